@@ -1,0 +1,218 @@
+"""The one car description: every number the Gazebo car model and the simulator use.
+
+A car description is a TOML file with one table per section below. Every field has a unit
+(in its name), a default and a source; ``docs/car.md`` is generated from this module
+(``python -m worlds.car --doc``) and ``worlds/data/nxp_cup_car.toml`` is the default file
+(``python -m worlds.car --write PATH`` writes a fresh, commented one).
+
+Car body frame: origin at the middle of the rear axle on the ground, x forward, y left,
+z up. Steering angles are radians, positive = left (counter-clockwise seen from above);
+the bicycle-equivalent angle ``steer_rad`` relates to the turn radius of the rear-axle
+midpoint by R = wheelbase / tan(steer).
+
+Default car: the real NXP Cup car (1:1, not the thesis's 130 % Gazebo model). Where the
+thesis gives a Gazebo number for its 130 % model, the default is that number divided by
+1.3 (the thesis's speed normalisation 0.774 = 1/1.29 confirms the scale).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+SCALE = 1.3  # thesis section 3.1: its Gazebo model was ~130 % of the real car
+
+
+class CarDescriptionError(ValueError):
+    """A car description file is missing, malformed or out of range."""
+
+
+def _f(default: Any, doc: str, source: str, lo: float | None = None, hi: float | None = None):
+    return field(default=default, metadata={"doc": doc, "source": source, "lo": lo, "hi": hi})
+
+
+@dataclass(frozen=True)
+class Chassis:
+    mass_kg: float = _f(1.0, "Total mass of the car including wheels.",
+                        "estimate for the NXP Cup car with battery; measure (thesis eq. 5.5)", 0.05, 50)
+    wheelbase_m: float = _f(0.175, "Distance between front and rear axle (L in thesis eq. 5.1).",
+                            "NXP Cup (Alamak-type) chassis, nominal", 0.05, 1.0)
+    track_m: float = _f(0.154, "Distance between left and right wheel centres (wheel separation).",
+                        "thesis Fig. 3.2 wheel_separation 0.2 m / 1.3", 0.05, 1.0)
+    length_m: float = _f(0.28, "Chassis box length (collision and drawing only).", "estimate", 0.05, 2.0)
+    width_m: float = _f(0.16, "Chassis box width.", "estimate", 0.02, 1.0)
+    height_m: float = _f(0.05, "Chassis box height.", "estimate", 0.005, 1.0)
+    rear_overhang_m: float = _f(0.05, "Chassis box extent behind the rear axle.", "estimate", 0.0, 1.0)
+    cog_height_m: float = _f(0.045, "Height of the chassis box centre above the ground.",
+                             "estimate", 0.01, 1.0)
+
+
+@dataclass(frozen=True)
+class Wheels:
+    radius_m: float = _f(0.034, "Wheel radius.", "thesis Fig. 3.2 wheel_radius 0.044 m / 1.3", 0.005, 0.5)
+    width_m: float = _f(0.025, "Tyre width.", "estimate", 0.002, 0.2)
+    mass_kg: float = _f(0.04, "Mass of one wheel.", "estimate", 0.001, 5)
+    friction_mu: float = _f(1.0, "Tyre-track friction coefficient (thesis eq. 5.4: mu = tan(slip angle)).",
+                            "estimate; calibrate with the tilt test", 0.01, 3.0)
+
+
+@dataclass(frozen=True)
+class Steering:
+    limit_rad: float = _f(0.40, "Maximum bicycle-equivalent steering angle (thesis eq. 5.1).",
+                          "estimate (~23 deg); calibrate from the measured turning radius", 0.01, 1.2)
+    rate_radps: float = _f(6.0, "Servo slew rate of the steering angle.",
+                           "hobby servo, ~0.17 s per 60 deg", 0.1, 100)
+
+
+@dataclass(frozen=True)
+class Drive:
+    max_speed_mps: float = _f(3.1, "Maximum forward (and reverse) speed.",
+                              "thesis Fig. 3.2 max_linear_velocity 4 m/s / 1.3", 0.1, 30)
+    max_accel_mps2: float = _f(3.1, "Acceleration limit (motor torque limit).",
+                               "thesis Fig. 3.2 max_linear_acceleration 4 m/s^2 / 1.3", 0.1, 50)
+    max_brake_mps2: float = _f(3.1, "Braking deceleration limit.",
+                               "thesis Fig. 3.2 min_linear_acceleration -4 m/s^2 / 1.3", 0.1, 50)
+
+
+@dataclass(frozen=True)
+class Camera:
+    forward_m: float = _f(0.20, "Camera position ahead of the rear axle.", "estimate", -1, 1)
+    height_m: float = _f(0.25, "Camera height above the ground.", "NXP Cup camera mast, estimate", 0.02, 2)
+    pitch_rad: float = _f(0.75, "Downward tilt of the optical axis from horizontal (positive = down).",
+                          "chosen so row 60 looks ~0.45 m ahead of the camera", 0.0, 1.57)
+    hfov_rad: float = _f(1.20, "Horizontal field of view.", "estimate", 0.1, 3.0)
+    width_px: int = _f(128, "Image width; the real line camera has 128 pixels.", "thesis 5.1.2", 8, 4096)
+    height_px: int = _f(128, "Image height (rows for the row-selection test, thesis Fig. 5.2).",
+                        "thesis Fig. 5.2 loops over 128 rows", 1, 4096)
+    default_row: int = _f(60, "The image row that plays the real line camera (Spinner.LINE_ROW, shown "
+                          "stretched in the debug video).", "thesis 5.1.2: the team used row 60", 0, 4095)
+    fps_hz: float = _f(50.0, "Frame rate; get_image() waits for the next frame.", "estimate", 1, 1000)
+    noise_std: float = _f(6.0, "Std-dev of additive Gaussian pixel noise (0-255 scale) of add_noise.",
+                          "estimate", 0, 128)
+
+
+@dataclass(frozen=True)
+class CarDescription:
+    """Everything the Gazebo car model and the dartpy car are built from."""
+
+    name: str = "nxp_cup_car"
+    chassis: Chassis = field(default_factory=Chassis)
+    wheels: Wheels = field(default_factory=Wheels)
+    steering: Steering = field(default_factory=Steering)
+    drive: Drive = field(default_factory=Drive)
+    camera: Camera = field(default_factory=Camera)
+
+    @property
+    def min_turn_radius_m(self) -> float:
+        """Smallest rear-axle turning radius, R = L / tan(limit) (thesis eq. 5.1)."""
+        return self.chassis.wheelbase_m / math.tan(self.steering.limit_rad)
+
+    def replace(self, **sections: Any) -> "CarDescription":
+        return dataclasses.replace(self, **sections)
+
+    # -- files ---------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def to_toml(self) -> str:
+        header = "# NXP Cup car description (units in field names; see docs/car.md)\n"
+        return header + tomli_w.dumps(self.to_dict())
+
+    def save(self, path: str | Path) -> None:
+        """Write atomically."""
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(self.to_toml())
+        tmp.replace(path)
+
+
+_SECTION_TYPES = {"chassis": Chassis, "wheels": Wheels, "steering": Steering, "drive": Drive,
+                  "camera": Camera}
+
+
+def car_from_dict(data: dict[str, Any], source: str = "<car>") -> CarDescription:
+    """Build and range-check a description; unknown keys and bad values raise."""
+    kwargs: dict[str, Any] = {}
+    for key, value in data.items():
+        if key == "name":
+            if not isinstance(value, str) or not value:
+                raise CarDescriptionError(f"{source}: 'name' must be a non-empty string")
+            kwargs["name"] = value
+            continue
+        cls = _SECTION_TYPES.get(key)
+        if cls is None:
+            raise CarDescriptionError(
+                f"{source}: unknown section [{key}] (expected one of {', '.join(_SECTION_TYPES)})")
+        if not isinstance(value, dict):
+            raise CarDescriptionError(f"{source}: [{key}] must be a table")
+        kwargs[key] = _section_from_dict(cls, key, value, source)
+    return CarDescription(**kwargs)
+
+
+def _section_from_dict(cls: type, section: str, data: dict[str, Any], source: str):
+    known = {f.name: f for f in fields(cls)}
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        f = known.get(key)
+        if f is None:
+            raise CarDescriptionError(
+                f"{source}: unknown field {section}.{key} (expected one of {', '.join(known)})")
+        want_int = f.type in (int, "int")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+                want_int and not isinstance(value, int)):
+            raise CarDescriptionError(
+                f"{source}: {section}.{key} = {value!r}: expected {'an integer' if want_int else 'a number'}")
+        if not math.isfinite(value):
+            raise CarDescriptionError(f"{source}: {section}.{key} = {value!r}: expected a finite number")
+        lo, hi = f.metadata.get("lo"), f.metadata.get("hi")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise CarDescriptionError(
+                f"{source}: {section}.{key} = {value!r}: expected a value in [{lo}, {hi}]")
+        out[key] = int(value) if want_int else float(value)
+    return cls(**out)
+
+
+def load_car(path: str | Path | None = None) -> CarDescription:
+    """Load a car description TOML file; ``None`` gives the default car."""
+    if path is None:
+        return CarDescription()
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise CarDescriptionError(f"{path}: cannot read car description ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        raise CarDescriptionError(f"{path}: not a text (TOML) file") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CarDescriptionError(f"{path}: invalid TOML: {exc}") from None
+    return car_from_dict(data, str(path))
+
+
+def markdown_doc() -> str:
+    """The field table of docs/car.md."""
+    lines = ["# Car description fields", "",
+             "Generated by `python -m worlds.car --doc`. Units are in the field names.", ""]
+    for section, cls in _SECTION_TYPES.items():
+        lines += [f"## [{section}]", "", "| field | default | range | meaning | source |",
+                  "| --- | --- | --- | --- | --- |"]
+        for f in fields(cls):
+            m = f.metadata
+            lines.append(f"| `{f.name}` | {f.default} | {m['lo']} .. {m['hi']} | {m['doc']} | {m['source']} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # pragma: no cover - developer helper
+    import sys
+
+    if sys.argv[1:2] == ["--doc"]:
+        sys.stdout.write(markdown_doc() + "\n")
+    elif sys.argv[1:2] == ["--write"]:
+        CarDescription().save(sys.argv[2])
