@@ -97,6 +97,40 @@ class Camera:
 
 
 @dataclass(frozen=True)
+class Effects:
+    """Catalogue of effects the nominal model leaves out (issue 4). Neutral values give back
+    the nominal model exactly. ``simrunner.effects`` applies them; docs/effects.md explains
+    what each means physically and which manoeuvre reveals it."""
+
+    steering_offset_rad: float = _f(0.0, "steering_offset: constant added to the steering command "
+                                    "(servo trim). Revealed by straight runs and left/right step steers.",
+                                    "neutral", -0.5, 0.5)
+    steering_gain: float = _f(1.0, "steering_gain: actual steer target = gain * command. Revealed by "
+                              "constant-radius circles.", "neutral", 0.2, 3.0)
+    steering_lag_s: float = _f(0.0, "steering_lag: first-order lag time constant of the steering "
+                               "target. Revealed by step steers and the chirp.", "neutral", 0.0, 2.0)
+    steering_rate_limit_radps: float = _f(math.inf, "steering_rate_limit: extra slew limit of the "
+                                          "steering (effective rate = min(servo rate, this)). Revealed by "
+                                          "large step steers.", "neutral (inf)", 0.01, math.inf)
+    command_latency_s: float = _f(0.0, "command_latency: pure delay between a command and its effect. "
+                                  "Revealed by step steers and speed steps.", "neutral", 0.0, 1.0)
+    motor_lag_s: float = _f(0.0, "motor_lag: first-order lag time constant of the speed command. "
+                            "Revealed by speed steps and ramps.", "neutral", 0.0, 5.0)
+    throttle_deadband_mps: float = _f(0.0, "throttle_deadband: speed commands below this magnitude "
+                                      "give no drive. Revealed by slow speed ramps.", "neutral", 0.0, 2.0)
+    rolling_resistance_coeff: float = _f(0.0, "rolling_resistance: resisting force c_rr * m * g "
+                                         "against motion. Revealed by coast-down at low speed.",
+                                         "neutral", 0.0, 0.5)
+    drag_coeff_kgpm: float = _f(0.0, "drag: resisting force k * v^2 (N with v in m/s). Revealed by "
+                                "coast-down from high speed.", "neutral", 0.0, 5.0)
+    tire_slip_understeer_radps2pm: float = _f(0.0, "tire_slip: understeer gradient K: effective steer "
+                                              "= steer - K * lateral acceleration (rad per m/s^2). "
+                                              "Revealed by circles at rising speed.", "neutral", 0.0, 0.5)
+    friction_scale: float = _f(1.0, "friction: multiplies the tyre friction coefficient. Revealed at "
+                               "the grip limit (circles at rising speed, tilt test).", "neutral", 0.05, 5.0)
+
+
+@dataclass(frozen=True)
 class CarDescription:
     """Everything the Gazebo car model and the dartpy car are built from."""
 
@@ -106,6 +140,7 @@ class CarDescription:
     steering: Steering = field(default_factory=Steering)
     drive: Drive = field(default_factory=Drive)
     camera: Camera = field(default_factory=Camera)
+    effects: Effects = field(default_factory=Effects)
 
     @property
     def min_turn_radius_m(self) -> float:
@@ -132,7 +167,7 @@ class CarDescription:
 
 
 _SECTION_TYPES = {"chassis": Chassis, "wheels": Wheels, "steering": Steering, "drive": Drive,
-                  "camera": Camera}
+                  "camera": Camera, "effects": Effects}
 
 
 def car_from_dict(data: dict[str, Any], source: str = "<car>") -> CarDescription:
@@ -167,7 +202,7 @@ def _section_from_dict(cls: type, section: str, data: dict[str, Any], source: st
                 want_int and not isinstance(value, int)):
             raise CarDescriptionError(
                 f"{source}: {section}.{key} = {value!r}: expected {'an integer' if want_int else 'a number'}")
-        if not math.isfinite(value):
+        if math.isnan(value) or (math.isinf(value) and f.metadata.get("hi") != math.inf):
             raise CarDescriptionError(f"{source}: {section}.{key} = {value!r}: expected a finite number")
         lo, hi = f.metadata.get("lo"), f.metadata.get("hi")
         if (lo is not None and value < lo) or (hi is not None and value > hi):
