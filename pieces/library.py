@@ -1,0 +1,244 @@
+"""Piece constructors: pure functions of their keyword-only parameters (metres, radians).
+
+Every constructor validates its inputs first and raises :class:`PieceError` naming the
+parameter, its value and the expected range; then it builds exact 2D footprints (meshes are
+made lazily by :class:`Piece`).
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable, Mapping
+
+import numpy as np
+import shapely
+
+from .geometry import arc_samples, arc_segments, rect, road_bands
+from .piece import Piece
+from .pose import Pose2
+from .spec import PARAMS, PieceError, PieceType, TrackSettings, check_range
+
+DEFAULT_SETTINGS = TrackSettings()
+
+
+def _check_settings(settings: TrackSettings) -> TrackSettings:
+    if not isinstance(settings, TrackSettings):
+        raise PieceError(f"settings={settings!r}: expected a pieces.TrackSettings")
+    return settings
+
+
+def _check_direction(direction: int) -> int:
+    if direction not in (1, -1):
+        raise PieceError(f"direction={direction!r}: expected +1 (left) or -1 (right)")
+    return int(direction)
+
+
+def _straight_edges(length_m: float, s: TrackSettings) -> shapely.MultiPolygon:
+    h, e = s.lane_width_m / 2.0, s.edge_width_m
+    return shapely.MultiPolygon([rect(0.0, -h - e, length_m, -h), rect(0.0, h, length_m, h + e)])
+
+
+def _straight(kind: PieceType, length_m: float, settings: TrackSettings) -> Piece:
+    s = _check_settings(settings)
+    length_m = check_range("length_m", length_m, 0.0)
+    h = s.lane_width_m / 2.0
+    return Piece(
+        kind=kind, settings=s, params={"length_m": length_m},
+        lane=rect(0.0, -h, length_m, h), edges=_straight_edges(length_m, s), marking=None,
+        centreline=[[0.0, 0.0], [length_m, 0.0]],
+        ports={"entry": Pose2(), "exit": Pose2(length_m, 0.0, 0.0)},
+        length_m=length_m,
+    )
+
+
+def straight(*, length_m: float = 1.0, settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """STRAIGHT: ``length_m`` long, exit at ``Pose2(length_m, 0, 0)``."""
+    return _straight(PieceType.STRAIGHT, length_m, settings)
+
+
+def straight_short(*, length_m: float = 0.5, settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """STRAIGHT_SHORT: a straight whose default length is 0.5 m."""
+    return _straight(PieceType.STRAIGHT_SHORT, length_m, settings)
+
+
+def start_finish(*, length_m: float = 1.0, mark_length_m: float = 0.05,
+                 settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """START_FINISH: a straight with a black bar ``mark_length_m`` long (along travel)
+    across the full lane width, centred at mid-piece. The bar is cut out of the lane (the
+    lane is two rectangles), so lane, edges and marking footprints are disjoint.
+    Extra port ``"finish"`` = ``Pose2(length_m / 2, 0, 0)``: the centre of the bar."""
+    s = _check_settings(settings)
+    length_m = check_range("length_m", length_m, 0.0)
+    mark_length_m = check_range("mark_length_m", mark_length_m, 0.0, length_m, hi_open=True)
+    h = s.lane_width_m / 2.0
+    x0, x1 = length_m / 2.0 - mark_length_m / 2.0, length_m / 2.0 + mark_length_m / 2.0
+    return Piece(
+        kind=PieceType.START_FINISH, settings=s,
+        params={"length_m": length_m, "mark_length_m": mark_length_m},
+        lane=shapely.MultiPolygon([rect(0.0, -h, x0, h), rect(x1, -h, length_m, h)]),
+        edges=_straight_edges(length_m, s), marking=rect(x0, -h, x1, h),
+        centreline=[[0.0, 0.0], [length_m, 0.0]],
+        ports={"entry": Pose2(), "exit": Pose2(length_m, 0.0, 0.0),
+               "finish": Pose2(length_m / 2.0, 0.0, 0.0)},
+        length_m=length_m,
+    )
+
+
+def turn(*, angle_rad: float = math.pi / 4, radius_m: float = 0.8, direction: int = 1,
+         settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """TURN_LEFT (``direction=+1``) or TURN_RIGHT (``-1``): a circular arc of centreline
+    radius ``radius_m`` (> half the road width) through ``angle_rad`` in (0, pi].
+    Exit at ``Pose2(R sin a, +-R (1 - cos a), +-a)``."""
+    s = _check_settings(settings)
+    direction = _check_direction(direction)
+    angle_rad = check_range("angle_rad", angle_rad, 0.0, math.pi, unit="rad")
+    half_road = s.road_width_m / 2.0
+    radius_m = check_range("radius_m", radius_m, half_road)
+    n = arc_segments(angle_rad, radius_m + half_road, s.arc_tolerance_m)
+    pts, yaw = arc_samples(radius_m, angle_rad, direction, n)
+    lane, edges = road_bands(pts, yaw, s.lane_width_m, s.edge_width_m)
+    exit_pose = Pose2(radius_m * math.sin(angle_rad),
+                      direction * radius_m * (1.0 - math.cos(angle_rad)), direction * angle_rad)
+    return Piece(
+        kind=PieceType.TURN_LEFT if direction > 0 else PieceType.TURN_RIGHT, settings=s,
+        params={"radius_m": radius_m, "angle_rad": angle_rad},
+        lane=lane, edges=edges, marking=None, centreline=pts,
+        ports={"entry": Pose2(), "exit": exit_pose},
+        length_m=radius_m * angle_rad, min_radius_m=radius_m,
+    )
+
+
+def turn_left(*, angle_rad: float = math.pi / 4, radius_m: float = 0.8,
+              settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """TURN_LEFT; see :func:`turn`."""
+    return turn(angle_rad=angle_rad, radius_m=radius_m, direction=1, settings=settings)
+
+
+def turn_right(*, angle_rad: float = math.pi / 4, radius_m: float = 0.8,
+               settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """TURN_RIGHT; see :func:`turn`."""
+    return turn(angle_rad=angle_rad, radius_m=radius_m, direction=-1, settings=settings)
+
+
+def chicane_geometry(length_m: float, offset_m: float) -> tuple[float, float]:
+    """Arc angle ``theta = 2 atan(offset / length)`` (rad) and radius
+    ``R = length / (2 sin theta)`` (m) of the two opposite arcs of a chicane."""
+    theta = 2.0 * math.atan2(offset_m, length_m)
+    return theta, length_m / (2.0 * math.sin(theta))
+
+
+def chicane(*, length_m: float = 1.0, offset_m: float = 0.20, direction: int = 1,
+            settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """CHICANE_LEFT (``direction=+1``, shifts to +y) or CHICANE_RIGHT (``-1``): an S-bend of
+    two opposite circular arcs (see :func:`chicane_geometry`) that moves the lane sideways
+    by ``offset_m`` over ``length_m`` and keeps the heading. Exit at
+    ``Pose2(length_m, +-offset_m, 0)``. The arc radius must exceed half the road width."""
+    s = _check_settings(settings)
+    direction = _check_direction(direction)
+    length_m = check_range("length_m", length_m, 0.0)
+    offset_m = check_range("offset_m", offset_m, 0.0)
+    theta, radius_m = chicane_geometry(length_m, offset_m)
+    half_road = s.road_width_m / 2.0
+    if not radius_m > half_road:
+        raise PieceError(
+            f"offset_m={offset_m:g} with length_m={length_m:g}: arc radius {radius_m:.4g} m must "
+            f"exceed half the road width {half_road:g} m (use a smaller offset or a longer piece)")
+    n = arc_segments(theta, radius_m + half_road, s.arc_tolerance_m)
+    p1, y1 = arc_samples(radius_m, theta, direction, n)
+    p2, y2 = arc_samples(radius_m, theta, -direction, n, start_xy=tuple(p1[-1]),
+                         start_yaw_rad=float(y1[-1]))
+    pts, yaw = np.vstack([p1, p2[1:]]), np.concatenate([y1, y2[1:]])
+    pts[-1] = (length_m, direction * offset_m)  # exact exit edge (rounding ~1e-16 otherwise)
+    yaw[-1] = 0.0
+    lane, edges = road_bands(pts, yaw, s.lane_width_m, s.edge_width_m)
+    return Piece(
+        kind=PieceType.CHICANE_LEFT if direction > 0 else PieceType.CHICANE_RIGHT, settings=s,
+        params={"length_m": length_m, "offset_m": offset_m},
+        lane=lane, edges=edges, marking=None, centreline=pts,
+        ports={"entry": Pose2(), "exit": Pose2(length_m, direction * offset_m, 0.0)},
+        length_m=2.0 * radius_m * theta, min_radius_m=radius_m,
+    )
+
+
+def chicane_left(*, length_m: float = 1.0, offset_m: float = 0.20,
+                 settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """CHICANE_LEFT; see :func:`chicane`."""
+    return chicane(length_m=length_m, offset_m=offset_m, direction=1, settings=settings)
+
+
+def chicane_right(*, length_m: float = 1.0, offset_m: float = 0.20,
+                  settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """CHICANE_RIGHT; see :func:`chicane`."""
+    return chicane(length_m=length_m, offset_m=offset_m, direction=-1, settings=settings)
+
+
+def crossroads(*, length_m: float = 0.6, settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """CROSSROADS: two perpendicular roads, each ``length_m`` long (>= the road width),
+    crossing at ``(length_m / 2, 0)``. White = union of both lanes; the edge lines are broken
+    where the other road passes: four L-shaped stubs at the corners.
+    Ports: entry, exit = ``Pose2(C, 0, 0)``, side_in = ``Pose2(C/2, -C/2, pi/2)``,
+    side_out = ``Pose2(C/2, C/2, pi/2)`` (side road travelled towards +y)."""
+    s = _check_settings(settings)
+    length_m = check_range("length_m", length_m, s.road_width_m, lo_open=False)
+    h, e, c = s.lane_width_m / 2.0, s.edge_width_m, length_m / 2.0
+    lane = shapely.union(rect(0.0, -h, length_m, h), rect(c - h, -c, c + h, c))
+    corners = []
+    for sx in (-1.0, 1.0):          # left / right of the side road
+        for sy in (-1.0, 1.0):      # below / above the main road
+            # L-shape: a main-road edge stub from the piece's end to the side lane, and a
+            # side-road edge stub from the main lane to the piece's side; they share the corner.
+            (x0, x1), (y0, y1) = sorted((c + sx * c, c + sx * h)), sorted((sy * h, sy * (h + e)))
+            stub_x = rect(x0, y0, x1, y1)
+            (x0, x1), (y0, y1) = sorted((c + sx * h, c + sx * (h + e))), sorted((sy * h, sy * c))
+            corners.append(shapely.union(stub_x, rect(x0, y0, x1, y1)))
+    edges = shapely.union_all(corners)
+    return Piece(
+        kind=PieceType.CROSSROADS, settings=s, params={"length_m": length_m},
+        lane=lane, edges=edges, marking=None,
+        centreline=[[0.0, 0.0], [length_m, 0.0]],
+        side_centreline=[[c, -c], [c, c]],
+        ports={"entry": Pose2(), "exit": Pose2(length_m, 0.0, 0.0),
+               "side_in": Pose2(c, -c, math.pi / 2), "side_out": Pose2(c, c, math.pi / 2)},
+        length_m=length_m,
+    )
+
+
+_BUILDERS: Mapping[PieceType, Callable[..., Piece]] = {
+    PieceType.STRAIGHT: straight,
+    PieceType.STRAIGHT_SHORT: straight_short,
+    PieceType.CROSSROADS: crossroads,
+    PieceType.TURN_LEFT: turn_left,
+    PieceType.TURN_RIGHT: turn_right,
+    PieceType.CHICANE_LEFT: chicane_left,
+    PieceType.CHICANE_RIGHT: chicane_right,
+    PieceType.START_FINISH: start_finish,
+}
+
+
+def make_piece(kind: PieceType, settings: TrackSettings = DEFAULT_SETTINGS, **params: float) -> Piece:
+    """Build a piece of ``kind`` from internal-unit keywords (``length_m``, ``radius_m``,
+    ``angle_rad``, ``offset_m``, ``mark_length_m``; see ``PARAMS[kind][..].internal``).
+    Unknown keywords raise :class:`PieceError`."""
+    if not isinstance(kind, PieceType):
+        raise PieceError(f"kind={kind!r}: expected a pieces.PieceType")
+    allowed = {spec.internal for spec in PARAMS[kind].values()}
+    for name in params:
+        if name not in allowed:
+            raise PieceError(f"{kind.name} has no parameter {name!r}: expected one of "
+                             f"{', '.join(sorted(allowed))}")
+    return _BUILDERS[kind](settings=settings, **params)
+
+
+def piece_from_layout(kind: PieceType, params: Mapping[str, float],
+                      settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """Build a piece from layout-file names and units (``angle=90`` is degrees,
+    lengths in metres); each value is range-checked against ``PARAMS[kind]`` first."""
+    if not isinstance(kind, PieceType):
+        raise PieceError(f"kind={kind!r}: expected a pieces.PieceType")
+    specs = PARAMS[kind]
+    internal = {}
+    for name, value in params.items():
+        if name not in specs:
+            known = ", ".join(specs) or "none"
+            raise PieceError(f"{kind.name} has no parameter {name!r}: expected one of {known}")
+        internal[specs[name].internal] = specs[name].check(value)
+    return make_piece(kind, settings, **internal)

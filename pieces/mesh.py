@@ -1,0 +1,51 @@
+"""Footprint to mesh: shapely (2D) -> manifold3d CrossSection -> extrude -> trimesh.
+
+Do the booleans in 2D and extrude once (see platform-facts: ~8x faster than 3D booleans,
+and world-placed footprints unioned with ``shapely.union_all(..., grid_size=1e-6)`` then
+extruded stay watertight).
+"""
+from __future__ import annotations
+
+import numpy as np
+import shapely
+import trimesh
+from manifold3d import CrossSection, FillRule
+
+from .spec import PieceError
+
+
+def _rings(geom) -> list[np.ndarray]:
+    """Every exterior and interior ring of a (Multi)Polygon as ``(N, 2)`` float arrays,
+    without the closing duplicate vertex."""
+    rings: list[np.ndarray] = []
+    for poly in shapely.get_parts(geom):
+        if poly.geom_type != "Polygon":
+            raise PieceError(f"footprint part is a {poly.geom_type}: expected Polygon parts")
+        if poly.is_empty:
+            continue
+        for ring in (poly.exterior, *poly.interiors):
+            rings.append(np.asarray(ring.coords, dtype=float)[:-1, :2])
+    return rings
+
+
+def cross_section(geom) -> CrossSection:
+    """manifold3d CrossSection of a shapely Polygon / MultiPolygon (holes kept)."""
+    return CrossSection(_rings(geom), FillRule.EvenOdd)
+
+
+def extrude_footprint(geom, thickness_m: float) -> trimesh.Trimesh:
+    """Watertight slab mesh of a shapely Polygon/MultiPolygon, z from 0 to ``thickness_m``.
+
+    Vertices ``(V, 3)`` float64 metres, faces ``(F, 3)`` int64, outward normals. An empty
+    footprint gives an empty mesh. Raises :class:`pieces.PieceError` for a non-positive
+    thickness or non-polygonal parts.
+    """
+    if not thickness_m > 0.0:
+        raise PieceError(f"thickness={thickness_m!r} m: expected (0, inf) m")
+    if geom is None or geom.is_empty:
+        return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), process=False)
+    solid = cross_section(geom).extrude(thickness_m)
+    mesh = solid.to_mesh64()
+    verts = np.asarray(mesh.vert_properties, dtype=float)[:, :3]
+    faces = np.asarray(mesh.tri_verts, dtype=np.int64)
+    return trimesh.Trimesh(verts, faces, process=False)

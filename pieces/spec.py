@@ -1,0 +1,152 @@
+"""Piece kinds, track-wide settings and the parameter table a layout file can set.
+
+Everything a person can type for a piece is described once here, in the units a person
+types (metres, degrees), together with the keyword argument it becomes in the Python API
+(metres, radians). ``trackgen`` uses :data:`PARAMS` to report unknown or out-of-range
+parameters by name; :func:`pieces.piece_from_layout` uses it to convert.
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, fields
+from types import MappingProxyType
+from typing import Callable, Mapping
+
+
+class PieceError(ValueError):
+    """A bad piece parameter or setting; the message names it, its value and the range."""
+
+
+class PieceType(enum.Enum):
+    """The six NXP Cup piece types of the thesis (turns and chicanes in two hands)."""
+
+    STRAIGHT = "STRAIGHT"
+    STRAIGHT_SHORT = "STRAIGHT_SHORT"
+    CROSSROADS = "CROSSROADS"
+    TURN_LEFT = "TURN_LEFT"
+    TURN_RIGHT = "TURN_RIGHT"
+    CHICANE_LEFT = "CHICANE_LEFT"
+    CHICANE_RIGHT = "CHICANE_RIGHT"
+    START_FINISH = "START_FINISH"
+
+
+def _identity(value: float) -> float:
+    return float(value)
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One settable number.
+
+    ``name`` is the layout-file name (``angle``), ``unit`` the unit a person types
+    (``"m"`` or ``"deg"``), ``default``/``lo``/``hi`` are in that unit; ``lo_open`` /
+    ``hi_open`` say whether the bound itself is excluded. ``internal`` is the Python
+    keyword it becomes (``angle_rad``) and ``to_internal`` converts the typed value.
+    """
+
+    name: str
+    unit: str
+    default: float
+    lo: float
+    hi: float = math.inf
+    lo_open: bool = True
+    hi_open: bool = False
+    internal: str = ""
+    to_internal: Callable[[float], float] = _identity
+
+    def range_text(self) -> str:
+        """Human-readable range, e.g. ``(0, 180] deg``."""
+        left = "(" if self.lo_open else "["
+        right = ")" if (self.hi_open or math.isinf(self.hi)) else "]"
+        hi = "inf" if math.isinf(self.hi) else f"{self.hi:g}"
+        return f"{left}{self.lo:g}, {hi}{right} {self.unit}"
+
+    def contains(self, value: float) -> bool:
+        """True if ``value`` (typed units) is finite and inside the range."""
+        if not math.isfinite(value):
+            return False
+        lo_ok = value > self.lo if self.lo_open else value >= self.lo
+        hi_ok = value < self.hi if self.hi_open else value <= self.hi
+        return lo_ok and hi_ok
+
+    def check(self, value: float) -> float:
+        """Validate a typed value; return it converted to internal units."""
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise PieceError(f"{self.name}={value!r}: expected a number in {self.range_text()}") from None
+        if not self.contains(value):
+            raise PieceError(f"{self.name}={value:g} {self.unit}: expected {self.range_text()}")
+        return self.to_internal(value)
+
+
+def check_range(name: str, value: float, lo: float, hi: float = math.inf, *,
+                unit: str = "m", lo_open: bool = True, hi_open: bool = False) -> float:
+    """Validate an internal-unit value; raise :class:`PieceError` naming ``name``."""
+    return ParamSpec(name, unit, value, lo, hi, lo_open, hi_open).check(value)
+
+
+def _m(name: str, default: float, lo: float = 0.0, hi: float = math.inf, **kw) -> ParamSpec:
+    return ParamSpec(name, "m", default, lo, hi, internal=f"{name}_m", **kw)
+
+
+_ANGLE = ParamSpec("angle", "deg", 45.0, 0.0, 180.0, internal="angle_rad", to_internal=math.radians)
+
+#: Layout-file parameters per kind: ``PARAMS[kind][layout_name] -> ParamSpec``.
+PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
+    PieceType.STRAIGHT: MappingProxyType({"length": _m("length", 1.0)}),
+    PieceType.STRAIGHT_SHORT: MappingProxyType({"length": _m("length", 0.5)}),
+    PieceType.CROSSROADS: MappingProxyType({"length": _m("length", 0.6)}),
+    PieceType.TURN_LEFT: MappingProxyType({"radius": _m("radius", 0.8), "angle": _ANGLE}),
+    PieceType.TURN_RIGHT: MappingProxyType({"radius": _m("radius", 0.8), "angle": _ANGLE}),
+    PieceType.CHICANE_LEFT: MappingProxyType({"length": _m("length", 1.0), "offset": _m("offset", 0.2)}),
+    PieceType.CHICANE_RIGHT: MappingProxyType({"length": _m("length", 1.0), "offset": _m("offset", 0.2)}),
+    PieceType.START_FINISH: MappingProxyType({"length": _m("length", 1.0),
+                                              "mark_length": _m("mark_length", 0.05)}),
+})
+
+#: Track-wide settings a layout file can set: layout name -> ParamSpec (internal = field name).
+SETTINGS_PARAMS: Mapping[str, ParamSpec] = MappingProxyType({
+    "lane_width": _m("lane_width", 0.55),
+    "edge_width": _m("edge_width", 0.020),
+    "thickness": _m("thickness", 0.01),
+    "arc_tolerance": _m("arc_tolerance", 0.001, hi=0.05),
+})
+
+
+@dataclass(frozen=True)
+class TrackSettings:
+    """Track-wide dimensions, metres.
+
+    ``lane_width_m``: white lane, edge to edge (between the black lines).
+    ``edge_width_m``: each black edge line, laid OUTSIDE the lane (road = lane + 2 edges).
+    ``thickness_m``: slab height; meshes span z in [0, thickness_m].
+    ``arc_tolerance_m``: max sagitta between a true arc and its polyline, in (0, 0.05].
+    """
+
+    lane_width_m: float = 0.55
+    edge_width_m: float = 0.020
+    thickness_m: float = 0.01
+    arc_tolerance_m: float = 0.001
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            spec = SETTINGS_PARAMS[f.name.removesuffix("_m")]
+            object.__setattr__(self, f.name, spec.check(getattr(self, f.name)))
+
+    @property
+    def road_width_m(self) -> float:
+        """Lane plus both edge lines."""
+        return self.lane_width_m + 2.0 * self.edge_width_m
+
+    @classmethod
+    def from_layout(cls, values: Mapping[str, float]) -> "TrackSettings":
+        """Build from layout names (``lane_width=0.55``); unknown names raise PieceError."""
+        kwargs = {}
+        for name, value in values.items():
+            if name not in SETTINGS_PARAMS:
+                known = ", ".join(SETTINGS_PARAMS)
+                raise PieceError(f"unknown track setting {name!r}: expected one of {known}")
+            kwargs[SETTINGS_PARAMS[name].internal] = value
+        return cls(**kwargs)
