@@ -1,0 +1,135 @@
+"""Lockstep clock: simulated time advances only inside Spinner calls, in whole physics steps.
+
+Everything runs on one thread. The controller runs; when it calls a waiting Spinner method
+(``get_image``, ``get_time``, ``sleep``, ...) the clock steps the physics. Commands set by
+``set_*`` are stored and handed to the sim once, before the next step (``CarSim.set_command``
+is not called per step). Steps are issued in chunks as large as possible: up to the next
+camera-frame boundary or the end of the wait, whichever is first (``CarSim.step(n)``).
+
+Frame schedule: frame ``k`` (k = 0, 1, 2, ...) is at physics step ``round(k * period / dt)``
+(an exact multiple when the period is a whole number of steps). At every frame boundary the
+``on_frame(k)`` callback runs (telemetry row, judge, video capture) whether or not the
+controller asked for an image; frame 0 is the initial state, called by :meth:`start`.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Callable, Protocol
+
+from .errors import RunFinished, SimError
+
+
+class SteppableSim(Protocol):
+    """The part of ``simrunner.physics.CarSim`` the clock uses."""
+
+    def set_command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None: ...
+
+    def step(self, n: int = 1) -> None: ...
+
+
+class LockstepClock:
+    """Steps ``sim`` in lockstep with the controller.
+
+    ``dt_s``: physics step (s). ``frame_period_s``: camera frame period (s), at least one step.
+    ``on_frame(frame_index)`` runs at each frame boundary and may call :meth:`finish`.
+    Attributes: ``step_index`` (int, steps done), ``frame_index`` (last frame boundary
+    reached), ``last_progress_wall_s`` (``time.monotonic()`` at the last progress, for the
+    watchdog), ``finished`` (None or the :class:`RunFinished` that ends the run).
+    """
+
+    def __init__(self, sim: SteppableSim, *, dt_s: float, frame_period_s: float,
+                 on_frame: Callable[[int], None] | None = None):
+        if not (math.isfinite(dt_s) and dt_s > 0):
+            raise SimError(f"dt_s = {dt_s!r}: expected a positive number of seconds")
+        if not (math.isfinite(frame_period_s) and frame_period_s > 0):
+            raise SimError(f"frame period = {frame_period_s!r}: expected a positive number of seconds")
+        self.sim = sim
+        self.dt_s = float(dt_s)
+        ratio = frame_period_s / dt_s
+        self._steps_per_frame = int(round(ratio)) if abs(ratio - round(ratio)) < 1e-9 else None
+        self._ratio = max(ratio, 1.0)
+        self.on_frame = on_frame or (lambda k: None)
+        self.step_index = 0
+        self.frame_index = 0
+        self._next_frame_step = self._frame_step(1)
+        self._command: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._command_dirty = True
+        self.finished: RunFinished | None = None
+        self.last_progress_wall_s = time.monotonic()
+
+    # -- schedule ------------------------------------------------------------------
+    def _frame_step(self, k: int) -> int:
+        if self._steps_per_frame is not None:
+            return k * max(self._steps_per_frame, 1)
+        return int(math.floor(k * self._ratio + 0.5))
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time (s) = steps done x dt (exact; no float accumulation)."""
+        return self.step_index * self.dt_s
+
+    @property
+    def frame_period_steps(self) -> float:
+        return self._ratio
+
+    def steps_to_next_frame(self) -> int:
+        return self._next_frame_step - self.step_index
+
+    # -- commands and end ----------------------------------------------------------
+    def command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None:
+        """Store the targets; they reach the sim before the next step."""
+        self._command = (speed_mps, steer_rad, yaw_rate_radps)
+        self._command_dirty = True
+
+    @property
+    def current_command(self) -> tuple[float, float, float]:
+        """(speed_mps, steer_rad, yaw_rate_radps) last commanded."""
+        return self._command
+
+    def finish(self, outcome: str, message: str = "") -> None:
+        """End the run (first call wins): the current and every later wait raises."""
+        if self.finished is None:
+            self.finished = RunFinished(outcome, message)
+
+    def check(self) -> None:
+        """Raise :class:`RunFinished` if the run is over."""
+        if self.finished is not None:
+            raise RunFinished(self.finished.outcome, self.finished.message)
+
+    # -- stepping ------------------------------------------------------------------
+    def start(self) -> None:
+        """Run the frame-0 callback (the initial state)."""
+        self.on_frame(0)
+        self.last_progress_wall_s = time.monotonic()
+        self.check()
+
+    def advance(self, n_steps: int) -> None:
+        """Step ``n_steps`` physics steps, running ``on_frame`` at each boundary crossed.
+
+        Raises :class:`RunFinished` (and stops stepping) as soon as the run is over.
+        """
+        self.check()
+        sim = self.sim
+        while n_steps > 0:
+            chunk = self._next_frame_step - self.step_index
+            if chunk > n_steps:
+                chunk = n_steps
+            if self._command_dirty:
+                sim.set_command(*self._command)
+                self._command_dirty = False
+            sim.step(chunk)
+            self.step_index += chunk
+            n_steps -= chunk
+            if self.step_index == self._next_frame_step:
+                self.frame_index += 1
+                self._next_frame_step = self._frame_step(self.frame_index + 1)
+                self.on_frame(self.frame_index)
+                self.last_progress_wall_s = time.monotonic()
+                if self.finished is not None:
+                    self.check()
+        self.last_progress_wall_s = time.monotonic()
+
+    def advance_to_next_frame(self) -> None:
+        """Step to the next frame boundary (at least one step)."""
+        self.advance(self._next_frame_step - self.step_index)
