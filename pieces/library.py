@@ -68,7 +68,8 @@ def start_finish(*, length_m: float = 1.0, mark_length_m: float = 0.05,
     Extra port ``"finish"`` = ``Pose2(length_m / 2, 0, 0)``: the centre of the bar."""
     s = _check_settings(settings)
     length_m = check_range("length_m", length_m, 0.0)
-    mark_length_m = check_range("mark_length_m", mark_length_m, 0.0, length_m, hi_open=True)
+    mark_length_m = check_range("mark_length_m", mark_length_m, 0.0, length_m, hi_open=True,
+                                why="shorter than the piece")
     h = s.lane_width_m / 2.0
     x0, x1 = length_m / 2.0 - mark_length_m / 2.0, length_m / 2.0 + mark_length_m / 2.0
     return Piece(
@@ -92,7 +93,7 @@ def turn(*, angle_rad: float = math.pi / 4, radius_m: float = 0.8, direction: in
     direction = _check_direction(direction)
     angle_rad = check_range("angle_rad", angle_rad, 0.0, math.pi, unit="rad")
     half_road = s.road_width_m / 2.0
-    radius_m = check_range("radius_m", radius_m, half_road)
+    radius_m = check_range("radius_m", radius_m, half_road, why="more than half the road width")
     n = arc_segments(angle_rad, radius_m + half_road, s.arc_tolerance_m)
     pts, yaw = arc_samples(radius_m, angle_rad, direction, n)
     lane, edges = road_bands(pts, yaw, s.lane_width_m, s.edge_width_m)
@@ -178,7 +179,8 @@ def crossroads(*, length_m: float = 0.6, settings: TrackSettings = DEFAULT_SETTI
     Ports: entry, exit = ``Pose2(C, 0, 0)``, side_in = ``Pose2(C/2, -C/2, pi/2)``,
     side_out = ``Pose2(C/2, C/2, pi/2)`` (side road travelled towards +y)."""
     s = _check_settings(settings)
-    length_m = check_range("length_m", length_m, s.road_width_m, lo_open=False)
+    length_m = check_range("length_m", length_m, s.road_width_m, lo_open=False,
+                           why="at least the road width")
     h, e, c = s.lane_width_m / 2.0, s.edge_width_m, length_m / 2.0
     lane = shapely.union(rect(0.0, -h, length_m, h), rect(c - h, -c, c + h, c))
     corners = []

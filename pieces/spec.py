@@ -82,9 +82,16 @@ class ParamSpec:
 
 
 def check_range(name: str, value: float, lo: float, hi: float = math.inf, *,
-                unit: str = "m", lo_open: bool = True, hi_open: bool = False) -> float:
-    """Validate an internal-unit value; raise :class:`PieceError` naming ``name``."""
-    return ParamSpec(name, unit, value, lo, hi, lo_open, hi_open).check(value)
+                unit: str = "m", lo_open: bool = True, hi_open: bool = False,
+                why: str = "") -> float:
+    """Validate an internal-unit value; raise :class:`PieceError` naming ``name`` (and
+    ``why`` the range is what it is, if given)."""
+    try:
+        return ParamSpec(name, unit, value, lo, hi, lo_open, hi_open).check(value)
+    except PieceError as err:
+        if why:
+            raise PieceError(f"{err} ({why})") from None
+        raise
 
 
 def _m(name: str, default: float, lo: float = 0.0, hi: float = math.inf, **kw) -> ParamSpec:
