@@ -7,6 +7,7 @@ made lazily by :class:`Piece`).
 from __future__ import annotations
 
 import math
+import re
 from typing import Callable, Mapping
 
 import numpy as np
@@ -243,4 +244,10 @@ def piece_from_layout(kind: PieceType, params: Mapping[str, float],
             known = ", ".join(specs) or "none"
             raise PieceError(f"{kind.name} has no parameter {name!r}: expected one of {known}")
         internal[specs[name].internal] = specs[name].check(value)
-    return make_piece(kind, settings, **internal)
+    try:
+        return make_piece(kind, settings, **internal)
+    except PieceError as err:  # limits that depend on settings: speak in layout names
+        message = str(err)
+        for spec in specs.values():
+            message = re.sub(rf"\b{spec.internal}=", f"{spec.name}=", message)
+        raise PieceError(message) from None

@@ -11,7 +11,7 @@ import shapely
 import trimesh
 from manifold3d import CrossSection, FillRule
 
-from .spec import PieceError
+from .spec import PieceError, check_range
 
 
 def _rings(geom) -> list[np.ndarray]:
@@ -40,8 +40,7 @@ def extrude_footprint(geom, thickness_m: float) -> trimesh.Trimesh:
     footprint gives an empty mesh. Raises :class:`pieces.PieceError` for a non-positive
     thickness or non-polygonal parts.
     """
-    if not thickness_m > 0.0:
-        raise PieceError(f"thickness={thickness_m!r} m: expected (0, inf) m")
+    thickness_m = check_range("thickness_m", thickness_m, 0.0)
     if geom is None or geom.is_empty:
         return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), process=False)
     solid = cross_section(geom).extrude(thickness_m)

@@ -140,7 +140,8 @@ class TrackSettings:
     def __post_init__(self) -> None:
         for f in fields(self):
             spec = SETTINGS_PARAMS[f.name.removesuffix("_m")]
-            object.__setattr__(self, f.name, spec.check(getattr(self, f.name)))
+            value = check_range(f.name, getattr(self, f.name), spec.lo, spec.hi)
+            object.__setattr__(self, f.name, value)
 
     @property
     def road_width_m(self) -> float:
@@ -155,5 +156,5 @@ class TrackSettings:
             if name not in SETTINGS_PARAMS:
                 known = ", ".join(SETTINGS_PARAMS)
                 raise PieceError(f"unknown track setting {name!r}: expected one of {known}")
-            kwargs[SETTINGS_PARAMS[name].internal] = value
+            kwargs[SETTINGS_PARAMS[name].internal] = SETTINGS_PARAMS[name].check(value)
         return cls(**kwargs)

@@ -1,5 +1,7 @@
 """Track pieces: watertight meshes, disjoint footprints, exact ports, seamless joins."""
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -299,6 +301,17 @@ def test_piece_from_layout_converts_degrees_and_checks_names():
     assert TrackSettings.from_layout({"lane_width": 0.5}).lane_width_m == 0.5
     with pytest.raises(PieceError, match="unknown track setting 'lane'"):
         TrackSettings.from_layout({"lane": 0.5})
+    with pytest.raises(PieceError, match=r"^thickness=-1 m: expected \(0, inf\) m"):
+        TrackSettings.from_layout({"thickness": -1})
+    # limits that depend on the settings are reported in layout names too
+    with pytest.raises(PieceError, match=r"^radius=0.2 m: expected \(0.295, inf\) m"):
+        piece_from_layout(TURN_LEFT, {"radius": 0.2})
+    with pytest.raises(PieceError, match=r"^length=0.5 m: expected \[0.59"):
+        piece_from_layout(CROSSROADS, {"length": 0.5})
+    with pytest.raises(PieceError, match=r"^offset=0.3 with length=0.3: arc radius"):
+        piece_from_layout(CHICANE_RIGHT, {"offset": 0.3, "length": 0.3})
+    with pytest.raises(PieceError, match=r"^mark_length=2 m"):
+        piece_from_layout(START_FINISH, {"mark_length": 2})
 
 
 BAD_CALLS = [
@@ -313,12 +326,12 @@ BAD_CALLS = [
     (lambda: pieces.chicane_left(length_m=0.3, offset_m=0.3), "offset_m=0.3.*radius"),
     (lambda: pieces.crossroads(length_m=0.5), r"length_m=0.5 m: expected \[0.59.*road width"),
     (lambda: pieces.start_finish(mark_length_m=1.0), "mark_length_m=1"),
-    (lambda: TrackSettings(lane_width_m=0.0), "lane_width=0"),
-    (lambda: TrackSettings(edge_width_m=-0.02), "edge_width=-0.02"),
-    (lambda: TrackSettings(thickness_m=0.0), "thickness=0"),
-    (lambda: TrackSettings(arc_tolerance_m=0.06), r"arc_tolerance=0.06 m: expected \(0, 0.05\]"),
+    (lambda: TrackSettings(lane_width_m=0.0), "lane_width_m=0"),
+    (lambda: TrackSettings(edge_width_m=-0.02), "edge_width_m=-0.02"),
+    (lambda: TrackSettings(thickness_m=0.0), "thickness_m=0"),
+    (lambda: TrackSettings(arc_tolerance_m=0.06), r"arc_tolerance_m=0.06 m: expected \(0, 0.05\]"),
     (lambda: pieces.straight(length_m="long"), "length_m='long'"),
-    (lambda: extrude_footprint(shapely.box(0, 0, 1, 1), 0.0), "thickness=0"),
+    (lambda: extrude_footprint(shapely.box(0, 0, 1, 1), 0.0), "thickness_m=0"),
 ]
 
 
@@ -326,6 +339,12 @@ BAD_CALLS = [
 def test_invalid_parameters_raise_piece_error_naming_them(call, match):
     with pytest.raises(PieceError, match=match):
         call()
+
+
+def test_pieces_does_not_import_physics_or_opencv():
+    code = "import sys, pieces; pieces.straight().lane_mesh; print(sorted({'dartpy', 'cv2'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
 
 
 def test_keyword_only():
