@@ -1,0 +1,414 @@
+"""The car as a dartpy multibody: torque-limited rear drive, Ackermann steering servo.
+
+``CarSim`` owns one dartpy ``World`` (ODE collision detector, no sleeping) holding a flat
+static ground box and the car of :mod:`simrunner.car_body`. Everything is per instance:
+two ``CarSim`` objects in one process do not interact, and the same calls give
+bit-identical results.
+
+Per physics step the only Python work is ``world.step(False)``. ``World.step()`` would
+zero every joint command after the step, so commands are set only in :meth:`set_command`
+(and state restores) and kept by ``step(False)``:
+
+* Drive (thesis 5.2, 5.3.2): the rear wheels are ``SERVO`` actuators (velocity target
+  with a force limit; ``VELOCITY`` would ignore force limits). Targets are the rear
+  differential ``omega_l/r = (v -+ w * track/2) / r``. The torque limit per wheel is
+  ``m_eff * a * r / 2`` with ``m_eff = m + 4 I_spin / r^2`` (the spinning wheels count too),
+  and ``a`` = ``drive.max_accel_mps2`` when the command asks to speed up, else
+  ``drive.max_brake_mps2`` (chosen at each ``set_command`` from the current speed;
+  a command of the opposite sign brakes at the brake limit). So the car speeds up at about
+  ``max_accel`` and brakes at about ``max_brake`` while the tyres grip.
+* Steering (thesis 5.3.1): the knuckles are ``VELOCITY`` actuators (kinematic: no
+  constraint rows, tyre forces cannot push them). A move to a new target is planned at
+  ``set_command``: both knuckles turn at constant speeds so the bicycle angle moves at
+  ``steering.rate_radps`` and they reach their Ackermann targets together; ``step`` runs
+  the whole steps of the move, one last partial step that lands exactly on the target,
+  then holds (speed 0). Python work happens only at these few events, never per step,
+  and the result does not depend on how ``step(n)`` calls are split.
+* Front wheels roll freely.
+
+Time step: 2 ms by default. Measured (bench/bench_physics.py, default car, one core):
+see the module docstring there; at 2 ms the bare step runs at ~40x real time, leaving room
+for camera + controller in the 30x closed-loop budget of issue 3, while the sanity checks
+(distance, braking, turn radius, tilt) stay within 1-3 % (tests/test_physics.py).
+Results at the friction limit depend on the step: use 1-2 ms for racing.
+
+Slope (thesis 5.4 tilt test): ``slope_rad > 0`` tilts the ground about the horizontal
+line through the start point parallel to world y, so that it descends along +x:
+a car with ``start.yaw = 0`` faces downhill.
+
+External forces (seam for issue 4 effects): :meth:`apply_external_force_n` sets one
+constant force on the chassis, in the car body frame, kept until changed.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import dartpy as dart
+import numpy as np
+
+from pieces.pose import Pose2
+from simrunner.car_body import CarBody, WheelShape, _iso, build_car_skeleton
+from worlds.car import CarDescription
+
+GRAVITY_MPS2 = 9.81
+GROUND_SIZE_M = 400.0  # side of the square ground box (tracks are a few metres)
+GROUND_THICKNESS_M = 1.0
+
+
+def kinematic_turn_radius_m(car: CarDescription, steer_rad: float) -> float:
+    """Turn radius of the rear-axle midpoint, R = L / tan(steer) (thesis eq. 5.1).
+
+    Signed like the steering (positive = left turn); ``inf`` for straight ahead.
+    """
+    t = math.tan(steer_rad)
+    return math.inf if t == 0.0 else car.chassis.wheelbase_m / t
+
+
+def ackermann_angles_rad(car: CarDescription, steer_rad: float) -> tuple[float, float]:
+    """(left, right) knuckle angles for the bicycle angle ``steer_rad`` (positive = left).
+
+    The inner wheel steers more: tan(d_in) = L / (R - t/2), tan(d_out) = L / (R + t/2)
+    with R = L / tan(steer); written with atan2 so it stays continuous past 90 degrees.
+    """
+    wb, half_t = car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
+    s, c = math.sin(steer_rad), math.cos(steer_rad)
+    return (math.atan2(wb * s, wb * c - half_t * s), math.atan2(wb * s, wb * c + half_t * s))
+
+
+def bicycle_angle_rad(left_rad: float, right_rad: float) -> float:
+    """Inverse of :func:`ackermann_angles_rad`: cot(steer) = (cot(left) + cot(right)) / 2.
+
+    Knuckles on opposite sides of zero (a brief transient) give their mean.
+    """
+    sl, sr = math.sin(left_rad), math.sin(right_rad)
+    den = math.sin(left_rad + right_rad)
+    if sl * sr <= 0.0 or den == 0.0:
+        return 0.5 * (left_rad + right_rad)
+    return math.atan(2.0 * sl * sr / den)
+
+
+def _rot_y(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _rot_z(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class _Control:
+    """Everything applied to the joints between steps (saved with the state)."""
+
+    speed_cmd_mps: float = 0.0
+    steer_cmd_rad: float = 0.0
+    yaw_rate_cmd_radps: float = 0.0
+    wheel_omega_radps: tuple[float, float] = (0.0, 0.0)  # rear left, rear right targets
+    wheel_torque_nm: float = 0.0  # per rear wheel
+    knuckle_target_rad: tuple[float, float] = (0.0, 0.0)  # (left, right) Ackermann targets
+    knuckle_vel_radps: tuple[float, float] = (0.0, 0.0)  # applied knuckle speeds
+    steer_steps_left: int = 0  # steps before the next steering event (0 = holding)
+    steer_final: bool = False  # the running segment is the last, partial step
+    wheels_locked: bool = False
+    ext_force_n: tuple[float, float] = (0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class SimState:
+    """Opaque snapshot for :meth:`CarSim.restore_state` (bit-exact)."""
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    time_s: float
+    control: _Control
+
+
+class CarSim:
+    """One car on flat (optionally tilted) ground; see the module docstring."""
+
+    def __init__(self, car: CarDescription, *, dt_s: float = 0.002, start: Pose2 = Pose2(),
+                 surface_z_m: float = 0.0, slope_rad: float = 0.0, ground_mu: float = 10.0,
+                 wheel_shape: WheelShape = WheelShape.SPHERE):
+        if not (0.0 < dt_s <= 0.02):
+            raise ValueError(f"dt_s = {dt_s!r}: expected a time step in (0, 0.02] s")
+        if not (-1.2 < slope_rad < 1.2):
+            raise ValueError(f"slope_rad = {slope_rad!r}: expected a value in (-1.2, 1.2) rad")
+        self.car = car
+        self.dt_s = float(dt_s)
+        self.surface_z_m = float(surface_z_m)
+        self.slope_rad = float(slope_rad)
+        self._start = start
+        # ground frame: origin at the start point on the surface, z = surface normal
+        self._ground_rot = _rot_y(self.slope_rad)
+        self._ground_origin = np.array([start.x_m, start.y_m, self.surface_z_m])
+
+        world = dart.simulation.World()
+        world.setName("carsim")
+        world.setTimeStep(self.dt_s)
+        world.setGravity(np.array([0.0, 0.0, -GRAVITY_MPS2]))
+        world.setCollisionDetector(dart.simulation.CollisionDetectorType.ODE)
+        sleep = world.getDeactivationOptions()
+        sleep.mEnabled = False  # sleeping state is hidden state: breaks save/restore and wake-up
+        world.setDeactivationOptions(sleep)
+        world.addSkeleton(self._build_ground(float(ground_mu)))
+        self._body: CarBody = build_car_skeleton(car, wheel_shape=wheel_shape)
+        world.addSkeleton(self._body.skeleton)
+        self._world = world
+
+        r = car.wheels.radius_m
+        self._m_eff_kg = self._body.total_mass_kg + 4.0 * self._body.wheel_spin_inertia_kgm2 / (r * r)
+        for j in self._body.knuckle_joints:
+            j.setActuatorType(dart.dynamics.ActuatorType.VELOCITY)
+        for j in self._body.wheel_joints[:2]:
+            j.setActuatorType(dart.dynamics.ActuatorType.PASSIVE)
+        self._control = _Control()
+        self._place(start, 0.0, 0.0, 0.0)
+        self._apply(self._control)
+
+    # -- construction ------------------------------------------------------------------
+    def _build_ground(self, mu: float) -> dart.dynamics.Skeleton:
+        ground = dart.dynamics.Skeleton("ground")
+        joint, body = ground.createWeldJointAndBodyNodePair()
+        centre = self._ground_origin + self._ground_rot @ np.array([0.0, 0.0, -0.5 * GROUND_THICKNESS_M])
+        joint.setTransformFromParentBodyNode(_iso(centre, self._ground_rot))
+        node = body.createShapeNode(
+            dart.dynamics.BoxShape(np.array([GROUND_SIZE_M, GROUND_SIZE_M, GROUND_THICKNESS_M])), "ground_box")
+        node.createVisualAspect()
+        node.createCollisionAspect()
+        node.createDynamicsAspect().setFrictionCoeff(mu)
+        return ground
+
+    def _place(self, pose: Pose2, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None:
+        """Set the planar state: chassis on the ground plane, wheels rolling, knuckles at steer."""
+        car, b = self.car, self._body
+        # position on the (possibly tilted) ground plane below/above (x, y)
+        n = self._ground_rot[:, 2]
+        dx, dy = pose.x_m - self._ground_origin[0], pose.y_m - self._ground_origin[1]
+        z = self._ground_origin[2] - (n[0] * dx + n[1] * dy) / n[2]
+        rot = self._ground_rot @ _rot_z(pose.yaw_rad)
+        q6 = dart.dynamics.FreeJoint.convertToPositions(_iso([pose.x_m, pose.y_m, z], rot))
+        b.free_joint.setPositions(q6)
+        # dartpy 6.20: FreeJoint velocities are [angular, linear] in WORLD coordinates
+        n_w = yaw_rate_radps * rot[:, 2]
+        v_w = speed_mps * rot[:, 0]
+        b.free_joint.setVelocities(np.concatenate([n_w, v_w]))
+        ql, qr = ackermann_angles_rad(car, steer_rad)
+        for j, q in zip(b.knuckle_joints, (ql, qr)):
+            j.setPosition(0, q)
+            j.setVelocity(0, 0.0)
+        r, wb, half_t = car.wheels.radius_m, car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
+        # rolling speeds from the rigid-body velocity field (rear-axle midpoint has no slip)
+        front = [math.hypot(speed_mps - yaw_rate_radps * y, yaw_rate_radps * wb) for y in (half_t, -half_t)]
+        front = [math.copysign(f, speed_mps) for f in front]
+        rear = [speed_mps - yaw_rate_radps * half_t, speed_mps + yaw_rate_radps * half_t]
+        for j, v in zip(b.wheel_joints, front + rear):
+            j.setVelocity(0, v / r)
+
+    # -- commands ----------------------------------------------------------------------
+    def set_command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float | None = None) -> None:
+        """Set the targets: speed (m/s, signed), steering (rad, + left), yaw rate (rad/s).
+
+        Speed and steering are clamped to the car's limits; ``yaw_rate_radps=None`` uses the
+        thesis's default differential w = v sin(steer) / L (eq. 5.2-5.3). This is the only
+        entry of commands (effects such as latency wrap it).
+        """
+        car = self.car
+        v = float(np.clip(speed_mps, -car.drive.max_speed_mps, car.drive.max_speed_mps))
+        d = float(np.clip(steer_rad, -car.steering.limit_rad, car.steering.limit_rad))
+        w = v * math.sin(d) / car.chassis.wheelbase_m if yaw_rate_radps is None else float(yaw_rate_radps)
+        r, half_t = car.wheels.radius_m, 0.5 * car.chassis.track_m
+        v_now = self.speed_mps
+        speeding_up = abs(v) > abs(v_now) and v * v_now >= 0.0
+        accel = car.drive.max_accel_mps2 if speeding_up else car.drive.max_brake_mps2
+        torque = 0.5 * self._m_eff_kg * accel * r
+
+        # steering servo: constant knuckle speeds so both reach the Ackermann target together
+        q_now = self.knuckle_angles_rad()
+        q_tgt = ackermann_angles_rad(car, d)
+        t_move = abs(d - bicycle_angle_rad(*q_now)) / car.steering.rate_radps
+        whole = int(math.floor(t_move / self.dt_s * (1.0 + 1e-12)))
+        if whole > 0:
+            k_vel = tuple((qt - qn) / t_move for qt, qn in zip(q_tgt, q_now))
+            plan = dict(knuckle_vel_radps=k_vel, steer_steps_left=whole, steer_final=False)
+        else:
+            plan = self._final_steer_segment(q_tgt, q_now)
+        self._control = _Control(
+            speed_cmd_mps=v, steer_cmd_rad=d, yaw_rate_cmd_radps=w,
+            wheel_omega_radps=((v - w * half_t) / r, (v + w * half_t) / r), wheel_torque_nm=torque,
+            knuckle_target_rad=q_tgt, wheels_locked=self._control.wheels_locked,
+            ext_force_n=self._control.ext_force_n, **plan)
+        self._apply(self._control)
+
+    def _final_steer_segment(self, q_tgt, q_now) -> dict:
+        """One partial step landing on the target, or holding if already there."""
+        k_vel = tuple((qt - qn) / self.dt_s for qt, qn in zip(q_tgt, q_now))
+        if max(abs(qt - qn) for qt, qn in zip(q_tgt, q_now)) <= 1e-15:
+            return dict(knuckle_vel_radps=(0.0, 0.0), steer_steps_left=0, steer_final=False)
+        return dict(knuckle_vel_radps=k_vel, steer_steps_left=1, steer_final=True)
+
+    def _steer_event(self) -> None:
+        """The running steering segment has ended: start the next one."""
+        c = self._control
+        if c.steer_final:
+            plan = dict(knuckle_vel_radps=(0.0, 0.0), steer_steps_left=0, steer_final=False)
+        else:
+            plan = self._final_steer_segment(c.knuckle_target_rad, self.knuckle_angles_rad())
+        self._control = _replace(c, **plan)
+        for j, vel in zip(self._body.knuckle_joints, self._control.knuckle_vel_radps):
+            j.setCommand(0, vel)
+
+    def set_wheel_lock(self, locked: bool) -> None:
+        """Lock all four wheels (thesis 5.4 tilt test: "wheels stopped"); False releases them."""
+        self._control = _replace(self._control, wheels_locked=bool(locked))
+        self._apply(self._control)
+
+    def apply_external_force_n(self, fx_n: float, fy_n: float) -> None:
+        """Set a constant force on the chassis at its centre of mass, in the CAR BODY frame
+        (x forward, y left; N). It replaces the previous one and stays until changed
+        (seam for drag / rolling resistance effects)."""
+        self._control = _replace(self._control, ext_force_n=(float(fx_n), float(fy_n)))
+        self._apply(self._control)
+
+    def _apply(self, c: _Control) -> None:
+        b = self._body
+        for j, vel in zip(b.knuckle_joints, c.knuckle_vel_radps):
+            j.setCommand(0, vel)
+        servo, locked = dart.dynamics.ActuatorType.SERVO, dart.dynamics.ActuatorType.LOCKED
+        for j in b.wheel_joints[:2]:
+            j.setActuatorType(locked if c.wheels_locked else dart.dynamics.ActuatorType.PASSIVE)
+        for j, omega in zip(b.wheel_joints[2:], c.wheel_omega_radps):
+            j.setActuatorType(locked if c.wheels_locked else servo)
+            j.setForceLowerLimit(0, -c.wheel_torque_nm)
+            j.setForceUpperLimit(0, c.wheel_torque_nm)
+            j.setCommand(0, 0.0 if c.wheels_locked else omega)
+        com = b.chassis.getLocalCOM()
+        b.chassis.setExtForce(np.array([c.ext_force_n[0], c.ext_force_n[1], 0.0]), com, True, True)
+
+    @property
+    def speed_cmd_mps(self) -> float:
+        """The clamped speed command in force (m/s)."""
+        return self._control.speed_cmd_mps
+
+    @property
+    def steer_cmd_rad(self) -> float:
+        """The clamped steering command in force (rad, bicycle-equivalent)."""
+        return self._control.steer_cmd_rad
+
+    @property
+    def yaw_rate_cmd_radps(self) -> float:
+        """The yaw-rate command of the rear differential in force (rad/s)."""
+        return self._control.yaw_rate_cmd_radps
+
+    # -- stepping ----------------------------------------------------------------------
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` physics steps of ``dt_s`` (commands stay as set)."""
+        step = self._world.step
+        while n > 0:
+            left = self._control.steer_steps_left
+            k = n if left == 0 else min(n, left)
+            for _ in range(k):
+                step(False)
+            n -= k
+            if left:
+                if left == k:
+                    self._steer_event()
+                else:
+                    self._control = _replace(self._control, steer_steps_left=left - k)
+
+    # -- state read-out ----------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        return self._world.getTime()
+
+    def _rotation(self) -> np.ndarray:
+        return self._body.chassis.getWorldTransform().rotation()
+
+    @property
+    def pose(self) -> Pose2:
+        """Rear-axle midpoint (on the ground) in world xy, and the chassis yaw."""
+        tf = self._body.chassis.getWorldTransform()
+        p, rot = tf.translation(), tf.rotation()
+        return Pose2(p[0], p[1], math.atan2(rot[1, 0], rot[0, 0]))
+
+    @property
+    def z_m(self) -> float:
+        """Height of the car body frame origin (rear-axle midpoint on the ground), m."""
+        return float(self._body.chassis.getWorldTransform().translation()[2])
+
+    @property
+    def roll_rad(self) -> float:
+        rot = self._rotation()
+        return math.atan2(rot[2, 1], rot[2, 2])
+
+    @property
+    def pitch_rad(self) -> float:
+        """Z-Y-X Euler pitch; positive = nose down (right-handed about y)."""
+        rot = self._rotation()
+        return math.asin(max(-1.0, min(1.0, -rot[2, 0])))
+
+    @property
+    def speed_mps(self) -> float:
+        """Velocity of the rear-axle midpoint along the car's x axis (signed), m/s."""
+        return float(self._body.chassis.getSpatialVelocity()[3])
+
+    @property
+    def lateral_speed_mps(self) -> float:
+        """Velocity of the rear-axle midpoint along the car's y axis (left positive), m/s."""
+        return float(self._body.chassis.getSpatialVelocity()[4])
+
+    @property
+    def yaw_rate_radps(self) -> float:
+        """World z component of the chassis angular velocity, rad/s (CCW positive)."""
+        return float(self._body.chassis.getAngularVelocity()[2])
+
+    @property
+    def steer_rad(self) -> float:
+        """Actual bicycle-equivalent steering angle from the two knuckle angles, rad."""
+        ql, qr = (j.getPosition(0) for j in self._body.knuckle_joints)
+        return bicycle_angle_rad(ql, qr)
+
+    def knuckle_angles_rad(self) -> tuple[float, float]:
+        """(left, right) actual knuckle angles, rad (positive = turned left)."""
+        return tuple(float(j.getPosition(0)) for j in self._body.knuckle_joints)
+
+    def wheel_contacts_xy(self) -> np.ndarray:
+        """``(4, 2)`` world xy of the FL, FR, RL, RR tyre contact points (below the wheel
+        centres along the ground normal), m."""
+        down = self.car.wheels.radius_m * self._ground_rot[:, 2]
+        return np.array([b.getWorldTransform().translation()[:2] - down[:2] for b in self._body.wheel_bodies])
+
+    def wheel_speeds_radps(self) -> np.ndarray:
+        """``(4,)`` FL, FR, RL, RR wheel spin relative to their mounts, rad/s (+ = forward)."""
+        return np.array([j.getVelocity(0) for j in self._body.wheel_joints])
+
+    # -- state ---------------------------------------------------------------------------
+    def save_state(self) -> SimState:
+        """Snapshot (positions, velocities, time, commands); restore is bit-exact."""
+        skel = self._body.skeleton
+        return SimState(skel.getPositions().copy(), skel.getVelocities().copy(), self._world.getTime(),
+                        self._control)
+
+    def restore_state(self, state: SimState) -> None:
+        skel = self._body.skeleton
+        skel.setPositions(state.positions)
+        skel.setVelocities(state.velocities)
+        self._world.setTime(state.time_s)
+        self._control = state.control
+        self._apply(self._control)
+
+    def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
+                  yaw_rate_radps: float = 0.0) -> None:
+        """Place the car at a planar state: chassis pose and velocity (speed along x, yaw
+        rate), wheels spinning consistently, knuckles at ``steer_rad`` (Ackermann). The
+        commands become (speed_mps, steer_rad, default differential) so the car carries on;
+        call :meth:`set_command` afterwards to change them. Time is unchanged."""
+        self._place(pose, float(speed_mps), float(steer_rad), float(yaw_rate_radps))
+        self.set_command(speed_mps, steer_rad)
+
+
+def _replace(c: _Control, **changes) -> _Control:
+    from dataclasses import replace
+
+    return replace(c, **changes)
