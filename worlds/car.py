@@ -155,8 +155,18 @@ class CarDescription:
         return dataclasses.asdict(self)
 
     def to_toml(self) -> str:
-        header = "# NXP Cup car description (units in field names; see docs/car.md)\n"
-        return header + tomli_w.dumps(self.to_dict())
+        """TOML text with a comment above every field (meaning, range, source)."""
+        lines = ["# NXP Cup car description (units in field names; see docs/car.md).",
+                 "# Every field is optional: a missing field takes its default.",
+                 "", tomli_w.dumps({"name": self.name}).rstrip("\n")]
+        for section, cls in _SECTION_TYPES.items():
+            lines += ["", f"[{section}]"]
+            values = dataclasses.asdict(getattr(self, section))
+            for f in fields(cls):
+                m = f.metadata
+                lines.append(f"# {m['doc']} Range {m['lo']} .. {m['hi']}. Source: {m['source']}.")
+                lines.append(tomli_w.dumps({f.name: values[f.name]}).rstrip("\n"))
+        return "\n".join(lines) + "\n"
 
     def save(self, path: str | Path) -> None:
         """Write atomically."""

@@ -1,0 +1,378 @@
+"""Read an SDF world (ours, NXP's or any Gazebo one) into a :class:`Scene` of mesh visuals.
+
+``read_world(path)`` accepts
+
+* a world file (``.sdf`` / ``.world``, SDF 1.4 and later) or a model file (``<sdf><model>``);
+* a folder: ``world.sdf`` inside (trackgen output), else its single ``*.world`` file (or the
+  one named like the folder; NXP's model folders ship one that places the track under a car
+  at the origin), else its
+  ``model.config`` (a Gazebo model folder; ``<sdf>`` names the model file).
+
+``<include><uri>model://NAME</uri>`` is resolved by looking for a folder NAME (with a
+``model.config``) in this order: the folder of the file being read and its parents
+(the folder itself counts when it is named NAME), ``models/`` beside the world, then every
+entry of ``GAZEBO_MODEL_PATH``, ``GZ_SIM_RESOURCE_PATH``, ``IGN_GAZEBO_RESOURCE_PATH`` and
+``SDF_PATH``. ``model://ground_plane`` (Gazebo's stock model) is never looked up: it is the
+ground at its include height. Mesh URIs may be ``model://NAME/...``, ``file://...``,
+absolute, or relative to the file that contains them.
+
+Poses (SDF: ``x y z roll pitch yaw``, ``R = Rz(yaw) Ry(pitch) Rx(roll)``) compose as
+world_from_mesh = include/model pose @ link pose @ visual pose (nested models and includes
+compose too). As in the SDF specification an include ``<pose>`` REPLACES the included
+model's own top-level ``<pose>``. ``relative_to`` (SDF 1.7+) may name the model or a
+sibling link only. Mesh ``<scale>`` is applied in the mesh frame, before world_from_mesh.
+
+The car: a model named like the car (``nxp_cup_car`` by default) or holding a camera sensor
+gives ``Scene.car_pose`` / ``car_z_m`` and contributes no visuals. Only ``<mesh>``
+geometries become visuals (primitives are not track surfaces); a ``<plane>`` collision (or
+the ``ground_plane`` include) gives ``ground_z_m``.
+"""
+from __future__ import annotations
+
+import math
+import os
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pieces.pose import Pose2
+from worlds.sdf_xml import WorldError, XmlDoc, parse_pose, parse_vector, parse_xml, text_of
+
+MODEL_PATH_ENV = ("GAZEBO_MODEL_PATH", "GZ_SIM_RESOURCE_PATH", "IGN_GAZEBO_RESOURCE_PATH", "SDF_PATH")
+GROUND_MODELS = ("ground_plane",)
+DEFAULT_CAR_NAME = "nxp_cup_car"  # worlds.car.CarDescription().name
+
+# Gazebo's stock material scripts (media/materials/scripts/gazebo.material), diffuse RGBA.
+GAZEBO_MATERIALS: dict[str, tuple[float, float, float, float]] = {
+    "Gazebo/White": (1.0, 1.0, 1.0, 1.0),
+    "Gazebo/WhiteGlow": (1.0, 1.0, 1.0, 1.0),
+    "Gazebo/Black": (0.0, 0.0, 0.0, 1.0),
+    "Gazebo/FlatBlack": (0.1, 0.1, 0.1, 1.0),
+    "Gazebo/Grey": (0.7, 0.7, 0.7, 1.0),
+    "Gazebo/Gray": (0.7, 0.7, 0.7, 1.0),
+    "Gazebo/DarkGrey": (0.175, 0.175, 0.175, 1.0),
+    "Gazebo/LightGrey": (0.9, 0.9, 0.9, 1.0),
+    "Gazebo/Red": (1.0, 0.0, 0.0, 1.0),
+    "Gazebo/Green": (0.0, 1.0, 0.0, 1.0),
+    "Gazebo/Blue": (0.0, 0.0, 1.0, 1.0),
+    "Gazebo/Yellow": (1.0, 1.0, 0.0, 1.0),
+    "Gazebo/Orange": (1.0, 0.5088, 0.0468, 1.0),
+    "Gazebo/Purple": (1.0, 0.0, 1.0, 1.0),
+    "Gazebo/Turquoise": (0.0, 1.0, 1.0, 1.0),
+}
+_ROLE_WORDS = (("lane", ("lane", "inside")), ("edge", ("edge", "border")), ("marking", ("marking",)))
+
+
+@dataclass(frozen=True, eq=False)
+class MeshVisual:
+    """One mesh visual or collision placed in the world.
+
+    ``world_from_mesh`` is ``(4, 4)`` float (metres); ``scale`` ``(3,)`` is applied in the
+    mesh frame first; ``rgba`` ``(4,)`` in 0..1 or None; ``role`` is "lane", "edge",
+    "marking" or "other" (from the element name, else from the colour).
+    """
+
+    name: str
+    mesh_path: Path
+    world_from_mesh: np.ndarray
+    scale: np.ndarray
+    rgba: np.ndarray | None
+    material_name: str | None
+    role: str = "other"
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """What the simulator needs from a world file (see the module docstring)."""
+
+    source: Path
+    visuals: tuple[MeshVisual, ...]
+    collisions: tuple[MeshVisual, ...]
+    car_pose: Pose2 | None
+    car_z_m: float | None
+    track_json: Path | None
+    ground_z_m: float | None
+
+
+def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
+    """Read a world/model file or folder (see the module docstring); raises WorldError."""
+    source = pick_file(Path(path))
+    reader = _Reader(source, car_name)
+    doc = parse_xml(source)
+    reader.document(doc)
+    track_json = source.parent / "track.json"
+    return Scene(source=source, visuals=tuple(reader.visuals), collisions=tuple(reader.collisions),
+                 car_pose=reader.car_pose, car_z_m=reader.car_z_m,
+                 track_json=track_json if track_json.is_file() else None,
+                 ground_z_m=reader.ground_z_m)
+
+
+def load_mesh_world(visual: MeshVisual):
+    """The visual's mesh as a ``trimesh.Trimesh`` with vertices ``(N, 3)`` in the world frame."""
+    import trimesh
+
+    try:
+        mesh = trimesh.load_mesh(visual.mesh_path, process=False)
+    except Exception as exc:  # trimesh raises many types for bad files
+        raise WorldError(f"{visual.mesh_path}: cannot read mesh ({exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise WorldError(f"{visual.mesh_path}: expected a triangle mesh")
+    verts = np.asarray(mesh.vertices, dtype=float) * visual.scale
+    verts = verts @ visual.world_from_mesh[:3, :3].T + visual.world_from_mesh[:3, 3]
+    return trimesh.Trimesh(verts, np.asarray(mesh.faces), process=False)
+
+
+# -- files and models ----------------------------------------------------------------------
+def pick_file(path: Path) -> Path:
+    """The SDF file to read for ``path`` (a file, or a folder as in the module docstring)."""
+    if path.is_file():
+        return path
+    if not path.is_dir():
+        raise WorldError(f"{path}: world file or folder not found")
+    if (path / "world.sdf").is_file():
+        return path / "world.sdf"
+    worlds = sorted(path.glob("*.world"))
+    named = [w for w in worlds if w.stem == path.name]
+    if len(worlds) == 1 or len(named) == 1:
+        return worlds[0] if len(worlds) == 1 else named[0]
+    if (path / "model.config").is_file():
+        return model_file(path)
+    if worlds:
+        raise WorldError(f"{path}: several .world files ({', '.join(w.name for w in worlds)}); pass one")
+    raise WorldError(f"{path}: expected world.sdf, one *.world file or model.config in the folder")
+
+
+def model_file(model_dir: Path) -> Path:
+    """The model SDF file of a Gazebo model folder (``model.config``'s ``<sdf>``, newest version)."""
+    config = model_dir / "model.config"
+    if not config.is_file():
+        if (model_dir / "model.sdf").is_file():
+            return model_dir / "model.sdf"
+        raise WorldError(f"{model_dir}: model folder has no model.config")
+    doc = parse_xml(config, "model.config")
+    best: tuple[tuple[int, ...], ET.Element] | None = None
+    for el in doc.root.findall("sdf"):
+        try:
+            version = tuple(int(p) for p in el.get("version", "0").split("."))
+        except ValueError:
+            raise doc.error(el, f"<sdf version='{el.get('version')}'>: expected a version like 1.6") from None
+        if text_of(el) and (best is None or version > best[0]):
+            best = (version, el)
+    if best is None:
+        raise doc.error(doc.root, "expected an <sdf> element naming the model file")
+    path = model_dir / text_of(best[1])
+    if not path.is_file():
+        raise doc.error(best[1], f"model file {path.name} not found in {model_dir}")
+    return path
+
+
+def model_search_dirs(start_dirs: list[Path]) -> list[Path]:
+    """Folders that may hold model folders, in search order (see the module docstring)."""
+    out: list[Path] = []
+    for start in start_dirs:
+        start = start.resolve()
+        for d in (start, *start.parents):
+            out.append(d)
+        out.append(start / "models")
+    for var in MODEL_PATH_ENV:
+        out += [Path(p) for p in os.environ.get(var, "").split(os.pathsep) if p]
+    seen: set[Path] = set()
+    return [d for d in out if not (d in seen or seen.add(d))]
+
+
+def find_model(name: str, start_dirs: list[Path]) -> Path | None:
+    """Folder of model NAME, or None (a folder counts when it has a model.config/model.sdf)."""
+    def is_model(d: Path) -> bool:
+        return (d / "model.config").is_file() or (d / "model.sdf").is_file()
+
+    for d in model_search_dirs(start_dirs):
+        if d.name == name and is_model(d):
+            return d
+        if is_model(d / name):
+            return d / name
+    return None
+
+
+def resolve_uri(uri: str, doc: XmlDoc, el: ET.Element, start_dirs: list[Path]) -> Path:
+    """Absolute path of a mesh URI written in ``doc``; the file must exist."""
+    if uri.startswith("model://"):
+        name, _, rest = uri[len("model://"):].partition("/")
+        model_dir = find_model(name, [doc.path.parent, *start_dirs])
+        if model_dir is None:
+            raise doc.error(el, f"model '{name}' of URI {uri} not found (searched the folders "
+                            f"above the file, models/ beside it, {', '.join(MODEL_PATH_ENV)})")
+        path = model_dir / rest
+    elif uri.startswith("file://"):
+        path = Path(uri[len("file://"):])
+    elif "://" in uri:
+        raise doc.error(el, f"URI {uri}: only model://, file:// and file paths are supported")
+    else:
+        path = Path(uri)
+    if not path.is_absolute():
+        path = doc.path.parent / path
+    if not path.is_file():
+        raise doc.error(el, f"mesh file {path} not found (URI {uri})")
+    return path
+
+
+def _role(name: str, rgba: np.ndarray | None) -> str:
+    low = name.lower()
+    for role, words in _ROLE_WORDS:
+        if any(w in low for w in words):
+            return role
+    if rgba is None:
+        return "other"
+    return "lane" if float(np.mean(rgba[:3])) >= 0.5 else "edge"
+
+
+# -- the reader ----------------------------------------------------------------------------
+class _Reader:
+    def __init__(self, source: Path, car_name: str):
+        self.start_dirs = [source.parent]
+        self.car_name = car_name
+        self.visuals: list[MeshVisual] = []
+        self.collisions: list[MeshVisual] = []
+        self.car_pose: Pose2 | None = None
+        self.car_z_m: float | None = None
+        self.ground_z_m: float | None = None
+
+    def document(self, doc: XmlDoc, world_from_parent: np.ndarray | None = None,
+                 pose_override: np.ndarray | None = None, name: str | None = None) -> None:
+        root = doc.root
+        if root.tag != "sdf":
+            raise doc.error(root, f"expected <sdf> as the root element, found <{root.tag}>")
+        included = world_from_parent is not None
+        tf = world_from_parent if included else np.eye(4)
+        world = root.find("world")
+        models = root.findall("model")
+        if world is not None and not included:
+            for child in world:
+                if child.tag == "model":
+                    self.model(doc, child, tf)
+                elif child.tag == "include":
+                    self.include(doc, child, tf)
+        elif models:
+            for model in models[:1] if included else models:  # an include names one model
+                self.model(doc, model, tf, pose_override, name)
+        else:
+            raise doc.error(root, "expected a <world> or <model> element under <sdf>")
+
+    def include(self, doc: XmlDoc, inc: ET.Element, parent_tf: np.ndarray) -> None:
+        uri_el = inc.find("uri")
+        uri = text_of(uri_el)
+        if not uri:
+            raise doc.error(inc, "<include> without a <uri>")
+        pose_el = inc.find("pose")
+        pose = parse_pose(doc, pose_el) if pose_el is not None else None
+        name = text_of(inc.find("name")) or None
+        target = uri[len("model://"):].rstrip("/") if uri.startswith("model://") else None
+        if target in GROUND_MODELS:
+            self._ground(parent_tf @ (pose if pose is not None else np.eye(4)))
+            return
+        if target is not None:
+            model_dir = find_model(target, [doc.path.parent, *self.start_dirs])
+            if model_dir is None:
+                raise doc.error(uri_el, f"model '{target}' not found (searched the folders above "
+                                f"the file, models/ beside it, {', '.join(MODEL_PATH_ENV)})")
+        else:
+            model_dir = Path(uri[len("file://"):] if uri.startswith("file://") else uri)
+            if not model_dir.is_absolute():
+                model_dir = doc.path.parent / model_dir
+            if not model_dir.is_dir():
+                raise doc.error(uri_el, f"included model folder {model_dir} not found")
+        self.document(parse_xml(model_file(model_dir)), parent_tf, pose, name)
+
+    def model(self, doc: XmlDoc, el: ET.Element, parent_tf: np.ndarray,
+              pose_override: np.ndarray | None = None, name: str | None = None) -> None:
+        name = name or el.get("name", "")
+        model_tf = parent_tf @ (pose_override if pose_override is not None
+                                else parse_pose(doc, el.find("pose")))
+        if name == self.car_name or any(s.get("type") in ("camera", "rgbd_camera", "depth_camera")
+                                        for s in el.iter("sensor")):
+            if self.car_pose is None:
+                yaw = math.atan2(model_tf[1, 0], model_tf[0, 0])
+                self.car_pose = Pose2(model_tf[0, 3], model_tf[1, 3], yaw)
+                self.car_z_m = float(model_tf[2, 3])
+            return
+        if name in GROUND_MODELS:
+            self._ground(model_tf)
+        links = {link.get("name", ""): link for link in el.findall("link")}
+        link_tfs: dict[str, np.ndarray] = {}
+
+        def link_tf(link_name: str, depth: int = 0) -> np.ndarray:
+            if link_name not in link_tfs:
+                link = links[link_name]
+                pose_el = link.find("pose")
+                rel = (pose_el.get("relative_to", "") if pose_el is not None else "").strip()
+                if rel in ("", "__model__", name):
+                    base = model_tf
+                elif rel in links and rel != link_name and depth < len(links):
+                    base = link_tf(rel, depth + 1)
+                else:
+                    raise doc.error(pose_el, f"<pose relative_to='{rel}'>: expected the model or "
+                                    f"a sibling link ({', '.join(links)})")
+                link_tfs[link_name] = base @ parse_pose(doc, pose_el)
+            return link_tfs[link_name]
+
+        for link_name, link in links.items():
+            ltf = link_tf(link_name)
+            for kind, out in (("visual", self.visuals), ("collision", self.collisions)):
+                for item in link.findall(kind):
+                    self.geometry(doc, item, ltf, link_name, out, kind == "collision")
+        for child in el:
+            if child.tag == "model":
+                self.model(doc, child, model_tf)
+            elif child.tag == "include":
+                self.include(doc, child, model_tf)
+
+    def geometry(self, doc: XmlDoc, item: ET.Element, link_tf: np.ndarray, link_name: str,
+                 out: list[MeshVisual], is_collision: bool) -> None:
+        pose_el = item.find("pose")
+        rel = (pose_el.get("relative_to", "") if pose_el is not None else "").strip()
+        if rel not in ("", link_name):
+            raise doc.error(pose_el, f"<pose relative_to='{rel}'>: expected the parent link '{link_name}'")
+        tf = link_tf @ parse_pose(doc, pose_el)
+        geom = item.find("geometry")
+        if geom is None:
+            raise doc.error(item, f"<{item.tag}> without <geometry>")
+        if is_collision and geom.find("plane") is not None:
+            self._ground(tf)
+        mesh = geom.find("mesh")
+        if mesh is None:
+            return
+        uri_el = mesh.find("uri")
+        if not text_of(uri_el):
+            raise doc.error(mesh, "<mesh> without a <uri>")
+        path = resolve_uri(text_of(uri_el), doc, uri_el, self.start_dirs)
+        scale = parse_vector(doc, mesh.find("scale"), 3, (1.0, 1.0, 1.0), "3 numbers (scale x y z)")
+        rgba, material_name = self.material(doc, item.find("material"))
+        name = item.get("name", "")
+        tf.setflags(write=False)
+        scale.setflags(write=False)
+        out.append(MeshVisual(name=name, mesh_path=path, world_from_mesh=tf, scale=scale, rgba=rgba,
+                              material_name=material_name, role=_role(name, rgba)))
+
+    @staticmethod
+    def material(doc: XmlDoc, mat: ET.Element | None) -> tuple[np.ndarray | None, str | None]:
+        if mat is None:
+            return None, None
+        script_name = text_of(mat.find("script/name")) or None
+        rgba = None
+        diffuse = mat.find("diffuse")
+        if diffuse is not None and text_of(diffuse):
+            values = parse_vector(doc, diffuse, len(text_of(diffuse).split()), (), "RGBA numbers")
+            if len(values) not in (3, 4):
+                raise doc.error(diffuse, f"<diffuse> '{text_of(diffuse)}' is not 3 or 4 numbers (RGBA)")
+            rgba = np.append(values, 1.0) if len(values) == 3 else values
+        elif script_name in GAZEBO_MATERIALS:
+            rgba = np.array(GAZEBO_MATERIALS[script_name])
+        if rgba is not None:
+            rgba = np.clip(rgba, 0.0, 1.0)
+            rgba.setflags(write=False)
+        return rgba, script_name
+
+    def _ground(self, tf: np.ndarray) -> None:
+        if self.ground_z_m is None:
+            self.ground_z_m = float(tf[2, 3])
