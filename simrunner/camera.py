@@ -1,0 +1,144 @@
+"""The car's camera: an exact pinhole view of the flat track, by ground-plane projection.
+
+Conventions (DESIGN.md): the image is ``(H, W) uint8``, row 0 is the top of the image
+(farthest from the car), column 0 is the car's LEFT side of the view. The camera sits in the
+car body frame (origin at the rear-axle midpoint on the ground, x forward, y left, z up) at
+``(forward_m, 0, height_m)``, looking forward along +x, tilted down by ``pitch_rad``, with no
+roll or yaw. ``height_m`` is measured above the track surface (the car stands on it), so the
+track's own height in the world (``SimTrack.surface_z_m``) needs no correction.
+
+Pinhole model with square pixels: ``f_px = (W / 2) / tan(hfov / 2)``; the pixel
+``(row, col)`` centre is ``u = col + 0.5 - W / 2`` right of and ``v = row + 0.5 - H / 2``
+below the principal point (the image centre). Its ray in the car frame is
+``d = forward_axis - (u / f_px) * left_axis - (v / f_px) * up_axis`` with
+``forward_axis = (cos p, 0, -sin p)``, ``left_axis = (0, 1, 0)``, ``up_axis = (sin p, 0, cos p)``.
+
+Tracks are flat, so every ray that goes down meets the ground at one point; those points
+are computed once per camera (``ground_xy_m``, car frame). A frame is then: move those
+points by the car pose into the world, convert to raster pixels and sample the top-down
+raster bilinearly (``cv2.remap``, ``INTER_LINEAR``). Rays that point at or above the horizon,
+or meet the ground farther than ``max_range_m``, see the floor/background gray. With
+``supersample=k`` each pixel averages a ``k x k`` grid of sub-pixel rays (box filter),
+which removes aliasing of thin far lines at k^2 times the cost.
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from pieces.pose import Pose2
+from simrunner.raster import TrackRaster
+
+
+def _raster_of(raster_or_track) -> TrackRaster:
+    return raster_or_track if isinstance(raster_or_track, TrackRaster) else raster_or_track.raster
+
+
+class Camera:
+    """Pinhole camera of ``cam`` (a ``worlds.car.Camera``) looking at ``raster`` (a
+    ``TrackRaster``, or a ``SimTrack`` whose raster is used)."""
+
+    def __init__(self, cam, raster, *, max_range_m: float = 10.0, supersample: int = 1) -> None:
+        if int(supersample) < 1:
+            raise ValueError(f"supersample must be >= 1, got {supersample!r}")
+        self.cam = cam
+        self.raster = _raster_of(raster)
+        self.width_px = int(cam.width_px)
+        self.height_px = int(cam.height_px)
+        self.max_range_m = float(max_range_m)
+        self.supersample = k = int(supersample)
+        self.f_px = (self.width_px / 2.0) / math.tan(float(cam.hfov_rad) / 2.0)
+        # Sub-pixel ray grid (H*k, W*k): sample centres inside each pixel.
+        sub = (np.arange(k) + 0.5) / k
+        cols = (np.arange(self.width_px)[:, None] + sub[None, :]).ravel()
+        rows = (np.arange(self.height_px)[:, None] + sub[None, :]).ravel()
+        gx, gy, ok = self._ground(rows[:, None] - self.height_px / 2.0,
+                                  cols[None, :] - self.width_px / 2.0)
+        self.ground_xy_m = np.stack((gx, gy), axis=-1)  # (H*k, W*k, 2), nan where no ground
+        self._gx = np.where(ok, gx, 0.0)
+        self._gy = np.where(ok, gy, 0.0)
+        self._miss = ~ok
+
+    # -- geometry ------------------------------------------------------------------
+    def _ground(self, v: np.ndarray, u: np.ndarray):
+        """Ground hit of rays at image offsets ``v`` (down) and ``u`` (right), in pixels."""
+        p = float(self.cam.pitch_rad)
+        h = float(self.cam.height_m)
+        a = -u / self.f_px  # along the car's left
+        b = -v / self.f_px  # along the camera's up axis
+        dx = math.cos(p) + b * math.sin(p)
+        dz = -math.sin(p) + b * math.cos(p)
+        dx, a, dz = np.broadcast_arrays(dx, a, dz)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(dz < 0, h / -dz, np.inf)
+            gx = float(self.cam.forward_m) + t * dx
+            gy = t * a
+        ok = np.isfinite(t) & (np.hypot(gx - float(self.cam.forward_m), gy) <= self.max_range_m)
+        return np.where(ok, gx, np.nan), np.where(ok, gy, np.nan), ok
+
+    def ground_point_of_pixel(self, row: float, col: float) -> tuple[float, float]:
+        """Car-frame ground point ``(x_m, y_m)`` seen at the centre of pixel ``(row, col)``;
+        ``(nan, nan)`` if that ray does not meet the ground within ``max_range_m``."""
+        gx, gy, _ = self._ground(np.float64(row + 0.5 - self.height_px / 2.0),
+                                 np.float64(col + 0.5 - self.width_px / 2.0))
+        return float(gx), float(gy)
+
+    def look_ahead_m(self, row: float) -> float:
+        """Car-frame x (metres ahead of the rear axle) of the ground seen at the middle of
+        ``row`` (on the image's vertical centre line); ``inf`` at or above the horizon."""
+        gx, _, ok = self._ground(np.float64(row + 0.5 - self.height_px / 2.0), np.float64(0.0))
+        return float(gx) if bool(ok) else math.inf
+
+    def visible_width_m(self, row: float) -> float:
+        """Ground width (m) spanned by ``row`` from the left edge of column 0 to the right edge
+        of the last column; ``inf`` if the row does not see the ground."""
+        v = np.float64(row + 0.5 - self.height_px / 2.0)
+        _, yl, okl = self._ground(v, np.float64(-self.width_px / 2.0))
+        _, yr, okr = self._ground(v, np.float64(self.width_px / 2.0))
+        return float(yl - yr) if bool(okl) and bool(okr) else math.inf
+
+    # -- rendering -----------------------------------------------------------------
+    def _maps(self, pose: Pose2, rows: slice):
+        r = self.raster
+        c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+        inv = 1.0 / r.m_per_px
+        gx, gy = self._gx[rows], self._gy[rows]
+        # world = pose (x, y) + R(yaw) g; px col = (X - x0)/m, row = (y0 - Y)/m
+        map_x = ((c * inv) * gx - (s * inv) * gy + (pose.x_m - r.origin_xy_m[0]) * inv).astype(np.float32)
+        map_y = (-(s * inv) * gx - (c * inv) * gy + (r.origin_xy_m[1] - pose.y_m) * inv).astype(np.float32)
+        miss = self._miss[rows]
+        map_x[miss] = -10.0
+        map_y[miss] = -10.0
+        return map_x, map_y
+
+    def _sample(self, pose: Pose2, rows: slice) -> np.ndarray:
+        map_x, map_y = self._maps(pose, rows)
+        img = cv2.remap(self.raster.image, map_x, map_y, interpolation=cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=int(self.raster.floor_gray))
+        k = self.supersample
+        if k == 1:
+            return img
+        h, w = img.shape[0] // k, img.shape[1] // k
+        total = img.reshape(h, k, w, k).sum(axis=(1, 3), dtype=np.uint32)
+        return ((total + (k * k) // 2) // (k * k)).astype(np.uint8)
+
+    def render(self, pose: Pose2) -> np.ndarray:
+        """The image ``(H, W) uint8`` seen from a car whose body frame is at ``pose``."""
+        return self._sample(pose, slice(None))
+
+    def render_row(self, pose: Pose2, row: int) -> np.ndarray:
+        """One image row ``(W,) uint8``, equal to ``render(pose)[row]`` (cheaper)."""
+        row = int(row)
+        if not 0 <= row < self.height_px:
+            raise IndexError(f"row {row} outside the image (0..{self.height_px - 1})")
+        k = self.supersample
+        return self._sample(pose, slice(row * k, (row + 1) * k))[0]
+
+    def add_noise(self, img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A copy of ``img`` (uint8, any shape) plus Gaussian noise of std ``noise_std``
+        (0-255 scale), rounded and clipped to 0..255. Only ``rng`` supplies randomness."""
+        std = float(self.cam.noise_std)
+        noisy = np.asarray(img, dtype=np.float64) + rng.normal(0.0, std, size=np.shape(img))
+        return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)

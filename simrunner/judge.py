@@ -1,0 +1,176 @@
+"""Lap counting and off-track detection from the car's poses (no physics, no rendering).
+
+Laps. The gate is the segment through ``track.gate`` across its heading, ``+-
+track.gate_half_width_m`` long on each side. A lap is counted when the rear-axle midpoint
+(the car pose's origin) crosses that segment in the gate's heading direction after travelling
+at least ``min_lap_fraction * track.lap_length_m`` since the previous counted crossing.
+Crossings are found between consecutive updates on the straight line joining the two
+positions; the crossing time (and distance) is interpolated linearly.
+- Lap 1 starts at the first update if the car stands on the gate line then (within
+  ``on_gate_tol_m`` along the gate heading, inside the segment): NXP's worlds start the car
+  on the gate, so timing starts at t = 0.
+- Otherwise lap 1 starts at the first forward crossing (trackgen's START_FINISH tracks start
+  the car 0.3 m behind the gate): that crossing needs no minimum distance.
+- Crossing backwards emits a ``"gate_backward"`` event and never counts; a forward crossing
+  too soon after the last one (less than the minimum distance) is ignored.
+- After ``laps`` laps the judge is ``finished`` and counts no more.
+
+Off track. A wheel is off the road when every sample of its contact patch lies outside
+``track.road_mask``; the patch is modelled as a segment across the tyre (along the car's
+lateral axis, the front wheels' steering ignored), ``tyre_width_m`` long, centred on the
+wheel's contact point, sampled at ``PATCH_SAMPLES`` points. Edge lines and markings belong to
+the road, so a wheel on the black edge line is on the road; a wheel overhanging the edge is on
+the road while any part of its tyre touches it. ``off_track`` is True while any wheel is off;
+``"off_track"`` / ``"on_track"`` events mark the changes.
+
+Events: ``Event(t_s, kind, text)`` with kind in ``"lap_start"``, ``"lap"``, ``"finished"``,
+``"gate_backward"``, ``"off_track"``, ``"on_track"``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from pieces.pose import Pose2
+
+WHEEL_NAMES = ("FL", "FR", "RL", "RR")
+PATCH_SAMPLES = 5
+
+
+@dataclass(frozen=True)
+class Event:
+    t_s: float
+    kind: str
+    text: str
+
+
+class Judge:
+    """Referee of one run on ``track`` (a ``SimTrack``) for ``laps`` laps."""
+
+    def __init__(self, track, *, laps: int, min_lap_fraction: float = 0.5,
+                 tyre_width_m: float = 0.025, on_gate_tol_m: float = 0.02) -> None:
+        if int(laps) < 1:
+            raise ValueError(f"laps must be >= 1, got {laps!r}")
+        if not 0.0 <= float(min_lap_fraction) <= 1.0:
+            raise ValueError(f"min_lap_fraction must be in [0, 1], got {min_lap_fraction!r}")
+        self.track = track
+        self.laps = int(laps)
+        self.min_lap_distance_m = float(min_lap_fraction) * float(track.lap_length_m)
+        self.on_gate_tol_m = float(on_gate_tol_m)
+        self._patch = np.linspace(-tyre_width_m / 2.0, tyre_width_m / 2.0, PATCH_SAMPLES)
+        g = track.gate
+        self._gate_xy = np.array([g.x_m, g.y_m])
+        self._gate_dir = np.array([math.cos(g.yaw_rad), math.sin(g.yaw_rad)])
+        self._gate_left = np.array([-math.sin(g.yaw_rad), math.cos(g.yaw_rad)])
+        self._half = float(track.gate_half_width_m)
+        self._prev: tuple[float, float, float, float] | None = None  # t, s, l, distance
+        self._prev_xy: np.ndarray | None = None
+        self._distance_m = 0.0
+        self._lap_start: tuple[float, float] | None = None  # t, distance
+        self._lap_times: list[float] = []
+        self._off_wheels: tuple[str, ...] = ()
+
+    # -- state ---------------------------------------------------------------------
+    @property
+    def laps_completed(self) -> int:
+        return len(self._lap_times)
+
+    @property
+    def lap_times_s(self) -> list[float]:
+        return list(self._lap_times)
+
+    @property
+    def finished(self) -> bool:
+        return self.laps_completed >= self.laps
+
+    @property
+    def lap_started_s(self) -> float | None:
+        """Start time of the lap being driven (None before lap 1 starts)."""
+        return None if self._lap_start is None else self._lap_start[0]
+
+    @property
+    def off_track(self) -> bool:
+        return bool(self._off_wheels)
+
+    @property
+    def off_wheels(self) -> tuple[str, ...]:
+        """Names (FL, FR, RL, RR) of the wheels now off the road."""
+        return self._off_wheels
+
+    @property
+    def distance_m(self) -> float:
+        """Path length of the rear-axle midpoint so far."""
+        return self._distance_m
+
+    # -- update --------------------------------------------------------------------
+    def update(self, t_s: float, pose: Pose2, wheel_xy: np.ndarray) -> list[Event]:
+        """Feed the state at time ``t_s``: car ``pose`` and wheel contact points ``wheel_xy``
+        ``(4, 2)`` world metres (FL, FR, RL, RR). Returns the events since the last update."""
+        events: list[Event] = []
+        xy = np.array([pose.x_m, pose.y_m])
+        rel = xy - self._gate_xy
+        s, lat = float(rel @ self._gate_dir), float(rel @ self._gate_left)
+        if self._prev is None:
+            if abs(s) <= self.on_gate_tol_m and abs(lat) <= self._half:
+                self._lap_start = (float(t_s), 0.0)
+                events.append(Event(float(t_s), "lap_start", "lap 1 started (car starts on the gate)"))
+        else:
+            self._distance_m += float(np.hypot(*(xy - self._prev_xy)))
+            events += self._gate_events(float(t_s), s, lat)
+        self._prev = (float(t_s), s, lat, self._distance_m)
+        self._prev_xy = xy
+        events += self._wheel_events(float(t_s), pose, wheel_xy)
+        return events
+
+    def _gate_events(self, t_s: float, s: float, lat: float) -> list[Event]:
+        t0, s0, lat0, d0 = self._prev
+        forward = s0 < 0.0 <= s
+        backward = s < 0.0 <= s0
+        if not (forward or backward) or self.finished:
+            return []
+        f = s0 / (s0 - s)
+        if abs(lat0 + f * (lat - lat0)) > self._half:
+            return []
+        tc = t0 + f * (t_s - t0)
+        dc = d0 + f * (self._distance_m - d0)
+        if backward:
+            return [Event(tc, "gate_backward", "crossed the finish gate backwards (not counted)")]
+        if self._lap_start is None:
+            self._lap_start = (tc, dc)
+            return [Event(tc, "lap_start", "lap 1 started (first gate crossing)")]
+        start_t, start_d = self._lap_start
+        if dc - start_d < self.min_lap_distance_m:
+            return []
+        self._lap_times.append(tc - start_t)
+        n = self.laps_completed
+        events = [Event(tc, "lap", f"lap {n} in {tc - start_t:.3f} s")]
+        if self.finished:
+            events.append(Event(tc, "finished", f"{n} lap{'s' if n > 1 else ''} done in "
+                                f"{sum(self._lap_times):.3f} s"))
+            self._lap_start = None
+        else:
+            self._lap_start = (tc, dc)
+            events.append(Event(tc, "lap_start", f"lap {n + 1} started"))
+        return events
+
+    def wheels_on_road(self, pose: Pose2, wheel_xy: np.ndarray) -> np.ndarray:
+        """``(4,) bool``: does each wheel's contact patch touch the road anywhere."""
+        wheels = np.asarray(wheel_xy, dtype=float).reshape(4, 2)
+        left = np.array([-math.sin(pose.yaw_rad), math.cos(pose.yaw_rad)])
+        pts = wheels[:, None, :] + self._patch[None, :, None] * left  # (4, P, 2)
+        on = self.track.raster.on_road(pts.reshape(-1, 2)).reshape(4, -1)
+        return on.any(axis=1)
+
+    def _wheel_events(self, t_s: float, pose: Pose2, wheel_xy: np.ndarray) -> list[Event]:
+        on = self.wheels_on_road(pose, wheel_xy)
+        off = tuple(name for name, ok in zip(WHEEL_NAMES, on) if not ok)
+        events = []
+        if off and not self._off_wheels:
+            events.append(Event(t_s, "off_track", f"wheel{'s' if len(off) > 1 else ''} "
+                                f"{', '.join(off)} off the track at ({pose.x_m:.2f}, {pose.y_m:.2f}) m"))
+        elif self._off_wheels and not off:
+            events.append(Event(t_s, "on_track", "all wheels back on the track"))
+        self._off_wheels = off
+        return events

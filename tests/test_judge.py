@@ -1,0 +1,159 @@
+"""Judge: laps through the gate, backwards crossings, wheels off the road (simrunner.judge)."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import shapely
+
+from pieces.pose import Pose2
+from simrunner.judge import Judge
+from simrunner.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_from_polygon
+from simrunner.track import SimTrack
+
+TRACKS = Path(__file__).resolve().parents[2] / "shared" / "tracks"
+R_M = 1.5  # centreline radius of a ring track, driven counter-clockwise
+HALF_ROAD_M = 0.275  # white 0.51 m + two 0.02 m edge lines
+LINE_M = 0.02
+WHEELBASE_M, TRACK_M = 0.175, 0.154
+
+
+def ring_track(start: Pose2 | None = None) -> SimTrack:
+    c = shapely.Point(0, 0)
+    road = c.buffer(R_M + HALF_ROAD_M, 256).difference(c.buffer(R_M - HALF_ROAD_M, 256))
+    white = c.buffer(R_M + HALF_ROAD_M - LINE_M, 256).difference(c.buffer(R_M - HALF_ROAD_M + LINE_M, 256))
+    raster = build_raster([layer_from_polygon("edges", road.difference(white), BLACK_GRAY),
+                           layer_from_polygon("lane", white, WHITE_GRAY)])
+    gate = Pose2(R_M, 0.0, math.pi / 2)
+    return SimTrack(name="ring", source=Path("ring"), raster=raster, surface_z_m=0.0,
+                    start=start or gate, gate=gate, gate_half_width_m=HALF_ROAD_M,
+                    lap_length_m=2 * math.pi * R_M)
+
+
+def ring_pose(angle_rad: float, radius_m: float = R_M, ccw: bool = True) -> Pose2:
+    heading = angle_rad + (math.pi / 2 if ccw else -math.pi / 2)
+    return Pose2(radius_m * math.cos(angle_rad), radius_m * math.sin(angle_rad), heading)
+
+
+def wheels(pose: Pose2) -> np.ndarray:
+    """Contact points FL, FR, RL, RR of a car at ``pose`` (rear-axle midpoint)."""
+    local = np.array([[WHEELBASE_M, TRACK_M / 2], [WHEELBASE_M, -TRACK_M / 2],
+                      [0.0, TRACK_M / 2], [0.0, -TRACK_M / 2]])
+    return pose.apply(local)
+
+
+def drive(judge: Judge, angles_rad: np.ndarray, dt_s: float, ccw: bool = True):
+    events = []
+    for i, a in enumerate(angles_rad):
+        p = ring_pose(a, ccw=ccw)
+        events += judge.update(i * dt_s, p, wheels(p))
+    return events
+
+
+@pytest.fixture(scope="module")
+def ring():
+    return ring_track()
+
+
+@pytest.mark.parametrize("speed_mps", [1.0, 2.7])
+def test_laps_on_a_ring_from_the_gate(ring, speed_mps):
+    dt = 0.013  # does not divide the lap time: crossings fall between updates
+    lap_t = 2 * math.pi * R_M / speed_mps
+    t = np.arange(0.0, 3.3 * lap_t, dt)
+    judge = Judge(ring, laps=3)
+    events = drive(judge, t * speed_mps / R_M, dt)
+    assert judge.laps_completed == 3 and judge.finished
+    # chord vs arc between updates: crossing-time error ~ (dt * v)^2 / R, well under 1 ms
+    assert judge.lap_times_s == pytest.approx([lap_t] * 3, abs=1e-3)
+    kinds = [e.kind for e in events]
+    assert kinds == ["lap_start", "lap", "lap_start", "lap", "lap_start", "lap", "finished"]
+    assert events[0].t_s == 0.0
+    assert judge.distance_m == pytest.approx(speed_mps * t[-1], rel=1e-4)
+    assert not judge.off_track
+
+
+def test_start_behind_gate_starts_timing_at_the_first_crossing():
+    behind = -0.3 / R_M
+    track = ring_track(start=ring_pose(behind))
+    judge = Judge(track, laps=2)
+    dt, v = 0.01, 1.5
+    t = np.arange(0.0, 8.0, dt)
+    events = drive(judge, behind + t * v / R_M, dt)
+    starts = [e for e in events if e.kind == "lap_start"]
+    assert starts[0].t_s == pytest.approx(0.3 / v, abs=1e-6)
+    assert judge.laps_completed == 1
+    assert judge.lap_times_s[0] == pytest.approx(2 * math.pi * R_M / v, abs=1e-3)
+
+
+def test_backward_crossings_never_count(ring):
+    judge = Judge(ring, laps=1)
+    t = np.arange(0.0, 15.0, 0.01)
+    events = drive(judge, -t / R_M, 0.01, ccw=False)  # clockwise, 1 m/s, ~1.6 loops
+    assert judge.laps_completed == 0
+    # leaving the start line backwards is one backward crossing, each loop another
+    assert [e.kind for e in events] == ["lap_start", "gate_backward", "gate_backward"]
+    assert events[2].t_s == pytest.approx(2 * math.pi * R_M, abs=1e-3)
+
+
+def test_reversing_across_the_gate_and_back_does_not_count():
+    behind = -0.3 / R_M
+    judge = Judge(ring_track(start=ring_pose(behind)), laps=1)
+    angles = np.concatenate([np.linspace(behind, 0.2, 50), np.linspace(0.2, -0.2, 50),
+                             np.linspace(-0.2, 0.3, 50)])
+    events = drive(judge, angles, 0.02)
+    assert [e.kind for e in events] == ["lap_start", "gate_backward"]
+    assert judge.laps_completed == 0
+    # ... and a full lap afterwards counts from the first crossing
+    for i, a in enumerate(np.linspace(0.3, 2 * math.pi + 0.1, 400)):
+        p = ring_pose(a)
+        events += judge.update(3.0 + i * 0.02, p, wheels(p))
+    assert judge.laps_completed == 1
+
+
+def test_short_wiggle_across_the_gate_is_ignored(ring):
+    judge = Judge(ring, laps=1)
+    angles = np.concatenate([np.linspace(0, 0.1, 10), np.linspace(0.1, -0.1, 10), np.linspace(-0.1, 0.5, 10)])
+    events = drive(judge, angles, 0.05)
+    assert judge.laps_completed == 0
+    assert "lap" not in [e.kind for e in events]
+
+
+def test_gate_segment_has_finite_width(ring):
+    """Crossing the gate's line outside its half width is not a crossing."""
+    judge = Judge(ring, laps=1, min_lap_fraction=0.0)
+    far = [Pose2(R_M + 0.5, y, math.pi / 2) for y in np.linspace(-0.5, 0.5, 11)]
+    events = []
+    for i, p in enumerate(far):
+        events += judge.update(i * 0.1, p, wheels(p))
+    assert not [e for e in events if e.kind in ("lap_start", "lap")]
+
+
+def test_wheel_off_road_detected_wheel_on_edge_line_not(ring):
+    judge = Judge(ring, laps=1)
+    outer_edge = R_M + HALF_ROAD_M
+    # Car heading north at x = X: its right wheels (FR, RR) are at X + TRACK_M / 2.
+    def car_at(right_wheel_x):
+        return Pose2(right_wheel_x - TRACK_M / 2, -0.05, math.pi / 2)
+
+    on_line = car_at(outer_edge - LINE_M / 2)  # right wheels on the black edge line
+    assert judge.update(0.0, on_line, wheels(on_line)) == []
+    assert not judge.off_track
+    half_over = car_at(outer_edge + 0.008)  # tyre (0.025 m) still touches the line
+    judge.update(0.1, half_over, wheels(half_over))
+    assert not judge.off_track
+    out = car_at(outer_edge + 0.03)
+    events = judge.update(0.2, out, wheels(out))
+    assert judge.off_track and judge.off_wheels == ("FR", "RR")
+    assert [e.kind for e in events] == ["off_track"] and "FR, RR" in events[0].text
+    back = car_at(R_M)
+    events = judge.update(0.3, back, wheels(back))
+    assert not judge.off_track and [e.kind for e in events] == ["on_track"]
+
+
+def test_bad_arguments(ring):
+    with pytest.raises(ValueError, match="laps"):
+        Judge(ring, laps=0)
+    with pytest.raises(ValueError, match="min_lap_fraction"):
+        Judge(ring, laps=1, min_lap_fraction=1.5)
