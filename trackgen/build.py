@@ -1,0 +1,228 @@
+"""``trackgen build`` and ``trackgen validate`` as library functions.
+
+:func:`check_layout` chains and validates a layout; :func:`build` refuses a failing layout
+(:class:`ValidationFailed`, nothing written) and otherwise writes the output folder of
+docs/DESIGN.md ("Track output folder") atomically: everything goes into a temporary folder
+beside ``out_dir`` that is renamed into place at the end, so a failed build leaves no
+``out_dir`` (and an existing one is only replaced with ``force=True``).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import trimesh
+
+from worlds.car import CarDescription
+
+from .chain import Track, chain
+from .errors import TrackError
+from .export import FORMAT, TrackGeometry, dumps_track_json, track_geometry, track_json
+from .layout import Layout, load_layout
+from .validate import Problem, check_meshes, errors, validate_track
+
+TRACK_JSON_KEYS = ("format", "name", "layout", "settings", "pieces", "start_pose",
+                   "finish_gate", "centreline", "length_m", "surface_z_m", "lane_polygon",
+                   "road_polygon")
+
+
+class ValidationFailed(TrackError):
+    """The layout has problems; ``problems`` lists them all (warnings included)."""
+
+    def __init__(self, problems: list[Problem]) -> None:
+        self.problems = list(problems)
+        errs = errors(self.problems)
+        more = f" (and {len(errs) - 1} more)" if len(errs) > 1 else ""
+        super().__init__(f"{errs[0]}{more}" if errs else "validation failed")
+
+
+class OutputError(TrackError):
+    """The output folder cannot be written (exists without force, permissions, disk)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Checked:
+    """A chained, validated layout: ``track``, its world ``geometry`` and ``problems``."""
+
+    track: Track
+    geometry: TrackGeometry
+    problems: list[Problem]
+
+    @property
+    def ok(self) -> bool:
+        return not errors(self.problems)
+
+
+@dataclass(frozen=True)
+class BuildResult:
+    """Paths written by :func:`build` and the warnings that did not stop it."""
+
+    out_dir: Path
+    world_path: Path
+    track_json_path: Path
+    preview_path: Path
+    preview_size_px: tuple[int, int]
+    warnings: list[Problem]
+
+
+def check_layout(layout: Layout, car: CarDescription | None = None) -> Checked:
+    """Chain ``layout`` and run every check of :mod:`trackgen.validate` (meshes included)."""
+    car = car or CarDescription()
+    track = chain(layout)
+    geometry = track_geometry(track)
+    problems = validate_track(track, car.min_turn_radius_m, meshes=geometry.meshes)
+    return Checked(track, geometry, problems)
+
+
+def build(layout: str | Path | Layout, out_dir: str | Path, *, force: bool = False,
+          car: CarDescription | None = None) -> BuildResult:
+    """Validate and write the output folder. Raises :class:`LayoutError` (bad layout),
+    :class:`ValidationFailed` (problems; nothing written), :class:`OutputError` (cannot
+    write; nothing left behind), ``worlds.WorldError`` from the SDF layer."""
+    car = car or CarDescription()
+    if not isinstance(layout, Layout):
+        layout = load_layout(layout)
+    out_dir = Path(out_dir)
+    if layout.name == car.name:
+        raise TrackError(f"{layout.path}: track name {layout.name!r} equals the car model "
+                         "name; choose another with '@name = ...'")
+    _check_target(out_dir, force)
+    checked = check_layout(layout, car)
+    if not checked.ok:
+        raise ValidationFailed(checked.problems)
+    try:
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
+    except OSError as exc:
+        raise OutputError(f"{out_dir}: cannot write output folder ({exc.strerror or exc})") from None
+    try:
+        size = _write_all(tmp, checked, car)
+        _move_into_place(tmp, out_dir, force)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise OutputError(f"{out_dir}: cannot write output folder ({exc.strerror or exc})") from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return BuildResult(out_dir, out_dir / "world.sdf", out_dir / "track.json",
+                       out_dir / "preview.png", size, checked.problems)
+
+
+def _check_target(out_dir: Path, force: bool) -> None:
+    if out_dir.exists() or out_dir.is_symlink():
+        if not out_dir.is_dir() or out_dir.is_symlink():
+            raise OutputError(f"{out_dir}: exists and is not a folder; choose another output")
+        if not force:
+            raise OutputError(f"{out_dir}: already exists (use --force to replace it)")
+
+
+def _write_all(tmp: Path, checked: Checked, car: CarDescription) -> tuple[int, int]:
+    from worlds.sdf_write import write_track_world
+    from .preview import render_preview
+
+    track, geometry = checked.track, checked.geometry
+    name = track.layout.name
+    mesh_dir = tmp / "models" / name / "meshes"
+    mesh_dir.mkdir(parents=True)
+    rel = {}
+    for role, mesh in geometry.meshes.items():
+        mesh.export(mesh_dir / f"{role}.stl", file_type="stl")
+        rel[role] = f"meshes/{role}.stl"
+    write_track_world(tmp, track_name=name, meshes=rel, start_pose=track.car_start_pose(),
+                      surface_z_m=track.layout.settings.thickness_m, car=car)
+    (tmp / "track.json").write_text(dumps_track_json(track_json(track, geometry)))
+    return render_preview(track, geometry, tmp / "preview.png")
+
+
+def _move_into_place(tmp: Path, out_dir: Path, force: bool) -> None:
+    os.chmod(tmp, 0o755 & ~_umask())
+    if out_dir.exists():
+        if not force:  # appeared while we were building
+            raise OutputError(f"{out_dir}: already exists (use --force to replace it)")
+        trash = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=out_dir.parent))
+        os.replace(out_dir, trash / "old")
+        os.replace(tmp, out_dir)
+        shutil.rmtree(trash, ignore_errors=True)
+    else:
+        os.replace(tmp, out_dir)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+# -- validate PATH ---------------------------------------------------------------------------
+def validate_path(path: str | Path, car: CarDescription | None = None, *,
+                  sdf_checker: bool = True) -> list[Problem]:
+    """Problems of a layout file, or of a build folder (its track.json's layout re-checked
+    if it can be found, plus the folder's meshes, track.json fields and world files).
+    Raises :class:`LayoutError` / :class:`TrackError` for unreadable input."""
+    path = Path(path)
+    if not path.is_dir():
+        return check_layout(load_layout(path), car).problems
+    return _validate_folder(path, car, sdf_checker)
+
+
+def _validate_folder(folder: Path, car: CarDescription | None, sdf_checker: bool) -> list[Problem]:
+    tj = folder / "track.json"
+    try:
+        doc = json.loads(tj.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise TrackError(f"{folder}: no track.json (expected a layout file or a "
+                         "'trackgen build' output folder)") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise TrackError(f"{tj}: cannot read track.json ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise TrackError(f"{tj}: not a {FORMAT} document")
+    problems: list[Problem] = []
+    missing = [k for k in TRACK_JSON_KEYS if k not in doc]
+    if missing:
+        problems.append(Problem(str(tj), None, f"missing fields: {', '.join(missing)}", "folder"))
+    layout_path = _find_layout(str(doc.get("layout", "")), folder)
+    if layout_path is None:
+        problems.append(Problem(str(tj), None, (
+            f"layout {doc.get('layout')!r} not found: checked the folder's files only"),
+            "folder", warning=True))
+    else:
+        problems += check_layout(load_layout(layout_path), car).problems
+    name = str(doc.get("name", ""))
+    mesh_dir = folder / "models" / name / "meshes"
+    meshes = {}
+    for role in ("lane", "edges", "markings"):
+        f = mesh_dir / f"{role}.stl"
+        if not f.is_file():
+            if role != "markings":
+                problems.append(Problem(str(f), None, f"{role} mesh missing", "mesh"))
+            continue
+        try:
+            meshes[role] = trimesh.load(f, file_type="stl", force="mesh")
+        except Exception as exc:  # trimesh raises many types for bad files
+            problems.append(Problem(str(f), None, f"cannot read mesh ({exc})", "mesh"))
+    for msg in check_meshes(meshes):
+        role = msg.split(" ", 1)[0]
+        problems.append(Problem(str(mesh_dir / f"{role}.stl"), None, msg, "mesh"))
+    world = folder / "world.sdf"
+    if not world.is_file():
+        problems.append(Problem(str(world), None, "world.sdf missing", "folder"))
+    else:
+        from worlds.check import check_world
+
+        problems += [Problem(str(world), None, msg, "folder")
+                     for msg in check_world(world, use_ign=sdf_checker)]
+    return problems
+
+
+def _find_layout(recorded: str, folder: Path) -> Path | None:
+    if not recorded:
+        return None
+    p = Path(recorded)
+    for cand in ([p] if p.is_absolute() else [p, folder / p, folder.parent / p]):
+        if cand.is_file():
+            return cand
+    return None

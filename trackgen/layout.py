@@ -1,0 +1,305 @@
+"""Layout files: the text a person writes to describe a track, one piece per line.
+
+Format (UTF-8 text; see also docs/layout-format.md)::
+
+    # The thesis's figure 8 (Figure 4.2)        <- '#' starts a comment, anywhere on a line
+    @name = thesis_figure8                        <- track-wide setting: '@key = value'
+    @lane_width = 0.55
+    CROSSROADS
+    STRAIGHT_SHORT
+    TURN_LEFT x2                                  <- 'xN' repeats the piece N times
+    STRAIGHT length=1.2                           <- 'key=value' piece parameters
+    TURN_LEFT angle=90 radius=0.6   # degrees, metres
+
+Pieces (names are case-insensitive) and their parameters, in the units people type
+(lengths in metres, angles in degrees; defaults from ``pieces.PARAMS``):
+
+    STRAIGHT        length=1.0
+    STRAIGHT_SHORT  length=0.5
+    CROSSROADS      length=0.6          (crossed a second time: see trackgen.chain)
+    TURN_LEFT       radius=0.8 angle=45
+    TURN_RIGHT      radius=0.8 angle=45
+    CHICANE_LEFT    length=1.0 offset=0.2
+    CHICANE_RIGHT   length=1.0 offset=0.2
+    START_FINISH    length=1.0 mark_length=0.05
+
+Track-wide settings, each at most once, anywhere in the file (conventionally at the top):
+
+    @name = TEXT          model/track name: letters, digits, '_', '-', '.' (default: file stem)
+    @lane_width = 0.55    white lane width, m
+    @edge_width = 0.02    each black edge line, m (laid outside the lane)
+    @thickness = 0.01     slab height of the meshes, m
+    @arc_tolerance = 0.001  max chord error of curved edges, m (not scaled)
+    @scale = 1.0          multiplies every length above and every piece length/radius/offset
+                          (angles are not scaled; 1.3 gives the thesis's 130 % Gazebo track)
+
+Limits: a repeat count is 1..MAX_REPEAT, a layout has at most MAX_PIECES pieces after
+repeats and at most MAX_FILE_BYTES bytes. Every error is a :class:`LayoutError` whose
+``str`` is ``path:line: message``, e.g.
+``track.txt:7: unknown piece 'TRUN_LEFT' (expected one of STRAIGHT, ...; did you mean TURN_LEFT?)``.
+"""
+from __future__ import annotations
+
+import difflib
+import math
+import re
+import unicodedata
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Mapping
+
+from pieces.spec import PARAMS, SETTINGS_PARAMS, ParamSpec, PieceError, PieceType, TrackSettings
+
+from .errors import LayoutError
+
+MAX_REPEAT = 1000
+"""Largest ``xN`` repeat count on one line."""
+MAX_PIECES = 10_000
+"""Largest number of pieces in one layout, after expanding repeats."""
+MAX_FILE_BYTES = 4 * 1024 * 1024
+"""Largest layout file read (a 10 000-piece layout is ~200 kB)."""
+MAX_SCALE = 100.0
+"""``@scale`` must lie in (0, MAX_SCALE]."""
+
+PIECE_NAMES: tuple[str, ...] = tuple(k.name for k in PieceType)
+SCALED_SETTINGS = ("lane_width", "edge_width", "thickness")
+"""Settings that ``@scale`` multiplies (``arc_tolerance`` is a meshing accuracy, not a size)."""
+EXTRA_SETTINGS = ("name", "scale")
+
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
+_REPEAT = re.compile(r"[xX]([+-]?[0-9.eE+-]*)\Z")
+_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}\Z")
+_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+_ALLOWED_CONTROL = {"\t", "\r", "\n", "\f", "\v"}
+
+
+@dataclass(frozen=True)
+class LayoutEntry:
+    """One piece of a layout: ``kind``, the parameters given on its line (layout names and
+    typed units, unscaled, e.g. ``{"angle": 90.0}``) and its 1-based source ``line``."""
+
+    kind: PieceType
+    params: Mapping[str, float]
+    line: int
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+
+    def describe(self) -> str:
+        """``TURN_LEFT angle=90`` as it would be written."""
+        return " ".join([self.kind.name] + [f"{k}={v:g}" for k, v in self.params.items()])
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A parsed layout.
+
+    ``path``: how the source was named (used in every message). ``name``: track name.
+    ``scale``: the ``@scale`` factor. ``settings``: :class:`pieces.TrackSettings` with the
+    scale already applied. ``setting_values``: the ``@`` settings as typed (layout names,
+    unscaled, without name/scale). ``entries``: pieces in driving order, repeats expanded.
+    """
+
+    path: str
+    name: str
+    entries: tuple[LayoutEntry, ...]
+    settings: TrackSettings = field(default_factory=TrackSettings)
+    scale: float = 1.0
+    setting_values: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "entries", tuple(self.entries))
+        object.__setattr__(self, "setting_values", MappingProxyType(dict(self.setting_values)))
+
+    def piece_kwargs(self, entry: LayoutEntry) -> dict[str, float]:
+        """Keywords for ``pieces.make_piece`` (internal units, scale applied)."""
+        specs = PARAMS[entry.kind]
+        out = {}
+        for name, value in entry.params.items():
+            spec = specs[name]
+            internal = spec.to_internal(value)
+            out[spec.internal] = internal * self.scale if spec.unit == "m" else internal
+        return out
+
+    def error(self, line: int | None, message: str) -> LayoutError:
+        return LayoutError(self.path, line, message)
+
+
+def range_text(spec: ParamSpec) -> str:
+    """``0 < angle <= 180 (deg)`` / ``length > 0 (m)`` for an error message."""
+    lo_op = "<" if spec.lo_open else "<="
+    if math.isinf(spec.hi):
+        return f"{spec.name} {'>' if spec.lo_open else '>='} {spec.lo:g} ({spec.unit})"
+    hi_op = "<" if spec.hi_open else "<="
+    return f"{spec.lo:g} {lo_op} {spec.name} {hi_op} {spec.hi:g} ({spec.unit})"
+
+
+def _did_you_mean(word: str, choices) -> str:
+    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]}?" if close else ""
+
+
+def _shown(token: str, limit: int = 40) -> str:
+    """A token quoted for a message, shortened and with control characters escaped."""
+    text = token if len(token) <= limit else token[: limit - 3] + "..."
+    return repr(text)
+
+
+def decode_layout(data: bytes, path: str) -> str:
+    """Bytes -> text; non-UTF-8 bytes or control characters raise ``path:line: not a text
+    layout file`` at the line of the first offending byte."""
+    if len(data) > MAX_FILE_BYTES:
+        raise LayoutError(path, 1, f"layout file too large ({len(data)} bytes > {MAX_FILE_BYTES})")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise LayoutError(path, line, f"not a text layout file (byte 0x{data[exc.start]:02x} "
+                                      "is not UTF-8)") from None
+    for i, ch in enumerate(text):
+        if ch not in _ALLOWED_CONTROL and unicodedata.category(ch) in ("Cc", "Cs"):
+            line = text.count("\n", 0, i) + 1
+            raise LayoutError(path, line, f"not a text layout file (control character "
+                                          f"U+{ord(ch):04X})")
+    return text
+
+
+def load_layout(path: str | Path) -> Layout:
+    """Read and parse a layout file. Raises :class:`LayoutError` (unreadable: line None)."""
+    shown = str(path)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
+    except IsADirectoryError:
+        raise LayoutError(shown, None, "is a folder, expected a layout file") from None
+    except OSError as exc:
+        raise LayoutError(shown, None, f"cannot read layout ({exc.strerror or exc})") from None
+    return parse_layout(decode_layout(data, shown), path=shown, default_name=Path(shown).stem)
+
+
+def sanitize_name(text: str) -> str:
+    """A file stem made into a valid track name (``[A-Za-z0-9_.-]``, <= 64 chars)."""
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", text).lstrip(".-")[:64]
+    return name or "track"
+
+
+def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "track") -> Layout:
+    """Parse layout text (see the module docstring). Raises :class:`LayoutError`."""
+    entries: list[LayoutEntry] = []
+    values: dict[str, float] = {}
+    seen_at: dict[str, int] = {}
+    name, scale = sanitize_name(default_name), 1.0
+    lines = text.split("\n")
+    for lineno, raw in enumerate(lines, start=1):
+        body = raw.split("#", 1)[0].strip()
+        if not body:
+            continue
+        if body.startswith("@"):
+            key, value = _parse_setting(body, path, lineno)
+            if key in seen_at:
+                raise LayoutError(path, lineno, f"@{key} set twice (first on line {seen_at[key]})")
+            seen_at[key] = lineno
+            if key == "name":
+                name = value
+            elif key == "scale":
+                scale = value
+            else:
+                values[key] = value
+            continue
+        entry, repeat = _parse_piece(body, path, lineno)
+        if len(entries) + repeat > MAX_PIECES:
+            raise LayoutError(path, lineno, f"too many pieces ({len(entries) + repeat} > "
+                                            f"{MAX_PIECES} allowed in one layout)")
+        entries.extend([entry] * repeat)
+    if not entries:
+        raise LayoutError(path, 1, "empty layout: no pieces (expected one piece per line, "
+                                   "e.g. STRAIGHT)")
+    scaled = {k: (v * scale if k in SCALED_SETTINGS else v) for k, v in values.items()}
+    defaults = TrackSettings()
+    for k in SCALED_SETTINGS:
+        if k not in scaled and scale != 1.0:
+            scaled[k] = getattr(defaults, SETTINGS_PARAMS[k].internal) * scale
+    try:
+        settings = TrackSettings.from_layout(scaled)
+    except PieceError as exc:  # only reachable through extreme scale factors
+        line = seen_at.get("scale", 1)
+        raise LayoutError(path, line, f"track settings after @scale={scale:g}: {exc}") from None
+    return Layout(path=path, name=name, entries=tuple(entries), settings=settings,
+                  scale=scale, setting_values=values)
+
+
+def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
+    key, sep, value = body[1:].partition("=")
+    key, value = key.strip(), value.strip()
+    if not sep:  # also accept '@key value'
+        key, _, value = body[1:].strip().partition(" ")
+        key, value = key.strip(), value.strip()
+    known = list(EXTRA_SETTINGS) + list(SETTINGS_PARAMS)
+    if key not in known:
+        hint = _did_you_mean(key.lower(), known)
+        raise LayoutError(path, lineno, f"unknown setting @{_shown(key)[1:-1]} (expected one of "
+                                        f"{', '.join('@' + k for k in known)}{hint})")
+    if not value:
+        raise LayoutError(path, lineno, f"@{key}: missing value (expected '@{key} = VALUE')")
+    if key == "name":
+        if not _NAME.match(value):
+            raise LayoutError(path, lineno, f"@name = {_shown(value)}: expected 1-64 letters, "
+                                            "digits, '_', '-' or '.' (not starting with '.' or '-')")
+        return key, value
+    if not _NUMBER.match(value):
+        raise LayoutError(path, lineno, f"@{key} = {_shown(value)}: expected a number")
+    number = float(value)
+    if key == "scale":
+        if not (math.isfinite(number) and 0.0 < number <= MAX_SCALE):
+            raise LayoutError(path, lineno, f"@scale = {value}: expected 0 < scale <= {MAX_SCALE:g}")
+        return key, number
+    spec = SETTINGS_PARAMS[key]
+    if not spec.contains(number):
+        raise LayoutError(path, lineno, f"@{key} = {value}: expected {range_text(spec)}")
+    return key, number
+
+
+def _parse_piece(body: str, path: str, lineno: int) -> tuple[LayoutEntry, int]:
+    body = re.sub(r"\s*=\s*", "=", body)
+    word, *tokens = body.split()
+    kind_name = word.upper()
+    if kind_name not in PIECE_NAMES:
+        raise LayoutError(path, lineno, f"unknown piece {_shown(word)} (expected one of "
+                                        f"{', '.join(PIECE_NAMES)}{_did_you_mean(kind_name, PIECE_NAMES)})")
+    kind = PieceType[kind_name]
+    specs = PARAMS[kind]
+    params: dict[str, float] = {}
+    repeat: int | None = None
+    for token in tokens:
+        rep = _REPEAT.match(token)
+        if rep and "=" not in token:
+            if repeat is not None:
+                raise LayoutError(path, lineno, f"{kind_name}: repeat count given twice")
+            count = rep.group(1)
+            if not count.isdigit() or not 1 <= int(count) <= MAX_REPEAT:
+                raise LayoutError(path, lineno, f"{kind_name} {_shown(token)[1:-1]}: expected a repeat "
+                                                f"count x1 to x{MAX_REPEAT}")
+            repeat = int(count)
+            continue
+        key, sep, value = token.partition("=")
+        if not sep:
+            raise LayoutError(path, lineno, f"{kind_name}: unexpected {_shown(token)} (expected "
+                                            "key=value parameters or a repeat count like x3)")
+        key_l = key.lower()
+        if key_l not in specs:
+            known = ", ".join(specs)
+            shown_key = _shown(key) if _KEY.match(key) else _shown(key)
+            raise LayoutError(path, lineno, f"{kind_name}: unknown parameter {shown_key} (expected "
+                                            f"{known}{_did_you_mean(key_l, specs)})")
+        if key_l in params:
+            raise LayoutError(path, lineno, f"{kind_name}: parameter {key_l} given twice")
+        spec = specs[key_l]
+        if not _NUMBER.match(value):
+            raise LayoutError(path, lineno, f"{kind_name} {key_l}={_shown(value)[1:-1]}: expected a "
+                                            f"number ({spec.unit})")
+        number = float(value)
+        if not spec.contains(number):
+            raise LayoutError(path, lineno, f"{kind_name} {key_l}={value}: expected {range_text(spec)}")
+        params[key_l] = number
+    return LayoutEntry(kind, params, lineno), (repeat or 1)

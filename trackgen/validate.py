@@ -1,0 +1,213 @@
+"""Checks of a chained track, each with a stated tolerance.
+
+Every problem is one :class:`Problem` whose ``str`` is ``path:line: message`` naming the
+layout line, the piece and the measured error. Warnings do not make a track invalid.
+
+Checks and tolerances (module constants):
+  closure       final exit vs start pose: CLOSURE_TOL_M, CLOSURE_TOL_RAD
+                (reported at the last piece's line)
+  continuity    previous exit vs next entry at every joint: JOINT_TOL_M, JOINT_TOL_RAD
+                (exact by construction; still checked)
+  re-entry      a crossroads crossed a second time: the pose vs its side port,
+                REENTRY_TOL_M, REENTRY_TOL_RAD; at most two passes; same parameters
+  overlap       road footprints (lane + edges + marking) of non-adjacent physical pieces
+                intersect by more than OVERLAP_TOL_M2 (the crossing of a crossroads is one
+                physical piece, so it is no overlap); STRtree, not all pairs
+  turn radius   every piece's tightest centreline radius >= the car's minimum turning
+                radius wheelbase / tan(steering limit) (thesis eq. 5.1), RADIUS_TOL_M slack
+  start/finish  at most one START_FINISH; none is a warning (laps are then timed at the
+                start pose)
+  meshes        lane / edges / markings meshes are watertight after a binary STL round
+                trip (float32), see :func:`check_meshes`
+"""
+from __future__ import annotations
+
+import io
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+import trimesh
+
+from pieces.spec import PieceType
+
+from .chain import Track
+
+CLOSURE_TOL_M = 1e-6
+CLOSURE_TOL_RAD = 1e-6
+JOINT_TOL_M = 1e-9
+JOINT_TOL_RAD = 1e-9
+REENTRY_TOL_M = 1e-6
+REENTRY_TOL_RAD = 1e-6
+OVERLAP_TOL_M2 = 1e-6
+RADIUS_TOL_M = 1e-9
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One finding. ``line`` is 1-based or ``None`` (a file as a whole); ``check`` names
+    the check (``closure``, ``continuity``, ``reentry``, ``overlap``, ``turn_radius``,
+    ``start_finish``, ``mesh``, ``folder``); ``warning`` findings do not fail validation."""
+
+    path: str
+    line: int | None
+    message: str
+    check: str
+    warning: bool = False
+
+    def __str__(self) -> str:
+        where = self.path if self.line is None else f"{self.path}:{self.line}"
+        return f"{where}: {'warning: ' if self.warning else ''}{self.message}"
+
+
+def errors(problems: list[Problem]) -> list[Problem]:
+    """The problems that fail validation (warnings removed)."""
+    return [p for p in problems if not p.warning]
+
+
+def _deg(rad: float) -> float:
+    return math.degrees(rad)
+
+
+def validate_track(track: Track, min_turn_radius_m: float, *, meshes: dict | None = None) -> list[Problem]:
+    """All checks of the module docstring; ``meshes`` (role -> trimesh) adds the mesh check.
+    Returns problems sorted by line (stable)."""
+    path = track.layout.path
+    out: list[Problem] = []
+    out += _check_closure(track, path)
+    out += _check_joints(track, path)
+    out += _check_reentries(track, path)
+    out += _check_overlaps(track, path)
+    out += _check_radius(track, path, min_turn_radius_m)
+    out += _check_start_finish(track, path)
+    if meshes is not None:
+        first_line = track.passes[0].line
+        out += [Problem(path, first_line, msg, "mesh") for msg in check_meshes(meshes)]
+    return sorted(out, key=lambda p: (p.line or 0))
+
+
+def _check_closure(track: Track, path: str) -> list[Problem]:
+    err_m, err_rad = track.closure_error()
+    if err_m <= CLOSURE_TOL_M and err_rad <= CLOSURE_TOL_RAD:
+        return []
+    last = track.passes[-1]
+    return [Problem(path, last.line, (
+        f"track does not close: the exit of {last.kind.name} (piece {last.index + 1}) misses "
+        f"the start pose by {err_m:.3f} m / {_deg(err_rad):.1f} deg "
+        f"(tolerance {CLOSURE_TOL_M:g} m / {CLOSURE_TOL_RAD:g} rad)"), "closure")]
+
+
+def _check_joints(track: Track, path: str) -> list[Problem]:
+    out = []
+    for prev, cur in zip(track.passes, track.passes[1:]):
+        if cur.revisit:
+            continue  # checked against the side port with the re-entry tolerance
+        err_m, err_rad = prev.exit_world.distance_to(cur.entry_world)
+        if err_m > JOINT_TOL_M or err_rad > JOINT_TOL_RAD:
+            out.append(Problem(path, cur.line, (
+                f"{cur.kind.name} (piece {cur.index + 1}) does not join the previous piece: "
+                f"off by {err_m:.3g} m / {_deg(err_rad):.3g} deg "
+                f"(tolerance {JOINT_TOL_M:g} m / {JOINT_TOL_RAD:g} rad)"), "continuity"))
+    return out
+
+
+def _check_reentries(track: Track, path: str) -> list[Problem]:
+    out = []
+    for r in track.reentries:
+        p, first = track.passes[r.index], track.passes[r.of_index]
+        if r.pass_number > 2:
+            out.append(Problem(path, p.line, (
+                f"CROSSROADS crossed {r.pass_number} times: the crossroads on line {first.line} "
+                "has one side road (at most two passes)"), "reentry"))
+        if r.error_m > REENTRY_TOL_M or r.error_rad > REENTRY_TOL_RAD:
+            out.append(Problem(path, p.line, (
+                f"CROSSROADS re-entry misses side port of the crossroads on line {first.line} by "
+                f"{r.error_m:.3f} m / {_deg(r.error_rad):.1f} deg "
+                f"(tolerance {REENTRY_TOL_M:g} m / {REENTRY_TOL_RAD:g} rad)"), "reentry"))
+        if r.params_differ:
+            out.append(Problem(path, p.line, (
+                f"CROSSROADS re-entry {p.entry.describe()} differs from the crossroads on line "
+                f"{first.line} ({first.entry.describe()}): a crossroads crossed twice is one "
+                "piece; give the parameters once"), "reentry"))
+    return out
+
+
+def _adjacent_pairs(track: Track) -> set[tuple[int, int]]:
+    """Pairs of physical-piece positions joined in driving order (incl. last -> first)."""
+    position = {p.index: i for i, p in enumerate(track.physical)}
+    seq = [position[p.revisit_of if p.revisit else p.index] for p in track.passes]
+    pairs = set()
+    for a, b in zip(seq, seq[1:] + seq[:1]):
+        pairs.add((min(a, b), max(a, b)))
+    return pairs
+
+
+def _check_overlaps(track: Track, path: str) -> list[Problem]:
+    roads = track.world_footprints["road"]
+    phys = track.physical
+    if len(roads) < 2:
+        return []
+    tree = shapely.STRtree(roads)
+    left, right = tree.query(roads, predicate="intersects")
+    keep = left < right
+    left, right = left[keep], right[keep]
+    adjacent = _adjacent_pairs(track)
+    mask = np.array([(int(a), int(b)) not in adjacent for a, b in zip(left, right)], dtype=bool)
+    left, right = left[mask] if mask.size else left, right[mask] if mask.size else right
+    if left.size == 0:
+        return []
+    geoms = np.asarray(roads, dtype=object)
+    areas = shapely.area(shapely.intersection(geoms[left], geoms[right]))
+    out = []
+    for a, b, area in zip(left, right, areas):
+        if area > OVERLAP_TOL_M2:
+            pa, pb = phys[int(a)], phys[int(b)]
+            out.append(Problem(path, pb.line, (
+                f"{pb.kind.name} (piece {pb.index + 1}) overlaps {pa.kind.name} (piece "
+                f"{pa.index + 1}, line {pa.line}) by {area:.4g} m^2 "
+                f"(tolerance {OVERLAP_TOL_M2:g} m^2)"), "overlap"))
+    return out
+
+
+def _check_radius(track: Track, path: str, min_turn_radius_m: float) -> list[Problem]:
+    out = []
+    for p in track.physical:
+        r = p.piece.min_radius_m
+        if r < min_turn_radius_m - RADIUS_TOL_M:
+            out.append(Problem(path, p.line, (
+                f"{p.entry.describe()} (piece {p.index + 1}): centreline radius {r:.3f} m is "
+                f"tighter than the car's minimum turning radius {min_turn_radius_m:.3f} m "
+                "(wheelbase / tan(steering limit), thesis eq. 5.1)"), "turn_radius"))
+    return out
+
+
+def _check_start_finish(track: Track, path: str) -> list[Problem]:
+    sfs = [p for p in track.passes if p.kind is PieceType.START_FINISH]
+    if not sfs:
+        return [Problem(path, track.passes[0].line, (
+            "no START_FINISH piece: the simulator then times laps at the start pose"),
+            "start_finish", warning=True)]
+    return [Problem(path, p.line, (
+        f"second START_FINISH (piece {p.index + 1}; the first is on line {sfs[0].line}): "
+        "a track has at most one"), "start_finish") for p in sfs[1:]]
+
+
+def stl_round_trip(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The mesh as a consumer sees it: binary STL (float32) read back with merged vertices."""
+    data = mesh.export(file_type="stl")
+    return trimesh.load(io.BytesIO(data), file_type="stl", force="mesh")
+
+
+def check_meshes(meshes: dict[str, trimesh.Trimesh]) -> list[str]:
+    """Messages for meshes that are empty or not watertight after an STL round trip."""
+    out = []
+    for role, mesh in meshes.items():
+        if len(mesh.faces) == 0:
+            out.append(f"{role} mesh is empty")
+            continue
+        back = stl_round_trip(mesh)
+        if not (back.is_watertight and back.is_winding_consistent):
+            out.append(f"{role} mesh is not watertight after the STL round trip "
+                       f"({len(back.faces)} faces, Euler number {back.euler_number})")
+    return out
