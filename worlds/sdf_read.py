@@ -71,7 +71,8 @@ class MeshVisual:
 
     ``world_from_mesh`` is ``(4, 4)`` float (metres); ``scale`` ``(3,)`` is applied in the
     mesh frame first; ``rgba`` ``(4,)`` in 0..1 or None; ``role`` is "lane", "edge",
-    "marking" or "other" (from the element name, else from the colour).
+    "marking" or "other": from the element name (lane/inside, edge/border, marking), else
+    from the colour (white-ish: lane, black-ish: edge).
     """
 
     name: str
@@ -222,9 +223,11 @@ def _role(name: str, rgba: np.ndarray | None) -> str:
     for role, words in _ROLE_WORDS:
         if any(w in low for w in words):
             return role
-    if rgba is None:
-        return "other"
-    return "lane" if float(np.mean(rgba[:3])) >= 0.5 else "edge"
+    if rgba is not None and float(np.min(rgba[:3])) >= 0.8:
+        return "lane"  # white-ish
+    if rgba is not None and float(np.max(rgba[:3])) <= 0.2:
+        return "edge"  # black-ish
+    return "other"
 
 
 # -- the reader ----------------------------------------------------------------------------
