@@ -70,57 +70,38 @@ class SimTrack:
         return self.raster.road_mask
 
 
-# -- spec -> world file ------------------------------------------------------------------
-def resolve_world(spec: str | Path) -> Path:
-    """The world file a (non-layout) spec stands for; raises ``TrackLoadError``."""
-    path = Path(spec)
-    if path.is_file():
-        if path.suffix.lower() in WORLD_SUFFIXES:
-            return path
-        raise TrackLoadError(f"{path}: not a track: expected a layout (.txt), a world "
-                             f"(.sdf/.world) or a track folder")
-    if path.is_dir():
-        if (path / "world.sdf").is_file():
-            return path / "world.sdf"
-        worlds = sorted(path.glob("*.world"))
-        if len(worlds) == 1:
-            return worlds[0]
-        named = [w for w in worlds if w.stem == path.name]
-        if len(named) == 1:
-            return named[0]
-        if worlds:
-            raise TrackLoadError(f"{path}: several .world files ({', '.join(w.name for w in worlds)}); "
-                                 f"name one of them")
-        if (path / "model.config").is_file():
-            return path  # a bare model folder: read_world reads the model itself
-        raise TrackLoadError(f"{path}: no world.sdf, *.world or model.config in this folder")
-    raise TrackLoadError(f"{path}: no such file or folder")
-
-
+# -- spec -> scene -----------------------------------------------------------------------
 def load_track(spec: str | Path, *, car=None, m_per_px: float = DEFAULT_M_PER_PX) -> SimTrack:
     """Load a track from a layout file, a trackgen folder, a world file or a model folder.
 
-    ``car`` (a ``worlds.car.CarDescription``) is only used when a layout is built.
+    ``car`` (a ``worlds.car.CarDescription``) is only used when a layout is built (trackgen
+    checks curve radii against the car). Raises ``TrackLoadError`` (a ``SimError``) for a bad
+    spec, layout or world; a layout's own error is its ``__cause__``.
     """
     path = Path(spec)
     if path.is_file() and path.suffix.lower() in LAYOUT_SUFFIXES:
-        from trackgen.build import build_track  # trackgen is only needed for layouts
+        from trackgen import TrackError
+        from trackgen.build import build  # trackgen is only needed for layouts
 
         with tempfile.TemporaryDirectory(prefix="nxpcup-track-") as tmp:
-            out = Path(tmp) / "track"
-            build_track(path, out, car=car)
-            scene = _read_world(resolve_world(out))
-            return track_from_scene(scene, source=path, m_per_px=m_per_px)
-    scene = _read_world(resolve_world(path))
-    return track_from_scene(scene, source=path, m_per_px=m_per_px)
+            try:
+                result = build(path, Path(tmp) / "track", car=car)
+            except TrackError as exc:
+                raise TrackLoadError(str(exc)) from exc
+            scene = _read_world(result.world_path)
+            return track_from_scene(scene, source=path, name=None, m_per_px=m_per_px)
+    if path.is_file() and path.suffix.lower() not in WORLD_SUFFIXES:
+        raise TrackLoadError(f"{path}: not a track: expected a layout ({', '.join(LAYOUT_SUFFIXES)}), "
+                             f"a world ({', '.join(WORLD_SUFFIXES)}) or a track folder")
+    return track_from_scene(_read_world(path), source=path, m_per_px=m_per_px)
 
 
-def _read_world(world: Path):
+def _read_world(path: Path):
     from worlds import WorldError
     from worlds.sdf_read import read_world
 
     try:
-        return read_world(world)
+        return read_world(path)
     except WorldError as exc:
         raise TrackLoadError(str(exc)) from None
 
@@ -139,14 +120,14 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
     surface_z = _surface_z(scene, layers)
 
     if scene.car_pose is not None:
-        start = scene.car_pose
+        start, origin = scene.car_pose, "the car's pose in the world"
     elif "start_pose" in meta:
-        start = meta["start_pose"]
+        start, origin = meta["start_pose"], "track.json's start_pose"
     else:
-        start = Pose2()
+        start, origin = Pose2(), "no car in the world and no track.json: the world origin"
     if not bool(raster.on_road([[start.x_m, start.y_m]])[0]):
         raise TrackLoadError(f"{scene.source}: the start pose ({start.x_m:.3f}, {start.y_m:.3f}) m "
-                             f"is not on the track")
+                             f"({origin}) is not on the track")
     gate_meta = meta.get("finish_gate")
     if gate_meta is not None:
         gate, half = gate_meta

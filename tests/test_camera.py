@@ -148,23 +148,12 @@ def test_rays_above_horizon_see_floor(lane):
 
 
 def nxp_raster():
-    """Raster of NXP's raceway through a local stand-in for worlds.sdf_read's Scene."""
-    from types import SimpleNamespace
-
-    from simrunner.raster import layer_from_visual
+    from simrunner.track import load_track
 
     folder = TRACKS / "nxp_raceway"
     if not folder.is_dir():
-        pytest.skip(f"NXP tracks not found at {TRACKS}")
-
-    def visual(name, mesh, dx, dy, material):
-        tf = np.eye(4)
-        tf[:3, 3] = (-0.7 + dx, -0.3 + dy, -0.04)  # the .world's include pose + the visual pose
-        return SimpleNamespace(name=name, mesh_path=folder / "meshes" / mesh, world_from_mesh=tf,
-                               scale=(1, 1, 1), rgba=None, material_name=material, role="other")
-
-    return build_raster([layer_from_visual(visual("inside", "CourseInside.stl", 0, 0, "Gazebo/White")),
-                         layer_from_visual(visual("border", "CourseBorder.stl", -.02, -.02, "Gazebo/Black"))])
+        pytest.skip(f"NXP tracks not found at {TRACKS} (expected beside the checkout)")
+    return load_track(folder).raster
 
 
 def test_nxp_raceway_start_view_is_white_lane_between_black_borders():

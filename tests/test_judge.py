@@ -157,3 +157,20 @@ def test_bad_arguments(ring):
         Judge(ring, laps=0)
     with pytest.raises(ValueError, match="min_lap_fraction"):
         Judge(ring, laps=1, min_lap_fraction=1.5)
+
+
+def test_nxp_raceway_start_is_on_the_road_and_on_the_gate():
+    from simrunner.track import load_track
+
+    folder = TRACKS / "nxp_raceway"
+    if not folder.is_dir():
+        pytest.skip(f"NXP tracks not found at {TRACKS} (expected beside the checkout)")
+    track = load_track(folder)
+    judge = Judge(track, laps=1)
+    events = judge.update(0.0, track.start, wheels(track.start))
+    assert not judge.off_track
+    assert [e.kind for e in events] == ["lap_start"] and judge.lap_started_s == 0.0
+    # 0.3 m sideways the right wheels leave the 0.555 m road
+    moved = track.start @ Pose2(0.0, -0.3, 0.0)
+    judge.update(0.1, moved, wheels(moved))
+    assert judge.off_track and judge.off_wheels == ("FR", "RR")

@@ -1,0 +1,171 @@
+"""Track loading: every kind of spec through worlds.sdf_read, raster, start, gate (simrunner.track)."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pieces.pose import Pose2
+from simrunner.errors import SimError
+from simrunner.raster import BLACK_GRAY, FLOOR_GRAY, WHITE_GRAY
+from simrunner.track import TrackLoadError, load_track, road_extents_m
+
+TRACKS = Path(__file__).resolve().parents[2] / "shared" / "tracks"
+OVAL = """@name = oval
+START_FINISH
+STRAIGHT
+TURN_LEFT x4
+STRAIGHT x2
+TURN_LEFT x4
+"""
+
+
+def need_nxp(name: str) -> Path:
+    folder = TRACKS / name
+    if not folder.is_dir():
+        pytest.skip(f"NXP tracks not found at {TRACKS} (expected beside the checkout)")
+    return folder
+
+
+def cross_section(track, pose: Pose2, half_m: float = 0.32) -> np.ndarray:
+    """Gray values along the pose's lateral axis, left to right, every 0.01 m."""
+    ys = np.arange(half_m, -half_m - 1e-9, -0.01)
+    return track.raster.gray_at(pose.apply(np.column_stack((np.zeros_like(ys), ys))))
+
+
+@pytest.fixture(scope="module")
+def oval_folder(tmp_path_factory):
+    from trackgen.build import build
+
+    tmp = tmp_path_factory.mktemp("oval")
+    layout = tmp / "oval.txt"
+    layout.write_text(OVAL)
+    build(layout, tmp / "out")
+    return tmp
+
+
+@pytest.mark.parametrize("name, spec", [("nxp_raceway", ""), ("nxp_raceway", "nxp_raceway.world"),
+                                        ("nxp_raceway_octagon", "")])
+def test_nxp_tracks_load_with_start_at_origin_on_the_lane(name, spec):
+    folder = need_nxp(name)
+    track = load_track(folder / spec if spec else folder)
+    assert track.name == name
+    assert track.start == Pose2() and track.gate == Pose2()
+    # the .world's include pose is applied: slab 0..0.05 m lowered by 0.04 m
+    assert track.surface_z_m == pytest.approx(0.01, abs=1e-6)
+    # white lane at the start, a black line, then the floor on both sides
+    section = cross_section(track, track.start)
+    assert section[len(section) // 2] == WHITE_GRAY
+    for side in (section[: len(section) // 2], section[len(section) // 2:][::-1]):
+        assert list(dict.fromkeys(side.tolist())) == [FLOOR_GRAY, BLACK_GRAY, WHITE_GRAY]
+    # road ~0.555 m edge to edge (PROVENANCE.md: 0.55 m lane incl. 0.02 m lines; 5 mm pixels)
+    left, right = road_extents_m(track.raster, track.start)
+    assert left + right == pytest.approx(0.555, abs=0.01)
+    assert track.gate_half_width_m == pytest.approx(max(left, right))
+    assert track.lap_length_estimated and track.centreline is None
+
+
+def test_nxp_raceway_lap_length_estimate_and_start_on_road():
+    track = load_track(need_nxp("nxp_raceway"))
+    assert track.raster.on_road([[0.0, 0.0]])[0]
+    # road area / road width; the centreline of NXP's raceway measures ~23-24 m
+    assert 20.0 < track.lap_length_m < 27.0
+
+
+def test_border_lines_sit_on_the_lane_edges():
+    """NXP's border visual has pose -.02 -.02: applied, each black line touches the white lane
+    (no floor between them) along the whole track."""
+    track = load_track(need_nxp("nxp_raceway"))
+    img = track.raster.image
+    white = img == WHITE_GRAY
+
+    def white_next_to(other):  # 4-neighbour pixel pairs (white, other)
+        return ((white[1:, :] & other[:-1, :]).sum() + (white[:-1, :] & other[1:, :]).sum()
+                + (white[:, 1:] & other[:, :-1]).sum() + (white[:, :-1] & other[:, 1:]).sum())
+
+    boundary = white_next_to(~white)
+    # Measured: 115 of 10596 boundary pairs touch the floor (mesh sliver gaps up to 4 mm);
+    # without the -.02 -.02 border pose it is 6195 of 13188.
+    assert white_next_to(img == FLOOR_GRAY) < 0.02 * boundary
+
+
+def test_layout_file_is_built_and_loaded(oval_folder):
+    track = load_track(oval_folder / "oval.txt")
+    data = json.loads((oval_folder / "out" / "track.json").read_text())
+    assert track.name == "oval" and track.source == oval_folder / "oval.txt"
+    gate = data["finish_gate"]
+    assert track.gate == Pose2(*gate["pose"]) and track.gate_half_width_m == gate["half_width_m"]
+    assert track.lap_length_m == pytest.approx(data["length_m"]) and not track.lap_length_estimated
+    assert track.centreline.shape[1] == 2
+    # START_FINISH starts the car 0.3 m behind the gate; the black bar lies across the gate
+    dist, dyaw = track.start.distance_to(track.gate)
+    assert dist == pytest.approx(0.3, abs=1e-9) and dyaw == pytest.approx(0.0, abs=1e-12)
+    assert track.raster.gray_at([[track.gate.x_m, track.gate.y_m]])[0] == BLACK_GRAY
+    assert track.raster.gray_at([[track.start.x_m, track.start.y_m]])[0] == WHITE_GRAY
+    assert track.surface_z_m == pytest.approx(data["surface_z_m"], abs=1e-6)
+
+
+def test_trackgen_folder_and_world_file_give_the_same_track(oval_folder):
+    a = load_track(oval_folder / "out")
+    b = load_track(oval_folder / "out" / "world.sdf")
+    c = load_track(oval_folder / "oval.txt")
+    for t in (b, c):
+        assert np.array_equal(a.raster.image, t.raster.image)
+        assert a.raster.origin_xy_m == t.raster.origin_xy_m
+        assert (a.start, a.gate, a.lap_length_m) == (t.start, t.gate, t.lap_length_m)
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("missing_dir", "not found"),
+    ("notes.md", "not a track"),
+    ("empty_dir", "expected world.sdf"),
+])
+def test_bad_specs_raise_one_clear_error(tmp_path, spec, message):
+    (tmp_path / "notes.md").write_text("hello")
+    (tmp_path / "empty_dir").mkdir()
+    with pytest.raises(TrackLoadError, match=message) as info:
+        load_track(tmp_path / spec)
+    assert isinstance(info.value, SimError) and str(tmp_path) in str(info.value)
+
+
+def test_bad_layout_raises_track_load_error_with_line(tmp_path):
+    layout = tmp_path / "bad.txt"
+    layout.write_text("STRAIGHT\nTRUN_LEFT\n")
+    with pytest.raises(TrackLoadError, match=r"bad.txt:2: .*TRUN_LEFT"):
+        load_track(layout)
+
+
+def test_model_file_without_start_on_the_road_is_refused():
+    folder = need_nxp("nxp_raceway")
+    with pytest.raises(TrackLoadError, match=r"start pose \(0.000, 0.000\) m .*world origin.* not on the track"):
+        load_track(folder / "nxp_raceway.sdf")
+
+
+@pytest.mark.parametrize("patch, message", [
+    ({"start_pose": [0, 0]}, "start_pose: expected"),
+    ({"finish_gate": {"pose": [0, 0, 0], "half_width_m": -1}}, "finish_gate: expected"),
+    ({"length_m": "long"}, "length_m: expected"),
+    ({"centreline": [[0, 0], [1]]}, "centreline: expected"),
+    ({"format": "other"}, "nxpcup-track/1"),
+])
+def test_bad_track_json_is_reported(oval_folder, tmp_path, patch, message):
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(oval_folder / "out", out)
+    data = json.loads((out / "track.json").read_text())
+    data.update(patch)
+    (out / "track.json").write_text(json.dumps(data))
+    with pytest.raises(TrackLoadError, match=message) as info:
+        load_track(out)
+    assert "track.json" in str(info.value)
+
+
+def test_start_pose_on_road_is_consistent_with_gate_heading(oval_folder):
+    track = load_track(oval_folder / "out")
+    ahead = track.start @ Pose2(0.3, 0.0, 0.0)
+    assert ahead.distance_to(track.gate)[0] == pytest.approx(0.0, abs=1e-9)
+    assert math.isclose(track.gate_half_width_m, 0.55 / 2 + 0.02, abs_tol=1e-9)
