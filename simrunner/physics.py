@@ -54,6 +54,9 @@ from worlds.car import CarDescription
 GRAVITY_MPS2 = 9.81
 GROUND_SIZE_M = 400.0  # side of the square ground box (tracks are a few metres)
 GROUND_THICKNESS_M = 1.0
+CONTACT_DEPTH_M = 4e-8  # initial tyre penetration = the resting depth measured for the default car.
+# ODE reports no contact at exactly 0 depth: a car placed exactly on the ground would fall one
+# step (g dt^2 = 39 um at 2 ms) and then creep back up for a second.
 
 
 def kinematic_turn_radius_m(car: CarDescription, steer_rad: float) -> float:
@@ -112,6 +115,7 @@ class _Control:
     steer_steps_left: int = 0  # steps before the next steering event (0 = holding)
     steer_final: bool = False  # the running segment is the last, partial step
     wheels_locked: bool = False
+    coast: bool = False
     ext_force_n: tuple[float, float] = (0.0, 0.0)
 
 
@@ -158,6 +162,8 @@ class CarSim:
         self._world = world
 
         r = car.wheels.radius_m
+        wb, half_t = car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
+        self._wheel_centres_m = np.array([[wb, half_t, r], [wb, -half_t, r], [0.0, half_t, r], [0.0, -half_t, r]])
         self._m_eff_kg = self._body.total_mass_kg + 4.0 * self._body.wheel_spin_inertia_kgm2 / (r * r)
         for j in self._body.knuckle_joints:
             j.setActuatorType(dart.dynamics.ActuatorType.VELOCITY)
@@ -165,7 +171,7 @@ class CarSim:
             j.setActuatorType(dart.dynamics.ActuatorType.PASSIVE)
         self._control = _Control()
         self._place(start, 0.0, 0.0, 0.0)
-        self._apply(self._control)
+        self._apply(self._control, force=True)
 
     # -- construction ------------------------------------------------------------------
     def _build_ground(self, mu: float) -> dart.dynamics.Skeleton:
@@ -186,7 +192,7 @@ class CarSim:
         # position on the (possibly tilted) ground plane below/above (x, y)
         n = self._ground_rot[:, 2]
         dx, dy = pose.x_m - self._ground_origin[0], pose.y_m - self._ground_origin[1]
-        z = self._ground_origin[2] - (n[0] * dx + n[1] * dy) / n[2]
+        z = self._ground_origin[2] - (n[0] * dx + n[1] * dy) / n[2] - CONTACT_DEPTH_M / n[2]
         rot = self._ground_rot @ _rot_z(pose.yaw_rad)
         q6 = dart.dynamics.FreeJoint.convertToPositions(_iso([pose.x_m, pose.y_m, z], rot))
         b.free_joint.setPositions(q6)
@@ -215,8 +221,9 @@ class CarSim:
         entry of commands (effects such as latency wrap it).
         """
         car = self.car
-        v = float(np.clip(speed_mps, -car.drive.max_speed_mps, car.drive.max_speed_mps))
-        d = float(np.clip(steer_rad, -car.steering.limit_rad, car.steering.limit_rad))
+        v_max, d_max = car.drive.max_speed_mps, car.steering.limit_rad
+        v = min(max(float(speed_mps), -v_max), v_max)
+        d = min(max(float(steer_rad), -d_max), d_max)
         w = v * math.sin(d) / car.chassis.wheelbase_m if yaw_rate_radps is None else float(yaw_rate_radps)
         r, half_t = car.wheels.radius_m, 0.5 * car.chassis.track_m
         v_now = self.speed_mps
@@ -238,7 +245,7 @@ class CarSim:
             speed_cmd_mps=v, steer_cmd_rad=d, yaw_rate_cmd_radps=w,
             wheel_omega_radps=((v - w * half_t) / r, (v + w * half_t) / r), wheel_torque_nm=torque,
             knuckle_target_rad=q_tgt, wheels_locked=self._control.wheels_locked,
-            ext_force_n=self._control.ext_force_n, **plan)
+            coast=self._control.coast, ext_force_n=self._control.ext_force_n, **plan)
         self._apply(self._control)
 
     def _final_steer_segment(self, q_tgt, q_now) -> dict:
@@ -264,6 +271,12 @@ class CarSim:
         self._control = _replace(self._control, wheels_locked=bool(locked))
         self._apply(self._control)
 
+    def set_coast(self, coast: bool) -> None:
+        """Coasting: no drive or brake torque, the rear wheels roll freely (True) until
+        ``set_coast(False)``; commands set meanwhile are kept and act again afterwards."""
+        self._control = _replace(self._control, coast=bool(coast))
+        self._apply(self._control)
+
     def apply_external_force_n(self, fx_n: float, fy_n: float) -> None:
         """Set a constant force on the chassis at its centre of mass, in the CAR BODY frame
         (x forward, y left; N). It replaces the previous one and stays until changed
@@ -271,20 +284,29 @@ class CarSim:
         self._control = _replace(self._control, ext_force_n=(float(fx_n), float(fy_n)))
         self._apply(self._control)
 
-    def _apply(self, c: _Control) -> None:
-        b = self._body
+    def _apply(self, c: _Control, *, force: bool = False) -> None:
+        """Set the joints and the chassis force from ``c``; only what changed since the last
+        call unless ``force`` (a control update then costs a few microseconds)."""
+        b, old = self._body, (None if force else self._applied)
+        A = dart.dynamics.ActuatorType
         for j, vel in zip(b.knuckle_joints, c.knuckle_vel_radps):
             j.setCommand(0, vel)
-        servo, locked = dart.dynamics.ActuatorType.SERVO, dart.dynamics.ActuatorType.LOCKED
-        for j in b.wheel_joints[:2]:
-            j.setActuatorType(locked if c.wheels_locked else dart.dynamics.ActuatorType.PASSIVE)
+        if old is None or (old.wheels_locked, old.coast) != (c.wheels_locked, c.coast):
+            for j in b.wheel_joints[:2]:
+                j.setActuatorType(A.LOCKED if c.wheels_locked else A.PASSIVE)
+            rear = A.LOCKED if c.wheels_locked else (A.PASSIVE if c.coast else A.SERVO)
+            for j in b.wheel_joints[2:]:
+                j.setActuatorType(rear)
+        if old is None or old.wheel_torque_nm != c.wheel_torque_nm:
+            for j in b.wheel_joints[2:]:
+                j.setForceLowerLimit(0, -c.wheel_torque_nm)
+                j.setForceUpperLimit(0, c.wheel_torque_nm)
         for j, omega in zip(b.wheel_joints[2:], c.wheel_omega_radps):
-            j.setActuatorType(locked if c.wheels_locked else servo)
-            j.setForceLowerLimit(0, -c.wheel_torque_nm)
-            j.setForceUpperLimit(0, c.wheel_torque_nm)
             j.setCommand(0, 0.0 if c.wheels_locked else omega)
-        com = b.chassis.getLocalCOM()
-        b.chassis.setExtForce(np.array([c.ext_force_n[0], c.ext_force_n[1], 0.0]), com, True, True)
+        if old is None or old.ext_force_n != c.ext_force_n:
+            b.chassis.setExtForce(np.array([c.ext_force_n[0], c.ext_force_n[1], 0.0]),
+                                  b.chassis.getLocalCOM(), True, True)
+        self._applied = c
 
     @property
     def speed_cmd_mps(self) -> float:
@@ -322,20 +344,23 @@ class CarSim:
     def time_s(self) -> float:
         return self._world.getTime()
 
+    def _matrix(self) -> np.ndarray:
+        """``(4, 4)`` world-from-car-body transform."""
+        return self._body.chassis.getWorldTransform().matrix()
+
     def _rotation(self) -> np.ndarray:
-        return self._body.chassis.getWorldTransform().rotation()
+        return self._matrix()[:3, :3]
 
     @property
     def pose(self) -> Pose2:
         """Rear-axle midpoint (on the ground) in world xy, and the chassis yaw."""
-        tf = self._body.chassis.getWorldTransform()
-        p, rot = tf.translation(), tf.rotation()
-        return Pose2(p[0], p[1], math.atan2(rot[1, 0], rot[0, 0]))
+        m = self._matrix()
+        return Pose2(m[0, 3], m[1, 3], math.atan2(m[1, 0], m[0, 0]))
 
     @property
     def z_m(self) -> float:
         """Height of the car body frame origin (rear-axle midpoint on the ground), m."""
-        return float(self._body.chassis.getWorldTransform().translation()[2])
+        return float(self._matrix()[2, 3])
 
     @property
     def roll_rad(self) -> float:
@@ -376,8 +401,9 @@ class CarSim:
     def wheel_contacts_xy(self) -> np.ndarray:
         """``(4, 2)`` world xy of the FL, FR, RL, RR tyre contact points (below the wheel
         centres along the ground normal), m."""
-        down = self.car.wheels.radius_m * self._ground_rot[:, 2]
-        return np.array([b.getWorldTransform().translation()[:2] - down[:2] for b in self._body.wheel_bodies])
+        m = self._matrix()
+        centres = self._wheel_centres_m @ m[:3, :3].T + m[:3, 3]  # knuckle pivots = wheel centres
+        return centres[:, :2] - self.car.wheels.radius_m * self._ground_rot[:2, 2]
 
     def wheel_speeds_radps(self) -> np.ndarray:
         """``(4,)`` FL, FR, RL, RR wheel spin relative to their mounts, rad/s (+ = forward)."""
@@ -396,7 +422,7 @@ class CarSim:
         skel.setVelocities(state.velocities)
         self._world.setTime(state.time_s)
         self._control = state.control
-        self._apply(self._control)
+        self._apply(self._control, force=True)
 
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
                   yaw_rate_radps: float = 0.0) -> None:
