@@ -108,7 +108,7 @@ def test_finish_marking_seen_only_in_rows_that_look_at_it():
     assert rows_far and min(rows_far) < min(rows_near)
 
 
-@pytest.mark.parametrize("supersample", [1, 2])
+@pytest.mark.parametrize("supersample", [1, 2, 3])
 def test_render_row_equals_render_and_is_deterministic(lane, supersample):
     cam = Camera(WIDE, lane, supersample=supersample)
     rng = np.random.default_rng(3)
