@@ -30,7 +30,7 @@ Track-wide settings, each at most once, anywhere in the file (conventionally at 
     @edge_width = 0.02    each black edge line, m (laid outside the lane)
     @thickness = 0.01     slab height of the meshes, m
     @arc_tolerance = 0.001  max chord error of curved edges, m (not scaled)
-    @scale = 1.0          multiplies every length above and every piece length/radius/offset
+    @scale = 1.0          (0.01 .. 100) multiplies every length above and every piece length/radius/offset
                           (angles are not scaled; 1.3 gives the thesis's 130 % Gazebo track)
 
 Limits: a repeat count is 1..MAX_REPEAT, a layout has at most MAX_PIECES pieces after
@@ -59,8 +59,8 @@ MAX_PIECES = 10_000
 """Largest number of pieces in one layout, after expanding repeats."""
 MAX_FILE_BYTES = 4 * 1024 * 1024
 """Largest layout file read (a 10 000-piece layout is ~200 kB)."""
-MAX_SCALE = 100.0
-"""``@scale`` must lie in (0, MAX_SCALE]."""
+MIN_SCALE, MAX_SCALE = 0.01, 100.0
+"""``@scale`` must lie in [MIN_SCALE, MAX_SCALE]."""
 
 PIECE_NAMES: tuple[str, ...] = tuple(k.name for k in PieceType)
 SCALED_SETTINGS = ("lane_width", "edge_width", "thickness")
@@ -70,7 +70,7 @@ EXTRA_SETTINGS = ("name", "scale")
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
 _REPEAT = re.compile(r"[xX]([+-]?[0-9.eE+-]*)\Z")
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}\Z")
-_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+_CONTROL_BYTES = re.compile(rb"[\x00-\x08\x0e-\x1f\x7f]")
 _ALLOWED_CONTROL = {"\t", "\r", "\n", "\f", "\v"}
 
 
@@ -151,17 +151,25 @@ def decode_layout(data: bytes, path: str) -> str:
     layout file`` at the line of the first offending byte."""
     if len(data) > MAX_FILE_BYTES:
         raise LayoutError(path, 1, f"layout file too large ({len(data)} bytes > {MAX_FILE_BYTES})")
+    bad_at, why = len(data), ""
+    ctrl = _CONTROL_BYTES.search(data)
+    if ctrl:
+        bad_at, why = ctrl.start(), f"control byte 0x{data[ctrl.start()]:02x}"
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        raise LayoutError(path, line, f"not a text layout file (byte 0x{data[exc.start]:02x} "
-                                      "is not UTF-8)") from None
-    for i, ch in enumerate(text):
-        if ch not in _ALLOWED_CONTROL and unicodedata.category(ch) in ("Cc", "Cs"):
-            line = text.count("\n", 0, i) + 1
-            raise LayoutError(path, line, f"not a text layout file (control character "
-                                          f"U+{ord(ch):04X})")
+        if exc.start < bad_at:
+            bad_at, why = exc.start, f"byte 0x{data[exc.start]:02x} is not UTF-8"
+        text = None
+    if text is not None and not why:
+        for i, ch in enumerate(text):
+            if ch not in _ALLOWED_CONTROL and unicodedata.category(ch) in ("Cc", "Cs"):
+                bad_at = len(text[:i].encode("utf-8", "surrogatepass"))
+                why = f"control character U+{ord(ch):04X}"
+                break
+    if why:
+        line = data.count(b"\n", 0, bad_at) + 1
+        raise LayoutError(path, line, f"not a text layout file ({why})")
     return text
 
 
@@ -190,7 +198,7 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     values: dict[str, float] = {}
     seen_at: dict[str, int] = {}
     name, scale = sanitize_name(default_name), 1.0
-    lines = text.split("\n")
+    lines = text.removeprefix("\ufeff").split("\n")
     for lineno, raw in enumerate(lines, start=1):
         body = raw.split("#", 1)[0].strip()
         if not body:
@@ -251,8 +259,9 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
         raise LayoutError(path, lineno, f"@{key} = {_shown(value)}: expected a number")
     number = float(value)
     if key == "scale":
-        if not (math.isfinite(number) and 0.0 < number <= MAX_SCALE):
-            raise LayoutError(path, lineno, f"@scale = {value}: expected 0 < scale <= {MAX_SCALE:g}")
+        if not MIN_SCALE <= number <= MAX_SCALE:
+            raise LayoutError(path, lineno, f"@scale = {value}: expected {MIN_SCALE:g} <= scale "
+                                            f"<= {MAX_SCALE:g}")
         return key, number
     spec = SETTINGS_PARAMS[key]
     if not spec.contains(number):
@@ -289,8 +298,7 @@ def _parse_piece(body: str, path: str, lineno: int) -> tuple[LayoutEntry, int]:
         key_l = key.lower()
         if key_l not in specs:
             known = ", ".join(specs)
-            shown_key = _shown(key) if _KEY.match(key) else _shown(key)
-            raise LayoutError(path, lineno, f"{kind_name}: unknown parameter {shown_key} (expected "
+            raise LayoutError(path, lineno, f"{kind_name}: unknown parameter {_shown(key)} (expected "
                                             f"{known}{_did_you_mean(key_l, specs)})")
         if key_l in params:
             raise LayoutError(path, lineno, f"{kind_name}: parameter {key_l} given twice")
