@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pieces.pose import Pose2
 from simrunner.camera import Camera
@@ -164,3 +166,59 @@ def test_nxp_raceway_start_view_is_white_lane_between_black_borders():
     assert row[60:68].min() > 200
     assert row[:left].min() < 30 and row[right + 1:].min() < 30
     assert abs((left + right) / 2 - 63.5) <= 2.0  # NXP's start is on the lane centre
+
+
+@settings(max_examples=60, deadline=None)
+@given(pitch=st.floats(0.2, 1.3), height=st.floats(0.05, 0.6), hfov=st.floats(0.3, 2.4),
+       row=st.integers(0, 127), col=st.integers(0, 127))
+def test_ground_point_reprojects_to_its_pixel(lane, pitch, height, hfov, row, col):
+    """Pinhole round trip: the ground point of a pixel projects back onto that pixel's centre."""
+    spec = CameraSpec(pitch_rad=pitch, height_m=height, hfov_rad=hfov)
+    cam = Camera(spec, lane, max_range_m=1e6)
+    gx, gy = cam.ground_point_of_pixel(row, col)
+    if math.isnan(gx):
+        # only rays at or above the horizon miss the ground
+        f = (spec.width_px / 2) / math.tan(hfov / 2)
+        assert math.atan((row + 0.5 - spec.height_px / 2) / f) + pitch <= 1e-9
+        return
+    d = np.array([gx - spec.forward_m, gy, -height])
+    fwd = np.array([math.cos(pitch), 0.0, -math.sin(pitch)])
+    up = np.array([math.sin(pitch), 0.0, math.cos(pitch)])
+    f_px = (spec.width_px / 2) / math.tan(hfov / 2)
+    u = -f_px * d[1] / (d @ fwd)
+    v = -f_px * (d @ up) / (d @ fwd)
+    assert u + spec.width_px / 2 - 0.5 == pytest.approx(col, abs=1e-6)
+    assert v + spec.height_px / 2 - 0.5 == pytest.approx(row, abs=1e-6)
+
+
+@settings(max_examples=40, deadline=None)
+@given(x=st.floats(-1, 3), y=st.floats(-0.2, 0.2), yaw=st.floats(-3.1, 3.1))
+def test_pixel_shows_the_raster_at_its_ground_point(lane, x, y, yaw):
+    """A rendered pixel equals the raster's bilinear value at the pixel's world ground point."""
+    cam = Camera(WIDE, lane)
+    pose = Pose2(x, y, yaw)
+    img = cam.render(pose)
+    for row, col in ((60, 10), (60, 64), (100, 120), (127, 0)):
+        world = pose.apply(np.array([cam.ground_point_of_pixel(row, col)]))
+        px = lane.world_to_px(world)[0]
+        c0, r0 = int(math.floor(px[0])), int(math.floor(px[1]))
+        h, w = lane.shape
+        if not (0 <= c0 < w - 1 and 0 <= r0 < h - 1):
+            if not (-1 <= c0 < w and -1 <= r0 < h):
+                assert img[row, col] == lane.floor_gray  # off the raster: the floor
+            continue
+        fc, fr = px[0] - c0, px[1] - r0
+        patch = lane.image[r0:r0 + 2, c0:c0 + 2].astype(float)
+        want = (patch[0, 0] * (1 - fc) * (1 - fr) + patch[0, 1] * fc * (1 - fr)
+                + patch[1, 0] * (1 - fc) * fr + patch[1, 1] * fc * fr)
+        assert abs(int(img[row, col]) - want) <= 2.0  # cv2 uses 1/32 px weights
+
+
+@settings(max_examples=50, deadline=None)
+@given(x=st.floats(-5, 5), y=st.floats(-5, 5))
+def test_raster_pixel_world_round_trip(lane, x, y):
+    px = lane.world_to_px([[x, y]])
+    assert np.allclose(lane.px_to_world(px), [[x, y]], atol=1e-9)
+    # +x goes right (col up), +y goes up the image (row down)
+    step = lane.world_to_px([[x + 1.0, y + 1.0]]) - px
+    assert np.allclose(step, [[1.0 / lane.m_per_px, -1.0 / lane.m_per_px]])

@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pieces.pose import Pose2
 from simrunner.judge import Judge
@@ -174,3 +176,18 @@ def test_nxp_raceway_start_is_on_the_road_and_on_the_gate():
     moved = track.start @ Pose2(0.0, -0.3, 0.0)
     judge.update(0.1, moved, wheels(moved))
     assert judge.off_track and judge.off_wheels == ("FR", "RR")
+
+
+@settings(max_examples=15, deadline=None)
+@given(dt=st.floats(0.004, 0.05), speed=st.floats(0.5, 3.0), phase=st.floats(0.0, 1.0))
+def test_lap_time_does_not_depend_on_the_update_rate(ring, dt, speed, phase):
+    lap_t = 2 * math.pi * R_M / speed
+    t = np.arange(0.0, 1.05 * lap_t + 2 * dt, dt) + phase * dt
+    judge = Judge(ring, laps=1)
+    start = -0.05  # just behind the gate: lap 1 starts at the first crossing
+    for ti in t:
+        p = ring_pose(start + (ti - t[0]) * speed / R_M)
+        judge.update(float(ti), p, wheels(p))
+    assert judge.laps_completed == 1
+    # the chord between updates cuts the circle: crossing error ~ (speed dt)^2 / (8 R) / speed
+    assert judge.lap_times_s[0] == pytest.approx(lap_t, abs=1e-6 + (speed * dt) ** 2 / R_M)
