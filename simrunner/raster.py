@@ -135,7 +135,12 @@ def world_triangles(mesh_path: Path, world_from_mesh: np.ndarray,
 
     The SDF ``<scale>`` applies in the mesh frame, before ``world_from_mesh (4, 4)``.
     """
-    mesh = trimesh.load(str(mesh_path), force="mesh", process=False)
+    try:
+        mesh = trimesh.load(str(mesh_path), force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for bad files
+        raise ValueError(f"{mesh_path}: cannot read mesh ({exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ValueError(f"{mesh_path}: expected a triangle mesh")
     verts = np.asarray(mesh.vertices, dtype=float) * np.asarray(scale, dtype=float)
     tf = np.asarray(world_from_mesh, dtype=float)
     verts = verts @ tf[:3, :3].T + tf[:3, 3]

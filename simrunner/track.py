@@ -112,12 +112,15 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
     """Build a ``SimTrack`` from a ``worlds.sdf_read.Scene`` (see the module docstring)."""
     source = Path(source if source is not None else scene.source)
     meta = _read_track_json(scene.track_json) if scene.track_json is not None else {}
-    layers = [layer for layer in (layer_from_visual(v) for v in scene.visuals) if layer is not None]
+    try:
+        layers = [layer for layer in (layer_from_visual(v) for v in scene.visuals) if layer is not None]
+        surface_z = _surface_z(scene, layers) if layers else 0.0
+    except ValueError as exc:  # an unreadable mesh file
+        raise TrackLoadError(str(exc)) from None
     if not layers:
         raise TrackLoadError(f"{scene.source}: the world has no mesh visuals with upward faces "
                              f"(nothing to drive on)")
     raster = build_raster(layers, m_per_px=m_per_px)
-    surface_z = _surface_z(scene, layers)
 
     if scene.car_pose is not None:
         start, origin = scene.car_pose, "the car's pose in the world"

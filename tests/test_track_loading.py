@@ -169,3 +169,14 @@ def test_start_pose_on_road_is_consistent_with_gate_heading(oval_folder):
     ahead = track.start @ Pose2(0.3, 0.0, 0.0)
     assert ahead.distance_to(track.gate)[0] == pytest.approx(0.0, abs=1e-9)
     assert math.isclose(track.gate_half_width_m, 0.55 / 2 + 0.02, abs_tol=1e-9)
+
+
+def test_unreadable_mesh_is_reported(oval_folder, tmp_path):
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(oval_folder / "out", out)
+    mesh = next(out.glob("models/oval/meshes/lane*"))
+    mesh.write_bytes(b"solid nonsense\nfacet normal 1 2\n")
+    with pytest.raises(TrackLoadError, match=r"lane.*(cannot read mesh|expected a triangle mesh)"):
+        load_track(out)
