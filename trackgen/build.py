@@ -18,6 +18,7 @@ from pathlib import Path
 import trimesh
 
 from worlds.car import CarDescription
+from worlds.sdf_xml import WorldError
 
 from .chain import Track, chain
 from .errors import TrackError
@@ -82,7 +83,7 @@ def build(layout: str | Path | Layout, out_dir: str | Path, *, force: bool = Fal
           car: CarDescription | None = None) -> BuildResult:
     """Validate and write the output folder. Raises :class:`LayoutError` (bad layout),
     :class:`ValidationFailed` (problems; nothing written), :class:`OutputError` (cannot
-    write; nothing left behind), ``worlds.WorldError`` from the SDF layer."""
+    write; nothing left behind), :class:`TrackError` (the SDF layer refused)."""
     car = car or CarDescription()
     if not isinstance(layout, Layout):
         layout = load_layout(layout)
@@ -105,6 +106,9 @@ def build(layout: str | Path | Layout, out_dir: str | Path, *, force: bool = Fal
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         raise OutputError(f"{out_dir}: cannot write output folder ({exc.strerror or exc})") from None
+    except WorldError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise TrackError(f"{layout.path}: cannot write the world: {exc}") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

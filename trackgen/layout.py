@@ -67,9 +67,9 @@ SCALED_SETTINGS = ("lane_width", "edge_width", "thickness")
 """Settings that ``@scale`` multiplies (``arc_tolerance`` is a meshing accuracy, not a size)."""
 EXTRA_SETTINGS = ("name", "scale")
 
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z")
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
 _REPEAT = re.compile(r"[xX]([+-]?[0-9.eE+-]*)\Z")
-_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}\Z")
+_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}\Z", re.ASCII)
 _CONTROL_BYTES = re.compile(rb"[\x00-\x08\x0e-\x1f\x7f]")
 _ALLOWED_CONTROL = {"\t", "\r", "\n", "\f", "\v"}
 
@@ -243,9 +243,10 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
     if not sep:  # also accept '@key value'
         key, _, value = body[1:].strip().partition(" ")
         key, value = key.strip(), value.strip()
+    key = key.lower()
     known = list(EXTRA_SETTINGS) + list(SETTINGS_PARAMS)
     if key not in known:
-        hint = _did_you_mean(key.lower(), known)
+        hint = _did_you_mean(key, known)
         raise LayoutError(path, lineno, f"unknown setting @{_shown(key)[1:-1]} (expected one of "
                                         f"{', '.join('@' + k for k in known)}{hint})")
     if not value:
@@ -286,7 +287,7 @@ def _parse_piece(body: str, path: str, lineno: int) -> tuple[LayoutEntry, int]:
             if repeat is not None:
                 raise LayoutError(path, lineno, f"{kind_name}: repeat count given twice")
             count = rep.group(1)
-            if not count.isdigit() or not 1 <= int(count) <= MAX_REPEAT:
+            if not count.isascii() or not count.isdigit() or not 1 <= int(count) <= MAX_REPEAT:
                 raise LayoutError(path, lineno, f"{kind_name} {_shown(token)[1:-1]}: expected a repeat "
                                                 f"count x1 to x{MAX_REPEAT}")
             repeat = int(count)
