@@ -82,10 +82,11 @@ class Drive:
 @dataclass(frozen=True)
 class Camera:
     forward_m: float = _f(0.20, "Camera position ahead of the rear axle.", "estimate", -1, 1)
-    height_m: float = _f(0.25, "Camera height above the ground.", "NXP Cup camera mast, estimate", 0.02, 2)
-    pitch_rad: float = _f(0.75, "Downward tilt of the optical axis from horizontal (positive = down).",
-                          "chosen so row 60 looks ~0.45 m ahead of the camera", 0.0, 1.57)
-    hfov_rad: float = _f(1.20, "Horizontal field of view.", "estimate", 0.1, 3.0)
+    height_m: float = _f(0.30, "Camera height above the ground.", "NXP Cup camera mast, estimate", 0.02, 2)
+    pitch_rad: float = _f(0.65, "Downward tilt of the optical axis from horizontal (positive = down).",
+                          "chosen so row 60 looks 0.40 m ahead of the front bumper and sees 0.80 m "
+                          "of ground across (both edge lines of a 0.55 m lane with margin)", 0.0, 1.57)
+    hfov_rad: float = _f(1.30, "Horizontal field of view.", "estimate (~75 deg lens)", 0.1, 3.0)
     width_px: int = _f(128, "Image width; the real line camera has 128 pixels.", "thesis 5.1.2", 8, 4096)
     height_px: int = _f(128, "Image height (rows for the row-selection test, thesis Fig. 5.2).",
                         "thesis Fig. 5.2 loops over 128 rows", 1, 4096)
