@@ -381,11 +381,12 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
             p.hold(1.0 if last else 0.4, 0.0, 0.0, "pause:end" if last else "pause:rest")
         return run
 
-    block_s = 3.0
+    block_s, overhead_s = 3.0, 4.5  # random steps; turn (~2 s), settle, brake and pause
     while True:
         t_now = len(b.rows) * b.dt
-        last = duration_s is None or t_now + 2 * (block_s + 4.5) > duration_s
-        b.turn_then(random_block(block_s, last), v_lo)
+        last = duration_s is None or t_now + 2 * (block_s + overhead_s) > duration_s
+        seconds = block_s if duration_s is None or not last else max(block_s, duration_s - t_now - overhead_s)
+        b.turn_then(random_block(seconds, last), v_lo)
         if last:
             break
 
