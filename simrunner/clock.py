@@ -57,6 +57,8 @@ class LockstepClock:
         self._command_dirty = True
         self.finished: RunFinished | None = None
         self.last_progress_wall_s = time.monotonic()
+        self._pose = None
+        self._pose_step = -1
 
     # -- schedule ------------------------------------------------------------------
     def _frame_step(self, k: int) -> int:
@@ -75,6 +77,13 @@ class LockstepClock:
 
     def steps_to_next_frame(self) -> int:
         return self._next_frame_step - self.step_index
+
+    def pose(self):
+        """``sim.pose`` (a ``Pose2``), read at most once per step index (cached)."""
+        if self._pose_step != self.step_index:
+            self._pose = self.sim.pose
+            self._pose_step = self.step_index
+        return self._pose
 
     # -- commands and end ----------------------------------------------------------
     def command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None:

@@ -87,6 +87,16 @@ def _finite(method: str, name: str, value: Any) -> float:
     return v
 
 
+def _norm_out(call: str, norm: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CommandError(f"{call}: {norm} returned {value!r}, expected a number") from None
+    if not math.isfinite(v):
+        raise CommandError(f"{call}: {norm} returned {value!r}, expected a finite number")
+    return v
+
+
 class Spinner:
     """The controller's handle on the simulated car (thesis Appendix A.2).
 
@@ -142,11 +152,12 @@ class Spinner:
     def _send(self, method: str, speed: float, angle: float, *, set_speed: bool,
               set_steer: bool) -> None:
         self._clock.check()
+        call = f"{method}(speed={speed!r}, angle={angle!r})"
         if set_steer:
-            self._steer_rad = _finite(method, "turn_norm(...) ->", self.turn_norm(speed, angle))
+            self._steer_rad = _norm_out(call, "turn_norm", self.turn_norm(speed, angle))
         if set_speed:
-            self._speed_mps = _finite(method, "speed_norm(...) ->", self.speed_norm(speed, angle))
-        yaw = _finite(method, "diff_norm(...) ->", self.diff_norm(self._speed_mps, self._steer_rad))
+            self._speed_mps = _norm_out(call, "speed_norm", self.speed_norm(speed, angle))
+        yaw = _norm_out(call, "diff_norm", self.diff_norm(self._speed_mps, self._steer_rad))
         self._clock.command(self._speed_mps, self._steer_rad, yaw)
 
     def _fail(self, err: CommandError) -> CommandError:
@@ -194,7 +205,7 @@ class Spinner:
                 f"get_image(line={line!r}): expected -1 (whole image) or a row 0..{h - 1}"))
         line = int(line)
         self._clock.advance_to_next_frame()
-        pose = self._sim.pose
+        pose = self._clock.pose()
         cam = self._s.camera
         if line < 0:
             img = cam.render(pose)
@@ -215,7 +226,7 @@ class Spinner:
         """World position ``(x, y, z)`` in metres of the car frame origin (rear-axle midpoint
         on the ground), after one physics step."""
         self._clock.advance(1)
-        p = self._sim.pose
+        p = self._clock.pose()
         return (p.x_m, p.y_m, float(self._sim.z_m))
 
     def get_time(self) -> float:
