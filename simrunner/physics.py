@@ -19,18 +19,23 @@ zero every joint command after the step, so commands are set only in :meth:`set_
   ``max_accel`` and brakes at about ``max_brake`` while the tyres grip.
 * Steering (thesis 5.3.1): the knuckles are ``VELOCITY`` actuators (kinematic: no
   constraint rows, tyre forces cannot push them). A move to a new target is planned at
-  ``set_command``: both knuckles turn at constant speeds so the bicycle angle moves at
-  ``steering.rate_radps`` and they reach their Ackermann targets together; ``step`` runs
-  the whole steps of the move, one last partial step that lands exactly on the target,
-  then holds (speed 0). Python work happens only at these few events, never per step,
-  and the result does not depend on how ``step(n)`` calls are split.
+  ``set_command``: both knuckles turn at constant speeds so that they reach their
+  Ackermann targets together after ``ceil(|move| / steering.rate_radps / dt)`` steps (the
+  bicycle angle moves at about ``rate_radps``, never faster); ``step`` stops them at the end
+  of the move (one Python event per move, never per step), so the result does not depend
+  on how ``step(n)`` calls are split.
 * Front wheels roll freely.
 
-Time step: 2 ms by default. Measured (bench/bench_physics.py, default car, one core):
-see the module docstring there; at 2 ms the bare step runs at ~40x real time, leaving room
-for camera + controller in the 30x closed-loop budget of issue 3, while the sanity checks
-(distance, braking, turn radius, tilt) stay within 1-3 % (tests/test_physics.py).
-Results at the friction limit depend on the step: use 1-2 ms for racing.
+Time step: 2 ms by default. Measured on one core (bench/bench_physics.py, CPU time, default
+car at 2 m/s): bare ``world.step`` ~33k steps/s = ~66x real time at 2 ms (~33x at 1 ms);
+with ``set_command`` and pose/speed/contact reads every 20 ms ~45x. Accuracy at 2 ms: the
+checks of tests/test_physics.py hold with wide margins (distance 0.0001 %, 0->2 m/s time
+0.13 %, braking distance 0.3 %, turn radius < 0.001 %, tilt threshold = atan(mu) within
+0.3 deg). At the friction limit the step matters: in a sliding circle (2.5 m/s, steer 0.4,
+2 s) the pose differs from a 0.5 ms reference by 0.9 cm / 1.0 deg at 2 ms, 0.5 cm / 0.4 deg
+at 1 ms and 1.4 cm / 1.8 deg at 4 ms. 1 ms halves the speed for little gain.
+
+Tyres: spheres by default (see :mod:`simrunner.car_body` for why not flat cylinders).
 
 Slope (thesis 5.4 tilt test): ``slope_rad > 0`` tilts the ground about the horizontal
 line through the start point parallel to world y, so that it descends along +x:
@@ -112,8 +117,7 @@ class _Control:
     wheel_torque_nm: float = 0.0  # per rear wheel
     knuckle_target_rad: tuple[float, float] = (0.0, 0.0)  # (left, right) Ackermann targets
     knuckle_vel_radps: tuple[float, float] = (0.0, 0.0)  # applied knuckle speeds
-    steer_steps_left: int = 0  # steps before the next steering event (0 = holding)
-    steer_final: bool = False  # the running segment is the last, partial step
+    steer_steps_left: int = 0  # steps before the steering move ends (0 = holding)
     wheels_locked: bool = False
     coast: bool = False
     ext_force_n: tuple[float, float] = (0.0, 0.0)
@@ -164,6 +168,8 @@ class CarSim:
         r = car.wheels.radius_m
         wb, half_t = car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
         self._wheel_centres_m = np.array([[wb, half_t, r], [wb, -half_t, r], [0.0, half_t, r], [0.0, -half_t, r]])
+        self._contact_drop_xy_m = r * self._ground_rot[:2, 2]  # centre -> contact, xy part
+        self._tf_cache: np.ndarray | None = None
         self._m_eff_kg = self._body.total_mass_kg + 4.0 * self._body.wheel_spin_inertia_kgm2 / (r * r)
         for j in self._body.knuckle_joints:
             j.setActuatorType(dart.dynamics.ActuatorType.VELOCITY)
@@ -189,6 +195,7 @@ class CarSim:
     def _place(self, pose: Pose2, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None:
         """Set the planar state: chassis on the ground plane, wheels rolling, knuckles at steer."""
         car, b = self.car, self._body
+        self._tf_cache = None
         # position on the (possibly tilted) ground plane below/above (x, y)
         n = self._ground_rot[:, 2]
         dx, dy = pose.x_m - self._ground_origin[0], pose.y_m - self._ground_origin[1]
@@ -232,39 +239,29 @@ class CarSim:
         torque = 0.5 * self._m_eff_kg * accel * r
 
         # steering servo: constant knuckle speeds so both reach the Ackermann target together
+        # after ceil(move / rate / dt) steps (so the mean rate is at most rate_radps)
         q_now = self.knuckle_angles_rad()
         q_tgt = ackermann_angles_rad(car, d)
-        t_move = abs(d - bicycle_angle_rad(*q_now)) / car.steering.rate_radps
-        whole = int(math.floor(t_move / self.dt_s * (1.0 + 1e-12)))
-        if whole > 0:
-            k_vel = tuple((qt - qn) / t_move for qt, qn in zip(q_tgt, q_now))
-            plan = dict(knuckle_vel_radps=k_vel, steer_steps_left=whole, steer_final=False)
-        else:
-            plan = self._final_steer_segment(q_tgt, q_now)
+        n_steps = math.ceil(abs(d - bicycle_angle_rad(*q_now)) / car.steering.rate_radps / self.dt_s - 1e-9)
+        if max(abs(qt - qn) for qt, qn in zip(q_tgt, q_now)) <= 1e-15:
+            n_steps = 0
+        elif n_steps < 1:
+            n_steps = 1
+        t_move = n_steps * self.dt_s
+        k_vel = tuple((qt - qn) / t_move for qt, qn in zip(q_tgt, q_now)) if n_steps else (0.0, 0.0)
         self._control = _Control(
             speed_cmd_mps=v, steer_cmd_rad=d, yaw_rate_cmd_radps=w,
             wheel_omega_radps=((v - w * half_t) / r, (v + w * half_t) / r), wheel_torque_nm=torque,
-            knuckle_target_rad=q_tgt, wheels_locked=self._control.wheels_locked,
-            coast=self._control.coast, ext_force_n=self._control.ext_force_n, **plan)
+            knuckle_target_rad=q_tgt, knuckle_vel_radps=k_vel, steer_steps_left=n_steps,
+            wheels_locked=self._control.wheels_locked, coast=self._control.coast,
+            ext_force_n=self._control.ext_force_n)
         self._apply(self._control)
 
-    def _final_steer_segment(self, q_tgt, q_now) -> dict:
-        """One partial step landing on the target, or holding if already there."""
-        k_vel = tuple((qt - qn) / self.dt_s for qt, qn in zip(q_tgt, q_now))
-        if max(abs(qt - qn) for qt, qn in zip(q_tgt, q_now)) <= 1e-15:
-            return dict(knuckle_vel_radps=(0.0, 0.0), steer_steps_left=0, steer_final=False)
-        return dict(knuckle_vel_radps=k_vel, steer_steps_left=1, steer_final=True)
-
     def _steer_event(self) -> None:
-        """The running steering segment has ended: start the next one."""
-        c = self._control
-        if c.steer_final:
-            plan = dict(knuckle_vel_radps=(0.0, 0.0), steer_steps_left=0, steer_final=False)
-        else:
-            plan = self._final_steer_segment(c.knuckle_target_rad, self.knuckle_angles_rad())
-        self._control = _replace(c, **plan)
-        for j, vel in zip(self._body.knuckle_joints, self._control.knuckle_vel_radps):
-            j.setCommand(0, vel)
+        """The steering move has ended: hold the knuckles."""
+        self._control = _replace(self._control, knuckle_vel_radps=(0.0, 0.0), steer_steps_left=0)
+        for j in self._body.knuckle_joints:
+            j.setCommand(0, 0.0)
 
     def set_wheel_lock(self, locked: bool) -> None:
         """Lock all four wheels (thesis 5.4 tilt test: "wheels stopped"); False releases them."""
@@ -327,6 +324,7 @@ class CarSim:
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps of ``dt_s`` (commands stay as set)."""
         step = self._world.step
+        self._tf_cache = None
         while n > 0:
             left = self._control.steer_steps_left
             k = n if left == 0 else min(n, left)
@@ -345,8 +343,10 @@ class CarSim:
         return self._world.getTime()
 
     def _matrix(self) -> np.ndarray:
-        """``(4, 4)`` world-from-car-body transform."""
-        return self._body.chassis.getWorldTransform().matrix()
+        """``(4, 4)`` world-from-car-body transform (cached until the state changes)."""
+        if self._tf_cache is None:
+            self._tf_cache = self._body.chassis.getWorldTransform().matrix()
+        return self._tf_cache
 
     def _rotation(self) -> np.ndarray:
         return self._matrix()[:3, :3]
@@ -402,8 +402,8 @@ class CarSim:
         """``(4, 2)`` world xy of the FL, FR, RL, RR tyre contact points (below the wheel
         centres along the ground normal), m."""
         m = self._matrix()
-        centres = self._wheel_centres_m @ m[:3, :3].T + m[:3, 3]  # knuckle pivots = wheel centres
-        return centres[:, :2] - self.car.wheels.radius_m * self._ground_rot[:2, 2]
+        # knuckle pivots = wheel centres, fixed in the car body frame
+        return self._wheel_centres_m @ m[:2, :3].T + (m[:2, 3] - self._contact_drop_xy_m)
 
     def wheel_speeds_radps(self) -> np.ndarray:
         """``(4,)`` FL, FR, RL, RR wheel spin relative to their mounts, rad/s (+ = forward)."""
@@ -418,6 +418,7 @@ class CarSim:
 
     def restore_state(self, state: SimState) -> None:
         skel = self._body.skeleton
+        self._tf_cache = None
         skel.setPositions(state.positions)
         skel.setVelocities(state.velocities)
         self._world.setTime(state.time_s)

@@ -238,7 +238,7 @@ def test_runs_are_bit_identical_and_instances_independent():
 def test_step_splitting_does_not_change_results():
     one, many = CarSim(CAR), CarSim(CAR)
     for sim, split in ((one, [40]), (many, [1, 3, 7, 2, 25, 2])):
-        sim.set_command(1.5, 0.35)  # a steering move of ~29 steps plus its final partial step
+        sim.set_command(1.5, 0.35)  # a steering move of 30 steps: its end falls inside a chunk
         for n in split:
             sim.step(n)
     assert np.array_equal(one.save_state().positions, many.save_state().positions)
