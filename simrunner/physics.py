@@ -54,6 +54,7 @@ import numpy as np
 
 from pieces.pose import Pose2
 from simrunner.car_body import CarBody, WheelShape, _iso, build_car_skeleton
+from simrunner.errors import SimError
 from worlds.car import CarDescription
 
 GRAVITY_MPS2 = 9.81
@@ -140,9 +141,12 @@ class CarSim:
                  surface_z_m: float = 0.0, slope_rad: float = 0.0, ground_mu: float = 10.0,
                  wheel_shape: WheelShape = WheelShape.SPHERE):
         if not (0.0 < dt_s <= 0.02):
-            raise ValueError(f"dt_s = {dt_s!r}: expected a time step in (0, 0.02] s")
+            raise SimError(f"CarSim: dt_s = {dt_s!r}: expected a time step in (0, 0.02] s")
         if not (-1.2 < slope_rad < 1.2):
-            raise ValueError(f"slope_rad = {slope_rad!r}: expected a value in (-1.2, 1.2) rad")
+            raise SimError(f"CarSim: slope_rad = {slope_rad!r}: expected a value in (-1.2, 1.2) rad")
+        if not (0.0 < ground_mu < math.inf) or not math.isfinite(surface_z_m):
+            raise SimError(f"CarSim: ground_mu = {ground_mu!r}, surface_z_m = {surface_z_m!r}: "
+                           "expected a positive friction coefficient and a finite height")
         self.car = car
         self.dt_s = float(dt_s)
         self.surface_z_m = float(surface_z_m)
@@ -228,6 +232,10 @@ class CarSim:
         entry of commands (effects such as latency wrap it).
         """
         car = self.car
+        if not (math.isfinite(speed_mps) and math.isfinite(steer_rad)
+                and (yaw_rate_radps is None or math.isfinite(yaw_rate_radps))):
+            raise SimError(f"CarSim.set_command({speed_mps!r}, {steer_rad!r}, {yaw_rate_radps!r}): "
+                           "expected finite numbers")
         v_max, d_max = car.drive.max_speed_mps, car.steering.limit_rad
         v = min(max(float(speed_mps), -v_max), v_max)
         d = min(max(float(steer_rad), -d_max), d_max)

@@ -10,8 +10,11 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pieces.pose import Pose2
+from simrunner.errors import SimError
 from simrunner.physics import (
     CarSim,
     ackermann_angles_rad,
@@ -277,3 +280,28 @@ def test_set_state_continues_smoothly():
     dist, dyaw = sim.pose.distance_to(arc)
     assert dist < 0.005 and dyaw < 0.01
     assert sim.z_m == pytest.approx(0.0, abs=1e-4)
+
+
+# -- input checks, Ackermann property ----------------------------------------------------------------
+@pytest.mark.parametrize("kwargs", [dict(dt_s=0.0), dict(dt_s=0.05), dict(slope_rad=1.3),
+                                    dict(ground_mu=0.0), dict(surface_z_m=math.nan)])
+def test_bad_construction_arguments_raise(kwargs):
+    with pytest.raises(SimError, match="CarSim: "):
+        CarSim(CAR, **kwargs)
+
+
+def test_non_finite_command_raises_and_changes_nothing():
+    sim = CarSim(CAR)
+    sim.set_command(1.0, 0.1)
+    with pytest.raises(SimError, match=r"set_command\(nan"):
+        sim.set_command(math.nan, 0.0)
+    assert sim.speed_cmd_mps == 1.0 and sim.steer_cmd_rad == 0.1
+
+
+@settings(max_examples=200, deadline=None)
+@given(steer=st.floats(-1.2, 1.2), wheelbase=st.floats(0.05, 1.0), track=st.floats(0.05, 1.0))
+def test_ackermann_round_trip(steer, wheelbase, track):
+    car = CAR.replace(chassis=dataclasses.replace(CAR.chassis, wheelbase_m=wheelbase, track_m=track))
+    left, right = ackermann_angles_rad(car, steer)
+    assert abs(left) >= abs(right) if steer > 0 else abs(right) >= abs(left)
+    assert bicycle_angle_rad(left, right) == pytest.approx(steer, abs=1e-9)
