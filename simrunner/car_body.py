@@ -66,7 +66,7 @@ class CarBody:
     total_mass_kg: float
 
 
-def _iso(translation=(0.0, 0.0, 0.0), rotation: np.ndarray | None = None) -> dart.math.Isometry3:
+def isometry(translation=(0.0, 0.0, 0.0), rotation: np.ndarray | None = None) -> dart.math.Isometry3:
     tf = dart.math.Isometry3()
     tf.set_identity()
     if rotation is not None:
@@ -115,7 +115,7 @@ def build_car_skeleton(car: CarDescription, name: str = "car",
         m_chassis * (ly * ly + lz * lz) / 12.0,
         m_chassis * (lx * lx + lz * lz) / 12.0,
         m_chassis * (lx * lx + ly * ly) / 12.0]))
-    _add_collision_shape(chassis, dart.dynamics.BoxShape(np.array([lx, ly, lz])), _iso(box_c),
+    _add_collision_shape(chassis, dart.dynamics.BoxShape(np.array([lx, ly, lz])), isometry(box_c),
                          CHASSIS_MU, "chassis_box")
 
     i_spin = 0.5 * m_w * r * r
@@ -123,12 +123,12 @@ def build_car_skeleton(car: CarDescription, name: str = "car",
     wheel_inertia = _inertia(m_w, [0.0, 0.0, 0.0], [i_across, i_spin, i_across])
     i_k = 0.4 * m_k * (0.5 * r) ** 2
     knuckle_inertia = _inertia(m_k, [0.0, 0.0, 0.0], [i_k, i_k, i_k])
-    cylinder_tf = _iso(rotation=_rot_x(-0.5 * np.pi))  # cylinder z axis -> body y axis (axle)
+    cylinder_tf = isometry(rotation=_rot_x(-0.5 * np.pi))  # cylinder z axis -> body y axis (axle)
 
     def revolute(parent, joint_name, body_name, offset, axis):
         props = dart.dynamics.RevoluteJointProperties()
         props.mName = joint_name
-        props.mT_ParentBodyToJoint = _iso(offset)
+        props.mT_ParentBodyToJoint = isometry(offset)
         props.mAxis = np.asarray(axis, dtype=float)
         joint, body = skel.createRevoluteJointAndBodyNodePair(parent, props)
         body.setName(body_name)
@@ -141,7 +141,7 @@ def build_car_skeleton(car: CarDescription, name: str = "car",
             _add_collision_shape(body, dart.dynamics.CylinderShape(r, w_t), cylinder_tf,
                                  wh.friction_mu, f"{tag}_tyre")
         else:
-            _add_collision_shape(body, dart.dynamics.SphereShape(r), _iso(), wh.friction_mu, f"{tag}_tyre")
+            _add_collision_shape(body, dart.dynamics.SphereShape(r), isometry(), wh.friction_mu, f"{tag}_tyre")
         return joint, body
 
     half_t, wb = 0.5 * ch.track_m, ch.wheelbase_m

@@ -53,7 +53,7 @@ import dartpy as dart
 import numpy as np
 
 from pieces.pose import Pose2
-from simrunner.car_body import CarBody, WheelShape, _iso, build_car_skeleton
+from simrunner.car_body import CarBody, WheelShape, isometry, build_car_skeleton
 from simrunner.errors import SimError
 from worlds.car import CarDescription
 
@@ -182,13 +182,14 @@ class CarSim:
         self._control = _Control()
         self._place(start, 0.0, 0.0, 0.0)
         self._apply(self._control, force=True)
+        self.set_command(0.0, 0.0)  # at rest, rear wheels held at the brake torque
 
     # -- construction ------------------------------------------------------------------
     def _build_ground(self, mu: float) -> dart.dynamics.Skeleton:
         ground = dart.dynamics.Skeleton("ground")
         joint, body = ground.createWeldJointAndBodyNodePair()
         centre = self._ground_origin + self._ground_rot @ np.array([0.0, 0.0, -0.5 * GROUND_THICKNESS_M])
-        joint.setTransformFromParentBodyNode(_iso(centre, self._ground_rot))
+        joint.setTransformFromParentBodyNode(isometry(centre, self._ground_rot))
         node = body.createShapeNode(
             dart.dynamics.BoxShape(np.array([GROUND_SIZE_M, GROUND_SIZE_M, GROUND_THICKNESS_M])), "ground_box")
         node.createVisualAspect()
@@ -205,7 +206,7 @@ class CarSim:
         dx, dy = pose.x_m - self._ground_origin[0], pose.y_m - self._ground_origin[1]
         z = self._ground_origin[2] - (n[0] * dx + n[1] * dy) / n[2] - CONTACT_DEPTH_M / n[2]
         rot = self._ground_rot @ _rot_z(pose.yaw_rad)
-        q6 = dart.dynamics.FreeJoint.convertToPositions(_iso([pose.x_m, pose.y_m, z], rot))
+        q6 = dart.dynamics.FreeJoint.convertToPositions(isometry([pose.x_m, pose.y_m, z], rot))
         b.free_joint.setPositions(q6)
         # dartpy 6.20: FreeJoint velocities are [angular, linear] in WORLD coordinates
         n_w = yaw_rate_radps * rot[:, 2]
