@@ -36,6 +36,9 @@ class KinematicSim:
     def set_command(self, speed_mps, steer_rad, yaw_rate_radps=None):
         self.v_cmd, self.s_cmd = speed_mps, steer_rad
 
+    def set_coast(self, coast):
+        pass
+
     def step(self, n=1):
         e, L = self.car.effects, self.car.chassis.wheelbase_m
         a = self.car.drive.max_accel_mps2 * self.dt

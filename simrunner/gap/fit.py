@@ -50,6 +50,7 @@ IMPROVEMENT_MIN = 0.05
 N_EFF_PER_S = 10.0  # independent values per second per signal (0.1 s decorrelation)
 GRID_POINTS = 5
 BRENT_MAXITER = 10
+REFINE_TOP = 3  # effects refined after the grid screening
 SCALE_FLOOR = {"along_m": 0.005, "cross_m": 0.005, "yaw_rad": 0.005, "speed_mps": 0.02,
                "yaw_rate_radps": 0.05}
 
@@ -159,18 +160,21 @@ class FitResult:
     improvement: float  # 1 - cost / cost_nominal on the fit windows
     evaluations: int
     trace: tuple[tuple[float, float], ...] = field(default=(), repr=False)  # (value, cost) evaluated
+    refined: bool = True  # False: screened out after the grid (coarse value)
 
     def to_json(self) -> dict:
         return {"effect": self.effect, "parameters": self.parameters, "cost": self.cost,
                 "bic": self.criterion, "delta_bic": self.delta_bic, "improvement": self.improvement,
-                "evaluations": self.evaluations}
+                "evaluations": self.evaluations, "refined": self.refined}
 
 
-def fit_effect(problem: Problem, name: str, nominal_cost: float) -> FitResult:
-    """Fit effect ``name`` on ``problem`` (grid, then bounded Brent); see the module docstring."""
+def fit_effect(problem: Problem, name: str, nominal_cost: float, *, refine: bool = True,
+               known: Sequence[tuple[float, float]] = ()) -> FitResult:
+    """Fit effect ``name`` on ``problem``: grid, then (``refine``) bounded Brent around the
+    best grid point; ``known`` (value, cost) pairs are not evaluated again."""
     cand = CANDIDATES[name]
     current = float(getattr(problem.car.effects, cand.field))
-    seen: dict[float, float] = {}
+    seen: dict[float, float] = dict(known)
     if cand.lo <= current <= cand.hi:
         seen[current] = nominal_cost
 
@@ -182,47 +186,74 @@ def fit_effect(problem: Problem, name: str, nominal_cost: float) -> FitResult:
 
     xs = np.linspace(cand.to_x(cand.lo), cand.to_x(cand.hi), GRID_POINTS)
     costs = [f(x) for x in xs]
-    k = int(np.argmin(costs))
-    a, b = xs[max(k - 1, 0)], xs[min(k + 1, GRID_POINTS - 1)]
-    span = cand.to_x(cand.hi) - cand.to_x(cand.lo)
-    minimize_scalar(f, bounds=(a, b), method="bounded",
-                    options={"xatol": 2e-3 * span, "maxiter": BRENT_MAXITER})
+    if refine:
+        k = int(np.argmin(costs))
+        a, b = xs[max(k - 1, 0)], xs[min(k + 1, GRID_POINTS - 1)]
+        span = cand.to_x(cand.hi) - cand.to_x(cand.lo)
+        minimize_scalar(f, bounds=(a, b), method="bounded",
+                        options={"xatol": 2e-3 * span, "maxiter": BRENT_MAXITER})
     best_v = min(seen, key=lambda v: (seen[v], v))
     best_cost = seen[best_v]
     crit = bic(problem, best_cost, 1)
     return FitResult(name, {cand.field: best_v}, best_cost, crit, bic(problem, nominal_cost, 0) - crit,
                      1.0 - best_cost / nominal_cost if nominal_cost > 0 else 0.0, len(seen),
-                     tuple(sorted(seen.items())))
+                     tuple(sorted(seen.items())), refined=refine)
+
+
+def _quiet_worker() -> None:
+    """Worker initialiser: send the C++ engine's warnings (stderr, fd 2) to /dev/null so they
+    do not garble the parent's progress bar; results and exceptions come back pickled."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    os.close(devnull)
 
 
 def _fit_task(args) -> FitResult:
-    problem, name, nominal_cost = args
-    return fit_effect(problem, name, nominal_cost)
+    problem, name, nominal_cost, refine, known = args
+    return fit_effect(problem, name, nominal_cost, refine=refine, known=known)
 
 
 def fit_all(problem: Problem, nominal_cost: float, effects: Sequence[str] | None = None, *, jobs: int = 2,
-            progress: Callable[[str], None] | None = None) -> list[FitResult]:
+            progress: Callable[[str], None] | None = None, refine_top: int = REFINE_TOP) -> list[FitResult]:
     """Fit every effect in ``effects`` (default: all of :data:`CANDIDATES`) and return them
-    ranked by criterion (ties by catalogue order). ``jobs`` worker processes (1 = in this
-    process); ``progress(effect_name)`` is called as each fit finishes."""
+    ranked by criterion (ties by catalogue order).
+
+    Two stages: every effect on its grid (screening), then the ``refine_top`` best (by grid
+    cost) refined by Brent; the others keep their best grid value (``refined`` False).
+    ``jobs`` worker processes (1 = in this process); ``progress(label)`` is called as each
+    fit finishes (``len(effects) + min(refine_top, len(effects))`` calls)."""
     names = list(CANDIDATES) if effects is None else list(effects)
     unknown = [n for n in names if n not in CANDIDATES]
     if unknown:
         raise GapError(f"unknown effect(s) {', '.join(unknown)} (expected some of {', '.join(CANDIDATES)})")
-    results: dict[str, FitResult] = {}
-    if jobs <= 1 or len(names) <= 1:
-        for n in names:
-            results[n] = fit_effect(problem, n, nominal_cost)
-            if progress:
-                progress(n)
-    else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_fit_task, (problem, n, nominal_cost)): n for n in names}
-            for fut in as_completed(futures):
-                results[futures[fut]] = fut.result()
-                if progress:
-                    progress(futures[fut])
     order = {n: i for i, n in enumerate(CANDIDATES)}
+    pool = (ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker)
+            if jobs > 1 and len(names) > 1 else None)
+
+    def run(tasks, label):
+        out: dict[str, FitResult] = {}
+        if pool is None:
+            for t in tasks:
+                out[t[1]] = _fit_task(t)
+                if progress:
+                    progress(f"{label} {t[1]}")
+        else:
+            futures = {pool.submit(_fit_task, t): t[1] for t in tasks}
+            for fut in as_completed(futures):
+                out[futures[fut]] = fut.result()
+                if progress:
+                    progress(f"{label} {futures[fut]}")
+        return out
+
+    try:
+        results = run([(problem, n, nominal_cost, False, ()) for n in names], "screen")
+        top = sorted(results.values(), key=lambda r: (r.cost, order[r.effect]))[:max(refine_top, 0)]
+        results.update(run([(problem, r.effect, nominal_cost, True, r.trace) for r in top], "refine"))
+    finally:
+        if pool is not None:
+            pool.shutdown()
     return sorted(results.values(), key=lambda r: (r.criterion, order[r.effect]))
 
 

@@ -9,7 +9,12 @@ The schema is the one ``simrunner drive`` writes (extra columns are ignored):
     speed_cmd  m/s   commanded speed (physical units)
     steer_cmd  rad   commanded bicycle-equivalent steering angle, positive = left
 
-Commands are taken as held from their sample to the next one (zero-order hold).
+Optional column (as written by ``simrunner excite``'s ``run_plan``):
+
+    coast      0/1   drive off, rear wheels rolling freely (absent: never coasting)
+
+Commands are taken as held from their sample to the next one (zero-order hold), as
+``simrunner.excite.run_plan`` logs them: the state at ``t_k`` and the command set at ``t_k``.
 """
 from __future__ import annotations
 
@@ -24,6 +29,7 @@ from scipy.signal import savgol_filter
 from simrunner.gap import LogError
 
 COLUMNS = ("t", "x", "y", "yaw", "speed", "speed_cmd", "steer_cmd")
+OPTIONAL = ("coast",)
 MIN_ROWS = 50
 MIN_DURATION_S = 6.0  # three 2-s replay windows: two to fit, one to hold out
 SMOOTH_S = 0.15  # Savitzky-Golay window for states and their derivatives
@@ -42,6 +48,7 @@ class MeasuredLog:
     speed_cmd_mps: np.ndarray
     steer_cmd_rad: np.ndarray
     source: str = "<log>"
+    coast: np.ndarray | None = None  # (N,) bool, or None: never coasting
 
     def __len__(self) -> int:
         return int(self.t_s.size)
@@ -52,8 +59,19 @@ class MeasuredLog:
 
     def as_columns(self) -> dict[str, np.ndarray]:
         """The schema's columns by their CSV names."""
-        return {"t": self.t_s, "x": self.x_m, "y": self.y_m, "yaw": self.yaw_rad,
+        cols = {"t": self.t_s, "x": self.x_m, "y": self.y_m, "yaw": self.yaw_rad,
                 "speed": self.speed_mps, "speed_cmd": self.speed_cmd_mps, "steer_cmd": self.steer_cmd_rad}
+        if self.coast is not None:
+            cols["coast"] = self.coast.astype(float)
+        return cols
+
+    def coasting(self) -> np.ndarray:
+        """(N,) bool: drive off at each sample."""
+        return np.zeros(len(self), dtype=bool) if self.coast is None else self.coast
+
+    def subset(self, stop: int) -> "MeasuredLog":
+        """The first ``stop`` samples (checked like any log)."""
+        return log_from_columns({k: v[:stop] for k, v in self.as_columns().items()}, self.source)
 
 
 def log_from_columns(columns: dict[str, np.ndarray], source: str = "<log>") -> MeasuredLog:
@@ -64,7 +82,8 @@ def log_from_columns(columns: dict[str, np.ndarray], source: str = "<log>") -> M
     missing = [c for c in COLUMNS if c not in columns]
     if missing:
         raise LogError(source, 1, f"expected columns {', '.join(COLUMNS)} (missing: {', '.join(missing)})")
-    arrays = {c: np.asarray(columns[c], dtype=float).reshape(-1) for c in COLUMNS}
+    names = COLUMNS + tuple(c for c in OPTIONAL if c in columns)
+    arrays = {c: np.asarray(columns[c], dtype=float).reshape(-1) for c in names}
     n = arrays["t"].size
     for c, a in arrays.items():
         if a.size != n:
@@ -72,9 +91,15 @@ def log_from_columns(columns: dict[str, np.ndarray], source: str = "<log>") -> M
         bad = np.flatnonzero(~np.isfinite(a))
         if bad.size:
             raise LogError(source, int(bad[0]) + 2, f"column {c!r}: expected a finite number")
+    coast = None
+    if "coast" in arrays:
+        bad = np.flatnonzero((arrays["coast"] != 0.0) & (arrays["coast"] != 1.0))
+        if bad.size:
+            raise LogError(source, int(bad[0]) + 2, "column 'coast': expected 0 or 1")
+        coast = arrays["coast"] == 1.0
     _check_time(arrays["t"], source)
     return MeasuredLog(arrays["t"], arrays["x"], arrays["y"], arrays["yaw"], arrays["speed"],
-                       arrays["speed_cmd"], arrays["steer_cmd"], source)
+                       arrays["speed_cmd"], arrays["steer_cmd"], source, coast)
 
 
 def _check_time(t: np.ndarray, source: str) -> None:
@@ -107,7 +132,8 @@ def read_log(path: str | Path) -> MeasuredLog:
             if missing:
                 raise LogError(str(path), 1, f"expected columns {', '.join(COLUMNS)} "
                                f"(missing: {', '.join(missing)})")
-            index = [names.index(c) for c in COLUMNS]
+            wanted = COLUMNS + tuple(c for c in OPTIONAL if c in names)
+            index = [names.index(c) for c in wanted]
             rows: list[list[float]] = []
             for row in reader:
                 line = reader.line_num
@@ -116,7 +142,7 @@ def read_log(path: str | Path) -> MeasuredLog:
                 if len(row) < len(names):
                     raise LogError(str(path), line, f"expected {len(names)} cells (got {len(row)})")
                 values = []
-                for c, i in zip(COLUMNS, index):
+                for c, i in zip(wanted, index):
                     try:
                         v = float(row[i])
                     except ValueError:
@@ -131,8 +157,8 @@ def read_log(path: str | Path) -> MeasuredLog:
             raise LogError(str(path), 1, "expected a text (CSV) file") from None
         except csv.Error as exc:
             raise LogError(str(path), reader.line_num, f"expected valid CSV ({exc})") from None
-    data = np.array(rows, dtype=float).reshape(-1, len(COLUMNS))
-    return log_from_columns({c: data[:, k] for k, c in enumerate(COLUMNS)}, str(path))
+    data = np.array(rows, dtype=float).reshape(-1, len(wanted))
+    return log_from_columns({c: data[:, k] for k, c in enumerate(wanted)}, str(path))
 
 
 def write_log(log: MeasuredLog, path: str | Path) -> None:
@@ -140,9 +166,9 @@ def write_log(log: MeasuredLog, path: str | Path) -> None:
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     cols = log.as_columns()
-    data = np.column_stack([cols[c] for c in COLUMNS])
+    data = np.column_stack(list(cols.values()))
     with tmp.open("w", newline="") as f:
-        f.write(",".join(COLUMNS) + "\n")
+        f.write(",".join(cols) + "\n")
         for row in data:
             f.write(",".join(repr(float(v)) for v in row) + "\n")
     tmp.replace(path)

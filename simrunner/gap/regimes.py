@@ -5,7 +5,8 @@ regime; samples with ``|speed| < MOVING_MPS`` are in neither):
 
     accelerating   smoothed acceleration > ACCEL_MPS2
     braking        acceleration < -ACCEL_MPS2 while drive is commanded (|speed_cmd| >= COAST_CMD_MPS)
-    coasting       no drive commanded (|speed_cmd| < COAST_CMD_MPS) while moving
+    coasting       drive off (the log's ``coast`` column) or no drive commanded
+                   (|speed_cmd| < COAST_CMD_MPS), while moving
     steady         moving, none of the three above
     straight       |steer_cmd| < STRAIGHT_RAD
     left, right    steer_cmd >= STRAIGHT_RAD / <= -STRAIGHT_RAD
@@ -32,7 +33,7 @@ def segment(log: MeasuredLog, derived: Derived) -> dict[str, np.ndarray]:
     """Boolean masks (N,) for every name in :data:`REGIMES` (see the module docstring)."""
     moving = np.abs(derived.speed_mps) >= MOVING_MPS
     a = derived.accel_mps2 * np.sign(np.where(derived.speed_mps == 0.0, 1.0, derived.speed_mps))
-    coasting = moving & (np.abs(log.speed_cmd_mps) < COAST_CMD_MPS)
+    coasting = moving & (log.coasting() | (np.abs(log.speed_cmd_mps) < COAST_CMD_MPS))
     accelerating = moving & ~coasting & (a > ACCEL_MPS2)
     braking = moving & ~coasting & (a < -ACCEL_MPS2)
     steady = moving & ~coasting & ~accelerating & ~braking

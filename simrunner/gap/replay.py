@@ -113,8 +113,11 @@ def replay(car: CarDescription, log: MeasuredLog, derived: Derived, windows: Seq
     out = np.full((5, n), np.nan)
     sim = sim_factory(car, dt_s)
     t = log.t_s
+    coast = log.coasting()
     for w in windows:
         i0 = w.start
+        coast_now = bool(coast[i0])
+        sim.set_coast(coast_now)
         sim.set_state(Pose2(derived.x_m[i0], derived.y_m[i0], derived.yaw_rad[i0]),
                       float(derived.speed_mps[i0]), float(derived.steer_rad[i0]),
                       float(derived.yaw_rate_radps[i0]))
@@ -123,6 +126,9 @@ def replay(car: CarDescription, log: MeasuredLog, derived: Derived, windows: Seq
             p = sim.pose
             out[:, i] = (p.x_m, p.y_m, p.yaw_rad, sim.speed_mps, sim.yaw_rate_radps)
             if i + 1 < w.stop:
+                if coast[i] != coast_now:
+                    coast_now = bool(coast[i])
+                    sim.set_coast(coast_now)
                 sim.set_command(float(log.speed_cmd_mps[i]), float(log.steer_cmd_rad[i]))
                 target = int(round((t[i + 1] - t[i0]) / dt_s))
                 if target > done:

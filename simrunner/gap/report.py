@@ -96,7 +96,7 @@ def run_gap(log: MeasuredLog, car: CarDescription | None = None, *, jobs: int = 
     """Run the workflow of the module docstring on ``log`` (``car`` default: the default car).
 
     ``effects`` restricts the candidates (default: the whole catalogue); ``progress(label)``
-    is called after each of the ``len(effects) + 3`` stages.
+    is called after each of the :func:`progress_total` stages.
     """
     car = car or CarDescription()
     tick = progress or (lambda label: None)
@@ -135,6 +135,13 @@ def run_gap(log: MeasuredLog, car: CarDescription | None = None, *, jobs: int = 
         stats_after=residual_stats({s: res1[s] for s in REPORT_SIGNALS + ("along_m", "cross_m")}, masks),
         log=log, derived=derived, fit_windows=fit_w, held_windows=held_w, pred_before=pred0, pred_after=pred1,
         settings=settings)
+
+
+def progress_total(n_effects: int) -> int:
+    """Number of ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates."""
+    from simrunner.gap.fit import REFINE_TOP
+
+    return 3 + n_effects + min(REFINE_TOP, n_effects)
 
 
 def summary_text(result: GapResult) -> str:
