@@ -57,3 +57,37 @@ def excite_cmd(output, duration_s, car, seed, simulate, dt_s) -> None:
     if log is not None:
         click.echo(f"simulated log: {simulate} (path {log['x'].max() - log['x'].min():.1f} x "
                    f"{log['y'].max() - log['y'].min():.1f} m)")
+
+
+@click.command("calibrate")
+@click.argument("measured", metavar="MEASURED.toml", type=click.Path(dir_okay=False, path_type=str))
+@click.option("--car", default=None, metavar="CAR.toml", help="Car description to start from (default: built-in car).")
+@click.option("-o", "--output", "output", required=True, metavar="NEW_CAR.toml",
+              help="Where to write the calibrated car description (written atomically).")
+@click.option("--dt", "dt_s", default=0.002, show_default=True,
+              type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS",
+              help="Physics time step of the simulated tests.")
+def calibrate_cmd(measured, car, output, dt_s) -> None:
+    """Run the thesis's chapter-5 calibration procedures against MEASURED.toml (numbers
+    measured on the real car; docs/calibration.md) and write the updated car description."""
+    from pathlib import Path
+
+    from simrunner.calibrate import calibrate, load_measurements
+    from simrunner.errors import SimError
+    from worlds.car import load_car
+
+    try:
+        measurements = load_measurements(measured)
+        car_desc = load_car(car)
+        result = calibrate(measurements, car_desc, dt_s=dt_s)
+        out = Path(output)
+        if out.parent and not out.parent.is_dir():
+            raise SimError(f"{out}: cannot write the car description (no folder {out.parent})")
+        try:
+            result.car_after.save(out)
+        except OSError as exc:
+            raise SimError(f"{out}: cannot write the car description ({exc.strerror})") from None
+    except _input_errors() as exc:
+        _fail(exc)
+    click.echo(result.report(), nl=False)
+    click.echo(f"car description: {output}")
