@@ -386,13 +386,19 @@ class EffectSim:
 
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
                   yaw_rate_radps: float = 0.0) -> None:
-        """Place the car (as ``CarSim.set_state``); the command path restarts holding
-        (speed_mps, steer_rad) as the effective command: no pending latency, lags settled."""
+        """Place the car (as ``CarSim.set_state``: ``steer_rad`` is the actual wheel angle).
+        The command path restarts settled at that state: no pending latency, the lag and
+        rate-limit states at the values that give ``steer_rad`` and ``speed_mps``, and the
+        held command the one that keeps them (steer undone through understeer, offset and
+        gain), so a following identical command changes nothing."""
+        e = self._e
         self.sim.set_state(pose, speed_mps, steer_rad, yaw_rate_radps)
-        raw = (float(speed_mps), float(steer_rad), None, self._raw[3])
+        pre = float(steer_rad) * (1.0 + e.tire_slip_understeer_radps2pm * float(speed_mps) ** 2
+                                  / self.car.chassis.wheelbase_m)
+        raw = (float(speed_mps), (pre - e.steering_offset_rad) / e.steering_gain, None, self._raw[3])
         self._raw = self._held = raw
         self._queue.clear()
-        self._steer_lag = self._steer_rl = self._static_map(raw)[1]
+        self._steer_lag = self._steer_rl = pre
         self._speed_lag = float(speed_mps)
         self._last_t = self.sim.time_s
         if self._forces:

@@ -191,3 +191,13 @@ def test_friction_scale_below_one_slides_where_nominal_holds(deg):
         return math.hypot(sim.pose.x_m, sim.pose.y_m)
     assert slid_m(CAR) < 1e-4  # mu = 1: holds below 45 deg
     assert slid_m(with_effects(CAR, friction_scale=0.8)) > 0.05  # mu 0.8: slides above 38.7 deg
+
+
+def test_set_state_starts_settled_at_the_given_state():
+    car = with_effects(CAR, steering_offset_rad=0.05, steering_gain=0.8, steering_lag_s=0.1, motor_lag_s=0.2,
+                       command_latency_s=0.05, tire_slip_understeer_radps2pm=0.02)
+    sim = make_sim(car)
+    sim.set_state(Pose2(1.0, 2.0, 0.3), 1.5, 0.12)
+    sim.step(100)
+    assert sim.steer_rad == pytest.approx(0.12, abs=1e-6)
+    assert sim.speed_mps == pytest.approx(1.5, abs=0.01)
