@@ -199,5 +199,5 @@ def test_set_state_starts_settled_at_the_given_state():
     sim = make_sim(car)
     sim.set_state(Pose2(1.0, 2.0, 0.3), 1.5, 0.12)
     sim.step(100)
-    assert sim.steer_rad == pytest.approx(0.12, abs=1e-6)
+    assert sim.steer_rad == pytest.approx(0.12, abs=1e-4)  # understeer follows the measured speed
     assert sim.speed_mps == pytest.approx(1.5, abs=0.01)
