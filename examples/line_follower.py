@@ -5,9 +5,9 @@ Run it:  simrunner drive examples/line_follower.py [--track ...] [--video run.mp
 Each frame it reads one image row (the line camera, ``spinner.line_row``), finds the white
 lane between the dark edge lines, steers towards the lane's middle (PD on the pixel error)
 and slows down while steering hard. Where only one edge is in view it places the middle
-half a lane width (learned while both edges are seen) from that edge; where no edge is
-seen (a crossroads, or a lane wider than the view) it keeps its last estimate, i.e. the
-last steering, as the thesis's team did.
+half a lane width (learned while both edges are seen) from that edge; where the whole row
+is white (a crossroads) it goes straight on; where nothing white is seen (line lost) it
+keeps its last estimate, i.e. the last steering, as the thesis's team did.
 
 Units: Spinner defaults (m/s, radians, + = left). The gains are per half image width.
 """
@@ -15,57 +15,75 @@ from __future__ import annotations
 
 import numpy as np
 
-V_MAX_MPS = 1.9        # on straights
-V_MIN_MPS = 1.0        # at full steering
-KP = 0.55              # rad of steering per half-image of lateral error
+V_MAX_MPS = 2.8        # on straights
+V_MIN_MPS = 1.5        # at full steering
+KP = 0.8               # rad of steering per half-image of lateral error
 KD = 0.9               # rad per half-image of error change per frame
 STEER_LIMIT_RAD = 0.40
 WHITE = 128            # gray threshold: lane is white (~235), edges/floor dark (15-40)
 SPEED_FILTER = 0.25    # low-pass factor of the speed command per frame
 
 
-def lane_edges(row: np.ndarray, guess_px: float) -> tuple[int | None, int | None]:
+def lane_edges(row: np.ndarray, guess_px: float) -> tuple[int | None, int | None] | None:
     """First and last column of the white lane run in one image row (None where the run
     reaches the image border, i.e. that edge is not in view). The run chosen is the one
-    containing ``guess_px``, else the nearest one; ``(None, None)`` if no pixel is white."""
+    containing ``guess_px``, else the nearest one. ``None`` if no pixel is white (lost)."""
     white = (row > WHITE).tobytes()  # 1 = white, 0 = dark; bytes.find is fast C
     w = len(white)
     g = min(max(int(guess_px), 0), w - 1)
     if not white[g]:
         r, l = white.find(1, g), white.rfind(1, 0, g)
         if r < 0 and l < 0:
-            return None, None
+            return None
         g = r if l < 0 or (0 <= r and r - g <= g - l) else l
     a, b = white.rfind(0, 0, g), white.find(0, g)
     return (a + 1 if a >= 0 else None), (b - 1 if b >= 0 else None)
 
 
+class LaneTracker:
+    """The lane middle in one image row, remembered between frames (pixels).
+
+    Both edges seen: the middle of them (and the lane width is learned). One edge seen: half
+    a lane width from it. All white (a crossroads): straight on. No white at all (lost):
+    the last estimate, i.e. the last steering, as the thesis's team did.
+    """
+
+    def __init__(self, width_px: int):
+        self.half = width_px / 2.0
+        self.centre = self.half
+        self.lane_px = float(width_px)
+        self.edges: tuple | None = (None, None)
+        self.at_crossing = False
+
+    def error(self, row: np.ndarray) -> float:
+        """Lateral error in half-image units, + = the lane middle is right of the car."""
+        self.edges = edges = lane_edges(row, self.centre)
+        left, right = edges if edges is not None else (None, None)
+        self.at_crossing = edges is not None and left is None and right is None
+        if left is not None and right is not None:
+            self.lane_px = 0.9 * self.lane_px + 0.1 * (right - left)
+            self.centre = 0.5 * (left + right)
+        elif left is not None:
+            self.centre = left + 0.5 * self.lane_px
+        elif right is not None:
+            self.centre = right - 0.5 * self.lane_px
+        elif self.at_crossing:
+            self.centre = self.half
+        return (self.centre - self.half) / self.half
+
+
 def main(spinner):
     s = spinner
-    row_index = s.line_row
-    width = s.image_shape[1]
-    half = width / 2.0
-    centre = half            # lane middle estimate, pixels
-    lane_px = float(width)   # lane width in pixels at this row (learned)
-    prev_err = 0.0
-    steer = 0.0
-    speed = V_MIN_MPS
+    lane = LaneTracker(s.image_shape[1])
+    prev_err, speed = 0.0, V_MIN_MPS
     while True:
-        row = s.get_image(row_index)[0]
-        left, right = lane_edges(row, centre)
-        if left is not None and right is not None:
-            lane_px = 0.9 * lane_px + 0.1 * (right - left)
-            centre = 0.5 * (left + right)
-        elif left is not None:
-            centre = left + 0.5 * lane_px
-        elif right is not None:
-            centre = right - 0.5 * lane_px
-        # else: no edge in view -> keep the last estimate (and so the last steering)
-        err = (centre - half) / half          # + = lane middle is to the car's right
+        err = lane.error(s.get_image(s.line_row)[0])
+        if lane.at_crossing:
+            prev_err = err  # no derivative kick when the estimate is reset
         steer = min(max(-KP * err - KD * (err - prev_err), -STEER_LIMIT_RAD), STEER_LIMIT_RAD)
         prev_err = err
         target = V_MAX_MPS - (V_MAX_MPS - V_MIN_MPS) * min(1.0, abs(steer) / (0.6 * STEER_LIMIT_RAD))
         speed += SPEED_FILTER * (target - speed) if target > speed else (target - speed)
         s.set_speed_and_servo(speed, steer)
-        s.add_data([f"edges {left} {right}  lane {lane_px:.0f} px",
+        s.add_data([f"edges {lane.edges}  lane {lane.lane_px:.0f} px",
                     f"steer {steer:+.3f} rad  speed {speed:.2f} m/s"])

@@ -64,6 +64,7 @@ class RunResult:
     track: str
     seed: int
     message: str = ""
+    cpu_time_s: float = 0.0  # process CPU time of the run loop (load-independent speed)
     error: ControllerError | None = None
     telemetry: TelemetryLog = field(default_factory=TelemetryLog, repr=False)
     outputs: dict[str, str] = field(default_factory=dict)
@@ -78,7 +79,8 @@ class RunResult:
                 "laps_completed": self.laps_completed,
                 "lap_times_s": [round(t, 6) for t in self.lap_times_s],
                 "sim_time_s": round(self.sim_time_s, 6), "wall_time_s": round(self.wall_time_s, 3),
-                "real_time_factor": round(self.real_time_factor, 2), "track": self.track,
+                "real_time_factor": round(self.real_time_factor, 2),
+                "cpu_time_s": round(self.cpu_time_s, 3), "track": self.track,
                 "seed": self.seed, "frames": len(self.telemetry), "outputs": self.outputs}
 
 
@@ -317,8 +319,9 @@ def drive(controller: str | Path | Callable, *, track: str | Path | None = None,
 
     outcome, message, error = None, "", None
     module_name = "simrunner_controller"
+    modules_before = set(sys.modules)
     added_path = None
-    wall0 = time.perf_counter()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
     watchdog = _Watchdog(clock, wall_limit_s, user_file)
     session.activate()
     try:
@@ -356,9 +359,11 @@ def drive(controller: str | Path | Callable, *, track: str | Path | None = None,
     finally:
         session.deactivate()
         sys.modules.pop(module_name, None)
-        if added_path is not None and added_path in sys.path:
-            sys.path.remove(added_path)
-    wall_s = time.perf_counter() - wall0
+        if added_path is not None:
+            _forget_modules_from(added_path, set(sys.modules) - modules_before)
+            if added_path in sys.path:
+                sys.path.remove(added_path)
+    wall_s, cpu_s = time.perf_counter() - wall0, time.process_time() - cpu0
     if outcome != "controller_error":
         if clock.finished is not None:
             outcome, message = clock.finished.outcome, clock.finished.message
@@ -369,10 +374,20 @@ def drive(controller: str | Path | Callable, *, track: str | Path | None = None,
     result = RunResult(outcome=outcome, laps=int(laps), laps_completed=judge.laps_completed,
                        lap_times_s=judge.lap_times_s, sim_time_s=sim_s, wall_time_s=wall_s,
                        real_time_factor=sim_s / wall_s if wall_s > 0 else math.inf,
-                       track=str(track_spec), seed=int(seed), message=message, error=error,
+                       track=str(track_spec), seed=int(seed), message=message, cpu_time_s=cpu_s,
+                       error=error,
                        telemetry=log)
     _write_outputs(result, recorder, sim_track, csv=csv, plot=plot, summary=summary)
     return result
+
+
+def _forget_modules_from(folder: str, names: set[str]) -> None:
+    """Unload helper modules a controller imported from its own folder (a later run of
+    another folder's ``helper.py`` must not get this one)."""
+    for name in names:
+        f = getattr(sys.modules.get(name), "__file__", None) or ""
+        if f and os.path.dirname(os.path.abspath(f)) == folder:
+            sys.modules.pop(name, None)
 
 
 def _write_outputs(result: RunResult, recorder, sim_track, *, csv, plot, summary) -> None:

@@ -195,6 +195,12 @@ def test_callable_controller_and_thesis_style_spinner_constructor():
     assert r.outcome == "controller_returned" and seen["t"] == pytest.approx(0.002)
 
 
+def test_real_car_units_example_laps_the_default_track():
+    r = drive(EXAMPLES / "real_car_units.py")
+    assert r.outcome == "finished", r.message
+    assert r.lap_times_s[0] > 6.5  # the full figure-8, not a shortcut through the crossroads
+
+
 @pytest.mark.parametrize("example", ["camera_row_test.py", "velocity_test.py"])
 def test_thesis_examples_run(example, tmp_path):
     r = drive(EXAMPLES / example, csv=tmp_path / "t.csv")
