@@ -162,6 +162,7 @@ class _FilterState:
 
     raw: tuple[float, float, float | None, bool]  # speed, steer, yaw rate, coast (as commanded)
     coast_on: bool  # coasting applied to the inner CarSim
+    sent: tuple | None  # the last command passed to the inner CarSim
     queue: tuple  # pending (t_effective_s, raw) for the latency
     held: tuple[float, float, float | None, bool]  # the delayed command in force
     steer_lag: float
@@ -202,6 +203,7 @@ class EffectSim:
         self._last_t = self.sim.time_s
         self._substep = 0
         self._coast_on = False
+        self._sent: tuple | None = None  # the last command passed to the inner CarSim
 
     # -- pass-through ----------------------------------------------------------------------
     def __getattr__(self, name: str):
@@ -332,7 +334,11 @@ class EffectSim:
             v_eff = min(max(v_eff, -vmax), vmax)
             d1 = min(max(d, -lim), lim)
             w = w_cmd + (v_eff * math.sin(d1) - v0 * math.sin(d0)) / wb
-        sim.set_command(v_eff, d, w)
+        sent = (v_eff, d, w)
+        if sent != self._sent or not self._dynamic:
+            # an unchanged command is not re-sent: CarSim keeps its targets (as without effects)
+            sim.set_command(v_eff, d, w)
+            self._sent = sent
         if coast != self._coast_on:
             self._coast_on = coast
             sim.set_coast(coast)
@@ -371,7 +377,7 @@ class EffectSim:
 
     # -- state ---------------------------------------------------------------------------
     def save_state(self) -> EffectSimState:
-        filt = _FilterState(self._raw, self._coast_on, tuple(self._queue), self._held, self._steer_lag, self._steer_rl,
+        filt = _FilterState(self._raw, self._coast_on, self._sent, tuple(self._queue), self._held, self._steer_lag, self._steer_rl,
                             self._speed_lag, self._last_t, self._substep)
         return EffectSimState(self.sim.save_state(), filt, self._user_force)
 
@@ -383,6 +389,7 @@ class EffectSim:
         self._last_t, self._substep = f.last_t, f.substep
         self._user_force = state.user_force_n
         self._coast_on = f.coast_on  # the inner state restores the inner coasting itself
+        self._sent = f.sent
 
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
                   yaw_rate_radps: float = 0.0) -> None:
@@ -399,6 +406,7 @@ class EffectSim:
         self._raw = self._held = raw
         self._queue.clear()
         self._steer_lag = self._steer_rl = pre
+        self._sent = None
         self._speed_lag = float(speed_mps)
         self._last_t = self.sim.time_s
         if self._forces:

@@ -1,0 +1,44 @@
+"""Cost of the effects layer (issue 4): ``make_sim`` steps per CPU-second for the nominal car
+(a plain CarSim), a static effect only (steering offset: no sub-step), and filtered effects
+(latency + lags + drag: control sub-step every 4 ms), each driving with a new command every
+20 ms for 4 simulated seconds at dt 2 ms; plus the wall time of one excitation-plan
+play-back (``run_plan``, ~67 s simulated). Best of 3, CPU time."""
+from __future__ import annotations
+
+import math
+import time
+
+from simrunner.effects import make_sim, with_effects
+from simrunner.excite import make_plan, run_plan
+from worlds.car import CarDescription
+
+SIM_S = 4.0
+REPEATS = 3
+
+
+def _rate(car) -> float:
+    best = math.inf
+    for _ in range(REPEATS):
+        sim = make_sim(car)
+        t0 = time.process_time()
+        for k in range(round(SIM_S / 0.02)):
+            sim.set_command(1.5, 0.2 * math.sin(0.05 * k))
+            sim.step(10)
+        best = min(best, time.process_time() - t0)
+    return round(SIM_S / 0.002) / best
+
+
+def main() -> None:
+    car = CarDescription()
+    rows = [("nominal (CarSim)", car),
+            ("steering_offset only", with_effects(car, steering_offset_rad=0.02)),
+            ("latency+lags+drag", with_effects(car, command_latency_s=0.03, steering_lag_s=0.05,
+                                               motor_lag_s=0.1, drag_coeff_kgpm=0.1))]
+    print(f"{'car':24s} {'steps/CPU-s':>12s} {'x real time':>12s}")
+    for name, c in rows:
+        r = _rate(c)
+        print(f"{name:24s} {r:12.0f} {r * 0.002:12.1f}")
+    plan = make_plan(car)
+    t0 = time.process_time()
+    run_plan(plan, car)
+    print(f"run_plan nominal, {plan.duration_s:.0f} s plan at dt 2 ms: {time.process_time() - t0:.2f} CPU-s")
