@@ -158,3 +158,28 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, args, match):
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and match.replace("BAD", "") in lines[0] and "Traceback" not in res.output
     assert not out.exists()
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as hs  # noqa: E402
+
+_VALUES = hs.one_of(hs.floats(allow_nan=True, allow_infinity=True), hs.integers(-10**6, 10**6), hs.booleans(),
+                    hs.text(max_size=5), hs.lists(hs.floats(-100, 100), max_size=4))
+
+
+@settings(max_examples=150, deadline=None)
+@given(hs.dictionaries(hs.sampled_from(["camera", "speed", "acceleration", "braking", "steering", "traction",
+                                        "mass", "other"]),
+                       hs.dictionaries(hs.sampled_from(["distance_m", "commands", "distances_m", "window_s",
+                                                        "model", "speed_mps", "command", "time_s", "radius_m",
+                                                        "measured_at", "slip_angle_deg", "orientation",
+                                                        "weight_kg", "scale", "junk"]), _VALUES, max_size=5),
+                       max_size=3))
+def test_measurements_parser_accepts_or_rejects_in_one_line(data):
+    """Any parsed TOML either loads or raises one CalibrationError line (never another error)."""
+    try:
+        m = measurements_from_dict(data, "p.toml")
+    except CalibrationError as err:
+        assert "\n" not in str(err) and str(err).startswith("p.toml")
+    else:
+        assert set(m.sections) == set(data)

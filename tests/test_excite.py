@@ -115,3 +115,33 @@ def test_every_effect_leaves_a_trace_in_its_segments(name, nominal_coarse):
     d_speed = np.abs(log["speed"] - nominal_coarse["speed"])[mask].max()
     d_yaw_rate = np.abs(log["yaw_rate"] - nominal_coarse["yaw_rate"])[mask].max()
     assert max(d_speed, d_yaw_rate) > 0.1, (name, d_speed, d_yaw_rate)
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as hs  # noqa: E402
+
+
+@settings(max_examples=40, deadline=None)
+@given(hs.lists(hs.tuples(hs.floats(-3, 3), hs.floats(-0.5, 0.5), hs.booleans(),
+                          hs.text("abcdefghij_:+-.0123456789", min_size=1, max_size=12)), min_size=2, max_size=30),
+       hs.sampled_from([10.0, 25.0, 50.0, 100.0]))
+def test_csv_round_trip_property(tmp_path_factory, rows, rate):
+    n = len(rows)
+    plan = ExcitationPlan(np.arange(n) / rate, np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                          np.array([r[2] for r in rows], dtype=bool), tuple(r[3] for r in rows), rate_hz=rate)
+    path = plan.to_csv(tmp_path_factory.mktemp("p") / "plan.csv", extent=(0.0, 1.0, 0.0, 1.0))
+    back = ExcitationPlan.from_csv(path)
+    assert back.rate_hz == rate and back.segment == plan.segment and np.array_equal(back.coast, plan.coast)
+    assert np.allclose(back.speed_cmd_mps, plan.speed_cmd_mps, atol=1e-6)
+    assert np.allclose(back.steer_cmd_rad, plan.steer_cmd_rad, atol=1e-6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(hs.text(max_size=200))
+def test_from_csv_never_crashes_on_junk(tmp_path_factory, text):
+    path = tmp_path_factory.mktemp("j") / "plan.csv"
+    path.write_text(text)
+    try:
+        ExcitationPlan.from_csv(path)
+    except PlanError as err:
+        assert "\n" not in str(err)
