@@ -112,11 +112,6 @@ def _set(car: CarDescription, dotted: str, value: float) -> CarDescription:
     return car.replace(**{section: dataclasses.replace(getattr(car, section), **{name: value})})
 
 
-def _get(car: CarDescription, dotted: str):
-    section, name = dotted.split(".")
-    return getattr(getattr(car, section), name)
-
-
 def _range_checked(car: CarDescription, m: Measurements, section: str) -> CarDescription:
     """The car must stay inside the description's ranges (worlds.car)."""
     try:

@@ -6,8 +6,9 @@ import dataclasses
 import math
 from pathlib import Path
 
-import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hs
 from click.testing import CliRunner
 
 from simrunner.calibrate import CalibrationError, calibrate
@@ -159,9 +160,6 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, args, match):
     assert len(lines) == 1 and match.replace("BAD", "") in lines[0] and "Traceback" not in res.output
     assert not out.exists()
 
-
-from hypothesis import given, settings  # noqa: E402
-from hypothesis import strategies as hs  # noqa: E402
 
 _VALUES = hs.one_of(hs.floats(allow_nan=True, allow_infinity=True), hs.integers(-10**6, 10**6), hs.booleans(),
                     hs.text(max_size=5), hs.lists(hs.floats(-100, 100), max_size=4))

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as hs
 
 from simrunner.effects import EFFECTS, with_effects
 from simrunner.excite import (AREA_M, SEGMENT_KINDS, ExcitationPlan, PlanError, make_plan, run_plan,
@@ -116,9 +118,6 @@ def test_every_effect_leaves_a_trace_in_its_segments(name, nominal_coarse):
     d_yaw_rate = np.abs(log["yaw_rate"] - nominal_coarse["yaw_rate"])[mask].max()
     assert max(d_speed, d_yaw_rate) > 0.1, (name, d_speed, d_yaw_rate)
 
-
-from hypothesis import given, settings  # noqa: E402
-from hypothesis import strategies as hs  # noqa: E402
 
 
 @settings(max_examples=40, deadline=None)
