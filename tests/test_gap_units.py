@@ -250,3 +250,10 @@ def test_choose_applies_thresholds():
     assert choose([fr("drag", 5.0, 0.5)]) is None
     assert choose([fr("drag", 500.0, 0.001)]) is None
     assert choose([]) is None
+
+
+def test_split_keeps_flagged_windows_in_the_fit_set():
+    w = [f"w{k}" for k in range(9)]
+    fit, held = split_windows(w, 3, must_fit=[False, False, True, False, False, True, True, False, False])
+    assert held == ["w3", "w7", "w8"]
+    assert len(fit) == 6

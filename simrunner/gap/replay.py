@@ -88,10 +88,21 @@ def make_windows(log: MeasuredLog, window_s: float = WINDOW_S) -> list[Window]:
     return [Window(a, b) for a, b in zip(edges[:-1], edges[1:])]
 
 
-def split_windows(windows: Sequence[Window], every: int = HOLDOUT_EVERY) -> tuple[list[Window], list[Window]]:
-    """(fit, held_out): window ``k`` is held out when ``k % every == every - 1``."""
-    fit = [w for k, w in enumerate(windows) if k % every != every - 1]
-    held = [w for k, w in enumerate(windows) if k % every == every - 1]
+def split_windows(windows: Sequence[Window], every: int = HOLDOUT_EVERY,
+                  must_fit: Sequence[bool] | None = None) -> tuple[list[Window], list[Window]]:
+    """(fit, held_out): window ``k`` is held out when ``k % every == every - 1``, except that
+    a window flagged in ``must_fit`` (rare manoeuvres: the plan has one short coast) stays
+    in the fit set and the next unflagged window is held out in its place."""
+    flags = list(must_fit) if must_fit is not None else [False] * len(windows)
+    held_idx: set[int] = set()
+    pending = False
+    for k in range(len(windows)):
+        pending = pending or k % every == every - 1
+        if pending and not flags[k]:
+            held_idx.add(k)
+            pending = False
+    fit = [w for k, w in enumerate(windows) if k not in held_idx]
+    held = [w for k, w in enumerate(windows) if k in held_idx]
     return fit, held
 
 

@@ -102,7 +102,8 @@ def run_gap(log: MeasuredLog, car: CarDescription | None = None, *, jobs: int = 
     tick = progress or (lambda label: None)
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad)
     windows = make_windows(log, window_s)
-    fit_w, held_w = split_windows(windows)
+    masks = segment(log, derived)
+    fit_w, held_w = split_windows(windows, must_fit=[bool(masks["coasting"][w.start:w.stop].any()) for w in windows])
     if len(fit_w) < 2 or not held_w:
         raise GapError(f"{log.source}: expected a log of at least 3 windows of {window_s:g} s "
                        f"(got {len(windows)})")
@@ -123,7 +124,6 @@ def run_gap(log: MeasuredLog, car: CarDescription | None = None, *, jobs: int = 
     tick("held-out check")
     res1 = residuals(log, derived, pred1)
     held = window_mask(len(log), held_w)
-    masks = segment(log, derived)
     settings = {"dt_s": dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
                 "improvement_min": improvement_min, "scales": problem.scales,
                 "effects": list(effects) if effects is not None else list(CANDIDATES)}

@@ -74,12 +74,13 @@ def draw_value(effect: str, rng: np.random.Generator) -> float:
 
 
 def make_measured_log(effect: str | None, *, rng: np.random.Generator, car: CarDescription | None = None,
-                      value: float | None = None, duration_s: float | None = None,
+                      value: float | None = None, start_s: float = 0.0, duration_s: float | None = None,
                       noise: bool = True) -> tuple[MeasuredLog, Truth]:
     """A synthetic measured log with ``effect`` hidden (see the module docstring).
 
-    ``value`` fixes the magnitude instead of drawing it; ``duration_s`` keeps only the
-    first part of the plan (tests use ~25 s); ``noise=False`` gives exact states (for the
+    ``value`` fixes the magnitude instead of drawing it; ``start_s``/``duration_s`` play
+    only that part of the plan (from rest at the origin; tests use ~20 s parts);
+    ``noise=False`` gives exact states (for the
     signal-to-noise computation of the bench). Returns ``(log, truth)``.
     """
     from simrunner.effects import with_effects
@@ -100,11 +101,12 @@ def make_measured_log(effect: str | None, *, rng: np.random.Generator, car: CarD
     if field is not None:
         truth_car = with_effects(truth_car, **{field: val})
     plan = make_plan(car, seed=plan_seed)
-    if duration_s is not None:
-        k = min(len(plan), int(round(duration_s * plan.rate_hz)))
-        plan = dataclasses.replace(plan, t_s=plan.t_s[:k], speed_cmd_mps=plan.speed_cmd_mps[:k],
-                                   steer_cmd_rad=plan.steer_cmd_rad[:k], coast=plan.coast[:k],
-                                   segment=plan.segment[:k])
+    if start_s > 0.0 or duration_s is not None:
+        a = int(round(start_s * plan.rate_hz))
+        b = len(plan) if duration_s is None else min(len(plan), a + int(round(duration_s * plan.rate_hz)))
+        plan = dataclasses.replace(plan, t_s=plan.t_s[a:b] - plan.t_s[a], speed_cmd_mps=plan.speed_cmd_mps[a:b],
+                                   steer_cmd_rad=plan.steer_cmd_rad[a:b], coast=plan.coast[a:b],
+                                   segment=plan.segment[a:b])
     out = run_plan(plan, truth_car, dt_s=SYNTH_DT_S)
     n = len(out["t"])
     cols = {k: np.asarray(out[k], dtype=float) for k in ("t", "x", "y", "yaw", "speed", "speed_cmd", "steer_cmd",

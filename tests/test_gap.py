@@ -1,0 +1,124 @@
+"""Gap workflow end to end on synthetic logs with a hidden effect (real physics).
+
+Logs are parts of the excitation plan (~20 s instead of 67 s) to keep the file within its
+time budget; the first part (straights, step steers, circles) hides lateral effects, the
+part from 38 s (speed steps, brake, straight at 2 m/s, coast) longitudinal ones.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from simrunner.cli_gap import gap
+from simrunner.gap.fit import CANDIDATES
+from simrunner.gap.logs import read_log, write_log
+from simrunner.gap.report import run_gap, write_outputs
+from simrunner.gap.synth import make_measured_log
+from worlds.car import load_car
+
+LONGITUDINAL = ["motor_lag", "command_latency", "throttle_deadband", "rolling_resistance", "drag"]
+PART_LATERAL = dict(start_s=0.0, duration_s=24.0)
+PART_LONGITUDINAL = dict(start_s=38.0, duration_s=18.0)
+
+
+@pytest.fixture(scope="module")
+def offset_run():
+    log, truth = make_measured_log("steering_offset", rng=np.random.default_rng(11), value=-0.03, **PART_LATERAL)
+    return log, truth, run_gap(log, jobs=2)
+
+
+def test_hidden_steering_offset_is_named_and_fitted(offset_run):
+    _, truth, result = offset_run
+    assert result.effect == "steering_offset"
+    assert result.parameters["steering_offset_rad"] == pytest.approx(truth.value, rel=0.10)
+    assert result.rmse_after["position_m"] < 0.5 * result.rmse_before["position_m"]
+    assert result.rmse_after["yaw_rad"] < 0.5 * result.rmse_before["yaw_rad"]
+    # every catalogue effect is in the ranking, best first
+    assert [r.effect for r in result.ranking][0] == "steering_offset"
+    assert sorted(r.effect for r in result.ranking) == sorted(CANDIDATES)
+
+
+def test_effect_free_log_gives_none():
+    log, _ = make_measured_log(None, rng=np.random.default_rng(12), **PART_LATERAL)
+    result = run_gap(log, jobs=2)
+    assert result.effect == "none" and result.parameters == {}
+    assert result.rmse_after == result.rmse_before
+
+
+@pytest.mark.parametrize("effect, value, field", [("motor_lag", 0.3, "motor_lag_s"),
+                                                  ("drag", 0.3, "drag_coeff_kgpm")])
+def test_hidden_longitudinal_effect_is_named(effect, value, field):
+    log, truth = make_measured_log(effect, rng=np.random.default_rng(13), value=value, **PART_LONGITUDINAL)
+    result = run_gap(log, jobs=2, effects=LONGITUDINAL)
+    assert result.effect == effect
+    assert result.parameters[field] == pytest.approx(value, rel=0.10)
+    assert result.rmse_after["speed_mps"] < result.rmse_before["speed_mps"]
+
+
+def test_report_folder(offset_run, tmp_path):
+    _, truth, result = offset_run
+    out = write_outputs(result, tmp_path / "gap")
+    names = {p.name for p in out.iterdir()}
+    assert {"report.json", "car.toml", "gap_before_after.png", "residuals_by_regime.png"} <= names
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["effect"] == "steering_offset"
+    assert set(rep["parameters"]) == {"steering_offset_rad"}
+    for key in ("rmse_before", "rmse_after"):
+        assert set(rep[key]) == {"position_m", "yaw_rad", "speed_mps", "yaw_rate_radps"}
+    assert len(rep["ranking"]) == len(CANDIDATES)
+    assert {"effect", "parameters", "bic", "delta_bic", "improvement"} <= set(rep["ranking"][0])
+    car = load_car(out / "car.toml")
+    assert car.effects.steering_offset_rad == pytest.approx(rep["parameters"]["steering_offset_rad"])
+    assert not list(tmp_path.glob(".gap.*"))  # no temporary folder left behind
+
+
+# -- command line ------------------------------------------------------------------------
+@pytest.mark.parametrize("text, line, what", [
+    ("t,x,y,yaw,speed,speed_cmd\n0,0,0,0,0,0\n", 1, "missing: steer_cmd"),
+    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n0,0,0,0,0,0,zero\n", 2, "expected a number"),
+    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + "".join(f"{i * 0.1},0,0,0,0,0,0\n" for i in range(100))
+     + "5.0,0,0,0,0,0,0\n", 102, "strictly increasing"),
+    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n0,0,0,0,0,0,0\n", 2, "expected at least"),
+])
+def test_cli_bad_input_exit_2_and_nothing_written(tmp_path, text, line, what):
+    p = tmp_path / "m.csv"
+    p.write_text(text)
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 2
+    err = res.stderr.strip()
+    assert "\n" not in err and f"{p}:{line}: " in err and what in err
+    assert "Traceback" not in res.output
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["m.csv"]
+
+
+def test_cli_bad_options_exit_2(tmp_path, offset_run):
+    log, _, _ = offset_run
+    p = tmp_path / "m.csv"
+    write_log(log, p)
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--effects", "warp_drive"])
+    assert res.exit_code == 2 and "warp_drive" in res.stderr
+    (tmp_path / "exists").mkdir()
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "exists")])
+    assert res.exit_code == 2 and "exists" in res.stderr
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--car", str(tmp_path / "nope.toml")])
+    assert res.exit_code == 2
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_run_matches_library_and_jobs_do_not_matter(tmp_path, offset_run):
+    log, _, _ = offset_run
+    p = tmp_path / "m.csv"
+    write_log(log, p)
+    subset = ["steering_offset", "steering_gain"]
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--jobs", "1", "--no-progress",
+                                   "--effects", ",".join(subset)])
+    assert res.exit_code == 0, res.output
+    assert "missing effect: steering_offset" in res.stdout
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    lib = run_gap(read_log(p), jobs=2, effects=subset)
+    assert rep["effect"] == lib.effect
+    assert [r["parameters"] for r in rep["ranking"]] == [r.parameters for r in lib.ranking]
+    assert [r["bic"] for r in rep["ranking"]] == [r.criterion for r in lib.ranking]
