@@ -1,7 +1,8 @@
 """``simrunner`` command line: a thin click layer over :func:`simrunner.runner.drive`.
 
 Exit codes: 0 the run finished its laps or ``main`` returned; 1 the run failed (off track,
-timeout, controller error, stalled); 2 bad input (one line on stderr, no traceback).
+timeout, controller error, stalled); 2 bad input (one line on stderr, no traceback);
+130 interrupted (Ctrl-C; outputs are still written).
 """
 from __future__ import annotations
 
@@ -83,7 +84,7 @@ def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, 
                f"{result.real_time_factor:.1f}x real time")
     if result.outputs:
         click.echo("wrote: " + ", ".join(result.outputs.values()))
-    sys.exit(0 if result.ok else 1)
+    sys.exit(0 if result.ok else 130 if result.outcome == "interrupted" else 1)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -9,8 +9,8 @@ The run ends when the judge counts the laps (``finished``), a wheel leaves the r
 raises :class:`~simrunner.errors.RunFinished` — when ``main`` returns
 (``controller_returned``), when it raises (``controller_error``; also bad commands such as
 NaN), or when it spends ``wall_limit_s`` of wall time without letting simulated time pass
-(``stalled``: a SIGALRM watchdog, main thread only). Telemetry, video, plot and summary are
-written in every case.
+(``stalled``: a SIGALRM watchdog, main thread only), or on Ctrl-C (``interrupted``).
+Telemetry, video, plot and summary are written in every case.
 """
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ from .spinner import Session, Spinner
 from .telemetry import TelemetryLog
 
 OUTCOMES = ("finished", "off_track", "timeout", "controller_error", "controller_returned",
-            "stalled")
+            "stalled", "interrupted")
 SUCCESS_OUTCOMES = ("finished", "controller_returned")
 _PACKAGE_DIR = str(Path(__file__).resolve().parent)
 _DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -343,6 +343,9 @@ def drive(controller: str | Path | Callable, *, track: str | Path | None = None,
             except ControllerFileError:
                 watchdog.disarm()
                 raise
+            except KeyboardInterrupt:
+                watchdog.disarm()
+                outcome, message = "interrupted", "Ctrl-C"
             except Exception as exc:
                 watchdog.disarm()
                 outcome = "controller_error"
@@ -364,7 +367,7 @@ def drive(controller: str | Path | Callable, *, track: str | Path | None = None,
             if added_path in sys.path:
                 sys.path.remove(added_path)
     wall_s, cpu_s = time.perf_counter() - wall0, time.process_time() - cpu0
-    if outcome != "controller_error":
+    if outcome not in ("controller_error", "interrupted"):
         if clock.finished is not None:
             outcome, message = clock.finished.outcome, clock.finished.message
         elif outcome is None:
