@@ -129,12 +129,15 @@ def compose(rec: FrameRecord, track_view: TrackView | None, laps: int,
     out = np.zeros((FRAME_H, FRAME_W, 3), np.uint8)
     st = rec.state
     # API column
-    rows = [("time", f"{rec.t_s:8.3f} s"), ("speed", f"{st['speed']:6.3f} m/s"),
-            ("speed cmd", f"{st['speed_cmd']:6.3f} m/s"),
-            ("steer", f"{math.degrees(st['steer']):6.1f} deg"),
-            ("steer cmd", f"{math.degrees(st['steer_cmd']):6.1f} deg"),
-            ("x", f"{rec.pose.x_m:7.3f} m"), ("y", f"{rec.pose.y_m:7.3f} m"),
-            ("yaw", f"{math.degrees(rec.pose.yaw_rad):6.1f} deg"),
+    def z(v: float, nd: int) -> float:  # no "-0.000"
+        return round(v, nd) + 0.0
+
+    rows = [("time", f"{rec.t_s:8.3f} s"), ("speed", f"{z(st['speed'], 3):6.3f} m/s"),
+            ("speed cmd", f"{z(st['speed_cmd'], 3):6.3f} m/s"),
+            ("steer", f"{z(math.degrees(st['steer']), 1):6.1f} deg"),
+            ("steer cmd", f"{z(math.degrees(st['steer_cmd']), 1):6.1f} deg"),
+            ("x", f"{z(rec.pose.x_m, 3):7.3f} m"), ("y", f"{z(rec.pose.y_m, 3):7.3f} m"),
+            ("yaw", f"{z(math.degrees(rec.pose.yaw_rad), 1):6.1f} deg"),
             ("lap", f"{st['lap']} / {laps}"), ("frame", f"{rec.frame}"),
             ("line row", f"{rec.line_row}")]
     y = 24
@@ -240,10 +243,12 @@ class VideoRecorder:
         self._pending = FrameRecord(frame, t_s, pose, state, line_row=self._last_row)
 
     def note_image(self, img: np.ndarray, line: int) -> None:
-        """The image (``line = -1``) or row the controller just got (kept by reference)."""
+        """The image (``line = -1``) or row the controller just got (copied: the controller
+        may change its array before the writer thread draws it)."""
         rec = self._pending
         if rec is None:
             return
+        img = img.copy()
         if line < 0:
             rec.image = img
             rec.line_row = self.default_row if self._last_row < 0 else self._last_row
