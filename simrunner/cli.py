@@ -87,5 +87,17 @@ def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, 
     sys.exit(0 if result.ok else 130 if result.outcome == "interrupted" else 1)
 
 
+def _register_workflow_commands() -> None:
+    """Calibration (`calibrate`, `excite`) and the sim-vs-measured `gap` workflow."""
+    from .cli_calib import calibrate_cmd, excite_cmd
+    from .cli_gap import gap
+
+    main.add_command(calibrate_cmd, "calibrate")
+    main.add_command(excite_cmd, "excite")
+    main.add_command(gap, "gap")
+
+
+_register_workflow_commands()
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -279,7 +279,7 @@ def drive(controller: str | Path | Callable, *, track: str | Path | None = None,
     """
     from .camera import Camera
     from .judge import Judge
-    from .physics import CarSim
+    from .effects import make_sim
 
     _check_options(laps, time_limit_s, seed, dt_s, wall_limit_s)
     code, ctrl_path, main = None, None, None
@@ -297,7 +297,9 @@ def drive(controller: str | Path | Callable, *, track: str | Path | None = None,
     track_spec = Path(track) if track is not None else default_track()
     sim_track = _load_track(track_spec, car_desc)
 
-    sim = CarSim(car_desc, dt_s=dt_s, start=sim_track.start, surface_z_m=sim_track.surface_z_m)
+    # make_sim: a plain CarSim when every effect of the car description is neutral,
+    # otherwise an EffectSim applying them (docs/effects.md)
+    sim = make_sim(car_desc, dt_s=dt_s, start=sim_track.start, surface_z_m=sim_track.surface_z_m)
     camera = Camera(car_desc.camera, sim_track)
     judge = Judge(sim_track, laps=int(laps))
     log = TelemetryLog()
