@@ -13,6 +13,11 @@ positions; the crossing time (and distance) is interpolated linearly.
   the car 0.3 m behind the gate): that crossing needs no minimum distance.
 - Crossing backwards emits a ``"gate_backward"`` event and never counts; a forward crossing
   too soon after the last one (less than the minimum distance) is ignored.
+- Shortcuts do not count: the road is divided into square cells of ``COVERAGE_CELL_M``; a
+  cell is visited when the rear-axle midpoint passes within ``COVERAGE_REACH_CELLS`` cells of
+  it. A forward crossing counts as a lap only if at least ``min_coverage`` (default 0.8) of
+  the road's cells were visited since the lap started; otherwise a ``"lap_short"`` event says
+  how much of the track was skipped (e.g. turning off at a crossroads and skipping a loop).
 - After ``laps`` laps the judge is ``finished`` and counts no more.
 
 Off track. A wheel is off the road when every sample of its contact patch lies outside
@@ -37,6 +42,9 @@ from pieces.pose import Pose2
 
 WHEEL_NAMES = ("FL", "FR", "RL", "RR")
 PATCH_SAMPLES = 5
+COVERAGE_CELL_M = 0.25
+COVERAGE_REACH_CELLS = 2      # cells within 2 cells (0.5-0.75 m) of the car count as visited
+COVERAGE_ROAD_FRACTION = 0.25  # a cell is road when at least this share of it is road
 
 
 @dataclass(frozen=True)
@@ -50,7 +58,8 @@ class Judge:
     """Referee of one run on ``track`` (a ``SimTrack``) for ``laps`` laps."""
 
     def __init__(self, track, *, laps: int, min_lap_fraction: float = 0.5,
-                 tyre_width_m: float = 0.025, on_gate_tol_m: float = 0.02) -> None:
+                 min_coverage: float = 0.8, tyre_width_m: float = 0.025,
+                 on_gate_tol_m: float = 0.02) -> None:
         if int(laps) < 1:
             raise ValueError(f"laps must be >= 1, got {laps!r}")
         if not 0.0 <= float(min_lap_fraction) <= 1.0:
@@ -71,6 +80,47 @@ class Judge:
         self._lap_start: tuple[float, float] | None = None  # t, distance
         self._lap_times: list[float] = []
         self._off_wheels: tuple[str, ...] = ()
+        self.min_coverage = float(min_coverage)
+        self._init_coverage(track.raster)
+        self._init_fast_lookup(track.raster)
+
+    def _init_coverage(self, raster) -> None:
+        mask = np.asarray(raster.road_mask, dtype=bool)
+        k = max(1, int(round(COVERAGE_CELL_M / raster.m_per_px)))
+        h, w = mask.shape
+        hc, wc = -(-h // k), -(-w // k)
+        padded = np.zeros((hc * k, wc * k), dtype=np.float32)
+        padded[:h, :w] = mask
+        share = padded.reshape(hc, k, wc, k).mean(axis=(1, 3))
+        self._cov_road = share >= COVERAGE_ROAD_FRACTION
+        self._cov_visited = np.zeros_like(self._cov_road)
+        self._cov_k_px = k
+
+    def _init_fast_lookup(self, raster) -> None:
+        self._mask = np.asarray(raster.road_mask, dtype=bool)
+        self._mask_h, self._mask_w = self._mask.shape
+        self._ox, self._oy = (float(v) for v in raster.origin_xy_m)
+        self._inv_m = 1.0 / float(raster.m_per_px)
+
+    def _px(self, x: float, y: float) -> tuple[int, int]:
+        """Nearest pixel (col, row) of a world point (same rule as ``TrackRaster.on_road``)."""
+        return round((x - self._ox) * self._inv_m), round((self._oy - y) * self._inv_m)
+
+    def _on_road(self, x: float, y: float) -> bool:
+        c, r = self._px(x, y)
+        return 0 <= c < self._mask_w and 0 <= r < self._mask_h and bool(self._mask[r, c])
+
+    def _visit(self, x: float, y: float) -> None:
+        c, r = self._px(x, y)
+        k, n = self._cov_k_px, COVERAGE_REACH_CELLS
+        ci, ri = c // k, r // k
+        self._cov_visited[max(ri - n, 0):max(ri + n + 1, 0), max(ci - n, 0):max(ci + n + 1, 0)] = True
+
+    @property
+    def coverage(self) -> float:
+        """Share of the road's cells visited since the current lap started."""
+        road = int(self._cov_road.sum())
+        return 1.0 if road == 0 else float((self._cov_visited & self._cov_road).sum()) / road
 
     # -- state ---------------------------------------------------------------------
     @property
@@ -109,18 +159,22 @@ class Judge:
         """Feed the state at time ``t_s``: car ``pose`` and wheel contact points ``wheel_xy``
         ``(4, 2)`` world metres (FL, FR, RL, RR). Returns the events since the last update."""
         events: list[Event] = []
-        xy = np.array([pose.x_m, pose.y_m])
-        rel = xy - self._gate_xy
-        s, lat = float(rel @ self._gate_dir), float(rel @ self._gate_left)
+        x, y = pose.x_m, pose.y_m
+        gx, gy = self._gate_xy
+        dx, dy = self._gate_dir
+        rx, ry = x - gx, y - gy
+        s, lat = rx * dx + ry * dy, -rx * dy + ry * dx
+        self._visit(x, y)
         if self._prev is None:
             if abs(s) <= self.on_gate_tol_m and abs(lat) <= self._half:
                 self._lap_start = (float(t_s), 0.0)
                 events.append(Event(float(t_s), "lap_start", "lap 1 started (car starts on the gate)"))
         else:
-            self._distance_m += float(np.hypot(*(xy - self._prev_xy)))
+            px, py = self._prev_xy
+            self._distance_m += math.hypot(x - px, y - py)
             events += self._gate_events(float(t_s), s, lat)
         self._prev = (float(t_s), s, lat, self._distance_m)
-        self._prev_xy = xy
+        self._prev_xy = (x, y)
         events += self._wheel_events(float(t_s), pose, wheel_xy)
         return events
 
@@ -138,11 +192,17 @@ class Judge:
         if backward:
             return [Event(tc, "gate_backward", "crossed the finish gate backwards (not counted)")]
         if self._lap_start is None:
-            self._lap_start = (tc, dc)
+            self._start_lap(tc, dc)
             return [Event(tc, "lap_start", "lap 1 started (first gate crossing)")]
         start_t, start_d = self._lap_start
         if dc - start_d < self.min_lap_distance_m:
             return []
+        coverage = self.coverage
+        if coverage < self.min_coverage:
+            self._start_lap(tc, dc)
+            return [Event(tc, "lap_short", f"crossed the finish gate after driving only "
+                          f"{100 * coverage:.0f} % of the track (needs {100 * self.min_coverage:.0f} %):"
+                          " lap not counted, timing restarts")]
         self._lap_times.append(tc - start_t)
         n = self.laps_completed
         events = [Event(tc, "lap", f"lap {n} in {tc - start_t:.3f} s")]
@@ -151,9 +211,15 @@ class Judge:
                                 f"{sum(self._lap_times):.3f} s"))
             self._lap_start = None
         else:
-            self._lap_start = (tc, dc)
+            self._start_lap(tc, dc)
             events.append(Event(tc, "lap_start", f"lap {n + 1} started"))
         return events
+
+    def _start_lap(self, t_s: float, distance_m: float) -> None:
+        self._lap_start = (t_s, distance_m)
+        self._cov_visited[:] = False
+        if self._prev_xy is not None:
+            self._visit(*self._prev_xy)
 
     def wheels_on_road(self, pose: Pose2, wheel_xy: np.ndarray) -> np.ndarray:
         """``(4,) bool``: does each wheel's contact patch touch the road anywhere."""
@@ -164,8 +230,14 @@ class Judge:
         return on.any(axis=1)
 
     def _wheel_events(self, t_s: float, pose: Pose2, wheel_xy: np.ndarray) -> list[Event]:
-        on = self.wheels_on_road(pose, wheel_xy)
-        off = tuple(name for name, ok in zip(WHEEL_NAMES, on) if not ok)
+        # fast path: a wheel whose contact point is on the road is on the road; only the
+        # others get the full contact-patch test
+        w = wheel_xy.tolist() if isinstance(wheel_xy, np.ndarray) else list(wheel_xy)
+        if all(self._on_road(px, py) for px, py in w):
+            off: tuple[str, ...] = ()
+        else:
+            on = self.wheels_on_road(pose, wheel_xy)
+            off = tuple(name for name, ok in zip(WHEEL_NAMES, on) if not ok)
         events = []
         if off and not self._off_wheels:
             events.append(Event(t_s, "off_track", f"wheel{'s' if len(off) > 1 else ''} "

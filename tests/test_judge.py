@@ -191,3 +191,47 @@ def test_lap_time_does_not_depend_on_the_update_rate(ring, dt, speed, phase):
     assert judge.laps_completed == 1
     # the chord between updates cuts the circle: crossing error ~ (speed dt)^2 / (8 R) / speed
     assert judge.lap_times_s[0] == pytest.approx(lap_t, abs=1e-6 + (speed * dt) ** 2 / R_M)
+
+
+def _polyline_poses(points: list[tuple[float, float]], step_m: float = 0.02) -> list[Pose2]:
+    poses = []
+    for (x0, y0), (x1, y1) in zip(points[:-1], points[1:]):
+        n = max(1, int(math.hypot(x1 - x0, y1 - y0) / step_m))
+        yaw = math.atan2(y1 - y0, x1 - x0)
+        poses += [Pose2(x0 + (x1 - x0) * i / n, y0 + (y1 - y0) * i / n, yaw) for i in range(n)]
+    return poses
+
+
+def test_shortcut_skipping_a_loop_of_the_figure8_is_not_a_lap():
+    """The thesis figure-8: turning off at the crossroads and driving only the lower loop
+    (twice, so the distance alone would pass) is flagged, not credited as a lap."""
+    from simrunner.track import load_track
+
+    track = load_track(Path(__file__).resolve().parents[1] / "examples" / "thesis_figure8.txt")
+    # lower loop: crossroads centre (0.3, 0) south to (0.3, -0.8), 270 deg right turn of
+    # radius 0.8 about (-0.5, -0.8), back east along y = 0 through the start gate at x = 0
+    arc = [(-0.5 + 0.8 * math.cos(a), -0.8 + 0.8 * math.sin(a))
+           for a in np.linspace(0.0, -1.5 * math.pi, 120)]
+    loop = [(0.3, 0.0), (0.3, -0.8)] + arc[1:] + [(0.3, 0.0)]
+    poses = _polyline_poses([(0.0, 0.0)] + loop + loop[1:] + loop[1:])
+    judge = Judge(track, laps=1)
+    events = []
+    for i, p in enumerate(poses):
+        events += judge.update(i * 0.01, p, wheels(p))
+    kinds = [e.kind for e in events]
+    assert "lap" not in kinds and judge.laps_completed == 0
+    short = [e for e in events if e.kind == "lap_short"]
+    assert short and "% of the track" in short[0].text
+    assert judge.coverage < 0.8
+
+
+def test_full_figure8_centreline_lap_counts():
+    from simrunner.track import load_track
+
+    track = load_track(Path(__file__).resolve().parents[1] / "examples" / "thesis_figure8.txt")
+    pts = [tuple(p) for p in np.asarray(track.centreline)]
+    poses = _polyline_poses(pts + [pts[0], pts[1]])
+    judge = Judge(track, laps=1)
+    for i, p in enumerate(poses):
+        judge.update(i * 0.01, p, wheels(p))
+    assert judge.laps_completed == 1
