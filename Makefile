@@ -15,7 +15,11 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/trackgen validate examples/thesis_figure8.txt
 	$(BIN)/trackgen build examples/thesis_figure8.txt -o out/thesis_figure8 --force
-	@echo "demo outputs in out/thesis_figure8 (preview.png, world.sdf, track.json, meshes/)"
+	mkdir -p out/demo
+	$(BIN)/simrunner drive examples/line_follower.py --track out/thesis_figure8 --laps 2 \
+		--video out/demo/run.mp4 --csv out/demo/run.csv --plot out/demo/run.png \
+		--summary out/demo/summary.json
+	@echo "demo outputs: out/thesis_figure8/ (preview.png, world.sdf, track.json, models/) and out/demo/ (run.mp4, run.csv, run.png, summary.json)"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2
