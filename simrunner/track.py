@@ -85,7 +85,7 @@ def load_track(spec: str | Path, *, car=None, m_per_px: float = DEFAULT_M_PER_PX
 
         with tempfile.TemporaryDirectory(prefix="nxpcup-track-") as tmp:
             try:
-                result = build(path, Path(tmp) / "track", car=car)
+                result = build(path, Path(tmp) / "track", car=car, preview=False)
             except TrackError as exc:
                 raise TrackLoadError(str(exc)) from exc
             scene = _read_world(result.world_path)

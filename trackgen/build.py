@@ -65,8 +65,8 @@ class BuildResult:
     out_dir: Path
     world_path: Path
     track_json_path: Path
-    preview_path: Path
-    preview_size_px: tuple[int, int]
+    preview_path: Path | None
+    preview_size_px: tuple[int, int] | None
     warnings: list[Problem]
 
 
@@ -80,8 +80,9 @@ def check_layout(layout: Layout, car: CarDescription | None = None) -> Checked:
 
 
 def build(layout: str | Path | Layout, out_dir: str | Path, *, force: bool = False,
-          car: CarDescription | None = None) -> BuildResult:
-    """Validate and write the output folder. Raises :class:`LayoutError` (bad layout),
+          car: CarDescription | None = None, preview: bool = True) -> BuildResult:
+    """Validate and write the output folder (``preview=False`` skips preview.png, e.g. for a
+    simulator that builds a layout on the fly). Raises :class:`LayoutError` (bad layout),
     :class:`ValidationFailed` (problems; nothing written), :class:`OutputError` (cannot
     write; nothing left behind), :class:`TrackError` (the SDF layer refused)."""
     car = car or CarDescription()
@@ -101,7 +102,7 @@ def build(layout: str | Path | Layout, out_dir: str | Path, *, force: bool = Fal
     except OSError as exc:
         raise OutputError(f"{out_dir}: cannot write output folder ({exc.strerror or exc})") from None
     try:
-        size = _write_all(tmp, checked, car)
+        size = _write_all(tmp, checked, car, preview)
         _move_into_place(tmp, out_dir, force)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -113,7 +114,7 @@ def build(layout: str | Path | Layout, out_dir: str | Path, *, force: bool = Fal
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return BuildResult(out_dir, out_dir / "world.sdf", out_dir / "track.json",
-                       out_dir / "preview.png", size, checked.problems)
+                       out_dir / "preview.png" if preview else None, size, checked.problems)
 
 
 def _check_target(out_dir: Path, force: bool) -> None:
@@ -124,10 +125,9 @@ def _check_target(out_dir: Path, force: bool) -> None:
             raise OutputError(f"{out_dir}: already exists (use --force to replace it)")
 
 
-def _write_all(tmp: Path, checked: Checked, car: CarDescription) -> tuple[int, int]:
+def _write_all(tmp: Path, checked: Checked, car: CarDescription,
+               preview: bool) -> tuple[int, int] | None:
     from worlds.sdf_write import write_track_world
-    from .preview import render_preview
-
     track, geometry = checked.track, checked.geometry
     name = track.layout.name
     mesh_dir = tmp / "models" / name / "meshes"
@@ -139,6 +139,10 @@ def _write_all(tmp: Path, checked: Checked, car: CarDescription) -> tuple[int, i
     write_track_world(tmp, track_name=name, meshes=rel, start_pose=track.car_start_pose(),
                       surface_z_m=track.layout.settings.thickness_m, car=car)
     (tmp / "track.json").write_text(dumps_track_json(track_json(track, geometry)))
+    if not preview:
+        return None
+    from .preview import render_preview  # matplotlib: only when a preview is wanted
+
     return render_preview(track, geometry, tmp / "preview.png")
 
 
