@@ -34,7 +34,26 @@ def _input_errors() -> tuple[type[BaseException], ...]:
     return tuple(roots)
 
 
-@click.group()
+class _LazyGroup(click.Group):
+    """Loads the workflow commands (scipy-heavy) only when they are used."""
+
+    LAZY = {"calibrate": ("simrunner.cli_calib", "calibrate_cmd"),
+            "excite": ("simrunner.cli_calib", "excite_cmd"),
+            "gap": ("simrunner.cli_gap", "gap")}
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(set(super().list_commands(ctx)) | set(self.LAZY))
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name in self.LAZY:
+            import importlib
+
+            module, attr = self.LAZY[name]
+            return getattr(importlib.import_module(module), attr)
+        return super().get_command(ctx, name)
+
+
+@click.group(cls=_LazyGroup)
 def main() -> None:
     """Headless NXP Cup car simulator with the thesis's Spinner API."""
 
@@ -86,18 +105,6 @@ def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, 
         click.echo("wrote: " + ", ".join(result.outputs.values()))
     sys.exit(0 if result.ok else 130 if result.outcome == "interrupted" else 1)
 
-
-def _register_workflow_commands() -> None:
-    """Calibration (`calibrate`, `excite`) and the sim-vs-measured `gap` workflow."""
-    from .cli_calib import calibrate_cmd, excite_cmd
-    from .cli_gap import gap
-
-    main.add_command(calibrate_cmd, "calibrate")
-    main.add_command(excite_cmd, "excite")
-    main.add_command(gap, "gap")
-
-
-_register_workflow_commands()
 
 if __name__ == "__main__":  # pragma: no cover
     main()
