@@ -26,6 +26,7 @@ import numpy as np
 from pieces.pose import Pose2, wrap_angle
 from simrunner.errors import SimError
 from worlds.car import CarDescription
+from worlds.userfiles import read_user_text
 
 RATE_HZ = 50.0
 MIN_DURATION_S = 67.0  # the core plan (every experiment once) of the default car lasts ~67 s
@@ -132,12 +133,7 @@ class ExcitationPlan:
         """Read a plan written by :meth:`to_csv` (``#`` lines are comments; ``coast`` and
         ``segment`` columns are optional). Errors name the file and line."""
         path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise PlanError(f"{path}: cannot read plan ({exc.strerror})") from None
-        except UnicodeDecodeError:
-            raise PlanError(f"{path}: not a text (CSV) file") from None
+        text = read_user_text(path, "plan", PlanError, "CSV")
         rows = [(i + 1, ln) for i, ln in enumerate(text.splitlines()) if ln.strip() and not ln.lstrip().startswith("#")]
         if not rows:
             raise PlanError(f"{path}:1: empty plan, expected the header t,speed_cmd,steer_cmd[,coast][,segment]")

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -227,17 +226,9 @@ def load_car(path: str | Path | None = None) -> CarDescription:
     """Load a car description TOML file; ``None`` gives the default car."""
     if path is None:
         return CarDescription()
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise CarDescriptionError(f"{path}: cannot read car description ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise CarDescriptionError(f"{path}: not a text (TOML) file") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise CarDescriptionError(f"{path}: invalid TOML: {exc}") from None
+    from .userfiles import read_user_toml
+
+    _, data = read_user_toml(path, "car description", CarDescriptionError)
     return car_from_dict(data, str(path))
 
 

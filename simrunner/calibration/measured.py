@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
+from worlds.userfiles import read_user_toml
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -169,16 +169,7 @@ def _check_section(section: str, v: dict[str, Any], fail) -> None:
 def load_measurements(path: str | Path) -> Measurements:
     """Read and check a measurements TOML file."""
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise CalibrationError(f"{path}: cannot read measurements ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise CalibrationError(f"{path}: not a text (TOML) file") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise CalibrationError(f"{path}: invalid TOML: {exc}") from None
+    text, data = read_user_toml(path, "measurements", CalibrationError)
     m = measurements_from_dict(data, str(path), text)
     if not m.sections:
         raise CalibrationError(f"{path}: no measurements: expected at least one of the sections "
