@@ -26,6 +26,14 @@ zero every joint command after the step, so commands are set only in :meth:`set_
   on how ``step(n)`` calls are split.
 * Front wheels roll freely.
 
+Python cost per control update (bench/bench_closed_loop.py): ``set_command`` plans with
+precomputed constants and sets only the joint commands that changed (a repeated steering
+target with the knuckles at rest is not re-planned); the state read-outs (pose, speeds,
+steering, contacts) come from one ``getPositions``/``getVelocities`` pair per step count,
+cached until the next ``step`` (the formulas reproduce dart's own rounding, so the values
+are bit-identical to ``BodyNode.getWorldTransform``/``getSpatialVelocity``/
+``getAngularVelocity``).
+
 Time step: 2 ms by default. Measured on one core (bench/bench_physics.py, CPU time, default
 car at 2 m/s): bare ``world.step`` ~33k steps/s = ~66x real time at 2 ms (~33x at 1 ms);
 with ``set_command`` and pose/speed/contact reads every 20 ms ~45x. Accuracy at 2 ms: the
@@ -48,6 +56,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import dartpy as dart
 import numpy as np
@@ -97,6 +106,9 @@ def bicycle_angle_rad(left_rad: float, right_rad: float) -> float:
     return math.atan(2.0 * sl * sr / den)
 
 
+_exp_map_rot = dart.math.expMapRot  # rotation vector (3,) -> (3, 3), as FreeJoint positions
+
+
 def _rot_y(a: float) -> np.ndarray:
     c, s = math.cos(a), math.sin(a)
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
@@ -107,8 +119,7 @@ def _rot_z(a: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-@dataclass(frozen=True)
-class _Control:
+class _Control(NamedTuple):
     """Everything applied to the joints between steps (saved with the state)."""
 
     speed_cmd_mps: float = 0.0
@@ -173,13 +184,28 @@ class CarSim:
         wb, half_t = car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
         self._wheel_centres_m = np.array([[wb, half_t, r], [wb, -half_t, r], [0.0, half_t, r], [0.0, -half_t, r]])
         self._contact_drop_xy_m = r * self._ground_rot[:2, 2]  # centre -> contact, xy part
-        self._tf_cache: np.ndarray | None = None
         self._m_eff_kg = self._body.total_mass_kg + 4.0 * self._body.wheel_spin_inertia_kgm2 / (r * r)
+        # constants of the command path (same expressions as the formulas they replace)
+        self._r_m, self._wb_m, self._half_t_m = r, wb, half_t
+        self._v_max_mps, self._d_max_rad = car.drive.max_speed_mps, car.steering.limit_rad
+        self._rate_radps = car.steering.rate_radps
+        self._torque_accel_nm = 0.5 * self._m_eff_kg * car.drive.max_accel_mps2 * r
+        self._torque_brake_nm = 0.5 * self._m_eff_kg * car.drive.max_brake_mps2 * r
+        skel = self._body.skeleton
+        self._skel = skel
+        self._world_step = world.step
+        self._i_knuckle = tuple(j.getIndexInSkeleton(0) for j in self._body.knuckle_joints)
+        self._i_wheel = tuple(j.getIndexInSkeleton(0) for j in self._body.wheel_joints)
+        self._check_velocity_convention()
         for j in self._body.knuckle_joints:
             j.setActuatorType(dart.dynamics.ActuatorType.VELOCITY)
         for j in self._body.wheel_joints[:2]:
             j.setActuatorType(dart.dynamics.ActuatorType.PASSIVE)
         self._control = _Control()
+        self._steer_left = 0  # steps before the steering move ends (authoritative copy)
+        self._held = False  # knuckles at rest where a plan to the commanded steer gave 0 steps
+        self._rd = None  # read-out cache: (positions list, velocities list, rotation list, rotation array)
+        self._pose: Pose2 | None = None
         self._place(start, 0.0, 0.0, 0.0)
         self._apply(self._control, force=True)
         self.set_command(0.0, 0.0)  # at rest, rear wheels held at the brake torque
@@ -197,10 +223,34 @@ class CarSim:
         node.createDynamicsAspect().setFrictionCoeff(mu)
         return ground
 
+    def _check_velocity_convention(self) -> None:
+        """The read-outs assume dartpy's FreeJoint convention (positions [rotation vector,
+        translation], velocities [angular, linear] in WORLD coordinates, measured on dartpy
+        6.20). Checked once on the fresh skeleton (state restored to zero afterwards)."""
+        skel, ch = self._skel, self._body.chassis
+        n = skel.getNumDofs()
+        q, dq = np.zeros(n), np.zeros(n)
+        q[:6] = (0.1, -0.2, 0.7, 1.0, 2.0, 0.3)
+        dq[:6] = (0.3, -0.1, 0.5, 1.5, -0.4, 0.2)
+        skel.setPositions(q)
+        skel.setVelocities(dq)
+        try:
+            self._rd, self._pose = None, None
+            want = (*ch.getWorldTransform().translation(), ch.getSpatialVelocity()[3],
+                    ch.getSpatialVelocity()[4], ch.getAngularVelocity()[2])
+            have = (*self._read()[0][3:6], self.speed_mps, self.lateral_speed_mps, self.yaw_rate_radps)
+        finally:
+            skel.setPositions(np.zeros(n))
+            skel.setVelocities(np.zeros(n))
+            self._rd, self._pose = None, None
+        if not np.allclose(want, have, rtol=0.0, atol=1e-12):
+            raise SimError("CarSim: this dartpy's FreeJoint state convention differs from the one "
+                           "simrunner.physics was written for (dartpy 6.20: world-frame velocities)")
+
     def _place(self, pose: Pose2, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None:
         """Set the planar state: chassis on the ground plane, wheels rolling, knuckles at steer."""
         car, b = self.car, self._body
-        self._tf_cache = None
+        self._rd, self._pose, self._held = None, None, False
         # position on the (possibly tilted) ground plane below/above (x, y)
         n = self._ground_rot[:, 2]
         dx, dy = pose.x_m - self._ground_origin[0], pose.y_m - self._ground_origin[1]
@@ -232,87 +282,108 @@ class CarSim:
         thesis's default differential w = v sin(steer) / L (eq. 5.2-5.3). This is the only
         entry of commands (effects such as latency wrap it).
         """
-        car = self.car
         if not (math.isfinite(speed_mps) and math.isfinite(steer_rad)
                 and (yaw_rate_radps is None or math.isfinite(yaw_rate_radps))):
             raise SimError(f"CarSim.set_command({speed_mps!r}, {steer_rad!r}, {yaw_rate_radps!r}): "
                            "expected finite numbers")
-        v_max, d_max = car.drive.max_speed_mps, car.steering.limit_rad
+        v_max, d_max = self._v_max_mps, self._d_max_rad
         v = min(max(float(speed_mps), -v_max), v_max)
         d = min(max(float(steer_rad), -d_max), d_max)
-        w = v * math.sin(d) / car.chassis.wheelbase_m if yaw_rate_radps is None else float(yaw_rate_radps)
-        r, half_t = car.wheels.radius_m, 0.5 * car.chassis.track_m
-        v_now = self.speed_mps
-        speeding_up = abs(v) > abs(v_now) and v * v_now >= 0.0
-        accel = car.drive.max_accel_mps2 if speeding_up else car.drive.max_brake_mps2
-        torque = 0.5 * self._m_eff_kg * accel * r
+        w = v * math.sin(d) / self._wb_m if yaw_rate_radps is None else float(yaw_rate_radps)
+        r, half_t = self._r_m, self._half_t_m
+        torque = self._torque_accel_nm
+        if torque != self._torque_brake_nm:  # the current speed decides (equal limits: no read)
+            v_now = self.speed_mps
+            if not (abs(v) > abs(v_now) and v * v_now >= 0.0):  # not speeding up: brake limit
+                torque = self._torque_brake_nm
 
         # steering servo: constant knuckle speeds so both reach the Ackermann target together
         # after ceil(move / rate / dt) steps (so the mean rate is at most rate_radps)
-        q_now = self.knuckle_angles_rad()
-        q_tgt = ackermann_angles_rad(car, d)
-        n_steps = math.ceil(abs(d - bicycle_angle_rad(*q_now)) / car.steering.rate_radps / self.dt_s - 1e-9)
-        if max(abs(qt - qn) for qt, qn in zip(q_tgt, q_now)) <= 1e-15:
-            n_steps = 0
-        elif n_steps < 1:
-            n_steps = 1
-        t_move = n_steps * self.dt_s
-        k_vel = tuple((qt - qn) / t_move for qt, qn in zip(q_tgt, q_now)) if n_steps else (0.0, 0.0)
-        self._control = _Control(
-            speed_cmd_mps=v, steer_cmd_rad=d, yaw_rate_cmd_radps=w,
-            wheel_omega_radps=((v - w * half_t) / r, (v + w * half_t) / r), wheel_torque_nm=torque,
-            knuckle_target_rad=q_tgt, knuckle_vel_radps=k_vel, steer_steps_left=n_steps,
-            wheels_locked=self._control.wheels_locked, coast=self._control.coast,
-            ext_force_n=self._control.ext_force_n)
-        self._apply(self._control)
+        c = self._control
+        if self._held and d == c.steer_cmd_rad and self._steer_left == 0:
+            q_tgt, k_vel, n_steps = c.knuckle_target_rad, (0.0, 0.0), 0  # same plan as last time
+        else:
+            q = self._read()[0]
+            ql, qr = q[self._i_knuckle[0]], q[self._i_knuckle[1]]
+            q_tgt = tl, tr = ackermann_angles_rad(self.car, d)
+            n_steps = math.ceil(abs(d - bicycle_angle_rad(ql, qr)) / self._rate_radps / self.dt_s - 1e-9)
+            if max(abs(tl - ql), abs(tr - qr)) <= 1e-15:
+                n_steps = 0
+            elif n_steps < 1:
+                n_steps = 1
+            if n_steps:
+                t_move = n_steps * self.dt_s
+                k_vel = ((tl - ql) / t_move, (tr - qr) / t_move)
+            else:
+                k_vel = (0.0, 0.0)
+            self._held = n_steps == 0
+        self._control = c = _Control(v, d, w, ((v - w * half_t) / r, (v + w * half_t) / r), torque,
+                                     q_tgt, k_vel, n_steps, c.wheels_locked, c.coast, c.ext_force_n)
+        self._steer_left = n_steps
+        self._apply(c)
 
     def _steer_event(self) -> None:
         """The steering move has ended: hold the knuckles."""
-        self._control = _replace(self._control, knuckle_vel_radps=(0.0, 0.0), steer_steps_left=0)
+        self._control = self._control._replace(knuckle_vel_radps=(0.0, 0.0), steer_steps_left=0)
+        self._steer_left = 0
         for j in self._body.knuckle_joints:
             j.setCommand(0, 0.0)
+        self._k_applied = (0.0, 0.0)
 
     def set_wheel_lock(self, locked: bool) -> None:
         """Lock all four wheels (thesis 5.4 tilt test: "wheels stopped"); False releases them."""
-        self._control = _replace(self._control, wheels_locked=bool(locked))
+        self._control = self._control._replace(wheels_locked=bool(locked))
         self._apply(self._control)
 
     def set_coast(self, coast: bool) -> None:
         """Coasting: no drive or brake torque, the rear wheels roll freely (True) until
         ``set_coast(False)``; commands set meanwhile are kept and act again afterwards."""
-        self._control = _replace(self._control, coast=bool(coast))
+        self._control = self._control._replace(coast=bool(coast))
         self._apply(self._control)
 
     def apply_external_force_n(self, fx_n: float, fy_n: float) -> None:
         """Set a constant force on the chassis at its centre of mass, in the CAR BODY frame
         (x forward, y left; N). It replaces the previous one and stays until changed
         (seam for drag / rolling resistance effects)."""
-        self._control = _replace(self._control, ext_force_n=(float(fx_n), float(fy_n)))
+        self._control = self._control._replace(ext_force_n=(float(fx_n), float(fy_n)))
         self._apply(self._control)
 
     def _apply(self, c: _Control, *, force: bool = False) -> None:
         """Set the joints and the chassis force from ``c``; only what changed since the last
-        call unless ``force`` (a control update then costs a few microseconds)."""
-        b, old = self._body, (None if force else self._applied)
-        A = dart.dynamics.ActuatorType
-        for j, vel in zip(b.knuckle_joints, c.knuckle_vel_radps):
-            j.setCommand(0, vel)
-        if old is None or (old.wheels_locked, old.coast) != (c.wheels_locked, c.coast):
+        call unless ``force`` (joint commands persist: the world steps with ``step(False)``)."""
+        b = self._body
+        if force:
+            self._k_applied = self._types_applied = self._torque_applied = None
+            self._omega_applied = self._force_applied = None
+        if c.knuckle_vel_radps != self._k_applied:
+            for j, vel in zip(b.knuckle_joints, c.knuckle_vel_radps):
+                j.setCommand(0, vel)
+            self._k_applied = c.knuckle_vel_radps
+        types = (c.wheels_locked, c.coast)
+        if types != self._types_applied:
+            A = dart.dynamics.ActuatorType
             for j in b.wheel_joints[:2]:
                 j.setActuatorType(A.LOCKED if c.wheels_locked else A.PASSIVE)
             rear = A.LOCKED if c.wheels_locked else (A.PASSIVE if c.coast else A.SERVO)
             for j in b.wheel_joints[2:]:
                 j.setActuatorType(rear)
-        if old is None or old.wheel_torque_nm != c.wheel_torque_nm:
+            self._types_applied = types
+            self._omega_applied = None  # set the rear commands again for the new type
+        if c.wheel_torque_nm != self._torque_applied:
             for j in b.wheel_joints[2:]:
                 j.setForceLowerLimit(0, -c.wheel_torque_nm)
                 j.setForceUpperLimit(0, c.wheel_torque_nm)
-        for j, omega in zip(b.wheel_joints[2:], c.wheel_omega_radps):
-            j.setCommand(0, 0.0 if c.wheels_locked else omega)
-        if old is None or old.ext_force_n != c.ext_force_n:
+            self._torque_applied = c.wheel_torque_nm
+        # a coasting (PASSIVE) wheel ignores commands: they are set when the servo is back
+        omega = (0.0, 0.0) if c.wheels_locked else (None if c.coast else c.wheel_omega_radps)
+        if omega is not None and omega != self._omega_applied:
+            for j, o in zip(b.wheel_joints[2:], omega):
+                j.setCommand(0, o)
+            self._omega_applied = omega
+        if c.ext_force_n != self._force_applied:
             b.chassis.setExtForce(np.array([c.ext_force_n[0], c.ext_force_n[1], 0.0]),
                                   b.chassis.getLocalCOM(), True, True)
-        self._applied = c
+            self._force_applied = c.ext_force_n
 
     @property
     def speed_cmd_mps(self) -> float:
@@ -332,106 +403,129 @@ class CarSim:
     # -- stepping ----------------------------------------------------------------------
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps of ``dt_s`` (commands stay as set)."""
-        step = self._world.step
-        self._tf_cache = None
-        while n > 0:
-            left = self._control.steer_steps_left
-            k = n if left == 0 else min(n, left)
-            for _ in range(k):
+        self._rd, self._pose = None, None
+        if n <= 0:
+            return
+        step = self._world_step
+        left = self._steer_left
+        if left == 0 or left > n:  # no steering event inside this chunk
+            for _ in range(n):
                 step(False)
-            n -= k
             if left:
-                if left == k:
-                    self._steer_event()
-                else:
-                    self._control = _replace(self._control, steer_steps_left=left - k)
+                self._steer_left = left - n
+            return
+        for _ in range(left):
+            step(False)
+        self._steer_event()
+        for _ in range(n - left):
+            step(False)
 
     # -- state read-out ----------------------------------------------------------------
     @property
     def time_s(self) -> float:
         return self._world.getTime()
 
-    def _matrix(self) -> np.ndarray:
-        """``(4, 4)`` world-from-car-body transform (cached until the state changes)."""
-        if self._tf_cache is None:
-            self._tf_cache = self._body.chassis.getWorldTransform().matrix()
-        return self._tf_cache
+    def _read(self) -> tuple[list, list, list, np.ndarray]:
+        """(positions, velocities, chassis rotation (3, 3) as lists, rotation array), read
+        once per step count. Positions: FreeJoint [rotation vector, translation], then the
+        knuckles and wheels (``_i_knuckle``, ``_i_wheel``); velocities: FreeJoint [angular,
+        linear] in world coordinates. ``expMapRot`` is the exact map dart's FreeJoint uses."""
+        rd = self._rd
+        if rd is None:
+            qa = self._skel.getPositions()
+            rot = _exp_map_rot(qa[:3])
+            rd = self._rd = (qa.tolist(), self._skel.getVelocities().tolist(), rot.tolist(), rot)
+        return rd
 
-    def _rotation(self) -> np.ndarray:
-        return self._matrix()[:3, :3]
+    def _rotation(self) -> list:
+        return self._read()[2]
 
     @property
     def pose(self) -> Pose2:
         """Rear-axle midpoint (on the ground) in world xy, and the chassis yaw."""
-        m = self._matrix()
-        return Pose2(m[0, 3], m[1, 3], math.atan2(m[1, 0], m[0, 0]))
+        p = self._pose
+        if p is None:
+            q, _, rot, _ = self._read()
+            p = self._pose = Pose2(q[3], q[4], math.atan2(rot[1][0], rot[0][0]))
+        return p
 
     @property
     def z_m(self) -> float:
         """Height of the car body frame origin (rear-axle midpoint on the ground), m."""
-        return float(self._matrix()[2, 3])
+        return self._read()[0][5]
 
     @property
     def roll_rad(self) -> float:
         rot = self._rotation()
-        return math.atan2(rot[2, 1], rot[2, 2])
+        return math.atan2(rot[2][1], rot[2][2])
 
     @property
     def pitch_rad(self) -> float:
         """Z-Y-X Euler pitch; positive = nose down (right-handed about y)."""
         rot = self._rotation()
-        return math.asin(max(-1.0, min(1.0, -rot[2, 0])))
+        return math.asin(max(-1.0, min(1.0, -rot[2][0])))
 
     @property
     def speed_mps(self) -> float:
         """Velocity of the rear-axle midpoint along the car's x axis (signed), m/s."""
-        return float(self._body.chassis.getSpatialVelocity()[3])
+        _, dq, rot, _ = self._read()
+        return rot[0][0] * dq[3] + rot[1][0] * dq[4] + rot[2][0] * dq[5]
 
     @property
     def lateral_speed_mps(self) -> float:
         """Velocity of the rear-axle midpoint along the car's y axis (left positive), m/s."""
-        return float(self._body.chassis.getSpatialVelocity()[4])
+        _, dq, rot, _ = self._read()
+        return rot[0][1] * dq[3] + rot[1][1] * dq[4] + rot[2][1] * dq[5]
 
     @property
     def yaw_rate_radps(self) -> float:
         """World z component of the chassis angular velocity, rad/s (CCW positive)."""
-        return float(self._body.chassis.getAngularVelocity()[2])
+        _, dq, (r0, r1, r2), _ = self._read()
+        wx, wy, wz = dq[0], dq[1], dq[2]
+        # world -> body -> world z, summed in the order dart does (bit-identical read-out)
+        b0 = r0[0] * wx + r1[0] * wy + r2[0] * wz
+        b1 = r0[1] * wx + r1[1] * wy + r2[1] * wz
+        b2 = r0[2] * wx + r1[2] * wy + r2[2] * wz
+        return r2[0] * b0 + (r2[1] * b1 + r2[2] * b2)
 
     @property
     def steer_rad(self) -> float:
         """Actual bicycle-equivalent steering angle from the two knuckle angles, rad."""
-        ql, qr = (j.getPosition(0) for j in self._body.knuckle_joints)
-        return bicycle_angle_rad(ql, qr)
+        q = self._read()[0]
+        return bicycle_angle_rad(q[self._i_knuckle[0]], q[self._i_knuckle[1]])
 
     def knuckle_angles_rad(self) -> tuple[float, float]:
         """(left, right) actual knuckle angles, rad (positive = turned left)."""
-        return tuple(float(j.getPosition(0)) for j in self._body.knuckle_joints)
+        q = self._read()[0]
+        return (q[self._i_knuckle[0]], q[self._i_knuckle[1]])
 
     def wheel_contacts_xy(self) -> np.ndarray:
         """``(4, 2)`` world xy of the FL, FR, RL, RR tyre contact points (below the wheel
         centres along the ground normal), m."""
-        m = self._matrix()
+        q, _, _, rot = self._read()
         # knuckle pivots = wheel centres, fixed in the car body frame
-        return self._wheel_centres_m @ m[:2, :3].T + (m[:2, 3] - self._contact_drop_xy_m)
+        return self._wheel_centres_m @ rot[:2, :3].T + (np.array((q[3], q[4])) - self._contact_drop_xy_m)
 
     def wheel_speeds_radps(self) -> np.ndarray:
         """``(4,)`` FL, FR, RL, RR wheel spin relative to their mounts, rad/s (+ = forward)."""
-        return np.array([j.getVelocity(0) for j in self._body.wheel_joints])
+        dq = self._read()[1]
+        return np.array([dq[i] for i in self._i_wheel])
 
     # -- state ---------------------------------------------------------------------------
     def save_state(self) -> SimState:
         """Snapshot (positions, velocities, time, commands); restore is bit-exact."""
-        skel = self._body.skeleton
+        skel = self._skel
         return SimState(skel.getPositions().copy(), skel.getVelocities().copy(), self._world.getTime(),
-                        self._control)
+                        self._control._replace(steer_steps_left=self._steer_left))
 
     def restore_state(self, state: SimState) -> None:
-        skel = self._body.skeleton
-        self._tf_cache = None
+        skel = self._skel
+        self._rd, self._pose, self._held = None, None, False
         skel.setPositions(state.positions)
         skel.setVelocities(state.velocities)
         self._world.setTime(state.time_s)
         self._control = state.control
+        self._steer_left = state.control.steer_steps_left
         self._apply(self._control, force=True)
 
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
@@ -443,8 +537,3 @@ class CarSim:
         self._place(pose, float(speed_mps), float(steer_rad), float(yaw_rate_radps))
         self.set_command(speed_mps, steer_rad)
 
-
-def _replace(c: _Control, **changes) -> _Control:
-    from dataclasses import replace
-
-    return replace(c, **changes)
