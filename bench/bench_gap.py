@@ -18,7 +18,8 @@ magnitude, nuisance mass/friction and noise from ``numpy.random.default_rng([SEE
 Targets: >= 90 % named where SNR >= 3, <= 5 % false claims, median parameter error
 <= 10 %, median RMSE after/before <= 0.5.
 
-``python -m bench.bench_gap [--trials N] [--jobs J] [--short] [--out FILE.jsonl]``;
+``python -m bench.bench_gap [--trials N] [--jobs J] [--short] [--out FILE.jsonl] [--no-wall]``
+(``--table FILE.jsonl`` prints the table of saved rows);
 ``python -m bench`` runs ``main()`` with the defaults (100 trials: hours on 2 cores).
 """
 from __future__ import annotations
@@ -53,6 +54,7 @@ def _trial(k: int) -> dict:
     row = {"trial": k, "effect": effect or "none", "named": result.effect, "value": truth.value,
            "field": truth.field, "fitted": result.parameters.get(truth.field) if truth.field else None,
            "rmse_before": result.rmse_before, "rmse_after": result.rmse_after,
+           "gap_ratio": result.gap_after / result.gap_before,
            "best": result.ranking[0].effect, "best_delta_bic": result.ranking[0].delta_bic,
            "best_improvement": result.ranking[0].improvement}
     if effect is not None:
@@ -95,6 +97,9 @@ def _table(rows: list[dict]) -> str:
         f"named overall (with effect): {acc(eff_rows):.1%} of {len(eff_rows)}",
         f"named where SNR >= 3: {acc(hi):.1%} of {len(hi)}   (target >= 90 %)",
         f"named where SNR < 3: {acc(lo):.1%} of {len(lo)}",
+        "named by SNR: " + ", ".join(
+            f"[{a:g}, {b:g}): {acc(rs):.0%} of {len(rs)}" for a, b in ((0, 1), (1, 3), (3, 10), (10, math.inf))
+            for rs in [[r for r in eff_rows if a <= r.get("snr", 0) < b]]),
         f"false claims on effect-free logs: {sum(r['named'] != 'none' for r in none_rows)} of {len(none_rows)}"
         f"   (target <= 5 %)",
         f"effect-free logs, best candidate: max delta_BIC {max([r['best_delta_bic'] for r in none_rows], default=float('nan')):.1f}, "
@@ -103,6 +108,11 @@ def _table(rows: list[dict]) -> str:
         f"   (target <= 10 %)",
         f"median held-out position RMSE after/before (with effect): "
         f"{med([r['rmse_after']['position_m'] / r['rmse_before']['position_m'] for r in eff_rows]):.2f}   (target <= 0.5)",
+        "median held-out RMSE after/before per signal (with effect): " + ", ".join(
+            f"{s} {med([r['rmse_after'][s] / r['rmse_before'][s] for r in eff_rows]):.2f}"
+            for s in ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps")),
+        f"median held-out gap after/before (normalised residuals, all signals; RMS ratio): "
+        f"{med([math.sqrt(r['gap_ratio']) for r in eff_rows if 'gap_ratio' in r]):.2f}",
         f"median wall time per trial (1 process): {med([r['wall_s'] for r in rows]):.0f} s",
     ]
     return "\n".join(lines)
@@ -126,7 +136,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--short", action="store_true", help=f"{SHORT_TRIALS} trials (one per class)")
     ap.add_argument("--out", type=Path, default=None, help="append per-trial rows (JSON lines)")
     ap.add_argument("--no-wall", action="store_true", help="skip the one-log wall-time measurement")
+    ap.add_argument("--table", type=Path, default=None, help="only print the table of a --out file")
     a = ap.parse_args([] if argv is None else argv)
+    if a.table:
+        print(_table(sorted((json.loads(ln) for ln in a.table.read_text().splitlines() if ln.strip()),
+                            key=lambda r: r["trial"])))
+        return
     n = SHORT_TRIALS if a.short else a.trials
     if not a.no_wall:
         print(f"one {67:d}-s log, whole catalogue, {a.jobs} processes: {wall_time_one_log(a.jobs):.0f} s wall",

@@ -103,15 +103,15 @@ def log_from_columns(columns: dict[str, np.ndarray], source: str = "<log>") -> M
 
 
 def _check_time(t: np.ndarray, source: str) -> None:
-    if t.size < MIN_ROWS or t[-1] - t[0] < MIN_DURATION_S:
-        span = float(t[-1] - t[0]) if t.size else 0.0
-        raise LogError(source, t.size + 1, f"expected at least {MIN_ROWS} rows and {MIN_DURATION_S:g} s of data "
-                       f"(got {t.size} rows, {span:.3g} s)")
     bad = np.flatnonzero(np.diff(t) <= 0.0)
     if bad.size:
         i = int(bad[0]) + 1
         raise LogError(source, i + 2, f"column 't': expected strictly increasing time (got {t[i]!r} "
                        f"after {t[i - 1]!r})")
+    if t.size < MIN_ROWS or t[-1] - t[0] < MIN_DURATION_S:
+        span = float(t[-1] - t[0]) if t.size else 0.0
+        raise LogError(source, t.size + 1, f"expected at least {MIN_ROWS} rows and {MIN_DURATION_S:g} s of data "
+                       f"(got {t.size} rows, {span:.3g} s)")
 
 
 def read_log(path: str | Path) -> MeasuredLog:

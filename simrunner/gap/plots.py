@@ -55,9 +55,10 @@ def plot_before_after(result, path: str | Path) -> None:
     ax.set_xlabel("t (s)")
     ax.set_ylabel("position error (m)")
     held = window_mask(len(log), result.held_windows)
-    ax.set_title("held-out RMSE: " + ", ".join(
-        f"{s.split('_')[0]} {result.rmse_before[s]:.3g}->{result.rmse_after[s]:.3g}"
-        for s in ("position_m", "speed_mps", "yaw_rate_radps")) if held.any() else "", fontsize=9)
+    ax.set_title("held-out RMSE before->after: " + ", ".join(
+        f"{label} {result.rmse_before[s]:.3g}->{result.rmse_after[s]:.3g}"
+        for s, label in (("position_m", "position"), ("speed_mps", "speed"), ("yaw_rate_radps", "yaw rate")))
+        if held.any() else "", fontsize=9)
     ax.legend(fontsize=8, loc="upper right")
     param = ", ".join(f"{k} = {v:.4g}" for k, v in result.parameters.items())
     fig.suptitle(f"{Path(log.source).name}: missing effect = {result.effect}" + (f" ({param})" if param else ""))

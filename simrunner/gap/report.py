@@ -29,7 +29,7 @@ from simrunner.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, FitRe
                                cost_of, fit_all, nominal_scales, with_effect)
 from simrunner.gap.logs import Derived, MeasuredLog, derive
 from simrunner.gap.regimes import residual_stats, segment
-from simrunner.gap.replay import (REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction, SimFactory, Window,
+from simrunner.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction, SimFactory, Window,
                                   default_sim_factory, make_windows, replay, residuals, rmse, split_windows,
                                   window_mask)
 from worlds.car import CarDescription
@@ -50,6 +50,8 @@ class GapResult:
     nominal_bic: float
     rmse_before: dict[str, float]
     rmse_after: dict[str, float]
+    gap_before: float  # held-out mean squared normalised residual (fit signals and scales)
+    gap_after: float
     stats_before: list[dict]
     stats_after: list[dict]
     log: MeasuredLog = field(repr=False)
@@ -66,9 +68,11 @@ class GapResult:
         return _finite({
             "format": FORMAT, "log": self.log.source, "effect": self.effect, "parameters": self.parameters,
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
+            "gap_before": self.gap_before, "gap_after": self.gap_after,
             "nominal": {"cost": self.nominal_cost, "bic": self.nominal_bic},
             "thresholds": {"delta_bic_min": self.settings.get("delta_bic_min"),
                            "improvement_min": self.settings.get("improvement_min")},
+            "criterion": "BIC on normalised residuals (lower is better; see simrunner.gap.fit)",
             "ranking": [r.to_json() for r in self.ranking],
             "windows": {"fit": len(self.fit_windows), "held_out": len(self.held_windows),
                         "window_s": self.settings.get("window_s")},
@@ -131,10 +135,19 @@ def run_gap(log: MeasuredLog, car: CarDescription | None = None, *, jobs: int = 
         effect=winner.effect if winner else "none", parameters=dict(winner.parameters) if winner else {},
         car=car_after, ranking=ranking, nominal_cost=nominal_cost, nominal_bic=bic(problem, nominal_cost, 0),
         rmse_before=rmse(res0, held), rmse_after=rmse(res1, held),
+        gap_before=_gap(res0, held, problem.scales), gap_after=_gap(res1, held, problem.scales),
         stats_before=residual_stats({s: res0[s] for s in REPORT_SIGNALS + ("along_m", "cross_m")}, masks),
         stats_after=residual_stats({s: res1[s] for s in REPORT_SIGNALS + ("along_m", "cross_m")}, masks),
         log=log, derived=derived, fit_windows=fit_w, held_windows=held_w, pred_before=pred0, pred_after=pred1,
         settings=settings)
+
+
+def _gap(res: dict[str, np.ndarray], mask: np.ndarray, scales: dict[str, float]) -> float:
+    """Mean squared normalised residual over ``mask`` and the fit signals (1 = as large as
+    the nominal model's residual on the fit windows)."""
+    v = np.concatenate([res[s][mask] / scales[s] for s in FIT_SIGNALS])
+    v = v[np.isfinite(v)]
+    return float(np.mean(v * v)) if v.size else float("nan")
 
 
 def progress_total(n_effects: int) -> int:
@@ -157,6 +170,8 @@ def summary_text(result: GapResult) -> str:
     lines.append("")
     lines.append(f"missing effect: {result.effect}" + (
         "" if result.effect == "none" else f" ({', '.join(f'{k} = {v:.4g}' for k, v in result.parameters.items())})"))
+    lines.append(f"held-out gap (mean squared normalised residual) before -> after: "
+                 f"{result.gap_before:.3g} -> {result.gap_after:.3g}")
     lines.append("held-out RMSE before -> after: " + ", ".join(
         f"{s} {result.rmse_before[s]:.4g} -> {result.rmse_after[s]:.4g}" for s in REPORT_SIGNALS))
     return "\n".join(lines)

@@ -3,8 +3,8 @@
 ``make_measured_log(effect, rng=...)`` plays the excitation plan
 (``simrunner.excite.make_plan``) in the simulator with
 
-* the hidden effect (or none) at a random magnitude drawn from :data:`RANGES`
-  (sign random where both signs make sense);
+* the hidden effect (or none) at a random magnitude drawn log-uniformly from
+  :data:`RANGES` (sign random where both signs make sense);
 * nuisance changes the workflow does not model: mass and tyre friction each scaled by a
   factor uniform in ``1 +- NUISANCE_FRACTION``;
 * a different physics step than the workflow: :data:`SYNTH_DT_S` = 1 ms
@@ -33,20 +33,21 @@ NOISE_YAW_RAD = 0.005
 NOISE_SPEED_MPS = 0.02
 NUISANCE_FRACTION = 0.03
 
-# effect -> (field, low, high, both signs): |value - neutral| ~ U(low, high) for offsets,
-# the value itself ~ U(low, high) otherwise. Ranges are "clearly there but plausible".
+# effect -> (field, low, high, both signs): |value - neutral| for offset and gain, else the
+# value, is log-uniform in [low, high] (sign random where both make sense). The ranges run
+# from barely visible (SNR ~ 1) to strong, so the bench sees accuracy against SNR.
 RANGES: dict[str, tuple[str, float, float, bool]] = {
-    "steering_offset": ("steering_offset_rad", 0.01, 0.05, True),
-    "steering_gain": ("steering_gain", 0.15, 0.35, True),  # gain = 1 +- U(0.15, 0.35)
-    "steering_lag": ("steering_lag_s", 0.04, 0.2, False),
-    "steering_rate_limit": ("steering_rate_limit_radps", 0.8, 3.0, False),
-    "command_latency": ("command_latency_s", 0.03, 0.15, False),
-    "motor_lag": ("motor_lag_s", 0.1, 0.6, False),
-    "throttle_deadband": ("throttle_deadband_mps", 0.1, 0.4, False),
-    "rolling_resistance": ("rolling_resistance_coeff", 0.02, 0.08, False),
-    "drag": ("drag_coeff_kgpm", 0.1, 0.4, False),
-    "tire_slip": ("tire_slip_understeer_radps2pm", 0.02, 0.08, False),
-    "friction": ("friction_scale", 0.45, 0.8, False),
+    "steering_offset": ("steering_offset_rad", 0.002, 0.05, True),
+    "steering_gain": ("steering_gain", 0.02, 0.35, True),  # gain = 1 +- that
+    "steering_lag": ("steering_lag_s", 0.01, 0.2, False),
+    "steering_rate_limit": ("steering_rate_limit_radps", 0.8, 5.0, False),
+    "command_latency": ("command_latency_s", 0.01, 0.15, False),
+    "motor_lag": ("motor_lag_s", 0.02, 0.6, False),
+    "throttle_deadband": ("throttle_deadband_mps", 0.03, 0.4, False),
+    "rolling_resistance": ("rolling_resistance_coeff", 0.005, 0.08, False),
+    "drag": ("drag_coeff_kgpm", 0.02, 0.4, False),
+    "tire_slip": ("tire_slip_understeer_radps2pm", 0.003, 0.08, False),
+    "friction": ("friction_scale", 0.45, 0.95, False),  # the value; log-uniform
 }
 _RELATIVE_TO_ONE = {"steering_gain"}
 
@@ -68,7 +69,7 @@ class Truth:
 def draw_value(effect: str, rng: np.random.Generator) -> float:
     """A random magnitude for ``effect`` from :data:`RANGES`."""
     _, lo, hi, signed = RANGES[effect]
-    mag = float(rng.uniform(lo, hi))
+    mag = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
     sign = float(rng.choice([-1.0, 1.0])) if signed else 1.0
     return 1.0 + sign * mag if effect in _RELATIVE_TO_ONE else sign * mag
 
