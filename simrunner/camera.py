@@ -60,6 +60,20 @@ class Camera:
         self._gx = np.where(ok, gx, 0.0)
         self._gy = np.where(ok, gy, 0.0)
         self._miss = ~ok
+        # per image row: does any of its sub-rows miss the ground (then maps need the mask)
+        self._row_misses = self._miss.reshape(self.height_px, -1).any(axis=1).tolist()
+        # one ray per pixel: the ground points of a row share their x (the ray's distance
+        # depends on the row only), so a row's maps need only its y values
+        self._row_gx: list[float | None] = [None] * self.height_px
+        if k == 1:
+            for r in range(self.height_px):
+                if not self._row_misses[r] and np.all(self._gx[r] == self._gx[r, 0]):
+                    self._row_gx[r] = float(self._gx[r, 0])
+        self._any_miss = bool(self._miss.any())
+        self._inv_m = 1.0 / self.raster.m_per_px
+        self._x0_m, self._y0_m = (float(v) for v in self.raster.origin_xy_m)
+        self._floor = int(self.raster.floor_gray)
+        self._noise_std = float(cam.noise_std)
 
     # -- geometry ------------------------------------------------------------------
     def _ground(self, v: np.ndarray, u: np.ndarray):
@@ -100,23 +114,24 @@ class Camera:
         return float(yl - yr) if bool(okl) and bool(okr) else math.inf
 
     # -- rendering -----------------------------------------------------------------
-    def _maps(self, pose: Pose2, rows: slice):
-        r = self.raster
+    def _maps(self, pose: Pose2, rows: slice, misses: bool):
+        """``(map_x, map_y)`` float32 remap coordinates (raster col, row) of the ray grid ``rows``."""
+        inv = self._inv_m
         c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
-        inv = 1.0 / r.m_per_px
         gx, gy = self._gx[rows], self._gy[rows]
         # world = pose (x, y) + R(yaw) g; px col = (X - x0)/m, row = (y0 - Y)/m
-        map_x = ((c * inv) * gx - (s * inv) * gy + (pose.x_m - r.origin_xy_m[0]) * inv).astype(np.float32)
-        map_y = (-(s * inv) * gx - (c * inv) * gy + (r.origin_xy_m[1] - pose.y_m) * inv).astype(np.float32)
-        miss = self._miss[rows]
-        map_x[miss] = -10.0
-        map_y[miss] = -10.0
+        map_x = ((c * inv) * gx - (s * inv) * gy + (pose.x_m - self._x0_m) * inv).astype(np.float32)
+        map_y = (-(s * inv) * gx - (c * inv) * gy + (self._y0_m - pose.y_m) * inv).astype(np.float32)
+        if misses:
+            miss = self._miss[rows]
+            map_x[miss] = -10.0
+            map_y[miss] = -10.0
         return map_x, map_y
 
-    def _sample(self, pose: Pose2, rows: slice) -> np.ndarray:
-        map_x, map_y = self._maps(pose, rows)
-        img = cv2.remap(self.raster.image, map_x, map_y, interpolation=cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_CONSTANT, borderValue=int(self.raster.floor_gray))
+    def _sample(self, pose: Pose2, rows: slice, misses: bool) -> np.ndarray:
+        map_x, map_y = self._maps(pose, rows, misses)
+        img = cv2.remap(self.raster.image, map_x, map_y, cv2.INTER_LINEAR, None,
+                        cv2.BORDER_CONSTANT, self._floor)
         k = self.supersample
         if k == 1:
             return img
@@ -125,19 +140,38 @@ class Camera:
 
     def render(self, pose: Pose2) -> np.ndarray:
         """The image ``(H, W) uint8`` seen from a car whose body frame is at ``pose``."""
-        return self._sample(pose, slice(None))
+        return self._sample(pose, slice(None), self._any_miss)
 
     def render_row(self, pose: Pose2, row: int) -> np.ndarray:
         """One image row ``(W,) uint8``, equal to ``render(pose)[row]`` (cheaper)."""
         row = int(row)
         if not 0 <= row < self.height_px:
             raise IndexError(f"row {row} outside the image (0..{self.height_px - 1})")
-        k = self.supersample
-        return self._sample(pose, slice(row * k, (row + 1) * k))[0]
+        gx = self._row_gx[row]
+        if gx is None:
+            k = self.supersample
+            return self._sample(pose, slice(row * k, (row + 1) * k), self._row_misses[row])[0]
+        # _maps with the row's common x folded into scalars: the same float64 operations, term
+        # for term, so the same pixels (a - s*g == a + (-s)*g exactly), fewer array operations
+        inv = self._inv_m
+        c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+        ci, si = c * inv, s * inv
+        gy = self._gy[row]  # (W,)
+        map_x = (gy * -si + ci * gx + (pose.x_m - self._x0_m) * inv).astype(np.float32)
+        map_y = (gy * -ci + -si * gx + (self._y0_m - pose.y_m) * inv).astype(np.float32)
+        return cv2.remap(self.raster.image, map_x, map_y, cv2.INTER_LINEAR, None,
+                         cv2.BORDER_CONSTANT, self._floor).reshape(-1)
 
     def add_noise(self, img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """A copy of ``img`` (uint8, any shape) plus Gaussian noise of std ``noise_std``
         (0-255 scale), rounded and clipped to 0..255. Only ``rng`` supplies randomness."""
-        std = float(self.cam.noise_std)
-        noisy = np.asarray(img, dtype=np.float64) + rng.normal(0.0, std, size=np.shape(img))
-        return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
+        a = np.asarray(img)
+        # = rng.normal(0, std, shape), draw for draw (normal is loc + scale * standard normal)
+        noise = rng.standard_normal(a.shape)
+        noise *= self._noise_std
+        if a.dtype == np.uint8 and 1 <= a.ndim <= 2:
+            # OpenCV adds in float64 and saturate-casts with round-half-even: the same
+            # result as the numpy expression below, in one call
+            return cv2.add(noise, a, dtype=cv2.CV_8U).reshape(a.shape)
+        noise += a
+        return np.clip(np.rint(noise), 0, 255).astype(np.uint8)

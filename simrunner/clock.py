@@ -19,6 +19,8 @@ from typing import Callable, Protocol
 
 from .errors import RunFinished, SimError
 
+_monotonic = time.monotonic
+
 
 class SteppableSim(Protocol):
     """The part of ``simrunner.physics.CarSim`` the clock uses."""
@@ -118,7 +120,8 @@ class LockstepClock:
 
         Raises :class:`RunFinished` (and stops stepping) as soon as the run is over.
         """
-        self.check()
+        if self.finished is not None:
+            self.check()
         sim = self.sim
         while n_steps > 0:
             chunk = self._next_frame_step - self.step_index
@@ -131,13 +134,13 @@ class LockstepClock:
             self.step_index += chunk
             n_steps -= chunk
             if self.step_index == self._next_frame_step:
-                self.frame_index += 1
-                self._next_frame_step = self._frame_step(self.frame_index + 1)
-                self.on_frame(self.frame_index)
-                self.last_progress_wall_s = time.monotonic()
+                k = self.frame_index = self.frame_index + 1
+                self._next_frame_step = self._frame_step(k + 1)
+                self.on_frame(k)
+                self.last_progress_wall_s = _monotonic()
                 if self.finished is not None:
                     self.check()
-        self.last_progress_wall_s = time.monotonic()
+        self.last_progress_wall_s = _monotonic()
 
     def advance_to_next_frame(self) -> None:
         """Step to the next frame boundary (at least one step)."""

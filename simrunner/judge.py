@@ -70,9 +70,8 @@ class Judge:
         self.on_gate_tol_m = float(on_gate_tol_m)
         self._patch = np.linspace(-tyre_width_m / 2.0, tyre_width_m / 2.0, PATCH_SAMPLES)
         g = track.gate
-        self._gate_xy = np.array([g.x_m, g.y_m])
-        self._gate_dir = np.array([math.cos(g.yaw_rad), math.sin(g.yaw_rad)])
-        self._gate_left = np.array([-math.sin(g.yaw_rad), math.cos(g.yaw_rad)])
+        self._gate_xy = (float(g.x_m), float(g.y_m))
+        self._gate_dir = (math.cos(g.yaw_rad), math.sin(g.yaw_rad))
         self._half = float(track.gate_half_width_m)
         self._prev: tuple[float, float, float, float] | None = None  # t, s, l, distance
         self._prev_xy: np.ndarray | None = None
@@ -95,10 +94,12 @@ class Judge:
         self._cov_road = share >= COVERAGE_ROAD_FRACTION
         self._cov_visited = np.zeros_like(self._cov_road)
         self._cov_k_px = k
+        self._cov_last: tuple[int, int] | None = None  # last cell visited (same cell: no work)
 
     def _init_fast_lookup(self, raster) -> None:
         self._mask = np.asarray(raster.road_mask, dtype=bool)
         self._mask_h, self._mask_w = self._mask.shape
+        self._mask_bytes = self._mask.tobytes()  # row-major, 1 = road: indexing bytes is cheap
         self._ox, self._oy = (float(v) for v in raster.origin_xy_m)
         self._inv_m = 1.0 / float(raster.m_per_px)
 
@@ -108,12 +109,15 @@ class Judge:
 
     def _on_road(self, x: float, y: float) -> bool:
         c, r = self._px(x, y)
-        return 0 <= c < self._mask_w and 0 <= r < self._mask_h and bool(self._mask[r, c])
+        return 0 <= c < self._mask_w and 0 <= r < self._mask_h and bool(self._mask_bytes[r * self._mask_w + c])
 
     def _visit(self, x: float, y: float) -> None:
         c, r = self._px(x, y)
         k, n = self._cov_k_px, COVERAGE_REACH_CELLS
-        ci, ri = c // k, r // k
+        cell = ci, ri = c // k, r // k
+        if cell == self._cov_last:  # already marked since the last reset
+            return
+        self._cov_last = cell
         self._cov_visited[max(ri - n, 0):max(ri + n + 1, 0), max(ci - n, 0):max(ci + n + 1, 0)] = True
 
     @property
@@ -158,6 +162,7 @@ class Judge:
     def update(self, t_s: float, pose: Pose2, wheel_xy: np.ndarray) -> list[Event]:
         """Feed the state at time ``t_s``: car ``pose`` and wheel contact points ``wheel_xy``
         ``(4, 2)`` world metres (FL, FR, RL, RR). Returns the events since the last update."""
+        t_s = float(t_s)
         events: list[Event] = []
         x, y = pose.x_m, pose.y_m
         gx, gy = self._gate_xy
@@ -165,21 +170,35 @@ class Judge:
         rx, ry = x - gx, y - gy
         s, lat = rx * dx + ry * dy, -rx * dy + ry * dx
         self._visit(x, y)
-        if self._prev is None:
+        prev = self._prev
+        if prev is None:
             if abs(s) <= self.on_gate_tol_m and abs(lat) <= self._half:
-                self._lap_start = (float(t_s), 0.0)
-                events.append(Event(float(t_s), "lap_start", "lap 1 started (car starts on the gate)"))
+                self._lap_start = (t_s, 0.0)
+                events.append(Event(t_s, "lap_start", "lap 1 started (car starts on the gate)"))
         else:
             px, py = self._prev_xy
             self._distance_m += math.hypot(x - px, y - py)
-            events += self._gate_events(float(t_s), s, lat)
-        self._prev = (float(t_s), s, lat, self._distance_m)
+            s0 = prev[1]
+            if (s0 < 0.0) != (s < 0.0):  # the gate line was crossed (forwards or backwards)
+                events += self._gate_events(t_s, s, lat)
+        self._prev = (t_s, s, lat, self._distance_m)
         self._prev_xy = (x, y)
-        events += self._wheel_events(float(t_s), pose, wheel_xy)
+        off = self._off_wheels
+        # fast path: a wheel whose contact point is on the road is on the road; only the
+        # others get the full contact-patch test (_wheel_events)
+        ox, oy, inv = self._ox, self._oy, self._inv_m
+        w, h, mask = self._mask_w, self._mask_h, self._mask_bytes
+        for cx, cy in (wheel_xy.tolist() if isinstance(wheel_xy, np.ndarray) else wheel_xy):
+            c, r = round((cx - ox) * inv), round((oy - cy) * inv)
+            if not (0 <= c < w and 0 <= r < h and mask[r * w + c]):
+                return events + self._wheel_events(t_s, pose, wheel_xy)
+        if off:
+            self._off_wheels = ()
+            events.append(Event(t_s, "on_track", "all wheels back on the track"))
         return events
 
     def _gate_events(self, t_s: float, s: float, lat: float) -> list[Event]:
-        t0, s0, lat0, d0 = self._prev
+        t0, s0, lat0, d0 = self._prev  # (the caller saw a sign change of s)
         forward = s0 < 0.0 <= s
         backward = s < 0.0 <= s0
         if not (forward or backward) or self.finished:
@@ -218,6 +237,7 @@ class Judge:
     def _start_lap(self, t_s: float, distance_m: float) -> None:
         self._lap_start = (t_s, distance_m)
         self._cov_visited[:] = False
+        self._cov_last = None
         if self._prev_xy is not None:
             self._visit(*self._prev_xy)
 
@@ -230,14 +250,10 @@ class Judge:
         return on.any(axis=1)
 
     def _wheel_events(self, t_s: float, pose: Pose2, wheel_xy: np.ndarray) -> list[Event]:
-        # fast path: a wheel whose contact point is on the road is on the road; only the
-        # others get the full contact-patch test
-        w = wheel_xy.tolist() if isinstance(wheel_xy, np.ndarray) else list(wheel_xy)
-        if all(self._on_road(px, py) for px, py in w):
-            off: tuple[str, ...] = ()
-        else:
-            on = self.wheels_on_road(pose, wheel_xy)
-            off = tuple(name for name, ok in zip(WHEEL_NAMES, on) if not ok)
+        """Off/on-track events when some wheel's contact point is off the road (the full
+        contact-patch test decides)."""
+        on = self.wheels_on_road(pose, wheel_xy)
+        off = tuple(name for name, ok in zip(WHEEL_NAMES, on) if not ok)
         events = []
         if off and not self._off_wheels:
             events.append(Event(t_s, "off_track", f"wheel{'s' if len(off) > 1 else ''} "

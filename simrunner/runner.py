@@ -199,25 +199,28 @@ class _FrameWork:
         self.time_limit_s = time_limit_s
         self.clock: LockstepClock | None = None
         self.events: list = []
+        # contact points as a list of (x, y) (CarSim.wheel_contacts) where the sim has it
+        self._contacts = getattr(sim, "wheel_contacts", None) or sim.wheel_contacts_xy
+        self._append = log.append
 
     def __call__(self, k: int) -> None:
         sim, judge, clock = self.sim, self.judge, self.clock
         t = clock.time_s
         pose = clock.pose()
-        events = judge.update(t, pose, sim.wheel_contacts_xy())
+        events = judge.update(t, pose, self._contacts())
         if events:
             self.events.extend(events)
         off = judge.off_track
         lap = judge.laps_completed
         speed_cmd, steer_cmd, yaw_cmd = clock.current_command
         speed, steer = sim.speed_mps, sim.steer_rad
-        self.log.append((k, t, pose.x_m, pose.y_m, pose.yaw_rad, speed, steer, sim.yaw_rate_radps,
-                         speed_cmd, steer_cmd, yaw_cmd, lap, 1 if off else 0))
+        self._append((k, t, pose.x_m, pose.y_m, pose.yaw_rad, speed, steer, sim.yaw_rate_radps,
+                      speed_cmd, steer_cmd, yaw_cmd, lap, 1 if off else 0))
         if self.video is not None:
             self.video.frame_boundary(k, t, pose, {
                 "speed": speed, "steer": steer, "speed_cmd": speed_cmd, "steer_cmd": steer_cmd,
                 "lap": lap, "off_track": off})
-        if judge.finished:
+        if lap >= judge.laps:
             clock.finish("finished", f"{lap} lap(s) completed")
         elif off:
             clock.finish("off_track", f"off track at t = {t:.3f} s (wheel(s) "

@@ -78,6 +78,8 @@ def _identity_angle(speed: float, angle: float) -> float:
 
 
 def _finite(method: str, name: str, value: Any) -> float:
+    if type(value) is float and value - value == 0.0:  # fast path: a finite float
+        return value
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -151,14 +153,23 @@ class Spinner:
     # -- commands --------------------------------------------------------------------
     def _send(self, method: str, speed: float, angle: float, *, set_speed: bool,
               set_steer: bool) -> None:
-        self._clock.check()
-        call = f"{method}(speed={speed!r}, angle={angle!r})"
+        clock = self._clock
+        if clock.finished is not None:
+            clock.check()
         if set_steer:
-            self._steer_rad = _norm_out(call, "turn_norm", self.turn_norm(speed, angle))
+            v = self.turn_norm(speed, angle)
+            if not (type(v) is float and v - v == 0.0):  # not a finite float: check, convert
+                v = _norm_out(f"{method}(speed={speed!r}, angle={angle!r})", "turn_norm", v)
+            self._steer_rad = v
         if set_speed:
-            self._speed_mps = _norm_out(call, "speed_norm", self.speed_norm(speed, angle))
-        yaw = _norm_out(call, "diff_norm", self.diff_norm(self._speed_mps, self._steer_rad))
-        self._clock.command(self._speed_mps, self._steer_rad, yaw)
+            v = self.speed_norm(speed, angle)
+            if not (type(v) is float and v - v == 0.0):
+                v = _norm_out(f"{method}(speed={speed!r}, angle={angle!r})", "speed_norm", v)
+            self._speed_mps = v
+        yaw = self.diff_norm(self._speed_mps, self._steer_rad)
+        if not (type(yaw) is float and yaw - yaw == 0.0):
+            yaw = _norm_out(f"{method}(speed={speed!r}, angle={angle!r})", "diff_norm", yaw)
+        clock.command(self._speed_mps, self._steer_rad, yaw)
 
     def _fail(self, err: CommandError) -> CommandError:
         self._clock.finish("controller_error", str(err))
@@ -200,21 +211,23 @@ class Spinner:
         """Wait for the next camera frame and return it: ``(H, W)`` uint8 for ``line=-1``,
         else row ``line`` as ``(1, W)`` uint8. Noise (``add_noise``) from the run's seed."""
         h = self.image_shape[0]
-        if isinstance(line, bool) or not isinstance(line, (int, np.integer)) or not -1 <= line < h:
-            raise self._fail(CommandError(
-                f"get_image(line={line!r}): expected -1 (whole image) or a row 0..{h - 1}"))
-        line = int(line)
-        self._clock.advance_to_next_frame()
-        pose = self._clock.pose()
-        cam = self._s.camera
+        if type(line) is not int or not -1 <= line < h:
+            if isinstance(line, bool) or not isinstance(line, (int, np.integer)) or not -1 <= line < h:
+                raise self._fail(CommandError(
+                    f"get_image(line={line!r}): expected -1 (whole image) or a row 0..{h - 1}"))
+            line = int(line)
+        clock, session = self._clock, self._s
+        clock.advance_to_next_frame()
+        pose = clock.pose()
+        cam = session.camera
         if line < 0:
             img = cam.render(pose)
         else:
             img = np.asarray(cam.render_row(pose, line), dtype=np.uint8).reshape(1, -1)
         if add_noise:
-            img = cam.add_noise(img, self._s.rng)
-        if self._s.video is not None:
-            self._s.video.note_image(img, line)
+            img = cam.add_noise(img, session.rng)
+        if session.video is not None:
+            session.video.note_image(img, line)
         return img
 
     def get_speed(self) -> float:
@@ -252,6 +265,8 @@ class Spinner:
         column; or a processed image line (``(W,)``, ``(1, W)`` or ``(k, W)`` array), shown
         stretched under the camera line. Data added during one frame replaces the previous
         frame's; it stays on screen until replaced."""
+        if type(data) is list and self._s.video is None and all(type(x) is str for x in data):
+            return  # the common case without a video: nothing to show (and nothing wrong)
         if isinstance(data, np.ndarray):
             arr = data
             if arr.ndim == 1:
