@@ -10,6 +10,9 @@ Frame schedule: frame ``k`` (k = 0, 1, 2, ...) is at physics step ``round(k * pe
 (an exact multiple when the period is a whole number of steps). At every frame boundary the
 ``on_frame(k)`` callback runs (telemetry row, judge, video capture) whether or not the
 controller asked for an image; frame 0 is the initial state, called by :meth:`start`.
+``on_row_command(k, command)`` (optional) runs once after boundary ``k``, right before the
+first physics step after it, with the command that step applies: the command "set at t_k"
+(what the controller answered to frame k), which telemetry row k records.
 """
 from __future__ import annotations
 
@@ -52,6 +55,8 @@ class LockstepClock:
         self._steps_per_frame = int(round(ratio)) if abs(ratio - round(ratio)) < 1e-9 else None
         self._ratio = max(ratio, 1.0)
         self.on_frame = on_frame or (lambda k: None)
+        self.on_row_command: Callable[[int, tuple[float, float, float]], None] | None = None
+        self._row_pending = True
         self.step_index = 0
         self.frame_index = 0
         self._next_frame_step = self._frame_step(1)
@@ -130,6 +135,10 @@ class LockstepClock:
             if self._command_dirty:
                 sim.set_command(*self._command)
                 self._command_dirty = False
+            if self._row_pending:
+                self._row_pending = False
+                if self.on_row_command is not None:
+                    self.on_row_command(self.frame_index, self._command)
             sim.step(chunk)
             self.step_index += chunk
             n_steps -= chunk
@@ -137,6 +146,7 @@ class LockstepClock:
                 k = self.frame_index = self.frame_index + 1
                 self._next_frame_step = self._frame_step(k + 1)
                 self.on_frame(k)
+                self._row_pending = True
                 self.last_progress_wall_s = _monotonic()
                 if self.finished is not None:
                     self.check()

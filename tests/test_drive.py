@@ -205,3 +205,21 @@ def test_real_car_units_example_laps_the_default_track():
 def test_thesis_examples_run(example, tmp_path):
     r = drive(EXAMPLES / example, csv=tmp_path / "t.csv")
     assert r.outcome == "controller_returned", r.message
+
+
+def test_csv_row_k_records_the_command_set_in_answer_to_frame_k(tmp_path):
+    """Row k = state at t_k and the command set at t_k (in force from t_k on), the same
+    convention as `simrunner excite --simulate` logs and `simrunner gap` reads."""
+    def main(s):
+        for k in range(1, 30):
+            s.get_image(s.line_row)          # frame k
+            s.set_speed_and_servo(0.01 * k, 0.001 * k)
+
+    res = drive(main, time_limit_s=2.0, csv=tmp_path / "c.csv")
+    log = read_csv(tmp_path / "c.csv")
+    assert res.outcome == "controller_returned"
+    k = log["frame"].astype(int)
+    assert log["speed_cmd"][0] == 0.0                      # nothing set before the first step
+    sel = (k >= 1) & (k < 29)
+    assert list(log["speed_cmd"][sel]) == pytest.approx(list(0.01 * k[sel]), abs=1e-6)
+    assert list(log["steer_cmd"][sel]) == pytest.approx(list(0.001 * k[sel]), abs=1e-6)
