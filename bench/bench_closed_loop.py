@@ -1,99 +1,159 @@
 """Closed-loop speed (issue 3 section 12): a full lap of examples/line_follower.py on the
 default track — physics + camera line at its frame rate + controller + judging + telemetry,
-video off — against bare physics of the same car measured in the same process
-(``CarSim.step(n)`` on a fresh sim, the same number of steps, driving a steady circle).
+video off — against two baselines measured in the same process, same car, same steps:
 
-Targets: closed-loop real-time factor >= 30x and >= 0.8 of the bare rate. Runs are
-interleaved and the best of ``REPEATS`` is kept; figures are given in process CPU time
-(robust on a shared machine) and in wall time. Also printed: the
-per-frame cost of the parts of the loop (camera line + noise, judge, command, read-outs).
+* ``replay``: a fresh sim re-applying the lap's recorded commands at the same frame times
+  (``set_command`` + ``step`` per frame, nothing else). It must reproduce the lap's last
+  pose exactly; closed / replay isolates the loop's own overhead from the physics cost of
+  changing commands (steering moves, servo events).
+* ``bare``: ``CarSim.step(n)`` in one call on a fresh sim driving a steady circle.
+
+Targets: closed-loop real-time factor >= 30x on one core and >= 0.8 of the bare rate.
+The three runs are interleaved and the best of ``REPEATS`` is kept, in process CPU time
+(robust on a shared machine) and in wall time. The parts of a frame are then timed inside
+one more (instrumented) closed-loop lap, so they include the cache effects of the loop.
 """
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import time
 from pathlib import Path
 
-import numpy as np
-
 from simrunner.camera import Camera
+from simrunner.effects import make_sim
 from simrunner.judge import Judge
 from simrunner.physics import CarSim
-from simrunner.runner import _load_track, default_track, drive
-from worlds.car import CarDescription
+from simrunner.runner import _FrameWork, _load_track, default_track, drive
+from simrunner.spinner import Spinner
+from worlds.car import load_car
 
-REPEATS = 3
+REPEATS = 5
 CONTROLLER = Path(__file__).resolve().parents[1] / "examples" / "line_follower.py"
+RTF_TARGET = 30.0
+RATIO_TARGET = 0.8
 
 
-def _per_call_us(fn, n: int) -> float:
+def _timed(fn) -> tuple[float, float]:
+    """(CPU s, wall s) of ``fn()``."""
+    c0, w0 = time.process_time(), time.perf_counter()
     fn()
-    t0 = time.perf_counter()
-    for _ in range(n):
-        fn()
-    return (time.perf_counter() - t0) / n * 1e6
+    return time.process_time() - c0, time.perf_counter() - w0
+
+
+def _replay(car, track, commands, steps_per_frame: int):
+    """A fresh sim driven by ``commands`` (one per frame); returns (sim, run function)."""
+    sim = make_sim(car, dt_s=0.002, start=track.start, surface_z_m=track.surface_z_m)
+
+    def run() -> None:
+        for cmd in commands:
+            sim.set_command(*cmd)
+            sim.step(steps_per_frame)
+    return sim, run
+
+
+def _bare(car, track, n_steps: int):
+    sim = make_sim(car, dt_s=0.002, start=track.start, surface_z_m=track.surface_z_m)
+    sim.set_command(1.5, 0.2)
+    return sim, lambda: sim.step(n_steps)
+
+
+@contextlib.contextmanager
+def _instrumented(acc: dict[str, float]):
+    """Time the parts of the loop by wrapping the classes' methods (restored on exit)."""
+    pc = time.perf_counter
+    wrapped = [(CarSim, "step", "physics (CarSim.step)"), (CarSim, "set_command", "set_command"),
+               (Camera, "render_row", "camera line"), (Camera, "add_noise", "camera noise"),
+               (Judge, "update", "judge.update"), (_FrameWork, "__call__", "frame work (all)"),
+               (Spinner, "get_image", "get_image (all)")]
+    saved = []
+    for cls, name, label in wrapped:
+        orig = cls.__dict__[name]
+        saved.append((cls, name, orig))
+        acc.setdefault(label, 0.0)
+
+        def wrapper(*a, _orig=orig, _label=label, **k):
+            t0 = pc()
+            try:
+                return _orig(*a, **k)
+            finally:
+                acc[_label] += pc() - t0
+        setattr(cls, name, wrapper)
+    try:
+        yield
+    finally:
+        for cls, name, orig in saved:
+            setattr(cls, name, orig)
 
 
 def main() -> None:
-    car = CarDescription()
+    car = load_car(None)
     track = _load_track(default_track(), car)
-    best = {"loop_cpu": math.inf, "loop_wall": math.inf, "bare_cpu": math.inf, "bare_wall": math.inf}
-    result = None
+    steps_per_frame = round(1.0 / car.camera.fps_hz / 0.002)
+    best = {k: [math.inf, math.inf] for k in ("closed", "replay", "bare")}
+    result, exact = None, True
     for _ in range(REPEATS):
         result = drive(CONTROLLER, laps=1, time_limit_s=60.0)
-        best["loop_cpu"] = min(best["loop_cpu"], result.cpu_time_s)
-        best["loop_wall"] = min(best["loop_wall"], result.wall_time_s)
-        n_steps = int(round(result.sim_time_s / 0.002))
-        sim = CarSim(car, dt_s=0.002, start=track.start, surface_z_m=track.surface_z_m)
-        sim.set_command(1.5, 0.2)
-        t0, c0 = time.perf_counter(), time.process_time()
-        sim.step(n_steps)
-        best["bare_cpu"] = min(best["bare_cpu"], time.process_time() - c0)
-        best["bare_wall"] = min(best["bare_wall"], time.perf_counter() - t0)
+        best["closed"] = [min(best["closed"][0], result.cpu_time_s), min(best["closed"][1], result.wall_time_s)]
+        rows = result.telemetry.rows
+        commands = [(r[8], r[9], r[10]) for r in rows[:-1]]  # row k: the command set at t_k
+        sim, run = _replay(car, track, commands, steps_per_frame)
+        cpu, wall = _timed(run)
+        best["replay"] = [min(best["replay"][0], cpu), min(best["replay"][1], wall)]
+        exact &= (sim.pose.x_m, sim.pose.y_m, sim.pose.yaw_rad) == (rows[-1][2], rows[-1][3], rows[-1][4])
+        sim, run = _bare(car, track, len(commands) * steps_per_frame)
+        cpu, wall = _timed(run)
+        best["bare"] = [min(best["bare"][0], cpu), min(best["bare"][1], wall)]
     sim_s = result.sim_time_s
-    frames = len(result.telemetry)
-    best_bare = best["bare_cpu"]
+    frames = len(result.telemetry) - 1  # frame 0 is the initial state
 
-    # per-frame parts, at the poses of the lap
-    cam = Camera(car.camera, track)
-    rng = np.random.default_rng(0)
-    rows = result.telemetry.rows
-    from pieces.pose import Pose2
+    parts: dict[str, float] = {}
+    with _instrumented(parts):
+        r2 = drive(CONTROLLER, laps=1, time_limit_s=60.0)
 
-    poses = [Pose2(r[2], r[3], r[4]) for r in rows]
-    row = car.camera.default_row
-    it = iter(range(10**9))
-    cam_line = _per_call_us(lambda: cam.add_noise(
-        cam.render_row(poses[next(it) % len(poses)], row).reshape(1, -1), rng), 2000)
-    cam_full = _per_call_us(lambda: cam.add_noise(cam.render(poses[next(it) % len(poses)]), rng), 300)
-    sim = CarSim(car, dt_s=0.002, start=track.start, surface_z_m=track.surface_z_m)
-    sim.set_command(1.0, 0.1)
-    sim.step(100)
-    judge = Judge(track, laps=1)
-    p, w = sim.pose, sim.wheel_contacts_xy()
-    judge_us = _per_call_us(lambda: judge.update(1.0, p, w), 2000)
-    k = iter(range(10**9))
-    cmd_us = _per_call_us(lambda: sim.set_command(1.0, 0.1 + 1e-4 * (next(k) % 7)), 1000)
-    reads_us = _per_call_us(lambda: (sim.pose, sim.speed_mps, sim.steer_rad, sim.yaw_rate_radps,
-                                     sim.wheel_contacts_xy()), 2000)
-    step_us = best_bare / max(frames - 1, 1) * 1e6
-
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"lap: {result.outcome}, {result.laps_completed} lap(s) "
           f"{', '.join(f'{t:.2f} s' for t in result.lap_times_s)}; {sim_s:.2f} s simulated, "
-          f"{frames} frames at {car.camera.fps_hz:g} fps, dt 2 ms")
-    print(f"{'':34s}{'CPU time':>10s}{'wall':>10s}  target")
-    for name, key, target in (("RTF closed loop (x real time)", "loop", ">= 30"),
-                              ("RTF bare CarSim.step (x)", "bare", "")):
-        print(f"{name:34s}{sim_s / best[key + '_cpu']:10.1f}{sim_s / best[key + '_wall']:10.1f}  {target}")
-    print(f"{'ratio closed / bare':34s}{best['bare_cpu'] / best['loop_cpu']:10.2f}"
-          f"{best['bare_wall'] / best['loop_wall']:10.2f}  >= 0.8")
-    print(f"{'physics per frame (us)':34s}{step_us:10.1f}")
-    print(f"{'closed loop per frame (us)':34s}{best['loop_cpu'] / max(frames - 1, 1) * 1e6:10.1f}")
-    print(f"{'camera line + noise per frame (us)':34s}{cam_line:10.1f}")
-    print(f"{'camera full image + noise (us)':34s}{cam_full:10.1f}")
-    print(f"{'judge.update per frame (us)':34s}{judge_us:10.1f}")
-    print(f"{'set_command per call (us)':34s}{cmd_us:10.1f}")
-    print(f"{'sim read-outs per frame (us)':34s}{reads_us:10.1f}")
+          f"{frames} frames at {car.camera.fps_hz:g} fps, dt 2 ms; best of {REPEATS}; "
+          f"load average {load:.2f}")
+    print(f"replay reproduces the lap: {'exactly' if exact else 'NOT exactly'}")
+    def verdict(value: float, target: float) -> str:
+        return f">= {target:g} ({'met' if value >= target else 'MISSED'}, CPU)"
+
+    print(f"{'':36s}{'CPU time':>10s}{'wall':>10s}  target")
+    rtf = sim_s / best["closed"][0]
+    for name, key, target in (("RTF closed loop (x real time)", "closed", verdict(rtf, RTF_TARGET)),
+                              ("RTF replay of the commands (x)", "replay", ""),
+                              ("RTF bare CarSim.step, circle (x)", "bare", "")):
+        cpu, wall = best[key]
+        print(f"{name:36s}{sim_s / cpu:10.1f}{sim_s / wall:10.1f}  {target}")
+    ratio = best["bare"][0] / best["closed"][0]
+    for name, key, target in (("ratio closed / bare", "bare", verdict(ratio, RATIO_TARGET)),
+                              ("ratio closed / replay", "replay", "")):
+        print(f"{name:36s}{best[key][0] / best['closed'][0]:10.2f}"
+              f"{best[key][1] / best['closed'][1]:10.2f}  {target}")
+    print("per frame, CPU time (us):")
+    us = 1e6 / frames
+    print(f"  {'bare physics (10 steps)':34s}{best['bare'][0] * us:8.1f}")
+    print(f"  {'+ command changes (replay - bare)':34s}{(best['replay'][0] - best['bare'][0]) * us:8.1f}")
+    print(f"  {'+ loop overhead (closed - replay)':34s}{(best['closed'][0] - best['replay'][0]) * us:8.1f}")
+    print(f"  {'= closed loop':34s}{best['closed'][0] * us:8.1f}")
+    print("inside one instrumented closed-loop lap, wall time per frame (us; each timer adds ~0.5 us):")
+    work = parts["frame work (all)"]
+    get_image = parts["get_image (all)"]
+    inside = (parts["physics (CarSim.step)"] + parts["set_command"] + work + parts["camera line"]
+              + parts["camera noise"])
+    for name, v in (("physics (CarSim.step)", parts["physics (CarSim.step)"]),
+                    ("set_command", parts["set_command"]),
+                    ("camera line (render_row)", parts["camera line"]),
+                    ("camera noise (add_noise)", parts["camera noise"]),
+                    ("judge.update", parts["judge.update"]),
+                    ("read-outs + telemetry row", work - parts["judge.update"]),
+                    ("Spinner + clock glue", get_image - inside),
+                    ("controller (outside get_image)", r2.wall_time_s - get_image),
+                    ("= instrumented lap", r2.wall_time_s)):
+        print(f"  {name:34s}{v * 1e6 / frames:8.1f}")
 
 
 if __name__ == "__main__":

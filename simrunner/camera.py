@@ -157,8 +157,12 @@ class Camera:
         c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
         ci, si = c * inv, s * inv
         gy = self._gy[row]  # (W,)
-        map_x = (gy * -si + ci * gx + (pose.x_m - self._x0_m) * inv).astype(np.float32)
-        map_y = (gy * -ci + -si * gx + (self._y0_m - pose.y_m) * inv).astype(np.float32)
+        w = len(gy)
+        # the last add computes in float64 and rounds into float32 (= .astype(np.float32))
+        map_x = np.add(gy * -si + ci * gx, (pose.x_m - self._x0_m) * inv, out=np.empty(w, np.float32),
+                       casting="same_kind")
+        map_y = np.add(gy * -ci + -si * gx, (self._y0_m - pose.y_m) * inv, out=np.empty(w, np.float32),
+                       casting="same_kind")
         return cv2.remap(self.raster.image, map_x, map_y, cv2.INTER_LINEAR, None,
                          cv2.BORDER_CONSTANT, self._floor).reshape(-1)
 

@@ -49,6 +49,39 @@ NormFn = Callable[[float, float], float]
 _ACTIVE: list["Session"] = []  # the running session (for Spinner() built inside main)
 
 
+class BufferedNormals:
+    """``rng.standard_normal(shape)`` served from a buffer refilled ``chunk`` draws at a time.
+
+    The values come in the same order as from ``rng`` directly (a generator's standard
+    normal stream does not depend on how it is split into calls), so images get the same
+    noise; a camera frame then costs a slice instead of a generator call. Other methods go
+    to ``rng`` itself (mixing them with buffered normals changes the order of the stream).
+    """
+
+    def __init__(self, rng: np.random.Generator, chunk: int = 16384):
+        self.rng = rng
+        self.chunk = int(chunk)
+        self._buf = np.empty(0)
+        self._pos = 0
+
+    def standard_normal(self, size=None) -> np.ndarray | float:
+        if size is None:
+            return float(self.standard_normal(1)[0])
+        shape = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
+        n = math.prod(shape)
+        pos, buf = self._pos, self._buf
+        if pos + n <= len(buf):
+            self._pos = pos + n
+            return buf[pos:pos + n].reshape(shape)
+        rest = buf[pos:]
+        fresh = self.rng.standard_normal(max(self.chunk, n - len(rest)))
+        self._buf, self._pos = fresh, n - len(rest)
+        return np.concatenate((rest, fresh[:self._pos])).reshape(shape)
+
+    def __getattr__(self, name: str):
+        return getattr(self.rng, name)
+
+
 @dataclass
 class Session:
     """What a Spinner talks to: the clock (and through it the sim), the camera, the car,
@@ -60,6 +93,9 @@ class Session:
     rng: np.random.Generator
     video: Any = None  # simrunner.video.VideoRecorder or None
     extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.noise_rng = BufferedNormals(self.rng)  # what images draw their noise from
 
     def activate(self) -> None:
         _ACTIVE.append(self)
@@ -225,7 +261,7 @@ class Spinner:
         else:
             img = np.asarray(cam.render_row(pose, line), dtype=np.uint8).reshape(1, -1)
         if add_noise:
-            img = cam.add_noise(img, session.rng)
+            img = cam.add_noise(img, session.noise_rng)
         if session.video is not None:
             session.video.note_image(img, line)
         return img
@@ -289,7 +325,7 @@ class Spinner:
 
     def add_noise(self, img: np.ndarray) -> np.ndarray:
         """Add camera noise to ``img`` in place (when writable) and return it."""
-        noisy = self._s.camera.add_noise(np.asarray(img), self._s.rng)
+        noisy = self._s.camera.add_noise(np.asarray(img), self._s.noise_rng)
         if isinstance(img, np.ndarray) and img.flags.writeable and img.shape == noisy.shape:
             img[...] = noisy
             return img
