@@ -20,7 +20,11 @@ from simrunner.gap.replay import WINDOW_S, WORKFLOW_DT_S
 def _engine_stderr_silenced():
     """Yield a text stream on the real stderr while fd 2 goes to /dev/null: the physics
     engine's C++ warnings would otherwise garble the progress bar."""
-    saved = os.dup(2)
+    try:
+        saved = os.dup(2)
+    except OSError:  # no fd 2 (detached process): nothing to silence
+        yield sys.stderr
+        return
     stream = os.fdopen(os.dup(saved), "w", buffering=1)
     devnull = os.open(os.devnull, os.O_WRONLY)
     sys.stderr.flush()
