@@ -66,7 +66,7 @@ def measure(text: str, repeat: int = 3) -> dict[str, float]:
         with tempfile.TemporaryDirectory() as tmp:
             work = Path(tmp) / ".work"
             work.mkdir()
-            _write_all(work, checked, car)
+            _write_all(work, checked, car, True)
             _move_into_place(work, Path(tmp) / "out", force=False)
 
     export_ms, _ = _best(export, repeat)
