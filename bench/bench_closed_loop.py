@@ -11,7 +11,8 @@ video off — against two baselines measured in the same process, same car, same
 Targets: closed-loop real-time factor >= 30x on one core and >= 0.8 of the bare rate.
 The three runs are interleaved and the best of ``REPEATS`` is kept, in process CPU time
 (robust on a shared machine) and in wall time. The parts of a frame are then timed inside
-one more (instrumented) closed-loop lap, so they include the cache effects of the loop.
+instrumented closed-loop laps (the quickest of three), so they include the cache effects of
+the loop: a part costs 2-3x more there than alone in a warm micro-benchmark.
 """
 from __future__ import annotations
 
@@ -108,9 +109,13 @@ def main() -> None:
     sim_s = result.sim_time_s
     frames = len(result.telemetry) - 1  # frame 0 is the initial state
 
-    parts: dict[str, float] = {}
-    with _instrumented(parts):
-        r2 = drive(CONTROLLER, laps=1, time_limit_s=60.0)
+    parts, r2 = {}, None
+    for _ in range(3):  # keep the quickest of three instrumented laps
+        acc: dict[str, float] = {}
+        with _instrumented(acc):
+            r = drive(CONTROLLER, laps=1, time_limit_s=60.0)
+        if r2 is None or r.wall_time_s < r2.wall_time_s:
+            parts, r2 = acc, r
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"lap: {result.outcome}, {result.laps_completed} lap(s) "
@@ -139,7 +144,7 @@ def main() -> None:
     print(f"  {'+ command changes (replay - bare)':34s}{(best['replay'][0] - best['bare'][0]) * us:8.1f}")
     print(f"  {'+ loop overhead (closed - replay)':34s}{(best['closed'][0] - best['replay'][0]) * us:8.1f}")
     print(f"  {'= closed loop':34s}{best['closed'][0] * us:8.1f}")
-    print("inside one instrumented closed-loop lap, wall time per frame (us; each timer adds ~0.5 us):")
+    print("inside an instrumented closed-loop lap (quickest of 3), wall time per frame (us; timers add ~0.5 us each):")
     work = parts["frame work (all)"]
     get_image = parts["get_image (all)"]
     inside = (parts["physics (CarSim.step)"] + parts["set_command"] + work + parts["camera line"]
