@@ -28,11 +28,13 @@ zero every joint command after the step, so commands are set only in :meth:`set_
 
 Python cost per control update (bench/bench_closed_loop.py): ``set_command`` plans with
 precomputed constants and sets only the joint commands that changed (a repeated steering
-target with the knuckles at rest is not re-planned); the state read-outs (pose, speeds,
-steering, contacts) come from one ``getPositions``/``getVelocities`` pair per step count,
-cached until the next ``step`` (the formulas reproduce dart's own rounding, so the values
-are bit-identical to ``BodyNode.getWorldTransform``/``getSpatialVelocity``/
-``getAngularVelocity``).
+target with the knuckles at rest is not re-planned; a coasting wheel gets no command, so
+dart prints no PASSIVE-joint warnings); the state read-outs come from one
+``getPositions``/``getVelocities`` pair per step count, cached until the next ``step``. The
+formulas reproduce dart's own rounding: pose, speeds and yaw rate are bit-identical to
+``BodyNode.getWorldTransform``/``getSpatialVelocity``/``getAngularVelocity`` (checked once per
+``CarSim`` against this dartpy's conventions); wheel contact points are plain Python sums
+(within 1 ulp of a numpy product).
 
 Time step: 2 ms by default. Measured on one core (bench/bench_physics.py, CPU time, default
 car at 2 m/s): bare ``world.step`` ~33k steps/s = ~66x real time at 2 ms (~33x at 1 ms);
