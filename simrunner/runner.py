@@ -93,12 +93,9 @@ def compile_controller(path: str | Path) -> types.CodeType:
         raise ControllerFileError(f"{path}: no such controller file")
     if path.suffix != ".py":
         raise ControllerFileError(f"{path}: expected a Python file (.py) with main(spinner)")
-    try:
-        source = path.read_text()
-    except UnicodeDecodeError:
-        raise ControllerFileError(f"{path}: not a text (Python) file") from None
-    except OSError as exc:
-        raise ControllerFileError(f"{path}: cannot read ({exc.strerror})") from None
+    from worlds.userfiles import read_user_text
+
+    source = read_user_text(path, "controller", ControllerFileError, "Python")
     try:
         return compile(source, str(path.resolve()), "exec")
     except SyntaxError as exc:
