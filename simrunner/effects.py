@@ -391,6 +391,15 @@ class EffectSim:
         self._coast_on = f.coast_on  # the inner state restores the inner coasting itself
         self._sent = f.sent
 
+    def place(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
+              yaw_rate_radps: float = 0.0) -> None:
+        """Move the car to a planar state (``CarSim.place``) and keep the command path as it
+        is: pending latency, lag and rate-limit states and the command in force. The gap
+        replay calls it after a lead-in that replayed the commands before a window."""
+        self.sim.place(pose, speed_mps, steer_rad, yaw_rate_radps)
+        if self._forces:
+            self._apply_forces()
+
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
                   yaw_rate_radps: float = 0.0) -> None:
         """Place the car (as ``CarSim.set_state``: ``steer_rad`` is the actual wheel angle).

@@ -373,6 +373,7 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
             p.hold(0.3, v_lo, 0.0, "straight:settle")
             for secs, steer in holds:
                 p.hold(secs, v_lo, steer, "random_steer:seed")
+            p.hold(0.6, 0.0, 0.0, f"coast:{v_lo:.1f}", coast=True)
             p.hold(0.8, 0.0, 0.0, "brake:0")
             p.hold(1.0 if last else 0.4, 0.0, 0.0, "pause:end" if last else "pause:rest")
         return run

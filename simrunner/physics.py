@@ -559,3 +559,13 @@ class CarSim:
         self._place(pose, float(speed_mps), float(steer_rad), float(yaw_rate_radps))
         self.set_command(speed_mps, steer_rad)
 
+    def place(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
+              yaw_rate_radps: float = 0.0) -> None:
+        """Move the car to a planar state like :meth:`set_state` but keep the commands in
+        force (the servo re-plans its move from the new knuckle angles; the brake/accel
+        torque limit follows the new speed). Time is unchanged. Used by the gap replay to
+        re-start a window after a lead-in that filled the command path."""
+        self._place(pose, float(speed_mps), float(steer_rad), float(yaw_rate_radps))
+        c = self._control
+        self.set_command(c.speed_cmd_mps, c.steer_cmd_rad, c.yaw_rate_cmd_radps)
+

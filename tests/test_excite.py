@@ -86,8 +86,11 @@ def test_nominal_play_back_stays_in_the_hall_area_and_writes_telemetry(tmp_path)
     back = read_csv(out)
     assert np.allclose(back["x"], log["x"], atol=1e-6) and np.allclose(back["speed_cmd"], PLAN.speed_cmd_mps)
     # the coast segment really coasts: no losses in the nominal model
-    coast = PLAN.kind_mask("coast")
-    assert np.ptp(log["speed"][coast]) < 0.02 and log["speed"][coast].min() > 1.5
+    coasts = [(a, b) for seg, a, b in PLAN.segments() if seg.startswith("coast:")]
+    assert len(coasts) == 2  # the coast-down and the end of the random steps
+    for a, b in coasts:
+        part = (PLAN.t_s >= a) & (PLAN.t_s < b)
+        assert np.ptp(log["speed"][part]) < 0.02 and log["speed"][part].min() > 0.7
 
 
 EFFECT_VALUES = {

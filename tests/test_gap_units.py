@@ -33,6 +33,10 @@ class KinematicSim:
         self.v_cmd = self.v_tgt = speed_mps
         self.s_cmd = (steer_rad / self.car.effects.steering_gain) - self.car.effects.steering_offset_rad
 
+    def place(self, pose, speed_mps, steer_rad=0.0, yaw_rate_radps=0.0):
+        self.x, self.y, self.yaw = pose.x_m, pose.y_m, pose.yaw_rad
+        self.v, self.steer = speed_mps, steer_rad
+
     def set_command(self, speed_mps, steer_rad, yaw_rate_radps=None):
         self.v_cmd, self.s_cmd = speed_mps, steer_rad
 
@@ -252,8 +256,14 @@ def test_choose_applies_thresholds():
     assert choose([]) is None
 
 
-def test_split_keeps_flagged_windows_in_the_fit_set():
+def test_split_is_stratified_by_label():
     w = [f"w{k}" for k in range(9)]
-    fit, held = split_windows(w, 3, must_fit=[False, False, True, False, False, True, True, False, False])
-    assert held == ["w3", "w7", "w8"]
-    assert len(fit) == 6
+    labels = ["a", "a", "c", "a", "a", "c", "c", "a", "a"]
+    fit, held = split_windows(w, 3, strata=labels)
+    # "a": w0 w1 w3 w4 w7 w8 -> last (w8) and third from it (w3); "c": w2 w5 w6 -> last (w6)
+    assert held == ["w3", "w6", "w8"]
+    assert fit == ["w0", "w1", "w2", "w4", "w5", "w7"]
+    fit2, held2 = split_windows(w[:5], 3, strata=["a", "c", "c", "a", "d"])
+    assert held2 == ["w2", "w3"] and fit2 == ["w0", "w1", "w4"]  # a lone "d" stays in the fit
+    fit3, held3 = split_windows(w[:3], 3, strata=["a", "c", "d"])
+    assert held3 == ["w2"]  # nothing held out by group: split without strata

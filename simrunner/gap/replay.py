@@ -4,7 +4,9 @@ The log is cut into windows of ``window_s`` (default :data:`WINDOW_S`). Each win
 the simulator afresh from the measured (smoothed) state at its first sample
 (``set_state(pose, speed, steer, yaw_rate)``, see :mod:`simrunner.gap.logs`), then applies
 each logged command until the next sample time (zero-order hold) and records the predicted
-state at every sample. Restarting keeps open-loop drift from swamping the comparison; one
+state at every sample. Before a window, the :data:`LEAD_S` seconds of commands that
+precede it are replayed unrecorded and the car is then moved (``place``) to the measured
+state at the window's start, so latency queues and lags carry the commands in flight. Restarting keeps open-loop drift from swamping the comparison; one
 simulator object serves all windows of a replay, so a whole replay is one pass.
 
 Residual signals (predicted minus measured, shape (N,), NaN outside the replayed windows):
@@ -30,11 +32,12 @@ from simrunner.gap.logs import Derived, MeasuredLog
 from worlds.car import CarDescription
 
 WINDOW_S = 2.0
-HOLDOUT_EVERY = 3  # every third window (index 2, 5, 8, ...) is held out from the fit
+HOLDOUT_EVERY = 3  # every third window, counted back from the last, is held out
 WORKFLOW_DT_S = 0.005  # physics step of the workflow (synthetic logs use 1 ms)
 QUIET_SHIFT_S = 0.5  # window boundaries move by up to this to a quiet sample
 QUIET_BEFORE_S = 0.25  # quiet = no command change in [t - before, t + after]
 QUIET_AFTER_S = 0.1
+LEAD_S = 0.3  # commands replayed before each window (not compared), see replay()
 
 FIT_SIGNALS = ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
 REPORT_SIGNALS = ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
@@ -89,20 +92,25 @@ def make_windows(log: MeasuredLog, window_s: float = WINDOW_S) -> list[Window]:
 
 
 def split_windows(windows: Sequence[Window], every: int = HOLDOUT_EVERY,
-                  must_fit: Sequence[bool] | None = None) -> tuple[list[Window], list[Window]]:
-    """(fit, held_out): window ``k`` is held out when ``k % every == every - 1``, except that
-    a window flagged in ``must_fit`` (rare manoeuvres: the plan has one short coast) stays
-    in the fit set and the next unflagged window is held out in its place."""
-    flags = list(must_fit) if must_fit is not None else [False] * len(windows)
-    held_idx: set[int] = set()
-    pending = False
-    for k in range(len(windows)):
-        pending = pending or k % every == every - 1
-        if pending and not flags[k]:
-            held_idx.add(k)
-            pending = False
-    fit = [w for k, w in enumerate(windows) if k not in held_idx]
-    held = [w for k, w in enumerate(windows) if k in held_idx]
+                  strata: Sequence[object] | None = None) -> tuple[list[Window], list[Window]]:
+    """(fit, held_out), stratified: the windows are grouped by their ``strata`` label
+    (default: one group) and, counting back from the group's last window, every
+    ``every``-th window is held out (the last, the ``every + 1``-th from last, ...). So a
+    rare manoeuvre (the report groups windows with coasting or braking to rest apart from
+    the others) reaches the held-out set as soon as the log has two of them — the plan's
+    last coast — while its first ones stay in the fit. A group of one window stays in the
+    fit; if nothing is held out that way (a short log), the split ignores the strata."""
+    labels = list(strata) if strata is not None else [None] * len(windows)
+    size: dict[object, int] = {}
+    for label in labels:
+        size[label] = size.get(label, 0) + 1
+    left = dict(size)
+    fit, held = [], []
+    for w, label in zip(windows, labels):
+        left[label] -= 1  # windows of this group after this one
+        (held if left[label] % every == 0 and size[label] > 1 else fit).append(w)
+    if not held and strata is not None:  # a short log: hold out without strata
+        return split_windows(windows, every)
     return fit, held
 
 
@@ -118,33 +126,57 @@ class Prediction:
 
 
 def replay(car: CarDescription, log: MeasuredLog, derived: Derived, windows: Sequence[Window], *,
-           dt_s: float = WORKFLOW_DT_S, sim_factory: SimFactory = default_sim_factory) -> Prediction:
-    """Replay ``windows`` of ``log`` with a simulator of ``car``; see the module docstring."""
+           dt_s: float = WORKFLOW_DT_S, sim_factory: SimFactory = default_sim_factory,
+           lead_s: float | None = None) -> Prediction:
+    """Replay ``windows`` of ``log`` with a simulator of ``car``; see the module docstring.
+
+    Lead-in: a window starting at sample ``i0 > 0`` is preceded by the ``lead_s`` seconds
+    of commands before it, replayed from the measured state at their first sample and not
+    recorded; at ``i0`` the car is moved to the measured state with ``sim.place`` (the
+    physical state only), so commands still in flight (latency, lags, rate limits) reach
+    the window as they would on the car instead of starting settled. ``lead_s=None``:
+    :data:`LEAD_S`; 0 starts every window settled."""
+    lead_s = LEAD_S if lead_s is None else float(lead_s)
     n = len(log)
     out = np.full((5, n), np.nan)
     sim = sim_factory(car, dt_s)
     t = log.t_s
     coast = log.coasting()
-    for w in windows:
-        i0 = w.start
-        coast_now = bool(coast[i0])
-        sim.set_coast(coast_now)
-        sim.set_state(Pose2(derived.x_m[i0], derived.y_m[i0], derived.yaw_rad[i0]),
-                      float(derived.speed_mps[i0]), float(derived.steer_rad[i0]),
-                      float(derived.yaw_rate_radps[i0]))
+
+    def state(i: int):
+        return (Pose2(derived.x_m[i], derived.y_m[i], derived.yaw_rad[i]), float(derived.speed_mps[i]),
+                float(derived.steer_rad[i]), float(derived.yaw_rate_radps[i]))
+
+    def run(a: int, b: int, record: bool) -> None:
+        """Apply the commands of samples a .. b-1 (zero-order hold) up to sample b (recorded
+        at a .. b-1 when ``record``; the last command is applied only if b is past it)."""
         done = 0
-        for i in range(i0, w.stop):
-            p = sim.pose
-            out[:, i] = (p.x_m, p.y_m, p.yaw_rad, sim.speed_mps, sim.yaw_rate_radps)
-            if i + 1 < w.stop:
+        coast_now = bool(coast[a])
+        for i in range(a, b):
+            if record:
+                p = sim.pose
+                out[:, i] = (p.x_m, p.y_m, p.yaw_rad, sim.speed_mps, sim.yaw_rate_radps)
+            if i + 1 < n and (i + 1 < b or not record):
                 if coast[i] != coast_now:
                     coast_now = bool(coast[i])
                     sim.set_coast(coast_now)
                 sim.set_command(float(log.speed_cmd_mps[i]), float(log.steer_cmd_rad[i]))
-                target = int(round((t[i + 1] - t[i0]) / dt_s))
+                target = int(round((t[i + 1] - t[a]) / dt_s))
                 if target > done:
                     sim.step(target - done)
                     done = target
+
+    for w in windows:
+        i0 = w.start
+        j0 = int(np.searchsorted(t, t[i0] - lead_s - 1e-9)) if lead_s > 0.0 else i0
+        sim.set_coast(bool(coast[j0]))
+        sim.set_state(*state(j0))
+        if j0 < i0:
+            run(j0, i0, record=False)
+            if bool(coast[i0 - 1]) != bool(coast[i0]):
+                sim.set_coast(bool(coast[i0]))
+            sim.place(*state(i0))
+        run(i0, w.stop, record=True)
     return Prediction(*out)
 
 

@@ -107,7 +107,7 @@ def run_gap(log: MeasuredLog, car: CarDescription | None = None, *, jobs: int = 
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad)
     windows = make_windows(log, window_s)
     masks = segment(log, derived)
-    fit_w, held_w = split_windows(windows, must_fit=[bool(masks["coasting"][w.start:w.stop].any()) for w in windows])
+    fit_w, held_w = split_windows(windows, strata=[bool(masks["coasting"][w.start:w.stop].any()) for w in windows])
     if len(fit_w) < 2 or not held_w:
         raise GapError(f"{log.source}: expected a log of at least 3 windows of {window_s:g} s "
                        f"(got {len(windows)})")
