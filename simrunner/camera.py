@@ -29,7 +29,10 @@ import cv2
 import numpy as np
 
 from pieces.pose import Pose2
+from simrunner.fastpath import camera_row
 from simrunner.raster import TrackRaster
+
+_NO_NORMALS = np.zeros(0)
 
 
 def _raster_of(raster_or_track) -> TrackRaster:
@@ -73,6 +76,7 @@ class Camera:
         self._inv_m = 1.0 / self.raster.m_per_px
         self._x0_m, self._y0_m = (float(v) for v in self.raster.origin_xy_m)
         self._floor = int(self.raster.floor_gray)
+        self._floor_f = float(self._floor)
         self._noise_std = float(cam.noise_std)
 
     # -- geometry ------------------------------------------------------------------
@@ -144,27 +148,39 @@ class Camera:
 
     def render_row(self, pose: Pose2, row: int) -> np.ndarray:
         """One image row ``(W,) uint8``, equal to ``render(pose)[row]`` (cheaper)."""
-        row = int(row)
-        if not 0 <= row < self.height_px:
-            raise IndexError(f"row {row} outside the image (0..{self.height_px - 1})")
-        gx = self._row_gx[row]
+        return self.line_image(pose, row)[0]
+
+    def line_image(self, pose: Pose2, row: int, normals=None) -> np.ndarray:
+        """What the Spinner's ``get_image(row)`` returns: ``render_row(pose, row)`` as a
+        ``(1, W) uint8`` image, with ``add_noise(img, normals)`` unless ``normals`` is None,
+        in one compiled call (:func:`simrunner.fastpath.camera_row`) for the rows whose
+        ground points share one x (all rows of a camera without supersampling that see only
+        ground). ``normals``: a ``numpy.random.Generator`` or a
+        :class:`simrunner.spinner.BufferedNormals` (its ``take``)."""
+        gx = self._row_gx[row] if type(row) is int and 0 <= row < self.height_px else None
         if gx is None:
+            row = int(row)
+            if not 0 <= row < self.height_px:
+                raise IndexError(f"row {row} outside the image (0..{self.height_px - 1})")
             k = self.supersample
-            return self._sample(pose, slice(row * k, (row + 1) * k), self._row_misses[row])[0]
+            img = self._sample(pose, slice(row * k, (row + 1) * k), self._row_misses[row])[:1]
+            return img if normals is None else self.add_noise(img, normals)
         # _maps with the row's common x folded into scalars: the same float64 operations, term
-        # for term, so the same pixels (a - s*g == a + (-s)*g exactly), fewer array operations
+        # for term, so the same pixels (a - s*g == a + (-s)*g exactly), fewer operations; the
+        # kernel rounds the sums to float32 maps and samples like cv2.remap
         inv = self._inv_m
-        c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
-        ci, si = c * inv, s * inv
-        gy = self._gy[row]  # (W,)
-        w = len(gy)
-        # the last add computes in float64 and rounds into float32 (= .astype(np.float32))
-        map_x = np.add(gy * -si + ci * gx, (pose.x_m - self._x0_m) * inv, out=np.empty(w, np.float32),
-                       casting="same_kind")
-        map_y = np.add(gy * -ci + -si * gx, (self._y0_m - pose.y_m) * inv, out=np.empty(w, np.float32),
-                       casting="same_kind")
-        return cv2.remap(self.raster.image, map_x, map_y, cv2.INTER_LINEAR, None,
-                         cv2.BORDER_CONSTANT, self._floor).reshape(-1)
+        yaw = pose.yaw_rad
+        ci, si = math.cos(yaw) * inv, math.sin(yaw) * inv
+        out = np.empty((1, self.width_px), np.uint8)
+        if normals is None:
+            buf, pos = _NO_NORMALS, 0
+        else:
+            take = getattr(normals, "take", None)
+            buf, pos = take(self.width_px) if take else (normals.standard_normal(self.width_px), 0)
+        camera_row(self.raster.image, self._gy[row], -si, ci * gx, (pose.x_m - self._x0_m) * inv,
+                   -ci, -si * gx, (self._y0_m - pose.y_m) * inv, self._floor_f,
+                   normals is not None, buf, pos, self._noise_std, out)
+        return out
 
     def add_noise(self, img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """A copy of ``img`` (uint8, any shape) plus Gaussian noise of std ``noise_std``
@@ -174,8 +190,8 @@ class Camera:
         noise = rng.standard_normal(a.shape)
         noise *= self._noise_std
         if a.dtype == np.uint8 and 1 <= a.ndim <= 2:
-            # OpenCV adds in float64 and saturate-casts with round-half-even: the same
-            # result as the numpy expression below, in one call
+            # OpenCV rounds the noise half to even, adds it and saturates: the numpy expression
+            # below except at exact ties (x.5 noise), in one call (fastpath.camera_row copies it)
             return cv2.add(noise, a, dtype=cv2.CV_8U).reshape(a.shape)
         noise += a
         return np.clip(np.rint(noise), 0, 255).astype(np.uint8)

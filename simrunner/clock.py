@@ -53,6 +53,7 @@ class LockstepClock:
         self.dt_s = float(dt_s)
         ratio = frame_period_s / dt_s
         self._steps_per_frame = int(round(ratio)) if abs(ratio - round(ratio)) < 1e-9 else None
+        self._whole_frame = max(self._steps_per_frame or 0, 1)  # steps per frame when whole
         self._ratio = max(ratio, 1.0)
         self.on_frame = on_frame or (lambda k: None)
         self.on_row_command: Callable[[int, tuple[float, float, float]], None] | None = None
@@ -153,5 +154,27 @@ class LockstepClock:
         self.last_progress_wall_s = _monotonic()
 
     def advance_to_next_frame(self) -> None:
-        """Step to the next frame boundary (at least one step)."""
-        self.advance(self._next_frame_step - self.step_index)
+        """Step to the next frame boundary (at least one step).
+
+        The same as ``advance(steps_to_next_frame())`` — one chunk — written out: this is
+        the path of every ``get_image`` (keep the two in step)."""
+        if self.finished is not None:
+            self.check()
+        sim = self.sim
+        if self._command_dirty:
+            sim.set_command(*self._command)
+            self._command_dirty = False
+        if self._row_pending:
+            self._row_pending = False
+            if self.on_row_command is not None:
+                self.on_row_command(self.frame_index, self._command)
+        sim.step(self._next_frame_step - self.step_index)
+        self.step_index = self._next_frame_step
+        k = self.frame_index = self.frame_index + 1
+        self._next_frame_step = ((k + 1) * self._whole_frame if self._steps_per_frame is not None
+                                 else self._frame_step(k + 1))
+        self.on_frame(k)
+        self._row_pending = True
+        self.last_progress_wall_s = _monotonic()
+        if self.finished is not None:
+            self.check()

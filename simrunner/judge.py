@@ -70,8 +70,8 @@ class Judge:
         self.on_gate_tol_m = float(on_gate_tol_m)
         self._patch = np.linspace(-tyre_width_m / 2.0, tyre_width_m / 2.0, PATCH_SAMPLES)
         g = track.gate
-        self._gate_xy = (float(g.x_m), float(g.y_m))
-        self._gate_dir = (math.cos(g.yaw_rad), math.sin(g.yaw_rad))
+        self._gate_x, self._gate_y = float(g.x_m), float(g.y_m)
+        self._gate_dx, self._gate_dy = math.cos(g.yaw_rad), math.sin(g.yaw_rad)
         self._half = float(track.gate_half_width_m)
         self._prev: tuple[float, float, float, float] | None = None  # t, s, l, distance
         self._prev_xy: np.ndarray | None = None
@@ -113,10 +113,15 @@ class Judge:
 
     def _visit(self, x: float, y: float) -> None:
         c, r = self._px(x, y)
-        k, n = self._cov_k_px, COVERAGE_REACH_CELLS
-        cell = ci, ri = c // k, r // k
-        if cell == self._cov_last:  # already marked since the last reset
-            return
+        k = self._cov_k_px
+        cell = (c // k, r // k)
+        if cell != self._cov_last:  # else already marked since the last reset
+            self._mark_cell(cell)
+
+    def _mark_cell(self, cell: tuple[int, int]) -> None:
+        """Mark the coverage cells within reach of ``cell`` (column, row) as visited."""
+        ci, ri = cell
+        n = COVERAGE_REACH_CELLS
         self._cov_last = cell
         self._cov_visited[max(ri - n, 0):max(ri + n + 1, 0), max(ci - n, 0):max(ci + n + 1, 0)] = True
 
@@ -162,15 +167,19 @@ class Judge:
     def update(self, t_s: float, pose: Pose2, wheel_xy: np.ndarray) -> list[Event]:
         """Feed the state at time ``t_s``: car ``pose`` and wheel contact points ``wheel_xy``
         ``(4, 2)`` world metres (FL, FR, RL, RR). Returns the events since the last update."""
+        # (runs every camera frame: plain float arithmetic, the rare cases in other methods)
         t_s = float(t_s)
-        events: list[Event] = []
         x, y = pose.x_m, pose.y_m
-        gx, gy = self._gate_xy
-        dx, dy = self._gate_dir
-        rx, ry = x - gx, y - gy
+        rx, ry = x - self._gate_x, y - self._gate_y
+        dx, dy = self._gate_dx, self._gate_dy
         s, lat = rx * dx + ry * dy, -rx * dy + ry * dx
-        self._visit(x, y)
+        ox, oy, inv = self._ox, self._oy, self._inv_m
+        k = self._cov_k_px  # coverage cell of the nearest pixel (_visit, inlined)
+        cell = (round((x - ox) * inv) // k, round((oy - y) * inv) // k)
+        if cell != self._cov_last:
+            self._mark_cell(cell)
         prev = self._prev
+        events: list[Event] = []
         if prev is None:
             if abs(s) <= self.on_gate_tol_m and abs(lat) <= self._half:
                 self._lap_start = (t_s, 0.0)
@@ -178,21 +187,18 @@ class Judge:
         else:
             px, py = self._prev_xy
             self._distance_m += math.hypot(x - px, y - py)
-            s0 = prev[1]
-            if (s0 < 0.0) != (s < 0.0):  # the gate line was crossed (forwards or backwards)
+            if (prev[1] < 0.0) != (s < 0.0):  # the gate line was crossed (forwards or backwards)
                 events += self._gate_events(t_s, s, lat)
         self._prev = (t_s, s, lat, self._distance_m)
         self._prev_xy = (x, y)
-        off = self._off_wheels
         # fast path: a wheel whose contact point is on the road is on the road; only the
         # others get the full contact-patch test (_wheel_events)
-        ox, oy, inv = self._ox, self._oy, self._inv_m
         w, h, mask = self._mask_w, self._mask_h, self._mask_bytes
         for cx, cy in (wheel_xy.tolist() if isinstance(wheel_xy, np.ndarray) else wheel_xy):
             c, r = round((cx - ox) * inv), round((oy - cy) * inv)
             if not (0 <= c < w and 0 <= r < h and mask[r * w + c]):
                 return events + self._wheel_events(t_s, pose, wheel_xy)
-        if off:
+        if self._off_wheels:
             self._off_wheels = ()
             events.append(Event(t_s, "on_track", "all wheels back on the track"))
         return events

@@ -199,9 +199,11 @@ class _FrameWork:
         self.events: list = []
         # contact points as a list of (x, y) (CarSim.wheel_contacts) where the sim has it
         self._contacts = getattr(sim, "wheel_contacts", None) or sim.wheel_contacts_xy
-        self._append = log.append
+        self._append = log.rows.append
+        self._row_command = None  # the command tuple recorded in the last row
 
     def __call__(self, k: int) -> None:
+        # (runs every camera frame)
         sim, judge, clock = self.sim, self.judge, self.clock
         t = clock.time_s
         pose = clock.pose()
@@ -210,13 +212,13 @@ class _FrameWork:
             self.events.extend(events)
         off = judge.off_track
         lap = judge.laps_completed
-        speed_cmd, steer_cmd, yaw_cmd = clock.current_command
+        cmd = self._row_command = clock.current_command
         speed, steer = sim.speed_mps, sim.steer_rad
         self._append((k, t, pose.x_m, pose.y_m, pose.yaw_rad, speed, steer, sim.yaw_rate_radps,
-                      speed_cmd, steer_cmd, yaw_cmd, lap, 1 if off else 0))
+                      *cmd, lap, 1 if off else 0))
         if self.video is not None:
             self.video.frame_boundary(k, t, pose, {
-                "speed": speed, "steer": steer, "speed_cmd": speed_cmd, "steer_cmd": steer_cmd,
+                "speed": speed, "steer": steer, "speed_cmd": cmd[0], "steer_cmd": cmd[1],
                 "lap": lap, "off_track": off})
         if lap >= judge.laps:
             clock.finish("finished", f"{lap} lap(s) completed")
@@ -229,6 +231,8 @@ class _FrameWork:
     def command_applied(self, k: int, command: tuple[float, float, float]) -> None:
         """``on_row_command``: row k records the command the controller set at t_k (in force
         from t_k to the next change), not the one in force before t_k (docs/telemetry.md)."""
+        if command is self._row_command:  # the clock's tuple is replaced at every command
+            return
         rows = self.log.rows
         row = rows[-1]
         if row[0] == k and row[8:11] != command:

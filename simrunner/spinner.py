@@ -78,6 +78,15 @@ class BufferedNormals:
         self._buf, self._pos = fresh, n - len(rest)
         return np.concatenate((rest, fresh[:self._pos])).reshape(shape)
 
+    def take(self, n: int) -> tuple[np.ndarray, int]:
+        """The next ``n`` normals as ``(buffer, start)``: ``buffer[start:start + n]`` (for
+        compiled code, which reads them in place). Same stream as :meth:`standard_normal`."""
+        pos = self._pos
+        if pos + n <= len(self._buf):
+            self._pos = pos + n
+            return self._buf, pos
+        return self.standard_normal(n), 0
+
     def __getattr__(self, name: str):
         return getattr(self.rng, name)
 
@@ -156,6 +165,8 @@ class Spinner:
         self._s = session
         self._clock = session.clock
         self._sim = session.clock.sim
+        # Camera.line_image: render_row + add_noise in one call (None: a camera without it)
+        self._line_image = getattr(session.camera, "line_image", None)
         cam = session.car.camera
         self.line_row: int = cam.default_row
         self.image_shape: tuple[int, int] = (cam.height_px, cam.width_px)
@@ -256,12 +267,15 @@ class Spinner:
         clock.advance_to_next_frame()
         pose = clock.pose()
         cam = session.camera
-        if line < 0:
-            img = cam.render(pose)
+        if line >= 0 and self._line_image is not None:  # one compiled call (simrunner.fastpath)
+            img = self._line_image(pose, line, session.noise_rng if add_noise else None)
         else:
-            img = np.asarray(cam.render_row(pose, line), dtype=np.uint8).reshape(1, -1)
-        if add_noise:
-            img = cam.add_noise(img, session.noise_rng)
+            if line < 0:
+                img = cam.render(pose)
+            else:
+                img = np.asarray(cam.render_row(pose, line), dtype=np.uint8).reshape(1, -1)
+            if add_noise:
+                img = cam.add_noise(img, session.noise_rng)
         if session.video is not None:
             session.video.note_image(img, line)
         return img
