@@ -65,7 +65,7 @@ def _instrumented(acc: dict[str, float]):
     """Time the parts of the loop by wrapping the classes' methods (restored on exit)."""
     pc = time.perf_counter
     wrapped = [(CarSim, "step", "physics (CarSim.step)"), (CarSim, "set_command", "set_command"),
-               (Camera, "render_row", "camera line"), (Camera, "add_noise", "camera noise"),
+               (Camera, "line_image", "camera line"),
                (Judge, "update", "judge.update"), (_FrameWork, "__call__", "frame work (all)"),
                (Spinner, "get_image", "get_image (all)")]
     saved = []
@@ -147,12 +147,10 @@ def main() -> None:
     print("inside an instrumented closed-loop lap (quickest of 3), wall time per frame (us; timers add ~0.5 us each):")
     work = parts["frame work (all)"]
     get_image = parts["get_image (all)"]
-    inside = (parts["physics (CarSim.step)"] + parts["set_command"] + work + parts["camera line"]
-              + parts["camera noise"])
+    inside = parts["physics (CarSim.step)"] + parts["set_command"] + work + parts["camera line"]
     for name, v in (("physics (CarSim.step)", parts["physics (CarSim.step)"]),
                     ("set_command", parts["set_command"]),
-                    ("camera line (render_row)", parts["camera line"]),
-                    ("camera noise (add_noise)", parts["camera noise"]),
+                    ("camera line + noise (line_image)", parts["camera line"]),
                     ("judge.update", parts["judge.update"]),
                     ("read-outs + telemetry row", work - parts["judge.update"]),
                     ("Spinner + clock glue", get_image - inside),

@@ -198,7 +198,7 @@ class Spinner:
         return self
 
     # -- commands --------------------------------------------------------------------
-    def _send(self, method: str, speed: float, angle: float, *, set_speed: bool,
+    def _send(self, method: str, speed: float, angle: float, set_speed: bool,
               set_steer: bool) -> None:
         clock = self._clock
         if clock.finished is not None:
@@ -228,7 +228,7 @@ class Spinner:
             a = _finite("set_servo", "angle", angle)
             s = self._speed if speed is None else _finite("set_servo", "speed", speed)
             self._angle = a
-            self._send("set_servo", s, a, set_speed=False, set_steer=True)
+            self._send("set_servo", s, a, False, True)
         except CommandError as err:
             raise self._fail(err) from None
 
@@ -239,17 +239,19 @@ class Spinner:
             s = _finite("set_speed", "speed", speed)
             a = self._angle if angle is None else _finite("set_speed", "angle", angle)
             self._speed = s
-            self._send("set_speed", s, a, set_speed=True, set_steer=False)
+            self._send("set_speed", s, a, True, False)
         except CommandError as err:
             raise self._fail(err) from None
 
     def set_speed_and_servo(self, speed: float, angle: float) -> None:
         """Drive and steer at once (recommended by the thesis)."""
         try:
-            s = _finite("set_speed_and_servo", "speed", speed)
-            a = _finite("set_speed_and_servo", "angle", angle)
+            s = speed if type(speed) is float and speed - speed == 0.0 else _finite(
+                "set_speed_and_servo", "speed", speed)
+            a = angle if type(angle) is float and angle - angle == 0.0 else _finite(
+                "set_speed_and_servo", "angle", angle)
             self._speed, self._angle = s, a
-            self._send("set_speed_and_servo", s, a, set_speed=True, set_steer=True)
+            self._send("set_speed_and_servo", s, a, True, True)
         except CommandError as err:
             raise self._fail(err) from None
 
@@ -315,8 +317,12 @@ class Spinner:
         column; or a processed image line (``(W,)``, ``(1, W)`` or ``(k, W)`` array), shown
         stretched under the camera line. Data added during one frame replaces the previous
         frame's; it stays on screen until replaced."""
-        if type(data) is list and self._s.video is None and all(type(x) is str for x in data):
-            return  # the common case without a video: nothing to show (and nothing wrong)
+        if type(data) is list and self._s.video is None:
+            try:  # the common case without a video: all str (join checks), nothing to show
+                "".join(data)
+                return
+            except TypeError:
+                pass  # not all str: the checks below raise
         if isinstance(data, np.ndarray):
             arr = data
             if arr.ndim == 1:
