@@ -20,6 +20,9 @@ raster bilinearly (``cv2.remap``, ``INTER_LINEAR``). Rays that point at or above
 or meet the ground farther than ``max_range_m``, see the floor/background gray. With
 ``supersample=k`` each pixel averages a ``k x k`` grid of sub-pixel rays (box filter),
 which removes aliasing of thin far lines at k^2 times the cost.
+
+The line camera (``line_image``: one row plus noise, every frame of a run) is one compiled
+call (:mod:`simrunner.fastpath`) that computes the same maps and pixels as the OpenCV path.
 """
 from __future__ import annotations
 
@@ -78,6 +81,11 @@ class Camera:
         self._floor = int(self.raster.floor_gray)
         self._floor_f = float(self._floor)
         self._noise_std = float(cam.noise_std)
+        # compile (first use in a checkout, ~1 s) or load (~0.1 s) the line kernel now, not
+        # inside a timed, watchdog-guarded run
+        line_rows = [r for r, gx in enumerate(self._row_gx) if gx is not None]
+        if line_rows:
+            self.line_image(Pose2(), line_rows[0])
 
     # -- geometry ------------------------------------------------------------------
     def _ground(self, v: np.ndarray, u: np.ndarray):
