@@ -86,5 +86,6 @@ def main(spinner):
         target = V_MAX_MPS - (V_MAX_MPS - V_MIN_MPS) * min(1.0, abs(steer) / (0.6 * STEER_LIMIT_RAD))
         speed += SPEED_FILTER * (target - speed) if target > speed else (target - speed)
         s.set_speed_and_servo(speed, steer)
-        s.add_data([f"edges {lane.edges}  lane {lane.lane_px:.0f} px",
-                    f"steer {steer:+.3f} rad  speed {speed:.2f} m/s"])
+        if s.recording:  # debug text for the video (formatting it costs time every frame)
+            s.add_data([f"edges {lane.edges}  lane {lane.lane_px:.0f} px",
+                        f"steer {steer:+.3f} rad  speed {speed:.2f} m/s"])

@@ -312,6 +312,12 @@ class Spinner:
         self._clock.advance(n)
 
     # -- debugging data ------------------------------------------------------------------
+    @property
+    def recording(self) -> bool:
+        """True when a debug video is being written, i.e. when :meth:`add_data` shows
+        anything (a controller may skip formatting debug text otherwise)."""
+        return self._s.video is not None
+
     def add_data(self, data: Sequence[str] | str | np.ndarray) -> None:
         """Add to the debug video: a list of text lines (or one string), shown in the right
         column; or a processed image line (``(W,)``, ``(1, W)`` or ``(k, W)`` array), shown

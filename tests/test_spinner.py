@@ -223,6 +223,9 @@ def test_add_data_accepts_text_and_image_lines_and_rejects_others():
     s.add_data(np.zeros((2, 128), np.uint8))
     with pytest.raises(CommandError, match="add_data"):
         s.add_data(42)
+    with pytest.raises(CommandError, match="add_data"):
+        s.add_data(["text", 3])  # every item must be a str, also without a video
+    assert s.recording is False  # no video: add_data shows nothing
 
 
 def test_add_noise_works_in_place():
