@@ -37,6 +37,8 @@ WORKFLOW_DT_S = 0.005  # physics step of the workflow (synthetic logs use 1 ms)
 QUIET_SHIFT_S = 0.5  # window boundaries move by up to this to a quiet sample
 QUIET_BEFORE_S = 0.25  # quiet = no command change in [t - before, t + after]
 QUIET_AFTER_S = 0.1
+NO_DRIVE_CMD_MPS = 0.05  # |speed_cmd| below this: no drive (as regimes.COAST_CMD_MPS)
+MOVING_MPS = 0.1
 LEAD_S = 0.3  # commands replayed before each window (not compared), see replay()
 
 FIT_SIGNALS = ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
@@ -66,17 +68,25 @@ def make_windows(log: MeasuredLog, window_s: float = WINDOW_S) -> list[Window]:
     Each boundary is moved (by up to :data:`QUIET_SHIFT_S`) to a quiet sample: the one with
     the least command change in ``[t - QUIET_BEFORE_S, t + QUIET_AFTER_S]`` (ties: nearest to
     the regular grid). A window that starts during a step or just after it would start
-    from smoothed states that blur the step; quiet starts avoid that. The last window is
+    from smoothed states that blur the step; quiet starts avoid that. A sample where the
+    car rolls with the drive off (coasting, or ``speed_cmd`` ~ 0 while moving) in
+    ``[t, t + QUIET_AFTER_S]`` is avoided above all: no speed loop would correct the
+    noise in the start speed there, and the error would grow through the window. The last window is
     merged into its neighbour when shorter than half a window.
     """
     t = log.t_s
     steps = np.abs(np.diff(log.speed_cmd_mps)) / 1.0 + np.abs(np.diff(log.steer_cmd_rad)) / 0.1
     csum = np.concatenate([[0.0], np.cumsum(steps)])  # csum[i] = change before sample i
+    # rolling with the drive off (coasting or braking to rest): no speed loop corrects the
+    # start state there, so a noisy start speed would persist through the window
+    free = (log.coasting() | (np.abs(log.speed_cmd_mps) < NO_DRIVE_CMD_MPS)) & (np.abs(log.speed_mps) >= MOVING_MPS)
+    fsum = np.concatenate([[0], np.cumsum(free)])
 
     def activity(i: int) -> float:
         a = int(np.searchsorted(t, t[i] - QUIET_BEFORE_S))
         b = int(np.searchsorted(t, t[i] + QUIET_AFTER_S))
-        return float(csum[min(b, len(t) - 1)] - csum[a])
+        b = min(b, len(t) - 1)
+        return float(csum[b] - csum[a]) + (1e3 if fsum[b + 1] - fsum[i] else 0.0)
 
     edges = [0]
     while True:
