@@ -65,26 +65,28 @@ crossing (y = -C/2 - s = -0.8 m) the six right turns (270 deg about the centre (
 -C/2 - s) = (-0.5, -0.8)) end heading +x at (C/2 - R, -C/2 - s + R) = (-0.5, 0.0), and the
 last SS returns to (0, 0). Pose-algebra closure error with these numbers: ~1e-15 m, 0 rad.
 """
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
 from .pose import Pose2, wrap_angle
 from .spec import PARAMS, SETTINGS_PARAMS, ParamSpec, PieceError, PieceType, TrackSettings
-from .piece import Piece
-from .library import (
-    DEFAULT_SETTINGS,
-    chicane,
-    chicane_geometry,
-    chicane_left,
-    chicane_right,
-    crossroads,
-    make_piece,
-    piece_from_layout,
-    start_finish,
-    straight,
-    straight_short,
-    turn,
-    turn_left,
-    turn_right,
-)
-from . import mesh
+
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time these load on first use
+    from . import mesh
+    from .library import (DEFAULT_SETTINGS, chicane, chicane_geometry, chicane_left, chicane_right,
+                          crossroads, make_piece, piece_from_layout, start_finish, straight,
+                          straight_short, turn, turn_left, turn_right)
+    from .piece import Piece
+
+# Lazy exports (PEP 562): shapely loads with the first piece, trimesh and manifold3d with the
+# first mesh, so ``import pieces.pose`` (e.g. for ``Pose2`` alone) costs numpy only.
+_EXPORTS = {"Piece": "pieces.piece", "mesh": None}
+_EXPORTS.update((name, "pieces.library") for name in (
+    "DEFAULT_SETTINGS", "chicane", "chicane_geometry", "chicane_left", "chicane_right",
+    "crossroads", "make_piece", "piece_from_layout", "start_finish", "straight",
+    "straight_short", "turn", "turn_left", "turn_right"))
 
 STRAIGHT = PieceType.STRAIGHT
 STRAIGHT_SHORT = PieceType.STRAIGHT_SHORT
@@ -103,3 +105,17 @@ __all__ = [
     "STRAIGHT", "STRAIGHT_SHORT", "CROSSROADS", "TURN_LEFT", "TURN_RIGHT", "CHICANE_LEFT",
     "CHICANE_RIGHT", "START_FINISH",
 ]
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'pieces' has no attribute {name!r}")
+    module = _EXPORTS[name]
+    value = importlib.import_module(f"pieces.{name}") if module is None else getattr(
+        importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -6,13 +6,16 @@ extruded stay watertight).
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import shapely
-import trimesh
-from manifold3d import CrossSection, FillRule
 
 from .spec import PieceError, check_range
 
+if TYPE_CHECKING:  # at run time trimesh (~0.5 s: it imports scipy) and manifold3d load in
+    import trimesh  # the functions, on the first mesh, not with ``pieces``
+    from manifold3d import CrossSection
 
 def _rings(geom) -> list[np.ndarray]:
     """Every exterior and interior ring of a (Multi)Polygon as ``(N, 2)`` float arrays,
@@ -30,6 +33,8 @@ def _rings(geom) -> list[np.ndarray]:
 
 def cross_section(geom) -> CrossSection:
     """manifold3d CrossSection of a shapely Polygon / MultiPolygon (holes kept)."""
+    from manifold3d import CrossSection, FillRule
+
     return CrossSection(_rings(geom), FillRule.EvenOdd)
 
 
@@ -40,6 +45,8 @@ def extrude_footprint(geom, thickness_m: float) -> trimesh.Trimesh:
     footprint gives an empty mesh. Raises :class:`pieces.PieceError` for a non-positive
     thickness or non-polygonal parts.
     """
+    import trimesh
+
     thickness_m = check_range("thickness_m", thickness_m, 0.0)
     if geom is None or geom.is_empty:
         return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), process=False)

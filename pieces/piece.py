@@ -5,15 +5,17 @@ import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from types import MappingProxyType
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
 import shapely
-import trimesh
 
 from .mesh import extrude_footprint
 from .pose import Pose2
 from .spec import PieceType, TrackSettings
+
+if TYPE_CHECKING:
+    import trimesh
 
 
 def frozen_array(points) -> np.ndarray:

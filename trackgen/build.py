@@ -15,8 +15,6 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-import trimesh
-
 from worlds.car import CarDescription
 from worlds.sdf_xml import WorldError
 
@@ -201,6 +199,8 @@ def _validate_folder(folder: Path, car: CarDescription | None, sdf_checker: bool
         problems += check_layout(load_layout(layout_path), car).problems
     name = str(doc.get("name", ""))
     mesh_dir = folder / "models" / name / "meshes"
+    import trimesh  # ~0.5 s (scipy): only when a folder's meshes are checked
+
     meshes = {}
     for role in ("lane", "edges", "markings"):
         f = mesh_dir / f"{role}.stl"

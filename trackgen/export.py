@@ -10,13 +10,16 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import shapely
-import trimesh
 
 from pieces.mesh import extrude_footprint
 
 from .chain import Track
+
+if TYPE_CHECKING:  # meshes come from pieces.mesh, which loads trimesh on first use
+    import trimesh
 
 GRID_M = 1e-6
 """Snapping grid of the unions (m)."""

@@ -25,14 +25,17 @@ from __future__ import annotations
 import io
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
-import trimesh
 
 from pieces.spec import PieceType
 
 from .chain import Track
+
+if TYPE_CHECKING:  # at run time trimesh (~0.5 s: scipy) loads with the first mesh check
+    import trimesh
 
 CLOSURE_TOL_M = 1e-6
 CLOSURE_TOL_RAD = 1e-6
@@ -195,6 +198,8 @@ def _check_start_finish(track: Track, path: str) -> list[Problem]:
 
 def stl_round_trip(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """The mesh as a consumer sees it: binary STL (float32) read back with merged vertices."""
+    import trimesh
+
     data = mesh.export(file_type="stl")
     return trimesh.load(io.BytesIO(data), file_type="stl", force="mesh")
 
