@@ -35,22 +35,53 @@ def _input_errors() -> tuple[type[BaseException], ...]:
 
 
 class _LazyGroup(click.Group):
-    """Loads the workflow commands (scipy-heavy) only when they are used."""
+    """Loads the workflow commands (scipy-heavy) only when they are used: ``simrunner --help``
+    lists them with the docstrings of their functions, read from the source without
+    importing it."""
 
     LAZY = {"calibrate": ("simrunner.cli_calib", "calibrate_cmd"),
             "excite": ("simrunner.cli_calib", "excite_cmd"),
             "gap": ("simrunner.cli_gap", "gap")}
+    _listing = False
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted(set(super().list_commands(ctx)) | set(self.LAZY))
 
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        self._listing = True
+        try:
+            super().format_commands(ctx, formatter)
+        finally:
+            self._listing = False
+
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         if name in self.LAZY:
+            module, attr = self.LAZY[name]
+            doc = _function_docstring(module, attr) if self._listing else None
+            if doc is not None:  # only the help text is wanted: a stand-in command
+                return click.Command(name, help=doc)
             import importlib
 
-            module, attr = self.LAZY[name]
             return getattr(importlib.import_module(module), attr)
         return super().get_command(ctx, name)
+
+
+def _function_docstring(module: str, function: str) -> str | None:
+    """The docstring of top-level ``function`` of ``module``, read without importing it
+    (None if it cannot be found: the caller then imports the module)."""
+    import ast
+    import importlib.util
+    from pathlib import Path
+
+    try:
+        spec = importlib.util.find_spec(module)
+        tree = ast.parse(Path(spec.origin).read_text(encoding="utf-8"))
+    except (ImportError, AttributeError, TypeError, OSError, SyntaxError, ValueError):
+        return None
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef) and node.name == function:
+            return ast.get_docstring(node, clean=False)
+    return None
 
 
 @click.group(cls=_LazyGroup)

@@ -21,7 +21,6 @@ from typing import Iterable, Sequence
 
 import cv2
 import numpy as np
-import trimesh
 
 FLOOR_GRAY = 40
 WHITE_GRAY = 235
@@ -45,6 +44,8 @@ GAZEBO_MATERIAL_RGB = {
 # Fallback when a visual has neither rgba nor a known material: by its role.
 ROLE_GRAY = {"lane": WHITE_GRAY, "edge": BLACK_GRAY, "marking": BLACK_GRAY}
 _SHIFT = 8  # fixed-point bits for cv2.fillConvexPoly (sub-pixel vertices)
+# A binary STL after its 84-byte header (80 bytes, uint32 count): 50 bytes per triangle.
+_STL_TRIANGLE = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,17 +135,46 @@ def world_triangles(mesh_path: Path, world_from_mesh: np.ndarray,
     """All triangles of a mesh file in the world frame: ``(T, 3, 3)`` metres.
 
     The SDF ``<scale>`` applies in the mesh frame, before ``world_from_mesh (4, 4)``.
+    Binary STL files are read directly; anything else (ASCII STL, COLLADA, OBJ, ...) through
+    trimesh, imported only then (~0.5 s).
     """
-    try:
-        mesh = trimesh.load(str(mesh_path), force="mesh", process=False)
-    except Exception as exc:  # trimesh raises many types for bad files
-        raise ValueError(f"{mesh_path}: cannot read mesh ({exc})") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise ValueError(f"{mesh_path}: expected a triangle mesh")
-    verts = np.asarray(mesh.vertices, dtype=float) * np.asarray(scale, dtype=float)
+    verts = _binary_stl_vertices(mesh_path)
+    if verts is not None:
+        faces = np.arange(len(verts)).reshape(-1, 3)
+    else:
+        import trimesh
+
+        try:
+            mesh = trimesh.load(str(mesh_path), force="mesh", process=False)
+        except Exception as exc:  # trimesh raises many types for bad files
+            raise ValueError(f"{mesh_path}: cannot read mesh ({exc})") from None
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            raise ValueError(f"{mesh_path}: expected a triangle mesh")
+        verts, faces = np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces)
+    verts = verts * np.asarray(scale, dtype=float)
     tf = np.asarray(world_from_mesh, dtype=float)
     verts = verts @ tf[:3, :3].T + tf[:3, 3]
-    return verts[np.asarray(mesh.faces)]
+    return verts[faces]
+
+
+def _binary_stl_vertices(mesh_path: Path) -> np.ndarray | None:
+    """Vertices ``(3 T, 3)`` float64 (float32 values, three per triangle in file order) of a
+    binary STL with at least one triangle, as trimesh reads them (``process=False``); None
+    when the file is not one (no ``.stl`` suffix, or its length does not match the header's
+    triangle count: ASCII STL) or cannot be read (trimesh then reports it)."""
+    if Path(mesh_path).suffix.lower() != ".stl":
+        return None
+    try:
+        data = Path(mesh_path).read_bytes()
+    except OSError:
+        return None
+    if len(data) < 84:
+        return None
+    count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0])
+    if count == 0 or len(data) - 84 != count * _STL_TRIANGLE.itemsize:
+        return None
+    triangles = np.frombuffer(data, dtype=_STL_TRIANGLE, count=count, offset=84)
+    return triangles["vertices"].reshape(-1, 3).astype(float)
 
 
 def upward_triangles(triangles: np.ndarray, min_normal_z: float = 0.5) -> np.ndarray:
