@@ -1,0 +1,101 @@
+"""Start-up time of the command-line tools: how long a student waits to try a change.
+
+Each command runs in a fresh subprocess (the installed console scripts' entry points, so
+nothing is imported or cached in the bench process); columns are the median / min / max
+wall time in seconds over ``REPEAT`` runs. Commands:
+
+* ``simrunner --help`` and ``trackgen --help``: imports only;
+* ``simrunner drive examples/line_follower.py --laps 1``: the default track (the bundled
+  figure 8, built on the fly) -- the simulation itself is well under half a second;
+* the same with ``--track`` the real NXP raceway (``shared/tracks/nxp_raceway``; skipped
+  when that folder is absent);
+* ``trackgen build examples/oval_start.txt -o TMP --force``.
+
+The second table: ``python -c "import MODULE"`` wall time for the main modules, and the bare
+interpreter (``python -c pass``) for reference. Column ``loads``: which of the heavy
+libraries (:data:`HEAVY`) the process had imported when it exited -- what to look at when a
+row gets slower. Times depend on the machine's load: compare runs made under the same
+conditions.
+"""
+from __future__ import annotations
+
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+TRACKS = REPO.parent / "shared" / "tracks"
+REPEAT = 3
+MODULES = ("pieces", "pieces.pose", "worlds", "trackgen", "trackgen.cli", "simrunner",
+           "simrunner.cli", "simrunner.runner", "simrunner.camera")
+HEAVY = ("scipy", "trimesh", "manifold3d", "shapely", "matplotlib", "cv2", "dartpy", "numba")
+_MARK = "bench_startup loaded:"
+# Python run in each fresh process before the code: reports HEAVY on exit (stderr).
+_REPORT = ("import atexit, sys; atexit.register(lambda: sys.stderr.write("
+           f"'\\n{_MARK}' + ' '.join(m for m in {HEAVY!r} if m in sys.modules) + '\\n')); ")
+
+
+def _python(code: str) -> list[str]:
+    return [sys.executable, "-c", _REPORT + code]
+
+
+def _entry(tool: str) -> list[str]:
+    """The console script ``tool`` as the installed entry point runs it."""
+    return _python(f"from {tool}.cli import main; sys.exit(main())")
+
+
+def commands(out_dir: Path) -> list[tuple[str, list[str]]]:
+    """(label, argv) of every timed command; argv runs from the repository root."""
+    simrunner, trackgen = _entry("simrunner"), _entry("trackgen")
+    drive = [*simrunner, "drive", "examples/line_follower.py", "--laps", "1"]
+    rows = [("simrunner --help", [*simrunner, "--help"]),
+            ("simrunner drive line_follower --laps 1", drive)]
+    if (TRACKS / "nxp_raceway").is_dir():
+        rows.append(("  ... --track nxp_raceway", [*drive, "--track", str(TRACKS / "nxp_raceway")]))
+    rows += [("trackgen --help", [*trackgen, "--help"]),
+             ("trackgen build oval_start.txt", [*trackgen, "build", "examples/oval_start.txt",
+                                                "-o", str(out_dir / "oval"), "--force"])]
+    return rows
+
+
+def wall_times_s(argv: list[str], repeat: int = REPEAT) -> tuple[list[float], str]:
+    """Wall times in seconds of ``repeat`` fresh runs of ``argv`` (each must exit 0) and
+    the HEAVY modules the last run had loaded (space-separated)."""
+    times, loaded = [], ""
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        done = subprocess.run(argv, cwd=REPO, capture_output=True, text=True)
+        times.append(time.perf_counter() - t0)
+        if done.returncode != 0:
+            raise RuntimeError(f"{' '.join(argv)} exited {done.returncode}: {done.stderr.strip()[-300:]}")
+        marks = [line for line in done.stderr.splitlines() if line.startswith(_MARK)]
+        loaded = marks[-1][len(_MARK):].strip() if marks else ""
+    return times, loaded
+
+
+def _row(label: str, measured: tuple[list[float], str]) -> str:
+    times, loaded = measured
+    return (f"{label:<40} {statistics.median(times):7.2f} {min(times):7.2f} {max(times):7.2f}  "
+            f"{loaded or '-'}")
+
+
+def main() -> None:
+    header = f"{'':<40} {'median':>7} {'min':>7} {'max':>7}  loads"
+    with tempfile.TemporaryDirectory() as tmp:
+        print(f"{'command (wall s, fresh process)':<40}" + header[40:])
+        for label, argv in commands(Path(tmp)):
+            print(_row(label, wall_times_s(argv)))
+    if not (TRACKS / "nxp_raceway").is_dir():
+        print(f"(nxp_raceway row skipped: no {TRACKS / 'nxp_raceway'})")
+    print()
+    print(f"{'import (wall s, fresh process)':<40}" + header[40:])
+    print(_row("(bare interpreter)", wall_times_s([sys.executable, "-c", "pass"])))
+    for module in MODULES:
+        print(_row(f"import {module}", wall_times_s(_python(f"import {module}"))))
+
+
+if __name__ == "__main__":
+    main()
