@@ -1,8 +1,16 @@
 """The simulator's view of a track: a top-down raster, the start pose, the lap gate.
 
 ``load_track(spec)`` accepts
-- a layout file (``*.txt``): built with ``trackgen`` into a temporary folder, read, and the
-  folder deleted again (everything the simulator needs is then in memory);
+- a layout file (``*.txt``): built with ``trackgen`` (no preview) into a folder of the track
+  cache and read from there like any trackgen folder. The cache key covers everything the
+  build depends on (the layout's path and bytes, the car, the source files of ``pieces``,
+  ``trackgen`` and ``worlds``, Python's version and the installed files of numpy, shapely,
+  manifold3d and trimesh), so the next run of the same layout skips the build and
+  trackgen's imports (trimesh, ~0.5 s). Cache folder: ``$NXPCUP_SIM_TRACK_CACHE``, else
+  ``$XDG_CACHE_HOME/nxpcup-sim/tracks``, else ``~/.cache/nxpcup-sim/tracks``; the
+  :data:`CACHE_KEEP` most recently used builds are kept. ``NXPCUP_SIM_TRACK_CACHE=off``, or
+  a cache that cannot be written, builds into a temporary folder deleted after reading.
+  A layout that fails to build is never cached (its error is raised every time);
 - a trackgen output folder (holds ``world.sdf``);
 - a world file (``*.sdf`` / ``*.world``);
 - a Gazebo model folder (``model.config`` beside a ``*.world``, like NXP's
@@ -27,8 +35,12 @@ From the scene:
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+import os
+import shutil
+import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +55,9 @@ from simrunner.raster import (DEFAULT_M_PER_PX, TrackRaster, build_raster, layer
 LAYOUT_SUFFIXES = (".txt",)
 WORLD_SUFFIXES = (".sdf", ".world")
 _WIDTH_SEARCH_M = 3.0  # how far to look sideways for the road's edge
+CACHE_ENV = "NXPCUP_SIM_TRACK_CACHE"
+CACHE_KEEP = 32  # built layouts kept in the cache (least recently used removed first)
+_CACHE_FORMAT = b"nxpcup-sim track cache 1"
 
 
 class TrackLoadError(SimError, ValueError):
@@ -80,6 +95,14 @@ def load_track(spec: str | Path, *, car=None, m_per_px: float = DEFAULT_M_PER_PX
     """
     path = Path(spec)
     if path.is_file() and path.suffix.lower() in LAYOUT_SUFFIXES:
+        cached = _cached_build(path, car)
+        if cached is not None:
+            try:
+                scene = _read_world(cached / "world.sdf")
+            except TrackLoadError:  # a damaged cache entry: drop it, build afresh below
+                shutil.rmtree(cached, ignore_errors=True)
+            else:
+                return track_from_scene(scene, source=path, name=None, m_per_px=m_per_px)
         from trackgen import TrackError
         from trackgen.build import build  # trackgen is only needed for layouts
 
@@ -94,6 +117,89 @@ def load_track(spec: str | Path, *, car=None, m_per_px: float = DEFAULT_M_PER_PX
         raise TrackLoadError(f"{path}: not a track: expected a layout ({', '.join(LAYOUT_SUFFIXES)}), "
                              f"a world ({', '.join(WORLD_SUFFIXES)}) or a track folder")
     return track_from_scene(_read_world(path), source=path, m_per_px=m_per_px)
+
+
+# -- layout build cache ------------------------------------------------------------------
+def _cache_dir() -> Path | None:
+    """The track cache folder (see the module docstring), None when switched off."""
+    configured = os.environ.get(CACHE_ENV, "")
+    if configured.lower() in ("off", "0", "no", "false"):
+        return None
+    if configured:
+        return Path(configured)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "nxpcup-sim" / "tracks"
+
+
+def _cache_key(layout: Path, car) -> str:
+    """Hex digest of everything a layout's trackgen build depends on (module docstring).
+    A dependency counts by its installed file (path, size, modification time): an upgrade
+    rewrites it (cheaper than importlib.metadata, ~30 ms)."""
+    import importlib.util
+    import platform
+
+    if car is None:
+        from worlds.car import CarDescription
+
+        car = CarDescription()
+    h = hashlib.sha256(_CACHE_FORMAT)
+    for part in (str(layout.resolve()), repr(car), sys.version, platform.machine()):
+        h.update(b"\0" + part.encode())
+    h.update(b"\0" + layout.read_bytes())
+    for dependency in ("numpy", "shapely", "manifold3d", "trimesh"):
+        origin = importlib.util.find_spec(dependency).origin
+        st = os.stat(origin)
+        h.update(f"\0{dependency} {origin} {st.st_size} {st.st_mtime_ns}".encode())
+    for package in ("pieces", "trackgen", "worlds"):
+        root = Path(importlib.util.find_spec(package).origin).parent
+        for f in sorted(root.rglob("*")):
+            if f.is_file() and "__pycache__" not in f.parts:
+                name = f"\0{package}/{f.relative_to(root).as_posix()}\0"
+                h.update(name.encode() + f.read_bytes())
+    return h.hexdigest()[:32]
+
+
+def _cached_build(layout: Path, car) -> Path | None:
+    """The cache folder holding ``trackgen build`` of ``layout`` (built now if missing), or
+    None when the cache is off or unusable (the caller then builds into a temporary folder).
+    Layout errors are raised as :class:`TrackLoadError`, as without the cache."""
+    try:
+        root = _cache_dir()
+        if root is None:
+            return None
+        entry = root / _cache_key(layout, car)
+        if (entry / "world.sdf").is_file():
+            os.utime(entry)  # most recently used
+            return entry
+        root.mkdir(parents=True, exist_ok=True)
+    except Exception:  # noqa: BLE001 - the cache never stops a run: build without it
+        return None
+    from trackgen import TrackError
+    from trackgen.build import OutputError, build
+
+    try:
+        build(layout, entry, car=car, preview=False)  # written beside, renamed into place
+    except OutputError:  # a concurrent run built it first, or the cache is not writable
+        return entry if (entry / "world.sdf").is_file() else None
+    except TrackError as exc:
+        raise TrackLoadError(str(exc)) from exc
+    _prune_cache(root)
+    return entry
+
+
+def _prune_cache(root: Path) -> None:
+    """Remove all but the CACHE_KEEP most recently used builds, and build temporaries
+    (``.NAME.*``, left only by a killed process) older than a day."""
+    import time
+
+    try:
+        folders = [(p, p.stat().st_mtime) for p in root.iterdir() if p.is_dir()]
+    except OSError:
+        return
+    builds = sorted((f for f in folders if not f[0].name.startswith(".")), key=lambda f: -f[1])
+    stale = [f for f in folders if f[0].name.startswith(".") and f[1] < time.time() - 86400]
+    for old, _ in builds[CACHE_KEEP:] + stale:
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def _read_world(path: Path):
