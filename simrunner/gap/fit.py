@@ -44,8 +44,8 @@ from simrunner.gap.replay import (FIT_SIGNALS, WORKFLOW_DT_S, SimFactory, Window
 from worlds.car import CarDescription
 
 # Calibrated on effect-free synthetic logs (python -m simrunner.gap.calibrate; docs/gap.md).
-DELTA_BIC_MIN = 86.0
-IMPROVEMENT_MIN = 0.045
+DELTA_BIC_MIN = 132.5
+IMPROVEMENT_MIN = 0.068
 
 N_EFF_PER_S = 10.0  # independent values per second per signal (0.1 s decorrelation)
 GRID_POINTS = 5
