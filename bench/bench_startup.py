@@ -6,7 +6,11 @@ wall time in seconds over ``REPEAT`` runs. Commands:
 
 * ``simrunner --help`` and ``trackgen --help``: imports only;
 * ``simrunner drive examples/line_follower.py --laps 1``: the default track (the bundled
-  figure 8, built on the fly) -- the simulation itself is well under half a second;
+  figure 8 layout) already in the track cache (a fresh cache folder, filled by one untimed
+  run first: what a student iterating on a controller sees) -- the simulation itself is well
+  under half a second;
+* the same with the track cache off (``NXPCUP_SIM_TRACK_CACHE=off``: the layout is built
+  every run, as on the first run of a layout);
 * the same with ``--track`` the real NXP raceway (``shared/tracks/nxp_raceway``; skipped
   when that folder is absent);
 * ``trackgen build examples/oval_start.txt -o TMP --force``.
@@ -19,6 +23,7 @@ conditions.
 """
 from __future__ import annotations
 
+import os
 import statistics
 import subprocess
 import sys
@@ -47,30 +52,41 @@ def _entry(tool: str) -> list[str]:
     return _python(f"from {tool}.cli import main; sys.exit(main())")
 
 
-def commands(out_dir: Path) -> list[tuple[str, list[str]]]:
-    """(label, argv) of every timed command; argv runs from the repository root."""
+def commands(tmp: Path) -> list[tuple[str, list[str], dict[str, str], bool]]:
+    """(label, argv, environment overrides, warm-up run first) of every timed command; argv
+    runs from the repository root; ``tmp`` holds the outputs and the track cache."""
     simrunner, trackgen = _entry("simrunner"), _entry("trackgen")
     drive = [*simrunner, "drive", "examples/line_follower.py", "--laps", "1"]
-    rows = [("simrunner --help", [*simrunner, "--help"]),
-            ("simrunner drive line_follower --laps 1", drive)]
+    cached = {"NXPCUP_SIM_TRACK_CACHE": str(tmp / "track-cache")}
+    rows = [("simrunner --help", [*simrunner, "--help"], {}, False),
+            ("simrunner drive line_follower --laps 1", drive, cached, True),
+            ("  ... track cache off", drive, {"NXPCUP_SIM_TRACK_CACHE": "off"}, False)]
     if (TRACKS / "nxp_raceway").is_dir():
-        rows.append(("  ... --track nxp_raceway", [*drive, "--track", str(TRACKS / "nxp_raceway")]))
-    rows += [("trackgen --help", [*trackgen, "--help"]),
+        rows.append(("  ... --track nxp_raceway", [*drive, "--track", str(TRACKS / "nxp_raceway")],
+                     {}, False))
+    rows += [("trackgen --help", [*trackgen, "--help"], {}, False),
              ("trackgen build oval_start.txt", [*trackgen, "build", "examples/oval_start.txt",
-                                                "-o", str(out_dir / "oval"), "--force"])]
+                                                "-o", str(tmp / "oval"), "--force"], {}, False)]
     return rows
 
 
-def wall_times_s(argv: list[str], repeat: int = REPEAT) -> tuple[list[float], str]:
-    """Wall times in seconds of ``repeat`` fresh runs of ``argv`` (each must exit 0) and
-    the HEAVY modules the last run had loaded (space-separated)."""
+def wall_times_s(argv: list[str], repeat: int = REPEAT, env: dict[str, str] | None = None,
+                 warm: bool = False) -> tuple[list[float], str]:
+    """Wall times in seconds of ``repeat`` fresh runs of ``argv`` (each must exit 0; with
+    ``warm`` after one untimed run) and the HEAVY modules the last run had loaded
+    (space-separated). ``env`` overrides environment variables."""
     times, loaded = [], ""
-    for _ in range(repeat):
+    environ = {**os.environ, **(env or {})}
+    for i in range(repeat + int(warm)):
         t0 = time.perf_counter()
-        done = subprocess.run(argv, cwd=REPO, capture_output=True, text=True)
-        times.append(time.perf_counter() - t0)
+        done = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, env=environ)
+        elapsed_s = time.perf_counter() - t0
         if done.returncode != 0:
-            raise RuntimeError(f"{' '.join(argv)} exited {done.returncode}: {done.stderr.strip()[-300:]}")
+            raise RuntimeError(f"{' '.join(argv)} exited {done.returncode}: "
+                               f"{done.stderr.strip()[-300:]}")
+        if warm and i == 0:
+            continue
+        times.append(elapsed_s)
         marks = [line for line in done.stderr.splitlines() if line.startswith(_MARK)]
         loaded = marks[-1][len(_MARK):].strip() if marks else ""
     return times, loaded
@@ -86,8 +102,8 @@ def main() -> None:
     header = f"{'':<40} {'median':>7} {'min':>7} {'max':>7}  loads"
     with tempfile.TemporaryDirectory() as tmp:
         print(f"{'command (wall s, fresh process)':<40}" + header[40:])
-        for label, argv in commands(Path(tmp)):
-            print(_row(label, wall_times_s(argv)))
+        for label, argv, env, warm in commands(Path(tmp)):
+            print(_row(label, wall_times_s(argv, env=env, warm=warm)))
     if not (TRACKS / "nxp_raceway").is_dir():
         print(f"(nxp_raceway row skipped: no {TRACKS / 'nxp_raceway'})")
     print()
