@@ -32,10 +32,19 @@ import cv2
 import numpy as np
 
 from pieces.pose import Pose2
-from simrunner.fastpath import camera_row
 from simrunner.raster import TrackRaster
 
 _NO_NORMALS = np.zeros(0)
+_camera_row = None  # simrunner.fastpath.camera_row, imported on first use (numba loads ~0.5 s)
+
+
+def _line_kernel():
+    global _camera_row
+    if _camera_row is None:
+        from simrunner.fastpath import camera_row
+
+        _camera_row = camera_row
+    return _camera_row
 
 
 def _raster_of(raster_or_track) -> TrackRaster:
@@ -46,7 +55,8 @@ class Camera:
     """Pinhole camera of ``cam`` (a ``worlds.car.Camera``) looking at ``raster`` (a
     ``TrackRaster``, or a ``SimTrack`` whose raster is used)."""
 
-    def __init__(self, cam, raster, *, max_range_m: float = 10.0, supersample: int = 1) -> None:
+    def __init__(self, cam, raster, *, max_range_m: float = 10.0, supersample: int = 1,
+                 load_line_kernel: bool = True) -> None:
         if int(supersample) < 1:
             raise ValueError(f"supersample must be >= 1, got {supersample!r}")
         self.cam = cam
@@ -83,8 +93,9 @@ class Camera:
         self._noise_std = float(cam.noise_std)
         # compile (first use in a checkout, ~1 s) or load (~0.1 s) the line kernel now, not
         # inside a timed, watchdog-guarded run
+        # (``load_line_kernel=False``: on first use instead, for callers that may never need it)
         line_rows = [r for r, gx in enumerate(self._row_gx) if gx is not None]
-        if line_rows:
+        if line_rows and load_line_kernel:
             self.line_image(Pose2(), line_rows[0])
 
     # -- geometry ------------------------------------------------------------------
@@ -185,7 +196,7 @@ class Camera:
         else:
             take = getattr(normals, "take", None)
             buf, pos = take(self.width_px) if take else (normals.standard_normal(self.width_px), 0)
-        camera_row(self.raster.image, self._gy[row], -si, ci * gx, (pose.x_m - self._x0_m) * inv,
+        (_camera_row or _line_kernel())(self.raster.image, self._gy[row], -si, ci * gx, (pose.x_m - self._x0_m) * inv,
                    -ci, -si * gx, (self._y0_m - pose.y_m) * inv, self._floor_f,
                    normals is not None, buf, pos, self._noise_std, out)
         return out

@@ -140,7 +140,7 @@ def _camera(car: CarDescription, raster=None):
     if raster is None:
         img = np.zeros((1, 1), np.uint8)
         raster = TrackRaster(img, img.astype(bool), 1.0, (0.0, 0.0))
-    return Camera(car.camera, raster)
+    return Camera(car.camera, raster, load_line_kernel=False)  # only render / look_ahead_m
 
 
 def row_ground_distances_m(car: CarDescription) -> np.ndarray:

@@ -24,7 +24,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from simrunner.gap import LogError
 
@@ -199,6 +198,7 @@ def sample_dt_s(log: MeasuredLog) -> float:
 
 def derive(log: MeasuredLog, wheelbase_m: float, steer_limit_rad: float = math.inf) -> Derived:
     """Smoothed states and derivatives; see :class:`Derived`."""
+    from scipy.signal import savgol_filter  # here, not at import: `simrunner gap --help` stays quick
     dt = sample_dt_s(log)
     win = max(5, int(round(SMOOTH_S / dt)) | 1)
     n = len(log)
