@@ -7,6 +7,7 @@ part from 38 s (speed steps, brake, straight at 2 m/s, coast) longitudinal ones.
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -66,8 +67,13 @@ def test_report_folder(offset_run, tmp_path):
     rep = json.loads((out / "report.json").read_text())
     assert rep["effect"] == "steering_offset"
     assert set(rep["parameters"]) == {"steering_offset_rad"}
-    for key in ("rmse_before", "rmse_after"):
+    for key in ("rmse_before", "rmse_after", "rmse_smoothed_before", "rmse_smoothed_after", "noise_rms"):
         assert set(rep[key]) == {"position_m", "yaw_rad", "speed_mps", "yaw_rate_radps"}
+    # against the smoothed states the sensor noise no longer adds to the residuals
+    for key in ("position_m", "yaw_rad"):
+        assert rep["rmse_smoothed_after"][key] < rep["rmse_after"][key]
+        assert rep["rmse_smoothed_after"][key] < 0.5 * rep["rmse_smoothed_before"][key]
+    assert rep["noise_rms"]["position_m"] == pytest.approx(5e-3 * math.sqrt(2), rel=0.3)
     assert len(rep["ranking"]) == len(CANDIDATES)
     assert {"effect", "parameters", "bic", "delta_bic", "improvement"} <= set(rep["ranking"][0])
     car = load_car(out / "car.toml")
