@@ -201,3 +201,23 @@ def test_set_state_starts_settled_at_the_given_state():
     sim.step(100)
     assert sim.steer_rad == pytest.approx(0.12, abs=1e-4)  # understeer follows the measured speed
     assert sim.speed_mps == pytest.approx(1.5, abs=0.01)
+
+
+def test_place_moves_the_car_but_keeps_commands_in_flight():
+    """The gap replay's lead-in: ``place`` after some commands keeps a latency's pending
+    command (``set_state`` would drop it) and re-places only the physical state."""
+    car = with_effects(CAR, command_latency_s=0.1)
+    sim = make_sim(car)  # dt 2 ms
+    sim.set_state(Pose2(), 1.0, 0.0)
+    sim.set_command(1.0, 0.2)
+    sim.step(25)  # 0.05 s: the new steering is still in the latency queue
+    assert sim.sim.steer_cmd_rad == 0.0
+    sim.place(Pose2(3.0, 4.0, 0.5), 1.0, 0.0)
+    assert (sim.pose.x_m, sim.pose.y_m) == pytest.approx((3.0, 4.0), abs=1e-3)
+    sim.step(30)  # 0.06 s later it acts, as if the car had not been moved
+    assert sim.sim.steer_cmd_rad == pytest.approx(0.2)
+    # a plain CarSim keeps its command through place as well
+    plain = make_sim(CAR)
+    plain.set_command(0.8, -0.1)
+    plain.place(Pose2(1.0, 0.0, 0.0), 0.5, 0.0)
+    assert (plain.speed_cmd_mps, plain.steer_cmd_rad) == (0.8, -0.1)
