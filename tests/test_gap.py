@@ -75,6 +75,7 @@ def test_report_folder(offset_run, tmp_path):
         assert rep["rmse_smoothed_after"][key] < 0.5 * rep["rmse_smoothed_before"][key]
     assert rep["noise_rms"]["position_m"] == pytest.approx(5e-3 * math.sqrt(2), rel=0.3)
     assert len(rep["ranking"]) == len(CANDIDATES)
+    assert rep["held_out_worse"] is False and rep["gap_after"] < rep["gap_before"]
     assert {"effect", "parameters", "bic", "delta_bic", "improvement"} <= set(rep["ranking"][0])
     car = load_car(out / "car.toml")
     assert car.effects.steering_offset_rad == pytest.approx(rep["parameters"]["steering_offset_rad"])

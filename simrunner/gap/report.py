@@ -68,6 +68,12 @@ class GapResult:
     rmse_smoothed_after: dict[str, float] = field(default_factory=dict)
     noise_rms: dict[str, float] = field(default_factory=dict)
 
+    @property
+    def held_out_worse(self) -> bool:
+        """True when an effect was named but the held-out gap (normalised residuals, all
+        fit signals) grew: the held-out data do not confirm it (weak or wrong effect)."""
+        return self.effect != "none" and self.gap_after > self.gap_before
+
     def to_json(self) -> dict:
         ratio = {s: (self.rmse_after[s] / self.rmse_before[s] if self.rmse_before[s] > 0 else float("nan"))
                  for s in self.rmse_before}
@@ -76,7 +82,7 @@ class GapResult:
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
             "rmse_smoothed_before": self.rmse_smoothed_before, "rmse_smoothed_after": self.rmse_smoothed_after,
             "noise_rms": self.noise_rms,
-            "gap_before": self.gap_before, "gap_after": self.gap_after,
+            "gap_before": self.gap_before, "gap_after": self.gap_after, "held_out_worse": self.held_out_worse,
             "nominal": {"cost": self.nominal_cost, "bic": self.nominal_bic},
             "thresholds": {"delta_bic_min": self.settings.get("delta_bic_min"),
                            "improvement_min": self.settings.get("improvement_min")},
@@ -183,6 +189,10 @@ def summary_text(result: GapResult) -> str:
         "" if result.effect == "none" else f" ({', '.join(f'{k} = {v:.4g}' for k, v in result.parameters.items())})"))
     lines.append(f"held-out gap (mean squared normalised residual) before -> after: "
                  f"{result.gap_before:.3g} -> {result.gap_after:.3g}")
+    if result.held_out_worse:
+        lines.append(f"WARNING: the held-out windows do not confirm {result.effect} (their gap grew): the "
+                     "evidence comes from the fitted windows only, so the effect is weak or a different "
+                     "one. Treat car.toml as uncertain; log the plan again and check.")
     lines.append("held-out RMSE before -> after: " + ", ".join(
         f"{s} {result.rmse_before[s]:.4g} -> {result.rmse_after[s]:.4g}" for s in REPORT_SIGNALS))
     if result.rmse_smoothed_before:
