@@ -53,7 +53,6 @@ class LockstepClock:
         self.dt_s = float(dt_s)
         ratio = frame_period_s / dt_s
         self._steps_per_frame = int(round(ratio)) if abs(ratio - round(ratio)) < 1e-9 else None
-        self._whole_frame = max(self._steps_per_frame or 0, 1)  # steps per frame when whole
         self._ratio = max(ratio, 1.0)
         self.on_frame = on_frame or (lambda k: None)
         self.on_row_command: Callable[[int, tuple[float, float, float]], None] | None = None
@@ -121,6 +120,27 @@ class LockstepClock:
         self.last_progress_wall_s = time.monotonic()
         self.check()
 
+    def _before_chunk(self) -> None:
+        """Send a changed command to the sim and report the pending row's command."""
+        if self._command_dirty:
+            self.sim.set_command(*self._command)
+            self._command_dirty = False
+        if self._row_pending:
+            self._row_pending = False
+            if self.on_row_command is not None:
+                self.on_row_command(self.frame_index, self._command)
+
+    def _frame_boundary(self) -> None:
+        """The step index has reached the next frame: run ``on_frame`` for it; raises
+        :class:`RunFinished` if the run is over."""
+        k = self.frame_index = self.frame_index + 1
+        self._next_frame_step = self._frame_step(k + 1)
+        self.on_frame(k)
+        self._row_pending = True
+        self.last_progress_wall_s = _monotonic()
+        if self.finished is not None:
+            self.check()
+
     def advance(self, n_steps: int) -> None:
         """Step ``n_steps`` physics steps, running ``on_frame`` at each boundary crossed.
 
@@ -128,53 +148,22 @@ class LockstepClock:
         """
         if self.finished is not None:
             self.check()
-        sim = self.sim
         while n_steps > 0:
-            chunk = self._next_frame_step - self.step_index
-            if chunk > n_steps:
-                chunk = n_steps
-            if self._command_dirty:
-                sim.set_command(*self._command)
-                self._command_dirty = False
-            if self._row_pending:
-                self._row_pending = False
-                if self.on_row_command is not None:
-                    self.on_row_command(self.frame_index, self._command)
-            sim.step(chunk)
+            chunk = min(self._next_frame_step - self.step_index, n_steps)
+            self._before_chunk()
+            self.sim.step(chunk)
             self.step_index += chunk
             n_steps -= chunk
             if self.step_index == self._next_frame_step:
-                k = self.frame_index = self.frame_index + 1
-                self._next_frame_step = self._frame_step(k + 1)
-                self.on_frame(k)
-                self._row_pending = True
-                self.last_progress_wall_s = _monotonic()
-                if self.finished is not None:
-                    self.check()
+                self._frame_boundary()
         self.last_progress_wall_s = _monotonic()
 
     def advance_to_next_frame(self) -> None:
-        """Step to the next frame boundary (at least one step).
-
-        The same as ``advance(steps_to_next_frame())`` — one chunk — written out: this is
-        the path of every ``get_image`` (keep the two in step)."""
+        """Step to the next frame boundary (at least one step): ``advance`` of one chunk,
+        the path of every ``get_image``."""
         if self.finished is not None:
             self.check()
-        sim = self.sim
-        if self._command_dirty:
-            sim.set_command(*self._command)
-            self._command_dirty = False
-        if self._row_pending:
-            self._row_pending = False
-            if self.on_row_command is not None:
-                self.on_row_command(self.frame_index, self._command)
-        sim.step(self._next_frame_step - self.step_index)
+        self._before_chunk()
+        self.sim.step(self._next_frame_step - self.step_index)
         self.step_index = self._next_frame_step
-        k = self.frame_index = self.frame_index + 1
-        self._next_frame_step = ((k + 1) * self._whole_frame if self._steps_per_frame is not None
-                                 else self._frame_step(k + 1))
-        self.on_frame(k)
-        self._row_pending = True
-        self.last_progress_wall_s = _monotonic()
-        if self.finished is not None:
-            self.check()
+        self._frame_boundary()
