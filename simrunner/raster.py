@@ -44,8 +44,6 @@ GAZEBO_MATERIAL_RGB = {
 # Fallback when a visual has neither rgba nor a known material: by its role.
 ROLE_GRAY = {"lane": WHITE_GRAY, "edge": BLACK_GRAY, "marking": BLACK_GRAY}
 _SHIFT = 8  # fixed-point bits for cv2.fillConvexPoly (sub-pixel vertices)
-# A binary STL after its 84-byte header (80 bytes, uint32 count): 50 bytes per triangle.
-_STL_TRIANGLE = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,22 +157,18 @@ def world_triangles(mesh_path: Path, world_from_mesh: np.ndarray,
 
 def _binary_stl_vertices(mesh_path: Path) -> np.ndarray | None:
     """Vertices ``(3 T, 3)`` float64 (float32 values, three per triangle in file order) of a
-    binary STL with at least one triangle, as trimesh reads them (``process=False``); None
-    when the file is not one (no ``.stl`` suffix, or its length does not match the header's
-    triangle count: ASCII STL) or cannot be read (trimesh then reports it)."""
+    binary STL with at least one triangle, read with numpy-stl (~0.2 s to import, against
+    trimesh's ~0.5 s), as trimesh reads them (``process=False``); None when the file is not
+    one (no ``.stl`` suffix, ASCII STL, unreadable: trimesh then reads or reports it)."""
     if Path(mesh_path).suffix.lower() != ".stl":
         return None
+    from stl import Mode, mesh as stl_mesh
+
     try:
-        data = Path(mesh_path).read_bytes()
-    except OSError:
+        vectors = stl_mesh.Mesh.from_file(str(mesh_path), mode=Mode.BINARY).vectors
+    except Exception:  # noqa: BLE001 - numpy-stl raises several types (ASCII: AssertionError)
         return None
-    if len(data) < 84:
-        return None
-    count = int(np.frombuffer(data, dtype="<u4", count=1, offset=80)[0])
-    if count == 0 or len(data) - 84 != count * _STL_TRIANGLE.itemsize:
-        return None
-    triangles = np.frombuffer(data, dtype=_STL_TRIANGLE, count=count, offset=84)
-    return triangles["vertices"].reshape(-1, 3).astype(float)
+    return vectors.reshape(-1, 3).astype(float) if len(vectors) else None
 
 
 def upward_triangles(triangles: np.ndarray, min_normal_z: float = 0.5) -> np.ndarray:
