@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from pieces.pose import Pose2
-from simrunner.camera import Camera
-from simrunner.raster import build_raster, layer_from_visual
-from simrunner.track import load_track
-from worlds.car import CarDescription
+from simrunner.sensors.camera import Camera
+from simrunner.track.raster import build_raster, layer_from_visual
+from simrunner.track.load import load_track
+from vehicle.description import CarDescription
 
 TRACKS = Path(__file__).resolve().parents[2] / "shared" / "tracks"
 OVAL = "@name = oval\nSTART_FINISH\nSTRAIGHT\nTURN_LEFT x4\nSTRAIGHT x2\nTURN_LEFT x4\n"

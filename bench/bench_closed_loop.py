@@ -31,13 +31,13 @@ import os
 import time
 from pathlib import Path
 
-from simrunner.camera import Camera
-from simrunner.effects import make_sim
-from simrunner.judge import Judge
-from simrunner.physics import CarSim
-from simrunner.runner import _FrameWork, _load_track, default_track, drive
-from simrunner.spinner import Spinner
-from worlds.car import load_car
+from simrunner.sensors.camera import Camera
+from simrunner.car.effects import make_sim
+from simrunner.run.judge import Judge
+from simrunner.car.physics import CarSim
+from simrunner.run.runner import _FrameWork, _load_track, default_track, drive
+from simrunner.run.spinner import Spinner
+from vehicle.description import load_car
 
 REPEATS = 5
 CONTROLLER = Path(__file__).resolve().parents[1] / "examples" / "line_follower.py"

@@ -8,9 +8,9 @@ from __future__ import annotations
 import math
 import time
 
-from simrunner.effects import make_sim, with_effects
-from simrunner.excite import make_plan, run_plan
-from worlds.car import CarDescription
+from simrunner.car.effects import make_sim, with_effects
+from simrunner.workflows.excite import make_plan, run_plan
+from vehicle.description import CarDescription
 
 SIM_S = 4.0
 REPEATS = 3

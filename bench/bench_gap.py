@@ -3,7 +3,7 @@
 Every fourth trial is effect-free ("none"), the others cycle through the catalogue
 (:func:`trial_effect`); each trial draws a plan seed, a
 magnitude, nuisance mass/friction and noise from ``numpy.random.default_rng([SEED, k])``
-(:func:`simrunner.gap.synth.make_measured_log`) and runs the whole catalogue
+(:func:`simrunner.workflows.gap.synth.make_measured_log`) and runs the whole catalogue
 (``run_gap(jobs=1)``); trials run in parallel processes. Reported:
 
 * naming accuracy overall, per effect, and by signal-to-noise ratio. SNR of a trial: the
@@ -43,12 +43,12 @@ NONE_EVERY = 4
 
 
 def _trial(k: int) -> dict:
-    from simrunner.gap.fit import _quiet_worker
-    from simrunner.gap.logs import derive
-    from simrunner.gap.replay import make_windows, replay
-    from simrunner.gap.report import run_gap
-    from simrunner.gap.synth import (NOISE_POS_M, NOISE_SPEED_MPS, NOISE_YAW_RAD, RANGES, make_measured_log)
-    from simrunner.effects import EFFECTS
+    from simrunner.workflows.gap.fit import _quiet_worker
+    from simrunner.workflows.gap.logs import derive
+    from simrunner.workflows.gap.replay import make_windows, replay
+    from simrunner.workflows.gap.report import run_gap
+    from simrunner.workflows.gap.synth import (NOISE_POS_M, NOISE_SPEED_MPS, NOISE_YAW_RAD, RANGES, make_measured_log)
+    from simrunner.car.effects import EFFECTS
 
     _quiet_worker()
     effect = trial_effect(k, list(RANGES))
@@ -62,8 +62,8 @@ def _trial(k: int) -> dict:
            "best": result.ranking[0].effect, "best_delta_bic": result.ranking[0].delta_bic,
            "best_improvement": result.ranking[0].improvement}
     # the same held-out RMSE against the smoothed measured states (sensor noise mostly removed)
-    from simrunner.gap.logs import log_from_columns
-    from simrunner.gap.replay import REPORT_SIGNALS, residuals, rmse, window_mask
+    from simrunner.workflows.gap.logs import log_from_columns
+    from simrunner.workflows.gap.replay import REPORT_SIGNALS, residuals, rmse, window_mask
 
     dv = result.derived
     smooth = log_from_columns({"t": log.t_s, "x": dv.x_m, "y": dv.y_m, "yaw": dv.yaw_rad, "speed": dv.speed_mps,
@@ -76,7 +76,7 @@ def _trial(k: int) -> dict:
         d = derive(exact, truth.car.chassis.wheelbase_m, truth.car.steering.limit_rad)
         w = make_windows(exact)
         neutral = EFFECTS[effect].neutral[0]
-        from simrunner.effects import with_effects
+        from simrunner.car.effects import with_effects
 
         p1 = replay(truth.car, exact, d, w)
         p0 = replay(with_effects(truth.car, **{truth.field: neutral}), exact, d, w)
@@ -151,8 +151,8 @@ def _table(rows: list[dict]) -> str:
 
 def wall_time_one_log(jobs: int = 2) -> float:
     """Seconds for one full plan-length log through the whole catalogue with ``jobs``."""
-    from simrunner.gap.report import run_gap
-    from simrunner.gap.synth import make_measured_log
+    from simrunner.workflows.gap.report import run_gap
+    from simrunner.workflows.gap.synth import make_measured_log
 
     log, _ = make_measured_log("steering_offset", rng=np.random.default_rng(SEED))
     t0 = time.perf_counter()

@@ -14,9 +14,9 @@ from __future__ import annotations
 import math
 import time
 
-from simrunner.car_body import WheelShape
-from simrunner.physics import CarSim
-from worlds.car import CarDescription
+from simrunner.car.body import WheelShape
+from simrunner.car.physics import CarSim
+from vehicle.description import CarDescription
 
 SIM_S = 4.0
 CONTROL_S = 0.02

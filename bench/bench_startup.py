@@ -35,7 +35,7 @@ REPO = Path(__file__).resolve().parents[1]
 TRACKS = REPO.parent / "shared" / "tracks"
 REPEAT = 3
 MODULES = ("pieces", "pieces.pose", "worlds", "trackgen", "trackgen.cli", "simrunner",
-           "simrunner.cli", "simrunner.runner", "simrunner.camera")
+           "simrunner.cli", "simrunner.run.runner", "simrunner.sensors.camera")
 HEAVY = ("scipy", "trimesh", "manifold3d", "shapely", "matplotlib", "cv2", "dartpy", "numba")
 _MARK = "bench_startup loaded:"
 # Python run in each fresh process before the code: reports HEAVY on exit (stderr).

@@ -22,7 +22,7 @@ from trackgen.export import track_geometry
 from trackgen.layout import parse_layout
 from trackgen.validate import errors, validate_track
 from trackgen.preview import render_preview
-from worlds.car import CarDescription
+from vehicle.description import CarDescription
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -3,9 +3,19 @@
 ``simrunner drive controller.py`` runs ``main(spinner)`` of a controller file against the
 dartpy car on a track; :func:`drive` is the same from Python. Heavy modules (dartpy) load
 only when :func:`drive` is first used.
+
+Layout (the folders follow one run; nothing imports a folder listed after it):
+
+- ``simrunner.errors``     the exception root :class:`SimError` and its subclasses
+- ``simrunner.track``      the simulator's track: raster, start pose, lap gate
+- ``simrunner.car``        the car model: dartpy body and physics, effects
+- ``simrunner.sensors``    the line camera
+- ``simrunner.run``        one run: clock, Spinner, judge, run log, video, plot, drive
+- ``simrunner.workflows``  excitation plans, calibration, the sim-vs-real gap
+- ``simrunner.cli``        the ``simrunner`` command
 """
-from .errors import CommandError, ControllerError, RunFinished, SimError
-from .spinner import Spinner
+from simrunner.errors import CommandError, ControllerError, RunFinished, SimError
+from simrunner.run.spinner import Spinner
 
 __all__ = ["SimError", "ControllerError", "CommandError", "RunFinished", "Spinner", "drive",
            "RunResult"]
@@ -13,7 +23,7 @@ __all__ = ["SimError", "ControllerError", "CommandError", "RunFinished", "Spinne
 
 def __getattr__(name: str):
     if name in ("drive", "RunResult"):
-        from . import runner
+        from simrunner.run import runner
 
         return getattr(runner, name)
     raise AttributeError(f"module 'simrunner' has no attribute {name!r}")

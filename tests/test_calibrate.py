@@ -11,11 +11,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as hs
 from click.testing import CliRunner
 
-from simrunner.calibrate import CalibrationError, calibrate
-from simrunner.calibration import simtests as st
-from simrunner.calibration.measured import load_measurements, measurements_from_dict
-from simrunner.cli_calib import calibrate_cmd
-from worlds.car import CarDescription, load_car
+from simrunner.workflows.calibration.calibrate import CalibrationError, calibrate
+from simrunner.workflows.calibration import simtests as st
+from simrunner.workflows.calibration.measured import load_measurements, measurements_from_dict
+from simrunner.cli.calib import calibrate_cmd
+from vehicle.description import CarDescription, load_car
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "measured_car.toml"
 START = CarDescription()

@@ -1,4 +1,4 @@
-"""Camera: ground-plane projection of the top-down raster (simrunner.camera)."""
+"""Camera: ground-plane projection of the top-down raster (simrunner.sensors.camera)."""
 from __future__ import annotations
 
 import math
@@ -11,9 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pieces.pose import Pose2
-from simrunner.camera import Camera
-from simrunner.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_from_polygon
-from worlds.car import Camera as CameraSpec
+from simrunner.sensors.camera import Camera
+from simrunner.track.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_from_polygon
+from vehicle.description import Camera as CameraSpec
 
 TRACKS = Path(__file__).resolve().parents[2] / "shared" / "tracks"
 LANE_HALF_M = 0.255  # white half width; edge lines 0.02 m outside it: 0.55 m edge to edge
@@ -153,7 +153,7 @@ def test_rays_above_horizon_see_floor(lane):
 
 
 def nxp_raster():
-    from simrunner.track import load_track
+    from simrunner.track.load import load_track
 
     folder = TRACKS / "nxp_raceway"
     if not folder.is_dir():

@@ -1,4 +1,4 @@
-"""worlds.car: the shipped default file and docs are generated from the description."""
+"""vehicle.description: the shipped default file and docs are generated from the description."""
 from __future__ import annotations
 
 import dataclasses
@@ -10,13 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from worlds.car import (_SECTION_TYPES, CarDescription, CarDescriptionError, car_from_dict, load_car,
+from vehicle.description import (_SECTION_TYPES, CarDescription, CarDescriptionError, car_from_dict, load_car,
                         markdown_doc)
 
 REPO = Path(__file__).resolve().parents[1]
-SHIPPED = REPO / "worlds" / "data" / "nxp_cup_car.toml"
-REGENERATE = "regenerate with `python -m worlds.car --write worlds/data/nxp_cup_car.toml` " \
-             "and `python -m worlds.car --doc > docs/car.md`"
+SHIPPED = REPO / "vehicle" / "data" / "nxp_cup_car.toml"
+REGENERATE = "regenerate with `python -m vehicle.description --write vehicle/data/nxp_cup_car.toml` " \
+             "and `python -m vehicle.description --doc > docs/car.md`"
 
 
 def test_shipped_file_is_the_generated_default():

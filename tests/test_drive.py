@@ -10,8 +10,8 @@ import pytest
 from click.testing import CliRunner
 
 from simrunner.cli import main as cli
-from simrunner.runner import default_track, drive
-from simrunner.telemetry import COLUMNS, read_csv
+from simrunner.run.runner import default_track, drive
+from simrunner.run.log import COLUMNS, read_csv
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"

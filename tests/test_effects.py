@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from pieces.pose import Pose2
-from simrunner.effects import EFFECTS, EffectSim, active_effects, make_sim, with_effects
-from simrunner.physics import CarSim
-from worlds.car import CarDescription, Effects
+from simrunner.car.effects import EFFECTS, EffectSim, active_effects, make_sim, with_effects
+from simrunner.car.physics import CarSim
+from vehicle.description import CarDescription, Effects
 
 CAR = CarDescription()
 WB = CAR.chassis.wheelbase_m

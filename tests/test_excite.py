@@ -6,11 +6,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as hs
 
-from simrunner.effects import EFFECTS, with_effects
-from simrunner.excite import (AREA_M, SEGMENT_KINDS, ExcitationPlan, PlanError, make_plan, run_plan,
+from simrunner.car.effects import EFFECTS, with_effects
+from simrunner.workflows.excite import (AREA_M, SEGMENT_KINDS, ExcitationPlan, PlanError, make_plan, run_plan,
                               segment_kind, write_log_csv)
-from simrunner.telemetry import COLUMNS, read_csv
-from worlds.car import CarDescription
+from simrunner.run.log import COLUMNS, read_csv
+from vehicle.description import CarDescription
 
 CAR = CarDescription()
 PLAN = make_plan(CAR)

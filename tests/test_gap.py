@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from simrunner.cli_gap import gap
-from simrunner.gap.fit import CANDIDATES
-from simrunner.gap.logs import read_log, write_log
-from simrunner.gap.report import run_gap, write_outputs
-from simrunner.gap.synth import make_measured_log
-from worlds.car import load_car
+from simrunner.cli.gap import gap
+from simrunner.workflows.gap.fit import CANDIDATES
+from simrunner.workflows.gap.logs import read_log, write_log
+from simrunner.workflows.gap.report import run_gap, write_outputs
+from simrunner.workflows.gap.synth import make_measured_log
+from vehicle.description import load_car
 
 LONGITUDINAL = ["motor_lag", "command_latency", "throttle_deadband", "rolling_resistance", "drag"]
 PART_LATERAL = dict(start_s=0.0, duration_s=20.0)

@@ -10,12 +10,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pieces.pose import Pose2
-from simrunner.gap import LogError
-from simrunner.gap.fit import CANDIDATES, FitResult, Problem, choose, cost_of, fit_effect, nominal_scales
-from simrunner.gap.logs import COLUMNS, derive, log_from_columns, read_log, write_log
-from simrunner.gap.regimes import REGIMES, format_stats, residual_stats, segment
-from simrunner.gap.replay import make_windows, replay, residuals, split_windows
-from worlds.car import CarDescription
+from simrunner.workflows.gap import LogError
+from simrunner.workflows.gap.fit import CANDIDATES, FitResult, Problem, choose, cost_of, fit_effect, nominal_scales
+from simrunner.workflows.gap.logs import COLUMNS, derive, log_from_columns, read_log, write_log
+from simrunner.workflows.gap.regimes import REGIMES, format_stats, residual_stats, segment
+from simrunner.workflows.gap.replay import make_windows, replay, residuals, split_windows
+from vehicle.description import CarDescription
 
 
 class KinematicSim:

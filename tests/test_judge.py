@@ -1,4 +1,4 @@
-"""Judge: laps through the gate, backwards crossings, wheels off the road (simrunner.judge)."""
+"""Judge: laps through the gate, backwards crossings, wheels off the road (simrunner.run.judge)."""
 from __future__ import annotations
 
 import math
@@ -11,9 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pieces.pose import Pose2
-from simrunner.judge import Judge
-from simrunner.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_from_polygon
-from simrunner.track import SimTrack
+from simrunner.run.judge import Judge
+from simrunner.track.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_from_polygon
+from simrunner.track.load import SimTrack
 
 TRACKS = Path(__file__).resolve().parents[2] / "shared" / "tracks"
 R_M = 1.5  # centreline radius of a ring track, driven counter-clockwise
@@ -162,7 +162,7 @@ def test_bad_arguments(ring):
 
 
 def test_nxp_raceway_start_is_on_the_road_and_on_the_gate():
-    from simrunner.track import load_track
+    from simrunner.track.load import load_track
 
     folder = TRACKS / "nxp_raceway"
     if not folder.is_dir():
@@ -205,7 +205,7 @@ def _polyline_poses(points: list[tuple[float, float]], step_m: float = 0.02) -> 
 def test_shortcut_skipping_a_loop_of_the_figure8_is_not_a_lap():
     """The thesis figure-8: turning off at the crossroads and driving only the lower loop
     (twice, so the distance alone would pass) is flagged, not credited as a lap."""
-    from simrunner.track import load_track
+    from simrunner.track.load import load_track
 
     track = load_track(Path(__file__).resolve().parents[1] / "examples" / "thesis_figure8.txt")
     # lower loop: crossroads centre (0.3, 0) south to (0.3, -0.8), 270 deg right turn of
@@ -226,7 +226,7 @@ def test_shortcut_skipping_a_loop_of_the_figure8_is_not_a_lap():
 
 
 def test_full_figure8_centreline_lap_counts():
-    from simrunner.track import load_track
+    from simrunner.track.load import load_track
 
     track = load_track(Path(__file__).resolve().parents[1] / "examples" / "thesis_figure8.txt")
     pts = [tuple(p) for p in np.asarray(track.centreline)]

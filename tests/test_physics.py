@@ -15,13 +15,13 @@ from hypothesis import strategies as st
 
 from pieces.pose import Pose2
 from simrunner.errors import SimError
-from simrunner.physics import (
+from simrunner.car.physics import (
     CarSim,
     ackermann_angles_rad,
     bicycle_angle_rad,
     kinematic_turn_radius_m,
 )
-from worlds.car import CarDescription, Drive, Wheels
+from vehicle.description import CarDescription, Drive, Wheels
 
 CAR = CarDescription()
 L_M = CAR.chassis.wheelbase_m

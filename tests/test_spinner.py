@@ -8,9 +8,9 @@ import pytest
 
 from pieces.pose import Pose2
 from simrunner import CommandError, RunFinished, SimError, Spinner
-from simrunner.clock import LockstepClock
-from simrunner.spinner import Session
-from worlds.car import CarDescription
+from simrunner.run.clock import LockstepClock
+from simrunner.run.spinner import Session
+from vehicle.description import CarDescription
 
 DT = 0.002
 CAR = CarDescription()  # camera 128 x 128 at 50 fps -> 10 steps per frame

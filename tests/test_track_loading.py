@@ -1,4 +1,4 @@
-"""Track loading: every kind of spec through worlds.sdf_read, raster, start, gate (simrunner.track)."""
+"""Track loading: every kind of spec through worlds.sdf_read, raster, start, gate (simrunner.track.load)."""
 from __future__ import annotations
 
 import json
@@ -10,8 +10,8 @@ import pytest
 
 from pieces.pose import Pose2
 from simrunner.errors import SimError
-from simrunner.raster import BLACK_GRAY, FLOOR_GRAY, WHITE_GRAY
-from simrunner.track import TrackLoadError, load_track, road_extents_m
+from simrunner.track.raster import BLACK_GRAY, FLOOR_GRAY, WHITE_GRAY
+from simrunner.track.load import TrackLoadError, load_track, road_extents_m
 
 TRACKS = Path(__file__).resolve().parents[2] / "shared" / "tracks"
 OVAL = """@name = oval

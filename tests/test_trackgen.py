@@ -22,7 +22,7 @@ from trackgen.build import OutputError, TRACK_JSON_KEYS, ValidationFailed, build
 from trackgen.chain import START_BEFORE_FINISH_M
 from trackgen.cli import main
 from trackgen.validate import CLOSURE_TOL_M, errors
-from worlds.car import CarDescription, Steering
+from vehicle.description import CarDescription, Steering
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 FIG8 = EXAMPLES / "thesis_figure8.txt"

@@ -9,8 +9,8 @@ import pytest
 
 from pieces.pose import Pose2
 from simrunner.errors import SimError
-from simrunner.runner import drive
-from simrunner.video import FRAME_H, FRAME_W, FrameRecord, VideoRecorder, compose
+from simrunner.run.runner import drive
+from simrunner.run.video import FRAME_H, FRAME_W, FrameRecord, VideoRecorder, compose
 
 
 def _frames(path):

@@ -14,9 +14,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pieces.pose import Pose2
-from worlds import (CarDescription, MeshVisual, WorldError, check_world, load_mesh_world, read_world,
+from vehicle import CarDescription
+from worlds import (MeshVisual, WorldError, check_world, load_mesh_world, read_world,
                     write_car_model, write_track_world)
-from worlds.car import Chassis, Drive, Steering, Wheels
+from vehicle.description import Chassis, Drive, Steering, Wheels
 from worlds.sdf_write import box_inertia, wheel_inertia
 from worlds.sdf_xml import fmt, parse_pose, parse_xml, pose_matrix
 
@@ -468,7 +469,7 @@ def test_car_model_numbers_match_description(tmp_path, key):
 
 
 def test_car_model_rejects_impossible_masses(tmp_path):
-    from worlds.car import CarDescriptionError
+    from vehicle.description import CarDescriptionError
 
     car = CarDescription(chassis=Chassis(mass_kg=0.1), wheels=Wheels(mass_kg=0.05))
     with pytest.raises(CarDescriptionError, match=r"chassis\.mass_kg = 0\.1 must exceed"):

@@ -15,7 +15,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from worlds.car import CarDescription
+from vehicle.description import CarDescription
 from worlds.sdf_xml import WorldError
 
 from .chain import Track, chain

@@ -14,7 +14,7 @@ from pathlib import Path
 import click
 
 from pieces.spec import PieceError
-from worlds.car import CarDescriptionError, load_car
+from vehicle.description import CarDescriptionError, load_car
 from worlds.sdf_xml import WorldError
 
 from .build import ValidationFailed, build as build_track, validate_path

@@ -1,7 +1,8 @@
-"""SDF layer: the car description, Gazebo world/model writing, world reading and checking.
+"""SDF layer: Gazebo world/model writing, world reading and checking (the car description
+they write comes from ``vehicle``).
 
 Nothing here imports dartpy (trackgen imports this package). Names load lazily (PEP 562),
-so ``python -m worlds.car`` runs without importing the rest.
+so importing one part does not load the others.
 """
 from __future__ import annotations
 
@@ -9,7 +10,6 @@ import importlib
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load on first use
-    from worlds.car import CarDescription, CarDescriptionError, load_car
     from worlds.check import check_world
     from worlds.sdf_read import MeshVisual, Scene, load_mesh_world, read_world
     from worlds.sdf_write import write_car_model, write_track_model, write_track_world, write_world
@@ -17,7 +17,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load on first
 
 _EXPORTS = {
     "WorldError": "worlds.sdf_xml",
-    "CarDescription": "worlds.car", "CarDescriptionError": "worlds.car", "load_car": "worlds.car",
     "Scene": "worlds.sdf_read", "MeshVisual": "worlds.sdf_read", "read_world": "worlds.sdf_read",
     "load_mesh_world": "worlds.sdf_read",
     "write_track_world": "worlds.sdf_write", "write_track_model": "worlds.sdf_write",

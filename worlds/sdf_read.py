@@ -42,7 +42,7 @@ from worlds.sdf_xml import WorldError, XmlDoc, parse_pose, parse_vector, parse_x
 
 MODEL_PATH_ENV = ("GAZEBO_MODEL_PATH", "GZ_SIM_RESOURCE_PATH", "IGN_GAZEBO_RESOURCE_PATH", "SDF_PATH")
 GROUND_MODELS = ("ground_plane",)
-DEFAULT_CAR_NAME = "nxp_cup_car"  # worlds.car.CarDescription().name
+DEFAULT_CAR_NAME = "nxp_cup_car"  # vehicle.description.CarDescription().name
 
 # Gazebo's stock material scripts (media/materials/scripts/gazebo.material), diffuse RGBA.
 GAZEBO_MATERIALS: dict[str, tuple[float, float, float, float]] = {

@@ -1,0 +1,422 @@
+"""Effects catalogue (issue 4): what the nominal car model leaves out, as switchable parts.
+
+Every effect has parameters in ``car.effects`` (``vehicle.description.Effects``) whose neutral
+values give back the nominal model exactly. :data:`EFFECTS` describes them;
+:func:`make_sim` builds the simulator for a car: a plain :class:`~simrunner.car.physics.CarSim`
+when every effect is neutral (zero extra cost, bit-identical), else an :class:`EffectSim`.
+
+Where each effect acts (docs/effects.md has the physics):
+
+* build: ``friction`` scales ``wheels.friction_mu`` before the car is built.
+* command path, applied to every ``set_command`` (no extra cost):
+  ``steering_offset``, ``steering_gain`` (steer -> gain * steer + offset) and
+  ``throttle_deadband`` (|speed| < deadband -> no drive: the rear wheels free-wheel).
+* command path, filtered at a control sub-step of ``n_sub = max(1, round(CONTROL_DT_S /
+  dt_s))`` physics steps (4 ms: 2 steps at the default 2 ms) while any of these is active:
+  ``command_latency`` (FIFO; a command acts at the first sub-step at or after
+  ``t_set + latency``), ``steering_lag`` and ``motor_lag`` (exact first-order lags),
+  ``steering_rate_limit`` (slew limit on the steering target, on top of the servo rate),
+  ``tire_slip`` (understeer: effective steer = steer - K * a_lat with the kinematic
+  lateral acceleration of the effective steer, a_lat = v^2 tan(steer_eff) / L; solved in
+  closed form, steer_eff = steer / (1 + K v^2 / L) for small angles, with the measured
+  speed v. Feeding back the measured yaw rate instead would be a stiff loop of gain
+  K v^2 / L, up to ~25 in the fit range).
+* forces (same sub-step): ``rolling_resistance`` ``c_rr * m * g`` and ``drag`` ``k * v^2``
+  act on the chassis against the motion through ``CarSim.apply_external_force_n`` (rolling
+  resistance fades in linearly below ``ROLL_EPS_MPS`` so a car at rest does not creep).
+
+Order of the steering path: latency -> gain, offset -> lag -> rate limit -> understeer ->
+CarSim (clamp to the limit, servo rate). Speed path: latency -> deadband -> motor lag ->
+CarSim (torque-limited accel/brake). Coasting (``set_coast``: no drive torque, the rear
+wheels roll freely) is a command too: it passes the latency; the deadband also coasts.
+
+Everything is deterministic: no randomness, state saved by :meth:`EffectSim.save_state`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+from pieces.pose import Pose2
+from simrunner.car.physics import GRAVITY_MPS2, CarSim
+from vehicle.description import CarDescription, Effects
+
+CONTROL_DT_S = 0.004  # control sub-step of the filtered effects (rounded to whole physics steps)
+ROLL_EPS_MPS = 0.02  # rolling resistance ramps from 0 to full over |v| in [0, ROLL_EPS_MPS]
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """One catalogue entry. ``params`` are field names of ``vehicle.description.Effects``;
+    ``neutral``, ``bounds`` (fit bounds, finite) and ``units`` are per parameter.
+    ``revealed_by`` names plan segment kinds of :mod:`simrunner.workflows.excite`."""
+
+    name: str
+    params: tuple[str, ...]
+    neutral: tuple[float, ...]
+    bounds: tuple[tuple[float, float], ...]
+    units: tuple[str, ...]
+    meaning: str
+    revealed_by: tuple[str, ...]
+    acts_on: str  # "command" | "force" | "build"
+
+    @property
+    def param(self) -> str:
+        """The (first and, so far, only) parameter."""
+        return self.params[0]
+
+
+def _spec(name, param, neutral, bounds, unit, meaning, revealed_by, acts_on="command") -> EffectSpec:
+    return EffectSpec(name, (param,), (neutral,), (bounds,), (unit,), meaning, tuple(revealed_by), acts_on)
+
+
+EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
+    _spec("steering_offset", "steering_offset_rad", 0.0, (-0.1, 0.1), "rad",
+          "servo trim: a zero steering command does not point the wheels straight",
+          ("straight", "step_steer", "circle")),
+    _spec("steering_gain", "steering_gain", 1.0, (0.5, 1.5), "1",
+          "servo/linkage scale: the wheels turn gain x the commanded angle",
+          ("circle", "step_steer")),
+    _spec("steering_lag", "steering_lag_s", 0.0, (0.0, 0.3), "s",
+          "first-order lag of the steering (servo control loop, linkage compliance)",
+          ("step_steer", "chirp")),
+    _spec("steering_rate_limit", "steering_rate_limit_radps", math.inf, (0.5, 20.0), "rad/s",
+          "the servo slews slower than the model's servo rate (loaded servo, low voltage)",
+          ("step_steer", "chirp")),
+    _spec("command_latency", "command_latency_s", 0.0, (0.0, 0.2), "s",
+          "pure delay from a command to the actuators (control loop, PWM update, ESC)",
+          ("step_steer", "speed_step", "chirp")),
+    _spec("motor_lag", "motor_lag_s", 0.0, (0.0, 1.0), "s",
+          "first-order lag of the speed target (motor/ESC speed loop, inertia)",
+          ("speed_step", "speed_ramp")),
+    _spec("throttle_deadband", "throttle_deadband_mps", 0.0, (0.0, 0.5), "m/s",
+          "small speed commands do not move the car (ESC neutral band, static friction)",
+          ("speed_ramp",)),
+    _spec("rolling_resistance", "rolling_resistance_coeff", 0.0, (0.0, 0.1), "1",
+          "constant resisting force c_rr m g (tyre hysteresis, bearings, gears)",
+          ("coast",), "force"),
+    _spec("drag", "drag_coeff_kgpm", 0.0, (0.0, 0.5), "kg/m",
+          "resisting force k v^2 (air drag; at these speeds mostly speed-dependent losses)",
+          ("coast",), "force"),
+    _spec("tire_slip", "tire_slip_understeer_radps2pm", 0.0, (0.0, 0.1), "rad/(m/s^2)",
+          "understeer from tyre slip angles: the car turns less than the wheels say, more so "
+          "at high lateral acceleration", ("circle",)),
+    _spec("friction", "friction_scale", 1.0, (0.3, 1.5), "1",
+          "grip of the real tyres on the real track relative to wheels.friction_mu",
+          ("circle", "tilt test"), "build"),
+)}
+
+_DYNAMIC_PARAMS = ("steering_lag_s", "command_latency_s", "motor_lag_s", "tire_slip_understeer_radps2pm",
+                   "rolling_resistance_coeff", "drag_coeff_kgpm")
+
+
+def active_effects(car: CarDescription) -> list[str]:
+    """Names of the effects whose parameters differ from neutral, in catalogue order."""
+    eff = car.effects
+    return [s.name for s in EFFECTS.values()
+            if any(getattr(eff, p) != n for p, n in zip(s.params, s.neutral))]
+
+
+def is_neutral(car: CarDescription) -> bool:
+    return not active_effects(car)
+
+
+def with_effects(car: CarDescription, **params: float) -> CarDescription:
+    """A copy of ``car`` with ``car.effects`` fields replaced (keys are Effects field names,
+    e.g. ``with_effects(car, motor_lag_s=0.1)``). Unknown names raise ``KeyError``."""
+    known = {f.name for f in dataclasses.fields(Effects)}
+    bad = sorted(set(params) - known)
+    if bad:
+        raise KeyError(f"unknown effect parameter(s) {', '.join(bad)} (expected one of {', '.join(sorted(known))})")
+    return car.replace(effects=dataclasses.replace(car.effects, **{k: float(v) for k, v in params.items()}))
+
+
+def neutral_car(car: CarDescription) -> CarDescription:
+    """``car`` with every effect neutral."""
+    return car.replace(effects=Effects())
+
+
+def built_car(car: CarDescription) -> CarDescription:
+    """The car the physics is built from: ``wheels.friction_mu`` times ``friction_scale``."""
+    scale = car.effects.friction_scale
+    if scale == 1.0:
+        return car
+    return car.replace(wheels=dataclasses.replace(car.wheels, friction_mu=car.wheels.friction_mu * scale))
+
+
+def make_sim(car: CarDescription, **carsim_kwargs: Any):
+    """The simulator for ``car``: a plain ``CarSim`` when all effects are neutral, else an
+    :class:`EffectSim` (same interface). ``carsim_kwargs`` go to ``CarSim`` (dt_s, start,
+    surface_z_m, slope_rad, ground_mu)."""
+    if is_neutral(car):
+        return CarSim(car, **carsim_kwargs)
+    return EffectSim(car, **carsim_kwargs)
+
+
+@dataclass(frozen=True)
+class _FilterState:
+    """The command-path state of an EffectSim (saved with the physics state)."""
+
+    raw: tuple[float, float, float | None, bool]  # speed, steer, yaw rate, coast (as commanded)
+    coast_on: bool  # coasting applied to the inner CarSim
+    sent: tuple | None  # the last command passed to the inner CarSim
+    queue: tuple  # pending (t_effective_s, raw) for the latency
+    held: tuple[float, float, float | None, bool]  # the delayed command in force
+    steer_lag: float
+    steer_rl: float
+    speed_lag: float
+    last_t: float
+    substep: int  # physics steps since the last sub-step boundary
+
+
+@dataclass(frozen=True)
+class EffectSimState:
+    """Opaque snapshot for :meth:`EffectSim.restore_state` (bit-exact)."""
+
+    inner: Any
+    filt: _FilterState
+    user_force_n: tuple[float, float]
+
+
+class EffectSim:
+    """A ``CarSim`` with ``car.effects`` applied (module docstring). Same interface as
+    ``CarSim``; everything not overridden here is the inner ``CarSim``'s (``self.sim``)."""
+
+    def __init__(self, car: CarDescription, **carsim_kwargs: Any):
+        self.car = car
+        self.sim = CarSim(built_car(car), **carsim_kwargs)
+        e = car.effects
+        self._e = e
+        self._dynamic = any(getattr(e, p) != getattr(Effects, p) for p in _DYNAMIC_PARAMS) or (
+            e.steering_rate_limit_radps != math.inf)
+        self._forces = e.rolling_resistance_coeff != 0.0 or e.drag_coeff_kgpm != 0.0
+        self.n_sub = max(1, round(CONTROL_DT_S / self.sim.dt_s))
+        self._user_force = (0.0, 0.0)
+        raw = (0.0, 0.0, None, False)
+        self._raw = raw
+        self._queue: deque = deque()
+        self._held = raw
+        self._steer_lag = self._steer_rl = self._speed_lag = 0.0
+        self._last_t = self.sim.time_s
+        self._substep = 0
+        self._coast_on = False
+        self._sent: tuple | None = None  # the last command passed to the inner CarSim
+
+    # -- pass-through ----------------------------------------------------------------------
+    def __getattr__(self, name: str):
+        # only called for attributes not found on EffectSim itself
+        sim = self.__dict__.get("sim")
+        if sim is None:
+            raise AttributeError(name)
+        return getattr(sim, name)
+
+    @property
+    def time_s(self) -> float:
+        return self.sim.time_s
+
+    @property
+    def dt_s(self) -> float:
+        return self.sim.dt_s
+
+    @property
+    def pose(self) -> Pose2:
+        return self.sim.pose
+
+    @property
+    def speed_mps(self) -> float:
+        return self.sim.speed_mps
+
+    @property
+    def steer_rad(self) -> float:
+        """Actual effective (bicycle-equivalent) steering angle, rad: after all effects."""
+        return self.sim.steer_rad
+
+    @property
+    def yaw_rate_radps(self) -> float:
+        return self.sim.yaw_rate_radps
+
+    def wheel_contacts_xy(self):
+        return self.sim.wheel_contacts_xy()
+
+    @property
+    def speed_cmd_mps(self) -> float:
+        """The speed command as given (clamped to the car's limits like CarSim), m/s."""
+        return float(min(max(self._raw[0], -self.car.drive.max_speed_mps), self.car.drive.max_speed_mps))
+
+    @property
+    def steer_cmd_rad(self) -> float:
+        """The steering command as given (clamped to the limit like CarSim), rad."""
+        lim = self.car.steering.limit_rad
+        return float(min(max(self._raw[1], -lim), lim))
+
+    @property
+    def coast(self) -> bool:
+        """Coasting as commanded (before latency and deadband)."""
+        return self._raw[3]
+
+    # -- commands ------------------------------------------------------------------------
+    def set_command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float | None = None) -> None:
+        """Commands as for ``CarSim.set_command`` (coasting, if on, stays on)."""
+        self._command((float(speed_mps), float(steer_rad),
+                       None if yaw_rate_radps is None else float(yaw_rate_radps), self._raw[3]))
+
+    def set_coast(self, coast: bool) -> None:
+        """As ``CarSim.set_coast``: no drive torque while on; it passes the command path
+        (latency) like any command. The speed/steering commands are kept."""
+        s, d, w, _ = self._raw
+        self._command((s, d, w, bool(coast)))
+
+    def _command(self, raw) -> None:
+        self._raw = raw
+        if self._e.command_latency_s > 0.0:
+            self._queue.append((self.sim.time_s + self._e.command_latency_s, raw))
+        else:
+            self._held = raw
+        self._update()
+
+    def apply_external_force_n(self, fx_n: float, fy_n: float) -> None:
+        """A user force on the chassis (car body frame, N), added to the effect forces."""
+        self._user_force = (float(fx_n), float(fy_n))
+        self._apply_forces()
+
+    def _static_map(self, cmd) -> tuple[float, float, float | None, bool]:
+        """Gain, offset and deadband (no state)."""
+        e = self._e
+        v, d, w, coast = cmd
+        d = e.steering_gain * d + e.steering_offset_rad
+        if e.throttle_deadband_mps > 0.0 and abs(v) < e.throttle_deadband_mps:
+            coast = True
+        return v, d, w, coast
+
+    def _update(self) -> None:
+        """One control update at the current time (all effects of the command path)."""
+        e, sim = self._e, self.sim
+        t = sim.time_s
+        dt = t - self._last_t
+        self._last_t = t
+        q = self._queue
+        while q and q[0][0] <= t + 1e-9:
+            self._held = q.popleft()[1]
+        v, d, w_cmd, coast = self._static_map(self._held)
+        if self._dynamic:
+            if e.steering_lag_s > 0.0:
+                self._steer_lag += -math.expm1(-dt / e.steering_lag_s) * (d - self._steer_lag)
+            else:
+                self._steer_lag = d
+            if e.steering_rate_limit_radps != math.inf:
+                step = e.steering_rate_limit_radps * dt
+                self._steer_rl += min(max(self._steer_lag - self._steer_rl, -step), step)
+            else:
+                self._steer_rl = self._steer_lag
+            d = self._steer_rl
+            if e.tire_slip_understeer_radps2pm > 0.0:
+                u = sim.speed_mps
+                d = d / (1.0 + e.tire_slip_understeer_radps2pm * u * u / self.car.chassis.wheelbase_m)
+            target_v = 0.0 if coast else v
+            if coast:  # the speed loop restarts from the actual speed when the drive re-engages
+                self._speed_lag = sim.speed_mps
+            elif e.motor_lag_s > 0.0:
+                self._speed_lag += -math.expm1(-dt / e.motor_lag_s) * (target_v - self._speed_lag)
+            else:
+                self._speed_lag = target_v
+            v_eff = self._speed_lag
+        else:
+            v_eff = v
+        w = None
+        if w_cmd is not None:
+            # keep the caller's deviation from the default differential; the default part
+            # follows the effective speed and steering
+            lim, wb, vmax = self.car.steering.limit_rad, self.car.chassis.wheelbase_m, self.car.drive.max_speed_mps
+            v0, d0 = min(max(self._held[0], -vmax), vmax), min(max(self._held[1], -lim), lim)
+            v_eff = min(max(v_eff, -vmax), vmax)
+            d1 = min(max(d, -lim), lim)
+            w = w_cmd + (v_eff * math.sin(d1) - v0 * math.sin(d0)) / wb
+        sent = (v_eff, d, w)
+        if sent != self._sent or not self._dynamic:
+            # an unchanged command is not re-sent: CarSim keeps its targets (as without effects)
+            sim.set_command(v_eff, d, w)
+            self._sent = sent
+        if coast != self._coast_on:
+            self._coast_on = coast
+            sim.set_coast(coast)
+        if self._forces:
+            self._apply_forces()
+
+    def _apply_forces(self) -> None:
+        e, sim = self._e, self.sim
+        fx, fy = self._user_force
+        if self._forces:
+            vx, vy = sim.speed_mps, sim.lateral_speed_mps
+            if e.rolling_resistance_coeff > 0.0:
+                f_rr = e.rolling_resistance_coeff * self.car.chassis.mass_kg * GRAVITY_MPS2
+                fx -= f_rr * min(max(vx / ROLL_EPS_MPS, -1.0), 1.0)
+            if e.drag_coeff_kgpm > 0.0:
+                speed = math.hypot(vx, vy)
+                fx -= e.drag_coeff_kgpm * speed * vx
+                fy -= e.drag_coeff_kgpm * speed * vy
+        sim.apply_external_force_n(fx, fy)
+
+    # -- stepping ------------------------------------------------------------------------
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` physics steps; filtered effects update every ``n_sub`` steps."""
+        if not (self._dynamic or self._forces):
+            self.sim.step(n)
+            return
+        n = int(n)
+        while n > 0:
+            k = min(n, self.n_sub - self._substep)
+            self.sim.step(k)
+            n -= k
+            self._substep += k
+            if self._substep >= self.n_sub:
+                self._substep = 0
+                self._update()
+
+    # -- state ---------------------------------------------------------------------------
+    def save_state(self) -> EffectSimState:
+        filt = _FilterState(self._raw, self._coast_on, self._sent, tuple(self._queue), self._held, self._steer_lag, self._steer_rl,
+                            self._speed_lag, self._last_t, self._substep)
+        return EffectSimState(self.sim.save_state(), filt, self._user_force)
+
+    def restore_state(self, state: EffectSimState) -> None:
+        self.sim.restore_state(state.inner)
+        f = state.filt
+        self._raw, self._queue, self._held = f.raw, deque(f.queue), f.held
+        self._steer_lag, self._steer_rl, self._speed_lag = f.steer_lag, f.steer_rl, f.speed_lag
+        self._last_t, self._substep = f.last_t, f.substep
+        self._user_force = state.user_force_n
+        self._coast_on = f.coast_on  # the inner state restores the inner coasting itself
+        self._sent = f.sent
+
+    def place(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
+              yaw_rate_radps: float = 0.0) -> None:
+        """Move the car to a planar state (``CarSim.place``) and keep the command path as it
+        is: pending latency, lag and rate-limit states and the command in force. The gap
+        replay calls it after a lead-in that replayed the commands before a window."""
+        self.sim.place(pose, speed_mps, steer_rad, yaw_rate_radps)
+        if self._forces:
+            self._apply_forces()
+
+    def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
+                  yaw_rate_radps: float = 0.0) -> None:
+        """Place the car (as ``CarSim.set_state``: ``steer_rad`` is the actual wheel angle).
+        The command path restarts settled at that state: no pending latency, the lag and
+        rate-limit states at the values that give ``steer_rad`` and ``speed_mps``, and the
+        held command the one that keeps them (steer undone through understeer, offset and
+        gain), so a following identical command changes nothing."""
+        e = self._e
+        self.sim.set_state(pose, speed_mps, steer_rad, yaw_rate_radps)
+        pre = float(steer_rad) * (1.0 + e.tire_slip_understeer_radps2pm * float(speed_mps) ** 2
+                                  / self.car.chassis.wheelbase_m)
+        raw = (float(speed_mps), (pre - e.steering_offset_rad) / e.steering_gain, None, self._raw[3])
+        self._raw = self._held = raw
+        self._queue.clear()
+        self._steer_lag = self._steer_rl = pre
+        self._sent = None
+        self._speed_lag = float(speed_mps)
+        self._last_t = self.sim.time_s
+        if self._forces:
+            self._apply_forces()

@@ -1,0 +1,141 @@
+"""``simrunner`` command line: a thin click layer over :func:`simrunner.run.runner.drive`.
+
+Exit codes: 0 the run finished its laps or ``main`` returned; 1 the run failed (off track,
+timeout, controller error, stalled); 2 bad input (one line on stderr, no traceback);
+130 interrupted (Ctrl-C; outputs are still written).
+"""
+from __future__ import annotations
+
+import sys
+
+import click
+
+from simrunner.errors import SimError
+
+
+def _input_errors() -> tuple[type[BaseException], ...]:
+    """The package exception roots that mean bad input."""
+    roots: list[type[BaseException]] = [SimError]
+    from vehicle.description import CarDescriptionError
+
+    roots.append(CarDescriptionError)
+    try:
+        from worlds import WorldError
+
+        roots.append(WorldError)
+    except ImportError:  # pragma: no cover - module not built yet
+        pass
+    try:
+        from trackgen import TrackError
+
+        roots.append(TrackError)
+    except ImportError:  # pragma: no cover
+        pass
+    return tuple(roots)
+
+
+class _LazyGroup(click.Group):
+    """Loads the workflow commands (scipy-heavy) only when they are used: ``simrunner --help``
+    lists them with the docstrings of their functions, read from the source without
+    importing it."""
+
+    LAZY = {"calibrate": ("simrunner.cli.calib", "calibrate_cmd"),
+            "excite": ("simrunner.cli.calib", "excite_cmd"),
+            "gap": ("simrunner.cli.gap", "gap")}
+    _listing = False
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(set(super().list_commands(ctx)) | set(self.LAZY))
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        self._listing = True
+        try:
+            super().format_commands(ctx, formatter)
+        finally:
+            self._listing = False
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name in self.LAZY:
+            module, attr = self.LAZY[name]
+            doc = _function_docstring(module, attr) if self._listing else None
+            if doc is not None:  # only the help text is wanted: a stand-in command
+                return click.Command(name, help=doc)
+            import importlib
+
+            return getattr(importlib.import_module(module), attr)
+        return super().get_command(ctx, name)
+
+
+def _function_docstring(module: str, function: str) -> str | None:
+    """The docstring of top-level ``function`` of ``module``, read without importing it
+    (None if it cannot be found: the caller then imports the module)."""
+    import ast
+    import importlib.util
+    from pathlib import Path
+
+    try:
+        spec = importlib.util.find_spec(module)
+        tree = ast.parse(Path(spec.origin).read_text(encoding="utf-8"))
+    except (ImportError, AttributeError, TypeError, OSError, SyntaxError, ValueError):
+        return None
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef) and node.name == function:
+            return ast.get_docstring(node, clean=False)
+    return None
+
+
+@click.group(cls=_LazyGroup)
+def main() -> None:
+    """Headless NXP Cup car simulator with the thesis's Spinner API."""
+
+
+@main.command("drive")
+@click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
+@click.option("--track", default=None, metavar="LAYOUT|DIR|WORLD",
+              help="Track: layout .txt, trackgen folder, world file or Gazebo model folder "
+                   "(default: the bundled thesis figure-8).")
+@click.option("--laps", default=1, show_default=True, type=click.IntRange(min=1),
+              help="Laps to complete.")
+@click.option("--time-limit", "time_limit_s", default=60.0, show_default=True,
+              type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
+              help="Simulated-time limit of the run.")
+@click.option("--video", default=None, metavar="PATH.mp4", help="Write the debug video.")
+@click.option("--csv", default=None, metavar="PATH", help="Write telemetry (one row per camera frame).")
+@click.option("--plot", default=None, metavar="PATH.png", help="Write path/speed/steering plot.")
+@click.option("--summary", default=None, metavar="PATH.json", help="Write the run summary as JSON.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+              help="Seed of the camera-noise generator.")
+@click.option("--car", default=None, metavar="CAR.toml", help="Car description (default: built-in car).")
+@click.option("--dt", "dt_s", default=0.002, show_default=True,
+              type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS",
+              help="Physics time step.")
+@click.option("--wall-limit", "wall_limit_s", default=10.0, show_default=True,
+              type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
+              help="Stop a controller that spends this much wall time without letting "
+                   "simulated time pass.")
+def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, seed, car, dt_s,
+              wall_limit_s) -> None:
+    """Run CONTROLLER (a .py file defining main(spinner)) on the simulated car."""
+    from simrunner.run.runner import drive
+
+    try:
+        result = drive(controller, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
+                       csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
+                       wall_limit_s=wall_limit_s)
+    except _input_errors() as exc:
+        click.echo(f"simrunner: {exc}", err=True)
+        sys.exit(2)
+    if result.error is not None:
+        click.echo(result.error.traceback_text.rstrip(), err=True)
+    laps_text = ", ".join(f"{t:.2f} s" for t in result.lap_times_s) or "-"
+    click.echo(f"outcome: {result.outcome} ({result.message})")
+    click.echo(f"laps: {result.laps_completed}/{result.laps}   lap times: {laps_text}")
+    click.echo(f"sim time {result.sim_time_s:.2f} s, wall {result.wall_time_s:.2f} s, "
+               f"{result.real_time_factor:.1f}x real time")
+    if result.outputs:
+        click.echo("wrote: " + ", ".join(result.outputs.values()))
+    sys.exit(0 if result.ok else 130 if result.outcome == "interrupted" else 1)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,93 @@
+"""``simrunner excite`` and ``simrunner calibrate``: thin click commands (registered by
+``simrunner.cli``) over :mod:`simrunner.workflows.excite` and :mod:`simrunner.workflows.calibration.calibrate`.
+
+Exit codes: 0 done; 2 bad input (one line on stderr, no traceback).
+"""
+from __future__ import annotations
+
+import sys
+
+import click
+
+
+def _fail(exc: BaseException) -> None:
+    click.echo(f"simrunner: {exc}", err=True)
+    sys.exit(2)
+
+
+def _input_errors() -> tuple[type[BaseException], ...]:
+    from simrunner.errors import SimError
+    from vehicle.description import CarDescriptionError
+
+    return (SimError, CarDescriptionError)
+
+
+@click.command("excite")
+@click.option("-o", "--output", "output", required=True, metavar="PLAN.csv",
+              help="Where to write the plan (t, speed_cmd, steer_cmd, coast, segment at 50 Hz).")
+@click.option("--duration", "duration_s", default=None, type=float, metavar="SECONDS",
+              help="Total duration: the core plan (~67 s) plus random-steer blocks "
+                   "(default: the core plan).")
+@click.option("--car", default=None, metavar="CAR.toml", help="Car description (default: built-in car).")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+              help="Seed of the random-steer steps.")
+@click.option("--simulate", default=None, metavar="OUT.csv",
+              help="Also play the plan in the simulator (car effects apply) and write the "
+                   "log in the telemetry CSV schema.")
+@click.option("--dt", "dt_s", default=0.002, show_default=True, type=float, metavar="SECONDS",
+              help="Physics time step of --simulate (must divide the 20 ms row period).")
+def excite_cmd(output, duration_s, car, seed, simulate, dt_s) -> None:
+    """Write an excitation plan to drive open loop on the real car (docs/calibration.md)."""
+    from simrunner.workflows.excite import make_plan, predict_path, run_plan, write_log_csv
+    from vehicle.description import load_car
+
+    try:
+        car_desc = load_car(car)
+        plan = make_plan(car_desc, seed=seed, duration_s=duration_s)
+        xy = predict_path(plan, car_desc)
+        extent = (xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max())
+        log = run_plan(plan, car_desc, dt_s=dt_s) if simulate else None
+        plan.to_csv(output, extent=extent)
+        if log is not None:
+            write_log_csv(log, simulate)
+    except _input_errors() as exc:
+        _fail(exc)
+    click.echo(f"plan: {output} ({len(plan)} rows, {plan.duration_s:.1f} s; predicted path "
+               f"{extent[1] - extent[0]:.1f} x {extent[3] - extent[2]:.1f} m)")
+    if log is not None:
+        click.echo(f"simulated log: {simulate} (path {log['x'].max() - log['x'].min():.1f} x "
+                   f"{log['y'].max() - log['y'].min():.1f} m)")
+
+
+@click.command("calibrate")
+@click.argument("measured", metavar="MEASURED.toml", type=click.Path(dir_okay=False, path_type=str))
+@click.option("--car", default=None, metavar="CAR.toml", help="Car description to start from (default: built-in car).")
+@click.option("-o", "--output", "output", required=True, metavar="NEW_CAR.toml",
+              help="Where to write the calibrated car description (written atomically).")
+@click.option("--dt", "dt_s", default=0.002, show_default=True,
+              type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS",
+              help="Physics time step of the simulated tests.")
+def calibrate_cmd(measured, car, output, dt_s) -> None:
+    """Run the thesis's chapter-5 calibration procedures against MEASURED.toml (numbers
+    measured on the real car; docs/calibration.md) and write the updated car description."""
+    from pathlib import Path
+
+    from simrunner.workflows.calibration.calibrate import calibrate, load_measurements
+    from simrunner.errors import SimError
+    from vehicle.description import load_car
+
+    try:
+        measurements = load_measurements(measured)
+        car_desc = load_car(car)
+        result = calibrate(measurements, car_desc, dt_s=dt_s)
+        out = Path(output)
+        if out.parent and not out.parent.is_dir():
+            raise SimError(f"{out}: cannot write the car description (no folder {out.parent})")
+        try:
+            result.car_after.save(out)
+        except OSError as exc:
+            raise SimError(f"{out}: cannot write the car description ({exc.strerror})") from None
+    except _input_errors() as exc:
+        _fail(exc)
+    click.echo(result.report(), nl=False)
+    click.echo(f"car description: {output}")

@@ -1,0 +1,169 @@
+"""Lockstep clock: simulated time advances only inside Spinner calls, in whole physics steps.
+
+Everything runs on one thread. The controller runs; when it calls a waiting Spinner method
+(``get_image``, ``get_time``, ``sleep``, ...) the clock steps the physics. Commands set by
+``set_*`` are stored and handed to the sim once, before the next step (``CarSim.set_command``
+is not called per step). Steps are issued in chunks as large as possible: up to the next
+camera-frame boundary or the end of the wait, whichever is first (``CarSim.step(n)``).
+
+Frame schedule: frame ``k`` (k = 0, 1, 2, ...) is at physics step ``round(k * period / dt)``
+(an exact multiple when the period is a whole number of steps). At every frame boundary the
+``on_frame(k)`` callback runs (telemetry row, judge, video capture) whether or not the
+controller asked for an image; frame 0 is the initial state, called by :meth:`start`.
+``on_row_command(k, command)`` (optional) runs once after boundary ``k``, right before the
+first physics step after it, with the command that step applies: the command "set at t_k"
+(what the controller answered to frame k), which telemetry row k records.
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Callable, Protocol
+
+from simrunner.errors import RunFinished, SimError
+
+_monotonic = time.monotonic
+
+
+class SteppableSim(Protocol):
+    """The part of ``simrunner.car.physics.CarSim`` the clock uses."""
+
+    def set_command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None: ...
+
+    def step(self, n: int = 1) -> None: ...
+
+
+class LockstepClock:
+    """Steps ``sim`` in lockstep with the controller.
+
+    ``dt_s``: physics step (s). ``frame_period_s``: camera frame period (s), at least one step.
+    ``on_frame(frame_index)`` runs at each frame boundary and may call :meth:`finish`.
+    Attributes: ``step_index`` (int, steps done), ``frame_index`` (last frame boundary
+    reached), ``last_progress_wall_s`` (``time.monotonic()`` at the last progress, for the
+    watchdog), ``finished`` (None or the :class:`RunFinished` that ends the run).
+    """
+
+    def __init__(self, sim: SteppableSim, *, dt_s: float, frame_period_s: float,
+                 on_frame: Callable[[int], None] | None = None):
+        if not (math.isfinite(dt_s) and dt_s > 0):
+            raise SimError(f"dt_s = {dt_s!r}: expected a positive number of seconds")
+        if not (math.isfinite(frame_period_s) and frame_period_s > 0):
+            raise SimError(f"frame period = {frame_period_s!r}: expected a positive number of seconds")
+        self.sim = sim
+        self.dt_s = float(dt_s)
+        ratio = frame_period_s / dt_s
+        self._steps_per_frame = int(round(ratio)) if abs(ratio - round(ratio)) < 1e-9 else None
+        self._ratio = max(ratio, 1.0)
+        self.on_frame = on_frame or (lambda k: None)
+        self.on_row_command: Callable[[int, tuple[float, float, float]], None] | None = None
+        self._row_pending = True
+        self.step_index = 0
+        self.frame_index = 0
+        self._next_frame_step = self._frame_step(1)
+        self._command: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._command_dirty = True
+        self.finished: RunFinished | None = None
+        self.last_progress_wall_s = time.monotonic()
+        self._pose = None
+        self._pose_step = -1
+
+    # -- schedule ------------------------------------------------------------------
+    def _frame_step(self, k: int) -> int:
+        if self._steps_per_frame is not None:
+            return k * max(self._steps_per_frame, 1)
+        return int(math.floor(k * self._ratio + 0.5))
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time (s) = steps done x dt (exact; no float accumulation)."""
+        return self.step_index * self.dt_s
+
+    @property
+    def frame_period_steps(self) -> float:
+        return self._ratio
+
+    def steps_to_next_frame(self) -> int:
+        return self._next_frame_step - self.step_index
+
+    def pose(self):
+        """``sim.pose`` (a ``Pose2``), read at most once per step index (cached)."""
+        if self._pose_step != self.step_index:
+            self._pose = self.sim.pose
+            self._pose_step = self.step_index
+        return self._pose
+
+    # -- commands and end ----------------------------------------------------------
+    def command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None:
+        """Store the targets; they reach the sim before the next step."""
+        self._command = (speed_mps, steer_rad, yaw_rate_radps)
+        self._command_dirty = True
+
+    @property
+    def current_command(self) -> tuple[float, float, float]:
+        """(speed_mps, steer_rad, yaw_rate_radps) last commanded."""
+        return self._command
+
+    def finish(self, outcome: str, message: str = "") -> None:
+        """End the run (first call wins): the current and every later wait raises."""
+        if self.finished is None:
+            self.finished = RunFinished(outcome, message)
+
+    def check(self) -> None:
+        """Raise :class:`RunFinished` if the run is over."""
+        if self.finished is not None:
+            raise RunFinished(self.finished.outcome, self.finished.message)
+
+    # -- stepping ------------------------------------------------------------------
+    def start(self) -> None:
+        """Run the frame-0 callback (the initial state)."""
+        self.on_frame(0)
+        self.last_progress_wall_s = time.monotonic()
+        self.check()
+
+    def _before_chunk(self) -> None:
+        """Send a changed command to the sim and report the pending row's command."""
+        if self._command_dirty:
+            self.sim.set_command(*self._command)
+            self._command_dirty = False
+        if self._row_pending:
+            self._row_pending = False
+            if self.on_row_command is not None:
+                self.on_row_command(self.frame_index, self._command)
+
+    def _frame_boundary(self) -> None:
+        """The step index has reached the next frame: run ``on_frame`` for it; raises
+        :class:`RunFinished` if the run is over."""
+        k = self.frame_index = self.frame_index + 1
+        self._next_frame_step = self._frame_step(k + 1)
+        self.on_frame(k)
+        self._row_pending = True
+        self.last_progress_wall_s = _monotonic()
+        if self.finished is not None:
+            self.check()
+
+    def advance(self, n_steps: int) -> None:
+        """Step ``n_steps`` physics steps, running ``on_frame`` at each boundary crossed.
+
+        Raises :class:`RunFinished` (and stops stepping) as soon as the run is over.
+        """
+        if self.finished is not None:
+            self.check()
+        while n_steps > 0:
+            chunk = min(self._next_frame_step - self.step_index, n_steps)
+            self._before_chunk()
+            self.sim.step(chunk)
+            self.step_index += chunk
+            n_steps -= chunk
+            if self.step_index == self._next_frame_step:
+                self._frame_boundary()
+        self.last_progress_wall_s = _monotonic()
+
+    def advance_to_next_frame(self) -> None:
+        """Step to the next frame boundary (at least one step): ``advance`` of one chunk,
+        the path of every ``get_image``."""
+        if self.finished is not None:
+            self.check()
+        self._before_chunk()
+        self.sim.step(self._next_frame_step - self.step_index)
+        self.step_index = self._next_frame_step
+        self._frame_boundary()

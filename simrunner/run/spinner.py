@@ -1,0 +1,369 @@
+"""The thesis's Spinner API (Appendix A.2) in Python, on a deterministic lockstep clock.
+
+A controller is a Python file with ``main(spinner)``; ``simrunner drive FILE`` calls it with
+a ready :class:`Spinner`. Units without norm functions (the defaults): speed in m/s,
+steering in radians (bicycle-equivalent, positive = left), time in s, position in m.
+
+Norm functions (all take ``(speed, angle)`` in the controller's units, speed first, like the
+thesis; each is optional):
+
+- ``speed_norm(speed, angle) -> speed_mps``      controller speed -> m/s (default: identity)
+- ``speed_denorm(speed_mps, angle) -> speed``    m/s -> controller speed, for ``get_speed``
+- ``turn_norm(speed, angle) -> steer_rad``        controller angle -> radians, + = left
+- ``diff_norm(speed_mps, steer_rad) -> yaw_rate_radps``  rear differential (thesis eq. 5.2,
+  5.3); takes the already normalised command; default ``v * sin(delta) / L``.
+
+Give a controller its own norms with :meth:`Spinner.configure` (returns the spinner)::
+
+    def main(spinner):
+        # the real car's -512..512 servo values, direction swapped (thesis 3.3)
+        s = spinner.configure(turn_norm=lambda speed, angle: -angle / 512 * 0.40)
+
+Time (see :mod:`simrunner.run.clock`): simulated time advances only inside ``get_image``
+(to the next camera frame), ``get_time``/``get_speed``/``get_position`` (one physics step
+each, so polling loops make progress) and ``sleep`` (``ceil(seconds / dt)`` steps, at least
+one). ``set_*`` and ``add_*`` only store values; commands act from the next physics step.
+When the run is over (laps done, time limit, off track) the next waiting call raises
+:class:`~simrunner.errors.RunFinished`, a ``BaseException`` that ends ``main``.
+
+Images: ``get_image()`` returns the whole ``(H, W)`` uint8 gray image (row 0 = farthest,
+column 0 = the car's left); ``get_image(k)`` returns row ``k`` as a ``(1, W)`` uint8 array
+(like a ``cv::Mat`` row). ``Spinner.LINE_ROW`` (default car) / ``spinner.line_row`` (this
+car) is ``camera.default_row``: the row that plays the real line camera.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from vehicle.description import CarDescription
+
+from simrunner.run.clock import LockstepClock
+from simrunner.errors import CommandError, SimError
+
+NormFn = Callable[[float, float], float]
+
+_ACTIVE: list["Session"] = []  # the running session (for Spinner() built inside main)
+
+
+class BufferedNormals:
+    """``rng.standard_normal(shape)`` served from a buffer refilled ``chunk`` draws at a time.
+
+    The values come in the same order as from ``rng`` directly (a generator's standard
+    normal stream does not depend on how it is split into calls), so images get the same
+    noise; a camera frame then costs a slice instead of a generator call. Other methods go
+    to ``rng`` itself (mixing them with buffered normals changes the order of the stream).
+    """
+
+    def __init__(self, rng: np.random.Generator, chunk: int = 16384):
+        self.rng = rng
+        self.chunk = int(chunk)
+        self._buf = np.empty(0)
+        self._pos = 0
+
+    def standard_normal(self, size=None) -> np.ndarray | float:
+        if size is None:
+            return float(self.standard_normal(1)[0])
+        shape = (size,) if isinstance(size, (int, np.integer)) else tuple(size)
+        n = math.prod(shape)
+        pos, buf = self._pos, self._buf
+        if pos + n <= len(buf):
+            self._pos = pos + n
+            return buf[pos:pos + n].reshape(shape)
+        rest = buf[pos:]
+        fresh = self.rng.standard_normal(max(self.chunk, n - len(rest)))
+        self._buf, self._pos = fresh, n - len(rest)
+        return np.concatenate((rest, fresh[:self._pos])).reshape(shape)
+
+    def take(self, n: int) -> tuple[np.ndarray, int]:
+        """The next ``n`` normals as ``(buffer, start)``: ``buffer[start:start + n]`` (for
+        compiled code, which reads them in place). Same stream as :meth:`standard_normal`."""
+        pos = self._pos
+        if pos + n <= len(self._buf):
+            self._pos = pos + n
+            return self._buf, pos
+        return self.standard_normal(n), 0
+
+    def __getattr__(self, name: str):
+        return getattr(self.rng, name)
+
+
+@dataclass
+class Session:
+    """What a Spinner talks to: the clock (and through it the sim), the camera, the car,
+    the noise generator and the optional video recorder. Built by :mod:`simrunner.run.runner`."""
+
+    clock: LockstepClock
+    camera: Any  # render(pose) -> (H, W) uint8; render_row(pose, row); add_noise(img, rng)
+    car: CarDescription
+    rng: np.random.Generator
+    video: Any = None  # simrunner.run.video.VideoRecorder or None
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.noise_rng = BufferedNormals(self.rng)  # what images draw their noise from
+
+    def activate(self) -> None:
+        _ACTIVE.append(self)
+
+    def deactivate(self) -> None:
+        if self in _ACTIVE:
+            _ACTIVE.remove(self)
+
+
+def _identity_speed(speed: float, angle: float) -> float:
+    return speed
+
+
+def _identity_angle(speed: float, angle: float) -> float:
+    return angle
+
+
+def _finite(method: str, name: str, value: Any) -> float:
+    if type(value) is float and value - value == 0.0:  # fast path: a finite float
+        return value
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CommandError(f"{method}({name}={value!r}): expected a number") from None
+    if not math.isfinite(v):
+        raise CommandError(f"{method}({name}={value!r}): expected a finite number")
+    return v
+
+
+def _norm_out(call: str, norm: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise CommandError(f"{call}: {norm} returned {value!r}, expected a number") from None
+    if not math.isfinite(v):
+        raise CommandError(f"{call}: {norm} returned {value!r}, expected a finite number")
+    return v
+
+
+class Spinner:
+    """The controller's handle on the simulated car (thesis Appendix A.2).
+
+    ``Spinner(speed_norm=None, speed_denorm=None, turn_norm=None, diff_norm=None)`` inside a
+    running controller attaches to the running simulation (like the thesis's constructor);
+    ``main(spinner)`` already gets one, which :meth:`configure` adapts.
+    """
+
+    LINE_ROW: int = CarDescription().camera.default_row
+
+    def __init__(self, speed_norm: NormFn | None = None, speed_denorm: NormFn | None = None,
+                 turn_norm: NormFn | None = None, diff_norm: NormFn | None = None, *,
+                 session: Session | None = None):
+        if session is None:
+            if not _ACTIVE:
+                raise SimError("Spinner() needs a running simulation: run the controller with "
+                               "`simrunner drive FILE` (it calls main(spinner))")
+            session = _ACTIVE[-1]
+        self._s = session
+        self._clock = session.clock
+        self._sim = session.clock.sim
+        # Camera.line_image: render_row + add_noise in one call (None: a camera without it)
+        self._line_image = getattr(session.camera, "line_image", None)
+        cam = session.car.camera
+        self.line_row: int = cam.default_row
+        self.image_shape: tuple[int, int] = (cam.height_px, cam.width_px)
+        self.wheelbase_m: float = session.car.chassis.wheelbase_m
+        self._speed = 0.0  # last speed and angle in the controller's units
+        self._angle = 0.0
+        self._speed_mps = 0.0
+        self._steer_rad = 0.0
+        self.speed_norm: NormFn = _identity_speed
+        self.speed_denorm: NormFn = _identity_speed
+        self.turn_norm: NormFn = _identity_angle
+        self.diff_norm: NormFn = self.default_diff_norm
+        self.configure(speed_norm, speed_denorm, turn_norm, diff_norm)
+
+    # -- configuration ---------------------------------------------------------------
+    def default_diff_norm(self, speed_mps: float, steer_rad: float) -> float:
+        """Thesis eq. 5.2/5.3: R = L / sin(delta), omega = v / R."""
+        return speed_mps * math.sin(steer_rad) / self.wheelbase_m
+
+    def configure(self, speed_norm: NormFn | None = None, speed_denorm: NormFn | None = None,
+                  turn_norm: NormFn | None = None, diff_norm: NormFn | None = None) -> "Spinner":
+        """Replace the given norm functions (``None`` keeps the current one); returns self."""
+        for name, fn in (("speed_norm", speed_norm), ("speed_denorm", speed_denorm),
+                         ("turn_norm", turn_norm), ("diff_norm", diff_norm)):
+            if fn is not None:
+                if not callable(fn):
+                    raise SimError(f"configure({name}={fn!r}): expected a function (speed, angle)")
+                setattr(self, name, fn)
+        return self
+
+    # -- commands --------------------------------------------------------------------
+    def _send(self, method: str, speed: float, angle: float, set_speed: bool,
+              set_steer: bool) -> None:
+        clock = self._clock
+        if clock.finished is not None:
+            clock.check()
+        if set_steer:
+            v = self.turn_norm(speed, angle)
+            if not (type(v) is float and v - v == 0.0):  # not a finite float: check, convert
+                v = _norm_out(f"{method}(speed={speed!r}, angle={angle!r})", "turn_norm", v)
+            self._steer_rad = v
+        if set_speed:
+            v = self.speed_norm(speed, angle)
+            if not (type(v) is float and v - v == 0.0):
+                v = _norm_out(f"{method}(speed={speed!r}, angle={angle!r})", "speed_norm", v)
+            self._speed_mps = v
+        yaw = self.diff_norm(self._speed_mps, self._steer_rad)
+        if not (type(yaw) is float and yaw - yaw == 0.0):
+            yaw = _norm_out(f"{method}(speed={speed!r}, angle={angle!r})", "diff_norm", yaw)
+        clock.command(self._speed_mps, self._steer_rad, yaw)
+
+    def _fail(self, err: CommandError) -> CommandError:
+        self._clock.finish("controller_error", str(err))
+        return err
+
+    def set_servo(self, angle: float, speed: float | None = None) -> None:
+        """Steer. ``speed`` (default: the last ``set_speed`` value) only feeds ``turn_norm``."""
+        try:
+            a = _finite("set_servo", "angle", angle)
+            s = self._speed if speed is None else _finite("set_servo", "speed", speed)
+            self._angle = a
+            self._send("set_servo", s, a, False, True)
+        except CommandError as err:
+            raise self._fail(err) from None
+
+    def set_speed(self, speed: float, angle: float | None = None) -> None:
+        """Drive. ``angle`` (default: the last ``set_servo`` value) only feeds ``speed_norm``;
+        the differential uses the commanded speed and steering."""
+        try:
+            s = _finite("set_speed", "speed", speed)
+            a = self._angle if angle is None else _finite("set_speed", "angle", angle)
+            self._speed = s
+            self._send("set_speed", s, a, True, False)
+        except CommandError as err:
+            raise self._fail(err) from None
+
+    def set_speed_and_servo(self, speed: float, angle: float) -> None:
+        """Drive and steer at once (recommended by the thesis)."""
+        try:
+            s = speed if type(speed) is float and speed - speed == 0.0 else _finite(
+                "set_speed_and_servo", "speed", speed)
+            a = angle if type(angle) is float and angle - angle == 0.0 else _finite(
+                "set_speed_and_servo", "angle", angle)
+            self._speed, self._angle = s, a
+            self._send("set_speed_and_servo", s, a, True, True)
+        except CommandError as err:
+            raise self._fail(err) from None
+
+    # -- sensors (these let time pass) ---------------------------------------------------
+    def get_image(self, line: int = -1, add_noise: bool = True) -> np.ndarray:
+        """Wait for the next camera frame and return it: ``(H, W)`` uint8 for ``line=-1``,
+        else row ``line`` as ``(1, W)`` uint8. Noise (``add_noise``) from the run's seed."""
+        h = self.image_shape[0]
+        if type(line) is not int or not -1 <= line < h:
+            if isinstance(line, bool) or not isinstance(line, (int, np.integer)) or not -1 <= line < h:
+                raise self._fail(CommandError(
+                    f"get_image(line={line!r}): expected -1 (whole image) or a row 0..{h - 1}"))
+            line = int(line)
+        clock, session = self._clock, self._s
+        clock.advance_to_next_frame()
+        pose = clock.pose()
+        cam = session.camera
+        if line >= 0 and self._line_image is not None:  # one compiled call (simrunner.sensors.line_kernel)
+            img = self._line_image(pose, line, session.noise_rng if add_noise else None)
+        else:
+            if line < 0:
+                img = cam.render(pose)
+            else:
+                img = np.asarray(cam.render_row(pose, line), dtype=np.uint8).reshape(1, -1)
+            if add_noise:
+                img = cam.add_noise(img, session.noise_rng)
+        if session.video is not None:
+            session.video.note_image(img, line)
+        return img
+
+    def get_speed(self) -> float:
+        """Current speed along the car's x (after one physics step), through ``speed_denorm``."""
+        self._clock.advance(1)
+        return float(self.speed_denorm(self._sim.speed_mps, self._angle))
+
+    def get_position(self) -> tuple[float, float, float]:
+        """World position ``(x, y, z)`` in metres of the car frame origin (rear-axle midpoint
+        on the ground), after one physics step."""
+        self._clock.advance(1)
+        p = self._clock.pose()
+        return (p.x_m, p.y_m, float(self._sim.z_m))
+
+    def get_time(self) -> float:
+        """Simulated time in seconds, after one physics step (busy-wait loops finish)."""
+        self._clock.advance(1)
+        return self._clock.time_s
+
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` of simulated time pass (``ceil(seconds / dt)`` steps, at least 1);
+        stands in for ``usleep``."""
+        try:
+            s = _finite("sleep", "seconds", seconds)
+            if s < 0:
+                raise CommandError(f"sleep(seconds={seconds!r}): expected >= 0")
+        except CommandError as err:
+            raise self._fail(err) from None
+        n = max(1, math.ceil(s / self._clock.dt_s - 1e-9))
+        self._clock.advance(n)
+
+    # -- debugging data ------------------------------------------------------------------
+    @property
+    def recording(self) -> bool:
+        """True when a debug video is being written, i.e. when :meth:`add_data` shows
+        anything (a controller may skip formatting debug text otherwise)."""
+        return self._s.video is not None
+
+    def add_data(self, data: Sequence[str] | str | np.ndarray) -> None:
+        """Add to the debug video: a list of text lines (or one string), shown in the right
+        column; or a processed image line (``(W,)``, ``(1, W)`` or ``(k, W)`` array), shown
+        stretched under the camera line. Data added during one frame replaces the previous
+        frame's; it stays on screen until replaced."""
+        if type(data) is list and self._s.video is None:
+            try:  # the common case without a video: all str (join checks), nothing to show
+                "".join(data)
+                return
+            except TypeError:
+                pass  # not all str: the checks below raise
+        if isinstance(data, np.ndarray):
+            arr = data
+            if arr.ndim == 1:
+                arr = arr.reshape(1, -1)
+            if arr.ndim != 2 or arr.shape[1] == 0:
+                raise self._fail(CommandError(
+                    f"add_data(array of shape {data.shape}): expected an image line (W,) or (k, W)"))
+            if self._s.video is not None:
+                self._s.video.add_lines(arr)
+            return
+        if isinstance(data, str):
+            lines = [data]
+        elif isinstance(data, (list, tuple)) and all(isinstance(x, str) for x in data):
+            lines = list(data)
+        else:
+            raise self._fail(CommandError(
+                f"add_data({type(data).__name__}): expected a list of str or a numpy image line"))
+        if self._s.video is not None:
+            self._s.video.add_text(lines)
+
+    def add_noise(self, img: np.ndarray) -> np.ndarray:
+        """Add camera noise to ``img`` in place (when writable) and return it."""
+        noisy = self._s.camera.add_noise(np.asarray(img), self._s.noise_rng)
+        if isinstance(img, np.ndarray) and img.flags.writeable and img.shape == noisy.shape:
+            img[...] = noisy
+            return img
+        return noisy
+
+    # -- camelCase aliases (the thesis's C++ names) --------------------------------------
+    setServo = set_servo
+    setSpeed = set_speed
+    setSpeedAndServo = set_speed_and_servo
+    getImage = get_image
+    getSpeed = get_speed
+    getPosition = get_position
+    getTime = get_time
+    addData = add_data
+    addNoise = add_noise

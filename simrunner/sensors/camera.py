@@ -1,0 +1,216 @@
+"""The car's camera: an exact pinhole view of the flat track, by ground-plane projection.
+
+Conventions (DESIGN.md): the image is ``(H, W) uint8``, row 0 is the top of the image
+(farthest from the car), column 0 is the car's LEFT side of the view. The camera sits in the
+car body frame (origin at the rear-axle midpoint on the ground, x forward, y left, z up) at
+``(forward_m, 0, height_m)``, looking forward along +x, tilted down by ``pitch_rad``, with no
+roll or yaw. ``height_m`` is measured above the track surface (the car stands on it), so the
+track's own height in the world (``SimTrack.surface_z_m``) needs no correction.
+
+Pinhole model with square pixels: ``f_px = (W / 2) / tan(hfov / 2)``; the pixel
+``(row, col)`` centre is ``u = col + 0.5 - W / 2`` right of and ``v = row + 0.5 - H / 2``
+below the principal point (the image centre). Its ray in the car frame is
+``d = forward_axis - (u / f_px) * left_axis - (v / f_px) * up_axis`` with
+``forward_axis = (cos p, 0, -sin p)``, ``left_axis = (0, 1, 0)``, ``up_axis = (sin p, 0, cos p)``.
+
+Tracks are flat, so every ray that goes down meets the ground at one point; those points
+are computed once per camera (``ground_xy_m``, car frame). A frame is then: move those
+points by the car pose into the world, convert to raster pixels and sample the top-down
+raster bilinearly (``cv2.remap``, ``INTER_LINEAR``). Rays that point at or above the horizon,
+or meet the ground farther than ``max_range_m``, see the floor/background gray. With
+``supersample=k`` each pixel averages a ``k x k`` grid of sub-pixel rays (box filter),
+which removes aliasing of thin far lines at k^2 times the cost.
+
+The line camera (``line_image``: one row plus noise, every frame of a run) is one compiled
+call (:mod:`simrunner.sensors.line_kernel`) that computes the same maps and pixels as the OpenCV path.
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from pieces.pose import Pose2
+from simrunner.track.raster import TrackRaster
+
+_NO_NORMALS = np.zeros(0)
+_camera_row = None  # simrunner.sensors.line_kernel.camera_row, imported on first use (numba loads ~0.5 s)
+
+
+def _line_kernel():
+    global _camera_row
+    if _camera_row is None:
+        from simrunner.sensors.line_kernel import camera_row
+
+        _camera_row = camera_row
+    return _camera_row
+
+
+def _raster_of(raster_or_track) -> TrackRaster:
+    return raster_or_track if isinstance(raster_or_track, TrackRaster) else raster_or_track.raster
+
+
+class Camera:
+    """Pinhole camera of ``cam`` (a ``vehicle.description.Camera``) looking at ``raster`` (a
+    ``TrackRaster``, or a ``SimTrack`` whose raster is used)."""
+
+    def __init__(self, cam, raster, *, max_range_m: float = 10.0, supersample: int = 1,
+                 load_line_kernel: bool = True) -> None:
+        if int(supersample) < 1:
+            raise ValueError(f"supersample must be >= 1, got {supersample!r}")
+        self.cam = cam
+        self.raster = _raster_of(raster)
+        self.width_px = int(cam.width_px)
+        self.height_px = int(cam.height_px)
+        self.max_range_m = float(max_range_m)
+        self.supersample = k = int(supersample)
+        self.f_px = (self.width_px / 2.0) / math.tan(float(cam.hfov_rad) / 2.0)
+        # Sub-pixel ray grid (H*k, W*k): sample centres inside each pixel.
+        sub = (np.arange(k) + 0.5) / k
+        cols = (np.arange(self.width_px)[:, None] + sub[None, :]).ravel()
+        rows = (np.arange(self.height_px)[:, None] + sub[None, :]).ravel()
+        gx, gy, ok = self._ground(rows[:, None] - self.height_px / 2.0,
+                                  cols[None, :] - self.width_px / 2.0)
+        self.ground_xy_m = np.stack((gx, gy), axis=-1)  # (H*k, W*k, 2), nan where no ground
+        self._gx = np.where(ok, gx, 0.0)
+        self._gy = np.where(ok, gy, 0.0)
+        self._miss = ~ok
+        # per image row: does any of its sub-rows miss the ground (then maps need the mask)
+        self._row_misses = self._miss.reshape(self.height_px, -1).any(axis=1).tolist()
+        # one ray per pixel: the ground points of a row share their x (the ray's distance
+        # depends on the row only), so a row's maps need only its y values
+        self._row_gx: list[float | None] = [None] * self.height_px
+        if k == 1:
+            for r in range(self.height_px):
+                if not self._row_misses[r] and np.all(self._gx[r] == self._gx[r, 0]):
+                    self._row_gx[r] = float(self._gx[r, 0])
+        self._any_miss = bool(self._miss.any())
+        self._inv_m = 1.0 / self.raster.m_per_px
+        self._x0_m, self._y0_m = (float(v) for v in self.raster.origin_xy_m)
+        self._floor = int(self.raster.floor_gray)
+        self._floor_f = float(self._floor)
+        self._noise_std = float(cam.noise_std)
+        # compile (first use in a checkout, ~1 s) or load (~0.1 s) the line kernel now, not
+        # inside a timed, watchdog-guarded run
+        # (``load_line_kernel=False``: on first use instead, for callers that may never need it)
+        line_rows = [r for r, gx in enumerate(self._row_gx) if gx is not None]
+        if line_rows and load_line_kernel:
+            self.line_image(Pose2(), line_rows[0])
+
+    # -- geometry ------------------------------------------------------------------
+    def _ground(self, v: np.ndarray, u: np.ndarray):
+        """Ground hit of rays at image offsets ``v`` (down) and ``u`` (right), in pixels."""
+        p = float(self.cam.pitch_rad)
+        h = float(self.cam.height_m)
+        a = -u / self.f_px  # along the car's left
+        b = -v / self.f_px  # along the camera's up axis
+        dx = math.cos(p) + b * math.sin(p)
+        dz = -math.sin(p) + b * math.cos(p)
+        dx, a, dz = np.broadcast_arrays(dx, a, dz)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(dz < 0, h / -dz, np.inf)
+            gx = float(self.cam.forward_m) + t * dx
+            gy = t * a
+        ok = np.isfinite(t) & (np.hypot(gx - float(self.cam.forward_m), gy) <= self.max_range_m)
+        return np.where(ok, gx, np.nan), np.where(ok, gy, np.nan), ok
+
+    def ground_point_of_pixel(self, row: float, col: float) -> tuple[float, float]:
+        """Car-frame ground point ``(x_m, y_m)`` seen at the centre of pixel ``(row, col)``;
+        ``(nan, nan)`` if that ray does not meet the ground within ``max_range_m``."""
+        gx, gy, _ = self._ground(np.float64(row + 0.5 - self.height_px / 2.0),
+                                 np.float64(col + 0.5 - self.width_px / 2.0))
+        return float(gx), float(gy)
+
+    def look_ahead_m(self, row: float) -> float:
+        """Car-frame x (metres ahead of the rear axle) of the ground seen at the middle of
+        ``row`` (on the image's vertical centre line); ``inf`` at or above the horizon."""
+        gx, _, ok = self._ground(np.float64(row + 0.5 - self.height_px / 2.0), np.float64(0.0))
+        return float(gx) if bool(ok) else math.inf
+
+    def visible_width_m(self, row: float) -> float:
+        """Ground width (m) spanned by ``row`` from the left edge of column 0 to the right edge
+        of the last column; ``inf`` if the row does not see the ground."""
+        v = np.float64(row + 0.5 - self.height_px / 2.0)
+        _, yl, okl = self._ground(v, np.float64(-self.width_px / 2.0))
+        _, yr, okr = self._ground(v, np.float64(self.width_px / 2.0))
+        return float(yl - yr) if bool(okl) and bool(okr) else math.inf
+
+    # -- rendering -----------------------------------------------------------------
+    def _maps(self, pose: Pose2, rows: slice, misses: bool):
+        """``(map_x, map_y)`` float32 remap coordinates (raster col, row) of the ray grid ``rows``."""
+        inv = self._inv_m
+        c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+        gx, gy = self._gx[rows], self._gy[rows]
+        # world = pose (x, y) + R(yaw) g; px col = (X - x0)/m, row = (y0 - Y)/m
+        map_x = ((c * inv) * gx - (s * inv) * gy + (pose.x_m - self._x0_m) * inv).astype(np.float32)
+        map_y = (-(s * inv) * gx - (c * inv) * gy + (self._y0_m - pose.y_m) * inv).astype(np.float32)
+        if misses:
+            miss = self._miss[rows]
+            map_x[miss] = -10.0
+            map_y[miss] = -10.0
+        return map_x, map_y
+
+    def _sample(self, pose: Pose2, rows: slice, misses: bool) -> np.ndarray:
+        map_x, map_y = self._maps(pose, rows, misses)
+        img = cv2.remap(self.raster.image, map_x, map_y, cv2.INTER_LINEAR, None,
+                        cv2.BORDER_CONSTANT, self._floor)
+        k = self.supersample
+        if k == 1:
+            return img
+        # integer factor: INTER_AREA is the exact k x k block mean, rounded
+        return cv2.resize(img, (img.shape[1] // k, img.shape[0] // k), interpolation=cv2.INTER_AREA)
+
+    def render(self, pose: Pose2) -> np.ndarray:
+        """The image ``(H, W) uint8`` seen from a car whose body frame is at ``pose``."""
+        return self._sample(pose, slice(None), self._any_miss)
+
+    def render_row(self, pose: Pose2, row: int) -> np.ndarray:
+        """One image row ``(W,) uint8``, equal to ``render(pose)[row]`` (cheaper)."""
+        return self.line_image(pose, row)[0]
+
+    def line_image(self, pose: Pose2, row: int, normals=None) -> np.ndarray:
+        """What the Spinner's ``get_image(row)`` returns: ``render_row(pose, row)`` as a
+        ``(1, W) uint8`` image, with ``add_noise(img, normals)`` unless ``normals`` is None,
+        in one compiled call (:func:`simrunner.sensors.line_kernel.camera_row`) for the rows whose
+        ground points share one x (all rows of a camera without supersampling that see only
+        ground). ``normals``: a ``numpy.random.Generator`` or a
+        :class:`simrunner.run.spinner.BufferedNormals` (its ``take``)."""
+        gx = self._row_gx[row] if type(row) is int and 0 <= row < self.height_px else None
+        if gx is None:
+            row = int(row)
+            if not 0 <= row < self.height_px:
+                raise IndexError(f"row {row} outside the image (0..{self.height_px - 1})")
+            k = self.supersample
+            img = self._sample(pose, slice(row * k, (row + 1) * k), self._row_misses[row])[:1]
+            return img if normals is None else self.add_noise(img, normals)
+        # _maps with the row's common x folded into scalars: the same float64 operations, term
+        # for term, so the same pixels (a - s*g == a + (-s)*g exactly), fewer operations; the
+        # kernel rounds the sums to float32 maps and samples like cv2.remap
+        inv = self._inv_m
+        yaw = pose.yaw_rad
+        ci, si = math.cos(yaw) * inv, math.sin(yaw) * inv
+        out = np.empty((1, self.width_px), np.uint8)
+        if normals is None:
+            buf, pos = _NO_NORMALS, 0
+        else:
+            take = getattr(normals, "take", None)
+            buf, pos = take(self.width_px) if take else (normals.standard_normal(self.width_px), 0)
+        (_camera_row or _line_kernel())(self.raster.image, self._gy[row], -si, ci * gx, (pose.x_m - self._x0_m) * inv,
+                   -ci, -si * gx, (self._y0_m - pose.y_m) * inv, self._floor_f,
+                   normals is not None, buf, pos, self._noise_std, out)
+        return out
+
+    def add_noise(self, img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A copy of ``img`` (uint8, any shape) plus Gaussian noise of std ``noise_std``
+        (0-255 scale), rounded and clipped to 0..255. Only ``rng`` supplies randomness."""
+        a = np.asarray(img)
+        # = rng.normal(0, std, shape), draw for draw (normal is loc + scale * standard normal)
+        noise = rng.standard_normal(a.shape)
+        noise *= self._noise_std
+        if a.dtype == np.uint8 and 1 <= a.ndim <= 2:
+            # OpenCV rounds the noise half to even, adds it and saturates: the numpy expression
+            # below except at exact ties (x.5 noise), in one call (fastpath.camera_row copies it)
+            return cv2.add(noise, a, dtype=cv2.CV_8U).reshape(a.shape)
+        noise += a
+        return np.clip(np.rint(noise), 0, 255).astype(np.uint8)

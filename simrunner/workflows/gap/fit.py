@@ -1,0 +1,291 @@
+"""Fit every catalogue effect by simulation, rank them, and decide which one is missing.
+
+Each candidate effect has one parameter (a field of ``vehicle.description.Effects``). It is fitted
+by simulation: the objective is the sum over the fit windows and the signals of
+:data:`simrunner.workflows.gap.replay.FIT_SIGNALS` of squared residuals, each signal normalised by
+its RMS under the nominal model (floored at :data:`SCALE_FLOOR`), so every signal weighs
+the same before fitting. Search: a coarse grid over the bounds (:data:`GRID_POINTS`, the
+car's current value counts as known), then bounded Brent
+(``scipy.optimize.minimize_scalar``) in the bracket around the best grid point; the best
+point evaluated wins.
+
+Ranking: Bayesian information criterion on the normalised residuals,
+
+    BIC = n_eff * ln(cost / n) + k * ln(n_eff)
+
+with ``n`` compared values, ``k`` fitted parameters (0 for the nominal model, 1 per effect)
+and ``n_eff`` the effective number of independent values, :data:`N_EFF_PER_S` per second of
+fit windows per signal (residuals within a window are strongly correlated, so ``n`` would
+overstate the evidence). Lower is better; ``delta_bic = BIC_nominal - BIC_effect``.
+
+Acceptance: the best effect is named only if ``delta_bic >= DELTA_BIC_MIN`` and its
+relative cost reduction ``improvement >= IMPROVEMENT_MIN``; otherwise the answer is
+``none``. The two thresholds are calibrated on effect-free synthetic logs by
+:mod:`simrunner.workflows.gap.thresholds` (see docs/gap.md for the run that produced them).
+
+Fits run in worker processes (``jobs``); dartpy worlds are built inside each worker. A fit
+depends only on its inputs, so results are identical for any ``jobs``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from simrunner.workflows.gap import GapError
+from simrunner.workflows.gap.logs import Derived, MeasuredLog
+from simrunner.workflows.gap.replay import (FIT_SIGNALS, WORKFLOW_DT_S, SimFactory, Window, default_sim_factory,
+                                  replay, residuals, window_mask)
+from vehicle.description import CarDescription
+
+# Calibrated on effect-free synthetic logs (python -m simrunner.workflows.gap.thresholds; docs/gap.md).
+DELTA_BIC_MIN = 132.5
+IMPROVEMENT_MIN = 0.068
+
+N_EFF_PER_S = 10.0  # independent values per second per signal (0.1 s decorrelation)
+GRID_POINTS = 5
+BRENT_MAXITER = 10
+REFINE_TOP = 3  # effects refined after the grid screening
+SCALE_FLOOR = {"along_m": 0.005, "cross_m": 0.005, "yaw_rad": 0.005, "speed_mps": 0.02,
+               "yaw_rate_radps": 0.05}
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One catalogue effect as a fit: its ``Effects`` field and search bounds."""
+
+    name: str
+    field: str
+    lo: float
+    hi: float
+    log_scale: bool = False  # search in log(value) (for positive parameters spanning decades)
+
+    def to_x(self, v: float) -> float:
+        return math.log(v) if self.log_scale else v
+
+    def from_x(self, x: float) -> float:
+        return math.exp(x) if self.log_scale else x
+
+
+def _candidates() -> dict[str, Candidate]:
+    """One candidate per ``simrunner.car.effects.EFFECTS`` entry, with its fit bounds; the
+    steering rate limit spans decades and is searched in log scale."""
+    from simrunner.car.effects import EFFECTS
+
+    out = {}
+    for spec in EFFECTS.values():
+        if len(spec.params) != 1:  # pragma: no cover - the catalogue has one parameter each
+            raise GapError(f"effect {spec.name}: expected one parameter (got {len(spec.params)})")
+        (lo, hi), = spec.bounds
+        out[spec.name] = Candidate(spec.name, spec.param, float(lo), float(hi),
+                                   log_scale=math.isinf(spec.neutral[0]))
+    return out
+
+
+CANDIDATES: dict[str, Candidate] = _candidates()
+
+
+def with_effect(car: CarDescription, name: str, value: float) -> CarDescription:
+    """``car`` with the parameter of effect ``name`` set to ``value``."""
+    eff = dataclasses.replace(car.effects, **{CANDIDATES[name].field: float(value)})
+    return car.replace(effects=eff)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything a fit needs (picklable: sent to worker processes)."""
+
+    car: CarDescription
+    log: MeasuredLog
+    derived: Derived
+    windows: tuple[Window, ...]
+    scales: dict[str, float]
+    dt_s: float = WORKFLOW_DT_S
+    sim_factory: SimFactory = default_sim_factory
+
+    @property
+    def n_values(self) -> int:
+        return int(window_mask(len(self.log), self.windows).sum()) * len(FIT_SIGNALS)
+
+    @property
+    def n_eff(self) -> float:
+        t = self.log.t_s
+        dur = sum(t[w.stop - 1] - t[w.start] for w in self.windows)
+        return max(N_EFF_PER_S * dur * len(FIT_SIGNALS), 2.0)
+
+
+def cost_of(problem: Problem, car: CarDescription) -> float:
+    """Sum of squared normalised residuals of ``car`` over the problem's windows."""
+    pred = replay(car, problem.log, problem.derived, problem.windows, dt_s=problem.dt_s,
+                  sim_factory=problem.sim_factory)
+    res = residuals(problem.log, problem.derived, pred)
+    m = window_mask(len(problem.log), problem.windows)
+    total = 0.0
+    for s in FIT_SIGNALS:
+        v = res[s][m] / problem.scales[s]
+        v = np.where(np.isfinite(v), v, 1e3)  # a diverged simulation is a very bad fit
+        total += float(np.dot(v, v))
+    return total
+
+
+def nominal_scales(log: MeasuredLog, res: dict[str, np.ndarray], windows: Sequence[Window]) -> dict[str, float]:
+    """Per-signal normalisation: RMS of the nominal residuals in ``windows``, floored."""
+    m = window_mask(len(log), windows)
+    out = {}
+    for s in FIT_SIGNALS:
+        v = res[s][m & np.isfinite(res[s])]
+        out[s] = max(float(np.sqrt(np.mean(v * v))) if v.size else 0.0, SCALE_FLOOR[s])
+    return out
+
+
+def bic(problem: Problem, cost: float, k: int) -> float:
+    n_eff = problem.n_eff
+    return n_eff * math.log(max(cost, 1e-300) / problem.n_values) + k * math.log(n_eff)
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """One fitted effect; ``parameters`` maps the ``Effects`` field to the fitted value."""
+
+    effect: str
+    parameters: dict[str, float]
+    cost: float
+    criterion: float  # BIC (lower is better)
+    delta_bic: float  # BIC_nominal - BIC (positive = better than nominal)
+    improvement: float  # 1 - cost / cost_nominal on the fit windows
+    evaluations: int
+    trace: tuple[tuple[float, float], ...] = field(default=(), repr=False)  # (value, cost) evaluated
+    refined: bool = True  # False: screened out after the grid (coarse value)
+
+    def to_json(self) -> dict:
+        return {"effect": self.effect, "parameters": self.parameters, "cost": self.cost,
+                "bic": self.criterion, "delta_bic": self.delta_bic, "improvement": self.improvement,
+                "evaluations": self.evaluations, "refined": self.refined}
+
+
+def fit_effect(problem: Problem, name: str, nominal_cost: float, *, refine: bool = True,
+               known: Sequence[tuple[float, float]] = ()) -> FitResult:
+    """Fit effect ``name`` on ``problem``: grid, then (``refine``) bounded Brent around the
+    best grid point; ``known`` (value, cost) pairs are not evaluated again."""
+    cand = CANDIDATES[name]
+    current = float(getattr(problem.car.effects, cand.field))
+    seen: dict[float, float] = dict(known)
+    if cand.lo <= current <= cand.hi:
+        seen[current] = nominal_cost
+
+    def f(x: float) -> float:
+        v = float(np.clip(cand.from_x(x), cand.lo, cand.hi))
+        if v not in seen:
+            seen[v] = cost_of(problem, with_effect(problem.car, name, v))
+        return seen[v]
+
+    xs = np.linspace(cand.to_x(cand.lo), cand.to_x(cand.hi), GRID_POINTS)
+    costs = [f(x) for x in xs]
+    f(_probe(xs, costs))
+    if refine:
+        k = int(np.argmin(costs))
+        a, b = xs[max(k - 1, 0)], xs[min(k + 1, GRID_POINTS - 1)]
+        span = cand.to_x(cand.hi) - cand.to_x(cand.lo)
+        minimize_scalar(f, bounds=(a, b), method="bounded",
+                        options={"xatol": 2e-3 * span, "maxiter": BRENT_MAXITER})
+    best_v = min(seen, key=lambda v: (seen[v], v))
+    best_cost = seen[best_v]
+    crit = bic(problem, best_cost, 1)
+    return FitResult(name, {cand.field: best_v}, best_cost, crit, bic(problem, nominal_cost, 0) - crit,
+                     1.0 - best_cost / nominal_cost if nominal_cost > 0 else 0.0, len(seen),
+                     tuple(sorted(seen.items())), refined=refine)
+
+
+def _probe(xs: np.ndarray, costs: Sequence[float]) -> float:
+    """One extra screening point: the vertex of the parabola through the best grid point
+    and its neighbours (three points at an end of the grid), kept within the neighbours;
+    the midpoint towards the better neighbour if the parabola is not convex. This finds
+    a small deviation from neutral that falls between grid points (e.g. a gain of 1.07
+    on a 0.25 grid)."""
+    k = int(np.argmin(costs))
+    j = min(max(k, 1), len(xs) - 2)
+    x0, x1, x2 = xs[j - 1], xs[j], xs[j + 1]
+    c0, c1, c2 = costs[j - 1], costs[j], costs[j + 1]
+    den = (x1 - x0) * (c1 - c2) - (x1 - x2) * (c1 - c0)
+    lo, hi = xs[max(k - 1, 0)], xs[min(k + 1, len(xs) - 1)]
+    if den != 0.0:
+        num = (x1 - x0) ** 2 * (c1 - c2) - (x1 - x2) ** 2 * (c1 - c0)
+        vertex = x1 - 0.5 * num / den
+        if c0 - 2.0 * c1 + c2 > 0.0 and np.isfinite(vertex):  # convex (uniform grid)
+            return float(min(max(vertex, lo), hi))
+    nb = [i for i in (k - 1, k + 1) if 0 <= i < len(xs)]
+    better = min(nb, key=lambda i: costs[i])
+    return float(0.5 * (xs[k] + xs[better]))
+
+
+def _quiet_worker() -> None:
+    """Worker initialiser: send the C++ engine's warnings (stderr, fd 2) to /dev/null so they
+    do not garble the parent's progress bar; results and exceptions come back pickled."""
+    import os
+
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 2)
+    os.close(devnull)
+
+
+def _fit_task(args) -> FitResult:
+    problem, name, nominal_cost, refine, known = args
+    return fit_effect(problem, name, nominal_cost, refine=refine, known=known)
+
+
+def fit_all(problem: Problem, nominal_cost: float, effects: Sequence[str] | None = None, *, jobs: int = 2,
+            progress: Callable[[str], None] | None = None, refine_top: int = REFINE_TOP) -> list[FitResult]:
+    """Fit every effect in ``effects`` (default: all of :data:`CANDIDATES`) and return them
+    ranked by criterion (ties by catalogue order).
+
+    Two stages: every effect on its grid (screening), then the ``refine_top`` best (by grid
+    cost) refined by Brent; the others keep their best grid value (``refined`` False).
+    ``jobs`` worker processes (1 = in this process); ``progress(label)`` is called as each
+    fit finishes (``len(effects) + min(refine_top, len(effects))`` calls)."""
+    names = list(CANDIDATES) if effects is None else list(effects)
+    unknown = [n for n in names if n not in CANDIDATES]
+    if unknown:
+        raise GapError(f"unknown effect(s) {', '.join(unknown)} (expected some of {', '.join(CANDIDATES)})")
+    order = {n: i for i, n in enumerate(CANDIDATES)}
+    pool = (ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker)
+            if jobs > 1 and len(names) > 1 else None)
+
+    def run(tasks, label):
+        out: dict[str, FitResult] = {}
+        if pool is None:
+            for t in tasks:
+                out[t[1]] = _fit_task(t)
+                if progress:
+                    progress(f"{label} {t[1]}")
+        else:
+            futures = {pool.submit(_fit_task, t): t[1] for t in tasks}
+            for fut in as_completed(futures):
+                out[futures[fut]] = fut.result()
+                if progress:
+                    progress(f"{label} {futures[fut]}")
+        return out
+
+    try:
+        results = run([(problem, n, nominal_cost, False, ()) for n in names], "screen")
+        top = sorted(results.values(), key=lambda r: (r.cost, order[r.effect]))[:max(refine_top, 0)]
+        results.update(run([(problem, r.effect, nominal_cost, True, r.trace) for r in top], "refine"))
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return sorted(results.values(), key=lambda r: (r.criterion, order[r.effect]))
+
+
+def choose(ranking: Sequence[FitResult], delta_bic_min: float = DELTA_BIC_MIN,
+           improvement_min: float = IMPROVEMENT_MIN) -> FitResult | None:
+    """The best-ranked effect if it passes both acceptance thresholds, else ``None``."""
+    if not ranking:
+        return None
+    best = ranking[0]
+    if best.delta_bic >= delta_bic_min and best.improvement >= improvement_min:
+        return best
+    return None

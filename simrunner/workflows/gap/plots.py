@@ -1,0 +1,90 @@
+"""Figures of the gap report (matplotlib, Agg backend, no display needed)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from simrunner.workflows.gap.replay import window_mask  # noqa: E402
+
+_REGIME_ORDER = ("all", "accelerating", "braking", "coasting", "steady", "straight", "left", "right")
+
+
+def _shade_held(ax, result) -> None:
+    t = result.log.t_s
+    for k, w in enumerate(result.held_windows):
+        ax.axvspan(t[w.start], t[w.stop - 1], color="0.9", zorder=0, label="held out" if k == 0 else None)
+
+
+def plot_before_after(result, path: str | Path) -> None:
+    """2x2 figure: path in xy, speed, yaw rate and position error over time, measured vs
+    nominal ("before") vs fitted ("after"); held-out windows shaded."""
+    log, d = result.log, result.derived
+    p0, p1 = result.pred_before, result.pred_after
+    t = log.t_s
+    fig, axes = plt.subplots(2, 2, figsize=(12, 8), dpi=90)
+    ax = axes[0, 0]
+    ax.plot(log.x_m, log.y_m, color="k", lw=1.0, label="measured")
+    ax.plot(p0.x_m, p0.y_m, color="tab:red", lw=0.9, label="simulated, nominal")
+    ax.plot(p1.x_m, p1.y_m, color="tab:blue", lw=0.9, ls="--", label=f"simulated, + {result.effect}")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title("path (each window restarts from the measured state)")
+    ax.legend(fontsize=8)
+    for ax, meas, a, b, label in (
+            (axes[0, 1], log.speed_mps, p0.speed_mps, p1.speed_mps, "speed (m/s)"),
+            (axes[1, 0], d.yaw_rate_radps, p0.yaw_rate_radps, p1.yaw_rate_radps, "yaw rate (rad/s)")):
+        _shade_held(ax, result)
+        ax.plot(t, meas, color="k", lw=0.8, label="measured")
+        ax.plot(t, a, color="tab:red", lw=0.8, label="nominal")
+        ax.plot(t, b, color="tab:blue", lw=0.8, ls="--", label=f"+ {result.effect}")
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel(label)
+        ax.legend(fontsize=8, loc="upper right")
+    ax = axes[1, 1]
+    _shade_held(ax, result)
+    e0 = np.hypot(p0.x_m - log.x_m, p0.y_m - log.y_m)
+    e1 = np.hypot(p1.x_m - log.x_m, p1.y_m - log.y_m)
+    ax.plot(t, e0, color="tab:red", lw=0.8, label="nominal")
+    ax.plot(t, e1, color="tab:blue", lw=0.8, ls="--", label=f"+ {result.effect}")
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("position error (m)")
+    held = window_mask(len(log), result.held_windows)
+    ax.set_title("held-out RMSE before->after: " + ", ".join(
+        f"{label} {result.rmse_before[s]:.3g}->{result.rmse_after[s]:.3g}"
+        for s, label in (("position_m", "position"), ("speed_mps", "speed"), ("yaw_rate_radps", "yaw rate")))
+        if held.any() else "", fontsize=9)
+    ax.legend(fontsize=8, loc="upper right")
+    param = ", ".join(f"{k} = {v:.4g}" for k, v in result.parameters.items())
+    fig.suptitle(f"{Path(log.source).name}: missing effect = {result.effect}" + (f" ({param})" if param else ""))
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_regimes(result, path: str | Path) -> None:
+    """One panel per signal: RMSE per regime before/after (bars) and bias (markers)."""
+    signals = ("position_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps", "along_m")
+    fig, axes = plt.subplots(2, 3, figsize=(14, 7), dpi=90)
+    for ax, sig in zip(axes.ravel(), signals):
+        rows0 = {r["regime"]: r for r in result.stats_before if r["signal"] == sig}
+        rows1 = {r["regime"]: r for r in result.stats_after if r["signal"] == sig}
+        regs = [g for g in _REGIME_ORDER if rows0.get(g, {}).get("count")]
+        x = np.arange(len(regs))
+        ax.bar(x - 0.2, [rows0[g]["rmse"] for g in regs], 0.4, color="tab:red", label="RMSE nominal")
+        ax.bar(x + 0.2, [rows1[g]["rmse"] for g in regs], 0.4, color="tab:blue", label="RMSE fitted")
+        ax.plot(x - 0.2, [rows0[g]["bias"] for g in regs], "kv", ms=5, label="bias nominal")
+        ax.plot(x + 0.2, [rows1[g]["bias"] for g in regs], "k^", ms=5, label="bias fitted")
+        ax.axhline(0.0, color="0.5", lw=0.6)
+        ax.set_xticks(x, regs, rotation=35, fontsize=8)
+        ax.set_title(sig)
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle(f"residuals by regime (all windows): nominal vs + {result.effect}")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,122 @@
+"""Synthetic "measured" logs with a hidden effect, for tests, the bench and calibration.
+
+``make_measured_log(effect, rng=...)`` plays the excitation plan
+(``simrunner.workflows.excite.make_plan``) in the simulator with
+
+* the hidden effect (or none) at a random magnitude drawn log-uniformly from
+  :data:`RANGES` (sign random where both signs make sense);
+* nuisance changes the workflow does not model: mass and tyre friction each scaled by a
+  factor uniform in ``1 +- NUISANCE_FRACTION``;
+* a different physics step than the workflow: :data:`SYNTH_DT_S` = 1 ms
+  (the workflow uses ``replay.WORKFLOW_DT_S`` = 5 ms);
+* Gaussian noise on the logged states: position :data:`NOISE_POS_M` (5 mm per axis), yaw
+  :data:`NOISE_YAW_RAD` (0.005 rad), speed :data:`NOISE_SPEED_MPS` (0.02 m/s). Commands
+  are exact (they are what the controller sent).
+
+All randomness comes from the ``rng`` argument (plan seed, magnitude, nuisance, noise).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from simrunner.workflows.gap import GapError
+from simrunner.workflows.gap.logs import MeasuredLog, log_from_columns
+from vehicle.description import CarDescription
+
+SYNTH_DT_S = 0.001
+NOISE_POS_M = 0.005
+NOISE_YAW_RAD = 0.005
+NOISE_SPEED_MPS = 0.02
+NUISANCE_FRACTION = 0.03
+
+# effect -> (field, low, high, both signs): |value - neutral| for offset and gain, else the
+# value, is log-uniform in [low, high] (sign random where both make sense). The ranges run
+# from barely visible (SNR ~ 1) to strong, so the bench sees accuracy against SNR.
+RANGES: dict[str, tuple[str, float, float, bool]] = {
+    "steering_offset": ("steering_offset_rad", 0.002, 0.05, True),
+    "steering_gain": ("steering_gain", 0.02, 0.35, True),  # gain = 1 +- that
+    "steering_lag": ("steering_lag_s", 0.01, 0.2, False),
+    "steering_rate_limit": ("steering_rate_limit_radps", 0.8, 5.0, False),
+    "command_latency": ("command_latency_s", 0.01, 0.15, False),
+    "motor_lag": ("motor_lag_s", 0.02, 0.6, False),
+    "throttle_deadband": ("throttle_deadband_mps", 0.03, 0.4, False),
+    "rolling_resistance": ("rolling_resistance_coeff", 0.005, 0.08, False),
+    "drag": ("drag_coeff_kgpm", 0.02, 0.4, False),
+    "tire_slip": ("tire_slip_understeer_radps2pm", 0.003, 0.08, False),
+    "friction": ("friction_scale", 0.45, 0.95, False),  # the value; log-uniform
+}
+_RELATIVE_TO_ONE = {"steering_gain"}
+
+
+@dataclass(frozen=True)
+class Truth:
+    """What :func:`make_measured_log` hid: ``effect`` (or None), its ``field`` and ``value``,
+    the nuisance factors, the plan seed, and the car the log was simulated with."""
+
+    effect: str | None
+    field: str | None
+    value: float | None
+    mass_factor: float
+    friction_factor: float
+    plan_seed: int
+    car: CarDescription
+
+
+def draw_value(effect: str, rng: np.random.Generator) -> float:
+    """A random magnitude for ``effect`` from :data:`RANGES`."""
+    _, lo, hi, signed = RANGES[effect]
+    mag = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+    sign = float(rng.choice([-1.0, 1.0])) if signed else 1.0
+    return 1.0 + sign * mag if effect in _RELATIVE_TO_ONE else sign * mag
+
+
+def make_measured_log(effect: str | None, *, rng: np.random.Generator, car: CarDescription | None = None,
+                      value: float | None = None, start_s: float = 0.0, duration_s: float | None = None,
+                      noise: bool = True) -> tuple[MeasuredLog, Truth]:
+    """A synthetic measured log with ``effect`` hidden (see the module docstring).
+
+    ``value`` fixes the magnitude instead of drawing it; ``start_s``/``duration_s`` play
+    only that part of the plan (from rest at the origin; tests use ~20 s parts);
+    ``noise=False`` gives exact states (for the
+    signal-to-noise computation of the bench). Returns ``(log, truth)``.
+    """
+    from simrunner.car.effects import with_effects
+    from simrunner.workflows.excite import make_plan, run_plan
+
+    car = car or CarDescription()
+    if effect is not None and effect not in RANGES:
+        raise GapError(f"unknown effect {effect!r} (expected one of {', '.join(RANGES)} or None)")
+    plan_seed = int(rng.integers(0, 2**31 - 1))
+    field = val = None
+    if effect is not None:
+        field = RANGES[effect][0]
+        val = float(value) if value is not None else draw_value(effect, rng)
+    m_f = 1.0 + float(rng.uniform(-NUISANCE_FRACTION, NUISANCE_FRACTION))
+    mu_f = 1.0 + float(rng.uniform(-NUISANCE_FRACTION, NUISANCE_FRACTION))
+    truth_car = car.replace(chassis=dataclasses.replace(car.chassis, mass_kg=car.chassis.mass_kg * m_f),
+                            wheels=dataclasses.replace(car.wheels, friction_mu=car.wheels.friction_mu * mu_f))
+    if field is not None:
+        truth_car = with_effects(truth_car, **{field: val})
+    plan = make_plan(car, seed=plan_seed)
+    if start_s > 0.0 or duration_s is not None:
+        a = int(round(start_s * plan.rate_hz))
+        b = len(plan) if duration_s is None else min(len(plan), a + int(round(duration_s * plan.rate_hz)))
+        plan = dataclasses.replace(plan, t_s=plan.t_s[a:b] - plan.t_s[a], speed_cmd_mps=plan.speed_cmd_mps[a:b],
+                                   steer_cmd_rad=plan.steer_cmd_rad[a:b], coast=plan.coast[a:b],
+                                   segment=plan.segment[a:b])
+    out = run_plan(plan, truth_car, dt_s=SYNTH_DT_S)
+    n = len(out["t"])
+    cols = {k: np.asarray(out[k], dtype=float) for k in ("t", "x", "y", "yaw", "speed", "speed_cmd", "steer_cmd",
+                                                          "coast")}
+    if noise:
+        cols["x"] = cols["x"] + rng.normal(0.0, NOISE_POS_M, n)
+        cols["y"] = cols["y"] + rng.normal(0.0, NOISE_POS_M, n)
+        yaw = cols["yaw"] + rng.normal(0.0, NOISE_YAW_RAD, n)
+        cols["yaw"] = (yaw + math.pi) % (2.0 * math.pi) - math.pi
+        cols["speed"] = cols["speed"] + rng.normal(0.0, NOISE_SPEED_MPS, n)
+    name = f"<synthetic {effect or 'none'}>"
+    return log_from_columns(cols, name), Truth(effect, field, val, m_f, mu_f, plan_seed, truth_car)

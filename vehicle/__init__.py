@@ -1,0 +1,11 @@
+"""The car description: every number of the car, read by the SDF writer (``worlds``), the
+track checks (``trackgen``) and the simulator (``simrunner``).
+
+``vehicle.description`` holds the frozen :class:`CarDescription` (TOML file, units in the
+field names, ranges checked at load); ``vehicle.userfiles`` reads the small text files users
+write (car descriptions, measurements, plans) with one-line errors naming the file.
+Nothing here imports a physics engine, OpenCV or numba.
+"""
+from vehicle.description import CarDescription, CarDescriptionError, Effects, car_from_dict, load_car
+
+__all__ = ["CarDescription", "CarDescriptionError", "Effects", "car_from_dict", "load_car"]

@@ -1,0 +1,255 @@
+"""The one car description: every number the Gazebo car model and the simulator use.
+
+A car description is a TOML file with one table per section below. Every field has a unit
+(in its name), a default and a source; ``docs/car.md`` is generated from this module
+(``python -m vehicle.description --doc``) and ``vehicle/data/nxp_cup_car.toml`` is the default file
+(``python -m vehicle.description --write PATH`` writes a fresh, commented one).
+
+Car body frame: origin at the middle of the rear axle on the ground, x forward, y left,
+z up. Steering angles are radians, positive = left (counter-clockwise seen from above);
+the bicycle-equivalent angle ``steer_rad`` relates to the turn radius of the rear-axle
+midpoint by R = wheelbase / tan(steer).
+
+Default car: the real NXP Cup car (1:1, not the thesis's 130 % Gazebo model). Where the
+thesis gives a Gazebo number for its 130 % model, the default is that number divided by
+1.3 (the thesis's speed normalisation 0.774 = 1/1.29 confirms the scale).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+SCALE = 1.3  # thesis section 3.1: its Gazebo model was ~130 % of the real car
+
+
+class CarDescriptionError(ValueError):
+    """A car description file is missing, malformed or out of range."""
+
+
+def _f(default: Any, doc: str, source: str, lo: float | None = None, hi: float | None = None):
+    return field(default=default, metadata={"doc": doc, "source": source, "lo": lo, "hi": hi})
+
+
+@dataclass(frozen=True)
+class Chassis:
+    mass_kg: float = _f(1.0, "Total mass of the car including wheels.",
+                        "estimate for the NXP Cup car with battery; measure (thesis eq. 5.5)", 0.05, 50)
+    wheelbase_m: float = _f(0.175, "Distance between front and rear axle (L in thesis eq. 5.1).",
+                            "NXP Cup (Alamak-type) chassis, nominal", 0.05, 1.0)
+    track_m: float = _f(0.154, "Distance between left and right wheel centres (wheel separation).",
+                        "thesis Fig. 3.2 wheel_separation 0.2 m / 1.3", 0.05, 1.0)
+    length_m: float = _f(0.28, "Chassis box length (collision and drawing only).", "estimate", 0.05, 2.0)
+    width_m: float = _f(0.16, "Chassis box width.", "estimate", 0.02, 1.0)
+    height_m: float = _f(0.05, "Chassis box height.", "estimate", 0.005, 1.0)
+    rear_overhang_m: float = _f(0.05, "Chassis box extent behind the rear axle.", "estimate", 0.0, 1.0)
+    cog_height_m: float = _f(0.045, "Height of the chassis box centre above the ground.",
+                             "estimate", 0.01, 1.0)
+
+
+@dataclass(frozen=True)
+class Wheels:
+    radius_m: float = _f(0.034, "Wheel radius.", "thesis Fig. 3.2 wheel_radius 0.044 m / 1.3", 0.005, 0.5)
+    width_m: float = _f(0.025, "Tyre width.", "estimate", 0.002, 0.2)
+    mass_kg: float = _f(0.04, "Mass of one wheel.", "estimate", 0.001, 5)
+    friction_mu: float = _f(1.0, "Tyre-track friction coefficient (thesis eq. 5.4: mu = tan(slip angle)).",
+                            "estimate; calibrate with the tilt test", 0.01, 3.0)
+
+
+@dataclass(frozen=True)
+class Steering:
+    limit_rad: float = _f(0.40, "Maximum bicycle-equivalent steering angle (thesis eq. 5.1).",
+                          "estimate (~23 deg); calibrate from the measured turning radius", 0.01, 1.2)
+    rate_radps: float = _f(6.0, "Servo slew rate of the steering angle.",
+                           "hobby servo, ~0.17 s per 60 deg", 0.1, 100)
+
+
+@dataclass(frozen=True)
+class Drive:
+    max_speed_mps: float = _f(3.1, "Maximum forward (and reverse) speed.",
+                              "thesis Fig. 3.2 max_linear_velocity 4 m/s / 1.3", 0.1, 30)
+    max_accel_mps2: float = _f(3.1, "Acceleration limit (motor torque limit).",
+                               "thesis Fig. 3.2 max_linear_acceleration 4 m/s^2 / 1.3", 0.1, 50)
+    max_brake_mps2: float = _f(3.1, "Braking deceleration limit.",
+                               "thesis Fig. 3.2 min_linear_acceleration -4 m/s^2 / 1.3", 0.1, 50)
+
+
+@dataclass(frozen=True)
+class Camera:
+    forward_m: float = _f(0.20, "Camera position ahead of the rear axle.", "estimate", -1, 1)
+    height_m: float = _f(0.30, "Camera height above the ground.", "NXP Cup camera mast, estimate", 0.02, 2)
+    pitch_rad: float = _f(0.65, "Downward tilt of the optical axis from horizontal (positive = down).",
+                          "chosen so row 60 looks 0.40 m ahead of the front bumper and sees 0.80 m "
+                          "of ground across (both edge lines of a 0.55 m lane with margin)", 0.0, 1.57)
+    hfov_rad: float = _f(1.30, "Horizontal field of view.", "estimate (~75 deg lens)", 0.1, 3.0)
+    width_px: int = _f(128, "Image width; the real line camera has 128 pixels.", "thesis 5.1.2", 8, 4096)
+    height_px: int = _f(128, "Image height (rows for the row-selection test, thesis Fig. 5.2).",
+                        "thesis Fig. 5.2 loops over 128 rows", 1, 4096)
+    default_row: int = _f(60, "The image row that plays the real line camera (Spinner.LINE_ROW, shown "
+                          "stretched in the debug video).", "thesis 5.1.2: the team used row 60", 0, 4095)
+    fps_hz: float = _f(50.0, "Frame rate; get_image() waits for the next frame.", "estimate", 1, 1000)
+    noise_std: float = _f(6.0, "Std-dev of additive Gaussian pixel noise (0-255 scale) of add_noise.",
+                          "estimate", 0, 128)
+
+
+@dataclass(frozen=True)
+class Effects:
+    """Catalogue of effects the nominal model leaves out (issue 4). Neutral values give back
+    the nominal model exactly. ``simrunner.car.effects`` applies them; docs/effects.md explains
+    what each means physically and which manoeuvre reveals it."""
+
+    steering_offset_rad: float = _f(0.0, "steering_offset: constant added to the steering command "
+                                    "(servo trim). Revealed by straight runs and left/right step steers.",
+                                    "neutral", -0.5, 0.5)
+    steering_gain: float = _f(1.0, "steering_gain: actual steer target = gain * command. Revealed by "
+                              "constant-radius circles.", "neutral", 0.2, 3.0)
+    steering_lag_s: float = _f(0.0, "steering_lag: first-order lag time constant of the steering "
+                               "target. Revealed by step steers and the chirp.", "neutral", 0.0, 2.0)
+    steering_rate_limit_radps: float = _f(math.inf, "steering_rate_limit: extra slew limit of the "
+                                          "steering (effective rate = min(servo rate, this)). Revealed by "
+                                          "large step steers.", "neutral (inf)", 0.01, math.inf)
+    command_latency_s: float = _f(0.0, "command_latency: pure delay between a command and its effect. "
+                                  "Revealed by step steers and speed steps.", "neutral", 0.0, 1.0)
+    motor_lag_s: float = _f(0.0, "motor_lag: first-order lag time constant of the speed command. "
+                            "Revealed by speed steps and ramps.", "neutral", 0.0, 5.0)
+    throttle_deadband_mps: float = _f(0.0, "throttle_deadband: speed commands below this magnitude "
+                                      "give no drive. Revealed by slow speed ramps.", "neutral", 0.0, 2.0)
+    rolling_resistance_coeff: float = _f(0.0, "rolling_resistance: resisting force c_rr * m * g "
+                                         "against motion. Revealed by coast-down at low speed.",
+                                         "neutral", 0.0, 0.5)
+    drag_coeff_kgpm: float = _f(0.0, "drag: resisting force k * v^2 (N with v in m/s). Revealed by "
+                                "coast-down from high speed.", "neutral", 0.0, 5.0)
+    tire_slip_understeer_radps2pm: float = _f(0.0, "tire_slip: understeer gradient K: effective steer "
+                                              "= steer - K * lateral acceleration (rad per m/s^2). "
+                                              "Revealed by circles at rising speed.", "neutral", 0.0, 0.5)
+    friction_scale: float = _f(1.0, "friction: multiplies the tyre friction coefficient. Revealed at "
+                               "the grip limit (circles at rising speed, tilt test).", "neutral", 0.05, 5.0)
+
+
+@dataclass(frozen=True)
+class CarDescription:
+    """Everything the Gazebo car model and the dartpy car are built from."""
+
+    name: str = "nxp_cup_car"
+    chassis: Chassis = field(default_factory=Chassis)
+    wheels: Wheels = field(default_factory=Wheels)
+    steering: Steering = field(default_factory=Steering)
+    drive: Drive = field(default_factory=Drive)
+    camera: Camera = field(default_factory=Camera)
+    effects: Effects = field(default_factory=Effects)
+
+    @property
+    def min_turn_radius_m(self) -> float:
+        """Smallest rear-axle turning radius, R = L / tan(limit) (thesis eq. 5.1)."""
+        return self.chassis.wheelbase_m / math.tan(self.steering.limit_rad)
+
+    def replace(self, **sections: Any) -> "CarDescription":
+        return dataclasses.replace(self, **sections)
+
+    # -- files ---------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def to_toml(self) -> str:
+        """TOML text with a comment above every field (meaning, range, source)."""
+        lines = ["# NXP Cup car description (units in field names; see docs/car.md).",
+                 "# Every field is optional: a missing field takes its default.",
+                 "", tomli_w.dumps({"name": self.name}).rstrip("\n")]
+        for section, cls in _SECTION_TYPES.items():
+            lines += ["", f"[{section}]"]
+            values = dataclasses.asdict(getattr(self, section))
+            for f in fields(cls):
+                m = f.metadata
+                lines.append(f"# {m['doc']} Range {m['lo']} .. {m['hi']}. Source: {m['source']}.")
+                lines.append(tomli_w.dumps({f.name: values[f.name]}).rstrip("\n"))
+        return "\n".join(lines) + "\n"
+
+    def save(self, path: str | Path) -> None:
+        """Write atomically."""
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(self.to_toml())
+        tmp.replace(path)
+
+
+_SECTION_TYPES = {"chassis": Chassis, "wheels": Wheels, "steering": Steering, "drive": Drive,
+                  "camera": Camera, "effects": Effects}
+
+
+def car_from_dict(data: dict[str, Any], source: str = "<car>") -> CarDescription:
+    """Build and range-check a description; unknown keys and bad values raise."""
+    kwargs: dict[str, Any] = {}
+    for key, value in data.items():
+        if key == "name":
+            if not isinstance(value, str) or not value:
+                raise CarDescriptionError(f"{source}: 'name' must be a non-empty string")
+            kwargs["name"] = value
+            continue
+        cls = _SECTION_TYPES.get(key)
+        if cls is None:
+            raise CarDescriptionError(
+                f"{source}: unknown section [{key}] (expected one of {', '.join(_SECTION_TYPES)})")
+        if not isinstance(value, dict):
+            raise CarDescriptionError(f"{source}: [{key}] must be a table")
+        kwargs[key] = _section_from_dict(cls, key, value, source)
+    return CarDescription(**kwargs)
+
+
+def _section_from_dict(cls: type, section: str, data: dict[str, Any], source: str):
+    known = {f.name: f for f in fields(cls)}
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        f = known.get(key)
+        if f is None:
+            raise CarDescriptionError(
+                f"{source}: unknown field {section}.{key} (expected one of {', '.join(known)})")
+        want_int = f.type in (int, "int")
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or (
+                want_int and not isinstance(value, int)):
+            raise CarDescriptionError(
+                f"{source}: {section}.{key} = {value!r}: expected {'an integer' if want_int else 'a number'}")
+        if math.isnan(value) or (math.isinf(value) and f.metadata.get("hi") != math.inf):
+            raise CarDescriptionError(f"{source}: {section}.{key} = {value!r}: expected a finite number")
+        lo, hi = f.metadata.get("lo"), f.metadata.get("hi")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise CarDescriptionError(
+                f"{source}: {section}.{key} = {value!r}: expected a value in [{lo}, {hi}]")
+        out[key] = int(value) if want_int else float(value)
+    return cls(**out)
+
+
+def load_car(path: str | Path | None = None) -> CarDescription:
+    """Load a car description TOML file; ``None`` gives the default car."""
+    if path is None:
+        return CarDescription()
+    from .userfiles import read_user_toml
+
+    _, data = read_user_toml(path, "car description", CarDescriptionError)
+    return car_from_dict(data, str(path))
+
+
+def markdown_doc() -> str:
+    """The field table of docs/car.md."""
+    lines = ["# Car description fields", "",
+             "Generated by `python -m vehicle.description --doc`. Units are in the field names.", ""]
+    for section, cls in _SECTION_TYPES.items():
+        lines += [f"## [{section}]", "", "| field | default | range | meaning | source |",
+                  "| --- | --- | --- | --- | --- |"]
+        for f in fields(cls):
+            m = f.metadata
+            lines.append(f"| `{f.name}` | {f.default} | {m['lo']} .. {m['hi']} | {m['doc']} | {m['source']} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # pragma: no cover - developer helper
+    import sys
+
+    if sys.argv[1:2] == ["--doc"]:
+        sys.stdout.write(markdown_doc() + "\n")
+    elif sys.argv[1:2] == ["--write"]:
+        CarDescription().save(sys.argv[2])
