@@ -35,7 +35,7 @@ from simrunner.sensors.camera import Camera
 from simrunner.car.effects import make_sim
 from simrunner.run.judge import Judge
 from simrunner.car.physics import CarSim
-from simrunner.run.runner import _FrameWork, _load_track, default_track, drive
+from simrunner.run.runner import FrameWork, drive, resolve_track
 from simrunner.run.spinner import Spinner
 from vehicle.description import load_car
 
@@ -86,7 +86,7 @@ def _instrumented(acc: dict[str, float]):
     pc = time.perf_counter
     wrapped = [(CarSim, "step", "physics (CarSim.step)"), (CarSim, "set_command", "set_command"),
                (Camera, "line_image", "camera line"),
-               (Judge, "update", "judge.update"), (_FrameWork, "__call__", "frame work (all)"),
+               (Judge, "update", "judge.update"), (FrameWork, "__call__", "frame work (all)"),
                (Spinner, "get_image", "get_image (all)")]
     saved = []
     for cls, name, label in wrapped:
@@ -110,19 +110,20 @@ def _instrumented(acc: dict[str, float]):
 
 def main() -> None:
     car = load_car(None)
-    track = _load_track(default_track(), car)
+    track, _ = resolve_track(None, car)  # loaded once, reused by every drive below
     steps_per_frame = round(1.0 / car.camera.fps_hz / 0.002)
     best = {k: [math.inf, math.inf] for k in ("closed", "replay", "bare", "speed")}
     result, exact = None, True
     for _ in range(REPEATS):
-        result = drive(CONTROLLER, laps=1, time_limit_s=60.0)
+        result = drive(CONTROLLER, track=track, laps=1, time_limit_s=60.0)
         best["closed"] = [min(best["closed"][0], result.cpu_time_s), min(best["closed"][1], result.wall_time_s)]
-        rows = result.telemetry.rows
-        commands = [(r[8], r[9], r[10]) for r in rows[:-1]]  # row k: the command set at t_k
+        log = result.log
+        commands = list(zip(log.speed_cmd_mps.tolist(), log.steer_cmd_rad.tolist(),
+                            log.yaw_rate_cmd_radps.tolist()))[:-1]  # row k: the command set at t_k
         sim, run = _replay(car, track, commands, steps_per_frame)
         cpu, wall = _timed(run)
         best["replay"] = [min(best["replay"][0], cpu), min(best["replay"][1], wall)]
-        exact &= (sim.pose.x_m, sim.pose.y_m, sim.pose.yaw_rad) == (rows[-1][2], rows[-1][3], rows[-1][4])
+        exact &= (sim.pose.x_m, sim.pose.y_m, sim.pose.yaw_rad) == (log.x_m[-1], log.y_m[-1], log.yaw_rad[-1])
         sim, run = _bare(car, track, len(commands) * steps_per_frame)
         cpu, wall = _timed(run)
         best["bare"] = [min(best["bare"][0], cpu), min(best["bare"][1], wall)]
@@ -130,13 +131,13 @@ def main() -> None:
         cpu, wall = _timed(run)
         best["speed"] = [min(best["speed"][0], cpu), min(best["speed"][1], wall)]
     sim_s = result.sim_time_s
-    frames = len(result.telemetry) - 1  # frame 0 is the initial state
+    frames = len(result.log) - 1  # frame 0 is the initial state
 
     parts, r2 = {}, None
     for _ in range(3):  # keep the quickest of three instrumented laps
         acc: dict[str, float] = {}
         with _instrumented(acc):
-            r = drive(CONTROLLER, laps=1, time_limit_s=60.0)
+            r = drive(CONTROLLER, track=track, laps=1, time_limit_s=60.0)
         if r2 is None or r.wall_time_s < r2.wall_time_s:
             parts, r2 = acc, r
 

@@ -18,12 +18,18 @@ from simrunner.errors import CommandError, ControllerError, RunFinished, SimErro
 from simrunner.run.spinner import Spinner
 
 __all__ = ["SimError", "ControllerError", "CommandError", "RunFinished", "Spinner", "drive",
-           "RunResult"]
+           "RunResult", "RunSettings", "Outcome", "RunLog", "read_log", "write_log"]
+
+_LAZY = {"drive": "simrunner.run.runner", "RunResult": "simrunner.run.result",
+         "Outcome": "simrunner.run.result", "RunSettings": "simrunner.run.settings",
+         "RunLog": "simrunner.run.log", "read_log": "simrunner.run.log",
+         "write_log": "simrunner.run.log"}
 
 
 def __getattr__(name: str):
-    if name in ("drive", "RunResult"):
-        from simrunner.run import runner
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'simrunner' has no attribute {name!r}")
+    import importlib
 
-        return getattr(runner, name)
-    raise AttributeError(f"module 'simrunner' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)

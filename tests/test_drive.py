@@ -6,12 +6,13 @@ import re
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from simrunner.cli import main as cli
 from simrunner.run.runner import default_track, drive
-from simrunner.run.log import COLUMNS, read_csv
+from simrunner.run.log import COLUMN_NAMES, read_log
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
@@ -43,11 +44,13 @@ def test_line_follower_completes_a_lap_of_the_default_track(tmp_path):
                 "real_time_factor", "track", "seed"):
         assert key in summary
     assert summary["outcome"] == "finished" and summary["seed"] == 0
-    data = read_csv(tmp_path / "t.csv")
-    assert list(data) == list(COLUMNS)
-    assert len(data["t"]) == len(r.telemetry)
-    assert data["t"][1] - data["t"][0] == pytest.approx(0.02)  # one row per camera frame
-    assert data["lap"][-1] == 1 and (data["off_track"] == 0).all()
+    data = read_log(tmp_path / "t.csv")
+    assert data.names == COLUMN_NAMES  # every column of the schema
+    assert len(data) == len(r.log)
+    np.testing.assert_allclose(data.x_m, r.log.x_m, rtol=0, atol=5e-7)  # the file: the log, %.6f
+    assert data.t_s[1] - data.t_s[0] == pytest.approx(0.02)  # one row per camera frame
+    assert data.lap[-1] == 1 and not data.off_track.any()
+    assert any("steer" in text for text in data.data_text)  # the controller's add_data text
     assert (tmp_path / "p.png").stat().st_size > 10_000
 
 
@@ -65,7 +68,7 @@ def test_same_inputs_and_seed_give_identical_csv_bytes(tmp_path):
     for name in ("a.csv", "b.csv"):
         drive(EXAMPLES / "line_follower.py", time_limit_s=2.0, seed=7, csv=tmp_path / name)
     a, b = (tmp_path / "a.csv").read_bytes(), (tmp_path / "b.csv").read_bytes()
-    assert a == b and a.count(b"\n") == 102  # header + frames 0..100
+    assert a == b and a.count(b"\n") == 103  # format line, header, frames 0..100
     drive(EXAMPLES / "line_follower.py", time_limit_s=2.0, seed=8, csv=tmp_path / "c.csv")
     assert (tmp_path / "c.csv").read_bytes() != a  # the seed drives the camera noise
 
@@ -89,8 +92,8 @@ def test_controller_that_raises(tmp_path):
     assert f'File "{ctrl.resolve()}", line 2, in helper' in err
     assert "ZeroDivisionError: division by zero" in err
     assert "simrunner" not in err.replace(str(ctrl.resolve()), "")  # no runner frames
-    data = read_csv(tmp_path / "t.csv")
-    assert data["frame"][-1] == 20  # rows up to the fault
+    data = read_log(tmp_path / "t.csv")
+    assert data.frame[-1] == 20  # rows up to the fault
     assert (tmp_path / "v.mp4").stat().st_size > 0
     assert json.loads((tmp_path / "s.json").read_text())["outcome"] == "controller_error"
 
@@ -105,7 +108,7 @@ def test_nan_command_is_a_clear_error(tmp_path):
     assert r.outcome == "controller_error"
     assert "set_speed(speed=nan): expected a finite number" in r.message
     assert 'line 3, in main' in r.error.traceback_text
-    assert len(read_csv(tmp_path / "t.csv")["t"]) == 2
+    assert len(read_log(tmp_path / "t.csv")) == 2
 
 
 def test_controller_cannot_swallow_the_end_of_the_run(tmp_path):
@@ -216,10 +219,10 @@ def test_csv_row_k_records_the_command_set_in_answer_to_frame_k(tmp_path):
             s.set_speed_and_servo(0.01 * k, 0.001 * k)
 
     res = drive(main, time_limit_s=2.0, csv=tmp_path / "c.csv")
-    log = read_csv(tmp_path / "c.csv")
+    log = read_log(tmp_path / "c.csv")
     assert res.outcome == "controller_returned"
-    k = log["frame"].astype(int)
-    assert log["speed_cmd"][0] == 0.0                      # nothing set before the first step
+    k = log.frame
+    assert log.speed_cmd_mps[0] == 0.0                      # nothing set before the first step
     sel = (k >= 1) & (k < 29)
-    assert list(log["speed_cmd"][sel]) == pytest.approx(list(0.01 * k[sel]), abs=1e-6)
-    assert list(log["steer_cmd"][sel]) == pytest.approx(list(0.001 * k[sel]), abs=1e-6)
+    assert list(log.speed_cmd_mps[sel]) == pytest.approx(list(0.01 * k[sel]), abs=1e-6)
+    assert list(log.steer_cmd_rad[sel]) == pytest.approx(list(0.001 * k[sel]), abs=1e-6)

@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pieces.pose import Pose2
+from simrunner.errors import SimError
 from simrunner.run.judge import Judge
 from simrunner.track.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_from_polygon
 from simrunner.track.load import SimTrack
@@ -155,9 +156,9 @@ def test_wheel_off_road_detected_wheel_on_edge_line_not(ring):
 
 
 def test_bad_arguments(ring):
-    with pytest.raises(ValueError, match="laps"):
+    with pytest.raises(SimError, match="laps"):
         Judge(ring, laps=0)
-    with pytest.raises(ValueError, match="min_lap_fraction"):
+    with pytest.raises(SimError, match="min_lap_fraction"):
         Judge(ring, laps=1, min_lap_fraction=1.5)
 
 

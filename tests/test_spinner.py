@@ -62,13 +62,18 @@ class FakeCamera:
         return np.full(128, row, np.uint8)
 
     def add_noise(self, img, rng):
-        return (img.astype(np.int16) + rng.integers(-3, 4, size=img.shape)).clip(0, 255).astype(np.uint8)
+        noise = np.rint(rng.standard_normal(img.shape) * 2.0).astype(np.int16)
+        return (img.astype(np.int16) + noise).clip(0, 255).astype(np.uint8)
+
+    def line_image(self, pose, row, normals=None):
+        img = self.render_row(pose, row).reshape(1, -1)
+        return img if normals is None else self.add_noise(img, normals)
 
 
 def make(frames: list | None = None):
     sim = FakeSim()
     clock = LockstepClock(sim, dt_s=DT, frame_period_s=1 / CAR.camera.fps_hz,
-                          on_frame=(frames.append if frames is not None else None))
+                          on_frame=((lambda k, *state: frames.append(k)) if frames is not None else None))
     session = Session(clock=clock, camera=FakeCamera(), car=CAR, rng=np.random.default_rng(0))
     return Spinner(session=session), sim, clock
 
@@ -205,9 +210,8 @@ def test_finish_during_a_wait_stops_stepping_at_that_frame():
     frames: list[int] = []
     s, sim, clock = make(frames)
 
-    def on_frame(k):
-        if k == 3:
-            clock.finish("finished", "laps done")
+    def on_frame(k, t_s, pose, command, row_command):
+        return ("finished", "laps done") if k == 3 else None
 
     clock.on_frame = on_frame
     with pytest.raises(RunFinished, match="laps done"):

@@ -40,7 +40,7 @@ def test_drive_writes_one_video_frame_per_camera_frame(tmp_path):
     r = drive(ctrl, video=tmp_path / "v.mp4", csv=tmp_path / "t.csv")
     assert r.outcome == "controller_returned"
     n, shapes = _frames(tmp_path / "v.mp4")
-    assert n == 31 == len(r.telemetry)  # frames 0..30 at the camera's 50 fps
+    assert n == 31 == len(r.log)  # frames 0..30 at the camera's 50 fps
     assert shapes == {(FRAME_H, FRAME_W, 3)}
     assert not (tmp_path / "v.partial.mp4").exists()
     cap = cv2.VideoCapture(str(tmp_path / "v.mp4"))

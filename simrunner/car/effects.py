@@ -41,11 +41,19 @@ from dataclasses import dataclass
 from typing import Any
 
 from pieces.pose import Pose2
+from simrunner.errors import SimError
 from simrunner.car.physics import GRAVITY_MPS2, CarSim
 from vehicle.description import CarDescription, Effects
 
 CONTROL_DT_S = 0.004  # control sub-step of the filtered effects (rounded to whole physics steps)
 ROLL_EPS_MPS = 0.02  # rolling resistance ramps from 0 to full over |v| in [0, ROLL_EPS_MPS]
+
+
+class EffectError(SimError, KeyError):
+    """An unknown effect or effect parameter (the message lists the known ones)."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
 
 
 @dataclass(frozen=True)
@@ -126,11 +134,11 @@ def is_neutral(car: CarDescription) -> bool:
 
 def with_effects(car: CarDescription, **params: float) -> CarDescription:
     """A copy of ``car`` with ``car.effects`` fields replaced (keys are Effects field names,
-    e.g. ``with_effects(car, motor_lag_s=0.1)``). Unknown names raise ``KeyError``."""
+    e.g. ``with_effects(car, motor_lag_s=0.1)``). Unknown names raise :class:`EffectError`."""
     known = {f.name for f in dataclasses.fields(Effects)}
     bad = sorted(set(params) - known)
     if bad:
-        raise KeyError(f"unknown effect parameter(s) {', '.join(bad)} (expected one of {', '.join(sorted(known))})")
+        raise EffectError(f"unknown effect parameter(s) {', '.join(bad)} (expected one of {', '.join(sorted(known))})")
     return car.replace(effects=dataclasses.replace(car.effects, **{k: float(v) for k, v in params.items()}))
 
 
@@ -205,14 +213,7 @@ class EffectSim:
         self._coast_on = False
         self._sent: tuple | None = None  # the last command passed to the inner CarSim
 
-    # -- pass-through ----------------------------------------------------------------------
-    def __getattr__(self, name: str):
-        # only called for attributes not found on EffectSim itself
-        sim = self.__dict__.get("sim")
-        if sim is None:
-            raise AttributeError(name)
-        return getattr(sim, name)
-
+    # -- read-outs: the inner CarSim's (the effects act on its inputs) ----------------------
     @property
     def time_s(self) -> float:
         return self.sim.time_s
@@ -226,8 +227,24 @@ class EffectSim:
         return self.sim.pose
 
     @property
+    def z_m(self) -> float:
+        return self.sim.z_m
+
+    @property
+    def roll_rad(self) -> float:
+        return self.sim.roll_rad
+
+    @property
+    def pitch_rad(self) -> float:
+        return self.sim.pitch_rad
+
+    @property
     def speed_mps(self) -> float:
         return self.sim.speed_mps
+
+    @property
+    def lateral_speed_mps(self) -> float:
+        return self.sim.lateral_speed_mps
 
     @property
     def steer_rad(self) -> float:
@@ -238,8 +255,26 @@ class EffectSim:
     def yaw_rate_radps(self) -> float:
         return self.sim.yaw_rate_radps
 
+    def knuckle_angles_rad(self) -> tuple[float, float]:
+        return self.sim.knuckle_angles_rad()
+
+    def wheel_contacts(self) -> list[tuple[float, float]]:
+        return self.sim.wheel_contacts()
+
     def wheel_contacts_xy(self):
         return self.sim.wheel_contacts_xy()
+
+    def wheel_speeds_radps(self):
+        return self.sim.wheel_speeds_radps()
+
+    @property
+    def yaw_rate_cmd_radps(self) -> float:
+        """The differential yaw rate the inner car applies (after the effects), rad/s."""
+        return self.sim.yaw_rate_cmd_radps
+
+    def set_wheel_lock(self, locked: bool) -> None:
+        """As ``CarSim.set_wheel_lock`` (tilt test); not part of the command path."""
+        self.sim.set_wheel_lock(locked)
 
     @property
     def speed_cmd_mps(self) -> float:

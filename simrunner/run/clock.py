@@ -8,11 +8,13 @@ camera-frame boundary or the end of the wait, whichever is first (``CarSim.step(
 
 Frame schedule: frame ``k`` (k = 0, 1, 2, ...) is at physics step ``round(k * period / dt)``
 (an exact multiple when the period is a whole number of steps). At every frame boundary the
-``on_frame(k)`` callback runs (telemetry row, judge, video capture) whether or not the
+clock calls ``on_frame(k, t_s, pose, command, row_command)`` once, whether or not the
 controller asked for an image; frame 0 is the initial state, called by :meth:`start`.
-``on_row_command(k, command)`` (optional) runs once after boundary ``k``, right before the
-first physics step after it, with the command that step applies: the command "set at t_k"
-(what the controller answered to frame k), which telemetry row k records.
+``command`` is the command in force at the boundary; ``row_command`` is the command the first
+physics step after the *previous* boundary applied (the controller's answer to frame k - 1,
+which telemetry row k - 1 records), or None when no step followed it. ``on_frame`` returns
+None, or ``(outcome, message)`` to end the run. The clock holds no reference back to its
+caller beyond this function.
 """
 from __future__ import annotations
 
@@ -20,43 +22,48 @@ import math
 import time
 from typing import Callable, Protocol
 
-from simrunner.errors import RunFinished, SimError
+from simrunner.errors import RunFinished
 
 _monotonic = time.monotonic
 
 
 class SteppableSim(Protocol):
-    """The part of ``simrunner.car.physics.CarSim`` the clock uses."""
+    """The part of a car model (``simrunner.car.CarModel``) the clock uses."""
 
     def set_command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None: ...
 
     def step(self, n: int = 1) -> None: ...
 
+    @property
+    def pose(self): ...
+
+
+Command = tuple[float, float, float]  # speed_mps, steer_rad, yaw_rate_radps
+# on_frame(k, t_s, pose, command in force, command of row k - 1 or None) -> None | (outcome, message)
+FrameCallback = Callable[[int, float, object, Command, "Command | None"], "tuple[str, str] | None"]
+
 
 class LockstepClock:
     """Steps ``sim`` in lockstep with the controller.
 
-    ``dt_s``: physics step (s). ``frame_period_s``: camera frame period (s), at least one step.
-    ``on_frame(frame_index)`` runs at each frame boundary and may call :meth:`finish`.
+    ``dt_s``: physics step (s) and ``frame_period_s``: camera frame period (s), both
+    validated by ``RunSettings`` / the car description; ``on_frame``: see the module
+    docstring.
     Attributes: ``step_index`` (int, steps done), ``frame_index`` (last frame boundary
     reached), ``last_progress_wall_s`` (``time.monotonic()`` at the last progress, for the
     watchdog), ``finished`` (None or the :class:`RunFinished` that ends the run).
     """
 
     def __init__(self, sim: SteppableSim, *, dt_s: float, frame_period_s: float,
-                 on_frame: Callable[[int], None] | None = None):
-        if not (math.isfinite(dt_s) and dt_s > 0):
-            raise SimError(f"dt_s = {dt_s!r}: expected a positive number of seconds")
-        if not (math.isfinite(frame_period_s) and frame_period_s > 0):
-            raise SimError(f"frame period = {frame_period_s!r}: expected a positive number of seconds")
+                 on_frame: FrameCallback | None = None):
         self.sim = sim
         self.dt_s = float(dt_s)
         ratio = frame_period_s / dt_s
         self._steps_per_frame = int(round(ratio)) if abs(ratio - round(ratio)) < 1e-9 else None
         self._ratio = max(ratio, 1.0)
-        self.on_frame = on_frame or (lambda k: None)
-        self.on_row_command: Callable[[int, tuple[float, float, float]], None] | None = None
-        self._row_pending = True
+        self.on_frame: FrameCallback = on_frame or (lambda *args: None)
+        self._row_pending = True  # no step yet since the last boundary
+        self._row_command: Command | None = None  # what the first step after it applied
         self.step_index = 0
         self.frame_index = 0
         self._next_frame_step = self._frame_step(1)
@@ -116,28 +123,32 @@ class LockstepClock:
     # -- stepping ------------------------------------------------------------------
     def start(self) -> None:
         """Run the frame-0 callback (the initial state)."""
-        self.on_frame(0)
+        end = self.on_frame(0, 0.0, self.pose(), self._command, None)
+        if end is not None:
+            self.finish(*end)
         self.last_progress_wall_s = time.monotonic()
         self.check()
 
     def _before_chunk(self) -> None:
-        """Send a changed command to the sim and report the pending row's command."""
+        """Send a changed command to the sim; remember the open row's command."""
         if self._command_dirty:
             self.sim.set_command(*self._command)
             self._command_dirty = False
         if self._row_pending:
             self._row_pending = False
-            if self.on_row_command is not None:
-                self.on_row_command(self.frame_index, self._command)
+            self._row_command = self._command
 
     def _frame_boundary(self) -> None:
         """The step index has reached the next frame: run ``on_frame`` for it; raises
         :class:`RunFinished` if the run is over."""
         k = self.frame_index = self.frame_index + 1
         self._next_frame_step = self._frame_step(k + 1)
-        self.on_frame(k)
+        row_command = None if self._row_pending else self._row_command
+        end = self.on_frame(k, self.step_index * self.dt_s, self.pose(), self._command, row_command)
         self._row_pending = True
         self.last_progress_wall_s = _monotonic()
+        if end is not None:
+            self.finish(*end)
         if self.finished is not None:
             self.check()
 

@@ -28,17 +28,20 @@ the road, so a wheel on the black edge line is on the road; a wheel overhanging 
 the road while any part of its tyre touches it. ``off_track`` is True while any wheel is off;
 ``"off_track"`` / ``"on_track"`` events mark the changes.
 
-Events: ``Event(t_s, kind, text)`` with kind in ``"lap_start"``, ``"lap"``, ``"finished"``,
-``"gate_backward"``, ``"off_track"``, ``"on_track"``.
+Events: ``Event(t_s, kind, text)`` with ``kind`` an :class:`EventKind` (a ``str``):
+``lap_start``, ``lap``, ``lap_short``, ``finished``, ``gate_backward``, ``off_track``,
+``on_track``.
 """
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from pieces.pose import Pose2
+from simrunner.errors import SimError
 
 WHEEL_NAMES = ("FL", "FR", "RL", "RR")
 PATCH_SAMPLES = 5
@@ -47,10 +50,22 @@ COVERAGE_REACH_CELLS = 2      # cells within 2 cells (0.5-0.75 m) of the car cou
 COVERAGE_ROAD_FRACTION = 0.25  # a cell is road when at least this share of it is road
 
 
+class EventKind(enum.StrEnum):
+    """What happened (see the module docstring)."""
+
+    LAP_START = "lap_start"
+    LAP = "lap"
+    LAP_SHORT = "lap_short"          # gate crossed after a shortcut: not counted
+    FINISHED = "finished"
+    GATE_BACKWARD = "gate_backward"
+    OFF_TRACK = "off_track"
+    ON_TRACK = "on_track"
+
+
 @dataclass(frozen=True)
 class Event:
     t_s: float
-    kind: str
+    kind: EventKind
     text: str
 
 
@@ -61,9 +76,9 @@ class Judge:
                  min_coverage: float = 0.8, tyre_width_m: float = 0.025,
                  on_gate_tol_m: float = 0.02) -> None:
         if int(laps) < 1:
-            raise ValueError(f"laps must be >= 1, got {laps!r}")
+            raise SimError(f"Judge: laps must be >= 1, got {laps!r}")
         if not 0.0 <= float(min_lap_fraction) <= 1.0:
-            raise ValueError(f"min_lap_fraction must be in [0, 1], got {min_lap_fraction!r}")
+            raise SimError(f"Judge: min_lap_fraction must be in [0, 1], got {min_lap_fraction!r}")
         self.track = track
         self.laps = int(laps)
         self.min_lap_distance_m = float(min_lap_fraction) * float(track.lap_length_m)
@@ -183,7 +198,7 @@ class Judge:
         if prev is None:
             if abs(s) <= self.on_gate_tol_m and abs(lat) <= self._half:
                 self._lap_start = (t_s, 0.0)
-                events.append(Event(t_s, "lap_start", "lap 1 started (car starts on the gate)"))
+                events.append(Event(t_s, EventKind.LAP_START, "lap 1 started (car starts on the gate)"))
         else:
             px, py = self._prev_xy
             self._distance_m += math.hypot(x - px, y - py)
@@ -200,7 +215,7 @@ class Judge:
                 return events + self._wheel_events(t_s, pose, wheel_xy)
         if self._off_wheels:
             self._off_wheels = ()
-            events.append(Event(t_s, "on_track", "all wheels back on the track"))
+            events.append(Event(t_s, EventKind.ON_TRACK, "all wheels back on the track"))
         return events
 
     def _gate_events(self, t_s: float, s: float, lat: float) -> list[Event]:
@@ -215,29 +230,29 @@ class Judge:
         tc = t0 + f * (t_s - t0)
         dc = d0 + f * (self._distance_m - d0)
         if backward:
-            return [Event(tc, "gate_backward", "crossed the finish gate backwards (not counted)")]
+            return [Event(tc, EventKind.GATE_BACKWARD, "crossed the finish gate backwards (not counted)")]
         if self._lap_start is None:
             self._start_lap(tc, dc)
-            return [Event(tc, "lap_start", "lap 1 started (first gate crossing)")]
+            return [Event(tc, EventKind.LAP_START, "lap 1 started (first gate crossing)")]
         start_t, start_d = self._lap_start
         if dc - start_d < self.min_lap_distance_m:
             return []
         coverage = self.coverage
         if coverage < self.min_coverage:
             self._start_lap(tc, dc)
-            return [Event(tc, "lap_short", f"crossed the finish gate after driving only "
+            return [Event(tc, EventKind.LAP_SHORT, f"crossed the finish gate after driving only "
                           f"{100 * coverage:.0f} % of the track (needs {100 * self.min_coverage:.0f} %):"
                           " lap not counted, timing restarts")]
         self._lap_times.append(tc - start_t)
         n = self.laps_completed
-        events = [Event(tc, "lap", f"lap {n} in {tc - start_t:.3f} s")]
+        events = [Event(tc, EventKind.LAP, f"lap {n} in {tc - start_t:.3f} s")]
         if self.finished:
-            events.append(Event(tc, "finished", f"{n} lap{'s' if n > 1 else ''} done in "
+            events.append(Event(tc, EventKind.FINISHED, f"{n} lap{'s' if n > 1 else ''} done in "
                                 f"{sum(self._lap_times):.3f} s"))
             self._lap_start = None
         else:
             self._start_lap(tc, dc)
-            events.append(Event(tc, "lap_start", f"lap {n + 1} started"))
+            events.append(Event(tc, EventKind.LAP_START, f"lap {n + 1} started"))
         return events
 
     def _start_lap(self, t_s: float, distance_m: float) -> None:
@@ -262,9 +277,9 @@ class Judge:
         off = tuple(name for name, ok in zip(WHEEL_NAMES, on) if not ok)
         events = []
         if off and not self._off_wheels:
-            events.append(Event(t_s, "off_track", f"wheel{'s' if len(off) > 1 else ''} "
+            events.append(Event(t_s, EventKind.OFF_TRACK, f"wheel{'s' if len(off) > 1 else ''} "
                                 f"{', '.join(off)} off the track at ({pose.x_m:.2f}, {pose.y_m:.2f}) m"))
         elif self._off_wheels and not off:
-            events.append(Event(t_s, "on_track", "all wheels back on the track"))
+            events.append(Event(t_s, EventKind.ON_TRACK, "all wheels back on the track"))
         self._off_wheels = off
         return events

@@ -1,91 +1,401 @@
-"""Telemetry of a run: one row per camera frame, written as CSV (schema: docs/telemetry.md).
+"""The run log: one frozen, typed, columnar record of a run, with one writer and one reader.
 
-Rows are kept in memory during the run (a tuple per frame; a 60 s run at 50 fps is 3000
-rows) and written once at the end, atomically (``PATH.tmp`` then rename), also when the
-controller crashed. Number formats are fixed, so the same run gives the same bytes.
+Every log of the project is a :class:`RunLog`: the telemetry of ``simrunner drive``, the
+simulated logs of ``simrunner excite --simulate`` and a car's measured log read by
+``simrunner gap``. Columns carry their unit in their name (:data:`COLUMNS`; the schema is
+documented once, in docs/telemetry.md). Only ``t_s`` is required: a measured log holds the
+columns its sensors gave (a column that is absent is ``None``), and each workflow asks for
+the ones it needs with :meth:`RunLog.require`.
+
+File (CSV): a first line ``# nxpcup-sim run log, format 2``, a header of column names,
+then one line per row; numbers in fixed formats (``%d`` and ``%.6f``; so the same run gives
+the same bytes), ``data_text`` quoted by the CSV rules when it needs to be. Written
+atomically (``PATH.tmp``, then renamed). :func:`read_log` also reads format 1 (the header of
+names without units, ``t,x,y,yaw,speed,...``, no format line), and any CSV with these
+columns in any order; unknown columns are ignored.
+
+During a run, :class:`RunRecorder` collects the rows: the state at each camera frame
+boundary ``t_k``, the command the first physics step after ``t_k`` applies (the
+controller's answer to frame ``k``; the last row keeps the command in force at its
+boundary), and the ``add_data`` text lines added between ``t_k`` and ``t_k+1``.
 """
 from __future__ import annotations
 
+import csv
+import io
+import math
 import os
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
 from simrunner.errors import SimError
 
-# (column, printf format); units: docs/telemetry.md
-SCHEMA: tuple[tuple[str, str], ...] = (
-    ("frame", "%d"),          # camera frame index, 0 = initial state
-    ("t", "%.6f"),            # simulated time, s
-    ("x", "%.6f"),            # rear-axle midpoint, world, m
-    ("y", "%.6f"),
-    ("yaw", "%.6f"),          # heading, rad, [-pi, pi)
-    ("speed", "%.6f"),        # actual speed along the car's x, m/s
-    ("steer", "%.6f"),        # actual bicycle-equivalent wheel angle, rad, + = left
-    ("yaw_rate", "%.6f"),     # actual yaw rate, rad/s
-    ("speed_cmd", "%.6f"),    # commanded speed after speed_norm, m/s
-    ("steer_cmd", "%.6f"),    # commanded steering after turn_norm, rad
-    ("yaw_rate_cmd", "%.6f"), # differential yaw rate from diff_norm, rad/s
-    ("lap", "%d"),            # laps completed so far
-    ("off_track", "%d"),      # 1 while any wheel is off the road
+FORMAT_VERSION = 2
+FORMAT_LINE = f"# nxpcup-sim run log, format {FORMAT_VERSION}"
+TEXT_SEPARATOR = " | "  # between the add_data text lines of one row
+
+
+class LogError(SimError):
+    """A log file or log columns are malformed. ``str(err)`` is ``path:line: what was
+    expected`` (line 0: the file as a whole)."""
+
+    def __init__(self, path: str, line: int, message: str):
+        self.path, self.line, self.message = str(path), int(line), message
+        super().__init__(f"{self.path}:{self.line}: {message}")
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of the schema: name (unit in it), unit, kind, file format, meaning."""
+
+    name: str
+    unit: str
+    kind: str  # "int" | "float" | "flag" (0/1) | "text"
+    fmt: str
+    meaning: str
+
+
+COLUMNS: tuple[Column, ...] = (
+    Column("frame", "-", "int", "%d", "camera frame index (row index in excitation logs)"),
+    Column("t_s", "s", "float", "%.6f", "time"),
+    Column("x_m", "m", "float", "%.6f", "world x of the car frame origin (rear-axle midpoint)"),
+    Column("y_m", "m", "float", "%.6f", "world y of the same point"),
+    Column("yaw_rad", "rad", "float", "%.6f", "heading, counter-clockwise from world +x"),
+    Column("speed_mps", "m/s", "float", "%.6f", "actual speed along the car's x (negative = reversing)"),
+    Column("steer_rad", "rad", "float", "%.6f", "actual bicycle-equivalent steering angle, + = left"),
+    Column("yaw_rate_radps", "rad/s", "float", "%.6f", "actual yaw rate, + = counter-clockwise"),
+    Column("speed_cmd_mps", "m/s", "float", "%.6f", "commanded speed (after speed_norm)"),
+    Column("steer_cmd_rad", "rad", "float", "%.6f", "commanded steering (after turn_norm)"),
+    Column("yaw_rate_cmd_radps", "rad/s", "float", "%.6f", "differential yaw rate (diff_norm)"),
+    Column("coast", "0/1", "flag", "%d", "drive off, rear wheels rolling freely"),
+    Column("lap", "-", "int", "%d", "laps completed so far"),
+    Column("off_track", "0/1", "flag", "%d", "a wheel's contact patch is entirely off the road"),
+    Column("data_text", "-", "text", "%s", "the controller's add_data text of this frame"),
 )
-COLUMNS: tuple[str, ...] = tuple(name for name, _ in SCHEMA)
-_LINE_FORMAT = ",".join(fmt for _, fmt in SCHEMA) + "\n"
+COLUMN_NAMES: tuple[str, ...] = tuple(c.name for c in COLUMNS)
+_BY_NAME = {c.name: c for c in COLUMNS}
+# format 1 (no units in the names) -> format 2
+FORMAT1_NAMES = {"t": "t_s", "x": "x_m", "y": "y_m", "yaw": "yaw_rad", "speed": "speed_mps",
+                 "steer": "steer_rad", "yaw_rate": "yaw_rate_radps", "speed_cmd": "speed_cmd_mps",
+                 "steer_cmd": "steer_cmd_rad", "yaw_rate_cmd": "yaw_rate_cmd_radps"}
 
 
-class TelemetryLog:
-    """Rows of :data:`COLUMNS` (tuples in that order), appended once per camera frame."""
+@dataclass(frozen=True, eq=False)
+class RunLog:
+    """A run's rows as read-only columns, each ``(N,)`` (``data_text`` a tuple of N str).
 
-    def __init__(self) -> None:
-        self.rows: list[tuple] = []
+    Numeric columns are float64 (``frame`` and ``lap`` int64, flags bool); a column the log
+    does not have is ``None``. ``source`` names where it came from (file path or a label).
+    """
 
-    def append(self, row: tuple) -> None:
-        self.rows.append(row)
+    t_s: np.ndarray
+    frame: np.ndarray | None = None
+    x_m: np.ndarray | None = None
+    y_m: np.ndarray | None = None
+    yaw_rad: np.ndarray | None = None
+    speed_mps: np.ndarray | None = None
+    steer_rad: np.ndarray | None = None
+    yaw_rate_radps: np.ndarray | None = None
+    speed_cmd_mps: np.ndarray | None = None
+    steer_cmd_rad: np.ndarray | None = None
+    yaw_rate_cmd_radps: np.ndarray | None = None
+    coast: np.ndarray | None = None
+    lap: np.ndarray | None = None
+    off_track: np.ndarray | None = None
+    data_text: tuple[str, ...] | None = None
+    source: str = "<log>"
 
     def __len__(self) -> int:
-        return len(self.rows)
+        return int(self.t_s.size)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t_s[-1] - self.t_s[0]) if len(self) else 0.0
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The columns this log has, in schema order."""
+        return tuple(n for n in COLUMN_NAMES if getattr(self, n) is not None)
 
     def column(self, name: str) -> np.ndarray:
-        """One column as a float array ``(N,)``."""
-        i = COLUMNS.index(name)
-        return np.array([r[i] for r in self.rows], dtype=float)
+        """Column ``name`` (numeric columns as float64); raises :class:`LogError` if absent."""
+        if name not in _BY_NAME:
+            raise LogError(self.source, 0, f"no column {name!r} in the schema (expected one of "
+                                           f"{', '.join(COLUMN_NAMES)})")
+        value = getattr(self, name)
+        if value is None:
+            raise LogError(self.source, 1, f"the log has no column {name!r}")
+        return value
 
-    def to_csv_text(self) -> str:
-        return ",".join(COLUMNS) + "\n" + "".join(_LINE_FORMAT % r for r in self.rows)
+    def require(self, *names: str, min_rows: int = 1, min_duration_s: float = 0.0) -> None:
+        """Raise :class:`LogError` unless the log has ``names`` and enough data."""
+        missing = [n for n in names if getattr(self, n, None) is None]
+        if missing:
+            raise LogError(self.source, 1, f"expected columns {', '.join(names)} "
+                                           f"(missing: {', '.join(missing)})")
+        if len(self) < min_rows or self.duration_s < min_duration_s:
+            raise LogError(self.source, len(self) + 1,
+                           f"expected at least {min_rows} rows and {min_duration_s:g} s of data "
+                           f"(got {len(self)} rows, {self.duration_s:.3g} s)")
 
-    def write_csv(self, path: str | Path) -> Path:
-        """Write the CSV atomically; raises :class:`SimError` if the file cannot be written."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        try:
-            if path.parent and not path.parent.exists():
-                path.parent.mkdir(parents=True, exist_ok=True)
-            with open(tmp, "w", newline="") as fh:
-                fh.write(self.to_csv_text())
-            os.replace(tmp, path)
-        except OSError as exc:
-            raise SimError(f"{path}: cannot write telemetry CSV ({exc.strerror})") from None
-        return path
+    def coasting(self) -> np.ndarray:
+        """``(N,) bool``: drive off at each row (all False without a ``coast`` column)."""
+        return np.zeros(len(self), dtype=bool) if self.coast is None else self.coast
+
+    def columns(self) -> dict[str, np.ndarray | tuple[str, ...]]:
+        """The present columns by name, in schema order."""
+        return {n: getattr(self, n) for n in self.names}
+
+    def subset(self, rows: slice | np.ndarray | int) -> "RunLog":
+        """The rows ``rows`` (a slice, an index array, or ``stop`` for the first rows)."""
+        if isinstance(rows, (int, np.integer)):
+            rows = slice(0, int(rows))
+        cols = {}
+        for n, v in self.columns().items():
+            if n == "data_text":
+                cols[n] = tuple(np.asarray(v, dtype=object)[rows]) if len(v) else ()
+            else:
+                cols[n] = v[rows]
+        return log_from_columns(cols, self.source)
+
+    def with_columns(self, **columns) -> "RunLog":
+        """A copy with the given columns replaced or added (checked like any log)."""
+        cols = dict(self.columns())
+        cols.update(columns)
+        return log_from_columns({k: v for k, v in cols.items() if v is not None}, self.source)
 
 
-def read_csv(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a telemetry CSV back: column name -> float array ``(N,)``."""
+def log_from_columns(columns: dict, source: str = "<log>") -> RunLog:
+    """Build and check a :class:`RunLog` from arrays keyed by schema names (format-1 names
+    are accepted too; unknown keys are ignored). Line numbers in errors count the header as
+    line 1, as in a file without the format line."""
+    cols = {FORMAT1_NAMES.get(k, k): v for k, v in columns.items()}
+    if "t_s" not in cols:
+        raise LogError(source, 1, "expected a time column t_s")
+    out: dict = {}
+    n = None
+    for c in COLUMNS:
+        if c.name not in cols or cols[c.name] is None:
+            continue
+        raw = cols[c.name]
+        if c.kind == "text":
+            arr = tuple("" if v is None else str(v) for v in raw)
+            size = len(arr)
+        else:
+            a = np.asarray(raw, dtype=float).reshape(-1)
+            size = a.size
+            bad = np.flatnonzero(~np.isfinite(a))
+            if bad.size:
+                raise LogError(source, int(bad[0]) + 2, f"column {c.name!r}: expected a finite number")
+            if c.kind == "flag":
+                bad = np.flatnonzero((a != 0.0) & (a != 1.0))
+                if bad.size:
+                    raise LogError(source, int(bad[0]) + 2, f"column {c.name!r}: expected 0 or 1")
+                arr = a == 1.0
+            elif c.kind == "int":
+                bad = np.flatnonzero(a != np.round(a))
+                if bad.size:
+                    raise LogError(source, int(bad[0]) + 2, f"column {c.name!r}: expected a whole number")
+                arr = a.astype(np.int64)
+            else:
+                arr = a.copy()
+            arr.flags.writeable = False
+        if n is None:
+            n = size
+        elif size != n:
+            raise LogError(source, 1, f"expected every column to have {n} values ({c.name!r} has {size})")
+        out[c.name] = arr
+    t = out["t_s"]
+    bad = np.flatnonzero(np.diff(t) <= 0.0)
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise LogError(source, i + 2, f"column 't_s': expected strictly increasing time (got "
+                                      f"{t[i]!r} after {t[i - 1]!r})")
+    return RunLog(source=str(source), **out)
+
+
+# -- writing -------------------------------------------------------------------------------
+def _quote(text: str) -> str:
+    if any(ch in text for ch in ',"\n\r'):
+        return '"' + text.replace('"', '""') + '"'
+    return text
+
+
+def to_csv_text(log: RunLog, *, float_format: str = "%.6f") -> str:
+    """The file's text (see the module docstring). ``float_format`` replaces ``%.6f`` (e.g.
+    ``"%r"``-like ``"%.17g"`` for a lossless copy)."""
+    names = log.names
+    fmts = [(_BY_NAME[n].fmt if _BY_NAME[n].fmt != "%.6f" else float_format) for n in names]
+    columns = []
+    for n in names:
+        v = getattr(log, n)
+        if n == "data_text":
+            columns.append([_quote(s) for s in v])
+        elif _BY_NAME[n].kind == "flag":
+            columns.append(v.astype(np.int64).tolist())
+        else:
+            columns.append(v.tolist())
+    line = ",".join(fmts) + "\n"
+    body = "".join(line % row for row in zip(*columns)) if columns else ""
+    return FORMAT_LINE + "\n" + ",".join(names) + "\n" + body
+
+
+def write_log(log: RunLog, path: str | Path, *, float_format: str = "%.6f") -> Path:
+    """Write ``log`` as CSV atomically; raises :class:`LogError` if it cannot be written."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        if path.parent and not path.parent.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "w", newline="") as fh:
+            fh.write(to_csv_text(log, float_format=float_format))
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True) if tmp.parent.exists() else None
+        raise LogError(str(path), 0, f"cannot write the log ({exc.strerror})") from None
+    return path
+
+
+# -- reading -------------------------------------------------------------------------------
+def read_log(path: str | Path) -> RunLog:
+    """Read a log CSV (format 2 or 1, see the module docstring); raise :class:`LogError`
+    (``path:line: what was expected``) for anything malformed."""
     path = Path(path)
     try:
-        text = path.read_text()
+        raw = path.read_bytes()
     except OSError as exc:
-        raise SimError(f"{path}: cannot read telemetry CSV ({exc.strerror})") from None
-    lines = text.splitlines()
-    if not lines:
-        raise SimError(f"{path}:1: empty file, expected the header {','.join(COLUMNS)}")
-    header = lines[0].split(",")
-    missing = [c for c in ("t", "x", "y", "yaw", "speed", "steer", "speed_cmd", "steer_cmd")
-               if c not in header]
-    if missing:
-        raise SimError(f"{path}:1: header lacks column(s) {', '.join(missing)}")
+        raise LogError(str(path), 0, f"expected a readable CSV file ({exc.strerror})") from None
     try:
-        data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:] if ln.strip()],
-                        dtype=float).reshape(-1, len(header))
-    except ValueError as exc:
-        raise SimError(f"{path}: bad number ({exc})") from None
-    return {name: data[:, i] for i, name in enumerate(header)}
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise LogError(str(path), 1, "expected a text (CSV) file") from None
+    if "\0" in text:
+        raise LogError(str(path), 1, "expected a text (CSV) file")
+    return _parse(text, str(path))
+
+
+def _parse(text: str, source: str) -> RunLog:
+    reader = csv.reader(io.StringIO(text, newline=""))
+    header, offset = None, 0
+    try:
+        for row in reader:
+            if row and row[0].lstrip().startswith("#"):
+                _check_format_line(",".join(row), source, reader.line_num)
+                continue
+            if not row or all(not c.strip() for c in row):
+                continue
+            header = [FORMAT1_NAMES.get(h.strip(), h.strip()) for h in row]
+            break
+        if header is None:
+            raise LogError(source, 1, f"expected a header line with columns such as "
+                                      f"{', '.join(COLUMN_NAMES[:6])}, ...")
+        if "t_s" not in header:
+            raise LogError(source, reader.line_num, "expected a time column t_s (or t) in the header")
+        wanted = [(i, h) for i, h in enumerate(header) if h in _BY_NAME]
+        values: dict[str, list] = {h: [] for _, h in wanted}
+        lines: list[int] = []
+        for row in reader:
+            line = reader.line_num
+            if not row or all(not c.strip() for c in row):
+                continue
+            if len(row) < len(header):
+                raise LogError(source, line, f"expected {len(header)} cells (got {len(row)})")
+            for i, h in wanted:
+                cell = row[i]
+                if _BY_NAME[h].kind == "text":
+                    values[h].append(cell)
+                    continue
+                try:
+                    v = float(cell)
+                except ValueError:
+                    raise LogError(source, line, f"column {h!r}: expected a number (got {cell!r})") from None
+                if not math.isfinite(v):
+                    raise LogError(source, line, f"column {h!r}: expected a finite number (got {cell!r})")
+                values[h].append(v)
+            lines.append(line)
+    except csv.Error as exc:
+        raise LogError(source, reader.line_num, f"expected valid CSV ({exc})") from None
+    try:
+        return log_from_columns(values, source)
+    except LogError as exc:  # map the row index back to the file's line
+        if exc.line >= 2 and exc.line - 2 < len(lines):
+            raise LogError(source, lines[exc.line - 2], exc.message) from None
+        raise
+
+
+def _check_format_line(line: str, source: str, lineno: int) -> None:
+    words = line.lstrip("#").split()
+    if "format" in words:
+        k = words.index("format")
+        if k + 1 < len(words) and words[k + 1].isdigit() and int(words[k + 1]) > FORMAT_VERSION:
+            raise LogError(source, lineno, f"log format {words[k + 1]} is newer than this "
+                                           f"simulator reads (format {FORMAT_VERSION}): update nxpcup-sim")
+
+
+# -- recording a run -------------------------------------------------------------------------
+class RunRecorder:
+    """Collects a run's rows (see the module docstring); :meth:`freeze` gives the RunLog.
+
+    ``frame(...)`` at each camera frame boundary k appends the state of row k and closes row
+    k - 1 with ``previous_command``: the command the first physics step after ``t_k-1``
+    applied (None when no step followed). ``text(lines)`` adds ``add_data`` text to the open
+    row. No row is changed after it is closed.
+    """
+
+    def __init__(self, *, record_text: bool = True) -> None:
+        self._state: list[tuple] = []
+        self._commands: list[tuple[float, float, float]] = []
+        self._texts: dict[int, list[str]] = {}
+        self._open_command: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.record_text = record_text
+
+    def __len__(self) -> int:
+        return len(self._state)
+
+    def frame(self, k: int, t_s: float, x_m: float, y_m: float, yaw_rad: float, speed_mps: float,
+              steer_rad: float, yaw_rate_radps: float, command: tuple[float, float, float],
+              previous_command: tuple[float, float, float] | None, lap: int, off_track: bool) -> None:
+        """Row k: the state at ``t_s``; ``command`` is in force now (row k keeps it if no
+        step follows)."""
+        if self._state:
+            self._commands.append(self._open_command if previous_command is None else previous_command)
+        self._state.append((k, t_s, x_m, y_m, yaw_rad, speed_mps, steer_rad, yaw_rate_radps, lap, off_track))
+        self._open_command = command
+
+    def text(self, lines: Sequence[str]) -> None:
+        """``add_data`` text of the open row (lines added within one frame accumulate)."""
+        if self.record_text and self._state:
+            self._texts.setdefault(len(self._state) - 1, []).extend(lines)
+
+    def freeze(self, source: str = "<run>") -> RunLog:
+        """The log so far (the open row keeps the command in force at its boundary)."""
+        commands = self._commands + ([self._open_command] if self._state else [])
+        n = len(self._state)
+        state = np.array(self._state, dtype=float).reshape(n, 10)
+        cmd = np.array(commands, dtype=float).reshape(n, 3)
+        texts = tuple(TEXT_SEPARATOR.join(self._texts.get(i, ())) for i in range(n))
+        cols = {"frame": state[:, 0], "t_s": state[:, 1], "x_m": state[:, 2], "y_m": state[:, 3],
+                "yaw_rad": state[:, 4], "speed_mps": state[:, 5], "steer_rad": state[:, 6],
+                "yaw_rate_radps": state[:, 7], "speed_cmd_mps": cmd[:, 0], "steer_cmd_rad": cmd[:, 1],
+                "yaw_rate_cmd_radps": cmd[:, 2], "coast": np.zeros(n), "lap": state[:, 8],
+                "off_track": state[:, 9], "data_text": texts}
+        return log_from_columns(cols, source)
+
+
+def empty_log(source: str = "<run>") -> RunLog:
+    """A log with no rows (every run column present)."""
+    return RunRecorder().freeze(source)
+
+
+def schema_markdown() -> str:
+    """The schema table of docs/telemetry.md."""
+    rows = ["| column | unit | meaning |", "| --- | --- | --- |"]
+    rows += [f"| `{c.name}` | {c.unit} | {c.meaning} |" for c in COLUMNS]
+    return "\n".join(rows)
+
+
+__all__ = ["RunLog", "RunRecorder", "LogError", "Column", "COLUMNS", "COLUMN_NAMES", "FORMAT_VERSION",
+           "log_from_columns", "read_log", "write_log", "to_csv_text", "empty_log", "schema_markdown"]

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from simrunner.errors import SimError
-from simrunner.run.log import TelemetryLog
+from simrunner.run.log import RunLog
 
 
-def plot_run(log: TelemetryLog, track, path: str | Path, *, title: str = "") -> Path:
+def plot_run(log: RunLog, track, path: str | Path, *, title: str = "") -> Path:
     """Write a 3-panel PNG: path over the track raster (``track``: a ``SimTrack`` or None),
     speed (actual and commanded, m/s) and steering (actual and commanded, deg) against time."""
     import matplotlib
@@ -21,7 +21,7 @@ def plot_run(log: TelemetryLog, track, path: str | Path, *, title: str = "") -> 
     from matplotlib.figure import Figure
 
     path = Path(path)
-    t = log.column("t")
+    t = log.t_s
     fig = Figure(figsize=(11, 8), dpi=100, layout="constrained")
     grid = fig.add_gridspec(2, 2, width_ratios=(1.2, 1))
     ax_map = fig.add_subplot(grid[:, 0])
@@ -34,19 +34,19 @@ def plot_run(log: TelemetryLog, track, path: str | Path, *, title: str = "") -> 
         ax_map.imshow(r.image, cmap="gray", vmin=0, vmax=255, extent=(x0 - h, x1 + h, y0 - h, y1 + h),
                       interpolation="nearest")
     if len(t):
-        x, y = log.column("x"), log.column("y")
-        off = log.column("off_track") > 0
+        x, y = log.x_m, log.y_m
+        off = log.off_track
         ax_map.plot(x, y, color="tab:green", lw=1.2, label="path")
         if off.any():
             ax_map.plot(np.where(off, x, np.nan), np.where(off, y, np.nan), color="tab:red",
                         lw=2, label="off track")
         ax_map.plot(x[:1], y[:1], "o", color="tab:blue", label="start")
         ax_map.plot(x[-1:], y[-1:], "s", color="tab:orange", label="end")
-        ax_v.plot(t, log.column("speed_cmd"), color="tab:gray", lw=1, ls="--", label="commanded")
-        ax_v.plot(t, log.column("speed"), color="tab:blue", lw=1.2, label="actual")
-        ax_s.plot(t, np.degrees(log.column("steer_cmd")), color="tab:gray", lw=1, ls="--",
+        ax_v.plot(t, log.speed_cmd_mps, color="tab:gray", lw=1, ls="--", label="commanded")
+        ax_v.plot(t, log.speed_mps, color="tab:blue", lw=1.2, label="actual")
+        ax_s.plot(t, np.degrees(log.steer_cmd_rad), color="tab:gray", lw=1, ls="--",
                   label="commanded")
-        ax_s.plot(t, np.degrees(log.column("steer")), color="tab:red", lw=1.2, label="actual")
+        ax_s.plot(t, np.degrees(log.steer_rad), color="tab:red", lw=1.2, label="actual")
     ax_map.set_aspect("equal")
     ax_map.set_xlabel("x (m)")
     ax_map.set_ylabel("y (m)")

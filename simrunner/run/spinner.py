@@ -33,20 +33,30 @@ car) is ``camera.default_row``: the row that plays the real line camera.
 """
 from __future__ import annotations
 
+import contextvars
 import math
-from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
 from vehicle.description import CarDescription
 
-from simrunner.run.clock import LockstepClock
 from simrunner.errors import CommandError, SimError
+from simrunner.run.clock import LockstepClock
+from simrunner.run.log import RunRecorder
+
+if TYPE_CHECKING:
+    from simrunner.run.video import VideoRecorder
+    from simrunner.sensors.camera import Camera
 
 NormFn = Callable[[float, float], float]
 
-_ACTIVE: list["Session"] = []  # the running session (for Spinner() built inside main)
+# The session of the run executing in this context (thread), for ``Spinner()`` built inside
+# ``main`` as in the thesis. A context variable, not a module global: two runs in two
+# threads each see their own.
+_current_session: contextvars.ContextVar["Session | None"] = contextvars.ContextVar(
+    "simrunner_session", default=None)
 
 
 class BufferedNormals:
@@ -54,8 +64,8 @@ class BufferedNormals:
 
     The values come in the same order as from ``rng`` directly (a generator's standard
     normal stream does not depend on how it is split into calls), so images get the same
-    noise; a camera frame then costs a slice instead of a generator call. Other methods go
-    to ``rng`` itself (mixing them with buffered normals changes the order of the stream).
+    noise; a camera frame then costs a slice instead of a generator call. Only standard
+    normals are served (camera noise is all the run draws).
     """
 
     def __init__(self, rng: np.random.Generator, chunk: int = 16384):
@@ -87,31 +97,33 @@ class BufferedNormals:
             return self._buf, pos
         return self.standard_normal(n), 0
 
-    def __getattr__(self, name: str):
-        return getattr(self.rng, name)
-
 
 @dataclass
 class Session:
-    """What a Spinner talks to: the clock (and through it the sim), the camera, the car,
-    the noise generator and the optional video recorder. Built by :mod:`simrunner.run.runner`."""
+    """What a Spinner talks to: the clock (and through it the car model), the camera, the
+    car description, the noise generator, the run recorder (``add_data`` text) and the
+    optional video recorder. Built by :mod:`simrunner.run.runner`."""
 
     clock: LockstepClock
-    camera: Any  # render(pose) -> (H, W) uint8; render_row(pose, row); add_noise(img, rng)
+    camera: "Camera"
     car: CarDescription
     rng: np.random.Generator
-    video: Any = None  # simrunner.run.video.VideoRecorder or None
-    extra: dict = field(default_factory=dict)
+    recorder: RunRecorder | None = None
+    video: "VideoRecorder | None" = None
 
     def __post_init__(self) -> None:
         self.noise_rng = BufferedNormals(self.rng)  # what images draw their noise from
+        self.record_text = self.recorder is not None and self.recorder.record_text
+        self._token: contextvars.Token | None = None
 
     def activate(self) -> None:
-        _ACTIVE.append(self)
+        """Make this the session ``Spinner()`` attaches to in this context."""
+        self._token = _current_session.set(self)
 
     def deactivate(self) -> None:
-        if self in _ACTIVE:
-            _ACTIVE.remove(self)
+        if self._token is not None:
+            _current_session.reset(self._token)
+            self._token = None
 
 
 def _identity_speed(speed: float, angle: float) -> float:
@@ -158,15 +170,14 @@ class Spinner:
                  turn_norm: NormFn | None = None, diff_norm: NormFn | None = None, *,
                  session: Session | None = None):
         if session is None:
-            if not _ACTIVE:
+            session = _current_session.get()
+            if session is None:
                 raise SimError("Spinner() needs a running simulation: run the controller with "
                                "`simrunner drive FILE` (it calls main(spinner))")
-            session = _ACTIVE[-1]
         self._s = session
         self._clock = session.clock
         self._sim = session.clock.sim
-        # Camera.line_image: render_row + add_noise in one call (None: a camera without it)
-        self._line_image = getattr(session.camera, "line_image", None)
+        self._line_image = session.camera.line_image  # render_row + add_noise in one call
         cam = session.car.camera
         self.line_row: int = cam.default_row
         self.image_shape: tuple[int, int] = (cam.height_px, cam.width_px)
@@ -269,13 +280,10 @@ class Spinner:
         clock.advance_to_next_frame()
         pose = clock.pose()
         cam = session.camera
-        if line >= 0 and self._line_image is not None:  # one compiled call (simrunner.sensors.line_kernel)
+        if line >= 0:  # one compiled call (simrunner.sensors.line_kernel)
             img = self._line_image(pose, line, session.noise_rng if add_noise else None)
         else:
-            if line < 0:
-                img = cam.render(pose)
-            else:
-                img = np.asarray(cam.render_row(pose, line), dtype=np.uint8).reshape(1, -1)
+            img = cam.render(pose)
             if add_noise:
                 img = cam.add_noise(img, session.noise_rng)
         if session.video is not None:
@@ -314,21 +322,25 @@ class Spinner:
     # -- debugging data ------------------------------------------------------------------
     @property
     def recording(self) -> bool:
-        """True when a debug video is being written, i.e. when :meth:`add_data` shows
-        anything (a controller may skip formatting debug text otherwise)."""
-        return self._s.video is not None
+        """True when :meth:`add_data` text is kept: a debug video or a run-log CSV (its
+        ``data_text`` column) is written. A controller may skip formatting text otherwise."""
+        return self._s.video is not None or self._s.record_text
 
     def add_data(self, data: Sequence[str] | str | np.ndarray) -> None:
         """Add to the debug video: a list of text lines (or one string), shown in the right
         column; or a processed image line (``(W,)``, ``(1, W)`` or ``(k, W)`` array), shown
         stretched under the camera line. Data added during one frame replaces the previous
         frame's; it stays on screen until replaced."""
-        if type(data) is list and self._s.video is None:
-            try:  # the common case without a video: all str (join checks), nothing to show
+        s = self._s
+        if type(data) is list and s.video is None:
+            try:  # the common case without a video: all str (join checks)
                 "".join(data)
-                return
             except TypeError:
                 pass  # not all str: the checks below raise
+            else:
+                if s.record_text:
+                    s.recorder.text(data)
+                return
         if isinstance(data, np.ndarray):
             arr = data
             if arr.ndim == 1:
@@ -336,8 +348,8 @@ class Spinner:
             if arr.ndim != 2 or arr.shape[1] == 0:
                 raise self._fail(CommandError(
                     f"add_data(array of shape {data.shape}): expected an image line (W,) or (k, W)"))
-            if self._s.video is not None:
-                self._s.video.add_lines(arr)
+            if s.video is not None:
+                s.video.add_lines(arr)
             return
         if isinstance(data, str):
             lines = [data]
@@ -346,8 +358,10 @@ class Spinner:
         else:
             raise self._fail(CommandError(
                 f"add_data({type(data).__name__}): expected a list of str or a numpy image line"))
-        if self._s.video is not None:
-            self._s.video.add_text(lines)
+        if s.record_text:
+            s.recorder.text(lines)
+        if s.video is not None:
+            s.video.add_text(lines)
 
     def add_noise(self, img: np.ndarray) -> np.ndarray:
         """Add camera noise to ``img`` in place (when writable) and return it."""

@@ -303,6 +303,16 @@ class VideoRecorder:
         os.replace(self._tmp, self.path)
         return self.path
 
+    def discard(self) -> None:
+        """Stop the writer and remove everything written (the run did not start)."""
+        try:
+            written = self.close()
+        except SimError:
+            written = None
+        self._tmp.unlink(missing_ok=True)
+        if written is not None:  # only what this run wrote
+            written.unlink(missing_ok=True)
+
     # -- writer thread -------------------------------------------------------------------
     def _run(self) -> None:
         view = None

@@ -1,0 +1,129 @@
+"""Loading a controller: a Python file defining ``main(spinner)``, or a callable.
+
+:func:`load_controller` checks the file (one-line :class:`ControllerFileError` for a missing,
+non-Python or syntactically wrong file) and compiles it; :meth:`Controller.loaded` executes it
+in its own module, with its folder first on ``sys.path`` (so ``import helper`` finds the
+controller's own modules) and undoes both afterwards, so a later run of another folder's
+``helper.py`` does not get this one. :func:`user_traceback` keeps the user's frames only.
+"""
+from __future__ import annotations
+
+import contextlib
+import inspect
+import os
+import sys
+import traceback
+import types
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+from simrunner.errors import ControllerFileError
+from vehicle.userfiles import read_user_text
+
+PACKAGE_DIR = str(Path(__file__).resolve().parent.parent)  # simrunner/: not the user's frames
+MODULE_NAME = "simrunner_controller"
+
+MainFn = Callable[[object], object]
+
+
+@dataclass(frozen=True)
+class Controller:
+    """A loaded-but-not-run controller: compiled ``code`` of ``path``, or a callable ``main``."""
+
+    path: Path | None
+    code: types.CodeType | None
+    main: MainFn | None
+    user_file: str | None  # file whose frames are the user's (watchdog, tracebacks)
+
+    @contextlib.contextmanager
+    def loaded(self) -> Iterator[MainFn]:
+        """Execute the file (its top-level code may raise: that is a controller fault) and
+        yield its ``main``; ``sys.modules``/``sys.path`` are restored on exit."""
+        if self.code is None:
+            yield self.main
+            return
+        folder = str(Path(self.code.co_filename).parent)
+        modules_before = set(sys.modules)
+        module = types.ModuleType(MODULE_NAME)
+        module.__file__ = self.code.co_filename
+        sys.modules[MODULE_NAME] = module
+        sys.path.insert(0, folder)
+        try:
+            exec(self.code, module.__dict__)
+            yield controller_main(module, self.path)
+        finally:
+            sys.modules.pop(MODULE_NAME, None)
+            _forget_modules_from(folder, set(sys.modules) - modules_before)
+            if folder in sys.path:
+                sys.path.remove(folder)
+
+
+def load_controller(controller: str | Path | MainFn) -> Controller:
+    """A :class:`Controller` from a file path or a callable ``main(spinner)``."""
+    if callable(controller):
+        try:
+            user_file = inspect.getsourcefile(controller)
+        except TypeError:
+            user_file = None
+        return Controller(None, None, controller, user_file)
+    path = Path(controller)
+    code = compile_controller(path)
+    return Controller(path, code, None, code.co_filename)
+
+
+def compile_controller(path: str | Path) -> types.CodeType:
+    """Compile a controller file; bad files raise :class:`ControllerFileError` (one line)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ControllerFileError(f"{path}: no such controller file")
+    if path.suffix != ".py":
+        raise ControllerFileError(f"{path}: expected a Python file (.py) with main(spinner)")
+    source = read_user_text(path, "controller", ControllerFileError, "Python")
+    try:
+        return compile(source, str(path.resolve()), "exec")
+    except SyntaxError as exc:
+        raise ControllerFileError(f"{path}:{exc.lineno}: syntax error: {exc.msg}") from None
+    except ValueError as exc:  # e.g. null bytes
+        raise ControllerFileError(f"{path}: not a Python file ({exc})") from None
+
+
+def controller_main(module: types.ModuleType, path: Path | None) -> MainFn:
+    """The module's ``main``, checked to take one argument."""
+    main = getattr(module, "main", None)
+    if not callable(main):
+        raise ControllerFileError(f"{path}: no main(spinner) function defined")
+    try:
+        inspect.signature(main).bind(object())
+    except TypeError:
+        raise ControllerFileError(f"{path}: main must take one argument (the Spinner)") from None
+    except ValueError:  # no signature (builtins): let the call decide
+        pass
+    return main
+
+
+def user_traceback(exc: BaseException) -> str:
+    """Traceback text of ``exc`` without the simulator's frames (the user's frames only)."""
+    te = traceback.TracebackException.from_exception(exc)
+    seen = set()
+
+    def trim(t: traceback.TracebackException | None) -> None:
+        while t is not None and id(t) not in seen:
+            seen.add(id(t))
+            t.stack = traceback.StackSummary.from_list(
+                [f for f in t.stack if not f.filename.startswith(PACKAGE_DIR)
+                 and not f.filename.startswith("<frozen importlib")
+                 and not f.filename.startswith(contextlib.__file__)])
+            trim(t.__cause__)
+            t = t.__context__
+
+    trim(te)
+    return "".join(te.format())
+
+
+def _forget_modules_from(folder: str, names: set[str]) -> None:
+    """Unload helper modules a controller imported from its own folder."""
+    for name in names:
+        f = getattr(sys.modules.get(name), "__file__", None) or ""
+        if f and os.path.dirname(os.path.abspath(f)) == folder:
+            sys.modules.pop(name, None)

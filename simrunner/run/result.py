@@ -1,0 +1,65 @@
+"""What a run did: :class:`Outcome` and :class:`RunResult` (the ``--summary`` JSON)."""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from simrunner.errors import ControllerError
+from simrunner.run.log import RunLog, empty_log
+
+
+class Outcome(enum.StrEnum):
+    """How a run ended (the summary's ``outcome``; a ``str``, so ``== "finished"`` works)."""
+
+    FINISHED = "finished"                        # the laps were completed
+    OFF_TRACK = "off_track"                      # a wheel left the road
+    TIMEOUT = "timeout"                          # the simulated time limit passed
+    CONTROLLER_ERROR = "controller_error"        # main raised (or sent a bad command)
+    CONTROLLER_RETURNED = "controller_returned"  # main returned
+    STALLED = "stalled"                          # no simulated time passed for the wall limit
+    INTERRUPTED = "interrupted"                  # Ctrl-C
+
+    @property
+    def ok(self) -> bool:
+        """The run succeeded (exit code 0)."""
+        return self in (Outcome.FINISHED, Outcome.CONTROLLER_RETURNED)
+
+
+@dataclass
+class RunResult:
+    """What a run did; times in seconds. ``log`` is the run log (one row per camera frame)."""
+
+    outcome: Outcome
+    laps: int
+    laps_completed: int
+    lap_times_s: list[float]
+    sim_time_s: float
+    wall_time_s: float
+    track: str
+    seed: int
+    message: str = ""
+    cpu_time_s: float = 0.0  # process CPU time of the run loop (load-independent speed)
+    error: ControllerError | None = None
+    log: RunLog = field(default_factory=empty_log, repr=False)
+    outputs: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return Outcome(self.outcome).ok
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated seconds per wall second."""
+        return self.sim_time_s / self.wall_time_s if self.wall_time_s > 0 else math.inf
+
+    def summary(self) -> dict[str, Any]:
+        """The ``--summary`` JSON object."""
+        return {"outcome": str(self.outcome), "message": self.message, "laps": self.laps,
+                "laps_completed": self.laps_completed,
+                "lap_times_s": [round(t, 6) for t in self.lap_times_s],
+                "sim_time_s": round(self.sim_time_s, 6), "wall_time_s": round(self.wall_time_s, 3),
+                "real_time_factor": round(self.real_time_factor, 2),
+                "cpu_time_s": round(self.cpu_time_s, 3), "track": self.track,
+                "seed": self.seed, "frames": len(self.log), "outputs": self.outputs}

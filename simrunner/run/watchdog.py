@@ -1,0 +1,64 @@
+"""The wall-clock watchdog: stops a controller that never lets simulated time pass."""
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from pathlib import Path
+
+from simrunner.errors import Stalled
+from simrunner.run.clock import LockstepClock
+
+
+class Watchdog:
+    """SIGALRM every ``period`` s: if ``clock`` made no progress for ``limit_s`` of wall
+    time, end the run and raise :class:`Stalled` in the controller. Works in the main
+    thread (where signals are delivered); elsewhere it is disabled (``enabled`` False). The
+    previous SIGALRM handler and timer are restored on exit."""
+
+    def __init__(self, clock: LockstepClock, limit_s: float, user_file: str | None):
+        self.clock = clock
+        self.limit_s = float(limit_s)
+        self.user_file = user_file
+        self.period_s = min(0.25, self.limit_s / 4.0)
+        self.armed = False
+        self._old = None
+        self.enabled = threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer")
+
+    def _where(self, frame) -> str:
+        f = frame
+        while f is not None:
+            if self.user_file and f.f_code.co_filename == self.user_file:
+                return f" (at {Path(f.f_code.co_filename).name}:{f.f_lineno} in {f.f_code.co_name})"
+            f = f.f_back
+        return ""
+
+    def _handler(self, signum, frame) -> None:
+        if not self.armed:
+            return
+        idle = time.monotonic() - self.clock.last_progress_wall_s
+        if idle <= self.limit_s:
+            return
+        msg = (f"controller stalled: {idle:.1f} s of wall time without letting simulated time "
+               f"pass{self._where(frame)}; call get_image(), sleep() or get_time() in every loop "
+               f"(limit --wall-limit {self.limit_s:g} s)")
+        self.clock.finish("stalled", msg)
+        self.clock.last_progress_wall_s = time.monotonic()  # raise again only after another limit
+        raise Stalled(msg)
+
+    def __enter__(self) -> "Watchdog":
+        if self.enabled:
+            self._old = signal.signal(signal.SIGALRM, self._handler)
+            signal.setitimer(signal.ITIMER_REAL, self.period_s, self.period_s)
+        self.armed = True
+        return self
+
+    def disarm(self) -> None:
+        self.armed = False
+        if self.enabled and self._old is not None:
+            signal.setitimer(signal.ITIMER_REAL, 0.0, 0.0)
+            signal.signal(signal.SIGALRM, self._old)
+            self._old = None
+
+    def __exit__(self, *exc) -> None:
+        self.disarm()
