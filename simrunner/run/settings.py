@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 from simrunner.errors import SimError
@@ -37,6 +38,6 @@ class RunSettings:
             object.__setattr__(self, name, int(v))
         for name, hi in (("time_limit_s", 1e6), ("dt_s", MAX_DT_S), ("wall_limit_s", 1e6)):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not 0.0 < v <= hi:
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or not 0.0 < v <= hi:
                 raise SettingsError(f"{name} = {v!r}: expected a number in (0, {hi:g}]")
             object.__setattr__(self, name, float(v))

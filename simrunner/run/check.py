@@ -1,0 +1,143 @@
+"""The controller checker: run a controller briefly and tell what breaks the contract.
+
+In the spirit of Gymnasium's ``env_checker``: :func:`check_controller` loads the controller,
+drives it twice for a short simulated time with the same seed, and reports
+
+- problems (the controller cannot work here): the file does not load or has no usable
+  ``main(spinner)``; ``main`` raises (with the user's file:line); it never lets simulated time
+  pass (stalled); it sends bad commands; two runs with the same seed differ (hidden wall-clock
+  time, an unseeded random generator, state kept between runs);
+- warnings (it runs, but probably not as meant): ``main`` returns early, the car never moves,
+  commands beyond the car's limits (capped), the car leaves the track in the check window.
+
+``simrunner check CONTROLLER`` prints the report; exit 0 without problems, 1 with.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from simrunner.errors import ControllerFileError
+from simrunner.run.controller import MainFn, load_controller
+from simrunner.run.result import Outcome, RunResult
+from simrunner.run.runner import Run, resolve_track
+from simrunner.run.settings import RunSettings
+from simrunner.track import SimTrack
+from vehicle.description import CarDescription, load_car
+
+CHECK_SECONDS = 3.0
+CHECK_WALL_LIMIT_S = 3.0
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """What :func:`check_controller` found; ``ok`` when there are no problems."""
+
+    controller: str
+    problems: tuple[str, ...]
+    warnings: tuple[str, ...]
+    sim_time_s: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+    def text(self) -> str:
+        lines = [f"{self.controller}: {'OK' if self.ok else 'PROBLEMS'} "
+                 f"({self.sim_time_s:.2f} s simulated, twice)"]
+        lines += [f"  problem: {p}" for p in self.problems]
+        lines += [f"  warning: {w}" for w in self.warnings]
+        return "\n".join(lines) + "\n"
+
+
+def _run_once(controller, track: SimTrack, car: CarDescription, settings: RunSettings) -> RunResult:
+    run = Run(track, car, settings)
+    outcome, message, error = run.execute(controller)
+    return RunResult(outcome=outcome, laps=settings.laps, laps_completed=run.judge.laps_completed,
+                     lap_times_s=run.judge.lap_times_s, sim_time_s=run.clock.time_s,
+                     wall_time_s=run.wall_time_s, track=str(track.source), seed=settings.seed,
+                     message=message, error=error, log=run.recorder.freeze("<check>"))
+
+
+def _first_difference(a, b) -> str | None:
+    if len(a) != len(b):
+        return f"{len(a)} vs {len(b)} frames"
+    for name in ("speed_cmd_mps", "steer_cmd_rad", "x_m", "y_m", "yaw_rad"):  # causes first
+        x, y = getattr(a, name), getattr(b, name)
+        diff = np.flatnonzero(x != y)
+        if diff.size:
+            k = int(diff[0])
+            return f"{name} differs first at frame {k} (t = {a.t_s[k]:.3f} s)"
+    return None
+
+
+def check_controller(controller: str | Path | MainFn, *, track: str | Path | SimTrack | None = None,
+                     car: str | Path | CarDescription | None = None, seconds: float = CHECK_SECONDS,
+                     seed: int = 0, wall_limit_s: float = CHECK_WALL_LIMIT_S) -> CheckReport:
+    """Check ``controller`` (a file or a callable) on ``track`` (default: the bundled one).
+
+    Bad input (missing track, bad car file, bad settings) raises as in :func:`drive`; a bad
+    controller file is a problem in the report.
+    """
+    name = str(controller) if not callable(controller) else getattr(controller, "__qualname__", "main")
+    car_desc = car if isinstance(car, CarDescription) else load_car(car)
+    settings = RunSettings(laps=1000, time_limit_s=seconds, seed=seed, wall_limit_s=wall_limit_s)
+    sim_track, _ = resolve_track(track, car_desc)
+    try:
+        ctrl = load_controller(controller)
+        first = _run_once(ctrl, sim_track, car_desc, settings)
+        second = None
+        if first.outcome not in (Outcome.CONTROLLER_ERROR, Outcome.STALLED):
+            second = _run_once(ctrl, sim_track, car_desc, settings)
+    except ControllerFileError as exc:
+        return CheckReport(name, (str(exc),), ())
+    problems: list[str] = []
+    warnings: list[str] = []
+    if first.outcome == Outcome.CONTROLLER_ERROR:
+        where = _user_location(first)
+        problems.append(f"main raised{where}: {first.message}")
+    elif first.outcome == Outcome.STALLED:
+        problems.append(first.message)
+    elif first.outcome == Outcome.CONTROLLER_RETURNED:
+        warnings.append(f"main returned after {first.sim_time_s:.2f} s of simulated time; a "
+                        f"controller normally loops until the run ends")
+    elif first.outcome == Outcome.OFF_TRACK:
+        warnings.append(f"the car left the track in the first {seconds:g} s: {first.message}")
+    if second is not None:
+        diff = _first_difference(first.log, second.log)
+        if diff is not None or first.outcome != second.outcome:
+            problems.append("two runs with the same seed differ ("
+                            f"{diff or f'{first.outcome} vs {second.outcome}'}): use the Spinner's "
+                            "time (get_time) instead of the wall clock, and seed any random "
+                            "generator; keep no state between runs")
+    log = first.log
+    if len(log) > 1:
+        if not np.any(log.speed_cmd_mps != 0.0):
+            warnings.append("no speed was ever commanded: the car does not move "
+                            "(call set_speed or set_speed_and_servo)")
+        vmax, dmax = car_desc.drive.max_speed_mps, car_desc.steering.limit_rad
+        v = float(np.max(np.abs(log.speed_cmd_mps)))
+        if v > vmax:
+            warnings.append(f"speed commands up to {v:.3g} m/s exceed the car's max_speed_mps "
+                            f"{vmax:g} (they are capped)")
+        d = float(np.max(np.abs(log.steer_cmd_rad)))
+        if d > dmax:
+            warnings.append(f"steering commands up to {d:.3g} rad exceed the car's limit "
+                            f"{dmax:g} rad (they are capped); check turn_norm's units")
+    return CheckReport(name, tuple(problems), tuple(warnings), first.sim_time_s)
+
+
+def _user_location(result: RunResult) -> str:
+    """`` at FILE:LINE`` of the innermost user frame of the traceback, if any."""
+    if result.error is None:
+        return ""
+    loc = ""
+    for line in result.error.traceback_text.splitlines():
+        s = line.strip()
+        if s.startswith('File "') and ", line " in s:
+            path = s[6:s.index('"', 6)]
+            lineno = s.split(", line ")[1].split(",")[0]
+            loc = f" at {Path(path).name}:{lineno}"
+    return loc

@@ -1,0 +1,96 @@
+"""The controller checker (simrunner.run.check): every example passes; each kind of broken
+controller gets the problem or warning that names what is wrong."""
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from simrunner.run.check import check_controller
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+@pytest.fixture(scope="module")
+def track():
+    from simrunner.run.runner import resolve_track
+    from vehicle import CarDescription
+
+    return resolve_track(None, CarDescription())[0]
+
+
+def write(tmp_path: Path, name: str, body: str) -> Path:
+    p = tmp_path / name
+    p.write_text(textwrap.dedent(body))
+    return p
+
+
+@pytest.mark.parametrize("example", sorted(p.name for p in EXAMPLES.glob("*.py")))
+def test_every_example_controller_passes_the_checker(example, track):
+    report = check_controller(EXAMPLES / example, track=track, seconds=2.0)
+    assert report.ok, report.text()
+    assert report.sim_time_s > 0.0
+
+
+def test_a_raising_controller_is_a_problem_with_its_line(tmp_path, track):
+    ctrl = write(tmp_path, "boom.py", """\
+        def main(s):
+            s.get_image()
+            x = 1 / 0
+        """)
+    report = check_controller(ctrl, track=track)
+    assert not report.ok
+    assert "main raised at boom.py:3: ZeroDivisionError" in report.problems[0]
+
+
+def test_an_unseeded_random_controller_is_not_deterministic(tmp_path, track):
+    ctrl = write(tmp_path, "rand.py", """\
+        import random
+        def main(s):
+            while True:
+                s.get_image(s.line_row)
+                s.set_speed_and_servo(1.0, random.uniform(-0.01, 0.01))
+        """)
+    report = check_controller(ctrl, track=track, seconds=1.0)
+    assert any("two runs with the same seed differ" in p and "steer_cmd_rad" in p
+               for p in report.problems), report.text()
+
+
+def test_a_controller_that_never_waits_is_stalled(tmp_path, track):
+    ctrl = write(tmp_path, "spin.py", """\
+        def main(s):
+            while True:
+                pass
+        """)
+    report = check_controller(ctrl, track=track, wall_limit_s=0.5)
+    assert any("controller stalled" in p and "(at spin.py:" in p for p in report.problems), report.text()
+
+
+def test_no_main_is_a_problem(tmp_path, track):
+    ctrl = write(tmp_path, "nomain.py", "x = 1\n")
+    report = check_controller(ctrl, track=track)
+    assert report.problems == (f"{ctrl}: no main(spinner) function defined",)
+
+
+def test_warnings_for_a_car_that_never_moves_and_a_main_that_returns(tmp_path, track):
+    ctrl = write(tmp_path, "lazy.py", """\
+        def main(s):
+            for _ in range(10):
+                s.get_image()
+        """)
+    report = check_controller(ctrl, track=track)
+    assert report.ok
+    assert any("main returned after 0.20 s" in w for w in report.warnings), report.text()
+    assert any("no speed was ever commanded" in w for w in report.warnings)
+
+
+def test_commands_beyond_the_limits_are_warned(tmp_path, track):
+    ctrl = write(tmp_path, "wild.py", """\
+        def main(s):
+            while True:
+                s.get_image(s.line_row)
+                s.set_speed_and_servo(50.0, 0.0)
+        """)
+    report = check_controller(ctrl, track=track, seconds=0.5)
+    assert any("exceed the car's max_speed_mps" in w for w in report.warnings), report.text()
