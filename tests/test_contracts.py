@@ -114,3 +114,12 @@ def test_two_runs_in_two_threads_give_what_they_give_alone():
         assert len(other) == len(log) > 50
         for name in ("x_m", "y_m", "yaw_rad", "speed_mps", "steer_cmd_rad"):
             np.testing.assert_array_equal(getattr(other, name), getattr(log, name))
+
+
+def test_the_log_schema_is_documented_once_in_docs_telemetry():
+    from simrunner.run.log import COLUMNS, FORMAT_LINE
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "telemetry.md").read_text()
+    assert FORMAT_LINE in doc
+    for column in COLUMNS:
+        assert f"| `{column.name}` | {column.unit} |" in doc, column.name
