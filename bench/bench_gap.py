@@ -62,15 +62,8 @@ def _trial(k: int) -> dict:
            "best": result.ranking[0].effect, "best_delta_bic": result.ranking[0].delta_bic,
            "best_improvement": result.ranking[0].improvement}
     # the same held-out RMSE against the smoothed measured states (sensor noise mostly removed)
-    from simrunner.workflows.gap.logs import log_from_columns
-    from simrunner.workflows.gap.replay import REPORT_SIGNALS, residuals, rmse, window_mask
-
-    dv = result.derived
-    smooth = log_from_columns({"t": log.t_s, "x": dv.x_m, "y": dv.y_m, "yaw": dv.yaw_rad, "speed": dv.speed_mps,
-                               "speed_cmd": log.speed_cmd_mps, "steer_cmd": log.steer_cmd_rad}, log.source)
-    held = window_mask(len(log), result.held_windows)
-    row["rmse_smooth_before"] = rmse(residuals(smooth, dv, result.pred_before), held, REPORT_SIGNALS)
-    row["rmse_smooth_after"] = rmse(residuals(smooth, dv, result.pred_after), held, REPORT_SIGNALS)
+    row["rmse_smooth_before"] = result.rmse_smoothed_before
+    row["rmse_smooth_after"] = result.rmse_smoothed_after
     if effect is not None:
         exact, _ = make_measured_log(effect, rng=np.random.default_rng([SEED, k]), noise=False)
         d = derive(exact, truth.car.chassis.wheelbase_m, truth.car.steering.limit_rad)

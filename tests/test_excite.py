@@ -7,9 +7,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as hs
 
 from simrunner.car.effects import EFFECTS, with_effects
+from simrunner.run.log import FORMAT_LINE, RunLog, read_log, write_log
 from simrunner.workflows.excite import (AREA_M, SEGMENT_KINDS, ExcitationPlan, PlanError, make_plan, run_plan,
-                              segment_kind, write_log_csv)
-from simrunner.run.log import COLUMNS, read_csv
+                                        segment_kind)
 from vehicle.description import CarDescription
 
 CAR = CarDescription()
@@ -77,20 +77,28 @@ def test_bad_plan_files_are_one_line_errors(tmp_path, body, match):
     assert "\n" not in str(err.value)
 
 
-def test_nominal_play_back_stays_in_the_hall_area_and_writes_telemetry(tmp_path):
+EXCITE_COLUMNS = ("frame", "t_s", "x_m", "y_m", "yaw_rad", "speed_mps", "steer_rad", "yaw_rate_radps",
+                  "speed_cmd_mps", "steer_cmd_rad", "yaw_rate_cmd_radps", "coast")
+
+
+def test_nominal_play_back_stays_in_the_hall_area_and_writes_its_run_log(tmp_path):
     log = run_plan(PLAN, CAR)
-    assert log["x"].max() - log["x"].min() < AREA_M - 0.3
-    assert log["y"].max() - log["y"].min() < AREA_M - 0.3
-    out = write_log_csv(log, tmp_path / "log.csv")
-    assert out.read_text().splitlines()[0] == ",".join(COLUMNS)
-    back = read_csv(out)
-    assert np.allclose(back["x"], log["x"], atol=1e-6) and np.allclose(back["speed_cmd"], PLAN.speed_cmd_mps)
+    assert isinstance(log, RunLog) and log.names == EXCITE_COLUMNS  # no lap / off_track: no track
+    assert np.array_equal(log.frame, np.arange(len(PLAN))) and np.array_equal(log.t_s, PLAN.t_s)
+    assert np.array_equal(log.coast, PLAN.coast) and np.array_equal(log.steer_cmd_rad, PLAN.steer_cmd_rad)
+    assert np.ptp(log.x_m) < AREA_M - 0.3
+    assert np.ptp(log.y_m) < AREA_M - 0.3
+    out = write_log(log, tmp_path / "log.csv")
+    assert out.read_text().splitlines()[:2] == [FORMAT_LINE, ",".join(EXCITE_COLUMNS)]
+    back = read_log(out)
+    assert back.names == EXCITE_COLUMNS and np.array_equal(back.coast, log.coast)
+    assert np.allclose(back.x_m, log.x_m, atol=1e-6) and np.allclose(back.speed_cmd_mps, PLAN.speed_cmd_mps)
     # the coast segment really coasts: no losses in the nominal model
     coasts = [(a, b) for seg, a, b in PLAN.segments() if seg.startswith("coast:")]
     assert len(coasts) == 2  # the coast-down and the end of the random steps
     for a, b in coasts:
         part = (PLAN.t_s >= a) & (PLAN.t_s < b)
-        assert np.ptp(log["speed"][part]) < 0.02 and log["speed"][part].min() > 0.7
+        assert np.ptp(log.speed_mps[part]) < 0.02 and log.speed_mps[part].min() > 0.7
 
 
 EFFECT_VALUES = {
@@ -117,8 +125,8 @@ def test_every_effect_leaves_a_trace_in_its_segments(name, nominal_coarse):
     mask = np.zeros(len(PLAN), dtype=bool)
     for k in kinds:
         mask |= PLAN.kind_mask(k)
-    d_speed = np.abs(log["speed"] - nominal_coarse["speed"])[mask].max()
-    d_yaw_rate = np.abs(log["yaw_rate"] - nominal_coarse["yaw_rate"])[mask].max()
+    d_speed = np.abs(log.speed_mps - nominal_coarse.speed_mps)[mask].max()
+    d_yaw_rate = np.abs(log.yaw_rate_radps - nominal_coarse.yaw_rate_radps)[mask].max()
     assert max(d_speed, d_yaw_rate) > 0.1, (name, d_speed, d_yaw_rate)
 
 

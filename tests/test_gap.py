@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from simrunner.cli.gap import gap
 from simrunner.workflows.gap.fit import CANDIDATES
-from simrunner.workflows.gap.logs import read_log, write_log
+from simrunner.run.log import read_log, write_log
 from simrunner.workflows.gap.report import run_gap, write_outputs
 from simrunner.workflows.gap.synth import make_measured_log
 from vehicle.description import load_car
@@ -84,7 +84,7 @@ def test_report_folder(offset_run, tmp_path):
 
 # -- command line ------------------------------------------------------------------------
 @pytest.mark.parametrize("text, line, what", [
-    ("t,x,y,yaw,speed,speed_cmd\n0,0,0,0,0,0\n", 1, "missing: steer_cmd"),
+    ("t,x,y,yaw,speed,speed_cmd\n0,0,0,0,0,0\n", 1, "missing: steer_cmd_rad"),
     ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n0,0,0,0,0,0,zero\n", 2, "expected a number"),
     ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + "".join(f"{i * 0.1},0,0,0,0,0,0\n" for i in range(100))
      + "5.0,0,0,0,0,0,0\n", 102, "strictly increasing"),
@@ -104,7 +104,7 @@ def test_cli_bad_input_exit_2_and_nothing_written(tmp_path, text, line, what):
 def test_cli_bad_options_exit_2(tmp_path, offset_run):
     log, _, _ = offset_run
     p = tmp_path / "m.csv"
-    write_log(log, p)
+    write_log(log, p, float_format="%.17g")
     res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--effects", "warp_drive"])
     assert res.exit_code == 2 and "warp_drive" in res.stderr
     (tmp_path / "exists").mkdir()
@@ -118,7 +118,7 @@ def test_cli_bad_options_exit_2(tmp_path, offset_run):
 def test_cli_run_matches_library_and_jobs_do_not_matter(tmp_path, offset_run):
     log, _, _ = offset_run
     p = tmp_path / "m.csv"
-    write_log(log.subset(int(np.searchsorted(log.t_s, 12.0))), p)  # 12 s: six windows
+    write_log(log.subset(int(np.searchsorted(log.t_s, 12.0))), p, float_format="%.17g")  # 12 s: six windows
     subset = ["steering_offset", "steering_gain"]
     res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--jobs", "1", "--no-progress",
                                    "--effects", ",".join(subset)])

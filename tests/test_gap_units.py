@@ -10,9 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pieces.pose import Pose2
-from simrunner.workflows.gap import LogError
+from simrunner.run.log import FORMAT_LINE, LogError, RunLog, log_from_columns, read_log, write_log
+from simrunner.workflows.gap import LogError as GapLogError
 from simrunner.workflows.gap.fit import CANDIDATES, FitResult, Problem, choose, cost_of, fit_effect, nominal_scales
-from simrunner.workflows.gap.logs import COLUMNS, derive, log_from_columns, read_log, write_log
+from simrunner.workflows.gap.logs import MEASURED_COLUMNS, check_measured, derive
 from simrunner.workflows.gap.regimes import REGIMES, format_stats, residual_stats, segment
 from simrunner.workflows.gap.replay import make_windows, replay, residuals, split_windows
 from vehicle.description import CarDescription
@@ -98,10 +99,13 @@ def simulate(car, noise_rng=None, duration_s=12.0):
     if noise_rng is not None:
         sig = np.array([0, 0.005, 0.005, 0.005, 0.02, 0, 0])
         data = data + noise_rng.normal(size=data.shape) * sig
-    return log_from_columns({c: data[:, k] for k, c in enumerate(COLUMNS)}, "<kin>")
+    return log_from_columns({c: data[:, k] for k, c in enumerate(MEASURED_COLUMNS)}, "<kin>")
 
 
 # -- logs ------------------------------------------------------------------------------
+GAP_HEADER = "t,x,y,yaw,speed,speed_cmd,steer_cmd\n"  # format 1 (no units in the names)
+
+
 def _write(tmp_path, text, name="log.csv"):
     p = tmp_path / name
     p.write_text(text)
@@ -112,37 +116,46 @@ def _good_rows(n=100, dt=0.1):
     return "".join(f"{i * dt},{i * 0.1},0,0,1,1,0\n" for i in range(n))
 
 
+def read_measured(path):
+    """What ``simrunner gap`` does with its input file."""
+    return check_measured(read_log(path))
+
+
+def test_gap_log_error_is_the_run_log_error():
+    assert GapLogError is LogError
+
+
 def test_read_log_round_trip(tmp_path):
     log = simulate(CarDescription())
-    write_log(log, tmp_path / "a.csv")
+    write_log(log, tmp_path / "a.csv", float_format="%.17g")
     back = read_log(tmp_path / "a.csv")
-    for c in COLUMNS:
-        np.testing.assert_array_equal(back.as_columns()[c], log.as_columns()[c])
+    assert back.names == log.names == MEASURED_COLUMNS
+    for c in MEASURED_COLUMNS:
+        np.testing.assert_array_equal(back.column(c), log.column(c))
 
 
 def test_read_log_ignores_extra_columns_and_order(tmp_path):
     text = "steer_cmd,t,extra,x,y,yaw,speed,speed_cmd\n" + "".join(
         f"0,{i * 0.1},hello,{i * 0.1},0,0,1,1\n" for i in range(100))
-    log = read_log(_write(tmp_path, text))
+    log = read_measured(_write(tmp_path, text))
     assert len(log) == 100 and log.x_m[10] == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize("text, line, what", [
-    ("t,x,y,yaw,speed,speed_cmd\n" + _good_rows(), 1, "missing: steer_cmd"),
+    ("t,x,y,yaw,speed,speed_cmd\n" + _good_rows(), 1, "missing: steer_cmd_rad"),
     ("", 1, "header"),
-    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + _good_rows(5), 6, "expected at least"),
-    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + _good_rows(20, 0.5), 21, "expected at least"),
-    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + _good_rows(10) + "1.0,abc,0,0,1,1,0\n" + _good_rows(90),
-     12, "column 'x': expected a number"),
-    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + _good_rows(10) + "1.0,nan,0,0,1,1,0\n", 12, "finite"),
-    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + _good_rows(10) + "0.5,0,0,0,1,1,0\n" + _good_rows(90),
-     12, "strictly increasing"),
-    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + _good_rows(10) + "5.0,0,0\n", 12, "expected 7 cells"),
+    (GAP_HEADER + _good_rows(5), 6, "expected at least"),
+    (GAP_HEADER + _good_rows(20, 0.5), 21, "expected at least"),
+    (GAP_HEADER + _good_rows(10) + "1.0,abc,0,0,1,1,0\n" + _good_rows(90), 12, "column 'x_m': expected a number"),
+    (GAP_HEADER + _good_rows(10) + "1.0,nan,0,0,1,1,0\n", 12, "finite"),
+    (GAP_HEADER + _good_rows(10) + "0.5,0,0,0,1,1,0\n" + _good_rows(90), 12, "strictly increasing"),
+    (GAP_HEADER + _good_rows(10) + "\n5.0,0,0\n", 13, "expected 7 cells"),
+    (FORMAT_LINE + "\n" + GAP_HEADER + _good_rows(10) + "0.5,0,0,0,1,1,0\n", 13, "strictly increasing"),
 ])
 def test_read_log_errors_name_file_and_line(tmp_path, text, line, what):
     p = _write(tmp_path, text)
     with pytest.raises(LogError, match=what) as info:
-        read_log(p)
+        read_measured(p)
     assert str(info.value).startswith(f"{p}:{line}: ")
     assert "\n" not in str(info.value)
 
@@ -154,11 +167,102 @@ def test_read_log_missing_file(tmp_path):
 
 @settings(max_examples=40, deadline=None)
 @given(st.lists(st.text(alphabet="0123456789.,-eE abn\n", max_size=30), max_size=8))
-def test_read_log_never_crashes_on_junk(tmp_path_factory, junk):
+def test_measured_log_never_crashes_on_junk(tmp_path_factory, junk):
     p = tmp_path_factory.mktemp("junk") / "j.csv"
-    p.write_text("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + "\n".join(junk))
+    p.write_text(GAP_HEADER + "\n".join(junk))
     with pytest.raises(LogError):
+        read_measured(p)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.sampled_from(list("0123456789.,-eE abn\n\r#\"") + ["t_s", "x_m", "t", "coast", "data_text",
+                                                                        "# nxpcup-sim run log, format 3"]),
+                max_size=80).map("".join))
+def test_read_log_never_crashes_on_junk(tmp_path_factory, junk):
+    """Any text: a RunLog or one LogError line, nothing else."""
+    p = tmp_path_factory.mktemp("junk") / "j.csv"
+    p.write_text(junk)
+    try:
+        log = read_log(p)
+    except LogError as err:
+        assert str(err).startswith(f"{p}:") and "\n" not in str(err)
+    else:
+        assert isinstance(log, RunLog) and log.t_s.size == len(log)
+
+
+def test_run_gap_checks_its_log_first():
+    from simrunner.workflows.gap.report import run_gap
+
+    log = simulate(CarDescription())
+    with pytest.raises(LogError, match=r"<kin>:41: expected at least 50 rows"):
+        run_gap(log.subset(40), sim_factory=kin_factory)
+    with pytest.raises(LogError, match=r"missing: steer_cmd_rad"):
+        run_gap(log_from_columns({k: v for k, v in log.columns().items() if k != "steer_cmd_rad"}, "<kin>"),
+                sim_factory=kin_factory)
+
+
+# -- the run log's formats (simrunner.run.log; docs/telemetry.md) ----------------------------
+def _full_log(n=6) -> RunLog:
+    t = 0.02 * np.arange(n)
+    cols = {name: np.linspace(-1.0, 1.0, n) + k for k, name in enumerate(
+        ("x_m", "y_m", "yaw_rad", "speed_mps", "steer_rad", "yaw_rate_radps", "speed_cmd_mps", "steer_cmd_rad",
+         "yaw_rate_cmd_radps"))}
+    cols.update(frame=np.arange(n), t_s=t, coast=np.arange(n) % 2, lap=np.arange(n) // 3, off_track=np.arange(n) == 4)
+    return log_from_columns(cols, "<full>")
+
+
+def _assert_same_log(a: RunLog, b: RunLog) -> None:
+    assert a.names == b.names
+    for name in a.names:
+        if name == "data_text":
+            assert a.data_text == b.data_text
+        else:
+            np.testing.assert_array_equal(a.column(name), b.column(name))
+            assert a.column(name).dtype == b.column(name).dtype
+
+
+def test_format_1_file_reads_as_the_format_2_file(tmp_path):
+    log = _full_log()
+    p2 = write_log(log, tmp_path / "two.csv", float_format="%.17g")
+    lines = p2.read_text().splitlines()
+    assert lines[0] == FORMAT_LINE
+    old_names = {"t_s": "t", "x_m": "x", "y_m": "y", "yaw_rad": "yaw", "speed_mps": "speed", "steer_rad": "steer",
+                 "yaw_rate_radps": "yaw_rate", "speed_cmd_mps": "speed_cmd", "steer_cmd_rad": "steer_cmd",
+                 "yaw_rate_cmd_radps": "yaw_rate_cmd"}
+    header = ",".join(old_names.get(n, n) for n in lines[1].split(","))
+    p1 = _write(tmp_path, "\n".join([header] + lines[2:]) + "\n", "one.csv")  # no format line
+    one, two = read_log(p1), read_log(p2)
+    _assert_same_log(one, two)
+    _assert_same_log(two, log)
+
+
+def test_newer_format_is_refused_in_one_line(tmp_path):
+    p = _write(tmp_path, "# nxpcup-sim run log, format 3\nt_s,x_m\n0,0\n0.1,0\n")
+    with pytest.raises(LogError, match="format 3 is newer") as info:
         read_log(p)
+    assert str(info.value).startswith(f"{p}:1: ") and "\n" not in str(info.value)
+
+
+def test_data_text_with_commas_and_quotes_round_trips(tmp_path):
+    texts = ("", 'say "hi", then go', "a,b,,c", '"', "line | two", "plain")
+    log = log_from_columns({"t_s": 0.1 * np.arange(len(texts)), "speed_mps": np.ones(len(texts)),
+                            "data_text": texts}, "<text>")
+    back = read_log(write_log(log, tmp_path / "text.csv", float_format="%.17g"))
+    assert back.data_text == texts
+    _assert_same_log(back, log)
+
+
+def test_log_without_pose_reads_and_require_names_what_is_missing(tmp_path):
+    p = _write(tmp_path, "# nxpcup-sim run log, format 2\nt_s,speed_mps,yaw_rate_radps\n"
+                         + "".join(f"{0.02 * i:.2f},1.0,0.1\n" for i in range(60)))
+    log = read_log(p)
+    assert log.names == ("t_s", "speed_mps", "yaw_rate_radps") and len(log) == 60
+    assert log.x_m is None and log.coasting().shape == (60,) and not log.coasting().any()
+    with pytest.raises(LogError, match=r"missing: x_m\)") as info:
+        log.require("x_m")
+    assert str(info.value).startswith(f"{p}:1: ")
+    with pytest.raises(LogError, match="missing: x_m, y_m, yaw_rad, speed_cmd_mps, steer_cmd_rad"):
+        check_measured(log)
 
 
 def test_derive_recovers_yaw_rate_and_steer():
@@ -180,8 +284,8 @@ def test_segment_on_constructed_log():
     speed_cmd = np.where(t < 4, 1.5, np.where(t < 6, 0.5, 0.0))
     steer_cmd = np.where(t < 3, 0.0, np.where(t < 5, 0.2, -0.2))
     x = np.cumsum(v) * 0.01
-    log = log_from_columns(dict(t=t, x=x, y=np.zeros(n), yaw=yaw, speed=v, speed_cmd=speed_cmd,
-                                steer_cmd=steer_cmd))
+    log = log_from_columns(dict(t_s=t, x_m=x, y_m=np.zeros(n), yaw_rad=yaw, speed_mps=v, speed_cmd_mps=speed_cmd,
+                                steer_cmd_rad=steer_cmd))
     d = derive(log, 0.175)
     m = segment(log, d)
     assert set(m) == set(REGIMES)

@@ -32,13 +32,14 @@ def _input_errors() -> tuple[type[BaseException], ...]:
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Seed of the random-steer steps.")
 @click.option("--simulate", default=None, metavar="OUT.csv",
-              help="Also play the plan in the simulator (car effects apply) and write the "
-                   "log in the telemetry CSV schema.")
+              help="Also play the plan in the simulator (car effects apply) and write its "
+                   "run log (CSV, docs/telemetry.md).")
 @click.option("--dt", "dt_s", default=0.002, show_default=True, type=float, metavar="SECONDS",
               help="Physics time step of --simulate (must divide the 20 ms row period).")
 def excite_cmd(output, duration_s, car, seed, simulate, dt_s) -> None:
     """Write an excitation plan to drive open loop on the real car (docs/calibration.md)."""
-    from simrunner.workflows.excite import make_plan, predict_path, run_plan, write_log_csv
+    from simrunner.run.log import write_log
+    from simrunner.workflows.excite import make_plan, predict_path, run_plan
     from vehicle.description import load_car
 
     try:
@@ -49,14 +50,14 @@ def excite_cmd(output, duration_s, car, seed, simulate, dt_s) -> None:
         log = run_plan(plan, car_desc, dt_s=dt_s) if simulate else None
         plan.to_csv(output, extent=extent)
         if log is not None:
-            write_log_csv(log, simulate)
+            write_log(log, simulate)
     except _input_errors() as exc:
         _fail(exc)
     click.echo(f"plan: {output} ({len(plan)} rows, {plan.duration_s:.1f} s; predicted path "
                f"{extent[1] - extent[0]:.1f} x {extent[3] - extent[2]:.1f} m)")
     if log is not None:
-        click.echo(f"simulated log: {simulate} (path {log['x'].max() - log['x'].min():.1f} x "
-                   f"{log['y'].max() - log['y'].min():.1f} m)")
+        click.echo(f"simulated log: {simulate} (path {log.x_m.max() - log.x_m.min():.1f} x "
+                   f"{log.y_m.max() - log.y_m.min():.1f} m)")
 
 
 @click.command("calibrate")

@@ -59,13 +59,14 @@ def _engine_stderr_silenced():
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 def gap(measured: Path, out_dir: Path, car: Path | None, jobs: int, effects: str | None, dt_s: float,
         window_s: float, force: bool, no_progress: bool) -> None:
-    """Find where MEASURED (telemetry CSV) and the simulator disagree, name the missing
+    """Find where MEASURED (a run log CSV, docs/telemetry.md) and the simulator disagree, name the missing
     effect, add it to the car and show the gap shrink on held-out data."""
     from tqdm import tqdm
 
     from simrunner.errors import SimError
+    from simrunner.run.log import read_log
     from simrunner.workflows.gap.fit import CANDIDATES
-    from simrunner.workflows.gap.logs import read_log
+    from simrunner.workflows.gap.logs import check_measured
     from simrunner.workflows.gap.report import progress_total, run_gap, summary_text, write_outputs
     from vehicle.description import CarDescriptionError, load_car
 
@@ -79,7 +80,7 @@ def gap(measured: Path, out_dir: Path, car: Path | None, jobs: int, effects: str
             if bad or not names:
                 raise SimError(f"--effects {effects!r}: expected names among {', '.join(CANDIDATES)}")
         description = load_car(car)
-        log = read_log(measured)
+        log = check_measured(read_log(measured))
         total = progress_total(len(names) if names is not None else len(CANDIDATES))
         with _engine_stderr_silenced() as err:
             bar = tqdm(total=total, file=err, disable=no_progress, desc="gap", unit="fit", leave=False)

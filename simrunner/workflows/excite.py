@@ -10,8 +10,8 @@ when either would do) points the car back through the middle of the area, using 
 kinematic bicycle prediction of the nominal car.
 
 :func:`run_plan` plays a plan in the simulator (``make_sim``, so effects apply) and
-returns a log in the telemetry schema; :func:`write_log_csv` writes it exactly like
-``simrunner drive`` does (``simrunner.run.log``).
+returns its :class:`~simrunner.run.log.RunLog`, the record every workflow uses (written with
+``simrunner.run.log.write_log``; schema: docs/telemetry.md).
 """
 from __future__ import annotations
 
@@ -25,6 +25,7 @@ import numpy as np
 
 from pieces.pose import Pose2, wrap_angle
 from simrunner.errors import SimError
+from simrunner.run.log import RunLog, log_from_columns
 from vehicle.description import CarDescription
 from vehicle.userfiles import read_user_text
 
@@ -402,27 +403,26 @@ def predict_path(plan: ExcitationPlan, car: CarDescription) -> np.ndarray:
 
 
 # -- simulating ----------------------------------------------------------------------------
-LOG_COLUMNS = ("t", "x", "y", "yaw", "speed", "steer", "speed_cmd", "steer_cmd")
-
-
 def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, seed: int = 0,
-             start: Pose2 = Pose2(), pose_noise_m: float = 0.0) -> dict[str, np.ndarray]:
+             start: Pose2 = Pose2(), pose_noise_m: float = 0.0) -> RunLog:
     """Play ``plan`` in the simulator (``simrunner.car.effects.make_sim``: effects apply).
 
     Each row's command is set at ``t_k`` and the state logged at ``t_k`` (before the
-    frame's physics steps), like the telemetry of ``simrunner drive``. Returns arrays
-    ``(N,)`` for :data:`LOG_COLUMNS` plus ``yaw_rate``, ``yaw_rate_cmd`` (the differential
-    in force) and ``coast``. ``pose_noise_m``
-    > 0 adds Gaussian noise of that std to x and y (std / 0.2 m per rad to yaw) from
-    ``numpy.random.default_rng(seed)``, to mimic a real position log; 0 gives the exact
-    simulated pose (``seed`` then has no effect).
+    frame's physics steps), like the telemetry of ``simrunner drive``. Returns a
+    :class:`~simrunner.run.log.RunLog` (source ``"<excite>"``) with ``frame`` (the row
+    index), ``t_s``, the pose ``x_m, y_m, yaw_rad``, the actual ``speed_mps, steer_rad,
+    yaw_rate_radps``, the commands ``speed_cmd_mps, steer_cmd_rad`` and the differential
+    in force ``yaw_rate_cmd_radps``, and ``coast``; no ``lap`` or ``off_track`` (there is
+    no track). ``pose_noise_m`` > 0 adds Gaussian noise of that std to x and y (std / 0.2 m
+    per rad to yaw) from ``numpy.random.default_rng(seed)``, to mimic a real position log;
+    0 gives the exact simulated pose (``seed`` then has no effect).
     """
     from simrunner.car.effects import make_sim
 
     steps = plan_steps_per_row(plan, dt_s)
     sim = make_sim(car, dt_s=dt_s, start=start)
     n = len(plan)
-    out = {k: np.empty(n) for k in LOG_COLUMNS + ("yaw_rate", "yaw_rate_cmd")}
+    state = np.empty((n, 7))  # x, y, yaw, speed, steer, yaw_rate, yaw_rate_cmd
     coast_now = False
     for k in range(n):
         v, d, c = float(plan.speed_cmd_mps[k]), float(plan.steer_cmd_rad[k]), bool(plan.coast[k])
@@ -431,19 +431,19 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
             coast_now = c
         sim.set_command(v, d)
         p = sim.pose
-        out["t"][k] = plan.t_s[k]
-        out["x"][k], out["y"][k], out["yaw"][k] = p.x_m, p.y_m, p.yaw_rad
-        out["speed"][k], out["steer"][k], out["yaw_rate"][k] = sim.speed_mps, sim.steer_rad, sim.yaw_rate_radps
-        out["speed_cmd"][k], out["steer_cmd"][k] = v, d
-        out["yaw_rate_cmd"][k] = sim.yaw_rate_cmd_radps
+        state[k] = (p.x_m, p.y_m, p.yaw_rad, sim.speed_mps, sim.steer_rad, sim.yaw_rate_radps,
+                    sim.yaw_rate_cmd_radps)
         sim.step(steps)
-    out["coast"] = plan.coast.astype(float)
+    x, y, yaw = state[:, 0], state[:, 1], state[:, 2]
     if pose_noise_m > 0.0:
         rng = np.random.default_rng(seed)
-        out["x"] = out["x"] + rng.normal(0.0, pose_noise_m, n)
-        out["y"] = out["y"] + rng.normal(0.0, pose_noise_m, n)
-        out["yaw"] = np.array([wrap_angle(a) for a in out["yaw"] + rng.normal(0.0, pose_noise_m / 0.2, n)])
-    return out
+        x = x + rng.normal(0.0, pose_noise_m, n)
+        y = y + rng.normal(0.0, pose_noise_m, n)
+        yaw = np.array([wrap_angle(a) for a in yaw + rng.normal(0.0, pose_noise_m / 0.2, n)])
+    return log_from_columns({"frame": np.arange(n), "t_s": plan.t_s, "x_m": x, "y_m": y, "yaw_rad": yaw,
+                             "speed_mps": state[:, 3], "steer_rad": state[:, 4], "yaw_rate_radps": state[:, 5],
+                             "speed_cmd_mps": plan.speed_cmd_mps, "steer_cmd_rad": plan.steer_cmd_rad,
+                             "yaw_rate_cmd_radps": state[:, 6], "coast": plan.coast}, "<excite>")
 
 
 def plan_steps_per_row(plan: ExcitationPlan, dt_s: float) -> int:
@@ -453,18 +453,3 @@ def plan_steps_per_row(plan: ExcitationPlan, dt_s: float) -> int:
         raise PlanError(f"dt_s = {dt_s!r}: expected a step that divides the plan's row period "
                         f"{1.0 / plan.rate_hz:g} s")
     return steps
-
-
-def write_log_csv(log: dict[str, np.ndarray], path: str | Path) -> Path:
-    """Write a :func:`run_plan` log as a telemetry CSV (``simrunner.run.log`` schema and
-    number formats; ``frame`` = row index, ``lap`` 0, ``off_track`` 0)."""
-    from simrunner.run.log import TelemetryLog
-
-    tel = TelemetryLog()
-    n = len(log["t"])
-    yaw_rate = log.get("yaw_rate", np.zeros(n))
-    yaw_rate_cmd = log.get("yaw_rate_cmd", np.zeros(n))
-    for k in range(n):
-        tel.append((k, log["t"][k], log["x"][k], log["y"][k], log["yaw"][k], log["speed"][k], log["steer"][k],
-                    yaw_rate[k], log["speed_cmd"][k], log["steer_cmd"][k], yaw_rate_cmd[k], 0, 0))
-    return tel.write_csv(path)

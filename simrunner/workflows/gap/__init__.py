@@ -4,7 +4,7 @@ the gap shrink on held-out data.
 
 Data flow::
 
-    telemetry CSV --logs.read_log--> MeasuredLog --logs.derive--> smoothed states
+    run log CSV --simrunner.run.log.read_log--> RunLog --logs.check_measured, logs.derive--> smoothed states
       --replay.replay_windows (per candidate car)--> predictions --replay.residuals-->
       --regimes / stats--> where it disagrees
       --fit.fit_all (one process per effect)--> ranking --fit.choose--> winner or "none"
@@ -15,22 +15,12 @@ bench. See docs/gap.md.
 """
 from __future__ import annotations
 
-try:  # the simulator package's exception root (docs/DESIGN.md), when present
-    from simrunner.errors import SimError as _Root
-except ImportError:  # pragma: no cover - until simrunner defines it
-    _Root = ValueError
+from simrunner.errors import SimError
+from simrunner.run.log import LogError  # a malformed log: ``path:line: what was expected``
 
 
-class GapError(_Root):
+class GapError(SimError):
     """Root of the gap workflow's errors (bad input, impossible request)."""
-
-
-class LogError(GapError):
-    """A measured log is malformed. ``str(err)`` is ``path:line: what was expected``."""
-
-    def __init__(self, path: str, line: int, message: str):
-        self.path, self.line, self.message = str(path), int(line), message
-        super().__init__(f"{self.path}:{self.line}: {message}")
 
 
 __all__ = ["GapError", "LogError"]

@@ -37,8 +37,9 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from simrunner.run.log import RunLog
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.logs import Derived, MeasuredLog
+from simrunner.workflows.gap.logs import Derived
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, WORKFLOW_DT_S, SimFactory, Window, default_sim_factory,
                                   replay, residuals, window_mask)
 from vehicle.description import CarDescription
@@ -101,7 +102,7 @@ class Problem:
     """Everything a fit needs (picklable: sent to worker processes)."""
 
     car: CarDescription
-    log: MeasuredLog
+    log: RunLog
     derived: Derived
     windows: tuple[Window, ...]
     scales: dict[str, float]
@@ -133,7 +134,7 @@ def cost_of(problem: Problem, car: CarDescription) -> float:
     return total
 
 
-def nominal_scales(log: MeasuredLog, res: dict[str, np.ndarray], windows: Sequence[Window]) -> dict[str, float]:
+def nominal_scales(log: RunLog, res: dict[str, np.ndarray], windows: Sequence[Window]) -> dict[str, float]:
     """Per-signal normalisation: RMS of the nominal residuals in ``windows``, floored."""
     m = window_mask(len(log), windows)
     out = {}

@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from simrunner.workflows.gap.logs import Derived, MeasuredLog
+from simrunner.run.log import RunLog
+from simrunner.workflows.gap.logs import Derived
 
 MOVING_MPS = 0.1
 ACCEL_MPS2 = 0.3
@@ -29,7 +30,7 @@ STRAIGHT_RAD = 0.03
 REGIMES = ("all", "accelerating", "braking", "coasting", "steady", "straight", "cornering", "left", "right")
 
 
-def segment(log: MeasuredLog, derived: Derived) -> dict[str, np.ndarray]:
+def segment(log: RunLog, derived: Derived) -> dict[str, np.ndarray]:
     """Boolean masks (N,) for every name in :data:`REGIMES` (see the module docstring)."""
     moving = np.abs(derived.speed_mps) >= MOVING_MPS
     a = derived.accel_mps2 * np.sign(np.where(derived.speed_mps == 0.0, 1.0, derived.speed_mps))

@@ -28,7 +28,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from pieces.pose import Pose2
-from simrunner.workflows.gap.logs import Derived, MeasuredLog
+from simrunner.run.log import RunLog
+from simrunner.workflows.gap.logs import Derived
 from vehicle.description import CarDescription
 
 WINDOW_S = 2.0
@@ -62,7 +63,7 @@ class Window:
     stop: int
 
 
-def make_windows(log: MeasuredLog, window_s: float = WINDOW_S) -> list[Window]:
+def make_windows(log: RunLog, window_s: float = WINDOW_S) -> list[Window]:
     """Consecutive windows of about ``window_s`` covering the log.
 
     Each boundary is moved (by up to :data:`QUIET_SHIFT_S`) to a quiet sample: the one with
@@ -135,7 +136,7 @@ class Prediction:
     yaw_rate_radps: np.ndarray
 
 
-def replay(car: CarDescription, log: MeasuredLog, derived: Derived, windows: Sequence[Window], *,
+def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence[Window], *,
            dt_s: float = WORKFLOW_DT_S, sim_factory: SimFactory = default_sim_factory,
            lead_s: float | None = None) -> Prediction:
     """Replay ``windows`` of ``log`` with a simulator of ``car``; see the module docstring.
@@ -190,7 +191,7 @@ def replay(car: CarDescription, log: MeasuredLog, derived: Derived, windows: Seq
     return Prediction(*out)
 
 
-def residuals(log: MeasuredLog, derived: Derived, pred: Prediction) -> dict[str, np.ndarray]:
+def residuals(log: RunLog, derived: Derived, pred: Prediction) -> dict[str, np.ndarray]:
     """Predicted minus measured, per signal of :data:`FIT_SIGNALS` plus ``position_m``."""
     ex, ey = pred.x_m - log.x_m, pred.y_m - log.y_m
     c, s = np.cos(log.yaw_rad), np.sin(log.yaw_rad)
@@ -202,17 +203,14 @@ def residuals(log: MeasuredLog, derived: Derived, pred: Prediction) -> dict[str,
             "position_m": np.hypot(along, cross)}
 
 
-def smoothed_log(log: MeasuredLog, derived: Derived) -> MeasuredLog:
+def smoothed_log(log: RunLog, derived: Derived) -> RunLog:
     """``log`` with its states replaced by the smoothed ones (``derived``): residuals against
     it show the model error without most of the sensor noise."""
-    from simrunner.workflows.gap.logs import log_from_columns
-
-    cols = log.as_columns()
-    cols.update({"x": derived.x_m, "y": derived.y_m, "yaw": derived.yaw_rad, "speed": derived.speed_mps})
-    return log_from_columns(cols, log.source)
+    return log.with_columns(x_m=derived.x_m, y_m=derived.y_m, yaw_rad=derived.yaw_rad,
+                            speed_mps=derived.speed_mps)
 
 
-def noise_rms(log: MeasuredLog, derived: Derived) -> dict[str, float]:
+def noise_rms(log: RunLog, derived: Derived) -> dict[str, float]:
     """Estimated sensor noise: RMS of measured minus smoothed states, per report signal
     (about 15 % below the true white-noise sigma: the smoother follows part of the noise)
     (``position_m`` is the distance; ``yaw_rate_radps`` is not measured: NaN)."""

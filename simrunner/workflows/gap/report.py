@@ -24,10 +24,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from simrunner.run.log import RunLog
 from simrunner.workflows.gap import GapError
 from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, FitResult, Problem, bic, choose,
                                cost_of, fit_all, nominal_scales, with_effect)
-from simrunner.workflows.gap.logs import Derived, MeasuredLog, derive
+from simrunner.workflows.gap.logs import Derived, check_measured, derive
 from simrunner.workflows.gap.regimes import residual_stats, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction, SimFactory, Window,
                                   default_sim_factory, make_windows, noise_rms, replay, residuals, rmse,
@@ -57,7 +58,7 @@ class GapResult:
     gap_after: float
     stats_before: list[dict]
     stats_after: list[dict]
-    log: MeasuredLog = field(repr=False)
+    log: RunLog = field(repr=False)
     derived: Derived = field(repr=False)
     fit_windows: list[Window] = field(repr=False)
     held_windows: list[Window] = field(repr=False)
@@ -106,16 +107,19 @@ def _finite(obj):
     return obj
 
 
-def run_gap(log: MeasuredLog, car: CarDescription | None = None, *, jobs: int = 2,
+def run_gap(log: RunLog, car: CarDescription | None = None, *, jobs: int = 2,
             effects: Sequence[str] | None = None, dt_s: float = WORKFLOW_DT_S, window_s: float = WINDOW_S,
             sim_factory: SimFactory = default_sim_factory,
             delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
             progress: Callable[[str], None] | None = None) -> GapResult:
     """Run the workflow of the module docstring on ``log`` (``car`` default: the default car).
 
-    ``effects`` restricts the candidates (default: the whole catalogue); ``progress(label)``
-    is called after each of the :func:`progress_total` stages.
+    ``log`` must pass :func:`simrunner.workflows.gap.logs.check_measured` (else
+    :class:`simrunner.run.log.LogError`). ``effects`` restricts the candidates (default: the
+    whole catalogue); ``progress(label)`` is called after each of the :func:`progress_total`
+    stages.
     """
+    check_measured(log)
     car = car or CarDescription()
     tick = progress or (lambda label: None)
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad)

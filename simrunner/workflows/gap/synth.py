@@ -23,8 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simrunner.run.log import RunLog, log_from_columns
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.logs import MeasuredLog, log_from_columns
+from simrunner.workflows.gap.logs import MEASURED_COLUMNS
 from vehicle.description import CarDescription
 
 SYNTH_DT_S = 0.001
@@ -76,13 +77,15 @@ def draw_value(effect: str, rng: np.random.Generator) -> float:
 
 def make_measured_log(effect: str | None, *, rng: np.random.Generator, car: CarDescription | None = None,
                       value: float | None = None, start_s: float = 0.0, duration_s: float | None = None,
-                      noise: bool = True) -> tuple[MeasuredLog, Truth]:
+                      noise: bool = True) -> tuple[RunLog, Truth]:
     """A synthetic measured log with ``effect`` hidden (see the module docstring).
 
     ``value`` fixes the magnitude instead of drawing it; ``start_s``/``duration_s`` play
     only that part of the plan (from rest at the origin; tests use ~20 s parts);
     ``noise=False`` gives exact states (for the
-    signal-to-noise computation of the bench). Returns ``(log, truth)``.
+    signal-to-noise computation of the bench). Returns ``(log, truth)``; the log holds what
+    a car would log for the gap: :data:`~simrunner.workflows.gap.logs.MEASURED_COLUMNS` and
+    ``coast`` (source ``"<synthetic EFFECT>"``).
     """
     from simrunner.car.effects import with_effects
     from simrunner.workflows.excite import make_plan, run_plan
@@ -109,14 +112,13 @@ def make_measured_log(effect: str | None, *, rng: np.random.Generator, car: CarD
                                    steer_cmd_rad=plan.steer_cmd_rad[a:b], coast=plan.coast[a:b],
                                    segment=plan.segment[a:b])
     out = run_plan(plan, truth_car, dt_s=SYNTH_DT_S)
-    n = len(out["t"])
-    cols = {k: np.asarray(out[k], dtype=float) for k in ("t", "x", "y", "yaw", "speed", "speed_cmd", "steer_cmd",
-                                                          "coast")}
+    n = len(out)
+    cols = {k: out.column(k) for k in MEASURED_COLUMNS + ("coast",)}
     if noise:
-        cols["x"] = cols["x"] + rng.normal(0.0, NOISE_POS_M, n)
-        cols["y"] = cols["y"] + rng.normal(0.0, NOISE_POS_M, n)
-        yaw = cols["yaw"] + rng.normal(0.0, NOISE_YAW_RAD, n)
-        cols["yaw"] = (yaw + math.pi) % (2.0 * math.pi) - math.pi
-        cols["speed"] = cols["speed"] + rng.normal(0.0, NOISE_SPEED_MPS, n)
+        cols["x_m"] = cols["x_m"] + rng.normal(0.0, NOISE_POS_M, n)
+        cols["y_m"] = cols["y_m"] + rng.normal(0.0, NOISE_POS_M, n)
+        yaw = cols["yaw_rad"] + rng.normal(0.0, NOISE_YAW_RAD, n)
+        cols["yaw_rad"] = (yaw + math.pi) % (2.0 * math.pi) - math.pi
+        cols["speed_mps"] = cols["speed_mps"] + rng.normal(0.0, NOISE_SPEED_MPS, n)
     name = f"<synthetic {effect or 'none'}>"
     return log_from_columns(cols, name), Truth(effect, field, val, m_f, mu_f, plan_seed, truth_car)
