@@ -1,8 +1,11 @@
-"""Track loading: every kind of spec through worlds.sdf_read, raster, start, gate (simrunner.track.load)."""
+"""Track loading (simrunner.track.load): layouts in memory, every world through worlds.sdf_read;
+raster, start, gate; both routes give the same track."""
 from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +14,10 @@ import pytest
 from pieces.pose import Pose2
 from simrunner.errors import SimError
 from simrunner.track.raster import BLACK_GRAY, FLOOR_GRAY, WHITE_GRAY
-from simrunner.track.load import TrackLoadError, load_track, road_extents_m
+from simrunner.track.load import TrackLoadError, load_track, road_extents_m, track_from_trackgen
 
-TRACKS = Path(__file__).resolve().parents[2] / "shared" / "tracks"
+REPO = Path(__file__).resolve().parents[1]
+TRACKS = REPO.parent / "shared" / "tracks"
 OVAL = """@name = oval
 START_FINISH
 STRAIGHT
@@ -92,7 +96,7 @@ def test_border_lines_sit_on_the_lane_edges():
     assert white_next_to(img == FLOOR_GRAY) < 0.02 * boundary
 
 
-def test_layout_file_is_built_and_loaded(oval_folder):
+def test_layout_file_is_loaded_in_memory(oval_folder):
     track = load_track(oval_folder / "oval.txt")
     data = json.loads((oval_folder / "out" / "track.json").read_text())
     assert track.name == "oval" and track.source == oval_folder / "oval.txt"
@@ -180,3 +184,100 @@ def test_unreadable_mesh_is_reported(oval_folder, tmp_path):
     mesh.write_bytes(b"solid nonsense\nfacet normal 1 2\n")
     with pytest.raises(TrackLoadError, match=r"lane.*(cannot read mesh|expected a triangle mesh)"):
         load_track(out)
+
+
+# -- layouts in memory vs their built world ---------------------------------------------------
+# An octagon of 1 m sides with the START_FINISH on the side at 135 deg: a rotated marking
+# and a start pose whose yaw the built world stores through a rotation matrix.
+OCTAGON = "@name = octagon_start\n" + "".join(
+    f"{'START_FINISH' if side == 3 else 'STRAIGHT'}\nTURN_LEFT\n" for side in range(8))
+
+
+@pytest.fixture(params=["examples/thesis_figure8.txt", "examples/oval_start.txt", "octagon"])
+def layout_path(request, tmp_path):
+    if request.param == "octagon":
+        path = tmp_path / "octagon_start.txt"
+        path.write_text(OCTAGON)
+        return path
+    return REPO / request.param
+
+
+def test_layout_in_memory_equals_its_built_world(layout_path, tmp_path):
+    """Issue 9: the simulator makes a layout's track in memory (raster from the polygons); the
+    same layout built by ``trackgen build`` and read from its world gives the same track, the
+    raster pixel for pixel (both paint the same triangles: raster.py, "Footprint layers")."""
+    from trackgen.build import build
+
+    build(layout_path, tmp_path / "built", preview=False)
+    mem = load_track(layout_path)
+    disk = load_track(tmp_path / "built")
+    a, b = mem.raster, disk.raster
+    assert (a.shape, a.origin_xy_m, a.m_per_px) == (b.shape, b.origin_xy_m, b.m_per_px)
+    assert int(np.count_nonzero(a.image != b.image)) == 0
+    assert int(np.count_nonzero(a.road_mask != b.road_mask)) == 0
+    assert (mem.start, mem.gate, mem.gate_half_width_m) == (disk.start, disk.gate, disk.gate_half_width_m)
+    assert mem.lap_length_m == disk.lap_length_m and not mem.lap_length_estimated
+    assert np.array_equal(mem.centreline, disk.centreline)
+    assert mem.surface_z_m == disk.surface_z_m  # the slab's top as float32, in both
+    assert mem.name == disk.name and mem.source == layout_path
+
+
+def test_layout_is_loaded_without_files_or_meshes(tmp_path):
+    """No trackgen build, no world read, no STL: trimesh (and scipy, numpy-stl) stay unloaded."""
+    code = (
+        "import sys\n"
+        "import simrunner.track.load as load, trackgen.build as build\n"
+        "def refuse(*a, **k): raise AssertionError('touched the disk route')\n"
+        "build.build = load._read_world = refuse\n"
+        f"track = load.load_track({str(REPO / 'examples' / 'oval_start.txt')!r})\n"
+        "print(track.name, sorted(m for m in ('trimesh', 'scipy', 'stl') if m in sys.modules))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=tmp_path, check=False)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["oval_start", "[]"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_track_from_trackgen_takes_a_python_built_track():
+    from trackgen import TrackGenerator
+
+    gen = TrackGenerator(name="py_oval").add_piece("START_FINISH").add_piece("STRAIGHT")
+    for _ in range(4):
+        gen.add_piece("TURN_LEFT")
+    gen.add_piece("STRAIGHT", length_m=2.0)
+    for _ in range(4):
+        gen.add_piece("TURN_LEFT")
+    track = track_from_trackgen(gen.build())
+    assert track.name == "py_oval" and track.source == Path(__file__)
+    assert track.lap_length_m == pytest.approx(4.0 + 2 * math.pi * 0.8)
+    assert track.raster.gray_at([[track.gate.x_m, track.gate.y_m]])[0] == BLACK_GRAY
+    assert track.centreline.shape[1] == 2 and not track.centreline.flags.writeable
+
+
+def test_failing_layout_raises_what_trackgen_build_raises(tmp_path):
+    """Same one-line ``file:line: ...`` message as ``trackgen build``; its error is the cause."""
+    from trackgen.build import ValidationFailed, build
+
+    broken = REPO / "examples" / "broken.txt"
+    with pytest.raises(ValidationFailed) as built:
+        build(broken, tmp_path / "out", preview=False)
+    with pytest.raises(TrackLoadError) as loaded:
+        load_track(broken)
+    assert str(loaded.value) == str(built.value)
+    assert str(loaded.value).startswith(f"{broken}:12: track does not close")
+    assert isinstance(loaded.value.__cause__, ValidationFailed)
+
+
+def test_layout_named_like_the_car_is_refused(tmp_path):
+    layout = tmp_path / "car.txt"
+    layout.write_text("@name = nxp_cup_car\n" + OVAL.split("\n", 1)[1])
+    with pytest.raises(TrackLoadError, match=r"car.txt: track name 'nxp_cup_car' equals the car"):
+        load_track(layout)
+
+
+@pytest.mark.parametrize("m_per_px", [0.0, -0.005, float("nan"), float("inf"), "5mm", True])
+def test_bad_m_per_px_is_reported(oval_folder, m_per_px):
+    for spec in (oval_folder / "oval.txt", oval_folder / "out"):
+        with pytest.raises(TrackLoadError, match=r"m_per_px = .*: expected a positive number") as info:
+            load_track(spec, m_per_px=m_per_px)
+        assert str(spec) in str(info.value)

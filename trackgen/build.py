@@ -68,32 +68,46 @@ class BuildResult:
     warnings: list[Problem]
 
 
-def check_layout(layout: Layout, car: CarDescription | None = None) -> Checked:
-    """Chain ``layout`` and run every check of :mod:`trackgen.validate` (meshes included)."""
+def check_layout(layout: Layout, car: CarDescription | None = None, *,
+                 meshes: bool = True) -> Checked:
+    """Chain ``layout`` and run every check of :mod:`trackgen.validate`; ``meshes=False``
+    skips the mesh check (and with it manifold3d and trimesh)."""
     car = car or CarDescription()
     track = chain(layout)
     geometry = track_geometry(track)
-    problems = validate_track(track, car.min_turn_radius_m, meshes=geometry.meshes)
+    problems = validate_track(track, car.min_turn_radius_m,
+                              meshes=geometry.meshes if meshes else None)
     return Checked(track, geometry, problems)
+
+
+def check_buildable(layout: Layout, car: CarDescription | None = None, *,
+                    meshes: bool = True) -> Checked:
+    """:func:`check_layout`, raising what :func:`build` raises for a layout it refuses:
+    :class:`TrackError` (the track is named like the car model) or :class:`ValidationFailed`.
+    ``meshes=False``: for a user of the 2D geometry only (the simulator's in-memory track),
+    without the mesh check."""
+    car = car or CarDescription()
+    if layout.name == car.name:
+        raise TrackError(f"{layout.path}: track name {layout.name!r} equals the car model "
+                         "name; choose another with '@name = ...'")
+    checked = check_layout(layout, car, meshes=meshes)
+    if not checked.ok:
+        raise ValidationFailed(checked.problems)
+    return checked
 
 
 def build(layout: str | Path | Layout, out_dir: str | Path, *, force: bool = False,
           car: CarDescription | None = None, preview: bool = True) -> BuildResult:
-    """Validate and write the output folder (``preview=False`` skips preview.png, e.g. for a
-    simulator that builds a layout on the fly). Raises :class:`LayoutError` (bad layout),
+    """Validate and write the output folder (``preview=False`` skips preview.png and
+    matplotlib). Raises :class:`LayoutError` (bad layout),
     :class:`ValidationFailed` (problems; nothing written), :class:`OutputError` (cannot
     write; nothing left behind), :class:`TrackError` (the SDF layer refused)."""
     car = car or CarDescription()
     if not isinstance(layout, Layout):
         layout = load_layout(layout)
     out_dir = Path(out_dir)
-    if layout.name == car.name:
-        raise TrackError(f"{layout.path}: track name {layout.name!r} equals the car model "
-                         "name; choose another with '@name = ...'")
     _check_target(out_dir, force)
-    checked = check_layout(layout, car)
-    if not checked.ok:
-        raise ValidationFailed(checked.problems)
+    checked = check_buildable(layout, car)
     try:
         out_dir.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))

@@ -1,23 +1,22 @@
 """The simulator's view of a track: a top-down raster, the start pose, the lap gate.
 
 ``load_track(spec)`` accepts
-- a layout file (``*.txt``): built with ``trackgen`` (no preview) into a folder of the track
-  cache and read from there like any trackgen folder. The cache key covers everything the
-  build depends on (the layout's path and bytes, the car, the source files of ``pieces``,
-  ``trackgen`` and ``worlds``, Python's version and the installed files of numpy, shapely,
-  manifold3d and trimesh), so the next run of the same layout skips the build and
-  trackgen's imports (trimesh, ~0.5 s). Cache folder: ``$NXPCUP_SIM_TRACK_CACHE``, else
-  ``$XDG_CACHE_HOME/nxpcup-sim/tracks``, else ``~/.cache/nxpcup-sim/tracks``; the
-  :data:`CACHE_KEEP` most recently used builds are kept. ``NXPCUP_SIM_TRACK_CACHE=off``, or
-  a cache that cannot be written, builds into a temporary folder deleted after reading.
-  A layout that fails to build is never cached (its error is raised every time);
+- a layout file (``*.txt``): parsed, chained and checked by ``trackgen`` in memory (the
+  checks of ``trackgen build`` but the mesh check, which concerns files the simulator does
+  not use; a layout ``trackgen build`` refuses raises the same one-line message) and turned
+  into a ``SimTrack`` by :func:`track_from_trackgen`: the raster is painted from the track's
+  polygons; no file is written or read, no mesh is made and trimesh is not imported
+  (manifold3d is, for its triangulator). It equals ``load_track`` of the layout's
+  ``trackgen build`` folder, raster pixel for pixel (raster.py, "Footprint layers"; pinned
+  by tests/test_track_loading.py);
 - a trackgen output folder (holds ``world.sdf``);
 - a world file (``*.sdf`` / ``*.world``);
 - a Gazebo model folder (``model.config`` beside a ``*.world``, like NXP's
   ``nxp_raceway/``): its ``.world`` is used so the include pose applies;
-and always reads the world through ``worlds.sdf_read.read_world`` (one path for all).
+and reads every world through ``worlds.sdf_read.read_world`` (one path for all worlds),
+then :func:`track_from_scene`.
 
-From the scene:
+From a scene (a world):
 - ``raster``: every mesh visual's top faces painted into a ``TrackRaster`` (see raster.py).
 - ``surface_z_m``: top of the lane = highest upward face of the collision meshes (else of the
   lane visuals, else of all visuals), world frame.
@@ -35,33 +34,31 @@ From the scene:
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
-import os
-import shutil
-import sys
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pieces.pose import Pose2
-from simrunner.errors import SimError
-from simrunner.track.raster import (DEFAULT_M_PER_PX, TrackRaster, build_raster, layer_from_visual,
-                              upward_triangles, world_triangles)
+from simrunner.track.errors import TrackLoadError
+from simrunner.track.raster import (DEFAULT_M_PER_PX, ROLE_GRAY, TrackRaster, build_raster,
+                                    check_m_per_px, layer_from_footprint, layer_from_visual,
+                                    upward_triangles, world_triangles)
+
+if TYPE_CHECKING:  # trackgen (shapely) loads only for a layout
+    from trackgen.chain import Track
+    from trackgen.export import TrackGeometry
+    from vehicle.description import CarDescription
 
 LAYOUT_SUFFIXES = (".txt",)
 WORLD_SUFFIXES = (".sdf", ".world")
 _WIDTH_SEARCH_M = 3.0  # how far to look sideways for the road's edge
-CACHE_ENV = "NXPCUP_SIM_TRACK_CACHE"
-CACHE_KEEP = 32  # built layouts kept in the cache (least recently used removed first)
-_CACHE_FORMAT = b"nxpcup-sim track cache 1"
 
-
-class TrackLoadError(SimError, ValueError):
-    """The track spec cannot be read or makes no drivable track (message names the file)."""
+__all__ = ["LAYOUT_SUFFIXES", "WORLD_SUFFIXES", "SimTrack", "TrackLoadError", "load_track",
+           "road_extents_m", "track_from_scene", "track_from_trackgen"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -85,121 +82,90 @@ class SimTrack:
         return self.raster.road_mask
 
 
-# -- spec -> scene -----------------------------------------------------------------------
-def load_track(spec: str | Path, *, car=None, m_per_px: float = DEFAULT_M_PER_PX) -> SimTrack:
+# -- spec -> SimTrack --------------------------------------------------------------------
+def load_track(spec: str | Path, *, car: CarDescription | None = None,
+               m_per_px: float = DEFAULT_M_PER_PX) -> SimTrack:
     """Load a track from a layout file, a trackgen folder, a world file or a model folder.
 
-    ``car`` (a ``vehicle.description.CarDescription``) is only used when a layout is built (trackgen
+    ``car`` (a ``vehicle.description.CarDescription``) is only used for a layout (trackgen
     checks curve radii against the car). Raises ``TrackLoadError`` (a ``SimError``) for a bad
     spec, layout or world; a layout's own error is its ``__cause__``.
     """
     path = Path(spec)
+    check_m_per_px(m_per_px, str(path))
     if path.is_file() and path.suffix.lower() in LAYOUT_SUFFIXES:
-        cached = _cached_build(path, car)
-        if cached is not None:
-            try:
-                scene = _read_world(cached / "world.sdf")
-            except TrackLoadError:  # a damaged cache entry: drop it, build afresh below
-                shutil.rmtree(cached, ignore_errors=True)
-            else:
-                return track_from_scene(scene, source=path, name=None, m_per_px=m_per_px)
-        from trackgen import TrackError
-        from trackgen.build import build  # trackgen is only needed for layouts
-
-        with tempfile.TemporaryDirectory(prefix="nxpcup-track-") as tmp:
-            try:
-                result = build(path, Path(tmp) / "track", car=car, preview=False)
-            except TrackError as exc:
-                raise TrackLoadError(str(exc)) from exc
-            scene = _read_world(result.world_path)
-            return track_from_scene(scene, source=path, name=None, m_per_px=m_per_px)
+        return _track_from_layout(path, car, m_per_px)
     if path.is_file() and path.suffix.lower() not in WORLD_SUFFIXES:
         raise TrackLoadError(f"{path}: not a track: expected a layout ({', '.join(LAYOUT_SUFFIXES)}), "
                              f"a world ({', '.join(WORLD_SUFFIXES)}) or a track folder")
     return track_from_scene(_read_world(path), source=path, m_per_px=m_per_px)
 
 
-# -- layout build cache ------------------------------------------------------------------
-def _cache_dir() -> Path | None:
-    """The track cache folder (see the module docstring), None when switched off."""
-    configured = os.environ.get(CACHE_ENV, "")
-    if configured.lower() in ("off", "0", "no", "false"):
-        return None
-    if configured:
-        return Path(configured)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "nxpcup-sim" / "tracks"
-
-
-def _cache_key(layout: Path, car) -> str:
-    """Hex digest of everything a layout's trackgen build depends on (module docstring).
-    A dependency counts by its installed file (path, size, modification time): an upgrade
-    rewrites it (cheaper than importlib.metadata, ~30 ms)."""
-    import importlib.util
-    import platform
-
-    if car is None:
-        from vehicle.description import CarDescription
-
-        car = CarDescription()
-    h = hashlib.sha256(_CACHE_FORMAT)
-    for part in (str(layout.resolve()), repr(car), sys.version, platform.machine()):
-        h.update(b"\0" + part.encode())
-    h.update(b"\0" + layout.read_bytes())
-    for dependency in ("numpy", "shapely", "manifold3d", "trimesh"):
-        origin = importlib.util.find_spec(dependency).origin
-        st = os.stat(origin)
-        h.update(f"\0{dependency} {origin} {st.st_size} {st.st_mtime_ns}".encode())
-    for package in ("pieces", "trackgen", "worlds"):
-        root = Path(importlib.util.find_spec(package).origin).parent
-        for f in sorted(root.rglob("*")):
-            if f.is_file() and "__pycache__" not in f.parts:
-                name = f"\0{package}/{f.relative_to(root).as_posix()}\0"
-                h.update(name.encode() + f.read_bytes())
-    return h.hexdigest()[:32]
-
-
-def _cached_build(layout: Path, car) -> Path | None:
-    """The cache folder holding ``trackgen build`` of ``layout`` (built now if missing), or
-    None when the cache is off or unusable (the caller then builds into a temporary folder).
-    Layout errors are raised as :class:`TrackLoadError`, as without the cache."""
-    try:
-        root = _cache_dir()
-        if root is None:
-            return None
-        entry = root / _cache_key(layout, car)
-        if (entry / "world.sdf").is_file():
-            os.utime(entry)  # most recently used
-            return entry
-        root.mkdir(parents=True, exist_ok=True)
-    except Exception:  # noqa: BLE001 - the cache never stops a run: build without it
-        return None
-    from trackgen import TrackError
-    from trackgen.build import OutputError, build
+def _track_from_layout(path: Path, car: CarDescription | None, m_per_px: float) -> SimTrack:
+    """Parse, chain and check a layout as ``trackgen build`` does, without its mesh check
+    (trackgen's own, on files the simulator does not use), then :func:`track_from_trackgen`."""
+    from trackgen import TrackError, load_layout  # trackgen (shapely) is only needed for layouts
+    from trackgen.build import check_buildable
 
     try:
-        build(layout, entry, car=car, preview=False)  # written beside, renamed into place
-    except OutputError:  # a concurrent run built it first, or the cache is not writable
-        return entry if (entry / "world.sdf").is_file() else None
+        checked = check_buildable(load_layout(path), car, meshes=False)
     except TrackError as exc:
         raise TrackLoadError(str(exc)) from exc
-    _prune_cache(root)
-    return entry
+    return track_from_trackgen(checked.track, geometry=checked.geometry, source=path,
+                               m_per_px=m_per_px)
 
 
-def _prune_cache(root: Path) -> None:
-    """Remove all but the CACHE_KEEP most recently used builds, and build temporaries
-    (``.NAME.*``, left only by a killed process) older than a day."""
-    import time
+# -- trackgen.Track -> SimTrack (in memory) ------------------------------------------------
+def track_from_trackgen(track: Track, *, geometry: TrackGeometry | None = None,
+                        source: str | Path | None = None, name: str | None = None,
+                        m_per_px: float = DEFAULT_M_PER_PX) -> SimTrack:
+    """A ``SimTrack`` made in memory from a chained ``trackgen.Track``: no file is written or
+    read, no mesh is made (trimesh is not imported; manifold3d only for its triangulator).
 
-    try:
-        folders = [(p, p.stat().st_mtime) for p in root.iterdir() if p.is_dir()]
-    except OSError:
-        return
-    builds = sorted((f for f in folders if not f[0].name.startswith(".")), key=lambda f: -f[1])
-    stale = [f for f in folders if f[0].name.startswith(".") and f[1] < time.time() - 86400]
-    for old, _ in builds[CACHE_KEEP:] + stale:
-        shutil.rmtree(old, ignore_errors=True)
+    ``geometry``: the track's ``trackgen.export.TrackGeometry`` if already computed (else
+    ``track_geometry(track)``). ``source`` defaults to the layout's path, ``name`` to the
+    layout's name. The result equals ``load_track`` of the track's ``trackgen build`` folder
+    (tests/test_track_loading.py):
+    - ``raster``: the lane (white), edge-line and marking (black) footprints painted by
+      :func:`~simrunner.track.raster.layer_from_footprint`: the built meshes' raster, pixel
+      for pixel;
+    - ``surface_z_m``: the slab thickness as the meshes' top stores it (float32);
+    - ``start``, ``gate`` / ``gate_half_width_m``, ``lap_length_m``, ``centreline``: the
+      values track.json holds (``Track.car_start_pose``, ``finish_gate`` -- without a
+      START_FINISH the gate is the start pose and its half width is measured on the raster,
+      as for a world without one -- ``length_m``, ``centreline``; see
+      ``trackgen.export.track_json``). The built world's car pose is the same start, its yaw
+      read back through a rotation matrix.
+    The track is taken as it is (``trackgen.build.check_buildable`` checks one); raises
+    ``TrackLoadError`` when the start pose is not on the road.
+    """
+    from trackgen.export import track_geometry
+
+    geometry = geometry if geometry is not None else track_geometry(track)
+    layout = track.layout
+    source = Path(source if source is not None else layout.path)
+    top_z = float(np.float32(geometry.thickness_m))  # the meshes' top as the binary STL stores it
+    layers = [layer_from_footprint("lane", geometry.lane, ROLE_GRAY["lane"], top_z_m=top_z),
+              layer_from_footprint("edges", geometry.edges, ROLE_GRAY["edge"], top_z_m=top_z)]
+    if geometry.markings is not None:
+        layers.append(layer_from_footprint("markings", geometry.markings, ROLE_GRAY["marking"],
+                                           top_z_m=top_z))
+    raster = build_raster(layers, m_per_px=m_per_px)
+    start = track.car_start_pose()
+    if not bool(raster.on_road([[start.x_m, start.y_m]])[0]):
+        raise TrackLoadError(f"{layout.path}: the start pose ({start.x_m:.3f}, {start.y_m:.3f}) m "
+                             f"(trackgen's start pose) is not on the track")
+    finish = track.finish_gate()
+    if finish is not None:
+        gate, half = finish
+    else:
+        gate, half = start, max(road_extents_m(raster, start))
+    centreline = np.asarray(track.centreline(), dtype=float)
+    centreline.flags.writeable = False
+    return SimTrack(
+        name=name or layout.name, source=source, raster=raster, surface_z_m=top_z, start=start,
+        gate=gate, gate_half_width_m=float(half), lap_length_m=float(track.length_m),
+        centreline=centreline, lap_length_estimated=False)
 
 
 def _read_world(path: Path):
@@ -218,11 +184,8 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
     """Build a ``SimTrack`` from a ``worlds.sdf_read.Scene`` (see the module docstring)."""
     source = Path(source if source is not None else scene.source)
     meta = _read_track_json(scene.track_json) if scene.track_json is not None else {}
-    try:
-        layers = [layer for layer in (layer_from_visual(v) for v in scene.visuals) if layer is not None]
-        surface_z = _surface_z(scene, layers) if layers else 0.0
-    except ValueError as exc:  # an unreadable mesh file
-        raise TrackLoadError(str(exc)) from None
+    layers = [layer for layer in (layer_from_visual(v) for v in scene.visuals) if layer is not None]
+    surface_z = _surface_z(scene, layers) if layers else 0.0
     if not layers:
         raise TrackLoadError(f"{scene.source}: the world has no mesh visuals with upward faces "
                              f"(nothing to drive on)")
