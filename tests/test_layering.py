@@ -1,0 +1,86 @@
+"""The import direction follows the data flow: nothing below imports anything above.
+
+Packages, bottom to top: pieces, vehicle, worlds, trackgen, simrunner. Inside simrunner:
+errors, track, car, sensors, run, workflows, cli (the package's own ``__init__`` is its
+public facade and may name anything). Every import counts, also those inside functions.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ["pieces", "vehicle", "worlds", "trackgen", "simrunner"]
+SIMRUNNER = ["errors", "track", "car", "sensors", "run", "workflows", "cli"]
+
+
+def rank(module: str) -> tuple[int, int] | None:
+    parts = module.split(".")
+    if parts[0] not in PACKAGES:
+        return None
+    top = PACKAGES.index(parts[0])
+    if parts[0] != "simrunner" or len(parts) == 1:
+        return (top, -1)
+    sub = parts[1]
+    return (top, SIMRUNNER.index(sub) if sub in SIMRUNNER else -1)
+
+
+def module_name(path: Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def imports(path: Path, name: str) -> list[str]:
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            out.append(mod)
+            out += [f"{mod}.{a.name}" for a in node.names]  # `from simrunner import run`
+    return out
+
+
+FILES = sorted(p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py"))
+
+
+def violations(name: str, targets: list[str]) -> list[str]:
+    """The imports of module ``name`` that sit above it."""
+    mine = rank(name)
+    bad = []
+    for target in targets:
+        r = rank(target)
+        if r is None or target.split(".")[:2] == name.split(".")[:2]:
+            continue
+        if r[0] > mine[0] or (r[0] == mine[0] == PACKAGES.index("simrunner") and r[1] > mine[1]):
+            bad.append(target)
+    return sorted(set(bad))
+
+
+def test_the_check_sees_upward_imports():
+    assert violations("simrunner.car.physics", ["simrunner.run.clock", "simrunner.errors"]) == [
+        "simrunner.run.clock"]
+    assert violations("worlds.sdf_write", ["trackgen.build", "pieces.pose"]) == ["trackgen.build"]
+    assert violations("simrunner.cli.gap", ["simrunner.workflows.gap", "trackgen"]) == []
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_nothing_below_imports_anything_above(path):
+    name = module_name(path)
+    if name == "simrunner":
+        return  # the facade
+    bad = violations(name, imports(path, name))
+    assert not bad, f"{name} imports {bad}, which sit above it"
