@@ -51,3 +51,8 @@ class Stalled(RunFinished):
 
     def __init__(self, message: str):
         super().__init__("stalled", message)
+
+
+class CameraError(SimError, ValueError):
+    """The camera got a setting or request it cannot use (``supersample`` below 1, an image
+    row outside ``0..H-1``); the message names the value and the valid range."""

@@ -30,12 +30,19 @@ def _caller(depth: int = 2) -> tuple[str, int]:
 class TrackGenerator:
     """Collects pieces in driving order; :meth:`build` chains them into a :class:`Track`.
 
-    ``settings``: :class:`pieces.TrackSettings` (default widths); ``name``: track name.
+    ``settings``: :class:`pieces.TrackSettings` (default widths); ``name``: track name. A
+    wrong ``settings`` or ``name`` raises :class:`LayoutError` naming the calling line, as
+    a wrong ``add_piece`` argument does.
     """
 
     def __init__(self, settings: TrackSettings | None = None, *, name: str = "track") -> None:
         if settings is not None and not isinstance(settings, TrackSettings):
-            raise TypeError(f"settings={settings!r}: expected a pieces.TrackSettings")
+            path, line = _caller()
+            raise LayoutError(path, line, f"TrackGenerator(settings={settings!r}): expected a "
+                                          "pieces.TrackSettings")
+        if not isinstance(name, str):
+            path, line = _caller()
+            raise LayoutError(path, line, f"TrackGenerator(name={name!r}): expected a string")
         self.settings = settings or TrackSettings()
         self.name = sanitize_name(name)
         self._entries: list[LayoutEntry] = []

@@ -99,38 +99,48 @@ def pose_matrix(x=0.0, y=0.0, z=0.0, roll=0.0, pitch=0.0, yaw=0.0) -> np.ndarray
 
 
 def _quat_matrix(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
-    n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
-    if n == 0.0:
-        raise ValueError("zero quaternion")
+    """``(3, 3)`` rotation of a non-zero quaternion (normalised here)."""
+    n = math.hypot(qx, qy, qz, qw)  # no underflow for tiny components
     x, y, z, w = qx / n, qy / n, qz / n, qw / n
     return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
+def _finite_numbers(text: str, n: int) -> list[float] | None:
+    """The ``n`` finite numbers of ``text`` ("a b c"); None when it is anything else."""
+    try:
+        values = [float(v) for v in text.split()]
+    except ValueError:
+        return None
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        return None
+    return values
+
+
 def parse_pose(doc: XmlDoc, el: ET.Element | None) -> np.ndarray:
-    """``(4, 4)`` transform of a ``<pose>`` element; identity when ``el`` is None.
+    """``(4, 4)`` transform of a ``<pose>`` element; identity when ``el`` is None or empty.
 
     Accepts ``x y z roll pitch yaw`` (radians; degrees with ``degrees="true"``) and, with
-    ``rotation_format="quat_xyzw"``, ``x y z qx qy qz qw``.
+    ``rotation_format="quat_xyzw"``, ``x y z qx qy qz qw``. Anything else raises
+    :class:`WorldError` at the element's line.
     """
-    if el is None:
+    text = text_of(el)
+    if not text:
         return np.eye(4)
     quat = el.get("rotation_format", "euler_rpy") == "quat_xyzw"
     want = 7 if quat else 6
-    text = text_of(el)
-    try:
-        values = [float(v) for v in text.split()] if text else [0.0] * want
-        if len(values) != want or not all(math.isfinite(v) for v in values):
-            raise ValueError
-        if quat:
-            m = np.eye(4)
-            m[:3, :3] = _quat_matrix(*values[3:])
-            m[:3, 3] = values[:3]
-            return m
-    except ValueError:
+    values = _finite_numbers(text, want)
+    if values is None:
         form = "x y z qx qy qz qw" if quat else "x y z roll pitch yaw"
-        raise doc.error(el, f"<pose> '{text}' is not {want} finite numbers ({form})") from None
+        raise doc.error(el, f"<pose> '{text}' is not {want} finite numbers ({form})")
+    if quat:
+        if math.hypot(*values[3:]) == 0.0:
+            raise doc.error(el, f"<pose> '{text}': the quaternion qx qy qz qw is zero")
+        m = np.eye(4)
+        m[:3, :3] = _quat_matrix(*values[3:])
+        m[:3, 3] = values[:3]
+        return m
     if el.get("degrees", "false").strip().lower() in ("true", "1"):
         values[3:] = [math.radians(v) for v in values[3:]]
     return pose_matrix(*values)
@@ -138,15 +148,13 @@ def parse_pose(doc: XmlDoc, el: ET.Element | None) -> np.ndarray:
 
 def parse_vector(doc: XmlDoc, el: ET.Element | None, n: int, default: tuple[float, ...],
                  what: str) -> np.ndarray:
-    """``(n,)`` float array from an element's text ("a b c"); ``default`` when absent."""
+    """``(n,)`` float array from an element's text ("a b c"); ``default`` when absent.
+    Anything but ``n`` finite numbers raises :class:`WorldError` at the element's line."""
     if el is None or not text_of(el):
         return np.array(default, dtype=float)
-    try:
-        values = [float(v) for v in text_of(el).split()]
-        if len(values) != n or not all(math.isfinite(v) for v in values):
-            raise ValueError
-    except ValueError:
-        raise doc.error(el, f"<{el.tag}> '{text_of(el)}' is not {what}") from None
+    values = _finite_numbers(text_of(el), n)
+    if values is None:
+        raise doc.error(el, f"<{el.tag}> '{text_of(el)}' is not {what}")
     return np.array(values, dtype=float)
 
 

@@ -34,6 +34,22 @@ def _input_errors() -> tuple[type[BaseException], ...]:
     return tuple(roots)
 
 
+# The simulator's own dependencies (pyproject.toml; the track tools need none of them):
+# import name -> distribution. An installation without one is bad input, not a bug.
+SIM_DEPENDENCIES = {"dartpy": "dartpy", "cv2": "opencv-python-headless", "numba": "numba",
+                    "llvmlite": "numba", "scipy": "scipy", "tqdm": "tqdm"}
+
+
+def _missing_dependency(exc: ModuleNotFoundError) -> str | None:
+    """The one line for a missing simulator dependency (None: some other module)."""
+    module = (exc.name or "").partition(".")[0]
+    dist = SIM_DEPENDENCIES.get(module)
+    if dist is None:
+        return None
+    what = dist if dist == module else f"{dist} (module {module})"
+    return f"simrunner: the simulator needs {what}, which is not installed: pip install {dist}"
+
+
 class _LazyGroup(click.Group):
     """Loads the workflow commands (scipy-heavy) only when they are used: ``simrunner --help``
     lists them with the docstrings of their functions, read from the source without
@@ -53,6 +69,17 @@ class _LazyGroup(click.Group):
             super().format_commands(ctx, formatter)
         finally:
             self._listing = False
+
+    def invoke(self, ctx: click.Context):
+        """Run the command; a simulator dependency that is not installed is one line, exit 2."""
+        try:
+            return super().invoke(ctx)
+        except ModuleNotFoundError as exc:
+            line = _missing_dependency(exc)
+            if line is None:
+                raise
+            click.echo(line, err=True)
+            sys.exit(2)
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         if name in self.LAZY:

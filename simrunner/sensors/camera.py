@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from pieces.pose import Pose2
+from simrunner.errors import CameraError
 from simrunner.track.raster import TrackRaster
 
 _NO_NORMALS = np.zeros(0)
@@ -53,12 +54,13 @@ def _raster_of(raster_or_track) -> TrackRaster:
 
 class Camera:
     """Pinhole camera of ``cam`` (a ``vehicle.description.Camera``) looking at ``raster`` (a
-    ``TrackRaster``, or a ``SimTrack`` whose raster is used)."""
+    ``TrackRaster``, or a ``SimTrack`` whose raster is used). ``supersample`` below 1, or
+    an image row outside ``0..H-1``, raises :class:`simrunner.errors.CameraError`."""
 
     def __init__(self, cam, raster, *, max_range_m: float = 10.0, supersample: int = 1,
                  load_line_kernel: bool = True) -> None:
         if int(supersample) < 1:
-            raise ValueError(f"supersample must be >= 1, got {supersample!r}")
+            raise CameraError(f"supersample must be >= 1, got {supersample!r}")
         self.cam = cam
         self.raster = _raster_of(raster)
         self.width_px = int(cam.width_px)
@@ -180,7 +182,7 @@ class Camera:
         if gx is None:
             row = int(row)
             if not 0 <= row < self.height_px:
-                raise IndexError(f"row {row} outside the image (0..{self.height_px - 1})")
+                raise CameraError(f"row {row} outside the image (0..{self.height_px - 1})")
             k = self.supersample
             img = self._sample(pose, slice(row * k, (row + 1) * k), self._row_misses[row])[:1]
             return img if normals is None else self.add_noise(img, normals)
