@@ -94,3 +94,18 @@ def test_commands_beyond_the_limits_are_warned(tmp_path, track):
         """)
     report = check_controller(ctrl, track=track, seconds=0.5)
     assert any("exceed the car's max_speed_mps" in w for w in report.warnings), report.text()
+
+
+def test_check_command_exit_codes(tmp_path):
+    from click.testing import CliRunner
+
+    from simrunner.cli import main
+
+    runner = CliRunner()
+    ok = runner.invoke(main, ["check", str(EXAMPLES / "line_follower.py"), "--seconds", "1"])
+    assert ok.exit_code == 0 and ": OK (two runs, 1.00 s simulated)" in ok.output
+    bad = write(tmp_path, "bad.py", "def main(s):\n    s.get_image()\n    1 / 0\n")
+    res = runner.invoke(main, ["check", str(bad)])
+    assert res.exit_code == 1 and "problem: main raised at bad.py:3: ZeroDivisionError" in res.output
+    res = runner.invoke(main, ["check", str(EXAMPLES / "line_follower.py"), "--track", "nope.txt"])
+    assert res.exit_code == 2 and "nope.txt: no such track" in res.stderr

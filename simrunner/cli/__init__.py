@@ -1,8 +1,13 @@
-"""``simrunner`` command line: a thin click layer over :func:`simrunner.run.runner.drive`.
+"""``simrunner`` command line: thin click layers over importable functions.
 
-Exit codes: 0 the run finished its laps or ``main`` returned; 1 the run failed (off track,
-timeout, controller error, stalled); 2 bad input (one line on stderr, no traceback);
-130 interrupted (Ctrl-C; outputs are still written).
+``drive`` (here, over :func:`simrunner.run.runner.drive`), ``check``
+(:mod:`simrunner.cli.check`), ``excite`` and ``calibrate`` (:mod:`simrunner.cli.calib`),
+``gap`` (:mod:`simrunner.cli.gap`); those load on use, so ``--help`` stays quick.
+
+Exit codes of ``drive``: 0 the run finished its laps or ``main`` returned; 1 the run failed
+(off track, timeout, controller error, stalled); 2 bad input, or a simulator dependency is
+not installed (one line on stderr, no traceback); 130 interrupted (Ctrl-C; outputs are still
+written).
 """
 from __future__ import annotations
 
@@ -13,7 +18,7 @@ import click
 from simrunner.errors import SimError
 
 
-def _input_errors() -> tuple[type[BaseException], ...]:
+def input_errors() -> tuple[type[BaseException], ...]:
     """The package exception roots that mean bad input."""
     roots: list[type[BaseException]] = [SimError]
     from vehicle.description import CarDescriptionError
@@ -55,7 +60,8 @@ class _LazyGroup(click.Group):
     lists them with the docstrings of their functions, read from the source without
     importing it."""
 
-    LAZY = {"calibrate": ("simrunner.cli.calib", "calibrate_cmd"),
+    LAZY = {"check": ("simrunner.cli.check", "check_cmd"),
+            "calibrate": ("simrunner.cli.calib", "calibrate_cmd"),
             "excite": ("simrunner.cli.calib", "excite_cmd"),
             "gap": ("simrunner.cli.gap", "gap")}
     _listing = False
@@ -149,7 +155,7 @@ def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, 
         result = drive(controller, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
                        csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
                        wall_limit_s=wall_limit_s)
-    except _input_errors() as exc:
+    except input_errors() as exc:
         click.echo(f"simrunner: {exc}", err=True)
         sys.exit(2)
     if result.error is not None:

@@ -9,17 +9,12 @@ import sys
 
 import click
 
+from simrunner.cli import input_errors
+
 
 def _fail(exc: BaseException) -> None:
     click.echo(f"simrunner: {exc}", err=True)
     sys.exit(2)
-
-
-def _input_errors() -> tuple[type[BaseException], ...]:
-    from simrunner.errors import SimError
-    from vehicle.description import CarDescriptionError
-
-    return (SimError, CarDescriptionError)
 
 
 @click.command("excite")
@@ -51,7 +46,7 @@ def excite_cmd(output, duration_s, car, seed, simulate, dt_s) -> None:
         plan.to_csv(output, extent=extent)
         if log is not None:
             write_log(log, simulate)
-    except _input_errors() as exc:
+    except input_errors() as exc:
         _fail(exc)
     click.echo(f"plan: {output} ({len(plan)} rows, {plan.duration_s:.1f} s; predicted path "
                f"{extent[1] - extent[0]:.1f} x {extent[3] - extent[2]:.1f} m)")
@@ -88,7 +83,7 @@ def calibrate_cmd(measured, car, output, dt_s) -> None:
             result.car_after.save(out)
         except OSError as exc:
             raise SimError(f"{out}: cannot write the car description ({exc.strerror})") from None
-    except _input_errors() as exc:
+    except input_errors() as exc:
         _fail(exc)
     click.echo(result.report(), nl=False)
     click.echo(f"car description: {output}")

@@ -39,14 +39,16 @@ class CheckReport:
     problems: tuple[str, ...]
     warnings: tuple[str, ...]
     sim_time_s: float = 0.0
+    runs: int = 0
 
     @property
     def ok(self) -> bool:
         return not self.problems
 
     def text(self) -> str:
+        runs = {0: "not run", 1: "one run", 2: "two runs"}.get(self.runs, f"{self.runs} runs")
         lines = [f"{self.controller}: {'OK' if self.ok else 'PROBLEMS'} "
-                 f"({self.sim_time_s:.2f} s simulated, twice)"]
+                 f"({runs}, {self.sim_time_s:.2f} s simulated)"]
         lines += [f"  problem: {p}" for p in self.problems]
         lines += [f"  warning: {w}" for w in self.warnings]
         return "\n".join(lines) + "\n"
@@ -113,7 +115,7 @@ def check_controller(controller: str | Path | MainFn, *, track: str | Path | Sim
                             "time (get_time) instead of the wall clock, and seed any random "
                             "generator; keep no state between runs")
     log = first.log
-    if len(log) > 1:
+    if len(log) > 1 and first.outcome not in (Outcome.CONTROLLER_ERROR, Outcome.STALLED):
         if not np.any(log.speed_cmd_mps != 0.0):
             warnings.append("no speed was ever commanded: the car does not move "
                             "(call set_speed or set_speed_and_servo)")
@@ -126,7 +128,8 @@ def check_controller(controller: str | Path | MainFn, *, track: str | Path | Sim
         if d > dmax:
             warnings.append(f"steering commands up to {d:.3g} rad exceed the car's limit "
                             f"{dmax:g} rad (they are capped); check turn_norm's units")
-    return CheckReport(name, tuple(problems), tuple(warnings), first.sim_time_s)
+    return CheckReport(name, tuple(problems), tuple(warnings), first.sim_time_s,
+                       1 if second is None else 2)
 
 
 def _user_location(result: RunResult) -> str:

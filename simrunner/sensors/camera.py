@@ -26,6 +26,7 @@ call (:mod:`simrunner.sensors.line_kernel`) that computes the same maps and pixe
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import cv2
@@ -36,16 +37,12 @@ from simrunner.errors import CameraError
 from simrunner.track.raster import TrackRaster
 
 _NO_NORMALS = np.zeros(0)
-_camera_row = None  # simrunner.sensors.line_kernel.camera_row, imported on first use (numba loads ~0.5 s)
-
-
 def _line_kernel():
-    global _camera_row
-    if _camera_row is None:
-        from simrunner.sensors.line_kernel import camera_row
+    """``simrunner.sensors.line_kernel.camera_row``, imported on first use (numba loads in
+    ~0.5 s; the import system caches the module, so later calls cost a dict lookup)."""
+    from simrunner.sensors.line_kernel import camera_row
 
-        _camera_row = camera_row
-    return _camera_row
+    return camera_row
 
 
 def _raster_of(raster_or_track) -> TrackRaster:
@@ -99,6 +96,11 @@ class Camera:
         line_rows = [r for r, gx in enumerate(self._row_gx) if gx is not None]
         if line_rows and load_line_kernel:
             self.line_image(Pose2(), line_rows[0])
+
+    @functools.cached_property
+    def _kernel(self):
+        """The compiled line kernel (loaded on first use, then an attribute of this camera)."""
+        return _line_kernel()
 
     # -- geometry ------------------------------------------------------------------
     def _ground(self, v: np.ndarray, u: np.ndarray):
@@ -198,7 +200,7 @@ class Camera:
         else:
             take = getattr(normals, "take", None)
             buf, pos = take(self.width_px) if take else (normals.standard_normal(self.width_px), 0)
-        (_camera_row or _line_kernel())(self.raster.image, self._gy[row], -si, ci * gx, (pose.x_m - self._x0_m) * inv,
+        self._kernel(self.raster.image, self._gy[row], -si, ci * gx, (pose.x_m - self._x0_m) * inv,
                    -ci, -si * gx, (self._y0_m - pose.y_m) * inv, self._floor_f,
                    normals is not None, buf, pos, self._noise_std, out)
         return out
