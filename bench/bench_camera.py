@@ -1,8 +1,8 @@
 """Track loading and camera speed (issue 3 sections 1 and 3).
 
 Rows per track (a layout built on the fly, and both NXP tracks if present):
-* ``load``: ``load_track`` (world read, meshes rasterised at 5 mm; a layout includes the
-  trackgen build);
+* ``load``: ``load_track`` (world read, meshes rasterised at 5 mm; a layout is parsed,
+  chained, checked and painted in memory, no files);
 * ``raster``: rasterisation alone (``build_raster`` of the scene's layers);
 * ``render``: one full 128 x 128 frame (``Camera.render``), default camera, supersample 1 and 2;
 * ``row``: one row (``Camera.render_row``, the Spinner's line-camera path);
