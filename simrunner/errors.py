@@ -37,8 +37,9 @@ class ControllerError(SimError):
 
 
 class RunFinished(BaseException):
-    """The run is over; ``outcome`` is one of the summary outcomes (``"finished"``,
-    ``"off_track"``, ``"timeout"``, ``"stalled"``, ``"controller_error"``)."""
+    """The run is over; ``outcome`` is the value of a ``simrunner.run.result.Outcome`` that
+    ends a run from inside it (``"finished"``, ``"off_track"``, ``"timeout"``, ``"stalled"``,
+    ``"controller_error"``); ``controller_returned`` and ``interrupted`` need no signal."""
 
     def __init__(self, outcome: str, message: str = ""):
         super().__init__(message or outcome)

@@ -20,7 +20,7 @@ computes, bit for bit (tests/test_fastpath.py checks them against it):
   saturated to 0..255, with ``normal`` from the run's standard-normal stream.
 
 Compilation: ``cache=True`` — the first use in a fresh checkout compiles (~1-2 s) and
-writes the machine code to ``simrunner/__pycache__`` (numba's own cache directory when that
+writes the machine code to ``simrunner/sensors/__pycache__`` (numba's own cache directory when that
 is not writable, or ``NUMBA_CACHE_DIR``); later processes load it (tens of ms).
 """
 from __future__ import annotations
