@@ -1,8 +1,12 @@
-"""Cost of the effects layer (issue 4): ``make_sim`` steps per CPU-second for the nominal car
-(a plain CarSim), a static effect only (steering offset: no sub-step), and filtered effects
-(latency + lags + drag: control sub-step every 4 ms), each driving with a new command every
-20 ms for 4 simulated seconds at dt 2 ms; plus the wall time of one excitation-plan
-play-back (``run_plan``, ~67 s simulated). Best of 3, CPU time."""
+"""Cost of the effects layer (issue 4, issue 10): ``make_sim`` steps per CPU-second for the
+nominal car (a plain CarSim), a static effect only (steering offset: no sub-step), the other
+command-time effects (speed scale, steering asymmetry, steering play: no sub-step), the
+build-time scales (accel, brake, servo rate, steering limit, mass: a plain EffectSim around a
+differently built car), the ESC brake-before-reverse (control sub-step every 4 ms; the bench
+drives forward, so this is the sub-step's cost), and filtered effects (latency + lags + drag:
+sub-step every 4 ms), each driving with a new command every 20 ms for 4 simulated seconds at
+dt 2 ms; plus the CPU time of one excitation-plan play-back (``run_plan``, ~67 s simulated).
+Best of 3, CPU time."""
 from __future__ import annotations
 
 import math
@@ -32,6 +36,11 @@ def main() -> None:
     car = CarDescription()
     rows = [("nominal (CarSim)", car),
             ("steering_offset only", with_effects(car, steering_offset_rad=0.02)),
+            ("speed_scale+asym+play", with_effects(car, speed_scale=0.95, steering_asymmetry=0.05,
+                                                   steering_play_rad=0.02)),
+            ("build scales", with_effects(car, accel_scale=0.9, brake_scale=1.1, servo_rate_scale=0.8,
+                                          steer_limit_scale=0.95, mass_scale=1.1)),
+            ("esc_reverse_delay", with_effects(car, esc_reverse_delay_s=0.2)),
             ("latency+lags+drag", with_effects(car, command_latency_s=0.03, steering_lag_s=0.05,
                                                motor_lag_s=0.1, drag_coeff_kgpm=0.1))]
     print(f"{'car':24s} {'steps/CPU-s':>12s} {'x real time':>12s}")

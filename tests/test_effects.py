@@ -8,15 +8,18 @@ import numpy as np
 import pytest
 
 from pieces.pose import Pose2
-from simrunner.car.effects import EFFECTS, EffectSim, active_effects, make_sim, with_effects
+from simrunner.car.effects import (EFFECTS, RESIDUAL_SIGNALS, EffectSim, active_effects, built_car, make_sim,
+                                   with_effects)
 from simrunner.car.physics import CarSim
-from vehicle.description import CarDescription, Effects
+from vehicle.description import CarDescription, CarDescriptionError, Effects
 
 CAR = CarDescription()
 WB = CAR.chassis.wheelbase_m
 
 NAMES = ["steering_offset", "steering_gain", "steering_lag", "steering_rate_limit", "command_latency",
-         "motor_lag", "throttle_deadband", "rolling_resistance", "drag", "tire_slip", "friction"]
+         "motor_lag", "throttle_deadband", "rolling_resistance", "drag", "tire_slip", "friction",
+         "speed_scale", "steering_asymmetry", "steering_play", "esc_brake_reverse", "accel_scale", "brake_scale",
+         "servo_rate_scale", "steer_limit_scale", "mass_scale"]
 
 
 def trace(sim, commands, seconds: float, every: int = 10) -> np.ndarray:
@@ -40,7 +43,21 @@ def test_catalogue_names_and_fields():
             assert getattr(defaults, param) == neutral, spec.name
             assert math.isfinite(lo) and math.isfinite(hi) and lo < hi
         assert spec.meaning and spec.revealed_by and spec.acts_on in ("command", "force", "build")
+        assert spec.observed_by and set(spec.observed_by) <= set(RESIDUAL_SIGNALS), spec.name
     assert {f.name for f in dataclasses.fields(Effects)} == {p for s in EFFECTS.values() for p in s.params}
+
+
+def test_observed_by_names_the_gap_residual_signals():
+    from simrunner.workflows.gap.replay import FIT_SIGNALS
+    assert tuple(RESIDUAL_SIGNALS) == tuple(FIT_SIGNALS)
+    assert set(EFFECTS["motor_lag"].observed_by) == {"speed_mps", "along_m"}
+    assert set(EFFECTS["steering_offset"].observed_by) == {"yaw_rate_radps", "yaw_rad", "cross_m"}
+
+
+def test_neutral_build_scales_build_the_same_car():
+    assert built_car(CAR) is CAR
+    with pytest.raises(CarDescriptionError, match=r"steer_limit_scale = 3\.0 .* at most 1\.2"):
+        built_car(with_effects(CAR, steer_limit_scale=3.0))
 
 
 def test_neutral_is_plain_carsim_and_bit_identical():
@@ -58,11 +75,14 @@ def test_with_effects_rejects_unknown_names():
         with_effects(CAR, steering_ofset=0.1)
 
 
-def test_deterministic_and_state_restore_bit_exact():
-    car = with_effects(CAR, command_latency_s=0.05, steering_lag_s=0.05, motor_lag_s=0.1, drag_coeff_kgpm=0.1)
+@pytest.mark.parametrize("extra", [{}, {"steering_play_rad": 0.03, "esc_reverse_delay_s": 0.1, "speed_scale": 0.9,
+                                      "steering_asymmetry": 0.1, "mass_scale": 1.2}])
+def test_deterministic_and_state_restore_bit_exact(extra):
+    car = with_effects(CAR, command_latency_s=0.05, steering_lag_s=0.05, motor_lag_s=0.1, drag_coeff_kgpm=0.1,
+                       **extra)
 
-    def cmd(t):
-        return (1.2, 0.2 if t > 0.3 else -0.1)
+    def cmd(t):  # forward, a steering reversal, then a reverse command while rolling
+        return (1.2 if t < 0.35 else -0.5, 0.2 if t > 0.3 else -0.1)
     a = trace(EffectSim(car), cmd, 0.8)
     assert np.array_equal(a, trace(EffectSim(car), cmd, 0.8))
     sim = EffectSim(car)
@@ -193,14 +213,19 @@ def test_friction_scale_below_one_slides_where_nominal_holds(deg):
     assert slid_m(with_effects(CAR, friction_scale=0.8)) > 0.05  # mu 0.8: slides above 38.7 deg
 
 
-def test_set_state_starts_settled_at_the_given_state():
+@pytest.mark.parametrize("speed, steer", [(1.5, 0.12), (-0.8, -0.1)])
+def test_set_state_starts_settled_at_the_given_state(speed, steer):
     car = with_effects(CAR, steering_offset_rad=0.05, steering_gain=0.8, steering_lag_s=0.1, motor_lag_s=0.2,
-                       command_latency_s=0.05, tire_slip_understeer_radps2pm=0.02)
+                       command_latency_s=0.05, tire_slip_understeer_radps2pm=0.02, steering_asymmetry=0.1,
+                       steering_play_rad=0.02, speed_scale=0.9, esc_reverse_delay_s=0.2)
     sim = make_sim(car)
-    sim.set_state(Pose2(1.0, 2.0, 0.3), 1.5, 0.12)
+    sim.set_state(Pose2(1.0, 2.0, 0.3), speed, steer)
     sim.step(100)
-    assert sim.steer_rad == pytest.approx(0.12, abs=1e-4)  # understeer follows the measured speed
-    assert sim.speed_mps == pytest.approx(1.5, abs=0.01)
+    assert sim.steer_rad == pytest.approx(steer, abs=1e-4)  # understeer follows the measured speed
+    assert sim.speed_mps == pytest.approx(speed, abs=0.01)  # reversing: the ESC stays in reverse
+    sim.set_command(sim.speed_cmd_mps, sim.steer_cmd_rad)  # the held command: nothing changes
+    sim.step(100)
+    assert (sim.steer_rad, sim.speed_mps) == pytest.approx((steer, speed), abs=0.01)
 
 
 def test_place_moves_the_car_but_keeps_commands_in_flight():
@@ -221,3 +246,116 @@ def test_place_moves_the_car_but_keeps_commands_in_flight():
     plain.set_command(0.8, -0.1)
     plain.place(Pose2(1.0, 0.0, 0.0), 0.5, 0.0)
     assert (plain.speed_cmd_mps, plain.steer_cmd_rad) == (0.8, -0.1)
+
+
+def test_speed_scale_scales_the_speed_reached():
+    for scale in (0.9, 1.1):
+        rows = trace(make_sim(with_effects(CAR, speed_scale=scale)), lambda t: (1.5, 0.0), 2.0)
+        assert rows[-1, 4] == pytest.approx(scale * 1.5, abs=0.002)
+    top = trace(make_sim(with_effects(CAR, speed_scale=0.9)), lambda t: (9.0, 0.0), 3.0)  # clamped, then scaled
+    assert top[-1, 4] == pytest.approx(0.9 * CAR.drive.max_speed_mps, abs=0.01)
+
+
+def _turn_radius_m(car, steer):
+    sim = make_sim(car)
+    sim.set_state(Pose2(), 1.0)
+    trace(sim, lambda t: (1.0, steer), 1.0)
+    return 1.0 / sim.yaw_rate_radps
+
+
+def test_steering_asymmetry_turns_tighter_to_the_left():
+    a = 0.1
+    car = with_effects(CAR, steering_asymmetry=a)
+    left, right = _turn_radius_m(car, 0.2), -_turn_radius_m(car, -0.2)
+    assert left == pytest.approx(WB / math.tan(0.2 * (1 + a)), rel=0.01)  # 0.784 m
+    assert right == pytest.approx(WB / math.tan(0.2 * (1 - a)), rel=0.01)  # 0.963 m
+    assert left < _turn_radius_m(CAR, 0.2) < right
+
+
+def test_steering_play_ignores_small_reversals_then_catches_up():
+    b = 0.05
+    sim = make_sim(with_effects(CAR, steering_play_rad=b))
+    sim.set_state(Pose2(), 1.0)
+    steer = []
+    for d in (0.2, 0.15, 0.12, 0.05, 0.1):
+        trace(sim, lambda t: (1.0, d), 0.2)
+        steer.append(sim.steer_rad)
+    # the slack is taken up (0.2 - b); reversals smaller than 2 b do nothing; a larger one
+    # moves the wheels b behind the command; turning back within the slack leaves them
+    assert steer == pytest.approx([0.15, 0.15, 0.15, 0.10, 0.10], abs=1e-9)
+
+
+def _reverse_times_s(car):
+    """Rolling forward at 1.5 m/s, command -1 m/s: (time to rest, time to -0.5 m/s)."""
+    sim = make_sim(car)
+    sim.set_state(Pose2(), 1.5)
+    t0 = sim.time_s
+    rows = trace(sim, lambda t: (-1.0, 0.0), 2.0, every=1)
+    rest = rows[int(np.argmax(rows[:, 4] < 0.02)), 0] - t0
+    return rest, _crossing_time(rows * [1, 1, 1, 1, -1, 1], 4, 0.5) - t0, rows
+
+
+def test_esc_brakes_to_rest_before_it_reverses():
+    delay = 0.3
+    rest0, rev0, _ = _reverse_times_s(CAR)
+    rest1, rev1, rows = _reverse_times_s(with_effects(CAR, esc_reverse_delay_s=delay))
+    assert rest1 == pytest.approx(rest0, abs=0.005)  # both brake at max_brake: 1.5 / 3.1 = 0.48 s
+    probe = EffectSim(with_effects(CAR, esc_reverse_delay_s=delay))
+    sub_step = probe.n_sub * probe.dt_s  # the hold is resolved to the control sub-step
+    assert delay - 0.01 <= rev1 - rev0 <= delay + 2 * sub_step  # 0.646 s -> 0.940 s
+    held = (rows[:, 0] > rows[0, 0] + rest1 + 0.01) & (rows[:, 0] < rows[0, 0] + rest1 + delay - 0.01)
+    assert np.abs(rows[held, 4]).max() < 0.02  # at rest during the hold
+    # from rest (or after a neutral command) it reverses at once, as without the effect
+    def from_rest(car):
+        return _crossing_time(trace(make_sim(car), lambda t: (-1.0, 0.0), 0.5, every=1) * [1, 1, 1, 1, -1, 1], 4, 0.5)
+    assert from_rest(with_effects(CAR, esc_reverse_delay_s=delay)) == pytest.approx(from_rest(CAR), abs=1e-9)
+
+
+def _time_to_speed_s(car, v=2.0):
+    rows = trace(make_sim(car), lambda t: (v, 0.0), 3.0, every=1)
+    return _crossing_time(rows, 4, 0.95 * v), rows[-1, 4]
+
+
+def _braking_distance_m(car):
+    sim = make_sim(car)
+    sim.set_state(Pose2(), 2.0)
+    rows = trace(sim, lambda t: (0.0, 0.0), 2.0, every=1)
+    assert abs(rows[-1, 4]) < 1e-6
+    return rows[-1, 1]
+
+
+def test_accel_and_brake_scales_change_the_drive_limits():
+    t_nom, _ = _time_to_speed_s(CAR)  # 0 -> 1.9 m/s at 3.1 m/s^2: 0.61 s
+    t_half, v_half = _time_to_speed_s(with_effects(CAR, accel_scale=0.5))
+    assert t_half / t_nom == pytest.approx(2.0, rel=0.02) and v_half == pytest.approx(2.0, abs=1e-3)
+    d_nom = _braking_distance_m(CAR)  # v^2 / (2 a) = 0.645 m
+    assert _braking_distance_m(with_effects(CAR, brake_scale=0.5)) / d_nom == pytest.approx(2.0, rel=0.01)
+    assert _braking_distance_m(with_effects(CAR, accel_scale=0.5)) == pytest.approx(d_nom, abs=1e-9)
+
+
+def test_mass_scale_same_top_speed_slower_to_reach_and_stop():
+    heavy = with_effects(CAR, mass_scale=2.0)
+    t_nom, _ = _time_to_speed_s(CAR)
+    t_heavy, v_heavy = _time_to_speed_s(heavy)
+    assert v_heavy == pytest.approx(2.0, abs=1e-3)  # same top speed
+    assert t_heavy / t_nom == pytest.approx(2.0, rel=0.02)  # the file's torque on twice the mass
+    assert _braking_distance_m(heavy) / _braking_distance_m(CAR) == pytest.approx(2.0, rel=0.01)
+    # drag slows the heavier car less: m_eff dv/dt = -k v^2 with twice m_eff
+    m_eff = CAR.chassis.mass_kg + 4 * 0.5 * CAR.wheels.mass_kg
+    _, v_heavy = coast_down(with_effects(CAR, drag_coeff_kgpm=0.2, mass_scale=2.0))
+    assert v_heavy == pytest.approx(1.0 / (1.0 / 2.0 + 0.2 / (2.0 * m_eff)), abs=0.02)  # 1.69 m/s, light 1.46
+
+
+def test_servo_rate_scale_slows_a_step_steer():
+    def time_to_steer_s(car):
+        sim = make_sim(car)
+        sim.set_state(Pose2(), 0.5)
+        return _crossing_time(trace(sim, lambda t: (0.5, 0.3), 0.3, every=1), 5, 0.299)
+    t_nom = time_to_steer_s(CAR)  # 0.3 rad at 6 rad/s: 0.05 s
+    assert time_to_steer_s(with_effects(CAR, servo_rate_scale=0.5)) / t_nom == pytest.approx(2.0, rel=0.05)
+
+
+def test_steer_limit_scale_widens_the_full_lock_circle():
+    car = with_effects(CAR, steer_limit_scale=0.8)
+    assert _turn_radius_m(car, 0.4) == pytest.approx(WB / math.tan(0.8 * 0.4), rel=0.01)  # 0.53 m, not 0.42 m
+    assert _turn_radius_m(car, 0.2) == pytest.approx(_turn_radius_m(CAR, 0.2), abs=1e-9)  # below the stop: as nominal

@@ -128,6 +128,29 @@ class Effects:
                                               "Revealed by circles at rising speed.", "neutral", 0.0, 0.5)
     friction_scale: float = _f(1.0, "friction: multiplies the tyre friction coefficient. Revealed at "
                                "the grip limit (circles at rising speed, tilt test).", "neutral", 0.05, 5.0)
+    speed_scale: float = _f(1.0, "speed_scale: the car reaches speed_scale x the commanded speed (ESC "
+                            "or encoder calibration; drive.max_speed_mps scales too). Revealed by "
+                            "steady straight runs and speed steps.", "neutral", 0.1, 10.0)
+    steering_asymmetry: float = _f(0.0, "steering_asymmetry: left steer targets get gain (1 + a), right ones "
+                                   "(1 - a), after gain and offset. Revealed by left and right circles and "
+                                   "step steers.", "neutral", -0.9, 0.9)
+    steering_play_rad: float = _f(0.0, "steering_play: backlash b of the linkage: the wheels follow the servo "
+                                  "only once the slack is taken up (hysteresis of width 2 b). Revealed by "
+                                  "small steering reversals (chirp, random steps).", "neutral", 0.0, 0.3)
+    esc_reverse_delay_s: float = _f(0.0, "esc_brake_reverse: a negative speed command while rolling forward "
+                                    "brakes to rest, holds for this time, then reverses (0 = reverses at "
+                                    "once). Revealed by forward-to-reverse commands.", "neutral", 0.0, 5.0)
+    accel_scale: float = _f(1.0, "accel_scale: the real acceleration limit is accel_scale x "
+                            "drive.max_accel_mps2. Revealed by speed steps up from rest.", "neutral", 0.05, 20.0)
+    brake_scale: float = _f(1.0, "brake_scale: the real braking limit is brake_scale x "
+                            "drive.max_brake_mps2. Revealed by braking to rest.", "neutral", 0.05, 20.0)
+    servo_rate_scale: float = _f(1.0, "servo_rate_scale: the real servo slew rate is servo_rate_scale x "
+                                 "steering.rate_radps. Revealed by large step steers.", "neutral", 0.01, 100.0)
+    steer_limit_scale: float = _f(1.0, "steer_limit_scale: the real steering stop is steer_limit_scale x "
+                                  "steering.limit_rad. Revealed by full-lock circles.", "neutral", 0.1, 3.0)
+    mass_scale: float = _f(1.0, "mass_scale: every mass and inertia of the car times this, with the motor "
+                           "and brake torques of the file's numbers (so accel and brake limits / mass_scale). "
+                           "Revealed by speed steps and braking.", "neutral", 0.1, 10.0)
 
 
 @dataclass(frozen=True)

@@ -7,15 +7,27 @@ when every effect is neutral (zero extra cost, bit-identical), else an :class:`E
 
 Where each effect acts (docs/effects.md has the physics):
 
-* build: ``friction`` scales ``wheels.friction_mu`` before the car is built.
+* build (:func:`built_car`): errors in the car file's own numbers, as scale factors:
+  ``friction`` (``wheels.friction_mu``), ``accel_scale`` / ``brake_scale``
+  (``drive.max_accel_mps2`` / ``max_brake_mps2``), ``servo_rate_scale``
+  (``steering.rate_radps``), ``steer_limit_scale`` (``steering.limit_rad``), ``mass_scale``
+  (every mass and inertia; the drive and brake torques stay those of the file's numbers, so
+  the accel and brake limits become ``max / mass_scale``); ``speed_scale`` also scales
+  ``drive.max_speed_mps``.
 * command path, applied to every ``set_command`` (no extra cost):
-  ``steering_offset``, ``steering_gain`` (steer -> gain * steer + offset) and
-  ``throttle_deadband`` (|speed| < deadband -> no drive: the rear wheels free-wheel).
+  ``steering_offset``, ``steering_gain`` (steer -> gain * steer + offset),
+  ``steering_asymmetry`` (then left x (1 + a), right x (1 - a)),
+  ``throttle_deadband`` (|speed| < deadband -> no drive: the rear wheels free-wheel),
+  ``speed_scale`` (speed -> scale * speed) and ``steering_play`` (backlash: the output moves
+  only when the input is more than ``b`` away from it, and then stays ``b`` behind; rate
+  independent, so it needs no sub-step).
 * command path, filtered at a control sub-step of ``n_sub = max(1, round(CONTROL_DT_S /
   dt_s))`` physics steps (4 ms: 2 steps at the default 2 ms) while any of these is active:
   ``command_latency`` (FIFO; a command acts at the first sub-step at or after
   ``t_set + latency``), ``steering_lag`` and ``motor_lag`` (exact first-order lags),
   ``steering_rate_limit`` (slew limit on the steering target, on top of the servo rate),
+  ``esc_brake_reverse`` (a negative speed command while rolling forward brakes to rest, holds
+  for ``esc_reverse_delay_s`` at rest, then reverses; a command >= 0 or coasting resets it),
   ``tire_slip`` (understeer: effective steer = steer - K * a_lat with the kinematic
   lateral acceleration of the effective steer, a_lat = v^2 tan(steer_eff) / L; solved in
   closed form, steer_eff = steer / (1 + K v^2 / L) for small angles, with the measured
@@ -25,9 +37,10 @@ Where each effect acts (docs/effects.md has the physics):
   act on the chassis against the motion through ``CarSim.apply_external_force_n`` (rolling
   resistance fades in linearly below ``ROLL_EPS_MPS`` so a car at rest does not creep).
 
-Order of the steering path: latency -> gain, offset -> lag -> rate limit -> understeer ->
-CarSim (clamp to the limit, servo rate). Speed path: latency -> deadband -> motor lag ->
-CarSim (torque-limited accel/brake). Coasting (``set_coast``: no drive torque, the rear
+Order of the steering path: latency -> gain, offset -> asymmetry -> lag -> rate limit ->
+play -> understeer -> CarSim (clamp to the limit, servo rate). Speed path: latency ->
+deadband -> speed scale -> ESC brake-before-reverse -> motor lag -> CarSim (torque-limited
+accel/brake). Coasting (``set_coast``: no drive torque, the rear
 wheels roll freely) is a command too: it passes the latency; the deadband also coasts.
 
 Everything is deterministic: no randomness, state saved by :meth:`EffectSim.save_state`.
@@ -35,6 +48,7 @@ Everything is deterministic: no randomness, state saved by :meth:`EffectSim.save
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -43,10 +57,17 @@ from typing import Any
 from pieces.pose import Pose2
 from simrunner.errors import SimError
 from simrunner.car.physics import GRAVITY_MPS2, CarSim
-from vehicle.description import CarDescription, Effects
+from vehicle.description import CarDescription, CarDescriptionError, Effects, Steering
 
 CONTROL_DT_S = 0.004  # control sub-step of the filtered effects (rounded to whole physics steps)
 ROLL_EPS_MPS = 0.02  # rolling resistance ramps from 0 to full over |v| in [0, ROLL_EPS_MPS]
+ESC_REST_MPS = 0.02  # the ESC counts the car at rest (or rolling) below (above) this speed
+
+# residual signals of the gap workflow (simrunner.workflows.gap.replay.FIT_SIGNALS) that
+# ``EffectSpec.observed_by`` names
+RESIDUAL_SIGNALS = ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
+_LATERAL = ("yaw_rate_radps", "yaw_rad", "cross_m")
+_LONGITUDINAL = ("speed_mps", "along_m")
 
 
 class EffectError(SimError, KeyError):
@@ -60,7 +81,9 @@ class EffectError(SimError, KeyError):
 class EffectSpec:
     """One catalogue entry. ``params`` are field names of ``vehicle.description.Effects``;
     ``neutral``, ``bounds`` (fit bounds, finite) and ``units`` are per parameter.
-    ``revealed_by`` names plan segment kinds of :mod:`simrunner.workflows.excite`."""
+    ``revealed_by`` names plan segment kinds of :mod:`simrunner.workflows.excite`;
+    ``observed_by`` the gap residual signals (:data:`RESIDUAL_SIGNALS`) in which the effect
+    shows, so a log without them cannot reveal it."""
 
     name: str
     params: tuple[str, ...]
@@ -69,6 +92,7 @@ class EffectSpec:
     units: tuple[str, ...]
     meaning: str
     revealed_by: tuple[str, ...]
+    observed_by: tuple[str, ...]
     acts_on: str  # "command" | "force" | "build"
 
     @property
@@ -77,48 +101,77 @@ class EffectSpec:
         return self.params[0]
 
 
-def _spec(name, param, neutral, bounds, unit, meaning, revealed_by, acts_on="command") -> EffectSpec:
-    return EffectSpec(name, (param,), (neutral,), (bounds,), (unit,), meaning, tuple(revealed_by), acts_on)
+def _spec(name, param, neutral, bounds, unit, meaning, revealed_by, observed_by, acts_on="command") -> EffectSpec:
+    return EffectSpec(name, (param,), (neutral,), (bounds,), (unit,), meaning, tuple(revealed_by),
+                      tuple(observed_by), acts_on)
 
 
 EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
     _spec("steering_offset", "steering_offset_rad", 0.0, (-0.1, 0.1), "rad",
           "servo trim: a zero steering command does not point the wheels straight",
-          ("straight", "step_steer", "circle")),
+          ("straight", "step_steer", "circle"), _LATERAL),
     _spec("steering_gain", "steering_gain", 1.0, (0.5, 1.5), "1",
           "servo/linkage scale: the wheels turn gain x the commanded angle",
-          ("circle", "step_steer")),
+          ("circle", "step_steer"), _LATERAL),
     _spec("steering_lag", "steering_lag_s", 0.0, (0.0, 0.3), "s",
           "first-order lag of the steering (servo control loop, linkage compliance)",
-          ("step_steer", "chirp")),
+          ("step_steer", "chirp"), _LATERAL),
     _spec("steering_rate_limit", "steering_rate_limit_radps", math.inf, (0.5, 20.0), "rad/s",
           "the servo slews slower than the model's servo rate (loaded servo, low voltage)",
-          ("step_steer", "chirp")),
+          ("step_steer", "chirp"), _LATERAL),
     _spec("command_latency", "command_latency_s", 0.0, (0.0, 0.2), "s",
           "pure delay from a command to the actuators (control loop, PWM update, ESC)",
-          ("step_steer", "speed_step", "chirp")),
+          ("step_steer", "speed_step", "chirp"), RESIDUAL_SIGNALS),
     _spec("motor_lag", "motor_lag_s", 0.0, (0.0, 1.0), "s",
           "first-order lag of the speed target (motor/ESC speed loop, inertia)",
-          ("speed_step", "speed_ramp")),
+          ("speed_step", "speed_ramp"), _LONGITUDINAL),
     _spec("throttle_deadband", "throttle_deadband_mps", 0.0, (0.0, 0.5), "m/s",
           "small speed commands do not move the car (ESC neutral band, static friction)",
-          ("speed_ramp",)),
+          ("speed_ramp",), _LONGITUDINAL),
     _spec("rolling_resistance", "rolling_resistance_coeff", 0.0, (0.0, 0.1), "1",
           "constant resisting force c_rr m g (tyre hysteresis, bearings, gears)",
-          ("coast",), "force"),
+          ("coast",), _LONGITUDINAL, "force"),
     _spec("drag", "drag_coeff_kgpm", 0.0, (0.0, 0.5), "kg/m",
           "resisting force k v^2 (air drag; at these speeds mostly speed-dependent losses)",
-          ("coast",), "force"),
+          ("coast",), _LONGITUDINAL, "force"),
     _spec("tire_slip", "tire_slip_understeer_radps2pm", 0.0, (0.0, 0.1), "rad/(m/s^2)",
           "understeer from tyre slip angles: the car turns less than the wheels say, more so "
-          "at high lateral acceleration", ("circle",)),
+          "at high lateral acceleration", ("circle",), _LATERAL),
     _spec("friction", "friction_scale", 1.0, (0.3, 1.5), "1",
           "grip of the real tyres on the real track relative to wheels.friction_mu",
-          ("circle", "tilt test"), "build"),
+          ("circle", "tilt test"), _LATERAL, "build"),
+    _spec("speed_scale", "speed_scale", 1.0, (0.7, 1.3), "1",
+          "ESC/encoder calibration: the car reaches scale x the commanded speed",
+          ("straight", "speed_step", "speed_ramp"), _LONGITUDINAL),
+    _spec("steering_asymmetry", "steering_asymmetry", 0.0, (-0.3, 0.3), "1",
+          "left and right steering differ: left targets x (1 + a), right targets x (1 - a)",
+          ("circle", "step_steer", "turn"), _LATERAL),
+    _spec("steering_play", "steering_play_rad", 0.0, (0.0, 0.06), "rad",
+          "backlash of the steering linkage: after a reversal the wheels stay put until the "
+          "servo has crossed the slack 2 b", ("chirp", "random_steer", "step_steer"), _LATERAL),
+    _spec("esc_brake_reverse", "esc_reverse_delay_s", 0.0, (0.0, 1.0), "s",
+          "a car ESC with brake: a negative command while rolling forward brakes to rest and "
+          "reverses only after a hold time at rest", ("reverse",), _LONGITUDINAL),
+    _spec("accel_scale", "accel_scale", 1.0, (0.3, 2.0), "1",
+          "the car file's drive.max_accel_mps2 is off by this factor (motor torque, battery)",
+          ("speed_step", "speed_ramp"), _LONGITUDINAL, "build"),
+    _spec("brake_scale", "brake_scale", 1.0, (0.3, 2.0), "1",
+          "the car file's drive.max_brake_mps2 is off by this factor (ESC brake strength)",
+          ("brake", "speed_step"), _LONGITUDINAL, "build"),
+    _spec("servo_rate_scale", "servo_rate_scale", 1.0, (0.1, 2.0), "1",
+          "the car file's steering.rate_radps is off by this factor (servo model, voltage)",
+          ("step_steer", "chirp"), _LATERAL, "build"),
+    _spec("steer_limit_scale", "steer_limit_scale", 1.0, (0.6, 1.3), "1",
+          "the car file's steering.limit_rad is off by this factor (mechanical steering stop)",
+          ("circle", "turn"), _LATERAL, "build"),
+    _spec("mass_scale", "mass_scale", 1.0, (0.5, 2.0), "1",
+          "the car file's masses are off by this factor: with the file's drive and brake torques "
+          "a heavier car speeds up and brakes more slowly (and drag slows it less)",
+          ("speed_step", "brake", "speed_ramp"), _LONGITUDINAL, "build"),
 )}
 
 _DYNAMIC_PARAMS = ("steering_lag_s", "command_latency_s", "motor_lag_s", "tire_slip_understeer_radps2pm",
-                   "rolling_resistance_coeff", "drag_coeff_kgpm")
+                   "rolling_resistance_coeff", "drag_coeff_kgpm", "esc_reverse_delay_s")
 
 
 def active_effects(car: CarDescription) -> list[str]:
@@ -148,11 +201,42 @@ def neutral_car(car: CarDescription) -> CarDescription:
 
 
 def built_car(car: CarDescription) -> CarDescription:
-    """The car the physics is built from: ``wheels.friction_mu`` times ``friction_scale``."""
-    scale = car.effects.friction_scale
-    if scale == 1.0:
+    """The car the physics is built from: the car file's numbers times the build-time scale
+    factors (``car`` itself when they are all 1). ``wheels.friction_mu`` x ``friction_scale``;
+    ``drive.max_speed_mps`` x ``speed_scale``; ``drive.max_accel_mps2`` x ``accel_scale /
+    mass_scale`` and ``max_brake_mps2`` x ``brake_scale / mass_scale``; ``steering.rate_radps``
+    x ``servo_rate_scale``; ``steering.limit_rad`` x ``steer_limit_scale``; ``chassis.mass_kg``
+    and ``wheels.mass_kg`` x ``mass_scale`` (all inertias follow the masses). ``CarSim`` sets
+    the drive and brake torques from the built mass and limits, so with ``mass_scale`` they
+    stay those of the file's numbers. A scaled steering limit above the description's range
+    raises ``CarDescriptionError``."""
+    e = car.effects
+    if (e.friction_scale == e.speed_scale == e.accel_scale == e.brake_scale == e.servo_rate_scale
+            == e.steer_limit_scale == e.mass_scale == 1.0):
         return car
-    return car.replace(wheels=dataclasses.replace(car.wheels, friction_mu=car.wheels.friction_mu * scale))
+    ch, wh, st, dr = car.chassis, car.wheels, car.steering, car.drive
+    m = e.mass_scale
+    if e.friction_scale != 1.0:
+        wh = dataclasses.replace(wh, friction_mu=wh.friction_mu * e.friction_scale)
+    if m != 1.0:
+        ch = dataclasses.replace(ch, mass_kg=ch.mass_kg * m)
+        wh = dataclasses.replace(wh, mass_kg=wh.mass_kg * m)
+    if e.speed_scale != 1.0:
+        dr = dataclasses.replace(dr, max_speed_mps=dr.max_speed_mps * e.speed_scale)
+    if e.accel_scale != 1.0 or m != 1.0:
+        dr = dataclasses.replace(dr, max_accel_mps2=dr.max_accel_mps2 * e.accel_scale / m)
+    if e.brake_scale != 1.0 or m != 1.0:
+        dr = dataclasses.replace(dr, max_brake_mps2=dr.max_brake_mps2 * e.brake_scale / m)
+    if e.servo_rate_scale != 1.0:
+        st = dataclasses.replace(st, rate_radps=st.rate_radps * e.servo_rate_scale)
+    if e.steer_limit_scale != 1.0:
+        st = dataclasses.replace(st, limit_rad=st.limit_rad * e.steer_limit_scale)
+        hi = next(f for f in dataclasses.fields(Steering) if f.name == "limit_rad").metadata["hi"]
+        if st.limit_rad > hi:
+            raise CarDescriptionError(
+                f"{car.name}: effects.steer_limit_scale = {e.steer_limit_scale!r} makes steering.limit_rad "
+                f"{st.limit_rad:.4g} rad: expected at most {hi} rad")
+    return car.replace(chassis=ch, wheels=wh, steering=st, drive=dr)
 
 
 def make_sim(car: CarDescription, **carsim_kwargs: Any):
@@ -162,6 +246,14 @@ def make_sim(car: CarDescription, **carsim_kwargs: Any):
     if is_neutral(car):
         return CarSim(car, **carsim_kwargs)
     return EffectSim(car, **carsim_kwargs)
+
+
+class EscMode(enum.Enum):
+    """State of the ESC brake-before-reverse logic (``esc_brake_reverse``)."""
+
+    DRIVE = "drive"  # commands pass (forward, or no negative command yet)
+    BRAKE = "brake"  # a negative command arrived while rolling forward: brake to rest, hold
+    REVERSE = "reverse"  # negative commands pass
 
 
 @dataclass(frozen=True)
@@ -178,6 +270,8 @@ class _FilterState:
     speed_lag: float
     last_t: float
     substep: int  # physics steps since the last sub-step boundary
+    play: float  # output of the steering play (backlash)
+    esc: tuple[EscMode, float | None]  # ESC mode, time the car came to rest while braking
 
 
 @dataclass(frozen=True)
@@ -195,7 +289,8 @@ class EffectSim:
 
     def __init__(self, car: CarDescription, **carsim_kwargs: Any):
         self.car = car
-        self.sim = CarSim(built_car(car), **carsim_kwargs)
+        self.built = built_car(car)  # the physical car (the car file's numbers x build-time scales)
+        self.sim = CarSim(self.built, **carsim_kwargs)
         e = car.effects
         self._e = e
         self._dynamic = any(getattr(e, p) != getattr(Effects, p) for p in _DYNAMIC_PARAMS) or (
@@ -212,6 +307,8 @@ class EffectSim:
         self._substep = 0
         self._coast_on = False
         self._sent: tuple | None = None  # the last command passed to the inner CarSim
+        self._play = 0.0
+        self._esc: tuple[EscMode, float | None] = (EscMode.DRIVE, None)
 
     # -- read-outs: the inner CarSim's (the effects act on its inputs) ----------------------
     @property
@@ -318,13 +415,49 @@ class EffectSim:
         self._apply_forces()
 
     def _static_map(self, cmd) -> tuple[float, float, float | None, bool]:
-        """Gain, offset and deadband (no state)."""
+        """Gain, offset, asymmetry, deadband and speed scale (no state)."""
         e = self._e
         v, d, w, coast = cmd
         d = e.steering_gain * d + e.steering_offset_rad
+        if e.steering_asymmetry != 0.0:
+            d *= (1.0 + e.steering_asymmetry) if d > 0.0 else (1.0 - e.steering_asymmetry)
         if e.throttle_deadband_mps > 0.0 and abs(v) < e.throttle_deadband_mps:
             coast = True
+        if e.speed_scale != 1.0:  # on the clamped command (the physical top speed scales too)
+            vmax = self.car.drive.max_speed_mps
+            v = e.speed_scale * min(max(v, -vmax), vmax)
         return v, d, w, coast
+
+    def _take_up_play(self, d: float) -> float:
+        """Backlash of width 2 b: the output stays until the input is more than b away."""
+        b, y = self._e.steering_play_rad, self._play
+        if d > y + b:
+            y = d - b
+        elif d < y - b:
+            y = d + b
+        self._play = y
+        return y
+
+    def _esc_target(self, v: float, coast: bool, t: float) -> float:
+        """ESC brake-before-reverse: the speed target the motor gets for the command ``v``."""
+        if coast or v >= 0.0:  # forward or neutral resets the ESC
+            self._esc = (EscMode.DRIVE, None)
+            return v
+        mode, rest_t = self._esc
+        u = self.sim.speed_mps
+        if mode is EscMode.DRIVE:
+            mode = EscMode.BRAKE if u > ESC_REST_MPS else EscMode.REVERSE
+        if mode is EscMode.BRAKE:
+            if abs(u) > ESC_REST_MPS:
+                rest_t = None
+            elif rest_t is None:
+                rest_t = t
+            if rest_t is None or t - rest_t < self._e.esc_reverse_delay_s - 1e-9:
+                self._esc = (mode, rest_t)
+                return 0.0
+            mode = EscMode.REVERSE
+        self._esc = (mode, None)
+        return v
 
     def _update(self) -> None:
         """One control update at the current time (all effects of the command path)."""
@@ -347,9 +480,13 @@ class EffectSim:
             else:
                 self._steer_rl = self._steer_lag
             d = self._steer_rl
+            if e.steering_play_rad > 0.0:
+                d = self._take_up_play(d)
             if e.tire_slip_understeer_radps2pm > 0.0:
                 u = sim.speed_mps
                 d = d / (1.0 + e.tire_slip_understeer_radps2pm * u * u / self.car.chassis.wheelbase_m)
+            if e.esc_reverse_delay_s > 0.0:
+                v = self._esc_target(v, coast, t)
             target_v = 0.0 if coast else v
             if coast:  # the speed loop restarts from the actual speed when the drive re-engages
                 self._speed_lag = sim.speed_mps
@@ -359,15 +496,19 @@ class EffectSim:
                 self._speed_lag = target_v
             v_eff = self._speed_lag
         else:
+            if e.steering_play_rad > 0.0:
+                d = self._take_up_play(d)
             v_eff = v
         w = None
         if w_cmd is not None:
-            # keep the caller's deviation from the default differential; the default part
-            # follows the effective speed and steering
+            # keep the caller's deviation from the default differential (of the command as
+            # given, clamped to the car file's limits); the default part follows the effective
+            # speed and steering, clamped to the physical limits
             lim, wb, vmax = self.car.steering.limit_rad, self.car.chassis.wheelbase_m, self.car.drive.max_speed_mps
             v0, d0 = min(max(self._held[0], -vmax), vmax), min(max(self._held[1], -lim), lim)
-            v_eff = min(max(v_eff, -vmax), vmax)
-            d1 = min(max(d, -lim), lim)
+            lim1, vmax1 = self.built.steering.limit_rad, self.built.drive.max_speed_mps
+            v_eff = min(max(v_eff, -vmax1), vmax1)
+            d1 = min(max(d, -lim1), lim1)
             w = w_cmd + (v_eff * math.sin(d1) - v0 * math.sin(d0)) / wb
         sent = (v_eff, d, w)
         if sent != self._sent or not self._dynamic:
@@ -386,7 +527,7 @@ class EffectSim:
         if self._forces:
             vx, vy = sim.speed_mps, sim.lateral_speed_mps
             if e.rolling_resistance_coeff > 0.0:
-                f_rr = e.rolling_resistance_coeff * self.car.chassis.mass_kg * GRAVITY_MPS2
+                f_rr = e.rolling_resistance_coeff * self.built.chassis.mass_kg * GRAVITY_MPS2
                 fx -= f_rr * min(max(vx / ROLL_EPS_MPS, -1.0), 1.0)
             if e.drag_coeff_kgpm > 0.0:
                 speed = math.hypot(vx, vy)
@@ -412,8 +553,8 @@ class EffectSim:
 
     # -- state ---------------------------------------------------------------------------
     def save_state(self) -> EffectSimState:
-        filt = _FilterState(self._raw, self._coast_on, self._sent, tuple(self._queue), self._held, self._steer_lag, self._steer_rl,
-                            self._speed_lag, self._last_t, self._substep)
+        filt = _FilterState(self._raw, self._coast_on, self._sent, tuple(self._queue), self._held, self._steer_lag,
+                            self._steer_rl, self._speed_lag, self._last_t, self._substep, self._play, self._esc)
         return EffectSimState(self.sim.save_state(), filt, self._user_force)
 
     def restore_state(self, state: EffectSimState) -> None:
@@ -422,6 +563,7 @@ class EffectSim:
         self._raw, self._queue, self._held = f.raw, deque(f.queue), f.held
         self._steer_lag, self._steer_rl, self._speed_lag = f.steer_lag, f.steer_rl, f.speed_lag
         self._last_t, self._substep = f.last_t, f.substep
+        self._play, self._esc = f.play, f.esc
         self._user_force = state.user_force_n
         self._coast_on = f.coast_on  # the inner state restores the inner coasting itself
         self._sent = f.sent
@@ -429,7 +571,7 @@ class EffectSim:
     def place(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
               yaw_rate_radps: float = 0.0) -> None:
         """Move the car to a planar state (``CarSim.place``) and keep the command path as it
-        is: pending latency, lag and rate-limit states and the command in force. The gap
+        is: pending latency, lag, rate-limit, play and ESC states and the command in force. The gap
         replay calls it after a lead-in that replayed the commands before a window."""
         self.sim.place(pose, speed_mps, steer_rad, yaw_rate_radps)
         if self._forces:
@@ -438,18 +580,24 @@ class EffectSim:
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
                   yaw_rate_radps: float = 0.0) -> None:
         """Place the car (as ``CarSim.set_state``: ``steer_rad`` is the actual wheel angle).
-        The command path restarts settled at that state: no pending latency, the lag and
-        rate-limit states at the values that give ``steer_rad`` and ``speed_mps``, and the
-        held command the one that keeps them (steer undone through understeer, offset and
-        gain), so a following identical command changes nothing."""
+        The command path restarts settled at that state: no pending latency, the lag,
+        rate-limit and play states at the values that give ``steer_rad`` and ``speed_mps``, the
+        ESC driving (reversing if ``speed_mps < 0``), and the held command the one that keeps
+        them (steer undone through understeer, asymmetry, offset and gain; speed through the
+        speed scale), so a following identical command changes nothing."""
         e = self._e
         self.sim.set_state(pose, speed_mps, steer_rad, yaw_rate_radps)
         pre = float(steer_rad) * (1.0 + e.tire_slip_understeer_radps2pm * float(speed_mps) ** 2
                                   / self.car.chassis.wheelbase_m)
-        raw = (float(speed_mps), (pre - e.steering_offset_rad) / e.steering_gain, None, self._raw[3])
+        d = pre
+        if e.steering_asymmetry != 0.0:
+            d /= (1.0 + e.steering_asymmetry) if d > 0.0 else (1.0 - e.steering_asymmetry)
+        v = float(speed_mps) / e.speed_scale if e.speed_scale != 1.0 else float(speed_mps)
+        raw = (v, (d - e.steering_offset_rad) / e.steering_gain, None, self._raw[3])
         self._raw = self._held = raw
         self._queue.clear()
-        self._steer_lag = self._steer_rl = pre
+        self._steer_lag = self._steer_rl = self._play = pre
+        self._esc = (EscMode.REVERSE if speed_mps < 0.0 else EscMode.DRIVE, None)
         self._sent = None
         self._speed_lag = float(speed_mps)
         self._last_t = self.sim.time_s
