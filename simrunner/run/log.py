@@ -27,11 +27,14 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from simrunner.errors import SimError
+
+if TYPE_CHECKING:  # columns.py builds on this module
+    from simrunner.run.columns import ColumnMap
 
 FORMAT_VERSION = 2
 FORMAT_LINE = f"# nxpcup-sim run log, format {FORMAT_VERSION}"
@@ -213,7 +216,7 @@ def log_from_columns(columns: dict, source: str = "<log>") -> RunLog:
     if bad.size:
         i = int(bad[0]) + 1
         raise LogError(source, i + 2, f"column 't_s': expected strictly increasing time (got "
-                                      f"{t[i]!r} after {t[i - 1]!r})")
+                                      f"{float(t[i])!r} after {float(t[i - 1])!r})")
     return RunLog(source=str(source), **out)
 
 
@@ -260,9 +263,14 @@ def write_log(log: RunLog, path: str | Path, *, float_format: str = "%.6f") -> P
 
 
 # -- reading -------------------------------------------------------------------------------
-def read_log(path: str | Path) -> RunLog:
+def read_log(path: str | Path, columns: ColumnMap | None = None) -> RunLog:
     """Read a log CSV (format 2 or 1, see the module docstring); raise :class:`LogError`
-    (``path:line: what was expected``) for anything malformed."""
+    (``path:line: what was expected``) for anything malformed.
+
+    ``columns`` (a :class:`simrunner.run.columns.ColumnMap`) reads a CSV whose columns have
+    other names or units: each schema column it has a rule for is computed from the file's
+    columns, the others are read by their own names (docs/telemetry.md, "Logs with other
+    columns or units"). Without it, or with an empty map, the file is read as above."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -274,10 +282,10 @@ def read_log(path: str | Path) -> RunLog:
         raise LogError(str(path), 1, "expected a text (CSV) file") from None
     if "\0" in text:
         raise LogError(str(path), 1, "expected a text (CSV) file")
-    return _parse(text, str(path))
+    return _parse(text, str(path), columns if columns is not None and columns.rules else None)
 
 
-def _parse(text: str, source: str) -> RunLog:
+def _parse(text: str, source: str, columns: ColumnMap | None = None) -> RunLog:
     reader = csv.reader(io.StringIO(text, newline=""))
     header, offset = None, 0
     try:
@@ -287,14 +295,19 @@ def _parse(text: str, source: str) -> RunLog:
                 continue
             if not row or all(not c.strip() for c in row):
                 continue
-            header = [FORMAT1_NAMES.get(h.strip(), h.strip()) for h in row]
+            header = [h.strip() for h in row]
+            if columns is None:
+                header = [FORMAT1_NAMES.get(h, h) for h in header]
             break
         if header is None:
             raise LogError(source, 1, f"expected a header line with columns such as "
                                       f"{', '.join(COLUMN_NAMES[:6])}, ...")
-        if "t_s" not in header:
+        if columns is not None:  # the map's source columns, as text; it converts them
+            wanted = [(i, h) for h, i in columns.columns_to_read(header, reader.line_num, source).items()]
+        elif "t_s" not in header:
             raise LogError(source, reader.line_num, "expected a time column t_s (or t) in the header")
-        wanted = [(i, h) for i, h in enumerate(header) if h in _BY_NAME]
+        else:
+            wanted = [(i, h) for i, h in enumerate(header) if h in _BY_NAME]
         values: dict[str, list] = {h: [] for _, h in wanted}
         lines: list[int] = []
         for row in reader:
@@ -305,7 +318,7 @@ def _parse(text: str, source: str) -> RunLog:
                 raise LogError(source, line, f"expected {len(header)} cells (got {len(row)})")
             for i, h in wanted:
                 cell = row[i]
-                if _BY_NAME[h].kind == "text":
+                if columns is not None or _BY_NAME[h].kind == "text":
                     values[h].append(cell)
                     continue
                 try:
@@ -319,6 +332,8 @@ def _parse(text: str, source: str) -> RunLog:
     except csv.Error as exc:
         raise LogError(source, reader.line_num, f"expected valid CSV ({exc})") from None
     try:
+        if columns is not None:
+            values = columns.apply(values, len(lines), source)
         return log_from_columns(values, source)
     except LogError as exc:  # map the row index back to the file's line
         if exc.line >= 2 and exc.line - 2 < len(lines):

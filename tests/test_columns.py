@@ -1,0 +1,363 @@
+"""Column mappings (simrunner.run.columns; docs/telemetry.md "Logs with other columns or
+units"): a team's own CSV read as the run log it means, and every mistake one line."""
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from simrunner.run.columns import ColumnMap, ColumnMapError, Expression, column_map_from
+from simrunner.run.log import LogError, RunLog, log_from_columns, read_log, write_log
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "ros_log_columns.toml"
+ROS_HEADER = ("header.stamp.sec,header.stamp.nanosec,header.frame_id,pose.position.x,pose.position.y,"
+              "pose.orientation.x,pose.orientation.y,pose.orientation.z,pose.orientation.w,odom.speed,imu.gyro_z,"
+              "servo,duty,motor_off")
+
+
+def _write(tmp_path: Path, text: str, name: str = "log.csv") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def _one_line(err: pytest.ExceptionInfo, start: str) -> str:
+    text = str(err.value)
+    assert text.startswith(start), text
+    assert "\n" not in text
+    return text
+
+
+def _ros_pair(tmp_path: Path, n: int = 200) -> tuple[Path, Path]:
+    """The same run as a native log file and as a ROS-style CSV (split stamps, quaternion of
+    any norm, km/h, deg/s, servo and duty command units)."""
+    rng = np.random.default_rng(3)
+    stamp_ns = 1234 * 10**9 + np.cumsum(rng.integers(19_000_000, 21_000_000, n))
+    yaw = rng.uniform(-3.1, 3.1, n)
+    servo = rng.integers(-512, 513, n)
+    duty = rng.integers(0, 101, n)
+    native = log_from_columns({
+        "t_s": [int(s) / 10**9 for s in stamp_ns], "x_m": rng.normal(0, 2, n), "y_m": rng.normal(0, 2, n),
+        "yaw_rad": yaw, "speed_mps": rng.uniform(-0.5, 3, n), "yaw_rate_radps": rng.normal(0, 2, n),
+        "speed_cmd_mps": duty / 100 * 3.1, "steer_cmd_rad": -servo / 512 * 0.40, "coast": rng.integers(0, 2, n)},
+        "<native>")
+    norm = rng.uniform(0.5, 2.0, n)
+    rows = [ROS_HEADER]
+    for k in range(n):
+        sec, nsec = divmod(int(stamp_ns[k]), 10**9)
+        q = (0.0, 0.0, norm[k] * math.sin(yaw[k] / 2), norm[k] * math.cos(yaw[k] / 2))
+        cells = [sec, nsec, "map", native.x_m[k], native.y_m[k], *q, native.speed_mps[k] * 3.6,
+                 math.degrees(native.yaw_rate_radps[k]), servo[k], duty[k], int(native.coast[k])]
+        rows.append(",".join(c if isinstance(c, str) else repr(float(c)) if isinstance(c, float) else str(c)
+                             for c in cells))
+    ros = _write(tmp_path, "\n".join(rows) + "\n", "ros.csv")
+    return write_log(native, tmp_path / "native.csv", float_format="%.17g"), ros
+
+
+def _assert_close(a: RunLog, b: RunLog) -> None:
+    assert a.names == b.names and len(a) == len(b)
+    for name in a.names:
+        assert a.column(name).dtype == b.column(name).dtype, name
+        np.testing.assert_allclose(a.column(name), b.column(name), rtol=0, atol=1e-9, err_msg=name)
+
+
+# -- mapped logs read as the native one ------------------------------------------------------
+def test_ros_style_log_reads_as_the_native_log(tmp_path):
+    native, ros = _ros_pair(tmp_path)
+    mapped = read_log(ros, columns=column_map_from(EXAMPLE))
+    _assert_close(mapped, read_log(native))
+    assert mapped.source == str(ros)
+
+
+def test_the_docs_example_is_the_example_file():
+    docs = (ROOT / "docs" / "telemetry.md").read_text()
+    section = docs[docs.index("## Logs with other columns or units"):]
+    block = re.search(r"```toml\n(.*?)```", section, re.S).group(1)
+    assert block == EXAMPLE.read_text()
+
+
+def test_example_rules_know_their_lines():
+    lines = EXAMPLE.read_text().splitlines()
+    for rule in column_map_from(EXAMPLE).rules:
+        assert lines[rule.origin.line - 1].startswith(f"{rule.target} = ")
+        assert str(rule.origin) == f"{EXAMPLE}:{rule.origin.line}"
+
+
+@pytest.mark.parametrize("target, unit, logged, expected", [
+    ("t_s", "s", 2.5, 2.5), ("t_s", "ms", 2500, 2.5), ("t_s", "us", 2.5e6, 2.5), ("t_s", "ns", 2.5e9, 2.5),
+    ("x_m", "m", 1.5, 1.5), ("x_m", "cm", 150, 1.5), ("x_m", "mm", 1500, 1.5),
+    ("yaw_rad", "rad", 0.5, 0.5), ("yaw_rad", "deg", 90, math.pi / 2),
+    ("speed_mps", "m/s", 2.0, 2.0), ("speed_mps", "km/h", 7.2, 2.0), ("speed_mps", "cm/s", 200, 2.0),
+    ("speed_mps", "mm/s", 2000, 2.0), ("yaw_rate_radps", "rad/s", 1.0, 1.0), ("yaw_rate_radps", "deg/s", 180, math.pi),
+])
+def test_units(tmp_path, target, unit, logged, expected):
+    p = _write(tmp_path, "t_s,v\n" + "".join(f"{k},{logged * (k + 1)!r}\n" for k in range(3)))
+    log = read_log(p, columns=column_map_from(items=[f'{target}={{column = "v", unit = "{unit}"}}']))
+    np.testing.assert_allclose(log.column(target), expected * np.arange(1, 4), rtol=1e-12)
+
+
+def test_plain_names_dotted_names_backticks_and_expr_with_unit(tmp_path):
+    p = _write(tmp_path, "%time,/odom/vx,pose.vy,stamp\n1,3.6,0,5\n2,0,7.2,6\n")
+    cmap = column_map_from(items=["t_s=`%time` / 1e3", 'speed_mps={expr = "hypot(`/odom/vx`, pose.vy)", unit = "km/h"}',
+                                  "x_m=stamp - 5"])
+    log = read_log(p, columns=cmap)
+    np.testing.assert_allclose(log.t_s, [0.001, 0.002])
+    np.testing.assert_allclose(log.speed_mps, [1.0, 2.0])
+    np.testing.assert_allclose(log.x_m, [0.0, 1.0])
+
+
+def test_unmapped_columns_are_read_by_their_names_and_items_override_the_file(tmp_path):
+    p = _write(tmp_path, "# nxpcup-sim run log, format 2\nt,speed_mps,v,lap,data_text,extra\n"
+                         "0.0,1.0,3.6,0,\"a, b\",x\n0.1,2.0,7.2,1,c,y\n")
+    cmap_file = _write(tmp_path, 'speed_mps = {column = "v", unit = "km/h"}\n', "map.toml")
+    log = read_log(p, columns=column_map_from(cmap_file))
+    assert log.names == ("t_s", "speed_mps", "lap", "data_text")
+    np.testing.assert_allclose(log.speed_mps, [1.0, 2.0])
+    assert log.data_text == ("a, b", "c") and log.lap.dtype == np.int64
+    log = read_log(p, columns=column_map_from(cmap_file, ["speed_mps=v", "speed_mps=speed_mps * 10",
+                                                          "data_text=extra"]))
+    np.testing.assert_allclose(log.speed_mps, [10.0, 20.0])
+    assert log.data_text == ("x", "y")
+
+
+def test_an_empty_map_reads_as_no_map(tmp_path):
+    native, _ = _ros_pair(tmp_path, 20)
+    plain = read_log(native)
+    for empty in (None, ColumnMap(), column_map_from()):
+        _assert_close(read_log(native, columns=empty), plain)
+
+
+def test_constant_and_flag_rules(tmp_path):
+    p = _write(tmp_path, "t_s,mode\n0,3\n1,2\n2,3\n")
+    log = read_log(p, columns=ColumnMap.from_toml_text('coast = "mode - 2"\nlap = 0\nframe = "t_s * 1"\n'))
+    assert log.coast.tolist() == [True, False, True] and log.lap.tolist() == [0, 0, 0]
+    assert log.frame.tolist() == [0, 1, 2]
+
+
+# -- errors: one line, the file and line to fix --------------------------------------------
+def test_missing_column_names_the_mapping_line(tmp_path):
+    p = _write(tmp_path, "stamp_ns,x\n1,2\n")
+    with pytest.raises(LogError) as err:
+        read_log(p, columns=column_map_from(EXAMPLE))
+    text = _one_line(err, f"{p}:1: mapping {EXAMPLE}:6 asks for column 'header.stamp.sec' (the file has: ")
+    assert "stamp_ns, x" in text
+    p = _write(tmp_path, "# nxpcup-sim run log, format 2\nt_s,x\n1,2\n")  # the header is line 2
+    with pytest.raises(LogError) as err:
+        read_log(p, columns=column_map_from(items=["x_m=pos_x"]))
+    _one_line(err, f"{p}:2: mapping --column 'x_m=pos_x' asks for column 'pos_x' (the file has: t_s, x)")
+
+
+def test_bad_unit_names_the_mapping_line(tmp_path):
+    m = _write(tmp_path, '# speeds\n\nspeed_mps = {column = "v", unit = "kmh"}\n', "MAP.toml")
+    with pytest.raises(ColumnMapError) as err:
+        column_map_from(m)
+    assert str(err.value) == f"{m}:3: unit 'kmh' for speed_mps: expected one of m/s, km/h, cm/s, mm/s"
+    assert isinstance(err.value, LogError) and (err.value.path, err.value.line) == (str(m), 3)
+
+
+def test_non_numeric_cell_names_the_log_line(tmp_path):
+    p = _write(tmp_path, "# comment\nt,v\n0,1\n\n1,n/a\n")
+    with pytest.raises(LogError) as err:
+        read_log(p, columns=column_map_from(items=["speed_mps=v / 3.6"]))
+    assert str(err.value) == f"{p}:5: column 'v': expected a number (got 'n/a')"
+
+
+@pytest.mark.parametrize("text, line, what", [
+    ('t_s = "t"\n[yaw_rad]\nquaternion = ["a", "b"]\n', 2, "yaw_rad: expected quaternion = [x, y, z, w]"),
+    ('t_s = "t"\nx_m = {quaternion = ["a", "b", "c", "d"]}\n', 2, "x_m: expected quaternion"),
+    ('x_m = {seconds = "s", nanoseconds = "ns"}\n', 1, "x_m: seconds and nanoseconds give a time"),
+    ('t_s = {seconds = "s"}\n', 1, "t_s: expected one of column, expr, quaternion, or seconds with nanoseconds"),
+    ('t_s = {column = "a", expr = "b"}\n', 1, "t_s: expected one of column"),
+    ('t_s = {column = "a", units = "s"}\n', 1, "t_s: unknown key 'units'"),
+    ('"yaw_rate_radps" = {quaternion = ["a", "b", "c", "d"], unit = "deg"}\n', 1, "unit goes with column or expr"),
+    ('\n\ncoast = {column = "c", unit = "s"}\n', 3, "unit 's' for coast: expected no unit (coast is a 0/1 flag)"),
+    ('x_m = {column = ""}\n', 1, "x_m: expected column names as non-empty strings"),
+    ('x_m = {column = "x", unit = 3}\n', 1, "x_m: expected the unit as a string"),
+    ('x_m = ["a"]\n', 1, "x_m: expected an expression string or a table"),
+    ('x_m = true\n', 1, "x_m: expected an expression or a table"),
+    ('data_text = "a + b"\n', 1, "data_text: expected a column name"),
+    ('\nspeed = "v"\n', 2, "'speed' is not a run log column (did you mean speed_mps?)"),
+    ('x_m = "a % 2"\n', 1, "x_m = 'a % 2': expected numbers, column names"),
+    ('x_m = {expr = "a // 2", unit = "mm"}\n', 1, "x_m = 'a // 2': expected numbers"),
+    ('x_m.column = "a"\nx_m.unit = "furlong"\n', 1, "unit 'furlong' for x_m"),
+    ('t_s = "t"\nx_m = {column = "x" unit = "mm"}\n', 2, "expected a TOML column mapping"),
+])
+def test_mapping_file_errors(tmp_path, text, line, what):
+    m = _write(tmp_path, text, "MAP.toml")
+    with pytest.raises(ColumnMapError) as err:
+        column_map_from(m)
+    assert what in _one_line(err, f"{m}:{line}: ")
+
+
+def test_missing_mapping_file(tmp_path):
+    with pytest.raises(ColumnMapError) as err:
+        column_map_from(tmp_path / "nope.toml")
+    _one_line(err, f"{tmp_path / 'nope.toml'}:0: expected a readable TOML file")
+
+
+@pytest.mark.parametrize("item, what", [
+    ("t_s", "expected NAME=EXPR"),
+    ("=v", "expected NAME=EXPR"),
+    ("t_s={column=", "expected a TOML inline table after t_s="),
+    ("speed=v", "'speed' is not a run log column"),
+    ("speed_mps=v/", "speed_mps = 'v/': expected numbers"),
+    ("speed_mps=open('x')", "(got a call of 'open')"),
+    ("speed_mps=v.__class__()", "(got a call of something not a name)"),
+    ("speed_mps=(1).real", "(got an attribute of something other than a name)"),
+    ("speed_mps=v if v else 1", "(got if/else)"),
+    ("speed_mps=v[0]", "(got an index [...])"),
+    ("speed_mps=v > 1", "(got a comparison)"),
+    ("speed_mps=lambda: 1", "(got a lambda)"),
+    ("speed_mps='v'", "(got the constant 'v')"),
+    ("speed_mps=`v", "(got an unmatched `)"),
+    ("speed_mps=sqrt(v, 2)", "(sqrt takes 1 argument (got 2))"),
+    ("speed_mps=min(v)", "(min takes at least 2 arguments (got 1))"),
+    ("speed_mps=atan2(y=v, x=1)", "(got keyword or * arguments to atan2)"),
+    ("speed_mps=" + "1" * 400, "(got a number too large for a float)"),
+    ("speed_mps=" + "-" * 500 + "v", "nested operations"),
+    ("speed_mps=" + "v+" * 600 + "v", "at most 1000"),
+])
+def test_command_line_item_errors(item, what):
+    with pytest.raises(ColumnMapError) as err:
+        column_map_from(items=["t_s=t", item])
+    assert what in _one_line(err, f"--column {item!r}: ")
+    assert (err.value.path, err.value.line) == ("--column", 2)
+
+
+@pytest.mark.parametrize("rows, items, line, what", [
+    ("0,0,0,0,1\n1,0,0,0,0\n", ['yaw_rad={quaternion = ["a", "b", "c", "d"]}'], 3,
+     "yaw_rad (--column 'yaw_rad={quaternion = [\"a\", \"b\", \"c\", \"d\"]}'): quaternion a, b, c, d is all zero"),
+    ("0,1,0,0,0\n1,0,1,0,0\n", ["x_m=a / b"], 2, "x_m = 'a / b' (--column 'x_m=a / b') gives inf: expected a finite"),
+    ("0,1,0,0,0\n1,-1,0,0,0\n", ["x_m=sqrt(a)"], 3, "gives nan"),
+    ("0,1,0,0,0\n1,0,0,0,0\n", ["t_s=a"], 3, "column 't_s': expected strictly increasing time (got 0.0 after 1.0)"),
+    ("0,1,0,0,0\n1,0.5,0,0,0\n", ["coast=a"], 3, "column 'coast': expected 0 or 1"),
+    ("0,1,0,0,0\n1,inf,0,0,0\n", ["x_m=a"], 3, "column 'a': expected a finite number (got 'inf')"),
+])
+def test_log_errors_after_mapping_name_the_log_line(tmp_path, rows, items, line, what):
+    p = _write(tmp_path, "t,a,b,c,d\n" + rows)
+    with pytest.raises(LogError) as err:
+        read_log(p, columns=column_map_from(items=items))
+    assert what in _one_line(err, f"{p}:{line}: ")
+
+
+def test_no_time_column_and_a_repeated_source_column(tmp_path):
+    p = _write(tmp_path, "a,b,b\n0,1,2\n")
+    with pytest.raises(LogError) as err:
+        read_log(p, columns=column_map_from(items=["x_m=a"]))
+    _one_line(err, f"{p}:1: expected a time column t_s (or t) in the header, or a rule for t_s")
+    with pytest.raises(LogError) as err:
+        read_log(p, columns=column_map_from(items=["t_s=b"]))
+    _one_line(err, f"{p}:1: mapping --column 't_s=b' asks for column 'b', which the header names 2 times")
+
+
+# -- expressions: like numpy, or refused ---------------------------------------------------
+_RNG = np.random.default_rng(11)
+COLS = {"a": _RNG.normal(0, 3, 16), "b": _RNG.uniform(-1, 1, 16), "pose.x": _RNG.uniform(0, 5, 16),
+        "%t": _RNG.normal(0, 100, 16)}
+_LEAF_TEXT = {"a": "a", "b": "b", "pose.x": "pose.x", "%t": "`%t`"}
+
+
+def _q(fn, *args):
+    """``fn(*args)`` with numpy's rules for inf and nan, quietly (as Expression.evaluate)."""
+    with np.errstate(all="ignore"):
+        return fn(*args)
+
+
+def _bin(op, x, y):
+    return _q({"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.true_divide, "**": np.power}[op], x, y)
+
+
+_numbers = st.floats(-1e3, 1e3, allow_nan=False).map(lambda v: (f"({v!r})", np.float64(v)))
+_columns = st.sampled_from(sorted(COLS)).map(lambda n: (_LEAF_TEXT[n], COLS[n]))
+_F1 = {"abs": np.abs, "sqrt": np.sqrt, "sin": np.sin, "cos": np.cos, "tan": np.tan, "radians": np.radians,
+       "degrees": np.degrees}
+
+
+def _extend(children):
+    return st.one_of(
+        st.tuples(st.sampled_from(["+", "-", "*", "/", "**"]), children, children).map(
+            lambda t: (f"({t[1][0]} {t[0]} {t[2][0]})", _bin(t[0], t[1][1], t[2][1]))),
+        children.map(lambda c: (f"(-{c[0]})", np.negative(c[1]))),
+        st.tuples(st.sampled_from(sorted(_F1)), children).map(
+            lambda t: (f"{t[0]}({t[1][0]})", _q(_F1[t[0]], t[1][1]))),
+        st.tuples(st.sampled_from(["atan2", "hypot"]), children, children).map(
+            lambda t: (f"{t[0]}({t[1][0]}, {t[2][0]})",
+                       _q({"atan2": np.arctan2, "hypot": np.hypot}[t[0]], t[1][1], t[2][1]))),
+        st.tuples(st.sampled_from(["min", "max"]), st.lists(children, min_size=2, max_size=3)).map(
+            lambda t: (f"{t[0]}({', '.join(c[0] for c in t[1])})",
+                       _reduce({"min": np.minimum, "max": np.maximum}[t[0]], [c[1] for c in t[1]]))),
+    )
+
+
+def _reduce(fn, values):
+    out = values[0]
+    for v in values[1:]:
+        out = _q(fn, out, v)
+    return out
+
+
+def _safe_expressions():
+    return st.recursive(st.one_of(_numbers, _columns), _extend, max_leaves=12)
+
+
+@settings(max_examples=300, deadline=None)
+@given(_safe_expressions())
+def test_safe_expressions_evaluate_like_numpy(case):
+    text, expected = case
+    got = Expression.parse(text).evaluate(COLS)
+    np.testing.assert_array_equal(np.broadcast_to(got, np.shape(expected)), expected)
+
+
+_TOKENS = ["a", "b", "pose", ".", "x", "1", "2.5", "1e308", "0", "+", "-", "*", "/", "**", "%", "//", "(", ")",
+           "[", "]", "{", "}", ",", ":", "=", "==", "<", "not", "and", "lambda", "if", "else", "for", "in",
+           "sqrt", "min", "atan2", "__import__", "open", "'s'", '"', "`", "`%t`", "\\", "\n", " ", "@", "~",
+           "yield", "await", "*", "j", "_q0", "True", "None", "..."]
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.one_of(st.text(max_size=40), st.lists(st.sampled_from(_TOKENS), max_size=20).map("".join)))
+def test_junk_expressions_are_refused_with_log_error(text):
+    """Any text: an expression that evaluates (numpy's inf/nan) or one LogError line."""
+    try:
+        expression = Expression.parse(text)
+    except LogError as err:
+        assert "\n" not in str(err)
+        return
+    value = expression.evaluate({name: COLS["a"] for name in expression.columns})
+    assert value.dtype == np.float64
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.one_of(st.text(max_size=60),
+                 st.lists(st.sampled_from(["t_s", "x_m", "coast", "data_text", "speed", " = ", "=", "{", "}",
+                                           "[", "]", '"', "column", "unit", "km/h", "deg", "quaternion",
+                                           "seconds", "nanoseconds", "expr", ",", "\n", "1", "a / b", "true"]),
+                          max_size=25).map("".join)))
+def test_junk_mappings_are_refused_with_log_error(text):
+    for parse in (lambda: ColumnMap.from_toml_text(text, "MAP.toml"), lambda: ColumnMap.from_items([text])):
+        try:
+            cmap = parse()
+        except ColumnMapError as err:
+            assert "\n" not in str(err)
+        else:
+            assert isinstance(cmap, ColumnMap)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.lists(st.sampled_from(list("0123456789.,-eE abn\n\r#\"") + [ROS_HEADER, "header.stamp.sec", "servo"]),
+                max_size=60).map("".join))
+def test_mapped_read_never_crashes_on_junk(tmp_path_factory, junk):
+    p = tmp_path_factory.mktemp("junk") / "j.csv"
+    p.write_text(junk)
+    try:
+        log = read_log(p, columns=column_map_from(EXAMPLE))
+    except LogError as err:
+        assert str(err).startswith(f"{p}:") and "\n" not in str(err)
+    else:
+        assert isinstance(log, RunLog)
