@@ -2,9 +2,9 @@
 nominal car (a plain CarSim), a static effect only (steering offset: no sub-step), the other
 command-time effects (speed scale, steering asymmetry, steering play: no sub-step), the
 build-time scales (accel, brake, servo rate, steering limit, mass: a plain EffectSim around a
-differently built car), the ESC brake-before-reverse (control sub-step every 4 ms; the bench
-drives forward, so this is the sub-step's cost), and filtered effects (latency + lags + drag:
-sub-step every 4 ms), each driving with a new command every 20 ms for 4 simulated seconds at
+differently built car), the ESC brake-before-reverse (checked at each command, sub-stepped
+only while it brakes; the bench drives forward, so this is its cost when it does not act),
+and filtered effects (latency + lags + drag: sub-step every 4 ms), each driving with a new command every 20 ms for 4 simulated seconds at
 dt 2 ms; plus the CPU time of one excitation-plan play-back (``run_plan``, ~67 s simulated).
 Best of 3, CPU time."""
 from __future__ import annotations

@@ -70,6 +70,14 @@ def test_neutral_is_plain_carsim_and_bit_identical():
     assert np.array_equal(a, b)
 
 
+def test_esc_delay_without_a_forward_to_reverse_command_is_nominal_bit_for_bit():
+    def cmd(t):  # forward, then braking to 0, then reversing from rest: the ESC never intervenes
+        return (1.2, 0.2) if t < 0.4 else ((0.0, -0.1) if t < 1.2 else (-0.5, 0.1))
+    a = trace(CarSim(CAR), cmd, 1.6)
+    assert a[-1, 4] < -0.4
+    assert np.array_equal(a, trace(make_sim(with_effects(CAR, esc_reverse_delay_s=0.3)), cmd, 1.6))
+
+
 def test_with_effects_rejects_unknown_names():
     with pytest.raises(KeyError, match="steering_ofset"):
         with_effects(CAR, steering_ofset=0.1)

@@ -26,13 +26,15 @@ Where each effect acts (docs/effects.md has the physics):
   ``command_latency`` (FIFO; a command acts at the first sub-step at or after
   ``t_set + latency``), ``steering_lag`` and ``motor_lag`` (exact first-order lags),
   ``steering_rate_limit`` (slew limit on the steering target, on top of the servo rate),
-  ``esc_brake_reverse`` (a negative speed command while rolling forward brakes to rest, holds
-  for ``esc_reverse_delay_s`` at rest, then reverses; a command >= 0 or coasting resets it),
   ``tire_slip`` (understeer: effective steer = steer - K * a_lat with the kinematic
   lateral acceleration of the effective steer, a_lat = v^2 tan(steer_eff) / L; solved in
   closed form, steer_eff = steer / (1 + K v^2 / L) for small angles, with the measured
   speed v. Feeding back the measured yaw rate instead would be a stiff loop of gain
   K v^2 / L, up to ~25 in the fit range).
+* ``esc_brake_reverse``: a negative speed command while rolling forward brakes to rest, holds
+  for ``esc_reverse_delay_s`` at rest, then reverses; a command >= 0 or coasting resets it.
+  It is checked at every command, and at the control sub-step only while it brakes, so
+  without a forward-to-reverse command the car is bit-identical to the nominal one.
 * forces (same sub-step): ``rolling_resistance`` ``c_rr * m * g`` and ``drag`` ``k * v^2``
   act on the chassis against the motion through ``CarSim.apply_external_force_n`` (rolling
   resistance fades in linearly below ``ROLL_EPS_MPS`` so a car at rest does not creep).
@@ -171,7 +173,7 @@ EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
 )}
 
 _DYNAMIC_PARAMS = ("steering_lag_s", "command_latency_s", "motor_lag_s", "tire_slip_understeer_radps2pm",
-                   "rolling_resistance_coeff", "drag_coeff_kgpm", "esc_reverse_delay_s")
+                   "rolling_resistance_coeff", "drag_coeff_kgpm")
 
 
 def active_effects(car: CarDescription) -> list[str]:
@@ -407,7 +409,7 @@ class EffectSim:
             self._queue.append((self.sim.time_s + self._e.command_latency_s, raw))
         else:
             self._held = raw
-        self._update()
+        self._update(user=True)
 
     def apply_external_force_n(self, fx_n: float, fy_n: float) -> None:
         """A user force on the chassis (car body frame, N), added to the effect forces."""
@@ -459,8 +461,10 @@ class EffectSim:
         self._esc = (mode, None)
         return v
 
-    def _update(self) -> None:
-        """One control update at the current time (all effects of the command path)."""
+    def _update(self, user: bool = False) -> None:
+        """One control update at the current time (all effects of the command path); ``user``:
+        called by a command (without filtered effects it is passed on even if unchanged, as
+        CarSim would get it)."""
         e, sim = self._e, self.sim
         t = sim.time_s
         dt = t - self._last_t
@@ -469,6 +473,8 @@ class EffectSim:
         while q and q[0][0] <= t + 1e-9:
             self._held = q.popleft()[1]
         v, d, w_cmd, coast = self._static_map(self._held)
+        if e.esc_reverse_delay_s > 0.0:
+            v = self._esc_target(v, coast, t)
         if self._dynamic:
             if e.steering_lag_s > 0.0:
                 self._steer_lag += -math.expm1(-dt / e.steering_lag_s) * (d - self._steer_lag)
@@ -485,8 +491,6 @@ class EffectSim:
             if e.tire_slip_understeer_radps2pm > 0.0:
                 u = sim.speed_mps
                 d = d / (1.0 + e.tire_slip_understeer_radps2pm * u * u / self.car.chassis.wheelbase_m)
-            if e.esc_reverse_delay_s > 0.0:
-                v = self._esc_target(v, coast, t)
             target_v = 0.0 if coast else v
             if coast:  # the speed loop restarts from the actual speed when the drive re-engages
                 self._speed_lag = sim.speed_mps
@@ -511,7 +515,7 @@ class EffectSim:
             d1 = min(max(d, -lim1), lim1)
             w = w_cmd + (v_eff * math.sin(d1) - v0 * math.sin(d0)) / wb
         sent = (v_eff, d, w)
-        if sent != self._sent or not self._dynamic:
+        if sent != self._sent or (user and not self._dynamic):
             # an unchanged command is not re-sent: CarSim keeps its targets (as without effects)
             sim.set_command(v_eff, d, w)
             self._sent = sent
@@ -537,8 +541,9 @@ class EffectSim:
 
     # -- stepping ------------------------------------------------------------------------
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` physics steps; filtered effects update every ``n_sub`` steps."""
-        if not (self._dynamic or self._forces):
+        """Advance ``n`` physics steps; filtered effects (and the ESC while it brakes) update
+        every ``n_sub`` steps."""
+        if not (self._dynamic or self._forces or self._esc[0] is EscMode.BRAKE):
             self.sim.step(n)
             return
         n = int(n)
