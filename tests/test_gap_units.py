@@ -2,7 +2,9 @@
 fit machinery on a fast kinematic stand-in simulator."""
 from __future__ import annotations
 
+import dataclasses
 import math
+import re
 
 import numpy as np
 import pytest
@@ -12,10 +14,13 @@ from hypothesis import strategies as st
 from pieces.pose import Pose2
 from simrunner.run.log import FORMAT_LINE, LogError, RunLog, log_from_columns, read_log, write_log
 from simrunner.workflows.gap import LogError as GapLogError
-from simrunner.workflows.gap.fit import CANDIDATES, FitResult, Problem, choose, cost_of, fit_effect, nominal_scales
+from simrunner.workflows.gap.fit import (CANDIDATES, FitResult, Problem, Segment, choose, cost_of, fit_effect,
+                                         nominal_scales)
+from simrunner.workflows.gap.glitches import GlitchKind, find_glitches, glitch_mask, time_gaps
 from simrunner.workflows.gap.logs import MEASURED_COLUMNS, check_measured, derive
 from simrunner.workflows.gap.regimes import REGIMES, format_stats, residual_stats, segment
-from simrunner.workflows.gap.replay import make_windows, replay, residuals, split_windows
+from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, make_windows, noise_rms, replay, residuals,
+                                            rmse, signals_of, smoothed_log, split_windows, window_mask)
 from vehicle.description import CarDescription
 
 
@@ -84,22 +89,25 @@ def commands(duration_s=12.0, rate_hz=100.0):
     return t, speed, steer
 
 
-def simulate(car, noise_rng=None, duration_s=12.0):
-    """A 'measured' log from the kinematic sim (truth at 1 ms, logged at 100 Hz)."""
-    t, v_cmd, s_cmd = commands(duration_s)
+def simulate(car, noise_rng=None, duration_s=12.0, rate_hz=100.0, columns=MEASURED_COLUMNS):
+    """A 'measured' log from the kinematic sim (truth at 1 ms, logged at ``rate_hz``) with
+    ``columns`` (any of MEASURED_COLUMNS and ``yaw_rate_radps``, the gyro)."""
+    t, v_cmd, s_cmd = commands(duration_s, rate_hz)
     sim = KinematicSim(car, 0.001)
     sim.set_state(Pose2(), 1.0, 0.0, 0.0)
+    per = int(round(1000.0 / rate_hz))
+    names = ("t_s", "x_m", "y_m", "yaw_rad", "speed_mps", "speed_cmd_mps", "steer_cmd_rad", "yaw_rate_radps")
     rows = []
     for i in range(t.size):
         p = sim.pose
-        rows.append((t[i], p.x_m, p.y_m, p.yaw_rad, sim.speed_mps, v_cmd[i], s_cmd[i]))
+        rows.append((t[i], p.x_m, p.y_m, p.yaw_rad, sim.speed_mps, v_cmd[i], s_cmd[i], sim.yaw_rate_radps))
         sim.set_command(v_cmd[i], s_cmd[i])
-        sim.step(10)
+        sim.step(per)
     data = np.array(rows)
     if noise_rng is not None:
-        sig = np.array([0, 0.005, 0.005, 0.005, 0.02, 0, 0])
+        sig = np.array([0, 0.005, 0.005, 0.005, 0.02, 0, 0, 0.01])
         data = data + noise_rng.normal(size=data.shape) * sig
-    return log_from_columns({c: data[:, k] for k, c in enumerate(MEASURED_COLUMNS)}, "<kin>")
+    return log_from_columns({c: data[:, k] for k, c in enumerate(names) if c in columns}, "<kin>")
 
 
 # -- logs ------------------------------------------------------------------------------
@@ -261,7 +269,7 @@ def test_log_without_pose_reads_and_require_names_what_is_missing(tmp_path):
     with pytest.raises(LogError, match=r"missing: x_m\)") as info:
         log.require("x_m")
     assert str(info.value).startswith(f"{p}:1: ")
-    with pytest.raises(LogError, match="missing: x_m, y_m, yaw_rad, speed_cmd_mps, steer_cmd_rad"):
+    with pytest.raises(LogError, match=r"missing: speed_cmd_mps, steer_cmd_rad\)"):
         check_measured(log)
 
 
@@ -336,7 +344,8 @@ def _problem(true_car, nominal_car, seed=1):
     d = derive(log, nominal_car.chassis.wheelbase_m)
     fit_w, _ = split_windows(make_windows(log))
     res = residuals(log, d, replay(nominal_car, log, d, fit_w, dt_s=0.002, sim_factory=kin_factory))
-    return Problem(nominal_car, log, d, tuple(fit_w), nominal_scales(log, res, fit_w), 0.002, kin_factory)
+    segments = (Segment(log, d, tuple(fit_w)),)
+    return Problem(nominal_car, segments, nominal_scales(segments, [res]), FIT_SIGNALS, 0.002, kin_factory)
 
 
 def test_fit_effect_finds_hidden_offset_on_stand_in():
@@ -371,3 +380,290 @@ def test_split_is_stratified_by_label():
     assert held2 == ["w2", "w3"] and fit2 == ["w0", "w1", "w4"]  # a lone "d" stays in the fit
     fit3, held3 = split_windows(w[:3], 3, strata=["a", "c", "d"])
     assert held3 == ["w2"]  # nothing held out by group: split without strata
+
+
+# -- measured logs of any sensor set (pose, speed sensor, gyro) ------------------------------------
+SPEED_GYRO = ("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad", "yaw_rate_radps")
+POSE_ONLY = ("t_s", "x_m", "y_m", "yaw_rad", "speed_cmd_mps", "steer_cmd_rad")
+FULL_GYRO = MEASURED_COLUMNS + ("yaw_rate_radps",)
+
+
+def test_check_measured_accepts_pose_or_speed_and_names_what_is_missing():
+    car = CarDescription()
+    for cols in (SPEED_GYRO, POSE_ONLY, MEASURED_COLUMNS, ("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad")):
+        check_measured(simulate(car, columns=cols))
+    with pytest.raises(LogError, match=r"<kin>:1: expected a pose .* or a speed sensor .*missing: yaw_rad, speed_mps"):
+        check_measured(simulate(car, columns=("t_s", "x_m", "y_m", "speed_cmd_mps", "steer_cmd_rad")))
+    slow = simulate(car, duration_s=30.0, rate_hz=5.0)
+    with pytest.raises(LogError, match=r"<kin>:0: expected a median sample rate of at least 10 Hz \(got 5 Hz\)"):
+        check_measured(slow)
+
+
+@pytest.mark.parametrize("cols, signals", [
+    (FULL_GYRO, FIT_SIGNALS), (MEASURED_COLUMNS, FIT_SIGNALS), (POSE_ONLY, FIT_SIGNALS),
+    (SPEED_GYRO, ("speed_mps", "yaw_rate_radps")),
+    (("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad"), ("speed_mps",))])
+def test_signals_of_follow_the_columns(cols, signals):
+    assert signals_of(simulate(CarDescription(), columns=cols)) == signals
+
+
+@pytest.mark.parametrize("cols", [SPEED_GYRO, POSE_ONLY, FULL_GYRO])
+def test_partial_logs_go_through_derive_replay_and_residuals(cols):
+    """A speed + gyro log (encoder + gyro car) and a pose-only log: only their signals are
+    compared, and the exact model replays them with tiny residuals."""
+    car = CarDescription()
+    truth = simulate(car, columns=FULL_GYRO)
+    log = simulate(car, columns=cols)
+    d = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad)
+    pose = "x_m" in cols
+    for name in ("x_m", "y_m", "yaw_rad"):
+        assert np.isfinite(getattr(d, name)).all() == pose and np.isnan(getattr(d, name)).all() != pose
+    steady = (log.t_s % 1.0 > 0.4) & (log.t_s % 1.0 < 0.9) & (np.abs(log.t_s - 9.75) > 1.0)  # no step, no stop
+    np.testing.assert_allclose(d.speed_mps[steady], truth.speed_mps[steady], atol=0.01)
+    np.testing.assert_allclose(d.yaw_rate_radps[steady], truth.yaw_rate_radps[steady], atol=0.03)
+    windows = make_windows(log)
+    res = residuals(log, d, replay(car, log, d, windows, dt_s=0.001, sim_factory=kin_factory))
+    assert set(res) == set(signals_of(log)) | ({"position_m"} if pose else set())
+    if "speed_mps" in cols:
+        assert np.nanmax(np.abs(res["speed_mps"])) < 0.05
+    if pose:
+        assert np.nanmax(res["position_m"]) < 0.03
+    mask = window_mask(len(log), windows)
+    err = rmse(res, mask)
+    assert set(err) == set(REPORT_SIGNALS)
+    assert all(math.isnan(err[s]) != (s in res) for s in REPORT_SIGNALS)
+    noise = noise_rms(log, d)
+    assert math.isnan(noise["position_m"]) != pose
+    assert math.isnan(noise["yaw_rate_radps"]) != ("yaw_rate_radps" in cols)
+    smooth = smoothed_log(log, d)
+    assert smooth.names == log.names
+    rows = residual_stats(res, segment(log, d))
+    assert {r["signal"] for r in rows} == set(res)
+    assert "-" in format_stats(rows) or all(r["count"] for r in rows)
+
+
+def test_pose_free_replay_starts_at_the_origin():
+    car = CarDescription()
+    log = simulate(car, columns=SPEED_GYRO)
+    d = derive(log, car.chassis.wheelbase_m)
+    windows = make_windows(log)
+    pred = replay(car, log, d, windows, dt_s=0.001, sim_factory=kin_factory, lead_s=0.0)
+    for w in windows:
+        assert (pred.x_m[w.start], pred.y_m[w.start], pred.yaw_rad[w.start]) == (0.0, 0.0, 0.0)
+
+
+def test_derive_does_not_smooth_across_gaps_or_excluded_samples():
+    n = 400
+    t = np.arange(n) * 0.01
+    t[200:] += 1.0  # a 1-s gap between samples 199 and 200
+    speed = np.where(np.arange(n) < 200, 1.0, 2.0)
+    speed[300] = 9.0  # a bad sample, excluded
+    cols = dict(t_s=t, x_m=np.cumsum(speed) * 0.01, y_m=np.zeros(n), yaw_rad=np.zeros(n), speed_mps=speed,
+                speed_cmd_mps=speed, steer_cmd_rad=np.zeros(n))
+    log = log_from_columns(cols, "<gap>")
+    exclude = np.arange(n) == 300
+    d = derive(log, 0.175, exclude=exclude)
+    assert d.speed_mps[199] == pytest.approx(1.0) and d.speed_mps[200] == pytest.approx(2.0)
+    assert abs(d.accel_mps2[199]) < 1e-9 and abs(d.accel_mps2[200]) < 1e-9
+    assert math.isnan(d.speed_mps[300]) and math.isnan(d.steer_rad[300])
+    np.testing.assert_allclose(d.speed_mps[[299, 301]], 2.0)
+
+
+def test_derive_handles_irregular_stamps():
+    """Samples kept 1 to 4 apart from a 200-Hz log (dt 5..20 ms): the yaw rate from the pose
+    still matches the truth."""
+    car = CarDescription()
+    full = simulate(car, rate_hz=200.0, columns=FULL_GYRO)
+    rng = np.random.default_rng(3)
+    keep = np.cumsum(rng.integers(1, 5, size=len(full)))
+    keep = keep[keep < len(full)]
+    log = full.subset(keep).with_columns(yaw_rate_radps=None)
+    d = derive(log, car.chassis.wheelbase_m)
+    steady = (log.t_s % 1.0 > 0.4) & (log.t_s % 1.0 < 0.9)
+    np.testing.assert_allclose(d.yaw_rate_radps[steady], full.yaw_rate_radps[keep][steady], atol=0.03)
+
+
+def test_segment_reversing_and_high_lateral_acceleration():
+    n = 600
+    t = np.arange(n) * 0.01
+    speed = np.where(t < 2.0, -0.8, 2.0)
+    yaw_rate = np.where(t < 4.0, 0.0, 3.0)  # 2 m/s * 3 rad/s = 6 m/s2 > 0.5 * mu * g for mu = 1
+    log = log_from_columns(dict(t_s=t, speed_mps=speed, yaw_rate_radps=yaw_rate, speed_cmd_mps=speed,
+                                steer_cmd_rad=np.where(t < 4.0, 0.0, 0.3)), "<regimes>")
+    d = derive(log, 0.175)
+    car = CarDescription()
+    m = segment(log, d, car)
+    inner = lambda a, b: (t > a + 0.1) & (t < b - 0.1)  # noqa: E731
+    assert m["reversing"][inner(0, 2)].all() and not m["reversing"][inner(2, 6)].any()
+    assert m["high_lat_accel"][inner(4, 6)].all() and not m["high_lat_accel"][inner(0, 4)].any()
+    grippy = car.replace(wheels=dataclasses.replace(car.wheels, friction_mu=2.0))  # 9.8 m/s2 at half grip
+    assert not segment(log, d, grippy)["high_lat_accel"].any()
+
+
+# -- glitches ---------------------------------------------------------------------------------------
+def _noisy(cols=MEASURED_COLUMNS, seed=0, rate_hz=100.0, jitter=0.0):
+    """A noisy kinematic log as a dict of columns; ``jitter`` moves each stamp by up to that
+    fraction of the time step (stamps taken late or early, as on a real car)."""
+    log = simulate(CarDescription(), np.random.default_rng(seed), rate_hz=rate_hz, columns=cols)
+    out = {k: np.array(v) for k, v in log.columns().items()}
+    if jitter:
+        out["t_s"] = out["t_s"] + np.random.default_rng(seed + 1).uniform(-jitter, jitter, len(log)) / rate_hz
+    return out
+
+
+def _log(cols):
+    return log_from_columns(cols, "<glitchy>")
+
+
+def _kinds(glitches):
+    return [(g.kind, round(g.t_start_s, 9), round(g.t_end_s, 9), g.column) for g in glitches]
+
+
+@pytest.mark.parametrize("cols", [MEASURED_COLUMNS, FULL_GYRO, POSE_ONLY, SPEED_GYRO])
+@pytest.mark.parametrize("rate_hz, jitter", [(100.0, 0.0), (100.0, 0.3), (20.0, 0.3)])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_clean_logs_have_no_glitches(cols, rate_hz, jitter, seed):
+    log = _log(_noisy(cols, seed, rate_hz, jitter))
+    assert find_glitches(log) == []
+    assert not glitch_mask(log, []).any()
+
+
+@pytest.mark.parametrize("cols", [MEASURED_COLUMNS, POSE_ONLY])
+def test_a_localisation_jump_is_found_at_its_step(cols):
+    c = _noisy(cols, jitter=0.3)
+    t = c["t_s"]
+    c["x_m"][500:] += 0.3  # the pose jumps by 0.3 m between samples 499 and 500
+    c["y_m"][800] -= 0.2  # one bad sample (out and back)
+    log = _log(c)
+    found = find_glitches(log)
+    assert _kinds(found) == [(GlitchKind.JUMP, round(t[499], 9), round(t[500], 9), "x_m,y_m"),
+                             (GlitchKind.JUMP, round(t[799], 9), round(t[801], 9), "x_m,y_m")]
+    assert re.match(r"position step 0\.[23]\d* m in 0\.0\d* s where speed \+1\.\d* m/s", found[0].detail)
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == [500, 800, 801]
+
+
+def test_time_gaps_and_duplicates_are_found_exactly():
+    c = _noisy(FULL_GYRO, jitter=0.3)
+    t0 = c["t_s"].copy()
+    keep = np.ones(len(t0), dtype=bool)
+    keep[300:320] = False  # 20 samples dropped: a 0.21-s gap
+    rows = np.flatnonzero(keep)
+    again = 700  # this row logged twice: once 0.1 ms later (same sample) ...
+    same_row = 900  # ... and this one again half a step later with every sensor value repeated
+    order = np.sort(np.concatenate([rows, [again, same_row]]))
+    out = {k: v[order].copy() for k, v in c.items()}
+    i_again = int(np.searchsorted(order, again)) + 1
+    i_same = int(np.searchsorted(order, same_row)) + 1
+    out["t_s"][i_again] = t0[again] + 1e-4
+    out["t_s"][i_same] = 0.5 * (t0[same_row] + t0[same_row + 1])
+    log = _log(out)
+    found = find_glitches(log)
+    assert _kinds(found) == [
+        (GlitchKind.TIME_GAP, round(t0[299], 9), round(t0[320], 9), "t_s"),
+        (GlitchKind.DUPLICATE, round(t0[again], 9), round(t0[again] + 1e-4, 9), "t_s"),
+        (GlitchKind.DUPLICATE, round(t0[same_row], 9), round(out["t_s"][i_same], 9),
+         "x_m,y_m,yaw_rad,speed_mps,yaw_rate_radps")]
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == [i_again, i_same]  # a gap holds no sample
+
+
+@pytest.mark.parametrize("cols, column", [
+    (MEASURED_COLUMNS, "speed_mps"), (FULL_GYRO, "yaw_rate_radps"), (SPEED_GYRO, "yaw_rate_radps"),
+    (MEASURED_COLUMNS, "x_m,y_m"), (FULL_GYRO, "yaw_rad")])
+def test_a_frozen_sensor_is_found(cols, column):
+    c = _noisy(cols, jitter=0.3)
+    t = c["t_s"]
+    a, b = 500, 540  # t 5.0 .. 5.4 s: moving at 1.5 m/s, turning
+    for name in column.split(","):
+        c[name][a:b] = c[name][a]
+    log = _log(c)
+    found = [g for g in find_glitches(log) if g.kind is GlitchKind.FROZEN]
+    assert _kinds(found) == [(GlitchKind.FROZEN, round(t[a], 9), round(t[b - 1], 9), column)]
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == list(range(a + 1, b))
+
+
+def test_noise_free_and_resting_logs_are_not_frozen():
+    """A simulator's speed holds its value exactly in steady state, and a car at rest logs
+    identical rows: neither is a glitch."""
+    log = simulate(CarDescription(), columns=FULL_GYRO)
+    assert (np.diff(log.speed_mps) == 0.0).sum() > 300
+    assert find_glitches(log) == []
+    c = _noisy(FULL_GYRO)
+    for k in ("speed_mps", "yaw_rate_radps", "speed_cmd_mps", "steer_cmd_rad"):
+        c[k][:300] = 0.0
+    for k in ("x_m", "y_m", "yaw_rad"):
+        c[k][:300] = c[k][300]
+    assert find_glitches(_log(c)) == []
+
+
+# -- windows on logs with gaps and excluded samples ------------------------------------------------
+def _assert_windows_clean(log, windows, exclude, window_s):
+    t = log.t_s
+    gaps = time_gaps(t)
+    last = 0
+    for w in windows:
+        assert last <= w.start < w.stop <= len(log)
+        last = w.stop
+        assert not exclude[w.start:w.stop].any()
+        assert not gaps[w.start:w.stop - 1].any()
+    if exclude.any() or gaps.any() or log.duration_s < 0.5 * window_s:
+        return
+    assert windows and windows[0].start == 0 and windows[-1].stop == len(log)
+
+
+def test_windows_skip_gaps_and_excluded_samples():
+    log = simulate(CarDescription(), duration_s=30.0)
+    keep = np.ones(len(log), dtype=bool)
+    keep[1000:1030] = False  # a 0.31-s gap at t = 10 s
+    log = log.subset(np.flatnonzero(keep))
+    exclude = np.zeros(len(log), dtype=bool)
+    exclude[[500, 2000, 2001]] = True
+    windows = make_windows(log, 2.0, exclude=exclude)
+    _assert_windows_clean(log, windows, exclude, 2.0)
+    t = log.t_s
+    for k in (500, 2000):  # the smoothing's reach around an excluded sample stays out too
+        assert all(not (t[w.start] - 0.075 <= t[k] <= t[w.stop - 1] + 0.075) for w in windows)
+    assert sum(t[w.stop - 1] - t[w.start] for w in windows) > 0.85 * log.duration_s
+    assert len(make_windows(log, 2.0, exclude=np.ones(len(log), dtype=bool))) == 0
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.one_of(st.floats(0.002, 0.06), st.floats(0.06, 3.0)), min_size=1, max_size=300),
+       st.lists(st.integers(0, 299), max_size=30), st.sampled_from([0.5, 1.0, 2.0, 5.0]),
+       st.integers(0, 2**31 - 1))
+def test_make_windows_never_fails_on_any_stamps_and_masks(dts, excluded, window_s, seed):
+    t = np.concatenate([[0.0], np.cumsum(dts)])
+    n = t.size
+    rng = np.random.default_rng(seed)
+    log = log_from_columns(dict(t_s=t, speed_mps=rng.normal(1.0, 1.0, n), speed_cmd_mps=rng.choice([0.0, 1.0, 2.0], n),
+                                steer_cmd_rad=rng.choice([0.0, 0.2], n), coast=rng.random(n) < 0.1), "<random>")
+    exclude = np.zeros(n, dtype=bool)
+    exclude[[k for k in excluded if k < n]] = True
+    windows = make_windows(log, window_s, exclude=exclude)
+    _assert_windows_clean(log, windows, exclude, window_s)
+    gaps = time_gaps(t)
+    for w1, w2 in zip(windows[:-1], windows[1:]):  # tiles, broken only where something is cut out
+        assert w1.stop == w2.start or exclude[w1.stop:w2.start].any() or gaps[w1.stop - 1:w2.start].any()
+    _assert_windows_clean(log, make_windows(log, window_s), np.zeros(n, dtype=bool), window_s)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.one_of(st.floats(1e-6, 0.05), st.floats(0.05, 2.0)), min_size=2, max_size=200),
+       st.sampled_from([MEASURED_COLUMNS, POSE_ONLY, SPEED_GYRO]), st.integers(0, 2**31 - 1),
+       st.floats(0.0, 1.0))
+def test_find_glitches_never_fails(dts, cols, seed, repeat):
+    """Any stamps, any columns, runs of repeated values: a list of glitches within the log."""
+    t = np.concatenate([[0.0], np.cumsum(dts)])
+    n = t.size
+    rng = np.random.default_rng(seed)
+    data = {c: rng.normal(0.0, 1.0, n) for c in cols if c != "t_s"}
+    for v in data.values():  # some values held (sensors that repeat)
+        held = rng.random(n) < repeat
+        for k in range(1, n):
+            if held[k]:
+                v[k] = v[k - 1]
+    log = log_from_columns(dict(t_s=t, **data), "<random>")
+    found = find_glitches(log)
+    for g in found:
+        assert t[0] <= g.t_start_s <= g.t_end_s <= t[-1] and isinstance(g.kind, GlitchKind)
+    assert glitch_mask(log, found).shape == (n,)
+    derive(log, 0.175, exclude=glitch_mask(log, found))

@@ -1,16 +1,22 @@
 """Measured logs: check a run log for the gap workflow and derive smoothed states from it.
 
 A measured log is a :class:`simrunner.run.log.RunLog` (read with
-``simrunner.run.log.read_log``; the one schema is docs/telemetry.md). The gap needs the
-columns :data:`MEASURED_COLUMNS` and at least :data:`MIN_ROWS` rows over
-:data:`MIN_DURATION_S`; :func:`check_measured` says so in one ``path:line:`` error:
+``simrunner.run.log.read_log``; the one schema is docs/telemetry.md). The gap needs
 
-    t_s            s     sample time, strictly increasing
-    x_m, y_m       m     rear-axle midpoint in the world frame
-    yaw_rad        rad   heading, counter-clockwise from +x (any wrapping)
-    speed_mps      m/s   signed speed along the car's x axis
+    t_s            s     sample time, strictly increasing (irregular stamps are fine)
     speed_cmd_mps  m/s   commanded speed (physical units)
     steer_cmd_rad  rad   commanded bicycle-equivalent steering angle, positive = left
+
+and at least one way to see the car move: the pose (``x_m, y_m`` of the rear-axle midpoint
+in the world frame, ``yaw_rad`` counter-clockwise from +x, any wrapping) or a speed sensor
+(``speed_mps``, signed, along the car's x: an encoder). A gyro (``yaw_rate_radps``) is used
+when present. :func:`check_measured` also asks for at least :data:`MIN_ROWS` rows over
+:data:`MIN_DURATION_S` and a median sample rate of at least :data:`MIN_RATE_HZ`, and says
+what is missing in one ``path:line:`` error.
+
+Which residual signals a log supports follows from its columns
+(:func:`simrunner.workflows.gap.replay.signals_of`): the pose gives position and heading,
+and speed and yaw rate when there is no speed sensor or gyro.
 
 ``coast`` (0/1: drive off, rear wheels rolling freely) is used when present (absent: never
 coasting); other columns are ignored.
@@ -25,30 +31,47 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simrunner.run.log import RunLog
+from simrunner.run.log import LogError, RunLog
+from simrunner.workflows.gap.glitches import has_pose, time_gaps
 
+REQUIRED_COLUMNS = ("t_s", "speed_cmd_mps", "steer_cmd_rad")
+POSE_COLUMNS = ("x_m", "y_m", "yaw_rad")
+# every state column a measured log may carry (a synthetic log has these and ``coast``)
 MEASURED_COLUMNS = ("t_s", "x_m", "y_m", "yaw_rad", "speed_mps", "speed_cmd_mps", "steer_cmd_rad")
 MIN_ROWS = 50
 MIN_DURATION_S = 6.0  # three 2-s replay windows: two to fit, one to hold out
+MIN_RATE_HZ = 10.0  # median sample rate; below it the smoothing (SMOOTH_S) sees single samples
 SMOOTH_S = 0.15  # Savitzky-Golay window for states and their derivatives
 MIN_SPEED_FOR_STEER_MPS = 0.15  # below this the steer estimate falls back to the command
 
 
 def check_measured(log: RunLog) -> RunLog:
-    """``log`` if the gap workflow can use it, else :class:`simrunner.run.log.LogError`
-    (``path:line: what was expected``): the columns :data:`MEASURED_COLUMNS`, at least
-    :data:`MIN_ROWS` rows and :data:`MIN_DURATION_S` of data."""
-    log.require(*MEASURED_COLUMNS, min_rows=MIN_ROWS, min_duration_s=MIN_DURATION_S)
+    """``log`` if the gap workflow can use it (see the module docstring), else
+    :class:`simrunner.run.log.LogError` (``path:line: what was expected``)."""
+    log.require(*REQUIRED_COLUMNS)
+    if log.speed_mps is None and not has_pose(log):
+        missing = [c for c in POSE_COLUMNS if getattr(log, c) is None]
+        raise LogError(log.source, 1, f"expected a pose ({', '.join(POSE_COLUMNS)}) or a speed sensor (speed_mps) "
+                                      f"(missing: {', '.join(missing)}, speed_mps)")
+    log.require(*REQUIRED_COLUMNS, min_rows=MIN_ROWS, min_duration_s=MIN_DURATION_S)
+    rate = 1.0 / float(np.median(np.diff(log.t_s)))
+    if rate < MIN_RATE_HZ * (1.0 - 1e-6):
+        raise LogError(log.source, 0, f"expected a median sample rate of at least {MIN_RATE_HZ:g} Hz "
+                                      f"(got {rate:.3g} Hz)")
     return log
 
 
 @dataclass(frozen=True)
 class Derived:
-    """Smoothed states of a log (Savitzky-Golay, ``SMOOTH_S`` window), all shape (N,).
+    """Smoothed states of a log (Savitzky-Golay, ``SMOOTH_S`` window), all shape (N,), NaN
+    where the log cannot give them (no pose: ``x_m``, ``y_m``, ``yaw_rad``; no pose and no
+    gyro: ``yaw_rate_radps``) and at excluded samples.
 
-    ``yaw_rad`` is unwrapped; ``yaw_rate_radps`` and ``accel_mps2`` are derivatives of the
-    smoothed yaw and speed; ``steer_rad`` is the bicycle-equivalent steer that explains the
-    yaw rate, ``atan(L * r / v)``, or the command where ``|v|`` is small.
+    ``yaw_rad`` is unwrapped within each piece; ``speed_mps`` is the smoothed speed sensor,
+    else the pose's velocity along the heading; ``yaw_rate_radps`` the smoothed gyro, else the
+    derivative of the smoothed yaw; ``accel_mps2`` the derivative of the smoothed speed;
+    ``steer_rad`` the bicycle-equivalent steer that explains the yaw rate,
+    ``atan(L * r / v)``, or the command where ``|v|`` is small or the yaw rate unknown.
     """
 
     x_m: np.ndarray
@@ -65,30 +88,111 @@ def sample_dt_s(log: RunLog) -> float:
     return float(np.median(np.diff(log.t_s)))
 
 
-def derive(log: RunLog, wheelbase_m: float, steer_limit_rad: float = math.inf) -> Derived:
-    """Smoothed states and derivatives; see :class:`Derived`."""
-    from scipy.signal import savgol_filter  # here, not at import: `simrunner gap --help` stays quick
-    dt = sample_dt_s(log)
-    win = max(5, int(round(SMOOTH_S / dt)) | 1)
+def pieces(log: RunLog, exclude: np.ndarray | None = None) -> list[tuple[int, int]]:
+    """Sample ranges ``[a, b)`` of kept samples (not ``exclude``) without a time gap inside
+    (:func:`simrunner.workflows.gap.glitches.time_gaps`), in order."""
     n = len(log)
-    win = min(win, n if n % 2 else n - 1)
+    keep = np.ones(n, dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
+    cut = np.zeros(n + 1, dtype=bool)  # cut[k]: a piece boundary before sample k
+    cut[1:n] = time_gaps(log.t_s)
+    out, a = [], None
+    for k in range(n):
+        if a is not None and (not keep[k] or cut[k]):
+            out.append((a, k))
+            a = None
+        if keep[k] and a is None:
+            a = k
+    if a is not None:
+        out.append((a, n))
+    return out
+
+
+def speed_estimate(log: RunLog) -> np.ndarray:
+    """``(N,)`` unsmoothed signed speed: the speed sensor, else the pose's velocity along the
+    heading (central differences within each piece; zero for a single-sample piece)."""
+    if log.speed_mps is not None:
+        return log.speed_mps
+    out = np.zeros(len(log))
     t = log.t_s
-    # Savitzky-Golay assumes a uniform grid: resample, filter, and sample back.
-    grid = np.linspace(t[0], t[-1], len(log))
-    step = grid[1] - grid[0]
+    for a, b in pieces(log):
+        if b - a < 2:
+            continue
+        vx, vy = np.gradient(log.x_m[a:b], t[a:b]), np.gradient(log.y_m[a:b], t[a:b])
+        out[a:b] = vx * np.cos(log.yaw_rad[a:b]) + vy * np.sin(log.yaw_rad[a:b])
+    return out
 
-    def smooth(v: np.ndarray, deriv: int = 0) -> np.ndarray:
-        g = np.interp(grid, t, v)
-        s = savgol_filter(g, win, 2, deriv=deriv, delta=step, mode="interp")
-        return np.interp(t, grid, s)
 
-    yaw_u = np.unwrap(log.yaw_rad)
-    speed = smooth(log.speed_mps)
-    yaw_rate = smooth(yaw_u, 1)
+def derive(log: RunLog, wheelbase_m: float, steer_limit_rad: float = math.inf, *,
+           exclude: np.ndarray | None = None) -> Derived:
+    """Smoothed states and derivatives; see :class:`Derived`.
+
+    The log is smoothed piece by piece (:func:`pieces`): nothing is smoothed across a time
+    gap or an ``exclude``-d sample (``(N,) bool``, e.g.
+    :func:`simrunner.workflows.gap.glitches.glitch_mask`), which stay NaN. Within a piece,
+    the irregular stamps are resampled to a uniform grid, filtered and sampled back."""
+    n = len(log)
+    out = {k: np.full(n, np.nan) for k in ("x_m", "y_m", "yaw_rad", "speed_mps", "yaw_rate_radps", "accel_mps2")}
+    for a, b in pieces(log, exclude):
+        for k, v in _derive_piece(log, a, b).items():
+            out[k][a:b] = v
+    speed, yaw_rate = out["speed_mps"], out["yaw_rate_radps"]
     with np.errstate(divide="ignore", invalid="ignore"):
         steer = np.arctan(wheelbase_m * yaw_rate / speed)
-    slow = np.abs(speed) < MIN_SPEED_FOR_STEER_MPS
-    steer = np.where(slow, log.steer_cmd_rad, steer)
+    fallback = ~(np.abs(speed) >= MIN_SPEED_FOR_STEER_MPS) | ~np.isfinite(steer)
+    steer = np.where(fallback, log.steer_cmd_rad, steer)
     steer = np.clip(steer, -steer_limit_rad, steer_limit_rad)
-    return Derived(smooth(log.x_m), smooth(log.y_m), smooth(yaw_u), speed, yaw_rate,
-                   smooth(log.speed_mps, 1), steer)
+    if exclude is not None:
+        steer = np.where(np.asarray(exclude, dtype=bool), np.nan, steer)
+    return Derived(out["x_m"], out["y_m"], out["yaw_rad"], speed, yaw_rate, out["accel_mps2"], steer)
+
+
+def _derive_piece(log: RunLog, a: int, b: int) -> dict[str, np.ndarray]:
+    """Smoothed states of samples a .. b - 1 (one piece: no gap, nothing excluded)."""
+    from scipy.signal import savgol_filter  # here, not at import: `simrunner gap --help` stays quick
+
+    m = b - a
+    t = log.t_s[a:b]
+    if m < 3:  # too short to smooth or differentiate: the raw values, no derivatives
+        raw = {}
+        if has_pose(log):
+            raw.update(x_m=log.x_m[a:b], y_m=log.y_m[a:b], yaw_rad=log.yaw_rad[a:b])
+        if log.speed_mps is not None:
+            raw["speed_mps"] = log.speed_mps[a:b]
+        if log.yaw_rate_radps is not None:
+            raw["yaw_rate_radps"] = log.yaw_rate_radps[a:b]
+        return raw
+    # Savitzky-Golay assumes a uniform grid: resample, filter, and sample back.
+    grid = np.linspace(t[0], t[-1], m)
+    step = grid[1] - grid[0]
+    win = max(5, int(round(SMOOTH_S / step)) | 1)
+    win = min(win, m if m % 2 else m - 1)
+    order = min(2, win - 1)
+
+    def on_grid(v: np.ndarray, deriv: int = 0) -> np.ndarray:
+        return savgol_filter(np.interp(grid, t, v), win, order, deriv=deriv, delta=step, mode="interp")
+
+    def back(g: np.ndarray) -> np.ndarray:
+        return np.interp(t, grid, g)
+
+    out: dict[str, np.ndarray] = {}
+    yaw_grid = None
+    if has_pose(log):
+        yaw_u = np.unwrap(log.yaw_rad[a:b])
+        yaw_grid = on_grid(yaw_u)
+        out.update(x_m=back(on_grid(log.x_m[a:b])), y_m=back(on_grid(log.y_m[a:b])), yaw_rad=back(yaw_grid))
+    if log.speed_mps is not None:
+        out["speed_mps"] = back(on_grid(log.speed_mps[a:b]))
+        out["accel_mps2"] = back(on_grid(log.speed_mps[a:b], 1))
+    elif yaw_grid is not None:  # the pose's velocity along the heading
+        v_grid = (on_grid(log.x_m[a:b], 1) * np.cos(yaw_grid) + on_grid(log.y_m[a:b], 1) * np.sin(yaw_grid))
+        out["speed_mps"] = back(v_grid)
+        out["accel_mps2"] = back(savgol_filter(v_grid, win, order, deriv=1, delta=step, mode="interp"))
+    if log.yaw_rate_radps is not None:  # the gyro, when there is one
+        out["yaw_rate_radps"] = back(on_grid(log.yaw_rate_radps[a:b]))
+    elif has_pose(log):
+        out["yaw_rate_radps"] = back(on_grid(np.unwrap(log.yaw_rad[a:b]), 1))
+    return out
+
+
+__all__ = ["Derived", "check_measured", "derive", "pieces", "speed_estimate", "sample_dt_s", "MEASURED_COLUMNS",
+           "REQUIRED_COLUMNS", "POSE_COLUMNS", "MIN_ROWS", "MIN_DURATION_S", "MIN_RATE_HZ", "SMOOTH_S"]

@@ -9,9 +9,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from simrunner.workflows.gap.glitches import has_pose  # noqa: E402
 from simrunner.workflows.gap.replay import window_mask  # noqa: E402
 
-_REGIME_ORDER = ("all", "accelerating", "braking", "coasting", "steady", "straight", "left", "right")
+_REGIME_ORDER = ("all", "accelerating", "braking", "coasting", "steady", "straight", "left", "right", "reversing",
+                 "high_lat_accel")
 
 
 def _shade_held(ax, result) -> None:
@@ -20,25 +22,40 @@ def _shade_held(ax, result) -> None:
         ax.axvspan(t[w.start], t[w.stop - 1], color="0.9", zorder=0, label="held out" if k == 0 else None)
 
 
+def _no_data(ax, text: str) -> None:
+    ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, fontsize=9, color="0.4")
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
 def plot_before_after(result, path: str | Path) -> None:
     """2x2 figure: path in xy, speed, yaw rate and position error over time, measured vs
     nominal ("before") vs fitted ("after"); held-out windows shaded."""
     log, d = result.log, result.derived
     p0, p1 = result.pred_before, result.pred_after
     t = log.t_s
+    pose = has_pose(log)
     fig, axes = plt.subplots(2, 2, figsize=(12, 8), dpi=90)
     ax = axes[0, 0]
-    ax.plot(log.x_m, log.y_m, color="k", lw=1.0, label="measured")
-    ax.plot(p0.x_m, p0.y_m, color="tab:red", lw=0.9, label="simulated, nominal")
-    ax.plot(p1.x_m, p1.y_m, color="tab:blue", lw=0.9, ls="--", label=f"simulated, + {result.effect}")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_title("path (each window restarts from the measured state)")
-    ax.legend(fontsize=8)
+    if pose:
+        ax.plot(log.x_m, log.y_m, color="k", lw=1.0, label="measured")
+        ax.plot(p0.x_m, p0.y_m, color="tab:red", lw=0.9, label="simulated, nominal")
+        ax.plot(p1.x_m, p1.y_m, color="tab:blue", lw=0.9, ls="--", label=f"simulated, + {result.effect}")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_title("path (each window restarts from the measured state)")
+        ax.legend(fontsize=8)
+    else:
+        _no_data(ax, "path: the log has no pose (x_m, y_m, yaw_rad)")
+    speed = log.speed_mps if log.speed_mps is not None else d.speed_mps
+    yaw_rate = log.yaw_rate_radps if log.yaw_rate_radps is not None else d.yaw_rate_radps
     for ax, meas, a, b, label in (
-            (axes[0, 1], log.speed_mps, p0.speed_mps, p1.speed_mps, "speed (m/s)"),
-            (axes[1, 0], d.yaw_rate_radps, p0.yaw_rate_radps, p1.yaw_rate_radps, "yaw rate (rad/s)")):
+            (axes[0, 1], speed, p0.speed_mps, p1.speed_mps, "speed (m/s)"),
+            (axes[1, 0], yaw_rate, p0.yaw_rate_radps, p1.yaw_rate_radps, "yaw rate (rad/s)")):
+        if not np.isfinite(meas).any():
+            _no_data(ax, f"{label}: not measured")
+            continue
         _shade_held(ax, result)
         ax.plot(t, meas, color="k", lw=0.8, label="measured")
         ax.plot(t, a, color="tab:red", lw=0.8, label="nominal")
@@ -47,19 +64,24 @@ def plot_before_after(result, path: str | Path) -> None:
         ax.set_ylabel(label)
         ax.legend(fontsize=8, loc="upper right")
     ax = axes[1, 1]
-    _shade_held(ax, result)
-    e0 = np.hypot(p0.x_m - log.x_m, p0.y_m - log.y_m)
-    e1 = np.hypot(p1.x_m - log.x_m, p1.y_m - log.y_m)
-    ax.plot(t, e0, color="tab:red", lw=0.8, label="nominal")
-    ax.plot(t, e1, color="tab:blue", lw=0.8, ls="--", label=f"+ {result.effect}")
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel("position error (m)")
+    if pose:
+        _shade_held(ax, result)
+        e0 = np.hypot(p0.x_m - log.x_m, p0.y_m - log.y_m)
+        e1 = np.hypot(p1.x_m - log.x_m, p1.y_m - log.y_m)
+        ax.plot(t, e0, color="tab:red", lw=0.8, label="nominal")
+        ax.plot(t, e1, color="tab:blue", lw=0.8, ls="--", label=f"+ {result.effect}")
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel("position error (m)")
+        ax.legend(fontsize=8, loc="upper right")
+    else:
+        _no_data(ax, "position error: the log has no pose")
     held = window_mask(len(log), result.held_windows)
+    shown = [(s, label) for s, label in (("position_m", "position"), ("speed_mps", "speed"),
+                                         ("yaw_rate_radps", "yaw rate"))
+             if np.isfinite(result.rmse_before.get(s, np.nan))]
     ax.set_title("held-out RMSE before->after: " + ", ".join(
-        f"{label} {result.rmse_before[s]:.3g}->{result.rmse_after[s]:.3g}"
-        for s, label in (("position_m", "position"), ("speed_mps", "speed"), ("yaw_rate_radps", "yaw rate")))
-        if held.any() else "", fontsize=9)
-    ax.legend(fontsize=8, loc="upper right")
+        f"{label} {result.rmse_before[s]:.3g}->{result.rmse_after.get(s, np.nan):.3g}" for s, label in shown)
+        if held.any() and shown else "", fontsize=9)
     param = ", ".join(f"{k} = {v:.4g}" for k, v in result.parameters.items())
     fig.suptitle(f"{Path(log.source).name}: missing effect = {result.effect}" + (f" ({param})" if param else ""))
     fig.tight_layout()
@@ -74,7 +96,10 @@ def plot_regimes(result, path: str | Path) -> None:
     for ax, sig in zip(axes.ravel(), signals):
         rows0 = {r["regime"]: r for r in result.stats_before if r["signal"] == sig}
         rows1 = {r["regime"]: r for r in result.stats_after if r["signal"] == sig}
-        regs = [g for g in _REGIME_ORDER if rows0.get(g, {}).get("count")]
+        regs = [g for g in _REGIME_ORDER if rows0.get(g, {}).get("count") and g in rows1]
+        if not regs:
+            _no_data(ax, f"{sig}: not measured")
+            continue
         x = np.arange(len(regs))
         ax.bar(x - 0.2, [rows0[g]["rmse"] for g in regs], 0.4, color="tab:red", label="RMSE nominal")
         ax.bar(x + 0.2, [rows1[g]["rmse"] for g in regs], 0.4, color="tab:blue", label="RMSE fitted")

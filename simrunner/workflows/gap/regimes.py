@@ -11,7 +11,12 @@ regime; samples with ``|speed| < MOVING_MPS`` are in neither):
     straight       |steer_cmd| < STRAIGHT_RAD
     left, right    steer_cmd >= STRAIGHT_RAD / <= -STRAIGHT_RAD
     cornering      left or right
+    reversing      smoothed speed < -MOVING_MPS
+    high_lat_accel |v * yaw_rate| above HIGH_LATERAL_FRACTION of the grip limit mu * g
+                   (mu: the car's ``wheels.friction_mu``): the tyres work in their
+                   non-linear range, where slip and friction effects show
 
+A regime is empty where the log cannot tell (no yaw rate: never ``high_lat_accel``).
 Lateral regimes follow the *command*: a car that curves while told to go straight shows up
 as a cross-track bias in "straight", which is what a steering offset looks like.
 """
@@ -21,19 +26,26 @@ import numpy as np
 
 from simrunner.run.log import RunLog
 from simrunner.workflows.gap.logs import Derived
+from vehicle.description import CarDescription
 
 MOVING_MPS = 0.1
 ACCEL_MPS2 = 0.3
 COAST_CMD_MPS = 0.05
 STRAIGHT_RAD = 0.03
+HIGH_LATERAL_FRACTION = 0.5  # of mu * g: beyond it a tyre's force no longer grows linearly with slip
+GRAVITY_MPS2 = 9.81
 
-REGIMES = ("all", "accelerating", "braking", "coasting", "steady", "straight", "cornering", "left", "right")
+REGIMES = ("all", "accelerating", "braking", "coasting", "steady", "straight", "cornering", "left", "right",
+           "reversing", "high_lat_accel")
 
 
-def segment(log: RunLog, derived: Derived) -> dict[str, np.ndarray]:
-    """Boolean masks (N,) for every name in :data:`REGIMES` (see the module docstring)."""
-    moving = np.abs(derived.speed_mps) >= MOVING_MPS
-    a = derived.accel_mps2 * np.sign(np.where(derived.speed_mps == 0.0, 1.0, derived.speed_mps))
+def segment(log: RunLog, derived: Derived, car: CarDescription | None = None) -> dict[str, np.ndarray]:
+    """Boolean masks (N,) for every name in :data:`REGIMES` (see the module docstring);
+    ``car`` gives the grip limit (default: the default car)."""
+    mu = (car or CarDescription()).wheels.friction_mu
+    speed = np.where(np.isfinite(derived.speed_mps), derived.speed_mps, 0.0)
+    moving = np.abs(speed) >= MOVING_MPS
+    a = derived.accel_mps2 * np.sign(np.where(speed == 0.0, 1.0, speed))
     coasting = moving & (log.coasting() | (np.abs(log.speed_cmd_mps) < COAST_CMD_MPS))
     accelerating = moving & ~coasting & (a > ACCEL_MPS2)
     braking = moving & ~coasting & (a < -ACCEL_MPS2)
@@ -41,19 +53,25 @@ def segment(log: RunLog, derived: Derived) -> dict[str, np.ndarray]:
     left = moving & (log.steer_cmd_rad >= STRAIGHT_RAD)
     right = moving & (log.steer_cmd_rad <= -STRAIGHT_RAD)
     straight = moving & ~left & ~right
+    with np.errstate(invalid="ignore"):
+        lateral = np.abs(derived.speed_mps * derived.yaw_rate_radps) > HIGH_LATERAL_FRACTION * mu * GRAVITY_MPS2
     return {"all": moving, "accelerating": accelerating, "braking": braking, "coasting": coasting,
-            "steady": steady, "straight": straight, "cornering": left | right, "left": left, "right": right}
+            "steady": steady, "straight": straight, "cornering": left | right, "left": left, "right": right,
+            "reversing": speed < -MOVING_MPS, "high_lat_accel": moving & lateral}
 
 
-def residual_stats(residuals: dict[str, np.ndarray], masks: dict[str, np.ndarray]) -> list[dict]:
+def residual_stats(residuals: dict[str, np.ndarray | None], masks: dict[str, np.ndarray]) -> list[dict]:
     """RMSE, bias (mean) and count of every residual signal in every regime.
 
-    ``residuals``: signal name -> (N,) array, NaN where not compared (outside windows).
-    Returns rows ``{"signal", "regime", "count", "rmse", "bias"}`` in signal-then-regime
-    order; ``rmse``/``bias`` are NaN when ``count`` is 0.
+    ``residuals``: signal name -> (N,) array, NaN where not compared (outside windows); a
+    signal the log does not support may be left out or given as None (no rows). Returns
+    rows ``{"signal", "regime", "count", "rmse", "bias"}`` in signal-then-regime order;
+    ``rmse``/``bias`` are NaN when ``count`` is 0.
     """
     rows = []
     for signal, r in residuals.items():
+        if r is None:
+            continue
         for regime, m in masks.items():
             v = r[m & np.isfinite(r)]
             n = int(v.size)
@@ -64,11 +82,16 @@ def residual_stats(residuals: dict[str, np.ndarray], masks: dict[str, np.ndarray
 
 
 def format_stats(rows: list[dict], units: dict[str, str] | None = None) -> str:
-    """A fixed-width text table of :func:`residual_stats` rows (signals as row blocks)."""
+    """A fixed-width text table of :func:`residual_stats` rows (signals as row blocks; ``-``
+    where a value is NaN)."""
     units = units or {}
-    lines = [f"{'signal':<16}{'regime':<14}{'count':>7}{'rmse':>11}{'bias':>11}"]
+
+    def num(x: float) -> str:
+        return f"{x:>11.4g}" if np.isfinite(x) else f"{'-':>11}"
+
+    lines = [f"{'signal':<16}{'regime':<16}{'count':>7}{'rmse':>11}{'bias':>11}"]
     for r in rows:
         u = units.get(r["signal"], "")
-        lines.append(f"{r['signal'] + (' ' + u if u else ''):<16}{r['regime']:<14}{r['count']:>7}"
-                     f"{r['rmse']:>11.4g}{r['bias']:>11.4g}")
+        lines.append(f"{r['signal'] + (' ' + u if u else ''):<16}{r['regime']:<16}{r['count']:>7}"
+                     f"{num(r['rmse'])}{num(r['bias'])}")
     return "\n".join(lines)

@@ -1,23 +1,28 @@
 """Windowed replay: re-run the logged commands in the simulator from the measured states.
 
-The log is cut into windows of ``window_s`` (default :data:`WINDOW_S`). Each window starts
-the simulator afresh from the measured (smoothed) state at its first sample
-(``set_state(pose, speed, steer, yaw_rate)``, see :mod:`simrunner.workflows.gap.logs`), then applies
-each logged command until the next sample time (zero-order hold) and records the predicted
-state at every sample. Before a window, the :data:`LEAD_S` seconds of commands that
-precede it are replayed unrecorded and the car is then moved (``place``) to the measured
-state at the window's start, so latency queues and lags carry the commands in flight. Restarting keeps open-loop drift from swamping the comparison; one
-simulator object serves all windows of a replay, so a whole replay is one pass.
+The log is cut into windows of ``window_s`` (default :data:`WINDOW_S`), never across a time
+gap or an excluded (glitch) sample. Each window starts the simulator afresh from the
+measured (smoothed) state at its first sample (``set_state(pose, speed, steer, yaw_rate)``,
+see :mod:`simrunner.workflows.gap.logs`), then applies each logged command until the next
+sample time (zero-order hold) and records the predicted state at every sample. Before a
+window, the :data:`LEAD_S` seconds of commands that precede it (within the same piece of
+the log) are replayed unrecorded and the car is then moved (``place``) to the measured
+state at the window's start, so latency queues and lags carry the commands in flight.
+Restarting keeps open-loop drift from swamping the comparison; one simulator object serves
+all windows of a replay, so a whole replay is one pass. A log without pose starts every
+window at the origin, heading 0, with the measured speed and yaw rate: only its pose-free
+signals are compared.
 
-Residual signals (predicted minus measured, shape (N,), NaN outside the replayed windows):
+Residual signals (predicted minus measured, shape (N,), NaN outside the replayed windows),
+those the log supports (:func:`signals_of`):
 
-    along_m         position error along the measured heading
-    cross_m         position error to the left of the measured heading
-    yaw_rad         heading error, wrapped to [-pi, pi)
-    speed_mps       speed error
-    yaw_rate_radps  yaw-rate error (measured: derivative of the smoothed yaw)
+    along_m         position error along the measured heading           (pose)
+    cross_m         position error to the left of the measured heading   (pose)
+    yaw_rad         heading error, wrapped to [-pi, pi)                  (pose)
+    speed_mps       speed error (measured: the speed sensor, else the pose's speed)
+    yaw_rate_radps  yaw-rate error (measured: the gyro, else the derivative of the smoothed yaw)
 
-``position_m`` (the distance, for reports) is ``hypot(along, cross)``.
+``position_m`` (the distance, for reports) is ``hypot(along, cross)`` (pose only).
 """
 from __future__ import annotations
 
@@ -29,7 +34,8 @@ import numpy as np
 
 from pieces.pose import Pose2
 from simrunner.run.log import RunLog
-from simrunner.workflows.gap.logs import Derived
+from simrunner.workflows.gap.glitches import has_pose, time_gaps
+from simrunner.workflows.gap.logs import SMOOTH_S, Derived, pieces, speed_estimate
 from vehicle.description import CarDescription
 
 WINDOW_S = 2.0
@@ -44,6 +50,21 @@ LEAD_S = 0.3  # commands replayed before each window (not compared), see replay(
 
 FIT_SIGNALS = ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
 REPORT_SIGNALS = ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
+POSE_SIGNALS = ("along_m", "cross_m", "yaw_rad")
+EXCLUDE_MARGIN_S = 0.5 * SMOOTH_S  # windows keep this far from an excluded sample (smoothing reach)
+
+
+def signals_of(log: RunLog) -> tuple[str, ...]:
+    """The residual signals ``log`` supports, in :data:`FIT_SIGNALS` order: the pose gives
+    ``along_m``, ``cross_m``, ``yaw_rad`` (and speed and yaw rate); a speed sensor
+    ``speed_mps``; a gyro ``yaw_rate_radps``."""
+    pose = has_pose(log)
+    have = set(POSE_SIGNALS) if pose else set()
+    if pose or log.speed_mps is not None:
+        have.add("speed_mps")
+    if pose or log.yaw_rate_radps is not None:
+        have.add("yaw_rate_radps")
+    return tuple(sig for sig in FIT_SIGNALS if sig in have)
 
 SimFactory = Callable[[CarDescription, float], object]
 
@@ -63,43 +84,82 @@ class Window:
     stop: int
 
 
-def make_windows(log: RunLog, window_s: float = WINDOW_S) -> list[Window]:
-    """Consecutive windows of about ``window_s`` covering the log.
+def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | None = None) -> list[Window]:
+    """Consecutive windows of about ``window_s`` covering the usable parts of the log.
 
-    Each boundary is moved (by up to :data:`QUIET_SHIFT_S`) to a quiet sample: the one with
-    the least command change in ``[t - QUIET_BEFORE_S, t + QUIET_AFTER_S]`` (ties: nearest to
-    the regular grid). A window that starts during a step or just after it would start
-    from smoothed states that blur the step; quiet starts avoid that. A sample where the
-    car rolls with the drive off (coasting, or ``speed_cmd`` ~ 0 while moving) in
-    ``[t, t + QUIET_AFTER_S]`` is avoided above all: no speed loop would correct the
-    noise in the start speed there, and the error would grow through the window. The last window is
-    merged into its neighbour when shorter than half a window.
+    The log is first cut into pieces (:func:`simrunner.workflows.gap.logs.pieces`) at every
+    time gap and around every ``exclude``-d sample (``(N,) bool``, e.g.
+    :func:`simrunner.workflows.gap.glitches.glitch_mask`; samples within
+    :data:`EXCLUDE_MARGIN_S` of one are left out too, as the smoothing reaches that far);
+    pieces shorter than half a window are dropped. So no window spans a gap or holds an
+    excluded sample, and a log with gaps gives fewer windows; a log that passed
+    ``check_measured`` never makes this raise (it may give no window at all).
+
+    Within a piece, each boundary is moved (by up to :data:`QUIET_SHIFT_S`, at most a quarter
+    window) to a quiet sample: the one with the least command change in
+    ``[t - QUIET_BEFORE_S, t + QUIET_AFTER_S]`` (ties: nearest to the regular grid). A window
+    that starts during a step or just after it would start from smoothed states that blur
+    the step; quiet starts avoid that. A sample where the car rolls with the drive off
+    (coasting, or ``speed_cmd`` ~ 0 while moving) in ``[t, t + QUIET_AFTER_S]`` is avoided
+    above all: no speed loop would correct the noise in the start speed there, and the error
+    would grow through the window. The last window of a piece is merged into its neighbour
+    when shorter than half a window.
     """
     t = log.t_s
+    n = len(log)
+    if n < 2:
+        return []
+    shift = min(QUIET_SHIFT_S, 0.25 * window_s)
     steps = np.abs(np.diff(log.speed_cmd_mps)) / 1.0 + np.abs(np.diff(log.steer_cmd_rad)) / 0.1
     csum = np.concatenate([[0.0], np.cumsum(steps)])  # csum[i] = change before sample i
     # rolling with the drive off (coasting or braking to rest): no speed loop corrects the
     # start state there, so a noisy start speed would persist through the window
-    free = (log.coasting() | (np.abs(log.speed_cmd_mps) < NO_DRIVE_CMD_MPS)) & (np.abs(log.speed_mps) >= MOVING_MPS)
+    drive_off = log.coasting() | (np.abs(log.speed_cmd_mps) < NO_DRIVE_CMD_MPS)
+    free = drive_off & (np.abs(speed_estimate(log)) >= MOVING_MPS)
     fsum = np.concatenate([[0], np.cumsum(free)])
 
     def activity(i: int) -> float:
         a = int(np.searchsorted(t, t[i] - QUIET_BEFORE_S))
         b = int(np.searchsorted(t, t[i] + QUIET_AFTER_S))
-        b = min(b, len(t) - 1)
+        b = min(b, n - 1)
         return float(csum[b] - csum[a]) + (1e3 if fsum[b + 1] - fsum[i] else 0.0)
 
-    edges = [0]
-    while True:
-        goal = t[edges[-1]] + window_s
-        if goal >= t[-1] - 0.5 * window_s:
-            break
-        lo = int(np.searchsorted(t, goal - QUIET_SHIFT_S))
-        hi = int(np.searchsorted(t, goal + QUIET_SHIFT_S))
-        cands = range(max(lo, edges[-1] + 1), min(hi, len(t) - 1))
-        edges.append(min(cands, key=lambda i: (round(activity(i), 9), abs(t[i] - goal))))
-    edges.append(len(t))
-    return [Window(a, b) for a, b in zip(edges[:-1], edges[1:])]
+    windows: list[Window] = []
+    for a, b in pieces(log, _widen(t, exclude, EXCLUDE_MARGIN_S)):
+        if t[b - 1] - t[a] < 0.5 * window_s:
+            continue
+        edges = [a]
+        while True:
+            goal = t[edges[-1]] + window_s
+            if goal >= t[b - 1] - 0.5 * window_s:
+                break
+            lo = int(np.searchsorted(t, goal - shift))
+            hi = int(np.searchsorted(t, goal + shift))
+            cands = range(max(lo, edges[-1] + 1), min(hi, b - 1))
+            if len(cands):
+                edges.append(min(cands, key=lambda i: (round(activity(i), 9), abs(t[i] - goal))))
+                continue
+            k = max(int(np.searchsorted(t, goal)), edges[-1] + 1)  # no sample near the goal: the next one
+            if k >= b - 1:
+                break
+            edges.append(k)
+        edges.append(b)
+        windows += [Window(x, y) for x, y in zip(edges[:-1], edges[1:])]
+    return windows
+
+
+def _widen(t: np.ndarray, exclude: np.ndarray | None, margin_s: float) -> np.ndarray | None:
+    """``exclude`` grown to every sample within ``margin_s`` of an excluded one."""
+    if exclude is None:
+        return None
+    ex = np.asarray(exclude, dtype=bool)
+    if not ex.any() or margin_s <= 0.0:
+        return ex
+    te = t[ex]
+    k = np.searchsorted(te, t)
+    before = np.abs(t - te[np.clip(k - 1, 0, te.size - 1)])
+    after = np.abs(te[np.clip(k, 0, te.size - 1)] - t)
+    return ex | (np.minimum(before, after) <= margin_s)
 
 
 def split_windows(windows: Sequence[Window], every: int = HOLDOUT_EVERY,
@@ -153,10 +213,20 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
     sim = sim_factory(car, dt_s)
     t = log.t_s
     coast = log.coasting()
+    pose = has_pose(log)
+    wheelbase = car.chassis.wheelbase_m
+    after_gap = np.concatenate([[0], np.flatnonzero(time_gaps(t)) + 1])  # first sample of each piece
 
     def state(i: int):
-        return (Pose2(derived.x_m[i], derived.y_m[i], derived.yaw_rad[i]), float(derived.speed_mps[i]),
-                float(derived.steer_rad[i]), float(derived.yaw_rate_radps[i]))
+        v, steer, r = float(derived.speed_mps[i]), float(derived.steer_rad[i]), float(derived.yaw_rate_radps[i])
+        if not math.isfinite(r):  # no gyro and no pose: the kinematic yaw rate of the steer
+            r = v * math.tan(steer) / wheelbase
+        p = Pose2(derived.x_m[i], derived.y_m[i], derived.yaw_rad[i]) if pose else Pose2(0.0, 0.0, 0.0)
+        return p, v, steer, r
+
+    def usable(i: int) -> bool:
+        p, v, steer, r = state(i)
+        return all(math.isfinite(x) for x in (p.x_m, p.y_m, p.yaw_rad, v, steer, r))
 
     def run(a: int, b: int, record: bool) -> None:
         """Apply the commands of samples a .. b-1 (zero-order hold) up to sample b (recorded
@@ -178,8 +248,13 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
                     done = target
 
     for w in windows:
-        i0 = w.start
+        i0 = next((i for i in range(w.start, w.stop) if usable(i)), None)
+        if i0 is None:
+            continue
+        piece_start = int(after_gap[np.searchsorted(after_gap, i0, side="right") - 1])
         j0 = int(np.searchsorted(t, t[i0] - lead_s - 1e-9)) if lead_s > 0.0 else i0
+        j0 = max(j0, piece_start)  # the lead-in stays on this side of a time gap
+        j0 = next(j for j in range(j0, i0 + 1) if usable(j))
         sim.set_coast(bool(coast[j0]))
         sim.set_state(*state(j0))
         if j0 < i0:
@@ -192,32 +267,58 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
 
 
 def residuals(log: RunLog, derived: Derived, pred: Prediction) -> dict[str, np.ndarray]:
-    """Predicted minus measured, per signal of :data:`FIT_SIGNALS` plus ``position_m``."""
-    ex, ey = pred.x_m - log.x_m, pred.y_m - log.y_m
-    c, s = np.cos(log.yaw_rad), np.sin(log.yaw_rad)
-    along, cross = ex * c + ey * s, -ex * s + ey * c
-    dyaw = (pred.yaw_rad - log.yaw_rad + math.pi) % (2.0 * math.pi) - math.pi
-    return {"along_m": along, "cross_m": cross, "yaw_rad": dyaw,
-            "speed_mps": pred.speed_mps - log.speed_mps,
-            "yaw_rate_radps": pred.yaw_rate_radps - derived.yaw_rate_radps,
-            "position_m": np.hypot(along, cross)}
+    """Predicted minus measured, per signal of :func:`signals_of` (``log``), plus
+    ``position_m`` when the log has a pose."""
+    out: dict[str, np.ndarray] = {}
+    have = signals_of(log)
+    if "along_m" in have:
+        ex, ey = pred.x_m - log.x_m, pred.y_m - log.y_m
+        c, s = np.cos(log.yaw_rad), np.sin(log.yaw_rad)
+        out["along_m"], out["cross_m"] = ex * c + ey * s, -ex * s + ey * c
+        out["yaw_rad"] = (pred.yaw_rad - log.yaw_rad + math.pi) % (2.0 * math.pi) - math.pi
+    if "speed_mps" in have:
+        out["speed_mps"] = pred.speed_mps - (log.speed_mps if log.speed_mps is not None else derived.speed_mps)
+    if "yaw_rate_radps" in have:
+        measured = log.yaw_rate_radps if log.yaw_rate_radps is not None else derived.yaw_rate_radps
+        out["yaw_rate_radps"] = pred.yaw_rate_radps - measured
+    if "along_m" in have:
+        out["position_m"] = np.hypot(out["along_m"], out["cross_m"])
+    return out
 
 
 def smoothed_log(log: RunLog, derived: Derived) -> RunLog:
-    """``log`` with its states replaced by the smoothed ones (``derived``): residuals against
-    it show the model error without most of the sensor noise."""
-    return log.with_columns(x_m=derived.x_m, y_m=derived.y_m, yaw_rad=derived.yaw_rad,
-                            speed_mps=derived.speed_mps)
+    """``log`` with its measured states replaced by the smoothed ones (``derived``; the
+    measured value stays where there is no smoothed one): residuals against it show the
+    model error without most of the sensor noise."""
+    cols = {}
+    for name in ("x_m", "y_m", "yaw_rad", "speed_mps", "yaw_rate_radps"):
+        measured = getattr(log, name)
+        if measured is not None:
+            smooth = getattr(derived, name)
+            cols[name] = np.where(np.isfinite(smooth), smooth, measured)
+    return log.with_columns(**cols)
 
 
 def noise_rms(log: RunLog, derived: Derived) -> dict[str, float]:
     """Estimated sensor noise: RMS of measured minus smoothed states, per report signal
-    (about 15 % below the true white-noise sigma: the smoother follows part of the noise)
-    (``position_m`` is the distance; ``yaw_rate_radps`` is not measured: NaN)."""
-    dyaw = (log.yaw_rad - derived.yaw_rad + math.pi) % (2.0 * math.pi) - math.pi
-    ms = lambda v: float(np.sqrt(np.mean(v * v)))  # noqa: E731
-    return {"position_m": ms(np.hypot(log.x_m - derived.x_m, log.y_m - derived.y_m)), "yaw_rad": ms(dyaw),
-            "speed_mps": ms(log.speed_mps - derived.speed_mps), "yaw_rate_radps": float("nan")}
+    (about 15 % below the true white-noise sigma: the smoother follows part of the noise);
+    NaN for a signal the log does not measure directly (``position_m`` and ``yaw_rad``
+    without a pose, ``speed_mps`` without a speed sensor or pose, ``yaw_rate_radps``
+    without a gyro)."""
+    def ms(v: np.ndarray) -> float:
+        v = v[np.isfinite(v)]
+        return float(np.sqrt(np.mean(v * v))) if v.size else float("nan")
+
+    nan = float("nan")
+    out = {"position_m": nan, "yaw_rad": nan, "speed_mps": nan, "yaw_rate_radps": nan}
+    if has_pose(log):
+        out["position_m"] = ms(np.hypot(log.x_m - derived.x_m, log.y_m - derived.y_m))
+        out["yaw_rad"] = ms((log.yaw_rad - derived.yaw_rad + math.pi) % (2.0 * math.pi) - math.pi)
+    if log.speed_mps is not None:
+        out["speed_mps"] = ms(log.speed_mps - derived.speed_mps)
+    if log.yaw_rate_radps is not None:
+        out["yaw_rate_radps"] = ms(log.yaw_rate_radps - derived.yaw_rate_radps)
+    return out
 
 
 def window_mask(n: int, windows: Sequence[Window]) -> np.ndarray:
@@ -229,9 +330,11 @@ def window_mask(n: int, windows: Sequence[Window]) -> np.ndarray:
 
 
 def rmse(res: dict[str, np.ndarray], mask: np.ndarray, signals: Sequence[str] = REPORT_SIGNALS) -> dict[str, float]:
-    """RMS of each residual signal over the finite samples in ``mask``."""
+    """RMS of each residual signal over the finite samples in ``mask`` (NaN for a signal
+    that ``res`` lacks or has no finite sample of in ``mask``)."""
     out = {}
     for s in signals:
-        v = res[s][mask & np.isfinite(res[s])]
+        r = res.get(s)
+        v = r[mask & np.isfinite(r)] if r is not None else np.zeros(0)
         out[s] = float(np.sqrt(np.mean(v * v))) if v.size else float("nan")
     return out

@@ -1,0 +1,369 @@
+"""Glitches of a measured log: samples the gap workflow must keep out of its windows.
+
+Real logs are not what a simulator writes: the localisation jumps, a topic stops for a
+while, a row is logged twice, a sensor repeats its last value. :func:`find_glitches`
+finds four kinds (:class:`GlitchKind`); :func:`glitch_mask` turns them into the samples to
+keep out. Every threshold is relative to the log itself - its median time step, the
+noise of its own signals, its own speed - so that one rule serves a 20-Hz particle
+filter and a 100-Hz motion-capture log alike:
+
+``time_gap``
+    ``dt > GAP_FACTOR * median(dt)``: samples were dropped (or the logger paused). Nothing is
+    known in between, so windows and smoothing are cut there (:func:`time_gaps`).
+``duplicate``
+    a time step below ``DUPLICATE_DT_FRACTION * median(dt)`` (the same sample stamped
+    twice), or a row whose every sensor column (pose, speed, gyro) equals the previous
+    row's while the car moves (a repeated row with a new stamp; at rest identical rows
+    are normal).
+``localisation_jump``
+    a position step that the speed and the time step cannot explain. Each step's
+    residual, along and across the heading, is ``step - v * dt * (cos, sin)(heading)``
+    with ``v`` the mean of the logged speeds at its two ends (without a speed column: the
+    median of the neighbouring steps' speeds). Its noise depends on speed (time-stamp
+    jitter grows with speed), so the steps are grouped by speed (quantiles, up to
+    :data:`SPEED_GROUPS`) and each group's median and robust scale (1.4826 MAD) give a
+    z-score (steps where the pose stood still at rest carry no noise and are left out of
+    the statistics); a step with ``z > JUMP_Z`` whose residual also exceeds
+    :data:`JUMP_MOTION_FRACTION` of the step the speed gives (more than a sideslip or a
+    speed-sensor error could explain: a noise-free log of a sliding car has outlying but
+    real residuals) is a jump. The scale is floored at
+    :data:`SCALE_FLOOR_FRACTION` of the median moving step (noise-free logs) and at the
+    CSV resolution.
+``frozen_sensor``
+    a channel (position, yaw, speed, gyro) repeating its exact value for a run of ``L``
+    samples while the car moves (evidence from the other channels: the speed column, a
+    frozen speed's own non-zero value, or the pose's displacement when it is well above
+    the pose noise and no jump is near), when such a run is
+    improbable for this channel: with ``p`` the chance that one sample repeats the last -
+    the larger of the fraction of repeats in the log's moving samples and the chance that
+    the channel's noise (robust, from second differences) stays within its quantisation
+    step - ``n_moving * p ** (L - 1) < FROZEN_ALPHA``. A channel without noise (a
+    simulator's) may legitimately hold a value and is never called frozen.
+
+A glitch keeps out the samples in ``(t_start_s, t_end_s]``: the sample after a jump, a
+duplicate, a frozen sensor's repeats. A time gap has no samples inside; windows and
+smoothing are cut at gaps anyway.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from simrunner.run.log import RunLog
+
+GAP_FACTOR = 5.0  # dt above this many median time steps: a time gap
+DUPLICATE_DT_FRACTION = 0.1  # dt below this fraction of the median: the same sample again
+JUMP_Z = 8.0  # robust z-score of a position step beyond which it is a jump
+JUMP_MOTION_FRACTION = 0.5  # ... and beyond this fraction of the step the speed gives (slip, speed error)
+SPEED_GROUPS = 8  # at most this many speed groups for the jump scale ...
+GROUP_MIN_STEPS = 50  # ... each with at least this many steps
+SCALE_FLOOR_FRACTION = 0.01  # jump scale floor: this fraction of the median moving step
+RESOLUTION = 1e-6  # the log format's resolution (%.6f)
+FROZEN_ALPHA = 0.01  # a repeat run is frozen when the log would show one this long with prob. < this
+FROZEN_MIN_SAMPLES = 3  # shortest frozen run (samples with the same value)
+MOVING_MPS = 0.1  # as replay.MOVING_MPS and regimes.MOVING_MPS
+MOVING_BASELINE_S = 1.0  # pose displacement over this long tells whether the car moves
+NEIGHBOUR_STEPS = 3  # each side, for the pose speed of a log without speed column
+
+POSE = ("x_m", "y_m", "yaw_rad")
+SENSOR_COLUMNS = ("x_m", "y_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
+
+
+class GlitchKind(StrEnum):
+    TIME_GAP = "time_gap"
+    DUPLICATE = "duplicate"
+    JUMP = "localisation_jump"
+    FROZEN = "frozen_sensor"
+
+
+@dataclass(frozen=True)
+class Glitch:
+    """One glitch: its kind, the time span ``[t_start_s, t_end_s]`` (samples in
+    ``(t_start_s, t_end_s]`` are kept out), the column(s) concerned (comma-separated) and a
+    one-line description with the numbers that made it a glitch."""
+
+    kind: GlitchKind
+    t_start_s: float
+    t_end_s: float
+    column: str
+    detail: str
+
+
+def has_pose(log: RunLog) -> bool:
+    return all(getattr(log, c) is not None for c in POSE)
+
+
+def median_dt_s(t: np.ndarray) -> float:
+    """Median time step of ``t`` (inf for fewer than two samples)."""
+    return float(np.median(np.diff(t))) if t.size > 1 else math.inf
+
+
+def time_gaps(t: np.ndarray) -> np.ndarray:
+    """``(N - 1,) bool``: the step from sample k to k + 1 is a time gap (see the module
+    docstring)."""
+    dt = np.diff(t)
+    return dt > GAP_FACTOR * median_dt_s(t) if dt.size else np.zeros(0, dtype=bool)
+
+
+def find_glitches(log: RunLog) -> list[Glitch]:
+    """The glitches of ``log`` (see the module docstring), sorted by start time."""
+    if len(log) < 3:
+        return []
+    found = _gaps(log) + _duplicates(log)
+    jumps = np.zeros(len(log) - 1, dtype=bool)
+    pose_scale = math.nan
+    if has_pose(log):
+        more, jumps, pose_scale = _jumps(log)
+        found += more
+    found += _frozen(log, jumps, pose_scale)
+    return sorted(found, key=lambda g: (g.t_start_s, g.t_end_s, g.kind))
+
+
+def glitch_mask(log: RunLog, glitches: list[Glitch] | tuple[Glitch, ...]) -> np.ndarray:
+    """``(N,) bool``: True for the samples to keep out (``(t_start_s, t_end_s]`` of every
+    glitch but time gaps, which hold no sample)."""
+    t = log.t_s
+    out = np.zeros(len(log), dtype=bool)
+    for g in glitches:
+        if g.kind is GlitchKind.TIME_GAP:
+            continue
+        a = int(np.searchsorted(t, g.t_start_s, side="right"))
+        b = int(np.searchsorted(t, g.t_end_s, side="right"))
+        out[a:b] = True
+    return out
+
+
+# -- the rules --------------------------------------------------------------------------------
+def _gaps(log: RunLog) -> list[Glitch]:
+    t = log.t_s
+    med = median_dt_s(t)
+    out = []
+    for k in np.flatnonzero(time_gaps(t)):
+        text = f"no sample for {t[k + 1] - t[k]:.3g} s ({(t[k + 1] - t[k]) / med:.0f} median time steps)"
+        if has_pose(log):
+            text += (f"; the pose moved {math.hypot(log.x_m[k + 1] - log.x_m[k], log.y_m[k + 1] - log.y_m[k]):.3g} m "
+                     f"and turned {_wrap(np.array(log.yaw_rad[k + 1] - log.yaw_rad[k])):+.2f} rad across it")
+        out.append(Glitch(GlitchKind.TIME_GAP, float(t[k]), float(t[k + 1]), "t_s", text))
+    return out
+
+
+def _sensor_columns(log: RunLog) -> tuple[str, ...]:
+    return tuple(c for c in SENSOR_COLUMNS if getattr(log, c) is not None
+                 and (c not in POSE or has_pose(log)))
+
+
+def moving(log: RunLog) -> np.ndarray:
+    """``(N,) bool``: the car moves at each sample: ``|speed| >= MOVING_MPS`` from the speed
+    column, else from the pose's displacement over :data:`MOVING_BASELINE_S` (all True when
+    the log has neither)."""
+    if log.speed_mps is not None:
+        return np.abs(log.speed_mps) >= MOVING_MPS
+    if has_pose(log):
+        return _pose_speed(log, MOVING_BASELINE_S) >= MOVING_MPS
+    return np.ones(len(log), dtype=bool)
+
+
+def _pose_speed(log: RunLog, baseline_s: float) -> np.ndarray:
+    """``(N,)`` speed from the pose's displacement over ``baseline_s`` centred on each sample."""
+    t = log.t_s
+    a = np.searchsorted(t, t - 0.5 * baseline_s)
+    b = np.minimum(np.searchsorted(t, t + 0.5 * baseline_s, side="right") - 1, len(t) - 1)
+    span = t[b] - t[a]
+    d = np.hypot(log.x_m[b] - log.x_m[a], log.y_m[b] - log.y_m[a])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(span > 0.0, d / np.where(span > 0.0, span, 1.0), 0.0)
+
+
+def _duplicates(log: RunLog) -> list[Glitch]:
+    t = log.t_s
+    dt = np.diff(t)
+    med = median_dt_s(t)
+    out = [Glitch(GlitchKind.DUPLICATE, float(t[k]), float(t[k + 1]), "t_s",
+                  f"stamped {dt[k] * 1e3:.3g} ms after the previous sample (median time step {med * 1e3:.3g} ms)")
+           for k in np.flatnonzero(dt < DUPLICATE_DT_FRACTION * med)]
+    cols = _sensor_columns(log)
+    if not cols:
+        return out
+    same = np.ones(len(log) - 1, dtype=bool)
+    for c in cols:
+        same &= np.diff(getattr(log, c)) == 0.0
+    mov = moving(log)
+    same &= mov[:-1] | mov[1:]
+    same &= dt >= DUPLICATE_DT_FRACTION * med  # already reported
+    for a, b in _runs(same):
+        out.append(Glitch(GlitchKind.DUPLICATE, float(t[a]), float(t[b]), ",".join(cols),
+                          f"{b - a} row(s) repeating every sensor column of the previous one while moving"))
+    return out
+
+
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """Maximal runs of True steps in ``flags`` (``(N - 1,)``, step k from sample k to k + 1)
+    as sample ranges ``(first, last)``: steps first .. last - 1 are True."""
+    f = np.concatenate([[False], np.asarray(flags, dtype=bool), [False]])
+    d = np.diff(f.astype(np.int8))
+    starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    return [(int(a), int(b)) for a, b in zip(starts, stops)]
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _robust(v: np.ndarray) -> tuple[float, float]:
+    """(median, 1.4826 MAD) of ``v``."""
+    m = float(np.median(v))
+    return m, 1.4826 * float(np.median(np.abs(v - m)))
+
+
+def _jumps(log: RunLog) -> tuple[list[Glitch], np.ndarray, float]:
+    """Localisation jumps; also the ``(N - 1,)`` jump steps and the pose's step noise at low
+    speed (the slowest group's cross-heading scale, m)."""
+    t = log.t_s
+    dt = np.diff(t)
+    med = median_dt_s(t)
+    dx, dy = np.diff(log.x_m), np.diff(log.y_m)
+    heading = log.yaw_rad[:-1] + 0.5 * _wrap(np.diff(log.yaw_rad))
+    c, s = np.cos(heading), np.sin(heading)
+    along, cross = dx * c + dy * s, -dx * s + dy * c
+    valid = ~time_gaps(t) & (dt >= DUPLICATE_DT_FRACTION * med)
+    if log.speed_mps is not None:
+        v = 0.5 * (log.speed_mps[:-1] + log.speed_mps[1:])
+    else:  # the neighbouring steps' speed along the heading, this step left out
+        rate = np.where(valid, along / np.where(dt > 0, dt, 1.0), np.nan)
+        k = NEIGHBOUR_STEPS
+        padded = np.concatenate([np.full(k, np.nan), rate, np.full(k, np.nan)])
+        near = np.stack([padded[j:j + rate.size] for j in range(2 * k + 1) if j != k])
+        with np.errstate(all="ignore"):
+            v = np.nanmedian(np.where(np.isnan(near).all(axis=0), 0.0, near), axis=0) \
+                if near.size else np.zeros_like(rate)
+        v = np.where(np.isfinite(v), v, 0.0)
+    ra, rc = along - v * dt, cross
+    jump = np.zeros(dt.size, dtype=bool)
+    z = np.zeros(dt.size)
+    idx = np.flatnonzero(valid)
+    if idx.size < 10:
+        return [], jump, math.nan
+    step = np.hypot(dx, dy)
+    moving_steps = idx[np.abs(v[idx]) >= MOVING_MPS]
+    floor = max(RESOLUTION, SCALE_FLOOR_FRACTION * (float(np.median(step[moving_steps])) if moving_steps.size else 0.0))
+    still = (dx == 0.0) & (dy == 0.0) & (v == 0.0)  # a pose that did not move at rest: no noise to learn
+    stats = idx[~still[idx]]
+    if stats.size < 10:
+        return [], jump, math.nan
+    order = stats[np.argsort(np.abs(v[stats]), kind="stable")]
+    groups = np.array_split(order, max(1, min(SPEED_GROUPS, order.size // GROUP_MIN_STEPS)))
+    slow_scale = math.nan
+    for g in groups:
+        ma, sa = _robust(ra[g])
+        mc, sc = _robust(rc[g])
+        sa, sc = max(sa, floor), max(sc, floor)
+        z[g] = np.hypot((ra[g] - ma) / sa, (rc[g] - mc) / sc)
+        if math.isnan(slow_scale):
+            slow_scale = sc
+    residual = np.hypot(ra, rc)
+    jump[idx] = (z[idx] > JUMP_Z) & (residual[idx] > JUMP_MOTION_FRACTION * np.abs(v[idx]) * dt[idx])
+    out = []
+    for a, b in _runs(jump):
+        k = int(np.argmax(z[a:b])) + a
+        out.append(Glitch(GlitchKind.JUMP, float(t[a]), float(t[b]), "x_m,y_m",
+                          f"position step {step[k]:.3g} m in {dt[k]:.3g} s where speed {v[k]:+.3g} m/s moves "
+                          f"{abs(v[k]) * dt[k]:.3g} m (z = {z[k]:.0f})"))
+    return out, jump, slow_scale
+
+
+def _channels(log: RunLog) -> list[tuple[str, tuple[str, ...]]]:
+    out = []
+    if has_pose(log):
+        out += [("position", ("x_m", "y_m")), ("yaw", ("yaw_rad",))]
+    for c in ("speed_mps", "yaw_rate_radps"):
+        if getattr(log, c) is not None:
+            out.append((c, (c,)))
+    return out
+
+
+def _repeat_chance(values: np.ndarray, mov_pairs: np.ndarray) -> float:
+    """Chance that the channel's noise leaves one column unchanged between two samples:
+    ``erf(q / (4 sigma))`` with ``q`` its smallest change and ``sigma`` its noise (robust,
+    from second differences over moving samples); 1 for a noise-free column."""
+    d = np.diff(values)
+    nz = np.abs(d[d != 0.0])
+    if nz.size == 0:
+        return 1.0
+    q = max(float(nz.min()), RESOLUTION)
+    d2 = np.diff(values, 2)
+    m2 = mov_pairs[:-1] & mov_pairs[1:]
+    if not m2.any():
+        return 1.0
+    sigma = 1.4826 * float(np.median(np.abs(d2[m2]))) / math.sqrt(6.0)
+    return 1.0 if sigma <= 0.0 else math.erf(q / (4.0 * sigma))
+
+
+def _frozen(log: RunLog, jumps: np.ndarray, pose_scale: float) -> list[Glitch]:
+    t = log.t_s
+    n = len(log)
+    out = []
+    gaps = time_gaps(t)
+    for name, cols in _channels(log):
+        values = [np.unwrap(log.yaw_rad) if c == "yaw_rad" else getattr(log, c) for c in cols]
+        same = np.ones(n - 1, dtype=bool)
+        for v in values:
+            same &= np.diff(v) == 0.0
+        mov = _moving_without(log, name)
+        mov_pairs = (mov[:-1] & mov[1:]) & ~gaps
+        n_mov = int(mov_pairs.sum())
+        if n_mov < 2:
+            continue
+        p_emp = max(float((same & mov_pairs).sum()) / n_mov, 1.0 / n_mov)
+        p_noise = math.prod(_repeat_chance(v, mov_pairs) for v in values)
+        p = max(p_emp, p_noise)
+        if p >= 1.0:
+            continue
+        for a, b in _runs(same):
+            length = b - a + 1
+            if length < FROZEN_MIN_SAMPLES or n_mov * p ** (length - 1) >= FROZEN_ALPHA:
+                continue
+            if not _moves_during(log, name, a, b, jumps, pose_scale):
+                continue
+            out.append(Glitch(GlitchKind.FROZEN, float(t[a]), float(t[b]), ",".join(cols),
+                              f"{name} holds {', '.join(f'{getattr(log, c)[a]:.6g}' for c in cols)} for {length} "
+                              f"samples ({t[b] - t[a]:.3g} s) while moving; its noise repeats a value with "
+                              f"p = {p:.2g} per sample"))
+    return out
+
+
+def _moving_without(log: RunLog, channel: str) -> np.ndarray:
+    """Per-sample moving evidence that does not come from ``channel`` (all True if none)."""
+    if channel != "speed_mps" and log.speed_mps is not None:
+        return np.abs(log.speed_mps) >= MOVING_MPS
+    if channel not in ("position", "yaw") and has_pose(log):
+        return _pose_speed(log, MOVING_BASELINE_S) >= MOVING_MPS
+    if channel == "speed_mps":
+        return np.abs(log.speed_mps) >= MOVING_MPS
+    return np.ones(len(log), dtype=bool)
+
+
+def _moves_during(log: RunLog, channel: str, a: int, b: int, jumps: np.ndarray, pose_scale: float) -> bool:
+    """Whether the car moves over samples a .. b by evidence other than ``channel`` itself:
+    the speed column; a frozen speed's own non-zero value (it says the car moves); the pose's
+    displacement, when it exceeds ``MOVING_MPS`` times the duration plus ``JUMP_Z`` times the
+    pose's step noise and no jump lies within ``MOVING_BASELINE_S / 2`` of the run."""
+    if channel != "speed_mps" and log.speed_mps is not None:
+        return float(np.median(np.abs(log.speed_mps[a:b + 1]))) >= MOVING_MPS
+    if channel == "speed_mps" and abs(float(log.speed_mps[a])) >= MOVING_MPS:
+        return True
+    if channel not in ("position", "yaw") and has_pose(log):
+        t = log.t_s
+        near = slice(int(np.searchsorted(t, t[a] - 0.5 * MOVING_BASELINE_S)),
+                     int(np.searchsorted(t, t[b] + 0.5 * MOVING_BASELINE_S)))
+        if jumps[near].any() or not math.isfinite(pose_scale):
+            return False  # a jumping pose is no evidence of motion
+        d = math.hypot(float(log.x_m[b] - log.x_m[a]), float(log.y_m[b] - log.y_m[a]))
+        return d >= MOVING_MPS * float(t[b] - t[a]) + JUMP_Z * pose_scale
+    return False
+
+
+__all__ = ["Glitch", "GlitchKind", "find_glitches", "glitch_mask", "time_gaps", "median_dt_s", "moving",
+           "has_pose", "GAP_FACTOR", "DUPLICATE_DT_FRACTION", "JUMP_Z", "FROZEN_ALPHA"]

@@ -1,0 +1,96 @@
+"""The gap workflow's per-log machinery on real car logs (shared/data/real_logs: an F1/10 car,
+particle-filter pose at 21-28 Hz with irregular stamps, wheel odometry, reversing).
+
+Skipped when the data are absent (``NXPCUP_REAL_LOGS`` names another folder). Only the
+cheap parts run here - read, check, glitches, smoothing, windows, a replay on the kinematic
+stand-in - not the whole workflow (slow). Facts asserted about a file are facts of that
+file (its README), not thresholds tuned to it.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from simrunner.run.log import read_log
+from simrunner.workflows.gap.glitches import GlitchKind, find_glitches, glitch_mask, time_gaps
+from simrunner.workflows.gap.logs import check_measured, derive
+from simrunner.workflows.gap.regimes import REGIMES, segment
+from simrunner.workflows.gap.replay import (FIT_SIGNALS, make_windows, replay, residuals, signals_of,
+                                            split_windows, window_mask)
+from test_gap_units import kin_factory
+from vehicle.description import load_car
+
+REAL = Path(os.environ.get("NXPCUP_REAL_LOGS", Path(__file__).resolve().parents[2] / "shared/data/real_logs"))
+LOGS = ("f1tenth_DS2.csv", "f1tenth_DS3.csv")
+pytestmark = pytest.mark.skipif(not (REAL / LOGS[0]).exists(), reason=f"no real logs in {REAL}")
+
+
+@pytest.fixture(scope="module")
+def car():
+    return load_car(REAL / "f1tenth_car.toml")
+
+
+@pytest.fixture(scope="module", params=LOGS)
+def prepared(request, car):
+    log = check_measured(read_log(REAL / request.param))
+    glitches = find_glitches(log)
+    exclude = glitch_mask(log, glitches)
+    derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=exclude)
+    windows = make_windows(log, 2.0, exclude=exclude)
+    return request.param, log, glitches, exclude, derived, windows
+
+
+def test_real_logs_read_and_support_every_signal(prepared):
+    _, log, *_ = prepared
+    assert signals_of(log) == FIT_SIGNALS
+    assert log.duration_s > 100.0
+
+
+def test_glitches_lie_in_the_log(prepared):
+    _, log, glitches, exclude, *_ = prepared
+    t = log.t_s
+    for g in glitches:
+        assert t[0] <= g.t_start_s < g.t_end_s <= t[-1] and g.detail
+    assert exclude.shape == (len(log),) and exclude.sum() < 0.05 * len(log)
+
+
+def test_ds2_jump_and_gaps_are_found():
+    glitches = find_glitches(check_measured(read_log(REAL / "f1tenth_DS2.csv")))
+    # the 9.6-m step of the pose happens across 27.8 s without any sample (README: "a 9.6-m
+    # localisation jump"): a time gap, with the step named
+    big = [g for g in glitches if g.t_start_s <= 115.2 and g.t_end_s >= 142.9]
+    assert [g.kind for g in big] == [GlitchKind.TIME_GAP] and "moved 9.58 m" in big[0].detail
+    assert sum(g.kind is GlitchKind.TIME_GAP for g in glitches) >= 3  # also 1.98 s and 1.75 s without samples
+    # the pose jumps 0.84 m in one step while the car stands (odometry 0 m/s)
+    assert any(g.kind is GlitchKind.JUMP and g.t_start_s == pytest.approx(145.714, abs=0.01) for g in glitches)
+
+
+def test_windows_avoid_glitches_and_gaps(prepared):
+    _, log, glitches, exclude, derived, windows = prepared
+    t = log.t_s
+    gaps = time_gaps(t)
+    for w in windows:
+        assert not exclude[w.start:w.stop].any() and not gaps[w.start:w.stop - 1].any()
+    covered = sum(t[w.stop - 1] - t[w.start] for w in windows)
+    usable = log.duration_s - float(np.sum(np.diff(t)[gaps]))
+    assert covered > 0.85 * usable
+    fit, held = split_windows(windows)
+    assert len(fit) >= 20 and len(held) >= 10
+    inside = window_mask(len(log), windows)
+    for name in ("x_m", "y_m", "yaw_rad", "speed_mps", "yaw_rate_radps", "steer_rad"):
+        assert np.isfinite(getattr(derived, name)[inside]).all()
+
+
+def test_regimes_and_a_replay_run(prepared, car):
+    _, log, _, _, derived, windows = prepared
+    masks = segment(log, derived, car)
+    assert set(masks) == set(REGIMES) and masks["reversing"].any()
+    some = windows[::8]
+    res = residuals(log, derived, replay(car, log, derived, some, dt_s=0.005, sim_factory=kin_factory))
+    inside = window_mask(len(log), some)
+    for s in FIT_SIGNALS:
+        assert np.isfinite(res[s][inside]).all()
+        assert np.isnan(res[s][~inside]).all()
