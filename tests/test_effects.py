@@ -19,7 +19,7 @@ WB = CAR.chassis.wheelbase_m
 NAMES = ["steering_offset", "steering_gain", "steering_lag", "steering_rate_limit", "command_latency",
          "motor_lag", "throttle_deadband", "rolling_resistance", "drag", "tire_slip", "friction",
          "speed_scale", "steering_asymmetry", "steering_play", "esc_brake_reverse", "accel_scale", "brake_scale",
-         "servo_rate_scale", "steer_limit_scale", "mass_scale"]
+         "servo_rate_scale", "steer_limit_scale", "mass_scale", "top_speed"]
 
 
 def trace(sim, commands, seconds: float, every: int = 10) -> np.ndarray:
@@ -367,3 +367,14 @@ def test_steer_limit_scale_widens_the_full_lock_circle():
     car = with_effects(CAR, steer_limit_scale=0.8)
     assert _turn_radius_m(car, 0.4) == pytest.approx(WB / math.tan(0.8 * 0.4), rel=0.01)  # 0.53 m, not 0.42 m
     assert _turn_radius_m(car, 0.2) == pytest.approx(_turn_radius_m(CAR, 0.2), abs=1e-9)  # below the stop: as nominal
+
+
+def test_top_speed_caps_the_speed_whatever_the_command():
+    def run(car):
+        sim = make_sim(car)
+        tr = trace(sim, lambda t: (2.5, 0.0), 3.0)
+        return tr[-1, 4]
+
+    assert run(CAR) == pytest.approx(2.5, abs=0.02)
+    assert run(with_effects(CAR, top_speed_mps=1.3)) == pytest.approx(1.3, abs=0.02)
+    assert run(with_effects(CAR, top_speed_mps=5.0)) == run(CAR)  # above the command: no change

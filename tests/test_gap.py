@@ -123,7 +123,7 @@ def test_cli_run_matches_library_and_jobs_do_not_matter(tmp_path, offset_run):
     res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--jobs", "1", "--no-progress",
                                    "--effects", ",".join(subset)])
     assert res.exit_code == 0, res.output
-    assert "missing effect: steering_offset" in res.stdout
+    assert "effects found: steering_offset" in res.stdout
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
     lib = run_gap(read_log(p), jobs=2, effects=subset)
     assert rep["effect"] == lib.effect

@@ -151,6 +151,10 @@ class Effects:
     mass_scale: float = _f(1.0, "mass_scale: every mass and inertia of the car times this, with the motor "
                            "and brake torques of the file's numbers (so accel and brake limits / mass_scale). "
                            "Revealed by speed steps and braking.", "neutral", 0.1, 10.0)
+    top_speed_mps: float = _f(math.inf, "top_speed: the car does not go faster than this whatever the "
+                              "command (ESC speed limit, gearing, battery); inf = the file's max_speed_mps "
+                              "only. Revealed by straights at high commanded speed.", "neutral (inf)",
+                              0.01, math.inf)
 
 
 @dataclass(frozen=True)

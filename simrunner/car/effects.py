@@ -170,6 +170,10 @@ EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
           "the car file's masses are off by this factor: with the file's drive and brake torques "
           "a heavier car speeds up and brakes more slowly (and drag slows it less)",
           ("speed_step", "brake", "speed_ramp"), _LONGITUDINAL, "build"),
+    _spec("top_speed", "top_speed_mps", math.inf, (0.3, 10.0), "m/s",
+          "the car tops out below the commanded speed (ESC speed limit, gearing, battery): speed "
+          "commands are capped at this magnitude",
+          ("straight", "speed_step", "speed_ramp"), _LONGITUDINAL),
 )}
 
 _DYNAMIC_PARAMS = ("steering_lag_s", "command_latency_s", "motor_lag_s", "tire_slip_understeer_radps2pm",
@@ -417,7 +421,7 @@ class EffectSim:
         self._apply_forces()
 
     def _static_map(self, cmd) -> tuple[float, float, float | None, bool]:
-        """Gain, offset, asymmetry, deadband and speed scale (no state)."""
+        """Gain, offset, asymmetry, deadband, speed scale and top speed (no state)."""
         e = self._e
         v, d, w, coast = cmd
         d = e.steering_gain * d + e.steering_offset_rad
@@ -428,6 +432,8 @@ class EffectSim:
         if e.speed_scale != 1.0:  # on the clamped command (the physical top speed scales too)
             vmax = self.car.drive.max_speed_mps
             v = e.speed_scale * min(max(v, -vmax), vmax)
+        if e.top_speed_mps != math.inf:
+            v = min(max(v, -e.top_speed_mps), e.top_speed_mps)
         return v, d, w, coast
 
     def _take_up_play(self, d: float) -> float:

@@ -40,15 +40,23 @@ def _engine_stderr_silenced():
 
 
 @click.command("gap")
-@click.argument("measured", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("measured", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               metavar="DIR", help="Output folder (report.json, car.toml, plots); written atomically.")
 @click.option("--car", default=None, type=click.Path(dir_okay=False, path_type=Path), metavar="CAR.toml",
               help="Nominal car description (default: built-in car).")
+@click.option("--columns", "columns_file", default=None, type=click.Path(dir_okay=False, path_type=Path),
+              metavar="MAP.toml", help="Column mapping for logs with other column names or units "
+                                       "(docs/telemetry.md).")
+@click.option("--column", "column_items", multiple=True, metavar="NAME=EXPR",
+              help="One column mapping item (repeatable; overrides --columns), e.g. "
+                   "speed_cmd_mps='duty / 100 * 3.1'.")
 @click.option("--jobs", default=2, show_default=True, type=click.IntRange(min=1),
-              help="Worker processes for the per-effect fits (results do not depend on it).")
+              help="Worker processes for the fits (results do not depend on it).")
 @click.option("--effects", default=None, metavar="NAME,NAME",
               help="Only these catalogue effects (default: all).")
+@click.option("--max-effects", default=None, type=click.IntRange(min=0, max=20), metavar="N",
+              help="Keep at most N effects (default: 4).")
 @click.option("--dt", "dt_s", default=WORKFLOW_DT_S, show_default=True,
               type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS",
               help="Physics step of the replays.")
@@ -57,18 +65,22 @@ def _engine_stderr_silenced():
               help="Replay window: each restarts from the measured state.")
 @click.option("--force", is_flag=True, help="Replace DIR if it exists.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
-def gap(measured: Path, out_dir: Path, car: Path | None, jobs: int, effects: str | None, dt_s: float,
-        window_s: float, force: bool, no_progress: bool) -> None:
-    """Find where MEASURED (a run log CSV, docs/telemetry.md) and the simulator disagree, name the missing
-    effect, add it to the car and show the gap shrink on held-out data."""
+def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_file: Path | None,
+        column_items: tuple[str, ...], jobs: int, effects: str | None, max_effects: int | None,
+        dt_s: float, window_s: float, force: bool, no_progress: bool) -> None:
+    """Find where MEASURED (one or several run logs of one car, docs/telemetry.md) and the
+    simulator disagree, build the chain of effects that closes the gap, and show it shrink on
+    held-out data."""
     from tqdm import tqdm
 
+    from simrunner.cli import input_errors
     from simrunner.errors import SimError
     from simrunner.run.log import read_log
+    from simrunner.workflows.gap.chain import MAX_EFFECTS
     from simrunner.workflows.gap.fit import CANDIDATES
     from simrunner.workflows.gap.logs import check_measured
     from simrunner.workflows.gap.report import progress_total, run_gap, summary_text, write_outputs
-    from vehicle.description import CarDescriptionError, load_car
+    from vehicle.description import load_car
 
     try:
         if out_dir.exists() and not force:
@@ -80,8 +92,10 @@ def gap(measured: Path, out_dir: Path, car: Path | None, jobs: int, effects: str
             if bad or not names:
                 raise SimError(f"--effects {effects!r}: expected names among {', '.join(CANDIDATES)}")
         description = load_car(car)
-        log = check_measured(read_log(measured))
-        total = progress_total(len(names) if names is not None else len(CANDIDATES))
+        read = _log_reader(columns_file, column_items)
+        logs = [check_measured(read(path)) for path in measured]
+        limit = MAX_EFFECTS if max_effects is None else max_effects
+        total = progress_total(len(names) if names is not None else len(CANDIDATES), limit)
         with _engine_stderr_silenced() as err:
             bar = tqdm(total=total, file=err, disable=no_progress, desc="gap", unit="fit", leave=False)
 
@@ -90,13 +104,26 @@ def gap(measured: Path, out_dir: Path, car: Path | None, jobs: int, effects: str
                 bar.update(1)
 
             try:
-                result = run_gap(log, description, jobs=jobs, effects=names, dt_s=dt_s, window_s=window_s,
-                                 progress=tick)
+                result = run_gap(logs, description, jobs=jobs, effects=names, dt_s=dt_s, window_s=window_s,
+                                 max_effects=limit, progress=tick)
             finally:
                 bar.close()
         write_outputs(result, out_dir, force=force)
-    except (SimError, CarDescriptionError) as exc:
+    except input_errors() as exc:
         click.echo(f"simrunner gap: {exc}", err=True)
         sys.exit(2)
     click.echo(summary_text(result))
-    click.echo(f"wrote {out_dir}/ (report.json, car.toml, gap_before_after.png, residuals_by_regime.png)")
+    click.echo(f"wrote {out_dir}/ (report.json, car.toml, residuals.txt, gap_before_after.png, "
+               f"residuals_by_regime.png)")
+
+
+def _log_reader(columns_file: Path | None, items: tuple[str, ...]):
+    """``read_log`` with the column mapping of ``--columns``/``--column`` (if any)."""
+    from simrunner.run.log import read_log
+
+    if columns_file is None and not items:
+        return read_log
+    from simrunner.run.columns import column_map_from
+
+    mapping = column_map_from(columns_file, items)
+    return lambda path: read_log(path, columns=mapping)

@@ -98,48 +98,79 @@ def with_effect(car: CarDescription, name: str, value: float) -> CarDescription:
 
 
 @dataclass(frozen=True)
-class Problem:
-    """Everything a fit needs (picklable: sent to worker processes)."""
+class Segment:
+    """One log's share of a problem: the log, its smoothed states and the windows used."""
 
-    car: CarDescription
     log: RunLog
     derived: Derived
     windows: tuple[Window, ...]
+
+    @property
+    def duration_s(self) -> float:
+        t = self.log.t_s
+        return float(sum(t[w.stop - 1] - t[w.start] for w in self.windows))
+
+    @property
+    def n_samples(self) -> int:
+        return int(window_mask(len(self.log), self.windows).sum())
+
+
+@dataclass(frozen=True)
+class Problem:
+    """Everything a fit needs (picklable: sent to worker processes): the car the candidate
+    parameters are set on, the windows of one or several logs of that car, the residual
+    signals compared (those every log supports) and their normalisation."""
+
+    car: CarDescription
+    segments: tuple[Segment, ...]
     scales: dict[str, float]
+    signals: tuple[str, ...] = FIT_SIGNALS
     dt_s: float = WORKFLOW_DT_S
     sim_factory: SimFactory = default_sim_factory
 
     @property
     def n_values(self) -> int:
-        return int(window_mask(len(self.log), self.windows).sum()) * len(FIT_SIGNALS)
+        return sum(s.n_samples for s in self.segments) * len(self.signals)
 
     @property
     def n_eff(self) -> float:
-        t = self.log.t_s
-        dur = sum(t[w.stop - 1] - t[w.start] for w in self.windows)
-        return max(N_EFF_PER_S * dur * len(FIT_SIGNALS), 2.0)
+        dur = sum(s.duration_s for s in self.segments)
+        return max(N_EFF_PER_S * dur * len(self.signals), 2.0)
+
+    def with_car(self, car: CarDescription) -> "Problem":
+        return dataclasses.replace(self, car=car)
+
+
+def segment_residuals(problem: Problem, car: CarDescription) -> list[dict[str, np.ndarray]]:
+    """Residuals of ``car`` on each segment's windows (NaN elsewhere), per log."""
+    out = []
+    for seg in problem.segments:
+        pred = replay(car, seg.log, seg.derived, seg.windows, dt_s=problem.dt_s,
+                      sim_factory=problem.sim_factory)
+        out.append(residuals(seg.log, seg.derived, pred))
+    return out
 
 
 def cost_of(problem: Problem, car: CarDescription) -> float:
     """Sum of squared normalised residuals of ``car`` over the problem's windows."""
-    pred = replay(car, problem.log, problem.derived, problem.windows, dt_s=problem.dt_s,
-                  sim_factory=problem.sim_factory)
-    res = residuals(problem.log, problem.derived, pred)
-    m = window_mask(len(problem.log), problem.windows)
     total = 0.0
-    for s in FIT_SIGNALS:
-        v = res[s][m] / problem.scales[s]
-        v = np.where(np.isfinite(v), v, 1e3)  # a diverged simulation is a very bad fit
-        total += float(np.dot(v, v))
+    for seg, res in zip(problem.segments, segment_residuals(problem, car)):
+        m = window_mask(len(seg.log), seg.windows)
+        for s in problem.signals:
+            v = res[s][m] / problem.scales[s]
+            v = np.where(np.isfinite(v), v, 1e3)  # a diverged simulation is a very bad fit
+            total += float(np.dot(v, v))
     return total
 
 
-def nominal_scales(log: RunLog, res: dict[str, np.ndarray], windows: Sequence[Window]) -> dict[str, float]:
-    """Per-signal normalisation: RMS of the nominal residuals in ``windows``, floored."""
-    m = window_mask(len(log), windows)
+def nominal_scales(segments: Sequence[Segment], res: Sequence[dict[str, np.ndarray]],
+                   signals: Sequence[str] = FIT_SIGNALS) -> dict[str, float]:
+    """Per-signal normalisation: RMS of the nominal residuals in the segments' windows, floored."""
     out = {}
-    for s in FIT_SIGNALS:
-        v = res[s][m & np.isfinite(res[s])]
+    for s in signals:
+        parts = [r[s][window_mask(len(seg.log), seg.windows) & np.isfinite(r[s])]
+                 for seg, r in zip(segments, res)]
+        v = np.concatenate(parts) if parts else np.zeros(0)
         out[s] = max(float(np.sqrt(np.mean(v * v))) if v.size else 0.0, SCALE_FLOOR[s])
     return out
 

@@ -1,14 +1,18 @@
 """The whole gap workflow (``run_gap``) and its output folder (``write_outputs``).
 
-``run_gap`` replays the log with the nominal car, localises the residuals by regime, fits
-every catalogue effect (:mod:`simrunner.workflows.gap.fit`), adds the accepted one to the car, and
-measures the gap on the held-out windows before and after. ``write_outputs`` writes
+``run_gap`` takes one or several logs of one car. Per log: check it, find its glitches
+(:mod:`simrunner.workflows.gap.glitches`: kept out of every window), derive smoothed states,
+cut windows and split them into fit and held-out windows. Then it replays the nominal car,
+builds the chain of effects (:mod:`simrunner.workflows.gap.chain`: forward selection with
+joint refits, each kept effect confirmed on the held-out windows), measures the gap on the
+held-out windows before and after, and compares what is left with the sensor noise per
+signal and regime (:func:`leftovers`). ``write_outputs`` writes
 
-    DIR/report.json               effect, parameters, rmse_before/after, ranking, regime stats
-    DIR/car.toml                  the car description with the effect added (vehicle.description)
-    DIR/gap_before_after.png      measured vs simulated, nominal and fitted model
+    DIR/report.json               the chain, parameters, rmse_before/after, glitches, leftovers, regimes
+    DIR/car.toml                  the car description with every kept effect (vehicle.description)
+    DIR/gap_before_after.png      measured vs simulated, nominal and final model (first log)
     DIR/residuals_by_regime.png   residual RMSE and bias per regime, before and after
-    DIR/residuals.txt             the regime tables as text
+    DIR/residuals.txt             the answer, then the regime tables, as text
 
 into a temporary sibling folder and renames it into place, so DIR is complete or absent.
 """
@@ -26,30 +30,54 @@ import numpy as np
 
 from simrunner.run.log import RunLog
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, FitResult, Problem, bic, choose,
-                               cost_of, fit_all, nominal_scales, with_effect)
+from simrunner.workflows.gap.chain import HELD_IMPROVEMENT_MIN, MAX_EFFECTS, Chain, build_chain
+from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, FitResult, Problem,
+                                         Segment, bic, nominal_scales, segment_residuals)
+from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive
 from simrunner.workflows.gap.regimes import residual_stats, segment
-from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction, SimFactory, Window,
-                                  default_sim_factory, make_windows, noise_rms, replay, residuals, rmse,
-                                  smoothed_log, split_windows, window_mask)
+from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
+                                            SimFactory, Window, default_sim_factory, make_windows, noise_rms,
+                                            replay, residuals, rmse, signals_of, smoothed_log, split_windows,
+                                            window_mask)
 from vehicle.description import CarDescription
 
-FORMAT = "nxpcup-gap/1"
+FORMAT = "nxpcup-gap/2"
+LEFTOVER_NOISE_RATIO = 4.0  # a residual this many times the sensor noise is "well above noise"
+LEFTOVER_MIN_SAMPLES = 20
+
+
+@dataclass(frozen=True)
+class LogPart:
+    """One log of the data set as the workflow used it."""
+
+    log: RunLog
+    derived: Derived
+    glitches: tuple[Glitch, ...]
+    fit_windows: tuple[Window, ...]
+    held_windows: tuple[Window, ...]
+    signals: tuple[str, ...]
+
+    @property
+    def windows(self) -> tuple[Window, ...]:
+        return tuple(sorted(self.fit_windows + self.held_windows, key=lambda w: w.start))
 
 
 @dataclass
 class GapResult:
-    """Outcome of :func:`run_gap`. ``effect`` is a catalogue name or ``"none"``;
-    ``rmse_before``/``rmse_after`` are per signal of REPORT_SIGNALS on held-out windows,
-    against the measured log; ``rmse_smoothed_*`` the same against the smoothed measured
-    states (the model error without most of the sensor noise, whose size ``noise_rms``
-    estimates)."""
+    """Outcome of :func:`run_gap`. ``effects``: the kept effects in the order chosen (``[]``:
+    none); ``effect`` the same joined by ``+`` (or ``"none"``); ``parameters`` every kept
+    parameter; ``rmse_before``/``rmse_after`` per signal of REPORT_SIGNALS on the held-out
+    windows of every log, against the measured logs; ``rmse_smoothed_*`` the same against
+    the smoothed measured states (the model error without most of the sensor noise, whose
+    size ``noise_rms`` estimates). ``log``, ``derived``, ``pred_*`` and the windows are those
+    of the first log (plots)."""
 
-    effect: str
+    effects: list[str]
     parameters: dict[str, float]
     car: CarDescription
-    ranking: list[FitResult]
+    chain: Chain
+    ranking: list[FitResult]  # the first step's screening of every candidate
     nominal_cost: float
     nominal_bic: float
     rmse_before: dict[str, float]
@@ -58,38 +86,72 @@ class GapResult:
     gap_after: float
     stats_before: list[dict]
     stats_after: list[dict]
-    log: RunLog = field(repr=False)
-    derived: Derived = field(repr=False)
-    fit_windows: list[Window] = field(repr=False)
-    held_windows: list[Window] = field(repr=False)
+    parts: list[LogPart] = field(repr=False)
     pred_before: Prediction = field(repr=False)
     pred_after: Prediction = field(repr=False)
     settings: dict = field(default_factory=dict)
     rmse_smoothed_before: dict[str, float] = field(default_factory=dict)
     rmse_smoothed_after: dict[str, float] = field(default_factory=dict)
     noise_rms: dict[str, float] = field(default_factory=dict)
+    unrevealable: dict[str, list[str]] = field(default_factory=dict)  # effect -> signals it needs
+    leftovers: list[dict] = field(default_factory=list)
+
+    @property
+    def effect(self) -> str:
+        return "+".join(self.effects) if self.effects else "none"
+
+    @property
+    def log(self) -> RunLog:
+        return self.parts[0].log
+
+    @property
+    def derived(self) -> Derived:
+        return self.parts[0].derived
+
+    @property
+    def fit_windows(self) -> list[Window]:
+        return list(self.parts[0].fit_windows)
+
+    @property
+    def held_windows(self) -> list[Window]:
+        return list(self.parts[0].held_windows)
+
+    @property
+    def glitches(self) -> list[tuple[str, Glitch]]:
+        return [(p.log.source, g) for p in self.parts for g in p.glitches]
 
     @property
     def held_out_worse(self) -> bool:
-        """True when an effect was named but the held-out gap (normalised residuals, all
-        fit signals) grew: the held-out data do not confirm it (weak or wrong effect)."""
-        return self.effect != "none" and self.gap_after > self.gap_before
+        """True when effects were kept but the held-out gap grew (cannot happen for a chain
+        whose every step was confirmed on held-out data; kept as a safety flag)."""
+        return bool(self.effects) and self.gap_after > self.gap_before
 
     def to_json(self) -> dict:
-        ratio = {s: (self.rmse_after[s] / self.rmse_before[s] if self.rmse_before[s] > 0 else float("nan"))
+        ratio = {s: (self.rmse_after[s] / self.rmse_before[s] if self.rmse_before.get(s) else float("nan"))
                  for s in self.rmse_before}
         return _finite({
-            "format": FORMAT, "log": self.log.source, "effect": self.effect, "parameters": self.parameters,
+            "format": FORMAT, "logs": [p.log.source for p in self.parts], "log": self.log.source,
+            "effects": self.effects, "effect": self.effect, "parameters": self.parameters,
+            "gap_before": self.gap_before, "gap_after": self.gap_after,
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
             "rmse_smoothed_before": self.rmse_smoothed_before, "rmse_smoothed_after": self.rmse_smoothed_after,
-            "noise_rms": self.noise_rms,
-            "gap_before": self.gap_before, "gap_after": self.gap_after, "held_out_worse": self.held_out_worse,
+            "noise_rms": self.noise_rms, "held_out_worse": self.held_out_worse,
+            "chain": self.chain.to_json(), "chain_stop": self.chain.stop_reason,
+            "rejected": [{"step": k, "effect": t.effect, "parameters": t.parameters, "reason": t.reason}
+                         for k, t in self.chain.rejected],
+            "unexplained": self.leftovers,
+            "cannot_reveal": self.unrevealable,
+            "glitches": [{"log": src, "kind": g.kind, "t_start_s": g.t_start_s, "t_end_s": g.t_end_s,
+                          "column": g.column, "detail": g.detail} for src, g in self.glitches],
+            "signals": list(self.settings.get("signals", ())),
             "nominal": {"cost": self.nominal_cost, "bic": self.nominal_bic},
             "thresholds": {"delta_bic_min": self.settings.get("delta_bic_min"),
-                           "improvement_min": self.settings.get("improvement_min")},
+                           "improvement_min": self.settings.get("improvement_min"),
+                           "held_improvement_min": self.settings.get("held_improvement_min")},
             "criterion": "BIC on normalised residuals (lower is better; see simrunner.workflows.gap.fit)",
             "ranking": [r.to_json() for r in self.ranking],
-            "windows": {"fit": len(self.fit_windows), "held_out": len(self.held_windows),
+            "windows": {"fit": sum(len(p.fit_windows) for p in self.parts),
+                        "held_out": sum(len(p.held_windows) for p in self.parts),
                         "window_s": self.settings.get("window_s")},
             "settings": self.settings,
             "regimes_before": self.stats_before, "regimes_after": self.stats_after,
@@ -107,104 +169,241 @@ def _finite(obj):
     return obj
 
 
-def run_gap(log: RunLog, car: CarDescription | None = None, *, jobs: int = 2,
+def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
+    """One log made ready: checked, glitches found, smoothed, windowed and split."""
+    check_measured(log)
+    glitches = tuple(find_glitches(log))
+    bad = glitch_mask(log, glitches)
+    derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
+    windows = make_windows(log, window_s, exclude=bad)
+    masks = segment(log, derived, car)
+    strata = [bool(masks["coasting"][w.start:w.stop].any()) for w in windows]
+    fit_w, held_w = split_windows(windows, strata=strata) if windows else ([], [])
+    return LogPart(log, derived, glitches, tuple(fit_w), tuple(held_w), signals_of(log))
+
+
+def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, *, jobs: int = 2,
             effects: Sequence[str] | None = None, dt_s: float = WORKFLOW_DT_S, window_s: float = WINDOW_S,
             sim_factory: SimFactory = default_sim_factory,
             delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
+            held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
             progress: Callable[[str], None] | None = None) -> GapResult:
-    """Run the workflow of the module docstring on ``log`` (``car`` default: the default car).
+    """Run the workflow of the module docstring on one log or several logs of one car
+    (``car`` default: the default car).
 
-    ``log`` must pass :func:`simrunner.workflows.gap.logs.check_measured` (else
+    Every log must pass :func:`simrunner.workflows.gap.logs.check_measured` (else
     :class:`simrunner.run.log.LogError`). ``effects`` restricts the candidates (default: the
-    whole catalogue); ``progress(label)`` is called after each of the :func:`progress_total`
-    stages.
+    whole catalogue); ``progress(label)`` is called as the stages finish.
     """
-    check_measured(log)
+    logs = [logs] if isinstance(logs, RunLog) else list(logs)
+    if not logs:
+        raise GapError("expected at least one log")
+    names = list(CANDIDATES) if effects is None else list(effects)
+    unknown = [n for n in names if n not in CANDIDATES]
+    if unknown:
+        raise GapError(f"unknown effect(s) {', '.join(unknown)} (expected some of {', '.join(CANDIDATES)})")
     car = car or CarDescription()
     tick = progress or (lambda label: None)
-    derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad)
-    windows = make_windows(log, window_s)
-    masks = segment(log, derived)
-    fit_w, held_w = split_windows(windows, strata=[bool(masks["coasting"][w.start:w.stop].any()) for w in windows])
-    if len(fit_w) < 2 or not held_w:
-        raise GapError(f"{log.source}: expected a log of at least 3 windows of {window_s:g} s "
-                       f"(got {len(windows)})")
-    pred0 = replay(car, log, derived, windows, dt_s=dt_s, sim_factory=sim_factory)
-    res0 = residuals(log, derived, pred0)
+    parts = [prepare(log, car, window_s) for log in logs]
+    signals = tuple(s for s in FIT_SIGNALS if all(s in p.signals for p in parts))
+    if not signals:
+        raise GapError("the logs have no signal in common to compare (pose or speed)")
+    n_fit = sum(len(p.fit_windows) for p in parts)
+    n_held = sum(len(p.held_windows) for p in parts)
+    if n_fit < 2 or n_held < 1:
+        raise GapError(f"{', '.join(p.log.source for p in parts)}: expected at least 3 clean windows of "
+                       f"{window_s:g} s (got {n_fit + n_held} after cutting out glitches and gaps)")
+    fit_segs = tuple(Segment(p.log, p.derived, p.fit_windows) for p in parts if p.fit_windows)
+    held_segs = tuple(Segment(p.log, p.derived, p.held_windows) for p in parts if p.held_windows)
+
+    def predict(c: CarDescription) -> list[Prediction]:
+        return [replay(c, p.log, p.derived, p.windows, dt_s=dt_s, sim_factory=sim_factory) for p in parts]
+
+    pred0 = predict(car)
+    res0_parts = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, pred0)]
     tick("nominal")
-    problem = Problem(car, log, derived, tuple(fit_w), nominal_scales(log, res0, fit_w), dt_s, sim_factory)
-    nominal_cost = cost_of(problem, car)
-    tick("nominal cost")
-    ranking = fit_all(problem, nominal_cost, effects, jobs=jobs, progress=tick)
-    winner = choose(ranking, delta_bic_min, improvement_min)
-    if winner is None:
-        car_after, pred1 = car, pred0
-    else:
-        name, value = winner.effect, next(iter(winner.parameters.values()))
-        car_after = with_effect(car, name, value)
-        pred1 = replay(car_after, log, derived, windows, dt_s=dt_s, sim_factory=sim_factory)
+    fit_res = [r for p, r in zip(parts, res0_parts) if p.fit_windows]
+    scales = nominal_scales(fit_segs, fit_res, signals)
+    fit_problem = Problem(car, fit_segs, scales, signals, dt_s, sim_factory)
+    held_problem = Problem(car, held_segs, scales, signals, dt_s, sim_factory)
+    chain = build_chain(fit_problem, held_problem, names, jobs=jobs, delta_bic_min=delta_bic_min,
+                        improvement_min=improvement_min, held_improvement_min=held_improvement_min,
+                        max_effects=max_effects, progress=tick)
+    car_after = chain.car
+    pred1 = pred0 if not chain.effects else predict(car_after)
+    res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
+                                                       for p, pr in zip(parts, pred1)]
     tick("held-out check")
-    res1 = residuals(log, derived, pred1)
-    held = window_mask(len(log), held_w)
-    smooth = smoothed_log(log, derived)
+    rep_signals = tuple(s for s in REPORT_SIGNALS if s in res0_parts[0])
+    stat_signals = tuple(dict.fromkeys(rep_signals + tuple(s for s in ("along_m", "cross_m") if s in signals)))
+    held = np.concatenate([window_mask(len(p.log), p.held_windows) for p in parts])
+
+    def joined(res_parts, names_):
+        return {s: np.concatenate([r[s] for r in res_parts]) for s in names_}
+
+    def smoothed(preds):
+        return joined([residuals(smoothed_log(p.log, p.derived), p.derived, pr) for p, pr in zip(parts, preds)],
+                      rep_signals)
+
+    res0 = joined(res0_parts, tuple(dict.fromkeys(rep_signals + signals + stat_signals)))
+    res1 = joined(res1_parts, tuple(dict.fromkeys(rep_signals + signals + stat_signals)))
+    seg_masks = [segment(p.log, p.derived, car) for p in parts]
+    regime = {k: np.concatenate([m[k] for m in seg_masks]) for k in seg_masks[0]}
+    noise = _noise(parts, rep_signals)
+    stats_after = residual_stats({s: res1[s] for s in stat_signals}, regime)
     settings = {"dt_s": dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
-                "improvement_min": improvement_min, "scales": problem.scales,
-                "effects": list(effects) if effects is not None else list(CANDIDATES)}
+                "improvement_min": improvement_min, "held_improvement_min": held_improvement_min,
+                "max_effects": max_effects, "scales": scales, "signals": list(signals), "effects": names}
     return GapResult(
-        effect=winner.effect if winner else "none", parameters=dict(winner.parameters) if winner else {},
-        car=car_after, ranking=ranking, nominal_cost=nominal_cost, nominal_bic=bic(problem, nominal_cost, 0),
-        rmse_before=rmse(res0, held), rmse_after=rmse(res1, held),
-        gap_before=_gap(res0, held, problem.scales), gap_after=_gap(res1, held, problem.scales),
-        stats_before=residual_stats({s: res0[s] for s in REPORT_SIGNALS + ("along_m", "cross_m")}, masks),
-        stats_after=residual_stats({s: res1[s] for s in REPORT_SIGNALS + ("along_m", "cross_m")}, masks),
-        log=log, derived=derived, fit_windows=fit_w, held_windows=held_w, pred_before=pred0, pred_after=pred1,
-        settings=settings,
-        rmse_smoothed_before=rmse(residuals(smooth, derived, pred0), held),
-        rmse_smoothed_after=rmse(residuals(smooth, derived, pred1), held), noise_rms=noise_rms(log, derived))
+        effects=chain.effects, parameters=chain.parameters, car=car_after, chain=chain,
+        ranking=list(chain.steps[0].screening) if chain.steps else [],
+        nominal_cost=chain.nominal_cost, nominal_bic=bic(fit_problem, chain.nominal_cost, 0),
+        rmse_before=rmse(res0, held, rep_signals), rmse_after=rmse(res1, held, rep_signals),
+        gap_before=_gap(res0, held, scales, signals), gap_after=_gap(res1, held, scales, signals),
+        stats_before=residual_stats({s: res0[s] for s in stat_signals}, regime), stats_after=stats_after,
+        parts=parts, pred_before=pred0[0], pred_after=pred1[0], settings=settings,
+        rmse_smoothed_before=rmse(smoothed(pred0), held, rep_signals),
+        rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
+        unrevealable=cannot_reveal(names, signals), leftovers=leftovers(stats_after, noise))
 
 
-def _gap(res: dict[str, np.ndarray], mask: np.ndarray, scales: dict[str, float]) -> float:
+def _noise(parts: Sequence[LogPart], signals: Sequence[str]) -> dict[str, float]:
+    """Sensor noise per report signal over every log (RMS of measured - smoothed, weighted
+    by the logs' lengths; NaN where no log measures the signal)."""
+    acc: dict[str, list[tuple[float, int]]] = {s: [] for s in signals}
+    for p in parts:
+        for s, v in noise_rms(p.log, p.derived).items():
+            if s in acc and math.isfinite(v):
+                acc[s].append((v, len(p.log)))
+    return {s: (math.sqrt(sum(v * v * n for v, n in vs) / sum(n for _, n in vs)) if vs else float("nan"))
+            for s, vs in acc.items()}
+
+
+def cannot_reveal(names: Sequence[str], signals: Sequence[str]) -> dict[str, list[str]]:
+    """The effects among ``names`` that no available residual signal shows: effect -> the
+    signals it would need (``EffectSpec.observed_by``)."""
+    from simrunner.car.effects import EFFECTS
+
+    out = {}
+    for n in names:
+        needs = list(getattr(EFFECTS[n], "observed_by", ()) or ())
+        if needs and not any(s in signals for s in needs):
+            out[n] = needs
+    return out
+
+
+# signal -> the noise estimate that bounds it from below (position errors: the pose noise)
+_NOISE_OF = {"position_m": "position_m", "along_m": "position_m", "cross_m": "position_m",
+             "yaw_rad": "yaw_rad", "speed_mps": "speed_mps", "yaw_rate_radps": "yaw_rate_radps"}
+_SIGNAL_WORDS = {"position_m": "position", "along_m": "position along the path",
+                 "cross_m": "cross-track position", "yaw_rad": "heading", "speed_mps": "speed",
+                 "yaw_rate_radps": "yaw rate"}
+
+
+def leftovers(stats: Sequence[dict], noise: dict[str, float], ratio: float = LEFTOVER_NOISE_RATIO,
+              min_samples: int = LEFTOVER_MIN_SAMPLES) -> list[dict]:
+    """What the final model leaves unexplained, one entry per signal (worst first): the
+    regimes where its residual RMSE is at least ``ratio`` times the sensor noise of that
+    signal. Signals whose noise the log does not tell (yaw rate without a gyro) are not
+    judged. Entry: signal, worst regime, its RMSE, noise and ratio, every regime above the
+    ratio, and a text such as ``unexplained: yaw rate while reversing, 4x noise``."""
+    per_signal: dict[str, list[dict]] = {}
+    for row in stats:
+        sig, reg = row["signal"], row["regime"]
+        floor = noise.get(_NOISE_OF.get(sig, sig), float("nan"))
+        if row["count"] < min_samples or not (math.isfinite(floor) and floor > 0):
+            continue
+        r = row["rmse"] / floor
+        if r >= ratio:
+            per_signal.setdefault(sig, []).append({"regime": reg, "rmse": row["rmse"], "times_noise": r,
+                                                   "count": row["count"], "noise": floor})
+    out = []
+    for sig, rows in per_signal.items():
+        named = [r for r in rows if r["regime"] != "all"] or rows
+        worst = max(named, key=lambda r: r["times_noise"])
+        others = sorted({r["regime"] for r in named} - {worst["regime"]})
+        text = (f"unexplained: {_SIGNAL_WORDS.get(sig, sig)} while {worst['regime'].replace('_', ' ')}, "
+                f"{worst['times_noise']:.0f}x noise")
+        if others:
+            text += f" (also above {ratio:g}x noise: {', '.join(o.replace('_', ' ') for o in others)})"
+        out.append({"signal": sig, "regime": worst["regime"], "rmse": worst["rmse"], "noise": worst["noise"],
+                    "times_noise": worst["times_noise"], "regimes": [r["regime"] for r in named], "text": text})
+    return sorted(out, key=lambda d: -d["times_noise"])
+
+
+def _gap(res: dict[str, np.ndarray], mask: np.ndarray, scales: dict[str, float],
+         signals: Sequence[str] = FIT_SIGNALS) -> float:
     """Mean squared normalised residual over ``mask`` and the fit signals (1 = as large as
     the nominal model's residual on the fit windows)."""
-    v = np.concatenate([res[s][mask] / scales[s] for s in FIT_SIGNALS])
+    v = np.concatenate([res[s][mask] / scales[s] for s in signals])
     v = v[np.isfinite(v)]
     return float(np.mean(v * v)) if v.size else float("nan")
 
 
-def progress_total(n_effects: int) -> int:
-    """Number of ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates."""
-    from simrunner.workflows.gap.fit import REFINE_TOP
+def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
+    """Upper bound of the ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates
+    (each chain step screens the remaining effects and runs one batch of joint refits)."""
+    steps = min(max_effects, n_effects) + 1
+    return 2 + sum(max(n_effects - s, 0) + 1 for s in range(steps))
 
-    return 3 + n_effects + min(REFINE_TOP, n_effects)
+
+def _params_text(params: dict[str, float]) -> str:
+    return ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
 
 
 def summary_text(result: GapResult) -> str:
-    """Human-readable summary: the regime table (nominal), the ranking, the verdict."""
+    """Human-readable summary: the answer first (the chain, the held-out figures, what is left
+    unexplained), then the screening of the first step and the regime tables."""
     from simrunner.workflows.gap.regimes import format_stats
 
-    lines = ["Residuals of the nominal model by regime (all windows):",
-             format_stats([r for r in result.stats_before if r["count"]]), "",
-             f"{'effect':<22}{'parameter':<32}{'value':>10}{'improvement':>13}{'delta_BIC':>11}"]
-    for r in result.ranking:
-        (p, v), = r.parameters.items()
-        lines.append(f"{r.effect:<22}{p:<32}{v:>10.4g}{r.improvement:>12.1%}{r.delta_bic:>11.1f}")
-    lines.append("")
-    lines.append(f"missing effect: {result.effect}" + (
-        "" if result.effect == "none" else f" ({', '.join(f'{k} = {v:.4g}' for k, v in result.parameters.items())})"))
+    chain = result.chain
+    lines = [f"effects found: {', '.join(result.effects) if result.effects else 'none'}"]
+    if result.parameters:
+        lines.append(f"  parameters: {_params_text(result.parameters)}")
     lines.append(f"held-out gap (mean squared normalised residual) before -> after: "
                  f"{result.gap_before:.3g} -> {result.gap_after:.3g}")
-    if result.held_out_worse:
-        lines.append(f"WARNING: the held-out windows do not confirm {result.effect} (their gap grew): the "
-                     "evidence comes from the fitted windows only, so the effect is weak or a different "
-                     "one. Treat car.toml as uncertain; log the plan again and check.")
+    for step in chain.steps:
+        kept = step.kept
+        if kept is not None:
+            lines.append(f"  step {step.index}: + {kept.effect:<20} held-out gap {step.held_gap_before:.3g} -> "
+                         f"{kept.held_gap:.3g}  (delta_BIC {kept.delta_bic:.0f}, fit {kept.improvement:.1%})")
+    lines.append(f"  the chain stopped: {chain.stop_reason}")
+    if chain.rejected:
+        lines.append("tried and not kept:")
+        for k, tr in chain.rejected:
+            lines.append(f"  step {k}: {tr.effect:<20} {tr.reason}")
     lines.append("held-out RMSE before -> after: " + ", ".join(
-        f"{s} {result.rmse_before[s]:.4g} -> {result.rmse_after[s]:.4g}" for s in REPORT_SIGNALS))
+        f"{s} {result.rmse_before[s]:.4g} -> {result.rmse_after[s]:.4g}" for s in result.rmse_before))
     if result.rmse_smoothed_before:
         lines.append("  against the smoothed measured states: " + ", ".join(
             f"{s} {result.rmse_smoothed_before[s]:.4g} -> {result.rmse_smoothed_after[s]:.4g}"
-            for s in REPORT_SIGNALS))
+            for s in result.rmse_smoothed_before))
         lines.append("  estimated sensor noise (measured - smoothed, RMS): " + ", ".join(
             f"{s} {v:.3g}" for s, v in result.noise_rms.items() if math.isfinite(v)))
+    if result.held_out_worse:
+        lines.append("WARNING: the held-out gap grew with the kept effects; treat car.toml as uncertain.")
+    if result.leftovers:
+        lines.append("left unexplained by the catalogue (final model, all windows):")
+        lines += [f"  {d['text']}" for d in result.leftovers[:8]]
+    else:
+        lines.append("left unexplained: nothing well above the sensor noise")
+    if result.unrevealable:
+        lines.append("this log cannot reveal: " + ", ".join(
+            f"{n} (needs {' or '.join(s)})" for n, s in result.unrevealable.items()))
+    if result.glitches:
+        lines.append(f"glitches kept out of the windows ({len(result.glitches)}):")
+        for src, g in result.glitches[:12]:
+            lines.append(f"  {Path(src).name} t = {g.t_start_s:.3f}..{g.t_end_s:.3f} s: {g.kind} "
+                         f"({g.column}) {g.detail}")
+    lines += ["", "first step, every candidate screened (one parameter, the others nominal):",
+              f"{'effect':<22}{'parameter':<32}{'value':>10}{'improvement':>13}{'delta_BIC':>11}"]
+    for r in result.ranking:
+        (p, v), = r.parameters.items()
+        lines.append(f"{r.effect:<22}{p:<32}{v:>10.4g}{r.improvement:>12.1%}{r.delta_bic:>11.1f}")
+    lines += ["", "Residuals of the nominal model by regime (all windows):",
+              format_stats([r for r in result.stats_before if r["count"]]),
+              "", "Residuals of the final model by regime (all windows):",
+              format_stats([r for r in result.stats_after if r["count"]])]
     return "\n".join(lines)
 
 

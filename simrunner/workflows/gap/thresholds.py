@@ -3,10 +3,11 @@
 ``python -m simrunner.workflows.gap.thresholds [--logs N] [--seed S] [--jobs J]`` makes ``N``
 effect-free synthetic logs (:func:`simrunner.workflows.gap.synth.make_measured_log` with
 ``effect=None``: noise, nuisance mass/friction, 1 ms physics), runs the whole catalogue on
-each and prints the best effect's ``delta_bic`` and ``improvement`` per log, then the
-thresholds: :data:`SAFETY` times the largest value seen, but not below the floors
-(:data:`FLOOR_DELTA_BIC`, :data:`FLOOR_IMPROVEMENT`). The constants in ``fit.py`` are the
-printed values (docs/gap.md records the run).
+each (nothing accepted) and prints, for the first chain step's best refitted candidate, its
+``delta_bic``, fit ``improvement`` and held-out improvement per log, then the thresholds:
+:data:`SAFETY` times the largest value seen, but not below the floors
+(:data:`FLOOR_DELTA_BIC`, :data:`FLOOR_IMPROVEMENT`, :data:`FLOOR_HELD_IMPROVEMENT`). The
+constants in ``fit.py`` and ``chain.py`` are the printed values (docs/gap.md records the run).
 """
 from __future__ import annotations
 
@@ -18,9 +19,10 @@ import numpy as np
 SAFETY = 2.0
 FLOOR_DELTA_BIC = 40.0
 FLOOR_IMPROVEMENT = 0.03
+FLOOR_HELD_IMPROVEMENT = 0.02
 
 
-def _one(args) -> tuple[float, float, str]:
+def _one(args) -> tuple[float, float, float, str]:
     seed, k = args
     from simrunner.workflows.gap.fit import _quiet_worker
     from simrunner.workflows.gap.report import run_gap
@@ -28,19 +30,22 @@ def _one(args) -> tuple[float, float, str]:
 
     _quiet_worker()
     log, _ = make_measured_log(None, rng=np.random.default_rng([seed, k]))
-    best = run_gap(log, jobs=1, delta_bic_min=np.inf).ranking[0]
-    return best.delta_bic, best.improvement, best.effect
+    step = run_gap(log, jobs=1, delta_bic_min=np.inf, max_effects=1).chain.steps[0]
+    best = max(step.trials, key=lambda tr: tr.delta_bic)
+    held = 1.0 - best.held_gap / step.held_gap_before if step.held_gap_before > 0 else 0.0
+    return best.delta_bic, best.improvement, held, best.effect
 
 
 def calibrate_thresholds(n_logs: int = 10, seed: int = 2024, jobs: int = 2) -> dict:
     """Run ``n_logs`` effect-free logs; return ``{"delta_bic_min", "improvement_min",
-    "observed": [(delta_bic, improvement, effect), ...]}``."""
+    "held_improvement_min", "observed": [(delta_bic, improvement, held_improvement, effect), ...]}``."""
     with ProcessPoolExecutor(max_workers=jobs) as pool:
         observed = list(pool.map(_one, [(seed, k) for k in range(n_logs)]))
     d = max(o[0] for o in observed)
     i = max(o[1] for o in observed)
+    h = max(o[2] for o in observed)
     return {"delta_bic_min": max(FLOOR_DELTA_BIC, SAFETY * d), "improvement_min": max(FLOOR_IMPROVEMENT, SAFETY * i),
-            "observed": observed}
+            "held_improvement_min": max(FLOOR_HELD_IMPROVEMENT, SAFETY * h), "observed": observed}
 
 
 def main(argv: list[str] | None = None) -> None:  # pragma: no cover - developer tool
@@ -50,10 +55,11 @@ def main(argv: list[str] | None = None) -> None:  # pragma: no cover - developer
     ap.add_argument("--jobs", type=int, default=2)
     a = ap.parse_args(argv)
     res = calibrate_thresholds(a.logs, a.seed, a.jobs)
-    for k, (d, i, e) in enumerate(res["observed"]):
-        print(f"log {k:3d}: best {e:<20} delta_bic {d:8.1f}  improvement {i:7.2%}")
+    for k, (d, i, h, e) in enumerate(res["observed"]):
+        print(f"log {k:3d}: best {e:<20} delta_bic {d:8.1f}  improvement {i:7.2%}  held-out {h:7.2%}")
     print(f"DELTA_BIC_MIN = {res['delta_bic_min']:.1f}")
     print(f"IMPROVEMENT_MIN = {res['improvement_min']:.3f}")
+    print(f"HELD_IMPROVEMENT_MIN = {res['held_improvement_min']:.3f}")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,287 @@
+"""Several effects at once: the model is built step by step (forward selection).
+
+Step ``s`` starts from the car with the effects kept so far (their parameters as last
+refitted) and
+
+1. screens every remaining catalogue effect: a one-parameter fit of the new effect with
+   the kept parameters held (:func:`simrunner.workflows.gap.fit.fit_all`, grid + probe), on
+   at most :data:`SCREEN_MAX_S` seconds of the fit windows (evenly chosen: screening only
+   ranks, so a long log costs no more than a 45-s one here);
+2. refits jointly the :data:`REFINE_TOP` best screened candidates: all kept parameters and
+   the new one together (``scipy.optimize.minimize``, Powell, in coordinates scaled to each
+   parameter's fit bounds; bounded Brent for the first step, which has one parameter);
+3. tries them in order of the information criterion (BIC with ``k`` = the number of fitted
+   parameters) and keeps the first that passes all three tests against the current model:
+   ``delta_bic >= DELTA_BIC_MIN`` and ``improvement >= IMPROVEMENT_MIN`` on the fit windows
+   (the thresholds calibrated on effect-free logs) **and** a held-out gap at least
+   :data:`HELD_IMPROVEMENT_MIN` smaller than before on the held-out windows, which no fit has
+   seen;
+4. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects.
+
+Every candidate that was tried and not kept is recorded with its reason. The chain's
+result is the car with all kept effects; its parameters are those of the last joint refit.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.optimize import minimize, minimize_scalar
+
+from simrunner.workflows.gap.fit import (BRENT_MAXITER, CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN,
+                                         REFINE_TOP, FitResult, Problem, _quiet_worker, bic,
+                                         cost_of, fit_all)
+from vehicle.description import CarDescription
+
+MAX_EFFECTS = 4
+# The held-out windows must confirm a kept effect: their gap (mean squared normalised
+# residual) shrinks by at least this fraction.
+HELD_IMPROVEMENT_MIN = 0.02
+POWELL_EVALS_PER_PARAMETER = 12
+SCREEN_MAX_S = 45.0
+BETTER = "a better candidate was kept"
+
+
+def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
+    """``problem`` with every k-th window only, k the smallest that keeps at most ``max_s``
+    seconds (the windows of all logs taken in turn, so every log keeps its share)."""
+    total = sum(s.duration_s for s in problem.segments)
+    k = max(1, math.ceil(total / max_s)) if max_s > 0 else 1
+    if k == 1:
+        return problem
+    segs, i = [], 0
+    for seg in problem.segments:
+        keep = []
+        for w in seg.windows:
+            if i % k == 0:
+                keep.append(w)
+            i += 1
+        if keep:
+            segs.append(dataclasses.replace(seg, windows=tuple(keep)))
+    return dataclasses.replace(problem, segments=tuple(segs))
+
+
+def with_parameters(car: CarDescription, parameters: dict[str, float]) -> CarDescription:
+    """``car`` with the ``Effects`` fields of ``parameters`` set."""
+    if not parameters:
+        return car
+    return car.replace(effects=dataclasses.replace(car.effects, **{k: float(v) for k, v in parameters.items()}))
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One candidate at one step after its joint refit."""
+
+    effect: str
+    parameters: dict[str, float]  # every fitted parameter (kept ones and the new one)
+    cost: float
+    delta_bic: float    # against the current model
+    improvement: float  # 1 - cost / current cost, fit windows
+    held_gap: float     # held-out gap with these parameters
+    evaluations: int
+    kept: bool = False
+    reason: str = ""
+
+    def to_json(self) -> dict:
+        return {"effect": self.effect, "parameters": self.parameters, "cost": self.cost,
+                "delta_bic": self.delta_bic, "improvement": self.improvement,
+                "held_gap": self.held_gap, "evaluations": self.evaluations, "kept": self.kept,
+                "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of the chain: the screening ranking, the refitted trials, what was kept."""
+
+    index: int
+    held_gap_before: float
+    screening: tuple[FitResult, ...]
+    trials: tuple[Trial, ...]
+
+    @property
+    def kept(self) -> Trial | None:
+        return next((t for t in self.trials if t.kept), None)
+
+    def to_json(self) -> dict:
+        kept = self.kept
+        return {"step": self.index, "kept": kept.effect if kept else None,
+                "parameters": kept.parameters if kept else {},
+                "held_gap_before": self.held_gap_before,
+                "held_gap_after": kept.held_gap if kept else self.held_gap_before,
+                "trials": [t.to_json() for t in self.trials],
+                "screened": [r.to_json() for r in self.screening]}
+
+
+@dataclass(frozen=True)
+class Chain:
+    """The steps taken; ``car`` has every kept effect."""
+
+    steps: tuple[Step, ...]
+    car: CarDescription
+    nominal_cost: float      # fit windows, nominal car
+    nominal_held_gap: float  # held-out windows, nominal car
+    stop_reason: str = ""
+
+    @property
+    def effects(self) -> list[str]:
+        return [s.kept.effect for s in self.steps if s.kept is not None]
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        kept = [s.kept for s in self.steps if s.kept is not None]
+        return dict(kept[-1].parameters) if kept else {}
+
+    @property
+    def rejected(self) -> list[tuple[int, Trial]]:
+        """``(step, trial)`` of the refitted candidates that failed a test (not those only
+        passed over for a better one at a step that kept something)."""
+        return [(s.index, t) for s in self.steps for t in s.trials if not t.kept and t.reason != BETTER]
+
+    def to_json(self) -> list[dict]:
+        return [s.to_json() for s in self.steps]
+
+
+def _bounds01(names: Sequence[str]):
+    cands = [CANDIDATES[n] for n in names]
+
+    def to_u(values: dict[str, float]) -> np.ndarray:
+        out = []
+        for c in cands:
+            lo, hi = c.to_x(c.lo), c.to_x(c.hi)
+            v = min(max(values[c.field], c.lo), c.hi)
+            out.append((c.to_x(v) - lo) / (hi - lo))
+        return np.array(out)
+
+    def from_u(u: np.ndarray) -> dict[str, float]:
+        out = {}
+        for c, ui in zip(cands, np.clip(u, 0.0, 1.0)):
+            lo, hi = c.to_x(c.lo), c.to_x(c.hi)
+            out[c.field] = float(min(max(c.from_x(lo + ui * (hi - lo)), c.lo), c.hi))
+        return out
+
+    return to_u, from_u
+
+
+def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
+                start: dict[str, float]) -> tuple[dict[str, float], float, int]:
+    """Refit the parameters of effects ``names`` together from ``start`` (their ``Effects``
+    fields), on ``problem``'s windows with ``base`` as the car: ``(values, cost, evals)``.
+    One parameter: bounded Brent around the start; more: Powell in [0, 1]-scaled coordinates."""
+    to_u, from_u = _bounds01(names)
+    seen: dict[tuple, float] = {}
+
+    def f(u) -> float:
+        values = from_u(np.atleast_1d(np.asarray(u, dtype=float)))
+        key = tuple(values[CANDIDATES[n].field] for n in names)
+        if key not in seen:
+            seen[key] = cost_of(problem, with_parameters(base, values))
+        return seen[key]
+
+    u0 = to_u(start)
+    f(u0)
+    if len(names) == 1:
+        a, b = max(u0[0] - 0.25, 0.0), min(u0[0] + 0.25, 1.0)
+        minimize_scalar(lambda x: f([x]), bounds=(a, b), method="bounded",
+                        options={"xatol": 2e-3, "maxiter": BRENT_MAXITER})
+    else:
+        minimize(f, u0, method="Powell", bounds=[(0.0, 1.0)] * len(names),
+                 options={"xtol": 2e-3, "ftol": 1e-4,
+                          "maxfev": POWELL_EVALS_PER_PARAMETER * len(names)})
+    key = min(seen, key=lambda k: (seen[k], k))
+    values = {CANDIDATES[n].field: v for n, v in zip(names, key)}
+    return values, seen[key], len(seen)
+
+
+def _trial_task(args) -> tuple[dict[str, float], float, int, float]:
+    fit_problem, held_problem, base, names, start = args
+    values, cost, evals = joint_refit(fit_problem, base, names, start)
+    held = cost_of(held_problem, with_parameters(base, values)) / max(held_problem.n_values, 1)
+    return values, cost, evals, held
+
+
+def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int = 2,
+                delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
+                held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
+                progress: Callable[[str], None] | None = None) -> Chain:
+    """Run the forward selection of the module docstring over the effects ``names``.
+
+    ``fit_problem`` and ``held_problem`` have the same base car (no chain effect yet), the
+    same signals and scales; the held-out gap is ``cost / n_values`` of ``held_problem``."""
+    base = fit_problem.car
+    tick = progress or (lambda label: None)
+    order = {n: i for i, n in enumerate(CANDIDATES)}
+    kept_names: list[str] = []
+    kept_values: dict[str, float] = {}
+    cost = cost_of(fit_problem, base)
+    held_gap = cost_of(held_problem, base) / max(held_problem.n_values, 1)
+    nominal_cost, nominal_held = cost, held_gap
+    steps: list[Step] = []
+    stop = ""
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) if jobs > 1 else None
+    try:
+        for index in range(1, max_effects + 1):
+            remaining = [n for n in names if n not in kept_names]
+            if not remaining:
+                stop = "every candidate effect is in the model"
+                break
+            current = with_parameters(base, kept_values)
+            k = len(kept_names)
+            full = fit_problem.with_car(current)
+            screen = screening_problem(full)
+            screen_cost = cost if screen is full else cost_of(screen, current)
+            screening = fit_all(screen, screen_cost, remaining, jobs=jobs, refine_top=0,
+                                progress=lambda label: tick(f"step {index} {label}"))
+            top = sorted(screening, key=lambda r: (r.cost, order[r.effect]))[:max(REFINE_TOP, 1)]
+            tasks = [(fit_problem, held_problem, base, kept_names + [r.effect], {**kept_values, **r.parameters})
+                     for r in top]
+            outs = list(pool.map(_trial_task, tasks)) if pool is not None else [_trial_task(t) for t in tasks]
+            tick(f"step {index} joint refits")
+            crit_now = bic(fit_problem, cost, k)
+            trials = []
+            for r, (values, c, evals, held) in zip(top, outs):
+                trials.append(Trial(r.effect, values, c, crit_now - bic(fit_problem, c, k + 1),
+                                    1.0 - c / cost if cost > 0 else 0.0, held, evals))
+            trials.sort(key=lambda tr: (-tr.delta_bic, order[tr.effect]))
+            decided, chosen = [], None
+            for tr in trials:
+                reason = _reject_reason(tr, held_gap, delta_bic_min, improvement_min, held_improvement_min)
+                if chosen is None and not reason:
+                    chosen = dataclasses.replace(tr, kept=True)
+                    decided.append(chosen)
+                else:
+                    decided.append(dataclasses.replace(tr, reason=reason or BETTER))
+            steps.append(Step(index, held_gap, tuple(sorted(screening, key=lambda r: (r.criterion, order[r.effect]))),
+                              tuple(decided)))
+            if chosen is None:
+                stop = "no remaining effect passes the tests"
+                break
+            kept_names.append(chosen.effect)
+            kept_values = dict(chosen.parameters)
+            cost, held_gap = chosen.cost, chosen.held_gap
+        else:
+            stop = f"the chain reached its limit of {max_effects} effects"
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return Chain(tuple(steps), with_parameters(base, kept_values), nominal_cost, nominal_held, stop)
+
+
+def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvement_min: float,
+                   held_improvement_min: float) -> str:
+    """Why ``tr`` is not kept ("" when it passes)."""
+    if tr.delta_bic < delta_bic_min:
+        return f"delta_BIC {tr.delta_bic:.1f} < {delta_bic_min:g} (fit windows)"
+    if tr.improvement < improvement_min:
+        return f"fit improvement {tr.improvement:.1%} < {improvement_min:.1%}"
+    if not (math.isfinite(tr.held_gap) and tr.held_gap <= held_before * (1.0 - held_improvement_min)):
+        return (f"held-out gap {held_before:.3g} -> {tr.held_gap:.3g}: not smaller by "
+                f"{held_improvement_min:.0%} (the held-out windows do not confirm it)")
+    return ""
+
+
+__all__ = ["Chain", "Step", "Trial", "build_chain", "joint_refit", "with_parameters",
+           "MAX_EFFECTS", "HELD_IMPROVEMENT_MIN"]
