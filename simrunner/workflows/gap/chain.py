@@ -7,9 +7,11 @@ refitted) and
    the kept parameters held (:func:`simrunner.workflows.gap.fit.fit_all`, grid + probe), on
    at most :data:`SCREEN_MAX_S` seconds of the fit windows (evenly chosen: screening only
    ranks, so a long log costs no more than a 45-s one here);
-2. refits jointly the :data:`REFINE_TOP` best screened candidates: all kept parameters and
-   the new one together (``scipy.optimize.minimize``, Powell, in coordinates scaled to each
-   parameter's fit bounds; bounded Brent for the first step, which has one parameter);
+2. refits jointly the :data:`REFINE_TOP` best screened candidates (:data:`REFINE_LATER`
+   from the second step on): all kept parameters and the new one together
+   (``scipy.optimize.minimize``, Powell, in coordinates scaled to each parameter's fit
+   bounds; bounded Brent for the first step, which has one parameter), on the screening
+   windows; the result is then scored once on all fit windows and once on the held-out ones;
 3. tries them in order of the information criterion (BIC with ``k`` = the number of fitted
    parameters) and keeps the first that passes all three tests against the current model:
    ``delta_bic >= DELTA_BIC_MIN`` and ``improvement >= IMPROVEMENT_MIN`` on the fit windows
@@ -41,7 +43,8 @@ MAX_EFFECTS = 4
 # The held-out windows must confirm a kept effect: their gap (mean squared normalised
 # residual) shrinks by at least this fraction.
 HELD_IMPROVEMENT_MIN = 0.02
-POWELL_EVALS_PER_PARAMETER = 12
+POWELL_EVALS_PER_PARAMETER = 8
+REFINE_LATER = 2
 SCREEN_MAX_S = 45.0
 BETTER = "a better candidate was kept"
 
@@ -197,9 +200,12 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
 
 
 def _trial_task(args) -> tuple[dict[str, float], float, int, float]:
-    fit_problem, held_problem, base, names, start = args
-    values, cost, evals = joint_refit(fit_problem, base, names, start)
-    held = cost_of(held_problem, with_parameters(base, values)) / max(held_problem.n_values, 1)
+    screen_problem, fit_problem, held_problem, base, names, start = args
+    values, cost, evals = joint_refit(screen_problem, base, names, start)
+    car = with_parameters(base, values)
+    if screen_problem is not fit_problem:
+        cost = cost_of(fit_problem, car)
+    held = cost_of(held_problem, car) / max(held_problem.n_values, 1)
     return values, cost, evals, held
 
 
@@ -235,9 +241,11 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             screen_cost = cost if screen is full else cost_of(screen, current)
             screening = fit_all(screen, screen_cost, remaining, jobs=jobs, refine_top=0,
                                 progress=lambda label: tick(f"step {index} {label}"))
-            top = sorted(screening, key=lambda r: (r.cost, order[r.effect]))[:max(REFINE_TOP, 1)]
-            tasks = [(fit_problem, held_problem, base, kept_names + [r.effect], {**kept_values, **r.parameters})
-                     for r in top]
+            n_top = REFINE_TOP if index == 1 else REFINE_LATER
+            top = sorted(screening, key=lambda r: (r.cost, order[r.effect]))[:max(n_top, 1)]
+            screen_base = screening_problem(fit_problem)
+            tasks = [(screen_base, fit_problem, held_problem, base, kept_names + [r.effect],
+                      {**kept_values, **r.parameters}) for r in top]
             outs = list(pool.map(_trial_task, tasks)) if pool is not None else [_trial_task(t) for t in tasks]
             tick(f"step {index} joint refits")
             crit_now = bic(fit_problem, cost, k)
