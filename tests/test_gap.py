@@ -129,3 +129,51 @@ def test_cli_run_matches_library_and_jobs_do_not_matter(tmp_path, offset_run):
     assert rep["effect"] == lib.effect
     assert [r["parameters"] for r in rep["ranking"]] == [r.parameters for r in lib.ranking]
     assert [r["bic"] for r in rep["ranking"]] == [r.criterion for r in lib.ranking]
+
+
+# -- several effects, several logs, partial sensors -----------------------------------------
+def test_two_hidden_effects_are_both_kept_with_a_chain():
+    log, truth = make_measured_log(["steering_offset", "motor_lag"], value=[-0.03, 0.3],
+                                   rng=np.random.default_rng(21), start_s=0.0, duration_s=56.0)
+    candidates = ["steering_offset", "steering_gain", "motor_lag", "drag", "command_latency"]
+    result = run_gap(log, jobs=2, effects=candidates)
+    assert sorted(result.effects) == ["motor_lag", "steering_offset"]
+    assert result.parameters["steering_offset_rad"] == pytest.approx(-0.03, rel=0.15)
+    assert result.parameters["motor_lag_s"] == pytest.approx(0.3, rel=0.15)
+    steps = result.chain.steps
+    assert [s.kept.effect for s in steps if s.kept] == result.effects
+    for s in steps:  # every kept step shrinks the held-out gap
+        if s.kept:
+            assert s.kept.held_gap < s.held_gap_before
+    assert result.gap_after < 0.5 * result.gap_before
+    assert steps[-1].kept is None and steps[-1].trials  # the chain stopped on rejections
+    rep = result.to_json()
+    assert rep["effects"] == result.effects and len(rep["chain"]) == len(steps)
+    assert all(r["reason"] for r in rep["rejected"])
+
+
+def test_speed_and_gyro_only_log_names_a_longitudinal_effect_and_says_what_it_cannot_see():
+    log, truth = make_measured_log("motor_lag", value=0.3, rng=np.random.default_rng(22),
+                                   sensors="speed_gyro", **PART_LONGITUDINAL)
+    assert log.x_m is None and log.yaw_rate_radps is not None
+    result = run_gap(log, jobs=2, effects=LONGITUDINAL + ["steering_offset"])
+    assert result.effects == ["motor_lag"]
+    assert result.parameters["motor_lag_s"] == pytest.approx(0.3, rel=0.15)
+    assert result.settings["signals"] == ["speed_mps", "yaw_rate_radps"]
+    assert "position_m" not in result.rmse_before
+
+
+def test_several_logs_of_one_car_form_one_data_set(tmp_path):
+    a, _ = make_measured_log("steering_offset", value=-0.03, rng=np.random.default_rng(23), **PART_LATERAL)
+    b, _ = make_measured_log("steering_offset", value=-0.03, rng=np.random.default_rng(24), start_s=20.0,
+                             duration_s=14.0)
+    pa, pb = tmp_path / "a.csv", tmp_path / "b.csv"
+    write_log(a, pa, float_format="%.17g")
+    write_log(b, pb, float_format="%.17g")
+    res = CliRunner().invoke(gap, [str(pa), str(pb), "-o", str(tmp_path / "out"), "--no-progress",
+                                   "--effects", "steering_offset,steering_gain"])
+    assert res.exit_code == 0, res.output
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert rep["logs"] == [str(pa), str(pb)] and rep["effects"] == ["steering_offset"]
+    assert rep["parameters"]["steering_offset_rad"] == pytest.approx(-0.03, rel=0.10)
+    assert rep["windows"]["held_out"] >= 2
