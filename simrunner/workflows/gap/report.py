@@ -234,7 +234,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
                                                        for p, pr in zip(parts, pred1)]
     tick("held-out check")
-    rep_signals = tuple(s for s in REPORT_SIGNALS if s in res0_parts[0])
+    rep_signals = tuple(s for s in REPORT_SIGNALS if all(s in r for r in res0_parts))
     stat_signals = tuple(dict.fromkeys(rep_signals + tuple(s for s in ("along_m", "cross_m") if s in signals)))
     held = np.concatenate([window_mask(len(p.log), p.held_windows) for p in parts])
 
