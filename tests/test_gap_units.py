@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from pieces.pose import Pose2
 from simrunner.run.log import FORMAT_LINE, LogError, RunLog, log_from_columns, read_log, write_log
 from simrunner.workflows.gap import LogError as GapLogError
-from simrunner.workflows.gap.fit import (CANDIDATES, FitResult, Problem, Segment, choose, cost_of, fit_effect,
+from simrunner.workflows.gap.fit import (Problem, Segment, cost_of, fit_effect,
                                          nominal_scales)
 from simrunner.workflows.gap.glitches import GlitchKind, find_glitches, glitch_mask, time_gaps
 from simrunner.workflows.gap.logs import MEASURED_COLUMNS, check_measured, derive
@@ -360,13 +360,16 @@ def test_fit_effect_finds_hidden_offset_on_stand_in():
     assert other.delta_bic < r.delta_bic
 
 
-def test_choose_applies_thresholds():
-    def fr(name, dbic, imp):
-        return FitResult(name, {CANDIDATES[name].field: 0.0}, 1.0, -dbic, dbic, imp, 3)
-    assert choose([fr("drag", 500.0, 0.5)]).effect == "drag"
-    assert choose([fr("drag", 5.0, 0.5)]) is None
-    assert choose([fr("drag", 500.0, 0.001)]) is None
-    assert choose([]) is None
+def test_chain_acceptance_needs_bic_fit_and_held_out_improvement():
+    from simrunner.workflows.gap.chain import Trial, _reject_reason
+
+    def tr(dbic, imp, held):
+        return Trial("drag", {"drag_coeff_kgpm": 0.1}, 1.0, dbic, imp, held, 5)
+    assert _reject_reason(tr(500.0, 0.5, 0.5), 1.0, 132.5, 0.068, 0.02) == ""
+    assert "delta_BIC 5.0 < 132.5" in _reject_reason(tr(5.0, 0.5, 0.5), 1.0, 132.5, 0.068, 0.02)
+    assert "fit improvement 0.1% < 6.8%" in _reject_reason(tr(500.0, 0.001, 0.5), 1.0, 132.5, 0.068, 0.02)
+    assert "do not confirm" in _reject_reason(tr(500.0, 0.5, 0.99), 1.0, 132.5, 0.068, 0.02)
+    assert "do not confirm" in _reject_reason(tr(500.0, 0.5, float("nan")), 1.0, 132.5, 0.068, 0.02)
 
 
 def test_split_is_stratified_by_label():

@@ -1,7 +1,7 @@
-"""``simrunner gap MEASURED.csv -o DIR``: name the effect the simulator misses (issue 4).
+"""``simrunner gap LOG.csv [LOG.csv ...] -o DIR``: the chain of effects the simulator misses.
 
 A thin click layer over :func:`simrunner.workflows.gap.report.run_gap` and ``write_outputs``
-(docs/gap.md). Exit codes: 0 done (whether or not an effect was named); 2 bad input (one
+(docs/gap.md). Exit codes: 0 done (whether or not effects were kept); 2 bad input (one
 line ``file:line: what was expected`` on stderr, no traceback, nothing written).
 """
 from __future__ import annotations
@@ -55,7 +55,7 @@ def _engine_stderr_silenced():
               help="Worker processes for the fits (results do not depend on it).")
 @click.option("--effects", default=None, metavar="NAME,NAME",
               help="Only these catalogue effects (default: all).")
-@click.option("--max-effects", default=None, type=click.IntRange(min=0, max=20), metavar="N",
+@click.option("--max-effects", default=None, type=click.IntRange(min=0, max=50), metavar="N",
               help="Keep at most N effects (default: 4).")
 @click.option("--dt", "dt_s", default=WORKFLOW_DT_S, show_default=True,
               type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS",
@@ -75,7 +75,6 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
 
     from simrunner.cli import input_errors
     from simrunner.errors import SimError
-    from simrunner.run.log import read_log
     from simrunner.workflows.gap.chain import MAX_EFFECTS
     from simrunner.workflows.gap.fit import CANDIDATES
     from simrunner.workflows.gap.logs import check_measured

@@ -93,7 +93,8 @@ class ColumnMapError(LogError):
     def __init__(self, origin: Origin, message: str):
         super().__init__(origin.path, origin.line, message)
         self.origin = origin
-        self.args = (f"{origin}: {message}",)
+        # one line, whatever the user typed (a line break inside an item or a name)
+        self.args = (f"{origin}: {message}".replace("\r", "\\r").replace("\n", "\\n"),)
 
     def __str__(self) -> str:
         return self.args[0]

@@ -47,7 +47,9 @@ class LogError(SimError):
 
     def __init__(self, path: str, line: int, message: str):
         self.path, self.line, self.message = str(path), int(line), message
-        super().__init__(f"{self.path}:{self.line}: {message}")
+        # one line, whatever the file holds (a quoted cell may contain a line break)
+        text = f"{self.path}:{self.line}: {message}".replace("\r", "\\r").replace("\n", "\\n")
+        super().__init__(text)
 
 
 @dataclass(frozen=True)
@@ -287,7 +289,7 @@ def read_log(path: str | Path, columns: ColumnMap | None = None) -> RunLog:
 
 def _parse(text: str, source: str, columns: ColumnMap | None = None) -> RunLog:
     reader = csv.reader(io.StringIO(text, newline=""))
-    header, offset = None, 0
+    header = None
     try:
         for row in reader:
             if row and row[0].lstrip().startswith("#"):

@@ -22,8 +22,6 @@ from __future__ import annotations
 import gc
 import time
 from pathlib import Path
-from typing import Callable
-
 import numpy as np
 
 from simrunner.car import CarModel

@@ -1,16 +1,18 @@
-"""Sim-to-real gap workflow (issue 4 sections 4-6): find where the simulator and a measured
-log disagree, name the missing effect from ``simrunner.car.effects.EFFECTS``, fit it, and show
-the gap shrink on held-out data.
+"""Sim-to-real gap workflow: find where the simulator and measured logs of one car
+disagree, build the chain of catalogue effects (``simrunner.car.effects.EFFECTS``) that closes
+the gap, and show it shrink on held-out data.
 
 Data flow::
 
-    run log CSV --simrunner.run.log.read_log--> RunLog --logs.check_measured, logs.derive--> smoothed states
-      --replay.replay_windows (per candidate car)--> predictions --replay.residuals-->
-      --regimes / stats--> where it disagrees
-      --fit.fit_all (one process per effect)--> ranking --fit.choose--> winner or "none"
-      --report.run_gap--> DIR/{report.json, car.toml, gap_before_after.png, residuals_by_regime.png}
+    run log CSV(s) --simrunner.run.log.read_log (+ column mapping)--> RunLog
+      --logs.check_measured, glitches.find_glitches, logs.derive--> smoothed states, clean pieces
+      --replay.make_windows, split_windows--> fit and held-out windows (per log)
+      --replay.replay / residuals (signals the logs support)--> where it disagrees (regimes)
+      --chain.build_chain (fit.fit_all screening, joint refits, held-out confirmation)--> kept effects
+      --report.run_gap--> leftovers vs noise, effects the logs cannot reveal
+      --report.write_outputs--> DIR/{report.json, car.toml, residuals.txt, *.png}
 
-``synth.make_measured_log`` makes "measured" logs with a hidden effect for tests and the
+``synth.make_measured_log`` makes "measured" logs with hidden effects for tests and the
 bench. See docs/gap.md.
 """
 from __future__ import annotations

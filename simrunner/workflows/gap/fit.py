@@ -1,4 +1,4 @@
-"""Fit every catalogue effect by simulation, rank them, and decide which one is missing.
+"""Fitting catalogue effects by simulation: the problem, its cost, one-parameter fits, screening.
 
 Each candidate effect has one parameter (a field of ``vehicle.description.Effects``). It is fitted
 by simulation: the objective is the sum over the fit windows and the signals of
@@ -18,9 +18,9 @@ and ``n_eff`` the effective number of independent values, :data:`N_EFF_PER_S` pe
 fit windows per signal (residuals within a window are strongly correlated, so ``n`` would
 overstate the evidence). Lower is better; ``delta_bic = BIC_nominal - BIC_effect``.
 
-Acceptance: the best effect is named only if ``delta_bic >= DELTA_BIC_MIN`` and its
-relative cost reduction ``improvement >= IMPROVEMENT_MIN``; otherwise the answer is
-``none``. The two thresholds are calibrated on effect-free synthetic logs by
+Acceptance (:mod:`simrunner.workflows.gap.chain` applies it at every step of the chain,
+with a held-out test on top): an effect passes only if ``delta_bic >= DELTA_BIC_MIN`` and
+its relative cost reduction ``improvement >= IMPROVEMENT_MIN``. The two thresholds are calibrated on effect-free synthetic logs by
 :mod:`simrunner.workflows.gap.thresholds` (see docs/gap.md for the run that produced them).
 
 Fits run in worker processes (``jobs``); dartpy worlds are built inside each worker. A fit
@@ -310,14 +310,3 @@ def fit_all(problem: Problem, nominal_cost: float, effects: Sequence[str] | None
         if pool is not None:
             pool.shutdown()
     return sorted(results.values(), key=lambda r: (r.criterion, order[r.effect]))
-
-
-def choose(ranking: Sequence[FitResult], delta_bic_min: float = DELTA_BIC_MIN,
-           improvement_min: float = IMPROVEMENT_MIN) -> FitResult | None:
-    """The best-ranked effect if it passes both acceptance thresholds, else ``None``."""
-    if not ranking:
-        return None
-    best = ranking[0]
-    if best.delta_bic >= delta_bic_min and best.improvement >= improvement_min:
-        return best
-    return None

@@ -83,7 +83,7 @@ def plot_before_after(result, path: str | Path) -> None:
         f"{label} {result.rmse_before[s]:.3g}->{result.rmse_after.get(s, np.nan):.3g}" for s, label in shown)
         if held.any() and shown else "", fontsize=9)
     param = ", ".join(f"{k} = {v:.4g}" for k, v in result.parameters.items())
-    fig.suptitle(f"{Path(log.source).name}: missing effect = {result.effect}" + (f" ({param})" if param else ""))
+    fig.suptitle(f"{Path(log.source).name}: effects = {result.effect}" + (f" ({param})" if param else ""))
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

@@ -32,7 +32,7 @@ from simrunner.run.log import RunLog
 from simrunner.workflows.gap import GapError
 from simrunner.workflows.gap.chain import HELD_IMPROVEMENT_MIN, MAX_EFFECTS, Chain, build_chain
 from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, FitResult, Problem,
-                                         Segment, bic, nominal_scales, segment_residuals)
+                                         Segment, bic, nominal_scales)
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive
 from simrunner.workflows.gap.regimes import residual_stats, segment

@@ -31,7 +31,6 @@ import numpy as np
 
 from simrunner.run.log import RunLog, log_from_columns
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.logs import MEASURED_COLUMNS
 from vehicle.description import CarDescription
 
 SYNTH_DT_S = 0.001
