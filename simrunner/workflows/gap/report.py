@@ -121,6 +121,20 @@ class GapResult:
         return [(p.log.source, g) for p in self.parts for g in p.glitches]
 
     @property
+    def at_bounds(self) -> list[str]:
+        """Kept parameters at (within 1 % of) an end of their fit range: the fit wanted to go
+        further, so the catalogue probably lacks the real cause (or the car file is far off)."""
+        out = []
+        by_field = {c.field: c for c in CANDIDATES.values()}
+        for name, v in self.parameters.items():
+            c = by_field[name]
+            lo, hi = c.to_x(c.lo), c.to_x(c.hi)
+            u = (c.to_x(min(max(v, c.lo), c.hi)) - lo) / (hi - lo)
+            if u <= 0.01 or u >= 0.99:
+                out.append(name)
+        return out
+
+    @property
     def held_out_worse(self) -> bool:
         """True when effects were kept but the held-out gap grew (cannot happen for a chain
         whose every step was confirmed on held-out data; kept as a safety flag)."""
@@ -135,7 +149,7 @@ class GapResult:
             "gap_before": self.gap_before, "gap_after": self.gap_after,
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
             "rmse_smoothed_before": self.rmse_smoothed_before, "rmse_smoothed_after": self.rmse_smoothed_after,
-            "noise_rms": self.noise_rms, "held_out_worse": self.held_out_worse,
+            "noise_rms": self.noise_rms, "held_out_worse": self.held_out_worse, "at_bounds": self.at_bounds,
             "chain": self.chain.to_json(), "chain_stop": self.chain.stop_reason,
             "rejected": [{"step": k, "effect": t.effect, "parameters": t.parameters, "reason": t.reason}
                          for k, t in self.chain.rejected],
@@ -360,6 +374,10 @@ def summary_text(result: GapResult) -> str:
     lines = [f"effects found: {', '.join(result.effects) if result.effects else 'none'}"]
     if result.parameters:
         lines.append(f"  parameters: {_params_text(result.parameters)}")
+    for name in result.at_bounds:
+        lines.append(f"  WARNING: {name} = {result.parameters[name]:.4g} is at the end of its fit range: the "
+                     "real cause is probably outside the catalogue (or the car file is far off); "
+                     "treat this value as a stand-in")
     lines.append(f"held-out gap (mean squared normalised residual) before -> after: "
                  f"{result.gap_before:.3g} -> {result.gap_after:.3g}")
     for step in chain.steps:
