@@ -19,40 +19,55 @@ def _fail(exc: BaseException) -> None:
 
 @click.command("excite")
 @click.option("-o", "--output", "output", required=True, metavar="PLAN.csv",
-              help="Where to write the plan (t, speed_cmd, steer_cmd, coast, segment at 50 Hz).")
+              help="Where to write the plan (t, speed_cmd, steer_cmd, coast, segment, and the turns' "
+                   "ref_x, ref_y, ref_yaw at 50 Hz).")
 @click.option("--duration", "duration_s", default=None, type=float, metavar="SECONDS",
-              help="Total duration: the core plan (~67 s) plus random-steer blocks "
+              help="Total duration: the core plan (~90 s) plus random-steer blocks "
                    "(default: the core plan).")
 @click.option("--car", default=None, metavar="CAR.toml", help="Car description (default: built-in car).")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
-              help="Seed of the random-steer steps.")
+              help="Seed of the random-steer steps (and of --pose-noise).")
 @click.option("--simulate", default=None, metavar="OUT.csv",
               help="Also play the plan in the simulator (car effects apply) and write its "
                    "run log (CSV, docs/telemetry.md).")
+@click.option("--closed-loop", "closed_loop", is_flag=True,
+              help="With --simulate: drive the turns closed loop, following their reference path "
+                   "from the (noisy) pose, as docs/calibration.md tells the car's code to.")
+@click.option("--pose-noise", "pose_noise_m", default=0.0, show_default=True,
+              type=click.FloatRange(min=0.0, max=1.0), metavar="METRES",
+              help="With --simulate: Gaussian noise on the logged x and y (and /0.2 m per rad on yaw), "
+                   "like a real pose measurement; closed loop, the car steers from it too.")
 @click.option("--dt", "dt_s", default=0.002, show_default=True, type=float, metavar="SECONDS",
               help="Physics time step of --simulate (must divide the 20 ms row period).")
-def excite_cmd(output, duration_s, car, seed, simulate, dt_s) -> None:
-    """Write an excitation plan to drive open loop on the real car (docs/calibration.md)."""
+def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_m, dt_s) -> None:
+    """Write an excitation plan to drive on the real car (docs/calibration.md)."""
     from simrunner.run.log import write_log
-    from simrunner.workflows.excite import make_plan, predict_path, run_plan
+    from simrunner.workflows.excite import AREA_M, AREA_MARGIN_M, make_plan, predict_path, run_plan
     from vehicle.description import load_car
 
+    if simulate is None and (closed_loop or pose_noise_m > 0.0):
+        _fail(click.UsageError("--closed-loop and --pose-noise apply to --simulate, which is not given"))
     try:
         car_desc = load_car(car)
         plan = make_plan(car_desc, seed=seed, duration_s=duration_s)
         xy = predict_path(plan, car_desc)
         extent = (xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max())
-        log = run_plan(plan, car_desc, dt_s=dt_s) if simulate else None
+        log = None
+        if simulate:
+            log = run_plan(plan, car_desc, dt_s=dt_s, seed=seed, pose_noise_m=pose_noise_m, closed_loop=closed_loop)
         plan.to_csv(output, extent=extent)
         if log is not None:
             write_log(log, simulate)
     except input_errors() as exc:
         _fail(exc)
     click.echo(f"plan: {output} ({len(plan)} rows, {plan.duration_s:.1f} s; predicted path "
-               f"{extent[1] - extent[0]:.1f} x {extent[3] - extent[2]:.1f} m)")
+               f"{extent[1] - extent[0]:.1f} x {extent[3] - extent[2]:.1f} m; area {AREA_M:g} x {AREA_M:g} m "
+               f"+ {AREA_MARGIN_M:g} m margin)")
     if log is not None:
-        click.echo(f"simulated log: {simulate} (path {log.x_m.max() - log.x_m.min():.1f} x "
-                   f"{log.y_m.max() - log.y_m.min():.1f} m)")
+        out = plan.outside_area_m(log.x_m, log.y_m)
+        where = "inside the area" if out == 0.0 else f"up to {out:.2f} m outside the area"
+        click.echo(f"simulated log: {simulate} ({'closed' if closed_loop else 'open'} loop, {log.duration_s:.1f} s, "
+                   f"path {log.x_m.max() - log.x_m.min():.1f} x {log.y_m.max() - log.y_m.min():.1f} m, {where})")
 
 
 @click.command("calibrate")

@@ -1,21 +1,43 @@
-"""Excitation plan (issue 4): a command schedule a team drives open loop on its real car.
+"""Excitation plan (issue 4): a command schedule a team drives on its real car.
 
-The plan is a table at the camera frame rate (``RATE_HZ`` = 50 Hz) of
-``t`` (s), ``speed_cmd`` (m/s), ``steer_cmd`` (rad, + = left), ``coast`` (0/1: drive off,
-wheels free) and ``segment`` (``kind:detail``). It is built so that every effect of
+The plan is a table at the camera frame rate (``RATE_HZ`` = 50 Hz) of ``t`` (s),
+``speed_cmd`` (m/s), ``steer_cmd`` (rad, + = left), ``coast`` (0/1: drive off, wheels free),
+``segment`` (``kind:detail``) and, on the rows of ``turn`` segments, the reference path
+``ref_x, ref_y, ref_yaw`` (m, m, rad). It is built so that every effect of
 :data:`simrunner.car.effects.EFFECTS` leaves a trace (``SEGMENT_KINDS`` says which kind
-reveals which effect; docs/calibration.md has the table) and the car stays in a hall-floor
-area of about 6 x 6 m: between experiments a ``turn`` segment (alternating left and right
-when either would do) points the car back through the middle of the area, using a
-kinematic bicycle prediction of the nominal car.
+reveals which effect; docs/calibration.md has the table).
 
-:func:`run_plan` plays a plan in the simulator (``make_sim``, so effects apply) and
-returns its :class:`~simrunner.run.log.RunLog`, the record every workflow uses (written with
-``simrunner.run.log.write_log``; schema: docs/telemetry.md).
+Staying in the hall area (issue 10 item 7). The experiments are open loop: their data is
+what the gap fit needs. Between two experiments a ``turn`` (a Dubins path: arcs and a
+straight run-in, at ``v_lo``) drives the car to the pose where the next experiment starts.
+The planner (:meth:`_Builder.return_then`) places every experiment so that the paths of the
+nominal car stay ``_PLAN_MARGIN_M`` inside the ``AREA_M`` x ``AREA_M`` area and those of the
+whole *design envelope* (kinematic bicycles with a steering trim of up to
+``DESIGN_TRIM_RAD``, a steering gain and a speed scale off by up to ``DESIGN_GAIN_ERROR`` and
+``DESIGN_SPEED_ERROR``, in every combination, with room to turn afterwards) inside it. A
+turn's rows hold what the nominal car does (``speed_cmd``, ``steer_cmd``) and where it is
+(``ref_*``: its pose at the row). Two ways to play the turns:
+
+* closed loop (recommended): the car follows the turn's reference path by pure pursuit
+  (:func:`follow_path`) from its measured pose. A turn is *elastic*: once the car has
+  arrived at the path's end the plan goes on with the row after the turn; while it has not,
+  the turn's last row is repeated. Every experiment then starts about where it was planned
+  whatever the car's errors: in the full simulator the cars of the design envelope stay
+  inside the area grown by ``AREA_MARGIN_M`` (tests/test_excite.py).
+* open loop: the turns' rows as they are. Errors then add up from one experiment to the
+  next; a car with a 2 degree trim needs a much larger area (docs/calibration.md).
+
+:func:`run_plan` plays a plan in the simulator (``make_sim``, so effects apply), open or
+closed loop, and returns its :class:`~simrunner.run.log.RunLog`, the record every workflow
+uses (written with ``simrunner.run.log.write_log``; schema: docs/telemetry.md).
+
+The plan frame is the car's start pose: origin at the rear-axle midpoint, +x ahead, +y left,
+yaw counter-clockwise (pieces/pose.py).
 """
 from __future__ import annotations
 
 import csv
+import itertools
 import math
 import os
 from dataclasses import dataclass
@@ -30,39 +52,70 @@ from vehicle.description import CarDescription
 from vehicle.userfiles import read_user_text
 
 RATE_HZ = 50.0
-MIN_DURATION_S = 67.0  # the core plan (every experiment once) of the default car lasts ~67 s
+MIN_DURATION_S = 90.0  # the core plan (every experiment once) of the default car lasts ~90 s
 MAX_DURATION_S = 600.0
 AREA_M = 6.0  # side of the square hall area the plan is meant for
-_MARGIN_M = 0.8  # the turn planner keeps the predicted path this far inside the area
+AREA_MARGIN_M = 0.6  # closed loop, a car of the design envelope stays inside the area grown by this
+_PLAN_MARGIN_M = 0.3  # the planner keeps the nominal car's predicted path this far inside
+
+# design envelope: the off-nominal cars the planner keeps inside the area (every combination)
+DESIGN_TRIM_RAD = math.radians(2.0)  # steering offset, +-
+DESIGN_GAIN_ERROR = 0.15  # steering gain 1 +- this
+DESIGN_SPEED_ERROR = 0.15  # speed scale 1 +- this
+
+# turns, closed loop (follow_path; docs/calibration.md has them in C)
+RETURN_STEER_FRACTION = 0.9  # of steering.limit_rad: the most a turn steers
+RETURN_LOOKAHEAD_M = 0.4  # pure pursuit: aim point this far away
+RETURN_WINDOW_M = 0.5  # the nearest path point is looked for this far along the path
+RETURN_PACE = 0.75  # the progress along the path keeps at least this fraction of the plan's ...
+RETURN_LAG_S = 0.5  # ... pace, after this many seconds
+RETURN_ARRIVED_M = 0.2  # arrived: past the path's end, at most this far off its end line
+RETURN_TIMEOUT_S = 20.0  # a turn's last row is repeated at most this long
+# turns, planned
+_ARC_FRACTION = 0.85  # arcs at this fraction of the most a turn steers (the rest: room to correct)
+_RUN_IN_M = 0.4  # a turn ends with this much straight on the experiment's start line
 
 # kind -> effects it reveals (names of simrunner.car.effects.EFFECTS); "pause" and "turn" link
 SEGMENT_KINDS: dict[str, tuple[str, ...]] = {
     "pause": (),
-    "speed_ramp": ("throttle_deadband", "motor_lag"),
-    "straight": ("steering_offset",),
-    "turn": ("steering_gain", "steering_rate_limit", "steering_offset"),
+    "speed_ramp": ("throttle_deadband", "motor_lag", "speed_scale", "top_speed"),  # gentler than max accel
+    "straight": ("steering_offset", "speed_scale", "top_speed"),
+    "turn": ("steering_gain", "steering_rate_limit", "steering_offset", "steering_asymmetry",
+             "steer_limit_scale"),
     "step_steer": ("steering_offset", "steering_gain", "steering_lag", "command_latency",
-                   "steering_rate_limit"),
-    "circle": ("steering_gain", "tire_slip", "friction", "steering_offset"),
-    "speed_step": ("command_latency", "motor_lag"),
+                   "steering_rate_limit", "steering_asymmetry", "steering_play", "servo_rate_scale"),
+    "circle": ("steering_gain", "tire_slip", "friction", "steering_offset", "steering_asymmetry",
+               "steer_limit_scale"),
+    "speed_step": ("command_latency", "motor_lag", "speed_scale", "accel_scale", "brake_scale", "mass_scale",
+                   "top_speed"),
     "coast": ("rolling_resistance", "drag"),
-    "brake": (),
-    "chirp": ("steering_lag", "command_latency", "steering_rate_limit"),
-    "random_steer": ("steering_lag", "command_latency", "steering_offset"),
+    "brake": ("brake_scale", "mass_scale"),
+    "chirp": ("steering_lag", "command_latency", "steering_rate_limit", "steering_play", "servo_rate_scale"),
+    "reverse": ("esc_brake_reverse",),
+    "random_steer": ("steering_lag", "command_latency", "steering_offset", "steering_play"),
 }
 
 HEADER = """\
 nxpcup excitation plan (simrunner excite): one row per camera frame ({rate:g} Hz), {n} rows, {dur:.1f} s.
 Columns: t (s from the start), speed_cmd (m/s, signed), steer_cmd (rad, bicycle-equivalent,
-+ = left), coast (1 = drive off, wheels roll freely), segment (kind:detail).
-Play-back on the real car: put it at rest in a free area of at least {area:g} x {area:g} m,
-facing along +x (the predicted path spans {wx:.1f} x {wy:.1f} m; start {sx:.1f} m from the
-area's west edge and {sy:.1f} m from its south edge). Every frame k, at t_k: convert speed_cmd
-with your speed normalisation (m/s -> your motor command) and steer_cmd with your servo
-normalisation (rad -> your servo command), send both (coast = 1: motor driver off / ESC
-neutral without drag brake), and log t, x, y, yaw, speed (and your actual commands) to a
-CSV in the telemetry schema (docs/telemetry.md). See docs/calibration.md.
-seed={seed}"""
++ = left), coast (1 = drive off, wheels roll freely), segment (kind:detail); on turn rows
+ref_x, ref_y (m), ref_yaw (rad): where the turn goes, in the plan frame (the start pose:
++x ahead, +y left).
+Area: clear {area:g} x {area:g} m plus {margin:g} m on every side. Put the car at rest facing
++x (along the area's west-east side), {sx:.2f} m from the area's west edge and {sy:.2f} m from
+its south edge (the nominal path spans {wx:.1f} x {wy:.1f} m).
+Every frame k, at t_k: log t, x, y, yaw, speed and the commands you send; convert speed_cmd
+with your speed normalisation (m/s -> motor command; coast = 1: motor driver off / ESC
+neutral without drag brake) and steer_cmd with your servo normalisation (rad -> servo).
+Turn rows: closed loop (recommended), steer to follow ref_x, ref_y with the pure-pursuit
+code of docs/calibration.md from your measured pose, and go on with the row after the turn
+once arrived (repeat the turn's last row until then); open loop, send them as they are.
+Log format: docs/telemetry.md; see docs/calibration.md.
+seed={seed}
+area_centre_m={cx:.4f},{cy:.4f}"""
+
+_COLUMNS = ("t", "speed_cmd", "steer_cmd", "coast", "segment", "ref_x", "ref_y", "ref_yaw")
+_REF_COLUMNS = _COLUMNS[5:]
 
 
 class PlanError(SimError):
@@ -72,7 +125,10 @@ class PlanError(SimError):
 @dataclass(frozen=True, eq=False)
 class ExcitationPlan:
     """A command schedule. Arrays are ``(N,)``: ``t_s`` from 0 at ``1 / rate_hz`` steps,
-    ``speed_cmd_mps``, ``steer_cmd_rad``, ``coast`` (bool), ``segment`` (str)."""
+    ``speed_cmd_mps``, ``steer_cmd_rad``, ``coast`` (bool), ``segment`` (str), and the
+    reference pose of the turns ``ref_x_m, ref_y_m, ref_yaw_rad`` (plan frame; NaN on other
+    rows; ``None``: no turns to follow). ``area_centre_m`` is the middle of the ``AREA_M``
+    square area in the plan frame (``None``: not known, e.g. a hand-made plan)."""
 
     t_s: np.ndarray
     speed_cmd_mps: np.ndarray
@@ -81,6 +137,10 @@ class ExcitationPlan:
     segment: tuple[str, ...]
     rate_hz: float = RATE_HZ
     seed: int = 0
+    ref_x_m: np.ndarray | None = None
+    ref_y_m: np.ndarray | None = None
+    ref_yaw_rad: np.ndarray | None = None
+    area_centre_m: tuple[float, float] | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -88,6 +148,32 @@ class ExcitationPlan:
     @property
     def duration_s(self) -> float:
         return float(len(self.t_s)) / self.rate_hz
+
+    def reference_rows(self) -> np.ndarray:
+        """``(N,) bool``: the rows with a reference pose (the turns to follow closed loop)."""
+        if self.ref_x_m is None:
+            return np.zeros(len(self), dtype=bool)
+        return np.isfinite(self.ref_x_m)
+
+    def turns(self) -> list[tuple[int, int]]:
+        """``[(first_row, end_row)]`` of every run of consecutive reference rows."""
+        ref = self.reference_rows()
+        edges = np.flatnonzero(np.diff(np.concatenate([[False], ref, [False]]).astype(int)))
+        return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
+
+    def area_bounds_m(self, margin_m: float = 0.0) -> tuple[float, float, float, float]:
+        """``(x_min, x_max, y_min, y_max)`` of the area grown by ``margin_m``, plan frame."""
+        if self.area_centre_m is None:
+            raise PlanError("the plan does not say where its area is (no area_centre_m)")
+        cx, cy = self.area_centre_m
+        h = 0.5 * AREA_M + margin_m
+        return cx - h, cx + h, cy - h, cy + h
+
+    def outside_area_m(self, x_m: np.ndarray, y_m: np.ndarray) -> float:
+        """How far the path ``(x_m, y_m)`` (``(N,)`` each, plan frame) gets outside the area
+        (0.0: it stays inside)."""
+        x0, x1, y0, y1 = self.area_bounds_m()
+        return float(max(x0 - np.min(x_m), np.max(x_m) - x1, y0 - np.min(y_m), np.max(y_m) - y1, 0.0))
 
     def segments(self) -> list[tuple[str, float, float]]:
         """``[(segment, t_start_s, t_end_s)]`` of consecutive runs of equal segment names."""
@@ -107,20 +193,24 @@ class ExcitationPlan:
     def to_csv(self, path: str | Path, *, extent: tuple[float, float, float, float] | None = None) -> Path:
         """Write the plan (atomically) with the play-back header as ``#`` comments.
         ``extent`` = predicted ``(x_min, x_max, y_min, y_max)`` of the path (default:
-        :func:`predict_path` of the default car)."""
+        :func:`predict_path` of the default car); it also places the area when the plan
+        has no ``area_centre_m``."""
         path = Path(path)
         if extent is None:
             xy = predict_path(self, CarDescription())
             extent = (xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max())
         x0, x1, y0, y1 = extent
-        wx, wy = x1 - x0, y1 - y0
+        cx, cy = self.area_centre_m if self.area_centre_m is not None else (0.5 * (x0 + x1), 0.5 * (y0 + y1))
+        ref = self.reference_rows()
         head = HEADER.format(rate=self.rate_hz, n=len(self), dur=self.duration_s, area=AREA_M,
-                             wx=wx, wy=wy, sx=0.5 * (AREA_M - wx) - x0, sy=0.5 * (AREA_M - wy) - y0,
-                             seed=self.seed)
+                             margin=AREA_MARGIN_M, wx=x1 - x0, wy=y1 - y0, sx=0.5 * AREA_M - cx,
+                             sy=0.5 * AREA_M - cy, seed=self.seed, cx=cx, cy=cy)
         lines = ["# " + ln for ln in head.splitlines()]
-        lines.append("t,speed_cmd,steer_cmd,coast,segment")
-        for t, v, d, c, s in zip(self.t_s, self.speed_cmd_mps, self.steer_cmd_rad, self.coast, self.segment):
-            lines.append(f"{t:.3f},{v:.6f},{d:.6f},{int(c)},{s}")
+        lines.append(",".join(_COLUMNS))
+        for k, (t, v, d, c, s) in enumerate(zip(self.t_s, self.speed_cmd_mps, self.steer_cmd_rad, self.coast,
+                                                self.segment)):
+            tail = f"{self.ref_x_m[k]:.4f},{self.ref_y_m[k]:.4f},{self.ref_yaw_rad[k]:.5f}" if ref[k] else ",,"
+            lines.append(f"{t:.3f},{v:.6f},{d:.6f},{int(c)},{s},{tail}")
         tmp = path.with_name(path.name + ".tmp")
         try:
             tmp.write_text("\n".join(lines) + "\n")
@@ -131,27 +221,37 @@ class ExcitationPlan:
 
     @classmethod
     def from_csv(cls, path: str | Path) -> "ExcitationPlan":
-        """Read a plan written by :meth:`to_csv` (``#`` lines are comments; ``coast`` and
-        ``segment`` columns are optional). Errors name the file and line."""
+        """Read a plan written by :meth:`to_csv` (``#`` lines are comments; ``coast``,
+        ``segment`` and the three ``ref_*`` columns are optional; a row's reference is three
+        numbers or three empty cells). Errors name the file and line."""
         path = Path(path)
         text = read_user_text(path, "plan", PlanError, "CSV")
         rows = [(i + 1, ln) for i, ln in enumerate(text.splitlines()) if ln.strip() and not ln.lstrip().startswith("#")]
+        expect = f"expected t,speed_cmd,steer_cmd[,coast][,segment][,{','.join(_REF_COLUMNS)}]"
         if not rows:
-            raise PlanError(f"{path}:1: empty plan, expected the header t,speed_cmd,steer_cmd[,coast][,segment]")
+            raise PlanError(f"{path}:1: empty plan, {expect}")
         hline, header = rows[0]
         cols = [c.strip() for c in next(csv.reader([header]))]
         for need in ("t", "speed_cmd", "steer_cmd"):
             if need not in cols:
-                raise PlanError(f"{path}:{hline}: header lacks column '{need}' (expected t,speed_cmd,steer_cmd[,coast][,segment])")
-        unknown = [c for c in cols if c not in ("t", "speed_cmd", "steer_cmd", "coast", "segment")]
+                raise PlanError(f"{path}:{hline}: header lacks column '{need}' ({expect})")
+        unknown = [c for c in cols if c not in _COLUMNS]
         if unknown:
-            raise PlanError(f"{path}:{hline}: unknown column '{unknown[0]}' (expected t,speed_cmd,steer_cmd[,coast][,segment])")
+            raise PlanError(f"{path}:{hline}: unknown column '{unknown[0]}' ({expect})")
+        has_ref = [c in cols for c in _REF_COLUMNS]
+        if any(has_ref) and not all(has_ref):
+            raise PlanError(f"{path}:{hline}: expected all of {','.join(_REF_COLUMNS)} or none")
         idx = {c: cols.index(c) for c in cols}
-        t, v, d, co, seg = [], [], [], [], []
-        seed = 0
-        for m in (ln for ln in text.splitlines() if ln.startswith("# seed=")):
+        t, v, d, co, seg, ref = [], [], [], [], [], []
+        seed, centre = 0, None
+        for m in (ln for ln in text.splitlines() if ln.startswith("#")):
+            key, _, val = m[1:].strip().partition("=")
             try:
-                seed = int(m.split("=", 1)[1])
+                if key == "seed":
+                    seed = int(val)
+                elif key == "area_centre_m":
+                    cx, cy = (float(p) for p in val.split(","))
+                    centre = (cx, cy) if math.isfinite(cx) and math.isfinite(cy) else None
             except ValueError:
                 pass
         for line_no, ln in rows[1:]:
@@ -167,6 +267,8 @@ class ExcitationPlan:
                 raise PlanError(f"{path}:{line_no}: expected finite numbers and coast 0 or 1")
             t.append(tv), v.append(vv), d.append(dv), co.append(bool(cv))
             seg.append(vals[idx["segment"]].strip() if "segment" in idx else "")
+            if all(has_ref):
+                ref.append(_read_reference([vals[idx[c]].strip() for c in _REF_COLUMNS], f"{path}:{line_no}"))
         if len(t) < 2:
             raise PlanError(f"{path}: expected at least 2 rows")
         ta = np.array(t)
@@ -177,8 +279,22 @@ class ExcitationPlan:
             raise PlanError(f"{path}:{rows[bad + 2][0]}: expected t to start at 0 and rise in equal steps "
                             f"(one row per camera frame)")
         rate = round(1.0 / period, 6)
+        r = np.array(ref, dtype=float).reshape(-1, 3).T if ref else (None, None, None)
         return cls(np.arange(len(t)) / rate, np.array(v), np.array(d), np.array(co, dtype=bool), tuple(seg),
-                   rate_hz=rate, seed=seed)
+                   rate_hz=rate, seed=seed, ref_x_m=r[0], ref_y_m=r[1], ref_yaw_rad=r[2], area_centre_m=centre)
+
+
+def _read_reference(cells: list[str], where: str) -> tuple[float, float, float]:
+    if not any(cells):
+        return (math.nan, math.nan, math.nan)
+    names = ",".join(_REF_COLUMNS)
+    try:
+        x, y, yaw = (float(c) for c in cells)
+    except ValueError:
+        raise PlanError(f"{where}: expected three numbers in {names} or three empty cells") from None
+    if not all(math.isfinite(a) for a in (x, y, yaw)):
+        raise PlanError(f"{where}: expected finite numbers in {names}")
+    return x, y, yaw
 
 
 def segment_kind(segment: str) -> str:
@@ -186,36 +302,199 @@ def segment_kind(segment: str) -> str:
     return segment.split(":", 1)[0]
 
 
+# -- steering by pure pursuit ------------------------------------------------------------
+def pursuit_steer_rad(dx_m, dy_m, yaw_rad, *, wheelbase_m: float, steer_max_rad: float):
+    """Pure pursuit from the rear-axle midpoint heading ``yaw_rad`` towards an aim point
+    ``(dx_m, dy_m)`` away (world axes): ``atan(2 L sin(alpha) / RETURN_LOOKAHEAD_M)``
+    (``alpha``: bearing of the aim point from the heading, ``L``: ``wheelbase_m``; the arc
+    through a point ``RETURN_LOOKAHEAD_M`` away in that direction, so a far aim point is
+    turned to as sharply as a near one), full ``steer_max_rad`` towards it when it is behind
+    (``|alpha|`` > 90 degrees), clamped to ``+-steer_max_rad``. Floats or arrays."""
+    alpha = (np.arctan2(dy_m, dx_m) - yaw_rad + math.pi) % (2.0 * math.pi) - math.pi
+    steer = np.arctan(2.0 * wheelbase_m * np.sin(alpha) / RETURN_LOOKAHEAD_M)
+    steer = np.where(np.abs(alpha) > 0.5 * math.pi, np.copysign(steer_max_rad, alpha), steer)
+    return np.clip(steer, -steer_max_rad, steer_max_rad)
+
+
+@dataclass(frozen=True)
+class FollowStep:
+    """One step of :func:`follow_path`: the steering to send, the progress to pass next
+    time, and whether the car has arrived at the path's end (then the plan goes on with the
+    row after the turn, in this frame)."""
+
+    steer_cmd_rad: float
+    progress: int
+    arrived: bool
+
+
+def follow_path(x_m: float, y_m: float, yaw_rad: float, path_xy: np.ndarray, end_yaw_rad: float, progress: int,
+                min_progress: int, *, wheelbase_m: float, steer_max_rad: float) -> FollowStep:
+    """Closed-loop turn: follow the reference path ``path_xy`` ``(M, 2)`` (a turn's
+    ``ref_x, ref_y``, one point per row, same frame as the pose) from the measured pose
+    ``(x_m, y_m, yaw_rad)`` (rear-axle midpoint). ``progress``: the index returned last
+    time (0 at the turn's first row); ``min_progress``: ``RETURN_PACE`` x (frames since the
+    turn began - ``RETURN_LAG_S`` x the frame rate).
+
+    1. progress = the path point nearest the car among those from ``max(progress,
+       min_progress)`` on up to ``RETURN_WINDOW_M`` further along the path. It only moves
+       on along the path, so a car that ended its experiment elsewhere joins the path at
+       its start and follows it in order; and at no less than ``RETURN_PACE`` of the plan's
+       pace, so a car that cannot get onto the path where it is (it would circle round it)
+       is led on along it;
+    2. aim = the first path point from there, before the last, at least
+       ``RETURN_LOOKAHEAD_M`` from the car; if there is none (the car is near the end), the
+       point ``RETURN_LOOKAHEAD_M`` ahead of the car's projection on the end line (through
+       the last point in the end heading ``end_yaw_rad``: the path ends on it); the car has
+       arrived once it is level with or past the last point (along that heading), less than
+       ``RETURN_ARRIVED_M`` off the end line, heading within 45 degrees of it (a car that
+       comes to the end line late starts the experiment further on: better than a loop);
+    3. steer by :func:`pursuit_steer_rad` towards the aim, at most ``steer_max_rad``.
+
+    The same in C: docs/calibration.md."""
+    last = len(path_xy) - 1
+    progress = min(last, max(progress, min_progress))
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path_xy[progress:], axis=0).T))])
+    win = path_xy[progress:progress + int(np.searchsorted(along, RETURN_WINDOW_M, side="right"))]
+    progress += int(np.argmin(np.hypot(win[:, 0] - x_m, win[:, 1] - y_m)))
+    ahead = np.hypot(path_xy[progress:last, 0] - x_m, path_xy[progress:last, 1] - y_m) >= RETURN_LOOKAHEAD_M
+    c, s = math.cos(end_yaw_rad), math.sin(end_yaw_rad)
+    if ahead.any():
+        ax, ay = path_xy[progress + int(np.argmax(ahead))]
+        arrived = False
+    else:
+        ex, ey = path_xy[last]
+        past, cross = c * (x_m - ex) + s * (y_m - ey), -s * (x_m - ex) + c * (y_m - ey)
+        ax, ay = ex + (past + RETURN_LOOKAHEAD_M) * c, ey + (past + RETURN_LOOKAHEAD_M) * s
+        aligned = abs(wrap_angle(yaw_rad - end_yaw_rad)) < 0.25 * math.pi
+        arrived = past >= 0.0 and abs(cross) < RETURN_ARRIVED_M and aligned
+    steer = float(pursuit_steer_rad(ax - x_m, ay - y_m, yaw_rad, wheelbase_m=wheelbase_m, steer_max_rad=steer_max_rad))
+    return FollowStep(steer, progress, bool(arrived))
+
+
+# -- the planner's turns: Dubins paths ----------------------------------------------------
+_WORDS = ("LSL", "RSR", "LSR", "RSL", "RLR", "LRL")
+_TURN_SIGN = {"L": 1.0, "S": 0.0, "R": -1.0}
+
+
+def _dubins(x0, y0, yaw0, x1, y1, yaw1, radius_m: float) -> np.ndarray:
+    """``(6, C, 3)``: the three segment lengths (in radii: arc angles, straight lengths)
+    of each :data:`_WORDS` path of radius ``radius_m`` from the poses ``(x0, y0, yaw0)``
+    to ``(x1, y1, yaw1)`` (arrays ``(C,)``); NaN where a word has no path. The shortest
+    paths between two poses of a car that turns no tighter than ``radius_m`` (L. E. Dubins,
+    1957; formulas as in Shkel and Lumelsky, 2001)."""
+    tau = 2.0 * math.pi
+    dx, dy = (np.asarray(x1) - x0) / radius_m, (np.asarray(y1) - y0) / radius_m
+    d, phi = np.hypot(dx, dy), np.arctan2(dy, dx)
+    a, b = np.mod(yaw0 - phi, tau), np.mod(yaw1 - phi, tau)
+    sa, sb, ca, cb, cab = np.sin(a), np.sin(b), np.cos(a), np.cos(b), np.cos(a - b)
+    out = np.full((6,) + d.shape + (3,), np.nan)
+    with np.errstate(invalid="ignore"):
+        at, p = np.arctan2(cb - ca, d + sa - sb), np.sqrt(2 + d * d - 2 * cab + 2 * d * (sa - sb))  # LSL
+        out[0] = np.stack([np.mod(at - a, tau), p, np.mod(b - at, tau)], -1)
+        at, p = np.arctan2(ca - cb, d - sa + sb), np.sqrt(2 + d * d - 2 * cab + 2 * d * (sb - sa))  # RSR
+        out[1] = np.stack([np.mod(a - at, tau), p, np.mod(at - b, tau)], -1)
+        p = np.sqrt(-2 + d * d + 2 * cab + 2 * d * (sa + sb))  # LSR
+        at = np.arctan2(-ca - cb, d + sa + sb) - np.arctan2(-2.0, p)
+        out[2] = np.stack([np.mod(at - a, tau), p, np.mod(at - b, tau)], -1)
+        p = np.sqrt(d * d - 2 + 2 * cab - 2 * d * (sa + sb))  # RSL
+        at = np.arctan2(ca + cb, d - sa - sb) - np.arctan2(2.0, p)
+        out[3] = np.stack([np.mod(a - at, tau), p, np.mod(b - at, tau)], -1)
+        p = np.mod(tau - np.arccos((6 - d * d + 2 * cab + 2 * d * (sa - sb)) / 8), tau)  # RLR
+        t = np.mod(a - np.arctan2(ca - cb, d - sa + sb) + p / 2, tau)
+        out[4] = np.stack([t, p, np.mod(a - b - t + p, tau)], -1)
+        p = np.mod(tau - np.arccos((6 - d * d + 2 * cab + 2 * d * (sb - sa)) / 8), tau)  # LRL
+        t = np.mod(-a - np.arctan2(ca - cb, d + sa - sb) + p / 2, tau)
+        out[5] = np.stack([t, p, np.mod(b - a - t + p, tau)], -1)
+    return out
+
+
+def _dubins_points(x0: float, y0: float, yaw0: float, segs: np.ndarray, radius_m: float, n: int = 8) -> np.ndarray:
+    """``(6, C, 3 n, 2)``: ``n`` points along each segment of the paths ``segs`` of
+    :func:`_dubins` from one pose."""
+    shape = segs.shape[:2]
+    x, y, yaw = np.full(shape, x0), np.full(shape, y0), np.full(shape, yaw0)
+    frac = np.arange(1, n + 1) / n
+    out = []
+    for j in range(3):
+        sign = np.array([_TURN_SIGN[w[j]] for w in _WORDS])[:, None, None]
+        ang = segs[:, :, j, None] * frac  # (6, C, n)
+        th = yaw[..., None] + sign * ang
+        arc_x = x[..., None] + sign * radius_m * (np.sin(th) - np.sin(yaw)[..., None])
+        arc_y = y[..., None] - sign * radius_m * (np.cos(th) - np.cos(yaw)[..., None])
+        line_x = x[..., None] + radius_m * ang * np.cos(yaw)[..., None]
+        line_y = y[..., None] + radius_m * ang * np.sin(yaw)[..., None]
+        px, py = np.where(sign == 0.0, line_x, arc_x), np.where(sign == 0.0, line_y, arc_y)
+        out.append(np.stack([px, py], -1))
+        x, y, yaw = px[..., -1], py[..., -1], th[..., -1]
+    return np.concatenate(out, axis=2)
+
+
+# -- prediction ------------------------------------------------------------------------------
+def design_envelope() -> np.ndarray:
+    """``(27, 3)``: ``(steering_offset_rad, steering_gain, speed_scale)`` of the cars the
+    planner keeps inside the area: every combination of -, 0, + each design error."""
+    return np.array(list(itertools.product((-DESIGN_TRIM_RAD, 0.0, DESIGN_TRIM_RAD),
+                                           (1.0 - DESIGN_GAIN_ERROR, 1.0, 1.0 + DESIGN_GAIN_ERROR),
+                                           (1.0 - DESIGN_SPEED_ERROR, 1.0, 1.0 + DESIGN_SPEED_ERROR))))
+
+
+_NOMINAL = np.array([[0.0, 1.0, 1.0]])
+
+
+class _Kinematic:
+    """Kinematic bicycle with the car's steering limit and rate and its accel and brake
+    limits, for ``S`` cars at once (state arrays ``(S,)``); ``cars`` ``(S, 3)`` as
+    :func:`design_envelope` (offset, gain and speed scale act like the effects of the same
+    names; ``(1, 3)`` nominal: the plain car)."""
+
+    def __init__(self, car: CarDescription, dt_s: float, cars: np.ndarray = _NOMINAL):
+        self.dt = dt_s
+        self.lim = car.steering.limit_rad
+        self.ds = car.steering.rate_radps * dt_s
+        self.acc, self.brk = car.drive.max_accel_mps2 * dt_s, car.drive.max_brake_mps2 * dt_s
+        self.wb = car.chassis.wheelbase_m
+        self.off, self.gain, self.vscale = (np.array(col, dtype=float) for col in np.asarray(cars, dtype=float).T)
+        n = len(self.off)
+        self.x, self.y, self.yaw, self.v, self.steer = (np.zeros(n) for _ in range(5))
+
+    def step(self, speed, steer, coast: bool) -> None:
+        """One frame of the commands ``speed`` (m/s), ``steer`` (rad): floats or ``(S,)``."""
+        target = np.clip(self.gain * steer + self.off, -self.lim, self.lim)
+        self.steer = self.steer + np.clip(target - self.steer, -self.ds, self.ds)
+        if not coast:
+            vt = self.vscale * speed
+            a = np.where(np.abs(vt) > np.abs(self.v), self.acc, self.brk)
+            self.v = self.v + np.clip(vt - self.v, -a, a)
+        self.yaw = self.yaw + self.v * np.tan(self.steer) / self.wb * self.dt
+        self.x = self.x + self.v * np.cos(self.yaw) * self.dt
+        self.y = self.y + self.v * np.sin(self.yaw) * self.dt
+
+
 # -- building ----------------------------------------------------------------------------
 class _Builder:
-    """Appends command rows and predicts the nominal car (kinematic bicycle with the speed
-    and steering limits) so turns can aim the car back through the area's middle."""
+    """Appends command rows while predicting them on ``cars`` (:class:`_Kinematic`); the
+    plan's builder predicts the nominal car, probes predict the design envelope."""
 
-    def __init__(self, car: CarDescription, rate_hz: float, middle_xy: tuple[float, float] = (0.0, 0.0)):
+    def __init__(self, car: CarDescription, rate_hz: float, cars: np.ndarray = _NOMINAL,
+                 centre_xy: tuple[float, float] = (0.0, 0.0)):
         self.car = car
-        self.mx, self.my = middle_xy
+        self.rate_hz = rate_hz
         self.dt = 1.0 / rate_hz
-        self.rows: list[tuple[float, float, bool, str]] = []
-        self.x = self.y = self.yaw = self.v = self.steer = 0.0
-        self.turn_sign = -1.0  # direction of the last turn: the next tie goes the other way
-        self._probe_cache: np.ndarray | None = None
-        self.xy: list[tuple[float, float]] = [(0.0, 0.0)]
+        self.kin = _Kinematic(car, self.dt, cars)
+        self.cx, self.cy = centre_xy
+        self.rows: list[tuple[float, float, bool, str, tuple[float, float, float] | None]] = []
+        self.xy: list[tuple[np.ndarray, np.ndarray]] = [(self.kin.x, self.kin.y)]
 
-    def emit(self, speed: float, steer: float, segment: str, coast: bool = False) -> None:
-        car, dt = self.car, self.dt
-        lim = car.steering.limit_rad
-        self.rows.append((float(speed), float(steer), bool(coast), segment))
-        # predict one frame
-        target = min(max(steer, -lim), lim)
-        ds = car.steering.rate_radps * dt
-        self.steer += min(max(target - self.steer, -ds), ds)
-        if not coast:
-            a = car.drive.max_accel_mps2 if abs(speed) > abs(self.v) else car.drive.max_brake_mps2
-            self.v += min(max(speed - self.v, -a * dt), a * dt)
-        self.yaw += self.v * math.tan(self.steer) / car.chassis.wheelbase_m * dt
-        self.x += self.v * math.cos(self.yaw) * dt
-        self.y += self.v * math.sin(self.yaw) * dt
-        self.xy.append((self.x, self.y))
+    @property
+    def steer_max(self) -> float:
+        return RETURN_STEER_FRACTION * self.car.steering.limit_rad
+
+    def emit(self, speed: float, steer: float, segment: str, coast: bool = False, ref: bool = False) -> None:
+        """One row; ``ref``: record the (first) car's pose at the row as its reference."""
+        pose = (float(self.kin.x[0]), float(self.kin.y[0]), float(wrap_angle(self.kin.yaw[0]))) if ref else None
+        self.rows.append((float(speed), float(steer), bool(coast), segment, pose))
+        self.kin.step(float(speed), float(steer), bool(coast))
+        self.xy.append((self.kin.x, self.kin.y))
 
     def hold(self, seconds: float, speed: float, steer: float, segment: str, coast: bool = False) -> None:
         for _ in range(max(1, round(seconds / self.dt))):
@@ -226,59 +505,103 @@ class _Builder:
         for k in range(n):
             self.emit(v0 + (v1 - v0) * (k + 1) / n, steer, segment)
 
-    def probe(self, experiment) -> np.ndarray:
-        """``(M, 2)`` path of ``experiment(builder)`` from this speed and steering, started at
-        the origin heading +x (a dry run: nothing is emitted here)."""
-        p = _Builder(self.car, 1.0 / self.dt)
-        p.v, p.steer = self.v, self.steer
-        experiment(p)
-        return np.array(p.xy)
+    def path(self) -> np.ndarray:
+        """``(F, S, 2)``: every predicted point so far (F frames, S cars)."""
+        return np.stack([np.array([p[0] for p in self.xy]), np.array([p[1] for p in self.xy])], 2)
 
-    def turn_then(self, experiment, speed: float, steer_frac: float = 0.8) -> None:
-        """Turn at ``steer_frac`` of the limit, then run ``experiment(builder)``. The turn
-        (direction, and angle in 5 degree steps) minimises the largest distance of the
-        experiment's predicted path from the middle of the area (plus a small price per
-        degree); ties go against the last turn's direction, so turns alternate."""
-        wb = self.car.chassis.wheelbase_m
-        steer = steer_frac * self.car.steering.limit_rad
-        radius = wb / math.tan(steer)
-        best = None
-        for sign in (-self.turn_sign, self.turn_sign):
-            cx, cy = self.x - sign * radius * math.sin(self.yaw), self.y + sign * radius * math.cos(self.yaw)
-            for k in range(72):
-                phi = math.radians(5.0 * k)
-                yaw = self.yaw + sign * phi
-                px, py = cx + sign * radius * math.sin(yaw), cy - sign * radius * math.cos(yaw)
-                path = self._probe_cache if k or sign != -self.turn_sign else None
-                if path is None:
-                    path = self._probe_cache = self.probe(experiment)
-                c, s_ = math.cos(yaw), math.sin(yaw)
-                wx = px + c * path[:, 0] - s_ * path[:, 1] - self.mx
-                wy = py + s_ * path[:, 0] + c * path[:, 1] - self.my
-                cost = float(np.sqrt(wx * wx + wy * wy).max()) + 0.05 * phi
-                cost += 0.0 if sign == -self.turn_sign else 0.05
-                if best is None or cost < best[0] - 1e-9:
-                    best = (cost, sign, phi)
-        _, sign, phi = best
-        self.turn_sign = sign
-        label = f"turn:{'left' if sign > 0 else 'right'}"
-        yaw0 = self.yaw
-        for _ in range(int(10.0 / self.dt)):
-            if sign * (self.yaw - yaw0) >= phi - 0.5 * abs(self.v) * math.tan(steer) / wb * self.dt:
+    def probe(self, experiment, speed: float, every: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """``(nominal (F, 2), envelope (M, 2))``: the paths of ``experiment(builder)``
+        started at the origin heading +x at ``speed`` (as commanded: each car at its own
+        scale) of the nominal car and of the design envelope, every ``every``-th frame and
+        the last; the envelope's with each car's room to turn afterwards: the arcs of a
+        quarter turn left and right at ``steer_max`` from its last pose, on the radius of the
+        envelope's widest-turning car (a dry run: nothing is emitted here)."""
+        p = _Builder(self.car, self.rate_hz, design_envelope())
+        p.kin.v = p.kin.vscale * speed
+        experiment(p)
+        path = p.path()
+        steer = (1.0 - DESIGN_GAIN_ERROR) * self.steer_max - DESIGN_TRIM_RAD
+        radius = self.car.chassis.wheelbase_m / math.tan(steer)
+        th = np.radians(np.arange(15.0, 91.0, 15.0))
+        fwd, side = radius * np.sin(th), radius * (1.0 - np.cos(th))
+        c, s = np.cos(p.kin.yaw)[:, None], np.sin(p.kin.yaw)[:, None]
+        arcs = [np.stack([p.kin.x[:, None] + c * fwd - s * sgn * side, p.kin.y[:, None] + s * fwd + c * sgn * side], 2)
+                for sgn in (1.0, -1.0)]
+        nominal = int(np.flatnonzero((design_envelope() == _NOMINAL).all(1))[0])
+        keep = np.concatenate([path[::every], path[-1:]])
+        return keep[:, nominal], np.concatenate([keep.reshape(-1, 2), *[a.reshape(-1, 2) for a in arcs]])
+
+    def return_then(self, experiment, speed: float) -> None:
+        """A ``turn`` at ``speed`` to the pose where ``experiment`` starts, then the
+        experiment. Candidate start poses: 24 headings (15 degrees apart), each with the
+        start point that centres the envelope's paths of the experiment (:meth:`probe`) in
+        the area, moved -1.5 .. 1.5 m along the heading and -0.5 .. 0.5 m across. The turn to
+        a candidate is a Dubins path (:func:`_dubins`; arcs at ``_ARC_FRACTION`` of the turn
+        steering) to ``_RUN_IN_M`` before the start, then straight to it. Chosen: the turn
+        and start whose nominal path stays ``_PLAN_MARGIN_M`` inside the area, whose
+        envelope reaches least far out of the area, then the shortest and most compact
+        (costs in :data:`_COST`)."""
+        nom, pts = self.probe(experiment, speed, every=3)
+        psi = np.radians(15.0 * np.arange(24))
+        c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
+        rx, ry = c * pts[:, 0] - s * pts[:, 1], s * pts[:, 0] + c * pts[:, 1]  # (24, M)
+        sx = self.cx - 0.5 * (rx.min(1) + rx.max(1))
+        sy = self.cy - 0.5 * (ry.min(1) + ry.max(1))
+        da, dc = (a.ravel() for a in np.meshgrid(np.linspace(-1.5, 1.5, 7), np.linspace(-0.5, 0.5, 3)))
+        tx = (sx[:, None] + da * c - dc * s).ravel()
+        ty = (sy[:, None] + da * s + dc * c).ravel()
+        tyaw = np.repeat(psi, len(da))
+        ct, st = np.cos(tyaw)[:, None], np.sin(tyaw)[:, None]
+
+        def reach_of(p):  # (C,): farthest Chebyshev distance of p (M, 2) started at the candidates
+            wx = tx[:, None] + ct * p[:, 0] - st * p[:, 1] - self.cx
+            wy = ty[:, None] + st * p[:, 0] + ct * p[:, 1] - self.cy
+            return np.maximum(np.abs(wx), np.abs(wy)).max(1)
+
+        k = self.kin
+        x0, y0, yaw0 = float(k.x[0]), float(k.y[0]), float(k.yaw[0])
+        radius = self.car.chassis.wheelbase_m / math.tan(_ARC_FRACTION * self.steer_max)
+        segs = _dubins(x0, y0, yaw0, tx - _RUN_IN_M * ct[:, 0], ty - _RUN_IN_M * st[:, 0], tyaw, radius)
+        length = radius * segs.sum(-1) + _RUN_IN_M  # (6, C)
+        way = _dubins_points(x0, y0, yaw0, np.nan_to_num(segs), radius)
+        reach_turn = np.maximum(np.abs(way[..., 0] - self.cx), np.abs(way[..., 1] - self.cy)).max(-1)
+        reach = np.maximum(reach_turn, reach_of(nom))  # (6, C) nominal
+        over = np.maximum(np.maximum(reach, reach_of(pts)) - 0.5 * AREA_M, 0.0)
+        inside = np.maximum(reach - (0.5 * AREA_M - _PLAN_MARGIN_M), 0.0)
+        cost = (_COST["out_m"] * over + _COST["margin_m"] * inside + _COST["reach_m"] * reach
+                + _COST["turn_s"] * length / speed)
+        best_w, best_c = np.unravel_index(int(np.argmin(np.where(np.isfinite(length), cost, np.inf))), cost.shape)
+        bounds = np.cumsum(np.append(radius * segs[best_w, best_c], _RUN_IN_M))
+        signs = [_TURN_SIGN[ch] for ch in _WORDS[best_w]] + [0.0]
+        steer_arc = _ARC_FRACTION * self.steer_max
+        done = 0.0  # distance driven: the steering follows the path's segments by distance
+        for _ in range(round(60.0 / self.dt)):
+            if done >= bounds[-1] - 1e-9:
                 break
-            self.emit(speed, sign * steer, label)
+            j = int(np.searchsorted(bounds, done, side="right"))
+            x_before, y_before = float(k.x[0]), float(k.y[0])
+            self.emit(speed, signs[min(j, 3)] * steer_arc, "turn:return", ref=True)
+            done += math.hypot(float(k.x[0]) - x_before, float(k.y[0]) - y_before)
         experiment(self)
+
+
+# weights of the planner's choice of turns (_Builder.return_then): per metre the nominal car or
+# the envelope (with room to turn afterwards) gets out of the area, per metre the nominal car
+# comes closer than _PLAN_MARGIN_M to the edge, per metre of its farthest reach, per second of turn
+_COST = {"out_m": 1000.0, "margin_m": 50.0, "reach_m": 0.1, "turn_s": 0.2}
 
 
 def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: float = RATE_HZ,
               duration_s: float | None = None) -> ExcitationPlan:
-    """The excitation plan for ``car`` (about 65 s; docs/calibration.md lists the segments).
+    """The excitation plan for ``car`` (about 90 s; docs/calibration.md lists the segments).
 
     Speeds and steering amplitudes follow the car's limits (``drive.max_speed_mps``,
     ``steering.limit_rad``, ``wheels.friction_mu``). ``seed`` drives only the
     ``random_steer`` steps (``numpy.random.default_rng(seed)``). ``duration_s`` (at least
-    ``MIN_DURATION_S``) appends more random-steer blocks until the plan lasts about that
-    long (each block a turn, 3 s of steps and a stop: +-4 s); ``None`` gives the core plan.
+    ``MIN_DURATION_S``) appends more random-steer blocks (each a turn, 3 to 4.5 s of steps
+    and a stop) and a longer final pause until the plan lasts that long (a few seconds
+    more if the last turn is long); ``None`` gives the core plan.
+    The same arguments give the same plan.
     """
     car = car or CarDescription()
     if not (5.0 <= rate_hz <= 1000.0):
@@ -291,12 +614,18 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
     wb, mu = car.chassis.wheelbase_m, car.wheels.friction_mu
     v_lo, v_mid = min(0.8, 0.5 * vmax), min(1.2, 0.6 * vmax)
     v_fast = min(2.0, 0.8 * vmax)
-    # the first run (ramp + straight) goes ~2.7 m east: the middle of the area is half-way
-    b = _Builder(car, rate_hz, middle_xy=(0.5 * (0.5 * 2.5 + 1.0) * v_mid, 0.0))
-    b.hold(1.0, 0.0, 0.0, "pause:start")
-    # 1. slow ramp from rest (deadband: when does it start to roll?), then straight (offset)
-    b.ramp(2.5, 0.0, v_mid, 0.0, f"speed_ramp:0-{v_mid:.1f}")
-    b.hold(1.0, v_mid, 0.0, f"straight:{v_mid:.1f}")
+
+    # 1. from rest: slow ramp (deadband: when does it start to roll?), then straight (offset);
+    #    the area's middle is the middle of this run's envelope
+    def first_run(p):
+        p.hold(1.0, 0.0, 0.0, "pause:start")
+        p.ramp(2.5, 0.0, v_mid, 0.0, f"speed_ramp:0-{v_mid:.1f}")
+        p.hold(1.0, v_mid, 0.0, f"straight:{v_mid:.1f}")
+
+    _, probe = _Builder(car, rate_hz).probe(first_run, 0.0)
+    b = _Builder(car, rate_hz, centre_xy=(0.5 * (probe[:, 0].min() + probe[:, 0].max()),
+                                          0.5 * (probe[:, 1].min() + probe[:, 1].max())))
+    first_run(b)
 
     # 2. step steers left and right, small and medium amplitude (offset, gain, lag, latency)
     def steps(frac):
@@ -308,8 +637,8 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
             p.hold(0.4, v_mid, 0.0, f"straight:{v_mid:.1f}")
         return run
 
-    b.turn_then(steps(0.25), v_lo)
-    b.turn_then(steps(0.5), v_lo)
+    b.return_then(steps(0.25), v_lo)
+    b.return_then(steps(0.5), v_lo)
 
     # 3. circles at rising speed, left then right (gain, understeer, grip limit)
     steer_c = 0.7 * lim
@@ -326,28 +655,29 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
             p.hold(0.8, v_lo, sign * steer_c, f"circle:{side}@{v_lo:.1f}")
         return run
 
-    b.turn_then(circles(1), v_lo)
-    b.turn_then(circles(-1), v_lo)
+    b.return_then(circles(1), v_lo)
+    b.return_then(circles(-1), v_lo)
 
     # 4. speed steps (latency, motor lag), then brake to rest
+    v_step = min(1.6, 0.7 * vmax)
+
     def speed_steps(p):
         p.hold(0.3, v_lo, 0.0, "straight:settle")
         for v in (v_step, v_lo, v_step, 0.3):
-            p.hold(0.8, v, 0.0, f"speed_step:{v:.1f}")
+            p.hold(0.7, v, 0.0, f"speed_step:{v:.1f}")
         p.hold(0.6, 0.0, 0.0, "brake:0")
         p.hold(0.5, 0.0, 0.0, "pause:rest")
 
-    v_step = min(1.6, 0.7 * vmax)
-    b.turn_then(speed_steps, v_lo)
+    b.return_then(speed_steps, v_lo)
 
     # 5. coast-down from speed (rolling resistance, drag), then brake to rest
     def coast(p):
-        p.hold(0.9, v_fast, 0.0, f"straight:{v_fast:.1f}")
+        p.hold(0.7, v_fast, 0.0, f"straight:{v_fast:.1f}")
         p.hold(1.0, 0.0, 0.0, f"coast:{v_fast:.1f}", coast=True)
         p.hold(0.8, 0.0, 0.0, "brake:0")
         p.hold(0.5, 0.0, 0.0, "pause:rest")
 
-    b.turn_then(coast, v_lo)
+    b.return_then(coast, v_lo)
 
     # 6. steering chirp 0.3 -> 2.5 Hz (lag, latency, rate limit)
     f0, f1, amp, v_chirp = 0.3, 2.5, 0.3 * lim, min(0.6, v_lo)
@@ -359,9 +689,32 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
             phase += 2.0 * math.pi * (f0 + (f1 - f0) * k / n) / rate_hz
             p.emit(v_chirp, amp * math.sin(phase), f"chirp:{f0:g}-{f1:g}Hz")
 
-    b.turn_then(chirp, v_lo)
+    b.return_then(chirp, v_lo)
 
-    # 7. random steering steps (seeded): holds 0.15-0.5 s, amplitudes up to half the limit;
+    # 7. slow circles at full lock, left then right (the steering limit: steer_limit_scale)
+    v_lock = min(0.5, 0.4 * vmax)
+
+    def full_lock(p):
+        p.hold(0.3, v_lock, 0.0, "straight:settle")
+        p.hold(2.5, v_lock, lim, f"circle:left@{v_lock:.1f}/lock")
+        p.hold(2.5, v_lock, -lim, f"circle:right@{v_lock:.1f}/lock")
+
+    b.return_then(full_lock, v_lo)
+
+    # 8. reverse: rolling forward, a negative speed command (an ESC with brake brakes, waits
+    #    at rest, then reverses), then forward again; brake to rest
+    v_rev = min(0.6, 0.4 * vmax)
+
+    def reverse(p):
+        p.hold(0.5, v_lo, 0.0, f"straight:{v_lo:.1f}")
+        p.hold(2.2, -v_rev, 0.0, f"reverse:-{v_rev:.1f}")
+        p.hold(1.0, v_lo, 0.0, f"reverse:+{v_lo:.1f}")
+        p.hold(0.6, 0.0, 0.0, "brake:0")
+        p.hold(0.3, 0.0, 0.0, "pause:rest")
+
+    b.return_then(reverse, v_lo)
+
+    # 9. random steering steps (seeded): holds 0.15-0.5 s, amplitudes up to half the limit;
     #    repeated (new draws) until the plan lasts duration_s
     def random_block(seconds, last):
         holds, t_left = [], seconds
@@ -379,71 +732,127 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
             p.hold(1.0 if last else 0.4, 0.0, 0.0, "pause:end" if last else "pause:rest")
         return run
 
-    block_s, overhead_s = 3.0, 4.5  # random steps; turn (~2 s), settle, brake and pause
+    block_s, overhead_s = 3.0, 5.5  # random steps; turn (~3.5 s), settle, coast, brake and pause
     while True:
-        t_now = len(b.rows) * b.dt
-        last = duration_s is None or t_now + 2 * (block_s + overhead_s) > duration_s
-        seconds = block_s if duration_s is None or not last else max(block_s, duration_s - t_now - overhead_s)
-        b.turn_then(random_block(seconds, last), v_lo)
+        t_left = 0.0 if duration_s is None else duration_s - len(b.rows) * b.dt
+        last = t_left < 2.0 * (block_s + overhead_s)
+        seconds = min(max(t_left - overhead_s, block_s), 1.5 * block_s) if last and duration_s else block_s
+        b.return_then(random_block(seconds, last), v_lo)
         if last:
             break
+    if duration_s is not None and duration_s - len(b.rows) * b.dt > b.dt:  # the rest: a longer pause at the end
+        b.hold(duration_s - len(b.rows) * b.dt, 0.0, 0.0, "pause:end")
 
     rows = b.rows
+    ref = np.array([r[4] if r[4] is not None else (math.nan,) * 3 for r in rows], dtype=float)
     return ExcitationPlan(np.arange(len(rows)) / rate_hz, np.array([r[0] for r in rows]),
                           np.array([r[1] for r in rows]), np.array([r[2] for r in rows], dtype=bool),
-                          tuple(r[3] for r in rows), rate_hz=float(rate_hz), seed=int(seed))
+                          tuple(r[3] for r in rows), rate_hz=float(rate_hz), seed=int(seed),
+                          ref_x_m=ref[:, 0], ref_y_m=ref[:, 1], ref_yaw_rad=ref[:, 2],
+                          area_centre_m=(float(b.cx), float(b.cy)))
 
 
 def predict_path(plan: ExcitationPlan, car: CarDescription) -> np.ndarray:
-    """``(N + 1, 2)`` kinematic prediction of the path (nominal car, from the origin facing +x)."""
+    """``(N + 1, 2)`` kinematic prediction of the open-loop path (nominal car, from the
+    origin facing +x)."""
     b = _Builder(car, plan.rate_hz)
     for v, d, c in zip(plan.speed_cmd_mps, plan.steer_cmd_rad, plan.coast):
         b.emit(float(v), float(d), "", bool(c))
-    return np.array(b.xy)
+    return b.path()[:, 0]
 
 
 # -- simulating ----------------------------------------------------------------------------
 def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, seed: int = 0,
-             start: Pose2 = Pose2(), pose_noise_m: float = 0.0) -> RunLog:
+             start: Pose2 = Pose2(), pose_noise_m: float = 0.0, closed_loop: bool = False) -> RunLog:
     """Play ``plan`` in the simulator (``simrunner.car.effects.make_sim``: effects apply).
 
     Each row's command is set at ``t_k`` and the state logged at ``t_k`` (before the
     frame's physics steps), like the telemetry of ``simrunner drive``. Returns a
-    :class:`~simrunner.run.log.RunLog` (source ``"<excite>"``) with ``frame`` (the row
+    :class:`~simrunner.run.log.RunLog` (source ``"<excite>"``) with ``frame`` (the frame
     index), ``t_s``, the pose ``x_m, y_m, yaw_rad``, the actual ``speed_mps, steer_rad,
-    yaw_rate_radps``, the commands ``speed_cmd_mps, steer_cmd_rad`` and the differential
+    yaw_rate_radps``, the commands sent ``speed_cmd_mps, steer_cmd_rad``, the differential
     in force ``yaw_rate_cmd_radps``, and ``coast``; no ``lap`` or ``off_track`` (there is
     no track). ``pose_noise_m`` > 0 adds Gaussian noise of that std to x and y (std / 0.2 m
     per rad to yaw) from ``numpy.random.default_rng(seed)``, to mimic a real position log;
-    0 gives the exact simulated pose (``seed`` then has no effect).
+    0 gives the exact simulated pose (``seed`` then has no effect). ``start`` is where the
+    plan frame's origin is in the world.
+
+    Open loop (default) the log has one row per plan row, at the plan's times.
+    ``closed_loop``: the car drives the turns as docs/calibration.md tells a team to: it
+    steers to follow each turn's reference path (:func:`follow_path`) from the logged
+    (noisy) pose, as a real car from its measured one; once it has arrived at the path's
+    end the plan goes on with the row after the turn (skipping the turn's remaining rows),
+    and until then the turn's last row is repeated (at most ``RETURN_TIMEOUT_S``). So the
+    log's length differs from the plan's; it holds the commands sent. A plan without
+    reference rows cannot be played closed loop (:class:`PlanError`).
     """
     from simrunner.car.effects import make_sim
 
     steps = plan_steps_per_row(plan, dt_s)
-    sim = make_sim(car, dt_s=dt_s, start=start)
     n = len(plan)
-    state = np.empty((n, 7))  # x, y, yaw, speed, steer, yaw_rate, yaw_rate_cmd
+    turns = plan.turns() if closed_loop else []
+    if closed_loop and not turns:
+        raise PlanError("the plan has no turns to follow closed loop (no ref_x, ref_y, ref_yaw rows)")
+    turn_of = np.full(n, -1)  # per row: index into turns
+    paths = []  # per turn: the reference path in the world, its end heading, its end row
+    for i, (a, b) in enumerate(turns):
+        turn_of[a:b] = i
+        paths.append((start.apply(np.stack([plan.ref_x_m[a:b], plan.ref_y_m[a:b]], 1)),
+                      float(plan.ref_yaw_rad[b - 1]) + start.yaw_rad, b))
+    rng = np.random.default_rng(seed) if pose_noise_m > 0.0 else None
+    noise_std = np.array([pose_noise_m, pose_noise_m, pose_noise_m / 0.2])
+    noise = np.zeros((3, n))  # open loop: drawn in advance (x for all rows, then y, then yaw)
+    if rng is not None and not turns:
+        noise = np.stack([rng.normal(0.0, sd, n) for sd in noise_std])
+    sim = make_sim(car, dt_s=dt_s, start=start)
+    wb, steer_max = car.chassis.wheelbase_m, RETURN_STEER_FRACTION * car.steering.limit_rad
+    max_extra = round(RETURN_TIMEOUT_S * plan.rate_hz)
+    rows: list[tuple] = []  # row, x, y, yaw, speed, steer, yaw_rate, yaw_rate_cmd, speed_cmd, steer_cmd
     coast_now = False
-    for k in range(n):
+    k, turn, progress, extra, turn_frames = 0, -1, 0, 0, 0
+    while k < n:
+        p = sim.pose
+        e = rng.normal(0.0, noise_std) if turns and rng is not None else noise[:, min(k, n - 1)]
+        x, y, yaw = p.x_m + e[0], p.y_m + e[1], p.yaw_rad
+        if rng is not None:
+            yaw = wrap_angle(yaw + e[2])
+        while k < n and turn_of[k] >= 0:  # a turn row: follow the turn's path, or skip the rest of it
+            if turn_of[k] != turn:
+                turn, progress, extra, turn_frames = int(turn_of[k]), 0, 0, 0
+            path_xy, end_yaw, end = paths[turn]
+            min_progress = int(RETURN_PACE * (turn_frames - RETURN_LAG_S * plan.rate_hz))
+            step = follow_path(x, y, yaw, path_xy, end_yaw, progress, min_progress, wheelbase_m=wb,
+                               steer_max_rad=steer_max)
+            progress = step.progress
+            if not step.arrived:
+                break
+            k = end
+        if k == n:
+            break
         v, d, c = float(plan.speed_cmd_mps[k]), float(plan.steer_cmd_rad[k]), bool(plan.coast[k])
+        if turn_of[k] >= 0:
+            d = step.steer_cmd_rad
+            turn_frames += 1
         if c != coast_now:
             sim.set_coast(c)
             coast_now = c
         sim.set_command(v, d)
-        p = sim.pose
-        state[k] = (p.x_m, p.y_m, p.yaw_rad, sim.speed_mps, sim.steer_rad, sim.yaw_rate_radps,
-                    sim.yaw_rate_cmd_radps)
+        rows.append((k, x, y, yaw, sim.speed_mps, sim.steer_rad, sim.yaw_rate_radps, sim.yaw_rate_cmd_radps, v, d))
         sim.step(steps)
-    x, y, yaw = state[:, 0], state[:, 1], state[:, 2]
-    if pose_noise_m > 0.0:
-        rng = np.random.default_rng(seed)
-        x = x + rng.normal(0.0, pose_noise_m, n)
-        y = y + rng.normal(0.0, pose_noise_m, n)
-        yaw = np.array([wrap_angle(a) for a in yaw + rng.normal(0.0, pose_noise_m / 0.2, n)])
-    return log_from_columns({"frame": np.arange(n), "t_s": plan.t_s, "x_m": x, "y_m": y, "yaw_rad": yaw,
-                             "speed_mps": state[:, 3], "steer_rad": state[:, 4], "yaw_rate_radps": state[:, 5],
-                             "speed_cmd_mps": plan.speed_cmd_mps, "steer_cmd_rad": plan.steer_cmd_rad,
-                             "yaw_rate_cmd_radps": state[:, 6], "coast": plan.coast}, "<excite>")
+        if turn_of[k] < 0:
+            k += 1
+        elif k + 1 == end and extra < max_extra:
+            extra += 1
+        else:
+            k += 1
+    state = np.array(rows, dtype=float)
+    row = state[:, 0].astype(int)
+    m = len(rows)
+    return log_from_columns({"frame": np.arange(m), "t_s": np.arange(m) / plan.rate_hz if turns else plan.t_s,
+                             "x_m": state[:, 1], "y_m": state[:, 2], "yaw_rad": state[:, 3],
+                             "speed_mps": state[:, 4], "steer_rad": state[:, 5], "yaw_rate_radps": state[:, 6],
+                             "speed_cmd_mps": state[:, 8], "steer_cmd_rad": state[:, 9],
+                             "yaw_rate_cmd_radps": state[:, 7], "coast": plan.coast[row]}, "<excite>")
 
 
 def plan_steps_per_row(plan: ExcitationPlan, dt_s: float) -> int:
