@@ -156,7 +156,7 @@ EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
           "reverses only after a hold time at rest", ("reverse",), _LONGITUDINAL),
     _spec("accel_scale", "accel_scale", 1.0, (0.3, 2.0), "1",
           "the car file's drive.max_accel_mps2 is off by this factor (motor torque, battery)",
-          ("speed_step", "speed_ramp"), _LONGITUDINAL, "build"),
+          ("speed_step",), _LONGITUDINAL, "build"),
     _spec("brake_scale", "brake_scale", 1.0, (0.3, 2.0), "1",
           "the car file's drive.max_brake_mps2 is off by this factor (ESC brake strength)",
           ("brake", "speed_step"), _LONGITUDINAL, "build"),
@@ -169,7 +169,7 @@ EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
     _spec("mass_scale", "mass_scale", 1.0, (0.5, 2.0), "1",
           "the car file's masses are off by this factor: with the file's drive and brake torques "
           "a heavier car speeds up and brakes more slowly (and drag slows it less)",
-          ("speed_step", "brake", "speed_ramp"), _LONGITUDINAL, "build"),
+          ("speed_step", "brake"), _LONGITUDINAL, "build"),
     _spec("top_speed", "top_speed_mps", math.inf, (0.3, 10.0), "m/s",
           "the car tops out below the commanded speed (ESC speed limit, gearing, battery): speed "
           "commands are capped at this magnitude",

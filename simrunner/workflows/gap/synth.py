@@ -141,9 +141,11 @@ def make_measured_log(effect: str | Sequence[str] | None, *, rng: np.random.Gene
     if start_s > 0.0 or duration_s is not None:
         a = int(round(start_s * plan.rate_hz))
         b = len(plan) if duration_s is None else min(len(plan), a + int(round(duration_s * plan.rate_hz)))
-        plan = dataclasses.replace(plan, t_s=plan.t_s[a:b] - plan.t_s[a], speed_cmd_mps=plan.speed_cmd_mps[a:b],
-                                   steer_cmd_rad=plan.steer_cmd_rad[a:b], coast=plan.coast[a:b],
-                                   segment=plan.segment[a:b])
+        n_rows = len(plan)
+        rows = {f.name: getattr(plan, f.name)[a:b] for f in dataclasses.fields(plan)
+                if isinstance(getattr(plan, f.name), np.ndarray) and len(getattr(plan, f.name)) == n_rows}
+        rows["t_s"] = rows["t_s"] - plan.t_s[a]
+        plan = dataclasses.replace(plan, **rows)
     out = run_plan(plan, truth_car, dt_s=SYNTH_DT_S)
     n = len(out)
     keep = ("t_s", "speed_cmd_mps", "steer_cmd_rad", "coast") + SENSORS[sensors]
