@@ -1,189 +1,562 @@
-"""Bench of the gap workflow (issue 4 section 6) on synthetic logs with a hidden effect.
+"""Bench of the gap workflow (issue 10's targets) on synthetic and real logs.
 
-Every fourth trial is effect-free ("none"), the others cycle through the catalogue
-(:func:`trial_effect`); each trial draws a plan seed, a
-magnitude, nuisance mass/friction and noise from ``numpy.random.default_rng([SEED, k])``
-(:func:`simrunner.workflows.gap.synth.make_measured_log`) and runs the whole catalogue
-(``run_gap(jobs=1)``); trials run in parallel processes. Reported:
+Modes (``--mode``, comma-separated; default: all of them, small):
 
-* naming accuracy overall, per effect, and by signal-to-noise ratio. SNR of a trial: the
-  RMS over the replay windows of the difference the hidden effect makes to x, y, yaw and
-  speed (replays from the exact states with the true car, with and without the effect),
-  each divided by its noise sigma, averaged in square over the four signals, square-rooted;
-* false claims on effect-free logs;
-* median relative parameter error |fit - true| / |true - neutral| (/ |true| when the
-  neutral value is infinite) over correctly named trials;
-* median held-out position RMSE after/before over trials with an effect (against the
-  noisy measured log, as the workflow reports it), per signal, and on the signal the
-  hidden effect changes most (known from the truth); the same ratios against the smoothed
-  measured states, where the sensor noise no longer sets a floor;
-* wall time of one full-length log through the whole catalogue on 2 processes.
+``single``
+    One hidden effect per log (as before issue 10): every :data:`NONE_EVERY`-th trial is
+    effect-free, the others cycle through the catalogue (:func:`trial_effect`); each trial's
+    plan seed, magnitude, nuisance (mass and grip +-3 %) and noise come from
+    ``numpy.random.default_rng([SEED, k])``. Pose + speed sensors.
+``multi``
+    2 or 3 simultaneous effects (even trials 2, odd 3), one from each of as many different
+    :data:`GROUPS` (:func:`multi_effects`; the rule: never two effects of one group, the
+    groups gather effects that act on the same thing in nearly the same way, e.g. at most
+    one of steering_gain / steering_asymmetry / steer_limit_scale), magnitudes from
+    ``synth.RANGES``, with the same nuisance and noise.
+``speed_gyro``
+    Logs with a speed sensor and a gyro only (no pose): trials cycle none / one effect /
+    two effects / one effect, over the effects such a log can reveal
+    (``report.cannot_reveal`` with the signals speed and yaw rate).
+``compare``
+    The ``multi`` logs (the same seeds: a run of ``multi,compare`` runs the chain once per
+    log) with two baselines on the same prepared logs, windows and residuals
+    (:mod:`bench.gap_baselines`): (a) one joint least-squares fit of every catalogue
+    parameter, (b) E-SINDy of the longitudinal and yaw dynamics.
+``real``
+    The two shared real logs (``REAL_DIR``, or the folder ``NXPCUP_REAL_LOGS`` names, as in
+    the tests; skipped when absent) with their car, one at a time.
+``timing``
+    One 60-s synthetic log with two hidden effects through the whole chain, ``run_gap(jobs=2)``.
 
-Targets: >= 90 % named where SNR >= 3, <= 5 % false claims, median parameter error
-<= 10 %, median RMSE after/before <= 0.5.
+Signal-to-noise ratio of a hidden effect: replay the noise-free log (same seed) in its
+windows from the exact states with the nuisance car plus only that effect and with the
+nuisance car alone; RMS over the windows of the difference in each signal the log has (x,
+y, yaw, speed; or speed and yaw rate), over that signal's noise sigma, quadratic mean over
+the signals. Parameter error: ``|fit - true| / |true - neutral|`` (``/ |true|`` when the
+neutral value is infinite), over correctly named effects. Held-out figures: the run's own
+``gap_after / gap_before`` and position RMSE after/before on the held-out windows (against
+the noisy measured log), and the same for the baselines' cars on the same windows.
 
-``python -m bench.bench_gap [--trials N] [--jobs J] [--short] [--out FILE.jsonl] [--no-wall]``
-(``--table FILE.jsonl`` prints the table of saved rows);
-``python -m bench`` runs ``main()`` with the defaults (100 trials: about an hour on 2 cores).
+``python -m bench.bench_gap [--mode single,multi,...] [--trials N] [--jobs J] [--out FILE.json]``
+(``--table FILE.json`` prints the tables of saved rows again). Synthetic trials run in
+``--jobs`` processes, one ``run_gap(jobs=1)`` each; real and timing runs use ``--jobs``
+processes inside ``run_gap``. ``python -m bench`` runs ``main()``: every mode, small
+(:data:`SMALL_TRIALS` per synthetic mode; about an hour on 2 cores).
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import os
+import sys
 import time
+import traceback
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
 
 SEED = 20240
-SHORT_TRIALS = 16  # every effect at least once, four effect-free
 NONE_EVERY = 4
+SMALL_TRIALS = 6
+SNR_MIN = 3.0
+MODES = ("single", "multi", "speed_gyro", "compare", "real", "timing")
+_MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3}  # seed tags: compare uses the multi logs
+REAL_DIR = Path(os.environ.get("NXPCUP_REAL_LOGS", Path(__file__).resolve().parents[2] / "shared" / "data" / "real_logs"))
+REAL_LOGS = ("f1tenth_DS2.csv", "f1tenth_DS3.csv")
+REAL_CAR = "f1tenth_car.toml"
+TIMING_LOG_S = 60.0
+TIMING_EFFECTS = {"steering_offset": 0.02, "motor_lag": 0.15}
+
+# Effects that act on the same thing in nearly the same way: a multi-effect log never hides
+# two of one group (every catalogue effect is in exactly one group).
+GROUPS: dict[str, tuple[str, ...]] = {
+    "steering trim": ("steering_offset",),
+    "steering scale": ("steering_gain", "steering_asymmetry", "steer_limit_scale"),
+    "steering dynamics": ("steering_lag", "steering_rate_limit", "servo_rate_scale", "steering_play"),
+    "lateral grip": ("friction", "tire_slip"),
+    "delay": ("command_latency",),
+    "speed level": ("speed_scale", "top_speed", "throttle_deadband"),
+    "speed response": ("motor_lag", "accel_scale", "brake_scale", "mass_scale"),
+    "coasting losses": ("rolling_resistance", "drag"),
+    "reverse": ("esc_brake_reverse",),
+}
 
 
-def _trial(k: int) -> dict:
-    from simrunner.workflows.gap.fit import _quiet_worker
-    from simrunner.workflows.gap.logs import derive
-    from simrunner.workflows.gap.replay import make_windows, replay
-    from simrunner.workflows.gap.report import run_gap
-    from simrunner.workflows.gap.synth import (NOISE_POS_M, NOISE_SPEED_MPS, NOISE_YAW_RAD, RANGES, make_measured_log)
-    from simrunner.car.effects import EFFECTS
-
-    _quiet_worker()
-    effect = trial_effect(k, list(RANGES))
-    t0 = time.perf_counter()
-    log, truth = make_measured_log(effect, rng=np.random.default_rng([SEED, k]))
-    result = run_gap(log, jobs=1)
-    row = {"trial": k, "effect": effect or "none", "named": result.effect, "value": truth.value,
-           "field": truth.field, "fitted": result.parameters.get(truth.field) if truth.field else None,
-           "rmse_before": result.rmse_before, "rmse_after": result.rmse_after,
-           "gap_ratio": result.gap_after / result.gap_before,
-           "best": result.ranking[0].effect, "best_delta_bic": result.ranking[0].delta_bic,
-           "best_improvement": result.ranking[0].improvement}
-    # the same held-out RMSE against the smoothed measured states (sensor noise mostly removed)
-    row["rmse_smooth_before"] = result.rmse_smoothed_before
-    row["rmse_smooth_after"] = result.rmse_smoothed_after
-    if effect is not None:
-        exact, _ = make_measured_log(effect, rng=np.random.default_rng([SEED, k]), noise=False)
-        d = derive(exact, truth.car.chassis.wheelbase_m, truth.car.steering.limit_rad)
-        w = make_windows(exact)
-        neutral = EFFECTS[effect].neutral[0]
-        from simrunner.car.effects import with_effects
-
-        p1 = replay(truth.car, exact, d, w)
-        p0 = replay(with_effects(truth.car, **{truth.field: neutral}), exact, d, w)
-        dyaw = (p1.yaw_rad - p0.yaw_rad + math.pi) % (2 * math.pi) - math.pi
-        ms = [np.nanmean(((p1.x_m - p0.x_m) / NOISE_POS_M) ** 2), np.nanmean(((p1.y_m - p0.y_m) / NOISE_POS_M) ** 2),
-              np.nanmean((dyaw / NOISE_YAW_RAD) ** 2), np.nanmean(((p1.speed_mps - p0.speed_mps) / NOISE_SPEED_MPS) ** 2)]
-        row["snr"] = float(np.sqrt(np.mean(ms)))
-        # the report signal the hidden effect changes most (relative to its noise), from the truth
-        row["most_affected"] = max((("position_m", 0.5 * (ms[0] + ms[1])), ("yaw_rad", ms[2]),
-                                    ("speed_mps", ms[3])), key=lambda p: p[1])[0]
-        if row["fitted"] is not None and result.effect == effect:
-            ref = abs(truth.value) if math.isinf(neutral) else abs(truth.value - neutral)
-            row["param_rel_err"] = abs(row["fitted"] - truth.value) / ref
-    row["wall_s"] = time.perf_counter() - t0
-    return row
-
+# --- trial design ------------------------------------------------------------------------------
 
 def trial_effect(k: int, effects: list[str]) -> str | None:
-    """The hidden effect of trial ``k``: every :data:`NONE_EVERY`-th trial is effect-free
-    (so false claims are measured on a quarter of the trials), the others cycle through
-    ``effects``."""
+    """The hidden effect of single-mode trial ``k``: every :data:`NONE_EVERY`-th trial is
+    effect-free, the others cycle through ``effects``."""
     if k % NONE_EVERY == 0:
         return None
     return effects[(k - 1 - k // NONE_EVERY) % len(effects)]
 
 
-def _table(rows: list[dict]) -> str:
-    med = lambda v: float(np.median(v)) if len(v) else float("nan")  # noqa: E731
-    lines = [f"{'effect':<20}{'n':>4}{'named':>7}{'med SNR':>9}{'med p.err':>11}{'med RMSE a/b':>14}"]
-    for eff in sorted({r["effect"] for r in rows}, key=lambda e: (e != "none", e)):
-        rs = [r for r in rows if r["effect"] == eff]
-        ok = sum(r["named"] == eff for r in rs)
-        snr = med([r["snr"] for r in rs if "snr" in r])
-        perr = med([r["param_rel_err"] for r in rs if "param_rel_err" in r])
-        ratio = med([r["rmse_after"]["position_m"] / r["rmse_before"]["position_m"] for r in rs])
-        lines.append(f"{eff:<20}{len(rs):>4}{ok:>4}/{len(rs):<2}{snr:>9.1f}{perr:>11.1%}{ratio:>14.2f}")
-    eff_rows = [r for r in rows if r["effect"] != "none"]
-    none_rows = [r for r in rows if r["effect"] == "none"]
-    hi = [r for r in eff_rows if r.get("snr", 0) >= 3]
-    lo = [r for r in eff_rows if r.get("snr", 0) < 3]
-    acc = lambda rs: (sum(r["named"] == r["effect"] for r in rs) / len(rs)) if rs else float("nan")  # noqa: E731
-    lines += [
-        "",
-        f"named overall (with effect): {acc(eff_rows):.1%} of {len(eff_rows)}",
-        f"named where SNR >= 3: {acc(hi):.1%} of {len(hi)}   (target >= 90 %)",
-        f"named where SNR < 3: {acc(lo):.1%} of {len(lo)}",
-        "named by SNR: " + ", ".join(
-            f"[{a:g}, {b:g}): {acc(rs):.0%} of {len(rs)}" for a, b in ((0, 1), (1, 3), (3, 10), (10, math.inf))
-            for rs in [[r for r in eff_rows if a <= r.get("snr", 0) < b]]),
-        f"false claims on effect-free logs: {sum(r['named'] != 'none' for r in none_rows)} of {len(none_rows)}"
-        f"   (target <= 5 %)",
-        f"effect-free logs, best candidate: max delta_BIC {max([r['best_delta_bic'] for r in none_rows], default=float('nan')):.1f}, "
-        f"max improvement {max([r['best_improvement'] for r in none_rows], default=float('nan')):.2%}",
-        f"median parameter error (correctly named): {med([r['param_rel_err'] for r in eff_rows if 'param_rel_err' in r]):.1%}"
-        f"   (target <= 10 %)",
-        f"median held-out position RMSE after/before (with effect): "
-        f"{med([r['rmse_after']['position_m'] / r['rmse_before']['position_m'] for r in eff_rows]):.2f}   (target <= 0.5)",
-        "median held-out RMSE after/before per signal (with effect): " + ", ".join(
-            f"{s} {med([r['rmse_after'][s] / r['rmse_before'][s] for r in eff_rows]):.2f}"
-            for s in ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps")),
-        f"median held-out RMSE after/before of the signal the effect changes most (from the truth): "
-        f"{med([r['rmse_after'][r['most_affected']] / r['rmse_before'][r['most_affected']] for r in eff_rows if 'most_affected' in r]):.2f}",
-        "against the smoothed measured states (noise mostly removed), median after/before: " + ", ".join(
-            f"{s} {med([r['rmse_smooth_after'][s] / r['rmse_smooth_before'][s] for r in eff_rows if 'rmse_smooth_after' in r]):.2f}"
-            for s in ("position_m", "yaw_rad", "speed_mps")),
-        f"median held-out gap after/before (normalised residuals, all signals; RMS ratio): "
-        f"{med([math.sqrt(r['gap_ratio']) for r in eff_rows if 'gap_ratio' in r]):.2f}",
-        f"median wall time per trial (1 process): {med([r['wall_s'] for r in rows]):.0f} s",
-    ]
-    return "\n".join(lines)
+def multi_effects(n: int, rng: np.random.Generator, allowed: list[str] | None = None) -> list[str]:
+    """``n`` effects from ``n`` different :data:`GROUPS` (groups and members drawn from
+    ``rng``; only ``allowed`` effects when given)."""
+    groups = {g: [e for e in members if allowed is None or e in allowed] for g, members in GROUPS.items()}
+    names = [g for g, members in groups.items() if members]
+    picked = rng.choice(len(names), size=n, replace=False)
+    return [str(rng.choice(groups[names[i]])) for i in sorted(picked)]
 
 
-def wall_time_one_log(jobs: int = 2) -> float:
-    """Seconds for one full plan-length log through the whole catalogue with ``jobs``."""
+def design(mode: str, k: int) -> tuple[list[str], str, np.random.Generator]:
+    """``(hidden effects, sensors, rng for make_measured_log)`` of trial ``k`` of ``mode``;
+    the same arguments always give the same log."""
+    from simrunner.workflows.gap.report import cannot_reveal
+    from simrunner.workflows.gap.synth import RANGES
+
+    if mode == "single":
+        e = trial_effect(k, list(RANGES))
+        return ([e] if e else []), "pose_speed", np.random.default_rng([SEED, k])
+    rng = np.random.default_rng([SEED, _MODE_TAG[mode], k])
+    if mode in ("multi", "compare"):
+        return multi_effects(2 + k % 2, rng), "pose_speed", rng
+    if mode == "speed_gyro":
+        hidden = cannot_reveal(list(RANGES), ("speed_mps", "yaw_rate_radps"))
+        allowed = [e for e in RANGES if e not in hidden]
+        kind = k % 4
+        if kind == 0:
+            return [], "speed_gyro", rng
+        if kind == 2:
+            return multi_effects(2, rng, allowed), "speed_gyro", rng
+        return [allowed[(k // 2 * 7 + kind) % len(allowed)]], "speed_gyro", rng
+    raise ValueError(f"mode {mode!r}: expected one of {', '.join(MODES)}")
+
+
+# --- one synthetic trial -----------------------------------------------------------------------
+
+def _sensor_signals(sensors: str):
+    from simrunner.workflows.gap.synth import NOISE_GYRO_RADPS, NOISE_POS_M, NOISE_SPEED_MPS, NOISE_YAW_RAD, SENSORS
+
+    sigma = {"x_m": NOISE_POS_M, "y_m": NOISE_POS_M, "yaw_rad": NOISE_YAW_RAD, "speed_mps": NOISE_SPEED_MPS,
+             "yaw_rate_radps": NOISE_GYRO_RADPS}
+    return {s: sigma[s] for s in SENSORS[sensors]}
+
+
+def effect_snr(mode: str, k: int) -> dict[str, float]:
+    """SNR of each hidden effect of trial ``k`` (module docstring)."""
+    from simrunner.car.effects import neutral_car, with_effects
+    from simrunner.workflows.gap.logs import derive
+    from simrunner.workflows.gap.replay import make_windows, replay
+    from simrunner.workflows.gap.synth import RANGES, make_measured_log
+
+    effects, sensors, rng = design(mode, k)
+    if not effects:
+        return {}
+    exact, truth = make_measured_log(effects, rng=rng, noise=False, sensors=sensors)
+    car = neutral_car(truth.car)  # the nuisance mass and grip, no effect
+    d = derive(exact, car.chassis.wheelbase_m, car.steering.limit_rad)
+    w = make_windows(exact)
+    p0 = replay(car, exact, d, w)
+    out = {}
+    for e in effects:
+        f = RANGES[e][0]
+        p1 = replay(with_effects(car, **{f: truth.values[f]}), exact, d, w)
+        ms = []
+        for s, sigma in _sensor_signals(sensors).items():
+            diff = getattr(p1, s) - getattr(p0, s)
+            if s == "yaw_rad":
+                diff = (diff + math.pi) % (2 * math.pi) - math.pi
+            ms.append(np.nanmean((diff / sigma) ** 2))
+        out[e] = float(np.sqrt(np.mean(ms)))
+    return out
+
+
+def rel_error(effect: str, fitted: float | None, true: float) -> float | None:
+    from simrunner.car.effects import EFFECTS
+
+    if fitted is None:
+        return None
+    neutral = EFFECTS[effect].neutral[0]
+    ref = abs(true) if math.isinf(neutral) else abs(true - neutral)
+    return abs(fitted - true) / ref if ref > 0 else None
+
+
+def held_out(result, car_before, car_after) -> dict:
+    """Held-out gap and RMSE of ``car_after`` vs ``car_before`` on ``result``'s held-out
+    windows (the definitions of ``run_gap``: gap = mean squared normalised residual)."""
+    from simrunner.workflows.gap.fit import cost_of
+    from simrunner.workflows.gap.replay import REPORT_SIGNALS, replay, residuals, rmse, window_mask
+
+    from bench.gap_baselines import problems
+
+    _, held = problems(result, car_before)
+    n = max(held.n_values, 1)
+    gb, ga = cost_of(held, car_before) / n, cost_of(held, car_after) / n
+    out = {"gap_before": gb, "gap_after": ga}
+    for tag, car in (("before", car_before), ("after", car_after)):
+        res, masks = [], []
+        for p in result.parts:
+            if p.held_windows:
+                pred = replay(car, p.log, p.derived, p.held_windows, dt_s=result.settings["dt_s"])
+                res.append(residuals(p.log, p.derived, pred))
+                masks.append(window_mask(len(p.log), p.held_windows))
+        sig = [s for s in REPORT_SIGNALS if all(s in r for r in res)]
+        joined = {s: np.concatenate([r[s] for r in res]) for s in sig}
+        out[f"rmse_{tag}"] = rmse(joined, np.concatenate(masks), sig)
+    return out
+
+
+def _method_row(named, params, truth_values, effects, held: dict, wall_s: float, extra: dict | None = None) -> dict:
+    from simrunner.workflows.gap.synth import RANGES
+
+    per = {}
+    for e in effects:
+        f = RANGES[e][0]
+        ok = e in named
+        per[e] = {"named": ok, "fitted": params.get(f),
+                  "rel_err": rel_error(e, params.get(f), truth_values[f]) if ok else None}
+    return {"named": list(named), "parameters": params, "per_effect": per,
+            "spurious": [n for n in named if n not in effects], "wall_s": wall_s, **held, **(extra or {})}
+
+
+def _trial(mode: str, k: int, baselines: bool) -> dict:
+    from simrunner.car.effects import neutral_car
+    from simrunner.workflows.gap.fit import _quiet_worker
     from simrunner.workflows.gap.report import run_gap
     from simrunner.workflows.gap.synth import make_measured_log
 
-    log, _ = make_measured_log("steering_offset", rng=np.random.default_rng(SEED))
+    _quiet_worker()
+    effects, sensors, rng = design(mode, k)
+    log, truth = make_measured_log(effects or None, rng=rng, sensors=sensors)
     t0 = time.perf_counter()
-    run_gap(log, jobs=jobs)
-    return time.perf_counter() - t0
+    result = run_gap(log, jobs=1)
+    wall = time.perf_counter() - t0
+    nominal = neutral_car(result.car)
+    held = {"gap_before": result.gap_before, "gap_after": result.gap_after,
+            "rmse_before": result.rmse_before, "rmse_after": result.rmse_after}
+    row = {"mode": mode, "trial": k, "sensors": sensors, "effects": effects, "values": truth.values,
+           "snr": effect_snr(mode, k), "signals": list(result.settings["signals"]),
+           "unrevealable": sorted(result.unrevealable),
+           "chain": _method_row(result.effects, result.parameters, truth.values, effects, held, wall,
+                                {"steps": [(s.index, s.kept.effect if s.kept else None, s.held_gap_before,
+                                            s.kept.held_gap if s.kept else s.held_gap_before)
+                                           for s in result.chain.steps]})}
+    if baselines:
+        from bench.gap_baselines import BaselineUnavailable, esindy, joint_least_squares, problems
+        from simrunner.workflows.gap.chain import with_parameters
 
+        fit_problem, _ = problems(result, nominal)
+        a = joint_least_squares(fit_problem)
+        row["joint_lsq"] = _method_row(a.named, a.parameters, truth.values, effects,
+                                       held_out(result, nominal, with_parameters(nominal, a.parameters)),
+                                       a.wall_s, {"evaluations": a.evaluations, **a.detail})
+        try:
+            b = esindy(result, nominal, seed=k)
+        except BaselineUnavailable as exc:
+            row["esindy"] = {"skipped": str(exc)}
+        else:
+            fields = _sindy_fields()
+            named_params = {fields[e]: b.parameters[fields[e]] for e in b.named}
+            row["esindy"] = _method_row(b.named, b.parameters, truth.values, effects,
+                                        held_out(result, nominal, with_parameters(nominal, named_params)),
+                                        b.wall_s, {"detail": b.detail})
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def _sindy_fields() -> dict[str, str]:
+    from bench.gap_baselines import SINDY_EFFECTS
+
+    return SINDY_EFFECTS
+
+
+# --- real logs and timing ------------------------------------------------------------------------
+
+def real_rows(jobs: int, real_dir: Path = REAL_DIR) -> list[dict]:
+    """One row per shared real log (none when the folder is absent)."""
+    from simrunner.run.log import read_log
+    from vehicle.description import load_car
+    from simrunner.workflows.gap.report import run_gap
+
+    if not (real_dir / REAL_CAR).exists():
+        return []
+    car = load_car(real_dir / REAL_CAR)
+    rows = []
+    for name in REAL_LOGS:
+        path = real_dir / name
+        if not path.exists():
+            continue
+        t0 = time.perf_counter()
+        row = {"mode": "real", "log": name}
+        try:
+            r = run_gap(read_log(path), car, jobs=jobs)
+        except Exception:  # noqa: BLE001 - the target is "no traceback": record it
+            row["error"] = traceback.format_exc()
+        else:
+            row.update(effects=r.effects, parameters=r.parameters, gap_before=r.gap_before, gap_after=r.gap_after,
+                       rmse_before=r.rmse_before, rmse_after=r.rmse_after, signals=list(r.settings["signals"]),
+                       steps=[(s.index, s.kept.effect, s.held_gap_before, s.kept.held_gap)
+                              for s in r.chain.steps if s.kept is not None],
+                       rejected=[(k, t.effect, t.reason) for k, t in r.chain.rejected],
+                       glitches=len(r.glitches), stop=r.chain.stop_reason)
+        row["wall_s"] = time.perf_counter() - t0
+        rows.append(row)
+    return rows
+
+
+def timing_row(jobs: int) -> dict:
+    """The whole chain on a :data:`TIMING_LOG_S` synthetic log with two hidden effects."""
+    from simrunner.workflows.gap.report import run_gap
+    from simrunner.workflows.gap.synth import make_measured_log
+
+    log, truth = make_measured_log(list(TIMING_EFFECTS), value=list(TIMING_EFFECTS.values()),
+                                   rng=np.random.default_rng([SEED, 6]), duration_s=TIMING_LOG_S)
+    t0 = time.perf_counter()
+    r = run_gap(log, jobs=jobs)
+    wall = time.perf_counter() - t0
+    return {"mode": "timing", "log_s": log.duration_s, "jobs": jobs, "wall_s": wall, "hidden": truth.values,
+            "effects": r.effects, "parameters": r.parameters, "steps": len(r.chain.steps)}
+
+
+# --- figures, targets, tables ----------------------------------------------------------------------
+
+def _med(v):
+    v = [x for x in v if x is not None and math.isfinite(x)]
+    return float(np.median(v)) if v else float("nan")
+
+
+def _frac(hits: list[bool]) -> tuple[float, int]:
+    return (sum(hits) / len(hits) if hits else float("nan")), len(hits)
+
+
+def figures(rows: list[dict], method: str = "chain", only: set[str] | None = None) -> dict:
+    """Naming, parameter and held-out figures of ``method`` over synthetic ``rows``
+    (``only``: count only these effects as hidden / nameable, for E-SINDy)."""
+    out = {}
+    rs = [r for r in rows if method in r and "skipped" not in r[method]]
+
+    def hidden(r):
+        return [e for e in r["effects"] if only is None or e in only]
+
+    single = [r for r in rs if len(r["effects"]) == 1 and hidden(r)]
+    multi = [r for r in rs if len(r["effects"]) >= 2]
+    empty = [r for r in rs if not r["effects"]]
+    out["single_named_hi"] = _frac([r[method]["per_effect"][r["effects"][0]]["named"]
+                                    for r in single if r["snr"][r["effects"][0]] >= SNR_MIN])
+    out["single_exact_hi"] = _frac([r[method]["named"] == r["effects"]
+                                    for r in single if r["snr"][r["effects"][0]] >= SNR_MIN])
+    out["single_named_lo"] = _frac([r[method]["per_effect"][r["effects"][0]]["named"]
+                                    for r in single if r["snr"][r["effects"][0]] < SNR_MIN])
+    out["false_claims"] = _frac([bool([n for n in r[method]["named"] if only is None or n in only]) for r in empty])
+    all_hi = [r for r in multi if hidden(r) and all(r["snr"][e] >= SNR_MIN for e in hidden(r))]
+    out["multi_all_named_hi"] = _frac([all(r[method]["per_effect"][e]["named"] for e in hidden(r)) for r in all_hi])
+    out["multi_effect_named_hi"] = _frac([r[method]["per_effect"][e]["named"] for r in multi for e in hidden(r)
+                                          if r["snr"][e] >= SNR_MIN])
+    out["multi_spurious"] = _frac([bool([n for n in r[method]["spurious"] if only is None or n in only])
+                                   for r in multi])
+    out["any_spurious"] = _frac([bool([n for n in r[method]["spurious"] if only is None or n in only])
+                                 for r in rs if r["effects"]])
+    out["spurious_per_log"] = _med([len(r[method]["spurious"]) for r in rs if r["effects"]])
+    errs = lambda group: [p["rel_err"] for r in group for e, p in r[method]["per_effect"].items()  # noqa: E731
+                          if (only is None or e in only) and p["named"] and p["rel_err"] is not None]
+    out["single_perr"] = (_med(errs(single)), len(errs(single)))
+    out["multi_perr"] = (_med(errs(multi)), len(errs(multi)))
+    with_eff = [r for r in rs if r["effects"]]
+    pos = [r[method]["rmse_after"]["position_m"] / r[method]["rmse_before"]["position_m"]
+           for r in with_eff if r[method]["rmse_before"].get("position_m")]
+    out["pos_ratio"] = (_med(pos), len(pos))
+    out["pos_ratio_single"] = (_med([r[method]["rmse_after"]["position_m"] / r[method]["rmse_before"]["position_m"]
+                                     for r in single if r[method]["rmse_before"].get("position_m")]), len(single))
+    out["gap_ratio"] = (_med([r[method]["gap_after"] / r[method]["gap_before"] for r in with_eff]), len(with_eff))
+    out["wall_s"] = (_med([r[method]["wall_s"] for r in rs]), len(rs))
+    return out
+
+
+def _fmt(v: tuple[float, int], pct: bool = True) -> str:
+    x, n = v
+    if not math.isfinite(x):
+        return f"n/a (n={n})"
+    return f"{x:.0%} (n={n})" if pct else f"{x:.2f} (n={n})"
+
+
+# Issue 10's targets on synthetic logs: (mode, figures() key, what, goal, at least (True) or
+# at most, limit, percent). "multi" counts the rows of the multi and compare modes.
+SYNTH_TARGETS = (
+    ("single", "single_named_hi", "named where SNR >= 3", True, 0.95, True),
+    ("single", "false_claims", "false claims, effect-free logs", False, 0.05, True),
+    ("single", "single_perr", "median parameter error", False, 0.10, True),
+    ("single", "pos_ratio", "median held-out position RMSE after/before", False, 0.3, False),
+    ("multi", "multi_all_named_hi", "every effect named, logs where each has SNR >= 3", True, 0.90, True),
+    ("multi", "multi_spurious", "spurious extra effect", False, 0.10, True),
+    ("multi", "multi_perr", "median parameter error", False, 0.15, True),
+    ("speed_gyro", "single_named_hi", "one effect: named where SNR >= 3", True, 0.95, True),
+    ("speed_gyro", "false_claims", "false claims, effect-free logs", False, 0.05, True),
+    ("speed_gyro", "multi_all_named_hi", "two effects: every effect named where each SNR >= 3", True, 0.90, True),
+    ("speed_gyro", "any_spurious", "spurious extra effect (logs with effects)", False, 0.10, True),
+)
+
+
+def target_rows(rows: list[dict]) -> list[dict]:
+    """Every issue-10 target the rows measure: figure, n, goal, met (None: nothing measured)."""
+    out = []
+
+    def add(mode, what, value, n, goal, ok, text):
+        out.append({"mode": mode, "target": what, "figure": value, "n": n, "goal": goal,
+                    "met": None if (n == 0 or not math.isfinite(value)) else bool(ok), "text": text})
+
+    groups = {"single": ("single",), "multi": ("multi", "compare"), "speed_gyro": ("speed_gyro",)}
+    figs = {m: figures([r for r in rows if r.get("mode") in modes]) for m, modes in groups.items()}
+    for mode, key, what, at_least, limit, pct in SYNTH_TARGETS:
+        if not any(r.get("mode") in groups[mode] for r in rows):
+            continue
+        value, n = figs[mode][key]
+        goal = f"{'>=' if at_least else '<='} {limit:.0%}" if pct else f"{'>=' if at_least else '<='} {limit:g}"
+        add(mode, what, value, n, goal.replace("%", " %"), value >= limit if at_least else value <= limit,
+            _fmt((value, n), pct))
+    for r in rows:
+        if r.get("mode") == "real":
+            name = r["log"]
+            if "error" in r:
+                add("real", f"{name}: no traceback", 0.0, 1, "none", False, "traceback")
+                continue
+            g = r["gap_after"] / r["gap_before"]
+            add("real", f"{name}: held-out gap after/before", g, 1, "<= 0.6", g <= 0.6, f"{g:.3g}")
+            pb = r["rmse_before"].get("position_m", float("nan"))
+            pa = r["rmse_after"].get("position_m", float("nan"))
+            add("real", f"{name}: held-out position RMSE not worse", pa / pb, 1, "after/before <= 1", pa <= pb,
+                f"{pb:.3f} -> {pa:.3f} m")
+            worse = [s for s in r["steps"] if not s[3] < s[2]]
+            add("real", f"{name}: every kept effect improves held-out", float(not worse), 1, "all", not worse,
+                f"{len(r['steps']) - len(worse)} of {len(r['steps'])} steps")
+            add("real", f"{name}: no traceback", 1.0, 1, "none", True, "none")
+        elif r.get("mode") == "timing":
+            add("timing", f"whole chain, {r['log_s']:.0f}-s log, {r['jobs']} processes", r["wall_s"], 1, "<= 180 s",
+                r["wall_s"] <= 180.0, f"{r['wall_s']:.0f} s")
+    return out
+
+
+def _trial_table(rows: list[dict]) -> str:
+    lines = [f"{'mode':<11}{'k':>3}  {'hidden (SNR)':<64}{'named by the chain':<44}{'p.err':>16}{'pos a/b':>8}"
+             f"{'gap a/b':>8}{'wall':>6}"]
+    for r in rows:
+        hid = ", ".join(f"{e} ({r['snr'][e]:.1f})" for e in r["effects"]) or "none"
+        c = r["chain"]
+        errs = ", ".join(f"{p['rel_err']:.0%}" for p in c["per_effect"].values() if p["rel_err"] is not None)
+        pb = c["rmse_before"].get("position_m")
+        pos = f"{c['rmse_after']['position_m'] / pb:.2f}" if pb else "-"
+        lines.append(f"{r['mode']:<11}{r['trial']:>3}  {hid:<64}{', '.join(c['named']) or 'none':<44}{errs:>16}"
+                     f"{pos:>8}{c['gap_after'] / c['gap_before']:>8.2f}{c['wall_s']:>6.0f}")
+    return "\n".join(lines)
+
+
+def _compare_table(rows: list[dict]) -> str:
+    from bench.gap_baselines import SINDY_EFFECTS
+
+    rs = [r for r in rows if "joint_lsq" in r]
+    if not rs:
+        return ""
+    lines = ["", f"side by side on the same {len(rs)} logs (compare mode):",
+             f"{'method':<26}{'all named, SNR>=3':>19}{'effect named, SNR>=3':>22}{'spurious logs':>15}"
+             f"{'med spurious':>13}{'med p.err':>16}{'med gap a/b':>13}{'med pos a/b':>13}{'med wall':>10}"]
+    skipped = [r["esindy"]["skipped"] for r in rs if "skipped" in r.get("esindy", {})]
+    for method, label, only in (("chain", "chain", None), ("joint_lsq", "(a) joint least squares", None),
+                                ("esindy", "(b) E-SINDy, all effects", None),
+                                ("esindy", "(b) E-SINDy, its 8 effects", set(SINDY_EFFECTS))):
+        f = figures(rs, method, only)
+        if f["wall_s"][1] == 0:
+            continue
+        lines.append(f"{label:<26}{_fmt(f['multi_all_named_hi']):>19}{_fmt(f['multi_effect_named_hi']):>22}"
+                     f"{_fmt(f['multi_spurious']):>15}{f['spurious_per_log']:>13.1f}{_fmt(f['multi_perr']):>16}"
+                     f"{_fmt(f['gap_ratio'], False):>13}{_fmt(f['pos_ratio'], False):>13}{f['wall_s'][0]:>9.0f}s")
+    if skipped:
+        lines.append(skipped[0])
+    lines.append("per log, named (spurious marked *):")
+    for r in rs:
+        def names(m):
+            if m not in r or "skipped" in r[m]:
+                return "-"
+            return ", ".join(n + ("*" if n in r[m]["spurious"] else "") for n in r[m]["named"]) or "none"
+        lines.append(f"  {r['trial']:>2} hidden {', '.join(r['effects'])}")
+        for m in ("chain", "joint_lsq", "esindy"):
+            lines.append(f"       {m:<10} {names(m)}")
+    return "\n".join(lines)
+
+
+def report(rows: list[dict]) -> str:
+    syn = [r for r in rows if r.get("mode") in ("single", "multi", "speed_gyro", "compare")]
+    parts = []
+    if syn:
+        parts.append(_trial_table(syn))
+    for r in rows:
+        if r.get("mode") == "real":
+            if "error" in r:
+                parts.append(f"real {r['log']}: TRACEBACK\n{r['error']}")
+                continue
+            steps = "; ".join(f"+{e} held-out gap {a:.3g} -> {b:.3g}" for _, e, a, b in r["steps"]) or "no effect kept"
+            parts.append(f"real {r['log']} ({r['wall_s']:.0f} s wall, signals {', '.join(r['signals'])}): kept "
+                         f"{', '.join(r['effects']) or 'none'} {r['parameters']}\n  held-out gap {r['gap_before']:.3g} -> "
+                         f"{r['gap_after']:.3g}; position RMSE {r['rmse_before'].get('position_m', float('nan')):.3f} -> "
+                         f"{r['rmse_after'].get('position_m', float('nan')):.3f} m\n  steps: {steps}\n  stop: {r['stop']}")
+        if r.get("mode") == "timing":
+            parts.append(f"timing: {r['log_s']:.0f}-s log, hidden {r['hidden']}, {r['jobs']} processes: "
+                         f"{r['wall_s']:.0f} s wall; kept {', '.join(r['effects']) or 'none'} {r['parameters']}")
+    cmp_ = _compare_table(rows)
+    if cmp_:
+        parts.append(cmp_)
+    t = target_rows(rows)
+    if t:
+        lines = ["", f"{'mode':<11}{'target':<58}{'figure':<26}{'goal':<18}met"]
+        for x in t:
+            met = "-" if x["met"] is None else ("met" if x["met"] else "NOT met")
+            lines.append(f"{x['mode']:<11}{x['target']:<58}{x['text']:<26}{x['goal']:<18}{met}")
+        parts.append("\n".join(lines))
+    return "\n".join(parts)
+
+
+# --- command line ------------------------------------------------------------------------------------
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description="gap workflow bench")
-    ap.add_argument("--trials", type=int, default=100)
+    ap = argparse.ArgumentParser(description="gap workflow bench (issue 10 targets)")
+    ap.add_argument("--mode", default=",".join(MODES), help=f"comma-separated, of {', '.join(MODES)}")
+    ap.add_argument("--trials", type=int, default=SMALL_TRIALS, help="trials per synthetic mode")
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--short", action="store_true", help=f"{SHORT_TRIALS} trials (every effect once)")
-    ap.add_argument("--out", type=Path, default=None, help="append per-trial rows (JSON lines)")
-    ap.add_argument("--no-wall", action="store_true", help="skip the one-log wall-time measurement")
-    ap.add_argument("--table", type=Path, default=None, help="only print the table of a --out file")
+    ap.add_argument("--out", type=Path, default=None, help="write the rows and targets (JSON)")
+    ap.add_argument("--table", type=Path, default=None, help="only print the tables of an --out file")
     a = ap.parse_args([] if argv is None else argv)
     if a.table:
-        print(_table(sorted((json.loads(ln) for ln in a.table.read_text().splitlines() if ln.strip()),
-                            key=lambda r: r["trial"])))
+        print(report(json.loads(a.table.read_text())["rows"]))
         return
-    n = SHORT_TRIALS if a.short else a.trials
-    if not a.no_wall:
-        print(f"one {67:d}-s log, whole catalogue, {a.jobs} processes: {wall_time_one_log(a.jobs):.0f} s wall",
-              flush=True)
-    rows = []
-    with ProcessPoolExecutor(max_workers=a.jobs) as pool:
-        futures = [pool.submit(_trial, k) for k in range(n)]
-        for fut in as_completed(futures):
-            row = fut.result()
-            rows.append(row)
-            if a.out:
-                with a.out.open("a") as f:
-                    f.write(json.dumps(row) + "\n")
-    rows.sort(key=lambda r: r["trial"])
-    print(_table(rows))
+    modes = [m.strip() for m in a.mode.split(",") if m.strip()]
+    bad = [m for m in modes if m not in MODES]
+    if bad:
+        ap.error(f"unknown mode(s) {', '.join(bad)} (expected {', '.join(MODES)})")
+    rows: list[dict] = []
+    t_start = time.perf_counter()
+    if "timing" in modes:
+        rows.append(timing_row(a.jobs))
+        print(f"[timing done, {time.perf_counter() - t_start:.0f} s]", file=sys.stderr, flush=True)
+    if "real" in modes:
+        for r in real_rows(a.jobs):
+            rows.append(r)
+            print(f"[real {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
+    tasks = []
+    if "compare" in modes:
+        tasks += [("compare", k, True) for k in range(a.trials)]
+    elif "multi" in modes:
+        tasks += [("multi", k, False) for k in range(a.trials)]
+    tasks += [(m, k, False) for m in ("single", "speed_gyro") if m in modes for k in range(a.trials)]
+    if tasks:
+        with ProcessPoolExecutor(max_workers=a.jobs) as pool:
+            futures = {pool.submit(_trial, *t): t for t in tasks}
+            for fut in as_completed(futures):
+                row = fut.result()
+                rows.append(row)
+                print(f"[{row['mode']} {row['trial']} done, {row['wall_s']:.0f} s; "
+                      f"{time.perf_counter() - t_start:.0f} s total]", file=sys.stderr, flush=True)
+    order = {m: i for i, m in enumerate(MODES)}
+    rows.sort(key=lambda r: (order[r["mode"]], r.get("trial", 0)))
+    text = report(rows)
+    print(text)
+    print(f"\nbench wall time: {time.perf_counter() - t_start:.0f} s on {a.jobs} processes")
+    if a.out:
+        a.out.write_text(json.dumps({"argv": sys.argv[1:] if argv is None else argv, "rows": rows,
+                                     "targets": target_rows(rows)}, indent=1, default=float) + "\n")
 
 
 if __name__ == "__main__":
-    import sys
-
     main(sys.argv[1:])
