@@ -63,7 +63,8 @@ SMALL_TRIALS = 6
 SNR_MIN = 3.0
 MODES = ("single", "multi", "speed_gyro", "compare", "real", "timing")
 _MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3}  # seed tags: compare uses the multi logs
-REAL_DIR = Path(os.environ.get("NXPCUP_REAL_LOGS", Path(__file__).resolve().parents[2] / "shared" / "data" / "real_logs"))
+REAL_DIR = Path(os.environ.get("NXPCUP_REAL_LOGS",
+                               Path(__file__).resolve().parents[2] / "shared" / "data" / "real_logs"))
 REAL_LOGS = ("f1tenth_DS2.csv", "f1tenth_DS3.csv")
 REAL_CAR = "f1tenth_car.toml"
 TIMING_LOG_S = 60.0
@@ -112,6 +113,10 @@ def design(mode: str, k: int) -> tuple[list[str], str, np.random.Generator]:
     if mode == "single":
         e = trial_effect(k, list(RANGES))
         return ([e] if e else []), "pose_speed", np.random.default_rng([SEED, k])
+    grouped = [e for members in GROUPS.values() for e in members]
+    if sorted(grouped) != sorted(RANGES):
+        raise ValueError(f"GROUPS must hold every synthetic effect once (got {sorted(grouped)}, "
+                         f"expected {sorted(RANGES)})")
     rng = np.random.default_rng([SEED, _MODE_TAG[mode], k])
     if mode in ("multi", "compare"):
         return multi_effects(2 + k % 2, rng), "pose_speed", rng
