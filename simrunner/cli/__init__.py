@@ -63,7 +63,8 @@ class _LazyGroup(click.Group):
     LAZY = {"check": ("simrunner.cli.check", "check_cmd"),
             "calibrate": ("simrunner.cli.calib", "calibrate_cmd"),
             "excite": ("simrunner.cli.calib", "excite_cmd"),
-            "gap": ("simrunner.cli.gap", "gap")}
+            "gap": ("simrunner.cli.gap", "gap"),
+            "batch": ("simrunner.cli.batch", "batch_cmd")}
     _listing = False
 
     def list_commands(self, ctx: click.Context) -> list[str]:

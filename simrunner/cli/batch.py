@@ -1,0 +1,85 @@
+"""``simrunner batch``: a thin click layer over :func:`simrunner.workflows.batch.run_batch`."""
+from __future__ import annotations
+
+import sys
+
+import click
+
+
+@click.command("batch")
+@click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
+@click.option("--tracks", "tracks", multiple=True, metavar="SPEC",
+              help="Tracks: layout/world files, folders, globs ('tracks/*.txt'), random:N; "
+                   "repeatable or comma-separated (default: the bundled track).")
+@click.option("--seeds", default="1", show_default=True, metavar="N|A:B",
+              help="Seeds of the camera noise: N = 0..N-1, A:B = A..B-1.")
+@click.option("--param", "params", multiple=True, metavar="NAME=V1,V2|START:STOP:STEP",
+              help="Controller parameter values to sweep (every combination); repeatable.")
+@click.option("--laps", default=1, show_default=True, type=click.IntRange(min=1))
+@click.option("--time-limit", "time_limit_s", default=60.0, show_default=True,
+              type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
+              help="Simulated-time limit of each run.")
+@click.option("--workers", default=None, type=click.IntRange(min=1),
+              help="Worker processes (default: all cores; with --ray: the cluster's CPUs).")
+@click.option("-o", "--out", "out_dir", required=True, metavar="DIR",
+              help="Output folder: results.csv, results.json, summary.png, runs/.")
+@click.option("--force", is_flag=True, help="Replace the results of an earlier batch in DIR.")
+@click.option("--video", default="none", show_default=True, metavar="none|all|failures|N,M",
+              help="Debug videos (DIR/runs/run_NNNNN.mp4) for these runs.")
+@click.option("--csv", default="none", show_default=True, metavar="none|all|failures|N,M",
+              help="Run-log CSVs (DIR/runs/run_NNNNN.csv) for these runs.")
+@click.option("--run-timeout", "run_timeout_s", default=None, type=float, metavar="SECONDS",
+              help="Wall-clock limit of one run (default 60 + 4 x the time limit).")
+@click.option("--car", default=None, metavar="CAR.toml", help="Car description (default: built-in car).")
+@click.option("--dt", "dt_s", default=0.002, show_default=True,
+              type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS")
+@click.option("--wall-limit", "wall_limit_s", default=10.0, show_default=True,
+              type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
+              help="Stop a run whose controller lets no simulated time pass for this long.")
+@click.option("--ray", "ray", is_flag=False, flag_value="local", default=None, metavar="[ADDRESS]",
+              help="Run on Ray: a local cluster without ADDRESS, else ray://host:10001 or "
+                   "host:6379 (pip install 'nxpcup-sim[ray]').")
+@click.option("--no-plot", is_flag=True, help="Do not write summary.png.")
+def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, out_dir, force,
+              video, csv, run_timeout_s, car, dt_s, wall_limit_s, ray, no_plot) -> None:
+    """Run CONTROLLER over tracks x parameters x seeds on all cores (or Ray); one row per run."""
+    from tqdm import tqdm
+
+    from simrunner.cli import input_errors
+    from simrunner.workflows.batch import run_batch
+
+    bar = tqdm(total=None, unit="run", dynamic_ncols=True, file=sys.stderr, disable=None)
+    failed = [0]
+
+    def on_row(row: dict) -> None:
+        if row["outcome"] not in ("finished", "controller_returned"):
+            failed[0] += 1
+        bar.update(1)
+        bar.set_postfix(failed=failed[0], refresh=False)
+
+    try:
+        result = run_batch(controller, out_dir=out_dir, tracks=tracks, seeds=seeds, params=params,
+                           laps=laps, time_limit_s=time_limit_s, dt_s=dt_s,
+                           wall_limit_s=wall_limit_s, car=car, workers=workers,
+                           run_timeout_s=run_timeout_s, video=video, csv=csv, plot=not no_plot,
+                           ray=ray, force=force, on_row=on_row,
+                           on_plan=lambda n: bar.reset(total=n))
+    except input_errors() as exc:
+        bar.close()
+        click.echo(f"simrunner batch: {str(exc).splitlines()[0]}", err=True)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        bar.close()
+        click.echo(f"simrunner batch: interrupted; the finished runs are in {out_dir}/results.csv",
+                   err=True)
+        sys.exit(130)
+    bar.close()
+    counts = ", ".join(f"{k} {v}" for k, v in sorted(result.counts().items()))
+    laps_done = sum(r["laps_completed"] for r in result.rows)
+    click.echo(f"{len(result.rows)} runs on {result.workers} worker(s) ({result.backend}) in "
+               f"{result.wall_time_s:.1f} s: {counts}; {laps_done} laps")
+    if result.rerun_mismatches:
+        click.echo("simrunner batch: warning: re-runs for outputs differed from the first run: "
+                   + ", ".join(map(str, result.rerun_mismatches)), err=True)
+    written = [result.csv_path, result.json_path] + ([result.plot_path] if result.plot_path else [])
+    click.echo("wrote: " + ", ".join(map(str, written)))

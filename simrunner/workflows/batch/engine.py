@@ -1,0 +1,190 @@
+"""``simrunner batch`` as a library function: :func:`run_batch`.
+
+Checks every input in this process first (controller file, car, tracks, seeds, parameter
+lists, output selection: one :class:`BatchError` line before any run), runs the jobs on the
+local process pool or on Ray, re-runs the runs selected by ``video="failures"`` /
+``csv="failures"`` with those outputs (runs are deterministic, so the re-run is the same
+run; runs that timed out or whose worker died are not re-run), and writes ``results.csv``, ``results.json`` and ``summary.png`` to ``out_dir``.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from simrunner.workflows.batch.pool import LocalBackend, run_jobs
+from simrunner.workflows.batch.results import (BATCH_OUTCOMES, RESERVED, deterministic,
+                                               write_results)
+from simrunner.workflows.batch.spec import (BatchConfig, BatchError, Job, make_jobs, parse_grid,
+                                            parse_seeds, resolve_tracks)
+
+OK_OUTCOMES = ("finished", "controller_returned")
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Which runs get an output: ``"none"``, ``"all"``, ``"failures"`` or run indices."""
+
+    mode: str = "none"
+    runs: frozenset[int] = frozenset()
+
+    @classmethod
+    def parse(cls, text: str | None, what: str) -> "Selection":
+        t = (text or "none").strip().lower()
+        if t in ("none", "all", "failures"):
+            return cls(t)
+        try:
+            runs = frozenset(int(v) for v in t.split(","))
+        except ValueError:
+            raise BatchError(f"--{what} {text!r}: expected none, all, failures or run numbers "
+                             "like 0,5,7") from None
+        if any(r < 0 for r in runs):
+            raise BatchError(f"--{what} {text!r}: run numbers are >= 0")
+        return cls("runs", runs)
+
+    def upfront(self, job: Job) -> bool:
+        return self.mode == "all" or (self.mode == "runs" and job.index in self.runs)
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """``rows`` sorted by run; the files written; ``rerun_mismatches``: re-run runs (for
+    failure outputs) whose row differed from the first run's (expected: none)."""
+
+    rows: list[dict]
+    csv_path: Path
+    json_path: Path
+    plot_path: Path | None
+    wall_time_s: float
+    workers: int
+    backend: str
+    rerun_mismatches: tuple[int, ...] = ()
+
+    def counts(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for row in self.rows:
+            out[row["outcome"]] = out.get(row["outcome"], 0) + 1
+        return out
+
+
+def default_workers() -> int:
+    """All cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: str | int = 1,
+              params=(), laps: int = 1, time_limit_s: float = 60.0, dt_s: float = 0.002,
+              wall_limit_s: float = 10.0, car: str | Path | None = None,
+              workers: int | None = None, run_timeout_s: float | None = None,
+              video: str | None = None, csv: str | None = None, plot: bool = True,
+              ray: str | None = None, force: bool = False, start_method: str | None = None,
+              on_row: Callable[[dict], None] | None = None,
+              on_plan: Callable[[int], None] | None = None, quiet_workers: bool = True) -> BatchResult:
+    """Run ``controller`` over every (track, parameter combination, seed); see
+    docs/batch.md. ``tracks``: files, folders, globs, ``random:N`` (default: the bundled
+    track). ``seeds``: N (0..N-1) or ``"A:B"``. ``params``: ``["NAME=V1,V2", "K=1:2:0.5"]``.
+    ``ray``: None (local pool), ``"local"`` (a local Ray cluster) or a cluster address.
+    ``on_plan``: called once with the number of runs; ``on_row``: with each row as it arrives
+    (a progress bar)."""
+    from simrunner.run.controller import load_controller
+    from simrunner.run.runner import default_track
+    from simrunner.run.settings import RunSettings
+    from vehicle.description import load_car
+
+    ctl_path = Path(controller).resolve()
+    load_controller(ctl_path)                       # a missing/broken file: one line, now
+    load_car(car)
+    RunSettings(laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s)
+    refs = resolve_tracks(list(tracks) or [str(default_track())])
+    grid = parse_grid(list(params), reserved=RESERVED)
+    jobs = make_jobs(refs, parse_seeds(seeds), grid)
+    video_sel, csv_sel = Selection.parse(video, "video"), Selection.parse(csv, "csv")
+    n_workers = default_workers() if workers is None else int(workers)
+    if n_workers < 1:
+        raise BatchError(f"--workers {workers}: expected >= 1")
+    timeout = float(run_timeout_s) if run_timeout_s is not None else 60.0 + 4.0 * time_limit_s
+    if not timeout > 0:
+        raise BatchError(f"--run-timeout {run_timeout_s}: expected > 0 (s)")
+    out = Path(out_dir)
+    if (out / "results.csv").exists() and not force:
+        raise BatchError(f"{out}: already holds results.csv (use --force to replace it)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BatchError(f"{out}: cannot create the output folder ({exc.strerror or exc})") from None
+    config = BatchConfig(controller=str(ctl_path), car=None if car is None else str(Path(car).resolve()),
+                         laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
+                         param_names=tuple(grid))
+
+    def outputs_for(job: Job, video_on: bool, csv_on: bool) -> dict | None:
+        if not (video_on or csv_on):
+            return None
+        runs = out / "runs"
+        runs.mkdir(exist_ok=True)
+        stem = runs / f"run_{job.index:05d}"
+        return {k: str(stem.with_suffix(sfx)) for k, sfx, on in
+                (("video", ".mp4", video_on), ("csv", ".csv", csv_on)) if on}
+
+    if ray is None:
+        backend_name, make_backend = "local", lambda: LocalBackend(config, start_method=start_method,
+                                                                    quiet=quiet_workers)
+    else:
+        from simrunner.workflows.batch.ray_backend import RayBackend
+
+        backend_name = f"ray ({ray})"
+        ray_backend = RayBackend(config, address=ray, workers=workers)
+        n_workers = ray_backend.workers
+        make_backend = lambda: ray_backend  # noqa: E731
+
+    rows: dict[int, dict] = {}
+    if on_plan is not None:
+        on_plan(len(jobs))
+
+    def take(row: dict) -> None:
+        rows[row["run"]] = row
+        if on_row is not None:
+            on_row(row)
+
+    t0 = time.perf_counter()
+    mismatches: list[int] = []
+    try:
+        run_jobs(jobs, make_backend(), workers=n_workers, run_timeout_s=timeout, laps=laps,
+                 on_row=take, outputs=lambda j: outputs_for(j, video_sel.upfront(j), csv_sel.upfront(j)))
+        again = [j for j in jobs if rows[j.index]["outcome"] not in OK_OUTCOMES + BATCH_OUTCOMES
+                 and (video_sel.mode == "failures" or csv_sel.mode == "failures")
+                 and not (video_sel.upfront(j) and csv_sel.upfront(j))]
+        if again:
+            first = {j.index: rows[j.index] for j in again}
+
+            def check(row: dict) -> None:
+                if deterministic(row) != deterministic(first[row["run"]]):
+                    mismatches.append(row["run"])
+
+            run_jobs(again, make_backend(), workers=n_workers, run_timeout_s=timeout, laps=laps,
+                     on_row=check, outputs=lambda j: outputs_for(
+                         j, video_sel.mode == "failures" or video_sel.upfront(j),
+                         csv_sel.mode == "failures" or csv_sel.upfront(j)))
+    finally:
+        if ray is not None:
+            ray_backend.shutdown()
+        ordered = [rows[i] for i in sorted(rows)]
+        wall = time.perf_counter() - t0
+        meta = {"controller": str(ctl_path), "car": config.car, "laps": laps,
+                "time_limit_s": time_limit_s, "dt_s": dt_s, "wall_limit_s": wall_limit_s,
+                "tracks": [r.label for r in refs], "seeds": parse_seeds(seeds),
+                "params": {k: v for k, v in grid.items()}, "runs_planned": len(jobs),
+                "runs_done": len(ordered), "backend": backend_name, "workers": n_workers,
+                "wall_time_s": round(wall, 3)}
+        csv_path, json_path = write_results(out, ordered, tuple(grid), meta)
+    plot_path = None
+    if plot and ordered:
+        from simrunner.workflows.batch.plot import plot_summary
+
+        plot_path = plot_summary(ordered, tuple(grid), out / "summary.png")
+    return BatchResult(ordered, csv_path, json_path, plot_path, wall, n_workers, backend_name,
+                       tuple(sorted(mismatches)))

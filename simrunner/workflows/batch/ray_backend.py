@@ -1,0 +1,118 @@
+"""The Ray backend of ``simrunner batch --ray [ADDRESS]``: one actor per worker, each holding
+a :class:`~simrunner.workflows.batch.worker.WorkerState` (its car and loaded tracks), so the
+rows are those of the local pool, bit for bit (the same :func:`execute_job`).
+
+``address``: ``"local"`` starts a private local Ray instance bound to 127.0.0.1 (stopped at
+the end); anything else is handed to ``ray.init(address=...)`` (``host:6379`` of a cluster
+started with ``ray start --head``, or ``ray://host:10001``). Every node needs nxpcup-sim
+installed (``pip install 'nxpcup-sim[ray]'``); ``--video``/``--csv`` files are written on the
+node that ran the run (use a shared folder for DIR on a multi-node cluster).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from simrunner.workflows.batch.pool import Handle
+from simrunner.workflows.batch.spec import BatchConfig, BatchError, Job
+
+INSTALL_HINT = "pip install 'nxpcup-sim[ray]'"
+LOCAL_OBJECT_STORE_BYTES = 128 * 1024 * 1024
+
+
+def import_ray():
+    try:
+        import ray
+    except ImportError:
+        raise BatchError(f"--ray needs Ray, which is not installed: {INSTALL_HINT}") from None
+    return ray
+
+
+class _RayWorker:
+    """The actor: the state of one worker, and one run per call."""
+
+    def __init__(self, config: BatchConfig):
+        from simrunner.workflows.batch.worker import WorkerState
+
+        self.state = WorkerState(config)
+
+    def run(self, job: Job, outputs: dict | None) -> dict:
+        from simrunner.workflows.batch.worker import execute_job
+
+        return execute_job(job, self.state, outputs)
+
+
+@dataclass(eq=False)
+class _Actor:
+    actor: Any
+    future: Any = None
+
+
+class RayBackend:
+    """Starts (``"local"``) or joins a Ray cluster; :meth:`shutdown` leaves it."""
+
+    def __init__(self, config: BatchConfig, *, address: str = "local", workers: int | None = None):
+        ray = import_ray()
+        self.ray, self.config = ray, config
+        if ray.is_initialized():
+            self.owner = False
+        elif address in (None, "", "local"):
+            from simrunner.workflows.batch.engine import default_workers
+
+            ray.init(num_cpus=workers or default_workers(), include_dashboard=False,
+                     object_store_memory=LOCAL_OBJECT_STORE_BYTES, log_to_driver=False,
+                     _node_ip_address="127.0.0.1", configure_logging=False)
+            self.owner = True
+        else:
+            try:
+                ray.init(address=address, log_to_driver=False, configure_logging=False)
+            except (ConnectionError, RuntimeError, ValueError) as exc:
+                raise BatchError(f"--ray {address}: cannot connect to the Ray cluster "
+                                 f"({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+            self.owner = True
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        self.workers = int(workers) if workers else max(1, cpus)
+        self._cls = ray.remote(num_cpus=1, max_restarts=0)(_RayWorker)
+        self.handles: list[Handle] = []
+
+    def start(self) -> Handle:
+        h = Handle(_Actor(self._cls.remote(self.config)))
+        self.handles.append(h)
+        return h
+
+    def submit(self, h: Handle, job: Job, outputs: dict | None) -> None:
+        h.ref.future = h.ref.actor.run.remote(job, outputs)
+
+    def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
+        ray = self.ray
+        by_ref = {h.ref.future: h for h in busy}
+        ready, rest = ray.wait(list(by_ref), num_returns=1, timeout=max(timeout_s, 0.0))
+        if ready and rest:
+            more, _ = ray.wait(rest, num_returns=len(rest), timeout=0)
+            ready += more
+        out = []
+        for ref in ready:
+            h = by_ref[ref]
+            try:
+                out.append((h, ray.get(ref), ""))
+            except ray.exceptions.RayError as exc:
+                first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+                out.append((h, None, f"Ray worker died during the run ({type(exc).__name__}: {first})"))
+        return out
+
+    def kill(self, h: Handle) -> None:
+        try:
+            self.ray.kill(h.ref.actor)
+        except Exception:  # noqa: BLE001 - already gone
+            pass
+        if h in self.handles:
+            self.handles.remove(h)
+
+    def close(self) -> None:
+        for h in list(self.handles):
+            self.kill(h)
+
+    def shutdown(self) -> None:
+        self.close()
+        if self.owner and self.ray.is_initialized():
+            self.ray.shutdown()

@@ -1,0 +1,141 @@
+"""One batch worker: :class:`WorkerState` (the car and the tracks this worker has loaded)
+and :func:`execute_job` (one run -> one row). Used by the local process pool
+(:func:`worker_loop`, in a child process) and by the Ray actors alike.
+
+A worker loads each track once and keeps the last :data:`MAX_TRACKS` (a ``SimTrack`` is
+immutable and ``drive`` accepts it), so a run costs only the run. Each run still builds its
+own car model, camera and judge (:class:`simrunner.run.runner.Run`) and executes the
+controller file afresh: a run's row does not depend on what the worker ran before.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import time
+import traceback
+from collections import OrderedDict
+
+from simrunner.errors import SimError
+from simrunner.workflows.batch.results import failure_row, row_from_result
+from simrunner.workflows.batch.spec import BatchConfig, Job, TrackRef
+
+MAX_TRACKS = 16
+"""Tracks a worker keeps loaded (least recently used dropped first)."""
+
+
+class WorkerState:
+    """What a worker keeps between runs: the batch config, the car and loaded tracks."""
+
+    def __init__(self, config: BatchConfig):
+        from vehicle.description import load_car
+
+        self.config = config
+        self.car = load_car(config.car)
+        self.tracks: OrderedDict[str, object] = OrderedDict()
+        self.loads = 0  # tracks loaded (for the overhead benchmark)
+
+    def track(self, ref: TrackRef):
+        """The loaded ``SimTrack`` of ``ref`` (raises ``SimError``/``TrackError`` once per
+        attempt for a track that does not load)."""
+        got = self.tracks.get(ref.label)
+        if got is None:
+            got = self.tracks[ref.label] = _load(ref, self.car)
+            self.loads += 1
+            while len(self.tracks) > MAX_TRACKS:
+                self.tracks.popitem(last=False)
+        else:
+            self.tracks.move_to_end(ref.label)
+        return got
+
+
+def _load(ref: TrackRef, car):
+    from simrunner.track import load_track
+
+    if ref.random_seed is None:
+        return load_track(ref.path, car=car)
+    from simrunner.track import track_from_trackgen
+    from trackgen import parse_layout
+    from trackgen.build import check_buildable
+    from trackgen.random import random_layout
+
+    text = random_layout(ref.random_seed, car=car)
+    checked = check_buildable(parse_layout(text, path=ref.label), car, meshes=False)
+    return track_from_trackgen(checked.track, geometry=checked.geometry, source=ref.label)
+
+
+def execute_job(job: Job, state: WorkerState, outputs: dict[str, str] | None = None) -> dict:
+    """Run ``job``; always returns a row (a fault that is not the controller's is outcome
+    ``error`` with its message)."""
+    from simrunner.run.runner import drive
+    from simrunner.run.settings import RunSettings
+
+    cfg = state.config
+    t0 = time.perf_counter()
+    try:
+        track = state.track(job.track)
+        settings = RunSettings(laps=cfg.laps, time_limit_s=cfg.time_limit_s, seed=job.seed,
+                               dt_s=cfg.dt_s, wall_limit_s=cfg.wall_limit_s, params=dict(job.params))
+        outputs = outputs or {}
+        result = drive(cfg.controller, track=track, car=state.car, settings=settings,
+                       video=outputs.get("video"), csv=outputs.get("csv"))
+    except Exception as exc:  # noqa: BLE001 - recorded in the row, the batch goes on
+        from trackgen import TrackError
+        from vehicle.description import CarDescriptionError
+
+        if isinstance(exc, (SimError, TrackError, CarDescriptionError)):
+            message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        else:
+            last = traceback.format_exception_only(type(exc), exc)[-1].strip()
+            message = f"internal error: {last}"
+        return failure_row(job, cfg.laps, "error", message, round(time.perf_counter() - t0, 4))
+    return row_from_result(job, result, track.centreline)
+
+
+def warm_up() -> None:
+    """Import what every run needs (dartpy, OpenCV, numba kernels), so a worker reports
+    ready - and its first run's timeout starts - only when it can run at full speed."""
+    import simrunner.car.effects  # noqa: F401
+    import simrunner.run.runner  # noqa: F401
+    import simrunner.sensors.camera  # noqa: F401
+    import simrunner.sensors.line_kernel  # noqa: F401
+    import trackgen.build  # noqa: F401
+
+
+def quiet_output() -> None:
+    """Send this process's stdout/stderr (controllers' prints) to /dev/null: the parent
+    shows a progress bar; a run's fault is in its row."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    for fd in (1, 2):
+        os.dup2(devnull, fd)
+    os.close(devnull)
+    sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - for the life of the worker
+    sys.stderr = sys.stdout
+
+
+def worker_loop(conn, config: BatchConfig, quiet: bool = True) -> None:
+    """A child process of the local pool: receive ``(job, outputs)``, send back the row;
+    ``None`` ends it."""
+    if quiet:
+        quiet_output()
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    try:
+        warm_up()
+        state = WorkerState(config)
+    except Exception as exc:  # noqa: BLE001 - e.g. a bad car file: every run reports it
+        conn.send(("fatal", f"{type(exc).__name__}: {exc}"))
+        return
+    conn.send(("ready", os.getpid()))
+    while True:
+        try:
+            msg = conn.recv()
+        except EOFError:
+            return
+        if msg is None:
+            return
+        job, outputs = msg
+        conn.send(("row", execute_job(job, state, outputs)))
+
+
+__all__ = ["WorkerState", "execute_job", "worker_loop", "warm_up", "MAX_TRACKS"]

@@ -1,0 +1,162 @@
+"""simrunner batch: job specs (tracks, seeds, value lists and ranges), rows bit-identical
+for 1 and 2 workers, failing / crashing / hanging runs recorded without stopping the batch,
+outputs for the failures, the CLI (one line, exit 2, for bad input)."""
+from __future__ import annotations
+
+import json
+import shutil
+import textwrap
+from decimal import Decimal
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from hypothesis import given, strategies as st
+
+from simrunner.cli import main as cli
+from simrunner.workflows.batch import BatchError, deterministic, read_results, run_batch
+from simrunner.workflows.batch.results import columns, csv_text
+from simrunner.workflows.batch.spec import (make_jobs, parse_grid, parse_seeds, parse_values,
+                                            resolve_tracks)
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = REPO / "examples"
+FOLLOWER = EXAMPLES / "line_follower.py"
+
+FAULTY = """
+import os, time
+
+def main(spinner):
+    mode = spinner.param("mode", "drive")
+    if mode == "crash":
+        raise RuntimeError("boom")
+    if mode == "die":
+        os._exit(3)
+    if mode == "slow":               # lets simulated time pass, far slower than the timeout
+        while True:
+            spinner.sleep(0.002)
+            time.sleep(0.05)
+    while True:
+        spinner.get_image(spinner.line_row)
+        spinner.set_speed_and_servo(1.0, 0.0)
+"""
+
+
+@pytest.mark.parametrize("text, values", [
+    ("1.5,2,left", [1.5, 2, "left"]),
+    ("1.0:2.0:0.5", [1.0, 1.5, 2.0]),
+    ("0.1:0.3:0.1", [0.1, 0.2, 0.3]),
+    ("1:5:2", [1, 3, 5]),
+    ("1:2:0.3", [1.0, 1.3, 1.6, 1.9]),
+    ("0:1:1,7", [0, 1, 7]),
+    ("a:b:c", ["a:b:c"]),
+])
+def test_value_lists_and_ranges(text, values):
+    got = parse_values(text)
+    assert got == values and [type(v) for v in got] == [type(v) for v in values]
+
+
+@given(start=st.decimals(-100, 100, places=2), n=st.integers(0, 40),
+       step=st.decimals("0.01", 10, places=2))
+def test_ranges_are_exact_decimals(start, n, step):
+    stop = start + n * step
+    got = parse_values(f"{start}:{stop}:{step}")
+    assert len(got) == n + 1
+    assert got == [float(start + i * step) for i in range(n + 1)] or all(isinstance(v, int) for v in got)
+
+
+@pytest.mark.parametrize("text, match", [
+    ("2:1:0.5", "START <= STOP"), ("1:2:0", "STEP > 0"), ("0:1e9:1", "at most"), ("1,,2", "empty"),
+])
+def test_bad_value_lists(text, match):
+    with pytest.raises(BatchError, match=match):
+        parse_values(text)
+
+
+def test_grid_seeds_and_job_order():
+    grid = parse_grid(["v=1,2", "mode=a,b"])
+    assert grid == {"v": [1, 2], "mode": ["a", "b"]}
+    with pytest.raises(BatchError, match="results column"):
+        parse_grid(["outcome=1"], reserved=tuple(columns(())))
+    with pytest.raises(BatchError, match="given twice"):
+        parse_grid(["v=1", "v=2"])
+    with pytest.raises(BatchError, match="NAME=V1,V2"):
+        parse_grid(["v"])
+    assert parse_seeds(3) == [0, 1, 2] and parse_seeds("5:7") == [5, 6]
+    for bad in ("0", "x", "3:3", "-1:2"):
+        with pytest.raises(BatchError, match="--seeds"):
+            parse_seeds(bad)
+    tracks = resolve_tracks(["random:2"])
+    jobs = make_jobs(tracks, [0, 1], grid)
+    assert len(jobs) == 2 * 4 * 2 and [j.index for j in jobs] == list(range(16))
+    assert (jobs[0].track.label, jobs[0].params, jobs[0].seed) == ("random:0", (("v", 1), ("mode", "a")), 0)
+    assert (jobs[1].seed, jobs[2].params) == (1, (("v", 1), ("mode", "b")))
+
+
+def test_track_specs(tmp_path):
+    (tmp_path / "a.txt").write_text((EXAMPLES / "oval_start.txt").read_text())
+    (tmp_path / "b.txt").write_text((EXAMPLES / "oval_start.txt").read_text())
+    (tmp_path / "notes.md").write_text("x")
+    labels = [r.label for r in resolve_tracks([str(tmp_path)])]
+    assert labels == [str(tmp_path / "a.txt"), str(tmp_path / "b.txt")]
+    assert [r.label for r in resolve_tracks([str(tmp_path / "*.txt") + ",random:1"])] == labels + ["random:0"]
+    for spec, match in ((str(tmp_path / "nope.txt"), "no such file"), (str(tmp_path / "*.sdf"), "matches no"),
+                        (str(tmp_path / "notes.md"), "not a track"), ("random:0", "random:N"),
+                        (str(tmp_path / "a.txt") + "," + str(tmp_path / "a.txt"), "given twice")):
+        with pytest.raises(BatchError, match=match):
+            resolve_tracks([spec])
+
+
+def test_rows_identical_for_one_and_two_workers(tmp_path):
+    common = dict(tracks=["random:1", str(EXAMPLES / "oval_start.txt")], seeds=2,
+                  params=["v_max=2.0,2.8"], time_limit_s=3.0)
+    one = run_batch(FOLLOWER, out_dir=tmp_path / "one", workers=1, **common)
+    two = run_batch(FOLLOWER, out_dir=tmp_path / "two", workers=2, **common)
+    assert len(one.rows) == 8 and [r["run"] for r in two.rows] == list(range(8))
+    assert [deterministic(r) for r in one.rows] == [deterministic(r) for r in two.rows]
+    assert len({r["sim_time_s"] for r in one.rows}) >= 1
+    assert {r["v_max"] for r in one.rows} == {2.0, 2.8}
+    # the files: CSV rows equal apart from the wall-clock columns; JSON rows read back
+    strip = lambda p: [line.rsplit(",", 2)[0] for line in (p / "results.csv").read_text().splitlines()]  # noqa: E731
+    assert strip(tmp_path / "one") == strip(tmp_path / "two")
+    assert read_results(tmp_path / "two" / "results.json") == json.loads(json.dumps(two.rows))
+    assert (tmp_path / "one" / "summary.png").stat().st_size > 10_000
+
+
+def test_faulty_runs_never_stop_the_batch(tmp_path):
+    ctl = tmp_path / "faulty.py"
+    ctl.write_text(textwrap.dedent(FAULTY))
+    res = run_batch(ctl, out_dir=tmp_path / "out", params=["mode=drive,crash,die,slow"],
+                    time_limit_s=1000.0, workers=2, run_timeout_s=20.0, csv="failures",
+                    tracks=[str(EXAMPLES / "oval_start.txt")])
+    by_mode = {r["mode"]: r for r in res.rows}
+    assert by_mode["drive"]["outcome"] == "off_track"
+    assert by_mode["drive"]["off_x_m"] is not None and 0.0 <= by_mode["drive"]["off_progress_frac"] <= 1.0
+    assert by_mode["crash"]["outcome"] == "controller_error" and "boom" in by_mode["crash"]["message"]
+    assert by_mode["die"]["outcome"] == "worker_died" and "exit code 3" in by_mode["die"]["message"]
+    assert by_mode["slow"]["outcome"] == "wall_timeout"
+    runs = sorted(p.name for p in (tmp_path / "out" / "runs").iterdir())
+    # failures re-run with a CSV (crash and off-track; the dead and the hung runs again fail)
+    assert "run_00000.csv" in runs and "run_00001.csv" in runs
+
+
+def test_cli_batch_and_bad_input(tmp_path):
+    runner = CliRunner()
+    out = tmp_path / "b"
+    res = runner.invoke(cli, ["batch", str(FOLLOWER), "--tracks", "random:1", "--seeds", "1",
+                              "--param", "v_max=2.0", "--time-limit", "2", "--workers", "1",
+                              "-o", str(out), "--no-plot"])
+    assert res.exit_code == 0, res.output
+    assert "1 runs on 1 worker(s)" in res.output and (out / "results.csv").is_file()
+    header = (out / "results.csv").read_text().splitlines()[0].split(",")
+    assert header[:4] == ["run", "track", "seed", "v_max"] and header[-2:] == ["wall_time_s", "cpu_time_s"]
+    res = runner.invoke(cli, ["batch", str(FOLLOWER), "--tracks", "random:1", "-o", str(out)])
+    assert res.exit_code == 2 and "already holds results.csv" in res.output
+    for args, match in ((["--tracks", str(tmp_path / "none.txt")], "no such file"),
+                        (["--param", "v=2:1:1"], "START <= STOP"),
+                        (["--video", "some"], "expected none, all, failures")):
+        res = runner.invoke(cli, ["batch", str(FOLLOWER), "-o", str(tmp_path / "c"), *args])
+        assert res.exit_code == 2 and match in res.output, res.output
+        assert not (tmp_path / "c" / "results.csv").exists()
+    res = runner.invoke(cli, ["batch", str(tmp_path / "missing.py"), "-o", str(tmp_path / "d")])
+    assert res.exit_code == 2
