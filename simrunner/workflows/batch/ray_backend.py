@@ -28,6 +28,25 @@ def import_ray():
     return ray
 
 
+def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
+    """A ``host:port`` that accepts no TCP connection is one clear line at once (Ray itself
+    retries for minutes)."""
+    import socket
+
+    hostport = address.removeprefix("ray://")
+    host, sep, port = hostport.rpartition(":")
+    if not sep or not port.isdigit():
+        if address == "auto":
+            return
+        raise BatchError(f"--ray {address}: expected HOST:PORT, ray://HOST:PORT or no address")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        raise BatchError(f"--ray {address}: cannot connect to the Ray cluster "
+                         f"({exc.strerror or exc}); start one with 'ray start --head'") from None
+
+
 class _RayWorker:
     """The actor: the state of one worker, and one run per call."""
 
@@ -64,6 +83,7 @@ class RayBackend:
                      _node_ip_address="127.0.0.1", configure_logging=False)
             self.owner = True
         else:
+            _check_reachable(address)
             try:
                 ray.init(address=address, log_to_driver=False, configure_logging=False)
             except (ConnectionError, RuntimeError, ValueError) as exc:

@@ -1,0 +1,92 @@
+"""simrunner batch --ray: a small batch on a local Ray cluster bound to 127.0.0.1 (started and
+stopped by the test, bounded in time) gives the local pool's rows bit for bit."""
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from simrunner.workflows.batch import deterministic, run_batch
+
+ray = pytest.importorskip("ray")
+
+REPO = Path(__file__).resolve().parents[1]
+FOLLOWER = REPO / "examples" / "line_follower.py"
+START_TIMEOUT_S = 90.0
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait_port(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"ray start exited with {proc.returncode}")
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.5)
+    raise TimeoutError(f"the Ray head did not listen on 127.0.0.1:{port} within {timeout_s:g} s")
+
+
+@pytest.fixture
+def ray_cluster():
+    """``ray start --head --block`` in its own session, bound to 127.0.0.1, 2 CPUs, small
+    object store; stopped by signalling its process group (only the processes it started)."""
+    port = _free_port()
+    temp = tempfile.mkdtemp(prefix="rt", dir="/tmp")
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+               RAY_USAGE_STATS_ENABLED="0")
+    ray_cli = Path(sys.executable).parent / "ray"
+    proc = subprocess.Popen(
+        [str(ray_cli), "start", "--head", "--block", "--node-ip-address=127.0.0.1",
+         f"--port={port}", "--num-cpus=2", "--include-dashboard=false",
+         "--object-store-memory=100000000", f"--temp-dir={temp}", "--disable-usage-stats"],
+        env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        _wait_port(port, proc, START_TIMEOUT_S)
+        yield f"127.0.0.1:{port}"
+    finally:
+        for sig, wait_s in ((signal.SIGTERM, 30.0), (signal.SIGKILL, 10.0)):
+            try:
+                os.killpg(proc.pid, sig)
+            except ProcessLookupError:
+                break
+            try:
+                proc.wait(timeout=wait_s)
+                break
+            except subprocess.TimeoutExpired:
+                continue
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # anything left of the group
+        except ProcessLookupError:
+            pass
+
+
+def test_ray_cluster_rows_equal_local_pool(ray_cluster, tmp_path):
+    common = dict(tracks=["random:1", str(REPO / "examples" / "oval_start.txt")], seeds=1,
+                  params=["v_max=2.0,2.8"], time_limit_s=3.0, plot=False)
+    on_ray = run_batch(FOLLOWER, out_dir=tmp_path / "ray", ray=ray_cluster, **common)
+    assert on_ray.backend.startswith("ray") and on_ray.workers == 2
+    local = run_batch(FOLLOWER, out_dir=tmp_path / "local", workers=2, **common)
+    assert len(on_ray.rows) == 4
+    assert [deterministic(r) for r in on_ray.rows] == [deterministic(r) for r in local.rows]
+    assert not ray.is_initialized()   # the driver left the cluster
+
+
+def test_ray_address_that_does_not_answer(tmp_path):
+    from simrunner.workflows.batch import BatchError
+
+    with pytest.raises(BatchError, match="cannot connect"):
+        run_batch(FOLLOWER, out_dir=tmp_path / "x", ray=f"127.0.0.1:{_free_port()}", time_limit_s=1.0)
