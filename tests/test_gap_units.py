@@ -19,7 +19,8 @@ from simrunner.workflows.gap.fit import (Problem, Segment, cost_of, fit_effect,
 from simrunner.workflows.gap.glitches import GlitchKind, find_glitches, glitch_mask, time_gaps
 from simrunner.workflows.gap.logs import MEASURED_COLUMNS, check_measured, derive
 from simrunner.workflows.gap.regimes import REGIMES, format_stats, residual_stats, segment
-from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, make_windows, noise_rms, replay, residuals,
+from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, dead_reckoned_yaw, make_windows, noise_rms,
+                                            replay, residuals,
                                             rmse, signals_of, smoothed_log, split_windows, window_mask)
 from vehicle.description import CarDescription
 
@@ -445,14 +446,20 @@ def test_partial_logs_go_through_derive_replay_and_residuals(cols):
     assert "-" in format_stats(rows) or all(r["count"] for r in rows)
 
 
-def test_pose_free_replay_starts_at_the_origin():
+def test_pose_free_replay_starts_at_the_origin_with_the_gyro_heading():
     car = CarDescription()
     log = simulate(car, columns=SPEED_GYRO)
+    truth = simulate(car)
     d = derive(log, car.chassis.wheelbase_m)
+    heading = dead_reckoned_yaw(log, d, car.chassis.wheelbase_m)
     windows = make_windows(log)
     pred = replay(car, log, d, windows, dt_s=0.001, sim_factory=kin_factory, lead_s=0.0)
     for w in windows:
-        assert (pred.x_m[w.start], pred.y_m[w.start], pred.yaw_rad[w.start]) == (0.0, 0.0, 0.0)
+        assert (pred.x_m[w.start], pred.y_m[w.start]) == (0.0, 0.0)
+        assert pred.yaw_rad[w.start] == pytest.approx(heading[w.start], abs=1e-9)
+    # the integrated gyro follows the true heading (the truth starts at heading 0)
+    assert abs(np.unwrap(truth.yaw_rad) - heading).max() < 0.05
+    assert abs(np.unwrap(truth.yaw_rad)).max() > 0.5  # and the car did turn
 
 
 def test_derive_does_not_smooth_across_gaps_or_excluded_samples():
