@@ -373,6 +373,27 @@ def test_chain_acceptance_needs_bic_fit_and_held_out_improvement():
     assert "do not confirm" in _reject_reason(tr(500.0, 0.5, float("nan")), 1.0, 132.5, 0.068, 0.02)
 
 
+@pytest.mark.parametrize("effect, field, neutral, near, away", [
+    ("drag", "drag_coeff_kgpm", 0.0, 1e-4, 0.05),
+    ("steering_offset", "steering_offset_rad", 0.0, 1e-5, 0.01),
+    ("steering_gain", "steering_gain", 1.0, 1.0005, 1.1),
+])
+def test_a_candidate_fitted_at_its_neutral_value_is_not_kept(effect, field, neutral, near, away):
+    """Passing every threshold is not enough when the candidate's own parameter stayed
+    neutral: the gain then came from refitting the kept ones."""
+    from simrunner.workflows.gap.chain import Trial, _reject_reason, neutral_offset
+
+    assert neutral_offset(effect, neutral) == 0.0
+    assert neutral_offset(effect, near) < 0.01 <= neutral_offset(effect, away)
+    args = (1.0, 132.5, 0.068, 0.02)
+    for value, kept in ((neutral, False), (near, False), (away, True)):
+        trial = Trial(effect, {"motor_lag_s": 0.2, field: value}, 1.0, 500.0, 0.5, 0.5, 5)
+        reason = _reject_reason(trial, *args)
+        assert (reason == "") is kept
+        if not kept:
+            assert "neutral value" in reason
+
+
 def test_split_is_stratified_by_label():
     w = [f"w{k}" for k in range(9)]
     labels = ["a", "a", "c", "a", "a", "c", "c", "a", "a"]
