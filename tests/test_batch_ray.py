@@ -41,13 +41,16 @@ def _wait_port(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
 
 
 @pytest.fixture
-def ray_cluster():
+def ray_cluster(monkeypatch):
     """``ray start --head --block`` in its own session, bound to 127.0.0.1, 2 CPUs, small
-    object store; stopped by signalling its process group (only the processes it started)."""
+    object store; stopped by signalling its process group (only the processes it started).
+    Token authentication is off for this loopback-only cluster (cluster and driver alike,
+    so a token left in ~/.ray by another Ray run does not get in the way)."""
     port = _free_port()
     temp = tempfile.mkdtemp(prefix="rt", dir="/tmp")
-    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""),
-               RAY_USAGE_STATS_ENABLED="0")
+    monkeypatch.setenv("RAY_AUTH_MODE", "disabled")
+    monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")
+    env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     ray_cli = Path(sys.executable).parent / "ray"
     proc = subprocess.Popen(
         [str(ray_cli), "start", "--head", "--block", "--node-ip-address=127.0.0.1",
