@@ -11,7 +11,7 @@ Run it::
 
 It trains until ``--timesteps`` environment steps or ``--minutes`` of wall time, whichever
 comes first, then drives the learnt policy once (deterministic actions, no exploration) on
-the same track and writes to the output folder:
+the same track (``--eval-time`` seconds) and writes to the output folder:
 
 - ``learning_curve.png``: episode return (metres of progress, minus penalties) and laps per
   episode against environment steps, with the wall time on the top axis;
@@ -53,7 +53,8 @@ def make_env(env_kwargs: dict):
 
 
 def train(*, timesteps: int, minutes: float, out: Path, seed: int = 0, n_envs: int = 4,
-          time_limit_s: float = 20.0, speed_max_mps: float = 2.5, verbose: bool = True) -> dict:
+          time_limit_s: float = 20.0, speed_max_mps: float = 2.5, n_steps: int = 512,
+          eval_time_s: float = 60.0, verbose: bool = True) -> dict:
     """Train, save, plot and evaluate; returns the evaluation (a dict)."""
     torch, PPO, BaseCallback, Monitor, DummyVecEnv = _imports()
     torch.set_num_threads(1)
@@ -86,7 +87,7 @@ def train(*, timesteps: int, minutes: float, out: Path, seed: int = 0, n_envs: i
                                         info_keywords=("t_s", "laps_completed", "off_track"))
                         for _ in range(n_envs)])
     venv.seed(seed)  # environment i: seed + i
-    model = PPO("MlpPolicy", venv, seed=seed, n_steps=512, batch_size=256, n_epochs=10,
+    model = PPO("MlpPolicy", venv, seed=seed, n_steps=n_steps, batch_size=min(256, n_steps * n_envs), n_epochs=10,
                 learning_rate=3e-4, gamma=0.99, gae_lambda=0.95, clip_range=0.2, ent_coef=0.0,
                 policy_kwargs={"net_arch": [64, 64]}, device="cpu", verbose=0)
     model.learn(total_timesteps=timesteps, callback=Record())
@@ -96,7 +97,7 @@ def train(*, timesteps: int, minutes: float, out: Path, seed: int = 0, n_envs: i
         w = csv.DictWriter(fh, fieldnames=["steps", "wall_s", "return", "length_s", "laps", "off_track"])
         w.writeheader()
         w.writerows(episodes)
-    result = evaluate(model, env_kwargs, seed)
+    result = evaluate(model, {**env_kwargs, "time_limit_s": eval_time_s}, seed)
     result.update(steps=int(model.num_timesteps), train_wall_s=round(train_s, 1),
                   episodes=len(episodes))
     (out / "evaluation.txt").write_text("".join(f"{k}: {v}\n" for k, v in result.items()))
@@ -105,8 +106,8 @@ def train(*, timesteps: int, minutes: float, out: Path, seed: int = 0, n_envs: i
 
 
 def evaluate(model, env_kwargs: dict, seed: int) -> dict:
-    """One episode of the deterministic policy on the training track (long enough for laps)."""
-    env = make_env({**env_kwargs, "time_limit_s": 60.0})
+    """One episode of the deterministic policy on the training track."""
+    env = make_env(env_kwargs)
     obs, info = env.reset(seed=seed + 10_000)
     ret, done = 0.0, False
     while not done:
@@ -160,9 +161,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--envs", type=int, default=4, help="environments stepped together (one process)")
     p.add_argument("--speed-max", type=float, default=2.5, help="speed of the action +1 (m/s)")
+    p.add_argument("--eval-time", type=float, default=60.0, help="length of the final drive (s)")
     a = p.parse_args(argv)
     result = train(timesteps=a.timesteps, minutes=a.minutes, out=a.out, seed=a.seed,
-                   n_envs=a.envs, speed_max_mps=a.speed_max)
+                   n_envs=a.envs, speed_max_mps=a.speed_max, eval_time_s=a.eval_time)
     for k, v in result.items():
         print(f"{k}: {v}")
 
