@@ -258,6 +258,34 @@ def test_random_tracks_come_from_the_reset_seed():
     np.testing.assert_array_equal(o1, o2)
 
 
+def test_a_random_track_is_the_layout_of_a_seed_drawn_from_the_reset_generator(monkeypatch):
+    """The plumbing of ``track="random"`` with a stand-in ``trackgen.random`` (two layouts by
+    the seed's parity): the seed comes from ``env.np_random``, the options are passed on."""
+    import types
+
+    calls = []
+    texts = [(ROOT / "examples" / "oval_start.txt").read_text(), default_track().read_text()]
+
+    def random_layout(seed, *, car=None, **options):
+        calls.append((seed, options))
+        return texts[seed % 2]
+
+    monkeypatch.setitem(sys.modules, "trackgen.random", types.SimpleNamespace(random_layout=random_layout))
+    env = NXPCupEnv(track="random", random_track_options={"length_m": (8, 20)}, time_limit_s=1.0)
+    seeds = []
+    for seed in (1, 2, 3, 1):
+        obs, info = env.reset(seed=seed)
+        seeds.append(int(np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed))).integers(0, 2**31 - 1)))
+        assert info["track"] == f"random:{seeds[-1]}"
+        assert env.track.lap_length_m == pytest.approx(13.0 if seeds[-1] % 2 == 0 else 14.74, abs=0.3)
+    assert [c[0] for c in calls] == seeds[:3]  # the fourth reset reuses the loaded track
+    assert all(c[1] == {"length_m": (8, 20)} for c in calls)
+    env.reset(seed=5, options={"track": "random:8"})
+    assert env.track.name == "oval_start" and env._track_spec == "random:8"
+    obs, info = env.reset()  # stays on random:8 (options change the spec for later episodes)
+    assert info["track"] == "random:8"
+
+
 def test_without_gymnasium_one_clear_line():
     code = ("import sys\nsys.modules['gymnasium'] = None\n"
             "try:\n    import simrunner.gym\nexcept ImportError as e:\n    print(e)\n")
