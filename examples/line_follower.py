@@ -10,6 +10,8 @@ is white (a crossroads) it goes straight on; where nothing white is seen (line l
 keeps its last estimate, i.e. the last steering, as the thesis's team did.
 
 Units: Spinner defaults (m/s, radians, + = left). The gains are per half image width.
+Parameters (``--param NAME=VALUE``, e.g. for ``simrunner batch`` sweeps): ``v_max``,
+``v_min`` (m/s), ``kp``, ``kd``; the defaults are the constants below.
 """
 from __future__ import annotations
 
@@ -75,15 +77,17 @@ class LaneTracker:
 
 def main(spinner):
     s = spinner
+    v_max, v_min = s.param("v_max", V_MAX_MPS), s.param("v_min", V_MIN_MPS)
+    kp, kd = s.param("kp", KP), s.param("kd", KD)
     lane = LaneTracker(s.image_shape[1])
-    prev_err, speed = 0.0, V_MIN_MPS
+    prev_err, speed = 0.0, v_min
     while True:
         err = lane.error(s.get_image(s.line_row)[0])
         if lane.at_crossing:
             prev_err = err  # no derivative kick when the estimate is reset
-        steer = min(max(-KP * err - KD * (err - prev_err), -STEER_LIMIT_RAD), STEER_LIMIT_RAD)
+        steer = min(max(-kp * err - kd * (err - prev_err), -STEER_LIMIT_RAD), STEER_LIMIT_RAD)
         prev_err = err
-        target = V_MAX_MPS - (V_MAX_MPS - V_MIN_MPS) * min(1.0, abs(steer) / (0.6 * STEER_LIMIT_RAD))
+        target = v_max - (v_max - v_min) * min(1.0, abs(steer) / (0.6 * STEER_LIMIT_RAD))
         speed += SPEED_FILTER * (target - speed) if target > speed else (target - speed)
         s.set_speed_and_servo(speed, steer)
         if s.recording:  # debug text for the video (formatting it costs time every frame)

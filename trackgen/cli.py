@@ -2,6 +2,7 @@
 
     trackgen validate LAYOUT_OR_DIR [--car CAR.toml]
     trackgen build LAYOUT -o DIR [--force] [--car CAR.toml]
+    trackgen random --seed N [-o FILE] [--car CAR.toml] [options]   (trackgen.random_cli)
 
 Exit codes: 0 success (warnings allowed), 1 the track has problems (one line each),
 2 unreadable input or an output folder that cannot be written (one line on stderr).
@@ -83,6 +84,11 @@ def build(layout: Path, out_dir: Path, force: bool, car_path: Path | None) -> No
     for w in result.warnings:
         click.echo(str(w), err=True)
     click.echo(f"wrote {result.out_dir} (world.sdf, track.json, preview.png, models/)")
+
+
+from .random_cli import random_cmd  # noqa: E402  (registers ``trackgen random``)
+
+main.add_command(random_cmd)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -146,15 +146,18 @@ def main() -> None:
               type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
               help="Stop a controller that spends this much wall time without letting "
                    "simulated time pass.")
+@click.option("--param", "param_items", multiple=True, metavar="NAME=VALUE",
+              help="Controller parameter, read with spinner.param(NAME, default); repeatable.")
 def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, seed, car, dt_s,
-              wall_limit_s) -> None:
+              wall_limit_s, param_items) -> None:
     """Run CONTROLLER (a .py file defining main(spinner)) on the simulated car."""
+    from simrunner.run.params import parse_params
     from simrunner.run.runner import drive
 
     try:
         result = drive(controller, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
                        csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
-                       wall_limit_s=wall_limit_s)
+                       wall_limit_s=wall_limit_s, params=parse_params(param_items))
     except input_errors() as exc:
         click.echo(f"simrunner: {exc}", err=True)
         sys.exit(2)
@@ -167,6 +170,10 @@ def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, 
                f"{result.real_time_factor:.1f}x real time")
     if result.outputs:
         click.echo("wrote: " + ", ".join(result.outputs.values()))
+    if result.unused_params:
+        click.echo("simrunner: warning: the controller never read --param "
+                   + ", ".join(result.unused_params)
+                   + " (read one with spinner.param(name, default))", err=True)
     sys.exit(0 if result.ok else 130 if result.outcome == "interrupted" else 1)
 
 

@@ -44,6 +44,7 @@ class RunResult:
     error: ControllerError | None = None
     log: RunLog = field(default_factory=empty_log, repr=False)
     outputs: dict[str, str] = field(default_factory=dict)
+    unused_params: tuple[str, ...] = ()  # --param names the controller never read
 
     @property
     def ok(self) -> bool:

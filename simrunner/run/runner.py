@@ -120,7 +120,7 @@ class Run:
                                    frame_period_s=1.0 / car.camera.fps_hz, on_frame=self.frames)
         self.session = Session(clock=self.clock, camera=self.camera, car=car,
                                rng=np.random.default_rng(settings.seed), recorder=self.recorder,
-                               video=self.video)
+                               video=self.video, params=settings.params)
         self.wall_time_s = 0.0
         self.cpu_time_s = 0.0
 
@@ -234,7 +234,8 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
                        lap_times_s=judge.lap_times_s, sim_time_s=run.clock.time_s,
                        wall_time_s=run.wall_time_s, track=track_label, seed=settings.seed,
                        message=message, cpu_time_s=run.cpu_time_s, error=error,
-                       log=run.recorder.freeze(track_label))
+                       log=run.recorder.freeze(track_label),
+                       unused_params=tuple(sorted(set(settings.params) - run.session.params_read)))
     write_outputs(result, outputs, run.video, sim_track)
     return result
 

@@ -35,8 +35,8 @@ from __future__ import annotations
 
 import contextvars
 import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -45,6 +45,7 @@ from vehicle.description import CarDescription
 from simrunner.errors import CommandError, SimError
 from simrunner.run.clock import LockstepClock
 from simrunner.run.log import RunRecorder
+from simrunner.run.params import ParamValue, convert
 
 if TYPE_CHECKING:
     from simrunner.run.video import VideoRecorder
@@ -110,8 +111,10 @@ class Session:
     rng: np.random.Generator
     recorder: RunRecorder | None = None
     video: "VideoRecorder | None" = None
+    params: Mapping[str, ParamValue] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        self.params_read: set[str] = set()  # names asked for with Spinner.param
         self.noise_rng = BufferedNormals(self.rng)  # what images draw their noise from
         self.record_text = self.recorder is not None and self.recorder.record_text
         self._token: contextvars.Token | None = None
@@ -318,6 +321,20 @@ class Spinner:
             raise self._fail(err) from None
         n = max(1, math.ceil(s / self._clock.dt_s - 1e-9))
         self._clock.advance(n)
+
+    # -- parameters ------------------------------------------------------------------------
+    def param(self, name: str, default: Any = None) -> Any:
+        """The run's ``--param NAME=VALUE`` converted to the type of ``default`` (int, float,
+        bool, str; None: as parsed), or ``default`` when it was not given. A value that does
+        not convert ends the run as a controller error naming it. Does not let time pass."""
+        s = self._s
+        s.params_read.add(name)
+        if name not in s.params:
+            return default
+        try:
+            return convert(name, s.params[name], default)
+        except CommandError as err:
+            raise self._fail(err) from None
 
     # -- debugging data ------------------------------------------------------------------
     @property
