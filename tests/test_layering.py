@@ -1,7 +1,7 @@
 """The import direction follows the data flow: nothing below imports anything above.
 
 Packages, bottom to top: pieces, vehicle, worlds, trackgen, simrunner. Inside simrunner:
-errors, track, car, sensors, run, workflows, cli (the package's own ``__init__`` is its
+errors, track, car, sensors, run, workflows, gym, cli (the package's own ``__init__`` is its
 public facade and may name anything). Every import counts, also those inside functions.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ["pieces", "vehicle", "worlds", "trackgen", "simrunner"]
-SIMRUNNER = ["errors", "track", "car", "sensors", "run", "workflows", "cli"]
+SIMRUNNER = ["errors", "track", "car", "sensors", "run", "workflows", "gym", "cli"]
 
 
 def rank(module: str) -> tuple[int, int] | None:
