@@ -15,7 +15,7 @@ import subprocess
 from dataclasses import dataclass
 
 SIGNAL_TEXT = {
-    signal.SIGSEGV: "segmentation fault (invalid memory access, or a stack overflow)",
+    signal.SIGSEGV: "segmentation fault (invalid memory access)",
     signal.SIGBUS: "bus error (invalid memory access)",
     signal.SIGILL: "illegal instruction",
     signal.SIGFPE: "arithmetic exception (integer division by zero)",
@@ -72,7 +72,7 @@ def _addr2line(module: str, offsets: list[int]) -> dict[int, list[tuple[str, str
         return {}
     try:
         proc = subprocess.run([tool, "-e", module, "-f", "-C", "-i", "-a",
-                               *(hex(o) for o in offsets)], capture_output=True, text=True,
+                               *(hex(o) for o in sorted(set(offsets)))], capture_output=True, text=True,
                               timeout=20)
     except (OSError, subprocess.TimeoutExpired):
         return {}
@@ -83,7 +83,7 @@ def _addr2line(module: str, offsets: list[int]) -> dict[int, list[tuple[str, str
     while i < len(lines):
         line = lines[i]
         if line.startswith("0x") and (i + 1 >= len(lines) or not lines[i + 1].startswith("0x")):
-            cur = out.setdefault(int(line, 16), [])
+            cur = out[int(line, 16)] = []
             i += 1
             continue
         if cur is not None and i + 1 < len(lines):
@@ -157,9 +157,16 @@ def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
     return Fault(sig, message, tuple(out))
 
 
+def _what(fault: Fault) -> str:
+    if not fault.signal:
+        return fault.message
+    text = SIGNAL_TEXT.get(fault.signal, f"signal {fault.signal}")
+    return fault.message if fault.message.startswith("stack overflow") else text
+
+
 def format_traceback(fault: Fault, program: str) -> str:
     """The traceback text (innermost frame first, repeated frames folded)."""
-    what = SIGNAL_TEXT.get(fault.signal, f"signal {fault.signal}") if fault.signal else fault.message
+    what = _what(fault)
     lines = [f"C controller {program}: {what}", "C backtrace (innermost first):"]
     prev, repeat = None, 0
     for i, f in enumerate(fault.frames):
@@ -185,8 +192,7 @@ def format_traceback(fault: Fault, program: str) -> str:
 
 def fault_message(fault: Fault) -> str:
     """One line: ``file:line: what happened in function()``."""
-    what = (SIGNAL_TEXT.get(fault.signal, f"signal {fault.signal}").split(" (")[0]
-            if fault.signal else fault.message)
+    what = _what(fault).split(" (")[0] if fault.signal else fault.message
     name = f"SIG{signal.Signals(fault.signal).name[3:]}: " if fault.signal in SIGNAL_TEXT else ""
     loc = fault.location
     if loc is None:

@@ -414,17 +414,21 @@ static void fault_report(int sig, const char *message, void *pc) {
 }
 
 static void on_fault(int sig, siginfo_t *info, void *context) {
-    (void)info;
     void *pc = NULL;
+    uintptr_t sp = 0;
     ucontext_t *uc = context;
 #if defined(__x86_64__)
     pc = (void *)uc->uc_mcontext.gregs[REG_RIP];
+    sp = (uintptr_t)uc->uc_mcontext.gregs[REG_RSP];
 #elif defined(__aarch64__)
     pc = (void *)uc->uc_mcontext.pc;
+    sp = (uintptr_t)uc->uc_mcontext.sp;
 #else
     (void)uc;
 #endif
-    fault_report(sig, "", pc);
+    uintptr_t addr = (uintptr_t)info->si_addr;
+    int overflow = sig == SIGSEGV && sp && addr + 65536 > sp && addr < sp + 65536;
+    fault_report(sig, overflow ? "stack overflow (the stack limit is `ulimit -s`)" : "", pc);
 }
 
 static void install_handlers(void) {
