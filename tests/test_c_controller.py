@@ -363,3 +363,10 @@ def test_cli_prints_the_include_dir_and_cflags():
     assert inc.exit_code == 0 and (Path(inc.output.strip()) / "spinner.h").is_file()
     flags = runner.invoke(cli, ["cflags"])
     assert flags.output.strip() == f"-I{inc.output.strip()}"
+
+
+def test_sources_without_main_are_bad_input_and_nothing_is_written(tmp_path, track):
+    src = write(tmp_path, "nomain.c", "int helper(void) { return 1; }\n")
+    with pytest.raises(ControllerFileError, match=r"nomain\.c: no main\(\) function defined"):
+        drive(src, track=track, csv=tmp_path / "run.csv")
+    assert not (tmp_path / "run.csv").exists()

@@ -277,11 +277,12 @@ class _Session:
     def _ended(self) -> None:
         """The pipe closed without a fault report: the program returned or exited."""
         rc = self._wait()
-        lib = self.ctrl.program.library
+        prog = self.ctrl.program
+        lib = ", ".join(map(str, prog.sources)) if prog.sources else str(prog.library)
         if rc == 0:
             return
         if rc == EXIT_NO_MAIN:
-            raise ControllerFileError(f"{lib}: no main() function defined in the controller")
+            raise ControllerFileError(f"{lib}: no main() function defined")
         if rc == EXIT_NOT_LOADED:
             raise ControllerFileError(f"{lib}: cannot be loaded (the line above says why)")
         if rc < 0:

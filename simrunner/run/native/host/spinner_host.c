@@ -470,10 +470,7 @@ int main(int argc, char **argv) {
         return 71;
     }
     int (*user_main)(int, char **, char **) = (int (*)(int, char **, char **))dlsym(lib, "main");
-    if (user_main == NULL) {
-        fprintf(stderr, "simrunner: %s: no main() function defined\n", argv[1]);
-        return 72;
-    }
+    if (user_main == NULL) return 72;  /* the simulator says so, naming the sources */
     extern char **environ;
     INIT();  /* the run has started */
     int rc = user_main(argc - 4, argv + 4, environ);
