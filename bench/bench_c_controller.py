@@ -123,8 +123,46 @@ def start_up() -> None:
           f"{'met' if margin < CACHED_MARGIN_S else 'NOT met'})")
 
 
+def parts() -> None:
+    """The C-only start-up parts, timed inside one process (robust to the interpreter's
+    start-up, which varies with the machine's load)."""
+    from simrunner.run.native import build_program, load_native
+    from simrunner.run.native.build import host_program
+
+    with tempfile.TemporaryDirectory() as tmp:
+        old = os.environ.get("SIMRUNNER_CACHE_DIR")
+        os.environ["SIMRUNNER_CACHE_DIR"] = str(Path(tmp) / "cache")
+        try:
+            src = Path(tmp) / "follower.c"
+            (Path(tmp) / "lane_tracker.h").write_text((EXAMPLES / "lane_tracker.h").read_text())
+            rows = []
+            for i in range(REPEAT):
+                src.write_text((EXAMPLES / "line_follower.c").read_text() + f"/* {i} */\n")
+                t0 = time.perf_counter()
+                host_program()
+                t1 = time.perf_counter()
+                prog = build_program([src])
+                t2 = time.perf_counter()
+                build_program([src])
+                t3 = time.perf_counter()
+                ctrl = load_native(prog)
+                t4 = time.perf_counter()
+                ctrl._ready.close()
+                rows.append((t1 - t0, t2 - t1, t3 - t2, t4 - t3))
+        finally:
+            if old is None:
+                os.environ.pop("SIMRUNNER_CACHE_DIR", None)
+            else:
+                os.environ["SIMRUNNER_CACHE_DIR"] = old
+    med = [statistics.median(col) for col in zip(*rows)]
+    print(f"C start-up parts in one process, median of {REPEAT}, s: host program build "
+          f"{rows[0][0]:.3f} (first), compile + link of line_follower.c {med[1]:.3f}, cached "
+          f"lookup {med[2]:.4f}, child process start {med[3]:.4f}")
+
+
 def main() -> None:
     closed_loop()
+    parts()
     start_up()
 
 
