@@ -30,7 +30,6 @@ import numpy as np
 
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
 from simrunner.run.native.build import NativeProgram, host_program
-from simrunner.run.native.symbolize import Fault, fault_message, format_traceback, parse_report
 
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
@@ -244,6 +243,8 @@ class _Session:
 
     def _fault(self, report: str) -> None:
         """The child reported a fault: wait for it to end, raise ControllerError."""
+        from simrunner.run.native.symbolize import fault_message, format_traceback, parse_report
+
         fault = parse_report(report, self._user_modules(), str(self.ctrl.host))
         self._drain()
         raise ControllerError(fault_message(fault), format_traceback(fault, self.name))
@@ -257,7 +258,9 @@ class _Session:
             while True:
                 op, payload = self._message(deadline)
                 if op == OP_FAULT:
-                    fault: Fault = parse_report(payload.decode("utf-8", "replace"),
+                    from simrunner.run.native.symbolize import parse_report
+
+                    fault = parse_report(payload.decode("utf-8", "replace"),
                                                 self._user_modules(), str(self.ctrl.host))
                     loc = fault.location
                     if loc is not None:

@@ -18,9 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import shutil
 import subprocess
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -78,6 +76,8 @@ def cache_dir() -> Path:
 
 def find_compiler(cxx: bool) -> str:
     """The compiler command (``$CXX``/``$CC``, else c++/g++/clang++ or cc/gcc/clang)."""
+    import shutil  # here and below: not imported on the cached path's start-up (~10 ms)
+
     env = os.environ.get("CXX" if cxx else "CC")
     names = [env] if env else (["c++", "g++", "clang++"] if cxx else ["cc", "gcc", "clang"])
     for name in names:
@@ -187,6 +187,9 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     hit = _cached(entry)
     if hit is not None:
         return NativeProgram(hit[0], tuple(paths), hit[1], cached=True)
+    import shutil
+    import tempfile
+
     entry.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".build-", dir=entry.parent))
     try:
