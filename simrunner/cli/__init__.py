@@ -125,6 +125,7 @@ def main() -> None:
 
 @main.command("drive")
 @click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
+@click.argument("more_sources", nargs=-1, type=click.Path(dir_okay=False, path_type=str))
 @click.option("--track", default=None, metavar="LAYOUT|DIR|WORLD",
               help="Track: layout .txt, trackgen folder, world file or Gazebo model folder "
                    "(default: the bundled thesis figure-8).")
@@ -148,14 +149,21 @@ def main() -> None:
               help="Stop a controller that spends this much wall time without letting "
                    "simulated time pass.")
 @click.option("--param", "param_items", multiple=True, metavar="NAME=VALUE",
-              help="Controller parameter, read with spinner.param(NAME, default); repeatable.")
-def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, seed, car, dt_s,
-              wall_limit_s, param_items) -> None:
-    """Run CONTROLLER (a .py file defining main(spinner)) on the simulated car."""
+              help="Controller parameter, read with spinner.param(NAME, default) (C: spinner_param); repeatable.")
+@click.option("-I", "--include", "include_dirs", multiple=True, metavar="DIR",
+              help="C/C++ controllers: an include directory (repeatable).")
+@click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
+              help="C/C++ controllers: a preprocessor define (repeatable).")
+def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
+              car, dt_s, wall_limit_s, param_items, include_dirs, defines) -> None:
+    """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
+    sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
+    a shared library (.so). See docs/c_controllers.md."""
     from simrunner.run.params import parse_params
     from simrunner.run.runner import drive
 
     try:
+        controller = _native_program(controller, more_sources, include_dirs, defines)
         result = drive(controller, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
                        csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
                        wall_limit_s=wall_limit_s, params=parse_params(param_items))
@@ -176,6 +184,43 @@ def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, 
                    + ", ".join(result.unused_params)
                    + " (read one with spinner.param(name, default))", err=True)
     sys.exit(0 if result.ok else 130 if result.outcome == "interrupted" else 1)
+
+
+def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs: tuple[str, ...],
+                    defines: tuple[str, ...]):
+    """``controller`` itself (Python), or the built C/C++ program; compiler warnings are
+    shown on stderr. Raises ControllerFileError (bad input) for compile errors."""
+    from simrunner.errors import ControllerFileError
+
+    if not more_sources and not include_dirs and not defines and controller.endswith(".py"):
+        return controller
+    from simrunner.run.native import build_program, is_native
+
+    sources = [controller, *more_sources]
+    bad = [s for s in sources if not is_native(s)]
+    if bad:
+        raise ControllerFileError(f"{bad[0]}: several files, -I and -D are for C/C++ controllers "
+                                  f"(.c, .cpp sources or one .so)")
+    program = build_program(sources, include_dirs=list(include_dirs), defines=list(defines))
+    if program.warnings.strip():
+        click.echo(program.warnings.rstrip(), err=True)
+    return program
+
+
+@main.command("cflags")
+def cflags_cmd() -> None:
+    """Print the compiler flags for building a C/C++ controller by hand (-I<include dir>)."""
+    from simrunner.run.native.build import cflags
+
+    click.echo(cflags())
+
+
+@main.command("include-dir")
+def include_dir_cmd() -> None:
+    """Print the directory holding spinner.h and spinner.hpp (the C/C++ Spinner API)."""
+    from simrunner.run.native.build import INCLUDE_DIR
+
+    click.echo(str(INCLUDE_DIR))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -59,15 +59,27 @@ class Controller:
                 sys.path.remove(folder)
 
 
-def load_controller(controller: str | Path | MainFn) -> Controller:
-    """A :class:`Controller` from a file path or a callable ``main(spinner)``."""
+def load_controller(controller) -> Controller:
+    """A :class:`Controller` from a file path (``.py``; ``.c``/``.cpp``/``.so``: see
+    :mod:`simrunner.run.native`), a built ``NativeProgram`` or a callable ``main(spinner)``."""
     if callable(controller):
         try:
             user_file = inspect.getsourcefile(controller)
         except TypeError:
             user_file = None
         return Controller(None, None, controller, user_file)
+    if not isinstance(controller, (str, Path)):  # a built C/C++ program (simrunner.run.native)
+        from simrunner.run.native import NativeProgram, load_native
+
+        if isinstance(controller, NativeProgram):
+            return Controller(None, None, load_native(controller), None)
     path = Path(controller)
+    from simrunner.run.native import is_native
+
+    if is_native(path):  # C/C++ sources or a shared library: compiled (cached), run in a child
+        from simrunner.run.native import load_native
+
+        return Controller(path, None, load_native([path]), None)
     code = compile_controller(path)
     return Controller(path, code, None, code.co_filename)
 
@@ -78,7 +90,8 @@ def compile_controller(path: str | Path) -> types.CodeType:
     if not path.is_file():
         raise ControllerFileError(f"{path}: no such controller file")
     if path.suffix != ".py":
-        raise ControllerFileError(f"{path}: expected a Python file (.py) with main(spinner)")
+        raise ControllerFileError(f"{path}: expected a Python file (.py) with main(spinner), "
+                                  f"C/C++ sources (.c, .cpp) with main() or a shared library (.so)")
     source = read_user_text(path, "controller", ControllerFileError, "Python")
     try:
         return compile(source, str(path.resolve()), "exec")

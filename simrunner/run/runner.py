@@ -147,6 +147,8 @@ class Run:
                     raise
                 except KeyboardInterrupt:
                     outcome, message = Outcome.INTERRUPTED, "Ctrl-C"
+                except ControllerError as exc:  # already described (a C controller's fault)
+                    outcome, message, error = Outcome.CONTROLLER_ERROR, str(exc), exc
                 except Exception as exc:
                     tb = user_traceback(exc)
                     message = tb.strip().splitlines()[-1] if tb.strip() else repr(exc)

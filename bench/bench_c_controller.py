@@ -1,0 +1,170 @@
+"""C controllers (issue 11): closed-loop speed of examples/line_follower.c against
+examples/line_follower.py in the same process, and the start-up a student sees.
+
+Closed loop: one lap of the default track, video off, the two controllers interleaved
+``REPEATS`` times, best of each kept. ``wall`` is the run's wall time (``RunResult``; the
+C controller's process is started before the run, with its library loaded, like the Python
+file is compiled before it); ``CPU`` adds the child process's CPU time (``RUSAGE_CHILDREN``)
+to the simulator's. The two laps log the same numbers (same arithmetic), so the runs do the
+same physics. Target: real-time factor of C >= that of Python.
+
+Start-up (each a fresh ``simrunner drive ... --laps 1`` process, median of ``REPEAT``):
+
+* ``python``: ``examples/line_follower.py`` (after one untimed run: caches warm);
+* ``C, new``: a copy of ``line_follower.c`` with a changed comment (a new build: compile
+  + load + 1 lap; the host program already built) - target < 3 s;
+* ``C, new + host``: the same with an empty cache (the host program is built too, once per
+  installation);
+* ``C, cached``: the same source again - target < python + 0.2 s.
+
+Times on a shared machine depend on its load: compare rows of one run.
+"""
+from __future__ import annotations
+
+import math
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from simrunner.run.runner import drive, resolve_track
+from vehicle.description import load_car
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = REPO / "examples"
+REPEATS = 5
+REPEAT = 3
+FIRST_RUN_TARGET_S = 3.0
+CACHED_MARGIN_S = 0.2
+
+
+def _children_cpu_s() -> float:
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return ru.ru_utime + ru.ru_stime
+
+
+def closed_loop() -> None:
+    car = load_car(None)
+    track, _ = resolve_track(None, car)
+    best = {name: [math.inf, math.inf] for name in ("line_follower.py", "line_follower.c")}
+    sim_s = {}
+    drive(EXAMPLES / "line_follower.c", track=track)  # build (cached) outside the timing
+    for _ in range(REPEATS):
+        for name in best:
+            child0 = _children_cpu_s()
+            r = drive(EXAMPLES / name, track=track, laps=1)
+            cpu = r.cpu_time_s + _children_cpu_s() - child0
+            best[name] = [min(best[name][0], cpu), min(best[name][1], r.wall_time_s)]
+            sim_s[name] = r.sim_time_s
+    print(f"closed loop, one lap of the default track, best of {REPEATS} (interleaved):")
+    print(f"  {'controller':<18} {'sim s':>6} {'wall s':>7} {'CPU s':>6} {'RTF wall':>9} {'RTF CPU':>8}")
+    for name, (cpu, wall) in best.items():
+        print(f"  {name:<18} {sim_s[name]:6.2f} {wall:7.3f} {cpu:6.3f} {sim_s[name] / wall:9.1f} "
+              f"{sim_s[name] / cpu:8.1f}")
+    c, py = best["line_follower.c"], best["line_follower.py"]
+    ratio = (sim_s["line_follower.c"] / c[1]) / (sim_s["line_follower.py"] / py[1])
+    print(f"  RTF C / Python (wall): {ratio:.2f}  (target >= 1.0: {'met' if ratio >= 1.0 else 'NOT met'})")
+
+
+def _wall_s(argv: list[str], env: dict[str, str], repeat: int, before=None) -> list[float]:
+    out = []
+    for _ in range(repeat):
+        if before is not None:
+            before()
+        t0 = time.perf_counter()
+        done = subprocess.run(argv, cwd=REPO, capture_output=True, text=True, env=env)
+        out.append(time.perf_counter() - t0)
+        if done.returncode != 0:
+            raise RuntimeError(f"{' '.join(argv)} failed:\n{done.stdout}{done.stderr}")
+    return out
+
+
+def start_up() -> None:
+    cli = [sys.executable, "-c", "import sys; from simrunner.cli import main; sys.exit(main())",
+           "drive"]
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {**os.environ, "SIMRUNNER_CACHE_DIR": str(Path(tmp) / "cache"),
+               "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
+        src = Path(tmp) / "follower.c"
+        base = (EXAMPLES / "line_follower.c").read_text()
+        counter = iter(range(10**6))
+        lane_h = (EXAMPLES / "lane_tracker.h").read_text()
+        (Path(tmp) / "lane_tracker.h").write_text(lane_h)
+
+        def new_source() -> None:  # a new controller: different content, not in the cache
+            src.write_text(base + f"/* variant {next(counter)} */\n")
+
+        def empty_cache() -> None:
+            new_source()
+            subprocess.run(["rm", "-rf", env["SIMRUNNER_CACHE_DIR"]], check=True)
+
+        py = [*cli, "examples/line_follower.py", "--laps", "1"]
+        c = [*cli, str(src), "--laps", "1"]
+        _wall_s(py, env, 1)  # warm caches (numba, OS file cache)
+        rows = [("python line_follower.py", _wall_s(py, env, REPEAT)),
+                ("C, new + host", _wall_s(c, env, REPEAT, empty_cache)),
+                ("C, new", _wall_s(c, env, REPEAT, new_source)),
+                ("C, cached", _wall_s(c, env, REPEAT))]
+    print(f"start-up, `simrunner drive ... --laps 1` in a fresh process, median of {REPEAT} "
+          f"(min, max), s:")
+    med = {}
+    for label, times in rows:
+        med[label] = statistics.median(times)
+        print(f"  {label:<24} {med[label]:6.2f}  ({min(times):.2f}, {max(times):.2f})")
+    first = med["C, new"]
+    margin = med["C, cached"] - med["python line_follower.py"]
+    print(f"  first run of a new C controller: {first:.2f} s (target < {FIRST_RUN_TARGET_S:g} s: "
+          f"{'met' if first < FIRST_RUN_TARGET_S else 'NOT met'})")
+    print(f"  cached C - Python: {margin:+.2f} s (target < {CACHED_MARGIN_S:g} s: "
+          f"{'met' if margin < CACHED_MARGIN_S else 'NOT met'})")
+
+
+def parts() -> None:
+    """The C-only start-up parts, timed inside one process (robust to the interpreter's
+    start-up, which varies with the machine's load)."""
+    from simrunner.run.native import build_program, load_native
+    from simrunner.run.native.build import host_program
+
+    with tempfile.TemporaryDirectory() as tmp:
+        old = os.environ.get("SIMRUNNER_CACHE_DIR")
+        os.environ["SIMRUNNER_CACHE_DIR"] = str(Path(tmp) / "cache")
+        try:
+            src = Path(tmp) / "follower.c"
+            (Path(tmp) / "lane_tracker.h").write_text((EXAMPLES / "lane_tracker.h").read_text())
+            rows = []
+            for i in range(REPEAT):
+                src.write_text((EXAMPLES / "line_follower.c").read_text() + f"/* {i} */\n")
+                t0 = time.perf_counter()
+                host_program()
+                t1 = time.perf_counter()
+                prog = build_program([src])
+                t2 = time.perf_counter()
+                build_program([src])
+                t3 = time.perf_counter()
+                ctrl = load_native(prog)
+                t4 = time.perf_counter()
+                ctrl._ready.close()
+                rows.append((t1 - t0, t2 - t1, t3 - t2, t4 - t3))
+        finally:
+            if old is None:
+                os.environ.pop("SIMRUNNER_CACHE_DIR", None)
+            else:
+                os.environ["SIMRUNNER_CACHE_DIR"] = old
+    med = [statistics.median(col) for col in zip(*rows)]
+    print(f"C start-up parts in one process, median of {REPEAT}, s: host program build "
+          f"{rows[0][0]:.3f} (first), compile + link of line_follower.c {med[1]:.3f}, cached "
+          f"lookup {med[2]:.4f}, child process start {med[3]:.4f}")
+
+
+def main() -> None:
+    closed_loop()
+    parts()
+    start_up()
+
+
+if __name__ == "__main__":
+    main()

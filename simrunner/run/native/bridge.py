@@ -1,0 +1,329 @@
+"""Running a C/C++ controller: a child process whose Spinner calls come over a pipe.
+
+:class:`NativeController` is a ``main(spinner)`` callable (what the runner calls for every
+controller), so a C program runs on the same lockstep clock, judging, telemetry and video as
+a Python one. Calling it starts the host program (``host/spinner_host.c``) with the
+controller's shared library; the host calls the program's own ``main`` and sends each
+Spinner call to this process, which answers it with the Python :class:`Spinner` - the
+simulation advances inside those answers, exactly as for a Python controller.
+
+The controller is isolated: a crash, an abort or a stack overflow kills the child only. The
+child reports the fault with its raw backtrace; :mod:`.symbolize` turns it into file:line
+and the run ends with ``controller_error`` (a :class:`ControllerError` with the C backtrace)
+after everything recorded so far. A loop that never calls the Spinner is stopped by the
+runner's watchdog; the child is then asked (SIGUSR1) where it is. The child's stdout and
+stderr are the terminal's.
+"""
+from __future__ import annotations
+
+import math
+import os
+import select
+import signal
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
+from simrunner.run.native.build import NativeProgram, host_program
+
+# request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
+OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
+    OP_PARAM, OP_FAULT = range(1, 12)
+ST_OK, ST_FINISHED, ST_ERROR = 0, 1, 2
+EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
+_HDR = struct.Struct("<II")
+_OK_EMPTY = _HDR.pack(ST_OK, 0)
+_CMD = struct.Struct("<3d")
+_D = struct.Struct("<d")
+_3D = struct.Struct("<3d")
+_2I = struct.Struct("<2i")
+EXIT_WAIT_S = 5.0
+
+
+class _ChildGone(Exception):
+    """The request pipe reached its end (the child exited or died)."""
+
+
+class _Child:
+    """A started host process and the simulator's ends of its two pipes. Started before the
+    run (process start and library loading are not run time); the program's ``main`` waits
+    for the run's first message."""
+
+    def __init__(self, host: Path, program: NativeProgram, args: tuple[str, ...]):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        req_r, req_w = os.pipe()
+        rep_r, rep_w = os.pipe()
+        try:
+            self.proc = subprocess.Popen(
+                [str(host), str(program.library), str(req_w), str(rep_r), program.name, *args],
+                pass_fds=(req_w, rep_r), close_fds=True)
+        except OSError as exc:
+            for fd in (req_r, req_w, rep_r, rep_w):
+                os.close(fd)
+            raise ControllerFileError(f"{host}: cannot start the controller ({exc})") from None
+        os.close(req_w)
+        os.close(rep_r)
+        self.rfd, self.wfd = req_r, rep_w
+
+    def close(self) -> None:
+        """Kill the process (if still running), reap it, close the pipes (idempotent)."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        for fd in (self.rfd, self.wfd):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self.rfd = self.wfd = -1
+
+    def __del__(self) -> None:  # an unused pre-started child (the run never started)
+        if getattr(self, "rfd", -1) >= 0:
+            self.close()
+
+
+class NativeController:
+    """``main(spinner)`` for a built :class:`NativeProgram` (see the module docstring).
+    The first child process is started here, ahead of the run."""
+
+    def __init__(self, program: NativeProgram, args: tuple[str, ...] = ()):
+        self.program = program
+        self.args = tuple(args)
+        self.host = host_program()  # built (once, cached) before the run starts
+        self._ready: _Child | None = _Child(self.host, program, self.args)
+
+    def __call__(self, spinner) -> None:
+        child, self._ready = self._ready, None
+        _Session(self, spinner, child or _Child(self.host, self.program, self.args)).run()
+
+
+class _Session:
+    """One run of the child: the pipes, the read buffer and the request loop."""
+
+    def __init__(self, ctrl: NativeController, spinner, child: _Child):
+        self.ctrl, self.spinner, self.child = ctrl, spinner, child
+        self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
+        self.name = ctrl.program.name
+        self.yaw = 0.0
+        spinner.configure(diff_norm=lambda v, d: self.yaw)  # the C side computes the yaw rate
+        self._buf = b""
+        self._pos = 0
+
+    # -- reading ---------------------------------------------------------------------
+    def _fill(self, need: int, deadline: float | None = None) -> None:
+        """Make at least ``need`` unread bytes available; raises _ChildGone at the end."""
+        chunks = [self._buf[self._pos:]]
+        have = len(chunks[0])
+        while have < need:
+            if deadline is not None:
+                left = deadline - time.monotonic()
+                if left <= 0 or not select.select([self.rfd], [], [], left)[0]:
+                    raise _ChildGone()
+            data = os.read(self.rfd, 1 << 16)
+            if not data:
+                raise _ChildGone()
+            chunks.append(data)
+            have += len(data)
+        self._buf, self._pos = b"".join(chunks), 0
+
+    def _message(self, deadline: float | None = None) -> tuple[int, bytes]:
+        buf, pos = self._buf, self._pos
+        if len(buf) - pos < 8:
+            if pos == len(buf) and deadline is None:  # the usual case: all read, read anew
+                buf, pos = os.read(self.rfd, 1 << 16), 0
+                if not buf:
+                    raise _ChildGone()
+                self._buf, self._pos = buf, 0
+            if len(buf) - pos < 8:
+                self._fill(8, deadline)
+                buf, pos = self._buf, 0
+        op, n = _HDR.unpack_from(buf, pos)
+        if len(buf) - pos < 8 + n:
+            self._fill(8 + n, deadline)
+            buf, pos = self._buf, 0
+        start = pos + 8
+        self._pos = start + n
+        return op, buf[start:start + n]
+
+    def _reply(self, data: bytes) -> None:
+        try:
+            os.write(self.wfd, data)
+        except BrokenPipeError:
+            pass  # the child is gone: the next read says how
+
+    # -- the run ---------------------------------------------------------------------
+    def run(self) -> None:
+        s = self.spinner
+        try:
+            h, w = s.image_shape
+            self._reply(struct.pack("<5d", h, w, s.line_row, 1.0 if s.recording else 0.0,
+                                    s.wheelbase_m))
+            self._serve()
+        except RunFinished as exc:
+            if isinstance(exc, Stalled):
+                raise self._stalled(exc) from None
+            self._reply(_HDR.pack(ST_FINISHED, 0))  # the child exits (stdio flushed)
+            self._drain()
+            raise
+        except _ChildGone:
+            self._ended()
+        finally:
+            self._close()
+
+    def _serve(self) -> None:
+        """Answer requests until the child ends (raises _ChildGone) or the run does."""
+        s, message, reply = self.spinner, self._message, self._reply
+        while True:
+            op, payload = message()
+            try:
+                if op == OP_CMD:
+                    v, d, self.yaw = _CMD.unpack(payload)
+                    s.set_speed_and_servo(v, d)
+                elif op == OP_IMAGE:
+                    line, noise = _2I.unpack(payload)
+                    img = s.get_image(line, noise != 0)
+                    reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
+                elif op == OP_TEXT:
+                    (count,) = struct.unpack_from("<i", payload)
+                    parts = payload[4:].split(b"\0")[:count]
+                    s.add_data([p.decode("utf-8", "replace") for p in parts])
+                elif op == OP_TIME:
+                    reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_time()))
+                elif op == OP_SPEED:
+                    reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_speed()))
+                elif op == OP_POSITION:
+                    reply(_HDR.pack(ST_OK, 24) + _3D.pack(*s.get_position()))
+                elif op == OP_SLEEP:
+                    s.sleep(_D.unpack(payload)[0])
+                    reply(_OK_EMPTY)
+                elif op == OP_LINE:
+                    rows, width = _2I.unpack_from(payload)
+                    s.add_data(np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width))
+                elif op == OP_NOISE:
+                    rows, width = _2I.unpack_from(payload)
+                    img = np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width).copy()
+                    out = np.ascontiguousarray(s.add_noise(img), dtype=np.uint8)
+                    reply(_HDR.pack(ST_OK, out.size) + out.tobytes())
+                elif op == OP_PARAM:
+                    reply(_HDR.pack(ST_OK, 8) + _D.pack(self._param(payload)))
+                elif op == OP_FAULT:
+                    self._fault(payload.decode("utf-8", "replace"))
+                else:
+                    raise ControllerError(f"{self.name}: unknown request {op} from the host program")
+            except (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt):
+                raise
+            except Exception as exc:  # a call the simulator refused: the child reports where
+                text = str(exc).encode()
+                self._reply(_HDR.pack(ST_ERROR, len(text)) + text)
+
+    def _param(self, payload: bytes) -> float:
+        default = _D.unpack_from(payload)[0]
+        name = payload[8:].decode("utf-8", "replace")
+        param = getattr(self.spinner, "param", None)  # the --param contract (branch many-runs)
+        if param is None:
+            return default
+        value = param(name, default)
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"spinner_param({name!r}): value {value!r} is not a number") from None
+        if not math.isfinite(v):
+            raise ValueError(f"spinner_param({name!r}): value {value!r} is not finite")
+        return v
+
+    # -- endings ---------------------------------------------------------------------
+    def _user_modules(self) -> set[str]:
+        return {str(self.ctrl.program.library)}
+
+    def _fault(self, report: str) -> None:
+        """The child reported a fault: wait for it to end, raise ControllerError."""
+        from simrunner.run.native.symbolize import fault_message, format_traceback, parse_report
+
+        fault = parse_report(report, self._user_modules(), str(self.ctrl.host))
+        self._drain()
+        raise ControllerError(fault_message(fault), format_traceback(fault, self.name))
+
+    def _stalled(self, exc: Stalled) -> Stalled:
+        """Ask the stalled child where it is (SIGUSR1), then end it; the message names the line."""
+        where = ""
+        try:
+            self.proc.send_signal(signal.SIGUSR1)
+            deadline = time.monotonic() + 2.0
+            while True:
+                op, payload = self._message(deadline)
+                if op == OP_FAULT:
+                    from simrunner.run.native.symbolize import parse_report
+
+                    fault = parse_report(payload.decode("utf-8", "replace"),
+                                                self._user_modules(), str(self.ctrl.host))
+                    loc = fault.location
+                    if loc is not None:
+                        where = f" (at {loc.file}:{loc.line} in {loc.function})"
+                    break
+        except (_ChildGone, OSError):
+            pass
+        self._kill()
+        message = exc.message
+        if where:
+            head, sep, tail = message.partition("; ")
+            message = f"{head}{where}{sep}{tail}"
+        clock = self.spinner._clock  # the run's clock records how it ended (simrunner.run)
+        clock.finished = Stalled(message)
+        return Stalled(message)
+
+    def _ended(self) -> None:
+        """The pipe closed without a fault report: the program returned or exited."""
+        rc = self._wait()
+        prog = self.ctrl.program
+        lib = ", ".join(map(str, prog.sources)) if prog.sources else str(prog.library)
+        if rc == 0:
+            return
+        if rc == EXIT_NO_MAIN:
+            raise ControllerFileError(f"{lib}: no main() function defined")
+        if rc == EXIT_NOT_LOADED:
+            raise ControllerFileError(f"{lib}: cannot be loaded (the line above says why)")
+        if rc < 0:
+            name = signal.Signals(-rc).name if -rc in signal.valid_signals() else str(-rc)
+            msg = f"{self.name}: the controller was killed by {name}"
+        else:
+            msg = f"{self.name}: the controller exited with status {rc}"
+        raise ControllerError(msg, msg + "\n")
+
+    def _drain(self) -> None:
+        """Read (and drop) what the child still sends until it exits (bounded), then reap it."""
+        deadline = time.monotonic() + EXIT_WAIT_S
+        try:
+            while True:
+                self._message(deadline)
+        except (_ChildGone, OSError):
+            pass
+        self._wait()
+
+    def _wait(self) -> int:
+        try:
+            return self.proc.wait(timeout=EXIT_WAIT_S)
+        except subprocess.TimeoutExpired:
+            self._kill()
+            return self.proc.returncode
+
+    def _kill(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+
+    def _close(self) -> None:
+        self.child.close()
+
+
+def load_native(sources: list[str | Path] | NativeProgram, args: tuple[str, ...] = ()) -> NativeController:
+    """A controller callable from C/C++ sources (built, cached) or a :class:`NativeProgram`."""
+    from simrunner.run.native.build import build_program
+
+    program = sources if isinstance(sources, NativeProgram) else build_program(list(sources))
+    return NativeController(program, args)

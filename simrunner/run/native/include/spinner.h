@@ -1,0 +1,87 @@
+/* spinner.h - the thesis's Spinner API (Appendix A.2) in C, for `simrunner drive ctrl.c`.
+ *
+ * Compile a controller by hand with `cc $(simrunner cflags) ...`; `simrunner drive` does it
+ * for you. The program's own `int main(...)` is the entry point; it runs in a child process
+ * of the simulator and every call below talks to the simulated car in lockstep: simulated
+ * time passes only inside the calls that wait (get_image, get_speed, get_position,
+ * get_time, sleep - and usleep/sleep/nanosleep, which wait in simulated time too).
+ *
+ * Units without norm functions (the defaults): speed in m/s, steering angle in radians
+ * (bicycle-equivalent, positive = left), time in s, position in m. Give the car's own
+ * units with spinner_configure (e.g. servo -512..512, direction swapped, duty in %).
+ *
+ * Image: row 0 = farthest from the car, column 0 = the car's left; gray levels 0..255.
+ * When the run is over (laps done, time limit, off track) the next waiting call ends the
+ * program (exit status 0: stdio is flushed, atexit handlers run).
+ */
+#ifndef NXPCUP_SPINNER_H
+#define NXPCUP_SPINNER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* A norm function: (speed, angle) in the controller's units -> simulator units (thesis
+ * A.2: speed first, angle second; a function may use only one). diff_norm takes the
+ * already normalised (speed_mps, steer_rad) and returns the yaw rate in rad/s. */
+typedef double (*spinner_norm_fn)(double speed, double angle);
+
+/* Replace the given norm functions (NULL keeps the current one; the defaults are identity
+ * and diff = v * sin(delta) / wheelbase, thesis eq. 5.2/5.3).
+ *   speed_norm(speed, angle)      -> m/s           (commands)
+ *   speed_denorm(speed_mps, angle)-> speed         (spinner_get_speed)
+ *   turn_norm(speed, angle)       -> rad, + = left (commands)
+ *   diff_norm(speed_mps, steer_rad) -> rad/s       (rear differential) */
+void spinner_configure(spinner_norm_fn speed_norm, spinner_norm_fn speed_denorm,
+                       spinner_norm_fn turn_norm, spinner_norm_fn diff_norm);
+
+/* Commands: stored, they act from the next physics step (no time passes). */
+void spinner_set_servo(double angle);              /* speed = last spinner_set_speed value */
+void spinner_set_servo_at(double angle, double speed);
+void spinner_set_speed(double speed);              /* angle = last spinner_set_servo value */
+void spinner_set_speed_at(double speed, double angle);
+void spinner_set_speed_and_servo(double speed, double angle);
+
+/* Camera: wait for the next frame. line = -1: the whole image (height x width bytes, row
+ * after row); line = 0..height-1: that row only (width bytes). add_noise != 0 adds the
+ * camera noise (seeded by the run). `buf` must hold `size` >= the bytes returned; returns
+ * the number of bytes written. */
+size_t spinner_get_image(int line, int add_noise, uint8_t *buf, size_t size);
+int spinner_image_width(void);     /* pixels (128 on the default car) */
+int spinner_image_height(void);    /* rows */
+int spinner_line_row(void);        /* the row that plays the real line camera (60) */
+
+/* Sensors: each lets one physics step pass (so polling loops make progress). */
+double spinner_get_speed(void);    /* through speed_denorm, with the last angle */
+void spinner_get_position(double *x_m, double *y_m, double *z_m);  /* world, rear axle */
+double spinner_get_time(void);     /* simulated s */
+
+/* Let `seconds` of simulated time pass (ceil(seconds / dt) steps, at least one). */
+void spinner_sleep(double seconds);
+
+/* Debug video: text lines in the right column (one call = the lines of this frame). */
+void spinner_add_text(const char *const *lines, int n);
+void spinner_add_textf(const char *format, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 1, 2)))
+#endif
+    ;  /* one line, printf-style */
+/* Debug video: a processed image line (rows x width bytes, rows >= 1), shown stretched. */
+void spinner_add_line(const uint8_t *pixels, int rows, int width);
+/* 1 when text added to the video/CSV is kept (a video or CSV is written): skip formatting
+ * otherwise. */
+int spinner_recording(void);
+
+/* Add camera noise to an image in place (rows x width bytes). */
+void spinner_add_noise(uint8_t *pixels, int rows, int width);
+
+/* A run parameter (`simrunner drive ... --param NAME=VALUE`), or default_value. */
+double spinner_param(const char *name, double default_value);
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* NXPCUP_SPINNER_H */

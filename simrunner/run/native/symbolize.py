@@ -1,0 +1,200 @@
+"""Turning a C controller's raw fault report into file:line: :func:`describe_fault`.
+
+The host program (``host/spinner_host.c``) reports a fault as text: ``signal N``, ``message
+TEXT``, optionally ``pc ADDR`` (the faulting instruction) and one ``frame ADDR OFFSET
+PATH<TAB>SYMBOL`` line per return address (glibc ``backtrace`` + ``dladdr``). Frames in the
+controller's own library are symbolised with its debug info by ``addr2line`` (binutils,
+part of ``build-essential``); without it, frames keep their symbol names only.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+from dataclasses import dataclass
+
+SIGNAL_TEXT = {
+    signal.SIGSEGV: "segmentation fault (invalid memory access)",
+    signal.SIGBUS: "bus error (invalid memory access)",
+    signal.SIGILL: "illegal instruction",
+    signal.SIGFPE: "arithmetic exception (integer division by zero)",
+    signal.SIGABRT: "aborted (abort() or a failed assert)",
+}
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One stack frame: ``function`` name, ``file``/``line`` (None without debug info) and
+    the ``module`` it is in."""
+
+    function: str
+    file: str | None
+    line: int | None
+    module: str
+
+    def text(self) -> str:
+        where = f"{self.file}:{self.line}" if self.file else f"in {os.path.basename(self.module)}"
+        return f"{self.function or '??'} at {where}" if self.file else f"{self.function or '??'} {where}"
+
+
+@dataclass(frozen=True)
+class Fault:
+    """A parsed report: ``signal`` (0 for a misused Spinner call, SIGUSR1 for a stalled
+    loop's position), ``message`` and the user's ``frames`` (innermost first)."""
+
+    signal: int
+    message: str
+    frames: tuple[Frame, ...]
+
+    @property
+    def location(self) -> Frame | None:
+        """The innermost frame with a file and line (the user's code), if any."""
+        return next((f for f in self.frames if f.file), None)
+
+    def where(self) -> str:
+        loc = self.location
+        return f"{loc.file}:{loc.line}" if loc else ""
+
+
+def _display_path(path: str) -> str:
+    try:
+        rel = os.path.relpath(path)
+    except ValueError:
+        return path
+    return rel if not rel.startswith("..") else path
+
+
+def _addr2line(module: str, offsets: list[int]) -> dict[int, list[tuple[str, str | None, int | None]]]:
+    """offset -> [(function, file, line)] innermost first (inlined calls expanded)."""
+    tool = shutil.which("addr2line")
+    if tool is None or not offsets:
+        return {}
+    try:
+        proc = subprocess.run([tool, "-e", module, "-f", "-C", "-i", "-a",
+                               *(hex(o) for o in sorted(set(offsets)))], capture_output=True, text=True,
+                              timeout=20)
+    except (OSError, subprocess.TimeoutExpired):
+        return {}
+    out: dict[int, list] = {}
+    cur: list | None = None
+    lines = proc.stdout.splitlines()
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        if line.startswith("0x") and (i + 1 >= len(lines) or not lines[i + 1].startswith("0x")):
+            cur = out[int(line, 16)] = []
+            i += 1
+            continue
+        if cur is not None and i + 1 < len(lines):
+            func, loc = line, lines[i + 1].split(" (discriminator")[0]
+            path, _, num = loc.rpartition(":")
+            ok = path and path != "??" and num.isdigit() and num != "0"
+            cur.append((func if func != "??" else "", _display_path(path) if ok else None,
+                        int(num) if ok else None))
+            i += 2
+            continue
+        i += 1
+    return out
+
+
+def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
+    """A :class:`Fault` from the host's report; frames of ``user_modules`` get file:line.
+
+    Handler and host frames above the fault are dropped; the frames below the controller's
+    ``main`` (the host starting it) are cut."""
+    sig, message, pc, raw = 0, "", None, []
+    for line in text.splitlines():
+        key, _, rest = line.partition(" ")
+        if key == "signal":
+            sig = int(rest or 0)
+        elif key == "message":
+            message = rest
+        elif key == "pc":
+            pc = int(rest, 16)
+        elif key == "frame":
+            addr, off, rest2 = (rest.split(" ", 2) + ["", ""])[:3]
+            path, _, sym = rest2.partition("\t")
+            raw.append((int(addr, 16), int(off, 16), path, sym))
+    user = {os.path.realpath(m) for m in user_modules}
+    host_real = os.path.realpath(host)
+    # (offset for symbolising, path, symbol): return addresses point after their call
+    frames: list[tuple[int, str, str]] = []
+    if pc is not None:
+        idx = next((i for i, f in enumerate(raw) if f[0] == pc), None)
+        if idx is None:
+            hit = next((f for f in raw if f[0] == pc), None)
+            frames = [(hit[1], hit[2], hit[3])] if hit else []
+        else:
+            first = raw[idx]
+            frames = [(first[1], first[2], first[3])] + [(o - 1, p, s) for _, o, p, s in raw[idx + 1:]]
+    else:
+        rest = list(raw)
+        while rest and os.path.realpath(rest[0][2]) == host_real:
+            rest.pop(0)  # the report's own frames and the Spinner call
+        frames = [(o - 1, p, s) for _, o, p, s in rest]
+    # cut below the controller's main: the first host frame after a user frame
+    seen_user, kept = False, []
+    for f in frames:
+        real = os.path.realpath(f[1]) if f[1] and f[1] != "?" else f[1]
+        if real in user:
+            seen_user = True
+        elif seen_user and real == host_real:
+            break
+        kept.append((f[0], f[1], f[2], real in user))
+    by_module: dict[str, list[int]] = {}
+    for off, path, _, is_user in kept:
+        if is_user:
+            by_module.setdefault(path, []).append(off)
+    symbols = {m: _addr2line(m, offs) for m, offs in by_module.items()}
+    out: list[Frame] = []
+    for off, path, sym, is_user in kept:
+        found = symbols.get(path, {}).get(off) if is_user else None
+        if found:
+            out.extend(Frame(fn or sym, file, line, path) for fn, file, line in found)
+        else:
+            out.append(Frame(sym, None, None, path))
+    return Fault(sig, message, tuple(out))
+
+
+def _what(fault: Fault) -> str:
+    if not fault.signal:
+        return fault.message
+    text = SIGNAL_TEXT.get(fault.signal, f"signal {fault.signal}")
+    return fault.message if fault.message.startswith("stack overflow") else text
+
+
+def format_traceback(fault: Fault, program: str) -> str:
+    """The traceback text (innermost frame first, repeated frames folded)."""
+    what = _what(fault)
+    lines = [f"C controller {program}: {what}", "C backtrace (innermost first):"]
+    prev, repeat = None, 0
+    for i, f in enumerate(fault.frames):
+        t = f.text()
+        if t == prev:
+            repeat += 1
+            continue
+        if repeat:
+            lines.append(f"    ... the frame above {repeat} more time(s)")
+            repeat = 0
+        lines.append(f"  #{i} {t}")
+        prev = t
+        if len(lines) > 40:
+            lines.append("    ...")
+            break
+    if repeat:
+        lines.append(f"    ... the frame above {repeat} more time(s)")
+    loc = fault.location
+    if loc is None:
+        lines.append("(no file:line: compile with debug info, -g, and install binutils for addr2line)")
+    return "\n".join(lines) + "\n"
+
+
+def fault_message(fault: Fault) -> str:
+    """One line: ``file:line: what happened in function()``."""
+    what = _what(fault).split(" (")[0] if fault.signal else fault.message
+    name = f"SIG{signal.Signals(fault.signal).name[3:]}: " if fault.signal in SIGNAL_TEXT else ""
+    loc = fault.location
+    if loc is None:
+        return f"{name}{what}"
+    return f"{loc.file}:{loc.line}: {name}{what} (in {loc.function}())"

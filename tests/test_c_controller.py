@@ -1,0 +1,372 @@
+"""C/C++ controllers (issue 11): build and cache, the run, faults with file:line, the
+examples against their Python twins, the thesis's C++ programs, the CLI."""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from simrunner.cli import main as cli
+from simrunner.errors import ControllerFileError
+from simrunner.run.log import read_log
+from simrunner.run.native import INCLUDE_DIR, build_program, cflags
+from simrunner.run.native.symbolize import parse_report
+from simrunner.run.runner import drive, resolve_track
+from simrunner.run.spinner import Spinner
+from vehicle.description import load_car
+
+pytestmark = pytest.mark.skipif(shutil.which("cc") is None and not os.environ.get("CC"),
+                                reason="no C compiler (apt-get install build-essential)")
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLES = REPO / "examples"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def cache(tmp_path_factory):
+    """One build cache for the module (the host program is built once)."""
+    old = os.environ.get("SIMRUNNER_CACHE_DIR")
+    path = tmp_path_factory.mktemp("native-cache")
+    os.environ["SIMRUNNER_CACHE_DIR"] = str(path)
+    yield path
+    if old is None:
+        os.environ.pop("SIMRUNNER_CACHE_DIR", None)
+    else:
+        os.environ["SIMRUNNER_CACHE_DIR"] = old
+
+
+@pytest.fixture(scope="module")
+def track():
+    return resolve_track(None, load_car(None))[0]
+
+
+def write(folder: Path, name: str, body: str) -> Path:
+    path = folder / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(textwrap.dedent(body))
+    return path
+
+
+FAULTS_C = """\
+#include <stdio.h>
+#include <stdlib.h>
+#include "spinner.h"
+static volatile int zero = 0;
+static int *volatile nowhere = NULL;
+static int recurse(int n) { volatile char pad[256]; pad[0] = (char)n; return n < 0 ? 0 : recurse(n + 1) + pad[0]; }
+static void fault(void) {
+#if FAULT == 1
+    *nowhere = 1;                                          /* line 9 */
+#elif FAULT == 2
+    abort();                                               /* line 11 */
+#elif FAULT == 3
+    printf("%d\\n", recurse(0));                            /* line 13 (recursion: 6) */
+#elif FAULT == 4
+    printf("%d\\n", 10 / zero);                             /* line 15 */
+#elif FAULT == 5
+    for (;;) {}                                            /* line 17 */
+#elif FAULT == 6
+    uint8_t row[128]; spinner_get_image(500, 1, row, 128); /* line 19 */
+#elif FAULT == 7
+    spinner_set_speed(0.0 / zero);                         /* line 21 */
+#elif FAULT == 8
+    exit(3);                                               /* line 23 */
+#endif
+}
+int main(void) {
+    uint8_t row[128];
+    for (int i = 0; i < 10; i++) {
+        spinner_get_image(60, 1, row, sizeof row);
+        spinner_set_speed_and_servo(0.5, 0.0);
+    }
+    printf("before the fault\\n");
+    fault();
+    return 0;
+}
+"""
+
+
+# -- build and cache --------------------------------------------------------------------------
+def test_compile_error_is_the_compilers_file_line_exit_2_and_nothing_written(tmp_path):
+    src = write(tmp_path, "bad.c", """\
+        #include "spinner.h"
+        int main(void) {
+            spinner_set_speed(1.0)
+            return 0;
+        }
+        """)
+    csv = tmp_path / "run.csv"
+    res = CliRunner().invoke(cli, ["drive", str(src), "--csv", str(csv)])
+    assert res.exit_code == 2
+    assert f"{src}:3:" in res.output and "error" in res.output and "Traceback" not in res.output
+    assert not csv.exists()
+
+
+def test_build_is_cached_by_content_and_headers_and_keeps_warnings(tmp_path):
+    inc = write(tmp_path, "inc/gain.h", "#define GAIN 1.0\n")
+    src = write(tmp_path, "c.c", """\
+        #include "spinner.h"
+        #include "gain.h"
+        int main(void) { int unused; spinner_set_speed(GAIN); return 0; }
+        """)
+    first = build_program([src], include_dirs=[inc.parent])
+    again = build_program([src], include_dirs=[inc.parent])
+    assert not first.cached and again.cached and again.library == first.library
+    assert "unused" in first.warnings and again.warnings == first.warnings
+    inc.write_text("#define GAIN 2.0\n")  # an included header changed: rebuilt
+    third = build_program([src], include_dirs=[inc.parent])
+    assert not third.cached
+    assert not build_program([src], include_dirs=[inc.parent], defines=["X=1"]).cached
+
+
+@pytest.mark.parametrize("sources, kw, message", [
+    (["missing.c"], {}, "no such controller file"),
+    (["notes.txt"], {}, "expected C/C++ sources"),
+    (["ok.c"], {"include_dirs": ["no-such-dir"]}, "no such include directory"),
+    ([], {}, "no controller source"),
+])
+def test_bad_build_input_is_one_line(tmp_path, monkeypatch, sources, kw, message):
+    monkeypatch.chdir(tmp_path)
+    write(tmp_path, "ok.c", "int main(void) { return 0; }\n")
+    write(tmp_path, "notes.txt", "x\n")
+    with pytest.raises(ControllerFileError, match=re.escape(message)) as err:
+        build_program(sources, **kw)
+    assert "\n" not in str(err.value)
+
+
+def test_no_compiler_is_one_line_naming_what_to_install(tmp_path, monkeypatch):
+    monkeypatch.setenv("CC", "no-such-compiler-here")
+    src = write(tmp_path, "c.c", "int main(void) { return 0; }\n")
+    res = CliRunner().invoke(cli, ["drive", str(src)])
+    assert res.exit_code == 2
+    assert "build-essential" in res.output and len(res.output.strip().splitlines()) == 1
+
+
+# -- runs -------------------------------------------------------------------------------------
+def test_line_follower_c_logs_the_same_lap_as_the_python_one_and_is_deterministic(tmp_path, track):
+    runs = {name: drive(EXAMPLES / name, track=track, csv=tmp_path / f"{name}.csv", seed=3)
+            for name in ("line_follower.c", "line_follower.py")}
+    c, py = runs["line_follower.c"], runs["line_follower.py"]
+    assert c.outcome == py.outcome == "finished"
+    assert abs(c.lap_times_s[0] - py.lap_times_s[0]) <= 0.02 * py.lap_times_s[0]
+    # the same arithmetic on the same images: the same run log, number for number
+    assert (tmp_path / "line_follower.c.csv").read_bytes() == (tmp_path / "line_follower.py.csv").read_bytes()
+    again = drive(EXAMPLES / "line_follower.c", track=track, seed=3, csv=tmp_path / "again.csv")
+    assert (tmp_path / "again.csv").read_bytes() == (tmp_path / "line_follower.c.csv").read_bytes()
+    assert again.lap_times_s == c.lap_times_s
+
+
+def test_real_car_units_c_drives_as_the_python_one(tmp_path, track):
+    c = drive(EXAMPLES / "real_car_units.c", track=track, csv=tmp_path / "c.csv")
+    py = drive(EXAMPLES / "real_car_units.py", track=track, csv=tmp_path / "py.csv")
+    assert c.outcome == py.outcome == "finished"
+    assert (tmp_path / "c.csv").read_bytes() == (tmp_path / "py.csv").read_bytes()
+
+
+def test_sleeps_wait_in_simulated_time_and_stdout_reaches_the_terminal(tmp_path, track, capfd):
+    src = write(tmp_path, "sleeps.c", """\
+        #include <stdio.h>
+        #include <time.h>
+        #include <unistd.h>
+        #include "spinner.h"
+        int main(void) {
+            double t0 = spinner_get_time();
+            usleep(100000);
+            double t1 = spinner_get_time();
+            struct timespec ts = {0, 50000000};
+            nanosleep(&ts, NULL);
+            double t2 = spinner_get_time();
+            sleep(1);
+            double t3 = spinner_get_time();
+            spinner_sleep(0.25);
+            printf("slept %.3f %.3f %.3f %.3f\\n", t1 - t0, t2 - t1, t3 - t2, spinner_get_time() - t3);
+            fprintf(stderr, "to stderr\\n");
+            return 0;
+        }
+        """)
+    r = drive(src, track=track, time_limit_s=5)
+    assert r.outcome == "controller_returned"
+    out, err = capfd.readouterr()
+    # each wait: its steps plus the one step of the get_time after it (dt 2 ms)
+    assert "slept 0.102 0.052 1.002 0.252" in out
+    assert "to stderr" in err
+    assert r.sim_time_s == pytest.approx(1.41, abs=0.005)
+
+
+def test_param_comes_from_the_python_spinner_when_it_has_param(tmp_path, track, capfd, monkeypatch):
+    src = write(tmp_path, "param.c", """\
+        #include <stdio.h>
+        #include "spinner.h"
+        int main(void) { printf("gain %g\\n", spinner_param("gain", 0.5)); return 0; }
+        """)
+    if not hasattr(Spinner, "param"):  # before the --param branch: the default
+        drive(src, track=track)
+        assert "gain 0.5" in capfd.readouterr().out
+        monkeypatch.setattr(Spinner, "param", lambda self, name, default: 2.5, raising=False)
+    else:
+        monkeypatch.setattr(Spinner, "param", lambda self, name, default: 2.5)
+    drive(src, track=track)
+    assert "gain 2.5" in capfd.readouterr().out
+
+
+def test_multiple_sources_include_dirs_defines_and_exit_status(tmp_path, track, capfd):
+    write(tmp_path, "inc/helper.h", "int helper(int);\n")
+    write(tmp_path, "helper.cpp", 'extern "C" int helper(int x) { return x * SCALE; }\n')
+    main_c = write(tmp_path, "main.c", """\
+        #include <stdio.h>
+        #include "helper.h"
+        #include "spinner.h"
+        int main(void) { printf("helper %d\\n", helper(21)); spinner_get_time(); return STATUS; }
+        """)
+    prog = build_program([main_c, tmp_path / "helper.cpp"], include_dirs=[tmp_path / "inc"],
+                         defines=["SCALE=2", "STATUS=0"])
+    assert drive(prog, track=track).outcome == "controller_returned"
+    assert "helper 42" in capfd.readouterr().out
+    failing = build_program([main_c, tmp_path / "helper.cpp"], include_dirs=[tmp_path / "inc"],
+                            defines=["SCALE=2", "STATUS=3"])
+    r = drive(failing, track=track)
+    assert r.outcome == "controller_error" and "exited with status 3" in r.message
+
+
+def test_a_prebuilt_shared_library_runs(tmp_path, track, capfd):
+    src = write(tmp_path, "pre.c", """\
+        #include <stdio.h>
+        #include "spinner.h"
+        int main(void) { uint8_t img[128 * 128];
+            printf("bytes %zu\\n", spinner_get_image(-1, 0, img, sizeof img)); return 0; }
+        """)
+    lib = tmp_path / "pre.so"
+    subprocess.run(["cc", "-shared", "-fPIC", "-g", cflags(), str(src), "-o", str(lib)], check=True)
+    r = drive(lib, track=track)
+    assert r.outcome == "controller_returned" and "bytes 16384" in capfd.readouterr().out
+
+
+# -- faults -----------------------------------------------------------------------------------
+@pytest.mark.parametrize("fault, outcome, line, words", [
+    (1, "controller_error", 9, "SIGSEGV"),
+    (2, "controller_error", 11, "SIGABRT"),
+    (3, "controller_error", 6, "stack overflow"),
+    (4, "controller_error", 15, "SIGFPE"),
+    (5, "stalled", 17, "stalled"),
+    (6, "controller_error", 19, "spinner_get_image(line=500)"),
+    (7, "controller_error", 21, "spinner_set_speed(speed="),
+    (8, "controller_error", None, "exited with status 3"),
+])
+def test_faults_name_the_c_line_and_keep_the_run_so_far(tmp_path, track, capfd, fault, outcome,
+                                                        line, words):
+    src = write(tmp_path, "faults.c", FAULTS_C)
+    prog = build_program([src], defines=[f"FAULT={fault}"])
+    r = drive(prog, track=track, csv=tmp_path / "run.csv", wall_limit_s=0.5)
+    assert r.outcome == outcome
+    assert words in r.message
+    if line is not None:
+        assert f"faults.c:{line}" in r.message
+        if outcome == "controller_error":
+            assert f"faults.c:{line}" in r.error.traceback_text
+    # the ten frames before the fault are recorded and written
+    assert len(read_log(tmp_path / "run.csv")) >= 11
+    assert "before the fault" in capfd.readouterr().out
+    # the simulator survives: the next run is fine
+    assert drive(EXAMPLES / "line_follower.c", track=track, time_limit_s=0.5).outcome == "timeout"
+
+
+def test_fault_report_parsing_table():
+    """The host's report format: handler frames dropped, frames below main cut."""
+    host, lib = "/x/spinner_host", "/x/ctrl.so"
+    report = "\n".join([
+        "signal 11", "message ", "pc 0x5010",
+        f"frame 0x1000 0x1000 {host}\tfault_report", f"frame 0x2000 0x2000 {host}\ton_fault",
+        "frame 0x3000 0x3000 /lib/libc.so.6\t", f"frame 0x5010 0x10 {lib}\tcrash",
+        f"frame 0x5020 0x20 {lib}\tmain", f"frame 0x6000 0x6000 {host}\tmain",
+        "frame 0x7000 0x7000 /lib/libc.so.6\t__libc_start_main"])
+    fault = parse_report(report, {lib}, host)
+    assert fault.signal == 11
+    assert [f.function for f in fault.frames] == ["crash", "main"]  # no debug info: names only
+    misuse = parse_report("\n".join(["signal 0", "message spinner_sleep(seconds=-1): bad",
+                                     f"frame 0x1 0x1 {host}\tfault_report",
+                                     f"frame 0x2 0x2 {host}\tspinner_sleep",
+                                     f"frame 0x3 0x30 {lib}\tloop"]), {lib}, host)
+    assert misuse.message.startswith("spinner_sleep") and [f.function for f in misuse.frames] == ["loop"]
+
+
+# -- C++ and the thesis's programs --------------------------------------------------------------
+def test_thesis_camera_row_program_runs_unchanged(tmp_path, track):
+    text = (EXAMPLES / "camera_row_test.cpp").read_text()
+    assert 's.addData({"image_row:" + std::to_string(i)});' in text and "usleep(100000);" in text
+    r = drive(EXAMPLES / "camera_row_test.cpp", track=track, csv=tmp_path / "rows.csv")
+    assert r.outcome == "controller_returned"
+    assert r.sim_time_s == pytest.approx(128 * 0.12)  # a frame + 0.1 s per row, as in Python
+    texts = read_log(tmp_path / "rows.csv").data_text
+    assert "image_row:0" in texts and "image_row:127" in texts
+
+
+def test_thesis_velocity_program_runs_unchanged(tmp_path, track, capfd):
+    text = (EXAMPLES / "velocity_test.cpp").read_text()
+    assert "auto [sx, sy, sz] = s.getPosition();" in text and "while(s.getTime() - time < 1){}" in text
+    r = drive(EXAMPLES / "velocity_test.cpp", track=track)
+    assert r.outcome == "controller_returned"
+    out = capfd.readouterr().out
+    dist = [float(line.split("distance:")[1]) for line in out.splitlines() if "distance:" in line]
+    # speed units of 0.1 m/s held 2 s, scaled by the thesis's 0.774193548
+    np.testing.assert_allclose(dist, [0.2 * 0.774193548 * k for k in (1, 2, 3)], rtol=0.03)
+
+
+def test_spinner_hpp_image_type_and_norms(tmp_path, track, capfd):
+    src = write(tmp_path, "img.cpp", """\
+        #include "spinner.hpp"
+        int main() {
+            Spinner s(std::nullopt, [](float v, float) { return v * 10; },
+                      [](float, float a) { return -a / 512 * 0.4f; });
+            auto row = s.getImage(60, false);
+            auto img = s.getImage();
+            s.addData(row);
+            s.addNoise(img);
+            s.setSpeedAndServo(1.0, -512);
+            auto [x, y, z] = s.getPosition();
+            for (int i = 0; i < 20; i++) s.getImage(60);
+            std::cout << row.rows << "x" << row.cols << " " << img.rows << "x" << img.cols
+                      << " mid " << int(row.at<uint8_t>(0, 64)) << " data " << int(row.data[64])
+                      << " speed " << (s.getSpeed() > 2 ? "denormed" : "raw") << std::endl;
+            (void)x; (void)y; (void)z;
+            return 0;
+        }
+        """)
+    r = drive(src, track=track, csv=tmp_path / "c.csv")
+    assert r.outcome == "controller_returned", r.message
+    out = capfd.readouterr().out
+    assert "1x128 128x128 mid " in out and "speed denormed" in out
+    mid = int(out.split(" mid ")[1].split()[0])
+    assert mid > 128 and f"data {mid}" in out  # the lane is white ahead
+    log = read_log(tmp_path / "c.csv")
+    assert log.steer_cmd_rad[-1] == pytest.approx(0.4)  # -512 = full left through turn_norm
+
+
+def test_headers_compile_cleanly_with_strict_warnings(tmp_path):
+    src = write(tmp_path, "strict.cpp", '#include "spinner.hpp"\nint main() { Spinner s; return 0; }\n')
+    c_src = write(tmp_path, "strict.c", '#include "spinner.h"\nint main(void) { return 0; }\n')
+    for compiler, path in (("c++", src), ("cc", c_src)):
+        proc = subprocess.run([compiler, "-fsyntax-only", "-Wall", "-Wextra", "-pedantic",
+                               f"-I{INCLUDE_DIR}", str(path)], capture_output=True, text=True)
+        assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+def test_cli_prints_the_include_dir_and_cflags():
+    runner = CliRunner()
+    inc = runner.invoke(cli, ["include-dir"])
+    assert inc.exit_code == 0 and (Path(inc.output.strip()) / "spinner.h").is_file()
+    flags = runner.invoke(cli, ["cflags"])
+    assert flags.output.strip() == f"-I{inc.output.strip()}"
+
+
+def test_sources_without_main_are_bad_input_and_nothing_is_written(tmp_path, track):
+    src = write(tmp_path, "nomain.c", "int helper(void) { return 1; }\n")
+    with pytest.raises(ControllerFileError, match=r"nomain\.c: no main\(\) function defined"):
+        drive(src, track=track, csv=tmp_path / "run.csv")
+    assert not (tmp_path / "run.csv").exists()
