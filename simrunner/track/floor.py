@@ -18,7 +18,7 @@ from simrunner.track.load import SimTrack
 from simrunner.track.raster import FLOOR_GRAY, TrackRaster
 
 FLOOR_NAME = "floor"
-FLOOR_SIZE_M = 20.0
+FLOOR_SIZE_M = 6.0
 FLOOR_M_PER_PX = 0.05
 
 
