@@ -7,7 +7,7 @@ track for MINUTES simulated minutes (laps unbounded), with ``--csv`` to a tempor
 without; it reports the peak RSS (``ru_maxrss``) and the rows written.
 
     python -m bench memory                     # 10 and 60 simulated minutes
-    BENCH_MEMORY_MINUTES=2,10 python -m bench memory
+    BENCH_MEMORY_MINUTES=2,10 BENCH_MEMORY_CSV=no python -m bench memory   # other lengths, no CSV
     BENCH_REPO=/path/to/other/checkout python -m bench memory   # the same on another tree
 """
 from __future__ import annotations
@@ -39,7 +39,7 @@ def measure(minutes: float, with_csv: bool, repo: Path) -> dict:
         env = dict(os.environ, PYTHONPATH=str(repo))
         out = subprocess.run([sys.executable, "-c", CHILD, str(minutes), csv,
                               str(repo / "examples" / "line_follower.py")],
-                             env=env, capture_output=True, text=True, check=True)
+                             env=env, cwd=repo, capture_output=True, text=True, check=True)
         result = json.loads(out.stdout.strip().splitlines()[-1])
         if with_csv:
             result["csv_mb"] = Path(csv).stat().st_size / 1e6
@@ -51,7 +51,7 @@ def main() -> None:
     minutes = [float(m) for m in os.environ.get("BENCH_MEMORY_MINUTES", "10,60").split(",")]
     print(f"repo {repo}")
     print(f"{'sim min':>8} {'csv':>4} {'outcome':>10} {'rows':>8} {'log rows':>9} {'peak RSS MB':>12} {'wall s':>7}")
-    for with_csv in (False, True):
+    for with_csv in [c == "csv" for c in os.environ.get("BENCH_MEMORY_CSV", "no,csv").split(",")]:
         for m in minutes:
             t0 = time.perf_counter()
             r = measure(m, with_csv, repo)
