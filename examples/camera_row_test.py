@@ -1,12 +1,13 @@
 """Camera row selection test: port of the thesis's Fig. 5.2.
 
-Run it:  simrunner drive examples/camera_row_test.py --video rows.mp4
+Run it:  simrunner drive examples/camera_row_test.py --start-before-finish 0.30 --video rows.mp4
 
 The car stands still; every image row 0..127 is taken in turn and labelled in the debug
 video ("image_row:i" in the text column, the row stretched beside the camera image), so the
-video shows which row sees a given mark (the thesis put the car the desired distance
-before the finish line and read off row 60). Place the car with ``--track`` (the start pose
-of the track).
+video shows which row sees a given mark. As in the thesis, ``--start-before-finish D`` puts
+the car's front bumper D metres before the finish line (the distance the camera should look
+ahead); the row that sees the line is the one to use (the thesis read off row 60).
+``--start X,Y,YAW`` places the car anywhere else.
 
 The C++ original::
 

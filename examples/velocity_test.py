@@ -1,13 +1,14 @@
 """Driving-speed calibration test: port of the thesis's Fig. 5.5 (section 5.2.1).
 
 Run it:  simrunner drive examples/velocity_test.py
+    or on an empty floor (no track, no judging):  simrunner drive examples/velocity_test.py --track floor
 
 For each speed the car accelerates for SETTLE_S, then the distance covered in MEASURE_S at
 constant speed is measured with getPosition (times by busy-waiting on getTime, like the
 thesis), the car stops and backs up to where it started, so the test fits the first
 straight of the default track (about 1.1 m). Compare the printed distances with the same
 test on the real car and adjust ``speed_norm`` until they agree; for the thesis's full
-1 s + 2 s protocol use a track with a long straight (``--track``).
+1 s + 2 s protocol use ``--track floor`` (nothing limits the distance there).
 
 ``norm`` plays the thesis's distance normalisation (its Gazebo car was 130 % of the real
 one, hence 0.774193548); the default car here is 1:1, so it is 1.0.

@@ -4,10 +4,11 @@
 (:mod:`simrunner.cli.check`), ``excite`` and ``calibrate`` (:mod:`simrunner.cli.calib`),
 ``gap`` (:mod:`simrunner.cli.gap`); those load on use, so ``--help`` stays quick.
 
-Exit codes of ``drive``: 0 the run finished its laps or ``main`` returned; 1 the run failed
-(off track, timeout, controller error, stalled); 2 bad input, or a simulator dependency is
-not installed (one line on stderr, no traceback); 130 interrupted (Ctrl-C; outputs are still
-written).
+Exit codes of ``drive``: 0 the run finished its laps or ``main`` returned (or called
+``sys.exit(0)``); 1 the run failed (off track, timeout, controller error or non-zero
+``sys.exit``, stalled, or stuck inside one C call - see simrunner.run.watchdog); 2 bad input,
+or a simulator dependency is not installed (one line on stderr, no traceback); 130
+interrupted by Ctrl-C, 143 by SIGTERM, 129 by SIGHUP (outputs are still written).
 """
 from __future__ import annotations
 
@@ -126,14 +127,25 @@ def main() -> None:
 @main.command("drive")
 @click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
 @click.argument("more_sources", nargs=-1, type=click.Path(dir_okay=False, path_type=str))
-@click.option("--track", default=None, metavar="LAYOUT|DIR|WORLD",
+@click.option("--track", default=None, metavar="LAYOUT|DIR|WORLD|floor",
               help="Track: layout .txt, trackgen folder, world file or Gazebo model folder "
-                   "(default: the bundled thesis figure-8).")
+                   "(default: the bundled thesis figure-8); 'floor': an empty floor, no judging.")
 @click.option("--laps", default=1, show_default=True, type=click.IntRange(min=1),
               help="Laps to complete.")
-@click.option("--time-limit", "time_limit_s", default=60.0, show_default=True,
+@click.option("--time-limit", "time_limit_s", default=None,
               type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
-              help="Simulated-time limit of the run.")
+              help="Simulated-time limit of the run [default: max(60, laps x lap length / "
+                   "0.5 m/s)].")
+@click.option("--start", "start", default=None, metavar="X,Y,YAW",
+              help="Start pose of the car (rear-axle midpoint): x, y in metres, heading in "
+                   "degrees (counter-clockwise from +x).")
+@click.option("--start-before-finish", "start_before_finish_m", default=None,
+              type=click.FloatRange(min=0, max=1e4), metavar="METRES",
+              help="Start on the track's centre with the front bumper this far before the "
+                   "finish line (thesis Fig. 5.2).")
+@click.option("--keep-driving", is_flag=True, default=False,
+              help="Leaving the track does not end the run (still recorded: off_track "
+                   "column, a warning).")
 @click.option("--video", default=None, metavar="PATH.mp4", help="Write the debug video.")
 @click.option("--csv", default=None, metavar="PATH", help="Write telemetry (one row per camera frame).")
 @click.option("--plot", default=None, metavar="PATH.png", help="Write path/speed/steering plot.")
@@ -155,23 +167,31 @@ def main() -> None:
 @click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
               help="C/C++ controllers: a preprocessor define (repeatable).")
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
-              car, dt_s, wall_limit_s, param_items, include_dirs, defines) -> None:
+              car, dt_s, wall_limit_s, param_items, include_dirs, defines, start, start_before_finish_m,
+              keep_driving) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
     a shared library (.so). See docs/c_controllers.md."""
     from simrunner.run.params import parse_params
+    from simrunner.run.faults import Terminated, exit_code
     from simrunner.run.runner import drive
 
     try:
         controller = _native_program(controller, more_sources, include_dirs, defines)
         result = drive(controller, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
                        csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
-                       wall_limit_s=wall_limit_s, params=parse_params(param_items))
+                       wall_limit_s=wall_limit_s, params=parse_params(param_items), start=_start_pose(start),
+                       start_before_finish_m=start_before_finish_m, keep_driving=keep_driving)
     except input_errors() as exc:
         click.echo(f"simrunner: {exc}", err=True)
         sys.exit(2)
+    except Terminated as exc:  # before the run started: nothing was written
+        click.echo(f"simrunner: {exc.args[0]} received before the run started", err=True)
+        sys.exit(128 + exc.signum)
     if result.error is not None:
         click.echo(result.error.traceback_text.rstrip(), err=True)
+    for text in result.warnings:
+        click.echo(f"warning: {text}", err=True)
     laps_text = ", ".join(f"{t:.2f} s" for t in result.lap_times_s) or "-"
     click.echo(f"outcome: {result.outcome} ({result.message})")
     click.echo(f"laps: {result.laps_completed}/{result.laps}   lap times: {laps_text}")
@@ -183,7 +203,31 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
         click.echo("simrunner: warning: the controller never read --param "
                    + ", ".join(result.unused_params)
                    + " (read one with spinner.param(name, default))", err=True)
-    sys.exit(0 if result.ok else 130 if result.outcome == "interrupted" else 1)
+    code = exit_code(result.outcome, result.signal)
+    if result.stray_threads:  # do not wait for the controller's threads at exit
+        sys.stdout.flush()
+        sys.stderr.flush()
+        import os
+
+        os._exit(code)
+    sys.exit(code)
+
+
+def _start_pose(text: str | None) -> tuple[float, float, float] | None:
+    """``--start X,Y,YAW`` (m, m, degrees) -> ``(x_m, y_m, yaw_rad)``; bad text is one line."""
+    if text is None:
+        return None
+    import math
+
+    parts = text.split(",")
+    try:
+        x, y, yaw_deg = (float(v) for v in parts)
+    except ValueError:
+        x = y = yaw_deg = math.nan
+    if not all(math.isfinite(v) for v in (x, y, yaw_deg)) or len(parts) != 3:
+        raise click.BadParameter(f"{text!r}: expected X,Y,YAW (metres, metres, degrees), e.g. 1.5,-0.2,90",
+                                 param_hint="'--start'")
+    return x, y, math.radians(yaw_deg)
 
 
 def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs: tuple[str, ...],

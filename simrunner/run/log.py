@@ -17,7 +17,9 @@ columns in any order; unknown columns are ignored.
 During a run, :class:`RunRecorder` collects the rows: the state at each camera frame
 boundary ``t_k``, the command the first physics step after ``t_k`` applies (the
 controller's answer to frame ``k``; the last row keeps the command in force at its
-boundary), and the ``add_data`` text lines added between ``t_k`` and ``t_k+1``.
+boundary), and the ``add_data`` text lines added between ``t_k`` and ``t_k+1``. It streams
+each row to the CSV as the run goes (:mod:`simrunner.run.stream`, the same bytes as
+:func:`write_log`) and keeps a bounded number in memory.
 """
 from __future__ import annotations
 
@@ -353,6 +355,10 @@ def _check_format_line(line: str, source: str, lineno: int) -> None:
 
 
 # -- recording a run -------------------------------------------------------------------------
+KEEP_ROWS = 1 << 17  # rows a RunRecorder keeps in memory (43 min at 50 fps); then every 2nd, 4th, ...
+_N_RUN_COLUMNS = 13  # frame .. yaw_rate_cmd_radps, lap, off_track (coast is always 0)
+
+
 class RunRecorder:
     """Collects a run's rows (see the module docstring); :meth:`freeze` gives the RunLog.
 
@@ -360,45 +366,112 @@ class RunRecorder:
     k - 1 with ``previous_command``: the command the first physics step after ``t_k-1``
     applied (None when no step followed). ``text(lines)`` adds ``add_data`` text to the open
     row. No row is changed after it is closed.
+
+    Memory stays bounded: each closed row goes to ``sink`` (``sink.row(values, text)``, e.g.
+    a :class:`simrunner.run.stream.CsvStream` writing the CSV as the run goes) and is kept in
+    memory only while fewer than ``max_rows`` are kept; then every other kept row is dropped
+    and from there on only every 2nd (4th, ...) row is kept (``stride``). :meth:`freeze` gives
+    the kept rows plus the open (last) row: every row of a run shorter than ``max_rows``
+    frames, a thinned log (``stride`` > 1) of a longer one. :meth:`finish` closes the open
+    row into the sink.
     """
 
-    def __init__(self, *, record_text: bool = True) -> None:
-        self._state: list[tuple] = []
-        self._commands: list[tuple[float, float, float]] = []
-        self._texts: dict[int, list[str]] = {}
+    def __init__(self, *, record_text: bool = True, sink=None, max_rows: int = KEEP_ROWS) -> None:
+        if max_rows < 2:
+            raise SimError(f"RunRecorder: max_rows = {max_rows!r}: expected >= 2")
+        self.max_rows = int(max_rows)
+        self._rows = np.empty((min(1024, self.max_rows), _N_RUN_COLUMNS))
+        self._kept = 0        # rows held in _rows
+        self._closed = 0      # rows closed so far (written to the sink)
+        self.stride = 1       # a closed row i is kept when i % stride == 0
+        self._texts: dict[int, str] = {}  # position in _rows -> data_text
+        self._open: tuple | None = None   # state of the open row
+        self._open_text: list[str] = []
         self._open_command: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.record_text = record_text
+        self.sink = sink
 
     def __len__(self) -> int:
-        return len(self._state)
+        """Rows recorded so far (closed and open), kept in memory or not."""
+        return self._closed + (self._open is not None)
 
     def frame(self, k: int, t_s: float, x_m: float, y_m: float, yaw_rad: float, speed_mps: float,
               steer_rad: float, yaw_rate_radps: float, command: tuple[float, float, float],
               previous_command: tuple[float, float, float] | None, lap: int, off_track: bool) -> None:
         """Row k: the state at ``t_s``; ``command`` is in force now (row k keeps it if no
         step follows)."""
-        if self._state:
-            self._commands.append(self._open_command if previous_command is None else previous_command)
-        self._state.append((k, t_s, x_m, y_m, yaw_rad, speed_mps, steer_rad, yaw_rate_radps, lap, off_track))
+        if self._open is not None:
+            self._close(self._open_command if previous_command is None else previous_command)
+        self._open = (k, t_s, x_m, y_m, yaw_rad, speed_mps, steer_rad, yaw_rate_radps, lap, off_track)
         self._open_command = command
+
+    def _close(self, command: tuple[float, float, float]) -> None:
+        s = self._open
+        row = (s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], command[0], command[1], command[2],
+               s[8], s[9])
+        text = TEXT_SEPARATOR.join(self._open_text) if self._open_text else ""
+        if self._open_text:
+            self._open_text = []
+        if self.sink is not None:
+            self.sink.row(row, text)
+        i = self._closed
+        self._closed = i + 1
+        if i % self.stride == 0:
+            self._keep(row, text)
+
+    def _keep(self, row: tuple, text: str) -> None:
+        n = self._kept
+        if n == len(self._rows):
+            if n < self.max_rows:  # grow
+                grown = np.empty((min(2 * n, self.max_rows), _N_RUN_COLUMNS))
+                grown[:n] = self._rows[:n]
+                self._rows = grown
+            else:  # full: keep every other row, double the stride
+                half = (n + 1) // 2
+                self._rows[:half] = self._rows[:n:2]
+                self._texts = {p // 2: v for p, v in self._texts.items() if p % 2 == 0}
+                self._kept = n = half
+                self.stride *= 2
+                if (self._closed - 1) % self.stride:
+                    return
+        self._rows[n] = row
+        if text:
+            self._texts[n] = text
+        self._kept = n + 1
 
     def text(self, lines: Sequence[str]) -> None:
         """``add_data`` text of the open row (lines added within one frame accumulate)."""
-        if self.record_text and self._state:
-            self._texts.setdefault(len(self._state) - 1, []).extend(lines)
+        if self.record_text and self._open is not None:
+            self._open_text.extend(lines)
+
+    def finish(self) -> None:
+        """Close the open row into the sink (the end of the run; it keeps the command in
+        force at its boundary). The rows stay available to :meth:`freeze`."""
+        if self._open is not None and self.sink is not None:
+            s = self._open
+            c = self._open_command
+            self.sink.row((s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], c[0], c[1], c[2],
+                           s[8], s[9]), TEXT_SEPARATOR.join(self._open_text))
+            self.sink = None
 
     def freeze(self, source: str = "<run>") -> RunLog:
-        """The log so far (the open row keeps the command in force at its boundary)."""
-        commands = self._commands + ([self._open_command] if self._state else [])
-        n = len(self._state)
-        state = np.array(self._state, dtype=float).reshape(n, 10)
-        cmd = np.array(commands, dtype=float).reshape(n, 3)
-        texts = tuple(TEXT_SEPARATOR.join(self._texts.get(i, ())) for i in range(n))
-        cols = {"frame": state[:, 0], "t_s": state[:, 1], "x_m": state[:, 2], "y_m": state[:, 3],
-                "yaw_rad": state[:, 4], "speed_mps": state[:, 5], "steer_rad": state[:, 6],
-                "yaw_rate_radps": state[:, 7], "speed_cmd_mps": cmd[:, 0], "steer_cmd_rad": cmd[:, 1],
-                "yaw_rate_cmd_radps": cmd[:, 2], "coast": np.zeros(n), "lap": state[:, 8],
-                "off_track": state[:, 9], "data_text": texts}
+        """The log so far: the kept rows and the open (last) row, which keeps the command in
+        force at its boundary (see the class docstring for long runs)."""
+        n = self._kept
+        rows = self._rows[:n]
+        texts = [self._texts.get(i, "") for i in range(n)]
+        if self._open is not None:
+            s, c = self._open, self._open_command
+            last = np.array([[s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], c[0], c[1], c[2],
+                              s[8], s[9]]], dtype=float)
+            rows = np.concatenate((rows, last))
+            texts.append(TEXT_SEPARATOR.join(self._open_text))
+        m = len(rows)
+        cols = {"frame": rows[:, 0], "t_s": rows[:, 1], "x_m": rows[:, 2], "y_m": rows[:, 3],
+                "yaw_rad": rows[:, 4], "speed_mps": rows[:, 5], "steer_rad": rows[:, 6],
+                "yaw_rate_radps": rows[:, 7], "speed_cmd_mps": rows[:, 8], "steer_cmd_rad": rows[:, 9],
+                "yaw_rate_cmd_radps": rows[:, 10], "coast": np.zeros(m), "lap": rows[:, 11],
+                "off_track": rows[:, 12], "data_text": tuple(texts)}
         return log_from_columns(cols, source)
 
 

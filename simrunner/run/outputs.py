@@ -21,10 +21,11 @@ class Outputs:
     summary: str | Path | None = None
 
 
-def write_outputs(result: RunResult, outputs: Outputs, video, track) -> None:
-    """Close the video (``video``: the run's VideoRecorder or None) and write CSV, plot and
-    summary. All are attempted; the first error is raised after the others were written.
-    ``result.outputs`` names what was written."""
+def write_outputs(result: RunResult, outputs: Outputs, video, track, *, csv_stream=None) -> None:
+    """Close the video (``video``: the run's VideoRecorder or None) and the CSV
+    (``csv_stream``: the run's :class:`~simrunner.run.stream.CsvStream`, else ``result.log``
+    is written) and write plot and summary. All are attempted; the first error is raised
+    after the others were written. ``result.outputs`` names what was written."""
     errors: list[SimError] = []
     if video is not None:
         try:
@@ -33,7 +34,12 @@ def write_outputs(result: RunResult, outputs: Outputs, video, track) -> None:
                 result.outputs["video"] = str(p)
         except SimError as exc:
             errors.append(exc)
-    if outputs.csv is not None:
+    if csv_stream is not None:
+        try:
+            result.outputs["csv"] = str(csv_stream.close())
+        except SimError as exc:
+            errors.append(exc)
+    elif outputs.csv is not None:
         try:
             result.outputs["csv"] = str(write_log(result.log, outputs.csv))
         except SimError as exc:
@@ -63,3 +69,40 @@ def write_outputs(result: RunResult, outputs: Outputs, video, track) -> None:
 def plot_title(r: RunResult) -> str:
     laps = ", ".join(f"{t:.2f} s" for t in r.lap_times_s) or "none"
     return f"{Path(r.track).name}: {r.outcome}, laps {r.laps_completed}/{r.laps} ({laps})"
+
+
+_SUFFIXES = {"video": (".mp4",), "plot": (), "summary": (), "csv": ()}
+_EXAMPLE = {"video": "run.mp4", "plot": "run.png", "summary": "summary.json", "csv": "run.csv"}
+_OPTION = {"video": "--video", "csv": "--csv", "plot": "--plot", "summary": "--summary"}
+
+
+def check_outputs(outputs: Outputs) -> None:
+    """Check every output path before a run (one line, :class:`SimError`, nothing written):
+    not an existing folder, not the same file twice, its folder creatable and writable, the
+    video an ``.mp4``."""
+    seen: dict[Path, str] = {}
+    for kind in ("csv", "video", "plot", "summary"):
+        value = getattr(outputs, kind)
+        if value is None:
+            continue
+        path = Path(value)
+        opt = f"{_OPTION[kind]} {path}"
+        if str(value) == "" or path.name in ("", ".", ".."):
+            raise SimError(f"{opt}: expected a file path")
+        if path.is_dir():
+            raise SimError(f"{opt}: is a folder; expected a file path (e.g. {path / _EXAMPLE[kind]})")
+        if _SUFFIXES[kind] and path.suffix.lower() not in _SUFFIXES[kind]:
+            raise SimError(f"{opt}: expected a {' or '.join(_SUFFIXES[kind])} file")
+        key = path.resolve()
+        if key in seen:
+            raise SimError(f"{opt}: the same file as {seen[key]}")
+        seen[key] = opt
+        parent = path.parent
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        if not parent.is_dir():
+            raise SimError(f"{opt}: {parent} is not a folder")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise SimError(f"{opt}: cannot write in {parent} (permission denied)")
+        if path.exists() and not os.access(path, os.W_OK):
+            raise SimError(f"{opt}: the file exists and is not writable")

@@ -45,6 +45,11 @@ class RunResult:
     log: RunLog = field(default_factory=empty_log, repr=False)
     outputs: dict[str, str] = field(default_factory=dict)
     unused_params: tuple[str, ...] = ()  # --param names the controller never read
+    # rows the run recorded (``log`` holds them all up to log.KEEP_ROWS, then every k-th)
+    frames: int | None = None
+    warnings: list[str] = field(default_factory=list)  # noticed, did not stop the run
+    stray_threads: int = 0  # non-daemon threads the controller left running
+    signal: int | None = None  # the signal that interrupted the run (None: Ctrl-C or none)
 
     @property
     def ok(self) -> bool:
@@ -63,4 +68,5 @@ class RunResult:
                 "sim_time_s": round(self.sim_time_s, 6), "wall_time_s": round(self.wall_time_s, 3),
                 "real_time_factor": round(self.real_time_factor, 2),
                 "cpu_time_s": round(self.cpu_time_s, 3), "track": self.track,
-                "seed": self.seed, "frames": len(self.log), "outputs": self.outputs}
+                "seed": self.seed, "frames": len(self.log) if self.frames is None else self.frames,
+                "warnings": list(self.warnings), "outputs": self.outputs}

@@ -20,6 +20,7 @@ The run log, video, plot and summary are written in every case.
 from __future__ import annotations
 
 import gc
+import threading
 import time
 from pathlib import Path
 import numpy as np
@@ -28,9 +29,10 @@ from simrunner.car import CarModel
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, SimError
 from simrunner.run.clock import Command, LockstepClock
 from simrunner.run.controller import Controller, MainFn, load_controller, user_traceback
+from simrunner.run.faults import ControllerGuards, SignalGuard, Terminated, exit_outcome, stray_threads
 from simrunner.run.judge import Judge
 from simrunner.run.log import RunRecorder
-from simrunner.run.outputs import Outputs, write_outputs
+from simrunner.run.outputs import Outputs, check_outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
 from simrunner.run.settings import RunSettings
 from simrunner.run.spinner import Session, Spinner
@@ -53,21 +55,28 @@ class FrameWork:
     (or None). Holds the parts it uses, never the clock."""
 
     def __init__(self, sim: CarModel, judge: Judge, recorder: RunRecorder, time_limit_s: float,
-                 video=None):
+                 video=None, *, judged: bool = True, keep_driving: bool = False):
         self.sim, self.judge, self.recorder, self.video = sim, judge, recorder, video
         self.time_limit_s = time_limit_s
         self.events: list = []
         self._contacts = sim.wheel_contacts
         self._record = recorder.frame
+        self.judged = judged  # False on a free floor: no laps, no off track
+        self.keep_driving = keep_driving  # leaving the track is recorded, does not end the run
+        self.off_track_count = 0
+        self.first_off_track = ""
 
     def __call__(self, k: int, t: float, pose, cmd: Command,
                  row_cmd: Command | None) -> tuple[Outcome, str] | None:
         sim, judge = self.sim, self.judge
-        events = judge.update(t, pose, self._contacts())
-        if events:
-            self.events.extend(events)
-        off = judge.off_track
-        lap = judge.laps_completed
+        if self.judged:
+            events = judge.update(t, pose, self._contacts())
+            if events:
+                self.events.extend(events)
+            off = judge.off_track
+            lap = judge.laps_completed
+        else:
+            off, lap = False, 0
         speed, steer = sim.speed_mps, sim.steer_rad
         self._record(k, t, pose.x_m, pose.y_m, pose.yaw_rad, speed, steer, sim.yaw_rate_radps,
                      cmd, row_cmd, lap, off)
@@ -78,8 +87,12 @@ class FrameWork:
         if lap >= judge.laps:
             return Outcome.FINISHED, f"{lap} lap(s) completed"
         if off:
-            return Outcome.OFF_TRACK, (f"off track at t = {t:.3f} s (wheel(s) "
-                                       f"{', '.join(judge.off_wheels)} off the road)")
+            text = f"off track at t = {t:.3f} s (wheel(s) {', '.join(judge.off_wheels)} off the road)"
+            if not self.keep_driving:
+                return Outcome.OFF_TRACK, text
+            if events and any(e.kind == "off_track" for e in events):
+                self.off_track_count += 1
+                self.first_off_track = self.first_off_track or text
         if t >= self.time_limit_s - 1e-9:
             return Outcome.TIMEOUT, f"time limit of {self.time_limit_s:g} s simulated time reached"
         return None
@@ -94,18 +107,29 @@ class Run:
     """
 
     def __init__(self, track: SimTrack, car: CarDescription, settings: RunSettings, *,
-                 video_path: str | Path | None = None, record_text: bool = False):
+                 video_path: str | Path | None = None, record_text: bool = False,
+                 csv_path: str | Path | None = None):
         from simrunner.car.effects import make_sim
         from simrunner.sensors.camera import Camera
 
+        from simrunner.run.start import start_pose
+
+        settings = settings.for_track(track)  # the time limit's default grows with the laps
         self.track, self.car, self.settings = track, car, settings
+        self.start = start_pose(track, car, settings)
         # make_sim: a plain CarSim when every effect of the car description is neutral,
         # otherwise an EffectSim applying them (docs/effects.md)
-        self.sim: CarModel = make_sim(car, dt_s=settings.dt_s, start=track.start,
+        self.sim: CarModel = make_sim(car, dt_s=settings.dt_s, start=self.start,
                                       surface_z_m=track.surface_z_m)
         self.camera = Camera(car.camera, track)
         self.judge = Judge(track, laps=settings.laps)
-        self.recorder = RunRecorder(record_text=record_text or video_path is not None)
+        self.csv = None
+        if csv_path is not None:  # written as the run goes (simrunner.run.stream)
+            from simrunner.run.stream import CsvStream
+
+            self.csv = CsvStream(csv_path)
+        self.recorder = RunRecorder(record_text=record_text or video_path is not None
+                                    or csv_path is not None, sink=self.csv)
         self.video = None
         if video_path is not None:
             from simrunner.run.video import VideoRecorder
@@ -115,7 +139,8 @@ class Run:
                                        laps=settings.laps, line_row=car.camera.default_row,
                                        car_length_m=car.chassis.wheelbase_m + 0.05,
                                        car_width_m=car.chassis.track_m)
-        self.frames = FrameWork(self.sim, self.judge, self.recorder, settings.time_limit_s, self.video)
+        self.frames = FrameWork(self.sim, self.judge, self.recorder, settings.time_limit_s, self.video,
+                                judged=track.judged, keep_driving=settings.keep_driving)
         self.clock = LockstepClock(self.sim, dt_s=settings.dt_s,
                                    frame_period_s=1.0 / car.camera.fps_hz, on_frame=self.frames)
         self.session = Session(clock=self.clock, camera=self.camera, car=car,
@@ -123,6 +148,7 @@ class Run:
                                video=self.video, params=settings.params)
         self.wall_time_s = 0.0
         self.cpu_time_s = 0.0
+        self.signal_guard = None  # a faults.SignalGuard, when drive() installed one
 
     def execute(self, controller: Controller) -> tuple[Outcome, str, ControllerError | None]:
         """Run ``controller`` to the end of the run: ``(outcome, message, error)``.
@@ -135,8 +161,10 @@ class Run:
         watchdog = Watchdog(clock, self.settings.wall_limit_s, controller.user_file)
         wall0, cpu0 = time.perf_counter(), time.process_time()
         self.session.activate()
+        if self.signal_guard is not None:
+            self.signal_guard.clock = clock
         try:
-            with _gc_frozen(), watchdog:
+            with _gc_frozen(), watchdog, ControllerGuards(self.session):
                 try:
                     clock.start()
                     with controller.loaded() as main:
@@ -145,8 +173,11 @@ class Run:
                     outcome, message = Outcome(exc.outcome), exc.message
                 except ControllerFileError:
                     raise
-                except KeyboardInterrupt:
-                    outcome, message = Outcome.INTERRUPTED, "Ctrl-C"
+                except KeyboardInterrupt as exc:
+                    outcome, message = Outcome.INTERRUPTED, (
+                        f"{exc.args[0]} received" if isinstance(exc, Terminated) else "Ctrl-C")
+                except SystemExit as exc:  # sys.exit / os._exit in the controller
+                    outcome, message, error = exit_outcome(exc)
                 except ControllerError as exc:  # already described (a C controller's fault)
                     outcome, message, error = Outcome.CONTROLLER_ERROR, str(exc), exc
                 except Exception as exc:
@@ -158,9 +189,13 @@ class Run:
         except ControllerFileError:
             if self.video is not None:
                 self.video.discard()
+            if self.csv is not None:
+                self.csv.discard()
             raise
         finally:
             self.session.deactivate()
+            if self.signal_guard is not None:
+                self.signal_guard.clock = None
         self.wall_time_s = time.perf_counter() - wall0
         self.cpu_time_s = time.process_time() - cpu0
         if outcome not in (Outcome.CONTROLLER_ERROR, Outcome.INTERRUPTED):
@@ -168,7 +203,17 @@ class Run:
                 outcome, message = Outcome(clock.finished.outcome), clock.finished.message
             elif outcome is None:
                 outcome, message = Outcome.CONTROLLER_RETURNED, "main() returned"
+        if self.frames.off_track_count:
+            n = self.frames.off_track_count
+            self.session.warn_once("keep_driving", (
+                f"left the track {n} time{'s' if n > 1 else ''} (first: {self.frames.first_off_track}); "
+                f"kept driving (keep_driving)"))
         return outcome, message, error
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the run noticed and did not stop for (speed capped, track left, ...)."""
+        return list(self.session.warnings)
 
 
 class _gc_frozen:
@@ -188,9 +233,14 @@ class _gc_frozen:
 
 # -- drive ----------------------------------------------------------------------------------
 def resolve_track(track: str | Path | SimTrack | None, car: CarDescription) -> tuple[SimTrack, str]:
-    """``(SimTrack, label)`` for a track argument of :func:`drive` (None = the default)."""
+    """``(SimTrack, label)`` for a track argument of :func:`drive` (None = the default;
+    ``"floor"`` = the free floor, :mod:`simrunner.track.floor`)."""
     if isinstance(track, SimTrack):
         return track, str(track.source)
+    if isinstance(track, str) and track == "floor":
+        from simrunner.track.floor import floor_track
+
+        return floor_track(), "floor"
     from simrunner.track import load_track
 
     path = Path(track) if track is not None else default_track()
@@ -208,11 +258,13 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
     """Run ``controller`` (a ``.py`` file with ``main(spinner)``, or a callable) on ``track``.
 
     ``track``: a layout ``.txt``, trackgen folder, world file, Gazebo model folder, an
-    already loaded :class:`~simrunner.track.SimTrack` (reuse it across runs), or None for
-    the bundled thesis figure-8. ``car``: a car TOML path, a ``CarDescription`` or None
+    already loaded :class:`~simrunner.track.SimTrack` (reuse it across runs), ``"floor"``
+    (an empty floor, not judged) or None for the bundled thesis figure-8. ``car``: a car TOML path, a ``CarDescription`` or None
     (the default car). ``settings``: a :class:`RunSettings`; or give its fields as keywords
-    (``laps=2, time_limit_s=30, seed=1, dt_s=0.002, wall_limit_s=10``). ``video``, ``csv``,
-    ``plot``, ``summary``: output paths (None: not written).
+    (``laps=2, time_limit_s=30, seed=1, dt_s=0.002, wall_limit_s=10, start=(x_m, y_m,
+    yaw_rad), start_before_finish_m=0.4, keep_driving=True``). ``video``, ``csv``, ``plot``,
+    ``summary``: output paths (None: not written), all checked before the run; the CSV is
+    written as the run goes, so a run cut short keeps its rows.
 
     Bad input (files, settings) raises a :class:`~simrunner.errors.SimError` (or the car
     description's error) before anything is written. A failing controller does not raise:
@@ -225,20 +277,32 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
     elif setting_values:
         raise SimError(f"drive(): give either settings= or setting keywords, not both "
                        f"({', '.join(setting_values)})")
-    ctrl = load_controller(controller)
-    car_desc = car if isinstance(car, CarDescription) else load_car(car)
-    sim_track, track_label = resolve_track(track, car_desc)
     outputs = Outputs(video=video, csv=csv, plot=plot, summary=summary)
-    run = Run(sim_track, car_desc, settings, video_path=video, record_text=csv is not None)
-    outcome, message, error = run.execute(ctrl)
-    judge = run.judge
-    result = RunResult(outcome=outcome, laps=settings.laps, laps_completed=judge.laps_completed,
-                       lap_times_s=judge.lap_times_s, sim_time_s=run.clock.time_s,
-                       wall_time_s=run.wall_time_s, track=track_label, seed=settings.seed,
-                       message=message, cpu_time_s=run.cpu_time_s, error=error,
-                       log=run.recorder.freeze(track_label),
-                       unused_params=tuple(sorted(set(settings.params) - run.session.params_read)))
-    write_outputs(result, outputs, run.video, sim_track)
+    check_outputs(outputs)  # before anything is loaded or driven
+    with SignalGuard() as signals:
+        ctrl = load_controller(controller)
+        car_desc = car if isinstance(car, CarDescription) else load_car(car)
+        sim_track, track_label = resolve_track(track, car_desc)
+        run = Run(sim_track, car_desc, settings, video_path=video, csv_path=csv)
+        run.signal_guard = signals
+        threads_before = set(threading.enumerate())
+        outcome, message, error = run.execute(ctrl)
+        signals.writing = True
+        judge = run.judge
+        warnings = run.warnings
+        stray = stray_threads(threads_before)
+        if stray:
+            warnings.append(f"the controller left {', '.join(stray)} running (not waited for)")
+        result = RunResult(outcome=outcome, laps=settings.laps, laps_completed=judge.laps_completed,
+                           lap_times_s=judge.lap_times_s, sim_time_s=run.clock.time_s,
+                           wall_time_s=run.wall_time_s, track=track_label, seed=settings.seed,
+                           message=message, cpu_time_s=run.cpu_time_s, error=error,
+                           log=run.recorder.freeze(track_label), frames=len(run.recorder),
+                           warnings=warnings, stray_threads=len(stray),
+                           signal=signals.received if outcome == Outcome.INTERRUPTED else None,
+                           unused_params=tuple(sorted(set(settings.params) - run.session.params_read)))
+        run.recorder.finish()
+        write_outputs(result, outputs, run.video, sim_track, csv_stream=run.csv)
     return result
 
 

@@ -1,6 +1,7 @@
 """The settings of one run, validated once: :class:`RunSettings`."""
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 from dataclasses import dataclass, field
@@ -20,20 +21,31 @@ class SettingsError(SimError):
 class RunSettings:
     """How to run a controller (every other part trusts these values).
 
-    ``laps``: laps to complete (>= 1). ``time_limit_s``: simulated-time limit (s).
-    ``seed``: seed of the camera-noise generator (>= 0). ``dt_s``: physics step (s, at most
-    0.02). ``wall_limit_s``: wall time a controller may spend without letting simulated time
-    pass before it is stopped (s). ``params``: controller parameters, a read-only mapping
-    name -> int | float | str, read with ``spinner.param(name, default)``
-    (:mod:`simrunner.run.params`).
+    ``laps``: laps to complete (>= 1). ``time_limit_s``: simulated-time limit (s); None (the
+    default) grows with the laps: ``max(60, laps x lap length / 0.5 m/s)``
+    (:func:`default_time_limit_s`; 60 s on a free floor). ``seed``: seed of the camera-noise
+    generator (>= 0). ``dt_s``: physics step (s, at most 0.02). ``wall_limit_s``: wall time
+    a controller may spend without letting simulated time pass before it is stopped (s).
+
+    Start pose (at most one of the two; default: the track's start,
+    :mod:`simrunner.run.start`): ``start`` a pose ``(x_m, y_m, yaw_rad)`` (or a ``Pose2``) of
+    the car frame (rear-axle midpoint) in the world; ``start_before_finish_m`` the car on
+    the track's centre, heading along it, its front bumper this far (m, along the track)
+    before the finish line. ``keep_driving``: leaving the track does not end the run (the
+    ``off_track`` column and the result's warnings still record it). ``params``: controller
+    parameters, a read-only mapping name -> int | float | str, read with
+    ``spinner.param(name, default)`` (:mod:`simrunner.run.params`).
     """
 
     laps: int = 1
-    time_limit_s: float = 60.0
+    time_limit_s: float | None = None
     seed: int = 0
     dt_s: float = 0.002
     wall_limit_s: float = 10.0
     params: Mapping[str, ParamValue] = field(default_factory=dict, hash=False)
+    start: tuple[float, float, float] | None = None
+    start_before_finish_m: float | None = None
+    keep_driving: bool = False
 
     def __post_init__(self) -> None:
         for name, lo in (("laps", 1), ("seed", 0)):
@@ -43,7 +55,45 @@ class RunSettings:
             object.__setattr__(self, name, int(v))
         for name, hi in (("time_limit_s", 1e6), ("dt_s", MAX_DT_S), ("wall_limit_s", 1e6)):
             v = getattr(self, name)
+            if v is None and name == "time_limit_s":
+                continue
             if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or not 0.0 < v <= hi:
                 raise SettingsError(f"{name} = {v!r}: expected a number in (0, {hi:g}]")
             object.__setattr__(self, name, float(v))
         object.__setattr__(self, "params", frozen_params(self.params))
+        if self.start is not None and self.start_before_finish_m is not None:
+            raise SettingsError("start and start_before_finish_m: give one of them, not both")
+        if self.start is not None:
+            v = self.start
+            values = (v.x_m, v.y_m, v.yaw_rad) if hasattr(v, "yaw_rad") else v
+            try:
+                values = tuple(float(x) for x in values)
+            except (TypeError, ValueError):
+                values = ()
+            if len(values) != 3 or not all(math.isfinite(x) for x in values):
+                raise SettingsError(f"start = {v!r}: expected (x_m, y_m, yaw_rad), three finite numbers")
+            object.__setattr__(self, "start", values)
+        v = self.start_before_finish_m
+        if v is not None:
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or not 0.0 <= v <= 1e4:
+                raise SettingsError(f"start_before_finish_m = {v!r}: expected a distance in [0, 10000] m")
+            object.__setattr__(self, "start_before_finish_m", float(v))
+        if not isinstance(self.keep_driving, bool):
+            raise SettingsError(f"keep_driving = {self.keep_driving!r}: expected True or False")
+
+    def for_track(self, track) -> "RunSettings":
+        """These settings with ``time_limit_s`` filled in for ``track`` (a ``SimTrack``)."""
+        if self.time_limit_s is not None:
+            return self
+        return dataclasses.replace(self, time_limit_s=default_time_limit_s(self.laps, track))
+
+
+DEFAULT_TIME_LIMIT_S = 60.0
+SLOW_LAP_SPEED_MPS = 0.5  # a slow first controller still finishes its laps in time
+
+
+def default_time_limit_s(laps: int, track) -> float:
+    """``max(60, laps x lap length / 0.5 m/s)``; 60 s on a track without laps (a floor)."""
+    if not getattr(track, "judged", True):
+        return DEFAULT_TIME_LIMIT_S
+    return min(1e6, max(DEFAULT_TIME_LIMIT_S, laps * float(track.lap_length_m) / SLOW_LAP_SPEED_MPS))

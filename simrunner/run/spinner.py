@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextvars
 import math
+import threading
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
@@ -58,6 +59,12 @@ NormFn = Callable[[float, float], float]
 # threads each see their own.
 _current_session: contextvars.ContextVar["Session | None"] = contextvars.ContextVar(
     "simrunner_session", default=None)
+_get_ident = threading.get_ident
+
+
+def current_session() -> "Session | None":
+    """The session of the run executing in this context (None outside a run)."""
+    return _current_session.get()
 
 
 class BufferedNormals:
@@ -112,16 +119,26 @@ class Session:
     recorder: RunRecorder | None = None
     video: "VideoRecorder | None" = None
     params: Mapping[str, ParamValue] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)  # warn_once texts, for the result
 
     def __post_init__(self) -> None:
         self.params_read: set[str] = set()  # names asked for with Spinner.param
         self.noise_rng = BufferedNormals(self.rng)  # what images draw their noise from
         self.record_text = self.recorder is not None and self.recorder.record_text
         self._token: contextvars.Token | None = None
+        self.thread_id: int | None = None  # the thread running main (set by activate)
+        self._warned: set[str] = set()
 
     def activate(self) -> None:
-        """Make this the session ``Spinner()`` attaches to in this context."""
+        """Make this the session ``Spinner()`` attaches to in this context (and thread)."""
         self._token = _current_session.set(self)
+        self.thread_id = _get_ident()
+
+    def warn_once(self, key: str, text: str) -> None:
+        """Add warning ``text`` unless one with ``key`` was added already."""
+        if key not in self._warned:
+            self._warned.add(key)
+            self.warnings.append(text)
 
     def deactivate(self) -> None:
         if self._token is not None:
@@ -175,9 +192,16 @@ class Spinner:
         if session is None:
             session = _current_session.get()
             if session is None:
+                from simrunner.run.faults import orphan_call
+
+                message = orphan_call("__init__")
+                if message is not None:
+                    raise CommandError(message)
                 raise SimError("Spinner() needs a running simulation: run the controller with "
                                "`simrunner drive FILE` (it calls main(spinner))")
         self._s = session
+        self._owner = session.thread_id if session.thread_id is not None else _get_ident()
+        self._vmax = session.car.drive.max_speed_mps
         self._clock = session.clock
         self._sim = session.clock.sim
         self._line_image = session.camera.line_image  # render_row + add_noise in one call
@@ -217,6 +241,8 @@ class Spinner:
         clock = self._clock
         if clock.finished is not None:
             clock.check()
+        if _get_ident() != self._owner:
+            raise self._foreign(method)
         if set_steer:
             v = self.turn_norm(speed, angle)
             if not (type(v) is float and v - v == 0.0):  # not a finite float: check, convert
@@ -226,11 +252,28 @@ class Spinner:
             v = self.speed_norm(speed, angle)
             if not (type(v) is float and v - v == 0.0):
                 v = _norm_out(f"{method}(speed={speed!r}, angle={angle!r})", "speed_norm", v)
+            if not -self._vmax <= v <= self._vmax:
+                self._capped(v)
             self._speed_mps = v
         yaw = self.diff_norm(self._speed_mps, self._steer_rad)
         if not (type(yaw) is float and yaw - yaw == 0.0):
             yaw = _norm_out(f"{method}(speed={speed!r}, angle={angle!r})", "diff_norm", yaw)
         clock.command(self._speed_mps, self._steer_rad, yaw)
+
+    def _foreign(self, method: str) -> CommandError:
+        """A call from a thread that does not run ``main``: end the run (controller_error)."""
+        from simrunner.run.faults import foreign_thread_message
+
+        return self._fail(CommandError(foreign_thread_message(method)))
+
+    def _capped(self, speed_mps: float) -> None:
+        from simrunner.run.faults import caller_location
+
+        where = caller_location(3)
+        self._s.warn_once("speed_cap", (
+            f"speed command {speed_mps:g} m/s{' at ' + where if where else ''} (t = "
+            f"{self._clock.time_s:.2f} s) is beyond the car's maximum {self._vmax:g} m/s "
+            f"(drive.max_speed_mps): the car drives at most that (warned once)"))
 
     def _fail(self, err: CommandError) -> CommandError:
         self._clock.finish("controller_error", str(err))
@@ -279,6 +322,8 @@ class Spinner:
                 raise self._fail(CommandError(
                     f"get_image(line={line!r}): expected -1 (whole image) or a row 0..{h - 1}"))
             line = int(line)
+        if _get_ident() != self._owner:
+            raise self._foreign("get_image")
         clock, session = self._clock, self._s
         clock.advance_to_next_frame()
         pose = clock.pose()
@@ -295,18 +340,24 @@ class Spinner:
 
     def get_speed(self) -> float:
         """Current speed along the car's x (after one physics step), through ``speed_denorm``."""
+        if _get_ident() != self._owner:
+            raise self._foreign("get_speed")
         self._clock.advance(1)
         return float(self.speed_denorm(self._sim.speed_mps, self._angle))
 
     def get_position(self) -> tuple[float, float, float]:
         """World position ``(x, y, z)`` in metres of the car frame origin (rear-axle midpoint
         on the ground), after one physics step."""
+        if _get_ident() != self._owner:
+            raise self._foreign("get_position")
         self._clock.advance(1)
         p = self._clock.pose()
         return (p.x_m, p.y_m, float(self._sim.z_m))
 
     def get_time(self) -> float:
         """Simulated time in seconds, after one physics step (busy-wait loops finish)."""
+        if _get_ident() != self._owner:
+            raise self._foreign("get_time")
         self._clock.advance(1)
         return self._clock.time_s
 
@@ -319,6 +370,8 @@ class Spinner:
                 raise CommandError(f"sleep(seconds={seconds!r}): expected >= 0")
         except CommandError as err:
             raise self._fail(err) from None
+        if _get_ident() != self._owner:
+            raise self._foreign("sleep")
         n = max(1, math.ceil(s / self._clock.dt_s - 1e-9))
         self._clock.advance(n)
 
@@ -349,6 +402,8 @@ class Spinner:
         stretched under the camera line. Data added during one frame replaces the previous
         frame's; it stays on screen until replaced."""
         s = self._s
+        if _get_ident() != self._owner:
+            raise self._foreign("add_data")
         if type(data) is list and s.video is None:
             try:  # the common case without a video: all str (join checks)
                 "".join(data)

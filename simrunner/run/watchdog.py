@@ -1,7 +1,20 @@
-"""The wall-clock watchdog: stops a controller that never lets simulated time pass."""
+"""The wall-clock watchdog: stops a controller that never lets simulated time pass.
+
+Two levels. A SIGALRM tick (every ``period_s``) raises :class:`Stalled` into a controller
+that made no progress for ``limit_s``; that works while the interpreter runs Python code or
+waits in an interruptible call. A controller stuck inside one C-level call that holds the
+interpreter (``sum(range(10**12))``, a huge regex) never lets the tick run: for that every
+tick re-arms ``faulthandler.dump_traceback_later(hard_limit_s, exit=True)``, a timer in a C
+thread, so after ``hard_limit_s = limit_s + max(2, limit_s)`` without a tick the process
+prints every thread's stack (the controller's file:line included, under ``Timeout
+(h:mm:ss)!``) and exits with code 1. The run-log CSV then holds every row up to the stall
+(it is written as the run goes); the summary, plot and video are not written.
+"""
 from __future__ import annotations
 
+import faulthandler
 import signal
+import sys
 import threading
 import time
 from pathlib import Path
@@ -24,6 +37,8 @@ class Watchdog:
         self.armed = False
         self._old = None
         self.enabled = threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer")
+        self.hard_limit_s = self.limit_s + max(2.0, self.limit_s)
+        self._hard = False
 
     def _where(self, frame) -> str:
         f = frame
@@ -33,9 +48,19 @@ class Watchdog:
             f = f.f_back
         return ""
 
+    def _arm_hard(self) -> None:
+        """(Re)start the C-level timer of a stuck call (see the module docstring)."""
+        try:
+            faulthandler.dump_traceback_later(self.hard_limit_s, exit=True, file=sys.__stderr__)
+            self._hard = True
+        except (AttributeError, ValueError, OSError, RuntimeError):  # no usable stderr
+            self._hard = False
+
     def _handler(self, signum, frame) -> None:
         if not self.armed:
             return
+        if self._hard:
+            self._arm_hard()
         idle = time.monotonic() - self.clock.last_progress_wall_s
         if idle <= self.limit_s:
             return
@@ -50,11 +75,15 @@ class Watchdog:
         if self.enabled:
             self._old = signal.signal(signal.SIGALRM, self._handler)
             signal.setitimer(signal.ITIMER_REAL, self.period_s, self.period_s)
+            self._arm_hard()
         self.armed = True
         return self
 
     def disarm(self) -> None:
         self.armed = False
+        if self._hard:
+            faulthandler.cancel_dump_traceback_later()
+            self._hard = False
         if self.enabled and self._old is not None:
             signal.setitimer(signal.ITIMER_REAL, 0.0, 0.0)
             signal.signal(signal.SIGALRM, self._old)

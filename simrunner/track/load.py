@@ -75,6 +75,7 @@ class SimTrack:
     lap_length_m: float
     centreline: np.ndarray | None = None  # (N, 2) metres, closed loop in driving order
     lap_length_estimated: bool = False
+    judged: bool = True  # False: a free floor (simrunner.track.floor), no laps, no off-track
 
     @property
     def road_mask(self) -> np.ndarray:
