@@ -22,7 +22,8 @@ or meet the ground farther than ``max_range_m``, see the floor/background gray. 
 which removes aliasing of thin far lines at k^2 times the cost.
 
 The line camera (``line_image``: one row plus noise, every frame of a run) is one compiled
-call (:mod:`simrunner.sensors.line_kernel`) that computes the same maps and pixels as the OpenCV path.
+call (:mod:`simrunner.sensors.line_row`, NumPy; the numba kernel :mod:`simrunner.sensors.line_kernel`
+computes the same pixels) that computes the same maps and pixels as the OpenCV path.
 """
 from __future__ import annotations
 
@@ -38,9 +39,9 @@ from simrunner.track.raster import TrackRaster
 
 _NO_NORMALS = np.zeros(0)
 def _line_kernel():
-    """``simrunner.sensors.line_kernel.camera_row``, imported on first use (numba loads in
-    ~0.5 s; the import system caches the module, so later calls cost a dict lookup)."""
-    from simrunner.sensors.line_kernel import camera_row
+    """The line-row function: :func:`simrunner.sensors.line_row.camera_row` (NumPy, bit for bit
+    the numba kernel :mod:`simrunner.sensors.line_kernel`, without numba's ~0.5 s load)."""
+    from simrunner.sensors.line_row import camera_row
 
     return camera_row
 
@@ -90,8 +91,7 @@ class Camera:
         self._floor = int(self.raster.floor_gray)
         self._floor_f = float(self._floor)
         self._noise_std = float(cam.noise_std)
-        # compile (first use in a checkout, ~1 s) or load (~0.1 s) the line kernel now, not
-        # inside a timed, watchdog-guarded run
+        # load the line kernel now, not inside a timed, watchdog-guarded run
         # (``load_line_kernel=False``: on first use instead, for callers that may never need it)
         line_rows = [r for r, gx in enumerate(self._row_gx) if gx is not None]
         if line_rows and load_line_kernel:
@@ -176,7 +176,7 @@ class Camera:
     def line_image(self, pose: Pose2, row: int, normals=None) -> np.ndarray:
         """What the Spinner's ``get_image(row)`` returns: ``render_row(pose, row)`` as a
         ``(1, W) uint8`` image, with ``add_noise(img, normals)`` unless ``normals`` is None,
-        in one compiled call (:func:`simrunner.sensors.line_kernel.camera_row`) for the rows whose
+        in one call (:func:`simrunner.sensors.line_row.camera_row`) for the rows whose
         ground points share one x (all rows of a camera without supersampling that see only
         ground). ``normals``: a ``numpy.random.Generator`` or a
         :class:`simrunner.run.spinner.BufferedNormals` (its ``take``)."""
