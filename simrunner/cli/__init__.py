@@ -63,7 +63,8 @@ class _LazyGroup(click.Group):
     LAZY = {"check": ("simrunner.cli.check", "check_cmd"),
             "calibrate": ("simrunner.cli.calib", "calibrate_cmd"),
             "excite": ("simrunner.cli.calib", "excite_cmd"),
-            "gap": ("simrunner.cli.gap", "gap")}
+            "gap": ("simrunner.cli.gap", "gap"),
+            "plot": ("simrunner.cli.plot", "plot_cmd")}
     _listing = False
 
     def list_commands(self, ctx: click.Context) -> list[str]:
@@ -117,7 +118,8 @@ def _function_docstring(module: str, function: str) -> str | None:
     return None
 
 
-@click.group(cls=_LazyGroup)
+@click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="nxpcup-sim", prog_name="simrunner")
 def main() -> None:
     """Headless NXP Cup car simulator with the thesis's Spinner API."""
 
@@ -146,10 +148,17 @@ def main() -> None:
               type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
               help="Stop a controller that spends this much wall time without letting "
                    "simulated time pass.")
+@click.option("--watch", is_flag=True,
+              help="Keep the track loaded and run again each time CONTROLLER is saved (Ctrl-C ends).")
 def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, seed, car, dt_s,
-              wall_limit_s) -> None:
+              wall_limit_s, watch=False) -> None:
     """Run CONTROLLER (a .py file defining main(spinner)) on the simulated car."""
     from simrunner.run.runner import drive
+
+    if watch:
+        from simrunner.cli.watch import watch_drive
+
+        watch_drive(click.get_current_context().params)
 
     try:
         result = drive(controller, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
@@ -169,6 +178,10 @@ def drive_cmd(controller, track, laps, time_limit_s, video, csv, plot, summary, 
         click.echo("wrote: " + ", ".join(result.outputs.values()))
     sys.exit(0 if result.ok else 130 if result.outcome == "interrupted" else 1)
 
+
+from simrunner.cli.names import add_api_spellings  # noqa: E402  (after the commands)
+
+add_api_spellings(drive_cmd)
 
 if __name__ == "__main__":  # pragma: no cover
     main()
