@@ -42,6 +42,29 @@ def test_numpy_row_equals_numba_kernel(kind):
         line_kernel.camera_row(img, *args, a)
         line_row.camera_row(img, *args, b)
         bad += int(np.count_nonzero(a != b))
+        line_row.camera_row(img, *args, b, monotone=True)  # gy is sorted
+        bad += int(np.count_nonzero(a != b))
+    assert bad == 0
+
+
+def test_unsorted_rows_and_fractions_near_ties():
+    """Unsorted ground points, and coordinates ``n + k / 2**23`` (the smallest fractions the
+    inside path sees) whose sums land on float32 half-way points."""
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 256, size=(80, 80), dtype=np.uint8)
+    a = np.empty((1, 128), np.uint8)
+    b = np.empty((1, 128), np.uint8)
+    bad = 0
+    for _ in range(400):
+        # gain 1 on "gy": the coordinates themselves, in random order
+        coords = rng.integers(1, 77) + rng.permutation(rng.integers(0, 64, 128)) * 2.0 ** -23
+        other = rng.uniform(2, 70)
+        for xg, yg in ((1.0, 0.0), (0.0, 1.0)):
+            args = (coords, xg, 0.0, 0.0 if xg else other, yg, 0.0, 0.0 if yg else other,
+                    40.0, False, np.zeros(0), 0, 0.0)
+            line_kernel.camera_row(img, *args, a)
+            line_row.camera_row(img, *args, b)
+            bad += int(np.count_nonzero(a != b))
     assert bad == 0
 
 

@@ -85,6 +85,10 @@ class Camera:
             for r in range(self.height_px):
                 if not self._row_misses[r] and np.all(self._gx[r] == self._gx[r, 0]):
                     self._row_gx[r] = float(self._gx[r, 0])
+        # rows whose ground y values are sorted: their extreme raster coordinates are at the
+        # ends (line_row.camera_row's cheap inside test)
+        d = np.diff(self._gy, axis=1)
+        self._row_monotone = (np.all(d >= 0, axis=1) | np.all(d <= 0, axis=1)).tolist()
         self._any_miss = bool(self._miss.any())
         self._inv_m = 1.0 / self.raster.m_per_px
         self._x0_m, self._y0_m = (float(v) for v in self.raster.origin_xy_m)
@@ -202,7 +206,8 @@ class Camera:
             buf, pos = take(self.width_px) if take else (normals.standard_normal(self.width_px), 0)
         self._kernel(self.raster.image, self._gy[row], -si, ci * gx, (pose.x_m - self._x0_m) * inv,
                    -ci, -si * gx, (self._y0_m - pose.y_m) * inv, self._floor_f,
-                   normals is not None, buf, pos, self._noise_std, out)
+                   normals is not None, buf, pos, self._noise_std, out,
+                   monotone=self._row_monotone[row])
         return out
 
     def add_noise(self, img: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -17,24 +17,36 @@ IEEE Trans. Computers 57(4), 2008). tests/test_line_row.py checks it against the
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 _CORNERS = np.array([0, 0, 1, 1])  # column offsets of p00, p10, p01, p11
 _ROWS = np.array([0, 1, 0, 1])     # row offsets of the same
 
 
-def _round32(p: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """``p + c`` (float64 arrays whose exact sum is wanted) correctly rounded to float32,
-    returned as float64."""
+@functools.lru_cache(maxsize=8)
+def _offsets(w: int) -> np.ndarray:
+    """Flat-index offsets of p00, p10, p01, p11 in an image ``w`` pixels wide."""
+    return _ROWS * w + _CORNERS
+
+
+def _round_odd(p: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``p + c`` in float64 rounded to odd: the nearest-rounded sum, moved one ulp towards
+    the exact sum when it is inexact and its last bit is even (TwoSum gives the error)."""
     s = p + c
     bb = s - p
     err = (p - (s - bb)) + (c - bb)
-    inexact = err != 0
-    if inexact.any():
-        fix = inexact & ((s.view(np.int64) & 1) == 0)
-        if fix.any():
-            s = np.where(fix, np.nextafter(s, np.where(err > 0, np.inf, -np.inf)), s)
-    return s.astype(np.float32).astype(np.float64)
+    fix = (err != 0) & ((s.view(np.int64) & 1) == 0)
+    if fix.any():
+        s = np.where(fix, np.nextafter(s, np.where(err > 0, np.inf, -np.inf)), s)
+    return s
+
+
+def _round32(p: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``p + c`` (float64 arrays whose exact sum is wanted) correctly rounded to float32,
+    returned as float64."""
+    return _round_odd(p, c).astype(np.float32).astype(np.float64)
 
 
 def _fma32(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -57,20 +69,82 @@ def _corners(image: np.ndarray, ix: np.ndarray, iy: np.ndarray, floor: float) ->
     return p
 
 
-def _to_u8(v: np.ndarray) -> np.ndarray:
-    """Round half to even and saturate to 0..255, as float64 (in place)."""
-    np.rint(v, out=v)
-    return np.clip(v, 0.0, 255.0, out=v)
-
-
 def camera_row(image, gy, x_gain, x_ground, x_pose, y_gain, y_ground, y_pose, floor,
-               noisy, normals, pos, std, out) -> None:
+               noisy, normals, pos, std, out, monotone: bool = False) -> None:
     """One camera row into ``out`` ``(1, W) uint8``, optionally with noise: the arguments
-    and result of :func:`simrunner.sensors.line_kernel.camera_row` (see there)."""
+    and result of :func:`simrunner.sensors.line_kernel.camera_row` (see there).
+    ``monotone``: ``gy`` is sorted (either way), so the row's extreme raster coordinates
+    are at its ends (a camera row's ground points are)."""
     h, w = image.shape
-    fl = float(np.float32(floor))
-    sx = (gy * x_gain + x_ground + x_pose).astype(np.float32)
-    sy = (gy * y_gain + y_ground + y_pose).astype(np.float32)
+    sx = gy * x_gain
+    sx += x_ground
+    sx += x_pose
+    sx = sx.astype(np.float32)
+    sy = gy * y_gain
+    sy += y_ground
+    sy += y_pose
+    sy = sy.astype(np.float32)
+    if monotone:
+        x_lo, x_hi = (sx[0], sx[-1]) if sx[0] <= sx[-1] else (sx[-1], sx[0])
+        y_lo, y_hi = (sy[0], sy[-1]) if sy[0] <= sy[-1] else (sy[-1], sy[0])
+    else:
+        x_lo, x_hi, y_lo, y_hi = sx.min(), sx.max(), sy.min(), sy.max()
+    if 1.0 <= x_lo and x_hi < w - 1 and 1.0 <= y_lo and y_hi < h - 1:
+        v = _inside(image, sx, sy)
+    else:
+        v = _anywhere(image, sx, sy, float(np.float32(floor)))
+    np.rint(v, out=v)
+    np.clip(v, 0.0, 255.0, out=v)
+    if noisy:
+        v += np.rint(np.asarray(normals[pos:pos + out.shape[1]], dtype=np.float64) * std)
+        np.rint(v, out=v)
+        np.clip(v, 0.0, 255.0, out=v)
+    out[0] = v
+
+
+def _inside(image: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
+    """The bilinear float32 values (as float64) of float32 coordinates with all four
+    neighbours inside and both coordinates >= 1. Then a fraction is a multiple of 2**-23
+    below 1, so ``ax * (p01 - p00) + p00`` is an exact float64 (a multiple of 2**-23 below
+    2**9) rounded once to float32, and so is ``bottom - top`` (both multiples of 2**-23
+    below 2**8); ``ay * d + top`` (a multiple of 2**-46 below 2**9: up to 55 bits) may be
+    inexact in float64, so it is checked for ties (:func:`_round32_normal`)."""
+    w = image.shape[1]
+    fx = np.floor(sx)
+    fy = np.floor(sy)
+    ax = (sx - fx).astype(np.float64)[:, None]
+    ay = (sy - fy).astype(np.float64)
+    idx = fy.astype(np.intp)
+    idx *= w
+    idx += fx.astype(np.intp)
+    p = image.ravel().take(idx[:, None] + _offsets(w)).astype(np.float64)
+    left = p[:, :2]  # p00, p10
+    tb = p[:, 2:] - left  # p01 - p00, p11 - p10: whole numbers, exact
+    tb *= ax
+    tb += left
+    tb = tb.astype(np.float32).astype(np.float64)  # top, bottom: exact sums rounded once
+    top = tb[:, 0]
+    d = (tb[:, 1] - top).astype(np.float32).astype(np.float64)
+    d *= ay  # exact: 24 + 24 bits
+    return _round32_normal(d, top)
+
+
+def _round32_normal(p: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """:func:`_round32` for sums whose float64 result is 0 or a normal float32 magnitude:
+    rounding twice (to float64, then float32) differs from rounding once only when the
+    float64 sum lands exactly half-way between two float32 values (its 29 low bits are
+    ``1000...0``) without being exact; only those are recomputed."""
+    s = p + c
+    tie = (s.view(np.int64) & 0x1FFFFFFF) == 0x10000000
+    if tie.any():
+        i = np.flatnonzero(tie)
+        s[i] = _round_odd(p[i], c[i])
+    return s.astype(np.float32).astype(np.float64)
+
+
+def _anywhere(image: np.ndarray, sx: np.ndarray, sy: np.ndarray, fl: float) -> np.ndarray:
+    """The bilinear values of any float32 coordinates (``fl`` outside the image)."""
+    h, w = image.shape
     fx = np.floor(sx)
     fy = np.floor(sy)
     ax = (sx - fx).astype(np.float64)  # exact in float32
@@ -80,17 +154,11 @@ def camera_row(image, gy, x_gain, x_ground, x_pose, y_gain, y_ground, y_pose, fl
     iy = np.clip(fy, -2.0, h + 1.0).astype(np.intp)
     p = _corners(image, ix, iy, fl)
     left = p[:, :2]  # p00, p10
-    ax2 = ax[:, None]
     # p01 - p00 and p11 - p10 are whole numbers: exact in float32
-    tb = _fma32(ax2, p[:, 2:] - left, left)  # top, bottom
+    tb = _fma32(ax[:, None], p[:, 2:] - left, left)  # top, bottom
     top = tb[:, 0]
     v = _fma32(ay, _round32(tb[:, 1], -top), top)
     outside = (ix + 1 < 0) | (ix >= w) | (iy + 1 < 0) | (iy >= h)
     if outside.any():
         v[outside] = fl
-    v = _to_u8(v)
-    if noisy:
-        n = out.shape[1]
-        v += np.rint(np.asarray(normals[pos:pos + n], dtype=np.float64) * std)
-        v = _to_u8(v)
-    out[0] = v
+    return v
