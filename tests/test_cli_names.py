@@ -54,13 +54,6 @@ def test_every_drive_keyword_is_a_cli_option_of_the_same_name():
     assert not missing, f"drive() keywords without a --same-name option: {missing}"
 
 
-def test_every_drive_option_reaches_the_api_under_its_name():
-    """Each option's destination is a drive() keyword or RunSettings field (or CLI-only)."""
-    cli_only = {"watch"}
-    dests = {p.name for p in drive_cmd.params if p.name != "controller"}
-    assert dests - cli_only <= _api_names()
-
-
 def test_api_spelling_and_short_spelling_both_work(tmp_path):
     ctrl = tmp_path / "c.py"
     ctrl.write_text("def main(spinner):\n    spinner.sleep(0.5)\n")
