@@ -93,12 +93,12 @@ def camera_row(image, gy, x_gain, x_ground, x_pose, y_gain, y_ground, y_pose, fl
         v = _inside(image, sx, sy)
     else:
         v = _anywhere(image, sx, sy, float(np.float32(floor)))
+    # round half to even, saturate to 0..255 (ufuncs: np.clip's wrapper costs more here)
     np.rint(v, out=v)
-    np.clip(v, 0.0, 255.0, out=v)
-    if noisy:
-        v += np.rint(np.asarray(normals[pos:pos + out.shape[1]], dtype=np.float64) * std)
-        np.rint(v, out=v)
-        np.clip(v, 0.0, 255.0, out=v)
+    np.minimum(np.maximum(v, 0.0, out=v), 255.0, out=v)
+    if noisy:  # whole numbers plus rounded noise: whole numbers, only saturated again
+        v += np.rint(normals[pos:pos + out.shape[1]] * std)
+        np.minimum(np.maximum(v, 0.0, out=v), 255.0, out=v)
     out[0] = v
 
 
