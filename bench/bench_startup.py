@@ -14,6 +14,13 @@ wall time in seconds over ``REPEAT`` runs. Commands:
   world read through ``worlds``; skipped when that folder is absent);
 * ``trackgen build examples/oval_start.txt -o TMP --force``.
 
+Then the issue-13 target: ``simrunner drive line_follower --time-limit 60`` (60 simulated
+seconds on the default track, ``REPEAT`` fresh processes after one warm-up): the whole
+process (target >= 35x real time, i.e. <= 1.71 s) and its start-up = whole process minus
+the run loop's own wall time from ``--summary`` (target <= 0.6 s); also the CPU seconds
+(user + system) of the processes, which a busy machine inflates less than wall time, and
+the load average before and after (the targets are for an idle machine).
+
 The second table: ``python -c "import MODULE"`` wall time for the main modules, and the bare
 interpreter (``python -c pass``) for reference. Column ``loads``: which of the heavy
 libraries (:data:`HEAVY`) the process had imported when it exited -- what to look at when a
@@ -32,7 +39,9 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 TRACKS = REPO.parent / "shared" / "tracks"
-REPEAT = 3
+REPEAT = 5
+SIXTY_S = 60.0
+TARGET_FACTOR, TARGET_STARTUP_S = 35.0, 0.6
 MODULES = ("pieces", "pieces.pose", "worlds", "trackgen", "trackgen.cli", "simrunner",
            "simrunner.cli", "simrunner.run.runner", "simrunner.sensors.camera")
 HEAVY = ("scipy", "trimesh", "manifold3d", "shapely", "matplotlib", "cv2", "dartpy", "numba")
@@ -89,6 +98,46 @@ def wall_times_s(argv: list[str], repeat: int = REPEAT, env: dict[str, str] | No
     return times, loaded
 
 
+def sixty_seconds(tmp: Path, repeat: int = REPEAT) -> dict[str, list[float]]:
+    """Whole-process wall and CPU seconds, loop wall seconds and start-up seconds of
+    ``repeat`` fresh ``drive --time-limit 60`` processes (after one warm-up run)."""
+    import json
+    import resource
+
+    summary = tmp / "sixty.json"
+    argv = [*_entry("simrunner"), "drive", "examples/line_follower.py", "--laps", "1000",
+            "--time-limit", f"{SIXTY_S:g}", "--summary", str(summary)]
+    out: dict[str, list[float]] = {"wall": [], "cpu": [], "loop": [], "startup": []}
+    for i in range(repeat + 1):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        t0 = time.perf_counter()
+        done = subprocess.run(argv, cwd=REPO, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        data = json.loads(summary.read_text())
+        if data["outcome"] != "timeout" or abs(data["sim_time_s"] - SIXTY_S) > 0.05:
+            raise RuntimeError(f"unexpected run: {data['outcome']} {done.stderr[-300:]}")
+        if i == 0:
+            continue
+        out["wall"].append(wall)
+        out["cpu"].append((after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime))
+        out["loop"].append(data["wall_time_s"])
+        out["startup"].append(wall - data["wall_time_s"])
+    return out
+
+
+def _sixty_report(m: dict[str, list[float]]) -> None:
+    med = {k: statistics.median(v) for k, v in m.items()}
+    factor = SIXTY_S / med["wall"]
+    print(f"{'60 simulated s, default track':<40} {'median':>7} {'min':>7} {'max':>7}")
+    for key, label in (("wall", "whole process (wall s)"), ("cpu", "whole process (CPU s)"),
+                       ("loop", "run loop (wall s)"), ("startup", "start-up = whole - loop (s)")):
+        print(f"{label:<40} {med[key]:7.2f} {min(m[key]):7.2f} {max(m[key]):7.2f}")
+    print(f"real-time factor of the whole process: {factor:.1f}x (target >= {TARGET_FACTOR:g}x: "
+          f"{'met' if factor >= TARGET_FACTOR else 'not met'}); start-up {med['startup']:.2f} s "
+          f"(target <= {TARGET_STARTUP_S} s: {'met' if med['startup'] <= TARGET_STARTUP_S else 'not met'})")
+
+
 def _row(label: str, measured: tuple[list[float], str]) -> str:
     times, loaded = measured
     return (f"{label:<40} {statistics.median(times):7.2f} {min(times):7.2f} {max(times):7.2f}  "
@@ -97,7 +146,11 @@ def _row(label: str, measured: tuple[list[float], str]) -> str:
 
 def main() -> None:
     header = f"{'':<40} {'median':>7} {'min':>7} {'max':>7}  loads"
+    load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
+        _sixty_report(sixty_seconds(Path(tmp)))
+        print(f"load average {load0:.1f} -> {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+        print()
         print(f"{'command (wall s, fresh process)':<40}" + header[40:])
         for label, argv, env, warm in commands(Path(tmp)):
             print(_row(label, wall_times_s(argv, env=env, warm=warm)))

@@ -72,8 +72,89 @@ def _section_values(cls):
     return st.builds(cls, **strategies)
 
 
+def _car_or_none(**kwargs):
+    """A CarDescription, or None when its fields do not fit together (relation_problem)."""
+    try:
+        return CarDescription(**kwargs)
+    except CarDescriptionError:
+        return None
+
+
 @settings(max_examples=60, deadline=None)
-@given(st.builds(CarDescription, name=st.from_regex(r"[a-z][a-z0-9_]{0,15}", fullmatch=True),
-                 **{name: _section_values(cls) for name, cls in _SECTION_TYPES.items()}))
+@given(st.builds(_car_or_none, name=st.from_regex(r"[a-z][a-z0-9_]{0,15}", fullmatch=True),
+                 **{name: _section_values(cls) for name, cls in _SECTION_TYPES.items()})
+       .filter(lambda car: car is not None))
 def test_toml_round_trip(car):
     assert car_from_dict(tomllib.loads(car.to_toml())) == car
+
+
+# -- file:line errors and the relations between fields (issue 13 item 8) -------------------
+@pytest.mark.parametrize("text, line, pattern", [
+    ('name = "x"\n[camera]\nwidth_px = 128\n\ndefault_row = 200\n', 5,
+     r"camera\.default_row = 200: expected a row in \[0, 127\] \(camera\.height_px = 128\)"),
+    ("[camera]\nheight_px = 40\n", 2,  # the default row (60) does not fit: the line of height_px
+     r"camera\.default_row = 60: expected a row in \[0, 39\]"),
+    ("[camera]\npitch_rad = 0.0\ndefault_row = 10\n", 3, r"looks at or above the horizon"),
+    ("[wheels]\nwidth_m = 0.2\n", 2, r"wheels\.width_m = 0\.2: expected less than chassis\.track_m"),
+    ("# a comment\n[wheels]\nradius_m = 9.0\n", 3, r"wheels\.radius_m = 9\.0: expected a value in"),
+    ("[wheels]\n  radius_m   =   'big'\n", 2, r"wheels\.radius_m = 'big': expected a number"),
+    ("[chassis]\nmass_kg = 1\n[camera]\nfps_hz = 0\n", 4, r"camera\.fps_hz = 0: expected a value in \[1, 1000\]"),
+    ("[drive]\nmax_speed_mps = 3\n\n[whels]\n", 4, r"unknown section \[whels\]"),
+    ("[steering]\nlimit_rad = 0.3\nrate = 1\n", 3, r"unknown field steering\.rate"),
+    ("camera.default_row = 500\n", 1, r"camera\.default_row = 500: expected a value in \[0, 4095\]|"
+                                      r"camera\.default_row = 500: expected a row"),
+    ("name = 3\n", 1, r"'name' must be a non-empty string"),
+    ("[wheels]\nradius_m = \n", 2, r"invalid TOML"),
+    ("[wheels]\nradius_m = 0.03\nradius_m = 0.04\n", 3, r"invalid TOML"),
+])
+def test_car_file_errors_name_file_and_line(tmp_path, text, line, pattern):
+    path = tmp_path / "car.toml"
+    path.write_text(text)
+    with pytest.raises(CarDescriptionError, match=pattern) as info:
+        load_car(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}:{line}: ") and "\n" not in message, message
+
+
+def test_relations_hold_in_the_python_api_too():
+    """CarDescription(...) refuses what load_car refuses (no line to name there)."""
+    from vehicle.description import Camera
+
+    with pytest.raises(CarDescriptionError, match=r"camera\.default_row = 200"):
+        CarDescription(camera=Camera(default_row=200))
+    assert CarDescription(camera=Camera(default_row=127)).camera.default_row == 127
+
+
+def test_out_of_range_row_is_bad_input_for_drive(tmp_path):
+    """default_row = 200 with 128 rows was accepted and failed later as a controller_error:
+    now drive() refuses the car file before anything runs."""
+    from simrunner.run.runner import drive
+
+    path = tmp_path / "car.toml"
+    path.write_text("[camera]\ndefault_row = 200\n")
+    with pytest.raises(CarDescriptionError, match=rf"^{path}:2: camera\.default_row = 200"):
+        drive(lambda spinner: None, car=path, csv=tmp_path / "run.csv")
+    assert not (tmp_path / "run.csv").exists()
+
+
+_RANGED = [(section, f) for section, cls in _SECTION_TYPES.items() for f in dataclasses.fields(cls)]
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.sampled_from(_RANGED), st.booleans(), st.integers(0, 3), st.integers(0, 4))
+def test_any_out_of_range_field_names_its_line(tmp_path_factory, pick, above, blank, comments):
+    """Every field is range-checked at load, and the error names the line it is on."""
+    section, f = pick
+    lo, hi = f.metadata["lo"], f.metadata["hi"]
+    if above and not math.isfinite(hi):
+        above = False
+    is_int = f.type in (int, "int")
+    bad = (hi + 1 if above else lo - 1) if is_int else (hi * 2 + 1 if above else lo - 1.5)
+    head = ["# my car"] * comments + [""] * blank
+    lines = head + [f"[{section}]", "# the value below is wrong"] + [""] * blank + [
+        f"{f.name} = {bad!r}"]
+    path = tmp_path_factory.mktemp("car") / "car.toml"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(CarDescriptionError) as info:
+        load_car(path)
+    assert str(info.value).startswith(f"{path}:{len(lines)}: {section}.{f.name} = "), str(info.value)

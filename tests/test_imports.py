@@ -120,7 +120,7 @@ def test_trackgen_cli_without_the_simulator_dependencies(tmp_path):
 
 
 # --------------------------------------------- simrunner: a missing dependency is one line
-@pytest.mark.parametrize("module", ["dartpy", "cv2", "numba"])
+@pytest.mark.parametrize("module", ["dartpy", "cv2"])
 def test_simrunner_drive_without_a_dependency_says_so_in_one_line(module):
     script = ("from simrunner.cli import main; sys.argv = ['simrunner', 'drive', "
               "'examples/line_follower.py', '--time-limit', '0.05']; main()")
@@ -131,6 +131,16 @@ def test_simrunner_drive_without_a_dependency_says_so_in_one_line(module):
     assert proc.stderr == (f"simrunner: the simulator needs {what}, which is not installed: "
                            f"pip install {dist}\n")
     assert proc.stdout == ""
+
+
+def test_simrunner_drive_does_not_load_numba():
+    """The camera line is NumPy (simrunner.sensors.line_row): drive runs with numba blocked,
+    so its ~0.5 s load is not in any run's start-up."""
+    script = ("from simrunner.cli import main; sys.argv = ['simrunner', 'drive', "
+              "'examples/line_follower.py', '--time-limit', '0.05']; main()")
+    proc = run_blocked(script, {"numba", "llvmlite", "scipy"})
+    assert proc.returncode == 1, proc.stderr  # the time limit: a failed run, not bad input
+    assert proc.stdout.startswith("outcome: timeout") and proc.stderr == ""
 
 
 def test_simrunner_help_without_the_simulator_dependencies():

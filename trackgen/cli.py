@@ -33,6 +33,7 @@ def _fail(message: str, code: int = EXIT_BAD_INPUT) -> click.exceptions.Exit:
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="nxpcup-sim", prog_name="trackgen")
 def main() -> None:
     """Generate NXP Cup tracks (Gazebo worlds, meshes, track.json) from layout files."""
 

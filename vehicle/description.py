@@ -18,8 +18,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
+import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import tomli_w
@@ -169,6 +172,11 @@ class CarDescription:
     camera: Camera = field(default_factory=Camera)
     effects: Effects = field(default_factory=Effects)
 
+    def __post_init__(self) -> None:
+        problem = relation_problem(self)
+        if problem is not None:
+            raise CarDescriptionError(problem[2])
+
     @property
     def min_turn_radius_m(self) -> float:
         """Smallest rear-axle turning radius, R = L / tan(limit) (thesis eq. 5.1)."""
@@ -207,56 +215,145 @@ _SECTION_TYPES = {"chassis": Chassis, "wheels": Wheels, "steering": Steering, "d
                   "camera": Camera, "effects": Effects}
 
 
-def car_from_dict(data: dict[str, Any], source: str = "<car>") -> CarDescription:
-    """Build and range-check a description; unknown keys and bad values raise."""
+def car_from_dict(data: dict[str, Any], source: str = "<car>", text: str | None = None) -> CarDescription:
+    """Build and range-check a description; unknown keys and bad values raise. ``text``: the
+    TOML text ``data`` was read from, so messages can say ``source:line:``."""
     kwargs: dict[str, Any] = {}
     for key, value in data.items():
         if key == "name":
             if not isinstance(value, str) or not value:
-                raise CarDescriptionError(f"{source}: 'name' must be a non-empty string")
+                raise _error(source, text, None, "name", "'name' must be a non-empty string")
             kwargs["name"] = value
             continue
         cls = _SECTION_TYPES.get(key)
         if cls is None:
-            raise CarDescriptionError(
-                f"{source}: unknown section [{key}] (expected one of {', '.join(_SECTION_TYPES)})")
+            raise _error(source, text, key, None,
+                         f"unknown section [{key}] (expected one of {', '.join(_SECTION_TYPES)})")
         if not isinstance(value, dict):
-            raise CarDescriptionError(f"{source}: [{key}] must be a table")
-        kwargs[key] = _section_from_dict(cls, key, value, source)
+            raise _error(source, text, None, key, f"[{key}] must be a table")
+        kwargs[key] = _section_from_dict(cls, key, value, source, text)
+    # the relations between fields, checked here too so the message can name the line
+    parts = {name: kwargs.get(name) or cls() for name, cls in _SECTION_TYPES.items()}
+    problem = relation_problem(SimpleNamespace(**parts))
+    if problem is not None:
+        section, key, message = problem
+        raise _error(source, text, section, key, message)
     return CarDescription(**kwargs)
 
 
-def _section_from_dict(cls: type, section: str, data: dict[str, Any], source: str):
+def relation_problem(car: CarDescription | SimpleNamespace) -> tuple[str, tuple[str, ...], str] | None:
+    """The first field that is in its own range but does not fit another one, as
+    ``(section, fields involved, message)``; None when the description is consistent."""
+    cam = car.camera
+    if cam.default_row >= cam.height_px:
+        return ("camera", ("default_row", "height_px"), f"camera.default_row = {cam.default_row}: expected a row "
+                f"in [0, {cam.height_px - 1}] (camera.height_px = {cam.height_px})")
+    # the line camera's row must look down at the ground (pinhole model of simrunner's camera)
+    f_px = (cam.width_px / 2.0) / math.tan(cam.hfov_rad / 2.0)
+    b = -(cam.default_row + 0.5 - cam.height_px / 2.0) / f_px
+    if -math.sin(cam.pitch_rad) + b * math.cos(cam.pitch_rad) >= 0.0:
+        return ("camera", ("default_row", "pitch_rad", "hfov_rad", "height_px"),
+                f"camera.default_row = {cam.default_row}: this row looks "
+                f"at or above the horizon (camera.pitch_rad = {cam.pitch_rad:g}); expected a row "
+                f"that sees the track")
+    if car.wheels.width_m >= car.chassis.track_m:
+        return ("wheels", ("width_m",), f"wheels.width_m = {car.wheels.width_m!r}: expected less "
+                f"than chassis.track_m = {car.chassis.track_m!r} (the wheels would overlap)")
+    return None
+
+
+_HEADER = re.compile(r"^\s*\[\s*([A-Za-z0-9_\-\"' .]+?)\s*\]\s*(#.*)?$")
+
+
+def _line_of(text: str | None, section: str | None, key: str | None) -> int | None:
+    """1-based line of ``key`` in table ``[section]`` (or of the header ``[section]`` when
+    ``key`` is None; a top-level key when ``section`` is None) in TOML ``text``; dotted keys
+    (``section.key = ...``) count too. None when it cannot be told."""
+    if text is None:
+        return None
+    current = None
+    names = [] if key is None else [key, f'"{key}"']
+    for number, line in enumerate(text.splitlines(), 1):
+        m = _HEADER.match(line)
+        if m:
+            current = m.group(1).strip().strip("\"'")
+            if key is None and current == section:
+                return number
+            continue
+        if key is None:
+            continue
+        left = line.split("=", 1)[0].strip() if "=" in line else None
+        if left is None:
+            continue
+        left = left.replace(" ", "")
+        if current == section and left in names:
+            return number
+        if current is None and section is not None and left in (f"{section}.{key}",):
+            return number
+    return None
+
+
+def _error(source: str, text: str | None, section: str | None, key: str | tuple[str, ...] | None,
+           message: str) -> CarDescriptionError:
+    """``source:line: message`` with the line of the first of ``key`` (one field or several)
+    found in ``[section]``, else of the section's header."""
+    keys = key if isinstance(key, tuple) else (key,)
+    line = next((n for k in keys if (n := _line_of(text, section, k)) is not None), None)
+    if line is None and section is not None and key is not None:
+        line = _line_of(text, section, None)
+    return CarDescriptionError(f"{source}:{line}: {message}" if line else f"{source}: {message}")
+
+
+def _section_from_dict(cls: type, section: str, data: dict[str, Any], source: str,
+                       text: str | None = None):
     known = {f.name: f for f in fields(cls)}
     out: dict[str, Any] = {}
     for key, value in data.items():
         f = known.get(key)
         if f is None:
-            raise CarDescriptionError(
-                f"{source}: unknown field {section}.{key} (expected one of {', '.join(known)})")
+            raise _error(source, text, section, key,
+                         f"unknown field {section}.{key} (expected one of {', '.join(known)})")
         want_int = f.type in (int, "int")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or (
                 want_int and not isinstance(value, int)):
-            raise CarDescriptionError(
-                f"{source}: {section}.{key} = {value!r}: expected {'an integer' if want_int else 'a number'}")
+            raise _error(source, text, section, key, f"{section}.{key} = {_short(value)}: expected "
+                         f"{'an integer' if want_int else 'a number'}")
         if math.isnan(value) or (math.isinf(value) and f.metadata.get("hi") != math.inf):
-            raise CarDescriptionError(f"{source}: {section}.{key} = {value!r}: expected a finite number")
+            raise _error(source, text, section, key,
+                         f"{section}.{key} = {value!r}: expected a finite number")
         lo, hi = f.metadata.get("lo"), f.metadata.get("hi")
         if (lo is not None and value < lo) or (hi is not None and value > hi):
-            raise CarDescriptionError(
-                f"{source}: {section}.{key} = {value!r}: expected a value in [{lo}, {hi}]")
+            raise _error(source, text, section, key,
+                         f"{section}.{key} = {_short(value)}: expected a value in [{lo}, {hi}]")
         out[key] = int(value) if want_int else float(value)
     return cls(**out)
 
 
+def _short(value: Any, limit: int = 40) -> str:
+    """``repr(value)`` cut to ``limit`` characters."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+_TOML_AT = re.compile(r"\(at line (\d+), column \d+\)")
+
+
 def load_car(path: str | Path | None = None) -> CarDescription:
-    """Load a car description TOML file; ``None`` gives the default car."""
+    """Load a car description TOML file; ``None`` gives the default car. Errors are one line,
+    ``PATH:LINE: what was expected`` (``PATH:`` alone when no line can be told)."""
     if path is None:
         return CarDescription()
-    from .userfiles import read_user_toml
+    from .userfiles import read_user_text
 
-    _, data = read_user_toml(path, "car description", CarDescriptionError)
-    return car_from_dict(data, str(path))
+    text = read_user_text(path, "car description", CarDescriptionError, "TOML")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = _TOML_AT.search(str(exc))
+        line = m.group(1) if m else (len(text.splitlines()) or 1) if "end of document" in str(exc) else None
+        where = f"{path}:{line}" if line else f"{path}"
+        raise CarDescriptionError(f"{where}: invalid TOML: {exc}") from None
+    return car_from_dict(data, str(path), text)
 
 
 def markdown_doc() -> str:

@@ -65,7 +65,8 @@ class _LazyGroup(click.Group):
             "calibrate": ("simrunner.cli.calib", "calibrate_cmd"),
             "excite": ("simrunner.cli.calib", "excite_cmd"),
             "gap": ("simrunner.cli.gap", "gap"),
-            "batch": ("simrunner.cli.batch", "batch_cmd")}
+            "batch": ("simrunner.cli.batch", "batch_cmd"),
+            "plot": ("simrunner.cli.plot", "plot_cmd")}
     _listing = False
 
     def list_commands(self, ctx: click.Context) -> list[str]:
@@ -119,7 +120,8 @@ def _function_docstring(module: str, function: str) -> str | None:
     return None
 
 
-@click.group(cls=_LazyGroup)
+@click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="nxpcup-sim", prog_name="simrunner")
 def main() -> None:
     """Headless NXP Cup car simulator with the thesis's Spinner API."""
 
@@ -160,6 +162,8 @@ def main() -> None:
               type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
               help="Stop a controller that spends this much wall time without letting "
                    "simulated time pass.")
+@click.option("--watch", is_flag=True,
+              help="Keep the track loaded and run again each time CONTROLLER is saved (Ctrl-C ends).")
 @click.option("--param", "param_items", multiple=True, metavar="NAME=VALUE",
               help="Controller parameter, read with spinner.param(NAME, default) (C: spinner_param); repeatable.")
 @click.option("-I", "--include", "include_dirs", multiple=True, metavar="DIR",
@@ -168,13 +172,29 @@ def main() -> None:
               help="C/C++ controllers: a preprocessor define (repeatable).")
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
               car, dt_s, wall_limit_s, param_items, include_dirs, defines, start, start_before_finish_m,
-              keep_driving) -> None:
+              keep_driving, watch=False) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
     a shared library (.so). See docs/c_controllers.md."""
     from simrunner.run.params import parse_params
     from simrunner.run.faults import Terminated, exit_code
     from simrunner.run.runner import drive
+
+    if watch:
+        from simrunner.cli.watch import watch_drive
+
+        if more_sources or include_dirs or defines or not controller.endswith(".py"):
+            click.echo("simrunner: --watch: expected one Python controller (.py)", err=True)
+            sys.exit(2)
+        try:
+            params = parse_params(param_items)
+        except input_errors() as exc:
+            click.echo(f"simrunner: {exc}", err=True)
+            sys.exit(2)
+        watch_drive(dict(controller=controller, track=track, laps=laps, time_limit_s=time_limit_s,
+                         video=video, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
+                         dt_s=dt_s, wall_limit_s=wall_limit_s, params=params, start=_start_pose(start),
+                         start_before_finish_m=start_before_finish_m, keep_driving=keep_driving))
 
     try:
         controller = _native_program(controller, more_sources, include_dirs, defines)
@@ -266,6 +286,10 @@ def include_dir_cmd() -> None:
 
     click.echo(str(INCLUDE_DIR))
 
+
+from simrunner.cli.names import add_api_spellings  # noqa: E402  (after the commands)
+
+add_api_spellings(drive_cmd)
 
 if __name__ == "__main__":  # pragma: no cover
     main()

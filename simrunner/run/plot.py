@@ -1,6 +1,12 @@
-"""Run plot (thesis Fig. 3.8): the path on the track, speed and steering over time -> PNG.
+"""Run plot (thesis Fig. 3.8) of any run log -> PNG: the path (over the track when it is
+known), speed, steering and yaw rate against time, each actual and commanded.
 
-matplotlib with the Agg backend (no display needed); the figure is closed after saving.
+Works on whatever columns a log has (a simulated run's telemetry, or a real car's log read
+through a column mapping): a panel whose columns are missing says so. Lap completions
+(where ``lap`` steps up) are numbered markers on the path and dotted lines in the time
+panels; the first off-track row is a red cross on the path and a red line in the panels.
+
+matplotlib's Agg canvas (no pyplot, no display, no global state); written atomically.
 """
 from __future__ import annotations
 
@@ -12,9 +18,77 @@ from simrunner.errors import SimError
 from simrunner.run.log import RunLog
 
 
+MAX_LAP_LABELS = 12  # laps after these get a marker but no label
+
+
+def lap_rows(log: RunLog) -> np.ndarray:
+    """Row indices where a lap was completed (the ``lap`` count steps up); empty without a
+    ``lap`` column."""
+    if log.lap is None or len(log) < 2:
+        return np.zeros(0, dtype=np.int64)
+    return np.flatnonzero(np.diff(log.lap) > 0) + 1
+
+
+def off_track_row(log: RunLog) -> int | None:
+    """The first row flagged off track (None: never, or no ``off_track`` column)."""
+    if log.off_track is None or not log.off_track.any():
+        return None
+    return int(np.argmax(log.off_track))
+
+
+def _track_background(ax, track) -> None:
+    r = track.raster
+    x0, x1, y0, y1 = r.extent_m() if callable(r.extent_m) else r.extent_m
+    h = 0.5 * r.m_per_px  # extent_m is of pixel centres; imshow wants pixel edges
+    ax.imshow(r.image, cmap="gray", vmin=0, vmax=255, extent=(x0 - h, x1 + h, y0 - h, y1 + h),
+              interpolation="nearest")
+
+
+def _map_panel(ax, log: RunLog, laps: np.ndarray, off: int | None) -> None:
+    if log.x_m is None or log.y_m is None or not len(log):
+        ax.text(0.5, 0.5, "no position (x_m, y_m) in this log", ha="center", va="center",
+                transform=ax.transAxes)
+        return
+    x, y = log.x_m, log.y_m
+    ax.plot(x, y, color="tab:green", lw=1.2, label="path")
+    if log.off_track is not None and log.off_track.any():
+        ax.plot(np.where(log.off_track, x, np.nan), np.where(log.off_track, y, np.nan),
+                color="tab:red", lw=2, label="off track")
+    ax.plot(x[:1], y[:1], "o", color="tab:blue", ms=7, label="start")
+    ax.plot(x[-1:], y[-1:], "s", color="tab:orange", ms=7, label="end")
+    if laps.size:
+        ax.plot(x[laps], y[laps], "D", color="gold", mec="black", ms=8, label="lap completed")
+        for n, i in enumerate(laps[:MAX_LAP_LABELS], 1):  # laps end near one line: stagger
+            ax.annotate(f"lap {n}: {log.t_s[i]:.2f} s", (x[i], y[i]), textcoords="offset points",
+                        xytext=(10, 6 + 15 * (n - 1)), fontsize=8, arrowprops={"arrowstyle": "-", "lw": 0.5}, bbox={"boxstyle": "round", "fc": "lightyellow",
+                                                         "alpha": 0.85})
+    if off is not None:
+        ax.plot(x[off], y[off], "X", color="red", mec="black", ms=14, label="left the track")
+        ax.annotate(f"off track\n{log.t_s[off]:.2f} s", (x[off], y[off]), textcoords="offset points",
+                    xytext=(10, -24), fontsize=9, color="darkred", fontweight="bold",
+                    bbox={"boxstyle": "round", "fc": "white", "ec": "red", "alpha": 0.9})
+    ax.legend(loc="best", fontsize=8)
+
+
+def _time_panel(ax, t, actual, commanded, unit: str, scale: float = 1.0) -> None:
+    drawn = False
+    if commanded is not None:
+        ax.plot(t, commanded * scale, color="tab:gray", lw=1, ls="--", label="commanded")
+        drawn = True
+    if actual is not None:
+        ax.plot(t, actual * scale, color="tab:blue", lw=1.2, label="actual")
+        drawn = True
+    ax.set_ylabel(unit)
+    if drawn:
+        ax.legend(loc="best", fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "not in this log", ha="center", va="center", transform=ax.transAxes)
+    ax.grid(True, alpha=0.3)
+
+
 def plot_run(log: RunLog, track, path: str | Path, *, title: str = "") -> Path:
-    """Write a 3-panel PNG: path over the track raster (``track``: a ``SimTrack`` or None),
-    speed (actual and commanded, m/s) and steering (actual and commanded, deg) against time."""
+    """Write the plot of ``log`` to ``path`` (PNG); ``track``: a ``SimTrack`` drawn under the
+    path, or None. Raises :class:`SimError` when the file cannot be written."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -22,42 +96,36 @@ def plot_run(log: RunLog, track, path: str | Path, *, title: str = "") -> Path:
 
     path = Path(path)
     t = log.t_s
-    fig = Figure(figsize=(11, 8), dpi=100, layout="constrained")
-    grid = fig.add_gridspec(2, 2, width_ratios=(1.2, 1))
+    laps, off = lap_rows(log), off_track_row(log)
+    fig = Figure(figsize=(12, 8), dpi=100, layout="constrained")
+    grid = fig.add_gridspec(3, 2, width_ratios=(1.2, 1))
     ax_map = fig.add_subplot(grid[:, 0])
     ax_v = fig.add_subplot(grid[0, 1])
     ax_s = fig.add_subplot(grid[1, 1], sharex=ax_v)
+    ax_w = fig.add_subplot(grid[2, 1], sharex=ax_v)
     if track is not None:
-        r = track.raster
-        x0, x1, y0, y1 = r.extent_m() if callable(r.extent_m) else r.extent_m
-        h = 0.5 * r.m_per_px  # extent_m is of pixel centres; imshow wants pixel edges
-        ax_map.imshow(r.image, cmap="gray", vmin=0, vmax=255, extent=(x0 - h, x1 + h, y0 - h, y1 + h),
-                      interpolation="nearest")
-    if len(t):
-        x, y = log.x_m, log.y_m
-        off = log.off_track
-        ax_map.plot(x, y, color="tab:green", lw=1.2, label="path")
-        if off.any():
-            ax_map.plot(np.where(off, x, np.nan), np.where(off, y, np.nan), color="tab:red",
-                        lw=2, label="off track")
-        ax_map.plot(x[:1], y[:1], "o", color="tab:blue", label="start")
-        ax_map.plot(x[-1:], y[-1:], "s", color="tab:orange", label="end")
-        ax_v.plot(t, log.speed_cmd_mps, color="tab:gray", lw=1, ls="--", label="commanded")
-        ax_v.plot(t, log.speed_mps, color="tab:blue", lw=1.2, label="actual")
-        ax_s.plot(t, np.degrees(log.steer_cmd_rad), color="tab:gray", lw=1, ls="--",
-                  label="commanded")
-        ax_s.plot(t, np.degrees(log.steer_rad), color="tab:red", lw=1.2, label="actual")
+        _track_background(ax_map, track)
+    _map_panel(ax_map, log, laps, off)
     ax_map.set_aspect("equal")
     ax_map.set_xlabel("x (m)")
     ax_map.set_ylabel("y (m)")
-    ax_map.legend(loc="best", fontsize=8)
-    ax_v.set_ylabel("speed (m/s)")
-    ax_v.legend(loc="best", fontsize=8)
-    ax_s.set_ylabel("steering (deg, + = left)")
-    ax_s.set_xlabel("simulated time (s)")
-    ax_s.legend(loc="best", fontsize=8)
-    for ax in (ax_v, ax_s):
-        ax.grid(True, alpha=0.3)
+    _time_panel(ax_v, t, log.speed_mps, log.speed_cmd_mps, "speed (m/s)")
+    _time_panel(ax_s, t, log.steer_rad, log.steer_cmd_rad, "steering (deg, + = left)",
+                float(np.degrees(1.0)))
+    _time_panel(ax_w, t, log.yaw_rate_radps, log.yaw_rate_cmd_radps, "yaw rate (deg/s, + = left)",
+                float(np.degrees(1.0)))
+    ax_w.set_xlabel("time (s)")
+    for ax in (ax_v, ax_s, ax_w):
+        for n, i in enumerate(laps, 1):
+            ax.axvline(t[i], color="goldenrod", ls=":", lw=1.2)
+            if ax is ax_v and n <= MAX_LAP_LABELS:
+                ax.annotate(f"lap {n}", (t[i], 1.0), xycoords=("data", "axes fraction"),
+                            xytext=(2, -10), textcoords="offset points", fontsize=7)
+        if off is not None:
+            ax.axvline(t[off], color="red", lw=1.5)
+    if off is not None:
+        ax_v.annotate("off track", (t[off], 0.0), xycoords=("data", "axes fraction"),
+                      xytext=(3, 4), textcoords="offset points", fontsize=8, color="darkred")
     if title:
         fig.suptitle(title)
     tmp = path.with_name(path.stem + ".partial" + (path.suffix or ".png"))
@@ -70,3 +138,15 @@ def plot_run(log: RunLog, track, path: str | Path, *, title: str = "") -> Path:
         raise SimError(f"{path}: cannot write plot ({exc})") from None
     return path
 
+
+def log_title(log: RunLog) -> str:
+    """A title for a log read from a file: its name, rows, duration, laps, off track."""
+    parts = [f"{Path(log.source).name}: {len(log)} rows, {log.duration_s:.1f} s"]
+    laps = lap_rows(log)
+    if log.lap is not None:
+        parts.append(f"{laps.size} lap(s)" + (f" completed at {', '.join(f'{log.t_s[i]:.2f}' for i in laps)} s"
+                                             if laps.size else ""))
+    off = off_track_row(log)
+    if off is not None:
+        parts.append(f"off track at {log.t_s[off]:.2f} s")
+    return ", ".join(parts)

@@ -328,7 +328,7 @@ class Spinner:
         clock.advance_to_next_frame()
         pose = clock.pose()
         cam = session.camera
-        if line >= 0:  # one compiled call (simrunner.sensors.line_kernel)
+        if line >= 0:  # one call (simrunner.sensors.line_row)
             img = self._line_image(pose, line, session.noise_rng if add_noise else None)
         else:
             img = cam.render(pose)

@@ -22,7 +22,8 @@ or meet the ground farther than ``max_range_m``, see the floor/background gray. 
 which removes aliasing of thin far lines at k^2 times the cost.
 
 The line camera (``line_image``: one row plus noise, every frame of a run) is one compiled
-call (:mod:`simrunner.sensors.line_kernel`) that computes the same maps and pixels as the OpenCV path.
+call (:mod:`simrunner.sensors.line_row`, NumPy; the numba kernel :mod:`simrunner.sensors.line_kernel`
+computes the same pixels) that computes the same maps and pixels as the OpenCV path.
 """
 from __future__ import annotations
 
@@ -38,9 +39,9 @@ from simrunner.track.raster import TrackRaster
 
 _NO_NORMALS = np.zeros(0)
 def _line_kernel():
-    """``simrunner.sensors.line_kernel.camera_row``, imported on first use (numba loads in
-    ~0.5 s; the import system caches the module, so later calls cost a dict lookup)."""
-    from simrunner.sensors.line_kernel import camera_row
+    """The line-row function: :func:`simrunner.sensors.line_row.camera_row` (NumPy, bit for bit
+    the numba kernel :mod:`simrunner.sensors.line_kernel`, without numba's ~0.5 s load)."""
+    from simrunner.sensors.line_row import camera_row
 
     return camera_row
 
@@ -84,14 +85,17 @@ class Camera:
             for r in range(self.height_px):
                 if not self._row_misses[r] and np.all(self._gx[r] == self._gx[r, 0]):
                     self._row_gx[r] = float(self._gx[r, 0])
+        # rows whose ground y values are sorted: their extreme raster coordinates are at the
+        # ends (line_row.camera_row's cheap inside test)
+        d = np.diff(self._gy, axis=1)
+        self._row_monotone = (np.all(d >= 0, axis=1) | np.all(d <= 0, axis=1)).tolist()
         self._any_miss = bool(self._miss.any())
         self._inv_m = 1.0 / self.raster.m_per_px
         self._x0_m, self._y0_m = (float(v) for v in self.raster.origin_xy_m)
         self._floor = int(self.raster.floor_gray)
         self._floor_f = float(self._floor)
         self._noise_std = float(cam.noise_std)
-        # compile (first use in a checkout, ~1 s) or load (~0.1 s) the line kernel now, not
-        # inside a timed, watchdog-guarded run
+        # load the line kernel now, not inside a timed, watchdog-guarded run
         # (``load_line_kernel=False``: on first use instead, for callers that may never need it)
         line_rows = [r for r, gx in enumerate(self._row_gx) if gx is not None]
         if line_rows and load_line_kernel:
@@ -176,7 +180,7 @@ class Camera:
     def line_image(self, pose: Pose2, row: int, normals=None) -> np.ndarray:
         """What the Spinner's ``get_image(row)`` returns: ``render_row(pose, row)`` as a
         ``(1, W) uint8`` image, with ``add_noise(img, normals)`` unless ``normals`` is None,
-        in one compiled call (:func:`simrunner.sensors.line_kernel.camera_row`) for the rows whose
+        in one call (:func:`simrunner.sensors.line_row.camera_row`) for the rows whose
         ground points share one x (all rows of a camera without supersampling that see only
         ground). ``normals``: a ``numpy.random.Generator`` or a
         :class:`simrunner.run.spinner.BufferedNormals` (its ``take``)."""
@@ -202,7 +206,8 @@ class Camera:
             buf, pos = take(self.width_px) if take else (normals.standard_normal(self.width_px), 0)
         self._kernel(self.raster.image, self._gy[row], -si, ci * gx, (pose.x_m - self._x0_m) * inv,
                    -ci, -si * gx, (self._y0_m - pose.y_m) * inv, self._floor_f,
-                   normals is not None, buf, pos, self._noise_std, out)
+                   normals is not None, buf, pos, self._noise_std, out,
+                   monotone=self._row_monotone[row])
         return out
 
     def add_noise(self, img: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -1,0 +1,215 @@
+"""One frame of the debug video (thesis 3.4, Fig. 3.7): :func:`compose` and its layout.
+
+Layout of a ``1024 x 576`` frame (BGR), every pixel assigned::
+
+    +----------------+---------------------+------------------------+
+    | camera image   | camera line (row r) | top-down view: track   |
+    | x3, the line   | stretched           | raster, the path so    |
+    | row marked     | controller line 1   | far (green; red where  |
+    | (384 x 384)    | its text lines      | off track), the car    |
+    |                | controller line 2   | (width from the track's|
+    +----------------+ ...                 | aspect; floor gray     |
+    | API: time,     | (add_data text      | around it)             |
+    | speed, steer,  | under the processed |                        |
+    | pose, lap ...  | lines, as Fig. 3.7) |                        |
+    +----------------+---------------------+------------------------+
+
+The controller's ``add_data(array)`` lines ("processed lines") sit under the camera line
+and its ``add_data(text)`` lines under them, as in the thesis's Figure 3.7. Panels have a
+dark gray background; the only black left is what the pictures themselves show.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+FRAME_W, FRAME_H = 1024, 576
+CAMERA_SCALE = 3  # the camera image (128 x 128 by default) is drawn 3x: 384 x 384
+GAP = 6
+MIN_TEXT_W = 300  # the middle column is at least this wide (~36 characters)
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+_PANEL = (40, 40, 40)
+_WHITE = (235, 235, 235)
+_GRAY = (160, 160, 160)
+_YELLOW = (60, 220, 240)
+_RED = (40, 40, 230)
+_GREEN = (60, 200, 60)
+LINE_H = 48   # height of the stretched camera line
+CTRL_LINE_H = 24
+TEXT_STEP = 19
+
+
+@dataclass
+class FrameRecord:
+    """What one video frame shows (filled by the main thread; small)."""
+
+    frame: int
+    t_s: float
+    pose: Any  # Pose2 of the car at the frame
+    state: dict  # speed, steer, speed_cmd, steer_cmd, lap, laps, off_track, z
+    image: np.ndarray | None = None  # (H, W) image the controller got, else rendered later
+    line: np.ndarray | None = None  # (1, W) line the controller got
+    line_row: int = 0
+    text: tuple = ()
+    lines: np.ndarray | None = None  # (k, W) controller image lines
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Panel boxes ``(x0, y0, x1, y1)`` of a frame."""
+
+    camera: tuple[int, int, int, int]
+    api: tuple[int, int, int, int]
+    middle: tuple[int, int, int, int]
+    top: tuple[int, int, int, int] | None
+
+    @classmethod
+    def for_frame(cls, image_shape: tuple[int, int], track_aspect: float | None) -> "Layout":
+        """The layout for a camera image of ``(H, W)`` and a track raster of width/height
+        ``track_aspect`` (None: no top-down view)."""
+        h, w = image_shape
+        s = min(CAMERA_SCALE * 128 / max(h, w), (FRAME_H - 150) / h)
+        cam_w, cam_h = int(round(w * s)), int(round(h * s))
+        camera = (0, 0, cam_w, cam_h)
+        api = (0, cam_h + GAP, cam_w, FRAME_H)
+        x_mid = cam_w + GAP
+        if track_aspect is None:
+            return cls(camera, api, (x_mid, 0, FRAME_W, FRAME_H), None)
+        room = FRAME_W - x_mid - GAP - MIN_TEXT_W
+        top_w = int(min(room, max(FRAME_H * track_aspect, 0.5 * room)))
+        x_top = FRAME_W - top_w
+        return cls(camera, api, (x_mid, 0, x_top - GAP, FRAME_H), (x_top, 0, FRAME_W, FRAME_H))
+
+
+class TrackView:
+    """The whole track raster fitted into a box (the floor's gray around it), with a path
+    layer drawn incrementally."""
+
+    def __init__(self, raster, box_w: int, box_h: int):
+        img = np.asarray(raster.image)
+        h, w = img.shape
+        self.scale = min(box_w / w, box_h / h)
+        size = (max(1, int(w * self.scale)), max(1, int(h * self.scale)))
+        small = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+        self.box_w, self.box_h = box_w, box_h
+        self.off = ((box_w - size[0]) // 2, (box_h - size[1]) // 2)
+        floor = int(getattr(raster, "floor_gray", 0))
+        canvas = np.full((box_h, box_w), floor, np.uint8)
+        canvas[self.off[1]:self.off[1] + size[1], self.off[0]:self.off[0] + size[0]] = small
+        self.canvas = cv2.cvtColor(canvas, cv2.COLOR_GRAY2BGR)
+        self.origin = (float(raster.origin_xy_m[0]), float(raster.origin_xy_m[1]))
+        self.px_per_m = self.scale / float(raster.m_per_px)
+        self._last: tuple[int, int] | None = None
+
+    def to_px(self, x_m: float, y_m: float) -> tuple[int, int]:
+        """Box pixel (col, row) of a world point (raster pixel centres at integer indices)."""
+        col = (x_m - self.origin[0]) * self.px_per_m + 0.5 * self.scale + self.off[0]
+        row = (self.origin[1] - y_m) * self.px_per_m + 0.5 * self.scale + self.off[1]
+        return int(round(col)), int(round(row))
+
+    def draw(self, pose, off_track: bool, car_length_m: float, car_width_m: float) -> np.ndarray:
+        """Extend the path to ``pose`` and return the box image ``(box_h, box_w, 3)``."""
+        p = self.to_px(pose.x_m, pose.y_m)
+        if self._last is not None:
+            cv2.line(self.canvas, self._last, p, _RED if off_track else _GREEN, 1, cv2.LINE_AA)
+        self._last = p
+        out = self.canvas.copy()
+        c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+        corners = [self.to_px(pose.x_m + c * fx - s * fy, pose.y_m + s * fx + c * fy)
+                   for fx, fy in ((car_length_m, 0.0), (0.0, car_width_m / 2), (0.0, -car_width_m / 2))]
+        cv2.fillConvexPoly(out, np.array(corners, np.int32), _YELLOW, cv2.LINE_AA)
+        return out
+
+
+def _put(img, text: str, x: int, y: int, color=_WHITE, scale: float = 0.45) -> None:
+    cv2.putText(img, text, (x, y), _FONT, scale, color, 1, cv2.LINE_AA)
+
+
+def _stretch(row: np.ndarray, w: int, h: int) -> np.ndarray:
+    arr = np.asarray(row)
+    if arr.dtype != np.uint8:
+        arr = np.clip(arr, 0, 255).astype(np.uint8)
+    return cv2.resize(arr.reshape(1, -1), (w, h), interpolation=cv2.INTER_NEAREST)[:, :, None]
+
+
+def _api_panel(out: np.ndarray, box, rec: FrameRecord, laps: int) -> None:
+    st = rec.state
+
+    def z(v: float, nd: int) -> float:  # no "-0.000"
+        return round(v, nd) + 0.0
+
+    rows = [("time", f"{rec.t_s:.3f} s"), ("frame", f"{rec.frame}"),
+            ("speed", f"{z(st['speed'], 3):.3f} m/s"), ("cmd", f"{z(st['speed_cmd'], 3):.3f} m/s"),
+            ("steer", f"{z(math.degrees(st['steer']), 1):.1f} deg"),
+            ("cmd", f"{z(math.degrees(st['steer_cmd']), 1):.1f} deg"),
+            ("x", f"{z(rec.pose.x_m, 3):.3f} m"), ("y", f"{z(rec.pose.y_m, 3):.3f} m"),
+            ("yaw", f"{z(math.degrees(rec.pose.yaw_rad), 1):.1f} deg"),
+            ("lap", f"{st['lap']} / {laps}"), ("line row", f"{rec.line_row}")]
+    x0, y0, x1, y1 = box
+    half = (x1 - x0) // 2
+    per_col = max(1, math.ceil(len(rows) / 2))
+    step = max(16, min(26, (y1 - y0 - 40) // per_col))
+    for i, (name, value) in enumerate(rows):
+        x = x0 + 8 + (i // per_col) * half
+        y = y0 + 20 + (i % per_col) * step
+        _put(out, name, x, y, _GRAY)
+        _put(out, value, x + 62, y)
+    if st.get("off_track"):
+        _put(out, "OFF TRACK", x0 + 8, y1 - 10, _RED, 0.7)
+
+
+def _middle_panel(out: np.ndarray, box, rec: FrameRecord) -> None:
+    """The camera line, the controller's processed lines, its text under them."""
+    x0, y0, x1, y1 = box
+    w = x1 - x0 - 16
+    y = y0 + 16
+    _put(out, f"camera line (row {rec.line_row})", x0 + 8, y, _GRAY)
+    y += 6
+    if rec.line is not None:
+        out[y:y + LINE_H, x0 + 8:x0 + 8 + w] = _stretch(rec.line, w, LINE_H)
+    y += LINE_H + 8
+    if rec.lines is not None and len(rec.lines):
+        _put(out, "controller", x0 + 8, y + 10, _GRAY)
+        y += 16
+        for ln in rec.lines:
+            if y + CTRL_LINE_H > y1 - 8:
+                break
+            out[y:y + CTRL_LINE_H, x0 + 8:x0 + 8 + w] = _stretch(ln, w, CTRL_LINE_H)
+            y += CTRL_LINE_H + 4
+    chars = max(8, w // 8)
+    y += 14
+    for line in rec.text:
+        if y > y1 - 6:
+            break
+        _put(out, str(line)[:chars], x0 + 8, y)
+        y += TEXT_STEP
+
+
+def compose(rec: FrameRecord, track_view: TrackView | None, laps: int,
+            car_length_m: float = 0.28, car_width_m: float = 0.16,
+            layout: Layout | None = None) -> np.ndarray:
+    """One ``(FRAME_H, FRAME_W, 3)`` BGR video frame from a record (see module layout);
+    ``layout`` defaults to the one for the record's image and the view's box."""
+    if layout is None:
+        aspect = None if track_view is None else track_view.box_w / track_view.box_h
+        layout = Layout.for_frame(rec.image.shape, aspect)
+    out = np.zeros((FRAME_H, FRAME_W, 3), np.uint8)
+    for box in (layout.api, layout.middle):
+        out[box[1]:box[3], box[0]:box[2]] = _PANEL
+    # camera image, the selected row marked at both sides
+    x0, y0, x1, y1 = layout.camera
+    out[y0:y1, x0:x1] = cv2.resize(rec.image, (x1 - x0, y1 - y0), interpolation=cv2.INTER_NEAREST)[:, :, None]
+    ry = y0 + int((rec.line_row + 0.5) * (y1 - y0) / rec.image.shape[0])
+    cv2.line(out, (x0, ry), (x0 + 8, ry), _RED, 2)
+    cv2.line(out, (x1 - 9, ry), (x1 - 1, ry), _RED, 2)
+    _api_panel(out, layout.api, rec, laps)
+    _middle_panel(out, layout.middle, rec)
+    if track_view is not None and layout.top is not None:
+        bx0, by0, bx1, by1 = layout.top
+        view = track_view.draw(rec.pose, bool(rec.state.get("off_track")), car_length_m, car_width_m)
+        out[by0:by0 + view.shape[0], bx0:bx0 + view.shape[1]] = view[:by1 - by0, :bx1 - bx0]
+    return out
