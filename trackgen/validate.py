@@ -23,7 +23,8 @@ Checks and tolerances (module constants; tolerances in metres are multiplied by 
   start/finish  at most one START_FINISH; none is a warning (laps are then timed at the
                 start pose)
   meshes        lane / edges / markings meshes are watertight after a binary STL round
-                trip (float32), see :func:`check_meshes`
+                trip (float32), see :func:`check_meshes` (run by trackgen.build.check_layout
+                only when the other checks pass)
 
 At most MAX_PROBLEMS problems are listed (errors first); the rest are summarised in one
 more line (``check="summary"``, its ``hidden`` count says how many it stands for).
@@ -267,15 +268,18 @@ def stl_round_trip(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return trimesh.load(io.BytesIO(data), file_type="stl", force="mesh")
 
 
-def check_meshes(meshes: dict[str, trimesh.Trimesh]) -> list[str]:
-    """Messages for meshes that are empty or not watertight after an STL round trip."""
+def check_meshes(meshes: dict) -> list[str]:
+    """Messages for meshes (:class:`trackgen.meshes.SlabMesh` or trimesh) that are empty or
+    not watertight after an STL round trip (:func:`trackgen.meshes.watertight_after_stl`)."""
+    from .meshes import watertight_after_stl
+
     out = []
     for role, mesh in meshes.items():
         if len(mesh.faces) == 0:
             out.append(f"{role} mesh is empty")
             continue
-        back = stl_round_trip(mesh)
-        if not (back.is_watertight and back.is_winding_consistent):
+        ok, faces, euler = watertight_after_stl(mesh)
+        if not ok:
             out.append(f"{role} mesh is not watertight after the STL round trip "
-                       f"({len(back.faces)} faces, Euler number {back.euler_number})")
+                       f"({faces} faces, Euler number {euler})")
     return out
