@@ -124,9 +124,9 @@ PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
 #: Track-wide settings a layout file can set: layout name -> ParamSpec (internal = field name).
 #: Ranges hold for the values typed and for the values after ``@scale``.
 SETTINGS_PARAMS: Mapping[str, ParamSpec] = MappingProxyType({
-    "lane_width": _m("lane_width", 0.55, 0.01, 100.0),
-    "edge_width": _m("edge_width", 0.020, 0.001, 10.0),
-    "thickness": _m("thickness", 0.01, 0.0001, 10.0),
+    "lane_width": _m("lane_width", 0.55, 1e-4, 100.0),
+    "edge_width": _m("edge_width", 0.020, 1e-5, 10.0),
+    "thickness": _m("thickness", 0.01, 1e-6, 10.0),
     "arc_tolerance": _m("arc_tolerance", 0.001, 1e-5, 0.05),
 })
 

@@ -81,7 +81,7 @@ def test_default_name_is_file_stem(tmp_path):
     ("# only a comment\n@lane_width = 0.5\n", 1, r"empty layout"),
     ("@lane_widht = 0.5\nSTRAIGHT\n", 1, r"unknown setting @lane_widht .*did you mean lane_width\?"),
     ("@lane_width = 0.5\n@lane_width = 0.6\nSTRAIGHT\n", 2, r"@lane_width set twice \(first on line 1\)"),
-    ("@lane_width = -0.5\nSTRAIGHT\n", 1, r"@lane_width = -0.5: expected 0.01 <= lane_width <= 100 \(m\)"),
+    ("@lane_width = -0.5\nSTRAIGHT\n", 1, r"@lane_width = -0.5: expected 0.0001 <= lane_width <= 100 \(m\)"),
     ("@lane_width =\nSTRAIGHT\n", 1, r"@lane_width: missing value"),
     ("@scale = 0\nSTRAIGHT\n", 1, r"@scale = 0: expected 0.01 <= scale <= 100"),
     ("@name = ../evil\nSTRAIGHT\n", 1, r"@name = '../evil': expected 1-64 letters"),

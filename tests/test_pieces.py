@@ -301,7 +301,7 @@ def test_piece_from_layout_converts_degrees_and_checks_names():
     assert TrackSettings.from_layout({"lane_width": 0.5}).lane_width_m == 0.5
     with pytest.raises(PieceError, match="unknown track setting 'lane'"):
         TrackSettings.from_layout({"lane": 0.5})
-    with pytest.raises(PieceError, match=r"^thickness=-1 m: expected \[0.0001, 10\] m"):
+    with pytest.raises(PieceError, match=r"^thickness=-1 m: expected \[1e-06, 10\] m"):
         TrackSettings.from_layout({"thickness": -1})
     # limits that depend on the settings are reported in layout names too
     with pytest.raises(PieceError, match=r"^radius=0.2 m: expected \(0.295, inf\) m"):
