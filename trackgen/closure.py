@@ -36,9 +36,17 @@ def turning_deg(p: PlacedPiece) -> float:
 
 
 def _lines(passes: list[PlacedPiece]) -> str:
+    """``line 3`` / ``lines 3, 5`` (at most _MAX_LINES listed)."""
     lines = sorted({p.line for p in passes})
     more = f" and {len(lines) - _MAX_LINES} more" if len(lines) > _MAX_LINES else ""
-    return ", ".join(str(n) for n in lines[:_MAX_LINES]) + more
+    word = "line" if len(lines) == 1 else "lines"
+    return f"{word} " + ", ".join(str(n) for n in lines[:_MAX_LINES]) + more
+
+
+def _heading_deg(rad: float) -> float:
+    """Degrees in (-180, 180]."""
+    deg = math.degrees(math.remainder(rad, 2.0 * math.pi))
+    return 180.0 if deg <= -180.0 + 1e-9 else deg
 
 
 def explain_closure(track: Track, tol_m: float, tol_rad: float) -> tuple[int | None, str]:
@@ -55,7 +63,7 @@ def explain_closure(track: Track, tol_m: float, tol_rad: float) -> tuple[int | N
 def _heading_cause(track: Track, total: float, needed: float, diff: float,
                    tol_deg: float) -> tuple[int | None, str]:
     text = (f"turns sum to {total:.6g} deg; {needed:.6g} needed "
-            f"({abs(diff):.6g} deg {'short' if diff > 0 else 'too many'})")
+            f"({abs(diff):.6g} deg {'too many' if abs(total) > abs(needed) else 'short'})")
     turns = [p for p in track.passes if turning_deg(p) != 0.0]
     angles = [abs(turning_deg(p)) for p in turns]
     for p, angle in zip(turns, angles):
@@ -90,11 +98,11 @@ def _position_cause(track: Track, total: float, tol_m: float,
         return None, text + "; no straight piece runs along that gap"
     parts = []
     if short:
-        parts.append(f"the pieces heading {math.degrees(need):.1f} deg (lines {_lines(short)}) "
+        parts.append(f"the pieces heading {_heading_deg(need):.1f} deg ({_lines(short)}) "
                      f"are {dist:.3f} m too short in total")
     if long_:
-        back = math.degrees(math.remainder(need + math.pi, 2.0 * math.pi))
-        parts.append(f"those heading {back:.1f} deg (lines {_lines(long_)}) {dist:.3f} m too long")
+        back = _heading_deg(need + math.pi)
+        parts.append(f"those heading {back:.1f} deg ({_lines(long_)}) {dist:.3f} m too long")
     first = (short or long_)[0]
     line = first.line if len({p.line for p in short + long_}) == 1 else None
     return line, text + ": " + ", or ".join(parts)
