@@ -158,7 +158,7 @@ def test_property_one_odd_turn_is_found(angles, change, at):
     total = sum(angles)
     fill = 360.0 - total % 360.0 if total % 360.0 else 0.0
     parts = math.ceil(fill / 180.0)
-    ring = list(angles) + [fill / parts] * parts
+    ring = list(angles) + ([fill / parts] * parts if parts else [])
     i = at % len(ring)
     if not 0 < ring[i] + change <= 180:
         return
