@@ -1,6 +1,6 @@
 """Random-mutation fuzzer for layout files (not collected by pytest; run it by hand).
 
-    python tests/fuzz_layouts.py [SECONDS] [SEED]
+    python tests/fuzz_layouts.py [SECONDS] [SEED] [STEPS]
 
 Mutates the example layouts (extreme numbers, long tokens, repeats, settings, Unicode
 look-alikes, byte damage, shuffled lines) and runs each through ``check_layout`` (chain,
@@ -88,28 +88,29 @@ def run_case(text: str, tmp: Path) -> None:
         render_preview(checked.track, checked.geometry, tmp / "p.png")
 
 
-def main(seconds: float = 120.0, seed: int = 0) -> int:
+def main(seconds: float = 120.0, seed: int = 0, steps: int = 3) -> int:
     rng = np.random.default_rng(seed)
     bases = [p.read_text() for p in sorted(EXAMPLES.glob("*.txt"))]
     failures = cases = 0
     end = time.monotonic() + seconds
     with tempfile.TemporaryDirectory() as tmp:
         while time.monotonic() < end:
-            text = mutate(str(bases[cases % len(bases)]), rng)
+            text = mutate(str(bases[cases % len(bases)]), rng, steps)
             cases += 1
             t0 = time.monotonic()
             try:
                 run_case(text, Path(tmp))
             except Exception:  # noqa: BLE001 - the fuzzer reports everything
                 failures += 1
-                print(f"--- case {cases}: {traceback.format_exc(limit=3)[-800:]}\n{text[:600]!r}")
+                print(f"--- case {cases}: {traceback.format_exc(limit=3)[-800:]}\n{text[:600]!r}",
+                      flush=True)
             took = time.monotonic() - t0
             if took > SLOW_S:
                 failures += 1
-                print(f"--- case {cases}: slow ({took:.1f} s)\n{text[:600]!r}")
+                print(f"--- case {cases}: slow ({took:.1f} s)\n{text[:600]!r}", flush=True)
     print(f"{cases} cases, {failures} failures")
     return 1 if failures else 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(*(float(a) for a in sys.argv[1:2]), *(int(a) for a in sys.argv[2:3])))
+    sys.exit(main(*(float(a) for a in sys.argv[1:2]), *(int(a) for a in sys.argv[2:4])))
