@@ -103,10 +103,10 @@ def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> t
         grid.line(k_px([[x, y1], [x, y1 - height / px_per_m]]), fill=GRID_RGB, width=SUPERSAMPLE)
     for y in gy:
         grid.line(k_px([[x0, y], [x0 + width / px_per_m, y]]), fill=GRID_RGB, width=SUPERSAMPLE)
-    for geom, colour in ((geometry.edges, (0, 0, 0)), (geometry.lane, (255, 255, 255)),
-                         (geometry.markings, (0, 0, 0))):
+    # edge lines and the finish bar are black: the whole road black, then the lane white
+    for geom, colour in ((geometry.road, (0, 0, 0)), (geometry.lane, (255, 255, 255))):
         image.paste(colour, (0, 0), _mask(geom, k_px, big))
-    image = image.resize((width, height), Image.Resampling.LANCZOS)
+    image = image.reduce(SUPERSAMPLE)  # box filter: smooth edges
     draw = ImageDraw.Draw(image)
     _labels(track, draw, to_px, px_per_m)
     _arrow(track, draw, to_px)
@@ -119,7 +119,7 @@ def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> t
         draw.text((3, py - 15), f"{y:g}", fill=TEXT_RGB, font=font)
     _scale_bar(draw, step, px_per_m, width, height, font)
     _legend(draw, step, font)
-    image.save(str(path), format="PNG", optimize=False)
+    image.save(str(path), format="PNG", compress_level=3)
     return width, height
 
 
