@@ -65,12 +65,17 @@ def _heading_cause(track: Track, total: float, needed: float, diff: float,
     text = (f"turns sum to {total:.6g} deg; {needed:.6g} needed "
             f"({abs(diff):.6g} deg {'too many' if abs(total) > abs(needed) else 'short'})")
     turns = [p for p in track.passes if turning_deg(p) != 0.0]
-    angles = [abs(turning_deg(p)) for p in turns]
-    for p, angle in zip(turns, angles):
+    lines_at: dict[float, set[int]] = {}   # angle (rounded to 1e-6 deg) -> up to 2 lines
+    for p in turns:
+        seen = lines_at.setdefault(round(abs(turning_deg(p)), 6), set())
+        if len(seen) < 2:
+            seen.add(p.line)
+    for p in turns:
+        angle = abs(turning_deg(p))
         fixed = angle + diff * (1.0 if turning_deg(p) > 0 else -1.0)
         if not 0.0 < fixed <= 180.0 + tol_deg:
             continue
-        if any(abs(fixed - a) <= 1e-6 for q, a in zip(turns, angles) if q.line != p.line):
+        if lines_at.get(round(fixed, 6), set()) - {p.line}:
             return p.line, (f"{text}: the turn on line {p.line} ({p.entry.describe()}) is the odd "
                             f"one out; angle={fixed:.6g} would close the heading")
     return None, text + "; no single turn explains it"
