@@ -53,20 +53,27 @@ def watertight_after_stl(mesh) -> tuple[bool, int, int]:
     """``(closed and consistently wound, faces, Euler number)`` of ``mesh`` after the float32
     STL round trip with equal vertices merged."""
     tri = np.asarray(mesh.vertices, dtype=float)[np.asarray(mesh.faces, dtype=np.int64)]
-    flat = tri.astype(np.float32).reshape(-1, 3)
+    flat = tri.astype(np.float32).reshape(-1, 3) + np.float32(0.0)   # -0.0 -> 0.0
     if flat.size == 0:
         return False, 0, 0
-    _, index = np.unique(flat, axis=0, return_inverse=True)
-    faces = index.reshape(-1, 3).astype(np.int64)
-    n_verts = int(index.max()) + 1
+    # merge equal vertices: sort the float32 bit patterns (lexsort: linear memory, fast)
+    bits = np.ascontiguousarray(flat).view(np.uint32)
+    order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0]))
+    sorted_bits = bits[order]
+    new = np.r_[True, (sorted_bits[1:] != sorted_bits[:-1]).any(axis=1)]
+    index = np.empty(len(flat), dtype=np.int64)
+    index[order] = np.cumsum(new) - 1
+    faces = index.reshape(-1, 3)
+    n_verts = int(new.sum())
     degenerate = ((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2])
                   | (faces[:, 2] == faces[:, 0])).any()
     a = faces.ravel()
     b = np.roll(faces, -1, axis=1).ravel()            # directed edges a -> b of every face
-    directed = a * n_verts + b
-    undirected = np.minimum(a, b) * n_verts + np.maximum(a, b)
-    _, uses = np.unique(undirected, return_counts=True)
+    directed = np.sort(a * n_verts + b)
+    undirected = np.sort(np.minimum(a, b) * n_verts + np.maximum(a, b))
+    starts = np.flatnonzero(np.r_[True, undirected[1:] != undirected[:-1]])
+    uses = np.diff(np.r_[starts, undirected.size])
     closed = bool((uses == 2).all())
-    consistent = np.unique(directed).size == directed.size
+    consistent = not (directed[1:] == directed[:-1]).any()
     euler = n_verts - uses.size + len(faces)
     return closed and consistent and not degenerate, len(faces), int(euler)
