@@ -30,7 +30,7 @@ from .layout import Layout, LayoutEntry
 
 START_BEFORE_FINISH_M = 0.3
 """With a START_FINISH piece the car starts this far before the centre of its marking."""
-MAX_TRACK_VERTICES = 2_000_000
+MAX_TRACK_VERTICES = 500_000
 """Most centreline samples in one layout (every pass counted): bounds the memory and time of
 the footprints, unions and meshes (10 000 default turns need ~110 000)."""
 _CENTRE_EPS_M = 1e-9
