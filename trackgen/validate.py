@@ -31,10 +31,8 @@ more line (``check="summary"``, its ``hidden`` count says how many it stands for
 """
 from __future__ import annotations
 
-import io
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
@@ -43,8 +41,6 @@ from pieces.spec import PieceType
 
 from .chain import Track
 
-if TYPE_CHECKING:  # at run time trimesh (~0.5 s: scipy) loads with the first mesh check
-    import trimesh
 
 CLOSURE_TOL_M = 1e-6
 CLOSURE_TOL_RAD = 1e-6
@@ -258,14 +254,6 @@ def _check_start_finish(track: Track, path: str) -> list[Problem]:
     return [Problem(path, p.line, (
         f"second START_FINISH (piece {p.index + 1}; the first is on line {sfs[0].line}): "
         "a track has at most one"), "start_finish") for p in sfs[1:]]
-
-
-def stl_round_trip(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """The mesh as a consumer sees it: binary STL (float32) read back with merged vertices."""
-    import trimesh
-
-    data = mesh.export(file_type="stl")
-    return trimesh.load(io.BytesIO(data), file_type="stl", force="mesh")
 
 
 def check_meshes(meshes: dict) -> list[str]:
