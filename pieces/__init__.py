@@ -29,6 +29,7 @@ Python API (metres and radians, keyword-only; bad values raise :class:`PieceErro
                                            internal, to_internal); .check(v), .range_text()
     SETTINGS_PARAMS[layout_name] -> ParamSpec;  TrackSettings.from_layout(mapping)
     pieces.mesh.extrude_footprint(geom, thickness_m) -> trimesh.Trimesh (watertight)
+    pieces.mesh.extrude_arrays(geom, thickness_m) -> (vertices, faces)  (no trimesh)
 
 Layout-file parameter names and units (``PARAMS``): STRAIGHT / STRAIGHT_SHORT / CROSSROADS
 ``length`` (m); TURN_* ``radius`` (m), ``angle`` (deg, (0, 180]); CHICANE_* ``length``,

@@ -17,13 +17,22 @@ import shapely
 from shapely.geometry import Polygon
 
 
+MAX_ARC_SEGMENTS = 1000
+"""Most chords of one arc: a larger arc than ~100 m radius at the finest tolerance is drawn
+with this many chords (its chord error then exceeds the tolerance), so that memory and
+time per piece stay bounded whatever the radius."""
+
+
 def arc_segments(angle_rad: float, max_radius_m: float, tolerance_m: float) -> int:
     """Number of equal chords so that no chord strays more than ``tolerance_m`` (sagitta)
-    from an arc of radius ``max_radius_m`` spanning ``angle_rad``; at least 1."""
+    from an arc of radius ``max_radius_m`` spanning ``angle_rad``; at least 1, at most
+    :data:`MAX_ARC_SEGMENTS`."""
     if tolerance_m >= max_radius_m:
         return max(1, math.ceil(abs(angle_rad) / (math.pi / 2)))
     step = 2.0 * math.acos(1.0 - tolerance_m / max_radius_m)
-    return max(1, math.ceil(abs(angle_rad) / step - 1e-12))
+    if not step > 0.0:  # tolerance below the float resolution of the radius
+        return MAX_ARC_SEGMENTS
+    return min(MAX_ARC_SEGMENTS, max(1, math.ceil(abs(angle_rad) / step - 1e-12)))
 
 
 def arc_samples(radius_m: float, angle_rad: float, direction: int, n: int,

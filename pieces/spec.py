@@ -94,11 +94,19 @@ def check_range(name: str, value: float, lo: float, hi: float = math.inf, *,
         raise
 
 
-def _m(name: str, default: float, lo: float = 0.0, hi: float = math.inf, **kw) -> ParamSpec:
+MIN_LENGTH_M, MAX_LENGTH_M = 0.001, 100.0
+"""Range of every piece length, radius and offset a layout can type (before ``@scale``):
+1 mm to 100 m -- bounds that keep every piece's geometry finite and its meshing bounded."""
+
+
+def _m(name: str, default: float, lo: float = MIN_LENGTH_M, hi: float = MAX_LENGTH_M,
+       **kw) -> ParamSpec:
+    kw.setdefault("lo_open", False)
     return ParamSpec(name, "m", default, lo, hi, internal=f"{name}_m", **kw)
 
 
-_ANGLE = ParamSpec("angle", "deg", 45.0, 0.0, 180.0, internal="angle_rad", to_internal=math.radians)
+_ANGLE = ParamSpec("angle", "deg", 45.0, 0.001, 180.0, lo_open=False, internal="angle_rad",
+                   to_internal=math.radians)
 
 #: Layout-file parameters per kind: ``PARAMS[kind][layout_name] -> ParamSpec``.
 PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
@@ -114,11 +122,12 @@ PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
 })
 
 #: Track-wide settings a layout file can set: layout name -> ParamSpec (internal = field name).
+#: Ranges hold for the values typed and for the values after ``@scale``.
 SETTINGS_PARAMS: Mapping[str, ParamSpec] = MappingProxyType({
-    "lane_width": _m("lane_width", 0.55),
-    "edge_width": _m("edge_width", 0.020),
-    "thickness": _m("thickness", 0.01),
-    "arc_tolerance": _m("arc_tolerance", 0.001, hi=0.05),
+    "lane_width": _m("lane_width", 0.55, 1e-4, 100.0),
+    "edge_width": _m("edge_width", 0.020, 1e-5, 10.0),
+    "thickness": _m("thickness", 0.01, 1e-6, 10.0),
+    "arc_tolerance": _m("arc_tolerance", 0.001, 1e-5, 0.05),
 })
 
 
@@ -129,7 +138,8 @@ class TrackSettings:
     ``lane_width_m``: white lane, edge to edge (between the black lines).
     ``edge_width_m``: each black edge line, laid OUTSIDE the lane (road = lane + 2 edges).
     ``thickness_m``: slab height; meshes span z in [0, thickness_m].
-    ``arc_tolerance_m``: max sagitta between a true arc and its polyline, in (0, 0.05].
+    ``arc_tolerance_m``: max sagitta between a true arc and its polyline, in [1e-5, 0.05].
+    Ranges: :data:`SETTINGS_PARAMS`.
     """
 
     lane_width_m: float = 0.55
@@ -140,7 +150,8 @@ class TrackSettings:
     def __post_init__(self) -> None:
         for f in fields(self):
             spec = SETTINGS_PARAMS[f.name.removesuffix("_m")]
-            value = check_range(f.name, getattr(self, f.name), spec.lo, spec.hi)
+            value = check_range(f.name, getattr(self, f.name), spec.lo, spec.hi,
+                                lo_open=spec.lo_open)
             object.__setattr__(self, f.name, value)
 
     @property

@@ -61,9 +61,9 @@ def test_default_name_is_file_stem(tmp_path):
     ("STRAIGHT\n\nTRUN_LEFT\n", 3,
      r"unknown piece 'TRUN_LEFT' \(expected one of STRAIGHT, .*; did you mean TURN_LEFT\?\)"),
     ("STRAIGHT\nSTRAIGHT\nTURN_LEFT angle=400\n", 3,
-     r"TURN_LEFT angle=400: expected 0 < angle <= 180 \(deg\)"),
-    ("TURN_LEFT angle=0\n", 1, r"expected 0 < angle <= 180"),
-    ("STRAIGHT length=-1\n", 1, r"STRAIGHT length=-1: expected length > 0 \(m\)"),
+     r"TURN_LEFT angle=400: expected 0.001 <= angle <= 180 \(deg\)"),
+    ("TURN_LEFT angle=0\n", 1, r"expected 0.001 <= angle <= 180"),
+    ("STRAIGHT length=-1\n", 1, r"STRAIGHT length=-1: expected 0.001 <= length <= 100 \(m\)"),
     ("STRAIGHT length=abc\n", 1, r"STRAIGHT length=abc: expected a number \(m\)"),
     ("STRAIGHT length=nan\n", 1, r"expected a number"),
     ("STRAIGHT length=inf\n", 1, r"expected a number"),
@@ -81,7 +81,7 @@ def test_default_name_is_file_stem(tmp_path):
     ("# only a comment\n@lane_width = 0.5\n", 1, r"empty layout"),
     ("@lane_widht = 0.5\nSTRAIGHT\n", 1, r"unknown setting @lane_widht .*did you mean lane_width\?"),
     ("@lane_width = 0.5\n@lane_width = 0.6\nSTRAIGHT\n", 2, r"@lane_width set twice \(first on line 1\)"),
-    ("@lane_width = -0.5\nSTRAIGHT\n", 1, r"@lane_width = -0.5: expected lane_width > 0 \(m\)"),
+    ("@lane_width = -0.5\nSTRAIGHT\n", 1, r"@lane_width = -0.5: expected 0.0001 <= lane_width <= 100 \(m\)"),
     ("@lane_width =\nSTRAIGHT\n", 1, r"@lane_width: missing value"),
     ("@scale = 0\nSTRAIGHT\n", 1, r"@scale = 0: expected 0.01 <= scale <= 100"),
     ("@name = ../evil\nSTRAIGHT\n", 1, r"@name = '../evil': expected 1-64 letters"),
@@ -125,7 +125,7 @@ def test_bom_and_crlf_accepted():
 def test_piece_error_from_constructor_gets_the_line():
     # radius above 0 passes the table, but must exceed half the road width (0.295 m)
     lay = parse("STRAIGHT\nTURN_LEFT radius=0.1\n")
-    with pytest.raises(LayoutError, match=r"^t.txt:2: TURN_LEFT radius=0.1: radius_m=0.1"):
+    with pytest.raises(LayoutError, match=r"^t.txt:2: TURN_LEFT radius=0.1: radius=0.1"):
         chain(lay)
 
 

@@ -291,7 +291,7 @@ def test_piece_from_layout_converts_degrees_and_checks_names():
     assert set(PARAMS[CHICANE_RIGHT]) == {"length", "offset"}
     with pytest.raises(PieceError, match="no parameter 'radius'.*length"):
         piece_from_layout(STRAIGHT, {"radius": 1.0})
-    with pytest.raises(PieceError, match=r"angle=270 deg: expected \(0, 180\] deg"):
+    with pytest.raises(PieceError, match=r"angle=270 deg: expected \[0.001, 180\] deg"):
         piece_from_layout(TURN_RIGHT, {"angle": 270})
     with pytest.raises(PieceError, match="no parameter 'angle_deg'"):
         make_piece(TURN_RIGHT, angle_deg=30)
@@ -301,7 +301,7 @@ def test_piece_from_layout_converts_degrees_and_checks_names():
     assert TrackSettings.from_layout({"lane_width": 0.5}).lane_width_m == 0.5
     with pytest.raises(PieceError, match="unknown track setting 'lane'"):
         TrackSettings.from_layout({"lane": 0.5})
-    with pytest.raises(PieceError, match=r"^thickness=-1 m: expected \(0, inf\) m"):
+    with pytest.raises(PieceError, match=r"^thickness=-1 m: expected \[1e-06, 10\] m"):
         TrackSettings.from_layout({"thickness": -1})
     # limits that depend on the settings are reported in layout names too
     with pytest.raises(PieceError, match=r"^radius=0.2 m: expected \(0.295, inf\) m"):
@@ -329,7 +329,7 @@ BAD_CALLS = [
     (lambda: TrackSettings(lane_width_m=0.0), "lane_width_m=0"),
     (lambda: TrackSettings(edge_width_m=-0.02), "edge_width_m=-0.02"),
     (lambda: TrackSettings(thickness_m=0.0), "thickness_m=0"),
-    (lambda: TrackSettings(arc_tolerance_m=0.06), r"arc_tolerance_m=0.06 m: expected \(0, 0.05\]"),
+    (lambda: TrackSettings(arc_tolerance_m=0.06), r"arc_tolerance_m=0.06 m: expected \[1e-05, 0.05\]"),
     (lambda: pieces.straight(length_m="long"), "length_m='long'"),
     (lambda: extrude_footprint(shapely.box(0, 0, 1, 1), 0.0), "thickness_m=0"),
 ]

@@ -98,7 +98,7 @@ def test_python_api_errors_point_at_the_call():
     with pytest.raises(LayoutError) as info:
         gen.add_piece(TURN_LEFT, angle_deg=400)
     assert info.value.path == __file__
-    assert "TURN_LEFT angle_deg=400: expected 0 < angle <= 180 (deg)" in info.value.message
+    assert "TURN_LEFT angle_deg=400: expected 0.001 <= angle <= 180 (deg)" in info.value.message
     with pytest.raises(LayoutError, match="unknown parameter 'angle'"):
         gen.add_piece(TURN_LEFT, angle=90)
     with pytest.raises(LayoutError, match="empty track"):
@@ -310,7 +310,7 @@ def test_cli_exit_codes(tmp_path):
 
 @pytest.mark.parametrize("content, pattern", [
     (b"STRAIGHT\nTRUN_LEFT\n", r"bad.txt:2: unknown piece 'TRUN_LEFT'"),
-    (b"TURN_LEFT angle=400\n", r"bad.txt:1: TURN_LEFT angle=400: expected 0 < angle <= 180"),
+    (b"TURN_LEFT angle=400\n", r"bad.txt:1: TURN_LEFT angle=400: expected 0.001 <= angle <= 180"),
     (b"TURN_LEFT radius=abc\n", r"bad.txt:1: TURN_LEFT radius=abc: expected a number"),
     (b"", r"bad.txt:1: empty layout"),
     (bytes(range(256)), r"bad.txt:1: not a text layout file"),

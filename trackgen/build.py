@@ -4,14 +4,15 @@
 (:class:`ValidationFailed`, nothing written) and otherwise writes the output folder of
 docs/DESIGN.md ("Track output folder") atomically: everything goes into a temporary folder
 beside ``out_dir`` that is renamed into place at the end, so a failed build leaves no
-``out_dir`` (and an existing one is only replaced with ``force=True``).
+``out_dir`` (and an existing one is only replaced with ``force=True``, swapped atomically:
+``out_dir`` always holds a complete build). Temporary folders of killed builds are removed
+by the next build of the same ``out_dir`` (:mod:`trackgen.outdir`).
 """
 from __future__ import annotations
 
 import json
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +23,8 @@ from .chain import Track, chain
 from .errors import TrackError
 from .export import FORMAT, TrackGeometry, dumps_track_json, track_geometry, track_json
 from .layout import Layout, load_layout
-from .validate import Problem, check_meshes, errors, validate_track
+from .outdir import clean_stale, make_temp, replace_folder
+from .validate import Problem, check_meshes, count_errors, errors, summarise, validate_track
 
 TRACK_JSON_KEYS = ("format", "name", "layout", "settings", "pieces", "start_pose",
                    "finish_gate", "centreline", "length_m", "surface_z_m", "lane_polygon",
@@ -35,7 +37,8 @@ class ValidationFailed(TrackError):
     def __init__(self, problems: list[Problem]) -> None:
         self.problems = list(problems)
         errs = errors(self.problems)
-        more = f" (and {len(errs) - 1} more)" if len(errs) > 1 else ""
+        count = count_errors(self.problems)
+        more = f" (and {count - 1} more)" if count > 1 else ""
         super().__init__(f"{errs[0]}{more}" if errs else "validation failed")
 
 
@@ -45,11 +48,18 @@ class OutputError(TrackError):
 
 @dataclass(frozen=True, eq=False)
 class Checked:
-    """A chained, validated layout: ``track``, its world ``geometry`` and ``problems``."""
+    """A chained, validated layout: ``track``, its world ``geometry`` (the footprint unions,
+    made on first use when the checks did not need them) and ``problems``."""
 
     track: Track
-    geometry: TrackGeometry
+    _geometry: TrackGeometry | None
     problems: list[Problem]
+
+    @property
+    def geometry(self) -> TrackGeometry:
+        if self._geometry is None:
+            object.__setattr__(self, "_geometry", track_geometry(self.track))
+        return self._geometry
 
     @property
     def ok(self) -> bool:
@@ -71,12 +81,19 @@ class BuildResult:
 def check_layout(layout: Layout, car: CarDescription | None = None, *,
                  meshes: bool = True) -> Checked:
     """Chain ``layout`` and run every check of :mod:`trackgen.validate`; ``meshes=False``
-    skips the mesh check (and with it manifold3d and trimesh)."""
+    skips the mesh check (and with it manifold3d). The footprint unions and the mesh check
+    run only when the other checks pass: overlapping pieces make unions slow (a layout of
+    10 000 pieces on one circle) and a failing layout is not built anyway."""
     car = car or CarDescription()
     track = chain(layout)
+    problems = validate_track(track, car.min_turn_radius_m)
+    if errors(problems) or not meshes:
+        return Checked(track, None, problems)
     geometry = track_geometry(track)
-    problems = validate_track(track, car.min_turn_radius_m,
-                              meshes=geometry.meshes if meshes else None)
+    first_line = track.passes[0].line
+    found = [Problem(layout.path, first_line, msg, "mesh") for msg in check_meshes(geometry.meshes)]
+    if found:
+        problems = summarise(sorted(problems + found, key=lambda p: (p.line or 0)), layout.path)
     return Checked(track, geometry, problems)
 
 
@@ -110,7 +127,8 @@ def build(layout: str | Path | Layout, out_dir: str | Path, *, force: bool = Fal
     checked = check_buildable(layout, car)
     try:
         out_dir.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
+        clean_stale(out_dir)
+        tmp = make_temp(out_dir)
     except OSError as exc:
         raise OutputError(f"{out_dir}: cannot write output folder ({exc.strerror or exc})") from None
     try:
@@ -163,12 +181,7 @@ def _move_into_place(tmp: Path, out_dir: Path, force: bool) -> None:
     if out_dir.exists():
         if not force:  # appeared while we were building
             raise OutputError(f"{out_dir}: already exists (use --force to replace it)")
-        trash = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=out_dir.parent))
-        os.replace(out_dir, trash / "old")
-        os.replace(tmp, out_dir)
-        shutil.rmtree(trash, ignore_errors=True)
-    else:
-        os.replace(tmp, out_dir)
+    replace_folder(tmp, out_dir)
 
 
 def _umask() -> int:

@@ -30,6 +30,9 @@ from .layout import Layout, LayoutEntry
 
 START_BEFORE_FINISH_M = 0.3
 """With a START_FINISH piece the car starts this far before the centre of its marking."""
+MAX_TRACK_VERTICES = 500_000
+"""Most centreline samples in one layout (every pass counted): bounds the memory and time of
+the footprints, unions and meshes (10 000 default turns need ~110 000)."""
 _CENTRE_EPS_M = 1e-9
 
 
@@ -183,8 +186,9 @@ def chain(layout: Layout) -> Track:
     cache: dict[tuple, Piece] = {}
     passes: list[PlacedPiece] = []
     reentries: list[ReEntry] = []
-    crossroads: list[tuple[int, np.ndarray, float]] = []   # (pass index, centre, length)
+    crossroads = _Crossroads()
     pass_count: dict[int, int] = {}
+    vertices = 0
     cur = Pose2()
     for index, entry in enumerate(layout.entries):
         kwargs = layout.piece_kwargs(entry)
@@ -194,12 +198,19 @@ def chain(layout: Layout) -> Track:
             try:
                 piece = make_piece(entry.kind, layout.settings, **kwargs)
             except PieceError as exc:
-                raise layout.error(entry.line, f"{entry.describe()}: {exc}") from None
+                message = layout.layout_names(str(exc), entry)
+                raise layout.error(entry.line, f"{entry.describe()}: {message}") from None
             cache[key] = piece
+        vertices += len(piece.centreline)
+        if vertices > MAX_TRACK_VERTICES:
+            raise layout.error(entry.line, (
+                f"track too detailed: the curves up to this line need more than "
+                f"{MAX_TRACK_VERTICES} centreline points (raise @arc_tolerance, or use fewer "
+                "or smaller curves)"))
         world = cur @ piece.entry.inverse()
         if entry.kind is PieceType.CROSSROADS:
             centre = _crossroads_centre(world, piece)
-            hit = _find_crossroads(crossroads, centre, piece.length_m)
+            hit = crossroads.find(centre, piece.length_m)
             if hit is not None:
                 placed, reentry = _reenter(index, entry, cur, passes[hit], piece,
                                            pass_count.get(hit, 1) + 1)
@@ -208,20 +219,37 @@ def chain(layout: Layout) -> Track:
                 reentries.append(reentry)
                 cur = placed.exit_world
                 continue
-            crossroads.append((index, centre, piece.length_m))
+            crossroads.add(index, centre, piece.length_m)
         placed = PlacedPiece(index, entry, piece, world, world @ piece.entry, world @ piece.exit)
         passes.append(placed)
         cur = placed.exit_world
     return Track(layout, tuple(passes), tuple(reentries))
 
 
-def _find_crossroads(crossroads, centre: np.ndarray, length_m: float) -> int | None:
-    best, best_d = None, math.inf
-    for index, c, size in crossroads:
-        d = float(np.hypot(*(centre - c)))
-        if d < 0.5 * (size + length_m) - _CENTRE_EPS_M and d < best_d:
-            best, best_d = index, d
-    return best
+class _Crossroads:
+    """The physical crossroads placed so far: pass index, centre and length, searched in
+    one vectorised step (a layout may hold thousands)."""
+
+    def __init__(self) -> None:
+        self.index: list[int] = []
+        self.centre = np.zeros((0, 2))
+        self.size = np.zeros(0)
+
+    def add(self, index: int, centre: np.ndarray, length_m: float) -> None:
+        self.index.append(index)
+        self.centre = np.vstack([self.centre, centre[None, :]])
+        self.size = np.append(self.size, length_m)
+
+    def find(self, centre: np.ndarray, length_m: float) -> int | None:
+        """The nearest crossroads closer than end to end to one at ``centre``, or ``None``."""
+        if not self.index:
+            return None
+        d = np.hypot(*(self.centre - centre).T)
+        near = d < 0.5 * (self.size + length_m) - _CENTRE_EPS_M
+        if not near.any():
+            return None
+        d = np.where(near, d, math.inf)
+        return self.index[int(np.argmin(d))]
 
 
 def _reenter(index: int, entry: LayoutEntry, cur: Pose2, phys: PlacedPiece, piece: Piece,

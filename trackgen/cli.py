@@ -20,7 +20,7 @@ from worlds.sdf_xml import WorldError
 
 from .build import ValidationFailed, build as build_track, validate_path
 from .errors import TrackError
-from .validate import errors
+from .validate import count_errors, errors
 
 EXIT_OK, EXIT_PROBLEMS, EXIT_BAD_INPUT = 0, 1, 2
 _INPUT_ERRORS = (TrackError, PieceError, WorldError, CarDescriptionError)
@@ -56,7 +56,7 @@ def validate(path: Path, car_path: Path | None, no_sdf_check: bool) -> None:
         click.echo(str(p))
     bad = errors(problems)
     if bad:
-        click.echo(f"{path}: INVALID, {len(bad)} problem(s)", err=True)
+        click.echo(f"{path}: INVALID, {count_errors(problems)} problem(s)", err=True)
         raise click.exceptions.Exit(EXIT_PROBLEMS)
     click.echo(f"{path}: OK")
 
@@ -76,7 +76,7 @@ def build(layout: Path, out_dir: Path, force: bool, car_path: Path | None) -> No
     except ValidationFailed as exc:
         for p in exc.problems:
             click.echo(str(p), err=True)
-        click.echo(f"{layout}: not built, {len(errors(exc.problems))} problem(s)", err=True)
+        click.echo(f"{layout}: not built, {count_errors(exc.problems)} problem(s)", err=True)
         raise click.exceptions.Exit(EXIT_PROBLEMS) from None
     except _INPUT_ERRORS as exc:
         raise _fail(str(exc)) from None

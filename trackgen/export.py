@@ -10,16 +10,12 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING
-
 import shapely
 
-from pieces.mesh import extrude_footprint
+from pieces.mesh import extrude_arrays
 
 from .chain import Track
-
-if TYPE_CHECKING:  # meshes come from pieces.mesh, which loads trimesh on first use
-    import trimesh
+from .meshes import SlabMesh
 
 GRID_M = 1e-6
 """Snapping grid of the unions (m)."""
@@ -42,12 +38,12 @@ class TrackGeometry:
     thickness_m: float
 
     @cached_property
-    def meshes(self) -> dict[str, trimesh.Trimesh]:
+    def meshes(self) -> dict[str, SlabMesh]:
         """Role -> watertight slab mesh, z in [0, thickness_m] (``markings`` only if any)."""
-        out = {"lane": extrude_footprint(self.lane, self.thickness_m),
-               "edges": extrude_footprint(self.edges, self.thickness_m)}
+        out = {"lane": SlabMesh(*extrude_arrays(self.lane, self.thickness_m)),
+               "edges": SlabMesh(*extrude_arrays(self.edges, self.thickness_m))}
         if self.markings is not None:
-            out["markings"] = extrude_footprint(self.markings, self.thickness_m)
+            out["markings"] = SlabMesh(*extrude_arrays(self.markings, self.thickness_m))
         return out
 
 

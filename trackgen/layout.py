@@ -30,11 +30,16 @@ Track-wide settings, each at most once, anywhere in the file (conventionally at 
     @edge_width = 0.02    each black edge line, m (laid outside the lane)
     @thickness = 0.01     slab height of the meshes, m
     @arc_tolerance = 0.001  max chord error of curved edges, m (not scaled)
-    @scale = 1.0          (0.01 .. 100) multiplies every length above and every piece length/radius/offset
-                          (angles are not scaled; 1.3 gives the thesis's 130 % Gazebo track)
+    @scale = 1.0          (0.01 .. 100) multiplies every length above and every piece
+                          length/radius/offset, given or default (angles are not scaled;
+                          1.3 gives the thesis's 130 % Gazebo track): a scaled layout is the
+                          unscaled one scaled, and closes exactly when that one does
 
 Limits: a repeat count is 1..MAX_REPEAT, a layout has at most MAX_PIECES pieces after
-repeats and at most MAX_FILE_BYTES bytes. Every error is a :class:`LayoutError` whose
+repeats and at most MAX_FILE_BYTES bytes, a line (without its comment) at most
+MAX_LINE_CHARS characters, a number at most MAX_NUMBER_CHARS; every number has a range
+(``pieces.PARAMS``, ``pieces.SETTINGS_PARAMS``). Piece names, parameter names and settings
+are ASCII (``ſtraight`` is not ``STRAIGHT``). Every error is a :class:`LayoutError` whose
 ``str`` is ``path:line: message``, e.g.
 ``track.txt:7: unknown piece 'TRUN_LEFT' (expected one of STRAIGHT, ...; did you mean TURN_LEFT?)``.
 """
@@ -43,7 +48,6 @@ from __future__ import annotations
 import difflib
 import math
 import re
-import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -61,17 +65,23 @@ MAX_FILE_BYTES = 4 * 1024 * 1024
 """Largest layout file read (a 10 000-piece layout is ~200 kB)."""
 MIN_SCALE, MAX_SCALE = 0.01, 100.0
 """``@scale`` must lie in [MIN_SCALE, MAX_SCALE]."""
+MAX_LINE_CHARS = 1000
+"""Longest line, without its comment (a piece line is ~40 characters)."""
+MAX_NUMBER_CHARS = 40
+"""Longest number (``0.000000000000000000000000000000001`` fits)."""
 
 PIECE_NAMES: tuple[str, ...] = tuple(k.name for k in PieceType)
 SCALED_SETTINGS = ("lane_width", "edge_width", "thickness")
 """Settings that ``@scale`` multiplies (``arc_tolerance`` is a meshing accuracy, not a size)."""
 EXTRA_SETTINGS = ("name", "scale")
 
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
+# Unambiguous (no nested quantifiers over the same digits): linear time on any input.
+_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
 _REPEAT = re.compile(r"[xX]([+-]?[0-9.eE+-]*)\Z")
 _NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}\Z", re.ASCII)
 _CONTROL_BYTES = re.compile(rb"[\x00-\x08\x0e-\x1f\x7f]")
-_ALLOWED_CONTROL = {"\t", "\r", "\n", "\f", "\v"}
+_CONTROL_CHARS = re.compile("[\x00-\x08\x0e-\x1f\x7f-\x9f\ud800-\udfff]")
+"""Unicode categories Cc (except tab, newlines, form feed) and Cs."""
 
 
 @dataclass(frozen=True)
@@ -113,21 +123,36 @@ class Layout:
         object.__setattr__(self, "setting_values", MappingProxyType(dict(self.setting_values)))
 
     def piece_kwargs(self, entry: LayoutEntry) -> dict[str, float]:
-        """Keywords for ``pieces.make_piece`` (internal units, scale applied)."""
+        """Keywords for ``pieces.make_piece`` (internal units, scale applied). With a scale
+        other than 1 every length is given, the defaults scaled too."""
         specs = PARAMS[entry.kind]
         out = {}
-        for name, value in entry.params.items():
-            spec = specs[name]
+        for name, spec in specs.items():
+            if name in entry.params:
+                value = entry.params[name]
+            elif spec.unit == "m" and self.scale != 1.0:
+                value = spec.default
+            else:
+                continue
             internal = spec.to_internal(value)
             out[spec.internal] = internal * self.scale if spec.unit == "m" else internal
         return out
+
+    def layout_names(self, message: str, entry: LayoutEntry) -> str:
+        """A piece constructor's message in the layout's words: internal keyword names
+        (``length_m=0.78``) become layout names (``length=0.78``), with the scale noted."""
+        for spec in PARAMS[entry.kind].values():
+            message = re.sub(rf"\b{spec.internal}=", f"{spec.name}=", message)
+        if self.scale != 1.0:
+            message += f" (lengths after @scale = {self.scale:g})"
+        return message
 
     def error(self, line: int | None, message: str) -> LayoutError:
         return LayoutError(self.path, line, message)
 
 
 def range_text(spec: ParamSpec) -> str:
-    """``0 < angle <= 180 (deg)`` / ``length > 0 (m)`` for an error message."""
+    """``0.001 <= angle <= 180 (deg)`` / ``length > 0 (m)`` for an error message."""
     lo_op = "<" if spec.lo_open else "<="
     if math.isinf(spec.hi):
         return f"{spec.name} {'>' if spec.lo_open else '>='} {spec.lo:g} ({spec.unit})"
@@ -146,6 +171,11 @@ def _shown(token: str, limit: int = 40) -> str:
     return repr(text)
 
 
+def _bare(token: str, limit: int = 40) -> str:
+    """A token for a message without quotes (``angle=400``), shortened like :func:`_shown`."""
+    return _shown(token, limit)[1:-1]
+
+
 def decode_layout(data: bytes, path: str) -> str:
     """Bytes -> text; non-UTF-8 bytes or control characters raise ``path:line: not a text
     layout file`` at the line of the first offending byte."""
@@ -162,11 +192,11 @@ def decode_layout(data: bytes, path: str) -> str:
             bad_at, why = exc.start, f"byte 0x{data[exc.start]:02x} is not UTF-8"
         text = None
     if text is not None and not why:
-        for i, ch in enumerate(text):
-            if ch not in _ALLOWED_CONTROL and unicodedata.category(ch) in ("Cc", "Cs"):
-                bad_at = len(text[:i].encode("utf-8", "surrogatepass"))
-                why = f"control character U+{ord(ch):04X}"
-                break
+        bad = _CONTROL_CHARS.search(text)
+        if bad:
+            i, ch = bad.start(), bad.group()
+            bad_at = len(text[:i].encode("utf-8", "surrogatepass"))
+            why = f"control character U+{ord(ch):04X}"
     if why:
         line = data.count(b"\n", 0, bad_at) + 1
         raise LayoutError(path, line, f"not a text layout file ({why})")
@@ -203,6 +233,10 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
         body = raw.split("#", 1)[0].strip()
         if not body:
             continue
+        if len(body) > MAX_LINE_CHARS:
+            raise LayoutError(path, lineno, f"line too long ({len(body)} characters before any "
+                                            f"comment; expected at most {MAX_LINE_CHARS}): "
+                                            f"{_shown(body)}")
         if body.startswith("@"):
             key, value = _parse_setting(body, path, lineno)
             if key in seen_at:
@@ -245,9 +279,9 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
         key, value = key.strip(), value.strip()
     key = key.lower()
     known = list(EXTRA_SETTINGS) + list(SETTINGS_PARAMS)
-    if key not in known:
+    if key not in known or not key.isascii():
         hint = _did_you_mean(key, known)
-        raise LayoutError(path, lineno, f"unknown setting @{_shown(key)[1:-1]} (expected one of "
+        raise LayoutError(path, lineno, f"unknown setting @{_bare(key)} (expected one of "
                                         f"{', '.join('@' + k for k in known)}{hint})")
     if not value:
         raise LayoutError(path, lineno, f"@{key}: missing value (expected '@{key} = VALUE')")
@@ -256,25 +290,32 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
             raise LayoutError(path, lineno, f"@name = {_shown(value)}: expected 1-64 letters, "
                                             "digits, '_', '-' or '.' (not starting with '.' or '-')")
         return key, value
-    if not _NUMBER.match(value):
+    number = _number(value)
+    if number is None:
         raise LayoutError(path, lineno, f"@{key} = {_shown(value)}: expected a number")
-    number = float(value)
     if key == "scale":
         if not MIN_SCALE <= number <= MAX_SCALE:
-            raise LayoutError(path, lineno, f"@scale = {value}: expected {MIN_SCALE:g} <= scale "
-                                            f"<= {MAX_SCALE:g}")
+            raise LayoutError(path, lineno, f"@scale = {_bare(value)}: expected {MIN_SCALE:g} "
+                                            f"<= scale <= {MAX_SCALE:g}")
         return key, number
     spec = SETTINGS_PARAMS[key]
     if not spec.contains(number):
-        raise LayoutError(path, lineno, f"@{key} = {value}: expected {range_text(spec)}")
+        raise LayoutError(path, lineno, f"@{key} = {_bare(value)}: expected {range_text(spec)}")
     return key, number
+
+
+def _number(text: str) -> float | None:
+    """A decimal number of at most MAX_NUMBER_CHARS characters, else ``None``."""
+    if len(text) > MAX_NUMBER_CHARS or not _NUMBER.match(text):
+        return None
+    return float(text)
 
 
 def _parse_piece(body: str, path: str, lineno: int) -> tuple[LayoutEntry, int]:
     body = re.sub(r"\s*=\s*", "=", body)
     word, *tokens = body.split()
     kind_name = word.upper()
-    if kind_name not in PIECE_NAMES:
+    if kind_name not in PIECE_NAMES or not word.isascii():  # 'ſtraight'.upper() == 'STRAIGHT'
         raise LayoutError(path, lineno, f"unknown piece {_shown(word)} (expected one of "
                                         f"{', '.join(PIECE_NAMES)}{_did_you_mean(kind_name, PIECE_NAMES)})")
     kind = PieceType[kind_name]
@@ -287,8 +328,9 @@ def _parse_piece(body: str, path: str, lineno: int) -> tuple[LayoutEntry, int]:
             if repeat is not None:
                 raise LayoutError(path, lineno, f"{kind_name}: repeat count given twice")
             count = rep.group(1)
-            if not count.isascii() or not count.isdigit() or not 1 <= int(count) <= MAX_REPEAT:
-                raise LayoutError(path, lineno, f"{kind_name} {_shown(token)[1:-1]}: expected a repeat "
+            if (not count.isascii() or not count.isdigit() or len(count) > 6
+                    or not 1 <= int(count) <= MAX_REPEAT):
+                raise LayoutError(path, lineno, f"{kind_name} {_bare(token)}: expected a repeat "
                                                 f"count x1 to x{MAX_REPEAT}")
             repeat = int(count)
             continue
@@ -297,18 +339,19 @@ def _parse_piece(body: str, path: str, lineno: int) -> tuple[LayoutEntry, int]:
             raise LayoutError(path, lineno, f"{kind_name}: unexpected {_shown(token)} (expected "
                                             "key=value parameters or a repeat count like x3)")
         key_l = key.lower()
-        if key_l not in specs:
+        if key_l not in specs or not key.isascii():
             known = ", ".join(specs)
             raise LayoutError(path, lineno, f"{kind_name}: unknown parameter {_shown(key)} (expected "
                                             f"{known}{_did_you_mean(key_l, specs)})")
         if key_l in params:
             raise LayoutError(path, lineno, f"{kind_name}: parameter {key_l} given twice")
         spec = specs[key_l]
-        if not _NUMBER.match(value):
-            raise LayoutError(path, lineno, f"{kind_name} {key_l}={_shown(value)[1:-1]}: expected a "
+        number = _number(value)
+        if number is None:
+            raise LayoutError(path, lineno, f"{kind_name} {key_l}={_bare(value)}: expected a "
                                             f"number ({spec.unit})")
-        number = float(value)
         if not spec.contains(number):
-            raise LayoutError(path, lineno, f"{kind_name} {key_l}={value}: expected {range_text(spec)}")
+            raise LayoutError(path, lineno, f"{kind_name} {key_l}={_bare(value)}: expected "
+                                            f"{range_text(spec)}")
         params[key_l] = number
     return LayoutEntry(kind, params, lineno), (repeat or 1)

@@ -3,29 +3,36 @@
 Every problem is one :class:`Problem` whose ``str`` is ``path:line: message`` naming the
 layout line, the piece and the measured error. Warnings do not make a track invalid.
 
-Checks and tolerances (module constants):
-  closure       final exit vs start pose: CLOSURE_TOL_M, CLOSURE_TOL_RAD
-                (reported at the last piece's line)
+Checks and tolerances (module constants; tolerances in metres are multiplied by the layout's
+``@scale``, areas by its square, so a scaled layout passes exactly when the unscaled one does):
+  closure       final exit vs start pose: CLOSURE_TOL_M, CLOSURE_TOL_RAD; the message says
+                what is wrong (:mod:`trackgen.closure`: the total turning and what would close
+                it, the pieces that would close the gap) and is reported at the line of the
+                cause when one turn or one run of straights can be named, else at the last
+                piece's line
   continuity    previous exit vs next entry at every joint: JOINT_TOL_M, JOINT_TOL_RAD
                 (exact by construction; still checked)
   re-entry      a crossroads crossed a second time: the pose vs its side port,
                 REENTRY_TOL_M, REENTRY_TOL_RAD; at most two passes; same parameters
   overlap       road footprints (lane + edges + marking) of non-adjacent physical pieces
                 intersect by more than OVERLAP_TOL_M2 (the crossing of a crossroads is one
-                physical piece, so it is no overlap); STRtree, not all pairs
+                physical piece, so it is no overlap); STRtree, not all pairs, in chunks;
+                stops after MAX_OVERLAPS overlaps (bounded time and memory)
   turn radius   every piece's tightest centreline radius >= the car's minimum turning
                 radius wheelbase / tan(steering limit) (thesis eq. 5.1), RADIUS_TOL_M slack
   start/finish  at most one START_FINISH; none is a warning (laps are then timed at the
                 start pose)
   meshes        lane / edges / markings meshes are watertight after a binary STL round
-                trip (float32), see :func:`check_meshes`
+                trip (float32), see :func:`check_meshes` (run by trackgen.build.check_layout
+                only when the other checks pass)
+
+At most MAX_PROBLEMS problems are listed (errors first); the rest are summarised in one
+more line (``check="summary"``, its ``hidden`` count says how many it stands for).
 """
 from __future__ import annotations
 
-import io
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import shapely
@@ -34,8 +41,6 @@ from pieces.spec import PieceType
 
 from .chain import Track
 
-if TYPE_CHECKING:  # at run time trimesh (~0.5 s: scipy) loads with the first mesh check
-    import trimesh
 
 CLOSURE_TOL_M = 1e-6
 CLOSURE_TOL_RAD = 1e-6
@@ -45,19 +50,28 @@ REENTRY_TOL_M = 1e-6
 REENTRY_TOL_RAD = 1e-6
 OVERLAP_TOL_M2 = 1e-6
 RADIUS_TOL_M = 1e-9
+MAX_PROBLEMS = 30
+"""Problems listed one per line; more are summarised in one line."""
+MAX_OVERLAPS = 20
+"""The overlap search stops after this many overlaps (one more line says so)."""
+MAX_OVERLAP_PAIRS = 200_000
+"""Most pairs of touching pieces whose overlap is measured (bounded time)."""
+_OVERLAP_CHUNK = 32
 
 
 @dataclass(frozen=True)
 class Problem:
     """One finding. ``line`` is 1-based or ``None`` (a file as a whole); ``check`` names
     the check (``closure``, ``continuity``, ``reentry``, ``overlap``, ``turn_radius``,
-    ``start_finish``, ``mesh``, ``folder``); ``warning`` findings do not fail validation."""
+    ``start_finish``, ``mesh``, ``folder``, ``summary``); ``warning`` findings do not fail
+    validation. ``hidden``: for a summary, how many problems it stands for."""
 
     path: str
     line: int | None
     message: str
     check: str
     warning: bool = False
+    hidden: int = 0
 
     def __str__(self) -> str:
         where = self.path if self.line is None else f"{self.path}:{self.line}"
@@ -69,6 +83,28 @@ def errors(problems: list[Problem]) -> list[Problem]:
     return [p for p in problems if not p.warning]
 
 
+def count_errors(problems: list[Problem]) -> int:
+    """How many errors ``problems`` stand for (a summary line counts what it hides)."""
+    return sum(p.hidden or 1 for p in errors(problems))
+
+
+def summarise(problems: list[Problem], path: str, limit: int = MAX_PROBLEMS) -> list[Problem]:
+    """At most ``limit`` problems (errors first, then by line) plus one summary line."""
+    if len(problems) <= limit:
+        return problems
+    ranked = sorted(problems, key=lambda p: (p.warning, p.line or 0))
+    shown, rest = ranked[:limit], ranked[limit:]
+    by_check: dict[str, int] = {}
+    for p in rest:
+        by_check[p.check] = by_check.get(p.check, 0) + (p.hidden or 1)
+    hidden_errors = sum(p.hidden or 1 for p in rest if not p.warning)
+    total = sum(by_check.values())
+    what = ", ".join(f"{k} {v}" for k, v in sorted(by_check.items()))
+    summary = Problem(path, None, f"... and {total} more problem(s) not listed ({what})",
+                      "summary", warning=hidden_errors == 0, hidden=hidden_errors or total)
+    return sorted(shown, key=lambda p: (p.line or 0)) + [summary]
+
+
 def _deg(rad: float) -> float:
     return math.degrees(rad)
 
@@ -77,28 +113,33 @@ def validate_track(track: Track, min_turn_radius_m: float, *, meshes: dict | Non
     """All checks of the module docstring; ``meshes`` (role -> trimesh) adds the mesh check.
     Returns problems sorted by line (stable)."""
     path = track.layout.path
+    scale = track.layout.scale
     out: list[Problem] = []
-    out += _check_closure(track, path)
+    out += _check_closure(track, path, scale)
     out += _check_joints(track, path)
-    out += _check_reentries(track, path)
-    out += _check_overlaps(track, path)
+    out += _check_reentries(track, path, scale)
+    out += _check_overlaps(track, path, scale)
     out += _check_radius(track, path, min_turn_radius_m)
     out += _check_start_finish(track, path)
     if meshes is not None:
         first_line = track.passes[0].line
         out += [Problem(path, first_line, msg, "mesh") for msg in check_meshes(meshes)]
-    return sorted(out, key=lambda p: (p.line or 0))
+    return summarise(sorted(out, key=lambda p: (p.line or 0)), path)
 
 
-def _check_closure(track: Track, path: str) -> list[Problem]:
+def _check_closure(track: Track, path: str, scale: float = 1.0) -> list[Problem]:
+    from .closure import explain_closure
+
     err_m, err_rad = track.closure_error()
-    if err_m <= CLOSURE_TOL_M and err_rad <= CLOSURE_TOL_RAD:
+    tol_m = CLOSURE_TOL_M * scale
+    if err_m <= tol_m and err_rad <= CLOSURE_TOL_RAD:
         return []
     last = track.passes[-1]
-    return [Problem(path, last.line, (
-        f"track does not close: the exit of {last.kind.name} (piece {last.index + 1}) misses "
-        f"the start pose by {err_m:.3f} m / {_deg(err_rad):.1f} deg "
-        f"(tolerance {CLOSURE_TOL_M:g} m / {CLOSURE_TOL_RAD:g} rad)"), "closure")]
+    line, hint = explain_closure(track, tol_m, CLOSURE_TOL_RAD)
+    return [Problem(path, line or last.line, (
+        f"track does not close: the exit of {last.kind.name} (piece {last.index + 1}, line "
+        f"{last.line}) misses the start pose by {err_m:.3f} m / {_deg(err_rad):.1f} deg "
+        f"(tolerance {tol_m:g} m / {CLOSURE_TOL_RAD:g} rad); {hint}"), "closure")]
 
 
 def _check_joints(track: Track, path: str) -> list[Problem]:
@@ -115,19 +156,20 @@ def _check_joints(track: Track, path: str) -> list[Problem]:
     return out
 
 
-def _check_reentries(track: Track, path: str) -> list[Problem]:
+def _check_reentries(track: Track, path: str, scale: float = 1.0) -> list[Problem]:
     out = []
+    tol_m = REENTRY_TOL_M * scale
     for r in track.reentries:
         p, first = track.passes[r.index], track.passes[r.of_index]
         if r.pass_number > 2:
             out.append(Problem(path, p.line, (
                 f"CROSSROADS crossed {r.pass_number} times: the crossroads on line {first.line} "
                 "has one side road (at most two passes)"), "reentry"))
-        if r.error_m > REENTRY_TOL_M or r.error_rad > REENTRY_TOL_RAD:
+        if r.error_m > tol_m or r.error_rad > REENTRY_TOL_RAD:
             out.append(Problem(path, p.line, (
                 f"CROSSROADS re-entry misses side port of the crossroads on line {first.line} by "
                 f"{r.error_m:.3f} m / {_deg(r.error_rad):.1f} deg "
-                f"(tolerance {REENTRY_TOL_M:g} m / {REENTRY_TOL_RAD:g} rad)"), "reentry"))
+                f"(tolerance {tol_m:g} m / {REENTRY_TOL_RAD:g} rad)"), "reentry"))
         if r.params_differ:
             out.append(Problem(path, p.line, (
                 f"CROSSROADS re-entry {p.entry.describe()} differs from the crossroads on line "
@@ -146,30 +188,48 @@ def _adjacent_pairs(track: Track) -> set[tuple[int, int]]:
     return pairs
 
 
-def _check_overlaps(track: Track, path: str) -> list[Problem]:
+def _check_overlaps(track: Track, path: str, scale: float = 1.0) -> list[Problem]:
+    """Overlapping non-adjacent pieces, searched a chunk of pieces at a time; stops after
+    MAX_PROBLEMS + 1 overlaps (the summary line says the rest was not searched)."""
     roads = track.world_footprints["road"]
     phys = track.physical
     if len(roads) < 2:
         return []
+    tol_m2 = OVERLAP_TOL_M2 * scale * scale
     tree = shapely.STRtree(roads)
-    left, right = tree.query(roads, predicate="intersects")
-    keep = left < right
-    left, right = left[keep], right[keep]
-    adjacent = _adjacent_pairs(track)
-    mask = np.array([(int(a), int(b)) not in adjacent for a, b in zip(left, right)], dtype=bool)
-    left, right = left[mask] if mask.size else left, right[mask] if mask.size else right
-    if left.size == 0:
-        return []
     geoms = np.asarray(roads, dtype=object)
-    areas = shapely.area(shapely.intersection(geoms[left], geoms[right]))
-    out = []
-    for a, b, area in zip(left, right, areas):
-        if area > OVERLAP_TOL_M2:
-            pa, pb = phys[int(a)], phys[int(b)]
-            out.append(Problem(path, pb.line, (
-                f"{pb.kind.name} (piece {pb.index + 1}) overlaps {pa.kind.name} (piece "
-                f"{pa.index + 1}, line {pa.line}) by {area:.4g} m^2 "
-                f"(tolerance {OVERLAP_TOL_M2:g} m^2)"), "overlap"))
+    adjacent = _adjacent_pairs(track)
+    out: list[Problem] = []
+    pairs = 0
+    for start in range(0, len(roads), _OVERLAP_CHUNK):
+        left, right = tree.query(geoms[start:start + _OVERLAP_CHUNK], predicate="intersects")
+        left = left + start
+        keep = left < right
+        left, right = left[keep], right[keep]
+        mask = np.array([(int(a), int(b)) not in adjacent for a, b in zip(left, right)], dtype=bool)
+        if not mask.any():
+            continue
+        order = np.lexsort((right[mask], left[mask]))
+        left, right = left[mask][order], right[mask][order]
+        for k in range(0, left.size, _OVERLAP_CHUNK):
+            lk, rk = left[k:k + _OVERLAP_CHUNK], right[k:k + _OVERLAP_CHUNK]
+            pairs += lk.size
+            areas = shapely.area(shapely.intersection(geoms[lk], geoms[rk]))
+            for a, b, area in zip(lk, rk, areas):
+                if area > tol_m2:
+                    pa, pb = phys[int(a)], phys[int(b)]
+                    out.append(Problem(path, pb.line, (
+                        f"{pb.kind.name} (piece {pb.index + 1}) overlaps {pa.kind.name} (piece "
+                        f"{pa.index + 1}, line {pa.line}) by {area:.4g} m^2 "
+                        f"(tolerance {tol_m2:g} m^2)"), "overlap"))
+                    if len(out) >= MAX_OVERLAPS:
+                        break
+            if len(out) >= MAX_OVERLAPS or pairs > MAX_OVERLAP_PAIRS:
+                out.append(Problem(path, None, (
+                    f"overlap search stopped after {len(out)} overlaps (at piece "
+                    f"{phys[int(a)].index + 1}, {pairs} touching pairs measured): further "
+                    "overlaps are not listed"), "overlap", warning=not out))
+                return out
     return out
 
 
@@ -196,23 +256,18 @@ def _check_start_finish(track: Track, path: str) -> list[Problem]:
         "a track has at most one"), "start_finish") for p in sfs[1:]]
 
 
-def stl_round_trip(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """The mesh as a consumer sees it: binary STL (float32) read back with merged vertices."""
-    import trimesh
+def check_meshes(meshes: dict) -> list[str]:
+    """Messages for meshes (:class:`trackgen.meshes.SlabMesh` or trimesh) that are empty or
+    not watertight after an STL round trip (:func:`trackgen.meshes.watertight_after_stl`)."""
+    from .meshes import watertight_after_stl
 
-    data = mesh.export(file_type="stl")
-    return trimesh.load(io.BytesIO(data), file_type="stl", force="mesh")
-
-
-def check_meshes(meshes: dict[str, trimesh.Trimesh]) -> list[str]:
-    """Messages for meshes that are empty or not watertight after an STL round trip."""
     out = []
     for role, mesh in meshes.items():
         if len(mesh.faces) == 0:
             out.append(f"{role} mesh is empty")
             continue
-        back = stl_round_trip(mesh)
-        if not (back.is_watertight and back.is_winding_consistent):
+        ok, faces, euler = watertight_after_stl(mesh)
+        if not ok:
             out.append(f"{role} mesh is not watertight after the STL round trip "
-                       f"({len(back.faces)} faces, Euler number {back.euler_number})")
+                       f"({faces} faces, Euler number {euler})")
     return out

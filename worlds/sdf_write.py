@@ -172,11 +172,12 @@ def write_track_model(model_dir: Path, name: str, meshes: dict[str, str], *,
 
 
 def _check_surface(lane_path: Path, surface_z_m: float) -> None:
-    import trimesh  # local: only needed here
+    from stl import mesh as stl_mesh  # numpy-stl: not trimesh, whose import (scipy) is ~0.5 s
 
     try:
-        top_m = float(trimesh.load_mesh(lane_path, process=False).bounds[1, 2])
-    except Exception as exc:  # trimesh raises many types for bad files
+        data = stl_mesh.Mesh.from_file(str(lane_path), calculate_normals=False)
+        top_m = float(data.vectors[..., 2].max())
+    except Exception as exc:  # numpy-stl raises many types for bad files
         raise WorldError(f"{lane_path}: cannot read lane mesh ({exc})") from None
     if abs(top_m - surface_z_m) > SURFACE_TOLERANCE_M:
         raise WorldError(f"{lane_path}: lane top at z = {top_m:.6f} m, expected surface_z_m = "
