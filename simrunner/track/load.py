@@ -46,7 +46,7 @@ from pieces.pose import Pose2
 from simrunner.track.errors import TrackLoadError
 from simrunner.track.raster import (DEFAULT_M_PER_PX, ROLE_GRAY, TrackRaster, build_raster,
                                     check_m_per_px, layer_from_footprint, layer_from_visual,
-                                    upward_triangles, world_triangles)
+                                    upward_triangles)
 
 if TYPE_CHECKING:  # trackgen (shapely) loads only for a layout
     from trackgen.chain import Track
@@ -184,8 +184,10 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
     """Build a ``SimTrack`` from a ``worlds.sdf_read.Scene`` (see the module docstring)."""
     source = Path(source if source is not None else scene.source)
     meta = _read_track_json(scene.track_json) if scene.track_json is not None else {}
-    layers = [layer for layer in (layer_from_visual(v) for v in scene.visuals) if layer is not None]
-    surface_z = _surface_z(scene, layers) if layers else 0.0
+    tris = _scene_triangles(scene)
+    layers = [layer for layer in (layer_from_visual(v, t) for v, t in zip(scene.visuals, tris.visuals))
+              if layer is not None]
+    surface_z = _surface_z(scene, layers, tris.collisions) if layers else 0.0
     if not layers:
         raise TrackLoadError(f"{scene.source}: the world has no mesh visuals with upward faces "
                              f"(nothing to drive on)")
@@ -234,10 +236,22 @@ def road_extents_m(raster: TrackRaster, pose: Pose2) -> tuple[float, float]:
     return out[0], out[1]
 
 
-def _surface_z(scene, layers) -> float:
+def _scene_triangles(scene):
+    """``worlds.mesh_read.scene_triangles`` (every mesh read once, the world's limits
+    checked: the same errors as ``trackgen validate``) with TrackLoadError."""
+    from worlds import WorldError
+    from worlds.mesh_read import scene_triangles
+
+    try:
+        return scene_triangles(scene)
+    except WorldError as exc:
+        raise TrackLoadError(str(exc)) from None
+
+
+def _surface_z(scene, layers, collision_triangles) -> float:
     tops = []
-    for coll in getattr(scene, "collisions", None) or []:
-        up = upward_triangles(world_triangles(coll.mesh_path, coll.world_from_mesh, coll.scale))
+    for tris in collision_triangles:
+        up = upward_triangles(tris)
         if len(up):
             tops.append(float(up[:, :, 2].max()))
     if tops:
