@@ -33,7 +33,7 @@ import numpy as np
 
 from worlds.sdf_xml import WorldError
 
-MAX_MESH_BYTES = 64 * 1024 * 1024  # one mesh file (NXP's are ~50 kB; a 64 MiB binary STL has 1.3 M triangles)
+MAX_MESH_BYTES = 32 * 1024 * 1024  # one mesh file (NXP's are ~50 kB; 32 MiB of binary STL: 670,000 triangles)
 MAX_WORLD_TRIANGLES = 4_000_000  # all meshes of a world together
 MAX_EXTENT_M = 50.0  # x and y span of all meshes of a world (NXP's tracks: 7 m and 12 m)
 
@@ -88,8 +88,11 @@ def _read_stl(path: Path) -> np.ndarray:
 
 
 def _looks_like_text(data: bytes) -> bool:
+    """Mostly printable ASCII in the first 4 kB (NXP's binary files start with 80 bytes of
+    text, then binary numbers)."""
     head = data[:4096]
-    return all(b in b"\t\n\r\f\v" or 32 <= b < 127 for b in head)
+    text = sum(1 for b in head if b in b"\t\n\r\f\v" or 32 <= b < 127)
+    return text >= 0.95 * len(head)
 
 
 def _read_ascii_stl(path: Path, data: bytes) -> np.ndarray:
