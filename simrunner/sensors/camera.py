@@ -39,9 +39,13 @@ from simrunner.track.raster import TrackRaster
 _NO_NORMALS = np.zeros(0)
 def _line_kernel():
     """``simrunner.sensors.line_kernel.camera_row``, imported on first use (numba loads in
-    ~0.5 s; the import system caches the module, so later calls cost a dict lookup)."""
+    ~0.5 s; the import system caches the module, so later calls cost a dict lookup). Its
+    on-disk cache entry is verified before the process first calls it (kernel_cache.py)."""
+    from simrunner.sensors import kernel_cache
     from simrunner.sensors.line_kernel import camera_row
 
+    if not camera_row.overloads:  # not yet compiled or loaded in this process
+        kernel_cache.verify(camera_row)
     return camera_row
 
 
@@ -96,6 +100,9 @@ class Camera:
         line_rows = [r for r, gx in enumerate(self._row_gx) if gx is not None]
         if line_rows and load_line_kernel:
             self.line_image(Pose2(), line_rows[0])
+            from simrunner.sensors import kernel_cache
+
+            kernel_cache.record(self._kernel)  # the entry numba just loaded or wrote
 
     @functools.cached_property
     def _kernel(self):
