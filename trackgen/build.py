@@ -8,7 +8,6 @@ beside ``out_dir`` that is renamed into place at the end, so a failed build leav
 """
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
@@ -20,7 +19,7 @@ from worlds.sdf_xml import WorldError
 
 from .chain import Track, chain
 from .errors import TrackError
-from .export import FORMAT, TrackGeometry, dumps_track_json, track_geometry, track_json
+from .export import TrackGeometry, dumps_track_json, track_geometry, track_json
 from .layout import Layout, load_layout
 from .validate import Problem, check_meshes, errors, validate_track
 
@@ -196,21 +195,14 @@ def validate_path(path: str | Path, car: CarDescription | None = None, *,
 
 
 def _validate_folder(folder: Path, car: CarDescription | None, sdf_checker: bool) -> list[Problem]:
-    tj = folder / "track.json"
-    try:
-        doc = json.loads(tj.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise TrackError(f"{folder}: no track.json (expected a layout file or a "
-                         "'trackgen build' output folder)") from None
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise TrackError(f"{tj}: cannot read track.json ({exc})") from None
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise TrackError(f"{tj}: not a {FORMAT} document")
-    from worlds.mesh_read import scene_triangles
-    from worlds.sdf_read import read_world
+    from worlds.track_json import load_json
 
-    scene_triangles(read_world(folder))  # the world as the simulator reads it: its errors first
-    problems: list[Problem] = []
+    from .world_check import read_world_road
+
+    world = read_world_road(folder)  # as the simulator reads it: its errors, in its order
+    tj = folder / "track.json"
+    doc = load_json(tj)
+    problems: list[Problem] = world.start_problems()
     missing = [k for k in TRACK_JSON_KEYS if k not in doc]
     if missing:
         problems.append(Problem(str(tj), None, f"missing fields: {', '.join(missing)}", "folder"))

@@ -70,33 +70,67 @@ class Trace:
         return float(np.hypot(d[:, 0], d[:, 1]).sum())
 
 
+@dataclass(frozen=True, eq=False)
+class WorldRoad:
+    """A world read as the simulator reads it: its ``scene``, the road footprint ``road``
+    (shapely), the ``start`` pose and where it comes from (``origin``, the simulator's words)."""
+
+    scene: object
+    road: object
+    start: Pose2
+    origin: str
+
+    def start_problems(self) -> list[Problem]:
+        """The start off the road (the simulator refuses to drive then)."""
+        s = self.start
+        if self.road.distance(shapely.Point(s.x_m, s.y_m)) <= START_TOL_M:
+            return []
+        return [Problem(str(self.scene.source), None, (
+            f"the start pose ({s.x_m:.3f}, {s.y_m:.3f}) m ({self.origin}) is not on the track"),
+            "start")]
+
+
+def read_world_road(path: str | Path) -> WorldRoad:
+    """Read a world in the simulator's order and with its errors (``read_world``, then
+    track.json's fields, then every mesh within the limits): ``worlds.WorldError``, or
+    :class:`TrackError` for a world with nothing to drive on."""
+    from worlds.mesh_read import scene_triangles, upward
+    from worlds.sdf_read import read_world
+    from worlds.track_json import read_track_json
+
+    scene = read_world(path)
+    meta = read_track_json(scene.track_json) if scene.track_json is not None else {}
+    tris = scene_triangles(scene)
+    tops = [upward(t)[:, :, :2] for t in tris.visuals]
+    tops = [t for t in tops if len(t)]
+    if not tops:
+        raise TrackError(f"{scene.source}: the world has no mesh visuals with upward faces "
+                         "(nothing to drive on)")
+    if scene.car_pose is not None:  # the simulator's rule (simrunner.track.load)
+        start, origin = scene.car_pose, "the car's pose in the world"
+    elif "start_pose" in meta:
+        start, origin = meta["start_pose"], "track.json's start_pose"
+    else:
+        start, origin = Pose2(), "no car in the world and no track.json: the world origin"
+    return WorldRoad(scene, road_footprint(np.concatenate(tops)), start, origin)
+
+
 def validate_world(path: str | Path, car: CarDescription | None = None, *,
                    sdf_checker: bool = True) -> list[Problem]:
     """Problems of an imported world or model folder/file (module docstring). Raises
     ``worlds.WorldError`` for a world the simulator refuses too, :class:`TrackError` for one
     with nothing to drive on."""
     from worlds.check import check_world
-    from worlds.mesh_read import scene_triangles, upward
-    from worlds.sdf_read import read_world
 
     car = car or CarDescription()
-    scene = read_world(path)
-    tris = scene_triangles(scene)
-    where = str(scene.source)
-    tops = [upward(t)[:, :, :2] for t in tris.visuals]
-    tops = [t for t in tops if len(t)]
-    if not tops:
-        raise TrackError(f"{scene.source}: the world has no mesh visuals with upward faces "
-                         "(nothing to drive on)")
-    problems = [Problem(where, None, msg, "world") for msg in check_world(scene.source, use_ign=sdf_checker)]
-    road = road_footprint(np.concatenate(tops))
-    start = scene.car_pose if scene.car_pose is not None else Pose2()
-    origin = "the car's pose in the world" if scene.car_pose is not None else "the world origin"
-    if road.distance(shapely.Point(start.x_m, start.y_m)) > START_TOL_M:
-        return problems + [Problem(where, None, (
-            f"the start pose ({start.x_m:.3f}, {start.y_m:.3f}) m ({origin}) is not on the track"),
-            "start")]
-    trace = trace_centreline(road, start)
+    world = read_world_road(path)
+    where = str(world.scene.source)
+    problems = [Problem(where, None, msg, "world")
+                for msg in check_world(world.scene.source, use_ign=sdf_checker)]
+    start = world.start_problems()
+    if start:
+        return problems + start
+    trace = trace_centreline(world.road, world.start)
     problems += _width_problems(where, trace, car)
     problems += _radius_problems(where, trace, car)
     if not trace.closed:

@@ -128,18 +128,15 @@ def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
 
 
 def load_mesh_world(visual: MeshVisual):
-    """The visual's mesh as a ``trimesh.Trimesh`` with vertices ``(N, 3)`` in the world frame."""
+    """The visual's mesh as a ``trimesh.Trimesh`` with vertices ``(N, 3)`` in the world frame
+    (read by :func:`worlds.mesh_read.read_triangles`: bounded, damaged files refused;
+    three vertices per triangle, not merged)."""
     import trimesh
 
-    try:
-        mesh = trimesh.load_mesh(visual.mesh_path, process=False)
-    except Exception as exc:  # trimesh raises many types for bad files
-        raise WorldError(f"{visual.mesh_path}: cannot read mesh ({exc})") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise WorldError(f"{visual.mesh_path}: expected a triangle mesh")
-    verts = np.asarray(mesh.vertices, dtype=float) * visual.scale
-    verts = verts @ visual.world_from_mesh[:3, :3].T + visual.world_from_mesh[:3, 3]
-    return trimesh.Trimesh(verts, np.asarray(mesh.faces), process=False)
+    from worlds.mesh_read import placed_triangles, read_triangles
+
+    tris = placed_triangles(read_triangles(visual.mesh_path), visual.world_from_mesh, visual.scale)
+    return trimesh.Trimesh(tris.reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3), process=False)
 
 
 # -- files and models ----------------------------------------------------------------------

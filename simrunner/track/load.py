@@ -34,8 +34,6 @@ From a scene (a world):
 """
 from __future__ import annotations
 
-import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -267,49 +265,13 @@ def _default_name(source: Path) -> str:
     return source.parent.name if source.stem in ("world", "model") else source.stem
 
 
-def _pose(value, where: str) -> Pose2:
-    if (not isinstance(value, (list, tuple)) or len(value) != 3
-            or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in value)):
-        raise TrackLoadError(f"{where}: expected [x_m, y_m, yaw_rad], got {value!r}")
-    return Pose2(*value)
-
-
 def _read_track_json(path: Path) -> dict:
-    """The fields of a track.json (format nxpcup-track/1) the simulator uses, checked."""
-    path = Path(path)
+    """The fields of a track.json the simulator uses, checked: ``worlds.track_json`` (the
+    reader ``trackgen validate`` uses too), its WorldError as TrackLoadError."""
+    from worlds import WorldError
+    from worlds.track_json import read_track_json
+
     try:
-        data = json.loads(path.read_text())
-    except OSError as exc:
-        raise TrackLoadError(f"{path}: cannot read ({exc.strerror})") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise TrackLoadError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(data, dict) or not str(data.get("format", "")).startswith("nxpcup-track/"):
-        raise TrackLoadError(f"{path}: expected a JSON object with \"format\": \"nxpcup-track/1\"")
-    out: dict = {}
-    if isinstance(data.get("name"), str) and data["name"]:
-        out["name"] = data["name"]
-    if data.get("start_pose") is not None:
-        out["start_pose"] = _pose(data["start_pose"], f"{path}: start_pose")
-    gate = data.get("finish_gate")
-    if gate is not None:
-        half = gate.get("half_width_m") if isinstance(gate, dict) else None
-        if not isinstance(half, (int, float)) or not half > 0:
-            raise TrackLoadError(f"{path}: finish_gate: expected {{\"pose\": [x, y, yaw], "
-                                 f"\"half_width_m\": > 0}}, got {gate!r}")
-        out["finish_gate"] = (_pose(gate.get("pose"), f"{path}: finish_gate.pose"), float(half))
-    length = data.get("length_m")
-    if length is not None:
-        if not isinstance(length, (int, float)) or not (length > 0 and math.isfinite(length)):
-            raise TrackLoadError(f"{path}: length_m: expected a positive number, got {length!r}")
-        out["length_m"] = float(length)
-    centre = data.get("centreline")
-    if centre is not None:
-        try:
-            arr = np.asarray(centre, dtype=float) if isinstance(centre, list) else None
-        except (TypeError, ValueError):
-            arr = None
-        if arr is None or arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2 or not np.isfinite(arr).all():
-            raise TrackLoadError(f"{path}: centreline: expected a list of [x_m, y_m] points")
-        arr.flags.writeable = False
-        out["centreline"] = arr
-    return out
+        return read_track_json(path)
+    except WorldError as exc:
+        raise TrackLoadError(str(exc)) from None
