@@ -376,3 +376,44 @@ def test_sdf_read_limits_are_documented():
         assert name in sdf_read.__doc__
     for name in ("MAX_MESH_BYTES", "MAX_WORLD_TRIANGLES", "MAX_EXTENT_M"):
         assert name in mesh_read.__doc__
+
+
+# -- the mesh reader, property-tested ---------------------------------------------------------
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_FINITE = st.floats(min_value=-1e3, max_value=1e3, allow_nan=False, width=32)
+_TRIS = st.lists(st.lists(st.tuples(_FINITE, _FINITE, _FINITE), min_size=3, max_size=3),
+                 min_size=1, max_size=20)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.binary(max_size=3000), prefix=st.sampled_from([b"", b"solid x\n", b"solid"]))
+def test_any_bytes_read_as_triangles_or_one_world_error(tmp_path, data, prefix):
+    path = tmp_path / "m.stl"
+    path.write_bytes(prefix + data)
+    try:
+        tris = mesh_read.read_triangles(path)
+    except WorldError as exc:
+        assert "\n" not in str(exc) and str(exc).startswith(str(path))
+    else:
+        assert tris.ndim == 3 and tris.shape[1:] == (3, 3) and len(tris) and np.isfinite(tris).all()
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(tris=_TRIS, cut=st.integers(min_value=1, max_value=49))
+def test_stl_round_trip_and_every_truncation_refused(tmp_path, tris, cut):
+    tris = np.asarray(tris, dtype=np.float32).astype(float)
+    binary, ascii_ = tmp_path / "b.stl", tmp_path / "a.stl"
+    binary.write_bytes(_binary_stl(tris))
+    ascii_.write_text(_ascii(tris))
+    np.testing.assert_array_equal(mesh_read.read_triangles(binary), tris)
+    np.testing.assert_array_equal(mesh_read.read_triangles(ascii_), tris)
+    data = binary.read_bytes()
+    binary.write_bytes(data[:-cut])  # any cut inside the last triangle
+    with pytest.raises(WorldError, match="truncated binary STL"):
+        mesh_read.read_triangles(binary)
+    lines = ascii_.read_text().splitlines(keepends=True)
+    ascii_.write_text("".join(lines[: max(1, len(lines) - 1 - cut % len(lines))]))
+    with pytest.raises(WorldError, match="ASCII STL"):
+        mesh_read.read_triangles(ascii_)

@@ -177,9 +177,10 @@ class SceneTriangles:
 
 def placed_triangles(tris: np.ndarray, world_from_mesh: np.ndarray, scale) -> np.ndarray:
     """Mesh-frame triangles ``(T, 3, 3)`` scaled (mesh frame) then moved by ``world_from_mesh (4, 4)``."""
-    verts = tris.reshape(-1, 3) * np.asarray(scale, dtype=float)
-    tf = np.asarray(world_from_mesh, dtype=float)
-    return (verts @ tf[:3, :3].T + tf[:3, 3]).reshape(-1, 3, 3)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is refused by the caller
+        verts = tris.reshape(-1, 3) * np.asarray(scale, dtype=float)
+        tf = np.asarray(world_from_mesh, dtype=float)
+        return (verts @ tf[:3, :3].T + tf[:3, 3]).reshape(-1, 3, 3)
 
 
 def scene_triangles(scene) -> SceneTriangles:

@@ -317,6 +317,9 @@ class _Reader:
         self.roots = allowed_roots(source)
         self.including: list[Path] = [_resolved(source)]  # model files being read, outermost first
         self.n_models = 0
+        self._docs: dict[Path, XmlDoc] = {}  # each model file parsed once per read
+        self._found: dict[tuple[str, Path], Path | None] = {}  # find_model per (name, folder)
+        self._model_files: dict[Path, tuple[Path, Path]] = {}  # model folder -> its file, resolved
         self.car_name = car_name
         self.visuals: list[MeshVisual] = []
         self.collisions: list[MeshVisual] = []
@@ -369,7 +372,10 @@ class _Reader:
             self._ground(parent_tf @ (pose if pose is not None else np.eye(4)))
             return
         if target is not None:
-            model_dir = find_model(target, [doc.path.parent, *self.start_dirs], self.roots)
+            key = (target, doc.path.parent)
+            if key not in self._found:
+                self._found[key] = find_model(target, [doc.path.parent, *self.start_dirs], self.roots)
+            model_dir = self._found[key]
             if model_dir is None:
                 raise doc.error(uri_el, _model_not_found(target, uri, [doc.path.parent, *self.start_dirs]))
         else:
@@ -382,15 +388,19 @@ class _Reader:
                 raise doc.error(uri_el, _outside(model_dir, self.roots, f"include {uri}: the folder"))
             if not _is_dir(model_dir):
                 raise doc.error(uri_el, f"included model folder {model_dir} not found")
-        path = model_file(model_dir)
-        resolved = _resolved(path)
+        if model_dir not in self._model_files:
+            path = model_file(model_dir)
+            self._model_files[model_dir] = (path, _resolved(path))
+        path, resolved = self._model_files[model_dir]
         if resolved in self.including:
             chain = " -> ".join(p.name if p.name not in ("model.sdf",) else f"{p.parent.name}/{p.name}"
                                 for p in [*self.including[self.including.index(resolved):], resolved])
             raise doc.error(uri_el, f"include {uri} includes itself ({chain})")
         self.including.append(resolved)
         try:
-            self.document(parse_xml(path), parent_tf, pose, name, depth)
+            if resolved not in self._docs:
+                self._docs[resolved] = parse_xml(path)
+            self.document(self._docs[resolved], parent_tf, pose, name, depth)
         finally:
             self.including.pop()
 
