@@ -417,3 +417,15 @@ def test_stl_round_trip_and_every_truncation_refused(tmp_path, tris, cut):
     ascii_.write_text("".join(lines[: max(1, len(lines) - 1 - cut % len(lines))]))
     with pytest.raises(WorldError, match="ASCII STL"):
         mesh_read.read_triangles(ascii_)
+
+
+def test_track_json_name_cannot_point_the_mesh_check_outside(built, tmp_path):
+    import json
+
+    out = tmp_path / "oval"
+    shutil.copytree(built, out)
+    doc = json.loads((out / "track.json").read_text())
+    doc["name"] = "../../.."
+    (out / "track.json").write_text(json.dumps(doc))
+    result = CliRunner().invoke(trackgen_main, ["validate", str(out), "--no-sdf-check"])
+    assert result.exit_code == 1 and "name '../../..': expected the track model's folder name" in result.output

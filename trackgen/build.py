@@ -209,13 +209,22 @@ def _validate_folder(folder: Path, car: CarDescription | None, sdf_checker: bool
     problems += _recorded_layout_problems(doc.get("layout"), folder, tj, car)
     name = str(doc.get("name", ""))
     mesh_dir = folder / "models" / name / "meshes"
+    import warnings
+
     import numpy as np
     import trimesh  # ~0.5 s (scipy): only when a folder's meshes are checked
 
     from worlds.mesh_read import read_triangles
 
     meshes = {}
-    for role in ("lane", "edges", "markings"):
+    from worlds.sdf_read import inside
+
+    roles = ("lane", "edges", "markings")
+    if not name or not inside(mesh_dir, (folder.resolve(),)):
+        problems.append(Problem(str(tj), None, f"name {name[:40]!r}: expected the track model's "
+                                "folder name (models/NAME inside the folder)", "folder"))
+        roles = ()
+    for role in roles:
         f = mesh_dir / f"{role}.stl"
         if not f.is_file():
             if role != "markings":
@@ -226,8 +235,13 @@ def _validate_folder(folder: Path, car: CarDescription | None, sdf_checker: bool
         except WorldError as exc:
             problems.append(Problem(str(f), None, str(exc).split(": ", 1)[-1], "mesh"))
             continue
-        meshes[role] = trimesh.Trimesh(tris.reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3))
-    for msg in check_meshes(meshes):
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            meshes[role] = trimesh.Trimesh(tris.reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3))
+    with warnings.catch_warnings(), np.errstate(all="ignore"):  # far vertices: checked, not warned
+        warnings.simplefilter("ignore")
+        mesh_messages = check_meshes(meshes)
+    for msg in mesh_messages:
         role = msg.split(" ", 1)[0]
         problems.append(Problem(str(mesh_dir / f"{role}.stl"), None, msg, "mesh"))
     world = folder / "world.sdf"
