@@ -19,7 +19,8 @@ from simrunner.workflows.gap.fit import (Problem, Segment, cost_of, fit_effect,
 from simrunner.workflows.gap.glitches import GlitchKind, find_glitches, glitch_mask, time_gaps
 from simrunner.workflows.gap.logs import MEASURED_COLUMNS, check_measured, derive
 from simrunner.workflows.gap.regimes import REGIMES, format_stats, residual_stats, segment
-from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, make_windows, noise_rms, replay, residuals,
+from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, dead_reckoned_yaw, make_windows, noise_rms,
+                                            replay, residuals,
                                             rmse, signals_of, smoothed_log, split_windows, window_mask)
 from vehicle.description import CarDescription
 
@@ -372,6 +373,27 @@ def test_chain_acceptance_needs_bic_fit_and_held_out_improvement():
     assert "do not confirm" in _reject_reason(tr(500.0, 0.5, float("nan")), 1.0, 132.5, 0.068, 0.02)
 
 
+@pytest.mark.parametrize("effect, field, neutral, near, away", [
+    ("drag", "drag_coeff_kgpm", 0.0, 1e-4, 0.05),
+    ("steering_offset", "steering_offset_rad", 0.0, 1e-5, 0.01),
+    ("steering_gain", "steering_gain", 1.0, 1.0005, 1.1),
+])
+def test_a_candidate_fitted_at_its_neutral_value_is_not_kept(effect, field, neutral, near, away):
+    """Passing every threshold is not enough when the candidate's own parameter stayed
+    neutral: the gain then came from refitting the kept ones."""
+    from simrunner.workflows.gap.chain import Trial, _reject_reason, neutral_offset
+
+    assert neutral_offset(effect, neutral) == 0.0
+    assert neutral_offset(effect, near) < 0.01 <= neutral_offset(effect, away)
+    args = (1.0, 132.5, 0.068, 0.02)
+    for value, kept in ((neutral, False), (near, False), (away, True)):
+        trial = Trial(effect, {"motor_lag_s": 0.2, field: value}, 1.0, 500.0, 0.5, 0.5, 5)
+        reason = _reject_reason(trial, *args)
+        assert (reason == "") is kept
+        if not kept:
+            assert "neutral value" in reason
+
+
 def test_split_is_stratified_by_label():
     w = [f"w{k}" for k in range(9)]
     labels = ["a", "a", "c", "a", "a", "c", "c", "a", "a"]
@@ -445,14 +467,20 @@ def test_partial_logs_go_through_derive_replay_and_residuals(cols):
     assert "-" in format_stats(rows) or all(r["count"] for r in rows)
 
 
-def test_pose_free_replay_starts_at_the_origin():
+def test_pose_free_replay_starts_at_the_origin_with_the_gyro_heading():
     car = CarDescription()
     log = simulate(car, columns=SPEED_GYRO)
+    truth = simulate(car)
     d = derive(log, car.chassis.wheelbase_m)
+    heading = dead_reckoned_yaw(log, d, car.chassis.wheelbase_m)
     windows = make_windows(log)
     pred = replay(car, log, d, windows, dt_s=0.001, sim_factory=kin_factory, lead_s=0.0)
     for w in windows:
-        assert (pred.x_m[w.start], pred.y_m[w.start], pred.yaw_rad[w.start]) == (0.0, 0.0, 0.0)
+        assert (pred.x_m[w.start], pred.y_m[w.start]) == (0.0, 0.0)
+        assert pred.yaw_rad[w.start] == pytest.approx(heading[w.start], abs=1e-9)
+    # the integrated gyro follows the true heading (the truth starts at heading 0)
+    assert abs(np.unwrap(truth.yaw_rad) - heading).max() < 0.05
+    assert abs(np.unwrap(truth.yaw_rad)).max() > 0.5  # and the car did turn
 
 
 def test_derive_does_not_smooth_across_gaps_or_excluded_samples():

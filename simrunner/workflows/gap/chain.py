@@ -11,14 +11,23 @@ refitted) and
    from the second step on): all kept parameters and the new one together
    (``scipy.optimize.minimize``, Powell, in coordinates scaled to each parameter's fit
    bounds; bounded Brent for the first step, which has one parameter), on the screening
-   windows; the result is then scored once on all fit windows and once on the held-out ones;
+   windows; the result is then scored once on all fit windows and once on the held-out ones.
+   From the second step on, the kept effects alone are refitted the same way (the
+   *baseline*): a candidate must beat the current model at its best, not only the
+   parameters the last step left, so a candidate cannot pass on the kept parameters'
+   refit alone;
 3. tries them in order of the information criterion (BIC with ``k`` = the number of fitted
-   parameters) and keeps the first that passes all three tests against the current model:
-   ``delta_bic >= DELTA_BIC_MIN`` and ``improvement >= IMPROVEMENT_MIN`` on the fit windows
-   (the thresholds calibrated on effect-free logs) **and** a held-out gap at least
+   parameters) and keeps the first that passes all four tests against the current model:
+   its own parameter left its neutral value (by more than :data:`NEUTRAL_TOL` of its fit
+   range), ``delta_bic >= DELTA_BIC_MIN`` and ``improvement >= IMPROVEMENT_MIN`` on the fit
+   windows (the thresholds calibrated on effect-free logs) **and** a held-out gap at least
    :data:`HELD_IMPROVEMENT_MIN` smaller than before on the held-out windows, which no fit has
-   seen;
-4. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects.
+   seen (the held-out problem may use a finer physics step than the fits: the step
+   ``simrunner drive`` uses, so what is kept holds for the car file as it will be driven);
+4. when every refitted candidate fails, refits the next ones in the screening order (at
+   most :data:`MAX_REFITS_PER_STEP` per step, only those whose screening fit gained at least
+   half of ``IMPROVEMENT_MIN``: a one-parameter gain below that is not worth a refit);
+5. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects.
 
 Every candidate that was tried and not kept is recorded with its reason. The chain's
 result is the car with all kept effects; its parameters are those of the last joint refit.
@@ -46,6 +55,8 @@ HELD_IMPROVEMENT_MIN = 0.02
 POWELL_EVALS_PER_PARAMETER = 8
 REFINE_LATER = 2
 SCREEN_MAX_S = 45.0
+MAX_REFITS_PER_STEP = 6
+NEUTRAL_TOL = 0.01  # fraction of the fit range (scaled coordinates) that counts as neutral
 BETTER = "a better candidate was kept"
 
 
@@ -128,15 +139,11 @@ class Chain:
     nominal_cost: float      # fit windows, nominal car
     nominal_held_gap: float  # held-out windows, nominal car
     stop_reason: str = ""
+    parameters: dict[str, float] = dataclasses.field(default_factory=dict)  # the final refit of every kept parameter
 
     @property
     def effects(self) -> list[str]:
         return [s.kept.effect for s in self.steps if s.kept is not None]
-
-    @property
-    def parameters(self) -> dict[str, float]:
-        kept = [s.kept for s in self.steps if s.kept is not None]
-        return dict(kept[-1].parameters) if kept else {}
 
     @property
     def rejected(self) -> list[tuple[int, Trial]]:
@@ -209,6 +216,18 @@ def _trial_task(args) -> tuple[dict[str, float], float, int, float]:
     return values, cost, evals, held
 
 
+def neutral_offset(name: str, value: float) -> float:
+    """How far ``value`` of effect ``name`` lies from its neutral value, as a fraction of its
+    fit range in the fit's coordinates (log scale where the fit searches in log scale; a
+    neutral value outside the fit bounds is taken at the nearest bound)."""
+    from simrunner.car.effects import EFFECTS
+
+    to_u, _ = _bounds01([name])
+    c = CANDIDATES[name]
+    neutral = min(max(EFFECTS[name].neutral[0], c.lo), c.hi)
+    return float(abs(to_u({c.field: value})[0] - to_u({c.field: neutral})[0]))
+
+
 def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int = 2,
                 delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
                 held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
@@ -216,7 +235,8 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     """Run the forward selection of the module docstring over the effects ``names``.
 
     ``fit_problem`` and ``held_problem`` have the same base car (no chain effect yet), the
-    same signals and scales; the held-out gap is ``cost / n_values`` of ``held_problem``."""
+    same signals and scales; the held-out gap is ``cost / n_values`` of ``held_problem``
+    (whose physics step may be finer than the fit problem's)."""
     base = fit_problem.car
     tick = progress or (lambda label: None)
     order = {n: i for i, n in enumerate(CANDIDATES)}
@@ -228,40 +248,56 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     steps: list[Step] = []
     stop = ""
     pool = ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) if jobs > 1 else None
+
+    def run_tasks(tasks):
+        return list(pool.map(_trial_task, tasks)) if pool is not None else [_trial_task(t) for t in tasks]
+
     try:
         for index in range(1, max_effects + 1):
             remaining = [n for n in names if n not in kept_names]
             if not remaining:
                 stop = "every candidate effect is in the model"
                 break
-            current = with_parameters(base, kept_values)
             k = len(kept_names)
+            screen_base = screening_problem(fit_problem)
+            if k:  # the baseline: the kept effects alone, refitted as the candidates will be
+                (b_values, b_cost, _, b_held), = run_tasks([(screen_base, fit_problem, held_problem, base,
+                                                              list(kept_names), dict(kept_values))])
+                if b_cost < cost:
+                    kept_values, cost, held_gap = b_values, b_cost, b_held
+            current = with_parameters(base, kept_values)
             full = fit_problem.with_car(current)
             screen = screening_problem(full)
             screen_cost = cost if screen is full else cost_of(screen, current)
             screening = fit_all(screen, screen_cost, remaining, jobs=jobs, refine_top=0,
                                 progress=lambda label: tick(f"step {index} {label}"))
-            n_top = REFINE_TOP if index == 1 else REFINE_LATER
-            top = sorted(screening, key=lambda r: (r.cost, order[r.effect]))[:max(n_top, 1)]
-            screen_base = screening_problem(fit_problem)
-            tasks = [(screen_base, fit_problem, held_problem, base, kept_names + [r.effect],
-                      {**kept_values, **r.parameters}) for r in top]
-            outs = list(pool.map(_trial_task, tasks)) if pool is not None else [_trial_task(t) for t in tasks]
-            tick(f"step {index} joint refits")
+            n_top = max(REFINE_TOP if index == 1 else REFINE_LATER, 1)
+            ranked = sorted(screening, key=lambda r: (r.cost, order[r.effect]))
+            later = [r for r in ranked[n_top:] if r.improvement >= 0.5 * improvement_min]
+            batches = [ranked[:n_top]] + [later[i:i + n_top] for i in range(0, len(later), n_top)]
             crit_now = bic(fit_problem, cost, k)
-            trials = []
-            for r, (values, c, evals, held) in zip(top, outs):
-                trials.append(Trial(r.effect, values, c, crit_now - bic(fit_problem, c, k + 1),
-                                    1.0 - c / cost if cost > 0 else 0.0, held, evals))
-            trials.sort(key=lambda tr: (-tr.delta_bic, order[tr.effect]))
-            decided, chosen = [], None
-            for tr in trials:
-                reason = _reject_reason(tr, held_gap, delta_bic_min, improvement_min, held_improvement_min)
-                if chosen is None and not reason:
-                    chosen = dataclasses.replace(tr, kept=True)
-                    decided.append(chosen)
-                else:
-                    decided.append(dataclasses.replace(tr, reason=reason or BETTER))
+            decided: list[Trial] = []
+            chosen = None
+            refits = 0
+            for batch in batches:
+                batch = batch[:max(MAX_REFITS_PER_STEP - refits, 0)]
+                if not batch or chosen is not None:
+                    break
+                refits += len(batch)
+                outs = run_tasks([(screen_base, fit_problem, held_problem, base, kept_names + [r.effect],
+                                   {**kept_values, **r.parameters}) for r in batch])
+                tick(f"step {index} joint refits")
+                trials = [Trial(r.effect, values, c, crit_now - bic(fit_problem, c, k + 1),
+                                1.0 - c / cost if cost > 0 else 0.0, held, evals)
+                          for r, (values, c, evals, held) in zip(batch, outs)]
+                trials.sort(key=lambda tr: (-tr.delta_bic, order[tr.effect]))
+                for tr in trials:
+                    reason = _reject_reason(tr, held_gap, delta_bic_min, improvement_min, held_improvement_min)
+                    if chosen is None and not reason:
+                        chosen = dataclasses.replace(tr, kept=True)
+                        decided.append(chosen)
+                    else:
+                        decided.append(dataclasses.replace(tr, reason=reason or BETTER))
             steps.append(Step(index, held_gap, tuple(sorted(screening, key=lambda r: (r.criterion, order[r.effect]))),
                               tuple(decided)))
             if chosen is None:
@@ -275,12 +311,16 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     finally:
         if pool is not None:
             pool.shutdown()
-    return Chain(tuple(steps), with_parameters(base, kept_values), nominal_cost, nominal_held, stop)
+    return Chain(tuple(steps), with_parameters(base, kept_values), nominal_cost, nominal_held, stop,
+                 dict(kept_values))
 
 
 def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvement_min: float,
                    held_improvement_min: float) -> str:
     """Why ``tr`` is not kept ("" when it passes)."""
+    value = tr.parameters[CANDIDATES[tr.effect].field]
+    if neutral_offset(tr.effect, value) < NEUTRAL_TOL:
+        return f"fitted at its neutral value ({value:.4g}): no effect"
     if tr.delta_bic < delta_bic_min:
         return f"delta_BIC {tr.delta_bic:.1f} < {delta_bic_min:g} (fit windows)"
     if tr.improvement < improvement_min:

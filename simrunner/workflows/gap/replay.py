@@ -10,8 +10,10 @@ the log) are replayed unrecorded and the car is then moved (``place``) to the me
 state at the window's start, so latency queues and lags carry the commands in flight.
 Restarting keeps open-loop drift from swamping the comparison; one simulator object serves
 all windows of a replay, so a whole replay is one pass. A log without pose starts every
-window at the origin, heading 0, with the measured speed and yaw rate: only its pose-free
-signals are compared.
+window at the origin with the measured speed and yaw rate, heading the yaw rate integrated
+from the log's start (:func:`dead_reckoned_yaw`; only pose-free signals are compared, but
+the simulator's tyre friction is a pyramid aligned with the world axes, so grip depends a
+little on heading, and a car that always starts at heading 0 would hide it).
 
 Residual signals (predicted minus measured, shape (N,), NaN outside the replayed windows),
 those the log supports (:func:`signals_of`):
@@ -217,11 +219,13 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
     wheelbase = car.chassis.wheelbase_m
     after_gap = np.concatenate([[0], np.flatnonzero(time_gaps(t)) + 1])  # first sample of each piece
 
+    heading = None if pose else dead_reckoned_yaw(log, derived, wheelbase)
+
     def state(i: int):
         v, steer, r = float(derived.speed_mps[i]), float(derived.steer_rad[i]), float(derived.yaw_rate_radps[i])
         if not math.isfinite(r):  # no gyro and no pose: the kinematic yaw rate of the steer
             r = v * math.tan(steer) / wheelbase
-        p = Pose2(derived.x_m[i], derived.y_m[i], derived.yaw_rad[i]) if pose else Pose2(0.0, 0.0, 0.0)
+        p = Pose2(derived.x_m[i], derived.y_m[i], derived.yaw_rad[i]) if pose else Pose2(0.0, 0.0, float(heading[i]))
         return p, v, steer, r
 
     def usable(i: int) -> bool:
@@ -264,6 +268,17 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
             sim.place(*state(i0))
         run(i0, w.stop, record=True)
     return Prediction(*out)
+
+
+def dead_reckoned_yaw(log: RunLog, derived: Derived, wheelbase_m: float) -> np.ndarray:
+    """``(N,)`` heading (rad) of a log without pose: the smoothed yaw rate (the kinematic
+    ``v tan(steer) / L`` where it is unknown) integrated by the trapezoid rule from 0 at the
+    first sample, across gaps too (the heading after a gap is a guess either way)."""
+    r = np.asarray(derived.yaw_rate_radps, dtype=float)
+    kin = derived.speed_mps * np.tan(derived.steer_rad) / wheelbase_m
+    r = np.where(np.isfinite(r), r, np.where(np.isfinite(kin), kin, 0.0))
+    inc = 0.5 * (r[1:] + r[:-1]) * np.diff(log.t_s)
+    return np.concatenate([[0.0], np.cumsum(inc)])
 
 
 def residuals(log: RunLog, derived: Derived, pred: Prediction) -> dict[str, np.ndarray]:

@@ -201,13 +201,17 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
             sim_factory: SimFactory = default_sim_factory,
             delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
             held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
-            progress: Callable[[str], None] | None = None) -> GapResult:
+            held_dt_s: float | None = None, progress: Callable[[str], None] | None = None) -> GapResult:
     """Run the workflow of the module docstring on one log or several logs of one car
     (``car`` default: the default car).
 
     Every log must pass :func:`simrunner.workflows.gap.logs.check_measured` (else
     :class:`simrunner.run.log.LogError`). ``effects`` restricts the candidates (default: the
     whole catalogue); ``progress(label)`` is called as the stages finish.
+
+    ``dt_s`` is the physics step of the fits; ``held_dt_s`` (default: the step of
+    ``simrunner drive``, ``RunSettings.dt_s``) that of the held-out confirmation and of the
+    before/after figures, so they describe the car file as it will be driven.
     """
     logs = [logs] if isinstance(logs, RunLog) else list(logs)
     if not logs:
@@ -230,21 +234,28 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     fit_segs = tuple(Segment(p.log, p.derived, p.fit_windows) for p in parts if p.fit_windows)
     held_segs = tuple(Segment(p.log, p.derived, p.held_windows) for p in parts if p.held_windows)
 
-    def predict(c: CarDescription) -> list[Prediction]:
-        return [replay(c, p.log, p.derived, p.windows, dt_s=dt_s, sim_factory=sim_factory) for p in parts]
+    if held_dt_s is None:
+        from simrunner.run.settings import RunSettings
 
-    pred0 = predict(car)
+        held_dt_s = RunSettings().dt_s
+
+    def predict(c: CarDescription, step_s: float, which: str = "windows") -> list[Prediction]:
+        return [replay(c, p.log, p.derived, getattr(p, which), dt_s=step_s, sim_factory=sim_factory)
+                for p in parts]
+
+    fit_pred0 = predict(car, dt_s, "fit_windows")
+    fit_res = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, fit_pred0) if p.fit_windows]
+    scales = nominal_scales(fit_segs, fit_res, signals)
+    pred0 = predict(car, held_dt_s)
     res0_parts = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, pred0)]
     tick("nominal")
-    fit_res = [r for p, r in zip(parts, res0_parts) if p.fit_windows]
-    scales = nominal_scales(fit_segs, fit_res, signals)
     fit_problem = Problem(car, fit_segs, scales, signals, dt_s, sim_factory)
-    held_problem = Problem(car, held_segs, scales, signals, dt_s, sim_factory)
+    held_problem = Problem(car, held_segs, scales, signals, held_dt_s, sim_factory)
     chain = build_chain(fit_problem, held_problem, names, jobs=jobs, delta_bic_min=delta_bic_min,
                         improvement_min=improvement_min, held_improvement_min=held_improvement_min,
                         max_effects=max_effects, progress=tick)
     car_after = chain.car
-    pred1 = pred0 if not chain.effects else predict(car_after)
+    pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
     res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
                                                        for p, pr in zip(parts, pred1)]
     tick("held-out check")
@@ -265,7 +276,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     regime = {k: np.concatenate([m[k] for m in seg_masks]) for k in seg_masks[0]}
     noise = _noise(parts, rep_signals)
     stats_after = residual_stats({s: res1[s] for s in stat_signals}, regime)
-    settings = {"dt_s": dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
+    settings = {"dt_s": dt_s, "held_dt_s": held_dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
                 "improvement_min": improvement_min, "held_improvement_min": held_improvement_min,
                 "max_effects": max_effects, "scales": scales, "signals": list(signals), "effects": names}
     return GapResult(
@@ -356,9 +367,13 @@ def _gap(res: dict[str, np.ndarray], mask: np.ndarray, scales: dict[str, float],
 
 def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
     """Upper bound of the ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates
-    (each chain step screens the remaining effects and runs one batch of joint refits)."""
+    (each chain step screens the remaining effects and runs its batches of joint refits)."""
+    from simrunner.workflows.gap.chain import MAX_REFITS_PER_STEP, REFINE_LATER
+    from simrunner.workflows.gap.fit import REFINE_TOP
+
     steps = min(max_effects, n_effects) + 1
-    return 2 + sum(max(n_effects - s, 0) + 1 for s in range(steps))
+    batches = -(-MAX_REFITS_PER_STEP // max(min(REFINE_LATER, REFINE_TOP), 1))
+    return 2 + sum(max(n_effects - s, 0) + batches for s in range(steps))
 
 
 def _params_text(params: dict[str, float]) -> str:
