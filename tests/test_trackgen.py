@@ -252,7 +252,7 @@ def test_fig8_build_has_no_markings_and_validates_as_folder(tmp_path):
     assert res.exit_code == 0, res.output
     (out / "models" / "thesis_figure8" / "meshes" / "lane.stl").write_bytes(b"\0" * 84)
     res = CliRunner().invoke(main, ["validate", str(out), "--no-sdf-check"])
-    assert res.exit_code == 1 and "lane.stl" in res.output
+    assert res.exit_code == 2 and "lane.stl: mesh has no triangles" in res.output  # as drive
 
 
 def test_build_refuses_failing_layout_and_existing_folder(tmp_path):
@@ -298,7 +298,7 @@ def test_cli_exit_codes(tmp_path):
     res = run(main, ["validate", str(tmp_path / "missing.txt")])
     assert res.exit_code == 2 and "cannot read layout" in res.output
     res = run(main, ["validate", str(tmp_path)])
-    assert res.exit_code == 2 and "no track.json" in res.output
+    assert res.exit_code == 2 and "expected world.sdf, one *.world file or model.config" in res.output
     car = tmp_path / "car.toml"
     car.write_text("[steering]\nlimit_rad = 0.2\n")
     res = run(main, ["validate", str(FIG8), "--car", str(car)])

@@ -10,7 +10,6 @@ by the next build of the same ``out_dir`` (:mod:`trackgen.outdir`).
 """
 from __future__ import annotations
 
-import json
 import os
 import shutil
 from dataclasses import dataclass
@@ -21,10 +20,12 @@ from worlds.sdf_xml import WorldError
 
 from .chain import Track, chain
 from .errors import TrackError
-from .export import FORMAT, TrackGeometry, dumps_track_json, track_geometry, track_json
+from .export import TrackGeometry, dumps_track_json, track_geometry, track_json
 from .layout import Layout, load_layout
 from .outdir import clean_stale, make_temp, replace_folder
 from .validate import Problem, check_meshes, count_errors, errors, summarise, validate_track
+
+WORLD_SUFFIXES = (".sdf", ".world")
 
 TRACK_JSON_KEYS = ("format", "name", "layout", "settings", "pieces", "start_pose",
                    "finish_gate", "centreline", "length_m", "surface_z_m", "lane_polygon",
@@ -196,50 +197,64 @@ def validate_path(path: str | Path, car: CarDescription | None = None, *,
     """Problems of a layout file, or of a build folder (its track.json's layout re-checked
     if it can be found, plus the folder's meshes, track.json fields and world files).
     Raises :class:`LayoutError` / :class:`TrackError` for unreadable input."""
+    from .world_check import validate_world
+
     path = Path(path)
+    if path.is_dir() and not (path / "track.json").is_file() or path.suffix.lower() in WORLD_SUFFIXES:
+        return validate_world(path, car, sdf_checker=sdf_checker)
     if not path.is_dir():
         return check_layout(load_layout(path), car).problems
     return _validate_folder(path, car, sdf_checker)
 
 
 def _validate_folder(folder: Path, car: CarDescription | None, sdf_checker: bool) -> list[Problem]:
+    from worlds.track_json import load_json
+
+    from .world_check import read_world_road
+
+    world = read_world_road(folder)  # as the simulator reads it: its errors, in its order
     tj = folder / "track.json"
-    try:
-        doc = json.loads(tj.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise TrackError(f"{folder}: no track.json (expected a layout file or a "
-                         "'trackgen build' output folder)") from None
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise TrackError(f"{tj}: cannot read track.json ({exc})") from None
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        raise TrackError(f"{tj}: not a {FORMAT} document")
-    problems: list[Problem] = []
+    doc = load_json(tj)
+    problems: list[Problem] = world.start_problems()
     missing = [k for k in TRACK_JSON_KEYS if k not in doc]
     if missing:
         problems.append(Problem(str(tj), None, f"missing fields: {', '.join(missing)}", "folder"))
-    layout_path = _find_layout(str(doc.get("layout", "")), folder)
-    if layout_path is None:
-        problems.append(Problem(str(tj), None, (
-            f"layout {doc.get('layout')!r} not found: checked the folder's files only"),
-            "folder", warning=True))
-    else:
-        problems += check_layout(load_layout(layout_path), car).problems
+    problems += _recorded_layout_problems(doc.get("layout"), folder, tj, car)
     name = str(doc.get("name", ""))
     mesh_dir = folder / "models" / name / "meshes"
+    import warnings
+
+    import numpy as np
     import trimesh  # ~0.5 s (scipy): only when a folder's meshes are checked
 
+    from worlds.mesh_read import read_triangles
+
     meshes = {}
-    for role in ("lane", "edges", "markings"):
+    from worlds.sdf_read import inside
+
+    roles = ("lane", "edges", "markings")
+    if not name or not inside(mesh_dir, (folder.resolve(),)):
+        problems.append(Problem(str(tj), None, f"name {name[:40]!r}: expected the track model's "
+                                "folder name (models/NAME inside the folder)", "folder"))
+        roles = ()
+    for role in roles:
         f = mesh_dir / f"{role}.stl"
         if not f.is_file():
             if role != "markings":
                 problems.append(Problem(str(f), None, f"{role} mesh missing", "mesh"))
             continue
-        try:
-            meshes[role] = trimesh.load(f, file_type="stl", force="mesh")
-        except Exception as exc:  # trimesh raises many types for bad files
-            problems.append(Problem(str(f), None, f"cannot read mesh ({exc})", "mesh"))
-    for msg in check_meshes(meshes):
+        try:  # bounded and strict (worlds.mesh_read); vertices merged as trimesh.load does
+            tris = read_triangles(f)
+        except WorldError as exc:
+            problems.append(Problem(str(f), None, str(exc).split(": ", 1)[-1], "mesh"))
+            continue
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            meshes[role] = trimesh.Trimesh(tris.reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3))
+    with warnings.catch_warnings(), np.errstate(all="ignore"):  # far vertices: checked, not warned
+        warnings.simplefilter("ignore")
+        mesh_messages = check_meshes(meshes)
+    for msg in mesh_messages:
         role = msg.split(" ", 1)[0]
         problems.append(Problem(str(mesh_dir / f"{role}.stl"), None, msg, "mesh"))
     world = folder / "world.sdf"
@@ -253,11 +268,51 @@ def _validate_folder(folder: Path, car: CarDescription | None, sdf_checker: bool
     return problems
 
 
-def _find_layout(recorded: str, folder: Path) -> Path | None:
-    if not recorded:
-        return None
+def _recorded_layout_problems(recorded, folder: Path, tj: Path,
+                              car: CarDescription | None) -> list[Problem]:
+    """Re-check the layout track.json names, if it is a layout file (``.txt``) in the folder,
+    beside it or under the working directory; its contents are never echoed from anywhere
+    else (a tampered ``"layout": "/etc/passwd"`` is not read)."""
+    from .layout import LayoutError
+
+    if not isinstance(recorded, str) or not recorded:
+        return [Problem(str(tj), None, "layout: expected the path of the layout file", "folder",
+                        warning=True)]
+    shown = recorded if len(recorded) <= 80 else recorded[:77] + "..."
+    found, refused = _find_layout(recorded, folder)
+    if found is None:
+        why = (f"not read: {refused}" if refused else
+               "not found beside the folder or under the working directory")
+        return [Problem(str(tj), None, f"layout {shown!r} {why}; the layout was not re-checked",
+                        "folder", warning=True)]
+    try:
+        layout = load_layout(found)
+    except LayoutError as exc:
+        at = f" (line {exc.line})" if exc.line else ""
+        return [Problem(str(tj), None, (
+            f"layout {shown!r} does not load{at}; run 'trackgen validate {found}' for details"),
+            "folder")]
+    return check_layout(layout, car).problems
+
+
+def _find_layout(recorded: str, folder: Path) -> tuple[Path | None, str | None]:
+    """The layout file track.json names and None, or None and why it is refused."""
+    from worlds.sdf_read import inside
+
     p = Path(recorded)
-    for cand in ([p] if p.is_absolute() else [p, folder / p, folder.parent / p]):
-        if cand.is_file():
-            return cand
-    return None
+    cands = [p] if p.is_absolute() else [p, folder / p, folder.parent / p]
+    roots = tuple(d.resolve() for d in (folder, folder.parent, Path.cwd()))
+    refused = None
+    for cand in cands:
+        try:
+            if not cand.is_file():
+                continue
+        except (OSError, ValueError):
+            continue
+        if cand.suffix.lower() != ".txt":
+            refused = "not a layout file (.txt)"
+        elif not inside(cand, roots):
+            refused = "outside the folder, its parent folder and the working directory"
+        else:
+            return cand, None
+    return None, refused

@@ -5,7 +5,8 @@
 * ``ign sdf -k`` (libsdformat's checker) when ``ign`` is installed: its ``Error`` lines. It is
   run with ``SDF_PATH`` set to the model search folders of :mod:`worlds.sdf_read`, plus a
   stand-in for Gazebo's stock ``ground_plane`` model when the world includes it;
-* every ``<mesh><uri>`` of the file and of the models it includes resolves to a file;
+* every ``<mesh><uri>`` of the file and of the models it includes resolves to a file inside
+  the world's folder or the model path (:func:`worlds.sdf_read.allowed_roots`);
 * every SDF file's version is between 1.4 and 1.6 (dartpy's SdfParser refuses 1.7+).
 """
 from __future__ import annotations
@@ -18,8 +19,8 @@ import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from worlds.sdf_read import (GROUND_MODELS, find_model, model_file, model_search_dirs, pick_file,
-                             resolve_uri)
+from worlds.sdf_read import (GROUND_MODELS, _model_not_found, allowed_roots, find_model,
+                             model_file, model_search_dirs, pick_file, resolve_uri)
 from worlds.sdf_xml import SDF_VERSION, WorldError, XmlDoc, parse_xml, sub, text_of, write_xml
 
 MIN_VERSION = (1, 4)
@@ -32,7 +33,8 @@ def check_world(path: str | Path, *, use_ign: bool = True) -> list[str]:
     """Problems of a world/model file or folder (see the module docstring)."""
     try:
         source = pick_file(Path(path))
-        docs, problems = _collect(source)
+        roots = allowed_roots(source)
+        docs, problems = _collect(source, roots)
     except WorldError as exc:
         return [str(exc)]
     for doc in docs:
@@ -43,7 +45,7 @@ def check_world(path: str | Path, *, use_ign: bool = True) -> list[str]:
                 problems.append(doc.error(mesh, "<mesh> without a <uri>").args[0])
                 continue
             try:
-                resolve_uri(text_of(uri_el), doc, uri_el, [source.parent])
+                resolve_uri(text_of(uri_el), doc, uri_el, [source.parent], roots)
             except WorldError as exc:
                 problems.append(str(exc))
     if use_ign and shutil.which("ign"):
@@ -58,7 +60,7 @@ def _include_target(inc: ET.Element) -> str | None:
     return uri[len("model://"):].rstrip("/") if uri.startswith("model://") else None
 
 
-def _collect(source: Path) -> tuple[list[XmlDoc], list[str]]:
+def _collect(source: Path, roots: tuple[Path, ...]) -> tuple[list[XmlDoc], list[str]]:
     """The file and every model file it includes (recursively); unresolved includes."""
     docs, problems, seen = [], [], set()
     todo = [source]
@@ -75,9 +77,10 @@ def _collect(source: Path) -> tuple[list[XmlDoc], list[str]]:
             name = _include_target(inc)
             if name is None or name in GROUND_MODELS:
                 continue
-            model_dir = find_model(name, [path.parent, source.parent])
+            model_dir = find_model(name, [path.parent, source.parent], roots)
             if model_dir is None:
-                problems.append(doc.error(inc, f"included model '{name}' not found").args[0])
+                problems.append(doc.error(inc, _model_not_found(name, f"model://{name}",
+                                                                [path.parent, source.parent])).args[0])
                 continue
             try:
                 todo.append(model_file(model_dir))

@@ -22,6 +22,19 @@ compose too). As in the SDF specification an include ``<pose>`` REPLACES the inc
 model's own top-level ``<pose>``. ``relative_to`` (SDF 1.7+) may name the model or a
 sibling link only. Mesh ``<scale>`` is applied in the mesh frame, before world_from_mesh.
 
+Files a world may read (``allowed_roots``): everything inside the world file's folder (for a
+model folder: that folder) and inside the folders of the model path variables above,
+compared after resolving ``..`` and symbolic links. A model, include or mesh URI that leads
+anywhere else (``../x.stl``, ``model://name/../..``, ``model://..``, an absolute path, a link
+out of the folder) is refused with a WorldError naming it; to read such files on purpose,
+add their folder to ``GAZEBO_MODEL_PATH`` (documented in docs/worlds.md). ``model.config``'s
+``<sdf>`` must name a file inside its own model folder.
+
+Bounds (one WorldError each, never a RecursionError): an include that includes itself
+(directly or through others), models nested more than :data:`MAX_MODEL_DEPTH` deep, more
+than :data:`MAX_MODELS` models and includes in all; the XML limits of
+:func:`worlds.sdf_xml.parse_xml`; and the mesh limits of :mod:`worlds.mesh_read`.
+
 The car: a model named like the car (``nxp_cup_car`` by default) or holding a camera sensor
 gives ``Scene.car_pose`` / ``car_z_m`` and contributes no visuals. Only ``<mesh>``
 geometries become visuals (primitives are not track surfaces); a ``<plane>`` collision (or
@@ -42,6 +55,8 @@ from worlds.sdf_xml import WorldError, XmlDoc, parse_pose, parse_vector, parse_x
 
 MODEL_PATH_ENV = ("GAZEBO_MODEL_PATH", "GZ_SIM_RESOURCE_PATH", "IGN_GAZEBO_RESOURCE_PATH", "SDF_PATH")
 GROUND_MODELS = ("ground_plane",)
+MAX_MODEL_DEPTH = 32  # <model>s and <include>s inside each other
+MAX_MODELS = 10_000  # <model>s and <include>s read in all (an include counts each time)
 DEFAULT_CAR_NAME = "nxp_cup_car"  # vehicle.description.CarDescription().name
 
 # Gazebo's stock material scripts (media/materials/scripts/gazebo.material), diffuse RGBA.
@@ -104,6 +119,8 @@ def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
     doc = parse_xml(source)
     reader.document(doc)
     track_json = source.parent / "track.json"
+    if _is_file(track_json) and not inside(track_json, reader.roots):
+        raise WorldError(f"{track_json}: links outside the world's folder {source.parent}")
     return Scene(source=source, visuals=tuple(reader.visuals), collisions=tuple(reader.collisions),
                  car_pose=reader.car_pose, car_z_m=reader.car_z_m,
                  track_json=track_json if track_json.is_file() else None,
@@ -111,26 +128,66 @@ def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
 
 
 def load_mesh_world(visual: MeshVisual):
-    """The visual's mesh as a ``trimesh.Trimesh`` with vertices ``(N, 3)`` in the world frame."""
+    """The visual's mesh as a ``trimesh.Trimesh`` with vertices ``(N, 3)`` in the world frame
+    (read by :func:`worlds.mesh_read.read_triangles`: bounded, damaged files refused;
+    three vertices per triangle, not merged)."""
     import trimesh
 
-    try:
-        mesh = trimesh.load_mesh(visual.mesh_path, process=False)
-    except Exception as exc:  # trimesh raises many types for bad files
-        raise WorldError(f"{visual.mesh_path}: cannot read mesh ({exc})") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise WorldError(f"{visual.mesh_path}: expected a triangle mesh")
-    verts = np.asarray(mesh.vertices, dtype=float) * visual.scale
-    verts = verts @ visual.world_from_mesh[:3, :3].T + visual.world_from_mesh[:3, 3]
-    return trimesh.Trimesh(verts, np.asarray(mesh.faces), process=False)
+    from worlds.mesh_read import placed_triangles, read_triangles
+
+    tris = placed_triangles(read_triangles(visual.mesh_path), visual.world_from_mesh, visual.scale)
+    return trimesh.Trimesh(tris.reshape(-1, 3), np.arange(3 * len(tris)).reshape(-1, 3), process=False)
 
 
 # -- files and models ----------------------------------------------------------------------
+def _is_file(path: Path) -> bool:
+    try:
+        return path.is_file()
+    except (OSError, ValueError):  # a name too long, a NUL byte
+        return False
+
+
+def _is_dir(path: Path) -> bool:
+    try:
+        return path.is_dir()
+    except (OSError, ValueError):
+        return False
+
+
+def _resolved(path: Path) -> Path:
+    try:
+        return path.resolve()
+    except (OSError, RuntimeError, ValueError):  # a symbolic-link loop, a name too long
+        return path.absolute()
+
+
+def model_path_dirs() -> list[Path]:
+    """The folders of the model path variables (``MODEL_PATH_ENV``), in order."""
+    return [Path(p) for var in MODEL_PATH_ENV for p in os.environ.get(var, "").split(os.pathsep) if p]
+
+
+def allowed_roots(source: Path) -> tuple[Path, ...]:
+    """Resolved folders whose files a world read from ``source`` may read (module docstring)."""
+    roots = [_resolved(Path(source).parent), *(_resolved(d) for d in model_path_dirs())]
+    return tuple(dict.fromkeys(roots))
+
+
+def inside(path: Path, roots: tuple[Path, ...]) -> bool:
+    """Whether ``path`` (resolved: ``..`` and links followed) lies in one of ``roots``."""
+    p = _resolved(Path(path))
+    return any(p == r or p.is_relative_to(r) for r in roots)
+
+
+def _outside(path: Path, roots: tuple[Path, ...], what: str) -> str:
+    return (f"{what} {path} is outside the world's folder {roots[0]} and the model path "
+            f"(to allow it, add its folder to GAZEBO_MODEL_PATH)")
+
+
 def pick_file(path: Path) -> Path:
     """The SDF file to read for ``path`` (a file, or a folder as in the module docstring)."""
-    if path.is_file():
+    if _is_file(path):
         return path
-    if not path.is_dir():
+    if not _is_dir(path):
         raise WorldError(f"{path}: world file or folder not found")
     if (path / "world.sdf").is_file():
         return path / "world.sdf"
@@ -148,8 +205,8 @@ def pick_file(path: Path) -> Path:
 def model_file(model_dir: Path) -> Path:
     """The model SDF file of a Gazebo model folder (``model.config``'s ``<sdf>``, newest version)."""
     config = model_dir / "model.config"
-    if not config.is_file():
-        if (model_dir / "model.sdf").is_file():
+    if not _is_file(config):
+        if _is_file(model_dir / "model.sdf") and inside(model_dir / "model.sdf", (_resolved(model_dir),)):
             return model_dir / "model.sdf"
         raise WorldError(f"{model_dir}: model folder has no model.config")
     doc = parse_xml(config, "model.config")
@@ -164,7 +221,10 @@ def model_file(model_dir: Path) -> Path:
     if best is None:
         raise doc.error(doc.root, "expected an <sdf> element naming the model file")
     path = model_dir / text_of(best[1])
-    if not path.is_file():
+    if not inside(path, (_resolved(model_dir),)):
+        raise doc.error(best[1], f"<sdf>{text_of(best[1])}</sdf>: expected a file inside the model "
+                        f"folder {model_dir}")
+    if not _is_file(path):
         raise doc.error(best[1], f"model file {path.name} not found in {model_dir}")
     return path
 
@@ -177,16 +237,21 @@ def model_search_dirs(start_dirs: list[Path]) -> list[Path]:
         for d in (start, *start.parents):
             out.append(d)
         out.append(start / "models")
-    for var in MODEL_PATH_ENV:
-        out += [Path(p) for p in os.environ.get(var, "").split(os.pathsep) if p]
+    out += model_path_dirs()
     seen: set[Path] = set()
     return [d for d in out if not (d in seen or seen.add(d))]
 
 
-def find_model(name: str, start_dirs: list[Path]) -> Path | None:
-    """Folder of model NAME, or None (a folder counts when it has a model.config/model.sdf)."""
+def find_model(name: str, start_dirs: list[Path], roots: tuple[Path, ...] | None = None) -> Path | None:
+    """Folder of model NAME, or None (a folder counts when it has a model.config/model.sdf).
+    With ``roots``, only folders inside them count; a NAME that is not a plain folder name
+    (empty, ``.``, ``..``, with a slash) is never found."""
+    if name in ("", ".", "..") or "/" in name or "\\" in name:
+        return None
+
     def is_model(d: Path) -> bool:
-        return (d / "model.config").is_file() or (d / "model.sdf").is_file()
+        return ((_is_file(d / "model.config") or _is_file(d / "model.sdf"))
+                and (roots is None or inside(d, roots)))
 
     for d in model_search_dirs(start_dirs):
         if d.name == name and is_model(d):
@@ -196,14 +261,27 @@ def find_model(name: str, start_dirs: list[Path]) -> Path | None:
     return None
 
 
-def resolve_uri(uri: str, doc: XmlDoc, el: ET.Element, start_dirs: list[Path]) -> Path:
-    """Absolute path of a mesh URI written in ``doc``; the file must exist."""
+def _model_not_found(name: str, uri: str, start_dirs: list[Path]) -> str:
+    if name in ("", ".", "..") or "/" in name or "\\" in name:
+        return f"URI {uri}: '{name}' is not a model name (expected model://NAME/...)"
+    outside = find_model(name, start_dirs)
+    if outside is not None:
+        return (f"model '{name}' of URI {uri} is only found at {outside}, outside the world's "
+                f"folder and the model path (to allow it, add its folder to GAZEBO_MODEL_PATH)")
+    return (f"model '{name}' not found (URI {uri}; searched the folders above the file, "
+            f"models/ beside it, {', '.join(MODEL_PATH_ENV)})")
+
+
+def resolve_uri(uri: str, doc: XmlDoc, el: ET.Element, start_dirs: list[Path],
+                roots: tuple[Path, ...] | None = None) -> Path:
+    """Absolute path of a mesh URI written in ``doc``; the file must exist and lie inside
+    ``roots`` (default: :func:`allowed_roots` of the first of ``start_dirs``' files)."""
+    roots = roots if roots is not None else allowed_roots(Path(start_dirs[0]) / "world.sdf")
     if uri.startswith("model://"):
         name, _, rest = uri[len("model://"):].partition("/")
-        model_dir = find_model(name, [doc.path.parent, *start_dirs])
+        model_dir = find_model(name, [doc.path.parent, *start_dirs], roots)
         if model_dir is None:
-            raise doc.error(el, f"model '{name}' of URI {uri} not found (searched the folders "
-                            f"above the file, models/ beside it, {', '.join(MODEL_PATH_ENV)})")
+            raise doc.error(el, _model_not_found(name, uri, [doc.path.parent, *start_dirs]))
         path = model_dir / rest
     elif uri.startswith("file://"):
         path = Path(uri[len("file://"):])
@@ -213,7 +291,9 @@ def resolve_uri(uri: str, doc: XmlDoc, el: ET.Element, start_dirs: list[Path]) -
         path = Path(uri)
     if not path.is_absolute():
         path = doc.path.parent / path
-    if not path.is_file():
+    if not inside(path, roots):
+        raise doc.error(el, _outside(path, roots, f"mesh URI {uri}: the file"))
+    if not _is_file(path):
         raise doc.error(el, f"mesh file {path} not found (URI {uri})")
     return path
 
@@ -234,6 +314,12 @@ def _role(name: str, rgba: np.ndarray | None) -> str:
 class _Reader:
     def __init__(self, source: Path, car_name: str):
         self.start_dirs = [source.parent]
+        self.roots = allowed_roots(source)
+        self.including: list[Path] = [_resolved(source)]  # model files being read, outermost first
+        self.n_models = 0
+        self._docs: dict[Path, XmlDoc] = {}  # each model file parsed once per read
+        self._found: dict[tuple[str, Path], Path | None] = {}  # find_model per (name, folder)
+        self._model_files: dict[Path, tuple[Path, Path]] = {}  # model folder -> its file, resolved
         self.car_name = car_name
         self.visuals: list[MeshVisual] = []
         self.collisions: list[MeshVisual] = []
@@ -242,7 +328,8 @@ class _Reader:
         self.ground_z_m: float | None = None
 
     def document(self, doc: XmlDoc, world_from_parent: np.ndarray | None = None,
-                 pose_override: np.ndarray | None = None, name: str | None = None) -> None:
+                 pose_override: np.ndarray | None = None, name: str | None = None,
+                 depth: int = 0) -> None:
         root = doc.root
         if root.tag != "sdf":
             raise doc.error(root, f"expected <sdf> as the root element, found <{root.tag}>")
@@ -253,16 +340,26 @@ class _Reader:
         if world is not None and not included:
             for child in world:
                 if child.tag == "model":
-                    self.model(doc, child, tf)
+                    self.model(doc, child, tf, depth=depth)
                 elif child.tag == "include":
-                    self.include(doc, child, tf)
+                    self.include(doc, child, tf, depth)
         elif models:
             for model in models[:1] if included else models:  # an include names one model
-                self.model(doc, model, tf, pose_override, name)
+                self.model(doc, model, tf, pose_override, name, depth)
         else:
             raise doc.error(root, "expected a <world> or <model> element under <sdf>")
 
-    def include(self, doc: XmlDoc, inc: ET.Element, parent_tf: np.ndarray) -> None:
+    def _enter(self, doc: XmlDoc, el: ET.Element, depth: int) -> None:
+        """Count one model or include; refuse too deep or too many."""
+        self.n_models += 1
+        if depth > MAX_MODEL_DEPTH:
+            raise doc.error(el, f"models and includes nested more than {MAX_MODEL_DEPTH} deep")
+        if self.n_models > MAX_MODELS:
+            raise doc.error(el, f"more than {MAX_MODELS:,} models and includes in the world "
+                            "(each include counted every time it is read)")
+
+    def include(self, doc: XmlDoc, inc: ET.Element, parent_tf: np.ndarray, depth: int = 0) -> None:
+        self._enter(doc, inc, depth)
         uri_el = inc.find("uri")
         uri = text_of(uri_el)
         if not uri:
@@ -275,20 +372,42 @@ class _Reader:
             self._ground(parent_tf @ (pose if pose is not None else np.eye(4)))
             return
         if target is not None:
-            model_dir = find_model(target, [doc.path.parent, *self.start_dirs])
+            key = (target, doc.path.parent)
+            if key not in self._found:
+                self._found[key] = find_model(target, [doc.path.parent, *self.start_dirs], self.roots)
+            model_dir = self._found[key]
             if model_dir is None:
-                raise doc.error(uri_el, f"model '{target}' not found (searched the folders above "
-                                f"the file, models/ beside it, {', '.join(MODEL_PATH_ENV)})")
+                raise doc.error(uri_el, _model_not_found(target, uri, [doc.path.parent, *self.start_dirs]))
         else:
+            if "://" in uri and not uri.startswith("file://"):
+                raise doc.error(uri_el, f"URI {uri}: only model://, file:// and folder paths are supported")
             model_dir = Path(uri[len("file://"):] if uri.startswith("file://") else uri)
             if not model_dir.is_absolute():
                 model_dir = doc.path.parent / model_dir
-            if not model_dir.is_dir():
+            if not inside(model_dir, self.roots):
+                raise doc.error(uri_el, _outside(model_dir, self.roots, f"include {uri}: the folder"))
+            if not _is_dir(model_dir):
                 raise doc.error(uri_el, f"included model folder {model_dir} not found")
-        self.document(parse_xml(model_file(model_dir)), parent_tf, pose, name)
+        if model_dir not in self._model_files:
+            path = model_file(model_dir)
+            self._model_files[model_dir] = (path, _resolved(path))
+        path, resolved = self._model_files[model_dir]
+        if resolved in self.including:
+            chain = " -> ".join(p.name if p.name not in ("model.sdf",) else f"{p.parent.name}/{p.name}"
+                                for p in [*self.including[self.including.index(resolved):], resolved])
+            raise doc.error(uri_el, f"include {uri} includes itself ({chain})")
+        self.including.append(resolved)
+        try:
+            if resolved not in self._docs:
+                self._docs[resolved] = parse_xml(path)
+            self.document(self._docs[resolved], parent_tf, pose, name, depth)
+        finally:
+            self.including.pop()
 
     def model(self, doc: XmlDoc, el: ET.Element, parent_tf: np.ndarray,
-              pose_override: np.ndarray | None = None, name: str | None = None) -> None:
+              pose_override: np.ndarray | None = None, name: str | None = None,
+              depth: int = 0) -> None:
+        self._enter(doc, el, depth + 1)
         name = name or el.get("name", "")
         model_tf = parent_tf @ (pose_override if pose_override is not None
                                 else parse_pose(doc, el.find("pose")))
@@ -304,20 +423,26 @@ class _Reader:
         links = {link.get("name", ""): link for link in el.findall("link")}
         link_tfs: dict[str, np.ndarray] = {}
 
-        def link_tf(link_name: str, depth: int = 0) -> np.ndarray:
-            if link_name not in link_tfs:
-                link = links[link_name]
-                pose_el = link.find("pose")
+        def link_tf(link_name: str) -> np.ndarray:
+            chain: list[str] = []  # links whose pose is relative to the next one (no recursion)
+            while link_name not in link_tfs:
+                pose_el = links[link_name].find("pose")
                 rel = (pose_el.get("relative_to", "") if pose_el is not None else "").strip()
+                chain.append(link_name)
                 if rel in ("", "__model__", name):
-                    base = model_tf
-                elif rel in links and rel != link_name and depth < len(links):
-                    base = link_tf(rel, depth + 1)
-                else:
-                    raise doc.error(pose_el, f"<pose relative_to='{rel}'>: expected the model or "
-                                    f"a sibling link ({', '.join(links)})")
-                link_tfs[link_name] = base @ parse_pose(doc, pose_el)
-            return link_tfs[link_name]
+                    link_tfs[link_name] = model_tf @ parse_pose(doc, pose_el)
+                    chain.pop()
+                    break
+                if rel not in links or rel in chain:
+                    some = ", ".join(list(links)[:5]) + (", ..." if len(links) > 5 else "")
+                    raise doc.error(pose_el, f"<pose relative_to='{rel[:40]}'>: expected the model or "
+                                    f"a sibling link ({some}), without a loop")
+                link_name = rel
+            for child in reversed(chain):
+                pose_el = links[child].find("pose")
+                parent = pose_el.get("relative_to", "").strip()
+                link_tfs[child] = link_tfs[parent] @ parse_pose(doc, pose_el)
+            return link_tfs[chain[0] if chain else link_name]
 
         for link_name, link in links.items():
             ltf = link_tf(link_name)
@@ -326,9 +451,9 @@ class _Reader:
                     self.geometry(doc, item, ltf, link_name, out, kind == "collision")
         for child in el:
             if child.tag == "model":
-                self.model(doc, child, model_tf)
+                self.model(doc, child, model_tf, depth=depth + 1)
             elif child.tag == "include":
-                self.include(doc, child, model_tf)
+                self.include(doc, child, model_tf, depth + 1)
 
     def geometry(self, doc: XmlDoc, item: ET.Element, link_tf: np.ndarray, link_name: str,
                  out: list[MeshVisual], is_collision: bool) -> None:
@@ -348,7 +473,7 @@ class _Reader:
         uri_el = mesh.find("uri")
         if not text_of(uri_el):
             raise doc.error(mesh, "<mesh> without a <uri>")
-        path = resolve_uri(text_of(uri_el), doc, uri_el, self.start_dirs)
+        path = resolve_uri(text_of(uri_el), doc, uri_el, self.start_dirs, self.roots)
         scale = parse_vector(doc, mesh.find("scale"), 3, (1.0, 1.0, 1.0), "3 numbers (scale x y z)")
         rgba, material_name = self.material(doc, item.find("material"))
         name = item.get("name", "")

@@ -21,6 +21,8 @@ from xml.parsers import expat
 import numpy as np
 
 SDF_VERSION = "1.6"  # dartpy's SdfParser reads 1.4-1.6 only; Gazebo reads 1.6
+MAX_XML_BYTES = 16 * 1024 * 1024  # one SDF / model.config file (NXP's are ~2 kB)
+MAX_XML_DEPTH = 100  # element nesting (an SDF world nests about 10 deep)
 
 
 class WorldError(ValueError):
@@ -45,24 +47,46 @@ class XmlDoc:
 
 
 def parse_xml(path: Path, what: str = "SDF file") -> XmlDoc:
-    """Parse ``path``; a missing/unreadable file or bad XML raises :class:`WorldError`."""
+    """Parse ``path``; a missing/unreadable file or bad XML raises :class:`WorldError`.
+
+    Bounded: files over :data:`MAX_XML_BYTES`, elements nested over :data:`MAX_XML_DEPTH`
+    deep and any ``<!DOCTYPE>`` (entity declarations: "billion laughs"; SDF uses none) are
+    refused."""
     path = Path(path)
     try:
+        size = path.stat().st_size
+        if size > MAX_XML_BYTES:
+            raise WorldError(f"{path}: {what} of {size / 2**20:.1f} MiB: at most "
+                             f"{MAX_XML_BYTES // 2**20} MiB are read")
         data = path.read_bytes()
     except FileNotFoundError:
         raise WorldError(f"{path}: {what} not found") from None
     except OSError as exc:
-        raise WorldError(f"{path}: cannot read {what} ({exc.strerror})") from None
+        raise WorldError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
     builder = ET.TreeBuilder()
     parser = expat.ParserCreate()
     lines: dict = {}
+    depth = [0]
 
     def start(tag, attrs):
+        depth[0] += 1
+        if depth[0] > MAX_XML_DEPTH:
+            raise WorldError(f"{path}:{parser.CurrentLineNumber}: elements nested more than "
+                             f"{MAX_XML_DEPTH} deep in {what}")
         lines[builder.start(tag, attrs)] = parser.CurrentLineNumber
 
+    def end(tag):
+        depth[0] -= 1
+        builder.end(tag)
+
+    def doctype(*_args):
+        raise WorldError(f"{path}:{parser.CurrentLineNumber}: <!DOCTYPE> in {what}: SDF files "
+                         "have none (entity declarations are not read)")
+
     parser.StartElementHandler = start
-    parser.EndElementHandler = builder.end
+    parser.EndElementHandler = end
     parser.CharacterDataHandler = builder.data
+    parser.StartDoctypeDeclHandler = doctype
     try:
         parser.Parse(data, True)
     except expat.ExpatError as exc:

@@ -34,8 +34,6 @@ From a scene (a world):
 """
 from __future__ import annotations
 
-import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -46,7 +44,7 @@ from pieces.pose import Pose2
 from simrunner.track.errors import TrackLoadError
 from simrunner.track.raster import (DEFAULT_M_PER_PX, ROLE_GRAY, TrackRaster, build_raster,
                                     check_m_per_px, layer_from_footprint, layer_from_visual,
-                                    upward_triangles, world_triangles)
+                                    upward_triangles)
 
 if TYPE_CHECKING:  # trackgen (shapely) loads only for a layout
     from trackgen.chain import Track
@@ -185,8 +183,10 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
     """Build a ``SimTrack`` from a ``worlds.sdf_read.Scene`` (see the module docstring)."""
     source = Path(source if source is not None else scene.source)
     meta = _read_track_json(scene.track_json) if scene.track_json is not None else {}
-    layers = [layer for layer in (layer_from_visual(v) for v in scene.visuals) if layer is not None]
-    surface_z = _surface_z(scene, layers) if layers else 0.0
+    tris = _scene_triangles(scene)
+    layers = [layer for layer in (layer_from_visual(v, t) for v, t in zip(scene.visuals, tris.visuals))
+              if layer is not None]
+    surface_z = _surface_z(scene, layers, tris.collisions) if layers else 0.0
     if not layers:
         raise TrackLoadError(f"{scene.source}: the world has no mesh visuals with upward faces "
                              f"(nothing to drive on)")
@@ -235,10 +235,22 @@ def road_extents_m(raster: TrackRaster, pose: Pose2) -> tuple[float, float]:
     return out[0], out[1]
 
 
-def _surface_z(scene, layers) -> float:
+def _scene_triangles(scene):
+    """``worlds.mesh_read.scene_triangles`` (every mesh read once, the world's limits
+    checked: the same errors as ``trackgen validate``) with TrackLoadError."""
+    from worlds import WorldError
+    from worlds.mesh_read import scene_triangles
+
+    try:
+        return scene_triangles(scene)
+    except WorldError as exc:
+        raise TrackLoadError(str(exc)) from None
+
+
+def _surface_z(scene, layers, collision_triangles) -> float:
     tops = []
-    for coll in getattr(scene, "collisions", None) or []:
-        up = upward_triangles(world_triangles(coll.mesh_path, coll.world_from_mesh, coll.scale))
+    for tris in collision_triangles:
+        up = upward_triangles(tris)
         if len(up):
             tops.append(float(up[:, :, 2].max()))
     if tops:
@@ -254,49 +266,13 @@ def _default_name(source: Path) -> str:
     return source.parent.name if source.stem in ("world", "model") else source.stem
 
 
-def _pose(value, where: str) -> Pose2:
-    if (not isinstance(value, (list, tuple)) or len(value) != 3
-            or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in value)):
-        raise TrackLoadError(f"{where}: expected [x_m, y_m, yaw_rad], got {value!r}")
-    return Pose2(*value)
-
-
 def _read_track_json(path: Path) -> dict:
-    """The fields of a track.json (format nxpcup-track/1) the simulator uses, checked."""
-    path = Path(path)
+    """The fields of a track.json the simulator uses, checked: ``worlds.track_json`` (the
+    reader ``trackgen validate`` uses too), its WorldError as TrackLoadError."""
+    from worlds import WorldError
+    from worlds.track_json import read_track_json
+
     try:
-        data = json.loads(path.read_text())
-    except OSError as exc:
-        raise TrackLoadError(f"{path}: cannot read ({exc.strerror})") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise TrackLoadError(f"{path}: not valid JSON ({exc})") from None
-    if not isinstance(data, dict) or not str(data.get("format", "")).startswith("nxpcup-track/"):
-        raise TrackLoadError(f"{path}: expected a JSON object with \"format\": \"nxpcup-track/1\"")
-    out: dict = {}
-    if isinstance(data.get("name"), str) and data["name"]:
-        out["name"] = data["name"]
-    if data.get("start_pose") is not None:
-        out["start_pose"] = _pose(data["start_pose"], f"{path}: start_pose")
-    gate = data.get("finish_gate")
-    if gate is not None:
-        half = gate.get("half_width_m") if isinstance(gate, dict) else None
-        if not isinstance(half, (int, float)) or not half > 0:
-            raise TrackLoadError(f"{path}: finish_gate: expected {{\"pose\": [x, y, yaw], "
-                                 f"\"half_width_m\": > 0}}, got {gate!r}")
-        out["finish_gate"] = (_pose(gate.get("pose"), f"{path}: finish_gate.pose"), float(half))
-    length = data.get("length_m")
-    if length is not None:
-        if not isinstance(length, (int, float)) or not (length > 0 and math.isfinite(length)):
-            raise TrackLoadError(f"{path}: length_m: expected a positive number, got {length!r}")
-        out["length_m"] = float(length)
-    centre = data.get("centreline")
-    if centre is not None:
-        try:
-            arr = np.asarray(centre, dtype=float) if isinstance(centre, list) else None
-        except (TypeError, ValueError):
-            arr = None
-        if arr is None or arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2 or not np.isfinite(arr).all():
-            raise TrackLoadError(f"{path}: centreline: expected a list of [x_m, y_m] points")
-        arr.flags.writeable = False
-        out["centreline"] = arr
-    return out
+        return read_track_json(path)
+    except WorldError as exc:
+        raise TrackLoadError(str(exc)) from None

@@ -38,6 +38,7 @@ FLOOR_GRAY = 40
 WHITE_GRAY = 235
 BLACK_GRAY = 15
 DEFAULT_M_PER_PX = 0.005
+MAX_RASTER_PX = 150_000_000  # ~300 MB (image + mask); worlds' 50 m limit gives <= 101 M at 5 mm
 
 # Diffuse colours of Gazebo's stock materials (media/materials/scripts/gazebo.material).
 GAZEBO_MATERIAL_RGB = {
@@ -144,60 +145,34 @@ def world_triangles(mesh_path: Path, world_from_mesh: np.ndarray,
                     scale: Sequence[float] = (1.0, 1.0, 1.0)) -> np.ndarray:
     """All triangles of a mesh file in the world frame: ``(T, 3, 3)`` metres.
 
-    The SDF ``<scale>`` applies in the mesh frame, before ``world_from_mesh (4, 4)``.
-    Binary STL files are read directly; anything else (ASCII STL, COLLADA, OBJ, ...) through
-    trimesh, imported only then (~0.5 s).
+    The SDF ``<scale>`` applies in the mesh frame, before ``world_from_mesh (4, 4)``. The
+    file is read by ``worlds.mesh_read.read_triangles`` (binary and ASCII STL directly,
+    other formats through trimesh; bounded, a damaged file refused): its WorldError becomes
+    a TrackLoadError with the same message.
     """
-    verts = _binary_stl_vertices(mesh_path)
-    if verts is not None:
-        faces = np.arange(len(verts)).reshape(-1, 3)
-    else:
-        import trimesh
-
-        try:
-            mesh = trimesh.load(str(mesh_path), force="mesh", process=False)
-        except Exception as exc:  # trimesh raises many types for bad files
-            raise TrackLoadError(f"{mesh_path}: cannot read mesh ({exc})") from None
-        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-            raise TrackLoadError(f"{mesh_path}: expected a triangle mesh")
-        verts, faces = np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces)
-    verts = verts * np.asarray(scale, dtype=float)
-    tf = np.asarray(world_from_mesh, dtype=float)
-    verts = verts @ tf[:3, :3].T + tf[:3, 3]
-    return verts[faces]
-
-
-def _binary_stl_vertices(mesh_path: Path) -> np.ndarray | None:
-    """Vertices ``(3 T, 3)`` float64 (float32 values, three per triangle in file order) of a
-    binary STL with at least one triangle, read with numpy-stl (~0.2 s to import, against
-    trimesh's ~0.5 s), as trimesh reads them (``process=False``); None when the file is not
-    one (no ``.stl`` suffix, ASCII STL, unreadable: trimesh then reads or reports it)."""
-    if Path(mesh_path).suffix.lower() != ".stl":
-        return None
-    from stl import Mode, mesh as stl_mesh
+    from worlds.mesh_read import placed_triangles, read_triangles
+    from worlds.sdf_xml import WorldError
 
     try:
-        vectors = stl_mesh.Mesh.from_file(str(mesh_path), mode=Mode.BINARY).vectors
-    except Exception:  # noqa: BLE001 - numpy-stl raises several types (ASCII: AssertionError)
-        return None
-    return vectors.reshape(-1, 3).astype(float) if len(vectors) else None
+        tris = read_triangles(mesh_path)
+    except WorldError as exc:
+        raise TrackLoadError(str(exc)) from None
+    return placed_triangles(tris, world_from_mesh, scale)
 
 
 def upward_triangles(triangles: np.ndarray, min_normal_z: float = 0.5) -> np.ndarray:
     """The triangles ``(T, 3, 3)`` whose unit normal has z > ``min_normal_z``."""
-    if len(triangles) == 0:
-        return triangles
-    n = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-    norm = np.linalg.norm(n, axis=1)
-    ok = norm > 0
-    nz = np.zeros(len(n))
-    nz[ok] = n[ok, 2] / norm[ok]
-    return triangles[nz > min_normal_z]
+    from worlds.mesh_read import upward
+
+    return upward(triangles, min_normal_z)
 
 
-def layer_from_visual(visual) -> RasterLayer | None:
-    """A ``RasterLayer`` from a ``worlds.sdf_read.MeshVisual`` (None if it has no top faces)."""
-    up = upward_triangles(world_triangles(visual.mesh_path, visual.world_from_mesh, visual.scale))
+def layer_from_visual(visual, triangles: np.ndarray | None = None) -> RasterLayer | None:
+    """A ``RasterLayer`` from a ``worlds.sdf_read.MeshVisual`` (None if it has no top faces);
+    ``triangles``: its world-frame triangles if already read (else read here)."""
+    if triangles is None:
+        triangles = world_triangles(visual.mesh_path, visual.world_from_mesh, visual.scale)
+    up = upward_triangles(triangles)
     if len(up) == 0:
         return None
     gray = gray_of(visual.rgba, visual.material_name, getattr(visual, "role", None))
@@ -253,6 +228,8 @@ def build_raster(layers: Iterable[RasterLayer], *, m_per_px: float = DEFAULT_M_P
         raise TrackLoadError("build_raster: no layer has upward-facing triangles (nothing to "
                              "rasterise)")
     allxy = np.concatenate([layer.triangles_xy.reshape(-1, 2) for layer in layers])
+    if not np.isfinite(allxy).all():
+        raise TrackLoadError("build_raster: a layer has non-finite coordinates")
     lo = allxy.min(axis=0) - margin_m
     hi = allxy.max(axis=0) + margin_m
     # Snap the origin to the pixel grid so the same track gives the same raster wherever it
@@ -261,6 +238,10 @@ def build_raster(layers: Iterable[RasterLayer], *, m_per_px: float = DEFAULT_M_P
     y0 = math.ceil(hi[1] / m_per_px) * m_per_px
     w = int(math.ceil((hi[0] - x0) / m_per_px)) + 1
     h = int(math.ceil((y0 - lo[1]) / m_per_px)) + 1
+    if w * h > MAX_RASTER_PX:
+        raise TrackLoadError(f"build_raster: the track spans {hi[0] - lo[0]:.4g} m x {hi[1] - lo[1]:.4g} m: "
+                             f"{w} x {h} pixels at {m_per_px:g} m per pixel, more than "
+                             f"{MAX_RASTER_PX:,} (use a larger m_per_px)")
     image = np.full((h, w), floor_gray, dtype=np.uint8)
     road = np.zeros((h, w), dtype=np.uint8)
     road_mask = road.view(bool)

@@ -1,0 +1,109 @@
+"""The line kernel's on-disk numba cache is verified (issue 13 item 16, the cache part): a
+truncated or changed entry is dropped and rebuilt, never served; track loading keeps no
+cache at all."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import pytest
+
+from simrunner.sensors import kernel_cache
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _fake_dispatcher(folder: Path) -> SimpleNamespace:
+    index = folder / "k.f-1.py311.nbi"
+    return SimpleNamespace(_cache=SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(index))))
+
+
+def _entry(folder: Path) -> tuple[Path, Path]:
+    index, data = folder / "k.f-1.py311.nbi", folder / "k.f-1.py311.1.nbc"
+    index.write_bytes(b"index")
+    data.write_bytes(b"machine code" * 100)
+    return index, data
+
+
+@pytest.mark.parametrize("damage", ["truncate", "flip", "extra", "remove_data", "no_manifest",
+                                    "bad_manifest"])
+def test_damaged_entry_is_dropped(tmp_path, damage):
+    d = _fake_dispatcher(tmp_path)
+    assert kernel_cache.verify(d) == "empty"
+    index, data = _entry(tmp_path)
+    if damage != "no_manifest":
+        kernel_cache.record(d)
+        assert kernel_cache.verify(d) == "verified"
+    if damage == "truncate":
+        data.write_bytes(data.read_bytes()[:50])
+    elif damage == "flip":
+        data.write_bytes(b"Machine code" + data.read_bytes()[12:])
+    elif damage == "extra":
+        (tmp_path / "k.f-1.py311.2.nbc").write_bytes(b"x")
+    elif damage == "remove_data":
+        data.unlink()
+    elif damage == "bad_manifest":
+        (tmp_path / ("k.f-1.py311.nbi" + kernel_cache.MANIFEST_SUFFIX)).write_text("{not json")
+    assert kernel_cache.verify(d) == "dropped"
+    assert sorted(p.name for p in tmp_path.iterdir()) == []  # the entry and its manifest are gone
+
+
+def test_unrelated_files_are_left_alone(tmp_path):
+    d = _fake_dispatcher(tmp_path)
+    _entry(tmp_path)
+    (tmp_path / "other.g-3.py311.1.nbc").write_bytes(b"other")
+    assert kernel_cache.verify(d) == "dropped"
+    assert [p.name for p in tmp_path.iterdir()] == ["other.g-3.py311.1.nbc"]
+
+
+def test_record_writes_sums_once(tmp_path):
+    d = _fake_dispatcher(tmp_path)
+    index, data = _entry(tmp_path)
+    kernel_cache.record(d)
+    manifest = tmp_path / (index.name + kernel_cache.MANIFEST_SUFFIX)
+    sums = json.loads(manifest.read_text())
+    assert set(sums) == {index.name, data.name} and all(len(v) == 64 for v in sums.values())
+    mtime = manifest.stat().st_mtime_ns
+    kernel_cache.record(d)
+    assert manifest.stat().st_mtime_ns == mtime
+
+
+_DRIVE = ("import sys; from simrunner.cli import main; sys.argv = ['simrunner', 'drive', "
+          "'examples/line_follower.py', '--time-limit', '0.5', '--csv', sys.argv[1]]; main()")
+
+
+def test_truncated_and_changed_numba_entries_are_rebuilt(tmp_path):
+    """End to end, in fresh processes with their own NUMBA_CACHE_DIR: the same CSV after a
+    truncated and after a changed machine-code file (it used to fail with UnpicklingError)."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "nbc"), PYTHONPATH=str(ROOT))
+
+    def drive(csv: str) -> bytes:
+        proc = subprocess.run([sys.executable, "-c", _DRIVE, str(tmp_path / csv)], cwd=ROOT, env=env,
+                              capture_output=True, text=True, timeout=300, check=False)
+        assert proc.returncode in (0, 1) and "Traceback" not in proc.stderr, proc.stderr
+        return (tmp_path / csv).read_bytes()
+
+    first = drive("a.csv")
+    (nbc,) = list((tmp_path / "nbc").rglob("*.nbc"))
+    assert list((tmp_path / "nbc").rglob("*" + kernel_cache.MANIFEST_SUFFIX))
+    nbc.write_bytes(nbc.read_bytes()[: nbc.stat().st_size // 2])
+    assert drive("b.csv") == first
+    data = bytearray(nbc.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    nbc.write_bytes(bytes(data))
+    assert drive("c.csv") == first
+    import hashlib  # the rebuilt entry is recorded: its manifest matches the new file
+
+    sums = json.loads(next((tmp_path / "nbc").rglob("*" + kernel_cache.MANIFEST_SUFFIX)).read_text())
+    assert sums[nbc.name] == hashlib.sha256(nbc.read_bytes()).hexdigest()
+
+
+def test_track_loading_keeps_no_cache():
+    text = "\n".join(p.read_text() for p in (ROOT / "simrunner" / "track").glob("*.py"))
+    text += "\n".join(p.read_text() for p in (ROOT / "worlds").glob("*.py"))
+    for word in ("~/.cache", "XDG_CACHE", "TRACK_CACHE", "expanduser"):
+        assert word not in text
