@@ -72,34 +72,8 @@ def test_record_writes_sums_once(tmp_path):
     assert manifest.stat().st_mtime_ns == mtime
 
 
-_DRIVE = ("import sys; from simrunner.cli import main; sys.argv = ['simrunner', 'drive', "
-          "'examples/line_follower.py', '--time-limit', '0.5', '--csv', sys.argv[1]]; main()")
-
-
-def test_truncated_and_changed_numba_entries_are_rebuilt(tmp_path):
-    """End to end, in fresh processes with their own NUMBA_CACHE_DIR: the same CSV after a
-    truncated and after a changed machine-code file (it used to fail with UnpicklingError)."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "nbc"), PYTHONPATH=str(ROOT))
-
-    def drive(csv: str) -> bytes:
-        proc = subprocess.run([sys.executable, "-c", _DRIVE, str(tmp_path / csv)], cwd=ROOT, env=env,
-                              capture_output=True, text=True, timeout=300, check=False)
-        assert proc.returncode in (0, 1) and "Traceback" not in proc.stderr, proc.stderr
-        return (tmp_path / csv).read_bytes()
-
-    first = drive("a.csv")
-    (nbc,) = list((tmp_path / "nbc").rglob("*.nbc"))
-    assert list((tmp_path / "nbc").rglob("*" + kernel_cache.MANIFEST_SUFFIX))
-    nbc.write_bytes(nbc.read_bytes()[: nbc.stat().st_size // 2])
-    assert drive("b.csv") == first
-    data = bytearray(nbc.read_bytes())
-    data[len(data) // 2] ^= 0x01
-    nbc.write_bytes(bytes(data))
-    assert drive("c.csv") == first
-    import hashlib  # the rebuilt entry is recorded: its manifest matches the new file
-
-    sums = json.loads(next((tmp_path / "nbc").rglob("*" + kernel_cache.MANIFEST_SUFFIX)).read_text())
-    assert sums[nbc.name] == hashlib.sha256(nbc.read_bytes()).hexdigest()
+# No end-to-end drive here: runs use the NumPy line row (simrunner/sensors/line_row.py), so
+# numba's cache entry can no longer break a drive; the checks above cover the reference kernel.
 
 
 def test_track_loading_keeps_no_cache():

@@ -100,3 +100,14 @@ def record(dispatcher) -> None:
             tmp.unlink()
         except OSError:
             pass
+
+
+def reference_row_kernel():
+    """The numba reference kernel (:func:`simrunner.sensors.line_kernel.camera_row`), its
+    on-disk entry verified before this process first loads it; call :func:`record` with it
+    after its first use so the entry it loaded or wrote is recorded."""
+    from simrunner.sensors.line_kernel import camera_row
+
+    if not camera_row.overloads:  # not yet compiled or loaded in this process
+        verify(camera_row)
+    return camera_row
