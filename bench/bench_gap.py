@@ -555,13 +555,14 @@ def main(argv: list[str] | None = None) -> None:
                       f"{time.perf_counter() - t_start:.0f} s total]", file=sys.stderr, flush=True)
     order = {m: i for i, m in enumerate(MODES)}
     rows.sort(key=lambda r: (order[r["mode"]], r.get("trial", 0)))
+    if a.out:  # first: a failing report must not lose hours of rows
+        a.out.write_text(json.dumps({"argv": sys.argv[1:] if argv is None else argv, "rows": rows,
+                                     "targets": target_rows(rows)}, indent=1, default=float) + "\n")
     text = report(rows)
     print(text)
     print(f"\nbench wall time: {time.perf_counter() - t_start:.0f} s on {a.jobs} processes")
-    if a.out:
-        a.out.write_text(json.dumps({"argv": sys.argv[1:] if argv is None else argv, "rows": rows,
-                                     "targets": target_rows(rows)}, indent=1, default=float) + "\n")
 
 
 if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run as a script: `bench` importable
     main(sys.argv[1:])
