@@ -164,14 +164,14 @@ def main() -> None:
                    "simulated time pass.")
 @click.option("--watch", is_flag=True,
               help="Keep the track loaded and run again each time CONTROLLER is saved (Ctrl-C ends).")
-@click.option("--param", "param_items", multiple=True, metavar="NAME=VALUE",
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="Controller parameter, read with spinner.param(NAME, default) (C: spinner_param); repeatable.")
 @click.option("-I", "--include", "include_dirs", multiple=True, metavar="DIR",
               help="C/C++ controllers: an include directory (repeatable).")
 @click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
               help="C/C++ controllers: a preprocessor define (repeatable).")
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
-              car, dt_s, wall_limit_s, param_items, include_dirs, defines, start, start_before_finish_m,
+              car, dt_s, wall_limit_s, params, include_dirs, defines, start, start_before_finish_m,
               keep_driving, watch=False) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
@@ -187,7 +187,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
             click.echo("simrunner: --watch: expected one Python controller (.py)", err=True)
             sys.exit(2)
         try:
-            params = parse_params(param_items)
+            params = parse_params(params)
         except input_errors() as exc:
             click.echo(f"simrunner: {exc}", err=True)
             sys.exit(2)
@@ -200,7 +200,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
         controller = _native_program(controller, more_sources, include_dirs, defines)
         result = drive(controller, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
                        csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
-                       wall_limit_s=wall_limit_s, params=parse_params(param_items), start=_start_pose(start),
+                       wall_limit_s=wall_limit_s, params=parse_params(params), start=_start_pose(start),
                        start_before_finish_m=start_before_finish_m, keep_driving=keep_driving)
     except input_errors() as exc:
         click.echo(f"simrunner: {exc}", err=True)

@@ -1,18 +1,21 @@
 """``render()`` of ``NXPCup-v0``: the debug-video frame of ``simrunner drive --video`` (see
-:mod:`simrunner.run.video`) as an ``(576, 1024, 3) uint8`` RGB array."""
+:mod:`simrunner.run.video`) as an ``(FRAME_H, FRAME_W, 3) uint8`` RGB array."""
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-from simrunner.run.video import _TOP_BOX, FrameRecord, TrackView, compose
+from simrunner.run.video import FrameRecord, Layout, TrackView, compose
 
 
 class EpisodeView:
     """Draws the frames of one episode (the top-down view keeps the path driven so far)."""
 
     def __init__(self, raster, *, camera, line_row: int, car_length_m: float, car_width_m: float):
-        self._view = TrackView(raster, _TOP_BOX[2] - _TOP_BOX[0], _TOP_BOX[3] - _TOP_BOX[1])
+        h, w = np.asarray(raster.image).shape
+        self._layout = Layout.for_frame((camera.height_px, camera.width_px), w / h)
+        x0, y0, x1, y1 = self._layout.top
+        self._view = TrackView(raster, x1 - x0, y1 - y0)
         self._camera = camera
         self._line_row = line_row
         self._car = (car_length_m, car_width_m)
@@ -23,5 +26,5 @@ class EpisodeView:
         ``state`` holds speed, steer, speed_cmd, steer_cmd (m/s, rad), lap, off_track."""
         rec = FrameRecord(k, t_s, pose, state, image=self._camera.render(pose), line=line,
                           line_row=self._line_row, text=text)
-        bgr = compose(rec, self._view, state.get("laps", 1), *self._car)
+        bgr = compose(rec, self._view, state.get("laps", 1), *self._car, layout=self._layout)
         return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
