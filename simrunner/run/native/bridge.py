@@ -254,7 +254,7 @@ class _Session:
         where = ""
         try:
             self.proc.send_signal(signal.SIGUSR1)
-            deadline = time.monotonic() + 2.0
+            deadline = time.monotonic() + 5.0  # a loaded machine can be slow to answer
             while True:
                 op, payload = self._message(deadline)
                 if op == OP_FAULT:
