@@ -19,7 +19,6 @@ from simrunner.run.log import read_log
 from simrunner.run.native import INCLUDE_DIR, build_program, cflags
 from simrunner.run.native.symbolize import parse_report
 from simrunner.run.runner import drive, resolve_track
-from simrunner.run.spinner import Spinner
 from vehicle.description import load_car
 
 pytestmark = pytest.mark.skipif(shutil.which("cc") is None and not os.environ.get("CC"),
@@ -200,19 +199,15 @@ def test_sleeps_wait_in_simulated_time_and_stdout_reaches_the_terminal(tmp_path,
     assert r.sim_time_s == pytest.approx(1.41, abs=0.005)
 
 
-def test_param_comes_from_the_python_spinner_when_it_has_param(tmp_path, track, capfd, monkeypatch):
+def test_param_comes_from_the_python_spinner(tmp_path, track, capfd):
     src = write(tmp_path, "param.c", """\
         #include <stdio.h>
         #include "spinner.h"
         int main(void) { printf("gain %g\\n", spinner_param("gain", 0.5)); return 0; }
         """)
-    if not hasattr(Spinner, "param"):  # before the --param branch: the default
-        drive(src, track=track)
-        assert "gain 0.5" in capfd.readouterr().out
-        monkeypatch.setattr(Spinner, "param", lambda self, name, default: 2.5, raising=False)
-    else:
-        monkeypatch.setattr(Spinner, "param", lambda self, name, default: 2.5)
-    drive(src, track=track)
+    drive(src, track=track)  # no --param: the default
+    assert "gain 0.5" in capfd.readouterr().out
+    drive(src, track=track, params={"gain": 2.5})
     assert "gain 2.5" in capfd.readouterr().out
 
 

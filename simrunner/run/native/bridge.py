@@ -225,10 +225,7 @@ class _Session:
     def _param(self, payload: bytes) -> float:
         default = _D.unpack_from(payload)[0]
         name = payload[8:].decode("utf-8", "replace")
-        param = getattr(self.spinner, "param", None)  # the --param contract (branch many-runs)
-        if param is None:
-            return default
-        value = param(name, default)
+        value = self.spinner.param(name, default)  # --param (simrunner.run.params)
         try:
             v = float(value)
         except (TypeError, ValueError):
