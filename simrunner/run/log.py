@@ -12,7 +12,9 @@ then one line per row; numbers in fixed formats (``%d`` and ``%.6f``; so the sam
 the same bytes), ``data_text`` quoted by the CSV rules when it needs to be. Written
 atomically (``PATH.tmp``, then renamed). :func:`read_log` also reads format 1 (the header of
 names without units, ``t,x,y,yaw,speed,...``, no format line), and any CSV with these
-columns in any order; unknown columns are ignored.
+columns in any order; unknown columns are ignored. A run log of this simulator whose last
+line has no line end was cut short while it was written (the process was killed): that line
+is left out, with a :class:`LogWarning`; every complete row is read.
 
 During a run, :class:`RunRecorder` collects the rows: the state at each camera frame
 boundary ``t_k``, the command the first physics step after ``t_k`` applies (the
@@ -27,6 +29,7 @@ import csv
 import io
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
@@ -52,6 +55,10 @@ class LogError(SimError):
         # one line, whatever the file holds (a quoted cell may contain a line break)
         text = f"{self.path}:{self.line}: {message}".replace("\r", "\\r").replace("\n", "\\n")
         super().__init__(text)
+
+
+class LogWarning(UserWarning):
+    """A log was read with something left out (a last line cut short)."""
 
 
 @dataclass(frozen=True)
@@ -286,7 +293,33 @@ def read_log(path: str | Path, columns: ColumnMap | None = None) -> RunLog:
         raise LogError(str(path), 1, "expected a text (CSV) file") from None
     if "\0" in text:
         raise LogError(str(path), 1, "expected a text (CSV) file")
+    text = _without_cut_line(text, str(path))
     return _parse(text, str(path), columns if columns is not None and columns.rules else None)
+
+
+def _without_cut_line(text: str, source: str) -> str:
+    """``text`` without its last line when that line was cut short: a run log of this
+    simulator (it starts with the format line) always ends its rows with a line end, so text
+    after the last one is a row a killed process did not finish writing (the rows before it
+    are whole: each was written with one call). Warns :class:`LogWarning` naming the line."""
+    if not text.startswith("# nxpcup-sim run log") or text.endswith("\n"):
+        return text
+    keep = pos = 0
+    quotes = 0
+    while True:  # the end of the last whole record: a line end outside quotes
+        end = text.find("\n", pos)
+        if end < 0:
+            break
+        quotes += text.count('"', pos, end)
+        pos = end + 1
+        if quotes % 2 == 0:
+            keep = pos
+    if text.count("\n", 0, keep) < 2:  # no header yet: nothing to keep
+        return text
+    line = text.count("\n", 0, keep) + 1
+    warnings.warn(f"{source}:{line}: the last row is cut short (the run was killed while "
+                  f"writing it); read without it", LogWarning, stacklevel=3)
+    return text[:keep]
 
 
 def _parse(text: str, source: str, columns: ColumnMap | None = None) -> RunLog:
@@ -487,5 +520,5 @@ def schema_markdown() -> str:
     return "\n".join(rows)
 
 
-__all__ = ["RunLog", "RunRecorder", "LogError", "Column", "COLUMNS", "COLUMN_NAMES", "FORMAT_VERSION",
+__all__ = ["RunLog", "RunRecorder", "LogError", "LogWarning", "Column", "COLUMNS", "COLUMN_NAMES", "FORMAT_VERSION",
            "log_from_columns", "read_log", "write_log", "to_csv_text", "empty_log", "schema_markdown"]

@@ -4,7 +4,9 @@ Each row closed by the :class:`~simrunner.run.log.RunRecorder` is formatted exac
 :func:`simrunner.run.log.write_log` formats it (same format line, header, ``%d`` / ``%.6f``
 and quoting: the same run gives the same bytes either way) and written at once with one
 ``os.write`` of whole lines, so the file on disk holds every row closed so far whatever ends
-the process (a crash, ``os._exit``, a hard kill): at most the open row is missing. The file
+the process (a crash, ``os._exit``, a hard kill): at most the open row is missing. (A kill
+that lands inside that one write can leave the row cut short; :func:`~simrunner.run.log.read_log`
+leaves such a last line out with a ``LogWarning``. tests/test_run_hard_end.py kills a run.) The file
 is the requested path itself (not a temporary renamed at the end): a run that was cut short
 still leaves its telemetry where it was asked for. Nothing of the rows is kept here.
 

@@ -1,0 +1,90 @@
+"""Runs that end without the simulator's say (issue 13 items 13 and 16): a hard kill
+(SIGKILL) and a controller stuck inside one C-level call that holds the interpreter.
+
+The run log is streamed one whole row per write, so after a hard kill every closed row is on
+disk and the file reads back; a last row cut short mid-write is left out with a warning."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from simrunner.run.log import LogWarning, read_log
+
+REPO = Path(__file__).resolve().parents[1]
+PY = sys.executable
+
+
+def start_drive(tmp_path: Path, body: str, *options: str) -> subprocess.Popen:
+    """``simrunner drive ctrl.py`` in its own session (so the test can end the whole group)."""
+    (tmp_path / "ctrl.py").write_text("import os, sys, time\ndef main(s):\n"
+                                      + textwrap.indent(textwrap.dedent(body), "    "))
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    return subprocess.Popen([PY, "-c", "from simrunner.cli import main; main()", "drive", "ctrl.py",
+                             *options], cwd=tmp_path, env=env, start_new_session=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def wait_for(path: Path, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not path.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert path.exists(), proc.communicate(timeout=10)
+
+
+def test_sigkill_mid_run_keeps_every_closed_row(tmp_path):
+    proc = start_drive(tmp_path, """\
+        k = 0
+        while True:
+            s.add_data([f"frame text {k}, \\"quoted\\""])
+            s.get_image()
+            k += 1
+            if k == 50:
+                open("started", "w").close()
+        """, "--csv", "t.csv", "--time-limit", "1e5")
+    try:
+        wait_for(tmp_path / "started", proc)
+        os.killpg(proc.pid, signal.SIGKILL)  # the command and everything it started
+        proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == -signal.SIGKILL
+    log = read_log(tmp_path / "t.csv")  # the project's reader takes it as it is
+    assert len(log) >= 50  # rows 0..49 were closed before the marker was written
+    assert log.frame.tolist() == list(range(len(log)))  # no gap, no half row
+    assert log.data_text[:50] == tuple(f'frame text {k}, "quoted"' for k in range(50))
+
+
+CUT_FILE = ("# nxpcup-sim run log, format 2\n"
+            "frame,t_s,data_text\n"
+            "0,0.000000,\n"
+            '1,0.020000,"two\nlines, ""quoted"""\n'
+            "2,0.040000,last\n")
+
+
+@pytest.mark.parametrize("cut", [1, 3, 8, 15, 17, 22, 30])
+def test_a_last_row_cut_short_is_left_out_with_a_warning(tmp_path, cut):
+    path = tmp_path / "t.csv"
+    text = CUT_FILE[:len(CUT_FILE) - cut]
+    path.write_text(text)
+    whole, line = (2, 6) if cut < 16 else (1, 4)  # the cut falls in row 2, or in row 1 (quoted)
+    with pytest.warns(LogWarning, match=rf"t\.csv:{line}: the last row is cut short"):
+        log = read_log(path)
+    assert log.frame.tolist() == list(range(whole))
+    if whole == 2:
+        assert log.data_text[1] == 'two\nlines, "quoted"'
+
+
+def test_a_whole_log_reads_without_warning(tmp_path, recwarn):
+    path = tmp_path / "t.csv"
+    path.write_text(CUT_FILE)
+    assert len(read_log(path)) == 3 and not recwarn.list
+    path.write_text("t_s,x_m\n0,1\n0.1,2")  # not a run log of this simulator: the last line counts
+    assert len(read_log(path)) == 2 and not recwarn.list
