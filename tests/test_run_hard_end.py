@@ -88,3 +88,62 @@ def test_a_whole_log_reads_without_warning(tmp_path, recwarn):
     assert len(read_log(path)) == 3 and not recwarn.list
     path.write_text("t_s,x_m\n0,1\n0.1,2")  # not a run log of this simulator: the last line counts
     assert len(read_log(path)) == 2 and not recwarn.list
+
+
+def test_a_controller_stuck_in_one_c_call_keeps_every_output(tmp_path):
+    """``sum(range(10**13))`` holds the interpreter: no Python code runs in the run's process.
+    The hard watchdog ends it; the supervisor writes summary, plot and video from the log."""
+    import json
+
+    import cv2
+
+    proc = start_drive(tmp_path, """\
+        for _ in range(10):
+            s.set_speed_and_servo(0.3, 0.0)
+            s.add_data(["before the stall"])
+            s.get_image()
+        sum(range(10 ** 13))
+        """, "--csv", "t.csv", "--video", "v.mp4", "--plot", "p.png", "--summary", "s.json",
+                       "--wall-limit", "0.5")
+    try:
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 1, err
+    assert 'ctrl.py", line 7 in main' in err  # the stack dump, with the controller's line
+    log = read_log(tmp_path / "t.csv")
+    assert log.frame.tolist() == list(range(10))  # rows 0..9 closed; row 10 was still open
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["outcome"] == "stalled" and "at ctrl.py:7 in main" in summary["message"]
+    assert summary["frames"] == 10 and summary["sim_time_s"] == pytest.approx(float(log.t_s[-1]))
+    assert set(summary["outputs"]) == {"csv", "video", "plot", "summary"}
+    assert "outcome: stalled" in out
+    assert cv2.imread(str(tmp_path / "p.png")) is not None
+    assert not (tmp_path / "v.partial.mp4").exists()
+    cap = cv2.VideoCapture(str(tmp_path / "v.mp4"))
+    frames = 0
+    while cap.read()[0]:
+        frames += 1
+    cap.release()
+    assert frames == 10  # one per row (50 fps camera: every frame)
+
+
+def test_without_csv_the_stuck_run_still_gets_its_summary(tmp_path):
+    import json
+
+    proc = start_drive(tmp_path, """\
+        for _ in range(5):
+            s.get_image()
+        sum(range(10 ** 13))
+        """, "--summary", "s.json", "--wall-limit", "0.5")
+    try:
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 1, err
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["outcome"] == "stalled" and summary["frames"] == 5
+    assert summary["outputs"] == {"summary": "s.json"}  # the supervisor's run log is not an output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ctrl.py", "s.json"]

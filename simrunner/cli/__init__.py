@@ -196,18 +196,76 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
                          dt_s=dt_s, wall_limit_s=wall_limit_s, params=params, start=_start_pose(start),
                          start_before_finish_m=start_before_finish_m, keep_driving=keep_driving))
 
+    start_pose = _start_pose(start)  # a usage error (click's), before any fork
+    strays = []
+
+    def run() -> int:
+        try:
+            program = _native_program(controller, more_sources, include_dirs, defines)
+            result = drive(program, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
+                           csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
+                           wall_limit_s=wall_limit_s, params=parse_params(params),
+                           start=start_pose, start_before_finish_m=start_before_finish_m,
+                           keep_driving=keep_driving)
+        except input_errors() as exc:
+            click.echo(f"simrunner: {exc}", err=True)
+            return 2
+        except Terminated as exc:  # before the run started: nothing was written
+            click.echo(f"simrunner: {exc.args[0]} received before the run started", err=True)
+            return 128 + exc.signum
+        _print_result(result)
+        if result.unused_params:
+            click.echo("simrunner: warning: the controller never read --param "
+                       + ", ".join(result.unused_params)
+                       + " (read one with spinner.param(name, default))", err=True)
+        strays.append(result.stray_threads)
+        return exit_code(result.outcome, result.signal)
+
+    from simrunner.run.supervise import can_supervise
+
+    if not can_supervise():
+        code = run()
+        if any(strays):  # do not wait for the controller's threads at exit
+            sys.stdout.flush()
+            sys.stderr.flush()
+            import os
+
+            os._exit(code)
+        sys.exit(code)
+    sys.exit(_supervised(run, controller, csv=csv, video=video, plot=plot, summary=summary,
+                         track=track, car=car, laps=laps, seed=seed, wall_limit_s=wall_limit_s))
+
+
+def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, laps, seed,
+                wall_limit_s) -> int:
+    """``run()`` in a supervised child (simrunner.run.supervise); a child ended by the hard
+    watchdog gets its outputs written here, from its run log. Returns the exit code."""
+    from simrunner.run.outputs import Outputs
+    from simrunner.run.supervise import remove_temporary, supervise
+
+    end = supervise(run, csv)
     try:
-        controller = _native_program(controller, more_sources, include_dirs, defines)
-        result = drive(controller, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
-                       csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
-                       wall_limit_s=wall_limit_s, params=parse_params(params), start=_start_pose(start),
-                       start_before_finish_m=start_before_finish_m, keep_driving=keep_driving)
-    except input_errors() as exc:
-        click.echo(f"simrunner: {exc}", err=True)
-        sys.exit(2)
-    except Terminated as exc:  # before the run started: nothing was written
-        click.echo(f"simrunner: {exc.args[0]} received before the run started", err=True)
-        sys.exit(128 + exc.signum)
+        if not end.stuck:
+            return end.code
+        from simrunner.run.postmortem import StuckRun, finish_stuck_run
+
+        click.echo(end.report.rstrip(), err=True)  # every thread's stack: the controller's line
+        stuck = StuckRun(controller=controller, outputs=Outputs(video=video, csv=csv, plot=plot,
+                                                                summary=summary),
+                         track=track, car=car, laps=laps, seed=seed, wall_limit_s=wall_limit_s)
+        try:
+            result = finish_stuck_run(stuck, end.report, end.csv_path, wall_time_s=end.wall_time_s,
+                                      cpu_time_s=end.cpu_time_s)
+        except input_errors() as exc:
+            click.echo(f"simrunner: {exc}", err=True)
+            return 1
+        _print_result(result)
+        return 1
+    finally:
+        remove_temporary(end, csv)
+
+
+def _print_result(result) -> None:
     if result.error is not None:
         click.echo(result.error.traceback_text.rstrip(), err=True)
     for text in result.warnings:
@@ -219,18 +277,6 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
                f"{result.real_time_factor:.1f}x real time")
     if result.outputs:
         click.echo("wrote: " + ", ".join(result.outputs.values()))
-    if result.unused_params:
-        click.echo("simrunner: warning: the controller never read --param "
-                   + ", ".join(result.unused_params)
-                   + " (read one with spinner.param(name, default))", err=True)
-    code = exit_code(result.outcome, result.signal)
-    if result.stray_threads:  # do not wait for the controller's threads at exit
-        sys.stdout.flush()
-        sys.stderr.flush()
-        import os
-
-        os._exit(code)
-    sys.exit(code)
 
 
 def _start_pose(text: str | None) -> tuple[float, float, float] | None:

@@ -34,9 +34,11 @@ def write_outputs(result: RunResult, outputs: Outputs, video, track, *, csv_stre
                 result.outputs["video"] = str(p)
         except SimError as exc:
             errors.append(exc)
-    if csv_stream is not None:
+    if csv_stream is not None:  # (without outputs.csv: a supervisor's copy, not an output)
         try:
-            result.outputs["csv"] = str(csv_stream.close())
+            path = csv_stream.close()
+            if outputs.csv is not None:
+                result.outputs["csv"] = str(path)
         except SimError as exc:
             errors.append(exc)
     elif outputs.csv is not None:

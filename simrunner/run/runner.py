@@ -36,6 +36,7 @@ from simrunner.run.outputs import Outputs, check_outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
 from simrunner.run.settings import RunSettings
 from simrunner.run.spinner import Session, Spinner
+from simrunner.run.supervise import current_supervision
 from simrunner.run.watchdog import Watchdog
 from simrunner.track import SimTrack
 from vehicle.description import CarDescription, load_car
@@ -124,6 +125,9 @@ class Run:
         self.camera = Camera(car.camera, track)
         self.judge = Judge(track, laps=settings.laps)
         self.csv = None
+        supervision = current_supervision()
+        if csv_path is None and supervision is not None:  # the supervisor's copy of the log
+            csv_path = supervision.csv_path
         if csv_path is not None:  # written as the run goes (simrunner.run.stream)
             from simrunner.run.stream import CsvStream
 

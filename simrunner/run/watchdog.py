@@ -8,7 +8,10 @@ tick re-arms ``faulthandler.dump_traceback_later(hard_limit_s, exit=True)``, a t
 thread, so after ``hard_limit_s = limit_s + max(2, limit_s)`` without a tick the process
 prints every thread's stack (the controller's file:line included, under ``Timeout
 (h:mm:ss)!``) and exits with code 1. The run-log CSV then holds every row up to the stall
-(it is written as the run goes); the summary, plot and video are not written.
+(it is written as the run goes). Under a supervisor (``simrunner drive``,
+:mod:`simrunner.run.supervise`) the dump goes to the supervisor's report file instead, and
+the supervisor writes the summary, plot and video from the run log; without one (``drive()``
+in a process of its own) they are not written.
 """
 from __future__ import annotations
 
@@ -21,6 +24,7 @@ from pathlib import Path
 
 from simrunner.errors import Stalled
 from simrunner.run.clock import LockstepClock
+from simrunner.run.supervise import current_supervision
 
 
 class Watchdog:
@@ -39,6 +43,8 @@ class Watchdog:
         self.enabled = threading.current_thread() is threading.main_thread() and hasattr(signal, "setitimer")
         self.hard_limit_s = self.limit_s + max(2.0, self.limit_s)
         self._hard = False
+        supervision = current_supervision()
+        self._report = sys.__stderr__ if supervision is None else supervision.report
 
     def _where(self, frame) -> str:
         f = frame
@@ -51,7 +57,7 @@ class Watchdog:
     def _arm_hard(self) -> None:
         """(Re)start the C-level timer of a stuck call (see the module docstring)."""
         try:
-            faulthandler.dump_traceback_later(self.hard_limit_s, exit=True, file=sys.__stderr__)
+            faulthandler.dump_traceback_later(self.hard_limit_s, exit=True, file=self._report)
             self._hard = True
         except (AttributeError, ValueError, OSError, RuntimeError):  # no usable stderr
             self._hard = False

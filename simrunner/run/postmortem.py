@@ -1,0 +1,126 @@
+"""The outputs of a run whose process the hard watchdog ended, written from what it left on
+disk (:mod:`simrunner.run.supervise`): :func:`finish_stuck_run`.
+
+The run log holds every row closed before the stall (it streams one whole row per write).
+From it: the summary (outcome ``stalled``; the message names the controller's file:line, read
+from the watchdog's stack dump; laps and lap times from the log's ``lap`` column, to a camera
+frame), the plot, and the video, rebuilt frame by frame from the rows: the camera view drawn
+at each row's pose (without the camera noise), the API's numbers and the ``add_data`` text of
+the row; ``add_data`` image lines are not in the log and are left out. The video the stuck
+process was writing (``NAME.partial.mp4``, never closed, unplayable) is removed.
+"""
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+from simrunner.run.log import TEXT_SEPARATOR, LogWarning, RunLog, empty_log, read_log
+from simrunner.run.outputs import Outputs, write_outputs
+from simrunner.run.result import Outcome, RunResult
+
+_FRAME = re.compile(r'^\s*File "(?P<file>.+)", line (?P<line>\d+) in (?P<func>.+)$')
+
+
+@dataclass(frozen=True)
+class StuckRun:
+    """What the supervisor knows of the run it started: the command's inputs."""
+
+    controller: str
+    outputs: Outputs
+    track: str | None = None
+    car: str | None = None
+    laps: int = 1
+    seed: int = 0
+    wall_limit_s: float = 10.0
+
+
+def stuck_location(report: str, controller: str) -> str:
+    """``file:line in function`` of the controller's innermost frame in a faulthandler dump
+    (most recent call first), or ``""``."""
+    want = Path(controller).resolve()
+    for line in report.splitlines():
+        m = _FRAME.match(line)
+        if m and Path(m["file"]) == want:
+            return f"{want.name}:{m['line']} in {m['func'].strip()}"
+    return ""
+
+
+def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s: float,
+                     cpu_time_s: float) -> RunResult:
+    """Write the outputs of a run ended by the hard watchdog (see the module docstring);
+    the result names them in ``outputs``. Raises the first output's ``SimError`` after the
+    others were written, as :func:`~simrunner.run.outputs.write_outputs`."""
+    from simrunner.run.runner import resolve_track
+    from simrunner.run.settings import RunSettings
+    from vehicle.description import load_car
+
+    log = _read(csv_path)
+    hard_s = run.wall_limit_s + max(2.0, run.wall_limit_s)
+    where = stuck_location(report, run.controller)
+    message = (f"controller stuck in one C-level call{f' at {where}' if where else ''}: no Python "
+               f"code ran for {hard_s:g} s of wall time (--wall-limit {run.wall_limit_s:g} s + "
+               f"max(2 s, --wall-limit)); the outputs were written from the run log")
+    car = load_car(run.car)
+    track, label = resolve_track(run.track, car)
+    laps_completed, lap_times = _laps(log)
+    settings = RunSettings(laps=run.laps, seed=run.seed).for_track(track)
+    result = RunResult(outcome=Outcome.STALLED, laps=settings.laps, laps_completed=laps_completed,
+                       lap_times_s=lap_times, sim_time_s=float(log.t_s[-1]) if len(log) else 0.0,
+                       wall_time_s=wall_time_s, cpu_time_s=cpu_time_s, track=label,
+                       seed=run.seed, message=message, log=log, frames=len(log))
+    if run.outputs.csv is not None:
+        result.outputs["csv"] = str(run.outputs.csv)
+    video = None
+    if run.outputs.video is not None:
+        video = _rebuild_video(log, run.outputs.video, track, car, settings.laps)
+    write_outputs(result, Outputs(plot=run.outputs.plot, summary=run.outputs.summary), video, track)
+    return result
+
+
+def _read(csv_path: Path) -> RunLog:
+    if not csv_path.exists():  # the run stalled before its first frame
+        return empty_log(str(csv_path))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LogWarning)  # a row cut short is left out
+        return read_log(csv_path)
+
+
+def _laps(log: RunLog) -> tuple[int, list[float]]:
+    """Laps completed and their times, from the ``lap`` column (to a frame): a lap's time
+    runs from the previous completion (the first: from the log's first row)."""
+    if not len(log):
+        return 0, []
+    lap = log.lap.tolist()
+    ends = [float(log.t_s[i]) for i in range(1, len(lap)) if lap[i] > lap[i - 1]]
+    starts = [float(log.t_s[0])] + ends[:-1]
+    return int(lap[-1]), [e - s for s, e in zip(starts, ends)]
+
+
+def _rebuild_video(log: RunLog, path, track, car, laps: int):
+    """A VideoRecorder fed with every row of ``log`` (closed by write_outputs)."""
+    from pieces.pose import Pose2
+    from simrunner.run.video import VideoRecorder
+    from simrunner.sensors.camera import Camera
+
+    path = Path(path)
+    path.with_name(path.stem + ".partial.mp4").unlink(missing_ok=True)  # the stuck run's
+    camera = Camera(car.camera, track)
+    video = VideoRecorder(path, camera_fps=car.camera.fps_hz, render=camera.render,
+                          raster=track.raster, laps=laps, line_row=car.camera.default_row,
+                          car_length_m=car.chassis.wheelbase_m + 0.05, car_width_m=car.chassis.track_m)
+    texts = log.data_text or ("",) * len(log)
+    for i in range(len(log)):
+        video.frame_boundary(int(log.frame[i]), float(log.t_s[i]),
+                             Pose2(float(log.x_m[i]), float(log.y_m[i]), float(log.yaw_rad[i])), {
+                                 "speed": float(log.speed_mps[i]), "steer": float(log.steer_rad[i]),
+                                 "speed_cmd": float(log.speed_cmd_mps[i]),
+                                 "steer_cmd": float(log.steer_cmd_rad[i]),
+                                 "lap": int(log.lap[i]), "off_track": bool(log.off_track[i])})
+        if texts[i]:
+            video.add_text(texts[i].split(TEXT_SEPARATOR))
+    return video
+
+
+__all__ = ["StuckRun", "finish_stuck_run", "stuck_location"]

@@ -1,0 +1,178 @@
+"""A run under a supervisor process, so that a run whose process dies still gets its outputs.
+
+A controller stuck inside one C-level call that holds the interpreter (``sum(range(10**13))``,
+a huge regex, a C extension that never returns) lets no Python code run in its process: no
+watchdog tick, no writer thread, no output writing. The hard watchdog
+(:mod:`simrunner.run.watchdog`) then ends that process. Nothing in it can write the summary,
+the plot or a playable video, so another process does it:
+
+:func:`supervise` forks. The child runs the drive as usual (the caller's ``child()``: drive,
+print, return the exit code), streaming its run log to disk as always (to a temporary file
+when no ``--csv`` was asked for) and, should the hard watchdog fire, its stack dump to a file
+of the supervisor's (:func:`current_supervision`). The parent waits (SIGTERM and SIGHUP are
+passed on to the child; SIGINT reaches both from the terminal and the parent ignores it). If
+the child's hard watchdog fired, the parent writes the outputs from what is on disk
+(:mod:`simrunner.run.postmortem`): the run log's rows, the summary (outcome ``stalled``, the
+controller's file:line from the dump), the plot and the video, rebuilt from the log.
+
+The child dies with the parent (``PR_SET_PDEATHSIG``, Linux), so killing the command kills
+the run. Only where a fork is safe and useful: the main thread, stdout and stderr real files
+(:func:`can_supervise`); elsewhere callers run the drive in-process.
+"""
+from __future__ import annotations
+
+import contextlib
+import contextvars
+import os
+import signal
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Callable, Iterator
+
+
+@dataclass(frozen=True)
+class Supervision:
+    """What a supervised run does for its supervisor: ``report`` receives the hard
+    watchdog's stack dump; ``csv_path`` is where the run log streams when the run was asked
+    for none."""
+
+    report: IO[str]
+    csv_path: Path
+
+
+_SUPERVISION: contextvars.ContextVar[Supervision | None] = contextvars.ContextVar(
+    "simrunner_supervision", default=None)
+
+
+def current_supervision() -> Supervision | None:
+    """The supervision of the runs started in this context (None: not supervised)."""
+    return _SUPERVISION.get()
+
+
+@contextlib.contextmanager
+def supervised_by(supervision: Supervision) -> Iterator[None]:
+    token = _SUPERVISION.set(supervision)
+    try:
+        yield
+    finally:
+        _SUPERVISION.reset(token)
+
+
+@dataclass(frozen=True)
+class ChildEnd:
+    """How the supervised child ended: its exit ``code`` (128 + N when killed by signal N),
+    the hard watchdog's ``report`` (empty unless it fired), the run log it streamed
+    (``csv_path``), its wall and CPU time."""
+
+    code: int
+    report: str
+    csv_path: Path
+    wall_time_s: float
+    cpu_time_s: float
+
+    @property
+    def stuck(self) -> bool:
+        """The hard watchdog ended the child (a controller stuck in one C-level call)."""
+        return "Timeout (" in self.report
+
+
+def can_supervise() -> bool:
+    """A fork is possible and its output reaches the same files (not under click's test
+    runner, whose streams are in memory)."""
+    if not hasattr(os, "fork") or threading.current_thread() is not threading.main_thread():
+        return False
+    try:
+        sys.stdout.fileno(), sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        return False
+    return True
+
+
+def supervise(child: Callable[[], int], csv_path: str | Path | None) -> ChildEnd:
+    """Run ``child()`` (returns an exit code; may raise ``SystemExit``) in a forked process
+    under :class:`Supervision`; return how it ended. ``csv_path``: the run log the child
+    writes, or None (then a temporary one; the caller removes ``ChildEnd.csv_path``)."""
+    folder = Path(tempfile.mkdtemp(prefix="simrunner-run-"))
+    report_path = folder / "stall.txt"
+    csv = Path(csv_path) if csv_path is not None else folder / "run.csv"
+    sys.stdout.flush()
+    sys.stderr.flush()
+    wall0 = time.monotonic()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns
+        _child(child, report_path, folder / "run.csv")
+    forward = {s: signal.signal(s, lambda signum, frame: _pass_on(pid, signum))
+               for s in (signal.SIGTERM, signal.SIGHUP)}
+    old_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        _, status, usage = os.wait4(pid, 0)
+    finally:
+        for s, old in forward.items():
+            signal.signal(s, old)
+        signal.signal(signal.SIGINT, old_int)
+    code = os.waitstatus_to_exitcode(status)
+    try:
+        report = report_path.read_text(errors="replace")
+        report_path.unlink()
+    except OSError:
+        report = ""
+    if csv_path is not None:
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # the temporary run log, if any, is the caller's to remove
+    return ChildEnd(code=128 - code if code < 0 else code, report=report, csv_path=csv,
+                    wall_time_s=time.monotonic() - wall0,
+                    cpu_time_s=usage.ru_utime + usage.ru_stime)
+
+
+def remove_temporary(end: ChildEnd, csv_path: str | Path | None) -> None:
+    """Remove the temporary run log of a run asked for none (and its folder)."""
+    if csv_path is None:
+        end.csv_path.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            end.csv_path.parent.rmdir()
+
+
+def _pass_on(pid: int, signum: int) -> None:
+    with contextlib.suppress(ProcessLookupError):
+        os.kill(pid, signum)
+
+
+def _child(child: Callable[[], int], report_path: Path, csv_path: Path) -> None:
+    code = 1
+    try:
+        _die_with_parent()
+        with open(report_path, "w") as report, supervised_by(Supervision(report, csv_path)):
+            code = child()
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except BaseException:  # noqa: BLE001 - a bug: shown like the uncaught exception it is
+        import traceback
+
+        traceback.print_exc()
+        code = 1
+    finally:
+        with contextlib.suppress(Exception):
+            sys.stdout.flush()
+            sys.stderr.flush()
+        os._exit(code)
+
+
+def _die_with_parent() -> None:
+    """Linux: the kernel sends SIGKILL to this process when its parent dies."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # not Linux: the child may outlive a killed parent
+        pass
+    if os.getppid() == 1:  # the parent died before the call
+        os._exit(1)
+
+
+__all__ = ["ChildEnd", "Supervision", "can_supervise", "current_supervision", "remove_temporary",
+           "supervise", "supervised_by"]
