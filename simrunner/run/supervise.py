@@ -96,15 +96,17 @@ def supervise(child: Callable[[], int], csv_path: str | Path | None) -> ChildEnd
     """Run ``child()`` (returns an exit code; may raise ``SystemExit``) in a forked process
     under :class:`Supervision`; return how it ended. ``csv_path``: the run log the child
     writes, or None (then a temporary one; the caller removes ``ChildEnd.csv_path``)."""
-    folder = Path(tempfile.mkdtemp(prefix="simrunner-run-"))
-    report_path = folder / "stall.txt"
-    csv = Path(csv_path) if csv_path is not None else folder / "run.csv"
+    if csv_path is None:
+        csv = Path(tempfile.mkdtemp(prefix="simrunner-run-")) / "run.csv"
+    else:
+        csv = Path(csv_path)
+    report = tempfile.TemporaryFile("w+", errors="replace")  # no name: nothing left behind
     sys.stdout.flush()
     sys.stderr.flush()
     wall0 = time.monotonic()
     pid = os.fork()
     if pid == 0:  # the child: never returns
-        _child(child, report_path, folder / "run.csv")
+        _child(child, report, csv)
     forward = {s: signal.signal(s, lambda signum, frame: _pass_on(pid, signum))
                for s in (signal.SIGTERM, signal.SIGHUP)}
     old_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -115,15 +117,10 @@ def supervise(child: Callable[[], int], csv_path: str | Path | None) -> ChildEnd
             signal.signal(s, old)
         signal.signal(signal.SIGINT, old_int)
     code = os.waitstatus_to_exitcode(status)
-    try:
-        report = report_path.read_text(errors="replace")
-        report_path.unlink()
-    except OSError:
-        report = ""
-    if csv_path is not None:
-        with contextlib.suppress(OSError):
-            folder.rmdir()  # the temporary run log, if any, is the caller's to remove
-    return ChildEnd(code=128 - code if code < 0 else code, report=report, csv_path=csv,
+    with report:
+        report.seek(0)  # the child wrote through the same open file
+        text = report.read()
+    return ChildEnd(code=128 - code if code < 0 else code, report=text, csv_path=csv,
                     wall_time_s=time.monotonic() - wall0,
                     cpu_time_s=usage.ru_utime + usage.ru_stime)
 
@@ -141,11 +138,11 @@ def _pass_on(pid: int, signum: int) -> None:
         os.kill(pid, signum)
 
 
-def _child(child: Callable[[], int], report_path: Path, csv_path: Path) -> None:
+def _child(child: Callable[[], int], report: IO[str], csv_path: Path) -> None:
     code = 1
     try:
         _die_with_parent()
-        with open(report_path, "w") as report, supervised_by(Supervision(report, csv_path)):
+        with supervised_by(Supervision(report, csv_path)):
             code = child()
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
