@@ -6,7 +6,9 @@
 
 Exit codes of ``drive``: 0 the run finished its laps or ``main`` returned (or called
 ``sys.exit(0)``); 1 the run failed (off track, timeout, controller error or non-zero
-``sys.exit``, stalled, or stuck inside one C call - see simrunner.run.watchdog); 2 bad input,
+``sys.exit``, stalled, or stuck inside one C call - see simrunner.run.watchdog; ``drive``
+runs the simulation in a child process it supervises, which writes the outputs of such a
+run: simrunner.run.supervise); 2 bad input,
 or a simulator dependency is not installed (one line on stderr, no traceback); 130
 interrupted by Ctrl-C, 143 by SIGTERM, 129 by SIGHUP (outputs are still written).
 """

@@ -15,7 +15,10 @@ raises :class:`~simrunner.errors.RunFinished` — when ``main`` returns
 (``controller_returned``), when it raises (``controller_error``; also bad commands such as
 NaN), or when it spends ``wall_limit_s`` of wall time without letting simulated time pass
 (``stalled``: a SIGALRM watchdog, main thread only), or on Ctrl-C (``interrupted``).
-The run log, video, plot and summary are written in every case.
+The run log, video, plot and summary are written in every case but one: a controller stuck
+inside one C-level call that holds the interpreter, which the hard watchdog ends with the
+process (:mod:`simrunner.run.watchdog`); under a supervisor (:mod:`simrunner.run.supervise`,
+``simrunner drive``) the run log streams to disk and the supervisor writes the rest from it.
 """
 from __future__ import annotations
 
