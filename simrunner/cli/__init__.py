@@ -215,6 +215,12 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
         except Terminated as exc:  # before the run started: nothing was written
             click.echo(f"simrunner: {exc.args[0]} received before the run started", err=True)
             return 128 + exc.signum
+        except ModuleNotFoundError as exc:  # as _LazyGroup.invoke (this may run in a child)
+            line = _missing_dependency(exc)
+            if line is None:
+                raise
+            click.echo(line, err=True)
+            return 2
         _print_result(result)
         if result.unused_params:
             click.echo("simrunner: warning: the controller never read --param "
