@@ -698,3 +698,86 @@ def test_find_glitches_never_fails(dts, cols, seed, repeat):
         assert t[0] <= g.t_start_s <= g.t_end_s <= t[-1] and isinstance(g.kind, GlitchKind)
     assert glitch_mask(log, found).shape == (n,)
     derive(log, 0.175, exclude=glitch_mask(log, found))
+
+
+# -- robust window cost and stratified screening ------------------------------------------------
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.0, 1e6), st.integers(1, 5000)), min_size=1, max_size=30),
+       st.floats(1e-6, 1e3))
+def test_robust_total_is_least_squares_for_small_windows_and_grows_slowly_for_large(costs, scale):
+    from simrunner.workflows.gap.fit import robust_total
+
+    ls = sum(c for c, _ in costs)
+    assert robust_total(costs, math.inf) == pytest.approx(ls, rel=1e-12, abs=1e-12)
+    rob = robust_total(costs, scale)
+    assert rob <= ls * (1 + 1e-12) + 1e-12  # never more than least squares
+    small = [(1e-4 * scale * n, n) for _, n in costs]  # every window far below its scale
+    assert robust_total(small, scale) == pytest.approx(sum(c for c, _ in small), rel=1e-4)
+    # monotone: a window that gets worse never lowers the total
+    worse = [(c * 2.0 + 1.0, n) for c, n in costs[:1]] + costs[1:]
+    assert robust_total(worse, scale) >= rob
+
+
+def test_robust_scale_is_the_median_mean_square_times_the_factor():
+    from simrunner.workflows.gap.fit import robust_scale_of
+
+    costs = [(10.0, 10), (40.0, 10), (1e6, 10)]  # per value 1, 4, 1e5: the outlier does not move it
+    assert robust_scale_of(costs, 4.0) == pytest.approx(16.0)
+    assert robust_scale_of(costs, math.inf) == math.inf and robust_scale_of([], 4.0) == math.inf
+
+
+def _pushed(log, t0, t1, yaw_rate_radps):
+    """``log`` with the car turned by an unmodelled push between ``t0`` and ``t1`` (a hand on
+    the car, a wall): the measured yaw drifts and the path bends with it."""
+    t = log.t_s
+    extra = np.clip(t - t0, 0.0, t1 - t0) * yaw_rate_radps
+    yaw = log.yaw_rad + extra
+    dx = np.concatenate([[0.0], np.diff(log.x_m)])
+    dy = np.concatenate([[0.0], np.diff(log.y_m)])
+    c, s = np.cos(extra), np.sin(extra)
+    x = log.x_m[0] + np.cumsum(c * dx - s * dy)
+    y = log.y_m[0] + np.cumsum(s * dx + c * dy)
+    return log.with_columns(x_m=x, y_m=y, yaw_rad=yaw)
+
+
+def test_an_unmodelled_push_in_one_window_does_not_decide_the_fit():
+    """A steering offset hidden in a log with one window where the car was pushed round: the
+    least-squares fit bends the offset towards the push; the robust window cost keeps it."""
+    from simrunner.workflows.gap.fit import robust_scale_of, window_costs
+
+    nominal = CarDescription()
+    truth = nominal.replace(effects=nominal.effects.__class__(steering_offset_rad=0.02))
+    log = _pushed(simulate(truth, np.random.default_rng(3), duration_s=30.0), 13.0, 15.0, 1.5)
+    d = derive(log, nominal.chassis.wheelbase_m)
+    windows = tuple(make_windows(log))
+    res = residuals(log, d, replay(nominal, log, d, windows, dt_s=0.002, sim_factory=kin_factory))
+    seg = (Segment(log, d, windows),)
+    ls = Problem(nominal, seg, nominal_scales(seg, [res]), FIT_SIGNALS, 0.002, kin_factory)
+    costs = window_costs(ls, [res])
+    assert max(c for c, _ in costs) > 10 * np.median([c for c, _ in costs])  # one window stands out
+    robust = dataclasses.replace(ls, robust_scale=robust_scale_of(costs))
+    err = {}
+    for name, prob in (("ls", ls), ("robust", robust)):
+        r = fit_effect(prob, "steering_offset", cost_of(prob, nominal))
+        err[name] = abs(r.parameters["steering_offset_rad"] - 0.02)
+    assert err["ls"] > 0.005  # least squares: off by a quarter and more
+    assert err["robust"] < 0.5 * err["ls"]
+
+
+def test_screening_keeps_the_windows_of_a_rare_manoeuvre():
+    from simrunner.workflows.gap.chain import screening_problem, window_labels
+
+    car = CarDescription()
+    log = simulate(car, duration_s=60.0)  # speed steps and step steers; the one stop at 9-10 s
+    d = derive(log, car.chassis.wheelbase_m)
+    windows = tuple(make_windows(log))
+    prob = Problem(car, (Segment(log, d, windows),), {s: 1.0 for s in FIT_SIGNALS}, FIT_SIGNALS, 0.002,
+                   kin_factory)
+    labels = window_labels(prob)
+    assert len(labels) == len(windows)
+    rare = [w for w, lab in zip(windows, labels) if labels.count(lab) == 1]
+    assert rare, labels  # the stop at 9-10 s is the only coast of the log
+    sub = screening_problem(prob, max_s=15.0)
+    kept = sub.segments[0].windows
+    assert sum(s.duration_s for s in sub.segments) < 0.5 * prob.segments[0].duration_s
+    assert all(w in kept for w in rare)

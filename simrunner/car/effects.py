@@ -96,6 +96,8 @@ class EffectSpec:
     revealed_by: tuple[str, ...]
     observed_by: tuple[str, ...]
     acts_on: str  # "command" | "force" | "build"
+    log_scale: bool = False  # the gap fit searches log(value): a factor spanning a decade or more
+
 
     @property
     def param(self) -> str:
@@ -103,9 +105,12 @@ class EffectSpec:
         return self.params[0]
 
 
-def _spec(name, param, neutral, bounds, unit, meaning, revealed_by, observed_by, acts_on="command") -> EffectSpec:
+def _spec(name, param, neutral, bounds, unit, meaning, revealed_by, observed_by, acts_on="command",
+          log_scale=None) -> EffectSpec:
+    """One-parameter entry; ``log_scale`` defaults to True for a neutral value at infinity
+    (a limit that is absent in the nominal model, searched over decades)."""
     return EffectSpec(name, (param,), (neutral,), (bounds,), (unit,), meaning, tuple(revealed_by),
-                      tuple(observed_by), acts_on)
+                      tuple(observed_by), acts_on, math.isinf(neutral) if log_scale is None else log_scale)
 
 
 EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
@@ -154,12 +159,12 @@ EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
     _spec("esc_brake_reverse", "esc_reverse_delay_s", 0.0, (0.0, 1.0), "s",
           "a car ESC with brake: a negative command while rolling forward brakes to rest and "
           "reverses only after a hold time at rest", ("reverse",), _LONGITUDINAL),
-    _spec("accel_scale", "accel_scale", 1.0, (0.3, 2.0), "1",
+    _spec("accel_scale", "accel_scale", 1.0, (0.1, 2.0), "1",
           "the car file's drive.max_accel_mps2 is off by this factor (motor torque, battery)",
-          ("speed_step",), _LONGITUDINAL, "build"),
-    _spec("brake_scale", "brake_scale", 1.0, (0.3, 2.0), "1",
+          ("speed_step",), _LONGITUDINAL, "build", log_scale=True),
+    _spec("brake_scale", "brake_scale", 1.0, (0.1, 2.0), "1",
           "the car file's drive.max_brake_mps2 is off by this factor (ESC brake strength)",
-          ("brake", "speed_step"), _LONGITUDINAL, "build"),
+          ("brake", "speed_step"), _LONGITUDINAL, "build", log_scale=True),
     _spec("servo_rate_scale", "servo_rate_scale", 1.0, (0.1, 2.0), "1",
           "the car file's steering.rate_radps is off by this factor (servo model, voltage)",
           ("step_steer", "chirp"), _LATERAL, "build"),

@@ -5,8 +5,9 @@ refitted) and
 
 1. screens every remaining catalogue effect: a one-parameter fit of the new effect with
    the kept parameters held (:func:`simrunner.workflows.gap.fit.fit_all`, grid + probe), on
-   at most :data:`SCREEN_MAX_S` seconds of the fit windows (evenly chosen: screening only
-   ranks, so a long log costs no more than a 45-s one here);
+   about :data:`SCREEN_MAX_S` seconds of the fit windows (every k-th window of each driving
+   regime, :func:`screening_problem`: screening only ranks, so a long log costs no more than
+   a 45-s one here, and a rare manoeuvre is not left out);
 2. refits jointly the :data:`REFINE_TOP` best screened candidates (:data:`REFINE_LATER`
    from the second step on): all kept parameters and the new one together
    (``scipy.optimize.minimize``, Powell, in coordinates scaled to each parameter's fit
@@ -60,20 +61,59 @@ NEUTRAL_TOL = 0.01  # fraction of the fit range (scaled coordinates) that counts
 BETTER = "a better candidate was kept"
 
 
+# regimes that label a window for the screening subset (simrunner.workflows.gap.regimes)
+SCREEN_REGIMES = ("coasting", "braking", "accelerating", "reversing", "high_lat_accel", "cornering", "straight")
+SCREEN_LABEL_MIN_SHARE = 0.1  # a regime labels a window only if it covers this share of its samples
+
+
+def window_labels(problem: Problem) -> list[str]:
+    """One label per window of ``problem`` (the windows of all segments in turn): the regime of
+    :data:`SCREEN_REGIMES` most over-represented in the window against all the problem's
+    windows (its share of the window's samples over its share of all windows' samples; it
+    must cover at least :data:`SCREEN_LABEL_MIN_SHARE` of the window), ``"other"`` when none
+    does. A window with the rare braking of a log is labelled ``braking``, one of a
+    cornering-heavy log's few straights ``straight``."""
+    from simrunner.workflows.gap.regimes import segment
+    from simrunner.workflows.gap.replay import window_mask
+
+    shares, total, count = [], np.zeros(len(SCREEN_REGIMES)), 0
+    for seg in problem.segments:
+        masks = segment(seg.log, seg.derived, problem.car)
+        inside = window_mask(len(seg.log), seg.windows)
+        total += [float(np.count_nonzero(masks[r] & inside)) for r in SCREEN_REGIMES]
+        count += int(np.count_nonzero(inside))
+        for w in seg.windows:
+            n = max(w.stop - w.start, 1)
+            shares.append(np.array([np.count_nonzero(masks[r][w.start:w.stop]) / n for r in SCREEN_REGIMES]))
+    overall = total / max(count, 1)
+    labels = []
+    for share in shares:
+        score = np.where((share >= SCREEN_LABEL_MIN_SHARE) & (overall > 0), share / np.maximum(overall, 1e-12), 0.0)
+        labels.append(SCREEN_REGIMES[int(np.argmax(score))] if score.max() > 0.0 else "other")
+    return labels
+
+
 def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
-    """``problem`` with every k-th window only, k the smallest that keeps at most ``max_s``
-    seconds (the windows of all logs taken in turn, so every log keeps its share)."""
+    """``problem`` with about ``max_s`` seconds of its windows, stratified: with ``k`` the
+    smallest step that keeps at most ``max_s`` seconds, every k-th window of each label of
+    :func:`window_labels` (the first of each label included), so a manoeuvre that a few
+    windows hold (a hard brake, a coast, reversing) stays in the screening and the effects it
+    reveals are ranked on it."""
     total = sum(s.duration_s for s in problem.segments)
     k = max(1, math.ceil(total / max_s)) if max_s > 0 else 1
     if k == 1:
         return problem
-    segs, i = [], 0
+    labels = iter(window_labels(problem))
+    seen: dict[str, int] = {}
+    segs = []
     for seg in problem.segments:
         keep = []
         for w in seg.windows:
+            label = next(labels)
+            i = seen.get(label, 0)
+            seen[label] = i + 1
             if i % k == 0:
                 keep.append(w)
-            i += 1
         if keep:
             segs.append(dataclasses.replace(seg, windows=tuple(keep)))
     return dataclasses.replace(problem, segments=tuple(segs))

@@ -9,6 +9,17 @@ car's current value counts as known), then bounded Brent
 (``scipy.optimize.minimize_scalar``) in the bracket around the best grid point; the best
 point evaluated wins.
 
+Robust window cost: real logs have windows the catalogue cannot follow at all (a slide, a
+touch of a wall, a hand on the car, a sensor hiccup too small to be a glitch); in a plain
+sum of squares a few of them outweigh every other window, and an effect that bends those
+few at the expense of the rest wins the fit and then fails on held-out data. So each
+window's sum of squares ``c_w`` (``n_w`` compared values) enters through the Cauchy loss
+``c0_w ln(1 + c_w / c0_w)`` with ``c0_w = robust_scale * n_w``; ``run_gap`` sets
+``robust_scale`` to :data:`ROBUST_WINDOW_FACTOR` times the median mean square per value of
+the nominal model's fit windows (:func:`robust_scale_of`), so a window well below that
+counts as in least squares and one 50 times the median counts about 10 times, not 50.
+``robust_scale = inf`` is the plain sum of squares.
+
 Ranking: Bayesian information criterion on the normalised residuals,
 
     BIC = n_eff * ln(cost / n) + k * ln(n_eff)
@@ -51,6 +62,7 @@ IMPROVEMENT_MIN = 0.068
 N_EFF_PER_S = 10.0  # independent values per second per signal (0.1 s decorrelation)
 GRID_POINTS = 5
 BRENT_MAXITER = 10
+ROBUST_WINDOW_FACTOR = 4.0  # Cauchy scale of a window: this x the median nominal mean square per value
 REFINE_TOP = 3  # effects refined after the grid screening
 SCALE_FLOOR = {"along_m": 0.005, "cross_m": 0.005, "yaw_rad": 0.005, "speed_mps": 0.02,
                "yaw_rate_radps": 0.05}
@@ -74,8 +86,9 @@ class Candidate:
 
 
 def _candidates() -> dict[str, Candidate]:
-    """One candidate per ``simrunner.car.effects.EFFECTS`` entry, with its fit bounds; the
-    steering rate limit spans decades and is searched in log scale."""
+    """One candidate per ``simrunner.car.effects.EFFECTS`` entry, with its fit bounds and
+    search scale (``EffectSpec.log_scale``: limits absent from the nominal model, such as the
+    steering rate limit and the top speed, and the drive-limit factors, which span decades)."""
     from simrunner.car.effects import EFFECTS
 
     out = {}
@@ -84,7 +97,7 @@ def _candidates() -> dict[str, Candidate]:
             raise GapError(f"effect {spec.name}: expected one parameter (got {len(spec.params)})")
         (lo, hi), = spec.bounds
         out[spec.name] = Candidate(spec.name, spec.param, float(lo), float(hi),
-                                   log_scale=math.isinf(spec.neutral[0]))
+                                   log_scale=spec.log_scale)
     return out
 
 
@@ -127,6 +140,7 @@ class Problem:
     signals: tuple[str, ...] = FIT_SIGNALS
     dt_s: float = WORKFLOW_DT_S
     sim_factory: SimFactory = default_sim_factory
+    robust_scale: float = math.inf  # Cauchy scale per compared value (module docstring); inf: least squares
 
     @property
     def n_values(self) -> int:
@@ -151,16 +165,49 @@ def segment_residuals(problem: Problem, car: CarDescription) -> list[dict[str, n
     return out
 
 
-def cost_of(problem: Problem, car: CarDescription) -> float:
-    """Sum of squared normalised residuals of ``car`` over the problem's windows."""
+def window_costs(problem: Problem, res: Sequence[dict[str, np.ndarray]]) -> list[tuple[float, int]]:
+    """``(c_w, n_w)`` per window of ``problem`` (segment by segment): the sum of squared
+    normalised residuals over the problem's signals and the number of values compared
+    (``res``: one residual dict per segment; a non-finite residual, a diverged simulation,
+    counts as 1e3 scales)."""
+    out = []
+    for seg, r in zip(problem.segments, res):
+        for w in seg.windows:
+            c, n = 0.0, 0
+            for s in problem.signals:
+                v = r[s][w.start:w.stop] / problem.scales[s]
+                v = np.where(np.isfinite(v), v, 1e3)
+                c += float(np.dot(v, v))
+                n += v.size
+            out.append((c, n))
+    return out
+
+
+def robust_total(costs: Sequence[tuple[float, int]], robust_scale: float) -> float:
+    """Sum over windows of ``c0_w ln(1 + c_w / c0_w)``, ``c0_w = robust_scale * n_w``
+    (the plain sum of ``c_w`` when ``robust_scale`` is infinite)."""
+    if not math.isfinite(robust_scale):
+        return float(sum(c for c, _ in costs))
     total = 0.0
-    for seg, res in zip(problem.segments, segment_residuals(problem, car)):
-        m = window_mask(len(seg.log), seg.windows)
-        for s in problem.signals:
-            v = res[s][m] / problem.scales[s]
-            v = np.where(np.isfinite(v), v, 1e3)  # a diverged simulation is a very bad fit
-            total += float(np.dot(v, v))
+    for c, n in costs:
+        c0 = robust_scale * max(n, 1)
+        total += c0 * math.log1p(c / c0)
     return total
+
+
+def robust_scale_of(costs: Sequence[tuple[float, int]], factor: float = ROBUST_WINDOW_FACTOR) -> float:
+    """:data:`ROBUST_WINDOW_FACTOR` (``factor``) times the median over windows of ``c_w / n_w``
+    (the nominal model's, when called by ``run_gap``); inf for no windows or ``factor = inf``."""
+    per_value = [c / n for c, n in costs if n > 0]
+    if not per_value or not math.isfinite(factor):
+        return math.inf
+    return max(factor * float(np.median(per_value)), 1e-12)
+
+
+def cost_of(problem: Problem, car: CarDescription) -> float:
+    """The cost of ``car`` on the problem's windows: the sum of squared normalised residuals,
+    each window through the robust loss of the module docstring."""
+    return robust_total(window_costs(problem, segment_residuals(problem, car)), problem.robust_scale)
 
 
 def nominal_scales(segments: Sequence[Segment], res: Sequence[dict[str, np.ndarray]],

@@ -18,6 +18,7 @@ into a temporary sibling folder and renames it into place, so DIR is complete or
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import shutil
@@ -31,8 +32,9 @@ import numpy as np
 from simrunner.run.log import RunLog
 from simrunner.workflows.gap import GapError
 from simrunner.workflows.gap.chain import HELD_IMPROVEMENT_MIN, MAX_EFFECTS, Chain, build_chain
-from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, FitResult, Problem,
-                                         Segment, bic, nominal_scales)
+from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, ROBUST_WINDOW_FACTOR,
+                                         FitResult, Problem, Segment, bic, nominal_scales, robust_scale_of,
+                                         robust_total, window_costs)
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive
 from simrunner.workflows.gap.regimes import residual_stats, segment
@@ -82,7 +84,7 @@ class GapResult:
     nominal_bic: float
     rmse_before: dict[str, float]
     rmse_after: dict[str, float]
-    gap_before: float  # held-out mean squared normalised residual (fit signals and scales)
+    gap_before: float  # held-out gap: robust mean squared normalised residual (fit signals and scales)
     gap_after: float
     stats_before: list[dict]
     stats_after: list[dict]
@@ -95,6 +97,8 @@ class GapResult:
     noise_rms: dict[str, float] = field(default_factory=dict)
     unrevealable: dict[str, list[str]] = field(default_factory=dict)  # effect -> signals it needs
     leftovers: list[dict] = field(default_factory=list)
+    gap_ls_before: float = math.nan  # the same in plain least squares (every window at full weight)
+    gap_ls_after: float = math.nan
 
     @property
     def effect(self) -> str:
@@ -147,6 +151,7 @@ class GapResult:
             "format": FORMAT, "logs": [p.log.source for p in self.parts], "log": self.log.source,
             "effects": self.effects, "effect": self.effect, "parameters": self.parameters,
             "gap_before": self.gap_before, "gap_after": self.gap_after,
+            "gap_ls_before": self.gap_ls_before, "gap_ls_after": self.gap_ls_after,
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
             "rmse_smoothed_before": self.rmse_smoothed_before, "rmse_smoothed_after": self.rmse_smoothed_after,
             "noise_rms": self.noise_rms, "held_out_worse": self.held_out_worse, "at_bounds": self.at_bounds,
@@ -201,7 +206,8 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
             sim_factory: SimFactory = default_sim_factory,
             delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
             held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
-            held_dt_s: float | None = None, progress: Callable[[str], None] | None = None) -> GapResult:
+            held_dt_s: float | None = None, robust_factor: float = ROBUST_WINDOW_FACTOR,
+            progress: Callable[[str], None] | None = None) -> GapResult:
     """Run the workflow of the module docstring on one log or several logs of one car
     (``car`` default: the default car).
 
@@ -212,6 +218,8 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     ``dt_s`` is the physics step of the fits; ``held_dt_s`` (default: the step of
     ``simrunner drive``, ``RunSettings.dt_s``) that of the held-out confirmation and of the
     before/after figures, so they describe the car file as it will be driven.
+    ``robust_factor`` sets the robust window loss (:mod:`simrunner.workflows.gap.fit`;
+    ``math.inf``: plain least squares).
     """
     logs = [logs] if isinstance(logs, RunLog) else list(logs)
     if not logs:
@@ -246,11 +254,13 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     fit_pred0 = predict(car, dt_s, "fit_windows")
     fit_res = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, fit_pred0) if p.fit_windows]
     scales = nominal_scales(fit_segs, fit_res, signals)
+    fit_problem = Problem(car, fit_segs, scales, signals, dt_s, sim_factory)
+    robust = robust_scale_of(window_costs(fit_problem, fit_res), robust_factor)
+    fit_problem = dataclasses.replace(fit_problem, robust_scale=robust)
+    held_problem = Problem(car, held_segs, scales, signals, held_dt_s, sim_factory, robust)
     pred0 = predict(car, held_dt_s)
     res0_parts = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, pred0)]
     tick("nominal")
-    fit_problem = Problem(car, fit_segs, scales, signals, dt_s, sim_factory)
-    held_problem = Problem(car, held_segs, scales, signals, held_dt_s, sim_factory)
     chain = build_chain(fit_problem, held_problem, names, jobs=jobs, delta_bic_min=delta_bic_min,
                         improvement_min=improvement_min, held_improvement_min=held_improvement_min,
                         max_effects=max_effects, progress=tick)
@@ -276,7 +286,8 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     regime = {k: np.concatenate([m[k] for m in seg_masks]) for k in seg_masks[0]}
     noise = _noise(parts, rep_signals)
     stats_after = residual_stats({s: res1[s] for s in stat_signals}, regime)
-    settings = {"dt_s": dt_s, "held_dt_s": held_dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
+    held_ls = dataclasses.replace(held_problem, robust_scale=math.inf)
+    settings = {"robust_scale": robust, "robust_factor": robust_factor, "dt_s": dt_s, "held_dt_s": held_dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
                 "improvement_min": improvement_min, "held_improvement_min": held_improvement_min,
                 "max_effects": max_effects, "scales": scales, "signals": list(signals), "effects": names}
     return GapResult(
@@ -284,7 +295,8 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         ranking=list(chain.steps[0].screening) if chain.steps else [],
         nominal_cost=chain.nominal_cost, nominal_bic=bic(fit_problem, chain.nominal_cost, 0),
         rmse_before=rmse(res0, held, rep_signals), rmse_after=rmse(res1, held, rep_signals),
-        gap_before=_gap(res0, held, scales, signals), gap_after=_gap(res1, held, scales, signals),
+        gap_before=_gap(held_problem, parts, res0_parts), gap_after=_gap(held_problem, parts, res1_parts),
+        gap_ls_before=_gap(held_ls, parts, res0_parts), gap_ls_after=_gap(held_ls, parts, res1_parts),
         stats_before=residual_stats({s: res0[s] for s in stat_signals}, regime), stats_after=stats_after,
         parts=parts, pred_before=pred0[0], pred_after=pred1[0], settings=settings,
         rmse_smoothed_before=rmse(smoothed(pred0), held, rep_signals),
@@ -356,13 +368,12 @@ def leftovers(stats: Sequence[dict], noise: dict[str, float], ratio: float = LEF
     return sorted(out, key=lambda d: -d["times_noise"])
 
 
-def _gap(res: dict[str, np.ndarray], mask: np.ndarray, scales: dict[str, float],
-         signals: Sequence[str] = FIT_SIGNALS) -> float:
-    """Mean squared normalised residual over ``mask`` and the fit signals (1 = as large as
-    the nominal model's residual on the fit windows)."""
-    v = np.concatenate([res[s][mask] / scales[s] for s in signals])
-    v = v[np.isfinite(v)]
-    return float(np.mean(v * v)) if v.size else float("nan")
+def _gap(held_problem: Problem, parts: Sequence[LogPart], res_parts: Sequence[dict[str, np.ndarray]]) -> float:
+    """The held-out gap: ``cost / n_values`` of ``held_problem`` (its robust window loss, or
+    least squares when its ``robust_scale`` is inf) for the residuals ``res_parts`` (one per
+    log of ``parts``; logs without held-out windows are skipped, as in the problem)."""
+    res = [r for p, r in zip(parts, res_parts) if p.held_windows]
+    return robust_total(window_costs(held_problem, res), held_problem.robust_scale) / max(held_problem.n_values, 1)
 
 
 def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
@@ -393,8 +404,10 @@ def summary_text(result: GapResult) -> str:
         lines.append(f"  WARNING: {name} = {result.parameters[name]:.4g} is at the end of its fit range: the "
                      "real cause is probably outside the catalogue (or the car file is far off); "
                      "treat this value as a stand-in")
-    lines.append(f"held-out gap (mean squared normalised residual) before -> after: "
-                 f"{result.gap_before:.3g} -> {result.gap_after:.3g}")
+    lines.append(f"held-out gap (mean squared normalised residual, robust) before -> after: "
+                 f"{result.gap_before:.3g} -> {result.gap_after:.3g}"
+                 + (f"  (least squares: {result.gap_ls_before:.3g} -> {result.gap_ls_after:.3g})"
+                    if math.isfinite(result.settings.get("robust_scale", math.inf)) else ""))
     for step in chain.steps:
         kept = step.kept
         if kept is not None:
