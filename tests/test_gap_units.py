@@ -781,3 +781,26 @@ def test_screening_keeps_the_windows_of_a_rare_manoeuvre():
     kept = sub.segments[0].windows
     assert sum(s.duration_s for s in sub.segments) < 0.5 * prob.segments[0].duration_s
     assert all(w in kept for w in rare)
+
+
+def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():
+    from simrunner.workflows.gap.report import leftovers
+
+    def row(sig, reg, rmse, count=100):
+        return {"signal": sig, "regime": reg, "rmse": rmse, "count": count}
+
+    noise = {"speed_mps": 0.01, "yaw_rate_radps": 0.02, "position_m": 0.005, "yaw_rad": math.nan}
+    stats = [row("speed_mps", "all", 0.02), row("speed_mps", "coasting", 0.10), row("speed_mps", "steady", 0.015),
+             row("speed_mps", "reversing", 0.5, count=5),  # too few samples to judge
+             row("yaw_rate_radps", "all", 0.2), row("yaw_rate_radps", "left", 0.2), row("yaw_rate_radps", "right", 0.3),
+             row("yaw_rad", "all", 1.0),  # no noise estimate: not judged
+             row("position_m", "all", 0.004), row("position_m", "left", 0.006)]
+    out = leftovers(stats, noise, ratio=4.0)
+    assert [d["signal"] for d in out] == ["yaw_rate_radps", "speed_mps"]  # worst first
+    yaw, speed = out
+    assert speed["regime"] == "coasting" and speed["times_noise"] == pytest.approx(10.0)
+    assert speed["times_all"] == pytest.approx(5.0) and not speed["everywhere"]
+    assert speed["text"] == "unexplained: speed while coasting, 10x noise, 5.0x its level over all windows"
+    assert yaw["regime"] == "right" and yaw["everywhere"]
+    assert "in every regime: the model misses yaw rate throughout" in yaw["text"]
+    assert leftovers(stats, {k: 1.0 for k in noise}, ratio=4.0) == []  # nothing well above noise

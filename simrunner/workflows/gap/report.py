@@ -342,14 +342,22 @@ def leftovers(stats: Sequence[dict], noise: dict[str, float], ratio: float = LEF
     """What the final model leaves unexplained, one entry per signal (worst first): the
     regimes where its residual RMSE is at least ``ratio`` times the sensor noise of that
     signal. Signals whose noise the log does not tell (yaw rate without a gyro) are not
-    judged. Entry: signal, worst regime, its RMSE, noise and ratio, every regime above the
-    ratio, and a text such as ``unexplained: yaw rate while reversing, 4x noise``."""
+    judged. Entry: signal, worst regime, its RMSE, noise and ratio, ``times_all`` (its RMSE
+    over the signal's RMSE in all moving samples: how much that regime stands out), every
+    regime above the ratio, ``everywhere`` (every judged regime is), and a text such as
+    ``unexplained: yaw rate while reversing, 4x noise, 2.5x its level over all windows``."""
     per_signal: dict[str, list[dict]] = {}
+    judged: dict[str, set[str]] = {}
+    level: dict[str, float] = {}
     for row in stats:
         sig, reg = row["signal"], row["regime"]
         floor = noise.get(_NOISE_OF.get(sig, sig), float("nan"))
         if row["count"] < min_samples or not (math.isfinite(floor) and floor > 0):
             continue
+        if reg == "all":
+            level[sig] = row["rmse"]
+        else:
+            judged.setdefault(sig, set()).add(reg)
         r = row["rmse"] / floor
         if r >= ratio:
             per_signal.setdefault(sig, []).append({"regime": reg, "rmse": row["rmse"], "times_noise": r,
@@ -359,12 +367,19 @@ def leftovers(stats: Sequence[dict], noise: dict[str, float], ratio: float = LEF
         named = [r for r in rows if r["regime"] != "all"] or rows
         worst = max(named, key=lambda r: r["times_noise"])
         others = sorted({r["regime"] for r in named} - {worst["regime"]})
-        text = (f"unexplained: {_SIGNAL_WORDS.get(sig, sig)} while {worst['regime'].replace('_', ' ')}, "
-                f"{worst['times_noise']:.0f}x noise")
-        if others:
+        everywhere = bool(judged.get(sig)) and {r["regime"] for r in named} >= judged[sig]
+        times_all = worst["rmse"] / level[sig] if level.get(sig) else float("nan")
+        words = _SIGNAL_WORDS.get(sig, sig)
+        text = f"unexplained: {words} while {worst['regime'].replace('_', ' ')}, {worst['times_noise']:.0f}x noise"
+        if math.isfinite(times_all) and worst["regime"] != "all":
+            text += f", {times_all:.1f}x its level over all windows"
+        if everywhere and others:
+            text += f" (above {ratio:g}x noise in every regime: the model misses {words} throughout)"
+        elif others:
             text += f" (also above {ratio:g}x noise: {', '.join(o.replace('_', ' ') for o in others)})"
         out.append({"signal": sig, "regime": worst["regime"], "rmse": worst["rmse"], "noise": worst["noise"],
-                    "times_noise": worst["times_noise"], "regimes": [r["regime"] for r in named], "text": text})
+                    "times_noise": worst["times_noise"], "times_all": times_all, "everywhere": everywhere,
+                    "regimes": [r["regime"] for r in named], "text": text})
     return sorted(out, key=lambda d: -d["times_noise"])
 
 
