@@ -31,12 +31,34 @@ _POLL_S = 0.5
 
 @dataclass(eq=False)
 class Handle:
-    """One worker as the scheduler sees it (backends keep their own fields in ``ref``)."""
+    """One worker as the scheduler sees it (backends keep their own fields in ``ref``).
+    Times are ``time.monotonic()`` seconds."""
 
     ref: Any
     track: str | None = None      # label of the track of its last job (it has it loaded)
     runs: int = 0
-    ready_at: float | None = None  # monotonic time the worker reported ready (None: unknown)
+    ready_at: float | None = None  # when the worker reported ready (None: not yet / unknown)
+    started_at: float = field(default_factory=time.monotonic)
+    first_row_at: float | None = None
+    last_row_at: float | None = None
+
+
+@dataclass(frozen=True)
+class WorkerTiming:
+    """When one worker started, reported ready and delivered its first and last rows
+    (``time.monotonic()`` seconds; None: never), and how many rows it delivered. What
+    :func:`run_jobs` returns, for benchmarks: a worker's steady rate is
+    ``(runs - 1) / (last_row_at - first_row_at)``, its start-up ``ready_at - started_at``."""
+
+    started_at: float
+    ready_at: float | None
+    first_row_at: float | None
+    last_row_at: float | None
+    runs: int
+
+    @classmethod
+    def of(cls, h: Handle) -> "WorkerTiming":
+        return cls(h.started_at, h.ready_at, h.first_row_at, h.last_row_at, h.runs)
 
 
 class Backend(Protocol):
@@ -174,13 +196,20 @@ def _deadline(h: Handle, submitted: float, run_timeout_s: float) -> float:
 
 def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: float,
              laps: int, on_row: Callable[[dict], None],
-             outputs: Callable[[Job], dict | None] = lambda job: None) -> None:
+             outputs: Callable[[Job], dict | None] = lambda job: None) -> list[WorkerTiming]:
     """Run every job; ``on_row`` gets each row as it comes (any order). Stops every worker
-    at the end (also on Ctrl-C, which is re-raised)."""
+    at the end (also on Ctrl-C, which is re-raised). Returns every worker's timing (in
+    start order, replaced workers included)."""
     queue = _Queue()
     for job in jobs:
         queue.add(job)
-    idle = [backend.start() for _ in range(min(workers, len(jobs)))]
+    started: list[Handle] = []
+
+    def start() -> Handle:
+        started.append(backend.start())
+        return started[-1]
+
+    idle = [start() for _ in range(min(workers, len(jobs)))]
     busy: dict[Handle, tuple[Job, float]] = {}
     try:
         while len(queue) or busy:
@@ -198,9 +227,12 @@ def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: 
                     on_row(failure_row(job, laps, "worker_died", reason))
                     backend.kill(h)
                     if len(queue):
-                        idle.append(backend.start())
+                        idle.append(start())
                     continue
                 h.runs += 1
+                h.last_row_at = time.monotonic()
+                if h.first_row_at is None:
+                    h.first_row_at = h.last_row_at
                 on_row(row)
                 idle.append(h)
             now = time.monotonic()
@@ -212,6 +244,7 @@ def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: 
                         f"the run passed the per-run wall-clock timeout of {run_timeout_s:g} s "
                         "(--run-timeout); its worker was stopped"), round(run_timeout_s, 4)))
                     if len(queue):
-                        idle.append(backend.start())
+                        idle.append(start())
     finally:
         backend.close()
+    return [WorkerTiming.of(h) for h in started]
