@@ -10,6 +10,7 @@ node that ran the run (use a shared folder for DIR on a multi-node cluster).
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,12 +49,20 @@ def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
 
 
 class _RayWorker:
-    """The actor: the state of one worker, and one run per call."""
+    """The actor: the state of one worker, and one run per call. Like a local worker it
+    discards controllers' prints (``quiet``) and imports everything a run needs before it
+    answers :meth:`ready`."""
 
-    def __init__(self, config: BatchConfig):
-        from simrunner.workflows.batch.worker import WorkerState
+    def __init__(self, config: BatchConfig, quiet: bool = True):
+        from simrunner.workflows.batch.worker import WorkerState, quiet_output, warm_up
 
+        if quiet:
+            quiet_output()
+        warm_up()
         self.state = WorkerState(config)
+
+    def ready(self) -> None:
+        return None
 
     def run(self, job: Job, outputs: dict | None) -> dict:
         from simrunner.workflows.batch.worker import execute_job
@@ -64,15 +73,17 @@ class _RayWorker:
 @dataclass(eq=False)
 class _Actor:
     actor: Any
+    ready: Any = None   # the ``ready()`` call's ref until it has answered
     future: Any = None
 
 
 class RayBackend:
     """Starts (``"local"``) or joins a Ray cluster; :meth:`shutdown` leaves it."""
 
-    def __init__(self, config: BatchConfig, *, address: str = "local", workers: int | None = None):
+    def __init__(self, config: BatchConfig, *, address: str = "local", workers: int | None = None,
+                 quiet: bool = True):
         ray = import_ray()
-        self.ray, self.config = ray, config
+        self.ray, self.config, self.quiet = ray, config, quiet
         if ray.is_initialized():
             self.owner = False
         elif address in (None, "", "local"):
@@ -96,7 +107,8 @@ class RayBackend:
         self.handles: list[Handle] = []
 
     def start(self) -> Handle:
-        h = Handle(_Actor(self._cls.remote(self.config)))
+        actor = self._cls.remote(self.config, self.quiet)
+        h = Handle(_Actor(actor, actor.ready.remote()))
         self.handles.append(h)
         return h
 
@@ -106,12 +118,17 @@ class RayBackend:
     def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
         ray = self.ray
         by_ref = {h.ref.future: h for h in busy}
-        ready, rest = ray.wait(list(by_ref), num_returns=1, timeout=max(timeout_s, 0.0))
+        starting = {h.ref.ready: h for h in busy if h.ref.ready is not None}
+        ready, rest = ray.wait([*starting, *by_ref], num_returns=1, timeout=max(timeout_s, 0.0))
         if ready and rest:
             more, _ = ray.wait(rest, num_returns=len(rest), timeout=0)
             ready += more
         out = []
         for ref in ready:
+            if ref in starting:   # the actor has imported everything: its run's clock starts
+                h = starting[ref]
+                h.ref.ready, h.ready_at = None, time.monotonic()
+                continue
             h = by_ref[ref]
             try:
                 out.append((h, ray.get(ref), ""))
