@@ -1,5 +1,6 @@
 """simrunner batch --ray: a small batch on a local Ray cluster bound to 127.0.0.1 (started and
-stopped by the test, bounded in time) gives the local pool's rows bit for bit."""
+stopped by the tests, bounded in time) gives the local pool's rows bit for bit, and a
+crashing, dying or hanging run is recorded with its reason without stopping the batch."""
 from __future__ import annotations
 
 import os
@@ -8,10 +9,12 @@ import socket
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 from pathlib import Path
 
 import pytest
+from test_batch import FAULTY
 
 from simrunner.workflows.batch import deterministic, run_batch
 
@@ -40,16 +43,22 @@ def _wait_port(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
     raise TimeoutError(f"the Ray head did not listen on 127.0.0.1:{port} within {timeout_s:g} s")
 
 
-@pytest.fixture
-def ray_cluster(monkeypatch):
+@pytest.fixture(scope="module")
+def ray_cluster():
     """``ray start --head --block`` in its own session, bound to 127.0.0.1, 2 CPUs, small
-    object store; stopped by signalling its process group (only the processes it started).
-    Token authentication is off for this loopback-only cluster (cluster and driver alike,
-    so a token left in ~/.ray by another Ray run does not get in the way)."""
+    object store, shared by this module's tests; stopped by signalling its process group
+    (only the processes it started). Token authentication is off for this loopback-only
+    cluster (cluster and driver alike, so a token left in ~/.ray by another Ray run does not
+    get in the way)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("RAY_AUTH_MODE", "disabled")
+        mp.setenv("RAY_USAGE_STATS_ENABLED", "0")
+        yield from _cluster()
+
+
+def _cluster():
     port = _free_port()
     temp = tempfile.mkdtemp(prefix="rt", dir="/tmp")
-    monkeypatch.setenv("RAY_AUTH_MODE", "disabled")
-    monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     ray_cli = Path(sys.executable).parent / "ray"
     proc = subprocess.Popen(
@@ -86,6 +95,25 @@ def test_ray_cluster_rows_equal_local_pool(ray_cluster, tmp_path):
     assert len(on_ray.rows) == 4
     assert [deterministic(r) for r in on_ray.rows] == [deterministic(r) for r in local.rows]
     assert not ray.is_initialized()   # the driver left the cluster
+    timing = on_ray.worker_timing     # the actors reported ready before their first row
+    assert sum(w.runs for w in timing) == 4
+    assert all(w.started_at <= w.ready_at <= w.first_row_at <= w.last_row_at for w in timing)
+
+
+def test_ray_faulty_runs_never_stop_the_batch(ray_cluster, tmp_path):
+    ctl = tmp_path / "faulty.py"
+    ctl.write_text(textwrap.dedent(FAULTY))
+    res = run_batch(ctl, out_dir=tmp_path / "out", params=["mode=drive,crash,die,slow"],
+                    time_limit_s=1000.0, run_timeout_s=20.0, csv="failures", ray=ray_cluster,
+                    tracks=[str(REPO / "examples" / "oval_start.txt")])
+    by_mode = {r["mode"]: r for r in res.rows}
+    assert by_mode["drive"]["outcome"] == "off_track"
+    assert by_mode["crash"]["outcome"] == "controller_error" and "boom" in by_mode["crash"]["message"]
+    assert by_mode["die"]["outcome"] == "worker_died" and "Ray worker died" in by_mode["die"]["message"]
+    assert by_mode["slow"]["outcome"] == "wall_timeout"
+    runs = sorted(p.name for p in (tmp_path / "out" / "runs").iterdir())
+    assert "run_00000.csv" in runs and "run_00001.csv" in runs
+    assert not ray.is_initialized()
 
 
 def test_ray_address_that_does_not_answer(tmp_path):
