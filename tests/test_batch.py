@@ -123,6 +123,9 @@ def test_rows_identical_for_one_and_two_workers(tmp_path):
     assert strip(tmp_path / "one") == strip(tmp_path / "two")
     assert read_results(tmp_path / "two" / "results.json") == json.loads(json.dumps(two.rows))
     assert (tmp_path / "one" / "summary.png").stat().st_size > 10_000
+    # every worker's timing (for benchmarks): ready before its first row, rows counted
+    assert len(two.worker_timing) == 2 and sum(w.runs for w in two.worker_timing) == 8
+    assert all(w.started_at <= w.ready_at <= w.first_row_at <= w.last_row_at for w in two.worker_timing)
 
 
 def test_faulty_runs_never_stop_the_batch(tmp_path):
