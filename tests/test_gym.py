@@ -351,8 +351,10 @@ def test_progress_refuses_bad_centrelines():
         CentrelineProgress(np.array([[0, 0], [1, 0], [1, 0], [0, 1.0]]))
 
 
-def test_learning_example_smoke(tmp_path):
-    """examples/learn_ppo.py for a few hundred steps (needs the learn extra)."""
+@pytest.mark.parametrize("track", [None, "random"])
+def test_learning_example_smoke(tmp_path, track):
+    """examples/learn_ppo.py for a few hundred steps (needs the learn extra), on the default
+    track and on a new random track every episode."""
     pytest.importorskip("stable_baselines3")
     sys.path.insert(0, str(ROOT / "examples"))
     try:
@@ -360,8 +362,9 @@ def test_learning_example_smoke(tmp_path):
     finally:
         sys.path.remove(str(ROOT / "examples"))
     result = learn_ppo.train(timesteps=256, minutes=5.0, out=tmp_path, n_envs=2, n_steps=128,
-                             eval_time_s=1.0, verbose=False)
+                             eval_time_s=1.0, track=track, verbose=False)
     assert result["steps"] == 256
+    assert result["eval_track"].startswith("random:") == (track == "random")
     for name in ("learning_curve.png", "episodes.csv", "policy.zip", "evaluation.txt"):
         assert (tmp_path / name).stat().st_size > 0
     assert "eval_progress_m" in (tmp_path / "evaluation.txt").read_text()
