@@ -101,18 +101,22 @@ def test_ray_cluster_rows_equal_local_pool(ray_cluster, tmp_path):
 
 
 def test_ray_faulty_runs_never_stop_the_batch(ray_cluster, tmp_path):
+    """One actor: ``slow`` is queued on it behind ``die`` (the actor dies with the call
+    queued), then ``drive`` behind ``slow`` (the actor is killed at the timeout): both queued
+    runs go to a new actor and run."""
     ctl = tmp_path / "faulty.py"
     ctl.write_text(textwrap.dedent(FAULTY))
-    res = run_batch(ctl, out_dir=tmp_path / "out", params=["mode=drive,crash,die,slow"],
+    res = run_batch(ctl, out_dir=tmp_path / "out", params=["mode=die,slow,drive,crash"],
                     time_limit_s=1000.0, run_timeout_s=20.0, csv="failures", ray=ray_cluster,
-                    tracks=[str(REPO / "examples" / "oval_start.txt")])
+                    workers=1, tracks=[str(REPO / "examples" / "oval_start.txt")])
     by_mode = {r["mode"]: r for r in res.rows}
     assert by_mode["drive"]["outcome"] == "off_track"
     assert by_mode["crash"]["outcome"] == "controller_error" and "boom" in by_mode["crash"]["message"]
     assert by_mode["die"]["outcome"] == "worker_died" and "Ray worker died" in by_mode["die"]["message"]
     assert by_mode["slow"]["outcome"] == "wall_timeout"
+    assert len(res.worker_timing) == 3      # the first actor died, the second was killed
     runs = sorted(p.name for p in (tmp_path / "out" / "runs").iterdir())
-    assert "run_00000.csv" in runs and "run_00001.csv" in runs
+    assert runs == ["run_00002.csv", "run_00003.csv"]  # failures re-run with a CSV: off track, crash
     assert not ray.is_initialized()
 
 

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from simrunner.workflows.batch.pool import LocalBackend, WorkerTiming, run_jobs
+from simrunner.workflows.batch.pool import LocalBackend
+from simrunner.workflows.batch.scheduler import WorkerTiming, run_jobs
 from simrunner.workflows.batch.results import (BATCH_OUTCOMES, RESERVED, deterministic,
                                                write_results)
 from simrunner.workflows.batch.spec import (BatchConfig, BatchError, Job, make_jobs, parse_grid,

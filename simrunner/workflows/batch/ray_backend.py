@@ -11,10 +11,11 @@ node that ran the run (use a shared folder for DIR on a multi-node cluster).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from typing import Any
 
-from simrunner.workflows.batch.pool import Handle
+from simrunner.workflows.batch.scheduler import Handle
 from simrunner.workflows.batch.spec import BatchConfig, BatchError, Job
 
 INSTALL_HINT = "pip install 'nxpcup-sim[ray]'"
@@ -74,7 +75,7 @@ class _RayWorker:
 class _Actor:
     actor: Any
     ready: Any = None   # the ``ready()`` call's ref until it has answered
-    future: Any = None
+    futures: deque = field(default_factory=deque)  # of the runs handed to it, in order
 
 
 class RayBackend:
@@ -113,11 +114,12 @@ class RayBackend:
         return h
 
     def submit(self, h: Handle, job: Job, outputs: dict | None) -> None:
-        h.ref.future = h.ref.actor.run.remote(job, outputs)
+        """Queue a run on the actor (an actor runs its calls one at a time, in order)."""
+        h.ref.futures.append(h.ref.actor.run.remote(job, outputs))
 
     def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
         ray = self.ray
-        by_ref = {h.ref.future: h for h in busy}
+        by_ref = {h.ref.futures[0]: h for h in busy}   # the run each actor is running
         starting = {h.ref.ready: h for h in busy if h.ref.ready is not None}
         ready, rest = ray.wait([*starting, *by_ref], num_returns=1, timeout=max(timeout_s, 0.0))
         if ready and rest:
@@ -130,6 +132,7 @@ class RayBackend:
                 h.ref.ready, h.ready_at = None, time.monotonic()
                 continue
             h = by_ref[ref]
+            h.ref.futures.popleft()
             try:
                 out.append((h, ray.get(ref), ""))
             except ray.exceptions.RayError as exc:
