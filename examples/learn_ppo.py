@@ -1,5 +1,6 @@
 """Train a PPO policy (stable-baselines3) to drive NXPCup-v0 on the default track (or a
-new random track every episode: ``--track random``), and plot its learning curve.
+new random track every episode: ``--track random``; from random points of the track:
+``--random-start``), and plot its learning curve.
 
 Needs the learning extra: ``pip install 'nxpcup-sim[learn]'`` (stable-baselines3, which
 needs PyTorch; a CPU build is enough: ``pip install torch --index-url
@@ -8,12 +9,13 @@ https://download.pytorch.org/whl/cpu`` first if pip would otherwise fetch a CUDA
 Run it::
 
     python examples/learn_ppo.py --minutes 30 -o ppo_run
-    python examples/learn_ppo.py --minutes 30 --track random -o ppo_random
+    python examples/learn_ppo.py --minutes 30 --track random --random-start -o ppo_random
 
 It trains until ``--timesteps`` environment steps or ``--minutes`` of wall time, whichever
 comes first, then drives the learnt policy once (deterministic actions, no exploration) on
 the same track - with ``--track random``, on a random track drawn from the seed ``--seed`` +
-10000 - (``--eval-time`` seconds) and writes to the output folder:
+10000 - from the track's start pose (``--eval-time`` seconds) and writes to the output
+folder:
 
 - ``learning_curve.png``: episode return (metres of progress, minus penalties) and laps per
   episode against environment steps, with the wall time on the top axis;
@@ -56,15 +58,17 @@ def make_env(env_kwargs: dict):
 
 def train(*, timesteps: int, minutes: float, out: Path, seed: int = 0, n_envs: int = 4,
           time_limit_s: float = 20.0, speed_max_mps: float = 2.5, n_steps: int = 512,
-          eval_time_s: float = 60.0, track: str | None = None, verbose: bool = True) -> dict:
+          eval_time_s: float = 60.0, track: str | None = None, random_start: bool = False,
+          verbose: bool = True) -> dict:
     """Train, save, plot and evaluate; returns the evaluation (a dict). ``track``: the
     environment's track (docs/gym.md: None = the default track, a path, ``"random"`` = a new
-    random track every episode, ``"random:N"``)."""
+    random track every episode, ``"random:N"``); ``random_start``: episodes start at random
+    points of the track (the evaluation starts at the track's start pose)."""
     torch, PPO, BaseCallback, Monitor, DummyVecEnv = _imports()
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)
     env_kwargs = {"time_limit_s": time_limit_s, "speed_max_mps": speed_max_mps, "laps": None,
-                  "track": track}
+                  "track": track, "random_start": random_start}
     episodes: list[dict] = []
     t0 = time.perf_counter()
 
@@ -102,11 +106,12 @@ def train(*, timesteps: int, minutes: float, out: Path, seed: int = 0, n_envs: i
         w = csv.DictWriter(fh, fieldnames=["steps", "wall_s", "return", "length_s", "laps", "off_track"])
         w.writeheader()
         w.writerows(episodes)
-    result = evaluate(model, {**env_kwargs, "time_limit_s": eval_time_s}, seed)
+    result = evaluate(model, {**env_kwargs, "time_limit_s": eval_time_s, "random_start": False}, seed)
     result.update(steps=int(model.num_timesteps), train_wall_s=round(train_s, 1),
                   episodes=len(episodes))
     (out / "evaluation.txt").write_text("".join(f"{k}: {v}\n" for k, v in result.items()))
-    plot(episodes, out / "learning_curve.png", result, "default track" if track is None else track)
+    what = ("default track" if track is None else track) + (", random starts" if random_start else "")
+    plot(episodes, out / "learning_curve.png", result, what)
     return result
 
 
@@ -171,9 +176,12 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--eval-time", type=float, default=60.0, help="length of the final drive (s)")
     p.add_argument("--track", default=None, help="the track: a layout path, 'random' (a new random "
                    "track every episode) or 'random:N' (default: the bundled track)")
+    p.add_argument("--random-start", action="store_true",
+                   help="start episodes at random points of the track (not only its start pose)")
     a = p.parse_args(argv)
     result = train(timesteps=a.timesteps, minutes=a.minutes, out=a.out, seed=a.seed,
-                   n_envs=a.envs, speed_max_mps=a.speed_max, eval_time_s=a.eval_time, track=a.track)
+                   n_envs=a.envs, speed_max_mps=a.speed_max, eval_time_s=a.eval_time, track=a.track,
+                   random_start=a.random_start)
     for k, v in result.items():
         print(f"{k}: {v}")
 
