@@ -290,7 +290,7 @@ def test_a_random_track_is_the_layout_of_a_seed_drawn_from_the_reset_generator(m
 def test_random_start_is_a_centreline_point_drawn_from_the_reset_seed():
     from gymnasium.utils.env_checker import check_env
 
-    env = NXPCupEnv(random_start=True, time_limit_s=1.0)
+    env = gymnasium.make("NXPCup-v0", random_start=True, time_limit_s=1.0).unwrapped
     check_env(env)
     starts = []
     for seed in (0, 1, 2, 3):
