@@ -4,6 +4,7 @@ crashing, dying or hanging run is recorded with its reason without stopping the 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -84,6 +85,7 @@ def _cluster():
             os.killpg(proc.pid, signal.SIGKILL)  # anything left of the group
         except ProcessLookupError:
             pass
+        shutil.rmtree(temp, ignore_errors=True)  # the cluster's session files and logs
 
 
 def test_ray_cluster_rows_equal_local_pool(ray_cluster, tmp_path):
