@@ -145,6 +145,29 @@ def test_faulty_runs_never_stop_the_batch(tmp_path):
     assert "run_00000.csv" in runs and "run_00001.csv" in runs
 
 
+def test_a_job_handed_to_a_dead_local_worker_is_reported_not_raised():
+    """A job queued on a worker that has just died (the pipe is closed): handing it over
+    does not raise; waiting reports the worker's death."""
+    from simrunner.workflows.batch.pool import LocalBackend
+    from simrunner.workflows.batch.spec import BatchConfig
+
+    backend = LocalBackend(BatchConfig(controller=str(FOLLOWER)))
+    try:
+        h = backend.start()
+        h.ref.process.kill()
+        h.ref.process.join(timeout=30.0)
+        job = make_jobs(resolve_tracks(["random:1"]), [0], {})[0]
+        backend.submit(h, job, None)
+        got = []
+        for _ in range(60):   # each wait returns at once here: the worker's sentinel is ready
+            got = backend.wait([h], 1.0)
+            if got:
+                break
+        assert got and got[0][1] is None and "died" in got[0][2]
+    finally:
+        backend.close()
+
+
 def test_cli_batch_and_bad_input(tmp_path):
     runner = CliRunner()
     out = tmp_path / "b"

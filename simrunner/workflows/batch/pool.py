@@ -45,7 +45,10 @@ class LocalBackend:
         return h
 
     def submit(self, h: Handle, job: Job, outputs: dict | None) -> None:
-        h.ref.conn.send((job, outputs))
+        try:
+            h.ref.conn.send((job, outputs))
+        except (OSError, ValueError):
+            pass  # the worker has died (its pipe is closed): wait() reports it
 
     def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
         by_obj: dict[Any, Handle] = {}
