@@ -20,6 +20,7 @@ machine load (1-minute average) is printed beside each line.
 """
 from __future__ import annotations
 
+import importlib.util
 import os
 import statistics
 import tempfile
@@ -170,11 +171,9 @@ def main() -> None:
         per_run = results[1]["steady_run"]
         print(f"per run: bare drive() {bare * 1e3:.0f} ms, batch on 1 worker (steady) "
               f"{per_run * 1e3:.0f} ms: overhead {100 * (per_run - bare) / bare:+.1f} %")
-        try:
-            import ray  # noqa: F401
-        except ImportError:
+        if importlib.util.find_spec("ray") is None:   # not imported: its private cluster sets
             print("ray: not installed (pip install 'nxpcup-sim[ray]'), Ray figures skipped")
-            return
+            return                                     # its loopback switch first
         _ray(tmp)
 
 

@@ -18,8 +18,12 @@ import pytest
 from test_batch import FAULTY
 
 from simrunner.workflows.batch import deterministic, run_batch
+from simrunner.workflows.batch.ray_backend import LOOPBACK_ENV
 
+# Ray reads its loopback switch when imported, in the cluster's processes and in this driver
+os.environ.setdefault(*LOOPBACK_ENV)
 ray = pytest.importorskip("ray")
+LOOPBACK_HEX = {"0100007F", "0000000000000000FFFF00000100007F", "00000000000000000000000001000000"}
 
 REPO = Path(__file__).resolve().parents[1]
 FOLLOWER = REPO / "examples" / "line_follower.py"
@@ -30,6 +34,40 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def _listening(pids: set[int]) -> set[str]:
+    """The local addresses (``/proc/net`` hex) of the TCP sockets ``pids`` listen on."""
+    inodes = set()
+    for pid in pids:
+        try:
+            links = [os.readlink(f"/proc/{pid}/fd/{fd}") for fd in os.listdir(f"/proc/{pid}/fd")]
+        except OSError:
+            continue
+        inodes |= {link[8:-1] for link in links if link.startswith("socket:[")}
+    out = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            f = line.split()
+            if f[3] == "0A" and f[9] in inodes:   # state LISTEN
+                out.add(f[1].rsplit(":", 1)[0])
+    return out
+
+
+def _tree(root: int) -> set[int]:
+    """``root`` and its live descendants."""
+    parent = {}
+    for entry in os.listdir("/proc"):
+        try:
+            parent[int(entry)] = int(Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (ValueError, OSError):
+            continue
+    out, todo = set(), [root]
+    while todo:
+        pid = todo.pop()
+        out.add(pid)
+        todo += [c for c, p in parent.items() if p == pid and c not in out]
+    return out
 
 
 def _wait_port(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
@@ -69,6 +107,7 @@ def _cluster():
         env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         _wait_port(port, proc, START_TIMEOUT_S)
+        assert _listening(_tree(proc.pid)) <= LOOPBACK_HEX   # no server on other interfaces
         yield f"127.0.0.1:{port}"
     finally:
         for sig, wait_s in ((signal.SIGTERM, 30.0), (signal.SIGKILL, 10.0)):
@@ -119,6 +158,17 @@ def test_ray_faulty_runs_never_stop_the_batch(ray_cluster, tmp_path):
     assert len(res.worker_timing) == 3      # the first actor died, the second was killed
     runs = sorted(p.name for p in (tmp_path / "out" / "runs").iterdir())
     assert runs == ["run_00002.csv", "run_00003.csv"]  # failures re-run with a CSV: off track, crash
+    assert not ray.is_initialized()
+
+
+def test_private_local_ray_listens_only_on_loopback(tmp_path):
+    """``--ray`` without an address: every server of the private Ray (GCS, raylet, agents,
+    workers, this driver's) listens on 127.0.0.1 only."""
+    seen: list[set[str]] = []
+    res = run_batch(FOLLOWER, out_dir=tmp_path / "r", ray="local", workers=1, time_limit_s=1.0,
+                    plot=False, on_row=lambda row: seen.append(_listening(_tree(os.getpid()))))
+    assert res.rows[0]["outcome"] and len(seen) == 1
+    assert seen[0] and seen[0] <= LOOPBACK_HEX, seen
     assert not ray.is_initialized()
 
 

@@ -3,13 +3,15 @@ a :class:`~simrunner.workflows.batch.worker.WorkerState` (its car and loaded tra
 rows are those of the local pool, bit for bit (the same :func:`execute_job`).
 
 ``address``: ``"local"`` starts a private local Ray instance bound to 127.0.0.1 (stopped at
-the end); anything else is handed to ``ray.init(address=...)`` (``host:6379`` of a cluster
+the end; see :data:`LOOPBACK_ENV`); anything else is handed to ``ray.init(address=...)`` (``host:6379`` of a cluster
 started with ``ray start --head``, or ``ray://host:10001``). Every node needs nxpcup-sim
 installed (``pip install 'nxpcup-sim[ray]'``); ``--video``/``--csv`` files are written on the
 node that ran the run (use a shared folder for DIR on a multi-node cluster).
 """
 from __future__ import annotations
 
+import os
+import sys
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -20,9 +22,24 @@ from simrunner.workflows.batch.spec import BatchConfig, BatchError, Job
 
 INSTALL_HINT = "pip install 'nxpcup-sim[ray]'"
 LOCAL_OBJECT_STORE_BYTES = 128 * 1024 * 1024
+LOOPBACK_ENV = ("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+"""Ray (2.60, Linux) turns a node address of 127.0.0.1 into the machine's routable address
+and its servers then listen on every interface; with its cluster mode off (this variable,
+meant for Windows and macOS) a node stays on 127.0.0.1. Ray reads it when it is imported, in
+every process (driver, daemons, workers): a private local Ray sets it before importing Ray,
+for this process and its children (so this process cannot join a multi-node cluster later)."""
 
 
-def import_ray():
+def import_ray(*, loopback: bool = False):
+    """``import ray`` (one line naming the install command if it is missing); ``loopback``:
+    for a private local Ray, which must be bound to 127.0.0.1 (:data:`LOOPBACK_ENV`)."""
+    name, value = LOOPBACK_ENV
+    if loopback and os.environ.get(name) != value:
+        if "ray" in sys.modules:
+            raise BatchError(f"--ray without an address starts a private Ray bound to 127.0.0.1, "
+                             f"which needs {name}={value} before Ray is imported (Ray was imported "
+                             "already): set it, or give a cluster address")
+        os.environ[name] = value
     try:
         import ray
     except ImportError:
@@ -83,17 +100,23 @@ class RayBackend:
 
     def __init__(self, config: BatchConfig, *, address: str = "local", workers: int | None = None,
                  quiet: bool = True):
-        ray = import_ray()
+        local = address in (None, "", "local")
+        joined = "ray" in sys.modules and sys.modules["ray"].is_initialized()  # the caller's Ray
+        ray = import_ray(loopback=local and not joined)
         self.ray, self.config, self.quiet = ray, config, quiet
         if ray.is_initialized():
             self.owner = False
-        elif address in (None, "", "local"):
+        elif local:
             from simrunner.workflows.batch.engine import default_workers
 
             ray.init(num_cpus=workers or default_workers(), include_dashboard=False,
                      object_store_memory=LOCAL_OBJECT_STORE_BYTES, log_to_driver=False,
                      _node_ip_address="127.0.0.1", configure_logging=False)
             self.owner = True
+            if any(node.get("NodeManagerAddress") != "127.0.0.1" for node in ray.nodes()):
+                ray.shutdown()
+                raise BatchError(f"--ray: the private Ray did not stay on 127.0.0.1 (this Ray "
+                                 f"version ignores {LOOPBACK_ENV[0]}): give a cluster address")
         else:
             _check_reachable(address)
             try:
