@@ -1,5 +1,6 @@
-"""Train a PPO policy (stable-baselines3) to drive NXPCup-v0 on the default track, and plot
-its learning curve.
+"""Train a PPO policy (stable-baselines3) to drive NXPCup-v0 on the default track (or a
+new random track every episode: ``--track random``; from random points of the track:
+``--random-start``), and plot its learning curve.
 
 Needs the learning extra: ``pip install 'nxpcup-sim[learn]'`` (stable-baselines3, which
 needs PyTorch; a CPU build is enough: ``pip install torch --index-url
@@ -8,10 +9,13 @@ https://download.pytorch.org/whl/cpu`` first if pip would otherwise fetch a CUDA
 Run it::
 
     python examples/learn_ppo.py --minutes 30 -o ppo_run
+    python examples/learn_ppo.py --minutes 30 --track random --random-start -o ppo_random
 
 It trains until ``--timesteps`` environment steps or ``--minutes`` of wall time, whichever
 comes first, then drives the learnt policy once (deterministic actions, no exploration) on
-the same track (``--eval-time`` seconds) and writes to the output folder:
+the same track - with ``--track random``, on a random track drawn from the seed ``--seed`` +
+10000 - from the track's start pose (``--eval-time`` seconds) and writes to the output
+folder:
 
 - ``learning_curve.png``: episode return (metres of progress, minus penalties) and laps per
   episode against environment steps, with the wall time on the top axis;
@@ -54,12 +58,17 @@ def make_env(env_kwargs: dict):
 
 def train(*, timesteps: int, minutes: float, out: Path, seed: int = 0, n_envs: int = 4,
           time_limit_s: float = 20.0, speed_max_mps: float = 2.5, n_steps: int = 512,
-          eval_time_s: float = 60.0, verbose: bool = True) -> dict:
-    """Train, save, plot and evaluate; returns the evaluation (a dict)."""
+          eval_time_s: float = 60.0, track: str | None = None, random_start: bool = False,
+          verbose: bool = True) -> dict:
+    """Train, save, plot and evaluate; returns the evaluation (a dict). ``track``: the
+    environment's track (docs/gym.md: None = the default track, a path, ``"random"`` = a new
+    random track every episode, ``"random:N"``); ``random_start``: episodes start at random
+    points of the track (the evaluation starts at the track's start pose)."""
     torch, PPO, BaseCallback, Monitor, DummyVecEnv = _imports()
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)
-    env_kwargs = {"time_limit_s": time_limit_s, "speed_max_mps": speed_max_mps, "laps": None}
+    env_kwargs = {"time_limit_s": time_limit_s, "speed_max_mps": speed_max_mps, "laps": None,
+                  "track": track, "random_start": random_start}
     episodes: list[dict] = []
     t0 = time.perf_counter()
 
@@ -97,16 +106,18 @@ def train(*, timesteps: int, minutes: float, out: Path, seed: int = 0, n_envs: i
         w = csv.DictWriter(fh, fieldnames=["steps", "wall_s", "return", "length_s", "laps", "off_track"])
         w.writeheader()
         w.writerows(episodes)
-    result = evaluate(model, {**env_kwargs, "time_limit_s": eval_time_s}, seed)
+    result = evaluate(model, {**env_kwargs, "time_limit_s": eval_time_s, "random_start": False}, seed)
     result.update(steps=int(model.num_timesteps), train_wall_s=round(train_s, 1),
                   episodes=len(episodes))
     (out / "evaluation.txt").write_text("".join(f"{k}: {v}\n" for k, v in result.items()))
-    plot(episodes, out / "learning_curve.png", result)
+    what = ("default track" if track is None else track) + (", random starts" if random_start else "")
+    plot(episodes, out / "learning_curve.png", result, what)
     return result
 
 
 def evaluate(model, env_kwargs: dict, seed: int) -> dict:
-    """One episode of the deterministic policy on the training track."""
+    """One episode of the deterministic policy on the training track (for ``"random"``, the
+    random track of the reset seed ``seed + 10000``)."""
     env = make_env(env_kwargs)
     obs, info = env.reset(seed=seed + 10_000)
     ret, done = 0.0, False
@@ -115,12 +126,12 @@ def evaluate(model, env_kwargs: dict, seed: int) -> dict:
         obs, r, term, trunc, info = env.step(action)
         ret += r
         done = term or trunc
-    return {"eval_return": round(ret, 3), "eval_progress_m": round(info["progress_m"], 2),
+    return {"eval_track": info["track"], "eval_return": round(ret, 3), "eval_progress_m": round(info["progress_m"], 2),
             "eval_laps": info["laps_completed"], "eval_lap_times_s": [round(t, 3) for t in info["lap_times_s"]],
             "eval_ended": "off track" if info["off_track"] else f"time limit {info['t_s']:g} s"}
 
 
-def plot(episodes: list[dict], path: Path, result: dict) -> None:
+def plot(episodes: list[dict], path: Path, result: dict, track: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -138,15 +149,16 @@ def plot(episodes: list[dict], path: Path, result: dict) -> None:
         ax1.plot(steps[k - 1:], smooth, "-", label=f"mean of {k}")
         ax2.plot(steps, laps, ".", ms=2, alpha=0.4)
         ax2.plot(steps[k - 1:], np.convolve(laps, np.ones(k) / k, mode="valid"), "-")
-        top = ax1.secondary_xaxis("top", functions=(
-            lambda s: np.interp(s, steps, [e["wall_s"] / 60 for e in episodes]),
-            lambda m: np.interp(m, [e["wall_s"] / 60 for e in episodes], steps)))
+    if len({e["wall_s"] for e in episodes}) >= 2:   # a wall-time axis needs two times
+        minutes = [e["wall_s"] / 60 for e in episodes]
+        top = ax1.secondary_xaxis("top", functions=(lambda s: np.interp(s, steps, minutes),
+                                                    lambda m: np.interp(m, minutes, steps)))
         top.set_xlabel("wall time (min)")
     ax1.set_ylabel("return (m of progress)")
     ax1.legend(loc="upper left")
     ax2.set_ylabel("laps per episode")
     ax2.set_xlabel("environment steps (50 Hz)")
-    fig.suptitle(f"PPO on NXPCup-v0 (default track): final policy {result['eval_laps']} lap(s), "
+    fig.suptitle(f"PPO on NXPCup-v0 ({track}): final policy {result['eval_laps']} lap(s), "
                  f"{result['eval_progress_m']} m, {result['eval_ended']}", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -162,9 +174,14 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--envs", type=int, default=4, help="environments stepped together (one process)")
     p.add_argument("--speed-max", type=float, default=2.5, help="speed of the action +1 (m/s)")
     p.add_argument("--eval-time", type=float, default=60.0, help="length of the final drive (s)")
+    p.add_argument("--track", default=None, help="the track: a layout path, 'random' (a new random "
+                   "track every episode) or 'random:N' (default: the bundled track)")
+    p.add_argument("--random-start", action="store_true",
+                   help="start episodes at random points of the track (not only its start pose)")
     a = p.parse_args(argv)
     result = train(timesteps=a.timesteps, minutes=a.minutes, out=a.out, seed=a.seed,
-                   n_envs=a.envs, speed_max_mps=a.speed_max, eval_time_s=a.eval_time)
+                   n_envs=a.envs, speed_max_mps=a.speed_max, eval_time_s=a.eval_time, track=a.track,
+                   random_start=a.random_start)
     for k, v in result.items():
         print(f"{k}: {v}")
 

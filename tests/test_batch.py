@@ -123,6 +123,9 @@ def test_rows_identical_for_one_and_two_workers(tmp_path):
     assert strip(tmp_path / "one") == strip(tmp_path / "two")
     assert read_results(tmp_path / "two" / "results.json") == json.loads(json.dumps(two.rows))
     assert (tmp_path / "one" / "summary.png").stat().st_size > 10_000
+    # every worker's timing (for benchmarks): ready before its first row, rows counted
+    assert len(two.worker_timing) == 2 and sum(w.runs for w in two.worker_timing) == 8
+    assert all(w.started_at <= w.ready_at <= w.first_row_at <= w.last_row_at for w in two.worker_timing)
 
 
 def test_faulty_runs_never_stop_the_batch(tmp_path):
@@ -140,6 +143,29 @@ def test_faulty_runs_never_stop_the_batch(tmp_path):
     runs = sorted(p.name for p in (tmp_path / "out" / "runs").iterdir())
     # failures re-run with a CSV (crash and off-track; the dead and the hung runs again fail)
     assert "run_00000.csv" in runs and "run_00001.csv" in runs
+
+
+def test_a_job_handed_to_a_dead_local_worker_is_reported_not_raised():
+    """A job queued on a worker that has just died (the pipe is closed): handing it over
+    does not raise; waiting reports the worker's death."""
+    from simrunner.workflows.batch.pool import LocalBackend
+    from simrunner.workflows.batch.spec import BatchConfig
+
+    backend = LocalBackend(BatchConfig(controller=str(FOLLOWER)))
+    try:
+        h = backend.start()
+        h.ref.process.kill()
+        h.ref.process.join(timeout=30.0)
+        job = make_jobs(resolve_tracks(["random:1"]), [0], {})[0]
+        backend.submit(h, job, None)
+        got = []
+        for _ in range(60):   # each wait returns at once here: the worker's sentinel is ready
+            got = backend.wait([h], 1.0)
+            if got:
+                break
+        assert got and got[0][1] is None and "died" in got[0][2]
+    finally:
+        backend.close()
 
 
 def test_cli_batch_and_bad_input(tmp_path):

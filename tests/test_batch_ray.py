@@ -1,21 +1,29 @@
 """simrunner batch --ray: a small batch on a local Ray cluster bound to 127.0.0.1 (started and
-stopped by the test, bounded in time) gives the local pool's rows bit for bit."""
+stopped by the tests, bounded in time) gives the local pool's rows bit for bit, and a
+crashing, dying or hanging run is recorded with its reason without stopping the batch."""
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 from pathlib import Path
 
 import pytest
+from test_batch import FAULTY
 
 from simrunner.workflows.batch import deterministic, run_batch
+from simrunner.workflows.batch.ray_backend import LOOPBACK_ENV
 
+# Ray reads its loopback switch when imported, in the cluster's processes and in this driver
+os.environ.setdefault(*LOOPBACK_ENV)
 ray = pytest.importorskip("ray")
+LOOPBACK_HEX = {"0100007F", "0000000000000000FFFF00000100007F", "00000000000000000000000001000000"}
 
 REPO = Path(__file__).resolve().parents[1]
 FOLLOWER = REPO / "examples" / "line_follower.py"
@@ -26,6 +34,40 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def _listening(pids: set[int]) -> set[str]:
+    """The local addresses (``/proc/net`` hex) of the TCP sockets ``pids`` listen on."""
+    inodes = set()
+    for pid in pids:
+        try:
+            links = [os.readlink(f"/proc/{pid}/fd/{fd}") for fd in os.listdir(f"/proc/{pid}/fd")]
+        except OSError:
+            continue
+        inodes |= {link[8:-1] for link in links if link.startswith("socket:[")}
+    out = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            f = line.split()
+            if f[3] == "0A" and f[9] in inodes:   # state LISTEN
+                out.add(f[1].rsplit(":", 1)[0])
+    return out
+
+
+def _tree(root: int) -> set[int]:
+    """``root`` and its live descendants."""
+    parent = {}
+    for entry in os.listdir("/proc"):
+        try:
+            parent[int(entry)] = int(Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (ValueError, OSError):
+            continue
+    out, todo = set(), [root]
+    while todo:
+        pid = todo.pop()
+        out.add(pid)
+        todo += [c for c, p in parent.items() if p == pid and c not in out]
+    return out
 
 
 def _wait_port(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
@@ -40,16 +82,22 @@ def _wait_port(port: int, proc: subprocess.Popen, timeout_s: float) -> None:
     raise TimeoutError(f"the Ray head did not listen on 127.0.0.1:{port} within {timeout_s:g} s")
 
 
-@pytest.fixture
-def ray_cluster(monkeypatch):
+@pytest.fixture(scope="module")
+def ray_cluster():
     """``ray start --head --block`` in its own session, bound to 127.0.0.1, 2 CPUs, small
-    object store; stopped by signalling its process group (only the processes it started).
-    Token authentication is off for this loopback-only cluster (cluster and driver alike,
-    so a token left in ~/.ray by another Ray run does not get in the way)."""
+    object store, shared by this module's tests; stopped by signalling its process group
+    (only the processes it started). Token authentication is off for this loopback-only
+    cluster (cluster and driver alike, so a token left in ~/.ray by another Ray run does not
+    get in the way)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("RAY_AUTH_MODE", "disabled")
+        mp.setenv("RAY_USAGE_STATS_ENABLED", "0")
+        yield from _cluster()
+
+
+def _cluster():
     port = _free_port()
     temp = tempfile.mkdtemp(prefix="rt", dir="/tmp")
-    monkeypatch.setenv("RAY_AUTH_MODE", "disabled")
-    monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")
     env = dict(os.environ, PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     ray_cli = Path(sys.executable).parent / "ray"
     proc = subprocess.Popen(
@@ -59,6 +107,7 @@ def ray_cluster(monkeypatch):
         env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         _wait_port(port, proc, START_TIMEOUT_S)
+        assert _listening(_tree(proc.pid)) <= LOOPBACK_HEX   # no server on other interfaces
         yield f"127.0.0.1:{port}"
     finally:
         for sig, wait_s in ((signal.SIGTERM, 30.0), (signal.SIGKILL, 10.0)):
@@ -75,6 +124,7 @@ def ray_cluster(monkeypatch):
             os.killpg(proc.pid, signal.SIGKILL)  # anything left of the group
         except ProcessLookupError:
             pass
+        shutil.rmtree(temp, ignore_errors=True)  # the cluster's session files and logs
 
 
 def test_ray_cluster_rows_equal_local_pool(ray_cluster, tmp_path):
@@ -86,6 +136,40 @@ def test_ray_cluster_rows_equal_local_pool(ray_cluster, tmp_path):
     assert len(on_ray.rows) == 4
     assert [deterministic(r) for r in on_ray.rows] == [deterministic(r) for r in local.rows]
     assert not ray.is_initialized()   # the driver left the cluster
+    timing = on_ray.worker_timing     # the actors reported ready before their first row
+    assert sum(w.runs for w in timing) == 4
+    assert all(w.started_at <= w.ready_at <= w.first_row_at <= w.last_row_at for w in timing)
+
+
+def test_ray_faulty_runs_never_stop_the_batch(ray_cluster, tmp_path):
+    """One actor: ``slow`` is queued on it behind ``die`` (the actor dies with the call
+    queued), then ``drive`` behind ``slow`` (the actor is killed at the timeout): both queued
+    runs go to a new actor and run."""
+    ctl = tmp_path / "faulty.py"
+    ctl.write_text(textwrap.dedent(FAULTY))
+    res = run_batch(ctl, out_dir=tmp_path / "out", params=["mode=die,slow,drive,crash"],
+                    time_limit_s=1000.0, run_timeout_s=20.0, csv="failures", ray=ray_cluster,
+                    workers=1, tracks=[str(REPO / "examples" / "oval_start.txt")])
+    by_mode = {r["mode"]: r for r in res.rows}
+    assert by_mode["drive"]["outcome"] == "off_track"
+    assert by_mode["crash"]["outcome"] == "controller_error" and "boom" in by_mode["crash"]["message"]
+    assert by_mode["die"]["outcome"] == "worker_died" and "Ray worker died" in by_mode["die"]["message"]
+    assert by_mode["slow"]["outcome"] == "wall_timeout"
+    assert len(res.worker_timing) == 3      # the first actor died, the second was killed
+    runs = sorted(p.name for p in (tmp_path / "out" / "runs").iterdir())
+    assert runs == ["run_00002.csv", "run_00003.csv"]  # failures re-run with a CSV: off track, crash
+    assert not ray.is_initialized()
+
+
+def test_private_local_ray_listens_only_on_loopback(tmp_path):
+    """``--ray`` without an address: every server of the private Ray (GCS, raylet, agents,
+    workers, this driver's) listens on 127.0.0.1 only."""
+    seen: list[set[str]] = []
+    res = run_batch(FOLLOWER, out_dir=tmp_path / "r", ray="local", workers=1, time_limit_s=1.0,
+                    plot=False, on_row=lambda row: seen.append(_listening(_tree(os.getpid()))))
+    assert res.rows[0]["outcome"] and len(seen) == 1
+    assert seen[0] and seen[0] <= LOOPBACK_HEX, seen
+    assert not ray.is_initialized()
 
 
 def test_ray_address_that_does_not_answer(tmp_path):

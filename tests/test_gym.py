@@ -210,6 +210,7 @@ def test_render_returns_the_debug_frame_as_rgb():
     ({"speed_min_mps": 2.0, "speed_max_mps": 1.0}, "speed_max_mps = 1: expected more than"),
     ({"line_row": 500}, "line_row = 500: expected a row 0..127"),
     ({"camera_noise": 1}, "camera_noise = 1: expected True or False"),
+    ({"random_start": "yes"}, "random_start = 'yes': expected True or False"),
     ({"render_mode": "human"}, "render_mode = 'human'"),
     ({"track": "no/such/track.txt"}, "no such track"),
     ({"track": 3}, "track = 3: expected a path"),
@@ -286,6 +287,34 @@ def test_a_random_track_is_the_layout_of_a_seed_drawn_from_the_reset_generator(m
     assert info["track"] == "random:8"
 
 
+def test_random_start_is_a_centreline_point_drawn_from_the_reset_seed():
+    from gymnasium.utils.env_checker import check_env
+
+    env = gymnasium.make("NXPCup-v0", random_start=True, time_limit_s=1.0).unwrapped
+    check_env(env)
+    starts = []
+    for seed in (0, 1, 2, 3):
+        obs, info = env.reset(seed=seed)
+        again, info2 = env.reset(seed=seed)
+        pose = (info["x_m"], info["y_m"], info["yaw_rad"])
+        assert np.array_equal(obs, again) and pose == (info2["x_m"], info2["y_m"], info2["yaw_rad"])
+        assert abs(info["lateral_m"]) < 1e-6 and not info["off_track"]
+        assert abs(info["speed_mps"]) < 1e-3 and info["t_s"] == 0.0
+        starts.append(info["s_m"])
+        # it faces the driving direction: straight ahead at half speed for 0.5 s is progress
+        progress = sum(env.step(np.array([0.0, 0.0], np.float32))[1] for _ in range(25))
+        assert 0.1 < progress < 0.8
+    assert len(set(starts)) == 4
+
+
+def test_progress_point_at_walks_the_loop():
+    p = CentrelineProgress(np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]))
+    assert p.point_at(0.5) == (0.5, 0.0, 0.0)
+    assert p.point_at(1.5) == pytest.approx((1.0, 0.5, math.pi / 2))
+    assert p.point_at(3.5) == pytest.approx((0.0, 0.5, -math.pi / 2))
+    assert p.point_at(4.5) == p.point_at(0.5) and p.point_at(-0.5) == p.point_at(3.5)
+
+
 def test_without_gymnasium_one_clear_line():
     code = ("import sys\nsys.modules['gymnasium'] = None\n"
             "try:\n    import simrunner.gym\nexcept ImportError as e:\n    print(e)\n")
@@ -351,8 +380,10 @@ def test_progress_refuses_bad_centrelines():
         CentrelineProgress(np.array([[0, 0], [1, 0], [1, 0], [0, 1.0]]))
 
 
-def test_learning_example_smoke(tmp_path):
-    """examples/learn_ppo.py for a few hundred steps (needs the learn extra)."""
+@pytest.mark.parametrize("track, random_start", [(None, False), ("random", False), (None, True)])
+def test_learning_example_smoke(tmp_path, track, random_start):
+    """examples/learn_ppo.py for a few hundred steps (needs the learn extra), on the default
+    track, on a new random track every episode and from random start points."""
     pytest.importorskip("stable_baselines3")
     sys.path.insert(0, str(ROOT / "examples"))
     try:
@@ -360,8 +391,9 @@ def test_learning_example_smoke(tmp_path):
     finally:
         sys.path.remove(str(ROOT / "examples"))
     result = learn_ppo.train(timesteps=256, minutes=5.0, out=tmp_path, n_envs=2, n_steps=128,
-                             eval_time_s=1.0, verbose=False)
+                             eval_time_s=1.0, track=track, random_start=random_start, verbose=False)
     assert result["steps"] == 256
+    assert result["eval_track"].startswith("random:") == (track == "random")
     for name in ("learning_curve.png", "episodes.csv", "policy.zip", "evaluation.txt"):
         assert (tmp_path / name).stat().st_size > 0
     assert "eval_progress_m" in (tmp_path / "evaluation.txt").read_text()

@@ -6,7 +6,7 @@ and the :class:`~simrunner.run.judge.Judge` - so a step is the physics a control
 between two ``get_image(row)`` calls: one camera frame (50 Hz for the default car), the
 command set before the frame's first physics step. Same seed, same actions: bit-identical
 observations. Randomness comes only from ``self.np_random`` (seeded by ``reset``): the
-camera noise and the seed of a random track.
+camera noise, the seed of a random track and (``random_start``) the start point.
 
 Spaces (``W`` = camera width, 128 for the default car):
 
@@ -35,6 +35,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from pieces.pose import Pose2
 from simrunner.car import CarModel, make_sim
 from simrunner.errors import SimError
 from simrunner.gym import tracks
@@ -149,6 +150,10 @@ class NXPCupEnv(gymnasium.Env):
         parts = self._parts = self._parts_for(tracks.concrete_spec(self._track_spec, self.np_random))
         sim = parts.sim
         sim.restore_state(parts.initial)
+        if self.settings.random_start:
+            x_m, y_m, heading_rad = parts.progress.point_at(
+                float(self.np_random.uniform(0.0, parts.progress.length_m)))
+            sim.set_state(Pose2(x_m, y_m, heading_rad), 0.0)
         self._sim = sim
         self._clock = LockstepClock(sim, dt_s=self.settings.dt_s, frame_period_s=self._frame_period_s)
         laps = self.settings.laps

@@ -57,6 +57,17 @@ class CentrelineProgress:
         self.s_m = 0.0
         self.lateral_m = 0.0
 
+    def point_at(self, s_m: float) -> tuple[float, float, float]:
+        """The centreline point at arc length ``s_m`` (taken modulo the loop length) and the
+        driving direction there: ``(x_m, y_m, heading_rad)`` (heading of its segment)."""
+        s = float(s_m) % self.length_m
+        for ax, ay, dx, dy, _, length, s0 in self._segs:
+            if s < s0 + length:
+                t = (s - s0) / length
+                return ax + t * dx, ay + t * dy, math.atan2(dy, dx)
+        ax, ay, dx, dy = self._segs[-1][:4]   # s rounded up to the loop length: its end
+        return ax + dx, ay + dy, math.atan2(dy, dx)
+
     def reset(self, x_m: float, y_m: float) -> None:
         """Start following at ``(x_m, y_m)``: projected onto the whole loop (nearest segment)."""
         self._seg, self.s_m, self.lateral_m = self._project(range(self._n), x_m, y_m)

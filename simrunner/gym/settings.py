@@ -28,6 +28,9 @@ class EnvSettings:
     subtracted from the reward of the step that leaves the track (metres of progress).
     ``camera_noise``: add the car's camera noise (``camera.noise_std``) to the line row.
     ``line_row``: the image row observed (None: the car's ``camera.default_row``).
+    ``random_start``: start each episode at rest at a point of the track's centreline drawn
+    uniformly along it (from the reset generator), heading in the driving direction; False:
+    at the track's start pose.
     """
 
     dt_s: float = 0.002
@@ -38,6 +41,7 @@ class EnvSettings:
     off_track_penalty: float = 2.0
     camera_noise: bool = True
     line_row: int | None = None
+    random_start: bool = False
 
     def __post_init__(self) -> None:
         for name, lo, hi, allow_zero in (("dt_s", 0.0, MAX_DT_S, False), ("time_limit_s", 0.0, 1e6, False),
@@ -59,8 +63,9 @@ class EnvSettings:
             if isinstance(v, bool) or not hasattr(v, "__index__") or int(v) < lo:
                 raise EnvSettingsError(f"{name} = {v!r}: expected a whole number >= {lo} (or None)")
             object.__setattr__(self, name, int(v))
-        if not isinstance(self.camera_noise, bool):
-            raise EnvSettingsError(f"camera_noise = {self.camera_noise!r}: expected True or False")
+        for name in ("camera_noise", "random_start"):
+            if not isinstance(getattr(self, name), bool):
+                raise EnvSettingsError(f"{name} = {getattr(self, name)!r}: expected True or False")
         if self.speed_max_mps is not None and self.speed_max_mps <= self.speed_min_mps:
             raise EnvSettingsError(f"speed_max_mps = {self.speed_max_mps:g}: expected more than "
                                    f"speed_min_mps = {self.speed_min_mps:g}")

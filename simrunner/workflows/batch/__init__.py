@@ -4,9 +4,9 @@ on all local cores or a Ray cluster (docs/batch.md).
     run_batch(controller, out_dir=..., tracks=[...], seeds=3, params=["speed=1.5,2.0"]) -> BatchResult
 
 Modules, in data-flow order: :mod:`.spec` (inputs -> jobs), :mod:`.worker` (one job -> one
-row, tracks loaded once per worker), :mod:`.pool` (scheduler, local processes),
-:mod:`.ray_backend` (Ray actors), :mod:`.results` (rows -> CSV/JSON), :mod:`.plot`
-(summary.png), :mod:`.engine` (:func:`run_batch`).
+row, tracks loaded once per worker), :mod:`.scheduler` (jobs -> workers), :mod:`.pool`
+(local processes), :mod:`.ray_backend` (Ray actors), :mod:`.results` (rows -> CSV/JSON),
+:mod:`.plot` (summary.png), :mod:`.engine` (:func:`run_batch`).
 """
 from simrunner.workflows.batch.engine import BatchResult, Selection, default_workers, run_batch
 from simrunner.workflows.batch.results import NONDETERMINISTIC, deterministic, read_results

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from simrunner.workflows.batch.pool import LocalBackend, run_jobs
+from simrunner.workflows.batch.pool import LocalBackend
+from simrunner.workflows.batch.scheduler import WorkerTiming, run_jobs
 from simrunner.workflows.batch.results import (BATCH_OUTCOMES, RESERVED, deterministic,
                                                write_results)
 from simrunner.workflows.batch.spec import (BatchConfig, BatchError, Job, make_jobs, parse_grid,
@@ -51,7 +52,9 @@ class Selection:
 @dataclass(frozen=True)
 class BatchResult:
     """``rows`` sorted by run; the files written; ``rerun_mismatches``: re-run runs (for
-    failure outputs) whose row differed from the first run's (expected: none)."""
+    failure outputs) whose row differed from the first run's (expected: none);
+    ``worker_timing``: the workers of the first pass (start-up and steady rates, for
+    benchmarks)."""
 
     rows: list[dict]
     csv_path: Path
@@ -61,6 +64,7 @@ class BatchResult:
     workers: int
     backend: str
     rerun_mismatches: tuple[int, ...] = ()
+    worker_timing: tuple[WorkerTiming, ...] = ()
 
     def counts(self) -> dict[str, int]:
         out: dict[str, int] = {}
@@ -137,7 +141,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
         from simrunner.workflows.batch.ray_backend import RayBackend
 
         backend_name = f"ray ({ray})"
-        ray_backend = RayBackend(config, address=ray, workers=workers)
+        ray_backend = RayBackend(config, address=ray, workers=workers, quiet=quiet_workers)
         n_workers = ray_backend.workers
         make_backend = lambda: ray_backend  # noqa: E731
 
@@ -152,9 +156,11 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
 
     t0 = time.perf_counter()
     mismatches: list[int] = []
+    timing: list[WorkerTiming] = []
     try:
-        run_jobs(jobs, make_backend(), workers=n_workers, run_timeout_s=timeout, laps=laps,
-                 on_row=take, outputs=lambda j: outputs_for(j, video_sel.upfront(j), csv_sel.upfront(j)))
+        timing = run_jobs(jobs, make_backend(), workers=n_workers, run_timeout_s=timeout, laps=laps,
+                          on_row=take, outputs=lambda j: outputs_for(j, video_sel.upfront(j),
+                                                                      csv_sel.upfront(j)))
         again = [j for j in jobs if rows[j.index]["outcome"] not in OK_OUTCOMES + BATCH_OUTCOMES
                  and (video_sel.mode == "failures" or csv_sel.mode == "failures")
                  and not (video_sel.upfront(j) and csv_sel.upfront(j))]
@@ -187,4 +193,4 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
 
         plot_path = plot_summary(ordered, tuple(grid), out / "summary.png")
     return BatchResult(ordered, csv_path, json_path, plot_path, wall, n_workers, backend_name,
-                       tuple(sorted(mismatches)))
+                       tuple(sorted(mismatches)), tuple(timing))

@@ -1,13 +1,5 @@
-"""Running a batch's jobs on workers: the scheduler (:func:`run_jobs`) and the local
-process backend (:class:`LocalBackend`; the Ray one is :mod:`.ray_backend`).
-
-A backend starts workers, hands one a job, waits for rows and stops a worker. The
-scheduler keeps every worker busy, gives a worker the next job of the track it already has
-loaded (a track is loaded by as few workers as possible), stops a run that passes the
-per-run wall-clock timeout (its worker is killed and replaced) and records a worker that
-dies during a run; neither stops the batch. A run's clock starts when it is
-handed to a worker that has reported ready; until then (a new worker importing the
-simulator) :data:`STARTUP_GRACE_S` applies.
+"""The local process backend of the batch scheduler (:mod:`.scheduler`): worker processes
+on this machine, one pipe each (the Ray backend is :mod:`.ray_backend`).
 
 Local workers are processes of the ``forkserver`` start method (``spawn`` where there is
 none): dartpy worlds cannot be pickled or forked safely, so every worker builds its own.
@@ -17,37 +9,13 @@ from __future__ import annotations
 import multiprocessing
 import multiprocessing.connection
 import time
-from collections import OrderedDict, deque
-from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol
+from dataclasses import dataclass
+from typing import Any
 
-from simrunner.workflows.batch.results import failure_row
+from simrunner.workflows.batch.scheduler import Handle
 from simrunner.workflows.batch.spec import BatchConfig, Job
 
-STARTUP_GRACE_S = 120.0
-"""Extra wall time for a worker's first run (process start, imports, first track)."""
-_POLL_S = 0.5
 
-
-@dataclass(eq=False)
-class Handle:
-    """One worker as the scheduler sees it (backends keep their own fields in ``ref``)."""
-
-    ref: Any
-    track: str | None = None      # label of the track of its last job (it has it loaded)
-    runs: int = 0
-    ready_at: float | None = None  # monotonic time the worker reported ready (None: unknown)
-
-
-class Backend(Protocol):
-    def start(self) -> Handle: ...
-    def submit(self, h: Handle, job: Job, outputs: dict | None) -> None: ...
-    def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]: ...
-    def kill(self, h: Handle) -> None: ...
-    def close(self) -> None: ...
-
-
-# -- the local process backend ---------------------------------------------------------------
 @dataclass(eq=False)
 class _Proc:
     process: Any
@@ -77,7 +45,10 @@ class LocalBackend:
         return h
 
     def submit(self, h: Handle, job: Job, outputs: dict | None) -> None:
-        h.ref.conn.send((job, outputs))
+        try:
+            h.ref.conn.send((job, outputs))
+        except (OSError, ValueError):
+            pass  # the worker has died (its pipe is closed): wait() reports it
 
     def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
         by_obj: dict[Any, Handle] = {}
@@ -134,84 +105,3 @@ class LocalBackend:
         for h in list(self.handles):
             h.ref.process.join(timeout=max(0.0, deadline - time.monotonic()))
             self.kill(h)
-
-
-# -- the scheduler ------------------------------------------------------------------------------
-@dataclass
-class _Queue:
-    """Pending jobs grouped by track, in job order."""
-
-    groups: "OrderedDict[str, deque[Job]]" = field(default_factory=OrderedDict)
-    taken: set = field(default_factory=set)   # track labels some worker has started
-
-    def __len__(self) -> int:
-        return sum(len(g) for g in self.groups.values())
-
-    def add(self, job: Job) -> None:
-        self.groups.setdefault(job.track.label, deque()).append(job)
-
-    def pick(self, h: Handle) -> Job:
-        if h.track in self.groups and self.groups[h.track]:
-            label = h.track
-        else:
-            fresh = [lab for lab, g in self.groups.items() if g and lab not in self.taken]
-            label = fresh[0] if fresh else max((lab for lab, g in self.groups.items() if g),
-                                               key=lambda lab: len(self.groups[lab]))
-        job = self.groups[label].popleft()
-        if not self.groups[label]:
-            del self.groups[label]
-        self.taken.add(label)
-        h.track = label
-        return job
-
-
-def _deadline(h: Handle, submitted: float, run_timeout_s: float) -> float:
-    """When a run handed to ``h`` at ``submitted`` is out of time."""
-    if h.ready_at is None and h.runs == 0:
-        return submitted + STARTUP_GRACE_S + run_timeout_s
-    return max(submitted, h.ready_at or submitted) + run_timeout_s
-
-
-def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: float,
-             laps: int, on_row: Callable[[dict], None],
-             outputs: Callable[[Job], dict | None] = lambda job: None) -> None:
-    """Run every job; ``on_row`` gets each row as it comes (any order). Stops every worker
-    at the end (also on Ctrl-C, which is re-raised)."""
-    queue = _Queue()
-    for job in jobs:
-        queue.add(job)
-    idle = [backend.start() for _ in range(min(workers, len(jobs)))]
-    busy: dict[Handle, tuple[Job, float]] = {}
-    try:
-        while len(queue) or busy:
-            while idle and len(queue):
-                h = idle.pop()
-                job = queue.pick(h)
-                backend.submit(h, job, outputs(job))
-                busy[h] = (job, time.monotonic())
-            now = time.monotonic()
-            deadlines = {h: _deadline(h, t0, run_timeout_s) for h, (_, t0) in busy.items()}
-            wait_s = min([_POLL_S] + [d - now for d in deadlines.values()])
-            for h, row, reason in backend.wait(list(busy), wait_s):
-                job, _ = busy.pop(h)
-                if row is None:
-                    on_row(failure_row(job, laps, "worker_died", reason))
-                    backend.kill(h)
-                    if len(queue):
-                        idle.append(backend.start())
-                    continue
-                h.runs += 1
-                on_row(row)
-                idle.append(h)
-            now = time.monotonic()
-            for h, (job, t0) in list(busy.items()):
-                if now > _deadline(h, t0, run_timeout_s):
-                    busy.pop(h)
-                    backend.kill(h)
-                    on_row(failure_row(job, laps, "wall_timeout", (
-                        f"the run passed the per-run wall-clock timeout of {run_timeout_s:g} s "
-                        "(--run-timeout); its worker was stopped"), round(run_timeout_s, 4)))
-                    if len(queue):
-                        idle.append(backend.start())
-    finally:
-        backend.close()

@@ -3,24 +3,43 @@ a :class:`~simrunner.workflows.batch.worker.WorkerState` (its car and loaded tra
 rows are those of the local pool, bit for bit (the same :func:`execute_job`).
 
 ``address``: ``"local"`` starts a private local Ray instance bound to 127.0.0.1 (stopped at
-the end); anything else is handed to ``ray.init(address=...)`` (``host:6379`` of a cluster
+the end; see :data:`LOOPBACK_ENV`); anything else is handed to ``ray.init(address=...)`` (``host:6379`` of a cluster
 started with ``ray start --head``, or ``ray://host:10001``). Every node needs nxpcup-sim
 installed (``pip install 'nxpcup-sim[ray]'``); ``--video``/``--csv`` files are written on the
 node that ran the run (use a shared folder for DIR on a multi-node cluster).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import os
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, field
 from typing import Any
 
-from simrunner.workflows.batch.pool import Handle
+from simrunner.workflows.batch.scheduler import Handle
 from simrunner.workflows.batch.spec import BatchConfig, BatchError, Job
 
 INSTALL_HINT = "pip install 'nxpcup-sim[ray]'"
 LOCAL_OBJECT_STORE_BYTES = 128 * 1024 * 1024
+LOOPBACK_ENV = ("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+"""Ray (2.60, Linux) turns a node address of 127.0.0.1 into the machine's routable address
+and its servers then listen on every interface; with its cluster mode off (this variable,
+meant for Windows and macOS) a node stays on 127.0.0.1. Ray reads it when it is imported, in
+every process (driver, daemons, workers): a private local Ray sets it before importing Ray,
+for this process and its children (so this process cannot join a multi-node cluster later)."""
 
 
-def import_ray():
+def import_ray(*, loopback: bool = False):
+    """``import ray`` (one line naming the install command if it is missing); ``loopback``:
+    for a private local Ray, which must be bound to 127.0.0.1 (:data:`LOOPBACK_ENV`)."""
+    name, value = LOOPBACK_ENV
+    if loopback and os.environ.get(name) != value:
+        if "ray" in sys.modules:
+            raise BatchError(f"--ray without an address starts a private Ray bound to 127.0.0.1, "
+                             f"which needs {name}={value} before Ray is imported (Ray was imported "
+                             "already): set it, or give a cluster address")
+        os.environ[name] = value
     try:
         import ray
     except ImportError:
@@ -48,12 +67,20 @@ def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
 
 
 class _RayWorker:
-    """The actor: the state of one worker, and one run per call."""
+    """The actor: the state of one worker, and one run per call. Like a local worker it
+    discards controllers' prints (``quiet``) and imports everything a run needs before it
+    answers :meth:`ready`."""
 
-    def __init__(self, config: BatchConfig):
-        from simrunner.workflows.batch.worker import WorkerState
+    def __init__(self, config: BatchConfig, quiet: bool = True):
+        from simrunner.workflows.batch.worker import WorkerState, quiet_output, warm_up
 
+        if quiet:
+            quiet_output()
+        warm_up()
         self.state = WorkerState(config)
+
+    def ready(self) -> None:
+        return None
 
     def run(self, job: Job, outputs: dict | None) -> dict:
         from simrunner.workflows.batch.worker import execute_job
@@ -64,24 +91,32 @@ class _RayWorker:
 @dataclass(eq=False)
 class _Actor:
     actor: Any
-    future: Any = None
+    ready: Any = None   # the ``ready()`` call's ref until it has answered
+    futures: deque = field(default_factory=deque)  # of the runs handed to it, in order
 
 
 class RayBackend:
     """Starts (``"local"``) or joins a Ray cluster; :meth:`shutdown` leaves it."""
 
-    def __init__(self, config: BatchConfig, *, address: str = "local", workers: int | None = None):
-        ray = import_ray()
-        self.ray, self.config = ray, config
+    def __init__(self, config: BatchConfig, *, address: str = "local", workers: int | None = None,
+                 quiet: bool = True):
+        local = address in (None, "", "local")
+        joined = "ray" in sys.modules and sys.modules["ray"].is_initialized()  # the caller's Ray
+        ray = import_ray(loopback=local and not joined)
+        self.ray, self.config, self.quiet = ray, config, quiet
         if ray.is_initialized():
             self.owner = False
-        elif address in (None, "", "local"):
+        elif local:
             from simrunner.workflows.batch.engine import default_workers
 
             ray.init(num_cpus=workers or default_workers(), include_dashboard=False,
                      object_store_memory=LOCAL_OBJECT_STORE_BYTES, log_to_driver=False,
                      _node_ip_address="127.0.0.1", configure_logging=False)
             self.owner = True
+            if any(node.get("NodeManagerAddress") != "127.0.0.1" for node in ray.nodes()):
+                ray.shutdown()
+                raise BatchError(f"--ray: the private Ray did not stay on 127.0.0.1 (this Ray "
+                                 f"version ignores {LOOPBACK_ENV[0]}): give a cluster address")
         else:
             _check_reachable(address)
             try:
@@ -96,23 +131,31 @@ class RayBackend:
         self.handles: list[Handle] = []
 
     def start(self) -> Handle:
-        h = Handle(_Actor(self._cls.remote(self.config)))
+        actor = self._cls.remote(self.config, self.quiet)
+        h = Handle(_Actor(actor, actor.ready.remote()))
         self.handles.append(h)
         return h
 
     def submit(self, h: Handle, job: Job, outputs: dict | None) -> None:
-        h.ref.future = h.ref.actor.run.remote(job, outputs)
+        """Queue a run on the actor (an actor runs its calls one at a time, in order)."""
+        h.ref.futures.append(h.ref.actor.run.remote(job, outputs))
 
     def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
         ray = self.ray
-        by_ref = {h.ref.future: h for h in busy}
-        ready, rest = ray.wait(list(by_ref), num_returns=1, timeout=max(timeout_s, 0.0))
+        by_ref = {h.ref.futures[0]: h for h in busy}   # the run each actor is running
+        starting = {h.ref.ready: h for h in busy if h.ref.ready is not None}
+        ready, rest = ray.wait([*starting, *by_ref], num_returns=1, timeout=max(timeout_s, 0.0))
         if ready and rest:
             more, _ = ray.wait(rest, num_returns=len(rest), timeout=0)
             ready += more
         out = []
         for ref in ready:
+            if ref in starting:   # the actor has imported everything: its run's clock starts
+                h = starting[ref]
+                h.ref.ready, h.ready_at = None, time.monotonic()
+                continue
             h = by_ref[ref]
+            h.ref.futures.popleft()
             try:
                 out.append((h, ray.get(ref), ""))
             except ray.exceptions.RayError as exc:
