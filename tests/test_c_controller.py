@@ -249,10 +249,7 @@ def test_a_prebuilt_shared_library_runs(tmp_path, track, capfd):
     (2, "controller_error", 11, "SIGABRT"),
     (3, "controller_error", 6, "stack overflow"),
     (4, "controller_error", 15, "SIGFPE"),
-    pytest.param(5, "stalled", 17, "stalled", marks=pytest.mark.xfail(
-        strict=False, reason="known: after tests/test_start_floor.py's refused off-road start in the "
-                             "same process the stalled child's location is missing (outcome and rows "
-                             "are right); passes alone - open in issue 11's note")),
+    (5, "stalled", 17, "stalled"),
     (6, "controller_error", 19, "spinner_get_image(line=500)"),
     (7, "controller_error", 21, "spinner_set_speed(speed="),
     (8, "controller_error", None, "exited with status 3"),
@@ -273,6 +270,33 @@ def test_faults_name_the_c_line_and_keep_the_run_so_far(tmp_path, track, capfd, 
     assert "before the fault" in capfd.readouterr().out
     # the simulator survives: the next run is fine
     assert drive(EXAMPLES / "line_follower.c", track=track, time_limit_s=0.5).outcome == "timeout"
+
+
+@pytest.mark.parametrize("fault, outcome, line", [(1, "controller_error", 9), (5, "stalled", 17)])
+def test_a_slow_symboliser_neither_loses_the_line_nor_steps_the_simulation(tmp_path, track,
+                                                                          monkeypatch, fault, outcome, line):
+    """addr2line that closes its output and lingers before it exits: subprocess's bounded wait
+    for it polls with time.sleep, which must be the real sleep there (the simulator's code),
+    not the run's simulated one (that raised RunFinished after a stall, losing the line, and
+    advanced the physics after a fault)."""
+    src = write(tmp_path, "faults.c", FAULTS_C)
+    prog = build_program([src], defines=[f"FAULT={fault}"])
+    before = drive(prog, track=track, wall_limit_s=0.5)
+    real = shutil.which("addr2line")
+    if real is None:
+        pytest.skip("no addr2line (binutils)")
+    slow = write(tmp_path, "bin/addr2line", f"""\
+        #!/bin/sh
+        {real} "$@"
+        exec >&- 2>&-
+        sleep 0.3
+        """)
+    slow.chmod(0o755)
+    monkeypatch.setenv("PATH", f"{slow.parent}{os.pathsep}{os.environ['PATH']}")
+    r = drive(prog, track=track, wall_limit_s=0.5)
+    assert r.outcome == before.outcome == outcome
+    assert f"faults.c:{line}" in r.message and f"faults.c:{line}" in before.message
+    assert r.sim_time_s == before.sim_time_s and r.frames == before.frames
 
 
 def test_fault_report_parsing_table():
