@@ -211,6 +211,26 @@ def test_param_comes_from_the_python_spinner(tmp_path, track, capfd):
     assert "gain 2.5" in capfd.readouterr().out
 
 
+@pytest.mark.parametrize("value", ["abc", "x" * 1500])  # the refusal: shorter, longer than 1023 bytes
+def test_a_refused_call_is_a_fault_at_its_c_line_with_the_simulators_words(tmp_path, track, value):
+    src = write(tmp_path, "refused.c", """\
+        #include <stdio.h>
+        #include "spinner.h"
+        int main(void) {
+            uint8_t img[128 * 128];
+            spinner_get_image(-1, 0, img, sizeof img);
+            printf("gain %g\\n", spinner_param("gain", 0.5));
+            return 0;
+        }
+        """)
+    r = drive(src, track=track, params={"gain": value}, csv=tmp_path / "run.csv")
+    assert r.outcome == "controller_error"
+    assert r.message.startswith(f"{src}:6: param gain='{value[:20]}")
+    if len(value) < 100:  # the whole text (a longer one is cut at 1023 bytes)
+        assert r.message.endswith("expected a value of type float (the type of the default 0.5) (in main())")
+    assert len(read_log(tmp_path / "run.csv")) == 2  # frame 0 and the one image
+
+
 def test_multiple_sources_include_dirs_defines_and_exit_status(tmp_path, track, capfd):
     write(tmp_path, "inc/helper.h", "int helper(int);\n")
     write(tmp_path, "helper.cpp", 'extern "C" int helper(int x) { return x * SCALE; }\n')
