@@ -42,11 +42,15 @@ _CMD = struct.Struct("<3d")
 _D = struct.Struct("<d")
 _3D = struct.Struct("<3d")
 _2I = struct.Struct("<2i")
+_FRAME = struct.Struct("<II3dII2i")  # OP_CMD {speed, steer, yaw} then OP_IMAGE {line, noise}
 EXIT_WAIT_S = 5.0
 
 
 class _ChildGone(Exception):
     """The request pipe reached its end (the child exited or died)."""
+
+
+_PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a refused call
 
 
 class _Child:
@@ -177,50 +181,87 @@ class _Session:
             self._close()
 
     def _serve(self) -> None:
-        """Answer requests until the child ends (raises _ChildGone) or the run does."""
-        s, message, reply = self.spinner, self._message, self._reply
+        """Answer requests until the child ends (raises _ChildGone) or the run does.
+
+        A camera frame's usual requests - the queued command, then the image call - arrive
+        in one read of exactly those bytes: they are answered from one unpack (the same
+        calls in the same order as message by message)."""
+        s, read, rfd, reply, refused = self.spinner, os.read, self.rfd, self._reply, self._refused
+        frame_size, unpack_frame = _FRAME.size, _FRAME.unpack
         while True:
-            op, payload = message()
+            if self._pos == len(self._buf):  # all read: read anew
+                buf = read(rfd, 1 << 16)
+                if not buf:
+                    raise _ChildGone()
+                if len(buf) == frame_size:
+                    op, n, v, d, yaw, op2, n2, line, noise = unpack_frame(buf)
+                    if op == OP_CMD and n == _CMD.size and op2 == OP_IMAGE and n2 == _2I.size:
+                        try:
+                            self.yaw = yaw
+                            s.set_speed_and_servo(v, d)
+                        except _PASS:
+                            raise
+                        except Exception as exc:
+                            refused(exc)
+                        try:
+                            img = s.get_image(line, noise != 0)
+                            reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
+                        except _PASS:
+                            raise
+                        except Exception as exc:
+                            refused(exc)
+                        continue
+                self._buf, self._pos = buf, 0
+            op, payload = self._message()
             try:
-                if op == OP_CMD:
-                    v, d, self.yaw = _CMD.unpack(payload)
-                    s.set_speed_and_servo(v, d)
-                elif op == OP_IMAGE:
-                    line, noise = _2I.unpack(payload)
-                    img = s.get_image(line, noise != 0)
-                    reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
-                elif op == OP_TEXT:
-                    (count,) = struct.unpack_from("<i", payload)
-                    parts = payload[4:].split(b"\0")[:count]
-                    s.add_data([p.decode("utf-8", "replace") for p in parts])
-                elif op == OP_TIME:
-                    reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_time()))
-                elif op == OP_SPEED:
-                    reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_speed()))
-                elif op == OP_POSITION:
-                    reply(_HDR.pack(ST_OK, 24) + _3D.pack(*s.get_position()))
-                elif op == OP_SLEEP:
-                    s.sleep(_D.unpack(payload)[0])
-                    reply(_OK_EMPTY)
-                elif op == OP_LINE:
-                    rows, width = _2I.unpack_from(payload)
-                    s.add_data(np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width))
-                elif op == OP_NOISE:
-                    rows, width = _2I.unpack_from(payload)
-                    img = np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width).copy()
-                    out = np.ascontiguousarray(s.add_noise(img), dtype=np.uint8)
-                    reply(_HDR.pack(ST_OK, out.size) + out.tobytes())
-                elif op == OP_PARAM:
-                    reply(_HDR.pack(ST_OK, 8) + _D.pack(self._param(payload)))
-                elif op == OP_FAULT:
-                    self._fault(payload.decode("utf-8", "replace"))
-                else:
-                    raise ControllerError(f"{self.name}: unknown request {op} from the host program")
-            except (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt):
+                self._handle(op, payload)
+            except _PASS:
                 raise
-            except Exception as exc:  # a call the simulator refused: the child reports where
-                text = str(exc).encode()
-                self._reply(_HDR.pack(ST_ERROR, len(text)) + text)
+            except Exception as exc:
+                refused(exc)
+
+    def _refused(self, exc: Exception) -> None:
+        """A call the simulator refused: the child reports it (with where) on reading this."""
+        text = str(exc).encode()
+        self._reply(_HDR.pack(ST_ERROR, len(text)) + text)
+
+    def _handle(self, op: int, payload: bytes) -> None:
+        """Answer one request (replying to the waiting ones)."""
+        s, reply = self.spinner, self._reply
+        if op == OP_CMD:
+            v, d, self.yaw = _CMD.unpack(payload)
+            s.set_speed_and_servo(v, d)
+        elif op == OP_IMAGE:
+            line, noise = _2I.unpack(payload)
+            img = s.get_image(line, noise != 0)
+            reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
+        elif op == OP_TEXT:
+            (count,) = struct.unpack_from("<i", payload)
+            parts = payload[4:].split(b"\0")[:count]
+            s.add_data([p.decode("utf-8", "replace") for p in parts])
+        elif op == OP_TIME:
+            reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_time()))
+        elif op == OP_SPEED:
+            reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_speed()))
+        elif op == OP_POSITION:
+            reply(_HDR.pack(ST_OK, 24) + _3D.pack(*s.get_position()))
+        elif op == OP_SLEEP:
+            s.sleep(_D.unpack(payload)[0])
+            reply(_OK_EMPTY)
+        elif op == OP_LINE:
+            rows, width = _2I.unpack_from(payload)
+            s.add_data(np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width))
+        elif op == OP_NOISE:
+            rows, width = _2I.unpack_from(payload)
+            img = np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width).copy()
+            out = np.ascontiguousarray(s.add_noise(img), dtype=np.uint8)
+            reply(_HDR.pack(ST_OK, out.size) + out.tobytes())
+        elif op == OP_PARAM:
+            reply(_HDR.pack(ST_OK, 8) + _D.pack(self._param(payload)))
+        elif op == OP_FAULT:
+            self._fault(payload.decode("utf-8", "replace"))
+        else:
+            raise ControllerError(f"{self.name}: unknown request {op} from the host program")
 
     def _param(self, payload: bytes) -> float:
         default = _D.unpack_from(payload)[0]
