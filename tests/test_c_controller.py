@@ -390,6 +390,98 @@ def test_spinner_hpp_image_type_and_norms(tmp_path, track, capfd):
     assert log.steer_cmd_rad[-1] == pytest.approx(0.4)  # -512 = full left through turn_norm
 
 
+# A stand-in for OpenCV's cv::Mat (not installed here): the members spinner.hpp uses, with
+# OpenCV's names and semantics - a region shares the pixels and keeps its parent's row step,
+# copyTo into a Mat of the same size and type writes into its pixels. The program below ran
+# the same against OpenCV 4.6's own headers and libopencv_core.
+CV_MAT_STAND_IN = """\
+    #pragma once
+    #include <algorithm>
+    #include <cstddef>
+    #include <memory>
+    #include <vector>
+    typedef unsigned char uchar;
+    #define CV_8UC1 0
+    namespace cv {
+    struct Rect {
+        int x, y, width, height;
+        Rect(int x_, int y_, int w_, int h_) : x(x_), y(y_), width(w_), height(h_) {}
+    };
+    class Mat {
+      public:
+        int rows = 0, cols = 0;
+        uchar *data = nullptr;
+        std::size_t step = 0;
+        Mat() = default;
+        Mat(int r, int c, int type)
+            : rows(r), cols(c), step(std::size_t(c)),
+              pixels_(std::make_shared<std::vector<uchar>>(std::size_t(r) * c)) {
+            (void)type;
+            data = pixels_->data();
+        }
+        Mat operator()(const Rect &roi) const {
+            Mat m = *this;
+            m.rows = roi.height;
+            m.cols = roi.width;
+            m.data = data + roi.y * step + roi.x;
+            return m;
+        }
+        bool isContinuous() const { return rows == 1 || step == std::size_t(cols); }
+        int type() const { return CV_8UC1; }
+        uchar *ptr(int r = 0) { return data + r * step; }
+        const uchar *ptr(int r = 0) const { return data + r * step; }
+        template <typename T> T &at(int r, int c) { return reinterpret_cast<T *>(ptr(r))[c]; }
+        Mat clone() const {
+            Mat m(rows, cols, CV_8UC1);
+            for (int r = 0; r < rows; r++) std::copy(ptr(r), ptr(r) + cols, m.ptr(r));
+            return m;
+        }
+        void copyTo(Mat &dst) const {  // dst: the same size (a region of a larger Mat too)
+            for (int r = 0; r < rows; r++) std::copy(ptr(r), ptr(r) + cols, dst.ptr(r));
+        }
+      private:
+        std::shared_ptr<std::vector<uchar>> pixels_;
+    };
+    }  // namespace cv
+    """
+
+
+def test_spinner_hpp_opencv_branch_noise_on_a_region_stays_in_it(tmp_path, track, capfd):
+    write(tmp_path, "cv/opencv2/core.hpp", CV_MAT_STAND_IN)
+    src = write(tmp_path, "roi.cpp", """\
+        #include <type_traits>
+        #include "spinner.hpp"
+        static_assert(std::is_same<spinner::Image, cv::Mat>::value, "the OpenCV branch");
+        int main() {
+            Spinner s;
+            cv::Mat row = s.getImage(60, false);
+            cv::Mat img = s.getImage(-1, false);
+            cv::Mat before = img.clone();
+            cv::Mat roi = img(cv::Rect(10, 50, 100, 20));  // columns 10..109 of rows 50..69
+            s.addData(roi);
+            s.addNoise(roi);
+            int outside = 0, inside = 0;
+            for (int r = 0; r < img.rows; r++)
+                for (int c = 0; c < img.cols; c++)
+                    if (img.at<uchar>(r, c) != before.at<uchar>(r, c))
+                        (r >= 50 && r < 70 && c >= 10 && c < 110 ? inside : outside)++;
+            std::cout << "row " << row.rows << "x" << row.cols << " mid " << int(row.at<uchar>(0, 64))
+                      << " continuous " << roi.isContinuous() << " outside " << outside
+                      << " inside " << inside << std::endl;
+            return 0;
+        }
+        """)
+    prog = build_program([src], include_dirs=[tmp_path / "cv"])
+    assert prog.warnings == ""
+    r = drive(prog, track=track)
+    assert r.outcome == "controller_returned", r.message
+    out = capfd.readouterr().out
+    assert "row 1x128 mid " in out and "continuous 0 outside 0 inside " in out
+    mid, inside = int(out.split(" mid ")[1].split()[0]), int(out.split(" inside ")[1].split()[0])
+    assert mid > 128  # the lane is white ahead
+    assert inside > 1000  # of the region's 2000 pixels, most got noise; none outside it
+
+
 def test_headers_compile_cleanly_with_strict_warnings(tmp_path):
     src = write(tmp_path, "strict.cpp", '#include "spinner.hpp"\nint main() { Spinner s; return 0; }\n')
     c_src = write(tmp_path, "strict.c", '#include "spinner.h"\nint main(void) { return 0; }\n')
