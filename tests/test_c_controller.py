@@ -231,6 +231,27 @@ def test_a_refused_call_is_a_fault_at_its_c_line_with_the_simulators_words(tmp_p
     assert len(read_log(tmp_path / "run.csv")) == 2  # frame 0 and the one image
 
 
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity here")
+def test_the_controller_process_is_kept_on_one_cpu_of_the_simulators(tmp_path, track, capfd):
+    src = write(tmp_path, "cpu.c", """\
+        #define _GNU_SOURCE
+        #include <sched.h>
+        #include <stdio.h>
+        #include "spinner.h"
+        int main(void) {
+            uint8_t row[128];
+            spinner_get_image(60, 0, row, sizeof row);
+            cpu_set_t set;
+            sched_getaffinity(0, sizeof set, &set);
+            printf("cpus %d on %d\\n", CPU_COUNT(&set), sched_getcpu());
+            return 0;
+        }
+        """)
+    assert drive(src, track=track).outcome == "controller_returned"
+    words = capfd.readouterr().out.split()
+    assert words[:2] == ["cpus", "1"] and int(words[3]) in os.sched_getaffinity(0)
+
+
 def test_multiple_sources_include_dirs_defines_and_exit_status(tmp_path, track, capfd):
     write(tmp_path, "inc/helper.h", "int helper(int);\n")
     write(tmp_path, "helper.cpp", 'extern "C" int helper(int x) { return x * SCALE; }\n')
