@@ -161,16 +161,11 @@ class _Session:
         self._buf, self._pos = b"".join(chunks), 0
 
     def _message(self, deadline: float | None = None) -> tuple[int, bytes]:
+        """The next ``(op, payload)``, reading as needed (until ``deadline``, if given)."""
         buf, pos = self._buf, self._pos
         if len(buf) - pos < 8:
-            if pos == len(buf) and deadline is None:  # the usual case: all read, read anew
-                buf, pos = os.read(self.rfd, 1 << 16), 0
-                if not buf:
-                    raise _ChildGone()
-                self._buf, self._pos = buf, 0
-            if len(buf) - pos < 8:
-                self._fill(8, deadline)
-                buf, pos = self._buf, 0
+            self._fill(8, deadline)
+            buf, pos = self._buf, 0
         op, n = _HDR.unpack_from(buf, pos)
         if len(buf) - pos < 8 + n:
             self._fill(8 + n, deadline)
