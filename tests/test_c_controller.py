@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from simrunner.cli import main as cli
 from simrunner.errors import ControllerFileError
-from simrunner.run.log import read_log
+from simrunner.run.log import read_log, write_log
 from simrunner.run.native import INCLUDE_DIR, build_program, cflags
 from simrunner.run.native.symbolize import parse_report
 from simrunner.run.runner import drive, resolve_track
@@ -160,6 +160,18 @@ def test_line_follower_c_logs_the_same_lap_as_the_python_one_and_is_deterministi
     again = drive(EXAMPLES / "line_follower.c", track=track, seed=3, csv=tmp_path / "again.csv")
     assert (tmp_path / "again.csv").read_bytes() == (tmp_path / "line_follower.c.csv").read_bytes()
     assert again.lap_times_s == c.lap_times_s
+
+
+def test_without_recording_the_c_lap_is_the_python_lap_bit_for_bit(tmp_path, track):
+    """No CSV, no video: the host sends no text, so each frame's requests are the queued
+    command and the image call in one read (the bridge's short path)."""
+    runs = {name: drive(EXAMPLES / name, track=track, seed=5)
+            for name in ("line_follower.c", "line_follower.py")}
+    for name, r in runs.items():
+        assert r.outcome == "finished"
+        write_log(r.log, tmp_path / f"{name}.csv", float_format="%.17g")
+    assert (tmp_path / "line_follower.c.csv").read_bytes() == (tmp_path / "line_follower.py.csv").read_bytes()
+    assert runs["line_follower.c"].lap_times_s == runs["line_follower.py"].lap_times_s
 
 
 def test_real_car_units_c_drives_as_the_python_one(tmp_path, track):
