@@ -133,7 +133,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     queue(op, a, na, b, nb);
     flush_out();
     uint32_t hdr[2];
-    size_t have = read_reply_head(hdr, reply, size);  /* have <= size, have <= hdr[1] */
+    size_t have = read_reply_head(hdr, reply, size);  /* have <= size */
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
         exit(0);
@@ -145,10 +145,11 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         if (c) memcpy(msg, reply, c);
         if (n > c) read_all(msg + c, n - c);
         msg[n] = 0;
-        skip_in(hdr[1] - (have > n ? have : n));
+        size_t used = have > n ? have : n;  /* more than hdr[1] if a second reply followed */
+        if (used < hdr[1]) skip_in(hdr[1] - used);
         fault_report(0, msg, NULL);
     }
-    size_t n = hdr[1] < size ? hdr[1] : size;
+    size_t n = hdr[1] < size ? hdr[1] : size;  /* one reply per request: have <= hdr[1] */
     if (n > have) read_all((unsigned char *)reply + have, n - have);
     skip_in(hdr[1] - n);
     return hdr[1];
