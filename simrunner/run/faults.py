@@ -5,9 +5,11 @@ controller misbehaves").
   ends the run like ``main`` returning (status 0 or None) or failing (any other status):
   :func:`exit_outcome`. ``os._exit(n)`` called in the run's thread does the same
   (:class:`ControllerGuards` replaces it while the run executes); the outputs are written.
-- ``time.sleep(s)`` in the run's thread waits ``s`` of *simulated* time, like
-  ``spinner.sleep`` and ``usleep`` in C controllers (:class:`ControllerGuards`); in every
-  other thread it is the real sleep.
+- ``time.sleep(s)`` called by the controller's code in the run's thread waits ``s`` of
+  *simulated* time, like ``spinner.sleep`` and ``usleep`` in C controllers
+  (:class:`ControllerGuards`); in every other thread, and where the simulator's own code
+  sleeps in the run's thread (directly or through a library, e.g. ``subprocess``'s bounded
+  waits in the C bridge), it is the real sleep.
 - SIGTERM and SIGHUP end the run like Ctrl-C (:class:`SignalGuard`): the outputs are written
   and the exit code is 128 + the signal's number (143, 129; Ctrl-C: 130).
 - Threads the controller started and left running are reported (:func:`stray_threads`); the
@@ -22,6 +24,7 @@ import math
 import os
 import signal
 import sys
+import sysconfig
 import threading
 import time
 from pathlib import Path
@@ -32,6 +35,10 @@ from simrunner.run.result import Outcome
 
 _real_sleep = time.sleep
 _real_exit = os._exit
+# code that sleeps on behalf of its caller: the standard library and installed packages
+_LIBRARY_DIRS = tuple(sorted({sysconfig.get_paths()[k] for k in ("stdlib", "platstdlib", "purelib",
+                                                                 "platlib")}))
+_PACKAGE_PREFIX = os.path.join(PACKAGE_DIR, "")
 _SIGNALS = tuple(s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None))
                  if s is not None)
 
@@ -143,9 +150,24 @@ def _run_session():
     return session
 
 
+def _called_by_simulator(frame) -> bool:
+    """True when the innermost frame from ``frame`` outwards that is not library code (the
+    standard library, installed packages) is the simulator's own: it sleeps, not the
+    controller."""
+    f = frame
+    while f is not None:
+        name = f.f_code.co_filename
+        if name.startswith(_PACKAGE_PREFIX):
+            return True
+        if not (name.startswith(_LIBRARY_DIRS) or name.startswith("<frozen ")):
+            return False  # the controller's code (its file, its helpers, a test's callable)
+        f = f.f_back
+    return False
+
+
 def _sleep(seconds) -> None:
     session = _run_session()
-    if session is None:
+    if session is None or _called_by_simulator(sys._getframe(1)):
         return _real_sleep(seconds)
     s = float(seconds)  # TypeError for non-numbers, as time.sleep
     if s < 0 or math.isnan(s):

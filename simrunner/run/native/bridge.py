@@ -13,6 +13,12 @@ and the run ends with ``controller_error`` (a :class:`ControllerError` with the 
 after everything recorded so far. A loop that never calls the Spinner is stopped by the
 runner's watchdog; the child is then asked (SIGUSR1) where it is. The child's stdout and
 stderr are the terminal's.
+
+Speed: a camera frame is one round trip (the host queues commands and debug data until the
+next waiting call), answered from one read. The child is kept on the CPU the simulator runs
+on (its affinity follows the simulator's CPU): the two take turns, so nothing runs in parallel
+anyway, and a hand-off on one CPU needs no wake-up of another, idle one (on a quiet virtual
+machine that cost ~60 us a frame). Threads the C program starts share that CPU.
 """
 from __future__ import annotations
 
@@ -25,6 +31,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -42,11 +49,15 @@ _CMD = struct.Struct("<3d")
 _D = struct.Struct("<d")
 _3D = struct.Struct("<3d")
 _2I = struct.Struct("<2i")
+_FRAME = struct.Struct("<II3dII2i")  # OP_CMD {speed, steer, yaw} then OP_IMAGE {line, noise}
 EXIT_WAIT_S = 5.0
 
 
 class _ChildGone(Exception):
     """The request pipe reached its end (the child exited or died)."""
+
+
+_PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a refused call
 
 
 class _Child:
@@ -88,6 +99,21 @@ class _Child:
             self.close()
 
 
+def _cpu_getter() -> Callable[[], int] | None:
+    """The C library's ``sched_getcpu`` (the CPU the calling thread runs on), or None where
+    it or ``os.sched_setaffinity`` is missing."""
+    if not hasattr(os, "sched_setaffinity"):
+        return None
+    try:
+        import ctypes
+
+        fn = ctypes.CDLL(None).sched_getcpu
+    except (OSError, AttributeError):
+        return None
+    fn.restype, fn.argtypes = ctypes.c_int, ()
+    return fn
+
+
 class NativeController:
     """``main(spinner)`` for a built :class:`NativeProgram` (see the module docstring).
     The first child process is started here, ahead of the run."""
@@ -96,6 +122,7 @@ class NativeController:
         self.program = program
         self.args = tuple(args)
         self.host = host_program()  # built (once, cached) before the run starts
+        self.getcpu = _cpu_getter()
         self._ready: _Child | None = _Child(self.host, program, self.args)
 
     def __call__(self, spinner) -> None:
@@ -114,6 +141,7 @@ class _Session:
         spinner.configure(diff_norm=lambda v, d: self.yaw)  # the C side computes the yaw rate
         self._buf = b""
         self._pos = 0
+        self._getcpu, self._cpu = ctrl.getcpu, -1
 
     # -- reading ---------------------------------------------------------------------
     def _fill(self, need: int, deadline: float | None = None) -> None:
@@ -133,16 +161,11 @@ class _Session:
         self._buf, self._pos = b"".join(chunks), 0
 
     def _message(self, deadline: float | None = None) -> tuple[int, bytes]:
+        """The next ``(op, payload)``, reading as needed (until ``deadline``, if given)."""
         buf, pos = self._buf, self._pos
         if len(buf) - pos < 8:
-            if pos == len(buf) and deadline is None:  # the usual case: all read, read anew
-                buf, pos = os.read(self.rfd, 1 << 16), 0
-                if not buf:
-                    raise _ChildGone()
-                self._buf, self._pos = buf, 0
-            if len(buf) - pos < 8:
-                self._fill(8, deadline)
-                buf, pos = self._buf, 0
+            self._fill(8, deadline)
+            buf, pos = self._buf, 0
         op, n = _HDR.unpack_from(buf, pos)
         if len(buf) - pos < 8 + n:
             self._fill(8 + n, deadline)
@@ -152,10 +175,26 @@ class _Session:
         return op, buf[start:start + n]
 
     def _reply(self, data: bytes) -> None:
+        """Send a reply (it wakes the child) from the CPU the child is kept on."""
+        getcpu = self._getcpu
+        if getcpu is not None:
+            cpu = getcpu()
+            if cpu != self._cpu:
+                self._follow(cpu)
         try:
             os.write(self.wfd, data)
         except BrokenPipeError:
             pass  # the child is gone: the next read says how
+
+    def _follow(self, cpu: int) -> None:
+        """Keep the child on ``cpu``, the simulator's (the two take turns, never run at once:
+        a hand-off on one CPU needs no cross-CPU wake-up, which costs tens of us on a virtual
+        machine whose other CPU sleeps). Stops following if the system refuses."""
+        self._cpu = cpu
+        try:
+            os.sched_setaffinity(self.proc.pid, {cpu})
+        except (OSError, ValueError):  # also cpu -1: sched_getcpu failed
+            self._getcpu = None
 
     # -- the run ---------------------------------------------------------------------
     def run(self) -> None:
@@ -177,50 +216,87 @@ class _Session:
             self._close()
 
     def _serve(self) -> None:
-        """Answer requests until the child ends (raises _ChildGone) or the run does."""
-        s, message, reply = self.spinner, self._message, self._reply
+        """Answer requests until the child ends (raises _ChildGone) or the run does.
+
+        A camera frame's usual requests - the queued command, then the image call - arrive
+        in one read of exactly those bytes: they are answered from one unpack (the same
+        calls in the same order as message by message)."""
+        s, read, rfd, reply, refused = self.spinner, os.read, self.rfd, self._reply, self._refused
+        frame_size, unpack_frame = _FRAME.size, _FRAME.unpack
         while True:
-            op, payload = message()
+            if self._pos == len(self._buf):  # all read: read anew
+                buf = read(rfd, 1 << 16)
+                if not buf:
+                    raise _ChildGone()
+                if len(buf) == frame_size:
+                    op, n, v, d, yaw, op2, n2, line, noise = unpack_frame(buf)
+                    if op == OP_CMD and n == _CMD.size and op2 == OP_IMAGE and n2 == _2I.size:
+                        try:
+                            self.yaw = yaw
+                            s.set_speed_and_servo(v, d)
+                        except _PASS:
+                            raise
+                        except Exception as exc:
+                            refused(exc)
+                        try:
+                            img = s.get_image(line, noise != 0)
+                            reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
+                        except _PASS:
+                            raise
+                        except Exception as exc:
+                            refused(exc)
+                        continue
+                self._buf, self._pos = buf, 0
+            op, payload = self._message()
             try:
-                if op == OP_CMD:
-                    v, d, self.yaw = _CMD.unpack(payload)
-                    s.set_speed_and_servo(v, d)
-                elif op == OP_IMAGE:
-                    line, noise = _2I.unpack(payload)
-                    img = s.get_image(line, noise != 0)
-                    reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
-                elif op == OP_TEXT:
-                    (count,) = struct.unpack_from("<i", payload)
-                    parts = payload[4:].split(b"\0")[:count]
-                    s.add_data([p.decode("utf-8", "replace") for p in parts])
-                elif op == OP_TIME:
-                    reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_time()))
-                elif op == OP_SPEED:
-                    reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_speed()))
-                elif op == OP_POSITION:
-                    reply(_HDR.pack(ST_OK, 24) + _3D.pack(*s.get_position()))
-                elif op == OP_SLEEP:
-                    s.sleep(_D.unpack(payload)[0])
-                    reply(_OK_EMPTY)
-                elif op == OP_LINE:
-                    rows, width = _2I.unpack_from(payload)
-                    s.add_data(np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width))
-                elif op == OP_NOISE:
-                    rows, width = _2I.unpack_from(payload)
-                    img = np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width).copy()
-                    out = np.ascontiguousarray(s.add_noise(img), dtype=np.uint8)
-                    reply(_HDR.pack(ST_OK, out.size) + out.tobytes())
-                elif op == OP_PARAM:
-                    reply(_HDR.pack(ST_OK, 8) + _D.pack(self._param(payload)))
-                elif op == OP_FAULT:
-                    self._fault(payload.decode("utf-8", "replace"))
-                else:
-                    raise ControllerError(f"{self.name}: unknown request {op} from the host program")
-            except (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt):
+                self._handle(op, payload)
+            except _PASS:
                 raise
-            except Exception as exc:  # a call the simulator refused: the child reports where
-                text = str(exc).encode()
-                self._reply(_HDR.pack(ST_ERROR, len(text)) + text)
+            except Exception as exc:
+                refused(exc)
+
+    def _refused(self, exc: Exception) -> None:
+        """A call the simulator refused: the child reports it (with where) on reading this."""
+        text = str(exc).encode()
+        self._reply(_HDR.pack(ST_ERROR, len(text)) + text)
+
+    def _handle(self, op: int, payload: bytes) -> None:
+        """Answer one request (replying to the waiting ones)."""
+        s, reply = self.spinner, self._reply
+        if op == OP_CMD:
+            v, d, self.yaw = _CMD.unpack(payload)
+            s.set_speed_and_servo(v, d)
+        elif op == OP_IMAGE:
+            line, noise = _2I.unpack(payload)
+            img = s.get_image(line, noise != 0)
+            reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
+        elif op == OP_TEXT:
+            (count,) = struct.unpack_from("<i", payload)
+            parts = payload[4:].split(b"\0")[:count]
+            s.add_data([p.decode("utf-8", "replace") for p in parts])
+        elif op == OP_TIME:
+            reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_time()))
+        elif op == OP_SPEED:
+            reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_speed()))
+        elif op == OP_POSITION:
+            reply(_HDR.pack(ST_OK, 24) + _3D.pack(*s.get_position()))
+        elif op == OP_SLEEP:
+            s.sleep(_D.unpack(payload)[0])
+            reply(_OK_EMPTY)
+        elif op == OP_LINE:
+            rows, width = _2I.unpack_from(payload)
+            s.add_data(np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width))
+        elif op == OP_NOISE:
+            rows, width = _2I.unpack_from(payload)
+            img = np.frombuffer(payload, np.uint8, rows * width, 8).reshape(rows, width).copy()
+            out = np.ascontiguousarray(s.add_noise(img), dtype=np.uint8)
+            reply(_HDR.pack(ST_OK, out.size) + out.tobytes())
+        elif op == OP_PARAM:
+            reply(_HDR.pack(ST_OK, 8) + _D.pack(self._param(payload)))
+        elif op == OP_FAULT:
+            self._fault(payload.decode("utf-8", "replace"))
+        else:
+            raise ControllerError(f"{self.name}: unknown request {op} from the host program")
 
     def _param(self, payload: bytes) -> float:
         default = _D.unpack_from(payload)[0]

@@ -7,10 +7,11 @@
  * (-rdynamic), so the controller's references bind to them: sleeping waits in simulated
  * time. Requests: {u32 op, u32 length, payload}; replies: {u32 status, u32 length,
  * payload}. Commands and debug data are buffered and sent with the next waiting call (one
- * round trip per camera frame). A fault (SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT; stack
- * overflow through an alternate signal stack), a misused call, or SIGUSR1 (the simulator's
- * watchdog asking where a stalled loop is) sends a FAULT report with the raw backtrace
- * (module, offset, symbol per frame); the simulator symbolises it with the debug info.
+ * round trip per camera frame: a write and a readv). A fault (SIGSEGV, SIGBUS, SIGILL,
+ * SIGFPE, SIGABRT; stack overflow through an alternate signal stack), a misused call, or
+ * SIGUSR1 (the simulator's watchdog asking where a stalled loop is) sends a FAULT report
+ * with the raw backtrace (module, offset, symbol per frame); the simulator symbolises it
+ * with the debug info.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -24,6 +25,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <sys/uio.h>
 #include <ucontext.h>
 #include <unistd.h>
 
@@ -100,6 +102,30 @@ static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t n
     if (nb) memcpy(out_buf + out_len, b, nb), out_len += nb;
 }
 
+static void skip_in(size_t n) {  /* drop n bytes of a reply (longer than the caller's buffer) */
+    unsigned char sink[4096];
+    while (n > 0) {
+        size_t k = n < sizeof sink ? n : sizeof sink;
+        read_all(sink, k);
+        n -= k;
+    }
+}
+
+/* Read a reply's header and as much of its payload as fits `reply` (`size` bytes) with one
+ * readv (the simulator writes a reply at once: usually all of it is there); returns the
+ * payload bytes read. */
+static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
+    struct iovec iov[2] = {{hdr, 2 * sizeof hdr[0]}, {reply, size}};
+    ssize_t k;
+    do k = readv(rep_fd, iov, size ? 2 : 1); while (k < 0 && errno == EINTR);
+    if (k <= 0) _exit(75);  /* the simulator is gone */
+    if ((size_t)k < iov[0].iov_len) {
+        read_all((unsigned char *)hdr + k, iov[0].iov_len - (size_t)k);
+        return 0;
+    }
+    return (size_t)k - iov[0].iov_len;
+}
+
 /* Send a waiting request and read the reply into `reply` (at most `size` bytes); returns the
  * reply's length. The run being over ends the program. */
 static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t nb,
@@ -107,7 +133,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     queue(op, a, na, b, nb);
     flush_out();
     uint32_t hdr[2];
-    read_all(hdr, sizeof hdr);
+    size_t have = read_reply_head(hdr, reply, size);  /* have <= size */
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
         exit(0);
@@ -115,14 +141,17 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     if (hdr[0] == ST_ERROR) {
         static char msg[1024];
         size_t n = hdr[1] < sizeof msg - 1 ? hdr[1] : sizeof msg - 1;
-        read_all(msg, n);
+        size_t c = have < n ? have : n;
+        if (c) memcpy(msg, reply, c);
+        if (n > c) read_all(msg + c, n - c);
         msg[n] = 0;
-        for (size_t rest = hdr[1] - n; rest > 0; rest--) { char c; read_all(&c, 1); }
+        size_t used = have > n ? have : n;  /* more than hdr[1] if a second reply followed */
+        if (used < hdr[1]) skip_in(hdr[1] - used);
         fault_report(0, msg, NULL);
     }
-    size_t n = hdr[1] < size ? hdr[1] : size;
-    read_all(reply, n);
-    for (size_t rest = hdr[1] - n; rest > 0; rest--) { char c; read_all(&c, 1); }
+    size_t n = hdr[1] < size ? hdr[1] : size;  /* one reply per request: have <= hdr[1] */
+    if (n > have) read_all((unsigned char *)reply + have, n - have);
+    skip_in(hdr[1] - n);
     return hdr[1];
 }
 

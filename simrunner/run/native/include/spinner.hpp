@@ -12,7 +12,8 @@
 // getImage returns a cv::Mat (CV_8UC1) when OpenCV's C++ headers are available, otherwise
 // spinner::Image: the part of cv::Mat a controller uses (rows, cols, data, at<uint8_t>(r, c),
 // ptr<uint8_t>(r), empty(), total(), clone()), so the same source compiles either way.
-// Define SPINNER_NO_OPENCV to use spinner::Image even with OpenCV installed.
+// Define SPINNER_NO_OPENCV to use spinner::Image even with OpenCV installed. With OpenCV,
+// addData and addNoise take CV_8UC1 Mats, regions of a larger one (img(cv::Rect(...))) too.
 // usleep/sleep/nanosleep wait in simulated time (see spinner.h).
 #ifndef NXPCUP_SPINNER_HPP
 #define NXPCUP_SPINNER_HPP
@@ -169,8 +170,27 @@ class Spinner {
         for (const auto &s : data) lines.push_back(s.c_str());
         spinner_add_text(lines.data(), int(lines.size()));
     }
-    void addData(const spinner::Image &img) { spinner_add_line(img.data, img.rows, img.cols); }
-    void addNoise(spinner::Image &img) { spinner_add_noise(img.data, img.rows, img.cols); }
+    void addData(const spinner::Image &img) {
+#ifdef SPINNER_HAVE_OPENCV
+        if (!img.isContinuous()) {  // a region of a larger Mat: its rows are not adjacent
+            const cv::Mat packed = img.clone();
+            spinner_add_line(packed.data, packed.rows, packed.cols);
+            return;
+        }
+#endif
+        spinner_add_line(img.data, img.rows, img.cols);
+    }
+    void addNoise(spinner::Image &img) {
+#ifdef SPINNER_HAVE_OPENCV
+        if (!img.isContinuous()) {  // noise on a packed copy, written back into the region
+            cv::Mat packed = img.clone();
+            spinner_add_noise(packed.data, packed.rows, packed.cols);
+            packed.copyTo(img);
+            return;
+        }
+#endif
+        spinner_add_noise(img.data, img.rows, img.cols);
+    }
 
     bool recording() const { return spinner_recording() != 0; }
     int lineRow() const { return spinner_line_row(); }
