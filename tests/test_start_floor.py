@@ -21,7 +21,7 @@ from vehicle.description import CarDescription
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
-SHARED_TRACKS = REPO.parents[1] / "shared" / "tracks"
+SHARED_TRACKS = REPO.parent / "shared" / "tracks"
 CAR = CarDescription()
 BUMPER_M = CAR.chassis.length_m - CAR.chassis.rear_overhang_m  # car frame -> front bumper
 
