@@ -367,7 +367,7 @@ def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvem
         return f"fit improvement {tr.improvement:.1%} < {improvement_min:.1%}"
     if not (math.isfinite(tr.held_gap) and tr.held_gap <= held_before * (1.0 - held_improvement_min)):
         return (f"held-out gap {held_before:.3g} -> {tr.held_gap:.3g}: not smaller by "
-                f"{held_improvement_min:.0%} (the held-out windows do not confirm it)")
+                f"{held_improvement_min:.1%} (the held-out windows do not confirm it)")
     return ""
 
 
