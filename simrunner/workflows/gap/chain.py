@@ -28,7 +28,13 @@ refitted) and
 4. when every refitted candidate fails, refits the next ones in the screening order (at
    most :data:`MAX_REFITS_PER_STEP` per step, only those whose screening fit gained at least
    half of ``IMPROVEMENT_MIN``: a one-parameter gain below that is not worth a refit);
-5. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects.
+5. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects;
+6. then checks every kept effect once more (backward elimination): with two or more kept,
+   each is left out in turn and the others refitted; an effect that would no longer pass
+   the tests of step 3 as the last one added (against the others refitted without it) is
+   removed, the weakest first, and the check repeats. A look-alike kept early (a slower
+   servo standing in for a latency found later) goes; ``Chain.pruned`` records it with its
+   reason.
 
 Every candidate that was tried and not kept is recorded with its reason. The chain's
 result is the car with all kept effects; its parameters are those of the last joint refit.
@@ -180,10 +186,12 @@ class Chain:
     nominal_held_gap: float  # held-out windows, nominal car
     stop_reason: str = ""
     parameters: dict[str, float] = dataclasses.field(default_factory=dict)  # the final refit of every kept parameter
+    pruned: tuple[Trial, ...] = ()  # kept by a step, removed by the final check (the trial: the model with it)
 
     @property
     def effects(self) -> list[str]:
-        return [s.kept.effect for s in self.steps if s.kept is not None]
+        gone = {t.effect for t in self.pruned}
+        return [s.kept.effect for s in self.steps if s.kept is not None and s.kept.effect not in gone]
 
     @property
     def rejected(self) -> list[tuple[int, Trial]]:
@@ -348,11 +356,33 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             cost, held_gap = chosen.cost, chosen.held_gap
         else:
             stop = f"the chain reached its limit of {max_effects} effects"
+        pruned: list[Trial] = []
+        while len(kept_names) > 1:  # the final check: every kept effect still earns its place
+            tick("final check")
+            k = len(kept_names)
+            outs = run_tasks([(screening_problem(fit_problem), fit_problem, held_problem, base,
+                               [n for n in kept_names if n != e],
+                               {f: v for f, v in kept_values.items() if f != CANDIDATES[e].field})
+                              for e in kept_names])
+            weakest = None
+            for e, (values, c, evals, held) in zip(kept_names, outs):
+                crit_without = bic(fit_problem, c, k - 1)
+                tr = Trial(e, dict(kept_values), cost, crit_without - bic(fit_problem, cost, k),
+                           1.0 - cost / c if c > 0 else 0.0, held_gap, evals)
+                reason = _reject_reason(tr, held, delta_bic_min, improvement_min, held_improvement_min)
+                if reason and (weakest is None or tr.delta_bic < weakest[0].delta_bic):
+                    weakest = (dataclasses.replace(tr, reason=reason), values, c, held)
+            if weakest is None:
+                break
+            tr, values, c, held = weakest
+            pruned.append(tr)
+            kept_names.remove(tr.effect)
+            kept_values, cost, held_gap = values, c, held
     finally:
         if pool is not None:
             pool.shutdown()
     return Chain(tuple(steps), with_parameters(base, kept_values), nominal_cost, nominal_held, stop,
-                 dict(kept_values))
+                 dict(kept_values), tuple(pruned))
 
 
 def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvement_min: float,

@@ -158,6 +158,8 @@ class GapResult:
             "chain": self.chain.to_json(), "chain_stop": self.chain.stop_reason,
             "rejected": [{"step": k, "effect": t.effect, "parameters": t.parameters, "reason": t.reason}
                          for k, t in self.chain.rejected],
+            "pruned": [{"effect": t.effect, "parameters": t.parameters, "reason": t.reason,
+                        "delta_bic": t.delta_bic, "improvement": t.improvement} for t in self.chain.pruned],
             "unexplained": self.leftovers,
             "cannot_reveal": self.unrevealable,
             "glitches": [{"log": src, "kind": g.kind, "t_start_s": g.t_start_s, "t_end_s": g.t_end_s,
@@ -393,13 +395,15 @@ def _gap(held_problem: Problem, parts: Sequence[LogPart], res_parts: Sequence[di
 
 def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
     """Upper bound of the ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates
-    (each chain step screens the remaining effects and runs its batches of joint refits)."""
+    (each chain step screens the remaining effects and runs its batches of joint refits; the
+    final check runs at most one round per kept effect but the last)."""
     from simrunner.workflows.gap.chain import MAX_REFITS_PER_STEP, REFINE_LATER
     from simrunner.workflows.gap.fit import REFINE_TOP
 
     steps = min(max_effects, n_effects) + 1
     batches = -(-MAX_REFITS_PER_STEP // max(min(REFINE_LATER, REFINE_TOP), 1))
-    return 2 + sum(max(n_effects - s, 0) + batches for s in range(steps))
+    final_checks = max(min(max_effects, n_effects) - 1, 0)
+    return 2 + sum(max(n_effects - s, 0) + batches for s in range(steps)) + final_checks
 
 
 def _params_text(params: dict[str, float]) -> str:
@@ -423,12 +427,16 @@ def summary_text(result: GapResult) -> str:
                  f"{result.gap_before:.3g} -> {result.gap_after:.3g}"
                  + (f"  (least squares: {result.gap_ls_before:.3g} -> {result.gap_ls_after:.3g})"
                     if math.isfinite(result.settings.get("robust_scale", math.inf)) else ""))
+    gone = {t.effect: t for t in chain.pruned}
     for step in chain.steps:
         kept = step.kept
         if kept is not None:
             lines.append(f"  step {step.index}: + {kept.effect:<20} held-out gap {step.held_gap_before:.3g} -> "
-                         f"{kept.held_gap:.3g}  (delta_BIC {kept.delta_bic:.0f}, fit {kept.improvement:.1%})")
+                         f"{kept.held_gap:.3g}  (delta_BIC {kept.delta_bic:.0f}, fit {kept.improvement:.1%})"
+                         + ("  removed by the final check" if kept.effect in gone else ""))
     lines.append(f"  the chain stopped: {chain.stop_reason}")
+    for tr in chain.pruned:
+        lines.append(f"  final check: - {tr.effect:<18} without it, the others refitted: {tr.reason}")
     if chain.rejected:
         lines.append("tried and not kept:")
         for k, tr in chain.rejected:
