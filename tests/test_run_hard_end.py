@@ -90,6 +90,15 @@ def test_a_whole_log_reads_without_warning(tmp_path, recwarn):
     assert len(read_log(path)) == 2 and not recwarn.list
 
 
+def _finish(proc, timeout_s: float = 120.0) -> tuple[str, str]:
+    """``proc``'s output once it ends (its process group killed if it outlives the test)."""
+    try:
+        return proc.communicate(timeout=timeout_s)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
 def test_a_controller_stuck_in_one_c_call_keeps_every_output(tmp_path):
     """``sum(range(10**13))`` holds the interpreter: no Python code runs in the run's process.
     The hard watchdog ends it; the supervisor writes summary, plot and video from the log."""
@@ -105,11 +114,7 @@ def test_a_controller_stuck_in_one_c_call_keeps_every_output(tmp_path):
         sum(range(10 ** 13))
         """, "--csv", "t.csv", "--video", "v.mp4", "--plot", "p.png", "--summary", "s.json",
                        "--wall-limit", "0.5")
-    try:
-        out, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+    out, err = _finish(proc)
     assert proc.returncode == 1, err
     assert 'ctrl.py", line 7 in main' in err  # the stack dump, with the controller's line
     log = read_log(tmp_path / "t.csv")
@@ -137,11 +142,7 @@ def test_without_csv_the_stuck_run_still_gets_its_summary(tmp_path):
             s.get_image()
         sum(range(10 ** 13))
         """, "--summary", "s.json", "--wall-limit", "0.5")
-    try:
-        out, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
+    out, err = _finish(proc)
     assert proc.returncode == 1, err
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["outcome"] == "stalled" and summary["frames"] == 5
