@@ -1,12 +1,13 @@
 """C controllers (issue 11): closed-loop speed of examples/line_follower.c against
 examples/line_follower.py in the same process, and the start-up a student sees.
 
-Closed loop: one lap of the default track, video off, the two controllers interleaved
+Closed loop: one lap of the default track, video off, the controllers interleaved
 ``REPEATS`` times, best (and median) of each kept, with the load average. ``wall`` is the
-run's wall time (``RunResult``; the C controller's process is started before the run, with
-its library loaded, like the Python file is compiled before it); ``CPU`` adds the child
-process's CPU time during the run (``RUSAGE_CHILDREN`` less its start-up, read from
-``/proc/PID/schedstat`` before the run) to the simulator's. The two laps log the same numbers
+run's wall time (``RunResult``; the C controller's library is opened before the run - or,
+``--isolate``, its process started with the library loaded - like the Python file is
+compiled before it); for ``--isolate`` ``CPU`` adds the child process's CPU time during the
+run (``RUSAGE_CHILDREN`` less its start-up, read from ``/proc/PID/schedstat`` before the
+run) to the simulator's. The two laps log the same numbers
 (same arithmetic), so the runs do the same physics. Target: real-time factor of C >= that of
 Python.
 
@@ -23,6 +24,7 @@ Times on a shared machine depend on its load: compare rows of one run.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import resource
@@ -62,7 +64,7 @@ def closed_loop() -> None:
 
     car = load_car(None)
     track, _ = resolve_track(None, car)
-    names = ("line_follower.py", "line_follower.c")
+    names = ("line_follower.py", "line_follower.c", "c --isolate")
     rows = {name: [] for name in names}  # (CPU s, wall s) per lap
     sim_s = {}
     program = build_program([EXAMPLES / "line_follower.c"])  # built (cached) outside the timing
@@ -71,8 +73,10 @@ def closed_loop() -> None:
     for _ in range(REPEATS):
         for name in names:
             child0, start_cpu = _children_cpu_s(), 0.0
-            if name.endswith(".c"):  # started with its library loaded before the run, like
-                ctrl = load_native(program)  # the Python file is compiled before it
+            if name.endswith(".c"):  # in-process: its library opened before the run, like
+                r = drive(load_native(program), track=track, laps=1)  # the .py is compiled
+            elif name == "c --isolate":  # a child process, started with its library loaded
+                ctrl = load_native(dataclasses.replace(program, isolate=True))
                 start_cpu = _started_cpu_s(ctrl._ready.proc.pid)
                 r = drive(ctrl, track=track, laps=1)
             else:
@@ -97,8 +101,11 @@ def closed_loop() -> None:
     c, py = best["line_follower.c"], best["line_follower.py"]
     ratio = (sim_s["line_follower.c"] / c[1]) / (sim_s["line_follower.py"] / py[1])
     ratio_cpu = (sim_s["line_follower.c"] / c[0]) / (sim_s["line_follower.py"] / py[0])
+    iso = best["c --isolate"]
+    ratio_iso = (sim_s["c --isolate"] / iso[1]) / (sim_s["line_follower.py"] / py[1])
     print(f"  RTF C / Python: wall {ratio:.2f}, CPU {ratio_cpu:.2f}  (target >= 1.0: "
-          f"{'met' if ratio >= 1.0 else 'NOT met'}; CPU counts the C child's run, not its start)")
+          f"{'met' if ratio >= 1.0 else 'NOT met'}); --isolate / Python: wall {ratio_iso:.2f} "
+          f"(CPU counts the C child's run, not its start)")
 
 
 def _wall_s(argv: list[str], env: dict[str, str], repeat: int, before=None) -> list[float]:

@@ -2,10 +2,12 @@
 examples against their Python twins, the thesis's C++ programs, the CLI."""
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import shutil
 import subprocess
+import sys
 import textwrap
 from pathlib import Path
 
@@ -16,7 +18,7 @@ from click.testing import CliRunner
 from simrunner.cli import main as cli
 from simrunner.errors import ControllerFileError
 from simrunner.run.log import read_log, write_log
-from simrunner.run.native import INCLUDE_DIR, build_program, cflags
+from simrunner.run.native import INCLUDE_DIR, NativeProgram, build_program, cflags, load_native
 from simrunner.run.native.symbolize import parse_report
 from simrunner.run.runner import drive, resolve_track
 from vehicle.description import load_car
@@ -44,6 +46,11 @@ def cache(tmp_path_factory):
 @pytest.fixture(scope="module")
 def track():
     return resolve_track(None, load_car(None))[0]
+
+
+def isolated(*sources, **kw) -> NativeProgram:
+    """The program built from ``sources``, to run in a child process (``--isolate``)."""
+    return dataclasses.replace(build_program(list(sources), **kw), isolate=True)
 
 
 def write(folder: Path, name: str, body: str) -> Path:
@@ -244,7 +251,7 @@ def test_a_refused_call_is_a_fault_at_its_c_line_with_the_simulators_words(tmp_p
 
 
 @pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity here")
-def test_the_controller_process_is_kept_on_one_cpu_of_the_simulators(tmp_path, track, capfd):
+def test_an_isolated_controller_process_is_kept_on_one_cpu_of_the_simulators(tmp_path, track, capfd):
     src = write(tmp_path, "cpu.c", """\
         #define _GNU_SOURCE
         #include <sched.h>
@@ -259,7 +266,7 @@ def test_the_controller_process_is_kept_on_one_cpu_of_the_simulators(tmp_path, t
             return 0;
         }
         """)
-    assert drive(src, track=track).outcome == "controller_returned"
+    assert drive(isolated(src), track=track).outcome == "controller_returned"
     words = capfd.readouterr().out.split()
     assert words[:2] == ["cpus", "1"] and int(words[3]) in os.sched_getaffinity(0)
 
@@ -307,10 +314,12 @@ def test_a_prebuilt_shared_library_runs(tmp_path, track, capfd):
     (7, "controller_error", 21, "spinner_set_speed(speed="),
     (8, "controller_error", None, "exited with status 3"),
 ])
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
 def test_faults_name_the_c_line_and_keep_the_run_so_far(tmp_path, track, capfd, fault, outcome,
-                                                        line, words):
+                                                        line, words, isolate):
     src = write(tmp_path, "faults.c", FAULTS_C)
     prog = build_program([src], defines=[f"FAULT={fault}"])
+    prog = dataclasses.replace(prog, isolate=isolate)
     r = drive(prog, track=track, csv=tmp_path / "run.csv", wall_limit_s=0.5)
     assert r.outcome == outcome
     assert words in r.message
@@ -326,14 +335,16 @@ def test_faults_name_the_c_line_and_keep_the_run_so_far(tmp_path, track, capfd, 
 
 
 @pytest.mark.parametrize("fault, outcome, line", [(1, "controller_error", 9), (5, "stalled", 17)])
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
 def test_a_slow_symboliser_neither_loses_the_line_nor_steps_the_simulation(tmp_path, track,
-                                                                          monkeypatch, fault, outcome, line):
+                                                                          monkeypatch, fault, outcome, line,
+                                                                          isolate):
     """addr2line that closes its output and lingers before it exits: subprocess's bounded wait
     for it polls with time.sleep, which must be the real sleep there (the simulator's code),
     not the run's simulated one (that raised RunFinished after a stall, losing the line, and
     advanced the physics after a fault)."""
     src = write(tmp_path, "faults.c", FAULTS_C)
-    prog = build_program([src], defines=[f"FAULT={fault}"])
+    prog = dataclasses.replace(build_program([src], defines=[f"FAULT={fault}"]), isolate=isolate)
     before = drive(prog, track=track, wall_limit_s=0.5)
     real = shutil.which("addr2line")
     if real is None:
@@ -537,3 +548,109 @@ def test_sources_without_main_are_bad_input_and_nothing_is_written(tmp_path, tra
     with pytest.raises(ControllerFileError, match=r"nomain\.c: no main\(\) function defined"):
         drive(src, track=track, csv=tmp_path / "run.csv")
     assert not (tmp_path / "run.csv").exists()
+
+
+# -- in the simulator's process (the default) and --isolate -------------------------------------
+def test_every_in_process_run_starts_from_fresh_globals(tmp_path, track, capfd):
+    """A static, and a C++ inline variable (GCC makes those process-wide unless told not to):
+    each run counts from 0 - a new program each time, or one controller run twice."""
+    src = write(tmp_path, "count.cpp", """\
+        #include <cstdio>
+        #include "spinner.hpp"
+        inline int shared_count = 0;
+        static int file_count;
+        int main() { Spinner s; s.getTime(); std::printf("count %d %d\\n", ++shared_count, ++file_count); }
+        """)
+    prog = build_program([src])
+    ctrl = load_native(prog)
+    for controller in (prog, prog, ctrl, ctrl):
+        assert drive(controller, track=track).outcome == "controller_returned"
+    assert capfd.readouterr().out.split("\n")[:4] == ["count 1 1"] * 4
+
+
+def test_after_an_in_process_run_the_signals_are_the_simulators_again(tmp_path):
+    """The run's handlers (faults in the controller's code) are removed after it: a crash of
+    the simulator itself later still reaches Python's faulthandler."""
+    src = write(tmp_path, "ok.c", '#include "spinner.h"\nint main(void) { spinner_get_time(); return 0; }\n')
+    code = textwrap.dedent(f"""\
+        import faulthandler, sys
+        faulthandler.enable()
+        from simrunner.run.runner import drive
+        print(drive({str(src)!r}, time_limit_s=1.0).outcome, flush=True)
+        faulthandler._sigsegv()
+        """)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.stdout.strip() == "controller_returned"
+    assert done.returncode != 0 and "Fatal Python error: Segmentation fault" in done.stderr
+
+
+def test_a_program_runs_in_the_simulators_process_unless_isolated(tmp_path, track, capfd):
+    src = write(tmp_path, "pid.c", """\
+        #include <stdio.h>
+        #include <unistd.h>
+        #include "spinner.h"
+        int main(void) { spinner_get_time(); printf("pid %d\\n", (int)getpid()); return 0; }
+        """)
+    for prog in (build_program([src]), isolated(src)):
+        assert drive(prog, track=track).outcome == "controller_returned"
+    pids = [int(line.split()[1]) for line in capfd.readouterr().out.splitlines() if line.startswith("pid")]
+    assert pids[0] == os.getpid() != pids[1]
+
+
+def test_cli_isolate_runs_a_c_controller_and_refuses_python(tmp_path):
+    runner = CliRunner()
+    res = runner.invoke(cli, ["drive", str(EXAMPLES / "line_follower.c"), "--isolate",
+                              "--time-limit", "1", "--summary", str(tmp_path / "s.json")])
+    assert res.exit_code == 1 and "outcome: timeout" in res.output  # a lap not completed
+    res = runner.invoke(cli, ["drive", str(EXAMPLES / "line_follower.py"), "--isolate"])
+    assert res.exit_code == 2
+    assert res.output.strip() == f"simrunner: {EXAMPLES / 'line_follower.py'}: --isolate is for C/C++ controllers"
+
+
+def test_two_runs_in_threads_at_once_both_run_and_log_what_one_alone_logs(tmp_path, track):
+    """One in-process run at a time per process: a second one at the same time (another
+    thread) runs in a child process, with the same numbers."""
+    import threading
+
+    prog = build_program([EXAMPLES / "line_follower.c"])
+    alone = drive(prog, track=track, time_limit_s=2.0, csv=tmp_path / "alone.csv")
+    results = {}
+
+    def run(k: int) -> None:
+        results[k] = drive(prog, track=track, time_limit_s=2.0, csv=tmp_path / f"{k}.csv")
+
+    threads = [threading.Thread(target=run, args=(k,)) for k in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    assert [results[k].outcome for k in range(2)] == [alone.outcome] * 2 == ["timeout"] * 2
+    for k in range(2):
+        assert (tmp_path / f"{k}.csv").read_bytes() == (tmp_path / "alone.csv").read_bytes()
+
+
+def test_while_the_in_process_host_is_taken_a_run_goes_to_a_child_process(tmp_path, track, capfd):
+    import ctypes
+
+    from simrunner.run.native.inproc import OpenedProgram, host_library
+
+    src = write(tmp_path, "pid.c", """\
+        #include <stdio.h>
+        #include <unistd.h>
+        #include "spinner.h"
+        int main(void) { spinner_get_time(); printf("pid %d\\n", (int)getpid()); return 0; }
+        """)
+    prog = build_program([src])
+    _, api = host_library()
+    other = OpenedProgram(api, prog)  # another run holds the host (as from another thread)
+    argv = (ctypes.c_char_p * 2)(b"other", None)
+    assert api.spinner_inproc_start(other.handle, 1, argv, 0.0) == 0
+    try:
+        assert drive(prog, track=track).outcome == "controller_returned"
+    finally:
+        api.spinner_inproc_finish()
+        other.close()
+    assert drive(prog, track=track).outcome == "controller_returned"
+    pids = [int(line.split()[1]) for line in capfd.readouterr().out.splitlines() if line.startswith("pid")]
+    assert pids[0] != os.getpid() == pids[1]

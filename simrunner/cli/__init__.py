@@ -172,9 +172,12 @@ def main() -> None:
               help="C/C++ controllers: an include directory (repeatable).")
 @click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
               help="C/C++ controllers: a preprocessor define (repeatable).")
+@click.option("--isolate", is_flag=True,
+              help="C/C++ controllers: run in a child process instead of the simulator's (slower; "
+                   "code that overwrites memory cannot touch the simulator). A .so always is.")
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
               car, dt_s, wall_limit_s, params, include_dirs, defines, start, start_before_finish_m,
-              keep_driving, watch=False) -> None:
+              keep_driving, watch=False, isolate=False) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
     a shared library (.so). See docs/c_controllers.md."""
@@ -185,7 +188,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
     if watch:
         from simrunner.cli.watch import watch_drive
 
-        if more_sources or include_dirs or defines or not controller.endswith(".py"):
+        if more_sources or include_dirs or defines or isolate or not controller.endswith(".py"):
             click.echo("simrunner: --watch: expected one Python controller (.py)", err=True)
             sys.exit(2)
         try:
@@ -203,7 +206,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
 
     def run() -> int:
         try:
-            program = _native_program(controller, more_sources, include_dirs, defines)
+            program = _native_program(controller, more_sources, include_dirs, defines, isolate)
             result = drive(program, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
                            csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
                            wall_limit_s=wall_limit_s, params=parse_params(params),
@@ -305,12 +308,17 @@ def _start_pose(text: str | None) -> tuple[float, float, float] | None:
 
 
 def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs: tuple[str, ...],
-                    defines: tuple[str, ...]):
-    """``controller`` itself (Python), or the built C/C++ program; compiler warnings are
-    shown on stderr. Raises ControllerFileError (bad input) for compile errors."""
+                    defines: tuple[str, ...], isolate: bool = False):
+    """``controller`` itself (Python), or the built C/C++ program (``isolate``: to run in a
+    child process); compiler warnings are shown on stderr. Raises ControllerFileError (bad
+    input) for compile errors."""
+    import dataclasses
+
     from simrunner.errors import ControllerFileError
 
     if not more_sources and not include_dirs and not defines and controller.endswith(".py"):
+        if isolate:
+            raise ControllerFileError(f"{controller}: --isolate is for C/C++ controllers")
         return controller
     from simrunner.run.native import build_program, is_native
 
@@ -322,7 +330,7 @@ def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs
     program = build_program(sources, include_dirs=list(include_dirs), defines=list(defines))
     if program.warnings.strip():
         click.echo(program.warnings.rstrip(), err=True)
-    return program
+    return dataclasses.replace(program, isolate=True) if isolate else program
 
 
 @main.command("cflags")

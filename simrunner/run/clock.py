@@ -71,6 +71,7 @@ class LockstepClock:
         self._command_dirty = True
         self.finished: RunFinished | None = None
         self.last_progress_wall_s = time.monotonic()
+        self.stall_limit_s: float | None = None  # the watchdog's limit, once armed
         self._pose = None
         self._pose_step = -1
 

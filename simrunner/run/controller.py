@@ -76,7 +76,7 @@ def load_controller(controller) -> Controller:
     path = Path(controller)
     from simrunner.run.native import is_native
 
-    if is_native(path):  # C/C++ sources or a shared library: compiled (cached), run in a child
+    if is_native(path):  # C/C++ sources or a shared library: compiled (cached), run (simrunner.run.native)
         from simrunner.run.native import load_native
 
         return Controller(path, None, load_native([path]), None)

@@ -27,6 +27,13 @@ from simrunner.run.clock import LockstepClock
 from simrunner.run.supervise import current_supervision
 
 
+def stall_message(idle_s: float, where: str, limit_s: float) -> str:
+    """The message of a stalled run (``where``: "" or " (at file:line in function)")."""
+    return (f"controller stalled: {idle_s:.1f} s of wall time without letting simulated time "
+            f"pass{where}; call get_image(), sleep() or get_time() in every loop "
+            f"(limit --wall-limit {limit_s:g} s)")
+
+
 class Watchdog:
     """SIGALRM every ``period`` s: if ``clock`` made no progress for ``limit_s`` of wall
     time, end the run and raise :class:`Stalled` in the controller. Works in the main
@@ -70,9 +77,7 @@ class Watchdog:
         idle = time.monotonic() - self.clock.last_progress_wall_s
         if idle <= self.limit_s:
             return
-        msg = (f"controller stalled: {idle:.1f} s of wall time without letting simulated time "
-               f"pass{self._where(frame)}; call get_image(), sleep() or get_time() in every loop "
-               f"(limit --wall-limit {self.limit_s:g} s)")
+        msg = stall_message(idle, self._where(frame), self.limit_s)
         self.clock.finish("stalled", msg)
         self.clock.last_progress_wall_s = time.monotonic()  # raise again only after another limit
         raise Stalled(msg)
@@ -82,6 +87,7 @@ class Watchdog:
             self._old = signal.signal(signal.SIGALRM, self._handler)
             signal.setitimer(signal.ITIMER_REAL, self.period_s, self.period_s)
             self._arm_hard()
+        self.clock.stall_limit_s = self.limit_s  # for code outside the interpreter (C, inproc)
         self.armed = True
         return self
 

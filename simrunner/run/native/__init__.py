@@ -1,6 +1,7 @@
 """C/C++ controllers (issue 11): ``spinner.h``/``spinner.hpp`` (``include/``), the build
-(:mod:`.build`), the child process that runs a program's ``main`` (:mod:`.bridge`, host
-``host/spinner_host.c``) and fault symbolisation (:mod:`.symbolize`). docs/c_controllers.md.
+(:mod:`.build`), running a program's ``main`` in the simulator's process (:mod:`.inproc`)
+or in a child process (:mod:`.bridge`; both hosted by ``host/spinner_host.c``) and fault
+symbolisation (:mod:`.symbolize`). docs/c_controllers.md.
 """
 from simrunner.run.native.build import (INCLUDE_DIR, NATIVE_SUFFIXES, NativeProgram, build_program,
                                         cflags, is_native)

@@ -1,11 +1,14 @@
-"""Running a C/C++ controller: a child process whose Spinner calls come over a pipe.
+"""Running a C/C++ controller: its Spinner calls as messages, answered by the Python Spinner.
 
 :class:`NativeController` is a ``main(spinner)`` callable (what the runner calls for every
 controller), so a C program runs on the same lockstep clock, judging, telemetry and video as
-a Python one. Calling it starts the host program (``host/spinner_host.c``) with the
+a Python one. A program simrunner built runs in this process by default (:mod:`.inproc`,
+the same messages handed over by a context switch). Otherwise - ``--isolate``, or a
+prebuilt library - calling it starts the host program (``host/spinner_host.c``) with the
 controller's shared library; the host calls the program's own ``main`` and sends each
-Spinner call to this process, which answers it with the Python :class:`Spinner` - the
-simulation advances inside those answers, exactly as for a Python controller.
+Spinner call to this process over a pipe, which answers it with the Python
+:class:`Spinner` - the simulation advances inside those answers, exactly as for a Python
+controller. The rest of this docstring is about that child process.
 
 The controller is isolated: a crash, an abort or a stack overflow kills the child only. The
 child reports the fault with its raw backtrace; :mod:`.symbolize` turns it into file:line
@@ -41,7 +44,7 @@ from simrunner.run.native.build import NativeProgram, host_program
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT = range(1, 12)
-ST_OK, ST_FINISHED, ST_ERROR = 0, 1, 2
+ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE = 0, 1, 2, 3
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
 _OK_EMPTY = _HDR.pack(ST_OK, 0)
@@ -116,18 +119,62 @@ def _cpu_getter() -> Callable[[], int] | None:
 
 class NativeController:
     """``main(spinner)`` for a built :class:`NativeProgram` (see the module docstring).
-    The first child process is started here, ahead of the run."""
+
+    A program simrunner built runs in this process (:mod:`.inproc`) unless
+    ``program.isolate``; a prebuilt library (its sleeps are not linked to the simulated
+    ones) and an isolated program run in a child process. The library is opened (or the
+    child started) here, ahead of the run."""
 
     def __init__(self, program: NativeProgram, args: tuple[str, ...] = ()):
         self.program = program
         self.args = tuple(args)
-        self.host = host_program()  # built (once, cached) before the run starts
-        self.getcpu = _cpu_getter()
-        self._ready: _Child | None = _Child(self.host, program, self.args)
+        self.inproc = bool(program.sources) and not program.isolate and sys.platform.startswith("linux")
+        self.host = self.getcpu = None
+        if self.inproc:
+            from simrunner.run.native.inproc import OpenedProgram, host_library
+
+            self.host_path, self.api = host_library()  # built (once, cached) before the run
+            self._spent: list = []  # libraries of finished runs, unloaded before the next one
+            self._ready = OpenedProgram(self.api, program)
+        else:
+            self._ready = self._child()
+
+    def _child(self) -> _Child:
+        if self.host is None:
+            self.host = host_program()  # built (once, cached)
+            self.getcpu = _cpu_getter()
+        return _Child(self.host, self.program, self.args)
 
     def __call__(self, spinner) -> None:
-        child, self._ready = self._ready, None
-        _Session(self, spinner, child or _Child(self.host, self.program, self.args)).run()
+        ready, self._ready = self._ready, None
+        if self.inproc:
+            from simrunner.run.native.inproc import Busy, InprocSession, OpenedProgram
+
+            if ready is None:
+                self._unload()
+                ready = OpenedProgram(self.api, self.program)
+            try:
+                InprocSession(self, spinner, ready, self.host_path).run()
+                return
+            except Busy:  # a run in another thread has the in-process host: use a child
+                self.spent(ready)
+            ready = None
+        _Session(self, spinner, ready or self._child()).run()
+
+    def spent(self, opened) -> None:
+        """A run's library, to unload once the run is over (not in its time)."""
+        self._spent.append(opened)
+
+    def _unload(self) -> None:
+        while self._spent:
+            self._spent.pop().close()
+
+    def __del__(self) -> None:  # and a library opened for a run that never started
+        if getattr(self, "inproc", False):
+            self._unload()
+            if self._ready is not None:
+                self._ready.close()
+                self._ready = None
 
 
 class _Session:
@@ -135,13 +182,16 @@ class _Session:
 
     def __init__(self, ctrl: NativeController, spinner, child: _Child):
         self.ctrl, self.spinner, self.child = ctrl, spinner, child
-        self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
+        self._setup_transport(child)
         self.name = ctrl.program.name
         self.yaw = 0.0
         spinner.configure(diff_norm=lambda v, d: self.yaw)  # the C side computes the yaw rate
         self._buf = b""
         self._pos = 0
-        self._getcpu, self._cpu = ctrl.getcpu, -1
+
+    def _setup_transport(self, child: _Child) -> None:
+        self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
+        self._getcpu, self._cpu = self.ctrl.getcpu, -1
 
     # -- reading ---------------------------------------------------------------------
     def _fill(self, need: int, deadline: float | None = None) -> None:
@@ -149,13 +199,9 @@ class _Session:
         chunks = [self._buf[self._pos:]]
         have = len(chunks[0])
         while have < need:
-            if deadline is not None:
-                left = deadline - time.monotonic()
-                if left <= 0 or not select.select([self.rfd], [], [], left)[0]:
-                    raise _ChildGone()
-            data = os.read(self.rfd, 1 << 16)
-            if not data:
+            if deadline is not None and not self._readable(deadline):
                 raise _ChildGone()
+            data = self._recv()
             chunks.append(data)
             have += len(data)
         self._buf, self._pos = b"".join(chunks), 0
@@ -173,6 +219,18 @@ class _Session:
         start = pos + 8
         self._pos = start + n
         return op, buf[start:start + n]
+
+    def _readable(self, deadline: float) -> bool:
+        """Whether requests arrive before ``deadline`` (``time.monotonic()``)."""
+        left = deadline - time.monotonic()
+        return left > 0 and bool(select.select([self.rfd], [], [], left)[0])
+
+    def _recv(self) -> bytes:
+        """The next bytes of requests (what one read gives); raises _ChildGone at the end."""
+        data = os.read(self.rfd, 1 << 16)
+        if not data:
+            raise _ChildGone()
+        return data
 
     def _reply(self, data: bytes) -> None:
         """Send a reply (it wakes the child) from the CPU the child is kept on."""
@@ -221,13 +279,11 @@ class _Session:
         A camera frame's usual requests - the queued command, then the image call - arrive
         in one read of exactly those bytes: they are answered from one unpack (the same
         calls in the same order as message by message)."""
-        s, read, rfd, reply, refused = self.spinner, os.read, self.rfd, self._reply, self._refused
+        s, recv, reply, refused = self.spinner, self._recv, self._reply, self._refused
         frame_size, unpack_frame = _FRAME.size, _FRAME.unpack
         while True:
             if self._pos == len(self._buf):  # all read: read anew
-                buf = read(rfd, 1 << 16)
-                if not buf:
-                    raise _ChildGone()
+                buf = recv()
                 if len(buf) == frame_size:
                     op, n, v, d, yaw, op2, n2, line, noise = unpack_frame(buf)
                     if op == OP_CMD and n == _CMD.size and op2 == OP_IMAGE and n2 == _2I.size:
@@ -311,6 +367,10 @@ class _Session:
         return v
 
     # -- endings ---------------------------------------------------------------------
+    def _host(self) -> str:
+        """Path of the module that hosts the program (its frames are not the program's)."""
+        return str(self.ctrl.host)
+
     def _user_modules(self) -> set[str]:
         return {str(self.ctrl.program.library)}
 
@@ -318,7 +378,7 @@ class _Session:
         """The child reported a fault: wait for it to end, raise ControllerError."""
         from simrunner.run.native.symbolize import fault_message, format_traceback, parse_report
 
-        fault = parse_report(report, self._user_modules(), str(self.ctrl.host))
+        fault = parse_report(report, self._user_modules(), self._host())
         self._drain()
         raise ControllerError(fault_message(fault), format_traceback(fault, self.name))
 
@@ -326,7 +386,7 @@ class _Session:
         """Ask the stalled child where it is (SIGUSR1), then end it; the message names the line."""
         where = ""
         try:
-            self.proc.send_signal(signal.SIGUSR1)
+            self._ask_where()
             deadline = time.monotonic() + 5.0  # a loaded machine can be slow to answer
             while True:
                 op, payload = self._message(deadline)
@@ -334,7 +394,7 @@ class _Session:
                     from simrunner.run.native.symbolize import parse_report
 
                     fault = parse_report(payload.decode("utf-8", "replace"),
-                                                self._user_modules(), str(self.ctrl.host))
+                                                self._user_modules(), self._host())
                     loc = fault.location
                     if loc is not None:
                         where = f" (at {loc.file}:{loc.line} in {loc.function})"
@@ -350,9 +410,17 @@ class _Session:
         clock.finished = Stalled(message)
         return Stalled(message)
 
+    def _ask_where(self) -> None:
+        """Make the stalled program report where it is (a FAULT report)."""
+        self.proc.send_signal(signal.SIGUSR1)
+
     def _ended(self) -> None:
         """The pipe closed without a fault report: the program returned or exited."""
         rc = self._wait()
+        self._raise_exit(rc)
+
+    def _raise_exit(self, rc: int) -> None:
+        """Nothing for status 0; else the error that ends the run."""
         prog = self.ctrl.program
         lib = ", ".join(map(str, prog.sources)) if prog.sources else str(prog.library)
         if rc == 0:

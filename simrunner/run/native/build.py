@@ -35,6 +35,14 @@ NATIVE_SUFFIXES = C_SUFFIXES + CXX_SUFFIXES + LIB_SUFFIXES
 COMMON_FLAGS = ("-g", "-Og", "-fno-omit-frame-pointer", "-fPIC", "-Wall")
 C_FLAGS = ("-std=gnu11",)
 CXX_FLAGS = ("-std=gnu++17",)
+# GCC makes the statics of inline functions and templates process-wide (STB_GNU_UNIQUE): a
+# library holding one can never be unloaded, and every later run of it would share them.
+# Runs in the simulator's process start from fresh globals, so they are made ordinary.
+CXX_FRESH_FLAGS = ("-fno-gnu-unique",)
+# the sleeps wait in simulated time and an exit ends the program, not the simulator: the
+# controller's calls go to __wrap_NAME (host/spinner_host.c, both builds)
+WRAPPED = ("usleep", "sleep", "nanosleep", "clock_nanosleep", "exit", "_exit", "_Exit", "quick_exit")
+LINK_FLAGS = ("-Wl,--wrap=" + ",--wrap=".join(WRAPPED),)
 INSTALL_HINT = "install a C compiler, e.g. `sudo apt-get install build-essential` (Debian/Ubuntu)"
 
 
@@ -42,12 +50,14 @@ INSTALL_HINT = "install a C compiler, e.g. `sudo apt-get install build-essential
 class NativeProgram:
     """A controller ready to run: ``library`` (a shared library defining ``main``), the
     ``sources`` it was built from (empty for a prebuilt library), the compiler's
-    ``warnings`` text ('' if none) and whether it came from the cache."""
+    ``warnings`` text ('' if none), whether it came from the cache, and ``isolate``: run it
+    in a child process rather than in the simulator's (bridge.NativeController)."""
 
     library: Path
     sources: tuple[Path, ...]
     warnings: str = ""
     cached: bool = False
+    isolate: bool = False
 
     @property
     def name(self) -> str:
@@ -106,6 +116,27 @@ def _file_digest(path: str | Path) -> str | None:
 def _compiler_id(compiler: str) -> str:
     st = os.stat(compiler)
     return f"{os.path.realpath(compiler)}:{st.st_size}:{st.st_mtime_ns}"
+
+
+def _accepts(compiler: str, flags: tuple[str, ...]) -> bool:
+    """Whether the C++ ``compiler`` takes ``flags`` (GCC's own; clang has no such statics).
+    Asked once per compiler and flags; the answer is kept in the cache folder."""
+    mark = cache_dir() / f"accepts-{_digest(_compiler_id(compiler), *flags)}"
+    for answer in ("yes", "no"):
+        if mark.with_suffix("." + answer).exists():
+            return answer == "yes"
+    try:
+        done = subprocess.run([compiler, *flags, "-fsyntax-only", "-x", "c++", os.devnull],
+                              capture_output=True)
+        ok = done.returncode == 0
+    except OSError:
+        return False
+    try:
+        mark.parent.mkdir(parents=True, exist_ok=True)
+        mark.with_suffix(".yes" if ok else ".no").touch()
+    except OSError:
+        pass
+    return ok
 
 
 def _run(cmd: list[str], what: str) -> str:
@@ -180,7 +211,8 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
                  True: find_compiler(True) if cxx else None}
     flags = [*(f"-I{d}" for d in include_dirs), f"-I{INCLUDE_DIR}", *(f"-D{d}" for d in defines)]
     cwd = os.getcwd()
-    key = _digest("controller/1", cwd, *map(str, flags), *COMMON_FLAGS,
+    cxx_flags = CXX_FLAGS + (CXX_FRESH_FLAGS if cxx and _accepts(compilers[True], CXX_FRESH_FLAGS) else ())
+    key = _digest("controller/2", cwd, *map(str, flags), *COMMON_FLAGS, *cxx_flags, *LINK_FLAGS,
                   *(_compiler_id(c) for c in compilers.values() if c),
                   *(f"{p}\0{_file_digest(p)}" for p in paths))
     entry = cache_dir() / key
@@ -197,14 +229,14 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
         for i, p in enumerate(paths):
             is_cxx = p.suffix in CXX_SUFFIXES
             obj, dep = tmp / f"{i}.o", tmp / f"{i}.d"
-            cmd = [compilers[is_cxx], *COMMON_FLAGS, *(CXX_FLAGS if is_cxx else C_FLAGS), *flags,
+            cmd = [compilers[is_cxx], *COMMON_FLAGS, *(cxx_flags if is_cxx else C_FLAGS), *flags,
                    "-MMD", "-MF", str(dep), "-c", str(p), "-o", str(obj)]
             warnings.append(_run(cmd, str(p)))
             objects.append(str(obj))
             depfiles.append(dep)
         linker = compilers[True] if cxx else compilers[False]
-        warnings.append(_run([linker, "-shared", "-g", *objects, "-o", str(tmp / "controller.so"),
-                              "-lm"], ", ".join(map(str, paths))))
+        warnings.append(_run([linker, "-shared", "-g", *LINK_FLAGS, *objects, "-o",
+                              str(tmp / "controller.so"), "-lm"], ", ".join(map(str, paths))))
         text = "".join(warnings)
         deps = _deps(depfiles)
         (tmp / "manifest.json").write_text(json.dumps({"deps": deps, "warnings": text}))
@@ -224,21 +256,32 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     return NativeProgram(entry / "controller.so", tuple(paths), text, cached=False)
 
 
-def host_program() -> Path:
-    """The host executable (``host/spinner_host.c``), built once per compiler and source."""
+def _build_host(kind: str, suffix: str, flags: list[str], libs: list[str]) -> Path:
+    """Build ``host/spinner_host.c`` once per compiler and source (cached by content)."""
     compiler = find_compiler(False)
-    key = _digest("host/1", _compiler_id(compiler), HOST_SOURCE.read_bytes(),
-                  (INCLUDE_DIR / "spinner.h").read_bytes())
-    exe = cache_dir() / f"spinner_host-{key}"
-    if exe.is_file():
-        return exe
-    exe.parent.mkdir(parents=True, exist_ok=True)
-    tmp = exe.with_name(f".{exe.name}.{os.getpid()}")
+    key = _digest(f"{kind}/1", _compiler_id(compiler), HOST_SOURCE.read_bytes(),
+                  (INCLUDE_DIR / "spinner.h").read_bytes(), *flags)
+    out = cache_dir() / f"{kind}-{key}{suffix}"
+    if out.is_file():
+        return out
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.{os.getpid()}")
     try:
-        _run([compiler, "-O2", "-g", "-rdynamic", f"-I{INCLUDE_DIR}", str(HOST_SOURCE), "-o",
-              str(tmp), "-ldl", "-lm"], "the simrunner host program")
-        os.replace(tmp, exe)
+        _run([compiler, "-O2", "-g", *flags, f"-I{INCLUDE_DIR}", str(HOST_SOURCE), "-o", str(tmp),
+              *libs], "the simrunner host program")
+        os.replace(tmp, out)
     finally:
         if tmp.exists():
             tmp.unlink()
-    return exe
+    return out
+
+
+def host_program() -> Path:
+    """The host executable: runs a controller in a child process (bridge.py)."""
+    return _build_host("spinner_host", "", ["-rdynamic"], ["-ldl", "-lm"])
+
+
+def inproc_library() -> Path:
+    """The in-process host library: runs a controller as a coroutine in this process."""
+    return _build_host("spinner_inproc", ".so", ["-shared", "-fPIC", "-DSPINNER_INPROC"],
+                       ["-ldl", "-lm", "-lpthread"])

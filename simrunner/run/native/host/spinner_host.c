@@ -1,17 +1,24 @@
-/* spinner_host: runs a C/C++ controller (a shared library with `main`) as a child of the
- * simulator and carries its Spinner calls over two pipes (simrunner/run/native/bridge.py).
+/* spinner_host: runs a C/C++ controller (a shared library with `main`) and carries its
+ * Spinner calls to the simulator (simrunner/run/native/bridge.py). Built two ways:
  *
- *   spinner_host CONTROLLER.so REQUEST_FD REPLY_FD PROGRAM_NAME [ARGS...]
+ * - the host program (default): a child process of the simulator, talking over two pipes,
+ *     spinner_host CONTROLLER.so REQUEST_FD REPLY_FD PROGRAM_NAME [ARGS...]
+ *   It exports the Spinner API (spinner.h) and usleep/sleep/nanosleep/clock_nanosleep
+ *   (-rdynamic), so a prebuilt controller's references bind to them.
+ * - the in-process library (-DSPINNER_INPROC, libspinner_inproc.so): loaded into the
+ *   simulator, it runs the program's `main` as a coroutine on a stack of its own. A waiting
+ *   call switches back to the simulator with the requests; the simulator answers and
+ *   switches in again (no process hand-off). Controllers built by simrunner are linked with
+ *   --wrap for the sleeps and exits (__wrap_usleep, __wrap_exit, ...), defined in both.
  *
- * The host exports the Spinner API (spinner.h) and usleep/sleep/nanosleep/clock_nanosleep
- * (-rdynamic), so the controller's references bind to them: sleeping waits in simulated
- * time. Requests: {u32 op, u32 length, payload}; replies: {u32 status, u32 length,
- * payload}. Commands and debug data are buffered and sent with the next waiting call (one
- * round trip per camera frame: a write and a readv). A fault (SIGSEGV, SIGBUS, SIGILL,
- * SIGFPE, SIGABRT; stack overflow through an alternate signal stack), a misused call, or
- * SIGUSR1 (the simulator's watchdog asking where a stalled loop is) sends a FAULT report
- * with the raw backtrace (module, offset, symbol per frame); the simulator symbolises it
- * with the debug info.
+ * Requests: {u32 op, u32 length, payload}; replies: {u32 status, u32 length, payload}.
+ * Commands and debug data are buffered and handed over with the next waiting call (one
+ * round trip per camera frame). A fault (SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT; stack
+ * overflow through an alternate signal stack), a misused call, or the simulator's watchdog
+ * asking where a stalled loop is (SIGUSR1; in-process also the reply ST_WHERE) sends a FAULT
+ * report with the raw backtrace (module, offset, symbol per frame); the simulator symbolises
+ * it with the debug info. In-process, a fault ends the coroutine (the simulator goes on);
+ * a signal that is not the controller's goes to the handler installed before.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -28,14 +35,18 @@
 #include <sys/uio.h>
 #include <ucontext.h>
 #include <unistd.h>
+#ifdef SPINNER_INPROC
+#include <pthread.h>
+#include <sys/mman.h>
+#include <sys/resource.h>
+#endif
 
 #include "spinner.h"
 
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT };
-enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2 };
+enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3 };
 
-static int req_fd = -1, rep_fd = -1;
 static unsigned char out_buf[1 << 16];
 static size_t out_len;
 static int img_h = 128, img_w = 128, line_row = 60, recording_on;
@@ -48,10 +59,125 @@ static double last_time_s, last_speed_val, last_pos[3];
 static int inited;  /* the run's INIT message read (lazily: the child starts before the run) */
 
 static void fault_report(int sig, const char *message, void *pc);
+static void ended(void) __attribute__((noreturn));
 static void read_init(void);
 #define INIT() do { if (!inited) read_init(); } while (0)
 
-/* -- pipe I/O ------------------------------------------------------------------------- */
+#ifdef SPINNER_INPROC
+/* -- in-process I/O: requests collect in out_buf; a read with nothing left of the reply
+ * switches to the simulator, which takes the requests and switches back with the reply. */
+/* Context switches. On x86-64 a few instructions (the callee-saved registers, MXCSR and the
+ * x87 control word, then the stack pointer): no system call, unlike swapcontext's signal
+ * mask. Elsewhere ucontext. co_start runs entry() on a fresh stack. */
+static void entry(void);
+#if defined(__x86_64__)
+#define FAST_SWITCH 1
+void spinner_switch(void **save_sp, void *to_sp);
+__asm__(".text\n"
+        ".globl spinner_switch\n"
+        ".hidden spinner_switch\n"
+        ".type spinner_switch,@function\n"
+        "spinner_switch:\n"
+        "  pushq %rbp\n  pushq %rbx\n  pushq %r12\n  pushq %r13\n  pushq %r14\n  pushq %r15\n"
+        "  subq $8, %rsp\n  stmxcsr (%rsp)\n  fnstcw 4(%rsp)\n"
+        "  movq %rsp, (%rdi)\n  movq %rsi, %rsp\n"
+        "  ldmxcsr (%rsp)\n  fldcw 4(%rsp)\n  addq $8, %rsp\n"
+        "  popq %r15\n  popq %r14\n  popq %r13\n  popq %r12\n  popq %rbx\n  popq %rbp\n"
+        "  ret\n"
+        ".size spinner_switch, .-spinner_switch\n");
+static void *sim_sp, *co_sp;
+static void co_start(void) { entry(); }
+static void ctx_make(void *stack_lo_p, size_t size) {
+    uintptr_t top = ((uintptr_t)stack_lo_p + size) & ~(uintptr_t)15;
+    uint64_t *f = (uint64_t *)(top - 72);  /* what spinner_switch pops, then co_start's return */
+    uint32_t mxcsr;
+    uint16_t cw;
+    __asm__ volatile("stmxcsr %0\n fnstcw %1" : "=m"(mxcsr), "=m"(cw));
+    f[0] = (uint64_t)mxcsr | (uint64_t)cw << 32;  /* as spinner_switch stores them */
+    for (int i = 1; i <= 6; i++) f[i] = 0;  /* r15 r14 r13 r12 rbx rbp */
+    f[7] = (uint64_t)(uintptr_t)co_start;   /* "returned" to, with rsp = top - 8 */
+    f[8] = 0;                               /* co_start's return address: the end */
+    co_sp = f;
+}
+#define TO_SIM() spinner_switch(&co_sp, sim_sp)
+#define TO_CO() spinner_switch(&sim_sp, co_sp)
+#define ESCAPE() do { void *dead; spinner_switch(&dead, sim_sp); } while (0)
+#else
+static ucontext_t sim_ctx, co_ctx;
+static void ctx_make(void *stack_lo_p, size_t size) {
+    getcontext(&co_ctx);
+    co_ctx.uc_stack.ss_sp = stack_lo_p;
+    co_ctx.uc_stack.ss_size = size;
+    co_ctx.uc_link = NULL;
+    makecontext(&co_ctx, entry, 0);
+}
+#define TO_SIM() swapcontext(&co_ctx, &sim_ctx)
+#define TO_CO() swapcontext(&sim_ctx, &co_ctx)
+#define ESCAPE() setcontext(&sim_ctx)
+#endif
+static sigset_t run_mask;                    /* the simulator's signal mask (restored on escape) */
+static volatile sig_atomic_t in_controller;  /* the controller's code runs (signals are its) */
+static volatile sig_atomic_t gone;           /* the controller ended (returned, exited, fault) */
+static int exit_code;
+static const unsigned char *rep_buf;         /* the reply handed in (valid until switched out) */
+static size_t rep_len, rep_pos;
+static volatile double resumed_at_s;         /* monotonic time of the last switch in */
+
+static void switch_out(void) {
+    in_controller = 0;
+    TO_SIM();
+    in_controller = 1;
+}
+
+static void write_all(const void *data, size_t n) {
+    const unsigned char *p = data;
+    while (n > 0) {
+        if (out_len == sizeof out_buf) switch_out();  /* the simulator takes it all */
+        size_t k = sizeof out_buf - out_len;
+        if (k > n) k = n;
+        memcpy(out_buf + out_len, p, k);
+        out_len += k;
+        p += k;
+        n -= k;
+    }
+}
+
+static void read_all(void *data, size_t n) {
+    unsigned char *p = data;
+    while (n > 0) {
+        if (rep_pos == rep_len) {
+            fflush(stdout);  /* the controller's prints reach the terminal in order */
+            switch_out();
+            continue;
+        }
+        size_t k = rep_len - rep_pos;
+        if (k > n) k = n;
+        memcpy(p, rep_buf + rep_pos, k);
+        rep_pos += k;
+        p += k;
+        n -= k;
+    }
+}
+
+static void flush_out(void) {}  /* handed over at the next switch */
+
+static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
+    uint32_t hdr[2] = {op, (uint32_t)(na + nb)};
+    write_all(hdr, sizeof hdr);
+    if (na) write_all(a, na);
+    if (nb) write_all(b, nb);
+}
+
+static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
+    (void)reply, (void)size;
+    read_all(hdr, 2 * sizeof hdr[0]);
+    return 0;
+}
+
+#else
+/* -- pipe I/O (the host program) ------------------------------------------------------ */
+static int req_fd = -1, rep_fd = -1;
+
 static void write_all(const void *data, size_t n) {
     const unsigned char *p = data;
     while (n > 0) {
@@ -102,6 +228,8 @@ static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t n
     if (nb) memcpy(out_buf + out_len, b, nb), out_len += nb;
 }
 
+#endif
+
 static void skip_in(size_t n) {  /* drop n bytes of a reply (longer than the caller's buffer) */
     unsigned char sink[4096];
     while (n > 0) {
@@ -111,6 +239,7 @@ static void skip_in(size_t n) {  /* drop n bytes of a reply (longer than the cal
     }
 }
 
+#ifndef SPINNER_INPROC
 /* Read a reply's header and as much of its payload as fits `reply` (`size` bytes) with one
  * readv (the simulator writes a reply at once: usually all of it is there); returns the
  * payload bytes read. */
@@ -125,6 +254,7 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
     }
     return (size_t)k - iov[0].iov_len;
 }
+#endif
 
 /* Send a waiting request and read the reply into `reply` (at most `size` bytes); returns the
  * reply's length. The run being over ends the program. */
@@ -136,8 +266,9 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     size_t have = read_reply_head(hdr, reply, size);  /* have <= size */
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
-        exit(0);
+        ended();
     }
+    if (hdr[0] == ST_WHERE) fault_report(SIGUSR1, "", NULL);
     if (hdr[0] == ST_ERROR) {
         static char msg[1024];
         size_t n = hdr[1] < sizeof msg - 1 ? hdr[1] : sizeof msg - 1;
@@ -330,17 +461,17 @@ double spinner_param(const char *name, double default_value) {
 }
 
 /* -- sleeping in simulated time ------------------------------------------------------------ */
-int usleep(useconds_t usec) {
+static int sim_usleep(useconds_t usec) {
     spinner_sleep(usec * 1e-6);
     return 0;
 }
 
-unsigned int sleep(unsigned int seconds) {
+static unsigned int sim_sleep(unsigned int seconds) {
     spinner_sleep((double)seconds);
     return 0;
 }
 
-int nanosleep(const struct timespec *req, struct timespec *rem) {
+static int sim_nanosleep(const struct timespec *req, struct timespec *rem) {
     if (req == NULL || req->tv_nsec < 0 || req->tv_nsec >= 1000000000L || req->tv_sec < 0) {
         errno = EINVAL;
         return -1;
@@ -350,7 +481,8 @@ int nanosleep(const struct timespec *req, struct timespec *rem) {
     return 0;
 }
 
-int clock_nanosleep(clockid_t clock, int flags, const struct timespec *req, struct timespec *rem) {
+static int sim_clock_nanosleep(clockid_t clock, int flags, const struct timespec *req,
+                               struct timespec *rem) {
     (void)clock;
     if (req == NULL || req->tv_nsec < 0 || req->tv_nsec >= 1000000000L) return EINVAL;
     double s = (double)req->tv_sec + req->tv_nsec * 1e-9;
@@ -359,6 +491,52 @@ int clock_nanosleep(clockid_t clock, int flags, const struct timespec *req, stru
     if (rem) rem->tv_sec = 0, rem->tv_nsec = 0;
     return 0;
 }
+
+/* What controllers built by simrunner call (linked with --wrap=usleep,...; build.py). */
+int __wrap_usleep(useconds_t usec) { return sim_usleep(usec); }
+unsigned int __wrap_sleep(unsigned int seconds) { return sim_sleep(seconds); }
+int __wrap_nanosleep(const struct timespec *req, struct timespec *rem) {
+    return sim_nanosleep(req, rem);
+}
+int __wrap_clock_nanosleep(clockid_t clock, int flags, const struct timespec *req,
+                           struct timespec *rem) {
+    return sim_clock_nanosleep(clock, flags, req, rem);
+}
+
+#ifndef SPINNER_INPROC
+/* The host program also interposes the real names (a prebuilt library's references). */
+int usleep(useconds_t usec) { return sim_usleep(usec); }
+unsigned int sleep(unsigned int seconds) { return sim_sleep(seconds); }
+int nanosleep(const struct timespec *req, struct timespec *rem) { return sim_nanosleep(req, rem); }
+int clock_nanosleep(clockid_t clock, int flags, const struct timespec *req, struct timespec *rem) {
+    return sim_clock_nanosleep(clock, flags, req, rem);
+}
+
+/* exit and friends end the host process as they would end the program. */
+static void ended(void) { exit(0); }
+void __wrap_exit(int status) { exit(status); }
+void __wrap__exit(int status) { _exit(status); }
+void __wrap__Exit(int status) { _Exit(status); }
+void __wrap_quick_exit(int status) { quick_exit(status); }
+#else
+/* In-process the program's exit ends its coroutine with that status (not the simulator). */
+static void leave(int status) __attribute__((noreturn));
+static void leave(int status) {
+    fflush(stdout);
+    fflush(stderr);
+    exit_code = status;
+    gone = 1;
+    in_controller = 0;
+    pthread_sigmask(SIG_SETMASK, &run_mask, NULL);  /* from a handler: unblock its signal */
+    ESCAPE();
+    abort();  /* not reached */
+}
+static void ended(void) { leave(0); }
+void __wrap_exit(int status) { leave(status); }
+void __wrap__exit(int status) { leave(status); }
+void __wrap__Exit(int status) { leave(status); }
+void __wrap_quick_exit(int status) { leave(status); }
+#endif
 
 /* -- faults ---------------------------------------------------------------------------- */
 static char report[1 << 15];
@@ -431,6 +609,13 @@ static void fault_report(int sig, const char *message, void *pc) {
         }
         rput("\n");
     }
+#ifdef SPINNER_INPROC
+    if (out_len + 8 + report_len > sizeof out_buf) out_len = 0;  /* the report goes first */
+    uint32_t hdr[2] = {OP_FAULT, (uint32_t)report_len};
+    write_all(hdr, sizeof hdr);
+    write_all(report, report_len);
+    leave(sig == SIGUSR1 ? 76 : 70);  /* back to the simulator (from a handler, too) */
+#else
     flush_out();
     uint32_t hdr[2] = {OP_FAULT, (uint32_t)report_len};
     write_all(hdr, sizeof hdr);
@@ -440,9 +625,37 @@ static void fault_report(int sig, const char *message, void *pc) {
         raise(sig);
     }
     _exit(sig == SIGUSR1 ? 76 : 70);
+#endif
 }
 
+static const int fault_sigs[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGUSR1};
+#define N_SIGS (sizeof fault_sigs / sizeof fault_sigs[0])
+
+#ifdef SPINNER_INPROC
+static struct sigaction old_actions[N_SIGS];
+static stack_t old_alt;
+static uintptr_t stack_lo, stack_hi;  /* the controller's stack (a guard page below stack_lo) */
+
+/* A signal that is not the controller's (the simulator's own, or after it ended): hand it
+ * to the handler installed before ours. */
+static void pass_on(int sig, siginfo_t *info) {
+    for (size_t i = 0; i < N_SIGS; i++) {
+        if (fault_sigs[i] != sig) continue;
+        if (sig == SIGUSR1 && old_actions[i].sa_handler == SIG_DFL) return;  /* a late tick */
+        sigaction(sig, &old_actions[i], NULL);
+        if (info->si_code <= 0) raise(sig);  /* sent (kill, raise, abort): send it again */
+        return;  /* a fault: the instruction runs again and faults into that handler */
+    }
+}
+#endif
+
 static void on_fault(int sig, siginfo_t *info, void *context) {
+#ifdef SPINNER_INPROC
+    if (!in_controller) {
+        pass_on(sig, info);
+        return;
+    }
+#endif
     void *pc = NULL;
     uintptr_t sp = 0;
     ucontext_t *uc = context;
@@ -457,20 +670,29 @@ static void on_fault(int sig, siginfo_t *info, void *context) {
 #endif
     uintptr_t addr = (uintptr_t)info->si_addr;
     int overflow = sig == SIGSEGV && sp && addr + 65536 > sp && addr < sp + 65536;
+#ifdef SPINNER_INPROC
+    if (sig == SIGSEGV && stack_lo && addr < stack_lo && addr + 65536 >= stack_lo) overflow = 1;
+    fault_report(sig, overflow ? "stack overflow (the controller's stack is `ulimit -s`)" : "", pc);
+#else
     fault_report(sig, overflow ? "stack overflow (the stack limit is `ulimit -s`)" : "", pc);
+#endif
 }
 
 static void install_handlers(void) {
     static char alt_stack[1 << 16];
     stack_t ss = {.ss_sp = alt_stack, .ss_size = sizeof alt_stack, .ss_flags = 0};
-    sigaltstack(&ss, NULL);
     struct sigaction sa;
     memset(&sa, 0, sizeof sa);
     sa.sa_sigaction = on_fault;
     sa.sa_flags = SA_SIGINFO | SA_ONSTACK;
     sigemptyset(&sa.sa_mask);
-    int sigs[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGUSR1};
-    for (size_t i = 0; i < sizeof sigs / sizeof sigs[0]; i++) sigaction(sigs[i], &sa, NULL);
+#ifdef SPINNER_INPROC
+    sigaltstack(&ss, &old_alt);
+    for (size_t i = 0; i < N_SIGS; i++) sigaction(fault_sigs[i], &sa, &old_actions[i]);
+#else
+    sigaltstack(&ss, NULL);
+    for (size_t i = 0; i < N_SIGS; i++) sigaction(fault_sigs[i], &sa, NULL);
+#endif
     void *warm[2];
     backtrace(warm, 2);  /* loads the unwinder now, not inside a signal handler */
 }
@@ -483,6 +705,7 @@ static void read_init(void) {
     recording_on = (int)init[3], wheelbase_m = init[4];
 }
 
+#ifndef SPINNER_INPROC
 /* -- start ------------------------------------------------------------------------------ */
 int main(int argc, char **argv) {
     if (argc < 5) {
@@ -506,3 +729,191 @@ int main(int argc, char **argv) {
     flush_out();
     exit(rc);
 }
+#else
+/* -- the in-process interface (ctypes, inproc.py) ---------------------------------------- */
+typedef int (*main_fn)(int, char **, char **);
+static main_fn user_main;
+static int user_argc;
+static char **user_argv;
+static void *stack_mem;  /* mapped at the first run, kept for the next ones */
+static size_t stack_size;
+static pthread_t sim_thread;
+
+static double now_s(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+/* The watchdog of code that never calls the API: after stall_limit_s in one stretch of the
+ * controller's code, SIGUSR1 to the simulator's thread reports where and ends the coroutine.
+ * One thread per process, started at the first run that needs it; between runs it sleeps
+ * until the next one (so a run's start and end cost no thread start, join or wake-up). */
+static pthread_mutex_t dog_lock = PTHREAD_MUTEX_INITIALIZER;
+static pthread_cond_t dog_wake = PTHREAD_COND_INITIALIZER;
+static int dog_started;
+static volatile int dog_active;  /* a run is on and wants the watchdog */
+static volatile double stall_limit_s;
+
+static void *watchdog(void *arg) {
+    (void)arg;
+    double asked_for = -1.0;
+    pthread_mutex_lock(&dog_lock);
+    for (;;) {
+        if (!dog_active) {
+            pthread_cond_wait(&dog_wake, &dog_lock);
+            continue;
+        }
+        double limit = stall_limit_s, period = limit / 5 < 0.05 ? limit / 5 : 0.05;
+        struct timespec until;
+        clock_gettime(CLOCK_REALTIME, &until);
+        double t = until.tv_sec + until.tv_nsec * 1e-9 + period;
+        until.tv_sec = (time_t)t;
+        until.tv_nsec = (long)((t - (double)until.tv_sec) * 1e9);
+        pthread_cond_timedwait(&dog_wake, &dog_lock, &until);
+        double t0 = resumed_at_s;
+        if (dog_active && in_controller && !gone && t0 != asked_for && now_s() - t0 > limit) {
+            asked_for = t0;
+            pthread_kill(sim_thread, SIGUSR1);
+        }
+    }
+    return NULL;
+}
+
+static void dog_after_fork(void) {  /* the thread is not in a forked child */
+    dog_started = 0;
+    dog_active = 0;
+    pthread_mutex_init(&dog_lock, NULL);
+    pthread_cond_init(&dog_wake, NULL);
+}
+
+static void dog_start(double limit_s) {
+    pthread_mutex_lock(&dog_lock);
+    stall_limit_s = limit_s;
+    dog_active = 1;
+    if (!dog_started) {
+        pthread_t t;
+        pthread_attr_t attr;
+        pthread_attr_init(&attr);
+        pthread_attr_setdetachstate(&attr, PTHREAD_CREATE_DETACHED);
+        sigset_t all, old;
+        sigfillset(&all);
+        pthread_sigmask(SIG_SETMASK, &all, &old);  /* signals are for the other threads */
+        if (pthread_create(&t, &attr, watchdog, NULL) == 0) {
+            if (!dog_started) pthread_atfork(NULL, NULL, dog_after_fork);
+            dog_started = 1;
+        }
+        pthread_sigmask(SIG_SETMASK, &old, NULL);
+        pthread_attr_destroy(&attr);
+    } else {
+        pthread_cond_signal(&dog_wake);
+    }
+    pthread_mutex_unlock(&dog_lock);
+}
+
+static void entry(void) {
+    extern char **environ;
+    in_controller = 1;
+    INIT();  /* the run has started */
+    int rc = user_main(user_argc, user_argv, environ);
+    leave(rc);
+}
+
+/* Open the controller's library: its handle, or NULL (spinner_inproc_error says why). */
+void *spinner_inproc_open(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
+
+const char *spinner_inproc_error(void) {
+    const char *e = dlerror();
+    return e ? e : "";
+}
+
+int spinner_inproc_close(void *lib) { return dlclose(lib); }
+
+/* Where the simulator reads the requests (spinner_inproc_resume says how many bytes). */
+unsigned char *spinner_inproc_requests(void) { return out_buf; }
+
+int spinner_inproc_exit_code(void) { return exit_code; }
+
+/* Whether the controller ended, and the bytes of its last requests (kept until the next
+ * resume: a fault's report can be read again). */
+int spinner_inproc_gone(void) { return gone; }
+long spinner_inproc_pending(void) { return (long)out_len; }
+
+/* Prepare a run of `lib`'s main(argc, argv) (`stall_s` > 0: with the watchdog). 0, or 72
+ * without main(), 12 without memory for its stack, 16 while another run is on (in another
+ * thread: spinner_inproc_finish ends a run). The controller starts at the first
+ * resume (whose reply is the run's INIT message). */
+static int run_active;  /* one run at a time in a process (the state above is the run's) */
+
+int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
+    if (__atomic_exchange_n(&run_active, 1, __ATOMIC_ACQ_REL)) return 16;  /* EBUSY */
+    user_main = (main_fn)dlsym(lib, "main");
+    if (user_main == NULL) {
+        __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);
+        return 72;
+    }
+    size_t page = (size_t)sysconf(_SC_PAGESIZE);
+    if (stack_mem == NULL) {  /* `ulimit -s` as for a main thread (8 MB if unlimited) */
+        struct rlimit rl;
+        stack_size = 8u << 20;
+        if (getrlimit(RLIMIT_STACK, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY &&
+            rl.rlim_cur >= 1u << 16)
+            stack_size = ((size_t)rl.rlim_cur + page - 1) / page * page;
+        void *m = mmap(NULL, stack_size + page, PROT_READ | PROT_WRITE,
+                       MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+        if (m == MAP_FAILED) {
+            __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);
+            return 12;
+        }
+        mprotect(m, page, PROT_NONE);  /* the guard page: an overflow faults there */
+        stack_mem = m;
+    }
+    stack_lo = (uintptr_t)stack_mem + page;
+    stack_hi = stack_lo + stack_size;
+    user_argc = argc;
+    user_argv = argv;
+    /* a fresh API state for this run */
+    finished = inited = 0;
+    out_len = 0;
+    rep_buf = NULL, rep_len = rep_pos = 0;
+    gone = 0, exit_code = 0, in_controller = 0;
+    last_speed = last_angle = speed_mps = steer_rad = 0.0;
+    last_time_s = last_speed_val = 0.0;
+    last_pos[0] = last_pos[1] = last_pos[2] = 0.0;
+    f_speed_norm = f_speed_denorm = f_turn_norm = f_diff_norm = NULL;
+    ctx_make((void *)stack_lo, stack_size);
+    pthread_sigmask(SIG_BLOCK, NULL, &run_mask);
+    sim_thread = pthread_self();
+    install_handlers();
+    if (stall_s > 0) dog_start(stall_s);
+    return 0;
+}
+
+/* Hand the controller `reply` (n bytes) and run it to its next waiting call: the number of
+ * request bytes at spinner_inproc_requests(), or -(that + 1) when the controller ended (it
+ * returned, exited or faulted: a fault's report is among the requests). */
+long spinner_inproc_resume(const unsigned char *reply, size_t n) {
+    if (gone) return -1;
+    rep_buf = reply, rep_len = n, rep_pos = 0;
+    out_len = 0;
+    resumed_at_s = now_s();
+    TO_CO();
+    in_controller = 0;
+    rep_buf = NULL, rep_len = rep_pos = 0;
+    return gone ? -(long)out_len - 1 : (long)out_len;
+}
+
+/* End the run's coroutine (wherever it is), restore the signal handlers. */
+void spinner_inproc_finish(void) {
+    gone = 1;
+    in_controller = 0;
+    pthread_mutex_lock(&dog_lock);  /* it sends only under the lock: none comes after this */
+    dog_active = 0;  /* the watchdog goes back to sleep at its next look */
+    pthread_mutex_unlock(&dog_lock);
+    for (size_t i = 0; i < N_SIGS; i++) sigaction(fault_sigs[i], &old_actions[i], NULL);
+    sigaltstack(&old_alt, NULL);
+    fflush(stdout);
+    fflush(stderr);
+    __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);
+}
+#endif

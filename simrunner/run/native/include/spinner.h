@@ -1,8 +1,9 @@
 /* spinner.h - the thesis's Spinner API (Appendix A.2) in C, for `simrunner drive ctrl.c`.
  *
  * Compile a controller by hand with `cc $(simrunner cflags) ...`; `simrunner drive` does it
- * for you. The program's own `int main(...)` is the entry point; it runs in a child process
- * of the simulator and every call below talks to the simulated car in lockstep: simulated
+ * for you. The program's own `int main(...)` is the entry point; it runs in the simulator's
+ * process (a child process with --isolate or as a prebuilt .so: docs/c_controllers.md) and
+ * every call below talks to the simulated car in lockstep: simulated
  * time passes only inside the calls that wait (get_image, get_speed, get_position,
  * get_time, sleep - and usleep/sleep/nanosleep, which wait in simulated time too).
  *
@@ -12,7 +13,7 @@
  *
  * Image: row 0 = farthest from the car, column 0 = the car's left; gray levels 0..255.
  * When the run is over (laps done, time limit, off track) the next waiting call ends the
- * program (exit status 0: stdio is flushed, atexit handlers run).
+ * program (exit status 0: stdio is flushed).
  */
 #ifndef NXPCUP_SPINNER_H
 #define NXPCUP_SPINNER_H

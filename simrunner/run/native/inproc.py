@@ -1,0 +1,211 @@
+"""Running a C/C++ controller inside the simulator's process, as a coroutine.
+
+The in-process host library (``host/spinner_host.c`` built with ``-DSPINNER_INPROC``,
+:func:`~simrunner.run.native.build.inproc_library`) is loaded once per process with
+``RTLD_GLOBAL``, so a controller built by simrunner binds its Spinner calls (and, through the
+link's ``--wrap``, its sleeps and exits) to it. The program's ``main`` runs on a stack of its
+own; a waiting call switches back here with the requests (the same messages as over the
+child's pipes, answered by the same :class:`~simrunner.run.native.bridge._Session` code) and
+the reply switches in again. A camera frame costs two context switches, no process hand-off.
+
+Faults stay the controller's: the library's signal handlers (installed for the run, the
+previous ones restored after it) report a SIGSEGV, SIGBUS, SIGILL, SIGFPE or SIGABRT in the
+controller's code with its raw backtrace and leave the coroutine; the run ends with
+``controller_error`` and the simulator goes on. A stack overflow hits a guard page below the
+controller's stack (``ulimit -s`` bytes, 8 MB if unlimited). A loop that never calls the
+API is stopped by a watchdog thread of the library after the run's ``--wall-limit``
+(SIGUSR1 to the simulator's thread: the report says where). What it cannot contain - a
+controller that overwrites the simulator's memory, or threads it leaves running - is what
+``--isolate`` (the child process of :mod:`.bridge`) is for; ``simrunner drive``'s supervisor
+still writes the outputs from the run log if the process dies.
+
+Each run starts from fresh globals: the library is unloaded after the run, and if it cannot
+be (C++ objects the loader keeps), the next run opens a private copy.
+"""
+from __future__ import annotations
+
+import ctypes
+import functools
+import os
+import shutil
+import signal
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from simrunner.errors import ControllerFileError, Stalled
+from simrunner.run.native.bridge import ST_WHERE, _HDR, _ChildGone, _Session
+from simrunner.run.native.build import NativeProgram, inproc_library
+from simrunner.run.watchdog import stall_message
+
+REQUEST_BUFFER_BYTES = 1 << 16  # out_buf in spinner_host.c
+EXIT_NO_MAIN, NO_MEMORY, BUSY = 72, 12, 16
+
+
+class Busy(Exception):
+    """Another run of a C controller is on in this process (in another thread)."""
+
+
+@functools.lru_cache(maxsize=None)
+def _api(path: str):
+    """The host library, loaded once per process (a second copy would split the API state
+    between the copies the controllers bind to and the one resumed)."""
+    lib = ctypes.CDLL(path, mode=os.RTLD_GLOBAL | os.RTLD_NOW)
+    c = ctypes
+    for name, res, args in (
+            ("spinner_inproc_open", c.c_void_p, [c.c_char_p]),
+            ("spinner_inproc_error", c.c_char_p, []),
+            ("spinner_inproc_close", c.c_int, [c.c_void_p]),
+            ("spinner_inproc_requests", c.c_void_p, []),
+            ("spinner_inproc_exit_code", c.c_int, []),
+            ("spinner_inproc_gone", c.c_int, []),
+            ("spinner_inproc_pending", c.c_long, []),
+            ("spinner_inproc_start", c.c_int, [c.c_void_p, c.c_int, c.POINTER(c.c_char_p), c.c_double]),
+            ("spinner_inproc_resume", c.c_long, [c.c_char_p, c.c_size_t]),
+            ("spinner_inproc_finish", None, [])):
+        fn = getattr(lib, name)
+        fn.restype, fn.argtypes = res, args
+    lib.view = (c.c_char * REQUEST_BUFFER_BYTES).from_address(lib.spinner_inproc_requests())
+    # the per-frame call: through PyDLL (it keeps the interpreter lock: a switch into the
+    # controller is shorter than releasing it) with ctypes' own conversions (bytes, int)
+    lib.resume = ctypes.PyDLL(path, mode=os.RTLD_GLOBAL | os.RTLD_NOW).spinner_inproc_resume
+    lib.resume.restype = c.c_long
+    return lib
+
+
+@functools.lru_cache(maxsize=1)
+def host_library() -> tuple[str, object]:
+    """(path, API) of the in-process host library, built and loaded once per process."""
+    path = str(inproc_library())
+    return path, _api(path)
+
+
+def _is_loaded(path: Path) -> bool:
+    """Whether ``path`` is still mapped (an earlier run's library the loader kept)."""
+    try:
+        handle = ctypes.CDLL(str(path), mode=os.RTLD_NOLOAD | os.RTLD_NOW)
+    except OSError:
+        return False
+    import _ctypes
+
+    _ctypes.dlclose(handle._handle)  # the reference RTLD_NOLOAD took
+    return True
+
+
+class OpenedProgram:
+    """A controller library opened for one run (a private copy if the original is still
+    loaded from an earlier run, removed on :meth:`close`)."""
+
+    def __init__(self, api, program: NativeProgram):
+        self.api = api
+        self.copy_dir: str | None = None
+        path = Path(program.library)
+        if _is_loaded(path):  # its globals are an earlier run's: use a fresh copy
+            self.copy_dir = tempfile.mkdtemp(prefix="simrunner-ctrl-")
+            copy = Path(self.copy_dir) / path.name
+            shutil.copyfile(path, copy)
+            path = copy
+        self.path = path
+        self.handle = api.spinner_inproc_open(str(path).encode())
+        if not self.handle:
+            err = api.spinner_inproc_error().decode("utf-8", "replace")
+            self.close()
+            lib = ", ".join(map(str, program.sources)) or str(program.library)
+            raise ControllerFileError(f"{lib}: cannot be loaded ({err})")
+
+    def close(self) -> None:
+        if getattr(self, "handle", None):
+            self.api.spinner_inproc_close(self.handle)
+            self.handle = None
+        if self.copy_dir is not None:
+            shutil.rmtree(self.copy_dir, ignore_errors=True)
+            self.copy_dir = None
+
+
+class InprocSession(_Session):
+    """One run of a controller in this process (module docstring): the transport of
+    :class:`_Session` is a context switch instead of two pipes."""
+
+    def __init__(self, ctrl, spinner, opened: OpenedProgram, host_path: str):
+        self.opened, self.api, self.host_path = opened, opened.api, host_path
+        self._resume, self._view = self.api.resume, self.api.view
+        self.proc = None
+        self._pending = b""
+        self._gone = False
+        super().__init__(ctrl, spinner, None)
+
+    def _setup_transport(self, child) -> None:
+        self.rfd = self.wfd = -1
+
+    # -- transport ---------------------------------------------------------------------
+    def _readable(self, deadline: float) -> bool:
+        return True  # a resume always returns (the library's watchdog bounds it)
+
+    def _recv(self) -> bytes:
+        if self._gone:
+            raise _ChildGone()
+        data, self._pending = self._pending, b""
+        n = self._resume(data, len(data))
+        if n < 0:
+            self._gone = True
+            n = -n - 1
+            if n == 0:
+                raise _ChildGone()
+        return self._view[:n]
+
+    def _reply(self, data: bytes) -> None:
+        self._pending = self._pending + data if self._pending else data
+
+    def _ask_where(self) -> None:
+        if self.api.spinner_inproc_gone():  # it ended already (its watchdog's report, say): the
+            self._gone = True               # requests again, in case the stall interrupted them
+            self._buf, self._pos = self.api.view[:self.api.spinner_inproc_pending()], 0
+        else:
+            self._pending = _HDR.pack(ST_WHERE, 0)  # the waiting call reports where it is
+
+    def _fault(self, report: str) -> None:
+        """A report of the library's watchdog (signal SIGUSR1) ends the run as stalled."""
+        if report.startswith(f"signal {int(signal.SIGUSR1)}\n"):
+            clock = self.spinner._clock
+            idle = time.monotonic() - clock.last_progress_wall_s
+            raise Stalled(stall_message(idle, "", clock.stall_limit_s or idle))  # run() adds where
+        super()._fault(report)
+
+    # -- the run -----------------------------------------------------------------------
+    def run(self) -> None:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        name = self.ctrl.program.name
+        argv = [name.encode(), *(a.encode() for a in self.ctrl.args)]
+        arr = (ctypes.c_char_p * (len(argv) + 1))(*argv, None)
+        stall_s = getattr(self.spinner._clock, "stall_limit_s", None) or 0.0
+        rc = self.api.spinner_inproc_start(self.opened.handle, len(argv), arr, float(stall_s))
+        if rc == BUSY:
+            raise Busy()
+        if rc == EXIT_NO_MAIN:
+            self.opened.close()
+            prog = self.ctrl.program
+            lib = ", ".join(map(str, prog.sources)) if prog.sources else str(prog.library)
+            raise ControllerFileError(f"{lib}: no main() function defined")
+        if rc == NO_MEMORY:
+            self.opened.close()
+            raise ControllerFileError(f"{name}: no memory for the controller's stack")
+        self._argv = arr  # alive while the program runs
+        super().run()
+
+    def _user_modules(self) -> set[str]:
+        return {str(self.opened.path)}
+
+    def _host(self) -> str:
+        return self.host_path
+
+    def _wait(self) -> int:
+        return self.api.spinner_inproc_exit_code()
+
+    def _kill(self) -> None:
+        pass  # the coroutine is left (and its stack freed) in _close
+
+    def _close(self) -> None:
+        self.api.spinner_inproc_finish()
+        self.ctrl.spent(self.opened)  # unloaded after the run (NativeController)
