@@ -654,3 +654,23 @@ def test_while_the_in_process_host_is_taken_a_run_goes_to_a_child_process(tmp_pa
     assert drive(prog, track=track).outcome == "controller_returned"
     pids = [int(line.split()[1]) for line in capfd.readouterr().out.splitlines() if line.startswith("pid")]
     assert pids[0] != os.getpid() == pids[1]
+
+
+def test_calls_after_the_run_from_atexit_handlers_return_at_once(tmp_path, track, capfd):
+    """atexit handlers run when the program's library is unloaded, outside any run: their
+    Spinner calls return at once (the last values) instead of switching to nowhere."""
+    import gc
+
+    src = write(tmp_path, "bye.c", """\
+        #include <stdio.h>
+        #include <stdlib.h>
+        #include "spinner.h"
+        static void bye(void) { printf("bye %.3f\\n", spinner_get_time()); fflush(stdout); }
+        int main(void) { atexit(bye); spinner_sleep(0.1); spinner_get_time(); return 0; }
+        """)
+    prog = build_program([src])
+    for _ in range(2):
+        assert drive(prog, track=track).outcome == "controller_returned"
+    gc.collect()
+    assert drive(EXAMPLES / "line_follower.c", track=track, time_limit_s=0.2).outcome == "timeout"
+    assert capfd.readouterr().out.count("bye 0.10") == 2

@@ -122,6 +122,7 @@ static int exit_code;
 static const unsigned char *rep_buf;         /* the reply handed in (valid until switched out) */
 static size_t rep_len, rep_pos;
 static volatile double resumed_at_s;         /* monotonic time of the last switch in */
+static pthread_t sim_thread_id;              /* the thread that runs the simulator */
 
 static void switch_out(void) {
     in_controller = 0;
@@ -129,8 +130,12 @@ static void switch_out(void) {
     in_controller = 1;
 }
 
+/* Outside the controller's run (an atexit handler or a destructor the unloading runs, a
+ * thread it left) there is no simulator to switch to: requests are dropped and replies are
+ * zeros (the calls return at once, as after the run's end). */
 static void write_all(const void *data, size_t n) {
     const unsigned char *p = data;
+    if (!in_controller || !pthread_equal(pthread_self(), sim_thread_id)) return;
     while (n > 0) {
         if (out_len == sizeof out_buf) switch_out();  /* the simulator takes it all */
         size_t k = sizeof out_buf - out_len;
@@ -144,6 +149,10 @@ static void write_all(const void *data, size_t n) {
 
 static void read_all(void *data, size_t n) {
     unsigned char *p = data;
+    if (!in_controller || !pthread_equal(pthread_self(), sim_thread_id)) {
+        memset(p, 0, n);
+        return;
+    }
     while (n > 0) {
         if (rep_pos == rep_len) {
             fflush(stdout);  /* the controller's prints reach the terminal in order */
@@ -522,6 +531,7 @@ void __wrap_quick_exit(int status) { quick_exit(status); }
 /* In-process the program's exit ends its coroutine with that status (not the simulator). */
 static void leave(int status) __attribute__((noreturn));
 static void leave(int status) {
+    finished = 1;
     fflush(stdout);
     fflush(stderr);
     exit_code = status;
@@ -651,8 +661,8 @@ static void pass_on(int sig, siginfo_t *info) {
 
 static void on_fault(int sig, siginfo_t *info, void *context) {
 #ifdef SPINNER_INPROC
-    if (!in_controller) {
-        pass_on(sig, info);
+    if (!in_controller || !pthread_equal(pthread_self(), sim_thread_id)) {
+        pass_on(sig, info);  /* not the run's controller code (another thread's, say) */
         return;
     }
 #endif
@@ -737,7 +747,6 @@ static int user_argc;
 static char **user_argv;
 static void *stack_mem;  /* mapped at the first run, kept for the next ones */
 static size_t stack_size;
-static pthread_t sim_thread;
 
 static double now_s(void) {
     struct timespec ts;
@@ -774,7 +783,7 @@ static void *watchdog(void *arg) {
         double t0 = resumed_at_s;
         if (dog_active && in_controller && !gone && t0 != asked_for && now_s() - t0 > limit) {
             asked_for = t0;
-            pthread_kill(sim_thread, SIGUSR1);
+            pthread_kill(sim_thread_id, SIGUSR1);
         }
     }
     return NULL;
@@ -883,7 +892,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     f_speed_norm = f_speed_denorm = f_turn_norm = f_diff_norm = NULL;
     ctx_make((void *)stack_lo, stack_size);
     pthread_sigmask(SIG_BLOCK, NULL, &run_mask);
-    sim_thread = pthread_self();
+    sim_thread_id = pthread_self();
     install_handlers();
     if (stall_s > 0) dog_start(stall_s);
     return 0;
@@ -905,7 +914,7 @@ long spinner_inproc_resume(const unsigned char *reply, size_t n) {
 
 /* End the run's coroutine (wherever it is), restore the signal handlers. */
 void spinner_inproc_finish(void) {
-    gone = 1;
+    gone = finished = 1;
     in_controller = 0;
     pthread_mutex_lock(&dog_lock);  /* it sends only under the lock: none comes after this */
     dog_active = 0;  /* the watchdog goes back to sleep at its next look */
