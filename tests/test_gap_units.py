@@ -340,6 +340,32 @@ def test_replay_of_exact_model_has_tiny_residuals():
     assert np.nanmax(np.abs(res["position_m"])) < 0.02
 
 
+@pytest.mark.parametrize("rate_hz", [10.0, 25.0, 50.0])
+def test_a_rate_taken_from_the_pose_is_compared_with_the_prediction_seen_the_same_way(rate_hz):
+    """No gyro and no speed sensor: the log's yaw rate and speed are derivatives of its
+    smoothed pose, so the prediction goes through the same smoothing. Against the raw
+    prediction, the rounded steps of the measured yaw rate would ask for a slower servo."""
+    car = CarDescription()
+    pose_cols = ("t_s", "x_m", "y_m", "yaw_rad", "speed_cmd_mps", "steer_cmd_rad")
+    log = simulate(car, rate_hz=rate_hz, columns=pose_cols)
+    with_sensors = simulate(car, rate_hz=rate_hz, columns=pose_cols + ("speed_mps", "yaw_rate_radps"))
+    d = derive(log, car.chassis.wheelbase_m)
+    windows = make_windows(log)
+    pred = replay(car, log, d, windows, dt_s=0.001, sim_factory=kin_factory)
+    raw = replay(car, with_sensors, d, windows, dt_s=0.001, sim_factory=kin_factory)
+    res = residuals(log, d, pred)
+    mask = window_mask(len(log), windows)
+
+    def rms(v):
+        return float(np.sqrt(np.mean(v[mask] ** 2)))
+
+    seen, unseen = rms(res["yaw_rate_radps"]), rms(raw.yaw_rate_radps - d.yaw_rate_radps)
+    assert seen < 0.01 * unseen and unseen > 0.02
+    assert rms(res["speed_mps"]) < 0.5 * rms(raw.speed_mps - d.speed_mps)
+    # the pose itself is compared as predicted
+    assert np.array_equal(pred.x_m[mask], raw.x_m[mask])
+
+
 def _problem(true_car, nominal_car, seed=1):
     log = simulate(true_car, np.random.default_rng(seed))
     d = derive(log, nominal_car.chassis.wheelbase_m)
@@ -781,6 +807,27 @@ def test_screening_keeps_the_windows_of_a_rare_manoeuvre():
     kept = sub.segments[0].windows
     assert sum(s.duration_s for s in sub.segments) < 0.5 * prob.segments[0].duration_s
     assert all(w in kept for w in rare)
+
+
+def test_screening_keeps_the_windows_at_the_cars_limits():
+    """Effects at the limits (a smaller steering limit, a top speed) act only in the windows
+    with the largest commands: a small screening subset keeps those windows."""
+    from simrunner.workflows.gap.chain import extreme_windows, screening_problem
+
+    car = CarDescription()
+    log = simulate(car, duration_s=60.0)
+    d = derive(log, car.chassis.wheelbase_m)
+    windows = tuple(make_windows(log))
+    prob = Problem(car, (Segment(log, d, windows),), {s: 1.0 for s in FIT_SIGNALS}, FIT_SIGNALS, 0.002,
+                   kin_factory)
+    steer = np.abs(log.steer_cmd_rad)
+    widest = max(range(len(windows)), key=lambda i: steer[windows[i].start:windows[i].stop].max())
+    fastest = max(range(len(windows)), key=lambda i: log.speed_cmd_mps[windows[i].start:windows[i].stop].max())
+    ext = extreme_windows(prob)
+    assert {widest, fastest} <= ext and len(ext) <= 7
+    kept = screening_problem(prob, max_s=6.0).segments[0].windows
+    assert len(kept) < len(windows) // 2
+    assert windows[widest] in kept and windows[fastest] in kept
 
 
 def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():

@@ -161,38 +161,86 @@ def _derive_piece(log: RunLog, a: int, b: int) -> dict[str, np.ndarray]:
         if log.yaw_rate_radps is not None:
             raw["yaw_rate_radps"] = log.yaw_rate_radps[a:b]
         return raw
-    # Savitzky-Golay assumes a uniform grid: resample, filter, and sample back.
-    grid = np.linspace(t[0], t[-1], m)
-    step = grid[1] - grid[0]
-    win = max(5, int(round(SMOOTH_S / step)) | 1)
-    win = min(win, m if m % 2 else m - 1)
-    order = min(2, win - 1)
-
-    def on_grid(v: np.ndarray, deriv: int = 0) -> np.ndarray:
-        return savgol_filter(np.interp(grid, t, v), win, order, deriv=deriv, delta=step, mode="interp")
-
-    def back(g: np.ndarray) -> np.ndarray:
-        return np.interp(t, grid, g)
-
+    sg = _Smoother(t)
+    on_grid, back = sg.on_grid, sg.back
     out: dict[str, np.ndarray] = {}
-    yaw_grid = None
     if has_pose(log):
-        yaw_u = np.unwrap(log.yaw_rad[a:b])
-        yaw_grid = on_grid(yaw_u)
-        out.update(x_m=back(on_grid(log.x_m[a:b])), y_m=back(on_grid(log.y_m[a:b])), yaw_rad=back(yaw_grid))
+        pose = _pose_states(sg, log.x_m[a:b], log.y_m[a:b], log.yaw_rad[a:b])
+        out.update(x_m=pose["x_m"], y_m=pose["y_m"], yaw_rad=pose["yaw_rad"])
     if log.speed_mps is not None:
         out["speed_mps"] = back(on_grid(log.speed_mps[a:b]))
         out["accel_mps2"] = back(on_grid(log.speed_mps[a:b], 1))
-    elif yaw_grid is not None:  # the pose's velocity along the heading
-        v_grid = (on_grid(log.x_m[a:b], 1) * np.cos(yaw_grid) + on_grid(log.y_m[a:b], 1) * np.sin(yaw_grid))
-        out["speed_mps"] = back(v_grid)
-        out["accel_mps2"] = back(savgol_filter(v_grid, win, order, deriv=1, delta=step, mode="interp"))
+    elif has_pose(log):  # the pose's velocity along the heading
+        out["speed_mps"] = back(pose["v_grid"])
+        out["accel_mps2"] = back(savgol_filter(pose["v_grid"], sg.win, sg.order, deriv=1, delta=sg.step,
+                                               mode="interp"))
     if log.yaw_rate_radps is not None:  # the gyro, when there is one
         out["yaw_rate_radps"] = back(on_grid(log.yaw_rate_radps[a:b]))
     elif has_pose(log):
-        out["yaw_rate_radps"] = back(on_grid(np.unwrap(log.yaw_rad[a:b]), 1))
+        out["yaw_rate_radps"] = pose["yaw_rate_radps"]
     return out
 
 
-__all__ = ["Derived", "check_measured", "derive", "pieces", "speed_estimate", "sample_dt_s", "MEASURED_COLUMNS",
+class _Smoother:
+    """The Savitzky-Golay smoothing of one piece with stamps ``t`` (at least 3): it assumes a
+    uniform grid, so values are resampled to one, filtered, and sampled back."""
+
+    def __init__(self, t: np.ndarray, win: int | None = None):
+        m = len(t)
+        self.t = t
+        self.grid = np.linspace(t[0], t[-1], m)
+        self.step = self.grid[1] - self.grid[0]
+        if win is None:
+            win = smoothing_window(t)
+        self.win = min(win, m if m % 2 else m - 1)
+        self.order = min(2, self.win - 1)
+
+    def on_grid(self, v: np.ndarray, deriv: int = 0) -> np.ndarray:
+        from scipy.signal import savgol_filter
+
+        return savgol_filter(np.interp(self.grid, self.t, v), self.win, self.order, deriv=deriv, delta=self.step,
+                             mode="interp")
+
+    def back(self, g: np.ndarray) -> np.ndarray:
+        return np.interp(self.t, self.grid, g)
+
+
+def smoothing_window(t_s: np.ndarray) -> int:
+    """Samples in the smoothing window of :func:`derive` for one piece with stamps ``t_s``
+    (odd, at least 5; about :data:`SMOOTH_S` at the piece's mean rate; at most the piece)."""
+    m = len(t_s)
+    step = (t_s[-1] - t_s[0]) / (m - 1)
+    win = max(5, int(round(SMOOTH_S / step)) | 1)
+    return min(win, m if m % 2 else m - 1)
+
+
+def _pose_states(sg: _Smoother, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.ndarray) -> dict[str, np.ndarray]:
+    """Smoothed pose, and the speed (on the grid: ``v_grid``) and yaw rate the pose gives."""
+    yaw_u = np.unwrap(yaw_rad)
+    yaw_grid = sg.on_grid(yaw_u)
+    v_grid = sg.on_grid(x_m, 1) * np.cos(yaw_grid) + sg.on_grid(y_m, 1) * np.sin(yaw_grid)
+    return {"x_m": sg.back(sg.on_grid(x_m)), "y_m": sg.back(sg.on_grid(y_m)), "yaw_rad": sg.back(yaw_grid),
+            "v_grid": v_grid, "yaw_rate_radps": sg.back(sg.on_grid(yaw_u, 1))}
+
+
+def pose_rates(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.ndarray,
+               window: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(speed_mps, yaw_rate_radps)`` that :func:`derive` takes from a pose ``x_m, y_m,
+    yaw_rad`` at stamps ``t_s`` (one piece, no gap): the same smoothing and derivatives. The
+    replay puts its predicted pose through this where the log's speed or yaw rate comes from
+    its pose, so that the prediction is compared with what the pose shows (the smoothing
+    rounds a step in yaw rate over ``SMOOTH_S``; compared unsmoothed, that rounding looks
+    like a slower servo or a latency). ``window``: samples in the smoothing window (that of
+    the log piece the samples come from, :func:`smoothing_window`; default: from ``t_s``).
+    Fewer than 3 samples: NaN."""
+    t_s = np.asarray(t_s, dtype=float)
+    if len(t_s) < 3:
+        nan = np.full(len(t_s), np.nan)
+        return nan, nan.copy()
+    sg = _Smoother(t_s, window)
+    pose = _pose_states(sg, np.asarray(x_m, float), np.asarray(y_m, float), np.asarray(yaw_rad, float))
+    return sg.back(pose["v_grid"]), pose["yaw_rate_radps"]
+
+
+__all__ = ["Derived", "check_measured", "derive", "pieces", "pose_rates", "smoothing_window", "speed_estimate", "sample_dt_s", "MEASURED_COLUMNS",
            "REQUIRED_COLUMNS", "POSE_COLUMNS", "MIN_ROWS", "MIN_DURATION_S", "MIN_RATE_HZ", "SMOOTH_S"]

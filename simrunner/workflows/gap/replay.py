@@ -24,6 +24,10 @@ those the log supports (:func:`signals_of`):
     speed_mps       speed error (measured: the speed sensor, else the pose's speed)
     yaw_rate_radps  yaw-rate error (measured: the gyro, else the derivative of the smoothed yaw)
 
+A speed or yaw rate that the log takes from its pose is compared with the predicted pose's,
+derived the same way (:class:`Prediction`): the smoothing rounds the steps of the measured
+one, and a raw prediction against it would ask for a slower servo or a latency.
+
 ``position_m`` (the distance, for reports) is ``hypot(along, cross)`` (pose only).
 """
 from __future__ import annotations
@@ -37,7 +41,7 @@ import numpy as np
 from pieces.pose import Pose2
 from simrunner.run.log import RunLog
 from simrunner.workflows.gap.glitches import has_pose, time_gaps
-from simrunner.workflows.gap.logs import SMOOTH_S, Derived, pieces, speed_estimate
+from simrunner.workflows.gap.logs import SMOOTH_S, Derived, pieces, pose_rates, smoothing_window, speed_estimate
 from vehicle.description import CarDescription
 
 WINDOW_S = 2.0
@@ -189,7 +193,11 @@ def split_windows(windows: Sequence[Window], every: int = HOLDOUT_EVERY,
 
 @dataclass(frozen=True)
 class Prediction:
-    """Predicted states at the log's samples, shape (N,), NaN outside replayed windows."""
+    """Predicted states at the log's samples, shape (N,), NaN outside replayed windows.
+
+    ``speed_mps`` and ``yaw_rate_radps`` are what the log's sensors would show: where the log
+    takes them from its pose (no speed sensor, no gyro), the predicted pose of each window
+    put through the same smoothing and derivative (:func:`simrunner.workflows.gap.logs.pose_rates`)."""
 
     x_m: np.ndarray
     y_m: np.ndarray
@@ -220,6 +228,10 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
     after_gap = np.concatenate([[0], np.flatnonzero(time_gaps(t)) + 1])  # first sample of each piece
 
     heading = None if pose else dead_reckoned_yaw(log, derived, wheelbase)
+    seen_through_pose = pose and (log.speed_mps is None or log.yaw_rate_radps is None)
+    if seen_through_pose:  # the pieces the log was smoothed in (derive leaves NaN between them)
+        smooth_pieces = pieces(log, ~np.isfinite(derived.x_m))
+        smooth_starts = np.array([lo for lo, _ in smooth_pieces])
 
     def state(i: int):
         v, steer, r = float(derived.speed_mps[i]), float(derived.steer_rad[i]), float(derived.yaw_rate_radps[i])
@@ -266,8 +278,29 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
             if bool(coast[i0 - 1]) != bool(coast[i0]):
                 sim.set_coast(bool(coast[i0]))
             sim.place(*state(i0))
-        run(i0, w.stop, record=True)
+        if not seen_through_pose:
+            run(i0, w.stop, record=True)
+            continue
+        # the rates the pose gives at a sample depend on the samples around it: the log's own
+        # pose before the window (the car's history), and the prediction run on past its end
+        k = int(np.searchsorted(smooth_starts, i0, side="right")) - 1
+        lo, hi = smooth_pieces[k]
+        win = smoothing_window(t[lo:hi])
+        a, stop2 = max(lo, i0 - win // 2), min(hi, w.stop + win // 2)
+        kept = out[:, w.stop:stop2].copy()
+        run(i0, stop2, record=True)
+        xs = np.concatenate([log.x_m[a:i0], out[0, i0:stop2]])
+        ys = np.concatenate([log.y_m[a:i0], out[1, i0:stop2]])
+        yaws = np.concatenate([log.yaw_rad[a:i0], out[2, i0:stop2]])  # pose_rates unwraps
+        speed, rate = pose_rates(t[a:stop2], xs, ys, yaws, window=win)
+        out[:, w.stop:stop2] = kept
+        if log.speed_mps is None:
+            out[3, i0:w.stop] = speed[i0 - a:w.stop - a]
+        if log.yaw_rate_radps is None:
+            out[4, i0:w.stop] = rate[i0 - a:w.stop - a]
     return Prediction(*out)
+
+
 
 
 def dead_reckoned_yaw(log: RunLog, derived: Derived, wheelbase_m: float) -> np.ndarray:
