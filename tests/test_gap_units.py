@@ -809,27 +809,6 @@ def test_screening_keeps_the_windows_of_a_rare_manoeuvre():
     assert all(w in kept for w in rare)
 
 
-def test_screening_keeps_the_windows_at_the_cars_limits():
-    """Effects at the limits (a smaller steering limit, a top speed) act only in the windows
-    with the largest commands: a small screening subset keeps those windows."""
-    from simrunner.workflows.gap.chain import extreme_windows, screening_problem
-
-    car = CarDescription()
-    log = simulate(car, duration_s=60.0)
-    d = derive(log, car.chassis.wheelbase_m)
-    windows = tuple(make_windows(log))
-    prob = Problem(car, (Segment(log, d, windows),), {s: 1.0 for s in FIT_SIGNALS}, FIT_SIGNALS, 0.002,
-                   kin_factory)
-    steer = np.abs(log.steer_cmd_rad)
-    widest = max(range(len(windows)), key=lambda i: steer[windows[i].start:windows[i].stop].max())
-    fastest = max(range(len(windows)), key=lambda i: log.speed_cmd_mps[windows[i].start:windows[i].stop].max())
-    ext = extreme_windows(prob)
-    assert {widest, fastest} <= ext and len(ext) <= 7
-    kept = screening_problem(prob, max_s=6.0).segments[0].windows
-    assert len(kept) < len(windows) // 2
-    assert windows[widest] in kept and windows[fastest] in kept
-
-
 def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():
     from simrunner.workflows.gap.report import leftovers
 
