@@ -809,6 +809,31 @@ def test_screening_keeps_the_windows_of_a_rare_manoeuvre():
     assert all(w in kept for w in rare)
 
 
+def test_screening_keeps_the_windows_that_steer_hardest():
+    """A smaller steering limit acts only in the windows that steer beyond it: a small
+    screening subset keeps the window with the largest steering command to each side."""
+    from simrunner.workflows.gap.chain import extreme_windows, screening_problem
+
+    car = CarDescription()
+    log = simulate(car, duration_s=60.0)
+    t = log.t_s
+    steer = np.where((t > 41.0) & (t < 42.0), 0.35, np.where((t > 51.0) & (t < 52.0), -0.3, log.steer_cmd_rad))
+    log = log.with_columns(steer_cmd_rad=steer)
+    d = derive(log, car.chassis.wheelbase_m)
+    windows = tuple(make_windows(log))
+    prob = Problem(car, (Segment(log, d, windows),), {s: 1.0 for s in FIT_SIGNALS}, FIT_SIGNALS, 0.002,
+                   kin_factory)
+    left = next(i for i, w in enumerate(windows) if steer[w.start:w.stop].max() == 0.35)
+    right = next(i for i, w in enumerate(windows) if steer[w.start:w.stop].min() == -0.3)
+    assert extreme_windows(prob) == {left, right}
+    kept = screening_problem(prob, max_s=6.0).segments[0].windows
+    assert len(kept) < len(windows) // 2
+    assert windows[left] in kept and windows[right] in kept
+    plain = dataclasses.replace(prob, segments=(Segment(log.with_columns(steer_cmd_rad=np.zeros(len(log))), d,
+                                                        windows),))
+    assert extreme_windows(plain) == set()  # nothing steers: no window is special
+
+
 def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():
     from simrunner.workflows.gap.report import leftovers
 

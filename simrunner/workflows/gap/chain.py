@@ -7,7 +7,8 @@ refitted) and
    the kept parameters held (:func:`simrunner.workflows.gap.fit.fit_all`, grid + probe), on
    about :data:`SCREEN_MAX_S` seconds of the fit windows (every k-th window of each driving
    regime, :func:`screening_problem`: screening only ranks, so a long log costs no more than
-   a 45-s one here, and a rare manoeuvre is not left out);
+   a 45-s one here, and a rare manoeuvre is not left out; nor are the windows that steer
+   hardest, :func:`extreme_windows`);
 2. refits jointly the :data:`REFINE_TOP` best screened candidates (:data:`REFINE_LATER`
    from the second step on): all kept parameters and the new one together
    (``scipy.optimize.minimize``, Powell, in coordinates scaled to each parameter's fit
@@ -99,27 +100,60 @@ def window_labels(problem: Problem) -> list[str]:
     return labels
 
 
+def extreme_windows(problem: Problem) -> set[int]:
+    """Indices (over the windows of all segments in turn) of the windows holding the largest
+    steering command to each side. A smaller steering limit acts only where the car was
+    asked to steer beyond it; a plan that steers at full lock in a few windows only (and a
+    teleoperated log) gives a subset without them, which screens the limit at 0 %.
+    Steering commands only: with the speed command's extremes and the fastest command
+    changes too (up to 7 windows), they tilted a real log's screening towards those moments
+    (DS2 then named mass_scale first; docs/gap.md)."""
+    feats: list[list[float]] = []
+    for seg in problem.segments:
+        steer = np.asarray(seg.log.steer_cmd_rad, float)
+        for w in seg.windows:
+            part = steer[w.start:w.stop]
+            feats.append([_finite_max(part), _finite_max(-part)])
+    if not feats:
+        return set()
+    out = set()
+    for col in np.array(feats).T:
+        if np.isfinite(col).any() and np.nanmax(col) > 0.0:
+            out.add(int(np.argmax(np.where(np.isfinite(col), col, -np.inf))))
+    return out
+
+
+def _finite_max(x) -> float:
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    return float(x.max()) if x.size else -math.inf
+
+
 def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
     """``problem`` with about ``max_s`` seconds of its windows, stratified: with ``k`` the
     smallest step that keeps at most ``max_s`` seconds, every k-th window of each label of
     :func:`window_labels` (the first of each label included), so a manoeuvre that a few
     windows hold (a hard brake, a coast, reversing) stays in the screening and the effects it
-    reveals are ranked on it."""
+    reveals are ranked on it; and the windows of :func:`extreme_windows` (the hardest
+    steering each way)."""
     total = sum(s.duration_s for s in problem.segments)
     k = max(1, math.ceil(total / max_s)) if max_s > 0 else 1
     if k == 1:
         return problem
     labels = iter(window_labels(problem))
+    extremes = extreme_windows(problem)
     seen: dict[str, int] = {}
     segs = []
+    index = 0
     for seg in problem.segments:
         keep = []
         for w in seg.windows:
             label = next(labels)
             i = seen.get(label, 0)
             seen[label] = i + 1
-            if i % k == 0:
+            if i % k == 0 or index in extremes:
                 keep.append(w)
+            index += 1
         if keep:
             segs.append(dataclasses.replace(seg, windows=tuple(keep)))
     return dataclasses.replace(problem, segments=tuple(segs))
