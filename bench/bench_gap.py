@@ -197,7 +197,7 @@ def held_out(result, car_before, car_after) -> dict:
         res, masks = [], []
         for p in result.parts:
             if p.held_windows:
-                pred = replay(car, p.log, p.derived, p.held_windows, dt_s=result.settings["dt_s"])
+                pred = replay(car, p.log, p.derived, p.held_windows, dt_s=result.settings["held_dt_s"])
                 res.append(residuals(p.log, p.derived, pred))
                 masks.append(window_mask(len(p.log), p.held_windows))
         sig = [s for s in REPORT_SIGNALS if all(s in r for r in res)]

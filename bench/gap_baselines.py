@@ -72,8 +72,10 @@ class BaselineFit:
 
 
 def problems(result, car):
-    """``(fit_problem, held_problem)`` rebuilt from a GapResult exactly as ``run_gap`` built
-    them (nominal ``car``, same windows, signals and scales)."""
+    """``(fit_problem, held_problem)`` rebuilt from a GapResult (nominal ``car``, same
+    windows, signals and scales). The fit problem is plain least squares (the baselines
+    fit residual vectors); the held-out one is ``run_gap``'s own (its physics step and
+    robust loss), so that held-out gaps compare with the chain's."""
     from simrunner.workflows.gap.fit import Problem, Segment
 
     parts = result.parts
@@ -83,7 +85,7 @@ def problems(result, car):
     fit = Problem(car, tuple(Segment(p.log, p.derived, p.fit_windows) for p in parts if p.fit_windows),
                   scales, signals, dt_s)
     held = Problem(car, tuple(Segment(p.log, p.derived, p.held_windows) for p in parts if p.held_windows),
-                   scales, signals, dt_s)
+                   scales, signals, result.settings["held_dt_s"], robust_scale=result.settings["robust_scale"])
     return fit, held
 
 
