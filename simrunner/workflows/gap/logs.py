@@ -148,8 +148,6 @@ def derive(log: RunLog, wheelbase_m: float, steer_limit_rad: float = math.inf, *
 
 def _derive_piece(log: RunLog, a: int, b: int) -> dict[str, np.ndarray]:
     """Smoothed states of samples a .. b - 1 (one piece: no gap, nothing excluded)."""
-    from scipy.signal import savgol_filter  # here, not at import: `simrunner gap --help` stays quick
-
     m = b - a
     t = log.t_s[a:b]
     if m < 3:  # too short to smooth or differentiate: the raw values, no derivatives
@@ -172,8 +170,7 @@ def _derive_piece(log: RunLog, a: int, b: int) -> dict[str, np.ndarray]:
         out["accel_mps2"] = back(on_grid(log.speed_mps[a:b], 1))
     elif has_pose(log):  # the pose's velocity along the heading
         out["speed_mps"] = back(pose["v_grid"])
-        out["accel_mps2"] = back(savgol_filter(pose["v_grid"], sg.win, sg.order, deriv=1, delta=sg.step,
-                                               mode="interp"))
+        out["accel_mps2"] = back(sg.filter(pose["v_grid"], 1))
     if log.yaw_rate_radps is not None:  # the gyro, when there is one
         out["yaw_rate_radps"] = back(on_grid(log.yaw_rate_radps[a:b]))
     elif has_pose(log):
@@ -196,10 +193,14 @@ class _Smoother:
         self.order = min(2, self.win - 1)
 
     def on_grid(self, v: np.ndarray, deriv: int = 0) -> np.ndarray:
-        from scipy.signal import savgol_filter
+        """``v`` (at the stamps) resampled to the grid and filtered."""
+        return self.filter(np.interp(self.grid, self.t, v), deriv)
 
-        return savgol_filter(np.interp(self.grid, self.t, v), self.win, self.order, deriv=deriv, delta=self.step,
-                             mode="interp")
+    def filter(self, g: np.ndarray, deriv: int = 0) -> np.ndarray:
+        """``g`` (on the grid) filtered, or its ``deriv``-th derivative."""
+        from scipy.signal import savgol_filter  # here, not at import: `simrunner gap --help` stays quick
+
+        return savgol_filter(g, self.win, self.order, deriv=deriv, delta=self.step, mode="interp")
 
     def back(self, g: np.ndarray) -> np.ndarray:
         return np.interp(self.t, self.grid, g)
@@ -242,5 +243,5 @@ def pose_rates(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.nd
     return sg.back(pose["v_grid"]), pose["yaw_rate_radps"]
 
 
-__all__ = ["Derived", "check_measured", "derive", "pieces", "pose_rates", "smoothing_window", "speed_estimate", "sample_dt_s", "MEASURED_COLUMNS",
-           "REQUIRED_COLUMNS", "POSE_COLUMNS", "MIN_ROWS", "MIN_DURATION_S", "MIN_RATE_HZ", "SMOOTH_S"]
+__all__ = ["Derived", "check_measured", "derive", "pieces", "pose_rates", "smoothing_window", "speed_estimate",
+           "sample_dt_s", "MEASURED_COLUMNS", "REQUIRED_COLUMNS", "POSE_COLUMNS", "MIN_ROWS", "MIN_DURATION_S", "MIN_RATE_HZ", "SMOOTH_S"]
