@@ -919,3 +919,35 @@ def test_the_final_check_removes_an_effect_the_later_ones_made_redundant(monkeyp
     # an effect the others do not replace stays: with the look-alike alone there is nothing to check
     only = chain.build_chain(fit_p, held_p, [look], jobs=1)
     assert only.effects == [look] and only.pruned == ()
+
+
+@pytest.mark.parametrize("truth_frac", [0.15, 0.25, 0.35])
+def test_screening_finds_a_small_value_in_a_narrow_valley_next_to_neutral(monkeypatch, truth_frac):
+    """A 12-ms latency on the 50-ms screening grid: its cost at 50 ms is far above the
+    neutral one, so the parabola through the grid's first three points puts its vertex
+    outside the bounds; a probe at the neutral end itself screened the latency at 0 % and
+    let look-alikes (a servo slew limit) take its place. The probe now goes inside."""
+    import simrunner.workflows.gap.fit as fit
+
+    cand = fit.CANDIDATES["command_latency"]
+    spacing = (cand.hi - cand.lo) / (fit.GRID_POINTS - 1)
+    truth = cand.lo + truth_frac * spacing
+    width = 0.4 * spacing  # the valley: cost back at the neutral level this far from the truth
+
+    def cost(problem, car):
+        x = car.effects.command_latency_s
+        return 1000.0 * (1.0 + ((x - truth) / width) ** 2) / (1.0 + (truth / width) ** 2)
+
+    monkeypatch.setattr(fit, "cost_of", cost)
+    car = CarDescription()
+    log = simulate(car)
+    seg = Segment(log, derive(log, car.chassis.wheelbase_m), tuple(make_windows(log)))
+    problem = Problem(car, (seg,), {"speed_mps": 1.0}, ("speed_mps",), 0.01)
+    screened = fit_effect(problem, "command_latency", 1000.0, refine=False)
+    best = 1000.0 / (1.0 + (truth / width) ** 2)
+    assert screened.cost < 1000.0 - 0.5 * (1000.0 - best)  # at least half the valley's depth
+    assert cand.lo < screened.parameters["command_latency_s"] < cand.lo + spacing
+    # and at the other end of a grid (a limit whose neutral value is its upper bound)
+    xs = np.linspace(0.0, 1.0, fit.GRID_POINTS)
+    probe = fit._probe(xs, [1.0 + ((x - (1.0 - truth_frac * 0.25)) / 0.1) ** 2 for x in xs])
+    assert xs[-2] < probe <= xs[-1] - fit.END_PROBE_FRACTION * 0.25

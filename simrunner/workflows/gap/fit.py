@@ -64,6 +64,7 @@ GRID_POINTS = 5
 BRENT_MAXITER = 10
 ROBUST_WINDOW_FACTOR = 4.0  # Cauchy scale of a window: this x the median nominal mean square per value
 REFINE_TOP = 3  # effects refined after the grid screening
+END_PROBE_FRACTION = 0.25  # a probe next to a best grid end goes at least this far towards its neighbour
 SCALE_FLOOR = {"along_m": 0.005, "cross_m": 0.005, "yaw_rad": 0.005, "speed_mps": 0.02,
                "yaw_rate_radps": 0.05}
 
@@ -285,13 +286,23 @@ def _probe(xs: np.ndarray, costs: Sequence[float]) -> float:
     and its neighbours (three points at an end of the grid), kept within the neighbours;
     the midpoint towards the better neighbour if the parabola is not convex. This finds
     a small deviation from neutral that falls between grid points (e.g. a gain of 1.07
-    on a 0.25 grid)."""
+    on a 0.25 grid).
+
+    When the best grid point is an end of the grid (the neutral value of a latency, a lag,
+    a play...), the probe goes at least :data:`END_PROBE_FRACTION` of the way towards its
+    neighbour: a small value there can sit in a narrow valley (a 12-ms latency on a 50-ms
+    grid: its cost at 50 ms is far above the neutral one, the parabola's vertex falls
+    outside the bounds, and a probe at the end itself would screen the latency at 0 %)."""
     k = int(np.argmin(costs))
+    lo, hi = xs[max(k - 1, 0)], xs[min(k + 1, len(xs) - 1)]
+    if k == 0:  # best at an end: the probe goes at least END_PROBE_FRACTION of the way inside
+        lo = xs[0] + END_PROBE_FRACTION * (xs[1] - xs[0])
+    elif k == len(xs) - 1:
+        hi = xs[-1] - END_PROBE_FRACTION * (xs[-1] - xs[-2])
     j = min(max(k, 1), len(xs) - 2)
     x0, x1, x2 = xs[j - 1], xs[j], xs[j + 1]
     c0, c1, c2 = costs[j - 1], costs[j], costs[j + 1]
     den = (x1 - x0) * (c1 - c2) - (x1 - x2) * (c1 - c0)
-    lo, hi = xs[max(k - 1, 0)], xs[min(k + 1, len(xs) - 1)]
     if den != 0.0:
         num = (x1 - x0) ** 2 * (c1 - c2) - (x1 - x2) ** 2 * (c1 - c0)
         vertex = x1 - 0.5 * num / den
