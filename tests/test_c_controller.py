@@ -181,6 +181,61 @@ def test_without_recording_the_c_lap_is_the_python_lap_bit_for_bit(tmp_path, tra
     assert runs["line_follower.c"].lap_times_s == runs["line_follower.py"].lap_times_s
 
 
+FRAMES_C = """\
+#include <stdio.h>
+#include "spinner.h"
+int main(int argc, char **argv) {
+    static uint8_t img[1 << 16];
+    unsigned long long sum = 0;
+    double gain = 0.0;
+    for (int i = 0; i < 6; i++) {
+        if (i == 3) {  /* a command and param(""): as many bytes as a frame's, not a frame */
+            spinner_set_speed_and_servo(0.5, 0.0);
+            gain = spinner_param("", 2.0);
+        }
+        spinner_set_speed_and_servo(0.5, 0.0);
+        int line = i % 2 ? spinner_line_row() : -1;
+        spinner_get_image(line, 1, img, sizeof img);
+        int n = spinner_image_width() * (line < 0 ? spinner_image_height() : 1);
+        for (int k = 0; k < n; k++) sum = sum * 31 + img[k];
+    }
+    printf("sum %llu gain %g\\n", sum, gain);
+    if (argc > 1) spinner_set_speed_and_servo(0.4, 0.0);  /* a command queued, then the end */
+    return 0;
+}
+"""
+
+FRAMES_PY = """\
+def main(s):
+    total, gain = 0, 0.0
+    for i in range(6):
+        if i == 3:
+            s.set_speed_and_servo(0.5, 0.0)
+            gain = s.param("", 2.0)
+        s.set_speed_and_servo(0.5, 0.0)
+        for v in s.get_image(s.line_row if i % 2 else -1).ravel().tolist():
+            total = (total * 31 + v) & (2 ** 64 - 1)
+    print(f"sum {total} gain {gain:g}")
+"""
+
+
+def test_frames_whole_images_other_requests_and_the_end_as_from_python(tmp_path, track, capfd):
+    """A camera frame in one switch (in process: the image handed in as it is, the next
+    requests read in the host's buffer): whole images and rows arrive as a Python
+    controller gets them, requests as long as a frame's that are not one are answered one
+    by one, and the program may end right after a frame or after queueing a command."""
+    src = write(tmp_path, "frames.c", FRAMES_C)
+    py = write(tmp_path, "frames.py", FRAMES_PY)
+    prog = build_program([src])
+    runs = [drive(py, track=track), drive(prog, track=track),
+            drive(load_native(prog, ("queue",)), track=track), drive(isolated(src), track=track),
+            drive(load_native(isolated(src), ("queue",)), track=track)]
+    assert [r.outcome for r in runs] == ["controller_returned"] * 5
+    assert {r.frames for r in runs} == {7}  # frame 0 and the six images
+    lines = [line for line in capfd.readouterr().out.splitlines() if line.startswith("sum ")]
+    assert len(lines) == 5 and len(set(lines)) == 1 and lines[0].endswith(" gain 2")
+
+
 def test_real_car_units_c_drives_as_the_python_one(tmp_path, track):
     c = drive(EXAMPLES / "real_car_units.c", track=track, csv=tmp_path / "c.csv")
     py = drive(EXAMPLES / "real_car_units.py", track=track, csv=tmp_path / "py.csv")

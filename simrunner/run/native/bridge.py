@@ -232,6 +232,12 @@ class _Session:
             raise _ChildGone()
         return data
 
+    def _exchange(self, img: np.ndarray) -> bytes:
+        """Answer an image call with ``img`` and return the next requests (as :meth:`_recv`:
+        at least a byte; raises _ChildGone at the end)."""
+        self._reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
+        return self._recv()
+
     def _reply(self, data: bytes) -> None:
         """Send a reply (it wakes the child) from the CPU the child is kept on."""
         getcpu = self._getcpu
@@ -278,31 +284,34 @@ class _Session:
 
         A camera frame's usual requests - the queued command, then the image call - arrive
         in one read of exactly those bytes: they are answered from one unpack (the same
-        calls in the same order as message by message)."""
-        s, recv, reply, refused = self.spinner, self._recv, self._reply, self._refused
+        calls in the same order as message by message), the reply and the next read in one
+        :meth:`_exchange`."""
+        s, recv, exchange, refused = self.spinner, self._recv, self._exchange, self._refused
         frame_size, unpack_frame = _FRAME.size, _FRAME.unpack
         while True:
             if self._pos == len(self._buf):  # all read: read anew
                 buf = recv()
-                if len(buf) == frame_size:
+                while len(buf) == frame_size:
                     op, n, v, d, yaw, op2, n2, line, noise = unpack_frame(buf)
-                    if op == OP_CMD and n == _CMD.size and op2 == OP_IMAGE and n2 == _2I.size:
-                        try:
-                            self.yaw = yaw
-                            s.set_speed_and_servo(v, d)
-                        except _PASS:
-                            raise
-                        except Exception as exc:
-                            refused(exc)
-                        try:
-                            img = s.get_image(line, noise != 0)
-                            reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
-                        except _PASS:
-                            raise
-                        except Exception as exc:
-                            refused(exc)
-                        continue
-                self._buf, self._pos = buf, 0
+                    if op != OP_CMD or n != _CMD.size or op2 != OP_IMAGE or n2 != _2I.size:
+                        break
+                    try:
+                        self.yaw = yaw
+                        s.set_speed_and_servo(v, d)
+                    except _PASS:
+                        raise
+                    except Exception as exc:
+                        refused(exc)
+                    try:
+                        img = s.get_image(line, noise != 0)
+                    except _PASS:
+                        raise
+                    except Exception as exc:
+                        refused(exc)
+                        buf = recv()
+                    else:
+                        buf = exchange(img)
+                self._buf, self._pos = bytes(buf), 0  # a copy if it was the host's buffer
             op, payload = self._message()
             try:
                 self._handle(op, payload)

@@ -35,7 +35,7 @@ import time
 from pathlib import Path
 
 from simrunner.errors import ControllerFileError, Stalled
-from simrunner.run.native.bridge import ST_WHERE, _HDR, _ChildGone, _Session
+from simrunner.run.native.bridge import ST_WHERE, _FRAME, _HDR, _ChildGone, _Session
 from simrunner.run.native.build import NativeProgram, inproc_library
 from simrunner.run.watchdog import stall_message
 
@@ -63,14 +63,17 @@ def _api(path: str):
             ("spinner_inproc_pending", c.c_long, []),
             ("spinner_inproc_start", c.c_int, [c.c_void_p, c.c_int, c.POINTER(c.c_char_p), c.c_double]),
             ("spinner_inproc_resume", c.c_long, [c.c_char_p, c.c_size_t]),
+            ("spinner_inproc_resume_image", c.c_long, [c.c_char_p, c.c_size_t]),
             ("spinner_inproc_finish", None, [])):
         fn = getattr(lib, name)
         fn.restype, fn.argtypes = res, args
     lib.view = (c.c_char * REQUEST_BUFFER_BYTES).from_address(lib.spinner_inproc_requests())
-    # the per-frame call: through PyDLL (it keeps the interpreter lock: a switch into the
+    lib.frame_view = memoryview(lib.view)[:_FRAME.size]  # a camera frame's requests, in place
+    # the per-frame calls: through PyDLL (it keeps the interpreter lock: a switch into the
     # controller is shorter than releasing it) with ctypes' own conversions (bytes, int)
-    lib.resume = ctypes.PyDLL(path, mode=os.RTLD_GLOBAL | os.RTLD_NOW).spinner_inproc_resume
-    lib.resume.restype = c.c_long
+    py = ctypes.PyDLL(path, mode=os.RTLD_GLOBAL | os.RTLD_NOW)
+    lib.resume, lib.resume_image = py.spinner_inproc_resume, py.spinner_inproc_resume_image
+    lib.resume.restype = lib.resume_image.restype = c.c_long
     return lib
 
 
@@ -130,6 +133,7 @@ class InprocSession(_Session):
     def __init__(self, ctrl, spinner, opened: OpenedProgram, host_path: str):
         self.opened, self.api, self.host_path = opened, opened.api, host_path
         self._resume, self._view = self.api.resume, self.api.view
+        self._resume_image, self._frame_view = self.api.resume_image, self.api.frame_view
         self.proc = None
         self._pending = b""
         self._gone = False
@@ -153,6 +157,22 @@ class InprocSession(_Session):
             if n == 0:
                 raise _ChildGone()
         return self._view[:n]
+
+    def _exchange(self, img) -> bytes | memoryview:
+        """A camera frame in one switch: the image goes in as it is (the host makes the reply's
+        header) and a frame's usual requests are read where the host wrote them (a view of
+        its buffer, valid until the next resume: :meth:`_serve` copies what it keeps)."""
+        if self._pending or self._gone:  # replies queued before (a refused command): in order
+            return super()._exchange(img)
+        data = img.tobytes()
+        n = self._resume_image(data, len(data))
+        if n < 0:
+            self._gone = True
+            n = -n - 1
+            if n == 0:
+                raise _ChildGone()
+            return self._view[:n]
+        return self._frame_view if n == _FRAME.size else self._view[:n]
 
     def _reply(self, data: bytes) -> None:
         self._pending = self._pending + data if self._pending else data

@@ -121,6 +121,9 @@ static volatile sig_atomic_t gone;           /* the controller ended (returned, 
 static int exit_code;
 static const unsigned char *rep_buf;         /* the reply handed in (valid until switched out) */
 static size_t rep_len, rep_pos;
+static const unsigned char *rep_more;        /* then these bytes (a camera frame's image) or NULL */
+static size_t rep_more_len;
+static uint32_t frame_head[2];               /* a camera frame's reply header (resume_image) */
 static volatile double resumed_at_s;         /* monotonic time of the last switch in */
 static pthread_t sim_thread_id;              /* the thread that runs the simulator */
 
@@ -155,6 +158,11 @@ static void read_all(void *data, size_t n) {
     }
     while (n > 0) {
         if (rep_pos == rep_len) {
+            if (rep_more != NULL) {  /* a camera frame's image after its header */
+                rep_buf = rep_more, rep_len = rep_more_len, rep_pos = 0;
+                rep_more = NULL;
+                continue;
+            }
             fflush(stdout);  /* the controller's prints reach the terminal in order */
             switch_out();
             continue;
@@ -884,7 +892,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     /* a fresh API state for this run */
     finished = inited = 0;
     out_len = 0;
-    rep_buf = NULL, rep_len = rep_pos = 0;
+    rep_buf = rep_more = NULL, rep_len = rep_pos = rep_more_len = 0;
     gone = 0, exit_code = 0, in_controller = 0;
     last_speed = last_angle = speed_mps = steer_rad = 0.0;
     last_time_s = last_speed_val = 0.0;
@@ -898,18 +906,33 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     return 0;
 }
 
-/* Hand the controller `reply` (n bytes) and run it to its next waiting call: the number of
- * request bytes at spinner_inproc_requests(), or -(that + 1) when the controller ended (it
- * returned, exited or faulted: a fault's report is among the requests). */
-long spinner_inproc_resume(const unsigned char *reply, size_t n) {
+/* Hand the controller `reply` (n bytes, then n_more bytes at `more`) and run it to its next
+ * waiting call: the number of request bytes at spinner_inproc_requests(), or -(that + 1)
+ * when the controller ended (it returned, exited or faulted: a fault's report is among the
+ * requests). The reply is read in place: it must stay valid (and unchanged) until then. */
+static long resume_with(const unsigned char *reply, size_t n, const unsigned char *more,
+                        size_t n_more) {
     if (gone) return -1;
     rep_buf = reply, rep_len = n, rep_pos = 0;
+    rep_more = n_more ? more : NULL, rep_more_len = n_more;
     out_len = 0;
     resumed_at_s = now_s();
     TO_CO();
     in_controller = 0;
-    rep_buf = NULL, rep_len = rep_pos = 0;
+    rep_buf = rep_more = NULL, rep_len = rep_pos = rep_more_len = 0;
     return gone ? -(long)out_len - 1 : (long)out_len;
+}
+
+long spinner_inproc_resume(const unsigned char *reply, size_t n) {
+    return resume_with(reply, n, NULL, 0);
+}
+
+/* The same with a camera frame's reply: status OK and the `n` image bytes (n < 2^32, as
+ * every reply length): the header is made here and the image read where it is, so the
+ * simulator need not join them. */
+long spinner_inproc_resume_image(const unsigned char *image, size_t n) {
+    frame_head[0] = ST_OK, frame_head[1] = (uint32_t)n;
+    return resume_with((const unsigned char *)frame_head, sizeof frame_head, image, n);
 }
 
 /* End the run's coroutine (wherever it is), restore the signal handlers. */
