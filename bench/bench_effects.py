@@ -41,6 +41,7 @@ def main() -> None:
             ("build scales", with_effects(car, accel_scale=0.9, brake_scale=1.1, servo_rate_scale=0.8,
                                           steer_limit_scale=0.95, mass_scale=1.1)),
             ("esc_reverse_delay", with_effects(car, esc_reverse_delay_s=0.2)),
+            ("lift_lag", with_effects(car, lift_lag_s=0.5)),
             ("latency+lags+drag", with_effects(car, command_latency_s=0.03, steering_lag_s=0.05,
                                                motor_lag_s=0.1, drag_coeff_kgpm=0.1))]
     print(f"{'car':24s} {'steps/CPU-s':>12s} {'x real time':>12s}")

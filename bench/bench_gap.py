@@ -79,7 +79,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "lateral grip": ("friction", "tire_slip"),
     "delay": ("command_latency",),
     "speed level": ("speed_scale", "top_speed", "throttle_deadband"),
-    "speed response": ("motor_lag", "accel_scale", "brake_scale", "mass_scale"),
+    "speed response": ("motor_lag", "accel_scale", "brake_scale", "mass_scale", "lift_lag"),
     "coasting losses": ("rolling_resistance", "drag"),
     "reverse": ("esc_brake_reverse",),
 }

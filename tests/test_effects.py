@@ -19,7 +19,7 @@ WB = CAR.chassis.wheelbase_m
 NAMES = ["steering_offset", "steering_gain", "steering_lag", "steering_rate_limit", "command_latency",
          "motor_lag", "throttle_deadband", "rolling_resistance", "drag", "tire_slip", "friction",
          "speed_scale", "steering_asymmetry", "steering_play", "esc_brake_reverse", "accel_scale", "brake_scale",
-         "servo_rate_scale", "steer_limit_scale", "mass_scale", "top_speed"]
+         "servo_rate_scale", "steer_limit_scale", "mass_scale", "top_speed", "lift_lag"]
 
 
 def trace(sim, commands, seconds: float, every: int = 10) -> np.ndarray:
@@ -378,3 +378,28 @@ def test_top_speed_caps_the_speed_whatever_the_command():
     assert run(CAR) == pytest.approx(2.5, abs=0.02)
     assert run(with_effects(CAR, top_speed_mps=1.3)) == pytest.approx(1.3, abs=0.02)
     assert run(with_effects(CAR, top_speed_mps=5.0)) == run(CAR)  # above the command: no change
+
+
+def test_lift_lag_slows_a_lift_to_a_lower_forward_command_but_not_a_stop_or_a_speed_up():
+    """From 2 m/s to a 1 m/s command: the lift lag's first-order decay (63 % of the drop
+    after tau, where the nominal car is there at once); a 0 command still brakes at the
+    nominal rate, and speeding up is the nominal car's bit for bit."""
+    tau = 0.4
+
+    def speed_after(car, target, t_s):
+        sim = make_sim(car)
+        sim.set_state(Pose2(), 2.0)
+        t0 = sim.time_s
+        rows = trace(sim, lambda t: (target, 0.0), t_s + 0.05)
+        return rows[np.searchsorted(rows[:, 0], t0 + t_s - 1e-9), 4]
+
+    lifted = with_effects(CAR, lift_lag_s=tau)
+    drop = (2.0 - speed_after(lifted, 1.0, tau)) / 1.0
+    assert drop == pytest.approx(1.0 - math.exp(-1.0), abs=0.05)
+    assert speed_after(CAR, 1.0, tau) == pytest.approx(1.0, abs=0.02)
+    assert speed_after(lifted, 0.0, 0.5) == pytest.approx(speed_after(CAR, 0.0, 0.5), abs=1e-9)
+
+    def up(t):
+        return (1.0 + 0.5 * t, 0.1)
+    a = trace(EffectSim(CAR), up, 1.0)
+    assert np.array_equal(a, trace(make_sim(lifted), up, 1.0))

@@ -237,7 +237,7 @@ EFFECT_VALUES = {
     "steering_play": {"steering_play_rad": 0.04}, "esc_brake_reverse": {"esc_reverse_delay_s": 0.3},
     "accel_scale": {"accel_scale": 0.6}, "brake_scale": {"brake_scale": 0.6},
     "servo_rate_scale": {"servo_rate_scale": 0.3}, "steer_limit_scale": {"steer_limit_scale": 0.8},
-    "mass_scale": {"mass_scale": 1.6}, "top_speed": {"top_speed_mps": 1.0},
+    "mass_scale": {"mass_scale": 1.6}, "top_speed": {"top_speed_mps": 1.0}, "lift_lag": {"lift_lag_s": 0.5},
 }
 
 

@@ -158,6 +158,10 @@ class Effects:
                               "command (ESC speed limit, gearing, battery); inf = the file's max_speed_mps "
                               "only. Revealed by straights at high commanded speed.", "neutral (inf)",
                               0.01, math.inf)
+    lift_lag_s: float = _f(0.0, "lift_lag: slowing down to a lower forward speed command follows a first-order "
+                           "lag of this time constant (an ESC that coasts or drag-brakes when the throttle is "
+                           "lifted); a zero or negative command still brakes. Revealed by speed steps down.",
+                           "neutral", 0.0, 10.0)
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,8 @@ Where each effect acts (docs/effects.md has the physics):
   dt_s))`` physics steps (4 ms: 2 steps at the default 2 ms) while any of these is active:
   ``command_latency`` (FIFO; a command acts at the first sub-step at or after
   ``t_set + latency``), ``steering_lag`` and ``motor_lag`` (exact first-order lags),
+  ``lift_lag`` (the speed target's lag while it comes down to a lower forward command:
+  time constant ``max(motor_lag, lift_lag)``; a target of 0 or below is not lifted),
   ``steering_rate_limit`` (slew limit on the steering target, on top of the servo rate),
   ``tire_slip`` (understeer: effective steer = steer - K * a_lat with the kinematic
   lateral acceleration of the effective steer, a_lat = v^2 tan(steer_eff) / L; solved in
@@ -41,7 +43,7 @@ Where each effect acts (docs/effects.md has the physics):
 
 Order of the steering path: latency -> gain, offset -> asymmetry -> lag -> rate limit ->
 play -> understeer -> CarSim (clamp to the limit, servo rate). Speed path: latency ->
-deadband -> speed scale -> ESC brake-before-reverse -> motor lag -> CarSim (torque-limited
+deadband -> speed scale -> ESC brake-before-reverse -> motor lag / lift lag -> CarSim (torque-limited
 accel/brake). Coasting (``set_coast``: no drive torque, the rear
 wheels roll freely) is a command too: it passes the latency; the deadband also coasts.
 
@@ -179,9 +181,13 @@ EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
           "the car tops out below the commanded speed (ESC speed limit, gearing, battery): speed "
           "commands are capped at this magnitude",
           ("straight", "speed_step", "speed_ramp"), _LONGITUDINAL),
+    _spec("lift_lag", "lift_lag_s", 0.0, (0.0, 3.0), "s",
+          "an ESC that coasts or drag-brakes when the throttle is lifted: slowing to a lower forward "
+          "command follows a first-order lag (a zero or negative command still brakes)",
+          ("speed_step",), _LONGITUDINAL),
 )}
 
-_DYNAMIC_PARAMS = ("steering_lag_s", "command_latency_s", "motor_lag_s", "tire_slip_understeer_radps2pm",
+_DYNAMIC_PARAMS = ("steering_lag_s", "command_latency_s", "motor_lag_s", "lift_lag_s", "tire_slip_understeer_radps2pm",
                    "rolling_resistance_coeff", "drag_coeff_kgpm")
 
 
@@ -505,10 +511,14 @@ class EffectSim:
             target_v = 0.0 if coast else v
             if coast:  # the speed loop restarts from the actual speed when the drive re-engages
                 self._speed_lag = sim.speed_mps
-            elif e.motor_lag_s > 0.0:
-                self._speed_lag += -math.expm1(-dt / e.motor_lag_s) * (target_v - self._speed_lag)
             else:
-                self._speed_lag = target_v
+                tau = e.motor_lag_s
+                if e.lift_lag_s > 0.0 and 0.0 < target_v < self._speed_lag:  # a throttle lift
+                    tau = max(tau, e.lift_lag_s)
+                if tau > 0.0:
+                    self._speed_lag += -math.expm1(-dt / tau) * (target_v - self._speed_lag)
+                else:
+                    self._speed_lag = target_v
             v_eff = self._speed_lag
         else:
             if e.steering_play_rad > 0.0:

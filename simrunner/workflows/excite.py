@@ -86,7 +86,7 @@ SEGMENT_KINDS: dict[str, tuple[str, ...]] = {
                    "steering_rate_limit", "steering_asymmetry", "steering_play", "servo_rate_scale"),
     "circle": ("steering_gain", "tire_slip", "friction", "steering_offset", "steering_asymmetry",
                "steer_limit_scale"),
-    "speed_step": ("command_latency", "motor_lag", "speed_scale", "accel_scale", "brake_scale", "mass_scale",
+    "speed_step": ("command_latency", "motor_lag", "lift_lag", "speed_scale", "accel_scale", "brake_scale", "mass_scale",
                    "top_speed"),
     "coast": ("rolling_resistance", "drag"),
     "brake": ("brake_scale", "mass_scale"),

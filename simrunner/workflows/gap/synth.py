@@ -68,6 +68,7 @@ RANGES: dict[str, tuple[str, float, float, bool]] = {
     "steer_limit_scale": ("steer_limit_scale", 0.05, 0.3, False),  # scale = 1 - that
     "mass_scale": ("mass_scale", 0.1, 0.6, True),  # scale = 1 +- that
     "top_speed": ("top_speed_mps", 1.2, 2.6, False),  # the cap; the plan reaches ~3 m/s
+    "lift_lag": ("lift_lag_s", 0.05, 1.0, False),
 }
 _RELATIVE_TO_ONE = {"steering_gain", "speed_scale", "mass_scale"}
 _BELOW_ONE = {"accel_scale", "brake_scale", "servo_rate_scale", "steer_limit_scale"}
