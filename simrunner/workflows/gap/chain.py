@@ -26,9 +26,12 @@ refitted) and
    :data:`HELD_IMPROVEMENT_MIN` smaller than before on the held-out windows, which no fit has
    seen (the held-out problem may use a finer physics step than the fits: the step
    ``simrunner drive`` uses, so what is kept holds for the car file as it will be driven);
-4. when every refitted candidate fails, refits the next ones in the screening order (at
-   most :data:`MAX_REFITS_PER_STEP` per step, only those whose screening fit gained at least
-   half of ``IMPROVEMENT_MIN``: a one-parameter gain below that is not worth a refit);
+4. when every refitted candidate fails, refits the next ones in the screening order, in
+   batches of the same size, every one whose screening fit gained at least half of
+   ``IMPROVEMENT_MIN`` (a one-parameter gain below that is not worth a refit). There is no
+   count limit: with a few kept effects held, a candidate that only helps once a kept one
+   is refitted with it can screen behind several that fail (DS2's third effect screened
+   7th, behind six that the tests rejected; a limit of 6 refits a step cut it off);
 5. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects;
 6. then checks every kept effect once more (backward elimination): with two or more kept,
    each is left out in turn and the others refitted; an effect that would no longer pass
@@ -63,7 +66,6 @@ HELD_IMPROVEMENT_MIN = 0.029  # calibrated: 2x the largest held-out gain of a ca
 POWELL_EVALS_PER_PARAMETER = 8
 REFINE_LATER = 2
 SCREEN_MAX_S = 45.0
-MAX_REFITS_PER_STEP = 6
 NEUTRAL_TOL = 0.01  # fraction of the fit range (scaled coordinates) that counts as neutral
 BETTER = "a better candidate was kept"
 
@@ -360,12 +362,9 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             crit_now = bic(fit_problem, cost, k)
             decided: list[Trial] = []
             chosen = None
-            refits = 0
             for batch in batches:
-                batch = batch[:max(MAX_REFITS_PER_STEP - refits, 0)]
                 if not batch or chosen is not None:
                     break
-                refits += len(batch)
                 outs = run_tasks([(screen_base, fit_problem, held_problem, base, kept_names + [r.effect],
                                    {**kept_values, **r.parameters}) for r in batch])
                 tick(f"step {index} joint refits")

@@ -397,13 +397,13 @@ def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
     """Upper bound of the ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates
     (each chain step screens the remaining effects and runs its batches of joint refits; the
     final check runs at most one round per kept effect but the last)."""
-    from simrunner.workflows.gap.chain import MAX_REFITS_PER_STEP, REFINE_LATER
+    from simrunner.workflows.gap.chain import REFINE_LATER
     from simrunner.workflows.gap.fit import REFINE_TOP
 
     steps = min(max_effects, n_effects) + 1
-    batches = -(-MAX_REFITS_PER_STEP // max(min(REFINE_LATER, REFINE_TOP), 1))
+    size = max(min(REFINE_LATER, REFINE_TOP), 1)
     final_checks = max(min(max_effects, n_effects) - 1, 0)
-    return 2 + sum(max(n_effects - s, 0) + batches for s in range(steps)) + final_checks
+    return 2 + sum(max(n_effects - s, 0) + -(-max(n_effects - s, 0) // size) for s in range(steps)) + final_checks
 
 
 def _params_text(params: dict[str, float]) -> str:
