@@ -152,11 +152,17 @@ class InprocSession(_Session):
         data, self._pending = self._pending, b""
         n = self._resume(data, len(data))
         if n < 0:
-            self._gone = True
-            n = -n - 1
-            if n == 0:
-                raise _ChildGone()
+            n = self._finished_with(n)
         return self._view[:n]
+
+    def _finished_with(self, n: int) -> int:
+        """The controller ended during a resume that returned ``n`` (< 0): the count of its
+        last requests (a fault's report, say); raises _ChildGone when there are none."""
+        self._gone = True
+        n = -n - 1
+        if n == 0:
+            raise _ChildGone()
+        return n
 
     def _exchange(self, img) -> bytes | memoryview:
         """A camera frame in one switch: the image goes in as it is (the host makes the reply's
@@ -167,11 +173,7 @@ class InprocSession(_Session):
         data = img.tobytes()
         n = self._resume_image(data, len(data))
         if n < 0:
-            self._gone = True
-            n = -n - 1
-            if n == 0:
-                raise _ChildGone()
-            return self._view[:n]
+            return self._view[:self._finished_with(n)]
         return self._frame_view if n == _FRAME.size else self._view[:n]
 
     def _reply(self, data: bytes) -> None:
