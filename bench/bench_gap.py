@@ -37,8 +37,10 @@ neutral value is infinite), over correctly named effects. Held-out figures: the 
 ``gap_after / gap_before`` and position RMSE after/before on the held-out windows (against
 the noisy measured log), and the same for the baselines' cars on the same windows.
 
-``python -m bench.bench_gap [--mode single,multi,...] [--trials N] [--jobs J] [--out FILE.json]``
-(``--table FILE.json`` prints the tables of saved rows again). Synthetic trials run in
+``python -m bench.bench_gap [--mode single,multi,...] [--trials N] [--first K] [--jobs J] [--out FILE.json]``
+(``--table FILE.json ...`` prints the tables of saved rows again, pooling several files: a
+large sample can be built in runs of trials ``K .. K+N-1`` each, as the trial designs
+depend on the trial number only). Synthetic trials run in
 ``--jobs`` processes, one ``run_gap(jobs=1)`` each; real and timing runs use ``--jobs``
 processes inside ``run_gap``. ``python -m bench`` runs ``main()``: every mode, small
 (:data:`SMALL_TRIALS` per synthetic mode; about an hour on 2 cores).
@@ -515,16 +517,32 @@ def report(rows: list[dict]) -> str:
 
 # --- command line ------------------------------------------------------------------------------------
 
+def pooled_rows(paths: list[Path]) -> list[dict]:
+    """The rows of several ``--out`` files, a trial run twice counted once (the later file's;
+    a ``compare`` trial is its ``multi`` trial with the baselines, and replaces it)."""
+    rows: dict[tuple, dict] = {}
+    for path in paths:
+        for r in json.loads(path.read_text())["rows"]:
+            rows[(r["mode"], r.get("trial", r.get("log")))] = r
+    for mode, k in [key for key in rows if key[0] == "compare"]:
+        rows.pop(("multi", k), None)
+    order = {m: i for i, m in enumerate(MODES)}
+    return sorted(rows.values(), key=lambda r: (order[r["mode"]], r.get("trial", 0)))
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description="gap workflow bench (issue 10 targets)")
     ap.add_argument("--mode", default=",".join(MODES), help=f"comma-separated, of {', '.join(MODES)}")
     ap.add_argument("--trials", type=int, default=SMALL_TRIALS, help="trials per synthetic mode")
+    ap.add_argument("--first", type=int, default=0,
+                    help="number of the first trial (to add trials to an earlier run's sample)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", type=Path, default=None, help="write the rows and targets (JSON)")
-    ap.add_argument("--table", type=Path, default=None, help="only print the tables of an --out file")
+    ap.add_argument("--table", type=Path, nargs="+", default=None,
+                    help="only print the tables of --out files (their rows pooled)")
     a = ap.parse_args([] if argv is None else argv)
     if a.table:
-        print(report(json.loads(a.table.read_text())["rows"]))
+        print(report(pooled_rows(a.table)))
         return
     modes = [m.strip() for m in a.mode.split(",") if m.strip()]
     bad = [m for m in modes if m not in MODES]
@@ -539,12 +557,12 @@ def main(argv: list[str] | None = None) -> None:
         for r in real_rows(a.jobs):
             rows.append(r)
             print(f"[real {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
-    tasks = []
+    tasks, trials = [], range(a.first, a.first + a.trials)
     if "compare" in modes:
-        tasks += [("compare", k, True) for k in range(a.trials)]
+        tasks += [("compare", k, True) for k in trials]
     elif "multi" in modes:
-        tasks += [("multi", k, False) for k in range(a.trials)]
-    tasks += [(m, k, False) for m in ("single", "speed_gyro") if m in modes for k in range(a.trials)]
+        tasks += [("multi", k, False) for k in trials]
+    tasks += [(m, k, False) for m in ("single", "speed_gyro") if m in modes for k in trials]
     if tasks:
         with ProcessPoolExecutor(max_workers=a.jobs) as pool:
             futures = {pool.submit(_trial, *t): t for t in tasks}
