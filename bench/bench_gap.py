@@ -524,10 +524,15 @@ def pooled_rows(paths: list[Path]) -> list[dict]:
     for path in paths:
         for r in json.loads(path.read_text())["rows"]:
             rows[(r["mode"], r.get("trial", r.get("log")))] = r
-    for mode, k in [key for key in rows if key[0] == "compare"]:
+    for _, k in [key for key in rows if key[0] == "compare"]:
         rows.pop(("multi", k), None)
+    return sorted_rows(rows.values())
+
+
+def sorted_rows(rows) -> list[dict]:
+    """Rows in the order of :data:`MODES`, then by trial."""
     order = {m: i for i, m in enumerate(MODES)}
-    return sorted(rows.values(), key=lambda r: (order[r["mode"]], r.get("trial", 0)))
+    return sorted(rows, key=lambda r: (order[r["mode"]], r.get("trial", 0)))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -571,8 +576,7 @@ def main(argv: list[str] | None = None) -> None:
                 rows.append(row)
                 print(f"[{row['mode']} {row['trial']} done, {row['wall_s']:.0f} s; "
                       f"{time.perf_counter() - t_start:.0f} s total]", file=sys.stderr, flush=True)
-    order = {m: i for i, m in enumerate(MODES)}
-    rows.sort(key=lambda r: (order[r["mode"]], r.get("trial", 0)))
+    rows = sorted_rows(rows)
     if a.out:  # first: a failing report must not lose hours of rows
         a.out.write_text(json.dumps({"argv": sys.argv[1:] if argv is None else argv, "rows": rows,
                                      "targets": target_rows(rows)}, indent=1, default=float) + "\n")
