@@ -2,7 +2,8 @@
 examples/line_follower.py in the same process, and the start-up a student sees.
 
 Closed loop: one lap of the default track, video off, the controllers interleaved
-``REPEATS`` times, best (and median) of each kept, with the load average. ``wall`` is the
+``REPEATS`` times, best (and median) of each kept, with the load average, and the median
+of the per-round ratio Python / C with its bootstrap interval. ``wall`` is the
 run's wall time (``RunResult``; the C controller's library is opened before the run - or,
 ``--isolate``, its process started with the library loaded - like the Python file is
 compiled before it); for ``--isolate`` ``CPU`` adds the child process's CPU time during the
@@ -40,7 +41,7 @@ from vehicle.description import load_car
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
-REPEATS = 12
+REPEATS = 24
 REPEAT = 3
 FIRST_RUN_TARGET_S = 3.0
 CACHED_MARGIN_S = 0.2
@@ -103,11 +104,28 @@ def closed_loop() -> None:
     ratio_cpu = (sim_s["line_follower.c"] / c[0]) / (sim_s["line_follower.py"] / py[0])
     med = {name: statistics.median(w for _, w in rows[name]) for name in names}
     ratio_med = med["line_follower.py"] / med["line_follower.c"]  # same simulated time
+    lo, mid, hi = paired_ratio_ci([w for _, w in rows["line_follower.py"]],
+                                  [w for _, w in rows["line_follower.c"]])
     iso = best["c --isolate"]
     ratio_iso = (sim_s["c --isolate"] / iso[1]) / (sim_s["line_follower.py"] / py[1])
     print(f"  RTF C / Python: wall {ratio:.3f} (medians {ratio_med:.3f}), CPU {ratio_cpu:.3f}  "
           f"(target >= 1.0: {'met' if ratio >= 1.0 else 'NOT met'}); "
           f"--isolate / Python: wall {ratio_iso:.3f} (CPU counts the C child's run, not its start)")
+    print(f"  paired laps (Python wall / C wall, same round): median {mid:.3f}, 95 % bootstrap "
+          f"interval of the median {lo:.3f}-{hi:.3f}")
+
+
+def paired_ratio_ci(py_wall_s: list[float], c_wall_s: list[float], n_boot: int = 2000,
+                    seed: int = 0) -> tuple[float, float, float]:
+    """(2.5 %, median, 97.5 %) of the median of the per-round ratios Python wall / C wall
+    (the laps of one round ran back to back: their ratio cancels the machine's slow drifts),
+    the interval by a percentile bootstrap over the rounds."""
+    import numpy as np
+
+    r = np.asarray(py_wall_s) / np.asarray(c_wall_s)
+    boots = np.median(np.random.default_rng(seed).choice(r, (n_boot, r.size)), axis=1)
+    lo, hi = np.percentile(boots, [2.5, 97.5])
+    return float(lo), float(np.median(r)), float(hi)
 
 
 def _wall_s(argv: list[str], env: dict[str, str], repeat: int, before=None) -> list[float]:
