@@ -37,7 +37,7 @@ neutral value is infinite), over correctly named effects. Held-out figures: the 
 ``gap_after / gap_before`` and position RMSE after/before on the held-out windows (against
 the noisy measured log), and the same for the baselines' cars on the same windows.
 
-``python -m bench.bench_gap [--mode single,multi,...] [--trials N] [--first K] [--jobs J] [--out FILE.json]``
+``python -m bench.bench_gap [--mode single,multi,...] [--trials N] [--first K | --only K,K,...] [--jobs J] [--out FILE.json]``
 (``--table FILE.json ...`` prints the tables of saved rows again, pooling several files: a
 large sample can be built in runs of trials ``K .. K+N-1`` each, as the trial designs
 depend on the trial number only). Synthetic trials run in
@@ -539,6 +539,9 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description="gap workflow bench (issue 10 targets)")
     ap.add_argument("--mode", default=",".join(MODES), help=f"comma-separated, of {', '.join(MODES)}")
     ap.add_argument("--trials", type=int, default=SMALL_TRIALS, help="trials per synthetic mode")
+    ap.add_argument("--only", type=lambda t: [int(x) for x in t.split(",") if x.strip()], default=None,
+                    help="comma-separated trial numbers (instead of --first/--trials: to re-run the "
+                         "trials a change can affect)")
     ap.add_argument("--first", type=int, default=0,
                     help="number of the first trial (to add trials to an earlier run's sample)")
     ap.add_argument("--jobs", type=int, default=2)
@@ -562,7 +565,7 @@ def main(argv: list[str] | None = None) -> None:
         for r in real_rows(a.jobs):
             rows.append(r)
             print(f"[real {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
-    tasks, trials = [], range(a.first, a.first + a.trials)
+    tasks, trials = [], (a.only if a.only is not None else range(a.first, a.first + a.trials))
     if "compare" in modes:
         tasks += [("compare", k, True) for k in trials]
     elif "multi" in modes:

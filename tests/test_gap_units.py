@@ -921,6 +921,71 @@ def test_the_final_check_removes_an_effect_the_later_ones_made_redundant(monkeyp
     assert only.effects == [look] and only.pruned == ()
 
 
+def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):
+    """A mass scale wins the first step by a hair over the brake scale it stands in for;
+    with the latency of step 2 in, the brake scale fits far better in its place: the
+    exchange after step 2 makes the swap, and a third step then finds nothing to add (the
+    mass scale gains too little on top). Costs come from tables, so only the chain's logic
+    runs."""
+    import simrunner.workflows.gap.chain as chain
+    from simrunner.workflows.gap.fit import FitResult
+
+    mass, brake, lat = "mass_scale", "brake_scale", "command_latency"
+    field = {mass: "mass_scale", brake: "brake_scale", lat: "command_latency_s"}
+    neutral = {mass: 1.0, brake: 1.0, lat: 0.0}
+    fitted = {mass: 1.6, brake: 0.62, lat: 0.03}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([mass]): (400.0, 0.40),  # (fit cost, held gap)
+             frozenset([brake]): (401.0, 0.41), frozenset([lat]): (700.0, 0.7),
+             frozenset([mass, lat]): (300.0, 0.30), frozenset([brake, lat]): (100.0, 0.10),
+             frozenset([mass, brake]): (399.0, 0.40), frozenset([mass, brake, lat]): (99.0, 0.10)}
+
+    class FakeProblem:
+        car = CarDescription()
+        n_values = 1
+
+        def with_car(self, car):
+            p = FakeProblem()
+            p.car = car
+            return p
+
+    def active(car):
+        return frozenset(n for n in field if getattr(car.effects, field[n]) != neutral[n])
+
+    def cost(problem, car):
+        c, held = refit[active(car)]
+        return held if problem is held_p else c
+
+    def trial(args):
+        names = args[4]
+        c, held = refit[frozenset(names)]
+        return {field[n]: fitted[n] for n in names}, c, 5, held
+
+    def screen(problem, current_cost, names, **kw):
+        have = active(problem.car)
+        return [FitResult(n, {field[n]: fitted[n]}, refit[have | {n}][0], 0.0, 0.0,
+                          1 - refit[have | {n}][0] / current_cost, 3) for n in names]
+
+    fit_p, held_p = FakeProblem(), FakeProblem()
+    monkeypatch.setattr(chain, "cost_of", cost)
+    monkeypatch.setattr(chain, "_trial_task", trial)
+    monkeypatch.setattr(chain, "fit_all", screen)
+    monkeypatch.setattr(chain, "screening_problem", lambda p, max_s=0: p)
+    monkeypatch.setattr(chain, "bic", lambda p, c, k: 1000.0 * math.log(c) + 10.0 * k)
+    monkeypatch.setattr(chain, "REFINE_TOP", 2)
+    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    result = chain.build_chain(fit_p, held_p, [mass, brake, lat], jobs=1)
+    assert [s.kept.effect for s in result.steps if s.kept] == [mass, lat]  # forward: the look-alike first
+    assert [(sw.step, sw.out, sw.into) for sw in result.swaps] == [(2, mass, brake)]
+    assert result.swaps[0].cost_before == 300.0 and result.swaps[0].cost_after == 100.0
+    assert result.effects == [brake, lat] and result.pruned == ()
+    assert result.parameters == {field[brake]: 0.62, field[lat]: 0.03}
+    assert result.steps[-1].kept is None  # step 3: the mass scale on top gains 1 %
+    # without a better runner-up nothing is exchanged: the brake scale's pair as costly as the mass's
+    refit[frozenset([brake, lat])] = (300.0, 0.30)
+    same = chain.build_chain(fit_p, held_p, [mass, brake, lat], jobs=1)
+    assert same.swaps == () and same.effects[:2] == [mass, lat]
+
+
 @pytest.mark.parametrize("truth_frac", [0.15, 0.25, 0.35])
 def test_screening_finds_a_small_value_in_a_narrow_valley_next_to_neutral(monkeypatch, truth_frac):
     """A 12-ms latency on the 50-ms screening grid: its cost at 50 ms is far above the

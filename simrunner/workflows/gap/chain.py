@@ -32,8 +32,16 @@ refitted) and
    count limit: with a few kept effects held, a candidate that only helps once a kept one
    is refitted with it can screen behind several that fail (DS2's third effect screened
    7th, behind six that the tests rejected; a limit of 6 refits a step cut it off);
-5. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects;
-6. then checks every kept effect once more (backward elimination): with two or more kept,
+5. once an effect is kept at a step past the first, tries exchanges: each effect kept at an
+   earlier step is replaced in turn by each of the :data:`REFINE_TOP` best candidates
+   refitted at that step and not kept (its runners-up), all kept parameters refitted
+   jointly with the replacement; the best exchange that lowers the fit windows' cost (same number of parameters: a lower BIC) and
+   does not worsen the held-out gap is made, and the exchanges repeat until none helps
+   (:data:`MAX_EXCHANGES` at most). A look-alike that won a near tie early (a mass scale
+   for a brake scale, an asymmetry for an offset) is swapped for the effect the later ones
+   fit with; ``Chain.swaps`` records each with its figures;
+6. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects;
+7. then checks every kept effect once more (backward elimination): with two or more kept,
    each is left out in turn and the others refitted; an effect that would no longer pass
    the tests of step 3 as the last one added (against the others refitted without it) is
    removed, the weakest first, and the check repeats. A look-alike kept early (a slower
@@ -64,6 +72,7 @@ MAX_EFFECTS = 4
 # residual) shrinks by at least this fraction.
 HELD_IMPROVEMENT_MIN = 0.029  # calibrated: 2x the largest held-out gain of a candidate on effect-free logs (docs/gap.md)
 POWELL_EVALS_PER_PARAMETER = 8
+MAX_EXCHANGES = 4  # exchange passes after a step (each pass makes at most one)
 REFINE_LATER = 2
 SCREEN_MAX_S = 45.0
 NEUTRAL_TOL = 0.01  # fraction of the fit range (scaled coordinates) that counts as neutral
@@ -213,6 +222,24 @@ class Step:
 
 
 @dataclass(frozen=True)
+class Swap:
+    """An exchange after step ``step``: ``out`` (kept at an earlier step) replaced by
+    ``into`` (one of that step's runners-up), every kept parameter refitted."""
+
+    step: int
+    out: str
+    into: str
+    parameters: dict[str, float]  # every kept parameter after the exchange
+    cost_before: float
+    cost_after: float      # fit windows
+    held_gap_before: float
+    held_gap_after: float
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
 class Chain:
     """The steps taken; ``car`` has every kept effect."""
 
@@ -223,11 +250,17 @@ class Chain:
     stop_reason: str = ""
     parameters: dict[str, float] = dataclasses.field(default_factory=dict)  # the final refit of every kept parameter
     pruned: tuple[Trial, ...] = ()  # kept by a step, removed by the final check (the trial: the model with it)
+    swaps: tuple[Swap, ...] = ()  # exchanges, in the order made
 
     @property
     def effects(self) -> list[str]:
+        """The kept effects in the order their slots were filled (an exchanged effect in
+        its predecessor's place), without those the final check removed."""
+        names = [s.kept.effect for s in self.steps if s.kept is not None]
+        for sw in self.swaps:
+            names[names.index(sw.out)] = sw.into
         gone = {t.effect for t in self.pruned}
-        return [s.kept.effect for s in self.steps if s.kept is not None and s.kept.effect not in gone]
+        return [n for n in names if n not in gone]
 
     @property
     def rejected(self) -> list[tuple[int, Trial]]:
@@ -330,6 +363,8 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     held_gap = cost_of(held_problem, base) / max(held_problem.n_values, 1)
     nominal_cost, nominal_held = cost, held_gap
     steps: list[Step] = []
+    swaps: list[Swap] = []
+    runners_up: dict[str, list[Trial]] = {}  # per kept effect: the step's other refitted candidates
     stop = ""
     pool = ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) if jobs > 1 else None
 
@@ -387,6 +422,18 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             kept_names.append(chosen.effect)
             kept_values = dict(chosen.parameters)
             cost, held_gap = chosen.cost, chosen.held_gap
+            runners_up[chosen.effect] = sorted((t for t in decided if not t.kept),
+                                               key=lambda tr: (tr.cost, order[tr.effect]))[:REFINE_TOP]
+            for _ in range(MAX_EXCHANGES if len(kept_names) > 1 else 0):
+                tick(f"step {index} exchanges")
+                swap = _best_exchange(run_tasks, screen_base, fit_problem, held_problem, base, index,
+                                      kept_names, kept_values, cost, held_gap, runners_up)
+                if swap is None:
+                    break
+                swaps.append(swap)
+                kept_names[kept_names.index(swap.out)] = swap.into
+                runners_up[swap.into] = [t for t in runners_up.pop(swap.out) if t.effect != swap.into]
+                kept_values, cost, held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
         else:
             stop = f"the chain reached its limit of {max_effects} effects"
         pruned: list[Trial] = []
@@ -415,7 +462,31 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
         if pool is not None:
             pool.shutdown()
     return Chain(tuple(steps), with_parameters(base, kept_values), nominal_cost, nominal_held, stop,
-                 dict(kept_values), tuple(pruned))
+                 dict(kept_values), tuple(pruned), tuple(swaps))
+
+
+def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, held_problem: Problem,
+                   base: CarDescription, index: int, kept_names: list[str], kept_values: dict[str, float],
+                   cost: float, held_gap: float, runners_up: dict[str, list[Trial]]) -> Swap | None:
+    """The best exchange of step 5 of the module docstring (None when none lowers the fit
+    cost without worsening the held-out gap). The last kept effect is not exchanged: its
+    runners-up were refitted with the same others and lost."""
+    pairs, tasks = [], []
+    for out in kept_names[:-1]:
+        start = {f: v for f, v in kept_values.items() if f != CANDIDATES[out].field}
+        for tr in runners_up.get(out, ()):
+            if tr.effect in kept_names:
+                continue
+            field = CANDIDATES[tr.effect].field
+            names = [tr.effect if n == out else n for n in kept_names]
+            pairs.append((out, tr.effect))
+            tasks.append((screen_problem, fit_problem, held_problem, base, names,
+                          {**start, field: tr.parameters[field]}))
+    best = None
+    for (out, into), (values, c, _, held) in zip(pairs, run_tasks(tasks) if tasks else []):
+        if c < cost and held <= held_gap and (best is None or c < best.cost_after):
+            best = Swap(index, out, into, dict(values), cost, c, held_gap, held)
+    return best
 
 
 def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvement_min: float,
@@ -434,5 +505,5 @@ def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvem
     return ""
 
 
-__all__ = ["Chain", "Step", "Trial", "build_chain", "joint_refit", "with_parameters",
+__all__ = ["Chain", "Step", "Swap", "Trial", "build_chain", "joint_refit", "with_parameters",
            "MAX_EFFECTS", "HELD_IMPROVEMENT_MIN"]

@@ -158,6 +158,7 @@ class GapResult:
             "chain": self.chain.to_json(), "chain_stop": self.chain.stop_reason,
             "rejected": [{"step": k, "effect": t.effect, "parameters": t.parameters, "reason": t.reason}
                          for k, t in self.chain.rejected],
+            "swaps": [sw.to_json() for sw in self.chain.swaps],
             "pruned": [{"effect": t.effect, "parameters": t.parameters, "reason": t.reason,
                         "delta_bic": t.delta_bic, "improvement": t.improvement} for t in self.chain.pruned],
             "unexplained": self.leftovers,
@@ -434,6 +435,10 @@ def summary_text(result: GapResult) -> str:
             lines.append(f"  step {step.index}: + {kept.effect:<20} held-out gap {step.held_gap_before:.3g} -> "
                          f"{kept.held_gap:.3g}  (delta_BIC {kept.delta_bic:.0f}, fit {kept.improvement:.1%})"
                          + ("  removed by the final check" if kept.effect in gone else ""))
+        for sw in (sw for sw in chain.swaps if sw.step == step.index):
+            lines.append(f"  after step {sw.step}: {sw.out} -> {sw.into} (exchanged, all refitted): fit cost "
+                         f"{sw.cost_before:.4g} -> {sw.cost_after:.4g}, held-out gap {sw.held_gap_before:.3g} -> "
+                         f"{sw.held_gap_after:.3g}" + ("; removed by the final check" if sw.into in gone else ""))
     lines.append(f"  the chain stopped: {chain.stop_reason}")
     for tr in chain.pruned:
         lines.append(f"  final check: - {tr.effect:<18} without it, the others refitted: {tr.reason}")
