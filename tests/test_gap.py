@@ -85,6 +85,26 @@ def test_report_folder(offset_run, tmp_path):
     assert not list(tmp_path.glob(".gap.*"))  # no temporary folder left behind
 
 
+def test_an_exchange_is_reported_in_text_and_json(offset_run):
+    """The chain's exchanges (tables test in test_gap_units) reach the summary and report.json."""
+    import dataclasses
+
+    from simrunner.workflows.gap.chain import Swap
+    from simrunner.workflows.gap.report import summary_text
+
+    _, _, result = offset_run
+    sw = Swap(1, "steering_offset", "steering_asymmetry", {"steering_asymmetry": 0.1}, 10.0, 8.0, 0.5, 0.4)
+    chain = dataclasses.replace(result.chain, swaps=(sw,))
+    assert chain.effects == ["steering_asymmetry"]
+    swapped = dataclasses.replace(result, chain=chain)
+    assert ("after step 1: steering_offset -> steering_asymmetry (exchanged, all refitted): fit cost 10 -> 8, "
+            "held-out gap 0.5 -> 0.4") in summary_text(swapped)
+    assert swapped.to_json()["swaps"] == [{"step": 1, "out": "steering_offset", "into": "steering_asymmetry",
+                                           "parameters": {"steering_asymmetry": 0.1}, "cost_before": 10.0,
+                                           "cost_after": 8.0, "held_gap_before": 0.5, "held_gap_after": 0.4}]
+    assert result.to_json()["swaps"] == []
+
+
 # -- command line ------------------------------------------------------------------------
 @pytest.mark.parametrize("text, line, what", [
     ("t,x,y,yaw,speed,speed_cmd\n0,0,0,0,0,0\n", 1, "missing: steer_cmd_rad"),
