@@ -857,87 +857,15 @@ def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():
     assert leftovers(stats, {k: 1.0 for k in noise}, ratio=4.0) == []  # nothing well above noise
 
 
-def test_the_final_check_removes_an_effect_the_later_ones_made_redundant(monkeypatch):
-    """Forward selection keeps a look-alike first (a slower servo for a latency whose
-    one-parameter screening missed its best value); once the real effect is in, the
-    look-alike no longer passes the tests against the others alone, and the final check
-    removes it. Costs come from tables, so only the chain's logic runs."""
+def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None):
+    """Fake fit and held-out problems for :func:`chain.build_chain` whose costs come from
+    tables: ``refit[frozenset(active effects)] = (fit cost, held-out gap)`` for the joint
+    refits and the replays, ``screened[...]`` (default: the refit's fit cost) for the
+    screening; a fitted effect takes its ``fitted`` value. Returns ``(fit, held)``."""
     import simrunner.workflows.gap.chain as chain
     from simrunner.workflows.gap.fit import FitResult
 
-    look, real = "servo_rate_scale", "command_latency"
-    field = {look: "servo_rate_scale", real: "command_latency_s"}
-    neutral = {look: 1.0, real: 0.0}
-    fitted = {look: 0.7, real: 0.04}
-    refit = {frozenset(): (1000.0, 1.0), frozenset([look]): (400.0, 0.4),  # (fit cost, held gap)
-             frozenset([real]): (101.0, 0.10), frozenset([look, real]): (100.0, 0.099)}
-    screened = {frozenset([look]): 400.0, frozenset([real]): 450.0, frozenset([look, real]): 100.0}
-
-    class FakeProblem:
-        car = CarDescription()
-        n_values = 1
-
-        def with_car(self, car):
-            return _with(self, car)
-
-    def _with(problem, car):
-        p = FakeProblem()
-        p.car = car
-        p.held = problem is held_p
-        return p
-
-    def active(car):
-        return frozenset(n for n in (look, real) if getattr(car.effects, field[n]) != neutral[n])
-
-    def cost(problem, car):
-        c, held = refit[active(car)]
-        return held if problem is held_p else c
-
-    def trial(args):
-        names = args[4]
-        c, held = refit[frozenset(names)]
-        return {field[n]: fitted[n] for n in names}, c, 5, held
-
-    def screen(problem, current_cost, names, **kw):
-        have = active(problem.car)
-        return [FitResult(n, {field[n]: fitted[n]}, screened[have | {n}], 0.0, 0.0,
-                          1 - screened[have | {n}] / current_cost, 3) for n in names]
-
-    fit_p, held_p = FakeProblem(), FakeProblem()
-    monkeypatch.setattr(chain, "cost_of", cost)
-    monkeypatch.setattr(chain, "_trial_task", trial)
-    monkeypatch.setattr(chain, "fit_all", screen)
-    monkeypatch.setattr(chain, "screening_problem", lambda p, max_s=0: p)
-    monkeypatch.setattr(chain, "bic", lambda p, c, k: 1000.0 * math.log(c) + 10.0 * k)
-    monkeypatch.setattr(chain, "REFINE_TOP", 1)
-    monkeypatch.setattr(chain, "REFINE_LATER", 1)
-    result = chain.build_chain(fit_p, held_p, [look, real], jobs=1)
-    assert [s.kept.effect for s in result.steps if s.kept] == [look, real]  # forward: both kept
-    assert result.effects == [real] and [t.effect for t in result.pruned] == [look]
-    assert result.parameters == {field[real]: 0.04}
-    assert result.pruned[0].reason.startswith("delta_BIC") and result.pruned[0].improvement < 0.068
-    # an effect the others do not replace stays: with the look-alike alone there is nothing to check
-    only = chain.build_chain(fit_p, held_p, [look], jobs=1)
-    assert only.effects == [look] and only.pruned == ()
-
-
-def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):
-    """A mass scale wins the first step by a hair over the brake scale it stands in for;
-    with the latency of step 2 in, the brake scale fits far better in its place: the
-    exchange after step 2 makes the swap, and a third step then finds nothing to add (the
-    mass scale gains too little on top). Costs come from tables, so only the chain's logic
-    runs."""
-    import simrunner.workflows.gap.chain as chain
-    from simrunner.workflows.gap.fit import FitResult
-
-    mass, brake, lat = "mass_scale", "brake_scale", "command_latency"
-    field = {mass: "mass_scale", brake: "brake_scale", lat: "command_latency_s"}
-    neutral = {mass: 1.0, brake: 1.0, lat: 0.0}
-    fitted = {mass: 1.6, brake: 0.62, lat: 0.03}
-    refit = {frozenset(): (1000.0, 1.0), frozenset([mass]): (400.0, 0.40),  # (fit cost, held gap)
-             frozenset([brake]): (401.0, 0.41), frozenset([lat]): (700.0, 0.7),
-             frozenset([mass, lat]): (300.0, 0.30), frozenset([brake, lat]): (100.0, 0.10),
-             frozenset([mass, brake]): (399.0, 0.40), frozenset([mass, brake, lat]): (99.0, 0.10)}
+    screened = screened or {k: c for k, (c, _) in refit.items()}
 
     class FakeProblem:
         car = CarDescription()
@@ -962,8 +890,8 @@ def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):
 
     def screen(problem, current_cost, names, **kw):
         have = active(problem.car)
-        return [FitResult(n, {field[n]: fitted[n]}, refit[have | {n}][0], 0.0, 0.0,
-                          1 - refit[have | {n}][0] / current_cost, 3) for n in names]
+        return [FitResult(n, {field[n]: fitted[n]}, screened[have | {n}], 0.0, 0.0,
+                          1 - screened[have | {n}] / current_cost, 3) for n in names]
 
     fit_p, held_p = FakeProblem(), FakeProblem()
     monkeypatch.setattr(chain, "cost_of", cost)
@@ -971,6 +899,53 @@ def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):
     monkeypatch.setattr(chain, "fit_all", screen)
     monkeypatch.setattr(chain, "screening_problem", lambda p, max_s=0: p)
     monkeypatch.setattr(chain, "bic", lambda p, c, k: 1000.0 * math.log(c) + 10.0 * k)
+    return fit_p, held_p
+
+
+def test_the_final_check_removes_an_effect_the_later_ones_made_redundant(monkeypatch):
+    """Forward selection keeps a look-alike first (a slower servo for a latency whose
+    one-parameter screening missed its best value); once the real effect is in, the
+    look-alike no longer passes the tests against the others alone, and the final check
+    removes it. Costs come from tables, so only the chain's logic runs."""
+    import simrunner.workflows.gap.chain as chain
+
+    look, real = "servo_rate_scale", "command_latency"
+    field = {look: "servo_rate_scale", real: "command_latency_s"}
+    neutral = {look: 1.0, real: 0.0}
+    fitted = {look: 0.7, real: 0.04}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([look]): (400.0, 0.4),  # (fit cost, held gap)
+             frozenset([real]): (101.0, 0.10), frozenset([look, real]): (100.0, 0.099)}
+    screened = {frozenset([look]): 400.0, frozenset([real]): 450.0, frozenset([look, real]): 100.0}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
+    monkeypatch.setattr(chain, "REFINE_TOP", 1)
+    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    result = chain.build_chain(fit_p, held_p, [look, real], jobs=1)
+    assert [s.kept.effect for s in result.steps if s.kept] == [look, real]  # forward: both kept
+    assert result.effects == [real] and [t.effect for t in result.pruned] == [look]
+    assert result.parameters == {field[real]: 0.04}
+    assert result.pruned[0].reason.startswith("delta_BIC") and result.pruned[0].improvement < 0.068
+    # an effect the others do not replace stays: with the look-alike alone there is nothing to check
+    only = chain.build_chain(fit_p, held_p, [look], jobs=1)
+    assert only.effects == [look] and only.pruned == ()
+
+
+def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):
+    """A mass scale wins the first step by a hair over the brake scale it stands in for;
+    with the latency of step 2 in, the brake scale fits far better in its place: the
+    exchange after step 2 makes the swap, and a third step then finds nothing to add (the
+    mass scale gains too little on top). Costs come from tables, so only the chain's logic
+    runs."""
+    import simrunner.workflows.gap.chain as chain
+
+    mass, brake, lat = "mass_scale", "brake_scale", "command_latency"
+    field = {mass: "mass_scale", brake: "brake_scale", lat: "command_latency_s"}
+    neutral = {mass: 1.0, brake: 1.0, lat: 0.0}
+    fitted = {mass: 1.6, brake: 0.62, lat: 0.03}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([mass]): (400.0, 0.40),  # (fit cost, held gap)
+             frozenset([brake]): (401.0, 0.41), frozenset([lat]): (700.0, 0.7),
+             frozenset([mass, lat]): (300.0, 0.30), frozenset([brake, lat]): (100.0, 0.10),
+             frozenset([mass, brake]): (399.0, 0.40), frozenset([mass, brake, lat]): (99.0, 0.10)}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit)
     monkeypatch.setattr(chain, "REFINE_TOP", 2)
     monkeypatch.setattr(chain, "REFINE_LATER", 1)
     result = chain.build_chain(fit_p, held_p, [mass, brake, lat], jobs=1)
