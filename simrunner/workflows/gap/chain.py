@@ -35,9 +35,9 @@ refitted) and
 5. once an effect is kept at a step past the first, tries exchanges: each effect kept at an
    earlier step is replaced in turn by each of the :data:`REFINE_TOP` best candidates
    refitted at that step and not kept (its runners-up), all kept parameters refitted
-   jointly with the replacement; the best exchange that lowers the fit windows' cost (same number of parameters: a lower BIC) and
-   does not worsen the held-out gap is made, and the exchanges repeat until none helps
-   (:data:`MAX_EXCHANGES` at most). A look-alike that won a near tie early (a mass scale
+   jointly with the replacement; the best exchange that lowers the fit windows' cost (same
+   number of parameters: a lower BIC) and does not worsen the held-out gap is made, and
+   the exchanges repeat until none helps (:data:`MAX_EXCHANGES` at most). A look-alike that won a near tie early (a mass scale
    for a brake scale, an asymmetry for an offset) is swapped for the effect the later ones
    fit with; ``Chain.swaps`` records each with its figures;
 6. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects;
