@@ -37,10 +37,13 @@ def test_plan_shape_and_contents():
     lock = PLAN.kind_mask("circle") & (np.abs(PLAN.steer_cmd_rad) == CAR.steering.limit_rad)
     assert lock.sum() * 0.02 >= 4.0 and np.all(PLAN.speed_cmd_mps[lock] <= 0.5)
     assert set(np.sign(PLAN.steer_cmd_rad[lock])) == {-1.0, 1.0}
-    # reverse: a negative speed command right after rolling forward, then forward again
+    # reverse: a negative speed command right after rolling forward, then forward again; twice
+    # (the gap workflow fits one and holds the other out)
     rev = PLAN.kind_mask("reverse")
     first = int(np.argmax(rev))
     assert PLAN.speed_cmd_mps[first - 1] > 0.5 and PLAN.speed_cmd_mps[first] < 0.0
+    onsets = np.flatnonzero((PLAN.speed_cmd_mps[1:] < 0.0) & (PLAN.speed_cmd_mps[:-1] > 0.5)) + 1
+    assert len(onsets) == 2 and np.all(rev[onsets])
     assert (PLAN.speed_cmd_mps[rev] < 0).sum() * 0.02 >= 2.0 and PLAN.speed_cmd_mps[rev][-1] > 0.0
     # the turns, and only they, carry the reference path
     assert np.array_equal(PLAN.reference_rows(), PLAN.kind_mask("turn"))

@@ -433,6 +433,54 @@ def test_split_is_stratified_by_label():
     assert held3 == ["w2"]  # nothing held out by group: split without strata
 
 
+def test_the_plans_two_reverses_go_one_to_the_fits_one_to_the_held_out_windows():
+    """An ESC that brakes before it reverses shows only where a reverse command meets a car
+    still rolling forward. The plan does that twice and the split keeps the two apart
+    (their own stratum), so the effect can be fitted on one and confirmed on the other."""
+    from simrunner.workflows.excite import make_plan
+    from simrunner.workflows.gap.report import WINDOW_S, prepare
+    from simrunner.workflows.gap.synth import make_measured_log
+
+    car = CarDescription()
+    rev = np.flatnonzero(make_plan(car).kind_mask("reverse"))
+    t0 = make_plan(car).t_s[rev[0]] - 4.0
+    log, _ = make_measured_log("esc_brake_reverse", value=0.5, rng=np.random.default_rng(5), start_s=t0,
+                               duration_s=rev.size * 0.02 + 8.0)
+    part = prepare(log, car, WINDOW_S)
+    speed = np.nan_to_num(part.derived.speed_mps)
+    onset = (np.asarray(log.speed_cmd_mps) < -0.05) & (speed > 0.1)
+
+    def with_onset(windows):
+        return [w for w in windows if onset[w.start:w.stop].any()]
+
+    assert len(with_onset(part.fit_windows)) >= 1 and len(with_onset(part.held_windows)) >= 1
+
+
+def test_a_joint_refit_searches_the_new_effect_first(monkeypatch):
+    """Powell's first pass line-searches one parameter after the other and a small budget
+    ends inside it: the effect just added (``first``) must be searched before the kept ones,
+    which start at their last refit. Searched last, it keeps its start value."""
+    import simrunner.workflows.gap.chain as chain
+
+    truth = {"steering_offset_rad": 0.01, "mass_scale": 1.2, "steering_gain": 0.9}
+    start = {"steering_offset_rad": 0.012, "mass_scale": 1.25, "steering_gain": 1.0}
+    u, _ = chain._bounds01(["steering_offset", "mass_scale", "steering_gain"])
+
+    def cost(problem, car):  # a bowl in the fit's scaled coordinates, its floor at the truth
+        e = car.effects
+        return 1.0 + float(np.sum((u({"steering_offset_rad": e.steering_offset_rad, "mass_scale": e.mass_scale,
+                                      "steering_gain": e.steering_gain}) - u(truth)) ** 2))
+
+    monkeypatch.setattr(chain, "cost_of", cost)
+    monkeypatch.setattr(chain, "POWELL_EVALS_PER_PARAMETER", 4)  # ends inside the first pass
+    names = ["steering_offset", "mass_scale", "steering_gain"]
+    new_first, c_first, _ = chain.joint_refit(None, CarDescription(), names, start, first="steering_gain")
+    old, c_last, _ = chain.joint_refit(None, CarDescription(), names, start)
+    assert list(new_first) == ["steering_offset_rad", "mass_scale", "steering_gain"]  # the order of names
+    assert abs(new_first["steering_gain"] - 0.9) < 0.01 and c_first < c_last
+    assert old["steering_gain"] == 1.0  # searched last: never reached
+
+
 # -- measured logs of any sensor set (pose, speed sensor, gyro) ------------------------------------
 SPEED_GYRO = ("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad", "yaw_rate_radps")
 POSE_ONLY = ("t_s", "x_m", "y_m", "yaw_rad", "speed_cmd_mps", "steer_cmd_rad")

@@ -702,13 +702,15 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
     b.return_then(full_lock, v_lo)
 
     # 8. reverse: rolling forward, a negative speed command (an ESC with brake brakes, waits
-    #    at rest, then reverses), then forward again; brake to rest
+    #    at rest, then reverses), then forward again; twice (the gap workflow fits one and
+    #    holds the other out to confirm it); brake to rest
     v_rev = min(0.6, 0.4 * vmax)
 
     def reverse(p):
         p.hold(0.5, v_lo, 0.0, f"straight:{v_lo:.1f}")
-        p.hold(2.2, -v_rev, 0.0, f"reverse:-{v_rev:.1f}")
-        p.hold(1.0, v_lo, 0.0, f"reverse:+{v_lo:.1f}")
+        for _ in range(2):
+            p.hold(2.2, -v_rev, 0.0, f"reverse:-{v_rev:.1f}")
+            p.hold(1.0, v_lo, 0.0, f"reverse:+{v_lo:.1f}")
         p.hold(0.6, 0.0, 0.0, "brake:0")
         p.hold(0.3, 0.0, 0.0, "pause:rest")
 

@@ -294,10 +294,20 @@ def _bounds01(names: Sequence[str]):
 
 
 def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
-                start: dict[str, float]) -> tuple[dict[str, float], float, int]:
+                start: dict[str, float], first: str | None = None) -> tuple[dict[str, float], float, int]:
     """Refit the parameters of effects ``names`` together from ``start`` (their ``Effects``
-    fields), on ``problem``'s windows with ``base`` as the car: ``(values, cost, evals)``.
-    One parameter: bounded Brent around the start; more: Powell in [0, 1]-scaled coordinates."""
+    fields), on ``problem``'s windows with ``base`` as the car: ``(values, cost, evals)``,
+    ``values`` in the order of ``names``.
+    One parameter: bounded Brent around the start; more: Powell in [0, 1]-scaled coordinates,
+    whose first pass line-searches one coordinate after the other, ``first`` (an effect of
+    ``names``: the one just added) before the others. Each line search spans the whole fit
+    range (about a dozen evaluations), so the budget of :data:`POWELL_EVALS_PER_PARAMETER` per
+    parameter can end inside the first pass: searched last, a new effect's parameter
+    would keep its screening value (multi log 25's steering gain, docs/gap.md), while the
+    kept ones start at their last refit and move little."""
+    given = list(names)
+    if first is not None:
+        names = [first] + [n for n in given if n != first]
     to_u, from_u = _bounds01(names)
     seen: dict[tuple, float] = {}
 
@@ -319,13 +329,13 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
                  options={"xtol": 2e-3, "ftol": 1e-4,
                           "maxfev": POWELL_EVALS_PER_PARAMETER * len(names)})
     key = min(seen, key=lambda k: (seen[k], k))
-    values = {CANDIDATES[n].field: v for n, v in zip(names, key)}
-    return values, seen[key], len(seen)
+    values = dict(zip((CANDIDATES[n].field for n in names), key))
+    return {CANDIDATES[n].field: values[CANDIDATES[n].field] for n in given}, seen[key], len(seen)
 
 
 def _trial_task(args) -> tuple[dict[str, float], float, int, float]:
-    screen_problem, fit_problem, held_problem, base, names, start = args
-    values, cost, evals = joint_refit(screen_problem, base, names, start)
+    screen_problem, fit_problem, held_problem, base, names, start, first = args
+    values, cost, evals = joint_refit(screen_problem, base, names, start, first)
     car = with_parameters(base, values)
     if screen_problem is not fit_problem:
         cost = cost_of(fit_problem, car)
@@ -381,7 +391,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             screen_base = screening_problem(fit_problem)
             if k:  # the baseline: the kept effects alone, refitted as the candidates will be
                 (b_values, b_cost, _, b_held), = run_tasks([(screen_base, fit_problem, held_problem, base,
-                                                              list(kept_names), dict(kept_values))])
+                                                              list(kept_names), dict(kept_values), None)])
                 if b_cost < cost:
                     kept_values, cost, held_gap = b_values, b_cost, b_held
             current = with_parameters(base, kept_values)
@@ -401,7 +411,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                 if not batch or chosen is not None:
                     break
                 outs = run_tasks([(screen_base, fit_problem, held_problem, base, kept_names + [r.effect],
-                                   {**kept_values, **r.parameters}) for r in batch])
+                                   {**kept_values, **r.parameters}, r.effect) for r in batch])
                 tick(f"step {index} joint refits")
                 trials = [Trial(r.effect, values, c, crit_now - bic(fit_problem, c, k + 1),
                                 1.0 - c / cost if cost > 0 else 0.0, held, evals)
@@ -442,7 +452,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             k = len(kept_names)
             outs = run_tasks([(screening_problem(fit_problem), fit_problem, held_problem, base,
                                [n for n in kept_names if n != e],
-                               {f: v for f, v in kept_values.items() if f != CANDIDATES[e].field})
+                               {f: v for f, v in kept_values.items() if f != CANDIDATES[e].field}, None)
                               for e in kept_names])
             weakest = None
             for e, (values, c, evals, held) in zip(kept_names, outs):
@@ -481,7 +491,7 @@ def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, hel
             names = [tr.effect if n == out else n for n in kept_names]
             pairs.append((out, tr.effect))
             tasks.append((screen_problem, fit_problem, held_problem, base, names,
-                          {**start, field: tr.parameters[field]}))
+                          {**start, field: tr.parameters[field]}, tr.effect))
     best = None
     for (out, into), (values, c, _, held) in zip(pairs, run_tasks(tasks) if tasks else []):
         if c < cost and held <= held_gap and (best is None or c < best.cost_after):

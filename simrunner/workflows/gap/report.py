@@ -37,7 +37,7 @@ from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_
                                          robust_total, window_costs)
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive
-from simrunner.workflows.gap.regimes import residual_stats, segment
+from simrunner.workflows.gap.regimes import COAST_CMD_MPS, MOVING_MPS, residual_stats, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
@@ -191,6 +191,28 @@ def _finite(obj):
     return obj
 
 
+def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
+                  windows: Sequence[Window]) -> list[str]:
+    """The group of each window for the fit/held-out split (:func:`split_windows`): the
+    rarest manoeuvre it holds. ``"brake_to_reverse"``: a reverse command (``speed_cmd_mps``
+    below ``-COAST_CMD_MPS``) while the car still rolls forward (an ESC that brakes before
+    it reverses shows only there); else ``"coast"``: coasting or rolling with no drive
+    commanded; else ``""``. A group of two or more windows sends some to the held-out set
+    and keeps the rest in the fit, so an effect seen only in a rare manoeuvre can be both
+    fitted and confirmed (the excitation plan reverses twice for this)."""
+    speed = np.where(np.isfinite(derived.speed_mps), derived.speed_mps, 0.0)
+    onset = (np.asarray(log.speed_cmd_mps, float) < -COAST_CMD_MPS) & (speed > MOVING_MPS)
+    out = []
+    for w in windows:
+        if onset[w.start:w.stop].any():
+            out.append("brake_to_reverse")
+        elif masks["coasting"][w.start:w.stop].any():
+            out.append("coast")
+        else:
+            out.append("")
+    return out
+
+
 def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
     """One log made ready: checked, glitches found, smoothed, windowed and split."""
     check_measured(log)
@@ -198,8 +220,7 @@ def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
     bad = glitch_mask(log, glitches)
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
     windows = make_windows(log, window_s, exclude=bad)
-    masks = segment(log, derived, car)
-    strata = [bool(masks["coasting"][w.start:w.stop].any()) for w in windows]
+    strata = window_strata(log, derived, segment(log, derived, car), windows)
     fit_w, held_w = split_windows(windows, strata=strata) if windows else ([], [])
     return LogPart(log, derived, glitches, tuple(fit_w), tuple(held_w), signals_of(log))
 
