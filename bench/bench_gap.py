@@ -242,7 +242,11 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
            "chain": _method_row(result.effects, result.parameters, truth.values, effects, held, wall,
                                 {"steps": [(s.index, s.kept.effect if s.kept else None, s.held_gap_before,
                                             s.kept.held_gap if s.kept else s.held_gap_before)
-                                           for s in result.chain.steps]})}
+                                           for s in result.chain.steps],
+                                 # every refitted candidate (to study the tests' thresholds afterwards)
+                                 "trials": [(s.index, t.effect, t.improvement, t.delta_bic,
+                                             1.0 - t.held_gap / s.held_gap_before if s.held_gap_before > 0 else 0.0,
+                                             t.kept, t.reason) for s in result.chain.steps for t in s.trials]})}
     if baselines:
         from bench.gap_baselines import BaselineUnavailable, esindy, joint_least_squares, problems
         from simrunner.workflows.gap.chain import with_parameters
