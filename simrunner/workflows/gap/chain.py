@@ -12,7 +12,8 @@ refitted) and
 2. refits jointly the :data:`REFINE_TOP` best screened candidates (:data:`REFINE_LATER`
    from the second step on): all kept parameters and the new one together
    (``scipy.optimize.minimize``, Powell, in coordinates scaled to each parameter's fit
-   bounds; bounded Brent for the first step, which has one parameter), on the screening
+   bounds, the new parameter's coordinate searched first (:func:`joint_refit`); bounded
+   Brent for the first step, which has one parameter), on the screening
    windows; the result is then scored once on all fit windows and once on the held-out ones.
    From the second step on, the kept effects alone are refitted the same way (the
    *baseline*): a candidate must beat the current model at its best, not only the
