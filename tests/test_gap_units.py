@@ -442,8 +442,9 @@ def test_the_plans_two_reverses_go_one_to_the_fits_one_to_the_held_out_windows()
     from simrunner.workflows.gap.synth import make_measured_log
 
     car = CarDescription()
-    rev = np.flatnonzero(make_plan(car).kind_mask("reverse"))
-    t0 = make_plan(car).t_s[rev[0]] - 4.0
+    plan = make_plan(car)
+    rev = np.flatnonzero(plan.kind_mask("reverse"))
+    t0 = plan.t_s[rev[0]] - 4.0
     log, _ = make_measured_log("esc_brake_reverse", value=0.5, rng=np.random.default_rng(5), start_s=t0,
                                duration_s=rev.size * 0.02 + 8.0)
     part = prepare(log, car, WINDOW_S)
