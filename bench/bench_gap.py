@@ -566,6 +566,8 @@ def main(argv: list[str] | None = None) -> None:
         rows.append(timing_row(a.jobs))
         print(f"[timing done, {time.perf_counter() - t_start:.0f} s]", file=sys.stderr, flush=True)
     if "real" in modes:
+        if not (REAL_DIR / REAL_CAR).exists():
+            print(f"[real: no shared real logs at {REAL_DIR} (set NXPCUP_REAL_LOGS): skipped]", file=sys.stderr)
         for r in real_rows(a.jobs):
             rows.append(r)
             print(f"[real {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
