@@ -457,24 +457,6 @@ def test_the_plans_two_reverses_go_one_to_the_fits_one_to_the_held_out_windows()
     assert len(with_onset(part.fit_windows)) >= 1 and len(with_onset(part.held_windows)) >= 1
 
 
-def test_the_plans_starts_from_rest_are_both_fitted_and_held_out():
-    """The split groups windows by the regime most over-represented in them, so a manoeuvre
-    the plan repeats a few times (a start from rest, where a throttle deadband shows) lands
-    on both sides; grouped by position only, the plan's three starts all stayed in the fit
-    and a deadband could not be confirmed on held-out data."""
-    from simrunner.workflows.gap.report import WINDOW_S, prepare
-    from simrunner.workflows.gap.synth import make_measured_log
-
-    log, _ = make_measured_log(None, rng=np.random.default_rng(3))
-    part = prepare(log, CarDescription(), WINDOW_S)
-    speed = np.abs(np.nan_to_num(part.derived.speed_mps))
-
-    def starts(windows):
-        return [w for w in windows if speed[w.start] < 0.1 and (speed[w.start:w.stop] > 0.5).any()]
-
-    assert len(starts(part.fit_windows)) >= 1 and len(starts(part.held_windows)) >= 1
-
-
 def test_a_joint_refit_searches_the_new_effect_first(monkeypatch):
     """Powell's first pass line-searches one parameter after the other and a small budget
     ends inside it: the effect just added (``first``) must be searched before the kept ones,

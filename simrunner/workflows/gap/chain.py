@@ -80,23 +80,36 @@ NEUTRAL_TOL = 0.01  # fraction of the fit range (scaled coordinates) that counts
 BETTER = "a better candidate was kept"
 
 
+# regimes that label a window for the screening subset (simrunner.workflows.gap.regimes)
+SCREEN_REGIMES = ("coasting", "braking", "accelerating", "reversing", "high_lat_accel", "cornering", "straight")
+SCREEN_LABEL_MIN_SHARE = 0.1  # a regime labels a window only if it covers this share of its samples
+
+
 def window_labels(problem: Problem) -> list[str]:
-    """One label per window of ``problem`` (the windows of all segments in turn):
-    :func:`simrunner.workflows.gap.regimes.label_windows` against the regime shares of all
-    the problem's windows."""
-    from simrunner.workflows.gap.regimes import LABEL_REGIMES, label_windows, segment, window_shares
+    """One label per window of ``problem`` (the windows of all segments in turn): the regime of
+    :data:`SCREEN_REGIMES` most over-represented in the window against all the problem's
+    windows (its share of the window's samples over its share of all windows' samples; it
+    must cover at least :data:`SCREEN_LABEL_MIN_SHARE` of the window), ``"other"`` when none
+    does. A window with the rare braking of a log is labelled ``braking``, one of a
+    cornering-heavy log's few straights ``straight``."""
+    from simrunner.workflows.gap.regimes import segment
     from simrunner.workflows.gap.replay import window_mask
 
-    shares, total, count = [], np.zeros(len(LABEL_REGIMES)), 0
+    shares, total, count = [], np.zeros(len(SCREEN_REGIMES)), 0
     for seg in problem.segments:
         masks = segment(seg.log, seg.derived, problem.car)
         inside = window_mask(len(seg.log), seg.windows)
-        total += [float(np.count_nonzero(masks[r] & inside)) for r in LABEL_REGIMES]
+        total += [float(np.count_nonzero(masks[r] & inside)) for r in SCREEN_REGIMES]
         count += int(np.count_nonzero(inside))
-        shares.append(window_shares(masks, seg.windows))
-    if not shares:
-        return []
-    return label_windows(np.concatenate(shares), total / max(count, 1))
+        for w in seg.windows:
+            n = max(w.stop - w.start, 1)
+            shares.append(np.array([np.count_nonzero(masks[r][w.start:w.stop]) / n for r in SCREEN_REGIMES]))
+    overall = total / max(count, 1)
+    labels = []
+    for share in shares:
+        score = np.where((share >= SCREEN_LABEL_MIN_SHARE) & (overall > 0), share / np.maximum(overall, 1e-12), 0.0)
+        labels.append(SCREEN_REGIMES[int(np.argmax(score))] if score.max() > 0.0 else "other")
+    return labels
 
 
 def extreme_windows(problem: Problem) -> set[int]:

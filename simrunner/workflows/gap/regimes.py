@@ -37,9 +37,6 @@ GRAVITY_MPS2 = 9.81
 
 REGIMES = ("all", "accelerating", "braking", "coasting", "steady", "straight", "cornering", "left", "right",
            "reversing", "high_lat_accel")
-# regimes that can label a window (label_windows: the screening subset, the fit/held-out split)
-LABEL_REGIMES = ("coasting", "braking", "accelerating", "reversing", "high_lat_accel", "cornering", "straight")
-LABEL_MIN_SHARE = 0.1  # a regime labels a window only if it covers this share of its samples
 
 
 def segment(log: RunLog, derived: Derived, car: CarDescription | None = None) -> dict[str, np.ndarray]:
@@ -61,30 +58,6 @@ def segment(log: RunLog, derived: Derived, car: CarDescription | None = None) ->
     return {"all": moving, "accelerating": accelerating, "braking": braking, "coasting": coasting,
             "steady": steady, "straight": straight, "cornering": left | right, "left": left, "right": right,
             "reversing": speed < -MOVING_MPS, "high_lat_accel": moving & lateral}
-
-
-def window_shares(masks: dict[str, np.ndarray], windows) -> np.ndarray:
-    """(W, R): the share of each window's samples in each regime of :data:`LABEL_REGIMES`
-    (``windows``: objects with ``start``/``stop`` sample indices)."""
-    out = np.zeros((len(windows), len(LABEL_REGIMES)))
-    for i, w in enumerate(windows):
-        n = max(w.stop - w.start, 1)
-        out[i] = [np.count_nonzero(masks[r][w.start:w.stop]) / n for r in LABEL_REGIMES]
-    return out
-
-
-def label_windows(shares: np.ndarray, overall: np.ndarray) -> list[str]:
-    """One label per row of ``shares`` (:func:`window_shares`): the regime of
-    :data:`LABEL_REGIMES` most over-represented in the window against ``overall`` (R,), the
-    regimes' shares of all windows' samples (the window's share over the overall share; it
-    must cover at least :data:`LABEL_MIN_SHARE` of the window), ``"other"`` when none does.
-    A window with a log's rare braking is labelled ``braking``, one of a cornering-heavy
-    log's few straights ``straight``."""
-    labels = []
-    for share in np.atleast_2d(shares):
-        score = np.where((share >= LABEL_MIN_SHARE) & (overall > 0), share / np.maximum(overall, 1e-12), 0.0)
-        labels.append(LABEL_REGIMES[int(np.argmax(score))] if score.max() > 0.0 else "other")
-    return labels
 
 
 def residual_stats(residuals: dict[str, np.ndarray | None], masks: dict[str, np.ndarray]) -> list[dict]:

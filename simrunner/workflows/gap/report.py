@@ -37,8 +37,7 @@ from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_
                                          robust_total, window_costs)
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive
-from simrunner.workflows.gap.regimes import (COAST_CMD_MPS, LABEL_REGIMES, MOVING_MPS, label_windows, residual_stats,
-                                            segment, window_shares)
+from simrunner.workflows.gap.regimes import COAST_CMD_MPS, MOVING_MPS, residual_stats, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
@@ -194,21 +193,24 @@ def _finite(obj):
 
 def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
                   windows: Sequence[Window]) -> list[str]:
-    """The group of each window for the fit/held-out split (:func:`split_windows`), so each
-    manoeuvre a log holds more than once is both fitted and held out.
-    ``"brake_to_reverse"``: a reverse command (``speed_cmd_mps`` below ``-COAST_CMD_MPS``)
-    while the car still rolls forward (an ESC that brakes before it reverses shows only
-    there; the excitation plan reverses twice for this); else the window's regime label
-    against this log's windows (:func:`simrunner.workflows.gap.regimes.label_windows`: the
-    regime most over-represented in it, e.g. ``accelerating`` for a start from rest,
-    ``coasting``, ``reversing``, ``high_lat_accel``; ``"other"`` when none)."""
+    """The group of each window for the fit/held-out split (:func:`split_windows`): the
+    rarest manoeuvre it holds. ``"brake_to_reverse"``: a reverse command (``speed_cmd_mps``
+    below ``-COAST_CMD_MPS``) while the car still rolls forward (an ESC that brakes before
+    it reverses shows only there); else ``"coast"``: coasting or rolling with no drive
+    commanded; else ``""``. A group of two or more windows sends some to the held-out set
+    and keeps the rest in the fit, so an effect seen only in a rare manoeuvre can be both
+    fitted and confirmed (the excitation plan reverses twice for this)."""
     speed = np.where(np.isfinite(derived.speed_mps), derived.speed_mps, 0.0)
     onset = (np.asarray(log.speed_cmd_mps, float) < -COAST_CMD_MPS) & (speed > MOVING_MPS)
-    inside = window_mask(len(log), windows)
-    count = max(int(np.count_nonzero(inside)), 1)
-    overall = np.array([np.count_nonzero(masks[r] & inside) / count for r in LABEL_REGIMES])
-    labels = label_windows(window_shares(masks, windows), overall) if windows else []
-    return ["brake_to_reverse" if onset[w.start:w.stop].any() else label for w, label in zip(windows, labels)]
+    out = []
+    for w in windows:
+        if onset[w.start:w.stop].any():
+            out.append("brake_to_reverse")
+        elif masks["coasting"][w.start:w.stop].any():
+            out.append("coast")
+        else:
+            out.append("")
+    return out
 
 
 def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
