@@ -76,9 +76,10 @@ def test_cli_watch_prints_a_result_per_save_and_ends_on_ctrl_c(tmp_path):
     ctrl = tmp_path / "ctrl.py"
     _save(ctrl, CONTROLLER.format(speed=1.0))
     env = {**os.environ, "PYTHONPATH": str(REPO)}
+    err = (tmp_path / "stderr.txt").open("w")  # a file, not a pipe nobody reads: never blocks the child
     proc = subprocess.Popen([sys.executable, "-u", "-c", "from simrunner.cli import main; main()",
                              "drive", str(ctrl), "--watch"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+                            stderr=err, text=True, env=env, cwd=tmp_path)
     try:
         out = _read_until(proc, "[run 1] waiting", 60)
         assert any("[run 1] outcome: controller_returned" in ln for ln in out), out
@@ -86,8 +87,16 @@ def test_cli_watch_prints_a_result_per_save_and_ends_on_ctrl_c(tmp_path):
         out = _read_until(proc, "[run 2] waiting", 60)
         assert any("[run 2] laps: 0/1" in ln and "after the save" in ln for ln in out), out
         proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=30) == 130
+        try:
+            code = proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            rest, _ = proc.communicate()
+            raise AssertionError(f"no exit 30 s after Ctrl-C; stdout after run 2: {rest!r}; "
+                                 f"stderr: {(tmp_path / 'stderr.txt').read_text()!r}") from None
+        assert code == 130, (tmp_path / "stderr.txt").read_text()
     finally:
+        err.close()
         if proc.poll() is None:
             proc.kill()
             proc.wait()
