@@ -77,9 +77,12 @@ def test_cli_watch_prints_a_result_per_save_and_ends_on_ctrl_c(tmp_path):
     _save(ctrl, CONTROLLER.format(speed=1.0))
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     err = (tmp_path / "stderr.txt").open("w")  # a file, not a pipe nobody reads: never blocks the child
+    # the child as started from a terminal: a test run launched in the background (bash: `cmd &`)
+    # passes SIGINT on ignored, and Python then keeps ignoring it (Ctrl-C would do nothing)
     proc = subprocess.Popen([sys.executable, "-u", "-c", "from simrunner.cli import main; main()",
                              "drive", str(ctrl), "--watch"], stdout=subprocess.PIPE,
-                            stderr=err, text=True, env=env, cwd=tmp_path)
+                            stderr=err, text=True, env=env, cwd=tmp_path,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         out = _read_until(proc, "[run 1] waiting", 60)
         assert any("[run 1] outcome: controller_returned" in ln for ln in out), out
