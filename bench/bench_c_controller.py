@@ -12,6 +12,17 @@ run) to the simulator's. The two laps log the same numbers
 (same arithmetic), so the runs do the same physics. Target: real-time factor of C >= that of
 Python.
 
+Split (``split``): the same laps again with ``Spinner.get_image`` and
+``Spinner.set_speed_and_servo`` timed (the same wrapper for both controllers). Both
+controllers make the same calls with the same arguments in the same order (their logs are
+equal), so the time inside them is the same work; what differs is the time *outside* them:
+the controller's own code, its transport (a C controller's switch and request parsing) and
+the run's set-up and tear-down. Per lap, that outside time is a few milliseconds of a
+~130 ms lap, far below the noise of whole-lap walls; its paired difference (Python - C, same
+round) with a bootstrap interval says which controller costs the run more, and the RTF ratio
+it implies (the mean inside time + each one's outside time) is the low-noise form of the
+closed-loop ratio.
+
 Start-up (each a fresh ``simrunner drive ... --laps 1`` process, median of ``REPEAT``):
 
 * ``python``: ``examples/line_follower.py`` (after one untimed run: caches warm);
@@ -113,6 +124,64 @@ def closed_loop() -> None:
           f"--isolate / Python: wall {ratio_iso:.3f} (CPU counts the C child's run, not its start)")
     print(f"  paired laps (Python wall / C wall, same round): median {mid:.3f}, 95 % bootstrap "
           f"interval of the median {lo:.3f}-{hi:.3f}")
+
+
+def split() -> None:
+    from simrunner.run import spinner as sp
+    from simrunner.run.native import build_program, load_native
+
+    car = load_car(None)
+    track, _ = resolve_track(None, car)
+    program = build_program([EXAMPLES / "line_follower.c"])
+    inside = [0.0]
+    clock = time.perf_counter
+    get_image, set_both = sp.Spinner.get_image, sp.Spinner.set_speed_and_servo
+
+    def timed_get_image(self, line=-1, add_noise=True):
+        t0 = clock()
+        try:
+            return get_image(self, line, add_noise)
+        finally:
+            inside[0] += clock() - t0
+
+    def timed_set_both(self, speed, angle):
+        t0 = clock()
+        try:
+            set_both(self, speed, angle)
+        finally:
+            inside[0] += clock() - t0
+
+    rows = {"py": [], "c": []}  # (inside s, outside s) per lap
+    sp.Spinner.get_image, sp.Spinner.set_speed_and_servo = timed_get_image, timed_set_both
+    try:
+        drive(program, track=track, laps=1)
+        for _ in range(REPEATS):
+            for name in rows:
+                ctrl = load_native(program) if name == "c" else EXAMPLES / "line_follower.py"
+                inside[0] = 0.0
+                r = drive(ctrl, track=track, laps=1)
+                rows[name].append((inside[0], r.wall_time_s - inside[0]))
+    finally:
+        sp.Spinner.get_image, sp.Spinner.set_speed_and_servo = get_image, set_both
+    import numpy as np
+
+    out_py = np.array([o for _, o in rows["py"]])
+    out_c = np.array([o for _, o in rows["c"]])
+    diff = out_py - out_c
+    boots = np.median(np.random.default_rng(0).choice(diff, (2000, diff.size)), axis=1)
+    lo, hi = np.percentile(boots, [2.5, 97.5])
+    inside_s = statistics.mean(i for rs in rows.values() for i, _ in rs)
+    ratio = (inside_s + float(np.median(out_py))) / (inside_s + float(np.median(out_c)))
+    print(f"split of the lap ({REPEATS} rounds): inside the Spinner calls {inside_s * 1e3:.1f} ms "
+          f"(mean of both); outside them, median: Python {np.median(out_py) * 1e3:.2f} ms, "
+          f"C {np.median(out_c) * 1e3:.2f} ms")
+    in_diff = np.array([i for i, _ in rows["py"]]) - np.array([i for i, _ in rows["c"]])
+    print(f"  Python - C outside, same round: median {np.median(diff) * 1e3:+.3f} ms, 95 % "
+          f"bootstrap interval {lo * 1e3:+.3f} to {hi * 1e3:+.3f} ms; implied RTF C / Python "
+          f"{ratio:.4f} (target >= 1.0: {'met' if lo > 0 else 'not shown' if hi > 0 else 'NOT met'})")
+    print(f"  (inside, Python - C, same round: median {np.median(in_diff) * 1e3:+.2f} ms, "
+          f"spread {np.percentile(in_diff, 10) * 1e3:+.2f} to {np.percentile(in_diff, 90) * 1e3:+.2f} ms "
+          f"(10-90 %): the same work, its noise is the whole-lap ratio's)")
 
 
 def paired_ratio_ci(py_wall_s: list[float], c_wall_s: list[float], n_boot: int = 2000,
@@ -220,6 +289,7 @@ def parts() -> None:
 
 def main() -> None:
     closed_loop()
+    split()
     parts()
     start_up()
 

@@ -25,6 +25,12 @@ Modes (``--mode``, comma-separated; default: all of them, small):
 ``real``
     The two shared real logs (``REAL_DIR``, or the folder ``NXPCUP_REAL_LOGS`` names, as in
     the tests; skipped when absent) with their car, one at a time.
+``real_partial``
+    The same two real runs as a team with partial sensors would log them: a wheel encoder
+    and a gyro (no pose), and a pose only (an overhead camera; no speed sensor, no gyro).
+    Made from the data sets' raw topic files (``REAL_DIR/raw``) by
+    :func:`bench.real_topics.partial_log_csv` into a temporary CSV with the topics' own
+    column names, read through a column mapping (split stamps, deg/s, a quaternion).
 ``timing``
     One 60-s synthetic log with two hidden effects through the whole chain, ``run_gap(jobs=2)``.
 
@@ -63,7 +69,7 @@ SEED = 20240
 NONE_EVERY = 4
 SMALL_TRIALS = 6
 SNR_MIN = 3.0
-MODES = ("single", "multi", "speed_gyro", "compare", "real", "timing")
+MODES = ("single", "multi", "speed_gyro", "compare", "real", "real_partial", "timing")
 _MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3}  # seed tags: compare uses the multi logs
 REAL_DIR = Path(os.environ.get("NXPCUP_REAL_LOGS",
                                Path(__file__).resolve().parents[2] / "shared" / "data" / "real_logs"))
@@ -282,31 +288,59 @@ def real_rows(jobs: int, real_dir: Path = REAL_DIR) -> list[dict]:
     """One row per shared real log (none when the folder is absent)."""
     from simrunner.run.log import read_log
     from vehicle.description import load_car
+
+    if not (real_dir / REAL_CAR).exists():
+        return []
+    car = load_car(real_dir / REAL_CAR)
+    return [_real_row("real", name, lambda path=real_dir / name: read_log(path), car, jobs)
+            for name in REAL_LOGS if (real_dir / name).exists()]
+
+
+def _real_row(mode: str, name: str, load, car, jobs: int) -> dict:
+    """Run the workflow on the log ``load()`` gives; the row records a traceback as such."""
     from simrunner.workflows.gap.report import run_gap
+
+    t0 = time.perf_counter()
+    row = {"mode": mode, "log": name}
+    try:
+        r = run_gap(load(), car, jobs=jobs)
+    except Exception:  # noqa: BLE001 - the target is "no traceback": record it
+        row["error"] = traceback.format_exc()
+    else:
+        row.update(effects=r.effects, parameters=r.parameters, gap_before=r.gap_before, gap_after=r.gap_after,
+                   rmse_before=r.rmse_before, rmse_after=r.rmse_after, signals=list(r.settings["signals"]),
+                   steps=[(s.index, s.kept.effect, s.held_gap_before, s.kept.held_gap)
+                          for s in r.chain.steps if s.kept is not None],
+                   rejected=[(k, t.effect, t.reason) for k, t in r.chain.rejected],
+                   glitches=len(r.glitches), stop=r.chain.stop_reason)
+    row["wall_s"] = time.perf_counter() - t0
+    return row
+
+
+def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR) -> list[dict]:
+    """One row per shared real data set and partial sensor set (none when absent)."""
+    import tempfile
+
+    from bench.real_topics import COLUMNS, SENSORS, partial_log_csv
+    from simrunner.run.columns import column_map_from
+    from simrunner.run.log import read_log
+    from vehicle.description import load_car
 
     if not (real_dir / REAL_CAR).exists():
         return []
     car = load_car(real_dir / REAL_CAR)
     rows = []
-    for name in REAL_LOGS:
-        path = real_dir / name
-        if not path.exists():
-            continue
-        t0 = time.perf_counter()
-        row = {"mode": "real", "log": name}
-        try:
-            r = run_gap(read_log(path), car, jobs=jobs)
-        except Exception:  # noqa: BLE001 - the target is "no traceback": record it
-            row["error"] = traceback.format_exc()
-        else:
-            row.update(effects=r.effects, parameters=r.parameters, gap_before=r.gap_before, gap_after=r.gap_after,
-                       rmse_before=r.rmse_before, rmse_after=r.rmse_after, signals=list(r.settings["signals"]),
-                       steps=[(s.index, s.kept.effect, s.held_gap_before, s.kept.held_gap)
-                              for s in r.chain.steps if s.kept is not None],
-                       rejected=[(k, t.effect, t.reason) for k, t in r.chain.rejected],
-                       glitches=len(r.glitches), stop=r.chain.stop_reason)
-        row["wall_s"] = time.perf_counter() - t0
-        rows.append(row)
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in REAL_LOGS:
+            raw = real_dir / "raw" / name.removeprefix("f1tenth_").removesuffix(".csv")
+            if not (raw / "commandData.csv").exists():
+                continue
+            for sensors in SENSORS:
+                path = Path(tmp) / f"{raw.name}_{sensors}.csv"
+                partial_log_csv(raw, path, sensors)
+                columns = column_map_from(None, COLUMNS[sensors])
+                rows.append(_real_row("real_partial", f"{raw.name} {sensors.replace('_', '+')}",
+                                      lambda: read_log(path, columns=columns), car, jobs))
     return rows
 
 
@@ -420,21 +454,25 @@ def target_rows(rows: list[dict]) -> list[dict]:
         add(mode, what, value, n, goal.replace("%", " %"), value >= limit if at_least else value <= limit,
             _fmt((value, n), pct))
     for r in rows:
-        if r.get("mode") == "real":
-            name = r["log"]
+        if r.get("mode") in ("real", "real_partial"):
+            name, mode = r["log"], r["mode"]
             if "error" in r:
-                add("real", f"{name}: no traceback", 0.0, 1, "none", False, "traceback")
+                add(mode, f"{name}: no traceback", 0.0, 1, "none", False, "traceback")
                 continue
             g = r["gap_after"] / r["gap_before"]
-            add("real", f"{name}: held-out gap after/before", g, 1, "<= 0.6", g <= 0.6, f"{g:.3g}")
-            pb = r["rmse_before"].get("position_m", float("nan"))
-            pa = r["rmse_after"].get("position_m", float("nan"))
-            add("real", f"{name}: held-out position RMSE not worse", pa / pb, 1, "after/before <= 1", pa <= pb,
-                f"{pb:.3f} -> {pa:.3f} m")
+            add(mode, f"{name}: held-out gap after/before", g, 1, "<= 0.6", g <= 0.6, f"{g:.3g}")
+            # the position where the log has a pose; else each rate it measures
+            for sig, unit in ((("position_m", "m"),) if "position_m" in r["rmse_before"] else
+                              (("speed_mps", "m/s"), ("yaw_rate_radps", "rad/s"))):
+                pb = r["rmse_before"].get(sig, float("nan"))
+                pa = r["rmse_after"].get(sig, float("nan"))
+                what = sig.rsplit("_", 1)[0].replace("_", " ")
+                add(mode, f"{name}: held-out {what} RMSE not worse", pa / pb, 1, "after/before <= 1",
+                    pa <= pb, f"{pb:.3f} -> {pa:.3f} {unit}")
             worse = [s for s in r["steps"] if not s[3] < s[2]]
-            add("real", f"{name}: every kept effect improves held-out", float(not worse), 1, "all", not worse,
+            add(mode, f"{name}: every kept effect improves held-out", float(not worse), 1, "all", not worse,
                 f"{len(r['steps']) - len(worse)} of {len(r['steps'])} steps")
-            add("real", f"{name}: no traceback", 1.0, 1, "none", True, "none")
+            add(mode, f"{name}: no traceback", 1.0, 1, "none", True, "none")
         elif r.get("mode") == "timing":
             add("timing", f"whole chain, {r['log_s']:.0f}-s log, {r['jobs']} processes", r["wall_s"], 1, "<= 180 s",
                 r["wall_s"] <= 180.0, f"{r['wall_s']:.0f} s")
@@ -494,15 +532,16 @@ def report(rows: list[dict]) -> str:
     if syn:
         parts.append(_trial_table(syn))
     for r in rows:
-        if r.get("mode") == "real":
+        if r.get("mode") in ("real", "real_partial"):
             if "error" in r:
                 parts.append(f"real {r['log']}: TRACEBACK\n{r['error']}")
                 continue
             steps = "; ".join(f"+{e} held-out gap {a:.3g} -> {b:.3g}" for _, e, a, b in r["steps"]) or "no effect kept"
+            rmse = ", ".join(f"{sig} {r['rmse_before'][sig]:.3f} -> {r['rmse_after'].get(sig, float('nan')):.3f}"
+                             for sig in ("position_m", "speed_mps", "yaw_rate_radps") if sig in r["rmse_before"])
             parts.append(f"real {r['log']} ({r['wall_s']:.0f} s wall, signals {', '.join(r['signals'])}): kept "
                          f"{', '.join(r['effects']) or 'none'} {r['parameters']}\n  held-out gap {r['gap_before']:.3g} -> "
-                         f"{r['gap_after']:.3g}; position RMSE {r['rmse_before'].get('position_m', float('nan')):.3f} -> "
-                         f"{r['rmse_after'].get('position_m', float('nan')):.3f} m\n  steps: {steps}\n  stop: {r['stop']}")
+                         f"{r['gap_after']:.3g}; RMSE {rmse}\n  steps: {steps}\n  stop: {r['stop']}")
         if r.get("mode") == "timing":
             parts.append(f"timing: {r['log_s']:.0f}-s log, hidden {r['hidden']}, {r['jobs']} processes: "
                          f"{r['wall_s']:.0f} s wall; kept {', '.join(r['effects']) or 'none'} {r['parameters']}")
@@ -571,6 +610,13 @@ def main(argv: list[str] | None = None) -> None:
         for r in real_rows(a.jobs):
             rows.append(r)
             print(f"[real {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
+    if "real_partial" in modes:
+        if not (REAL_DIR / REAL_CAR).exists():
+            print(f"[real_partial: no shared real logs at {REAL_DIR} (set NXPCUP_REAL_LOGS): skipped]",
+                  file=sys.stderr)
+        for r in real_partial_rows(a.jobs):
+            rows.append(r)
+            print(f"[real_partial {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
     tasks, trials = [], (a.only if a.only is not None else range(a.first, a.first + a.trials))
     if "compare" in modes:
         tasks += [("compare", k, True) for k in trials]

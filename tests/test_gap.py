@@ -105,6 +105,26 @@ def test_an_exchange_is_reported_in_text_and_json(offset_run):
     assert result.to_json()["swaps"] == []
 
 
+def test_glitch_times_of_a_log_with_epoch_stamps_also_say_how_far_into_the_log(offset_run):
+    """A log stamped in epoch (ROS) time lists its glitches as logged and as seconds into it."""
+    import dataclasses
+
+    from simrunner.workflows.gap.glitches import Glitch, GlitchKind
+    from simrunner.workflows.gap.report import summary_text
+
+    _, _, result = offset_run
+    part = result.parts[0]
+    t0 = 1650776487.0
+    epoch = part.log.with_columns(t_s=part.log.t_s + t0)
+    gap = Glitch(GlitchKind.TIME_GAP, t0 + 12.25, t0 + 12.6, "t_s", "no sample for 0.35 s")
+    shifted = dataclasses.replace(result, parts=[dataclasses.replace(part, log=epoch, glitches=(gap,))])
+    assert "t = 1650776499.250..1650776499.600 s (12.2 s into the log): time_gap (t_s)" in summary_text(shifted)
+    # stamps from 0 (the log's own clock) need no second time
+    plain = dataclasses.replace(result, parts=[dataclasses.replace(
+        part, glitches=(Glitch(GlitchKind.TIME_GAP, 12.25, 12.6, "t_s", "no sample for 0.35 s"),))])
+    assert "t = 12.250..12.600 s: time_gap (t_s)" in summary_text(plain)
+
+
 # -- command line ------------------------------------------------------------------------
 @pytest.mark.parametrize("text, line, what", [
     ("t,x,y,yaw,speed,speed_cmd\n0,0,0,0,0,0\n", 1, "missing: steer_cmd_rad"),

@@ -94,3 +94,36 @@ def test_regimes_and_a_replay_run(prepared, car):
     for s in FIT_SIGNALS:
         assert np.isfinite(res[s][inside]).all()
         assert np.isnan(res[s][~inside]).all()
+
+
+# -- the same runs with partial sensors, as a team would log them (bench/real_topics.py) ----------
+@pytest.mark.skipif(not (REAL / "raw" / "DS2" / "imuData.csv").exists(), reason="no raw topic files")
+@pytest.mark.parametrize("data_set", ["DS2", "DS3"])
+def test_real_partial_sensor_logs_read_through_a_mapping_and_prepare(data_set, tmp_path, car):
+    """The raw topics merged into an encoder + gyro log and a pose-only log with the topics'
+    own names and units (split ROS stamps, gyro in deg/s, a quaternion), read through a column
+    mapping: each gives the signals its sensors support and clean windows, and the gyro, read
+    in deg/s, turns with the pose (same sign and scale: the topic's unit)."""
+    from bench.real_topics import COLUMNS, partial_log_csv
+    from simrunner.run.columns import column_map_from
+
+    logs = {}
+    for sensors in ("encoder_gyro", "pose"):
+        path = tmp_path / f"{sensors}.csv"
+        assert partial_log_csv(REAL / "raw" / data_set, path, sensors) > 2000
+        logs[sensors] = log = check_measured(read_log(path, columns=column_map_from(None, COLUMNS[sensors])))
+        assert log.t_s[0] > 1.6e9 and log.duration_s > 100.0  # ROS time, as logged
+        exclude = glitch_mask(log, find_glitches(log))
+        derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=exclude)
+        fit, held = split_windows(make_windows(log, 2.0, exclude=exclude))
+        assert len(fit) >= 20 and len(held) >= 10
+        inside = window_mask(len(log), fit + held)
+        assert np.isfinite(derived.yaw_rate_radps[inside]).all() and np.isfinite(derived.speed_mps[inside]).all()
+    assert signals_of(logs["encoder_gyro"]) == ("speed_mps", "yaw_rate_radps")
+    assert signals_of(logs["pose"]) == ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
+    gyro, pose = logs["encoder_gyro"], logs["pose"]
+    pose_rate = np.gradient(np.unwrap(pose.yaw_rad), pose.t_s)
+    gyro_at_pose = np.interp(pose.t_s, gyro.t_s, gyro.yaw_rate_radps)
+    turning = np.abs(pose_rate) > 0.3
+    slope = np.sum(gyro_at_pose[turning] * pose_rate[turning]) / np.sum(pose_rate[turning] ** 2)
+    assert 0.7 < slope < 1.3

@@ -93,6 +93,7 @@ def plot_regimes(result, path: str | Path) -> None:
     """One panel per signal: RMSE per regime before/after (bars) and bias (markers)."""
     signals = ("position_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps", "along_m")
     fig, axes = plt.subplots(2, 3, figsize=(14, 7), dpi=90)
+    legend_ax = None  # the first panel with data (a log without a pose has no position panel)
     for ax, sig in zip(axes.ravel(), signals):
         rows0 = {r["regime"]: r for r in result.stats_before if r["signal"] == sig}
         rows1 = {r["regime"]: r for r in result.stats_after if r["signal"] == sig}
@@ -108,7 +109,9 @@ def plot_regimes(result, path: str | Path) -> None:
         ax.axhline(0.0, color="0.5", lw=0.6)
         ax.set_xticks(x, regs, rotation=35, fontsize=8)
         ax.set_title(sig)
-    axes[0, 0].legend(fontsize=7)
+        legend_ax = legend_ax or ax
+    if legend_ax is not None:
+        legend_ax.legend(fontsize=7)
     fig.suptitle(f"residuals by regime (all windows): nominal vs + {result.effect}")
     fig.tight_layout()
     fig.savefig(path)
