@@ -480,7 +480,7 @@ def target_rows(rows: list[dict]) -> list[dict]:
 
 
 def _trial_table(rows: list[dict]) -> str:
-    lines = [f"{'mode':<11}{'k':>3}  {'hidden (SNR)':<64}{'named by the chain':<44}{'p.err':>16}{'pos a/b':>8}"
+    lines = [f"{'mode':<13}{'k':>3}  {'hidden (SNR)':<64}{'named by the chain':<44}{'p.err':>16}{'pos a/b':>8}"
              f"{'gap a/b':>8}{'wall':>6}"]
     for r in rows:
         hid = ", ".join(f"{e} ({r['snr'][e]:.1f})" for e in r["effects"]) or "none"
@@ -488,7 +488,7 @@ def _trial_table(rows: list[dict]) -> str:
         errs = ", ".join(f"{p['rel_err']:.0%}" for p in c["per_effect"].values() if p["rel_err"] is not None)
         pb = c["rmse_before"].get("position_m")
         pos = f"{c['rmse_after']['position_m'] / pb:.2f}" if pb else "-"
-        lines.append(f"{r['mode']:<11}{r['trial']:>3}  {hid:<64}{', '.join(c['named']) or 'none':<44}{errs:>16}"
+        lines.append(f"{r['mode']:<13}{r['trial']:>3}  {hid:<64}{', '.join(c['named']) or 'none':<44}{errs:>16}"
                      f"{pos:>8}{c['gap_after'] / c['gap_before']:>8.2f}{c['wall_s']:>6.0f}")
     return "\n".join(lines)
 
@@ -550,10 +550,10 @@ def report(rows: list[dict]) -> str:
         parts.append(cmp_)
     t = target_rows(rows)
     if t:
-        lines = ["", f"{'mode':<11}{'target':<58}{'figure':<26}{'goal':<18}met"]
+        lines = ["", f"{'mode':<13}{'target':<58}{'figure':<26}{'goal':<18}met"]
         for x in t:
             met = "-" if x["met"] is None else ("met" if x["met"] else "NOT met")
-            lines.append(f"{x['mode']:<11}{x['target']:<58}{x['text']:<26}{x['goal']:<18}{met}")
+            lines.append(f"{x['mode']:<13}{x['target']:<58}{x['text']:<26}{x['goal']:<18}{met}")
         parts.append("\n".join(lines))
     return "\n".join(parts)
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simrunner.run.log import read_log
+from simrunner.run.log import LogError, read_log
 from simrunner.workflows.gap.glitches import GlitchKind, find_glitches, glitch_mask, time_gaps
 from simrunner.workflows.gap.logs import check_measured, derive
 from simrunner.workflows.gap.regimes import REGIMES, segment
@@ -55,6 +55,16 @@ def test_glitches_lie_in_the_log(prepared):
     for g in glitches:
         assert t[0] <= g.t_start_s < g.t_end_s <= t[-1] and g.detail
     assert exclude.shape == (len(log),) and exclude.sum() < 0.05 * len(log)
+
+
+def test_real_logs_pass_the_conventions_check(prepared, car):
+    """A real car's pose, odometry and commands in the run log's conventions are not refused
+    (simrunner.workflows.gap.conventions: the heading points along the motion in 96-99 % of
+    the moving samples here, against 85 % asked)."""
+    from simrunner.workflows.gap.conventions import check_conventions
+
+    _, log, _, exclude, *_ = prepared
+    check_conventions(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude)
 
 
 def test_ds2_jump_and_gaps_are_found():
@@ -106,6 +116,7 @@ def test_real_partial_sensor_logs_read_through_a_mapping_and_prepare(data_set, t
     in deg/s, turns with the pose (same sign and scale: the topic's unit)."""
     from bench.real_topics import COLUMNS, partial_log_csv
     from simrunner.run.columns import column_map_from
+    from simrunner.workflows.gap.conventions import check_conventions
 
     logs = {}
     for sensors in ("encoder_gyro", "pose"):
@@ -114,6 +125,7 @@ def test_real_partial_sensor_logs_read_through_a_mapping_and_prepare(data_set, t
         logs[sensors] = log = check_measured(read_log(path, columns=column_map_from(None, COLUMNS[sensors])))
         assert log.t_s[0] > 1.6e9 and log.duration_s > 100.0  # ROS time, as logged
         exclude = glitch_mask(log, find_glitches(log))
+        check_conventions(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude)
         derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=exclude)
         fit, held = split_windows(make_windows(log, 2.0, exclude=exclude))
         assert len(fit) >= 20 and len(held) >= 10
@@ -127,3 +139,8 @@ def test_real_partial_sensor_logs_read_through_a_mapping_and_prepare(data_set, t
     turning = np.abs(pose_rate) > 0.3
     slope = np.sum(gyro_at_pose[turning] * pose_rate[turning]) / np.sum(pose_rate[turning] ** 2)
     assert 0.7 < slope < 1.3
+    # the gyro read without its unit (deg/s taken as rad/s) is refused, naming the unit
+    as_logged = [c for c in COLUMNS["encoder_gyro"] if not c.startswith("yaw_rate_radps")] + ["yaw_rate_radps=gyro_z"]
+    raw = read_log(tmp_path / "encoder_gyro.csv", columns=column_map_from(None, as_logged))
+    with pytest.raises(LogError, match='yaw_rate_radps: .*unit = "deg/s"'):
+        check_conventions(raw, car.chassis.wheelbase_m, car.steering.limit_rad, glitch_mask(raw, find_glitches(raw)))

@@ -35,6 +35,7 @@ from simrunner.workflows.gap.chain import HELD_IMPROVEMENT_MIN, MAX_EFFECTS, Cha
 from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, ROBUST_WINDOW_FACTOR,
                                          FitResult, Problem, Segment, bic, nominal_scales, robust_scale_of,
                                          robust_total, window_costs)
+from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive
 from simrunner.workflows.gap.regimes import COAST_CMD_MPS, MOVING_MPS, residual_stats, segment
@@ -221,6 +222,7 @@ def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
     check_measured(log)
     glitches = tuple(find_glitches(log))
     bad = glitch_mask(log, glitches)
+    check_conventions(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
     windows = make_windows(log, window_s, exclude=bad)
     strata = window_strata(log, derived, segment(log, derived, car), windows)

@@ -1,0 +1,196 @@
+"""Sign and unit conventions of a measured log, checked between its own signals.
+
+A log whose columns follow other conventions than the run log's (docs/telemetry.md) reads
+without an error, and the chain would then fit nonsense to it: a gyro that counts
+clockwise as positive, a steering command that is positive to the right (the thesis's car),
+a speed in km/h read as m/s, a heading in degrees. Each of these leaves an unmistakable trace
+between the log's own signals, so :func:`check_conventions` compares them where the log has
+two views of one quantity and refuses the log (:class:`~simrunner.run.log.LogError`, the
+column named, what was found, what was expected and how to map it) when one is reversed or
+off by a unit's factor:
+
+========================  ==========================================================  =========================
+check                     compares (moving samples, glitches left out)                refused when
+========================  ==========================================================  =========================
+heading                   ``yaw_rad`` with the direction the positions move in        negated or in degrees it fits
+                                                                                      better; or under half the
+                                                                                      samples within 37 deg
+gyro                      ``yaw_rate_radps`` with the pose's yaw rate                 slope -1 (sign) or ~57 (deg/s)
+speed sensor              ``speed_mps`` with the pose's speed along its heading        slope -1 (sign) or ~3.6, 100,
+                                                                                      1000 (km/h, cm/s, mm/s)
+speed command             ``speed_cmd_mps`` with the measured speed                    opposite signs (slope < 0),
+                                                                                      or the speed 2.5x the command
+steering command range    ``steer_cmd_rad`` itself                                     1 % of it beyond both 1.2 rad
+                                                                                      and 3x the car's limit
+steering command sign     the measured yaw rate with ``v tan(steer_cmd) / L``           opposite signs (slope < 0);
+                                                                                      a gyro without a pose: slope
+                                                                                      57 +- 60 % (deg/s)
+========================  ==========================================================  =========================
+
+"slope": the least-squares slope through the origin of the first signal on the second over
+the samples where the second is clearly non-zero (:data:`MIN_RATE_RADPS`,
+:data:`MIN_SPEED_MPS`), with their correlation beyond +-:data:`MIN_CORRELATION`; a check
+needs :data:`MIN_SAMPLES` such samples (else it is skipped: the log does not show it). The
+bands are wide (a real car's odometry and pose disagree by up to ~20 %, a gain or a lag
+moves a slope, never its sign) and a unit factor is named only near its value, so a log in
+the right conventions is never refused for a car effect.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from simrunner.run.log import LogError, RunLog
+from simrunner.workflows.gap.glitches import has_pose
+from simrunner.workflows.gap.logs import derive
+
+MIN_SAMPLES = 50
+MIN_SPEED_MPS = 0.3
+MIN_RATE_RADPS = 0.3
+MIN_CORRELATION = 0.5
+ALIGNED_COS = 0.8  # direction of motion within ~37 deg of the heading (or of its reverse)
+ALIGNED_SHARE = 0.85  # a right heading: 0.96 (DS2's particle filter) .. 1.0 (synthetic)
+ALIGNED_SHARE_OTHER = 0.9  # another convention that explains the motion names the mistake
+MIN_ALIGNED_SHARE = 0.5  # below it, the heading is refused even when no convention explains it
+UNIT_BAND = 0.25  # a slope within +-25 % of a unit's factor names that unit
+MAX_SPEED_PER_COMMAND = 2.5  # no car goes 2.5x faster than commanded (a top speed only slows it)
+STEER_RANGE_RAD = 1.2  # no car steers this far (bicycle-equivalent)
+STEER_RANGE_LIMITS = 3.0  # nor 3x beyond its own limit
+_DOC = "(docs/telemetry.md, \"Logs with other columns or units\")"
+_REVERSED = "sign is reversed? map it negated, e.g. --column '{col}=-COLUMN'"
+
+
+def _fit(y: np.ndarray, x: np.ndarray, ok: np.ndarray) -> tuple[float, float] | None:
+    """(slope through the origin of y on x, correlation) over ``ok``; None when too few."""
+    ok = ok & np.isfinite(x) & np.isfinite(y)
+    if np.count_nonzero(ok) < MIN_SAMPLES:
+        return None
+    x, y = x[ok], y[ok]
+    sxx, syy = float(np.dot(x, x)), float(np.dot(y, y))
+    if sxx <= 0.0 or syy <= 0.0:
+        return None
+    sxy = float(np.dot(x, y))
+    return sxy / sxx, sxy / math.sqrt(sxx * syy)
+
+
+def _unit(slope: float, factors: dict[str, float], band: float = UNIT_BAND) -> str | None:
+    for unit, f in factors.items():
+        if abs(slope / f - 1.0) <= band:
+            return unit
+    return None
+
+
+def _refuse(log: RunLog, column: str, text: str) -> LogError:
+    return LogError(log.source, 1, f"{column}: {text}")
+
+
+def _heading(log: RunLog, pose) -> None:
+    """The heading points along the motion (forward or reversing)."""
+    t = log.t_s
+    with np.errstate(invalid="ignore"):
+        vx, vy = np.gradient(pose.x_m, t), np.gradient(pose.y_m, t)
+    moving = np.hypot(vx, vy) > MIN_SPEED_MPS
+    moving &= np.isfinite(vx) & np.isfinite(vy) & np.isfinite(log.yaw_rad)
+    if np.count_nonzero(moving) < MIN_SAMPLES:
+        return
+    course = np.arctan2(vy[moving], vx[moving])
+
+    def share(yaw: np.ndarray) -> float:
+        return float(np.mean(np.abs(np.cos(course - yaw)) >= ALIGNED_COS))
+
+    yaw = log.yaw_rad[moving]
+    own = share(yaw)
+    if own >= ALIGNED_SHARE:
+        return
+    found = f"points along the motion in {own:.0%} of the moving samples"
+    for alt, what, fix in ((-yaw, "negated", f"expected counter-clockwise from +x; its "
+                                              f"{_REVERSED.format(col='yaw_rad')}"),
+                           (np.radians(yaw), "read as degrees", f"expected radians; map it with unit = \"deg\" {_DOC}")):
+        if share(alt) >= ALIGNED_SHARE_OTHER and share(alt) > own + 0.1:
+            raise _refuse(log, "yaw_rad", f"{found}, {what} in {share(alt):.0%}: {fix}")
+    if own < MIN_ALIGNED_SHARE:
+        raise _refuse(log, "yaw_rad", f"{found}: expected the heading of the car (radians, counter-clockwise "
+                                      f"from +x) with x_m, y_m in one world frame; check its unit, sign and frame")
+
+
+def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
+                      exclude: np.ndarray | None = None) -> None:
+    """Raise :class:`LogError` (``path:1: column: what was found, what was expected``) when a
+    column of ``log`` is reversed or in another unit (module docstring); ``exclude``: samples
+    to leave out (glitches)."""
+    steer = np.asarray(log.steer_cmd_rad, dtype=float)
+    keep = np.ones(len(log), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
+    far = np.abs(steer[keep]) > max(STEER_RANGE_RAD, STEER_RANGE_LIMITS * steer_limit_rad)
+    if far.size and far.mean() > 0.01:
+        top = float(np.max(np.abs(steer[keep])))
+        raise _refuse(log, "steer_cmd_rad", f"reaches {top:.4g} rad, beyond any steering (this car's limit: "
+                                            f"{steer_limit_rad:.3g} rad): expected radians, bicycle-equivalent; "
+                                            f"degrees or the car's own units? map it {_DOC}")
+    pose = None
+    if has_pose(log):
+        bare = log.with_columns(speed_mps=None, yaw_rate_radps=None)
+        pose = derive(bare, wheelbase_m, exclude=exclude)
+        _heading(log, pose)
+    measured = derive(log, wheelbase_m, exclude=exclude)  # the sensors where present, else the pose
+    if pose is not None and log.yaw_rate_radps is not None:
+        fit = _fit(measured.yaw_rate_radps, pose.yaw_rate_radps, np.abs(pose.yaw_rate_radps) > MIN_RATE_RADPS)
+        if fit is not None:
+            slope, corr = fit
+            found = f"is {slope:.3g}x the yaw rate of the pose (correlation {corr:.2f})"
+            if slope < 0.0 and corr < -MIN_CORRELATION:
+                raise _refuse(log, "yaw_rate_radps", f"{found}: expected + = counter-clockwise; "
+                                                     f"its {_REVERSED.format(col='yaw_rate_radps')}")
+            unit = _unit(slope, {"deg/s": 180.0 / math.pi}) if corr > MIN_CORRELATION else None
+            if unit:
+                raise _refuse(log, "yaw_rate_radps", f"{found}: expected rad/s; in {unit}? map it with "
+                                                     f"unit = \"{unit}\" {_DOC}")
+    if pose is not None and log.speed_mps is not None:
+        fit = _fit(measured.speed_mps, pose.speed_mps, np.abs(pose.speed_mps) > MIN_SPEED_MPS)
+        if fit is not None:
+            slope, corr = fit
+            found = f"is {slope:.3g}x the speed of the pose along its heading (correlation {corr:.2f})"
+            if slope < 0.0 and corr < -MIN_CORRELATION:
+                raise _refuse(log, "speed_mps", f"{found}: expected + = forward; "
+                                                f"its {_REVERSED.format(col='speed_mps')}")
+            unit = _unit(slope, {"km/h": 3.6, "cm/s": 100.0, "mm/s": 1000.0}) if corr > MIN_CORRELATION else None
+            if unit:
+                raise _refuse(log, "speed_mps", f"{found}: expected m/s; in {unit}? map it with unit = \"{unit}\" {_DOC}")
+    # the measured speed and yaw rate are now right where a pose confirmed them (or gave them);
+    # without a pose, a reversal below may be the sensor's as well as the command's
+    v, rate = measured.speed_mps, measured.yaw_rate_radps
+    cmd = np.asarray(log.speed_cmd_mps, dtype=float)
+    fit = _fit(v, cmd, (np.abs(cmd) > MIN_SPEED_MPS) & (np.abs(v) > MIN_SPEED_MPS))
+    if fit is not None and fit[0] < 0.0 and fit[1] < -MIN_CORRELATION:
+        found = f"the measured speed is {fit[0]:.3g}x the command (correlation {fit[1]:.2f})"
+        if pose is not None:  # the measured speed is the pose's or was checked against it
+            raise _refuse(log, "speed_cmd_mps", f"{found}: expected + = forward; its "
+                                                f"{_REVERSED.format(col='speed_cmd_mps')}")
+        raise _refuse(log, "speed_cmd_mps or speed_mps", f"{found}: expected + = forward for both; one "
+                                                         f"{_REVERSED.format(col='speed_cmd_mps')} (or speed_mps)")
+    if fit is not None and fit[0] > MAX_SPEED_PER_COMMAND and fit[1] > MIN_CORRELATION:
+        raise _refuse(log, "speed_mps or speed_cmd_mps", f"the measured speed is {fit[0]:.3g}x the command "
+                                                         f"(correlation {fit[1]:.2f}): expected both in m/s; "
+                                                         f"is one in km/h, cm/s or the car's own units? map it "
+                                                         f"{_DOC}")
+    with np.errstate(invalid="ignore"):
+        kinematic = v * np.tan(np.clip(steer, -1.5, 1.5)) / wheelbase_m
+    fit = _fit(rate, kinematic, (np.abs(kinematic) > MIN_RATE_RADPS) & (np.abs(v) > MIN_SPEED_MPS))
+    if pose is None and fit is not None and fit[1] > MIN_CORRELATION and _unit(fit[0], {"deg/s": 180.0 / math.pi},
+                                                                              band=0.6):
+        raise _refuse(log, "yaw_rate_radps", f"is {fit[0]:.3g}x the yaw rate the steering command and the speed "
+                                             f"give (correlation {fit[1]:.2f}): expected rad/s; in deg/s? map it "
+                                             f"with unit = \"deg/s\" {_DOC}")
+    if fit is not None and fit[0] < 0.0 and fit[1] < -MIN_CORRELATION:
+        found = (f"the car turns against the command (measured yaw rate {fit[0]:.3g}x what it gives, "
+                 f"correlation {fit[1]:.2f})")
+        if pose is not None:
+            raise _refuse(log, "steer_cmd_rad", f"{found}: expected + = left; its "
+                                                f"{_REVERSED.format(col='steer_cmd_rad')}")
+        raise _refuse(log, "steer_cmd_rad or yaw_rate_radps", f"{found}: expected + = left (steering) and + = "
+                                                              f"counter-clockwise (gyro); one "
+                                                              f"{_REVERSED.format(col='steer_cmd_rad')} (or "
+                                                              f"yaw_rate_radps)")
+
+
+__all__ = ["check_conventions"]
