@@ -114,6 +114,21 @@ def _heading(log: RunLog, pose) -> None:
                                       f"from +x) with x_m, y_m in one world frame; check its unit, sign and frame")
 
 
+def _against_pose(log: RunLog, column: str, sensor: np.ndarray, from_pose: np.ndarray, min_value: float,
+                  what: str, positive: str, unit: str, units: dict[str, float]) -> None:
+    """A sensor against the same quantity from the pose: reversed, or in one of ``units``."""
+    fit = _fit(sensor, from_pose, np.abs(from_pose) > min_value)
+    if fit is None:
+        return
+    slope, corr = fit
+    found = f"is {slope:.3g}x {what} (correlation {corr:.2f})"
+    if slope < 0.0 and corr < -MIN_CORRELATION:
+        raise _refuse(log, column, f"{found}: expected + = {positive}; its {_REVERSED.format(col=column)}")
+    other = _unit(slope, units) if corr > MIN_CORRELATION else None
+    if other:
+        raise _refuse(log, column, f"{found}: expected {unit}; in {other}? map it with unit = \"{other}\" {_DOC}")
+
+
 def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
                       exclude: np.ndarray | None = None) -> None:
     """Raise :class:`LogError` (``path:1: column: what was found, what was expected``) when a
@@ -133,29 +148,14 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
         pose = derive(bare, wheelbase_m, exclude=exclude)
         _heading(log, pose)
     measured = derive(log, wheelbase_m, exclude=exclude)  # the sensors where present, else the pose
-    if pose is not None and log.yaw_rate_radps is not None:
-        fit = _fit(measured.yaw_rate_radps, pose.yaw_rate_radps, np.abs(pose.yaw_rate_radps) > MIN_RATE_RADPS)
-        if fit is not None:
-            slope, corr = fit
-            found = f"is {slope:.3g}x the yaw rate of the pose (correlation {corr:.2f})"
-            if slope < 0.0 and corr < -MIN_CORRELATION:
-                raise _refuse(log, "yaw_rate_radps", f"{found}: expected + = counter-clockwise; "
-                                                     f"its {_REVERSED.format(col='yaw_rate_radps')}")
-            unit = _unit(slope, {"deg/s": 180.0 / math.pi}) if corr > MIN_CORRELATION else None
-            if unit:
-                raise _refuse(log, "yaw_rate_radps", f"{found}: expected rad/s; in {unit}? map it with "
-                                                     f"unit = \"{unit}\" {_DOC}")
-    if pose is not None and log.speed_mps is not None:
-        fit = _fit(measured.speed_mps, pose.speed_mps, np.abs(pose.speed_mps) > MIN_SPEED_MPS)
-        if fit is not None:
-            slope, corr = fit
-            found = f"is {slope:.3g}x the speed of the pose along its heading (correlation {corr:.2f})"
-            if slope < 0.0 and corr < -MIN_CORRELATION:
-                raise _refuse(log, "speed_mps", f"{found}: expected + = forward; "
-                                                f"its {_REVERSED.format(col='speed_mps')}")
-            unit = _unit(slope, {"km/h": 3.6, "cm/s": 100.0, "mm/s": 1000.0}) if corr > MIN_CORRELATION else None
-            if unit:
-                raise _refuse(log, "speed_mps", f"{found}: expected m/s; in {unit}? map it with unit = \"{unit}\" {_DOC}")
+    if pose is not None:
+        if log.yaw_rate_radps is not None:
+            _against_pose(log, "yaw_rate_radps", measured.yaw_rate_radps, pose.yaw_rate_radps, MIN_RATE_RADPS,
+                          "the yaw rate of the pose", "counter-clockwise", "rad/s", {"deg/s": 180.0 / math.pi})
+        if log.speed_mps is not None:
+            _against_pose(log, "speed_mps", measured.speed_mps, pose.speed_mps, MIN_SPEED_MPS,
+                          "the speed of the pose along its heading", "forward", "m/s",
+                          {"km/h": 3.6, "cm/s": 100.0, "mm/s": 1000.0})
     # the measured speed and yaw rate are now right where a pose confirmed them (or gave them);
     # without a pose, a reversal below may be the sensor's as well as the command's
     v, rate = measured.speed_mps, measured.yaw_rate_radps
