@@ -35,6 +35,7 @@ from typing import Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from simrunner.run.log import COLUMN_NAMES, COLUMNS, FORMAT1_NAMES, LogError
+from simrunner.run.sparse import is_empty_cell
 
 _BY_NAME = {c.name: c for c in COLUMNS}
 
@@ -460,15 +461,17 @@ class ColumnMap:
                 out[name] = schema
         return out
 
-    def apply(self, cells: Mapping[str, Sequence[str]], rows: int, source: str) -> dict:
+    def apply(self, cells: Mapping[str, Sequence[str]], rows: int, source: str, *, merged: bool = False) -> dict:
         """The schema columns from the file's ``cells`` (``{name: rows strings}``, the names
         of :meth:`columns_to_read`). Errors are :class:`LogError` at ``row + 2`` (the
-        :func:`~simrunner.run.log.log_from_columns` convention; read_log maps them to lines)."""
+        :func:`~simrunner.run.log.log_from_columns` convention; read_log maps them to lines).
+        ``merged`` (a merged topic log, :mod:`simrunner.run.sparse`): an empty cell is NaN,
+        and so is a rule's value in a row where a column it uses is empty."""
         numbers: dict[str, np.ndarray] = {}
 
         def number(name: str) -> np.ndarray:
             if name not in numbers:
-                numbers[name] = _numbers(name, cells[name], source)
+                numbers[name] = _numbers(name, cells[name], source, merged)
             return numbers[name]
 
         out: dict = {}
@@ -477,6 +480,9 @@ class ColumnMap:
                 out[rule.target] = tuple(cells[rule.sources[0]])
                 continue
             values = {name: number(name) for name in rule.sources}
+            empty = np.zeros(rows, dtype=bool)
+            for v in values.values():
+                empty |= np.isnan(v)
             if rule.nonzero:
                 zero = np.flatnonzero(np.all([values[n] == 0.0 for n in rule.nonzero], axis=0))
                 if zero.size:
@@ -484,7 +490,8 @@ class ColumnMap:
                                    f"{rule.target} ({rule.origin}): quaternion {', '.join(rule.nonzero)} "
                                    f"is all zero: expected a rotation")
             value = np.array(np.broadcast_to(rule.expression.evaluate(values), (rows,)), dtype=float)
-            bad = np.flatnonzero(~np.isfinite(value))
+            value[empty] = np.nan
+            bad = np.flatnonzero(~np.isfinite(value) & ~empty)
             if bad.size:
                 i = int(bad[0])
                 raise LogError(source, i + 2, f"{rule.target} = {rule.expression.text!r} ({rule.origin}) gives "
@@ -495,9 +502,12 @@ class ColumnMap:
         return out
 
 
-def _numbers(name: str, cells: Sequence[str], source: str) -> np.ndarray:
+def _numbers(name: str, cells: Sequence[str], source: str, merged: bool = False) -> np.ndarray:
     out = np.empty(len(cells))
     for i, cell in enumerate(cells):
+        if merged and is_empty_cell(cell):
+            out[i] = np.nan
+            continue
         try:
             v = float(cell)
         except ValueError:

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from simrunner.errors import SimError
+from simrunner.run.sparse import is_empty_cell
 
 if TYPE_CHECKING:  # columns.py builds on this module
     from simrunner.run.columns import ColumnMap
@@ -274,14 +275,19 @@ def write_log(log: RunLog, path: str | Path, *, float_format: str = "%.6f") -> P
 
 
 # -- reading -------------------------------------------------------------------------------
-def read_log(path: str | Path, columns: ColumnMap | None = None) -> RunLog:
+def read_log(path: str | Path, columns: ColumnMap | None = None, *, merged: bool = False) -> RunLog:
     """Read a log CSV (format 2 or 1, see the module docstring); raise :class:`LogError`
     (``path:line: what was expected``) for anything malformed.
 
     ``columns`` (a :class:`simrunner.run.columns.ColumnMap`) reads a CSV whose columns have
     other names or units: each schema column it has a rule for is computed from the file's
     columns, the others are read by their own names (docs/telemetry.md, "Logs with other
-    columns or units"). Without it, or with an empty map, the file is read as above."""
+    columns or units"). Without it, or with an empty map, the file is read as above.
+
+    ``merged``: the CSV may be a merged topic log, each row holding the cells of the sensor
+    that sent it and empty (or ``nan``) cells for the others; it is read as one row per
+    sample of the leading sensor (:mod:`simrunner.run.sparse`). A log without empty cells
+    reads the same either way."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -294,7 +300,7 @@ def read_log(path: str | Path, columns: ColumnMap | None = None) -> RunLog:
     if "\0" in text:
         raise LogError(str(path), 1, "expected a text (CSV) file")
     text = _without_cut_line(text, str(path))
-    return _parse(text, str(path), columns if columns is not None and columns.rules else None)
+    return _parse(text, str(path), columns if columns is not None and columns.rules else None, merged)
 
 
 def _without_cut_line(text: str, source: str) -> str:
@@ -322,7 +328,7 @@ def _without_cut_line(text: str, source: str) -> str:
     return text[:keep]
 
 
-def _parse(text: str, source: str, columns: ColumnMap | None = None) -> RunLog:
+def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: bool = False) -> RunLog:
     reader = csv.reader(io.StringIO(text, newline=""))
     header = None
     try:
@@ -358,6 +364,9 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None) -> RunLog:
                 if columns is not None or _BY_NAME[h].kind == "text":
                     values[h].append(cell)
                     continue
+                if merged and is_empty_cell(cell):
+                    values[h].append(math.nan)
+                    continue
                 try:
                     v = float(cell)
                 except ValueError:
@@ -370,7 +379,16 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None) -> RunLog:
         raise LogError(source, reader.line_num, f"expected valid CSV ({exc})") from None
     try:
         if columns is not None:
-            values = columns.apply(values, len(lines), source)
+            values = columns.apply(values, len(lines), source, merged=merged)
+        if merged:
+            from simrunner.run.sparse import SparseError, merge_rows  # noqa: PLC0415 - merged logs only
+
+            try:
+                values, kept = merge_rows({k: (tuple(v) if _BY_NAME[k].kind == "text" else np.asarray(v, dtype=float))
+                                           for k, v in values.items()})
+            except SparseError as exc:
+                raise LogError(source, exc.row + 2, exc.message) from None
+            lines = [lines[i] for i in kept]
         return log_from_columns(values, source)
     except LogError as exc:  # map the row index back to the file's line
         if exc.line >= 2 and exc.line - 2 < len(lines):

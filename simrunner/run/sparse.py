@@ -1,0 +1,123 @@
+"""Merged topic logs: rows where each sensor fills only its own cells.
+
+A log exported from several topics or sensors at their own rates (a PlotJuggler export, a
+pandas merge of ROS topics, an MCU that writes a line per event) has one row per message,
+and a row holds the cells of the sensor that sent it; the others are empty (or ``nan``).
+:func:`merge_rows` turns such columns into one row per sample of the **leading sensor** -
+the pose (``x_m, y_m, yaw_rad`` all in the row) when the log has one, else the speed sensor
+(``speed_mps``) - which is how :func:`simrunner.workflows.gap` wants a measured log:
+
+- the commands (``speed_cmd_mps``, ``steer_cmd_rad``, ``coast``) hold their last value until
+  the next one (zero-order hold, as a command is in force until the next is sent): a row
+  takes the last value stamped at or before its own stamp; rows before a command's first
+  value are left out (the command is not known there);
+- every other sensor (``speed_mps`` when the pose leads, ``yaw_rate_radps``) is interpolated
+  linearly at the leading rows' stamps from its own samples, where the two samples around
+  a stamp are at most :data:`GAP_FACTOR` of that sensor's median interval apart; a leading
+  row outside that (a gap of the other sensor, before its first sample, after its last)
+  is left out, so the log shows a time gap there rather than made-up values;
+- a column without any value is absent; any other column with empty cells is dropped (the
+  gap workflow reads none of them).
+
+Rows must be in time order (``t_s`` never decreasing) and every row needs its time stamp.
+A log without empty cells is returned as it is.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+POSE = ("x_m", "y_m", "yaw_rad")
+HELD = ("speed_cmd_mps", "steer_cmd_rad", "coast")
+INTERPOLATED = ("speed_mps", "yaw_rate_radps")
+GAP_FACTOR = 5.0
+
+
+def is_empty_cell(cell: str) -> bool:
+    """A cell of a merged log that holds no value: empty, blanks, or ``nan`` (any case)."""
+    text = cell.strip()
+    return not text or text.lower() == "nan"
+
+
+class SparseError(ValueError):
+    """A merged log that cannot be made into rows: ``row`` (0-based) and what was expected."""
+
+    def __init__(self, row: int, message: str):
+        super().__init__(message)
+        self.row, self.message = row, message
+
+
+def _interpolate(t: np.ndarray, own: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``own`` (NaN where the sensor has no sample) at the stamps ``at``; NaN where the own
+    samples around a stamp are more than GAP_FACTOR median intervals apart, or outside them."""
+    have = np.isfinite(own)
+    ts, vs = t[have], own[have]
+    out = np.full(len(at), np.nan)
+    if ts.size < 2:
+        return out
+    steps = np.diff(ts)
+    limit = GAP_FACTOR * float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
+    k = np.searchsorted(ts, at, side="right")  # ts[k - 1] <= at < ts[k]
+    exact = (k >= 1) & (ts[np.clip(k - 1, 0, ts.size - 1)] == at)
+    inside = (k >= 1) & (k < ts.size)
+    lo, hi = np.clip(k - 1, 0, ts.size - 1), np.clip(k, 0, ts.size - 1)
+    ok = inside & (ts[hi] - ts[lo] <= limit) & (ts[hi] > ts[lo])
+    w = np.where(ok, (at - ts[lo]) / np.where(ok, ts[hi] - ts[lo], 1.0), 0.0)
+    out[ok] = (vs[lo] + w * (vs[hi] - vs[lo]))[ok]
+    out[exact] = vs[np.clip(k - 1, 0, ts.size - 1)][exact]
+    return out
+
+
+def merge_rows(values: dict) -> tuple[dict, np.ndarray]:
+    """``(columns, rows kept)`` of a merged log's columns (module docstring): numeric
+    columns are float arrays with NaN for an empty cell, text columns tuples. ``rows kept``
+    are the indices of the input rows the output's rows come from. Raises
+    :class:`SparseError`."""
+    numeric = {k: v for k, v in values.items() if not isinstance(v, tuple)}
+    n = len(values["t_s"])
+    if all(np.isfinite(v).all() for v in numeric.values()):
+        return values, np.arange(n)
+    t = np.asarray(values["t_s"], dtype=float)
+    missing = np.flatnonzero(~np.isfinite(t))
+    if missing.size:
+        raise SparseError(int(missing[0]), "column 't_s': expected a time stamp in every row of a merged log")
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise SparseError(i, f"column 't_s': expected the rows of a merged log in time order (got {t[i]!r} "
+                             f"after {t[i - 1]!r})")
+    present = {k for k, v in numeric.items() if np.isfinite(v).any()}
+    if all(c in present for c in POSE):
+        lead = np.all([np.isfinite(numeric[c]) for c in POSE], axis=0)
+    elif "speed_mps" in present:
+        lead = np.isfinite(numeric["speed_mps"])
+    else:  # empty cells and nothing to lead
+        name = next(k for k, v in numeric.items() if not np.isfinite(v).all())
+        row = int(np.flatnonzero(~np.isfinite(numeric[name]))[0])
+        raise SparseError(row, f"column {name!r}: an empty cell (a merged log): expected a pose (x_m, y_m, "
+                               f"yaw_rad) or a speed sensor (speed_mps) with values, whose rows the log is read at")
+    rows = np.flatnonzero(lead)
+    keep = np.ones(rows.size, dtype=bool)
+    out: dict = {"t_s": t[rows]}
+    for name, v in numeric.items():
+        if name == "t_s" or name not in present:
+            continue
+        if np.isfinite(v[rows]).all():
+            out[name] = v[rows]  # a leading column, or one with a value in every leading row
+        elif name in HELD:
+            have = np.flatnonzero(np.isfinite(v))  # the last value stamped at or before each row
+            last = np.searchsorted(t[have], t[rows], side="right") - 1
+            keep &= last >= 0
+            out[name] = np.where(last >= 0, v[have[np.clip(last, 0, None)]], np.nan)
+        elif name in INTERPOLATED:
+            out[name] = _interpolate(t, v, t[rows])
+            keep &= np.isfinite(out[name])
+        # other columns with empty cells: not read by the gap workflow, dropped
+    for name, v in values.items():
+        if isinstance(v, tuple):
+            out[name] = tuple(v[i] for i in rows)
+    kept = rows[keep]
+    return {k: (tuple(v[i] for i in np.flatnonzero(keep)) if isinstance(v, tuple) else v[keep])
+            for k, v in out.items()}, kept
+
+
+__all__ = ["merge_rows", "is_empty_cell", "SparseError", "GAP_FACTOR"]
