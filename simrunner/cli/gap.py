@@ -70,7 +70,13 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
         dt_s: float, window_s: float, force: bool, no_progress: bool) -> None:
     """Find where MEASURED (one or several run logs of one car, docs/telemetry.md) and the
     simulator disagree, build the chain of effects that closes the gap, and show it shrink on
-    held-out data."""
+    held-out data.
+
+    \b
+    A log needs the commands and a pose or a speed sensor (a gyro helps); a log merged from
+    several topics (a row per message, other cells empty) is read at its pose's (else its
+    speed sensor's) samples. A column reversed or in another unit (a gyro in deg/s, steering
+    + = right) is refused with the mapping that fixes it (docs/gap.md, "Input")."""
     from tqdm import tqdm
 
     from simrunner.cli import input_errors
