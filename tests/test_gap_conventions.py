@@ -101,3 +101,21 @@ def test_cli_refuses_a_reversed_steering_column_exit_2_one_line_nothing_written(
     assert lines == [f"simrunner gap: {path}:1: steer_cmd_rad: " + lines[0].split(": steer_cmd_rad: ", 1)[1]]
     assert "expected + = left" in lines[0] and "Traceback" not in res.output
     assert not out.exists() and list(tmp_path.iterdir()) == [path]
+
+
+def test_a_standing_car_s_localisation_jitter_is_not_taken_for_motion(logs):
+    """A minute at rest with 3 cm of pose jitter in any direction (a particle filter), then the
+    drive: the heading is judged on the path's chords that really travel, and passes."""
+    drive = logs["pose"]
+    rng = np.random.default_rng(7)
+    n = 3000  # 60 s at 50 Hz
+    still_t = np.arange(n) * 0.02
+    cols = {"t_s": np.r_[still_t, drive.t_s + still_t[-1] + 0.02],
+            "x_m": np.r_[drive.x_m[0] + 0.03 * rng.standard_normal(n), drive.x_m],
+            "y_m": np.r_[drive.y_m[0] + 0.03 * rng.standard_normal(n), drive.y_m],
+            "yaw_rad": np.r_[drive.yaw_rad[0] + 0.02 * rng.standard_normal(n), drive.yaw_rad],
+            "speed_cmd_mps": np.r_[np.zeros(n), drive.speed_cmd_mps],
+            "steer_cmd_rad": np.r_[np.zeros(n), drive.steer_cmd_rad]}
+    from simrunner.run.log import log_from_columns
+
+    check(log_from_columns(cols, "still-then-drive"))

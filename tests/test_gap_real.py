@@ -59,8 +59,8 @@ def test_glitches_lie_in_the_log(prepared):
 
 def test_real_logs_pass_the_conventions_check(prepared, car):
     """A real car's pose, odometry and commands in the run log's conventions are not refused
-    (simrunner.workflows.gap.conventions: the heading points along the motion in 96-99 % of
-    the moving samples here, against 85 % asked)."""
+    (simrunner.workflows.gap.conventions: the heading follows 99.7-99.8 % of the path's chords
+    here, against 85 % asked)."""
     from simrunner.workflows.gap.conventions import check_conventions
 
     _, log, _, exclude, *_ = prepared

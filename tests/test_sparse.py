@@ -48,7 +48,7 @@ def merged_tables(draw):
 @given(merged_tables())
 def test_merge_gives_one_row_per_pose_sample_with_held_commands_and_interpolated_sensors(table):
     values, (t_pose, t_speed, t_cmd, cmds, a, b) = table
-    out, kept = merge_rows(values)
+    out, kept, notes = merge_rows(values)
     t = out["t_s"]
     assert np.all(np.diff(t) >= 0) and np.isin(t, t_pose).all()
     assert np.array_equal(values["t_s"][kept], t)
@@ -57,13 +57,14 @@ def test_merge_gives_one_row_per_pose_sample_with_held_commands_and_interpolated
     # the speed sensor sampled a line: interpolated exactly, inside its own coverage only
     assert np.allclose(out["speed_mps"], a + b * t, atol=1e-9)
     assert (t >= t_speed[0] - 1e-12).all() and (t <= t_speed[-1] + 1e-12).all()
+    assert notes == []  # the speed sensor covers the log: never dropped
     # the command in force is the last one sent at or before the row
     last = np.searchsorted(t_cmd, t, side="right") - 1
     assert (last >= 0).all() and np.array_equal(out["speed_cmd_mps"], np.asarray(cmds)[last])
     # every pose sample inside both coverages is kept (the speed sensor's steps are at most
-    # 5x its median here, so it has no gap)
+    # 5x its median here, so it has no gap; it covers nearly all of the log)
     steps = np.diff(t_speed)
-    if steps.max() <= GAP_FACTOR * np.median(steps):
+    if steps.max() <= GAP_FACTOR * np.median(steps) and not notes:
         inside = (t_pose >= max(t_speed[0], t_cmd[0])) & (t_pose <= t_speed[-1])
         assert len(t) == np.count_nonzero(inside)
 
@@ -71,8 +72,8 @@ def test_merge_gives_one_row_per_pose_sample_with_held_commands_and_interpolated
 def test_a_dense_log_is_returned_as_it_is():
     values = {"t_s": np.arange(5.0), "speed_mps": np.ones(5), "speed_cmd_mps": np.ones(5),
               "steer_cmd_rad": np.zeros(5), "data_text": ("",) * 5}
-    out, kept = merge_rows(values)
-    assert out is values and list(kept) == list(range(5))
+    out, kept, notes = merge_rows(values)
+    assert out is values and notes == [] and list(kept) == list(range(5))
 
 
 def test_a_gap_of_the_other_sensor_leaves_its_rows_out():
@@ -82,7 +83,8 @@ def test_a_gap_of_the_other_sensor_leaves_its_rows_out():
     x = np.where(np.arange(t.size) % 2 == 1, t, np.nan)
     values = {"t_s": t, "x_m": x, "y_m": 0 * x, "yaw_rad": 0 * x, "speed_mps": speed,
               "speed_cmd_mps": np.where(t < 0.15, 1.0, np.nan), "steer_cmd_rad": np.zeros(t.size)}
-    out, _ = merge_rows(values)
+    out, _, notes = merge_rows(values)
+    assert notes == []
     assert not ((out["t_s"] > 4.0) & (out["t_s"] < 6.0)).any()
     assert (out["t_s"] < 4.0).any() and (out["t_s"] > 6.0).any()
     assert (out["speed_cmd_mps"] == 1.0).all()  # a command holds however long
@@ -154,3 +156,29 @@ def test_the_gap_cli_reads_a_merged_log(tmp_path):
     assert res.exit_code == 2 and "Traceback" not in res.output
     assert "expected at least" in res.output  # read; too short for the workflow
     assert not (tmp_path / "out").exists()
+
+
+def test_review_cases_of_merged_logs(tmp_path):
+    """A pose split over rows, a late gyro, a bad flag held on, other spellings of 'empty'."""
+    path = tmp_path / "m.csv"
+    head = "t_s,x_m,y_m,yaw_rad,yaw_rate_radps,speed_cmd_mps,steer_cmd_rad,coast\n"
+    # position and heading never in one row
+    rows = "".join(f"{k * 0.02:.2f},{k * 0.01:.3f},0,,,1,0,0\n{k * 0.02 + 0.01:.2f},,,0,,,,\n" for k in range(100))
+    path.write_text(head + rows)
+    with pytest.raises(LogError, match=r"m.csv:2: columns x_m, y_m, yaw_rad never share a row"):
+        read_log(path, merged=True)
+    # a gyro that starts at 15 s of 20: left out with a warning, the 20 s kept
+    rows = "".join(f"{k * 0.02:.2f},{k * 0.01:.3f},0,0,{'0.1' if k * 0.02 >= 15 else 'NA'},1,0,-nan\n"
+                   for k in range(1000))
+    path.write_text(head + rows)
+    with pytest.warns(UserWarning, match=r"column 'yaw_rate_radps' covers only t = 15.000..19.980 s"):
+        log = read_log(path, merged=True)
+    assert len(log) == 1000 and log.yaw_rate_radps is None and log.coast is None
+    # a flag is checked on the row that logged it, not the pose row it is held into
+    path.write_text(head + "0.00,,,,,1,0,0\n0.01,0,0,0,,,,\n0.02,,,,,1,0,2\n0.03,0.1,0,0,,,,\n")
+    with pytest.raises(LogError, match=r"m.csv:4: column 'coast': expected 0 or 1"):
+        read_log(path, merged=True)
+    # every pose sample before the first command
+    path.write_text(head + "0.00,0,0,0,,,,\n0.01,0.1,0,0,,,,\n0.02,,,,,1,0,0\n")
+    with pytest.raises(LogError, match=r"no sample of the pose .* comes after the first command"):
+        read_log(path, merged=True)

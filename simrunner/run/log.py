@@ -384,10 +384,12 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
             from simrunner.run.sparse import SparseError, merge_rows  # noqa: PLC0415 - merged logs only
 
             try:
-                values, kept = merge_rows({k: (tuple(v) if _BY_NAME[k].kind == "text" else np.asarray(v, dtype=float))
-                                           for k, v in values.items()})
+                values, kept, notes = merge_rows({k: (tuple(v) if _BY_NAME[k].kind == "text" else
+                                                      np.asarray(v, dtype=float)) for k, v in values.items()})
             except SparseError as exc:
-                raise LogError(source, exc.row + 2, exc.message) from None
+                raise LogError(source, exc.row + 2, exc.message) from None  # mapped to its line below
+            for note in notes:
+                warnings.warn(f"{source}: {note}", LogWarning, stacklevel=3)
             lines = [lines[i] for i in kept]
         return log_from_columns(values, source)
     except LogError as exc:  # map the row index back to the file's line

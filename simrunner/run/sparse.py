@@ -15,11 +15,15 @@ the pose (``x_m, y_m, yaw_rad`` all in the row) when the log has one, else the s
   linearly at the leading rows' stamps from its own samples, where the two samples around
   a stamp are at most :data:`GAP_FACTOR` of that sensor's median interval apart; a leading
   row outside that (a gap of the other sensor, before its first sample, after its last)
-  is left out, so the log shows a time gap there rather than made-up values;
+  is left out, so the log shows a time gap there rather than made-up values - except that a
+  sensor starting late or ending early by more than :data:`MAX_OUTSIDE_S` and
+  :data:`MAX_OUTSIDE_SHARE` of the log is left out instead of the log being cut to its span
+  (a gyro that started late), and a note says so;
 - a column without any value is absent; any other column with empty cells is dropped (the
   gap workflow reads none of them).
 
-Rows must be in time order (``t_s`` never decreasing) and every row needs its time stamp.
+Rows must be in time order (``t_s`` never decreasing) and every row needs its time stamp;
+``coast`` is checked (0 or 1) in the rows that logged it.
 A log without empty cells is returned as it is.
 """
 from __future__ import annotations
@@ -30,12 +34,20 @@ POSE = ("x_m", "y_m", "yaw_rad")
 HELD = ("speed_cmd_mps", "steer_cmd_rad", "coast")
 INTERPOLATED = ("speed_mps", "yaw_rate_radps")
 GAP_FACTOR = 5.0
+# a sensor starting late or ending early by more than both of these is left out (rather than
+# the log cut to its span)
+MAX_OUTSIDE_S = 2.0
+MAX_OUTSIDE_SHARE = 0.1
+FLAGS = ("coast",)
+
+
+EMPTY_CELLS = ("", "nan", "-nan", "+nan", "na", "n/a", "null", "none")
 
 
 def is_empty_cell(cell: str) -> bool:
-    """A cell of a merged log that holds no value: empty, blanks, or ``nan`` (any case)."""
-    text = cell.strip()
-    return not text or text.lower() == "nan"
+    """A cell of a merged log that holds no value: empty, blanks, or one of
+    :data:`EMPTY_CELLS` in any case (``nan`` of Python/pandas, ``-nan`` of C's printf, ``NA`` of R)."""
+    return cell.strip().lower() in EMPTY_CELLS
 
 
 class SparseError(ValueError):
@@ -67,15 +79,15 @@ def _interpolate(t: np.ndarray, own: np.ndarray, at: np.ndarray) -> np.ndarray:
     return out
 
 
-def merge_rows(values: dict) -> tuple[dict, np.ndarray]:
-    """``(columns, rows kept)`` of a merged log's columns (module docstring): numeric
+def merge_rows(values: dict) -> tuple[dict, np.ndarray, list[str]]:
+    """``(columns, rows kept, notes)`` of a merged log's columns (module docstring): numeric
     columns are float arrays with NaN for an empty cell, text columns tuples. ``rows kept``
-    are the indices of the input rows the output's rows come from. Raises
-    :class:`SparseError`."""
+    are the indices of the input rows the output's rows come from; ``notes`` say what was
+    left out (a sensor dropped). Raises :class:`SparseError`."""
     numeric = {k: v for k, v in values.items() if not isinstance(v, tuple)}
     n = len(values["t_s"])
     if all(np.isfinite(v).all() for v in numeric.values()):
-        return values, np.arange(n)
+        return values, np.arange(n), []
     t = np.asarray(values["t_s"], dtype=float)
     missing = np.flatnonzero(~np.isfinite(t))
     if missing.size:
@@ -85,11 +97,20 @@ def merge_rows(values: dict) -> tuple[dict, np.ndarray]:
         i = int(back[0]) + 1
         raise SparseError(i, f"column 't_s': expected the rows of a merged log in time order (got {t[i]!r} "
                              f"after {t[i - 1]!r})")
+    for name in FLAGS:  # checked where they were logged (a held value is copied to other rows)
+        v = numeric.get(name)
+        bad = np.flatnonzero(np.isfinite(v) & (v != 0.0) & (v != 1.0)) if v is not None else []
+        if len(bad):
+            raise SparseError(int(bad[0]), f"column {name!r}: expected 0 or 1 (got {v[bad[0]]!r})")
     present = {k for k, v in numeric.items() if np.isfinite(v).any()}
     if all(c in present for c in POSE):
-        lead = np.all([np.isfinite(numeric[c]) for c in POSE], axis=0)
+        lead, leader = np.all([np.isfinite(numeric[c]) for c in POSE], axis=0), "the pose (x_m, y_m, yaw_rad)"
+        if not lead.any():
+            raise SparseError(int(np.flatnonzero(np.isfinite(numeric["x_m"]))[0]),
+                              "columns x_m, y_m, yaw_rad never share a row: expected a merged log's pose in "
+                              "one row per pose sample")
     elif "speed_mps" in present:
-        lead = np.isfinite(numeric["speed_mps"])
+        lead, leader = np.isfinite(numeric["speed_mps"]), "the speed sensor (speed_mps)"
     else:  # empty cells and nothing to lead
         name = next(k for k, v in numeric.items() if not np.isfinite(v).all())
         row = int(np.flatnonzero(~np.isfinite(numeric[name]))[0])
@@ -97,27 +118,43 @@ def merge_rows(values: dict) -> tuple[dict, np.ndarray]:
                                f"yaw_rad) or a speed sensor (speed_mps) with values, whose rows the log is read at")
     rows = np.flatnonzero(lead)
     keep = np.ones(rows.size, dtype=bool)
+    notes: list[str] = []
     out: dict = {"t_s": t[rows]}
+    for name in HELD:  # first: a sensor's coverage is judged on the rows with commands
+        v = numeric.get(name)
+        if name not in present or np.isfinite(v[rows]).all():
+            continue
+        have = np.flatnonzero(np.isfinite(v))  # the last value stamped at or before each row
+        last = np.searchsorted(t[have], t[rows], side="right") - 1
+        keep &= last >= 0
+        out[name] = np.where(last >= 0, v[have[np.clip(last, 0, None)]], np.nan)
+    if not keep.any():
+        raise SparseError(int(rows[-1]), f"no sample of {leader} comes after the first command: expected "
+                                         f"commands (speed_cmd_mps, steer_cmd_rad) from the start of the log")
     for name, v in numeric.items():
-        if name == "t_s" or name not in present:
+        if name == "t_s" or name not in present or name in out:
             continue
         if np.isfinite(v[rows]).all():
             out[name] = v[rows]  # a leading column, or one with a value in every leading row
-        elif name in HELD:
-            have = np.flatnonzero(np.isfinite(v))  # the last value stamped at or before each row
-            last = np.searchsorted(t[have], t[rows], side="right") - 1
-            keep &= last >= 0
-            out[name] = np.where(last >= 0, v[have[np.clip(last, 0, None)]], np.nan)
         elif name in INTERPOLATED:
+            own = t[np.isfinite(v)]
+            span = t[rows][keep]  # the rows with commands
+            outside_s = max(own[0] - span[0], 0.0) + max(span[-1] - own[-1], 0.0)
+            if outside_s > max(MAX_OUTSIDE_S, MAX_OUTSIDE_SHARE * (span[-1] - span[0])):
+                notes.append(f"column {name!r} covers only t = {own[0]:.3f}..{own[-1]:.3f} s of the "
+                             f"{span[0]:.3f}..{span[-1]:.3f} s of {leader}: left out (keeping it would cut "
+                             f"{outside_s:.3g} s off the log)")
+                continue
             out[name] = _interpolate(t, v, t[rows])
-            keep &= np.isfinite(out[name])
+            keep &= np.isfinite(out[name])  # its holes become time gaps
         # other columns with empty cells: not read by the gap workflow, dropped
     for name, v in values.items():
         if isinstance(v, tuple):
             out[name] = tuple(v[i] for i in rows)
     kept = rows[keep]
-    return {k: (tuple(v[i] for i in np.flatnonzero(keep)) if isinstance(v, tuple) else v[keep])
-            for k, v in out.items()}, kept
+    idx = np.flatnonzero(keep)
+    return {k: (tuple(v[i] for i in idx) if isinstance(v, tuple) else v[keep]) for k, v in out.items()}, kept, notes
 
 
-__all__ = ["merge_rows", "is_empty_cell", "SparseError", "GAP_FACTOR"]
+__all__ = ["merge_rows", "is_empty_cell", "SparseError", "EMPTY_CELLS", "GAP_FACTOR", "MAX_OUTSIDE_S",
+           "MAX_OUTSIDE_SHARE"]

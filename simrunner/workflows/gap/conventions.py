@@ -12,9 +12,10 @@ off by a unit's factor:
 ========================  ==========================================================  =========================
 check                     compares (moving samples, glitches left out)                refused when
 ========================  ==========================================================  =========================
-heading                   ``yaw_rad`` with the direction the positions move in        negated or in degrees it fits
+heading                   ``yaw_rad`` with the direction of the path's chords         negated or in degrees it fits
                                                                                       better; or under half the
-                                                                                      samples within 37 deg
+                                                                                      chords within 37 deg (chords:
+                                                                                      0.5 s, at least 0.3 m)
 gyro                      ``yaw_rate_radps`` with the pose's yaw rate                 slope -1 (sign) or ~57 (deg/s)
 speed sensor              ``speed_mps`` with the pose's speed along its heading        slope -1 (sign) or ~3.6, 100,
                                                                                       1000 (km/h, cm/s, mm/s)
@@ -50,7 +51,9 @@ MIN_SPEED_MPS = 0.3
 MIN_RATE_RADPS = 0.3
 MIN_CORRELATION = 0.5
 ALIGNED_COS = 0.8  # direction of motion within ~37 deg of the heading (or of its reverse)
-ALIGNED_SHARE = 0.85  # a right heading: 0.96 (DS2's particle filter) .. 1.0 (synthetic)
+CHORD_S = 0.5  # the path's direction: chords over this long ...
+CHORD_M = 0.3  # ... that travel at least this far (a standing car's jitter does not)
+ALIGNED_SHARE = 0.85  # a right heading: 0.998 (DS2's, DS3's particle filter) .. 1.0 (synthetic)
 ALIGNED_SHARE_OTHER = 0.9  # another convention that explains the motion names the mistake
 MIN_ALIGNED_SHARE = 0.5  # below it, the heading is refused even when no convention explains it
 UNIT_BAND = 0.25  # a slope within +-25 % of a unit's factor names that unit
@@ -85,30 +88,42 @@ def _refuse(log: RunLog, column: str, text: str) -> LogError:
     return LogError(log.source, 1, f"{column}: {text}")
 
 
-def _heading(log: RunLog, pose) -> None:
-    """The heading points along the motion (forward or reversing)."""
-    t = log.t_s
-    with np.errstate(invalid="ignore"):
-        vx, vy = np.gradient(pose.x_m, t), np.gradient(pose.y_m, t)
-    moving = np.hypot(vx, vy) > MIN_SPEED_MPS
-    moving &= np.isfinite(vx) & np.isfinite(vy) & np.isfinite(log.yaw_rad)
-    if np.count_nonzero(moving) < MIN_SAMPLES:
+def _heading(log: RunLog, exclude: np.ndarray) -> None:
+    """The heading points along the motion (forward or reversing): the direction of each
+    chord of the path over :data:`CHORD_S` that travels at least :data:`CHORD_M` (so a
+    standing car's localisation jitter, centimetres in any direction, never counts) against
+    the mean heading at its ends."""
+    t, x, y = log.t_s, log.x_m, log.y_m
+    j = np.searchsorted(t, t + CHORD_S)
+    i = np.flatnonzero(j < len(t))
+    j = j[i]
+    bad = np.concatenate([[0], np.cumsum(exclude.astype(np.int64))])  # excluded samples in [i, j]
+    ok = (bad[j + 1] - bad[i] == 0) & (t[j] - t[i] <= 2.0 * CHORD_S)  # no glitch, no time gap inside
+    dx, dy = x[j] - x[i], y[j] - y[i]
+    ok &= np.hypot(dx, dy) >= CHORD_M
+    if np.count_nonzero(ok) < MIN_SAMPLES:
         return
-    course = np.arctan2(vy[moving], vx[moving])
+    course = np.arctan2(dy[ok], dx[ok])
+    i, j = i[ok], j[ok]
 
-    def share(yaw: np.ndarray) -> float:
-        return float(np.mean(np.abs(np.cos(course - yaw)) >= ALIGNED_COS))
+    def share(heading: np.ndarray) -> float:
+        """Share of the chords within ~37 deg of ``heading`` (the whole column's, any
+        wrapping) averaged over the chord's ends."""
+        h = np.unwrap(heading)
+        return float(np.mean(np.abs(np.cos(course - 0.5 * (h[i] + h[j]))) >= ALIGNED_COS))
 
-    yaw = log.yaw_rad[moving]
+    yaw = np.asarray(log.yaw_rad, dtype=float)
     own = share(yaw)
     if own >= ALIGNED_SHARE:
         return
-    found = f"points along the motion in {own:.0%} of the moving samples"
-    for alt, what, fix in ((-yaw, "negated", f"expected counter-clockwise from +x; its "
-                                              f"{_REVERSED.format(col='yaw_rad')}"),
-                           (np.radians(yaw), "read as degrees", f"expected radians; map it with unit = \"deg\" {_DOC}")):
-        if share(alt) >= ALIGNED_SHARE_OTHER and share(alt) > own + 0.1:
-            raise _refuse(log, "yaw_rad", f"{found}, {what} in {share(alt):.0%}: {fix}")
+    found = f"points along the motion in {own:.0%} of the path's chords"
+    if share(np.zeros_like(yaw)) < ALIGNED_SHARE:  # the path turns enough to tell conventions apart
+        for alt, what, fix in ((-yaw, "negated", f"expected counter-clockwise from +x; its "
+                                                 f"{_REVERSED.format(col='yaw_rad')}"),
+                               (np.radians(yaw), "read as degrees",
+                                f"expected radians; map it with unit = \"deg\" {_DOC}")):
+            if share(alt) >= ALIGNED_SHARE_OTHER and share(alt) > own + 0.1:
+                raise _refuse(log, "yaw_rad", f"{found}, {what} in {share(alt):.0%}: {fix}")
     if own < MIN_ALIGNED_SHARE:
         raise _refuse(log, "yaw_rad", f"{found}: expected the heading of the car (radians, counter-clockwise "
                                       f"from +x) with x_m, y_m in one world frame; check its unit, sign and frame")
@@ -135,7 +150,8 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
     column of ``log`` is reversed or in another unit (module docstring); ``exclude``: samples
     to leave out (glitches)."""
     steer = np.asarray(log.steer_cmd_rad, dtype=float)
-    keep = np.ones(len(log), dtype=bool) if exclude is None else ~np.asarray(exclude, dtype=bool)
+    keep_out = np.zeros(len(log), dtype=bool) if exclude is None else np.asarray(exclude, dtype=bool)
+    keep = ~keep_out
     far = np.abs(steer[keep]) > max(STEER_RANGE_RAD, STEER_RANGE_LIMITS * steer_limit_rad)
     if far.size and far.mean() > 0.01:
         top = float(np.max(np.abs(steer[keep])))
@@ -146,7 +162,7 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
     if has_pose(log):
         bare = log.with_columns(speed_mps=None, yaw_rate_radps=None)
         pose = derive(bare, wheelbase_m, exclude=exclude)
-        _heading(log, pose)
+        _heading(log, keep_out)
     measured = derive(log, wheelbase_m, exclude=exclude)  # the sensors where present, else the pose
     if pose is not None:
         if log.yaw_rate_radps is not None:
