@@ -49,7 +49,7 @@ large sample can be built in runs of trials ``K .. K+N-1`` each, as the trial de
 depend on the trial number only). Synthetic trials run in
 ``--jobs`` processes, one ``run_gap(jobs=1)`` each; real and timing runs use ``--jobs``
 processes inside ``run_gap``. ``python -m bench`` runs ``main()``: every mode, small
-(:data:`SMALL_TRIALS` per synthetic mode; about an hour on 2 cores).
+(:data:`SMALL_TRIALS` per synthetic mode; about 80 minutes on 2 cores with the shared real logs).
 """
 from __future__ import annotations
 
@@ -62,6 +62,7 @@ import time
 import traceback
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
@@ -284,16 +285,17 @@ def _sindy_fields() -> dict[str, str]:
 
 # --- real logs and timing ------------------------------------------------------------------------
 
-def real_rows(jobs: int, real_dir: Path = REAL_DIR) -> list[dict]:
-    """One row per shared real log (none when the folder is absent)."""
+def real_rows(jobs: int, real_dir: Path = REAL_DIR) -> Iterator[dict]:
+    """One row per shared real log, each as it is done (none when the folder is absent)."""
     from simrunner.run.log import read_log
     from vehicle.description import load_car
 
     if not (real_dir / REAL_CAR).exists():
-        return []
+        return
     car = load_car(real_dir / REAL_CAR)
-    return [_real_row("real", name, lambda path=real_dir / name: read_log(path), car, jobs)
-            for name in REAL_LOGS if (real_dir / name).exists()]
+    for name in REAL_LOGS:
+        if (real_dir / name).exists():
+            yield _real_row("real", name, lambda path=real_dir / name: read_log(path), car, jobs)
 
 
 def _real_row(mode: str, name: str, load, car, jobs: int) -> dict:
@@ -317,8 +319,9 @@ def _real_row(mode: str, name: str, load, car, jobs: int) -> dict:
     return row
 
 
-def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR) -> list[dict]:
-    """One row per shared real data set and partial sensor set (none when absent)."""
+def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR) -> Iterator[dict]:
+    """One row per shared real data set and partial sensor set, each as it is done (none when
+    absent)."""
     import tempfile
 
     from bench.real_topics import COLUMNS, SENSORS, partial_log_csv
@@ -327,9 +330,8 @@ def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR) -> list[dict]:
     from vehicle.description import load_car
 
     if not (real_dir / REAL_CAR).exists():
-        return []
+        return
     car = load_car(real_dir / REAL_CAR)
-    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in REAL_LOGS:
             raw = real_dir / "raw" / name.removeprefix("f1tenth_").removesuffix(".csv")
@@ -339,9 +341,8 @@ def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR) -> list[dict]:
                 path = Path(tmp) / f"{raw.name}_{sensors}.csv"
                 partial_log_csv(raw, path, sensors)
                 columns = column_map_from(None, COLUMNS[sensors])
-                rows.append(_real_row("real_partial", f"{raw.name} {sensors.replace('_', '+')}",
-                                      lambda: read_log(path, columns=columns), car, jobs))
-    return rows
+                yield _real_row("real_partial", f"{raw.name} {sensors.replace('_', '+')}",
+                                lambda: read_log(path, columns=columns), car, jobs)
 
 
 def timing_row(jobs: int) -> dict:
