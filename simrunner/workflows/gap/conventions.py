@@ -44,7 +44,7 @@ import numpy as np
 
 from simrunner.run.log import LogError, RunLog
 from simrunner.workflows.gap.glitches import has_pose
-from simrunner.workflows.gap.logs import derive
+from simrunner.workflows.gap.logs import Derived, derive
 
 MIN_SAMPLES = 50
 MIN_SPEED_MPS = 0.3
@@ -145,10 +145,11 @@ def _against_pose(log: RunLog, column: str, sensor: np.ndarray, from_pose: np.nd
 
 
 def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
-                      exclude: np.ndarray | None = None) -> None:
+                      exclude: np.ndarray | None = None, measured: Derived | None = None) -> None:
     """Raise :class:`LogError` (``path:1: column: what was found, what was expected``) when a
     column of ``log`` is reversed or in another unit (module docstring); ``exclude``: samples
-    to leave out (glitches)."""
+    to leave out (glitches); ``measured``: ``derive(log, wheelbase_m, exclude=exclude)`` if
+    the caller has it already."""
     steer = np.asarray(log.steer_cmd_rad, dtype=float)
     keep_out = np.zeros(len(log), dtype=bool) if exclude is None else np.asarray(exclude, dtype=bool)
     keep = ~keep_out
@@ -163,7 +164,8 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
         bare = log.with_columns(speed_mps=None, yaw_rate_radps=None)
         pose = derive(bare, wheelbase_m, exclude=exclude)
         _heading(log, keep_out)
-    measured = derive(log, wheelbase_m, exclude=exclude)  # the sensors where present, else the pose
+    if measured is None:  # the sensors where present, else the pose
+        measured = derive(log, wheelbase_m, exclude=exclude)
     if pose is not None:
         if log.yaw_rate_radps is not None:
             _against_pose(log, "yaw_rate_radps", measured.yaw_rate_radps, pose.yaw_rate_radps, MIN_RATE_RADPS,
