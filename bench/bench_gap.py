@@ -247,8 +247,7 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
            "snr": effect_snr(mode, k), "signals": list(result.settings["signals"]),
            "unrevealable": sorted(result.unrevealable),
            "chain": _method_row(result.effects, result.parameters, truth.values, effects, held, wall,
-                                {"steps": [(s.index, s.kept.effect if s.kept else None, s.held_gap_before,
-                                            s.kept.held_gap if s.kept else s.held_gap_before)
+                                {"steps": [(s.index, s.kept.effect if s.kept else None, s.gap_before, s.gap_after)
                                            for s in result.chain.steps],
                                  # every refitted candidate (to study the tests' thresholds afterwards)
                                  "trials": [(s.index, t.effect, t.improvement, t.delta_bic,
@@ -311,7 +310,7 @@ def _real_row(mode: str, name: str, load, car, jobs: int) -> dict:
     else:
         row.update(effects=r.effects, parameters=r.parameters, gap_before=r.gap_before, gap_after=r.gap_after,
                    rmse_before=r.rmse_before, rmse_after=r.rmse_after, signals=list(r.settings["signals"]),
-                   steps=[(s.index, s.kept.effect, s.held_gap_before, s.kept.held_gap)
+                   steps=[(s.index, s.kept.effect, s.gap_before, s.gap_after)  # the report's held-out gap
                           for s in r.chain.steps if s.kept is not None],
                    rejected=[(k, t.effect, t.reason) for k, t in r.chain.rejected],
                    glitches=len(r.glitches), stop=r.chain.stop_reason)
@@ -602,14 +601,22 @@ def main(argv: list[str] | None = None) -> None:
         ap.error(f"unknown mode(s) {', '.join(bad)} (expected {', '.join(MODES)})")
     rows: list[dict] = []
     t_start = time.perf_counter()
+
+    def save() -> None:  # after every row: a run cut short keeps what it did (``--table`` reads it)
+        if a.out:
+            done = sorted_rows(rows)
+            a.out.write_text(json.dumps({"argv": sys.argv[1:] if argv is None else argv, "rows": done,
+                                         "targets": target_rows(done)}, indent=1, default=float) + "\n")
     if "timing" in modes:
         rows.append(timing_row(a.jobs))
+        save()
         print(f"[timing done, {time.perf_counter() - t_start:.0f} s]", file=sys.stderr, flush=True)
     if "real" in modes:
         if not (REAL_DIR / REAL_CAR).exists():
             print(f"[real: no shared real logs at {REAL_DIR} (set NXPCUP_REAL_LOGS): skipped]", file=sys.stderr)
         for r in real_rows(a.jobs):
             rows.append(r)
+            save()
             print(f"[real {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
     if "real_partial" in modes:
         if not (REAL_DIR / REAL_CAR).exists():
@@ -617,6 +624,7 @@ def main(argv: list[str] | None = None) -> None:
                   file=sys.stderr)
         for r in real_partial_rows(a.jobs):
             rows.append(r)
+            save()
             print(f"[real_partial {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
     tasks, trials = [], (a.only if a.only is not None else range(a.first, a.first + a.trials))
     if "compare" in modes:
@@ -630,12 +638,11 @@ def main(argv: list[str] | None = None) -> None:
             for fut in as_completed(futures):
                 row = fut.result()
                 rows.append(row)
+                save()
                 print(f"[{row['mode']} {row['trial']} done, {row['wall_s']:.0f} s; "
                       f"{time.perf_counter() - t_start:.0f} s total]", file=sys.stderr, flush=True)
     rows = sorted_rows(rows)
-    if a.out:  # first: a failing report must not lose hours of rows
-        a.out.write_text(json.dumps({"argv": sys.argv[1:] if argv is None else argv, "rows": rows,
-                                     "targets": target_rows(rows)}, indent=1, default=float) + "\n")
+    save()  # first: a failing report must not lose hours of rows
     text = report(rows)
     print(text)
     print(f"\nbench wall time: {time.perf_counter() - t_start:.0f} s on {a.jobs} processes")

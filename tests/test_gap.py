@@ -185,9 +185,14 @@ def test_two_hidden_effects_are_both_kept_with_a_chain():
     assert result.parameters["motor_lag_s"] == pytest.approx(0.3, rel=0.15)
     steps = result.chain.steps
     assert [s.kept.effect for s in steps if s.kept] == result.effects
-    for s in steps:  # every kept step shrinks the held-out gap
+    for s in steps:  # every kept step shrinks the held-out gap, on its own and on the report's normalisation
         if s.kept:
-            assert s.kept.held_gap < s.held_gap_before
+            assert s.kept.held_gap < s.held_gap_before and s.gap_after < s.gap_before
+    assert steps[0].gap_before == pytest.approx(result.gap_before)
+    assert steps[1].gap_before == steps[0].gap_after
+    # the second step is normalised to the first model's residuals: the signals the offset
+    # explained weigh more than they did under the nominal model
+    assert steps[1].scales["cross_m"] < 0.5 * steps[0].scales["cross_m"]
     assert result.gap_after < 0.5 * result.gap_before
     assert steps[-1].kept is None and steps[-1].trials  # the chain stopped on rejections
     rep = result.to_json()

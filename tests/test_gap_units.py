@@ -387,6 +387,31 @@ def test_fit_effect_finds_hidden_offset_on_stand_in():
     assert other.delta_bic < r.delta_bic
 
 
+def test_rescaled_weighs_every_signal_the_same_under_the_given_car():
+    """The normalisation a later chain step judges on: under the nominal car it is the
+    problem's own; under the true car the signals the effect bent get much smaller scales,
+    and each signal's mean square is 1 again (or below, at the floor)."""
+    from simrunner.workflows.gap.fit import SCALE_FLOOR, rescaled, robust_scale_of, segment_residuals, window_costs
+
+    nominal = CarDescription()
+    truth = nominal.replace(effects=nominal.effects.__class__(steering_offset_rad=0.04))
+    prob = _problem(truth, nominal)
+    robust = dataclasses.replace(prob, robust_scale=robust_scale_of(window_costs(prob, segment_residuals(prob, nominal))))
+    again = rescaled(robust, nominal)
+    assert again.scales == pytest.approx(robust.scales, rel=1e-12)
+    assert again.robust_scale == pytest.approx(robust.robust_scale, rel=1e-12)
+    assert rescaled(prob, nominal).robust_scale == math.inf  # least squares stays least squares
+    judge = rescaled(robust, truth)
+    assert judge.segments is robust.segments and judge.signals == robust.signals
+    for s in ("cross_m", "yaw_rad", "yaw_rate_radps"):
+        assert judge.scales[s] < 0.2 * robust.scales[s]
+    res = segment_residuals(judge, truth)[0]
+    mask = window_mask(len(prob.segments[0].log), prob.segments[0].windows)
+    for s in judge.signals:
+        ms = float(np.nanmean((res[s][mask] / judge.scales[s]) ** 2))
+        assert ms == pytest.approx(1.0, rel=1e-9) or judge.scales[s] == SCALE_FLOOR[s]
+
+
 def test_chain_acceptance_needs_bic_fit_and_held_out_improvement():
     from simrunner.workflows.gap.chain import Trial, _reject_reason
 
@@ -395,7 +420,8 @@ def test_chain_acceptance_needs_bic_fit_and_held_out_improvement():
     assert _reject_reason(tr(500.0, 0.5, 0.5), 1.0, 132.5, 0.068, 0.02) == ""
     assert "delta_BIC 5.0 < 132.5" in _reject_reason(tr(5.0, 0.5, 0.5), 1.0, 132.5, 0.068, 0.02)
     assert "fit improvement 0.1% < 6.8%" in _reject_reason(tr(500.0, 0.001, 0.5), 1.0, 132.5, 0.068, 0.02)
-    assert "do not confirm" in _reject_reason(tr(500.0, 0.5, 0.99), 1.0, 132.5, 0.068, 0.02)
+    assert "held-out gap -1.0%: not smaller by 2.0% (the held-out windows do not confirm it)" == \
+        _reject_reason(tr(500.0, 0.5, 0.99), 1.0, 132.5, 0.068, 0.02)
     assert "do not confirm" in _reject_reason(tr(500.0, 0.5, float("nan")), 1.0, 132.5, 0.068, 0.02)
 
 
@@ -919,6 +945,7 @@ def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None):
     class FakeProblem:
         car = CarDescription()
         n_values = 1
+        scales: dict = {}
 
         def with_car(self, car):
             p = FakeProblem()
@@ -933,9 +960,9 @@ def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None):
         return held if problem is held_p else c
 
     def trial(args):
-        names = args[4]
+        names = args[5]
         c, held = refit[frozenset(names)]
-        return {field[n]: fitted[n] for n in names}, c, 5, held
+        return chain.Outcome({field[n]: fitted[n] for n in names}, c, 5, held, c, held)
 
     def screen(problem, current_cost, names, **kw):
         have = active(problem.car)
@@ -947,6 +974,7 @@ def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None):
     monkeypatch.setattr(chain, "_trial_task", trial)
     monkeypatch.setattr(chain, "fit_all", screen)
     monkeypatch.setattr(chain, "screening_problem", lambda p, max_s=0: p)
+    monkeypatch.setattr(chain, "renormalised", lambda fit, held, car, factor: chain.Judge(fit, held))  # one scale
     monkeypatch.setattr(chain, "bic", lambda p, c, k: 1000.0 * math.log(c) + 10.0 * k)
     return fit_p, held_p
 

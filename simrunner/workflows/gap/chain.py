@@ -41,8 +41,20 @@ refitted) and
    the exchanges repeat until none helps (:data:`MAX_EXCHANGES` at most). A look-alike that won a near tie early (a mass scale
    for a brake scale, an asymmetry for an offset) is swapped for the effect the later ones
    fit with; ``Chain.swaps`` records each with its figures;
-6. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects;
-7. then checks every kept effect once more (backward elimination): with two or more kept,
+6. sets the normalisation the next step judges on (:func:`renormalised`): every signal's
+   scale becomes the RMS of the current model's residuals on the fit windows (the robust
+   window scale likewise), so the tests of step 3 weigh every signal the same again, as
+   they do at the first step under the nominal model, where the thresholds were calibrated
+   (effect-free logs: every signal's normalised cost about 1). Under the nominal scales a
+   strong first effect leaves its signals far below 1 while an untouched signal stays at
+   its noise, and a second effect on the same signals is judged against a cost it barely
+   touches (a steering asymmetry next to a strong offset: 1.6 % of the fit cost; 36 % of
+   it on the renormalised signals; docs/gap.md). The fits themselves keep minimising the
+   cost on the problems' normalisation, the report's, so the parameters and the held-out
+   gaps reported are those of one objective; only the tests' figures (``Trial.delta_bic``,
+   ``improvement``, ``held_gap``, ``Step.held_gap_before``) are on the step's;
+7. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects;
+8. then checks every kept effect once more (backward elimination): with two or more kept,
    each is left out in turn and the others refitted; an effect that would no longer pass
    the tests of step 3 as the last one added (against the others refitted without it) is
    removed, the weakest first, and the check repeats. A look-alike kept early (a slower
@@ -64,8 +76,9 @@ import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
 from simrunner.workflows.gap.fit import (BRENT_MAXITER, CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN,
-                                         REFINE_TOP, FitResult, Problem, _quiet_worker, bic,
-                                         cost_of, fit_all)
+                                         REFINE_TOP, ROBUST_WINDOW_FACTOR, FitResult, Problem, _quiet_worker,
+                                         bic, cost_of, fit_all, rescaled, robust_total, segment_residuals,
+                                         window_costs)
 from vehicle.description import CarDescription
 
 MAX_EFFECTS = 4
@@ -184,7 +197,8 @@ class Trial:
 
     effect: str
     parameters: dict[str, float]  # every fitted parameter (kept ones and the new one)
-    cost: float
+    cost: float         # fit windows, on the problems' normalisation (what the refit minimised)
+    # the tests' figures, on the step's normalisation (module docstring, step 6):
     delta_bic: float    # against the current model
     improvement: float  # 1 - cost / current cost, fit windows
     held_gap: float     # held-out gap with these parameters
@@ -204,9 +218,12 @@ class Step:
     """One step of the chain: the screening ranking, the refitted trials, what was kept."""
 
     index: int
-    held_gap_before: float
+    held_gap_before: float  # the current model's, on this step's normalisation (``scales``), as the trials'
     screening: tuple[FitResult, ...]
     trials: tuple[Trial, ...]
+    scales: dict[str, float] = dataclasses.field(default_factory=dict)  # the step's normalisation
+    gap_before: float = math.nan  # held-out gap of the model before / after the step on the
+    gap_after: float = math.nan   # problems' normalisation (the report's: GapResult.gap_before/after)
 
     @property
     def kept(self) -> Trial | None:
@@ -216,8 +233,8 @@ class Step:
         kept = self.kept
         return {"step": self.index, "kept": kept.effect if kept else None,
                 "parameters": kept.parameters if kept else {},
-                "held_gap_before": self.held_gap_before,
-                "held_gap_after": kept.held_gap if kept else self.held_gap_before,
+                "held_gap_before": self.gap_before, "held_gap_after": self.gap_after,
+                "scales": self.scales, "step_held_gap_before": self.held_gap_before,
                 "trials": [t.to_json() for t in self.trials],
                 "screened": [r.to_json() for r in self.screening]}
 
@@ -334,14 +351,45 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
     return {CANDIDATES[n].field: values[CANDIDATES[n].field] for n in given}, seen[key], len(seen)
 
 
-def _trial_task(args) -> tuple[dict[str, float], float, int, float]:
-    screen_problem, fit_problem, held_problem, base, names, start, first = args
-    values, cost, evals = joint_refit(screen_problem, base, names, start, first)
+@dataclass(frozen=True)
+class Judge:
+    """The normalisation a step judges its candidates on (step 6 of the module docstring):
+    the fit and held-out problems with the scales of the current model's residuals."""
+
+    fit: Problem
+    held: Problem
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """A refit's result: the values, the fit-window cost and held-out gap on the problems'
+    (the report's) normalisation, and the same two on the step's (``judged_*``)."""
+
+    values: dict[str, float]
+    cost: float
+    evaluations: int
+    held_gap: float
+    judged_cost: float
+    judged_held_gap: float
+
+
+def judged(problem: Problem, judge: Problem, car: CarDescription) -> tuple[float, float]:
+    """``car``'s cost on ``problem`` and on ``judge`` (same windows, other scales): one replay."""
+    res = segment_residuals(problem, car)
+    cost = robust_total(window_costs(problem, res), problem.robust_scale)
+    if judge is problem:
+        return cost, cost
+    return cost, robust_total(window_costs(judge, res), judge.robust_scale)
+
+
+def _trial_task(args) -> Outcome:
+    screen_problem, fit_problem, held_problem, judge, base, names, start, first = args
+    values, _, evals = joint_refit(screen_problem, base, names, start, first)
     car = with_parameters(base, values)
-    if screen_problem is not fit_problem:
-        cost = cost_of(fit_problem, car)
-    held = cost_of(held_problem, car) / max(held_problem.n_values, 1)
-    return values, cost, evals, held
+    cost, j_cost = judged(fit_problem, judge.fit, car)
+    held, j_held = judged(held_problem, judge.held, car)
+    n = max(held_problem.n_values, 1)
+    return Outcome(values, cost, evals, held / n, j_cost, j_held / n)
 
 
 def neutral_offset(name: str, value: float) -> float:
@@ -359,12 +407,15 @@ def neutral_offset(name: str, value: float) -> float:
 def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int = 2,
                 delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
                 held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
+                robust_factor: float = ROBUST_WINDOW_FACTOR,
                 progress: Callable[[str], None] | None = None) -> Chain:
     """Run the forward selection of the module docstring over the effects ``names``.
 
     ``fit_problem`` and ``held_problem`` have the same base car (no chain effect yet), the
     same signals and scales; the held-out gap is ``cost / n_values`` of ``held_problem``
-    (whose physics step may be finer than the fit problem's)."""
+    (whose physics step may be finer than the fit problem's). Every fit minimises the cost
+    on their normalisation; the tests of step 3 judge on the step's (``robust_factor``: the
+    robust window scale's factor, as ``run_gap``'s)."""
     base = fit_problem.car
     tick = progress or (lambda label: None)
     order = {n: i for i, n in enumerate(CANDIDATES)}
@@ -373,13 +424,15 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     cost = cost_of(fit_problem, base)
     held_gap = cost_of(held_problem, base) / max(held_problem.n_values, 1)
     nominal_cost, nominal_held = cost, held_gap
+    judge = Judge(fit_problem, held_problem)  # step 1: the nominal model's normalisation
+    j_cost, j_held = cost, held_gap  # the current model's cost and held-out gap as the step judges them
     steps: list[Step] = []
     swaps: list[Swap] = []
     runners_up: dict[str, list[Trial]] = {}  # per kept effect: the step's other refitted candidates
     stop = ""
     pool = ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) if jobs > 1 else None
 
-    def run_tasks(tasks):
+    def run_tasks(tasks) -> list[Outcome]:
         return list(pool.map(_trial_task, tasks)) if pool is not None else [_trial_task(t) for t in tasks]
 
     try:
@@ -391,10 +444,11 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             k = len(kept_names)
             screen_base = screening_problem(fit_problem)
             if k:  # the baseline: the kept effects alone, refitted as the candidates will be
-                (b_values, b_cost, _, b_held), = run_tasks([(screen_base, fit_problem, held_problem, base,
-                                                              list(kept_names), dict(kept_values), None)])
-                if b_cost < cost:
-                    kept_values, cost, held_gap = b_values, b_cost, b_held
+                b, = run_tasks([(screen_base, fit_problem, held_problem, judge, base,
+                                 list(kept_names), dict(kept_values), None)])
+                if b.cost < cost:
+                    kept_values, cost, held_gap = b.values, b.cost, b.held_gap
+                    j_cost, j_held = b.judged_cost, b.judged_held_gap
             current = with_parameters(base, kept_values)
             full = fit_problem.with_car(current)
             screen = screening_problem(full)
@@ -405,39 +459,42 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             ranked = sorted(screening, key=lambda r: (r.cost, order[r.effect]))
             later = [r for r in ranked[n_top:] if r.improvement >= 0.5 * improvement_min]
             batches = [ranked[:n_top]] + [later[i:i + n_top] for i in range(0, len(later), n_top)]
-            crit_now = bic(fit_problem, cost, k)
+            crit_now = bic(judge.fit, j_cost, k)
             decided: list[Trial] = []
             chosen = None
+            outcome: dict[str, Outcome] = {}
             for batch in batches:
                 if not batch or chosen is not None:
                     break
-                outs = run_tasks([(screen_base, fit_problem, held_problem, base, kept_names + [r.effect],
+                outs = run_tasks([(screen_base, fit_problem, held_problem, judge, base, kept_names + [r.effect],
                                    {**kept_values, **r.parameters}, r.effect) for r in batch])
                 tick(f"step {index} joint refits")
-                trials = [Trial(r.effect, values, c, crit_now - bic(fit_problem, c, k + 1),
-                                1.0 - c / cost if cost > 0 else 0.0, held, evals)
-                          for r, (values, c, evals, held) in zip(batch, outs)]
+                outcome.update((r.effect, o) for r, o in zip(batch, outs))
+                trials = [Trial(r.effect, o.values, o.cost, crit_now - bic(judge.fit, o.judged_cost, k + 1),
+                                1.0 - o.judged_cost / j_cost if j_cost > 0 else 0.0, o.judged_held_gap,
+                                o.evaluations) for r, o in zip(batch, outs)]
                 trials.sort(key=lambda tr: (-tr.delta_bic, order[tr.effect]))
                 for tr in trials:
-                    reason = _reject_reason(tr, held_gap, delta_bic_min, improvement_min, held_improvement_min)
+                    reason = _reject_reason(tr, j_held, delta_bic_min, improvement_min, held_improvement_min)
                     if chosen is None and not reason:
                         chosen = dataclasses.replace(tr, kept=True)
                         decided.append(chosen)
                     else:
                         decided.append(dataclasses.replace(tr, reason=reason or BETTER))
-            steps.append(Step(index, held_gap, tuple(sorted(screening, key=lambda r: (r.criterion, order[r.effect]))),
-                              tuple(decided)))
+            steps.append(Step(index, j_held, tuple(sorted(screening, key=lambda r: (r.criterion, order[r.effect]))),
+                              tuple(decided), dict(judge.fit.scales), held_gap,
+                              held_gap if chosen is None else outcome[chosen.effect].held_gap))
             if chosen is None:
                 stop = "no remaining effect passes the tests"
                 break
             kept_names.append(chosen.effect)
             kept_values = dict(chosen.parameters)
-            cost, held_gap = chosen.cost, chosen.held_gap
+            cost, held_gap = chosen.cost, outcome[chosen.effect].held_gap
             runners_up[chosen.effect] = sorted((t for t in decided if not t.kept),
                                                key=lambda tr: (tr.cost, order[tr.effect]))[:REFINE_TOP]
             for _ in range(MAX_EXCHANGES if len(kept_names) > 1 else 0):
                 tick(f"step {index} exchanges")
-                swap = _best_exchange(run_tasks, screen_base, fit_problem, held_problem, base, index,
+                swap = _best_exchange(run_tasks, screen_base, fit_problem, held_problem, judge, base, index,
                                       kept_names, kept_values, cost, held_gap, runners_up)
                 if swap is None:
                     break
@@ -445,30 +502,34 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                 kept_names[kept_names.index(swap.out)] = swap.into
                 runners_up[swap.into] = [t for t in runners_up.pop(swap.out) if t.effect != swap.into]
                 kept_values, cost, held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
+            # the next step judges on the current model's normalisation (module docstring, step 6)
+            current = with_parameters(base, kept_values)
+            judge = renormalised(fit_problem, held_problem, current, robust_factor)
+            j_cost = cost_of(judge.fit, current)
+            j_held = cost_of(judge.held, current) / max(held_problem.n_values, 1)
         else:
             stop = f"the chain reached its limit of {max_effects} effects"
         pruned: list[Trial] = []
         while len(kept_names) > 1:  # the final check: every kept effect still earns its place
             tick("final check")
             k = len(kept_names)
-            outs = run_tasks([(screening_problem(fit_problem), fit_problem, held_problem, base,
+            outs = run_tasks([(screening_problem(fit_problem), fit_problem, held_problem, judge, base,
                                [n for n in kept_names if n != e],
                                {f: v for f, v in kept_values.items() if f != CANDIDATES[e].field}, None)
                               for e in kept_names])
             weakest = None
-            for e, (values, c, evals, held) in zip(kept_names, outs):
-                crit_without = bic(fit_problem, c, k - 1)
-                tr = Trial(e, dict(kept_values), cost, crit_without - bic(fit_problem, cost, k),
-                           1.0 - cost / c if c > 0 else 0.0, held_gap, evals)
-                reason = _reject_reason(tr, held, delta_bic_min, improvement_min, held_improvement_min)
+            for e, o in zip(kept_names, outs):
+                tr = Trial(e, dict(kept_values), cost, bic(judge.fit, o.judged_cost, k - 1) - bic(judge.fit, j_cost, k),
+                           1.0 - j_cost / o.judged_cost if o.judged_cost > 0 else 0.0, j_held, o.evaluations)
+                reason = _reject_reason(tr, o.judged_held_gap, delta_bic_min, improvement_min, held_improvement_min)
                 if reason and (weakest is None or tr.delta_bic < weakest[0].delta_bic):
-                    weakest = (dataclasses.replace(tr, reason=reason), values, c, held)
+                    weakest = (dataclasses.replace(tr, reason=reason), o)
             if weakest is None:
                 break
-            tr, values, c, held = weakest
+            tr, o = weakest
             pruned.append(tr)
             kept_names.remove(tr.effect)
-            kept_values, cost, held_gap = values, c, held
+            kept_values, cost, held_gap, j_cost, j_held = o.values, o.cost, o.held_gap, o.judged_cost, o.judged_held_gap
     finally:
         if pool is not None:
             pool.shutdown()
@@ -476,7 +537,14 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                  dict(kept_values), tuple(pruned), tuple(swaps))
 
 
-def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, held_problem: Problem,
+def renormalised(fit_problem: Problem, held_problem: Problem, car: CarDescription, robust_factor: float) -> Judge:
+    """Step 6 of the module docstring: the problems normalised to ``car``'s residuals on the
+    fit windows (the held-out windows never set a scale)."""
+    fit = rescaled(fit_problem, car, robust_factor)
+    return Judge(fit, dataclasses.replace(held_problem, scales=fit.scales, robust_scale=fit.robust_scale))
+
+
+def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, held_problem: Problem, judge: Judge,
                    base: CarDescription, index: int, kept_names: list[str], kept_values: dict[str, float],
                    cost: float, held_gap: float, runners_up: dict[str, list[Trial]]) -> Swap | None:
     """The best exchange of step 5 of the module docstring (None when none lowers the fit
@@ -491,12 +559,12 @@ def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, hel
             field = CANDIDATES[tr.effect].field
             names = [tr.effect if n == out else n for n in kept_names]
             pairs.append((out, tr.effect))
-            tasks.append((screen_problem, fit_problem, held_problem, base, names,
+            tasks.append((screen_problem, fit_problem, held_problem, judge, base, names,
                           {**start, field: tr.parameters[field]}, tr.effect))
     best = None
-    for (out, into), (values, c, _, held) in zip(pairs, run_tasks(tasks) if tasks else []):
-        if c < cost and held <= held_gap and (best is None or c < best.cost_after):
-            best = Swap(index, out, into, dict(values), cost, c, held_gap, held)
+    for (out, into), o in zip(pairs, run_tasks(tasks) if tasks else []):
+        if o.cost < cost and o.held_gap <= held_gap and (best is None or o.cost < best.cost_after):
+            best = Swap(index, out, into, dict(o.values), cost, o.cost, held_gap, o.held_gap)
     return best
 
 
@@ -511,8 +579,9 @@ def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvem
     if tr.improvement < improvement_min:
         return f"fit improvement {tr.improvement:.1%} < {improvement_min:.1%}"
     if not (math.isfinite(tr.held_gap) and tr.held_gap <= held_before * (1.0 - held_improvement_min)):
-        return (f"held-out gap {held_before:.3g} -> {tr.held_gap:.3g}: not smaller by "
-                f"{held_improvement_min:.1%} (the held-out windows do not confirm it)")
+        change = f"{tr.held_gap / held_before - 1.0:+.1%}" if held_before > 0 and math.isfinite(tr.held_gap) else "not finite"
+        return (f"held-out gap {change}: not smaller by {held_improvement_min:.1%} "
+                "(the held-out windows do not confirm it)")
     return ""
 
 

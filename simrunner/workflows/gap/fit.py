@@ -223,6 +223,19 @@ def nominal_scales(segments: Sequence[Segment], res: Sequence[dict[str, np.ndarr
     return out
 
 
+def rescaled(problem: Problem, car: CarDescription, robust_factor: float = ROBUST_WINDOW_FACTOR) -> Problem:
+    """``problem`` normalised to ``car``'s residuals on its windows (:func:`nominal_scales`
+    and :func:`robust_scale_of` with ``car`` in the nominal model's place; a least-squares
+    problem stays one): every signal weighs the same again under ``car``, as every signal
+    weighs the same under the nominal model before the first fit."""
+    res = segment_residuals(problem, car)
+    out = dataclasses.replace(problem, scales=nominal_scales(problem.segments, res, problem.signals),
+                              robust_scale=math.inf)
+    if math.isfinite(problem.robust_scale):
+        out = dataclasses.replace(out, robust_scale=robust_scale_of(window_costs(out, res), robust_factor))
+    return out
+
+
 def bic(problem: Problem, cost: float, k: int) -> float:
     n_eff = problem.n_eff
     return n_eff * math.log(max(cost, 1e-300) / problem.n_values) + k * math.log(n_eff)

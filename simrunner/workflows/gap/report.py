@@ -292,7 +292,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     tick("nominal")
     chain = build_chain(fit_problem, held_problem, names, jobs=jobs, delta_bic_min=delta_bic_min,
                         improvement_min=improvement_min, held_improvement_min=held_improvement_min,
-                        max_effects=max_effects, progress=tick)
+                        max_effects=max_effects, robust_factor=robust_factor, progress=tick)
     car_after = chain.car
     pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
     res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
@@ -458,8 +458,8 @@ def summary_text(result: GapResult) -> str:
     for step in chain.steps:
         kept = step.kept
         if kept is not None:
-            lines.append(f"  step {step.index}: + {kept.effect:<20} held-out gap {step.held_gap_before:.3g} -> "
-                         f"{kept.held_gap:.3g}  (delta_BIC {kept.delta_bic:.0f}, fit {kept.improvement:.1%})"
+            lines.append(f"  step {step.index}: + {kept.effect:<20} held-out gap {step.gap_before:.3g} -> "
+                         f"{step.gap_after:.3g}  (delta_BIC {kept.delta_bic:.0f}, fit {kept.improvement:.1%})"
                          + ("  removed by the final check" if kept.effect in gone else ""))
         for sw in (sw for sw in chain.swaps if sw.step == step.index):
             lines.append(f"  after step {sw.step}: {sw.out} -> {sw.into} (exchanged, all refitted): fit cost "
