@@ -974,7 +974,7 @@ def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None):
     monkeypatch.setattr(chain, "_trial_task", trial)
     monkeypatch.setattr(chain, "fit_all", screen)
     monkeypatch.setattr(chain, "screening_problem", lambda p, max_s=0: p)
-    monkeypatch.setattr(chain, "renormalised", lambda fit, held, car, factor: chain.Judge(fit, held))  # one scale
+    monkeypatch.setattr(chain, "renormalised", lambda fit, held, car, factor: (chain.Judge(fit, held), cost(fit, car)))  # one scale
     monkeypatch.setattr(chain, "bic", lambda p, c, k: 1000.0 * math.log(c) + 10.0 * k)
     return fit_p, held_p
 

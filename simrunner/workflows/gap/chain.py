@@ -504,8 +504,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                 kept_values, cost, held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
             # the next step judges on the current model's normalisation (module docstring, step 6)
             current = with_parameters(base, kept_values)
-            judge = renormalised(fit_problem, held_problem, current, robust_factor)
-            j_cost = cost_of(judge.fit, current)
+            judge, j_cost = renormalised(fit_problem, held_problem, current, robust_factor)
             j_held = cost_of(judge.held, current) / max(held_problem.n_values, 1)
         else:
             stop = f"the chain reached its limit of {max_effects} effects"
@@ -537,11 +536,15 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                  dict(kept_values), tuple(pruned), tuple(swaps))
 
 
-def renormalised(fit_problem: Problem, held_problem: Problem, car: CarDescription, robust_factor: float) -> Judge:
+def renormalised(fit_problem: Problem, held_problem: Problem, car: CarDescription,
+                 robust_factor: float) -> tuple[Judge, float]:
     """Step 6 of the module docstring: the problems normalised to ``car``'s residuals on the
-    fit windows (the held-out windows never set a scale)."""
-    fit = rescaled(fit_problem, car, robust_factor)
-    return Judge(fit, dataclasses.replace(held_problem, scales=fit.scales, robust_scale=fit.robust_scale))
+    fit windows (the held-out windows never set a scale), and ``car``'s fit cost on that
+    normalisation (from the same replay)."""
+    res = segment_residuals(fit_problem, car)
+    fit = rescaled(fit_problem, car, robust_factor, res=res)
+    judge = Judge(fit, dataclasses.replace(held_problem, scales=fit.scales, robust_scale=fit.robust_scale))
+    return judge, robust_total(window_costs(fit, res), fit.robust_scale)
 
 
 def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, held_problem: Problem, judge: Judge,

@@ -223,12 +223,14 @@ def nominal_scales(segments: Sequence[Segment], res: Sequence[dict[str, np.ndarr
     return out
 
 
-def rescaled(problem: Problem, car: CarDescription, robust_factor: float = ROBUST_WINDOW_FACTOR) -> Problem:
+def rescaled(problem: Problem, car: CarDescription, robust_factor: float = ROBUST_WINDOW_FACTOR,
+             res: Sequence[dict[str, np.ndarray]] | None = None) -> Problem:
     """``problem`` normalised to ``car``'s residuals on its windows (:func:`nominal_scales`
     and :func:`robust_scale_of` with ``car`` in the nominal model's place; a least-squares
     problem stays one): every signal weighs the same again under ``car``, as every signal
-    weighs the same under the nominal model before the first fit."""
-    res = segment_residuals(problem, car)
+    weighs the same under the nominal model before the first fit. ``res``: ``car``'s
+    residuals on the problem (:func:`segment_residuals`), when the caller has them."""
+    res = segment_residuals(problem, car) if res is None else res
     out = dataclasses.replace(problem, scales=nominal_scales(problem.segments, res, problem.signals),
                               robust_scale=math.inf)
     if math.isfinite(problem.robust_scale):
