@@ -252,7 +252,9 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
                                  # every refitted candidate (to study the tests' thresholds afterwards)
                                  "trials": [(s.index, t.effect, t.improvement, t.delta_bic,
                                              1.0 - t.held_gap / s.held_gap_before if s.held_gap_before > 0 else 0.0,
-                                             t.kept, t.reason) for s in result.chain.steps for t in s.trials]})}
+                                             t.kept, t.reason) for s in result.chain.steps for t in s.trials],
+                                 "pruned": [(t.effect, after) for t, after in zip(result.chain.pruned,
+                                                                                 result.chain.pruned_after)]})}
     if baselines:
         from bench.gap_baselines import BaselineUnavailable, esindy, joint_least_squares, problems
         from simrunner.workflows.gap.chain import with_parameters
@@ -313,6 +315,7 @@ def _real_row(mode: str, name: str, load, car, jobs: int) -> dict:
                    steps=[(s.index, s.kept.effect, s.gap_before, s.gap_after)  # the report's held-out gap
                           for s in r.chain.steps if s.kept is not None],
                    rejected=[(k, t.effect, t.reason) for k, t in r.chain.rejected],
+                   pruned=[(t.effect, after) for t, after in zip(r.chain.pruned, r.chain.pruned_after)],
                    glitches=len(r.glitches), stop=r.chain.stop_reason)
     row["wall_s"] = time.perf_counter() - t0
     return row

@@ -144,3 +144,20 @@ def test_real_partial_sensor_logs_read_through_a_mapping_and_prepare(data_set, t
     raw = read_log(tmp_path / "encoder_gyro.csv", columns=column_map_from(None, as_logged))
     with pytest.raises(LogError, match='yaw_rate_radps: .*unit = "deg/s"'):
         check_conventions(raw, car.chassis.wheelbase_m, car.steering.limit_rad, glitch_mask(raw, find_glitches(raw)))
+
+
+def test_ds2_has_one_brake_to_reverse_and_it_stays_in_the_fit(car):
+    """DS2 (README: reversing) commands reverse while rolling forward once at speed (113.9 s,
+    from 4.4 m/s) and once from rest (87.8 s, a smoothed 0.11 m/s for one sample): only the
+    first is a brake-to-reverse window, and a lone group stays in the fit windows."""
+    from simrunner.workflows.gap.report import WINDOW_S, prepare, window_strata
+
+    part = prepare(read_log(REAL / "f1tenth_DS2.csv"), car, WINDOW_S)
+    windows = sorted(part.fit_windows + part.held_windows, key=lambda w: w.start)
+    strata = window_strata(part.log, part.derived, segment(part.log, part.derived, car), windows,
+                           car.drive.max_brake_mps2)
+    onset = [w for w, s in zip(windows, strata) if s == "brake_to_reverse"]
+    assert len(onset) == 1 and part.log.t_s[onset[0].start] < 113.95 < part.log.t_s[onset[0].stop - 1]
+    assert onset[0] in part.fit_windows
+    loose = window_strata(part.log, part.derived, segment(part.log, part.derived, car), windows)
+    assert loose.count("brake_to_reverse") == 2  # with MOVING_MPS alone the blip at rest counts

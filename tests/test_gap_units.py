@@ -446,6 +446,30 @@ def test_a_candidate_fitted_at_its_neutral_value_is_not_kept(effect, field, neut
             assert "neutral value" in reason
 
 
+@pytest.mark.parametrize("rate_hz", [20.0, 50.0])
+def test_a_reverse_command_is_a_brake_to_reverse_only_while_the_car_rolls_faster_than_one_sample_of_braking(rate_hz):
+    """DS2 has a reverse command from rest at a smoothed 0.11 m/s: no braking to see (the
+    car is at rest by the next sample), so it must not take the split's brake-to-reverse
+    group (with one real event, that event then stays in the fit). At 2 m/s it is one."""
+    from simrunner.workflows.gap.report import window_strata
+
+    t = np.arange(0.0, 12.0, 1.0 / rate_hz)
+    max_brake = 9.51
+    for v_roll in (0.15, 2.0):
+        speed = np.full(t.size, v_roll)
+        cmd = np.where((t > 5.0) & (t < 5.0 + 2.0 / rate_hz), -5.0, v_roll)
+        log = _log({"t_s": t, "x_m": v_roll * t, "y_m": np.zeros_like(t), "yaw_rad": np.zeros_like(t),
+                    "speed_mps": speed, "speed_cmd_mps": cmd, "steer_cmd_rad": np.zeros_like(t)})
+        derived = derive(log, 0.33)
+        windows = make_windows(log)
+        masks = segment(log, derived)
+        with_car = window_strata(log, derived, masks, windows, max_brake)
+        without = window_strata(log, derived, masks, windows)
+        assert "brake_to_reverse" in without  # above MOVING_MPS either way
+        assert ("brake_to_reverse" in with_car) is (v_roll > max_brake / rate_hz)
+        assert with_car.count("brake_to_reverse") <= 1
+
+
 def test_split_is_stratified_by_label():
     w = [f"w{k}" for k in range(9)]
     labels = ["a", "a", "c", "a", "a", "c", "c", "a", "a"]
@@ -1004,6 +1028,41 @@ def test_the_final_check_removes_an_effect_the_later_ones_made_redundant(monkeyp
     # an effect the others do not replace stays: with the look-alike alone there is nothing to check
     only = chain.build_chain(fit_p, held_p, [look], jobs=1)
     assert only.effects == [look] and only.pruned == ()
+
+
+def test_a_chain_at_its_limit_resumes_after_the_check_removes_a_look_alike(monkeypatch):
+    """Stepwise selection: with room for two effects the look-alike and the real one fill
+    the chain; the check removes the look-alike, which frees a place, and the forward
+    steps resume (without the removed one) and keep the effect the limit had shut out
+    (DS2: an acceleration scale kept at step 3 and removed by the check had taken the
+    place of its brake scale). Costs come from tables, so only the chain's logic runs."""
+    import simrunner.workflows.gap.chain as chain
+
+    look, real, third = "servo_rate_scale", "command_latency", "brake_scale"
+    field = {look: "servo_rate_scale", real: "command_latency_s", third: "brake_scale"}
+    neutral = {look: 1.0, real: 0.0, third: 1.0}
+    fitted = {look: 0.7, real: 0.04, third: 0.4}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([look]): (400.0, 0.4),  # (fit cost, held gap)
+             frozenset([real]): (101.0, 0.10), frozenset([third]): (900.0, 0.9),
+             frozenset([look, real]): (100.0, 0.099), frozenset([look, third]): (350.0, 0.35),
+             frozenset([real, third]): (50.0, 0.05), frozenset([look, real, third]): (49.0, 0.049)}
+    screened = {frozenset([look]): 400.0, frozenset([real]): 450.0, frozenset([third]): 900.0,
+                frozenset([look, real]): 100.0, frozenset([look, third]): 350.0, frozenset([real, third]): 50.0,
+                frozenset([look, real, third]): 49.0}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
+    monkeypatch.setattr(chain, "REFINE_TOP", 1)
+    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    result = chain.build_chain(fit_p, held_p, [look, real, third], jobs=1, max_effects=2)
+    assert [(s.index, s.kept.effect) for s in result.steps if s.kept] == [(1, look), (2, real), (3, third)]
+    assert [t.effect for t in result.pruned] == [look] and result.pruned_after == (2,)
+    assert result.effects == [real, third]
+    assert result.parameters == {field[real]: 0.04, field[third]: 0.4}
+    assert look not in {r.effect for r in result.steps[2].screening}  # removed: not tried again
+    assert result.stop_reason == "the chain reached its limit of 2 effects"
+    # with room for all three the look-alike is removed the same way and nothing resumes
+    roomy = chain.build_chain(fit_p, held_p, [look, real, third], jobs=1, max_effects=3)
+    assert roomy.effects == [real, third] and [t.effect for t in roomy.pruned] == [look]
+    assert roomy.pruned_after == (3,) and len(roomy.steps) == 3
 
 
 def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):

@@ -53,13 +53,18 @@ refitted) and
    cost on the problems' normalisation, the report's, so the parameters and the held-out
    gaps reported are those of one objective; only the tests' figures (``Trial.delta_bic``,
    ``improvement``, ``held_gap``, ``Step.held_gap_before``) are on the step's;
-7. stops when no candidate passes, or after :data:`MAX_EFFECTS` effects;
+7. stops when no candidate passes, or with :data:`MAX_EFFECTS` effects kept;
 8. then checks every kept effect once more (backward elimination): with two or more kept,
    each is left out in turn and the others refitted; an effect that would no longer pass
    the tests of step 3 as the last one added (against the others refitted without it) is
    removed, the weakest first, and the check repeats. A look-alike kept early (a slower
    servo standing in for a latency found later) goes; ``Chain.pruned`` records it with its
-   reason.
+   reason (``Chain.pruned_after``: the last step before that check);
+9. when the check removed an effect, resumes the forward steps from the smaller model (on
+   its normalisation; a removed effect is not tried again), then checks again after any
+   step that kept something: stepwise selection in both directions. A look-alike that took
+   a place of a chain at its limit (DS2: an acceleration scale, removed by the check after
+   step 4) no longer shuts out the effect the data hold next.
 
 Every candidate that was tried and not kept is recorded with its reason. The chain's
 result is the car with all kept effects; its parameters are those of the last joint refit.
@@ -269,6 +274,7 @@ class Chain:
     parameters: dict[str, float] = dataclasses.field(default_factory=dict)  # the final refit of every kept parameter
     pruned: tuple[Trial, ...] = ()  # kept by a step, removed by the final check (the trial: the model with it)
     swaps: tuple[Swap, ...] = ()  # exchanges, in the order made
+    pruned_after: tuple[int, ...] = ()  # per pruned trial: the last step before the check that removed it
 
     @property
     def effects(self) -> list[str]:
@@ -436,104 +442,124 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
         return list(pool.map(_trial_task, tasks)) if pool is not None else [_trial_task(t) for t in tasks]
 
     try:
-        for index in range(1, max_effects + 1):
-            remaining = [n for n in names if n not in kept_names]
-            if not remaining:
-                stop = "every candidate effect is in the model"
-                break
-            k = len(kept_names)
-            screen_base = screening_problem(fit_problem)
-            if k:  # the baseline: the kept effects alone, refitted as the candidates will be
-                b, = run_tasks([(screen_base, fit_problem, held_problem, judge, base,
-                                 list(kept_names), dict(kept_values), None)])
-                if b.cost < cost:
-                    kept_values, cost, held_gap = b.values, b.cost, b.held_gap
-                    j_cost, j_held = b.judged_cost, b.judged_held_gap
-            current = with_parameters(base, kept_values)
-            full = fit_problem.with_car(current)
-            screen = screening_problem(full)
-            screen_cost = cost if screen is full else cost_of(screen, current)
-            screening = fit_all(screen, screen_cost, remaining, jobs=jobs, refine_top=0,
-                                progress=lambda label: tick(f"step {index} {label}"))
-            n_top = max(REFINE_TOP if index == 1 else REFINE_LATER, 1)
-            ranked = sorted(screening, key=lambda r: (r.cost, order[r.effect]))
-            later = [r for r in ranked[n_top:] if r.improvement >= 0.5 * improvement_min]
-            batches = [ranked[:n_top]] + [later[i:i + n_top] for i in range(0, len(later), n_top)]
-            crit_now = bic(judge.fit, j_cost, k)
-            decided: list[Trial] = []
-            chosen = None
-            outcome: dict[str, Outcome] = {}
-            for batch in batches:
-                if not batch or chosen is not None:
+        index = 0
+        excluded: set[str] = set()  # removed by a check: not tried again
+        pruned: list[Trial] = []
+        pruned_after: list[int] = []  # the last step before each removal
+        checked = 0  # steps that kept an effect, at the last check
+        while True:  # forward steps, then the check; again while the check removes something
+            while True:
+                if len(kept_names) >= max_effects:
+                    stop = f"the chain reached its limit of {max_effects} effects"
                     break
-                outs = run_tasks([(screen_base, fit_problem, held_problem, judge, base, kept_names + [r.effect],
-                                   {**kept_values, **r.parameters}, r.effect) for r in batch])
-                tick(f"step {index} joint refits")
-                outcome.update((r.effect, o) for r, o in zip(batch, outs))
-                trials = [Trial(r.effect, o.values, o.cost, crit_now - bic(judge.fit, o.judged_cost, k + 1),
-                                1.0 - o.judged_cost / j_cost if j_cost > 0 else 0.0, o.judged_held_gap,
-                                o.evaluations) for r, o in zip(batch, outs)]
-                trials.sort(key=lambda tr: (-tr.delta_bic, order[tr.effect]))
-                for tr in trials:
-                    reason = _reject_reason(tr, j_held, delta_bic_min, improvement_min, held_improvement_min)
-                    if chosen is None and not reason:
-                        chosen = dataclasses.replace(tr, kept=True)
-                        decided.append(chosen)
-                    else:
-                        decided.append(dataclasses.replace(tr, reason=reason or BETTER))
-            steps.append(Step(index, j_held, tuple(sorted(screening, key=lambda r: (r.criterion, order[r.effect]))),
-                              tuple(decided), dict(judge.fit.scales), held_gap,
-                              held_gap if chosen is None else outcome[chosen.effect].held_gap))
-            if chosen is None:
-                stop = "no remaining effect passes the tests"
-                break
-            kept_names.append(chosen.effect)
-            kept_values = dict(chosen.parameters)
-            cost, held_gap = chosen.cost, outcome[chosen.effect].held_gap
-            runners_up[chosen.effect] = sorted((t for t in decided if not t.kept),
-                                               key=lambda tr: (tr.cost, order[tr.effect]))[:REFINE_TOP]
-            for _ in range(MAX_EXCHANGES if len(kept_names) > 1 else 0):
-                tick(f"step {index} exchanges")
-                swap = _best_exchange(run_tasks, screen_base, fit_problem, held_problem, judge, base, index,
-                                      kept_names, kept_values, cost, held_gap, runners_up)
-                if swap is None:
+                remaining = [n for n in names if n not in kept_names and n not in excluded]
+                if not remaining:
+                    stop = "every candidate effect is in the model"
                     break
-                swaps.append(swap)
-                kept_names[kept_names.index(swap.out)] = swap.into
-                runners_up[swap.into] = [t for t in runners_up.pop(swap.out) if t.effect != swap.into]
-                kept_values, cost, held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
-            # the next step judges on the current model's normalisation (module docstring, step 6)
+                index += 1
+                k = len(kept_names)
+                screen_base = screening_problem(fit_problem)
+                if k:  # the baseline: the kept effects alone, refitted as the candidates will be
+                    b, = run_tasks([(screen_base, fit_problem, held_problem, judge, base,
+                                     list(kept_names), dict(kept_values), None)])
+                    if b.cost < cost:
+                        kept_values, cost, held_gap = b.values, b.cost, b.held_gap
+                        j_cost, j_held = b.judged_cost, b.judged_held_gap
+                current = with_parameters(base, kept_values)
+                full = fit_problem.with_car(current)
+                screen = screening_problem(full)
+                screen_cost = cost if screen is full else cost_of(screen, current)
+                screening = fit_all(screen, screen_cost, remaining, jobs=jobs, refine_top=0,
+                                    progress=lambda label: tick(f"step {index} {label}"))
+                n_top = max(REFINE_TOP if index == 1 else REFINE_LATER, 1)
+                ranked = sorted(screening, key=lambda r: (r.cost, order[r.effect]))
+                later = [r for r in ranked[n_top:] if r.improvement >= 0.5 * improvement_min]
+                batches = [ranked[:n_top]] + [later[i:i + n_top] for i in range(0, len(later), n_top)]
+                crit_now = bic(judge.fit, j_cost, k)
+                decided: list[Trial] = []
+                chosen = None
+                outcome: dict[str, Outcome] = {}
+                for batch in batches:
+                    if not batch or chosen is not None:
+                        break
+                    outs = run_tasks([(screen_base, fit_problem, held_problem, judge, base, kept_names + [r.effect],
+                                       {**kept_values, **r.parameters}, r.effect) for r in batch])
+                    tick(f"step {index} joint refits")
+                    outcome.update((r.effect, o) for r, o in zip(batch, outs))
+                    trials = [Trial(r.effect, o.values, o.cost, crit_now - bic(judge.fit, o.judged_cost, k + 1),
+                                    1.0 - o.judged_cost / j_cost if j_cost > 0 else 0.0, o.judged_held_gap,
+                                    o.evaluations) for r, o in zip(batch, outs)]
+                    trials.sort(key=lambda tr: (-tr.delta_bic, order[tr.effect]))
+                    for tr in trials:
+                        reason = _reject_reason(tr, j_held, delta_bic_min, improvement_min, held_improvement_min)
+                        if chosen is None and not reason:
+                            chosen = dataclasses.replace(tr, kept=True)
+                            decided.append(chosen)
+                        else:
+                            decided.append(dataclasses.replace(tr, reason=reason or BETTER))
+                steps.append(Step(index, j_held, tuple(sorted(screening, key=lambda r: (r.criterion, order[r.effect]))),
+                                  tuple(decided), dict(judge.fit.scales), held_gap,
+                                  held_gap if chosen is None else outcome[chosen.effect].held_gap))
+                if chosen is None:
+                    stop = "no remaining effect passes the tests"
+                    break
+                kept_names.append(chosen.effect)
+                kept_values = dict(chosen.parameters)
+                cost, held_gap = chosen.cost, outcome[chosen.effect].held_gap
+                runners_up[chosen.effect] = sorted((t for t in decided if not t.kept),
+                                                   key=lambda tr: (tr.cost, order[tr.effect]))[:REFINE_TOP]
+                for _ in range(MAX_EXCHANGES if len(kept_names) > 1 else 0):
+                    tick(f"step {index} exchanges")
+                    swap = _best_exchange(run_tasks, screen_base, fit_problem, held_problem, judge, base, index,
+                                          kept_names, kept_values, cost, held_gap, runners_up)
+                    if swap is None:
+                        break
+                    swaps.append(swap)
+                    kept_names[kept_names.index(swap.out)] = swap.into
+                    runners_up[swap.into] = [t for t in runners_up.pop(swap.out) if t.effect != swap.into]
+                    kept_values, cost, held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
+                # the next step judges on the current model's normalisation (module docstring, step 6)
+                current = with_parameters(base, kept_values)
+                judge, j_cost = renormalised(fit_problem, held_problem, current, robust_factor)
+                j_held = cost_of(judge.held, current) / max(held_problem.n_values, 1)
+            n_kept = sum(st.kept is not None for st in steps)
+            if pruned and n_kept == checked:  # resumed, and nothing kept since the last check
+                break
+            checked, n_pruned = n_kept, len(pruned)
+            while len(kept_names) > 1:  # the final check: every kept effect still earns its place
+                tick("final check")
+                k = len(kept_names)
+                outs = run_tasks([(screening_problem(fit_problem), fit_problem, held_problem, judge, base,
+                                   [n for n in kept_names if n != e],
+                                   {f: v for f, v in kept_values.items() if f != CANDIDATES[e].field}, None)
+                                  for e in kept_names])
+                weakest = None
+                for e, o in zip(kept_names, outs):
+                    tr = Trial(e, dict(kept_values), cost, bic(judge.fit, o.judged_cost, k - 1) - bic(judge.fit, j_cost, k),
+                               1.0 - j_cost / o.judged_cost if o.judged_cost > 0 else 0.0, j_held, o.evaluations)
+                    reason = _reject_reason(tr, o.judged_held_gap, delta_bic_min, improvement_min, held_improvement_min)
+                    if reason and (weakest is None or tr.delta_bic < weakest[0].delta_bic):
+                        weakest = (dataclasses.replace(tr, reason=reason), o)
+                if weakest is None:
+                    break
+                tr, o = weakest
+                pruned.append(tr)
+                pruned_after.append(index)
+                kept_names.remove(tr.effect)
+                kept_values, cost, held_gap, j_cost, j_held = o.values, o.cost, o.held_gap, o.judged_cost, o.judged_held_gap
+            if len(pruned) == n_pruned:
+                break
+            # stepwise: the forward steps resume on the smaller model (step 9 of the module docstring)
+            excluded.update(t.effect for t in pruned[n_pruned:])
+            runners_up = {e: [t for t in ts if t.effect not in excluded] for e, ts in runners_up.items()}
             current = with_parameters(base, kept_values)
             judge, j_cost = renormalised(fit_problem, held_problem, current, robust_factor)
             j_held = cost_of(judge.held, current) / max(held_problem.n_values, 1)
-        else:
-            stop = f"the chain reached its limit of {max_effects} effects"
-        pruned: list[Trial] = []
-        while len(kept_names) > 1:  # the final check: every kept effect still earns its place
-            tick("final check")
-            k = len(kept_names)
-            outs = run_tasks([(screening_problem(fit_problem), fit_problem, held_problem, judge, base,
-                               [n for n in kept_names if n != e],
-                               {f: v for f, v in kept_values.items() if f != CANDIDATES[e].field}, None)
-                              for e in kept_names])
-            weakest = None
-            for e, o in zip(kept_names, outs):
-                tr = Trial(e, dict(kept_values), cost, bic(judge.fit, o.judged_cost, k - 1) - bic(judge.fit, j_cost, k),
-                           1.0 - j_cost / o.judged_cost if o.judged_cost > 0 else 0.0, j_held, o.evaluations)
-                reason = _reject_reason(tr, o.judged_held_gap, delta_bic_min, improvement_min, held_improvement_min)
-                if reason and (weakest is None or tr.delta_bic < weakest[0].delta_bic):
-                    weakest = (dataclasses.replace(tr, reason=reason), o)
-            if weakest is None:
-                break
-            tr, o = weakest
-            pruned.append(tr)
-            kept_names.remove(tr.effect)
-            kept_values, cost, held_gap, j_cost, j_held = o.values, o.cost, o.held_gap, o.judged_cost, o.judged_held_gap
     finally:
         if pool is not None:
             pool.shutdown()
     return Chain(tuple(steps), with_parameters(base, kept_values), nominal_cost, nominal_held, stop,
-                 dict(kept_values), tuple(pruned), tuple(swaps))
+                 dict(kept_values), tuple(pruned), tuple(swaps), tuple(pruned_after))
 
 
 def renormalised(fit_problem: Problem, held_problem: Problem, car: CarDescription,

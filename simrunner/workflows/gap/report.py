@@ -37,7 +37,7 @@ from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_
                                          robust_total, window_costs)
 from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
-from simrunner.workflows.gap.logs import Derived, check_measured, derive
+from simrunner.workflows.gap.logs import Derived, check_measured, derive, sample_dt_s
 from simrunner.workflows.gap.regimes import COAST_CMD_MPS, MOVING_MPS, residual_stats, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
@@ -164,7 +164,8 @@ class GapResult:
                          for k, t in self.chain.rejected],
             "swaps": [sw.to_json() for sw in self.chain.swaps],
             "pruned": [{"effect": t.effect, "parameters": t.parameters, "reason": t.reason,
-                        "delta_bic": t.delta_bic, "improvement": t.improvement} for t in self.chain.pruned],
+                        "delta_bic": t.delta_bic, "improvement": t.improvement, "after_step": after}
+                       for t, after in zip(self.chain.pruned, self.chain.pruned_after)],
             "unexplained": self.leftovers,
             "cannot_reveal": self.unrevealable,
             "glitches": [{"log": src, "kind": g.kind, "t_start_s": g.t_start_s, "t_end_s": g.t_end_s,
@@ -196,16 +197,21 @@ def _finite(obj):
 
 
 def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
-                  windows: Sequence[Window]) -> list[str]:
+                  windows: Sequence[Window], max_brake_mps2: float | None = None) -> list[str]:
     """The group of each window for the fit/held-out split (:func:`split_windows`): the
     rarest manoeuvre it holds. ``"brake_to_reverse"``: a reverse command (``speed_cmd_mps``
-    below ``-COAST_CMD_MPS``) while the car still rolls forward (an ESC that brakes before
-    it reverses shows only there); else ``"coast"``: coasting or rolling with no drive
+    below ``-COAST_CMD_MPS``) while the car still rolls forward, faster than ``MOVING_MPS``
+    and than it sheds in one sample interval braking at ``max_brake_mps2`` (the car
+    file's; None: ``MOVING_MPS`` only) (an ESC that
+    brakes before it reverses shows only there; slower, the car is at rest by the next
+    sample, and the log cannot show how it braked: DS2's reverse command from rest at a
+    smoothed 0.11 m/s is no such event); else ``"coast"``: coasting or rolling with no drive
     commanded; else ``""``. A group of two or more windows sends some to the held-out set
     and keeps the rest in the fit, so an effect seen only in a rare manoeuvre can be both
     fitted and confirmed (the excitation plan reverses twice for this)."""
     speed = np.where(np.isfinite(derived.speed_mps), derived.speed_mps, 0.0)
-    onset = (np.asarray(log.speed_cmd_mps, float) < -COAST_CMD_MPS) & (speed > MOVING_MPS)
+    rolling_mps = MOVING_MPS if max_brake_mps2 is None else max(MOVING_MPS, max_brake_mps2 * sample_dt_s(log))
+    onset = (np.asarray(log.speed_cmd_mps, float) < -COAST_CMD_MPS) & (speed > rolling_mps)
     out = []
     for w in windows:
         if onset[w.start:w.stop].any():
@@ -225,7 +231,7 @@ def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
     check_conventions(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad, measured=derived)
     windows = make_windows(log, window_s, exclude=bad)
-    strata = window_strata(log, derived, segment(log, derived, car), windows)
+    strata = window_strata(log, derived, segment(log, derived, car), windows, car.drive.max_brake_mps2)
     fit_w, held_w = split_windows(windows, strata=strata) if windows else ([], [])
     return LogPart(log, derived, glitches, tuple(fit_w), tuple(held_w), signals_of(log))
 
@@ -454,20 +460,20 @@ def summary_text(result: GapResult) -> str:
                  f"{result.gap_before:.3g} -> {result.gap_after:.3g}"
                  + (f"  (least squares: {result.gap_ls_before:.3g} -> {result.gap_ls_after:.3g})"
                     if math.isfinite(result.settings.get("robust_scale", math.inf)) else ""))
-    gone = {t.effect: t for t in chain.pruned}
+    gone = {t.effect: after for t, after in zip(chain.pruned, chain.pruned_after)}
     for step in chain.steps:
         kept = step.kept
         if kept is not None:
             lines.append(f"  step {step.index}: + {kept.effect:<20} held-out gap {step.gap_before:.3g} -> "
                          f"{step.gap_after:.3g}  (delta_BIC {kept.delta_bic:.0f}, fit {kept.improvement:.1%})"
-                         + ("  removed by the final check" if kept.effect in gone else ""))
+                         + (f"  removed by the check after step {gone[kept.effect]}" if kept.effect in gone else ""))
         for sw in (sw for sw in chain.swaps if sw.step == step.index):
             lines.append(f"  after step {sw.step}: {sw.out} -> {sw.into} (exchanged, all refitted): fit cost "
                          f"{sw.cost_before:.4g} -> {sw.cost_after:.4g}, held-out gap {sw.held_gap_before:.3g} -> "
-                         f"{sw.held_gap_after:.3g}" + ("; removed by the final check" if sw.into in gone else ""))
+                         f"{sw.held_gap_after:.3g}" + (f"; removed by the check after step {gone[sw.into]}" if sw.into in gone else ""))
     lines.append(f"  the chain stopped: {chain.stop_reason}")
-    for tr in chain.pruned:
-        lines.append(f"  final check: - {tr.effect:<18} without it, the others refitted: {tr.reason}")
+    for tr, after in zip(chain.pruned, chain.pruned_after):
+        lines.append(f"  check after step {after}: - {tr.effect:<18} without it, the others refitted: {tr.reason}")
     if chain.rejected:
         lines.append("tried and not kept:")
         for k, tr in chain.rejected:
