@@ -63,8 +63,8 @@ refitted) and
 9. when the check removed an effect, resumes the forward steps from the smaller model (on
    its normalisation; a removed effect is not tried again), then checks again after any
    step that kept something: stepwise selection in both directions. A look-alike that took
-   a place of a chain at its limit (DS2: an acceleration scale, removed by the check after
-   step 4) no longer shuts out the effect the data hold next.
+   a place of a chain at its limit no longer shuts out the effect the data hold next, and
+   a candidate the look-alike made fail is tried again without it.
 
 Every candidate that was tried and not kept is recorded with its reason. The chain's
 result is the car with all kept effects; its parameters are those of the last joint refit.
