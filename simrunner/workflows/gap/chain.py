@@ -438,6 +438,12 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     stop = ""
     pool = ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) if jobs > 1 else None
 
+    def rejudged(values: dict[str, float]) -> tuple[Judge, float, float]:
+        """The normalisation of the model with ``values`` (step 6), its fit cost and held-out gap on it."""
+        current = with_parameters(base, values)
+        new_judge, fit_cost = renormalised(fit_problem, held_problem, current, robust_factor)
+        return new_judge, fit_cost, cost_of(new_judge.held, current) / max(held_problem.n_values, 1)
+
     def run_tasks(tasks) -> list[Outcome]:
         return list(pool.map(_trial_task, tasks)) if pool is not None else [_trial_task(t) for t in tasks]
 
@@ -518,10 +524,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     kept_names[kept_names.index(swap.out)] = swap.into
                     runners_up[swap.into] = [t for t in runners_up.pop(swap.out) if t.effect != swap.into]
                     kept_values, cost, held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
-                # the next step judges on the current model's normalisation (module docstring, step 6)
-                current = with_parameters(base, kept_values)
-                judge, j_cost = renormalised(fit_problem, held_problem, current, robust_factor)
-                j_held = cost_of(judge.held, current) / max(held_problem.n_values, 1)
+                judge, j_cost, j_held = rejudged(kept_values)  # module docstring, step 6
             n_kept = sum(st.kept is not None for st in steps)
             if pruned and n_kept == checked:  # resumed, and nothing kept since the last check
                 break
@@ -552,9 +555,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             # stepwise: the forward steps resume on the smaller model (step 9 of the module docstring)
             excluded.update(t.effect for t in pruned[n_pruned:])
             runners_up = {e: [t for t in ts if t.effect not in excluded] for e, ts in runners_up.items()}
-            current = with_parameters(base, kept_values)
-            judge, j_cost = renormalised(fit_problem, held_problem, current, robust_factor)
-            j_held = cost_of(judge.held, current) / max(held_problem.n_values, 1)
+            judge, j_cost, j_held = rejudged(kept_values)
     finally:
         if pool is not None:
             pool.shutdown()
