@@ -4,7 +4,7 @@ command-time effects (speed scale, steering asymmetry, steering play: no sub-ste
 build-time scales (accel, brake, servo rate, steering limit, mass: a plain EffectSim around a
 differently built car), the ESC brake-before-reverse (checked at each command, sub-stepped
 only while it brakes; the bench drives forward, so this is its cost when it does not act),
-and filtered effects (latency + lags + drag: sub-step every 4 ms), each driving with a new command every 20 ms for 4 simulated seconds at
+four-wheel drive (``front_drive``: two more wheel servos in the physics), and filtered effects (latency + lags + drag: sub-step every 4 ms), each driving with a new command every 20 ms for 4 simulated seconds at
 dt 2 ms; plus the CPU time of one excitation-plan play-back (``run_plan``, ~67 s simulated).
 Best of 3, CPU time."""
 from __future__ import annotations
@@ -42,6 +42,7 @@ def main() -> None:
                                           steer_limit_scale=0.95, mass_scale=1.1)),
             ("esc_reverse_delay", with_effects(car, esc_reverse_delay_s=0.2)),
             ("lift_lag", with_effects(car, lift_lag_s=0.5)),
+            ("front_drive (4WD)", with_effects(car, front_share_shift=0.5)),
             ("latency+lags+drag", with_effects(car, command_latency_s=0.03, steering_lag_s=0.05,
                                                motor_lag_s=0.1, drag_coeff_kgpm=0.1))]
     print(f"{'car':24s} {'steps/CPU-s':>12s} {'x real time':>12s}")

@@ -19,7 +19,7 @@ WB = CAR.chassis.wheelbase_m
 NAMES = ["steering_offset", "steering_gain", "steering_lag", "steering_rate_limit", "command_latency",
          "motor_lag", "throttle_deadband", "rolling_resistance", "drag", "tire_slip", "friction",
          "speed_scale", "steering_asymmetry", "steering_play", "esc_brake_reverse", "accel_scale", "brake_scale",
-         "servo_rate_scale", "steer_limit_scale", "mass_scale", "top_speed", "lift_lag"]
+         "servo_rate_scale", "steer_limit_scale", "mass_scale", "top_speed", "lift_lag", "front_drive"]
 
 
 def trace(sim, commands, seconds: float, every: int = 10) -> np.ndarray:
@@ -84,7 +84,8 @@ def test_with_effects_rejects_unknown_names():
 
 
 @pytest.mark.parametrize("extra", [{}, {"steering_play_rad": 0.03, "esc_reverse_delay_s": 0.1, "speed_scale": 0.9,
-                                      "steering_asymmetry": 0.1, "mass_scale": 1.2}])
+                                      "steering_asymmetry": 0.1, "mass_scale": 1.2},
+                                     {"front_share_shift": 0.5, "esc_reverse_delay_s": 0.1}])
 def test_deterministic_and_state_restore_bit_exact(extra):
     car = with_effects(CAR, command_latency_s=0.05, steering_lag_s=0.05, motor_lag_s=0.1, drag_coeff_kgpm=0.1,
                        **extra)
@@ -403,3 +404,47 @@ def test_lift_lag_slows_a_lift_to_a_lower_forward_command_but_not_a_stop_or_a_sp
         return (1.0 + 0.5 * t, 0.1)
     a = trace(EffectSim(CAR), up, 1.0)
     assert np.array_equal(a, trace(make_sim(lifted), up, 1.0))
+
+
+# drive and brake limits the rear tyres alone cannot hold (9 m/s^2 with mu 1): where the
+# front wheels' share of the torque shows
+GRIPPY = CAR.replace(drive=dataclasses.replace(CAR.drive, max_accel_mps2=9.0, max_brake_mps2=9.0))
+
+
+def test_front_drive_brakes_and_accelerates_at_the_limit_the_rear_tyres_alone_cannot_hold():
+    """From 3 m/s to a stop at 9 m/s^2: the rear-drive car locks up its rear wheels (about
+    twice the v^2 / 2a = 0.5 m), the four-wheel-drive car stops close to 0.5 m; braking in a
+    turn, the rear-drive car spins about twice as far round; speeding up, the four-wheel-drive
+    car reaches 2.4 m/s almost at 9 m/s^2. Within the grip (the default car's 3.1 m/s^2)
+    the share changes nothing measurable."""
+    def brake(car, steer):
+        sim = make_sim(car)
+        sim.set_state(Pose2(), 3.0, steer)
+        trace(sim, lambda t: (0.0, steer), 1.0, every=1)
+        assert abs(sim.speed_mps) < 1e-3
+        return sim.pose
+
+    awd = with_effects(GRIPPY, front_share_shift=0.5)
+    rwd_stop, awd_stop = brake(GRIPPY, 0.0).x_m, brake(awd, 0.0).x_m
+    assert rwd_stop > 1.8 * 0.5 and awd_stop == pytest.approx(0.5, rel=0.15)
+    assert abs(brake(GRIPPY, 0.3).yaw_rad) > 1.6 * abs(brake(awd, 0.3).yaw_rad)
+    assert _time_to_speed_s(awd, 2.5)[0] < 0.6 * _time_to_speed_s(GRIPPY, 2.5)[0]
+    assert _time_to_speed_s(awd, 2.5)[0] == pytest.approx(0.95 * 2.5 / 9.0, rel=0.15)
+    assert _braking_distance_m(with_effects(CAR, front_share_shift=0.5)) == pytest.approx(
+        _braking_distance_m(CAR), rel=1e-3)
+
+
+def test_front_share_in_the_car_file_is_the_shifted_share_and_clamps_to_0_1():
+    """``drive.front_share`` in the car file builds the same car as the shift on a rear-drive
+    file; a shift below 0 on a rear-drive file clamps to rear drive: the nominal car bit for bit."""
+    filed = GRIPPY.replace(drive=dataclasses.replace(GRIPPY.drive, front_share=0.5))
+    assert type(make_sim(filed)) is CarSim
+    assert built_car(with_effects(GRIPPY, front_share_shift=0.5)).drive == filed.drive
+    assert built_car(with_effects(filed, front_share_shift=0.7)).drive.front_share == 1.0
+
+    def cmd(t):
+        return (2.5, 0.2) if t < 0.5 else (-1.0, -0.3)
+    assert np.array_equal(trace(make_sim(filed), cmd, 1.0),
+                          trace(make_sim(with_effects(GRIPPY, front_share_shift=0.5)), cmd, 1.0))
+    assert np.array_equal(trace(CarSim(GRIPPY), cmd, 1.0),
+                          trace(make_sim(with_effects(GRIPPY, front_share_shift=-0.3)), cmd, 1.0))

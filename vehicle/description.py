@@ -79,6 +79,10 @@ class Drive:
                                "thesis Fig. 3.2 max_linear_acceleration 4 m/s^2 / 1.3", 0.1, 50)
     max_brake_mps2: float = _f(3.1, "Braking deceleration limit.",
                                "thesis Fig. 3.2 min_linear_acceleration -4 m/s^2 / 1.3", 0.1, 50)
+    front_share: float = _f(0.0, "Share of the drive and brake torque at the front wheels (0 = rear-wheel "
+                            "drive; 0.5 = four-wheel drive with an even split). simrunner's car only: the "
+                            "Gazebo model drives the rear wheels.",
+                            "NXP Cup car: rear-wheel drive (thesis 5.2)", 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -162,6 +166,10 @@ class Effects:
                            "lag of this time constant (an ESC that coasts or drag-brakes when the throttle is "
                            "lifted); a zero or negative command still brakes. Revealed by speed steps down.",
                            "neutral", 0.0, 10.0)
+    front_share_shift: float = _f(0.0, "front_drive: the car drives and brakes its front wheels with a share "
+                                  "drive.front_share + this of the torque (clamped to [0, 1]): a four-wheel-drive "
+                                  "car whose file says rear drive. Revealed by hard braking and accelerating, "
+                                  "most of all while turning.", "neutral", -1.0, 1.0)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,8 @@ Where each effect acts (docs/effects.md has the physics):
   (``steering.rate_radps``), ``steer_limit_scale`` (``steering.limit_rad``), ``mass_scale``
   (every mass and inertia; the drive and brake torques stay those of the file's numbers, so
   the accel and brake limits become ``max / mass_scale``); ``speed_scale`` also scales
-  ``drive.max_speed_mps``.
+  ``drive.max_speed_mps``; ``front_drive`` shifts ``drive.front_share`` (the front wheels'
+  share of drive and brake torque, clamped to [0, 1]: a four-wheel-drive car).
 * command path, applied to every ``set_command`` (no extra cost):
   ``steering_offset``, ``steering_gain`` (steer -> gain * steer + offset),
   ``steering_asymmetry`` (then left x (1 + a), right x (1 - a)),
@@ -185,6 +186,10 @@ EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
           "an ESC that coasts or drag-brakes when the throttle is lifted: slowing to a lower forward "
           "command follows a first-order lag (a zero or negative command still brakes)",
           ("speed_step",), _LONGITUDINAL),
+    _spec("front_drive", "front_share_shift", 0.0, (-0.5, 0.5), "1",
+          "the car drives and brakes its front wheels too (four-wheel drive): the front share of the "
+          "torque is the car file's drive.front_share + this; shows where the tyres near their grip",
+          ("brake", "speed_step"), RESIDUAL_SIGNALS, "build"),
 )}
 
 _DYNAMIC_PARAMS = ("steering_lag_s", "command_latency_s", "motor_lag_s", "lift_lag_s", "tire_slip_understeer_radps2pm",
@@ -225,11 +230,12 @@ def built_car(car: CarDescription) -> CarDescription:
     x ``servo_rate_scale``; ``steering.limit_rad`` x ``steer_limit_scale``; ``chassis.mass_kg``
     and ``wheels.mass_kg`` x ``mass_scale`` (all inertias follow the masses). ``CarSim`` sets
     the drive and brake torques from the built mass and limits, so with ``mass_scale`` they
-    stay those of the file's numbers. A scaled steering limit above the description's range
-    raises ``CarDescriptionError``."""
+    stay those of the file's numbers. ``drive.front_share`` + ``front_share_shift``, clamped to
+    [0, 1]. A scaled steering limit above the description's range raises
+    ``CarDescriptionError``."""
     e = car.effects
     if (e.friction_scale == e.speed_scale == e.accel_scale == e.brake_scale == e.servo_rate_scale
-            == e.steer_limit_scale == e.mass_scale == 1.0):
+            == e.steer_limit_scale == e.mass_scale == 1.0 and e.front_share_shift == 0.0):
         return car
     ch, wh, st, dr = car.chassis, car.wheels, car.steering, car.drive
     m = e.mass_scale
@@ -244,6 +250,8 @@ def built_car(car: CarDescription) -> CarDescription:
         dr = dataclasses.replace(dr, max_accel_mps2=dr.max_accel_mps2 * e.accel_scale / m)
     if e.brake_scale != 1.0 or m != 1.0:
         dr = dataclasses.replace(dr, max_brake_mps2=dr.max_brake_mps2 * e.brake_scale / m)
+    if e.front_share_shift != 0.0:
+        dr = dataclasses.replace(dr, front_share=min(max(dr.front_share + e.front_share_shift, 0.0), 1.0))
     if e.servo_rate_scale != 1.0:
         st = dataclasses.replace(st, rate_radps=st.rate_radps * e.servo_rate_scale)
     if e.steer_limit_scale != 1.0:

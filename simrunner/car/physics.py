@@ -17,6 +17,11 @@ zero every joint command after the step, so commands are set only in :meth:`set_
   ``drive.max_brake_mps2`` (chosen at each ``set_command`` from the current speed;
   a command of the opposite sign brakes at the brake limit). So the car speeds up at about
   ``max_accel`` and brakes at about ``max_brake`` while the tyres grip.
+* Four-wheel drive (``drive.front_share`` f > 0): the front wheels are ``SERVO`` actuators too,
+  with the share f of the torque (``f m_eff a r / 2`` per wheel, the rear ones ``(1 - f)``) and
+  velocity targets ``u / r`` where ``u`` is the speed of the wheel centre along its Ackermann
+  target heading ``delta``: ``u = (v -+ w track/2) cos(delta) + w L sin(delta)``. With f = 0 the
+  front wheels roll freely, as in the thesis.
 * Steering (thesis 5.3.1): the knuckles are ``VELOCITY`` actuators (kinematic: no
   constraint rows, tyre forces cannot push them). A move to a new target is planned at
   ``set_command``: both knuckles turn at constant speeds so that they reach their
@@ -24,7 +29,7 @@ zero every joint command after the step, so commands are set only in :meth:`set_
   bicycle angle moves at about ``rate_radps``, never faster); ``step`` stops them at the end
   of the move (one Python event per move, never per step), so the result does not depend
   on how ``step(n)`` calls are split.
-* Front wheels roll freely.
+* Front wheels roll freely (rear-wheel drive, ``drive.front_share`` = 0).
 
 Python cost per control update (bench/bench_closed_loop.py): ``set_command`` plans with
 precomputed constants and sets only the joint commands that changed (a repeated steering
@@ -135,6 +140,7 @@ class _Control(NamedTuple):
     wheels_locked: bool = False
     coast: bool = False
     ext_force_n: tuple[float, float] = (0.0, 0.0)
+    front_omega_radps: tuple[float, float] = (0.0, 0.0)  # front left, right targets (four-wheel drive)
 
 
 @dataclass(frozen=True)
@@ -193,6 +199,7 @@ class CarSim:
         self._rate_radps = car.steering.rate_radps
         self._torque_accel_nm = 0.5 * self._m_eff_kg * car.drive.max_accel_mps2 * r
         self._torque_brake_nm = 0.5 * self._m_eff_kg * car.drive.max_brake_mps2 * r
+        self._front_share = car.drive.front_share  # 0: rear-wheel drive, the front wheels roll freely
         skel = self._body.skeleton
         self._skel = skel
         self._world_step = world.step
@@ -323,8 +330,14 @@ class CarSim:
             else:
                 k_vel = (0.0, 0.0)
             self._held = n_steps == 0
+        front = (0.0, 0.0)
+        if self._front_share > 0.0:  # front wheels: centre speed along the Ackermann target heading
+            tl, tr = q_tgt
+            ww = w * self._wb_m
+            front = (((v - w * half_t) * math.cos(tl) + ww * math.sin(tl)) / r,
+                     ((v + w * half_t) * math.cos(tr) + ww * math.sin(tr)) / r)
         self._control = c = _Control(v, d, w, ((v - w * half_t) / r, (v + w * half_t) / r), torque,
-                                     q_tgt, k_vel, n_steps, c.wheels_locked, c.coast, c.ext_force_n)
+                                     q_tgt, k_vel, n_steps, c.wheels_locked, c.coast, c.ext_force_n, front)
         self._steer_left, self._kvel = n_steps, k_vel
         self._apply(c)
 
@@ -373,24 +386,32 @@ class CarSim:
                 j.setCommand(0, vel)
             self._k_applied = c.knuckle_vel_radps
         types = (c.wheels_locked, c.coast)
+        f = self._front_share
         if types != self._types_applied:
             A = dart.dynamics.ActuatorType
+            driven = A.LOCKED if c.wheels_locked else (A.PASSIVE if c.coast else A.SERVO)
             for j in b.wheel_joints[:2]:
-                j.setActuatorType(A.LOCKED if c.wheels_locked else A.PASSIVE)
-            rear = A.LOCKED if c.wheels_locked else (A.PASSIVE if c.coast else A.SERVO)
+                j.setActuatorType(driven if f > 0.0 else (A.LOCKED if c.wheels_locked else A.PASSIVE))
             for j in b.wheel_joints[2:]:
-                j.setActuatorType(rear)
+                j.setActuatorType(driven)
             self._types_applied = types
-            self._omega_applied = None  # set the rear commands again for the new type
+            self._omega_applied = None  # set the driven wheels' commands again for the new type
         if c.wheel_torque_nm != self._torque_applied:
-            for j in b.wheel_joints[2:]:
-                j.setForceLowerLimit(0, -c.wheel_torque_nm)
-                j.setForceUpperLimit(0, c.wheel_torque_nm)
+            if f > 0.0:
+                shares = ((b.wheel_joints[:2], f * c.wheel_torque_nm), (b.wheel_joints[2:], (1.0 - f) * c.wheel_torque_nm))
+            else:
+                shares = ((b.wheel_joints[2:], c.wheel_torque_nm),)
+            for joints, torque in shares:
+                for j in joints:
+                    j.setForceLowerLimit(0, -torque)
+                    j.setForceUpperLimit(0, torque)
             self._torque_applied = c.wheel_torque_nm
         # a coasting (PASSIVE) wheel ignores commands: they are set when the servo is back
-        omega = (0.0, 0.0) if c.wheels_locked else (None if c.coast else c.wheel_omega_radps)
+        omega = ((0.0, 0.0) if c.wheels_locked else (None if c.coast else c.wheel_omega_radps))
+        if f > 0.0 and omega is not None:
+            omega = omega + ((0.0, 0.0) if c.wheels_locked else c.front_omega_radps)
         if omega is not None and omega != self._omega_applied:
-            for j, o in zip(b.wheel_joints[2:], omega):
+            for j, o in zip(b.wheel_joints[2:] if f == 0.0 else b.wheel_joints[2:] + b.wheel_joints[:2], omega):
                 j.setCommand(0, o)
             self._omega_applied = omega
         if c.ext_force_n != self._force_applied:
