@@ -17,6 +17,22 @@ Modes (``--mode``, comma-separated; default: all of them, small):
     Logs with a speed sensor and a gyro only (no pose): trials cycle none / one effect /
     two effects / one effect, over the effects such a log can reveal
     (``report.cannot_reveal`` with the signals speed and yaw rate).
+``tenth``
+    Another car at another rate: one hidden effect per log as in ``single`` (every
+    :data:`NONE_EVERY`-th log effect-free), on a 1:10 car (:func:`tenth_car`: 3.5 kg,
+    wheelbase 0.33 m, 8 m/s, drive and brake limits of 6 and 8 m/s^2, near the tyres' grip,
+    servo 3.5 rad/s) driving its own plan (``make_plan(car)``: 181 s), its pose and speed
+    logged at irregular stamps, about 30 Hz (each 50-Hz row kept with probability
+    :data:`TENTH_KEEP`). The catalogue includes ``front_drive`` (the file says rear drive),
+    which the default car's logs cannot show (:data:`GRIP_LIMITED`).
+``unmodelled``
+    Logs no catalogue effect explains (the issue's "is told so"): the default car, pose +
+    speed, no catalogue effect, and one thing the catalogue lacks - even trials a steering
+    that turns :data:`CASTER_GAIN` times further while reversing (caster pushing the wheels
+    round, :class:`ReverseCaster`), odd trials a floor tilted by :data:`SLOPE_DEG` in a random
+    direction (``CarSim(slope_rad=)``). Figures: logs where nothing is named; logs whose report
+    lists an ``unexplained`` leftover; for the caster, logs whose leftovers name a steering
+    signal (yaw rate, yaw, position) while reversing.
 ``compare``
     The ``multi`` logs (the same seeds: a run of ``multi,compare`` runs the chain once per
     log) with two baselines on the same prepared logs, windows and residuals
@@ -70,8 +86,14 @@ SEED = 20240
 NONE_EVERY = 4
 SMALL_TRIALS = 6
 SNR_MIN = 3.0
-MODES = ("single", "multi", "speed_gyro", "compare", "real", "real_partial", "timing")
-_MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3}  # seed tags: compare uses the multi logs
+MODES = ("single", "multi", "speed_gyro", "tenth", "unmodelled", "compare", "real", "real_partial", "timing")
+_MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3, "tenth": 4, "unmodelled": 5}  # seed tags: compare uses the multi logs
+# effects that show only where the drive and brake limits reach the tyres' grip: not on the
+# default car (3.1 m/s^2), so the default-car modes leave them out; ``tenth`` has them
+GRIP_LIMITED = ("front_drive",)
+TENTH_KEEP = 0.6  # share of the 50-Hz rows a ``tenth`` log keeps (irregular stamps, ~30 Hz)
+CASTER_GAIN = (1.5, 2.5)  # ``unmodelled``: steering gain while reversing, uniform in this range
+SLOPE_DEG = (1.5, 3.0)  # ``unmodelled``: floor tilt, uniform in this range
 REAL_DIR = Path(os.environ.get("NXPCUP_REAL_LOGS",
                                Path(__file__).resolve().parents[2] / "shared" / "data" / "real_logs"))
 REAL_LOGS = ("f1tenth_DS2.csv", "f1tenth_DS3.csv")
@@ -113,25 +135,91 @@ def multi_effects(n: int, rng: np.random.Generator, allowed: list[str] | None = 
     return [str(rng.choice(groups[names[i]])) for i in sorted(picked)]
 
 
+def tenth_car():
+    """The ``tenth`` mode's car: generic 1:10 numbers (not any one real car's), a rear-drive
+    file whose drive and brake limits reach the grip of its rear tyres alone."""
+    from vehicle.description import CarDescription, Chassis, Drive, Steering, Wheels
+
+    return CarDescription(
+        name="tenth_scale",
+        chassis=Chassis(mass_kg=3.5, wheelbase_m=0.33, track_m=0.28, length_m=0.5, width_m=0.29, height_m=0.1,
+                        rear_overhang_m=0.09, cog_height_m=0.07),
+        wheels=Wheels(radius_m=0.05, width_m=0.045, mass_kg=0.1, friction_mu=1.0),
+        steering=Steering(limit_rad=0.42, rate_radps=3.5),
+        drive=Drive(max_speed_mps=8.0, max_accel_mps2=6.0, max_brake_mps2=8.0))
+
+
+def mode_car(mode: str):
+    """The car of ``mode``'s synthetic logs and of their gap runs (None: the default car)."""
+    return tenth_car() if mode == "tenth" else None
+
+
+def thinned(log, rng: np.random.Generator, keep: float):
+    """``log`` with each row but the first and last kept with probability ``keep``:
+    irregular stamps at ``keep`` x the rate (a command sent between kept rows shows at the
+    next one, as in a log written slower than the controller runs)."""
+    rows = rng.random(len(log)) < keep
+    rows[0] = rows[-1] = True
+    return log.subset(np.flatnonzero(rows))
+
+
+class ReverseCaster:
+    """A car whose steering turns ``gain`` times further while the speed command is negative
+    (a castered front axle pushing the wheels round when reversing; the servo gives way): not
+    in the catalogue. Wraps a simulator; everything else is the inner one's."""
+
+    def __init__(self, sim, gain: float):
+        self._sim, self._gain = sim, gain
+
+    def set_command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float | None = None) -> None:
+        self._sim.set_command(speed_mps, steer_rad * self._gain if speed_mps < 0.0 else steer_rad, yaw_rate_radps)
+
+    def __getattr__(self, name):
+        return getattr(self._sim, name)
+
+
+def unmodelled_design(k: int) -> tuple[str, float, object]:
+    """``(what, magnitude, sim_factory)`` of ``unmodelled`` trial ``k`` (see the module docstring)."""
+    from pieces.pose import Pose2
+    from simrunner.car.effects import make_sim
+
+    rng = np.random.default_rng([SEED, _MODE_TAG["unmodelled"], k, 1])
+    if k % 2 == 0:
+        gain = float(rng.uniform(*CASTER_GAIN))
+        return "reverse_caster", gain, lambda car, dt_s, start: ReverseCaster(make_sim(car, dt_s=dt_s, start=start), gain)
+    slope, heading = float(rng.uniform(*SLOPE_DEG)), float(rng.uniform(-math.pi, math.pi))
+
+    def sloped(car, dt_s, start):  # the plan's frame turned by ``heading`` on a floor descending along +x
+        return make_sim(car, dt_s=dt_s, start=Pose2(start.x_m, start.y_m, start.yaw_rad + heading),
+                        slope_rad=math.radians(slope))
+    return "floor_slope_deg", slope, sloped
+
+
 def design(mode: str, k: int) -> tuple[list[str], str, np.random.Generator]:
     """``(hidden effects, sensors, rng for make_measured_log)`` of trial ``k`` of ``mode``;
     the same arguments always give the same log."""
     from simrunner.workflows.gap.report import cannot_reveal
     from simrunner.workflows.gap.synth import RANGES
 
+    default_car = [e for e in RANGES if e not in GRIP_LIMITED]
     if mode == "single":
-        e = trial_effect(k, list(RANGES))
+        e = trial_effect(k, default_car)
         return ([e] if e else []), "pose_speed", np.random.default_rng([SEED, k])
     grouped = [e for members in GROUPS.values() for e in members]
-    if sorted(grouped) != sorted(RANGES):
-        raise ValueError(f"GROUPS must hold every synthetic effect once (got {sorted(grouped)}, "
-                         f"expected {sorted(RANGES)})")
+    if sorted(grouped) != sorted(default_car):
+        raise ValueError(f"GROUPS must hold every synthetic effect of the default car once (got "
+                         f"{sorted(grouped)}, expected {sorted(default_car)})")
     rng = np.random.default_rng([SEED, _MODE_TAG[mode], k])
+    if mode == "tenth":
+        e = trial_effect(k, list(RANGES))
+        return ([e] if e else []), "pose_speed", rng
+    if mode == "unmodelled":
+        return [], "pose_speed", rng
     if mode in ("multi", "compare"):
         return multi_effects(2 + k % 2, rng), "pose_speed", rng
     if mode == "speed_gyro":
-        hidden = cannot_reveal(list(RANGES), ("speed_mps", "yaw_rate_radps"))
-        allowed = [e for e in RANGES if e not in hidden]
+        hidden = cannot_reveal(default_car, ("speed_mps", "yaw_rate_radps"))
+        allowed = [e for e in default_car if e not in hidden]
         kind = k % 4
         if kind == 0:
             return [], "speed_gyro", rng
@@ -161,7 +249,7 @@ def effect_snr(mode: str, k: int) -> dict[str, float]:
     effects, sensors, rng = design(mode, k)
     if not effects:
         return {}
-    exact, truth = make_measured_log(effects, rng=rng, noise=False, sensors=sensors)
+    exact, truth = make_measured_log(effects, rng=rng, noise=False, sensors=sensors, car=mode_car(mode))
     car = neutral_car(truth.car)  # the nuisance mass and grip, no effect
     d = derive(exact, car.chassis.wheelbase_m, car.steering.limit_rad)
     w = make_windows(exact)
@@ -236,9 +324,14 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
 
     _quiet_worker()
     effects, sensors, rng = design(mode, k)
-    log, truth = make_measured_log(effects or None, rng=rng, sensors=sensors)
+    car = mode_car(mode)
+    unmodelled = unmodelled_design(k) if mode == "unmodelled" else None
+    log, truth = make_measured_log(effects or None, rng=rng, sensors=sensors, car=car,
+                                   sim_factory=unmodelled[2] if unmodelled else None)
+    if mode == "tenth":
+        log = thinned(log, rng, TENTH_KEEP)
     t0 = time.perf_counter()
-    result = run_gap(log, jobs=1)
+    result = run_gap(log, car, jobs=1)
     wall = time.perf_counter() - t0
     nominal = neutral_car(result.car)
     held = {"gap_before": result.gap_before, "gap_after": result.gap_after,
@@ -254,7 +347,11 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
                                              1.0 - t.held_gap / s.held_gap_before if s.held_gap_before > 0 else 0.0,
                                              t.kept, t.reason) for s in result.chain.steps for t in s.trials],
                                  "pruned": [(t.effect, after) for t, after in zip(result.chain.pruned,
-                                                                                 result.chain.pruned_after)]})}
+                                                                                 result.chain.pruned_after)]}),
+           "leftovers": [{k_: d[k_] for k_ in ("signal", "regime", "times_noise", "regimes", "text")}
+                         for d in result.leftovers]}
+    if unmodelled:
+        row["unmodelled"] = {"what": unmodelled[0], "value": unmodelled[1]}
     if baselines:
         from bench.gap_baselines import BaselineUnavailable, esindy, joint_least_squares, problems
         from simrunner.workflows.gap.chain import with_parameters
@@ -358,7 +455,9 @@ def timing_row(jobs: int) -> dict:
     r = run_gap(log, jobs=jobs)
     wall = time.perf_counter() - t0
     return {"mode": "timing", "log_s": log.duration_s, "jobs": jobs, "wall_s": wall, "hidden": truth.values,
-            "effects": r.effects, "parameters": r.parameters, "steps": len(r.chain.steps)}
+            "effects": r.effects, "parameters": r.parameters, "steps": len(r.chain.steps),
+            "refits": sum(len(s.trials) for s in r.chain.steps), "swaps": [sw.into for sw in r.chain.swaps],
+            "pruned": [t.effect for t in r.chain.pruned]}
 
 
 # --- figures, targets, tables ----------------------------------------------------------------------
@@ -436,6 +535,9 @@ SYNTH_TARGETS = (
     ("speed_gyro", "false_claims", "false claims, effect-free logs", False, 0.05, True),
     ("speed_gyro", "multi_all_named_hi", "two effects: every effect named where each SNR >= 3", True, 0.90, True),
     ("speed_gyro", "any_spurious", "spurious extra effect (logs with effects)", False, 0.10, True),
+    ("tenth", "single_named_hi", "1:10 car, ~30 Hz: named where SNR >= 3", True, 0.95, True),
+    ("tenth", "false_claims", "1:10 car, ~30 Hz: false claims, effect-free logs", False, 0.05, True),
+    ("tenth", "single_perr", "1:10 car, ~30 Hz: median parameter error", False, 0.10, True),
 )
 
 
@@ -447,7 +549,7 @@ def target_rows(rows: list[dict]) -> list[dict]:
         out.append({"mode": mode, "target": what, "figure": value, "n": n, "goal": goal,
                     "met": None if (n == 0 or not math.isfinite(value)) else bool(ok), "text": text})
 
-    groups = {"single": ("single",), "multi": ("multi", "compare"), "speed_gyro": ("speed_gyro",)}
+    groups = {"single": ("single",), "multi": ("multi", "compare"), "speed_gyro": ("speed_gyro",), "tenth": ("tenth",)}
     figs = {m: figures([r for r in rows if r.get("mode") in modes]) for m, modes in groups.items()}
     for mode, key, what, at_least, limit, pct in SYNTH_TARGETS:
         if not any(r.get("mode") in groups[mode] for r in rows):
@@ -456,6 +558,16 @@ def target_rows(rows: list[dict]) -> list[dict]:
         goal = f"{'>=' if at_least else '<='} {limit:.0%}" if pct else f"{'>=' if at_least else '<='} {limit:g}"
         add(mode, what, value, n, goal.replace("%", " %"), value >= limit if at_least else value <= limit,
             _fmt((value, n), pct))
+    um = [r for r in rows if r.get("mode") == "unmodelled"]
+    caster = [r for r in um if r["unmodelled"]["what"] == "reverse_caster"]
+    for what, hits in (("nothing named", [not r["chain"]["named"] for r in um]),
+                       ("told so: an unexplained leftover listed", [bool(r["leftovers"]) for r in um]),
+                       ("reverse caster: a leftover in steering while reversing",
+                        [any(d["signal"] in ("yaw_rate_radps", "yaw_rad", "position_m") and "reversing" in d["regimes"]
+                             for d in r["leftovers"]) for r in caster])):
+        if hits:
+            value, n = _frac(hits)
+            add("unmodelled", what, value, n, ">= 90 %", value >= 0.9, _fmt((value, n)))
     for r in rows:
         if r.get("mode") in ("real", "real_partial"):
             name, mode = r["log"], r["mode"]
@@ -487,6 +599,8 @@ def _trial_table(rows: list[dict]) -> str:
              f"{'gap a/b':>8}{'wall':>6}"]
     for r in rows:
         hid = ", ".join(f"{e} ({r['snr'][e]:.1f})" for e in r["effects"]) or "none"
+        if "unmodelled" in r:
+            hid = f"{r['unmodelled']['what']} {r['unmodelled']['value']:.3g} (not in the catalogue)"
         c = r["chain"]
         errs = ", ".join(f"{p['rel_err']:.0%}" for p in c["per_effect"].values() if p["rel_err"] is not None)
         pb = c["rmse_before"].get("position_m")
@@ -530,10 +644,13 @@ def _compare_table(rows: list[dict]) -> str:
 
 
 def report(rows: list[dict]) -> str:
-    syn = [r for r in rows if r.get("mode") in ("single", "multi", "speed_gyro", "compare")]
+    syn = [r for r in rows if r.get("mode") in ("single", "multi", "speed_gyro", "tenth", "unmodelled", "compare")]
     parts = []
     if syn:
         parts.append(_trial_table(syn))
+    for r in rows:
+        if r.get("mode") == "unmodelled":
+            parts.append(f"unmodelled {r['trial']}: " + ("; ".join(d["text"] for d in r["leftovers"]) or "no leftover"))
     for r in rows:
         if r.get("mode") in ("real", "real_partial"):
             if "error" in r:
@@ -634,7 +751,7 @@ def main(argv: list[str] | None = None) -> None:
         tasks += [("compare", k, True) for k in trials]
     elif "multi" in modes:
         tasks += [("multi", k, False) for k in trials]
-    tasks += [(m, k, False) for m in ("single", "speed_gyro") if m in modes for k in trials]
+    tasks += [(m, k, False) for m in ("single", "speed_gyro", "tenth", "unmodelled") if m in modes for k in trials]
     if tasks:
         with ProcessPoolExecutor(max_workers=a.jobs) as pool:
             futures = {pool.submit(_trial, *t): t for t in tasks}

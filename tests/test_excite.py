@@ -315,3 +315,23 @@ def test_from_csv_never_crashes_on_junk(tmp_path_factory, text):
         ExcitationPlan.from_csv(path)
     except PlanError as err:
         assert "\n" not in str(err)
+
+
+def test_run_plan_plays_in_the_simulator_the_factory_builds(nominal_coarse):
+    """``sim_factory`` replaces ``make_sim``: the same simulator gives the same log bit for
+    bit; a tilted floor (something the catalogue does not model) changes it."""
+    from simrunner.car.effects import make_sim
+
+    built = []
+
+    def same(car, dt_s, start):
+        built.append(dt_s)
+        return make_sim(car, dt_s=dt_s, start=start)
+
+    log = run_plan(PLAN, CAR, dt_s=0.005, sim_factory=same)
+    assert built == [0.005] and np.array_equal(log.x_m, nominal_coarse.x_m)
+    assert np.array_equal(log.speed_mps, nominal_coarse.speed_mps)
+    tilted = run_plan(PLAN, CAR, dt_s=0.005,
+                      sim_factory=lambda car, dt_s, start: make_sim(car, dt_s=dt_s, start=start, slope_rad=0.05))
+    coasting = PLAN.coast.astype(bool)
+    assert np.abs(tilted.speed_mps - nominal_coarse.speed_mps)[coasting].max() > 0.05

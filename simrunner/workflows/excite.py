@@ -42,6 +42,7 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 
@@ -765,7 +766,8 @@ def predict_path(plan: ExcitationPlan, car: CarDescription) -> np.ndarray:
 
 # -- simulating ----------------------------------------------------------------------------
 def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, seed: int = 0,
-             start: Pose2 = Pose2(), pose_noise_m: float = 0.0, closed_loop: bool = False) -> RunLog:
+             start: Pose2 = Pose2(), pose_noise_m: float = 0.0, closed_loop: bool = False,
+             sim_factory: Callable[..., Any] | None = None) -> RunLog:
     """Play ``plan`` in the simulator (``simrunner.car.effects.make_sim``: effects apply).
 
     Each row's command is set at ``t_k`` and the state logged at ``t_k`` (before the
@@ -777,7 +779,9 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
     no track). ``pose_noise_m`` > 0 adds Gaussian noise of that std to x and y (std / 0.2 m
     per rad to yaw) from ``numpy.random.default_rng(seed)``, to mimic a real position log;
     0 gives the exact simulated pose (``seed`` then has no effect). ``start`` is where the
-    plan frame's origin is in the world.
+    plan frame's origin is in the world. ``sim_factory(car, dt_s=, start=)`` builds the
+    simulator instead of ``make_sim`` (anything with the ``CarSim`` interface: a car with
+    something the catalogue does not model, for the gap bench).
 
     Open loop (default) the log has one row per plan row, at the plan's times.
     ``closed_loop``: the car drives the turns as docs/calibration.md tells a team to: it
@@ -806,7 +810,7 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
     noise = np.zeros((3, n))  # open loop: drawn in advance (x for all rows, then y, then yaw)
     if rng is not None and not turns:
         noise = np.stack([rng.normal(0.0, sd, n) for sd in noise_std])
-    sim = make_sim(car, dt_s=dt_s, start=start)
+    sim = (sim_factory or make_sim)(car, dt_s=dt_s, start=start)
     wb, steer_max = car.chassis.wheelbase_m, RETURN_STEER_FRACTION * car.steering.limit_rad
     max_extra = round(RETURN_TIMEOUT_S * plan.rate_hz)
     rows: list[tuple] = []  # row, x, y, yaw, speed, steer, yaw_rate, yaw_rate_cmd, speed_cmd, steer_cmd

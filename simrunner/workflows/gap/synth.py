@@ -69,6 +69,9 @@ RANGES: dict[str, tuple[str, float, float, bool]] = {
     "mass_scale": ("mass_scale", 0.1, 0.6, True),  # scale = 1 +- that
     "top_speed": ("top_speed_mps", 1.2, 2.6, False),  # the cap; the plan reaches ~3 m/s
     "lift_lag": ("lift_lag_s", 0.05, 1.0, False),
+    # a four-wheel-drive car with a rear-drive file; shows only where the drive and brake limits
+    # reach the tyres' grip (not on the default car: its 3.1 m/s^2 stay well inside it)
+    "front_drive": ("front_share_shift", 0.15, 0.5, False),
 }
 _RELATIVE_TO_ONE = {"steering_gain", "speed_scale", "mass_scale"}
 _BELOW_ONE = {"accel_scale", "brake_scale", "servo_rate_scale", "steer_limit_scale"}
@@ -104,13 +107,15 @@ def draw_value(effect: str, rng: np.random.Generator) -> float:
 def make_measured_log(effect: str | Sequence[str] | None, *, rng: np.random.Generator,
                       car: CarDescription | None = None, value: float | Sequence[float] | None = None,
                       start_s: float = 0.0, duration_s: float | None = None, noise: bool = True,
-                      sensors: str = "pose_speed") -> tuple[RunLog, Truth]:
+                      sensors: str = "pose_speed", sim_factory=None) -> tuple[RunLog, Truth]:
     """A synthetic measured log with ``effect`` hidden (see the module docstring).
 
     ``effect``: a catalogue name, several names, or None. ``value`` fixes the magnitude(s)
     instead of drawing them; ``start_s``/``duration_s`` play only that part of the plan
     (from rest at the origin; tests use ~20 s parts); ``noise=False`` gives exact states
-    (for the signal-to-noise computation of the bench); ``sensors`` one of :data:`SENSORS`.
+    (for the signal-to-noise computation of the bench); ``sensors`` one of :data:`SENSORS`;
+    ``sim_factory`` plays the plan in another simulator (``excite.run_plan``'s: something the
+    catalogue does not model, on top of the car and its effects).
     Returns ``(log, truth)``; the log holds the commands, ``coast`` and the sensors' columns
     (source ``"<synthetic EFFECT+EFFECT>"``).
     """
@@ -147,7 +152,7 @@ def make_measured_log(effect: str | Sequence[str] | None, *, rng: np.random.Gene
                 if isinstance(getattr(plan, f.name), np.ndarray) and len(getattr(plan, f.name)) == n_rows}
         rows["t_s"] = rows["t_s"] - plan.t_s[a]
         plan = dataclasses.replace(plan, **rows)
-    out = run_plan(plan, truth_car, dt_s=SYNTH_DT_S)
+    out = run_plan(plan, truth_car, dt_s=SYNTH_DT_S, sim_factory=sim_factory)
     n = len(out)
     keep = ("t_s", "speed_cmd_mps", "steer_cmd_rad", "coast") + SENSORS[sensors]
     cols = {k: out.column(k) for k in keep}
