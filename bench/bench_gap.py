@@ -27,12 +27,13 @@ Modes (``--mode``, comma-separated; default: all of them, small):
     which the default car's logs cannot show (:data:`GRIP_LIMITED`).
 ``unmodelled``
     Logs no catalogue effect explains (the issue's "is told so"): the default car, pose +
-    speed, no catalogue effect, and one thing the catalogue lacks - even trials a steering
-    that turns :data:`CASTER_GAIN` times further while reversing (caster pushing the wheels
-    round, :class:`ReverseCaster`), odd trials a floor tilted by :data:`SLOPE_DEG` in a random
-    direction (``CarSim(slope_rad=)``). Figures: logs where nothing is named; logs whose report
-    lists an ``unexplained`` leftover; for the caster, logs whose leftovers name a steering
-    signal (yaw rate, yaw, position) while reversing.
+    speed, no catalogue effect, and one thing the catalogue lacks - even trials wheels that
+    turn :data:`REVERSE_PULL_RAD` to one side while reversing only (slack in the linkage
+    taken up the other way round when the wheels are pushed; :class:`ReversePull`), odd
+    trials a floor tilted by :data:`SLOPE_DEG` in a random direction (``CarSim(slope_rad=)``).
+    Figures: logs where nothing is named; logs whose report lists an ``unexplained`` leftover;
+    for the pull, logs whose leftovers name a steering signal (yaw rate, yaw, position) while
+    reversing.
 ``compare``
     The ``multi`` logs (the same seeds: a run of ``multi,compare`` runs the chain once per
     log) with two baselines on the same prepared logs, windows and residuals
@@ -92,7 +93,7 @@ _MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3, "tenth": 4, "unmodelled"
 # default car (3.1 m/s^2), so the default-car modes leave them out; ``tenth`` has them
 GRIP_LIMITED = ("front_drive",)
 TENTH_KEEP = 0.6  # share of the 50-Hz rows a ``tenth`` log keeps (irregular stamps, ~30 Hz)
-CASTER_GAIN = (1.5, 2.5)  # ``unmodelled``: steering gain while reversing, uniform in this range
+REVERSE_PULL_RAD = (0.03, 0.08)  # ``unmodelled``: steering offset while reversing, uniform (sign random)
 SLOPE_DEG = (1.5, 3.0)  # ``unmodelled``: floor tilt, uniform in this range
 REAL_DIR = Path(os.environ.get("NXPCUP_REAL_LOGS",
                                Path(__file__).resolve().parents[2] / "shared" / "data" / "real_logs"))
@@ -163,16 +164,17 @@ def thinned(log, rng: np.random.Generator, keep: float):
     return log.subset(np.flatnonzero(rows))
 
 
-class ReverseCaster:
-    """A car whose steering turns ``gain`` times further while the speed command is negative
-    (a castered front axle pushing the wheels round when reversing; the servo gives way): not
-    in the catalogue. Wraps a simulator; everything else is the inner one's."""
+class ReversePull:
+    """A car whose wheels turn ``offset_rad`` to one side while the speed command is negative
+    only (the linkage's slack taken up the other way round when reversing pushes the wheels):
+    not in the catalogue, whose offset acts in both directions. Wraps a simulator;
+    everything else is the inner one's."""
 
-    def __init__(self, sim, gain: float):
-        self._sim, self._gain = sim, gain
+    def __init__(self, sim, offset_rad: float):
+        self._sim, self._offset = sim, offset_rad
 
     def set_command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float | None = None) -> None:
-        self._sim.set_command(speed_mps, steer_rad * self._gain if speed_mps < 0.0 else steer_rad, yaw_rate_radps)
+        self._sim.set_command(speed_mps, steer_rad + self._offset if speed_mps < 0.0 else steer_rad, yaw_rate_radps)
 
     def __getattr__(self, name):
         return getattr(self._sim, name)
@@ -185,8 +187,8 @@ def unmodelled_design(k: int) -> tuple[str, float, object]:
 
     rng = np.random.default_rng([SEED, _MODE_TAG["unmodelled"], k, 1])
     if k % 2 == 0:
-        gain = float(rng.uniform(*CASTER_GAIN))
-        return "reverse_caster", gain, lambda car, dt_s, start: ReverseCaster(make_sim(car, dt_s=dt_s, start=start), gain)
+        pull = float(rng.uniform(*REVERSE_PULL_RAD) * rng.choice([-1.0, 1.0]))
+        return "reverse_pull_rad", pull, lambda car, dt_s, start: ReversePull(make_sim(car, dt_s=dt_s, start=start), pull)
     slope, heading = float(rng.uniform(*SLOPE_DEG)), float(rng.uniform(-math.pi, math.pi))
 
     def sloped(car, dt_s, start):  # the plan's frame turned by ``heading`` on a floor descending along +x
@@ -559,12 +561,12 @@ def target_rows(rows: list[dict]) -> list[dict]:
         add(mode, what, value, n, goal.replace("%", " %"), value >= limit if at_least else value <= limit,
             _fmt((value, n), pct))
     um = [r for r in rows if r.get("mode") == "unmodelled"]
-    caster = [r for r in um if r["unmodelled"]["what"] == "reverse_caster"]
+    pull = [r for r in um if r["unmodelled"]["what"] == "reverse_pull_rad"]
     for what, hits in (("nothing named", [not r["chain"]["named"] for r in um]),
                        ("told so: an unexplained leftover listed", [bool(r["leftovers"]) for r in um]),
-                       ("reverse caster: a leftover in steering while reversing",
+                       ("reverse pull: a leftover in steering while reversing",
                         [any(d["signal"] in ("yaw_rate_radps", "yaw_rad", "position_m") and "reversing" in d["regimes"]
-                             for d in r["leftovers"]) for r in caster])):
+                             for d in r["leftovers"]) for r in pull])):
         if hits:
             value, n = _frac(hits)
             add("unmodelled", what, value, n, ">= 90 %", value >= 0.9, _fmt((value, n)))
