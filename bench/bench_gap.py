@@ -21,9 +21,10 @@ Modes (``--mode``, comma-separated; default: all of them, small):
     Another car at another rate: one hidden effect per log as in ``single`` (every
     :data:`NONE_EVERY`-th log effect-free), on a 1:10 car (:func:`tenth_car`: 3.5 kg,
     wheelbase 0.33 m, 8 m/s, drive and brake limits of 6 and 8 m/s^2, near the tyres' grip,
-    servo 3.5 rad/s) driving its own plan (``make_plan(car)``: 181 s), its pose and speed
-    logged at irregular stamps, about 30 Hz (each 50-Hz row kept with probability
-    :data:`TENTH_KEEP`). The catalogue includes ``front_drive`` (the file says rear drive),
+    servo 3.5 rad/s) driving its own plan (``make_plan(car)``: 181 s) with a controller that
+    runs at irregular stamps, about 30 Hz (:class:`SlowController`: it acts at each 50-Hz plan
+    row with probability :data:`TENTH_KEEP` and holds its command in between), its pose and
+    speed logged when it acts. The catalogue includes ``front_drive`` (the file says rear drive),
     which the default car's logs cannot show (:data:`GRIP_LIMITED`).
 ``unmodelled``
     Logs no catalogue effect explains (the issue's "is told so"): the default car, pose +
@@ -92,7 +93,7 @@ _MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3, "tenth": 4, "unmodelled"
 # effects that show only where the drive and brake limits reach the tyres' grip: not on the
 # default car (3.1 m/s^2), so the default-car modes leave them out; ``tenth`` has them
 GRIP_LIMITED = ("front_drive",)
-TENTH_KEEP = 0.6  # share of the 50-Hz rows a ``tenth`` log keeps (irregular stamps, ~30 Hz)
+TENTH_KEEP = 0.6  # share of the 50-Hz plan rows the ``tenth`` controller acts at (irregular stamps, ~30 Hz)
 REVERSE_PULL_RAD = (0.03, 0.08)  # ``unmodelled``: steering offset while reversing, uniform (sign random)
 SLOPE_DEG = (1.5, 3.0)  # ``unmodelled``: floor tilt, uniform in this range
 REAL_DIR = Path(os.environ.get("NXPCUP_REAL_LOGS",
@@ -155,13 +156,31 @@ def mode_car(mode: str):
     return tenth_car() if mode == "tenth" else None
 
 
-def thinned(log, rng: np.random.Generator, keep: float):
-    """``log`` with each row but the first and last kept with probability ``keep``:
-    irregular stamps at ``keep`` x the rate (a command sent between kept rows shows at the
-    next one, as in a log written slower than the controller runs)."""
-    rows = rng.random(len(log)) < keep
-    rows[0] = rows[-1] = True
-    return log.subset(np.flatnonzero(rows))
+class SlowController:
+    """A controller at irregular stamps: of the plan's rows (one ``set_command`` each, in
+    ``run_plan``) it acts at the first and then at each with probability ``keep``, and holds
+    its command (and coasting) in between; ``acted`` records the rows it acted at, the rows
+    its log keeps, so the log holds every command the car got. Wraps a simulator."""
+
+    def __init__(self, sim, rng: np.random.Generator, keep: float):
+        self._sim, self._rng, self._keep = sim, rng, keep
+        self.acted: list[bool] = []
+        self._coast: bool | None = None
+
+    def set_coast(self, coast: bool) -> None:
+        self._coast = bool(coast)  # applied at the next row the controller acts at
+
+    def set_command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float | None = None) -> None:
+        act = not self.acted or bool(self._rng.random() < self._keep)
+        self.acted.append(act)
+        if act:
+            if self._coast is not None:
+                self._sim.set_coast(self._coast)
+                self._coast = None
+            self._sim.set_command(speed_mps, steer_rad, yaw_rate_radps)
+
+    def __getattr__(self, name):
+        return getattr(self._sim, name)
 
 
 class ReversePull:
@@ -328,10 +347,20 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
     effects, sensors, rng = design(mode, k)
     car = mode_car(mode)
     unmodelled = unmodelled_design(k) if mode == "unmodelled" else None
-    log, truth = make_measured_log(effects or None, rng=rng, sensors=sensors, car=car,
-                                   sim_factory=unmodelled[2] if unmodelled else None)
+    factory = unmodelled[2] if unmodelled else None
+    slow: list[SlowController] = []
     if mode == "tenth":
-        log = thinned(log, rng, TENTH_KEEP)
+        from simrunner.car.effects import make_sim
+
+        def factory(car_, dt_s, start):
+            slow.append(SlowController(make_sim(car_, dt_s=dt_s, start=start),
+                                       np.random.default_rng([SEED, _MODE_TAG[mode], k, 1]), TENTH_KEEP))
+            return slow[-1]
+    log, truth = make_measured_log(effects or None, rng=rng, sensors=sensors, car=car, sim_factory=factory)
+    if slow:
+        if len(slow[0].acted) != len(log):  # pragma: no cover - run_plan open loop: one row per plan row
+            raise ValueError("tenth: the log's rows are not the plan's")
+        log = log.subset(np.flatnonzero(slow[0].acted))
     t0 = time.perf_counter()
     result = run_gap(log, car, jobs=1)
     wall = time.perf_counter() - t0
