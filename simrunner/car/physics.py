@@ -407,8 +407,8 @@ class CarSim:
                     j.setForceUpperLimit(0, torque)
             self._torque_applied = c.wheel_torque_nm
         # a coasting (PASSIVE) wheel ignores commands: they are set when the servo is back
-        omega = ((0.0, 0.0) if c.wheels_locked else (None if c.coast else c.wheel_omega_radps))
-        if f > 0.0 and omega is not None:
+        omega = (0.0, 0.0) if c.wheels_locked else (None if c.coast else c.wheel_omega_radps)
+        if f > 0.0 and omega is not None:  # rear left, rear right, front left, front right
             omega = omega + ((0.0, 0.0) if c.wheels_locked else c.front_omega_radps)
         if omega is not None and omega != self._omega_applied:
             for j, o in zip(b.wheel_joints[2:] if f == 0.0 else b.wheel_joints[2:] + b.wheel_joints[:2], omega):
