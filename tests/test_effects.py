@@ -294,6 +294,26 @@ def test_steering_play_ignores_small_reversals_then_catches_up():
     assert steer == pytest.approx([0.15, 0.15, 0.15, 0.10, 0.10], abs=1e-9)
 
 
+@pytest.mark.parametrize("before, lag", [(0.0, 0.0), (0.4, 0.0), (0.0, 0.08)])
+def test_prime_steering_rests_the_play_on_the_side_the_commands_came_from(before, lag):
+    """A wheel angle measured inside the play's band does not say which side the output
+    rests on; the commands before do: coming up from 0 it rests b below the command, coming
+    down from 0.4 b above (a lag or not). Without a play ``prime_steering`` changes nothing."""
+    b, cmd = 0.03, 0.2
+    sim = make_sim(with_effects(CAR, steering_play_rad=b, steering_lag_s=lag))
+    sim.set_state(Pose2(), 1.0, cmd + 0.01)  # measured 0.21: inside the band, on neither edge
+    t = np.linspace(0.0, 3.0, 151)
+    sim.prime_steering(t, np.where(t[:-1] < 1.0, before, cmd))
+    trace(sim, lambda t_: (1.0, cmd), 0.5)
+    assert sim.steer_rad == pytest.approx(cmd - b if before < cmd else cmd + b, abs=1e-4)
+    plain, unprimed = make_sim(CAR), make_sim(with_effects(CAR, steering_lag_s=0.08))
+    for s_ in (plain, unprimed):
+        s_.set_state(Pose2(), 1.0, cmd)
+        before_state = s_.save_state()
+        s_.prime_steering(t, np.full(150, 0.4))
+        assert repr(s_.save_state()) == repr(before_state)
+
+
 def _reverse_times_s(car):
     """Rolling forward at 1.5 m/s, command -1 m/s: (time to rest, time to -0.5 m/s)."""
     sim = make_sim(car)

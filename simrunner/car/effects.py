@@ -611,6 +611,32 @@ class EffectSim:
         if self._forces:
             self._apply_forces()
 
+    def prime_steering(self, t_s, steer_cmd_rad) -> None:
+        """Bring the steering path's state to where earlier steering commands leave it:
+        ``steer_cmd_rad[k]`` held from ``t_s[k]`` to ``t_s[k + 1]`` (one more time than
+        commands), through gain, offset, asymmetry, lag, rate limit and play (latency
+        ignored), from the states :meth:`set_state` left (those of the measured angle). Only
+        the steering play needs it: which side of its band the output rests on is remembered
+        for as long as the commands stay inside the band, and a measured angle (noisy, or
+        inside the band) does not say it; commands that cross the band do. Without a play
+        nothing changes. The gap replay calls it after :meth:`set_state`."""
+        e = self._e
+        if e.steering_play_rad <= 0.0:
+            return
+        b = e.steering_play_rad
+        lag, rl, y = self._steer_lag, self._steer_rl, self._play
+        for k, cmd in enumerate(steer_cmd_rad):
+            d = self._static_map((0.0, float(cmd), None, False))[1]
+            dt = float(t_s[k + 1]) - float(t_s[k])
+            lag = lag - math.expm1(-dt / e.steering_lag_s) * (d - lag) if e.steering_lag_s > 0.0 else d
+            if e.steering_rate_limit_radps != math.inf:
+                step = e.steering_rate_limit_radps * dt
+                rl += min(max(lag - rl, -step), step)
+            else:
+                rl = lag
+            y = rl - b if rl > y + b else rl + b if rl < y - b else y
+        self._steer_lag, self._steer_rl, self._play = lag, rl, y
+
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
                   yaw_rate_radps: float = 0.0) -> None:
         """Place the car (as ``CarSim.set_state``: ``steer_rad`` is the actual wheel angle).

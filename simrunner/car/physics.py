@@ -580,6 +580,10 @@ class CarSim:
         self._place(pose, float(speed_mps), float(steer_rad), float(yaw_rate_radps))
         self.set_command(speed_mps, steer_rad)
 
+    def prime_steering(self, t_s, steer_cmd_rad) -> None:
+        """Nothing to do: the nominal car's steering state is the wheel angle itself (set by
+        :meth:`set_state` / :meth:`place`); see ``EffectSim.prime_steering``."""
+
     def place(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
               yaw_rate_radps: float = 0.0) -> None:
         """Move the car to a planar state like :meth:`set_state` but keep the commands in

@@ -73,6 +73,7 @@ class CarModel(Protocol):
                   yaw_rate_radps: float = 0.0) -> None: ...
     def place(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
               yaw_rate_radps: float = 0.0) -> None: ...
+    def prime_steering(self, t_s: Any, steer_cmd_rad: Any) -> None: ...  # state earlier commands leave
 
 
 def protocol_members() -> tuple[str, ...]:

@@ -7,7 +7,9 @@ see :mod:`simrunner.workflows.gap.logs`), then applies each logged command until
 sample time (zero-order hold) and records the predicted state at every sample. Before a
 window, the :data:`LEAD_S` seconds of commands that precede it (within the same piece of
 the log) are replayed unrecorded and the car is then moved (``place``) to the measured
-state at the window's start, so latency queues and lags carry the commands in flight.
+state at the window's start, so latency queues and lags carry the commands in flight
+(a steering play, whose state no measurement gives, also gets the :data:`PLAY_HISTORY_S`
+seconds of steering commands before that).
 Restarting keeps open-loop drift from swamping the comparison; one simulator object serves
 all windows of a replay, so a whole replay is one pass. A log without pose starts every
 window at the origin with the measured speed and yaw rate, heading the yaw rate integrated
@@ -53,6 +55,7 @@ QUIET_AFTER_S = 0.1
 NO_DRIVE_CMD_MPS = 0.05  # |speed_cmd| below this: no drive (as regimes.COAST_CMD_MPS)
 MOVING_MPS = 0.1
 LEAD_S = 0.3  # commands replayed before each window (not compared), see replay()
+PLAY_HISTORY_S = 10.0  # steering commands before a lead-in that set a steering play's state
 
 FIT_SIGNALS = ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
 REPORT_SIGNALS = ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
@@ -216,7 +219,9 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
     recorded; at ``i0`` the car is moved to the measured state with ``sim.place`` (the
     physical state only), so commands still in flight (latency, lags, rate limits) reach
     the window as they would on the car instead of starting settled. ``lead_s=None``:
-    :data:`LEAD_S`; 0 starts every window settled."""
+    :data:`LEAD_S`; 0 starts every window settled. A car with a steering play first gets
+    the :data:`PLAY_HISTORY_S` seconds of steering commands before the lead-in
+    (``prime_steering``): which side of its band the play rests on is in no measured state."""
     lead_s = LEAD_S if lead_s is None else float(lead_s)
     n = len(log)
     out = np.full((5, n), np.nan)
@@ -225,6 +230,7 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
     coast = log.coasting()
     pose = has_pose(log)
     wheelbase = car.chassis.wheelbase_m
+    prime = car.effects.steering_play_rad > 0.0  # the only history-dependent command state
     after_gap = np.concatenate([[0], np.flatnonzero(time_gaps(t)) + 1])  # first sample of each piece
 
     heading = None if pose else dead_reckoned_yaw(log, derived, wheelbase)
@@ -273,6 +279,10 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         j0 = next(j for j in range(j0, i0 + 1) if usable(j))
         sim.set_coast(bool(coast[j0]))
         sim.set_state(*state(j0))
+        if prime and lead_s > 0.0:
+            h = int(np.searchsorted(t, t[j0] - PLAY_HISTORY_S - 1e-9))  # time gaps: commands held
+            if h < j0:
+                sim.prime_steering(t[h:j0 + 1], log.steer_cmd_rad[h:j0])
         if j0 < i0:
             run(j0, i0, record=False)
             if bool(coast[i0 - 1]) != bool(coast[i0]):
