@@ -933,6 +933,33 @@ def test_screening_keeps_the_windows_that_steer_hardest():
     assert extreme_windows(plain) == set()  # nothing steers: no window is special
 
 
+def test_screening_keeps_the_windows_that_ask_to_reverse_while_rolling_forward():
+    """An ESC that brakes before it reverses shows only where the car is asked to reverse
+    while rolling forward; a long log has a few such windows, and every k-th window of a
+    label may miss them: the screening subset keeps them all."""
+    from simrunner.workflows.gap.chain import reversal_windows, screening_problem
+
+    car = CarDescription()
+    log = simulate(car, duration_s=60.0)
+    t = log.t_s
+    assert np.all(log.speed_cmd_mps >= 0.0) and np.median(log.speed_mps) > 0.3
+    cmd = np.where((t > 33.0) & (t < 33.3), -0.5, log.speed_cmd_mps)
+    log = log.with_columns(speed_cmd_mps=cmd)
+    d = derive(log, car.chassis.wheelbase_m)
+    windows = tuple(make_windows(log))
+    prob = Problem(car, (Segment(log, d, windows),), {s: 1.0 for s in FIT_SIGNALS}, FIT_SIGNALS, 0.002,
+                   kin_factory)
+    asked = {i for i, w in enumerate(windows) if (cmd[w.start:w.stop] < 0.0).any()
+             and (d.speed_mps[w.start:w.stop][cmd[w.start:w.stop] < 0.0] > 0.1).any()}
+    assert asked and reversal_windows(prob) == asked
+    kept = screening_problem(prob, max_s=6.0).segments[0].windows
+    assert len(kept) < len(windows) // 2
+    assert all(windows[i] in kept for i in asked)
+    plain = dataclasses.replace(prob, segments=(Segment(log.with_columns(speed_cmd_mps=log.speed_cmd_mps.clip(0.0)),
+                                                        d, windows),))
+    assert reversal_windows(plain) == set()
+
+
 def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():
     from simrunner.workflows.gap.report import leftovers
 

@@ -153,6 +153,24 @@ def extreme_windows(problem: Problem) -> set[int]:
     return out
 
 
+def reversal_windows(problem: Problem) -> set[int]:
+    """Indices (over the windows of all segments in turn) of the windows where the car is
+    asked to reverse while it still rolls forward
+    (:func:`simrunner.workflows.gap.regimes.brake_to_reverse`, the car file's brake limit):
+    an ESC that brakes before it reverses shows only there, and a plan reverses a few times
+    in a long log, so every k-th window of a label can miss them all."""
+    from simrunner.workflows.gap.regimes import brake_to_reverse
+
+    out, index = set(), 0
+    for seg in problem.segments:
+        onset = brake_to_reverse(seg.log, seg.derived, problem.car.drive.max_brake_mps2)
+        for w in seg.windows:
+            if onset[w.start:w.stop].any():
+                out.add(index)
+            index += 1
+    return out
+
+
 def _finite_max(x) -> float:
     x = np.asarray(x, float)
     x = x[np.isfinite(x)]
@@ -165,13 +183,14 @@ def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
     :func:`window_labels` (the first of each label included), so a manoeuvre that a few
     windows hold (a hard brake, a coast, reversing) stays in the screening and the effects it
     reveals are ranked on it; and the windows of :func:`extreme_windows` (the hardest
-    steering each way)."""
+    steering each way) and of :func:`reversal_windows` (a reverse command while rolling
+    forward)."""
     total = sum(s.duration_s for s in problem.segments)
     k = max(1, math.ceil(total / max_s)) if max_s > 0 else 1
     if k == 1:
         return problem
     labels = iter(window_labels(problem))
-    extremes = extreme_windows(problem)
+    extremes = extreme_windows(problem) | reversal_windows(problem)
     seen: dict[str, int] = {}
     segs = []
     index = 0

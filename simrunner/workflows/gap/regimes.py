@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from simrunner.run.log import RunLog
-from simrunner.workflows.gap.logs import Derived
+from simrunner.workflows.gap.logs import Derived, sample_dt_s
 from vehicle.description import CarDescription
 
 MOVING_MPS = 0.1
@@ -58,6 +58,18 @@ def segment(log: RunLog, derived: Derived, car: CarDescription | None = None) ->
     return {"all": moving, "accelerating": accelerating, "braking": braking, "coasting": coasting,
             "steady": steady, "straight": straight, "cornering": left | right, "left": left, "right": right,
             "reversing": speed < -MOVING_MPS, "high_lat_accel": moving & lateral}
+
+
+def brake_to_reverse(log: RunLog, derived: Derived, max_brake_mps2: float | None = None) -> np.ndarray:
+    """``(N,) bool``: a reverse command (``speed_cmd_mps`` below ``-COAST_CMD_MPS``) while the
+    car still rolls forward, faster than ``MOVING_MPS`` and than it sheds in one sample
+    interval braking at ``max_brake_mps2`` (the car file's; None: ``MOVING_MPS`` only). An
+    ESC that brakes before it reverses shows only there; slower, the car is at rest by the
+    next sample and the log cannot show how it braked (DS2's reverse command from rest at a
+    smoothed 0.11 m/s is no such event)."""
+    speed = np.where(np.isfinite(derived.speed_mps), derived.speed_mps, 0.0)
+    rolling_mps = MOVING_MPS if max_brake_mps2 is None else max(MOVING_MPS, max_brake_mps2 * sample_dt_s(log))
+    return (np.asarray(log.speed_cmd_mps, float) < -COAST_CMD_MPS) & (speed > rolling_mps)
 
 
 def residual_stats(residuals: dict[str, np.ndarray | None], masks: dict[str, np.ndarray]) -> list[dict]:

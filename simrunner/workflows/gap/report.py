@@ -37,8 +37,8 @@ from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_
                                          robust_total, window_costs)
 from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
-from simrunner.workflows.gap.logs import Derived, check_measured, derive, sample_dt_s
-from simrunner.workflows.gap.regimes import COAST_CMD_MPS, MOVING_MPS, residual_stats, segment
+from simrunner.workflows.gap.logs import Derived, check_measured, derive
+from simrunner.workflows.gap.regimes import brake_to_reverse, residual_stats, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
@@ -199,19 +199,13 @@ def _finite(obj):
 def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
                   windows: Sequence[Window], max_brake_mps2: float | None = None) -> list[str]:
     """The group of each window for the fit/held-out split (:func:`split_windows`): the
-    rarest manoeuvre it holds. ``"brake_to_reverse"``: a reverse command (``speed_cmd_mps``
-    below ``-COAST_CMD_MPS``) while the car still rolls forward, faster than ``MOVING_MPS``
-    and than it sheds in one sample interval braking at ``max_brake_mps2`` (the car
-    file's; None: ``MOVING_MPS`` only) (an ESC that
-    brakes before it reverses shows only there; slower, the car is at rest by the next
-    sample, and the log cannot show how it braked: DS2's reverse command from rest at a
-    smoothed 0.11 m/s is no such event); else ``"coast"``: coasting or rolling with no drive
+    rarest manoeuvre it holds. ``"brake_to_reverse"``: a reverse command while the car
+    still rolls forward (:func:`simrunner.workflows.gap.regimes.brake_to_reverse`, with the
+    car file's ``max_brake_mps2``); else ``"coast"``: coasting or rolling with no drive
     commanded; else ``""``. A group of two or more windows sends some to the held-out set
     and keeps the rest in the fit, so an effect seen only in a rare manoeuvre can be both
     fitted and confirmed (the excitation plan reverses twice for this)."""
-    speed = np.where(np.isfinite(derived.speed_mps), derived.speed_mps, 0.0)
-    rolling_mps = MOVING_MPS if max_brake_mps2 is None else max(MOVING_MPS, max_brake_mps2 * sample_dt_s(log))
-    onset = (np.asarray(log.speed_cmd_mps, float) < -COAST_CMD_MPS) & (speed > rolling_mps)
+    onset = brake_to_reverse(log, derived, max_brake_mps2)
     out = []
     for w in windows:
         if onset[w.start:w.stop].any():
