@@ -423,6 +423,9 @@ def test_chain_acceptance_needs_bic_fit_and_held_out_improvement():
     assert "held-out gap -1.0%: not smaller by 2.0% (the held-out windows do not confirm it)" == \
         _reject_reason(tr(500.0, 0.5, 0.99), 1.0, 132.5, 0.068, 0.02)
     assert "do not confirm" in _reject_reason(tr(500.0, 0.5, float("nan")), 1.0, 132.5, 0.068, 0.02)
+    # an effect that acts on none of the held-out windows (an ESC delay, no reversal held out)
+    assert "the held-out windows hold nothing it acts on" in _reject_reason(tr(500.0, 0.5, 1.0), 1.0, 132.5,
+                                                                           0.068, 0.02)
 
 
 @pytest.mark.parametrize("effect, field, neutral, near, away", [

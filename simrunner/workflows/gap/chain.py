@@ -628,6 +628,9 @@ def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvem
     if tr.improvement < improvement_min:
         return f"fit improvement {tr.improvement:.1%} < {improvement_min:.1%}"
     if not (math.isfinite(tr.held_gap) and tr.held_gap <= held_before * (1.0 - held_improvement_min)):
+        if tr.held_gap == held_before:
+            return ("held-out gap unchanged to the last digit: the held-out windows hold nothing it acts on "
+                    "(a log with more of the manoeuvre it shows in can confirm it)")
         change = f"{tr.held_gap / held_before - 1.0:+.1%}" if held_before > 0 and math.isfinite(tr.held_gap) else "not finite"
         return (f"held-out gap {change}: not smaller by {held_improvement_min:.1%} "
                 "(the held-out windows do not confirm it)")
