@@ -1176,3 +1176,20 @@ def test_a_steering_play_starts_each_window_on_the_side_the_commands_left_it(mon
         return rmse(res, np.ones(len(log), dtype=bool))["yaw_rad"]
 
     assert yaw_rms(replay_mod.PLAY_HISTORY_S) < 0.8 * yaw_rms(0.0)
+
+
+def test_a_log_without_a_reverse_command_while_rolling_cannot_reveal_an_esc_delay():
+    """``esc_brake_reverse`` acts only where a reverse command meets a car rolling forward:
+    listed as unrevealable until a fit window and a held-out window each hold one."""
+    from simrunner.workflows.gap.report import missing_manoeuvres, prepare
+
+    car = CarDescription()
+    log = simulate(car, duration_s=60.0)
+    t = log.t_s
+    none = prepare(log, car, 2.0)
+    assert missing_manoeuvres(["steering_gain"], [none], car) == {}
+    listed = missing_manoeuvres(["esc_brake_reverse", "steering_gain"], [none], car)
+    assert list(listed) == ["esc_brake_reverse"] and "(these logs: 0 fit, 0 held out)" in listed["esc_brake_reverse"][0]
+    events = (t > 13.0) & (t < 13.2) | (t > 33.0) & (t < 33.2) | (t > 53.0) & (t < 53.2)
+    both = prepare(log.with_columns(speed_cmd_mps=np.where(events, -0.5, log.speed_cmd_mps)), car, 2.0)
+    assert missing_manoeuvres(["esc_brake_reverse"], [both], car) == {}

@@ -99,7 +99,7 @@ class GapResult:
     rmse_smoothed_before: dict[str, float] = field(default_factory=dict)
     rmse_smoothed_after: dict[str, float] = field(default_factory=dict)
     noise_rms: dict[str, float] = field(default_factory=dict)
-    unrevealable: dict[str, list[str]] = field(default_factory=dict)  # effect -> signals it needs
+    unrevealable: dict[str, list[str]] = field(default_factory=dict)  # effect -> signals (or manoeuvre) it needs
     leftovers: list[dict] = field(default_factory=list)
     gap_ls_before: float = math.nan  # the same in plain least squares (every window at full weight)
     gap_ls_after: float = math.nan
@@ -330,7 +330,8 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         parts=parts, pred_before=pred0[0], pred_after=pred1[0], settings=settings,
         rmse_smoothed_before=rmse(smoothed(pred0), held, rep_signals),
         rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
-        unrevealable=cannot_reveal(names, signals), leftovers=leftovers(stats_after, noise))
+        unrevealable={**missing_manoeuvres(names, parts, car), **cannot_reveal(names, signals)},
+        leftovers=leftovers(stats_after, noise))
 
 
 def _noise(parts: Sequence[LogPart], signals: Sequence[str]) -> dict[str, float]:
@@ -356,6 +357,25 @@ def cannot_reveal(names: Sequence[str], signals: Sequence[str]) -> dict[str, lis
         if needs and not any(s in signals for s in needs):
             out[n] = needs
     return out
+
+
+def missing_manoeuvres(names: Sequence[str], parts: Sequence[LogPart], car: CarDescription) -> dict[str, list[str]]:
+    """The effects among ``names`` that act only in a manoeuvre the logs' windows lack in the
+    fit or in the held-out set (so no fit can find them, or no held-out window can confirm
+    them): effect -> what it would need. Today one: ``esc_brake_reverse`` acts only where a
+    reverse command meets a car still rolling forward
+    (:func:`simrunner.workflows.gap.regimes.brake_to_reverse`)."""
+    if "esc_brake_reverse" not in names:
+        return {}
+    counts = [0, 0]
+    for p in parts:
+        onset = brake_to_reverse(p.log, p.derived, car.drive.max_brake_mps2)
+        for k, windows in enumerate((p.fit_windows, p.held_windows)):
+            counts[k] += sum(1 for w in windows if onset[w.start:w.stop].any())
+    if min(counts) > 0:
+        return {}
+    return {"esc_brake_reverse": [f"a reverse command while rolling forward in a fit and in a held-out window "
+                                  f"(these logs: {counts[0]} fit, {counts[1]} held out)"]}
 
 
 # signal -> the noise estimate that bounds it from below (position errors: the pose noise)
