@@ -159,16 +159,11 @@ def reversal_windows(problem: Problem) -> set[int]:
     (:func:`simrunner.workflows.gap.regimes.brake_to_reverse`, the car file's brake limit):
     an ESC that brakes before it reverses shows only there, and a plan reverses a few times
     in a long log, so every k-th window of a label can miss them all."""
-    from simrunner.workflows.gap.regimes import brake_to_reverse
+    from simrunner.workflows.gap.regimes import reversal_onsets
 
-    out, index = set(), 0
-    for seg in problem.segments:
-        onset = brake_to_reverse(seg.log, seg.derived, problem.car.drive.max_brake_mps2)
-        for w in seg.windows:
-            if onset[w.start:w.stop].any():
-                out.add(index)
-            index += 1
-    return out
+    flags = [f for seg in problem.segments
+             for f in reversal_onsets(seg.log, seg.derived, seg.windows, problem.car.drive.max_brake_mps2)]
+    return {i for i, f in enumerate(flags) if f}
 
 
 def _finite_max(x) -> float:

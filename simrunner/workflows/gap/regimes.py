@@ -72,6 +72,14 @@ def brake_to_reverse(log: RunLog, derived: Derived, max_brake_mps2: float | None
     return (np.asarray(log.speed_cmd_mps, float) < -COAST_CMD_MPS) & (speed > rolling_mps)
 
 
+def reversal_onsets(log: RunLog, derived: Derived, windows, max_brake_mps2: float | None = None) -> list[bool]:
+    """One flag per window (anything with ``start``/``stop`` sample indices): does it hold
+    a :func:`brake_to_reverse` sample? The one test behind the fit/held-out split, the
+    screening subset and the cannot-reveal check."""
+    onset = brake_to_reverse(log, derived, max_brake_mps2)
+    return [bool(onset[w.start:w.stop].any()) for w in windows]
+
+
 def residual_stats(residuals: dict[str, np.ndarray | None], masks: dict[str, np.ndarray]) -> list[dict]:
     """RMSE, bias (mean) and count of every residual signal in every regime.
 

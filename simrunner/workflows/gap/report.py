@@ -38,7 +38,7 @@ from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_
 from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive
-from simrunner.workflows.gap.regimes import brake_to_reverse, residual_stats, segment
+from simrunner.workflows.gap.regimes import residual_stats, reversal_onsets, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
@@ -205,10 +205,9 @@ def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
     commanded; else ``""``. A group of two or more windows sends some to the held-out set
     and keeps the rest in the fit, so an effect seen only in a rare manoeuvre can be both
     fitted and confirmed (the excitation plan reverses twice for this)."""
-    onset = brake_to_reverse(log, derived, max_brake_mps2)
     out = []
-    for w in windows:
-        if onset[w.start:w.stop].any():
+    for w, onset in zip(windows, reversal_onsets(log, derived, windows, max_brake_mps2)):
+        if onset:
             out.append("brake_to_reverse")
         elif masks["coasting"][w.start:w.stop].any():
             out.append("coast")
@@ -369,9 +368,8 @@ def missing_manoeuvres(names: Sequence[str], parts: Sequence[LogPart], car: CarD
         return {}
     counts = [0, 0]
     for p in parts:
-        onset = brake_to_reverse(p.log, p.derived, car.drive.max_brake_mps2)
         for k, windows in enumerate((p.fit_windows, p.held_windows)):
-            counts[k] += sum(1 for w in windows if onset[w.start:w.stop].any())
+            counts[k] += sum(reversal_onsets(p.log, p.derived, windows, car.drive.max_brake_mps2))
     if min(counts) > 0:
         return {}
     return {"esc_brake_reverse": [f"a reverse command while rolling forward in a fit and in a held-out window "
