@@ -141,6 +141,9 @@ def test_cli_prints_report_and_writes_car(tmp_path):
     car = load_car(out)
     assert car.wheels.friction_mu == pytest.approx(math.tan(math.radians(35)), rel=1e-9)
     assert car.chassis.mass_kg == pytest.approx(1.1)
+    text = out.read_text()
+    assert "Source: simrunner calibrate [traction], thesis" in text  # the calibrated fields say so
+    assert "Source: simrunner calibrate [mass], thesis" in text
     assert not (tmp_path / "car.toml.tmp").exists()
 
 

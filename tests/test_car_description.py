@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vehicle.description import (_SECTION_TYPES, CarDescription, CarDescriptionError, car_from_dict, load_car,
-                        markdown_doc)
+from vehicle.description import (_SECTION_TYPES, CarDescription, CarDescriptionError, Chassis, Effects,
+                                 car_from_dict, load_car, markdown_doc)
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = REPO / "vehicle" / "data" / "nxp_cup_car.toml"
@@ -86,6 +86,23 @@ def _car_or_none(**kwargs):
        .filter(lambda car: car is not None))
 def test_toml_round_trip(car):
     assert car_from_dict(tomllib.loads(car.to_toml())) == car
+
+
+def test_a_written_file_credits_no_changed_number_to_the_default_source():
+    """A field that differs from its default does not carry the default's source comment
+    (an F1/10's 3.74 kg is not "estimate for the NXP Cup car"); ``sources`` names a fit."""
+    car = CarDescription(chassis=Chassis(mass_kg=3.74), effects=Effects(steering_lag_s=0.12))
+    lines = car.to_toml({"effects.steering_lag_s": "fitted by a test"}).splitlines()
+
+    def comment(key):
+        return lines[lines.index(next(x for x in lines if x.startswith(f"{key} ="))) - 1]
+
+    assert comment("mass_kg").endswith("Source: this file, not the default (1.0: estimate for the NXP Cup car "
+                                       "with battery; measure (thesis eq. 5.5)).")
+    assert comment("steering_lag_s").endswith("Source: fitted by a test.")
+    assert comment("wheelbase_m").endswith("Source: NXP Cup (Alamak-type) chassis, nominal.")  # the default
+    assert comment("steering_rate_limit_radps").endswith("Source: neutral (inf).")
+    assert car_from_dict(tomllib.loads("\n".join(lines))) == car
 
 
 # -- file:line errors and the relations between fields (issue 13 item 8) -------------------

@@ -82,6 +82,11 @@ def test_report_folder(offset_run, tmp_path):
     assert {"effect", "parameters", "bic", "delta_bic", "improvement"} <= set(rep["ranking"][0])
     car = load_car(out / "car.toml")
     assert car.effects.steering_offset_rad == pytest.approx(rep["parameters"]["steering_offset_rad"])
+    # the fitted number says where it came from, not the default's "neutral"
+    text = (out / "car.toml").read_text().splitlines()
+    above = text[text.index(next(x for x in text if x.startswith("steering_offset_rad ="))) - 1]
+    assert "Source: fitted by simrunner gap (steering_offset) on " in above and "held-out gap" in above
+    assert "neutral" not in above
     assert not list(tmp_path.glob(".gap.*"))  # no temporary folder left behind
 
 

@@ -23,7 +23,7 @@ import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Any
+from typing import Any, Mapping
 
 import tomli_w
 
@@ -201,8 +201,14 @@ class CarDescription:
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
-    def to_toml(self) -> str:
-        """TOML text with a comment above every field (meaning, range, source)."""
+    def to_toml(self, sources: Mapping[str, str] | None = None) -> str:
+        """TOML text with a comment above every field (meaning, range, source).
+
+        ``sources``: ``"section.field"`` -> where that value comes from (a fit, a
+        calibration). A field without one says its default's source when it holds the
+        default, else that its value is not the default (and what the default is), so a
+        written file never credits a changed number to the default's source."""
+        sources = sources or {}
         lines = ["# NXP Cup car description (units in field names; see docs/car.md).",
                  "# Every field is optional: a missing field takes its default.",
                  "", tomli_w.dumps({"name": self.name}).rstrip("\n")]
@@ -211,16 +217,26 @@ class CarDescription:
             values = dataclasses.asdict(getattr(self, section))
             for f in fields(cls):
                 m = f.metadata
-                lines.append(f"# {m['doc']} Range {m['lo']} .. {m['hi']}. Source: {m['source']}.")
-                lines.append(tomli_w.dumps({f.name: values[f.name]}).rstrip("\n"))
+                value = values[f.name]
+                source = sources.get(f"{section}.{f.name}")
+                if source is None:
+                    source = m["source"] if value == f.default else (
+                        f"this file, not the default ({_toml_value(f.default)}: {m['source']})")
+                lines.append(f"# {m['doc']} Range {m['lo']} .. {m['hi']}. Source: {source}.")
+                lines.append(tomli_w.dumps({f.name: value}).rstrip("\n"))
         return "\n".join(lines) + "\n"
 
-    def save(self, path: str | Path) -> None:
-        """Write atomically."""
+    def save(self, path: str | Path, sources: Mapping[str, str] | None = None) -> None:
+        """Write atomically (``sources``: see :meth:`to_toml`)."""
         path = Path(path)
         tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(self.to_toml())
+        tmp.write_text(self.to_toml(sources))
         tmp.replace(path)
+
+
+def _toml_value(value: Any) -> str:
+    """``value`` as TOML writes it (``inf``, ``1.0``, ``"text"``)."""
+    return tomli_w.dumps({"v": value}).strip()[len("v = "):]
 
 
 _SECTION_TYPES = {"chassis": Chassis, "wheels": Wheels, "steering": Steering, "drive": Drive,

@@ -95,7 +95,7 @@ def calibrate_cmd(measured, car, output, dt_s) -> None:
         if out.parent and not out.parent.is_dir():
             raise SimError(f"{out}: cannot write the car description (no folder {out.parent})")
         try:
-            result.car_after.save(out)
+            result.car_after.save(out, result.sources())
         except OSError as exc:
             raise SimError(f"{out}: cannot write the car description ({exc.strerror})") from None
     except input_errors() as exc:

@@ -79,6 +79,12 @@ class CalibrationResult:
     def procedure(self, section: str) -> ProcedureResult:
         return next(p for p in self.procedures if p.section == section)
 
+    def sources(self) -> dict[str, str]:
+        """``"section.field"`` -> the procedure that set it (the written car file's source
+        comments, :meth:`vehicle.description.CarDescription.to_toml`)."""
+        return {key: f"simrunner calibrate [{p.section}], thesis {THESIS[p.section]}: {p.title}"
+                for p in self.procedures for key in p.changes}
+
     def report(self) -> str:
         """Human-readable text: per procedure the notes, changes and a measured / before /
         after table."""

@@ -528,6 +528,15 @@ def summary_text(result: GapResult) -> str:
     return "\n".join(lines)
 
 
+def car_sources(result: GapResult) -> dict[str, str]:
+    """``"effects.field"`` -> where the written car file's kept parameters come from (see
+    :meth:`vehicle.description.CarDescription.to_toml`)."""
+    logs = ", ".join(Path(p.log.source).name for p in result.parts)
+    fitted = (f"fitted by simrunner gap ({result.effect}) on {logs}, held-out gap "
+              f"{result.gap_before:.3g} -> {result.gap_after:.3g}")
+    return {f"effects.{name}": fitted for name in result.parameters}
+
+
 def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False) -> Path:
     """Write the output folder atomically (see the module docstring); returns its path.
 
@@ -542,7 +551,7 @@ def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
         (tmp / "report.json").write_text(json.dumps(result.to_json(), indent=2) + "\n")
-        result.car.save(tmp / "car.toml")
+        result.car.save(tmp / "car.toml", car_sources(result))
         (tmp / "residuals.txt").write_text(summary_text(result) + "\n")
         plot_before_after(result, tmp / "gap_before_after.png")
         plot_regimes(result, tmp / "residuals_by_regime.png")
