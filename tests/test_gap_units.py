@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pieces.pose import Pose2
-from simrunner.run.log import FORMAT_LINE, LogError, RunLog, log_from_columns, read_log, write_log
+from simrunner.run.log import FORMAT_LINE, CommandSteps, LogError, RunLog, log_from_columns, read_log, write_log
 from simrunner.workflows.gap import LogError as GapLogError
 from simrunner.workflows.gap.fit import (Problem, Segment, cost_of, fit_effect,
                                          nominal_scales)
@@ -338,6 +338,29 @@ def test_replay_of_exact_model_has_tiny_residuals():
     res = residuals(log, d, replay(car, log, d, make_windows(log), dt_s=0.001, sim_factory=kin_factory))
     assert np.nanmax(np.abs(res["speed_mps"])) < 0.05  # window starts on a speed ramp: smoothing
     assert np.nanmax(np.abs(res["position_m"])) < 0.02
+
+
+def test_a_merged_logs_commands_between_rows_act_at_their_own_stamps():
+    """A pose logged at 20 Hz with commands sent at 100 Hz (a merged topic log): each row
+    holds the command last sent, so every command change reaches the row-held replay up to
+    40 ms late; with the log's command steps it acts when it was sent."""
+    car = CarDescription()
+    full = simulate(car)  # 100 Hz: the commands' own rate; steps at whole seconds
+    thin = full.subset(np.arange(2, len(full), 5))  # the pose at 20 Hz, 20 ms after each step
+    merged = dataclasses.replace(thin, command_steps=CommandSteps(full.t_s, full.speed_cmd_mps, full.steer_cmd_rad))
+    d = derive(thin, car.chassis.wheelbase_m)
+    windows = make_windows(thin)
+    mask = window_mask(len(thin), windows)
+
+    def position_rms(log):
+        res = residuals(log, d, replay(car, log, d, windows, dt_s=0.001, sim_factory=kin_factory))
+        return float(np.sqrt(np.mean(res["position_m"][mask] ** 2)))
+
+    held, stamped = position_rms(thin), position_rms(merged)
+    assert stamped < 0.3 * held and held > 0.005
+    # steps at the rows' own stamps only change nothing
+    on_rows = dataclasses.replace(thin, command_steps=CommandSteps(thin.t_s, thin.speed_cmd_mps, thin.steer_cmd_rad))
+    assert position_rms(on_rows) == held
 
 
 @pytest.mark.parametrize("rate_hz", [10.0, 25.0, 50.0])

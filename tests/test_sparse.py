@@ -8,7 +8,7 @@ from hypothesis import given, settings, strategies as st
 
 from simrunner.run.columns import column_map_from
 from simrunner.run.log import LogError, read_log
-from simrunner.run.sparse import GAP_FACTOR, merge_rows
+from simrunner.run.sparse import GAP_FACTOR, command_steps, merge_rows
 
 
 def _stamps(draw, n_min, n_max, t_end):
@@ -69,6 +69,37 @@ def test_merge_gives_one_row_per_pose_sample_with_held_commands_and_interpolated
         assert len(t) == np.count_nonzero(inside)
 
 
+@settings(max_examples=60, deadline=None)
+@given(merged_tables())
+def test_every_command_is_kept_at_its_own_stamp(table):
+    """The commands sent between two leading rows are not lost: ``command_steps`` gives each
+    at its stamp, and at every row the last one at or before it is the row's command."""
+    values, (t_pose, t_speed, t_cmd, cmds, a, b) = table
+    steps = command_steps(values)
+    assert np.array_equal(steps["t_s"], t_cmd) and np.array_equal(steps["speed_cmd_mps"], cmds)
+    assert (steps["steer_cmd_rad"] == 0.0).all() and "coast" not in steps
+    out, _, _ = merge_rows(values)
+    last = np.searchsorted(steps["t_s"], out["t_s"], side="right") - 1
+    assert np.array_equal(steps["speed_cmd_mps"][last], out["speed_cmd_mps"])
+
+
+def test_command_steps_hold_each_column_and_start_where_all_are_known():
+    nan = np.nan
+    values = {"t_s": np.array([0.0, 0.1, 0.2, 0.2, 0.3, 0.4]),
+              "x_m": np.array([nan, 0.0, nan, nan, nan, 1.0]), "y_m": np.array([nan, 0.0, nan, nan, nan, 0.0]),
+              "yaw_rad": np.array([nan, 0.0, nan, nan, nan, 0.0]),
+              "speed_cmd_mps": np.array([1.0, nan, 2.0, 3.0, nan, nan]),
+              "steer_cmd_rad": np.array([nan, nan, nan, 0.1, 0.2, nan]),
+              "coast": np.array([0.0, nan, nan, nan, 1.0, nan])}
+    steps = command_steps(values)
+    # 0.0: steering unknown yet; 0.2 twice: the later row counts; 0.3: the steering and coast
+    assert list(steps["t_s"]) == [0.2, 0.3]
+    assert list(steps["speed_cmd_mps"]) == [3.0, 3.0] and list(steps["steer_cmd_rad"]) == [0.1, 0.2]
+    assert steps["coast"].dtype == bool and list(steps["coast"]) == [False, True]
+    dense = {"t_s": np.arange(3.0), "speed_cmd_mps": np.ones(3), "steer_cmd_rad": np.zeros(3)}
+    assert command_steps(dense) is None
+
+
 def test_a_dense_log_is_returned_as_it_is():
     values = {"t_s": np.arange(5.0), "speed_mps": np.ones(5), "speed_cmd_mps": np.ones(5),
               "steer_cmd_rad": np.zeros(5), "data_text": ("",) * 5}
@@ -119,6 +150,10 @@ def test_read_a_merged_ros_export_through_a_mapping(tmp_path):
     assert np.allclose(log.speed_mps, [1.0 + 0.2 * 3 / 4, 1.2 + 0.2 * 3 / 4])
     assert np.allclose(log.yaw_rate_radps, np.radians([5.7 + 5.7 * 2 / 4, 11.4 - 5.7 * 2 / 4]))
     assert list(log.speed_cmd_mps) == [1.5, 2.0] and list(log.steer_cmd_rad) == [0.1, -0.1]
+    # the commands also at their own stamps (a replay applies 100.08's between the rows)
+    steps = log.command_steps
+    assert list(steps.t_s) == [100.00, 100.08] and list(steps.steer_cmd_rad) == [0.1, -0.1]
+    assert log.subset(np.array([1])).command_steps is steps and log.with_columns().command_steps is steps
     # strict reading still refuses the empty cells, naming the first
     with pytest.raises(LogError, match=r"export.csv:2: column 'pose.x': expected a number \(got ''\)"):
         read_log(path, columns=column_map_from(None, MAP))

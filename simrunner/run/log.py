@@ -99,11 +99,30 @@ FORMAT1_NAMES = {"t": "t_s", "x": "x_m", "y": "y_m", "yaw": "yaw_rad", "speed": 
 
 
 @dataclass(frozen=True, eq=False)
+class CommandSteps:
+    """The commands of a merged log at their own stamps (:func:`simrunner.run.sparse.command_steps`):
+    one entry per command message, every command column held at its last value, shape (M,),
+    ``t_s`` strictly increasing. A log read a row per leading-sensor sample keeps them so a
+    replay can apply a command sent between two rows when it was sent; ``coast`` is None
+    when the log has none."""
+
+    t_s: np.ndarray
+    speed_cmd_mps: np.ndarray
+    steer_cmd_rad: np.ndarray
+    coast: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.t_s.size)
+
+
+@dataclass(frozen=True, eq=False)
 class RunLog:
     """A run's rows as read-only columns, each ``(N,)`` (``data_text`` a tuple of N str).
 
     Numeric columns are float64 (``frame`` and ``lap`` int64, flags bool); a column the log
     does not have is ``None``. ``source`` names where it came from (file path or a label).
+    ``command_steps``: a merged log's commands at their own stamps (:class:`CommandSteps`;
+    None for a log with a row per command), kept by :meth:`subset` and :meth:`with_columns`.
     """
 
     t_s: np.ndarray
@@ -122,6 +141,7 @@ class RunLog:
     off_track: np.ndarray | None = None
     data_text: tuple[str, ...] | None = None
     source: str = "<log>"
+    command_steps: CommandSteps | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.size)
@@ -174,19 +194,19 @@ class RunLog:
                 cols[n] = tuple(np.asarray(v, dtype=object)[rows]) if len(v) else ()
             else:
                 cols[n] = v[rows]
-        return log_from_columns(cols, self.source)
+        return log_from_columns(cols, self.source, self.command_steps)
 
     def with_columns(self, **columns) -> "RunLog":
         """A copy with the given columns replaced or added (checked like any log)."""
         cols = dict(self.columns())
         cols.update(columns)
-        return log_from_columns({k: v for k, v in cols.items() if v is not None}, self.source)
+        return log_from_columns({k: v for k, v in cols.items() if v is not None}, self.source, self.command_steps)
 
 
-def log_from_columns(columns: dict, source: str = "<log>") -> RunLog:
+def log_from_columns(columns: dict, source: str = "<log>", command_steps: CommandSteps | None = None) -> RunLog:
     """Build and check a :class:`RunLog` from arrays keyed by schema names (format-1 names
     are accepted too; unknown keys are ignored). Line numbers in errors count the header as
-    line 1, as in a file without the format line."""
+    line 1, as in a file without the format line. ``command_steps``: see :class:`RunLog`."""
     cols = {FORMAT1_NAMES.get(k, k): v for k, v in columns.items()}
     if "t_s" not in cols:
         raise LogError(source, 1, "expected a time column t_s")
@@ -229,7 +249,7 @@ def log_from_columns(columns: dict, source: str = "<log>") -> RunLog:
         i = int(bad[0]) + 1
         raise LogError(source, i + 2, f"column 't_s': expected strictly increasing time (got "
                                       f"{float(t[i])!r} after {float(t[i - 1])!r})")
-    return RunLog(source=str(source), **out)
+    return RunLog(source=str(source), command_steps=command_steps, **out)
 
 
 # -- writing -------------------------------------------------------------------------------
@@ -381,16 +401,20 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
         if columns is not None:
             values = columns.apply(values, len(lines), source, merged=merged)
         if merged:
-            from simrunner.run.sparse import SparseError, merge_rows  # noqa: PLC0415 - merged logs only
+            from simrunner.run.sparse import SparseError, command_steps, merge_rows  # noqa: PLC0415 - merged logs only
 
+            raw = {k: (tuple(v) if _BY_NAME[k].kind == "text" else np.asarray(v, dtype=float))
+                   for k, v in values.items()}
             try:
-                values, kept, notes = merge_rows({k: (tuple(v) if _BY_NAME[k].kind == "text" else
-                                                      np.asarray(v, dtype=float)) for k, v in values.items()})
+                values, kept, notes = merge_rows(raw)
             except SparseError as exc:
                 raise LogError(source, exc.row + 2, exc.message) from None  # mapped to its line below
             for note in notes:
                 warnings.warn(f"{source}: {note}", LogWarning, stacklevel=3)
             lines = [lines[i] for i in kept]
+            steps = command_steps(raw)
+            if steps is not None:
+                return log_from_columns(values, source, CommandSteps(**steps))
         return log_from_columns(values, source)
     except LogError as exc:  # map the row index back to the file's line
         if exc.line >= 2 and exc.line - 2 < len(lines):
@@ -540,5 +564,5 @@ def schema_markdown() -> str:
     return "\n".join(rows)
 
 
-__all__ = ["RunLog", "RunRecorder", "LogError", "LogWarning", "Column", "COLUMNS", "COLUMN_NAMES", "FORMAT_VERSION",
+__all__ = ["RunLog", "CommandSteps", "RunRecorder", "LogError", "LogWarning", "Column", "COLUMNS", "COLUMN_NAMES", "FORMAT_VERSION",
            "log_from_columns", "read_log", "write_log", "to_csv_text", "empty_log", "schema_markdown"]

@@ -156,5 +156,33 @@ def merge_rows(values: dict) -> tuple[dict, np.ndarray, list[str]]:
     return {k: (tuple(v[i] for i in idx) if isinstance(v, tuple) else v[keep]) for k, v in out.items()}, kept, notes
 
 
-__all__ = ["merge_rows", "is_empty_cell", "SparseError", "EMPTY_CELLS", "GAP_FACTOR", "MAX_OUTSIDE_S",
+def command_steps(values: dict) -> dict[str, np.ndarray] | None:
+    """The commands of a merged log (the raw columns :func:`merge_rows` reads, after it
+    accepted them) at their own stamps: ``{"t_s", "speed_cmd_mps", "steer_cmd_rad"[, "coast"]}``,
+    one entry per row that logged a command column, every command column held at its last
+    value (zero-order hold, as :func:`merge_rows` holds them), from the first stamp where all
+    are known; of several rows with one stamp the last counts. None for a log without
+    empty cells (its rows are its commands) or without both command columns."""
+    numeric = {k: np.asarray(v, dtype=float) for k, v in values.items() if not isinstance(v, tuple)}
+    if all(np.isfinite(v).all() for v in numeric.values()):
+        return None
+    names = [n for n in HELD if n in numeric and np.isfinite(numeric[n]).any()]
+    if "speed_cmd_mps" not in names or "steer_cmd_rad" not in names:
+        return None
+    t = numeric["t_s"]
+    rows = np.flatnonzero(np.any([np.isfinite(numeric[n]) for n in names], axis=0))
+    out = {"t_s": t[rows]}
+    for n in names:
+        have = np.flatnonzero(np.isfinite(numeric[n]))
+        last = np.searchsorted(t[have], t[rows], side="right") - 1
+        out[n] = np.where(last >= 0, numeric[n][have[np.clip(last, 0, None)]], np.nan)
+    keep = np.all([np.isfinite(out[n]) for n in names], axis=0)
+    keep &= np.append(np.diff(out["t_s"]) > 0.0, True)  # one stamp, several rows: the last
+    out = {k: v[keep] for k, v in out.items()}
+    if "coast" in out:
+        out["coast"] = out["coast"] == 1.0
+    return out
+
+
+__all__ = ["merge_rows", "command_steps", "is_empty_cell", "SparseError", "EMPTY_CELLS", "GAP_FACTOR", "MAX_OUTSIDE_S",
            "MAX_OUTSIDE_SHARE"]

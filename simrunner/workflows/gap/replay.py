@@ -4,7 +4,8 @@ The log is cut into windows of ``window_s`` (default :data:`WINDOW_S`), never ac
 gap or an excluded (glitch) sample. Each window starts the simulator afresh from the
 measured (smoothed) state at its first sample (``set_state(pose, speed, steer, yaw_rate)``,
 see :mod:`simrunner.workflows.gap.logs`), then applies each logged command until the next
-sample time (zero-order hold) and records the predicted state at every sample. Before a
+sample time (zero-order hold; a merged log's command messages between two samples,
+``RunLog.command_steps``, at their own stamps) and records the predicted state at every sample. Before a
 window, the :data:`LEAD_S` seconds of commands that precede it (within the same piece of
 the log) are replayed unrecorded and the car is then moved (``place``) to the measured
 state at the window's start, so latency queues and lags carry the commands in flight
@@ -250,9 +251,17 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         p, v, steer, r = state(i)
         return all(math.isfinite(x) for x in (p.x_m, p.y_m, p.yaw_rad, v, steer, r))
 
+    steps = log.command_steps  # a merged log's commands at their own stamps (None: the rows')
+    if steps is not None:
+        step_coast = steps.coast if steps.coast is not None else np.zeros(len(steps), dtype=bool)
+        # the command messages strictly between each row and the next
+        first_step = np.searchsorted(steps.t_s, t, side="right")
+        last_step = np.append(np.searchsorted(steps.t_s, t[1:], side="left"), first_step[-1])
+
     def run(a: int, b: int, record: bool) -> None:
         """Apply the commands of samples a .. b-1 (zero-order hold) up to sample b (recorded
-        at a .. b-1 when ``record``; the last command is applied only if b is past it)."""
+        at a .. b-1 when ``record``; the last command is applied only if b is past it); a
+        merged log's command messages between two samples take effect at their own stamps."""
         done = 0
         coast_now = bool(coast[a])
         for i in range(a, b):
@@ -264,6 +273,16 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
                     coast_now = bool(coast[i])
                     sim.set_coast(coast_now)
                 sim.set_command(float(log.speed_cmd_mps[i]), float(log.steer_cmd_rad[i]))
+                if steps is not None:
+                    for k in range(first_step[i], last_step[i]):
+                        target = int(round((steps.t_s[k] - t[a]) / dt_s))
+                        if target > done:
+                            sim.step(target - done)
+                            done = target
+                        if bool(step_coast[k]) != coast_now:
+                            coast_now = bool(step_coast[k])
+                            sim.set_coast(coast_now)
+                        sim.set_command(float(steps.speed_cmd_mps[k]), float(steps.steer_cmd_rad[k]))
                 target = int(round((t[i + 1] - t[a]) / dt_s))
                 if target > done:
                     sim.step(target - done)
