@@ -264,6 +264,14 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         merged log's command messages between two samples take effect at their own stamps."""
         done = 0
         coast_now = bool(coast[a])
+
+        def advance(to_s: float) -> None:  # step the simulator up to the time to_s
+            nonlocal done
+            target = int(round((to_s - t[a]) / dt_s))
+            if target > done:
+                sim.step(target - done)
+                done = target
+
         for i in range(a, b):
             if record:
                 p = sim.pose
@@ -275,18 +283,12 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
                 sim.set_command(float(log.speed_cmd_mps[i]), float(log.steer_cmd_rad[i]))
                 if steps is not None:
                     for k in range(first_step[i], last_step[i]):
-                        target = int(round((steps.t_s[k] - t[a]) / dt_s))
-                        if target > done:
-                            sim.step(target - done)
-                            done = target
+                        advance(steps.t_s[k])
                         if bool(step_coast[k]) != coast_now:
                             coast_now = bool(step_coast[k])
                             sim.set_coast(coast_now)
                         sim.set_command(float(steps.speed_cmd_mps[k]), float(steps.steer_cmd_rad[k]))
-                target = int(round((t[i + 1] - t[a]) / dt_s))
-                if target > done:
-                    sim.step(target - done)
-                    done = target
+                advance(t[i + 1])
 
     for w in windows:
         i0 = next((i for i in range(w.start, w.stop) if usable(i)), None)
