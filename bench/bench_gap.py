@@ -26,6 +26,13 @@ Modes (``--mode``, comma-separated; default: all of them, small):
     row with probability :data:`TENTH_KEEP` and holds its command in between), its pose and
     speed logged when it acts. The catalogue includes ``front_drive`` (the file says rear drive),
     which the default car's logs cannot show (:data:`GRIP_LIMITED`).
+``merged``
+    The ``tenth`` logs' effects and seeds, with the controller at every 50-Hz plan row and a
+    log written as a merged topic log would be: the pose and speed at about 30 Hz (each row
+    kept with probability :data:`TENTH_KEEP`), the commands at their own stamps
+    (``RunLog.command_steps``). The chain runs on it, and again on the same rows alone
+    (``rows_held``: each row's command held to the next, the command changes between rows
+    lost), so the two columns show what the commands' stamps give.
 ``unmodelled``
     Logs no catalogue effect explains (the issue's "is told so"): the default car, pose +
     speed, no catalogue effect, and one thing the catalogue lacks - even trials wheels that
@@ -72,6 +79,7 @@ processes inside ``run_gap``. ``python -m bench`` runs ``main()``: every mode, s
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -88,8 +96,8 @@ SEED = 20240
 NONE_EVERY = 4
 SMALL_TRIALS = 6
 SNR_MIN = 3.0
-MODES = ("single", "multi", "speed_gyro", "tenth", "unmodelled", "compare", "real", "real_partial", "timing")
-_MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3, "tenth": 4, "unmodelled": 5}  # seed tags: compare uses the multi logs
+MODES = ("single", "multi", "speed_gyro", "tenth", "merged", "unmodelled", "compare", "real", "real_partial", "timing")
+_MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3, "tenth": 4, "merged": 4, "unmodelled": 5}  # seed tags: compare uses the multi logs
 # effects that show only where the drive and brake limits reach the tyres' grip: not on the
 # default car (3.1 m/s^2), so the default-car modes leave them out; ``tenth`` has them
 GRIP_LIMITED = ("front_drive",)
@@ -153,7 +161,7 @@ def tenth_car():
 
 def mode_car(mode: str):
     """The car of ``mode``'s synthetic logs and of their gap runs (None: the default car)."""
-    return tenth_car() if mode == "tenth" else None
+    return tenth_car() if mode in ("tenth", "merged") else None
 
 
 class SlowController:
@@ -231,7 +239,7 @@ def design(mode: str, k: int) -> tuple[list[str], str, np.random.Generator]:
         raise ValueError(f"GROUPS must hold every synthetic effect of the default car once (got "
                          f"{sorted(grouped)}, expected {sorted(default_car)})")
     rng = np.random.default_rng([SEED, _MODE_TAG[mode], k])
-    if mode == "tenth":
+    if mode in ("tenth", "merged"):  # the same effects and seeds
         e = trial_effect(k, list(RANGES))
         return ([e] if e else []), "pose_speed", rng
     if mode == "unmodelled":
@@ -361,6 +369,15 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
         if len(slow[0].acted) != len(log):  # pragma: no cover - run_plan open loop: one row per plan row
             raise ValueError("tenth: the log's rows are not the plan's")
         log = log.subset(np.flatnonzero(slow[0].acted))
+    rows_only = None
+    if mode == "merged":  # the pose and speed at ~30 Hz, every command at its own stamp
+        from simrunner.run.log import CommandSteps
+
+        kept = np.random.default_rng([SEED, _MODE_TAG[mode], k, 1]).random(len(log)) < TENTH_KEEP
+        kept[0] = True
+        rows_only = log.subset(np.flatnonzero(kept))
+        log = dataclasses.replace(rows_only, command_steps=CommandSteps(log.t_s, log.speed_cmd_mps, log.steer_cmd_rad,
+                                                                        log.coast))
     t0 = time.perf_counter()
     result = run_gap(log, car, jobs=1)
     wall = time.perf_counter() - t0
@@ -383,6 +400,13 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
                          for d in result.leftovers]}
     if unmodelled:
         row["unmodelled"] = {"what": unmodelled[0], "value": unmodelled[1]}
+    if rows_only is not None:
+        t1 = time.perf_counter()
+        alone = run_gap(rows_only, car, jobs=1)
+        row["rows_held"] = _method_row(alone.effects, alone.parameters, truth.values, effects,
+                                       {"gap_before": alone.gap_before, "gap_after": alone.gap_after,
+                                        "rmse_before": alone.rmse_before, "rmse_after": alone.rmse_after},
+                                       time.perf_counter() - t1)
     if baselines:
         from bench.gap_baselines import BaselineUnavailable, esindy, joint_least_squares, problems
         from simrunner.workflows.gap.chain import with_parameters
@@ -569,6 +593,9 @@ SYNTH_TARGETS = (
     ("tenth", "single_named_hi", "1:10 car, ~30 Hz: named where SNR >= 3", True, 0.95, True),
     ("tenth", "false_claims", "1:10 car, ~30 Hz: false claims, effect-free logs", False, 0.05, True),
     ("tenth", "single_perr", "1:10 car, ~30 Hz: median parameter error", False, 0.10, True),
+    ("merged", "single_named_hi", "pose ~30 Hz, commands 50 Hz: named where SNR >= 3", True, 0.95, True),
+    ("merged", "false_claims", "pose ~30 Hz, commands 50 Hz: false claims", False, 0.05, True),
+    ("merged", "single_perr", "pose ~30 Hz, commands 50 Hz: median parameter error", False, 0.10, True),
 )
 
 
@@ -580,7 +607,8 @@ def target_rows(rows: list[dict]) -> list[dict]:
         out.append({"mode": mode, "target": what, "figure": value, "n": n, "goal": goal,
                     "met": None if (n == 0 or not math.isfinite(value)) else bool(ok), "text": text})
 
-    groups = {"single": ("single",), "multi": ("multi", "compare"), "speed_gyro": ("speed_gyro",), "tenth": ("tenth",)}
+    groups = {"single": ("single",), "multi": ("multi", "compare"), "speed_gyro": ("speed_gyro",), "tenth": ("tenth",),
+              "merged": ("merged",)}
     figs = {m: figures([r for r in rows if r.get("mode") in modes]) for m, modes in groups.items()}
     for mode, key, what, at_least, limit, pct in SYNTH_TARGETS:
         if not any(r.get("mode") in groups[mode] for r in rows):
@@ -641,6 +669,23 @@ def _trial_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _rows_held_table(rows: list[dict]) -> str:
+    """``merged`` mode: the chain on the commands' own stamps vs on the rows alone."""
+    lines = ["", f"merged logs: commands at their own stamps vs held per row ({len(rows)} logs):",
+             f"{'method':<26}{'named, SNR>=3':>15}{'false claims':>14}{'med p.err':>16}{'med gap a/b':>13}",
+             ]
+    for method, label in (("chain", "commands at their stamps"), ("rows_held", "held per row")):
+        f = figures(rows, method)
+        lines.append(f"{label:<26}{_fmt(f['single_named_hi']):>15}{_fmt(f['false_claims']):>14}"
+                     f"{_fmt(f['single_perr']):>16}{_fmt(f['gap_ratio'], False):>13}")
+    for r in rows:
+        named = {m: ", ".join(f"{n} {v:.4g}" for n, v in r[m]["parameters"].items()) or "none"
+                 for m in ("chain", "rows_held")}
+        truth = ", ".join(f"{n} {v:.4g}" for n, v in r["values"].items()) or "none"
+        lines.append(f"  {r['trial']:>2} hidden {truth}: stamps {named['chain']}; rows {named['rows_held']}")
+    return "\n".join(lines)
+
+
 def _compare_table(rows: list[dict]) -> str:
     from bench.gap_baselines import SINDY_EFFECTS
 
@@ -675,7 +720,8 @@ def _compare_table(rows: list[dict]) -> str:
 
 
 def report(rows: list[dict]) -> str:
-    syn = [r for r in rows if r.get("mode") in ("single", "multi", "speed_gyro", "tenth", "unmodelled", "compare")]
+    syn = [r for r in rows if r.get("mode") in ("single", "multi", "speed_gyro", "tenth", "merged", "unmodelled",
+                                                "compare")]
     parts = []
     if syn:
         parts.append(_trial_table(syn))
@@ -696,6 +742,9 @@ def report(rows: list[dict]) -> str:
         if r.get("mode") == "timing":
             parts.append(f"timing: {r['log_s']:.0f}-s log, hidden {r['hidden']}, {r['jobs']} processes: "
                          f"{r['wall_s']:.0f} s wall; kept {', '.join(r['effects']) or 'none'} {r['parameters']}")
+    merged = [r for r in rows if "rows_held" in r]
+    if merged:
+        parts.append(_rows_held_table(merged))
     cmp_ = _compare_table(rows)
     if cmp_:
         parts.append(cmp_)
@@ -782,7 +831,8 @@ def main(argv: list[str] | None = None) -> None:
         tasks += [("compare", k, True) for k in trials]
     elif "multi" in modes:
         tasks += [("multi", k, False) for k in trials]
-    tasks += [(m, k, False) for m in ("single", "speed_gyro", "tenth", "unmodelled") if m in modes for k in trials]
+    tasks += [(m, k, False) for m in ("single", "speed_gyro", "tenth", "merged", "unmodelled") if m in modes
+              for k in trials]
     if tasks:
         with ProcessPoolExecutor(max_workers=a.jobs) as pool:
             futures = {pool.submit(_trial, *t): t for t in tasks}
