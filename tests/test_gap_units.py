@@ -22,7 +22,7 @@ from simrunner.workflows.gap.regimes import REGIMES, format_stats, residual_stat
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, dead_reckoned_yaw, make_windows, noise_rms,
                                             replay, residuals,
                                             rmse, signals_of, smoothed_log, split_windows, window_mask)
-from vehicle.description import CarDescription
+from vehicle.description import CarDescription, Effects
 
 
 class KinematicSim:
@@ -1199,6 +1199,36 @@ def test_a_steering_play_starts_each_window_on_the_side_the_commands_left_it(mon
         return rmse(res, np.ones(len(log), dtype=bool))["yaw_rad"]
 
     assert yaw_rms(replay_mod.PLAY_HISTORY_S) < 0.8 * yaw_rms(0.0)
+
+
+def test_a_merged_logs_play_history_holds_the_commands_between_its_rows():
+    """A merged log primes a steering play with every command message before the lead-in,
+    at its own stamp, not only the commands the rows held."""
+    from simrunner.car.effects import make_sim
+
+    car = CarDescription().replace(effects=Effects(steering_play_rad=0.02))
+    full = simulate(car, duration_s=20.0)
+    thin = full.subset(np.arange(2, len(full), 5))
+    merged = dataclasses.replace(thin, command_steps=CommandSteps(full.t_s, full.speed_cmd_mps, full.steer_cmd_rad))
+    calls = []
+
+    def recording(car_, dt_s):
+        sim = make_sim(car_, dt_s=dt_s)
+        inner = sim.prime_steering
+        sim.prime_steering = lambda t_s, steer: (calls.append((np.array(t_s), np.array(steer))), inner(t_s, steer))
+        return sim
+
+    d = derive(thin, car.chassis.wheelbase_m)
+    windows = make_windows(thin)
+    replay(car, merged, d, windows[-1:], sim_factory=recording)
+    (t_s, steer), = calls
+    assert t_s.size == steer.size + 1 and np.all(np.diff(t_s) >= 0.0)
+    inside = (full.t_s > t_s[0]) & (full.t_s < t_s[-1])
+    assert np.array_equal(t_s[1:-1], full.t_s[inside])  # every message between the first and the last row
+    assert np.array_equal(steer[1:], full.steer_cmd_rad[inside])
+    calls.clear()
+    replay(car, thin, d, windows[-1:], sim_factory=recording)  # the rows alone: their commands only
+    assert np.isin(calls[0][0], thin.t_s).all()
 
 
 def test_a_log_without_a_reverse_command_while_rolling_cannot_reveal_an_esc_delay():

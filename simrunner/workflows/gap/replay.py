@@ -302,8 +302,12 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         sim.set_state(*state(j0))
         if prime and lead_s > 0.0:
             h = int(np.searchsorted(t, t[j0] - PLAY_HISTORY_S - 1e-9))  # time gaps: commands held
-            if h < j0:
+            if h < j0 and steps is None:
                 sim.prime_steering(t[h:j0 + 1], log.steer_cmd_rad[h:j0])
+            elif h < j0:  # a merged log: the command messages between the rows too
+                a, b = first_step[h], int(np.searchsorted(steps.t_s, t[j0], side="left"))
+                sim.prime_steering(np.concatenate([[t[h]], steps.t_s[a:b], [t[j0]]]),
+                                   np.concatenate([[log.steer_cmd_rad[h]], steps.steer_cmd_rad[a:b]]))
         if j0 < i0:
             run(j0, i0, record=False)
             if bool(coast[i0 - 1]) != bool(coast[i0]):
