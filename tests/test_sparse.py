@@ -154,6 +154,7 @@ def test_read_a_merged_ros_export_through_a_mapping(tmp_path):
     steps = log.command_steps
     assert list(steps.t_s) == [100.00, 100.08] and list(steps.steer_cmd_rad) == [0.1, -0.1]
     assert log.subset(np.array([1])).command_steps is steps and log.with_columns().command_steps is steps
+    assert log.with_columns(steer_cmd_rad=-log.steer_cmd_rad).command_steps is None  # would not match the rows
     # strict reading still refuses the empty cells, naming the first
     with pytest.raises(LogError, match=r"export.csv:2: column 'pose.x': expected a number \(got ''\)"):
         read_log(path, columns=column_map_from(None, MAP))

@@ -122,7 +122,8 @@ class RunLog:
     Numeric columns are float64 (``frame`` and ``lap`` int64, flags bool); a column the log
     does not have is ``None``. ``source`` names where it came from (file path or a label).
     ``command_steps``: a merged log's commands at their own stamps (:class:`CommandSteps`;
-    None for a log with a row per command), kept by :meth:`subset` and :meth:`with_columns`.
+    None for a log with a row per command), kept by :meth:`subset` and :meth:`with_columns`
+    (unless it replaces a command column).
     """
 
     t_s: np.ndarray
@@ -197,10 +198,13 @@ class RunLog:
         return log_from_columns(cols, self.source, self.command_steps)
 
     def with_columns(self, **columns) -> "RunLog":
-        """A copy with the given columns replaced or added (checked like any log)."""
+        """A copy with the given columns replaced or added (checked like any log); a new
+        command column (``speed_cmd_mps``, ``steer_cmd_rad``, ``coast``) drops the
+        ``command_steps``, which would no longer match the rows."""
         cols = dict(self.columns())
         cols.update(columns)
-        return log_from_columns({k: v for k, v in cols.items() if v is not None}, self.source, self.command_steps)
+        steps = None if {"speed_cmd_mps", "steer_cmd_rad", "coast"} & set(columns) else self.command_steps
+        return log_from_columns({k: v for k, v in cols.items() if v is not None}, self.source, steps)
 
 
 def log_from_columns(columns: dict, source: str = "<log>", command_steps: CommandSteps | None = None) -> RunLog:
