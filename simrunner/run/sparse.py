@@ -79,6 +79,14 @@ def _interpolate(t: np.ndarray, own: np.ndarray, at: np.ndarray) -> np.ndarray:
     return out
 
 
+def _held(t: np.ndarray, own: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``own`` (NaN where the column logged nothing) held: at each stamp of ``at`` the last
+    value stamped at or before it; NaN before its first value."""
+    have = np.flatnonzero(np.isfinite(own))
+    last = np.searchsorted(t[have], at, side="right") - 1
+    return np.where(last >= 0, own[have[np.clip(last, 0, None)]], np.nan)
+
+
 def merge_rows(values: dict) -> tuple[dict, np.ndarray, list[str]]:
     """``(columns, rows kept, notes)`` of a merged log's columns (module docstring): numeric
     columns are float arrays with NaN for an empty cell, text columns tuples. ``rows kept``
@@ -124,10 +132,8 @@ def merge_rows(values: dict) -> tuple[dict, np.ndarray, list[str]]:
         v = numeric.get(name)
         if name not in present or np.isfinite(v[rows]).all():
             continue
-        have = np.flatnonzero(np.isfinite(v))  # the last value stamped at or before each row
-        last = np.searchsorted(t[have], t[rows], side="right") - 1
-        keep &= last >= 0
-        out[name] = np.where(last >= 0, v[have[np.clip(last, 0, None)]], np.nan)
+        out[name] = _held(t, v, t[rows])
+        keep &= np.isfinite(out[name])
     if not keep.any():
         raise SparseError(int(rows[-1]), f"no sample of {leader} comes after the first command: expected "
                                          f"commands (speed_cmd_mps, steer_cmd_rad) from the start of the log")
@@ -173,9 +179,7 @@ def command_steps(values: dict) -> dict[str, np.ndarray] | None:
     rows = np.flatnonzero(np.any([np.isfinite(numeric[n]) for n in names], axis=0))
     out = {"t_s": t[rows]}
     for n in names:
-        have = np.flatnonzero(np.isfinite(numeric[n]))
-        last = np.searchsorted(t[have], t[rows], side="right") - 1
-        out[n] = np.where(last >= 0, numeric[n][have[np.clip(last, 0, None)]], np.nan)
+        out[n] = _held(t, numeric[n], t[rows])
     keep = np.all([np.isfinite(out[n]) for n in names], axis=0)
     keep &= np.append(np.diff(out["t_s"]) > 0.0, True)  # one stamp, several rows: the last
     out = {k: v[keep] for k, v in out.items()}
