@@ -748,6 +748,25 @@ def test_time_gaps_and_duplicates_are_found_exactly():
     assert np.flatnonzero(glitch_mask(log, found)).tolist() == [i_again, i_same]  # a gap holds no sample
 
 
+def test_a_log_with_irregular_stamps_has_only_its_real_gap():
+    """Rows logged when a controller acts (a 50-Hz tick, each with probability 0.6): steps of
+    20, 40, 60 ... ms are its rhythm, not gaps (5 median steps, the old rule, cut it 9 times
+    here); a second without rows is one."""
+    c = _noisy(FULL_GYRO, rate_hz=50.0, jitter=0.1)
+    t0 = c["t_s"]
+    acts = np.random.default_rng(7).random(len(t0)) < 0.6
+    acts[0] = True
+    assert (np.diff(t0[acts]) > 5 * np.median(np.diff(t0[acts]))).sum() > 3
+    assert not time_gaps(t0[acts]).any()
+    acts[(t0 > 4.0) & (t0 < 5.0)] = False
+    rows = np.flatnonzero(acts)
+    log = _log({k: v[rows] for k, v in c.items()})
+    found = [g for g in find_glitches(log) if g.kind is GlitchKind.TIME_GAP]
+    assert [(round(g.t_start_s, 9), round(g.t_end_s, 9)) for g in found] == [
+        (round(t0[rows][t0[rows] <= 4.0][-1], 9), round(t0[rows][t0[rows] >= 5.0][0], 9))]
+    assert re.search(r"this log's gaps are longer than 0\.3\d* s", found[0].detail), found[0].detail
+
+
 @pytest.mark.parametrize("cols, column", [
     (MEASURED_COLUMNS, "speed_mps"), (FULL_GYRO, "yaw_rate_radps"), (SPEED_GYRO, "yaw_rate_radps"),
     (MEASURED_COLUMNS, "x_m,y_m"), (FULL_GYRO, "yaw_rad")])

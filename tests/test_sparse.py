@@ -8,7 +8,7 @@ from hypothesis import given, settings, strategies as st
 
 from simrunner.run.columns import column_map_from
 from simrunner.run.log import LogError, read_log
-from simrunner.run.sparse import GAP_FACTOR, command_steps, merge_rows
+from simrunner.run.sparse import GAP_FACTOR, command_steps, gap_limit_s, merge_rows
 
 
 def _stamps(draw, n_min, n_max, t_end):
@@ -61,10 +61,10 @@ def test_merge_gives_one_row_per_pose_sample_with_held_commands_and_interpolated
     # the command in force is the last one sent at or before the row
     last = np.searchsorted(t_cmd, t, side="right") - 1
     assert (last >= 0).all() and np.array_equal(out["speed_cmd_mps"], np.asarray(cmds)[last])
-    # every pose sample inside both coverages is kept (the speed sensor's steps are at most
-    # 5x its median here, so it has no gap; it covers nearly all of the log)
+    # every pose sample inside both coverages is kept (when the speed sensor has no hole; it
+    # covers nearly all of the log)
     steps = np.diff(t_speed)
-    if steps.max() <= GAP_FACTOR * np.median(steps) and not notes:
+    if steps.max() <= gap_limit_s(steps) and not notes:
         inside = (t_pose >= max(t_speed[0], t_cmd[0])) & (t_pose <= t_speed[-1])
         assert len(t) == np.count_nonzero(inside)
 
@@ -105,6 +105,37 @@ def test_a_dense_log_is_returned_as_it_is():
               "steer_cmd_rad": np.zeros(5), "data_text": ("",) * 5}
     out, kept, notes = merge_rows(values)
     assert out is values and notes == [] and list(kept) == list(range(5))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.floats(0.001, 0.2), st.floats(1.0, 3.0), st.integers(40, 400), st.floats(0.0, 0.05),
+       st.integers(0, 2**31 - 1))
+def test_a_hole_is_found_whatever_the_streams_rhythm(step_s, spread, n, hole_share, seed):
+    """A stream's steps vary by up to ``spread`` (regular, jittery, irregular stamps); holes
+    take under a tenth of its steps. Every hole longer than GAP_FACTOR times its longest
+    normal step is beyond the limit; no normal step is."""
+    rng = np.random.default_rng(seed)
+    steps = rng.uniform(step_s, spread * step_s, n)
+    holes = rng.choice(n, int(hole_share * n), replace=False)
+    steps[holes] = GAP_FACTOR * spread * step_s * rng.uniform(1.01, 20.0, holes.size)
+    limit = gap_limit_s(steps)
+    normal = np.setdiff1d(np.arange(n), holes)
+    assert (steps[holes] > limit).all() and (steps[normal] <= limit).all()
+
+
+def test_the_hole_limit_follows_the_streams_own_long_interval():
+    assert gap_limit_s(np.full(100, 0.02)) == pytest.approx(GAP_FACTOR * 0.02)  # regular: 5 steps
+    # a controller that logs when it acts, at a 50-Hz tick with probability 0.6: steps of
+    # 1, 2, 3, ... ticks; a 0.12-s step is part of its rhythm (one in a hundred), not a hole
+    rng = np.random.default_rng(3)
+    ticks = np.flatnonzero(rng.random(20000) < 0.6)
+    steps = np.diff(ticks) * 0.02
+    assert (steps >= 0.12 - 1e-9).sum() > 50
+    assert gap_limit_s(steps) == pytest.approx(GAP_FACTOR * 0.06)
+    # a logger writing bursts: four samples 1 ms apart, then 50 ms
+    bursts = np.tile([0.001, 0.001, 0.001, 0.001, 0.05], 100)
+    assert gap_limit_s(bursts) == pytest.approx(GAP_FACTOR * 0.05)
+    assert gap_limit_s(np.zeros(3)) == 0.0 and gap_limit_s(np.zeros(0)) == 0.0
 
 
 def test_a_gap_of_the_other_sensor_leaves_its_rows_out():

@@ -13,7 +13,9 @@ the pose (``x_m, y_m, yaw_rad`` all in the row) when the log has one, else the s
   value are left out (the command is not known there);
 - every other sensor (``speed_mps`` when the pose leads, ``yaw_rate_radps``) is interpolated
   linearly at the leading rows' stamps from its own samples, where the two samples around
-  a stamp are at most :data:`GAP_FACTOR` of that sensor's median interval apart; a leading
+  a stamp are at most :func:`gap_limit_s` apart (:data:`GAP_FACTOR` of that sensor's own
+  long interval, its :data:`GAP_QUANTILE` quantile: the median for a regular sensor, more for
+  one with irregular stamps, whose long intervals are not holes); a leading
   row outside that (a gap of the other sensor, before its first sample, after its last)
   is left out, so the log shows a time gap there rather than made-up values - except that a
   sensor starting late or ending early by more than :data:`MAX_OUTSIDE_S` and
@@ -33,7 +35,8 @@ import numpy as np
 POSE = ("x_m", "y_m", "yaw_rad")
 HELD = ("speed_cmd_mps", "steer_cmd_rad", "coast")
 INTERPOLATED = ("speed_mps", "yaw_rate_radps")
-GAP_FACTOR = 5.0
+GAP_FACTOR = 5.0  # a step longer than this many of the stream's own long intervals is a hole
+GAP_QUANTILE = 0.9  # the stream's own long interval: this quantile of its time steps
 # a sensor starting late or ending early by more than both of these is left out (rather than
 # the log cut to its span)
 MAX_OUTSIDE_S = 2.0
@@ -58,16 +61,31 @@ class SparseError(ValueError):
         self.row, self.message = row, message
 
 
+def gap_limit_s(steps_s: np.ndarray) -> float:
+    """The longest time step of a stream (a sensor's samples, a log's rows) that is not a
+    hole: :data:`GAP_FACTOR` times the :data:`GAP_QUANTILE` quantile of its positive steps.
+
+    For a regular stream that quantile is its median step (every step is one); a stream
+    with irregular stamps - a controller or logger acting at irregular times, a sensor with
+    jitter - has long intervals as part of its normal rhythm, and only a step well beyond
+    them means samples were lost. A stream that loses more than a tenth of its steps to
+    holes sets its own normal that high, so only holes 5 times longer are found; such a log
+    is mostly holes. 0 when no step is positive."""
+    steps_s = np.asarray(steps_s, dtype=float)
+    positive = steps_s[steps_s > 0]
+    return GAP_FACTOR * float(np.quantile(positive, GAP_QUANTILE)) if positive.size else 0.0
+
+
 def _interpolate(t: np.ndarray, own: np.ndarray, at: np.ndarray) -> np.ndarray:
     """``own`` (NaN where the sensor has no sample) at the stamps ``at``; NaN where the own
-    samples around a stamp are more than GAP_FACTOR median intervals apart, or outside them."""
+    samples around a stamp are more than :func:`gap_limit_s` apart, or outside them."""
     have = np.isfinite(own)
     ts, vs = t[have], own[have]
     out = np.full(len(at), np.nan)
     if ts.size < 2:
         return out
     steps = np.diff(ts)
-    limit = GAP_FACTOR * float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
+    limit = gap_limit_s(steps)
     k = np.searchsorted(ts, at, side="right")  # ts[k - 1] <= at < ts[k]
     exact = (k >= 1) & (ts[np.clip(k - 1, 0, ts.size - 1)] == at)
     inside = (k >= 1) & (k < ts.size)
@@ -188,5 +206,6 @@ def command_steps(values: dict) -> dict[str, np.ndarray] | None:
     return out
 
 
-__all__ = ["merge_rows", "command_steps", "is_empty_cell", "SparseError", "EMPTY_CELLS", "GAP_FACTOR", "MAX_OUTSIDE_S",
+__all__ = ["merge_rows", "command_steps", "is_empty_cell", "SparseError", "EMPTY_CELLS", "GAP_FACTOR", "GAP_QUANTILE", "gap_limit_s",
+           "MAX_OUTSIDE_S",
            "MAX_OUTSIDE_SHARE"]

@@ -3,13 +3,17 @@
 Real logs are not what a simulator writes: the localisation jumps, a topic stops for a
 while, a row is logged twice, a sensor repeats its last value. :func:`find_glitches`
 finds four kinds (:class:`GlitchKind`); :func:`glitch_mask` turns them into the samples to
-keep out. Every threshold is relative to the log itself - its median time step, the
+keep out. Every threshold is relative to the log itself - its time steps, the
 noise of its own signals, its own speed - so that one rule serves a 20-Hz particle
 filter and a 100-Hz motion-capture log alike:
 
 ``time_gap``
-    ``dt > GAP_FACTOR * median(dt)``: samples were dropped (or the logger paused). Nothing is
-    known in between, so windows and smoothing are cut there (:func:`time_gaps`).
+    ``dt > GAP_FACTOR * quantile(dt, GAP_QUANTILE)`` (:func:`simrunner.run.sparse.gap_limit_s`:
+    5 times the log's own long interval, its median step when the stamps are regular):
+    samples were dropped (or the logger paused). Nothing is known in between, so windows and
+    smoothing are cut there (:func:`time_gaps`). A log with irregular stamps (a controller
+    logging when it acts, a sensor with jitter) has long intervals as part of its rhythm;
+    they are not gaps.
 ``duplicate``
     a time step below ``DUPLICATE_DT_FRACTION * median(dt)`` (the same sample stamped
     twice), or a row whose every sensor column (pose, speed, gyro) equals the previous
@@ -53,8 +57,8 @@ from enum import StrEnum
 import numpy as np
 
 from simrunner.run.log import RunLog
+from simrunner.run.sparse import GAP_FACTOR, GAP_QUANTILE, gap_limit_s
 
-GAP_FACTOR = 5.0  # dt above this many median time steps: a time gap
 DUPLICATE_DT_FRACTION = 0.1  # dt below this fraction of the median: the same sample again
 JUMP_Z = 8.0  # robust z-score of a position step beyond which it is a jump
 JUMP_MOTION_FRACTION = 0.5  # ... and beyond this fraction of the step the speed gives (slip, speed error)
@@ -105,7 +109,7 @@ def time_gaps(t: np.ndarray) -> np.ndarray:
     """``(N - 1,) bool``: the step from sample k to k + 1 is a time gap (see the module
     docstring)."""
     dt = np.diff(t)
-    return dt > GAP_FACTOR * median_dt_s(t) if dt.size else np.zeros(0, dtype=bool)
+    return dt > gap_limit_s(dt) if dt.size else np.zeros(0, dtype=bool)
 
 
 def find_glitches(log: RunLog) -> list[Glitch]:
@@ -139,10 +143,11 @@ def glitch_mask(log: RunLog, glitches: list[Glitch] | tuple[Glitch, ...]) -> np.
 # -- the rules --------------------------------------------------------------------------------
 def _gaps(log: RunLog) -> list[Glitch]:
     t = log.t_s
-    med = median_dt_s(t)
+    med, limit = median_dt_s(t), gap_limit_s(np.diff(t))
     out = []
     for k in np.flatnonzero(time_gaps(t)):
-        text = f"no sample for {t[k + 1] - t[k]:.3g} s ({(t[k + 1] - t[k]) / med:.0f} median time steps)"
+        text = (f"no sample for {t[k + 1] - t[k]:.3g} s ({(t[k + 1] - t[k]) / med:.0f} median time steps; "
+                f"this log's gaps are longer than {limit:.3g} s)")
         if has_pose(log):
             text += (f"; the pose moved {math.hypot(log.x_m[k + 1] - log.x_m[k], log.y_m[k + 1] - log.y_m[k]):.3g} m "
                      f"and turned {_wrap(np.array(log.yaw_rad[k + 1] - log.yaw_rad[k])):+.2f} rad across it")
@@ -366,4 +371,4 @@ def _moves_during(log: RunLog, channel: str, a: int, b: int, jumps: np.ndarray, 
 
 
 __all__ = ["Glitch", "GlitchKind", "find_glitches", "glitch_mask", "time_gaps", "median_dt_s", "moving",
-           "has_pose", "GAP_FACTOR", "DUPLICATE_DT_FRACTION", "JUMP_Z", "FROZEN_ALPHA"]
+           "has_pose", "GAP_FACTOR", "GAP_QUANTILE", "DUPLICATE_DT_FRACTION", "JUMP_Z", "FROZEN_ALPHA"]
