@@ -149,6 +149,21 @@ def test_cli_bad_input_exit_2_and_nothing_written(tmp_path, text, line, what):
     assert sorted(x.name for x in tmp_path.iterdir()) == ["m.csv"]
 
 
+def test_a_log_of_a_car_at_rest_is_refused_in_one_line(tmp_path):
+    """20 s of a car standing still (noisy sensors, zero commands): nothing can show, so the
+    workflow says so instead of reporting 'effects found: none'."""
+    rng = np.random.default_rng(0)
+    rows = "".join(f"{i * 0.02:.2f},{rng.normal(0, 0.005):.4f},{rng.normal(0, 0.005):.4f},{rng.normal(0, 0.005):.4f},"
+                   f"{rng.normal(0, 0.02):.4f},0,0\n" for i in range(1000))
+    p = tmp_path / "m.csv"
+    p.write_text("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + rows)
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    err = res.stderr.strip()
+    assert "\n" not in err and "expected the car to move" in err and "(got 0 of " in err and "simrunner excite" in err
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["m.csv"]
+
+
 def test_cli_bad_options_exit_2(tmp_path, offset_run):
     log, _, _ = offset_run
     p = tmp_path / "m.csv"

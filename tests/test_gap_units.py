@@ -340,6 +340,22 @@ def test_replay_of_exact_model_has_tiny_residuals():
     assert np.nanmax(np.abs(res["position_m"])) < 0.02
 
 
+def test_a_log_far_from_its_origin_replays_as_near_it():
+    """A map frame whose origin is a kilometre away: the simulator's ground is finite (400 m),
+    so each window is replayed shifted by whole 100 m towards it (a car placed at x = 1234 m
+    fell off the ground and drove backwards at 2 m/s)."""
+    car = CarDescription()
+    near = simulate(car, np.random.default_rng(1), rate_hz=50.0)
+    far = log_from_columns({**near.columns(), "x_m": near.x_m + 1234.5, "y_m": near.y_m - 987.25}, "<far>")
+    res = []
+    for log in (near, far):
+        d = derive(log, car.chassis.wheelbase_m)
+        res.append(residuals(log, d, replay(car, log, d, make_windows(log))))
+    assert np.nanmax(np.abs(res[0]["position_m"])) < 0.1 and np.nanmax(np.abs(res[0]["speed_mps"])) < 0.2
+    for k in ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps"):
+        assert np.allclose(res[1][k], res[0][k], atol=1e-6, equal_nan=True), k
+
+
 def test_a_merged_logs_commands_between_rows_act_at_their_own_stamps():
     """A pose logged at 20 Hz with commands sent at 100 Hz (a merged topic log): each row
     holds the command last sent, so every command change reaches the row-held replay up to

@@ -11,6 +11,11 @@ the log) are replayed unrecorded and the car is then moved (``place``) to the me
 state at the window's start, so latency queues and lags carry the commands in flight
 (a steering play, whose state no measurement gives, also gets the :data:`PLAY_HISTORY_S`
 seconds of steering commands before that).
+A window far from the log's origin (a map frame, a motion-capture hall's corner) is replayed
+with its poses shifted by a whole number of :data:`ORIGIN_STEP_M` towards the simulator's
+origin, and shifted back when recorded: the ground is flat and the same everywhere, but
+finite (``physics.GROUND_SIZE_M``), and a car placed past its edge falls. A log within
+half a step of its origin is replayed where it is.
 Restarting keeps open-loop drift from swamping the comparison; one simulator object serves
 all windows of a replay, so a whole replay is one pass. A log without pose starts every
 window at the origin with the measured speed and yaw rate, heading the yaw rate integrated
@@ -57,6 +62,7 @@ NO_DRIVE_CMD_MPS = 0.05  # |speed_cmd| below this: no drive (as regimes.COAST_CM
 MOVING_MPS = 0.1
 LEAD_S = 0.3  # commands replayed before each window (not compared), see replay()
 PLAY_HISTORY_S = 10.0  # steering commands before a lead-in that set a steering play's state
+ORIGIN_STEP_M = 100.0  # windows are replayed within half of this of the origin (ground: 400 m)
 
 FIT_SIGNALS = ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
 REPORT_SIGNALS = ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
@@ -240,11 +246,14 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         smooth_pieces = pieces(log, ~np.isfinite(derived.x_m))
         smooth_starts = np.array([lo for lo, _ in smooth_pieces])
 
+    shift = [0.0, 0.0]  # the current window's poses minus the simulator's (ORIGIN_STEP_M)
+
     def state(i: int):
         v, steer, r = float(derived.speed_mps[i]), float(derived.steer_rad[i]), float(derived.yaw_rate_radps[i])
         if not math.isfinite(r):  # no gyro and no pose: the kinematic yaw rate of the steer
             r = v * math.tan(steer) / wheelbase
-        p = Pose2(derived.x_m[i], derived.y_m[i], derived.yaw_rad[i]) if pose else Pose2(0.0, 0.0, float(heading[i]))
+        p = (Pose2(derived.x_m[i] - shift[0], derived.y_m[i] - shift[1], derived.yaw_rad[i]) if pose
+             else Pose2(0.0, 0.0, float(heading[i])))
         return p, v, steer, r
 
     def usable(i: int) -> bool:
@@ -275,7 +284,7 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         for i in range(a, b):
             if record:
                 p = sim.pose
-                out[:, i] = (p.x_m, p.y_m, p.yaw_rad, sim.speed_mps, sim.yaw_rate_radps)
+                out[:, i] = (p.x_m + shift[0], p.y_m + shift[1], p.yaw_rad, sim.speed_mps, sim.yaw_rate_radps)
             if i + 1 < n and (i + 1 < b or not record):
                 if coast[i] != coast_now:
                     coast_now = bool(coast[i])
@@ -298,6 +307,9 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         j0 = int(np.searchsorted(t, t[i0] - lead_s - 1e-9)) if lead_s > 0.0 else i0
         j0 = max(j0, piece_start)  # the lead-in stays on this side of a time gap
         j0 = next(j for j in range(j0, i0 + 1) if usable(j))
+        if pose:
+            shift[:] = [ORIGIN_STEP_M * round(float(derived.x_m[j0]) / ORIGIN_STEP_M),
+                        ORIGIN_STEP_M * round(float(derived.y_m[j0]) / ORIGIN_STEP_M)]
         sim.set_coast(bool(coast[j0]))
         sim.set_state(*state(j0))
         if prime and lead_s > 0.0:

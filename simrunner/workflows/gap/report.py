@@ -38,7 +38,7 @@ from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_
 from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive
-from simrunner.workflows.gap.regimes import residual_stats, reversal_onsets, segment
+from simrunner.workflows.gap.regimes import MOVING_MPS, residual_stats, reversal_onsets, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
@@ -267,6 +267,12 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     if n_fit < 2 or n_held < 1:
         raise GapError(f"{', '.join(p.log.source for p in parts)}: expected at least 3 clean windows of "
                        f"{window_s:g} s (got {n_fit + n_held} after cutting out glitches and gaps)")
+    moving = [sum(moves_in(p, p.fit_windows) for p in parts), sum(moves_in(p, p.held_windows) for p in parts)]
+    if moving[0] < 2 or moving[1] < 1:
+        raise GapError(f"{', '.join(p.log.source for p in parts)}: expected the car to move (|speed| >= "
+                       f"{MOVING_MPS:g} m/s) in at least 2 fit windows and 1 held-out window (got {moving[0]} of "
+                       f"{n_fit} and {moving[1]} of {n_held}): a car at rest shows no effect; drive the plan of "
+                       "`simrunner excite`")
     fit_segs = tuple(Segment(p.log, p.derived, p.fit_windows) for p in parts if p.fit_windows)
     held_segs = tuple(Segment(p.log, p.derived, p.held_windows) for p in parts if p.held_windows)
 
@@ -331,6 +337,13 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
         unrevealable={**missing_manoeuvres(names, parts, car), **cannot_reveal(names, signals)},
         leftovers=leftovers(stats_after, noise))
+
+
+def moves_in(part: LogPart, windows: Sequence[Window]) -> int:
+    """How many of ``windows`` (of ``part``) hold a sample where the car moves (the smoothed
+    speed at least ``regimes.MOVING_MPS``)."""
+    moving = np.abs(np.nan_to_num(part.derived.speed_mps)) >= MOVING_MPS
+    return sum(bool(moving[w.start:w.stop].any()) for w in windows)
 
 
 def _noise(parts: Sequence[LogPart], signals: Sequence[str]) -> dict[str, float]:
