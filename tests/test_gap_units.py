@@ -587,8 +587,15 @@ def test_check_measured_accepts_pose_or_speed_and_names_what_is_missing():
     with pytest.raises(LogError, match=r"<kin>:1: expected a pose .* or a speed sensor .*missing: yaw_rad, speed_mps"):
         check_measured(simulate(car, columns=("t_s", "x_m", "y_m", "speed_cmd_mps", "steer_cmd_rad")))
     slow = simulate(car, duration_s=30.0, rate_hz=5.0)
-    with pytest.raises(LogError, match=r"<kin>:0: expected a median sample rate of at least 10 Hz \(got 5 Hz\)"):
+    with pytest.raises(LogError, match=r"<kin>:0: expected a median sample rate of at least 10 Hz \(got 5 Hz\)$"):
         check_measured(slow)
+    for unit, factor in (("ms", 1e3), ("us", 1e6), ("ns", 1e9)):  # stamps in another unit: the mapping that reads them
+        log = simulate(car, rate_hz=50.0)
+        scaled = log_from_columns({**log.columns(), "t_s": log.t_s * factor}, "<kin>")
+        with pytest.raises(LogError, match=r"\(got [0-9.e-]+ Hz\); a median step of [0-9.e+]+ looks like stamps in "
+                                           + unit + r": read them with --column 't_s=\{column = \"YOUR_TIME_COLUMN\", "
+                                           r"unit = \"" + unit + r"\"\}'$"):
+            check_measured(scaled)
 
 
 @pytest.mark.parametrize("cols, signals", [

@@ -54,11 +54,22 @@ def check_measured(log: RunLog) -> RunLog:
         raise LogError(log.source, 1, f"expected a pose ({', '.join(POSE_COLUMNS)}) or a speed sensor (speed_mps) "
                                       f"(missing: {', '.join(missing)}, speed_mps)")
     log.require(*REQUIRED_COLUMNS, min_rows=MIN_ROWS, min_duration_s=MIN_DURATION_S)
-    rate = 1.0 / float(np.median(np.diff(log.t_s)))
+    step = float(np.median(np.diff(log.t_s)))
+    rate = 1.0 / step
     if rate < MIN_RATE_HZ * (1.0 - 1e-6):
         raise LogError(log.source, 0, f"expected a median sample rate of at least {MIN_RATE_HZ:g} Hz "
-                                      f"(got {rate:.3g} Hz)")
+                                      f"(got {rate:.3g} Hz){_stamp_unit_hint(step)}")
     return log
+
+
+def _stamp_unit_hint(step: float) -> str:
+    """For a median time step that would be a plausible logging rate (10-1000 Hz) in ms, us
+    or ns: the mapping that reads such stamps (docs/telemetry.md), else ''."""
+    for unit, factor in (("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)):
+        if MIN_RATE_HZ <= 1.0 / (step * factor) <= 1000.0:
+            return (f"; a median step of {step:.6g} looks like stamps in {unit}: read them with "
+                    f"--column 't_s={{column = \"YOUR_TIME_COLUMN\", unit = \"{unit}\"}}'")
+    return ""
 
 
 @dataclass(frozen=True)
