@@ -75,6 +75,24 @@ def test_ros_style_log_reads_as_the_native_log(tmp_path):
     assert mapped.source == str(ros)
 
 
+@pytest.mark.parametrize("sep, decimal", [(";", "."), (";", ","), ("\t", ".")])
+def test_a_spreadsheets_semicolon_or_tab_export_reads_as_the_comma_file(tmp_path, sep, decimal):
+    """A European spreadsheet writes ``;`` between cells and decimal commas; others tabs. The
+    same log reads the same, with and without a column mapping."""
+    native, ros = _ros_pair(tmp_path)
+    for path, cmap in ((native, None), (ros, column_map_from(EXAMPLE))):
+        lines = path.read_text().splitlines(keepends=True)
+        out = []
+        for line in lines:
+            if line.startswith("#"):
+                out.append(line)
+                continue
+            cells = line.rstrip("\n").split(",")
+            out.append(sep.join(c.replace(".", decimal) if re.fullmatch(r"[-+0-9.e]+", c) else c for c in cells) + "\n")
+        other = _write(tmp_path, "".join(out), f"other_{path.name}")
+        _assert_close(read_log(other, columns=cmap), read_log(path, columns=cmap))
+
+
 def test_the_docs_example_is_the_example_file():
     docs = (ROOT / "docs" / "telemetry.md").read_text()
     section = docs[docs.index("## Logs with other columns or units"):]

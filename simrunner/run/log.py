@@ -12,7 +12,9 @@ then one line per row; numbers in fixed formats (``%d`` and ``%.6f``; so the sam
 the same bytes), ``data_text`` quoted by the CSV rules when it needs to be. Written
 atomically (``PATH.tmp``, then renamed). :func:`read_log` also reads format 1 (the header of
 names without units, ``t,x,y,yaw,speed,...``, no format line), and any CSV with these
-columns in any order; unknown columns are ignored. A run log of this simulator whose last
+columns in any order; unknown columns are ignored. Cells are separated by commas, or by
+semicolons or tabs when the header line has no comma (a spreadsheet's export); in a
+semicolon file a number may use a decimal comma (``0,02``, :func:`_delimiter`). A run log of this simulator whose last
 line has no line end was cut short while it was written (the process was killed): that line
 is left out, with a :class:`LogWarning`; every complete row is read.
 
@@ -29,6 +31,7 @@ import csv
 import io
 import math
 import os
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -352,8 +355,31 @@ def _without_cut_line(text: str, source: str) -> str:
     return text[:keep]
 
 
+_DECIMAL_COMMA = re.compile(r"\s*[-+]?\d*,\d+(?:[eE][-+]?\d+)?\s*")
+
+
+def _delimiter(text: str) -> str:
+    """The cell separator of a CSV text: ``,``, else ``;`` or a tab when the header line (its
+    first line that is neither empty nor a ``#`` comment) has no comma but one of them."""
+    for line in text.splitlines():
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        if "," not in line:
+            for sep in (";", "\t"):
+                if sep in line:
+                    return sep
+        return ","
+    return ","
+
+
+def _decimal_points(row: list[str]) -> list[str]:
+    """The cells of a semicolon-separated row with decimal commas written with points."""
+    return [c.replace(",", ".") if _DECIMAL_COMMA.fullmatch(c) else c for c in row]
+
+
 def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: bool = False) -> RunLog:
-    reader = csv.reader(io.StringIO(text, newline=""))
+    delimiter = _delimiter(text)
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
     header = None
     try:
         for row in reader:
@@ -383,6 +409,8 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
                 continue
             if len(row) < len(header):
                 raise LogError(source, line, f"expected {len(header)} cells (got {len(row)})")
+            if delimiter == ";":
+                row = _decimal_points(row)
             for i, h in wanted:
                 cell = row[i]
                 if columns is not None or _BY_NAME[h].kind == "text":
