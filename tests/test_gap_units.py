@@ -342,7 +342,7 @@ def test_replay_of_exact_model_has_tiny_residuals():
 
 def test_a_log_far_from_its_origin_replays_as_near_it():
     """A map frame whose origin is a kilometre away: the simulator's ground is finite (400 m),
-    so each window is replayed shifted by whole 100 m towards it (a car placed at x = 1234 m
+    so each window is replayed shifted by whole 200 m towards it (a car placed at x = 1234 m
     fell off the ground and drove backwards at 2 m/s)."""
     car = CarDescription()
     near = simulate(car, np.random.default_rng(1), rate_hz=50.0)

@@ -62,7 +62,7 @@ NO_DRIVE_CMD_MPS = 0.05  # |speed_cmd| below this: no drive (as regimes.COAST_CM
 MOVING_MPS = 0.1
 LEAD_S = 0.3  # commands replayed before each window (not compared), see replay()
 PLAY_HISTORY_S = 10.0  # steering commands before a lead-in that set a steering play's state
-ORIGIN_STEP_M = 100.0  # windows are replayed within half of this of the origin (ground: 400 m)
+ORIGIN_STEP_M = 200.0  # windows start within half of this of the origin (ground: 400 m wide)
 
 FIT_SIGNALS = ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
 REPORT_SIGNALS = ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
