@@ -14,9 +14,10 @@ atomically (``PATH.tmp``, then renamed). :func:`read_log` also reads format 1 (t
 names without units, ``t,x,y,yaw,speed,...``, no format line), and any CSV with these
 columns in any order; unknown columns are ignored. Cells are separated by commas, or by
 semicolons or tabs when the header line has no comma (a spreadsheet's export); in a
-semicolon file a number may use a decimal comma (``0,02``, :func:`_delimiter`). A run log of this simulator whose last
-line has no line end was cut short while it was written (the process was killed): that line
-is left out, with a :class:`LogWarning`; every complete row is read.
+semicolon file a number may use a decimal comma (``0,02``; :func:`_delimiter`). A run log of
+this simulator whose last line has no line end was cut short while it was written (the
+process was killed): that line is left out, with a :class:`LogWarning`; every complete row
+is read.
 
 During a run, :class:`RunRecorder` collects the rows: the state at each camera frame
 boundary ``t_k``, the command the first physics step after ``t_k`` applies (the
