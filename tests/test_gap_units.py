@@ -834,6 +834,25 @@ def _assert_windows_clean(log, windows, exclude, window_s):
     assert windows and windows[0].start == 0 and windows[-1].stop == len(log)
 
 
+def test_no_window_starts_inside_a_brake_to_reverse():
+    """From a reverse command given while rolling forward until the car reverses, an ESC that
+    brakes first is braking or waiting at rest (no measurement says which): a window that
+    starts there, or ends there, sees half of it. The boundary near t = 10 s moves before it"""
+    t = np.arange(0.0, 20.0, 0.02)
+    cmd = np.where(t < 9.9, 1.0, -0.6)
+    speed = np.interp(t, [0.0, 9.9, 10.2, 10.8, 11.0, 20.0], [1.0, 1.0, 0.0, 0.0, -0.6, -0.6])
+    log = log_from_columns(dict(t_s=t, speed_mps=speed, speed_cmd_mps=cmd, steer_cmd_rad=0.0 * t), "<esc>")
+    starts = [t[w.start] for w in make_windows(log, 2.0)]
+    assert any(9.4 <= s < 9.9 for s in starts), starts
+    assert not any(9.9 <= s <= 11.0 for s in starts), starts
+    # a reverse command from rest is no such event: the boundary stays at the quietest sample
+    # (its quietest sample, the nearest to 10 s after the command change); from rest the
+    # reverse command is no such event and the boundary stays there
+    rest = log_from_columns(dict(t_s=t, speed_mps=np.where(t < 10.8, 0.0, speed), speed_cmd_mps=np.where(t < 9.9, 0.0, cmd),
+                                 steer_cmd_rad=0.0 * t), "<rest>")
+    assert any(10.1 <= t[w.start] <= 10.2 for w in make_windows(rest, 2.0))
+
+
 def test_windows_skip_gaps_and_excluded_samples():
     log = simulate(CarDescription(), duration_s=30.0)
     keep = np.ones(len(log), dtype=bool)
