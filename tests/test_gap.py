@@ -164,6 +164,20 @@ def test_a_log_of_a_car_at_rest_is_refused_in_one_line(tmp_path):
     assert sorted(x.name for x in tmp_path.iterdir()) == ["m.csv"]
 
 
+def test_cli_reads_a_log_with_a_row_written_twice(tmp_path, offset_run):
+    """The same row twice (a logger's repeat): the run goes on, the repeat is listed."""
+    log, _, _ = offset_run
+    p = tmp_path / "m.csv"
+    write_log(log.subset(int(np.searchsorted(log.t_s, 12.0))), p)
+    lines = p.read_text().splitlines(keepends=True)
+    p.write_text("".join(lines[:300] + [lines[299]] + lines[300:]))
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--max-effects", "0", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert "duplicate (t_s) line 301 repeats the row before it (same stamp, same values): left out" in res.stdout
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert any("line 301" in g["detail"] for g in rep["glitches"])
+
+
 def test_cli_bad_options_exit_2(tmp_path, offset_run):
     log, _, _ = offset_run
     p = tmp_path / "m.csv"

@@ -771,6 +771,39 @@ def test_time_gaps_and_duplicates_are_found_exactly():
     assert np.flatnonzero(glitch_mask(log, found)).tolist() == [i_again, i_same]  # a gap holds no sample
 
 
+def test_rows_repeating_a_stamp_are_left_out_and_listed(tmp_path):
+    """A logger that writes a row twice (same stamp, same values) or two messages in one
+    clock tick (same stamp, other values): read for the gap workflow, the second row is left
+    out and listed as a duplicate; the doubtful first one of a clash is kept out of the
+    windows, a copy keeps nothing out. Read plainly, the file is still refused."""
+    c = _noisy(MEASURED_COLUMNS, jitter=0.3)
+    p = tmp_path / "m.csv"
+    write_log(_log(c), p)
+    lines = p.read_text().splitlines(keepends=True)  # format line, header, row k on line k + 3
+    copy_row, clash_row = 400, 700
+    clash = lines[clash_row + 2].split(",")
+    x_col = lines[1].strip().split(",").index("x_m")
+    clash[x_col] = f"{float(clash[x_col]) + 0.25:.6f}"
+    text = (lines[:copy_row + 3] + [lines[copy_row + 2]] + lines[copy_row + 3:clash_row + 3] + [",".join(clash)]
+            + lines[clash_row + 3:])
+    p.write_text("".join(text))
+    with pytest.raises(LogError, match=f":{copy_row + 4}: column 't_s': expected strictly increasing"):
+        read_log(p)
+    for merged in (False, True):
+        log = read_log(p, merged=merged, repeated_stamps=True)
+        assert len(log) == len(c["t_s"]) and np.array_equal(log.x_m, np.round(c["x_m"], 6))
+        assert log.repeats.lines == (copy_row + 4, clash_row + 5) and log.repeats.differ == ("", "x_m")
+    t = log.t_s
+    found = [g for g in find_glitches(log) if g.kind is GlitchKind.DUPLICATE]
+    assert _kinds(found) == [(GlitchKind.DUPLICATE, t[copy_row], t[copy_row], "t_s"),
+                             (GlitchKind.DUPLICATE, t[clash_row - 1], t[clash_row], "x_m")]
+    assert f"line {copy_row + 4} repeats the row before it" in found[0].detail
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == [clash_row]
+    # a subset keeps the repeats inside it only
+    assert log.subset(slice(0, 500)).repeats.lines == (copy_row + 4,)
+    assert log.subset(slice(500, 600)).repeats is None
+
+
 def test_a_log_with_irregular_stamps_has_only_its_real_gap():
     """Rows logged when a controller acts (a 50-Hz tick, each with probability 0.6): steps of
     20, 40, 60 ... ms are its rhythm, not gaps (5 median steps, the old rule, cut it 9 times

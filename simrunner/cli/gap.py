@@ -124,12 +124,13 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
 
 def _log_reader(columns_file: Path | None, items: tuple[str, ...]):
     """``read_log`` with the column mapping of ``--columns``/``--column`` (if any), reading
-    merged topic logs (empty cells: :mod:`simrunner.run.sparse`)."""
+    merged topic logs (empty cells: :mod:`simrunner.run.sparse`) and leaving out a row that
+    repeats the stamp before it (listed as a duplicate glitch)."""
     from simrunner.run.log import read_log
 
     if columns_file is None and not items:
-        return lambda path: read_log(path, merged=True)
+        return lambda path: read_log(path, merged=True, repeated_stamps=True)
     from simrunner.run.columns import column_map_from
 
     mapping = column_map_from(columns_file, items)
-    return lambda path: read_log(path, columns=mapping, merged=True)
+    return lambda path: read_log(path, columns=mapping, merged=True, repeated_stamps=True)

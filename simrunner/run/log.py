@@ -34,7 +34,7 @@ import math
 import os
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
@@ -120,6 +120,22 @@ class CommandSteps:
 
 
 @dataclass(frozen=True, eq=False)
+class Repeats:
+    """The rows a reader left out because each was stamped the same as the row before it
+    (``read_log(repeated_stamps=True)``), shape (M,): their stamps, their file lines, and
+    for each the columns whose values differ from the row kept (``""``: a copy of it). A
+    logger that wrote one message twice, or two messages in one clock tick, gives them;
+    :func:`simrunner.workflows.gap.glitches.find_glitches` lists them as duplicates."""
+
+    t_s: np.ndarray
+    lines: tuple[int, ...]
+    differ: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return int(self.t_s.size)
+
+
+@dataclass(frozen=True, eq=False)
 class RunLog:
     """A run's rows as read-only columns, each ``(N,)`` (``data_text`` a tuple of N str).
 
@@ -127,7 +143,8 @@ class RunLog:
     does not have is ``None``. ``source`` names where it came from (file path or a label).
     ``command_steps``: a merged log's commands at their own stamps (:class:`CommandSteps`;
     None for a log with a row per command), kept by :meth:`subset` and :meth:`with_columns`
-    (unless it replaces a command column).
+    (unless it replaces a command column). ``repeats``: the rows the reader left out for
+    repeating the previous row's stamp (:class:`Repeats`; None when it left none out).
     """
 
     t_s: np.ndarray
@@ -147,6 +164,7 @@ class RunLog:
     data_text: tuple[str, ...] | None = None
     source: str = "<log>"
     command_steps: CommandSteps | None = None
+    repeats: Repeats | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.size)
@@ -199,7 +217,15 @@ class RunLog:
                 cols[n] = tuple(np.asarray(v, dtype=object)[rows]) if len(v) else ()
             else:
                 cols[n] = v[rows]
-        return log_from_columns(cols, self.source, self.command_steps)
+        out = log_from_columns(cols, self.source, self.command_steps)
+        if self.repeats is None or not len(out):
+            return out
+        r = self.repeats
+        inside = np.flatnonzero((r.t_s >= out.t_s[0]) & (r.t_s <= out.t_s[-1]))
+        if not inside.size:
+            return out
+        return _with_repeats(out, Repeats(r.t_s[inside], tuple(r.lines[i] for i in inside),
+                                          tuple(r.differ[i] for i in inside)))
 
     def with_columns(self, **columns) -> "RunLog":
         """A copy with the given columns replaced or added (checked like any log); a new
@@ -208,7 +234,12 @@ class RunLog:
         cols = dict(self.columns())
         cols.update(columns)
         steps = None if {"speed_cmd_mps", "steer_cmd_rad", "coast"} & set(columns) else self.command_steps
-        return log_from_columns({k: v for k, v in cols.items() if v is not None}, self.source, steps)
+        out = log_from_columns({k: v for k, v in cols.items() if v is not None}, self.source, steps)
+        return out if self.repeats is None else _with_repeats(out, self.repeats)
+
+
+def _with_repeats(log: RunLog, repeats: Repeats | None) -> RunLog:
+    return replace(log, repeats=repeats)
 
 
 def log_from_columns(columns: dict, source: str = "<log>", command_steps: CommandSteps | None = None) -> RunLog:
@@ -303,7 +334,8 @@ def write_log(log: RunLog, path: str | Path, *, float_format: str = "%.6f") -> P
 
 
 # -- reading -------------------------------------------------------------------------------
-def read_log(path: str | Path, columns: ColumnMap | None = None, *, merged: bool = False) -> RunLog:
+def read_log(path: str | Path, columns: ColumnMap | None = None, *, merged: bool = False,
+             repeated_stamps: bool = False) -> RunLog:
     """Read a log CSV (format 2 or 1, see the module docstring); raise :class:`LogError`
     (``path:line: what was expected``) for anything malformed.
 
@@ -315,7 +347,12 @@ def read_log(path: str | Path, columns: ColumnMap | None = None, *, merged: bool
     ``merged``: the CSV may be a merged topic log, each row holding the cells of the sensor
     that sent it and empty (or ``nan``) cells for the others; it is read as one row per
     sample of the leading sensor (:mod:`simrunner.run.sparse`). A log without empty cells
-    reads the same either way."""
+    reads the same either way.
+
+    ``repeated_stamps``: a row stamped the same as the row before it (after the mapping and
+    the merge) is left out instead of refused, and recorded in ``RunLog.repeats`` (the first
+    row of a stamp is kept); a stamp that goes back is still refused. For measured logs
+    (``simrunner gap``), whose loggers sometimes write a message twice."""
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -328,7 +365,8 @@ def read_log(path: str | Path, columns: ColumnMap | None = None, *, merged: bool
     if "\0" in text:
         raise LogError(str(path), 1, "expected a text (CSV) file")
     text = _without_cut_line(text, str(path))
-    return _parse(text, str(path), columns if columns is not None and columns.rules else None, merged)
+    return _parse(text, str(path), columns if columns is not None and columns.rules else None, merged,
+                  repeated_stamps)
 
 
 def _without_cut_line(text: str, source: str) -> str:
@@ -378,7 +416,36 @@ def _decimal_points(row: list[str]) -> list[str]:
     return [c.replace(",", ".") if _DECIMAL_COMMA.fullmatch(c) else c for c in row]
 
 
-def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: bool = False) -> RunLog:
+def _drop_repeated_stamps(values: dict, lines: list[int]) -> tuple[dict, list[int], Repeats | None]:
+    """``values`` and ``lines`` without the rows stamped the same as the row before them,
+    and those rows as :class:`Repeats` (None when there are none)."""
+    try:
+        t = np.asarray(values["t_s"], dtype=float)
+    except (KeyError, TypeError, ValueError):
+        return values, lines, None  # log_from_columns names what is wrong
+    again = np.flatnonzero(np.diff(t) == 0.0) + 1
+    if not again.size:
+        return values, lines, None
+    keep = np.ones(t.size, dtype=bool)
+    keep[again] = False
+    first = np.maximum.accumulate(np.where(keep, np.arange(t.size), 0))  # the row kept for each
+    differ = []
+    for i in again:
+        j = int(first[i])
+        names = []
+        for name, v in values.items():
+            a, b = v[i], v[j]
+            if not (a == b or (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b))):
+                names.append(name)
+        differ.append(",".join(names))
+    rows = np.flatnonzero(keep)
+    out = {k: (tuple(v[i] for i in rows) if isinstance(v, tuple) else
+               [v[i] for i in rows] if isinstance(v, list) else np.asarray(v)[rows]) for k, v in values.items()}
+    return out, [lines[i] for i in rows], Repeats(t[again], tuple(lines[i] for i in again), tuple(differ))
+
+
+def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: bool = False,
+           repeated_stamps: bool = False) -> RunLog:
     delimiter = _delimiter(text)
     reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
     header = None
@@ -430,6 +497,7 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
             lines.append(line)
     except csv.Error as exc:
         raise LogError(source, reader.line_num, f"expected valid CSV ({exc})") from None
+    steps = None
     try:
         if columns is not None:
             values = columns.apply(values, len(lines), source, merged=merged)
@@ -446,9 +514,11 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
                 warnings.warn(f"{source}: {note}", LogWarning, stacklevel=3)
             lines = [lines[i] for i in kept]
             steps = command_steps(raw)
-            if steps is not None:
-                return log_from_columns(values, source, CommandSteps(**steps))
-        return log_from_columns(values, source)
+        repeats = None
+        if repeated_stamps:
+            values, lines, repeats = _drop_repeated_stamps(values, lines)
+        log = log_from_columns(values, source, CommandSteps(**steps) if steps is not None else None)
+        return log if repeats is None else _with_repeats(log, repeats)
     except LogError as exc:  # map the row index back to the file's line
         if exc.line >= 2 and exc.line - 2 < len(lines):
             raise LogError(source, lines[exc.line - 2], exc.message) from None
@@ -597,5 +667,5 @@ def schema_markdown() -> str:
     return "\n".join(rows)
 
 
-__all__ = ["RunLog", "CommandSteps", "RunRecorder", "LogError", "LogWarning", "Column", "COLUMNS", "COLUMN_NAMES", "FORMAT_VERSION",
+__all__ = ["RunLog", "CommandSteps", "Repeats", "RunRecorder", "LogError", "LogWarning", "Column", "COLUMNS", "COLUMN_NAMES", "FORMAT_VERSION",
            "log_from_columns", "read_log", "write_log", "to_csv_text", "empty_log", "schema_markdown"]

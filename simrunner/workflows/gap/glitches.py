@@ -18,7 +18,10 @@ filter and a 100-Hz motion-capture log alike:
     a time step below ``DUPLICATE_DT_FRACTION * median(dt)`` (the same sample stamped
     twice), or a row whose every sensor column (pose, speed, gyro) equals the previous
     row's while the car moves (a repeated row with a new stamp; at rest identical rows
-    are normal).
+    are normal), or a row the reader left out for repeating the previous row's stamp
+    (``RunLog.repeats``, ``read_log(repeated_stamps=True)``): a copy of the row kept leaves
+    its data whole and keeps nothing out; a row with other values makes the kept one
+    doubtful too, which is kept out.
 ``localisation_jump``
     a position step that the speed and the time step cannot explain. Each step's
     residual, along and across the heading, is ``step - v * dt * (cos, sin)(heading)``
@@ -182,11 +185,32 @@ def _pose_speed(log: RunLog, baseline_s: float) -> np.ndarray:
         return np.where(span > 0.0, d / np.where(span > 0.0, span, 1.0), 0.0)
 
 
+def _repeats(log: RunLog) -> list[Glitch]:
+    """The rows left out at reading for repeating the stamp before them (module docstring)."""
+    rep = log.repeats
+    if rep is None:
+        return []
+    t = log.t_s
+    out = []
+    for ts, line, differ in zip(rep.t_s, rep.lines, rep.differ):
+        ts = float(ts)
+        if not differ:
+            out.append(Glitch(GlitchKind.DUPLICATE, ts, ts, "t_s",
+                              f"line {line} repeats the row before it (same stamp, same values): left out"))
+            continue
+        k = int(np.searchsorted(t, ts, side="left"))  # the row kept at that stamp
+        before = float(t[k - 1]) if k > 0 else math.nextafter(ts, -math.inf)
+        out.append(Glitch(GlitchKind.DUPLICATE, before, ts, differ,
+                          f"line {line} has the stamp of the row before it with other values ({differ}): "
+                          f"left out, and the row kept is kept out of the windows"))
+    return out
+
+
 def _duplicates(log: RunLog) -> list[Glitch]:
     t = log.t_s
     dt = np.diff(t)
     med = median_dt_s(t)
-    out = [Glitch(GlitchKind.DUPLICATE, float(t[k]), float(t[k + 1]), "t_s",
+    out = _repeats(log) + [Glitch(GlitchKind.DUPLICATE, float(t[k]), float(t[k + 1]), "t_s",
                   f"stamped {dt[k] * 1e3:.3g} ms after the previous sample (median time step {med * 1e3:.3g} ms)")
            for k in np.flatnonzero(dt < DUPLICATE_DT_FRACTION * med)]
     cols = _sensor_columns(log)
