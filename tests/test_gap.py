@@ -137,6 +137,7 @@ def test_glitch_times_of_a_log_with_epoch_stamps_also_say_how_far_into_the_log(o
     ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n" + "".join(f"{i * 0.1},0,0,0,0,0,0\n" for i in range(100))
      + "5.0,0,0,0,0,0,0\n", 102, "strictly increasing"),
     ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n0,0,0,0,0,0,0\n", 2, "expected at least"),
+    ("t,x,y,yaw,speed,speed_cmd,steer_cmd\n", 1, "expected rows of data after the header (got none)"),
 ])
 def test_cli_bad_input_exit_2_and_nothing_written(tmp_path, text, line, what):
     p = tmp_path / "m.csv"

@@ -194,10 +194,12 @@ class RunLog:
         if missing:
             raise LogError(self.source, 1, f"expected columns {', '.join(names)} "
                                            f"(missing: {', '.join(missing)})")
+        if not len(self) and min_rows > 0:
+            raise LogError(self.source, 1, "expected rows of data after the header (got none)")
         if len(self) < min_rows or self.duration_s < min_duration_s:
+            want = f"{min_rows} rows and {min_duration_s:g} s" if min_duration_s > 0.0 else f"{min_rows} rows"
             raise LogError(self.source, len(self) + 1,
-                           f"expected at least {min_rows} rows and {min_duration_s:g} s of data "
-                           f"(got {len(self)} rows, {self.duration_s:.3g} s)")
+                           f"expected at least {want} of data (got {len(self)} rows, {self.duration_s:.3g} s)")
 
     def coasting(self) -> np.ndarray:
         """``(N,) bool``: drive off at each row (all False without a ``coast`` column)."""
