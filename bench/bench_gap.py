@@ -332,7 +332,10 @@ def held_out(result, car_before, car_after) -> dict:
     return out
 
 
-def _method_row(named, params, truth_values, effects, held: dict, wall_s: float, extra: dict | None = None) -> dict:
+def _method_row(named, params, truth_values, effects, held: dict, wall_s: float, extra: dict | None = None,
+                sigma: dict | None = None) -> dict:
+    """``sigma``: the method's standard error per parameter (the chain's), kept per effect with
+    ``z`` = (fitted - true) / sigma."""
     from simrunner.workflows.gap.synth import RANGES
 
     per = {}
@@ -341,6 +344,10 @@ def _method_row(named, params, truth_values, effects, held: dict, wall_s: float,
         ok = e in named
         per[e] = {"named": ok, "fitted": params.get(f),
                   "rel_err": rel_error(e, params.get(f), truth_values[f]) if ok else None}
+        if ok and sigma is not None and f in sigma:
+            sd = sigma[f]
+            per[e]["sigma"] = sd
+            per[e]["z"] = (params[f] - truth_values[f]) / sd if sd and math.isfinite(sd) else None
     return {"named": list(named), "parameters": params, "per_effect": per,
             "spurious": [n for n in named if n not in effects], "wall_s": wall_s, **held, **(extra or {})}
 
@@ -395,7 +402,8 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
                                              1.0 - t.held_gap / s.held_gap_before if s.held_gap_before > 0 else 0.0,
                                              t.kept, t.reason) for s in result.chain.steps for t in s.trials],
                                  "pruned": [(t.effect, after) for t, after in zip(result.chain.pruned,
-                                                                                 result.chain.pruned_after)]}),
+                                                                                 result.chain.pruned_after)]},
+                                result.parameter_sigma),
            "leftovers": [{k_: d[k_] for k_ in ("signal", "regime", "times_noise", "regimes", "text")}
                          for d in result.leftovers]}
     if unmodelled:
@@ -462,7 +470,7 @@ def _real_row(mode: str, name: str, load, car, jobs: int) -> dict:
     except Exception:  # noqa: BLE001 - the target is "no traceback": record it
         row["error"] = traceback.format_exc()
     else:
-        row.update(effects=r.effects, parameters=r.parameters, gap_before=r.gap_before, gap_after=r.gap_after,
+        row.update(effects=r.effects, parameters=r.parameters, parameter_sigma=r.parameter_sigma, gap_before=r.gap_before, gap_after=r.gap_after,
                    rmse_before=r.rmse_before, rmse_after=r.rmse_after, signals=list(r.settings["signals"]),
                    steps=[(s.index, s.kept.effect, s.gap_before, s.gap_after)  # the report's held-out gap
                           for s in r.chain.steps if s.kept is not None],
@@ -510,7 +518,8 @@ def timing_row(jobs: int) -> dict:
     r = run_gap(log, jobs=jobs)
     wall = time.perf_counter() - t0
     return {"mode": "timing", "log_s": log.duration_s, "jobs": jobs, "wall_s": wall, "hidden": truth.values,
-            "effects": r.effects, "parameters": r.parameters, "steps": len(r.chain.steps),
+            "effects": r.effects, "parameters": r.parameters, "parameter_sigma": r.parameter_sigma,
+            "steps": len(r.chain.steps),
             "refits": sum(len(s.trials) for s in r.chain.steps), "swaps": [sw.into for sw in r.chain.swaps],
             "pruned": [t.effect for t in r.chain.pruned]}
 
@@ -557,6 +566,9 @@ def figures(rows: list[dict], method: str = "chain", only: set[str] | None = Non
     errs = lambda group: [p["rel_err"] for r in group for e, p in r[method]["per_effect"].items()  # noqa: E731
                           if (only is None or e in only) and p["named"] and p["rel_err"] is not None]
     out["single_perr"] = (_med(errs(single)), len(errs(single)))
+    zs = [p.get("z") for r in rs if r["effects"] for e, p in r[method]["per_effect"].items()
+          if (only is None or e in only) and p["named"] and "sigma" in p]
+    out["within_2_sigma"] = _frac([z is not None and abs(z) <= 2.0 for z in zs])
     out["multi_perr"] = (_med(errs(multi)), len(errs(multi)))
     with_eff = [r for r in rs if r["effects"]]
     pos = [r[method]["rmse_after"]["position_m"] / r[method]["rmse_before"]["position_m"]
@@ -583,9 +595,11 @@ SYNTH_TARGETS = (
     ("single", "false_claims", "false claims, effect-free logs", False, 0.05, True),
     ("single", "single_perr", "median parameter error", False, 0.10, True),
     ("single", "pos_ratio", "median held-out position RMSE after/before", False, 0.3, False),
+    ("single", "within_2_sigma", "named parameters within 2 standard errors of the truth (ours)", True, 0.90, True),
     ("multi", "multi_all_named_hi", "every effect named, logs where each has SNR >= 3", True, 0.90, True),
     ("multi", "multi_spurious", "spurious extra effect", False, 0.10, True),
     ("multi", "multi_perr", "median parameter error", False, 0.15, True),
+    ("multi", "within_2_sigma", "named parameters within 2 standard errors of the truth (ours)", True, 0.90, True),
     ("speed_gyro", "single_named_hi", "one effect: named where SNR >= 3", True, 0.95, True),
     ("speed_gyro", "false_claims", "false claims, effect-free logs", False, 0.05, True),
     ("speed_gyro", "multi_all_named_hi", "two effects: every effect named where each SNR >= 3", True, 0.90, True),
@@ -737,8 +751,10 @@ def report(rows: list[dict]) -> str:
             steps = "; ".join(f"+{e} held-out gap {a:.3g} -> {b:.3g}" for _, e, a, b in r["steps"]) or "no effect kept"
             rmse = ", ".join(f"{sig} {r['rmse_before'][sig]:.3f} -> {r['rmse_after'].get(sig, float('nan')):.3f}"
                              for sig in ("position_m", "speed_mps", "yaw_rate_radps") if sig in r["rmse_before"])
+            sd = r.get("parameter_sigma", {})
+            values = ", ".join(f"{f} = {v:.4g}" + (f" +- {sd[f]:.2g}" if f in sd else "") for f, v in r["parameters"].items())
             parts.append(f"real {r['log']} ({r['wall_s']:.0f} s wall, signals {', '.join(r['signals'])}): kept "
-                         f"{', '.join(r['effects']) or 'none'} {r['parameters']}\n  held-out gap {r['gap_before']:.3g} -> "
+                         f"{', '.join(r['effects']) or 'none'} ({values})\n  held-out gap {r['gap_before']:.3g} -> "
                          f"{r['gap_after']:.3g}; RMSE {rmse}\n  steps: {steps}\n  stop: {r['stop']}")
         if r.get("mode") == "timing":
             parts.append(f"timing: {r['log_s']:.0f}-s log, hidden {r['hidden']}, {r['jobs']} processes: "

@@ -31,7 +31,7 @@ import numpy as np
 
 from simrunner.run.log import RunLog
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.chain import HELD_IMPROVEMENT_MIN, MAX_EFFECTS, Chain, build_chain
+from simrunner.workflows.gap.chain import HELD_IMPROVEMENT_MIN, MAX_EFFECTS, Chain, build_chain, screening_problem
 from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, ROBUST_WINDOW_FACTOR,
                                          FitResult, Problem, Segment, bic, nominal_scales, robust_scale_of,
                                          robust_total, window_costs)
@@ -43,6 +43,7 @@ from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
                                             window_mask)
+from simrunner.workflows.gap.uncertainty import parameter_sigma
 from vehicle.description import CarDescription
 
 FORMAT = "nxpcup-gap/2"
@@ -103,6 +104,8 @@ class GapResult:
     leftovers: list[dict] = field(default_factory=list)
     gap_ls_before: float = math.nan  # the same in plain least squares (every window at full weight)
     gap_ls_after: float = math.nan
+    # standard error of each kept parameter (simrunner.workflows.gap.uncertainty; nan: not pinned)
+    parameter_sigma: dict[str, float] = field(default_factory=dict)
 
     @property
     def effect(self) -> str:
@@ -154,6 +157,7 @@ class GapResult:
         return _finite({
             "format": FORMAT, "logs": [p.log.source for p in self.parts], "log": self.log.source,
             "effects": self.effects, "effect": self.effect, "parameters": self.parameters,
+            "parameter_sigma": self.parameter_sigma,
             "gap_before": self.gap_before, "gap_after": self.gap_after,
             "gap_ls_before": self.gap_ls_before, "gap_ls_after": self.gap_ls_after,
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
@@ -299,6 +303,8 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                         improvement_min=improvement_min, held_improvement_min=held_improvement_min,
                         max_effects=max_effects, robust_factor=robust_factor, progress=tick)
     car_after = chain.car
+    sigma = parameter_sigma(screening_problem(fit_problem), car, chain.effects, chain.parameters, jobs=jobs)
+    tick("uncertainty")
     pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
     res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
                                                        for p, pr in zip(parts, pred1)]
@@ -336,7 +342,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         rmse_smoothed_before=rmse(smoothed(pred0), held, rep_signals),
         rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
         unrevealable={**missing_manoeuvres(names, parts, car), **cannot_reveal(names, signals)},
-        leftovers=leftovers(stats_after, noise))
+        leftovers=leftovers(stats_after, noise), parameter_sigma=sigma)
 
 
 def moves_in(part: LogPart, windows: Sequence[Window]) -> int:
@@ -454,18 +460,22 @@ def _gap(held_problem: Problem, parts: Sequence[LogPart], res_parts: Sequence[di
 def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
     """Upper bound of the ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates
     (each chain step screens the remaining effects and runs its batches of joint refits; the
-    final check runs at most one round per kept effect but the last)."""
+    final check runs at most one round per kept effect but the last; and the nominal replay,
+    the uncertainty and the held-out check)."""
     from simrunner.workflows.gap.chain import REFINE_LATER
     from simrunner.workflows.gap.fit import REFINE_TOP
 
     steps = min(max_effects, n_effects) + 1
     size = max(min(REFINE_LATER, REFINE_TOP), 1)
     final_checks = max(min(max_effects, n_effects) - 1, 0)
-    return 2 + sum(max(n_effects - s, 0) + -(-max(n_effects - s, 0) // size) for s in range(steps)) + final_checks
+    return 3 + sum(max(n_effects - s, 0) + -(-max(n_effects - s, 0) // size) for s in range(steps)) + final_checks
 
 
-def _params_text(params: dict[str, float]) -> str:
-    return ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
+def _params_text(params: dict[str, float], sigma: dict[str, float] | None = None) -> str:
+    sigma = sigma or {}
+    return ", ".join(f"{k} = {v:.4g}" + (f" +- {sigma[k]:.2g}" if math.isfinite(sigma.get(k, math.nan)) else
+                                          " (+- not known: the log does not pin it)" if k in sigma else "")
+                     for k, v in params.items())
 
 
 def summary_text(result: GapResult) -> str:
@@ -476,7 +486,10 @@ def summary_text(result: GapResult) -> str:
     chain = result.chain
     lines = [f"effects found: {', '.join(result.effects) if result.effects else 'none'}"]
     if result.parameters:
-        lines.append(f"  parameters: {_params_text(result.parameters)}")
+        lines.append(f"  parameters: {_params_text(result.parameters, result.parameter_sigma)}")
+        if result.parameter_sigma:
+            lines.append("  (+- one standard error, from the spread between the fit windows; a catalogue effect "
+                         "standing in for another cause can be off by more)")
     for name in result.at_bounds:
         lines.append(f"  WARNING: {name} = {result.parameters[name]:.4g} is at the end of its fit range: the "
                      "real cause is probably outside the catalogue (or the car file is far off); "

@@ -1,0 +1,136 @@
+"""How well the log pins each kept parameter: a standard error per parameter.
+
+The chain's parameters minimise ``F(p) = sum_w f_w(p)``, the robust cost of the windows
+``w`` they were fitted on (:func:`simrunner.workflows.gap.chain.screening_problem` of the fit
+windows; each window restarts from the measured state, so the windows are the independent
+units of the data). The covariance of such an estimate is the *sandwich*
+
+    cov = H^-1 B H^-1,   H = the Hessian of F,   B = n/(n-1) sum_w (g_w - g)(g_w - g)^T
+
+with ``g_w`` the gradient of window ``w``'s cost and ``g`` their mean (the scores, centred:
+the optimiser stops near, not at, the minimum). It needs no noise model: a window the model
+misses weighs in as much as the spread of its gradient says, so model error that differs
+from window to window widens the interval, while a bias common to all windows (a nuisance
+the catalogue absorbs in a kept parameter) does not.
+
+Derivatives by central differences in the fit's ``[0, 1]``-scaled coordinates (the fit
+ranges of :data:`simrunner.workflows.gap.fit.CANDIDATES`, log-scaled where the fit searches
+in log), with a step of :data:`STEP` (5 % of the range: latencies act in whole control
+sub-steps of 4-5 ms, so a much smaller step would see a staircase). The stencil (the centre,
+``+-h`` along each parameter and the four corners of each pair: ``1 + 2k + 2k(k-1)``
+replays) is moved inside the range for a parameter near its bound, and each window's
+gradient carried back to the parameter by its own Hessian. ``sigma`` is ``nan`` when ``H``
+is not positive definite (the cost does not curve upward around the parameters: the log
+does not pin them); it says nothing about a bias of the catalogue effect standing in for
+something else (docs/gap.md, "Known limits").
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from concurrent.futures import ProcessPoolExecutor
+from typing import Sequence
+
+import numpy as np
+
+from simrunner.workflows.gap.chain import with_parameters
+from simrunner.workflows.gap.fit import CANDIDATES, Problem, _quiet_worker, segment_residuals, window_costs
+from vehicle.description import CarDescription
+
+STEP = 0.05  # the difference step, as a fraction of each parameter's fit range
+
+
+def window_values(problem: Problem, car: CarDescription) -> np.ndarray:
+    """``(W,)``: each window's contribution to :func:`simrunner.workflows.gap.fit.cost_of`."""
+    costs = window_costs(problem, segment_residuals(problem, car))
+    if not math.isfinite(problem.robust_scale):
+        return np.array([c for c, _ in costs])
+    c0 = problem.robust_scale * np.array([max(n, 1) for _, n in costs], dtype=float)
+    return c0 * np.log1p(np.array([c for c, _ in costs]) / c0)
+
+
+def _task(args) -> np.ndarray:
+    problem, car = args
+    return window_values(problem, car)
+
+
+def _scaling(names: Sequence[str]):
+    """``(to_u, from_u, dvalue_du)`` of the fit's ``[0, 1]`` coordinates of ``names``."""
+    cands = [CANDIDATES[n] for n in names]
+    lo = np.array([c.to_x(c.lo) for c in cands])
+    span = np.array([c.to_x(c.hi) for c in cands]) - lo
+
+    def to_u(values: dict[str, float]) -> np.ndarray:
+        return np.array([(c.to_x(min(max(values[c.field], c.lo), c.hi)) - a) / s
+                         for c, a, s in zip(cands, lo, span)])
+
+    def from_u(u: np.ndarray) -> dict[str, float]:
+        return {c.field: float(c.from_x(a + s * x)) for c, a, s, x in zip(cands, lo, span, u)}
+
+    def dvalue_du(u: np.ndarray) -> np.ndarray:
+        return np.array([s * (c.from_x(a + s * x) if c.log_scale else 1.0)  # d exp(x)/dx = exp(x)
+                         for c, a, s, x in zip(cands, lo, span, u)])
+
+    return to_u, from_u, dvalue_du
+
+
+def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str], values: dict[str, float],
+                    *, jobs: int = 1, step: float = STEP) -> dict[str, float]:
+    """The standard error of each parameter of ``values`` (the ``Effects`` fields of the
+    effects ``names``, fitted on ``problem``'s windows with ``base`` as the car): the module
+    docstring's sandwich; ``{}`` for no parameter."""
+    names = list(names)
+    k = len(names)
+    if not k:
+        return {}
+    to_u, from_u, dvalue_du = _scaling(names)
+    u = to_u(values)
+    c = np.clip(u, step, 1.0 - step)  # the stencil's centre, inside the range
+    points = [c.copy()]
+    for i in range(k):
+        for s in (1.0, -1.0):
+            p = c.copy()
+            p[i] += s * step
+            points.append(p)
+    for i, j in itertools.combinations(range(k), 2):
+        for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+            p = c.copy()
+            p[i] += si * step
+            p[j] += sj * step
+            points.append(p)
+    cars = [with_parameters(base, {**values, **from_u(p)}) for p in points]
+    if jobs > 1:
+        with ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) as pool:
+            f = np.array(list(pool.map(_task, [(problem, car) for car in cars])))
+    else:
+        f = np.array([window_values(problem, car) for car in cars])
+    n = f.shape[1]
+    if n < 2 or not np.isfinite(f).all():
+        return {CANDIDATES[m].field: math.nan for m in names}
+    f0 = f[0]
+    grad = np.empty((n, k))
+    hess = np.empty((n, k, k))
+    for i in range(k):
+        plus, minus = f[1 + 2 * i], f[2 + 2 * i]
+        grad[:, i] = (plus - minus) / (2.0 * step)
+        hess[:, i, i] = (plus - 2.0 * f0 + minus) / step ** 2
+    corner = 1 + 2 * k
+    for i, j in itertools.combinations(range(k), 2):
+        pp, pm, mp, mm = f[corner:corner + 4]
+        corner += 4
+        hess[:, i, j] = hess[:, j, i] = (pp - pm - mp + mm) / (4.0 * step ** 2)
+    grad += hess @ (u - c)  # each window's gradient carried from the centre to the parameters
+    h = hess.sum(axis=0)
+    centred = grad - grad.mean(axis=0)
+    b = centred.T @ centred * n / (n - 1)
+    try:
+        np.linalg.cholesky(h)
+    except np.linalg.LinAlgError:
+        return {CANDIDATES[m].field: math.nan for m in names}
+    h_inv = np.linalg.inv(h)
+    cov_u = h_inv @ b @ h_inv
+    sigma = np.sqrt(np.maximum(np.diag(cov_u), 0.0)) * np.abs(dvalue_du(u))
+    return {CANDIDATES[m].field: float(s) for m, s in zip(names, sigma)}
+
+
+__all__ = ["parameter_sigma", "window_values", "STEP"]
