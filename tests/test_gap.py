@@ -260,3 +260,26 @@ def test_several_logs_of_one_car_form_one_data_set(tmp_path):
     assert rep["logs"] == [str(pa), str(pb)] and rep["effects"] == ["steering_offset"]
     assert rep["parameters"]["steering_offset_rad"] == pytest.approx(-0.03, rel=0.10)
     assert rep["windows"]["held_out"] >= 2
+    assert [d["log"] for d in rep["per_log"]] == [str(pa), str(pb)] and rep["logs_worse"] == []
+    assert all(d["gap_after"] < 0.5 * d["gap_before"] for d in rep["per_log"])
+    assert "held-out gap per log before -> after: a.csv " in res.stdout and "WARNING" not in res.stdout
+
+
+def test_logs_one_model_cannot_fit_are_named():
+    """Two logs of 'one car', one of them with a steering offset the other lacks (a trim
+    changed between the runs): the pooled offset helps the first and spoils the second, and
+    the report says which log got worse; the standard error shows the spread between them."""
+    import dataclasses
+
+    from simrunner.workflows.gap.report import summary_text
+
+    a, _ = make_measured_log("steering_offset", value=0.04, rng=np.random.default_rng(11), **PART_LATERAL)
+    b, _ = make_measured_log(None, rng=np.random.default_rng(12), **PART_LATERAL)
+    r = run_gap([dataclasses.replace(a, source="a.csv"), dataclasses.replace(b, source="b.csv")], jobs=1,
+                effects=["steering_offset"])
+    assert r.effects == ["steering_offset"] and 0.01 < r.parameters["steering_offset_rad"] < 0.03
+    (da, db) = r.per_log
+    assert da["gap_after"] < da["gap_before"] and db["gap_after"] > db["gap_before"]
+    assert r.logs_worse == ["b.csv"]
+    assert "WARNING: the kept effects fit b.csv worse than the nominal car" in summary_text(r)
+    assert r.parameter_sigma["steering_offset_rad"] > 0.1 * r.parameters["steering_offset_rad"]

@@ -106,6 +106,8 @@ class GapResult:
     gap_ls_after: float = math.nan
     # standard error of each kept parameter (simrunner.workflows.gap.uncertainty; nan: not pinned)
     parameter_sigma: dict[str, float] = field(default_factory=dict)
+    # per log with held-out windows: log, held_windows, gap_before/after, rmse_before/after
+    per_log: list[dict] = field(default_factory=list)
 
     @property
     def effect(self) -> str:
@@ -146,6 +148,14 @@ class GapResult:
         return out
 
     @property
+    def logs_worse(self) -> list[str]:
+        """The logs (of several) whose held-out gap the kept effects made larger: the one
+        model does not fit them all (a speed limit, a battery, a floor changed between them)."""
+        if len(self.per_log) < 2 or not self.effects:
+            return []
+        return [d["log"] for d in self.per_log if d["gap_after"] > d["gap_before"]]
+
+    @property
     def held_out_worse(self) -> bool:
         """True when effects were kept but the held-out gap grew (cannot happen for a chain
         whose every step was confirmed on held-out data; kept as a safety flag)."""
@@ -157,7 +167,7 @@ class GapResult:
         return _finite({
             "format": FORMAT, "logs": [p.log.source for p in self.parts], "log": self.log.source,
             "effects": self.effects, "effect": self.effect, "parameters": self.parameters,
-            "parameter_sigma": self.parameter_sigma,
+            "parameter_sigma": self.parameter_sigma, "per_log": self.per_log, "logs_worse": self.logs_worse,
             "gap_before": self.gap_before, "gap_after": self.gap_after,
             "gap_ls_before": self.gap_ls_before, "gap_ls_after": self.gap_ls_after,
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
@@ -326,6 +336,15 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     regime = {k: np.concatenate([m[k] for m in seg_masks]) for k in seg_masks[0]}
     noise = _noise(parts, rep_signals)
     stats_after = residual_stats({s: res1[s] for s in stat_signals}, regime)
+    per_log = []
+    for p, seg, r0, r1 in zip([p for p in parts if p.held_windows], held_segs,
+                              [r for p, r in zip(parts, res0_parts) if p.held_windows],
+                              [r for p, r in zip(parts, res1_parts) if p.held_windows]):
+        one = dataclasses.replace(held_problem, segments=(seg,))
+        mask = window_mask(len(p.log), p.held_windows)
+        per_log.append({"log": p.log.source, "held_windows": len(p.held_windows),
+                        "gap_before": _gap(one, [p], [r0]), "gap_after": _gap(one, [p], [r1]),
+                        "rmse_before": rmse(r0, mask, rep_signals), "rmse_after": rmse(r1, mask, rep_signals)})
     held_ls = dataclasses.replace(held_problem, robust_scale=math.inf)
     settings = {"robust_scale": robust, "robust_factor": robust_factor, "dt_s": dt_s, "held_dt_s": held_dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
                 "improvement_min": improvement_min, "held_improvement_min": held_improvement_min,
@@ -342,7 +361,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         rmse_smoothed_before=rmse(smoothed(pred0), held, rep_signals),
         rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
         unrevealable={**missing_manoeuvres(names, parts, car), **cannot_reveal(names, signals)},
-        leftovers=leftovers(stats_after, noise), parameter_sigma=sigma)
+        leftovers=leftovers(stats_after, noise), parameter_sigma=sigma, per_log=per_log)
 
 
 def moves_in(part: LogPart, windows: Sequence[Window]) -> int:
@@ -526,6 +545,15 @@ def summary_text(result: GapResult) -> str:
             f"{s} {v:.3g}" for s, v in result.noise_rms.items() if math.isfinite(v)))
     if result.held_out_worse:
         lines.append("WARNING: the held-out gap grew with the kept effects; treat car.toml as uncertain.")
+    if len(result.per_log) > 1:
+        lines.append("held-out gap per log before -> after: " + "; ".join(
+            f"{Path(d['log']).name} {d['gap_before']:.3g} -> {d['gap_after']:.3g}" for d in result.per_log))
+    for name in result.logs_worse:
+        d = next(d for d in result.per_log if d["log"] == name)
+        lines.append(f"WARNING: the kept effects fit {Path(name).name} worse than the nominal car (held-out gap "
+                     f"{d['gap_before']:.3g} -> {d['gap_after']:.3g}): one model does not fit all these logs. Were "
+                     "they driven with one set-up (speed limit, battery, tyres, floor)? Run them one at a time "
+                     "to compare.")
     if result.leftovers:
         lines.append("left unexplained by the catalogue (final model, all windows):")
         lines += [f"  {d['text']}" for d in result.leftovers[:8]]
