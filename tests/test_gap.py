@@ -86,6 +86,7 @@ def test_report_folder(offset_run, tmp_path):
     text = (out / "car.toml").read_text().splitlines()
     above = text[text.index(next(x for x in text if x.startswith("steering_offset_rad ="))) - 1]
     assert "Source: fitted by simrunner gap (steering_offset) on " in above and "held-out gap" in above
+    assert f"standard error {rep['parameter_sigma']['steering_offset_rad']:.2g}" in above
     assert "neutral" not in above
     assert not list(tmp_path.glob(".gap.*"))  # no temporary folder left behind
 

@@ -588,7 +588,12 @@ def car_sources(result: GapResult) -> dict[str, str]:
     logs = ", ".join(Path(p.log.source).name for p in result.parts)
     fitted = (f"fitted by simrunner gap ({result.effect}) on {logs}, held-out gap "
               f"{result.gap_before:.3g} -> {result.gap_after:.3g}")
-    return {f"effects.{name}": fitted for name in result.parameters}
+
+    def sigma(name: str) -> str:
+        sd = result.parameter_sigma.get(name, math.nan)
+        return f", standard error {sd:.2g}" if math.isfinite(sd) else ""
+
+    return {f"effects.{name}": fitted + sigma(name) for name in result.parameters}
 
 
 def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False) -> Path:
