@@ -33,20 +33,19 @@ from typing import Sequence
 
 import numpy as np
 
-from simrunner.workflows.gap.chain import with_parameters
-from simrunner.workflows.gap.fit import CANDIDATES, Problem, _quiet_worker, segment_residuals, window_costs
+from simrunner.workflows.gap.chain import _bounds01, with_parameters
+from simrunner.workflows.gap.fit import (CANDIDATES, Problem, _quiet_worker, robust_total, segment_residuals,
+                                         window_costs)
 from vehicle.description import CarDescription
 
 STEP = 0.05  # the difference step, as a fraction of each parameter's fit range
 
 
 def window_values(problem: Problem, car: CarDescription) -> np.ndarray:
-    """``(W,)``: each window's contribution to :func:`simrunner.workflows.gap.fit.cost_of`."""
+    """``(W,)``: each window's contribution to :func:`simrunner.workflows.gap.fit.cost_of`
+    (its robust loss, :func:`simrunner.workflows.gap.fit.robust_total` of that window alone)."""
     costs = window_costs(problem, segment_residuals(problem, car))
-    if not math.isfinite(problem.robust_scale):
-        return np.array([c for c, _ in costs])
-    c0 = problem.robust_scale * np.array([max(n, 1) for _, n in costs], dtype=float)
-    return c0 * np.log1p(np.array([c for c, _ in costs]) / c0)
+    return np.array([robust_total([cw], problem.robust_scale) for cw in costs])
 
 
 def _task(args) -> np.ndarray:
@@ -54,24 +53,14 @@ def _task(args) -> np.ndarray:
     return window_values(problem, car)
 
 
-def _scaling(names: Sequence[str]):
-    """``(to_u, from_u, dvalue_du)`` of the fit's ``[0, 1]`` coordinates of ``names``."""
-    cands = [CANDIDATES[n] for n in names]
-    lo = np.array([c.to_x(c.lo) for c in cands])
-    span = np.array([c.to_x(c.hi) for c in cands]) - lo
-
-    def to_u(values: dict[str, float]) -> np.ndarray:
-        return np.array([(c.to_x(min(max(values[c.field], c.lo), c.hi)) - a) / s
-                         for c, a, s in zip(cands, lo, span)])
-
-    def from_u(u: np.ndarray) -> dict[str, float]:
-        return {c.field: float(c.from_x(a + s * x)) for c, a, s, x in zip(cands, lo, span, u)}
-
-    def dvalue_du(u: np.ndarray) -> np.ndarray:
-        return np.array([s * (c.from_x(a + s * x) if c.log_scale else 1.0)  # d exp(x)/dx = exp(x)
-                         for c, a, s, x in zip(cands, lo, span, u)])
-
-    return to_u, from_u, dvalue_du
+def _dvalue_du(names: Sequence[str], u: np.ndarray) -> np.ndarray:
+    """d value / d u of each parameter at ``u``, in the fit's ``[0, 1]`` coordinates
+    (``chain._bounds01``: linear in the value, or in its log where the fit searches in log)."""
+    out = []
+    for c, x in zip((CANDIDATES[n] for n in names), u):
+        lo, hi = c.to_x(c.lo), c.to_x(c.hi)
+        out.append((hi - lo) * (c.from_x(lo + x * (hi - lo)) if c.log_scale else 1.0))  # d exp(x)/dx = exp(x)
+    return np.array(out)
 
 
 def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str], values: dict[str, float],
@@ -83,7 +72,7 @@ def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str]
     k = len(names)
     if not k:
         return {}
-    to_u, from_u, dvalue_du = _scaling(names)
+    to_u, from_u = _bounds01(names)
     u = to_u(values)
     c = np.clip(u, step, 1.0 - step)  # the stencil's centre, inside the range
     points = [c.copy()]
@@ -129,7 +118,7 @@ def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str]
         return {CANDIDATES[m].field: math.nan for m in names}
     h_inv = np.linalg.inv(h)
     cov_u = h_inv @ b @ h_inv
-    sigma = np.sqrt(np.maximum(np.diag(cov_u), 0.0)) * np.abs(dvalue_du(u))
+    sigma = np.sqrt(np.maximum(np.diag(cov_u), 0.0)) * np.abs(_dvalue_du(names, u))
     return {CANDIDATES[m].field: float(s) for m, s in zip(names, sigma)}
 
 
