@@ -24,8 +24,8 @@ Modes (``--mode``, comma-separated; default: all of them, small):
     servo 3.5 rad/s) driving its own plan (``make_plan(car)``: 181 s) with a controller that
     runs at irregular stamps, about 30 Hz (:class:`SlowController`: it acts at each 50-Hz plan
     row with probability :data:`TENTH_KEEP` and holds its command in between), its pose and
-    speed logged when it acts. The catalogue includes ``front_drive`` (the file says rear drive),
-    which the default car's logs cannot show (:data:`GRIP_LIMITED`).
+    speed logged when it acts. The catalogue includes ``front_drive`` (the file says rear drive)
+    and ``inertia``, which the default car's logs cannot show (:data:`GRIP_LIMITED`).
 ``merged``
     The ``tenth`` logs' effects and seeds, with the controller at every 50-Hz plan row and a
     log written as a merged topic log would be: the pose and speed at about 30 Hz (each row
@@ -98,9 +98,9 @@ SMALL_TRIALS = 6
 SNR_MIN = 3.0
 MODES = ("single", "multi", "speed_gyro", "tenth", "merged", "unmodelled", "compare", "real", "real_partial", "timing")
 _MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3, "tenth": 4, "merged": 4, "unmodelled": 5}  # seed tags: compare uses the multi logs
-# effects that show only where the drive and brake limits reach the tyres' grip: not on the
-# default car (3.1 m/s^2), so the default-car modes leave them out; ``tenth`` has them
-GRIP_LIMITED = ("front_drive",)
+# effects that show only where the drive and brake limits reach the tyres' grip (or the tyres
+# slide): not on the default car (3.1 m/s^2), so the default-car modes leave them out; ``tenth`` has them
+GRIP_LIMITED = ("front_drive", "inertia")
 TENTH_KEEP = 0.6  # share of the 50-Hz plan rows the ``tenth`` controller acts at (irregular stamps, ~30 Hz)
 REVERSE_PULL_RAD = (0.03, 0.08)  # ``unmodelled``: steering offset while reversing, uniform (sign random)
 SLOPE_DEG = (1.5, 3.0)  # ``unmodelled``: floor tilt, uniform in this range

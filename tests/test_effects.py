@@ -19,7 +19,8 @@ WB = CAR.chassis.wheelbase_m
 NAMES = ["steering_offset", "steering_gain", "steering_lag", "steering_rate_limit", "command_latency",
          "motor_lag", "throttle_deadband", "rolling_resistance", "drag", "tire_slip", "friction",
          "speed_scale", "steering_asymmetry", "steering_play", "esc_brake_reverse", "accel_scale", "brake_scale",
-         "servo_rate_scale", "steer_limit_scale", "mass_scale", "top_speed", "lift_lag", "front_drive"]
+         "servo_rate_scale", "steer_limit_scale", "mass_scale", "top_speed", "lift_lag", "front_drive",
+         "inertia"]
 
 
 def trace(sim, commands, seconds: float, every: int = 10) -> np.ndarray:
@@ -468,3 +469,30 @@ def test_front_share_in_the_car_file_is_the_shifted_share_and_clamps_to_0_1():
                           trace(make_sim(with_effects(GRIPPY, front_share_shift=0.5)), cmd, 1.0))
     assert np.array_equal(trace(CarSim(GRIPPY), cmd, 1.0),
                           trace(make_sim(with_effects(GRIPPY, front_share_shift=-0.3)), cmd, 1.0))
+
+
+def test_inertia_scales_the_chassis_moments_and_shows_only_where_the_tyres_slide():
+    """The chassis box's three moments times the scale (mass and centre unchanged). A step
+    steer within the grip (1 m/s, 0.2 rad: 1.2 m/s^2) gives nearly the same yaw rate whatever
+    the inertia; past the grip (2.5 m/s, 0.35 rad: ~13 m/s^2 asked of mu g = 9.8) a lighter
+    chassis turns faster: the yaw rate 0.1 s after the step orders 0.4 > 1 > 2.5."""
+    from simrunner.car.body import build_car_skeleton
+    nominal, light = build_car_skeleton(CAR).chassis, build_car_skeleton(with_effects(CAR, inertia_scale=0.5)).chassis
+    assert np.allclose(np.asarray(light.getInertia().getMoment()), 0.5 * np.asarray(nominal.getInertia().getMoment()),
+                       rtol=1e-12, atol=0.0)
+    assert light.getMass() == nominal.getMass()
+    assert np.array_equal(light.getLocalCOM(), nominal.getLocalCOM())
+
+    def yaw_rates(scale, speed, steer):
+        sim = make_sim(with_effects(CAR, inertia_scale=scale))
+        sim.set_state(Pose2(), speed, 0.0)
+        return trace(sim, lambda t: (speed, steer), 0.6, every=1)[:, 3]
+
+    def rate_at(yaw, t_s):
+        k = round(t_s / 0.002)
+        return (yaw[k + 1] - yaw[k - 1]) / 0.004
+
+    grip = {s: np.diff(yaw_rates(s, 1.0, 0.2)) / 0.002 for s in (0.4, 1.0, 2.5)}
+    assert np.abs(grip[0.4] - grip[1.0]).max() < 0.05 and np.abs(grip[2.5] - grip[1.0]).max() < 0.1
+    slide = {s: rate_at(yaw_rates(s, 2.5, 0.35), 0.1) for s in (0.4, 1.0, 2.5)}
+    assert slide[0.4] > 1.15 * slide[1.0] > 1.15 ** 2 * slide[2.5], slide

@@ -242,11 +242,11 @@ EFFECT_VALUES = {
     "accel_scale": {"accel_scale": 0.6}, "brake_scale": {"brake_scale": 0.6},
     "servo_rate_scale": {"servo_rate_scale": 0.3}, "steer_limit_scale": {"steer_limit_scale": 0.8},
     "mass_scale": {"mass_scale": 1.6}, "top_speed": {"top_speed_mps": 1.0}, "lift_lag": {"lift_lag_s": 0.5},
-    "front_drive": {"front_share_shift": 0.5},
+    "front_drive": {"front_share_shift": 0.5}, "inertia": {"inertia_scale": 0.4},
 }
-# effects that show only where the drive and brake reach the tyres' grip: run on a car whose
-# limits do (9 m/s^2; the default car's 3.1 m/s^2 leaves the grip untouched)
-GRIP_LIMITED = {"front_drive"}
+# effects that show only where the drive and brake reach the tyres' grip (or the tyres slide): run
+# on a car whose limits do (9 m/s^2; the default car's 3.1 m/s^2 leaves the grip untouched)
+GRIP_LIMITED = {"front_drive", "inertia"}
 
 
 @pytest.fixture(scope="module")

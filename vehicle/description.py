@@ -170,6 +170,10 @@ class Effects:
                                   "drive.front_share + this of the torque (clamped to [0, 1]): a four-wheel-drive "
                                   "car whose file says rear drive. Revealed by hard braking and accelerating, "
                                   "most of all while turning.", "neutral", -1.0, 1.0)
+    inertia_scale: float = _f(1.0, "inertia: the chassis body's moments of inertia (those of a uniform box "
+                              "of the chassis size) times this: below 1 when the mass sits near the centre "
+                              "(battery, motor, electronics). Revealed where the tyres slide: fast steering "
+                              "reversals near the grip limit.", "neutral", 0.05, 5.0)
 
 
 @dataclass(frozen=True)

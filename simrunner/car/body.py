@@ -5,7 +5,8 @@ Bodies and joints (all numbers from the description; frames as in docs/DESIGN.md
     chassis      FreeJoint root. Body frame = car body frame: origin at the rear-axle
                  midpoint ON THE GROUND, x forward, y left, z up. Collision/inertia: a box
                  ``length x width x height`` centred ``length/2 - rear_overhang`` ahead of the
-                 rear axle at height ``cog_height``.
+                 rear axle at height ``cog_height`` (its moments of inertia times
+                 ``effects.inertia_scale``, 1 in the nominal model).
     knuckle_l/r  RevoluteJoint about the chassis z axis at the front wheel centres
                  ``(wheelbase, +-track/2, wheel_radius)``; positive angle = wheel turned left.
     wheel_fl/fr  RevoluteJoint about the knuckle's y axis (the axle), at the knuckle origin.
@@ -111,10 +112,11 @@ def build_car_skeleton(car: CarDescription, name: str = "car",
     chassis.setName("chassis")
     box_c = np.array([0.5 * ch.length_m - ch.rear_overhang_m, 0.0, ch.cog_height_m])
     lx, ly, lz = ch.length_m, ch.width_m, ch.height_m
-    chassis.setInertia(_inertia(m_chassis, box_c, [
-        m_chassis * (ly * ly + lz * lz) / 12.0,
-        m_chassis * (lx * lx + lz * lz) / 12.0,
-        m_chassis * (lx * lx + ly * ly) / 12.0]))
+    box_moments = [m_chassis * (ly * ly + lz * lz) / 12.0, m_chassis * (lx * lx + lz * lz) / 12.0,
+                   m_chassis * (lx * lx + ly * ly) / 12.0]
+    if car.effects.inertia_scale != 1.0:  # the ``inertia`` effect (simrunner.car.effects)
+        box_moments = [car.effects.inertia_scale * i for i in box_moments]
+    chassis.setInertia(_inertia(m_chassis, box_c, box_moments))
     _add_collision_shape(chassis, dart.dynamics.BoxShape(np.array([lx, ly, lz])), isometry(box_c),
                          CHASSIS_MU, "chassis_box")
 

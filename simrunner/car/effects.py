@@ -190,6 +190,10 @@ EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
           "the car drives and brakes its front wheels too (four-wheel drive): the front share of the "
           "torque is the car file's drive.front_share + this; shows where the tyres near their grip",
           ("brake", "speed_step"), RESIDUAL_SIGNALS, "build"),
+    _spec("inertia", "inertia_scale", 1.0, (0.2, 2.0), "1",
+          "the chassis's moments of inertia differ from those of the model's uniform box (mass near "
+          "the centre: < 1); shows only where the tyres slide, in how fast the yaw rate changes",
+          ("circle", "turn", "step_steer"), _LATERAL, "build", log_scale=True),
 )}
 
 _DYNAMIC_PARAMS = ("steering_lag_s", "command_latency_s", "motor_lag_s", "lift_lag_s", "tire_slip_understeer_radps2pm",

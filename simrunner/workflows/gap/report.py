@@ -507,9 +507,9 @@ def summary_text(result: GapResult) -> str:
     if result.parameters:
         lines.append(f"  parameters: {_params_text(result.parameters, result.parameter_sigma)}")
         if result.parameter_sigma:
-            lines.append("  (+- one standard error from the spread between the fit windows: a lower bound; a bias "
-                         "shared by all windows (a stand-in effect, a wrong car-file number) and the fit's own "
-                         "tolerance are not in it)")
+            lines.append("  (+- one standard error from the spread between the fit windows and the fit's distance "
+                         "from the cost's minimum: a lower bound; a bias shared by all windows (a stand-in effect, "
+                         "a wrong car-file number) is not in it)")
     for name in result.at_bounds:
         lines.append(f"  WARNING: {name} = {result.parameters[name]:.4g} is at the end of its fit range: the "
                      "real cause is probably outside the catalogue (or the car file is far off); "

@@ -72,8 +72,10 @@ RANGES: dict[str, tuple[str, float, float, bool]] = {
     # a four-wheel-drive car with a rear-drive file; shows only where the drive and brake limits
     # reach the tyres' grip (not on the default car: its 3.1 m/s^2 stay well inside it)
     "front_drive": ("front_share_shift", 0.15, 0.5, False),
+    # the chassis's inertia: shows only where the tyres slide (as front_drive, not on the default car)
+    "inertia": ("inertia_scale", 0.3, 0.6, True),  # scale = 1 +- that
 }
-_RELATIVE_TO_ONE = {"steering_gain", "speed_scale", "mass_scale"}
+_RELATIVE_TO_ONE = {"steering_gain", "speed_scale", "mass_scale", "inertia"}
 _BELOW_ONE = {"accel_scale", "brake_scale", "servo_rate_scale", "steer_limit_scale"}
 
 

@@ -5,13 +5,17 @@ The chain's parameters minimise ``F(p) = sum_w f_w(p)``, the robust cost of the 
 windows; each window restarts from the measured state, so the windows are the independent
 units of the data). The covariance of such an estimate is the *sandwich*
 
-    cov = H^-1 B H^-1,   H = the Hessian of F,   B = n/(n-1) sum_w (g_w - g)(g_w - g)^T
+    cov = H^-1 B H^-1 + d d^T,   H = the Hessian of F,   B = n/(n-1) sum_w (g_w - g)(g_w - g)^T
 
 with ``g_w`` the gradient of window ``w``'s cost and ``g`` their mean (the scores, centred:
 the optimiser stops near, not at, the minimum). It needs no noise model: a window the model
 misses weighs in as much as the spread of its gradient says, so model error that differs
 from window to window widens the interval, while a bias common to all windows (a nuisance
-the catalogue absorbs in a kept parameter) does not.
+the catalogue absorbs in a kept parameter) does not. ``d = -H^-1 sum_w g_w`` is the Newton
+step from the fitted values to the minimum of the cost's quadratic model over the stencil:
+the fit's own distance from the minimum it was after (its tolerance, a cost that moves in
+steps such as a latency's control sub-steps), kept inside the fit range and added in
+quadrature.
 
 Derivatives by central differences in the fit's ``[0, 1]``-scaled coordinates (the fit
 ranges of :data:`simrunner.workflows.gap.fit.CANDIDATES`, log-scaled where the fit searches
@@ -117,7 +121,8 @@ def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str]
     except np.linalg.LinAlgError:
         return {CANDIDATES[m].field: math.nan for m in names}
     h_inv = np.linalg.inv(h)
-    cov_u = h_inv @ b @ h_inv
+    newton = np.clip(u - h_inv @ grad.sum(axis=0), 0.0, 1.0) - u  # to the minimum within the fit range
+    cov_u = h_inv @ b @ h_inv + np.outer(newton, newton)
     sigma = np.sqrt(np.maximum(np.diag(cov_u), 0.0)) * np.abs(_dvalue_du(names, u))
     return {CANDIDATES[m].field: float(s) for m, s in zip(names, sigma)}
 
