@@ -79,3 +79,14 @@ def test_the_standard_error_is_that_of_the_fit_windows_and_nan_where_nothing_pin
     flat = parameter_sigma(problem, car, ["esc_brake_reverse"], {"esc_reverse_delay_s": 0.3})
     assert math.isnan(flat["esc_reverse_delay_s"])
     assert parameter_sigma(problem, car, [], {}) == {}
+
+
+def test_a_value_away_from_the_minimum_widens_the_standard_error_by_its_distance(exact_log, runs):
+    """Reported 3 mrad (about four of its standard errors) off the fitted minimum, the offset's
+    standard error grows to about that distance: the Newton step back to the minimum is in it."""
+    _, car = exact_log
+    r = runs[1.0]
+    problem = _fit_problem(r, car)
+    fitted, sigma = r.parameters["steering_offset_rad"], r.parameter_sigma["steering_offset_rad"]
+    off = parameter_sigma(problem, car, ["steering_offset"], {"steering_offset_rad": fitted + 0.003})
+    assert 0.7 * 0.003 < off["steering_offset_rad"] < 1.5 * 0.003 + sigma, (sigma, off)
