@@ -90,3 +90,14 @@ def test_a_value_away_from_the_minimum_widens_the_standard_error_by_its_distance
     fitted, sigma = r.parameters["steering_offset_rad"], r.parameter_sigma["steering_offset_rad"]
     off = parameter_sigma(problem, car, ["steering_offset"], {"steering_offset_rad": fitted + 0.003})
     assert 0.7 * 0.003 < off["steering_offset_rad"] < 1.5 * 0.003 + sigma, (sigma, off)
+
+
+def test_a_parameter_nothing_pins_leaves_the_others_their_standard_error(exact_log, runs):
+    """The offset beside the ESC delay (which this part of the plan never exercises): the delay
+    gets nan, the offset the standard error it has alone."""
+    _, car = exact_log
+    r = runs[1.0]
+    both = parameter_sigma(_fit_problem(r, car), car, ["steering_offset", "esc_brake_reverse"],
+                           {**r.parameters, "esc_reverse_delay_s": 0.3})
+    assert math.isnan(both["esc_reverse_delay_s"])
+    assert both["steering_offset_rad"] == pytest.approx(r.parameter_sigma["steering_offset_rad"], rel=1e-6)

@@ -23,9 +23,10 @@ in log), with a step of :data:`STEP` (5 % of the range: latencies act in whole c
 sub-steps of 4-5 ms, so a much smaller step would see a staircase). The stencil (the centre,
 ``+-h`` along each parameter and the four corners of each pair: ``1 + 2k + 2k(k-1)``
 replays) is moved inside the range for a parameter near its bound, and each window's
-gradient carried back to the parameter by its own Hessian. ``sigma`` is ``nan`` when ``H``
-is not positive definite (the cost does not curve upward around the parameters: the log
-does not pin them); it says nothing about a bias of the catalogue effect standing in for
+gradient carried back to the parameter by its own Hessian. ``sigma`` is ``nan`` for a
+parameter along which the cost does not curve upward (``H_ii <= 0``: the log does not pin
+it), and the others' sandwich is that with it held; all are ``nan`` when the rest of ``H`` is
+not positive definite either. It says nothing about a bias of the catalogue effect standing in for
 something else (docs/gap.md, "Known limits").
 """
 from __future__ import annotations
@@ -113,18 +114,23 @@ def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str]
         corner += 4
         hess[:, i, j] = hess[:, j, i] = (pp - pm - mp + mm) / (4.0 * step ** 2)
     grad += hess @ (u - c)  # each window's gradient carried from the centre to the parameters
-    h = hess.sum(axis=0)
-    centred = grad - grad.mean(axis=0)
-    b = centred.T @ centred * n / (n - 1)
+    out = {CANDIDATES[m].field: math.nan for m in names}
+    h_all = hess.sum(axis=0)
+    pinned = [i for i in range(k) if h_all[i, i] > 0.0]  # the others: the cost does not curve along them
+    h = h_all[np.ix_(pinned, pinned)]
     try:
         np.linalg.cholesky(h)
     except np.linalg.LinAlgError:
-        return {CANDIDATES[m].field: math.nan for m in names}
+        return out
+    g = grad[:, pinned]
+    centred = g - g.mean(axis=0)
+    b = centred.T @ centred * n / (n - 1)
     h_inv = np.linalg.inv(h)
-    newton = np.clip(u - h_inv @ grad.sum(axis=0), 0.0, 1.0) - u  # to the minimum within the fit range
+    newton = np.clip(u[pinned] - h_inv @ g.sum(axis=0), 0.0, 1.0) - u[pinned]  # to the minimum within the range
     cov_u = h_inv @ b @ h_inv + np.outer(newton, newton)
-    sigma = np.sqrt(np.maximum(np.diag(cov_u), 0.0)) * np.abs(_dvalue_du(names, u))
-    return {CANDIDATES[m].field: float(s) for m, s in zip(names, sigma)}
+    sigma = np.sqrt(np.maximum(np.diag(cov_u), 0.0)) * np.abs(_dvalue_du(names, u)[pinned])
+    out.update({CANDIDATES[names[i]].field: float(s) for i, s in zip(pinned, sigma)})
+    return out
 
 
 __all__ = ["parameter_sigma", "window_values", "STEP"]
