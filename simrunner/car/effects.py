@@ -14,7 +14,9 @@ Where each effect acts (docs/effects.md has the physics):
   (every mass and inertia; the drive and brake torques stay those of the file's numbers, so
   the accel and brake limits become ``max / mass_scale``); ``speed_scale`` also scales
   ``drive.max_speed_mps``; ``front_drive`` shifts ``drive.front_share`` (the front wheels'
-  share of drive and brake torque, clamped to [0, 1]: a four-wheel-drive car).
+  share of drive and brake torque, clamped to [0, 1]: a four-wheel-drive car). ``inertia``
+  is not a file number: ``simrunner.car.body.build_car_skeleton`` multiplies the chassis
+  box's moments of inertia by ``inertia_scale`` (mass and centre of mass unchanged).
 * command path, applied to every ``set_command`` (no extra cost):
   ``steering_offset``, ``steering_gain`` (steer -> gain * steer + offset),
   ``steering_asymmetry`` (then left x (1 + a), right x (1 - a)),
