@@ -172,8 +172,8 @@ class Effects:
                                   "most of all while turning.", "neutral", -1.0, 1.0)
     inertia_scale: float = _f(1.0, "inertia: the chassis body's moments of inertia (those of a uniform box "
                               "of the chassis size) times this: below 1 when the mass sits near the centre "
-                              "(battery, motor, electronics). Revealed where the tyres slide: fast steering "
-                              "reversals near the grip limit.", "neutral", 0.05, 5.0)
+                              "(battery, motor, electronics). Revealed only where the tyres slide: circles, turns and "
+                              "step steers at the grip limit.", "neutral", 0.05, 5.0)
 
 
 @dataclass(frozen=True)
