@@ -574,6 +574,51 @@ def test_a_joint_refit_searches_the_new_effect_first(monkeypatch):
     assert old["steering_gain"] == 1.0  # searched last: never reached
 
 
+def test_a_refit_keeps_the_value_nearest_neutral_among_those_the_fit_windows_cannot_tell_apart(monkeypatch):
+    """A deadband the fit windows pin only to (0, 0.5] m/s (no speed command between zero and
+    0.5 in them: the cost is the same for every positive value, a hair lower at the far end)
+    is kept at the plateau's edge nearest the car file, twice NEUTRAL_TOL of the range from
+    neutral; a parameter whose cost rises towards neutral keeps its minimum."""
+    from types import SimpleNamespace
+
+    import simrunner.workflows.gap.chain as chain
+
+    def cost(problem, car):
+        e = car.effects
+        d = e.throttle_deadband_mps
+        plateau = 1.0 if d == 0.0 else 0.5 - 1e-7 * d  # zero commands coast for any d > 0
+        return plateau + (e.steering_gain - 0.9) ** 2
+
+    monkeypatch.setattr(chain, "cost_of", cost)
+    problem = SimpleNamespace(n_eff=2000.0)  # a tie: within delta BIC 2, 0.1 % of the cost
+    v, c, _ = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"], {"throttle_deadband_mps": 0.4375})
+    edge = 2 * chain.NEUTRAL_TOL * chain.CANDIDATES["throttle_deadband"].hi
+    assert v["throttle_deadband_mps"] == pytest.approx(edge) and c == pytest.approx(0.51, abs=1e-6)  # the gain is the car's (1)
+    names, start = ["steering_gain", "throttle_deadband"], {"steering_gain": 1.0, "throttle_deadband_mps": 0.4375}
+    both, _, _ = chain.joint_refit(problem, CarDescription(), names, start, first="throttle_deadband")
+    monkeypatch.setattr(chain, "TIE_DELTA_BIC", 0.0)  # exact ties only: the search's own answer
+    searched, _, _ = chain.joint_refit(problem, CarDescription(), names, start, first="throttle_deadband")
+    assert both["throttle_deadband_mps"] == pytest.approx(edge) and searched["throttle_deadband_mps"] > 0.45
+    assert both["steering_gain"] == searched["steering_gain"] != 1.0  # pinned: not moved towards 1
+
+
+def test_a_plateau_that_ends_short_of_neutral_is_kept_to_its_edge(monkeypatch):
+    """The cost is flat for deadbands 0.2-0.5 m/s and rises below 0.2: the refit moves to the
+    edge (within the bisection's resolution), not past it."""
+    from types import SimpleNamespace
+
+    import simrunner.workflows.gap.chain as chain
+
+    def cost(problem, car):
+        d = car.effects.throttle_deadband_mps
+        return 1.0 + max(0.2 - d, 0.0) ** 2 * 100.0 - 1e-7 * d
+
+    monkeypatch.setattr(chain, "cost_of", cost)
+    v, _, _ = chain.joint_refit(SimpleNamespace(n_eff=2000.0), CarDescription(), ["throttle_deadband"],
+                                {"throttle_deadband_mps": 0.45})
+    assert 0.17 < v["throttle_deadband_mps"] < 0.22
+
+
 # -- measured logs of any sensor set (pose, speed sensor, gyro) ------------------------------------
 SPEED_GYRO = ("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad", "yaw_rate_radps")
 POSE_ONLY = ("t_s", "x_m", "y_m", "yaw_rad", "speed_cmd_mps", "steer_cmd_rad")
