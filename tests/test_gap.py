@@ -107,7 +107,8 @@ def test_an_exchange_is_reported_in_text_and_json(offset_run):
             "held-out gap 0.5 -> 0.4") in summary_text(swapped)
     assert swapped.to_json()["swaps"] == [{"step": 1, "out": "steering_offset", "into": "steering_asymmetry",
                                            "parameters": {"steering_asymmetry": 0.1}, "cost_before": 10.0,
-                                           "cost_after": 8.0, "held_gap_before": 0.5, "held_gap_after": 0.4}]
+                                           "cost_after": 8.0, "held_gap_before": 0.5, "held_gap_after": 0.4,
+                                           "spans": {}}]
     assert result.to_json()["swaps"] == []
 
 
@@ -284,3 +285,27 @@ def test_logs_one_model_cannot_fit_are_named():
     assert r.logs_worse == ["b.csv"]
     assert "WARNING: the kept effects fit b.csv worse than the nominal car" in summary_text(r)
     assert r.parameter_sigma["steering_offset_rad"] > 0.1 * r.parameters["steering_offset_rad"]
+
+
+def test_a_deadband_pinned_on_one_side_only_is_kept_nearest_the_car_file_and_said_so():
+    """This part of the plan (40-65 s) holds zero speed commands and one of 0.3 m/s, none in
+    between: every deadband in (0, 0.3) fits it as well (a zero command coasts instead of
+    braking). The chain keeps the plateau's edge nearest the car file (twice NEUTRAL_TOL of
+    the 0-0.5 range), reports the value its search stopped on as fitting as well, and gives
+    no standard error for it."""
+    from simrunner.workflows.gap.chain import NEUTRAL_TOL
+    from simrunner.workflows.gap.report import summary_text
+
+    log, _ = make_measured_log("throttle_deadband", value=0.03, rng=np.random.default_rng(3), start_s=40.0,
+                               duration_s=25.0)
+    cmd = np.abs(log.speed_cmd_mps)
+    assert set(np.round(cmd[(cmd > 0) & (cmd < 0.5)], 3)) == {0.3}
+    result = run_gap(log, jobs=2, effects=["throttle_deadband"])
+    assert result.effects == ["throttle_deadband"] and result.gap_after < 0.5 * result.gap_before
+    edge = 2 * NEUTRAL_TOL * CANDIDATES["throttle_deadband"].hi
+    assert result.parameters["throttle_deadband_mps"] == pytest.approx(edge)
+    (kept, found), = result.parameter_spans.values()
+    assert kept == pytest.approx(edge) and 0.05 < found <= 0.3
+    assert math.isnan(result.parameter_sigma["throttle_deadband_mps"])
+    assert f"fit as well with {found:.4g}: they pin it on one side only" in summary_text(result)
+    assert result.to_json()["parameter_spans"] == {"throttle_deadband_mps": [kept, found]}

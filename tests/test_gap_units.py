@@ -567,8 +567,8 @@ def test_a_joint_refit_searches_the_new_effect_first(monkeypatch):
     monkeypatch.setattr(chain, "cost_of", cost)
     monkeypatch.setattr(chain, "POWELL_EVALS_PER_PARAMETER", 4)  # ends inside the first pass
     names = ["steering_offset", "mass_scale", "steering_gain"]
-    new_first, c_first, _ = chain.joint_refit(None, CarDescription(), names, start, first="steering_gain")
-    old, c_last, _ = chain.joint_refit(None, CarDescription(), names, start)
+    new_first, c_first, _, _ = chain.joint_refit(None, CarDescription(), names, start, first="steering_gain")
+    old, c_last, _, _ = chain.joint_refit(None, CarDescription(), names, start)
     assert list(new_first) == ["steering_offset_rad", "mass_scale", "steering_gain"]  # the order of names
     assert abs(new_first["steering_gain"] - 0.9) < 0.01 and c_first < c_last
     assert old["steering_gain"] == 1.0  # searched last: never reached
@@ -591,13 +591,16 @@ def test_a_refit_keeps_the_value_nearest_neutral_among_those_the_fit_windows_can
 
     monkeypatch.setattr(chain, "cost_of", cost)
     problem = SimpleNamespace(n_eff=2000.0)  # a tie: within delta BIC 2, 0.1 % of the cost
-    v, c, _ = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"], {"throttle_deadband_mps": 0.4375})
+    v, c, _, spans = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"],
+                                       {"throttle_deadband_mps": 0.4375})
     edge = 2 * chain.NEUTRAL_TOL * chain.CANDIDATES["throttle_deadband"].hi
     assert v["throttle_deadband_mps"] == pytest.approx(edge) and c == pytest.approx(0.51, abs=1e-6)  # the gain is the car's (1)
+    (moved, found), = spans.values()  # the plateau's edge and the value the search stopped on
+    assert moved == v["throttle_deadband_mps"] and found > 0.45
     names, start = ["steering_gain", "throttle_deadband"], {"steering_gain": 1.0, "throttle_deadband_mps": 0.4375}
-    both, _, _ = chain.joint_refit(problem, CarDescription(), names, start, first="throttle_deadband")
+    both, _, _, _ = chain.joint_refit(problem, CarDescription(), names, start, first="throttle_deadband")
     monkeypatch.setattr(chain, "TIE_DELTA_BIC", 0.0)  # exact ties only: the search's own answer
-    searched, _, _ = chain.joint_refit(problem, CarDescription(), names, start, first="throttle_deadband")
+    searched, _, _, _ = chain.joint_refit(problem, CarDescription(), names, start, first="throttle_deadband")
     assert both["throttle_deadband_mps"] == pytest.approx(edge) and searched["throttle_deadband_mps"] > 0.45
     assert both["steering_gain"] == searched["steering_gain"] != 1.0  # pinned: not moved towards 1
 
@@ -614,7 +617,7 @@ def test_a_plateau_that_ends_short_of_neutral_is_kept_to_its_edge(monkeypatch):
         return 1.0 + max(0.2 - d, 0.0) ** 2 * 100.0 - 1e-7 * d
 
     monkeypatch.setattr(chain, "cost_of", cost)
-    v, _, _ = chain.joint_refit(SimpleNamespace(n_eff=2000.0), CarDescription(), ["throttle_deadband"],
+    v, _, _, _ = chain.joint_refit(SimpleNamespace(n_eff=2000.0), CarDescription(), ["throttle_deadband"],
                                 {"throttle_deadband_mps": 0.45})
     assert 0.17 < v["throttle_deadband_mps"] < 0.22
 

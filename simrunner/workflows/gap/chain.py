@@ -229,12 +229,13 @@ class Trial:
     evaluations: int
     kept: bool = False
     reason: str = ""
+    spans: dict[str, tuple[float, float]] = dataclasses.field(default_factory=dict)  # joint_refit's
 
     def to_json(self) -> dict:
         return {"effect": self.effect, "parameters": self.parameters, "cost": self.cost,
                 "delta_bic": self.delta_bic, "improvement": self.improvement,
                 "held_gap": self.held_gap, "evaluations": self.evaluations, "kept": self.kept,
-                "reason": self.reason}
+                "reason": self.reason, "spans": self.spans}
 
 
 @dataclass(frozen=True)
@@ -276,6 +277,7 @@ class Swap:
     cost_after: float      # fit windows
     held_gap_before: float
     held_gap_after: float
+    spans: dict[str, tuple[float, float]] = dataclasses.field(default_factory=dict)  # joint_refit's
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -294,6 +296,8 @@ class Chain:
     pruned: tuple[Trial, ...] = ()  # kept by a step, removed by the final check (the trial: the model with it)
     swaps: tuple[Swap, ...] = ()  # exchanges, in the order made
     pruned_after: tuple[int, ...] = ()  # per pruned trial: the last step before the check that removed it
+    # kept parameters the last refit moved to a plateau's edge: (that edge, the value the search found)
+    spans: dict[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
 
     @property
     def effects(self) -> list[str]:
@@ -337,10 +341,12 @@ def _bounds01(names: Sequence[str]):
 
 
 def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
-                start: dict[str, float], first: str | None = None) -> tuple[dict[str, float], float, int]:
+                start: dict[str, float], first: str | None = None
+                ) -> tuple[dict[str, float], float, int, dict[str, tuple[float, float]]]:
     """Refit the parameters of effects ``names`` together from ``start`` (their ``Effects``
-    fields), on ``problem``'s windows with ``base`` as the car: ``(values, cost, evals)``,
-    ``values`` in the order of ``names``.
+    fields), on ``problem``'s windows with ``base`` as the car: ``(values, cost, evals,
+    spans)``, ``values`` in the order of ``names``; ``spans`` maps each parameter moved to a
+    plateau's edge (:func:`_towards_neutral`) to ``(that edge, the value the search found)``.
     One parameter: bounded Brent around the start; more: Powell in [0, 1]-scaled coordinates,
     whose first pass line-searches one coordinate after the other, ``first`` (an effect of
     ``names``: the one just added) before the others. Each line search spans the whole fit
@@ -373,9 +379,11 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
                           "maxfev": POWELL_EVALS_PER_PARAMETER * len(names)})
     key = min(seen, key=lambda k: (seen[k], k))
     tie = seen[key] * math.exp(TIE_DELTA_BIC / problem.n_eff) if problem is not None else seen[key]
-    key = _towards_neutral(f, names, to_u, dict(zip((CANDIDATES[n].field for n in names), key)), tie)
+    found = dict(zip((CANDIDATES[n].field for n in names), key))
+    key = _towards_neutral(f, names, to_u, found, tie)
     values = dict(zip((CANDIDATES[n].field for n in names), key))
-    return {CANDIDATES[n].field: values[CANDIDATES[n].field] for n in given}, seen[key], len(seen)
+    spans = {k: (v, found[k]) for k, v in values.items() if v != found[k]}
+    return {CANDIDATES[n].field: values[CANDIDATES[n].field] for n in given}, seen[key], len(seen), spans
 
 
 def _towards_neutral(f, names: Sequence[str], to_u, values: dict[str, float], tie: float) -> tuple:
@@ -454,6 +462,7 @@ class Outcome:
     held_gap: float
     judged_cost: float
     judged_held_gap: float
+    spans: dict[str, tuple[float, float]] = dataclasses.field(default_factory=dict)  # joint_refit's
 
 
 def judged(problem: Problem, judge: Problem, car: CarDescription) -> tuple[float, float]:
@@ -467,12 +476,12 @@ def judged(problem: Problem, judge: Problem, car: CarDescription) -> tuple[float
 
 def _trial_task(args) -> Outcome:
     screen_problem, fit_problem, held_problem, judge, base, names, start, first = args
-    values, _, evals = joint_refit(screen_problem, base, names, start, first)
+    values, _, evals, spans = joint_refit(screen_problem, base, names, start, first)
     car = with_parameters(base, values)
     cost, j_cost = judged(fit_problem, judge.fit, car)
     held, j_held = judged(held_problem, judge.held, car)
     n = max(held_problem.n_values, 1)
-    return Outcome(values, cost, evals, held / n, j_cost, j_held / n)
+    return Outcome(values, cost, evals, held / n, j_cost, j_held / n, spans)
 
 
 def neutral_offset(name: str, value: float) -> float:
@@ -504,6 +513,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     order = {n: i for i, n in enumerate(CANDIDATES)}
     kept_names: list[str] = []
     kept_values: dict[str, float] = {}
+    kept_spans: dict[str, tuple[float, float]] = {}  # of the refit that set kept_values
     cost = cost_of(fit_problem, base)
     held_gap = cost_of(held_problem, base) / max(held_problem.n_values, 1)
     nominal_cost, nominal_held = cost, held_gap
@@ -546,7 +556,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     b, = run_tasks([(screen_base, fit_problem, held_problem, judge, base,
                                      list(kept_names), dict(kept_values), None)])
                     if b.cost < cost:
-                        kept_values, cost, held_gap = b.values, b.cost, b.held_gap
+                        kept_values, cost, held_gap, kept_spans = b.values, b.cost, b.held_gap, b.spans
                         j_cost, j_held = b.judged_cost, b.judged_held_gap
                 current = with_parameters(base, kept_values)
                 full = fit_problem.with_car(current)
@@ -571,7 +581,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     outcome.update((r.effect, o) for r, o in zip(batch, outs))
                     trials = [Trial(r.effect, o.values, o.cost, crit_now - bic(judge.fit, o.judged_cost, k + 1),
                                     1.0 - o.judged_cost / j_cost if j_cost > 0 else 0.0, o.judged_held_gap,
-                                    o.evaluations) for r, o in zip(batch, outs)]
+                                    o.evaluations, spans=o.spans) for r, o in zip(batch, outs)]
                     trials.sort(key=lambda tr: (-tr.delta_bic, order[tr.effect]))
                     for tr in trials:
                         reason = _reject_reason(tr, j_held, delta_bic_min, improvement_min, held_improvement_min)
@@ -587,7 +597,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     stop = "no remaining effect passes the tests"
                     break
                 kept_names.append(chosen.effect)
-                kept_values = dict(chosen.parameters)
+                kept_values, kept_spans = dict(chosen.parameters), dict(chosen.spans)
                 cost, held_gap = chosen.cost, outcome[chosen.effect].held_gap
                 runners_up[chosen.effect] = sorted((t for t in decided if not t.kept),
                                                    key=lambda tr: (tr.cost, order[tr.effect]))[:REFINE_TOP]
@@ -601,6 +611,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     kept_names[kept_names.index(swap.out)] = swap.into
                     runners_up[swap.into] = [t for t in runners_up.pop(swap.out) if t.effect != swap.into]
                     kept_values, cost, held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
+                    kept_spans = dict(swap.spans)
                 judge, j_cost, j_held = rejudged(kept_values)  # module docstring, step 6
             n_kept = sum(st.kept is not None for st in steps)
             if pruned and n_kept == checked:  # resumed, and nothing kept since the last check
@@ -627,6 +638,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                 pruned_after.append(index)
                 kept_names.remove(tr.effect)
                 kept_values, cost, held_gap, j_cost, j_held = o.values, o.cost, o.held_gap, o.judged_cost, o.judged_held_gap
+                kept_spans = dict(o.spans)
             if len(pruned) == n_pruned:
                 break
             # stepwise: the forward steps resume on the smaller model (step 9 of the module docstring)
@@ -637,7 +649,8 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
         if pool is not None:
             pool.shutdown()
     return Chain(tuple(steps), with_parameters(base, kept_values), nominal_cost, nominal_held, stop,
-                 dict(kept_values), tuple(pruned), tuple(swaps), tuple(pruned_after))
+                 dict(kept_values), tuple(pruned), tuple(swaps), tuple(pruned_after),
+                 {k: v for k, v in kept_spans.items() if k in kept_values})
 
 
 def renormalised(fit_problem: Problem, held_problem: Problem, car: CarDescription,
@@ -671,7 +684,7 @@ def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, hel
     best = None
     for (out, into), o in zip(pairs, run_tasks(tasks) if tasks else []):
         if o.cost < cost and o.held_gap <= held_gap and (best is None or o.cost < best.cost_after):
-            best = Swap(index, out, into, dict(o.values), cost, o.cost, held_gap, o.held_gap)
+            best = Swap(index, out, into, dict(o.values), cost, o.cost, held_gap, o.held_gap, dict(o.spans))
     return best
 
 

@@ -106,6 +106,9 @@ class GapResult:
     gap_ls_after: float = math.nan
     # standard error of each kept parameter (simrunner.workflows.gap.uncertainty; nan: not pinned)
     parameter_sigma: dict[str, float] = field(default_factory=dict)
+    # kept parameters the fit windows pin on one side only (chain.Chain.spans): the value kept
+    # (the plateau's edge nearest the car file) and one as good further out
+    parameter_spans: dict[str, tuple[float, float]] = field(default_factory=dict)
     # per log with held-out windows: log, held_windows, gap_before/after, rmse_before/after
     per_log: list[dict] = field(default_factory=list)
 
@@ -167,7 +170,8 @@ class GapResult:
         return _finite({
             "format": FORMAT, "logs": [p.log.source for p in self.parts], "log": self.log.source,
             "effects": self.effects, "effect": self.effect, "parameters": self.parameters,
-            "parameter_sigma": self.parameter_sigma, "per_log": self.per_log, "logs_worse": self.logs_worse,
+            "parameter_sigma": self.parameter_sigma,
+            "parameter_spans": {k: list(v) for k, v in self.parameter_spans.items()}, "per_log": self.per_log, "logs_worse": self.logs_worse,
             "gap_before": self.gap_before, "gap_after": self.gap_after,
             "gap_ls_before": self.gap_ls_before, "gap_ls_after": self.gap_ls_after,
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
@@ -314,6 +318,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                         max_effects=max_effects, robust_factor=robust_factor, progress=tick)
     car_after = chain.car
     sigma = parameter_sigma(screening_problem(fit_problem), car, chain.effects, chain.parameters, jobs=jobs)
+    sigma.update({k: math.nan for k in chain.spans})  # a plateau's edge: no curvature says how far it could move
     tick("uncertainty")
     pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
     res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
@@ -361,7 +366,8 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         rmse_smoothed_before=rmse(smoothed(pred0), held, rep_signals),
         rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
         unrevealable={**missing_manoeuvres(names, parts, car), **cannot_reveal(names, signals)},
-        leftovers=leftovers(stats_after, noise), parameter_sigma=sigma, per_log=per_log)
+        leftovers=leftovers(stats_after, noise), parameter_sigma=sigma, per_log=per_log,
+        parameter_spans=dict(chain.spans))
 
 
 def moves_in(part: LogPart, windows: Sequence[Window]) -> int:
@@ -490,11 +496,19 @@ def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
     return 3 + sum(max(n_effects - s, 0) + -(-max(n_effects - s, 0) // size) for s in range(steps)) + final_checks
 
 
-def _params_text(params: dict[str, float], sigma: dict[str, float] | None = None) -> str:
-    sigma = sigma or {}
-    return ", ".join(f"{k} = {v:.4g}" + (f" +- {sigma[k]:.2g}" if math.isfinite(sigma.get(k, math.nan)) else
-                                          " (+- not known: the log does not pin it)" if k in sigma else "")
-                     for k, v in params.items())
+def _params_text(params: dict[str, float], sigma: dict[str, float] | None = None,
+                 spans: dict[str, tuple[float, float]] | None = None) -> str:
+    sigma, spans = sigma or {}, spans or {}
+
+    def one(k: str, v: float) -> str:
+        if k in spans:
+            return (f"{k} = {v:.4g} (the fit windows fit as well with {spans[k][1]:.4g}: they pin it on one side "
+                    "only; the value nearest the car file is kept)")
+        if math.isfinite(sigma.get(k, math.nan)):
+            return f"{k} = {v:.4g} +- {sigma[k]:.2g}"
+        return f"{k} = {v:.4g}" + (" (+- not known: the log does not pin it)" if k in sigma else "")
+
+    return ", ".join(one(k, v) for k, v in params.items())
 
 
 def summary_text(result: GapResult) -> str:
@@ -505,7 +519,7 @@ def summary_text(result: GapResult) -> str:
     chain = result.chain
     lines = [f"effects found: {', '.join(result.effects) if result.effects else 'none'}"]
     if result.parameters:
-        lines.append(f"  parameters: {_params_text(result.parameters, result.parameter_sigma)}")
+        lines.append(f"  parameters: {_params_text(result.parameters, result.parameter_sigma, result.parameter_spans)}")
         if result.parameter_sigma:
             lines.append("  (+- one standard error from the spread between the fit windows and the fit's distance "
                          "from the cost's minimum: a lower bound; a bias shared by all windows (a stand-in effect, "
@@ -591,6 +605,8 @@ def car_sources(result: GapResult) -> dict[str, str]:
               f"{result.gap_before:.3g} -> {result.gap_after:.3g}")
 
     def sigma(name: str) -> str:
+        if name in result.parameter_spans:
+            return f", pinned on one side only (as good with {result.parameter_spans[name][1]:.4g})"
         sd = result.parameter_sigma.get(name, math.nan)
         return f", standard error {sd:.2g}" if math.isfinite(sd) else ""
 
