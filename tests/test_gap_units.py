@@ -1388,3 +1388,15 @@ def test_a_log_without_a_reverse_command_while_rolling_cannot_reveal_an_esc_dela
     events = (t > 13.0) & (t < 13.2) | (t > 33.0) & (t < 33.2) | (t > 53.0) & (t < 53.2)
     both = prepare(log.with_columns(speed_cmd_mps=np.where(events, -0.5, log.speed_cmd_mps)), car, 2.0)
     assert missing_manoeuvres(["esc_brake_reverse"], [both], car) == {}
+
+
+def test_a_plateau_edge_found_by_an_earlier_refit_stays_reported_while_the_value_stays():
+    """A refit that starts on a plateau's edge finds nothing to move: the earlier refit's span
+    stays with the parameter as long as its value is the edge; a value that moved drops it."""
+    from simrunner.workflows.gap.chain import _carried
+
+    old = {"throttle_deadband_mps": (0.01, 0.44)}
+    assert _carried(old, {"throttle_deadband_mps": 0.01, "steering_gain": 1.1}, {}) == old
+    assert _carried(old, {"throttle_deadband_mps": 0.02}, {}) == {}
+    new = {"steering_gain": (1.02, 1.3)}
+    assert _carried(old, {"throttle_deadband_mps": 0.01, "steering_gain": 1.02}, new) == {**old, **new}

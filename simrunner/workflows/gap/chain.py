@@ -556,7 +556,8 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     b, = run_tasks([(screen_base, fit_problem, held_problem, judge, base,
                                      list(kept_names), dict(kept_values), None)])
                     if b.cost < cost:
-                        kept_values, cost, held_gap, kept_spans = b.values, b.cost, b.held_gap, b.spans
+                        kept_values, cost, held_gap = b.values, b.cost, b.held_gap
+                        kept_spans = _carried(kept_spans, b.values, b.spans)
                         j_cost, j_held = b.judged_cost, b.judged_held_gap
                 current = with_parameters(base, kept_values)
                 full = fit_problem.with_car(current)
@@ -597,7 +598,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     stop = "no remaining effect passes the tests"
                     break
                 kept_names.append(chosen.effect)
-                kept_values, kept_spans = dict(chosen.parameters), dict(chosen.spans)
+                kept_values, kept_spans = dict(chosen.parameters), _carried(kept_spans, chosen.parameters, chosen.spans)
                 cost, held_gap = chosen.cost, outcome[chosen.effect].held_gap
                 runners_up[chosen.effect] = sorted((t for t in decided if not t.kept),
                                                    key=lambda tr: (tr.cost, order[tr.effect]))[:REFINE_TOP]
@@ -611,7 +612,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     kept_names[kept_names.index(swap.out)] = swap.into
                     runners_up[swap.into] = [t for t in runners_up.pop(swap.out) if t.effect != swap.into]
                     kept_values, cost, held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
-                    kept_spans = dict(swap.spans)
+                    kept_spans = _carried(kept_spans, swap.parameters, swap.spans)
                 judge, j_cost, j_held = rejudged(kept_values)  # module docstring, step 6
             n_kept = sum(st.kept is not None for st in steps)
             if pruned and n_kept == checked:  # resumed, and nothing kept since the last check
@@ -638,7 +639,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                 pruned_after.append(index)
                 kept_names.remove(tr.effect)
                 kept_values, cost, held_gap, j_cost, j_held = o.values, o.cost, o.held_gap, o.judged_cost, o.judged_held_gap
-                kept_spans = dict(o.spans)
+                kept_spans = _carried(kept_spans, o.values, o.spans)
             if len(pruned) == n_pruned:
                 break
             # stepwise: the forward steps resume on the smaller model (step 9 of the module docstring)
@@ -651,6 +652,16 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     return Chain(tuple(steps), with_parameters(base, kept_values), nominal_cost, nominal_held, stop,
                  dict(kept_values), tuple(pruned), tuple(swaps), tuple(pruned_after),
                  {k: v for k, v in kept_spans.items() if k in kept_values})
+
+
+def _carried(spans: dict[str, tuple[float, float]], values: dict[str, float],
+             new: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
+    """The spans of a refit that set ``values``: its own (``new``), and an earlier refit's for a
+    parameter it left on the edge that refit found (a refit starting on a plateau's edge finds
+    nothing to move)."""
+    out = {k: v for k, v in spans.items() if values.get(k) == v[0]}
+    out.update(new)
+    return out
 
 
 def renormalised(fit_problem: Problem, held_problem: Problem, car: CarDescription,
