@@ -96,8 +96,8 @@ REFINE_LATER = 2
 SCREEN_MAX_S = 45.0
 NEUTRAL_TOL = 0.01  # fraction of the fit range (scaled coordinates) that counts as neutral
 # Costs within this BIC difference of the best are ties (Kass & Raftery 1995: below 2, "not
-# worth more than a bare mention"); among ties a refit keeps the value nearest neutral
-# (:func:`_towards_neutral`), TIE_BISECTIONS halvings locating a plateau's edge.
+# worth more than a bare mention"); a parameter on a plateau of ties is kept at its middle
+# (:func:`_plateaus`), TIE_BISECTIONS halvings locating each end.
 TIE_DELTA_BIC = 2.0
 TIE_BISECTIONS = 5
 BETTER = "a better candidate was kept"
@@ -296,7 +296,7 @@ class Chain:
     pruned: tuple[Trial, ...] = ()  # kept by a step, removed by the final check (the trial: the model with it)
     swaps: tuple[Swap, ...] = ()  # exchanges, in the order made
     pruned_after: tuple[int, ...] = ()  # per pruned trial: the last step before the check that removed it
-    # kept parameters the last refit moved to a plateau's edge: (that edge, the value the search found)
+    # kept parameters the fit windows pin only to an interval (a plateau, kept at its middle): (low, high)
     spans: dict[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
 
     @property
@@ -345,8 +345,8 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
                 ) -> tuple[dict[str, float], float, int, dict[str, tuple[float, float]]]:
     """Refit the parameters of effects ``names`` together from ``start`` (their ``Effects``
     fields), on ``problem``'s windows with ``base`` as the car: ``(values, cost, evals,
-    spans)``, ``values`` in the order of ``names``; ``spans`` maps each parameter moved to a
-    plateau's edge (:func:`_towards_neutral`) to ``(that edge, the value the search found)``.
+    spans)``, ``values`` in the order of ``names``; ``spans`` maps each parameter the cost
+    pins only to an interval (:func:`_plateaus`: moved to its middle) to ``(low, high)``.
     One parameter: bounded Brent around the start; more: Powell in [0, 1]-scaled coordinates,
     whose first pass line-searches one coordinate after the other, ``first`` (an effect of
     ``names``: the one just added) before the others. Each line search spans the whole fit
@@ -379,40 +379,42 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
                           "maxfev": POWELL_EVALS_PER_PARAMETER * len(names)})
     key = min(seen, key=lambda k: (seen[k], k))
     tie = seen[key] * math.exp(TIE_DELTA_BIC / problem.n_eff) if problem is not None else seen[key]
-    found = dict(zip((CANDIDATES[n].field for n in names), key))
-    key = _towards_neutral(f, names, to_u, found, tie)
+    key, spans = _plateaus(f, names, to_u, dict(zip((CANDIDATES[n].field for n in names), key)), tie)
     values = dict(zip((CANDIDATES[n].field for n in names), key))
-    spans = {k: (v, found[k]) for k, v in values.items() if v != found[k]}
     return {CANDIDATES[n].field: values[CANDIDATES[n].field] for n in given}, seen[key], len(seen), spans
 
 
-def _towards_neutral(f, names: Sequence[str], to_u, values: dict[str, float], tie: float) -> tuple:
-    """The fitted ``values`` (``Effects`` fields of ``names``) moved towards neutral along
-    each parameter in turn, as far as the cost ``f`` (of ``[0, 1]``-scaled coordinates)
-    stays within ``tie``: the key of the point reached.
+def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
+              tie: float) -> tuple[tuple, dict[str, tuple[float, float]]]:
+    """The fitted ``values`` (``Effects`` fields of ``names``) with every parameter that sits on
+    a plateau of the cost ``f`` (of ``[0, 1]``-scaled coordinates) moved to its middle: ``(the
+    key of the point reached, {field: (plateau's low end, high end)})``.
 
-    A parameter the fit windows pin only to an interval (a plateau of the cost: a deadband
-    between the smallest speed command the fit windows hold and zero, a top speed above the
-    fastest they reach) leaves the fit at whatever value of the plateau the search stopped
-    on, possibly its far end, which held-out windows with one more command in range then
-    contradict (multi log 10: a deadband of 0.033 m/s fitted at 0.5 m/s, the held-out gap
-    2.3 % worse, where any value of 0.01-0.3 m/s makes it 40 % better). Among values the fit
-    windows cannot tell apart, the one nearest the car file is kept: the least change that
-    explains them (as least squares takes the minimum-norm solution of a direction the data
-    do not determine). One probe halfway to neutral decides: a cost that rises towards
-    neutral (every pinned parameter) leaves the value as it is; on a plateau, bisection finds
-    its edge (:data:`TIE_BISECTIONS` steps), never nearer neutral than twice
-    :data:`NEUTRAL_TOL` of the fit range (nearer counts as no effect)."""
+    A parameter the fit windows pin only to an interval (a deadband between zero and the
+    smallest speed command they hold, a top speed above the fastest they reach) leaves the
+    search at whatever point of the plateau it stopped on, possibly one end, and any value
+    in the interval is as likely to be the car's (multi log 10: a deadband of 0.033 m/s
+    fitted at 0.5 m/s, where the fit windows cost the same from 0.001 to 0.3 m/s, and
+    held-out windows with 0.3-0.4 m/s commands contradicted it; log 0: 0.27 m/s, the same
+    plateau, the search at 0.095). The middle is nearest to every value of the interval at
+    worst, and the report gives the interval instead of a standard error.
+
+    One probe halfway to neutral decides: a cost that rises towards neutral by more than
+    ``tie`` (every pinned parameter) leaves the value as it is. On a plateau, each end is
+    found by bisection (:data:`TIE_BISECTIONS` steps; the end towards neutral never nearer
+    than twice :data:`NEUTRAL_TOL` of the fit range, which counts as no effect), and the
+    middle is kept if it is on the plateau too (else the value found)."""
     from simrunner.car.effects import EFFECTS
 
     u = to_u(values)
     moved = False
+    spans: dict[str, tuple[float, float]] = {}
     for i, name in enumerate(names):
         c = CANDIDATES[name]
         n_u = float(to_u({**values, c.field: min(max(EFFECTS[name].neutral[0], c.lo), c.hi)})[i])
         side = math.copysign(1.0, u[i] - n_u)
-        target = n_u + side * 2.0 * NEUTRAL_TOL
-        if (u[i] - target) * side <= 0.0:
+        near_limit = n_u + side * 2.0 * NEUTRAL_TOL
+        if (u[i] - near_limit) * side <= 0.0:
             continue
 
         def at(x: float) -> np.ndarray:
@@ -420,26 +422,34 @@ def _towards_neutral(f, names: Sequence[str], to_u, values: dict[str, float], ti
             p[i] = x
             return p
 
-        inside, outside = u[i], target
-        mid = 0.5 * (inside + outside)
-        if f(at(mid)) > tie:
-            continue  # the cost rises towards neutral: pinned
-        inside = mid
-        if f(at(target)) <= tie:
-            inside = target
-        else:
+        def edge(inside: float, outside: float) -> float:
+            if f(at(outside)) <= tie:
+                return outside
             for _ in range(TIE_BISECTIONS):
                 mid = 0.5 * (inside + outside)
                 if f(at(mid)) <= tie:
                     inside = mid
                 else:
                     outside = mid
-        u, moved = at(inside), True
+            return inside
+
+        half = 0.5 * (u[i] + near_limit)
+        if f(at(half)) > tie:
+            continue  # the cost rises towards neutral: pinned
+        near = edge(half, near_limit)
+        far = edge(u[i], 1.0 if side > 0 else 0.0)
+        middle = 0.5 * (near + far)
+        x = middle if f(at(middle)) <= tie else u[i]
+        _, one_from_u = _bounds01([name])
+        ends = sorted((one_from_u(np.array([near]))[c.field], one_from_u(np.array([far]))[c.field]))
+        spans[c.field] = (ends[0], ends[1])
+        if x != u[i]:
+            u, moved = at(x), True
     if not moved:
-        return tuple(values[CANDIDATES[n].field] for n in names)
+        return tuple(values[CANDIDATES[n].field] for n in names), spans
     _, from_u = _bounds01(names)
     reached = from_u(u)
-    return tuple(reached[CANDIDATES[n].field] for n in names)
+    return tuple(reached[CANDIDATES[n].field] for n in names), spans
 
 
 @dataclass(frozen=True)
@@ -657,9 +667,8 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
 def _carried(spans: dict[str, tuple[float, float]], values: dict[str, float],
              new: dict[str, tuple[float, float]]) -> dict[str, tuple[float, float]]:
     """The spans of a refit that set ``values``: its own (``new``), and an earlier refit's for a
-    parameter it left on the edge that refit found (a refit starting on a plateau's edge finds
-    nothing to move)."""
-    out = {k: v for k, v in spans.items() if values.get(k) == v[0]}
+    parameter it left inside that span."""
+    out = {k: v for k, v in spans.items() if k in values and v[0] <= values[k] <= v[1]}
     out.update(new)
     return out
 

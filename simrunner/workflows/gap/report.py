@@ -106,8 +106,8 @@ class GapResult:
     gap_ls_after: float = math.nan
     # standard error of each kept parameter (simrunner.workflows.gap.uncertainty; nan: not pinned)
     parameter_sigma: dict[str, float] = field(default_factory=dict)
-    # kept parameters the fit windows pin on one side only (chain.Chain.spans): the value kept
-    # (the plateau's edge nearest the car file) and one as good further out
+    # kept parameters the fit windows pin only to an interval (chain.Chain.spans): (low, high);
+    # the value kept is its middle
     parameter_spans: dict[str, tuple[float, float]] = field(default_factory=dict)
     # per log with held-out windows: log, held_windows, gap_before/after, rmse_before/after
     per_log: list[dict] = field(default_factory=list)
@@ -319,7 +319,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                         max_effects=max_effects, robust_factor=robust_factor, progress=tick)
     car_after = chain.car
     sigma = parameter_sigma(screening_problem(fit_problem), car, chain.effects, chain.parameters, jobs=jobs)
-    sigma.update({k: math.nan for k in chain.spans})  # a plateau's edge: no curvature says how far it could move
+    sigma.update({k: math.nan for k in chain.spans})  # on a plateau: the interval says it, not a curvature
     tick("uncertainty")
     pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
     res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
@@ -503,8 +503,8 @@ def _params_text(params: dict[str, float], sigma: dict[str, float] | None = None
 
     def one(k: str, v: float) -> str:
         if k in spans:
-            return (f"{k} = {v:.4g} (the fit windows fit as well with {spans[k][1]:.4g}: they pin it on one side "
-                    "only; the value nearest the car file is kept)")
+            return (f"{k} = {v:.4g} (any value {spans[k][0]:.4g}-{spans[k][1]:.4g} fits the fit windows as well: "
+                    "they hold nothing that pins it closer; the middle is kept)")
         if math.isfinite(sigma.get(k, math.nan)):
             return f"{k} = {v:.4g} +- {sigma[k]:.2g}"
         return f"{k} = {v:.4g}" + (" (+- not known: the log does not pin it)" if k in sigma else "")
@@ -607,7 +607,8 @@ def car_sources(result: GapResult) -> dict[str, str]:
 
     def sigma(name: str) -> str:
         if name in result.parameter_spans:
-            return f", pinned on one side only (as good with {result.parameter_spans[name][1]:.4g})"
+            lo, hi = result.parameter_spans[name]
+            return f", pinned only to {lo:.4g}-{hi:.4g} (the middle kept)"
         sd = result.parameter_sigma.get(name, math.nan)
         return f", standard error {sd:.2g}" if math.isfinite(sd) else ""
 
