@@ -625,6 +625,774 @@ def test_a_plateau_that_ends_short_of_neutral_is_found_to_its_ends(monkeypatch):
     assert 0.18 < lo < 0.21 and hi == 0.5 and v["throttle_deadband_mps"] == pytest.approx(0.5 * (lo + hi))
 
 
+# -- measured logs of any sensor set (pose, speed sensor, gyro) ------------------------------------
+SPEED_GYRO = ("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad", "yaw_rate_radps")
+POSE_ONLY = ("t_s", "x_m", "y_m", "yaw_rad", "speed_cmd_mps", "steer_cmd_rad")
+FULL_GYRO = MEASURED_COLUMNS + ("yaw_rate_radps",)
+
+
+def test_check_measured_accepts_pose_or_speed_and_names_what_is_missing():
+    car = CarDescription()
+    for cols in (SPEED_GYRO, POSE_ONLY, MEASURED_COLUMNS, ("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad")):
+        check_measured(simulate(car, columns=cols))
+    with pytest.raises(LogError, match=r"<kin>:1: expected a pose .* or a speed sensor .*missing: yaw_rad, speed_mps"):
+        check_measured(simulate(car, columns=("t_s", "x_m", "y_m", "speed_cmd_mps", "steer_cmd_rad")))
+    slow = simulate(car, duration_s=30.0, rate_hz=5.0)
+    with pytest.raises(LogError, match=r"<kin>:0: expected a median sample rate of at least 10 Hz \(got 5 Hz\)$"):
+        check_measured(slow)
+    for unit, factor in (("ms", 1e3), ("us", 1e6), ("ns", 1e9)):  # stamps in another unit: the mapping that reads them
+        log = simulate(car, rate_hz=50.0)
+        scaled = log_from_columns({**log.columns(), "t_s": log.t_s * factor}, "<kin>")
+        with pytest.raises(LogError, match=r"\(got [0-9.e-]+ Hz\); a median step of [0-9.e+]+ looks like stamps in "
+                                           + unit + r": read them with --column 't_s=\{column = \"YOUR_TIME_COLUMN\", "
+                                           r"unit = \"" + unit + r"\"\}'$"):
+            check_measured(scaled)
+
+
+@pytest.mark.parametrize("cols, signals", [
+    (FULL_GYRO, FIT_SIGNALS), (MEASURED_COLUMNS, FIT_SIGNALS), (POSE_ONLY, FIT_SIGNALS),
+    (SPEED_GYRO, ("speed_mps", "yaw_rate_radps")),
+    (("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad"), ("speed_mps",))])
+def test_signals_of_follow_the_columns(cols, signals):
+    assert signals_of(simulate(CarDescription(), columns=cols)) == signals
+
+
+@pytest.mark.parametrize("cols", [SPEED_GYRO, POSE_ONLY, FULL_GYRO])
+def test_partial_logs_go_through_derive_replay_and_residuals(cols):
+    """A speed + gyro log (encoder + gyro car) and a pose-only log: only their signals are
+    compared, and the exact model replays them with tiny residuals."""
+    car = CarDescription()
+    truth = simulate(car, columns=FULL_GYRO)
+    log = simulate(car, columns=cols)
+    d = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad)
+    pose = "x_m" in cols
+    for name in ("x_m", "y_m", "yaw_rad"):
+        assert np.isfinite(getattr(d, name)).all() == pose and np.isnan(getattr(d, name)).all() != pose
+    steady = (log.t_s % 1.0 > 0.4) & (log.t_s % 1.0 < 0.9) & (np.abs(log.t_s - 9.75) > 1.0)  # no step, no stop
+    np.testing.assert_allclose(d.speed_mps[steady], truth.speed_mps[steady], atol=0.01)
+    np.testing.assert_allclose(d.yaw_rate_radps[steady], truth.yaw_rate_radps[steady], atol=0.03)
+    windows = make_windows(log)
+    res = residuals(log, d, replay(car, log, d, windows, dt_s=0.001, sim_factory=kin_factory))
+    assert set(res) == set(signals_of(log)) | ({"position_m"} if pose else set())
+    if "speed_mps" in cols:
+        assert np.nanmax(np.abs(res["speed_mps"])) < 0.05
+    if pose:
+        assert np.nanmax(res["position_m"]) < 0.03
+    mask = window_mask(len(log), windows)
+    err = rmse(res, mask)
+    assert set(err) == set(REPORT_SIGNALS)
+    assert all(math.isnan(err[s]) != (s in res) for s in REPORT_SIGNALS)
+    noise = noise_rms(log, d)
+    assert math.isnan(noise["position_m"]) != pose
+    assert math.isnan(noise["yaw_rate_radps"]) != ("yaw_rate_radps" in cols)
+    smooth = smoothed_log(log, d)
+    assert smooth.names == log.names
+    rows = residual_stats(res, segment(log, d))
+    assert {r["signal"] for r in rows} == set(res)
+    assert "-" in format_stats(rows) or all(r["count"] for r in rows)
+
+
+def test_pose_free_replay_starts_at_the_origin_with_the_gyro_heading():
+    car = CarDescription()
+    log = simulate(car, columns=SPEED_GYRO)
+    truth = simulate(car)
+    d = derive(log, car.chassis.wheelbase_m)
+    heading = dead_reckoned_yaw(log, d, car.chassis.wheelbase_m)
+    windows = make_windows(log)
+    pred = replay(car, log, d, windows, dt_s=0.001, sim_factory=kin_factory, lead_s=0.0)
+    for w in windows:
+        assert (pred.x_m[w.start], pred.y_m[w.start]) == (0.0, 0.0)
+        assert pred.yaw_rad[w.start] == pytest.approx(heading[w.start], abs=1e-9)
+    # the integrated gyro follows the true heading (the truth starts at heading 0)
+    assert abs(np.unwrap(truth.yaw_rad) - heading).max() < 0.05
+    assert abs(np.unwrap(truth.yaw_rad)).max() > 0.5  # and the car did turn
+
+
+def test_derive_does_not_smooth_across_gaps_or_excluded_samples():
+    n = 400
+    t = np.arange(n) * 0.01
+    t[200:] += 1.0  # a 1-s gap between samples 199 and 200
+    speed = np.where(np.arange(n) < 200, 1.0, 2.0)
+    speed[300] = 9.0  # a bad sample, excluded
+    cols = dict(t_s=t, x_m=np.cumsum(speed) * 0.01, y_m=np.zeros(n), yaw_rad=np.zeros(n), speed_mps=speed,
+                speed_cmd_mps=speed, steer_cmd_rad=np.zeros(n))
+    log = log_from_columns(cols, "<gap>")
+    exclude = np.arange(n) == 300
+    d = derive(log, 0.175, exclude=exclude)
+    assert d.speed_mps[199] == pytest.approx(1.0) and d.speed_mps[200] == pytest.approx(2.0)
+    assert abs(d.accel_mps2[199]) < 1e-9 and abs(d.accel_mps2[200]) < 1e-9
+    assert math.isnan(d.speed_mps[300]) and math.isnan(d.steer_rad[300])
+    np.testing.assert_allclose(d.speed_mps[[299, 301]], 2.0)
+
+
+def test_derive_handles_irregular_stamps():
+    """Samples kept 1 to 4 apart from a 200-Hz log (dt 5..20 ms): the yaw rate from the pose
+    still matches the truth."""
+    car = CarDescription()
+    full = simulate(car, rate_hz=200.0, columns=FULL_GYRO)
+    rng = np.random.default_rng(3)
+    keep = np.cumsum(rng.integers(1, 5, size=len(full)))
+    keep = keep[keep < len(full)]
+    log = full.subset(keep).with_columns(yaw_rate_radps=None)
+    d = derive(log, car.chassis.wheelbase_m)
+    steady = (log.t_s % 1.0 > 0.4) & (log.t_s % 1.0 < 0.9)
+    np.testing.assert_allclose(d.yaw_rate_radps[steady], full.yaw_rate_radps[keep][steady], atol=0.03)
+
+
+def test_segment_reversing_and_high_lateral_acceleration():
+    n = 600
+    t = np.arange(n) * 0.01
+    speed = np.where(t < 2.0, -0.8, 2.0)
+    yaw_rate = np.where(t < 4.0, 0.0, 3.0)  # 2 m/s * 3 rad/s = 6 m/s2 > 0.5 * mu * g for mu = 1
+    log = log_from_columns(dict(t_s=t, speed_mps=speed, yaw_rate_radps=yaw_rate, speed_cmd_mps=speed,
+                                steer_cmd_rad=np.where(t < 4.0, 0.0, 0.3)), "<regimes>")
+    d = derive(log, 0.175)
+    car = CarDescription()
+    m = segment(log, d, car)
+    inner = lambda a, b: (t > a + 0.1) & (t < b - 0.1)  # noqa: E731
+    assert m["reversing"][inner(0, 2)].all() and not m["reversing"][inner(2, 6)].any()
+    assert m["high_lat_accel"][inner(4, 6)].all() and not m["high_lat_accel"][inner(0, 4)].any()
+    grippy = car.replace(wheels=dataclasses.replace(car.wheels, friction_mu=2.0))  # 9.8 m/s2 at half grip
+    assert not segment(log, d, grippy)["high_lat_accel"].any()
+
+
+# -- glitches ---------------------------------------------------------------------------------------
+def _noisy(cols=MEASURED_COLUMNS, seed=0, rate_hz=100.0, jitter=0.0):
+    """A noisy kinematic log as a dict of columns; ``jitter`` moves each stamp by up to that
+    fraction of the time step (stamps taken late or early, as on a real car)."""
+    log = simulate(CarDescription(), np.random.default_rng(seed), rate_hz=rate_hz, columns=cols)
+    out = {k: np.array(v) for k, v in log.columns().items()}
+    if jitter:
+        out["t_s"] = out["t_s"] + np.random.default_rng(seed + 1).uniform(-jitter, jitter, len(log)) / rate_hz
+    return out
+
+
+def _log(cols):
+    return log_from_columns(cols, "<glitchy>")
+
+
+def _kinds(glitches):
+    return [(g.kind, round(g.t_start_s, 9), round(g.t_end_s, 9), g.column) for g in glitches]
+
+
+@pytest.mark.parametrize("cols", [MEASURED_COLUMNS, FULL_GYRO, POSE_ONLY, SPEED_GYRO])
+@pytest.mark.parametrize("rate_hz, jitter", [(100.0, 0.0), (100.0, 0.3), (20.0, 0.3)])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_clean_logs_have_no_glitches(cols, rate_hz, jitter, seed):
+    log = _log(_noisy(cols, seed, rate_hz, jitter))
+    assert find_glitches(log) == []
+    assert not glitch_mask(log, []).any()
+
+
+@pytest.mark.parametrize("cols", [MEASURED_COLUMNS, POSE_ONLY])
+def test_a_localisation_jump_is_found_at_its_step(cols):
+    c = _noisy(cols, jitter=0.3)
+    t = c["t_s"]
+    c["x_m"][500:] += 0.3  # the pose jumps by 0.3 m between samples 499 and 500
+    c["y_m"][800] -= 0.2  # one bad sample (out and back)
+    log = _log(c)
+    found = find_glitches(log)
+    assert _kinds(found) == [(GlitchKind.JUMP, round(t[499], 9), round(t[500], 9), "x_m,y_m"),
+                             (GlitchKind.JUMP, round(t[799], 9), round(t[801], 9), "x_m,y_m")]
+    assert re.match(r"position step 0\.[23]\d* m in 0\.0\d* s where speed \+1\.\d* m/s", found[0].detail)
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == [500, 800, 801]
+
+
+def test_time_gaps_and_duplicates_are_found_exactly():
+    c = _noisy(FULL_GYRO, jitter=0.3)
+    t0 = c["t_s"].copy()
+    keep = np.ones(len(t0), dtype=bool)
+    keep[300:320] = False  # 20 samples dropped: a 0.21-s gap
+    rows = np.flatnonzero(keep)
+    again = 700  # this row logged twice: once 0.1 ms later (same sample) ...
+    same_row = 900  # ... and this one again half a step later with every sensor value repeated
+    order = np.sort(np.concatenate([rows, [again, same_row]]))
+    out = {k: v[order].copy() for k, v in c.items()}
+    i_again = int(np.searchsorted(order, again)) + 1
+    i_same = int(np.searchsorted(order, same_row)) + 1
+    out["t_s"][i_again] = t0[again] + 1e-4
+    out["t_s"][i_same] = 0.5 * (t0[same_row] + t0[same_row + 1])
+    log = _log(out)
+    found = find_glitches(log)
+    assert _kinds(found) == [
+        (GlitchKind.TIME_GAP, round(t0[299], 9), round(t0[320], 9), "t_s"),
+        (GlitchKind.DUPLICATE, round(t0[again], 9), round(t0[again] + 1e-4, 9), "t_s"),
+        (GlitchKind.DUPLICATE, round(t0[same_row], 9), round(out["t_s"][i_same], 9),
+         "x_m,y_m,yaw_rad,speed_mps,yaw_rate_radps")]
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == [i_again, i_same]  # a gap holds no sample
+
+
+def test_rows_repeating_a_stamp_are_left_out_and_listed(tmp_path):
+    """A logger that writes a row twice (same stamp, same values) or two messages in one
+    clock tick (same stamp, other values): read for the gap workflow, the second row is left
+    out and listed as a duplicate; the doubtful first one of a clash is kept out of the
+    windows, a copy keeps nothing out. Read plainly, the file is still refused."""
+    c = _noisy(MEASURED_COLUMNS, jitter=0.3)
+    p = tmp_path / "m.csv"
+    write_log(_log(c), p)
+    lines = p.read_text().splitlines(keepends=True)  # format line, header, row k on line k + 3
+    copy_row, clash_row = 400, 700
+    clash = lines[clash_row + 2].split(",")
+    x_col = lines[1].strip().split(",").index("x_m")
+    clash[x_col] = f"{float(clash[x_col]) + 0.25:.6f}"
+    text = (lines[:copy_row + 3] + [lines[copy_row + 2]] + lines[copy_row + 3:clash_row + 3] + [",".join(clash)]
+            + lines[clash_row + 3:])
+    p.write_text("".join(text))
+    with pytest.raises(LogError, match=f":{copy_row + 4}: column 't_s': expected strictly increasing"):
+        read_log(p)
+    for merged in (False, True):
+        log = read_log(p, merged=merged, repeated_stamps=True)
+        assert len(log) == len(c["t_s"]) and np.array_equal(log.x_m, np.round(c["x_m"], 6))
+        assert log.repeats.lines == (copy_row + 4, clash_row + 5) and log.repeats.differ == ("", "x_m")
+    t = log.t_s
+    found = [g for g in find_glitches(log) if g.kind is GlitchKind.DUPLICATE]
+    assert _kinds(found) == [(GlitchKind.DUPLICATE, t[copy_row], t[copy_row], "t_s"),
+                             (GlitchKind.DUPLICATE, t[clash_row - 1], t[clash_row], "x_m")]
+    assert f"line {copy_row + 4} repeats the row before it" in found[0].detail
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == [clash_row]
+    # a subset keeps the repeats inside it only
+    assert log.subset(slice(0, 500)).repeats.lines == (copy_row + 4,)
+    assert log.subset(slice(500, 600)).repeats is None
+
+
+def test_a_log_with_irregular_stamps_has_only_its_real_gap():
+    """Rows logged when a controller acts (a 50-Hz tick, each with probability 0.6): steps of
+    20, 40, 60 ... ms are its rhythm, not gaps (5 median steps, the old rule, cut it 9 times
+    here); a second without rows is one."""
+    c = _noisy(FULL_GYRO, rate_hz=50.0, jitter=0.1)
+    t0 = c["t_s"]
+    acts = np.random.default_rng(7).random(len(t0)) < 0.6
+    acts[0] = True
+    assert (np.diff(t0[acts]) > 5 * np.median(np.diff(t0[acts]))).sum() > 3
+    assert not time_gaps(t0[acts]).any()
+    acts[(t0 > 4.0) & (t0 < 5.0)] = False
+    rows = np.flatnonzero(acts)
+    log = _log({k: v[rows] for k, v in c.items()})
+    found = [g for g in find_glitches(log) if g.kind is GlitchKind.TIME_GAP]
+    assert [(round(g.t_start_s, 9), round(g.t_end_s, 9)) for g in found] == [
+        (round(t0[rows][t0[rows] <= 4.0][-1], 9), round(t0[rows][t0[rows] >= 5.0][0], 9))]
+    assert re.search(r"this log's gaps are longer than 0\.3\d* s", found[0].detail), found[0].detail
+
+
+@pytest.mark.parametrize("cols, column", [
+    (MEASURED_COLUMNS, "speed_mps"), (FULL_GYRO, "yaw_rate_radps"), (SPEED_GYRO, "yaw_rate_radps"),
+    (MEASURED_COLUMNS, "x_m,y_m"), (FULL_GYRO, "yaw_rad")])
+def test_a_frozen_sensor_is_found(cols, column):
+    c = _noisy(cols, jitter=0.3)
+    t = c["t_s"]
+    a, b = 500, 540  # t 5.0 .. 5.4 s: moving at 1.5 m/s, turning
+    for name in column.split(","):
+        c[name][a:b] = c[name][a]
+    log = _log(c)
+    found = [g for g in find_glitches(log) if g.kind is GlitchKind.FROZEN]
+    assert _kinds(found) == [(GlitchKind.FROZEN, round(t[a], 9), round(t[b - 1], 9), column)]
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == list(range(a + 1, b))
+
+
+def test_noise_free_and_resting_logs_are_not_frozen():
+    """A simulator's speed holds its value exactly in steady state, and a car at rest logs
+    identical rows: neither is a glitch."""
+    log = simulate(CarDescription(), columns=FULL_GYRO)
+    assert (np.diff(log.speed_mps) == 0.0).sum() > 300
+    assert find_glitches(log) == []
+    c = _noisy(FULL_GYRO)
+    for k in ("speed_mps", "yaw_rate_radps", "speed_cmd_mps", "steer_cmd_rad"):
+        c[k][:300] = 0.0
+    for k in ("x_m", "y_m", "yaw_rad"):
+        c[k][:300] = c[k][300]
+    assert find_glitches(_log(c)) == []
+
+
+# -- windows on logs with gaps and excluded samples ------------------------------------------------
+def _assert_windows_clean(log, windows, exclude, window_s):
+    t = log.t_s
+    gaps = time_gaps(t)
+    last = 0
+    for w in windows:
+        assert last <= w.start < w.stop <= len(log)
+        last = w.stop
+        assert not exclude[w.start:w.stop].any()
+        assert not gaps[w.start:w.stop - 1].any()
+    if exclude.any() or gaps.any() or log.duration_s < 0.5 * window_s:
+        return
+    assert windows and windows[0].start == 0 and windows[-1].stop == len(log)
+
+
+def test_no_window_starts_inside_a_brake_to_reverse():
+    """From a reverse command given while rolling forward until the car reverses, an ESC that
+    brakes first is braking or waiting at rest (no measurement says which): a window that
+    starts there, or ends there, sees half of it. The boundary near t = 10 s moves before it"""
+    t = np.arange(0.0, 20.0, 0.02)
+    cmd = np.where(t < 9.9, 1.0, -0.6)
+    speed = np.interp(t, [0.0, 9.9, 10.2, 10.8, 11.0, 20.0], [1.0, 1.0, 0.0, 0.0, -0.6, -0.6])
+    log = log_from_columns(dict(t_s=t, speed_mps=speed, speed_cmd_mps=cmd, steer_cmd_rad=0.0 * t), "<esc>")
+    starts = [t[w.start] for w in make_windows(log, 2.0)]
+    assert any(9.4 <= s < 9.9 for s in starts), starts
+    assert not any(9.9 <= s <= 11.0 for s in starts), starts
+    # a reverse command from rest is no such event: the boundary stays at the quietest sample
+    # (its quietest sample, the nearest to 10 s after the command change); from rest the
+    # reverse command is no such event and the boundary stays there
+    rest = log_from_columns(dict(t_s=t, speed_mps=np.where(t < 10.8, 0.0, speed), speed_cmd_mps=np.where(t < 9.9, 0.0, cmd),
+                                 steer_cmd_rad=0.0 * t), "<rest>")
+    assert any(10.1 <= t[w.start] <= 10.2 for w in make_windows(rest, 2.0))
+
+
+def test_windows_skip_gaps_and_excluded_samples():
+    log = simulate(CarDescription(), duration_s=30.0)
+    keep = np.ones(len(log), dtype=bool)
+    keep[1000:1030] = False  # a 0.31-s gap at t = 10 s
+    log = log.subset(np.flatnonzero(keep))
+    exclude = np.zeros(len(log), dtype=bool)
+    exclude[[500, 2000, 2001]] = True
+    windows = make_windows(log, 2.0, exclude=exclude)
+    _assert_windows_clean(log, windows, exclude, 2.0)
+    t = log.t_s
+    for k in (500, 2000):  # the smoothing's reach around an excluded sample stays out too
+        assert all(not (t[w.start] - 0.075 <= t[k] <= t[w.stop - 1] + 0.075) for w in windows)
+    assert sum(t[w.stop - 1] - t[w.start] for w in windows) > 0.85 * log.duration_s
+    assert len(make_windows(log, 2.0, exclude=np.ones(len(log), dtype=bool))) == 0
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.one_of(st.floats(0.002, 0.06), st.floats(0.06, 3.0)), min_size=1, max_size=300),
+       st.lists(st.integers(0, 299), max_size=30), st.sampled_from([0.5, 1.0, 2.0, 5.0]),
+       st.integers(0, 2**31 - 1))
+def test_make_windows_never_fails_on_any_stamps_and_masks(dts, excluded, window_s, seed):
+    t = np.concatenate([[0.0], np.cumsum(dts)])
+    n = t.size
+    rng = np.random.default_rng(seed)
+    log = log_from_columns(dict(t_s=t, speed_mps=rng.normal(1.0, 1.0, n), speed_cmd_mps=rng.choice([0.0, 1.0, 2.0], n),
+                                steer_cmd_rad=rng.choice([0.0, 0.2], n), coast=rng.random(n) < 0.1), "<random>")
+    exclude = np.zeros(n, dtype=bool)
+    exclude[[k for k in excluded if k < n]] = True
+    windows = make_windows(log, window_s, exclude=exclude)
+    _assert_windows_clean(log, windows, exclude, window_s)
+    gaps = time_gaps(t)
+    for w1, w2 in zip(windows[:-1], windows[1:]):  # tiles, broken only where something is cut out
+        assert w1.stop == w2.start or exclude[w1.stop:w2.start].any() or gaps[w1.stop - 1:w2.start].any()
+    _assert_windows_clean(log, make_windows(log, window_s), np.zeros(n, dtype=bool), window_s)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.one_of(st.floats(1e-6, 0.05), st.floats(0.05, 2.0)), min_size=2, max_size=200),
+       st.sampled_from([MEASURED_COLUMNS, POSE_ONLY, SPEED_GYRO]), st.integers(0, 2**31 - 1),
+       st.floats(0.0, 1.0))
+def test_find_glitches_never_fails(dts, cols, seed, repeat):
+    """Any stamps, any columns, runs of repeated values: a list of glitches within the log."""
+    t = np.concatenate([[0.0], np.cumsum(dts)])
+    n = t.size
+    rng = np.random.default_rng(seed)
+    data = {c: rng.normal(0.0, 1.0, n) for c in cols if c != "t_s"}
+    for v in data.values():  # some values held (sensors that repeat)
+        held = rng.random(n) < repeat
+        for k in range(1, n):
+            if held[k]:
+                v[k] = v[k - 1]
+    log = log_from_columns(dict(t_s=t, **data), "<random>")
+    found = find_glitches(log)
+    for g in found:
+        assert t[0] <= g.t_start_s <= g.t_end_s <= t[-1] and isinstance(g.kind, GlitchKind)
+    assert glitch_mask(log, found).shape == (n,)
+    derive(log, 0.175, exclude=glitch_mask(log, found))
+
+
+# -- robust window cost and stratified screening ------------------------------------------------
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.0, 1e6), st.integers(1, 5000)), min_size=1, max_size=30),
+       st.floats(1e-6, 1e3))
+def test_robust_total_is_least_squares_for_small_windows_and_grows_slowly_for_large(costs, scale):
+    from simrunner.workflows.gap.fit import robust_total
+
+    ls = sum(c for c, _ in costs)
+    assert robust_total(costs, math.inf) == pytest.approx(ls, rel=1e-12, abs=1e-12)
+    rob = robust_total(costs, scale)
+    assert rob <= ls * (1 + 1e-12) + 1e-12  # never more than least squares
+    small = [(1e-4 * scale * n, n) for _, n in costs]  # every window far below its scale
+    assert robust_total(small, scale) == pytest.approx(sum(c for c, _ in small), rel=1e-4)
+    # monotone: a window that gets worse never lowers the total
+    worse = [(c * 2.0 + 1.0, n) for c, n in costs[:1]] + costs[1:]
+    assert robust_total(worse, scale) >= rob
+
+
+def test_robust_scale_is_the_median_mean_square_times_the_factor():
+    from simrunner.workflows.gap.fit import robust_scale_of
+
+    costs = [(10.0, 10), (40.0, 10), (1e6, 10)]  # per value 1, 4, 1e5: the outlier does not move it
+    assert robust_scale_of(costs, 4.0) == pytest.approx(16.0)
+    assert robust_scale_of(costs, math.inf) == math.inf and robust_scale_of([], 4.0) == math.inf
+
+
+def _pushed(log, t0, t1, yaw_rate_radps):
+    """``log`` with the car turned by an unmodelled push between ``t0`` and ``t1`` (a hand on
+    the car, a wall): the measured yaw drifts and the path bends with it."""
+    t = log.t_s
+    extra = np.clip(t - t0, 0.0, t1 - t0) * yaw_rate_radps
+    yaw = log.yaw_rad + extra
+    dx = np.concatenate([[0.0], np.diff(log.x_m)])
+    dy = np.concatenate([[0.0], np.diff(log.y_m)])
+    c, s = np.cos(extra), np.sin(extra)
+    x = log.x_m[0] + np.cumsum(c * dx - s * dy)
+    y = log.y_m[0] + np.cumsum(s * dx + c * dy)
+    return log.with_columns(x_m=x, y_m=y, yaw_rad=yaw)
+
+
+def test_an_unmodelled_push_in_one_window_does_not_decide_the_fit():
+    """A steering offset hidden in a log with one window where the car was pushed round: the
+    least-squares fit bends the offset towards the push; the robust window cost keeps it."""
+    from simrunner.workflows.gap.fit import robust_scale_of, window_costs
+
+    nominal = CarDescription()
+    truth = nominal.replace(effects=nominal.effects.__class__(steering_offset_rad=0.02))
+    log = _pushed(simulate(truth, np.random.default_rng(3), duration_s=30.0), 13.0, 15.0, 1.5)
+    d = derive(log, nominal.chassis.wheelbase_m)
+    windows = tuple(make_windows(log))
+    res = residuals(log, d, replay(nominal, log, d, windows, dt_s=0.002, sim_factory=kin_factory))
+    seg = (Segment(log, d, windows),)
+    ls = Problem(nominal, seg, nominal_scales(seg, [res]), FIT_SIGNALS, 0.002, kin_factory)
+    costs = window_costs(ls, [res])
+    assert max(c for c, _ in costs) > 10 * np.median([c for c, _ in costs])  # one window stands out
+    robust = dataclasses.replace(ls, robust_scale=robust_scale_of(costs))
+    err = {}
+    for name, prob in (("ls", ls), ("robust", robust)):
+        r = fit_effect(prob, "steering_offset", cost_of(prob, nominal))
+        err[name] = abs(r.parameters["steering_offset_rad"] - 0.02)
+    assert err["ls"] > 0.005  # least squares: off by a quarter and more
+    assert err["robust"] < 0.5 * err["ls"]
+
+
+def test_screening_keeps_the_windows_of_a_rare_manoeuvre():
+    from simrunner.workflows.gap.chain import screening_problem, window_labels
+
+    car = CarDescription()
+    log = simulate(car, duration_s=60.0)  # speed steps and step steers; the one stop at 9-10 s
+    d = derive(log, car.chassis.wheelbase_m)
+    windows = tuple(make_windows(log))
+    prob = Problem(car, (Segment(log, d, windows),), {s: 1.0 for s in FIT_SIGNALS}, FIT_SIGNALS, 0.002,
+                   kin_factory)
+    labels = window_labels(prob)
+    assert len(labels) == len(windows)
+    rare = [w for w, lab in zip(windows, labels) if labels.count(lab) == 1]
+    assert rare, labels  # the stop at 9-10 s is the only coast of the log
+    sub = screening_problem(prob, max_s=15.0)
+    kept = sub.segments[0].windows
+    assert sum(s.duration_s for s in sub.segments) < 0.5 * prob.segments[0].duration_s
+    assert all(w in kept for w in rare)
+
+
+def test_screening_keeps_the_windows_that_steer_hardest():
+    """A smaller steering limit acts only in the windows that steer beyond it: a small
+    screening subset keeps the window with the largest steering command to each side."""
+    from simrunner.workflows.gap.chain import extreme_windows, screening_problem
+
+    car = CarDescription()
+    log = simulate(car, duration_s=60.0)
+    t = log.t_s
+    steer = np.where((t > 41.0) & (t < 42.0), 0.35, np.where((t > 51.0) & (t < 52.0), -0.3, log.steer_cmd_rad))
+    log = log.with_columns(steer_cmd_rad=steer)
+    d = derive(log, car.chassis.wheelbase_m)
+    windows = tuple(make_windows(log))
+    prob = Problem(car, (Segment(log, d, windows),), {s: 1.0 for s in FIT_SIGNALS}, FIT_SIGNALS, 0.002,
+                   kin_factory)
+    left = next(i for i, w in enumerate(windows) if steer[w.start:w.stop].max() == 0.35)
+    right = next(i for i, w in enumerate(windows) if steer[w.start:w.stop].min() == -0.3)
+    assert extreme_windows(prob) == {left, right}
+    kept = screening_problem(prob, max_s=6.0).segments[0].windows
+    assert len(kept) < len(windows) // 2
+    assert windows[left] in kept and windows[right] in kept
+    plain = dataclasses.replace(prob, segments=(Segment(log.with_columns(steer_cmd_rad=np.zeros(len(log))), d,
+                                                        windows),))
+    assert extreme_windows(plain) == set()  # nothing steers: no window is special
+
+
+def test_screening_keeps_the_windows_that_ask_to_reverse_while_rolling_forward():
+    """An ESC that brakes before it reverses shows only where the car is asked to reverse
+    while rolling forward; a long log has a few such windows, and every k-th window of a
+    label may miss them: the screening subset keeps them all."""
+    from simrunner.workflows.gap.chain import reversal_windows, screening_problem
+
+    car = CarDescription()
+    log = simulate(car, duration_s=60.0)
+    t = log.t_s
+    assert np.all(log.speed_cmd_mps >= 0.0) and np.median(log.speed_mps) > 0.3
+    cmd = np.where((t > 33.0) & (t < 33.3), -0.5, log.speed_cmd_mps)
+    log = log.with_columns(speed_cmd_mps=cmd)
+    d = derive(log, car.chassis.wheelbase_m)
+    windows = tuple(make_windows(log))
+    prob = Problem(car, (Segment(log, d, windows),), {s: 1.0 for s in FIT_SIGNALS}, FIT_SIGNALS, 0.002,
+                   kin_factory)
+    asked = {i for i, w in enumerate(windows) if (cmd[w.start:w.stop] < 0.0).any()
+             and (d.speed_mps[w.start:w.stop][cmd[w.start:w.stop] < 0.0] > 0.1).any()}
+    assert asked and reversal_windows(prob) == asked
+    kept = screening_problem(prob, max_s=6.0).segments[0].windows
+    assert len(kept) < len(windows) // 2
+    assert all(windows[i] in kept for i in asked)
+    plain = dataclasses.replace(prob, segments=(Segment(log.with_columns(speed_cmd_mps=log.speed_cmd_mps.clip(0.0)),
+                                                        d, windows),))
+    assert reversal_windows(plain) == set()
+
+
+def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():
+    from simrunner.workflows.gap.report import leftovers
+
+    def row(sig, reg, rmse, count=100):
+        return {"signal": sig, "regime": reg, "rmse": rmse, "count": count}
+
+    noise = {"speed_mps": 0.01, "yaw_rate_radps": 0.02, "position_m": 0.005, "yaw_rad": math.nan}
+    stats = [row("speed_mps", "all", 0.02), row("speed_mps", "coasting", 0.10), row("speed_mps", "steady", 0.015),
+             row("speed_mps", "reversing", 0.5, count=5),  # too few samples to judge
+             row("yaw_rate_radps", "all", 0.2), row("yaw_rate_radps", "left", 0.2), row("yaw_rate_radps", "right", 0.3),
+             row("yaw_rad", "all", 1.0),  # no noise estimate: not judged
+             row("position_m", "all", 0.004), row("position_m", "left", 0.006)]
+    out = leftovers(stats, noise, ratio=4.0)
+    assert [d["signal"] for d in out] == ["yaw_rate_radps", "speed_mps"]  # worst first
+    yaw, speed = out
+    assert speed["regime"] == "coasting" and speed["times_noise"] == pytest.approx(10.0)
+    assert speed["times_all"] == pytest.approx(5.0) and not speed["everywhere"]
+    assert speed["text"] == "unexplained: speed while coasting, 10x noise, 5.0x its level over all windows"
+    assert yaw["regime"] == "right" and yaw["everywhere"]
+    assert "in every regime: the model misses yaw rate throughout" in yaw["text"]
+    assert leftovers(stats, {k: 1.0 for k in noise}, ratio=4.0) == []  # nothing well above noise
+
+
+def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None):
+    """Fake fit and held-out problems for :func:`chain.build_chain` whose costs come from
+    tables: ``refit[frozenset(active effects)] = (fit cost, held-out gap)`` for the joint
+    refits and the replays, ``screened[...]`` (default: the refit's fit cost) for the
+    screening; a fitted effect takes its ``fitted`` value. Returns ``(fit, held)``."""
+    import simrunner.workflows.gap.chain as chain
+    from simrunner.workflows.gap.fit import FitResult
+
+    screened = screened or {k: c for k, (c, _) in refit.items()}
+
+    class FakeProblem:
+        car = CarDescription()
+        n_values = 1
+        scales: dict = {}
+
+        def with_car(self, car):
+            p = FakeProblem()
+            p.car = car
+            return p
+
+    def active(car):
+        return frozenset(n for n in field if getattr(car.effects, field[n]) != neutral[n])
+
+    def cost(problem, car):
+        c, held = refit[active(car)]
+        return held if problem is held_p else c
+
+    def trial(args):
+        names = args[5]
+        c, held = refit[frozenset(names)]
+        return chain.Outcome({field[n]: fitted[n] for n in names}, c, 5, held, c, held)
+
+    def screen(problem, current_cost, names, **kw):
+        have = active(problem.car)
+        return [FitResult(n, {field[n]: fitted[n]}, screened[have | {n}], 0.0, 0.0,
+                          1 - screened[have | {n}] / current_cost, 3) for n in names]
+
+    fit_p, held_p = FakeProblem(), FakeProblem()
+    monkeypatch.setattr(chain, "cost_of", cost)
+    monkeypatch.setattr(chain, "_trial_task", trial)
+    monkeypatch.setattr(chain, "fit_all", screen)
+    monkeypatch.setattr(chain, "screening_problem", lambda p, max_s=0: p)
+    monkeypatch.setattr(chain, "renormalised", lambda fit, held, car, factor: (chain.Judge(fit, held), cost(fit, car)))  # one scale
+    monkeypatch.setattr(chain, "bic", lambda p, c, k: 1000.0 * math.log(c) + 10.0 * k)
+    return fit_p, held_p
+
+
+def test_the_final_check_removes_an_effect_the_later_ones_made_redundant(monkeypatch):
+    """Forward selection keeps a look-alike first (a slower servo for a latency whose
+    one-parameter screening missed its best value); once the real effect is in, the
+    look-alike no longer passes the tests against the others alone, and the final check
+    removes it. Costs come from tables, so only the chain's logic runs."""
+    import simrunner.workflows.gap.chain as chain
+
+    look, real = "servo_rate_scale", "command_latency"
+    field = {look: "servo_rate_scale", real: "command_latency_s"}
+    neutral = {look: 1.0, real: 0.0}
+    fitted = {look: 0.7, real: 0.04}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([look]): (400.0, 0.4),  # (fit cost, held gap)
+             frozenset([real]): (101.0, 0.10), frozenset([look, real]): (100.0, 0.099)}
+    screened = {frozenset([look]): 400.0, frozenset([real]): 450.0, frozenset([look, real]): 100.0}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
+    monkeypatch.setattr(chain, "REFINE_TOP", 1)
+    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    result = chain.build_chain(fit_p, held_p, [look, real], jobs=1)
+    assert [s.kept.effect for s in result.steps if s.kept] == [look, real]  # forward: both kept
+    assert result.effects == [real] and [t.effect for t in result.pruned] == [look]
+    assert result.parameters == {field[real]: 0.04}
+    assert result.pruned[0].reason.startswith("delta_BIC") and result.pruned[0].improvement < 0.068
+    # an effect the others do not replace stays: with the look-alike alone there is nothing to check
+    only = chain.build_chain(fit_p, held_p, [look], jobs=1)
+    assert only.effects == [look] and only.pruned == ()
+
+
+def test_a_chain_at_its_limit_resumes_after_the_check_removes_a_look_alike(monkeypatch):
+    """Stepwise selection: with room for two effects the look-alike and the real one fill
+    the chain; the check removes the look-alike, which frees a place, and the forward
+    steps resume (without the removed one) and keep the effect the limit had shut out
+    (DS2: an acceleration scale kept at step 3 and removed by the check had taken the
+    place of its brake scale). Costs come from tables, so only the chain's logic runs."""
+    import simrunner.workflows.gap.chain as chain
+
+    look, real, third = "servo_rate_scale", "command_latency", "brake_scale"
+    field = {look: "servo_rate_scale", real: "command_latency_s", third: "brake_scale"}
+    neutral = {look: 1.0, real: 0.0, third: 1.0}
+    fitted = {look: 0.7, real: 0.04, third: 0.4}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([look]): (400.0, 0.4),  # (fit cost, held gap)
+             frozenset([real]): (101.0, 0.10), frozenset([third]): (900.0, 0.9),
+             frozenset([look, real]): (100.0, 0.099), frozenset([look, third]): (350.0, 0.35),
+             frozenset([real, third]): (50.0, 0.05), frozenset([look, real, third]): (49.0, 0.049)}
+    screened = {frozenset([look]): 400.0, frozenset([real]): 450.0, frozenset([third]): 900.0,
+                frozenset([look, real]): 100.0, frozenset([look, third]): 350.0, frozenset([real, third]): 50.0,
+                frozenset([look, real, third]): 49.0}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
+    monkeypatch.setattr(chain, "REFINE_TOP", 1)
+    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    result = chain.build_chain(fit_p, held_p, [look, real, third], jobs=1, max_effects=2)
+    assert [(s.index, s.kept.effect) for s in result.steps if s.kept] == [(1, look), (2, real), (3, third)]
+    assert [t.effect for t in result.pruned] == [look] and result.pruned_after == (2,)
+    assert result.effects == [real, third]
+    assert result.parameters == {field[real]: 0.04, field[third]: 0.4}
+    assert look not in {r.effect for r in result.steps[2].screening}  # removed: not tried again
+    assert result.stop_reason == "the chain reached its limit of 2 effects"
+    # with room for all three the look-alike is removed the same way and nothing resumes
+    roomy = chain.build_chain(fit_p, held_p, [look, real, third], jobs=1, max_effects=3)
+    assert roomy.effects == [real, third] and [t.effect for t in roomy.pruned] == [look]
+    assert roomy.pruned_after == (3,) and len(roomy.steps) == 3
+
+
+def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):
+    """A mass scale wins the first step by a hair over the brake scale it stands in for;
+    with the latency of step 2 in, the brake scale fits far better in its place: the
+    exchange after step 2 makes the swap, and a third step then finds nothing to add (the
+    mass scale gains too little on top). Costs come from tables, so only the chain's logic
+    runs."""
+    import simrunner.workflows.gap.chain as chain
+
+    mass, brake, lat = "mass_scale", "brake_scale", "command_latency"
+    field = {mass: "mass_scale", brake: "brake_scale", lat: "command_latency_s"}
+    neutral = {mass: 1.0, brake: 1.0, lat: 0.0}
+    fitted = {mass: 1.6, brake: 0.62, lat: 0.03}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([mass]): (400.0, 0.40),  # (fit cost, held gap)
+             frozenset([brake]): (401.0, 0.41), frozenset([lat]): (700.0, 0.7),
+             frozenset([mass, lat]): (300.0, 0.30), frozenset([brake, lat]): (100.0, 0.10),
+             frozenset([mass, brake]): (399.0, 0.40), frozenset([mass, brake, lat]): (99.0, 0.10)}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit)
+    monkeypatch.setattr(chain, "REFINE_TOP", 2)
+    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    result = chain.build_chain(fit_p, held_p, [mass, brake, lat], jobs=1)
+    assert [s.kept.effect for s in result.steps if s.kept] == [mass, lat]  # forward: the look-alike first
+    assert [(sw.step, sw.out, sw.into) for sw in result.swaps] == [(2, mass, brake)]
+    assert result.swaps[0].cost_before == 300.0 and result.swaps[0].cost_after == 100.0
+    assert result.effects == [brake, lat] and result.pruned == ()
+    assert result.parameters == {field[brake]: 0.62, field[lat]: 0.03}
+    assert result.steps[-1].kept is None  # step 3: the mass scale on top gains 1 %
+    # without a better runner-up nothing is exchanged: the brake scale's pair as costly as the mass's
+    refit[frozenset([brake, lat])] = (300.0, 0.30)
+    same = chain.build_chain(fit_p, held_p, [mass, brake, lat], jobs=1)
+    assert same.swaps == () and same.effects[:2] == [mass, lat]
+
+
+@pytest.mark.parametrize("truth_frac", [0.15, 0.25, 0.35])
+def test_screening_finds_a_small_value_in_a_narrow_valley_next_to_neutral(monkeypatch, truth_frac):
+    """A 12-ms latency on the 50-ms screening grid: its cost at 50 ms is far above the
+    neutral one, so the parabola through the grid's first three points puts its vertex
+    outside the bounds; a probe at the neutral end itself screened the latency at 0 % and
+    let look-alikes (a servo slew limit) take its place. The probe now goes inside."""
+    import simrunner.workflows.gap.fit as fit
+
+    cand = fit.CANDIDATES["command_latency"]
+    spacing = (cand.hi - cand.lo) / (fit.GRID_POINTS - 1)
+    truth = cand.lo + truth_frac * spacing
+    width = 0.4 * spacing  # the valley: cost back at the neutral level this far from the truth
+
+    def cost(problem, car):
+        x = car.effects.command_latency_s
+        return 1000.0 * (1.0 + ((x - truth) / width) ** 2) / (1.0 + (truth / width) ** 2)
+
+    monkeypatch.setattr(fit, "cost_of", cost)
+    car = CarDescription()
+    log = simulate(car)
+    seg = Segment(log, derive(log, car.chassis.wheelbase_m), tuple(make_windows(log)))
+    problem = Problem(car, (seg,), {"speed_mps": 1.0}, ("speed_mps",), 0.01)
+    screened = fit_effect(problem, "command_latency", 1000.0, refine=False)
+    best = 1000.0 / (1.0 + (truth / width) ** 2)
+    assert screened.cost < 1000.0 - 0.5 * (1000.0 - best)  # at least half the valley's depth
+    assert cand.lo < screened.parameters["command_latency_s"] < cand.lo + spacing
+    # and at the other end of a grid (a limit whose neutral value is its upper bound)
+    xs = np.linspace(0.0, 1.0, fit.GRID_POINTS)
+    probe = fit._probe(xs, [1.0 + ((x - (1.0 - truth_frac * 0.25)) / 0.1) ** 2 for x in xs])
+    assert xs[-2] < probe <= xs[-1] - fit.END_PROBE_FRACTION * 0.25
+
+
+def test_a_steering_play_starts_each_window_on_the_side_the_commands_left_it(monkeypatch):
+    """The replay gives a car with a play the steering commands before each window: the
+    car that made the log then replays it closer than when the play starts from the noisy
+    measured angle (30 s of the plan, play 0.03 rad; measured yaw RMS 0.0169 -> 0.0112)."""
+    from simrunner.workflows.gap import replay as replay_mod
+    from simrunner.workflows.gap.synth import make_measured_log
+
+    log, truth = make_measured_log("steering_play", value=0.03, rng=np.random.default_rng(0), duration_s=30.0)
+    d = derive(log, truth.car.chassis.wheelbase_m, truth.car.steering.limit_rad)
+    windows = make_windows(log)
+
+    def yaw_rms(history_s):
+        monkeypatch.setattr(replay_mod, "PLAY_HISTORY_S", history_s)
+        res = residuals(log, d, replay(truth.car, log, d, windows))
+        return rmse(res, np.ones(len(log), dtype=bool))["yaw_rad"]
+
+    assert yaw_rms(replay_mod.PLAY_HISTORY_S) < 0.8 * yaw_rms(0.0)
+
+
+def test_a_merged_logs_play_history_holds_the_commands_between_its_rows():
+    """A merged log primes a steering play with every command message before the lead-in,
+    at its own stamp, not only the commands the rows held."""
+    from simrunner.car.effects import make_sim
+
+    car = CarDescription().replace(effects=Effects(steering_play_rad=0.02))
+    full = simulate(car, duration_s=20.0)
+    thin = full.subset(np.arange(2, len(full), 5))
+    merged = dataclasses.replace(thin, command_steps=CommandSteps(full.t_s, full.speed_cmd_mps, full.steer_cmd_rad))
+    calls = []
+
+    def recording(car_, dt_s):
+        sim = make_sim(car_, dt_s=dt_s)
+        inner = sim.prime_steering
+        sim.prime_steering = lambda t_s, steer: (calls.append((np.array(t_s), np.array(steer))), inner(t_s, steer))
+        return sim
+
+    d = derive(thin, car.chassis.wheelbase_m)
+    windows = make_windows(thin)
+    replay(car, merged, d, windows[-1:], sim_factory=recording)
+    (t_s, steer), = calls
+    assert t_s.size == steer.size + 1 and np.all(np.diff(t_s) >= 0.0)
+    inside = (full.t_s > t_s[0]) & (full.t_s < t_s[-1])
+    assert np.array_equal(t_s[1:-1], full.t_s[inside])  # every message between the first and the last row
+    assert np.array_equal(steer[1:], full.steer_cmd_rad[inside])
+    calls.clear()
+    replay(car, thin, d, windows[-1:], sim_factory=recording)  # the rows alone: their commands only
+    assert np.isin(calls[0][0], thin.t_s).all()
+
+
+def test_a_log_without_a_reverse_command_while_rolling_cannot_reveal_an_esc_delay():
+    """``esc_brake_reverse`` acts only where a reverse command meets a car rolling forward:
+    listed as unrevealable until a fit window and a held-out window each hold one."""
+    from simrunner.workflows.gap.report import missing_manoeuvres, prepare
+
+    car = CarDescription()
+    log = simulate(car, duration_s=60.0)
+    t = log.t_s
+    none = prepare(log, car, 2.0)
+    assert missing_manoeuvres(["steering_gain"], [none], car) == {}
+    listed = missing_manoeuvres(["esc_brake_reverse", "steering_gain"], [none], car)
+    assert list(listed) == ["esc_brake_reverse"] and "(these logs: 0 fit, 0 held out)" in listed["esc_brake_reverse"][0]
+    events = (t > 13.0) & (t < 13.2) | (t > 33.0) & (t < 33.2) | (t > 53.0) & (t < 53.2)
+    both = prepare(log.with_columns(speed_cmd_mps=np.where(events, -0.5, log.speed_cmd_mps)), car, 2.0)
+    assert missing_manoeuvres(["esc_brake_reverse"], [both], car) == {}
+
+
 def test_a_plateau_found_by_an_earlier_refit_stays_reported_while_the_value_stays_in_it():
     """The earlier refit's interval stays with a parameter a later refit left inside it; a
     value that moved out drops it."""
