@@ -1403,3 +1403,33 @@ def test_a_plateau_found_by_an_earlier_refit_stays_reported_while_the_value_stay
     assert _carried(old, {"throttle_deadband_mps": 0.45}, {}) == {}
     new = {"steering_gain": (1.02, 1.3)}
     assert _carried(old, {"throttle_deadband_mps": 0.225, "steering_gain": 1.02}, new) == {**old, **new}
+
+
+def test_a_parameter_on_a_plateau_is_held_while_the_others_get_their_standard_errors(monkeypatch):
+    """run_gap computes the standard errors of the kept parameters not on a plateau only, the
+    plateau's parameter held at its value, and gives that one nan."""
+    import simrunner.workflows.gap.report as report
+
+    seen = {}
+
+    def sigma(problem, base, names, values, *, jobs=1):
+        seen["names"], seen["values"] = list(names), dict(values)
+        return {report.CANDIDATES[n].field: 0.01 for n in names}
+
+    monkeypatch.setattr(report, "parameter_sigma", sigma)
+    chain_spans = {"throttle_deadband_mps": (0.01, 0.3)}
+    import simrunner.workflows.gap.chain as chain_mod
+
+    real_build = chain_mod.build_chain
+
+    def build(*a, **k):
+        c = real_build(*a, **{**k, "max_effects": 0})
+        return dataclasses.replace(c, parameters={"throttle_deadband_mps": 0.155, "drag_coeff_kgpm": 0.05},
+                                   spans=chain_spans)
+
+    monkeypatch.setattr(report, "build_chain", build)
+    monkeypatch.setattr(chain_mod.Chain, "effects", property(lambda self: ["throttle_deadband", "drag"]))
+    log = simulate(CarDescription(), duration_s=30.0, rate_hz=50.0)
+    result = report.run_gap(log, jobs=1, sim_factory=kin_factory, effects=["drag"])
+    assert seen["names"] == ["drag"] and seen["values"]["throttle_deadband_mps"] == 0.155
+    assert result.parameter_sigma["drag_coeff_kgpm"] == 0.01 and math.isnan(result.parameter_sigma["throttle_deadband_mps"])

@@ -318,8 +318,10 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                         improvement_min=improvement_min, held_improvement_min=held_improvement_min,
                         max_effects=max_effects, robust_factor=robust_factor, progress=tick)
     car_after = chain.car
-    sigma = parameter_sigma(screening_problem(fit_problem), car, chain.effects, chain.parameters, jobs=jobs)
-    sigma.update({k: math.nan for k in chain.spans})  # on a plateau: the interval says it, not a curvature
+    # a parameter on a plateau is held (its interval says how well it is pinned, not a curvature)
+    curved = [e for e in chain.effects if CANDIDATES[e].field not in chain.spans]
+    sigma = parameter_sigma(screening_problem(fit_problem), car, curved, chain.parameters, jobs=jobs)
+    sigma.update({k: math.nan for k in chain.spans})
     tick("uncertainty")
     pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
     res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
