@@ -404,14 +404,12 @@ def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
     found by bisection (:data:`TIE_BISECTIONS` steps; the end towards neutral never nearer
     than twice :data:`NEUTRAL_TOL` of the fit range, which counts as no effect), and the
     middle is kept if it is on the plateau too (else the value found)."""
-    from simrunner.car.effects import EFFECTS
-
     u = to_u(values)
     moved = False
     spans: dict[str, tuple[float, float]] = {}
     for i, name in enumerate(names):
         c = CANDIDATES[name]
-        n_u = float(to_u({**values, c.field: min(max(EFFECTS[name].neutral[0], c.lo), c.hi)})[i])
+        n_u = _neutral_u(name)
         side = math.copysign(1.0, u[i] - n_u)
         near_limit = n_u + side * 2.0 * NEUTRAL_TOL
         if (u[i] - near_limit) * side <= 0.0:
@@ -498,12 +496,18 @@ def neutral_offset(name: str, value: float) -> float:
     """How far ``value`` of effect ``name`` lies from its neutral value, as a fraction of its
     fit range in the fit's coordinates (log scale where the fit searches in log scale; a
     neutral value outside the fit bounds is taken at the nearest bound)."""
+    to_u, _ = _bounds01([name])
+    return float(abs(to_u({CANDIDATES[name].field: value})[0] - _neutral_u(name)))
+
+
+def _neutral_u(name: str) -> float:
+    """Effect ``name``'s neutral value in the fit's ``[0, 1]`` coordinates (a neutral value
+    outside the fit bounds taken at the nearest bound)."""
     from simrunner.car.effects import EFFECTS
 
     to_u, _ = _bounds01([name])
     c = CANDIDATES[name]
-    neutral = min(max(EFFECTS[name].neutral[0], c.lo), c.hi)
-    return float(abs(to_u({c.field: value})[0] - to_u({c.field: neutral})[0]))
+    return float(to_u({c.field: min(max(EFFECTS[name].neutral[0], c.lo), c.hi)})[0])
 
 
 def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int = 2,
