@@ -149,6 +149,21 @@ def test_steering_servo_rate():
     assert sim.steer_rad == pytest.approx(0.2, rel=0.05)
 
 
+@pytest.mark.parametrize("dt", [0.001, 0.002, 0.005, 0.02])
+@pytest.mark.parametrize("target", [0.31, -0.047, 0.013])
+def test_the_servo_is_where_a_continuous_one_would_be_at_every_step_whatever_the_step(dt, target):
+    """A move that ends inside a step is not stretched to a whole number of steps (which
+    made the servo slower the coarser the step: 0.013 rad at 6 rad/s in one 5-ms step
+    instead of 2.2 ms)."""
+    rate = CAR.steering.rate_radps
+    sim = CarSim(CAR, dt_s=dt)
+    sim.set_command(0.0, target)
+    for k in range(1, int(0.08 / dt) + 1):
+        sim.step(1)
+        continuous = math.copysign(min(rate * k * dt, abs(target)), target)
+        assert sim.steer_rad == pytest.approx(continuous, abs=1e-4), (k, dt)  # knuckles linear, bicycle angle not quite
+
+
 @pytest.mark.parametrize("steer", [0.3, -0.3, 0.05, CAR.steering.limit_rad])
 def test_ackermann_inner_wheel_steers_more(steer):
     sim = CarSim(CAR)
@@ -259,6 +274,23 @@ def test_save_restore_is_bit_exact():
     assert sim.time_s == state.time_s
     second = trajectory(sim, DRIVE_SEQ[40:])
     assert np.array_equal(first, second)
+
+
+@pytest.mark.parametrize("save_after", [24, 25, 26])  # 0.31 rad at 6 rad/s, 2 ms: 25 whole steps and a part
+def test_save_restore_is_bit_exact_around_the_servo_moves_last_partial_step(save_after):
+    sim = CarSim(CAR)
+    sim.set_command(1.0, 0.31)
+    sim.step(save_after)
+    state = sim.save_state()
+    sim.step(5)
+    first = sim.save_state()
+    sim.restore_state(state)
+    sim.step(2)
+    sim.step(3)
+    second = sim.save_state()
+    assert np.array_equal(first.positions, second.positions)
+    assert np.array_equal(first.velocities, second.velocities)
+    assert sim.steer_rad == pytest.approx(0.31, abs=1e-4)
 
 
 def test_set_state_continues_smoothly():

@@ -24,11 +24,14 @@ zero every joint command after the step, so commands are set only in :meth:`set_
   front wheels roll freely, as in the thesis.
 * Steering (thesis 5.3.1): the knuckles are ``VELOCITY`` actuators (kinematic: no
   constraint rows, tyre forces cannot push them). A move to a new target is planned at
-  ``set_command``: both knuckles turn at constant speeds so that they reach their
-  Ackermann targets together after ``ceil(|move| / steering.rate_radps / dt)`` steps (the
-  bicycle angle moves at about ``rate_radps``, never faster); ``step`` stops them at the end
-  of the move (one Python event per move, never per step), so the result does not depend
-  on how ``step(n)`` calls are split.
+  ``set_command``: the bicycle angle moves at ``steering.rate_radps`` and both knuckles reach
+  their Ackermann targets together after ``T = |move| / rate_radps``; the knuckles turn at
+  constant speeds for the ``floor(T / dt)`` whole steps inside ``T`` and cover the rest of
+  the move in one last step at a lower speed, so at every step boundary they are where a
+  continuous servo would be, whatever ``dt`` (a move of 1.2 steps at full speed for 2 steps
+  would make the servo slower the coarser the step). ``step`` changes to the last step's
+  speed and stops the knuckles at the end of the move (at most two Python events per move,
+  never per step), so the result does not depend on how ``step(n)`` calls are split.
 * Front wheels roll freely (rear-wheel drive, ``drive.front_share`` = 0).
 
 Python cost per control update (bench/bench_closed_loop.py): ``set_command`` plans with
@@ -141,6 +144,7 @@ class _Control(NamedTuple):
     coast: bool = False
     ext_force_n: tuple[float, float] = (0.0, 0.0)
     front_omega_radps: tuple[float, float] = (0.0, 0.0)  # front left, right targets (four-wheel drive)
+    knuckle_tail_radps: tuple[float, float] | None = None  # knuckle speeds of a move's last, partial step
 
 
 @dataclass(frozen=True)
@@ -213,6 +217,7 @@ class CarSim:
         self._control = _Control()
         self._steer_left = 0  # steps before the steering move ends (live value)
         self._kvel = (0.0, 0.0)  # knuckle speeds now applied (live value)
+        self._tail = None  # knuckle speeds of the move's last, partial step, still to come (live value)
         self._held = False  # knuckles at rest where a plan to the commanded steer gave 0 steps
         self._rd = None  # read-out cache: (positions, velocities, rotation) lists
         self._pose: Pose2 | None = None
@@ -309,9 +314,10 @@ class CarSim:
             if not (abs(v) > abs(v_now) and v * v_now >= 0.0):  # not speeding up: brake limit
                 torque = self._torque_brake_nm
 
-        # steering servo: constant knuckle speeds so both reach the Ackermann target together
-        # after ceil(move / rate / dt) steps (so the mean rate is at most rate_radps)
+        # steering servo: both knuckles reach the Ackermann target together after
+        # T = move / rate: constant speeds for the whole steps inside T, the rest in a last step
         c = self._control
+        tail = None
         if self._held and d == c.steer_cmd_rad and self._steer_left == 0:
             q_tgt, k_vel, n_steps = c.knuckle_target_rad, (0.0, 0.0), 0  # same plan as last time
         else:
@@ -319,16 +325,20 @@ class CarSim:
             ql, qr = q[self._i_knuckle[0]], q[self._i_knuckle[1]]
             wb, sd, cd = self._wb_m, math.sin(d), math.cos(d)  # ackermann_angles_rad, inlined
             q_tgt = tl, tr = (math.atan2(wb * sd, wb * cd - half_t * sd), math.atan2(wb * sd, wb * cd + half_t * sd))
-            n_steps = math.ceil(abs(d - bicycle_angle_rad(ql, qr)) / self._rate_radps / self.dt_s - 1e-9)
+            steps = abs(d - bicycle_angle_rad(ql, qr)) / self._rate_radps / self.dt_s  # T / dt
+            n_steps = math.ceil(steps - 1e-9)
             if max(abs(tl - ql), abs(tr - qr)) <= 1e-15:
                 n_steps = 0
-            elif n_steps < 1:
+            elif n_steps <= 1:
                 n_steps = 1
-            if n_steps:
+            if n_steps == 1 or n_steps - steps < 1e-9:  # the move fills whole steps
                 t_move = n_steps * self.dt_s
+                k_vel = ((tl - ql) / t_move, (tr - qr) / t_move) if n_steps else (0.0, 0.0)
+            else:  # n_steps - 1 whole steps at full speed, the rest of the move in the last
+                t_move, n_full = steps * self.dt_s, n_steps - 1
                 k_vel = ((tl - ql) / t_move, (tr - qr) / t_move)
-            else:
-                k_vel = (0.0, 0.0)
+                tail = ((tl - ql - k_vel[0] * n_full * self.dt_s) / self.dt_s,
+                        (tr - qr - k_vel[1] * n_full * self.dt_s) / self.dt_s)
             self._held = n_steps == 0
         front = (0.0, 0.0)
         if self._front_share > 0.0:  # front wheels: centre speed along the Ackermann target heading
@@ -337,8 +347,8 @@ class CarSim:
             front = (((v - w * half_t) * math.cos(tl) + ww * math.sin(tl)) / r,
                      ((v + w * half_t) * math.cos(tr) + ww * math.sin(tr)) / r)
         self._control = c = _Control(v, d, w, ((v - w * half_t) / r, (v + w * half_t) / r), torque,
-                                     q_tgt, k_vel, n_steps, c.wheels_locked, c.coast, c.ext_force_n, front)
-        self._steer_left, self._kvel = n_steps, k_vel
+                                     q_tgt, k_vel, n_steps, c.wheels_locked, c.coast, c.ext_force_n, front, tail)
+        self._steer_left, self._kvel, self._tail = n_steps, k_vel, tail
         self._apply(c)
 
     def _steer_event(self) -> None:
@@ -349,11 +359,20 @@ class CarSim:
         for j in self._body.knuckle_joints:
             j.setCommand(0, 0.0)
 
+    def _tail_event(self) -> None:
+        """The steering move's last, partial step begins: its lower knuckle speeds."""
+        self._kvel = self._k_applied = self._tail
+        self._tail = None
+        for j, vel in zip(self._body.knuckle_joints, self._kvel):
+            j.setCommand(0, vel)
+
     def _control_now(self) -> _Control:
         """``_control`` with the live steering-move fields (steps left, knuckle speeds)."""
         c = self._control
-        if c.steer_steps_left != self._steer_left or c.knuckle_vel_radps != self._kvel:
-            c = self._control = c._replace(steer_steps_left=self._steer_left, knuckle_vel_radps=self._kvel)
+        if (c.steer_steps_left != self._steer_left or c.knuckle_vel_radps != self._kvel
+                or c.knuckle_tail_radps != self._tail):
+            c = self._control = c._replace(steer_steps_left=self._steer_left, knuckle_vel_radps=self._kvel,
+                                           knuckle_tail_radps=self._tail)
         return c
 
     def set_wheel_lock(self, locked: bool) -> None:
@@ -442,6 +461,13 @@ class CarSim:
             return
         step = self._world_step
         left = self._steer_left
+        if self._tail is not None and left - 1 <= n:  # the last, partial step begins inside
+            for _ in range(left - 1):
+                step(False)
+            self._steer_left, n, left = 1, n - (left - 1), 1
+            self._tail_event()
+            if n == 0:
+                return
         if left == 0 or left > n:  # no steering event inside this chunk
             for _ in range(n):
                 step(False)
@@ -569,6 +595,7 @@ class CarSim:
         self._world.setTime(state.time_s)
         self._control = state.control
         self._steer_left, self._kvel = state.control.steer_steps_left, state.control.knuckle_vel_radps
+        self._tail = state.control.knuckle_tail_radps
         self._apply(self._control, force=True)
 
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
