@@ -101,3 +101,38 @@ def test_a_parameter_nothing_pins_leaves_the_others_their_standard_error(exact_l
                            {**r.parameters, "esc_reverse_delay_s": 0.3})
     assert math.isnan(both["esc_reverse_delay_s"])
     assert both["steering_offset_rad"] == pytest.approx(r.parameter_sigma["steering_offset_rad"], rel=1e-6)
+
+
+
+def test_a_parameter_at_an_end_of_its_fit_range_gets_no_standard_error_and_the_others_keep_theirs(monkeypatch):
+    """Window costs that are exact quadratics (so the Hessian is known): the offset's minimum
+    inside its range, the gain's beyond the top of its range, where the fit stopped (1.5). The
+    bound, not the cost's curvature, made the gain's value (the report warns of it), so it
+    gets nan; the offset gets the sandwich of its own curvature and spread, the gain held
+    (DS3's pose-only rolling resistance at its bound once took every other sigma with it)."""
+    from simrunner.workflows.gap import uncertainty
+    from simrunner.workflows.gap.fit import CANDIDATES
+    from vehicle.description import CarDescription
+
+    rng = np.random.default_rng(5)
+    spread_a, spread_b = rng.normal(0.0, 0.01, 40), rng.normal(0.0, 0.01, 40)
+    spread_a -= spread_a.mean()  # the offset fitted at its minimum: no Newton step in its error
+    off, gain = CANDIDATES["steering_offset"], CANDIDATES["steering_gain"]
+
+    def window_values(problem, car):
+        ua, ub = off.u(car.effects.steering_offset_rad), gain.u(car.effects.steering_gain)
+        # the gain's coordinate unclipped (its minimum lies outside the range, at u = 1.2)
+        ub = (car.effects.steering_gain - gain.lo) / (gain.hi - gain.lo) if ub >= 1.0 else ub
+        return 100.0 * (ua - 0.5 - spread_a) ** 2 + 100.0 * (ub - 1.2 - spread_b) ** 2
+
+    monkeypatch.setattr(uncertainty, "window_values", window_values)
+    values = {"steering_offset_rad": 0.0, "steering_gain": 1.5}
+    sigma = parameter_sigma(None, CarDescription(), ["steering_offset", "steering_gain"], values)
+    assert math.isnan(sigma["steering_gain"])
+    # the offset alone: H = 2 * 100 * 40 in u, B = n/(n-1) * sum (200 spread_a)^2 centred
+    g = 200.0 * spread_a
+    expected_u = math.sqrt(g @ g * 40 / 39) / (200.0 * 40)
+    assert sigma["steering_offset_rad"] == pytest.approx(expected_u * (off.hi - off.lo), rel=0.05)
+    inside = parameter_sigma(None, CarDescription(), ["steering_offset", "steering_gain"],
+                             {**values, "steering_gain": 1.4})
+    assert math.isfinite(inside["steering_gain"]) and inside["steering_gain"] > 0.0

@@ -65,6 +65,7 @@ BRENT_MAXITER = 10
 ROBUST_WINDOW_FACTOR = 4.0  # Cauchy scale of a window: this x the median nominal mean square per value
 REFINE_TOP = 3  # effects refined after the grid screening
 END_PROBE_FRACTION = 0.25  # a probe next to a best grid end goes at least this far towards its neighbour
+AT_BOUND_U = 0.01  # a fitted value this close to an end of its fit range (fraction of it) is at the bound
 SCALE_FLOOR = {"along_m": 0.005, "cross_m": 0.005, "yaw_rad": 0.005, "speed_mps": 0.02,
                "yaw_rate_radps": 0.05}
 
@@ -84,6 +85,16 @@ class Candidate:
 
     def from_x(self, x: float) -> float:
         return math.exp(x) if self.log_scale else x
+
+    def u(self, v: float) -> float:
+        """Where ``v`` lies in the fit range, ``[0, 1]`` in the search's scale (clipped)."""
+        lo, hi = self.to_x(self.lo), self.to_x(self.hi)
+        return (self.to_x(min(max(v, self.lo), self.hi)) - lo) / (hi - lo)
+
+    def at_bound(self, v: float) -> bool:
+        """``v`` within :data:`AT_BOUND_U` of an end of the fit range: the fit wanted to go further."""
+        u = self.u(v)
+        return u <= AT_BOUND_U or u >= 1.0 - AT_BOUND_U
 
 
 def _candidates() -> dict[str, Candidate]:

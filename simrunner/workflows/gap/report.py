@@ -140,15 +140,8 @@ class GapResult:
     def at_bounds(self) -> list[str]:
         """Kept parameters at (within 1 % of) an end of their fit range: the fit wanted to go
         further, so the catalogue probably lacks the real cause (or the car file is far off)."""
-        out = []
         by_field = {c.field: c for c in CANDIDATES.values()}
-        for name, v in self.parameters.items():
-            c = by_field[name]
-            lo, hi = c.to_x(c.lo), c.to_x(c.hi)
-            u = (c.to_x(min(max(v, c.lo), c.hi)) - lo) / (hi - lo)
-            if u <= 0.01 or u >= 0.99:
-                out.append(name)
-        return out
+        return [name for name, v in self.parameters.items() if by_field[name].at_bound(v)]
 
     @property
     def logs_worse(self) -> list[str]:

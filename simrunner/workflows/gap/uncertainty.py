@@ -25,8 +25,10 @@ sub-steps of 4-5 ms, so a much smaller step would see a staircase). The stencil 
 replays) is moved inside the range for a parameter near its bound, and each window's
 gradient carried back to the parameter by its own Hessian. ``sigma`` is ``nan`` for a
 parameter along which the cost does not curve upward (``H_ii <= 0``: the log does not pin
-it), and the others' sandwich is that with it held; all are ``nan`` when the rest of ``H`` is
-not positive definite either. It says nothing about a bias of the catalogue effect standing in for
+it) and for one at an end of its fit range (``Candidate.at_bound``: the bound, not the cost,
+made that minimum, and the report warns of it; DS3's pose-only rolling resistance at 0.1
+turned ``H`` indefinite and took every other sigma with it), and the others' sandwich is
+that with it held; all are ``nan`` when the rest of ``H`` is not positive definite either. It says nothing about a bias of the catalogue effect standing in for
 something else (docs/gap.md, "Known limits").
 """
 from __future__ import annotations
@@ -116,7 +118,10 @@ def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str]
     grad += hess @ (u - c)  # each window's gradient carried from the centre to the parameters
     out = {CANDIDATES[m].field: math.nan for m in names}
     h_all = hess.sum(axis=0)
-    pinned = [i for i in range(k) if h_all[i, i] > 0.0]  # the others: the cost does not curve along them
+    # the others: the cost does not curve along them, or the fit stopped at a bound (a minimum
+    # the bound makes, not the cost's curvature)
+    pinned = [i for i in range(k) if h_all[i, i] > 0.0
+              and not CANDIDATES[names[i]].at_bound(values[CANDIDATES[names[i]].field])]
     h = h_all[np.ix_(pinned, pinned)]
     try:
         np.linalg.cholesky(h)
