@@ -467,6 +467,19 @@ def test_chain_acceptance_needs_bic_fit_and_held_out_improvement():
                                                                            0.068, 0.02)
 
 
+def test_a_kept_effect_must_not_grow_the_reports_held_out_gap():
+    """The step's tests judge on the step's normalisation; the report shows the held-out gap
+    on the nominal one. A candidate whose report figure grows (DS3 pose only: a brake scale
+    at +2 %) is not kept, whatever the step's figure says."""
+    from simrunner.workflows.gap.chain import _report_held_reason
+
+    assert _report_held_reason(0.0042, 0.0050) == ""
+    assert _report_held_reason(0.0050, 0.0050) == ""
+    reason = _report_held_reason(0.00514, 0.00504)
+    assert reason.startswith("held-out gap on the report's normalisation +2.0%: the held-out windows do not confirm")
+    assert "not finite" in _report_held_reason(float("nan"), 0.005)
+
+
 @pytest.mark.parametrize("effect, field, neutral, near, away", [
     ("drag", "drag_coeff_kgpm", 0.0, 1e-4, 0.05),
     ("steering_offset", "steering_offset_rad", 0.0, 1e-5, 0.01),
