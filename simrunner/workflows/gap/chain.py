@@ -331,12 +331,7 @@ def _bounds01(names: Sequence[str]):
     cands = [CANDIDATES[n] for n in names]
 
     def to_u(values: dict[str, float]) -> np.ndarray:
-        out = []
-        for c in cands:
-            lo, hi = c.to_x(c.lo), c.to_x(c.hi)
-            v = min(max(values[c.field], c.lo), c.hi)
-            out.append((c.to_x(v) - lo) / (hi - lo))
-        return np.array(out)
+        return np.array([c.u(values[c.field]) for c in cands])
 
     def from_u(u: np.ndarray) -> dict[str, float]:
         out = {}
