@@ -1308,6 +1308,56 @@ def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):
     assert same.swaps == () and same.effects[:2] == [mass, lat]
 
 
+def test_a_candidate_the_screening_subset_underrates_is_refitted_on_its_gain_over_all_fit_windows(monkeypatch):
+    """Step 4's gate: a candidate screened below half of IMPROVEMENT_MIN on the screening
+    subset is scored once more at its screened value on every fit window, and refitted when
+    that gain reaches the gate (multi log 0: a drag screened at 2.6 % on 20 of its 30 fit
+    windows gains 8.7 % on all of them; the windows at top speed were left out). When the
+    subset is all the fit windows, the screening's gain decides, as before. Costs come
+    from tables, so only the chain's logic runs."""
+    import simrunner.workflows.gap.chain as chain
+
+    first, real, decoy = "throttle_deadband", "drag", "servo_rate_scale"
+    field = {first: "throttle_deadband_mps", real: "drag_coeff_kgpm", decoy: "servo_rate_scale"}
+    neutral = {first: 0.0, real: 0.0, decoy: 1.0}
+    fitted = {first: 0.15, real: 0.05, decoy: 1.04}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([first]): (400.0, 0.4),  # (fit cost, held gap)
+             frozenset([real]): (900.0, 0.9), frozenset([decoy]): (950.0, 0.95),
+             frozenset([first, real]): (300.0, 0.3), frozenset([first, decoy]): (395.0, 0.395),
+             frozenset([real, decoy]): (890.0, 0.89), frozenset([first, real, decoy]): (299.0, 0.299)}
+    screened = {frozenset(): 1000.0, frozenset([first]): 400.0, frozenset([real]): 990.0,
+                frozenset([decoy]): 960.0, frozenset([first, decoy]): 390.0,  # 2.5 %: ranked above the drag
+                frozenset([first, real]): 395.0,  # 1.25 % on the subset: below the gate of 3.4 %
+                frozenset([real, decoy]): 985.0, frozenset([first, real, decoy]): 299.0}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
+    monkeypatch.setattr(chain, "REFINE_TOP", 1)
+    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    # the same chain where the screening subset is all the fit windows: the drag is never refitted
+    whole = chain.build_chain(fit_p, held_p, [first, real, decoy], jobs=1)
+    assert whole.effects == [first]
+    assert [t.effect for t in whole.steps[1].trials] == [decoy]
+
+    table_cost = chain.cost_of
+
+    def subset_of(problem, max_s=0):
+        sub = problem.with_car(problem.car)
+        sub.subset = True
+        return sub
+
+    def cost(problem, car):
+        if getattr(problem, "subset", False):
+            return screened[frozenset(n for n in field if getattr(car.effects, field[n]) != neutral[n])]
+        return table_cost(problem, car)
+
+    monkeypatch.setattr(chain, "screening_problem", subset_of)
+    monkeypatch.setattr(chain, "cost_of", cost)
+    result = chain.build_chain(fit_p, held_p, [first, real, decoy], jobs=1)
+    assert [s.kept.effect for s in result.steps if s.kept] == [first, real]
+    assert [t.effect for t in result.steps[1].trials] == [decoy, real]  # the decoy first, in screening order
+    assert result.steps[1].trials[0].reason.startswith("delta_BIC")
+    assert result.effects == [first, real] and result.parameters == {field[first]: 0.15, field[real]: 0.05}
+
+
 @pytest.mark.parametrize("truth_frac", [0.15, 0.25, 0.35])
 def test_screening_finds_a_small_value_in_a_narrow_valley_next_to_neutral(monkeypatch, truth_frac):
     """A 12-ms latency on the 50-ms screening grid: its cost at 50 ms is far above the
