@@ -1241,6 +1241,37 @@ def test_the_final_check_removes_an_effect_the_later_ones_made_redundant(monkeyp
     assert only.effects == [look] and only.pruned == ()
 
 
+def test_an_effect_a_later_one_takes_a_little_from_stays_at_a_gain_no_effect_free_log_reaches(monkeypatch):
+    """The final check's hysteresis: a brake scale kept first (the screening underrated the
+    steering lag) gains 6.2 % of the fit cost beside the lag, below the 6.8 % it needs to
+    enter but above the 3.4 % an effect-free log's best candidate reaches, and removing it
+    grows the held-out gap by 6 %: it stays (DS2). Beside a lag that takes nearly all of it
+    (2.4 %, delta_BIC 14.7 against 20 to stay) it goes. Costs come from tables, so only the chain's logic runs."""
+    import simrunner.workflows.gap.chain as chain
+
+    first, later = "brake_scale", "steering_lag"
+    field = {first: "brake_scale", later: "steering_lag_s"}
+    neutral = {first: 1.0, later: 0.0}
+    fitted = {first: 0.5, later: 0.12}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([first]): (800.0, 0.8),  # (fit cost, held gap)
+             frozenset([later]): (640.0, 0.64), frozenset([first, later]): (600.0, 0.6)}
+    screened = {frozenset([first]): 800.0, frozenset([later]): 900.0, frozenset([first, later]): 600.0}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
+    monkeypatch.setattr(chain, "REFINE_TOP", 1)
+    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    entry = {"delta_bic_min": 40.0, "improvement_min": 0.068, "held_improvement_min": 0.029}
+    assert chain.staying(*entry.values()) == (20.0, 0.034, 0.0145)
+    result = chain.build_chain(fit_p, held_p, [first, later], jobs=1, **entry)
+    assert [s.kept.effect for s in result.steps if s.kept] == [first, later]
+    assert result.effects == [first, later] and result.pruned == ()
+    assert 1.0 - 600.0 / 640.0 < entry["improvement_min"]  # it would not enter now: it stays
+    # beside a later effect that takes nearly all of it, it goes
+    refit[frozenset([later])] = (615.0, 0.615)
+    gone = chain.build_chain(fit_p, held_p, [first, later], jobs=1, **entry)
+    assert gone.effects == [later] and [t.effect for t in gone.pruned] == [first]
+    assert gone.pruned[0].reason == "delta_BIC 14.7 < 20 (fit windows)"  # the staying threshold
+
+
 def test_a_chain_at_its_limit_resumes_after_the_check_removes_a_look_alike(monkeypatch):
     """Stepwise selection: with room for two effects the look-alike and the real one fill
     the chain; the check removes the look-alike, which frees a place, and the forward

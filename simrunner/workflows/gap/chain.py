@@ -69,11 +69,21 @@ refitted) and
 7. stops when no candidate passes, or with :data:`MAX_EFFECTS` effects kept;
 8. then checks every kept effect once more (backward elimination): with two or more kept,
    each is left out in turn and the others refitted; an effect that would no longer pass
-   the tests of step 3 as the last one added (against the others refitted without it) is
-   removed (so is one whose removal would not make the report's held-out gap grow), the
-   weakest first, and the check repeats. A look-alike kept early (a slower
-   servo standing in for a latency found later) goes; ``Chain.pruned`` records it with its
-   reason (``Chain.pruned_after``: the last step before that check);
+   the tests of step 3 as the last one added (against the others refitted without it) at
+   the thresholds to *stay* is removed (so is one whose removal would not make the
+   report's held-out gap grow), the weakest first, and the check repeats. To enter, a
+   candidate needs :data:`~simrunner.workflows.gap.thresholds.SAFETY` times the largest
+   ``delta_bic``, fit improvement and held-out gain an effect-free log's best candidate
+   showed (the calibration, ``thresholds.py``); to stay, an effect the held-out windows
+   confirmed on entry needs that largest value itself (:func:`staying`): a gain beside
+   the others that no effect-free log reaches is not noise. This is the hysteresis of
+   stepwise regression (Efroymson 1960: an F-to-remove below the F-to-enter), without
+   which an effect that a later one takes a little from is removed at a gain that admits
+   no false claim (DS2's brake scale: 6.6 % beside two later effects, against 6.8 % to
+   enter and 3.4 % at most on an effect-free log; removing it grows the held-out gap
+   20 %). A look-alike kept early (a slower servo standing in for a latency found later)
+   gains about nothing beside the real effect and goes; ``Chain.pruned`` records it with
+   its reason (``Chain.pruned_after``: the last step before that check);
 9. when the check removed an effect, resumes the forward steps from the smaller model (on
    its normalisation; a removed effect is not tried again), then checks again after any
    step that kept something: stepwise selection in both directions. A look-alike that took
@@ -98,6 +108,7 @@ from simrunner.workflows.gap.fit import (BRENT_MAXITER, CANDIDATES, DELTA_BIC_MI
                                          REFINE_TOP, ROBUST_WINDOW_FACTOR, FitResult, Problem, _quiet_worker,
                                          bic, cost_of, fit_all, rescaled, robust_total, segment_residuals,
                                          window_costs)
+from simrunner.workflows.gap.thresholds import SAFETY
 from vehicle.description import CarDescription
 
 MAX_EFFECTS = 4
@@ -629,7 +640,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     else:
                         gains = [1.0 - c / j_cost for c in run_costs(
                             [(judge.fit, with_parameters(base, {**kept_values, **r.parameters})) for r in rest])]
-                    return [r for r, g in zip(rest, gains) if g >= 0.5 * improvement_min]
+                    return [r for r, g in zip(rest, gains) if g >= improvement_min / SAFETY]
 
                 batches: list[list[FitResult]] = [ranked[:n_top]]
                 gate_done = False
@@ -696,7 +707,8 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                 for e, o in zip(kept_names, outs):
                     tr = Trial(e, dict(kept_values), cost, bic(judge.fit, o.judged_cost, k - 1) - bic(judge.fit, j_cost, k),
                                1.0 - j_cost / o.judged_cost if o.judged_cost > 0 else 0.0, j_held, o.evaluations)
-                    reason = (_reject_reason(tr, o.judged_held_gap, delta_bic_min, improvement_min, held_improvement_min)
+                    reason = (_reject_reason(tr, o.judged_held_gap, *staying(delta_bic_min, improvement_min,
+                                                                              held_improvement_min))
                               or _report_held_reason(held_gap, o.held_gap))
                     if reason and (weakest is None or tr.delta_bic < weakest[0].delta_bic):
                         weakest = (dataclasses.replace(tr, reason=reason), o)
@@ -765,6 +777,12 @@ def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, hel
         if o.cost < cost and o.held_gap <= held_gap and (best is None or o.cost < best.cost_after):
             best = Swap(index, out, into, dict(o.values), cost, o.cost, held_gap, o.held_gap, dict(o.spans))
     return best
+
+
+def staying(delta_bic_min: float, improvement_min: float, held_improvement_min: float) -> tuple[float, float, float]:
+    """The thresholds an effect already kept must still pass in the final check (step 8 of the
+    module docstring): the entry thresholds without the calibration's safety factor."""
+    return delta_bic_min / SAFETY, improvement_min / SAFETY, held_improvement_min / SAFETY
 
 
 def _report_held_reason(after: float, before: float) -> str:
