@@ -614,6 +614,13 @@ SYNTH_TARGETS = (
 )
 
 
+def _sigma_text(sd: float | None) -> str:
+    """A parameter's standard error as the report writes it (``report.text``)."""
+    if sd is None:
+        return ""
+    return f" +- {sd:.2g}" if math.isfinite(sd) else " (+- not known: the log does not pin it)"
+
+
 def target_rows(rows: list[dict]) -> list[dict]:
     """Every issue-10 target the rows measure: figure, n, goal, met (None: nothing measured)."""
     out = []
@@ -752,7 +759,7 @@ def report(rows: list[dict]) -> str:
             rmse = ", ".join(f"{sig} {r['rmse_before'][sig]:.3f} -> {r['rmse_after'].get(sig, float('nan')):.3f}"
                              for sig in ("position_m", "speed_mps", "yaw_rate_radps") if sig in r["rmse_before"])
             sd = r.get("parameter_sigma", {})
-            values = ", ".join(f"{f} = {v:.4g}" + (f" +- {sd[f]:.2g}" if f in sd else "") for f, v in r["parameters"].items())
+            values = ", ".join(f"{f} = {v:.4g}" + _sigma_text(sd.get(f)) for f, v in r["parameters"].items())
             parts.append(f"real {r['log']} ({r['wall_s']:.0f} s wall, signals {', '.join(r['signals'])}): kept "
                          f"{', '.join(r['effects']) or 'none'} ({values})\n  held-out gap {r['gap_before']:.3g} -> "
                          f"{r['gap_after']:.3g}; RMSE {rmse}\n  steps: {steps}\n  stop: {r['stop']}")
