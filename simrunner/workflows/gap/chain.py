@@ -35,8 +35,9 @@ refitted) and
    seen (the held-out problem may use a finer physics step than the fits: the step
    ``simrunner drive`` uses, so what is kept holds for the car file as it will be driven);
 4. when every refitted candidate fails, refits the next ones in the screening order, in
-   batches of the same size, every one whose screening fit gained at least half of
-   ``IMPROVEMENT_MIN`` (a one-parameter gain below that is not worth a refit). The gate is
+   batches of the same size, every one whose screening fit gained at least
+   ``IMPROVEMENT_MIN / SAFETY`` (half of it: the largest gain an effect-free log's best
+   candidate showed; a one-parameter gain below that is not worth a refit). The gate is
    a test and judges where the tests do: on all fit windows and on the step's
    normalisation (step 6), each candidate replayed once at its screened value (the
    screening's own figures when they are those: the first step of a log the subset holds
