@@ -708,9 +708,9 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                 for e, o in zip(kept_names, outs):
                     tr = Trial(e, dict(kept_values), cost, bic(judge.fit, o.judged_cost, k - 1) - bic(judge.fit, j_cost, k),
                                1.0 - j_cost / o.judged_cost if o.judged_cost > 0 else 0.0, j_held, o.evaluations)
-                    reason = (_reject_reason(tr, o.judged_held_gap, *staying(delta_bic_min, improvement_min,
-                                                                              held_improvement_min))
-                              or _report_held_reason(held_gap, o.held_gap))
+                    stay = _reject_reason(tr, o.judged_held_gap, *staying(delta_bic_min, improvement_min,
+                                                                          held_improvement_min))
+                    reason = f"to stay: {stay}" if stay else _report_held_reason(held_gap, o.held_gap)
                     if reason and (weakest is None or tr.delta_bic < weakest[0].delta_bic):
                         weakest = (dataclasses.replace(tr, reason=reason), o)
                 if weakest is None:
