@@ -816,5 +816,5 @@ def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvem
     return ""
 
 
-__all__ = ["Chain", "Step", "Swap", "Trial", "build_chain", "joint_refit", "with_parameters",
+__all__ = ["Chain", "Step", "Swap", "Trial", "build_chain", "joint_refit", "staying", "with_parameters",
            "MAX_EFFECTS", "HELD_IMPROVEMENT_MIN"]
