@@ -151,7 +151,7 @@ def test_read_log_ignores_extra_columns_and_order(tmp_path):
 
 
 @pytest.mark.parametrize("text, line, what", [
-    ("t,x,y,yaw,speed,speed_cmd\n" + _good_rows(), 1, "missing: steer_cmd_rad"),
+    ("t,x,y,yaw,speed,speed_cmd\n" + _good_rows().replace(",0\n", "\n"), 1, "missing: steer_cmd_rad"),
     ("", 1, "header"),
     (GAP_HEADER + _good_rows(5), 6, "expected at least"),
     (GAP_HEADER + _good_rows(20, 0.5), 21, "expected at least"),
@@ -159,6 +159,7 @@ def test_read_log_ignores_extra_columns_and_order(tmp_path):
     (GAP_HEADER + _good_rows(10) + "1.0,nan,0,0,1,1,0\n", 12, "finite"),
     (GAP_HEADER + _good_rows(10) + "0.5,0,0,0,1,1,0\n" + _good_rows(90), 12, "strictly increasing"),
     (GAP_HEADER + _good_rows(10) + "\n5.0,0,0\n", 13, "expected 7 cells"),
+    (GAP_HEADER + _good_rows(10) + "1.0,0,0,0,1,1,0,7\n" + _good_rows(90), 12, "expected 7 cells"),
     (FORMAT_LINE + "\n" + GAP_HEADER + _good_rows(10) + "0.5,0,0,0,1,1,0\n", 13, "strictly increasing"),
 ])
 def test_read_log_errors_name_file_and_line(tmp_path, text, line, what):
@@ -167,6 +168,12 @@ def test_read_log_errors_name_file_and_line(tmp_path, text, line, what):
         read_measured(p)
     assert str(info.value).startswith(f"{p}:{line}: ")
     assert "\n" not in str(info.value)
+
+
+def test_read_log_takes_a_trailing_separator_as_no_cell(tmp_path):
+    rows = "".join(f"{i * 0.1},{i * 0.1},0,0,1,1,0,\n" for i in range(100))
+    log = read_measured(_write(tmp_path, GAP_HEADER + rows))
+    assert len(log) == 100 and log.x_m[10] == pytest.approx(1.0)
 
 
 def test_read_log_missing_file(tmp_path):

@@ -477,7 +477,9 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
             line = reader.line_num
             if not row or all(not c.strip() for c in row):
                 continue
-            if len(row) < len(header):
+            if len(row) < len(header) or any(c.strip() for c in row[len(header):]):
+                # a trailing separator (empty cells past the header) is fine; a value there
+                # means the row's cells are shifted against the header
                 raise LogError(source, line, f"expected {len(header)} cells (got {len(row)})")
             if delimiter == ";":
                 row = _decimal_points(row)
