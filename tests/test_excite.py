@@ -285,6 +285,18 @@ def test_cli_writes_plan_and_simulated_log_with_every_column(tmp_path):
     assert res.exit_code == 2 and "--simulate" in res.output and "Traceback" not in res.output
 
 
+def test_cli_tells_an_open_loop_run_that_leaves_the_area_to_close_the_loop(tmp_path):
+    car_path = tmp_path / "trim.toml"
+    car_path.write_text("[effects]\nsteering_offset_rad = 0.035\n")  # a 2-degree servo trim
+    args = ["-o", str(tmp_path / "plan.csv"), "--car", str(car_path), "--simulate", str(tmp_path / "log.csv"),
+            "--dt", "0.005"]
+    res = CliRunner().invoke(excite_cmd, args)
+    assert res.exit_code == 0, res.output
+    assert "m outside the area" in res.output and "--closed-loop" in res.output
+    res = CliRunner().invoke(excite_cmd, args + ["--closed-loop"])
+    assert res.exit_code == 0 and "inside the area" in res.output and "--closed-loop" not in res.output
+
+
 @settings(max_examples=40, deadline=None)
 @given(hs.lists(hs.tuples(hs.floats(-3, 3), hs.floats(-0.5, 0.5), hs.booleans(),
                           hs.text("abcdefghij_:+-.0123456789", min_size=1, max_size=12),

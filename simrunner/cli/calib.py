@@ -66,6 +66,9 @@ def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_
     if log is not None:
         out = plan.outside_area_m(log.x_m, log.y_m)
         where = "inside the area" if out == 0.0 else f"up to {out:.2f} m outside the area"
+        if out > 0.0 and not closed_loop:
+            where += ("; a real car drifts like this unless the turns close the loop on its pose: "
+                      "--closed-loop (docs/calibration.md)")
         click.echo(f"simulated log: {simulate} ({'closed' if closed_loop else 'open'} loop, {log.duration_s:.1f} s, "
                    f"path {log.x_m.max() - log.x_m.min():.1f} x {log.y_m.max() - log.y_m.min():.1f} m, {where})")
 
