@@ -392,6 +392,7 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
     held = {"gap_before": result.gap_before, "gap_after": result.gap_after,
             "rmse_before": result.rmse_before, "rmse_after": result.rmse_after}
     row = {"mode": mode, "trial": k, "sensors": sensors, "effects": effects, "values": truth.values,
+           "nuisance": {"mass_factor": truth.mass_factor, "friction_factor": truth.friction_factor},
            "snr": effect_snr(mode, k), "signals": list(result.settings["signals"]),
            "unrevealable": sorted(result.unrevealable),
            "chain": _method_row(result.effects, result.parameters, truth.values, effects, held, wall,
@@ -688,7 +689,24 @@ def _trial_table(rows: list[dict]) -> str:
         pos = f"{c['rmse_after']['position_m'] / pb:.2f}" if pb else "-"
         lines.append(f"{r['mode']:<13}{r['trial']:>3}  {hid:<64}{', '.join(c['named']) or 'none':<44}{errs:>16}"
                      f"{pos:>8}{c['gap_after'] / c['gap_before']:>8.2f}{c['wall_s']:>6.0f}")
-    return "\n".join(lines)
+    notes = [_nuisance_note(r) for r in rows]
+    return "\n".join(lines + [n for n in notes if n])
+
+
+# a spurious effect that acts like a nuisance factor of the log's car: the factor beside it
+_NUISANCE_OF = {"friction": ("friction_scale", "friction_factor", "grip"), "mass_scale": ("mass_scale", "mass_factor", "mass")}
+
+
+def _nuisance_note(row: dict) -> str:
+    """A line for a spurious ``friction`` or ``mass_scale``: its fitted value beside the log's
+    hidden grip or mass factor (the +-3 % nuisance, real but not counted as an effect)."""
+    nuisance = row.get("nuisance")
+    if not nuisance:  # rows saved before the nuisance was kept
+        return ""
+    parts = [f"{field} {row['chain']['parameters'][field]:.4g} (the car's hidden {what} factor "
+             f"{nuisance[key]:.4g})" for e in row["chain"]["spurious"] if e in _NUISANCE_OF
+             for field, key, what in [_NUISANCE_OF[e]] if field in row["chain"]["parameters"]]
+    return f"  {row['mode']} {row['trial']}: spurious {'; '.join(parts)}" if parts else ""
 
 
 def _rows_held_table(rows: list[dict]) -> str:
