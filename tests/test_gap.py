@@ -132,6 +132,22 @@ def test_glitch_times_of_a_log_with_epoch_stamps_also_say_how_far_into_the_log(o
     assert "t = 12.250..12.600 s: time_gap (t_s)" in summary_text(plain)
 
 
+def test_a_log_with_many_glitches_lists_twelve_and_says_how_many_more(offset_run):
+    import dataclasses
+
+    from simrunner.workflows.gap.glitches import Glitch, GlitchKind
+    from simrunner.workflows.gap.report import summary_text
+
+    _, _, result = offset_run
+    part = result.parts[0]
+    many = tuple(Glitch(GlitchKind.DUPLICATE, 1.0 + k, 1.0 + k, "t_s", "repeats the row before it")
+                 for k in range(20))
+    text = summary_text(dataclasses.replace(result, parts=[dataclasses.replace(part, glitches=many)]))
+    assert "glitches kept out of the windows (20):" in text
+    assert text.count("duplicate (t_s) repeats") == 12
+    assert '... and 8 more (all of them: report.json, "glitches")' in text
+
+
 # -- command line ------------------------------------------------------------------------
 @pytest.mark.parametrize("text, line, what", [
     ("t,x,y,yaw,speed,speed_cmd\n0,0,0,0,0,0\n", 1, "missing: steer_cmd_rad"),

@@ -581,6 +581,8 @@ def summary_text(result: GapResult) -> str:
             into = f" ({g.t_start_s - t0:.1f} s into the log)" if abs(t0) >= EPOCH_LIKE_S else ""
             lines.append(f"  {Path(src).name} t = {g.t_start_s:.3f}..{g.t_end_s:.3f} s{into}: {g.kind} "
                          f"({g.column}) {g.detail}")
+        if len(result.glitches) > 12:
+            lines.append(f"  ... and {len(result.glitches) - 12} more (all of them: report.json, \"glitches\")")
     lines += ["", "first step, every candidate screened (one parameter, the others nominal):",
               f"{'effect':<22}{'parameter':<32}{'value':>10}{'improvement':>13}{'delta_BIC':>11}"]
     for r in result.ranking:
