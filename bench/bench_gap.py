@@ -703,9 +703,12 @@ def _nuisance_note(row: dict) -> str:
     nuisance = row.get("nuisance")
     if not nuisance:  # rows saved before the nuisance was kept
         return ""
-    parts = [f"{field} {row['chain']['parameters'][field]:.4g} (the car's hidden {what} factor "
-             f"{nuisance[key]:.4g})" for e in row["chain"]["spurious"] if e in _NUISANCE_OF
-             for field, key, what in [_NUISANCE_OF[e]] if field in row["chain"]["parameters"]]
+    parts = []
+    for e in row["chain"]["spurious"]:
+        field, key, what = _NUISANCE_OF.get(e, (None, None, None))
+        if field in row["chain"]["parameters"]:
+            parts.append(f"{field} {row['chain']['parameters'][field]:.4g} (the car's hidden {what} factor "
+                         f"{nuisance[key]:.4g})")
     return f"  {row['mode']} {row['trial']}: spurious {'; '.join(parts)}" if parts else ""
 
 

@@ -49,6 +49,7 @@ from vehicle.description import CarDescription
 FORMAT = "nxpcup-gap/2"
 LEFTOVER_NOISE_RATIO = 4.0  # a residual this many times the sensor noise is "well above noise"
 LEFTOVER_MIN_SAMPLES = 20
+GLITCHES_LISTED = 12  # the summary lists this many glitches; report.json has all of them
 # a log whose stamps start this far from 0 (epoch or ROS time) gets its glitch times also as
 # seconds into the log in residuals.txt
 EPOCH_LIKE_S = 1000.0
@@ -576,13 +577,13 @@ def summary_text(result: GapResult) -> str:
     if result.glitches:
         lines.append(f"glitches kept out of the windows ({len(result.glitches)}):")
         starts = {p.log.source: float(p.log.t_s[0]) for p in result.parts}
-        for src, g in result.glitches[:12]:
+        for src, g in result.glitches[:GLITCHES_LISTED]:
             t0 = starts.get(src, 0.0)  # stamps far from 0 (epoch time): also say how far into the log
             into = f" ({g.t_start_s - t0:.1f} s into the log)" if abs(t0) >= EPOCH_LIKE_S else ""
             lines.append(f"  {Path(src).name} t = {g.t_start_s:.3f}..{g.t_end_s:.3f} s{into}: {g.kind} "
                          f"({g.column}) {g.detail}")
-        if len(result.glitches) > 12:
-            lines.append(f"  ... and {len(result.glitches) - 12} more (all of them: report.json, \"glitches\")")
+        if len(result.glitches) > GLITCHES_LISTED:
+            lines.append(f"  ... and {len(result.glitches) - GLITCHES_LISTED} more (all of them: report.json, \"glitches\")")
     lines += ["", "first step, every candidate screened (one parameter, the others nominal):",
               f"{'effect':<22}{'parameter':<32}{'value':>10}{'improvement':>13}{'delta_BIC':>11}"]
     for r in result.ranking:
