@@ -68,7 +68,8 @@ neutral value is infinite), over correctly named effects. Held-out figures: the 
 ``gap_after / gap_before`` and position RMSE after/before on the held-out windows (against
 the noisy measured log), and the same for the baselines' cars on the same windows.
 
-``python -m bench.bench_gap [--mode single,multi,...] [--trials N] [--first K | --only K,K,...] [--jobs J] [--out FILE.json]``
+``python -m bench.bench_gap [--mode single,multi,...] [--trials N] [--first K | --only K,K,...] [--jobs J] [--screen S] [--out FILE.json]``
+(``--screen``: ``run_gap``'s ``screen_max_s``, e.g. 0 to screen and refit on all fit windows)
 (``--table FILE.json ...`` prints the tables of saved rows again, pooling several files: a
 large sample can be built in runs of trials ``K .. K+N-1`` each, as the trial designs
 depend on the trial number only). Synthetic trials run in
@@ -352,7 +353,12 @@ def _method_row(named, params, truth_values, effects, held: dict, wall_s: float,
             "spurious": [n for n in named if n not in effects], "wall_s": wall_s, **held, **(extra or {})}
 
 
-def _trial(mode: str, k: int, baselines: bool) -> dict:
+def _screen(screen_max_s: float | None) -> dict:
+    """``run_gap``'s keyword for ``--screen`` (none: the chain's default subset)."""
+    return {} if screen_max_s is None else {"screen_max_s": screen_max_s}
+
+
+def _trial(mode: str, k: int, baselines: bool, screen_max_s: float | None = None) -> dict:
     from simrunner.car.effects import neutral_car
     from simrunner.workflows.gap.fit import _quiet_worker
     from simrunner.workflows.gap.report import run_gap
@@ -386,12 +392,12 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
         log = dataclasses.replace(rows_only, command_steps=CommandSteps(log.t_s, log.speed_cmd_mps, log.steer_cmd_rad,
                                                                         log.coast))
     t0 = time.perf_counter()
-    result = run_gap(log, car, jobs=1)
+    result = run_gap(log, car, jobs=1, **_screen(screen_max_s))
     wall = time.perf_counter() - t0
     nominal = neutral_car(result.car)
     held = {"gap_before": result.gap_before, "gap_after": result.gap_after,
             "rmse_before": result.rmse_before, "rmse_after": result.rmse_after}
-    row = {"mode": mode, "trial": k, "sensors": sensors, "effects": effects, "values": truth.values,
+    row = {"mode": mode, "trial": k, "screen_max_s": screen_max_s, "sensors": sensors, "effects": effects, "values": truth.values,
            "nuisance": {"mass_factor": truth.mass_factor, "friction_factor": truth.friction_factor},
            "snr": effect_snr(mode, k), "signals": list(result.settings["signals"]),
            "unrevealable": sorted(result.unrevealable),
@@ -411,7 +417,7 @@ def _trial(mode: str, k: int, baselines: bool) -> dict:
         row["unmodelled"] = {"what": unmodelled[0], "value": unmodelled[1]}
     if rows_only is not None:
         t1 = time.perf_counter()
-        alone = run_gap(rows_only, car, jobs=1)
+        alone = run_gap(rows_only, car, jobs=1, **_screen(screen_max_s))
         row["rows_held"] = _method_row(alone.effects, alone.parameters, truth.values, effects,
                                        {"gap_before": alone.gap_before, "gap_after": alone.gap_after,
                                         "rmse_before": alone.rmse_before, "rmse_after": alone.rmse_after},
@@ -447,7 +453,7 @@ def _sindy_fields() -> dict[str, str]:
 
 # --- real logs and timing ------------------------------------------------------------------------
 
-def real_rows(jobs: int, real_dir: Path = REAL_DIR) -> Iterator[dict]:
+def real_rows(jobs: int, real_dir: Path = REAL_DIR, screen_max_s: float | None = None) -> Iterator[dict]:
     """One row per shared real log, each as it is done (none when the folder is absent)."""
     from simrunner.run.log import read_log
     from vehicle.description import load_car
@@ -457,17 +463,17 @@ def real_rows(jobs: int, real_dir: Path = REAL_DIR) -> Iterator[dict]:
     car = load_car(real_dir / REAL_CAR)
     for name in REAL_LOGS:
         if (real_dir / name).exists():
-            yield _real_row("real", name, lambda path=real_dir / name: read_log(path), car, jobs)
+            yield _real_row("real", name, lambda path=real_dir / name: read_log(path), car, jobs, screen_max_s)
 
 
-def _real_row(mode: str, name: str, load, car, jobs: int) -> dict:
+def _real_row(mode: str, name: str, load, car, jobs: int, screen_max_s: float | None = None) -> dict:
     """Run the workflow on the log ``load()`` gives; the row records a traceback as such."""
     from simrunner.workflows.gap.report import run_gap
 
     t0 = time.perf_counter()
-    row = {"mode": mode, "log": name}
+    row = {"mode": mode, "log": name, "screen_max_s": screen_max_s}
     try:
-        r = run_gap(load(), car, jobs=jobs)
+        r = run_gap(load(), car, jobs=jobs, **_screen(screen_max_s))
     except Exception:  # noqa: BLE001 - the target is "no traceback": record it
         row["error"] = traceback.format_exc()
     else:
@@ -482,7 +488,7 @@ def _real_row(mode: str, name: str, load, car, jobs: int) -> dict:
     return row
 
 
-def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR) -> Iterator[dict]:
+def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR, screen_max_s: float | None = None) -> Iterator[dict]:
     """One row per shared real data set and partial sensor set, each as it is done (none when
     absent)."""
     import tempfile
@@ -505,7 +511,7 @@ def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR) -> Iterator[dict]:
                 partial_log_csv(raw, path, sensors)
                 columns = column_map_from(None, COLUMNS[sensors])
                 yield _real_row("real_partial", f"{raw.name} {sensors.replace('_', '+')}",
-                                lambda: read_log(path, columns=columns), car, jobs)
+                                lambda: read_log(path, columns=columns), car, jobs, screen_max_s)
 
 
 def timing_row(jobs: int) -> dict:
@@ -833,6 +839,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--first", type=int, default=0,
                     help="number of the first trial (to add trials to an earlier run's sample)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--screen", type=float, default=None, metavar="SECONDS",
+                    help="run_gap's screen_max_s (default: the chain's; 0: all fit windows)")
     ap.add_argument("--out", type=Path, default=None, help="write the rows and targets (JSON)")
     ap.add_argument("--table", type=Path, nargs="+", default=None,
                     help="only print the tables of --out files (their rows pooled)")
@@ -859,7 +867,7 @@ def main(argv: list[str] | None = None) -> None:
     if "real" in modes:
         if not (REAL_DIR / REAL_CAR).exists():
             print(f"[real: no shared real logs at {REAL_DIR} (set NXPCUP_REAL_LOGS): skipped]", file=sys.stderr)
-        for r in real_rows(a.jobs):
+        for r in real_rows(a.jobs, screen_max_s=a.screen):
             rows.append(r)
             save()
             print(f"[real {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
@@ -867,7 +875,7 @@ def main(argv: list[str] | None = None) -> None:
         if not (REAL_DIR / REAL_CAR).exists():
             print(f"[real_partial: no shared real logs at {REAL_DIR} (set NXPCUP_REAL_LOGS): skipped]",
                   file=sys.stderr)
-        for r in real_partial_rows(a.jobs):
+        for r in real_partial_rows(a.jobs, screen_max_s=a.screen):
             rows.append(r)
             save()
             print(f"[real_partial {r['log']} done, {r['wall_s']:.0f} s]", file=sys.stderr, flush=True)
@@ -880,7 +888,7 @@ def main(argv: list[str] | None = None) -> None:
               for k in trials]
     if tasks:
         with ProcessPoolExecutor(max_workers=a.jobs) as pool:
-            futures = {pool.submit(_trial, *t): t for t in tasks}
+            futures = {pool.submit(_trial, *t, a.screen): t for t in tasks}
             for fut in as_completed(futures):
                 row = fut.result()
                 rows.append(row)

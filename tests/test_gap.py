@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from simrunner.cli.gap import gap
 from simrunner.workflows.gap.fit import CANDIDATES
 from simrunner.run.log import read_log, write_log
-from simrunner.workflows.gap.report import run_gap, write_outputs
+from simrunner.workflows.gap.report import run_gap, summary_text, write_outputs
 from simrunner.workflows.gap.synth import make_measured_log
 from vehicle.description import load_car
 
@@ -225,6 +225,32 @@ def test_cli_run_matches_library_and_jobs_do_not_matter(tmp_path, offset_run):
     assert rep["effect"] == lib.effect
     assert [r["parameters"] for r in rep["ranking"]] == [r.parameters for r in lib.ranking]
     assert [r["bic"] for r in rep["ranking"]] == [r.criterion for r in lib.ranking]
+
+
+
+def test_cli_screen_option_fits_on_a_subset_and_says_so(tmp_path, offset_run):
+    """``--screen S``: the screening and refits use about S seconds of the fit windows (the
+    report says how many of how many); the default uses all of a log this short."""
+    log, _, _ = offset_run
+    p = tmp_path / "m.csv"
+    write_log(log.subset(int(np.searchsorted(log.t_s, 12.0))), p, float_format="%.17g")
+    subset = ["steering_offset", "steering_gain"]
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--jobs", "1", "--no-progress",
+                                   "--effects", ",".join(subset), "--screen", "3"])
+    assert res.exit_code == 0, res.output
+    settings = json.loads((tmp_path / "out" / "report.json").read_text())["settings"]
+    assert settings["screen_max_s"] == 3.0
+    assert 0.0 < settings["screen_windows_s"] < settings["fit_windows_s"]
+    assert (f"screened and refitted on {settings['screen_windows_s']:.0f} s of the "
+            f"{settings['fit_windows_s']:.0f} s of fit windows") in res.stdout
+    assert "effects found: steering_offset" in res.stdout
+    lib = run_gap(read_log(p), jobs=2, effects=subset, screen_max_s=3.0)
+    assert lib.parameters == json.loads((tmp_path / "out" / "report.json").read_text())["parameters"]
+    whole = run_gap(read_log(p), jobs=2, effects=subset)
+    assert whole.settings["screen_windows_s"] == whole.settings["fit_windows_s"]
+    assert "screened and refitted on" not in summary_text(whole)
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "neg"), "--screen", "-1"])
+    assert res.exit_code == 2 and "--screen" in res.stderr and not (tmp_path / "neg").exists()
 
 
 # -- several effects, several logs, partial sensors -----------------------------------------

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import click
 
+from simrunner.workflows.gap.chain import SCREEN_MAX_S
 from simrunner.workflows.gap.replay import WINDOW_S, WORKFLOW_DT_S
 
 
@@ -63,11 +64,15 @@ def _engine_stderr_silenced():
 @click.option("--window", "window_s", default=WINDOW_S, show_default=True,
               type=click.FloatRange(min=0.5, max=30.0), metavar="SECONDS",
               help="Replay window: each restarts from the measured state.")
+@click.option("--screen", "screen_s", default=SCREEN_MAX_S, show_default=True, type=click.FloatRange(min=0.0),
+              metavar="SECONDS", help="Seconds of fit windows the screening and refits use on a longer "
+                                      "log, chosen by regime; 0: all of them (slower; a near tie then "
+                                      "depends less on the windows' layout).")
 @click.option("--force", is_flag=True, help="Replace DIR if it exists.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_file: Path | None,
         column_items: tuple[str, ...], jobs: int, effects: str | None, max_effects: int | None,
-        dt_s: float, window_s: float, force: bool, no_progress: bool) -> None:
+        dt_s: float, window_s: float, screen_s: float, force: bool, no_progress: bool) -> None:
     """Find where MEASURED (one or several run logs of one car, docs/telemetry.md) and the
     simulator disagree, build the chain of effects that closes the gap, and show it shrink on
     held-out data.
@@ -110,7 +115,8 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
 
             try:
                 result = run_gap(logs, description, jobs=jobs, effects=names, dt_s=dt_s, window_s=window_s,
-                                 max_effects=limit, progress=tick)
+                                 max_effects=limit, progress=tick,
+                                 screen_max_s=screen_s)
             finally:
                 bar.close()
         write_outputs(result, out_dir, force=force)

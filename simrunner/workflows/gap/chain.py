@@ -5,8 +5,9 @@ refitted) and
 
 1. screens every remaining catalogue effect: a one-parameter fit of the new effect with
    the kept parameters held (:func:`simrunner.workflows.gap.fit.fit_all`, grid + probe), on
-   about :data:`SCREEN_MAX_S` seconds of the fit windows (every k-th window of each driving
-   regime, :func:`screening_problem`: screening only ranks, so a long log costs no more than
+   about :data:`SCREEN_MAX_S` seconds of the fit windows (``build_chain``'s ``screen_max_s``,
+   ``--screen``; 0: all of them), every k-th window of each driving
+   regime (:func:`screening_problem`: screening only ranks, so a long log costs no more than
    a 45-s one here, and a rare manoeuvre is not left out; nor are the windows that steer
    hardest, :func:`extreme_windows`);
 2. refits jointly the :data:`REFINE_TOP` best screened candidates (:data:`REFINE_LATER`
@@ -539,7 +540,7 @@ def _neutral_u(name: str) -> float:
 def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int = 2,
                 delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
                 held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
-                robust_factor: float = ROBUST_WINDOW_FACTOR,
+                robust_factor: float = ROBUST_WINDOW_FACTOR, screen_max_s: float = SCREEN_MAX_S,
                 progress: Callable[[str], None] | None = None) -> Chain:
     """Run the forward selection of the module docstring over the effects ``names``.
 
@@ -547,7 +548,8 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     same signals and scales; the held-out gap is ``cost / n_values`` of ``held_problem``
     (whose physics step may be finer than the fit problem's). Every fit minimises the cost
     on their normalisation; the tests of step 3 judge on the step's (``robust_factor``: the
-    robust window scale's factor, as ``run_gap``'s)."""
+    robust window scale's factor, as ``run_gap``'s). ``screen_max_s``: the seconds of fit
+    windows the screening and the refits use (:func:`screening_problem`; 0: all of them)."""
     base = fit_problem.car
     tick = progress or (lambda label: None)
     order = {n: i for i, n in enumerate(CANDIDATES)}
@@ -595,7 +597,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                     break
                 index += 1
                 k = len(kept_names)
-                screen_base = screening_problem(fit_problem)
+                screen_base = screening_problem(fit_problem, screen_max_s)
                 if k and not polished:  # the baseline: the kept effects alone, refitted as the candidates will be
                     b, = run_tasks([(screen_base, fit_problem, held_problem, judge, base,
                                      list(kept_names), dict(kept_values), None)])
@@ -605,7 +607,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                         j_cost, j_held = b.judged_cost, b.judged_held_gap
                 current = with_parameters(base, kept_values)
                 full = fit_problem.with_car(current)
-                screen = screening_problem(full)
+                screen = screening_problem(full, screen_max_s)
                 screen_cost = cost if screen is full else cost_of(screen, current)
                 screening = fit_all(screen, screen_cost, remaining, jobs=jobs, refine_top=0,
                                     progress=lambda label: tick(f"step {index} {label}"))
@@ -700,7 +702,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             while len(kept_names) > 1:  # the final check: every kept effect still earns its place
                 tick("final check")
                 k = len(kept_names)
-                outs = run_tasks([(screening_problem(fit_problem), fit_problem, held_problem, judge, base,
+                outs = run_tasks([(screening_problem(fit_problem, screen_max_s), fit_problem, held_problem, judge, base,
                                    [n for n in kept_names if n != e],
                                    {f: v for f, v in kept_values.items() if f != CANDIDATES[e].field}, None)
                                   for e in kept_names])

@@ -31,7 +31,8 @@ import numpy as np
 
 from simrunner.run.log import RunLog
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.chain import HELD_IMPROVEMENT_MIN, MAX_EFFECTS, Chain, build_chain, screening_problem
+from simrunner.workflows.gap.chain import (HELD_IMPROVEMENT_MIN, MAX_EFFECTS, SCREEN_MAX_S, Chain, build_chain,
+                                           screening_problem)
 from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, ROBUST_WINDOW_FACTOR,
                                          FitResult, Problem, Segment, bic, nominal_scales, robust_scale_of,
                                          robust_total, window_costs)
@@ -248,7 +249,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
             delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
             held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
             held_dt_s: float | None = None, robust_factor: float = ROBUST_WINDOW_FACTOR,
-            progress: Callable[[str], None] | None = None) -> GapResult:
+            screen_max_s: float = SCREEN_MAX_S, progress: Callable[[str], None] | None = None) -> GapResult:
     """Run the workflow of the module docstring on one log or several logs of one car
     (``car`` default: the default car).
 
@@ -260,7 +261,9 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     ``simrunner drive``, ``RunSettings.dt_s``) that of the held-out confirmation and of the
     before/after figures, so they describe the car file as it will be driven.
     ``robust_factor`` sets the robust window loss (:mod:`simrunner.workflows.gap.fit`;
-    ``math.inf``: plain least squares).
+    ``math.inf``: plain least squares). ``screen_max_s``: the seconds of fit windows the
+    chain's screening and refits use on a longer log (a subset by regime,
+    :func:`simrunner.workflows.gap.chain.screening_problem`; 0: all of them, slower).
     """
     logs = [logs] if isinstance(logs, RunLog) else list(logs)
     if not logs:
@@ -310,11 +313,13 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     tick("nominal")
     chain = build_chain(fit_problem, held_problem, names, jobs=jobs, delta_bic_min=delta_bic_min,
                         improvement_min=improvement_min, held_improvement_min=held_improvement_min,
-                        max_effects=max_effects, robust_factor=robust_factor, progress=tick)
+                        max_effects=max_effects, robust_factor=robust_factor, screen_max_s=screen_max_s,
+                        progress=tick)
     car_after = chain.car
+    screen = screening_problem(fit_problem, screen_max_s)
     # a parameter on a plateau is held (its interval says how well it is pinned, not a curvature)
     curved = [e for e in chain.effects if CANDIDATES[e].field not in chain.spans]
-    sigma = parameter_sigma(screening_problem(fit_problem), car, curved, chain.parameters, jobs=jobs)
+    sigma = parameter_sigma(screen, car, curved, chain.parameters, jobs=jobs)
     sigma.update({k: math.nan for k in chain.spans})
     tick("uncertainty")
     pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
@@ -350,7 +355,9 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     held_ls = dataclasses.replace(held_problem, robust_scale=math.inf)
     settings = {"robust_scale": robust, "robust_factor": robust_factor, "dt_s": dt_s, "held_dt_s": held_dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
                 "improvement_min": improvement_min, "held_improvement_min": held_improvement_min,
-                "max_effects": max_effects, "scales": scales, "signals": list(signals), "effects": names}
+                "max_effects": max_effects, "scales": scales, "signals": list(signals), "effects": names,
+                "screen_max_s": screen_max_s, "fit_windows_s": sum(g.duration_s for g in fit_problem.segments),
+                "screen_windows_s": sum(g.duration_s for g in screen.segments)}
     return GapResult(
         effects=chain.effects, parameters=chain.parameters, car=car_after, chain=chain,
         ranking=list(chain.steps[0].screening) if chain.steps else [],
@@ -541,6 +548,11 @@ def summary_text(result: GapResult) -> str:
                          f"{sw.cost_before:.4g} -> {sw.cost_after:.4g}, held-out gap {sw.held_gap_before:.3g} -> "
                          f"{sw.held_gap_after:.3g}" + (f"; removed by the check after step {gone[sw.into]}" if sw.into in gone else ""))
     lines.append(f"  the chain stopped: {chain.stop_reason}")
+    screened, fitted = result.settings.get("screen_windows_s"), result.settings.get("fit_windows_s")
+    if screened is not None and fitted is not None and screened < fitted:
+        lines.append(f"  screened and refitted on {screened:.0f} s of the {fitted:.0f} s of fit windows (a subset by "
+                     "regime; `--screen 0` uses them all: slower, and a near tie between look-alike effects then "
+                     "depends less on which windows the layout and any glitch leave)")
     for tr, after in zip(chain.pruned, chain.pruned_after):
         lines.append(f"  check after step {after}: - {tr.effect:<18} without it, the others refitted: {tr.reason}")
     if chain.rejected:
