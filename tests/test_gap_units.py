@@ -818,6 +818,29 @@ def test_a_localisation_jump_is_found_at_its_step(cols):
     assert np.flatnonzero(glitch_mask(log, found)).tolist() == [500, 800, 801]
 
 
+@pytest.mark.parametrize("cols", [MEASURED_COLUMNS, FULL_GYRO, POSE_ONLY])
+def test_a_heading_jump_is_found_and_its_displaced_samples_kept_out(cols):
+    """The heading alone jumps (a particle filter's or a camera marker's flip): one bad
+    sample, and a heading displaced for half a second and back. Both are listed as
+    localisation jumps of ``yaw_rad`` and every displaced sample is kept out; the position,
+    which did not jump, is not listed (its test uses the heading with the jumps taken out)."""
+    c = _noisy(cols, jitter=0.3)
+    t = c["t_s"]
+    assert len(t) > 1000
+    c["yaw_rad"][500] += 0.3
+    c["yaw_rad"][800:850] -= math.pi  # a flip by half a turn, 50 samples
+    log = _log(c)
+    found = find_glitches(log)
+    assert _kinds(found) == [(GlitchKind.JUMP, round(t[499], 9), round(t[501], 9), "yaw_rad"),
+                             (GlitchKind.JUMP, round(t[799], 9), round(t[850], 9), "yaw_rad")]
+    assert re.match(r"heading step \+0\.[23]\d* rad in 0\.0\d* s where the (gyro|neighbouring steps) turn",
+                    found[0].detail)
+    assert found[1].detail.startswith("heading displaced by ")
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == [500, 501] + list(range(800, 851))
+    # a car that turns tighter than this log's heading steps explains nothing away: found all the same
+    assert _kinds(find_glitches(log, min_turn_radius_m=0.2)) == _kinds(found)
+
+
 def test_time_gaps_and_duplicates_are_found_exactly():
     c = _noisy(FULL_GYRO, jitter=0.3)
     t0 = c["t_s"].copy()

@@ -36,6 +36,18 @@ filter and a 100-Hz motion-capture log alike:
     real residuals) is a jump. The scale is floored at
     :data:`SCALE_FLOOR_FRACTION` of the median moving step (noise-free logs) and at the
     CSV resolution.
+    The heading can jump alone (a particle filter's flip, a camera marker read the wrong way
+    round, a quaternion's sign): each heading step's residual is ``wrap(dyaw - turn)``, the
+    turn from the gyro (trapezoid) or, without one, the median turn rate of the
+    neighbouring steps; a step is a jump when its robust z-score exceeds ``JUMP_Z`` **and**
+    the step is more than the car can turn in it (``|v| dt / R``, ``R`` the car's smallest
+    turning radius, ``CarDescription.min_turn_radius_m``) plus ``JUMP_Z`` noise scales
+    **and** its residual exceeds :data:`JUMP_MOTION_FRACTION` of that most the car can turn
+    (a noise-free log's tiny residuals at full lock are no jump). A jump out followed by
+    the next one back (their residuals cancel within ``JUMP_Z`` scales) keeps out the
+    samples between them too: a heading displaced for a while and restored, whose windows
+    would start from a wrong heading. The position test then uses the heading with the
+    jumps taken out.
 ``frozen_sensor``
     a channel (position, yaw, speed, gyro) repeating its exact value for a run of ``L``
     samples while the car moves (evidence from the other channels: the speed column, a
@@ -115,15 +127,21 @@ def time_gaps(t: np.ndarray) -> np.ndarray:
     return dt > gap_limit_s(dt) if dt.size else np.zeros(0, dtype=bool)
 
 
-def find_glitches(log: RunLog) -> list[Glitch]:
-    """The glitches of ``log`` (see the module docstring), sorted by start time."""
+def find_glitches(log: RunLog, min_turn_radius_m: float | None = None) -> list[Glitch]:
+    """The glitches of ``log`` (see the module docstring), sorted by start time.
+    ``min_turn_radius_m``: the car's (``CarDescription.min_turn_radius_m``; None: the default
+    car's), which bounds a real heading step."""
     if len(log) < 3:
         return []
     found = _gaps(log) + _duplicates(log)
     jumps = np.zeros(len(log) - 1, dtype=bool)
     pose_scale = math.nan
     if has_pose(log):
-        more, jumps, pose_scale = _jumps(log)
+        if min_turn_radius_m is None:
+            from vehicle.description import CarDescription
+
+            min_turn_radius_m = CarDescription().min_turn_radius_m
+        more, jumps, pose_scale = _jumps(log, min_turn_radius_m)
         found += more
     found += _frozen(log, jumps, pose_scale)
     return sorted(found, key=lambda g: (g.t_start_s, g.t_end_s, g.kind))
@@ -247,41 +265,51 @@ def _robust(v: np.ndarray) -> tuple[float, float]:
     return m, 1.4826 * float(np.median(np.abs(v - m)))
 
 
-def _jumps(log: RunLog) -> tuple[list[Glitch], np.ndarray, float]:
-    """Localisation jumps; also the ``(N - 1,)`` jump steps and the pose's step noise at low
-    speed (the slowest group's cross-heading scale, m)."""
+def _neighbour_median(rate: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Per step, the median of ``rate`` over the :data:`NEIGHBOUR_STEPS` valid steps each side
+    (the step itself left out; 0 where there are none)."""
+    rate = np.where(valid, rate, np.nan)
+    k = NEIGHBOUR_STEPS
+    padded = np.concatenate([np.full(k, np.nan), rate, np.full(k, np.nan)])
+    near = np.stack([padded[j:j + rate.size] for j in range(2 * k + 1) if j != k])
+    with np.errstate(all="ignore"):
+        v = np.nanmedian(np.where(np.isnan(near).all(axis=0), 0.0, near), axis=0) \
+            if near.size else np.zeros_like(rate)
+    return np.where(np.isfinite(v), v, 0.0)
+
+
+def _jumps(log: RunLog, min_turn_radius_m: float) -> tuple[list[Glitch], np.ndarray, float]:
+    """Localisation jumps, of the heading (:func:`_heading_jumps`) and of the position; also
+    the ``(N - 1,)`` jump steps and the pose's step noise at low speed (the slowest group's
+    cross-heading scale, m)."""
     t = log.t_s
     dt = np.diff(t)
     med = median_dt_s(t)
-    dx, dy = np.diff(log.x_m), np.diff(log.y_m)
-    heading = log.yaw_rad[:-1] + 0.5 * _wrap(np.diff(log.yaw_rad))
-    c, s = np.cos(heading), np.sin(heading)
-    along, cross = dx * c + dy * s, -dx * s + dy * c
     valid = ~time_gaps(t) & (dt >= DUPLICATE_DT_FRACTION * med)
+    safe_dt = np.where(dt > 0, dt, 1.0)
+    dx, dy = np.diff(log.x_m), np.diff(log.y_m)
     if log.speed_mps is not None:
         v = 0.5 * (log.speed_mps[:-1] + log.speed_mps[1:])
     else:  # the neighbouring steps' speed along the heading, this step left out
-        rate = np.where(valid, along / np.where(dt > 0, dt, 1.0), np.nan)
-        k = NEIGHBOUR_STEPS
-        padded = np.concatenate([np.full(k, np.nan), rate, np.full(k, np.nan)])
-        near = np.stack([padded[j:j + rate.size] for j in range(2 * k + 1) if j != k])
-        with np.errstate(all="ignore"):
-            v = np.nanmedian(np.where(np.isnan(near).all(axis=0), 0.0, near), axis=0) \
-                if near.size else np.zeros_like(rate)
-        v = np.where(np.isfinite(v), v, 0.0)
+        yaw0 = log.yaw_rad[:-1] + 0.5 * _wrap(np.diff(log.yaw_rad))
+        v = _neighbour_median((dx * np.cos(yaw0) + dy * np.sin(yaw0)) / safe_dt, valid)
+    out, turned, yaw = _heading_jumps(log, dt, valid, v, min_turn_radius_m)
+    heading = yaw[:-1] + 0.5 * _wrap(np.diff(yaw))
+    c, s = np.cos(heading), np.sin(heading)
+    along, cross = dx * c + dy * s, -dx * s + dy * c
     ra, rc = along - v * dt, cross
     jump = np.zeros(dt.size, dtype=bool)
     z = np.zeros(dt.size)
     idx = np.flatnonzero(valid)
     if idx.size < 10:
-        return [], jump, math.nan
+        return out, jump | turned, math.nan
     step = np.hypot(dx, dy)
     moving_steps = idx[np.abs(v[idx]) >= MOVING_MPS]
     floor = max(RESOLUTION, SCALE_FLOOR_FRACTION * (float(np.median(step[moving_steps])) if moving_steps.size else 0.0))
     still = (dx == 0.0) & (dy == 0.0) & (v == 0.0)  # a pose that did not move at rest: no noise to learn
     stats = idx[~still[idx]]
     if stats.size < 10:
-        return [], jump, math.nan
+        return out, jump | turned, math.nan
     order = stats[np.argsort(np.abs(v[stats]), kind="stable")]
     groups = np.array_split(order, max(1, min(SPEED_GROUPS, order.size // GROUP_MIN_STEPS)))
     slow_scale = math.nan
@@ -294,13 +322,60 @@ def _jumps(log: RunLog) -> tuple[list[Glitch], np.ndarray, float]:
             slow_scale = sc
     residual = np.hypot(ra, rc)
     jump[idx] = (z[idx] > JUMP_Z) & (residual[idx] > JUMP_MOTION_FRACTION * np.abs(v[idx]) * dt[idx])
-    out = []
     for a, b in _runs(jump):
         k = int(np.argmax(z[a:b])) + a
         out.append(Glitch(GlitchKind.JUMP, float(t[a]), float(t[b]), "x_m,y_m",
                           f"position step {step[k]:.3g} m in {dt[k]:.3g} s where speed {v[k]:+.3g} m/s moves "
                           f"{abs(v[k]) * dt[k]:.3g} m (z = {z[k]:.0f})"))
-    return out, jump, slow_scale
+    return out, jump | turned, slow_scale
+
+
+def _heading_jumps(log: RunLog, dt: np.ndarray, valid: np.ndarray, v: np.ndarray,
+                   min_turn_radius_m: float) -> tuple[list[Glitch], np.ndarray, np.ndarray]:
+    """Heading jumps (see the module docstring): the glitches, the ``(N - 1,)`` jump steps and
+    the yaw with each jump taken out of its samples (for the position test)."""
+    yaw = np.asarray(log.yaw_rad, float)
+    dyaw = _wrap(np.diff(yaw))
+    if log.yaw_rate_radps is not None:
+        pred = 0.5 * (log.yaw_rate_radps[:-1] + log.yaw_rate_radps[1:]) * dt
+        source = "the gyro turns"
+    else:
+        pred = _neighbour_median(dyaw / np.where(dt > 0, dt, 1.0), valid) * dt
+        source = "the neighbouring steps turn"
+    res = _wrap(dyaw - pred)
+    jump = np.zeros(dt.size, dtype=bool)
+    idx = np.flatnonzero(valid & ~((dyaw == 0.0) & (pred == 0.0)))
+    if idx.size < 10:
+        return [], jump, yaw
+    m, scale = _robust(res[idx])
+    scale = max(scale, RESOLUTION)
+    z = np.abs(res - m) / scale
+    turn = np.abs(v) * dt / min_turn_radius_m  # the most the car turns in the step (at its steering limit)
+    jump[idx] = ((z[idx] > JUMP_Z) & (np.abs(dyaw[idx]) > turn[idx] + JUMP_Z * scale)
+                 & (np.abs(res[idx]) > JUMP_MOTION_FRACTION * turn[idx]))
+    runs = _runs(jump)
+    spans: list[tuple[int, int, str]] = []
+    i = 0
+    while i < len(runs):
+        a, b = runs[i]
+        k = int(np.argmax(z[a:b])) + a
+        text = (f"heading step {dyaw[k]:+.3g} rad in {dt[k]:.3g} s where {source} {pred[k]:+.3g} rad and the car "
+                f"turns {turn[k]:.3g} rad at most (z = {z[k]:.0f})")
+        if i + 1 < len(runs):  # out and back: the samples between are displaced too
+            a2, b2 = runs[i + 1]
+            if abs(float(_wrap(np.array(res[a:b].sum() + res[a2:b2].sum())))) < JUMP_Z * scale:
+                text = (f"heading displaced by {float(res[a:b].sum()):+.3g} rad for {log.t_s[a2] - log.t_s[a]:.3g} s "
+                        f"and back ({text})")
+                b, i = b2, i + 1
+        spans.append((a, b, text))
+        i += 1
+    held = yaw.copy()  # each span's samples less the jumps so far in it
+    out = []
+    for a, b, text in spans:
+        held[a + 1:b + 1] = yaw[a + 1:b + 1] - np.cumsum(np.where(jump[a:b], res[a:b], 0.0))
+        jump[a:b] = True
+        out.append(Glitch(GlitchKind.JUMP, float(log.t_s[a]), float(log.t_s[b]), "yaw_rad", text))
+    return out, jump, held
 
 
 def _channels(log: RunLog) -> list[tuple[str, tuple[str, ...]]]:
