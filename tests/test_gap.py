@@ -62,6 +62,23 @@ def test_hidden_longitudinal_effect_is_named(effect, value, field):
     assert result.rmse_after["speed_mps"] < result.rmse_before["speed_mps"]
 
 
+def test_summary_says_which_effects_the_logs_cannot_tell_apart(offset_run):
+    """A step that recorded a look-alike (``Step.alike``): the answer names both, and the
+    step's line gives the figures."""
+    import dataclasses
+
+    from simrunner.workflows.gap.chain import Alike
+
+    _, _, result = offset_run
+    assert "cannot tell them apart" not in summary_text(result)
+    step = dataclasses.replace(result.chain.steps[0], alike=(Alike("steering_gain", {"steering_gain": 0.9}, 0.73, 10),))
+    chain = dataclasses.replace(result.chain, steps=(step,) + result.chain.steps[1:])
+    text = summary_text(dataclasses.replace(result, chain=chain))
+    answer = text.split("held-out gap")[0]
+    assert "steering_offset or steering_gain: these logs cannot tell them apart (step 1" in answer
+    assert "as good on these windows: steering_gain" in text and "z = +0.73 over 10 windows" in text
+
+
 def test_report_folder(offset_run, tmp_path):
     _, truth, result = offset_run
     out = write_outputs(result, tmp_path / "gap")

@@ -1197,11 +1197,13 @@ def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():
     assert leftovers(stats, {k: 1.0 for k in noise}, ratio=4.0) == []  # nothing well above noise
 
 
-def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None):
+def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None, windows=None):
     """Fake fit and held-out problems for :func:`chain.build_chain` whose costs come from
     tables: ``refit[frozenset(active effects)] = (fit cost, held-out gap)`` for the joint
     refits and the replays, ``screened[...]`` (default: the refit's fit cost) for the
-    screening; a fitted effect takes its ``fitted`` value. Returns ``(fit, held)``."""
+    screening, ``windows[...] = (fit windows' costs, held-out windows' costs)`` for the
+    per-window comparison (default: one window each, the costs); a fitted effect takes its
+    ``fitted`` value. Returns ``(fit, held)``."""
     import simrunner.workflows.gap.chain as chain
     from simrunner.workflows.gap.fit import FitResult
 
@@ -1234,7 +1236,14 @@ def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None):
         return [FitResult(n, {field[n]: fitted[n]}, screened[have | {n}], 0.0, 0.0,
                           1 - screened[have | {n}] / current_cost, 3) for n in names]
 
+    def per_window(args):
+        problem, car = args
+        if windows is None:
+            return np.array([cost(problem, car)])
+        return np.asarray(windows[active(car)][1 if problem is held_p else 0], float)
+
     fit_p, held_p = FakeProblem(), FakeProblem()
+    monkeypatch.setattr(chain, "_window_values_task", per_window)
     monkeypatch.setattr(chain, "cost_of", cost)
     monkeypatch.setattr(chain, "_trial_task", trial)
     monkeypatch.setattr(chain, "fit_all", screen)
@@ -1367,6 +1376,43 @@ def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):
     refit[frozenset([brake, lat])] = (300.0, 0.30)
     same = chain.build_chain(fit_p, held_p, [mass, brake, lat], jobs=1)
     assert same.swaps == () and same.effects[:2] == [mass, lat]
+
+
+def test_a_near_tie_the_windows_cannot_break_is_recorded(monkeypatch):
+    """Two candidates pass step 1 and the mass scale is kept by a hair; window by window the
+    brake scale does as well (costs that differ both ways), so the step records it as alike;
+    when it is worse in every window, it is not. The chain itself is the same either way."""
+    import simrunner.workflows.gap.chain as chain
+
+    mass, brake = "mass_scale", "brake_scale"
+    field = {mass: "mass_scale", brake: "brake_scale"}
+    neutral = {mass: 1.0, brake: 1.0}
+    fitted = {mass: 1.6, brake: 0.62}
+    refit = {frozenset(): (1000.0, 1.0), frozenset([mass]): (400.0, 0.40), frozenset([brake]): (401.0, 0.41),
+             frozenset([mass, brake]): (399.0, 0.40)}
+    windows = {frozenset([mass]): ([100.0, 90.0, 110.0, 100.0], [0.2, 0.2]),
+               frozenset([brake]): ([95.0, 105.0, 100.0, 101.0], [0.25, 0.16])}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, windows=windows)
+    monkeypatch.setattr(chain, "REFINE_TOP", 2)
+    tie = chain.build_chain(fit_p, held_p, [mass, brake], jobs=1)
+    assert tie.effects == [mass]
+    alike, = tie.steps[0].alike
+    assert alike.effect == brake and alike.windows == 6 and alike.parameters == {field[brake]: 0.62}
+    d = np.array([-5.0, 15.0, -10.0, 1.0, 0.05, -0.04])
+    assert alike.z == pytest.approx(d.mean() / (d.std(ddof=1) / math.sqrt(6)))
+    assert tie.steps[0].to_json()["alike"][0]["effect"] == brake
+    windows[frozenset([brake])] = ([125.0, 115.0, 135.0, 126.0], [0.3, 0.3])
+    clear = chain.build_chain(fit_p, held_p, [mass, brake], jobs=1)
+    assert clear.effects == [mass] and clear.steps[0].alike == ()
+    assert [t.reason for t in clear.steps[0].trials] == [t.reason for t in tie.steps[0].trials]
+
+
+def test_vuong_z():
+    from simrunner.workflows.gap.chain import vuong_z
+
+    assert vuong_z(np.array([1.0, 2.0]), np.array([1.0, 2.0])) == 0.0
+    assert vuong_z(np.array([1.0, 2.0]), np.array([2.0, 3.0])) == math.inf  # worse everywhere by the same
+    assert vuong_z(np.array([0.0, 0.0, 0.0]), np.array([1.0, 2.0, 3.0])) == pytest.approx(2.0 / (1.0 / math.sqrt(3)))
 
 
 def test_a_candidate_the_screening_subset_underrates_is_refitted_on_its_gain_over_all_fit_windows(monkeypatch):

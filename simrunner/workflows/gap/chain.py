@@ -92,6 +92,12 @@ refitted) and
    a place of a chain at its limit no longer shuts out the effect the data hold next, and
    a candidate the look-alike made fail is tried again without it.
 
+A candidate that passed a step's tests but lost to the kept one is compared with it window
+by window (fit and held-out windows, the step's normalisation): when the two models' costs
+differ by less than :data:`ALIKE_Z` standard errors (Vuong's test), the windows cannot tell
+them apart and ``Step.alike`` records it, for the report to say so. This changes nothing in
+the chain: it names the kept one, and a near tie's name is the report's to qualify.
+
 Every candidate that was tried and not kept is recorded with its reason. The chain's
 result is the car with all kept effects; its parameters are those of the last joint refit.
 """
@@ -127,6 +133,10 @@ NEUTRAL_TOL = 0.01  # fraction of the fit range (scaled coordinates) that counts
 # (:func:`_plateaus`), TIE_BISECTIONS halvings locating each end.
 TIE_DELTA_BIC = 2.0
 TIE_BISECTIONS = 5
+# Two candidates that both pass a step's tests are look-alikes on these windows when their
+# per-window costs differ by less than this many standard errors (Vuong 1989's test for
+# non-nested models, windows as the units, 5 % two-sided): :class:`Alike`.
+ALIKE_Z = 1.96
 BETTER = "a better candidate was kept"
 
 
@@ -266,6 +276,33 @@ class Trial:
 
 
 @dataclass(frozen=True)
+class Alike:
+    """A candidate that passed a step's tests where another was kept, and that the windows
+    cannot tell from the kept one: the mean over the fit and held-out windows of its cost
+    minus the kept one's (each window's robust cost, on the step's normalisation) is within
+    :data:`ALIKE_Z` standard errors of 0 (``z``; > 0: the kept one fits better)."""
+
+    effect: str
+    parameters: dict[str, float]  # every fitted parameter of the model with it
+    z: float
+    windows: int
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def vuong_z(kept: np.ndarray, other: np.ndarray) -> float:
+    """Per-window costs ``other - kept``: their mean over its standard error (Vuong's
+    statistic; 0 for identical costs, +-inf for a difference without spread)."""
+    d = np.asarray(other, float) - np.asarray(kept, float)
+    mean = float(d.mean()) if d.size else 0.0
+    sd = float(d.std(ddof=1)) if d.size > 1 else 0.0
+    if sd == 0.0:
+        return 0.0 if mean == 0.0 else math.copysign(math.inf, mean)
+    return mean / (sd / math.sqrt(d.size))
+
+
+@dataclass(frozen=True)
 class Step:
     """One step of the chain: the screening ranking, the refitted trials, what was kept."""
 
@@ -276,6 +313,7 @@ class Step:
     scales: dict[str, float] = dataclasses.field(default_factory=dict)  # the step's normalisation
     gap_before: float = math.nan  # held-out gap of the model before / after the step on the
     gap_after: float = math.nan   # problems' normalisation (the report's: GapResult.gap_before/after)
+    alike: tuple[Alike, ...] = ()  # candidates the windows cannot tell from the kept one
 
     @property
     def kept(self) -> Trial | None:
@@ -288,6 +326,7 @@ class Step:
                 "held_gap_before": self.gap_before, "held_gap_after": self.gap_after,
                 "scales": self.scales, "step_held_gap_before": self.held_gap_before,
                 "trials": [t.to_json() for t in self.trials],
+                "alike": [a.to_json() for a in self.alike],
                 "screened": [r.to_json() for r in self.screening]}
 
 
@@ -509,6 +548,13 @@ def _cost_task(args) -> float:
     return cost_of(problem, car)
 
 
+def _window_values_task(args) -> np.ndarray:
+    """``(W,)``: each window's robust cost of ``car`` on ``problem``."""
+    problem, car = args
+    return np.array([robust_total([cw], problem.robust_scale)
+                     for cw in window_costs(problem, segment_residuals(problem, car))])
+
+
 def _trial_task(args) -> Outcome:
     screen_problem, fit_problem, held_problem, judge, base, names, start, first = args
     values, _, evals, spans = joint_refit(screen_problem, base, names, start, first)
@@ -578,6 +624,21 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
 
     def run_costs(tasks) -> list[float]:
         return list(pool.map(_cost_task, tasks)) if pool is not None else [_cost_task(t) for t in tasks]
+
+    def alike_of(chosen: Trial, others: list[Trial], outcome: dict[str, Outcome]) -> tuple[Alike, ...]:
+        """The candidates of ``others`` the windows cannot tell from ``chosen`` (:class:`Alike`)."""
+        if not others:
+            return ()
+        cars = [with_parameters(base, outcome[t.effect].values) for t in [chosen] + others]
+        tasks = [(p, c) for c in cars for p in (judge.fit, judge.held)]
+        vals = list(pool.map(_window_values_task, tasks)) if pool is not None else [_window_values_task(t) for t in tasks]
+        per = [np.concatenate(vals[2 * i:2 * i + 2]) for i in range(len(cars))]
+        out = []
+        for t, v in zip(others, per[1:]):
+            z = vuong_z(per[0], v)
+            if abs(z) < ALIKE_Z:
+                out.append(Alike(t.effect, dict(outcome[t.effect].values), z, int(v.size)))
+        return tuple(out)
 
     try:
         index = 0
@@ -670,9 +731,10 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                             decided.append(chosen)
                         else:
                             decided.append(dataclasses.replace(tr, reason=reason or BETTER))
+                alike = () if chosen is None else alike_of(chosen, [t for t in decided if t.reason == BETTER], outcome)
                 steps.append(Step(index, j_held, tuple(sorted(screening, key=lambda r: (r.criterion, order[r.effect]))),
                                   tuple(decided), dict(judge.fit.scales), held_gap,
-                                  held_gap if chosen is None else outcome[chosen.effect].held_gap))
+                                  held_gap if chosen is None else outcome[chosen.effect].held_gap, alike))
                 if chosen is None:
                     stop = "no remaining effect passes the tests"
                     break
@@ -818,5 +880,5 @@ def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvem
     return ""
 
 
-__all__ = ["Chain", "Step", "Swap", "Trial", "build_chain", "joint_refit", "staying", "with_parameters",
+__all__ = ["Alike", "Chain", "Step", "Swap", "Trial", "vuong_z", "build_chain", "joint_refit", "staying", "with_parameters",
            "MAX_EFFECTS", "HELD_IMPROVEMENT_MIN"]

@@ -31,8 +31,8 @@ import numpy as np
 
 from simrunner.run.log import RunLog
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.chain import (HELD_IMPROVEMENT_MIN, MAX_EFFECTS, SCREEN_MAX_S, Chain, build_chain,
-                                           screening_problem)
+from simrunner.workflows.gap.chain import (ALIKE_Z, HELD_IMPROVEMENT_MIN, MAX_EFFECTS, SCREEN_MAX_S, Chain,
+                                           build_chain, screening_problem)
 from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, ROBUST_WINDOW_FACTOR,
                                          FitResult, Problem, Segment, bic, nominal_scales, robust_scale_of,
                                          robust_total, window_costs)
@@ -528,6 +528,11 @@ def summary_text(result: GapResult) -> str:
             lines.append("  (+- one standard error from the spread between the fit windows and the fit's distance "
                          "from the cost's minimum: a lower bound; a bias shared by all windows (a stand-in effect, "
                          "a wrong car-file number) is not in it)")
+    for step in chain.steps:
+        if step.alike and step.kept is not None and step.kept.effect in result.effects:
+            others = " or ".join(a.effect for a in step.alike)
+            lines.append(f"  {step.kept.effect} or {others}: these logs cannot tell them apart (step {step.index}: "
+                         f"window by window, within {ALIKE_Z:g} standard errors; treat the name as one of these)")
     for name in result.at_bounds:
         lines.append(f"  WARNING: {name} = {result.parameters[name]:.4g} is at the end of its fit range: the "
                      "real cause is probably outside the catalogue (or the car file is far off); "
@@ -543,6 +548,9 @@ def summary_text(result: GapResult) -> str:
             lines.append(f"  step {step.index}: + {kept.effect:<20} held-out gap {step.gap_before:.3g} -> "
                          f"{step.gap_after:.3g}  (delta_BIC {kept.delta_bic:.0f}, fit {kept.improvement:.1%})"
                          + (f"  removed by the check after step {gone[kept.effect]}" if kept.effect in gone else ""))
+            for a in step.alike:
+                lines.append(f"          as good on these windows: {a.effect:<20} (per-window cost difference "
+                             f"z = {a.z:+.2f} over {a.windows} windows)")
         for sw in (sw for sw in chain.swaps if sw.step == step.index):
             lines.append(f"  after step {sw.step}: {sw.out} -> {sw.into} (exchanged, all refitted): fit cost "
                          f"{sw.cost_before:.4g} -> {sw.cost_after:.4g}, held-out gap {sw.held_gap_before:.3g} -> "
