@@ -115,8 +115,7 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
 
             try:
                 result = run_gap(logs, description, jobs=jobs, effects=names, dt_s=dt_s, window_s=window_s,
-                                 max_effects=limit, progress=tick,
-                                 screen_max_s=screen_s)
+                                 max_effects=limit, screen_max_s=screen_s, progress=tick)
             finally:
                 bar.close()
         write_outputs(result, out_dir, force=force)
