@@ -416,12 +416,16 @@ def _glitch_trial(k: int, screen_max_s: float | None) -> dict:
         r = run_gap(lg, jobs=1, **_screen(screen_max_s))
         row[tag] = {"named": list(r.effects), "parameters": r.parameters, "gap_before": r.gap_before,
                     "gap_after": r.gap_after,
-                    "alike": [(s.index, s.kept.effect, a.effect, a.z) for s in r.chain.steps if s.kept is not None
-                              for a in s.alike],
+                    "alike": _alike(r),
                     "glitches": [(g.kind.value, g.t_start_s, g.t_end_s, g.column) for _, g in r.glitches]}
     row["glitch"]["listed"] = [g for g in row["glitchy"]["glitches"] if g[2] >= t0 - 0.1 and g[1] <= t1 + 0.1]
     row["wall_s"] = time.perf_counter() - t_start
     return row
+
+
+def _alike(result) -> list[tuple]:
+    """``(step, kept, look-alike, z)`` of every look-alike a step recorded (``Step.alike``)."""
+    return [(s.index, s.kept.effect, a.effect, a.z) for s in result.chain.steps if s.kept is not None for a in s.alike]
 
 
 def glitch_figures(rows: list[dict]) -> dict[str, tuple[float, int]]:
@@ -492,7 +496,8 @@ def _trial(mode: str, k: int, baselines: bool, screen_max_s: float | None = None
                                              1.0 - t.held_gap / s.held_gap_before if s.held_gap_before > 0 else 0.0,
                                              t.kept, t.reason) for s in result.chain.steps for t in s.trials],
                                  "pruned": [(t.effect, after) for t, after in zip(result.chain.pruned,
-                                                                                 result.chain.pruned_after)]},
+                                                                                 result.chain.pruned_after)],
+                                 "alike": _alike(result)},
                                 result.parameter_sigma),
            "leftovers": [{k_: d[k_] for k_ in ("signal", "regime", "times_noise", "regimes", "text")}
                          for d in result.leftovers]}
