@@ -77,6 +77,9 @@ def test_summary_says_which_effects_the_logs_cannot_tell_apart(offset_run):
     answer = text.split("held-out gap")[0]
     assert "steering_offset or steering_gain: these logs cannot tell them apart (step 1" in answer
     assert "as good on these windows: steering_gain" in text and "z = +0.73 over 10 windows" in text
+    # a look-alike the chain kept as well is no alternative to the kept one
+    both = dataclasses.replace(result, effects=list(result.effects) + ["steering_gain"])
+    assert "cannot tell them apart" not in summary_text(dataclasses.replace(both, chain=chain))
 
 
 def test_report_folder(offset_run, tmp_path):

@@ -528,9 +528,10 @@ def summary_text(result: GapResult) -> str:
             lines.append("  (+- one standard error from the spread between the fit windows and the fit's distance "
                          "from the cost's minimum: a lower bound; a bias shared by all windows (a stand-in effect, "
                          "a wrong car-file number) is not in it)")
-    for step in chain.steps:
-        if step.alike and step.kept is not None and step.kept.effect in result.effects:
-            others = " or ".join(a.effect for a in step.alike)
+    for step in chain.steps:  # a look-alike kept as well (at a later step) is no alternative
+        alike = [a.effect for a in step.alike if a.effect not in result.effects]
+        if alike and step.kept is not None and step.kept.effect in result.effects:
+            others = " or ".join(alike)
             lines.append(f"  {step.kept.effect} or {others}: these logs cannot tell them apart (step {step.index}: "
                          f"window by window, within {ALIKE_Z:g} standard errors; treat the name as one of these)")
     for name in result.at_bounds:
