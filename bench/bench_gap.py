@@ -83,7 +83,8 @@ large sample can be built in runs of trials ``K .. K+N-1`` each, as the trial de
 depend on the trial number only). Synthetic trials run in
 ``--jobs`` processes, one ``run_gap(jobs=1)`` each; real and timing runs use ``--jobs``
 processes inside ``run_gap``. ``python -m bench`` runs ``main()``: every mode, small
-(:data:`SMALL_TRIALS` per synthetic mode; about 95 minutes on 2 cores with the shared real logs).
+(:data:`SMALL_TRIALS` per synthetic mode; about 130 minutes on 2 cores with the shared real logs,
+``glitch`` about 37 of them).
 """
 from __future__ import annotations
 
