@@ -432,16 +432,17 @@ def _alike(result) -> list[tuple]:
 def glitch_figures(rows: list[dict]) -> dict[str, tuple[float, int]]:
     """The ``glitch`` mode's figures (fraction, n): listed, names unchanged, changes qualified."""
     rows = [r for r in rows if r.get("mode") == "glitch"]
-    changed = [r for r in rows if set(r["clean"]["named"]) != set(r["glitchy"]["named"])]
+    same = [set(r["clean"]["named"]) == set(r["glitchy"]["named"]) for r in rows]
 
-    def qualified(r) -> bool:
-        pairs = {frozenset((a, b)) for run in ("clean", "glitchy") for _, a, b, _ in r[run]["alike"]}
+    def qualified(r) -> bool:  # a pair whose look-alike the run kept as well is no alternative (the report's rule)
+        pairs = {frozenset((a, b)) for run in ("clean", "glitchy") for _, a, b, _ in r[run]["alike"]
+                 if b not in r[run]["named"]}
         moved = set(r["clean"]["named"]) ^ set(r["glitchy"]["named"])
         return all(any(e in p for p in pairs) for e in moved)
 
     return {"listed": _frac([bool(r["glitch"]["listed"]) for r in rows]),
-            "unchanged": _frac([r not in changed for r in rows]),
-            "qualified": _frac([qualified(r) for r in changed])}
+            "unchanged": _frac(same),
+            "qualified": _frac([qualified(r) for r, ok in zip(rows, same) if not ok])}
 
 
 def _trial(mode: str, k: int, baselines: bool, screen_max_s: float | None = None) -> dict:
