@@ -115,7 +115,7 @@ from scipy.optimize import minimize, minimize_scalar
 from simrunner.workflows.gap.fit import (BRENT_MAXITER, CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN,
                                          REFINE_TOP, ROBUST_WINDOW_FACTOR, FitResult, Problem, _quiet_worker,
                                          bic, cost_of, fit_all, rescaled, robust_total, segment_residuals,
-                                         window_costs)
+                                         window_costs, window_values)
 from simrunner.workflows.gap.thresholds import SAFETY
 from vehicle.description import CarDescription
 
@@ -551,8 +551,7 @@ def _cost_task(args) -> float:
 def _window_values_task(args) -> np.ndarray:
     """``(W,)``: each window's robust cost of ``car`` on ``problem``."""
     problem, car = args
-    return np.array([robust_total([cw], problem.robust_scale)
-                     for cw in window_costs(problem, segment_residuals(problem, car))])
+    return window_values(problem, car)
 
 
 def _trial_task(args) -> Outcome:

@@ -216,6 +216,13 @@ def robust_scale_of(costs: Sequence[tuple[float, int]], factor: float = ROBUST_W
     return max(factor * float(np.median(per_value)), 1e-12)
 
 
+def window_values(problem: Problem, car: CarDescription) -> np.ndarray:
+    """``(W,)``: each window's contribution to :func:`cost_of` (its robust loss,
+    :func:`robust_total` of that window alone)."""
+    costs = window_costs(problem, segment_residuals(problem, car))
+    return np.array([robust_total([cw], problem.robust_scale) for cw in costs])
+
+
 def cost_of(problem: Problem, car: CarDescription) -> float:
     """The cost of ``car`` on the problem's windows: the sum of squared normalised residuals,
     each window through the robust loss of the module docstring."""

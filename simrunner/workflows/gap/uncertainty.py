@@ -41,18 +41,10 @@ from typing import Sequence
 import numpy as np
 
 from simrunner.workflows.gap.chain import _bounds01, with_parameters
-from simrunner.workflows.gap.fit import (CANDIDATES, Problem, _quiet_worker, robust_total, segment_residuals,
-                                         window_costs)
+from simrunner.workflows.gap.fit import CANDIDATES, Problem, _quiet_worker, window_values
 from vehicle.description import CarDescription
 
 STEP = 0.05  # the difference step, as a fraction of each parameter's fit range
-
-
-def window_values(problem: Problem, car: CarDescription) -> np.ndarray:
-    """``(W,)``: each window's contribution to :func:`simrunner.workflows.gap.fit.cost_of`
-    (its robust loss, :func:`simrunner.workflows.gap.fit.robust_total` of that window alone)."""
-    costs = window_costs(problem, segment_residuals(problem, car))
-    return np.array([robust_total([cw], problem.robust_scale) for cw in costs])
 
 
 def _task(args) -> np.ndarray:
