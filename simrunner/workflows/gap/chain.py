@@ -143,6 +143,7 @@ BETTER = "a better candidate was kept"
 # regimes that label a window for the screening subset (simrunner.workflows.gap.regimes)
 SCREEN_REGIMES = ("coasting", "braking", "accelerating", "reversing", "high_lat_accel", "cornering", "straight")
 SCREEN_LABEL_MIN_SHARE = 0.1  # a regime labels a window only if it covers this share of its samples
+GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # screening_problem's even spread of grid slots
 
 
 def window_labels(problem: Problem) -> list[str]:
@@ -215,29 +216,33 @@ def _finite_max(x) -> float:
 
 
 def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
-    """``problem`` with about ``max_s`` seconds of its windows, stratified: with ``k`` the
-    smallest step that keeps at most ``max_s`` seconds, every k-th window of each label of
-    :func:`window_labels` (the first of each label included), so a manoeuvre that a few
-    windows hold (a hard brake, a coast, reversing) stays in the screening and the effects it
-    reveals are ranked on it; and the windows of :func:`extreme_windows` (the hardest
-    steering each way) and of :func:`reversal_windows` (a reverse command while rolling
-    forward)."""
+    """``problem`` with about ``max_s`` seconds of its windows: with ``k = ceil(total /
+    max_s)`` (the seconds of all windows over ``max_s``), the windows whose grid slot
+    (:attr:`simrunner.workflows.gap.replay.Window.slot`) falls in the first ``1/k`` of a
+    golden-ratio sequence (``frac(slot * 0.618...) < 1/k``: spread evenly through the log
+    and through each label, whatever the held-out split's pattern, and each window's own
+    choice, so a glitch that removes a window changes no other's; counting every k-th
+    window did); the first window of each label of :func:`window_labels`, so a manoeuvre
+    that a few windows hold (a hard brake, a coast, reversing) stays in the screening and
+    the effects it reveals are ranked on it; and the windows of :func:`extreme_windows`
+    (the hardest steering each way) and of :func:`reversal_windows` (a reverse command
+    while rolling forward)."""
     total = sum(s.duration_s for s in problem.segments)
     k = max(1, math.ceil(total / max_s)) if max_s > 0 else 1
     if k == 1:
         return problem
     labels = iter(window_labels(problem))
     extremes = extreme_windows(problem) | reversal_windows(problem)
-    seen: dict[str, int] = {}
+    seen: dict[str, int] = {}  # labels met
     segs = []
     index = 0
     for seg in problem.segments:
         keep = []
         for w in seg.windows:
             label = next(labels)
-            i = seen.get(label, 0)
-            seen[label] = i + 1
-            if i % k == 0 or index in extremes:
+            first = label not in seen
+            seen[label] = 1
+            if first or (w.slot * GOLDEN) % 1.0 < 1.0 / k or index in extremes:
                 keep.append(w)
             index += 1
         if keep:

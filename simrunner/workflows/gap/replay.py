@@ -94,10 +94,14 @@ def default_sim_factory(car: CarDescription, dt_s: float):
 
 @dataclass(frozen=True)
 class Window:
-    """Samples ``start <= i < stop`` of a log."""
+    """Samples ``start <= i < stop`` of a log; ``slot``: the window's place on the grid of
+    ``window_s`` fixed in the log's time (``m * window_s`` from ``t = 0``) that
+    :func:`make_windows` lays the windows on: the window starting near ``m * window_s`` has
+    slot ``m`` (the first window of a piece: the slot before its end's)."""
 
     start: int
     stop: int
+    slot: int = 0
 
 
 def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | None = None) -> list[Window]:
@@ -111,8 +115,14 @@ def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | 
     excluded sample, and a log with gaps gives fewer windows; a log that passed
     ``check_measured`` never makes this raise (it may give no window at all).
 
-    Within a piece, each boundary is moved (by up to :data:`QUIET_SHIFT_S`, at most a quarter
-    window) to a quiet sample: the one with the least command change in
+    Within a piece, the boundaries aim at a grid fixed in the log's time, ``m * window_s``
+    from ``t = 0`` (the first at least half a window after the piece's start), not at one
+    window after the boundary before: so a glitch or a gap changes only the windows it
+    touches, and every window away from it is the same with and without it (laid one after
+    the other, the windows after a dropped second started up to a window earlier, and a
+    hidden effect living in two windows 55 s later moved the answer; docs/gap.md). Each
+    boundary is moved (by up to :data:`QUIET_SHIFT_S`, at most a quarter window) from its
+    grid time to a quiet sample: the one with the least command change in
     ``[t - QUIET_BEFORE_S, t + QUIET_AFTER_S]`` (ties: nearest to the regular grid). A window
     that starts during a step or just after it would start from smoothed states that blur
     the step; quiet starts avoid that. A sample where the car rolls with the drive off
@@ -150,23 +160,28 @@ def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | 
     for a, b in pieces(log, _widen(t, exclude, EXCLUDE_MARGIN_S)):
         if t[b - 1] - t[a] < 0.5 * window_s:
             continue
-        edges = [a]
+        edges, slots = [a], [math.ceil((t[a] + 0.5 * window_s) / window_s) - 1]
+        m = slots[0]
         while True:
-            goal = t[edges[-1]] + window_s
+            m += 1  # the next boundary's grid slot
+            goal = m * window_s
             if goal >= t[b - 1] - 0.5 * window_s:
                 break
+            if goal <= t[edges[-1]]:  # passed already (a sparse stretch): the next slot
+                continue
             lo = int(np.searchsorted(t, goal - shift))
             hi = int(np.searchsorted(t, goal + shift))
             cands = range(max(lo, edges[-1] + 1), min(hi, b - 1))
             if len(cands):
                 edges.append(min(cands, key=lambda i: (round(activity(i), 9), abs(t[i] - goal))))
-                continue
-            k = max(int(np.searchsorted(t, goal)), edges[-1] + 1)  # no sample near the goal: the next one
-            if k >= b - 1:
-                break
-            edges.append(k)
+            else:
+                k = max(int(np.searchsorted(t, goal)), edges[-1] + 1)  # no sample near the goal: the next one
+                if k >= b - 1:
+                    break
+                edges.append(k)
+            slots.append(m)
         edges.append(b)
-        windows += [Window(x, y) for x, y in zip(edges[:-1], edges[1:])]
+        windows += [Window(x, y, m) for x, y, m in zip(edges[:-1], edges[1:], slots)]
     return windows
 
 
@@ -202,23 +217,35 @@ def _widen(t: np.ndarray, exclude: np.ndarray | None, margin_s: float) -> np.nda
 def split_windows(windows: Sequence[Window], every: int = HOLDOUT_EVERY,
                   strata: Sequence[object] | None = None) -> tuple[list[Window], list[Window]]:
     """(fit, held_out), stratified: the windows are grouped by their ``strata`` label
-    (default: one group) and, counting back from the group's last window, every
-    ``every``-th window is held out (the last, the ``every + 1``-th from last, ...). So a
-    rare manoeuvre (the report groups windows with coasting or braking to rest apart from
-    the others) reaches the held-out set as soon as the log has two of them — the plan's
-    last coast — while its first ones stay in the fit. A group of one window stays in the
-    fit; if nothing is held out that way (a short log), the split ignores the strata."""
+    (default: one group). In the largest group (the first of equal ones), a window is held
+    out when its grid slot (:attr:`Window.slot`) is ``every - 1`` modulo ``every``: the
+    choice is the window's own, so a glitch or a gap that removes a window leaves every
+    other window where it was (counted from the group's last window, the windows before a
+    dropped second of a log all moved between the sets). In each other group, counting
+    back from its last window, every ``every``-th window is held out (the last, the ``every
+    + 1``-th from last, ...), so a rare manoeuvre (the report groups windows with coasting
+    or braking to rest apart) reaches the held-out set as soon as the log has two of them -
+    the plan's last coast - while its first ones stay in the fit; a group of one window
+    stays in the fit. If nothing is held out that way (a short log), the split ignores the
+    strata, and if still nothing, the last window is held out."""
     labels = list(strata) if strata is not None else [None] * len(windows)
     size: dict[object, int] = {}
     for label in labels:
         size[label] = size.get(label, 0) + 1
+    main = max(size, key=lambda label: size[label]) if size else None  # max keeps the first of equals
     left = dict(size)
     fit, held = [], []
     for w, label in zip(windows, labels):
         left[label] -= 1  # windows of this group after this one
-        (held if left[label] % every == 0 and size[label] > 1 else fit).append(w)
+        if label == main:
+            out = w.slot % every == every - 1
+        else:
+            out = left[label] % every == 0 and size[label] > 1
+        (held if out else fit).append(w)
     if not held and strata is not None:  # a short log: hold out without strata
         return split_windows(windows, every)
+    if not held and len(windows) > 1:
+        return list(windows[:-1]), [windows[-1]]
     return fit, held
 
 
