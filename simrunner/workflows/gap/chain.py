@@ -6,8 +6,8 @@ refitted) and
 1. screens every remaining catalogue effect: a one-parameter fit of the new effect with
    the kept parameters held (:func:`simrunner.workflows.gap.fit.fit_all`, grid + probe), on
    about :data:`SCREEN_MAX_S` seconds of the fit windows (``build_chain``'s ``screen_max_s``,
-   ``--screen``; 0: all of them), every k-th window of each driving
-   regime (:func:`screening_problem`: screening only ranks, so a long log costs no more than
+   ``--screen``; 0: all of them), spread evenly over the log's time
+   grid with the first window of each driving regime (:func:`screening_problem`: screening only ranks, so a long log costs no more than
    a 45-s one here, and a rare manoeuvre is not left out; nor are the windows that steer
    hardest, :func:`extreme_windows`);
 2. refits jointly the :data:`REFINE_TOP` best screened candidates (:data:`REFINE_LATER`

@@ -53,7 +53,7 @@ from simrunner.workflows.gap.logs import SMOOTH_S, Derived, pieces, pose_rates, 
 from vehicle.description import CarDescription
 
 WINDOW_S = 2.0
-HOLDOUT_EVERY = 3  # every third window, counted back from the last, is held out
+HOLDOUT_EVERY = 3  # a window of the main group is held out when its slot is 2 modulo 3 (split_windows)
 WORKFLOW_DT_S = 0.005  # physics step of the workflow (synthetic logs use 1 ms)
 QUIET_SHIFT_S = 0.5  # window boundaries move by up to this to a quiet sample
 QUIET_BEFORE_S = 0.25  # quiet = no command change in [t - before, t + after]
