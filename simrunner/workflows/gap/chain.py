@@ -233,7 +233,7 @@ def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
         return problem
     labels = iter(window_labels(problem))
     extremes = extreme_windows(problem) | reversal_windows(problem)
-    seen: dict[str, int] = {}  # labels met
+    seen: set[str] = set()  # labels met
     segs = []
     index = 0
     for seg in problem.segments:
@@ -241,7 +241,7 @@ def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
         for w in seg.windows:
             label = next(labels)
             first = label not in seen
-            seen[label] = 1
+            seen.add(label)
             if first or (w.slot * GOLDEN) % 1.0 < 1.0 / k or index in extremes:
                 keep.append(w)
             index += 1
