@@ -8,7 +8,7 @@ import re
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pieces.pose import Pose2
@@ -1539,6 +1539,31 @@ def test_screening_finds_a_small_value_in_a_narrow_valley_next_to_neutral(monkey
     xs = np.linspace(0.0, 1.0, fit.GRID_POINTS)
     probe = fit._probe(xs, [1.0 + ((x - (1.0 - truth_frac * 0.25)) / 0.1) ** 2 for x in xs])
     assert xs[-2] < probe <= xs[-1] - fit.END_PROBE_FRACTION * 0.25
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(0.05, 0.45), st.floats(2.0, 50.0))
+def test_screening_finds_a_limits_valley_next_to_its_steep_side(truth_frac, steep):
+    """A limit's cost is flat above its true value (the car never reaches it) and steep
+    below: on a grid with the truth just above a grid point, the parabola lands on the flat
+    side, and the second probe (the midpoint towards the steep neighbour) is what finds the
+    valley (multi log 3's friction scale)."""
+    from simrunner.workflows.gap import fit
+
+    xs = np.linspace(0.0, 1.0, fit.GRID_POINTS)  # grid points 0, .25, .5, .75, 1
+    truth = 0.25 + truth_frac * 0.25  # between the second and the third grid point
+
+    def cost(x):  # a valley at the truth, flat above it, steep below it
+        return 1.0 - 0.6 * math.exp(-((x - truth) / 0.1) ** 2) + (steep * (truth - x) if x < truth else 0.0)
+
+    costs = [cost(x) for x in xs]
+    assume(int(np.argmin(costs)) == 2)  # the steep side's grid point costs more than the flat one's
+    probe = fit._probe(xs, costs)
+    other = fit._other_side(xs, costs, probe)
+    assert other is not None and min(probe, other) < xs[2] < max(probe, other)  # both sides probed
+    if probe >= xs[2]:  # the parabola went to the flat side: the second probe finds the valley
+        assert other == 0.375 and cost(other) < min(costs)
+    assert fit._other_side(xs, [0.0, 1.0, 2.0, 3.0, 4.0], 0.1) is None  # an end: _probe's job
 
 
 def test_a_steering_play_starts_each_window_on_the_side_the_commands_left_it(monkeypatch):

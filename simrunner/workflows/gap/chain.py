@@ -4,7 +4,7 @@ Step ``s`` starts from the car with the effects kept so far (their parameters as
 refitted) and
 
 1. screens every remaining catalogue effect: a one-parameter fit of the new effect with
-   the kept parameters held (:func:`simrunner.workflows.gap.fit.fit_all`, grid + probe), on
+   the kept parameters held (:func:`simrunner.workflows.gap.fit.fit_all`, grid + probes), on
    about :data:`SCREEN_MAX_S` seconds of the fit windows (``build_chain``'s ``screen_max_s``,
    ``--screen``; 0: all of them), spread evenly over the log's time
    grid with the first window of each driving regime (:func:`screening_problem`: screening only ranks, so a long log costs no more than

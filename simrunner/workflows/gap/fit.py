@@ -299,7 +299,11 @@ def fit_effect(problem: Problem, name: str, nominal_cost: float, *, refine: bool
 
     xs = np.linspace(cand.to_x(cand.lo), cand.to_x(cand.hi), GRID_POINTS)
     costs = [f(x) for x in xs]
-    f(_probe(xs, costs))
+    probe = _probe(xs, costs)
+    f(probe)
+    other = _other_side(xs, costs, probe)
+    if other is not None:
+        f(other)
     if refine:
         k = int(np.argmin(costs))
         a, b = xs[max(k - 1, 0)], xs[min(k + 1, GRID_POINTS - 1)]
@@ -344,6 +348,27 @@ def _probe(xs: np.ndarray, costs: Sequence[float]) -> float:
     nb = [i for i in (k - 1, k + 1) if 0 <= i < len(xs)]
     better = min(nb, key=lambda i: costs[i])
     return float(0.5 * (xs[k] + xs[better]))
+
+
+def _other_side(xs: np.ndarray, costs: Sequence[float], probe: float) -> float | None:
+    """A second screening point when the best grid point is inside the grid: the midpoint
+    towards the neighbour on the other side of :func:`_probe`'s (towards the worse
+    neighbour when the probe is the best point itself). A limit (a friction scale, a top
+    speed) is flat on one side of its true value and steep on the other: the parabola then
+    puts its vertex on the flat side and the valley next to the steep side goes unseen (a
+    friction scale of 0.67 on the grid 0.6, 0.9, 1.2: costs 1020, 432, 445, vertex at 1.04;
+    at 0.75 the cost is 325, at 0.67 229; screened at 0.9, 0.5 %, the chain never refitted
+    it). None at an end of the grid (:func:`_probe` goes inside already)."""
+    k = int(np.argmin(costs))
+    if k == 0 or k == len(xs) - 1:
+        return None
+    if probe > xs[k]:
+        side = k - 1
+    elif probe < xs[k]:
+        side = k + 1
+    else:
+        side = max((k - 1, k + 1), key=lambda i: costs[i])
+    return float(0.5 * (xs[k] + xs[side]))
 
 
 def _quiet_worker() -> None:
