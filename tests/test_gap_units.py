@@ -1287,7 +1287,7 @@ def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None, wind
         return np.asarray(windows[active(car)][1 if problem is held_p else 0], float)
 
     fit_p, held_p = FakeProblem(), FakeProblem()
-    monkeypatch.setattr(chain, "_window_values_task", per_window)
+    monkeypatch.setattr(chain, "window_values_task", per_window)
     monkeypatch.setattr(chain, "cost_of", cost)
     monkeypatch.setattr(chain, "_trial_task", trial)
     monkeypatch.setattr(chain, "fit_all", screen)

@@ -115,7 +115,7 @@ from scipy.optimize import minimize, minimize_scalar
 from simrunner.workflows.gap.fit import (BRENT_MAXITER, CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN,
                                          REFINE_TOP, ROBUST_WINDOW_FACTOR, FitResult, Problem, _quiet_worker,
                                          bic, cost_of, fit_all, rescaled, robust_total, segment_residuals,
-                                         window_costs, window_values)
+                                         window_costs, window_values_task)
 from simrunner.workflows.gap.thresholds import SAFETY
 from vehicle.description import CarDescription
 
@@ -553,12 +553,6 @@ def _cost_task(args) -> float:
     return cost_of(problem, car)
 
 
-def _window_values_task(args) -> np.ndarray:
-    """``(W,)``: each window's robust cost of ``car`` on ``problem``."""
-    problem, car = args
-    return window_values(problem, car)
-
-
 def _trial_task(args) -> Outcome:
     screen_problem, fit_problem, held_problem, judge, base, names, start, first = args
     values, _, evals, spans = joint_refit(screen_problem, base, names, start, first)
@@ -635,7 +629,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
             return ()
         cars = [with_parameters(base, outcome[t.effect].values) for t in [chosen] + others]
         tasks = [(p, c) for c in cars for p in (judge.fit, judge.held)]
-        vals = list(pool.map(_window_values_task, tasks)) if pool is not None else [_window_values_task(t) for t in tasks]
+        vals = list(pool.map(window_values_task, tasks)) if pool is not None else [window_values_task(t) for t in tasks]
         per = [np.concatenate(vals[2 * i:2 * i + 2]) for i in range(len(cars))]
         out = []
         for t, v in zip(others, per[1:]):

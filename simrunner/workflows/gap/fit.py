@@ -223,6 +223,12 @@ def window_values(problem: Problem, car: CarDescription) -> np.ndarray:
     return np.array([robust_total([cw], problem.robust_scale) for cw in costs])
 
 
+def window_values_task(args: tuple[Problem, CarDescription]) -> np.ndarray:
+    """:func:`window_values` of ``(problem, car)``, for a process pool."""
+    problem, car = args
+    return window_values(problem, car)
+
+
 def cost_of(problem: Problem, car: CarDescription) -> float:
     """The cost of ``car`` on the problem's windows: the sum of squared normalised residuals,
     each window through the robust loss of the module docstring."""

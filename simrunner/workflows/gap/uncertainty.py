@@ -41,15 +41,10 @@ from typing import Sequence
 import numpy as np
 
 from simrunner.workflows.gap.chain import _bounds01, with_parameters
-from simrunner.workflows.gap.fit import CANDIDATES, Problem, _quiet_worker, window_values
+from simrunner.workflows.gap.fit import CANDIDATES, Problem, _quiet_worker, window_values, window_values_task
 from vehicle.description import CarDescription
 
 STEP = 0.05  # the difference step, as a fraction of each parameter's fit range
-
-
-def _task(args) -> np.ndarray:
-    problem, car = args
-    return window_values(problem, car)
 
 
 def _dvalue_du(names: Sequence[str], u: np.ndarray) -> np.ndarray:
@@ -89,7 +84,7 @@ def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str]
     cars = [with_parameters(base, {**values, **from_u(p)}) for p in points]
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) as pool:
-            f = np.array(list(pool.map(_task, [(problem, car) for car in cars])))
+            f = np.array(list(pool.map(window_values_task, [(problem, car) for car in cars])))
     else:
         f = np.array([window_values(problem, car) for car in cars])
     n = f.shape[1]
