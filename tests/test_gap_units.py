@@ -689,6 +689,41 @@ def test_a_plateau_that_ends_short_of_neutral_is_found_to_its_ends(monkeypatch):
     assert 0.18 < lo < 0.21 and hi == 0.5 and v["throttle_deadband_mps"] == pytest.approx(0.5 * (lo + hi))
 
 
+def test_a_search_stopped_near_neutral_on_a_plateau_with_a_cliff_at_neutral_moves_out_along_it(monkeypatch):
+    """Multi log 10: the cost is flat for deadbands 0.003-0.04 m/s and twice as high at 0
+    (no deadband); a search stopped at 0.004 m/s (within 2 NEUTRAL_TOL of neutral, which the
+    chain rejects as no effect) is moved to the plateau's middle with its ends reported. The
+    same start on a cost as good at neutral, or one that rises away from the start inside the
+    band (pinned there), stays where it is, with no interval."""
+    from types import SimpleNamespace
+
+    import simrunner.workflows.gap.chain as chain
+
+    def cliff(problem, car):
+        d = car.effects.throttle_deadband_mps
+        return 2.0 if d < 0.003 else 1.0 + (max(d - 0.04, 0.0) * 10.0) ** 2 - 1e-9 * d
+
+    def flat_to_zero(problem, car):
+        d = car.effects.throttle_deadband_mps
+        return 1.0 + (max(d - 0.04, 0.0) * 10.0) ** 2
+
+    def pinned(problem, car):
+        d = car.effects.throttle_deadband_mps
+        return 2.0 if d == 0.0 else 1.0 + ((d - 0.004) * 100.0) ** 2
+
+    start, problem = {"throttle_deadband_mps": 0.004}, SimpleNamespace(n_eff=2000.0)
+    monkeypatch.setattr(chain, "BRENT_MAXITER", 0)  # the search stops where it starts
+    monkeypatch.setattr(chain, "cost_of", cliff)
+    v, _, _, spans = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"], start)
+    (lo, hi), = spans.values()
+    assert 0.0 < lo <= 0.004 and 0.039 < hi < 0.042 and v["throttle_deadband_mps"] == pytest.approx(0.5 * (lo + hi))
+    assert chain.neutral_offset("throttle_deadband", v["throttle_deadband_mps"]) > chain.NEUTRAL_TOL
+    for cost in (flat_to_zero, pinned):
+        monkeypatch.setattr(chain, "cost_of", cost)
+        v, _, _, spans = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"], start)
+        assert spans == {} and v["throttle_deadband_mps"] == pytest.approx(0.004, abs=1e-3)
+
+
 # -- measured logs of any sensor set (pose, speed sensor, gyro) ------------------------------------
 SPEED_GYRO = ("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad", "yaw_rate_radps")
 POSE_ONLY = ("t_s", "x_m", "y_m", "yaw_rad", "speed_cmd_mps", "steer_cmd_rad")

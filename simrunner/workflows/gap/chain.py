@@ -450,6 +450,13 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
     return {CANDIDATES[n].field: values[CANDIDATES[n].field] for n in given}, seen[key], len(seen), spans
 
 
+def _with_coordinate(u: np.ndarray, i: int, x: float) -> np.ndarray:
+    """``u`` with coordinate ``i`` set to ``x`` (a copy)."""
+    p = u.copy()
+    p[i] = x
+    return p
+
+
 def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
               tie: float) -> tuple[tuple, dict[str, tuple[float, float]]]:
     """The fitted ``values`` (``Effects`` fields of ``names``) with every parameter that sits on
@@ -469,7 +476,11 @@ def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
     ``tie`` (every pinned parameter) leaves the value as it is. On a plateau, each end is
     found by bisection (:data:`TIE_BISECTIONS` steps; the end towards neutral never nearer
     than twice :data:`NEUTRAL_TOL` of the fit range, which counts as no effect), and the
-    middle is kept if it is on the plateau too (else the value found)."""
+    middle is kept if it is on the plateau too (else the value found). A search that stopped
+    within that band of neutral, on a plateau that reaches beyond it, while neutral itself
+    costs more than ``tie`` (a cliff at neutral: any deadband above a few mm/s fits as well,
+    none fits far worse), is moved out along the plateau the same way; at or as good as
+    neutral, or pinned inside the band, it stays (and the chain rejects it as no effect)."""
     u = to_u(values)
     moved = False
     spans: dict[str, tuple[float, float]] = {}
@@ -478,13 +489,12 @@ def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
         n_u = _neutral_u(name)
         side = math.copysign(1.0, u[i] - n_u)
         near_limit = n_u + side * 2.0 * NEUTRAL_TOL
-        if (u[i] - near_limit) * side <= 0.0:
-            continue
+        within = (u[i] - near_limit) * side <= 0.0
+        if within and (u[i] == n_u or f(_with_coordinate(u, i, n_u)) <= tie or f(_with_coordinate(u, i, near_limit)) > tie):
+            continue  # neutral, as good as neutral, or pinned near it
 
         def at(x: float) -> np.ndarray:
-            p = u.copy()
-            p[i] = x
-            return p
+            return _with_coordinate(u, i, x)
 
         def edge(inside: float, outside: float) -> float:
             if f(at(outside)) <= tie:
@@ -497,11 +507,16 @@ def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
                     outside = mid
             return inside
 
-        half = 0.5 * (u[i] + near_limit)
-        if f(at(half)) > tie:
-            continue  # the cost rises towards neutral: pinned
-        near = edge(half, near_limit)
-        far = edge(u[i], 1.0 if side > 0 else 0.0)
+        if within:
+            # a plateau from a cliff at neutral outwards, the search stopped at its near end
+            # (multi log 10: a deadband costs the same from 0.004 to 0.04 m/s, 2x more at 0)
+            near, start = edge(u[i], n_u), near_limit
+        else:
+            half = 0.5 * (u[i] + near_limit)
+            if f(at(half)) > tie:
+                continue  # the cost rises towards neutral: pinned
+            near, start = edge(half, near_limit), u[i]
+        far = edge(start, 1.0 if side > 0 else 0.0)
         middle = 0.5 * (near + far)
         x = middle if f(at(middle)) <= tie else u[i]
         _, one_from_u = _bounds01([name])
