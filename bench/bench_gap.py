@@ -49,9 +49,10 @@ Modes (``--mode``, comma-separated; default: all of them, small):
     parameter, (b) E-SINDy of the longitudinal and yaw dynamics.
 ``glitch``
     The ``multi`` logs (same seeds) run twice: as made, and with one glitch put in at a
-    random sample of the middle 80 % (:func:`inject_glitch`; kind ``k % 4``: the position
+    random sample of the middle 80 % (:func:`inject_glitch`; kind ``k % 5``: the position
     displaced by 0.5-1 m for 3 samples, the heading by 0.3-3 rad for 2-20 samples, the pose
-    frozen for 1-3 s while the car drives on, or 0.5-2 s of rows dropped). Figures: the
+    frozen for 1-3 s while the car drives on, 0.5-2 s of rows dropped, or the speed off by
+    1-2 m/s for 1-3 readings; before 2026-11-29 ``k % 4`` without the speed spike). Figures: the
     glitch listed; the names unchanged by it (issue 10: glitches "never drive the naming");
     of the logs whose names changed, those where every changed name stands in a
     "cannot tell them apart" pair of either run (``Step.alike``).
@@ -110,7 +111,7 @@ MODES = ("single", "multi", "speed_gyro", "tenth", "merged", "unmodelled", "comp
          "timing")
 _MODE_TAG = {"multi": 2, "compare": 2, "speed_gyro": 3, "tenth": 4, "merged": 4, "unmodelled": 5,
              "glitch": 7}  # seed tags: compare uses the multi logs; glitch the multi logs, its own for the glitch
-GLITCH_KINDS = ("jump", "heading", "frozen", "gap")  # ``glitch``: trial k puts in kind k % 4
+GLITCH_KINDS = ("jump", "heading", "frozen", "gap", "spike")  # ``glitch``: trial k puts in kind k % 5
 # effects that show only where the drive and brake limits reach the tyres' grip (or the tyres
 # slide): not on the default car (3.1 m/s^2), so the default-car modes leave them out; ``tenth`` has them
 GRIP_LIMITED = ("front_drive", "inertia")
@@ -389,6 +390,11 @@ def inject_glitch(log, kind: str, rng: np.random.Generator):
         yaw = log.yaw_rad.copy()
         yaw[i:j] = (yaw[i:j] + rng.choice([-1.0, 1.0]) * rng.uniform(0.3, 3.0) + math.pi) % (2 * math.pi) - math.pi
         cols = {"yaw_rad": yaw}
+    elif kind == "spike":  # an encoder that missed or doubled ticks: 1-3 readings off by 1-2 m/s
+        j = i + int(rng.integers(1, 4))
+        speed = log.speed_mps.copy()
+        speed[i:j] += rng.choice([-1.0, 1.0]) * rng.uniform(1.0, 2.0)
+        cols = {"speed_mps": speed}
     elif kind == "frozen":
         j = int(np.searchsorted(t, t[i] + rng.uniform(1.0, 3.0)))
         cols = {c: getattr(log, c).copy() for c in ("x_m", "y_m", "yaw_rad")}

@@ -917,7 +917,10 @@ def test_a_heading_jump_is_found_and_its_displaced_samples_kept_out(cols):
     assert found[1].detail.startswith("heading displaced by ")
     assert np.flatnonzero(glitch_mask(log, found)).tolist() == [500, 501] + list(range(800, 851))
     # a car that turns tighter than this log's heading steps explains nothing away: found all the same
-    assert _kinds(find_glitches(log, min_turn_radius_m=0.2)) == _kinds(found)
+    tight = CarDescription()
+    tight = dataclasses.replace(tight, steering=dataclasses.replace(tight.steering, limit_rad=0.75))
+    assert tight.min_turn_radius_m < 0.2
+    assert _kinds(find_glitches(log, tight)) == _kinds(found)
 
 
 def test_time_gaps_and_duplicates_are_found_exactly():
@@ -1009,6 +1012,58 @@ def test_a_frozen_sensor_is_found(cols, column):
     found = [g for g in find_glitches(log) if g.kind is GlitchKind.FROZEN]
     assert _kinds(found) == [(GlitchKind.FROZEN, round(t[a], 9), round(t[b - 1], 9), column)]
     assert np.flatnonzero(glitch_mask(log, found)).tolist() == list(range(a + 1, b))
+
+
+@pytest.mark.parametrize("rate_hz", [100.0, 20.0])
+def test_speed_and_gyro_spikes_are_found_and_only_their_samples_kept_out(rate_hz):
+    """An encoder that missed ticks for one sample (speed read at 30 %), and a gyro that read
+    5 rad/s too much for three samples: each is listed as a sensor spike of its column and
+    exactly its samples are kept out (test_clean_logs_have_no_glitches: the same logs without
+    them have none), at 100 Hz and at 20 Hz (where a servo twice the car file's rate could
+    swing the yaw rate by 4 rad/s in a step: a 2-rad/s gyro spike is not told from steering)."""
+    c = _noisy(FULL_GYRO, rate_hz=rate_hz, jitter=0.3)
+    t = c["t_s"]
+    i, j = int(5.3 * rate_hz), int(7.7 * rate_hz)  # moving at 1.5 and 0.8 m/s
+    c["speed_mps"][i] *= 0.3
+    c["yaw_rate_radps"][j:j + 3] += 5.0
+    log = _log(c)
+    found = [g for g in find_glitches(log) if g.kind is GlitchKind.SPIKE]
+    assert _kinds(found) == [(GlitchKind.SPIKE, round(t[i - 1], 9), round(t[i], 9), "speed_mps"),
+                             (GlitchKind.SPIKE, round(t[j - 1], 9), round(t[j + 2], 9), "yaw_rate_radps")]
+    assert re.match(r"speed_mps steps -[01]\.\d+ and back \+1\.\d+ in 0\.\d+ s \(1 sample\(s\): \+0\.4\d*\); the car ", found[0].detail)
+    assert np.flatnonzero(glitch_mask(log, found)).tolist() == [i, j, j + 1, j + 2]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_glitch_bench_speed_spikes_are_found_whole(seed):
+    """bench_gap's ``spike`` glitch (1-3 readings off by 1-2 m/s, anywhere in the middle 80 %
+    of the log, also while the car stands) is listed as one sensor spike whose kept-out
+    samples are exactly the readings changed."""
+    from bench.bench_gap import inject_glitch
+
+    log = _log(_noisy(MEASURED_COLUMNS, seed, jitter=0.3))
+    bad, t0, t1 = inject_glitch(log, "spike", np.random.default_rng(seed))
+    changed = np.flatnonzero(bad.speed_mps != log.speed_mps)
+    assert 1 <= changed.size <= 3 and log.t_s[changed[0]] == t0
+    found = find_glitches(bad)
+    assert [g.kind for g in found] == [GlitchKind.SPIKE]
+    assert np.flatnonzero(glitch_mask(bad, found)).tolist() == changed.tolist()
+
+
+def test_a_level_that_changes_and_stays_is_no_spike():
+    """A speed reading that steps by 1 m/s within one sample and stays (a sensor's offset
+    changed, or the car was set down rolling): impossible for the car, but neither side can
+    be told wrong; not a spike. The same step out and back 3 readings later is one; 100
+    readings later, none."""
+    c = _noisy(SPEED_GYRO)
+    c["speed_mps"][600:] += 1.0
+    assert [g for g in find_glitches(_log(c)) if g.kind is GlitchKind.SPIKE] == []
+    c["speed_mps"][603:] -= 1.0
+    spikes = [g for g in find_glitches(_log(c)) if g.kind is GlitchKind.SPIKE]
+    assert [(g.column, int(np.searchsorted(c["t_s"], g.t_start_s)), int(np.searchsorted(c["t_s"], g.t_end_s)))
+            for g in spikes] == [("speed_mps", 599, 602)]
+    c["speed_mps"][603:700] += 1.0  # back after 100 readings: a wheel that locked, say; left in
+    assert [g for g in find_glitches(_log(c)) if g.kind is GlitchKind.SPIKE] == []
 
 
 def test_noise_free_and_resting_logs_are_not_frozen():

@@ -2,7 +2,7 @@
 
 Real logs are not what a simulator writes: the localisation jumps, a topic stops for a
 while, a row is logged twice, a sensor repeats its last value. :func:`find_glitches`
-finds four kinds (:class:`GlitchKind`); :func:`glitch_mask` turns them into the samples to
+finds five kinds (:class:`GlitchKind`); :func:`glitch_mask` turns them into the samples to
 keep out. Every threshold is relative to the log itself - its time steps, the
 noise of its own signals, its own speed - so that one rule serves a 20-Hz particle
 filter and a 100-Hz motion-capture log alike:
@@ -59,8 +59,24 @@ filter and a 100-Hz motion-capture log alike:
     step - ``n_moving * p ** (L - 1) < FROZEN_ALPHA``. A channel without noise (a
     simulator's) may legitimately hold a value and is never called frozen.
 
+``sensor_spike``
+    a speed or gyro reading that steps out and back by more than the car can change it: a
+    step ``|dy| > A dt + JUMP_Z sqrt(2) sigma`` is impossible for the car, with ``A`` the
+    most that signal's rate of change can be - :data:`SPIKE_AGILITY` times the car file's
+    (speed: its acceleration or brake limit; yaw rate: ``A_speed tan(limit) / L + |v| rate /
+    (L cos^2(limit))``, with the steering limit, the servo rate and the faster end's speed) -
+    and ``sigma`` one sample's noise (robust, from each sample's distance to the line through
+    its neighbours). An impossible step followed by the next impossible one back (opposite
+    sign, at most :data:`SPIKE_MAX_SAMPLES` readings later, and the readings either side of
+    the pair differ by what the car can do in the time) keeps the readings between out: an
+    encoder that missed ticks, a gyro that saturated for a few samples. Longer excursions
+    are left in: a wheel that locks under hard braking and spins up again reads like that
+    for a second (DS2's brake to reverse at 113.9 s, encoder at 30 Hz), and is the car's. One impossible step alone (a level that changes and stays) is no spike: its
+    two sides cannot tell which is wrong. Samples already kept out (jumps, frozen runs,
+    duplicates) and steps across time gaps are not judged.
+
 A glitch keeps out the samples in ``(t_start_s, t_end_s]``: the sample after a jump, a
-duplicate, a frozen sensor's repeats. A time gap has no samples inside; windows and
+duplicate, a frozen sensor's repeats, a spike. A time gap has no samples inside; windows and
 smoothing are cut at gaps anyway.
 """
 from __future__ import annotations
@@ -73,6 +89,7 @@ import numpy as np
 
 from simrunner.run.log import RunLog
 from simrunner.run.sparse import GAP_FACTOR, GAP_QUANTILE, gap_limit_s
+from vehicle.description import CarDescription
 
 DUPLICATE_DT_FRACTION = 0.1  # dt below this fraction of the median: the same sample again
 JUMP_Z = 8.0  # robust z-score of a position step beyond which it is a jump
@@ -83,6 +100,8 @@ SCALE_FLOOR_FRACTION = 0.01  # jump scale floor: this fraction of the median mov
 RESOLUTION = 1e-6  # the log format's resolution (%.6f)
 FROZEN_ALPHA = 0.01  # a repeat run is frozen when the log would show one this long with prob. < this
 FROZEN_MIN_SAMPLES = 3  # shortest frozen run (samples with the same value)
+SPIKE_AGILITY = 2.0  # a car up to this many times as quick as its car file says makes no spike
+SPIKE_MAX_SAMPLES = 5  # a spike is this many readings at most (longer: the wheel, not the sensor)
 MOVING_MPS = 0.1  # as replay.MOVING_MPS and regimes.MOVING_MPS
 MOVING_BASELINE_S = 1.0  # pose displacement over this long tells whether the car moves
 NEIGHBOUR_STEPS = 3  # each side, for the pose speed of a log without speed column
@@ -96,6 +115,7 @@ class GlitchKind(StrEnum):
     DUPLICATE = "duplicate"
     JUMP = "localisation_jump"
     FROZEN = "frozen_sensor"
+    SPIKE = "sensor_spike"
 
 
 @dataclass(frozen=True)
@@ -127,23 +147,22 @@ def time_gaps(t: np.ndarray) -> np.ndarray:
     return dt > gap_limit_s(dt) if dt.size else np.zeros(0, dtype=bool)
 
 
-def find_glitches(log: RunLog, min_turn_radius_m: float | None = None) -> list[Glitch]:
-    """The glitches of ``log`` (see the module docstring), sorted by start time.
-    ``min_turn_radius_m``: the car's (``CarDescription.min_turn_radius_m``; None: the default
-    car's), which bounds a real heading step."""
+def find_glitches(log: RunLog, car: CarDescription | None = None) -> list[Glitch]:
+    """The glitches of ``log`` (see the module docstring), sorted by start time. ``car``: the
+    car file (None: the default car), whose smallest turning radius bounds a real heading
+    step and whose limits bound a real change of speed and yaw rate."""
     if len(log) < 3:
         return []
+    if car is None:
+        car = CarDescription()
     found = _gaps(log) + _duplicates(log)
     jumps = np.zeros(len(log) - 1, dtype=bool)
     pose_scale = math.nan
     if has_pose(log):
-        if min_turn_radius_m is None:
-            from vehicle.description import CarDescription
-
-            min_turn_radius_m = CarDescription().min_turn_radius_m
-        more, jumps, pose_scale = _jumps(log, min_turn_radius_m)
+        more, jumps, pose_scale = _jumps(log, car.min_turn_radius_m)
         found += more
     found += _frozen(log, jumps, pose_scale)
+    found += _spikes(log, car, glitch_mask(log, found))
     return sorted(found, key=lambda g: (g.t_start_s, g.t_end_s, g.kind))
 
 
@@ -436,6 +455,70 @@ def _frozen(log: RunLog, jumps: np.ndarray, pose_scale: float) -> list[Glitch]:
                               f"samples ({t[b] - t[a]:.3g} s) while moving; its noise repeats a value with "
                               f"p = {p:.2g} per sample"))
     return out
+
+
+def _spikes(log: RunLog, car: CarDescription, kept_out: np.ndarray) -> list[Glitch]:
+    """Speed and gyro spikes (module docstring); ``kept_out``: the samples other glitches
+    keep out already (neither judged nor used as neighbours)."""
+    t = log.t_s
+    dt_all = np.diff(t)
+    cut = np.concatenate([[0], np.cumsum(time_gaps(t) | (dt_all < DUPLICATE_DT_FRACTION * median_dt_s(t)))])
+    if log.speed_mps is not None:
+        speed = np.abs(log.speed_mps)
+    elif has_pose(log):
+        speed = _pose_speed(log, MOVING_BASELINE_S)
+    else:
+        speed = np.zeros(len(log))
+    accel = SPIKE_AGILITY * max(car.drive.max_accel_mps2, car.drive.max_brake_mps2)
+    wheelbase, limit = car.chassis.wheelbase_m, car.steering.limit_rad
+    steer_rate = SPIKE_AGILITY * car.steering.rate_radps
+    idx = np.flatnonzero(~np.asarray(kept_out, dtype=bool))
+    if idx.size < 10:
+        return []
+    ti, dt = t[idx], np.diff(t[idx])
+    ok = (cut[idx[1:]] - cut[idx[:-1]]) == 0  # the step between two judged samples crosses no gap
+    fast = np.maximum(speed[idx[:-1]], speed[idx[1:]])
+    out = []
+    for c in ("speed_mps", "yaw_rate_radps"):
+        y = getattr(log, c)
+        if y is None:
+            continue
+        yi = y[idx]
+        most = np.full(dt.size, accel) if c == "speed_mps" else \
+            accel * math.tan(limit) / wheelbase + fast * steer_rate / (wheelbase * math.cos(limit) ** 2)
+        sigma = _sample_noise(ti, yi, ok)
+        d = np.diff(yi)
+        noise = JUMP_Z * math.sqrt(2.0) * sigma  # of a step: two samples' noise
+        big = np.flatnonzero(ok & (np.abs(d) > most * dt + noise))
+        i = 0
+        while i + 1 < big.size:
+            a, b = int(big[i]), int(big[i + 1])
+            net = yi[b + 1] - yi[a]
+            if (b - a <= SPIKE_MAX_SAMPLES and ok[a:b + 1].all() and np.sign(d[a]) == -np.sign(d[b])
+                    and abs(net) <= float(most[a:b + 1].max()) * (ti[b + 1] - ti[a]) + noise):
+                values = ", ".join(f"{v:+.3g}" for v in yi[a + 1:b + 1][:4]) + (" ..." if b - a > 4 else "")
+                out.append(Glitch(GlitchKind.SPIKE, float(ti[a]), float(ti[b]), c,
+                                  f"{c} steps {d[a]:+.3g} and back {d[b]:+.3g} in {ti[b + 1] - ti[a]:.3g} s "
+                                  f"({b - a} sample(s): {values}); the car changes it by at most "
+                                  f"{float(most[a]) * dt[a] + noise:.3g} in a step (noise included)"))
+                i += 2
+            else:
+                i += 1
+    return out
+
+
+def _sample_noise(t: np.ndarray, y: np.ndarray, ok: np.ndarray) -> float:
+    """One sample's noise in ``y`` (robust), from each sample's distance to the line through
+    its neighbours (whose variance is 1.5 sigma^2 at regular stamps); floored at the CSV
+    resolution."""
+    both = ok[:-1] & ok[1:]
+    d1, d2 = np.diff(t)[:-1], np.diff(t)[1:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = y[1:-1] - (y[:-2] * d2 + y[2:] * d1) / (d1 + d2)
+    r = r[both & np.isfinite(r)]
+    if r.size < 10:
+        return RESOLUTION
+    return max(_robust(r)[1] / math.sqrt(1.5), RESOLUTION)
 
 
 def _moving_without(log: RunLog, channel: str) -> np.ndarray:

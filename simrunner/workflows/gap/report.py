@@ -233,7 +233,7 @@ def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
 def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
     """One log made ready: checked, glitches found, smoothed, windowed and split."""
     check_measured(log)
-    glitches = tuple(find_glitches(log, car.min_turn_radius_m))
+    glitches = tuple(find_glitches(log, car))
     bad = glitch_mask(log, glitches)
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
     check_conventions(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad, measured=derived)
