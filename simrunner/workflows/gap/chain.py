@@ -490,7 +490,8 @@ def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
         side = math.copysign(1.0, u[i] - n_u)
         near_limit = n_u + side * 2.0 * NEUTRAL_TOL
         within = (u[i] - near_limit) * side <= 0.0
-        if within and (u[i] == n_u or f(_with_coordinate(u, i, n_u)) <= tie or f(_with_coordinate(u, i, near_limit)) > tie):
+        if within and (u[i] == n_u or f(_with_coordinate(u, i, n_u)) <= tie
+                       or f(_with_coordinate(u, i, near_limit)) > tie):
             continue  # neutral, as good as neutral, or pinned near it
 
         def at(x: float) -> np.ndarray:
