@@ -450,13 +450,6 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
     return {CANDIDATES[n].field: values[CANDIDATES[n].field] for n in given}, seen[key], len(seen), spans
 
 
-def _with_coordinate(u: np.ndarray, i: int, x: float) -> np.ndarray:
-    """``u`` with coordinate ``i`` set to ``x`` (a copy)."""
-    p = u.copy()
-    p[i] = x
-    return p
-
-
 def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
               tie: float) -> tuple[tuple, dict[str, tuple[float, float]]]:
     """The fitted ``values`` (``Effects`` fields of ``names``) with every parameter that sits on
@@ -490,12 +483,14 @@ def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
         side = math.copysign(1.0, u[i] - n_u)
         near_limit = n_u + side * 2.0 * NEUTRAL_TOL
         within = (u[i] - near_limit) * side <= 0.0
-        if within and (u[i] == n_u or f(_with_coordinate(u, i, n_u)) <= tie
-                       or f(_with_coordinate(u, i, near_limit)) > tie):
-            continue  # neutral, as good as neutral, or pinned near it
 
         def at(x: float) -> np.ndarray:
-            return _with_coordinate(u, i, x)
+            p = u.copy()
+            p[i] = x
+            return p
+
+        if within and (u[i] == n_u or f(at(n_u)) <= tie or f(at(near_limit)) > tie):
+            continue  # neutral, as good as neutral, or pinned near it
 
         def edge(inside: float, outside: float) -> float:
             if f(at(outside)) <= tie:
