@@ -1735,31 +1735,76 @@ def test_a_plateau_found_by_an_earlier_refit_stays_reported_while_the_value_stay
     assert _carried(old, {"throttle_deadband_mps": 0.225, "steering_gain": 1.02}, new) == {**old, **new}
 
 
-def test_a_parameter_on_a_plateau_is_held_while_the_others_get_their_standard_errors(monkeypatch):
-    """run_gap computes the standard errors of the kept parameters not on a plateau only, the
-    plateau's parameter held at its value, and gives that one nan."""
+def _run_with_a_plateau_and_drag(monkeypatch, one_window: bool):
+    """run_gap on a kinematic 30-s log with the chain replaced by a deadband on a plateau and
+    a drag, and ``parameter_uncertainty`` by a stand-in: drag's sigma 0.01, or (``one_window``)
+    nan with the screening's second window as the one that alone pins it. Returns ``(what the
+    stand-in was given, result)``."""
+    import simrunner.workflows.gap.chain as chain_mod
     import simrunner.workflows.gap.report as report
+    from simrunner.workflows.gap.uncertainty import Uncertainty
 
     seen = {}
 
-    def sigma(problem, base, names, values, *, jobs=1):
-        seen["names"], seen["values"] = list(names), dict(values)
-        return {report.CANDIDATES[n].field: 0.01 for n in names}
+    def uncertainty(problem, base, names, values, *, jobs=1):
+        seen["names"], seen["values"], seen["places"] = list(names), dict(values), problem.window_places()
+        if one_window:
+            return Uncertainty({report.CANDIDATES[n].field: math.nan for n in names},
+                               {report.CANDIDATES[n].field: 1 for n in names})
+        return Uncertainty({report.CANDIDATES[n].field: 0.01 for n in names})
 
-    monkeypatch.setattr(report, "parameter_sigma", sigma)
-    chain_spans = {"throttle_deadband_mps": (0.01, 0.3)}
-    import simrunner.workflows.gap.chain as chain_mod
-
+    monkeypatch.setattr(report, "parameter_uncertainty", uncertainty)
     real_build = chain_mod.build_chain
 
     def build(*a, **k):
         c = real_build(*a, **{**k, "max_effects": 0})
         return dataclasses.replace(c, parameters={"throttle_deadband_mps": 0.155, "drag_coeff_kgpm": 0.05},
-                                   spans=chain_spans)
+                                   spans={"throttle_deadband_mps": (0.01, 0.3)})
 
     monkeypatch.setattr(report, "build_chain", build)
     monkeypatch.setattr(chain_mod.Chain, "effects", property(lambda self: ["throttle_deadband", "drag"]))
     log = simulate(CarDescription(), duration_s=30.0, rate_hz=50.0)
-    result = report.run_gap(log, jobs=1, sim_factory=kin_factory, effects=["drag"])
+    return seen, report.run_gap(log, jobs=1, sim_factory=kin_factory, effects=["drag"])
+
+
+def test_a_parameter_on_a_plateau_is_held_while_the_others_get_their_standard_errors(monkeypatch):
+    """run_gap computes the standard errors of the kept parameters not on a plateau only, the
+    plateau's parameter held at its value, and gives that one nan."""
+    seen, result = _run_with_a_plateau_and_drag(monkeypatch, one_window=False)
     assert seen["names"] == ["drag"] and seen["values"]["throttle_deadband_mps"] == 0.155
     assert result.parameter_sigma["drag_coeff_kgpm"] == 0.01 and math.isnan(result.parameter_sigma["throttle_deadband_mps"])
+    assert result.parameter_one_window == {} and result.to_json()["parameter_one_window"] == {}
+
+
+def test_a_parameter_one_window_alone_pins_is_reported_with_that_windows_place(monkeypatch):
+    """The window :func:`parameter_uncertainty` names is given by its log and stamps in the
+    result, the JSON, the text and the car file's note, in place of a standard error."""
+    from simrunner.workflows.gap.report import car_sources, summary_text
+
+    seen, result = _run_with_a_plateau_and_drag(monkeypatch, one_window=True)
+    src, t0, t1 = seen["places"][1]
+    assert 0.0 < t0 < t1 and src == result.log.source
+    assert result.parameter_one_window == {"drag_coeff_kgpm": (src, t0, t1)}
+    assert math.isnan(result.parameter_sigma["drag_coeff_kgpm"])
+    assert result.to_json()["parameter_one_window"] == {"drag_coeff_kgpm": {"log": src, "t_start_s": t0,
+                                                                           "t_end_s": t1}}
+    assert (f"drag_coeff_kgpm = 0.05 (+- not known: one window alone pins it, {src} {t0:.1f}-{t1:.1f} s"
+            in summary_text(result))
+    assert car_sources(result)["effects.drag_coeff_kgpm"].endswith(f"pinned by one window alone ({src} "
+                                                                   f"{t0:.1f}-{t1:.1f} s)")
+
+
+def test_the_parameters_text_says_why_a_standard_error_is_missing():
+    """A standard error, an interval, one window that alone pins it, the end of the fit range,
+    or a cost that does not curve: each parameter's text says which."""
+    from simrunner.workflows.gap.report import _params_text
+
+    nan = math.nan
+    text = _params_text({"a": 1.0, "b": 0.3, "c": 2.0, "d": 0.5, "e": 0.2},
+                        {"a": 0.1, "b": nan, "c": nan, "d": nan, "e": nan}, {"e": (0.1, 0.3)},
+                        {"c": ("logs/run.csv", 1.04, 3.0)}, ["b"])
+    assert text == ", ".join(["a = 1 +- 0.1", "b = 0.3 (+- not known: at the end of its fit range, see the warning below)",
+                    "c = 2 (+- not known: one window alone pins it, run.csv 1.0-3.0 s; a log with more of that "
+                    "driving would tell how well)", "d = 0.5 (+- not known: the log does not pin it)",
+                    "e = 0.2 (any value 0.1-0.3 fits the fit windows as well: they hold nothing that pins it closer;"
+                    " the middle is kept)"])

@@ -166,6 +166,12 @@ class Problem:
     def with_car(self, car: CarDescription) -> "Problem":
         return dataclasses.replace(self, car=car)
 
+    def window_places(self) -> list[tuple[str, float, float]]:
+        """``(log source, first stamp s, last stamp s)`` of each window, in the order of
+        :func:`window_values`."""
+        return [(seg.log.source, float(seg.log.t_s[w.start]), float(seg.log.t_s[w.stop - 1]))
+                for seg in self.segments for w in seg.windows]
+
 
 def segment_residuals(problem: Problem, car: CarDescription) -> list[dict[str, np.ndarray]]:
     """Residuals of ``car`` on each segment's windows (NaN elsewhere), per log."""

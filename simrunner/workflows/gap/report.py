@@ -44,7 +44,7 @@ from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
                                             window_mask)
-from simrunner.workflows.gap.uncertainty import parameter_sigma
+from simrunner.workflows.gap.uncertainty import parameter_uncertainty
 from vehicle.description import CarDescription
 
 FORMAT = "nxpcup-gap/2"
@@ -108,6 +108,8 @@ class GapResult:
     gap_ls_after: float = math.nan
     # standard error of each kept parameter (simrunner.workflows.gap.uncertainty; nan: not pinned)
     parameter_sigma: dict[str, float] = field(default_factory=dict)
+    # kept parameters that one fit window alone pins (their sigma nan): (log source, t_start_s, t_end_s)
+    parameter_one_window: dict[str, tuple[str, float, float]] = field(default_factory=dict)
     # kept parameters the fit windows pin only to an interval (chain.Chain.spans): (low, high);
     # the value kept is its middle
     parameter_spans: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -166,6 +168,8 @@ class GapResult:
             "format": FORMAT, "logs": [p.log.source for p in self.parts], "log": self.log.source,
             "effects": self.effects, "effect": self.effect, "parameters": self.parameters,
             "parameter_sigma": self.parameter_sigma,
+            "parameter_one_window": {k: {"log": src, "t_start_s": t0, "t_end_s": t1}
+                                     for k, (src, t0, t1) in self.parameter_one_window.items()},
             "parameter_spans": {k: list(v) for k, v in self.parameter_spans.items()},
             "per_log": self.per_log, "logs_worse": self.logs_worse,
             "gap_before": self.gap_before, "gap_after": self.gap_after,
@@ -319,8 +323,10 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     screen = screening_problem(fit_problem, screen_max_s)
     # a parameter on a plateau is held (its interval says how well it is pinned, not a curvature)
     curved = [e for e in chain.effects if CANDIDATES[e].field not in chain.spans]
-    sigma = parameter_sigma(screen, car, curved, chain.parameters, jobs=jobs)
-    sigma.update({k: math.nan for k in chain.spans})
+    unc = parameter_uncertainty(screen, car, curved, chain.parameters, jobs=jobs)
+    sigma = {**unc.sigma, **{k: math.nan for k in chain.spans}}
+    places = screen.window_places()
+    one_window = {k: places[w] for k, w in unc.one_window.items()}
     tick("uncertainty")
     pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
     res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
@@ -370,8 +376,8 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         rmse_smoothed_before=rmse(smoothed(pred0), held, rep_signals),
         rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
         unrevealable={**missing_manoeuvres(names, parts, car), **cannot_reveal(names, signals)},
-        leftovers=leftovers(stats_after, noise), parameter_sigma=sigma, per_log=per_log,
-        parameter_spans=dict(chain.spans))
+        leftovers=leftovers(stats_after, noise), parameter_sigma=sigma, parameter_one_window=one_window,
+        per_log=per_log, parameter_spans=dict(chain.spans))
 
 
 def moves_in(part: LogPart, windows: Sequence[Window]) -> int:
@@ -501,8 +507,10 @@ def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
 
 
 def _params_text(params: dict[str, float], sigma: dict[str, float] | None = None,
-                 spans: dict[str, tuple[float, float]] | None = None) -> str:
-    sigma, spans = sigma or {}, spans or {}
+                 spans: dict[str, tuple[float, float]] | None = None,
+                 one_window: dict[str, tuple[str, float, float]] | None = None,
+                 at_bounds: Sequence[str] = ()) -> str:
+    sigma, spans, one_window = sigma or {}, spans or {}, one_window or {}
 
     def one(k: str, v: float) -> str:
         if k in spans:
@@ -510,6 +518,12 @@ def _params_text(params: dict[str, float], sigma: dict[str, float] | None = None
                     "they hold nothing that pins it closer; the middle is kept)")
         if math.isfinite(sigma.get(k, math.nan)):
             return f"{k} = {v:.4g} +- {sigma[k]:.2g}"
+        if k in at_bounds and k in sigma:
+            return f"{k} = {v:.4g} (+- not known: at the end of its fit range, see the warning below)"
+        if k in one_window:
+            src, t0, t1 = one_window[k]
+            return (f"{k} = {v:.4g} (+- not known: one window alone pins it, {Path(src).name} {t0:.1f}-{t1:.1f} s; "
+                    "a log with more of that driving would tell how well)")
         return f"{k} = {v:.4g}" + (" (+- not known: the log does not pin it)" if k in sigma else "")
 
     return ", ".join(one(k, v) for k, v in params.items())
@@ -523,9 +537,11 @@ def summary_text(result: GapResult) -> str:
     chain = result.chain
     lines = [f"effects found: {', '.join(result.effects) if result.effects else 'none'}"]
     if result.parameters:
-        lines.append(f"  parameters: {_params_text(result.parameters, result.parameter_sigma, result.parameter_spans)}")
+        text = _params_text(result.parameters, result.parameter_sigma, result.parameter_spans,
+                            result.parameter_one_window, result.at_bounds)
+        lines.append(f"  parameters: {text}")
         if result.parameter_sigma:
-            lines.append("  (+- one standard error from the spread between the fit windows and the fit's distance "
+            lines.append("  (+- one standard error from the fits that leave one fit window out and the fit's distance "
                          "from the cost's minimum: a lower bound; a bias shared by all windows (a stand-in effect, "
                          "a wrong car-file number) is not in it)")
     for step in chain.steps:  # a look-alike kept as well (at a later step) is no alternative
@@ -629,6 +645,9 @@ def car_sources(result: GapResult) -> dict[str, str]:
             lo, hi = result.parameter_spans[name]
             return f", pinned only to {lo:.4g}-{hi:.4g} (the middle kept)"
         sd = result.parameter_sigma.get(name, math.nan)
+        if name in result.parameter_one_window:
+            src, t0, t1 = result.parameter_one_window[name]
+            return f", pinned by one window alone ({Path(src).name} {t0:.1f}-{t1:.1f} s)"
         return f", standard error {sd:.2g}" if math.isfinite(sd) else ""
 
     return {f"effects.{name}": fitted + sigma(name) for name in result.parameters}

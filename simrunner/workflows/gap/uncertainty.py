@@ -3,18 +3,23 @@
 The chain's parameters minimise ``F(p) = sum_w f_w(p)``, the robust cost of the windows
 ``w`` they were fitted on (:func:`simrunner.workflows.gap.chain.screening_problem` of the fit
 windows; each window restarts from the measured state, so the windows are the independent
-units of the data). The covariance of such an estimate is the *sandwich*
+units of the data). The covariance of such an estimate is taken from the spread of the fits
+that leave one window out (the *jackknife*), each a Newton step from the fitted values:
 
-    cov = H^-1 B H^-1 + d d^T,   H = the Hessian of F,   B = n/(n-1) sum_w (g_w - g)(g_w - g)^T
+    p_(-w) - p = -(H - H_w)^-1 (G - g_w),   cov = (n-1)/n sum_w (d_w - d)(d_w - d)^T + s s^T
 
-with ``g_w`` the gradient of window ``w``'s cost and ``g`` their mean (the scores, centred:
-the optimiser stops near, not at, the minimum). It needs no noise model: a window the model
-misses weighs in as much as the spread of its gradient says, so model error that differs
-from window to window widens the interval, while a bias common to all windows (a nuisance
-the catalogue absorbs in a kept parameter) does not. ``d = -H^-1 sum_w g_w`` is the Newton
-step from the fitted values to the minimum of the cost's quadratic model over the stencil:
-the fit's own distance from the minimum it was after (its tolerance, a cost that moves in
-steps such as a latency's control sub-steps), kept inside the fit range and added in
+with ``H_w``, ``g_w`` window ``w``'s cost Hessian and gradient, ``H``, ``G`` their sums, ``d_w``
+the left-out fit's step and ``d`` their mean. Where each window holds a small share of ``H``
+this is the sandwich ``H^-1 B H^-1`` (``B`` the scores' spread); where a few windows pin a
+parameter (a brake-before-reverse seen in the plan's two reversals, a deadband in its one
+slow window) it is wider, as it must be: the sandwich then estimates ``B`` from a couple of
+gradients and was measured 7-15 times too narrow on such parameters (docs/gap.md). It needs
+no noise model: a window the model misses weighs in as much as the spread says, so model
+error that differs from window to window widens the interval, while a bias common to all
+windows (a nuisance the catalogue absorbs in a kept parameter) does not. ``s = -H^-1 G`` is
+the Newton step from the fitted values to the minimum of the cost's quadratic model over the
+stencil: the fit's own distance from the minimum it was after (its tolerance, a cost that
+moves in steps such as a latency's control sub-steps), kept inside the fit range and added in
 quadrature.
 
 Derivatives by central differences in the fit's ``[0, 1]``-scaled coordinates (the fit
@@ -25,16 +30,19 @@ sub-steps of 4-5 ms, so a much smaller step would see a staircase). The stencil 
 replays) is moved inside the range for a parameter near its bound, and each window's
 gradient carried back to the parameter by its own Hessian. ``sigma`` is ``nan`` for a
 parameter along which the cost does not curve upward (``H_ii <= 0``: the log does not pin
-it) and for one at an end of its fit range (``Candidate.at_bound``: the bound, not the cost,
+it), for one at an end of its fit range (``Candidate.at_bound``: the bound, not the cost,
 made that minimum, and the report warns of it; DS3's pose-only rolling resistance at 0.1
-turned ``H`` indefinite and took every other sigma with it), and the others' sandwich is
-that with it held; all are ``nan`` when the rest of ``H`` is not positive definite either. It says nothing about a bias of the catalogue effect standing in for
-something else (docs/gap.md, "Known limits").
+turned ``H`` indefinite and took every other sigma with it), and for one that a single
+window pins (``H - H_w`` not positive definite: without that window the log would not pin
+it; :attr:`Uncertainty.one_window` names the window), and the others' are those with it held;
+all are ``nan`` when the rest of ``H`` is not positive definite either. It says nothing about
+a bias of the catalogue effect standing in for something else (docs/gap.md, "Known limits").
 """
 from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import dataclass, field
 from concurrent.futures import ProcessPoolExecutor
 from typing import Sequence
 
@@ -57,18 +65,17 @@ def _dvalue_du(names: Sequence[str], u: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str], values: dict[str, float],
-                    *, jobs: int = 1, step: float = STEP) -> dict[str, float]:
-    """The standard error of each parameter of ``values`` (the ``Effects`` fields of the
-    effects ``names``, fitted on ``problem``'s windows with ``base`` as the car): the module
-    docstring's sandwich; ``{}`` for no parameter."""
-    names = list(names)
-    k = len(names)
-    if not k:
-        return {}
-    to_u, from_u = _bounds01(names)
-    u = to_u(values)
-    c = np.clip(u, step, 1.0 - step)  # the stencil's centre, inside the range
+@dataclass(frozen=True)
+class Uncertainty:
+    """:func:`parameter_uncertainty`'s answer, by ``Effects`` field."""
+
+    sigma: dict[str, float]  # the standard error (nan: not known; the module docstring)
+    one_window: dict[str, int] = field(default_factory=dict)  # parameters one window alone pins: its index
+
+
+def _stencil(c: np.ndarray, step: float) -> list[np.ndarray]:
+    """The centre, ``+-step`` along each coordinate, the four corners of each pair."""
+    k = len(c)
     points = [c.copy()]
     for i in range(k):
         for s in (1.0, -1.0):
@@ -81,15 +88,13 @@ def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str]
             p[i] += si * step
             p[j] += sj * step
             points.append(p)
-    cars = [with_parameters(base, {**values, **from_u(p)}) for p in points]
-    if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) as pool:
-            f = np.array(list(pool.map(window_values_task, [(problem, car) for car in cars])))
-    else:
-        f = np.array([window_values(problem, car) for car in cars])
+    return points
+
+
+def _window_derivatives(f: np.ndarray, k: int, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each window's gradient ``(n, k)`` and Hessian ``(n, k, k)`` at the stencil's centre from
+    its costs ``f`` (``(points, n)``, the points in :func:`_stencil`'s order)."""
     n = f.shape[1]
-    if n < 2 or not np.isfinite(f).all():
-        return {CANDIDATES[m].field: math.nan for m in names}
     f0 = f[0]
     grad = np.empty((n, k))
     hess = np.empty((n, k, k))
@@ -102,27 +107,88 @@ def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str]
         pp, pm, mp, mm = f[corner:corner + 4]
         corner += 4
         hess[:, i, j] = hess[:, j, i] = (pp - pm - mp + mm) / (4.0 * step ** 2)
+    return grad, hess
+
+
+def _positive_definite(a: np.ndarray) -> bool:
+    try:
+        np.linalg.cholesky(a)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def covariance_u(grad: np.ndarray, hess: np.ndarray, u: np.ndarray, pinned: list[int]
+                 ) -> tuple[np.ndarray | None, list[int], dict[int, int]]:
+    """``(cov, kept, one_window)``: the module docstring's covariance (in ``u``) of the
+    parameters ``kept`` (``pinned`` but those one window alone pins, ``one_window``: parameter
+    -> that window), from the windows' gradients ``grad`` and Hessians ``hess`` at ``u``;
+    ``cov`` None when their ``H`` is not positive definite."""
+    h_all = hess.sum(axis=0)
+    kept = list(pinned)
+    if not kept or not _positive_definite(h_all[np.ix_(kept, kept)]):
+        return None, kept, {}
+    one_window: dict[int, int] = {}
+    while kept:  # drop, one at a time, a parameter that only one window pins
+        idx = np.ix_(kept, kept)
+        lone = next((w for w in range(len(hess)) if not _positive_definite(h_all[idx] - hess[w][idx])), None)
+        if lone is None:
+            break
+        share = np.diag(hess[lone])[kept] / np.diag(h_all)[kept]
+        i = kept[int(np.argmax(share))]
+        one_window[i] = lone
+        kept.remove(i)
+    if not kept:
+        return None, kept, one_window
+    idx = np.ix_(kept, kept)
+    h, g = h_all[idx], grad[:, kept]
+    n = len(g)
+    total = g.sum(axis=0)
+    left_out = np.array([-np.linalg.solve(h - hess[w][idx], total - g[w]) for w in range(n)])
+    spread = left_out - left_out.mean(axis=0)
+    newton = np.clip(u[kept] - np.linalg.solve(h, total), 0.0, 1.0) - u[kept]  # to the minimum within the range
+    return spread.T @ spread * (n - 1) / n + np.outer(newton, newton), kept, one_window
+
+
+def parameter_uncertainty(problem: Problem, base: CarDescription, names: Sequence[str], values: dict[str, float],
+                          *, jobs: int = 1, step: float = STEP) -> Uncertainty:
+    """The standard error of each parameter of ``values`` (the ``Effects`` fields of the
+    effects ``names``, fitted on ``problem``'s windows with ``base`` as the car): the module
+    docstring's jackknife, and the parameters one window alone pins."""
+    names = list(names)
+    k = len(names)
+    if not k:
+        return Uncertainty({})
+    to_u, from_u = _bounds01(names)
+    u = to_u(values)
+    c = np.clip(u, step, 1.0 - step)  # the stencil's centre, inside the range
+    cars = [with_parameters(base, {**values, **from_u(p)}) for p in _stencil(c, step)]
+    if jobs > 1:
+        with ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) as pool:
+            f = np.array(list(pool.map(window_values_task, [(problem, car) for car in cars])))
+    else:
+        f = np.array([window_values(problem, car) for car in cars])
+    fields = [CANDIDATES[m].field for m in names]
+    out = {fd: math.nan for fd in fields}
+    if f.shape[1] < 2 or not np.isfinite(f).all():
+        return Uncertainty(out)
+    grad, hess = _window_derivatives(f, k, step)
     grad += hess @ (u - c)  # each window's gradient carried from the centre to the parameters
-    out = {CANDIDATES[m].field: math.nan for m in names}
     h_all = hess.sum(axis=0)
     # the others: the cost does not curve along them, or the fit stopped at a bound (a minimum
     # the bound makes, not the cost's curvature)
-    pinned = [i for i in range(k) if h_all[i, i] > 0.0
-              and not CANDIDATES[names[i]].at_bound(values[CANDIDATES[names[i]].field])]
-    h = h_all[np.ix_(pinned, pinned)]
-    try:
-        np.linalg.cholesky(h)
-    except np.linalg.LinAlgError:
-        return out
-    g = grad[:, pinned]
-    centred = g - g.mean(axis=0)
-    b = centred.T @ centred * n / (n - 1)
-    h_inv = np.linalg.inv(h)
-    newton = np.clip(u[pinned] - h_inv @ g.sum(axis=0), 0.0, 1.0) - u[pinned]  # to the minimum within the range
-    cov_u = h_inv @ b @ h_inv + np.outer(newton, newton)
-    sigma = np.sqrt(np.maximum(np.diag(cov_u), 0.0)) * np.abs(_dvalue_du(names, u)[pinned])
-    out.update({CANDIDATES[names[i]].field: float(s) for i, s in zip(pinned, sigma)})
-    return out
+    pinned = [i for i in range(k) if h_all[i, i] > 0.0 and not CANDIDATES[names[i]].at_bound(values[fields[i]])]
+    cov_u, kept, lone = covariance_u(grad, hess, u, pinned)
+    if cov_u is not None:
+        sigma = np.sqrt(np.maximum(np.diag(cov_u), 0.0)) * np.abs(_dvalue_du(names, u)[kept])
+        out.update({fields[i]: float(s) for i, s in zip(kept, sigma)})
+    return Uncertainty(out, {fields[i]: w for i, w in lone.items()})
 
 
-__all__ = ["parameter_sigma", "window_values", "STEP"]
+def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str], values: dict[str, float],
+                    *, jobs: int = 1, step: float = STEP) -> dict[str, float]:
+    """:attr:`Uncertainty.sigma` of :func:`parameter_uncertainty` (``{}`` for no parameter)."""
+    return parameter_uncertainty(problem, base, names, values, jobs=jobs, step=step).sigma
+
+
+__all__ = ["Uncertainty", "parameter_uncertainty", "parameter_sigma", "covariance_u", "window_values", "STEP"]
