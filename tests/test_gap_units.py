@@ -1808,3 +1808,62 @@ def test_the_parameters_text_says_why_a_standard_error_is_missing():
                     "driving would tell how well)", "d = 0.5 (+- not known: the log does not pin it)",
                     "e = 0.2 (any value 0.1-0.3 fits the fit windows as well: they hold nothing that pins it closer;"
                     " the middle is kept)"])
+
+
+def _rest_then_ramp(rng, columns, creep_mps=0.0):
+    """6 s at 50 Hz: standing (or creeping at ``creep_mps``) for 2 s, a ramp to 1 m/s over
+    1 s, then 1 m/s straight along x; speed noise 0.02 m/s, pose noise 5 mm and 0.005 rad."""
+    t = np.arange(0.0, 6.0, 0.02)
+    v = np.clip(t - 2.0, 0.0, 1.0) + creep_mps
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    cols = {"t_s": t, "x_m": x + rng.normal(0.0, 0.005, t.size), "y_m": rng.normal(0.0, 0.005, t.size),
+            "yaw_rad": rng.normal(0.0, 0.005, t.size), "speed_mps": v + rng.normal(0.0, 0.02, t.size),
+            "speed_cmd_mps": np.where(t < 2.0, 0.0, 1.0), "steer_cmd_rad": np.zeros(t.size)}
+    return t, log_from_columns({c: cols[c] for c in columns}, "<rest>")
+
+
+@pytest.mark.parametrize("columns", [("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad"),
+                                     ("t_s", "x_m", "y_m", "yaw_rad", "speed_cmd_mps", "steer_cmd_rad")],
+                         ids=["encoder", "pose"])
+def test_a_car_standing_reads_at_rest_and_a_moving_or_creeping_one_does_not(columns):
+    """Standing in noise: at rest up to the smoothing window before the ramp; moving (from 0.2
+    m/s, 10 speed-noise sigmas) never; a car creeping at 0.3 m/s never."""
+    from simrunner.workflows.gap.logs import SMOOTH_S
+
+    for seed in range(5):
+        t, log = _rest_then_ramp(np.random.default_rng(seed), columns)
+        rest = derive(log, 0.2).at_rest
+        assert rest[t <= 2.0 - SMOOTH_S - 0.05].mean() >= 0.9, seed
+        assert not rest[t >= 2.2].any(), seed
+        t, log = _rest_then_ramp(np.random.default_rng(seed), columns, creep_mps=0.3)
+        assert not derive(log, 0.2).at_rest.any(), seed
+
+
+def test_a_window_starting_at_rest_starts_the_car_at_rest_so_a_deadband_is_seen_where_the_ramp_passes_it():
+    """A synthetic log from rest (the plan's first ramp) with a throttle deadband of 0.12 m/s:
+    the smoothed speed at the first sample is noise, and a car whose drive is off (the
+    deadband at a zero command) rolled on at it through the whole pause, so the first
+    window's cost was lowest with no deadband at all. Started at rest, it stands until the
+    ramp passes the deadband, and the window's cost is lower at the true deadband than at
+    a tenth of it or at twice it."""
+    from simrunner.car.effects import neutral_car
+    from simrunner.workflows.gap.fit import Problem, Segment, nominal_scales, window_values
+    from simrunner.workflows.gap.synth import make_measured_log
+
+    log, truth = make_measured_log("throttle_deadband", value=0.12, rng=np.random.default_rng(3), start_s=0.0,
+                                   duration_s=8.0)
+    car = neutral_car(truth.car)
+    derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad)
+    assert derived.at_rest[0] and abs(derived.speed_mps[0]) > 0.0
+    first = make_windows(log)[:1]
+    assert log.t_s[first[0].stop - 1] > 1.5 and np.all(log.speed_cmd_mps[log.t_s < 0.9] == 0.0)
+    pred = replay(car.replace(effects=dataclasses.replace(car.effects, throttle_deadband_mps=0.12)), log, derived,
+                  first)
+    rest = log.t_s < 0.9
+    assert np.abs(pred.speed_mps[rest]).max() < 1e-6 and np.ptp(pred.x_m[rest]) < 1e-6
+    seg = Segment(log, derived, tuple(first))
+    res = [residuals(log, derived, replay(car, log, derived, first))]
+    problem = Problem(car, (seg,), nominal_scales((seg,), res, FIT_SIGNALS), FIT_SIGNALS)
+    cost = {d: float(window_values(problem, car.replace(effects=dataclasses.replace(
+        car.effects, throttle_deadband_mps=d)))[0]) for d in (0.012, 0.12, 0.24)}
+    assert cost[0.12] < min(cost[0.012], cost[0.24]), cost

@@ -42,6 +42,7 @@ MIN_ROWS = 50
 MIN_DURATION_S = 6.0  # three 2-s replay windows: two to fit, one to hold out
 MIN_RATE_HZ = 10.0  # median sample rate; below it the smoothing (SMOOTH_S) sees single samples
 SMOOTH_S = 0.15  # Savitzky-Golay window for states and their derivatives
+AT_REST_Z = 3.0  # at rest: the speed over SMOOTH_S either side within this many standard errors of zero
 MIN_SPEED_FOR_STEER_MPS = 0.15  # below this the steer estimate falls back to the command
 
 
@@ -82,7 +83,10 @@ class Derived:
     else the pose's velocity along the heading; ``yaw_rate_radps`` the smoothed gyro, else the
     derivative of the smoothed yaw; ``accel_mps2`` the derivative of the smoothed speed;
     ``steer_rad`` the bicycle-equivalent steer that explains the yaw rate,
-    ``atan(L * r / v)``, or the command where ``|v|`` is small or the yaw rate unknown.
+    ``atan(L * r / v)``, or the command where ``|v|`` is small or the yaw rate unknown;
+    ``at_rest`` (bool) where the car stands still (:func:`at_rest`): a replay starting there
+    starts the car at rest, not at the smoothed noise's speed (a car whose drive is off, a
+    deadband's, would roll on at it).
     """
 
     x_m: np.ndarray
@@ -92,6 +96,7 @@ class Derived:
     yaw_rate_radps: np.ndarray
     accel_mps2: np.ndarray
     steer_rad: np.ndarray
+    at_rest: np.ndarray
 
 
 def sample_dt_s(log: RunLog) -> float:
@@ -154,7 +159,52 @@ def derive(log: RunLog, wheelbase_m: float, steer_limit_rad: float = math.inf, *
     steer = np.clip(steer, -steer_limit_rad, steer_limit_rad)
     if exclude is not None:
         steer = np.where(np.asarray(exclude, dtype=bool), np.nan, steer)
-    return Derived(out["x_m"], out["y_m"], out["yaw_rad"], speed, yaw_rate, out["accel_mps2"], steer)
+    return Derived(out["x_m"], out["y_m"], out["yaw_rad"], speed, yaw_rate, out["accel_mps2"], steer,
+                   at_rest(log, out, exclude))
+
+
+def _rms(v: np.ndarray) -> float:
+    v = v[np.isfinite(v)]
+    return float(np.sqrt(np.mean(v * v))) if v.size else math.nan
+
+
+def at_rest(log: RunLog, smoothed: dict[str, np.ndarray], exclude: np.ndarray | None = None) -> np.ndarray:
+    """``(N,) bool``: the car stands still at the sample. Over :data:`SMOOTH_S` either side
+    (within the sample's piece, :func:`pieces`; at least 3 readings), the speed readings'
+    mean (a speed sensor; without one, the slope of a straight line through each of the
+    pose's x and y against time) lies within :data:`AT_REST_Z` of its standard errors of
+    zero: the readings cannot tell the car from one standing still. The noise sigma is the
+    RMS of the readings about ``smoothed`` (:func:`derive`'s states: a little below the true
+    sigma, the smoother follows part of the noise)."""
+    n = len(log)
+    out = np.zeros(n, dtype=bool)
+    t = log.t_s
+    if log.speed_mps is not None:
+        sigma = _rms(log.speed_mps - smoothed["speed_mps"])
+    elif has_pose(log):
+        sigma = _rms(np.hypot(log.x_m - smoothed["x_m"], log.y_m - smoothed["y_m"])) / math.sqrt(2.0)
+    else:  # pragma: no cover - check_measured asks for a pose or a speed sensor
+        return out
+    if not sigma > 0.0:
+        return out
+    for a, b in pieces(log, exclude):
+        tt = t[a:b]
+        lo = np.searchsorted(tt, tt - SMOOTH_S - 1e-9, side="left")
+        hi = np.searchsorted(tt, tt + SMOOTH_S + 1e-9, side="right")
+        m = hi - lo
+        if log.speed_mps is not None:
+            c = np.concatenate([[0.0], np.cumsum(log.speed_mps[a:b])])
+            out[a:b] = (m >= 3) & (np.abs(c[hi] - c[lo]) / np.maximum(m, 1) <= AT_REST_Z * sigma / np.sqrt(m))
+            continue
+        xs, ys = log.x_m[a:b], log.y_m[a:b]
+        for i in np.flatnonzero(m >= 3):
+            dt = tt[lo[i]:hi[i]] - tt[i]
+            sxx = float(np.sum((dt - dt.mean()) ** 2))
+            if sxx <= 0.0:
+                continue
+            limit = AT_REST_Z * sigma / math.sqrt(sxx)  # the slope's standard error times AT_REST_Z
+            out[a + i] = all(abs(float(np.dot(dt - dt.mean(), p[lo[i]:hi[i]]))) / sxx <= limit for p in (xs, ys))
+    return out
 
 
 def _derive_piece(log: RunLog, a: int, b: int) -> dict[str, np.ndarray]:
@@ -254,5 +304,5 @@ def pose_rates(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.nd
     return sg.back(pose["v_grid"]), pose["yaw_rate_radps"]
 
 
-__all__ = ["Derived", "check_measured", "derive", "pieces", "pose_rates", "smoothing_window", "speed_estimate",
+__all__ = ["Derived", "at_rest", "check_measured", "derive", "pieces", "pose_rates", "smoothing_window", "speed_estimate",
            "sample_dt_s", "MEASURED_COLUMNS", "REQUIRED_COLUMNS", "POSE_COLUMNS", "MIN_ROWS", "MIN_DURATION_S", "MIN_RATE_HZ", "SMOOTH_S"]

@@ -298,6 +298,8 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
 
     def state(i: int):
         v, steer, r = float(derived.speed_mps[i]), float(derived.steer_rad[i]), float(derived.yaw_rate_radps[i])
+        if derived.at_rest[i]:  # standing: not rolling at the smoothed noise's speed
+            v, r = 0.0, 0.0
         if not math.isfinite(r):  # no gyro and no pose: the kinematic yaw rate of the steer
             r = v * math.tan(steer) / wheelbase
         p = (Pose2(derived.x_m[i] - shift[0], derived.y_m[i] - shift[1], derived.yaw_rad[i]) if pose
