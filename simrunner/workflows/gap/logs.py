@@ -192,9 +192,14 @@ def at_rest(log: RunLog, smoothed: dict[str, np.ndarray], exclude: np.ndarray | 
         lo = np.searchsorted(tt, tt - SMOOTH_S - 1e-9, side="left")
         hi = np.searchsorted(tt, tt + SMOOTH_S + 1e-9, side="right")
         m = hi - lo
-        if log.speed_mps is not None:
-            c = np.concatenate([[0.0], np.cumsum(log.speed_mps[a:b])])
-            out[a:b] = (m >= 3) & (np.abs(c[hi] - c[lo]) / np.maximum(m, 1) <= AT_REST_Z * sigma / np.sqrt(m))
+        if log.speed_mps is not None:  # the finite readings' mean
+            v = log.speed_mps[a:b]
+            finite = np.isfinite(v)
+            c = np.concatenate([[0.0], np.cumsum(np.where(finite, v, 0.0))])
+            k = np.concatenate([[0], np.cumsum(finite)])
+            m = k[hi] - k[lo]
+            mean = (c[hi] - c[lo]) / np.maximum(m, 1)
+            out[a:b] = (m >= 3) & (np.abs(mean) <= AT_REST_Z * sigma / np.sqrt(np.maximum(m, 1)))
             continue
         xs, ys = log.x_m[a:b], log.y_m[a:b]
         for i in np.flatnonzero(m >= 3):
@@ -304,5 +309,6 @@ def pose_rates(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.nd
     return sg.back(pose["v_grid"]), pose["yaw_rate_radps"]
 
 
-__all__ = ["Derived", "at_rest", "check_measured", "derive", "pieces", "pose_rates", "smoothing_window", "speed_estimate",
-           "sample_dt_s", "MEASURED_COLUMNS", "REQUIRED_COLUMNS", "POSE_COLUMNS", "MIN_ROWS", "MIN_DURATION_S", "MIN_RATE_HZ", "SMOOTH_S"]
+__all__ = ["Derived", "at_rest", "check_measured", "derive", "pieces", "pose_rates", "smoothing_window",
+           "speed_estimate", "sample_dt_s", "MEASURED_COLUMNS", "REQUIRED_COLUMNS", "POSE_COLUMNS", "MIN_ROWS",
+           "MIN_DURATION_S", "MIN_RATE_HZ", "SMOOTH_S", "AT_REST_Z"]
