@@ -1803,11 +1803,13 @@ def test_the_parameters_text_says_why_a_standard_error_is_missing():
     text = _params_text({"a": 1.0, "b": 0.3, "c": 2.0, "d": 0.5, "e": 0.2},
                         {"a": 0.1, "b": nan, "c": nan, "d": nan, "e": nan}, {"e": (0.1, 0.3)},
                         {"c": ("logs/run.csv", 1.04, 3.0)}, ["b"])
-    assert text == ", ".join(["a = 1 +- 0.1", "b = 0.3 (+- not known: at the end of its fit range, see the warning below)",
-                    "c = 2 (+- not known: one window alone pins it, run.csv 1.0-3.0 s; a log with more of that "
-                    "driving would tell how well)", "d = 0.5 (+- not known: the log does not pin it)",
-                    "e = 0.2 (any value 0.1-0.3 fits the fit windows as well: they hold nothing that pins it closer;"
-                    " the middle is kept)"])
+    assert text == ", ".join(["a = 1 +- 0.1",
+                              "b = 0.3 (+- not known: at the end of its fit range, see the warning below)",
+                              "c = 2 (+- not known: one window alone pins it, run.csv 1.0-3.0 s; a log with more "
+                              "of that driving would tell how well)",
+                              "d = 0.5 (+- not known: the log does not pin it)",
+                              "e = 0.2 (any value 0.1-0.3 fits the fit windows as well: they hold nothing that pins "
+                              "it closer; the middle is kept)"])
 
 
 def _rest_then_ramp(rng, columns, creep_mps=0.0):
