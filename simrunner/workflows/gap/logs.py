@@ -163,7 +163,8 @@ def derive(log: RunLog, wheelbase_m: float, steer_limit_rad: float = math.inf, *
                    at_rest(log, out, exclude))
 
 
-def _rms(v: np.ndarray) -> float:
+def rms_finite(v: np.ndarray) -> float:
+    """RMS of the finite values of ``v`` (NaN for none)."""
     v = v[np.isfinite(v)]
     return float(np.sqrt(np.mean(v * v))) if v.size else math.nan
 
@@ -180,9 +181,9 @@ def at_rest(log: RunLog, smoothed: dict[str, np.ndarray], exclude: np.ndarray | 
     out = np.zeros(n, dtype=bool)
     t = log.t_s
     if log.speed_mps is not None:
-        sigma = _rms(log.speed_mps - smoothed["speed_mps"])
+        sigma = rms_finite(log.speed_mps - smoothed["speed_mps"])
     elif has_pose(log):
-        sigma = _rms(np.hypot(log.x_m - smoothed["x_m"], log.y_m - smoothed["y_m"])) / math.sqrt(2.0)
+        sigma = rms_finite(np.hypot(log.x_m - smoothed["x_m"], log.y_m - smoothed["y_m"])) / math.sqrt(2.0)
     else:  # pragma: no cover - check_measured asks for a pose or a speed sensor
         return out
     if not sigma > 0.0:
@@ -309,6 +310,6 @@ def pose_rates(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.nd
     return sg.back(pose["v_grid"]), pose["yaw_rate_radps"]
 
 
-__all__ = ["Derived", "at_rest", "check_measured", "derive", "pieces", "pose_rates", "smoothing_window",
+__all__ = ["Derived", "at_rest", "check_measured", "derive", "pieces", "pose_rates", "rms_finite", "smoothing_window",
            "speed_estimate", "sample_dt_s", "MEASURED_COLUMNS", "REQUIRED_COLUMNS", "POSE_COLUMNS", "MIN_ROWS",
            "MIN_DURATION_S", "MIN_RATE_HZ", "SMOOTH_S", "AT_REST_Z"]

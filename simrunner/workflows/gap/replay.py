@@ -49,7 +49,8 @@ import numpy as np
 from pieces.pose import Pose2
 from simrunner.run.log import RunLog
 from simrunner.workflows.gap.glitches import has_pose, time_gaps
-from simrunner.workflows.gap.logs import SMOOTH_S, Derived, pieces, pose_rates, smoothing_window, speed_estimate
+from simrunner.workflows.gap.logs import (SMOOTH_S, Derived, pieces, pose_rates, rms_finite, smoothing_window,
+                                          speed_estimate)
 from vehicle.description import CarDescription
 
 WINDOW_S = 2.0
@@ -450,19 +451,15 @@ def noise_rms(log: RunLog, derived: Derived) -> dict[str, float]:
     NaN for a signal the log does not measure directly (``position_m`` and ``yaw_rad``
     without a pose, ``speed_mps`` without a speed sensor or pose, ``yaw_rate_radps``
     without a gyro)."""
-    def ms(v: np.ndarray) -> float:
-        v = v[np.isfinite(v)]
-        return float(np.sqrt(np.mean(v * v))) if v.size else float("nan")
-
     nan = float("nan")
     out = {"position_m": nan, "yaw_rad": nan, "speed_mps": nan, "yaw_rate_radps": nan}
     if has_pose(log):
-        out["position_m"] = ms(np.hypot(log.x_m - derived.x_m, log.y_m - derived.y_m))
-        out["yaw_rad"] = ms((log.yaw_rad - derived.yaw_rad + math.pi) % (2.0 * math.pi) - math.pi)
+        out["position_m"] = rms_finite(np.hypot(log.x_m - derived.x_m, log.y_m - derived.y_m))
+        out["yaw_rad"] = rms_finite((log.yaw_rad - derived.yaw_rad + math.pi) % (2.0 * math.pi) - math.pi)
     if log.speed_mps is not None:
-        out["speed_mps"] = ms(log.speed_mps - derived.speed_mps)
+        out["speed_mps"] = rms_finite(log.speed_mps - derived.speed_mps)
     if log.yaw_rate_radps is not None:
-        out["yaw_rate_radps"] = ms(log.yaw_rate_radps - derived.yaw_rate_radps)
+        out["yaw_rate_radps"] = rms_finite(log.yaw_rate_radps - derived.yaw_rate_radps)
     return out
 
 
