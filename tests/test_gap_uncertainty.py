@@ -13,8 +13,11 @@ from simrunner.workflows.gap.replay import default_sim_factory
 from simrunner.workflows.gap.report import run_gap, summary_text
 from simrunner.workflows.gap.synth import NOISE_POS_M, NOISE_SPEED_MPS, NOISE_YAW_RAD, make_measured_log
 from simrunner.workflows.gap.uncertainty import parameter_sigma
+from vehicle.description import CarDescription
 
 OFFSET_RAD = -0.03
+# a problem for the stand-in window costs below (which ignore it): at any physics step the same
+_NO_WINDOWS = Problem(CarDescription(), (), {})
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +115,6 @@ def test_a_parameter_at_an_end_of_its_fit_range_gets_no_standard_error_and_the_o
     (DS3's pose-only rolling resistance at its bound once took every other sigma with it)."""
     from simrunner.workflows.gap import uncertainty
     from simrunner.workflows.gap.fit import CANDIDATES
-    from vehicle.description import CarDescription
 
     rng = np.random.default_rng(5)
     spread_a, spread_b = rng.normal(0.0, 0.01, 40), rng.normal(0.0, 0.01, 40)
@@ -127,13 +129,13 @@ def test_a_parameter_at_an_end_of_its_fit_range_gets_no_standard_error_and_the_o
 
     monkeypatch.setattr(uncertainty, "window_values", window_values)
     values = {"steering_offset_rad": 0.0, "steering_gain": 1.5}
-    sigma = parameter_sigma(None, CarDescription(), ["steering_offset", "steering_gain"], values)
+    sigma = parameter_sigma(_NO_WINDOWS, CarDescription(), ["steering_offset", "steering_gain"], values)
     assert math.isnan(sigma["steering_gain"])
     # the offset alone: H = 2 * 100 * 40 in u, B = n/(n-1) * sum (200 spread_a)^2 centred
     g = 200.0 * spread_a
     expected_u = math.sqrt(g @ g * 40 / 39) / (200.0 * 40)
     assert sigma["steering_offset_rad"] == pytest.approx(expected_u * (off.hi - off.lo), rel=0.05)
-    inside = parameter_sigma(None, CarDescription(), ["steering_offset", "steering_gain"],
+    inside = parameter_sigma(_NO_WINDOWS, CarDescription(), ["steering_offset", "steering_gain"],
                              {**values, "steering_gain": 1.4})
     assert math.isfinite(inside["steering_gain"]) and inside["steering_gain"] > 0.0
 
@@ -163,7 +165,6 @@ def test_a_parameter_few_windows_pin_gets_the_spread_of_the_fits_that_leave_one_
     curvature: 1.9 times too narrow here; measured 7-15 times on the bench's ESC and steering
     limit). The offset, spread over all windows with no leverage, keeps the sandwich's."""
     from simrunner.workflows.gap.uncertainty import parameter_uncertainty
-    from vehicle.description import CarDescription
 
     n = 20
     rng = np.random.default_rng(2)
@@ -175,7 +176,7 @@ def test_a_parameter_few_windows_pin_gets_the_spread_of_the_fits_that_leave_one_
     centre_b[3], centre_b[11] = 0.52, 0.48
     off, gain = _quadratic_windows(monkeypatch, np.full(n, 100.0), 0.5 + spread, curv_b, centre_b)
     values = {"steering_offset_rad": 0.5 * (off.lo + off.hi), "steering_gain": 0.5 * (gain.lo + gain.hi)}
-    got = parameter_uncertainty(None, CarDescription(), ["steering_offset", "steering_gain"], values)
+    got = parameter_uncertainty(_NO_WINDOWS, CarDescription(), ["steering_offset", "steering_gain"], values)
     assert got.one_window == {}
     assert got.sigma["steering_gain"] == pytest.approx(math.sqrt(19 / 20 * 2 * 0.02 ** 2) * (gain.hi - gain.lo),
                                                        rel=1e-6)
@@ -189,7 +190,6 @@ def test_a_parameter_one_window_alone_pins_gets_no_standard_error_and_names_the_
     spread between windows cannot say how well it is pinned: nan, and the window is named;
     the offset keeps its standard error (the gain held)."""
     from simrunner.workflows.gap.uncertainty import parameter_uncertainty
-    from vehicle.description import CarDescription
 
     n = 12
     spread = np.linspace(-0.01, 0.01, n)
@@ -197,9 +197,69 @@ def test_a_parameter_one_window_alone_pins_gets_no_standard_error_and_names_the_
     curv_b[7] = 80.0
     off, gain = _quadratic_windows(monkeypatch, np.full(n, 100.0), 0.5 + spread, curv_b, np.full(n, 0.5))
     values = {"steering_offset_rad": 0.5 * (off.lo + off.hi), "steering_gain": 0.5 * (gain.lo + gain.hi)}
-    got = parameter_uncertainty(None, CarDescription(), ["steering_offset", "steering_gain"], values)
+    got = parameter_uncertainty(_NO_WINDOWS, CarDescription(), ["steering_offset", "steering_gain"], values)
     assert got.one_window == {"steering_gain": 7}
     assert math.isnan(got.sigma["steering_gain"])
     g = 200.0 * spread
     assert got.sigma["steering_offset_rad"] == pytest.approx(
         math.sqrt(g @ g * n / (n - 1)) / (200.0 * n) * (off.hi - off.lo), rel=1e-6)
+
+
+def test_the_physics_steps_bias_is_added_from_the_minimum_at_half_the_step(monkeypatch):
+    """Window costs whose minima move with the physics step, ``u* = 0.5 + slope * dt`` (an
+    error of first order in the step, as a steering lag's at 5 ms): fitted at the 5-ms minimum,
+    the gradient at 2.5 ms says the minimum moves by ``-slope * 2.5 ms``, so the value at step
+    zero lies ``slope * 5 ms`` away, and that distance is added in quadrature to the spread."""
+    from simrunner.workflows.gap import uncertainty
+    from simrunner.workflows.gap.fit import CANDIDATES
+    from simrunner.workflows.gap.uncertainty import parameter_uncertainty
+
+    lag = CANDIDATES["steering_lag"]
+    n, slope, dt_s = 16, 4.0, 0.005
+    spread = np.linspace(-0.01, 0.01, n)
+
+    def window_values(problem, car):
+        return 100.0 * (lag.u(car.effects.steering_lag_s) - 0.5 - slope * problem.dt_s - spread) ** 2
+
+    monkeypatch.setattr(uncertainty, "window_values", window_values)
+    problem = Problem(CarDescription(), (), {}, dt_s=dt_s)
+    value = {"steering_lag_s": lag.lo + (0.5 + slope * dt_s) * (lag.hi - lag.lo)}
+    got = parameter_uncertainty(problem, CarDescription(), ["steering_lag"], value).sigma["steering_lag_s"]
+    g = 200.0 * spread
+    jackknife_u = math.sqrt(g @ g * n / (n - 1)) / (200.0 * n)
+    assert got == pytest.approx(math.hypot(jackknife_u, slope * dt_s) * (lag.hi - lag.lo), rel=1e-6)
+    # no dependence on the step: the spread alone
+    monkeypatch.setattr(uncertainty, "window_values",
+                        lambda problem, car: 100.0 * (lag.u(car.effects.steering_lag_s) - 0.5 - spread) ** 2)
+    flat = parameter_uncertainty(problem, CarDescription(), ["steering_lag"],
+                                 {"steering_lag_s": 0.5 * (lag.lo + lag.hi)}).sigma["steering_lag_s"]
+    assert flat == pytest.approx(jackknife_u * (lag.hi - lag.lo), rel=1e-6)
+
+
+@pytest.mark.parametrize("dt_s, substep_s", [(0.005, 0.005), (0.001, 0.004), (0.002, 0.004)])
+def test_a_latency_is_known_no_better_than_to_its_control_sub_step(monkeypatch, dt_s, substep_s):
+    """The command latency acts at whole control sub-steps (4 ms rounded to whole physics
+    steps): values within one give the same replay, so a uniform variance of ``sub-step^2 / 12``
+    is added to what the windows say; the steering lag (continuous) gets none."""
+    from simrunner.car.effects import control_steps
+    from simrunner.workflows.gap import uncertainty
+    from simrunner.workflows.gap.fit import CANDIDATES
+    from simrunner.workflows.gap.uncertainty import parameter_uncertainty
+
+    assert control_steps(dt_s) * dt_s == pytest.approx(substep_s)
+    lat, lag = CANDIDATES["command_latency"], CANDIDATES["steering_lag"]
+    n = 10
+    spread = np.linspace(-0.02, 0.02, n)
+
+    def window_values(problem, car):
+        return sum(100.0 * (c.u(getattr(car.effects, c.field)) - 0.5 - spread) ** 2 for c in (lat, lag))
+
+    monkeypatch.setattr(uncertainty, "window_values", window_values)
+    values = {"command_latency_s": 0.5 * (lat.lo + lat.hi), "steering_lag_s": 0.5 * (lag.lo + lag.hi)}
+    got = parameter_uncertainty(Problem(CarDescription(), (), {}, dt_s=dt_s), CarDescription(),
+                                ["command_latency", "steering_lag"], values).sigma
+    g = 200.0 * spread
+    jackknife_u = math.sqrt(g @ g * n / (n - 1)) / (200.0 * n)
+    assert got["steering_lag_s"] == pytest.approx(jackknife_u * (lag.hi - lag.lo), rel=1e-6)
+    assert got["command_latency_s"] ** 2 == pytest.approx((jackknife_u * (lat.hi - lat.lo)) ** 2 + substep_s ** 2 / 12,
+                                                          rel=1e-6)

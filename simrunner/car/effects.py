@@ -77,6 +77,12 @@ _LATERAL = ("yaw_rate_radps", "yaw_rad", "cross_m")
 _LONGITUDINAL = ("speed_mps", "along_m")
 
 
+def control_steps(dt_s: float) -> int:
+    """Physics steps of ``dt_s`` per control sub-step of the filtered effects (``CONTROL_DT_S``
+    rounded to whole steps, at least one): a latency or the ESC's delay acts at whole sub-steps."""
+    return max(1, round(CONTROL_DT_S / dt_s))
+
+
 class EffectError(SimError, KeyError):
     """An unknown effect or effect parameter (the message lists the known ones)."""
 
@@ -327,7 +333,7 @@ class EffectSim:
         self._dynamic = any(getattr(e, p) != getattr(Effects, p) for p in _DYNAMIC_PARAMS) or (
             e.steering_rate_limit_radps != math.inf)
         self._forces = e.rolling_resistance_coeff != 0.0 or e.drag_coeff_kgpm != 0.0
-        self.n_sub = max(1, round(CONTROL_DT_S / self.sim.dt_s))
+        self.n_sub = control_steps(self.sim.dt_s)
         self._user_force = (0.0, 0.0)
         raw = (0.0, 0.0, None, False)
         self._raw = raw

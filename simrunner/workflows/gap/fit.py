@@ -166,6 +166,10 @@ class Problem:
     def with_car(self, car: CarDescription) -> "Problem":
         return dataclasses.replace(self, car=car)
 
+    def with_step(self, dt_s: float) -> "Problem":
+        """The same windows replayed at the physics step ``dt_s``."""
+        return dataclasses.replace(self, dt_s=dt_s)
+
     def window_places(self) -> list[tuple[str, float, float]]:
         """``(log source, first stamp s, last stamp s)`` of each window, in the order of
         :func:`window_values`."""

@@ -541,9 +541,9 @@ def summary_text(result: GapResult) -> str:
                             result.parameter_one_window, result.at_bounds)
         lines.append(f"  parameters: {text}")
         if result.parameter_sigma:
-            lines.append("  (+- one standard error from the fits that leave one fit window out and the fit's distance "
-                         "from the cost's minimum: a lower bound; a bias shared by all windows (a stand-in effect, "
-                         "a wrong car-file number) is not in it)")
+            lines.append("  (+- one standard error from the fits that leave one fit window out, the fit's distance "
+                         "from the cost's minimum and the physics step's bias: a lower bound; a stand-in effect or "
+                         "a wrong car-file number is not in it)")
     for step in chain.steps:  # a look-alike kept as well (at a later step) is no alternative
         alike = [a.effect for a in step.alike if a.effect not in result.effects]
         if alike and step.kept is not None and step.kept.effect in result.effects:

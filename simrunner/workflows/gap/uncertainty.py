@@ -6,7 +6,7 @@ windows; each window restarts from the measured state, so the windows are the in
 units of the data). The covariance of such an estimate is taken from the spread of the fits
 that leave one window out (the *jackknife*), each a Newton step from the fitted values:
 
-    p_(-w) - p = -(H - H_w)^-1 (G - g_w),   cov = (n-1)/n sum_w (d_w - d)(d_w - d)^T + s s^T
+    p_(-w) - p = -(H - H_w)^-1 (G - g_w),   cov = (n-1)/n sum_w (d_w - d)(d_w - d)^T + s s^T + b b^T
 
 with ``H_w``, ``g_w`` window ``w``'s cost Hessian and gradient, ``H``, ``G`` their sums, ``d_w``
 the left-out fit's step and ``d`` their mean. Where each window holds a small share of ``H``
@@ -22,6 +22,16 @@ stencil: the fit's own distance from the minimum it was after (its tolerance, a 
 moves in steps such as a latency's control sub-steps), kept inside the fit range and added in
 quadrature.
 
+Two biases every window shares are estimated and added the same way, since the spread cannot
+show them. ``b`` is the fits' physics step (``Problem.dt_s``, 5 ms): the cost's gradient again
+at half the step gives where the minimum moves, ``d = -H^-1 (G_half - G)``; the step's error
+is of first order in the step, so the minimum at step zero lies ``b = 2 d`` away (Richardson's
+estimate; a steering lag fitted 3 ms short at 5 ms, as a 1-ms replay shows, and a steering
+rate limit 5 of its standard errors high, docs/gap.md). And a time that acts at whole control
+sub-steps (:data:`SUBSTEP_TIMES`: the command latency's queue and the ESC's hold are checked
+there, ``simrunner.car.effects.control_steps``) cannot be told apart within one: a variance
+of ``sub-step^2 / 12`` (uniform over it) is added to its own.
+
 Derivatives by central differences in the fit's ``[0, 1]``-scaled coordinates (the fit
 ranges of :data:`simrunner.workflows.gap.fit.CANDIDATES`, log-scaled where the fit searches
 in log), with a step of :data:`STEP` (5 % of the range: latencies act in whole control
@@ -36,7 +46,8 @@ turned ``H`` indefinite and took every other sigma with it), and for one that a 
 window pins (``H - H_w`` not positive definite: without that window the log would not pin
 it; :attr:`Uncertainty.one_window` names the window), and the others' are those with it held;
 all are ``nan`` when the rest of ``H`` is not positive definite either. It says nothing about
-a bias of the catalogue effect standing in for something else (docs/gap.md, "Known limits").
+a bias of the catalogue effect standing in for something else, nor about car-file numbers
+that are off (docs/gap.md, "Known limits").
 """
 from __future__ import annotations
 
@@ -48,11 +59,14 @@ from typing import Sequence
 
 import numpy as np
 
+from simrunner.car.effects import control_steps
 from simrunner.workflows.gap.chain import _bounds01, with_parameters
 from simrunner.workflows.gap.fit import CANDIDATES, Problem, _quiet_worker, window_values, window_values_task
 from vehicle.description import CarDescription
 
 STEP = 0.05  # the difference step, as a fraction of each parameter's fit range
+# ``Effects`` fields that act at whole control sub-steps (simrunner.car.effects): resolved to one
+SUBSTEP_TIMES = ("command_latency_s", "esc_reverse_delay_s")
 
 
 def _dvalue_du(names: Sequence[str], u: np.ndarray) -> np.ndarray:
@@ -118,11 +132,12 @@ def _positive_definite(a: np.ndarray) -> bool:
     return True
 
 
-def covariance_u(grad: np.ndarray, hess: np.ndarray, u: np.ndarray, pinned: list[int]
-                 ) -> tuple[np.ndarray | None, list[int], dict[int, int]]:
+def covariance_u(grad: np.ndarray, hess: np.ndarray, u: np.ndarray, pinned: list[int],
+                 grad_half: np.ndarray | None = None) -> tuple[np.ndarray | None, list[int], dict[int, int]]:
     """``(cov, kept, one_window)``: the module docstring's covariance (in ``u``) of the
     parameters ``kept`` (``pinned`` but those one window alone pins, ``one_window``: parameter
-    -> that window), from the windows' gradients ``grad`` and Hessians ``hess`` at ``u``;
+    -> that window), from the windows' gradients ``grad`` and Hessians ``hess`` at ``u``, and
+    (for the physics step's term ``b b^T``) their gradients ``grad_half`` at half the step;
     ``cov`` None when their ``H`` is not positive definite."""
     h_all = hess.sum(axis=0)
     kept = list(pinned)
@@ -147,14 +162,19 @@ def covariance_u(grad: np.ndarray, hess: np.ndarray, u: np.ndarray, pinned: list
     left_out = np.array([-np.linalg.solve(h - hess[w][idx], total - g[w]) for w in range(n)])
     spread = left_out - left_out.mean(axis=0)
     newton = np.clip(u[kept] - np.linalg.solve(h, total), 0.0, 1.0) - u[kept]  # to the minimum within the range
-    return spread.T @ spread * (n - 1) / n + np.outer(newton, newton), kept, one_window
+    cov = spread.T @ spread * (n - 1) / n + np.outer(newton, newton)
+    if grad_half is not None:  # Richardson: twice the move of the minimum from the step to half of it
+        b = np.clip(u[kept] - 2.0 * np.linalg.solve(h, grad_half[:, kept].sum(axis=0) - total), 0.0, 1.0) - u[kept]
+        cov += np.outer(b, b)
+    return cov, kept, one_window
 
 
 def parameter_uncertainty(problem: Problem, base: CarDescription, names: Sequence[str], values: dict[str, float],
                           *, jobs: int = 1, step: float = STEP) -> Uncertainty:
     """The standard error of each parameter of ``values`` (the ``Effects`` fields of the
     effects ``names``, fitted on ``problem``'s windows with ``base`` as the car): the module
-    docstring's jackknife, and the parameters one window alone pins."""
+    docstring's jackknife with its two shared biases, and the parameters one window alone
+    pins. ``problem`` needs ``dt_s`` and ``with_step`` (:class:`~simrunner.workflows.gap.fit.Problem`)."""
     names = list(names)
     k = len(names)
     if not k:
@@ -163,25 +183,32 @@ def parameter_uncertainty(problem: Problem, base: CarDescription, names: Sequenc
     u = to_u(values)
     c = np.clip(u, step, 1.0 - step)  # the stencil's centre, inside the range
     cars = [with_parameters(base, {**values, **from_u(p)}) for p in _stencil(c, step)]
+    half = problem.with_step(problem.dt_s / 2.0)
+    tasks = [(problem, car) for car in cars] + [(half, car) for car in cars[1:1 + 2 * k]]  # +-step at half
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) as pool:
-            f = np.array(list(pool.map(window_values_task, [(problem, car) for car in cars])))
+            f_all = np.array(list(pool.map(window_values_task, tasks)))
     else:
-        f = np.array([window_values(problem, car) for car in cars])
+        f_all = np.array([window_values(p, car) for p, car in tasks])
+    f, f_half = f_all[:len(cars)], f_all[len(cars):]
     fields = [CANDIDATES[m].field for m in names]
     out = {fd: math.nan for fd in fields}
-    if f.shape[1] < 2 or not np.isfinite(f).all():
+    if f.shape[1] < 2 or not np.isfinite(f_all).all():
         return Uncertainty(out)
     grad, hess = _window_derivatives(f, k, step)
+    grad_half = (f_half[0::2] - f_half[1::2]).T / (2.0 * step)
     grad += hess @ (u - c)  # each window's gradient carried from the centre to the parameters
+    grad_half += hess @ (u - c)
     h_all = hess.sum(axis=0)
     # the others: the cost does not curve along them, or the fit stopped at a bound (a minimum
     # the bound makes, not the cost's curvature)
     pinned = [i for i in range(k) if h_all[i, i] > 0.0 and not CANDIDATES[names[i]].at_bound(values[fields[i]])]
-    cov_u, kept, lone = covariance_u(grad, hess, u, pinned)
+    cov_u, kept, lone = covariance_u(grad, hess, u, pinned, grad_half)
     if cov_u is not None:
-        sigma = np.sqrt(np.maximum(np.diag(cov_u), 0.0)) * np.abs(_dvalue_du(names, u)[kept])
-        out.update({fields[i]: float(s) for i, s in zip(kept, sigma)})
+        var = np.maximum(np.diag(cov_u), 0.0) * _dvalue_du(names, u)[kept] ** 2
+        substep_s = control_steps(problem.dt_s) * problem.dt_s
+        var += [substep_s ** 2 / 12.0 if fields[i] in SUBSTEP_TIMES else 0.0 for i in kept]
+        out.update({fields[i]: float(s) for i, s in zip(kept, np.sqrt(var))})
     return Uncertainty(out, {fields[i]: w for i, w in lone.items()})
 
 
@@ -191,4 +218,5 @@ def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str]
     return parameter_uncertainty(problem, base, names, values, jobs=jobs, step=step).sigma
 
 
-__all__ = ["Uncertainty", "parameter_uncertainty", "parameter_sigma", "covariance_u", "window_values", "STEP"]
+__all__ = ["Uncertainty", "parameter_uncertainty", "parameter_sigma", "covariance_u", "window_values", "STEP",
+           "SUBSTEP_TIMES"]
