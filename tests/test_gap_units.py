@@ -1050,6 +1050,28 @@ def test_the_glitch_bench_speed_spikes_are_found_whole(seed):
     assert np.flatnonzero(glitch_mask(bad, found)).tolist() == changed.tolist()
 
 
+def test_the_bench_counts_standard_errors_within_2_sigma_of_all_named_and_of_those_given():
+    """bench_gap's coverage figures: a named parameter without a standard error (z None)
+    counts as outside in the first and is left out of the second; unnamed ones are in neither."""
+    from bench.bench_gap import figures
+
+    def row(per_effect):
+        named = [e for e, p in per_effect.items() if p["named"]]
+        return {"mode": "multi", "effects": list(per_effect), "snr": {e: 5.0 for e in per_effect},
+                "chain": {"named": named, "spurious": [], "per_effect": per_effect,
+                          "rmse_before": {"position_m": 1.0}, "rmse_after": {"position_m": 0.5},
+                          "gap_before": 1.0, "gap_after": 0.5, "wall_s": 1.0}}
+
+    def effect(named, z):
+        return {"named": named, "rel_err": 0.1 if named else None, "sigma": 0.01, "z": z}
+
+    rows = [row({"drag": effect(True, 0.5), "steering_gain": effect(True, None)}),
+            row({"motor_lag": effect(True, -3.0), "steering_offset": effect(False, None)})]
+    f = figures(rows)
+    assert f["within_2_sigma"] == (pytest.approx(1 / 3), 3)
+    assert f["within_2_sigma_given"] == (pytest.approx(1 / 2), 2)
+
+
 def test_a_level_that_changes_and_stays_is_no_spike():
     """A speed reading that steps by 1 m/s within one sample and stays (a sensor's offset
     changed, or the car was set down rolling): impossible for the car, but neither side can
