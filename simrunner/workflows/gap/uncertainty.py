@@ -27,7 +27,7 @@ show them. ``b`` is the fits' physics step (``Problem.dt_s``, 5 ms): the cost's 
 at half the step gives where the minimum moves, ``d = -H^-1 (G_half - G)``; the step's error
 is of first order in the step, so the minimum at step zero lies ``b = 2 d`` away (Richardson's
 estimate; a steering lag fitted 3 ms short at 5 ms, as a 1-ms replay shows, and a steering
-rate limit 5 of its standard errors high, docs/gap.md). And a time that acts at whole control
+rate limit 4.5 of its standard errors high, docs/gap.md). And a time that acts at whole control
 sub-steps (:data:`SUBSTEP_TIMES`: the command latency's queue and the ESC's hold are checked
 there, ``simrunner.car.effects.control_steps``) cannot be told apart within one: a variance
 of ``sub-step^2 / 12`` (uniform over it) is added to its own.
@@ -193,12 +193,13 @@ def parameter_uncertainty(problem: Problem, base: CarDescription, names: Sequenc
     f, f_half = f_all[:len(cars)], f_all[len(cars):]
     fields = [CANDIDATES[m].field for m in names]
     out = {fd: math.nan for fd in fields}
-    if f.shape[1] < 2 or not np.isfinite(f_all).all():
+    if f.shape[1] < 2 or not np.isfinite(f).all():
         return Uncertainty(out)
     grad, hess = _window_derivatives(f, k, step)
-    grad_half = (f_half[0::2] - f_half[1::2]).T / (2.0 * step)
     grad += hess @ (u - c)  # each window's gradient carried from the centre to the parameters
-    grad_half += hess @ (u - c)
+    grad_half = None  # (a replay that failed at half the step leaves that term out)
+    if np.isfinite(f_half).all():
+        grad_half = (f_half[0::2] - f_half[1::2]).T / (2.0 * step) + hess @ (u - c)
     h_all = hess.sum(axis=0)
     # the others: the cost does not curve along them, or the fit stopped at a bound (a minimum
     # the bound makes, not the cost's curvature)
