@@ -228,6 +228,11 @@ def test_the_physics_steps_bias_is_added_from_the_minimum_at_half_the_step(monke
     g = 200.0 * spread
     jackknife_u = math.sqrt(g @ g * n / (n - 1)) / (200.0 * n)
     assert got == pytest.approx(math.hypot(jackknife_u, slope * dt_s) * (lag.hi - lag.lo), rel=1e-6)
+    # a replay that fails at half the step (nan) leaves that term out, not the standard error
+    monkeypatch.setattr(uncertainty, "window_values", lambda problem, car: window_values(problem, car)
+                        if problem.dt_s == dt_s else np.full(n, np.nan))
+    failed = parameter_uncertainty(problem, CarDescription(), ["steering_lag"], value).sigma["steering_lag_s"]
+    assert failed == pytest.approx(jackknife_u * (lag.hi - lag.lo), rel=1e-6)
     # no dependence on the step: the spread alone
     monkeypatch.setattr(uncertainty, "window_values",
                         lambda problem, car: 100.0 * (lag.u(car.effects.steering_lag_s) - 0.5 - spread) ** 2)
