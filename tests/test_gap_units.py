@@ -1052,7 +1052,9 @@ def test_the_glitch_bench_speed_spikes_are_found_whole(seed):
 
 def test_the_bench_counts_standard_errors_within_2_sigma_of_all_named_and_of_those_given():
     """bench_gap's coverage figures: a named parameter without a standard error (z None)
-    counts as outside in the first and is left out of the second; unnamed ones are in neither."""
+    counts as outside in the first and is left out of the second, and one on a plateau counts
+    as within what the report states where the truth lies in its interval; unnamed ones are in
+    none."""
     from bench.bench_gap import figures
 
     def row(per_effect):
@@ -1065,11 +1067,20 @@ def test_the_bench_counts_standard_errors_within_2_sigma_of_all_named_and_of_tho
     def effect(named, z):
         return {"named": named, "rel_err": 0.1 if named else None, "sigma": 0.01, "z": z}
 
+    deadband = {**effect(True, None), "span": [0.01, 0.08], "in_span": True}
     rows = [row({"drag": effect(True, 0.5), "steering_gain": effect(True, None)}),
-            row({"motor_lag": effect(True, -3.0), "steering_offset": effect(False, None)})]
+            row({"motor_lag": effect(True, -3.0), "steering_offset": effect(False, None), "throttle_deadband": deadband})]
     f = figures(rows)
-    assert f["within_2_sigma"] == (pytest.approx(1 / 3), 3)
+    assert f["within_2_sigma"] == (pytest.approx(1 / 4), 4)
     assert f["within_2_sigma_given"] == (pytest.approx(1 / 2), 2)
+    assert f["within_stated"] == (pytest.approx(2 / 4), 4)  # the deadband's truth inside its interval
+    # a chain row as the bench writes it: the report's interval and whether the truth lies in it
+    from bench.bench_gap import _method_row
+
+    got = _method_row(["throttle_deadband"], {"throttle_deadband_mps": 0.045}, {"throttle_deadband_mps": 0.033},
+                      ["throttle_deadband"], {}, 1.0, sigma={"throttle_deadband_mps": math.nan},
+                      spans={"throttle_deadband_mps": (0.01, 0.08)})["per_effect"]["throttle_deadband"]
+    assert got["z"] is None and got["span"] == [0.01, 0.08] and got["in_span"] is True
 
 
 def test_a_level_that_changes_and_stays_is_no_spike():
