@@ -1012,6 +1012,7 @@ def test_a_frozen_sensor_is_found(cols, column):
     found = [g for g in find_glitches(log) if g.kind is GlitchKind.FROZEN]
     assert _kinds(found) == [(GlitchKind.FROZEN, round(t[a], 9), round(t[b - 1], 9), column)]
     assert np.flatnonzero(glitch_mask(log, found)).tolist() == list(range(a + 1, b))
+    assert "its noise repeats a value with p = " in found[0].detail
 
 
 @pytest.mark.parametrize("rate_hz", [100.0, 20.0])
@@ -1111,6 +1112,53 @@ def test_noise_free_and_resting_logs_are_not_frozen():
     for k in ("x_m", "y_m", "yaw_rad"):
         c[k][:300] = c[k][300]
     assert find_glitches(_log(c)) == []
+
+
+@pytest.fixture(scope="module")
+def plan_logs(tmp_path_factory):
+    """The excitation plan simulated as ``simrunner excite --simulate`` writes it (CSV, 6
+    decimals): the nominal car open loop without noise, and a car with a steering lag and a
+    latency closed loop with a 5-mm pose noise (speed and gyro noise-free)."""
+    from simrunner.car.effects import with_effects
+    from simrunner.run.log import write_log
+    from simrunner.workflows.excite import make_plan, run_plan
+
+    tmp = tmp_path_factory.mktemp("plan")
+    lagged = with_effects(CarDescription(), steering_lag_s=0.06, command_latency_s=0.03)
+    nominal = run_plan(make_plan(CarDescription()), CarDescription())
+    closed = run_plan(make_plan(lagged), lagged, closed_loop=True, pose_noise_m=0.005)
+    return [read_log(write_log(log, tmp / f"{k}.csv")) for k, log in enumerate((nominal, closed))]
+
+
+def test_a_simulated_plan_log_holds_values_in_steady_driving_without_a_frozen_sensor(plan_logs):
+    """Written with 6 decimals, a simulator's speed and gyro repeat their value through every
+    steady stretch, and the heading on every straight (a hundred runs and more, up to 3 s):
+    such a channel holds values, its repeats are not independent, and a run that ends without
+    a catch-up is no frozen sensor (58 were listed on the closed-loop log, 19 headings on the
+    nominal one, before)."""
+    for log in plan_logs:
+        assert (np.diff(log.speed_mps) == 0.0).sum() > 1000
+        assert [g for g in find_glitches(log) if g.kind is GlitchKind.FROZEN] == []
+
+
+@pytest.mark.parametrize("column, start", [("speed_mps", 2869), ("yaw_rate_radps", 786)])
+def test_a_channel_that_holds_values_is_frozen_where_it_held_while_the_signal_moved_on(plan_logs, column, start):
+    """The nominal plan log's speed held through 0.4 s of braking (1.9 -> 0.7 m/s), its gyro
+    through a step steer's reversal (1.4 -> -1.4 rad/s): each then catches up by more than
+    twice its one-sample changes ever are, so the run is a frozen sensor, though the channel
+    holds its value elsewhere without being one."""
+    log = plan_logs[0]
+    a, b = start, start + 20
+    v = getattr(log, column).copy()
+    assert abs(v[b] - v[a]) > 1.0
+    v[a:b] = v[a]
+    while v[a - 1] == v[a]:  # the run the held value began (the gyro was steady at 1.39 rad/s before)
+        a -= 1
+    bad = log.with_columns(**{column: v})
+    found = [g for g in find_glitches(bad) if g.kind is GlitchKind.FROZEN]
+    t = log.t_s
+    assert _kinds(found) == [(GlitchKind.FROZEN, round(t[a], 9), round(t[b - 1], 9), column)]
+    assert "it held while the value moved on" in found[0].detail
 
 
 # -- windows on logs with gaps and excluded samples ------------------------------------------------

@@ -56,8 +56,15 @@ filter and a 100-Hz motion-capture log alike:
     improbable for this channel: with ``p`` the chance that one sample repeats the last -
     the larger of the fraction of repeats in the log's moving samples and the chance that
     the channel's noise (robust, from second differences) stays within its quantisation
-    step - ``n_moving * p ** (L - 1) < FROZEN_ALPHA``. A channel without noise (a
-    simulator's) may legitimately hold a value and is never called frozen.
+    step - ``n_moving * p ** (L - 1) < FROZEN_ALPHA``. That test takes the repeats as
+    independent. A heading, speed or yaw rate without noise (a simulator's, written with 6
+    decimals) holds its value through every steady stretch instead, one run after the other:
+    where the channel has no noise (``p = 1``), or holds a value for ``FROZEN_MIN_SAMPLES`` or
+    more :data:`FROZEN_COMMON_RUNS` other times while moving (DS2's ESC speed does 13 times, a
+    simulator's speed a hundred), a run is frozen only where the channel then catches up by
+    more than the shortest frozen run would at its fast rate of change (twice the 99th
+    percentile of its one-sample changes while moving): it held while the value moved on. A
+    position holds no value while the car moves.
 
 ``sensor_spike``
     a speed or gyro reading that steps out and back by more than the car can change it: a
@@ -101,6 +108,7 @@ SCALE_FLOOR_FRACTION = 0.01  # jump scale floor: this fraction of the median mov
 RESOLUTION = 1e-6  # the log format's resolution (%.6f)
 FROZEN_ALPHA = 0.01  # a repeat run is frozen when the log would show one this long with prob. < this
 FROZEN_MIN_SAMPLES = 3  # shortest frozen run (samples with the same value)
+FROZEN_COMMON_RUNS = 5  # other runs of FROZEN_MIN_SAMPLES or more while moving: the channel holds values
 SPIKE_AGILITY = 2.0  # a car up to this many times as quick as its car file says makes no spike
 SPIKE_MAX_SAMPLES = 5  # a spike is this many readings at most (longer: the wheel, not the sensor)
 MOVING_MPS = 0.1  # as replay.MOVING_MPS and regimes.MOVING_MPS
@@ -425,6 +433,17 @@ def _repeat_chance(values: np.ndarray, mov_pairs: np.ndarray) -> float:
     return 1.0 if sigma <= 0.0 else math.erf(q / (4.0 * sigma))
 
 
+def _catches_up(v: np.ndarray, b: int, mov_pairs: np.ndarray) -> bool:
+    """Whether ``v`` moves from sample ``b`` to the next by more than ``FROZEN_MIN_SAMPLES - 1``
+    times the 99th percentile of its one-sample changes while moving: what the shortest frozen
+    run catches up where the signal moves on that fast (a steady stretch's first change after
+    a step command is one such change: a simulator's speed and gyro, without noise)."""
+    d = np.abs(np.diff(v))
+    changes = d[mov_pairs & (d > 0.0)]
+    return (b + 1 < len(v) and bool(mov_pairs[b]) and changes.size > 0
+            and d[b] > (FROZEN_MIN_SAMPLES - 1) * np.quantile(changes, 0.99))
+
+
 def _frozen(log: RunLog, jumps: np.ndarray, pose_scale: float) -> list[Glitch]:
     t = log.t_s
     n = len(log)
@@ -443,18 +462,29 @@ def _frozen(log: RunLog, jumps: np.ndarray, pose_scale: float) -> list[Glitch]:
         p_emp = max(float((same & mov_pairs).sum()) / n_mov, 1.0 / n_mov)
         p_noise = math.prod(_repeat_chance(v, mov_pairs) for v in values)
         p = max(p_emp, p_noise)
-        if p >= 1.0:
-            continue
+        # the channel's runs of repeats while the car moves (a heading or rate that holds its
+        # value through steady driving has many)
+        n_runs = sum(b - a + 1 >= FROZEN_MIN_SAMPLES for a, b in _runs(same & mov_pairs))
         for a, b in _runs(same):
             length = b - a + 1
-            if length < FROZEN_MIN_SAMPLES or n_mov * p ** (length - 1) >= FROZEN_ALPHA:
+            if length < FROZEN_MIN_SAMPLES:
                 continue
+            others = n_runs - int(bool(mov_pairs[a:b].all()))  # but this one
+            if name != "position" and (p >= 1.0 or others >= FROZEN_COMMON_RUNS):
+                if not _catches_up(values[0], b, mov_pairs):
+                    continue
+                why = (f"then jumps by {abs(values[0][b + 1] - values[0][b]):.3g}: it held while the value moved on "
+                       f"(the channel holds a value for {FROZEN_MIN_SAMPLES} samples or more {others} other times "
+                       "while moving)")
+            elif p >= 1.0 or n_mov * p ** (length - 1) >= FROZEN_ALPHA:
+                continue
+            else:
+                why = f"its noise repeats a value with p = {p:.2g} per sample"
             if not _moves_during(log, name, a, b, jumps, pose_scale):
                 continue
             out.append(Glitch(GlitchKind.FROZEN, float(t[a]), float(t[b]), ",".join(cols),
                               f"{name} holds {', '.join(f'{getattr(log, c)[a]:.6g}' for c in cols)} for {length} "
-                              f"samples ({t[b] - t[a]:.3g} s) while moving; its noise repeats a value with "
-                              f"p = {p:.2g} per sample"))
+                              f"samples ({t[b] - t[a]:.3g} s) while moving; {why}"))
     return out
 
 
