@@ -1070,7 +1070,8 @@ def test_the_bench_counts_standard_errors_within_2_sigma_of_all_named_and_of_tho
 
     deadband = {**effect(True, None), "span": [0.01, 0.08], "in_span": True}
     rows = [row({"drag": effect(True, 0.5), "steering_gain": effect(True, None)}),
-            row({"motor_lag": effect(True, -3.0), "steering_offset": effect(False, None), "throttle_deadband": deadband})]
+            row({"motor_lag": effect(True, -3.0), "steering_offset": effect(False, None),
+                 "throttle_deadband": deadband})]
     f = figures(rows)
     assert f["within_2_sigma"] == (pytest.approx(1 / 4), 4)
     assert f["within_2_sigma_given"] == (pytest.approx(1 / 2), 2)
