@@ -741,6 +741,8 @@ def _sigma_text(sd: float | None) -> str:
 
 def target_rows(rows: list[dict]) -> list[dict]:
     """Every issue-10 target the rows measure: figure, n, goal, met (None: nothing measured)."""
+    from simrunner.workflows.gap.report import worse_signals
+
     out = []
 
     def add(mode, what, value, n, goal, ok, text):
@@ -761,6 +763,9 @@ def target_rows(rows: list[dict]) -> list[dict]:
     pull = [r for r in um if r["unmodelled"]["what"] == "reverse_pull_rad"]
     for what, hits in (("nothing named", [not r["chain"]["named"] for r in um]),
                        ("told so: an unexplained leftover listed", [bool(r["leftovers"]) for r in um]),
+                       ("told so: a leftover, or a held-out signal made worse",
+                        [bool(r["leftovers"]) or bool(r["chain"]["named"] and worse_signals(
+                            r["chain"]["rmse_before"], r["chain"]["rmse_after"])) for r in um]),
                        ("reverse pull: a leftover in steering while reversing",
                         [any(d["signal"] in ("yaw_rate_radps", "yaw_rad", "position_m") and "reversing" in d["regimes"]
                              for d in r["leftovers"]) for r in pull])):

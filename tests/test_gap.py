@@ -31,6 +31,32 @@ def offset_run():
     return log, truth, run_gap(log, jobs=2)
 
 
+def test_a_held_out_signal_the_kept_effects_make_worse_is_said_so(offset_run):
+    """The chain keeps what shrinks the held-out gap over all signals; when a signal's own
+    RMSE grows beyond the held-out test's noise level (its mean square by more than
+    HELD_IMPROVEMENT_MIN) the effects trade it for the others and the report says so (a
+    sloped floor's coasting fitted as drag: docs/gap.md). Within that level, or with nothing
+    kept, it says nothing."""
+    import dataclasses
+
+    from simrunner.workflows.gap.chain import HELD_IMPROVEMENT_MIN
+    from simrunner.workflows.gap.report import summary_text, worse_signals
+
+    _, _, result = offset_run
+    assert result.signals_worse == {} and "trade these signals" not in summary_text(result)
+    before = result.rmse_before
+    edge = math.sqrt(1.0 + HELD_IMPROVEMENT_MIN)
+    traded = dataclasses.replace(result, rmse_after={**result.rmse_after, "speed_mps": 1.10 * before["speed_mps"],
+                                                     "yaw_rate_radps": 0.999 * edge * before["yaw_rate_radps"]})
+    assert traded.signals_worse == {"speed_mps": pytest.approx(1.10)}
+    assert traded.to_json()["signals_worse"] == {"speed_mps": pytest.approx(1.10)}
+    text = summary_text(traded)
+    assert "WARNING: the kept effects make the held-out speed_mps RMSE 10% larger" in text
+    assert dataclasses.replace(traded, effects=[]).signals_worse == {}
+    assert worse_signals({"a": 1.0, "b": 0.0, "c": 1.0}, {"a": float("nan"), "b": 1.0, "c": 1.001 * edge}) \
+        == {"c": pytest.approx(1.001 * edge)}
+
+
 def test_hidden_steering_offset_is_named_and_fitted(offset_run):
     _, truth, result = offset_run
     assert result.effect == "steering_offset"
@@ -101,6 +127,7 @@ def test_report_folder(offset_run, tmp_path):
     assert rep["noise_rms"]["position_m"] == pytest.approx(5e-3 * math.sqrt(2), rel=0.3)
     assert len(rep["ranking"]) == len(CANDIDATES)
     assert rep["held_out_worse"] is False and rep["gap_after"] < rep["gap_before"]
+    assert rep["signals_worse"] == {}  # the offset leaves the speed as it was and mends the rest
     assert {"effect", "parameters", "bic", "delta_bic", "improvement"} <= set(rep["ranking"][0])
     car = load_car(out / "car.toml")
     assert car.effects.steering_offset_rad == pytest.approx(rep["parameters"]["steering_offset_rad"])

@@ -1085,6 +1085,26 @@ def test_the_bench_counts_standard_errors_within_2_sigma_of_all_named_and_of_tho
     assert got["z"] is None and got["span"] == [0.01, 0.08] and got["in_span"] is True
 
 
+def test_the_unmodelled_bench_counts_a_warned_trade_as_told_so():
+    """bench_gap's ``unmodelled`` figures: a log with a leftover is told so; one whose kept
+    stand-in makes a held-out signal worse (the report's ``signals_worse``) is told so by the
+    second figure only; one with nothing kept and no leftover by neither."""
+    from bench.bench_gap import target_rows
+
+    def row(named, leftovers, speed_after):
+        return {"mode": "unmodelled", "unmodelled": {"what": "floor_slope_deg", "value": 2.0},
+                "leftovers": leftovers,
+                "chain": {"named": named, "rmse_before": {"speed_mps": 0.026, "position_m": 0.017},
+                          "rmse_after": {"speed_mps": speed_after, "position_m": 0.017}}}
+
+    rows = [row([], [{"signal": "speed_mps", "regimes": ["coasting"], "text": "unexplained: ..."}], 0.026),
+            row(["drag"], [], 0.029), row(["drag"], [], 0.0261), row([], [], 0.026)]
+    got = {t["target"]: t["figure"] for t in target_rows(rows) if t["mode"] == "unmodelled"}
+    assert got["nothing named"] == pytest.approx(2 / 4)
+    assert got["told so: an unexplained leftover listed"] == pytest.approx(1 / 4)
+    assert got["told so: a leftover, or a held-out signal made worse"] == pytest.approx(2 / 4)
+
+
 def test_a_level_that_changes_and_stays_is_no_spike():
     """A speed reading that steps by 1 m/s within one sample and stays (a sensor's offset
     changed, or the car was set down rolling): impossible for the car, but neither side can

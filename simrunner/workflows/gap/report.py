@@ -156,6 +156,12 @@ class GapResult:
         return [d["log"] for d in self.per_log if d["gap_after"] > d["gap_before"]]
 
     @property
+    def signals_worse(self) -> dict[str, float]:
+        """:func:`worse_signals` of the held-out RMSEs when effects were kept (signal ->
+        RMSE after / before)."""
+        return worse_signals(self.rmse_before, self.rmse_after) if self.effects else {}
+
+    @property
     def held_out_worse(self) -> bool:
         """True when effects were kept but the held-out gap grew (cannot happen for a chain
         whose every step was confirmed on held-out data; kept as a safety flag)."""
@@ -176,7 +182,8 @@ class GapResult:
             "gap_ls_before": self.gap_ls_before, "gap_ls_after": self.gap_ls_after,
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
             "rmse_smoothed_before": self.rmse_smoothed_before, "rmse_smoothed_after": self.rmse_smoothed_after,
-            "noise_rms": self.noise_rms, "held_out_worse": self.held_out_worse, "at_bounds": self.at_bounds,
+            "noise_rms": self.noise_rms, "held_out_worse": self.held_out_worse,
+            "signals_worse": self.signals_worse, "at_bounds": self.at_bounds,
             "chain": self.chain.to_json(), "chain_stop": self.chain.stop_reason,
             "rejected": [{"step": k, "effect": t.effect, "parameters": t.parameters, "reason": t.reason}
                          for k, t in self.chain.rejected],
@@ -484,6 +491,19 @@ def leftovers(stats: Sequence[dict], noise: dict[str, float], ratio: float = LEF
     return sorted(out, key=lambda d: -d["times_noise"])
 
 
+def worse_signals(before: dict[str, float], after: dict[str, float],
+                  held_improvement_min: float = HELD_IMPROVEMENT_MIN) -> dict[str, float]:
+    """The signals whose RMSE ``after`` exceeds ``before`` by more than the held-out test's
+    noise level (the mean square up by ``held_improvement_min``, the smallest held-out gain
+    the chain takes for an effect): ``{signal: after / before}``. The chain keeps effects
+    that shrink the held-out gap over all signals; one that shrinks it while a signal gets
+    worse trades that signal for the others, the mark of a stand-in (a sloped floor's
+    coasting fitted as drag: speed and position worse, heading better)."""
+    limit = math.sqrt(1.0 + held_improvement_min)
+    return {s: after[s] / b for s, b in before.items()
+            if b > 0 and math.isfinite(b) and math.isfinite(after.get(s, math.nan)) and after[s] > b * limit}
+
+
 def _gap(held_problem: Problem, parts: Sequence[LogPart], res_parts: Sequence[dict[str, np.ndarray]]) -> float:
     """The held-out gap: ``cost / n_values`` of ``held_problem`` (its robust window loss, or
     least squares when its ``robust_scale`` is inf) for the residuals ``res_parts`` (one per
@@ -594,6 +614,11 @@ def summary_text(result: GapResult) -> str:
             f"{s} {v:.3g}" for s, v in result.noise_rms.items() if math.isfinite(v)))
     if result.held_out_worse:
         lines.append("WARNING: the held-out gap grew with the kept effects; treat car.toml as uncertain.")
+    if result.signals_worse and not result.held_out_worse:
+        lines.append("WARNING: the kept effects make the held-out " + ", ".join(
+            f"{s} RMSE {r - 1.0:.0%} larger" for s, r in result.signals_worse.items())
+            + ", while the gap over all signals shrinks: they trade these signals for the others, so one of "
+            "them may stand in for something the catalogue lacks (docs/gap.md, \"Known limits\").")
     if len(result.per_log) > 1:
         lines.append("held-out gap per log before -> after: " + "; ".join(
             f"{Path(d['log']).name} {d['gap_before']:.3g} -> {d['gap_after']:.3g}" for d in result.per_log))
