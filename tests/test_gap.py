@@ -52,6 +52,8 @@ def test_a_held_out_signal_the_kept_effects_make_worse_is_said_so(offset_run):
     assert traded.to_json()["signals_worse"] == {"speed_mps": pytest.approx(1.10)}
     text = summary_text(traded)
     assert "WARNING: the kept effects make the held-out speed_mps RMSE 10% larger" in text
+    assert ("left unexplained: nothing well above the sensor noise in any regime, but the kept effects trade "
+            "signals" in text) == (not traded.leftovers)
     assert dataclasses.replace(traded, effects=[]).signals_worse == {}
     assert worse_signals({"a": 1.0, "b": 0.0, "c": 1.0}, {"a": float("nan"), "b": 1.0, "c": 1.001 * edge}) \
         == {"c": pytest.approx(1.001 * edge)}

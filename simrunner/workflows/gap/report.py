@@ -631,6 +631,9 @@ def summary_text(result: GapResult) -> str:
     if result.leftovers:
         lines.append("left unexplained by the catalogue (final model, all windows):")
         lines += [f"  {d['text']}" for d in result.leftovers[:8]]
+    elif result.signals_worse and not result.held_out_worse:
+        lines.append("left unexplained: nothing well above the sensor noise in any regime, but the kept effects "
+                     "trade signals (the warning above): part of the gap may have a cause the catalogue lacks")
     else:
         lines.append("left unexplained: nothing well above the sensor noise")
     if result.unrevealable:
