@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from simrunner.cli.gap import gap
 from simrunner.workflows.gap.fit import CANDIDATES
 from simrunner.run.log import read_log, write_log
-from simrunner.workflows.gap.report import run_gap, summary_text, write_outputs
+from simrunner.workflows.gap.report import GapError, run_gap, summary_text, write_outputs
 from simrunner.workflows.gap.synth import make_measured_log
 from vehicle.description import load_car
 
@@ -110,6 +110,25 @@ def test_summary_says_which_effects_the_logs_cannot_tell_apart(offset_run):
     # a look-alike the chain kept as well is no alternative to the kept one
     both = dataclasses.replace(result, effects=list(result.effects) + ["steering_gain"])
     assert "cannot tell them apart" not in summary_text(dataclasses.replace(both, chain=chain))
+
+
+def test_report_folder_that_cannot_be_written_is_one_line_and_leaves_nothing(offset_run, tmp_path, monkeypatch):
+    """A disk that fills while the folder is written: a GapError naming the folder, no
+    half-written folder and no temporary one beside it."""
+    import errno
+
+    import simrunner.workflows.gap.plots as plots
+
+    _, _, result = offset_run
+
+    def full(*_a, **_k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(plots, "plot_regimes", full)
+    with pytest.raises(GapError, match=r"gap: cannot write the output folder \(No space left on device\)") as info:
+        write_outputs(result, tmp_path / "gap")
+    assert "\n" not in str(info.value)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_report_folder(offset_run, tmp_path):
@@ -260,6 +279,11 @@ def test_cli_bad_options_exit_2(tmp_path, offset_run):
     res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--car", str(tmp_path / "nope.toml")])
     assert res.exit_code == 2
     assert not (tmp_path / "out").exists()
+    # a folder that cannot be made is told before the run, not after its minutes
+    (tmp_path / "afile").write_text("")
+    res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "afile" / "out")])
+    assert res.exit_code == 2 and res.stdout == ""
+    assert res.stderr.startswith(f"simrunner gap: {tmp_path / 'afile' / 'out'}: cannot write the output folder there")
 
 
 def test_cli_run_matches_library_and_jobs_do_not_matter(tmp_path, offset_run):

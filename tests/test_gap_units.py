@@ -157,10 +157,16 @@ def test_read_log_ignores_extra_columns_and_order(tmp_path):
     (GAP_HEADER + _good_rows(20, 0.5), 21, "expected at least"),
     (GAP_HEADER + _good_rows(10) + "1.0,abc,0,0,1,1,0\n" + _good_rows(90), 12, "column 'x_m': expected a number"),
     (GAP_HEADER + _good_rows(10) + "1.0,nan,0,0,1,1,0\n", 12, "finite"),
+    (GAP_HEADER + _good_rows(10) + "1.0,0,0,0,1e300,1,0\n" + _good_rows(90), 12,
+     "column 'speed_mps': expected at most 10000 m/s in magnitude"),
     (GAP_HEADER + _good_rows(10) + "0.5,0,0,0,1,1,0\n" + _good_rows(90), 12, "strictly increasing"),
     (GAP_HEADER + _good_rows(10) + "\n5.0,0,0\n", 13, "expected 7 cells"),
     (GAP_HEADER + _good_rows(10) + "1.0,0,0,0,1,1,0,7\n" + _good_rows(90), 12, "expected 7 cells"),
     (FORMAT_LINE + "\n" + GAP_HEADER + _good_rows(10) + "0.5,0,0,0,1,1,0\n", 13, "strictly increasing"),
+    (GAP_HEADER.replace("\n", ",t\n") + _good_rows().replace("\n", ",0\n"), 1,
+     r"t_s is in the header 2 times \(columns 1 \(t\), 8 \(t\)\)"),
+    (GAP_HEADER.replace("speed,", "speed,x_m,", 1) + _good_rows().replace("\n", ",0\n"), 1,
+     r"x_m is in the header 2 times \(columns 2 \(x\), 6 \(x_m\)\)"),
 ])
 def test_read_log_errors_name_file_and_line(tmp_path, text, line, what):
     p = _write(tmp_path, text)

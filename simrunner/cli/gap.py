@@ -89,12 +89,12 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
     from simrunner.workflows.gap.chain import MAX_EFFECTS
     from simrunner.workflows.gap.fit import CANDIDATES
     from simrunner.workflows.gap.logs import check_measured
-    from simrunner.workflows.gap.report import progress_total, run_gap, summary_text, write_outputs
+    from simrunner.workflows.gap.report import (check_output_dir, progress_total, run_gap, summary_text,
+                                                write_outputs)
     from vehicle.description import load_car
 
     try:
-        if out_dir.exists() and not force:
-            raise SimError(f"{out_dir}: output folder exists (use --force to replace it)")
+        check_output_dir(out_dir, force=force)
         names = None
         if effects is not None:
             names = [n.strip() for n in effects.split(",") if n.strip()]
@@ -118,7 +118,11 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
                                  max_effects=limit, screen_max_s=screen_s, progress=tick)
             finally:
                 bar.close()
-        write_outputs(result, out_dir, force=force)
+        try:
+            write_outputs(result, out_dir, force=force)
+        except input_errors():
+            click.echo(summary_text(result))  # the run's answer is not lost with the folder
+            raise
     except input_errors() as exc:
         click.echo(f"simrunner gap: {exc}", err=True)
         sys.exit(2)

@@ -48,6 +48,10 @@ if TYPE_CHECKING:  # columns.py builds on this module
 
 FORMAT_VERSION = 2
 FORMAT_LINE = f"# nxpcup-sim run log, format {FORMAT_VERSION}"
+# No car reaches these (a position of a planet's size, a speed or turn rate of a rifle bullet
+# in a minute's log); a value beyond one is a unit or mapping error, read before anything
+# squares it into an overflow. Positions allow UTM coordinates (northing to 1e7 m).
+MAGNITUDE_LIMITS = {"m": 1e8, "m/s": 1e4, "rad": 1e5, "rad/s": 1e4}
 TEXT_SEPARATOR = " | "  # between the add_data text lines of one row
 
 
@@ -277,6 +281,12 @@ def log_from_columns(columns: dict, source: str = "<log>", command_steps: Comman
                     raise LogError(source, int(bad[0]) + 2, f"column {c.name!r}: expected a whole number")
                 arr = a.astype(np.int64)
             else:
+                limit = MAGNITUDE_LIMITS.get(c.unit)
+                bad = np.flatnonzero(np.abs(a) > limit) if limit is not None else ()
+                if len(bad):
+                    raise LogError(source, int(bad[0]) + 2, f"column {c.name!r}: expected at most {limit:g} {c.unit} "
+                                                            f"in magnitude (got {float(a[bad[0]]):.6g}): a unit or "
+                                                            "mapping error?")
                 arr = a.copy()
             arr.flags.writeable = False
         if n is None:
@@ -459,6 +469,7 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
             if not row or all(not c.strip() for c in row):
                 continue
             header = [h.strip() for h in row]
+            named = list(header)  # as the file names them
             if columns is None:
                 header = [FORMAT1_NAMES.get(h, h) for h in header]
             break
@@ -471,6 +482,11 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
             raise LogError(source, reader.line_num, "expected a time column t_s (or t) in the header")
         else:
             wanted = [(i, h) for i, h in enumerate(header) if h in _BY_NAME]
+            for name in dict.fromkeys(h for _, h in wanted):
+                at = [f"{i + 1} ({named[i]})" for i, h in wanted if h == name]
+                if len(at) > 1:  # two columns would fill one list (t and t_s are one column)
+                    raise LogError(source, reader.line_num, f"expected each column once: {name} is in the header "
+                                                            f"{len(at)} times (columns {', '.join(at)})")
         values: dict[str, list] = {h: [] for _, h in wanted}
         lines: list[int] = []
         for row in reader:

@@ -681,18 +681,34 @@ def car_sources(result: GapResult) -> dict[str, str]:
     return {f"effects.{name}": fitted + sigma(name) for name in result.parameters}
 
 
-def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False) -> Path:
-    """Write the output folder atomically (see the module docstring); returns its path.
-
-    An existing ``out_dir`` is replaced only with ``force``; otherwise GapError.
-    """
-    from simrunner.workflows.gap.plots import plot_before_after, plot_regimes
-
+def check_output_dir(out_dir: str | Path, *, force: bool = False) -> Path:
+    """Raise GapError (one line) unless :func:`write_outputs` can write ``out_dir``: it
+    exists without ``force``, or its folder cannot be made or written. Made before a run
+    that takes minutes, so that a typo in ``-o`` costs none of them."""
     out = Path(out_dir)
     if out.exists() and not force:
         raise GapError(f"{out}: output folder exists (use --force to replace it)")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        shutil.rmtree(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    except OSError as exc:
+        raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
+    return out
+
+
+def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False) -> Path:
+    """Write the output folder atomically (see the module docstring); returns its path.
+
+    An existing ``out_dir`` is replaced only with ``force``; that, or a folder that cannot
+    be written (the disk full, no permission), is a GapError; nothing is left half-written.
+    """
+    from simrunner.workflows.gap.plots import plot_before_after, plot_regimes
+
+    out = check_output_dir(out_dir, force=force)
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    except OSError as exc:
+        raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
     try:
         (tmp / "report.json").write_text(json.dumps(result.to_json(), indent=2) + "\n")
         result.car.save(tmp / "car.toml", car_sources(result))
@@ -706,6 +722,9 @@ def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False
             shutil.rmtree(old)
         else:
             tmp.rename(out)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise GapError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
