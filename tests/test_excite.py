@@ -92,6 +92,8 @@ def test_csv_round_trip(tmp_path):
     assert np.allclose(back.ref_x_m[ref], PLAN.ref_x_m[ref], atol=1e-4)
     assert np.allclose(back.ref_yaw_rad[ref], PLAN.ref_yaw_rad[ref], atol=1e-5)
     assert back.area_centre_m == pytest.approx(PLAN.area_centre_m, abs=1e-4)
+    assert PLAN.area_m == back.area_m == AREA_M and "# area_m=6\n" in text
+    assert PLAN.margin_m == back.margin_m == AREA_MARGIN_M and "# margin_m=0.6\n" in text
     # the header says where to put the car in the area
     cx, cy = PLAN.area_centre_m
     start = f"{0.5 * AREA_M - cx:.2f} m from the area's west edge and {0.5 * AREA_M - cy:.2f} m"
@@ -185,6 +187,50 @@ def _experiment_blocks_in_order(plan: ExcitationPlan, log: RunLog) -> bool:
         else:
             return False
     return True
+
+
+# a 1:10 car (F1/10-like numbers): its turning circle is twice the default car's
+TENTH = dataclasses.replace(CAR, chassis=dataclasses.replace(CAR.chassis, mass_kg=3.7, wheelbase_m=0.33, track_m=0.28),
+                            steering=dataclasses.replace(CAR.steering, limit_rad=0.42, rate_radps=3.2),
+                            drive=dataclasses.replace(CAR.drive, max_speed_mps=8.0, max_accel_mps2=6.0,
+                                                      max_brake_mps2=8.0),
+                            wheels=dataclasses.replace(CAR.wheels, friction_mu=1.05))
+
+
+def test_a_car_whose_turns_need_more_room_gets_a_larger_area_and_says_so(tmp_path):
+    """The default car fits 6 x 6 m. A 1:10 car's turns do not (at 6 m its predicted path
+    gets 0.3 m out): the plan grows the area to the smallest that fits, in 0.5 m steps, and
+    keeps the nominal path inside it; a side asked for that does not fit names the one that
+    does."""
+    from simrunner.workflows.excite import predict_path
+
+    plan = make_plan(TENTH)
+    assert AREA_M < plan.area_m <= AREA_M + 2.0 and (plan.area_m / 0.5).is_integer()
+    xy = predict_path(plan, TENTH)
+    assert plan.outside_area_m(xy[:, 0], xy[:, 1]) == 0.0
+    with pytest.raises(PlanError, match=rf"area = 6 m: this car's plan does not fit it .* the smallest area it "
+                                        rf"fits: {plan.area_m:g} x {plan.area_m:g} m") as err:
+        make_plan(TENTH, area_m=6.0)
+    assert "\n" not in str(err.value)
+    assert make_plan(TENTH, area_m=plan.area_m + 1.0).area_m == plan.area_m + 1.0
+    with pytest.raises(PlanError, match="expected 6 .. 15 m"):
+        make_plan(CAR, area_m=5.0)
+    back = ExcitationPlan.from_csv(plan.to_csv(tmp_path / "p.csv", extent=(0, 1, 0, 1)))
+    assert back.area_m == plan.area_m and back.margin_m == plan.margin_m
+    # its margin grows with its turning circle (1.8 times the default car's)
+    assert plan.margin_m == pytest.approx(AREA_MARGIN_M * 1.8, abs=0.05)
+    assert back.area_bounds_m()[1] - back.area_bounds_m()[0] == pytest.approx(plan.area_m)
+
+
+def test_a_one_tenth_car_off_nominal_stays_in_its_area_closed_loop():
+    """A car of the design envelope on the 1:10 car's plan (trim and gain against its right
+    turns) stays within the plan's margin: 0.11 m out, where following the turns at 90 % of
+    the steering limit (it cannot steer their arcs then) took it 0.73 m out."""
+    plan = make_plan(TENTH)
+    car = with_effects(TENTH, steering_offset_rad=math.radians(2.0), steering_gain=0.85)
+    log = run_plan(plan, car, dt_s=0.005, closed_loop=True, pose_noise_m=0.01, seed=3)
+    assert plan.outside_area_m(log.x_m, log.y_m) <= plan.margin_m
+    assert log.duration_s < plan.duration_s + 30.0
 
 
 @pytest.mark.parametrize("name", list(OFF_NOMINAL))

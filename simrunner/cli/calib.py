@@ -39,17 +39,20 @@ def _fail(exc: BaseException) -> None:
                    "like a real pose measurement; closed loop, the car steers from it too.")
 @click.option("--dt", "dt_s", default=0.002, show_default=True, type=float, metavar="SECONDS",
               help="Physics time step of --simulate (must divide the 20 ms row period).")
-def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_m, dt_s) -> None:
+@click.option("--area", "area_m", default=None, type=float, metavar="METRES",
+              help="Side of the square area to plan for (6 .. 15 m; default: the smallest from 6 m up, "
+                   "in 0.5 m steps, that the car's turns fit).")
+def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_m, dt_s, area_m) -> None:
     """Write an excitation plan to drive on the real car (docs/calibration.md)."""
     from simrunner.run.log import write_log
-    from simrunner.workflows.excite import AREA_M, AREA_MARGIN_M, make_plan, predict_path, run_plan
+    from simrunner.workflows.excite import AREA_M, make_plan, predict_path, run_plan
     from vehicle.description import load_car
 
     if simulate is None and (closed_loop or pose_noise_m > 0.0):
         _fail(click.UsageError("--closed-loop and --pose-noise apply to --simulate, which is not given"))
     try:
         car_desc = load_car(car)
-        plan = make_plan(car_desc, seed=seed, duration_s=duration_s)
+        plan = make_plan(car_desc, seed=seed, duration_s=duration_s, area_m=area_m)
         xy = predict_path(plan, car_desc)
         extent = (xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max())
         log = None
@@ -61,11 +64,14 @@ def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_
     except input_errors() as exc:
         _fail(exc)
     click.echo(f"plan: {output} ({len(plan)} rows, {plan.duration_s:.1f} s; predicted path "
-               f"{extent[1] - extent[0]:.1f} x {extent[3] - extent[2]:.1f} m; area {AREA_M:g} x {AREA_M:g} m "
-               f"+ {AREA_MARGIN_M:g} m margin)")
+               f"{extent[1] - extent[0]:.1f} x {extent[3] - extent[2]:.1f} m; area {plan.area_m:g} x {plan.area_m:g} m "
+               f"+ {plan.margin_m:g} m margin"
+               + (f"; this car's turns need more than {AREA_M:g} m" if area_m is None and plan.area_m > AREA_M
+                  else "") + ")")
     if log is not None:
         out = plan.outside_area_m(log.x_m, log.y_m)
-        where = "inside the area" if out == 0.0 else f"up to {out:.2f} m outside the area"
+        where = "inside the area" if out == 0.0 else f"up to {out:.2f} m outside the area" + (
+            " (within the margin)" if out <= plan.margin_m else " (beyond the margin)")
         if out > 0.0 and not closed_loop:
             where += ("; a real car drifts like this unless the turns close the loop on its pose: "
                       "--closed-loop (docs/calibration.md)")

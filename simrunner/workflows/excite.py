@@ -23,7 +23,8 @@ turn's rows hold what the nominal car does (``speed_cmd``, ``steer_cmd``) and wh
   arrived at the path's end the plan goes on with the row after the turn; while it has not,
   the turn's last row is repeated. Every experiment then starts about where it was planned
   whatever the car's errors: in the full simulator the cars of the design envelope stay
-  inside the area grown by ``AREA_MARGIN_M`` (tests/test_excite.py).
+  inside the area grown by the margin (:func:`area_margin_m`: ``AREA_MARGIN_M`` for the
+  default car, more for a car that turns wider; tests/test_excite.py).
 * open loop: the turns' rows as they are. Errors then add up from one experiment to the
   next; a car with a 2 degree trim needs a much larger area (docs/calibration.md).
 
@@ -55,8 +56,11 @@ from vehicle.userfiles import read_user_text
 RATE_HZ = 50.0
 MIN_DURATION_S = 90.0  # the core plan (every experiment once) of the default car lasts ~90 s
 MAX_DURATION_S = 600.0
-AREA_M = 6.0  # side of the square hall area the plan is meant for
+AREA_M = 6.0  # side of the square hall area a plan is meant for, at least (a larger car's: make_plan)
+AREA_STEP_M = 0.5  # make_plan tries larger areas in these steps ...
+AREA_MAX_M = 15.0  # ... up to this side
 AREA_MARGIN_M = 0.6  # closed loop, a car of the design envelope stays inside the area grown by this
+# (the default car's; a car that turns wider drifts further while it catches up: area_margin_m)
 _PLAN_MARGIN_M = 0.3  # the planner keeps the nominal car's predicted path this far inside
 
 # design envelope: the off-nominal cars the planner keeps inside the area (every combination)
@@ -65,7 +69,8 @@ DESIGN_GAIN_ERROR = 0.15  # steering gain 1 +- this
 DESIGN_SPEED_ERROR = 0.15  # speed scale 1 +- this
 
 # turns, closed loop (follow_path; docs/calibration.md has them in C)
-RETURN_STEER_FRACTION = 0.9  # of steering.limit_rad: the most a turn steers
+RETURN_STEER_FRACTION = 0.9  # of steering.limit_rad: the most a planned turn steers
+FOLLOW_STEER_FRACTION = 1.0  # of steering.limit_rad: the most the car steers to follow a turn
 RETURN_LOOKAHEAD_M = 0.4  # pure pursuit: aim point this far away
 RETURN_WINDOW_M = 0.5  # the nearest path point is looked for this far along the path
 RETURN_PACE = 0.75  # the progress along the path keeps at least this fraction of the plan's ...
@@ -113,7 +118,9 @@ code of docs/calibration.md from your measured pose, and go on with the row afte
 once arrived (repeat the turn's last row until then); open loop, send them as they are.
 Log format: docs/telemetry.md; see docs/calibration.md.
 seed={seed}
-area_centre_m={cx:.4f},{cy:.4f}"""
+area_centre_m={cx:.4f},{cy:.4f}
+area_m={area:g}
+margin_m={margin:g}"""
 
 _COLUMNS = ("t", "speed_cmd", "steer_cmd", "coast", "segment", "ref_x", "ref_y", "ref_yaw")
 _REF_COLUMNS = _COLUMNS[5:]
@@ -128,8 +135,9 @@ class ExcitationPlan:
     """A command schedule. Arrays are ``(N,)``: ``t_s`` from 0 at ``1 / rate_hz`` steps,
     ``speed_cmd_mps``, ``steer_cmd_rad``, ``coast`` (bool), ``segment`` (str), and the
     reference pose of the turns ``ref_x_m, ref_y_m, ref_yaw_rad`` (plan frame; NaN on other
-    rows; ``None``: no turns to follow). ``area_centre_m`` is the middle of the ``AREA_M``
-    square area in the plan frame (``None``: not known, e.g. a hand-made plan)."""
+    rows; ``None``: no turns to follow). ``area_centre_m`` is the middle of the square area
+    of side ``area_m`` the plan was made for, in the plan frame (``None``: not known, e.g. a
+    hand-made plan)."""
 
     t_s: np.ndarray
     speed_cmd_mps: np.ndarray
@@ -142,6 +150,8 @@ class ExcitationPlan:
     ref_y_m: np.ndarray | None = None
     ref_yaw_rad: np.ndarray | None = None
     area_centre_m: tuple[float, float] | None = None
+    area_m: float = AREA_M
+    margin_m: float = AREA_MARGIN_M
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -167,7 +177,7 @@ class ExcitationPlan:
         if self.area_centre_m is None:
             raise PlanError("the plan does not say where its area is (no area_centre_m)")
         cx, cy = self.area_centre_m
-        h = 0.5 * AREA_M + margin_m
+        h = 0.5 * self.area_m + margin_m
         return cx - h, cx + h, cy - h, cy + h
 
     def outside_area_m(self, x_m: np.ndarray, y_m: np.ndarray) -> float:
@@ -203,9 +213,9 @@ class ExcitationPlan:
         x0, x1, y0, y1 = extent
         cx, cy = self.area_centre_m if self.area_centre_m is not None else (0.5 * (x0 + x1), 0.5 * (y0 + y1))
         ref = self.reference_rows()
-        head = HEADER.format(rate=self.rate_hz, n=len(self), dur=self.duration_s, area=AREA_M,
-                             margin=AREA_MARGIN_M, wx=x1 - x0, wy=y1 - y0, sx=0.5 * AREA_M - cx,
-                             sy=0.5 * AREA_M - cy, seed=self.seed, cx=cx, cy=cy)
+        head = HEADER.format(rate=self.rate_hz, n=len(self), dur=self.duration_s, area=self.area_m,
+                             margin=self.margin_m, wx=x1 - x0, wy=y1 - y0, sx=0.5 * self.area_m - cx,
+                             sy=0.5 * self.area_m - cy, seed=self.seed, cx=cx, cy=cy)
         lines = ["# " + ln for ln in head.splitlines()]
         lines.append(",".join(_COLUMNS))
         for k, (t, v, d, c, s) in enumerate(zip(self.t_s, self.speed_cmd_mps, self.steer_cmd_rad, self.coast,
@@ -244,7 +254,7 @@ class ExcitationPlan:
             raise PlanError(f"{path}:{hline}: expected all of {','.join(_REF_COLUMNS)} or none")
         idx = {c: cols.index(c) for c in cols}
         t, v, d, co, seg, ref = [], [], [], [], [], []
-        seed, centre = 0, None
+        seed, centre, area, margin = 0, None, AREA_M, AREA_MARGIN_M
         for m in (ln for ln in text.splitlines() if ln.startswith("#")):
             key, _, val = m[1:].strip().partition("=")
             try:
@@ -253,6 +263,12 @@ class ExcitationPlan:
                 elif key == "area_centre_m":
                     cx, cy = (float(p) for p in val.split(","))
                     centre = (cx, cy) if math.isfinite(cx) and math.isfinite(cy) else None
+                elif key == "area_m":
+                    side = float(val)
+                    area = side if math.isfinite(side) and side > 0.0 else AREA_M
+                elif key == "margin_m":
+                    grown = float(val)
+                    margin = grown if math.isfinite(grown) and grown >= 0.0 else AREA_MARGIN_M
             except ValueError:
                 pass
         for line_no, ln in rows[1:]:
@@ -282,7 +298,8 @@ class ExcitationPlan:
         rate = round(1.0 / period, 6)
         r = np.array(ref, dtype=float).reshape(-1, 3).T if ref else (None, None, None)
         return cls(np.arange(len(t)) / rate, np.array(v), np.array(d), np.array(co, dtype=bool), tuple(seg),
-                   rate_hz=rate, seed=seed, ref_x_m=r[0], ref_y_m=r[1], ref_yaw_rad=r[2], area_centre_m=centre)
+                   rate_hz=rate, seed=seed, ref_x_m=r[0], ref_y_m=r[1], ref_yaw_rad=r[2], area_centre_m=centre,
+                   area_m=area, margin_m=margin)
 
 
 def _read_reference(cells: list[str], where: str) -> tuple[float, float, float]:
@@ -477,12 +494,14 @@ class _Builder:
     plan's builder predicts the nominal car, probes predict the design envelope."""
 
     def __init__(self, car: CarDescription, rate_hz: float, cars: np.ndarray = _NOMINAL,
-                 centre_xy: tuple[float, float] = (0.0, 0.0)):
+                 centre_xy: tuple[float, float] = (0.0, 0.0), area_m: float = AREA_M):
         self.car = car
         self.rate_hz = rate_hz
         self.dt = 1.0 / rate_hz
         self.kin = _Kinematic(car, self.dt, cars)
         self.cx, self.cy = centre_xy
+        self.area_m = area_m
+        self.out_m = 0.0  # the farthest the chosen turns and experiments' envelope get out of the area
         self.rows: list[tuple[float, float, bool, str, tuple[float, float, float] | None]] = []
         self.xy: list[tuple[np.ndarray, np.ndarray]] = [(self.kin.x, self.kin.y)]
 
@@ -567,11 +586,12 @@ class _Builder:
         way = _dubins_points(x0, y0, yaw0, np.nan_to_num(segs), radius)
         reach_turn = np.maximum(np.abs(way[..., 0] - self.cx), np.abs(way[..., 1] - self.cy)).max(-1)
         reach = np.maximum(reach_turn, reach_of(nom))  # (6, C) nominal
-        over = np.maximum(np.maximum(reach, reach_of(pts)) - 0.5 * AREA_M, 0.0)
-        inside = np.maximum(reach - (0.5 * AREA_M - _PLAN_MARGIN_M), 0.0)
+        over = np.maximum(np.maximum(reach, reach_of(pts)) - 0.5 * self.area_m, 0.0)
+        inside = np.maximum(reach - (0.5 * self.area_m - _PLAN_MARGIN_M), 0.0)
         cost = (_COST["out_m"] * over + _COST["margin_m"] * inside + _COST["reach_m"] * reach
                 + _COST["turn_s"] * length / speed)
         best_w, best_c = np.unravel_index(int(np.argmin(np.where(np.isfinite(length), cost, np.inf))), cost.shape)
+        self.out_m = max(self.out_m, float(over[best_w, best_c]))
         bounds = np.cumsum(np.append(radius * segs[best_w, best_c], _RUN_IN_M))
         signs = [_TURN_SIGN[ch] for ch in _WORDS[best_w]] + [0.0]
         steer_arc = _ARC_FRACTION * self.steer_max
@@ -593,7 +613,7 @@ _COST = {"out_m": 1000.0, "margin_m": 50.0, "reach_m": 0.1, "turn_s": 0.2}
 
 
 def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: float = RATE_HZ,
-              duration_s: float | None = None) -> ExcitationPlan:
+              duration_s: float | None = None, area_m: float | None = None) -> ExcitationPlan:
     """The excitation plan for ``car`` (about 90 s; docs/calibration.md lists the segments).
 
     Speeds and steering amplitudes follow the car's limits (``drive.max_speed_mps``,
@@ -602,7 +622,15 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
     ``MIN_DURATION_S``) appends more random-steer blocks (each a turn, 3 to 4.5 s of steps
     and a stop) and a longer final pause until the plan lasts that long (a few seconds
     more if the last turn is long); ``None`` gives the core plan.
-    The same arguments give the same plan.
+
+    ``area_m``: the side of the square area to plan for. The plan *fits* it when the turns
+    and the design envelope of every experiment as planned (``_Builder.out_m``) and the
+    nominal car's predicted path of the whole plan (:func:`predict_path`: the turns driven
+    with the steering's rate limit) stay inside; the
+    turns of a car with a wide turning circle (a 1:10 car's) do not fit the default
+    ``AREA_M``. ``None``: the smallest side from ``AREA_M`` up, in ``AREA_STEP_M`` steps,
+    that fits (``ExcitationPlan.area_m`` says which). A given side that does not fit is a
+    :class:`PlanError` naming the smallest that does. The same arguments give the same plan.
     """
     car = car or CarDescription()
     if not (5.0 <= rate_hz <= 1000.0):
@@ -610,6 +638,46 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
     if duration_s is not None and not (MIN_DURATION_S <= duration_s <= MAX_DURATION_S):
         raise PlanError(f"duration = {duration_s!r} s: expected {MIN_DURATION_S:g} .. {MAX_DURATION_S:g} s "
                         f"(the core plan needs about {MIN_DURATION_S:g} s)")
+    if area_m is not None and not (AREA_M <= area_m <= AREA_MAX_M):
+        raise PlanError(f"area = {area_m!r} m: expected {AREA_M:g} .. {AREA_MAX_M:g} m")
+    sides = [AREA_M + AREA_STEP_M * k for k in range(int(round((AREA_MAX_M - AREA_M) / AREA_STEP_M)) + 1)]
+    first = area_m if area_m is not None else AREA_M
+    plan, out_m = _plan_in(car, seed, rate_hz, duration_s, first)
+    if out_m == 0.0:
+        return plan
+    for side in (x for x in sides if x > first + 1e-9):
+        bigger, out_big = _plan_in(car, seed, rate_hz, duration_s, side)
+        if out_big == 0.0:
+            if area_m is None:
+                return bigger
+            raise PlanError(f"area = {area_m:g} m: this car's plan does not fit it (its turns or an experiment's "
+                            f"off-nominal cars get up to {out_m:.2f} m out); the smallest area it fits: "
+                            f"{side:g} x {side:g} m")
+    raise PlanError(f"this car's plan fits no area up to {AREA_MAX_M:g} x {AREA_MAX_M:g} m (at "
+                    f"{first:g} m its turns or an experiment's off-nominal cars get up to {out_m:.2f} m out): "
+                    "check the car file's wheelbase and steering limit")
+
+
+def turn_radius_m(car: CarDescription) -> float:
+    """Radius of the planned turns' arcs: ``_ARC_FRACTION`` of the most a planned turn
+    steers (``RETURN_STEER_FRACTION`` of the steering limit), kinematic."""
+    return car.chassis.wheelbase_m / math.tan(_ARC_FRACTION * RETURN_STEER_FRACTION * car.steering.limit_rad)
+
+
+def area_margin_m(car: CarDescription) -> float:
+    """How far outside the area a car of the design envelope may get, closed loop:
+    ``AREA_MARGIN_M`` (measured on the default car) scaled by the car's
+    :func:`turn_radius_m` over the default car's, never less. An off-nominal car drifts off
+    a turn's path in proportion to the arcs it cannot quite steer (docs/calibration.md:
+    measured on two 1:10 cars, whose arcs are 1.8 times the default car's, 0.61 and 0.65 m)."""
+    return round(AREA_MARGIN_M * max(1.0, turn_radius_m(car) / turn_radius_m(CarDescription())), 2)
+
+
+def _plan_in(car: CarDescription, seed: int, rate_hz: float, duration_s: float | None,
+             area_m: float) -> tuple[ExcitationPlan, float]:
+    """The plan of :func:`make_plan` for an area of side ``area_m``, and how far its turns
+    and the experiments' design envelope as planned, or the nominal car's predicted path,
+    get out of that area (0.0: it fits)."""
     rng = np.random.default_rng(seed)
     lim, vmax = car.steering.limit_rad, car.drive.max_speed_mps
     wb, mu = car.chassis.wheelbase_m, car.wheels.friction_mu
@@ -625,7 +693,7 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
 
     _, probe = _Builder(car, rate_hz).probe(first_run, 0.0)
     b = _Builder(car, rate_hz, centre_xy=(0.5 * (probe[:, 0].min() + probe[:, 0].max()),
-                                          0.5 * (probe[:, 1].min() + probe[:, 1].max())))
+                                          0.5 * (probe[:, 1].min() + probe[:, 1].max())), area_m=area_m)
     first_run(b)
 
     # 2. step steers left and right, small and medium amplitude (offset, gain, lag, latency)
@@ -748,11 +816,14 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
 
     rows = b.rows
     ref = np.array([r[4] if r[4] is not None else (math.nan,) * 3 for r in rows], dtype=float)
-    return ExcitationPlan(np.arange(len(rows)) / rate_hz, np.array([r[0] for r in rows]),
+    plan = ExcitationPlan(np.arange(len(rows)) / rate_hz, np.array([r[0] for r in rows]),
                           np.array([r[1] for r in rows]), np.array([r[2] for r in rows], dtype=bool),
                           tuple(r[3] for r in rows), rate_hz=float(rate_hz), seed=int(seed),
                           ref_x_m=ref[:, 0], ref_y_m=ref[:, 1], ref_yaw_rad=ref[:, 2],
-                          area_centre_m=(float(b.cx), float(b.cy)))
+                          area_centre_m=(float(b.cx), float(b.cy)), area_m=float(area_m),
+                          margin_m=area_margin_m(car))
+    xy = predict_path(plan, car)
+    return plan, max(b.out_m, plan.outside_area_m(xy[:, 0], xy[:, 1]))
 
 
 def predict_path(plan: ExcitationPlan, car: CarDescription) -> np.ndarray:
@@ -811,7 +882,7 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
     if rng is not None and not turns:
         noise = np.stack([rng.normal(0.0, sd, n) for sd in noise_std])
     sim = (sim_factory or make_sim)(car, dt_s=dt_s, start=start)
-    wb, steer_max = car.chassis.wheelbase_m, RETURN_STEER_FRACTION * car.steering.limit_rad
+    wb, steer_max = car.chassis.wheelbase_m, FOLLOW_STEER_FRACTION * car.steering.limit_rad
     max_extra = round(RETURN_TIMEOUT_S * plan.rate_hz)
     rows: list[tuple] = []  # row, x, y, yaw, speed, steer, yaw_rate, yaw_rate_cmd, speed_cmd, steer_cmd
     coast_now = False
