@@ -149,6 +149,7 @@ def test_report_folder(offset_run, tmp_path):
     assert len(rep["ranking"]) == len(CANDIDATES)
     assert rep["held_out_worse"] is False and rep["gap_after"] < rep["gap_before"]
     assert rep["signals_worse"] == {}  # the offset leaves the speed as it was and mends the rest
+    assert rep["conventions_unchecked"] == {}  # pose, speed and gyro: every convention checked
     assert {"effect", "parameters", "bic", "delta_bic", "improvement"} <= set(rep["ranking"][0])
     car = load_car(out / "car.toml")
     assert car.effects.steering_offset_rad == pytest.approx(rep["parameters"]["steering_offset_rad"])
@@ -363,6 +364,11 @@ def test_speed_and_gyro_only_log_names_a_longitudinal_effect_and_says_what_it_ca
     assert result.parameters["motor_lag_s"] == pytest.approx(0.3, rel=0.15)
     assert result.settings["signals"] == ["speed_mps", "yaw_rate_radps"]
     assert "position_m" not in result.rmse_before
+    # no pose: the speed sensor's unit has nothing to be checked against, and the report says so
+    assert result.to_json()["conventions_unchecked"] == {log.source: [
+        "speed_mps's unit (no pose to compare it with; only its sign, against the command)"]}
+    assert (f"not checked in {log.source}" in summary_text(result)
+            and "speed_mps's unit (no pose" in summary_text(result))
 
 
 def test_several_logs_of_one_car_form_one_data_set(tmp_path):

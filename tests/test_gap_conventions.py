@@ -19,7 +19,8 @@ SENSORS = ("both", "pose_speed", "pose", "speed_gyro")
 
 
 def check(log):
-    check_conventions(log, CAR.chassis.wheelbase_m, CAR.steering.limit_rad, glitch_mask(log, find_glitches(log)))
+    return check_conventions(log, CAR.chassis.wheelbase_m, CAR.steering.limit_rad,
+                             glitch_mask(log, find_glitches(log)))
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +33,23 @@ def logs():
 @pytest.mark.parametrize("sensors", SENSORS)
 def test_a_log_in_the_run_log_conventions_passes(logs, sensors):
     check(logs[sensors])
+
+
+def test_what_a_log_shows_too_little_of_is_listed_as_not_checked(logs):
+    """Every check is made on 20 s of the plan with a pose (nothing listed); without a pose
+    the speed sensor's unit has nothing to be compared with; a log that only drives straight
+    on shows no steering, so its sign (and the gyro's unit) go unchecked, and the report and
+    its JSON say so instead of passing them in silence."""
+    assert check(logs["both"]) == () and check(logs["pose"]) == ()
+    assert check(logs["speed_gyro"]) == ("speed_mps's unit (no pose to compare it with; only its sign, "
+                                         "against the command)",)
+    straight = logs["speed_gyro"].with_columns(steer_cmd_rad=np.zeros(len(logs["speed_gyro"])))
+    assert any(u.startswith("steer_cmd_rad's sign (too little turning) and yaw_rate_radps's unit")
+               for u in check(straight))
+    pose = logs["pose"]
+    short = pose.subset(int(np.searchsorted(pose.t_s, 3.0)))  # the ramp from rest: little travel, no turn
+    assert {"yaw_rad's sign and unit (too little travel)", "steer_cmd_rad's sign (too little turning)"} <= set(
+        check(short))
 
 
 @pytest.mark.parametrize("effect, value", [("steering_gain", 0.55), ("steering_offset", -0.06),

@@ -88,7 +88,7 @@ def _refuse(log: RunLog, column: str, text: str) -> LogError:
     return LogError(log.source, 1, f"{column}: {text}")
 
 
-def _heading(log: RunLog, exclude: np.ndarray) -> None:
+def _heading(log: RunLog, exclude: np.ndarray) -> bool:
     """The heading points along the motion (forward or reversing): the direction of each
     chord of the path over :data:`CHORD_S` that travels at least :data:`CHORD_M` (so a
     standing car's localisation jitter, centimetres in any direction, never counts) against
@@ -102,7 +102,7 @@ def _heading(log: RunLog, exclude: np.ndarray) -> None:
     dx, dy = x[j] - x[i], y[j] - y[i]
     ok &= np.hypot(dx, dy) >= CHORD_M
     if np.count_nonzero(ok) < MIN_SAMPLES:
-        return
+        return False
     course = np.arctan2(dy[ok], dx[ok])
     i, j = i[ok], j[ok]
 
@@ -115,7 +115,7 @@ def _heading(log: RunLog, exclude: np.ndarray) -> None:
     yaw = np.asarray(log.yaw_rad, dtype=float)
     own = share(yaw)
     if own >= ALIGNED_SHARE:
-        return
+        return True
     found = f"points along the motion in {own:.0%} of the path's chords"
     if share(np.zeros_like(yaw)) < ALIGNED_SHARE:  # the path turns enough to tell conventions apart
         for alt, what, fix in ((-yaw, "negated", f"expected counter-clockwise from +x; its "
@@ -127,14 +127,16 @@ def _heading(log: RunLog, exclude: np.ndarray) -> None:
     if own < MIN_ALIGNED_SHARE:
         raise _refuse(log, "yaw_rad", f"{found}: expected the heading of the car (radians, counter-clockwise "
                                       f"from +x) with x_m, y_m in one world frame; check its unit, sign and frame")
+    return True
 
 
 def _against_pose(log: RunLog, column: str, sensor: np.ndarray, from_pose: np.ndarray, min_value: float,
-                  what: str, positive: str, unit: str, units: dict[str, float]) -> None:
-    """A sensor against the same quantity from the pose: reversed, or in one of ``units``."""
+                  what: str, positive: str, unit: str, units: dict[str, float]) -> bool:
+    """A sensor against the same quantity from the pose: reversed, or in one of ``units``;
+    False when the log shows too little of it to tell."""
     fit = _fit(sensor, from_pose, np.abs(from_pose) > min_value)
     if fit is None:
-        return
+        return False
     slope, corr = fit
     found = f"is {slope:.3g}x {what} (correlation {corr:.2f})"
     if slope < 0.0 and corr < -MIN_CORRELATION:
@@ -142,14 +144,18 @@ def _against_pose(log: RunLog, column: str, sensor: np.ndarray, from_pose: np.nd
     other = _unit(slope, units) if corr > MIN_CORRELATION else None
     if other:
         raise _refuse(log, column, f"{found}: expected {unit}; in {other}? map it with unit = \"{other}\" {_DOC}")
+    return True
 
 
 def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
-                      exclude: np.ndarray | None = None, measured: Derived | None = None) -> None:
+                      exclude: np.ndarray | None = None, measured: Derived | None = None) -> tuple[str, ...]:
     """Raise :class:`LogError` (``path:1: column: what was found, what was expected``) when a
     column of ``log`` is reversed or in another unit (module docstring); ``exclude``: samples
     to leave out (glitches); ``measured``: ``derive(log, wheelbase_m, exclude=exclude)`` if
-    the caller has it already."""
+    the caller has it already. Returns what could not be checked (a check the log shows too
+    little of, or, without a pose, a sensor's unit that nothing else measures), one phrase
+    each, for the report to say: a short log or one without turns passes them unseen."""
+    unchecked: list[str] = []
     steer = np.asarray(log.steer_cmd_rad, dtype=float)
     keep_out = np.zeros(len(log), dtype=bool) if exclude is None else np.asarray(exclude, dtype=bool)
     keep = ~keep_out
@@ -163,22 +169,29 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
     if has_pose(log):
         bare = log.with_columns(speed_mps=None, yaw_rate_radps=None)
         pose = derive(bare, wheelbase_m, exclude=exclude)
-        _heading(log, keep_out)
+        if not _heading(log, keep_out):
+            unchecked.append("yaw_rad's sign and unit (too little travel)")
     if measured is None:  # the sensors where present, else the pose
         measured = derive(log, wheelbase_m, exclude=exclude)
     if pose is not None:
-        if log.yaw_rate_radps is not None:
-            _against_pose(log, "yaw_rate_radps", measured.yaw_rate_radps, pose.yaw_rate_radps, MIN_RATE_RADPS,
-                          "the yaw rate of the pose", "counter-clockwise", "rad/s", {"deg/s": 180.0 / math.pi})
-        if log.speed_mps is not None:
-            _against_pose(log, "speed_mps", measured.speed_mps, pose.speed_mps, MIN_SPEED_MPS,
-                          "the speed of the pose along its heading", "forward", "m/s",
-                          {"km/h": 3.6, "cm/s": 100.0, "mm/s": 1000.0})
+        if log.yaw_rate_radps is not None and not _against_pose(
+                log, "yaw_rate_radps", measured.yaw_rate_radps, pose.yaw_rate_radps, MIN_RATE_RADPS,
+                "the yaw rate of the pose", "counter-clockwise", "rad/s", {"deg/s": 180.0 / math.pi}):
+            unchecked.append("yaw_rate_radps's sign and unit (too little turning)")
+        if log.speed_mps is not None and not _against_pose(
+                log, "speed_mps", measured.speed_mps, pose.speed_mps, MIN_SPEED_MPS,
+                "the speed of the pose along its heading", "forward", "m/s",
+                {"km/h": 3.6, "cm/s": 100.0, "mm/s": 1000.0}):
+            unchecked.append("speed_mps's sign and unit (too little driving)")
+    elif log.speed_mps is not None:
+        unchecked.append("speed_mps's unit (no pose to compare it with; only its sign, against the command)")
     # the measured speed and yaw rate are now right where a pose confirmed them (or gave them);
     # without a pose, a reversal below may be the sensor's as well as the command's
     v, rate = measured.speed_mps, measured.yaw_rate_radps
     cmd = np.asarray(log.speed_cmd_mps, dtype=float)
     fit = _fit(v, cmd, (np.abs(cmd) > MIN_SPEED_MPS) & (np.abs(v) > MIN_SPEED_MPS))
+    if fit is None:
+        unchecked.append("speed_cmd_mps's sign and unit (too little driving)")
     if fit is not None and fit[0] < 0.0 and fit[1] < -MIN_CORRELATION:
         found = f"the measured speed is {fit[0]:.3g}x the command (correlation {fit[1]:.2f})"
         if pose is not None:  # the measured speed is the pose's or was checked against it
@@ -194,6 +207,9 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
     with np.errstate(invalid="ignore"):
         kinematic = v * np.tan(np.clip(steer, -1.5, 1.5)) / wheelbase_m
     fit = _fit(rate, kinematic, (np.abs(kinematic) > MIN_RATE_RADPS) & (np.abs(v) > MIN_SPEED_MPS))
+    if fit is None:
+        unchecked.append("steer_cmd_rad's sign (too little turning)"
+                         + (" and yaw_rate_radps's unit" if pose is None and log.yaw_rate_radps is not None else ""))
     if pose is None and fit is not None and fit[1] > MIN_CORRELATION and _unit(fit[0], {"deg/s": 180.0 / math.pi},
                                                                               band=0.6):
         raise _refuse(log, "yaw_rate_radps", f"is {fit[0]:.3g}x the yaw rate the steering command and the speed "
@@ -209,6 +225,7 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
                                                               f"counter-clockwise (gyro); one "
                                                               f"{_REVERSED.format(col='steer_cmd_rad')} (or "
                                                               f"yaw_rate_radps)")
+    return tuple(unchecked)
 
 
 __all__ = ["check_conventions"]

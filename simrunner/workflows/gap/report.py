@@ -66,6 +66,7 @@ class LogPart:
     fit_windows: tuple[Window, ...]
     held_windows: tuple[Window, ...]
     signals: tuple[str, ...]
+    unchecked: tuple[str, ...] = ()  # conventions the log shows too little of (check_conventions)
 
     @property
     def windows(self) -> tuple[Window, ...]:
@@ -193,6 +194,7 @@ class GapResult:
                        for t, after in zip(self.chain.pruned, self.chain.pruned_after)],
             "unexplained": self.leftovers,
             "cannot_reveal": self.unrevealable,
+            "conventions_unchecked": {p.log.source: list(p.unchecked) for p in self.parts if p.unchecked},
             "glitches": [{"log": src, "kind": g.kind, "t_start_s": g.t_start_s, "t_end_s": g.t_end_s,
                           "column": g.column, "detail": g.detail} for src, g in self.glitches],
             "signals": list(self.settings.get("signals", ())),
@@ -247,11 +249,12 @@ def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
     glitches = tuple(find_glitches(log, car))
     bad = glitch_mask(log, glitches)
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
-    check_conventions(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad, measured=derived)
+    unchecked = check_conventions(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad,
+                                  measured=derived)
     windows = make_windows(log, window_s, exclude=bad)
     strata = window_strata(log, derived, segment(log, derived, car), windows, car.drive.max_brake_mps2)
     fit_w, held_w = split_windows(windows, strata=strata) if windows else ([], [])
-    return LogPart(log, derived, glitches, tuple(fit_w), tuple(held_w), signals_of(log))
+    return LogPart(log, derived, glitches, tuple(fit_w), tuple(held_w), signals_of(log), unchecked)
 
 
 def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, *, jobs: int = 2,
@@ -636,6 +639,9 @@ def summary_text(result: GapResult) -> str:
                      "trade signals (the warning above): part of the gap may have a cause the catalogue lacks")
     else:
         lines.append("left unexplained: nothing well above the sensor noise")
+    for part in (p for p in result.parts if p.unchecked):
+        lines.append(f"not checked in {Path(part.log.source).name} (docs/gap.md, \"Input\"): "
+                     + "; ".join(part.unchecked) + ": make sure of these by hand")
     if result.unrevealable:
         lines.append("this log cannot reveal: " + ", ".join(
             f"{n} (needs {' or '.join(s)})" for n, s in result.unrevealable.items()))
