@@ -6,6 +6,7 @@ part from 44 s (speed steps, brake, straight at 2 m/s, coast) longitudinal ones.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -129,6 +130,19 @@ def test_report_folder_that_cannot_be_written_is_one_line_and_leaves_nothing(off
         write_outputs(result, tmp_path / "gap")
     assert "\n" not in str(info.value)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_log_faster_than_the_car_file_allows_is_warned_of(offset_run):
+    """A log of another car run without its car file (an F1/10 log at 5 m/s on the default
+    car's 3.1 m/s): the answer asks whether the car file is the car's."""
+    _, _, result = offset_run
+    assert "beyond the car file's top speed" not in summary_text(result)
+    fastest = max(float(np.nanmax(np.abs(p.derived.speed_mps))) for p in result.parts)
+    slow = dataclasses.replace(result.car, drive=dataclasses.replace(result.car.drive, max_speed_mps=fastest / 1.5))
+    text = summary_text(dataclasses.replace(result, car=slow))
+    answer = text.split("held-out gap")[0]
+    assert f"WARNING: the logs reach {fastest:.3g} m/s, beyond the car file's top speed" in answer
+    assert "(--car CAR.toml)" in answer
 
 
 def test_report_folder(offset_run, tmp_path):
@@ -264,6 +278,8 @@ def test_cli_reads_a_log_with_a_row_written_twice(tmp_path, offset_run):
     res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--max-effects", "0", "--no-progress"])
     assert res.exit_code == 0, res.output
     assert "duplicate (t_s) line 301 repeats the row before it (same stamp, same values): left out" in res.stdout
+    assert "the chain stopped: max effects 0: nothing tried" in res.stdout
+    assert "left unexplained by the catalogue" not in res.stdout  # no effect was tried
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
     assert any("line 301" in g["detail"] for g in rep["glitches"])
 

@@ -1581,7 +1581,7 @@ def test_a_chain_at_its_limit_resumes_after_the_check_removes_a_look_alike(monke
     assert result.effects == [real, third]
     assert result.parameters == {field[real]: 0.04, field[third]: 0.4}
     assert look not in {r.effect for r in result.steps[2].screening}  # removed: not tried again
-    assert result.stop_reason == "the chain reached its limit of 2 effects"
+    assert result.stop_reason.startswith("the chain reached its limit of 2 effects (more may pass: `--max-effects N`")
     # with room for all three the look-alike is removed the same way and nothing resumes
     roomy = chain.build_chain(fit_p, held_p, [look, real, third], jobs=1, max_effects=3)
     assert roomy.effects == [real, third] and [t.effect for t in roomy.pruned] == [look]

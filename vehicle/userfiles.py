@@ -8,13 +8,13 @@ from typing import Any
 
 
 def read_user_text(path: str | Path, what: str, error: type[Exception], kind: str = "text") -> str:
-    """The file's text, or ``error("PATH: cannot read WHAT (reason)")`` /
+    """The file's text, or ``error("PATH: cannot read WHAT (reason): expected a readable KIND file")`` /
     ``error("PATH: not a text (KIND) file")``."""
     path = Path(path)
     try:
         return path.read_text()
     except OSError as exc:
-        raise error(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+        raise error(f"{path}: cannot read {what} ({exc.strerror or exc}): expected a readable {kind} file") from None
     except UnicodeDecodeError:
         raise error(f"{path}: not a text ({kind}) file") from None
 

@@ -57,7 +57,7 @@ def _engine_stderr_silenced():
 @click.option("--effects", default=None, metavar="NAME,NAME",
               help="Only these catalogue effects (default: all).")
 @click.option("--max-effects", default=None, type=click.IntRange(min=0, max=50), metavar="N",
-              help="Keep at most N effects (default: 4).")
+              help="Keep at most N effects (default: 6).")
 @click.option("--dt", "dt_s", default=WORKFLOW_DT_S, show_default=True,
               type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS",
               help="Physics step of the replays.")

@@ -50,6 +50,7 @@ from vehicle.description import CarDescription
 FORMAT = "nxpcup-gap/2"
 LEFTOVER_NOISE_RATIO = 4.0  # a residual this many times the sensor noise is "well above noise"
 LEFTOVER_MIN_SAMPLES = 20
+TOP_SPEED_MARGIN = 1.2  # a log this much faster than the car file's top speed: the wrong car file?
 GLITCHES_LISTED = 12  # the summary lists this many glitches; report.json has all of them
 # a log whose stamps start this far from 0 (epoch or ROS time) gets its glitch times also as
 # seconds into the log in residuals.txt
@@ -573,6 +574,12 @@ def summary_text(result: GapResult) -> str:
             others = " or ".join(alike)
             lines.append(f"  {step.kept.effect} or {others}: these logs cannot tell them apart (step {step.index}: "
                          f"window by window, within {ALIKE_Z:g} standard errors; treat the name as one of these)")
+    fastest = max((float(np.nanmax(np.abs(p.derived.speed_mps))) for p in result.parts
+                   if np.isfinite(p.derived.speed_mps).any()), default=0.0)
+    if fastest > TOP_SPEED_MARGIN * result.car.drive.max_speed_mps:
+        lines.append(f"  WARNING: the logs reach {fastest:.3g} m/s, beyond the car file's top speed "
+                     f"({result.car.drive.max_speed_mps:g} m/s, car \"{result.car.name}\"): is this the car's "
+                     "file (--car CAR.toml)? Every effect is fitted against its numbers")
     for name in result.at_bounds:
         lines.append(f"  WARNING: {name} = {result.parameters[name]:.4g} is at the end of its fit range: the "
                      "real cause is probably outside the catalogue (or the car file is far off); "
@@ -631,7 +638,10 @@ def summary_text(result: GapResult) -> str:
                      f"{d['gap_before']:.3g} -> {d['gap_after']:.3g}): one model does not fit all these logs. Were "
                      "they driven with one set-up (speed limit, battery, tyres, floor)? Run them one at a time "
                      "to compare.")
-    if result.leftovers:
+    if result.leftovers and not result.settings.get("max_effects", MAX_EFFECTS):
+        lines.append("above the sensor noise (the nominal model, all windows; no effect was tried: max effects 0):")
+        lines += [f"  {d['text']}" for d in result.leftovers[:8]]
+    elif result.leftovers:
         lines.append("left unexplained by the catalogue (final model, all windows):")
         lines += [f"  {d['text']}" for d in result.leftovers[:8]]
     elif result.signals_worse and not result.held_out_worse:
