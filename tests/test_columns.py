@@ -379,3 +379,76 @@ def test_mapped_read_never_crashes_on_junk(tmp_path_factory, junk):
         assert str(err).startswith(f"{p}:") and "\n" not in str(err)
     else:
         assert isinstance(log, RunLog)
+
+
+# -- the controller's own norm functions (--norms) -------------------------------------------
+REAL_UNITS = ROOT / "examples" / "real_car_units.py"
+
+
+def test_a_log_in_the_car_s_units_reads_through_the_controller_s_own_norm_functions(tmp_path):
+    """The ROS-style log's servo and duty read through examples/real_car_units.py's
+    spinner.configure(turn_norm=, speed_norm=), row by row: the native log, as the
+    hand-written expressions of the example mapping give it."""
+    from simrunner.run.norms import controller_norms
+
+    native, ros = _ros_pair(tmp_path)
+    items = ["steer_cmd_rad=turn_norm(duty, servo)", "speed_cmd_mps=speed_norm(duty, servo)"]
+    mapped = read_log(ros, columns=column_map_from(EXAMPLE, items, controller_norms(REAL_UNITS)))
+    _assert_close(mapped, read_log(native))
+
+
+def test_norm_calls_parse_evaluate_and_say_what_is_missing(tmp_path):
+    e = Expression.parse("2 * speed_norm(d, s / 2) + 1")
+    assert e.norms == ("speed_norm",) and e.columns == ("d", "s")
+    out = e.evaluate({"d": np.array([1.0, np.nan, 3.0]), "s": np.array([4.0, 5.0, 6.0])},
+                     {"speed_norm": lambda v, a: v * 10 + a})
+    assert out[0] == 2 * (10 + 2) + 1 and math.isnan(out[1]) and out[2] == 2 * (30 + 3) + 1  # empty cell: NaN
+    with pytest.raises(ColumnMapError, match="speed_norm takes 2 arguments"):
+        Expression.parse("speed_norm(d)")
+    with pytest.raises(LogError, match=r"calls turn_norm: expected the controller's norm functions"):
+        Expression.parse("turn_norm(d, s)").evaluate({"d": 1.0, "s": 1.0})
+    with pytest.raises(ColumnMapError) as err:
+        column_map_from(items=["steer_cmd_rad=turn_norm(duty, servo)"])
+    _one_line(err, "--column 'steer_cmd_rad=turn_norm(duty, servo)': steer_cmd_rad calls turn_norm: expected "
+                   "the controller whose norm functions it means: --norms CONTROLLER.py")
+    with pytest.raises(ColumnMapError) as err:
+        column_map_from(items=["x_m=a"], norms={"speed_norm": max, "turn_norm": max}, norms_from="--norms c.py")
+    _one_line(err, "--norms c.py:0: no column rule calls speed_norm or turn_norm")
+
+
+def test_a_norm_function_that_fails_names_the_log_line_and_its_own_line(tmp_path):
+    ctl = _write(tmp_path, "def main(spinner):\n    spinner.configure(\n"
+                           "        speed_norm=lambda v, a: 1.0 / (v - 2.0))\n", "ctl.py")
+    from simrunner.run.norms import controller_norms
+
+    p = _write(tmp_path, "t,duty,servo,x,y,yaw\n0,1,0,0,0,0\n0.1,2,0,0,0,0\n0.2,3,0,0,0,0\n")
+    cmap = column_map_from(items=["speed_cmd_mps=speed_norm(duty, servo)", "steer_cmd_rad=servo"],
+                           norms=controller_norms(ctl))
+    with pytest.raises(LogError) as err:
+        read_log(p, columns=cmap)
+    text = _one_line(err, f"{p}:3: speed_cmd_mps = 'speed_norm(duty, servo)' (--column ")
+    assert "speed_norm(speed=2.0, angle=0.0) raised ZeroDivisionError: float division by zero at " in text
+    assert text.endswith(f"ctl.py:3")
+
+
+@pytest.mark.parametrize("source, what", [
+    ("def main(spinner):\n    return\n", None),  # never configures: m/s and radians
+    ("def main(spinner):\n    spinner.get_image()\n", "uses spinner.get_image before spinner.configure"),
+    ("def main(spinner):\n    x = 1 / 0\n", "failed before configuring its norms: ZeroDivisionError"),
+    ("from simrunner.run.spinner import Spinner\n\ndef main(spinner):\n    Spinner(turn_norm=abs)\n",
+     "main builds Spinner(...) itself"),
+])
+def test_controller_norms_of_odd_controllers(tmp_path, source, what):
+    from simrunner.errors import ControllerFileError
+    from simrunner.run.norms import controller_norms
+
+    ctl = _write(tmp_path, source, "ctl.py")
+    if what is None:
+        norms = controller_norms(ctl)
+        assert norms["speed_norm"](1.5, 0.2) == 1.5 and norms["turn_norm"](1.5, 0.2) == 0.2
+        return
+    with pytest.raises(ControllerFileError, match=re.escape(what)) as err:
+        controller_norms(ctl)
+    assert "\n" not in str(err.value) and str(err.value).startswith(str(ctl))
+    with pytest.raises(ControllerFileError, match="expected a Python controller"):
+        controller_norms(_write(tmp_path, "int main(void) { return 0; }\n", "ctl.c"))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -282,6 +283,38 @@ def test_cli_reads_a_log_with_a_row_written_twice(tmp_path, offset_run):
     assert "left unexplained by the catalogue" not in res.stdout  # no effect was tried
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
     assert any("line 301" in g["detail"] for g in rep["glitches"])
+
+
+def test_cli_reads_a_log_in_the_car_s_units_through_the_controller_s_norms(tmp_path, offset_run):
+    """The commands logged as the car's code sends them (examples/real_car_units.py: servo
+    -512..512, + = right; duty in percent) read through that controller's own norm
+    functions (--norms): the same gap as the log in m/s and radians."""
+    import csv as csvmod
+
+    log, _, _ = offset_run
+    native = tmp_path / "native.csv"
+    write_log(log, native, float_format="%.17g")
+    with native.open() as f:
+        rows = [r for r in csvmod.reader(f) if r and not r[0].startswith("#")]
+    head = rows[0]
+    i_v, i_s = head.index("speed_cmd_mps"), head.index("steer_cmd_rad")
+    head[i_v], head[i_s] = "duty", "servo"
+    for r in rows[1:]:
+        r[i_v], r[i_s] = repr(float(r[i_v]) / 3.1 * 100), repr(-float(r[i_s]) * 512 / 0.40)
+    units = tmp_path / "car_units.csv"
+    units.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    ctl = Path(__file__).resolve().parents[1] / "examples" / "real_car_units.py"
+    res = CliRunner().invoke(gap, [str(units), "-o", str(tmp_path / "a"), "--max-effects", "0", "--no-progress",
+                                   "--column", "speed_cmd_mps=speed_norm(duty, servo)",
+                                   "--column", "steer_cmd_rad=turn_norm(duty, servo)", "--norms", str(ctl)])
+    assert res.exit_code == 0, res.output
+    ref = CliRunner().invoke(gap, [str(native), "-o", str(tmp_path / "b"), "--max-effects", "0", "--no-progress"])
+    assert ref.exit_code == 0, ref.output
+    a, b = (json.loads((tmp_path / d / "report.json").read_text()) for d in "ab")
+    assert a["gap_before"] == pytest.approx(b["gap_before"], rel=1e-9)
+    # --norms that no rule calls is refused before anything runs
+    res = CliRunner().invoke(gap, [str(native), "-o", str(tmp_path / "c"), "--norms", str(ctl)])
+    assert res.exit_code == 2 and "no column rule calls speed_norm or turn_norm" in res.stderr
 
 
 def test_cli_bad_options_exit_2(tmp_path, offset_run):

@@ -52,6 +52,9 @@ def _engine_stderr_silenced():
 @click.option("--column", "column_items", multiple=True, metavar="NAME=EXPR",
               help="One column mapping item (repeatable; overrides --columns), e.g. "
                    "speed_cmd_mps='duty / 100 * 3.1'.")
+@click.option("--norms", "norms_file", default=None, type=click.Path(dir_okay=False, path_type=Path),
+              metavar="CONTROLLER.py", help="The Python controller whose spinner.configure(speed_norm=, "
+                                            "turn_norm=) the mapping calls: speed_cmd_mps='speed_norm(duty, servo)'.")
 @click.option("--jobs", default=2, show_default=True, type=click.IntRange(min=1),
               help="Worker processes for the fits (results do not depend on it).")
 @click.option("--effects", default=None, metavar="NAME,NAME",
@@ -71,7 +74,7 @@ def _engine_stderr_silenced():
 @click.option("--force", is_flag=True, help="Replace DIR if it exists.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_file: Path | None,
-        column_items: tuple[str, ...], jobs: int, effects: str | None, max_effects: int | None,
+        column_items: tuple[str, ...], norms_file: Path | None, jobs: int, effects: str | None, max_effects: int | None,
         dt_s: float, window_s: float, screen_s: float, force: bool, no_progress: bool) -> None:
     """Find where MEASURED (one or several run logs of one car, docs/telemetry.md) and the
     simulator disagree, build the chain of effects that closes the gap, and show it shrink on
@@ -102,7 +105,7 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
             if bad or not names:
                 raise SimError(f"--effects {effects!r}: expected names among {', '.join(CANDIDATES)}")
         description = load_car(car)
-        read = _log_reader(columns_file, column_items)
+        read = _log_reader(columns_file, column_items, norms_file)
         logs = [check_measured(read(path)) for path in measured]
         limit = MAX_EFFECTS if max_effects is None else max_effects
         total = progress_total(len(names) if names is not None else len(CANDIDATES), limit)
@@ -131,15 +134,21 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
                f"residuals_by_regime.png)")
 
 
-def _log_reader(columns_file: Path | None, items: tuple[str, ...]):
-    """``read_log`` with the column mapping of ``--columns``/``--column`` (if any), reading
-    merged topic logs (empty cells: :mod:`simrunner.run.sparse`) and leaving out a row that
-    repeats the stamp before it (listed as a duplicate glitch)."""
+def _log_reader(columns_file: Path | None, items: tuple[str, ...], norms_file: Path | None = None):
+    """``read_log`` with the column mapping of ``--columns``/``--column`` (if any; its
+    ``speed_norm``/``turn_norm`` those ``--norms`` configures), reading merged topic logs
+    (empty cells: :mod:`simrunner.run.sparse`) and leaving out a row that repeats the stamp
+    before it (listed as a duplicate glitch)."""
     from simrunner.run.log import read_log
 
-    if columns_file is None and not items:
+    if columns_file is None and not items and norms_file is None:
         return lambda path: read_log(path, merged=True, repeated_stamps=True)
     from simrunner.run.columns import column_map_from
 
-    mapping = column_map_from(columns_file, items)
+    norms = None
+    if norms_file is not None:
+        from simrunner.run.norms import controller_norms
+
+        norms = controller_norms(norms_file)
+    mapping = column_map_from(columns_file, items, norms, norms_from=f"--norms {norms_file}")
     return lambda path: read_log(path, columns=mapping, merged=True, repeated_stamps=True)

@@ -28,7 +28,8 @@ import math
 import re
 import tomllib
 import warnings
-from dataclasses import dataclass
+import dataclasses
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable, Mapping, Sequence
 
@@ -64,8 +65,11 @@ FUNCTIONS: dict[str, tuple[int, Callable]] = {
     "atan2": (2, np.arctan2), "hypot": (2, np.hypot), "radians": (1, np.radians), "degrees": (1, np.degrees),
     "min": (-2, np.minimum), "max": (-2, np.maximum),
 }
+# the controller's own norm functions (simrunner.run.spinner), given with --norms CONTROLLER.py:
+# name(speed, angle) in the controller's units -> m/s or rad, called row by row
+NORM_FUNCTIONS = ("speed_norm", "turn_norm")
 ALLOWED = ("numbers, column names (other names in backticks: `%time`), + - * / **, unary minus, "
-           f"parentheses and {', '.join(FUNCTIONS)}")
+           f"parentheses, {', '.join(FUNCTIONS)} and the controller's {' and '.join(NORM_FUNCTIONS)}")
 _NODE_WORDS = {ast.Compare: "a comparison", ast.BoolOp: "and/or", ast.Subscript: "an index [...]",
                ast.Lambda: "a lambda", ast.IfExp: "if/else", ast.List: "a list", ast.Tuple: "a tuple",
                ast.Dict: "a dict", ast.Set: "a set", ast.JoinedStr: "an f-string", ast.NamedExpr: ":=",
@@ -187,6 +191,10 @@ class Expression:
                 raise refuse(f"got the operator {_operator(node.op)}")
             if isinstance(node, ast.Call):
                 fname = node.func.id if isinstance(node.func, ast.Name) else None
+                if fname in NORM_FUNCTIONS:
+                    if node.keywords or len(node.args) != 2 or any(isinstance(a, ast.Starred) for a in node.args):
+                        raise refuse(f"{fname} takes 2 arguments, speed and angle in the controller's units")
+                    return ("norm", fname, tuple(convert(a, depth + 1) for a in node.args))
                 if fname not in FUNCTIONS:
                     raise refuse(f"got a call of {fname!r}" if fname else "got a call of something not a name")
                 if node.keywords or any(isinstance(a, ast.Starred) for a in node.args):
@@ -202,41 +210,94 @@ class Expression:
         tree = convert(body, 0)
         return cls(text, tree, tuple(names))
 
-    def evaluate(self, columns: Mapping[str, np.ndarray | float]) -> np.ndarray:
+    @property
+    def norms(self) -> tuple[str, ...]:
+        """The controller's norm functions it calls (:data:`NORM_FUNCTIONS`)."""
+        found: list[str] = []
+
+        def walk(node: tuple) -> None:
+            if node[0] == "norm" and node[1] not in found:
+                found.append(node[1])
+            for child in node[1:]:
+                if isinstance(child, tuple):
+                    for c in (child if child and isinstance(child[0], tuple) else (child,)):
+                        walk(c)
+
+        walk(self.tree)
+        return tuple(found)
+
+    def evaluate(self, columns: Mapping[str, np.ndarray | float],
+                 norms: Mapping[str, Callable[[float, float], float]] | None = None) -> np.ndarray:
         """The value, float64, broadcast over the columns' shape (0-d without columns);
         numpy's rules for inf and nan (no warnings). Raises :class:`LogError` if ``columns``
-        lacks one this expression reads."""
+        lacks one this expression reads, or ``norms`` a norm function it calls; a norm
+        function that raises or returns no number raises :class:`NormFault` (its row)."""
         missing = [n for n in self.columns if n not in columns]
         if missing:
             raise LogError("<expression>", 0, f"expression {self.text!r} reads column {missing[0]!r} "
                                               f"(got columns: {', '.join(map(repr, columns)) or 'none'})")
+        absent = [n for n in self.norms if not norms or n not in norms]
+        if absent:
+            raise LogError("<expression>", 0, f"expression {self.text!r} calls {absent[0]}: expected the "
+                                              "controller's norm functions (simrunner gap --norms CONTROLLER.py)")
         values = {n: np.asarray(columns[n], dtype=float) for n in self.columns}
         with np.errstate(all="ignore"):
-            return np.asarray(_evaluate(self.tree, values), dtype=float)
+            return np.asarray(_evaluate(self.tree, values, norms or {}), dtype=float)
 
 
 def _operator(op: ast.AST) -> str:
     return _REFUSED_OPERATORS.get(type(op), type(op).__name__)
 
 
-def _evaluate(node: tuple, values: Mapping[str, np.ndarray]):
+class NormFault(Exception):
+    """A controller's norm function failed at ``row`` (index into the evaluated arrays)."""
+
+    def __init__(self, row: int, message: str):
+        super().__init__(message)
+        self.row = row
+        self.message = message
+
+
+def _call_norm(name: str, fn: Callable[[float, float], float], speed, angle) -> np.ndarray:
+    """``fn(speed, angle)`` row by row (NaN where an argument is NaN: an empty cell)."""
+    a, b = np.broadcast_arrays(np.asarray(speed, dtype=float), np.asarray(angle, dtype=float))
+    out = np.full(a.shape, np.nan)
+    flat_a, flat_b, flat = a.reshape(-1), b.reshape(-1), out.reshape(-1)
+    for i in np.flatnonzero(np.isfinite(flat_a) & np.isfinite(flat_b)):
+        try:
+            v = fn(float(flat_a[i]), float(flat_b[i]))
+            flat[i] = float(v)
+        except Exception as exc:  # noqa: BLE001 - the user's function: any fault is reported
+            tb = exc.__traceback__
+            while tb is not None and tb.tb_next is not None:
+                tb = tb.tb_next
+            where = f" at {tb.tb_frame.f_code.co_filename}:{tb.tb_lineno}" if tb is not None else ""
+            raise NormFault(int(i), f"{name}(speed={float(flat_a[i])!r}, angle={float(flat_b[i])!r}) raised "
+                                    f"{type(exc).__name__}: {exc}{where}") from None
+    return out
+
+
+def _evaluate(node: tuple, values: Mapping[str, np.ndarray], norms: Mapping[str, Callable]):
     kind = node[0]
     if kind == "num":
         return np.float64(node[1])
     if kind == "col":
         return values[node[1]]
     if kind == "neg":
-        return np.negative(_evaluate(node[1], values))
+        return np.negative(_evaluate(node[1], values, norms))
+    if kind == "norm":
+        speed, angle = (_evaluate(a, values, norms) for a in node[2])
+        return _call_norm(node[1], norms[node[1]], speed, angle)
     if kind == "call":
         arity, fn = FUNCTIONS[node[1]]
-        args = [_evaluate(a, values) for a in node[2]]
+        args = [_evaluate(a, values, norms) for a in node[2]]
         if arity < 0:  # min/max: element-wise over all arguments
             out = args[0]
             for a in args[1:]:
                 out = fn(out, a)
             return out
         return fn(*args)
-    return _UFUNCS[kind](_evaluate(node[1], values), _evaluate(node[2], values))
+    return _UFUNCS[kind](_evaluate(node[1], values, norms), _evaluate(node[2], values, norms))
 
 
 def _quote(name: str) -> str:
@@ -357,6 +418,8 @@ class ColumnMap:
     An empty map reads a log exactly as no map."""
 
     rules: tuple[ColumnRule, ...] = ()
+    # the controller's norm functions the rules may call (controller_norms); not compared
+    norms: Mapping[str, Callable[[float, float], float]] | None = field(default=None, compare=False)
 
     @classmethod
     def from_rules(cls, rules: Iterable[ColumnRule]) -> "ColumnMap":
@@ -489,7 +552,12 @@ class ColumnMap:
                     raise LogError(source, int(zero[0]) + 2,
                                    f"{rule.target} ({rule.origin}): quaternion {', '.join(rule.nonzero)} "
                                    f"is all zero: expected a rotation")
-            value = np.array(np.broadcast_to(rule.expression.evaluate(values), (rows,)), dtype=float)
+            try:
+                value = np.array(np.broadcast_to(rule.expression.evaluate(values, self.norms), (rows,)),
+                                 dtype=float)
+            except NormFault as fault:
+                raise LogError(source, fault.row + 2, f"{rule.target} = {rule.expression.text!r} "
+                                                      f"({rule.origin}): {fault.message}") from None
             value[empty] = np.nan
             bad = np.flatnonzero(~np.isfinite(value) & ~empty)
             if bad.size:
@@ -518,12 +586,27 @@ def _numbers(name: str, cells: Sequence[str], source: str, merged: bool = False)
     return out
 
 
-def column_map_from(file: str | Path | None = None, items: Iterable[str] = ()) -> ColumnMap:
-    """The map of ``simrunner gap --columns FILE --column ITEM ...``: the TOML file's rules,
-    with the command-line ``items`` (``NAME=EXPR``) replacing or adding rules."""
+def column_map_from(file: str | Path | None = None, items: Iterable[str] = (),
+                    norms: Mapping[str, Callable[[float, float], float]] | None = None,
+                    norms_from: str = "--norms") -> ColumnMap:
+    """The map of ``simrunner gap --columns FILE --column ITEM ... --norms CONTROLLER.py``:
+    the TOML file's rules, with the command-line ``items`` (``NAME=EXPR``) replacing or
+    adding rules; ``norms`` (:func:`simrunner.run.norms.controller_norms`) for the rules that
+    call ``speed_norm``/``turn_norm``. A rule that calls one without ``norms``, or ``norms``
+    that no rule calls, is a :class:`ColumnMapError`."""
     base = ColumnMap.from_toml(file) if file is not None else ColumnMap()
-    return base.merged(ColumnMap.from_items(items))
+    out = base.merged(ColumnMap.from_items(items))
+    calling = [r for r in out.rules if r.expression.norms]
+    if norms is None and calling:
+        r = calling[0]
+        raise ColumnMapError(r.origin, f"{r.target} calls {r.expression.norms[0]}: expected the controller whose "
+                                       "norm functions it means: --norms CONTROLLER.py")
+    if norms is not None and not calling:
+        raise ColumnMapError(Origin(norms_from, 0), "no column rule calls speed_norm or turn_norm: expected e.g. "
+                                                    "--column 'speed_cmd_mps=speed_norm(duty, servo)' --column "
+                                                    "'steer_cmd_rad=turn_norm(duty, servo)'")
+    return dataclasses.replace(out, norms=norms) if norms is not None else out
 
 
 __all__ = ["ColumnMap", "ColumnRule", "ColumnMapError", "Expression", "Origin", "UNITS", "FUNCTIONS",
-           "column_map_from"]
+           "NORM_FUNCTIONS", "NormFault", "column_map_from"]

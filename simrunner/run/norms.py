@@ -1,0 +1,90 @@
+"""A controller's norm functions, for reading a log written in the car's own command units.
+
+A team that logs its commands as its code sends them (servo values, duty cycle in percent)
+converts them to the run log's m/s and radians with the same functions its controller gives
+the Spinner (``spinner.configure(speed_norm=..., turn_norm=...)``, :mod:`simrunner.run.spinner`).
+:func:`controller_norms` takes them from the controller file itself: it runs ``main`` with a
+stand-in for the Spinner that records what ``configure`` is given and stops ``main`` there;
+nothing is simulated. A column mapping then calls them row by row
+(``speed_cmd_mps = "speed_norm(duty, servo)"``, :mod:`simrunner.run.columns`).
+
+Python controllers only: a C or C++ controller's norm functions are written as expressions
+(docs/telemetry.md, "Logs with other columns or units").
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+from simrunner.errors import ControllerFileError
+from simrunner.run.controller import load_controller, user_traceback
+
+NormFn = Callable[[float, float], float]
+
+
+class _Configured(BaseException):
+    """Stops ``main`` once it has configured its norms (a BaseException: a controller's
+    ``except Exception`` does not catch it)."""
+
+
+class _Stand_in:  # noqa: N801 - the name says what it is
+    """What ``main(spinner)`` gets: ``configure`` records the norms and stops ``main``; any
+    other use of the Spinner before it is an error naming the attribute."""
+
+    def __init__(self, path: Path):
+        self._path = path
+        self.norms: dict[str, NormFn] | None = None
+
+    def configure(self, speed_norm: NormFn | None = None, speed_denorm: NormFn | None = None,
+                  turn_norm: NormFn | None = None, diff_norm: NormFn | None = None) -> "_Stand_in":
+        self.norms = {"speed_norm": speed_norm or _identity_speed, "turn_norm": turn_norm or _identity_angle}
+        raise _Configured
+
+    def __getattr__(self, name: str):
+        raise ControllerFileError(f"{self._path}: main(spinner) uses spinner.{name} before spinner.configure(...): "
+                                  "expected the norm functions configured first (or write them as column "
+                                  "expressions, docs/telemetry.md)")
+
+
+def _identity_speed(speed: float, angle: float) -> float:
+    return speed
+
+
+def _identity_angle(speed: float, angle: float) -> float:
+    return angle
+
+
+def controller_norms(path: str | Path) -> dict[str, NormFn]:
+    """``{"speed_norm": f, "turn_norm": g}`` (``(speed, angle)`` in the controller's units ->
+    m/s, rad) as the Python controller at ``path`` configures them; a controller that
+    returns without configuring any speaks m/s and radians (identities). Raises
+    :class:`~simrunner.errors.ControllerFileError` (one line) for a C/C++ controller, one
+    that builds ``Spinner(...)`` itself, or one that fails before configuring (its
+    traceback's last line and file:line)."""
+    path = Path(path)
+    if path.suffix != ".py":
+        raise ControllerFileError(f"{path}: expected a Python controller (.py) for --norms; a C or C++ "
+                                  "controller's norm functions are written as column expressions")
+    controller = load_controller(path)
+    probe = _Stand_in(path)
+    try:
+        with controller.loaded() as main:
+            main(probe)
+    except _Configured:
+        return dict(probe.norms or {})
+    except ControllerFileError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the user's code: any fault is reported
+        last = user_traceback(exc).rstrip().splitlines()
+        frames = [ln.strip() for ln in last if ln.strip().startswith("File ")]
+        where = f" ({frames[-1]})" if frames else ""
+        if "needs a running simulation" in str(exc):
+            raise ControllerFileError(f"{path}: main builds Spinner(...) itself: expected "
+                                      "spinner.configure(speed_norm=..., turn_norm=...) for --norms, or the "
+                                      "norm functions written as column expressions") from None
+        raise ControllerFileError(f"{path}: main(spinner) failed before configuring its norms: "
+                                  f"{type(exc).__name__}: {exc}{where}") from None
+    return {"speed_norm": _identity_speed, "turn_norm": _identity_angle}
+
+
+__all__ = ["controller_norms"]
