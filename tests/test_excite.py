@@ -393,3 +393,32 @@ def test_run_plan_plays_in_the_simulator_the_factory_builds(nominal_coarse):
                       sim_factory=lambda car, dt_s, start: make_sim(car, dt_s=dt_s, start=start, slope_rad=0.05))
     coasting = PLAN.coast.astype(bool)
     assert np.abs(tilted.speed_mps - nominal_coarse.speed_mps)[coasting].max() > 0.05
+
+
+def test_dead_reckoning_integrates_speed_and_gyro_with_their_errors():
+    from simrunner.workflows.excite import DeadReckoning
+
+    pose = (0.0, 0.0, 0.0)
+    for _ in range(50):  # 1 s at 1 m/s, straight
+        pose = DeadReckoning().advance(pose, 1.0, 0.0, 0.02)
+    assert pose == pytest.approx((1.0, 0.0, 0.0))
+    pose = (0.0, 0.0, 0.0)
+    for _ in range(500):  # a full circle of radius 1 m: back at the start
+        pose = DeadReckoning().advance(pose, 2 * math.pi / 10.0, 2 * math.pi / 10.0, 0.02)
+    assert pose[:2] == pytest.approx((0.0, 0.0), abs=1e-3) and pose[2] == pytest.approx(2 * math.pi)
+    biased = DeadReckoning(gyro_bias_radps=0.01, odometry_scale=1.1).advance((0.0, 0.0, 0.0), 1.0, 0.0, 1.0)
+    assert biased[2] == pytest.approx(0.01) and math.hypot(*biased[:2]) == pytest.approx(1.1)
+
+
+def test_closed_loop_from_dead_reckoning_stays_in_the_area_while_the_gyro_bias_is_small():
+    """A team without a camera steers the turns from its own wheel speed and gyro
+    (docs/calibration.md): with a bias of 0.3 deg/s left after zeroing, the nominal car stays
+    within the margin; at 1 deg/s the heading it believes is 1.6 rad off by the end and
+    the car gets beyond the margin (0.85 m: the log holds where it really went)."""
+    from simrunner.workflows.excite import DeadReckoning
+
+    runs = {b: run_plan(PLAN, CAR, dt_s=0.005, closed_loop=True, seed=3,
+                        dead_reckoning=DeadReckoning(gyro_bias_radps=math.radians(b))) for b in (0.0, 0.3, 1.0)}
+    assert _out_of_area_m(PLAN, runs[0.0]) == 0.0
+    assert 0.0 < _out_of_area_m(PLAN, runs[0.3]) <= AREA_MARGIN_M
+    assert _out_of_area_m(PLAN, runs[1.0]) > AREA_MARGIN_M

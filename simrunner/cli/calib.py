@@ -5,6 +5,7 @@ Exit codes: 0 done; 2 bad input (one line on stderr, no traceback).
 """
 from __future__ import annotations
 
+import math
 import sys
 
 import click
@@ -39,17 +40,24 @@ def _fail(exc: BaseException) -> None:
                    "like a real pose measurement; closed loop, the car steers from it too.")
 @click.option("--dt", "dt_s", default=0.002, show_default=True, type=float, metavar="SECONDS",
               help="Physics time step of --simulate (must divide the 20 ms row period).")
+@click.option("--dead-reckoning", "gyro_bias_dps", default=None, type=click.FloatRange(min=-10.0, max=10.0),
+              metavar="DEG_PER_S", help="With --closed-loop: steer the turns from a pose the car integrates from its "
+                                        "wheel speed and gyro, whose bias after zeroing is this (deg/s), as a team "
+                                        "without a camera does; the log holds where the car really went.")
 @click.option("--area", "area_m", default=None, type=float, metavar="METRES",
               help="Side of the square area to plan for (6 .. 15 m; default: the smallest from 6 m up, "
                    "in 0.5 m steps, that the car's turns fit).")
-def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_m, dt_s, area_m) -> None:
+def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_m, dt_s, gyro_bias_dps,
+               area_m) -> None:
     """Write an excitation plan to drive on the real car (docs/calibration.md)."""
     from simrunner.run.log import write_log
-    from simrunner.workflows.excite import AREA_M, make_plan, predict_path, run_plan
+    from simrunner.workflows.excite import AREA_M, DeadReckoning, make_plan, predict_path, run_plan
     from vehicle.description import load_car
 
     if simulate is None and (closed_loop or pose_noise_m > 0.0):
         _fail(click.UsageError("--closed-loop and --pose-noise apply to --simulate, which is not given"))
+    if gyro_bias_dps is not None and not closed_loop:
+        _fail(click.UsageError("--dead-reckoning applies to --closed-loop (the turns steer from the pose)"))
     try:
         car_desc = load_car(car)
         plan = make_plan(car_desc, seed=seed, duration_s=duration_s, area_m=area_m)
@@ -57,7 +65,9 @@ def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_
         extent = (xy[:, 0].min(), xy[:, 0].max(), xy[:, 1].min(), xy[:, 1].max())
         log = None
         if simulate:
-            log = run_plan(plan, car_desc, dt_s=dt_s, seed=seed, pose_noise_m=pose_noise_m, closed_loop=closed_loop)
+            dr = None if gyro_bias_dps is None else DeadReckoning(gyro_bias_radps=math.radians(gyro_bias_dps))
+            log = run_plan(plan, car_desc, dt_s=dt_s, seed=seed, pose_noise_m=pose_noise_m, closed_loop=closed_loop,
+                           dead_reckoning=dr)
         plan.to_csv(output, extent=extent)
         if log is not None:
             write_log(log, simulate)
@@ -75,7 +85,9 @@ def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_
         if out > 0.0 and not closed_loop:
             where += ("; a real car drifts like this unless the turns close the loop on its pose: "
                       "--closed-loop (docs/calibration.md)")
-        click.echo(f"simulated log: {simulate} ({'closed' if closed_loop else 'open'} loop, {log.duration_s:.1f} s, "
+        click.echo(f"simulated log: {simulate} ({'closed' if closed_loop else 'open'} loop"
+                   f"{'' if gyro_bias_dps is None else f' from dead reckoning, gyro bias {gyro_bias_dps:g} deg/s'}, "
+                   f"{log.duration_s:.1f} s, "
                    f"path {log.x_m.max() - log.x_m.min():.1f} x {log.y_m.max() - log.y_m.min():.1f} m, {where})")
 
 

@@ -838,7 +838,8 @@ def predict_path(plan: ExcitationPlan, car: CarDescription) -> np.ndarray:
 # -- simulating ----------------------------------------------------------------------------
 def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, seed: int = 0,
              start: Pose2 = Pose2(), pose_noise_m: float = 0.0, closed_loop: bool = False,
-             sim_factory: Callable[..., Any] | None = None) -> RunLog:
+             sim_factory: Callable[..., Any] | None = None,
+             dead_reckoning: DeadReckoning | None = None) -> RunLog:
     """Play ``plan`` in the simulator (``simrunner.car.effects.make_sim``: effects apply).
 
     Each row's command is set at ``t_k`` and the state logged at ``t_k`` (before the
@@ -862,6 +863,11 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
     and until then the turn's last row is repeated (at most ``RETURN_TIMEOUT_S``). So the
     log's length differs from the plan's; it holds the commands sent. A plan without
     reference rows cannot be played closed loop (:class:`PlanError`).
+
+    ``dead_reckoning`` (closed loop): the car steers from a pose it integrates itself from
+    its wheel speed and gyro (:class:`DeadReckoning`: their errors), as a team without a
+    camera or motion capture does; the log still holds the simulated (noisy) pose, where
+    the car really went.
     """
     from simrunner.car.effects import make_sim
 
@@ -887,12 +893,17 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
     rows: list[tuple] = []  # row, x, y, yaw, speed, steer, yaw_rate, yaw_rate_cmd, speed_cmd, steer_cmd
     coast_now = False
     k, turn, progress, extra, turn_frames = 0, -1, 0, 0, 0
+    row_s = 1.0 / plan.rate_hz
+    dr = (start.x_m, start.y_m, start.yaw_rad)  # the dead-reckoned pose (world frame)
     while k < n:
         p = sim.pose
         e = rng.normal(0.0, noise_std) if turns and rng is not None else noise[:, min(k, n - 1)]
         x, y, yaw = p.x_m + e[0], p.y_m + e[1], p.yaw_rad
         if rng is not None:
             yaw = wrap_angle(yaw + e[2])
+        logged = (x, y, yaw)
+        if dead_reckoning is not None and turns:
+            x, y, yaw = dr
         while k < n and turn_of[k] >= 0:  # a turn row: follow the turn's path, or skip the rest of it
             if turn_of[k] != turn:
                 turn, progress, extra, turn_frames = int(turn_of[k]), 0, 0, 0
@@ -914,8 +925,10 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
             sim.set_coast(c)
             coast_now = c
         sim.set_command(v, d)
-        rows.append((k, x, y, yaw, sim.speed_mps, sim.steer_rad, sim.yaw_rate_radps, sim.yaw_rate_cmd_radps, v, d))
+        rows.append((k, *logged, sim.speed_mps, sim.steer_rad, sim.yaw_rate_radps, sim.yaw_rate_cmd_radps, v, d))
         sim.step(steps)
+        if dead_reckoning is not None:  # this frame's wheel speed and gyro, as the car reads them after it
+            dr = dead_reckoning.advance(dr, sim.speed_mps, sim.yaw_rate_radps, row_s)
         if turn_of[k] < 0:
             k += 1
         elif k + 1 == end and extra < max_extra:
@@ -930,6 +943,27 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
                              "speed_mps": state[:, 4], "steer_rad": state[:, 5], "yaw_rate_radps": state[:, 6],
                              "speed_cmd_mps": state[:, 8], "steer_cmd_rad": state[:, 9],
                              "yaw_rate_cmd_radps": state[:, 7], "coast": plan.coast[row]}, "<excite>")
+
+
+@dataclass(frozen=True)
+class DeadReckoning:
+    """A pose integrated on the car from its wheel speed and gyro, frame by frame (the
+    closed-loop turns without a camera: docs/calibration.md): ``gyro_bias_radps`` (what
+    is left of the gyro's bias after it was zeroed at rest) and ``odometry_scale`` (the
+    wheel speed's scale error: a worn tyre, a wrong wheel radius)."""
+
+    gyro_bias_radps: float = 0.0
+    odometry_scale: float = 1.0
+
+    def advance(self, pose: tuple[float, float, float], speed_mps: float, yaw_rate_radps: float,
+                dt_s: float) -> tuple[float, float, float]:
+        """``(x, y, yaw)`` after ``dt_s`` at the measured ``speed_mps`` and ``yaw_rate_radps``
+        (midpoint heading)."""
+        x, y, yaw = pose
+        turn = (yaw_rate_radps + self.gyro_bias_radps) * dt_s
+        v = speed_mps * self.odometry_scale
+        mid = yaw + 0.5 * turn
+        return x + v * math.cos(mid) * dt_s, y + v * math.sin(mid) * dt_s, yaw + turn
 
 
 def plan_steps_per_row(plan: ExcitationPlan, dt_s: float) -> int:
