@@ -317,6 +317,38 @@ def test_cli_reads_a_log_in_the_car_s_units_through_the_controller_s_norms(tmp_p
     assert res.exit_code == 2 and "no column rule calls speed_norm or turn_norm" in res.stderr
 
 
+def test_cli_one_mapping_reads_logs_of_one_car_with_other_sensors(tmp_path):
+    """A camera log (pose only) and an encoder + gyro log, each with the team's own column
+    names, under one mapping: each log is read with the sensors it has and the two form one
+    data set (the signals both have); a rule that no log can follow is still refused."""
+    import csv as csvmod
+
+    names = {"t_s": "stamp", "x_m": "cam_x", "y_m": "cam_y", "yaw_rad": "cam_yaw", "speed_mps": "enc_v",
+             "yaw_rate_radps": "gyro_z", "speed_cmd_mps": "v_cmd", "steer_cmd_rad": "d_cmd"}
+    paths = []
+    for k, sensors in enumerate(("pose", "speed_gyro")):
+        log, _ = make_measured_log("speed_scale", value=1.1, rng=np.random.default_rng(40 + k), sensors=sensors,
+                                   duration_s=14.0)
+        p = tmp_path / f"{sensors}.csv"
+        write_log(log, p, float_format="%.17g")
+        with p.open() as f:
+            rows = [r for r in csvmod.reader(f) if r and not r[0].startswith("#")]
+        rows[0] = [names.get(h, h) for h in rows[0]]
+        p.write_text("\n".join(",".join(r) for r in rows) + "\n")
+        paths.append(str(p))
+    cmap = tmp_path / "map.toml"
+    cmap.write_text("".join(f'{k} = "{v}"\n' for k, v in names.items()))
+    res = CliRunner().invoke(gap, paths + ["-o", str(tmp_path / "out"), "--columns", str(cmap), "--max-effects", "0",
+                                           "--no-progress"])
+    assert res.exit_code == 0, res.output
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert rep["logs"] == paths and set(rep["rmse_before"]) == {"speed_mps", "yaw_rate_radps"}
+    cmap.write_text(cmap.read_text() + 'coast = "motor_off"\n')
+    res = CliRunner().invoke(gap, paths + ["-o", str(tmp_path / "out2"), "--columns", str(cmap)])
+    assert res.exit_code == 2 and res.stderr.startswith(
+        f"simrunner gap: {cmap}:9: coast asks for column 'motor_off', which none of the 2 logs has")
+
+
 def test_cli_bad_options_exit_2(tmp_path, offset_run):
     log, _, _ = offset_run
     p = tmp_path / "m.csv"

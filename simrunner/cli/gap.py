@@ -105,8 +105,7 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
             if bad or not names:
                 raise SimError(f"--effects {effects!r}: expected names among {', '.join(CANDIDATES)}")
         description = load_car(car)
-        read = _log_reader(columns_file, column_items, norms_file)
-        logs = [check_measured(read(path)) for path in measured]
+        logs = [check_measured(log) for log in _read_logs(measured, columns_file, column_items, norms_file)]
         limit = MAX_EFFECTS if max_effects is None else max_effects
         total = progress_total(len(names) if names is not None else len(CANDIDATES), limit)
         with _engine_stderr_silenced() as err:
@@ -134,16 +133,20 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
                f"residuals_by_regime.png)")
 
 
-def _log_reader(columns_file: Path | None, items: tuple[str, ...], norms_file: Path | None = None):
-    """``read_log`` with the column mapping of ``--columns``/``--column`` (if any; its
+def _read_logs(paths: tuple[Path, ...], columns_file: Path | None, items: tuple[str, ...],
+               norms_file: Path | None = None) -> list:
+    """The logs, read with the column mapping of ``--columns``/``--column`` (if any; its
     ``speed_norm``/``turn_norm`` those ``--norms`` configures), reading merged topic logs
     (empty cells: :mod:`simrunner.run.sparse`) and leaving out a row that repeats the stamp
-    before it (listed as a duplicate glitch)."""
+    before it (listed as a duplicate glitch). Several logs share the mapping, each with the
+    sensors it has (``ColumnMap.partial``); a rule no log can follow is an error."""
+    import dataclasses
+
     from simrunner.run.log import read_log
 
     if columns_file is None and not items and norms_file is None:
-        return lambda path: read_log(path, merged=True, repeated_stamps=True)
-    from simrunner.run.columns import column_map_from
+        return [read_log(path, merged=True, repeated_stamps=True) for path in paths]
+    from simrunner.run.columns import NEEDED, ColumnMapError, column_map_from
 
     norms = None
     if norms_file is not None:
@@ -151,4 +154,12 @@ def _log_reader(columns_file: Path | None, items: tuple[str, ...], norms_file: P
 
         norms = controller_norms(norms_file)
     mapping = column_map_from(columns_file, items, norms, norms_from=f"--norms {norms_file}")
-    return lambda path: read_log(path, columns=mapping, merged=True, repeated_stamps=True)
+    if len(paths) == 1:
+        return [read_log(paths[0], columns=mapping, merged=True, repeated_stamps=True)]
+    partial = dataclasses.replace(mapping, partial=True)
+    logs = [read_log(path, columns=partial, merged=True, repeated_stamps=True) for path in paths]
+    for rule in mapping.rules:
+        if rule.target not in NEEDED and all(getattr(log, rule.target, None) is None for log in logs):
+            raise ColumnMapError(rule.origin, f"{rule.target} asks for column {', '.join(map(repr, rule.sources))}, "
+                                              f"which none of the {len(paths)} logs has: expected it in one of them")
+    return logs

@@ -65,6 +65,8 @@ FUNCTIONS: dict[str, tuple[int, Callable]] = {
     "atan2": (2, np.arctan2), "hypot": (2, np.hypot), "radians": (1, np.radians), "degrees": (1, np.degrees),
     "min": (-2, np.minimum), "max": (-2, np.maximum),
 }
+# the columns every log needs: a partial map (ColumnMap.partial) never skips their rules
+NEEDED = ("t_s", "speed_cmd_mps", "steer_cmd_rad")
 # the controller's own norm functions (simrunner.run.spinner), given with --norms CONTROLLER.py:
 # name(speed, angle) in the controller's units -> m/s or rad, called row by row
 NORM_FUNCTIONS = ("speed_norm", "turn_norm")
@@ -420,6 +422,10 @@ class ColumnMap:
     rules: tuple[ColumnRule, ...] = ()
     # the controller's norm functions the rules may call (controller_norms); not compared
     norms: Mapping[str, Callable[[float, float], float]] | None = field(default=None, compare=False)
+    # one map for several logs of one car with other sensors (simrunner gap a.csv b.csv): a
+    # rule for a sensor column (not time, not a command) whose source columns a log lacks
+    # leaves that column out of that log (the caller checks that some log had them)
+    partial: bool = field(default=False, compare=False)
 
     @classmethod
     def from_rules(cls, rules: Iterable[ColumnRule]) -> "ColumnMap":
@@ -497,6 +503,8 @@ class ColumnMap:
             index.setdefault(h, i)
         wanted: dict[str, int] = {}
         for rule in self.rules:
+            if self.partial and rule.target not in NEEDED and any(n not in index for n in rule.sources):
+                continue  # this log has not that sensor
             for name in rule.sources:
                 if name not in index:
                     close = difflib.get_close_matches(name, list(index), n=1)
@@ -539,6 +547,8 @@ class ColumnMap:
 
         out: dict = {}
         for rule in self.rules:
+            if any(n not in cells for n in rule.sources):  # a sensor this log lacks (partial)
+                continue
             if _BY_NAME[rule.target].kind == "text":
                 out[rule.target] = tuple(cells[rule.sources[0]])
                 continue
