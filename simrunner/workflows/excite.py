@@ -639,7 +639,7 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
         raise PlanError(f"duration = {duration_s!r} s: expected {MIN_DURATION_S:g} .. {MAX_DURATION_S:g} s "
                         f"(the core plan needs about {MIN_DURATION_S:g} s)")
     if area_m is not None and not (AREA_M <= area_m <= AREA_MAX_M):
-        raise PlanError(f"area = {area_m!r} m: expected {AREA_M:g} .. {AREA_MAX_M:g} m")
+        raise PlanError(f"area = {area_m:g} m: expected {AREA_M:g} .. {AREA_MAX_M:g} m")
     sides = [AREA_M + AREA_STEP_M * k for k in range(int(round((AREA_MAX_M - AREA_M) / AREA_STEP_M)) + 1)]
     first = area_m if area_m is not None else AREA_M
     plan, out_m = _plan_in(car, seed, rate_hz, duration_s, first)
