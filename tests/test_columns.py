@@ -452,3 +452,46 @@ def test_controller_norms_of_odd_controllers(tmp_path, source, what):
     assert "\n" not in str(err.value) and str(err.value).startswith(str(ctl))
     with pytest.raises(ControllerFileError, match="expected a Python controller"):
         controller_norms(_write(tmp_path, "int main(void) { return 0; }\n", "ctl.c"))
+
+
+def test_controller_norms_follow_every_configure_call_and_refuse_what_is_no_function(tmp_path):
+    """configure() twice keeps both norms, as the Spinner does; main stops at its next use
+    of the Spinner; a norm that is no function, or returns no number, is one line naming it."""
+    from simrunner.errors import ControllerFileError
+    from simrunner.run.norms import controller_norms
+
+    ctl = _write(tmp_path, "def main(spinner):\n    spinner.configure(turn_norm=lambda v, a: -a)\n"
+                           "    spinner.configure(speed_norm=lambda v, a: v / 100)\n    spinner.get_image()\n"
+                           "    raise RuntimeError('never here')\n", "twice.py")
+    norms = controller_norms(ctl)
+    assert norms["speed_norm"](50.0, 1.0) == 0.5 and norms["turn_norm"](50.0, 1.0) == -1.0
+    bad = _write(tmp_path, "def main(spinner):\n    spinner.configure(speed_norm=3.1)\n", "bad.py")
+    with pytest.raises(ControllerFileError, match=r"configure\(speed_norm=3.1\): expected a function"):
+        controller_norms(bad)
+    none = _write(tmp_path, "def main(spinner):\n    spinner.configure(\n        speed_norm=lambda v, a: None)\n",
+                  "none.py")
+    p = _write(tmp_path, "t,duty,servo,x,y,yaw\n0,1,0,0,0,0\n0.1,2,0,0,0,0\n")
+    cmap = column_map_from(items=["speed_cmd_mps=speed_norm(duty, servo)", "steer_cmd_rad=servo"],
+                           norms=controller_norms(none))
+    with pytest.raises(LogError) as err:
+        read_log(p, columns=cmap)
+    text = _one_line(err, f"{p}:2: speed_cmd_mps = 'speed_norm(duty, servo)'")
+    assert "speed_norm(speed=1.0, angle=0.0) returned None: expected a number (defined at " in text
+    assert text.endswith("none.py:3)")
+
+
+def test_a_partial_map_leaves_out_a_missing_sensor_but_not_a_misnamed_column(tmp_path):
+    """Several logs under one map (ColumnMap.partial): a log without the camera's columns
+    reads without a pose; a log with two of them and a misnamed third is refused, naming
+    the third, as a single log is."""
+    import dataclasses
+
+    m = dataclasses.replace(column_map_from(items=["t_s=stamp", "x_m=cam_x", "y_m=cam_y", "yaw_rad=cam_yaw",
+                                                   "speed_mps=enc_v", "speed_cmd_mps=v", "steer_cmd_rad=d"]),
+                            partial=True)
+    enc = _write(tmp_path, "stamp,enc_v,v,d\n0,1,1,0\n0.1,1,1,0\n", "enc.csv")
+    assert read_log(enc, columns=m).names == ("t_s", "speed_mps", "speed_cmd_mps", "steer_cmd_rad")
+    typo = _write(tmp_path, "stamp,cam_x,cam_y,cam_heading,enc_v,v,d\n0,0,0,0,1,1,0\n0.1,0,0,0,1,1,0\n", "typo.csv")
+    with pytest.raises(LogError) as err:
+        read_log(typo, columns=m)
+    assert "asks for column 'cam_yaw'" in _one_line(err, f"{typo}:1: mapping --column 'yaw_rad=cam_yaw'")

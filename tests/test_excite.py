@@ -229,7 +229,7 @@ def test_a_one_tenth_car_off_nominal_stays_in_its_area_closed_loop():
     plan = make_plan(TENTH)
     car = with_effects(TENTH, steering_offset_rad=math.radians(2.0), steering_gain=0.85)
     log = run_plan(plan, car, dt_s=0.005, closed_loop=True, pose_noise_m=0.01, seed=3)
-    assert plan.outside_area_m(log.x_m, log.y_m) <= plan.margin_m
+    assert plan.outside_area_m(log.x_m, log.y_m) <= 0.3 < plan.margin_m  # 0.11 m; at 90 %: 0.73 m
     assert log.duration_s < plan.duration_s + 30.0
 
 
@@ -422,3 +422,21 @@ def test_closed_loop_from_dead_reckoning_stays_in_the_area_while_the_gyro_bias_i
     assert _out_of_area_m(PLAN, runs[0.0]) == 0.0
     assert 0.0 < _out_of_area_m(PLAN, runs[0.3]) <= AREA_MARGIN_M
     assert _out_of_area_m(PLAN, runs[1.0]) > AREA_MARGIN_M
+
+
+def test_a_plan_header_with_a_bad_area_and_dead_reckoning_with_nan_are_one_line_errors(tmp_path):
+    from simrunner.workflows.excite import DeadReckoning
+
+    text = PLAN.to_csv(tmp_path / "p.csv").read_text()
+    lines = text.splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.startswith("# area_m="))
+    for bad in ("7,5", "-3", "nan"):
+        lines[at] = f"# area_m={bad}"
+        (tmp_path / "bad.csv").write_text("\n".join(lines) + "\n")
+        with pytest.raises(PlanError, match=rf"bad.csv:{at + 1}: expected area_m= a positive number of metres"):
+            ExcitationPlan.from_csv(tmp_path / "bad.csv")
+    with pytest.raises(PlanError, match="expected finite numbers"):
+        DeadReckoning(gyro_bias_radps=math.nan)
+    res = CliRunner().invoke(excite_cmd, ["-o", str(tmp_path / "x.csv"), "--simulate", str(tmp_path / "y.csv"),
+                                          "--closed-loop", "--dead-reckoning", "nan"])
+    assert res.exit_code == 2 and "expected a finite gyro bias" in res.output

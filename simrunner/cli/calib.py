@@ -56,6 +56,8 @@ def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_
 
     if simulate is None and (closed_loop or pose_noise_m > 0.0):
         _fail(click.UsageError("--closed-loop and --pose-noise apply to --simulate, which is not given"))
+    if gyro_bias_dps is not None and not math.isfinite(gyro_bias_dps):
+        _fail(click.UsageError(f"--dead-reckoning {gyro_bias_dps}: expected a finite gyro bias in deg/s"))
     if gyro_bias_dps is not None and not closed_loop:
         _fail(click.UsageError("--dead-reckoning applies to --closed-loop (the turns steer from the pose)"))
     try:

@@ -67,6 +67,7 @@ FUNCTIONS: dict[str, tuple[int, Callable]] = {
 }
 # the columns every log needs: a partial map (ColumnMap.partial) never skips their rules
 NEEDED = ("t_s", "speed_cmd_mps", "steer_cmd_rad")
+POSE_COLUMNS = ("x_m", "y_m", "yaw_rad")  # one sensor: a partial map leaves them out together
 # the controller's own norm functions (simrunner.run.spinner), given with --norms CONTROLLER.py:
 # name(speed, angle) in the controller's units -> m/s or rad, called row by row
 NORM_FUNCTIONS = ("speed_norm", "turn_norm")
@@ -266,16 +267,20 @@ def _call_norm(name: str, fn: Callable[[float, float], float], speed, angle) -> 
     out = np.full(a.shape, np.nan)
     flat_a, flat_b, flat = a.reshape(-1), b.reshape(-1), out.reshape(-1)
     for i in np.flatnonzero(np.isfinite(flat_a) & np.isfinite(flat_b)):
+        call = f"{name}(speed={float(flat_a[i])!r}, angle={float(flat_b[i])!r})"
         try:
             v = fn(float(flat_a[i]), float(flat_b[i]))
-            flat[i] = float(v)
         except Exception as exc:  # noqa: BLE001 - the user's function: any fault is reported
             tb = exc.__traceback__
             while tb is not None and tb.tb_next is not None:
                 tb = tb.tb_next
             where = f" at {tb.tb_frame.f_code.co_filename}:{tb.tb_lineno}" if tb is not None else ""
-            raise NormFault(int(i), f"{name}(speed={float(flat_a[i])!r}, angle={float(flat_b[i])!r}) raised "
-                                    f"{type(exc).__name__}: {exc}{where}") from None
+            raise NormFault(int(i), f"{call} raised {type(exc).__name__}: {exc}{where}") from None
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+            code = getattr(fn, "__code__", None)
+            where = f" (defined at {code.co_filename}:{code.co_firstlineno})" if code is not None else ""
+            raise NormFault(int(i), f"{call} returned {v!r}: expected a number{where}")
+        flat[i] = float(v)
     return out
 
 
@@ -502,8 +507,9 @@ class ColumnMap:
         for i, h in enumerate(header):
             index.setdefault(h, i)
         wanted: dict[str, int] = {}
+        skipped = set(self.absent_sensors(index)) if self.partial else set()
         for rule in self.rules:
-            if self.partial and rule.target not in NEEDED and any(n not in index for n in rule.sources):
+            if rule.target in skipped:
                 continue  # this log has not that sensor
             for name in rule.sources:
                 if name not in index:
@@ -522,6 +528,19 @@ class ColumnMap:
         for name in passthrough:
             wanted.setdefault(name, index[name])
         return wanted
+
+    def absent_sensors(self, header: Iterable[str]) -> tuple[str, ...]:
+        """The sensor columns a partial map leaves out of a log with ``header``: those whose
+        rule finds none of its source columns there, the pose's three only together (a log
+        with some of a sensor's columns, or of the pose's, lacks the others by mistake: the
+        read names them)."""
+        have = set(header)
+        gone = [r.target for r in self.rules
+                if r.target not in NEEDED and r.sources and not any(n in have for n in r.sources)]
+        pose = [r.target for r in self.rules if r.target in POSE_COLUMNS]
+        if any(t in pose for t in gone) and not all(t in gone for t in pose):
+            gone = [t for t in gone if t not in pose]
+        return tuple(gone)
 
     def _passthrough(self, names: Iterable[str]) -> dict[str, str]:
         """``{file name: schema name}`` of the columns read by their own (format 2 or 1) name."""

@@ -4,8 +4,8 @@ A team that logs its commands as its code sends them (servo values, duty cycle i
 converts them to the run log's m/s and radians with the same functions its controller gives
 the Spinner (``spinner.configure(speed_norm=..., turn_norm=...)``, :mod:`simrunner.run.spinner`).
 :func:`controller_norms` takes them from the controller file itself: it runs ``main`` with a
-stand-in for the Spinner that records what ``configure`` is given and stops ``main`` there;
-nothing is simulated. A column mapping then calls them row by row
+stand-in for the Spinner that records what ``configure`` is given (each call, as the
+Spinner does) and stops ``main`` at its next use of the Spinner; nothing is simulated. A column mapping then calls them row by row
 (``speed_cmd_mps = "speed_norm(duty, servo)"``, :mod:`simrunner.run.columns`).
 
 Python controllers only: a C or C++ controller's norm functions are written as expressions
@@ -23,13 +23,15 @@ NormFn = Callable[[float, float], float]
 
 
 class _Configured(BaseException):
-    """Stops ``main`` once it has configured its norms (a BaseException: a controller's
-    ``except Exception`` does not catch it)."""
+    """Stops ``main`` at its first use of the Spinner after configuring its norms (a
+    BaseException: a controller's ``except Exception`` does not catch it)."""
 
 
 class _Stand_in:  # noqa: N801 - the name says what it is
-    """What ``main(spinner)`` gets: ``configure`` records the norms and stops ``main``; any
-    other use of the Spinner before it is an error naming the attribute."""
+    """What ``main(spinner)`` gets: ``configure`` records the norms as the Spinner's does
+    (a later call replaces only what it gives) and returns the stand-in; the first other use
+    of the Spinner stops ``main`` once norms are configured, and is an error naming the
+    attribute before."""
 
     def __init__(self, path: Path):
         self._path = path
@@ -37,10 +39,19 @@ class _Stand_in:  # noqa: N801 - the name says what it is
 
     def configure(self, speed_norm: NormFn | None = None, speed_denorm: NormFn | None = None,
                   turn_norm: NormFn | None = None, diff_norm: NormFn | None = None) -> "_Stand_in":
-        self.norms = {"speed_norm": speed_norm or _identity_speed, "turn_norm": turn_norm or _identity_angle}
-        raise _Configured
+        norms = dict(self.norms or {"speed_norm": _identity_speed, "turn_norm": _identity_angle})
+        for name, fn in (("speed_norm", speed_norm), ("turn_norm", turn_norm)):
+            if fn is not None:
+                if not callable(fn):
+                    raise ControllerFileError(f"{self._path}: configure({name}={fn!r}): expected a function "
+                                              "(speed, angle)")
+                norms[name] = fn
+        self.norms = norms
+        return self
 
     def __getattr__(self, name: str):
+        if self.norms is not None:
+            raise _Configured
         raise ControllerFileError(f"{self._path}: main(spinner) uses spinner.{name} before spinner.configure(...): "
                                   "expected the norm functions configured first (or write them as column "
                                   "expressions, docs/telemetry.md)")
@@ -74,7 +85,14 @@ def controller_norms(path: str | Path) -> dict[str, NormFn]:
         return dict(probe.norms or {})
     except ControllerFileError:
         raise
+    except SystemExit as exc:
+        if probe.norms is not None:
+            return dict(probe.norms)
+        raise ControllerFileError(f"{path}: main(spinner) called sys.exit({exc.code!r}) before configuring its "
+                                  "norms: expected spinner.configure(...) first") from None
     except Exception as exc:  # noqa: BLE001 - the user's code: any fault is reported
+        if probe.norms is not None:  # after configuring: the norms are known
+            return dict(probe.norms)
         last = user_traceback(exc).rstrip().splitlines()
         frames = [ln.strip() for ln in last if ln.strip().startswith("File ")]
         where = f" ({frames[-1]})" if frames else ""
@@ -84,7 +102,7 @@ def controller_norms(path: str | Path) -> dict[str, NormFn]:
                                       "norm functions written as column expressions") from None
         raise ControllerFileError(f"{path}: main(spinner) failed before configuring its norms: "
                                   f"{type(exc).__name__}: {exc}{where}") from None
-    return {"speed_norm": _identity_speed, "turn_norm": _identity_angle}
+    return dict(probe.norms or {"speed_norm": _identity_speed, "turn_norm": _identity_angle})
 
 
 __all__ = ["controller_norms"]

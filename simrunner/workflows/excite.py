@@ -255,8 +255,16 @@ class ExcitationPlan:
         idx = {c: cols.index(c) for c in cols}
         t, v, d, co, seg, ref = [], [], [], [], [], []
         seed, centre, area, margin = 0, None, AREA_M, AREA_MARGIN_M
-        for m in (ln for ln in text.splitlines() if ln.startswith("#")):
+        for line_no, m in ((i + 1, ln) for i, ln in enumerate(text.splitlines()) if ln.startswith("#")):
             key, _, val = m[1:].strip().partition("=")
+            if key in ("area_m", "margin_m"):
+                try:
+                    side = float(val)
+                except ValueError:
+                    side = math.nan
+                if not (math.isfinite(side) and (side > 0.0 if key == "area_m" else side >= 0.0)):
+                    raise PlanError(f"{path}:{line_no}: expected {key}= a {'positive' if key == 'area_m' else 'non-negative'} "
+                                    f"number of metres (got {val.strip()!r})")
             try:
                 if key == "seed":
                     seed = int(val)
@@ -264,11 +272,9 @@ class ExcitationPlan:
                     cx, cy = (float(p) for p in val.split(","))
                     centre = (cx, cy) if math.isfinite(cx) and math.isfinite(cy) else None
                 elif key == "area_m":
-                    side = float(val)
-                    area = side if math.isfinite(side) and side > 0.0 else AREA_M
+                    area = float(val)
                 elif key == "margin_m":
-                    grown = float(val)
-                    margin = grown if math.isfinite(grown) and grown >= 0.0 else AREA_MARGIN_M
+                    margin = float(val)
             except ValueError:
                 pass
         for line_no, ln in rows[1:]:
@@ -954,6 +960,12 @@ class DeadReckoning:
 
     gyro_bias_radps: float = 0.0
     odometry_scale: float = 1.0
+
+    def __post_init__(self):
+        if not (math.isfinite(self.gyro_bias_radps) and math.isfinite(self.odometry_scale)
+                and self.odometry_scale > 0.0):
+            raise PlanError(f"dead reckoning: gyro bias {self.gyro_bias_radps!r} rad/s, odometry scale "
+                            f"{self.odometry_scale!r}: expected finite numbers, the scale above 0")
 
     def advance(self, pose: tuple[float, float, float], speed_mps: float, yaw_rate_radps: float,
                 dt_s: float) -> tuple[float, float, float]:

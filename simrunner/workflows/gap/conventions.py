@@ -135,7 +135,7 @@ def _against_pose(log: RunLog, column: str, sensor: np.ndarray, from_pose: np.nd
     """A sensor against the same quantity from the pose: reversed, or in one of ``units``;
     False when the log shows too little of it to tell."""
     fit = _fit(sensor, from_pose, np.abs(from_pose) > min_value)
-    if fit is None:
+    if fit is None or abs(fit[1]) <= MIN_CORRELATION:  # too little, or too scattered to tell
         return False
     slope, corr = fit
     found = f"is {slope:.3g}x {what} (correlation {corr:.2f})"
@@ -177,12 +177,12 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
         if log.yaw_rate_radps is not None and not _against_pose(
                 log, "yaw_rate_radps", measured.yaw_rate_radps, pose.yaw_rate_radps, MIN_RATE_RADPS,
                 "the yaw rate of the pose", "counter-clockwise", "rad/s", {"deg/s": 180.0 / math.pi}):
-            unchecked.append("yaw_rate_radps's sign and unit (too little turning)")
+            unchecked.append("yaw_rate_radps's sign and unit (too little turning, or too scattered to tell)")
         if log.speed_mps is not None and not _against_pose(
                 log, "speed_mps", measured.speed_mps, pose.speed_mps, MIN_SPEED_MPS,
                 "the speed of the pose along its heading", "forward", "m/s",
                 {"km/h": 3.6, "cm/s": 100.0, "mm/s": 1000.0}):
-            unchecked.append("speed_mps's sign and unit (too little driving)")
+            unchecked.append("speed_mps's sign and unit (too little driving, or too scattered to tell)")
     elif log.speed_mps is not None:
         unchecked.append("speed_mps's unit (no pose to compare it with; only its sign, against the command)")
     # the measured speed and yaw rate are now right where a pose confirmed them (or gave them);
@@ -190,8 +190,10 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
     v, rate = measured.speed_mps, measured.yaw_rate_radps
     cmd = np.asarray(log.speed_cmd_mps, dtype=float)
     fit = _fit(v, cmd, (np.abs(cmd) > MIN_SPEED_MPS) & (np.abs(v) > MIN_SPEED_MPS))
-    if fit is None:
-        unchecked.append("speed_cmd_mps's sign and unit (too little driving)")
+    if fit is None or abs(fit[1]) <= MIN_CORRELATION:
+        unchecked.append("speed_cmd_mps's sign and unit (too little driving)" if fit is None else
+                         f"speed_cmd_mps's sign and unit (the measured speed follows it too loosely: "
+                         f"correlation {fit[1]:.2f})")
     if fit is not None and fit[0] < 0.0 and fit[1] < -MIN_CORRELATION:
         found = f"the measured speed is {fit[0]:.3g}x the command (correlation {fit[1]:.2f})"
         if pose is not None:  # the measured speed is the pose's or was checked against it
@@ -207,8 +209,10 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
     with np.errstate(invalid="ignore"):
         kinematic = v * np.tan(np.clip(steer, -1.5, 1.5)) / wheelbase_m
     fit = _fit(rate, kinematic, (np.abs(kinematic) > MIN_RATE_RADPS) & (np.abs(v) > MIN_SPEED_MPS))
-    if fit is None:
-        unchecked.append("steer_cmd_rad's sign (too little turning)"
+    if fit is None or abs(fit[1]) <= MIN_CORRELATION:
+        unchecked.append(("steer_cmd_rad's sign (too little turning)" if fit is None else
+                          f"steer_cmd_rad's sign (the measured yaw rate follows it too loosely: correlation "
+                          f"{fit[1]:.2f})")
                          + (" and yaw_rate_radps's unit" if pose is None and log.yaw_rate_radps is not None else ""))
     if pose is None and fit is not None and fit[1] > MIN_CORRELATION and _unit(fit[0], {"deg/s": 180.0 / math.pi},
                                                                               band=0.6):
