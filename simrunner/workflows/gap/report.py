@@ -18,6 +18,7 @@ into a temporary sibling folder and renames it into place, so DIR is complete or
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -704,11 +705,16 @@ def check_output_dir(out_dir: str | Path, *, force: bool = False) -> Path:
     out = Path(out_dir)
     if out.exists() and not force:
         raise GapError(f"{out}: output folder exists (use --force to replace it)")
+    made = [p for p in (out.parent, *out.parent.parents) if not p.exists()]  # the folders the probe makes
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         shutil.rmtree(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     except OSError as exc:
         raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
+    finally:
+        for folder in made:  # deepest first: leave nothing behind before the run
+            with contextlib.suppress(OSError):
+                folder.rmdir()
     return out
 
 
