@@ -416,17 +416,22 @@ def test_norm_calls_parse_evaluate_and_say_what_is_missing(tmp_path):
     _one_line(err, "--norms c.py:0: no column rule calls speed_norm or turn_norm")
 
 
-def test_a_norm_function_that_fails_names_the_log_line_and_its_own_line(tmp_path):
-    ctl = _write(tmp_path, "def main(spinner):\n    spinner.configure(\n"
-                           "        speed_norm=lambda v, a: 1.0 / (v - 2.0))\n", "ctl.py")
+def _norm_read_error(tmp_path, norm_source: str, name: str, line: int) -> str:
+    """The one-line error of reading a 3-row log whose speed command goes through a
+    controller with ``speed_norm=norm_source`` (the controller's line 3)."""
     from simrunner.run.norms import controller_norms
 
+    ctl = _write(tmp_path, f"def main(spinner):\n    spinner.configure(\n        speed_norm={norm_source})\n", name)
     p = _write(tmp_path, "t,duty,servo,x,y,yaw\n0,1,0,0,0,0\n0.1,2,0,0,0,0\n0.2,3,0,0,0,0\n")
     cmap = column_map_from(items=["speed_cmd_mps=speed_norm(duty, servo)", "steer_cmd_rad=servo"],
                            norms=controller_norms(ctl))
     with pytest.raises(LogError) as err:
         read_log(p, columns=cmap)
-    text = _one_line(err, f"{p}:3: speed_cmd_mps = 'speed_norm(duty, servo)' (--column ")
+    return _one_line(err, f"{p}:{line}: speed_cmd_mps = 'speed_norm(duty, servo)' (--column ")
+
+
+def test_a_norm_function_that_fails_names_the_log_line_and_its_own_line(tmp_path):
+    text = _norm_read_error(tmp_path, "lambda v, a: 1.0 / (v - 2.0)", "ctl.py", 3)
     assert "speed_norm(speed=2.0, angle=0.0) raised ZeroDivisionError: float division by zero at " in text
     assert text.endswith(f"ctl.py:3")
 
@@ -468,14 +473,7 @@ def test_controller_norms_follow_every_configure_call_and_refuse_what_is_no_func
     bad = _write(tmp_path, "def main(spinner):\n    spinner.configure(speed_norm=3.1)\n", "bad.py")
     with pytest.raises(ControllerFileError, match=r"configure\(speed_norm=3.1\): expected a function"):
         controller_norms(bad)
-    none = _write(tmp_path, "def main(spinner):\n    spinner.configure(\n        speed_norm=lambda v, a: None)\n",
-                  "none.py")
-    p = _write(tmp_path, "t,duty,servo,x,y,yaw\n0,1,0,0,0,0\n0.1,2,0,0,0,0\n")
-    cmap = column_map_from(items=["speed_cmd_mps=speed_norm(duty, servo)", "steer_cmd_rad=servo"],
-                           norms=controller_norms(none))
-    with pytest.raises(LogError) as err:
-        read_log(p, columns=cmap)
-    text = _one_line(err, f"{p}:2: speed_cmd_mps = 'speed_norm(duty, servo)'")
+    text = _norm_read_error(tmp_path, "lambda v, a: None", "none.py", 2)
     assert "speed_norm(speed=1.0, angle=0.0) returned None: expected a number (defined at " in text
     assert text.endswith("none.py:3)")
 
