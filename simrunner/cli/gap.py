@@ -140,13 +140,11 @@ def _read_logs(paths: tuple[Path, ...], columns_file: Path | None, items: tuple[
     (empty cells: :mod:`simrunner.run.sparse`) and leaving out a row that repeats the stamp
     before it (listed as a duplicate glitch). Several logs share the mapping, each with the
     sensors it has (``ColumnMap.partial``); a rule no log can follow is an error."""
-    import dataclasses
-
     from simrunner.run.log import read_log
 
     if columns_file is None and not items and norms_file is None:
         return [read_log(path, merged=True, repeated_stamps=True) for path in paths]
-    from simrunner.run.columns import NEEDED, ColumnMapError, column_map_from
+    from simrunner.run.columns import column_map_from, read_mapped_logs
 
     norms = None
     if norms_file is not None:
@@ -154,12 +152,4 @@ def _read_logs(paths: tuple[Path, ...], columns_file: Path | None, items: tuple[
 
         norms = controller_norms(norms_file)
     mapping = column_map_from(columns_file, items, norms, norms_from=f"--norms {norms_file}")
-    if len(paths) == 1:
-        return [read_log(paths[0], columns=mapping, merged=True, repeated_stamps=True)]
-    partial = dataclasses.replace(mapping, partial=True)
-    logs = [read_log(path, columns=partial, merged=True, repeated_stamps=True) for path in paths]
-    for rule in mapping.rules:
-        if rule.target not in NEEDED and all(getattr(log, rule.target, None) is None for log in logs):
-            raise ColumnMapError(rule.origin, f"{rule.target} asks for column {', '.join(map(repr, rule.sources))}, "
-                                              f"which none of the {len(paths)} logs has: expected it in one of them")
-    return logs
+    return read_mapped_logs(paths, mapping, merged=True, repeated_stamps=True)

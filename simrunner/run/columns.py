@@ -35,7 +35,7 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from simrunner.run.log import COLUMN_NAMES, COLUMNS, FORMAT1_NAMES, LogError
+from simrunner.run.log import COLUMN_NAMES, COLUMNS, FORMAT1_NAMES, LogError, read_log
 from simrunner.run.sparse import is_empty_cell
 
 _BY_NAME = {c.name: c for c in COLUMNS}
@@ -637,5 +637,21 @@ def column_map_from(file: str | Path | None = None, items: Iterable[str] = (),
     return dataclasses.replace(out, norms=norms) if norms is not None else out
 
 
+def read_mapped_logs(paths: Sequence[str | Path], mapping: ColumnMap, **read_kw) -> list:
+    """Several logs of one car read with one ``mapping`` (``read_kw``: the rest of
+    :func:`~simrunner.run.log.read_log`'s options): one log as the map says; several each
+    with the sensors it has (:attr:`ColumnMap.partial`), a rule that no log can follow being
+    a :class:`ColumnMapError` at the rule's line."""
+    if len(paths) == 1:
+        return [read_log(paths[0], columns=mapping, **read_kw)]
+    partial = dataclasses.replace(mapping, partial=True)
+    logs = [read_log(path, columns=partial, **read_kw) for path in paths]
+    for rule in mapping.rules:
+        if rule.target not in NEEDED and all(getattr(log, rule.target, None) is None for log in logs):
+            raise ColumnMapError(rule.origin, f"{rule.target} asks for column {', '.join(map(repr, rule.sources))}, "
+                                              f"which none of the {len(paths)} logs has: expected it in one of them")
+    return logs
+
+
 __all__ = ["ColumnMap", "ColumnRule", "ColumnMapError", "Expression", "Origin", "UNITS", "FUNCTIONS",
-           "NORM_FUNCTIONS", "NormFault", "column_map_from"]
+           "NORM_FUNCTIONS", "NormFault", "column_map_from", "read_mapped_logs"]
