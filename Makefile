@@ -1,16 +1,19 @@
-# Quick start: `make demo` and `make test`. Both create .venv and install what they need.
+# Quick start: `make demo` and `make test`. Both create .venv and install what they need, at
+# the versions locked in constraints.txt (docs/dependencies.md: `make test-latest`, `make lock`).
 PY ?= python3
+export PY
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 BENCH_STAMP := $(VENV)/.installed-bench
+LOCK := constraints.txt
 
-.PHONY: demo test bench clean
+.PHONY: demo test test-latest lock bench clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(LOCK)
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[test]'
+	$(BIN)/pip install -q -c $(LOCK) -e '.[test]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -26,11 +29,19 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -n 2
 
 $(BENCH_STAMP): $(STAMP)
-	$(BIN)/pip install -q -e '.[test,bench]'
+	$(BIN)/pip install -q -c $(LOCK) -e '.[test,bench]'
 	touch $(BENCH_STAMP)
+
+# the newest releases in .venv-latest: the tests, and the reference drives' bytes against .venv
+test-latest: $(STAMP)
+	bash tools/test_latest.sh
+
+# rewrite constraints.txt from the newest releases (after test-latest passes)
+lock:
+	bash tools/lock.sh
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python -m bench
 
 clean:
-	rm -rf $(VENV) out build *.egg-info
+	rm -rf $(VENV) .venv-latest out build *.egg-info

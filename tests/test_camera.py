@@ -215,7 +215,8 @@ def test_pixel_shows_the_raster_at_its_ground_point(lane, x, y, yaw):
         patch = lane.image[r0:r0 + 2, c0:c0 + 2].astype(float)
         want = (patch[0, 0] * (1 - fc) * (1 - fr) + patch[0, 1] * fc * (1 - fr)
                 + patch[1, 0] * (1 - fc) * fr + patch[1, 1] * fc * fr)
-        assert abs(int(img[row, col]) - want) <= 2.0  # cv2 uses 1/32 px weights
+        # float32 map coordinates (~1e-4 px) and float32 arithmetic, then rounding to a whole gray
+        assert abs(int(img[row, col]) - want) <= 0.55
 
 
 @settings(max_examples=50, deadline=None)

@@ -16,25 +16,27 @@ below the principal point (the image centre). Its ray in the car frame is
 Tracks are flat, so every ray that goes down meets the ground at one point; those points
 are computed once per camera (``ground_xy_m``, car frame). A frame is then: move those
 points by the car pose into the world, convert to raster pixels and sample the top-down
-raster bilinearly (``cv2.remap``, ``INTER_LINEAR``). Rays that point at or above the horizon,
+raster bilinearly (:func:`simrunner.sensors.line_row.sample_u8`: float32 fused multiply-adds,
+rounded half to even, the floor gray outside the raster). Rays that point at or above the horizon,
 or meet the ground farther than ``max_range_m``, see the floor/background gray. With
 ``supersample=k`` each pixel averages a ``k x k`` grid of sub-pixel rays (box filter),
-which removes aliasing of thin far lines at k^2 times the cost.
+which removes aliasing of thin far lines at k^2 times the cost (the block mean rounded half
+to even).
 
 The line camera (``line_image``: one row plus noise, every frame of a run) is one compiled
 call (:mod:`simrunner.sensors.line_row`, NumPy; the numba kernel :mod:`simrunner.sensors.line_kernel`
-computes the same pixels) that computes the same maps and pixels as the OpenCV path.
+computes the same pixels) that computes the same maps and pixels as ``render``.
 """
 from __future__ import annotations
 
 import functools
 import math
 
-import cv2
 import numpy as np
 
 from pieces.pose import Pose2
 from simrunner.errors import CameraError
+from simrunner.sensors.line_row import add_noise_u8, block_mean_u8, sample_u8
 from simrunner.track.raster import TrackRaster
 
 _NO_NORMALS = np.zeros(0)
@@ -161,13 +163,9 @@ class Camera:
 
     def _sample(self, pose: Pose2, rows: slice, misses: bool) -> np.ndarray:
         map_x, map_y = self._maps(pose, rows, misses)
-        img = cv2.remap(self.raster.image, map_x, map_y, cv2.INTER_LINEAR, None,
-                        cv2.BORDER_CONSTANT, self._floor)
+        img = sample_u8(self.raster.image, map_x, map_y, self._floor_f)
         k = self.supersample
-        if k == 1:
-            return img
-        # integer factor: INTER_AREA is the exact k x k block mean, rounded
-        return cv2.resize(img, (img.shape[1] // k, img.shape[0] // k), interpolation=cv2.INTER_AREA)
+        return img if k == 1 else block_mean_u8(img, k)
 
     def render(self, pose: Pose2) -> np.ndarray:
         """The image ``(H, W) uint8`` seen from a car whose body frame is at ``pose``."""
@@ -194,7 +192,7 @@ class Camera:
             return img if normals is None else self.add_noise(img, normals)
         # _maps with the row's common x folded into scalars: the same float64 operations, term
         # for term, so the same pixels (a - s*g == a + (-s)*g exactly), fewer operations; the
-        # kernel rounds the sums to float32 maps and samples like cv2.remap
+        # kernel rounds the sums to float32 maps and samples like sample_u8
         inv = self._inv_m
         yaw = pose.yaw_rad
         ci, si = math.cos(yaw) * inv, math.sin(yaw) * inv
@@ -211,15 +209,11 @@ class Camera:
         return out
 
     def add_noise(self, img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """A copy of ``img`` (uint8, any shape) plus Gaussian noise of std ``noise_std``
-        (0-255 scale), rounded and clipped to 0..255. Only ``rng`` supplies randomness."""
+        """A copy of ``img`` (any shape) plus Gaussian noise of std ``noise_std`` (0-255
+        scale) as uint8: the noise rounded half to even, added, saturated to 0..255
+        (:func:`simrunner.sensors.line_row.add_noise_u8`). Only ``rng`` supplies randomness."""
         a = np.asarray(img)
         # = rng.normal(0, std, shape), draw for draw (normal is loc + scale * standard normal)
         noise = rng.standard_normal(a.shape)
         noise *= self._noise_std
-        if a.dtype == np.uint8 and 1 <= a.ndim <= 2:
-            # OpenCV rounds the noise half to even, adds it and saturates: the numpy expression
-            # below except at exact ties (x.5 noise), in one call (fastpath.camera_row copies it)
-            return cv2.add(noise, a, dtype=cv2.CV_8U).reshape(a.shape)
-        noise += a
-        return np.clip(np.rint(noise), 0, 255).astype(np.uint8)
+        return add_noise_u8(a, noise)

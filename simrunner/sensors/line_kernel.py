@@ -2,22 +2,23 @@
 
 The Spinner's line camera (``get_image(row)``) costs one call of :func:`camera_row` per frame
 instead of a dozen NumPy/OpenCV calls. The kernels compute exactly what the code they replace
-computes, bit for bit (tests/test_fastpath.py checks them against it):
+computes, bit for bit (tests/test_line_kernel.py checks them against it):
 
 * the remap coordinates of :meth:`simrunner.sensors.camera.Camera.render_row`: float64 sums in the
   same order, rounded to float32;
-* ``cv2.remap(image, map_x, map_y, INTER_LINEAR, BORDER_CONSTANT, floor)`` of OpenCV >= 4.11
-  on 8-bit images: the pixel at ``(ix + ax, iy + ay)`` (``ix = floor(sx)``, ``ax = sx - ix``
-  in float32) is ``t = fma(ax, p01 - p00, p00)``, ``b = fma(ax, p11 - p10, p10)``,
-  ``v = fma(ay, b - t, t)`` in float32 with single-rounding fused multiply-adds (OpenCV's
-  SIMD path on FMA hardware), rounded half to even and saturated to 0..255; neighbours
-  outside the image read ``floor``, a pixel with all four outside is ``floor``. (The
-  ``llvm.fma`` intrinsic is exact on every CPU, so the kernel does not depend on FMA
-  hardware; OpenCV without FMA would differ from it in ~1 pixel per million.)
-* the noise of :meth:`simrunner.sensors.camera.Camera.add_noise` (``cv2.add`` of the float64 noise
-  to the uint8 image): ``pixel + rint(normal * std)`` (the noise rounded half to even
-  first, so an exact tie ``pixel + k.5`` rounds by the parity of ``k``, not of the sum),
-  saturated to 0..255, with ``normal`` from the run's standard-normal stream.
+* the bilinear sample of an 8-bit image at float32 ``(sx, sy)``: the pixel at
+  ``(ix + ax, iy + ay)`` (``ix = floor(sx)``, ``ax = sx - ix`` in float32) is
+  ``t = fma(ax, p01 - p00, p00)``, ``b = fma(ax, p11 - p10, p10)``,
+  ``v = fma(ay, b - t, t)`` in float32 with single-rounding fused multiply-adds, rounded half
+  to even and saturated to 0..255; neighbours outside the image read ``floor``, a pixel with
+  all four outside is ``floor``. (This is what ``cv2.remap(..., INTER_LINEAR,
+  BORDER_CONSTANT, floor)`` of OpenCV 4.11-5.1 computes on FMA hardware, which the camera
+  used to call; the rule is ours now. The ``llvm.fma`` intrinsic is exact on every CPU, so
+  the kernel does not depend on FMA hardware.)
+* the noise of :meth:`simrunner.sensors.camera.Camera.add_noise`: ``pixel + rint(normal * std)``
+  (the noise rounded half to even first, so an exact tie ``pixel + k.5`` rounds by the
+  parity of ``k``, not of the sum), saturated to 0..255, with ``normal`` from the run's
+  standard-normal stream.
 
 Compilation: ``cache=True`` — the first use in a fresh checkout compiles (~1-2 s) and
 writes the machine code to ``simrunner/sensors/__pycache__`` (numba's own cache directory when that
@@ -57,7 +58,7 @@ def _pixel(image, ix, iy, border):
 
 @njit(cache=True, inline="always")
 def _bilinear(image, sx, sy, floor):
-    """``cv2.remap`` INTER_LINEAR / BORDER_CONSTANT of one pixel at float32 ``(sx, sy)``:
+    """The bilinear sample (module docstring) of one pixel at float32 ``(sx, sy)``:
     the float32 result before rounding to uint8 (``floor`` when all neighbours are outside)."""
     h, w = image.shape
     ix = int(np.floor(sx))
@@ -83,7 +84,7 @@ def _bilinear(image, sx, sy, floor):
 
 @njit(cache=True, inline="always")
 def _to_u8(v):
-    """Round half to even and saturate to 0..255 (OpenCV's ``saturate_cast<uchar>``)."""
+    """Round half to even and saturate to 0..255."""
     r = np.rint(v)
     if r < 0.0:
         return np.uint8(0)

@@ -1,5 +1,10 @@
-"""The camera line of the closed loop in NumPy: :func:`camera_row`, bit for bit the numba
-kernel :func:`simrunner.sensors.line_kernel.camera_row` (same arguments, same pixels).
+"""The camera's pixel arithmetic in NumPy: the line of the closed loop (:func:`camera_row`, bit
+for bit the numba kernel :func:`simrunner.sensors.line_kernel.camera_row`: same arguments,
+same pixels), whole frames (:func:`sample_u8`), supersampling (:func:`block_mean_u8`) and noise
+(:func:`add_noise_u8`). Every rounding is stated here and done here, not left to a library:
+bilinear values are float32 fused multiply-adds, pixels are rounded half to even and
+saturated to 0..255, noise is rounded half to even before it is added. (The camera once
+used ``cv2.remap``, ``cv2.resize`` and ``cv2.add``; OpenCV 5.1 changed ``cv2.add``'s ties.)
 
 Why NumPy: the compiled kernel costs ~2 us a frame but loading numba and its cached machine
 code costs ~0.5 s of every process (numba, its typing registries and the scipy.linalg it
@@ -102,6 +107,56 @@ def camera_row(image, gy, x_gain, x_ground, x_pose, y_gain, y_ground, y_pose, fl
     out[0] = v
 
 
+def sample_u8(image: np.ndarray, sx: np.ndarray, sy: np.ndarray, floor: float) -> np.ndarray:
+    """Bilinear samples of ``image (H, W) uint8`` at float32 raster coordinates ``(sx, sy)``
+    (col, row; any equal shapes) as uint8 of that shape: the kernel's float32 value (fused
+    multiply-adds, ``floor`` outside the image), rounded half to even, saturated to 0..255.
+    The whole-frame camera (``Camera.render``) samples with it; rows are exactly
+    :func:`camera_row`'s pixels."""
+    shape = np.shape(sx)
+    fx = np.asarray(sx, np.float32).ravel()
+    fy = np.asarray(sy, np.float32).ravel()
+    h, w = image.shape
+    inside = (fx >= 1.0) & (fx < w - 1) & (fy >= 1.0) & (fy < h - 1)
+    v = np.empty(fx.size)
+    if inside.all():
+        v[:] = _inside(image, fx, fy)
+    else:  # the cheap exact path where it applies (most pixels of a frame)
+        v[inside] = _inside(image, fx[inside], fy[inside])
+        fl = float(np.float32(floor))
+        far = (fx < -1.0) | (fx >= w) | (fy < -1.0) | (fy >= h)  # all four neighbours outside
+        v[far] = fl
+        rest = ~(inside | far)
+        if rest.any():
+            v[rest] = _anywhere(image, fx[rest], fy[rest], fl)
+    np.rint(v, out=v)
+    return np.clip(v, 0.0, 255.0).astype(np.uint8).reshape(shape)
+
+
+def block_mean_u8(img: np.ndarray, k: int) -> np.ndarray:
+    """The mean of each ``k x k`` block of ``img (H*k, W*k) uint8`` as ``(H, W) uint8``,
+    rounded half to even (exact: integer sums, ties decided by the quotient's parity)."""
+    h, w = img.shape[0] // k, img.shape[1] // k
+    total = img[:h * k, :w * k].reshape(h, k, w, k).sum(axis=(1, 3), dtype=np.int64)
+    n = k * k
+    q, r = np.divmod(total, n)
+    q += (2 * r > n) | ((2 * r == n) & (q % 2 == 1))
+    return q.astype(np.uint8)
+
+
+def add_noise_u8(img: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    """``img`` plus ``noise`` (float64, same shape) by the camera's rule: the noise is
+    rounded half to even to a whole number first, then added to the pixel, and the sum is
+    saturated to 0..255 (so a tie ``pixel + k.5`` rounds by the parity of ``k``, not of the
+    sum). uint8 images give exactly :func:`camera_row`'s noisy pixels; other dtypes are
+    rounded half to even after the sum. Returns uint8 of ``img``'s shape."""
+    v = np.rint(noise)
+    v += img
+    if img.dtype != np.uint8:
+        np.rint(v, out=v)
+    return np.clip(v, 0.0, 255.0).astype(np.uint8)
+
+
 def _inside(image: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
     """The bilinear float32 values (as float64) of float32 coordinates with all four
     neighbours inside and both coordinates >= 1. Then a fraction is a multiple of 2**-23
@@ -112,19 +167,27 @@ def _inside(image: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
     w = image.shape[1]
     fx = np.floor(sx)
     fy = np.floor(sy)
-    ax = (sx - fx).astype(np.float64)[:, None]
+    ax = (sx - fx).astype(np.float64)
     ay = (sy - fy).astype(np.float64)
     idx = fy.astype(np.intp)
     idx *= w
     idx += fx.astype(np.intp)
-    p = image.ravel().take(idx[:, None] + _offsets(w)).astype(np.float64)
-    left = p[:, :2]  # p00, p10
-    tb = p[:, 2:] - left  # p01 - p00, p11 - p10: whole numbers, exact
-    tb *= ax
-    tb += left
-    tb = tb.astype(np.float32).astype(np.float64)  # top, bottom: exact sums rounded once
-    top = tb[:, 0]
-    d = (tb[:, 1] - top).astype(np.float32).astype(np.float64)
+    flat = image.ravel()
+    p00 = flat.take(idx).astype(np.float64)
+    idx += 1
+    top = flat.take(idx).astype(np.float64)
+    idx += w
+    p11 = flat.take(idx).astype(np.float64)
+    idx -= 1
+    p10 = flat.take(idx).astype(np.float64)
+    top -= p00  # p01 - p00, p11 - p10: whole numbers, exact
+    p11 -= p10
+    top *= ax
+    p11 *= ax
+    top += p00
+    p11 += p10
+    top = top.astype(np.float32).astype(np.float64)  # top, bottom: exact sums rounded once
+    d = (p11.astype(np.float32) - top.astype(np.float32)).astype(np.float64)
     d *= ay  # exact: 24 + 24 bits
     return _round32_normal(d, top)
 
