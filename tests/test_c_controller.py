@@ -729,3 +729,44 @@ def test_calls_after_the_run_from_atexit_handlers_return_at_once(tmp_path, track
     gc.collect()
     assert drive(EXAMPLES / "line_follower.c", track=track, time_limit_s=0.2).outcome == "timeout"
     assert capfd.readouterr().out.count("bye 0.10") == 2
+
+
+def test_exposure_from_c_and_cpp_sets_the_line_cameras_frame_period(tmp_path, track, capfd):
+    car = load_car(None)
+    toml = tmp_path / "car.toml"
+    car.replace(camera=dataclasses.replace(car.camera, model="linescan")).save(toml)
+    src = write(tmp_path, "exposure.c", """\
+        #include <stdio.h>
+        #include "spinner.h"
+        int main(void) {
+            uint8_t row[128];
+            spinner_get_image(60, 1, row, sizeof row);
+            double t0 = spinner_get_time();
+            spinner_set_exposure(0.0045);
+            spinner_get_image(60, 1, row, sizeof row);
+            spinner_get_image(60, 1, row, sizeof row);
+            printf("exposure %g period %.4f\\n", spinner_get_exposure(), spinner_get_time() - t0);
+            spinner_set_exposure(-1.0);
+            return 0;
+        }
+        """)
+    r = drive(src, track=track, car=toml)
+    out = capfd.readouterr().out
+    # t0 is one step after frame 1 (20 ms); then frames at 20 + 5 and 25 + 5 ms, one step more
+    assert "exposure 0.0045 period 0.0100" in out
+    assert r.outcome == "controller_error"
+    assert "set_exposure(seconds=-1.0): expected 1e-05 to 1 s" in r.message
+    assert "exposure.c:11" in r.error.traceback_text
+    cpp = write(tmp_path, "exposure.cpp", """\
+        #include <cstdio>
+        #include "spinner.hpp"
+        int main() {
+            Spinner s;
+            s.setExposure(0.0095);
+            s.getImage(60);
+            std::printf("cpp exposure %g\\n", s.getExposure());
+            return 0;
+        }
+        """)
+    drive(cpp, track=track, car=toml)
+    assert "cpp exposure 0.0095" in capfd.readouterr().out

@@ -65,7 +65,12 @@ def _section_values(cls):
     strategies = {}
     for f in dataclasses.fields(cls):
         lo, hi = f.metadata["lo"], f.metadata["hi"]
-        if f.type in (int, "int"):
+        if f.metadata.get("choices"):
+            strategies[f.name] = st.sampled_from(f.metadata["choices"])
+        elif f.metadata.get("list"):  # empty, or one number per column of the default camera
+            strategies[f.name] = st.one_of(st.just(()), st.lists(
+                st.floats(lo, hi, allow_nan=False), min_size=128, max_size=128).map(tuple))
+        elif f.type in (int, "int"):
             strategies[f.name] = st.integers(int(lo), int(hi))
         else:
             strategies[f.name] = st.floats(lo, hi if math.isfinite(hi) else 1e6, allow_nan=False)

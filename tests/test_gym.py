@@ -397,3 +397,26 @@ def test_learning_example_smoke(tmp_path, track, random_start):
     for name in ("learning_curve.png", "episodes.csv", "policy.zip", "evaluation.txt"):
         assert (tmp_path / name).stat().st_size > 0
     assert "eval_progress_m" in (tmp_path / "evaluation.txt").read_text()
+
+
+def test_a_linescan_car_observes_its_physical_camera_at_its_frame_period():
+    import dataclasses
+
+    from vehicle.description import CarDescription
+
+    base = CarDescription()
+    car = base.replace(camera=dataclasses.replace(base.camera, model="linescan", exposure_s=0.0095,
+                                                  startup_frames=1))
+    env = NXPCupEnv(car=car, time_limit_s=1.0)
+    obs, info = env.reset(seed=3)
+    assert env.metadata["render_fps"] == pytest.approx(100.0)
+    obs, *_ = env.step(np.array([0.0, -0.5], np.float32))
+    assert info["t_s"] == 0.0 and env._clock.time_s == pytest.approx(0.01)  # 9.5 + 0.5 ms
+    assert (obs[:128] == 1.0).all()  # frame 1: the start-up frame reads full
+    obs, *_ = env.step(np.array([0.0, -0.5], np.float32))
+    lane = obs[:128]
+    assert lane.max() < 1.0 and lane[64] > 0.3 and lane[0] < 0.5 * lane[64]  # lit, not clipped, vignetted
+    again = NXPCupEnv(car=car, time_limit_s=1.0)
+    again.reset(seed=3)
+    again.step(np.array([0.0, -0.5], np.float32))
+    assert np.array_equal(again.step(np.array([0.0, -0.5], np.float32))[0], obs)

@@ -19,9 +19,21 @@ echo "== the reference drives: locked (.venv) against newest ($LATEST)"
 "$LATEST/bin/python" tools/reference_drives.py out/drift/latest || exit 1
 .venv/bin/python tools/reference_drives.py --compare out/drift/locked out/drift/latest
 drives=$?
-echo "== moved since the lock (constraints.txt -> newest)"
-diff <(grep -v '^#' constraints.txt | sort -f) <("$LATEST/bin/pip" freeze --exclude-editable | sort -f) \
-  | sed -n 's/^> /  newest: /p; s/^< /  locked: /p'
+echo "== releases newer than the lock (constraints.txt)"
+"$LATEST/bin/pip" freeze --exclude-editable | "$LATEST/bin/python" -c '
+import sys
+def pins(lines):
+    out = {}
+    for line in lines:
+        if "==" in line and not line.startswith("#"):
+            name, version = line.strip().split("==", 1)
+            out[name.lower().replace("_", "-")] = version
+    return out
+locked, newest = pins(open("constraints.txt")), pins(sys.stdin)
+moved = [f"  {n}: {locked[n]} -> {v}" for n, v in sorted(newest.items()) if n in locked and locked[n] != v]
+new = [f"  {n}: {v} (not in the lock)" for n, v in sorted(newest.items()) if n not in locked]
+print("\n".join(moved + new) or "  none: the lock is the newest")
+'
 if [ "$tests" -ne 0 ] || [ "$drives" -ne 0 ]; then
   echo "test-latest: tests exit $tests, drives exit $drives: the newest releases change results"
   exit 1

@@ -85,8 +85,26 @@ class Drive:
                             "NXP Cup car: rear-wheel drive (thesis 5.2)", 0.0, 1.0)
 
 
+CAMERA_MODELS = ("ideal", "linescan", "area")
+TSL1401 = "TSL1401CL datasheet (ams, 2016)"
+
+
+def _choice(default: str, choices: tuple[str, ...], doc: str, source: str):
+    return field(default=default, metadata={"doc": doc, "source": source, "lo": None, "hi": None,
+                                            "choices": choices})
+
+
+def _floats(doc: str, source: str, lo: float, hi: float):
+    return field(default=(), metadata={"doc": doc, "source": source, "lo": lo, "hi": hi, "list": True})
+
+
 @dataclass(frozen=True)
 class Camera:
+    """The camera: where it sits and what it sees (geometry, the first group), and how it turns
+    light into numbers (``model`` and the sensor and lens fields after it; docs/camera.md).
+    ``model = "ideal"`` is the exact render of earlier versions (fixed grey levels plus
+    ``noise_std``); the sensor and lens fields then do nothing."""
+
     forward_m: float = _f(0.20, "Camera position ahead of the rear axle.", "estimate", -1, 1)
     height_m: float = _f(0.30, "Camera height above the ground.", "NXP Cup camera mast, estimate", 0.02, 2)
     pitch_rad: float = _f(0.65, "Downward tilt of the optical axis from horizontal (positive = down).",
@@ -98,9 +116,81 @@ class Camera:
                         "thesis Fig. 5.2 loops over 128 rows", 1, 4096)
     default_row: int = _f(60, "The image row that plays the real line camera (Spinner.LINE_ROW, shown "
                           "stretched in the debug video).", "thesis 5.1.2: the team used row 60", 0, 4095)
-    fps_hz: float = _f(50.0, "Frame rate; get_image() waits for the next frame.", "estimate", 1, 1000)
-    noise_std: float = _f(6.0, "Std-dev of additive Gaussian pixel noise (0-255 scale) of add_noise.",
-                          "estimate", 0, 128)
+    fps_hz: float = _f(50.0, "Frame rate of the ideal and area models; get_image() waits for the next "
+                       "frame. (linescan: the frame period is exposure_s + readout_s.)", "estimate", 1, 1000)
+    noise_std: float = _f(6.0, "Std-dev of additive Gaussian pixel noise (0-255 scale) of add_noise "
+                          "(and of the ideal model's images).", "estimate", 0, 128)
+    model: str = _choice("ideal", CAMERA_MODELS,
+                         "How light becomes pixels: 'ideal' (exact render, fixed grey levels + noise_std); "
+                         "'linescan' (one row integrated over exposure_s, frame period = exposure_s + "
+                         "readout_s, as the TSL1401); 'area' (every row, frames at fps_hz, exposure_s <= "
+                         "1 / fps_hz). linescan and area follow the EMVA 1288 linear camera model.",
+                         "issue 47; EMVA 1288 release 4.0 (linear model)")
+    exposure_s: float = _f(0.0195, "Integration (exposure) time at the start of a run; the controller sets it "
+                           "with set_exposure(seconds). linescan: the time between two SI pulses minus "
+                           "the read-out.", "estimate: teams use 1-20 ms (issue 47); 19.5 ms + 0.5 ms "
+                           "read-out = 50 frames a second, the ideal model's fps_hz", 1e-5, 1.0)
+    readout_s: float = _f(0.0005, "linescan: time to clock out and convert the 128 pixels after the "
+                          "exposure (the frame period is exposure_s + readout_s).",
+                          "estimate: 128 ADC conversions of ~4 us (FRDM-KL25Z); the sensor itself "
+                          f"clocks up to 8 MHz ({TSL1401})", 0.0, 0.1)
+    f_number: float = _f(2.8, "Lens f-number N: image-plane illuminance = reflectance x illuminance x "
+                         "lens_transmission / (4 N^2) on the optical axis.", "estimate (small M12 lens; the white lane reads ~210 of 255 at the image centre under "
+                         "500 lux with the default exposure)",
+                         0.7, 32)
+    lens_transmission: float = _f(0.9, "Fraction of light the lens passes.", "estimate (coated glass lens)",
+                                  0.05, 1.0)
+    vignetting_power: float = _f(4.0, "Fall-off of the image-plane illuminance with the ray's angle theta to "
+                                 "the optical axis: cos(theta)^power (4 = the natural cos^4 law; 0 = none).",
+                                 "cos^4 law of a thin lens (e.g. Smith, Modern Optical Engineering)", 0.0, 12.0)
+    vignetting_profile: tuple = _floats("Optional measured relative response of each column (width_px "
+                                        "numbers, 1 = on-axis; e.g. from a flat field), multiplied on top of "
+                                        "the cos^power law. Empty = none.", "none (measure with a flat field)",
+                                        0.0, 10.0)
+    psf_sigma_px: float = _f(0.7, "Optical blur: standard deviation of the lens's Gaussian point-spread "
+                             "function along the row, in pixels (0 = sharp).",
+                             "estimate: a 2 cm line 0.4 m ahead spans ~3 px and never reaches black "
+                             "(issue 47)", 0.0, 20.0)
+    motion_blur_samples: int = _f(4, "Poses averaged over the exposure (the image is integrated while "
+                                  "the car moves; 1 = no motion blur).", "estimate (4 is within 1 grey "
+                                  "level of 32 at 3 m/s and 10 ms)", 1, 64)
+    quantum_efficiency: float = _f(0.6, "EMVA 1288 eta: electrons per photon (white light).",
+                                   "estimate for a silicon photodiode in the visible", 0.01, 1.0)
+    pixel_area_um2: float = _f(3524.3, "Light-sensitive area of one pixel.", TSL1401, 1.0, 1e5)
+    saturation_capacity_e: float = _f(6.0e6, "EMVA 1288 saturation capacity: electrons at which a pixel "
+                                      "saturates (full well).", "estimate: ~1700 e- per um^2 of the "
+                                      "3524 um^2 pixel", 100.0, 1e9)
+    dark_noise_e: float = _f(1500.0, "EMVA 1288 dark (read) noise, temporal, electrons rms.",
+                             f"{TSL1401}: dynamic range 4000:1 (72 dB) = saturation / dark noise",
+                             0.0, 1e8)
+    dark_current_eps: float = _f(4.0e4, "Dark current, electrons per second.", "estimate", 0.0, 1e9)
+    dsnu_e: float = _f(3.0e4, "EMVA 1288 DSNU: pixel-to-pixel spread (std) of the dark signal, electrons "
+                       "(fixed pattern offset, seeded).", "estimate (~0.5 % of saturation)", 0.0, 1e8)
+    prnu: float = _f(0.03, "EMVA 1288 PRNU: pixel-to-pixel spread (std) of the response, as a fraction "
+                     "(fixed pattern gain, seeded).", "estimate", 0.0, 1.0)
+    analog_gain: float = _f(1.0, "Gain before the ADC: at 1 the saturation capacity reaches the ADC's "
+                            "maximum.", "TFC kit: no programmable gain", 0.01, 1000.0)
+    black_level_dn: float = _f(4.0, "ADC reading of a dark pixel (offset), in ADC counts.",
+                               "estimate: dark output up to ~0.1 V on a 3.3 V ADC", 0.0, 65535.0)
+    adc_bits: int = _f(8, "ADC resolution. Images are 8-bit: more bits are shifted down to the top 8, "
+                       "fewer are shifted up.", "FRDM-KL25Z ADC: 8 to 16 bits; 8 as the thesis's images",
+                       1, 16)
+    dead_pixels: int = _f(0, "Pixels that give the black level whatever the light (seeded places).",
+                          "none on a good sensor", 0, 4096)
+    hot_pixels: int = _f(0, "Pixels that read the ADC maximum whatever the light (seeded places).",
+                         "none on a good sensor", 0, 4096)
+    startup_frames: int = _f(1, "Frames after power-up that read saturated (the pixels integrated since "
+                             "power-up before the first SI pulse).", "estimate", 0, 100)
+    fixed_pattern_seed: int = _f(1, "Seed of this camera's fixed pattern (DSNU, PRNU, dead and hot pixel "
+                                 "places): one number per physical camera, not per run.", "arbitrary",
+                                 0, 2**31 - 1)
+
+    def frame_period_s(self, exposure_s: float | None = None) -> float:
+        """Time between frames: ``exposure + readout_s`` for ``linescan`` (``exposure``:
+        ``exposure_s`` when None), else ``1 / fps_hz``."""
+        if self.model == "linescan":
+            return float(self.exposure_s if exposure_s is None else exposure_s) + self.readout_s
+        return 1.0 / self.fps_hz
 
 
 @dataclass(frozen=True)
@@ -226,7 +316,9 @@ class CarDescription:
                 if source is None:
                     source = m["source"] if value == f.default else (
                         f"this file, not the default ({_toml_value(f.default)}: {m['source']})")
-                lines.append(f"# {m['doc']} Range {m['lo']} .. {m['hi']}. Source: {source}.")
+                rng = (f"One of {', '.join(repr(c) for c in m['choices'])}" if m.get("choices")
+                       else f"Range {m['lo']} .. {m['hi']}" + (" each" if m.get("list") else ""))
+                lines.append(f"# {m['doc']} {rng}. Source: {source}.")
                 lines.append(tomli_w.dumps({f.name: value}).rstrip("\n"))
         return "\n".join(lines) + "\n"
 
@@ -288,6 +380,17 @@ def relation_problem(car: CarDescription | SimpleNamespace) -> tuple[str, tuple[
                 f"camera.default_row = {cam.default_row}: this row looks "
                 f"at or above the horizon (camera.pitch_rad = {cam.pitch_rad:g}); expected a row "
                 f"that sees the track")
+    if cam.vignetting_profile and len(cam.vignetting_profile) != cam.width_px:
+        return ("camera", ("vignetting_profile", "width_px"), f"camera.vignetting_profile has "
+                f"{len(cam.vignetting_profile)} numbers: expected one per column (camera.width_px = "
+                f"{cam.width_px}) or none")
+    if cam.model == "area" and cam.exposure_s > 1.0 / cam.fps_hz:
+        return ("camera", ("exposure_s", "fps_hz"), f"camera.exposure_s = {cam.exposure_s!r}: an area "
+                f"camera exposes within its frame, expected at most 1 / fps_hz = {1.0 / cam.fps_hz:g} s")
+    if cam.model != "ideal" and cam.dead_pixels + cam.hot_pixels > cam.width_px * cam.height_px:
+        return ("camera", ("dead_pixels", "hot_pixels"), f"camera.dead_pixels + hot_pixels = "
+                f"{cam.dead_pixels + cam.hot_pixels}: expected at most the {cam.width_px * cam.height_px} "
+                f"pixels of the sensor")
     if car.wheels.width_m >= car.chassis.track_m:
         return ("wheels", ("width_m",), f"wheels.width_m = {car.wheels.width_m!r}: expected less "
                 f"than chassis.track_m = {car.chassis.track_m!r} (the wheels would overlap)")
@@ -345,6 +448,16 @@ def _section_from_dict(cls: type, section: str, data: dict[str, Any], source: st
         if f is None:
             raise _error(source, text, section, key,
                          f"unknown field {section}.{key} (expected one of {', '.join(known)})")
+        choices = f.metadata.get("choices")
+        if choices is not None:
+            if value not in choices:
+                raise _error(source, text, section, key, f"{section}.{key} = {_short(value)}: expected "
+                             f"one of {', '.join(repr(c) for c in choices)}")
+            out[key] = value
+            continue
+        if f.metadata.get("list"):
+            out[key] = _number_list(section, key, value, f.metadata, source, text)
+            continue
         want_int = f.type in (int, "int")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or (
                 want_int and not isinstance(value, int)):
@@ -359,6 +472,20 @@ def _section_from_dict(cls: type, section: str, data: dict[str, Any], source: st
                          f"{section}.{key} = {_short(value)}: expected a value in [{lo}, {hi}]")
         out[key] = int(value) if want_int else float(value)
     return cls(**out)
+
+
+def _number_list(section: str, key: str, value: Any, meta: Mapping[str, Any], source: str,
+                 text: str | None) -> tuple[float, ...]:
+    """A TOML array of finite numbers, each in the field's range, as a tuple of floats."""
+    if not isinstance(value, (list, tuple)):
+        raise _error(source, text, section, key, f"{section}.{key} = {_short(value)}: expected a list "
+                     f"of numbers")
+    lo, hi = meta["lo"], meta["hi"]
+    for i, v in enumerate(value):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
+            raise _error(source, text, section, key, f"{section}.{key}[{i}] = {_short(v)}: expected a "
+                         f"number in [{lo}, {hi}]")
+    return tuple(float(v) for v in value)
 
 
 def _short(value: Any, limit: int = 40) -> str:
@@ -397,7 +524,13 @@ def markdown_doc() -> str:
                   "| --- | --- | --- | --- | --- |"]
         for f in fields(cls):
             m = f.metadata
-            lines.append(f"| `{f.name}` | {f.default} | {m['lo']} .. {m['hi']} | {m['doc']} | {m['source']} |")
+            if m.get("choices"):
+                rng = " / ".join(f"`{c}`" for c in m["choices"])
+                default = f"`{f.default}`"
+            else:
+                rng = f"{m['lo']} .. {m['hi']}" + (" each" if m.get("list") else "")
+                default = "[]" if m.get("list") else f.default
+            lines.append(f"| `{f.name}` | {default} | {rng} | {m['doc']} | {m['source']} |")
         lines.append("")
     return "\n".join(lines)
 

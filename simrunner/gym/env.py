@@ -63,6 +63,7 @@ class _TrackParts:
     initial: Any  # sim.save_state() at the start pose, at rest
     camera: Camera
     progress: CentrelineProgress
+    imager: Any = None  # the physical camera (camera.model linescan / area), else None
 
 
 class NXPCupEnv(gymnasium.Env):
@@ -95,8 +96,8 @@ class NXPCupEnv(gymnasium.Env):
         self.line_row = cam.default_row if s.line_row is None else s.line_row
         if not 0 <= self.line_row < cam.height_px:
             raise SimError(f"line_row = {self.line_row}: expected a row 0..{cam.height_px - 1}")
-        self._frame_period_s = 1.0 / float(cam.fps_hz)
-        self.metadata = {**self.metadata, "render_fps": float(cam.fps_hz)}
+        self._frame_period_s = cam.frame_period_s()  # a linescan camera: exposure + read-out
+        self.metadata = {**self.metadata, "render_fps": 1.0 / self._frame_period_s}
         self._steer_limit_rad = float(self.car.steering.limit_rad)
         self._wheelbase_m = float(self.car.chassis.wheelbase_m)
         self._v_min = s.speed_min_mps
@@ -126,8 +127,14 @@ class NXPCupEnv(gymnasium.Env):
             track, label = tracks.load(spec, self.car, self._random_options)
             sim = make_sim(self.car, dt_s=self.settings.dt_s, start=track.start,
                            surface_z_m=track.surface_z_m)
-            parts = _TrackParts(track, label, sim, sim.save_state(), Camera(self.car.camera, track),
-                                CentrelineProgress(track.centreline))
+            camera = Camera(self.car.camera, track)
+            imager = None
+            if self.car.camera.model != "ideal":
+                from simrunner.sensors.imaging import Imager
+
+                imager = Imager(camera)
+            parts = _TrackParts(track, label, sim, sim.save_state(), camera,
+                                CentrelineProgress(track.centreline), imager)
             if len(self._cache) >= _MAX_CACHED_TRACKS:
                 self._cache.pop(next(iter(self._cache)))
             self._cache[key] = parts
@@ -229,7 +236,14 @@ class NXPCupEnv(gymnasium.Env):
 
     # -- observation and info ----------------------------------------------------------------
     def _observe(self, pose) -> np.ndarray:
-        row = self._parts.camera.line_image(pose, self.line_row, self._normals)
+        imager = self._parts.imager
+        if imager is None:
+            row = self._parts.camera.line_image(pose, self.line_row, self._normals)
+        else:  # the physical camera at the car file's exposure, blurred by the car's motion
+            sim = self._sim
+            row = imager.line(pose, self.line_row, exposure_s=self.car.camera.exposure_s,
+                              twist=(sim.speed_mps, sim.lateral_speed_mps, sim.yaw_rate_radps),
+                              normals=self._normals, frame_index=self._clock.frame_index)
         obs = np.empty(self._width + 2, np.float32)
         obs[:self._width] = self._lut[row[0]]
         sim = self._sim

@@ -7,7 +7,10 @@ is not called per step). Steps are issued in chunks as large as possible: up to 
 camera-frame boundary or the end of the wait, whichever is first (``CarSim.step(n)``).
 
 Frame schedule: frame ``k`` (k = 0, 1, 2, ...) is at physics step ``round(k * period / dt)``
-(an exact multiple when the period is a whole number of steps). At every frame boundary the
+(an exact multiple when the period is a whole number of steps). :meth:`LockstepClock.set_frame_period`
+changes the period (a line camera whose exposure the controller sets): the frame in progress then
+ends one new period after the last boundary (or after the current step, if that has passed) and
+later frames follow at the new period. At every frame boundary the
 clock calls ``on_frame(k, t_s, pose, command, row_command)`` once, whether or not the
 controller asked for an image; frame 0 is the initial state, called by :meth:`start`.
 ``command`` is the command in force at the boundary; ``row_command`` is the command the first
@@ -66,6 +69,9 @@ class LockstepClock:
         self._row_command: Command | None = None  # what the first step after it applied
         self.step_index = 0
         self.frame_index = 0
+        self._anchor_step = 0   # frame _anchor_frame is at step _anchor_step; later ones follow
+        self._anchor_frame = 0  # at the period (set_frame_period moves the anchor)
+        self._boundary_step = 0  # step of the last frame boundary
         self._next_frame_step = self._frame_step(1)
         self._command: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._command_dirty = True
@@ -77,9 +83,24 @@ class LockstepClock:
 
     # -- schedule ------------------------------------------------------------------
     def _frame_step(self, k: int) -> int:
+        j = k - self._anchor_frame
         if self._steps_per_frame is not None:
-            return k * max(self._steps_per_frame, 1)
-        return int(math.floor(k * self._ratio + 0.5))
+            return self._anchor_step + j * max(self._steps_per_frame, 1)
+        return self._anchor_step + int(math.floor(j * self._ratio + 0.5))
+
+    def set_frame_period(self, period_s: float) -> None:
+        """Frames from now on are ``period_s`` apart: the frame in progress ends one period
+        after the last boundary (if that step has passed, one period from now) and every later
+        frame one period after the one before (``period_s`` validated by the caller)."""
+        ratio = period_s / self.dt_s
+        self._steps_per_frame = int(round(ratio)) if abs(ratio - round(ratio)) < 1e-9 else None
+        self._ratio = max(ratio, 1.0)
+        self._anchor_step, self._anchor_frame = self._boundary_step, self.frame_index
+        nxt = self._frame_step(self.frame_index + 1)
+        if nxt <= self.step_index:  # the new period has passed already: it starts now
+            self._anchor_step = self.step_index
+            nxt = self._frame_step(self.frame_index + 1)
+        self._next_frame_step = nxt
 
     @property
     def time_s(self) -> float:
@@ -143,6 +164,7 @@ class LockstepClock:
         """The step index has reached the next frame: run ``on_frame`` for it; raises
         :class:`RunFinished` if the run is over."""
         k = self.frame_index = self.frame_index + 1
+        self._boundary_step = self.step_index
         self._next_frame_step = self._frame_step(k + 1)
         row_command = None if self._row_pending else self._row_command
         end = self.on_frame(k, self.step_index * self.dt_s, self.pose(), self._command, row_command)

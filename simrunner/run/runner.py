@@ -126,6 +126,11 @@ class Run:
         self.sim: CarModel = make_sim(car, dt_s=settings.dt_s, start=self.start,
                                       surface_z_m=track.surface_z_m)
         self.camera = Camera(car.camera, track)
+        self.imager = None
+        if car.camera.model != "ideal":  # the physical camera (docs/camera.md)
+            from simrunner.sensors.imaging import Imager
+
+            self.imager = Imager(self.camera)
         self.judge = Judge(track, laps=settings.laps)
         self.csv = None
         supervision = current_supervision()
@@ -141,7 +146,7 @@ class Run:
         if video_path is not None:
             from simrunner.run.video import VideoRecorder
 
-            self.video = VideoRecorder(video_path, camera_fps=car.camera.fps_hz,
+            self.video = VideoRecorder(video_path, camera_fps=1.0 / car.camera.frame_period_s(),
                                        render=self.camera.render, raster=track.raster,
                                        laps=settings.laps, line_row=car.camera.default_row,
                                        car_length_m=car.chassis.wheelbase_m + 0.05,
@@ -149,10 +154,10 @@ class Run:
         self.frames = FrameWork(self.sim, self.judge, self.recorder, settings.time_limit_s, self.video,
                                 judged=track.judged, keep_driving=settings.keep_driving)
         self.clock = LockstepClock(self.sim, dt_s=settings.dt_s,
-                                   frame_period_s=1.0 / car.camera.fps_hz, on_frame=self.frames)
+                                   frame_period_s=car.camera.frame_period_s(), on_frame=self.frames)
         self.session = Session(clock=self.clock, camera=self.camera, car=car,
                                rng=np.random.default_rng(settings.seed), recorder=self.recorder,
-                               video=self.video, params=settings.params)
+                               video=self.video, params=settings.params, imager=self.imager)
         self.wall_time_s = 0.0
         self.cpu_time_s = 0.0
         self.signal_guard = None  # a faults.SignalGuard, when drive() installed one

@@ -51,6 +51,7 @@ from simrunner.run.params import ParamValue, convert
 if TYPE_CHECKING:
     from simrunner.run.video import VideoRecorder
     from simrunner.sensors.camera import Camera
+    from simrunner.sensors.imaging import Imager
 
 NormFn = Callable[[float, float], float]
 
@@ -119,6 +120,7 @@ class Session:
     recorder: RunRecorder | None = None
     video: "VideoRecorder | None" = None
     params: Mapping[str, ParamValue] = field(default_factory=dict)
+    imager: "Imager | None" = None  # the physical camera (camera.model linescan / area)
     warnings: list[str] = field(default_factory=list)  # warn_once texts, for the result
 
     def __post_init__(self) -> None:
@@ -128,6 +130,7 @@ class Session:
         self._token: contextvars.Token | None = None
         self.thread_id: int | None = None  # the thread running main (set by activate)
         self._warned: set[str] = set()
+        self.exposure_s = float(self.car.camera.exposure_s)  # set_exposure's value
 
     def activate(self) -> None:
         """Make this the session ``Spinner()`` attaches to in this context (and thread)."""
@@ -327,16 +330,55 @@ class Spinner:
         clock, session = self._clock, self._s
         clock.advance_to_next_frame()
         pose = clock.pose()
-        cam = session.camera
-        if line >= 0:  # one call (simrunner.sensors.line_row)
+        imager = session.imager
+        if imager is not None:  # the physical camera (simrunner.sensors.imaging)
+            img = self._expose(imager, pose, line, add_noise)
+        elif line >= 0:  # one call (simrunner.sensors.line_row)
             img = self._line_image(pose, line, session.noise_rng if add_noise else None)
         else:
+            cam = session.camera
             img = cam.render(pose)
             if add_noise:
                 img = cam.add_noise(img, session.noise_rng)
         if session.video is not None:
             session.video.note_image(img, line)
         return img
+
+    def _expose(self, imager: "Imager", pose, line: int, add_noise: bool) -> np.ndarray:
+        """The physical camera's frame just read: integrated over the exposure in force,
+        blurred by the car's motion, noisy unless ``add_noise`` is False."""
+        sim, session = self._sim, self._s
+        twist = (sim.speed_mps, sim.lateral_speed_mps, sim.yaw_rate_radps) \
+            if imager.spec.motion_blur_samples > 1 else None
+        kw = dict(exposure_s=session.exposure_s, twist=twist, frame_index=self._clock.frame_index,
+                  normals=session.noise_rng if add_noise else None)
+        return imager.line(pose, line, **kw) if line >= 0 else imager.frame(pose, **kw)
+
+    def set_exposure(self, seconds: float) -> None:
+        """Set the camera's exposure (integration) time in seconds (``camera.exposure_s`` at
+        the start). A ``linescan`` camera's frames are then ``seconds + readout_s`` apart,
+        from the frame in progress on (as an SI pulse timer the code reprograms); an ``area``
+        camera keeps its frame rate and exposes at most one frame period; the ``ideal``
+        camera stores the value and ignores it. No time passes."""
+        s = _finite("set_exposure", "seconds", seconds)
+        cam = self._s.car.camera
+        lo, hi = 1e-5, 1.0
+        if cam.model == "area":
+            hi = 1.0 / cam.fps_hz
+        if not lo <= s <= hi:
+            raise self._fail(CommandError(
+                f"set_exposure(seconds={seconds!r}): expected {lo:g} to {hi:g} s"
+                + (f" (an area camera exposes within its frame of 1 / {cam.fps_hz:g} Hz)"
+                   if cam.model == "area" else "")))
+        if _get_ident() != self._owner:
+            raise self._foreign("set_exposure")
+        self._s.exposure_s = s
+        if cam.model == "linescan":
+            self._clock.set_frame_period(cam.frame_period_s(s))
+
+    def get_exposure(self) -> float:
+        """The exposure time in seconds (:meth:`set_exposure`). No time passes."""
+        return self._s.exposure_s
 
     def get_speed(self) -> float:
         """Current speed along the car's x (after one physics step), through ``speed_denorm``."""
@@ -453,3 +495,5 @@ class Spinner:
     getTime = get_time
     addData = add_data
     addNoise = add_noise
+    setExposure = set_exposure
+    getExposure = get_exposure

@@ -43,7 +43,7 @@ from simrunner.run.native.build import NativeProgram, host_program
 
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
-    OP_PARAM, OP_FAULT = range(1, 12)
+    OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE = range(1, 14)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE = 0, 1, 2, 3
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
@@ -358,6 +358,11 @@ class _Session:
             reply(_HDR.pack(ST_OK, out.size) + out.tobytes())
         elif op == OP_PARAM:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(self._param(payload)))
+        elif op == OP_SET_EXPOSURE:
+            s.set_exposure(_D.unpack(payload)[0])
+            reply(_OK_EMPTY)
+        elif op == OP_GET_EXPOSURE:
+            reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_exposure()))
         elif op == OP_FAULT:
             self._fault(payload.decode("utf-8", "replace"))
         else:

@@ -44,7 +44,7 @@
 #include "spinner.h"
 
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
-       OP_NOISE, OP_PARAM, OP_FAULT };
+       OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3 };
 
 static unsigned char out_buf[1 << 16];
@@ -411,6 +411,20 @@ double spinner_get_time(void) {
     INIT();
     if (!finished) call(OP_TIME, NULL, 0, NULL, 0, &last_time_s, sizeof last_time_s);
     return last_time_s;
+}
+
+void spinner_set_exposure(double seconds) {
+    INIT();
+    if (!isfinite(seconds)) misuse("spinner_set_exposure(seconds=%g): expected a finite number", seconds);
+    if (finished) return;
+    call(OP_SET_EXPOSURE, &seconds, sizeof seconds, NULL, 0, NULL, 0);
+}
+
+double spinner_get_exposure(void) {
+    static double last_exposure_s;
+    INIT();
+    if (!finished) call(OP_GET_EXPOSURE, NULL, 0, NULL, 0, &last_exposure_s, sizeof last_exposure_s);
+    return last_exposure_s;
 }
 
 void spinner_sleep(double seconds) {

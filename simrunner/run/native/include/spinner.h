@@ -55,6 +55,12 @@ int spinner_image_width(void);     /* pixels (128 on the default car) */
 int spinner_image_height(void);    /* rows */
 int spinner_line_row(void);        /* the row that plays the real line camera (60) */
 
+/* Camera exposure (integration) time in seconds; no time passes. A linescan camera's frames
+ * are then exposure + read-out apart (from the frame in progress on), an area camera keeps
+ * its frame rate, the ideal camera ignores it (docs/camera.md). Out of range: an error. */
+void spinner_set_exposure(double seconds);
+double spinner_get_exposure(void);
+
 /* Sensors: each lets one physics step pass (so polling loops make progress). */
 double spinner_get_speed(void);    /* through speed_denorm, with the last angle */
 void spinner_get_position(double *x_m, double *y_m, double *z_m);  /* world, rear axle */

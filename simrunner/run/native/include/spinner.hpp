@@ -162,6 +162,8 @@ class Spinner {
         return {float(x), float(y), float(z)};
     }
     double getTime() { return spinner_get_time(); }  // double: exact steps (the thesis: float)
+    void setExposure(double seconds) { spinner_set_exposure(seconds); }
+    double getExposure() { return spinner_get_exposure(); }
     void sleep(double seconds) { spinner_sleep(seconds); }
 
     void addData(const std::vector<std::string> &data) {
