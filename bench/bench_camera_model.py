@@ -56,7 +56,7 @@ def main() -> None:
     print(f"RTF linescan / ideal: {ratio:.2f} (target >= {RATIO_TARGET}: {verdict})")
 
     cam = Camera(physical.camera, track)
-    imager = Imager(cam)
+    imager = Imager(cam, track.lighting, surface_z_m=track.surface_z_m)
     pose = track.start
     rng = np.random.default_rng(0)
     row = physical.camera.default_row

@@ -16,9 +16,10 @@ from simrunner import CommandError, Spinner
 from simrunner.run.clock import LockstepClock
 from simrunner.run.spinner import Session
 from simrunner.sensors.camera import Camera
-from simrunner.sensors.imaging import PHOTONS_PER_LM_S, Imager, Lighting, bilinear_f64
+from simrunner.sensors.imaging import PHOTONS_PER_LM_S, Imager, bilinear_f64
 from simrunner.track.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_from_polygon
 from vehicle.description import CarDescription, CarDescriptionError, load_car
+from worlds.lighting import Light, TrackLighting
 
 CAR = CarDescription()
 QUIET = dict(prnu=0.0, dsnu_e=0.0, dark_current_eps=0.0, psf_sigma_px=0.0, motion_blur_samples=1,
@@ -43,7 +44,7 @@ def stripe():
 
 
 def imager(raster, lux=500.0, **kw):
-    return Imager(Camera(spec(**kw), raster), Lighting(lux))
+    return Imager(Camera(spec(**kw), raster), TrackLighting(ambient_lux=lux))
 
 
 def line(im, exposure_s, row=60, **kw):

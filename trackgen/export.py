@@ -106,6 +106,7 @@ def track_json(track: Track, geometry: TrackGeometry) -> dict:
         "surface_z_m": s.thickness_m,
         "lane_polygon": polygon_json(geometry.lane),
         "road_polygon": polygon_json(geometry.road),
+        **({} if layout.lighting.is_default() else {"lighting": layout.lighting.to_json()}),
     }
 
 

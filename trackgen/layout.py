@@ -35,6 +35,16 @@ Track-wide settings, each at most once, anywhere in the file (conventionally at 
                           1.3 gives the thesis's 130 % Gazebo track): a scaled layout is the
                           unscaled one scaled, and closes exactly when that one does
 
+Light and surfaces (the physical camera's scene; ``worlds.lighting``, docs/camera.md):
+
+    @ambient_lux = 500    illuminance on the whole track, lux (0 .. 200000)
+    @light = X Y Z INTENSITY_CD [CONE_DEG]   a lamp at world X Y Z (m; Z above the track,
+                          scaled by @scale), luminous intensity in candela, optionally a spot
+                          pointing down with that full cone angle (deg); may repeat
+    @lane_reflectance = 0.92, @line_reflectance = 0.06, @floor_reflectance = 0.16,
+    @specular = 0.03      fractions of light the lane, the black lines and the floor return;
+                          the glossy share of the lamps' light
+
 Limits: a repeat count is 1..MAX_REPEAT, a layout has at most MAX_PIECES pieces after
 repeats and at most MAX_FILE_BYTES bytes, a line (without its comment) at most
 MAX_LINE_CHARS characters, a number at most MAX_NUMBER_CHARS; every number has a range
@@ -55,6 +65,9 @@ from typing import Mapping
 
 from pieces.spec import PARAMS, SETTINGS_PARAMS, ParamSpec, PieceError, PieceType, TrackSettings
 
+from worlds.lighting import LIMITS as LIGHT_LIMITS
+from worlds.lighting import Light, TrackLighting
+
 from .errors import LayoutError
 
 MAX_REPEAT = 1000
@@ -73,7 +86,10 @@ MAX_NUMBER_CHARS = 40
 PIECE_NAMES: tuple[str, ...] = tuple(k.name for k in PieceType)
 SCALED_SETTINGS = ("lane_width", "edge_width", "thickness")
 """Settings that ``@scale`` multiplies (``arc_tolerance`` is a meshing accuracy, not a size)."""
-EXTRA_SETTINGS = ("name", "scale")
+LIGHT_SETTINGS = ("ambient_lux", "light", "lane_reflectance", "line_reflectance", "floor_reflectance",
+                  "specular")
+"""The light and surface settings (``worlds.lighting.TrackLighting``); only ``@light`` repeats."""
+EXTRA_SETTINGS = ("name", "scale") + LIGHT_SETTINGS
 
 # Unambiguous (no nested quantifiers over the same digits): linear time on any input.
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
@@ -117,6 +133,7 @@ class Layout:
     settings: TrackSettings = field(default_factory=TrackSettings)
     scale: float = 1.0
     setting_values: Mapping[str, float] = field(default_factory=dict)
+    lighting: TrackLighting = field(default_factory=TrackLighting)  # @ambient_lux, @light, ...
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "entries", tuple(self.entries))
@@ -228,6 +245,8 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     values: dict[str, float] = {}
     seen_at: dict[str, int] = {}
     name, scale = sanitize_name(default_name), 1.0
+    light_values: dict[str, float] = {}
+    lamps: list[tuple[int, tuple[float, ...]]] = []
     lines = text.removeprefix("\ufeff").split("\n")
     for lineno, raw in enumerate(lines, start=1):
         body = raw.split("#", 1)[0].strip()
@@ -239,6 +258,9 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
                                             f"{_shown(body)}")
         if body.startswith("@"):
             key, value = _parse_setting(body, path, lineno)
+            if key == "light":
+                lamps.append((lineno, value))
+                continue
             if key in seen_at:
                 raise LayoutError(path, lineno, f"@{key} set twice (first on line {seen_at[key]})")
             seen_at[key] = lineno
@@ -246,6 +268,8 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
                 name = value
             elif key == "scale":
                 scale = value
+            elif key in LIGHT_SETTINGS:
+                light_values[key] = value
             else:
                 values[key] = value
             continue
@@ -267,8 +291,15 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     except PieceError as exc:  # only reachable through extreme scale factors
         line = seen_at.get("scale", 1)
         raise LayoutError(path, line, f"track settings after @scale={scale:g}: {exc}") from None
+    lights = tuple(Light(x * scale, y * scale, z * scale, cd, cone) for _, (x, y, z, cd, cone) in lamps)
+    for lineno, (_, _, z, _, _) in lamps:
+        if not LIGHT_LIMITS["height_m"][0] <= z * scale <= LIGHT_LIMITS["height_m"][1]:
+            lo, hi = LIGHT_LIMITS["height_m"]
+            raise LayoutError(path, lineno, f"@light: Z = {z * scale:g} m{' after @scale' if scale != 1 else ''}: "
+                                            f"expected {lo:g} <= Z <= {hi:g} (m above the track)")
+    lighting = TrackLighting(lights=lights, **light_values)
     return Layout(path=path, name=name, entries=tuple(entries), settings=settings,
-                  scale=scale, setting_values=values)
+                  scale=scale, setting_values=values, lighting=lighting)
 
 
 def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
@@ -285,6 +316,8 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
                                         f"{', '.join('@' + k for k in known)}{hint})")
     if not value:
         raise LayoutError(path, lineno, f"@{key}: missing value (expected '@{key} = VALUE')")
+    if key == "light":
+        return key, _parse_light(value, path, lineno)
     if key == "name":
         if not _NAME.match(value):
             raise LayoutError(path, lineno, f"@name = {_shown(value)}: expected 1-64 letters, "
@@ -298,10 +331,37 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
             raise LayoutError(path, lineno, f"@scale = {_bare(value)}: expected {MIN_SCALE:g} "
                                             f"<= scale <= {MAX_SCALE:g}")
         return key, number
+    if key in LIGHT_SETTINGS:
+        lo, hi = LIGHT_LIMITS["ambient_lux" if key == "ambient_lux" else
+                              "specular" if key == "specular" else "reflectance"]
+        if not lo <= number <= hi:
+            raise LayoutError(path, lineno, f"@{key} = {_bare(value)}: expected {lo:g} <= {key} <= {hi:g}"
+                                            f"{' (lux)' if key == 'ambient_lux' else ' (a fraction)'}")
+        return key, number
     spec = SETTINGS_PARAMS[key]
     if not spec.contains(number):
         raise LayoutError(path, lineno, f"@{key} = {_bare(value)}: expected {range_text(spec)}")
     return key, number
+
+
+def _parse_light(value: str, path: str, lineno: int) -> tuple[float, float, float, float, float | None]:
+    """``X Y Z INTENSITY_CD [CONE_DEG]`` of an ``@light`` line."""
+    usage = "expected '@light = X Y Z INTENSITY_CD [CONE_DEG]' (m, m, m, candela, degrees)"
+    words = value.split()
+    if not 4 <= len(words) <= 5:
+        raise LayoutError(path, lineno, f"@light = {_shown(value)}: {usage}")
+    numbers = []
+    for word, what, limit in zip(words, ("X", "Y", "Z", "INTENSITY_CD", "CONE_DEG"),
+                                 ("coordinate_m", "coordinate_m", "coordinate_m", "intensity_cd", "cone_deg")):
+        number = _number(word)
+        if number is None:
+            raise LayoutError(path, lineno, f"@light: {what} = {_shown(word)}: expected a number; {usage}")
+        lo, hi = LIGHT_LIMITS[limit]
+        if not lo <= number <= hi:
+            raise LayoutError(path, lineno, f"@light: {what} = {_bare(word)}: expected {lo:g} <= {what} <= {hi:g}")
+        numbers.append(number)
+    x, y, z, cd = numbers[:4]
+    return x, y, z, cd, (numbers[4] if len(numbers) == 5 else None)
 
 
 def _number(text: str) -> float | None:

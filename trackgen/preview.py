@@ -70,6 +70,28 @@ def _mask(geom, to_px, size: tuple[int, int]):
     return mask
 
 
+def _lit(image, lighting, x0: float, y1: float, px_per_m: float, surface_z_m: float):
+    """``image`` as the track's light shows it: each pixel times its illuminance over the
+    default hall's (``worlds.lighting.DEFAULT_AMBIENT_LUX``), clipped at white; the lamps marked
+    with their position (a yellow ring)."""
+    from PIL import Image, ImageDraw
+
+    from worlds.lighting import DEFAULT_AMBIENT_LUX
+
+    w, h = image.size
+    xs = x0 + (np.arange(w) + 0.5) / px_per_m
+    ys = y1 - (np.arange(h) + 0.5) / px_per_m
+    lux = np.broadcast_to(lighting.illuminance_lux(xs[None, :] + 0 * ys[:, None], ys[:, None] + 0 * xs[None, :],
+                                                   surface_z_m), (h, w))
+    shade = np.asarray(image, dtype=np.float64) * (lux / DEFAULT_AMBIENT_LUX)[:, :, None]
+    out = Image.fromarray(np.clip(np.rint(shade), 0, 255).astype(np.uint8), "RGB")
+    draw = ImageDraw.Draw(out)
+    for lamp in lighting.lights:
+        px, py = (lamp.x_m - x0) * px_per_m, (y1 - lamp.y_m) * px_per_m
+        draw.ellipse((px - 6, py - 6, px + 6, py + 6), outline=(230, 190, 0), width=2)
+    return out
+
+
 def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> tuple[int, int]:
     """Write the PNG to ``path``; return its ``(width_px, height_px)``."""
     from PIL import Image, ImageDraw
@@ -107,6 +129,9 @@ def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> t
     for geom, colour in ((geometry.road, (0, 0, 0)), (geometry.lane, (255, 255, 255))):
         image.paste(colour, (0, 0), _mask(geom, k_px, big))
     image = image.reduce(SUPERSAMPLE)  # box filter: smooth edges
+    lighting = track.layout.lighting
+    if not lighting.is_default():
+        image = _lit(image, lighting, x0, y1, px_per_m, track.layout.settings.thickness_m)
     draw = ImageDraw.Draw(image)
     _labels(track, draw, to_px, px_per_m)
     _arrow(track, draw, to_px)

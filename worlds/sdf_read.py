@@ -52,6 +52,7 @@ import numpy as np
 
 from pieces.pose import Pose2
 from worlds.sdf_xml import WorldError, XmlDoc, parse_pose, parse_vector, parse_xml, text_of
+from worlds.lighting import TrackLighting, from_sdf_world
 
 MODEL_PATH_ENV = ("GAZEBO_MODEL_PATH", "GZ_SIM_RESOURCE_PATH", "IGN_GAZEBO_RESOURCE_PATH", "SDF_PATH")
 GROUND_MODELS = ("ground_plane",)
@@ -110,6 +111,7 @@ class Scene:
     car_z_m: float | None
     track_json: Path | None
     ground_z_m: float | None
+    lighting: TrackLighting | None = None  # the world's lights (worlds.lighting), None: none
 
 
 def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
@@ -121,10 +123,14 @@ def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
     track_json = source.parent / "track.json"
     if _is_file(track_json) and not inside(track_json, reader.roots):
         raise WorldError(f"{track_json}: links outside the world's folder {source.parent}")
+    world = doc.root.find("world")
+    lighting = None
+    if world is not None:
+        lighting = from_sdf_world(world, lambda el: tuple(parse_pose(doc, el.find("pose"))[:3, 3]))
     return Scene(source=source, visuals=tuple(reader.visuals), collisions=tuple(reader.collisions),
                  car_pose=reader.car_pose, car_z_m=reader.car_z_m,
                  track_json=track_json if track_json.is_file() else None,
-                 ground_z_m=reader.ground_z_m)
+                 ground_z_m=reader.ground_z_m, lighting=lighting)
 
 
 def load_mesh_world(visual: MeshVisual):

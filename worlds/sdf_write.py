@@ -44,6 +44,7 @@ from pathlib import Path
 
 from pieces.pose import Pose2
 from vehicle.description import CarDescription, CarDescriptionError
+from worlds.lighting import TrackLighting, write_sdf
 from worlds.sdf_xml import SDF_VERSION, WorldError, fmt, parse_xml, sub, write_xml
 
 TRACK_ROLES = {  # role -> RGBA of its material
@@ -366,8 +367,10 @@ def _sun(world: ET.Element) -> None:
 
 
 def write_world(path: Path, *, world_name: str, track_model: str, car_model: str,
-                car_pose: Pose2, car_z_m: float) -> None:
-    """Write a world with ground, sun, the track and the car standing at ``car_pose``.
+                car_pose: Pose2, car_z_m: float, lighting: TrackLighting | None = None) -> None:
+    """Write a world with ground, sun, the track and the car standing at ``car_pose``;
+    ``lighting`` other than the default adds its lamps and photometric numbers
+    (:func:`worlds.lighting.write_sdf`).
 
     The models are read from ``path.parent / "models" / NAME / "model.sdf"`` (written by
     :func:`write_track_model` and :func:`write_car_model`) and inlined with mesh URIs
@@ -394,6 +397,8 @@ def write_world(path: Path, *, world_name: str, track_model: str, car_model: str
     sub(scene, "background", "0.7 0.7 0.7 1")
     sub(scene, "shadows", False)
     _sun(world)
+    if lighting is not None and not lighting.is_default():
+        write_sdf(world, lighting, fmt)
     _ground(world)
     track = _inline_model(world_dir, track_model)
     track.insert(0, ET.Element("pose"))
@@ -407,7 +412,8 @@ def write_world(path: Path, *, world_name: str, track_model: str, car_model: str
 
 
 def write_track_world(out_dir: Path, *, track_name: str, meshes: dict[str, str],
-                      start_pose: Pose2, surface_z_m: float, car: CarDescription) -> Path:
+                      start_pose: Pose2, surface_z_m: float, car: CarDescription,
+                      lighting: TrackLighting | None = None) -> Path:
     """Write the track model, the car model and ``out_dir/world.sdf``; return the world path.
 
     ``meshes`` maps role -> path relative to ``out_dir/models/<track_name>/`` (the STL files
@@ -421,5 +427,5 @@ def write_track_world(out_dir: Path, *, track_name: str, meshes: dict[str, str],
     write_car_model(out_dir / "models" / car.name, car)
     world_path = out_dir / "world.sdf"
     write_world(world_path, world_name=track_name, track_model=track_name, car_model=car.name,
-                car_pose=start_pose, car_z_m=surface_z_m)
+                car_pose=start_pose, car_z_m=surface_z_m, lighting=lighting)
     return world_path

@@ -132,7 +132,7 @@ class NXPCupEnv(gymnasium.Env):
             if self.car.camera.model != "ideal":
                 from simrunner.sensors.imaging import Imager
 
-                imager = Imager(camera)
+                imager = Imager(camera, track.lighting, surface_z_m=track.surface_z_m)
             parts = _TrackParts(track, label, sim, sim.save_state(), camera,
                                 CentrelineProgress(track.centreline), imager)
             if len(self._cache) >= _MAX_CACHED_TRACKS:

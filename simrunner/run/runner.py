@@ -130,7 +130,7 @@ class Run:
         if car.camera.model != "ideal":  # the physical camera (docs/camera.md)
             from simrunner.sensors.imaging import Imager
 
-            self.imager = Imager(self.camera)
+            self.imager = Imager(self.camera, track.lighting, surface_z_m=track.surface_z_m)
         self.judge = Judge(track, laps=settings.laps)
         self.csv = None
         supervision = current_supervision()

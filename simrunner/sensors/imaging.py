@@ -4,10 +4,14 @@ One chain per pixel, the linear camera model of the EMVA 1288 standard (release 
 numbers a camera maker publishes go straight into the car file (docs/camera.md):
 
 1. **Scene.** The ground point the pixel's ray meets (:class:`~simrunner.sensors.camera.Camera`'s
-   pinhole geometry) has a reflectance ``rho`` (the track raster's grey level / 255: lane
-   0.92, edge lines 0.06, floor 0.16) and is lit with an illuminance ``E`` in lux
-   (:class:`Lighting`: an ambient level for now). A matte (Lambertian) surface then has the
-   luminance ``rho E / pi``.
+   pinhole geometry) has a reflectance ``rho`` (the track's lane, line or floor reflectance,
+   :class:`worlds.lighting.TrackLighting`; by default the raster's grey level / 255: lane
+   0.92, edge lines 0.06, floor 0.16) and is lit with an illuminance ``E`` in lux: the
+   track's ambient level plus its lamps (inverse-square law, Lambert's cosine, spot cones).
+   A matte (Lambertian) surface then has the luminance ``rho E / pi``; the lamps also give a
+   glossy highlight, Blinn-Phong ``k_s (s + 8) / (8 pi) cos(n, h)^s E_lamp`` (``k_s`` the
+   track's ``specular``, ``s = SHININESS``, ``h`` half-way between the directions to the lamp
+   and to the camera).
 2. **Lens.** The image-plane illuminance is ``rho E tau / (4 N^2)`` on the optical axis (``tau``
    the lens transmission, ``N`` the f-number), times ``cos(theta)^n`` (``n =
    vignetting_power``, 4 for the natural cos^4 law; ``theta`` the ray's angle to the axis) and
@@ -46,26 +50,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from pieces.pose import Pose2
+from worlds.lighting import SHININESS, TrackLighting
 
 # Photons per lumen-second of white light: a white LED's spectrum gives ~300 lm per radiant
 # watt (luminous efficacy of radiation) at a mean photon energy of ~3.5e-19 J (~560 nm), so
 # 1 lm s = 1/300 J = 9.4e15 photons. (Monochromatic 555 nm light would give 4.1e15.)
 PHOTONS_PER_LM_S = 9.4e15
-# EN 12193 (sports lighting) asks 500 lux of a class II indoor hall (regional competition);
-# school gyms (class III) have 200-300 lux, class I halls 750 lux.
-DEFAULT_AMBIENT_LUX = 500.0
-
-
-@dataclass(frozen=True)
-class Lighting:
-    """The light on the track: ``ambient_lux`` everywhere (point and spot lights: issue 47
-    item 2)."""
-
-    ambient_lux: float = DEFAULT_AMBIENT_LUX
-
-    def illuminance_lux(self, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray | float:
-        """Illuminance (lux) on the track at the world points ``(x_m, y_m)`` (equal shapes)."""
-        return self.ambient_lux
 
 
 def _gaussian_kernel(sigma_px: float) -> np.ndarray:
@@ -133,13 +123,23 @@ class Imager:
     :meth:`line` and :meth:`frame` give what ``get_image(row)`` and ``get_image()`` return.
     Per-pixel constants (lens fall-off, fixed pattern) are computed once here."""
 
-    def __init__(self, camera, lighting: Lighting | None = None) -> None:
+    def __init__(self, camera, lighting: TrackLighting | None = None, *, surface_z_m: float = 0.0) -> None:
         spec = camera.cam
         if spec.model not in ("linescan", "area"):
             raise ValueError(f"Imager: camera model {spec.model!r} is not a physical camera")
         self.camera = camera
         self.spec = spec
-        self.lighting = lighting or Lighting()
+        self.lighting = lighting if lighting is not None else TrackLighting()
+        self.surface_z_m = float(surface_z_m)
+        # reflectance image: the raster itself when reflectance = grey / 255, else a 16-bit map
+        raster = camera.raster
+        lut = self.lighting.reflectance_of_gray()
+        if np.array_equal(lut, np.arange(256) / 255.0):
+            self._refl_image, self._refl_scale = raster.image, 1.0 / 255.0
+        else:
+            self._refl_image = np.rint(lut[raster.image] * 65535.0).astype(np.uint16)
+            self._refl_scale = 1.0 / 65535.0
+        self._refl_floor = float(lut[int(raster.floor_gray)]) / self._refl_scale
         w, h = camera.width_px, camera.height_px
         self._kernel = _gaussian_kernel(float(spec.psf_sigma_px))
         self._margin = (len(self._kernel) - 1) // 2
@@ -220,11 +220,9 @@ class Imager:
         return xs, ys, yaws
 
     def scene_lux(self, poses, r0: int, r1: int) -> np.ndarray:
-        """Reflectance x illuminance (lux) seen along rows ``r0 .. r1 - 1`` over ``W + 2
-        margin`` columns, the mean over ``poses`` (``(x_m, y_m, yaw_rad)`` lists):
-        ``(r1 - r0, W + 2 margin)``."""
-        raster = self.camera.raster
-        floor = float(raster.floor_gray)
+        """Reflectance x illuminance (lux; plus the lamps' highlights) seen along rows ``r0 ..
+        r1 - 1`` over ``W + 2 margin`` columns, the mean over ``poses`` (``(x_m, y_m,
+        yaw_rad)`` lists): ``(r1 - r0, W + 2 margin)``."""
         gx, gy, miss, any_miss, segment = self._rows_ground(r0, r1)
         inv = self._inv_m
         xs, ys, yaws = poses
@@ -246,15 +244,43 @@ class Imager:
         sx *= inv
         sy = self._y0_m - wy
         sy *= inv
-        gray = bilinear_f64(raster.image, sx, sy, floor, ends_only=segment)
+        scene = bilinear_f64(self._refl_image, sx, sy, self._refl_floor, ends_only=segment)
         if any_miss:
-            gray[..., miss] = floor
-        lux = self.lighting.illuminance_lux(wx, wy)
+            scene[..., miss] = self._refl_floor
+        lighting = self.lighting
+        if not lighting.lights:
+            scene *= lighting.ambient_lux * self._refl_scale
+        else:
+            scene *= lighting.illuminance_lux(wx, wy, self.surface_z_m) * self._refl_scale
+            if lighting.specular > 0.0:
+                scene += self._highlights(wx, wy, xs, ys, yaws)
         if n == 1:
-            gray *= lux * (1.0 / 255.0)
-            return gray
-        gray *= lux * (1.0 / (255.0 * n))
-        return gray.sum(axis=0)
+            return scene
+        scene *= 1.0 / n
+        return scene.sum(axis=0)
+
+    def _highlights(self, wx, wy, xs, ys, yaws) -> np.ndarray:
+        """The lamps' glossy reflection toward the camera (Blinn-Phong, the module docstring)
+        at the surface points ``(wx, wy)`` seen from the camera of each pose."""
+        spec, z_s = self.spec, self.surface_z_m
+        f = float(spec.forward_m)
+        if wx.ndim == 3:  # one camera position per pose
+            yaw = np.array(yaws)[:, None, None]
+            px = np.array(xs)[:, None, None] + f * np.cos(yaw)
+            py = np.array(ys)[:, None, None] + f * np.sin(yaw)
+        else:
+            px, py = xs[0] + f * math.cos(yaws[0]), ys[0] + f * math.sin(yaws[0])
+        vx, vy, vz = px - wx, py - wy, float(spec.height_m)
+        vn = np.sqrt(vx * vx + vy * vy + vz * vz)
+        k = self.lighting.specular * (SHININESS + 8.0) / 8.0
+        out = np.zeros(np.shape(wx))
+        for lamp in self.lighting.lights:
+            lx, ly, lz = lamp.x_m - wx, lamp.y_m - wy, lamp.z_m - z_s
+            ln = np.sqrt(lx * lx + ly * ly + lz * lz)
+            hx, hy, hz = lx / ln + vx / vn, ly / ln + vy / vn, lz / ln + vz / vn
+            cos_h = hz / np.sqrt(hx * hx + hy * hy + hz * hz)
+            out += k * cos_h ** SHININESS * lamp.illuminance_lux(wx, wy, z_s)
+        return out
 
     # -- the sensor ----------------------------------------------------------------
     def _expose(self, scene: np.ndarray, r0: int, r1: int, exposure_s: float, normals,

@@ -34,13 +34,14 @@ From a scene (a world):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from pieces.pose import Pose2
+from worlds.lighting import TrackLighting
 from simrunner.track.errors import TrackLoadError
 from simrunner.track.raster import (DEFAULT_M_PER_PX, ROLE_GRAY, TrackRaster, build_raster,
                                     check_m_per_px, layer_from_footprint, layer_from_visual,
@@ -74,6 +75,7 @@ class SimTrack:
     centreline: np.ndarray | None = None  # (N, 2) metres, closed loop in driving order
     lap_length_estimated: bool = False
     judged: bool = True  # False: a free floor (simrunner.track.floor), no laps, no off-track
+    lighting: TrackLighting = field(default_factory=TrackLighting)  # the physical camera's light
 
     @property
     def road_mask(self) -> np.ndarray:
@@ -164,7 +166,7 @@ def track_from_trackgen(track: Track, *, geometry: TrackGeometry | None = None,
     return SimTrack(
         name=name or layout.name, source=source, raster=raster, surface_z_m=top_z, start=start,
         gate=gate, gate_half_width_m=float(half), lap_length_m=float(track.length_m),
-        centreline=centreline, lap_length_estimated=False)
+        centreline=centreline, lap_length_estimated=False, lighting=layout.lighting)
 
 
 def _read_world(path: Path):
@@ -218,7 +220,8 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
         name=name or meta.get("name") or _default_name(scene.source),
         source=source, raster=raster, surface_z_m=surface_z, start=start, gate=gate,
         gate_half_width_m=float(half), lap_length_m=float(lap_length),
-        centreline=meta.get("centreline"), lap_length_estimated=estimated)
+        centreline=meta.get("centreline"), lap_length_estimated=estimated,
+        lighting=scene.lighting if scene.lighting is not None else TrackLighting())
 
 
 def road_extents_m(raster: TrackRaster, pose: Pose2) -> tuple[float, float]:
