@@ -171,3 +171,21 @@ def test_reflectances_and_the_lamps_highlight(floor):
     assert glossy.max() < 255 and (gain >= 0).all()
     assert gain[40:88].max() > 0.5 * matte[40:88].max()  # the highlight, where the mirror angle is
     assert gain[:10].max() <= 1 and gain[-10:].max() <= 1  # and nowhere else
+
+
+def test_the_dim_hall_of_the_docs_defeats_a_fixed_threshold_not_an_adaptive_one(tmp_path):
+    """docs/camera.md "A dim hall", as it says: the line follower with its fixed threshold
+    leaves the track in the dim loop; with threshold=0 it laps, and the C twin logs the same."""
+    from pathlib import Path
+
+    from simrunner.run.runner import drive
+
+    ex = Path(__file__).resolve().parents[1] / "examples"
+    kw = dict(track=ex / "dim_hall.txt", car=ex / "linescan_car.toml", laps=2)
+    fixed = drive(ex / "line_follower.py", **kw)
+    assert fixed.outcome == "off_track" and fixed.sim_time_s < 3.0
+    adaptive = drive(ex / "line_follower.py", params={"threshold": 0}, csv=tmp_path / "py.csv", **kw)
+    assert adaptive.outcome == "finished" and adaptive.laps_completed == 2
+    twin = drive(ex / "line_follower.c", params={"threshold": 0}, csv=tmp_path / "c.csv", **kw)
+    assert twin.outcome == "finished"
+    assert (tmp_path / "py.csv").read_bytes() == (tmp_path / "c.csv").read_bytes()
