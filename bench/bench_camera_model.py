@@ -1,6 +1,6 @@
 """The physical camera's cost (issue 47): closed-loop laps of examples/line_follower.py on the
-default track with the default car (``camera.model = "ideal"``) and the same car with
-``model = "linescan"`` (same 50 Hz frame period: 19.5 ms exposure + 0.5 ms read-out),
+default track with the default car (``camera.model = "linescan"``: 19.5 ms exposure + 0.5 ms
+read-out, 50 Hz) and the same car with ``model = "ideal"`` (50 Hz),
 interleaved, best of ``REPEATS`` in process CPU time; and the camera line alone per frame
 (``Camera.line_image`` against ``Imager.line`` with noise and motion blur), warm.
 
@@ -37,8 +37,8 @@ def _line_cost_us(fn, n: int = 2000) -> float:
 
 
 def main() -> None:
-    ideal = load_car(None)
-    physical = ideal.replace(camera=dataclasses.replace(ideal.camera, model="linescan"))
+    physical = load_car(None)  # the default car: a linescan camera
+    ideal = physical.replace(camera=dataclasses.replace(physical.camera, model="ideal"))
     track, _ = resolve_track(None, ideal)
     best = {"ideal": math.inf, "linescan": math.inf}
     laps = {}

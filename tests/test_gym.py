@@ -3,6 +3,7 @@ same physics as ``simrunner drive``, reward / termination / truncation, render, 
 The progress tracker's geometry has property tests. Gymnasium is an optional extra."""
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -19,6 +20,7 @@ from simrunner.errors import SimError  # noqa: E402
 from simrunner.gym.env import NXPCupEnv  # noqa: E402
 from simrunner.gym.progress import CentrelineProgress  # noqa: E402
 from simrunner.run.runner import default_track, drive  # noqa: E402
+from vehicle.description import CarDescription  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 W = 128
@@ -54,9 +56,13 @@ def test_spaces_are_documented_boxes(env):
     obs, info = env.reset(seed=0)
     assert env.observation_space.contains(obs)
     assert obs[-2] == 0.0 and obs[-1] == 0.0  # at rest, wheels straight
-    # the lane is white (1.0) in the middle of the row at the start, the floor dark at the sides
-    assert obs[W // 2] > 0.8 and obs[0] < 0.3 and obs[W - 1] < 0.3
+    assert (obs[:W] == 1.0).all()  # the line camera's power-up frame reads full (docs/gym.md)
     assert info["t_s"] == 0.0 and info["laps_completed"] == 0 and not info["off_track"]
+    # past power-up: the lane is bright in the middle of the row, the floor dark at the sides
+    base = CarDescription()
+    awake = NXPCupEnv(car=base.replace(camera=dataclasses.replace(base.camera, startup_frames=0)))
+    obs, _ = awake.reset(seed=0)
+    assert obs[W // 2] > 0.75 and obs[0] < 0.3 and obs[W - 1] < 0.3
 
 
 VEC_ACTIONS = np.array([[0.1, 0.5], [-0.2, 0.0]], np.float32)
@@ -109,13 +115,17 @@ def test_same_seed_and_actions_give_bit_identical_observations():
                 break
         return np.stack(out)
 
-    a, b = NXPCupEnv(time_limit_s=2.0), NXPCupEnv(time_limit_s=2.0)
+    base = CarDescription()  # a line camera with visible temporal noise (~2.5 grey levels)
+    car = base.replace(camera=dataclasses.replace(base.camera, dark_noise_e=60000.0))
+    a, b = NXPCupEnv(car=car, time_limit_s=2.0), NXPCupEnv(car=car, time_limit_s=2.0)
     first = run(a)
     run(a)  # an episode in between: the car state is restored exactly at reset
     np.testing.assert_array_equal(run(a), first)
     np.testing.assert_array_equal(run(b), first)
-    other_seed = b.reset(seed=43)[0]
-    assert not np.array_equal(other_seed, first[0, :-1])  # the camera noise differs
+    b.reset(seed=43)
+    for a in actions[:3]:  # past the power-up frame
+        other_seed = b.step(a)[0]
+    assert not np.array_equal(other_seed, first[3, :-1])  # the camera noise differs
 
 
 def test_a_step_is_the_physics_drive_runs_between_two_camera_frames():
@@ -410,9 +420,10 @@ def test_a_linescan_car_observes_its_physical_camera_at_its_frame_period():
     env = NXPCupEnv(car=car, time_limit_s=1.0)
     obs, info = env.reset(seed=3)
     assert env.metadata["render_fps"] == pytest.approx(100.0)
+    assert (obs[:128] == 1.0).all()  # frame 0 and 1: the power-up frames read full
     obs, *_ = env.step(np.array([0.0, -0.5], np.float32))
     assert info["t_s"] == 0.0 and env._clock.time_s == pytest.approx(0.01)  # 9.5 + 0.5 ms
-    assert (obs[:128] == 1.0).all()  # frame 1: the start-up frame reads full
+    assert (obs[:128] == 1.0).all()
     obs, *_ = env.step(np.array([0.0, -0.5], np.float32))
     lane = obs[:128]
     assert lane.max() < 1.0 and lane[64] > 0.3 and lane[0] < 0.5 * lane[64]  # lit, not clipped, vignetted
@@ -420,3 +431,6 @@ def test_a_linescan_car_observes_its_physical_camera_at_its_frame_period():
     again.reset(seed=3)
     again.step(np.array([0.0, -0.5], np.float32))
     assert np.array_equal(again.step(np.array([0.0, -0.5], np.float32))[0], obs)
+    ideal = NXPCupEnv(car=base.replace(camera=dataclasses.replace(base.camera, model="ideal")), time_limit_s=1.0)
+    assert ideal.metadata["render_fps"] == pytest.approx(50.0)
+    assert ideal.reset(seed=3)[0][64] == pytest.approx(235 / 255, abs=0.1)  # the exact render, noisy

@@ -303,8 +303,8 @@ def test_camera_fields_are_checked_with_their_line(tmp_path, body, message):
     assert message in str(err.value)
 
 
-def test_camera_file_round_trip_and_ideal_default(tmp_path):
-    assert CAR.camera.model == "ideal" and CAR.camera.frame_period_s() == 1 / CAR.camera.fps_hz
+def test_camera_file_round_trip_and_the_default_line_camera(tmp_path):
+    assert CAR.camera.model == "linescan" and CAR.camera.frame_period_s() == pytest.approx(0.02)  # 50 Hz
     car = CAR.replace(camera=spec(vignetting_profile=tuple(np.linspace(0.6, 1.0, 128))))
     car.save(tmp_path / "c.toml")
     back = load_car(tmp_path / "c.toml")

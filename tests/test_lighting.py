@@ -181,7 +181,7 @@ def test_the_dim_hall_of_the_docs_defeats_a_fixed_threshold_not_an_adaptive_one(
     from simrunner.run.runner import drive
 
     ex = Path(__file__).resolve().parents[1] / "examples"
-    kw = dict(track=ex / "dim_hall.txt", car=ex / "linescan_car.toml", laps=2)
+    kw = dict(track=ex / "dim_hall.txt", laps=2)  # the default car: a linescan camera
     fixed = drive(ex / "line_follower.py", **kw)
     assert fixed.outcome == "off_track" and fixed.sim_time_s < 3.0
     adaptive = drive(ex / "line_follower.py", params={"threshold": 0}, csv=tmp_path / "py.csv", **kw)

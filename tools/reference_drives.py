@@ -5,9 +5,10 @@
 
 Drives ``examples/line_follower.py`` for one lap (seed 0) on the bundled default track and,
 when ``../shared/tracks`` is beside the checkout, on ``nxp_raceway`` and
-``nxp_raceway_octagon``; also one run whose controller takes the whole 2-D camera frame with
-noise and logs a digest of its pixels (the full-frame render and ``add_noise`` path, which the
-line follower does not use). Writes ``OUT_DIR/<name>.csv`` and ``OUT_DIR/digests.txt``
+``nxp_raceway_octagon``; the default track again with the ideal camera (``camera.model =
+"ideal"``: the images of earlier versions); and one run whose controller takes the whole 2-D
+camera frame with noise and logs a digest of its pixels, with each camera (the full-frame
+paths, which the line follower does not use). Writes ``OUT_DIR/<name>.csv`` and ``OUT_DIR/digests.txt``
 (``sha256  name``), and the installed versions of the libraries whose arithmetic reaches the
 bytes (``OUT_DIR/versions.txt``). ``--compare`` prints which libraries moved and which drives
 differ (and from which row), exit status 1 when any does. ``make test-latest`` runs both.
@@ -35,13 +36,20 @@ def full_frame_controller(s) -> None:
         s.add_data([f"crc:{zlib.crc32(img.tobytes()):08x}"])
 
 
-def reference_runs() -> list[tuple[str, object, object]]:
-    """``(name, controller, track)`` of every reference drive this checkout can run."""
+def reference_runs() -> list[tuple[str, object, object, object]]:
+    """``(name, controller, track, car)`` of every reference drive this checkout can run."""
+    import dataclasses
+
+    from vehicle.description import CarDescription
+
+    base = CarDescription()
+    ideal = base.replace(camera=dataclasses.replace(base.camera, model="ideal"))
     follower = REPO / "examples" / "line_follower.py"
-    runs = [("default", follower, None), ("full_frame", full_frame_controller, None)]
+    runs = [("default", follower, None, None), ("full_frame", full_frame_controller, None, None),
+            ("ideal_default", follower, None, ideal), ("ideal_full_frame", full_frame_controller, None, ideal)]
     for name in ("nxp_raceway", "nxp_raceway_octagon"):
         if (SHARED_TRACKS / name).is_dir():
-            runs.append((name, follower, SHARED_TRACKS / name))
+            runs.append((name, follower, SHARED_TRACKS / name, None))
     return runs
 
 
@@ -51,9 +59,9 @@ def main(out_dir: str) -> int:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     lines = []
-    for name, controller, track in reference_runs():
+    for name, controller, track, car in reference_runs():
         csv = out / f"{name}.csv"
-        drive(controller, track=track, laps=1, seed=0, csv=csv)
+        drive(controller, track=track, car=car, laps=1, seed=0, csv=csv)
         lines.append(f"{hashlib.sha256(csv.read_bytes()).hexdigest()}  {name}")
     (out / "digests.txt").write_text("\n".join(lines) + "\n")
     versions = [f"python=={sys.version.split()[0]}"]

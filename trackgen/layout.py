@@ -292,11 +292,6 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
         line = seen_at.get("scale", 1)
         raise LayoutError(path, line, f"track settings after @scale={scale:g}: {exc}") from None
     lights = tuple(Light(x * scale, y * scale, z * scale, cd, cone) for _, (x, y, z, cd, cone) in lamps)
-    for lineno, (_, _, z, _, _) in lamps:
-        if not LIGHT_LIMITS["height_m"][0] <= z * scale <= LIGHT_LIMITS["height_m"][1]:
-            lo, hi = LIGHT_LIMITS["height_m"]
-            raise LayoutError(path, lineno, f"@light: Z = {z * scale:g} m{' after @scale' if scale != 1 else ''}: "
-                                            f"expected {lo:g} <= Z <= {hi:g} (m above the track)")
     lighting = TrackLighting(lights=lights, **light_values)
     return Layout(path=path, name=name, entries=tuple(entries), settings=settings,
                   scale=scale, setting_values=values, lighting=lighting)
@@ -361,6 +356,10 @@ def _parse_light(value: str, path: str, lineno: int) -> tuple[float, float, floa
             raise LayoutError(path, lineno, f"@light: {what} = {_bare(word)}: expected {lo:g} <= {what} <= {hi:g}")
         numbers.append(number)
     x, y, z, cd = numbers[:4]
+    lo, hi = LIGHT_LIMITS["height_m"]  # as typed, before @scale (as every length)
+    if not lo <= z <= hi:
+        raise LayoutError(path, lineno, f"@light: Z = {_bare(words[2])} m: expected {lo:g} <= Z <= {hi:g} "
+                                        f"(m above the track)")
     return x, y, z, cd, (numbers[4] if len(numbers) == 5 else None)
 
 

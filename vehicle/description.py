@@ -102,8 +102,9 @@ def _floats(doc: str, source: str, lo: float, hi: float):
 class Camera:
     """The camera: where it sits and what it sees (geometry, the first group), and how it turns
     light into numbers (``model`` and the sensor and lens fields after it; docs/camera.md).
-    ``model = "ideal"`` is the exact render of earlier versions (fixed grey levels plus
-    ``noise_std``); the sensor and lens fields then do nothing."""
+    The default is a physical line camera; ``model = "ideal"`` is the exact render of earlier
+    versions (fixed grey levels plus ``noise_std``), whose images do not depend on the sensor
+    and lens fields."""
 
     forward_m: float = _f(0.20, "Camera position ahead of the rear axle.", "estimate", -1, 1)
     height_m: float = _f(0.30, "Camera height above the ground.", "NXP Cup camera mast, estimate", 0.02, 2)
@@ -120,12 +121,13 @@ class Camera:
                        "frame. (linescan: the frame period is exposure_s + readout_s.)", "estimate", 1, 1000)
     noise_std: float = _f(6.0, "Std-dev of additive Gaussian pixel noise (0-255 scale) of add_noise "
                           "(and of the ideal model's images).", "estimate", 0, 128)
-    model: str = _choice("ideal", CAMERA_MODELS,
+    model: str = _choice("linescan", CAMERA_MODELS,
                          "How light becomes pixels: 'ideal' (exact render, fixed grey levels + noise_std); "
                          "'linescan' (one row integrated over exposure_s, frame period = exposure_s + "
                          "readout_s, as the TSL1401); 'area' (every row, frames at fps_hz, exposure_s <= "
                          "1 / fps_hz). linescan and area follow the EMVA 1288 linear camera model.",
-                         "issue 47; EMVA 1288 release 4.0 (linear model)")
+                         "a TSL1401-type line camera as NXP Cup kits have (docs/camera.md); EMVA 1288 "
+                         "release 4.0 (linear model)")
     exposure_s: float = _f(0.0195, "Integration (exposure) time at the start of a run; the controller sets it "
                            "with set_exposure(seconds). linescan: the time between two SI pulses minus "
                            "the read-out.", "estimate: teams use 1-20 ms (issue 47); 19.5 ms + 0.5 ms "

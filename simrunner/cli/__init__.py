@@ -65,6 +65,7 @@ class _LazyGroup(click.Group):
 
     LAZY = {"check": ("simrunner.cli.check", "check_cmd"),
             "calibrate": ("simrunner.cli.calib", "calibrate_cmd"),
+            "calibrate-camera": ("simrunner.cli.calib", "calibrate_camera_cmd"),
             "excite": ("simrunner.cli.calib", "excite_cmd"),
             "gap": ("simrunner.cli.gap", "gap"),
             "batch": ("simrunner.cli.batch", "batch_cmd"),

@@ -1,5 +1,6 @@
-"""``simrunner excite`` and ``simrunner calibrate``: thin click commands (registered by
-``simrunner.cli``) over :mod:`simrunner.workflows.excite` and :mod:`simrunner.workflows.calibration.calibrate`.
+"""``simrunner excite``, ``simrunner calibrate`` and ``simrunner calibrate-camera``: thin click
+commands (registered by ``simrunner.cli``) over :mod:`simrunner.workflows.excite`,
+:mod:`simrunner.workflows.calibration.calibrate` and :mod:`simrunner.workflows.calibration.camera_fit`.
 
 Exit codes: 0 done; 2 bad input (one line on stderr, no traceback).
 """
@@ -125,3 +126,31 @@ def calibrate_cmd(measured, car, output, dt_s) -> None:
         _fail(exc)
     click.echo(result.report(), nl=False)
     click.echo(f"car description: {output}")
+
+
+@click.command("calibrate-camera")
+@click.argument("lines", nargs=-1, required=True, metavar="LINES.csv [MORE.csv ...]",
+                type=click.Path(dir_okay=False, path_type=str))
+@click.option("--scene", type=click.Choice(["straight"]), default="straight", show_default=True,
+              help="What the car looked at while recording: 'straight' (standing on a straight piece).")
+@click.option("--car", default=None, metavar="CAR.toml", help="Car description whose camera is compared "
+              "(default: built-in car).")
+@click.option("-o", "--output", "output", required=True, metavar="DIR",
+              help="Folder for report.json, car.toml and lines.png (replaced whole).")
+def calibrate_camera_cmd(lines, scene, car, output) -> None:
+    """Compare the car file's camera with lines recorded on the real car (one frame a row,
+    128 numbers 0..255; docs/camera.md), name the camera effects the recording shows and
+    write the car with the fitted camera."""
+    from simrunner.workflows.calibration.camera_fit import calibrate_straight, write_outputs
+    from simrunner.workflows.calibration.camera_lines import read_recordings
+    from vehicle.description import load_car
+
+    try:
+        car_desc = load_car(car)
+        recording = read_recordings(lines, car_desc.camera.width_px)
+        fit = calibrate_straight(recording, car_desc)
+        write_outputs(fit, output, list(lines))
+    except input_errors() as exc:
+        _fail(exc)
+    click.echo(fit.text(), nl=False)
+    click.echo(f"wrote {output}/ (report.json, car.toml, lines.png)")

@@ -239,8 +239,8 @@ class NXPCupEnv(gymnasium.Env):
         imager = self._parts.imager
         if imager is None:
             row = self._parts.camera.line_image(pose, self.line_row, self._normals)
-        else:  # the physical camera at the car file's exposure, blurred by the car's motion
-            sim = self._sim
+        else:  # the physical camera at the car file's exposure, blurred by the car's motion,
+            sim = self._sim  # powered up with the episode (its first frames read full, as in drive)
             row = imager.line(pose, self.line_row, exposure_s=self.car.camera.exposure_s,
                               twist=(sim.speed_mps, sim.lateral_speed_mps, sim.yaw_rate_radps),
                               normals=self._normals, frame_index=self._clock.frame_index)

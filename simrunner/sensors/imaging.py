@@ -295,7 +295,8 @@ class Imager:
             else:
                 blurred = np.stack([np.convolve(r, k, mode="valid") for r in scene])
         rows = slice(r0, r1)
-        if frame_index <= int(spec.startup_frames):  # frame 1 is the first read after power-up
+        startup = int(spec.startup_frames)
+        if startup and frame_index <= startup:  # frame 1 is the first read after power-up
             e = np.full(blurred.shape, self.full_e)
         else:
             e = self.gain_e_per_lux_s[rows] * blurred
