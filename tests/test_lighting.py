@@ -189,3 +189,16 @@ def test_the_dim_hall_of_the_docs_defeats_a_fixed_threshold_not_an_adaptive_one(
     twin = drive(ex / "line_follower.c", params={"threshold": 0}, csv=tmp_path / "c.csv", **kw)
     assert twin.outcome == "finished"
     assert (tmp_path / "py.csv").read_bytes() == (tmp_path / "c.csv").read_bytes()
+
+
+def test_the_video_track_map_shows_the_light(floor):
+    from simrunner.run.video_frame import TrackView
+
+    lamp = TrackLighting(ambient_lux=50.0, lights=(Light(2.0, 2.0, 1.5, 3000.0, 60.0),))
+    plain = TrackView(floor, 200, 200).canvas
+    lit = TrackView(floor, 200, 200, lamp, 0.0)
+    under = lit.to_px(2.0, 2.0)
+    away = lit.to_px(-5.0, -5.0)
+    assert lit.canvas[under[1], under[0]].mean() == 255  # the lane under the spot, clipped white
+    assert lit.canvas[away[1], away[0]].mean() < 0.15 * plain[away[1], away[0]].mean()  # 50 of 500 lux
+    assert np.array_equal(TrackView(floor, 200, 200, TrackLighting(), 0.0).canvas, plain)

@@ -147,7 +147,8 @@ class Run:
             from simrunner.run.video import VideoRecorder
 
             self.video = VideoRecorder(video_path, camera_fps=1.0 / car.camera.frame_period_s(),
-                                       render=self.camera.render, raster=track.raster,
+                                       render=self._render_view, raster=track.raster,
+                                       lighting=track.lighting, surface_z_m=track.surface_z_m,
                                        laps=settings.laps, line_row=car.camera.default_row,
                                        car_length_m=car.chassis.wheelbase_m + 0.05,
                                        car_width_m=car.chassis.track_m)
@@ -161,6 +162,13 @@ class Run:
         self.wall_time_s = 0.0
         self.cpu_time_s = 0.0
         self.signal_guard = None  # a faults.SignalGuard, when drive() installed one
+
+    def _render_view(self, pose) -> np.ndarray:
+        """The debug video's camera view in a frame the controller took no image: the camera's
+        own image without temporal noise (the physical camera at the exposure in force)."""
+        if self.imager is None:
+            return self.camera.render(pose)
+        return self.imager.frame(pose, exposure_s=self.session.exposure_s)
 
     def execute(self, controller: Controller) -> tuple[Outcome, str, ControllerError | None]:
         """Run ``controller`` to the end of the run: ``(outcome, message, error)``.

@@ -38,12 +38,14 @@ class VideoRecorder:
 
     ``render(pose) -> (H, W) uint8`` draws the camera view when the controller took no image
     in a frame. ``camera_fps``: frame rate of the camera; the video keeps every
-    ``ceil(fps / 60)``-th frame. ``raster``: the track's ``TrackRaster`` (top-down view).
+    ``ceil(fps / 60)``-th frame. ``raster``: the track's ``TrackRaster`` (top-down view), shaded
+    by ``lighting`` (a ``worlds.lighting.TrackLighting``) when it is not the default hall.
     """
 
     def __init__(self, path: str | Path, *, camera_fps: float, render: Callable, raster=None,
                  laps: int = 1, line_row: int = 0, car_length_m: float = 0.28,
-                 car_width_m: float = 0.16, queue_size: int = 32):
+                 car_width_m: float = 0.16, queue_size: int = 32, lighting=None,
+                 surface_z_m: float = 0.0):
         self.path = Path(path)
         if self.path.suffix.lower() != ".mp4":
             raise SimError(f"{self.path}: the debug video must be an .mp4 file")
@@ -60,6 +62,7 @@ class VideoRecorder:
             raise SimError(f"{self.path}: OpenCV cannot write an mp4v video here")
         self._render = render
         self._raster = raster
+        self._lighting = (lighting, surface_z_m)  # the top view shows the track's light
         self._laps = laps
         self._car = (car_length_m, car_width_m)
         self.default_row = line_row
@@ -179,7 +182,7 @@ class VideoRecorder:
                     layout = Layout.for_frame(rec.image.shape, aspect)
                     if layout.top is not None:
                         x0, y0, x1, y1 = layout.top
-                        view = TrackView(self._raster, x1 - x0, y1 - y0)
+                        view = TrackView(self._raster, x1 - x0, y1 - y0, *self._lighting)
                 self._writer.write(compose(rec, view, self._laps, *self._car, layout=layout))
                 self.frames_written += 1
             except BaseException as exc:  # keep draining the queue; reported by close()

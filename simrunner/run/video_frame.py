@@ -89,12 +89,14 @@ class TrackView:
     """The whole track raster fitted into a box (the floor's gray around it), with a path
     layer drawn incrementally."""
 
-    def __init__(self, raster, box_w: int, box_h: int):
+    def __init__(self, raster, box_w: int, box_h: int, lighting=None, surface_z_m: float = 0.0):
         img = np.asarray(raster.image)
         h, w = img.shape
         self.scale = min(box_w / w, box_h / h)
         size = (max(1, int(w * self.scale)), max(1, int(h * self.scale)))
         small = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+        if lighting is not None and not lighting.is_default():  # the track as its light shows it
+            small = _lit(small, raster, self.scale, lighting, surface_z_m)
         self.box_w, self.box_h = box_w, box_h
         self.off = ((box_w - size[0]) // 2, (box_h - size[1]) // 2)
         floor = int(getattr(raster, "floor_gray", 0))
@@ -123,6 +125,21 @@ class TrackView:
                    for fx, fy in ((car_length_m, 0.0), (0.0, car_width_m / 2), (0.0, -car_width_m / 2))]
         cv2.fillConvexPoly(out, np.array(corners, np.int32), _YELLOW, cv2.LINE_AA)
         return out
+
+
+def _lit(small: np.ndarray, raster, scale: float, lighting, surface_z_m: float) -> np.ndarray:
+    """``small`` (the raster shrunk by ``scale``) times the illuminance over the default hall's
+    (``worlds.lighting.DEFAULT_AMBIENT_LUX``), clipped at white (as trackgen's preview.png)."""
+    from worlds.lighting import DEFAULT_AMBIENT_LUX
+
+    hs, ws = small.shape
+    m = float(raster.m_per_px) / scale  # metres per small pixel
+    x0, y0 = (float(v) for v in raster.origin_xy_m)
+    xs = x0 + (np.arange(ws) + 0.5) * m
+    ys = y0 - (np.arange(hs) + 0.5) * m
+    lux = np.broadcast_to(lighting.illuminance_lux(xs[None, :] + 0.0 * ys[:, None],
+                                                   ys[:, None] + 0.0 * xs[None, :], surface_z_m), (hs, ws))
+    return np.clip(np.rint(small * (lux / DEFAULT_AMBIENT_LUX)), 0, 255).astype(np.uint8)
 
 
 def _put(img, text: str, x: int, y: int, color=_WHITE, scale: float = 0.45) -> None:
