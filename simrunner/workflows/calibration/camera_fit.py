@@ -24,8 +24,12 @@ model of the car file is compared with them, on the same scene:
   that one half of the frames finds and the other half confirms). Each is named when it differs
   from what the car file's camera would record.
 
-What no effect explains is reported as the remaining error (``rmse_after``) against the noise
-floor of the mean line, with the columns where it is largest.
+A gain pattern that both halves of the frames show is measured pixel by pixel on the lane
+(``response``) and written into the fitted car as ``camera.vignetting_profile`` (with
+``camera.prnu = 0``): the fitted camera then gives those pixels the recorded line; its error
+``rmse_after`` is measured with the pattern of the first half of the frames on the second.
+What no effect explains is reported against the error noise and fixed pattern explain, with
+the columns where it is largest.
 """
 from __future__ import annotations
 
@@ -72,13 +76,15 @@ class CameraFit:
     frames_used: int
     car_after: CarDescription
     unexplained: str
+    response_measured: bool = False  # the per-pixel response went into camera.vignetting_profile
     lines: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
 
     def report_json(self) -> dict:
         return {"scene": "straight", "effects": list(self.effects), "parameters": self.parameters,
                 "hints": self.hints, "rmse_before": self.rmse_before, "rmse_after": self.rmse_after,
                 "noise_floor": self.noise_floor, "nuisance": self.nuisance,
-                "frames_used": self.frames_used, "unexplained": self.unexplained}
+                "frames_used": self.frames_used, "unexplained": self.unexplained,
+                "response_measured": self.response_measured}
 
     def text(self) -> str:
         out = [f"camera gap, straight scene: {self.frames_used} frames; mean-line error "
@@ -88,6 +94,9 @@ class CameraFit:
             out.append("effects: none (the car file's camera records these lines)")
         for name in self.effects:
             out.append(f"  {name}: {self.hints[name]}")
+        if self.response_measured:
+            out.append("measured: each pixel's response on the lane (written as camera.vignetting_profile; "
+                       "camera.prnu set to 0)")
         if self.unexplained:
             out.append(f"not explained: {self.unexplained}")
         return "\n".join(out) + "\n"
@@ -348,8 +357,24 @@ def calibrate_straight(rec: Recording, car: CarDescription) -> CameraFit:
     signal = float(np.median((line_after - p_after["black_level"])[lit])) if lit.any() else 0.0
     floor = float(np.sqrt(np.median(spread[valid]) ** 2 / n + 1 / (12 * n) + (pattern * signal) ** 2))
     resid = np.abs(line_after - mean)
+    rmse_smooth = rmse_after
+    response = None
+    if prnu is not None:  # a gain pattern both halves show: measure it pixel by pixel
+        measurable = lit & ~clipped_mask(mean)
+        black = p_after["black_level"]
+
+        def gains(line_mean: np.ndarray) -> np.ndarray:
+            g = np.ones(len(line_mean))
+            g[measurable] = ((line_mean - black) / np.maximum(line_after - black, 1.0))[measurable]
+            return g
+
+        half = n // 2  # measured on the first half of the frames, tested on the second
+        held_out = np.clip(black + (line_after - black) * gains(frames[:half].mean(axis=0)), 0.0, 255.0)
+        rmse_after = float(np.sqrt(np.mean((held_out - frames[half:].mean(axis=0))[valid] ** 2)))
+        response = gains(mean)
+        line_after = np.clip(black + (line_after - black) * response, 0.0, 255.0)
     unexplained = ""
-    if rmse_after > 1.5 * max(floor, 0.3) + MODEL_DN:
+    if rmse_smooth > 1.5 * max(floor, 0.3) + MODEL_DN:
         worst = np.argsort(-(resid * valid))[:5]
         unexplained = (f"{rmse_after:.2f} grey levels remain (noise and fixed pattern explain {floor:.2f}), "
                        f"largest at columns "
@@ -358,8 +383,8 @@ def calibrate_straight(rec: Recording, car: CarDescription) -> CameraFit:
         effects=effects, parameters=params, hints=hints, rmse_before=rmse_before, rmse_after=rmse_after,
         noise_floor=floor, nuisance={"offset_m": p_after["offset"], "scale": p_after["scale"],
                                      "floor_reflectance": p_after["floor"]},
-        frames_used=n, car_after=_car_after(car, pred, params),
-        unexplained=unexplained,
+        frames_used=n, car_after=_car_after(car, pred, params, response),
+        unexplained=unexplained, response_measured=response is not None,
         lines={"recorded": mean, "before": view.mean_line(p_before), "after": line_after})
 
 
@@ -423,11 +448,13 @@ def _fixed_pattern(frames, line, black, use, valid) -> float | None:
     return float(math.sqrt(max(np.mean(a * b), 0.0) / (1.0 - 1.0 / 9.0)))
 
 
-def _car_after(car: CarDescription, pred: dict, params: dict) -> CarDescription:
+def _car_after(car: CarDescription, pred: dict, params: dict, response=None) -> CarDescription:
     """``car`` with the fitted camera: an ideal camera becomes the default line camera first
-    (it cannot show these effects), then each named effect sets its field."""
+    (it cannot show these effects), then each named effect sets its field; a measured
+    per-pixel ``response`` multiplies the camera's profile and replaces its seeded gain
+    pattern (``prnu = 0``)."""
     cam = car.camera
-    if cam.model == "ideal" and params:
+    if cam.model == "ideal" and (params or response is not None):
         cam = dataclasses.replace(CarDescription().camera, **{f.name: getattr(cam, f.name) for f in
                                                                dataclasses.fields(cam)
                                                                if f.name in GEOMETRY_FIELDS})
@@ -454,6 +481,10 @@ def _car_after(car: CarDescription, pred: dict, params: dict) -> CarDescription:
         if k8:
             e_lane = (pred["gain"] * LANE_REFLECTANCE) / k8
             updates["dark_noise_e"] = min(math.sqrt(max((params["noise"] / k8) ** 2 - e_lane, 0.0)), 1e8)
+    if response is not None:
+        base = np.asarray(cam.vignetting_profile, np.float64) if cam.vignetting_profile else np.ones(cam.width_px)
+        updates["vignetting_profile"] = tuple(float(v) for v in np.clip(base * response, 0.0, 10.0))
+        updates["prnu"] = 0.0
     cam = dataclasses.replace(cam, **updates)
     if cam.dead_pixels + cam.hot_pixels > cam.width_px * cam.height_px:
         cam = dataclasses.replace(cam, dead_pixels=0, hot_pixels=0)
@@ -519,6 +550,9 @@ def write_outputs(fit: CameraFit, out_dir, sources: list[str]) -> None:
                  "dead_pixels": "camera.dead_pixels", "hot_pixels": "camera.hot_pixels",
                  "noise": "camera.dark_noise_e"}
         fitted = {names[e]: "simrunner calibrate-camera (report.json)" for e in fit.effects if e in names}
+        if fit.response_measured:
+            fitted["camera.vignetting_profile"] = "simrunner calibrate-camera: each pixel's measured response"
+            fitted["camera.prnu"] = "simrunner calibrate-camera: the measured response replaces the seeded pattern"
         fit.car_after.save(tmp / "car.toml", fitted)
         _plot(fit, tmp / "lines.png")
         replace_folder(tmp, out)
