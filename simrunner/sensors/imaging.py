@@ -25,12 +25,13 @@ numbers a camera maker publishes go straight into the car file (docs/camera.md):
    PHOTONS_PER_LM_S`` photons per lumen-second of white light), electrons ``mu_e = eta mu_p (1 +
    PRNU_i) + dark_current t`` with ``eta`` the quantum efficiency and ``PRNU_i``,
    ``DSNU_i`` this camera's fixed pattern (drawn once from ``fixed_pattern_seed``).
-4. **Noise.** Shot noise ``sqrt(mu_e)`` and dark (read) noise ``dark_noise_e``, Gaussian, from
-   the run's standard-normal stream (two normals per pixel per frame), only when the image
-   asks for noise (``get_image(line, add_noise=True)``, the default).
+4. **Noise.** Shot noise ``sqrt(mu_e)`` in the well and dark (read) noise ``dark_noise_e`` in
+   the read-out chain, Gaussian, from the run's standard-normal stream (two normals per pixel
+   per frame), only when the image asks for noise (``get_image(line, add_noise=True)``, the
+   default).
 5. **Saturation and ADC.** Electrons are clipped to ``[0, saturation_capacity_e]`` (the full
-   well), then the pixel's dark offset ``DSNU_i`` is added (it belongs to the read-out chain, so
-   it shows below the black level too); a dead pixel reads the black level, a hot one the
+   well), then the pixel's dark offset ``DSNU_i`` and the read noise are added (they belong to
+   the read-out chain, so they show below the black level too); a dead pixel reads the black level, a hot one the
    ADC's maximum. The ADC reads ``black_level_dn + K e`` with ``K =
    analog_gain (2^bits - 1) / saturation_capacity_e`` (at gain 1 a full pixel reaches the
    ADC's maximum), rounded half to even and clipped to ``[0, 2^bits - 1]``; the image is 8-bit
@@ -302,16 +303,18 @@ class Imager:
             e = self.gain_e_per_lux_s[rows] * blurred
             e *= exposure_s
             e += self._dark_current_eps * exposure_s
+            z = None
             if normals is not None:
                 z = normals.standard_normal((2,) + e.shape)
                 shot = np.maximum(e, 0.0)
                 np.sqrt(shot, out=shot)
                 shot *= z[0]
                 e += shot
+            np.minimum(np.maximum(e, 0.0, out=e), self.full_e, out=e)  # the full well
+            e += self.dsnu_e[rows]  # the read-out chain, after the well: its dark offset ...
+            if z is not None:  # ... and its dark (read) noise, which shows below the black level too
                 z[1] *= self._dark_noise_e
                 e += z[1]
-            np.minimum(np.maximum(e, 0.0, out=e), self.full_e, out=e)  # the full well
-            e += self.dsnu_e[rows]  # the dark offset of the read-out chain, after the well
             if self._any_defect:
                 e[self.dead[rows]] = 0.0
                 e[self.hot[rows]] = self.full_e * 2.0  # past the ADC's maximum at any gain >= 0.5

@@ -37,8 +37,9 @@ from typing import Any, Callable
 import numpy as np
 from scipy.optimize import OptimizeWarning, brentq, curve_fit
 
+from simrunner.workflows.calibration import camera_procedures as cp
 from simrunner.workflows.calibration import simtests as st
-from simrunner.workflows.calibration.measured import (ORDER, THESIS, CalibrationError, Measurements,
+from simrunner.workflows.calibration.measured import (ORDER, SOURCES, CalibrationError, Measurements,
                                             load_measurements)
 from vehicle.description import CarDescription, CarDescriptionError, car_from_dict
 
@@ -82,7 +83,7 @@ class CalibrationResult:
     def sources(self) -> dict[str, str]:
         """``"section.field"`` -> the procedure that set it (the written car file's source
         comments, :meth:`vehicle.description.CarDescription.to_toml`)."""
-        return {key: f"simrunner calibrate [{p.section}], thesis {THESIS[p.section]}: {p.title}"
+        return {key: f"simrunner calibrate [{p.section}], {SOURCES[p.section]}: {p.title}"
                 for p in self.procedures for key in p.changes}
 
     def report(self) -> str:
@@ -90,7 +91,7 @@ class CalibrationResult:
         after table."""
         out: list[str] = []
         for p in self.procedures:
-            out.append(f"[{p.section}] thesis {THESIS[p.section]}: {p.title}")
+            out.append(f"[{p.section}] {SOURCES[p.section]}: {p.title}")
             out += [f"  {n}" for n in p.notes]
             for key, (old, new) in p.changes.items():
                 out.append(f"  {key}: {_num(old)} -> {_num(new)}")
@@ -354,7 +355,8 @@ def _camera(car, m, v, dt_s):
 
 
 _PROCEDURES = {"mass": _mass, "traction": _traction, "steering": _steering, "speed": _speed,
-               "acceleration": _acceleration, "braking": _braking, "camera": _camera}
+               "acceleration": _acceleration, "braking": _braking, "camera": _camera,
+               "camera_dark": cp.camera_dark, "camera_flat": cp.camera_flat, "camera_sweep": cp.camera_sweep}
 
 
 def calibrate(measurements: Measurements, car: CarDescription | None = None, *,

@@ -584,3 +584,27 @@ def _plot(fit: CameraFit, path) -> None:
     fig.tight_layout()
     fig.savefig(str(path))
     plt.close(fig)
+
+
+def record_uniform(car: CarDescription, n_frames: int, *, lux: float, exposure_s: float | None = None,
+                   seed: int = 0, skip_startup: bool = True) -> np.ndarray:
+    """``n_frames`` lines the car's own (physical) camera records looking at an evenly lit
+    white card (``lux``; 0: the lens covered, a dark frame) at ``exposure_s`` (default the
+    car file's): ``(n_frames, W)`` float, for checking the camera procedures
+    (tests, docs/calibration.md)."""
+    import shapely
+
+    from pieces.pose import Pose2
+    from simrunner.sensors.camera import Camera
+    from simrunner.sensors.imaging import Imager
+    from simrunner.track.raster import WHITE_GRAY, build_raster, layer_from_polygon
+    from worlds.lighting import TrackLighting
+
+    raster = build_raster([layer_from_polygon("lane", shapely.box(-5.0, -5.0, 5.0, 5.0), WHITE_GRAY)])
+    cam = car.camera
+    imager = Imager(Camera(cam, raster), TrackLighting(ambient_lux=lux))
+    rng = np.random.default_rng(seed)
+    first = cam.startup_frames + 1 if skip_startup else 1
+    t = cam.exposure_s if exposure_s is None else exposure_s
+    return np.array([imager.line(Pose2(), cam.default_row, exposure_s=t, normals=rng, frame_index=first + k)[0]
+                     for k in range(n_frames)], float)

@@ -49,8 +49,10 @@ def _number(cell: str) -> float | None:
     return v if math.isfinite(v) else None
 
 
-def read_file(path: str | Path, width: int) -> tuple[np.ndarray, list[str], np.ndarray | None, np.ndarray | None]:
-    """One recording file: ``(frames, where, t_s, poses)`` (see :class:`Recording`)."""
+def read_file(path: str | Path, width: int, *, allow_flat: bool = False
+              ) -> tuple[np.ndarray, list[str], np.ndarray | None, np.ndarray | None]:
+    """One recording file: ``(frames, where, t_s, poses)`` (see :class:`Recording`).
+    ``allow_flat``: lines that read one value everywhere are kept (a dark frame)."""
     path = Path(path)
     try:
         if path.stat().st_size > MAX_FILE_BYTES:
@@ -109,7 +111,7 @@ def read_file(path: str | Path, width: int) -> tuple[np.ndarray, list[str], np.n
     flat = np.ptp(pix, axis=1) == 0
     lead = int(np.argmin(flat)) if not flat.all() else len(flat)  # leading flat frames: power-up
     later = np.flatnonzero(flat[lead:]) + lead
-    if lead == len(flat) or len(later):
+    if not allow_flat and (lead == len(flat) or len(later)):
         r = int(later[0]) if len(later) else 0
         raise CalibrationError(f"{where[r]}: every pixel reads {pix[r, 0]:g}: not a camera line of a "
                                f"track (lens covered, camera unplugged or not yet clocked?)")

@@ -49,10 +49,18 @@ SCHEMA: dict[str, dict[str, tuple]] = {
     "traction": {"slip_angle_deg": ("num", 0.0, 68.0, REQUIRED),
                  "orientation": ("str:downhill|sideways", None, None, "downhill")},
     "mass": {"weight_kg": ("num", 0.0, 50.0, REQUIRED), "scale": ("num", 0.0, 10.0, 1.0)},
+    # the camera procedures (camera_procedures.py): files of recorded lines, relative to this file
+    "camera_dark": {"lines": ("path", None, None, REQUIRED), "exposure_s": ("num", 0.0, 1.0, None)},
+    "camera_flat": {"lines": ("path", None, None, REQUIRED)},
+    "camera_sweep": {"exposures_s": ("nums", 0.0, 1.0, REQUIRED), "lines": ("paths", None, None, REQUIRED)},
 }
 THESIS = {"camera": "Fig. 5.2", "speed": "5.2.1", "acceleration": "5.2.2", "braking": "5.2.3",
           "steering": "5.3.1", "traction": "5.4", "mass": "5.5"}
-ORDER = ("mass", "traction", "steering", "speed", "acceleration", "braking", "camera")
+# where each procedure comes from (the report's headings, the car file's source comments)
+SOURCES = {**{k: f"thesis {v}" for k, v in THESIS.items()}, "camera_dark": "EMVA 1288 (dark measurements)",
+           "camera_flat": "EMVA 1288 (flat field, PRNU)", "camera_sweep": "EMVA 1288 (photon transfer)"}
+ORDER = ("mass", "traction", "steering", "speed", "acceleration", "braking", "camera_dark", "camera_flat",
+         "camera_sweep", "camera")
 
 
 @dataclass(frozen=True)
@@ -113,6 +121,14 @@ def _check_value(kind: str, lo, hi, value: Any) -> tuple[Any, str | None]:
                 return None, f"expected a list of numbers ({err.replace('expected ', '')}), got {v!r}"
             out.append(conv)
         return out, None
+    if kind == "path":
+        if not isinstance(value, str) or not value.strip():
+            return None, "expected a file name (of recorded lines)"
+        return value, None
+    if kind == "paths":
+        if not isinstance(value, list) or not value or not all(isinstance(x, str) and x.strip() for x in value):
+            return None, "expected a non-empty list of file names (of recorded lines)"
+        return value, None
     options = kind.split(":", 1)[1].split("|")
     if value not in options:
         return None, f"expected one of {', '.join(repr(o) for o in options)}"
