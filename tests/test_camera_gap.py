@@ -129,3 +129,13 @@ def test_power_up_frames_lead_a_file_and_are_skipped(tmp_path):
     assert (rec.frames[:2] == 255).all()
     fit = calibrate_straight(rec, CAR)
     assert fit.parameters["startup_frames"] == 2.0 and fit.frames_used == 28
+
+
+def test_two_effects_that_trade_for_each_other_are_both_found():
+    """A raised black level and a stronger fall-off can each be half-mimicked by a gain change;
+    scoring the effects together finds the two that are there."""
+    truth = camera(black_level_dn=20.0, vignetting_power=5.0)
+    fit = fit_of(truth, offset_m=0.04, seed=2)
+    assert fit.effects == ["black_level", "vignetting"], fit.effects
+    assert fit.parameters["black_level"] == pytest.approx(predicted(truth)["black_level"], rel=0.1)
+    assert fit.parameters["vignetting"] == pytest.approx(5.0, rel=0.1)

@@ -15,8 +15,8 @@ model of the car file is compared with them, on the same scene:
   (``before``). Each of them is an effect of the catalogue (``gain``, ``black_level``,
   ``vignetting``, ``blur``); one is named only if freeing it lowers the error on held-out
   pixels (two folds: even and odd columns; the effect fitted on one, the scene refitted on the
-  other) by more than 5 % and 0.3 grey levels, chosen greedily, best first, then dropped again
-  if the others make it unnecessary.
+  other) by more than 5 % and 0.3 grey levels; all 16 subsets are scored (effects that trade
+  for each other are judged together), and an effect the others make unnecessary is dropped.
 * **From the frames**: ``startup_frames`` (leading frames far from the others),
   ``saturation`` (pixels at 255 in the mean line), ``dead_pixels`` (the black level where the
   fitted line is lit), ``hot_pixels`` (255 where it is not), ``noise`` (the temporal spread of
@@ -236,6 +236,32 @@ def _held_out_rmse(view, target, valid, fixed, free) -> float:
     return float(np.sqrt(np.mean(np.square(err))))
 
 
+def _better(value: float, than: float) -> bool:
+    """``value`` beats ``than`` by the margins an effect must earn (MIN_GAIN, MIN_GAIN_DN)."""
+    return value < (1.0 - MIN_GAIN) * than and than - value > MIN_GAIN_DN
+
+
+def _choose_effects(view, mean, valid, fixed) -> list[str]:
+    """The mean line's effects the recording shows: every subset of the four is scored on
+    held-out pixels (16 fits: effects that trade for each other, as black level and fall-off,
+    are judged together, not one after the other); the best is kept if it beats the car
+    file's camera by the margins, then each of its effects is dropped again if the others
+    do as well without it."""
+    import itertools
+
+    scores = {subset: _held_out_rmse(view, mean, valid, fixed, subset)
+              for k in range(len(SHAPE_EFFECTS) + 1) for subset in itertools.combinations(SHAPE_EFFECTS, k)}
+    best = min(scores, key=lambda sub: (scores[sub], len(sub)))
+    if not _better(scores[best], scores[()]):
+        return []
+    chosen = list(best)
+    for name in list(best):  # an effect the others make unnecessary goes again
+        rest = tuple(c for c in chosen if c != name)
+        if not _better(scores[tuple(c for c in SHAPE_EFFECTS if c in chosen)], scores[rest]):
+            chosen = list(rest)
+    return chosen
+
+
 def _startup(frames: np.ndarray, starts: tuple[int, ...]) -> tuple[int, np.ndarray]:
     """Leading frames of each file far from the file's median frame: ``(count in the first
     file, mask of frames kept)``."""
@@ -283,25 +309,7 @@ def calibrate_straight(rec: Recording, car: CarDescription) -> CameraFit:
     hot &= (255.0 - line_before) > margin
     valid = ~(dead | hot)  # kept out of the fit
     p_before, _ = _fit(view, mean, valid, fixed, ())
-    # greedy choice of the mean line's effects on held-out pixels
-    chosen: list[str] = []
-    cv = _held_out_rmse(view, mean, valid, fixed, ())
-    while True:
-        trials = {name: _held_out_rmse(view, mean, valid, fixed, tuple(chosen) + (name,))
-                  for name in SHAPE_EFFECTS if name not in chosen}
-        if not trials:
-            break
-        name, value = min(trials.items(), key=lambda kv: kv[1])
-        if value < (1.0 - MIN_GAIN) * cv and cv - value > MIN_GAIN_DN:
-            chosen.append(name)
-            cv = value
-        else:
-            break
-    for name in list(chosen):  # backward: an effect the others made unnecessary goes again
-        rest = tuple(c for c in chosen if c != name)
-        without = _held_out_rmse(view, mean, valid, fixed, rest)
-        if not (without > cv / (1.0 - MIN_GAIN) and without - cv > MIN_GAIN_DN):
-            chosen, cv = list(rest), min(cv, without)
+    chosen = _choose_effects(view, mean, valid, fixed)
     p_after, _ = _fit(view, mean, valid, fixed, tuple(chosen))
     line_after = view.mean_line(p_after)
     rmse_before = float(np.sqrt(np.mean((view.mean_line(p_before) - mean)[valid] ** 2)))
