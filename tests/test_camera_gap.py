@@ -139,3 +139,57 @@ def test_two_effects_that_trade_for_each_other_are_both_found():
     assert fit.effects == ["black_level", "vignetting"], fit.effects
     assert fit.parameters["black_level"] == pytest.approx(predicted(truth)["black_level"], rel=0.1)
     assert fit.parameters["vignetting"] == pytest.approx(5.0, rel=0.1)
+
+
+# -- --scene track: lines recorded while driving, with poses ---------------------------------
+@pytest.fixture(scope="module")
+def track_poses():
+    from simrunner.run.runner import default_track
+    from simrunner.track.load import load_track
+
+    track = load_track(default_track())
+    cl = np.asarray(track.centreline)
+    rng = np.random.default_rng(0)
+    idx = np.linspace(0, len(cl) - 2, 100).astype(int)
+    d = cl[idx + 1] - cl[idx]
+    yaw = np.arctan2(d[:, 1], d[:, 0]) + rng.normal(0, 0.05, len(idx))
+    off = rng.normal(0, 0.05, len(idx))
+    pts = cl[idx] + np.column_stack((-np.sin(yaw), np.cos(yaw))) * off[:, None]
+    return track, np.column_stack((pts, yaw))
+
+
+@pytest.mark.parametrize("truth, effects", [(CAR, []), (camera(black_level_dn=20.0), ["black_level"]),
+                                            (camera(startup_frames=3), ["startup_frames"])])
+def test_track_scene_names_what_differs(track_poses, truth, effects):
+    from simrunner.workflows.calibration.camera_track import calibrate_track, record_track
+
+    track, poses = track_poses
+    lines = record_track(truth, track, poses, seed=1)
+    rec = Recording(lines, tuple(f"t.csv:{i + 2}" for i in range(len(lines))), None, poses, (0,))
+    fit = calibrate_track(rec, CAR, track)
+    assert fit.effects == effects and fit.scene == "track" and not fit.unexplained
+    if effects == ["black_level"]:
+        assert fit.parameters["black_level"] == pytest.approx(predicted(truth)["black_level"], rel=0.1)
+
+
+def test_track_scene_cli_and_its_input_errors(tmp_path, track_poses):
+    from simrunner.run.runner import default_track
+    from simrunner.workflows.calibration.camera_track import record_track
+
+    track, poses = track_poses
+    lines = record_track(camera(vignetting_power=6.0), track, poses[:60], seed=2).astype(int)
+    header = "x_m,y_m,yaw_rad," + ",".join(f"p{i}" for i in range(128))
+    rows = [",".join([f"{x:.5f}", f"{y:.5f}", f"{t:.5f}"] + [str(v) for v in line])
+            for (x, y, t), line in zip(poses[:60], lines)]
+    (tmp_path / "drive.csv").write_text(header + "\n" + "\n".join(rows) + "\n")
+    res = CliRunner().invoke(cli, ["calibrate-camera", str(tmp_path / "drive.csv"), "--scene", "track",
+                                   "--track", str(default_track()), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "out" / "report.json").read_text())["effects"] == ["vignetting"]
+    res = CliRunner().invoke(cli, ["calibrate-camera", str(tmp_path / "drive.csv"), "--scene", "track",
+                                   "-o", str(tmp_path / "o2")])
+    assert res.exit_code == 2 and "--scene track needs --track" in res.output
+    _write(tmp_path / "plain.csv", lines[:20])
+    res = CliRunner().invoke(cli, ["calibrate-camera", str(tmp_path / "plain.csv"), "--scene", "track",
+                                   "--track", str(default_track()), "-o", str(tmp_path / "o3")])
+    assert res.exit_code == 2 and "needs the car's pose with every line" in res.output

@@ -131,24 +131,38 @@ def calibrate_cmd(measured, car, output, dt_s) -> None:
 @click.command("calibrate-camera")
 @click.argument("lines", nargs=-1, required=True, metavar="LINES.csv [MORE.csv ...]",
                 type=click.Path(dir_okay=False, path_type=str))
-@click.option("--scene", type=click.Choice(["straight"]), default="straight", show_default=True,
-              help="What the car looked at while recording: 'straight' (standing on a straight piece).")
+@click.option("--scene", type=click.Choice(["straight", "track"]), default="straight", show_default=True,
+              help="What the car looked at while recording: 'straight' (standing on a straight piece) or "
+                   "'track' (driving TRACK; the lines carry the pose: columns x_m, y_m, yaw_rad).")
+@click.option("--track", "track", default=None, metavar="LAYOUT|DIR|WORLD",
+              help="The track the lines were recorded on (--scene track).")
 @click.option("--car", default=None, metavar="CAR.toml", help="Car description whose camera is compared "
               "(default: built-in car).")
 @click.option("-o", "--output", "output", required=True, metavar="DIR",
               help="Folder for report.json, car.toml and lines.png (replaced whole).")
-def calibrate_camera_cmd(lines, scene, car, output) -> None:
+def calibrate_camera_cmd(lines, scene, track, car, output) -> None:
     """Compare the car file's camera with lines recorded on the real car (one frame a row,
     128 numbers 0..255; docs/camera.md), name the camera effects the recording shows and
     write the car with the fitted camera."""
+    from simrunner.errors import SimError
     from simrunner.workflows.calibration.camera_fit import calibrate_straight, write_outputs
     from simrunner.workflows.calibration.camera_lines import read_recordings
     from vehicle.description import load_car
 
     try:
+        if (scene == "track") != (track is not None):
+            raise SimError("--scene track needs --track LAYOUT|DIR|WORLD (the track the lines were recorded on)"
+                           if scene == "track" else "--track is for --scene track")
         car_desc = load_car(car)
         recording = read_recordings(lines, car_desc.camera.width_px)
-        fit = calibrate_straight(recording, car_desc)
+        if scene == "track":
+            from simrunner.run.runner import resolve_track
+            from simrunner.workflows.calibration.camera_track import calibrate_track
+
+            sim_track, _ = resolve_track(track, car_desc)
+            fit = calibrate_track(recording, car_desc, sim_track)
+        else:
+            fit = calibrate_straight(recording, car_desc)
         write_outputs(fit, output, list(lines))
     except input_errors() as exc:
         _fail(exc)

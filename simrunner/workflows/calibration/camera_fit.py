@@ -77,17 +77,18 @@ class CameraFit:
     car_after: CarDescription
     unexplained: str
     response_measured: bool = False  # the per-pixel response went into camera.vignetting_profile
+    scene: str = "straight"
     lines: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
 
     def report_json(self) -> dict:
-        return {"scene": "straight", "effects": list(self.effects), "parameters": self.parameters,
+        return {"scene": self.scene, "effects": list(self.effects), "parameters": self.parameters,
                 "hints": self.hints, "rmse_before": self.rmse_before, "rmse_after": self.rmse_after,
                 "noise_floor": self.noise_floor, "nuisance": self.nuisance,
                 "frames_used": self.frames_used, "unexplained": self.unexplained,
                 "response_measured": self.response_measured}
 
     def text(self) -> str:
-        out = [f"camera gap, straight scene: {self.frames_used} frames; mean-line error "
+        out = [f"camera gap, {self.scene} scene: {self.frames_used} frames; mean-line error "
                f"{self.rmse_before:.2f} grey levels with the car file's camera, {self.rmse_after:.2f} "
                f"fitted (noise and fixed pattern: {self.noise_floor:.2f})"]
         if not self.effects:
@@ -195,7 +196,8 @@ def _fit(view: StraightView, target: np.ndarray, use: np.ndarray, fixed: dict[st
     the parameters and the rms error on them."""
     from scipy.optimize import least_squares
 
-    names = ("offset", "scale", "floor") + free
+    nuisance = getattr(view, "nuisance", ("offset", "scale", "floor"))
+    names = tuple(nuisance) + free
     lo = np.array([BOUNDS[n][0] for n in names])
     hi = np.array([BOUNDS[n][1] for n in names])
 
@@ -207,15 +209,22 @@ def _fit(view: StraightView, target: np.ndarray, use: np.ndarray, fixed: dict[st
     def resid(x):
         return (view.mean_line(params(x)) - target)[use]
 
-    best = None
-    for offset in np.linspace(-0.3, 0.3, 25):  # the lane's edges make local minima: start on a grid
-        x0 = np.array([offset, 1.0, fixed["floor"]] + [fixed[n] for n in free])
-        x0 = np.clip(x0, lo, hi)
-        cost = float(np.sum(resid(x0) ** 2))
-        if best is None or cost < best[0]:
-            best = (cost, x0)
-    x0 = best[1]
-    steps = np.array([1e-3, 1e-3, 1e-2] + [max(1e-3, 1e-3 * abs(fixed[n])) for n in free])
+    if not names:
+        r = resid(np.zeros(0))
+        return dict(fixed), float(np.sqrt(np.mean(r ** 2)))
+    start = [fixed[n] for n in free]
+    if "offset" in nuisance:  # the lane's edges make local minima: start on a grid of offsets
+        best = None
+        for offset in np.linspace(-0.3, 0.3, 25):
+            x0 = np.clip(np.array([offset, 1.0, fixed["floor"]] + start), lo, hi)
+            cost = float(np.sum(resid(x0) ** 2))
+            if best is None or cost < best[0]:
+                best = (cost, x0)
+        x0 = best[1]
+    else:
+        x0 = np.clip(np.array([fixed[n] for n in nuisance] + start), lo, hi)
+    steps = np.array([{"offset": 1e-3, "scale": 1e-3, "floor": 1e-2}[n] for n in nuisance]
+                     + [max(1e-3, 1e-3 * abs(fixed[n])) for n in free])
     sol = least_squares(resid, x0, bounds=(lo, hi), x_scale=steps, diff_step=1e-4, method="trf")
     p = params(sol.x)
     return p, float(np.sqrt(np.mean(resid(sol.x) ** 2)))
@@ -226,7 +235,7 @@ def _held_out_rmse(view, target, valid, fixed, free) -> float:
     tested on the odd ones, and back. The scene (offset, scale, floor) is refitted on the test
     columns with the effects frozen: an effect must carry over, the car's place need not (a
     black line 3 pixels wide is found again in either half)."""
-    blocks = np.arange(view.width) % 2 == 0
+    blocks = np.arange(len(target)) % 2 == 0  # the columns' parity (frames flattened row after row)
     err = []
     for train in (blocks, ~blocks):
         p, _ = _fit(view, target, valid & train, fixed, free)
@@ -588,7 +597,8 @@ def _plot(fit: CameraFit, path) -> None:
     ax.set_ylabel("grey level")
     ax.set_ylim(0, 260)
     ax.legend(loc="lower center", fontsize=8)
-    ax.set_title("calibrate-camera: the line on a straight")
+    ax.set_title("calibrate-camera: the line on a straight" if fit.scene == "straight"
+                 else "calibrate-camera: the mean of the lines recorded on the track")
     fig.tight_layout()
     fig.savefig(str(path))
     plt.close(fig)
