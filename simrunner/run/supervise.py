@@ -146,6 +146,8 @@ def _child(child: Callable[[], int], report: IO[str], csv_path: Path) -> None:
             code = child()
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    except BrokenPipeError:  # the reader of our output went away (`simrunner drive ... | head`)
+        code = 141  # as a shell reports SIGPIPE; nothing to show: the reader is gone
     except BaseException:  # noqa: BLE001 - a bug: shown like the uncaught exception it is
         import traceback
 
