@@ -147,6 +147,15 @@ def calibrate_track(rec: Recording, car: CarDescription, track) -> CameraFit:
         hints["startup_frames"] = (f"the first {n_start} frame(s) after power-up are not camera lines: skip "
                                    f"them in your code (the car file: {int(pred['startup_frames'])})")
     prnu = _track_pattern(frames, line_after, p_after["black_level"], ok)
+    response = None
+    if prnu is not None:  # measure it pixel by pixel: first half of the frames, tested on the second
+        black = p_after["black_level"]
+        half = len(frames) // 2
+        g_first = _column_gains(frames[:half], line_after[:half], black)
+        held_out = np.clip(black + (line_after[half:] - black) * g_first, 0.0, 255.0)
+        rmse_after = float(np.sqrt(np.mean((held_out - frames[half:])[:, ok] ** 2)))
+        response = _column_gains(frames, line_after, black)
+        line_after = np.clip(black + (line_after - black) * response, 0.0, 255.0)
     if prnu is not None and abs(prnu - pred["prnu"]) > max(0.015, 0.4 * pred["prnu"]):
         params["fixed_pattern"] = prnu
         hints["fixed_pattern"] = (f"pixel-to-pixel gain differs by {prnu * 100:.1f} % (the car file: "
@@ -166,9 +175,22 @@ def calibrate_track(rec: Recording, car: CarDescription, track) -> CameraFit:
                        f"motion blur at speed?)")
     return CameraFit(effects=effects, parameters=params, hints=hints, rmse_before=rmse_before,
                      rmse_after=rmse_after, noise_floor=floor, nuisance={}, frames_used=len(frames),
-                     car_after=_car_after(car, pred, params), unexplained=unexplained, scene="track",
+                     car_after=_car_after(car, pred, params, response), unexplained=unexplained, scene="track",
+                     response_measured=response is not None,
                      lines={"recorded": frames.mean(axis=0), "before": line_before.mean(axis=0),
                             "after": line_after.mean(axis=0)})
+
+
+def _column_gains(frames, line, black) -> np.ndarray:
+    """Each column's mean ratio of recorded to modelled signal where the model is well lit (1
+    where it never is): the pixels' own gains."""
+    sig = line - black
+    lit = sig > 0.5 * np.percentile(sig, 95)
+    ratio = np.where(lit, (frames - black) / np.maximum(sig, 1.0), np.nan)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        g = np.nanmean(ratio, axis=0)
+    return np.where(np.sum(lit, axis=0) >= 3, g, 1.0)
 
 
 def _track_pattern(frames, line, black, ok) -> float | None:
@@ -204,7 +226,10 @@ def record_track(car: CarDescription, track, poses: np.ndarray, *, seed: int = 0
     from simrunner.sensors.imaging import Imager
 
     cam = car.camera
-    imager = Imager(Camera(cam, track, load_line_kernel=False), track.lighting, surface_z_m=track.surface_z_m)
+    camera = Camera(cam, track, load_line_kernel=False)
     rng = np.random.default_rng(seed)
+    if cam.model == "ideal":
+        return np.array([camera.line_image(Pose2(*p), cam.default_row, rng)[0] for p in poses], float)
+    imager = Imager(camera, track.lighting, surface_z_m=track.surface_z_m)
     return np.array([imager.line(Pose2(*p), cam.default_row, exposure_s=cam.exposure_s, normals=rng,
                                  frame_index=k + 1)[0] for k, p in enumerate(poses)], float)
