@@ -88,9 +88,10 @@ class CameraFit:
                 "response_measured": self.response_measured}
 
     def text(self) -> str:
+        left = "the noise alone" if self.response_measured else "the noise and the pixels' own gains"
         out = [f"camera gap, {self.scene} scene: {self.frames_used} frames; mean-line error "
                f"{self.rmse_before:.2f} grey levels with the car file's camera, {self.rmse_after:.2f} "
-               f"fitted (noise and fixed pattern: {self.noise_floor:.2f})"]
+               f"fitted ({left}: {self.noise_floor:.2f})"]
         if not self.effects:
             out.append("effects: none (the car file's camera records these lines)")
         for name in self.effects:
@@ -391,9 +392,12 @@ def calibrate_straight(rec: Recording, car: CarDescription) -> CameraFit:
         response = gains(mean)
         line_after = np.clip(black + (line_after - black) * response, 0.0, 255.0)
     unexplained = ""
-    if rmse_smooth > 1.5 * max(floor, 0.3) + MODEL_DN:
+    floor_smooth = floor
+    if response is not None:  # the fitted model carries the pattern: only the noise is left
+        floor = float(np.sqrt(np.median(spread[valid]) ** 2 / n + 1 / (12 * n)))
+    if rmse_smooth > 1.5 * max(floor_smooth, 0.3) + MODEL_DN:
         worst = np.argsort(-(resid * valid))[:5]
-        unexplained = (f"{rmse_after:.2f} grey levels remain (noise and fixed pattern explain {floor:.2f}), "
+        unexplained = (f"{rmse_smooth:.2f} grey levels remain (noise and fixed pattern explain {floor_smooth:.2f}), "
                        f"largest at columns "
                        f"{', '.join(str(int(c)) for c in sorted(worst))}")
     return CameraFit(
