@@ -193,3 +193,24 @@ def test_track_scene_cli_and_its_input_errors(tmp_path, track_poses):
     res = CliRunner().invoke(cli, ["calibrate-camera", str(tmp_path / "plain.csv"), "--scene", "track",
                                    "--track", str(default_track()), "-o", str(tmp_path / "o3")])
     assert res.exit_code == 2 and "needs the car's pose with every line" in res.output
+
+
+def test_the_fitted_car_gives_the_controller_the_recorded_line(tmp_path):
+    """The issue's promise: 200 lines of a 'real' camera standing on a straight, one command,
+    and the simulator's camera (the written car.toml) then gives the same line there."""
+    real = camera(black_level_dn=15.0, vignetting_power=5.0, prnu=0.06)
+    lines = record_straight(real, 200, offset_m=0.05, seed=11)
+    path = _write(tmp_path / "real.csv", lines.astype(int))
+    res = CliRunner().invoke(cli, ["calibrate-camera", str(path), "-o", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    fitted = load_car(tmp_path / "out" / "car.toml")
+    recorded = lines[1:].mean(axis=0)
+    before = record_straight(CAR, 40, offset_m=0.05, seed=12)[1:].mean(axis=0)
+    after = record_straight(fitted, 40, offset_m=0.05, seed=12)[1:].mean(axis=0)
+    rmse = lambda a, m=slice(None): float(np.sqrt(np.mean((a - recorded)[m] ** 2)))  # noqa: E731
+    assert rmse(after) < 0.5 * rmse(before), (rmse(before), rmse(after))
+    # on the lane, where each pixel's own gain was measured, the line is the recorded one; at the
+    # lane's edges the pixels' gains are not measured (the edge moves when the car does)
+    lane = np.zeros(128, bool)
+    lane[25:90] = True
+    assert rmse(after, lane) < 1.5 < 0.25 * rmse(before, lane), (rmse(before, lane), rmse(after, lane))

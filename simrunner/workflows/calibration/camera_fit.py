@@ -378,12 +378,15 @@ def calibrate_straight(rec: Recording, car: CarDescription) -> CameraFit:
     rmse_smooth = rmse_after
     response = None
     if prnu is not None:  # a gain pattern both halves show: measure it pixel by pixel
-        measurable = lit & ~clipped_mask(mean)
         black = p_after["black_level"]
 
         def gains(line_mean: np.ndarray) -> np.ndarray:
+            """Each lane pixel's gain over the model; a clipped one at least what reaches 255."""
             g = np.ones(len(line_mean))
-            g[measurable] = ((line_mean - black) / np.maximum(line_after - black, 1.0))[measurable]
+            ratio = (line_mean - black) / np.maximum(line_after - black, 1.0)
+            g[lit] = ratio[lit]
+            clipped_lit = lit & (line_mean >= 254.5)
+            g[clipped_lit] = np.maximum(ratio[clipped_lit], 1.0)
             return g
 
         half = n // 2  # measured on the first half of the frames, tested on the second
