@@ -81,8 +81,7 @@ def _lit(image, lighting, x0: float, y1: float, px_per_m: float, surface_z_m: fl
     w, h = image.size
     xs = x0 + (np.arange(w) + 0.5) / px_per_m
     ys = y1 - (np.arange(h) + 0.5) / px_per_m
-    lux = np.broadcast_to(lighting.illuminance_lux(xs[None, :] + 0 * ys[:, None], ys[:, None] + 0 * xs[None, :],
-                                                   surface_z_m), (h, w))
+    lux = lighting.illuminance_grid(xs, ys, surface_z_m)
     shade = np.asarray(image, dtype=np.float64) * (lux / DEFAULT_AMBIENT_LUX)[:, :, None]
     out = Image.fromarray(np.clip(np.rint(shade), 0, 255).astype(np.uint8), "RGB")
     draw = ImageDraw.Draw(out)

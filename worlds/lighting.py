@@ -104,6 +104,12 @@ class TrackLighting:
             e = e + light.illuminance_lux(x_m, y_m, surface_z_m)
         return e
 
+    def illuminance_grid(self, xs_m: np.ndarray, ys_m: np.ndarray, surface_z_m: float = 0.0) -> np.ndarray:
+        """Illuminance (lux) on the grid of columns ``xs_m`` and rows ``ys_m``:
+        ``(len(ys_m), len(xs_m))`` (a top view: preview.png, the debug video's map)."""
+        x, y = np.meshgrid(np.asarray(xs_m, np.float64), np.asarray(ys_m, np.float64))
+        return np.broadcast_to(self.illuminance_lux(x, y, surface_z_m), x.shape)
+
     def reflectance_of_gray(self) -> np.ndarray:
         """``(256,)`` reflectance of each raster grey level: the lane's, lines' and floor's
         grey get this track's reflectances, any other grey (imported worlds) gray / 255."""

@@ -137,8 +137,7 @@ def _lit(small: np.ndarray, raster, scale: float, lighting, surface_z_m: float) 
     x0, y0 = (float(v) for v in raster.origin_xy_m)
     xs = x0 + (np.arange(ws) + 0.5) * m
     ys = y0 - (np.arange(hs) + 0.5) * m
-    lux = np.broadcast_to(lighting.illuminance_lux(xs[None, :] + 0.0 * ys[:, None],
-                                                   ys[:, None] + 0.0 * xs[None, :], surface_z_m), (hs, ws))
+    lux = lighting.illuminance_grid(xs, ys, surface_z_m)
     return np.clip(np.rint(small * (lux / DEFAULT_AMBIENT_LUX)), 0, 255).astype(np.uint8)
 
 

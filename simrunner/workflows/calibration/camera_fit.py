@@ -125,8 +125,7 @@ class StraightView:
         t = cam.height_m / -dz
         centres = np.arange(-MARGIN_PX, w + MARGIN_PX) + 0.5 - w / 2.0
         self.gy = t * (-centres / f)  # (W + 2 margin,) metres, + = left
-        uc = np.arange(w) + 0.5 - w / 2.0
-        self.cos_theta = f / np.sqrt(f * f + uc ** 2 + v * v)
+        self.cos_theta = row_cos_theta(cam)
         self.profile = (np.asarray(cam.vignetting_profile, np.float64) if cam.vignetting_profile
                         else np.ones(w))
         self.width = w
@@ -324,39 +323,14 @@ def calibrate_straight(rec: Recording, car: CarDescription) -> CameraFit:
     line_after = view.mean_line(p_after)
     rmse_before = float(np.sqrt(np.mean((view.mean_line(p_before) - mean)[valid] ** 2)))
     rmse_after = float(np.sqrt(np.mean((line_after - mean)[valid] ** 2)))
-    effects, params, hints = [], {}, {}
-    for name in chosen:
-        v = p_after[name]
-        params[name] = v
-        hints[name] = {
-            "gain": f"the line is {v / pred['gain']:.2f} x as bright as the car file's camera predicts under "
-                    f"{DEFAULT_AMBIENT_LUX:g} lux (exposure, light or gain)",
-            "black_level": f"a dark pixel reads {v:.1f} (the car file: {pred['black_level']:.1f})",
-            "vignetting": f"the ends of the line fall off as cos^{v:.2f} (the car file: cos^{pred['vignetting']:g})",
-            "blur": f"lines are blurred by {v:.2f} px (the car file: {pred['blur']:g} px): focus the lens "
-                    f"or expect shallower black lines",
-        }[name]
+    params, hints = shape_effects(chosen, p_after, pred, f"{DEFAULT_AMBIENT_LUX:g} lux",
+                                  blur_advice=": focus the lens or expect shallower black lines")
     # effects seen in the frames
     top = p_after["black_level"] + 0.5 * (line_after.max() - p_after["black_level"])
     lit = valid & (line_after > top)
     lit &= np.convolve(lit.astype(float), np.ones(7), mode="same") >= 7  # 3 px inside the lane's edges
-    clipped = float(np.mean(mean[valid] >= 254.5))
-    if clipped >= 0.01:
-        params["saturation"] = clipped
-        hints["saturation"] = (f"{clipped * 100:.0f} % of the line is clipped at 255: shorten the exposure "
-                               f"or lower the gain")
-    for name, mask, what in (("dead_pixels", dead, "read the black level whatever the light"),
-                             ("hot_pixels", hot, "read 255 whatever the light")):
-        count = int(mask.sum())
-        expected = _expected_defects(car, name)
-        if count != expected:
-            params[name] = float(count)
-            cols = ", ".join(str(c) for c in np.flatnonzero(mask)[:8])
-            hints[name] = f"{count} pixel(s) {what} (columns {cols}; the car file: {expected})"
-    if n_start != int(pred["startup_frames"]):
-        params["startup_frames"] = float(n_start)
-        hints["startup_frames"] = (f"the first {n_start} frame(s) after power-up are not camera lines: skip "
-                                   f"them in your code (the car file: {int(pred['startup_frames'])})")
+    frame_effects(params, hints, car, pred, clipped=float(np.mean(mean[valid] >= 254.5)), clipped_what="line is",
+                  dead=dead, hot=hot, against="light", n_start=n_start)
     noise = float(np.median(spread[lit & ~clipped_mask(mean)])) if (lit & ~clipped_mask(mean)).any() else 0.0
     noise_pred = math.sqrt(pred["noise_dn"] ** 2 + (1 / 12 if pred["noise_dn"] > 0.3 else 0.0))
     n = len(frames)
@@ -365,10 +339,7 @@ def calibrate_straight(rec: Recording, car: CarDescription) -> CameraFit:
         hints["noise"] = (f"each pixel varies by {noise:.2f} grey levels from frame to frame (the car file's "
                           f"camera: {noise_pred:.2f}): supply or ADC noise, or a flickering light")
     prnu = _fixed_pattern(frames, line_after, p_after["black_level"], lit & ~clipped_mask(mean), valid)
-    if prnu is not None and abs(prnu - pred["prnu"]) > max(0.015, 0.4 * pred["prnu"]):
-        params["fixed_pattern"] = prnu
-        hints["fixed_pattern"] = (f"pixel-to-pixel gain differs by {prnu * 100:.1f} % (the car file: "
-                                  f"{pred['prnu'] * 100:.1f} %)")
+    pattern_effect(params, hints, prnu, pred)
     effects = [name for name in CATALOGUE if name in params]
     # the error no smooth model can remove: temporal noise over n frames and the pixels' own gains
     pattern = prnu if prnu is not None else pred["prnu"]
@@ -410,6 +381,64 @@ def calibrate_straight(rec: Recording, car: CarDescription) -> CameraFit:
         frames_used=n, car_after=_car_after(car, pred, params, response),
         unexplained=unexplained, response_measured=response is not None,
         lines={"recorded": mean, "before": view.mean_line(p_before), "after": line_after})
+
+
+def shape_effects(chosen, p: dict, pred: dict, light: str, blur_advice: str = "") -> tuple[dict, dict]:
+    """``(parameters, hints)`` of the mean-line effects ``chosen``, fitted as ``p``, against the
+    car file's camera ``pred`` (``light``: the scene's light, for the gain's hint)."""
+    params, hints = {}, {}
+    for name in chosen:
+        v = p[name]
+        params[name] = v
+        hints[name] = {
+            "gain": f"the line is {v / pred['gain']:.2f} x as bright as the car file's camera predicts under "
+                    f"{light} (exposure, light or gain)",
+            "black_level": f"a dark pixel reads {v:.1f} (the car file: {pred['black_level']:.1f})",
+            "vignetting": f"the ends of the line fall off as cos^{v:.2f} (the car file: cos^{pred['vignetting']:g})",
+            "blur": f"lines are blurred by {v:.2f} px (the car file: {pred['blur']:g} px){blur_advice}",
+        }[name]
+    return params, hints
+
+
+def frame_effects(params: dict, hints: dict, car: CarDescription, pred: dict, *, clipped: float,
+                  clipped_what: str, dead: np.ndarray, hot: np.ndarray, against: str, n_start: int) -> None:
+    """Add the effects the frames show to ``params`` and ``hints``: ``saturation`` (``clipped``:
+    the fraction at 255), dead and hot pixels (masks) where their count differs from the car
+    file's, ``startup_frames`` where ``n_start`` does."""
+    if clipped >= 0.01:
+        params["saturation"] = clipped
+        hints["saturation"] = (f"{clipped * 100:.0f} % of the {clipped_what} clipped at 255: shorten the "
+                               f"exposure or lower the gain")
+    for name, mask, what in (("dead_pixels", dead, f"read the black level whatever the {against}"),
+                             ("hot_pixels", hot, f"read 255 whatever the {against}")):
+        count = int(mask.sum())
+        expected = _expected_defects(car, name)
+        if count != expected:
+            params[name] = float(count)
+            cols = ", ".join(str(c) for c in np.flatnonzero(mask)[:8])
+            hints[name] = f"{count} pixel(s) {what} (columns {cols}; the car file: {expected})"
+    if n_start != int(pred["startup_frames"]):
+        params["startup_frames"] = float(n_start)
+        hints["startup_frames"] = (f"the first {n_start} frame(s) after power-up are not camera lines: skip "
+                                   f"them in your code (the car file: {int(pred['startup_frames'])})")
+
+
+def pattern_effect(params: dict, hints: dict, prnu: float | None, pred: dict) -> None:
+    """Add ``fixed_pattern`` when a measured gain pattern ``prnu`` differs from the car file's."""
+    if prnu is not None and abs(prnu - pred["prnu"]) > max(0.015, 0.4 * pred["prnu"]):
+        params["fixed_pattern"] = prnu
+        hints["fixed_pattern"] = (f"pixel-to-pixel gain differs by {prnu * 100:.1f} % (the car file: "
+                                  f"{pred['prnu'] * 100:.1f} %)")
+
+
+def row_cos_theta(cam) -> np.ndarray:
+    """``(W,)`` cosine of the angle between each pixel's ray in the line row (``default_row``)
+    and the optical axis (the pinhole of :class:`simrunner.sensors.camera.Camera`)."""
+    w = cam.width_px
+    f = (w / 2.0) / math.tan(cam.hfov_rad / 2.0)
+    u = np.arange(w) + 0.5 - w / 2.0
+    v = cam.default_row + 0.5 - cam.height_px / 2.0
+    return f / np.sqrt(f * f + u * u + v * v)
 
 
 def clipped_mask(mean: np.ndarray) -> np.ndarray:

@@ -30,6 +30,7 @@ import numpy as np
 
 from vehicle.description import CarDescription
 
+from simrunner.workflows.calibration.camera_fit import row_cos_theta
 from simrunner.workflows.calibration.camera_lines import read_file
 from simrunner.workflows.calibration.measured import CalibrationError, Measurements
 
@@ -63,14 +64,6 @@ def _physical(car: CarDescription) -> CarDescription:
 
     return car.replace(camera=dataclasses.replace(CarDescription().camera,
                                                   **{f: getattr(cam, f) for f in GEOMETRY_FIELDS}))
-
-
-def _cos_theta(cam) -> np.ndarray:
-    w, h = cam.width_px, cam.height_px
-    f = (w / 2.0) / math.tan(cam.hfov_rad / 2.0)
-    u = np.arange(w) + 0.5 - w / 2.0
-    v = cam.default_row + 0.5 - h / 2.0
-    return f / np.sqrt(f * f + u * u + v * v)
 
 
 def camera_dark(car: CarDescription, m: Measurements, v: dict, dt_s: float):
@@ -134,7 +127,7 @@ def camera_flat(car: CarDescription, m: Measurements, v: dict, dt_s: float):
     if np.median(signal) < 20.0:
         raise CalibrationError(f"{m.where('camera_flat', 'lines')}: the flat field reads {np.median(mean):.0f} "
                                f"(black level {black:.0f}): too dark to measure; light the card or expose longer")
-    cos_t = _cos_theta(cam)
+    cos_t = row_cos_theta(cam)
     # dead pixels: far below the pixels around them (kept out of the fall-off fit)
     padded = np.pad(signal, 3, mode="reflect")
     around = np.array([np.median(np.delete(padded[i:i + 7], 3)) for i in range(len(signal))])

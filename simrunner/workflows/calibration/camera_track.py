@@ -21,8 +21,9 @@ import numpy as np
 from vehicle.description import CarDescription
 from worlds.lighting import DEFAULT_AMBIENT_LUX
 
-from simrunner.workflows.calibration.camera_fit import (CATALOGUE, MARGIN_PX, SHAPE_EFFECTS, CameraFit,
-                                                        _car_after, _choose_effects, _fit, predicted)
+from simrunner.workflows.calibration.camera_fit import (CATALOGUE, MARGIN_PX, MODEL_DN, SHAPE_EFFECTS, CameraFit,
+                                                        _car_after, _choose_effects, _fit, frame_effects,
+                                                        pattern_effect, predicted, row_cos_theta, shape_effects)
 from simrunner.workflows.calibration.camera_lines import Recording
 from simrunner.workflows.calibration.measured import CalibrationError
 
@@ -47,10 +48,7 @@ class TrackScene:
         self.scene = np.stack([imager.scene_lux(([x], [y], [yaw]), row, row + 1)[0]
                                for x, y, yaw in poses]) / DEFAULT_AMBIENT_LUX
         w = cam.width_px
-        f = (w / 2.0) / math.tan(cam.hfov_rad / 2.0)
-        u = np.arange(w) + 0.5 - w / 2.0
-        v = row + 0.5 - cam.height_px / 2.0
-        self.cos_theta = f / np.sqrt(f * f + u * u + v * v)
+        self.cos_theta = row_cos_theta(cam)
         self.profile = np.asarray(cam.vignetting_profile, np.float64) if cam.vignetting_profile else np.ones(w)
         self.frames, self.width = len(poses), w
         self._pose = Pose2
@@ -117,35 +115,9 @@ def calibrate_track(rec: Recording, car: CarDescription, track) -> CameraFit:
     ok = ~(dead | hot)
     rmse_before = float(np.sqrt(np.mean((line_before - frames)[:, ok] ** 2)))
     rmse_after = float(np.sqrt(np.mean((line_after - frames)[:, ok] ** 2)))
-    params, hints = {}, {}
-    for name in chosen:
-        v = p_after[name]
-        params[name] = v
-        hints[name] = {
-            "gain": f"the line is {v / pred['gain']:.2f} x as bright as the car file's camera predicts under the "
-                    f"track's light (exposure, light or gain)",
-            "black_level": f"a dark pixel reads {v:.1f} (the car file: {pred['black_level']:.1f})",
-            "vignetting": f"the ends of the line fall off as cos^{v:.2f} (the car file: cos^{pred['vignetting']:g})",
-            "blur": f"lines are blurred by {v:.2f} px (the car file: {pred['blur']:g} px)",
-        }[name]
-    clipped = float(np.mean(frames[:, ok] >= 255.0))
-    if clipped >= 0.01:
-        params["saturation"] = clipped
-        hints["saturation"] = (f"{clipped * 100:.0f} % of the pixels are clipped at 255: shorten the exposure "
-                               f"or lower the gain")
-    from simrunner.workflows.calibration.camera_fit import _expected_defects
-
-    for name, mask, what in (("dead_pixels", dead, "read the black level whatever the scene"),
-                             ("hot_pixels", hot, "read 255 whatever the scene")):
-        count, expected = int(mask.sum()), _expected_defects(car, name)
-        if count != expected:
-            params[name] = float(count)
-            cols = ", ".join(str(c) for c in np.flatnonzero(mask)[:8])
-            hints[name] = f"{count} pixel(s) {what} (columns {cols}; the car file: {expected})"
-    if n_start != int(pred["startup_frames"]):
-        params["startup_frames"] = float(n_start)
-        hints["startup_frames"] = (f"the first {n_start} frame(s) after power-up are not camera lines: skip "
-                                   f"them in your code (the car file: {int(pred['startup_frames'])})")
+    params, hints = shape_effects(chosen, p_after, pred, "the track's light")
+    frame_effects(params, hints, car, pred, clipped=float(np.mean(frames[:, ok] >= 255.0)),
+                  clipped_what="pixels are", dead=dead, hot=hot, against="scene", n_start=n_start)
     prnu = _track_pattern(frames, line_after, p_after["black_level"], ok)
     response = None
     if prnu is not None:  # measure it pixel by pixel: first half of the frames, tested on the second
@@ -156,17 +128,12 @@ def calibrate_track(rec: Recording, car: CarDescription, track) -> CameraFit:
         rmse_after = float(np.sqrt(np.mean((held_out - frames[half:])[:, ok] ** 2)))
         response = _column_gains(frames, line_after, black)
         line_after = np.clip(black + (line_after - black) * response, 0.0, 255.0)
-    if prnu is not None and abs(prnu - pred["prnu"]) > max(0.015, 0.4 * pred["prnu"]):
-        params["fixed_pattern"] = prnu
-        hints["fixed_pattern"] = (f"pixel-to-pixel gain differs by {prnu * 100:.1f} % (the car file: "
-                                  f"{pred['prnu'] * 100:.1f} %)")
+    pattern_effect(params, hints, prnu, pred)
     effects = [name for name in CATALOGUE if name in params]
     signal = float(np.median(np.maximum(line_after - p_after["black_level"], 0.0)[:, ok]))
     pattern = prnu if prnu is not None else pred["prnu"]
     floor = float(math.sqrt(pred["noise_dn"] ** 2 + 1.0 / 12 + (pattern * signal) ** 2))
     unexplained = ""
-    from simrunner.workflows.calibration.camera_fit import MODEL_DN
-
     if rmse_after > 1.5 * floor + MODEL_DN:
         resid = np.sqrt(np.mean((line_after - frames) ** 2, axis=0)) * ok
         worst = np.argsort(-resid)[:5]
