@@ -187,6 +187,12 @@ class Camera:
                                  "places): one number per physical camera, not per run.", "arbitrary",
                                  0, 2**31 - 1)
 
+    @staticmethod
+    def exposure_range_s() -> tuple[float, float]:
+        """The range of ``exposure_s`` (set_exposure checks against it too)."""
+        m = next(f for f in fields(Camera) if f.name == "exposure_s").metadata
+        return float(m["lo"]), float(m["hi"])
+
     def frame_period_s(self, exposure_s: float | None = None) -> float:
         """Time between frames: ``exposure + readout_s`` for ``linescan`` (``exposure``:
         ``exposure_s`` when None), else ``1 / fps_hz``."""

@@ -362,7 +362,7 @@ class Spinner:
         camera stores the value and ignores it. No time passes."""
         s = _finite("set_exposure", "seconds", seconds)
         cam = self._s.car.camera
-        lo, hi = 1e-5, 1.0
+        lo, hi = cam.exposure_range_s()
         if cam.model == "area":
             hi = 1.0 / cam.fps_hz
         if not lo <= s <= hi:
