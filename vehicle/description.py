@@ -201,6 +201,39 @@ class Camera:
         return 1.0 / self.fps_hz
 
 
+PIXY2_LINE_API = "Pixy2 line tracking API and PixyMon line parameters (docs.pixycam.com, wiki v2)"
+
+
+@dataclass(frozen=True)
+class Pixy2:
+    """The Pixy2's line tracking (the Pixy2 API of ``spinner.pixy2()``, ``Pixy2.h``,
+    ``pixy2_line.h``; docs/pixy2.md): how the camera's frame becomes vectors and
+    intersections. The camera section gives the frame (a Pixy2 car: examples/pixy2_car.toml);
+    its width and height must be whole multiples of the grid."""
+
+    grid_width_px: int = _f(79, "Width of the line-tracking grid (vector x is 0 .. width - 1); the frame "
+                            "is averaged over blocks of camera.width_px / this.", PIXY2_LINE_API + ": x 0..78", 8, 1024)
+    grid_height_px: int = _f(52, "Height of the line-tracking grid (vector y is 0 .. height - 1, 0 = top = "
+                             "farthest).", PIXY2_LINE_API + ": y 0..51", 8, 1024)
+    edge_threshold: float = _f(10.0, "Edge threshold: grey-level step (0-255) between two grid pixels "
+                               "edge_distance_px apart that counts as an edge (lower: more lines).",
+                               "estimate; PixyMon 'Edge threshold' (tune it as on the real camera)", 1.0, 255.0)
+    edge_distance_px: int = _f(2, "Edge distance: pixels between the two samples of the edge detector "
+                               "(larger: fuzzier edges found).", "estimate; PixyMon 'Edge distance'", 1, 8)
+    min_line_width_px: float = _f(0.0, "Narrower dark runs are not lines.", "PixyMon 'Minimum line width'; "
+                                  "estimate", 0.0, 100.0)
+    max_line_width_px: float = _f(10.0, "Wider dark runs are not lines (the crossing's square, the floor).",
+                                  "PixyMon 'Maximum line width'; estimate: a 2 cm line is ~5 grid px at "
+                                  "the nearest row of examples/pixy2_car.toml", 1.0, 200.0)
+    min_line_length_px: float = _f(4.0, "Shorter lines are dropped (end to end).",
+                                   "PixyMon 'Minimum line length'; estimate", 0.0, 200.0)
+    max_merge_distance_px: float = _f(5.0, "Line ends this close meet (an intersection when 3 or more do).",
+                                      "PixyMon 'Maximum merge distance'; estimate", 0.0, 100.0)
+    max_line_compare_px: float = _f(10.0, "A line keeps its tracking index from the last frame when both "
+                                    "its ends moved at most this far.", "PixyMon 'Maximum line compare'; "
+                                    "estimate", 0.0, 200.0)
+
+
 @dataclass(frozen=True)
 class Effects:
     """Catalogue of effects the nominal model leaves out (issue 4). Neutral values give back
@@ -285,6 +318,7 @@ class CarDescription:
     drive: Drive = field(default_factory=Drive)
     camera: Camera = field(default_factory=Camera)
     effects: Effects = field(default_factory=Effects)
+    pixy2: Pixy2 = field(default_factory=Pixy2)
 
     def __post_init__(self) -> None:
         problem = relation_problem(self)
@@ -344,7 +378,7 @@ def _toml_value(value: Any) -> str:
 
 
 _SECTION_TYPES = {"chassis": Chassis, "wheels": Wheels, "steering": Steering, "drive": Drive,
-                  "camera": Camera, "effects": Effects}
+                  "camera": Camera, "effects": Effects, "pixy2": Pixy2}
 
 
 def car_from_dict(data: dict[str, Any], source: str = "<car>", text: str | None = None) -> CarDescription:

@@ -49,6 +49,7 @@ from simrunner.run.log import RunRecorder
 from simrunner.run.params import ParamValue, convert
 
 if TYPE_CHECKING:
+    from simrunner.run.pixy2 import Pixy2
     from simrunner.run.video import VideoRecorder
     from simrunner.sensors.camera import Camera
     from simrunner.sensors.imaging import Imager
@@ -131,6 +132,8 @@ class Session:
         self.thread_id: int | None = None  # the thread running main (set by activate)
         self._warned: set[str] = set()
         self.exposure_s = float(self.car.camera.exposure_s)  # set_exposure's value
+        self.pixy2_tracker = None  # the Pixy2's line tracker (simrunner.run.pixy2), made on first use
+        self.pixy2_frame: int | None = None  # the last frame the Pixy2 returned features of
 
     def activate(self) -> None:
         """Make this the session ``Spinner()`` attaches to in this context (and thread)."""
@@ -329,20 +332,54 @@ class Spinner:
             raise self._foreign("get_image")
         clock, session = self._clock, self._s
         clock.advance_to_next_frame()
-        pose = clock.pose()
-        imager = session.imager
-        if imager is not None:  # the physical camera (simrunner.sensors.imaging)
-            img = self._expose(imager, pose, line, add_noise)
-        elif line >= 0:  # one call (simrunner.sensors.line_row)
-            img = self._line_image(pose, line, session.noise_rng if add_noise else None)
-        else:
-            cam = session.camera
-            img = cam.render(pose)
-            if add_noise:
-                img = cam.add_noise(img, session.noise_rng)
+        img = self._frame_now(line, add_noise)
         if session.video is not None:
             session.video.note_image(img, line)
         return img
+
+    def _frame_now(self, line: int, add_noise: bool) -> np.ndarray:
+        """The camera's image (row ``line``, or all for -1) at the clock's pose."""
+        session = self._s
+        pose = self._clock.pose()
+        imager = session.imager
+        if imager is not None:  # the physical camera (simrunner.sensors.imaging)
+            return self._expose(imager, pose, line, add_noise)
+        if line >= 0:  # one call (simrunner.sensors.line_row)
+            return self._line_image(pose, line, session.noise_rng if add_noise else None)
+        cam = session.camera
+        img = cam.render(pose)
+        return cam.add_noise(img, session.noise_rng) if add_noise else img
+
+    # -- the Pixy2 (simrunner.run.pixy2) ------------------------------------------------
+    def pixy2(self) -> "Pixy2":
+        """The car's Pixy2 (its Arduino/C++ API: ``pixy.line.getMainFeatures()``, ...;
+        docs/pixy2.md). Its frames are this camera's; the car needs a Pixy2 camera
+        (``--car examples/pixy2_car.toml``)."""
+        from simrunner.run.pixy2 import Pixy2
+
+        return Pixy2(self)
+
+    def _next_pixy_frame(self, wait: bool) -> bool:
+        """Process the next Pixy2 frame (module docstring of :mod:`simrunner.run.pixy2`);
+        False when polling (``wait`` False) found no new frame."""
+        if _get_ident() != self._owner:
+            raise self._foreign("pixy2")
+        s, clock = self._s, self._clock
+        if s.pixy2_frame == clock.frame_index:
+            if wait:
+                clock.advance_to_next_frame()
+            else:
+                clock.advance(1)
+                if s.pixy2_frame == clock.frame_index:
+                    return False
+        s.pixy2_frame = clock.frame_index
+        img = self._frame_now(-1, True)
+        tracker = s.pixy2_tracker
+        tracker.process(img)
+        if s.video is not None:
+            s.video.note_image(img, -1)
+            s.video.note_pixy2(tracker.all, tracker.vector_index, tracker.w, tracker.h)
+        return True
 
     def _expose(self, imager: "Imager", pose, line: int, add_noise: bool) -> np.ndarray:
         """The physical camera's frame just read: integrated over the exposure in force,

@@ -106,6 +106,11 @@ class VideoRecorder:
             rec.line = img
         self._last_line = rec.line
 
+    def note_pixy2(self, features, vector_index, grid_w: int, grid_h: int) -> None:
+        """The Pixy2's features of the image just noted (drawn over it)."""
+        if self._pending is not None:
+            self._pending.pixy2 = (features, vector_index, grid_w, grid_h)
+
     def add_text(self, lines: list[str]) -> None:
         if self._text_frame != self._frame:
             self._text, self._text_frame = [], self._frame

@@ -56,6 +56,7 @@ class FrameRecord:
     line_row: int = 0
     text: tuple = ()
     lines: np.ndarray | None = None  # (k, W) controller image lines
+    pixy2: tuple | None = None  # (all Features, Vector index or None, grid_w, grid_h): drawn on the image
 
 
 @dataclass(frozen=True)
@@ -205,6 +206,21 @@ def _middle_panel(out: np.ndarray, box, rec: FrameRecord) -> None:
         y += TEXT_STEP
 
 
+def _pixy2_overlay(out: np.ndarray, box, features, vector_index, grid_w: int, grid_h: int) -> None:
+    """The Pixy2's vectors (green, the Vector yellow; arrows point to the head) and
+    intersections (red rings) over the camera image, as PixyMon's "all features" view."""
+    x0, y0, x1, y1 = box
+    sx, sy = (x1 - x0) / grid_w, (y1 - y0) / grid_h
+
+    def at(x: int, y: int) -> tuple[int, int]:
+        return int(x0 + (x + 0.5) * sx), int(y0 + (y + 0.5) * sy)
+    for v in features.vectors:
+        color = _YELLOW if v.m_index == vector_index else _GREEN
+        cv2.arrowedLine(out, at(v.m_x0, v.m_y0), at(v.m_x1, v.m_y1), color, 2, tipLength=0.08)
+    for it in features.intersections:
+        cv2.circle(out, at(it.m_x, it.m_y), 7, _RED, 2)
+
+
 def compose(rec: FrameRecord, track_view: TrackView | None, laps: int,
             car_length_m: float = 0.28, car_width_m: float = 0.16,
             layout: Layout | None = None) -> np.ndarray:
@@ -222,6 +238,8 @@ def compose(rec: FrameRecord, track_view: TrackView | None, laps: int,
     ry = y0 + int((rec.line_row + 0.5) * (y1 - y0) / rec.image.shape[0])
     cv2.line(out, (x0, ry), (x0 + 8, ry), _RED, 2)
     cv2.line(out, (x1 - 9, ry), (x1 - 1, ry), _RED, 2)
+    if rec.pixy2 is not None:
+        _pixy2_overlay(out, layout.camera, *rec.pixy2)
     _api_panel(out, layout.api, rec, laps)
     _middle_panel(out, layout.middle, rec)
     if track_view is not None and layout.top is not None:
