@@ -21,12 +21,13 @@ they are read, from the camera at that moment. The setters let no time pass.
 """
 from __future__ import annotations
 
+import struct
 from typing import TYPE_CHECKING
 
 from simrunner.errors import CameraError, CommandError
 from simrunner.sensors.pixy2 import (LINE_ALL_FEATURES, LINE_BARCODE, LINE_INTERSECTION,
-                                     LINE_VECTOR, PIXY_RESULT_BUSY, PIXY_RESULT_OK, Features,
-                                     LineTracker)
+                                     LINE_MAX_INTERSECTION_LINES, LINE_VECTOR, PIXY_RESULT_BUSY,
+                                     PIXY_RESULT_OK, Features, IntersectionLine, LineTracker)
 
 if TYPE_CHECKING:
     from simrunner.run.spinner import Spinner
@@ -40,6 +41,26 @@ def _int(method: str, name: str, value, lo: int, hi: int) -> int:
     if not lo <= v <= hi:
         raise CommandError(f"{method}({name}={value!r}): expected an integer {lo}..{hi}")
     return v
+
+
+_VECTOR = struct.Struct("<6B")
+_INTERSECTION_HEAD = struct.Struct("<4B")
+_INTERSECTION_LINE = struct.Struct("<2Bh")
+_BARCODE = struct.Struct("<4B")
+_COUNTS = struct.Struct("<3i")
+
+
+def pack_features(line: "Pixy2Line") -> bytes:
+    """``line``'s last features as the C structures of ``pixy2_line.h`` (little-endian):
+    three int32 counts, then the vectors, intersections and barcodes."""
+    out = [_COUNTS.pack(len(line.vectors), len(line.intersections), len(line.barcodes))]
+    out += [_VECTOR.pack(v.m_x0, v.m_y0, v.m_x1, v.m_y1, v.m_index, v.m_flags) for v in line.vectors]
+    for it in line.intersections:
+        lines = list(it.m_intLines) + [IntersectionLine(0, 0)] * (LINE_MAX_INTERSECTION_LINES - len(it.m_intLines))
+        out.append(_INTERSECTION_HEAD.pack(it.m_x, it.m_y, it.m_n, 0))
+        out += [_INTERSECTION_LINE.pack(ln.m_index, 0, ln.m_angle) for ln in lines]
+    out += [_BARCODE.pack(b.m_x, b.m_y, b.m_flags, b.m_code) for b in line.barcodes]
+    return b"".join(out)
 
 
 class Pixy2Line:

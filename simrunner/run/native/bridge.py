@@ -43,7 +43,8 @@ from simrunner.run.native.build import NativeProgram, host_program
 
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
-    OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE = range(1, 14)
+    OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
+    OP_PIXY_PROG = range(1, 17)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE = 0, 1, 2, 3
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
@@ -363,6 +364,8 @@ class _Session:
             reply(_OK_EMPTY)
         elif op == OP_GET_EXPOSURE:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_exposure()))
+        elif op in (OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG):
+            reply(_pixy2_answer(s, op, payload))
         elif op == OP_FAULT:
             self._fault(payload.decode("utf-8", "replace"))
         else:
@@ -474,6 +477,41 @@ class _Session:
 
     def _close(self) -> None:
         self.child.close()
+
+
+_3I = struct.Struct("<3i")
+_I = struct.Struct("<i")
+_PIXY_SETTERS = {1: "set_mode", 2: "set_next_turn", 3: "set_default_turn", 4: "set_vector",
+                 5: "reverse_vector", 6: "set_camera_brightness", 7: "init", 8: "set_lamp"}
+
+
+def _pixy2_answer(spinner, op: int, payload: bytes) -> bytes:
+    """The reply to a Pixy2 request of pixy2_line.h (``spinner_host.c``'s pixy_* functions)."""
+    from simrunner.run.pixy2 import pack_features
+
+    pixy = spinner.pixy2()
+    if op == OP_PIXY_PROG:
+        result = pixy.change_prog(payload.decode("utf-8", "replace"))
+    elif op == OP_PIXY_SET:
+        what, value = _2I.unpack(payload)
+        name = _PIXY_SETTERS.get(what)
+        if name is None:
+            raise ControllerError(f"unknown Pixy2 request {what} from the host program")
+        if name in ("reverse_vector", "init"):
+            result = getattr(pixy if name == "init" else pixy.line, name)()
+        elif name == "set_lamp":
+            result = pixy.set_lamp(value >> 8, value & 0xFF)
+        elif name == "set_camera_brightness":
+            result = pixy.set_camera_brightness(value)
+        else:
+            result = getattr(pixy.line, name)(value)
+    else:
+        main, features, wait = _3I.unpack(payload)
+        line = pixy.line
+        result = (line.get_main_features if main else line.get_all_features)(features, wait != 0)
+        data = _I.pack(result) + (b"" if result < 0 else pack_features(line))
+        return _HDR.pack(ST_OK, len(data)) + data
+    return _HDR.pack(ST_OK, 4) + _I.pack(result)
 
 
 def load_native(sources: list[str | Path] | NativeProgram, args: tuple[str, ...] = ()) -> NativeController:

@@ -42,9 +42,11 @@
 #endif
 
 #include "spinner.h"
+#include "pixy2_line.h"
 
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
-       OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE };
+       OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
+       OP_PIXY_SET, OP_PIXY_PROG };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3 };
 
 static unsigned char out_buf[1 << 16];
@@ -425,6 +427,80 @@ double spinner_get_exposure(void) {
     INIT();
     if (!finished) call(OP_GET_EXPOSURE, NULL, 0, NULL, 0, &last_exposure_s, sizeof last_exposure_s);
     return last_exposure_s;
+}
+
+/* -- the Pixy2 (pixy2_line.h): requests answered by simrunner.run.pixy2 ------------------ */
+enum { PIXY_SET_MODE = 1, PIXY_SET_NEXT_TURN, PIXY_SET_DEFAULT_TURN, PIXY_SET_VECTOR,
+       PIXY_REVERSE_VECTOR, PIXY_SET_BRIGHTNESS, PIXY_INIT, PIXY_SET_LAMP };
+
+static int8_t pixy_set(int32_t what, int32_t value) {
+    int32_t req[2] = {what, value}, result = PIXY_RESULT_OK;
+    INIT();
+    if (finished) return PIXY_RESULT_OK;
+    call(OP_PIXY_SET, req, sizeof req, NULL, 0, &result, sizeof result);
+    return (int8_t)result;
+}
+
+int8_t pixy2_init(void) { return pixy_set(PIXY_INIT, 0); }
+int8_t pixy2_line_set_mode(uint8_t mode) { return pixy_set(PIXY_SET_MODE, mode); }
+int8_t pixy2_line_set_next_turn(int16_t angle) { return pixy_set(PIXY_SET_NEXT_TURN, angle); }
+int8_t pixy2_line_set_default_turn(int16_t angle) { return pixy_set(PIXY_SET_DEFAULT_TURN, angle); }
+int8_t pixy2_line_set_vector(uint8_t index) { return pixy_set(PIXY_SET_VECTOR, index); }
+int8_t pixy2_line_reverse_vector(void) { return pixy_set(PIXY_REVERSE_VECTOR, 0); }
+int8_t pixy2_set_camera_brightness(uint8_t brightness) { return pixy_set(PIXY_SET_BRIGHTNESS, brightness); }
+int8_t pixy2_set_lamp(uint8_t upper, uint8_t lower) { return pixy_set(PIXY_SET_LAMP, upper << 8 | lower); }
+
+int8_t pixy2_change_prog(const char *prog) {
+    int32_t result = PIXY_RESULT_OK;
+    INIT();
+    if (prog == NULL) misuse("pixy2_change_prog(prog=NULL): expected a program name (\"line\")");
+    if (finished) return PIXY_RESULT_OK;
+    call(OP_PIXY_PROG, prog, strlen(prog), NULL, 0, &result, sizeof result);
+    return (int8_t)result;
+}
+
+/* The reply: int32 result, int32 counts (vectors, intersections, barcodes), then the three
+ * arrays in the layouts of pixy2_line.h. */
+static struct {
+    int32_t head[4];
+    pixy2_vector vectors[255];
+    pixy2_intersection intersections[255];
+    pixy2_barcode barcodes[255];
+} pixy_reply;
+
+static int8_t pixy_features(int32_t main_features, uint8_t features, bool wait, pixy2_line_features *out) {
+    static unsigned char buf[sizeof pixy_reply];
+    int32_t req[3] = {main_features, features, wait ? 1 : 0};
+    INIT();
+    if (out == NULL) misuse("pixy2_line_get_%s_features(out=NULL): expected a pixy2_line_features to fill",
+                            main_features ? "main" : "all");
+    if (finished) {
+        memset(out, 0, sizeof *out);
+        return 0;
+    }
+    size_t n = call(OP_PIXY_FEATURES, req, sizeof req, NULL, 0, buf, sizeof buf);
+    int32_t head[4] = {0, 0, 0, 0};
+    if (n >= sizeof head) memcpy(head, buf, sizeof head);
+    if (head[0] == PIXY_RESULT_BUSY) return PIXY_RESULT_BUSY;
+    size_t nv = (size_t)head[1], ni = (size_t)head[2], nb = (size_t)head[3];
+    const unsigned char *p = buf + sizeof head;
+    memcpy(pixy_reply.vectors, p, nv * sizeof(pixy2_vector));
+    p += nv * sizeof(pixy2_vector);
+    memcpy(pixy_reply.intersections, p, ni * sizeof(pixy2_intersection));
+    p += ni * sizeof(pixy2_intersection);
+    memcpy(pixy_reply.barcodes, p, nb * sizeof(pixy2_barcode));
+    out->numVectors = (uint8_t)nv, out->vectors = pixy_reply.vectors;
+    out->numIntersections = (uint8_t)ni, out->intersections = pixy_reply.intersections;
+    out->numBarcodes = (uint8_t)nb, out->barcodes = pixy_reply.barcodes;
+    return (int8_t)head[0];
+}
+
+int8_t pixy2_line_get_main_features(uint8_t features, bool wait, pixy2_line_features *out) {
+    return pixy_features(1, features, wait, out);
+}
+
+int8_t pixy2_line_get_all_features(uint8_t features, bool wait, pixy2_line_features *out) {
+    return pixy_features(0, features, wait, out);
 }
 
 void spinner_sleep(double seconds) {
