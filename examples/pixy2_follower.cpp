@@ -105,8 +105,20 @@ std::optional<P> pursuit_point(const std::vector<P> &pts, double radius_m) {
     return best;
 }
 
+// The vector with its tail at its lower end (the Pixy2 may have reversed it).
+Vector upward(Vector v) {
+    if (std::make_pair(v.m_y0, -v.m_x0) < std::make_pair(v.m_y1, -v.m_x1)) {
+        std::swap(v.m_x0, v.m_x1);
+        std::swap(v.m_y0, v.m_y1);
+    }
+    return v;
+}
+
 // The left and the right edge as vector chains (empty where there is none).
-std::pair<std::vector<Vector>, std::vector<Vector>> lane_edges(const Vector *vs, int n) {
+std::pair<std::vector<Vector>, std::vector<Vector>> lane_edges(const Vector *raw, int n) {
+    std::vector<Vector> up;
+    for (int i = 0; i < n; i++) up.push_back(upward(raw[i]));
+    const Vector *vs = up.data();
     std::vector<std::tuple<double, int, P, Vector>> near;
     for (int i = 0; i < n; i++) {
         auto tail = to_floor(vs[i].m_x0, vs[i].m_y0);

@@ -17,6 +17,7 @@ Parameters (``--param NAME=VALUE``): ``v_max``, ``v_min`` (m/s), ``lookahead`` (
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 GRID_W, GRID_H = 79, 52      # the Pixy2's line grid (x 0..78, y 0..51)
 CAM_HEIGHT_M = 0.30          # the camera mount (examples/pixy2_car.toml)
@@ -120,10 +121,27 @@ def pursuit_point(pts, radius_m: float) -> tuple[float, float] | None:
     return best
 
 
+class Seg(NamedTuple):
+    """A vector with its tail at its lower end (the Pixy2 may have reversed it)."""
+
+    m_x0: int
+    m_y0: int
+    m_x1: int
+    m_y1: int
+    m_index: int
+
+
+def upward(v) -> Seg:
+    if (v.m_y0, -v.m_x0) < (v.m_y1, -v.m_x1):
+        return Seg(v.m_x1, v.m_y1, v.m_x0, v.m_y0, v.m_index)
+    return Seg(v.m_x0, v.m_y0, v.m_x1, v.m_y1, v.m_index)
+
+
 def lane_edges(vectors):
     """The left and the right edge line as vector chains (or None): the vector whose tail is
     nearest the camera (within NEAR_M) starts the edge on its side; the nearest one on the
     other side that starts at least MIN_GAP_M from that chain starts the other edge."""
+    vectors = [upward(v) for v in vectors]
     near = []
     for v in vectors:
         tail = to_floor(v.m_x0, v.m_y0)

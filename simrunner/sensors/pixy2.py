@@ -364,6 +364,7 @@ class LineTracker:
         self._counter = 0
         self.vector_index: int | None = None    # the Vector's tracking index
         self.pending_index: int | None = None   # the branch chosen at the Vector's intersection
+        self._pending_at = np.zeros(2)          # ... and where that intersection was
         self.all = Features()                   # the last frame's features (getAllFeatures)
         self.main = Features()                  # ... and its main features (getMainFeatures)
 
@@ -436,9 +437,9 @@ class LineTracker:
             s = by_index[k]
             if (self.pending_index in by_index and s.head_node in inter
                     and nodes[s.head_node][1] >= _TURN_ROW * (self.h - 1)):
-                k = self._take_pending()
+                k = self._take_pending(by_index)
         elif self.pending_index in by_index:
-            k = self._take_pending()
+            k = self._take_pending(by_index)
         else:
             low = [(float((s.tail[0] - (self.w - 1) / 2.0) ** 2 + (self.h - 1 - s.tail[1]) ** 2), i)
                    for i, s in by_index.items() if s.tail[1] >= (self.h - 1) / 2.0]
@@ -448,8 +449,14 @@ class LineTracker:
         self.vector_index = k
         return k
 
-    def _take_pending(self) -> int:
+    def _take_pending(self, by_index: dict[int, _Seg]) -> int:
+        """The chosen branch becomes the Vector, pointing away from the intersection."""
         k, self.pending_index, self.next_turn_deg = self.pending_index, None, None
+        s = by_index[k]
+        at = self._pending_at
+        if np.hypot(*(s.head - at)) < np.hypot(*(s.tail - at)):
+            self._reversed ^= {k}
+            by_index[k] = s.reverse()
         return k  # type: ignore[return-value]
 
     def _choose_branch(self, by_index: dict[int, _Seg], k: int, node: int | None, inter: list[int]) -> None:
@@ -462,6 +469,8 @@ class LineTracker:
                     if ln.m_index != k), default=None)
         if best is not None:
             self.pending_index = best[1]
+            it = self.main.intersections[0]
+            self._pending_at = np.array([float(it.m_x), float(it.m_y)])
 
     def reverse_vector(self) -> None:
         """Swap the Vector's head and tail from now on (``reverseVector``)."""

@@ -480,7 +480,7 @@ static int8_t pixy_features(int32_t main_features, uint8_t features, bool wait, 
     }
     size_t n = call(OP_PIXY_FEATURES, req, sizeof req, NULL, 0, buf, sizeof buf);
     int32_t head[4] = {0, 0, 0, 0};
-    if (n >= sizeof head) memcpy(head, buf, sizeof head);
+    memcpy(head, buf, n < sizeof head ? n : sizeof head);  /* BUSY: the result alone */
     if (head[0] == PIXY_RESULT_BUSY) return PIXY_RESULT_BUSY;
     size_t nv = (size_t)head[1], ni = (size_t)head[2], nb = (size_t)head[3];
     const unsigned char *p = buf + sizeof head;
