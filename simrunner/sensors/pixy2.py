@@ -132,37 +132,56 @@ def grid_image(frame: np.ndarray, grid_w: int, grid_h: int) -> np.ndarray:
 
 
 # -- 2. line points -------------------------------------------------------------------------
-def _edges(g: np.ndarray, mask: np.ndarray, d: int) -> list[float]:
-    """Centres of the runs of ``mask`` in ``g``, weighted by ``|g|``, shifted by ``d / 2``."""
+def _edge_centres(g: np.ndarray, mask: np.ndarray, d: int) -> list[list[float]]:
+    """Per scan (row of ``g``): the centres of the runs of ``mask``, weighted by ``|g|``,
+    shifted by ``d / 2``."""
+    n, m = mask.shape
+    pad = np.zeros((n, m + 2), dtype=np.int8)
+    pad[:, 1:-1] = mask
+    step = np.diff(pad, axis=1)
+    rows, starts = np.nonzero(step == 1)   # row-major: runs in order
+    _rows, ends = np.nonzero(step == -1)
+    w = np.where(mask, np.abs(g), 0.0)
+    cw = np.zeros((n, m + 1))
+    cxw = np.zeros((n, m + 1))
+    np.cumsum(w, axis=1, out=cw[:, 1:])
+    np.cumsum(w * np.arange(m), axis=1, out=cxw[:, 1:])
+    centres = (cxw[rows, ends] - cxw[rows, starts]) / (cw[rows, ends] - cw[rows, starts]) + d / 2.0
+    values, out, i = centres.tolist(), [], 0
+    for count in np.bincount(rows, minlength=n).tolist():
+        out.append(values[i:i + count])
+        i += count
+    return out
+
+
+def scan_lines(profiles: np.ndarray, *, threshold: float, d: int, min_w: float,
+               max_w: float) -> list[list[float]]:
+    """Line points along each scan (row of ``profiles``): a dark run between a falling and a
+    rising edge, ``min_w`` to ``max_w`` wide."""
+    g = profiles[:, d:] - profiles[:, :-d]
+    falls = _edge_centres(g, g <= -threshold, d)
+    rises = _edge_centres(g, g >= threshold, d)
     out = []
-    idx = np.flatnonzero(mask)
-    if idx.size == 0:
-        return out
-    breaks = np.flatnonzero(np.diff(idx) > 1)
-    starts = np.concatenate(([0], breaks + 1))
-    ends = np.concatenate((breaks + 1, [idx.size]))
-    for a, b in zip(starts.tolist(), ends.tolist()):
-        run = idx[a:b]
-        wgt = np.abs(g[run])
-        out.append(float((run * wgt).sum() / wgt.sum()) + d / 2.0)
+    for f_row, r_row in zip(falls, rises):
+        points: list[float] = []
+        if f_row and r_row:
+            events = sorted([(x, 0) for x in f_row] + [(x, 1) for x in r_row])
+            fall = None
+            for x, kind in events:
+                if kind == 0:
+                    fall = x
+                elif fall is not None:
+                    if min_w <= x - fall <= max_w:
+                        points.append((fall + x) / 2.0)
+                    fall = None
+        out.append(points)
     return out
 
 
 def scan_points(profile: np.ndarray, *, threshold: float, d: int, min_w: float, max_w: float) -> list[float]:
-    """Line points along one scan (a dark run between a falling and a rising edge)."""
-    g = profile[d:] - profile[:-d]
-    falls = _edges(g, g <= -threshold, d)
-    rises = _edges(g, g >= threshold, d)
-    events = sorted([(x, 0) for x in falls] + [(x, 1) for x in rises])
-    points, fall = [], None
-    for x, kind in events:
-        if kind == 0:
-            fall = x
-        elif fall is not None:
-            if min_w <= x - fall <= max_w:
-                points.append((fall + x) / 2.0)
-            fall = None
-    return points
+    """Line points along one scan (:func:`scan_lines` of one row)."""
+    return scan_lines(np.asarray(profile, dtype=np.float64)[None, :], threshold=threshold, d=d,
+                      min_w=min_w, max_w=max_w)[0]
 
 
 # -- 3. lines ---------------------------------------------------------------------------------
@@ -239,8 +258,8 @@ def _pieces_of(grid: np.ndarray, spec, white_line: bool) -> list[np.ndarray]:
     g = 255.0 - grid if white_line else grid
     kw = dict(threshold=float(spec.edge_threshold), d=int(spec.edge_distance_px),
               min_w=float(spec.min_line_width_px), max_w=float(spec.max_line_width_px))
-    rows = [scan_points(g[y], **kw) for y in range(g.shape[0])]
-    cols = [scan_points(g[:, x], **kw) for x in range(g.shape[1])]
+    rows = scan_lines(g, **kw)
+    cols = scan_lines(np.ascontiguousarray(g.T), **kw)
     pieces = []
     for ch in _chains(rows):
         pieces += [p for p in _pieces(ch, steep=True)]                  # (x, y)
