@@ -27,12 +27,13 @@ def write(tmp_path: Path, name: str, body: str) -> Path:
 
 
 NOT_CONTROLLERS = {"learn_ppo.py"}  # scripts run with python, not `simrunner drive`
+CARS = {"pixy2_follower.py": EXAMPLES / "pixy2_car.toml"}  # controllers of another car than the default
 
 
 @pytest.mark.parametrize("example", sorted(p.name for p in EXAMPLES.glob("*.py")
                                            if p.name not in NOT_CONTROLLERS))
 def test_every_example_controller_passes_the_checker(example, track):
-    report = check_controller(EXAMPLES / example, track=track, seconds=2.0)
+    report = check_controller(EXAMPLES / example, track=track, car=CARS.get(example), seconds=2.0)
     assert report.ok, report.text()
     assert report.sim_time_s > 0.0
 
