@@ -22,7 +22,7 @@ from simrunner.track.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_f
 from trackgen import LayoutError
 from trackgen.layout import parse_layout
 from vehicle.description import CarDescription
-from worlds.lighting import GAZEBO_LUX, Light, TrackLighting
+from worlds.lighting import GAZEBO_LUX, SHADE_EDGE_M, Light, Shade, TrackLighting, from_json
 from worlds.sdf_read import read_world
 
 OVAL = "START_FINISH\nSTRAIGHT\nTURN_LEFT x4\nSTRAIGHT x2\nTURN_LEFT x4\n"
@@ -65,7 +65,26 @@ def test_layout_settings_make_the_lighting():
     assert parse_layout(OVAL).lighting.is_default()
 
 
+def test_shades_in_a_layout_and_their_light():
+    layout = parse_layout("@shade = 1 0 0.5 0.8 90 0.2\n@shade = 3 0 1 1 0 0\n" + OVAL)
+    tunnel, shadow = layout.lighting.shades
+    assert tunnel == Shade(1.0, 0.0, 0.5, 0.8, math.pi / 2, 0.2)
+    assert parse_layout("@scale = 2\n@shade = 1 0 0.5 0.8 0 0.2\n" + OVAL).lighting.shades == (
+        Shade(2.0, 0.0, 1.0, 1.6, 0.0, 0.2),)
+    # along the heading (here +y) the roof is 0.5 m long, across it 0.8 m wide
+    x = np.array([1.0, 1.0, 1.0, 1.3, 1.0, 1.0 + 0.4 - SHADE_EDGE_M / 2])
+    y = np.array([0.0, 0.2, 0.3, 0.0, 0.25 - SHADE_EDGE_M / 2, 0.0])
+    assert tunnel.factor(x, y) == pytest.approx([0.2, 0.2, 1.0, 0.2, 0.6, 0.6])
+    lit = layout.lighting
+    assert lit.illuminance_lux(np.array([1.0, 3.0, 5.0]), np.zeros(3)) == pytest.approx([100.0, 0.0, 500.0])
+    assert from_json(json.loads(json.dumps(lit.to_json())), "t") == lit
+
+
 @pytest.mark.parametrize("text, line, message", [
+    ("@shade = 1 2 3\n", 1, "@shade = '1 2 3': expected '@shade = X Y LENGTH WIDTH HEADING_DEG TRANSMISSION'"),
+    ("@shade = 1 2 0.5 0.5 0 1.5\n", 1, "@shade: TRANSMISSION = 1.5: expected 0 <= TRANSMISSION <= 1"),
+    ("@shade = 1 2 0 0.5 0 0.5\n", 1, "@shade: LENGTH = 0: expected 0.01 <= LENGTH <= 1000"),
+    ("@shade = 1 2 0.5 wide 0 0.5\n", 1, "@shade: WIDTH = 'wide': expected a number"),
     ("@light = 1 2\n", 1, "@light = '1 2': expected '@light = X Y Z INTENSITY_CD [CONE_DEG]'"),
     ("# lamps\n@light = 1 2 three 100\n", 2, "@light: Z = 'three': expected a number"),
     ("@light = 1 2 0.01 100\n", 1, "@light: Z = 0.01 m: expected 0.05 <= Z <= 100"),
@@ -97,7 +116,7 @@ def _build(tmp_path, text):
 
 def test_build_writes_the_lamps_for_gazebo_and_reads_them_back(tmp_path):
     text = "@name = lit\n@ambient_lux = 60\n@light = 0.5 0 2.0 1500 70\n@light = 2.5 0.25 1.5 300\n" \
-           "@floor_reflectance = 0.3\n" + OVAL
+           "@floor_reflectance = 0.3\n@shade = 1.5 0 0.5 0.8 0 0.1\n" + OVAL
     src, out = _build(tmp_path, text)
     sdf = (out / "world.sdf").read_text()
     assert sdf.count("<light ") == 3 and 'type="spot"' in sdf and "<nxpcup:intensity_cd>1500<" in sdf
@@ -157,6 +176,17 @@ def test_a_dark_zone_and_a_lamp_change_the_line(floor):
     assert dark[40] < 0.15 * hall[40]  # a tenth of the light: a tenth of the signal (+ black level)
     assert lamp[40] > 3 * dark[40]
     assert np.argmin(lamp) in range(60, 69)  # the black line is still there, in the middle
+
+
+def test_a_tunnel_darkens_the_line_by_its_transmission(floor):
+    black = CarDescription().camera.black_level_dn
+    hall = _line(floor, TrackLighting())
+    tunnel = _line(floor, TrackLighting(shades=(Shade(0.6, 0.0, 1.0, 2.0, 0.0, 0.2),)))
+    lamp_in_tunnel = _line(floor, TrackLighting(ambient_lux=50.0, lights=(Light(0.6, 0.0, 1.0, 600.0),),
+                                                shades=(Shade(0.6, 0.0, 1.0, 2.0, 0.0, 0.2),)))
+    lamp = _line(floor, TrackLighting(ambient_lux=50.0, lights=(Light(0.6, 0.0, 1.0, 600.0),)))
+    assert (tunnel[40] - black) / (hall[40] - black) == pytest.approx(0.2, abs=0.02)
+    assert (lamp_in_tunnel[40] - black) / (lamp[40] - black) == pytest.approx(0.2, abs=0.02)
 
 
 def test_reflectances_and_the_lamps_highlight(floor):

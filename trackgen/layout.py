@@ -41,6 +41,10 @@ Light and surfaces (the physical camera's scene; ``worlds.lighting``, docs/camer
     @light = X Y Z INTENSITY_CD [CONE_DEG]   a lamp at world X Y Z (m; Z above the track,
                           scaled by @scale), luminous intensity in candela, optionally a spot
                           pointing down with that full cone angle (deg); may repeat
+    @shade = X Y LENGTH WIDTH HEADING_DEG TRANSMISSION   a tunnel's roof or a shadow: the
+                          LENGTH x WIDTH rectangle (m, scaled by @scale) centred at world X Y,
+                          its length along HEADING_DEG, lets through TRANSMISSION (0 .. 1) of
+                          the light; may repeat
     @lane_reflectance = 0.92, @line_reflectance = 0.06, @floor_reflectance = 0.16,
     @specular = 0.03      fractions of light the lane, the black lines and the floor return;
                           the glossy share of the lamps' light
@@ -66,7 +70,7 @@ from typing import Mapping
 from pieces.spec import PARAMS, SETTINGS_PARAMS, ParamSpec, PieceError, PieceType, TrackSettings
 
 from worlds.lighting import LIMITS as LIGHT_LIMITS
-from worlds.lighting import Light, TrackLighting
+from worlds.lighting import Light, Shade, TrackLighting
 
 from .errors import LayoutError
 
@@ -86,9 +90,9 @@ MAX_NUMBER_CHARS = 40
 PIECE_NAMES: tuple[str, ...] = tuple(k.name for k in PieceType)
 SCALED_SETTINGS = ("lane_width", "edge_width", "thickness")
 """Settings that ``@scale`` multiplies (``arc_tolerance`` is a meshing accuracy, not a size)."""
-LIGHT_SETTINGS = ("ambient_lux", "light", "lane_reflectance", "line_reflectance", "floor_reflectance",
-                  "specular")
-"""The light and surface settings (``worlds.lighting.TrackLighting``); only ``@light`` repeats."""
+LIGHT_SETTINGS = ("ambient_lux", "light", "shade", "lane_reflectance", "line_reflectance",
+                  "floor_reflectance", "specular")
+"""The light and surface settings (``worlds.lighting.TrackLighting``); ``@light`` and ``@shade`` repeat."""
 EXTRA_SETTINGS = ("name", "scale") + LIGHT_SETTINGS
 
 # Unambiguous (no nested quantifiers over the same digits): linear time on any input.
@@ -247,6 +251,7 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     name, scale = sanitize_name(default_name), 1.0
     light_values: dict[str, float] = {}
     lamps: list[tuple[int, tuple[float, ...]]] = []
+    shade_lines: list[tuple[float, ...]] = []
     lines = text.removeprefix("\ufeff").split("\n")
     for lineno, raw in enumerate(lines, start=1):
         body = raw.split("#", 1)[0].strip()
@@ -260,6 +265,9 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
             key, value = _parse_setting(body, path, lineno)
             if key == "light":
                 lamps.append((lineno, value))
+                continue
+            if key == "shade":
+                shade_lines.append(value)
                 continue
             if key in seen_at:
                 raise LayoutError(path, lineno, f"@{key} set twice (first on line {seen_at[key]})")
@@ -292,7 +300,9 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
         line = seen_at.get("scale", 1)
         raise LayoutError(path, line, f"track settings after @scale={scale:g}: {exc}") from None
     lights = tuple(Light(x * scale, y * scale, z * scale, cd, cone) for _, (x, y, z, cd, cone) in lamps)
-    lighting = TrackLighting(lights=lights, **light_values)
+    shades = tuple(Shade(x * scale, y * scale, length * scale, width * scale, math.radians(heading), t)
+                   for x, y, length, width, heading, t in shade_lines)
+    lighting = TrackLighting(lights=lights, shades=shades, **light_values)
     return Layout(path=path, name=name, entries=tuple(entries), settings=settings,
                   scale=scale, setting_values=values, lighting=lighting)
 
@@ -313,6 +323,8 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
         raise LayoutError(path, lineno, f"@{key}: missing value (expected '@{key} = VALUE')")
     if key == "light":
         return key, _parse_light(value, path, lineno)
+    if key == "shade":
+        return key, _parse_shade(value, path, lineno)
     if key == "name":
         if not _NAME.match(value):
             raise LayoutError(path, lineno, f"@name = {_shown(value)}: expected 1-64 letters, "
@@ -361,6 +373,26 @@ def _parse_light(value: str, path: str, lineno: int) -> tuple[float, float, floa
         raise LayoutError(path, lineno, f"@light: Z = {_bare(words[2])} m: expected {lo:g} <= Z <= {hi:g} "
                                         f"(m above the track)")
     return x, y, z, cd, (numbers[4] if len(numbers) == 5 else None)
+
+
+def _parse_shade(value: str, path: str, lineno: int) -> tuple[float, ...]:
+    """``X Y LENGTH WIDTH HEADING_DEG TRANSMISSION`` of an ``@shade`` line."""
+    usage = "expected '@shade = X Y LENGTH WIDTH HEADING_DEG TRANSMISSION' (m, m, m, m, degrees, 0..1)"
+    words = value.split()
+    if len(words) != 6:
+        raise LayoutError(path, lineno, f"@shade = {_shown(value)}: {usage}")
+    numbers = []
+    for word, what, limit in zip(words, ("X", "Y", "LENGTH", "WIDTH", "HEADING_DEG", "TRANSMISSION"),
+                                 ("coordinate_m", "coordinate_m", "size_m", "size_m", "heading_deg",
+                                  "transmission")):
+        number = _number(word)
+        if number is None:
+            raise LayoutError(path, lineno, f"@shade: {what} = {_shown(word)}: expected a number; {usage}")
+        lo, hi = LIGHT_LIMITS[limit]
+        if not lo <= number <= hi:
+            raise LayoutError(path, lineno, f"@shade: {what} = {_bare(word)}: expected {lo:g} <= {what} <= {hi:g}")
+        numbers.append(number)
+    return tuple(numbers)
 
 
 def _number(text: str) -> float | None:

@@ -2,9 +2,10 @@
 
 A :class:`TrackLighting` is an ambient illuminance (lux) on the whole track plus point or spot
 lights (position in world metres, luminous intensity in candela, spots pointing straight down
-with a full cone angle), and the reflectances of the lane, the black lines and the floor (the
+with a full cone angle), shades (a tunnel's roof or a shadow over a rectangle of the floor,
+letting through a fraction of all the light), and the reflectances of the lane, the black lines and the floor (the
 fraction of light a matte surface returns) with a small specular (glossy) term. Layouts set it
-with ``@ambient_lux``, ``@light``, ``@lane_reflectance``, ``@line_reflectance``,
+with ``@ambient_lux``, ``@light``, ``@shade``, ``@lane_reflectance``, ``@line_reflectance``,
 ``@floor_reflectance``, ``@specular`` (trackgen.layout); ``trackgen build`` writes it into
 ``world.sdf`` as SDF ``<light>`` elements (for Gazebo) with the photometric numbers in elements
 of the ``nxpcup`` XML namespace, and into ``track.json``; ``worlds.sdf_read`` reads it back,
@@ -13,7 +14,9 @@ and reads the lights of any other world by the Gazebo convention of :func:`from_
 Illuminance on the (horizontal) track surface at a point ``q``, from a light of intensity ``I``
 at height ``h`` above the surface and distance ``d``: ``E = I cos(theta) / d^2 = I h / d^3``
 (inverse-square law with Lambert's cosine; a spot gives this inside its cone, fading to 0
-over the last 10 % of its half-angle).
+over the last 10 % of its half-angle). Under a shade the sum is multiplied by its
+``transmission``, rising linearly to 1 over the last ``SHADE_EDGE_M`` inside its rectangle
+(the soft edge of a shadow, the light coming in at a tunnel's mouth).
 """
 from __future__ import annotations
 
@@ -38,6 +41,7 @@ DEFAULT_SPECULAR = 0.03  # fraction of light reflected glossily by matte print (
 SHININESS = 30.0  # Blinn-Phong exponent: a broad highlight, as on a satin-printed surface
 GAZEBO_LUX = 500.0  # Gazebo lights have no units: a white (diffuse 1) light straight down = this
 SPOT_EDGE = 0.9  # a spot is full strength out to 90 % of its half-angle, then fades to 0
+SHADE_EDGE_M = 0.05  # a shade's edge: full transmission outside, its own 5 cm inside (estimate)
 
 LIMITS = {  # the range of each number (layout errors and readers say these)
     "ambient_lux": (0.0, 200_000.0),
@@ -47,6 +51,9 @@ LIMITS = {  # the range of each number (layout errors and readers say these)
     "reflectance": (0.0, 1.0),
     "specular": (0.0, 1.0),
     "coordinate_m": (-10_000.0, 10_000.0),
+    "size_m": (0.01, 1_000.0),
+    "heading_deg": (-360.0, 360.0),
+    "transmission": (0.0, 1.0),
 }
 
 
@@ -80,12 +87,36 @@ class Light:
 
 
 @dataclass(frozen=True)
+class Shade:
+    """A tunnel's roof or a shadow: the ``length_m x width_m`` rectangle centred at world
+    ``(x_m, y_m)``, its length along ``heading_rad``, where ``transmission`` of the light
+    reaches the floor (module docstring)."""
+
+    x_m: float
+    y_m: float
+    length_m: float
+    width_m: float
+    heading_rad: float
+    transmission: float
+
+    def factor(self, x_m, y_m) -> np.ndarray:
+        """Light factor at the points: 1 outside, ``transmission`` deep inside."""
+        c, s = math.cos(self.heading_rad), math.sin(self.heading_rad)
+        dx, dy = np.asarray(x_m) - self.x_m, np.asarray(y_m) - self.y_m
+        along, across = dx * c + dy * s, -dx * s + dy * c
+        depth = np.minimum(self.length_m / 2.0 - np.abs(along), self.width_m / 2.0 - np.abs(across))
+        inside = np.clip(depth / SHADE_EDGE_M, 0.0, 1.0)
+        return 1.0 - (1.0 - self.transmission) * inside
+
+
+@dataclass(frozen=True)
 class TrackLighting:
     """The light on a track and its surfaces (module docstring). The default is a hall of
     ``DEFAULT_AMBIENT_LUX`` with no lamps and the simulator's grey levels as reflectances."""
 
     ambient_lux: float = DEFAULT_AMBIENT_LUX
     lights: tuple[Light, ...] = ()
+    shades: tuple[Shade, ...] = ()
     lane_reflectance: float = LANE_REFLECTANCE
     line_reflectance: float = LINE_REFLECTANCE
     floor_reflectance: float = FLOOR_REFLECTANCE
@@ -95,14 +126,21 @@ class TrackLighting:
         return self == TrackLighting()
 
     def illuminance_lux(self, x_m, y_m, surface_z_m: float = 0.0):
-        """Ambient plus every light (lux) at the surface points ``(x_m, y_m)``: a scalar when
-        there are no lights, else an array of their shape."""
-        if not self.lights:
+        """Ambient plus every light (lux) at the surface points ``(x_m, y_m)``, times the
+        shades: a scalar when there are no lights and no shades, else an array of their shape."""
+        if not self.lights and not self.shades:
             return self.ambient_lux
         e = np.full(np.shape(x_m), self.ambient_lux)
         for light in self.lights:
             e = e + light.illuminance_lux(x_m, y_m, surface_z_m)
-        return e
+        return e * self.shade_factor(x_m, y_m) if self.shades else e
+
+    def shade_factor(self, x_m, y_m):
+        """The product of the shades' light factors at the points (1 without shades)."""
+        f = 1.0
+        for shade in self.shades:
+            f = f * shade.factor(x_m, y_m)
+        return f
 
     def illuminance_grid(self, xs_m: np.ndarray, ys_m: np.ndarray, surface_z_m: float = 0.0) -> np.ndarray:
         """Illuminance (lux) on the grid of columns ``xs_m`` and rows ``ys_m``:
@@ -124,11 +162,21 @@ class TrackLighting:
         return {"ambient_lux": self.ambient_lux,
                 "lights": [{"x_m": l.x_m, "y_m": l.y_m, "z_m": l.z_m, "intensity_cd": l.intensity_cd,
                             "cone_deg": l.cone_deg} for l in self.lights],
+                **({"shades": [{k: getattr(sh, k) for k in SHADE_FIELDS} for sh in self.shades]}
+                   if self.shades else {}),
                 "lane_reflectance": self.lane_reflectance, "line_reflectance": self.line_reflectance,
                 "floor_reflectance": self.floor_reflectance, "specular": self.specular}
 
 
-def _number(value, name: str, where: str, key: str) -> float:
+SHADE_FIELDS = ("x_m", "y_m", "length_m", "width_m", "heading_rad", "transmission")
+_SHADE_LIMITS = ("coordinate_m", "coordinate_m", "size_m", "size_m", None, "transmission")
+
+
+def _number(value, name: str, where: str, key: str | None) -> float:
+    if key is None:  # any finite number
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"{where}: {name} = {value!r}: expected a finite number")
+        return float(value)
     lo, hi = LIMITS[key]
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
             or not lo <= value <= hi:
@@ -151,10 +199,16 @@ def from_json(doc, where: str) -> TrackLighting:
                                ("intensity_cd", "intensity_cd"))),
                             None if cone is None else _number(cone, f"lighting.lights[{i}].cone_deg", where,
                                                               "cone_deg")))
+    shades = []
+    for i, item in enumerate(doc.get("shades", [])):
+        if not isinstance(item, dict):
+            raise ValueError(f"{where}: lighting.shades[{i}]: expected an object")
+        shades.append(Shade(*(_number(item.get(k), f"lighting.shades[{i}].{k}", where, lim)
+                              for k, lim in zip(SHADE_FIELDS, _SHADE_LIMITS))))
     d = TrackLighting()
     return TrackLighting(
         ambient_lux=_number(doc.get("ambient_lux", d.ambient_lux), "lighting.ambient_lux", where, "ambient_lux"),
-        lights=tuple(lights),
+        lights=tuple(lights), shades=tuple(shades),
         lane_reflectance=_number(doc.get("lane_reflectance", d.lane_reflectance), "lighting.lane_reflectance",
                                  where, "reflectance"),
         line_reflectance=_number(doc.get("line_reflectance", d.line_reflectance), "lighting.line_reflectance",
@@ -205,6 +259,10 @@ def write_sdf(world: ET.Element, lighting: TrackLighting, fmt) -> None:
     info = ET.SubElement(world, _q("lighting"))
     for key in ("ambient_lux", "lane_reflectance", "line_reflectance", "floor_reflectance", "specular"):
         ET.SubElement(info, _q(key)).text = fmt(getattr(lighting, key))
+    for shade in lighting.shades:
+        el = ET.SubElement(info, _q("shade"))
+        for key in SHADE_FIELDS:
+            ET.SubElement(el, _q(key)).text = fmt(getattr(shade, key))
 
 
 def _gray(text: str | None) -> float:
@@ -257,8 +315,17 @@ def from_sdf_world(world: ET.Element, pose_of) -> TrackLighting | None:
         v = default if info is None else _float(_ours(info, key), default)
         return min(max(v, 0.0), 1.0)
 
+    shades = []
+    if info is not None:
+        for el in info.findall(_q("shade")) + info.findall("nxpcup:shade"):
+            numbers = [_float(_ours(el, key)) for key in SHADE_FIELDS]
+            if None not in numbers:  # a shade without all its numbers is not ours to guess
+                x, y, length, width, heading, transmission = numbers
+                shades.append(Shade(x, y, max(length, 0.0), max(width, 0.0), heading,
+                                    min(max(transmission, 0.0), 1.0)))
     return TrackLighting(
         ambient_lux=min(max(ambient, 0.0), LIMITS["ambient_lux"][1]), lights=tuple(lights),
+        shades=tuple(shades),
         lane_reflectance=value("lane_reflectance", d.lane_reflectance),
         line_reflectance=value("line_reflectance", d.line_reflectance),
         floor_reflectance=value("floor_reflectance", d.floor_reflectance),

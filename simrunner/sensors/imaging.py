@@ -249,11 +249,11 @@ class Imager:
         if any_miss:
             scene[..., miss] = self._refl_floor
         lighting = self.lighting
-        if not lighting.lights:
+        if not lighting.lights and not lighting.shades:
             scene *= lighting.ambient_lux * self._refl_scale
         else:
             scene *= lighting.illuminance_lux(wx, wy, self.surface_z_m) * self._refl_scale
-            if lighting.specular > 0.0:
+            if lighting.specular > 0.0 and lighting.lights:
                 scene += self._highlights(wx, wy, xs, ys, yaws)
         if n == 1:
             return scene
@@ -281,7 +281,7 @@ class Imager:
             hx, hy, hz = lx / ln + vx / vn, ly / ln + vy / vn, lz / ln + vz / vn
             cos_h = hz / np.sqrt(hx * hx + hy * hy + hz * hz)
             out += k * cos_h ** SHININESS * lamp.illuminance_lux(wx, wy, z_s)
-        return out
+        return out * self.lighting.shade_factor(wx, wy) if self.lighting.shades else out
 
     # -- the sensor ----------------------------------------------------------------
     def _expose(self, scene: np.ndarray, r0: int, r1: int, exposure_s: float, normals,
