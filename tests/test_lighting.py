@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 import shutil
 import subprocess
 
@@ -232,3 +233,14 @@ def test_the_video_track_map_shows_the_light(floor):
     assert lit.canvas[under[1], under[0]].mean() == 255  # the lane under the spot, clipped white
     assert lit.canvas[away[1], away[0]].mean() < 0.15 * plain[away[1], away[0]].mean()  # 50 of 500 lux
     assert np.array_equal(TrackView(floor, 200, 200, TrackLighting(), 0.0).canvas, plain)
+
+
+def test_the_tunnel_example_dims_its_straight_and_the_line_follower_laps_it():
+    from simrunner.run.runner import drive
+
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    track = load_track(examples / "tunnel.txt")
+    shade, = track.lighting.shades
+    assert shade.transmission == 0.15
+    r = drive(examples / "line_follower.py", track=track, laps=1, seed=0)
+    assert r.outcome == "finished", r.message
