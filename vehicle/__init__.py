@@ -3,7 +3,8 @@ track checks (``trackgen``) and the simulator (``simrunner``).
 
 ``vehicle.description`` holds the frozen :class:`CarDescription` (TOML file, units in the
 field names, ranges checked at load); ``vehicle.userfiles`` reads the small text files users
-write (car descriptions, measurements, plans) with one-line errors naming the file.
+write (car descriptions, measurements, plans) with one-line errors naming the file;
+``vehicle.modelling`` the modelling choices both car models share (not car properties).
 Nothing here imports a physics engine, OpenCV or numba. Names load on first use (PEP 562),
 so ``python -m vehicle.description`` runs cleanly.
 """

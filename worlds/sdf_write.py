@@ -44,6 +44,7 @@ from pathlib import Path
 
 from pieces.pose import Pose2
 from vehicle.description import CarDescription, CarDescriptionError
+from vehicle.modelling import CHASSIS_MU, KNUCKLE_MASS_FRACTION
 from worlds.lighting import TrackLighting, write_sdf
 from worlds.sdf_xml import SDF_VERSION, WorldError, fmt, parse_xml, sub, write_xml
 
@@ -53,8 +54,6 @@ TRACK_ROLES = {  # role -> RGBA of its material
     "markings": (0.0, 0.0, 0.0, 1.0),
 }
 GROUND_RGBA = (0.55, 0.55, 0.55, 1.0)  # grey hall floor around the track
-KNUCKLE_MASS_FRACTION = 0.25  # knuckle mass / wheel mass (as simrunner.car.body)
-CHASSIS_MU = 0.3  # friction of the chassis box (as simrunner.car.body; touches only in a crash)
 STEER_P_GAIN_PER_S = 100.0  # Gazebo's steering-joint position gain (not a car property)
 CAMERA_CLIP_M = (0.01, 20.0)  # near/far clipping planes of the camera sensor
 SURFACE_TOLERANCE_M = 1e-4  # lane mesh top vs surface_z_m (float32 STL)

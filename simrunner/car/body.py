@@ -39,9 +39,8 @@ import dartpy as dart
 import numpy as np
 
 from vehicle.description import CarDescription, CarDescriptionError
+from vehicle.modelling import CHASSIS_MU, KNUCKLE_MASS_FRACTION
 
-KNUCKLE_MASS_FRACTION = 0.25  # knuckle mass / wheel mass (small; keeps the joint chain well-conditioned)
-CHASSIS_MU = 0.3  # friction of the chassis box (only touches the ground in a crash)
 
 WHEEL_NAMES = ("wheel_fl", "wheel_fr", "wheel_rl", "wheel_rr")
 
