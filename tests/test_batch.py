@@ -19,29 +19,13 @@ from simrunner.workflows.batch.results import columns, csv_text
 from simrunner.workflows.batch.spec import (make_jobs, parse_grid, parse_seeds, parse_values,
                                             resolve_tracks)
 
+from helpers import FAULTY
+
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
 FOLLOWER = EXAMPLES / "line_follower.py"
 
-FAULTY = """
-import os, signal, time
 
-def main(spinner):
-    mode = spinner.param("mode", "drive")
-    if mode == "crash":
-        raise RuntimeError("boom")
-    if mode == "die":                # the worker process itself dies (os._exit is a controller error now)
-        os.kill(os.getpid(), signal.SIGKILL)
-    if mode == "slow":               # lets simulated time pass, far slower than the timeout
-        while True:
-            spinner.sleep(0.002)
-            t = time.perf_counter()  # busy wait: time.sleep waits in simulated time
-            while time.perf_counter() - t < 0.05:
-                pass
-    while True:
-        spinner.get_image(spinner.line_row)
-        spinner.set_speed_and_servo(1.0, 0.0)
-"""
 
 
 @pytest.mark.parametrize("text, values", [

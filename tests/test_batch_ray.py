@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from test_batch import FAULTY
+from helpers import FAULTY
 
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.ray_backend import LOOPBACK_ENV

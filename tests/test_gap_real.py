@@ -20,7 +20,7 @@ from simrunner.workflows.gap.logs import check_measured, derive
 from simrunner.workflows.gap.regimes import REGIMES, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, make_windows, replay, residuals, signals_of,
                                             split_windows, window_mask)
-from test_gap_units import kin_factory
+from helpers import kin_factory
 from vehicle.description import load_car
 
 REAL = Path(os.environ.get("NXPCUP_REAL_LOGS", Path(__file__).resolve().parents[2] / "shared/data/real_logs"))

@@ -1,0 +1,86 @@
+"""Helpers several test modules share (test modules import from here, not from each other)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pieces.pose import Pose2
+
+
+class KinematicSim:
+    """Kinematic bicycle with first-order speed tracking; honours steering_offset,
+    steering_gain and motor_lag of ``car.effects`` (a CarSim stand-in for fast tests)."""
+
+    def __init__(self, car, dt_s):
+        self.car, self.dt = car, dt_s
+        self.x = self.y = self.yaw = self.v = self.steer = 0.0
+        self.v_cmd = self.s_cmd = self.v_tgt = 0.0
+
+    def set_state(self, pose, speed_mps, steer_rad=0.0, yaw_rate_radps=0.0):
+        self.x, self.y, self.yaw = pose.x_m, pose.y_m, pose.yaw_rad
+        self.v, self.steer = speed_mps, steer_rad
+        self.v_cmd = self.v_tgt = speed_mps
+        self.s_cmd = (steer_rad / self.car.effects.steering_gain) - self.car.effects.steering_offset_rad
+
+    def place(self, pose, speed_mps, steer_rad=0.0, yaw_rate_radps=0.0):
+        self.x, self.y, self.yaw = pose.x_m, pose.y_m, pose.yaw_rad
+        self.v, self.steer = speed_mps, steer_rad
+
+    def set_command(self, speed_mps, steer_rad, yaw_rate_radps=None):
+        self.v_cmd, self.s_cmd = speed_mps, steer_rad
+
+    def set_coast(self, coast):
+        pass
+
+    def step(self, n=1):
+        e, L = self.car.effects, self.car.chassis.wheelbase_m
+        a = self.car.drive.max_accel_mps2 * self.dt
+        for _ in range(n):
+            lag = e.motor_lag_s
+            self.v_tgt += (self.v_cmd - self.v_tgt) * (1.0 if lag == 0 else min(1.0, self.dt / lag))
+            self.v += float(np.clip(self.v_tgt - self.v, -a, a))
+            tgt = np.clip(e.steering_gain * (self.s_cmd + e.steering_offset_rad), -0.4, 0.4)
+            r = self.car.steering.rate_radps * self.dt
+            self.steer += float(np.clip(tgt - self.steer, -r, r))
+            self.yaw += self.v * math.tan(self.steer) / L * self.dt
+            self.x += self.v * math.cos(self.yaw) * self.dt
+            self.y += self.v * math.sin(self.yaw) * self.dt
+
+    @property
+    def pose(self):
+        return Pose2(self.x, self.y, self.yaw)
+
+    @property
+    def speed_mps(self):
+        return self.v
+
+    @property
+    def yaw_rate_radps(self):
+        return self.v * math.tan(self.steer) / self.car.chassis.wheelbase_m
+
+
+def kin_factory(car, dt_s):
+    return KinematicSim(car, dt_s)
+
+
+# a batch controller that fails as ``--param mode`` says
+FAULTY = """
+import os, signal, time
+
+def main(spinner):
+    mode = spinner.param("mode", "drive")
+    if mode == "crash":
+        raise RuntimeError("boom")
+    if mode == "die":                # the worker process itself dies (os._exit is a controller error now)
+        os.kill(os.getpid(), signal.SIGKILL)
+    if mode == "slow":               # lets simulated time pass, far slower than the timeout
+        while True:
+            spinner.sleep(0.002)
+            t = time.perf_counter()  # busy wait: time.sleep waits in simulated time
+            while time.perf_counter() - t < 0.05:
+                pass
+    while True:
+        spinner.get_image(spinner.line_row)
+        spinner.set_speed_and_servo(1.0, 0.0)
+"""
