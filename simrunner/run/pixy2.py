@@ -22,15 +22,11 @@ they are read, from the camera at that moment. The setters let no time pass.
 from __future__ import annotations
 
 import struct
-from typing import TYPE_CHECKING
 
 from simrunner.errors import CameraError, CommandError
 from simrunner.sensors.pixy2 import (LINE_ALL_FEATURES, LINE_BARCODE, LINE_INTERSECTION,
                                      LINE_MAX_INTERSECTION_LINES, LINE_VECTOR, PIXY_RESULT_BUSY,
                                      PIXY_RESULT_OK, Features, IntersectionLine, LineTracker)
-
-if TYPE_CHECKING:
-    from simrunner.run.spinner import Spinner
 
 
 def _int(method: str, name: str, value, lo: int, hi: int) -> int:
@@ -160,7 +156,7 @@ class Pixy2:
     ``frame_width`` / ``frame_height`` (the camera's frame), ``init``, ``change_prog``,
     ``set_camera_brightness``, ``set_lamp``, ``get_resolution``."""
 
-    def __init__(self, spinner: "Spinner") -> None:
+    def __init__(self, spinner) -> None:  # a simrunner.run.spinner.Spinner (not imported: no circle)
         self.spinner = spinner
         cam = spinner._s.car.camera
         self.frame_width = int(cam.width_px)

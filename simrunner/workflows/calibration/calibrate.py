@@ -32,7 +32,7 @@ import dataclasses
 import math
 import warnings
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import OptimizeWarning, brentq, curve_fit
@@ -41,34 +41,11 @@ from simrunner.workflows.calibration import camera_procedures as cp
 from simrunner.workflows.calibration import simtests as st
 from simrunner.workflows.calibration.measured import (ORDER, SOURCES, CalibrationError, Measurements,
                                             load_measurements)
-from vehicle.description import CarDescription, CarDescriptionError, car_from_dict
+from simrunner.workflows.calibration.procedure import Check, ProcedureResult, range_checked
+from vehicle.description import CarDescription, CarDescriptionError
 
 __all__ = ["calibrate", "CalibrationResult", "ProcedureResult", "Check", "CalibrationError",
            "load_measurements"]
-
-
-@dataclass(frozen=True)
-class Check:
-    """One compared quantity: measured on the real car, simulated before and after."""
-
-    label: str
-    unit: str
-    measured: float
-    before: float
-    after: float
-
-
-@dataclass(frozen=True)
-class ProcedureResult:
-    """One procedure: the car fields it changed ``{"section.field": (old, new)}``, the
-    checks, and notes (derived numbers such as the speed normalisation)."""
-
-    section: str
-    title: str
-    changes: dict[str, tuple[float, float]]
-    checks: tuple[Check, ...]
-    notes: tuple[str, ...] = ()
-    values: dict[str, Any] = dataclasses.field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -119,14 +96,6 @@ def _set(car: CarDescription, dotted: str, value: float) -> CarDescription:
     return car.replace(**{section: dataclasses.replace(getattr(car, section), **{name: value})})
 
 
-def _range_checked(car: CarDescription, m: Measurements, section: str) -> CarDescription:
-    """The car must stay inside the description's ranges (vehicle.description)."""
-    try:
-        return car_from_dict(car.to_dict(), m.path)
-    except CarDescriptionError as exc:
-        raise CalibrationError(f"{m.path}: {section}: the result is out of range ({str(exc).split(': ', 1)[-1]})") from None
-
-
 def _solve(f: Callable[[float], float], guess: float, lo: float, hi: float, where: str, what: str) -> float:
     """Root of increasing-or-decreasing ``f`` in [lo, hi], bracketing around ``guess``
     first (few simulations), then the whole range."""
@@ -146,7 +115,7 @@ def _solve(f: Callable[[float], float], guess: float, lo: float, hi: float, wher
 def _mass(car, m, v, dt_s):
     weight, scale = v["weight_kg"], v["scale"]
     mass = weight * scale ** 3
-    new = _range_checked(_set(car, "chassis.mass_kg", mass), m, "mass")
+    new = range_checked(_set(car, "chassis.mass_kg", mass), m, "mass")
     try:
         before, after = st.built_mass_kg(car), st.built_mass_kg(new)
     except CarDescriptionError as exc:
@@ -163,7 +132,7 @@ def _traction(car, m, v, dt_s):
     mu_eff = math.tan(theta)
     scale = car.effects.friction_scale
     mu = mu_eff / scale
-    new = _range_checked(_set(car, "wheels.friction_mu", mu), m, "traction")
+    new = range_checked(_set(car, "wheels.friction_mu", mu), m, "traction")
     before = math.degrees(st.slip_angle_rad(car, orient, dt_s))
     after = math.degrees(st.slip_angle_rad(new, orient, dt_s))
     margin = math.radians(2.0)
@@ -208,7 +177,7 @@ def _steering(car, m, v, dt_s):
                        m.where("steering", "radius_m"), "steering.limit_rad")
     except CalibrationError:
         limit = limit0  # the simulated radius does not bracket: keep eq. 5.1
-    new = _range_checked(_set(car, "steering.limit_rad", limit), m, "steering")
+    new = range_checked(_set(car, "steering.limit_rad", limit), m, "steering")
     before, after = st.turn_radius_m(car, speed, dt_s), st.turn_radius_m(new, speed, dt_s)
     notes = [f"thesis eq. 5.1 with the measured radius: atan(L / R) = atan({L:g} / {r:g}) = "
              f"{math.atan(L / r):.4f} rad ({math.degrees(math.atan(L / r)):.2f} deg)",
@@ -263,13 +232,13 @@ def _speed(car, m, v, dt_s):
     if v["full_command"] is not None:
         vmax = speed_of(v["full_command"])
         changes["drive.max_speed_mps"] = (vmax_old, vmax)
-        new = _range_checked(_set(car, "drive.max_speed_mps", vmax), m, "speed")
+        new = range_checked(_set(car, "drive.max_speed_mps", vmax), m, "speed")
     elif max(speeds) > vmax_old:
         vmax = max(speeds)
         changes["drive.max_speed_mps"] = (vmax_old, vmax)
         notes.append("the measured speeds exceed drive.max_speed_mps: raised to the fastest measured speed "
                      "(give full_command for the real top speed)")
-        new = _range_checked(_set(car, "drive.max_speed_mps", vmax), m, "speed")
+        new = range_checked(_set(car, "drive.max_speed_mps", vmax), m, "speed")
     norm = v["sim_norm"]
     checks = tuple(
         Check(f"distance in {window:g} s after {settle:g} s, command {c:g}", "m", d,
@@ -306,7 +275,7 @@ def _acceleration(car, m, v, dt_s, speed_result=None):
     def err(a):
         return st.accel_distance_m(_set(car, "drive.max_accel_mps2", a), speed, T, dt_s) - D
     a = _solve(err, guess, 0.1, 50.0, m.where("acceleration", "distance_m"), "drive.max_accel_mps2")
-    new = _range_checked(_set(car, "drive.max_accel_mps2", a), m, "acceleration")
+    new = range_checked(_set(car, "drive.max_accel_mps2", a), m, "acceleration")
     return new, ProcedureResult(
         "acceleration", "acceleration limit from the distance covered from standstill",
         {"drive.max_accel_mps2": (car.drive.max_accel_mps2, a)},
@@ -322,7 +291,7 @@ def _braking(car, m, v, dt_s, speed_result=None):
     def err(b):
         return st.brake_distance_m(_set(car, "drive.max_brake_mps2", b), speed, dt_s) - D
     b = _solve(err, speed ** 2 / (2 * D), 0.1, 50.0, m.where("braking", "distance_m"), "drive.max_brake_mps2")
-    new = _range_checked(_set(car, "drive.max_brake_mps2", b), m, "braking")
+    new = range_checked(_set(car, "drive.max_brake_mps2", b), m, "braking")
     return new, ProcedureResult(
         "braking", "braking limit from the braking distance",
         {"drive.max_brake_mps2": (car.drive.max_brake_mps2, b)},
@@ -341,7 +310,7 @@ def _camera(car, m, v, dt_s):
                                f"(its rows cover {seen} ahead of the front bumper)")
     row = st.row_for_distance(car, d)
     old = car.camera.default_row
-    new = _range_checked(_set(car, "camera.default_row", row), m, "camera")
+    new = range_checked(_set(car, "camera.default_row", row), m, "camera")
     rows = st.rows_seeing_line(car, d)
     seen = f"rows {rows[0]}..{rows[-1]}" if rows else "no row"
     return new, ProcedureResult(

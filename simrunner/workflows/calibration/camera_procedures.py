@@ -33,6 +33,7 @@ from vehicle.description import CarDescription
 from simrunner.workflows.calibration.camera_fit import row_cos_theta
 from simrunner.workflows.calibration.camera_lines import read_file
 from simrunner.workflows.calibration.measured import CalibrationError, Measurements
+from simrunner.workflows.calibration.procedure import Check, ProcedureResult, range_checked
 
 HOT_DN = 40.0  # a dark-frame pixel this far above the black level is hot
 DEAD_FRACTION = 0.2  # a flat-field pixel below this fraction of its neighbours' response is dead
@@ -68,7 +69,6 @@ def _physical(car: CarDescription) -> CarDescription:
 
 def camera_dark(car: CarDescription, m: Measurements, v: dict, dt_s: float):
     """``[camera_dark]``: black level, DSNU, dark noise and hot pixels from a covered lens."""
-    from simrunner.workflows.calibration.calibrate import Check, ProcedureResult, _range_checked
 
     car = _physical(car)
     cam = car.camera
@@ -96,7 +96,7 @@ def camera_dark(car: CarDescription, m: Measurements, v: dict, dt_s: float):
     cam_after = dataclasses.replace(cam, **new)
     for key, value in new.items():
         changes[f"camera.{key}"] = (getattr(cam, key), value)
-    after = _range_checked(car.replace(camera=cam_after), m, "camera_dark")
+    after = range_checked(car.replace(camera=cam_after), m, "camera_dark")
     notes.append(f"{n} frames; black level {black:.2f}, pixel-to-pixel spread {spread:.2f}, frame-to-frame "
                  f"{temporal:.2f} counts; {np.count_nonzero(hot)} hot pixel(s)"
                  + (f" at {', '.join(str(int(c)) for c in np.flatnonzero(hot)[:8])}" if hot.any() else ""))
@@ -112,7 +112,6 @@ def camera_flat(car: CarDescription, m: Measurements, v: dict, dt_s: float):
     """``[camera_flat]``: the fall-off toward the ends and each pixel's response."""
     from scipy.optimize import least_squares
 
-    from simrunner.workflows.calibration.calibrate import Check, ProcedureResult, _range_checked
 
     car = _physical(car)
     cam = car.camera
@@ -144,7 +143,7 @@ def camera_flat(car: CarDescription, m: Measurements, v: dict, dt_s: float):
     old_profile = np.asarray(cam.vignetting_profile, np.float64) if cam.vignetting_profile else np.ones(cam.width_px)
     new = dict(vignetting_power=power, vignetting_profile=tuple(float(r) for r in np.clip(response, 0.0, 10.0)),
                prnu=0.0, dead_pixels=int(round(np.count_nonzero(dead) * cam.height_px)))
-    after = _range_checked(car.replace(camera=dataclasses.replace(cam, **new)), m, "camera_flat")
+    after = range_checked(car.replace(camera=dataclasses.replace(cam, **new)), m, "camera_flat")
     changes = {"camera.vignetting_power": (cam.vignetting_power, power),
                "camera.vignetting_profile": (len(cam.vignetting_profile), cam.width_px),  # how many values
                "camera.prnu": (cam.prnu, 0.0),
@@ -165,7 +164,6 @@ def camera_flat(car: CarDescription, m: Measurements, v: dict, dt_s: float):
 
 def camera_sweep(car: CarDescription, m: Measurements, v: dict, dt_s: float):
     """``[camera_sweep]``: linearity, clipping exposure and the photon transfer curve."""
-    from simrunner.workflows.calibration.calibrate import Check, ProcedureResult, _range_checked
 
     car = _physical(car)
     cam = car.camera
@@ -210,7 +208,7 @@ def camera_sweep(car: CarDescription, m: Measurements, v: dict, dt_s: float):
         sat_e = cam.analog_gain * (2 ** cam.adc_bits - 1) / scale / k8_new
         sat_e = min(max(sat_e, 100.0), 1e9)
         changes["camera.saturation_capacity_e"] = (cam.saturation_capacity_e, sat_e)
-        after = _range_checked(car.replace(camera=dataclasses.replace(cam, saturation_capacity_e=sat_e)),
+        after = range_checked(car.replace(camera=dataclasses.replace(cam, saturation_capacity_e=sat_e)),
                                m, "camera_sweep")
         notes.append(f"photon transfer: {k8_new:.4g} counts per electron (8-bit), saturation capacity "
                      f"{sat_e:.4g} electrons")
