@@ -142,7 +142,7 @@ def orphan_call(method: str) -> str | None:
 
 def _run_session():
     """The session of the run executing in this thread, or None."""
-    from simrunner.run.spinner import current_session
+    from simrunner.run.context import current_session
 
     session = current_session()
     if session is None or session.thread_id != threading.get_ident():

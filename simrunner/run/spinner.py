@@ -45,6 +45,7 @@ from vehicle.description import CarDescription
 
 from simrunner.errors import CommandError, SimError
 from simrunner.run.clock import LockstepClock
+from simrunner.run.context import SESSION, current_session  # noqa: F401  (current_session: re-exported)
 from simrunner.run.log import RunRecorder
 from simrunner.run.params import ParamValue, convert
 
@@ -56,17 +57,8 @@ if TYPE_CHECKING:
 
 NormFn = Callable[[float, float], float]
 
-# The session of the run executing in this context (thread), for ``Spinner()`` built inside
-# ``main`` as in the thesis. A context variable, not a module global: two runs in two
-# threads each see their own.
-_current_session: contextvars.ContextVar["Session | None"] = contextvars.ContextVar(
-    "simrunner_session", default=None)
+_current_session = SESSION  # the run executing in this context (simrunner.run.context)
 _get_ident = threading.get_ident
-
-
-def current_session() -> "Session | None":
-    """The session of the run executing in this context (None outside a run)."""
-    return _current_session.get()
 
 
 class BufferedNormals:

@@ -8,14 +8,13 @@ run; runs that timed out or whose worker died are not re-run), and writes ``resu
 """
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from simrunner.workflows.batch.pool import LocalBackend
-from simrunner.workflows.batch.scheduler import WorkerTiming, run_jobs
+from simrunner.workflows.batch.scheduler import WorkerTiming, default_workers, run_jobs
 from simrunner.workflows.batch.results import (BATCH_OUTCOMES, RESERVED, deterministic,
                                                write_results)
 from simrunner.workflows.batch.spec import (BatchConfig, BatchError, Job, make_jobs, parse_grid,
@@ -71,14 +70,6 @@ class BatchResult:
         for row in self.rows:
             out[row["outcome"]] = out.get(row["outcome"], 0) + 1
         return out
-
-
-def default_workers() -> int:
-    """All cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
 
 
 def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: str | int = 1,

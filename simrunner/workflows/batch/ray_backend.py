@@ -17,7 +17,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
-from simrunner.workflows.batch.scheduler import Handle
+from simrunner.workflows.batch.scheduler import Handle, default_workers
 from simrunner.workflows.batch.spec import BatchConfig, BatchError, Job
 
 INSTALL_HINT = "pip install 'nxpcup-sim[ray]'"
@@ -107,8 +107,6 @@ class RayBackend:
         if ray.is_initialized():
             self.owner = False
         elif local:
-            from simrunner.workflows.batch.engine import default_workers
-
             ray.init(num_cpus=workers or default_workers(), include_dashboard=False,
                      object_store_memory=LOCAL_OBJECT_STORE_BYTES, log_to_driver=False,
                      _node_ip_address="127.0.0.1", configure_logging=False)

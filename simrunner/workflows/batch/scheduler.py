@@ -13,6 +13,8 @@ worker importing the simulator) :data:`STARTUP_GRACE_S` applies.
 """
 from __future__ import annotations
 
+import os
+
 import time
 from collections import OrderedDict, deque
 from dataclasses import dataclass, field
@@ -20,6 +22,15 @@ from typing import Any, Callable, Protocol
 
 from simrunner.workflows.batch.results import failure_row
 from simrunner.workflows.batch.spec import Job
+
+
+def default_workers() -> int:
+    """All cores this process may use."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
 
 STARTUP_GRACE_S = 120.0
 """Extra wall time for a worker's first run (process start, imports, first track)."""
