@@ -992,7 +992,7 @@ def test_the_glitch_bench_speed_spikes_are_found_whole(seed):
     """bench_gap's ``spike`` glitch (1-3 readings off by 1-2 m/s, anywhere in the middle 80 %
     of the log, also while the car stands) is listed as one sensor spike whose kept-out
     samples are exactly the readings changed."""
-    from bench.bench_gap import inject_glitch
+    from bench.gap_scoring import inject_glitch
 
     log = _log(_noisy(MEASURED_COLUMNS, seed, jitter=0.3))
     bad, t0, t1 = inject_glitch(log, "spike", np.random.default_rng(seed))
@@ -1008,7 +1008,7 @@ def test_the_bench_counts_standard_errors_within_2_sigma_of_all_named_and_of_tho
     counts as outside in the first and is left out of the second, and one on a plateau counts
     as within what the report states where the truth lies in its interval; unnamed ones are in
     none."""
-    from bench.bench_gap import figures
+    from bench.gap_scoring import figures
 
     def row(per_effect):
         named = [e for e, p in per_effect.items() if p["named"]]
@@ -1029,9 +1029,9 @@ def test_the_bench_counts_standard_errors_within_2_sigma_of_all_named_and_of_tho
     assert f["within_2_sigma_given"] == (pytest.approx(1 / 2), 2)
     assert f["within_stated"] == (pytest.approx(2 / 4), 4)  # the deadband's truth inside its interval
     # a chain row as the bench writes it: the report's interval and whether the truth lies in it
-    from bench.bench_gap import _method_row
+    from bench.gap_scoring import method_row
 
-    got = _method_row(["throttle_deadband"], {"throttle_deadband_mps": 0.045}, {"throttle_deadband_mps": 0.033},
+    got = method_row(["throttle_deadband"], {"throttle_deadband_mps": 0.045}, {"throttle_deadband_mps": 0.033},
                       ["throttle_deadband"], {}, 1.0, sigma={"throttle_deadband_mps": math.nan},
                       spans={"throttle_deadband_mps": (0.01, 0.08)})["per_effect"]["throttle_deadband"]
     assert got["z"] is None and got["span"] == [0.01, 0.08] and got["in_span"] is True
@@ -1041,7 +1041,7 @@ def test_the_unmodelled_bench_counts_a_warned_trade_as_told_so():
     """bench_gap's ``unmodelled`` figures: a log with a leftover is told so; one whose kept
     stand-in makes a held-out signal worse (the report's ``signals_worse``) is told so by the
     second figure only; one with nothing kept and no leftover by neither."""
-    from bench.bench_gap import target_rows
+    from bench.gap_scoring import target_rows
 
     def row(named, leftovers, speed_after):
         return {"mode": "unmodelled", "unmodelled": {"what": "floor_slope_deg", "value": 2.0},
