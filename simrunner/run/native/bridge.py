@@ -1,7 +1,7 @@
 """Running a C/C++ controller: its Spinner calls as messages, answered by the Python Spinner.
 
-:class:`NativeController` is a ``main(spinner)`` callable (what the runner calls for every
-controller), so a C program runs on the same lockstep clock, judging, telemetry and video as
+:class:`~simrunner.run.native.controller.NativeController` is a ``main(spinner)`` callable
+(what the runner calls for every controller), so a C program runs on the same lockstep clock, judging, telemetry and video as
 a Python one. A program simrunner built runs in this process by default (:mod:`.inproc`,
 the same messages handed over by a context switch). Otherwise - ``--isolate``, or a
 prebuilt library - calling it starts the host program (``host/spinner_host.c``) with the
@@ -39,7 +39,7 @@ from typing import Callable
 import numpy as np
 
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
-from simrunner.run.native.build import NativeProgram, host_program
+from simrunner.run.native.build import NativeProgram
 
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
@@ -118,70 +118,10 @@ def _cpu_getter() -> Callable[[], int] | None:
     return fn
 
 
-class NativeController:
-    """``main(spinner)`` for a built :class:`NativeProgram` (see the module docstring).
-
-    A program simrunner built runs in this process (:mod:`.inproc`) unless
-    ``program.isolate``; a prebuilt library (its sleeps are not linked to the simulated
-    ones) and an isolated program run in a child process. The library is opened (or the
-    child started) here, ahead of the run."""
-
-    def __init__(self, program: NativeProgram, args: tuple[str, ...] = ()):
-        self.program = program
-        self.args = tuple(args)
-        self.inproc = bool(program.sources) and not program.isolate and sys.platform.startswith("linux")
-        self.host = self.getcpu = None
-        if self.inproc:
-            from simrunner.run.native.inproc import OpenedProgram, host_library
-
-            self.host_path, self.api = host_library()  # built (once, cached) before the run
-            self._spent: list = []  # libraries of finished runs, unloaded before the next one
-            self._ready = OpenedProgram(self.api, program)
-        else:
-            self._ready = self._child()
-
-    def _child(self) -> _Child:
-        if self.host is None:
-            self.host = host_program()  # built (once, cached)
-            self.getcpu = _cpu_getter()
-        return _Child(self.host, self.program, self.args)
-
-    def __call__(self, spinner) -> None:
-        ready, self._ready = self._ready, None
-        if self.inproc:
-            from simrunner.run.native.inproc import Busy, InprocSession, OpenedProgram
-
-            if ready is None:
-                self._unload()
-                ready = OpenedProgram(self.api, self.program)
-            try:
-                InprocSession(self, spinner, ready, self.host_path).run()
-                return
-            except Busy:  # a run in another thread has the in-process host: use a child
-                self.spent(ready)
-            ready = None
-        _Session(self, spinner, ready or self._child()).run()
-
-    def spent(self, opened) -> None:
-        """A run's library, to unload once the run is over (not in its time)."""
-        self._spent.append(opened)
-
-    def _unload(self) -> None:
-        while self._spent:
-            self._spent.pop().close()
-
-    def __del__(self) -> None:  # and a library opened for a run that never started
-        if getattr(self, "inproc", False):
-            self._unload()
-            if self._ready is not None:
-                self._ready.close()
-                self._ready = None
-
-
 class _Session:
     """One run of the child: the pipes, the read buffer and the request loop."""
 
-    def __init__(self, ctrl: NativeController, spinner, child: _Child):
+    def __init__(self, ctrl, spinner, child: _Child):  # ctrl: a controller.NativeController
         self.ctrl, self.spinner, self.child = ctrl, spinner, child
         self._setup_transport(child)
         self.name = ctrl.program.name
@@ -512,11 +452,3 @@ def _pixy2_answer(spinner, op: int, payload: bytes) -> bytes:
         data = _I.pack(result) + (b"" if result < 0 else pack_features(line))
         return _HDR.pack(ST_OK, len(data)) + data
     return _HDR.pack(ST_OK, 4) + _I.pack(result)
-
-
-def load_native(sources: list[str | Path] | NativeProgram, args: tuple[str, ...] = ()) -> NativeController:
-    """A controller callable from C/C++ sources (built, cached) or a :class:`NativeProgram`."""
-    from simrunner.run.native.build import build_program
-
-    program = sources if isinstance(sources, NativeProgram) else build_program(list(sources))
-    return NativeController(program, args)

@@ -51,7 +51,7 @@ class NativeProgram:
     """A controller ready to run: ``library`` (a shared library defining ``main``), the
     ``sources`` it was built from (empty for a prebuilt library), the compiler's
     ``warnings`` text ('' if none), whether it came from the cache, and ``isolate``: run it
-    in a child process rather than in the simulator's (bridge.NativeController)."""
+    in a child process rather than in the simulator's (controller.NativeController)."""
 
     library: Path
     sources: tuple[Path, ...]

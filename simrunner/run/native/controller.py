@@ -1,0 +1,75 @@
+"""A C/C++ controller as a ``main(spinner)`` callable: :class:`NativeController` runs a built
+program in this process (:mod:`.inproc`) or in a child process (:mod:`.bridge`), and
+:func:`load_native` builds one from sources. The runner calls it as any controller."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from simrunner.run.native.bridge import _Child, _cpu_getter, _Session
+from simrunner.run.native.build import NativeProgram, host_program
+from simrunner.run.native.inproc import Busy, InprocSession, OpenedProgram, host_library
+
+
+class NativeController:
+    """``main(spinner)`` for a built :class:`NativeProgram` (see the module docstring).
+
+    A program simrunner built runs in this process (:mod:`.inproc`) unless
+    ``program.isolate``; a prebuilt library (its sleeps are not linked to the simulated
+    ones) and an isolated program run in a child process. The library is opened (or the
+    child started) here, ahead of the run."""
+
+    def __init__(self, program: NativeProgram, args: tuple[str, ...] = ()):
+        self.program = program
+        self.args = tuple(args)
+        self.inproc = bool(program.sources) and not program.isolate and sys.platform.startswith("linux")
+        self.host = self.getcpu = None
+        if self.inproc:
+            self.host_path, self.api = host_library()  # built (once, cached) before the run
+            self._spent: list = []  # libraries of finished runs, unloaded before the next one
+            self._ready = OpenedProgram(self.api, program)
+        else:
+            self._ready = self._child()
+
+    def _child(self) -> _Child:
+        if self.host is None:
+            self.host = host_program()  # built (once, cached)
+            self.getcpu = _cpu_getter()
+        return _Child(self.host, self.program, self.args)
+
+    def __call__(self, spinner) -> None:
+        ready, self._ready = self._ready, None
+        if self.inproc:
+            if ready is None:
+                self._unload()
+                ready = OpenedProgram(self.api, self.program)
+            try:
+                InprocSession(self, spinner, ready, self.host_path).run()
+                return
+            except Busy:  # a run in another thread has the in-process host: use a child
+                self.spent(ready)
+            ready = None
+        _Session(self, spinner, ready or self._child()).run()
+
+    def spent(self, opened) -> None:
+        """A run's library, to unload once the run is over (not in its time)."""
+        self._spent.append(opened)
+
+    def _unload(self) -> None:
+        while self._spent:
+            self._spent.pop().close()
+
+    def __del__(self) -> None:  # and a library opened for a run that never started
+        if getattr(self, "inproc", False):
+            self._unload()
+            if self._ready is not None:
+                self._ready.close()
+                self._ready = None
+
+
+def load_native(sources: list[str | Path] | NativeProgram, args: tuple[str, ...] = ()) -> NativeController:
+    """A controller callable from C/C++ sources (built, cached) or a :class:`NativeProgram`."""
+    from simrunner.run.native.build import build_program
+
+    program = sources if isinstance(sources, NativeProgram) else build_program(list(sources))
+    return NativeController(program, args)
