@@ -1,9 +1,9 @@
 """Running a C/C++ controller: its Spinner calls as messages, answered by the Python Spinner.
 
 :class:`~simrunner.run.native.controller.NativeController` is a ``main(spinner)`` callable
-(what the runner calls for every controller), so a C program runs on the same lockstep clock, judging, telemetry and video as
-a Python one. A program simrunner built runs in this process by default (:mod:`.inproc`,
-the same messages handed over by a context switch). Otherwise - ``--isolate``, or a
+(what the runner calls for every controller), so a C program runs on the same lockstep clock,
+judging, telemetry and video as a Python one. A program simrunner built runs in this process
+by default (:mod:`.inproc`, the same messages handed over by a context switch). Otherwise - ``--isolate``, or a
 prebuilt library - calling it starts the host program (``host/spinner_host.c``) with the
 controller's shared library; the host calls the program's own ``main`` and sends each
 Spinner call to this process over a pipe, which answers it with the Python
