@@ -351,22 +351,31 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
     return key, number
 
 
+def _ranged_numbers(key: str, words: list[str], fields: tuple[tuple[str, str], ...], usage: str,
+                    path: str, lineno: int) -> list[float]:
+    """The numbers of an ``@key`` line's ``words``, each ``(NAME, limit)`` of ``fields`` checked
+    against ``worlds.lighting.LIMITS[limit]``."""
+    numbers = []
+    for word, (what, limit) in zip(words, fields):
+        number = _number(word)
+        if number is None:
+            raise LayoutError(path, lineno, f"@{key}: {what} = {_shown(word)}: expected a number; {usage}")
+        lo, hi = LIGHT_LIMITS[limit]
+        if not lo <= number <= hi:
+            raise LayoutError(path, lineno, f"@{key}: {what} = {_bare(word)}: expected {lo:g} <= {what} <= {hi:g}")
+        numbers.append(number)
+    return numbers
+
+
 def _parse_light(value: str, path: str, lineno: int) -> tuple[float, float, float, float, float | None]:
     """``X Y Z INTENSITY_CD [CONE_DEG]`` of an ``@light`` line."""
     usage = "expected '@light = X Y Z INTENSITY_CD [CONE_DEG]' (m, m, m, candela, degrees)"
     words = value.split()
     if not 4 <= len(words) <= 5:
         raise LayoutError(path, lineno, f"@light = {_shown(value)}: {usage}")
-    numbers = []
-    for word, what, limit in zip(words, ("X", "Y", "Z", "INTENSITY_CD", "CONE_DEG"),
-                                 ("coordinate_m", "coordinate_m", "coordinate_m", "intensity_cd", "cone_deg")):
-        number = _number(word)
-        if number is None:
-            raise LayoutError(path, lineno, f"@light: {what} = {_shown(word)}: expected a number; {usage}")
-        lo, hi = LIGHT_LIMITS[limit]
-        if not lo <= number <= hi:
-            raise LayoutError(path, lineno, f"@light: {what} = {_bare(word)}: expected {lo:g} <= {what} <= {hi:g}")
-        numbers.append(number)
+    numbers = _ranged_numbers("light", words, (("X", "coordinate_m"), ("Y", "coordinate_m"), ("Z", "coordinate_m"),
+                                               ("INTENSITY_CD", "intensity_cd"), ("CONE_DEG", "cone_deg")),
+                              usage, path, lineno)
     x, y, z, cd = numbers[:4]
     lo, hi = LIGHT_LIMITS["height_m"]  # as typed, before @scale (as every length)
     if not lo <= z <= hi:
@@ -381,18 +390,10 @@ def _parse_shade(value: str, path: str, lineno: int) -> tuple[float, ...]:
     words = value.split()
     if len(words) != 6:
         raise LayoutError(path, lineno, f"@shade = {_shown(value)}: {usage}")
-    numbers = []
-    for word, what, limit in zip(words, ("X", "Y", "LENGTH", "WIDTH", "HEADING_DEG", "TRANSMISSION"),
-                                 ("coordinate_m", "coordinate_m", "size_m", "size_m", "heading_deg",
-                                  "transmission")):
-        number = _number(word)
-        if number is None:
-            raise LayoutError(path, lineno, f"@shade: {what} = {_shown(word)}: expected a number; {usage}")
-        lo, hi = LIGHT_LIMITS[limit]
-        if not lo <= number <= hi:
-            raise LayoutError(path, lineno, f"@shade: {what} = {_bare(word)}: expected {lo:g} <= {what} <= {hi:g}")
-        numbers.append(number)
-    return tuple(numbers)
+    return tuple(_ranged_numbers("shade", words, (("X", "coordinate_m"), ("Y", "coordinate_m"),
+                                                  ("LENGTH", "size_m"), ("WIDTH", "size_m"),
+                                                  ("HEADING_DEG", "heading_deg"), ("TRANSMISSION", "transmission")),
+                                 usage, path, lineno))
 
 
 def _number(text: str) -> float | None:

@@ -262,7 +262,7 @@ def _pieces_of(grid: np.ndarray, spec, white_line: bool) -> list[np.ndarray]:
     cols = scan_lines(np.ascontiguousarray(g.T), **kw)
     pieces = []
     for ch in _chains(rows):
-        pieces += [p for p in _pieces(ch, steep=True)]                  # (x, y)
+        pieces += _pieces(ch, steep=True)                               # (x, y)
     for ch in _chains(cols):
         pieces += [p[:, ::-1].copy() for p in _pieces(ch, steep=False)]  # (y, x) -> (x, y)
     return pieces
