@@ -107,6 +107,7 @@ def track_json(track: Track, geometry: TrackGeometry) -> dict:
         "lane_polygon": polygon_json(geometry.lane),
         "road_polygon": polygon_json(geometry.road),
         **({} if layout.lighting.is_default() else {"lighting": layout.lighting.to_json()}),
+        **({"barcodes": [b.to_json() for b in layout.barcodes]} if layout.barcodes else {}),
     }
 
 

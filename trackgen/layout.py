@@ -49,6 +49,13 @@ Light and surfaces (the physical camera's scene; ``worlds.lighting``, docs/camer
     @specular = 0.03      fractions of light the lane, the black lines and the floor return;
                           the glossy share of the lamps' light
 
+Printed marks (``worlds.marks``, docs/pixy2.md):
+
+    @barcode = X Y CODE HEADING_DEG [MODULE [LENGTH]]   a Pixy2 barcode CODE (0 .. 15) on a
+                          white card centred at world X Y (m), its bars along HEADING_DEG (the
+                          direction a car drives over it), narrow bar MODULE m wide (0.01), bars
+                          LENGTH m long (0.05); lengths scaled by @scale; may repeat
+
 Limits: a repeat count is 1..MAX_REPEAT, a layout has at most MAX_PIECES pieces after
 repeats and at most MAX_FILE_BYTES bytes, a line (without its comment) at most
 MAX_LINE_CHARS characters, a number at most MAX_NUMBER_CHARS; every number has a range
@@ -71,6 +78,8 @@ from pieces.spec import PARAMS, SETTINGS_PARAMS, ParamSpec, PieceError, PieceTyp
 
 from worlds.lighting import LIMITS as LIGHT_LIMITS
 from worlds.lighting import Light, Shade, TrackLighting
+from worlds.marks import DEFAULT_LENGTH_M, DEFAULT_MODULE_M, Barcode
+from worlds.marks import LIMITS as MARK_LIMITS
 
 from .errors import LayoutError
 
@@ -93,7 +102,7 @@ SCALED_SETTINGS = ("lane_width", "edge_width", "thickness")
 LIGHT_SETTINGS = ("ambient_lux", "light", "shade", "lane_reflectance", "line_reflectance",
                   "floor_reflectance", "specular")
 """The light and surface settings (``worlds.lighting.TrackLighting``); ``@light`` and ``@shade`` repeat."""
-EXTRA_SETTINGS = ("name", "scale") + LIGHT_SETTINGS
+EXTRA_SETTINGS = ("name", "scale") + LIGHT_SETTINGS + ("barcode",)
 
 # Unambiguous (no nested quantifiers over the same digits): linear time on any input.
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
@@ -138,6 +147,7 @@ class Layout:
     scale: float = 1.0
     setting_values: Mapping[str, float] = field(default_factory=dict)
     lighting: TrackLighting = field(default_factory=TrackLighting)  # @ambient_lux, @light, ...
+    barcodes: tuple[Barcode, ...] = ()  # @barcode lines (worlds.marks)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "entries", tuple(self.entries))
@@ -252,6 +262,7 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     light_values: dict[str, float] = {}
     lamps: list[tuple[int, tuple[float, ...]]] = []
     shade_lines: list[tuple[float, ...]] = []
+    code_lines: list[tuple[float, ...]] = []
     lines = text.removeprefix("\ufeff").split("\n")
     for lineno, raw in enumerate(lines, start=1):
         body = raw.split("#", 1)[0].strip()
@@ -268,6 +279,9 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
                 continue
             if key == "shade":
                 shade_lines.append(value)
+                continue
+            if key == "barcode":
+                code_lines.append(value)
                 continue
             if key in seen_at:
                 raise LayoutError(path, lineno, f"@{key} set twice (first on line {seen_at[key]})")
@@ -303,8 +317,10 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     shades = tuple(Shade(x * scale, y * scale, length * scale, width * scale, math.radians(heading), t)
                    for x, y, length, width, heading, t in shade_lines)
     lighting = TrackLighting(lights=lights, shades=shades, **light_values)
+    barcodes = tuple(Barcode(x * scale, y * scale, int(code), math.radians(heading), module * scale, length * scale)
+                     for x, y, code, heading, module, length in code_lines)
     return Layout(path=path, name=name, entries=tuple(entries), settings=settings,
-                  scale=scale, setting_values=values, lighting=lighting)
+                  scale=scale, setting_values=values, lighting=lighting, barcodes=barcodes)
 
 
 def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
@@ -325,6 +341,8 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
         return key, _parse_light(value, path, lineno)
     if key == "shade":
         return key, _parse_shade(value, path, lineno)
+    if key == "barcode":
+        return key, _parse_barcode(value, path, lineno)
     if key == "name":
         if not _NAME.match(value):
             raise LayoutError(path, lineno, f"@name = {_shown(value)}: expected 1-64 letters, "
@@ -352,15 +370,15 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
 
 
 def _ranged_numbers(key: str, words: list[str], fields: tuple[tuple[str, str], ...], usage: str,
-                    path: str, lineno: int) -> list[float]:
+                    path: str, lineno: int, limits=LIGHT_LIMITS) -> list[float]:
     """The numbers of an ``@key`` line's ``words``, each ``(NAME, limit)`` of ``fields`` checked
-    against ``worlds.lighting.LIMITS[limit]``."""
+    against ``limits[limit]`` (``worlds.lighting.LIMITS``)."""
     numbers = []
     for word, (what, limit) in zip(words, fields):
         number = _number(word)
         if number is None:
             raise LayoutError(path, lineno, f"@{key}: {what} = {_shown(word)}: expected a number; {usage}")
-        lo, hi = LIGHT_LIMITS[limit]
+        lo, hi = limits[limit]
         if not lo <= number <= hi:
             raise LayoutError(path, lineno, f"@{key}: {what} = {_bare(word)}: expected {lo:g} <= {what} <= {hi:g}")
         numbers.append(number)
@@ -394,6 +412,21 @@ def _parse_shade(value: str, path: str, lineno: int) -> tuple[float, ...]:
                                                   ("LENGTH", "size_m"), ("WIDTH", "size_m"),
                                                   ("HEADING_DEG", "heading_deg"), ("TRANSMISSION", "transmission")),
                                  usage, path, lineno))
+
+
+def _parse_barcode(value: str, path: str, lineno: int) -> tuple[float, ...]:
+    """``X Y CODE HEADING_DEG [MODULE [LENGTH]]`` of an ``@barcode`` line."""
+    usage = "expected '@barcode = X Y CODE HEADING_DEG [MODULE [LENGTH]]' (m, m, 0..15, degrees, m, m)"
+    words = value.split()
+    if not 4 <= len(words) <= 6:
+        raise LayoutError(path, lineno, f"@barcode = {_shown(value)}: {usage}")
+    numbers = _ranged_numbers("barcode", words, (("X", "coordinate_m"), ("Y", "coordinate_m"), ("CODE", "code"),
+                                                 ("HEADING_DEG", "heading_deg"), ("MODULE", "module_m"),
+                                                 ("LENGTH", "length_m")), usage, path, lineno, MARK_LIMITS)
+    if numbers[2] != int(numbers[2]):
+        raise LayoutError(path, lineno, f"@barcode: CODE = {_bare(words[2])}: expected a whole number 0 .. 15")
+    numbers += [DEFAULT_MODULE_M, DEFAULT_LENGTH_M][len(numbers) - 4:]
+    return tuple(numbers)
 
 
 def _number(text: str) -> float | None:

@@ -229,6 +229,16 @@ class Pixy2:
                                    "PixyMon 'Minimum line length'; estimate", 0.0, 200.0)
     max_merge_distance_px: float = _f(5.0, "Line ends this close meet (an intersection when 3 or more do).",
                                       "PixyMon 'Maximum merge distance'; estimate", 0.0, 100.0)
+    barcode_edge_threshold: float = _f(35.0, "Edge threshold of the barcode reader: grey-level step between "
+                                       "two frame pixels barcode_edge_distance_px apart (single pixels, "
+                                       "so higher than edge_threshold, which acts on grid block means).",
+                                       "the firmware's default edge threshold (charmedlabs/pixy2 line.h "
+                                       "LINE_EDGE_THRESH_DEFAULT)", 1.0, 255.0)
+    barcode_edge_distance_px: int = _f(2, "Edge distance of the barcode reader along the camera frame's "
+                                       "rows, in frame pixels: narrower bars and gaps are measured too "
+                                       "wide (larger: fuzzier edges found, bigger barcodes needed).",
+                                       "estimate; PixyMon 'Edge distance' (its docs: it sets the minimum "
+                                       "barcode size)", 1, 16)
     max_line_compare_px: float = _f(10.0, "A line keeps its tracking index from the last frame when both "
                                     "its ends moved at most this far.", "PixyMon 'Maximum line compare'; "
                                     "estimate", 0.0, 200.0)

@@ -53,6 +53,8 @@ import numpy as np
 from pieces.pose import Pose2
 from worlds.sdf_xml import WorldError, XmlDoc, parse_pose, parse_vector, parse_xml, text_of
 from worlds.lighting import TrackLighting, from_sdf_world
+from worlds.marks import Barcode
+from worlds.marks import from_sdf_world as barcodes_of
 
 MODEL_PATH_ENV = ("GAZEBO_MODEL_PATH", "GZ_SIM_RESOURCE_PATH", "IGN_GAZEBO_RESOURCE_PATH", "SDF_PATH")
 GROUND_MODELS = ("ground_plane",)
@@ -112,6 +114,7 @@ class Scene:
     track_json: Path | None
     ground_z_m: float | None
     lighting: TrackLighting | None = None  # the world's lights (worlds.lighting), None: none
+    barcodes: tuple[Barcode, ...] = ()      # printed barcodes (worlds.marks)
 
 
 def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
@@ -124,13 +127,14 @@ def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
     if _is_file(track_json) and not inside(track_json, reader.roots):
         raise WorldError(f"{track_json}: links outside the world's folder {source.parent}")
     world = doc.root.find("world")
-    lighting = None
+    lighting, barcodes = None, ()
     if world is not None:
         lighting = from_sdf_world(world, lambda el: tuple(parse_pose(doc, el.find("pose"))[:3, 3]))
+        barcodes = barcodes_of(world)
     return Scene(source=source, visuals=tuple(reader.visuals), collisions=tuple(reader.collisions),
                  car_pose=reader.car_pose, car_z_m=reader.car_z_m,
                  track_json=track_json if track_json.is_file() else None,
-                 ground_z_m=reader.ground_z_m, lighting=lighting)
+                 ground_z_m=reader.ground_z_m, lighting=lighting, barcodes=barcodes)
 
 
 def load_mesh_world(visual: MeshVisual):

@@ -208,7 +208,8 @@ def _middle_panel(out: np.ndarray, box, rec: FrameRecord) -> None:
 
 def _pixy2_overlay(out: np.ndarray, box, features, vector_index, grid_w: int, grid_h: int) -> None:
     """The Pixy2's vectors (green, the Vector yellow; arrows point to the head) and
-    intersections (red rings) over the camera image, as PixyMon's "all features" view."""
+    intersections (red rings), barcodes (their code in a red box) over the camera image, as
+    PixyMon's "all features" view."""
     x0, y0, x1, y1 = box
     sx, sy = (x1 - x0) / grid_w, (y1 - y0) / grid_h
 
@@ -219,6 +220,10 @@ def _pixy2_overlay(out: np.ndarray, box, features, vector_index, grid_w: int, gr
         cv2.arrowedLine(out, at(v.m_x0, v.m_y0), at(v.m_x1, v.m_y1), color, 2, tipLength=0.08)
     for it in features.intersections:
         cv2.circle(out, at(it.m_x, it.m_y), 7, _RED, 2)
+    for b in features.barcodes:
+        cx, cy = at(b.m_x, b.m_y)
+        cv2.rectangle(out, (cx - 10, cy - 8), (cx + 10, cy + 8), _RED, 1)
+        cv2.putText(out, str(b.m_code), (cx - 7, cy + 5), cv2.FONT_HERSHEY_SIMPLEX, 0.4, _RED, 1, cv2.LINE_AA)
 
 
 def compose(rec: FrameRecord, track_view: TrackView | None, laps: int,

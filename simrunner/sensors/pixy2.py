@@ -52,6 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from simrunner.errors import CameraError
+from simrunner.sensors.pixy2_codes import cleared, edge_centres, find_codes
 
 LINE_VECTOR, LINE_INTERSECTION, LINE_BARCODE = 0x01, 0x02, 0x04
 LINE_ALL_FEATURES = LINE_VECTOR | LINE_INTERSECTION | LINE_BARCODE
@@ -101,7 +102,8 @@ class Intersection:
 
 @dataclass(frozen=True)
 class Barcode:
-    """A barcode (never reported: the simulated tracks carry none; docs/pixy2.md)."""
+    """A barcode read in the frame: its centre (grid pixels), flags, its code 0-15
+    (:mod:`simrunner.sensors.pixy2_codes`)."""
 
     m_x: int
     m_y: int
@@ -132,35 +134,13 @@ def grid_image(frame: np.ndarray, grid_w: int, grid_h: int) -> np.ndarray:
 
 
 # -- 2. line points -------------------------------------------------------------------------
-def _edge_centres(g: np.ndarray, mask: np.ndarray, d: int) -> list[list[float]]:
-    """Per scan (row of ``g``): the centres of the runs of ``mask``, weighted by ``|g|``,
-    shifted by ``d / 2``."""
-    n, m = mask.shape
-    pad = np.zeros((n, m + 2), dtype=np.int8)
-    pad[:, 1:-1] = mask
-    step = np.diff(pad, axis=1)
-    rows, starts = np.nonzero(step == 1)   # row-major: runs in order
-    _rows, ends = np.nonzero(step == -1)
-    w = np.where(mask, np.abs(g), 0.0)
-    cw = np.zeros((n, m + 1))
-    cxw = np.zeros((n, m + 1))
-    np.cumsum(w, axis=1, out=cw[:, 1:])
-    np.cumsum(w * np.arange(m), axis=1, out=cxw[:, 1:])
-    centres = (cxw[rows, ends] - cxw[rows, starts]) / (cw[rows, ends] - cw[rows, starts]) + d / 2.0
-    values, out, i = centres.tolist(), [], 0
-    for count in np.bincount(rows, minlength=n).tolist():
-        out.append(values[i:i + count])
-        i += count
-    return out
-
-
 def scan_lines(profiles: np.ndarray, *, threshold: float, d: int, min_w: float,
                max_w: float) -> list[list[float]]:
     """Line points along each scan (row of ``profiles``): a dark run between a falling and a
     rising edge, ``min_w`` to ``max_w`` wide."""
     g = profiles[:, d:] - profiles[:, :-d]
-    falls = _edge_centres(g, g <= -threshold, d)
-    rises = _edge_centres(g, g >= threshold, d)
+    falls = edge_centres(g, g <= -threshold, d)
+    rises = edge_centres(g, g >= threshold, d)
     out = []
     for f_row, r_row in zip(falls, rises):
         points: list[float] = []
@@ -254,12 +234,17 @@ class _Line:
         return v / nv if nv > 0 else np.array([0.0, -1.0])
 
 
-def _pieces_of(grid: np.ndarray, spec, white_line: bool) -> list[np.ndarray]:
+def _pieces_of(grid: np.ndarray, spec, white_line: bool, clear=()) -> list[np.ndarray]:
+    """Straight pieces of line, ``(N, 2)`` grid points each; no points inside the ``clear``
+    rectangles ``(x0, x1, y0, y1)`` (barcodes)."""
     g = 255.0 - grid if white_line else grid
     kw = dict(threshold=float(spec.edge_threshold), d=int(spec.edge_distance_px),
               min_w=float(spec.min_line_width_px), max_w=float(spec.max_line_width_px))
     rows = scan_lines(g, **kw)
     cols = scan_lines(np.ascontiguousarray(g.T), **kw)
+    for x0, x1, y0, y1 in clear:
+        rows = [[x for x in pts if not (x0 <= x <= x1 and y0 <= y <= y1)] for y, pts in enumerate(rows)]
+        cols = [[y for y in pts if not (x0 <= x <= x1 and y0 <= y <= y1)] for x, pts in enumerate(cols)]
     pieces = []
     for ch in _chains(rows):
         pieces += _pieces(ch, steep=True)                               # (x, y)
@@ -392,7 +377,15 @@ class LineTracker:
         """Features of ``frame`` (all of them; :attr:`main` holds the main ones)."""
         spec = self.spec
         grid = grid_image(frame, self.w, self.h)
-        pieces = _pieces_of(grid, spec, bool(self.mode & LINE_MODE_WHITE_LINE))
+        fh, fw = frame.shape
+        sx, sy = self.w / fw, self.h / fh
+        codes = find_codes(frame, threshold=float(spec.barcode_edge_threshold), d=int(spec.barcode_edge_distance_px),
+                           row_step=max(1, fh // (2 * self.h)))
+        gx, gy = (lambda f: (f + 0.5) * sx - 0.5), (lambda f: (f + 0.5) * sy - 0.5)  # frame -> grid px
+        clear = [(gx(x0), gx(x1), gy(y0), gy(y1)) for x0, x1, y0, y1 in map(cleared, codes)]
+        barcodes = tuple(Barcode(_px(gx(c.centre_px[0]), self.w - 1), _px(gy(c.centre_px[1]), self.h - 1), 0, c.code)
+                         for c in codes)
+        pieces = _pieces_of(grid, spec, bool(self.mode & LINE_MODE_WHITE_LINE), clear)
         lines, nodes = _graph(pieces, float(spec.max_merge_distance_px))
         lines = _straight([ln for ln in lines
                            if np.hypot(*(ln.pts[-1] - ln.pts[0])) >= float(spec.min_line_length_px)])
@@ -439,11 +432,13 @@ class LineTracker:
             return Intersection(_px(nodes[n][0], self.w - 1), _px(nodes[n][1], self.h - 1), len(out), tuple(out))
 
         self.all = Features(tuple(vector(i) for i in sorted(by_index)),
-                            tuple(intersection(n) for n in inter_nodes), ())
+                            tuple(intersection(n) for n in inter_nodes), barcodes)
+        nearest = (max(barcodes, key=lambda b: (b.m_y, -abs(b.m_x - self.w / 2.0))),) if barcodes else ()
         if vec is None:
-            self.main = Features()
+            self.main = Features((), (), nearest)
         else:
-            self.main = Features((vector(k),), (intersection(ref_node),) if ref_node in inter_nodes else (), ())
+            self.main = Features((vector(k),), (intersection(ref_node),) if ref_node in inter_nodes else (),
+                                 nearest)
             self._choose_branch(by_index, k, ref_node, inter_nodes)
         return self.all
 

@@ -44,7 +44,7 @@ from pieces.pose import Pose2
 from worlds.lighting import TrackLighting
 from simrunner.track.errors import TrackLoadError
 from simrunner.track.raster import (DEFAULT_M_PER_PX, ROLE_GRAY, TrackRaster, build_raster,
-                                    check_m_per_px, layer_from_footprint, layer_from_visual,
+                                    check_m_per_px, layer_from_footprint, layer_from_polygon, layer_from_visual,
                                     upward_triangles)
 
 if TYPE_CHECKING:  # trackgen (shapely) loads only for a layout
@@ -76,6 +76,7 @@ class SimTrack:
     lap_length_estimated: bool = False
     judged: bool = True  # False: a free floor (simrunner.track.floor), no laps, no off-track
     lighting: TrackLighting = field(default_factory=TrackLighting)  # the physical camera's light
+    barcodes: tuple = ()  # printed barcodes (worlds.marks.Barcode), painted into the raster
 
     @property
     def road_mask(self) -> np.ndarray:
@@ -151,7 +152,7 @@ def track_from_trackgen(track: Track, *, geometry: TrackGeometry | None = None,
     if geometry.markings is not None:
         layers.append(layer_from_footprint("markings", geometry.markings, ROLE_GRAY["marking"],
                                            top_z_m=top_z))
-    raster = build_raster(layers, m_per_px=m_per_px)
+    raster = build_raster(layers + mark_layers(layout.barcodes, top_z, m_per_px), m_per_px=m_per_px)
     start = track.car_start_pose()
     if not bool(raster.on_road([[start.x_m, start.y_m]])[0]):
         raise TrackLoadError(f"{layout.path}: the start pose ({start.x_m:.3f}, {start.y_m:.3f}) m "
@@ -166,7 +167,8 @@ def track_from_trackgen(track: Track, *, geometry: TrackGeometry | None = None,
     return SimTrack(
         name=name or layout.name, source=source, raster=raster, surface_z_m=top_z, start=start,
         gate=gate, gate_half_width_m=float(half), lap_length_m=float(track.length_m),
-        centreline=centreline, lap_length_estimated=False, lighting=layout.lighting)
+        centreline=centreline, lap_length_estimated=False, lighting=layout.lighting,
+        barcodes=layout.barcodes)
 
 
 def _read_world(path: Path):
@@ -192,7 +194,7 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
     if not layers:
         raise TrackLoadError(f"{scene.source}: the world has no mesh visuals with upward faces "
                              f"(nothing to drive on)")
-    raster = build_raster(layers, m_per_px=m_per_px)
+    raster = build_raster(layers + mark_layers(scene.barcodes, surface_z, m_per_px), m_per_px=m_per_px)
 
     if scene.car_pose is not None:
         start, origin = scene.car_pose, "the car's pose in the world"
@@ -221,7 +223,25 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
         source=source, raster=raster, surface_z_m=surface_z, start=start, gate=gate,
         gate_half_width_m=float(half), lap_length_m=float(lap_length),
         centreline=meta.get("centreline"), lap_length_estimated=estimated,
-        lighting=scene.lighting if scene.lighting is not None else TrackLighting())
+        lighting=scene.lighting if scene.lighting is not None else TrackLighting(),
+        barcodes=scene.barcodes)
+
+
+def mark_layers(barcodes, surface_z_m: float, m_per_px: float) -> list:
+    """Raster layers of printed barcodes (worlds.marks): each white card, then its black bars,
+    just above the track's top so they are painted over it; not road. The painter fills a
+    polygon's outline pixels too (one pixel wider than the polygon), so each bar is drawn half a
+    pixel narrower on each side: bars and gaps keep their widths (the code's narrow and wide)."""
+    layers = []
+    top = surface_z_m + 1e-4
+    inset = m_per_px / 2.0
+    for i, b in enumerate(barcodes):
+        layers.append(layer_from_polygon(f"barcode_{i}_card", b.card(), ROLE_GRAY["lane"], top_z_m=top,
+                                         is_road=False))
+        bars = [bar.buffer(-inset, join_style="mitre") for bar in b.bars()]
+        layers += [layer_from_polygon(f"barcode_{i}_bar_{j}", bar, ROLE_GRAY["marking"], top_z_m=top,
+                                      is_road=False) for j, bar in enumerate(bars) if not bar.is_empty]
+    return layers
 
 
 def road_extents_m(raster: TrackRaster, pose: Pose2) -> tuple[float, float]:
