@@ -24,6 +24,7 @@ constexpr double HALF_LANE_M = 0.265;   // lane centre to an edge line's centre
 constexpr double MIN_GAP_M = 0.35, NEAR_M = 0.9, LOOKAHEAD_M = 0.45, SMOOTH = 0.5;
 constexpr double MAX_TURN_RAD = 2.0, FAR_EXTRA_M = 0.40, TIGHT_RADIUS_M = 0.6;
 constexpr double V_MAX_MPS = 2.2, V_MIN_MPS = 1.2, STEER_LIMIT_RAD = 0.40;
+constexpr int SLOW_CODE = 1, FAST_CODE = 2;  // barcodes: a slow zone starts / ends
 const double F_PX = (GRID_W / 2.0) / std::tan(HFOV_RAD / 2.0);
 
 struct P { double x, y; };  // on the floor: ahead, left (m)
@@ -160,9 +161,13 @@ int main() {
     pixy.changeProg("line");
     const double v_max = s.param("v_max", V_MAX_MPS), v_min = s.param("v_min", V_MIN_MPS);
     const double look = s.param("lookahead", LOOKAHEAD_M);
-    double steer = 0.0;
+    double steer = 0.0, cap = v_max;
     for (;;) {
         pixy.line.getAllFeatures();
+        for (int i = 0; i < pixy.line.numBarcodes; i++) {  // barcodes: a slow zone starts / ends
+            if (pixy.line.barcodes[i].m_code == SLOW_CODE) cap = v_min;
+            else if (pixy.line.barcodes[i].m_code == FAST_CODE) cap = v_max;
+        }
         auto [left, right] = lane_edges(pixy.line.vectors, pixy.line.numVectors);
         std::vector<P> aims, fars;
         for (auto [chain, inward] : {std::pair{&left, -HALF_LANE_M}, std::pair{&right, HALF_LANE_M}}) {
@@ -175,6 +180,6 @@ int main() {
         steer = std::clamp(steer, -STEER_LIMIT_RAD, STEER_LIMIT_RAD);
         double bend = std::fabs(steer) / STEER_LIMIT_RAD;
         if (!fars.empty()) bend = std::max(bend, std::min(1.0, std::fabs(curvature(fars)) * TIGHT_RADIUS_M));
-        s.setSpeedAndServo(v_max - (v_max - v_min) * bend, steer);
+        s.setSpeedAndServo(std::min(cap, v_max - (v_max - v_min) * bend), steer);
     }
 }

@@ -9,7 +9,9 @@ examples/pixy2_car.toml below). Of the lines that start near the car, the neares
 the car is the left edge, the nearest right of it the right edge. It aims at the lane's middle
 LOOKAHEAD_M from the rear axle - the edges it sees moved half a lane inwards - and steers
 there by pure pursuit; with no edge in view it keeps its last steering. It slows down while
-steering hard or when the middle farther ahead (FAR_EXTRA_M more) bends tightly.
+steering hard or when the middle farther ahead (FAR_EXTRA_M more) bends tightly. Barcodes on
+the track (docs/pixy2.md, examples/barcodes.txt) cap its speed from the frame they are read:
+code SLOW_CODE at ``v_min``, code FAST_CODE lifts the cap again.
 
 Units: Spinner defaults (m/s, radians, + = left). The C++ twin: examples/pixy2_follower.cpp.
 Parameters (``--param NAME=VALUE``): ``v_max``, ``v_min`` (m/s), ``lookahead`` (m).
@@ -36,6 +38,7 @@ TIGHT_RADIUS_M = 0.6         # a bend this tight ahead: the lowest speed
 V_MAX_MPS = 2.2
 V_MIN_MPS = 1.2
 STEER_LIMIT_RAD = 0.40
+SLOW_CODE, FAST_CODE = 1, 2  # barcodes: a slow zone starts / ends
 _F_PX = (GRID_W / 2.0) / math.tan(HFOV_RAD / 2.0)
 
 
@@ -175,9 +178,11 @@ def main(spinner):
     v_max = spinner.param("v_max", V_MAX_MPS)
     v_min = spinner.param("v_min", V_MIN_MPS)
     look = spinner.param("lookahead", LOOKAHEAD_M)
-    steer = 0.0
+    steer, cap = 0.0, v_max
     while True:
         pixy.line.getAllFeatures()
+        for code in pixy.line.barcodes:
+            cap = v_min if code.m_code == SLOW_CODE else v_max if code.m_code == FAST_CODE else cap
         left, right = lane_edges(pixy.line.vectors)
         aims, fars = [], []  # the lane's middle from each edge in view: near and far aim points
         for chain, inward in ((left, -HALF_LANE_M), (right, HALF_LANE_M)):
@@ -193,7 +198,7 @@ def main(spinner):
             steer += SMOOTH * (math.atan(WHEELBASE_M * aim) - steer)
         steer = max(-STEER_LIMIT_RAD, min(STEER_LIMIT_RAD, steer))
         bend = max(abs(steer) / STEER_LIMIT_RAD, min(1.0, abs(curvature(fars)) * TIGHT_RADIUS_M) if fars else 0.0)
-        speed = v_max - (v_max - v_min) * bend
+        speed = min(cap, v_max - (v_max - v_min) * bend)
         spinner.set_speed_and_servo(speed, steer)
         if spinner.recording:
             spinner.add_data([f"vectors {pixy.line.numVectors}",

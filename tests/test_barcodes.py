@@ -226,3 +226,17 @@ def test_c_api_reads_barcodes(tmp_path, capfd):
     assert r.outcome != "controller_error", r.message
     out = capfd.readouterr().out
     assert "code 5 at" in out
+
+
+def test_the_follower_drives_the_example_slow_zone_between_its_codes(tmp_path):
+    from simrunner.run.log import read_log
+
+    r = drive(REPO / "examples" / "pixy2_follower.py", car=PIXY_CAR, track=REPO / "examples" / "barcodes.txt",
+              laps=1, seed=0, csv=tmp_path / "run.csv")
+    assert r.outcome == "finished", r.message
+    log = read_log(tmp_path / "run.csv")
+    x, y, cmd = log.column("x_m"), log.column("y_m"), log.column("speed_cmd_mps")
+    right_straight = (np.abs(x - 1.9) < 0.2) & (y > 2.3) & (y < 2.8)   # after code 1 (x 1.9, y 1.8)
+    first_straight = (y < 0.2) & (x > 0.4) & (x < 1.0)                  # before it
+    assert right_straight.any() and cmd[right_straight].max() <= 1.2 + 1e-9   # v_min
+    assert cmd[first_straight].max() > 1.8
