@@ -127,6 +127,10 @@ def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> t
     # edge lines and the finish bar are black: the whole road black, then the lane white
     for geom, colour in ((geometry.road, (0, 0, 0)), (geometry.lane, (255, 255, 255))):
         image.paste(colour, (0, 0), _mask(geom, k_px, big))
+    for code in track.layout.barcodes:  # printed barcodes (worlds.marks): card, then bars
+        image.paste((255, 255, 255), (0, 0), _mask(code.card(), k_px, big))
+        for bar in code.bars():
+            image.paste((0, 0, 0), (0, 0), _mask(bar, k_px, big))
     image = image.reduce(SUPERSAMPLE)  # box filter: smooth edges
     lighting = track.layout.lighting
     if not lighting.is_default():
