@@ -399,7 +399,7 @@ def _trial(mode: str, k: int, baselines: bool, screen_max_s: float | None = None
         log = log.subset(np.flatnonzero(slow[0].acted))
     rows_only = None
     if mode == "merged":  # the pose and speed at ~30 Hz, every command at its own stamp
-        from simrunner.run.log import CommandSteps
+        from simrunner.telemetry.log import CommandSteps
 
         kept = np.random.default_rng([SEED, _MODE_TAG[mode], k, 1]).random(len(log)) < TENTH_KEEP
         kept[0] = True
@@ -471,7 +471,7 @@ def _sindy_fields() -> dict[str, str]:
 
 def real_rows(jobs: int, real_dir: Path = REAL_DIR, screen_max_s: float | None = None) -> Iterator[dict]:
     """One row per shared real log, each as it is done (none when the folder is absent)."""
-    from simrunner.run.log import read_log
+    from simrunner.telemetry.log import read_log
     from vehicle.description import load_car
 
     if not (real_dir / REAL_CAR).exists():
@@ -510,8 +510,8 @@ def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR, screen_max_s: float 
     import tempfile
 
     from bench.real_topics import COLUMNS, SENSORS, partial_log_csv
-    from simrunner.run.columns import column_map_from
-    from simrunner.run.log import read_log
+    from simrunner.telemetry.columns import column_map_from
+    from simrunner.telemetry.log import read_log
     from vehicle.description import load_car
 
     if not (real_dir / REAL_CAR).exists():

@@ -9,8 +9,10 @@ Layout (the folders follow one run; nothing imports a folder listed after it):
 - ``simrunner.errors``     the exception root :class:`SimError` and its subclasses
 - ``simrunner.track``      the simulator's track: raster, start pose, lap gate
 - ``simrunner.car``        the car model: dartpy body and physics, effects
-- ``simrunner.sensors``    the line camera
-- ``simrunner.run``        one run: clock, Spinner, judge, run log, video, plot, drive
+- ``simrunner.sensors``    the cameras: line camera, physical imaging, the Pixy2
+- ``simrunner.telemetry``  the run log: schema, reading, writing, streaming, column maps
+- ``simrunner.reports``    what a run leaves to read: plot, debug video, the output files
+- ``simrunner.run``        one run: clock, Spinner, judge, controllers, drive
 - ``simrunner.workflows``  excitation plans, calibration, the sim-vs-real gap
 - ``simrunner.cli``        the ``simrunner`` command
 """
@@ -22,8 +24,8 @@ __all__ = ["SimError", "ControllerError", "CommandError", "RunFinished", "Spinne
 
 _LAZY = {"drive": "simrunner.run.runner", "RunResult": "simrunner.run.result",
          "Outcome": "simrunner.run.result", "RunSettings": "simrunner.run.settings",
-         "RunLog": "simrunner.run.log", "read_log": "simrunner.run.log",
-         "write_log": "simrunner.run.log"}
+         "RunLog": "simrunner.telemetry.log", "read_log": "simrunner.telemetry.log",
+         "write_log": "simrunner.telemetry.log"}
 
 
 def __getattr__(name: str):

@@ -229,7 +229,7 @@ def test_c_api_reads_barcodes(tmp_path, capfd):
 
 
 def test_the_follower_drives_the_example_slow_zone_between_its_codes(tmp_path):
-    from simrunner.run.log import read_log
+    from simrunner.telemetry.log import read_log
 
     r = drive(REPO / "examples" / "pixy2_follower.py", car=PIXY_CAR, track=REPO / "examples" / "barcodes.txt",
               laps=1, seed=0, csv=tmp_path / "run.csv")

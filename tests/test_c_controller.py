@@ -17,7 +17,7 @@ from click.testing import CliRunner
 
 from simrunner.cli import main as cli
 from simrunner.errors import ControllerFileError
-from simrunner.run.log import read_log, write_log
+from simrunner.telemetry.log import read_log, write_log
 from simrunner.run.native import INCLUDE_DIR, NativeProgram, build_program, cflags, load_native
 from simrunner.run.native.symbolize import parse_report
 from simrunner.run.runner import drive, resolve_track

@@ -1,4 +1,4 @@
-"""Column mappings (simrunner.run.columns; docs/telemetry.md "Logs with other columns or
+"""Column mappings (simrunner.telemetry.columns; docs/telemetry.md "Logs with other columns or
 units"): a team's own CSV read as the run log it means, and every mistake one line."""
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from simrunner.run.columns import ColumnMap, ColumnMapError, Expression, column_map_from
-from simrunner.run.log import LogError, RunLog, log_from_columns, read_log, write_log
+from simrunner.telemetry.columns import ColumnMap, ColumnMapError, Expression, column_map_from
+from simrunner.telemetry.log import LogError, RunLog, log_from_columns, read_log, write_log
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "ros_log_columns.toml"

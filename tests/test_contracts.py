@@ -15,7 +15,7 @@ from simrunner.car.physics import CarSim
 from simrunner.car.protocol import protocol_members
 from simrunner.errors import SimError
 from simrunner.run.judge import EventKind
-from simrunner.run.log import RunRecorder
+from simrunner.telemetry.log import RunRecorder
 from simrunner.run.result import Outcome
 from simrunner.run.runner import drive, resolve_track
 from simrunner.run.settings import RunSettings, SettingsError
@@ -117,7 +117,7 @@ def test_two_runs_in_two_threads_give_what_they_give_alone():
 
 
 def test_the_log_schema_is_documented_once_in_docs_telemetry():
-    from simrunner.run.log import COLUMNS, FORMAT_LINE
+    from simrunner.telemetry.log import COLUMNS, FORMAT_LINE
 
     doc = (Path(__file__).resolve().parents[1] / "docs" / "telemetry.md").read_text()
     assert FORMAT_LINE in doc

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from simrunner.cli import main as cli
 from simrunner.run.runner import default_track, drive
-from simrunner.run.log import COLUMN_NAMES, read_log
+from simrunner.telemetry.log import COLUMN_NAMES, read_log
 from vehicle.description import CarDescription
 
 REPO = Path(__file__).resolve().parents[1]

@@ -13,7 +13,7 @@ from hypothesis import strategies as hs
 
 from simrunner.car.effects import EFFECTS, with_effects
 from simrunner.cli.calib import excite_cmd
-from simrunner.run.log import FORMAT_LINE, RunLog, read_log, write_log
+from simrunner.telemetry.log import FORMAT_LINE, RunLog, read_log, write_log
 from simrunner.workflows.excite import (AREA_M, AREA_MARGIN_M, SEGMENT_KINDS, ExcitationPlan, PlanError,
                                         follow_path, make_plan, run_plan, segment_kind)
 from vehicle.description import CarDescription

@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from simrunner.cli.gap import gap
-from simrunner.run.log import LogError, write_log
+from simrunner.telemetry.log import LogError, write_log
 from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import find_glitches, glitch_mask
 from simrunner.workflows.gap.synth import make_measured_log
@@ -134,6 +134,6 @@ def test_a_standing_car_s_localisation_jitter_is_not_taken_for_motion(logs):
             "yaw_rad": np.r_[drive.yaw_rad[0] + 0.02 * rng.standard_normal(n), drive.yaw_rad],
             "speed_cmd_mps": np.r_[np.zeros(n), drive.speed_cmd_mps],
             "steer_cmd_rad": np.r_[np.zeros(n), drive.steer_cmd_rad]}
-    from simrunner.run.log import log_from_columns
+    from simrunner.telemetry.log import log_from_columns
 
     check(log_from_columns(cols, "still-then-drive"))

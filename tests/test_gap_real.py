@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simrunner.run.log import LogError, read_log
+from simrunner.telemetry.log import LogError, read_log
 from simrunner.workflows.gap.glitches import GlitchKind, find_glitches, glitch_mask, time_gaps
 from simrunner.workflows.gap.logs import check_measured, derive
 from simrunner.workflows.gap.regimes import REGIMES, segment
@@ -115,7 +115,7 @@ def test_real_partial_sensor_logs_read_through_a_mapping_and_prepare(data_set, t
     mapping: each gives the signals its sensors support and clean windows, and the gyro, read
     in deg/s, turns with the pose (same sign and scale: the topic's unit)."""
     from bench.real_topics import COLUMNS, partial_log_csv
-    from simrunner.run.columns import column_map_from
+    from simrunner.telemetry.columns import column_map_from
     from simrunner.workflows.gap.conventions import check_conventions
 
     logs = {}

@@ -12,7 +12,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pieces.pose import Pose2
-from simrunner.run.log import FORMAT_LINE, CommandSteps, LogError, RunLog, log_from_columns, read_log, write_log
+from simrunner.telemetry.log import FORMAT_LINE, CommandSteps, LogError, RunLog, log_from_columns, read_log, write_log
 from simrunner.workflows.gap import LogError as GapLogError
 from simrunner.workflows.gap.fit import (Problem, Segment, cost_of, fit_effect,
                                          nominal_scales)
@@ -169,7 +169,7 @@ def test_run_gap_checks_its_log_first():
                 sim_factory=kin_factory)
 
 
-# -- the run log's formats (simrunner.run.log; docs/telemetry.md) ----------------------------
+# -- the run log's formats (simrunner.telemetry.log; docs/telemetry.md) ----------------------------
 def _full_log(n=6) -> RunLog:
     t = 0.02 * np.arange(n)
     cols = {name: np.linspace(-1.0, 1.0, n) + k for k, name in enumerate(
@@ -1093,7 +1093,7 @@ def plan_logs(tmp_path_factory):
     decimals): the nominal car open loop without noise, and a car with a steering lag and a
     latency closed loop with a 5-mm pose noise (speed and gyro noise-free)."""
     from simrunner.car.effects import with_effects
-    from simrunner.run.log import write_log
+    from simrunner.telemetry.log import write_log
     from simrunner.workflows.excite import make_plan, run_plan
 
     tmp = tmp_path_factory.mktemp("plan")

@@ -223,7 +223,7 @@ def test_the_dim_hall_of_the_docs_defeats_a_fixed_threshold_not_an_adaptive_one(
 
 
 def test_the_video_track_map_shows_the_light(floor):
-    from simrunner.run.video_frame import TrackView
+    from simrunner.reports.video_frame import TrackView
 
     lamp = TrackLighting(ambient_lux=50.0, lights=(Light(2.0, 2.0, 1.5, 3000.0, 60.0),))
     plain = TrackView(floor, 200, 200).canvas

@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from simrunner.errors import CameraError
-from simrunner.run.log import read_log
+from simrunner.telemetry.log import read_log
 from simrunner.run.native.build import INCLUDE_DIR
 from simrunner.run.runner import drive
 from simrunner.sensors.pixy2 import (LINE_ALL_FEATURES, LINE_FLAG_INTERSECTION_PRESENT,

@@ -11,8 +11,8 @@ import pytest
 from click.testing import CliRunner
 
 from simrunner.cli import main as cli
-from simrunner.run.log import read_log, write_log
-from simrunner.run.plot import lap_rows, off_track_row
+from simrunner.telemetry.log import read_log, write_log
+from simrunner.reports.plot import lap_rows, off_track_row
 from simrunner.run.runner import drive
 
 REPO = Path(__file__).resolve().parents[1]

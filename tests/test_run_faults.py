@@ -20,7 +20,7 @@ from hypothesis import given, settings, strategies as st
 
 from simrunner.errors import SimError
 from simrunner.run.faults import exit_code
-from simrunner.run.log import RunRecorder, read_log, to_csv_text
+from simrunner.telemetry.log import RunRecorder, read_log, to_csv_text
 from simrunner.run.runner import Run, drive, resolve_track
 from simrunner.run.settings import RunSettings
 from vehicle.description import CarDescription

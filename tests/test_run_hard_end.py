@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from simrunner.run.log import LogWarning, read_log
+from simrunner.telemetry.log import LogWarning, read_log
 
 REPO = Path(__file__).resolve().parents[1]
 PY = sys.executable

@@ -1,4 +1,4 @@
-"""Merged topic logs (simrunner.run.sparse, read_log(merged=True)): each sensor fills its own
+"""Merged topic logs (simrunner.telemetry.sparse, read_log(merged=True)): each sensor fills its own
 cells at its own rate; the log is read as one row per sample of the leading sensor."""
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from simrunner.run.columns import column_map_from
-from simrunner.run.log import LogError, read_log
-from simrunner.run.sparse import GAP_FACTOR, command_steps, gap_limit_s, merge_rows
+from simrunner.telemetry.columns import column_map_from
+from simrunner.telemetry.log import LogError, read_log
+from simrunner.telemetry.sparse import GAP_FACTOR, command_steps, gap_limit_s, merge_rows
 
 
 def _stamps(draw, n_min, n_max, t_end):

@@ -13,7 +13,7 @@ from hypothesis import given, settings, strategies as st
 
 from pieces.pose import Pose2
 from simrunner.cli import main as cli
-from simrunner.run.log import read_log
+from simrunner.telemetry.log import read_log
 from simrunner.run.runner import drive, resolve_track
 from simrunner.run.settings import RunSettings, SettingsError
 from simrunner.run.start import along_centreline, start_pose, wheel_points

@@ -11,7 +11,7 @@ import pytest
 from pieces.pose import Pose2
 from simrunner.errors import SimError
 from simrunner.run.runner import drive
-from simrunner.run.video import FRAME_H, FRAME_W, FrameRecord, Layout, VideoRecorder, compose
+from simrunner.reports.video import FRAME_H, FRAME_W, FrameRecord, Layout, VideoRecorder, compose
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -252,7 +252,7 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
                 wall_limit_s) -> int:
     """``run()`` in a supervised child (simrunner.run.supervise); a child ended by the hard
     watchdog gets its outputs written here, from its run log. Returns the exit code."""
-    from simrunner.run.outputs import Outputs
+    from simrunner.reports.outputs import Outputs
     from simrunner.run.supervise import remove_temporary, supervise
 
     end = supervise(run, csv)

@@ -51,7 +51,7 @@ def _fail(exc: BaseException) -> None:
 def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_m, dt_s, gyro_bias_dps,
                area_m) -> None:
     """Write an excitation plan to drive on the real car (docs/calibration.md)."""
-    from simrunner.run.log import write_log
+    from simrunner.telemetry.log import write_log
     from simrunner.workflows.excite import AREA_M, DeadReckoning, make_plan, predict_path, run_plan
     from vehicle.description import load_car
 

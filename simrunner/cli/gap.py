@@ -137,14 +137,14 @@ def _read_logs(paths: tuple[Path, ...], columns_file: Path | None, items: tuple[
                norms_file: Path | None = None) -> list:
     """The logs, read with the column mapping of ``--columns``/``--column`` (if any; its
     ``speed_norm``/``turn_norm`` those ``--norms`` configures), reading merged topic logs
-    (empty cells: :mod:`simrunner.run.sparse`) and leaving out a row that repeats the stamp
+    (empty cells: :mod:`simrunner.telemetry.sparse`) and leaving out a row that repeats the stamp
     before it (listed as a duplicate glitch). Several logs share the mapping, each with the
     sensors it has (``ColumnMap.partial``); a rule no log can follow is an error."""
-    from simrunner.run.log import read_log
+    from simrunner.telemetry.log import read_log
 
     if columns_file is None and not items and norms_file is None:
         return [read_log(path, merged=True, repeated_stamps=True) for path in paths]
-    from simrunner.run.columns import column_map_from, read_mapped_logs
+    from simrunner.telemetry.columns import column_map_from, read_mapped_logs
 
     norms = None
     if norms_file is not None:

@@ -1,5 +1,5 @@
 """``simrunner plot``: the run plot of any log (telemetry of ``drive --csv`` or a real car's
-log read through a column mapping), a thin layer over :func:`simrunner.run.plot.plot_run`."""
+log read through a column mapping), a thin layer over :func:`simrunner.reports.plot.plot_run`."""
 from __future__ import annotations
 
 import sys
@@ -24,14 +24,14 @@ def plot_cmd(log: Path, out: Path | None, track: str | None, car: Path | None,
              columns_file: Path | None, column_items: tuple[str, ...]) -> None:
     """Plot a run LOG (CSV): path, speed, steering, yaw rate, commands vs actual, laps, off track."""
     from simrunner.cli import input_errors
-    from simrunner.run.log import read_log
-    from simrunner.run.plot import log_title, plot_run
+    from simrunner.telemetry.log import read_log
+    from simrunner.reports.plot import log_title, plot_run
 
     out = out if out is not None else log.with_suffix(".png")
     try:
         mapping = None
         if columns_file is not None or column_items:
-            from simrunner.run.columns import column_map_from
+            from simrunner.telemetry.columns import column_map_from
 
             mapping = column_map_from(columns_file, column_items)
         run_log = read_log(log, columns=mapping)

@@ -1,11 +1,11 @@
 """``render()`` of ``NXPCup-v0``: the debug-video frame of ``simrunner drive --video`` (see
-:mod:`simrunner.run.video`) as an ``(FRAME_H, FRAME_W, 3) uint8`` RGB array."""
+:mod:`simrunner.reports.video`) as an ``(FRAME_H, FRAME_W, 3) uint8`` RGB array."""
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-from simrunner.run.video import FrameRecord, Layout, TrackView, compose
+from simrunner.reports.video import FrameRecord, Layout, TrackView, compose
 
 
 class EpisodeView:

@@ -1,2 +1,3 @@
-"""One run: the lockstep clock, the Spinner API, the judge, the run log, video and plot,
-and :func:`~simrunner.run.runner.drive` that wires them."""
+"""One run: the lockstep clock, the Spinner API, the judge, the controllers, and
+:func:`~simrunner.run.runner.drive` that wires them (with the run log of
+:mod:`simrunner.telemetry` and the outputs of :mod:`simrunner.reports`)."""

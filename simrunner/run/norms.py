@@ -6,7 +6,7 @@ the Spinner (``spinner.configure(speed_norm=..., turn_norm=...)``, :mod:`simrunn
 :func:`controller_norms` takes them from the controller file itself: it runs ``main`` with a
 stand-in for the Spinner that records what ``configure`` is given (each call, as the
 Spinner does) and stops ``main`` at its next use of the Spinner; nothing is simulated. A column mapping then calls them row by row
-(``speed_cmd_mps = "speed_norm(duty, servo)"``, :mod:`simrunner.run.columns`).
+(``speed_cmd_mps = "speed_norm(duty, servo)"``, :mod:`simrunner.telemetry.columns`).
 
 Python controllers only: a C or C++ controller's norm functions are written as expressions
 (docs/telemetry.md, "Logs with other columns or units").

@@ -16,8 +16,8 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from simrunner.run.log import TEXT_SEPARATOR, LogWarning, RunLog, empty_log, read_log
-from simrunner.run.outputs import Outputs, write_outputs
+from simrunner.telemetry.log import TEXT_SEPARATOR, LogWarning, RunLog, empty_log, read_log
+from simrunner.reports.outputs import Outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
 
 _FRAME = re.compile(r'^\s*File "(?P<file>.+)", line (?P<line>\d+) in (?P<func>.+)$')
@@ -51,7 +51,7 @@ def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s:
                      cpu_time_s: float) -> RunResult:
     """Write the outputs of a run ended by the hard watchdog (see the module docstring);
     the result names them in ``outputs``. Raises the first output's ``SimError`` after the
-    others were written, as :func:`~simrunner.run.outputs.write_outputs`."""
+    others were written, as :func:`~simrunner.reports.outputs.write_outputs`."""
     from simrunner.run.runner import resolve_track
     from simrunner.run.settings import RunSettings
     from vehicle.description import load_car
@@ -101,7 +101,7 @@ def _laps(log: RunLog) -> tuple[int, list[float]]:
 def _rebuild_video(log: RunLog, path, track, car, laps: int):
     """A VideoRecorder fed with every row of ``log`` (closed by write_outputs)."""
     from pieces.pose import Pose2
-    from simrunner.run.video import VideoRecorder
+    from simrunner.reports.video import VideoRecorder
     from simrunner.sensors.camera import Camera
 
     path = Path(path)

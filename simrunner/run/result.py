@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from simrunner.errors import ControllerError
-from simrunner.run.log import RunLog, empty_log
+from simrunner.telemetry.log import RunLog, empty_log
 
 
 class Outcome(enum.StrEnum):

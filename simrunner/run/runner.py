@@ -3,7 +3,7 @@
 ``drive`` has three parts: load (the controller - :mod:`simrunner.run.controller` -, the car
 description and the track), wire one run (:class:`Run`: car model, camera, judge, run
 recorder, video, clock, Spinner session; every part is owned by the run, nothing points back
-at it) and write the outputs (:mod:`simrunner.run.outputs`).
+at it) and write the outputs (:mod:`simrunner.reports.outputs`).
 
 One thread: the controller runs in the calling thread; the simulation advances inside its
 Spinner calls (:mod:`simrunner.run.clock`). At every camera frame :class:`FrameWork` judges
@@ -34,8 +34,8 @@ from simrunner.run.clock import Command, LockstepClock
 from simrunner.run.controller import Controller, MainFn, load_controller, user_traceback
 from simrunner.run.faults import ControllerGuards, SignalGuard, Terminated, exit_outcome, stray_threads
 from simrunner.run.judge import Judge
-from simrunner.run.log import RunRecorder
-from simrunner.run.outputs import Outputs, check_outputs, write_outputs
+from simrunner.telemetry.log import RunRecorder
+from simrunner.reports.outputs import Outputs, check_outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
 from simrunner.run.settings import RunSettings
 from simrunner.run.spinner import Session, Spinner
@@ -136,15 +136,15 @@ class Run:
         supervision = current_supervision()
         if csv_path is None and supervision is not None:  # the supervisor's copy of the log
             csv_path = supervision.csv_path
-        if csv_path is not None:  # written as the run goes (simrunner.run.stream)
-            from simrunner.run.stream import CsvStream
+        if csv_path is not None:  # written as the run goes (simrunner.telemetry.stream)
+            from simrunner.telemetry.stream import CsvStream
 
             self.csv = CsvStream(csv_path)
         self.recorder = RunRecorder(record_text=record_text or video_path is not None
                                     or csv_path is not None, sink=self.csv)
         self.video = None
         if video_path is not None:
-            from simrunner.run.video import VideoRecorder
+            from simrunner.reports.video import VideoRecorder
 
             self.video = VideoRecorder(video_path, camera_fps=1.0 / car.camera.frame_period_s(),
                                        render=self._render_view, raster=track.raster,

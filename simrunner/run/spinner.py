@@ -46,12 +46,12 @@ from vehicle.description import CarDescription
 from simrunner.errors import CommandError, SimError
 from simrunner.run.clock import LockstepClock
 from simrunner.run.context import SESSION, current_session  # noqa: F401  (current_session: re-exported)
-from simrunner.run.log import RunRecorder
+from simrunner.telemetry.log import RunRecorder
 from simrunner.run.params import ParamValue, convert
 
 if TYPE_CHECKING:
     from simrunner.run.pixy2 import Pixy2
-    from simrunner.run.video import VideoRecorder
+    from simrunner.reports.video import VideoRecorder
     from simrunner.sensors.camera import Camera
     from simrunner.sensors.imaging import Imager
 

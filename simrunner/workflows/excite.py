@@ -29,8 +29,8 @@ turn's rows hold what the nominal car does (``speed_cmd``, ``steer_cmd``) and wh
   next; a car with a 2 degree trim needs a much larger area (docs/calibration.md).
 
 :func:`run_plan` plays a plan in the simulator (``make_sim``, so effects apply), open or
-closed loop, and returns its :class:`~simrunner.run.log.RunLog`, the record every workflow
-uses (written with ``simrunner.run.log.write_log``; schema: docs/telemetry.md).
+closed loop, and returns its :class:`~simrunner.telemetry.log.RunLog`, the record every workflow
+uses (written with ``simrunner.telemetry.log.write_log``; schema: docs/telemetry.md).
 
 The plan frame is the car's start pose: origin at the rear-axle midpoint, +x ahead, +y left,
 yaw counter-clockwise (pieces/pose.py).
@@ -49,7 +49,7 @@ import numpy as np
 
 from pieces.pose import Pose2, wrap_angle
 from simrunner.errors import SimError
-from simrunner.run.log import RunLog, log_from_columns
+from simrunner.telemetry.log import RunLog, log_from_columns
 from vehicle.description import CarDescription
 from vehicle.userfiles import read_user_text
 
@@ -850,7 +850,7 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
 
     Each row's command is set at ``t_k`` and the state logged at ``t_k`` (before the
     frame's physics steps), like the telemetry of ``simrunner drive``. Returns a
-    :class:`~simrunner.run.log.RunLog` (source ``"<excite>"``) with ``frame`` (the frame
+    :class:`~simrunner.telemetry.log.RunLog` (source ``"<excite>"``) with ``frame`` (the frame
     index), ``t_s``, the pose ``x_m, y_m, yaw_rad``, the actual ``speed_mps, steer_rad,
     yaw_rate_radps``, the commands sent ``speed_cmd_mps, steer_cmd_rad``, the differential
     in force ``yaw_rate_cmd_radps``, and ``coast``; no ``lap`` or ``off_track`` (there is

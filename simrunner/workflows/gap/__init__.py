@@ -4,7 +4,7 @@ the gap, and show it shrink on held-out data.
 
 Data flow::
 
-    run log CSV(s) --simrunner.run.log.read_log (+ column mapping)--> RunLog
+    run log CSV(s) --simrunner.telemetry.log.read_log (+ column mapping)--> RunLog
       --logs.check_measured, glitches.find_glitches, logs.derive--> smoothed states, clean pieces
       --replay.make_windows, split_windows--> fit and held-out windows (per log)
       --replay.replay / residuals (signals the logs support)--> where it disagrees (regimes)
@@ -18,7 +18,7 @@ bench. See docs/gap.md.
 from __future__ import annotations
 
 from simrunner.errors import SimError
-from simrunner.run.log import LogError  # a malformed log: ``path:line: what was expected``
+from simrunner.telemetry.log import LogError  # a malformed log: ``path:line: what was expected``
 
 
 class GapError(SimError):

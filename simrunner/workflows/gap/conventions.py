@@ -5,7 +5,7 @@ without an error, and the chain would then fit nonsense to it: a gyro that count
 clockwise as positive, a steering command that is positive to the right (the thesis's car),
 a speed in km/h read as m/s, a heading in degrees. Each of these leaves an unmistakable trace
 between the log's own signals, so :func:`check_conventions` compares them where the log has
-two views of one quantity and refuses the log (:class:`~simrunner.run.log.LogError`, the
+two views of one quantity and refuses the log (:class:`~simrunner.telemetry.log.LogError`, the
 column named, what was found, what was expected and how to map it) when one is reversed or
 off by a unit's factor:
 
@@ -42,7 +42,7 @@ import math
 
 import numpy as np
 
-from simrunner.run.log import LogError, RunLog
+from simrunner.telemetry.log import LogError, RunLog
 from simrunner.workflows.gap.glitches import has_pose
 from simrunner.workflows.gap.logs import Derived, derive
 

@@ -48,7 +48,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from simrunner.run.log import RunLog
+from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap import GapError
 from simrunner.workflows.gap.logs import Derived
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, WORKFLOW_DT_S, SimFactory, Window, default_sim_factory,

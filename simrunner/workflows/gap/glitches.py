@@ -8,7 +8,7 @@ noise of its own signals, its own speed - so that one rule serves a 20-Hz partic
 filter and a 100-Hz motion-capture log alike:
 
 ``time_gap``
-    ``dt > GAP_FACTOR * quantile(dt, GAP_QUANTILE)`` (:func:`simrunner.run.sparse.gap_limit_s`:
+    ``dt > GAP_FACTOR * quantile(dt, GAP_QUANTILE)`` (:func:`simrunner.telemetry.sparse.gap_limit_s`:
     5 times the log's own long interval, its median step when the stamps are regular):
     samples were dropped (or the logger paused). Nothing is known in between, so windows and
     smoothing are cut there (:func:`time_gaps`). A log with irregular stamps (a controller
@@ -95,8 +95,8 @@ from enum import StrEnum
 
 import numpy as np
 
-from simrunner.run.log import RunLog
-from simrunner.run.sparse import GAP_FACTOR, GAP_QUANTILE, gap_limit_s
+from simrunner.telemetry.log import RunLog
+from simrunner.telemetry.sparse import GAP_FACTOR, GAP_QUANTILE, gap_limit_s
 from vehicle.description import CarDescription
 
 DUPLICATE_DT_FRACTION = 0.1  # dt below this fraction of the median: the same sample again

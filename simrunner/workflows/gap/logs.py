@@ -1,7 +1,7 @@
 """Measured logs: check a run log for the gap workflow and derive smoothed states from it.
 
-A measured log is a :class:`simrunner.run.log.RunLog` (read with
-``simrunner.run.log.read_log``; the one schema is docs/telemetry.md). The gap needs
+A measured log is a :class:`simrunner.telemetry.log.RunLog` (read with
+``simrunner.telemetry.log.read_log``; the one schema is docs/telemetry.md). The gap needs
 
     t_s            s     sample time, strictly increasing (irregular stamps are fine)
     speed_cmd_mps  m/s   commanded speed (physical units)
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simrunner.run.log import LogError, RunLog
+from simrunner.telemetry.log import LogError, RunLog
 from simrunner.workflows.gap.glitches import has_pose, time_gaps
 
 REQUIRED_COLUMNS = ("t_s", "speed_cmd_mps", "steer_cmd_rad")
@@ -48,7 +48,7 @@ MIN_SPEED_FOR_STEER_MPS = 0.15  # below this the steer estimate falls back to th
 
 def check_measured(log: RunLog) -> RunLog:
     """``log`` if the gap workflow can use it (see the module docstring), else
-    :class:`simrunner.run.log.LogError` (``path:line: what was expected``)."""
+    :class:`simrunner.telemetry.log.LogError` (``path:line: what was expected``)."""
     log.require(*REQUIRED_COLUMNS)
     if log.speed_mps is None and not has_pose(log):
         missing = [c for c in POSE_COLUMNS if getattr(log, c) is None]

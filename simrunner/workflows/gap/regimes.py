@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simrunner.run.log import RunLog
+from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap.logs import Derived, sample_dt_s
 from vehicle.description import CarDescription
 

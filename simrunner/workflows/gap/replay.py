@@ -47,7 +47,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from pieces.pose import Pose2
-from simrunner.run.log import RunLog
+from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap.glitches import has_pose, time_gaps
 from simrunner.workflows.gap.logs import (SMOOTH_S, Derived, pieces, pose_rates, rms_finite, smoothing_window,
                                           speed_estimate)

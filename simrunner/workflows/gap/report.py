@@ -30,7 +30,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from simrunner.run.log import RunLog
+from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap import GapError
 from simrunner.workflows.gap.chain import (ALIKE_Z, HELD_IMPROVEMENT_MIN, MAX_EFFECTS, SCREEN_MAX_S, Chain,
                                            build_chain, screening_problem)
@@ -270,7 +270,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     (``car`` default: the default car).
 
     Every log must pass :func:`simrunner.workflows.gap.logs.check_measured` (else
-    :class:`simrunner.run.log.LogError`). ``effects`` restricts the candidates (default: the
+    :class:`simrunner.telemetry.log.LogError`). ``effects`` restricts the candidates (default: the
     whole catalogue); ``progress(label)`` is called as the stages finish.
 
     ``dt_s`` is the physics step of the fits; ``held_dt_s`` (default: the step of

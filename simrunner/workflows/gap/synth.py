@@ -29,7 +29,7 @@ from typing import Sequence
 
 import numpy as np
 
-from simrunner.run.log import RunLog, log_from_columns
+from simrunner.telemetry.log import RunLog, log_from_columns
 from simrunner.workflows.gap import GapError
 from vehicle.description import CarDescription
 

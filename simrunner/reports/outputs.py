@@ -7,8 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from simrunner.errors import SimError
-from simrunner.run.log import write_log
-from simrunner.run.result import RunResult
+from simrunner.telemetry.log import write_log
 
 
 @dataclass(frozen=True)
@@ -21,9 +20,9 @@ class Outputs:
     summary: str | Path | None = None
 
 
-def write_outputs(result: RunResult, outputs: Outputs, video, track, *, csv_stream=None) -> None:
-    """Close the video (``video``: the run's VideoRecorder or None) and the CSV
-    (``csv_stream``: the run's :class:`~simrunner.run.stream.CsvStream`, else ``result.log``
+def write_outputs(result, outputs: Outputs, video, track, *, csv_stream=None) -> None:
+    """Write what a run's ``result`` (a :class:`simrunner.run.result.RunResult`) asks for. Close the video (``video``: the run's VideoRecorder or None) and the CSV
+    (``csv_stream``: the run's :class:`~simrunner.telemetry.stream.CsvStream`, else ``result.log``
     is written) and write plot and summary. All are attempted; the first error is raised
     after the others were written. ``result.outputs`` names what was written."""
     errors: list[SimError] = []
@@ -48,7 +47,7 @@ def write_outputs(result: RunResult, outputs: Outputs, video, track, *, csv_stre
             errors.append(exc)
     if outputs.plot is not None:
         try:
-            from simrunner.run.plot import plot_run
+            from simrunner.reports.plot import plot_run
 
             result.outputs["plot"] = str(plot_run(result.log, track, outputs.plot,
                                                   title=plot_title(result)))
@@ -68,7 +67,8 @@ def write_outputs(result: RunResult, outputs: Outputs, video, track, *, csv_stre
         raise errors[0]
 
 
-def plot_title(r: RunResult) -> str:
+def plot_title(r) -> str:
+    """The plot's title line of a run's result (a :class:`simrunner.run.result.RunResult`)."""
     laps = ", ".join(f"{t:.2f} s" for t in r.lap_times_s) or "none"
     return f"{Path(r.track).name}: {r.outcome}, laps {r.laps_completed}/{r.laps} ({laps})"
 

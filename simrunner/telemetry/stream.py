@@ -1,24 +1,24 @@
 """Writing the run-log CSV as the run goes: :class:`CsvStream`.
 
-Each row closed by the :class:`~simrunner.run.log.RunRecorder` is formatted exactly as
-:func:`simrunner.run.log.write_log` formats it (same format line, header, ``%d`` / ``%.6f``
+Each row closed by the :class:`~simrunner.telemetry.log.RunRecorder` is formatted exactly as
+:func:`simrunner.telemetry.log.write_log` formats it (same format line, header, ``%d`` / ``%.6f``
 and quoting: the same run gives the same bytes either way) and written at once with one
 ``os.write`` of whole lines, so the file on disk holds every row closed so far whatever ends
 the process (a crash, ``os._exit``, a hard kill): at most the open row is missing. (A kill
-that lands inside that one write can leave the row cut short; :func:`~simrunner.run.log.read_log`
+that lands inside that one write can leave the row cut short; :func:`~simrunner.telemetry.log.read_log`
 leaves such a last line out with a ``LogWarning``. tests/test_run_hard_end.py kills a run.) The file
 is the requested path itself (not a temporary renamed at the end): a run that was cut short
 still leaves its telemetry where it was asked for. Nothing of the rows is kept here.
 
 A write error (disk full, ...) stops the writing; :meth:`close` then raises a
-:class:`~simrunner.run.log.LogError` naming the path, after the run has ended normally.
+:class:`~simrunner.telemetry.log.LogError` naming the path, after the run has ended normally.
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
-from simrunner.run.log import COLUMNS, FORMAT_LINE, LogError, _quote
+from simrunner.telemetry.log import COLUMNS, FORMAT_LINE, LogError, _quote
 
 # the run's columns in schema order; coast is always 0 in a simulated run
 _LINE = ",".join(c.fmt for c in COLUMNS) + "\n"

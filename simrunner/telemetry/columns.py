@@ -10,14 +10,14 @@ small TOML file (keys: schema columns) or as command-line items ``NAME=EXPR``::
     speed_mps = {column = "v", unit = "km/h"}
     steer_cmd_rad = "-servo / 512 * 0.40"      # the car's turn_norm
 
-:func:`simrunner.run.log.read_log` applies it: ``read_log(path, columns=column_map_from(
+:func:`simrunner.telemetry.log.read_log` applies it: ``read_log(path, columns=column_map_from(
 "map.toml", ["speed_mps=v/3.6"]))``. Schema columns the map has no rule for are read by
 their own names (format 2 or 1), as without a map.
 
 Every rule compiles to one :class:`Expression` (a unit is a factor, a quaternion is
 ``atan2``, split stamps are a sum), parsed with :mod:`ast` and evaluated on numpy arrays by
 walking a tree of the allowed operations; nothing reaches ``eval``. Errors are
-:class:`ColumnMapError` (a :class:`~simrunner.run.log.LogError`) naming the mapping's file
+:class:`ColumnMapError` (a :class:`~simrunner.telemetry.log.LogError`) naming the mapping's file
 and line, or the command-line item; errors in the log name the log's file and line.
 """
 from __future__ import annotations
@@ -35,8 +35,8 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from simrunner.run.log import COLUMN_NAMES, COLUMNS, FORMAT1_NAMES, LogError, read_log
-from simrunner.run.sparse import is_empty_cell
+from simrunner.telemetry.log import COLUMN_NAMES, COLUMNS, FORMAT1_NAMES, LogError, read_log
+from simrunner.telemetry.sparse import is_empty_cell
 
 _BY_NAME = {c.name: c for c in COLUMNS}
 
@@ -498,7 +498,7 @@ class ColumnMap:
         """This map with ``override``'s rules replacing or adding to its own."""
         return ColumnMap.from_rules(self.rules + override.rules)
 
-    # -- reading a log (used by simrunner.run.log.read_log) --------------------------------
+    # -- reading a log (used by simrunner.telemetry.log.read_log) --------------------------------
     def columns_to_read(self, header: Sequence[str], header_line: int, source: str) -> dict[str, int]:
         """``{name: index}`` of the header's columns to read: those the rules use, then the
         schema-named ones the map has no rule for. Raises :class:`LogError`
@@ -554,8 +554,8 @@ class ColumnMap:
     def apply(self, cells: Mapping[str, Sequence[str]], rows: int, source: str, *, merged: bool = False) -> dict:
         """The schema columns from the file's ``cells`` (``{name: rows strings}``, the names
         of :meth:`columns_to_read`). Errors are :class:`LogError` at ``row + 2`` (the
-        :func:`~simrunner.run.log.log_from_columns` convention; read_log maps them to lines).
-        ``merged`` (a merged topic log, :mod:`simrunner.run.sparse`): an empty cell is NaN,
+        :func:`~simrunner.telemetry.log.log_from_columns` convention; read_log maps them to lines).
+        ``merged`` (a merged topic log, :mod:`simrunner.telemetry.sparse`): an empty cell is NaN,
         and so is a rule's value in a row where a column it uses is empty."""
         numbers: dict[str, np.ndarray] = {}
 
@@ -639,7 +639,7 @@ def column_map_from(file: str | Path | None = None, items: Iterable[str] = (),
 
 def read_mapped_logs(paths: Sequence[str | Path], mapping: ColumnMap, **read_kw) -> list:
     """Several logs of one car read with one ``mapping`` (``read_kw``: the rest of
-    :func:`~simrunner.run.log.read_log`'s options): one log as the map says; several each
+    :func:`~simrunner.telemetry.log.read_log`'s options): one log as the map says; several each
     with the sensors it has (:attr:`ColumnMap.partial`), a rule that no log can follow being
     a :class:`ColumnMapError` at the rule's line."""
     if len(paths) == 1:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from simrunner.errors import SimError
-from simrunner.run.log import RunLog
+from simrunner.telemetry.log import RunLog
 
 
 MAX_LAP_LABELS = 12  # laps after these get a marker but no label

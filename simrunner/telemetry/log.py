@@ -23,7 +23,7 @@ During a run, :class:`RunRecorder` collects the rows: the state at each camera f
 boundary ``t_k``, the command the first physics step after ``t_k`` applies (the
 controller's answer to frame ``k``; the last row keeps the command in force at its
 boundary), and the ``add_data`` text lines added between ``t_k`` and ``t_k+1``. It streams
-each row to the CSV as the run goes (:mod:`simrunner.run.stream`, the same bytes as
+each row to the CSV as the run goes (:mod:`simrunner.telemetry.stream`, the same bytes as
 :func:`write_log`) and keeps a bounded number in memory.
 """
 from __future__ import annotations
@@ -36,15 +36,24 @@ import re
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import Mapping, Protocol, Sequence
 
 import numpy as np
 
 from simrunner.errors import SimError
-from simrunner.run.sparse import is_empty_cell
+from simrunner.telemetry.sparse import is_empty_cell
 
-if TYPE_CHECKING:  # columns.py builds on this module
-    from simrunner.run.columns import ColumnMap
+
+
+class ColumnMap(Protocol):
+    """What :func:`read_log` asks of a column mapping (:class:`simrunner.telemetry.columns.ColumnMap`,
+    which builds on this module): its rules, the CSV columns to read, and the mapped values."""
+
+    rules: tuple
+
+    def columns_to_read(self, header: Sequence[str], header_line: int, source: str) -> dict[str, int]: ...
+
+    def apply(self, cells: Mapping[str, Sequence[str]], rows: int, source: str, *, merged: bool = False) -> dict: ...
 
 FORMAT_VERSION = 2
 FORMAT_LINE = f"# nxpcup-sim run log, format {FORMAT_VERSION}"
@@ -108,7 +117,7 @@ FORMAT1_NAMES = {"t": "t_s", "x": "x_m", "y": "y_m", "yaw": "yaw_rad", "speed": 
 
 @dataclass(frozen=True, eq=False)
 class CommandSteps:
-    """The commands of a merged log at their own stamps (:func:`simrunner.run.sparse.command_steps`):
+    """The commands of a merged log at their own stamps (:func:`simrunner.telemetry.sparse.command_steps`):
     one entry per command message, every command column held at its last value, shape (M,),
     ``t_s`` strictly increasing. A log read a row per leading-sensor sample keeps them so a
     replay can apply a command sent between two rows when it was sent; ``coast`` is None
@@ -351,14 +360,14 @@ def read_log(path: str | Path, columns: ColumnMap | None = None, *, merged: bool
     """Read a log CSV (format 2 or 1, see the module docstring); raise :class:`LogError`
     (``path:line: what was expected``) for anything malformed.
 
-    ``columns`` (a :class:`simrunner.run.columns.ColumnMap`) reads a CSV whose columns have
+    ``columns`` (a :class:`simrunner.telemetry.columns.ColumnMap`) reads a CSV whose columns have
     other names or units: each schema column it has a rule for is computed from the file's
     columns, the others are read by their own names (docs/telemetry.md, "Logs with other
     columns or units"). Without it, or with an empty map, the file is read as above.
 
     ``merged``: the CSV may be a merged topic log, each row holding the cells of the sensor
     that sent it and empty (or ``nan``) cells for the others; it is read as one row per
-    sample of the leading sensor (:mod:`simrunner.run.sparse`). A log without empty cells
+    sample of the leading sensor (:mod:`simrunner.telemetry.sparse`). A log without empty cells
     reads the same either way.
 
     ``repeated_stamps``: a row stamped the same as the row before it (after the mapping and
@@ -522,7 +531,7 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
         if columns is not None:
             values = columns.apply(values, len(lines), source, merged=merged)
         if merged:
-            from simrunner.run.sparse import SparseError, command_steps, merge_rows  # noqa: PLC0415 - merged logs only
+            from simrunner.telemetry.sparse import SparseError, command_steps, merge_rows  # noqa: PLC0415 - merged logs only
 
             raw = {k: (tuple(v) if _BY_NAME[k].kind == "text" else np.asarray(v, dtype=float))
                    for k, v in values.items()}
@@ -568,7 +577,7 @@ class RunRecorder:
     row. No row is changed after it is closed.
 
     Memory stays bounded: each closed row goes to ``sink`` (``sink.row(values, text)``, e.g.
-    a :class:`simrunner.run.stream.CsvStream` writing the CSV as the run goes) and is kept in
+    a :class:`simrunner.telemetry.stream.CsvStream` writing the CSV as the run goes) and is kept in
     memory only while fewer than ``max_rows`` are kept; then every other kept row is dropped
     and from there on only every 2nd (4th, ...) row is kept (``stride``). :meth:`freeze` gives
     the kept rows plus the open (last) row: every row of a run shorter than ``max_rows``

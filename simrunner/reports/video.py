@@ -1,6 +1,6 @@
 """Debug video (thesis 3.4, Fig. 3.7): one MP4 frame per recorded camera frame.
 
-The frame (``1024 x 576``, BGR) and its layout: :mod:`simrunner.run.video_frame` (camera
+The frame (``1024 x 576``, BGR) and its layout: :mod:`simrunner.reports.video_frame` (camera
 image x3, the API's numbers under it, the camera line stretched with the controller's
 processed lines and text under it, the top-down track view).
 
@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from simrunner.errors import SimError
-from simrunner.run.video_frame import FRAME_H, FRAME_W, FrameRecord, Layout, TrackView, compose
+from simrunner.reports.video_frame import FRAME_H, FRAME_W, FrameRecord, Layout, TrackView, compose
 
 __all__ = ["VideoRecorder", "FrameRecord", "TrackView", "Layout", "compose", "FRAME_W", "FRAME_H"]
 
