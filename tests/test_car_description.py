@@ -74,7 +74,12 @@ def _section_values(cls):
             strategies[f.name] = st.integers(int(lo), int(hi))
         else:
             strategies[f.name] = st.floats(lo, hi if math.isfinite(hi) else 1e6, allow_nan=False)
-    return st.builds(cls, **strategies)
+    built = st.builds(cls, **strategies)
+    if cls.__name__ == "Camera":  # most random cameras break a relation: keep the row and profile in range
+        built = built.map(lambda cam: dataclasses.replace(
+            cam, default_row=min(cam.default_row, cam.height_px - 1),
+            vignetting_profile=cam.vignetting_profile if len(cam.vignetting_profile) == cam.width_px else ()))
+    return built
 
 
 def _car_or_none(**kwargs):

@@ -1,4 +1,5 @@
-"""The output folder of ``trackgen build``: written beside its place, swapped in whole.
+"""Output folders written beside their place and swapped in whole: ``trackgen build``,
+``simrunner gap``, ``simrunner calibrate-camera`` (output files: ``vehicle.userfiles.write_atomic``).
 
 * A build writes into ``.NAME.trackgen-PID-XXXXXXXX.tmp`` beside ``NAME`` (same file
   system, so the final step is a rename). The process id in the name lets a later build

@@ -27,6 +27,8 @@ from typing import Any, Mapping
 
 import tomli_w
 
+from vehicle.userfiles import write_atomic
+
 SCALE = 1.3  # thesis section 3.1: its Gazebo model was ~130 % of the real car
 
 
@@ -376,10 +378,7 @@ class CarDescription:
 
     def save(self, path: str | Path, sources: Mapping[str, str] | None = None) -> None:
         """Write atomically (``sources``: see :meth:`to_toml`)."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(self.to_toml(sources))
-        tmp.replace(path)
+        write_atomic(Path(path), self.to_toml(sources))
 
 
 def _toml_value(value: Any) -> str:

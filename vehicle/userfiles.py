@@ -1,10 +1,41 @@
-"""Reading the small text files users write (car descriptions, measurements, plans) with
-one-line errors that name the file; shared by ``worlds`` and ``simrunner``."""
+"""Users' files: reading the small text files users write (car descriptions, measurements,
+plans) with one-line errors that name the file, and writing every output file whole or not at
+all (:func:`write_atomic`). Shared by ``worlds``, ``trackgen`` and ``simrunner``; output
+folders are swapped in whole by ``trackgen.outdir``."""
 from __future__ import annotations
 
+import os
+import threading
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
+
+
+def write_atomic(path: str | Path, data: str | bytes | Callable[[Path], None]) -> Path:
+    """Write ``path`` whole or not at all; return it. ``data``: the text (UTF-8), the bytes, or
+    a function that writes the file at the path it is given. It is written into a temporary
+    file beside ``path`` (same folder: the last step is a rename, atomic), named after it, this
+    process and thread, with its suffix; on any error that file is removed and the error
+    (``OSError`` and the like) raised for the caller to word; ``path`` is then untouched."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{threading.get_ident()}.tmp{path.suffix}")
+    try:
+        if callable(data):
+            data(tmp)
+        elif isinstance(data, str):
+            with open(tmp, "w", encoding="utf-8", newline="") as fh:
+                fh.write(data)
+        else:
+            with open(tmp, "wb") as fh:
+                fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise
+    return path
 
 
 def read_user_text(path: str | Path, what: str, error: type[Exception], kind: str = "text") -> str:

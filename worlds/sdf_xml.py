@@ -12,13 +12,14 @@
 from __future__ import annotations
 
 import math
-import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.parsers import expat
 
 import numpy as np
+
+from vehicle.userfiles import write_atomic
 
 SDF_VERSION = "1.6"  # dartpy's SdfParser reads 1.4-1.6 only; Gazebo reads 1.6
 MAX_XML_BYTES = 16 * 1024 * 1024  # one SDF / model.config file (NXP's are ~2 kB)
@@ -209,12 +210,12 @@ def write_xml(root: ET.Element, path: Path) -> None:
     """Pretty-print ``root`` to ``path`` atomically (temporary file, then rename)."""
     path = Path(path)
     ET.indent(root, space="  ")
-    tmp = path.with_name(path.name + ".tmp")
-    try:
+
+    def write(tmp: Path) -> None:
         with open(tmp, "wb") as fh:
             ET.ElementTree(root).write(fh, encoding="utf-8", xml_declaration=True)
             fh.write(b"\n")
-        os.replace(tmp, path)
+    try:
+        write_atomic(path, write)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise WorldError(f"{path}: cannot write ({exc.strerror})") from None

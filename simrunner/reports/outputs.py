@@ -8,6 +8,7 @@ from pathlib import Path
 
 from simrunner.errors import SimError
 from simrunner.telemetry.log import write_log
+from vehicle.userfiles import write_atomic
 
 
 @dataclass(frozen=True)
@@ -56,11 +57,9 @@ def write_outputs(result, outputs: Outputs, video, track, *, csv_stream=None) ->
     if outputs.summary is not None:
         path = Path(outputs.summary)
         result.outputs["summary"] = str(path)
-        tmp = path.with_name(path.name + ".tmp")
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp.write_text(json.dumps(result.summary(), indent=2) + "\n")
-            os.replace(tmp, path)
+            write_atomic(path, json.dumps(result.summary(), indent=2) + "\n")
         except OSError as exc:
             errors.append(SimError(f"{path}: cannot write summary ({exc.strerror})"))
     if errors:

@@ -16,6 +16,7 @@ import numpy as np
 
 from simrunner.errors import SimError
 from simrunner.telemetry.log import RunLog
+from vehicle.userfiles import write_atomic
 
 
 MAX_LAP_LABELS = 12  # laps after these get a marker but no label
@@ -128,13 +129,10 @@ def plot_run(log: RunLog, track, path: str | Path, *, title: str = "") -> Path:
                       xytext=(3, 4), textcoords="offset points", fontsize=8, color="darkred")
     if title:
         fig.suptitle(title)
-    tmp = path.with_name(path.stem + ".partial" + (path.suffix or ".png"))
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(tmp, format="png")
-        tmp.replace(path)
+        write_atomic(path, lambda tmp: fig.savefig(tmp, format="png"))
     except (OSError, ValueError) as exc:
-        tmp.unlink(missing_ok=True)
         raise SimError(f"{path}: cannot write plot ({exc})") from None
     return path
 

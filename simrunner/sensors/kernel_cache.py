@@ -21,8 +21,9 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from pathlib import Path
+
+from vehicle.userfiles import write_atomic
 
 MANIFEST_SUFFIX = ".sha256.json"
 
@@ -91,15 +92,10 @@ def record(dispatcher) -> None:
             return
     except (OSError, ValueError):
         pass
-    tmp = manifest.with_name(f"{manifest.name}.{os.getpid()}.tmp")
     try:
-        tmp.write_text(json.dumps(sums, sort_keys=True))
-        os.replace(tmp, manifest)
+        write_atomic(manifest, json.dumps(sums, sort_keys=True))
     except OSError:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
+        pass
 
 
 def reference_row_kernel():

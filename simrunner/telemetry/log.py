@@ -31,7 +31,6 @@ from __future__ import annotations
 import csv
 import io
 import math
-import os
 import re
 import warnings
 from dataclasses import dataclass, replace
@@ -42,6 +41,7 @@ import numpy as np
 
 from simrunner.errors import SimError
 from simrunner.telemetry.sparse import is_empty_cell
+from vehicle.userfiles import write_atomic
 
 
 
@@ -341,15 +341,11 @@ def to_csv_text(log: RunLog, *, float_format: str = "%.6f") -> str:
 def write_log(log: RunLog, path: str | Path, *, float_format: str = "%.6f") -> Path:
     """Write ``log`` as CSV atomically; raises :class:`LogError` if it cannot be written."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
     try:
         if path.parent and not path.parent.exists():
             path.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "w", newline="") as fh:
-            fh.write(to_csv_text(log, float_format=float_format))
-        os.replace(tmp, path)
+        write_atomic(path, to_csv_text(log, float_format=float_format))
     except OSError as exc:
-        tmp.unlink(missing_ok=True) if tmp.parent.exists() else None
         raise LogError(str(path), 0, f"cannot write the log ({exc.strerror})") from None
     return path
 

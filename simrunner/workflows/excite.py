@@ -40,7 +40,6 @@ from __future__ import annotations
 import csv
 import itertools
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -51,7 +50,7 @@ from pieces.pose import Pose2, wrap_angle
 from simrunner.errors import SimError
 from simrunner.telemetry.log import RunLog, log_from_columns
 from vehicle.description import CarDescription
-from vehicle.userfiles import read_user_text
+from vehicle.userfiles import read_user_text, write_atomic
 
 RATE_HZ = 50.0
 MIN_DURATION_S = 90.0  # the core plan (every experiment once) of the default car lasts ~90 s
@@ -222,10 +221,8 @@ class ExcitationPlan:
                                                 self.segment)):
             tail = f"{self.ref_x_m[k]:.4f},{self.ref_y_m[k]:.4f},{self.ref_yaw_rad[k]:.5f}" if ref[k] else ",,"
             lines.append(f"{t:.3f},{v:.6f},{d:.6f},{int(c)},{s},{tail}")
-        tmp = path.with_name(path.name + ".tmp")
         try:
-            tmp.write_text("\n".join(lines) + "\n")
-            os.replace(tmp, path)
+            write_atomic(path, "\n".join(lines) + "\n")
         except OSError as exc:
             raise PlanError(f"{path}: cannot write plan ({exc.strerror})") from None
         return path

@@ -23,14 +23,13 @@ import csv
 import io
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from simrunner.workflows.batch.spec import Job
+from vehicle.userfiles import write_atomic
 
 FIXED_BEFORE = ("run", "track", "seed")
 FIXED_AFTER = ("outcome", "message", "laps", "laps_completed", "lap_times_s", "best_lap_s",
@@ -109,17 +108,6 @@ def _cell(value: Any) -> str:
     return str(value)
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def csv_text(rows: list[dict[str, Any]], param_names) -> str:
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
@@ -142,11 +130,11 @@ def write_results(out_dir: Path, rows: list[dict[str, Any]], param_names, meta: 
     """Write ``results.csv`` and ``results.json`` (each atomically); rows sorted by run."""
     rows = sorted(rows, key=lambda r: r["run"])
     csv_path, json_path = out_dir / "results.csv", out_dir / "results.json"
-    _atomic_write(csv_path, csv_text(rows, param_names))
+    write_atomic(csv_path, csv_text(rows, param_names))
     doc = {"format": FORMAT, **meta, "columns": columns(param_names),
            "nondeterministic_columns": list(NONDETERMINISTIC),
            "runs": [{k: _json_safe(row.get(k)) for k in columns(param_names)} for row in rows]}
-    _atomic_write(json_path, json.dumps(doc, indent=1) + "\n")
+    write_atomic(json_path, json.dumps(doc, indent=1) + "\n")
     return csv_path, json_path
 
 

@@ -23,7 +23,6 @@ import dataclasses
 import json
 import math
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
@@ -46,6 +45,7 @@ from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
                                             window_mask)
 from simrunner.workflows.gap.uncertainty import parameter_uncertainty
+from trackgen.outdir import clean_stale, make_temp, replace_folder
 from vehicle.description import CarDescription
 
 FORMAT = "nxpcup-gap/2"
@@ -708,7 +708,7 @@ def check_output_dir(out_dir: str | Path, *, force: bool = False) -> Path:
     made = [p for p in (out.parent, *out.parent.parents) if not p.exists()]  # the folders the probe makes
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        shutil.rmtree(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+        shutil.rmtree(make_temp(out))
     except OSError as exc:
         raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
     finally:
@@ -727,8 +727,9 @@ def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False
     from simrunner.workflows.gap.plots import plot_before_after, plot_regimes
 
     out = check_output_dir(out_dir, force=force)
+    clean_stale(out)
     try:
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+        tmp = make_temp(out)
     except OSError as exc:
         raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
     try:
@@ -737,13 +738,7 @@ def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False
         (tmp / "residuals.txt").write_text(summary_text(result) + "\n")
         plot_before_after(result, tmp / "gap_before_after.png")
         plot_regimes(result, tmp / "residuals_by_regime.png")
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old.", dir=out.parent))
-            out.rename(old / out.name)
-            tmp.rename(out)
-            shutil.rmtree(old)
-        else:
-            tmp.rename(out)
+        replace_folder(tmp, out)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         raise GapError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
