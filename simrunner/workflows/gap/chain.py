@@ -116,36 +116,27 @@ from simrunner.workflows.gap.fit import (BRENT_MAXITER, CANDIDATES, DELTA_BIC_MI
                                          REFINE_TOP, ROBUST_WINDOW_FACTOR, FitResult, Problem, _quiet_worker,
                                          bic, cost_of, fit_all, rescaled, robust_total, segment_residuals,
                                          window_costs, window_values_task)
-from simrunner.workflows.gap.thresholds import SAFETY
+from simrunner.workflows.gap.settings import SETTINGS
 from vehicle.description import CarDescription
 
-# A guard on the run time, not a model choice: the chain stops when no candidate passes. Of
-# six real-log runs, four reached 4 effects; DS2, DS3 and DS2's pose alone, run with 8, stop
-# by themselves at step 5 with the same four (docs/gap-measured.md, 2026-11-30).
-MAX_EFFECTS = 6
-# The held-out windows must confirm a kept effect: their gap (mean squared normalised
-# residual) shrinks by at least this fraction.
-HELD_IMPROVEMENT_MIN = 0.029  # calibrated: 2x the largest held-out gain of a candidate on effect-free logs (docs/gap.md)
-POWELL_EVALS_PER_PARAMETER = 8
-MAX_EXCHANGES = 4  # exchange passes after a step (each pass makes at most one)
-REFINE_LATER = 2
-SCREEN_MAX_S = 45.0
-NEUTRAL_TOL = 0.01  # fraction of the fit range (scaled coordinates) that counts as neutral
-# Costs within this BIC difference of the best are ties (Kass & Raftery 1995: below 2, "not
-# worth more than a bare mention"); a parameter on a plateau of ties is kept at its middle
-# (:func:`_plateaus`), TIE_BISECTIONS halvings locating each end.
-TIE_DELTA_BIC = 2.0
-TIE_BISECTIONS = 5
-# Two candidates that both pass a step's tests are look-alikes on these windows when their
-# per-window costs differ by less than this many standard errors (Vuong 1989's test for
-# non-nested models, windows as the units, 5 % two-sided): :class:`Alike`.
-ALIKE_Z = 1.96
+# The thresholds (units, derivations, sources: simrunner.workflows.gap.settings)
+SAFETY = SETTINGS.safety
+MAX_EFFECTS = SETTINGS.max_effects
+HELD_IMPROVEMENT_MIN = SETTINGS.held_improvement_min
+POWELL_EVALS_PER_PARAMETER = SETTINGS.powell_evals_per_parameter
+MAX_EXCHANGES = SETTINGS.max_exchanges
+REFINE_LATER = SETTINGS.refine_later
+SCREEN_MAX_S = SETTINGS.screen_max_s
+NEUTRAL_TOL = SETTINGS.neutral_tol
+TIE_DELTA_BIC = SETTINGS.tie_delta_bic
+TIE_BISECTIONS = SETTINGS.tie_bisections
+ALIKE_Z = SETTINGS.alike_z
 BETTER = "a better candidate was kept"
 
 
 # regimes that label a window for the screening subset (simrunner.workflows.gap.regimes)
 SCREEN_REGIMES = ("coasting", "braking", "accelerating", "reversing", "high_lat_accel", "cornering", "straight")
-SCREEN_LABEL_MIN_SHARE = 0.1  # a regime labels a window only if it covers this share of its samples
+SCREEN_LABEL_MIN_SHARE = SETTINGS.screen_label_min_share
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # screening_problem's even spread of grid slots
 
 

@@ -45,21 +45,22 @@ import numpy as np
 from simrunner.telemetry.log import LogError, RunLog
 from simrunner.workflows.gap.glitches import has_pose
 from simrunner.workflows.gap.logs import Derived, derive
+from simrunner.workflows.gap.settings import SETTINGS
 
-MIN_SAMPLES = 50
-MIN_SPEED_MPS = 0.3
-MIN_RATE_RADPS = 0.3
-MIN_CORRELATION = 0.5
-ALIGNED_COS = 0.8  # direction of motion within ~37 deg of the heading (or of its reverse)
-CHORD_S = 0.5  # the path's direction: chords over this long ...
-CHORD_M = 0.3  # ... that travel at least this far (a standing car's jitter does not)
-ALIGNED_SHARE = 0.85  # a right heading: 0.998 (DS2's, DS3's particle filter) .. 1.0 (synthetic)
-ALIGNED_SHARE_OTHER = 0.9  # another convention that explains the motion names the mistake
-MIN_ALIGNED_SHARE = 0.5  # below it, the heading is refused even when no convention explains it
-UNIT_BAND = 0.25  # a slope within +-25 % of a unit's factor names that unit
-MAX_SPEED_PER_COMMAND = 2.5  # no car goes 2.5x faster than commanded (a top speed only slows it)
-STEER_RANGE_RAD = 1.2  # no car steers this far (bicycle-equivalent)
-STEER_RANGE_LIMITS = 3.0  # nor 3x beyond its own limit
+MIN_SAMPLES = SETTINGS.conventions_min_samples
+MIN_SPEED_MPS = SETTINGS.conventions_min_speed_mps
+MIN_RATE_RADPS = SETTINGS.conventions_min_rate_radps
+MIN_CORRELATION = SETTINGS.conventions_min_correlation
+ALIGNED_COS = SETTINGS.aligned_cos
+CHORD_S = SETTINGS.chord_s
+CHORD_M = SETTINGS.chord_m
+ALIGNED_SHARE = SETTINGS.aligned_share
+ALIGNED_SHARE_OTHER = SETTINGS.aligned_share_other
+MIN_ALIGNED_SHARE = SETTINGS.min_aligned_share
+UNIT_BAND = SETTINGS.unit_band
+MAX_SPEED_PER_COMMAND = SETTINGS.max_speed_per_command
+STEER_RANGE_RAD = SETTINGS.steer_range_rad
+STEER_RANGE_LIMITS = SETTINGS.steer_range_limits
 _DOC = "(docs/telemetry.md, \"Logs with other columns or units\")"
 _REVERSED = "sign is reversed? map it negated, e.g. --column '{col}=-COLUMN'"
 

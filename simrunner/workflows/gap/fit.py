@@ -53,21 +53,23 @@ from simrunner.workflows.gap import GapError
 from simrunner.workflows.gap.logs import Derived
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, WORKFLOW_DT_S, SimFactory, Window, default_sim_factory,
                                   replay, residuals, window_mask)
+from simrunner.workflows.gap.settings import SETTINGS
 from vehicle.description import CarDescription
 
 # Calibrated on effect-free synthetic logs (python -m simrunner.workflows.gap.thresholds; docs/gap.md).
-DELTA_BIC_MIN = 132.5
-IMPROVEMENT_MIN = 0.068
+DELTA_BIC_MIN = SETTINGS.delta_bic_min
+IMPROVEMENT_MIN = SETTINGS.improvement_min
 
-N_EFF_PER_S = 10.0  # independent values per second per signal (0.1 s decorrelation)
-GRID_POINTS = 5
-BRENT_MAXITER = 10
-ROBUST_WINDOW_FACTOR = 4.0  # Cauchy scale of a window: this x the median nominal mean square per value
-REFINE_TOP = 3  # effects refined after the grid screening
-END_PROBE_FRACTION = 0.25  # a probe next to a best grid end goes at least this far towards its neighbour
-AT_BOUND_U = 0.01  # a fitted value this close to an end of its fit range (fraction of it) is at the bound
-SCALE_FLOOR = {"along_m": 0.005, "cross_m": 0.005, "yaw_rad": 0.005, "speed_mps": 0.02,
-               "yaw_rate_radps": 0.05}
+N_EFF_PER_S = SETTINGS.n_eff_per_s
+GRID_POINTS = SETTINGS.grid_points
+BRENT_MAXITER = SETTINGS.brent_maxiter
+ROBUST_WINDOW_FACTOR = SETTINGS.robust_window_factor
+REFINE_TOP = SETTINGS.refine_top
+END_PROBE_FRACTION = SETTINGS.end_probe_fraction
+AT_BOUND_U = SETTINGS.at_bound_u
+SCALE_FLOOR = {"along_m": SETTINGS.scale_floor_position_m, "cross_m": SETTINGS.scale_floor_position_m,
+               "yaw_rad": SETTINGS.scale_floor_yaw_rad, "speed_mps": SETTINGS.scale_floor_speed_mps,
+               "yaw_rate_radps": SETTINGS.scale_floor_yaw_rate_radps}
 
 
 @dataclass(frozen=True)

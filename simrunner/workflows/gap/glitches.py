@@ -97,23 +97,24 @@ import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.telemetry.sparse import GAP_FACTOR, GAP_QUANTILE, gap_limit_s
+from simrunner.workflows.gap.settings import SETTINGS
 from vehicle.description import CarDescription
 
-DUPLICATE_DT_FRACTION = 0.1  # dt below this fraction of the median: the same sample again
-JUMP_Z = 8.0  # robust z-score of a position step beyond which it is a jump
-JUMP_MOTION_FRACTION = 0.5  # ... and beyond this fraction of the step the speed gives (slip, speed error)
-SPEED_GROUPS = 8  # at most this many speed groups for the jump scale ...
-GROUP_MIN_STEPS = 50  # ... each with at least this many steps
-SCALE_FLOOR_FRACTION = 0.01  # jump scale floor: this fraction of the median moving step
-RESOLUTION = 1e-6  # the log format's resolution (%.6f)
-FROZEN_ALPHA = 0.01  # a repeat run is frozen when the log would show one this long with prob. < this
-FROZEN_MIN_SAMPLES = 3  # shortest frozen run (samples with the same value)
-FROZEN_COMMON_RUNS = 5  # other runs of FROZEN_MIN_SAMPLES or more while moving: the channel holds values
-SPIKE_AGILITY = 2.0  # a car up to this many times as quick as its car file says makes no spike
-SPIKE_MAX_SAMPLES = 5  # a spike is this many readings at most (longer: the wheel, not the sensor)
-MOVING_MPS = 0.1  # as replay.MOVING_MPS and regimes.MOVING_MPS
-MOVING_BASELINE_S = 1.0  # pose displacement over this long tells whether the car moves
-NEIGHBOUR_STEPS = 3  # each side, for the pose speed of a log without speed column
+DUPLICATE_DT_FRACTION = SETTINGS.duplicate_dt_fraction
+JUMP_Z = SETTINGS.jump_z
+JUMP_MOTION_FRACTION = SETTINGS.jump_motion_fraction
+SPEED_GROUPS = SETTINGS.speed_groups
+GROUP_MIN_STEPS = SETTINGS.group_min_steps
+SCALE_FLOOR_FRACTION = SETTINGS.scale_floor_fraction
+RESOLUTION = SETTINGS.resolution
+FROZEN_ALPHA = SETTINGS.frozen_alpha
+FROZEN_MIN_SAMPLES = SETTINGS.frozen_min_samples
+FROZEN_COMMON_RUNS = SETTINGS.frozen_common_runs
+SPIKE_AGILITY = SETTINGS.spike_agility
+SPIKE_MAX_SAMPLES = SETTINGS.spike_max_samples
+MOVING_MPS = SETTINGS.moving_mps
+MOVING_BASELINE_S = SETTINGS.moving_baseline_s
+NEIGHBOUR_STEPS = SETTINGS.neighbour_steps
 
 POSE = ("x_m", "y_m", "yaw_rad")
 SENSOR_COLUMNS = ("x_m", "y_m", "yaw_rad", "speed_mps", "yaw_rate_radps")

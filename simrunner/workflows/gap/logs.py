@@ -33,17 +33,18 @@ import numpy as np
 
 from simrunner.telemetry.log import LogError, RunLog
 from simrunner.workflows.gap.glitches import has_pose, time_gaps
+from simrunner.workflows.gap.settings import SETTINGS
 
 REQUIRED_COLUMNS = ("t_s", "speed_cmd_mps", "steer_cmd_rad")
 POSE_COLUMNS = ("x_m", "y_m", "yaw_rad")
 # every state column a measured log may carry (a synthetic log has these and ``coast``)
 MEASURED_COLUMNS = ("t_s", "x_m", "y_m", "yaw_rad", "speed_mps", "speed_cmd_mps", "steer_cmd_rad")
-MIN_ROWS = 50
-MIN_DURATION_S = 6.0  # three 2-s replay windows: two to fit, one to hold out
-MIN_RATE_HZ = 10.0  # median sample rate; below it the smoothing (SMOOTH_S) sees single samples
-SMOOTH_S = 0.15  # Savitzky-Golay window for states and their derivatives
-AT_REST_Z = 3.0  # at rest: the speed over SMOOTH_S either side within this many standard errors of zero
-MIN_SPEED_FOR_STEER_MPS = 0.15  # below this the steer estimate falls back to the command
+MIN_ROWS = SETTINGS.min_rows
+MIN_DURATION_S = SETTINGS.min_duration_s
+MIN_RATE_HZ = SETTINGS.min_rate_hz
+SMOOTH_S = SETTINGS.smooth_s
+AT_REST_Z = SETTINGS.at_rest_z
+MIN_SPEED_FOR_STEER_MPS = SETTINGS.min_speed_for_steer_mps
 
 
 def check_measured(log: RunLog) -> RunLog:

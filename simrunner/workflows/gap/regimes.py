@@ -26,14 +26,15 @@ import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap.logs import Derived, sample_dt_s
+from simrunner.workflows.gap.settings import SETTINGS
 from vehicle.description import CarDescription
 
-MOVING_MPS = 0.1
-ACCEL_MPS2 = 0.3
-COAST_CMD_MPS = 0.05
-STRAIGHT_RAD = 0.03
-HIGH_LATERAL_FRACTION = 0.5  # of mu * g: beyond it a tyre's force no longer grows linearly with slip
-GRAVITY_MPS2 = 9.81
+MOVING_MPS = SETTINGS.moving_mps
+ACCEL_MPS2 = SETTINGS.accel_mps2
+COAST_CMD_MPS = SETTINGS.coast_cmd_mps
+STRAIGHT_RAD = SETTINGS.straight_rad
+HIGH_LATERAL_FRACTION = SETTINGS.high_lateral_fraction
+GRAVITY_MPS2 = 9.81  # standard gravity, rounded (CGPM 1901: 9.80665 m/s^2)
 
 REGIMES = ("all", "accelerating", "braking", "coasting", "steady", "straight", "cornering", "left", "right",
            "reversing", "high_lat_accel")

@@ -51,19 +51,20 @@ from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap.glitches import has_pose, time_gaps
 from simrunner.workflows.gap.logs import (SMOOTH_S, Derived, pieces, pose_rates, rms_finite, smoothing_window,
                                           speed_estimate)
+from simrunner.workflows.gap.settings import SETTINGS
 from vehicle.description import CarDescription
 
-WINDOW_S = 2.0
-HOLDOUT_EVERY = 3  # a window of the main group is held out when its slot is 2 modulo 3 (split_windows)
-WORKFLOW_DT_S = 0.005  # physics step of the workflow (synthetic logs use 1 ms)
-QUIET_SHIFT_S = 0.5  # window boundaries move by up to this to a quiet sample
-QUIET_BEFORE_S = 0.25  # quiet = no command change in [t - before, t + after]
-QUIET_AFTER_S = 0.1
-NO_DRIVE_CMD_MPS = 0.05  # |speed_cmd| below this: no drive (as regimes.COAST_CMD_MPS)
-MOVING_MPS = 0.1
-LEAD_S = 0.3  # commands replayed before each window (not compared), see replay()
-PLAY_HISTORY_S = 10.0  # steering commands before a lead-in that set a steering play's state
-ORIGIN_STEP_M = 200.0  # windows start within half of this of the origin (ground: 400 m wide)
+WINDOW_S = SETTINGS.window_s
+HOLDOUT_EVERY = SETTINGS.holdout_every
+WORKFLOW_DT_S = SETTINGS.workflow_dt_s
+QUIET_SHIFT_S = SETTINGS.quiet_shift_s
+QUIET_BEFORE_S = SETTINGS.quiet_before_s
+QUIET_AFTER_S = SETTINGS.quiet_after_s
+NO_DRIVE_CMD_MPS = SETTINGS.coast_cmd_mps
+MOVING_MPS = SETTINGS.moving_mps
+LEAD_S = SETTINGS.lead_s
+PLAY_HISTORY_S = SETTINGS.play_history_s
+ORIGIN_STEP_M = SETTINGS.origin_step_m
 
 FIT_SIGNALS = ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
 REPORT_SIGNALS = ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps")

@@ -44,18 +44,19 @@ from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
                                             window_mask)
+from simrunner.workflows.gap.settings import SETTINGS
 from simrunner.workflows.gap.uncertainty import parameter_uncertainty
 from trackgen.outdir import clean_stale, make_temp, replace_folder
 from vehicle.description import CarDescription
 
 FORMAT = "nxpcup-gap/2"
-LEFTOVER_NOISE_RATIO = 4.0  # a residual this many times the sensor noise is "well above noise"
-LEFTOVER_MIN_SAMPLES = 20
-TOP_SPEED_MARGIN = 1.2  # a log this much faster than the car file's top speed: the wrong car file?
-GLITCHES_LISTED = 12  # the summary lists this many glitches; report.json has all of them
+LEFTOVER_NOISE_RATIO = SETTINGS.leftover_noise_ratio
+LEFTOVER_MIN_SAMPLES = SETTINGS.leftover_min_samples
+TOP_SPEED_MARGIN = SETTINGS.top_speed_margin
+GLITCHES_LISTED = SETTINGS.glitches_listed
 # a log whose stamps start this far from 0 (epoch or ROS time) gets its glitch times also as
 # seconds into the log in residuals.txt
-EPOCH_LIKE_S = 1000.0
+EPOCH_LIKE_S = SETTINGS.epoch_like_s
 
 
 @dataclass(frozen=True)

@@ -62,9 +62,10 @@ import numpy as np
 from simrunner.car.effects import control_steps
 from simrunner.workflows.gap.chain import _bounds01, with_parameters
 from simrunner.workflows.gap.fit import CANDIDATES, Problem, _quiet_worker, window_values, window_values_task
+from simrunner.workflows.gap.settings import SETTINGS
 from vehicle.description import CarDescription
 
-STEP = 0.05  # the difference step, as a fraction of each parameter's fit range
+STEP = SETTINGS.uncertainty_step
 # ``Effects`` fields that act at whole control sub-steps (simrunner.car.effects): resolved to one
 SUBSTEP_TIMES = ("command_latency_s", "esc_reverse_delay_s")
 
