@@ -78,6 +78,8 @@ neutral value is infinite), over correctly named effects. Held-out figures: the 
 the noisy measured log), and the same for the baselines' cars on the same windows.
 
 ``python -m bench.bench_gap [--mode single,multi,...] [--trials N] [--first K | --only K,K,...] [--jobs J] [--screen S] [--out FILE.json]``
+(``--results``: after the run, its targets into ``bench/results/gap.json``, which
+``python tools/render_bench_tables.py`` renders into docs/gap.md)
 (``--screen``: ``run_gap``'s ``screen_max_s``, e.g. 0 to screen and refit on all fit windows)
 (``--table FILE.json ...`` prints the tables of saved rows again, pooling several files: a
 large sample can be built in runs of trials ``K .. K+N-1`` each, as the trial designs
@@ -103,8 +105,8 @@ from typing import Iterator
 
 import numpy as np
 
-from bench.gap_scoring import (GLITCH_KINDS, figures, fmt_figure, inject_glitch, method_row, sigma_text,
-                               target_rows)
+from bench.gap_scoring import (GLITCH_KINDS, SYNTH_TARGETS, figures, fmt_figure, inject_glitch, method_row,
+                               sigma_text, target_rows)
 
 SEED = 20240
 NONE_EVERY = 4
@@ -690,6 +692,105 @@ def report(rows: list[dict]) -> str:
     return "\n".join(parts)
 
 
+# --- bench/results/gap.json: the figures docs/gap.md shows (``--results``) ----------------------------
+
+RESULTS = Path(__file__).resolve().parent / "results" / "gap.json"
+RESULTS_FORMAT = "nxpcup-bench-results/1"  # what tools/render_bench_tables.py reads
+_COMPARE_FIGURES = (("multi_all_named_hi", "every effect named, logs where each has SNR >= 3", "share"),
+                    ("multi_effect_named_hi", "effects named where SNR >= 3", "share"),
+                    ("multi_spurious", "logs with a spurious effect", "share"),
+                    ("multi_perr", "median parameter error", "error"),
+                    ("gap_ratio", "median held-out gap after/before", "ratio"),
+                    ("pos_ratio", "median held-out position RMSE after/before", "ratio"),
+                    ("wall_s", "median wall time per log", "seconds"))
+_METHODS = (("chain", "chain"), ("joint_lsq", "joint least squares"), ("esindy", "E-SINDy"))
+
+
+def _result_kind(target: dict) -> tuple[str, str]:
+    """``(kind, detail)`` of a :func:`target_rows` row: how the render script writes its figure."""
+    mode, what = target["mode"], target["target"]
+    if mode == "timing":
+        return "seconds", ""
+    if mode in ("real", "real_partial"):
+        if what.endswith("after/before"):
+            return "ratio", ""
+        return ("ratio" if "RMSE" in what else "text"), target["text"]
+    for m, key, w, _, _, pct in SYNTH_TARGETS:
+        if (m, w) == (mode, what):
+            return ("error" if key.endswith("perr") else "share" if pct else "ratio"), ""
+    return "share", ""  # unmodelled, glitch
+
+
+def results_data(rows: list[dict], modes: list[str], run: dict, old: dict | None = None) -> dict:
+    """The results file after a run of ``modes`` (``rows``: its rows; ``run``: ``command``,
+    ``date``, ``commit``, ``wall_min``, ``jobs``, ``note``): one row per target of
+    :func:`target_rows` (and per figure and method of the ``compare`` side by side), which
+    replace ``old``'s rows of the same modes; a mode the run gave no rows keeps its old ones."""
+    def label(mode: str) -> str:  # the multi targets of a compare run are the compare logs'
+        return "compare" if mode == "multi" and "multi" not in modes else mode
+
+    def trials(mode: str) -> str:
+        group = ("multi", "compare") if mode in ("multi", "compare") else (mode,)
+        ks = sorted({r["trial"] for r in rows if r.get("mode") in group and "trial" in r})
+        if ks and ks == list(range(ks[0], ks[-1] + 1)):
+            return f"{ks[0]}-{ks[-1]}" if len(ks) > 1 else str(ks[0])
+        return ",".join(map(str, ks))
+
+    def finite(x) -> float | None:
+        return float(x) if x is not None and math.isfinite(x) else None
+
+    rid = f"{run['date']} {'+'.join(modes)}"
+    new = []
+    for t in target_rows(rows):
+        kind, detail = _result_kind(t)
+        new.append({"mode": label(t["mode"]), "trials": trials(t["mode"]), "target": t["target"], "kind": kind,
+                    "value": finite(t["figure"]), "n": t["n"], "detail": detail, "goal": t["goal"], "met": t["met"],
+                    "run": rid})
+    side = [r for r in rows if "joint_lsq" in r]
+    if side:
+        figs = {method: figures(side, method) for method, _ in _METHODS}
+        for key, what, kind in _COMPARE_FIGURES:
+            for method, name in _METHODS:
+                value, n = figs[method][key]
+                new.append({"mode": "compare", "trials": trials("compare"), "target": what, "kind": kind,
+                            "value": finite(value), "n": n, "detail": "", "goal": "reported", "met": None,
+                            "run": rid, "method": name})
+    done = {r["mode"] for r in new}
+    order = {m: i for i, m in enumerate(MODES)}
+    kept = [r for r in (old or {}).get("rows", []) if r["mode"] not in done]
+    all_rows = sorted(kept + new, key=lambda r: order.get(r["mode"], len(order)))
+    runs = {**(old or {}).get("runs", {}), rid: run}
+    return {"format": RESULTS_FORMAT, "bench": "gap",
+            "about": (old or {}).get("about", "The gap bench's latest figure of every target; rendered into "
+                                              "docs/gap.md by tools/render_bench_tables.py."),
+            "runs": {k: v for k, v in runs.items() if any(r["run"] == k for r in all_rows)}, "rows": all_rows}
+
+
+def write_results(path: Path, rows: list[dict], modes: list[str], argv: list[str], wall_s: float, jobs: int) -> None:
+    """:func:`results_data` of this run into ``path`` (its old content merged), with the
+    command line, today's date (UTC) and the commit (marked when the tree had changes)."""
+    import datetime
+    import shlex
+    import subprocess
+
+    def git(*args: str) -> str:
+        try:
+            return subprocess.run(["git", *args], cwd=Path(__file__).resolve().parents[1], capture_output=True,
+                                  text=True, check=True).stdout.strip()
+        except (OSError, subprocess.CalledProcessError):
+            return ""
+
+    commit = git("rev-parse", "--short", "HEAD") or "unknown"
+    if git("status", "--porcelain", "--untracked-files=no"):
+        commit += " with uncommitted changes"
+    run = {"command": " ".join(["python -m bench.bench_gap", *map(shlex.quote, argv)]),
+           "date": datetime.datetime.now(datetime.timezone.utc).date().isoformat(), "commit": commit,
+           "wall_min": round(wall_s / 60.0, 1), "jobs": jobs, "note": ""}
+    old = json.loads(path.read_text()) if path.exists() else None
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(results_data(rows, modes, run, old), indent=1, default=float) + "\n")
+
+
 # --- command line ------------------------------------------------------------------------------------
 
 def pooled_rows(paths: list[Path]) -> list[dict]:
@@ -723,6 +824,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--screen", type=float, default=None, metavar="SECONDS",
                     help="run_gap's screen_max_s (default: the chain's; 0: all fit windows)")
     ap.add_argument("--out", type=Path, default=None, help="write the rows and targets (JSON)")
+    ap.add_argument("--results", type=Path, nargs="?", const=RESULTS, default=None, metavar="FILE.json",
+                    help="after the run, put its targets into FILE.json (default bench/results/gap.json; "
+                         "then python tools/render_bench_tables.py)")
     ap.add_argument("--table", type=Path, nargs="+", default=None,
                     help="only print the tables of --out files (their rows pooled)")
     a = ap.parse_args([] if argv is None else argv)
@@ -778,6 +882,9 @@ def main(argv: list[str] | None = None) -> None:
                       f"{time.perf_counter() - t_start:.0f} s total]", file=sys.stderr, flush=True)
     rows = sorted_rows(rows)
     save()  # first: a failing report must not lose hours of rows
+    if a.results:
+        write_results(a.results, rows, modes, list(argv or []), time.perf_counter() - t_start, a.jobs)
+        print(f"[results: {a.results}]", file=sys.stderr, flush=True)
     text = report(rows)
     print(text)
     print(f"\nbench wall time: {time.perf_counter() - t_start:.0f} s on {a.jobs} processes")

@@ -1,0 +1,155 @@
+"""The docs' bench tables are what tools/render_bench_tables.py renders from bench/results/*.json
+(docs/gap.md, "The bench"), and its ``--check`` notices when they are not."""
+from __future__ import annotations
+
+import importlib.util
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SCRIPT = REPO / "tools" / "render_bench_tables.py"
+REGENERATE = "regenerate with `python tools/render_bench_tables.py`"
+
+
+def run_script(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(SCRIPT), *args], cwd=REPO, capture_output=True, text=True,
+                          timeout=60)
+
+
+def load_script():
+    spec = importlib.util.spec_from_file_location("render_bench_tables", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture
+def copies(tmp_path):
+    """A copy of the gap results and of docs/gap.md: (results dir, docs dir, results file, doc)."""
+    results, docs = tmp_path / "results", tmp_path / "docs"
+    results.mkdir()
+    docs.mkdir()
+    shutil.copy(REPO / "bench" / "results" / "gap.json", results / "gap.json")
+    shutil.copy(REPO / "docs" / "gap.md", docs / "gap.md")
+    return results, docs, results / "gap.json", docs / "gap.md"
+
+
+def check(results: Path, docs: Path) -> subprocess.CompletedProcess:
+    return run_script("--check", "--results", str(results), "--docs", str(docs))
+
+
+def test_the_docs_bench_tables_are_current():
+    done = run_script("--check")
+    assert done.returncode == 0, f"{done.stdout}{done.stderr}{REGENERATE}"
+    assert done.stdout == done.stderr == ""
+
+
+def test_every_results_file_has_a_renderer_and_a_doc():
+    module = load_script()
+    for path in sorted((REPO / "bench" / "results").glob("*.json")):
+        assert path.stem in module.RENDERERS, f"{path.name}: no renderer in tools/render_bench_tables.py"
+        begin = module.markers(path.stem)[0]
+        assert any(begin in doc.read_text() for doc in (REPO / "docs").glob("*.md")), f"no doc has {begin}"
+
+
+def test_a_changed_figure_fails_the_check_naming_the_doc(copies):
+    results, docs, gap_json, gap_md = copies
+    assert check(results, docs).returncode == 0  # the copies are current, as the repository is
+    data = json.loads(gap_json.read_text())
+    row = next(r for r in data["rows"] if r["mode"] == "timing")
+    row["value"] += 7.0  # 155 s -> 162 s
+    gap_json.write_text(json.dumps(data, indent=1))
+
+    done = check(results, docs)
+    assert done.returncode == 1
+    assert done.stdout == ""
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and "gap.md" in lines[0] and "not current" in lines[0], done.stderr
+    assert "162 s" not in gap_md.read_text()  # --check writes nothing
+
+    wrote = run_script("--results", str(results), "--docs", str(docs))
+    assert wrote.returncode == 0 and "gap.md" in wrote.stdout
+    text = gap_md.read_text()
+    assert "| 162 s |" in text and "| 155 s |" not in text
+    assert check(results, docs).returncode == 0
+    outside = text.split("<!-- bench:gap begin -->")[0] + text.split("<!-- bench:gap end -->")[1]
+    original = (REPO / "docs" / "gap.md").read_text()
+    assert outside == original.split("<!-- bench:gap begin -->")[0] + original.split("<!-- bench:gap end -->")[1]
+
+
+def test_a_block_edited_by_hand_fails_the_check(copies):
+    results, docs, _, gap_md = copies
+    gap_md.write_text(gap_md.read_text().replace("| timing |", "| timing (edited) |"))
+    done = check(results, docs)
+    assert done.returncode == 1 and "gap.md" in done.stderr
+
+
+@pytest.mark.parametrize("spoil, message", [
+    (lambda t: t.replace("<!-- bench:gap end -->", ""), "expected one"),
+    (lambda t: t.replace("<!-- bench:gap begin -->", "").replace("<!-- bench:gap end -->", ""), "no doc"),
+])
+def test_markers_that_do_not_pair_up_are_bad_input(copies, spoil, message):
+    results, docs, _, gap_md = copies
+    gap_md.write_text(spoil(gap_md.read_text()))
+    done = check(results, docs)
+    assert done.returncode == 2 and message in done.stderr and len(done.stderr.splitlines()) == 1
+
+
+def test_render_writes_the_figures_and_names_the_runs():
+    module = load_script()
+    data = {"format": module.RESULTS_FORMAT, "runs": {
+        "a": {"command": "python -m bench.bench_gap --mode single", "date": "2027-01-02", "commit": "abc1234",
+              "wall_min": 3.5, "jobs": 2, "note": ""}},
+        "rows": [
+            {"mode": "single", "trials": "0-3", "target": "named where SNR >= 3", "kind": "share", "value": 0.75,
+             "n": 4, "detail": "", "goal": ">= 95 %", "met": False, "run": "a"},
+            {"mode": "single", "trials": "0-3", "target": "median parameter error", "kind": "error",
+             "value": 0.04, "n": 9, "detail": "", "goal": "<= 10 %", "met": True, "run": "a"},
+            {"mode": "real", "trials": "", "target": "DS2: held-out position RMSE not worse", "kind": "ratio",
+             "value": 0.492, "n": 1, "detail": "0.435 -> 0.214 m", "goal": "after/before <= 1", "met": True,
+             "run": "a"},
+            {"mode": "compare", "trials": "0-3", "target": "median wall time per log", "kind": "seconds",
+             "value": 554.0, "n": 4, "goal": "reported", "met": None, "run": "a", "method": "chain"}]}
+    text = module.render("gap", data)
+    assert ("| single 0-3 | named where SNR >= 3; median parameter error | 75 % (3 of 4); 4 % (n = 9) | "
+            ">= 95 %; <= 10 % | **no**; yes | 1 |") in text
+    assert "| real: DS2 | held-out position RMSE not worse | 0.492 (0.435 -> 0.214 m) |" in text
+    assert "| median wall time per log | 554 s | 1 |" in text
+    assert "1. `python -m bench.bench_gap --mode single` (2027-01-02, commit abc1234, 3.5 min, 2 processes)" in text
+    with pytest.raises(module.RenderError):
+        module.render("nothing", data)
+    with pytest.raises(module.RenderError):
+        module.render("gap", {**data, "rows": [{**data["rows"][0], "run": "b"}]})
+
+
+def test_the_bench_results_option_writes_what_the_renderer_reads(tmp_path):
+    """``python -m bench.bench_gap ... --results`` after a run: its modes' targets replace
+    those modes' rows, the other modes keep theirs (here on rows a timing run and a real run
+    that failed would give, without running either)."""
+    from bench.bench_gap import write_results
+
+    module = load_script()
+    path = tmp_path / "gap.json"
+    shutil.copy(REPO / "bench" / "results" / "gap.json", path)
+    before = json.loads(path.read_text())
+    rows = [{"mode": "timing", "log_s": 60.0, "jobs": 2, "wall_s": 150.4},
+            {"mode": "real", "log": "f1tenth_DS2.csv", "error": "Traceback (most recent call last): ..."}]
+    write_results(path, rows, ["timing", "real"], ["--mode", "timing,real", "--results"], 200.0, 2)
+    data = json.loads(path.read_text())
+    new = [r for r in data["rows"] if r["mode"] in ("timing", "real")]
+    assert [(r["target"], r["value"]) for r in new] == [("f1tenth_DS2.csv: no traceback", 0.0),
+                                                         ("whole chain, 60-s log, 2 processes", 150.4)]
+    assert [r for r in data["rows"] if r["mode"] not in ("timing", "real")] == \
+        [r for r in before["rows"] if r["mode"] not in ("timing", "real")]
+    run = data["runs"][new[0]["run"]]
+    assert run["command"] == "python -m bench.bench_gap --mode timing,real --results" and run["wall_min"] == 3.3
+    assert not any(r["run"] in ("real-ds2", "real-ds3", "timing") for r in data["rows"])
+    assert set(data["runs"]) == {r["run"] for r in data["rows"]}
+    text = module.render("gap", data)
+    assert "| timing | whole chain, 60-s log, 2 processes | 150 s | <= 180 s | yes |" in text
+    assert "| real: f1tenth_DS2.csv | no traceback | traceback | none | **no** |" in text

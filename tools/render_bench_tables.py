@@ -1,0 +1,222 @@
+"""Render the benches' saved figures into the docs.
+
+    python tools/render_bench_tables.py            (with the environment's interpreter)
+    python tools/render_bench_tables.py --check    exit 1 when a doc is not what the render gives
+
+Every ``bench/results/NAME.json`` that has a renderer (:data:`RENDERERS`) is rendered to a
+markdown block, which replaces the text between ``<!-- bench:NAME begin -->`` and
+``<!-- bench:NAME end -->`` in the docs (``docs/*.md``) that hold those markers. A bench
+writes its JSON (``python -m bench.bench_gap ... --results``); this script is the only
+writer of the blocks, so the docs show the saved figures and nothing else.
+
+``--check`` writes nothing and prints one line per doc whose block differs (exit 1). Bad
+input (a results file no doc has markers for, markers that do not pair up, a JSON in a
+format the renderer does not know): one line, exit 2. ``--results DIR`` and ``--docs DIR``
+point elsewhere (tests run it on copies).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import sys
+from pathlib import Path
+from typing import Callable
+
+REPO = Path(__file__).resolve().parents[1]
+RESULTS_DIR = REPO / "bench" / "results"
+DOCS_DIR = REPO / "docs"
+RESULTS_FORMAT = "nxpcup-bench-results/1"
+
+
+class RenderError(ValueError):
+    """A results file or a doc the script cannot handle (the message says which and why)."""
+
+
+# --- figures -------------------------------------------------------------------------------------
+
+def figure_text(row: dict) -> str:
+    """A row's figure as the docs write it. ``kind``: ``share`` (``value`` of ``n``: "75 % (6
+    of 8)"), ``error`` (a median relative error: "4 % (n = 9)"), ``ratio`` ("0.352"),
+    ``seconds`` ("155 s") or ``text`` (``detail`` alone); ``detail`` follows the number in
+    brackets. A ``value`` of null is "n/a"."""
+    kind, value, n, detail = row["kind"], row.get("value"), row.get("n"), row.get("detail") or ""
+    if kind == "text":
+        return detail
+    if value is None or not math.isfinite(value):
+        text = "n/a" + (f" (n = {n})" if n is not None else "")
+    elif kind == "share":
+        text = f"{100 * value:.0f} %" + (f" ({round(value * n)} of {n})" if n else "")
+    elif kind == "error":
+        text = f"{100 * value:.0f} %" + (f" (n = {n})" if n else "")
+    elif kind == "ratio":
+        text = f"{value:.3g}" + (f" (n = {n})" if n and n > 1 else "")
+    elif kind == "seconds":
+        text = f"{value:.0f} s"
+    else:
+        raise RenderError(f"figure kind {kind!r}: expected share, error, ratio, seconds or text")
+    return f"{text} ({detail})" if detail else text
+
+
+def _cell(text: str) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _met(met: bool | None) -> str:
+    return "" if met is None else ("yes" if met else "**no**")
+
+
+def _run_text(run: dict) -> str:
+    parts = [run["date"], f"commit {run['commit']}"]
+    if run.get("wall_min") is not None:
+        parts.append(f"{run['wall_min']:g} min")
+    if run.get("jobs") is not None:
+        parts.append(f"{run['jobs']} processes")
+    note = f"; {run['note']}" if run.get("note") else ""
+    return f"`{run['command']}` ({', '.join(parts)}{note})"
+
+
+def render_gap(data: dict) -> str:
+    """``bench/results/gap.json`` (written by ``python -m bench.bench_gap --results``): the
+    per-mode table (a row per mode, run and subject: its targets, figures, goals and whether
+    each is met, ``; ``-separated in target order; a target ``SUBJECT: what`` goes to its
+    subject's row, the subject named in the mode cell), one side-by-side table per mode whose
+    rows carry a ``method``, and the numbered list of the runs (command, date, commit, wall
+    time, note)."""
+    runs, rows = data["runs"], data["rows"]
+    order: list[str] = []  # run ids, numbered by first use
+
+    def run_no(row: dict) -> int:
+        rid = row["run"]
+        if rid not in runs:
+            raise RenderError(f"row {row['target']!r}: run {rid!r} is not in runs")
+        if rid not in order:
+            order.append(rid)
+        return order.index(rid) + 1
+
+    def mode_of(row: dict) -> str:
+        return f"{row['mode']} {row.get('trials') or ''}".strip()
+
+    groups: dict[tuple[str, int, str], list[dict]] = {}
+    for row in rows:  # a target "SUBJECT: what" (a log, a car, ...) joins the row of its subject
+        if "method" not in row:
+            subject = row["target"].split(": ", 1)[0] if ": " in row["target"] else ""
+            groups.setdefault((mode_of(row), run_no(row), subject), []).append(row)
+    lines = ["| mode | targets | figures | goals | met | run |", "| --- | --- | --- | --- | --- | --- |"]
+    for (mode, no, subject), group in groups.items():
+        targets = [r["target"][len(subject) + 2:] if subject else r["target"] for r in group]
+        mode = f"{mode}: {subject}" if subject else mode
+        cells = [targets, [figure_text(r) for r in group],
+                 [r.get("goal", "") for r in group], [_met(r.get("met")) for r in group]]
+        lines.append(f"| {_cell(mode)} | " + " | ".join(_cell("; ".join(c)) for c in cells) + f" | {no} |")
+    side: dict[str, list[dict]] = {}
+    for row in rows:
+        if "method" in row:
+            side.setdefault(mode_of(row), []).append(row)
+    for mode, group in side.items():
+        methods = list(dict.fromkeys(r["method"] for r in group))
+        targets = list(dict.fromkeys(r["target"] for r in group))
+        cells = {(r["target"], r["method"]): r for r in group}
+        lines += ["", f"| {_cell(mode)}, side by side | " + " | ".join(_cell(m) for m in methods) + " | run |",
+                  "| --- | " + " | ".join("---" for _ in methods) + " | --- |"]
+        for target in targets:
+            here = [cells.get((target, m)) for m in methods]
+            nos = sorted({run_no(r) for r in here if r is not None})
+            lines.append(f"| {_cell(target)} | "
+                         + " | ".join(_cell(figure_text(r)) if r is not None else "" for r in here)
+                         + f" | {', '.join(map(str, nos))} |")
+    lines += ["", "The runs (column `run`):"]
+    lines += [f"{i}. {_run_text(runs[rid])}" for i, rid in enumerate(order, start=1)]
+    return "\n".join(lines)
+
+
+RENDERERS: dict[str, Callable[[dict], str]] = {"gap": render_gap}
+
+
+def render(name: str, data: dict) -> str:
+    """The markdown block of results file ``name`` (its stem) holding ``data``; what goes
+    between the doc's markers (without them)."""
+    if name not in RENDERERS:
+        raise RenderError(f"bench results {name!r}: no renderer (expected one of {', '.join(RENDERERS)})")
+    if data.get("format") != RESULTS_FORMAT:
+        raise RenderError(f"bench results {name!r}: format {data.get('format')!r}, expected {RESULTS_FORMAT!r}")
+    try:
+        return RENDERERS[name](data)
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise RenderError(f"bench results {name!r}: a run or row lacks a field or has the wrong type ({exc!r})") from None
+
+
+# --- docs ----------------------------------------------------------------------------------------------
+
+def markers(name: str) -> tuple[str, str]:
+    return f"<!-- bench:{name} begin -->", f"<!-- bench:{name} end -->"
+
+
+def replaced(text: str, name: str, block: str, where: str = "the doc") -> str:
+    """``text`` with what stands between ``name``'s markers replaced by ``block``."""
+    begin, end = markers(name)
+    if text.count(begin) != 1 or text.count(end) != 1 or text.index(begin) > text.index(end):
+        raise RenderError(f"{where}: expected one {begin} before one {end}")
+    head, rest = text.split(begin)
+    _, tail = rest.split(end)
+    return f"{head}{begin}\n{block}\n{end}{tail}"
+
+
+def updates(results_dir: Path, docs_dir: Path) -> list[tuple[Path, str, str]]:
+    """``(doc, its text, its text rendered)`` for every doc the render changes."""
+    docs = {p: p.read_text(encoding="utf-8") for p in sorted(docs_dir.glob("*.md"))}
+    new = dict(docs)
+    for path in sorted(results_dir.glob("*.json")):
+        name = path.stem
+        if name not in RENDERERS:
+            continue
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except json.JSONDecodeError as exc:
+            raise RenderError(f"{path}:{exc.lineno}: {exc.msg}") from None
+        block = render(name, data)
+        begin = markers(name)[0]
+        holders = [doc for doc, text in new.items() if begin in text]
+        if not holders:
+            raise RenderError(f"{path}: no doc in {docs_dir} has {begin}")
+        for doc in holders:
+            new[doc] = replaced(new[doc], name, block, str(doc))
+    # a doc with markers for a results file that does not exist
+    for doc, text in docs.items():
+        for name in re.findall(r"<!-- bench:([\w-]+) begin -->", text):
+            if not (results_dir / f"{name}.json").exists():
+                raise RenderError(f"{doc}: {markers(name)[0]} but no {results_dir / (name + '.json')}")
+    return [(doc, docs[doc], new[doc]) for doc in docs if new[doc] != docs[doc]]
+
+
+def _shown(path: Path) -> str:
+    try:
+        return path.resolve().relative_to(Path.cwd().resolve()).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description="render bench/results/*.json into the docs' bench tables")
+    ap.add_argument("--check", action="store_true", help="write nothing; exit 1 when a doc is not current")
+    ap.add_argument("--results", type=Path, default=RESULTS_DIR, metavar="DIR", help="the results folder")
+    ap.add_argument("--docs", type=Path, default=DOCS_DIR, metavar="DIR", help="the docs folder")
+    a = ap.parse_args(sys.argv[1:] if argv is None else argv)
+    try:
+        found = updates(a.results, a.docs)
+    except (RenderError, OSError) as exc:
+        print(f"render_bench_tables: {exc}", file=sys.stderr)
+        return 2
+    for doc, _, new in found:
+        if a.check:
+            print(f"{_shown(doc)}: bench tables are not current (run python tools/render_bench_tables.py)",
+                  file=sys.stderr)
+        else:
+            doc.write_text(new, encoding="utf-8")
+            print(f"{_shown(doc)}: bench tables rendered")
+    return 1 if (a.check and found) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
