@@ -244,7 +244,7 @@ def unmodelled_design(k: int) -> tuple[str, float, object]:
 def design(mode: str, k: int) -> tuple[list[str], str, np.random.Generator]:
     """``(hidden effects, sensors, rng for make_measured_log)`` of trial ``k`` of ``mode``;
     the same arguments always give the same log."""
-    from simrunner.workflows.gap.report import cannot_reveal
+    from simrunner.workflows.gap.workflow import cannot_reveal
     from simrunner.workflows.gap.synth import RANGES
 
     default_car = [e for e in RANGES if e not in GRIP_LIMITED]
@@ -346,7 +346,7 @@ def _screen(screen_max_s: float | None) -> dict:
 
 def _glitch_trial(k: int, screen_max_s: float | None) -> dict:
     from simrunner.workflows.gap.fit import _quiet_worker
-    from simrunner.workflows.gap.report import run_gap
+    from simrunner.workflows.gap.workflow import run_gap
     from simrunner.workflows.gap.synth import make_measured_log
 
     _quiet_worker()
@@ -378,7 +378,7 @@ def _trial(mode: str, k: int, baselines: bool, screen_max_s: float | None = None
         return _glitch_trial(k, screen_max_s)
     from simrunner.car.effects import neutral_car
     from simrunner.workflows.gap.fit import _quiet_worker
-    from simrunner.workflows.gap.report import run_gap
+    from simrunner.workflows.gap.workflow import run_gap
     from simrunner.workflows.gap.synth import make_measured_log
 
     _quiet_worker()
@@ -486,7 +486,7 @@ def real_rows(jobs: int, real_dir: Path = REAL_DIR, screen_max_s: float | None =
 
 def _real_row(mode: str, name: str, load, car, jobs: int, screen_max_s: float | None = None) -> dict:
     """Run the workflow on the log ``load()`` gives; the row records a traceback as such."""
-    from simrunner.workflows.gap.report import run_gap
+    from simrunner.workflows.gap.workflow import run_gap
 
     t0 = time.perf_counter()
     row = {"mode": mode, "log": name, "screen_max_s": screen_max_s}
@@ -534,7 +534,7 @@ def real_partial_rows(jobs: int, real_dir: Path = REAL_DIR, screen_max_s: float 
 
 def timing_row(jobs: int) -> dict:
     """The whole chain on a :data:`TIMING_LOG_S` synthetic log with two hidden effects."""
-    from simrunner.workflows.gap.report import run_gap
+    from simrunner.workflows.gap.workflow import run_gap
     from simrunner.workflows.gap.synth import make_measured_log
 
     log, truth = make_measured_log(list(TIMING_EFFECTS), value=list(TIMING_EFFECTS.values()),

@@ -18,7 +18,8 @@ from click.testing import CliRunner
 from simrunner.cli.gap import gap
 from simrunner.workflows.gap.fit import CANDIDATES
 from simrunner.telemetry.log import read_log, write_log
-from simrunner.workflows.gap.report import GapError, run_gap, summary_text, write_outputs
+from simrunner.workflows.gap.report import GapError, summary_text, write_outputs
+from simrunner.workflows.gap.workflow import run_gap
 from simrunner.workflows.gap.synth import make_measured_log
 from vehicle.description import load_car
 

@@ -153,7 +153,7 @@ def test_ds2_has_one_brake_to_reverse_and_it_stays_in_the_fit(car):
     """DS2 (README: reversing) commands reverse while rolling forward once at speed (113.9 s,
     from 4.4 m/s) and once from rest (87.8 s, a smoothed 0.11 m/s for one sample): only the
     first is a brake-to-reverse window, and a lone group stays in the fit windows."""
-    from simrunner.workflows.gap.report import WINDOW_S, prepare, window_strata
+    from simrunner.workflows.gap.workflow import WINDOW_S, prepare, window_strata
 
     part = prepare(read_log(REAL / "f1tenth_DS2.csv"), car, WINDOW_S)
     windows = sorted(part.fit_windows + part.held_windows, key=lambda w: w.start)

@@ -10,7 +10,8 @@ import pytest
 from simrunner.car.effects import neutral_car
 from simrunner.workflows.gap.fit import Problem, Segment
 from simrunner.workflows.gap.replay import default_sim_factory
-from simrunner.workflows.gap.report import run_gap, summary_text
+from simrunner.workflows.gap.report import summary_text
+from simrunner.workflows.gap.workflow import run_gap
 from simrunner.workflows.gap.synth import NOISE_POS_M, NOISE_SPEED_MPS, NOISE_YAW_RAD, make_measured_log
 from simrunner.workflows.gap.uncertainty import parameter_sigma
 from vehicle.description import CarDescription

@@ -159,7 +159,7 @@ def test_read_log_never_crashes_on_junk(tmp_path_factory, junk):
 
 
 def test_run_gap_checks_its_log_first():
-    from simrunner.workflows.gap.report import run_gap
+    from simrunner.workflows.gap.workflow import run_gap
 
     log = simulate(CarDescription())
     with pytest.raises(LogError, match=r"<kin>:41: expected at least 50 rows"):
@@ -465,7 +465,7 @@ def test_a_reverse_command_is_a_brake_to_reverse_only_while_the_car_rolls_faster
     """DS2 has a reverse command from rest at a smoothed 0.11 m/s: no braking to see (the
     car is at rest by the next sample), so it must not take the split's brake-to-reverse
     group (with one real event, that event then stays in the fit). At 2 m/s it is one."""
-    from simrunner.workflows.gap.report import window_strata
+    from simrunner.workflows.gap.workflow import window_strata
 
     t = np.arange(0.0, 12.0, 1.0 / rate_hz)
     max_brake = 9.51
@@ -546,7 +546,7 @@ def test_the_plans_two_reverses_go_one_to_the_fits_one_to_the_held_out_windows()
     still rolling forward. The plan does that twice and the split keeps the two apart
     (their own stratum), so the effect can be fitted on one and confirmed on the other."""
     from simrunner.workflows.excite import make_plan
-    from simrunner.workflows.gap.report import WINDOW_S, prepare
+    from simrunner.workflows.gap.workflow import WINDOW_S, prepare
     from simrunner.workflows.gap.synth import make_measured_log
 
     car = CarDescription()
@@ -1363,7 +1363,7 @@ def test_screening_keeps_the_windows_that_ask_to_reverse_while_rolling_forward()
 
 
 def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():
-    from simrunner.workflows.gap.report import leftovers
+    from simrunner.workflows.gap.workflow import leftovers
 
     def row(sig, reg, rmse, count=100):
         return {"signal": sig, "regime": reg, "rmse": rmse, "count": count}
@@ -1763,7 +1763,7 @@ def test_a_merged_logs_play_history_holds_the_commands_between_its_rows():
 def test_a_log_without_a_reverse_command_while_rolling_cannot_reveal_an_esc_delay():
     """``esc_brake_reverse`` acts only where a reverse command meets a car rolling forward:
     listed as unrevealable until a fit window and a held-out window each hold one."""
-    from simrunner.workflows.gap.report import missing_manoeuvres, prepare
+    from simrunner.workflows.gap.workflow import missing_manoeuvres, prepare
 
     car = CarDescription()
     log = simulate(car, duration_s=60.0)
@@ -1795,7 +1795,7 @@ def _run_with_a_plateau_and_drag(monkeypatch, one_window: bool):
     nan with the screening's second window as the one that alone pins it. Returns ``(what the
     stand-in was given, result)``."""
     import simrunner.workflows.gap.chain as chain_mod
-    import simrunner.workflows.gap.report as report
+    import simrunner.workflows.gap.workflow as workflow
     from simrunner.workflows.gap.uncertainty import Uncertainty
 
     seen = {}
@@ -1803,11 +1803,11 @@ def _run_with_a_plateau_and_drag(monkeypatch, one_window: bool):
     def uncertainty(problem, base, names, values, *, jobs=1):
         seen["names"], seen["values"], seen["places"] = list(names), dict(values), problem.window_places()
         if one_window:
-            return Uncertainty({report.CANDIDATES[n].field: math.nan for n in names},
-                               {report.CANDIDATES[n].field: 1 for n in names})
-        return Uncertainty({report.CANDIDATES[n].field: 0.01 for n in names})
+            return Uncertainty({workflow.CANDIDATES[n].field: math.nan for n in names},
+                               {workflow.CANDIDATES[n].field: 1 for n in names})
+        return Uncertainty({workflow.CANDIDATES[n].field: 0.01 for n in names})
 
-    monkeypatch.setattr(report, "parameter_uncertainty", uncertainty)
+    monkeypatch.setattr(workflow, "parameter_uncertainty", uncertainty)
     real_build = chain_mod.build_chain
 
     def build(*a, **k):
@@ -1815,10 +1815,10 @@ def _run_with_a_plateau_and_drag(monkeypatch, one_window: bool):
         return dataclasses.replace(c, parameters={"throttle_deadband_mps": 0.155, "drag_coeff_kgpm": 0.05},
                                    spans={"throttle_deadband_mps": (0.01, 0.3)})
 
-    monkeypatch.setattr(report, "build_chain", build)
+    monkeypatch.setattr(workflow, "build_chain", build)
     monkeypatch.setattr(chain_mod.Chain, "effects", property(lambda self: ["throttle_deadband", "drag"]))
     log = simulate(CarDescription(), duration_s=30.0, rate_hz=50.0)
-    return seen, report.run_gap(log, jobs=1, sim_factory=kin_factory, effects=["drag"])
+    return seen, workflow.run_gap(log, jobs=1, sim_factory=kin_factory, effects=["drag"])
 
 
 def test_a_parameter_on_a_plateau_is_held_while_the_others_get_their_standard_errors(monkeypatch):

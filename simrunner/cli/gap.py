@@ -1,6 +1,6 @@
 """``simrunner gap LOG.csv [LOG.csv ...] -o DIR``: the chain of effects the simulator misses.
 
-A thin click layer over :func:`simrunner.workflows.gap.report.run_gap` and ``write_outputs``
+A thin click layer over :func:`simrunner.workflows.gap.workflow.run_gap` and ``report.write_outputs``
 (docs/gap.md). Exit codes: 0 done (whether or not effects were kept); 2 bad input (one
 line ``file:line: what was expected`` on stderr, no traceback, nothing written).
 """
@@ -92,8 +92,8 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
     from simrunner.workflows.gap.chain import MAX_EFFECTS
     from simrunner.workflows.gap.fit import CANDIDATES
     from simrunner.workflows.gap.logs import check_measured
-    from simrunner.workflows.gap.report import (check_output_dir, progress_total, run_gap, summary_text,
-                                                write_outputs)
+    from simrunner.workflows.gap.report import check_output_dir, summary_text, write_outputs
+    from simrunner.workflows.gap.workflow import progress_total, run_gap
     from vehicle.description import load_car
 
     try:

@@ -9,8 +9,10 @@ Data flow::
       --replay.make_windows, split_windows--> fit and held-out windows (per log)
       --replay.replay / residuals (signals the logs support)--> where it disagrees (regimes)
       --chain.build_chain (fit.fit_all screening, joint refits, held-out confirmation)--> kept effects
-      --report.run_gap--> leftovers vs noise, effects the logs cannot reveal
+      --workflow.run_gap--> GapResult: leftovers vs noise, effects the logs cannot reveal
       --report.write_outputs--> DIR/{report.json, car.toml, residuals.txt, *.png}
+
+Every threshold: ``settings.SETTINGS`` (units, derivations). Entry: ``workflow.run_gap``.
 
 ``synth.make_measured_log`` makes "measured" logs with hidden effects for tests and the
 bench. See docs/gap.md.

@@ -64,7 +64,7 @@ refitted) and
    strong first effect leaves its signals far below 1 while an untouched signal stays at
    its noise, and a second effect on the same signals is judged against a cost it barely
    touches (a steering asymmetry next to a strong offset: 1.6 % of the fit cost; 36 % of
-   it on the renormalised signals; docs/gap-measured.md). The fits themselves keep minimising the
+   it on the renormalised signals; bench/results/gap-history.md). The fits themselves keep minimising the
    cost on the problems' normalisation, the report's, so the parameters and the held-out
    gaps reported are those of one objective; only the tests' figures (``Trial.delta_bic``,
    ``improvement``, ``held_gap``, ``Step.held_gap_before``) are on the step's;
@@ -174,7 +174,7 @@ def extreme_windows(problem: Problem) -> set[int]:
     teleoperated log) gives a subset without them, which screens the limit at 0 %.
     Steering commands only: with the speed command's extremes and the fastest command
     changes too (up to 7 windows), they tilted a real log's screening towards those moments
-    (DS2 then named mass_scale first; docs/gap-measured.md)."""
+    (DS2 then named mass_scale first; bench/results/gap-history.md)."""
     feats: list[list[float]] = []
     for seg in problem.segments:
         steer = np.asarray(seg.log.steer_cmd_rad, float)
@@ -412,7 +412,7 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
     ``names``: the one just added) before the others. Each line search spans the whole fit
     range (about a dozen evaluations), so the budget of :data:`POWELL_EVALS_PER_PARAMETER` per
     parameter can end inside the first pass: searched last, a new effect's parameter
-    would keep its screening value (multi log 25's steering gain, docs/gap-measured.md), while the
+    would keep its screening value (multi log 25's steering gain, bench/results/gap-history.md), while the
     kept ones start at their last refit and move little."""
     given = list(names)
     if first is not None:

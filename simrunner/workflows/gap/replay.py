@@ -122,7 +122,7 @@ def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | 
     window after the boundary before: so a glitch or a gap changes only the windows it
     touches, and every window away from it is the same with and without it (laid one after
     the other, the windows after a dropped second started up to a window earlier, and a
-    hidden effect living in two windows 55 s later moved the answer; docs/gap-measured.md). Each
+    hidden effect living in two windows 55 s later moved the answer; bench/results/gap-history.md). Each
     boundary is moved (by up to :data:`QUIET_SHIFT_S`, at most a quarter window) from its
     grid time to a quiet sample: the one with the least command change in
     ``[t - QUIET_BEFORE_S, t + QUIET_AFTER_S]`` (ties: nearest to the regular grid). A window

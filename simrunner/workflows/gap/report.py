@@ -1,12 +1,5 @@
-"""The whole gap workflow (``run_gap``) and its output folder (``write_outputs``).
-
-``run_gap`` takes one or several logs of one car. Per log: check it, find its glitches
-(:mod:`simrunner.workflows.gap.glitches`: kept out of every window), derive smoothed states,
-cut windows and split them into fit and held-out windows. Then it replays the nominal car,
-builds the chain of effects (:mod:`simrunner.workflows.gap.chain`: forward selection with
-joint refits, each kept effect confirmed on the held-out windows), measures the gap on the
-held-out windows before and after, and compares what is left with the sensor noise per
-signal and regime (:func:`leftovers`). ``write_outputs`` writes
+"""The answer of the gap workflow: :class:`GapResult` (what :func:`simrunner.workflows.gap.workflow.run_gap`
+returns), its text (:func:`summary_text`) and its output folder (:func:`write_outputs`):
 
     DIR/report.json               the chain, parameters, rmse_before/after, glitches, leftovers, regimes
     DIR/car.toml                  the car description with every kept effect (vehicle.description)
@@ -14,44 +7,33 @@ signal and regime (:func:`leftovers`). ``write_outputs`` writes
     DIR/residuals_by_regime.png   residual RMSE and bias per regime, before and after
     DIR/residuals.txt             the answer, then the regime tables, as text
 
-into a temporary sibling folder and renames it into place, so DIR is complete or absent.
+written into a temporary sibling folder and swapped into place (trackgen.outdir), so DIR is
+complete or absent.
 """
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import math
 import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.chain import (ALIKE_Z, HELD_IMPROVEMENT_MIN, MAX_EFFECTS, SCREEN_MAX_S, Chain,
-                                           build_chain, screening_problem)
-from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, ROBUST_WINDOW_FACTOR,
-                                         FitResult, Problem, Segment, bic, nominal_scales, robust_scale_of,
-                                         robust_total, window_costs)
-from simrunner.workflows.gap.conventions import check_conventions
-from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
-from simrunner.workflows.gap.logs import Derived, check_measured, derive
-from simrunner.workflows.gap.regimes import MOVING_MPS, residual_stats, reversal_onsets, segment
-from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
-                                            SimFactory, Window, default_sim_factory, make_windows, noise_rms,
-                                            replay, residuals, rmse, signals_of, smoothed_log, split_windows,
-                                            window_mask)
+from simrunner.workflows.gap.chain import ALIKE_Z, HELD_IMPROVEMENT_MIN, MAX_EFFECTS, Chain
+from simrunner.workflows.gap.fit import CANDIDATES, FitResult
+from simrunner.workflows.gap.glitches import Glitch
+from simrunner.workflows.gap.logs import Derived
+from simrunner.workflows.gap.replay import Prediction, Window, noise_rms
 from simrunner.workflows.gap.settings import SETTINGS
-from simrunner.workflows.gap.uncertainty import parameter_uncertainty
 from trackgen.outdir import clean_stale, make_temp, replace_folder
 from vehicle.description import CarDescription
 
 FORMAT = "nxpcup-gap/2"
-LEFTOVER_NOISE_RATIO = SETTINGS.leftover_noise_ratio
-LEFTOVER_MIN_SAMPLES = SETTINGS.leftover_min_samples
 TOP_SPEED_MARGIN = SETTINGS.top_speed_margin
 GLITCHES_LISTED = SETTINGS.glitches_listed
 # a log whose stamps start this far from 0 (epoch or ROS time) gets its glitch times also as
@@ -78,7 +60,7 @@ class LogPart:
 
 @dataclass
 class GapResult:
-    """Outcome of :func:`run_gap`. ``effects``: the kept effects in the order chosen (``[]``:
+    """Outcome of :func:`simrunner.workflows.gap.workflow.run_gap`. ``effects``: the kept effects in the order chosen (``[]``:
     none); ``effect`` the same joined by ``+`` (or ``"none"``); ``parameters`` every kept
     parameter; ``rmse_before``/``rmse_after`` per signal of REPORT_SIGNALS on the held-out
     windows of every log, against the measured logs; ``rmse_smoothed_*`` the same against
@@ -215,288 +197,6 @@ class GapResult:
         })
 
 
-def _finite(obj):
-    """JSON has no NaN/inf: map them to null."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
-
-
-def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
-                  windows: Sequence[Window], max_brake_mps2: float | None = None) -> list[str]:
-    """The group of each window for the fit/held-out split (:func:`split_windows`): the
-    rarest manoeuvre it holds. ``"brake_to_reverse"``: a reverse command while the car
-    still rolls forward (:func:`simrunner.workflows.gap.regimes.brake_to_reverse`, with the
-    car file's ``max_brake_mps2``); else ``"coast"``: coasting or rolling with no drive
-    commanded; else ``""``. A group of two or more windows sends some to the held-out set
-    and keeps the rest in the fit, so an effect seen only in a rare manoeuvre can be both
-    fitted and confirmed (the excitation plan reverses twice for this)."""
-    out = []
-    for w, onset in zip(windows, reversal_onsets(log, derived, windows, max_brake_mps2)):
-        if onset:
-            out.append("brake_to_reverse")
-        elif masks["coasting"][w.start:w.stop].any():
-            out.append("coast")
-        else:
-            out.append("")
-    return out
-
-
-def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
-    """One log made ready: checked, glitches found, smoothed, windowed and split."""
-    check_measured(log)
-    glitches = tuple(find_glitches(log, car))
-    bad = glitch_mask(log, glitches)
-    derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
-    unchecked = check_conventions(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad,
-                                  measured=derived)
-    windows = make_windows(log, window_s, exclude=bad)
-    strata = window_strata(log, derived, segment(log, derived, car), windows, car.drive.max_brake_mps2)
-    fit_w, held_w = split_windows(windows, strata=strata) if windows else ([], [])
-    return LogPart(log, derived, glitches, tuple(fit_w), tuple(held_w), signals_of(log), unchecked)
-
-
-def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, *, jobs: int = 2,
-            effects: Sequence[str] | None = None, dt_s: float = WORKFLOW_DT_S, window_s: float = WINDOW_S,
-            sim_factory: SimFactory = default_sim_factory,
-            delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
-            held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
-            held_dt_s: float | None = None, robust_factor: float = ROBUST_WINDOW_FACTOR,
-            screen_max_s: float = SCREEN_MAX_S, progress: Callable[[str], None] | None = None) -> GapResult:
-    """Run the workflow of the module docstring on one log or several logs of one car
-    (``car`` default: the default car).
-
-    Every log must pass :func:`simrunner.workflows.gap.logs.check_measured` (else
-    :class:`simrunner.telemetry.log.LogError`). ``effects`` restricts the candidates (default: the
-    whole catalogue); ``progress(label)`` is called as the stages finish.
-
-    ``dt_s`` is the physics step of the fits; ``held_dt_s`` (default: the step of
-    ``simrunner drive``, ``RunSettings.dt_s``) that of the held-out confirmation and of the
-    before/after figures, so they describe the car file as it will be driven.
-    ``robust_factor`` sets the robust window loss (:mod:`simrunner.workflows.gap.fit`;
-    ``math.inf``: plain least squares). ``screen_max_s``: the seconds of fit windows the
-    chain's screening and refits use on a longer log (a subset by regime,
-    :func:`simrunner.workflows.gap.chain.screening_problem`; 0: all of them, slower).
-    """
-    logs = [logs] if isinstance(logs, RunLog) else list(logs)
-    if not logs:
-        raise GapError("expected at least one log")
-    names = list(CANDIDATES) if effects is None else list(effects)
-    unknown = [n for n in names if n not in CANDIDATES]
-    if unknown:
-        raise GapError(f"unknown effect(s) {', '.join(unknown)} (expected some of {', '.join(CANDIDATES)})")
-    car = car or CarDescription()
-    tick = progress or (lambda label: None)
-    parts = [prepare(log, car, window_s) for log in logs]
-    signals = tuple(s for s in FIT_SIGNALS if all(s in p.signals for p in parts))
-    if not signals:
-        raise GapError("the logs have no signal in common to compare (pose or speed)")
-    n_fit = sum(len(p.fit_windows) for p in parts)
-    n_held = sum(len(p.held_windows) for p in parts)
-    if n_fit < 2 or n_held < 1:
-        raise GapError(f"{', '.join(p.log.source for p in parts)}: expected at least 3 clean windows of "
-                       f"{window_s:g} s (got {n_fit + n_held} after cutting out glitches and gaps)")
-    moving = [sum(moves_in(p, p.fit_windows) for p in parts), sum(moves_in(p, p.held_windows) for p in parts)]
-    if moving[0] < 2 or moving[1] < 1:
-        raise GapError(f"{', '.join(p.log.source for p in parts)}: expected the car to move (|speed| >= "
-                       f"{MOVING_MPS:g} m/s) in at least 2 fit windows and 1 held-out window (got {moving[0]} of "
-                       f"{n_fit} and {moving[1]} of {n_held}): a car at rest shows no effect; drive the plan of "
-                       "`simrunner excite`")
-    fit_segs = tuple(Segment(p.log, p.derived, p.fit_windows) for p in parts if p.fit_windows)
-    held_segs = tuple(Segment(p.log, p.derived, p.held_windows) for p in parts if p.held_windows)
-
-    if held_dt_s is None:
-        from simrunner.run.settings import RunSettings
-
-        held_dt_s = RunSettings().dt_s
-
-    def predict(c: CarDescription, step_s: float, which: str = "windows") -> list[Prediction]:
-        return [replay(c, p.log, p.derived, getattr(p, which), dt_s=step_s, sim_factory=sim_factory)
-                for p in parts]
-
-    fit_pred0 = predict(car, dt_s, "fit_windows")
-    fit_res = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, fit_pred0) if p.fit_windows]
-    scales = nominal_scales(fit_segs, fit_res, signals)
-    fit_problem = Problem(car, fit_segs, scales, signals, dt_s, sim_factory)
-    robust = robust_scale_of(window_costs(fit_problem, fit_res), robust_factor)
-    fit_problem = dataclasses.replace(fit_problem, robust_scale=robust)
-    held_problem = Problem(car, held_segs, scales, signals, held_dt_s, sim_factory, robust)
-    pred0 = predict(car, held_dt_s)
-    res0_parts = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, pred0)]
-    tick("nominal")
-    chain = build_chain(fit_problem, held_problem, names, jobs=jobs, delta_bic_min=delta_bic_min,
-                        improvement_min=improvement_min, held_improvement_min=held_improvement_min,
-                        max_effects=max_effects, robust_factor=robust_factor, screen_max_s=screen_max_s,
-                        progress=tick)
-    car_after = chain.car
-    screen = screening_problem(fit_problem, screen_max_s)
-    # a parameter on a plateau is held (its interval says how well it is pinned, not a curvature)
-    curved = [e for e in chain.effects if CANDIDATES[e].field not in chain.spans]
-    unc = parameter_uncertainty(screen, car, curved, chain.parameters, jobs=jobs)
-    sigma = {**unc.sigma, **{k: math.nan for k in chain.spans}}
-    places = screen.window_places()
-    one_window = {k: places[w] for k, w in unc.one_window.items()}
-    tick("uncertainty")
-    pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
-    res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
-                                                       for p, pr in zip(parts, pred1)]
-    tick("held-out check")
-    rep_signals = tuple(s for s in REPORT_SIGNALS if all(s in r for r in res0_parts))
-    stat_signals = tuple(dict.fromkeys(rep_signals + tuple(s for s in ("along_m", "cross_m") if s in signals)))
-    held = np.concatenate([window_mask(len(p.log), p.held_windows) for p in parts])
-
-    def joined(res_parts, names_):
-        return {s: np.concatenate([r[s] for r in res_parts]) for s in names_}
-
-    def smoothed(preds):
-        return joined([residuals(smoothed_log(p.log, p.derived), p.derived, pr) for p, pr in zip(parts, preds)],
-                      rep_signals)
-
-    res0 = joined(res0_parts, tuple(dict.fromkeys(rep_signals + signals + stat_signals)))
-    res1 = joined(res1_parts, tuple(dict.fromkeys(rep_signals + signals + stat_signals)))
-    seg_masks = [segment(p.log, p.derived, car) for p in parts]
-    regime = {k: np.concatenate([m[k] for m in seg_masks]) for k in seg_masks[0]}
-    noise = _noise(parts, rep_signals)
-    stats_after = residual_stats({s: res1[s] for s in stat_signals}, regime)
-    per_log = []
-    for p, seg, r0, r1 in zip([p for p in parts if p.held_windows], held_segs,
-                              [r for p, r in zip(parts, res0_parts) if p.held_windows],
-                              [r for p, r in zip(parts, res1_parts) if p.held_windows]):
-        one = dataclasses.replace(held_problem, segments=(seg,))
-        mask = window_mask(len(p.log), p.held_windows)
-        per_log.append({"log": p.log.source, "held_windows": len(p.held_windows),
-                        "gap_before": _gap(one, [p], [r0]), "gap_after": _gap(one, [p], [r1]),
-                        "rmse_before": rmse(r0, mask, rep_signals), "rmse_after": rmse(r1, mask, rep_signals)})
-    held_ls = dataclasses.replace(held_problem, robust_scale=math.inf)
-    settings = {"robust_scale": robust, "robust_factor": robust_factor, "dt_s": dt_s, "held_dt_s": held_dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
-                "improvement_min": improvement_min, "held_improvement_min": held_improvement_min,
-                "max_effects": max_effects, "scales": scales, "signals": list(signals), "effects": names,
-                "screen_max_s": screen_max_s, "fit_windows_s": sum(g.duration_s for g in fit_problem.segments),
-                "screen_windows_s": sum(g.duration_s for g in screen.segments)}
-    return GapResult(
-        effects=chain.effects, parameters=chain.parameters, car=car_after, chain=chain,
-        ranking=list(chain.steps[0].screening) if chain.steps else [],
-        nominal_cost=chain.nominal_cost, nominal_bic=bic(fit_problem, chain.nominal_cost, 0),
-        rmse_before=rmse(res0, held, rep_signals), rmse_after=rmse(res1, held, rep_signals),
-        gap_before=_gap(held_problem, parts, res0_parts), gap_after=_gap(held_problem, parts, res1_parts),
-        gap_ls_before=_gap(held_ls, parts, res0_parts), gap_ls_after=_gap(held_ls, parts, res1_parts),
-        stats_before=residual_stats({s: res0[s] for s in stat_signals}, regime), stats_after=stats_after,
-        parts=parts, pred_before=pred0[0], pred_after=pred1[0], settings=settings,
-        rmse_smoothed_before=rmse(smoothed(pred0), held, rep_signals),
-        rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
-        unrevealable={**missing_manoeuvres(names, parts, car), **cannot_reveal(names, signals)},
-        leftovers=leftovers(stats_after, noise), parameter_sigma=sigma, parameter_one_window=one_window,
-        per_log=per_log, parameter_spans=dict(chain.spans))
-
-
-def moves_in(part: LogPart, windows: Sequence[Window]) -> int:
-    """How many of ``windows`` (of ``part``) hold a sample where the car moves (the smoothed
-    speed at least ``regimes.MOVING_MPS``)."""
-    moving = np.abs(np.nan_to_num(part.derived.speed_mps)) >= MOVING_MPS
-    return sum(bool(moving[w.start:w.stop].any()) for w in windows)
-
-
-def _noise(parts: Sequence[LogPart], signals: Sequence[str]) -> dict[str, float]:
-    """Sensor noise per report signal over every log (RMS of measured - smoothed, weighted
-    by the logs' lengths; NaN where no log measures the signal)."""
-    acc: dict[str, list[tuple[float, int]]] = {s: [] for s in signals}
-    for p in parts:
-        for s, v in noise_rms(p.log, p.derived).items():
-            if s in acc and math.isfinite(v):
-                acc[s].append((v, len(p.log)))
-    return {s: (math.sqrt(sum(v * v * n for v, n in vs) / sum(n for _, n in vs)) if vs else float("nan"))
-            for s, vs in acc.items()}
-
-
-def cannot_reveal(names: Sequence[str], signals: Sequence[str]) -> dict[str, list[str]]:
-    """The effects among ``names`` that no available residual signal shows: effect -> the
-    signals it would need (``EffectSpec.observed_by``)."""
-    from simrunner.car.effects import EFFECTS
-
-    out = {}
-    for n in names:
-        needs = list(getattr(EFFECTS[n], "observed_by", ()) or ())
-        if needs and not any(s in signals for s in needs):
-            out[n] = needs
-    return out
-
-
-def missing_manoeuvres(names: Sequence[str], parts: Sequence[LogPart], car: CarDescription) -> dict[str, list[str]]:
-    """The effects among ``names`` that act only in a manoeuvre the logs' windows lack in the
-    fit or in the held-out set (so no fit can find them, or no held-out window can confirm
-    them): effect -> what it would need. Today one: ``esc_brake_reverse`` acts only where a
-    reverse command meets a car still rolling forward
-    (:func:`simrunner.workflows.gap.regimes.brake_to_reverse`)."""
-    if "esc_brake_reverse" not in names:
-        return {}
-    counts = [0, 0]
-    for p in parts:
-        for k, windows in enumerate((p.fit_windows, p.held_windows)):
-            counts[k] += sum(reversal_onsets(p.log, p.derived, windows, car.drive.max_brake_mps2))
-    if min(counts) > 0:
-        return {}
-    return {"esc_brake_reverse": [f"a reverse command while rolling forward in a fit and in a held-out window "
-                                  f"(these logs: {counts[0]} fit, {counts[1]} held out)"]}
-
-
-# signal -> the noise estimate that bounds it from below (position errors: the pose noise)
-_NOISE_OF = {"position_m": "position_m", "along_m": "position_m", "cross_m": "position_m",
-             "yaw_rad": "yaw_rad", "speed_mps": "speed_mps", "yaw_rate_radps": "yaw_rate_radps"}
-_SIGNAL_WORDS = {"position_m": "position", "along_m": "position along the path",
-                 "cross_m": "cross-track position", "yaw_rad": "heading", "speed_mps": "speed",
-                 "yaw_rate_radps": "yaw rate"}
-
-
-def leftovers(stats: Sequence[dict], noise: dict[str, float], ratio: float = LEFTOVER_NOISE_RATIO,
-              min_samples: int = LEFTOVER_MIN_SAMPLES) -> list[dict]:
-    """What the final model leaves unexplained, one entry per signal (worst first): the
-    regimes where its residual RMSE is at least ``ratio`` times the sensor noise of that
-    signal. Signals whose noise the log does not tell (yaw rate without a gyro) are not
-    judged. Entry: signal, worst regime, its RMSE, noise and ratio, ``times_all`` (its RMSE
-    over the signal's RMSE in all moving samples: how much that regime stands out), every
-    regime above the ratio, ``everywhere`` (every judged regime is), and a text such as
-    ``unexplained: yaw rate while reversing, 4x noise, 2.5x its level over all windows``."""
-    per_signal: dict[str, list[dict]] = {}
-    judged: dict[str, set[str]] = {}
-    level: dict[str, float] = {}
-    for row in stats:
-        sig, reg = row["signal"], row["regime"]
-        floor = noise.get(_NOISE_OF.get(sig, sig), float("nan"))
-        if row["count"] < min_samples or not (math.isfinite(floor) and floor > 0):
-            continue
-        if reg == "all":
-            level[sig] = row["rmse"]
-        else:
-            judged.setdefault(sig, set()).add(reg)
-        r = row["rmse"] / floor
-        if r >= ratio:
-            per_signal.setdefault(sig, []).append({"regime": reg, "rmse": row["rmse"], "times_noise": r,
-                                                   "count": row["count"], "noise": floor})
-    out = []
-    for sig, rows in per_signal.items():
-        named = [r for r in rows if r["regime"] != "all"] or rows
-        worst = max(named, key=lambda r: r["times_noise"])
-        others = sorted({r["regime"] for r in named} - {worst["regime"]})
-        everywhere = bool(judged.get(sig)) and {r["regime"] for r in named} >= judged[sig]
-        times_all = worst["rmse"] / level[sig] if level.get(sig) else float("nan")
-        words = _SIGNAL_WORDS.get(sig, sig)
-        text = f"unexplained: {words} while {worst['regime'].replace('_', ' ')}, {worst['times_noise']:.0f}x noise"
-        if math.isfinite(times_all) and worst["regime"] != "all":
-            text += f", {times_all:.1f}x its level over all windows"
-        if everywhere and others:
-            text += f" (above {ratio:g}x noise in every regime: the model misses {words} throughout)"
-        elif others:
-            text += f" (also above {ratio:g}x noise: {', '.join(o.replace('_', ' ') for o in others)})"
-        out.append({"signal": sig, "regime": worst["regime"], "rmse": worst["rmse"], "noise": worst["noise"],
-                    "times_noise": worst["times_noise"], "times_all": times_all, "everywhere": everywhere,
-                    "regimes": [r["regime"] for r in named], "text": text})
-    return sorted(out, key=lambda d: -d["times_noise"])
-
-
 def worse_signals(before: dict[str, float], after: dict[str, float],
                   held_improvement_min: float = HELD_IMPROVEMENT_MIN) -> dict[str, float]:
     """The signals whose RMSE ``after`` exceeds ``before`` by more than the held-out test's
@@ -510,26 +210,15 @@ def worse_signals(before: dict[str, float], after: dict[str, float],
             if b > 0 and math.isfinite(b) and math.isfinite(after.get(s, math.nan)) and after[s] > b * limit}
 
 
-def _gap(held_problem: Problem, parts: Sequence[LogPart], res_parts: Sequence[dict[str, np.ndarray]]) -> float:
-    """The held-out gap: ``cost / n_values`` of ``held_problem`` (its robust window loss, or
-    least squares when its ``robust_scale`` is inf) for the residuals ``res_parts`` (one per
-    log of ``parts``; logs without held-out windows are skipped, as in the problem)."""
-    res = [r for p, r in zip(parts, res_parts) if p.held_windows]
-    return robust_total(window_costs(held_problem, res), held_problem.robust_scale) / max(held_problem.n_values, 1)
-
-
-def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
-    """Upper bound of the ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates
-    (each chain step screens the remaining effects and runs its batches of joint refits; the
-    final check runs at most one round per kept effect but the last; and the nominal replay,
-    the uncertainty and the held-out check)."""
-    from simrunner.workflows.gap.chain import REFINE_LATER
-    from simrunner.workflows.gap.fit import REFINE_TOP
-
-    steps = min(max_effects, n_effects) + 1
-    size = max(min(REFINE_LATER, REFINE_TOP), 1)
-    final_checks = max(min(max_effects, n_effects) - 1, 0)
-    return 3 + sum(max(n_effects - s, 0) + -(-max(n_effects - s, 0) // size) for s in range(steps)) + final_checks
+def _finite(obj):
+    """JSON has no NaN/inf: map them to null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
 
 
 def _params_text(params: dict[str, float], sigma: dict[str, float] | None = None,

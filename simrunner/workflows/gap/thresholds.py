@@ -29,7 +29,7 @@ FLOOR_HELD_IMPROVEMENT = SETTINGS.floor_held_improvement
 def _one(args) -> tuple[float, float, float, str]:
     seed, k = args
     from simrunner.workflows.gap.fit import _quiet_worker
-    from simrunner.workflows.gap.report import run_gap
+    from simrunner.workflows.gap.workflow import run_gap
     from simrunner.workflows.gap.synth import make_measured_log
 
     _quiet_worker()

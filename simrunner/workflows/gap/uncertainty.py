@@ -13,7 +13,7 @@ the left-out fit's step and ``d`` their mean. Where each window holds a small sh
 this is the sandwich ``H^-1 B H^-1`` (``B`` the scores' spread); where a few windows pin a
 parameter (a brake-before-reverse seen in the plan's two reversals, a deadband in its one
 slow window) it is wider, as it must be: the sandwich then estimates ``B`` from a couple of
-gradients and was measured 7-15 times too narrow on such parameters (docs/gap-measured.md). It needs
+gradients and was measured 7-15 times too narrow on such parameters (bench/results/gap-history.md). It needs
 no noise model: a window the model misses weighs in as much as the spread says, so model
 error that differs from window to window widens the interval, while a bias common to all
 windows (a nuisance the catalogue absorbs in a kept parameter) does not. ``s = -H^-1 G`` is
@@ -27,7 +27,7 @@ show them. ``b`` is the fits' physics step (``Problem.dt_s``, 5 ms): the cost's 
 at half the step gives where the minimum moves, ``d = -H^-1 (G_half - G)``; the step's error
 is of first order in the step, so the minimum at step zero lies ``b = 2 d`` away (Richardson's
 estimate; a steering lag fitted 3 ms short at 5 ms, as a 1-ms replay shows, and a steering
-rate limit 4.5 of its standard errors high, docs/gap-measured.md). And a time that acts at whole control
+rate limit 4.5 of its standard errors high, bench/results/gap-history.md). And a time that acts at whole control
 sub-steps (:data:`SUBSTEP_TIMES`: the command latency's queue and the ESC's hold are checked
 there, ``simrunner.car.effects.control_steps``) cannot be told apart within one: a variance
 of ``sub-step^2 / 12`` (uniform over it) is added to its own.
