@@ -7,7 +7,7 @@ signals and normalisation, read back from the :class:`GapResult`).
 (a) :func:`joint_least_squares`: one bounded least-squares fit of every catalogue
     parameter at once (``scipy.optimize.least_squares``, trf, forward-difference Jacobian
     with a step of :data:`LSQ_DIFF_STEP` of each parameter's fit range) on the normalised residuals of the
-    chain's screening windows (:func:`simrunner.workflows.gap.chain.screening_problem`: the
+    chain's screening windows (:func:`simrunner.workflows.gap.screening.screening_problem`: the
     windows its joint refits use), in the chain's [0, 1]-scaled coordinates (log scale for
     the parameters whose neutral value is infinite), from the neutral car (infinite
     neutrals start at their upper bound). At most :data:`LSQ_MAX_NFEV` iterations. "Named":
@@ -146,7 +146,8 @@ def joint_least_squares(fit_problem, names=None, *, max_nfev: int = LSQ_MAX_NFEV
     logic and the sub-step filters at once, and trf rejects every step."""
     from scipy.optimize import least_squares
 
-    from simrunner.workflows.gap.chain import _bounds01, screening_problem, with_parameters
+    from simrunner.workflows.gap.chain import _bounds01, with_parameters
+    from simrunner.workflows.gap.screening import screening_problem
     from simrunner.workflows.gap.fit import CANDIDATES
 
     t0 = time.perf_counter()

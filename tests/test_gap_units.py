@@ -1292,7 +1292,7 @@ def test_an_unmodelled_push_in_one_window_does_not_decide_the_fit():
 
 
 def test_screening_keeps_the_windows_of_a_rare_manoeuvre():
-    from simrunner.workflows.gap.chain import screening_problem, window_labels
+    from simrunner.workflows.gap.screening import screening_problem, window_labels
 
     car = CarDescription()
     log = simulate(car, duration_s=60.0)  # speed steps and step steers; the one stop at 9-10 s
@@ -1313,7 +1313,7 @@ def test_screening_keeps_the_windows_of_a_rare_manoeuvre():
 def test_screening_keeps_the_windows_that_steer_hardest():
     """A smaller steering limit acts only in the windows that steer beyond it: a small
     screening subset keeps the window with the largest steering command to each side."""
-    from simrunner.workflows.gap.chain import extreme_windows, screening_problem
+    from simrunner.workflows.gap.screening import extreme_windows, screening_problem
 
     car = CarDescription()
     log = simulate(car, duration_s=60.0)
@@ -1339,7 +1339,7 @@ def test_screening_keeps_the_windows_that_ask_to_reverse_while_rolling_forward()
     """An ESC that brakes before it reverses shows only where the car is asked to reverse
     while rolling forward; a long log has a few such windows, and every k-th window of a
     label may miss them: the screening subset keeps them all."""
-    from simrunner.workflows.gap.chain import reversal_windows, screening_problem
+    from simrunner.workflows.gap.screening import reversal_windows, screening_problem
 
     car = CarDescription()
     log = simulate(car, duration_s=60.0)
@@ -1414,8 +1414,8 @@ def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None, wind
         c, held = refit[active(car)]
         return held if problem is held_p else c
 
-    def trial(args):
-        names = args[5]
+    def trial(job):
+        names = job.names
         c, held = refit[frozenset(names)]
         return chain.Outcome({field[n]: fitted[n] for n in names}, c, 5, held, c, held)
 

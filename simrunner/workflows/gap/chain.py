@@ -100,6 +100,13 @@ the chain: it names the kept one, and a near tie's name is the report's to quali
 
 Every candidate that was tried and not kept is recorded with its reason. The chain's
 result is the car with all kept effects; its parameters are those of the last joint refit.
+
+In the code, :func:`build_chain` runs a :class:`_ChainBuilder`, whose methods are the steps
+above: :meth:`~_ChainBuilder.forward_step` (``baseline``: step 2's baseline, ``screen``: 1,
+``decide`` with ``refit``, ``polish`` and ``gate``: 2-4, ``exchange``: 5, ``rejudge``: 6, its
+``False``: 7), :meth:`~_ChainBuilder.backward_check` (8) and :meth:`~_ChainBuilder.build`, which
+alternates them (9). Each joint refit is a :class:`RefitJob` a worker process runs. The
+thresholds are :mod:`simrunner.workflows.gap.settings`'s.
 """
 from __future__ import annotations
 
@@ -116,6 +123,7 @@ from simrunner.workflows.gap.fit import (BRENT_MAXITER, CANDIDATES, DELTA_BIC_MI
                                          REFINE_TOP, ROBUST_WINDOW_FACTOR, FitResult, Problem, _quiet_worker,
                                          bic, cost_of, fit_all, rescaled, robust_total, segment_residuals,
                                          window_costs, window_values_task)
+from simrunner.workflows.gap.screening import screening_problem
 from simrunner.workflows.gap.settings import SETTINGS
 from vehicle.description import CarDescription
 
@@ -132,116 +140,6 @@ TIE_DELTA_BIC = SETTINGS.tie_delta_bic
 TIE_BISECTIONS = SETTINGS.tie_bisections
 ALIKE_Z = SETTINGS.alike_z
 BETTER = "a better candidate was kept"
-
-
-# regimes that label a window for the screening subset (simrunner.workflows.gap.regimes)
-SCREEN_REGIMES = ("coasting", "braking", "accelerating", "reversing", "high_lat_accel", "cornering", "straight")
-SCREEN_LABEL_MIN_SHARE = SETTINGS.screen_label_min_share
-GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # screening_problem's even spread of grid slots
-
-
-def window_labels(problem: Problem) -> list[str]:
-    """One label per window of ``problem`` (the windows of all segments in turn): the regime of
-    :data:`SCREEN_REGIMES` most over-represented in the window against all the problem's
-    windows (its share of the window's samples over its share of all windows' samples; it
-    must cover at least :data:`SCREEN_LABEL_MIN_SHARE` of the window), ``"other"`` when none
-    does. A window with the rare braking of a log is labelled ``braking``, one of a
-    cornering-heavy log's few straights ``straight``."""
-    from simrunner.workflows.gap.regimes import segment
-    from simrunner.workflows.gap.replay import window_mask
-
-    shares, total, count = [], np.zeros(len(SCREEN_REGIMES)), 0
-    for seg in problem.segments:
-        masks = segment(seg.log, seg.derived, problem.car)
-        inside = window_mask(len(seg.log), seg.windows)
-        total += [float(np.count_nonzero(masks[r] & inside)) for r in SCREEN_REGIMES]
-        count += int(np.count_nonzero(inside))
-        for w in seg.windows:
-            n = max(w.stop - w.start, 1)
-            shares.append(np.array([np.count_nonzero(masks[r][w.start:w.stop]) / n for r in SCREEN_REGIMES]))
-    overall = total / max(count, 1)
-    labels = []
-    for share in shares:
-        score = np.where((share >= SCREEN_LABEL_MIN_SHARE) & (overall > 0), share / np.maximum(overall, 1e-12), 0.0)
-        labels.append(SCREEN_REGIMES[int(np.argmax(score))] if score.max() > 0.0 else "other")
-    return labels
-
-
-def extreme_windows(problem: Problem) -> set[int]:
-    """Indices (over the windows of all segments in turn) of the windows holding the largest
-    steering command to each side. A smaller steering limit acts only where the car was
-    asked to steer beyond it; a plan that steers at full lock in a few windows only (and a
-    teleoperated log) gives a subset without them, which screens the limit at 0 %.
-    Steering commands only: with the speed command's extremes and the fastest command
-    changes too (up to 7 windows), they tilted a real log's screening towards those moments
-    (DS2 then named mass_scale first; bench/results/gap-history.md)."""
-    feats: list[list[float]] = []
-    for seg in problem.segments:
-        steer = np.asarray(seg.log.steer_cmd_rad, float)
-        for w in seg.windows:
-            part = steer[w.start:w.stop]
-            feats.append([_finite_max(part), _finite_max(-part)])
-    if not feats:
-        return set()
-    out = set()
-    for col in np.array(feats).T:
-        if np.isfinite(col).any() and np.nanmax(col) > 0.0:
-            out.add(int(np.argmax(np.where(np.isfinite(col), col, -np.inf))))
-    return out
-
-
-def reversal_windows(problem: Problem) -> set[int]:
-    """Indices (over the windows of all segments in turn) of the windows where the car is
-    asked to reverse while it still rolls forward
-    (:func:`simrunner.workflows.gap.regimes.brake_to_reverse`, the car file's brake limit):
-    an ESC that brakes before it reverses shows only there, and a plan reverses a few times
-    in a long log, so every k-th window of a label can miss them all."""
-    from simrunner.workflows.gap.regimes import reversal_onsets
-
-    flags = [f for seg in problem.segments
-             for f in reversal_onsets(seg.log, seg.derived, seg.windows, problem.car.drive.max_brake_mps2)]
-    return {i for i, f in enumerate(flags) if f}
-
-
-def _finite_max(x) -> float:
-    x = np.asarray(x, float)
-    x = x[np.isfinite(x)]
-    return float(x.max()) if x.size else -math.inf
-
-
-def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
-    """``problem`` with about ``max_s`` seconds of its windows: with ``k = ceil(total /
-    max_s)`` (the seconds of all windows over ``max_s``), the windows whose grid slot
-    (:attr:`simrunner.workflows.gap.replay.Window.slot`) falls in the first ``1/k`` of a
-    golden-ratio sequence (``frac(slot * 0.618...) < 1/k``: spread evenly through the log
-    and through each label, whatever the held-out split's pattern, and each window's own
-    choice, so a glitch that removes a window changes no other's; counting every k-th
-    window did); the first window of each label of :func:`window_labels`, so a manoeuvre
-    that a few windows hold (a hard brake, a coast, reversing) stays in the screening and
-    the effects it reveals are ranked on it; and the windows of :func:`extreme_windows`
-    (the hardest steering each way) and of :func:`reversal_windows` (a reverse command
-    while rolling forward)."""
-    total = sum(s.duration_s for s in problem.segments)
-    k = max(1, math.ceil(total / max_s)) if max_s > 0 else 1
-    if k == 1:
-        return problem
-    labels = iter(window_labels(problem))
-    extremes = extreme_windows(problem) | reversal_windows(problem)
-    seen: set[str] = set()  # labels met
-    segs = []
-    index = 0
-    for seg in problem.segments:
-        keep = []
-        for w in seg.windows:
-            label = next(labels)
-            first = label not in seen
-            seen.add(label)
-            if first or (w.slot * GOLDEN) % 1.0 < 1.0 / k or index in extremes:
-                keep.append(w)
-            index += 1
-        if keep:
-            segs.append(dataclasses.replace(seg, windows=tuple(keep)))
-    return dataclasses.replace(problem, segments=tuple(segs))
 
 
 def with_parameters(car: CarDescription, parameters: dict[str, float]) -> CarDescription:
@@ -558,13 +456,29 @@ def _cost_task(args) -> float:
     return cost_of(problem, car)
 
 
-def _trial_task(args) -> Outcome:
-    screen_problem, fit_problem, held_problem, judge, base, names, start, first = args
-    values, _, evals, spans = joint_refit(screen_problem, base, names, start, first)
-    car = with_parameters(base, values)
-    cost, j_cost = judged(fit_problem, judge.fit, car)
-    held, j_held = judged(held_problem, judge.held, car)
-    n = max(held_problem.n_values, 1)
+@dataclass(frozen=True)
+class RefitJob:
+    """One joint refit for a worker (:func:`_trial_task`): the parameters of the effects
+    ``names`` refitted together from ``start`` on ``screen``'s windows (``first``'s searched
+    first; :func:`joint_refit`) with ``base`` as the car, then scored on all ``fit`` windows and
+    on the ``held``-out ones, on the problems' normalisation and on ``judge``'s."""
+
+    screen: Problem
+    fit: Problem
+    held: Problem
+    judge: Judge
+    base: CarDescription
+    names: tuple[str, ...]
+    start: dict[str, float]
+    first: str | None = None
+
+
+def _trial_task(job: RefitJob) -> Outcome:
+    values, _, evals, spans = joint_refit(job.screen, job.base, job.names, job.start, job.first)
+    car = with_parameters(job.base, values)
+    cost, j_cost = judged(job.fit, job.judge.fit, car)
+    held, j_held = judged(job.held, job.judge.held, car)
+    n = max(job.held.n_values, 1)
     return Outcome(values, cost, evals, held / n, j_cost, j_held / n, spans)
 
 
@@ -591,7 +505,7 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                 held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
                 robust_factor: float = ROBUST_WINDOW_FACTOR, screen_max_s: float = SCREEN_MAX_S,
                 progress: Callable[[str], None] | None = None) -> Chain:
-    """Run the forward selection of the module docstring over the effects ``names``.
+    """Run the stepwise selection of the module docstring over the effects ``names``.
 
     ``fit_problem`` and ``held_problem`` have the same base car (no chain effect yet), the
     same signals and scales; the held-out gap is ``cost / n_values`` of ``held_problem``
@@ -599,42 +513,241 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     on their normalisation; the tests of step 3 judge on the step's (``robust_factor``: the
     robust window scale's factor, as ``run_gap``'s). ``screen_max_s``: the seconds of fit
     windows the screening and the refits use (:func:`screening_problem`; 0: all of them)."""
-    base = fit_problem.car
-    tick = progress or (lambda label: None)
-    order = {n: i for i, n in enumerate(CANDIDATES)}
-    kept_names: list[str] = []
-    kept_values: dict[str, float] = {}
-    kept_spans: dict[str, tuple[float, float]] = {}  # of the refit that set kept_values
-    cost = cost_of(fit_problem, base)
-    held_gap = cost_of(held_problem, base) / max(held_problem.n_values, 1)
-    nominal_cost, nominal_held = cost, held_gap
-    judge = Judge(fit_problem, held_problem)  # step 1: the nominal model's normalisation
-    j_cost, j_held = cost, held_gap  # the current model's cost and held-out gap as the step judges them
-    steps: list[Step] = []
-    swaps: list[Swap] = []
-    runners_up: dict[str, list[Trial]] = {}  # per kept effect: the step's other refitted candidates
-    stop = ""
-    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_quiet_worker) if jobs > 1 else None
+    builder = _ChainBuilder(fit_problem, held_problem, names, jobs=jobs,
+                            tests=(delta_bic_min, improvement_min, held_improvement_min),
+                            max_effects=max_effects, robust_factor=robust_factor, screen_max_s=screen_max_s,
+                            progress=progress)
+    return builder.build()
 
-    def rejudged(values: dict[str, float]) -> tuple[Judge, float, float]:
-        """The normalisation of the model with ``values`` (step 6), its fit cost and held-out gap on it."""
-        current = with_parameters(base, values)
-        new_judge, fit_cost = renormalised(fit_problem, held_problem, current, robust_factor)
-        return new_judge, fit_cost, cost_of(new_judge.held, current) / max(held_problem.n_values, 1)
 
-    def run_tasks(tasks) -> list[Outcome]:
-        return list(pool.map(_trial_task, tasks)) if pool is not None else [_trial_task(t) for t in tasks]
+@dataclass
+class _StepState:
+    """What one forward step works with: its index, the number of effects kept before it, the
+    screening subset of the nominal-car problem (the refits' windows), the current model's
+    full and screening problems, the screening ranking and the refits' outcomes so far."""
 
-    def run_costs(tasks) -> list[float]:
-        return list(pool.map(_cost_task, tasks)) if pool is not None else [_cost_task(t) for t in tasks]
+    index: int
+    k: int
+    screen_base: Problem
+    full: Problem
+    screen: Problem
+    screening: list[FitResult]
+    ranked: list[FitResult]
+    n_top: int
+    crit_now: float
+    outcome: dict[str, Outcome] = dataclasses.field(default_factory=dict)
 
-    def alike_of(chosen: Trial, others: list[Trial], outcome: dict[str, Outcome]) -> tuple[Alike, ...]:
+
+class _ChainBuilder:
+    """The chain's state while it is built (module docstring): the kept effects, their
+    parameters and spans, the current model's costs (on the problems' normalisation and on the
+    step's, ``judge``), the steps, exchanges and removals so far. :meth:`build` runs the named
+    steps: :meth:`forward_step` (:meth:`baseline`, :meth:`screen`, :meth:`refit` in batches,
+    :meth:`gate`, :meth:`polish`, :meth:`exchange`), :meth:`backward_check`, and again."""
+
+    def __init__(self, fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int,
+                 tests: tuple[float, float, float], max_effects: int, robust_factor: float,
+                 screen_max_s: float, progress: Callable[[str], None] | None):
+        self.fit_problem, self.held_problem, self.names = fit_problem, held_problem, list(names)
+        self.jobs, self.tests, self.max_effects = jobs, tests, max_effects
+        self.robust_factor, self.screen_max_s = robust_factor, screen_max_s
+        self.tick = progress or (lambda label: None)
+        self.base = fit_problem.car
+        self.order = {n: i for i, n in enumerate(CANDIDATES)}
+        self.kept_names: list[str] = []
+        self.kept_values: dict[str, float] = {}
+        self.kept_spans: dict[str, tuple[float, float]] = {}  # of the refit that set kept_values
+        self.cost = cost_of(fit_problem, self.base)
+        self.held_gap = cost_of(held_problem, self.base) / max(held_problem.n_values, 1)
+        self.nominal_cost, self.nominal_held = self.cost, self.held_gap
+        self.judge = Judge(fit_problem, held_problem)  # step 1: the nominal model's normalisation
+        self.j_cost, self.j_held = self.cost, self.held_gap  # the current model as the step judges it
+        self.steps: list[Step] = []
+        self.swaps: list[Swap] = []
+        self.runners_up: dict[str, list[Trial]] = {}  # per kept effect: its step's other refitted candidates
+        self.stop = ""
+        self.index = 0
+        self.excluded: set[str] = set()  # removed by a check: not tried again
+        self.pruned: list[Trial] = []
+        self.pruned_after: list[int] = []  # the last step before each removal
+        self.polished = False  # the kept parameters come from a kept candidate's second refit
+        self.pool: ProcessPoolExecutor | None = None
+
+    # -- workers -------------------------------------------------------------------------------
+    def job(self, screen: Problem, names: Sequence[str], start: dict[str, float],
+            first: str | None = None) -> RefitJob:
+        return RefitJob(screen, self.fit_problem, self.held_problem, self.judge, self.base, tuple(names),
+                        dict(start), first)
+
+    def run(self, jobs: list[RefitJob]) -> list[Outcome]:
+        return list(self.pool.map(_trial_task, jobs)) if self.pool is not None else [_trial_task(j) for j in jobs]
+
+    def costs(self, tasks) -> list[float]:
+        return list(self.pool.map(_cost_task, tasks)) if self.pool is not None else [_cost_task(t) for t in tasks]
+
+    def values_per_window(self, tasks) -> list[np.ndarray]:
+        return (list(self.pool.map(window_values_task, tasks)) if self.pool is not None
+                else [window_values_task(t) for t in tasks])
+
+    def rejudge(self) -> None:
+        """Step 6: the normalisation of the current model, its fit cost and held-out gap on it."""
+        current = with_parameters(self.base, self.kept_values)
+        self.judge, self.j_cost = renormalised(self.fit_problem, self.held_problem, current, self.robust_factor)
+        self.j_held = cost_of(self.judge.held, current) / max(self.held_problem.n_values, 1)
+
+    # -- the whole selection -------------------------------------------------------------------
+    def build(self) -> Chain:
+        self.pool = ProcessPoolExecutor(max_workers=self.jobs, initializer=_quiet_worker) if self.jobs > 1 else None
+        try:
+            checked = 0  # steps that kept an effect, at the last check
+            while True:  # forward steps, then the check; again while the check removes something
+                while self.forward_step():
+                    pass
+                n_kept = sum(st.kept is not None for st in self.steps)
+                if self.pruned and n_kept == checked:  # resumed, and nothing kept since the last check
+                    break
+                checked, n_pruned = n_kept, len(self.pruned)
+                self.backward_check()
+                if len(self.pruned) == n_pruned:
+                    break
+                # stepwise: the forward steps resume on the smaller model (step 9 of the module docstring)
+                self.excluded.update(t.effect for t in self.pruned[n_pruned:])
+                self.runners_up = {e: [t for t in ts if t.effect not in self.excluded]
+                                   for e, ts in self.runners_up.items()}
+                self.rejudge()
+        finally:
+            if self.pool is not None:
+                self.pool.shutdown()
+        return Chain(tuple(self.steps), with_parameters(self.base, self.kept_values), self.nominal_cost,
+                     self.nominal_held, self.stop, dict(self.kept_values), tuple(self.pruned), tuple(self.swaps),
+                     tuple(self.pruned_after),
+                     {k: v for k, v in self.kept_spans.items() if k in self.kept_values})
+
+    # -- a forward step (steps 1-7 of the module docstring) -------------------------------------
+    def forward_step(self) -> bool:
+        """One forward step; False when the forward steps stop (``self.stop`` says why)."""
+        if len(self.kept_names) >= self.max_effects:
+            self.stop = (f"the chain reached its limit of {self.max_effects} effects (more may pass: "
+                         "`--max-effects N`, `max_effects=N`)") if self.max_effects else "max effects 0: nothing tried"
+            return False
+        remaining = [n for n in self.names if n not in self.kept_names and n not in self.excluded]
+        if not remaining:
+            self.stop = "every candidate effect is in the model"
+            return False
+        self.index += 1
+        screen_base = screening_problem(self.fit_problem, self.screen_max_s)
+        if self.kept_names and not self.polished:
+            self.baseline(screen_base)
+        st = self.screen(screen_base, remaining)
+        chosen, decided = self.decide(st)
+        alike = () if chosen is None else self.alike_of(chosen, [t for t in decided if t.reason == BETTER],
+                                                         st.outcome)
+        self.steps.append(Step(st.index, self.j_held,
+                               tuple(sorted(st.screening, key=lambda r: (r.criterion, self.order[r.effect]))),
+                               tuple(decided), dict(self.judge.fit.scales), self.held_gap,
+                               self.held_gap if chosen is None else st.outcome[chosen.effect].held_gap, alike))
+        if chosen is None:
+            self.stop = "no remaining effect passes the tests"
+            return False
+        self.keep(chosen, st, decided)
+        for _ in range(self.max_exchanges_now()):
+            self.tick(f"step {st.index} exchanges")
+            if not self.exchange(st):
+                break
+        self.rejudge()  # module docstring, step 6
+        return True
+
+    def baseline(self, screen_base: Problem) -> None:
+        """Step 2's baseline: the kept effects alone, refitted as the candidates will be."""
+        b, = self.run([self.job(screen_base, self.kept_names, self.kept_values)])
+        if b.cost < self.cost:
+            self.kept_values, self.cost, self.held_gap = b.values, b.cost, b.held_gap
+            self.kept_spans = _carried(self.kept_spans, b.values, b.spans)
+            self.j_cost, self.j_held = b.judged_cost, b.judged_held_gap
+
+    def screen(self, screen_base: Problem, remaining: list[str]) -> _StepState:
+        """Step 1: every remaining effect fitted alone beside the kept ones, on the screening subset."""
+        index, k = self.index, len(self.kept_names)
+        current = with_parameters(self.base, self.kept_values)
+        full = self.fit_problem.with_car(current)
+        screen = screening_problem(full, self.screen_max_s)
+        screen_cost = self.cost if screen is full else cost_of(screen, current)
+        screening = fit_all(screen, screen_cost, remaining, jobs=self.jobs, refine_top=0,
+                            progress=lambda label: self.tick(f"step {index} {label}"))
+        n_top = max(REFINE_TOP if index == 1 else REFINE_LATER, 1)
+        ranked = sorted(screening, key=lambda r: (r.cost, self.order[r.effect]))
+        return _StepState(index, k, screen_base, full, screen, screening, ranked, n_top,
+                          bic(self.judge.fit, self.j_cost, k))
+
+    def trial_of(self, st: _StepState, effect: str, o: Outcome) -> Trial:
+        """A refit's figures as the step's tests see them."""
+        return Trial(effect, o.values, o.cost, st.crit_now - bic(self.judge.fit, o.judged_cost, st.k + 1),
+                     1.0 - o.judged_cost / self.j_cost if self.j_cost > 0 else 0.0, o.judged_held_gap,
+                     o.evaluations, spans=o.spans)
+
+    def decide(self, st: _StepState) -> tuple[Trial | None, list[Trial]]:
+        """Steps 2-4: the best screened candidates refitted jointly in batches (then the gated later
+        ones), tried in BIC order against the tests; the first that passes and passes again after
+        :meth:`polish` is kept. Returns ``(the kept trial or None, every trial decided)``."""
+        decided: list[Trial] = []
+        chosen = None
+        batches: list[list[FitResult]] = [st.ranked[:st.n_top]]
+        gate_done = False
+        while chosen is None:
+            if not batches:  # every refitted candidate failed: step 4's later batches
+                if gate_done:
+                    break
+                gate_done, later = True, self.gate(st)
+                batches = [later[i:i + st.n_top] for i in range(0, len(later), st.n_top)]
+                continue
+            for tr in self.refit(st, batches.pop(0)):
+                reason = _reject_reason(tr, self.j_held, *self.tests)
+                if chosen is None and not reason:
+                    tr, reason = self.polish(st, tr.effect)
+                if chosen is None and not reason:
+                    chosen = dataclasses.replace(tr, kept=True)
+                    decided.append(chosen)
+                else:
+                    decided.append(dataclasses.replace(tr, reason=reason or BETTER))
+        return chosen, decided
+
+    def refit(self, st: _StepState, batch: list[FitResult]) -> list[Trial]:
+        """Step 2: the batch's candidates refitted jointly with the kept effects, in BIC order."""
+        outs = self.run([self.job(st.screen_base, self.kept_names + [r.effect],
+                                  {**self.kept_values, **r.parameters}, r.effect) for r in batch])
+        self.tick(f"step {st.index} joint refits")
+        st.outcome.update((r.effect, o) for r, o in zip(batch, outs))
+        trials = [self.trial_of(st, r.effect, o) for r, o in zip(batch, outs)]
+        trials.sort(key=lambda tr: (-tr.delta_bic, self.order[tr.effect]))
+        return trials
+
+    def polish(self, st: _StepState, effect: str) -> tuple[Trial, str]:
+        """Step 3's second refit of a candidate that passed: its figures and the tests' verdict."""
+        o = st.outcome[effect]
+        p, = self.run([self.job(st.screen_base, self.kept_names + [effect], o.values)])
+        if p.cost < o.cost:
+            o = dataclasses.replace(p, spans=_carried(o.spans, p.values, p.spans))
+        st.outcome[effect] = o = dataclasses.replace(o, evaluations=o.evaluations + p.evaluations)
+        tr = self.trial_of(st, effect, o)
+        return tr, (_reject_reason(tr, self.j_held, *self.tests) or _report_held_reason(o.held_gap, self.held_gap))
+
+    def gate(self, st: _StepState) -> list[FitResult]:
+        """Step 4's later candidates: the gate is a test, judged where the tests judge (all fit
+        windows, the step's normalisation), at each candidate's screened value."""
+        rest = [r for r in st.ranked[st.n_top:] if r.improvement > 0.0]  # else screened at neutral
+        if st.screen is st.full and self.judge.fit is self.fit_problem:  # the screening's own figures
+            gains = [r.improvement for r in rest]
+        else:
+            gains = [1.0 - c / self.j_cost for c in self.costs(
+                [(self.judge.fit, with_parameters(self.base, {**self.kept_values, **r.parameters})) for r in rest])]
+        return [r for r, g in zip(rest, gains) if g >= self.tests[1] / SAFETY]
+
+    def alike_of(self, chosen: Trial, others: list[Trial], outcome: dict[str, Outcome]) -> tuple[Alike, ...]:
         """The candidates of ``others`` the windows cannot tell from ``chosen`` (:class:`Alike`)."""
         if not others:
             return ()
-        cars = [with_parameters(base, outcome[t.effect].values) for t in [chosen] + others]
-        tasks = [(p, c) for c in cars for p in (judge.fit, judge.held)]
-        vals = list(pool.map(window_values_task, tasks)) if pool is not None else [window_values_task(t) for t in tasks]
+        cars = [with_parameters(self.base, outcome[t.effect].values) for t in [chosen] + others]
+        vals = self.values_per_window([(p, c) for c in cars for p in (self.judge.fit, self.judge.held)])
         per = [np.concatenate(vals[2 * i:2 * i + 2]) for i in range(len(cars))]
         out = []
         for t, v in zip(others, per[1:]):
@@ -643,165 +756,66 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
                 out.append(Alike(t.effect, dict(outcome[t.effect].values), z, int(v.size)))
         return tuple(out)
 
-    try:
-        index = 0
-        excluded: set[str] = set()  # removed by a check: not tried again
-        pruned: list[Trial] = []
-        pruned_after: list[int] = []  # the last step before each removal
-        checked = 0  # steps that kept an effect, at the last check
-        polished = False  # the kept parameters come from a kept candidate's second refit
-        while True:  # forward steps, then the check; again while the check removes something
-            while True:
-                if len(kept_names) >= max_effects:
-                    stop = (f"the chain reached its limit of {max_effects} effects (more may pass: "
-                            "`--max-effects N`, `max_effects=N`)") if max_effects else "max effects 0: nothing tried"
-                    break
-                remaining = [n for n in names if n not in kept_names and n not in excluded]
-                if not remaining:
-                    stop = "every candidate effect is in the model"
-                    break
-                index += 1
-                k = len(kept_names)
-                screen_base = screening_problem(fit_problem, screen_max_s)
-                if k and not polished:  # the baseline: the kept effects alone, refitted as the candidates will be
-                    b, = run_tasks([(screen_base, fit_problem, held_problem, judge, base,
-                                     list(kept_names), dict(kept_values), None)])
-                    if b.cost < cost:
-                        kept_values, cost, held_gap = b.values, b.cost, b.held_gap
-                        kept_spans = _carried(kept_spans, b.values, b.spans)
-                        j_cost, j_held = b.judged_cost, b.judged_held_gap
-                current = with_parameters(base, kept_values)
-                full = fit_problem.with_car(current)
-                screen = screening_problem(full, screen_max_s)
-                screen_cost = cost if screen is full else cost_of(screen, current)
-                screening = fit_all(screen, screen_cost, remaining, jobs=jobs, refine_top=0,
-                                    progress=lambda label: tick(f"step {index} {label}"))
-                n_top = max(REFINE_TOP if index == 1 else REFINE_LATER, 1)
-                ranked = sorted(screening, key=lambda r: (r.cost, order[r.effect]))
-                crit_now = bic(judge.fit, j_cost, k)
-                decided: list[Trial] = []
-                chosen = None
-                outcome: dict[str, Outcome] = {}
+    def keep(self, chosen: Trial, st: _StepState, decided: list[Trial]) -> None:
+        """The chosen candidate joins the model; its runners-up are remembered for the exchanges."""
+        self.kept_names.append(chosen.effect)
+        self.kept_values = dict(chosen.parameters)
+        self.kept_spans = _carried(self.kept_spans, chosen.parameters, chosen.spans)
+        self.cost, self.held_gap = chosen.cost, st.outcome[chosen.effect].held_gap
+        self.polished = True  # the next step's baseline is done
+        self.runners_up[chosen.effect] = sorted((t for t in decided if not t.kept),
+                                                key=lambda tr: (tr.cost, self.order[tr.effect]))[:REFINE_TOP]
 
-                def trial_of(effect: str, o: Outcome) -> Trial:
-                    return Trial(effect, o.values, o.cost, crit_now - bic(judge.fit, o.judged_cost, k + 1),
-                                 1.0 - o.judged_cost / j_cost if j_cost > 0 else 0.0, o.judged_held_gap,
-                                 o.evaluations, spans=o.spans)
+    def max_exchanges_now(self) -> int:
+        return MAX_EXCHANGES if len(self.kept_names) > 1 else 0
 
-                def polish(effect: str) -> tuple[Trial, str]:
-                    """Step 3's second refit of a candidate that passed: its figures and the tests' verdict."""
-                    o = outcome[effect]
-                    p, = run_tasks([(screen_base, fit_problem, held_problem, judge, base, kept_names + [effect],
-                                     dict(o.values), None)])
-                    if p.cost < o.cost:
-                        o = dataclasses.replace(p, spans=_carried(o.spans, p.values, p.spans))
-                    outcome[effect] = o = dataclasses.replace(o, evaluations=o.evaluations + p.evaluations)
-                    tr = trial_of(effect, o)
-                    return tr, (_reject_reason(tr, j_held, delta_bic_min, improvement_min, held_improvement_min)
-                                or _report_held_reason(o.held_gap, held_gap))
-                def gated() -> list[FitResult]:
-                    """Step 4's later candidates: the gate is a test, judged where the tests judge (all
-                    fit windows, the step's normalisation), at each candidate's screened value."""
-                    rest = [r for r in ranked[n_top:] if r.improvement > 0.0]  # else screened at neutral
-                    if screen is full and judge.fit is fit_problem:  # the screening's own figures
-                        gains = [r.improvement for r in rest]
-                    else:
-                        gains = [1.0 - c / j_cost for c in run_costs(
-                            [(judge.fit, with_parameters(base, {**kept_values, **r.parameters})) for r in rest])]
-                    return [r for r, g in zip(rest, gains) if g >= improvement_min / SAFETY]
+    def exchange(self, st: _StepState) -> bool:
+        """Step 5: the best exchange of an earlier kept effect for a runner-up of its step, made;
+        False when none helps."""
+        swap = _best_exchange(self.run, st.screen_base, self.fit_problem, self.held_problem, self.judge,
+                              self.base, st.index, self.kept_names, self.kept_values, self.cost, self.held_gap,
+                              self.runners_up)
+        if swap is None:
+            return False
+        self.swaps.append(swap)
+        self.polished = False
+        self.kept_names[self.kept_names.index(swap.out)] = swap.into
+        self.runners_up[swap.into] = [t for t in self.runners_up.pop(swap.out) if t.effect != swap.into]
+        self.kept_values, self.cost, self.held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
+        self.kept_spans = _carried(self.kept_spans, swap.parameters, swap.spans)
+        return True
 
-                batches: list[list[FitResult]] = [ranked[:n_top]]
-                gate_done = False
-                while chosen is None:
-                    if not batches:  # every refitted candidate failed: step 4's later batches
-                        if gate_done:
-                            break
-                        gate_done, later = True, gated()
-                        batches = [later[i:i + n_top] for i in range(0, len(later), n_top)]
-                        continue
-                    batch = batches.pop(0)
-                    outs = run_tasks([(screen_base, fit_problem, held_problem, judge, base, kept_names + [r.effect],
-                                       {**kept_values, **r.parameters}, r.effect) for r in batch])
-                    tick(f"step {index} joint refits")
-                    outcome.update((r.effect, o) for r, o in zip(batch, outs))
-                    trials = [trial_of(r.effect, o) for r, o in zip(batch, outs)]
-                    trials.sort(key=lambda tr: (-tr.delta_bic, order[tr.effect]))
-                    for tr in trials:
-                        reason = _reject_reason(tr, j_held, delta_bic_min, improvement_min, held_improvement_min)
-                        if chosen is None and not reason:
-                            tr, reason = polish(tr.effect)
-                        if chosen is None and not reason:
-                            chosen = dataclasses.replace(tr, kept=True)
-                            decided.append(chosen)
-                        else:
-                            decided.append(dataclasses.replace(tr, reason=reason or BETTER))
-                alike = () if chosen is None else alike_of(chosen, [t for t in decided if t.reason == BETTER], outcome)
-                steps.append(Step(index, j_held, tuple(sorted(screening, key=lambda r: (r.criterion, order[r.effect]))),
-                                  tuple(decided), dict(judge.fit.scales), held_gap,
-                                  held_gap if chosen is None else outcome[chosen.effect].held_gap, alike))
-                if chosen is None:
-                    stop = "no remaining effect passes the tests"
-                    break
-                kept_names.append(chosen.effect)
-                kept_values, kept_spans = dict(chosen.parameters), _carried(kept_spans, chosen.parameters, chosen.spans)
-                cost, held_gap = chosen.cost, outcome[chosen.effect].held_gap
-                polished = True  # the next step's baseline is done
-                runners_up[chosen.effect] = sorted((t for t in decided if not t.kept),
-                                                   key=lambda tr: (tr.cost, order[tr.effect]))[:REFINE_TOP]
-                for _ in range(MAX_EXCHANGES if len(kept_names) > 1 else 0):
-                    tick(f"step {index} exchanges")
-                    swap = _best_exchange(run_tasks, screen_base, fit_problem, held_problem, judge, base, index,
-                                          kept_names, kept_values, cost, held_gap, runners_up)
-                    if swap is None:
-                        break
-                    swaps.append(swap)
-                    polished = False
-                    kept_names[kept_names.index(swap.out)] = swap.into
-                    runners_up[swap.into] = [t for t in runners_up.pop(swap.out) if t.effect != swap.into]
-                    kept_values, cost, held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
-                    kept_spans = _carried(kept_spans, swap.parameters, swap.spans)
-                judge, j_cost, j_held = rejudged(kept_values)  # module docstring, step 6
-            n_kept = sum(st.kept is not None for st in steps)
-            if pruned and n_kept == checked:  # resumed, and nothing kept since the last check
-                break
-            checked, n_pruned = n_kept, len(pruned)
-            while len(kept_names) > 1:  # the final check: every kept effect still earns its place
-                tick("final check")
-                k = len(kept_names)
-                outs = run_tasks([(screening_problem(fit_problem, screen_max_s), fit_problem, held_problem, judge, base,
-                                   [n for n in kept_names if n != e],
-                                   {f: v for f, v in kept_values.items() if f != CANDIDATES[e].field}, None)
-                                  for e in kept_names])
-                weakest = None
-                for e, o in zip(kept_names, outs):
-                    tr = Trial(e, dict(kept_values), cost, bic(judge.fit, o.judged_cost, k - 1) - bic(judge.fit, j_cost, k),
-                               1.0 - j_cost / o.judged_cost if o.judged_cost > 0 else 0.0, j_held, o.evaluations)
-                    stay = _reject_reason(tr, o.judged_held_gap, *staying(delta_bic_min, improvement_min,
-                                                                          held_improvement_min))
-                    reason = f"to stay: {stay}" if stay else _report_held_reason(held_gap, o.held_gap)
-                    if reason and (weakest is None or tr.delta_bic < weakest[0].delta_bic):
-                        weakest = (dataclasses.replace(tr, reason=reason), o)
-                if weakest is None:
-                    break
-                tr, o = weakest
-                pruned.append(tr)
-                pruned_after.append(index)
-                kept_names.remove(tr.effect)
-                polished = False
-                kept_values, cost, held_gap, j_cost, j_held = o.values, o.cost, o.held_gap, o.judged_cost, o.judged_held_gap
-                kept_spans = _carried(kept_spans, o.values, o.spans)
-            if len(pruned) == n_pruned:
-                break
-            # stepwise: the forward steps resume on the smaller model (step 9 of the module docstring)
-            excluded.update(t.effect for t in pruned[n_pruned:])
-            runners_up = {e: [t for t in ts if t.effect not in excluded] for e, ts in runners_up.items()}
-            judge, j_cost, j_held = rejudged(kept_values)
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    return Chain(tuple(steps), with_parameters(base, kept_values), nominal_cost, nominal_held, stop,
-                 dict(kept_values), tuple(pruned), tuple(swaps), tuple(pruned_after),
-                 {k: v for k, v in kept_spans.items() if k in kept_values})
+    # -- the backward check (step 8 of the module docstring) ------------------------------------
+    def backward_check(self) -> None:
+        """Every kept effect still earns its place: the weakest that would not is removed, and the
+        check repeats."""
+        while len(self.kept_names) > 1:
+            self.tick("final check")
+            k = len(self.kept_names)
+            outs = self.run([self.job(screening_problem(self.fit_problem, self.screen_max_s),
+                                      [n for n in self.kept_names if n != e],
+                                      {f: v for f, v in self.kept_values.items() if f != CANDIDATES[e].field})
+                             for e in self.kept_names])
+            weakest = None
+            for e, o in zip(self.kept_names, outs):
+                tr = Trial(e, dict(self.kept_values), self.cost,
+                           bic(self.judge.fit, o.judged_cost, k - 1) - bic(self.judge.fit, self.j_cost, k),
+                           1.0 - self.j_cost / o.judged_cost if o.judged_cost > 0 else 0.0, self.j_held,
+                           o.evaluations)
+                stay = _reject_reason(tr, o.judged_held_gap, *staying(*self.tests))
+                reason = f"to stay: {stay}" if stay else _report_held_reason(self.held_gap, o.held_gap)
+                if reason and (weakest is None or tr.delta_bic < weakest[0].delta_bic):
+                    weakest = (dataclasses.replace(tr, reason=reason), o)
+            if weakest is None:
+                return
+            tr, o = weakest
+            self.pruned.append(tr)
+            self.pruned_after.append(self.index)
+            self.kept_names.remove(tr.effect)
+            self.polished = False
+            self.kept_values, self.cost, self.held_gap = o.values, o.cost, o.held_gap
+            self.j_cost, self.j_held = o.judged_cost, o.judged_held_gap
+            self.kept_spans = _carried(self.kept_spans, o.values, o.spans)
 
 
 def _carried(spans: dict[str, tuple[float, float]], values: dict[str, float],
@@ -824,7 +838,7 @@ def renormalised(fit_problem: Problem, held_problem: Problem, car: CarDescriptio
     return judge, robust_total(window_costs(fit, res), fit.robust_scale)
 
 
-def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, held_problem: Problem, judge: Judge,
+def _best_exchange(run_jobs, screen_problem: Problem, fit_problem: Problem, held_problem: Problem, judge: Judge,
                    base: CarDescription, index: int, kept_names: list[str], kept_values: dict[str, float],
                    cost: float, held_gap: float, runners_up: dict[str, list[Trial]]) -> Swap | None:
     """The best exchange of step 5 of the module docstring (None when none lowers the fit
@@ -839,10 +853,10 @@ def _best_exchange(run_tasks, screen_problem: Problem, fit_problem: Problem, hel
             field = CANDIDATES[tr.effect].field
             names = [tr.effect if n == out else n for n in kept_names]
             pairs.append((out, tr.effect))
-            tasks.append((screen_problem, fit_problem, held_problem, judge, base, names,
-                          {**start, field: tr.parameters[field]}, tr.effect))
+            tasks.append(RefitJob(screen_problem, fit_problem, held_problem, judge, base, tuple(names),
+                                  {**start, field: tr.parameters[field]}, tr.effect))
     best = None
-    for (out, into), o in zip(pairs, run_tasks(tasks) if tasks else []):
+    for (out, into), o in zip(pairs, run_jobs(tasks) if tasks else []):
         if o.cost < cost and o.held_gap <= held_gap and (best is None or o.cost < best.cost_after):
             best = Swap(index, out, into, dict(o.values), cost, o.cost, held_gap, o.held_gap, dict(o.spans))
     return best

@@ -1,7 +1,7 @@
 """How well the log pins each kept parameter: a standard error per parameter.
 
 The chain's parameters minimise ``F(p) = sum_w f_w(p)``, the robust cost of the windows
-``w`` they were fitted on (:func:`simrunner.workflows.gap.chain.screening_problem` of the fit
+``w`` they were fitted on (:func:`simrunner.workflows.gap.screening.screening_problem` of the fit
 windows; each window restarts from the measured state, so the windows are the independent
 units of the data). The covariance of such an estimate is taken from the spread of the fits
 that leave one window out (the *jackknife*), each a Newton step from the fitted values:

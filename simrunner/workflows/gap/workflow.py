@@ -97,7 +97,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     ``robust_factor`` sets the robust window loss (:mod:`simrunner.workflows.gap.fit`;
     ``math.inf``: plain least squares). ``screen_max_s``: the seconds of fit windows the
     chain's screening and refits use on a longer log (a subset by regime,
-    :func:`simrunner.workflows.gap.chain.screening_problem`; 0: all of them, slower).
+    :func:`simrunner.workflows.gap.screening.screening_problem`; 0: all of them, slower).
     """
     logs = [logs] if isinstance(logs, RunLog) else list(logs)
     if not logs:
