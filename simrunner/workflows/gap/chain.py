@@ -23,7 +23,7 @@ refitted) and
    refit (below), done already;
 3. tries them in order of the information criterion (BIC with ``k`` = the number of fitted
    parameters); the first that passes the four tests below is refitted once more from its
-   values (the budget of one refit can end before the kept parameters have moved: DS3's
+   values [shaped by the shared logs] (the budget of one refit can end before the kept parameters have moved: DS3's
    pose-only brake scale was judged at a point its next refit bettered by 17 % on the
    held-out windows), and kept if it passes them again with those figures and its held-out
    gap on the report's normalisation has not grown (the tests judge on the step's
@@ -46,7 +46,7 @@ refitted) and
    windows at the plan's top speed, gained 0.4 % there on the nominal scales, 8.4 % on all
    fit windows on the step's. There is no
    count limit: with a few kept effects held, a candidate that only helps once a kept one
-   is refitted with it can screen behind several that fail (DS2's third effect screened
+   is refitted with it can screen behind several that fail [shaped by the shared logs] (DS2's third effect screened
    7th, behind six that the tests rejected; a limit of 6 refits a step cut it off);
 5. once an effect is kept at a step past the first, tries exchanges: each effect kept at an
    earlier step is replaced in turn by each of the :data:`REFINE_TOP` best candidates
@@ -81,7 +81,7 @@ refitted) and
    the others that no effect-free log reaches is not noise. This is the hysteresis of
    stepwise regression (Efroymson 1960: an F-to-remove below the F-to-enter), without
    which an effect that a later one takes a little from is removed at a gain that admits
-   no false claim (DS2's brake scale: 6.6 % beside two later effects, against 6.8 % to
+   no false claim [shaped by the shared logs] (DS2's brake scale: 6.6 % beside two later effects, against 6.8 % to
    enter and 3.4 % at most on an effect-free log; removing it grows the held-out gap
    20 %). A look-alike kept early (a slower servo standing in for a latency found later)
    gains about nothing beside the real effect and goes; ``Chain.pruned`` records it with
@@ -97,6 +97,9 @@ by window (fit and held-out windows, the step's normalisation): when the two mod
 differ by less than :data:`ALIKE_Z` standard errors (Vuong's test), the windows cannot tell
 them apart and ``Step.alike`` records it, for the report to say so. This changes nothing in
 the chain: it names the kept one, and a near tie's name is the report's to qualify.
+
+"[shaped by the shared logs]" marks a rule the two shared real logs (DS2, DS3,
+``../shared/data/real_logs``) gave its form; the settings flag such values (``shared_logs``).
 
 Every candidate that was tried and not kept is recorded with its reason. The chain's
 result is the car with all kept effects; its parameters are those of the last joint refit.

@@ -78,7 +78,8 @@ filter and a 100-Hz motion-capture log alike:
     the pair differ by what the car can do in the time) keeps the readings between out: an
     encoder that missed ticks, a gyro that saturated for a few samples. Longer excursions
     are left in: a wheel that locks under hard braking and spins up again reads like that
-    for a second (DS2's brake to reverse at 113.9 s, encoder at 30 Hz), and is the car's.
+    for a second (DS2's brake to reverse at 113.9 s, encoder at 30 Hz), and is the car's
+    [shaped by the shared logs].
     One impossible step alone (a level that changes and stays) is no spike: its two sides
     cannot tell which is wrong. Samples already kept out (jumps, frozen runs, duplicates)
     and steps across time gaps are not judged.

@@ -55,7 +55,7 @@ def extreme_windows(problem: Problem) -> set[int]:
     teleoperated log) gives a subset without them, which screens the limit at 0 %.
     Steering commands only: with the speed command's extremes and the fastest command
     changes too (up to 7 windows), they tilted a real log's screening towards those moments
-    (DS2 then named mass_scale first; bench/results/gap-history.md)."""
+    (DS2 then named mass_scale first; bench/results/gap-history.md) [shaped by the shared logs]."""
     feats: list[list[float]] = []
     for seg in problem.segments:
         steer = np.asarray(seg.log.steer_cmd_rad, float)
