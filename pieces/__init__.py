@@ -72,12 +72,12 @@ import importlib
 from typing import TYPE_CHECKING
 
 from .pose import Pose2, wrap_angle
-from .spec import PARAMS, SETTINGS_PARAMS, ParamSpec, PieceError, PieceType, TrackSettings
+from .spec import KITS, PARAMS, SETTINGS_PARAMS, Kit, ParamSpec, PieceError, PieceType, TrackSettings
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time these load on first use
     from . import mesh
     from .library import (DEFAULT_SETTINGS, chicane, chicane_geometry, chicane_left, chicane_right,
-                          crossroads, make_piece, piece_from_layout, start_finish, straight,
+                          crossroads, extender, make_piece, piece_from_layout, start_finish, straight,
                           straight_short, turn, turn_left, turn_right)
     from .piece import Piece
 
@@ -86,7 +86,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time these load on first
 _EXPORTS = {"Piece": "pieces.piece", "mesh": None}
 _EXPORTS.update((name, "pieces.library") for name in (
     "DEFAULT_SETTINGS", "chicane", "chicane_geometry", "chicane_left", "chicane_right",
-    "crossroads", "make_piece", "piece_from_layout", "start_finish", "straight",
+    "crossroads", "extender", "make_piece", "piece_from_layout", "start_finish", "straight",
     "straight_short", "turn", "turn_left", "turn_right"))
 
 STRAIGHT = PieceType.STRAIGHT
@@ -97,14 +97,15 @@ TURN_RIGHT = PieceType.TURN_RIGHT
 CHICANE_LEFT = PieceType.CHICANE_LEFT
 CHICANE_RIGHT = PieceType.CHICANE_RIGHT
 START_FINISH = PieceType.START_FINISH
+EXTENDER = PieceType.EXTENDER
 
 __all__ = [
-    "Pose2", "wrap_angle", "PARAMS", "SETTINGS_PARAMS", "ParamSpec", "PieceError", "PieceType",
+    "Pose2", "wrap_angle", "KITS", "Kit", "PARAMS", "SETTINGS_PARAMS", "ParamSpec", "PieceError", "PieceType",
     "TrackSettings", "Piece", "DEFAULT_SETTINGS", "chicane", "chicane_geometry", "chicane_left",
-    "chicane_right", "crossroads", "make_piece", "piece_from_layout", "start_finish", "straight",
+    "chicane_right", "crossroads", "extender", "make_piece", "piece_from_layout", "start_finish", "straight",
     "straight_short", "turn", "turn_left", "turn_right", "mesh",
     "STRAIGHT", "STRAIGHT_SHORT", "CROSSROADS", "TURN_LEFT", "TURN_RIGHT", "CHICANE_LEFT",
-    "CHICANE_RIGHT", "START_FINISH",
+    "CHICANE_RIGHT", "START_FINISH", "EXTENDER",
 ]
 
 

@@ -205,6 +205,12 @@ def crossroads(*, length_m: float = 0.6, settings: TrackSettings = DEFAULT_SETTI
     )
 
 
+def extender(*, length_m: float = 0.17, settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """EXTENDER: the official kit's short straight (0.17 m: a 45-degree kit turn's centreline
+    radius, 0.445 m, is half a kit crossing, 0.275 m, plus one extender)."""
+    return _straight(PieceType.EXTENDER, length_m, settings)
+
+
 _BUILDERS: Mapping[PieceType, Callable[..., Piece]] = {
     PieceType.STRAIGHT: straight,
     PieceType.STRAIGHT_SHORT: straight_short,
@@ -214,6 +220,7 @@ _BUILDERS: Mapping[PieceType, Callable[..., Piece]] = {
     PieceType.CHICANE_LEFT: chicane_left,
     PieceType.CHICANE_RIGHT: chicane_right,
     PieceType.START_FINISH: start_finish,
+    PieceType.EXTENDER: extender,
 }
 
 

@@ -19,7 +19,8 @@ class PieceError(ValueError):
 
 
 class PieceType(enum.Enum):
-    """The six NXP Cup piece types of the thesis (turns and chicanes in two hands)."""
+    """The six NXP Cup piece types of the thesis (turns and chicanes in two hands), and the
+    official kit's extender (a short straight: :data:`KITS`)."""
 
     STRAIGHT = "STRAIGHT"
     STRAIGHT_SHORT = "STRAIGHT_SHORT"
@@ -29,6 +30,7 @@ class PieceType(enum.Enum):
     CHICANE_LEFT = "CHICANE_LEFT"
     CHICANE_RIGHT = "CHICANE_RIGHT"
     START_FINISH = "START_FINISH"
+    EXTENDER = "EXTENDER"
 
 
 def _identity(value: float) -> float:
@@ -119,6 +121,35 @@ PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
     PieceType.CHICANE_RIGHT: MappingProxyType({"length": _m("length", 1.0), "offset": _m("offset", 0.2)}),
     PieceType.START_FINISH: MappingProxyType({"length": _m("length", 1.0),
                                               "mark_length": _m("mark_length", 0.05)}),
+    PieceType.EXTENDER: MappingProxyType({"length": _m("length", 0.17)}),
+})
+
+
+@dataclass(frozen=True)
+class Kit:
+    """A track kit: the defaults a layout's ``@kit = NAME`` puts in place of the pieces' own
+    (layout names and units, as :data:`PARAMS`) and of the track-wide settings; a value
+    the layout gives still wins. ``source``: where the numbers come from."""
+
+    name: str
+    params: Mapping[PieceType, Mapping[str, float]]
+    settings: Mapping[str, float]
+    source: str
+
+
+_RULES = "../shared/reference/nxp-cup-rules.md, section 1.2 (the track kit's drawings, TC)"
+_KIT_TURN = MappingProxyType({"radius": 0.445, "angle": 45.0})  # R170 / R720 edges: lane centre R445
+#: The kits a layout can name with ``@kit``.
+KITS: Mapping[str, Kit] = MappingProxyType({
+    "nxp": Kit("nxp", MappingProxyType({
+        PieceType.STRAIGHT: MappingProxyType({"length": 0.72}),
+        PieceType.EXTENDER: MappingProxyType({"length": 0.17}),
+        PieceType.CROSSROADS: MappingProxyType({"length": 0.55}),  # the 550 x 550 square (its stubs: EXTENDERs)
+        PieceType.TURN_LEFT: _KIT_TURN,
+        PieceType.TURN_RIGHT: _KIT_TURN,
+        PieceType.START_FINISH: MappingProxyType({"length": 0.72, "mark_length": 0.02}),
+    }), MappingProxyType({"lane_width": 0.51, "edge_width": 0.02}),  # 550 over the lines, 20 mm lines inside
+        _RULES),
 })
 
 #: Track-wide settings a layout file can set: layout name -> ParamSpec (internal = field name).

@@ -365,7 +365,7 @@ def random_pieces(draw):
     s = draw(track_settings)
     kind = draw(st.sampled_from(ALL_KINDS))
     road = s.road_width_m
-    if kind in (STRAIGHT, STRAIGHT_SHORT):
+    if kind in (STRAIGHT, STRAIGHT_SHORT, PieceType.EXTENDER):
         params = {"length_m": draw(st.floats(0.01, 3.0))}
     elif kind is START_FINISH:
         length = draw(st.floats(0.1, 3.0))

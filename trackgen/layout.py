@@ -22,10 +22,12 @@ Pieces (names are case-insensitive) and their parameters, in the units people ty
     CHICANE_LEFT    length=1.0 offset=0.2
     CHICANE_RIGHT   length=1.0 offset=0.2
     START_FINISH    length=1.0 mark_length=0.05
+    EXTENDER        length=0.17
 
 Track-wide settings, each at most once, anywhere in the file (conventionally at the top):
 
     @name = TEXT          model/track name: letters, digits, '_', '-', '.' (default: file stem)
+    @kit = nxp            the official kit's pieces and road as the defaults (pieces.KITS)
     @lane_width = 0.55    white lane width, m
     @edge_width = 0.02    each black edge line, m (laid outside the lane)
     @thickness = 0.01     slab height of the meshes, m
@@ -74,7 +76,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Mapping
 
-from pieces.spec import PARAMS, SETTINGS_PARAMS, ParamSpec, PieceError, PieceType, TrackSettings
+from pieces.spec import KITS, PARAMS, SETTINGS_PARAMS, ParamSpec, PieceError, PieceType, TrackSettings
 
 from worlds.lighting import LIMITS as LIGHT_LIMITS
 from worlds.lighting import Light, Shade, TrackLighting
@@ -102,7 +104,7 @@ SCALED_SETTINGS = ("lane_width", "edge_width", "thickness")
 LIGHT_SETTINGS = ("ambient_lux", "light", "shade", "lane_reflectance", "line_reflectance",
                   "floor_reflectance", "specular")
 """The light and surface settings (``worlds.lighting.TrackLighting``); ``@light`` and ``@shade`` repeat."""
-EXTRA_SETTINGS = ("name", "scale") + LIGHT_SETTINGS + ("barcode",)
+EXTRA_SETTINGS = ("name", "scale", "kit") + LIGHT_SETTINGS + ("barcode",)
 
 # Unambiguous (no nested quantifiers over the same digits): linear time on any input.
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
@@ -148,6 +150,7 @@ class Layout:
     setting_values: Mapping[str, float] = field(default_factory=dict)
     lighting: TrackLighting = field(default_factory=TrackLighting)  # @ambient_lux, @light, ...
     barcodes: tuple[Barcode, ...] = ()  # @barcode lines (worlds.marks)
+    kit: str | None = None  # @kit: the pieces' defaults come from pieces.KITS[kit]
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "entries", tuple(self.entries))
@@ -157,10 +160,13 @@ class Layout:
         """Keywords for ``pieces.make_piece`` (internal units, scale applied). With a scale
         other than 1 every length is given, the defaults scaled too."""
         specs = PARAMS[entry.kind]
+        kit = KITS[self.kit].params.get(entry.kind, {}) if self.kit else {}
         out = {}
         for name, spec in specs.items():
             if name in entry.params:
                 value = entry.params[name]
+            elif name in kit:
+                value = kit[name]
             elif spec.unit == "m" and self.scale != 1.0:
                 value = spec.default
             else:
@@ -258,7 +264,7 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     entries: list[LayoutEntry] = []
     values: dict[str, float] = {}
     seen_at: dict[str, int] = {}
-    name, scale = sanitize_name(default_name), 1.0
+    name, scale, kit = sanitize_name(default_name), 1.0, None
     light_values: dict[str, float] = {}
     lamps: list[tuple[int, tuple[float, ...]]] = []
     shade_lines: list[tuple[float, ...]] = []
@@ -288,6 +294,8 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
             seen_at[key] = lineno
             if key == "name":
                 name = value
+            elif key == "kit":
+                kit = value
             elif key == "scale":
                 scale = value
             elif key in LIGHT_SETTINGS:
@@ -303,7 +311,10 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     if not entries:
         raise LayoutError(path, 1, "empty layout: no pieces (expected one piece per line, "
                                    "e.g. STRAIGHT)")
-    scaled = {k: (v * scale if k in SCALED_SETTINGS else v) for k, v in values.items()}
+    wanted = dict(values)
+    if kit is not None:  # the kit's track-wide settings, unless the layout sets them
+        wanted = {**KITS[kit].settings, **values}
+    scaled = {k: (v * scale if k in SCALED_SETTINGS else v) for k, v in wanted.items()}
     defaults = TrackSettings()
     for k in SCALED_SETTINGS:
         if k not in scaled and scale != 1.0:
@@ -320,7 +331,7 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     barcodes = tuple(Barcode(x * scale, y * scale, int(code), math.radians(heading), module * scale, length * scale)
                      for x, y, code, heading, module, length in code_lines)
     return Layout(path=path, name=name, entries=tuple(entries), settings=settings,
-                  scale=scale, setting_values=values, lighting=lighting, barcodes=barcodes)
+                  scale=scale, setting_values=values, lighting=lighting, barcodes=barcodes, kit=kit)
 
 
 def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
@@ -343,6 +354,12 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
         return key, _parse_shade(value, path, lineno)
     if key == "barcode":
         return key, _parse_barcode(value, path, lineno)
+    if key == "kit":
+        word = value.lower()
+        if word not in KITS or not word.isascii():
+            raise LayoutError(path, lineno, f"@kit = {_shown(value)}: expected one of {', '.join(KITS)}"
+                                            f"{_did_you_mean(word, list(KITS))}")
+        return key, word
     if key == "name":
         if not _NAME.match(value):
             raise LayoutError(path, lineno, f"@name = {_shown(value)}: expected 1-64 letters, "

@@ -1,0 +1,71 @@
+"""The official track kit (issue 49, item 1, first slice): ``@kit = nxp`` makes the kit's
+pieces the defaults, EXTENDER, and the rules' training sets S and M as example layouts."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+import shapely
+
+from pieces import KITS, PARAMS, PieceType
+from trackgen.chain import chain as chain_layout
+from trackgen.errors import LayoutError
+from trackgen.export import track_geometry
+from trackgen.layout import load_layout, parse_layout
+
+REPO = Path(__file__).resolve().parents[1]
+OVAL = "START_FINISH\nTURN_LEFT x4\nSTRAIGHT\nTURN_LEFT x4\n"
+
+
+def test_the_kit_sets_the_pieces_and_the_road_and_given_values_win():
+    lay = parse_layout("@kit = NXP\n" + OVAL + "STRAIGHT length=1\nEXTENDER\n")
+    assert lay.kit == "nxp"
+    assert (lay.settings.lane_width_m, lay.settings.edge_width_m) == (0.51, 0.02)  # 0.55 over the lines
+    kw = [lay.piece_kwargs(e) for e in lay.entries]
+    assert kw[0] == {"length_m": 0.72, "mark_length_m": 0.02}
+    assert kw[1] == {"radius_m": 0.445, "angle_rad": pytest.approx(math.radians(45.0))}
+    assert kw[-2] == {"length_m": 1.0} and kw[-1] == {"length_m": 0.17}
+    mine = parse_layout("@kit = nxp\n@lane_width = 0.5\nTURN_LEFT radius=0.6 angle=90\n")
+    assert mine.settings.lane_width_m == 0.5 and mine.piece_kwargs(mine.entries[0]) == {
+        "radius_m": 0.6, "angle_rad": pytest.approx(math.pi / 2)}
+
+
+def test_without_the_kit_nothing_changes():
+    lay = parse_layout(OVAL)
+    assert lay.kit is None and lay.piece_kwargs(lay.entries[0]) == {}
+    assert PARAMS[PieceType.STRAIGHT]["length"].default == 1.0
+
+
+def test_an_unknown_kit_is_a_one_line_error():
+    with pytest.raises(LayoutError) as err:
+        parse_layout("@kit = nxpp\n" + OVAL, path="t.txt")
+    assert str(err.value) == "t.txt:1: @kit = 'nxpp': expected one of nxp; did you mean nxp?"
+
+
+@pytest.mark.parametrize("name, size_m, curves, straights", [("kit_S", (2.16, 1.44), 8, 2),
+                                                            ("kit_M", (3.77, 2.33), 12, 4)])
+def test_the_training_sets_have_the_rules_envelopes(name, size_m, curves, straights):
+    """Rules summary section 1.3: S is an oval 2160 x 1440 mm, M option 1 a figure 8
+    3770 x 2330 mm (the kit's intersection counted as CROSSROADS + an EXTENDER each arm)."""
+    lay = load_layout(REPO / "examples" / f"{name}.txt")
+    track = chain_layout(lay)
+    assert track.closure_error()[0] < 1e-9
+    x0, y0, x1, y1 = track_geometry(track).road.bounds
+    assert (x1 - x0, y1 - y0) == pytest.approx(size_m, abs=1e-6)
+    kinds = [e.kind for e in lay.entries]
+    assert sum(k in (PieceType.TURN_LEFT, PieceType.TURN_RIGHT) for k in kinds) == curves
+    assert sum(k in (PieceType.STRAIGHT, PieceType.START_FINISH) for k in kinds) == straights
+    if name == "kit_S":   # "lane-centre lap about 4.24 m (derived: 2 x 720 + 2 pi 445)"
+        assert track.length_m == pytest.approx(2 * 0.72 + 2 * math.pi * 0.445, abs=1e-3)
+
+
+def test_the_kit_cites_its_source():
+    assert "nxp-cup-rules.md" in KITS["nxp"].source
+
+
+def test_the_line_follower_laps_the_kit_oval():
+    from simrunner.run.runner import drive
+
+    r = drive(REPO / "examples" / "line_follower.py", track=REPO / "examples" / "kit_S.txt", laps=2, seed=0)
+    assert r.outcome == "finished", r.message
