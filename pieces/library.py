@@ -211,6 +211,44 @@ def extender(*, length_m: float = 0.17, settings: TrackSettings = DEFAULT_SETTIN
     return _straight(PieceType.EXTENDER, length_m, settings)
 
 
+def _speed_limit(kind: PieceType, stripes: int, length_m: float, stripe_length_m: float,
+                 stripe_width_m: float, settings: TrackSettings) -> Piece:
+    s = _check_settings(settings)
+    length_m = check_range("length_m", length_m, 0.0)
+    stripe_length_m = check_range("stripe_length_m", stripe_length_m, 0.0, length_m, hi_open=True,
+                                  why="shorter than the piece")
+    h = s.lane_width_m / 2.0
+    across = (2 * stripes - 1) * stripe_width_m  # stripes and the gaps between them (gap = stripe width)
+    check_range("stripe_width_m", stripe_width_m, 0.0, s.lane_width_m / (2 * stripes - 1), hi_open=True,
+                why=f"{stripes} stripes and their gaps inside the lane")
+    x0 = (length_m - stripe_length_m) / 2.0
+    marks = [rect(x0, -across / 2 + 2 * i * stripe_width_m, x0 + stripe_length_m,
+                  -across / 2 + (2 * i + 1) * stripe_width_m) for i in range(stripes)]
+    marking = shapely.MultiPolygon(marks)
+    return Piece(
+        kind=kind, settings=s,
+        params={"length_m": length_m, "stripe_length_m": stripe_length_m, "stripe_width_m": stripe_width_m},
+        lane=shapely.difference(rect(0.0, -h, length_m, h), marking), edges=_straight_edges(length_m, s),
+        marking=marking, centreline=[[0.0, 0.0], [length_m, 0.0]],
+        ports={"entry": Pose2(), "exit": Pose2(length_m, 0.0, 0.0)},
+        length_m=length_m,
+    )
+
+
+def speed_limit_start(*, length_m: float = 0.72, stripe_length_m: float = 0.30, stripe_width_m: float = 0.05,
+                      settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """SPEED_LIMIT_START: a straight with the rules' 4 black stripes along the lane (each
+    ``stripe_length_m`` x ``stripe_width_m``, gaps as wide as a stripe, centred on the piece):
+    the speed-limit zone begins (../shared/reference/nxp-cup-rules.md, section 1.2)."""
+    return _speed_limit(PieceType.SPEED_LIMIT_START, 4, length_m, stripe_length_m, stripe_width_m, settings)
+
+
+def speed_limit_end(*, length_m: float = 0.72, stripe_length_m: float = 0.30, stripe_width_m: float = 0.05,
+                    settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """SPEED_LIMIT_END: as :func:`speed_limit_start` with 3 stripes: the zone ends."""
+    return _speed_limit(PieceType.SPEED_LIMIT_END, 3, length_m, stripe_length_m, stripe_width_m, settings)
+
+
 _BUILDERS: Mapping[PieceType, Callable[..., Piece]] = {
     PieceType.STRAIGHT: straight,
     PieceType.STRAIGHT_SHORT: straight_short,
@@ -221,6 +259,8 @@ _BUILDERS: Mapping[PieceType, Callable[..., Piece]] = {
     PieceType.CHICANE_RIGHT: chicane_right,
     PieceType.START_FINISH: start_finish,
     PieceType.EXTENDER: extender,
+    PieceType.SPEED_LIMIT_START: speed_limit_start,
+    PieceType.SPEED_LIMIT_END: speed_limit_end,
 }
 
 

@@ -31,6 +31,8 @@ class PieceType(enum.Enum):
     CHICANE_RIGHT = "CHICANE_RIGHT"
     START_FINISH = "START_FINISH"
     EXTENDER = "EXTENDER"
+    SPEED_LIMIT_START = "SPEED_LIMIT_START"
+    SPEED_LIMIT_END = "SPEED_LIMIT_END"
 
 
 def _identity(value: float) -> float:
@@ -122,6 +124,14 @@ PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
     PieceType.START_FINISH: MappingProxyType({"length": _m("length", 1.0),
                                               "mark_length": _m("mark_length", 0.05)}),
     PieceType.EXTENDER: MappingProxyType({"length": _m("length", 0.17)}),
+    # the rules' speed-limit pieces: 4 (start) or 3 (end) stripes along the lane, 0.30 x 0.05 m
+    # with 0.05 m gaps, centred (../shared/reference/nxp-cup-rules.md, section 1.2)
+    PieceType.SPEED_LIMIT_START: MappingProxyType({"length": _m("length", 0.72),
+                                                   "stripe_length": _m("stripe_length", 0.30),
+                                                   "stripe_width": _m("stripe_width", 0.05)}),
+    PieceType.SPEED_LIMIT_END: MappingProxyType({"length": _m("length", 0.72),
+                                                 "stripe_length": _m("stripe_length", 0.30),
+                                                 "stripe_width": _m("stripe_width", 0.05)}),
 })
 
 

@@ -69,3 +69,31 @@ def test_the_line_follower_laps_the_kit_oval():
 
     r = drive(REPO / "examples" / "line_follower.py", track=REPO / "examples" / "kit_S.txt", laps=2, seed=0)
     assert r.outcome == "finished", r.message
+
+
+def test_the_speed_limit_pieces_carry_the_rules_stripes():
+    """Rules summary section 1.2: 4 (start) or 3 (end) stripes of 300 x 50 mm along the lane,
+    50 mm gaps, centred across (80 / 130 mm to each edge line), 210 mm from each end."""
+    from pieces import speed_limit_end, speed_limit_start
+    from pieces.spec import TrackSettings
+
+    kit = TrackSettings(lane_width_m=0.51, edge_width_m=0.02)
+    for make, n, to_line in ((speed_limit_start, 4, 0.08), (speed_limit_end, 3, 0.13)):
+        p = make(settings=kit)
+        parts = list(p.marking.geoms)
+        assert len(parts) == n
+        for g in parts:
+            x0, y0, x1, y1 = g.bounds
+            assert (x0, 0.72 - x1, x1 - x0, y1 - y0) == pytest.approx((0.21, 0.21, 0.30, 0.05))
+        y_min, y_max = p.marking.bounds[1], p.marking.bounds[3]
+        assert (0.255 + y_min, 0.255 - y_max) == pytest.approx((to_line, to_line))
+        assert p.lane.intersection(p.marking).area == pytest.approx(0.0, abs=1e-12)
+    lay = load_layout(REPO / "examples" / "kit_speed_limit.txt")
+    x0, y0, x1, y1 = track_geometry(chain_layout(lay)).road.bounds
+    assert (x1 - x0, y1 - y0) == pytest.approx((2.88, 1.44), abs=1e-6)
+
+
+def test_too_many_stripes_for_the_lane_is_a_one_line_error():
+    with pytest.raises(LayoutError) as err:
+        chain_layout(parse_layout("@kit = nxp\nSPEED_LIMIT_START stripe_width=0.2\n", path="t.txt"))
+    assert "t.txt:2:" in str(err.value) and "stripe_width=0.2" in str(err.value)

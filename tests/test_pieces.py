@@ -45,7 +45,8 @@ def test_meshes_watertight_and_volume_matches_area(kind):
         assert mesh.volume == pytest.approx(geom.area * t, rel=1e-6)
         assert mesh.bounds[0][2] == pytest.approx(0.0, abs=1e-12)
         assert mesh.bounds[1][2] == pytest.approx(t, abs=1e-12)
-    assert (piece.marking is None) == (kind is not START_FINISH)
+    marked = (START_FINISH, PieceType.SPEED_LIMIT_START, PieceType.SPEED_LIMIT_END)
+    assert (piece.marking is None) == (kind not in marked)
 
 
 @pytest.mark.parametrize("kind", ALL_KINDS, ids=lambda k: k.name)
@@ -85,7 +86,8 @@ def test_lane_and_edge_widths_perpendicular_to_centreline(kind, fraction):
         fraction = {0.1: 0.005, 0.8: 0.995}.get(fraction)
         if fraction is None:
             pytest.skip("inside the crossing the lane is the other road")
-    assert _normal_probe_lengths(piece, piece.lane, fraction) == pytest.approx([s.lane_width_m], abs=TOL_M)
+    surface = piece.lane if piece.marking is None else shapely.union(piece.lane, piece.marking)  # marks lie on the lane
+    assert _normal_probe_lengths(piece, surface, fraction) == pytest.approx([s.lane_width_m], abs=TOL_M)
     assert _normal_probe_lengths(piece, piece.edges, fraction) == pytest.approx([s.edge_width_m] * 2, abs=TOL_M)
 
 
@@ -372,6 +374,10 @@ def random_pieces(draw):
         params = {"length_m": length, "mark_length_m": draw(st.floats(0.01, 0.9)) * length}
     elif kind is CROSSROADS:
         params = {"length_m": road + draw(st.floats(0.0, 1.0))}
+    elif kind in (PieceType.SPEED_LIMIT_START, PieceType.SPEED_LIMIT_END):
+        length = draw(st.floats(0.1, 3.0))
+        params = {"length_m": length, "stripe_length_m": draw(st.floats(0.05, 0.95)) * length,
+                  "stripe_width_m": draw(st.floats(0.05, 0.95)) * s.lane_width_m / 7}
     elif kind in (TURN_LEFT, TURN_RIGHT):
         params = {"radius_m": road / 2 + draw(st.floats(0.01, 3.0)),
                   "angle_rad": draw(st.floats(0.01, math.pi))}

@@ -23,6 +23,7 @@ Pieces (names are case-insensitive) and their parameters, in the units people ty
     CHICANE_RIGHT   length=1.0 offset=0.2
     START_FINISH    length=1.0 mark_length=0.05
     EXTENDER        length=0.17
+    SPEED_LIMIT_START length=0.72 stripe_length=0.30 stripe_width=0.05   (4 stripes; _END: 3)
 
 Track-wide settings, each at most once, anywhere in the file (conventionally at the top):
 
