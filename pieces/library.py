@@ -61,26 +61,45 @@ def straight_short(*, length_m: float = 0.5, settings: TrackSettings = DEFAULT_S
     return _straight(PieceType.STRAIGHT_SHORT, length_m, settings)
 
 
-def start_finish(*, length_m: float = 1.0, mark_length_m: float = 0.05,
+def start_finish(*, length_m: float = 1.0, mark_length_m: float = 0.05, mark_gap_m: float = 0.0,
+                 mark_inset_m: float = 0.0, mark_offset_m: float = 0.0,
                  settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
-    """START_FINISH: a straight with a black bar ``mark_length_m`` long (along travel)
-    across the full lane width, centred at mid-piece. The bar is cut out of the lane (the
-    lane is two rectangles), so lane, edges and marking footprints are disjoint.
-    Extra port ``"finish"`` = ``Pose2(length_m / 2, 0, 0)``: the centre of the bar."""
+    """START_FINISH: a straight with a black bar ``mark_length_m`` long (along travel) across
+    the lane, its centre ``mark_offset_m`` after mid-piece (negative: before). ``mark_gap_m``
+    leaves a white gap that wide in the lane's centre (two bars, as the rules' mark) and
+    ``mark_inset_m`` that much white between each bar and its edge line; by default one bar
+    across the full lane at mid-piece. The bars are cut out of the lane, so lane, edges and
+    marking footprints are disjoint. Extra port ``"finish"``: the centre of the mark."""
     s = _check_settings(settings)
     length_m = check_range("length_m", length_m, 0.0)
     mark_length_m = check_range("mark_length_m", mark_length_m, 0.0, length_m, hi_open=True,
                                 why="shorter than the piece")
+    reach = (length_m - mark_length_m) / 2.0
+    mark_offset_m = check_range("mark_offset_m", mark_offset_m, -reach, reach, lo_open=False,
+                                why="the mark on the piece")
     h = s.lane_width_m / 2.0
-    x0, x1 = length_m / 2.0 - mark_length_m / 2.0, length_m / 2.0 + mark_length_m / 2.0
+    mark_gap_m = check_range("mark_gap_m", mark_gap_m, 0.0, s.lane_width_m, lo_open=False, hi_open=True,
+                             why="narrower than the lane")
+    mark_inset_m = check_range("mark_inset_m", mark_inset_m, 0.0, h - mark_gap_m / 2.0, lo_open=False,
+                               hi_open=True, why="the bars wider than nothing: mark_gap / 2 + mark_inset < lane / 2")
+    c = length_m / 2.0 + mark_offset_m
+    x0, x1 = c - mark_length_m / 2.0, c + mark_length_m / 2.0
+    params = {"length_m": length_m, "mark_length_m": mark_length_m}
+    if (mark_gap_m, mark_inset_m, mark_offset_m) == (0.0, 0.0, 0.0):  # one bar across the lane
+        lane = shapely.MultiPolygon([rect(0.0, -h, x0, h), rect(x1, -h, length_m, h)])
+        marking = rect(x0, -h, x1, h)
+    else:
+        params.update(mark_gap_m=mark_gap_m, mark_inset_m=mark_inset_m, mark_offset_m=mark_offset_m)
+        g, a = mark_gap_m / 2.0, h - mark_inset_m
+        bars = [rect(x0, -a, x1, -g), rect(x0, g, x1, a)] if g > 0.0 else [rect(x0, -a, x1, a)]
+        marking = shapely.MultiPolygon(bars) if len(bars) > 1 else bars[0]
+        lane = shapely.difference(rect(0.0, -h, length_m, h), marking)
     return Piece(
-        kind=PieceType.START_FINISH, settings=s,
-        params={"length_m": length_m, "mark_length_m": mark_length_m},
-        lane=shapely.MultiPolygon([rect(0.0, -h, x0, h), rect(x1, -h, length_m, h)]),
-        edges=_straight_edges(length_m, s), marking=rect(x0, -h, x1, h),
+        kind=PieceType.START_FINISH, settings=s, params=params,
+        lane=lane, edges=_straight_edges(length_m, s), marking=marking,
         centreline=[[0.0, 0.0], [length_m, 0.0]],
         ports={"entry": Pose2(), "exit": Pose2(length_m, 0.0, 0.0),
-               "finish": Pose2(length_m / 2.0, 0.0, 0.0)},
+               "finish": Pose2(c, 0.0, 0.0)},
         length_m=length_m,
     )
 

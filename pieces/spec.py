@@ -122,7 +122,10 @@ PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
     PieceType.CHICANE_LEFT: MappingProxyType({"length": _m("length", 1.0), "offset": _m("offset", 0.2)}),
     PieceType.CHICANE_RIGHT: MappingProxyType({"length": _m("length", 1.0), "offset": _m("offset", 0.2)}),
     PieceType.START_FINISH: MappingProxyType({"length": _m("length", 1.0),
-                                              "mark_length": _m("mark_length", 0.05)}),
+                                              "mark_length": _m("mark_length", 0.05),
+                                              "mark_gap": _m("mark_gap", 0.0, 0.0),
+                                              "mark_inset": _m("mark_inset", 0.0, 0.0),
+                                              "mark_offset": _m("mark_offset", 0.0, -MAX_LENGTH_M)}),
     PieceType.EXTENDER: MappingProxyType({"length": _m("length", 0.17)}),
     # the rules' speed-limit pieces: 4 (start) or 3 (end) stripes along the lane, 0.30 x 0.05 m
     # with 0.05 m gaps, centred (../shared/reference/nxp-cup-rules.md, section 1.2)
@@ -157,7 +160,10 @@ KITS: Mapping[str, Kit] = MappingProxyType({
         PieceType.CROSSROADS: MappingProxyType({"length": 0.55}),  # the 550 x 550 square (its stubs: EXTENDERs)
         PieceType.TURN_LEFT: _KIT_TURN,
         PieceType.TURN_RIGHT: _KIT_TURN,
-        PieceType.START_FINISH: MappingProxyType({"length": 0.72, "mark_length": 0.02}),
+        # two 20 x 94 mm bars, a 74 mm gap in the lane's centre, 124 mm of white to each line,
+        # their near edge 550 mm from the piece's entry (the rules do not say which end: ours)
+        PieceType.START_FINISH: MappingProxyType({"length": 0.72, "mark_length": 0.02, "mark_gap": 0.074,
+                                                  "mark_inset": 0.124, "mark_offset": 0.20}),
     }), MappingProxyType({"lane_width": 0.51, "edge_width": 0.02}),  # 550 over the lines, 20 mm lines inside
         _RULES),
 })

@@ -23,7 +23,8 @@ def test_the_kit_sets_the_pieces_and_the_road_and_given_values_win():
     assert lay.kit == "nxp"
     assert (lay.settings.lane_width_m, lay.settings.edge_width_m) == (0.51, 0.02)  # 0.55 over the lines
     kw = [lay.piece_kwargs(e) for e in lay.entries]
-    assert kw[0] == {"length_m": 0.72, "mark_length_m": 0.02}
+    assert kw[0] == {"length_m": 0.72, "mark_length_m": 0.02, "mark_gap_m": 0.074, "mark_inset_m": 0.124,
+                     "mark_offset_m": 0.2}
     assert kw[1] == {"radius_m": 0.445, "angle_rad": pytest.approx(math.radians(45.0))}
     assert kw[-2] == {"length_m": 1.0} and kw[-1] == {"length_m": 0.17}
     mine = parse_layout("@kit = nxp\n@lane_width = 0.5\nTURN_LEFT radius=0.6 angle=90\n")
@@ -97,3 +98,21 @@ def test_too_many_stripes_for_the_lane_is_a_one_line_error():
     with pytest.raises(LayoutError) as err:
         chain_layout(parse_layout("@kit = nxp\nSPEED_LIMIT_START stripe_width=0.2\n", path="t.txt"))
     assert "t.txt:2:" in str(err.value) and "stripe_width=0.2" in str(err.value)
+
+
+def test_the_kit_finish_mark_is_two_bars_with_a_gap_in_the_centre():
+    """Rules summary section 1.2: two bars 20 mm along x 94 mm across, a 74 mm gap in the
+    lane's centre, 124 mm of white to each line (20+124+94+74+94+124+20 = 550), 550 mm from
+    one end of the 720 mm piece (the entry, our choice); the lap is timed at the mark."""
+    lay = parse_layout("@kit = nxp\n" + OVAL)
+    track = chain_layout(lay)
+    sf = track.start_finish.piece
+    bars = sorted(g.bounds for g in sf.marking.geoms)
+    assert len(bars) == 2
+    (ax0, ay0, ax1, ay1), (bx0, by0, bx1, by1) = bars
+    assert (ax1 - ax0, ay1 - ay0, by1 - by0) == pytest.approx((0.02, 0.094, 0.094))
+    assert (by0 - ay1, 0.255 - by1, ay0 + 0.255, ax0) == pytest.approx((0.074, 0.124, 0.124, 0.55))
+    gate, half = track.finish_gate()
+    assert (gate.x_m, gate.y_m) == pytest.approx((0.56, 0.0)) and half == pytest.approx(0.275)
+    plain = chain_layout(parse_layout(OVAL)).start_finish.piece   # without the kit: one bar across
+    assert plain.marking.geom_type == "Polygon" and plain.ports["finish"].x_m == 0.5

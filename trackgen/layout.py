@@ -21,7 +21,7 @@ Pieces (names are case-insensitive) and their parameters, in the units people ty
     TURN_RIGHT      radius=0.8 angle=45
     CHICANE_LEFT    length=1.0 offset=0.2
     CHICANE_RIGHT   length=1.0 offset=0.2
-    START_FINISH    length=1.0 mark_length=0.05
+    START_FINISH    length=1.0 mark_length=0.05 mark_offset=0 mark_gap=0 mark_inset=0
     EXTENDER        length=0.17
     SPEED_LIMIT_START length=0.72 stripe_length=0.30 stripe_width=0.05   (4 stripes; _END: 3)
 
