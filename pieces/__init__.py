@@ -79,7 +79,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time these load on first
     from .library import (DEFAULT_SETTINGS, chicane, chicane_geometry, chicane_left, chicane_right,
                           crossroads, extender, make_piece, piece_from_layout, speed_limit_end,
                           speed_limit_start, start_finish, straight, straight_short, turn, turn_left,
-                          turn_right)
+                          turn_right, wave, wave_geometry)
     from .piece import Piece
 
 # Lazy exports (PEP 562): shapely loads with the first piece, trimesh and manifold3d with the
@@ -88,7 +88,7 @@ _EXPORTS = {"Piece": "pieces.piece", "mesh": None}
 _EXPORTS.update((name, "pieces.library") for name in (
     "DEFAULT_SETTINGS", "chicane", "chicane_geometry", "chicane_left", "chicane_right",
     "crossroads", "extender", "make_piece", "piece_from_layout", "speed_limit_end", "speed_limit_start",
-    "start_finish", "straight", "straight_short", "turn", "turn_left", "turn_right"))
+    "start_finish", "straight", "straight_short", "turn", "turn_left", "turn_right", "wave", "wave_geometry"))
 
 STRAIGHT = PieceType.STRAIGHT
 STRAIGHT_SHORT = PieceType.STRAIGHT_SHORT
@@ -101,15 +101,16 @@ START_FINISH = PieceType.START_FINISH
 EXTENDER = PieceType.EXTENDER
 SPEED_LIMIT_START = PieceType.SPEED_LIMIT_START
 SPEED_LIMIT_END = PieceType.SPEED_LIMIT_END
+WAVE = PieceType.WAVE
 
 __all__ = [
     "Pose2", "wrap_angle", "KITS", "Kit", "PARAMS", "SETTINGS_PARAMS", "ParamSpec", "PieceError", "PieceType",
     "TrackSettings", "Piece", "DEFAULT_SETTINGS", "chicane", "chicane_geometry", "chicane_left",
     "chicane_right", "crossroads", "extender", "make_piece", "piece_from_layout", "speed_limit_end",
-    "speed_limit_start", "start_finish", "straight",
+    "speed_limit_start", "start_finish", "straight", "wave", "wave_geometry",
     "straight_short", "turn", "turn_left", "turn_right", "mesh",
     "STRAIGHT", "STRAIGHT_SHORT", "CROSSROADS", "TURN_LEFT", "TURN_RIGHT", "CHICANE_LEFT",
-    "CHICANE_RIGHT", "START_FINISH", "EXTENDER", "SPEED_LIMIT_START", "SPEED_LIMIT_END",
+    "CHICANE_RIGHT", "START_FINISH", "EXTENDER", "SPEED_LIMIT_START", "SPEED_LIMIT_END", "WAVE",
 ]
 
 

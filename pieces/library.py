@@ -268,6 +268,48 @@ def speed_limit_end(*, length_m: float = 0.72, stripe_length_m: float = 0.30, st
     return _speed_limit(PieceType.SPEED_LIMIT_END, 3, length_m, stripe_length_m, stripe_width_m, settings)
 
 
+def wave_geometry(period_m: float, swing_m: float) -> tuple[float, float]:
+    """Arc angle ``theta = 2 atan(2 swing / period)`` (rad) and radius ``R = period / (4 sin
+    theta)`` (m) of the four arcs (left, right, right, left, each ``theta``) of one wave of
+    ``period_m`` that swings ``swing_m`` side to side and ends where it started across."""
+    theta = 2.0 * math.atan2(2.0 * swing_m, period_m)
+    return theta, period_m / (4.0 * math.sin(theta))
+
+
+def wave(*, length_m: float = 1.44, swing_m: float = 0.08557, settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """WAVE: the rules' chicane (../shared/reference/nxp-cup-rules.md, section 1.2): two waves
+    over ``length_m``, each four circular arcs of equal radius (left, right, right, left;
+    :func:`wave_geometry`), the lane swinging ``swing_m`` to the left and back; exit at
+    ``Pose2(length_m, 0, 0)``. The kit's: 1.44 m, swing 85.57 mm, arcs of R0.400 (its edge
+    lines are drawn as R400 arcs; here the centreline is, the lines follow it at the lane's
+    half width). ``min_radius_m`` is not the arcs' (tighter than the default car turns) but
+    that of the smoothest path a point can take through the lane, which swings
+    ``max(0, swing - lane width)``: infinite (straight) for the kit's wave."""
+    s = _check_settings(settings)
+    length_m = check_range("length_m", length_m, 0.0)
+    swing_m = check_range("swing_m", swing_m, 0.0)
+    theta, radius_m = wave_geometry(length_m / 2.0, swing_m)
+    half_road = s.road_width_m / 2.0
+    if not radius_m > half_road:
+        raise PieceError(f"swing_m={swing_m:g} with length_m={length_m:g}: arc radius {radius_m:.4g} m must "
+                         f"exceed half the road width {half_road:g} m (use a smaller swing or a longer piece)")
+    n = arc_segments(theta, radius_m + half_road, s.arc_tolerance_m)
+    pts, yaw = np.zeros((1, 2)), np.zeros(1)
+    for turn in (1, -1, -1, 1, 1, -1, -1, 1):
+        p, y = arc_samples(radius_m, theta, turn, n, start_xy=tuple(pts[-1]), start_yaw_rad=float(yaw[-1]))
+        pts, yaw = np.vstack([pts, p[1:]]), np.concatenate([yaw, y[1:]])
+    pts[-1], yaw[-1] = (length_m, 0.0), 0.0  # exact exit edge (rounding ~1e-16 otherwise)
+    lane, edges = road_bands(pts, yaw, s.lane_width_m, s.edge_width_m)
+    slack = max(0.0, swing_m - s.lane_width_m)
+    smooth = math.inf if slack == 0.0 else wave_geometry(length_m / 2.0, slack)[1]
+    return Piece(
+        kind=PieceType.WAVE, settings=s, params={"length_m": length_m, "swing_m": swing_m},
+        lane=lane, edges=edges, marking=None, centreline=pts,
+        ports={"entry": Pose2(), "exit": Pose2(length_m, 0.0, 0.0)},
+        length_m=8.0 * radius_m * theta, min_radius_m=smooth,
+    )
+
+
 _BUILDERS: Mapping[PieceType, Callable[..., Piece]] = {
     PieceType.STRAIGHT: straight,
     PieceType.STRAIGHT_SHORT: straight_short,
@@ -280,6 +322,7 @@ _BUILDERS: Mapping[PieceType, Callable[..., Piece]] = {
     PieceType.EXTENDER: extender,
     PieceType.SPEED_LIMIT_START: speed_limit_start,
     PieceType.SPEED_LIMIT_END: speed_limit_end,
+    PieceType.WAVE: wave,
 }
 
 

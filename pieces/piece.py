@@ -42,7 +42,8 @@ class Piece:
       ports: read-only mapping name -> :class:`Pose2`, heading in the direction of travel:
         ``"entry"`` (identity), ``"exit"``; crossroads also ``"side_in"``, ``"side_out"``.
       length_m: driving length of the centreline entry -> exit.
-      min_radius_m: tightest centreline radius (``math.inf`` for straight pieces).
+      min_radius_m: tightest centreline radius (``math.inf`` for straight pieces); for a WAVE
+        the tightest radius of the smoothest path through its lane (:func:`pieces.library.wave`).
     Equality and hash follow (kind, settings, params): a piece is a function of them.
     """
 

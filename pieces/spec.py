@@ -33,6 +33,7 @@ class PieceType(enum.Enum):
     EXTENDER = "EXTENDER"
     SPEED_LIMIT_START = "SPEED_LIMIT_START"
     SPEED_LIMIT_END = "SPEED_LIMIT_END"
+    WAVE = "WAVE"
 
 
 def _identity(value: float) -> float:
@@ -132,6 +133,9 @@ PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
     PieceType.SPEED_LIMIT_START: MappingProxyType({"length": _m("length", 0.72),
                                                    "stripe_length": _m("stripe_length", 0.30),
                                                    "stripe_width": _m("stripe_width", 0.05)}),
+    # the rules' chicane: two waves of R400 arcs, the lane swinging 85.57 mm side to side
+    # (envelope 635.57 of a 550 road; ../shared/reference/nxp-cup-rules.md, section 1.2)
+    PieceType.WAVE: MappingProxyType({"length": _m("length", 1.44), "swing": _m("swing", 0.08557)}),
     PieceType.SPEED_LIMIT_END: MappingProxyType({"length": _m("length", 0.72),
                                                  "stripe_length": _m("stripe_length", 0.30),
                                                  "stripe_width": _m("stripe_width", 0.05)}),

@@ -116,3 +116,23 @@ def test_the_kit_finish_mark_is_two_bars_with_a_gap_in_the_centre():
     assert (gate.x_m, gate.y_m) == pytest.approx((0.56, 0.0)) and half == pytest.approx(0.275)
     plain = chain_layout(parse_layout(OVAL)).start_finish.piece   # without the kit: one bar across
     assert plain.marking.geom_type == "Polygon" and plain.ports["finish"].x_m == 0.5
+
+
+def test_the_wave_is_the_rules_chicane_and_validates_by_its_smoothest_path():
+    """Rules summary section 1.2: 1440 mm, R400 arcs, envelope 635.57 mm of the 550 road (a
+    swing of 85.57 mm), about two waves; its arcs are tighter than the default car turns
+    (0.414 m), the smoothest path through its lane is straight."""
+    from pieces import wave
+    from pieces.spec import TrackSettings
+    from trackgen.build import validate_path as validate
+
+    p = wave(settings=TrackSettings(lane_width_m=0.51, edge_width_m=0.02))
+    x0, y0, x1, y1 = p.footprint.bounds
+    assert (x1 - x0, y1 - y0) == pytest.approx((1.44, 0.63557), abs=1e-9)
+    assert p.ports["exit"].x_m == 1.44 and p.ports["exit"].y_m == 0.0 and p.ports["exit"].yaw_rad == 0.0
+    assert p.min_radius_m == math.inf
+    from pieces import wave_geometry
+    assert wave_geometry(0.72, 0.08557)[1] == pytest.approx(0.400, abs=1e-4)
+    assert validate(REPO / "examples" / "kit_wave.txt") == []
+    steep = wave(length_m=4.0, swing_m=0.7)   # swings more than its lane: a curving path
+    assert 0.0 < steep.min_radius_m < math.inf

@@ -374,6 +374,9 @@ def random_pieces(draw):
         params = {"length_m": length, "mark_length_m": draw(st.floats(0.01, 0.9)) * length}
     elif kind is CROSSROADS:
         params = {"length_m": road + draw(st.floats(0.0, 1.0))}
+    elif kind is PieceType.WAVE:
+        length = draw(st.floats(0.3, 3.0))
+        params = {"length_m": length, "swing_m": draw(st.floats(0.001, 0.04)) * length}
     elif kind in (PieceType.SPEED_LIMIT_START, PieceType.SPEED_LIMIT_END):
         length = draw(st.floats(0.1, 3.0))
         params = {"length_m": length, "stripe_length_m": draw(st.floats(0.05, 0.95)) * length,

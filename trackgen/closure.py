@@ -23,7 +23,7 @@ from .chain import PlacedPiece, Track
 _TURNS = {PieceType.TURN_LEFT: 1.0, PieceType.TURN_RIGHT: -1.0}
 _RUNS = (PieceType.STRAIGHT, PieceType.STRAIGHT_SHORT, PieceType.START_FINISH,
          PieceType.CHICANE_LEFT, PieceType.CHICANE_RIGHT, PieceType.EXTENDER,
-         PieceType.SPEED_LIMIT_START, PieceType.SPEED_LIMIT_END)
+         PieceType.SPEED_LIMIT_START, PieceType.SPEED_LIMIT_END, PieceType.WAVE)
 """Pieces whose exit heading is their entry heading and whose length moves the exit along it."""
 _MAX_LINES = 5
 

@@ -24,6 +24,7 @@ Pieces (names are case-insensitive) and their parameters, in the units people ty
     START_FINISH    length=1.0 mark_length=0.05 mark_offset=0 mark_gap=0 mark_inset=0
     EXTENDER        length=0.17
     SPEED_LIMIT_START length=0.72 stripe_length=0.30 stripe_width=0.05   (4 stripes; _END: 3)
+    WAVE            length=1.44 swing=0.08557
 
 Track-wide settings, each at most once, anywhere in the file (conventionally at the top):
 

@@ -238,8 +238,10 @@ def _check_radius(track: Track, path: str, min_turn_radius_m: float) -> list[Pro
     for p in track.physical:
         r = p.piece.min_radius_m
         if r < min_turn_radius_m - RADIUS_TOL_M:
+            what = ("the smoothest path through its lane has radius" if p.kind is PieceType.WAVE
+                    else "centreline radius")
             out.append(Problem(path, p.line, (
-                f"{p.entry.describe()} (piece {p.index + 1}): centreline radius {r:.3f} m is "
+                f"{p.entry.describe()} (piece {p.index + 1}): {what} {r:.3f} m is "
                 f"tighter than the car's minimum turning radius {min_turn_radius_m:.3f} m "
                 "(wheelbase / tan(steering limit), thesis eq. 5.1)"), "turn_radius"))
     return out
