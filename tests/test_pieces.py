@@ -376,7 +376,10 @@ def random_pieces(draw):
         params = {"length_m": road + draw(st.floats(0.0, 1.0))}
     elif kind is PieceType.WAVE:
         length = draw(st.floats(0.3, 3.0))
-        params = {"length_m": length, "swing_m": draw(st.floats(0.001, 0.04)) * length}
+        swing = draw(st.floats(0.001, 0.04)) * length
+        if pieces.wave_geometry(length / 2, swing)[1] <= road / 2 + 1e-3:
+            swing = (length / 2) ** 2 / (16.0 * (road + 1.0))  # gentle: R ~ road + 1 m
+        params = {"length_m": length, "swing_m": swing}
     elif kind in (PieceType.SPEED_LIMIT_START, PieceType.SPEED_LIMIT_END):
         length = draw(st.floats(0.1, 3.0))
         params = {"length_m": length, "stripe_length_m": draw(st.floats(0.05, 0.95)) * length,
