@@ -219,16 +219,17 @@ def from_json(doc, where: str) -> TrackLighting:
 
 
 # -- SDF -------------------------------------------------------------------------------------
-def _q(tag: str) -> str:
+def nxpcup_tag(tag: str) -> str:
+    """``tag`` in our XML namespace (``{NS}tag``), for ElementTree (shared with worlds.marks)."""
     return f"{{{NS}}}{tag}"
 
 
-def _ours(el: ET.Element | None, tag: str) -> ET.Element | None:
+def nxpcup_child(el: ET.Element | None, tag: str) -> ET.Element | None:
     """The child ``nxpcup:tag`` of ``el``: namespace-resolved (``{NS}tag``) or, from a parser
     that keeps prefixes (worlds.sdf_xml), ``nxpcup:tag``."""
     if el is None:
         return None
-    found = el.find(_q(tag))
+    found = el.find(nxpcup_tag(tag))
     return found if found is not None else el.find(f"nxpcup:{tag}")
 
 
@@ -255,14 +256,14 @@ def write_sdf(world: ET.Element, lighting: TrackLighting, fmt) -> None:
             ET.SubElement(spot, "inner_angle").text = fmt(SPOT_EDGE * half)
             ET.SubElement(spot, "outer_angle").text = fmt(half)
             ET.SubElement(spot, "falloff").text = fmt(1.0)
-        ET.SubElement(el, _q("intensity_cd")).text = fmt(light.intensity_cd)
-    info = ET.SubElement(world, _q("lighting"))
+        ET.SubElement(el, nxpcup_tag("intensity_cd")).text = fmt(light.intensity_cd)
+    info = ET.SubElement(world, nxpcup_tag("lighting"))
     for key in ("ambient_lux", "lane_reflectance", "line_reflectance", "floor_reflectance", "specular"):
-        ET.SubElement(info, _q(key)).text = fmt(getattr(lighting, key))
+        ET.SubElement(info, nxpcup_tag(key)).text = fmt(getattr(lighting, key))
     for shade in lighting.shades:
-        el = ET.SubElement(info, _q("shade"))
+        el = ET.SubElement(info, nxpcup_tag("shade"))
         for key in SHADE_FIELDS:
-            ET.SubElement(el, _q(key)).text = fmt(getattr(shade, key))
+            ET.SubElement(el, nxpcup_tag(key)).text = fmt(getattr(shade, key))
 
 
 def _gray(text: str | None) -> float:
@@ -273,7 +274,8 @@ def _gray(text: str | None) -> float:
         return 1.0
 
 
-def _float(el: ET.Element | None, default: float | None = None) -> float | None:
+def float_of(el: ET.Element | None, default: float | None = None) -> float | None:
+    """The first number of ``el``'s text, or ``default`` (no element, no text, not a finite number)."""
     if el is None or el.text is None:
         return default
     try:
@@ -293,32 +295,32 @@ def from_sdf_world(world: ET.Element, pose_of) -> TrackLighting | None:
     hall's ambient stands for it), and a point or spot light without ``<nxpcup:intensity_cd>``
     has ``GAZEBO_LUX x (mean of its diffuse RGB)`` candela (500 lux one metre below a white
     one). ``pose_of(el)``: the world position (x, y, z) of a light element."""
-    info = _ours(world, "lighting")
+    info = nxpcup_child(world, "lighting")
     lamps = [el for el in world.findall("light") if el.get("type", "point") in ("point", "spot")]
     if info is None and not lamps:
         return None
     d = TrackLighting()
-    ambient = _float(_ours(info, "ambient_lux"), d.ambient_lux) if info is not None else d.ambient_lux
+    ambient = float_of(nxpcup_child(info, "ambient_lux"), d.ambient_lux) if info is not None else d.ambient_lux
     lights = []
     for el in lamps:
         gray = _gray((el.find("diffuse").text if el.find("diffuse") is not None else None))
         x, y, z = (float(v) for v in pose_of(el))
-        cd = _float(_ours(el, "intensity_cd"), GAZEBO_LUX * gray)
+        cd = float_of(nxpcup_child(el, "intensity_cd"), GAZEBO_LUX * gray)
         cone = None
         if el.get("type") == "spot":
-            outer = _float(el.find("spot/outer_angle") if el.find("spot") is not None else None)
+            outer = float_of(el.find("spot/outer_angle") if el.find("spot") is not None else None)
             cone = min(max(math.degrees(2.0 * outer), LIMITS["cone_deg"][0]), LIMITS["cone_deg"][1]) \
                 if outer is not None else 90.0
         lights.append(Light(x, y, z, max(cd, 0.0), cone))
 
     def value(key: str, default: float) -> float:  # a fraction: clamped to [0, 1]
-        v = default if info is None else _float(_ours(info, key), default)
+        v = default if info is None else float_of(nxpcup_child(info, key), default)
         return min(max(v, 0.0), 1.0)
 
     shades = []
     if info is not None:
-        for el in info.findall(_q("shade")) + info.findall("nxpcup:shade"):
-            numbers = [_float(_ours(el, key)) for key in SHADE_FIELDS]
+        for el in info.findall(nxpcup_tag("shade")) + info.findall("nxpcup:shade"):
+            numbers = [float_of(nxpcup_child(el, key)) for key in SHADE_FIELDS]
             if None not in numbers:  # a shade without all its numbers is not ours to guess
                 x, y, length, width, heading, transmission = numbers
                 shades.append(Shade(x, y, max(length, 0.0), max(width, 0.0), heading,

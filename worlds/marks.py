@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import shapely
 
-from worlds.lighting import _float, _ours, _q
+from worlds.lighting import float_of, nxpcup_child, nxpcup_tag
 
 CODE_BITS = 4
 MIN_ELEMENTS = 7        # the firmware's fewest bars and gaps of a code (LINE_MMC_MIN_EDGES - 1)
@@ -132,9 +132,9 @@ def write_sdf(world: ET.Element, barcodes: tuple[Barcode, ...], fmt, surface_z_m
     if not barcodes:
         return
     for b in barcodes:
-        el = ET.SubElement(world, _q("barcode"))
+        el = ET.SubElement(world, nxpcup_tag("barcode"))
         for key in FIELDS:
-            ET.SubElement(el, _q(key)).text = str(b.code) if key == "code" else fmt(getattr(b, key))
+            ET.SubElement(el, nxpcup_tag(key)).text = str(b.code) if key == "code" else fmt(getattr(b, key))
     model = ET.SubElement(world, "model", name="barcodes")
     ET.SubElement(model, "static").text = "true"
     link = ET.SubElement(model, "link", name="cards")
@@ -162,8 +162,8 @@ def _box_visual(link: ET.Element, name: str, poly: shapely.Polygon, yaw: float, 
 def from_sdf_world(world: ET.Element) -> tuple[Barcode, ...]:
     """The ``<nxpcup:barcode>`` elements of an SDF ``<world>`` (those with every number valid)."""
     out = []
-    for el in world.findall(_q("barcode")) + world.findall("nxpcup:barcode"):
-        values = [_float(_ours(el, key)) for key in FIELDS]
+    for el in world.findall(nxpcup_tag("barcode")) + world.findall("nxpcup:barcode"):
+        values = [float_of(nxpcup_child(el, key)) for key in FIELDS]
         if None in values:
             continue
         try:

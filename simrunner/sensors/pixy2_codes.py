@@ -171,7 +171,8 @@ def find_codes(frame: np.ndarray, *, threshold: float, d: int, row_step: int) ->
         votes: dict[int, int] = {}
         for *_, code in cl:
             votes[code] = votes.get(code, 0) + 1
-        code, n = max(votes.items(), key=lambda kv: (kv[1], -list(votes).index(kv[0])))
+        code = max(votes, key=votes.get)  # the first code to reach the most votes
+        n = votes[code]
         if n < 2 or 2 * n < len(cl):
             continue
         top, bottom = cl[0][0] * row_step, cl[-1][0] * row_step
