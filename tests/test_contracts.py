@@ -76,7 +76,7 @@ def test_outcomes_and_event_kinds_are_string_enums():
     assert Outcome.FINISHED == "finished" and f"{Outcome.OFF_TRACK}" == "off_track"
     assert Outcome.FINISHED.ok and Outcome.CONTROLLER_RETURNED.ok and not Outcome.TIMEOUT.ok
     assert {k.value for k in EventKind} == {"lap_start", "lap", "lap_short", "finished",
-                                            "gate_backward", "off_track", "on_track"}
+                                            "gate_backward", "off_track", "on_track", "off_course"}
 
 
 def test_recorder_closes_each_row_with_the_command_of_the_first_step_after_it():

@@ -187,8 +187,18 @@ def test_driving_off_the_track_ends_the_run(tmp_path):
             while True:
                 s.get_image()
         """)
+    # the car starts before the crossroads: turning left there leaves the course first
     r = drive(ctrl, time_limit_s=10.0)
-    assert r.outcome == "off_track" and r.sim_time_s < 5.0
+    assert r.outcome == "off_course" and r.message.startswith("turned at CROSSROADS (piece 0, line 7)")
+    # from the start gate of a plain oval it leaves the road: 3 wheels off end the run
+    # (the rules), 1 wheel with the strict rule, earlier; the first wheel off is a warning
+    oval = Path(__file__).resolve().parents[1] / "examples" / "kit_S.txt"
+    rules = drive(ctrl, track=oval, time_limit_s=10.0)
+    strict = drive(ctrl, track=oval, time_limit_s=10.0, off_track_wheels=1)
+    assert rules.outcome == strict.outcome == "off_track"
+    assert strict.sim_time_s < rules.sim_time_s < 5.0
+    assert any("fewer than 3 wheels off the road" in w for w in rules.warnings)
+    assert not strict.warnings
 
 
 def test_callable_controller_and_thesis_style_spinner_constructor():

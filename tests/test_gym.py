@@ -18,7 +18,7 @@ gymnasium = pytest.importorskip("gymnasium")
 import simrunner.gym  # noqa: E402,F401 - registers NXPCup-v0
 from simrunner.errors import SimError  # noqa: E402
 from simrunner.gym.env import NXPCupEnv  # noqa: E402
-from simrunner.gym.progress import CentrelineProgress  # noqa: E402
+from simrunner.track.progress import CentrelineProgress  # noqa: E402
 from simrunner.run.runner import default_track, drive  # noqa: E402
 from vehicle.description import CarDescription  # noqa: E402
 

@@ -203,24 +203,48 @@ def _polyline_poses(points: list[tuple[float, float]], step_m: float = 0.02) -> 
     return poses
 
 
-def test_shortcut_skipping_a_loop_of_the_figure8_is_not_a_lap():
-    """The thesis figure-8: turning off at the crossroads and driving only the lower loop
-    (twice, so the distance alone would pass) is flagged, not credited as a lap."""
-    from simrunner.track.load import load_track
-
-    track = load_track(Path(__file__).resolve().parents[1] / "examples" / "thesis_figure8.txt")
+def _lower_loop_poses() -> list[Pose2]:
+    """The thesis figure-8 driven the wrong way: turning right at the crossroads and driving
+    only the lower loop (three times, so the distance alone would pass)."""
     # lower loop: crossroads centre (0.3, 0) south to (0.3, -0.8), 270 deg right turn of
     # radius 0.8 about (-0.5, -0.8), back east along y = 0 through the start gate at x = 0
     arc = [(-0.5 + 0.8 * math.cos(a), -0.8 + 0.8 * math.sin(a))
            for a in np.linspace(0.0, -1.5 * math.pi, 120)]
     loop = [(0.3, 0.0), (0.3, -0.8)] + arc[1:] + [(0.3, 0.0)]
-    poses = _polyline_poses([(0.0, 0.0)] + loop + loop[1:] + loop[1:])
+    return _polyline_poses([(0.0, 0.0)] + loop + loop[1:] + loop[1:])
+
+
+def test_turning_at_the_crossroads_leaves_the_course_and_names_the_piece():
+    from simrunner.track.load import load_track
+
+    track = load_track(Path(__file__).resolve().parents[1] / "examples" / "thesis_figure8.txt")
     judge = Judge(track, laps=1)
     events = []
-    for i, p in enumerate(poses):
+    for i, p in enumerate(_lower_loop_poses()):
         events += judge.update(i * 0.01, p, wheels(p))
     kinds = [e.kind for e in events]
     assert "lap" not in kinds and judge.laps_completed == 0
+    off = [e for e in events if e.kind == "off_course"]
+    # the layout's first line is the crossroads (examples/thesis_figure8.txt, line 7)
+    assert off and off[0].text.startswith("turned at CROSSROADS (piece 0, line 7)")
+    assert judge.off_course == "turned at CROSSROADS (piece 0, line 7)"
+    # the car turned 0.3 + 0.15 m past the crossing's centre: caught on the crossing road
+    assert 0.3 < -float(off[0].text.split(", ")[-1].split(")")[0]) < 0.6
+    short = [e for e in events if e.kind == "lap_short"]
+    assert short and "after the car turned at CROSSROADS" in short[0].text
+
+
+def test_without_a_course_the_coverage_rule_catches_the_shortcut():
+    import dataclasses
+
+    from simrunner.track.load import load_track
+
+    track = load_track(Path(__file__).resolve().parents[1] / "examples" / "thesis_figure8.txt")
+    judge = Judge(dataclasses.replace(track, course=None), laps=1)
+    events = []
+    for i, p in enumerate(_lower_loop_poses()):
+        events += judge.update(i * 0.01, p, wheels(p))
+    assert judge.laps_completed == 0 and "off_course" not in [e.kind for e in events]
     short = [e for e in events if e.kind == "lap_short"]
     assert short and "% of the track" in short[0].text
     assert judge.coverage < 0.8

@@ -171,14 +171,17 @@ def test_keep_driving_records_leaving_the_track(tmp_path):
             while True:
                 s.get_image()
         """)
-    stopped = drive(ctrl, time_limit_s=6.0)
+    oval = Path(__file__).resolve().parents[1] / "examples" / "kit_S.txt"
+    stopped = drive(ctrl, track=oval, time_limit_s=6.0, off_track_wheels=1)
     assert stopped.outcome == "off_track"
-    kept = drive(ctrl, time_limit_s=6.0, keep_driving=True, csv=tmp_path / "t.csv")
+    kept = drive(ctrl, track=oval, time_limit_s=6.0, keep_driving=True, csv=tmp_path / "t.csv")
     assert kept.outcome == "timeout" and kept.sim_time_s == pytest.approx(6.0)
     log = read_log(tmp_path / "t.csv")
     assert log.off_track.any()
     first_off = float(log.t_s[np.argmax(log.off_track)])
     assert first_off == pytest.approx(stopped.sim_time_s, abs=1e-9)
     assert any(f"left the track" in w and f"t = {first_off:.3f} s" in w for w in kept.warnings)
+    assert any(w.startswith("left the course ") and "(first: left the course at START_FINISH (piece 0, line 7)"
+               in w for w in kept.warnings)
     res = CliRunner().invoke(cli, ["drive", str(ctrl), "--keep-driving", "--time-limit", "3"])
     assert "outcome: timeout" in res.output

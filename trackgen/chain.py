@@ -139,6 +139,17 @@ class Track:
             pts = pts[:-1]
         return pts
 
+    def course_sections(self) -> list[tuple[float, float]]:
+        """Arc length (m) along :meth:`centreline` where each pass starts and ends, in
+        driving order (the polyline's own arc length: a little under ``length_m`` on arcs)."""
+        out, s = [], 0.0
+        for p in self.passes:
+            pts = p.centreline_world()
+            length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
+            out.append((s, s + length))
+            s += length
+        return out
+
     @property
     def start_finish(self) -> PlacedPiece | None:
         """The first START_FINISH pass, or ``None``."""

@@ -102,6 +102,8 @@ def track_json(track: Track, geometry: TrackGeometry) -> dict:
         "start_pose": _pose(track.car_start_pose()),
         "finish_gate": None if gate is None else {"pose": _pose(gate[0]), "half_width_m": gate[1]},
         "centreline": track.centreline().tolist(),
+        "course": [{"index": p.index, "kind": p.kind.name, "line": p.line, "s_start_m": a, "s_end_m": b}
+                   for p, (a, b) in zip(track.passes, track.course_sections())],
         "length_m": track.length_m,
         "surface_z_m": s.thickness_m,
         "lane_polygon": polygon_json(geometry.lane),

@@ -5,7 +5,9 @@ with the same line.
 
 :func:`read_track_json` returns the checked fields (absent ones are left out):
 ``name: str``, ``start_pose: Pose2``, ``finish_gate: (Pose2, half_width_m)``,
-``length_m: float``, ``centreline: (N, 2)`` read-only float array; it raises
+``length_m: float``, ``centreline: (N, 2)`` read-only float array, ``course``: a tuple of
+``(index, kind, line, s_start_m, s_end_m)`` per pass in driving order (where each piece lies
+along the centreline; files written before it have none); it raises
 :class:`worlds.WorldError` (``file:line: message`` for bad JSON, ``file: field: expected
 ...`` for a bad field) and reads at most :data:`MAX_TRACK_JSON_BYTES`.
 """
@@ -91,4 +93,29 @@ def read_track_json(path: str | Path) -> dict:
             raise WorldError(f"{path}: centreline: expected a list of [x_m, y_m] points")
         arr.flags.writeable = False
         out["centreline"] = arr
+    course = data.get("course")
+    if course is not None:
+        out["course"] = _course(course, path)
     return out
+
+
+def _course(course, path: Path) -> tuple:
+    expected = (f"{path}: course: expected a list of {{\"index\": int, \"kind\": str, \"line\": int, "
+                f"\"s_start_m\": m, \"s_end_m\": m}} in driving order")
+    if not isinstance(course, list):
+        raise WorldError(expected)
+    out = []
+    last = 0.0
+    for item in course:
+        try:
+            index, kind, line = item["index"], item["kind"], item["line"]
+            a, b = float(item["s_start_m"]), float(item["s_end_m"])
+        except (TypeError, KeyError, ValueError):
+            raise WorldError(f"{expected}, got {_short(item)}") from None
+        if (not all(isinstance(v, int) and not isinstance(v, bool) for v in (index, line))
+                or not isinstance(kind, str) or not (math.isfinite(a) and math.isfinite(b))
+                or not last - 1e-9 <= a <= b):
+            raise WorldError(f"{expected}, got {_short(item)}")
+        out.append((index, kind, line, a, b))
+        last = b
+    return tuple(out)

@@ -149,8 +149,15 @@ def main() -> None:
               help="Start on the track's centre with the front bumper this far before the "
                    "finish line (thesis Fig. 5.2).")
 @click.option("--keep-driving", is_flag=True, default=False,
-              help="Leaving the track does not end the run (still recorded: off_track "
-                   "column, a warning).")
+              help="Leaving the track or the course does not end the run (still recorded: "
+                   "off_track column, a warning).")
+@click.option("--off-track-wheels", "off_track_wheels", default=3, show_default=True,
+              type=click.IntRange(1, 4), metavar="N",
+              help="Wheels off the road that end the run: 3 is the rules' race, 1 the stricter "
+                   "any-wheel rule.")
+@click.option("--event", default=None, type=click.Choice(["race"]),
+              help="Run a discipline as the rules do: 'race' = one timed lap, 120 s, +1 s when "
+                   "the car does not stop within 2 m after the finish (default: practice, --laps).")
 @click.option("--video", default=None, metavar="PATH.mp4", help="Write the debug video.")
 @click.option("--csv", default=None, metavar="PATH", help="Write telemetry (one row per camera frame).")
 @click.option("--plot", default=None, metavar="PATH.png", help="Write path/speed/steering plot.")
@@ -178,7 +185,7 @@ def main() -> None:
                    "code that overwrites memory cannot touch the simulator). A .so always is.")
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
               car, dt_s, wall_limit_s, params, include_dirs, defines, start, start_before_finish_m,
-              keep_driving, watch=False, isolate=False) -> None:
+              keep_driving, off_track_wheels=3, event=None, watch=False, isolate=False) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
     a shared library (.so). See docs/c_controllers.md."""
@@ -200,7 +207,8 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
         watch_drive(dict(controller=controller, track=track, laps=laps, time_limit_s=time_limit_s,
                          video=video, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
                          dt_s=dt_s, wall_limit_s=wall_limit_s, params=params, start=_start_pose(start),
-                         start_before_finish_m=start_before_finish_m, keep_driving=keep_driving))
+                         start_before_finish_m=start_before_finish_m, keep_driving=keep_driving,
+                         off_track_wheels=off_track_wheels, event=event))
 
     start_pose = _start_pose(start)  # a usage error (click's), before any fork
     strays = []
@@ -212,7 +220,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
                            csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
                            wall_limit_s=wall_limit_s, params=parse_params(params),
                            start=start_pose, start_before_finish_m=start_before_finish_m,
-                           keep_driving=keep_driving)
+                           keep_driving=keep_driving, off_track_wheels=off_track_wheels, event=event)
         except input_errors() as exc:
             click.echo(f"simrunner: {exc}", err=True)
             return 2
@@ -285,6 +293,10 @@ def _print_result(result) -> None:
     laps_text = ", ".join(f"{t:.2f} s" for t in result.lap_times_s) or "-"
     click.echo(f"outcome: {result.outcome} ({result.message})")
     click.echo(f"laps: {result.laps_completed}/{result.laps}   lap times: {laps_text}")
+    if result.event is not None:
+        penalties = "".join(f", +{p.seconds:g} s: {p.reason}" for p in result.penalties)
+        time_text = "-" if result.time_s is None else f"{result.time_s:.2f} s"
+        click.echo(f"{result.event}: {'passed' if result.passed else 'failed'}, time {time_text}{penalties}")
     click.echo(f"sim time {result.sim_time_s:.2f} s, wall {result.wall_time_s:.2f} s, "
                f"{result.real_time_factor:.1f}x real time")
     if result.outputs:

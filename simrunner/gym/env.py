@@ -39,7 +39,7 @@ from pieces.pose import Pose2
 from simrunner.car import CarModel, make_sim
 from simrunner.errors import SimError
 from simrunner.gym import tracks
-from simrunner.gym.progress import CentrelineProgress
+from simrunner.track.progress import CentrelineProgress
 from simrunner.gym.settings import EnvSettings
 from simrunner.run.clock import LockstepClock
 from simrunner.run.judge import Judge

@@ -13,12 +13,26 @@ positions; the crossing time (and distance) is interpolated linearly.
   the car 0.3 m behind the gate): that crossing needs no minimum distance.
 - Crossing backwards emits a ``"gate_backward"`` event and never counts; a forward crossing
   too soon after the last one (less than the minimum distance) is ignored.
-- Shortcuts do not count: the road is divided into square cells of ``COVERAGE_CELL_M``; a
-  cell is visited when the rear-axle midpoint passes within ``COVERAGE_REACH_CELLS`` cells of
-  it. A forward crossing counts as a lap only if at least ``min_coverage`` (default 0.8) of
-  the road's cells were visited since the lap started; otherwise a ``"lap_short"`` event says
-  how much of the track was skipped (e.g. turning off at a crossroads and skipping a loop).
-- After ``laps`` laps the judge is ``finished`` and counts no more.
+- A lap follows the course (``track.course``, :mod:`simrunner.track.course`: the layout's
+  pieces in order, crossings straight on; a world's traced centreline). The rear-axle
+  midpoint is followed along the course's centreline (projected onto the part near where it
+  was, never onto the other branch of a crossing). The car leaves the course when it is
+  farther than half the road (``track.gate_half_width_m``) + ``OFF_COURSE_MARGIN_M`` from
+  that part (it turned at a crossing, or cut across to another part of the track), or when
+  it has driven ``BACKWARD_LIMIT_M`` back along the course: an ``"off_course"`` event names
+  the place (``turned at CROSSROADS (piece 38, line 41)``; on a traced course the distance
+  from the finish line) and the lap in progress cannot count. A forward crossing counts as a
+  lap only when the car followed the course since the lap started, at least its length less
+  ``COURSE_SLACK_M``; otherwise a ``"lap_short"`` event says why (timing restarts). After
+  leaving the course the car is found again on the nearest part of the course once it is
+  back on it (a run that keeps driving).
+- Without a course (a world whose road could not be traced around a loop) shortcuts are
+  caught by coverage: the road is divided into square cells of ``COVERAGE_CELL_M``; a cell
+  is visited when the rear-axle midpoint passes within ``COVERAGE_REACH_CELLS`` cells of it.
+  A forward crossing counts as a lap only if at least ``min_coverage`` (default 0.8) of the
+  road's cells were visited since the lap started; otherwise a ``"lap_short"`` event says
+  how much of the track was skipped.
+- After ``laps`` laps the judge is ``finished`` and counts no more (nor follows the course).
 
 Off track. A wheel is off the road when every sample of its contact patch lies outside
 ``track.road_mask``; the patch is modelled as a segment across the tyre (along the car's
@@ -30,7 +44,7 @@ the road while any part of its tyre touches it. ``off_track`` is True while any 
 
 Events: ``Event(t_s, kind, text)`` with ``kind`` an :class:`EventKind` (a ``str``):
 ``lap_start``, ``lap``, ``lap_short``, ``finished``, ``gate_backward``, ``off_track``,
-``on_track``.
+``on_track``, ``off_course``.
 """
 from __future__ import annotations
 
@@ -42,12 +56,20 @@ import numpy as np
 
 from pieces.pose import Pose2
 from simrunner.errors import SimError
+from simrunner.track.progress import CentrelineProgress
 
 WHEEL_NAMES = ("FL", "FR", "RL", "RR")
 PATCH_SAMPLES = 5
 COVERAGE_CELL_M = 0.25
 COVERAGE_REACH_CELLS = 2      # cells within 2 cells (0.5-0.75 m) of the car count as visited
 COVERAGE_ROAD_FRACTION = 0.25  # a cell is road when at least this share of it is road
+# The course: with fewer than 3 wheels off (the rules' limit, rules summary section 3) the
+# rear-axle midpoint stays within half a car width of the road's edge; 0.15 m covers the
+# widest 1:10 car (track 0.25 m) with margin, and is less than half a crossing's arm, so a
+# car turning at a crossing is caught on the crossing road's first piece.
+OFF_COURSE_MARGIN_M = 0.15
+BACKWARD_LIMIT_M = 1.0   # driving back along the course this far leaves it (a U-turn)
+COURSE_SLACK_M = 0.5     # a lap follows at least the course's length less this
 
 
 class EventKind(enum.StrEnum):
@@ -60,6 +82,7 @@ class EventKind(enum.StrEnum):
     GATE_BACKWARD = "gate_backward"
     OFF_TRACK = "off_track"
     ON_TRACK = "on_track"
+    OFF_COURSE = "off_course"        # turned at a crossing, cut across, drove back
 
 
 @dataclass(frozen=True)
@@ -97,6 +120,16 @@ class Judge:
         self.min_coverage = float(min_coverage)
         self._init_coverage(track.raster)
         self._init_fast_lookup(track.raster)
+        self.course = getattr(track, "course", None)
+        self._follow = None if self.course is None else CentrelineProgress(self.course.centreline)
+        self._course_tol_m = float(track.gate_half_width_m) + OFF_COURSE_MARGIN_M
+        self._lap_progress_m = 0.0   # along the course since the lap started
+        self._best_progress_m = 0.0  # its largest value (driving back is measured from it)
+        self._lap_left_course = ""   # why the lap in progress cannot count ("" : it can)
+        self._lost = False           # off the course, not yet back on it
+        self._off_course = ""        # the last off-course text
+        self.finish_t_s: float | None = None         # when the last lap was completed
+        self.finish_distance_m: float | None = None  # distance_m then
 
     def _init_coverage(self, raster) -> None:
         mask = np.asarray(raster.road_mask, dtype=bool)
@@ -174,6 +207,17 @@ class Judge:
         return self._off_wheels
 
     @property
+    def off_course(self) -> str:
+        """Where the car last left the course (``turned at CROSSROADS (piece 38, line 41)``),
+        "" when it never did."""
+        return self._off_course
+
+    @property
+    def course_progress_m(self) -> float:
+        """Distance followed along the course since the lap in progress started (m)."""
+        return self._lap_progress_m
+
+    @property
     def distance_m(self) -> float:
         """Path length of the rear-axle midpoint so far."""
         return self._distance_m
@@ -195,6 +239,8 @@ class Judge:
             self._mark_cell(cell)
         prev = self._prev
         events: list[Event] = []
+        if self._follow is not None and not self.finished:
+            events += self._follow_course(t_s, x, y, prev is None)
         if prev is None:
             if abs(s) <= self.on_gate_tol_m and abs(lat) <= self._half:
                 self._lap_start = (t_s, 0.0)
@@ -237,8 +283,13 @@ class Judge:
         start_t, start_d = self._lap_start
         if dc - start_d < self.min_lap_distance_m:
             return []
-        coverage = self.coverage
-        if coverage < self.min_coverage:
+        if self._follow is not None:
+            short = self._course_shortfall()
+            if short:
+                self._start_lap(tc, dc)
+                return [Event(tc, EventKind.LAP_SHORT, f"crossed the finish gate {short}: lap not "
+                              "counted, timing restarts")]
+        elif (coverage := self.coverage) < self.min_coverage:
             self._start_lap(tc, dc)
             return [Event(tc, EventKind.LAP_SHORT, f"crossed the finish gate after driving only "
                           f"{100 * coverage:.0f} % of the track (needs {100 * self.min_coverage:.0f} %):"
@@ -247,6 +298,7 @@ class Judge:
         n = self.laps_completed
         events = [Event(tc, EventKind.LAP, f"lap {n} in {tc - start_t:.3f} s")]
         if self.finished:
+            self.finish_t_s, self.finish_distance_m = tc, dc
             events.append(Event(tc, EventKind.FINISHED, f"{n} lap{'s' if n > 1 else ''} done in "
                                 f"{sum(self._lap_times):.3f} s"))
             self._lap_start = None
@@ -255,7 +307,46 @@ class Judge:
             events.append(Event(tc, EventKind.LAP_START, f"lap {n + 1} started"))
         return events
 
+    def _follow_course(self, t_s: float, x: float, y: float, first: bool) -> list[Event]:
+        """Follow the car along the course; an ``off_course`` event when it leaves it."""
+        follow = self._follow
+        if first or self._lost:
+            follow.reset(x, y)
+            if self._lost and abs(follow.lateral_m) <= self._course_tol_m:
+                self._lost = False  # back on the course (the lap in progress stays void)
+                self._best_progress_m = self._lap_progress_m
+            return []
+        progress = self._lap_progress_m + follow.advance(x, y)
+        self._lap_progress_m = progress
+        if progress > self._best_progress_m:
+            self._best_progress_m = progress
+        if abs(follow.lateral_m) > self._course_tol_m:
+            section = self.course.section_at(follow.s_m)
+            where = self.course.describe(follow.s_m)
+            text = (f"turned at {where}" if section is not None and section.kind == "CROSSROADS"
+                    else f"left the course at {where}")
+        elif progress < self._best_progress_m - BACKWARD_LIMIT_M:
+            text = f"drove backwards at {self.course.describe(follow.s_m)}"
+        else:
+            return []
+        self._off_course = text
+        self._lap_left_course = self._lap_left_course or text
+        self._lost = True
+        return [Event(t_s, EventKind.OFF_COURSE, f"{text} at ({x:.2f}, {y:.2f}) m")]
+
+    def _course_shortfall(self) -> str:
+        """Why the lap in progress does not count ("" when it does)."""
+        if self._lap_left_course:
+            return f"after the car {self._lap_left_course}"
+        need = self.course.length_m - COURSE_SLACK_M
+        if self._lap_progress_m < need:
+            return (f"after following only {self._lap_progress_m:.2f} m of the course's "
+                    f"{self.course.length_m:.2f} m")
+        return ""
+
     def _start_lap(self, t_s: float, distance_m: float) -> None:
+        self._lap_progress_m = self._best_progress_m = 0.0
+        self._lap_left_course = self._off_course if self._lost else ""
         self._lap_start = (t_s, distance_m)
         self._cov_visited[:] = False
         self._cov_last = None

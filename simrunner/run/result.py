@@ -14,7 +14,8 @@ class Outcome(enum.StrEnum):
     """How a run ended (the summary's ``outcome``; a ``str``, so ``== "finished"`` works)."""
 
     FINISHED = "finished"                        # the laps were completed
-    OFF_TRACK = "off_track"                      # a wheel left the road
+    OFF_TRACK = "off_track"                      # too many wheels left the road
+    OFF_COURSE = "off_course"                    # turned at a crossing, cut across, drove back
     TIMEOUT = "timeout"                          # the simulated time limit passed
     CONTROLLER_ERROR = "controller_error"        # main raised (or sent a bad command)
     CONTROLLER_RETURNED = "controller_returned"  # main returned
@@ -50,6 +51,22 @@ class RunResult:
     warnings: list[str] = field(default_factory=list)  # noticed, did not stop the run
     stray_threads: int = 0  # non-daemon threads the controller left running
     signal: int | None = None  # the signal that interrupted the run (None: Ctrl-C or none)
+    event: str | None = None  # None: practice; "race": the rules' timed race
+    penalties: list = field(default_factory=list)  # simrunner.run.rules.Penalty, in order
+
+    @property
+    def penalty_s(self) -> float:
+        return float(sum(p.seconds for p in self.penalties))
+
+    @property
+    def passed(self) -> bool:
+        """The attempt counts: its laps were completed (no failure)."""
+        return Outcome(self.outcome) == Outcome.FINISHED
+
+    @property
+    def time_s(self) -> float | None:
+        """The race's result: the first lap's time plus the penalties (None without a lap)."""
+        return self.lap_times_s[0] + self.penalty_s if self.lap_times_s else None
 
     @property
     def ok(self) -> bool:
@@ -69,4 +86,9 @@ class RunResult:
                 "real_time_factor": round(self.real_time_factor, 2),
                 "cpu_time_s": round(self.cpu_time_s, 3), "track": self.track,
                 "seed": self.seed, "frames": len(self.log) if self.frames is None else self.frames,
-                "warnings": list(self.warnings), "outputs": self.outputs}
+                "warnings": list(self.warnings), "outputs": self.outputs,
+                "event": self.event, "passed": self.passed,
+                "penalties": [{"seconds": p.seconds, "reason": p.reason} for p in self.penalties],
+                "penalty_s": self.penalty_s,
+                "time_s": None if self.time_s is None else round(self.time_s, 6),
+                "points": None}

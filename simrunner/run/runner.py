@@ -9,8 +9,10 @@ One thread: the controller runs in the calling thread; the simulation advances i
 Spinner calls (:mod:`simrunner.run.clock`). At every camera frame :class:`FrameWork` judges
 (laps, off track), records the run-log row and hands the frame to the video writer thread.
 
-The run ends when the judge counts the laps (``finished``), a wheel leaves the road
-(``off_track``), the simulated time limit passes (``timeout``) — then the next Spinner call
+The run ends when the judge counts the laps (``finished``; in the race once the car's stop
+after the finish line is judged, :mod:`simrunner.run.rules`), too many wheels leave the road
+(``off_track``: 3 by default, the rules'), the car leaves the course (``off_course``: it
+turned at a crossing or cut across), the simulated time limit passes (``timeout``) — then the next Spinner call
 raises :class:`~simrunner.errors.RunFinished` — when ``main`` returns
 (``controller_returned``), when it raises (``controller_error``; also bad commands such as
 NaN), or when it spends ``wall_limit_s`` of wall time without letting simulated time pass
@@ -37,6 +39,7 @@ from simrunner.run.judge import Judge
 from simrunner.telemetry.log import RunRecorder
 from simrunner.reports.outputs import Outputs, check_outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
+from simrunner.run.rules import Penalty, StopCheck
 from simrunner.run.settings import RunSettings
 from simrunner.run.spinner import Session, Spinner
 from simrunner.run.supervise import current_supervision
@@ -56,10 +59,16 @@ def default_track() -> Path:
 # -- per-frame work -----------------------------------------------------------------------
 class FrameWork:
     """The clock's ``on_frame``: judge, run-log row, video frame; returns how the run ends
-    (or None). Holds the parts it uses, never the clock."""
+    (or None). Holds the parts it uses, never the clock.
+
+    Ends the run when the judge counts the laps (in the race, once the stop after the finish
+    line is judged: :class:`~simrunner.run.rules.StopCheck`), when ``off_track_wheels`` wheels
+    are off the road, when the car leaves the course, or at the time limit; with
+    ``keep_driving`` leaving the track or the course is only counted (the run's warnings)."""
 
     def __init__(self, sim: CarModel, judge: Judge, recorder: RunRecorder, time_limit_s: float,
-                 video=None, *, judged: bool = True, keep_driving: bool = False):
+                 video=None, *, judged: bool = True, keep_driving: bool = False,
+                 off_track_wheels: int = 1, race: bool = False):
         self.sim, self.judge, self.recorder, self.video = sim, judge, recorder, video
         self.time_limit_s = time_limit_s
         self.events: list = []
@@ -67,12 +76,19 @@ class FrameWork:
         self._record = recorder.frame
         self.judged = judged  # False on a free floor: no laps, no off track
         self.keep_driving = keep_driving  # leaving the track is recorded, does not end the run
+        self.off_track_wheels = off_track_wheels
         self.off_track_count = 0
         self.first_off_track = ""
+        self.off_course_count = 0
+        self.first_off_course = ""
+        self.race = race
+        self.stop_check: StopCheck | None = None
+        self.penalties: list[Penalty] = []
 
     def __call__(self, k: int, t: float, pose, cmd: Command,
                  row_cmd: Command | None) -> tuple[Outcome, str] | None:
         sim, judge = self.sim, self.judge
+        events = None
         if self.judged:
             events = judge.update(t, pose, self._contacts())
             if events:
@@ -89,17 +105,40 @@ class FrameWork:
                 "speed": speed, "steer": steer, "speed_cmd": cmd[0], "steer_cmd": cmd[1],
                 "lap": lap, "off_track": off})
         if lap >= judge.laps:
-            return Outcome.FINISHED, f"{lap} lap(s) completed"
+            if not self.race:
+                return Outcome.FINISHED, f"{lap} lap(s) completed"
+            return self._after_finish(t, speed, len(judge.off_wheels) >= self.off_track_wheels)
         if off:
             text = f"off track at t = {t:.3f} s (wheel(s) {', '.join(judge.off_wheels)} off the road)"
-            if not self.keep_driving:
+            if len(judge.off_wheels) >= self.off_track_wheels and not self.keep_driving:
                 return Outcome.OFF_TRACK, text
             if events and any(e.kind == "off_track" for e in events):
                 self.off_track_count += 1
                 self.first_off_track = self.first_off_track or text
+        if events and any(e.kind == "off_course" for e in events):
+            text = f"{judge.off_course} at t = {t:.3f} s"
+            if not self.keep_driving:
+                return Outcome.OFF_COURSE, text
+            self.off_course_count += 1
+            self.first_off_course = self.first_off_course or text
         if t >= self.time_limit_s - 1e-9:
             return Outcome.TIMEOUT, f"time limit of {self.time_limit_s:g} s simulated time reached"
         return None
+
+    def _after_finish(self, t: float, speed: float, off: bool) -> tuple[Outcome, str] | None:
+        """The race after its lap: None until the stop is judged."""
+        judge = self.judge
+        if self.stop_check is None:
+            self.stop_check = StopCheck(judge.finish_t_s, judge.finish_distance_m)
+        verdict = self.stop_check.update(t, judge.distance_m, speed, int(off),
+                                         time_up=t >= self.time_limit_s - 1e-9)
+        if verdict is None:
+            return None
+        text, penalty = verdict
+        if penalty is not None:
+            self.penalties.append(penalty)
+            text += f" (+{penalty.seconds:g} s)"
+        return Outcome.FINISHED, f"{judge.laps_completed} lap(s) completed; {text}"
 
 
 # -- one run, wired -----------------------------------------------------------------------
@@ -153,7 +192,8 @@ class Run:
                                        car_length_m=car.chassis.wheelbase_m + 0.05,
                                        car_width_m=car.chassis.track_m)
         self.frames = FrameWork(self.sim, self.judge, self.recorder, settings.time_limit_s, self.video,
-                                judged=track.judged, keep_driving=settings.keep_driving)
+                                judged=track.judged, keep_driving=settings.keep_driving,
+                                off_track_wheels=settings.off_track_wheels, race=settings.event == "race")
         self.clock = LockstepClock(self.sim, dt_s=settings.dt_s,
                                    frame_period_s=car.camera.frame_period_s(), on_frame=self.frames)
         self.session = Session(clock=self.clock, camera=self.camera, car=car,
@@ -223,10 +263,18 @@ class Run:
                 outcome, message = Outcome(clock.finished.outcome), clock.finished.message
             elif outcome is None:
                 outcome, message = Outcome.CONTROLLER_RETURNED, "main() returned"
-        if self.frames.off_track_count:
-            n = self.frames.off_track_count
-            self.session.warn_once("keep_driving", (
-                f"left the track {n} time{'s' if n > 1 else ''} (first: {self.frames.first_off_track}); "
+        frames = self.frames
+        if frames.off_track_count:
+            n = frames.off_track_count
+            why = ("keep_driving" if self.settings.keep_driving else
+                   f"fewer than {frames.off_track_wheels} wheels off the road do not end the run")
+            self.session.warn_once("off_track", (
+                f"left the track {n} time{'s' if n > 1 else ''} (first: {frames.first_off_track}); "
+                f"kept driving ({why})"))
+        if frames.off_course_count:
+            n = frames.off_course_count
+            self.session.warn_once("off_course", (
+                f"left the course {n} time{'s' if n > 1 else ''} (first: {frames.first_off_course}); "
                 f"kept driving (keep_driving)"))
         return outcome, message, error
 
@@ -320,6 +368,7 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
                            log=run.recorder.freeze(track_label), frames=len(run.recorder),
                            warnings=warnings, stray_threads=len(stray),
                            signal=signals.received if outcome == Outcome.INTERRUPTED else None,
+                           event=settings.event, penalties=list(run.frames.penalties),
                            unused_params=tuple(sorted(set(settings.params) - run.session.params_read)))
         run.recorder.finish()
         write_outputs(result, outputs, run.video, sim_track, csv_stream=run.csv)

@@ -9,6 +9,7 @@ from typing import Mapping
 
 from simrunner.errors import SimError
 from simrunner.run.params import ParamValue, frozen_params
+from simrunner.run.rules import EVENTS, RACE_LAPS, RACE_TIME_LIMIT_S, RULES_OFF_TRACK_WHEELS
 
 MAX_DT_S = 0.02
 
@@ -31,8 +32,16 @@ class RunSettings:
     :mod:`simrunner.run.start`): ``start`` a pose ``(x_m, y_m, yaw_rad)`` (or a ``Pose2``) of
     the car frame (rear-axle midpoint) in the world; ``start_before_finish_m`` the car on
     the track's centre, heading along it, its front bumper this far (m, along the track)
-    before the finish line. ``keep_driving``: leaving the track does not end the run (the
-    ``off_track`` column and the result's warnings still record it). ``params``: controller
+    before the finish line.
+
+    Judging: ``off_track_wheels``: how many wheels off the road end the run (1-4; default 3,
+    the rules' race: "3 or more wheels", :mod:`simrunner.run.rules`; 1 is the stricter rule
+    that any wheel off ends it); fewer wheels off are recorded (the ``off_track`` column, a
+    warning). Leaving the course (:mod:`simrunner.run.judge`) ends the run too.
+    ``keep_driving``: neither ends the run (both are still recorded). ``event``: None
+    (practice: ``laps`` laps) or ``"race"``: the rules' timed race, one lap, 120 s unless
+    ``time_limit_s`` says otherwise, +1 s when the car does not stop within 2 m after the
+    finish line (:mod:`simrunner.run.rules`). ``params``: controller
     parameters, a read-only mapping name -> int | float | str, read with
     ``spinner.param(name, default)`` (:mod:`simrunner.run.params`).
     """
@@ -46,6 +55,8 @@ class RunSettings:
     start: tuple[float, float, float] | None = None
     start_before_finish_m: float | None = None
     keep_driving: bool = False
+    off_track_wheels: int = RULES_OFF_TRACK_WHEELS
+    event: str | None = None
 
     def __post_init__(self) -> None:
         for name, lo in (("laps", 1), ("seed", 0)):
@@ -53,6 +64,16 @@ class RunSettings:
             if isinstance(v, bool) or not hasattr(v, "__index__") or int(v) < lo:
                 raise SettingsError(f"{name} = {v!r}: expected a whole number >= {lo}")
             object.__setattr__(self, name, int(v))
+        if self.event is not None and self.event not in EVENTS:
+            raise SettingsError(f"event = {self.event!r}: expected one of {', '.join(EVENTS)} (or none: practice)")
+        if self.event == "race" and self.laps != RACE_LAPS:
+            raise SettingsError(f"laps = {self.laps!r}: the race is one lap per attempt (rules summary, "
+                                "section 3); several laps are practice (no event)")
+        v = self.off_track_wheels
+        if isinstance(v, bool) or not hasattr(v, "__index__") or not 1 <= int(v) <= 4:
+            raise SettingsError(f"off_track_wheels = {v!r}: expected 1, 2, 3 or 4 (wheels off the road "
+                                "that end the run)")
+        object.__setattr__(self, "off_track_wheels", int(v))
         for name, hi in (("time_limit_s", 1e6), ("dt_s", MAX_DT_S), ("wall_limit_s", 1e6)):
             v = getattr(self, name)
             if v is None and name == "time_limit_s":
@@ -85,6 +106,8 @@ class RunSettings:
         """These settings with ``time_limit_s`` filled in for ``track`` (a ``SimTrack``)."""
         if self.time_limit_s is not None:
             return self
+        if self.event == "race":
+            return dataclasses.replace(self, time_limit_s=RACE_TIME_LIMIT_S)
         return dataclasses.replace(self, time_limit_s=default_time_limit_s(self.laps, track))
 
 

@@ -23,8 +23,7 @@ import numpy as np
 from pieces.pose import Pose2
 from simrunner.run.settings import RunSettings, SettingsError
 from simrunner.track.load import SimTrack, road_extents_m
-
-TRACE_STEP_M = 0.01
+from simrunner.track.trace import TRACE_STEP_M, RidgeWalker
 
 
 def start_pose(track: SimTrack, car, settings: RunSettings) -> Pose2:
@@ -95,46 +94,15 @@ def along_centreline(centre: np.ndarray, gate: Pose2, back_m: float) -> Pose2:
 
 def trace_back(track: SimTrack, back_m: float, step_m: float = TRACE_STEP_M) -> Pose2:
     """Walk ``back_m`` backwards along the road from the finish line on the raster, keeping
-    to the middle of the road (see the module docstring); the pose heads forwards.
-
-    The middle is the ridge of the road's distance transform (distance of each road pixel
-    to the nearest non-road pixel): every step moves ``step_m`` along the heading, then to
-    the largest distance on a short segment across the heading; the heading follows the
-    path, smoothed. At a crossing the ridge is flat, and the walk goes straight on."""
-    import cv2
-
+    to the middle of the road (:class:`simrunner.track.trace.RidgeWalker`: every step moves
+    ``step_m`` along the heading, then to the ridge of the road's distance transform across
+    it; straight on at a crossing); the pose heads forwards."""
     raster, gate = track.raster, track.gate
-    dist = cv2.distanceTransform(np.asarray(raster.road_mask, dtype=np.uint8), cv2.DIST_L2, 5)
-    h_px, w_px = dist.shape
     left, right = road_extents_m(raster, gate)
-    half_search = max(0.25 * (left + right), 2 * raster.m_per_px)
-    offsets = np.linspace(-half_search, half_search, 2 * int(half_search / raster.m_per_px) + 1)
-
-    def depth(points: np.ndarray) -> np.ndarray:
-        px = np.rint(raster.world_to_px(points)).astype(np.int64)
-        inside = (px[:, 0] >= 0) & (px[:, 0] < w_px) & (px[:, 1] >= 0) & (px[:, 1] < h_px)
-        out = np.zeros(len(px))
-        out[inside] = dist[px[inside, 1], px[inside, 0]]
-        return out
-
-    x, y = gate.x_m, gate.y_m
-    yaw = gate.yaw_rad + math.pi  # walking direction
-    dx, dy = math.cos(yaw), math.sin(yaw)
+    walker = RidgeWalker(raster, gate.x_m, gate.y_m, gate.yaw_rad + math.pi, 0.25 * (left + right))
     travelled = 0.0
     while travelled < back_m - 1e-12:
         h = min(step_m, back_m - travelled)
-        nx, ny = x + h * dx, y + h * dy
-        across = np.column_stack((nx - offsets * dy, ny + offsets * dx))
-        d = depth(across)
-        best = np.flatnonzero(d >= d.max() - 0.5)  # the ridge (flat at a crossing: its middle)
-        k = int(best[np.argmin(np.abs(offsets[best]))]) if d.max() > 0 else len(offsets) // 2
-        nx, ny = float(across[k, 0]), float(across[k, 1])
-        ndx, ndy = nx - x, ny - y
-        n = math.hypot(ndx, ndy)
-        if n > 0:  # the heading follows the path, smoothed
-            dx, dy = 0.8 * dx + 0.2 * ndx / n, 0.8 * dy + 0.2 * ndy / n
-            m = math.hypot(dx, dy)
-            dx, dy = dx / m, dy / m
-        x, y = nx, ny
+        walker.step(h)
         travelled += h
-    return Pose2(x, y, math.atan2(dy, dx) + math.pi)
+    return Pose2(walker.x_m, walker.y_m, math.atan2(walker.dy, walker.dx) + math.pi)

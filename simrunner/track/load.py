@@ -26,11 +26,14 @@ From a scene (a world):
   start pose and its half width the larger of the road's extents to the left and to the right
   of the start pose, measured on the raster along the start's lateral axis (so the gate
   segment spans the whole road there, edge lines included).
-- ``lap_length_m``: track.json's ``length_m``; without it an estimate: road area (raster) /
-  road width at the start. The estimate undercounts crossings (their area counts once but
-  is driven twice), typically by a few per cent; the judge only uses it for its minimum-lap
-  distance, which tolerates that (``lap_length_estimated`` is then True).
+- ``lap_length_m``: track.json's ``length_m``; without it the length of the traced course
+  (below), else an estimate: road area (raster) / road width at the start, which
+  undercounts crossings (their area counts once but is driven twice); the judge only uses it
+  for its minimum-lap distance, which tolerates that (``lap_length_estimated`` is then True).
 - ``centreline``: track.json's ``centreline`` ``(N, 2)`` or None.
+- ``course`` (:mod:`simrunner.track.course`): the centreline with track.json's ``course``
+  (the pieces along it); without a centreline the road's middle traced from the finish line
+  around the loop; None when it cannot be traced.
 """
 from __future__ import annotations
 
@@ -42,6 +45,7 @@ import numpy as np
 
 from pieces.pose import Pose2
 from worlds.lighting import TrackLighting
+from simrunner.track.course import Course, course_from_sections, traced_course
 from simrunner.track.errors import TrackLoadError
 from simrunner.track.raster import (DEFAULT_M_PER_PX, ROLE_GRAY, TrackRaster, build_raster,
                                     check_m_per_px, layer_from_footprint, layer_from_polygon, layer_from_visual,
@@ -77,6 +81,7 @@ class SimTrack:
     judged: bool = True  # False: a free floor (simrunner.track.floor), no laps, no off-track
     lighting: TrackLighting = field(default_factory=TrackLighting)  # the physical camera's light
     barcodes: tuple = ()  # printed barcodes (worlds.marks.Barcode), painted into the raster
+    course: Course | None = None  # what a lap must follow (simrunner.track.course)
 
     @property
     def road_mask(self) -> np.ndarray:
@@ -164,11 +169,13 @@ def track_from_trackgen(track: Track, *, geometry: TrackGeometry | None = None,
         gate, half = start, max(road_extents_m(raster, start))
     centreline = np.asarray(track.centreline(), dtype=float)
     centreline.flags.writeable = False
+    course = course_from_sections(centreline, [(p.index, p.kind.name, p.line, a, b) for p, (a, b)
+                                               in zip(track.passes, track.course_sections())], gate)
     return SimTrack(
         name=name or layout.name, source=source, raster=raster, surface_z_m=top_z, start=start,
         gate=gate, gate_half_width_m=float(half), lap_length_m=float(track.length_m),
         centreline=centreline, lap_length_estimated=False, lighting=layout.lighting,
-        barcodes=layout.barcodes)
+        barcodes=layout.barcodes, course=course)
 
 
 def _read_world(path: Path):
@@ -218,13 +225,20 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
         left, right = road_extents_m(raster, start)
         area = float(np.count_nonzero(raster.road_mask)) * raster.m_per_px ** 2
         lap_length, estimated = area / (left + right), True
+    centreline = meta.get("centreline")
+    if centreline is not None:
+        course = course_from_sections(centreline, meta.get("course", ()), gate)
+    else:
+        course = traced_course(raster, gate, sum(road_extents_m(raster, gate)), lap_length)
+        if course is not None:
+            lap_length = course.length_m
     return SimTrack(
         name=name or meta.get("name") or _default_name(scene.source),
         source=source, raster=raster, surface_z_m=surface_z, start=start, gate=gate,
         gate_half_width_m=float(half), lap_length_m=float(lap_length),
         centreline=meta.get("centreline"), lap_length_estimated=estimated,
         lighting=scene.lighting if scene.lighting is not None else TrackLighting(),
-        barcodes=scene.barcodes)
+        barcodes=scene.barcodes, course=course)
 
 
 def mark_layers(barcodes, surface_z_m: float, m_per_px: float) -> list:
