@@ -18,7 +18,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from pieces import CROSSROADS, STRAIGHT, STRAIGHT_SHORT, TURN_LEFT, TURN_RIGHT, Pose2
 from trackgen import LayoutError, TrackError, TrackGenerator, chain, load_layout, parse_layout
-from trackgen.build import OutputError, TRACK_JSON_KEYS, ValidationFailed, build, check_layout
+from trackgen.build import OPTIONAL_TRACK_JSON_KEYS, OutputError, TRACK_JSON_KEYS, ValidationFailed, build, check_layout
 from trackgen.chain import START_BEFORE_FINISH_M
 from trackgen.cli import main
 from trackgen.validate import CLOSURE_TOL_M, errors
@@ -198,7 +198,8 @@ def _png_size(path: Path) -> tuple[int, int]:
 def test_build_round_trip(built_oval):
     out, result = built_oval
     doc = json.loads((out / "track.json").read_text())
-    assert tuple(doc) == TRACK_JSON_KEYS
+    assert tuple(k for k in doc if k not in OPTIONAL_TRACK_JSON_KEYS) == TRACK_JSON_KEYS
+    assert set(OPTIONAL_TRACK_JSON_KEYS) <= set(doc)
     assert doc["format"] == "nxpcup-track/1" and doc["name"] == "oval_start"
     assert doc["layout"] == str(OVAL)
     layout = load_layout(OVAL)

@@ -30,6 +30,9 @@ WORLD_SUFFIXES = (".sdf", ".world")
 TRACK_JSON_KEYS = ("format", "name", "layout", "settings", "pieces", "start_pose",
                    "finish_gate", "centreline", "length_m", "surface_z_m", "lane_polygon",
                    "road_polygon")
+"""The fields every track.json has (``trackgen validate`` reports the missing ones)."""
+OPTIONAL_TRACK_JSON_KEYS = ("course",)
+"""Fields newer builds write (a folder built before them still validates and drives)."""
 
 
 class ValidationFailed(TrackError):

@@ -116,6 +116,7 @@ class Judge:
         self._distance_m = 0.0
         self._lap_start: tuple[float, float] | None = None  # t, distance
         self._lap_times: list[float] = []
+        self._lap_distances: list[float] = []
         self._off_wheels: tuple[str, ...] = ()
         self.min_coverage = float(min_coverage)
         self._init_coverage(track.raster)
@@ -187,6 +188,11 @@ class Judge:
     @property
     def lap_times_s(self) -> list[float]:
         return list(self._lap_times)
+
+    @property
+    def lap_distances_m(self) -> list[float]:
+        """Path length of the rear-axle midpoint in each counted lap (m)."""
+        return list(self._lap_distances)
 
     @property
     def finished(self) -> bool:
@@ -295,6 +301,7 @@ class Judge:
                           f"{100 * coverage:.0f} % of the track (needs {100 * self.min_coverage:.0f} %):"
                           " lap not counted, timing restarts")]
         self._lap_times.append(tc - start_t)
+        self._lap_distances.append(dc - start_d)
         n = self.laps_completed
         events = [Event(tc, EventKind.LAP, f"lap {n} in {tc - start_t:.3f} s")]
         if self.finished:

@@ -52,6 +52,7 @@ class RunResult:
     stray_threads: int = 0  # non-daemon threads the controller left running
     signal: int | None = None  # the signal that interrupted the run (None: Ctrl-C or none)
     event: str | None = None  # None: practice; "race": the rules' timed race
+    lap_distances_m: list[float] = field(default_factory=list)  # path driven in each counted lap
     penalties: list = field(default_factory=list)  # simrunner.run.rules.Penalty, in order
 
     @property
@@ -82,6 +83,7 @@ class RunResult:
         return {"outcome": str(self.outcome), "message": self.message, "laps": self.laps,
                 "laps_completed": self.laps_completed,
                 "lap_times_s": [round(t, 6) for t in self.lap_times_s],
+                "lap_distances_m": [round(d, 4) for d in self.lap_distances_m],
                 "sim_time_s": round(self.sim_time_s, 6), "wall_time_s": round(self.wall_time_s, 3),
                 "real_time_factor": round(self.real_time_factor, 2),
                 "cpu_time_s": round(self.cpu_time_s, 3), "track": self.track,

@@ -369,6 +369,7 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
                            warnings=warnings, stray_threads=len(stray),
                            signal=signals.received if outcome == Outcome.INTERRUPTED else None,
                            event=settings.event, penalties=list(run.frames.penalties),
+                           lap_distances_m=judge.lap_distances_m,
                            unused_params=tuple(sorted(set(settings.params) - run.session.params_read)))
         run.recorder.finish()
         write_outputs(result, outputs, run.video, sim_track, csv_stream=run.csv)
