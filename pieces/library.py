@@ -12,6 +12,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 import shapely
+import shapely.affinity
 
 from .geometry import arc_samples, arc_segments, rect, road_bands
 from .piece import Piece
@@ -192,34 +193,66 @@ def chicane_right(*, length_m: float = 1.0, offset_m: float = 0.20,
     return chicane(length_m=length_m, offset_m=offset_m, direction=-1, settings=settings)
 
 
-def crossroads(*, length_m: float = 0.6, settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
-    """CROSSROADS: two perpendicular roads, each ``length_m`` long (>= the road width),
-    crossing at ``(length_m / 2, 0)``. White = union of both lanes; the edge lines are broken
-    where the other road passes: four L-shaped stubs at the corners.
-    Ports: entry, exit = ``Pose2(C, 0, 0)``, side_in = ``Pose2(C/2, -C/2, pi/2)``,
-    side_out = ``Pose2(C/2, C/2, pi/2)`` (side road travelled towards +y)."""
+def crossroads(*, length_m: float | None = None, angle_rad: float = math.pi / 2,
+               settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """CROSSROADS: two roads, each ``length_m`` long, crossing at their middles, ``(C, 0)``
+    with ``C = length_m / 2``; the side road at ``angle_rad`` to the main road (pi/2, the
+    default: perpendicular; the rules allow 45-degree crossings too, rules summary section 7).
+    White = union of both lanes; the edge lines are broken where the other road passes.
+    Ports: entry, exit = ``Pose2(length_m, 0, 0)``, side_in = ``Pose2(C - C cos a, -C sin a,
+    a)``, side_out = ``Pose2(C + C cos a, C sin a, a)`` (side road travelled away from -y).
+
+    ``length_m`` (default 0.6 m at 90 degrees, else the smallest that fits) is at least
+    ``road_width (1 + cos a) / sin a``: at 90 degrees the road width (a square), at 45
+    degrees 2.41 road widths: then the side road's ends clear the main road and the piece
+    stays between its entry and exit lines, as every piece does."""
     s = _check_settings(settings)
-    length_m = check_range("length_m", length_m, s.road_width_m, lo_open=False,
-                           why="at least the road width")
+    angle_rad = check_range("angle_rad", angle_rad, math.radians(30.0), math.radians(150.0),
+                            lo_open=False, why="30 to 150 degrees")
+    perpendicular = angle_rad == math.pi / 2
+    need = s.road_width_m if perpendicular else (
+        s.road_width_m * (1.0 + abs(math.cos(angle_rad))) / math.sin(angle_rad))
+    if length_m is None:
+        length_m = 0.6 if perpendicular else math.ceil(need * 1000.0 - 1e-9) / 1000.0
+    length_m = check_range("length_m", length_m, need, lo_open=False,
+                           why="at least the road width" if perpendicular else
+                           f"at least {need:.3f} m for a {math.degrees(angle_rad):g}-degree crossing")
     h, e, c = s.lane_width_m / 2.0, s.edge_width_m, length_m / 2.0
-    lane = shapely.union(rect(0.0, -h, length_m, h), rect(c - h, -c, c + h, c))
-    corners = []
-    for sx in (-1.0, 1.0):          # left / right of the side road
-        for sy in (-1.0, 1.0):      # below / above the main road
-            # L-shape: a main-road edge stub from the piece's end to the side lane, and a
-            # side-road edge stub from the main lane to the piece's side; they share the corner.
-            (x0, x1), (y0, y1) = sorted((c + sx * c, c + sx * h)), sorted((sy * h, sy * (h + e)))
-            stub_x = rect(x0, y0, x1, y1)
-            (x0, x1), (y0, y1) = sorted((c + sx * h, c + sx * (h + e))), sorted((sy * h, sy * c))
-            corners.append(shapely.union(stub_x, rect(x0, y0, x1, y1)))
-    edges = shapely.union_all(corners)
+    if perpendicular:  # (the square of the thesis's figure 8, built as it always was)
+        lane = shapely.union(rect(0.0, -h, length_m, h), rect(c - h, -c, c + h, c))
+        corners = []
+        for sx in (-1.0, 1.0):          # left / right of the side road
+            for sy in (-1.0, 1.0):      # below / above the main road
+                # L-shape: a main-road edge stub from the piece's end to the side lane, and a
+                # side-road edge stub from the main lane to the piece's side; they share the corner.
+                (x0, x1), (y0, y1) = sorted((c + sx * c, c + sx * h)), sorted((sy * h, sy * (h + e)))
+                stub_x = rect(x0, y0, x1, y1)
+                (x0, x1), (y0, y1) = sorted((c + sx * h, c + sx * (h + e))), sorted((sy * h, sy * c))
+                corners.append(shapely.union(stub_x, rect(x0, y0, x1, y1)))
+        edges = shapely.union_all(corners)
+        side = [[c, -c], [c, c]]
+        side_in, side_out = Pose2(c, -c, math.pi / 2), Pose2(c, c, math.pi / 2)
+        params = {"length_m": length_m}
+    else:
+        def side_road(half_width: float):
+            band = rect(-c, -half_width, c, half_width)
+            return shapely.affinity.translate(shapely.affinity.rotate(band, angle_rad, origin=(0, 0),
+                                                                      use_radians=True), c, 0.0)
+
+        lane = shapely.union(rect(0.0, -h, length_m, h), side_road(h))
+        road = shapely.union(rect(0.0, -h - e, length_m, h + e), side_road(h + e))
+        edges = road.difference(lane)
+        ca, sa = c * math.cos(angle_rad), c * math.sin(angle_rad)
+        side = [[c - ca, -sa], [c + ca, sa]]
+        side_in, side_out = Pose2(c - ca, -sa, angle_rad), Pose2(c + ca, sa, angle_rad)
+        params = {"length_m": length_m, "angle_rad": angle_rad}
     return Piece(
-        kind=PieceType.CROSSROADS, settings=s, params={"length_m": length_m},
+        kind=PieceType.CROSSROADS, settings=s, params=params,
         lane=lane, edges=edges, marking=None,
         centreline=[[0.0, 0.0], [length_m, 0.0]],
-        side_centreline=[[c, -c], [c, c]],
+        side_centreline=side,
         ports={"entry": Pose2(), "exit": Pose2(length_m, 0.0, 0.0),
-               "side_in": Pose2(c, -c, math.pi / 2), "side_out": Pose2(c, c, math.pi / 2)},
+               "side_in": side_in, "side_out": side_out},
         length_m=length_m,
     )
 

@@ -117,7 +117,10 @@ _ANGLE = ParamSpec("angle", "deg", 45.0, 0.001, 180.0, lo_open=False, internal="
 PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
     PieceType.STRAIGHT: MappingProxyType({"length": _m("length", 1.0)}),
     PieceType.STRAIGHT_SHORT: MappingProxyType({"length": _m("length", 0.5)}),
-    PieceType.CROSSROADS: MappingProxyType({"length": _m("length", 0.6)}),
+    PieceType.CROSSROADS: MappingProxyType({
+        "length": _m("length", 0.6),  # at 90 deg; at other angles the smallest that fits
+        "angle": ParamSpec("angle", "deg", 90.0, 30.0, 150.0, lo_open=False, internal="angle_rad",
+                           to_internal=math.radians)}),
     PieceType.TURN_LEFT: MappingProxyType({"radius": _m("radius", 0.8), "angle": _ANGLE}),
     PieceType.TURN_RIGHT: MappingProxyType({"radius": _m("radius", 0.8), "angle": _ANGLE}),
     PieceType.CHICANE_LEFT: MappingProxyType({"length": _m("length", 1.0), "offset": _m("offset", 0.2)}),

@@ -136,3 +136,52 @@ def test_the_wave_is_the_rules_chicane_and_validates_by_its_smoothest_path():
     assert validate(REPO / "examples" / "kit_wave.txt") == []
     steep = wave(length_m=4.0, swing_m=0.7)   # swings more than its lane: a curving path
     assert 0.0 < steep.min_radius_m < math.inf
+
+
+@pytest.mark.parametrize("angle_deg", [45.0, 60.0, 120.0, 135.0])
+def test_a_crossing_at_another_angle_crosses_at_its_middle_and_keeps_to_its_piece(angle_deg):
+    """CROSSROADS angle=A: two equal roads crossing at their middles at A degrees; the side
+    road's ports are on its centreline, the piece's footprint stays between its entry and
+    exit lines (as every piece's does), and its edge lines are broken where a lane passes."""
+    from pieces import crossroads
+    from pieces.spec import TrackSettings
+
+    kit = TrackSettings(lane_width_m=0.51, edge_width_m=0.02)
+    a = math.radians(angle_deg)
+    p = crossroads(angle_rad=a, settings=kit)
+    need = 0.55 * (1 + abs(math.cos(a))) / math.sin(a)
+    assert need <= p.length_m < need + 0.001 and p.params["angle_rad"] == a
+    c = p.length_m / 2
+    for port, sign in (("side_in", -1), ("side_out", 1)):
+        q = p.ports[port]
+        assert (q.x_m, q.y_m, q.yaw_rad) == pytest.approx((c + sign * c * math.cos(a), sign * c * math.sin(a), a))
+    x0, _, x1, _ = p.footprint.bounds
+    assert x0 > -1e-9 and x1 < p.length_m + 1e-9
+    assert p.lane.intersection(p.edges).area < 1e-12
+    centre = shapely.Point(c, 0.0)
+    assert p.lane.contains(centre) and not p.edges.intersects(centre.buffer(0.25))
+    with pytest.raises(Exception, match="at least 1.3"):
+        crossroads(angle_rad=math.radians(45.0), length_m=0.55, settings=kit)
+
+
+def test_the_90_degree_crossroads_is_unchanged():
+    from pieces import crossroads
+
+    p = crossroads()
+    assert p.params == {"length_m": 0.6} and p.ports["side_in"].yaw_rad == math.pi / 2
+    assert crossroads(angle_rad=math.pi / 2).lane.equals_exact(p.lane, 0.0)
+
+
+def test_a_kit_figure8_crossing_at_45_degrees_is_followed_straight_on():
+    """examples/kit_crossing45.txt: the kit's 0.55 m is for its 90-degree square; a crossing at
+    45 degrees takes its own smallest length. The layout closes, validates, and the line
+    follower laps it; its laps follow the course through both passes of the crossing."""
+    from simrunner.run.runner import drive
+    from simrunner.track import load_track
+
+    lay = load_layout(REPO / "examples" / "kit_crossing45.txt")
+    assert lay.piece_kwargs(lay.entries[0]) == {"angle_rad": pytest.approx(math.pi / 4)}
+    track = load_track(REPO / "examples" / "kit_crossing45.txt")
+    r = drive(REPO / "examples" / "line_follower.py", track=track, laps=2, seed=0)
+    assert r.outcome == "finished", r.message
+    assert all(d >= 0.9 * track.course.length_m for d in r.lap_distances_m)

@@ -374,6 +374,10 @@ def random_pieces(draw):
         params = {"length_m": length, "mark_length_m": draw(st.floats(0.01, 0.9)) * length}
     elif kind is CROSSROADS:
         params = {"length_m": road + draw(st.floats(0.0, 1.0))}
+        if draw(st.booleans()):  # a crossing at another angle: at least its own smallest length
+            a = math.radians(draw(st.floats(30.0, 150.0)))
+            params = {"angle_rad": a,
+                      "length_m": road * (1 + abs(math.cos(a))) / math.sin(a) + draw(st.floats(1e-6, 1.0))}
     elif kind is PieceType.WAVE:
         length = draw(st.floats(0.3, 3.0))
         swing = draw(st.floats(0.001, 0.04)) * length
