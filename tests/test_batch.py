@@ -112,6 +112,19 @@ def test_rows_identical_for_one_and_two_workers(tmp_path):
     assert all(w.started_at <= w.ready_at <= w.first_row_at <= w.last_row_at for w in two.worker_timing)
 
 
+def test_batch_event_race_rows_carry_the_result_and_penalty(tmp_path):
+    res = CliRunner().invoke(cli, ["batch", str(FOLLOWER), "--tracks", str(EXAMPLES / "kit_S.txt"),
+                                   "--seeds", "2", "--event", "race", "--workers", "1", "--no-plot",
+                                   "-o", str(tmp_path / "race")])
+    assert res.exit_code == 0, res.output
+    rows = read_results(tmp_path / "race" / "results.json")
+    assert [r["outcome"] for r in rows] == ["finished", "finished"] and all(r["passed"] for r in rows)
+    # the follower never stops after the finish line: +1 s each
+    assert all(r["penalty_s"] == 1.0 and r["time_s"] == pytest.approx(r["lap_times_s"][0] + 1.0) for r in rows)
+    meta = json.loads((tmp_path / "race" / "results.json").read_text())
+    assert meta["event"] == "race" and meta["time_limit_s"] == 120.0
+
+
 def test_faulty_runs_never_stop_the_batch(tmp_path):
     ctl = tmp_path / "faulty.py"
     ctl.write_text(textwrap.dedent(FAULTY))

@@ -16,9 +16,14 @@ import click
 @click.option("--param", "params", multiple=True, metavar="NAME=V1,V2|START:STOP:STEP",
               help="Controller parameter values to sweep (every combination); repeatable.")
 @click.option("--laps", default=1, show_default=True, type=click.IntRange(min=1))
-@click.option("--time-limit", "time_limit_s", default=60.0, show_default=True,
+@click.option("--time-limit", "time_limit_s", default=None,
               type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
-              help="Simulated-time limit of each run.")
+              help="Simulated-time limit of each run [default: 60; the race: 120].")
+@click.option("--off-track-wheels", "off_track_wheels", default=3, show_default=True,
+              type=click.IntRange(1, 4), metavar="N",
+              help="Wheels off the road that end a run (3: the rules' race; 1: any wheel).")
+@click.option("--event", default=None, type=click.Choice(["race"]),
+              help="Run each as the rules' race (one lap, 120 s, the stop after the finish).")
 @click.option("--workers", default=None, type=click.IntRange(min=1),
               help="Worker processes (default: all cores; with --ray: the cluster's CPUs).")
 @click.option("-o", "--out", "out_dir", required=True, metavar="DIR",
@@ -41,7 +46,8 @@ import click
                    "host:6379 (pip install 'nxpcup-sim[ray]').")
 @click.option("--no-plot", is_flag=True, help="Do not write summary.png.")
 def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, out_dir, force,
-              video, csv, run_timeout_s, car, dt_s, wall_limit_s, ray, no_plot) -> None:
+              video, csv, run_timeout_s, car, dt_s, wall_limit_s, ray, no_plot,
+              off_track_wheels=3, event=None) -> None:
     """Run CONTROLLER over tracks x parameters x seeds on all cores (or Ray); one row per run."""
     from tqdm import tqdm
 
@@ -62,7 +68,8 @@ def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, ou
                            laps=laps, time_limit_s=time_limit_s, dt_s=dt_s,
                            wall_limit_s=wall_limit_s, car=car, workers=workers,
                            run_timeout_s=run_timeout_s, video=video, csv=csv, plot=not no_plot,
-                           ray=ray, force=force, on_row=on_row,
+                           ray=ray, force=force, on_row=on_row, off_track_wheels=off_track_wheels,
+                           event=event,
                            on_plan=lambda n: bar.reset(total=n))
     except input_errors() as exc:
         bar.close()

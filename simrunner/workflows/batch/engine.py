@@ -73,28 +73,34 @@ class BatchResult:
 
 
 def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: str | int = 1,
-              params=(), laps: int = 1, time_limit_s: float = 60.0, dt_s: float = 0.002,
+              params=(), laps: int = 1, time_limit_s: float | None = None, dt_s: float = 0.002,
               wall_limit_s: float = 10.0, car: str | Path | None = None,
               workers: int | None = None, run_timeout_s: float | None = None,
               video: str | None = None, csv: str | None = None, plot: bool = True,
               ray: str | None = None, force: bool = False, start_method: str | None = None,
               on_row: Callable[[dict], None] | None = None,
-              on_plan: Callable[[int], None] | None = None, quiet_workers: bool = True) -> BatchResult:
+              on_plan: Callable[[int], None] | None = None, quiet_workers: bool = True,
+              off_track_wheels: int = 3, event: str | None = None) -> BatchResult:
     """Run ``controller`` over every (track, parameter combination, seed); see
     docs/batch.md. ``tracks``: files, folders, globs, ``random:N`` (default: the bundled
     track). ``seeds``: N (0..N-1) or ``"A:B"``. ``params``: ``["NAME=V1,V2", "K=1:2:0.5"]``.
     ``ray``: None (local pool), ``"local"`` (a local Ray cluster) or a cluster address.
     ``on_plan``: called once with the number of runs; ``on_row``: with each row as it arrives
-    (a progress bar)."""
+    (a progress bar). ``time_limit_s``: of each run (default 60 s; the race's 120 s with
+    ``event="race"``); ``off_track_wheels``, ``event``: as for ``simrunner drive``."""
     from simrunner.run.controller import load_controller
     from simrunner.run.runner import default_track
-    from simrunner.run.settings import RunSettings
+    from simrunner.run.rules import RACE_TIME_LIMIT_S
+    from simrunner.run.settings import DEFAULT_TIME_LIMIT_S, RunSettings
     from vehicle.description import load_car
 
     ctl_path = Path(controller).resolve()
     load_controller(ctl_path)                       # a missing/broken file: one line, now
     load_car(car)
-    RunSettings(laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s)
+    if time_limit_s is None:
+        time_limit_s = RACE_TIME_LIMIT_S if event == "race" else DEFAULT_TIME_LIMIT_S
+    RunSettings(laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
+                off_track_wheels=off_track_wheels, event=event)
     refs = resolve_tracks(list(tracks) or [str(default_track())])
     grid = parse_grid(list(params), reserved=RESERVED)
     jobs = make_jobs(refs, parse_seeds(seeds), grid)
@@ -114,6 +120,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
         raise BatchError(f"{out}: cannot create the output folder ({exc.strerror or exc})") from None
     config = BatchConfig(controller=str(ctl_path), car=None if car is None else str(Path(car).resolve()),
                          laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
+                         off_track_wheels=off_track_wheels, event=event,
                          param_names=tuple(grid))
 
     def outputs_for(job: Job, video_on: bool, csv_on: bool) -> dict | None:
@@ -173,6 +180,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
         wall = time.perf_counter() - t0
         meta = {"controller": str(ctl_path), "car": config.car, "laps": laps,
                 "time_limit_s": time_limit_s, "dt_s": dt_s, "wall_limit_s": wall_limit_s,
+                "off_track_wheels": off_track_wheels, "event": event,
                 "tracks": [r.label for r in refs], "seeds": parse_seeds(seeds),
                 "params": {k: v for k, v in grid.items()}, "runs_planned": len(jobs),
                 "runs_done": len(ordered), "backend": backend_name, "workers": n_workers,

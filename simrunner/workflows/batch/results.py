@@ -33,7 +33,7 @@ from vehicle.userfiles import write_atomic
 
 FIXED_BEFORE = ("run", "track", "seed")
 FIXED_AFTER = ("outcome", "message", "laps", "laps_completed", "lap_times_s", "best_lap_s",
-               "sim_time_s", "frames", "off_x_m", "off_y_m", "off_t_s", "off_progress_m",
+               "passed", "penalty_s", "time_s", "sim_time_s", "frames", "off_x_m", "off_y_m", "off_t_s", "off_progress_m",
                "off_progress_frac")
 NONDETERMINISTIC = ("wall_time_s", "cpu_time_s")
 RESERVED = FIXED_BEFORE + FIXED_AFTER + NONDETERMINISTIC
@@ -49,7 +49,7 @@ def base_row(job: Job, laps: int) -> dict[str, Any]:
     row: dict[str, Any] = {"run": job.index, "track": job.track.label, "seed": job.seed}
     row.update(dict(job.params))
     row.update({"outcome": "", "message": "", "laps": laps, "laps_completed": 0, "lap_times_s": [],
-                "best_lap_s": None, "sim_time_s": 0.0, "frames": 0, "off_x_m": None,
+                "best_lap_s": None, "passed": False, "penalty_s": 0.0, "time_s": None, "sim_time_s": 0.0, "frames": 0, "off_x_m": None,
                 "off_y_m": None, "off_t_s": None, "off_progress_m": None,
                 "off_progress_frac": None, "wall_time_s": 0.0, "cpu_time_s": 0.0})
     return row
@@ -80,11 +80,12 @@ def row_from_result(job: Job, result, centreline: np.ndarray | None) -> dict[str
     laps = [float(t) for t in result.lap_times_s]
     row.update(outcome=str(result.outcome), message=result.message,
                laps_completed=int(result.laps_completed), lap_times_s=laps,
-               best_lap_s=min(laps) if laps else None, sim_time_s=float(result.sim_time_s),
+               best_lap_s=min(laps) if laps else None, passed=bool(result.passed),
+               penalty_s=float(result.penalty_s), time_s=result.time_s, sim_time_s=float(result.sim_time_s),
                frames=len(result.log), wall_time_s=round(float(result.wall_time_s), 4),
                cpu_time_s=round(float(result.cpu_time_s), 4))
     log = result.log
-    if str(result.outcome) == "off_track" and len(log) and log.x_m is not None:
+    if str(result.outcome) in ("off_track", "off_course") and len(log) and log.x_m is not None:
         x, y, t = float(log.x_m[-1]), float(log.y_m[-1]), float(log.t_s[-1])
         row.update(off_x_m=x, off_y_m=y, off_t_s=t)
         where = progress_along(centreline, x, y)

@@ -59,7 +59,8 @@ class BatchConfig:
     """What every run of a batch shares (sent once to each worker).
 
     ``controller``: absolute path of the controller file. ``car``: car TOML path or None.
-    ``laps``, ``time_limit_s``, ``dt_s``, ``wall_limit_s``: as for ``simrunner drive``.
+    ``laps``, ``time_limit_s``, ``dt_s``, ``wall_limit_s``, ``off_track_wheels``, ``event``:
+    as for ``simrunner drive``.
     """
 
     controller: str
@@ -69,6 +70,8 @@ class BatchConfig:
     dt_s: float = 0.002
     wall_limit_s: float = 10.0
     param_names: tuple[str, ...] = field(default_factory=tuple)
+    off_track_wheels: int = 3
+    event: str | None = None
 
 
 def _is_track_folder(path: Path) -> bool:
