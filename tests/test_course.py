@@ -157,7 +157,7 @@ def test_race_event_one_lap_and_the_stop_after_the_finish(tmp_path):
     stops = drive(_stopping_follower(track.course.length_m + 0.3 + 1.0), track=track, event="race")
     assert stops.outcome == "finished" and not stops.penalties
     assert "stopped" in stops.message and stops.time_s == pytest.approx(r.lap_times_s[0], abs=0.05)
-    with pytest.raises(SettingsError, match="one lap per attempt"):
+    with pytest.raises(SettingsError, match="the race event sets its own laps"):
         RunSettings(event="race", laps=2)
     assert RunSettings(event="race").for_track(track).time_limit_s == 120.0
 

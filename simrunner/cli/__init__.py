@@ -19,6 +19,7 @@ import sys
 import click
 
 from simrunner.errors import SimError
+from simrunner.run.rules import EVENT_NAMES
 
 
 def input_errors() -> tuple[type[BaseException], ...]:
@@ -151,13 +152,14 @@ def main() -> None:
 @click.option("--keep-driving", is_flag=True, default=False,
               help="Leaving the track or the course does not end the run (still recorded: "
                    "off_track column, a warning).")
-@click.option("--off-track-wheels", "off_track_wheels", default=3, show_default=True,
+@click.option("--off-track-wheels", "off_track_wheels", default=None,
               type=click.IntRange(1, 4), metavar="N",
-              help="Wheels off the road that end the run: 3 is the rules' race, 1 the stricter "
-                   "any-wheel rule.")
-@click.option("--event", default=None, type=click.Choice(["race"]),
-              help="Run a discipline as the rules do: 'race' = one timed lap, 120 s, +1 s when "
-                   "the car does not stop within 2 m after the finish (default: practice, --laps).")
+              help="Wheels off the road that end the run [default: 3, the rules' race; 1 in the "
+                   "other disciplines: any wheel].")
+@click.option("--event", default=None, type=click.Choice(EVENT_NAMES),
+              help="Run a discipline as the rules do, on its own layout unless --track: race (one "
+                   "timed lap, 120 s, +1 s without a stop within 2 m), figure8, speed_limit; "
+                   "docs/events.md (default: practice, --laps).")
 @click.option("--video", default=None, metavar="PATH.mp4", help="Write the debug video.")
 @click.option("--csv", default=None, metavar="PATH", help="Write telemetry (one row per camera frame).")
 @click.option("--plot", default=None, metavar="PATH.png", help="Write path/speed/steering plot.")
@@ -185,7 +187,7 @@ def main() -> None:
                    "code that overwrites memory cannot touch the simulator). A .so always is.")
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
               car, dt_s, wall_limit_s, params, include_dirs, defines, start, start_before_finish_m,
-              keep_driving, off_track_wheels=3, event=None, watch=False, isolate=False) -> None:
+              keep_driving, off_track_wheels=None, event=None, watch=False, isolate=False) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
     a shared library (.so). See docs/c_controllers.md."""
@@ -292,11 +294,14 @@ def _print_result(result) -> None:
         click.echo(f"warning: {text}", err=True)
     laps_text = ", ".join(f"{t:.2f} s" for t in result.lap_times_s) or "-"
     click.echo(f"outcome: {result.outcome} ({result.message})")
-    click.echo(f"laps: {result.laps_completed}/{result.laps}   lap times: {laps_text}")
-    if result.event is not None:
+    if result.event is None:
+        click.echo(f"laps: {result.laps_completed}/{result.laps}   lap times: {laps_text}")
+    else:
+        click.echo(f"laps: {result.laps_completed}   lap times: {laps_text}")
         penalties = "".join(f", +{p.seconds:g} s: {p.reason}" for p in result.penalties)
-        time_text = "-" if result.time_s is None else f"{result.time_s:.2f} s"
-        click.echo(f"{result.event}: {'passed' if result.passed else 'failed'}, time {time_text}{penalties}")
+        time_text = "" if result.time_s is None else f", time {result.time_s:.2f} s"
+        points = "" if result.points is None else f", {result.points} points"
+        click.echo(f"{result.event}: {'passed' if result.passed else 'failed'}{time_text}{points}{penalties}")
     click.echo(f"sim time {result.sim_time_s:.2f} s, wall {result.wall_time_s:.2f} s, "
                f"{result.real_time_factor:.1f}x real time")
     if result.outputs:

@@ -5,6 +5,8 @@ import sys
 
 import click
 
+from simrunner.run.rules import EVENT_NAMES
+
 
 @click.command("batch")
 @click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
@@ -19,11 +21,11 @@ import click
 @click.option("--time-limit", "time_limit_s", default=None,
               type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
               help="Simulated-time limit of each run [default: 60; the race: 120].")
-@click.option("--off-track-wheels", "off_track_wheels", default=3, show_default=True,
+@click.option("--off-track-wheels", "off_track_wheels", default=None,
               type=click.IntRange(1, 4), metavar="N",
-              help="Wheels off the road that end a run (3: the rules' race; 1: any wheel).")
-@click.option("--event", default=None, type=click.Choice(["race"]),
-              help="Run each as the rules' race (one lap, 120 s, the stop after the finish).")
+              help="Wheels off the road that end a run [default: 3, the rules' race; the event's].")
+@click.option("--event", default=None, type=click.Choice(EVENT_NAMES),
+              help="Run each as the rules' discipline (as simrunner drive --event).")
 @click.option("--workers", default=None, type=click.IntRange(min=1),
               help="Worker processes (default: all cores; with --ray: the cluster's CPUs).")
 @click.option("-o", "--out", "out_dir", required=True, metavar="DIR",
@@ -47,7 +49,7 @@ import click
 @click.option("--no-plot", is_flag=True, help="Do not write summary.png.")
 def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, out_dir, force,
               video, csv, run_timeout_s, car, dt_s, wall_limit_s, ray, no_plot,
-              off_track_wheels=3, event=None) -> None:
+              off_track_wheels=None, event=None) -> None:
     """Run CONTROLLER over tracks x parameters x seeds on all cores (or Ray); one row per run."""
     from tqdm import tqdm
 

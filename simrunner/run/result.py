@@ -51,9 +51,14 @@ class RunResult:
     warnings: list[str] = field(default_factory=list)  # noticed, did not stop the run
     stray_threads: int = 0  # non-daemon threads the controller left running
     signal: int | None = None  # the signal that interrupted the run (None: Ctrl-C or none)
-    event: str | None = None  # None: practice; "race": the rules' timed race
+    event: str | None = None  # None: practice; else the discipline (simrunner.run.events)
+    verdict: Any = None       # the discipline's simrunner.run.events.Verdict (None: practice)
     lap_distances_m: list[float] = field(default_factory=list)  # path driven in each counted lap
-    penalties: list = field(default_factory=list)  # simrunner.run.rules.Penalty, in order
+
+    @property
+    def penalties(self) -> list:
+        """The discipline's time penalties (:class:`simrunner.run.rules.Penalty`), in order."""
+        return [] if self.verdict is None else list(self.verdict.penalties)
 
     @property
     def penalty_s(self) -> float:
@@ -61,13 +66,22 @@ class RunResult:
 
     @property
     def passed(self) -> bool:
-        """The attempt counts: its laps were completed (no failure)."""
+        """The attempt counts: the discipline's verdict; in practice, the laps were completed."""
+        if self.verdict is not None:
+            return bool(self.verdict.passed)
         return Outcome(self.outcome) == Outcome.FINISHED
+
+    @property
+    def points(self) -> int | None:
+        """The rules' points for this attempt (None: practice, or ranked among teams)."""
+        return None if self.verdict is None else self.verdict.points
 
     @property
     def time_s(self) -> float | None:
         """The race's result: the first lap's time plus the penalties (None without a lap)."""
-        return self.lap_times_s[0] + self.penalty_s if self.lap_times_s else None
+        if self.event != "race" or not self.lap_times_s:
+            return None
+        return self.lap_times_s[0] + self.penalty_s
 
     @property
     def ok(self) -> bool:
@@ -93,4 +107,5 @@ class RunResult:
                 "penalties": [{"seconds": p.seconds, "reason": p.reason} for p in self.penalties],
                 "penalty_s": self.penalty_s,
                 "time_s": None if self.time_s is None else round(self.time_s, 6),
-                "points": None}
+                "points": self.points,
+                "details": {} if self.verdict is None else dict(self.verdict.details)}

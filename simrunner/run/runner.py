@@ -24,6 +24,7 @@ process (:mod:`simrunner.run.watchdog`); under a supervisor (:mod:`simrunner.run
 """
 from __future__ import annotations
 
+import dataclasses
 import gc
 import threading
 import time
@@ -39,7 +40,7 @@ from simrunner.run.judge import Judge
 from simrunner.telemetry.log import RunRecorder
 from simrunner.reports.outputs import Outputs, check_outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
-from simrunner.run.rules import Penalty, StopCheck
+from simrunner.run.events import EVENTS, event_track, make_monitor, start_past
 from simrunner.run.settings import RunSettings
 from simrunner.run.spinner import Session, Spinner
 from simrunner.run.supervise import current_supervision
@@ -61,14 +62,15 @@ class FrameWork:
     """The clock's ``on_frame``: judge, run-log row, video frame; returns how the run ends
     (or None). Holds the parts it uses, never the clock.
 
-    Ends the run when the judge counts the laps (in the race, once the stop after the finish
-    line is judged: :class:`~simrunner.run.rules.StopCheck`), when ``off_track_wheels`` wheels
-    are off the road, when the car leaves the course, or at the time limit; with
-    ``keep_driving`` leaving the track or the course is only counted (the run's warnings)."""
+    Ends the run when the judge counts the laps, when ``off_track_wheels`` wheels are off the
+    road, when the car leaves the course, or at the time limit; with ``keep_driving`` leaving
+    the track or the course is only counted (the run's warnings). A discipline's
+    ``monitor`` (:mod:`simrunner.run.events`) sees every frame and decides what the laps and
+    the time limit mean (the race's stop after the line, the figure 8's laps in the time)."""
 
     def __init__(self, sim: CarModel, judge: Judge, recorder: RunRecorder, time_limit_s: float,
                  video=None, *, judged: bool = True, keep_driving: bool = False,
-                 off_track_wheels: int = 1, race: bool = False):
+                 off_track_wheels: int = 1, monitor=None):
         self.sim, self.judge, self.recorder, self.video = sim, judge, recorder, video
         self.time_limit_s = time_limit_s
         self.events: list = []
@@ -81,9 +83,7 @@ class FrameWork:
         self.first_off_track = ""
         self.off_course_count = 0
         self.first_off_course = ""
-        self.race = race
-        self.stop_check: StopCheck | None = None
-        self.penalties: list[Penalty] = []
+        self.monitor = monitor
 
     def __call__(self, k: int, t: float, pose, cmd: Command,
                  row_cmd: Command | None) -> tuple[Outcome, str] | None:
@@ -104,10 +104,15 @@ class FrameWork:
             self.video.frame_boundary(k, t, pose, {
                 "speed": speed, "steer": steer, "speed_cmd": cmd[0], "steer_cmd": cmd[1],
                 "lap": lap, "off_track": off})
+        monitor = self.monitor
+        if monitor is not None:
+            end = monitor.frame(t, pose, speed)
+            if end is not None:
+                return end
         if lap >= judge.laps:
-            if not self.race:
+            if monitor is None:
                 return Outcome.FINISHED, f"{lap} lap(s) completed"
-            return self._after_finish(t, speed, len(judge.off_wheels) >= self.off_track_wheels)
+            return monitor.at_laps(t, speed, len(judge.off_wheels) >= self.off_track_wheels)
         if off:
             text = f"off track at t = {t:.3f} s (wheel(s) {', '.join(judge.off_wheels)} off the road)"
             if len(judge.off_wheels) >= self.off_track_wheels and not self.keep_driving:
@@ -122,23 +127,10 @@ class FrameWork:
             self.off_course_count += 1
             self.first_off_course = self.first_off_course or text
         if t >= self.time_limit_s - 1e-9:
+            if monitor is not None:
+                return monitor.at_time_limit(t)
             return Outcome.TIMEOUT, f"time limit of {self.time_limit_s:g} s simulated time reached"
         return None
-
-    def _after_finish(self, t: float, speed: float, off: bool) -> tuple[Outcome, str] | None:
-        """The race after its lap: None until the stop is judged."""
-        judge = self.judge
-        if self.stop_check is None:
-            self.stop_check = StopCheck(judge.finish_t_s, judge.finish_distance_m)
-        verdict = self.stop_check.update(t, judge.distance_m, speed, int(off),
-                                         time_up=t >= self.time_limit_s - 1e-9)
-        if verdict is None:
-            return None
-        text, penalty = verdict
-        if penalty is not None:
-            self.penalties.append(penalty)
-            text += f" (+{penalty.seconds:g} s)"
-        return Outcome.FINISHED, f"{judge.laps_completed} lap(s) completed; {text}"
 
 
 # -- one run, wired -----------------------------------------------------------------------
@@ -158,7 +150,13 @@ class Run:
         from simrunner.run.start import start_pose
 
         settings = settings.for_track(track)  # the time limit's default grows with the laps
+        if (settings.event == "speed_limit" and settings.start is None and settings.start_before_finish_m is None
+                and track.course is not None):  # the rules: just past the 3-stripe piece (R20)
+            past = start_past(track.course, "SPEED_LIMIT_END", 0.05)
+            if past is not None:
+                settings = dataclasses.replace(settings, start=(past.x_m, past.y_m, past.yaw_rad))
         self.track, self.car, self.settings = track, car, settings
+        self.time_limit_s = settings.time_limit_s
         self.start = start_pose(track, car, settings)
         # make_sim: a plain CarSim when every effect of the car description is neutral,
         # otherwise an EffectSim applying them (docs/effects.md)
@@ -170,7 +168,9 @@ class Run:
             from simrunner.sensors.imaging import Imager
 
             self.imager = Imager(self.camera, track.lighting, surface_z_m=track.surface_z_m)
-        self.judge = Judge(track, laps=settings.laps)
+        self.judge = Judge(track, laps=settings.laps if settings.event is None
+                           else EVENTS[settings.event].laps)
+        self.monitor = None if settings.event is None else make_monitor(settings.event, self)
         self.csv = None
         supervision = current_supervision()
         if csv_path is None and supervision is not None:  # the supervisor's copy of the log
@@ -193,7 +193,7 @@ class Run:
                                        car_width_m=car.chassis.track_m)
         self.frames = FrameWork(self.sim, self.judge, self.recorder, settings.time_limit_s, self.video,
                                 judged=track.judged, keep_driving=settings.keep_driving,
-                                off_track_wheels=settings.off_track_wheels, race=settings.event == "race")
+                                off_track_wheels=settings.off_track_wheels, monitor=self.monitor)
         self.clock = LockstepClock(self.sim, dt_s=settings.dt_s,
                                    frame_period_s=car.camera.frame_period_s(), on_frame=self.frames)
         self.session = Session(clock=self.clock, camera=self.camera, car=car,
@@ -263,6 +263,8 @@ class Run:
                 outcome, message = Outcome(clock.finished.outcome), clock.finished.message
             elif outcome is None:
                 outcome, message = Outcome.CONTROLLER_RETURNED, "main() returned"
+        if self.monitor is not None and outcome != Outcome.FINISHED:
+            self.monitor.failed(outcome)
         frames = self.frames
         if frames.off_track_count:
             n = frames.off_track_count
@@ -350,6 +352,8 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
     with SignalGuard() as signals:
         ctrl = load_controller(controller)
         car_desc = car if isinstance(car, CarDescription) else load_car(car)
+        if track is None and settings.event is not None:
+            track = event_track(settings.event)  # the discipline's own layout (None: the default)
         sim_track, track_label = resolve_track(track, car_desc)
         run = Run(sim_track, car_desc, settings, video_path=video, csv_path=csv)
         run.signal_guard = signals
@@ -368,7 +372,7 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
                            log=run.recorder.freeze(track_label), frames=len(run.recorder),
                            warnings=warnings, stray_threads=len(stray),
                            signal=signals.received if outcome == Outcome.INTERRUPTED else None,
-                           event=settings.event, penalties=list(run.frames.penalties),
+                           event=settings.event, verdict=run.monitor.verdict if run.monitor else None,
                            lap_distances_m=judge.lap_distances_m,
                            unused_params=tuple(sorted(set(settings.params) - run.session.params_read)))
         run.recorder.finish()

@@ -9,7 +9,8 @@ from typing import Mapping
 
 from simrunner.errors import SimError
 from simrunner.run.params import ParamValue, frozen_params
-from simrunner.run.rules import EVENTS, RACE_LAPS, RACE_TIME_LIMIT_S, RULES_OFF_TRACK_WHEELS
+from simrunner.run.events import EVENTS
+from simrunner.run.rules import RULES_OFF_TRACK_WHEELS
 
 MAX_DT_S = 0.02
 
@@ -34,14 +35,15 @@ class RunSettings:
     the track's centre, heading along it, its front bumper this far (m, along the track)
     before the finish line.
 
-    Judging: ``off_track_wheels``: how many wheels off the road end the run (1-4; default 3,
-    the rules' race: "3 or more wheels", :mod:`simrunner.run.rules`; 1 is the stricter rule
-    that any wheel off ends it); fewer wheels off are recorded (the ``off_track`` column, a
-    warning). Leaving the course (:mod:`simrunner.run.judge`) ends the run too.
-    ``keep_driving``: neither ends the run (both are still recorded). ``event``: None
-    (practice: ``laps`` laps) or ``"race"``: the rules' timed race, one lap, 120 s unless
-    ``time_limit_s`` says otherwise, +1 s when the car does not stop within 2 m after the
-    finish line (:mod:`simrunner.run.rules`). ``params``: controller
+    Judging: ``off_track_wheels``: how many wheels off the road end the run (1-4; None, the
+    default: 3, the rules' race, "3 or more wheels", :mod:`simrunner.run.rules`, or the
+    event's; 1 is the stricter rule that any wheel off ends it, the other disciplines'); fewer
+    wheels off are recorded (the ``off_track`` column, a warning). Leaving the course
+    (:mod:`simrunner.run.judge`) ends the run too. ``keep_driving``: neither ends the run
+    (both are still recorded). ``event``: None (practice: ``laps`` laps) or a discipline of
+    :data:`simrunner.run.events.EVENTS` (``"race"``: the rules' timed race, one lap, 120 s,
+    +1 s when the car does not stop within 2 m after the finish line; ``"figure8"``, ...): its
+    laps, time limit (unless ``time_limit_s`` is given) and off-track rule. ``params``: controller
     parameters, a read-only mapping name -> int | float | str, read with
     ``spinner.param(name, default)`` (:mod:`simrunner.run.params`).
     """
@@ -55,7 +57,7 @@ class RunSettings:
     start: tuple[float, float, float] | None = None
     start_before_finish_m: float | None = None
     keep_driving: bool = False
-    off_track_wheels: int = RULES_OFF_TRACK_WHEELS
+    off_track_wheels: int | None = None
     event: str | None = None
 
     def __post_init__(self) -> None:
@@ -66,9 +68,13 @@ class RunSettings:
             object.__setattr__(self, name, int(v))
         if self.event is not None and self.event not in EVENTS:
             raise SettingsError(f"event = {self.event!r}: expected one of {', '.join(EVENTS)} (or none: practice)")
-        if self.event == "race" and self.laps != RACE_LAPS:
-            raise SettingsError(f"laps = {self.laps!r}: the race is one lap per attempt (rules summary, "
-                                "section 3); several laps are practice (no event)")
+        if self.event is not None and self.laps != 1:
+            rules = EVENTS[self.event]
+            raise SettingsError(f"laps = {self.laps!r}: the {self.event} event sets its own laps (rules "
+                                f"summary, {rules.rules}); several laps are practice (no event)")
+        if self.off_track_wheels is None:
+            object.__setattr__(self, "off_track_wheels", RULES_OFF_TRACK_WHEELS if self.event is None
+                               else EVENTS[self.event].off_track_wheels)
         v = self.off_track_wheels
         if isinstance(v, bool) or not hasattr(v, "__index__") or not 1 <= int(v) <= 4:
             raise SettingsError(f"off_track_wheels = {v!r}: expected 1, 2, 3 or 4 (wheels off the road "
@@ -106,8 +112,8 @@ class RunSettings:
         """These settings with ``time_limit_s`` filled in for ``track`` (a ``SimTrack``)."""
         if self.time_limit_s is not None:
             return self
-        if self.event == "race":
-            return dataclasses.replace(self, time_limit_s=RACE_TIME_LIMIT_S)
+        if self.event is not None:
+            return dataclasses.replace(self, time_limit_s=EVENTS[self.event].time_limit_s)
         return dataclasses.replace(self, time_limit_s=default_time_limit_s(self.laps, track))
 
 

@@ -80,7 +80,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
               ray: str | None = None, force: bool = False, start_method: str | None = None,
               on_row: Callable[[dict], None] | None = None,
               on_plan: Callable[[int], None] | None = None, quiet_workers: bool = True,
-              off_track_wheels: int = 3, event: str | None = None) -> BatchResult:
+              off_track_wheels: int | None = None, event: str | None = None) -> BatchResult:
     """Run ``controller`` over every (track, parameter combination, seed); see
     docs/batch.md. ``tracks``: files, folders, globs, ``random:N`` (default: the bundled
     track). ``seeds``: N (0..N-1) or ``"A:B"``. ``params``: ``["NAME=V1,V2", "K=1:2:0.5"]``.
@@ -90,7 +90,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     ``event="race"``); ``off_track_wheels``, ``event``: as for ``simrunner drive``."""
     from simrunner.run.controller import load_controller
     from simrunner.run.runner import default_track
-    from simrunner.run.rules import RACE_TIME_LIMIT_S
+    from simrunner.run.events import EVENTS
     from simrunner.run.settings import DEFAULT_TIME_LIMIT_S, RunSettings
     from vehicle.description import load_car
 
@@ -98,7 +98,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     load_controller(ctl_path)                       # a missing/broken file: one line, now
     load_car(car)
     if time_limit_s is None:
-        time_limit_s = RACE_TIME_LIMIT_S if event == "race" else DEFAULT_TIME_LIMIT_S
+        time_limit_s = EVENTS[event].time_limit_s if event in EVENTS else DEFAULT_TIME_LIMIT_S
     RunSettings(laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
                 off_track_wheels=off_track_wheels, event=event)
     refs = resolve_tracks(list(tracks) or [str(default_track())])

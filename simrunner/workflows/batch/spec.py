@@ -70,7 +70,7 @@ class BatchConfig:
     dt_s: float = 0.002
     wall_limit_s: float = 10.0
     param_names: tuple[str, ...] = field(default_factory=tuple)
-    off_track_wheels: int = 3
+    off_track_wheels: int | None = None
     event: str | None = None
 
 
