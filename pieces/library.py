@@ -213,7 +213,7 @@ def crossroads(*, length_m: float | None = None, angle_rad: float = math.pi / 2,
     need = s.road_width_m if perpendicular else (
         s.road_width_m * (1.0 + abs(math.cos(angle_rad))) / math.sin(angle_rad))
     if length_m is None:
-        length_m = 0.6 if perpendicular else math.ceil(need * 1000.0 - 1e-9) / 1000.0
+        length_m = 0.6 if perpendicular else need
     length_m = check_range("length_m", length_m, need, lo_open=False,
                            why="at least the road width" if perpendicular else
                            f"at least {need:.3f} m for a {math.degrees(angle_rad):g}-degree crossing")

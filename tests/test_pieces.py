@@ -429,7 +429,6 @@ def test_random_valid_pieces_watertight_with_exact_ports(p):
     _assert_joined(p.footprint, placed(p, p.ports["exit"]))
 
 
-bad_values = st.one_of(st.floats(max_value=0.0), st.just(math.nan), st.just(math.inf))
 
 
 @settings(max_examples=60, deadline=None)
@@ -437,7 +436,9 @@ bad_values = st.one_of(st.floats(max_value=0.0), st.just(math.nan), st.just(math
 def test_invalid_layout_values_raise_with_the_name(kind, data):
     name = data.draw(st.sampled_from(sorted(PARAMS[kind])))
     spec = PARAMS[kind][name]
-    value = data.draw(st.one_of(bad_values, st.floats(min_value=spec.hi, exclude_min=not spec.hi_open)
-                                if math.isfinite(spec.hi) else bad_values))
+    below = st.one_of(st.floats(max_value=spec.lo, exclude_max=not spec.lo_open), st.just(math.nan),
+                      st.just(math.inf))  # (0 is a valid mark_gap: below its range, not <= 0)
+    value = data.draw(st.one_of(below, st.floats(min_value=spec.hi, exclude_min=not spec.hi_open)
+                                if math.isfinite(spec.hi) else below))
     with pytest.raises(PieceError, match=f"^{name}="):
         piece_from_layout(kind, {name: value})

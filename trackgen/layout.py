@@ -167,10 +167,11 @@ class Layout:
         for name, spec in specs.items():
             if name in entry.params:
                 value = entry.params[name]
-            elif name in kit and not (entry.kind is PieceType.CROSSROADS and name == "length"
-                                      and entry.params.get("angle", 90.0) != 90.0):
-                # (the kit's crossing is the 90-degree square; one at another angle takes
-                # the smallest length that fits it, the piece's own default)
+            elif (entry.kind is PieceType.CROSSROADS and name == "length"
+                  and entry.params.get("angle", 90.0) != 90.0):
+                continue  # a crossing at another angle: the smallest length that fits it (the
+                # piece's own default, from the scaled road; the kit's is for its square)
+            elif name in kit:
                 value = kit[name]
             elif spec.unit == "m" and self.scale != 1.0:
                 value = spec.default

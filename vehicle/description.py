@@ -246,6 +246,36 @@ class Pixy2:
                                     "estimate", 0.0, 200.0)
 
 
+HC_SR04 = "HC-SR04 ultrasonic ranging module datasheet (Elecfreaks)"
+
+
+@dataclass(frozen=True)
+class RangeSensor:
+    """One range sensor on the car (``[range_sensors.NAME]``; read with ``get_distance(NAME)``,
+    docs/events.md): where it sits and looks (car body frame), its cone, range, rate and
+    noise. It measures the objects standing on the track (the rules' cube and block), not the
+    floor. Defaults: an HC-SR04 ultrasonic module at the front bumper, looking ahead."""
+
+    kind: str = _choice("ultrasonic", ("ultrasonic", "infrared", "tof"),
+                        "What the sensor is (documents the numbers; every kind is a cone of rays).",
+                        "the part on your car")
+    x_m: float = _f(0.24, "Position of the sensor ahead of the rear axle.", "estimate: the default car's "
+                    "front bumper", -2.0, 2.0)
+    y_m: float = _f(0.0, "Position to the left of the car's centre line.", "estimate", -1.0, 1.0)
+    z_m: float = _f(0.06, "Height of the sensor above the track.", "estimate", 0.0, 1.0)
+    yaw_rad: float = _f(0.0, "Direction it looks, + = left of straight ahead.", "estimate", -3.1416, 3.1416)
+    fov_rad: float = _f(0.26, "Full angle of its cone across the car (rays spread over it).",
+                        HC_SR04 + ": measuring angle 15 deg", 0.0, 3.1)
+    rays: int = _f(7, "Rays across the cone; the reading is the nearest hit.", "ours", 1, 181)
+    min_range_m: float = _f(0.02, "Nearer objects read this.", HC_SR04 + ": 2 cm", 0.0, 10.0)
+    max_range_m: float = _f(4.0, "Nothing nearer than this: the reading is inf.", HC_SR04 + ": 400 cm",
+                            0.01, 100.0)
+    rate_hz: float = _f(16.0, "Readings per second; a reading is held until the next.",
+                        HC_SR04 + ": a measurement cycle of at least 60 ms", 0.1, 1000.0)
+    noise_std_m: float = _f(0.003, "Standard deviation of the reading's Gaussian noise.",
+                            HC_SR04 + ": resolution 0.3 cm", 0.0, 1.0)
+
+
 @dataclass(frozen=True)
 class Effects:
     """Catalogue of effects the nominal model leaves out (issue 4). Neutral values give back
@@ -331,6 +361,7 @@ class CarDescription:
     camera: Camera = field(default_factory=Camera)
     effects: Effects = field(default_factory=Effects)
     pixy2: Pixy2 = field(default_factory=Pixy2)
+    range_sensors: tuple = ()  # (name, RangeSensor) pairs: [range_sensors.NAME] tables
 
     def __post_init__(self) -> None:
         problem = relation_problem(self)
@@ -374,6 +405,8 @@ class CarDescription:
                        else f"Range {m['lo']} .. {m['hi']}" + (" each" if m.get("list") else ""))
                 lines.append(f"# {m['doc']} {rng}. Source: {source}.")
                 lines.append(tomli_w.dumps({f.name: value}).rstrip("\n"))
+        for name, sensor in self.range_sensors:
+            lines += ["", f"[range_sensors.{name}]", tomli_w.dumps(dataclasses.asdict(sensor)).rstrip("\n")]
         return "\n".join(lines) + "\n"
 
     def save(self, path: str | Path, sources: Mapping[str, str] | None = None) -> None:
@@ -400,10 +433,17 @@ def car_from_dict(data: dict[str, Any], source: str = "<car>", text: str | None 
                 raise _error(source, text, None, "name", "'name' must be a non-empty string")
             kwargs["name"] = value
             continue
+        if key == "range_sensors":
+            if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
+                raise _error(source, text, None, key, "[range_sensors.NAME] tables expected, one per sensor")
+            kwargs[key] = tuple((name, _section_from_dict(RangeSensor, f"range_sensors.{name}", table, source,
+                                                          text)) for name, table in value.items())
+            continue
         cls = _SECTION_TYPES.get(key)
         if cls is None:
             raise _error(source, text, key, None,
-                         f"unknown section [{key}] (expected one of {', '.join(_SECTION_TYPES)})")
+                         f"unknown section [{key}] (expected one of {', '.join(_SECTION_TYPES)}, "
+                         "range_sensors)")
         if not isinstance(value, dict):
             raise _error(source, text, None, key, f"[{key}] must be a table")
         kwargs[key] = _section_from_dict(cls, key, value, source, text)
@@ -583,6 +623,14 @@ def markdown_doc() -> str:
                 default = "[]" if m.get("list") else f.default
             lines.append(f"| `{f.name}` | {default} | {rng} | {m['doc']} | {m['source']} |")
         lines.append("")
+    lines += ["## [range_sensors.NAME]", "", (RangeSensor.__doc__ or "").split("\n\n")[0].replace("\n    ", " "),
+              "", "| field | default | range | meaning | source |", "| --- | --- | --- | --- | --- |"]
+    for f in fields(RangeSensor):
+        m = f.metadata
+        rng = " / ".join(f"`{c}`" for c in m["choices"]) if m.get("choices") else f"{m['lo']} .. {m['hi']}"
+        default = f"`{f.default}`" if m.get("choices") else f.default
+        lines.append(f"| `{f.name}` | {default} | {rng} | {m['doc']} | {m['source']} |")
+    lines.append("")
     return "\n".join(lines)
 
 

@@ -623,6 +623,14 @@ class EffectSim:
         if self._forces:
             self._apply_forces()
 
+    def add_solid(self, solid) -> None:
+        """The inner CarSim's (:meth:`CarSim.add_solid`)."""
+        self.sim.add_solid(solid)
+
+    def touched_solids(self) -> tuple[str, ...]:
+        """The inner CarSim's (:meth:`CarSim.touched_solids`)."""
+        return self.sim.touched_solids()
+
     def prime_steering(self, t_s, steer_cmd_rad) -> None:
         """Bring the steering path's state to where earlier steering commands leave it:
         ``steer_cmd_rad[k]`` held from ``t_s[k]`` to ``t_s[k + 1]`` (one more time than

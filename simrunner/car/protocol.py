@@ -75,6 +75,10 @@ class CarModel(Protocol):
               yaw_rate_radps: float = 0.0) -> None: ...
     def prime_steering(self, t_s: Any, steer_cmd_rad: Any) -> None: ...  # state earlier commands leave
 
+    # -- objects on the track ------------------------------------------------------------
+    def add_solid(self, solid: Any) -> None: ...                 # a worlds.solids.Solid, a rigid body
+    def touched_solids(self) -> tuple[str, ...]: ...             # names the car has touched
+
 
 def protocol_members() -> tuple[str, ...]:
     """Names :class:`CarModel` requires (for tests and checkers)."""

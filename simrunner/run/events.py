@@ -9,12 +9,15 @@ the other disciplines section 4; "ours" marks what the rules leave open.
 | ``race`` | the given track (default: the bundled one) | 1 lap, 120 s, 3 wheels off fail | the lap is done; +1 s when the car does not stop within 2 m after the line |
 | ``figure8`` | the kit's M figure 8 | laps until 60 s (``--time-limit 90``: the 2018/19 rules) | the whole time driven without a wheel off; score: laps |
 | ``speed_limit`` | the kit's M oval with the zone | from just past the 3-stripe piece to 1.5 m past it again | the zone's speed at most 0.6 x the approach, back to 0.8 x after it |
+| ``obstacle`` | the kit's S oval | lap 1 clear, then a white 20 cm cube on a straight ahead (seeded), off the lane's middle | lap 2 done without touching it |
+| ``emergency_brake`` | the kit's S oval without marks | 2 laps, then a black 20 x 60 x 20 cm block across a straight ahead (seeded) | the car stops without touching it |
 
 The other disciplines void an attempt when any part of any wheel leaves the track (section 4,
 "Common void-attempt conditions"): their runs end at the first wheel off.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -54,6 +57,9 @@ EVENTS: dict[str, EventRules] = {
     # 60 s in 2019/20 (R20), 90 s in 2018/19 (R19): section 4.1
     "figure8": EventRules("figure8", "kit_M.txt", 10**6, 60.0, 1, None, "section 4.1"),
     "speed_limit": EventRules("speed_limit", "kit_speed_limit.txt", 10**6, 90.0, 1, SUCCESS_POINTS, "section 4.3"),
+    "obstacle": EventRules("obstacle", "kit_S.txt", 2, 90.0, 1, SUCCESS_POINTS, "section 4.2"),
+    "emergency_brake": EventRules("emergency_brake", "kit_S_plain.txt", 10**6, 90.0, 1, SUCCESS_POINTS,
+                                  "section 4.4"),
 }
 
 
@@ -194,7 +200,125 @@ class SpeedLimitMonitor(EventMonitor):
         return Outcome.FINISHED, ("passed: " if self.verdict.passed else "failed: ") + text
 
 
-MONITORS = {"race": RaceMonitor, "figure8": Figure8Monitor, "speed_limit": SpeedLimitMonitor}
+STRAIGHT_KINDS = ("STRAIGHT", "STRAIGHT_SHORT", "START_FINISH", "SPEED_LIMIT_START", "SPEED_LIMIT_END")
+OBJECT_AHEAD_M = 1.5            # ours: an object goes on a straight at least this far ahead of the car
+CUBE_OFF_CENTRE_M = (0.05, 0.155)  # ours: the cube's centre this far off the lane's middle (a seeded
+#                                  side; wholly on the lane, and a 20 cm wide car passes on the road)
+BLOCK_AFTER_START_M = 0.3       # ours: the block at least this far along its straight (a car sees it)
+STOPPED_FOR_S = 0.5             # ours: standing still this long is a stop
+
+
+class _ObjectMonitor(EventMonitor):
+    """Shared by the disciplines that put an object on the track during the run."""
+
+    def __init__(self, rules, run):
+        super().__init__(rules, run)
+        if run.track.course is None:
+            raise ValueError(f"the {rules.name} event needs a track with a course (a layout or a "
+                             "traced world)")
+        self.rng = np.random.default_rng([int(run.settings.seed), sum(map(ord, rules.name))])
+        self.solid = None
+
+    def _ahead(self, s_m: float) -> float:
+        """Arc length from the car to ``s_m`` along the course, in [0, L)."""
+        return (s_m - self.run.judge.course_s_m) % self.run.track.course.length_m
+
+    def _straight_ahead(self, from_start_m: float) -> float:
+        """A seeded arc length on a straight piece at least OBJECT_AHEAD_M ahead of the car, at
+        least ``from_start_m`` after the piece's start and 0.1 m before its end."""
+        course = self.run.track.course
+        straights = [s for s in course.sections if s.kind in STRAIGHT_KINDS
+                     and self._ahead(s.s_start_m) >= OBJECT_AHEAD_M
+                     and self._ahead(s.s_end_m) > self._ahead(s.s_start_m)
+                     and s.s_end_m - s.s_start_m >= from_start_m + 0.1]
+        if not straights:
+            raise ValueError(f"the {self.rules.name} event needs a straight piece {OBJECT_AHEAD_M} m ahead "
+                             "of the car")
+        sec = straights[int(self.rng.integers(len(straights)))]
+        return float(self.rng.uniform(sec.s_start_m + from_start_m, sec.s_end_m - 0.1))
+
+    def _place(self, solid, along_m: float, across_m: float) -> None:
+        self.solid = solid
+        self.run.place_solid(solid)
+        self.verdict.details.update(object=solid.name, x_m=round(solid.x_m, 4), y_m=round(solid.y_m, 4),
+                                    along_m=round(along_m, 4), across_m=round(across_m, 4))
+
+    def frame(self, t, pose, speed):
+        touched = self.run.sim.touched_solids() if self.solid is not None else ()
+        if touched:
+            self.verdict.details["touched"] = touched[0]
+            self.failed(Outcome.TOUCHED)
+            return Outcome.TOUCHED, f"touched the {touched[0]} at t = {t:.3f} s"
+        return None
+
+
+class ObstacleMonitor(_ObjectMonitor):
+    """Lap 1 clear; then the white 20 cm cube on a straight at least 1.5 m ahead, anywhere
+    along it (section 4.2: "anywhere along that straight"), 5 to 15.5 cm off the lane's middle
+    on a seeded side (the rules: not specified; ours, so that a car passes on the road); lap 2
+    without touching it (and no wheel off)."""
+
+    def frame(self, t, pose, speed):
+        if self.solid is None and self.run.judge.laps_completed >= 1:
+            from worlds.solids import obstacle_cube
+
+            along = self._straight_ahead(0.1)
+            across = float(self.rng.uniform(*CUBE_OFF_CENTRE_M)) * (1.0 if self.rng.random() < 0.5 else -1.0)
+            x, y, yaw = _course_point(self.run.track.course, along, across)
+            self._place(obstacle_cube("cube", x, y, yaw), along, across)
+        return super().frame(t, pose, speed)
+
+
+class EmergencyBrakeMonitor(_ObjectMonitor):
+    """Two laps; then the black block across a straight at least 1.5 m ahead, at least 0.3 m
+    after its start (seeded; section 4.4: when and where are not said, the drawing shows a bar
+    across a straight); passed when the car stands still (below 0.02 m/s for 0.5 s) without
+    touching it."""
+
+    still_since: float | None = None
+
+    def frame(self, t, pose, speed):
+        if self.solid is None:
+            if self.run.judge.laps_completed >= 2:
+                from worlds.solids import braking_block
+
+                along = self._straight_ahead(BLOCK_AFTER_START_M)
+                x, y, yaw = _course_point(self.run.track.course, along, 0.0)
+                self._place(braking_block("block", x, y, yaw), along, 0.0)
+                self.verdict.details["placed_ahead_m"] = round(self._ahead(along), 4)
+            return None
+        end = super().frame(t, pose, speed)
+        if end is not None:
+            return end
+        if abs(speed) >= STOPPED_MPS:
+            self.still_since = None
+            return None
+        if self.still_since is None:
+            self.still_since = t
+        if t - self.still_since < STOPPED_FOR_S:
+            return None
+        chassis = self.run.car.chassis  # the front bumper to the block's near face
+        gap = self._ahead(self.verdict.details["along_m"]) - 0.1 - (chassis.length_m - chassis.rear_overhang_m)
+        self.verdict.passed, self.verdict.points = True, self.rules.points
+        self.verdict.details["stopped_before_m"] = round(gap, 4)
+        return Outcome.FINISHED, f"stopped with its front {gap:.2f} m before the block"
+
+    def at_time_limit(self, t):
+        self.failed(Outcome.TIMEOUT)
+        what = "did not stop before the block" if self.solid is not None else "the block was never placed"
+        return Outcome.TIMEOUT, f"time limit of {self.rules.time_limit_s:g} s: {what}"
+
+
+def _course_point(course, along_m: float, across_m: float) -> tuple[float, float, float]:
+    """World ``(x, y, heading)`` ``across_m`` to the left of the course at arc length ``along_m``."""
+    from simrunner.track.progress import CentrelineProgress
+
+    x, y, yaw = CentrelineProgress(course.centreline).point_at(along_m)
+    return x - math.sin(yaw) * across_m, y + math.cos(yaw) * across_m, yaw
+
+
+MONITORS = {"race": RaceMonitor, "figure8": Figure8Monitor, "speed_limit": SpeedLimitMonitor,
+            "obstacle": ObstacleMonitor, "emergency_brake": EmergencyBrakeMonitor}
 
 
 def make_monitor(name: str, run) -> EventMonitor:

@@ -219,6 +219,11 @@ class Judge:
         return self._off_course
 
     @property
+    def course_s_m(self) -> float | None:
+        """Where the car is along the course's centreline (arc length, m; None: no course)."""
+        return None if self._follow is None else self._follow.s_m
+
+    @property
     def course_progress_m(self) -> float:
         """Distance followed along the course since the lap in progress started (m)."""
         return self._lap_progress_m

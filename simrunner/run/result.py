@@ -16,6 +16,7 @@ class Outcome(enum.StrEnum):
     FINISHED = "finished"                        # the laps were completed
     OFF_TRACK = "off_track"                      # too many wheels left the road
     OFF_COURSE = "off_course"                    # turned at a crossing, cut across, drove back
+    TOUCHED = "touched"                          # the car touched an object on the track
     TIMEOUT = "timeout"                          # the simulated time limit passed
     CONTROLLER_ERROR = "controller_error"        # main raised (or sent a bad command)
     CONTROLLER_RETURNED = "controller_returned"  # main returned

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-EVENT_NAMES = ("race", "figure8", "speed_limit")  # simrunner.run.events
+EVENT_NAMES = ("race", "figure8", "speed_limit", "obstacle", "emergency_brake")  # simrunner.run.events
 RACE_LAPS = 1                # section 3, "Laps": one lap per attempt
 RACE_TIME_LIMIT_S = 120.0    # section 3, "Time limit"
 RULES_OFF_TRACK_WHEELS = 3   # section 3, "Leaving the track": 3 or more wheels off fails

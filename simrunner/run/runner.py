@@ -199,9 +199,16 @@ class Run:
         self.session = Session(clock=self.clock, camera=self.camera, car=car,
                                rng=np.random.default_rng(settings.seed), recorder=self.recorder,
                                video=self.video, params=settings.params, imager=self.imager)
+        self.session.seed, self.session.surface_z_m = settings.seed, track.surface_z_m
         self.wall_time_s = 0.0
         self.cpu_time_s = 0.0
         self.signal_guard = None  # a faults.SignalGuard, when drive() installed one
+
+    def place_solid(self, solid) -> None:
+        """Put ``solid`` (:class:`worlds.solids.Solid`) on the track now: a rigid body the car
+        can touch, seen by the cameras and the range sensors."""
+        self.sim.add_solid(solid)
+        self.camera.solids = self.camera.solids + (solid,)
 
     def _render_view(self, pose) -> np.ndarray:
         """The debug video's camera view in a frame the controller took no image: the camera's

@@ -126,6 +126,9 @@ class Session:
         self.exposure_s = float(self.car.camera.exposure_s)  # set_exposure's value
         self.pixy2_tracker = None  # the Pixy2's line tracker (simrunner.run.pixy2), made on first use
         self.pixy2_frame: int | None = None  # the last frame the Pixy2 returned features of
+        self.ranging = None  # the range sensors (simrunner.sensors.ranging), made on first use
+        self.seed = 0        # the run's seed (the range sensors' noise)
+        self.surface_z_m = 0.0
 
     def activate(self) -> None:
         """Make this the session ``Spinner()`` attaches to in this context (and thread)."""
@@ -416,6 +419,21 @@ class Spinner:
         self._clock.advance(1)
         return float(self.speed_denorm(self._sim.speed_mps, self._angle))
 
+    def get_distance(self, name: str) -> float:
+        """The reading of range sensor ``name`` (the car file's ``[range_sensors.NAME]``): metres
+        to the nearest object standing on the track, ``inf`` when none is in range
+        (:mod:`simrunner.sensors.ranging`), after one physics step."""
+        if _get_ident() != self._owner:
+            raise self._foreign("get_distance")
+        s = self._s
+        if s.ranging is None:
+            from simrunner.sensors.ranging import RangeSensors
+
+            s.ranging = RangeSensors(s.car.range_sensors, s.seed)
+        self._clock.advance(1)
+        return s.ranging.read(str(name), self._clock.time_s, self._clock.pose(), s.camera.solids,
+                              s.surface_z_m)
+
     def get_position(self) -> tuple[float, float, float]:
         """World position ``(x, y, z)`` in metres of the car frame origin (rear-axle midpoint
         on the ground), after one physics step."""
@@ -521,6 +539,7 @@ class Spinner:
     getImage = get_image
     getSpeed = get_speed
     getPosition = get_position
+    getDistance = get_distance
     getTime = get_time
     addData = add_data
     addNoise = add_noise

@@ -23,6 +23,11 @@ or meet the ground farther than ``max_range_m``, see the floor/background gray. 
 which removes aliasing of thin far lines at k^2 times the cost (the block mean rounded half
 to even).
 
+Objects standing on the track (``solids``: :class:`worlds.solids.Solid` boxes, set by the run
+when a discipline places them) hide the ground behind them: where a pixel's ray meets one
+before the ground the pixel is the box's shade (:mod:`simrunner.sensors.solids`: its
+reflectance x 255 x the sky factor of the face), at the pixel's centre ray.
+
 The line camera (``line_image``: one row plus noise, every frame of a run) is one compiled
 call (:mod:`simrunner.sensors.line_row`, NumPy; the numba kernel :mod:`simrunner.sensors.line_kernel`
 computes the same pixels) that computes the same maps and pixels as ``render``.
@@ -97,6 +102,8 @@ class Camera:
         self._floor = int(self.raster.floor_gray)
         self._floor_f = float(self._floor)
         self._noise_std = float(cam.noise_std)
+        self.solids: tuple = ()  # objects standing on the track (worlds.solids.Solid)
+        self._solid_rays: dict[int, tuple] = {}  # image row -> its car-frame rays
         # load the line kernel now, not inside a timed, watchdog-guarded run
         # (``load_line_kernel=False``: on first use instead, for callers that may never need it)
         line_rows = [r for r, gx in enumerate(self._row_gx) if gx is not None]
@@ -169,7 +176,26 @@ class Camera:
 
     def render(self, pose: Pose2) -> np.ndarray:
         """The image ``(H, W) uint8`` seen from a car whose body frame is at ``pose``."""
-        return self._sample(pose, slice(None), self._any_miss)
+        img = self._sample(pose, slice(None), self._any_miss)
+        if self.solids:
+            for r in range(self.height_px):
+                self._paint_solids(img[r:r + 1], pose, r)
+        return img
+
+    def _paint_solids(self, img: np.ndarray, pose: Pose2, row: int) -> None:
+        """Paint the solids seen along image row ``row`` into ``img`` ``(1, W)``, in place."""
+        from simrunner.sensors.solids import camera_hits, camera_rays, sky_factor
+
+        rays = self._solid_rays.get(row)
+        if rays is None:
+            u = np.arange(self.width_px) + 0.5 - self.width_px / 2.0
+            rays = self._solid_rays[row] = camera_rays(self.cam, np.float64(row + 0.5 - self.height_px / 2.0), u)
+        hits = camera_hits(self.solids, 0.0, self.cam, pose, rays)
+        if hits is None:
+            return
+        mask, idx, nz, _, _ = hits
+        refl = np.array([s.reflectance for s in self.solids])[idx[mask]]
+        img[0, mask] = np.clip(np.rint(255.0 * refl * sky_factor(nz[mask])), 0, 255).astype(np.uint8)
 
     def render_row(self, pose: Pose2, row: int) -> np.ndarray:
         """One image row ``(W,) uint8``, equal to ``render(pose)[row]`` (cheaper)."""
@@ -182,13 +208,15 @@ class Camera:
         ground points share one x (all rows of a camera without supersampling that see only
         ground). ``normals``: a ``numpy.random.Generator`` or a
         :class:`simrunner.run.spinner.BufferedNormals` (its ``take``)."""
-        gx = self._row_gx[row] if type(row) is int and 0 <= row < self.height_px else None
+        gx = self._row_gx[row] if type(row) is int and 0 <= row < self.height_px and not self.solids else None
         if gx is None:
             row = int(row)
             if not 0 <= row < self.height_px:
                 raise CameraError(f"row {row} outside the image (0..{self.height_px - 1})")
             k = self.supersample
             img = self._sample(pose, slice(row * k, (row + 1) * k), self._row_misses[row])[:1]
+            if self.solids:
+                self._paint_solids(img, pose, row)
             return img if normals is None else self.add_noise(img, normals)
         # _maps with the row's common x folded into scalars: the same float64 operations, term
         # for term, so the same pixels (a - s*g == a + (-s)*g exactly), fewer operations; the

@@ -177,6 +177,7 @@ class Imager:
         self._black_dn = float(spec.black_level_dn)
         self._lead_s = float(spec.readout_s) if spec.model == "linescan" else 0.0
         self._rows: dict[tuple[int, int], tuple] = {}
+        self._solid_rays: dict[tuple[int, int], tuple] = {}
         self._inv_m = 1.0 / camera.raster.m_per_px
         self._x0_m, self._y0_m = (float(c) for c in camera.raster.origin_xy_m)
 
@@ -255,10 +256,38 @@ class Imager:
             scene *= lighting.illuminance_lux(wx, wy, self.surface_z_m) * self._refl_scale
             if lighting.specular > 0.0 and lighting.lights:
                 scene += self._highlights(wx, wy, xs, ys, yaws)
+        if self.camera.solids:
+            self._paint_solids(scene, xs, ys, yaws, r0, r1)
         if n == 1:
             return scene
         scene *= 1.0 / n
         return scene.sum(axis=0)
+
+    def _paint_solids(self, scene: np.ndarray, xs, ys, yaws, r0: int, r1: int) -> None:
+        """The solids standing on the track in front of the ground, in place: reflectance x the
+        illuminance at the hit point x the face's sky factor (:mod:`simrunner.sensors.solids`)."""
+        from simrunner.sensors.solids import camera_hits, camera_rays, sky_factor
+
+        cam, solids = self.camera, self.camera.solids
+        rays = self._solid_rays.get((r0, r1))
+        if rays is None:
+            m = self._margin
+            u = np.arange(-m, cam.width_px + m) + 0.5 - cam.width_px / 2.0
+            v = np.arange(r0, r1) + 0.5 - cam.height_px / 2.0
+            rays = self._solid_rays[(r0, r1)] = camera_rays(cam.cam, v[:, None], u[None, :])
+        refl = np.array([s.reflectance for s in solids])
+        lighting = self.lighting
+        for j, pose in enumerate(zip(xs, ys, yaws)):
+            hits = camera_hits(solids, self.surface_z_m, cam.cam, Pose2(*pose), rays)
+            if hits is None:
+                continue
+            mask, idx, nz, hx, hy = hits
+            if not lighting.lights and not lighting.shades:
+                lux = np.full(int(mask.sum()), float(lighting.ambient_lux))
+            else:
+                lux = lighting.illuminance_lux(hx[mask], hy[mask], self.surface_z_m)
+            target = scene if scene.ndim == 2 else scene[j]
+            target[mask] = refl[idx[mask]] * lux * sky_factor(nz[mask])
 
     def _highlights(self, wx, wy, xs, ys, yaws) -> np.ndarray:
         """The lamps' glossy reflection toward the camera (Blinn-Phong, the module docstring)

@@ -46,7 +46,7 @@
 
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
-       OP_PIXY_SET, OP_PIXY_PROG };
+       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3 };
 
 static unsigned char out_buf[1 << 16];
@@ -407,6 +407,14 @@ void spinner_get_position(double *x_m, double *y_m, double *z_m) {
     if (x_m) *x_m = last_pos[0];
     if (y_m) *y_m = last_pos[1];
     if (z_m) *z_m = last_pos[2];
+}
+
+double spinner_get_distance(const char *name) {
+    static double last_distance_m;
+    INIT();
+    if (name == NULL) misuse("spinner_get_distance(name=NULL): expected a range sensor's name");
+    if (!finished) call(OP_DISTANCE, NULL, 0, name, strlen(name), &last_distance_m, sizeof last_distance_m);
+    return last_distance_m;
 }
 
 double spinner_get_time(void) {

@@ -65,6 +65,9 @@ double spinner_get_exposure(void);
 double spinner_get_speed(void);    /* through speed_denorm, with the last angle */
 void spinner_get_position(double *x_m, double *y_m, double *z_m);  /* world, rear axle */
 double spinner_get_time(void);     /* simulated s */
+/* Range sensor NAME of the car file ([range_sensors.NAME]): metres to the nearest object on the
+ * track, INFINITY when none is in range (docs/events.md). An unknown name is an error. */
+double spinner_get_distance(const char *name);
 
 /* Let `seconds` of simulated time pass (ceil(seconds / dt) steps, at least one). */
 void spinner_sleep(double seconds);

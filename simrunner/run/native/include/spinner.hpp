@@ -162,6 +162,7 @@ class Spinner {
         return {float(x), float(y), float(z)};
     }
     double getTime() { return spinner_get_time(); }  // double: exact steps (the thesis: float)
+    float getDistance(const std::string &name) { return float(spinner_get_distance(name.c_str())); }
     void setExposure(double seconds) { spinner_set_exposure(seconds); }
     double getExposure() { return spinner_get_exposure(); }
     void sleep(double seconds) { spinner_sleep(seconds); }

@@ -1,0 +1,169 @@
+"""Objects on the track (worlds.solids, simrunner.sensors.solids), the range sensors
+(simrunner.sensors.ranging, get_distance in Python and C) and the disciplines that use them
+(--event obstacle / emergency_brake)."""
+from __future__ import annotations
+
+import math
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pieces.pose import Pose2
+from simrunner.car.effects import make_sim
+from simrunner.run.runner import drive
+from simrunner.sensors.camera import Camera
+from simrunner.sensors.solids import cast
+from simrunner.track import load_track
+from vehicle.description import CarDescription, CarDescriptionError, RangeSensor, car_from_dict, load_car
+from worlds.solids import Solid, braking_block, obstacle_cube
+
+REPO = Path(__file__).resolve().parents[1]
+KIT_S = REPO / "examples" / "kit_S.txt"
+SENSOR_CAR = REPO / "examples" / "events" / "sensor_car.toml"
+FOLLOWER = REPO / "examples" / "line_follower.py"
+
+
+def test_rays_meet_a_box_at_its_faces():
+    box = Solid("b", 2.0, 0.0, 0.4, 0.2, 0.3, yaw_rad=0.0)
+    t, idx, nz = cast([box], 0.0, (0.0, 0.0, 0.1), np.array([1.0, 1.0, 0.0]), np.array([0.0, 0.3, 1.0]),
+                      np.array([0.0, 0.0, 0.0]))
+    assert t[0] == pytest.approx(1.8) and idx[0] == 0 and nz[0] == 0.0   # the near side face
+    assert math.isinf(t[1]) and idx[1] == -1 and math.isinf(t[2])       # beside it, straight up
+    down = cast([box], 0.0, (2.0, 0.0, 1.0), np.array([0.0]), np.array([0.0]), np.array([-1.0]))
+    assert down[0][0] == pytest.approx(0.7) and down[2][0] == 1.0       # the top
+    turned = Solid("r", 2.0, 0.0, 0.4, 0.2, 0.3, yaw_rad=math.pi / 2)  # now 0.2 long along x
+    assert cast([turned], 0.0, (0.0, 0.0, 0.1), np.array([1.0]), np.array([0.0]), np.array([0.0]))[0][0] \
+        == pytest.approx(1.9)
+    behind = cast([box], 0.0, (3.0, 0.0, 0.1), np.array([1.0]), np.array([0.0]), np.array([0.0]))
+    assert math.isinf(behind[0][0])
+
+
+def test_the_camera_sees_a_cube_standing_on_the_lane():
+    track = load_track(KIT_S)
+    cam = Camera(CarDescription().camera, track)
+    p = track.start
+    plain = cam.render(p)
+    cam.solids = (obstacle_cube("cube", p.x_m + 0.8, p.y_m, 0.0),)
+    seen = cam.render(p)
+    changed = np.unique(seen[seen != plain])
+    # its top in full light (0.85 x 255), its sides in half (the sky factor)
+    assert set(changed.tolist()) == {round(0.85 * 255), round(0.85 * 255 * 0.5)}
+    assert (seen != plain).sum() > 500
+    cam.solids = (obstacle_cube("cube", p.x_m - 1.0, p.y_m, 0.0),)  # behind the car: not seen
+    assert np.array_equal(cam.render(p), plain)
+    # the line camera's row: the same pixels as the image's row
+    cam.solids = (obstacle_cube("cube", p.x_m + 0.6, p.y_m, 0.0),)
+    row = CarDescription().camera.default_row
+    assert np.array_equal(cam.line_image(p, row), cam.render(p)[row:row + 1])
+    assert (cam.line_image(p, row) == round(0.85 * 255 * 0.5)).sum() > 10
+
+
+def test_the_physical_camera_shades_the_cube_by_its_light():
+    from simrunner.sensors.imaging import Imager
+
+    track = load_track(KIT_S)
+    car = CarDescription()
+    cam = Camera(car.camera, track)
+    imager = Imager(cam, track.lighting, surface_z_m=track.surface_z_m)
+    p = track.start
+    row = car.camera.default_row
+    plain = imager.line(p, row, exposure_s=0.002)
+    cam.solids = (braking_block("block", p.x_m + 0.6, p.y_m, 0.0),)
+    dark = imager.line(p, row, exposure_s=0.002)
+    assert dark.min() < plain[0, 40:90].min() and (dark[0, 40:90] < 0.5 * plain[0, 40:90]).all()
+
+
+def test_a_car_driving_into_a_block_touches_it_and_pushes_it():
+    car = CarDescription()
+    sim = make_sim(car, dt_s=0.002, start=Pose2(), surface_z_m=0.01)
+    sim.add_solid(braking_block("block", 1.0, 0.0, 0.0))
+    sim.add_solid(obstacle_cube("aside", 1.0, 1.0, 0.0))
+    sim.set_command(1.0, 0.0)
+    touched_at = None
+    for _ in range(150):
+        sim.step(10)
+        if touched_at is None and sim.touched_solids():
+            touched_at = sim.pose.x_m
+    assert sim.touched_solids() == ("block",)  # the cube 1 m to the side: never
+    front = car.chassis.length_m - car.chassis.rear_overhang_m
+    assert touched_at + front == pytest.approx(0.9, abs=0.02)  # the block's near face
+    with pytest.raises(Exception, match="already"):
+        sim.add_solid(braking_block("block", 3.0, 0.0, 0.0))
+
+
+def test_range_sensors_in_the_car_file():
+    car = load_car(SENSOR_CAR)
+    (name, front), = car.range_sensors
+    assert name == "front" and front == RangeSensor()  # the file writes the defaults out
+    again = car_from_dict(__import__("tomllib").loads(car.to_toml()))
+    assert again.range_sensors == car.range_sensors
+    text = '[range_sensors.front]\nkind = "sonar"\n'
+    with pytest.raises(CarDescriptionError, match=r"car.toml:2: range_sensors.front.kind = 'sonar': expected one of"):
+        car_from_dict(__import__("tomllib").loads(text), "car.toml", text)
+    text = '[range_sensors.front]\nrange_m = 3\n'
+    with pytest.raises(CarDescriptionError, match=r"car.toml:2: unknown field range_sensors.front.range_m"):
+        car_from_dict(__import__("tomllib").loads(text), "car.toml", text)
+
+
+def test_get_distance_measures_the_solid_ahead(tmp_path):
+    """Standing still before a block placed by the test (through the run): the reading is the
+    distance from the sensor to the block's face, with the sensor's noise; held between the
+    sensor's ticks; inf when nothing is in range; an unknown name is the controller's error."""
+    from simrunner.run.runner import Run
+    from simrunner.run.settings import RunSettings
+    from simrunner.run.controller import load_controller
+
+    car = load_car(SENSOR_CAR)
+    track = load_track(KIT_S)
+    seen = []
+
+    def main(s):
+        seen.append(s.get_distance("front"))
+        run.place_solid(braking_block("block", track.start.x_m + 1.5, track.start.y_m, 0.0))
+        s.sleep(0.1)
+        seen.append(s.get_distance("front"))
+        seen.append(s.get_distance("front"))  # the same tick: the same reading
+        s.sleep(0.1)
+        seen.append(s.get_distance("front"))
+        s.get_distance("rear")
+
+    run = Run(track, car, RunSettings(time_limit_s=5.0))
+    outcome, message, error = run.execute(load_controller(main))
+    assert math.isinf(seen[0])
+    expected = 1.5 - 0.1 - 0.24  # block face - the sensor, ahead of the rear axle
+    assert seen[1] == pytest.approx(expected, abs=0.015) and seen[1] == seen[2]
+    assert seen[3] == pytest.approx(expected, abs=0.015) and seen[3] != seen[1]
+    assert outcome == "controller_error" and "no such range sensor" in message and "front" in message
+
+
+def test_c_controllers_read_the_range_sensor(tmp_path):
+    """spinner_get_distance answers through the bridge: inf with nothing in range; an unknown
+    sensor is the controller's error, naming it."""
+    src = tmp_path / "probe.c"
+    src.write_text(textwrap.dedent("""\
+        #include <math.h>
+        #include "spinner.h"
+        int main(void) {
+            if (!isinf(spinner_get_distance("front"))) return 1;  /* nothing on the track */
+            spinner_set_speed_and_servo(0.5, 0.0);
+            spinner_sleep(0.2);
+            spinner_get_distance("rear");
+            return 0;
+        }
+        """))
+    r = drive(str(src), track=KIT_S, car=SENSOR_CAR, time_limit_s=5.0)
+    assert r.outcome == "controller_error" and "no such range sensor" in r.message and "'rear'" in r.message
+
+
+def test_the_line_follower_fails_the_object_events_and_the_examples_pass():
+    for event in ("obstacle", "emergency_brake"):
+        r = drive(FOLLOWER, event=event)
+        assert r.outcome == "touched" and not r.passed and r.points == 0, (event, r.message)
+        assert r.verdict.details["touched"] in ("cube", "block")
+    for seed in range(3):
+        r = drive(REPO / "examples" / "events" / "emergency_brake.py", event="emergency_brake", car=SENSOR_CAR,
+                  seed=seed)
+        assert r.outcome == "finished" and r.passed and r.points == 150, r.message
+        assert 0.0 < r.verdict.details["stopped_before_m"] < 0.3
