@@ -99,6 +99,7 @@ def test_range_sensors_in_the_car_file():
     assert name == "front" and front == RangeSensor()  # the file writes the defaults out
     again = car_from_dict(__import__("tomllib").loads(car.to_toml()))
     assert again.range_sensors == car.range_sensors
+    assert car_from_dict(car.to_dict()).range_sensors == car.range_sensors  # the calibrations' round trip
     text = '[range_sensors.front]\nkind = "sonar"\n'
     with pytest.raises(CarDescriptionError, match=r"car.toml:2: range_sensors.front.kind = 'sonar': expected one of"):
         car_from_dict(__import__("tomllib").loads(text), "car.toml", text)

@@ -434,6 +434,11 @@ def car_from_dict(data: dict[str, Any], source: str = "<car>", text: str | None 
             kwargs["name"] = value
             continue
         if key == "range_sensors":
+            if isinstance(value, (list, tuple)):  # to_dict's form: (name, table) pairs
+                try:
+                    value = {name: table for name, table in value}
+                except (TypeError, ValueError):
+                    value = None
             if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
                 raise _error(source, text, None, key, "[range_sensors.NAME] tables expected, one per sensor")
             kwargs[key] = tuple((name, _section_from_dict(RangeSensor, f"range_sensors.{name}", table, source,
