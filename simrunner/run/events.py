@@ -8,7 +8,7 @@ the other disciplines section 4; "ours" marks what the rules leave open.
 | --- | --- | --- | --- |
 | ``race`` | the given track (default: the bundled one) | 1 lap, 120 s, 3 wheels off fail | the lap is done; +1 s when the car does not stop within 2 m after the line |
 | ``figure8`` | the kit's M figure 8 | laps until 60 s (``--time-limit 90``: the 2018/19 rules) | the whole time driven without a wheel off; score: laps |
-| ``speed_limit`` | the kit's M oval with the zone | from just past the 3-stripe piece to 1.5 m past it again | the zone's speed at most 0.6 x the approach, back to 0.8 x after it |
+| ``speed_limit`` | the kit's M oval with the zone | from just past the 3-stripe piece to 1.5 m past it again | the zone's speed at most 0.6 x the approach, back to 0.8 x from the 3-stripe piece on |
 | ``obstacle`` | the kit's S oval | lap 1 clear, then a white 20 cm cube on a straight ahead (seeded), off the lane's middle | lap 2 done without touching it |
 | ``emergency_brake`` | the kit's S oval without marks | 2 laps, then a black 20 x 60 x 20 cm block across a straight ahead (seeded) | the car stops without touching it |
 
@@ -144,10 +144,11 @@ class Figure8Monitor(EventMonitor):
 
 
 class SpeedLimitMonitor(EventMonitor):
-    """The speed-limit zone (section 4.3; the rules give no measure, ours is stated in the
-    module docstring): the approach speed is the mean over the metre before the 4-stripe piece,
-    the zone's speed the highest from 0.5 m into it to its end, and after the 3-stripe piece
-    the car must be back to 0.8 x the approach within 1.5 m."""
+    """The speed-limit zone (section 4.3: slow at the 4-stripe pattern, back to speed at the
+    3-stripe pattern; the rules give no measure, ours): the approach speed is the mean over the
+    metre before the 4-stripe piece, the zone's speed the highest from 0.5 m into it to the
+    3-stripe piece, and from the 3-stripe piece to 1.5 m past it the car must be back to 0.8 x
+    the approach."""
 
     def __init__(self, rules, run):
         super().__init__(rules, run)
@@ -159,8 +160,11 @@ class SpeedLimitMonitor(EventMonitor):
         if not starts or not ends:
             raise ValueError("the speed_limit event needs a track with SPEED_LIMIT_START and SPEED_LIMIT_END "
                              "pieces (e.g. simrunner/data/events/kit_speed_limit.txt)")
-        self.zone = (starts[0].s_start_m, next((e.s_end_m for e in ends if e.s_end_m > starts[0].s_start_m),
-                                               ends[0].s_end_m + course.length_m))
+        end = next((e for e in ends if e.s_start_m > starts[0].s_start_m), ends[0])
+        end_start = end.s_start_m if end.s_start_m > starts[0].s_start_m else end.s_start_m + course.length_m
+        # the zone: from the 4-stripe piece to the 3-stripe piece, where the car speeds up again
+        self.zone = (starts[0].s_start_m, end_start)
+        self.end_length = end.s_end_m - end.s_start_m
         self.length = course.length_m
         self.follow = CentrelineProgress(course.centreline)
         self.s_m: float | None = None
@@ -178,13 +182,13 @@ class SpeedLimitMonitor(EventMonitor):
         while a < self.s0:
             a, b = a + self.length, b + self.length
         self.samples.append((self.s_m, speed))
-        if self.s_m < b + SPEED_LIMIT_AFTER_M:
+        if self.s_m < b + self.end_length + SPEED_LIMIT_AFTER_M:
             return None
         s = np.array([p[0] for p in self.samples])
         v = np.array([p[1] for p in self.samples])
         approach = v[(s >= a - APPROACH_M) & (s < a)]
         zone = v[(s >= a + SPEED_LIMIT_SETTLE_M) & (s <= b)]
-        after = v[(s > b) & (s <= b + SPEED_LIMIT_AFTER_M)]
+        after = v[(s > b) & (s <= b + self.end_length + SPEED_LIMIT_AFTER_M)]
         if not len(approach) or not len(zone) or not len(after):
             return None
         v_in, v_zone, v_out = float(approach.mean()), float(zone.max()), float(after.max())
