@@ -105,3 +105,27 @@ def test_cli_event_prints_the_verdict():
     assert res.exit_code == 0 and "speed_limit: failed, 0 points" in res.output
     bad = CliRunner().invoke(cli, ["drive", str(FOLLOWER), "--event", "figure8", "--laps", "3"])
     assert bad.exit_code == 2 and "sets its own laps" in bad.output
+
+
+EVENTS_DIR = REPO / "examples" / "events"
+
+
+@pytest.mark.parametrize("track", ["kit_S.txt", "kit_wave.txt", "kit_crossing45.txt"])
+def test_the_race_example_stops_after_the_kit_finish_mark(track):
+    r = drive(EVENTS_DIR / "race.py", track=REPO / "examples" / track, event="race")
+    assert r.outcome == "finished" and r.passed and not r.penalties, r.message
+    assert "stopped" in r.message
+
+
+def test_the_race_example_never_stops_early_where_there_is_no_kit_mark():
+    """The default pieces' finish bar, the speed-limit stripes: it drives the lap (and takes
+    the +1 s) rather than stopping on a mark it cannot read."""
+    for track in (REPO / "simrunner" / "data" / "thesis_figure8.txt", REPO / "examples" / "kit_speed_limit.txt"):
+        r = drive(EVENTS_DIR / "race.py", track=track, event="race")
+        assert r.outcome == "finished" and r.laps_completed == 1, r.message
+
+
+def test_the_speed_limit_example_passes():
+    for seed in range(3):
+        r = drive(EVENTS_DIR / "speed_limit.py", event="speed_limit", seed=seed)
+        assert r.passed and r.points == 150, r.message

@@ -81,7 +81,6 @@ GROUND_SIZE_M = 400.0  # side of the square ground box (tracks are a few metres)
 GROUND_THICKNESS_M = 1.0
 SOLID_MU = 0.5          # friction of a solid on the track and the car (ours: polystyrene)
 SOLID_REST_M = 4e-8     # a solid starts at ODE's resting depth above the surface (platform facts)
-SOLID_MOVED_M = 0.001   # a solid moved this far has been touched
 CONTACT_DEPTH_M = 4e-8  # initial tyre penetration = the resting depth measured for the default car.
 # ODE reports no contact at exactly 0 depth: a car placed exactly on the ground would fall one
 # step (g dt^2 = 39 um at 2 ms) and then creep back up for a second.
@@ -194,7 +193,7 @@ class CarSim:
         self._body: CarBody = build_car_skeleton(car, wheel_shape=wheel_shape)
         world.addSkeleton(self._body.skeleton)
         self._world = world
-        self._solids: list = []  # (name, skeleton, body) of each solid on the track
+        self._solids: list = []  # (name, skeleton) of each solid on the track
 
         r = car.wheels.radius_m
         wb, half_t = car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
@@ -459,31 +458,29 @@ class CarSim:
 
     # -- objects on the track -------------------------------------------------------------
     def add_solid(self, solid) -> None:
-        """Put ``solid`` (a :class:`worlds.solids.Solid`) on the ground: a free rigid box of its
-        mass (uniform density), friction 0.5 with everything (ours: polystyrene on a smooth
-        track), resting on the surface. A car that hits it pushes it."""
-        if any(name == solid.name for name, _, _ in self._solids):
+        """Put ``solid`` (a :class:`worlds.solids.Solid`) on the ground: a box welded to the
+        world (a touch ends an attempt, so what happens to a pushed object does not matter;
+        a fixed one costs the engine no dynamics), friction 0.5 with the car (ours:
+        polystyrene). Its mass is kept in the description for the SDF model."""
+        if any(name == solid.name for name, _ in self._solids):
             raise SimError(f"CarSim: a solid named {solid.name!r} is on the track already")
         sk = dart.dynamics.Skeleton(f"solid:{solid.name}")
-        joint, body = sk.createFreeJointAndBodyNodePair()
+        joint, body = sk.createWeldJointAndBodyNodePair()
         body.setName(f"solid:{solid.name}")
         shape = dart.dynamics.BoxShape(np.array([solid.length_m, solid.width_m, solid.height_m]))
         node = body.createShapeNode(shape, f"solid:{solid.name}")
         node.createVisualAspect()
         node.createCollisionAspect()
         node.createDynamicsAspect().setFrictionCoeff(SOLID_MU)
-        inertia = dart.dynamics.Inertia()
-        inertia.setMass(float(solid.mass_kg))
-        inertia.setMoment(shape.computeInertia(float(solid.mass_kg)))
-        body.setInertia(inertia)
         centre = np.array([solid.x_m, solid.y_m, self.surface_z_m + 0.5 * solid.height_m + SOLID_REST_M])
         joint.setTransformFromParentBodyNode(isometry(centre, _rot_z(solid.yaw_rad)))
         self._world.addSkeleton(sk)
-        self._solids.append((solid.name, sk, body))
+        self._solids.append((solid.name, sk))
 
     def touched_solids(self) -> tuple[str, ...]:
-        """Names of the solids the car touches at the last step, or has moved (more than
-        ``SOLID_MOVED_M``) since they were put down: a touch between two read-outs is not missed."""
+        """Names of the solids the car touched at the last step, in the order they were put
+        down. (Read every camera frame by the run: a touch lasts longer than a frame, since the
+        car cannot pass through a solid.)"""
         if not self._solids:
             return ()
         touching = set()
@@ -493,10 +490,7 @@ class CarSim:
             for mine, other in ((a, b), (b, a)):
                 if mine.startswith("solid:") and other != "ground_box" and not other.startswith("solid:"):
                     touching.add(mine[len("solid:"):])
-        for name, sk, _ in self._solids:
-            if float(np.linalg.norm(sk.getPositions()[3:])) > SOLID_MOVED_M:
-                touching.add(name)
-        return tuple(name for name, _, _ in self._solids if name in touching)
+        return tuple(name for name, _ in self._solids if name in touching)
 
     # -- stepping ----------------------------------------------------------------------
     def step(self, n: int = 1) -> None:

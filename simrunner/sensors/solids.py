@@ -58,6 +58,22 @@ def cast(solids, surface_z_m: float, origin: tuple[float, float, float], dx: np.
     return best_t, best_i, best_nz
 
 
+def _straddles(b, surface_z_m: float, origin, normal) -> bool:
+    """Whether box ``b`` has corners on both sides of (or on) the plane through ``origin``."""
+    c, s = math.cos(b.yaw_rad), math.sin(b.yaw_rad)
+    sides = set()
+    for lx in (-0.5 * b.length_m, 0.5 * b.length_m):
+        for ly in (-0.5 * b.width_m, 0.5 * b.width_m):
+            x = b.x_m + c * lx - s * ly - origin[0]
+            y = b.y_m + s * lx + c * ly - origin[1]
+            for z in (surface_z_m - origin[2], surface_z_m + b.height_m - origin[2]):
+                d = normal[0] * x + normal[1] * y + normal[2] * z
+                sides.add(d > 0.0)
+                if d == 0.0 or len(sides) == 2:
+                    return True
+    return False
+
+
 def camera_rays(cam, v: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Car-frame ray directions of image offsets ``v`` (down) and ``u`` (right), in pixels,
     as :meth:`simrunner.sensors.camera.Camera._ground` forms them (the ground is met at ``t =
@@ -79,8 +95,22 @@ def camera_hits(solids, surface_z_m: float, cam, pose, rays):
     c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
     fwd, h = float(cam.forward_m), float(cam.height_m)
     origin = (pose.x_m + c * fwd, pose.y_m + s * fwd, surface_z_m + h)
+    # only the solids in front of the camera (a camera looks forward, tilted down: nothing
+    # wholly behind the plane through it across the car is seen)
+    near = [i for i, b in enumerate(solids)
+            if (b.x_m - origin[0]) * c + (b.y_m - origin[1]) * s > -0.5 * math.hypot(b.length_m, b.width_m)]
+    if near and dx.size and float(dx.flat[0]) == float(dx.max()) == float(dx.min()) \
+            and float(dz.max()) == float(dz.min()):
+        # one image row: its rays fan out in one plane through the camera; a box wholly on one
+        # side of that plane is not seen by it (eight dot products instead of the rays' casts)
+        ex, ez = float(dx.flat[0]), float(dz.flat[0])
+        normal = (c * ez, s * ez, -ex)
+        near = [i for i in near if _straddles(solids[i], surface_z_m, origin, normal)]
+    if not near:
+        return None
     wx, wy = c * dx - s * dy, s * dx + c * dy
-    t, idx, nz = cast(solids, surface_z_m, origin, wx, wy, dz)
+    t, idx, nz = cast([solids[i] for i in near], surface_z_m, origin, wx, wy, dz)
+    idx = np.where(idx >= 0, np.asarray(near)[np.maximum(idx, 0)], -1)
     with np.errstate(divide="ignore"):
         ground = np.where(dz < 0, h / -dz, np.inf)
     mask = t < ground
