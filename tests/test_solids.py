@@ -75,7 +75,7 @@ def test_the_physical_camera_shades_the_cube_by_its_light():
     assert dark.min() < plain[0, 40:90].min() and (dark[0, 40:90] < 0.5 * plain[0, 40:90]).all()
 
 
-def test_a_car_driving_into_a_block_touches_it_and_pushes_it():
+def test_a_car_driving_into_a_block_touches_it():
     car = CarDescription()
     sim = make_sim(car, dt_s=0.002, start=Pose2(), surface_z_m=0.01)
     sim.add_solid(braking_block("block", 1.0, 0.0, 0.0))
@@ -168,3 +168,54 @@ def test_the_line_follower_fails_the_object_events_and_the_examples_pass():
                   seed=seed)
         assert r.outcome == "finished" and r.passed and r.points == 150, r.message
         assert 0.0 < r.verdict.details["stopped_before_m"] < 0.3
+
+
+BOXES = """@kit = nxp
+@box = 1.4 0.1 0.2 0.2 0.2
+@box = 2.5 3 0.3 0.1 0.4 30 0.05
+START_FINISH
+STRAIGHT x2
+TURN_LEFT x4
+STRAIGHT x3
+TURN_LEFT x4
+"""
+
+
+def test_layout_boxes_stand_on_the_track_and_in_the_world(tmp_path):
+    """``@box`` lines: objects from the start of every run, written into world.sdf (models
+    Gazebo shows, and elements the simulator reads back) and track.json."""
+    import json
+
+    from trackgen.build import build
+    from trackgen.layout import parse_layout
+
+    lay = parse_layout(BOXES, path="b.txt")
+    a, b = lay.boxes
+    assert (a.name, a.x_m, a.length_m, a.reflectance) == ("box_1", 1.4, 0.2, 0.85)
+    assert b.yaw_rad == pytest.approx(math.radians(30)) and b.reflectance == 0.05
+    assert parse_layout("@scale = 2\n" + BOXES.split("\n", 1)[1], path="s.txt").boxes[0].x_m == 2.8
+    layout = tmp_path / "b.txt"
+    layout.write_text(BOXES)
+    build(layout, tmp_path / "out")
+    sdf = (tmp_path / "out" / "world.sdf").read_text()
+    assert sdf.count('<model name="box_') == 2 and "nxpcup:solid" in sdf
+    assert [d["name"] for d in json.loads((tmp_path / "out" / "track.json").read_text())["boxes"]] == ["box_1", "box_2"]
+    assert load_track(tmp_path / "out").boxes == load_track(layout).boxes == lay.boxes
+    r = drive(FOLLOWER, track=layout)
+    assert r.outcome == "touched" and r.message.startswith("touched the box_1 at t = ")
+    kept = drive(FOLLOWER, track=layout, keep_driving=True, time_limit_s=4.0)
+    assert kept.outcome == "timeout" and any("touching objects" in w for w in kept.warnings)
+
+
+@pytest.mark.parametrize("line, message", [
+    ("@box = 1 2 0.2 0.2", "@box = '1 2 0.2 0.2': expected '@box = X Y LENGTH WIDTH HEIGHT"),
+    ("@box = 1 2 0.2 0.2 0", "@box: HEIGHT = 0: expected 0.005 <= HEIGHT <= 10"),
+    ("@box = 1 2 0.2 0.2 0.2 0 1.5", "@box: REFLECTANCE = 1.5: expected 0 <= REFLECTANCE <= 1"),
+])
+def test_bad_box_lines_are_one_line_errors(line, message):
+    from trackgen.errors import LayoutError
+    from trackgen.layout import parse_layout
+
+    with pytest.raises(LayoutError) as err:
+        parse_layout(f"{line}\nSTRAIGHT\n", path="t.txt")
+    assert str(err.value).startswith(f"t.txt:1: {message}")

@@ -110,6 +110,7 @@ def track_json(track: Track, geometry: TrackGeometry) -> dict:
         "road_polygon": polygon_json(geometry.road),
         **({} if layout.lighting.is_default() else {"lighting": layout.lighting.to_json()}),
         **({"barcodes": [b.to_json() for b in layout.barcodes]} if layout.barcodes else {}),
+        **({"boxes": [b.to_json() for b in layout.boxes]} if layout.boxes else {}),
     }
 
 

@@ -60,6 +60,13 @@ Printed marks (``worlds.marks``, docs/pixy2.md):
                           direction a car drives over it), narrow bar MODULE m wide (0.01), bars
                           LENGTH m long (0.05); lengths scaled by @scale; may repeat
 
+Objects standing on the track (``worlds.solids``, docs/events.md):
+
+    @box = X Y LENGTH WIDTH HEIGHT [HEADING_DEG [REFLECTANCE]]   a box centred at world X Y
+                          (m), LENGTH along HEADING_DEG (0), WIDTH across, HEIGHT tall,
+                          returning REFLECTANCE of the light (0.85: white polystyrene); the
+                          car must not touch it; lengths scaled by @scale; may repeat
+
 Limits: a repeat count is 1..MAX_REPEAT, a layout has at most MAX_PIECES pieces after
 repeats and at most MAX_FILE_BYTES bytes, a line (without its comment) at most
 MAX_LINE_CHARS characters, a number at most MAX_NUMBER_CHARS; every number has a range
@@ -84,6 +91,7 @@ from worlds.lighting import LIMITS as LIGHT_LIMITS
 from worlds.lighting import Light, Shade, TrackLighting
 from worlds.marks import DEFAULT_LENGTH_M, DEFAULT_MODULE_M, Barcode
 from worlds.marks import LIMITS as MARK_LIMITS
+from worlds.solids import LIMITS as SOLID_LIMITS, WHITE_REFLECTANCE, Solid, box_mass_kg
 
 from .errors import LayoutError
 
@@ -106,7 +114,7 @@ SCALED_SETTINGS = ("lane_width", "edge_width", "thickness")
 LIGHT_SETTINGS = ("ambient_lux", "light", "shade", "lane_reflectance", "line_reflectance",
                   "floor_reflectance", "specular")
 """The light and surface settings (``worlds.lighting.TrackLighting``); ``@light`` and ``@shade`` repeat."""
-EXTRA_SETTINGS = ("name", "scale", "kit") + LIGHT_SETTINGS + ("barcode",)
+EXTRA_SETTINGS = ("name", "scale", "kit") + LIGHT_SETTINGS + ("barcode", "box")
 
 # Unambiguous (no nested quantifiers over the same digits): linear time on any input.
 _NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\Z", re.ASCII)
@@ -152,6 +160,7 @@ class Layout:
     setting_values: Mapping[str, float] = field(default_factory=dict)
     lighting: TrackLighting = field(default_factory=TrackLighting)  # @ambient_lux, @light, ...
     barcodes: tuple[Barcode, ...] = ()  # @barcode lines (worlds.marks)
+    boxes: tuple = ()  # @box lines (worlds.solids.Solid): objects standing on the track
     kit: str | None = None  # @kit: the pieces' defaults come from pieces.KITS[kit]
 
     def __post_init__(self) -> None:
@@ -275,6 +284,7 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     lamps: list[tuple[int, tuple[float, ...]]] = []
     shade_lines: list[tuple[float, ...]] = []
     code_lines: list[tuple[float, ...]] = []
+    box_lines: list[tuple[float, ...]] = []
     lines = text.removeprefix("\ufeff").split("\n")
     for lineno, raw in enumerate(lines, start=1):
         body = raw.split("#", 1)[0].strip()
@@ -294,6 +304,9 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
                 continue
             if key == "barcode":
                 code_lines.append(value)
+                continue
+            if key == "box":
+                box_lines.append(value)
                 continue
             if key in seen_at:
                 raise LayoutError(path, lineno, f"@{key} set twice (first on line {seen_at[key]})")
@@ -336,8 +349,13 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
     lighting = TrackLighting(lights=lights, shades=shades, **light_values)
     barcodes = tuple(Barcode(x * scale, y * scale, int(code), math.radians(heading), module * scale, length * scale)
                      for x, y, code, heading, module, length in code_lines)
+    boxes = tuple(Solid(f"box_{i + 1}", x * scale, y * scale, length * scale, width * scale, height * scale,
+                        math.radians(heading), reflectance,
+                        box_mass_kg(length * scale, width * scale, height * scale))
+                  for i, (x, y, length, width, height, heading, reflectance) in enumerate(box_lines))
     return Layout(path=path, name=name, entries=tuple(entries), settings=settings,
-                  scale=scale, setting_values=values, lighting=lighting, barcodes=barcodes, kit=kit)
+                  scale=scale, setting_values=values, lighting=lighting, barcodes=barcodes, kit=kit,
+                  boxes=boxes)
 
 
 def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
@@ -360,6 +378,8 @@ def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
         return key, _parse_shade(value, path, lineno)
     if key == "barcode":
         return key, _parse_barcode(value, path, lineno)
+    if key == "box":
+        return key, _parse_box(value, path, lineno)
     if key == "kit":
         word = value.lower()
         if word not in KITS or not word.isascii():
@@ -449,6 +469,19 @@ def _parse_barcode(value: str, path: str, lineno: int) -> tuple[float, ...]:
     if numbers[2] != int(numbers[2]):
         raise LayoutError(path, lineno, f"@barcode: CODE = {_bare(words[2])}: expected a whole number 0 .. 15")
     numbers += [DEFAULT_MODULE_M, DEFAULT_LENGTH_M][len(numbers) - 4:]
+    return tuple(numbers)
+
+
+def _parse_box(value: str, path: str, lineno: int) -> tuple[float, ...]:
+    """``X Y LENGTH WIDTH HEIGHT [HEADING_DEG [REFLECTANCE]]`` of an ``@box`` line."""
+    usage = "expected '@box = X Y LENGTH WIDTH HEIGHT [HEADING_DEG [REFLECTANCE]]' (m, m, m, m, m, degrees, 0..1)"
+    words = value.split()
+    if not 5 <= len(words) <= 7:
+        raise LayoutError(path, lineno, f"@box = {_shown(value)}: {usage}")
+    numbers = _ranged_numbers("box", words, (("X", "coordinate_m"), ("Y", "coordinate_m"), ("LENGTH", "size_m"),
+                                             ("WIDTH", "size_m"), ("HEIGHT", "size_m"), ("HEADING_DEG", "heading_deg"),
+                                             ("REFLECTANCE", "reflectance")), usage, path, lineno, SOLID_LIMITS)
+    numbers += [0.0, WHITE_REFLECTANCE][len(numbers) - 5:]
     return tuple(numbers)
 
 

@@ -131,6 +131,9 @@ def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> t
         image.paste((255, 255, 255), (0, 0), _mask(code.card(), k_px, big))
         for bar in code.bars():
             image.paste((0, 0, 0), (0, 0), _mask(bar, k_px, big))
+    for box in track.layout.boxes:  # objects standing on the track (worlds.solids): their footprint,
+        shade = int(round(255 * box.reflectance * 0.5))  # in the grey of their sides
+        image.paste((shade, shade, min(255, shade + 60)), (0, 0), _mask(shapely.Polygon(box.corners_xy()), k_px, big))
     image = image.reduce(SUPERSAMPLE)  # box filter: smooth edges
     lighting = track.layout.lighting
     if not lighting.is_default():

@@ -55,6 +55,7 @@ from worlds.sdf_xml import WorldError, XmlDoc, parse_pose, parse_vector, parse_x
 from worlds.lighting import TrackLighting, from_sdf_world
 from worlds.marks import Barcode
 from worlds.marks import from_sdf_world as barcodes_of
+from worlds.solids import from_sdf_world as solids_of
 
 MODEL_PATH_ENV = ("GAZEBO_MODEL_PATH", "GZ_SIM_RESOURCE_PATH", "IGN_GAZEBO_RESOURCE_PATH", "SDF_PATH")
 GROUND_MODELS = ("ground_plane",)
@@ -115,6 +116,7 @@ class Scene:
     ground_z_m: float | None
     lighting: TrackLighting | None = None  # the world's lights (worlds.lighting), None: none
     barcodes: tuple[Barcode, ...] = ()      # printed barcodes (worlds.marks)
+    boxes: tuple = ()                       # objects standing on the track (worlds.solids)
 
 
 def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
@@ -127,14 +129,15 @@ def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
     if _is_file(track_json) and not inside(track_json, reader.roots):
         raise WorldError(f"{track_json}: links outside the world's folder {source.parent}")
     world = doc.root.find("world")
-    lighting, barcodes = None, ()
+    lighting, barcodes, boxes = None, (), ()
     if world is not None:
         lighting = from_sdf_world(world, lambda el: tuple(parse_pose(doc, el.find("pose"))[:3, 3]))
         barcodes = barcodes_of(world)
+        boxes = solids_of(world)
     return Scene(source=source, visuals=tuple(reader.visuals), collisions=tuple(reader.collisions),
                  car_pose=reader.car_pose, car_z_m=reader.car_z_m,
                  track_json=track_json if track_json.is_file() else None,
-                 ground_z_m=reader.ground_z_m, lighting=lighting, barcodes=barcodes)
+                 ground_z_m=reader.ground_z_m, lighting=lighting, barcodes=barcodes, boxes=boxes)
 
 
 def load_mesh_world(visual: MeshVisual):

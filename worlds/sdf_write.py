@@ -47,6 +47,7 @@ from vehicle.description import CarDescription, CarDescriptionError
 from vehicle.modelling import CHASSIS_MU, KNUCKLE_MASS_FRACTION
 from worlds.lighting import TrackLighting, write_sdf
 from worlds.marks import write_sdf as write_marks
+from worlds.solids import write_sdf as write_solids
 from worlds.sdf_xml import SDF_VERSION, WorldError, fmt, parse_xml, sub, write_xml
 
 TRACK_ROLES = {  # role -> RGBA of its material
@@ -368,10 +369,11 @@ def _sun(world: ET.Element) -> None:
 
 def write_world(path: Path, *, world_name: str, track_model: str, car_model: str,
                 car_pose: Pose2, car_z_m: float, lighting: TrackLighting | None = None,
-                barcodes: tuple = ()) -> None:
+                barcodes: tuple = (), boxes: tuple = ()) -> None:
     """Write a world with ground, sun, the track and the car standing at ``car_pose``;
     ``lighting`` other than the default adds its lamps and photometric numbers
-    (:func:`worlds.lighting.write_sdf`), ``barcodes`` their cards (:func:`worlds.marks.write_sdf`).
+    (:func:`worlds.lighting.write_sdf`), ``barcodes`` their cards (:func:`worlds.marks.write_sdf`),
+    ``boxes`` the objects standing on the track (:func:`worlds.solids.write_sdf`).
 
     The models are read from ``path.parent / "models" / NAME / "model.sdf"`` (written by
     :func:`write_track_model` and :func:`write_car_model`) and inlined with mesh URIs
@@ -406,6 +408,7 @@ def write_world(path: Path, *, world_name: str, track_model: str, car_model: str
     track[0].text = fmt(0, 0, 0, 0, 0, 0)
     world.append(track)
     write_marks(world, tuple(barcodes), fmt, car_z_m)
+    write_solids(world, tuple(boxes), car_z_m)
     car = _inline_model(world_dir, car_model)
     car.insert(0, ET.Element("pose"))
     car[0].text = fmt(car_pose.x_m, car_pose.y_m, car_z_m, 0, 0, car_pose.yaw_rad)
@@ -415,7 +418,7 @@ def write_world(path: Path, *, world_name: str, track_model: str, car_model: str
 
 def write_track_world(out_dir: Path, *, track_name: str, meshes: dict[str, str],
                       start_pose: Pose2, surface_z_m: float, car: CarDescription,
-                      lighting: TrackLighting | None = None, barcodes: tuple = ()) -> Path:
+                      lighting: TrackLighting | None = None, barcodes: tuple = (), boxes: tuple = ()) -> Path:
     """Write the track model, the car model and ``out_dir/world.sdf``; return the world path.
 
     ``meshes`` maps role -> path relative to ``out_dir/models/<track_name>/`` (the STL files
@@ -429,5 +432,5 @@ def write_track_world(out_dir: Path, *, track_name: str, meshes: dict[str, str],
     write_car_model(out_dir / "models" / car.name, car)
     world_path = out_dir / "world.sdf"
     write_world(world_path, world_name=track_name, track_model=track_name, car_model=car.name,
-                car_pose=start_pose, car_z_m=surface_z_m, lighting=lighting, barcodes=barcodes)
+                car_pose=start_pose, car_z_m=surface_z_m, lighting=lighting, barcodes=barcodes, boxes=boxes)
     return world_path

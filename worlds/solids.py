@@ -4,20 +4,27 @@ emergency-braking block), in the world frame.
 A solid stands on the track's surface: its footprint is a ``length_m x width_m`` rectangle
 centred at ``(x_m, y_m)``, ``length_m`` along ``yaw_rad`` (radians, counter-clockwise from
 +x), ``height_m`` tall. ``reflectance`` is the fraction of light its faces return (the
-cameras' shade, :mod:`simrunner.sensors.solids`), ``mass_kg`` its mass (a light object is
-pushed by a car that hits it). The simulator makes it a rigid body in the dartpy world, the
-cameras see it, range sensors measure it; :meth:`Solid.sdf` writes it as a Gazebo model.
+cameras' shade, :mod:`simrunner.sensors.solids`), ``mass_kg`` its mass. The simulator makes
+it a box in the dartpy world, the
+cameras see it, range sensors measure it; :meth:`Solid.sdf` writes it as a Gazebo model. The
+simulator holds it fixed (a touch ends an attempt); ``mass_kg`` is for the SDF model.
 """
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 import numpy as np
 
+from worlds.marks import float_of, nxpcup_child, nxpcup_tag
+
 # expanded polystyrene: 15-30 kg/m^3 for the usual grades (ours: 20); the rules: "Styrofoam or
 # similar" (rules summary sections 4.2, 4.4)
 EPS_DENSITY_KGPM3 = 20.0
+LIMITS = {"coordinate_m": (-10_000.0, 10_000.0), "size_m": (0.005, 10.0), "heading_deg": (-360.0, 360.0),
+          "reflectance": (0.0, 1.0)}
+FIELDS = ("x_m", "y_m", "length_m", "width_m", "height_m", "yaw_rad", "reflectance", "mass_kg")
 WHITE_REFLECTANCE = 0.85   # white polystyrene (ours; the kit's lane is 0.92)
 BLACK_REFLECTANCE = 0.05   # matte black (the kit's lines: 0.06)
 
@@ -75,6 +82,35 @@ class Solid:
                 f"<visual name=\"visual\"><geometry><box><size>{size}</size></box></geometry><material>"
                 f"<ambient>{g} {g} {g} 1</ambient><diffuse>{g} {g} {g} 1</diffuse></material></visual>"
                 "</link></model>")
+
+
+def box_mass_kg(length_m: float, width_m: float, height_m: float) -> float:
+    """The mass of a polystyrene box of that size (EPS_DENSITY_KGPM3)."""
+    return EPS_DENSITY_KGPM3 * length_m * width_m * height_m
+
+
+def write_sdf(world: ET.Element, solids: tuple, surface_z_m: float) -> None:
+    """Append ``solids`` to an SDF ``<world>``: an ``<nxpcup:solid>`` element each (what the
+    simulator reads back) and a Gazebo model each (:meth:`Solid.sdf`)."""
+    for b in solids:
+        el = ET.SubElement(world, nxpcup_tag("solid"), name=b.name)
+        for key in FIELDS:
+            ET.SubElement(el, nxpcup_tag(key)).text = repr(float(getattr(b, key)))
+        world.append(ET.fromstring(b.sdf(surface_z_m)))
+
+
+def from_sdf_world(world: ET.Element) -> tuple[Solid, ...]:
+    """The ``<nxpcup:solid>`` elements of an SDF ``<world>`` (those with every number valid)."""
+    out = []
+    for el in world.findall(nxpcup_tag("solid")) + world.findall("nxpcup:solid"):
+        values = [float_of(nxpcup_child(el, key)) for key in FIELDS]
+        if None in values:
+            continue
+        try:
+            out.append(Solid(el.get("name") or f"box_{len(out) + 1}", *values))
+        except ValueError:
+            continue
+    return tuple(out)
 
 
 def obstacle_cube(name: str, x_m: float, y_m: float, yaw_rad: float) -> Solid:

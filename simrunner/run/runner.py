@@ -84,6 +84,10 @@ class FrameWork:
         self.off_course_count = 0
         self.first_off_course = ""
         self.monitor = monitor
+        self.has_solids = False  # objects on the track (Run.place_solid): a touch ends the run
+        self.touch_count = 0
+        self.first_touch = ""
+        self._touching = False
 
     def __call__(self, k: int, t: float, pose, cmd: Command,
                  row_cmd: Command | None) -> tuple[Outcome, str] | None:
@@ -109,6 +113,16 @@ class FrameWork:
             end = monitor.frame(t, pose, speed)
             if end is not None:
                 return end
+        elif self.has_solids:
+            touched = sim.touched_solids()
+            if touched:
+                text = f"touched the {touched[0]} at t = {t:.3f} s"
+                if not self.keep_driving:
+                    return Outcome.TOUCHED, text
+                if not self._touching:
+                    self.touch_count += 1
+                    self.first_touch = self.first_touch or text
+            self._touching = bool(touched)
         if lap >= judge.laps:
             if monitor is None:
                 return Outcome.FINISHED, f"{lap} lap(s) completed"
@@ -200,6 +214,8 @@ class Run:
                                rng=np.random.default_rng(settings.seed), recorder=self.recorder,
                                video=self.video, params=settings.params, imager=self.imager)
         self.session.seed, self.session.surface_z_m = settings.seed, track.surface_z_m
+        for box in track.boxes:  # the layout's @box objects stand there from the start
+            self.place_solid(box)
         self.wall_time_s = 0.0
         self.cpu_time_s = 0.0
         self.signal_guard = None  # a faults.SignalGuard, when drive() installed one
@@ -209,6 +225,7 @@ class Run:
         can touch, seen by the cameras and the range sensors."""
         self.sim.add_solid(solid)
         self.camera.solids = self.camera.solids + (solid,)
+        self.frames.has_solids = True
 
     def _render_view(self, pose) -> np.ndarray:
         """The debug video's camera view in a frame the controller took no image: the camera's
@@ -280,6 +297,9 @@ class Run:
             self.session.warn_once("off_track", (
                 f"left the track {n} time{'s' if n > 1 else ''} (first: {frames.first_off_track}); "
                 f"kept driving ({why})"))
+        if frames.touch_count:
+            self.session.warn_once("touched", f"kept touching objects on the track (first: {frames.first_touch}); "
+                                   "kept driving (keep_driving)")
         if frames.off_course_count:
             n = frames.off_course_count
             self.session.warn_once("off_course", (

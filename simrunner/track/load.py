@@ -82,6 +82,7 @@ class SimTrack:
     lighting: TrackLighting = field(default_factory=TrackLighting)  # the physical camera's light
     barcodes: tuple = ()  # printed barcodes (worlds.marks.Barcode), painted into the raster
     course: Course | None = None  # what a lap must follow (simrunner.track.course)
+    boxes: tuple = ()  # objects standing on the track from the start (worlds.solids.Solid)
 
     @property
     def road_mask(self) -> np.ndarray:
@@ -175,7 +176,7 @@ def track_from_trackgen(track: Track, *, geometry: TrackGeometry | None = None,
         name=name or layout.name, source=source, raster=raster, surface_z_m=top_z, start=start,
         gate=gate, gate_half_width_m=float(half), lap_length_m=float(track.length_m),
         centreline=centreline, lap_length_estimated=False, lighting=layout.lighting,
-        barcodes=layout.barcodes, course=course)
+        barcodes=layout.barcodes, course=course, boxes=layout.boxes)
 
 
 def _read_world(path: Path):
@@ -238,7 +239,7 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
         gate_half_width_m=float(half), lap_length_m=float(lap_length),
         centreline=meta.get("centreline"), lap_length_estimated=estimated,
         lighting=scene.lighting if scene.lighting is not None else TrackLighting(),
-        barcodes=scene.barcodes, course=course)
+        barcodes=scene.barcodes, course=course, boxes=scene.boxes)
 
 
 def mark_layers(barcodes, surface_z_m: float, m_per_px: float) -> list:
