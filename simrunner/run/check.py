@@ -107,6 +107,10 @@ def check_controller(controller: str | Path | MainFn, *, track: str | Path | Sim
                         f"controller normally loops until the run ends")
     elif first.outcome == Outcome.OFF_TRACK:
         warnings.append(f"the car left the track in the first {seconds:g} s: {first.message}")
+    elif first.outcome == Outcome.OFF_COURSE:
+        warnings.append(f"the car left the course in the first {seconds:g} s: {first.message}")
+    elif first.outcome == Outcome.TOUCHED:
+        warnings.append(f"the car touched an object on the track in the first {seconds:g} s: {first.message}")
     if second is not None:
         diff = _first_difference(first.log, second.log)
         if diff is not None or first.outcome != second.outcome:
