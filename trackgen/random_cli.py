@@ -3,6 +3,7 @@
     trackgen random --seed N [-o FILE] [--car CAR.toml] [--length MIN:MAX]
                     [--crossings N|MIN:MAX] [--mix straight=3,turn=4,chicane=1]
                     [--angles 30,45,60,90] [--radii 0.6,0.8,1] [--walk MIN:MAX] [--check-meshes]
+    trackgen random --kit nxp --seed N [-o FILE] [--car CAR.toml] [--length MIN:MAX]
 
 Writes the layout text to FILE (atomically) or to stdout. Exit 2 with one line for bad
 options or an unwritable FILE.
@@ -77,8 +78,11 @@ def write_text_atomic(path: Path, text: str) -> None:
 @click.option("--radii", default=None, metavar="M,...", help="Turn radii, m (0.6,0.8,1).")
 @click.option("--walk", default=None, metavar="MIN:MAX", help="Pieces per random walk (2:6).")
 @click.option("--check-meshes", is_flag=True, help="Also run the watertight-mesh check (~40 ms).")
+@click.option("--kit", default=None, type=click.Choice(["nxp"]),
+              help="Only the official kit's pieces: a loop on the kit's 0.89 m grid (no crossings; "
+                   "with --length only).")
 def random_cmd(seed, out_path, car_path, length, crossings, mix, angles, radii, walk,
-               check_meshes) -> None:
+               check_meshes, kit=None) -> None:
     """Write a random closed layout (valid for the car) drawn from SEED."""
     from .random import random_layout
 
@@ -89,9 +93,22 @@ def random_cmd(seed, out_path, car_path, length, crossings, mix, angles, radii, 
                        ("radii_m", radii and _numbers(radii, "radii in metres"))):
         if value is not None:
             options[key] = value
+    if kit is not None:
+        other = [f"--{k}" for k, v in (("crossings", crossings), ("mix", mix), ("angles", angles),
+                                        ("radii", radii), ("walk", walk)) if v is not None]
+        if other:
+            click.echo(f"trackgen random: {', '.join(other)}: not with --kit (the kit's tracks are "
+                       "loops of its own pieces; --length sets them)", err=True)
+            raise click.exceptions.Exit(2)
     try:
         car = load_car(car_path)
-        text = random_layout(seed, car=car, **options)
+        if kit is not None:
+            from .random_kit import random_kit_layout
+
+            text = random_kit_layout(seed, car=car, **({"length_m": options["length_m"]}
+                                                       if "length_m" in options else {}))
+        else:
+            text = random_layout(seed, car=car, **options)
     except (TrackError, CarDescriptionError) as exc:
         click.echo(f"trackgen random: {str(exc).splitlines()[0]}", err=True)
         raise click.exceptions.Exit(2) from None
