@@ -85,6 +85,23 @@ def lane_edges(row: np.ndarray, guess_px: float, is_white: bytes = _IS_WHITE) ->
     return (a + 1 if a >= 0 else None), (b - 1 if b >= 0 else None)
 
 
+class AutoExposure:
+    """The exposure control of :func:`main` for ``spinner``: :meth:`update` with each row read
+    (the first SKIP_FRAMES rows after power-up are not used)."""
+
+    def __init__(self, spinner):
+        self.s = spinner
+        self.exposure = spinner.get_exposure()
+        self.frames = 0
+
+    def update(self, row: np.ndarray) -> None:
+        self.frames += 1
+        new = next_exposure(self.exposure, int(row.max())) if self.frames > SKIP_FRAMES else self.exposure
+        if new != self.exposure:
+            self.s.set_exposure(new)
+            self.exposure = new
+
+
 class LaneTracker:
     """The lane middle in one image row, remembered between frames (pixels).
 
@@ -124,15 +141,11 @@ def main(spinner):
     threshold = int(s.param("threshold", WHITE))
     lane = LaneTracker(s.image_shape[1])
     prev_err, speed = 0.0, v_min
-    exposure, frames = s.get_exposure(), 0
+    exposure = AutoExposure(s)
     while True:
         row = s.get_image(s.line_row)[0]
         err = lane.error(row, white_table(row_threshold(row) if threshold == 0 else threshold))
-        frames += 1
-        new = next_exposure(exposure, int(row.max())) if frames > SKIP_FRAMES else exposure
-        if new != exposure:
-            s.set_exposure(new)
-            exposure = new
+        exposure.update(row)
         if lane.at_crossing:
             prev_err = err  # no derivative kick when the estimate is reset
         steer = min(max(-kp * err - kd * (err - prev_err), -STEER_LIMIT_RAD), STEER_LIMIT_RAD)

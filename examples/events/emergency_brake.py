@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # examples/: the line follower
-from line_follower import LaneTracker, next_exposure, white_table, WHITE, SKIP_FRAMES  # noqa: E402
+from line_follower import AutoExposure, LaneTracker, white_table, WHITE  # noqa: E402
 
 V_MAX_MPS, V_MIN_MPS = 1.8, 1.2
 KP, KD = 0.8, 0.9
@@ -30,15 +30,11 @@ def main(s):
     v_max, v_min = s.param("v_max", V_MAX_MPS), s.param("v_min", V_MIN_MPS)
     lane = LaneTracker(s.image_shape[1])
     is_white = white_table(WHITE)
-    prev, speed, exposure, frames = 0.0, v_min, s.get_exposure(), 0
+    prev, speed, exposure = 0.0, v_min, AutoExposure(s)
     stopping = False
     while True:
         row = s.get_image(s.line_row)[0]
-        frames += 1
-        new = next_exposure(exposure, int(row.max())) if frames > SKIP_FRAMES else exposure
-        if new != exposure:
-            s.set_exposure(new)
-            exposure = new
+        exposure.update(row)
         err = lane.error(row, is_white)
         steer = min(max(-KP * err - KD * (err - prev), -STEER_LIMIT_RAD), STEER_LIMIT_RAD)
         prev = err

@@ -14,11 +14,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # examples/: the line follower
-from line_follower import (KD, KP, STEER_LIMIT_RAD, V_MAX_MPS, V_MIN_MPS, LaneTracker, SKIP_FRAMES,  # noqa: E402
-                           WHITE, next_exposure, white_table)
+from line_follower import (AutoExposure, KD, KP, STEER_LIMIT_RAD, V_MAX_MPS, V_MIN_MPS, LaneTracker,  # noqa: E402
+                           WHITE, white_table)
 from marks import MARK_AHEAD_M, MARK_ROW, MarkReader  # noqa: E402  (this folder)
 
 MIN_LAP_M = 2.5          # shorter than any lap: the next mark seen after this is the finish
@@ -29,7 +27,7 @@ ZONE_CLEAR_M = 1.0       # no finish within this after a speed-limit piece's str
 def main(s):
     lane = LaneTracker(s.image_shape[1])
     is_white = white_table(WHITE)
-    prev, speed, exposure, frames = 0.0, V_MIN_MPS, s.get_exposure(), 0
+    prev, speed, exposure = 0.0, V_MIN_MPS, AutoExposure(s)
     travelled, t_prev = 0.0, s.get_time()
     finish_at = None  # odometry at which the rear axle is past the finish line
     marks = MarkReader()
@@ -39,11 +37,7 @@ def main(s):
         t = s.get_time()
         travelled += max(s.get_speed(), 0.0) * (t - t_prev)
         t_prev = t
-        frames += 1
-        new = next_exposure(exposure, int(row.max())) if frames > SKIP_FRAMES else exposure
-        if new != exposure:
-            s.set_exposure(new)
-            exposure = new
+        exposure.update(row)
         err = lane.error(row, is_white)
         mark = marks.read(s.get_image(MARK_ROW)[0])  # (every frame: the flat field learns)
         if mark in ("zone_start", "zone_end", "stripes"):
