@@ -75,3 +75,20 @@ def test_no_module_renames_a_temporary_file_itself():
                 if isinstance(node, ast.Attribute) and node.attr in ("mkstemp",):
                     offenders.append(f"{rel}:{node.lineno}")
     assert not offenders, offenders
+
+
+def test_output_folders_get_the_permissions_mkdir_would_give(tmp_path):
+    """Folders swapped in whole (gap, camera calibration, trackgen build) are readable by the
+    team, as with mkdir: mkdtemp alone would leave them 0700."""
+    import os
+
+    from trackgen.outdir import make_temp, replace_folder
+
+    mask = os.umask(0o022)
+    try:
+        tmp = make_temp(tmp_path / "out")
+        (tmp / "a.txt").write_text("x")
+        replace_folder(tmp, tmp_path / "out")
+    finally:
+        os.umask(mask)
+    assert (tmp_path / "out").stat().st_mode & 0o777 == 0o755

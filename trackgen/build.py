@@ -10,7 +10,6 @@ by the next build of the same ``out_dir`` (:mod:`trackgen.outdir`).
 """
 from __future__ import annotations
 
-import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -183,17 +182,10 @@ def _write_all(tmp: Path, checked: Checked, car: CarDescription,
 
 
 def _move_into_place(tmp: Path, out_dir: Path, force: bool) -> None:
-    os.chmod(tmp, 0o755 & ~_umask())
     if out_dir.exists():
         if not force:  # appeared while we were building
             raise OutputError(f"{out_dir}: already exists (use --force to replace it)")
     replace_folder(tmp, out_dir)
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 # -- validate PATH ---------------------------------------------------------------------------

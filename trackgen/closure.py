@@ -52,7 +52,7 @@ def _heading_deg(rad: float) -> float:
 
 def explain_closure(track: Track, tol_m: float, tol_rad: float) -> tuple[int | None, str]:
     """``(line of the cause or None, text)`` for a track that does not close."""
-    total = sum(turning_deg(p) for p in track.passes)
+    total = round(sum(turning_deg(p) for p in track.passes), 9) + 0.0  # no "1.42109e-14 deg"
     needed = 360.0 * round(total / 360.0)
     diff = needed - total
     tol_deg = math.degrees(tol_rad)

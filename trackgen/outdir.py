@@ -32,9 +32,20 @@ def _pattern(out_dir: Path) -> re.Pattern:
 
 
 def make_temp(out_dir: Path, suffix: str = ".tmp") -> Path:
-    """A new empty folder beside ``out_dir`` named after it and this process."""
-    return Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.{_TAG}-{os.getpid()}-", suffix=suffix,
-                                 dir=out_dir.parent))
+    """A new empty folder beside ``out_dir`` named after it and this process, with the
+    permissions a folder made with ``mkdir`` would get (mkdtemp's are 0700: a teammate could
+    not read the output swapped in from it)."""
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.{_TAG}-{os.getpid()}-", suffix=suffix,
+                                dir=out_dir.parent))
+    os.chmod(tmp, 0o777 & ~_umask())
+    return tmp
+
+
+def _umask() -> int:
+    """This process's file-creation mask (read by setting it and setting it back)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def _alive(pid: int) -> bool:

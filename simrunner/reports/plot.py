@@ -60,7 +60,7 @@ def _map_panel(ax, log: RunLog, laps: np.ndarray, off: int | None) -> None:
     if laps.size:
         ax.plot(x[laps], y[laps], "D", color="gold", mec="black", ms=8, label="lap completed")
         for n, i in enumerate(laps[:MAX_LAP_LABELS], 1):  # laps end near one line: stagger
-            ax.annotate(f"lap {n}: {log.t_s[i]:.2f} s", (x[i], y[i]), textcoords="offset points",
+            ax.annotate(f"lap {n} done at {log.t_s[i]:.2f} s", (x[i], y[i]), textcoords="offset points",
                         xytext=(10, 6 + 15 * (n - 1)), fontsize=8, arrowprops={"arrowstyle": "-", "lw": 0.5}, bbox={"boxstyle": "round", "fc": "lightyellow",
                                                          "alpha": 0.85})
     if off is not None:
