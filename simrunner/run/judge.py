@@ -129,6 +129,7 @@ class Judge:
         self._lap_left_course = ""   # why the lap in progress cannot count ("" : it can)
         self._lost = False           # off the course, not yet back on it
         self._off_course = ""        # the last off-course text
+        self._course_s0: float | None = None  # where the car started along the course
         self.finish_t_s: float | None = None         # when the last lap was completed
         self.finish_distance_m: float | None = None  # distance_m then
 
@@ -222,6 +223,14 @@ class Judge:
     def course_s_m(self) -> float | None:
         """Where the car is along the course's centreline (arc length, m; None: no course)."""
         return None if self._follow is None else self._follow.s_m
+
+    @property
+    def course_from_start_m(self) -> float | None:
+        """Where the car is along the course, measured from where it started (m, in [0, L);
+        None: no course)."""
+        if self._follow is None or self._course_s0 is None:
+            return None
+        return (self._follow.s_m - self._course_s0) % self._follow.length_m
 
     @property
     def course_progress_m(self) -> float:
@@ -324,6 +333,8 @@ class Judge:
         follow = self._follow
         if first or self._lost:
             follow.reset(x, y)
+            if first:
+                self._course_s0 = follow.s_m
             if self._lost and abs(follow.lateral_m) <= self._course_tol_m:
                 self._lost = False  # back on the course (the lap in progress stays void)
                 self._best_progress_m = self._lap_progress_m

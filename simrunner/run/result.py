@@ -55,6 +55,8 @@ class RunResult:
     event: str | None = None  # None: practice; else the discipline (simrunner.run.events)
     verdict: Any = None       # the discipline's simrunner.run.events.Verdict (None: practice)
     lap_distances_m: list[float] = field(default_factory=list)  # path driven in each counted lap
+    course_from_start_m: float | None = None  # where the run ended along the course, from its start
+    course_length_m: float | None = None
 
     @property
     def penalties(self) -> list:

@@ -88,7 +88,11 @@ def row_from_result(job: Job, result, centreline: np.ndarray | None) -> dict[str
     if str(result.outcome) in ("off_track", "off_course") and len(log) and log.x_m is not None:
         x, y, t = float(log.x_m[-1]), float(log.y_m[-1]), float(log.t_s[-1])
         row.update(off_x_m=x, off_y_m=y, off_t_s=t)
-        where = progress_along(centreline, x, y)
+        if result.course_from_start_m is not None and result.course_length_m:
+            # the judge's place along the course (the right branch at a crossing)
+            where = (result.course_from_start_m, result.course_from_start_m / result.course_length_m)
+        else:
+            where = progress_along(centreline, x, y)
         if where is not None:
             row.update(off_progress_m=where[0], off_progress_frac=where[1])
     return row
