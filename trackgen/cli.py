@@ -52,8 +52,8 @@ def validate(path: Path, car_path: Path | None, no_sdf_check: bool) -> None:
         raise _fail(str(exc)) from None
     except OSError as exc:
         raise _fail(f"{path}: {exc.strerror or exc}") from None
-    for p in problems:
-        click.echo(str(p))
+    for p in problems:  # on stderr, as build's and the INVALID line
+        click.echo(str(p), err=True)
     bad = errors(problems)
     if bad:
         click.echo(f"{path}: INVALID, {count_errors(problems)} problem(s)", err=True)

@@ -21,7 +21,7 @@ itself, with shapely only (no simulator import):
    a turn shorter than that reads wider than it is) against the car's minimum turning
    radius ``wheelbase / tan(steering limit)``, with :data:`RADIUS_TOL` relative slack for
    the tracing's noise. Tighter than that is a warning when the car can still take the turn
-   by moving to its inside (radius + half the road width - half the car's width reaches the
+   by moving towards the outside of the turn (radius + half the road width - half the car's width reaches the
    minimum radius: the centreline is only estimated, and NXP's own ``nxp_raceway`` has
    such a hairpin, about 0.36 m against the default car's 0.414 m), an error otherwise.
 
@@ -253,12 +253,12 @@ def _radius_problems(where: str, trace: Trace, car: CarDescription) -> list[Prob
     near = np.hypot(*(trace.points - xy).T) <= RADIUS_SPAN_M
     widths = trace.widths[near & np.isfinite(trace.widths)]
     width = float(widths.min()) if len(widths) else float(np.nanmedian(trace.widths))
-    inside = radius + (width - car.chassis.width_m) / 2.0
+    outside = radius + (width - car.chassis.width_m) / 2.0  # the widest path inside the road
     text = (f"the centreline's radius is about {radius:.3f} m at ({xy[0]:.2f}, {xy[1]:.2f}) m: "
             f"tighter than the car's minimum turning radius {need:.3f} m (wheelbase / "
             f"tan(steering limit), thesis eq. 5.1)")
-    if inside >= need:
+    if outside >= need:
         return [Problem(where, None, f"{text}; the car can take it only off the centreline, "
-                        f"towards the inside", "turn_radius", warning=True)]
-    return [Problem(where, None, f"{text}, even along the inside of the {width:.3f} m road",
+                        f"towards the outside of the turn", "turn_radius", warning=True)]
+    return [Problem(where, None, f"{text}, even along the outside of the {width:.3f} m road",
                     "turn_radius")]
