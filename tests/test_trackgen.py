@@ -166,6 +166,9 @@ def test_crossroads_reentry_miss():
     assert "CROSSROADS re-entry misses side port of the crossroads on line 1 by 0.120 m / 0.0 deg" \
         in p.message
     assert "(tolerance 1e-06 m / 1e-06 rad)" in p.message
+    # where it arrives, in the port's frame, and the fix (a straight 0.12 m too long before it)
+    assert p.message.endswith("it arrives 0.120 m past the port and 0.000 m to its right, heading 0.0 deg "
+                              "right of it; the pieces before it are 0.120 m too long (along the side road)")
 
 
 def test_crossroads_three_passes_and_different_params():

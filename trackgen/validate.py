@@ -169,13 +169,31 @@ def _check_reentries(track: Track, path: str, scale: float = 1.0) -> list[Proble
             out.append(Problem(path, p.line, (
                 f"CROSSROADS re-entry misses side port of the crossroads on line {first.line} by "
                 f"{r.error_m:.3f} m / {_deg(r.error_rad):.1f} deg "
-                f"(tolerance {tol_m:g} m / {REENTRY_TOL_RAD:g} rad)"), "reentry"))
+                f"(tolerance {tol_m:g} m / {REENTRY_TOL_RAD:g} rad){_reentry_fix(track, r)}"), "reentry"))
         if r.params_differ:
             out.append(Problem(path, p.line, (
                 f"CROSSROADS re-entry {p.entry.describe()} differs from the crossroads on line "
                 f"{first.line} ({first.entry.describe()}): a crossroads crossed twice is one "
                 "piece; give the parameters once"), "reentry"))
     return out
+
+
+def _reentry_fix(track: Track, r) -> str:
+    """Where the track arrives at a crossroads' side port, in the port's own frame, and what
+    would make it arrive there (the pieces before it longer or shorter)."""
+    if r.index == 0:
+        return ""
+    port = track.passes[r.index].entry_world
+    arrival = port.inverse() @ track.passes[r.index - 1].exit_world
+    along, across = arrival.x_m, arrival.y_m
+    along, across = (v if abs(v) >= 5e-4 else 0.0 for v in (along, across))  # no "-0.000"
+    text = (f": it arrives {abs(along):.3f} m {'before' if along < 0 else 'past'} the port and "
+            f"{abs(across):.3f} m to its {'left' if across > 0 else 'right'}, heading "
+            f"{_deg(abs(arrival.yaw_rad)):.1f} deg {'left' if arrival.yaw_rad > 0 else 'right'} of it")
+    if abs(along) >= 5e-4 and abs(across) < 5e-4 and abs(arrival.yaw_rad) < REENTRY_TOL_RAD:
+        text += (f"; the pieces before it are {abs(along):.3f} m too "
+                 f"{'short' if along < 0 else 'long'} (along the side road)")
+    return text
 
 
 def _adjacent_pairs(track: Track) -> set[tuple[int, int]]:
