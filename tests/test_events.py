@@ -129,3 +129,59 @@ def test_the_speed_limit_example_passes():
     for seed in range(3):
         r = drive(EVENTS_DIR / "speed_limit.py", event="speed_limit", seed=seed)
         assert r.passed and r.points == 150, r.message
+
+
+def test_events_refuse_what_they_cannot_judge_in_one_line(tmp_path):
+    res = CliRunner().invoke(cli, ["drive", str(FOLLOWER), "--event", "speed_limit", "--track", str(KIT_S)])
+    assert res.exit_code == 2 and "needs a layout with SPEED_LIMIT_START" in res.output
+    assert "Traceback" not in res.output
+    with pytest.raises(Exception, match="keep_driving: not with an event"):
+        RunSettings(event="figure8", keep_driving=True)
+
+
+def test_an_event_reports_its_own_laps_and_time_limit():
+    r = drive(FOLLOWER, track=KIT_S, event="figure8", time_limit_s=10.0)
+    assert r.message == f"{r.laps_completed} complete lap(s) in 10 s" and r.laps == r.laps_completed
+
+
+def test_a_layout_box_ends_an_event_too(tmp_path):
+    layout = tmp_path / "boxed.txt"
+    layout.write_text(KIT_S.read_text() + "@box = 0.36 0.89 0.2 0.2 0.2\n")  # on the far straight
+    r = drive(FOLLOWER, track=layout, event="race")
+    assert r.outcome == "touched" and not r.passed and r.time_s is None
+    assert r.verdict.details["touched"] == "box_1"
+
+
+def test_a_race_whose_main_returns_after_the_lap_still_counts():
+    """main returns once the lap is done (still rolling): the attempt counts, the stop is
+    judged on the state it ended in (+1 s while rolling)."""
+    def main(s):
+        import runpy
+
+        follower = runpy.run_path(str(FOLLOWER))["main"]
+
+        class Until:
+            def __getattr__(self, name):
+                return getattr(s, name)
+
+            def get_image(self, *a, **k):
+                if s.get_time() > 2.95:  # just past the line (lap 2.49 s from ~0.4 s)
+                    raise StopIteration
+                return s.get_image(*a, **k)
+
+        try:
+            follower(Until())
+        except StopIteration:
+            return
+
+    r = drive(main, track=KIT_S, event="race")
+    assert r.outcome == "controller_returned" and r.passed and r.laps_completed == 1
+    assert [p.seconds for p in r.penalties] == [1.0] and r.time_s == pytest.approx(r.lap_times_s[0] + 1.0)
+
+
+def test_batch_event_runs_on_the_events_own_track(tmp_path):
+    from simrunner.workflows.batch import run_batch
+
+    res = run_batch(FOLLOWER, out_dir=tmp_path / "b", event="speed_limit", workers=1, plot=False)
+    (row,) = res.rows
+    assert row["outcome"] == "finished" and "approach" in row["message"]

@@ -441,6 +441,10 @@ def car_from_dict(data: dict[str, Any], source: str = "<car>", text: str | None 
                     value = None
             if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
                 raise _error(source, text, None, key, "[range_sensors.NAME] tables expected, one per sensor")
+            for name in value:
+                if not re.fullmatch(r"[A-Za-z0-9_-]{1,40}", str(name)):
+                    raise _error(source, text, key, None, f"[range_sensors.{name}]: a sensor's name is 1 to 40 "
+                                 "letters, digits, '_' or '-' (get_distance(NAME) reads it)")
             kwargs[key] = tuple((name, _section_from_dict(RangeSensor, f"range_sensors.{name}", table, source,
                                                           text)) for name, table in value.items())
             continue

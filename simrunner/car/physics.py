@@ -194,6 +194,7 @@ class CarSim:
         world.addSkeleton(self._body.skeleton)
         self._world = world
         self._solids: list = []  # (name, skeleton) of each solid on the track
+        self._touched: set[str] = set()  # solids touched since touched_solids() was last read
 
         r = car.wheels.radius_m
         wb, half_t = car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
@@ -476,21 +477,27 @@ class CarSim:
         joint.setTransformFromParentBodyNode(isometry(centre, _rot_z(solid.yaw_rad)))
         self._world.addSkeleton(sk)
         self._solids.append((solid.name, sk))
+        self._world_step = self._step_noting_touches
 
     def touched_solids(self) -> tuple[str, ...]:
-        """Names of the solids the car touched at the last step, in the order they were put
-        down. (Read every camera frame by the run: a touch lasts longer than a frame, since the
-        car cannot pass through a solid.)"""
+        """Names of the solids the car touched at any step since the last call, in the order
+        they were put down (every step's contacts are noted once a solid is on the track: a
+        grazing touch shorter than a camera frame is not missed)."""
         if not self._solids:
             return ()
-        touching = set()
+        touched, self._touched = self._touched, set()
+        return tuple(name for name, _ in self._solids if name in touched)
+
+    def _step_noting_touches(self, reset: bool) -> None:
+        """One world step, then the solids the car touches in it (set as the world's step once a
+        solid is on the track)."""
+        self._world.step(reset)
         for contact in self._world.getLastCollisionResult().getContacts():
             a = contact.collisionObject1.getShapeFrame().getName()
             b = contact.collisionObject2.getShapeFrame().getName()
             for mine, other in ((a, b), (b, a)):
                 if mine.startswith("solid:") and other != "ground_box" and not other.startswith("solid:"):
-                    touching.add(mine[len("solid:"):])
-        return tuple(name for name, _ in self._solids if name in touching)
+                    self._touched.add(mine[len("solid:"):])
 
     # -- stepping ----------------------------------------------------------------------
     def step(self, n: int = 1) -> None:

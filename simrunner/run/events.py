@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from simrunner.run.result import Outcome
-from simrunner.run.rules import (EVENT_NAMES, RACE_LAPS, RACE_TIME_LIMIT_S, RULES_OFF_TRACK_WHEELS, STOPPED_MPS,
-                                 Penalty, StopCheck)
+from simrunner.run.settings import SettingsError
+from simrunner.run.rules import EVENTS, STOPPED_MPS, EventRules, Penalty, StopCheck
 
 EVENT_TRACKS = Path(__file__).resolve().parent.parent / "data" / "events"
 SPEED_LIMIT_SLOW = 0.6       # ours: "about half" the approach speed (section 4.3: not specified)
@@ -33,37 +33,8 @@ SPEED_LIMIT_BACK = 0.8       # ours: back to this share of the approach speed af
 SPEED_LIMIT_AFTER_M = 1.5    # ... within this far past the 3-stripe piece
 SPEED_LIMIT_SETTLE_M = 0.5   # ours: the zone's first 0.5 m are for braking (not judged)
 APPROACH_M = 1.0             # the approach speed: the mean over the last metre before the zone
-SUCCESS_POINTS = 150         # section 4.2-4.4: 150 for success, 0 otherwise
 
 
-@dataclass(frozen=True)
-class EventRules:
-    """One discipline: ``layout`` (a file of simrunner/data/events, None: the run's track),
-    the judge's ``laps``, ``time_limit_s``, ``off_track_wheels`` and the ``points`` for
-    success (None: by rank among the teams, not known from one run); ``rules``: the rules
-    summary's section."""
-
-    name: str
-    layout: str | None
-    laps: int
-    time_limit_s: float
-    off_track_wheels: int
-    points: int | None
-    rules: str
-
-
-EVENTS: dict[str, EventRules] = {
-    "race": EventRules("race", None, RACE_LAPS, RACE_TIME_LIMIT_S, RULES_OFF_TRACK_WHEELS, None, "section 3"),
-    # 60 s in 2019/20 (R20), 90 s in 2018/19 (R19): section 4.1
-    "figure8": EventRules("figure8", "kit_M.txt", 10**6, 60.0, 1, None, "section 4.1"),
-    "speed_limit": EventRules("speed_limit", "kit_speed_limit.txt", 10**6, 90.0, 1, SUCCESS_POINTS, "section 4.3"),
-    "obstacle": EventRules("obstacle", "kit_S.txt", 2, 90.0, 1, SUCCESS_POINTS, "section 4.2"),
-    "emergency_brake": EventRules("emergency_brake", "kit_S_plain.txt", 10**6, 90.0, 1, SUCCESS_POINTS,
-                                  "section 4.4"),
-}
-
-
-assert tuple(EVENTS) == EVENT_NAMES
 
 
 def event_track(name: str) -> Path | None:
@@ -94,19 +65,19 @@ class EventMonitor:
         self.run = run  # the run's parts (track, sim, judge, objects)
         self.verdict = Verdict(points=None)
 
-    def frame(self, t: float, pose, speed: float) -> tuple[Outcome, str] | None:
+    def frame(self, t_s: float, pose, speed_mps: float) -> tuple[Outcome, str] | None:
         return None
 
-    def at_laps(self, t: float, speed: float, off: bool) -> tuple[Outcome, str] | None:
+    def at_laps(self, t_s: float, speed_mps: float, off: bool) -> tuple[Outcome, str] | None:
         self.verdict.passed = True
         self.verdict.points = self.rules.points
         return Outcome.FINISHED, f"{self.run.judge.laps_completed} lap(s) completed"
 
-    def at_time_limit(self, t: float) -> tuple[Outcome, str]:
-        return Outcome.TIMEOUT, f"time limit of {self.rules.time_limit_s:g} s simulated time reached"
+    def at_time_limit(self, t_s: float) -> tuple[Outcome, str]:
+        return Outcome.TIMEOUT, f"time limit of {self.run.time_limit_s:g} s simulated time reached"
 
     def failed(self, outcome: Outcome) -> None:
-        """The run ended otherwise (off track, off course, a fault): not passed."""
+        """The run ended otherwise (off track, off course, a touch, a fault): not passed."""
         self.verdict.passed = False
         self.verdict.points = 0 if self.rules.points is not None else None
 
@@ -116,31 +87,48 @@ class RaceMonitor(EventMonitor):
 
     stop: StopCheck | None = None
 
-    def at_laps(self, t, speed, off):
+    def at_laps(self, t_s, speed_mps, off):
         judge = self.run.judge
         if self.stop is None:
             self.stop = StopCheck(judge.finish_t_s, judge.finish_distance_m)
-        verdict = self.stop.update(t, judge.distance_m, speed, int(off),
-                                   time_up=t >= self.run.time_limit_s - 1e-9)
+        verdict = self.stop.update(t_s, judge.distance_m, speed_mps, int(off),
+                                   time_up=t_s >= self.run.time_limit_s - 1e-9)
         if verdict is None:
             return None
+        return Outcome.FINISHED, f"{judge.laps_completed} lap(s) completed; {self._stop_verdict(verdict)}"
+
+    def _stop_verdict(self, verdict) -> str:
         text, penalty = verdict
         if penalty is not None:
             self.verdict.penalties.append(penalty)
             text += f" (+{penalty.seconds:g} s)"
         self.verdict.passed = True
-        return Outcome.FINISHED, f"{judge.laps_completed} lap(s) completed; {text}"
+        return text
+
+    def failed(self, outcome: Outcome) -> None:
+        """After the lap the attempt counts whatever ends the run; the stop is judged on the
+        state it ended in (main returned while rolling: +1 s)."""
+        judge = self.run.judge
+        if not judge.finished or self.verdict.passed:
+            super().failed(outcome)
+            return
+        if self.stop is None:
+            self.stop = StopCheck(judge.finish_t_s, judge.finish_distance_m)
+        sim = self.run.sim
+        verdict = self.stop.update(sim.time_s, judge.distance_m, sim.speed_mps,
+                                   int(len(judge.off_wheels) >= self.run.settings.off_track_wheels), time_up=True)
+        self.verdict.details["stop"] = self._stop_verdict(verdict)
 
 
 class Figure8Monitor(EventMonitor):
     """As many complete laps as the time allows; the attempt counts when the whole time was
     driven cleanly (section 4.1)."""
 
-    def at_time_limit(self, t):
+    def at_time_limit(self, t_s):
         n = self.run.judge.laps_completed
         self.verdict.passed = n >= 1
         self.verdict.details["laps"] = n
-        return Outcome.FINISHED, f"{n} complete lap(s) in {self.rules.time_limit_s:g} s"
+        return Outcome.FINISHED, f"{n} complete lap(s) in {self.run.time_limit_s:g} s"
 
 
 class SpeedLimitMonitor(EventMonitor):
@@ -155,11 +143,11 @@ class SpeedLimitMonitor(EventMonitor):
         from simrunner.track.progress import CentrelineProgress
 
         course = run.track.course
-        starts = [s for s in course.sections if s.kind == "SPEED_LIMIT_START"]
-        ends = [s for s in course.sections if s.kind == "SPEED_LIMIT_END"]
+        starts = [s for s in course.sections if s.kind == "SPEED_LIMIT_START"] if course else []
+        ends = [s for s in course.sections if s.kind == "SPEED_LIMIT_END"] if course else []
         if not starts or not ends:
-            raise ValueError("the speed_limit event needs a track with SPEED_LIMIT_START and SPEED_LIMIT_END "
-                             "pieces (e.g. simrunner/data/events/kit_speed_limit.txt)")
+            raise SettingsError(f"{run.track.name}: the speed_limit event needs a layout with SPEED_LIMIT_START "
+                                "and SPEED_LIMIT_END pieces (e.g. simrunner/data/events/kit_speed_limit.txt)")
         end = next((e for e in ends if e.s_start_m > starts[0].s_start_m), ends[0])
         end_start = end.s_start_m if end.s_start_m > starts[0].s_start_m else end.s_start_m + course.length_m
         # the zone: from the 4-stripe piece to the 3-stripe piece, where the car speeds up again
@@ -170,7 +158,8 @@ class SpeedLimitMonitor(EventMonitor):
         self.s_m: float | None = None
         self.samples: list[tuple[float, float]] = []  # (s along the course since the start, speed)
 
-    def frame(self, t, pose, speed):
+    def frame(self, t_s, pose, speed_mps):
+        speed = speed_mps
         if self.s_m is None:
             self.follow.reset(pose.x_m, pose.y_m)
             self.s_m = self.follow.s_m
@@ -217,9 +206,11 @@ class _ObjectMonitor(EventMonitor):
 
     def __init__(self, rules, run):
         super().__init__(rules, run)
-        if run.track.course is None:
-            raise ValueError(f"the {rules.name} event needs a track with a course (a layout or a "
-                             "traced world)")
+        course = run.track.course
+        if course is None or not any(s.kind in STRAIGHT_KINDS and s.s_end_m - s.s_start_m >= 0.5
+                                     for s in course.sections):
+            raise SettingsError(f"{run.track.name}: the {rules.name} event needs a layout with straight "
+                                "pieces (STRAIGHT, START_FINISH, ...) to put its object on")
         self.rng = np.random.default_rng([int(run.settings.seed), sum(map(ord, rules.name))])
         self.solid = None
 
@@ -235,9 +226,9 @@ class _ObjectMonitor(EventMonitor):
                      and self._ahead(s.s_start_m) >= OBJECT_AHEAD_M
                      and self._ahead(s.s_end_m) > self._ahead(s.s_start_m)
                      and s.s_end_m - s.s_start_m >= from_start_m + 0.1]
-        if not straights:
-            raise ValueError(f"the {self.rules.name} event needs a straight piece {OBJECT_AHEAD_M} m ahead "
-                             "of the car")
+        if not straights:  # (the check at the start found one: any is ahead within a lap)
+            straights = [s for s in course.sections if s.kind in STRAIGHT_KINDS
+                         and s.s_end_m - s.s_start_m >= from_start_m + 0.1]
         sec = straights[int(self.rng.integers(len(straights)))]
         return float(self.rng.uniform(sec.s_start_m + from_start_m, sec.s_end_m - 0.1))
 
@@ -247,13 +238,6 @@ class _ObjectMonitor(EventMonitor):
         self.verdict.details.update(object=solid.name, x_m=round(solid.x_m, 4), y_m=round(solid.y_m, 4),
                                     along_m=round(along_m, 4), across_m=round(across_m, 4))
 
-    def frame(self, t, pose, speed):
-        touched = self.run.sim.touched_solids() if self.solid is not None else ()
-        if touched:
-            self.verdict.details["touched"] = touched[0]
-            self.failed(Outcome.TOUCHED)
-            return Outcome.TOUCHED, f"touched the {touched[0]} at t = {t:.3f} s"
-        return None
 
 
 class ObstacleMonitor(_ObjectMonitor):
@@ -262,7 +246,7 @@ class ObstacleMonitor(_ObjectMonitor):
     on a seeded side (the rules: not specified; ours, so that a car passes on the road); lap 2
     without touching it (and no wheel off)."""
 
-    def frame(self, t, pose, speed):
+    def frame(self, t_s, pose, speed_mps):
         if self.solid is None and self.run.judge.laps_completed >= 1:
             from worlds.solids import obstacle_cube
 
@@ -270,7 +254,7 @@ class ObstacleMonitor(_ObjectMonitor):
             across = float(self.rng.uniform(*CUBE_OFF_CENTRE_M)) * (1.0 if self.rng.random() < 0.5 else -1.0)
             x, y, yaw = _course_point(self.run.track.course, along, across)
             self._place(obstacle_cube("cube", x, y, yaw), along, across)
-        return super().frame(t, pose, speed)
+        return None
 
 
 class EmergencyBrakeMonitor(_ObjectMonitor):
@@ -281,7 +265,7 @@ class EmergencyBrakeMonitor(_ObjectMonitor):
 
     still_since: float | None = None
 
-    def frame(self, t, pose, speed):
+    def frame(self, t_s, pose, speed_mps):
         if self.solid is None:
             if self.run.judge.laps_completed >= 2:
                 from worlds.solids import braking_block
@@ -291,15 +275,12 @@ class EmergencyBrakeMonitor(_ObjectMonitor):
                 self._place(braking_block("block", x, y, yaw), along, 0.0)
                 self.verdict.details["placed_ahead_m"] = round(self._ahead(along), 4)
             return None
-        end = super().frame(t, pose, speed)
-        if end is not None:
-            return end
-        if abs(speed) >= STOPPED_MPS:
+        if abs(speed_mps) >= STOPPED_MPS:
             self.still_since = None
             return None
         if self.still_since is None:
-            self.still_since = t
-        if t - self.still_since < STOPPED_FOR_S:
+            self.still_since = t_s
+        if t_s - self.still_since < STOPPED_FOR_S:
             return None
         chassis = self.run.car.chassis  # the front bumper to the block's near face
         gap = self._ahead(self.verdict.details["along_m"]) - 0.1 - (chassis.length_m - chassis.rear_overhang_m)
@@ -307,10 +288,10 @@ class EmergencyBrakeMonitor(_ObjectMonitor):
         self.verdict.details["stopped_before_m"] = round(gap, 4)
         return Outcome.FINISHED, f"stopped with its front {gap:.2f} m before the block"
 
-    def at_time_limit(self, t):
+    def at_time_limit(self, t_s):
         self.failed(Outcome.TIMEOUT)
         what = "did not stop before the block" if self.solid is not None else "the block was never placed"
-        return Outcome.TIMEOUT, f"time limit of {self.rules.time_limit_s:g} s: {what}"
+        return Outcome.TIMEOUT, f"time limit of {self.run.time_limit_s:g} s: {what}"
 
 
 def _course_point(course, along_m: float, across_m: float) -> tuple[float, float, float]:

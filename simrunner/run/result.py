@@ -81,8 +81,9 @@ class RunResult:
 
     @property
     def time_s(self) -> float | None:
-        """The race's result: the first lap's time plus the penalties (None without a lap)."""
-        if self.event != "race" or not self.lap_times_s:
+        """The race's result: the first lap's time plus the penalties (None without a lap, or
+        when the attempt failed)."""
+        if self.event != "race" or not self.lap_times_s or not self.passed:
             return None
         return self.lap_times_s[0] + self.penalty_s
 

@@ -3,6 +3,9 @@ track ends an attempt. Numbers from the rules summary (``../shared/reference/nxp
 section 3, the timed race: identical in the 2018/19 and 2019/20 rules, R19 §5, §8, §9 and
 R20 §7, §10, §11); where the rules are silent the simulator's choice is marked "ours".
 
+The disciplines' table (:data:`EVENTS`) lives here too (the settings check against it);
+:mod:`simrunner.run.events` runs them.
+
 The race: one lap per attempt, timed when the car crosses the start/finish line and crosses
 it again (the judge times the rear-axle midpoint's crossings: the same interval as "the
 first part of the car" for a car that keeps its shape); the attempt fails after 120 s or
@@ -13,7 +16,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-EVENT_NAMES = ("race", "figure8", "speed_limit", "obstacle", "emergency_brake")  # simrunner.run.events
 RACE_LAPS = 1                # section 3, "Laps": one lap per attempt
 RACE_TIME_LIMIT_S = 120.0    # section 3, "Time limit"
 RULES_OFF_TRACK_WHEELS = 3   # section 3, "Leaving the track": 3 or more wheels off fails
@@ -21,6 +23,38 @@ STOP_WITHIN_M = 2.0          # section 3, "Stop after finish": 2 m (6 ft) ...
 STOP_PENALTY_S = 1.0         # ... or +1 s
 STOPPED_MPS = 0.02           # ours: a car slower than this has stopped
 STOP_WAIT_S = 10.0           # ours: a car still rolling this long after the finish has not stopped
+
+
+SUCCESS_POINTS = 150         # section 4.2-4.4: 150 for success, 0 otherwise
+
+
+@dataclass(frozen=True)
+class EventRules:
+    """One discipline of ``--event`` (:mod:`simrunner.run.events` runs it): ``layout`` (a file
+    of simrunner/data/events, None: the run's track), the judge's ``laps`` (None: as many as
+    the time allows), ``time_limit_s``, ``off_track_wheels`` and the ``points`` for success
+    (None: by rank among the teams, not known from one run); ``rules``: the rules summary's
+    section."""
+
+    name: str
+    layout: str | None
+    laps: int | None
+    time_limit_s: float
+    off_track_wheels: int
+    points: int | None
+    rules: str
+
+
+EVENTS: dict[str, EventRules] = {
+    "race": EventRules("race", None, RACE_LAPS, RACE_TIME_LIMIT_S, RULES_OFF_TRACK_WHEELS, None, "section 3"),
+    # 60 s in 2019/20 (R20), 90 s in 2018/19 (R19): section 4.1
+    "figure8": EventRules("figure8", "kit_M.txt", None, 60.0, 1, None, "section 4.1"),
+    "speed_limit": EventRules("speed_limit", "kit_speed_limit.txt", None, 90.0, 1, SUCCESS_POINTS, "section 4.3"),
+    "obstacle": EventRules("obstacle", "kit_S.txt", 2, 90.0, 1, SUCCESS_POINTS, "section 4.2"),
+    "emergency_brake": EventRules("emergency_brake", "kit_S_plain.txt", None, 90.0, 1, SUCCESS_POINTS,
+                                  "section 4.4"),
+}
+EVENT_NAMES = tuple(EVENTS)
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,8 @@ from simrunner.run.judge import Judge
 from simrunner.telemetry.log import RunRecorder
 from simrunner.reports.outputs import Outputs, check_outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
-from simrunner.run.events import EVENTS, event_track, make_monitor, start_past
+from simrunner.run.events import event_track, make_monitor, start_past
+from simrunner.run.rules import EVENTS
 from simrunner.run.settings import RunSettings
 from simrunner.run.spinner import Session, Spinner
 from simrunner.run.supervise import current_supervision
@@ -49,6 +50,7 @@ from simrunner.track import SimTrack
 from vehicle.description import CarDescription, load_car
 
 _DATA_DIR = Path(__file__).resolve().parent.parent / "data"
+UNLIMITED_LAPS = 10**6  # the judge's laps in a discipline that counts laps until its time is up
 DEFAULT_TRACK_NAME = "thesis_figure8.txt"
 
 
@@ -109,20 +111,22 @@ class FrameWork:
                 "speed": speed, "steer": steer, "speed_cmd": cmd[0], "steer_cmd": cmd[1],
                 "lap": lap, "off_track": off})
         monitor = self.monitor
-        if monitor is not None:
-            end = monitor.frame(t, pose, speed)
-            if end is not None:
-                return end
-        elif self.has_solids:
+        if self.has_solids:
             touched = sim.touched_solids()
             if touched:
                 text = f"touched the {touched[0]} at t = {t:.3f} s"
                 if not self.keep_driving:
+                    if monitor is not None:
+                        monitor.verdict.details["touched"] = touched[0]
                     return Outcome.TOUCHED, text
                 if not self._touching:
                     self.touch_count += 1
                     self.first_touch = self.first_touch or text
             self._touching = bool(touched)
+        if monitor is not None:
+            end = monitor.frame(t, pose, speed)
+            if end is not None:
+                return end
         if lap >= judge.laps:
             if monitor is None:
                 return Outcome.FINISHED, f"{lap} lap(s) completed"
@@ -182,8 +186,9 @@ class Run:
             from simrunner.sensors.imaging import Imager
 
             self.imager = Imager(self.camera, track.lighting, surface_z_m=track.surface_z_m)
+        event_laps = None if settings.event is None else EVENTS[settings.event].laps
         self.judge = Judge(track, laps=settings.laps if settings.event is None
-                           else EVENTS[settings.event].laps)
+                           else (event_laps or UNLIMITED_LAPS))
         self.monitor = None if settings.event is None else make_monitor(settings.event, self)
         self.csv = None
         supervision = current_supervision()
@@ -392,7 +397,8 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
         stray = stray_threads(threads_before)
         if stray:
             warnings.append(f"the controller left {', '.join(stray)} running (not waited for)")
-        result = RunResult(outcome=outcome, laps=settings.laps, laps_completed=judge.laps_completed,
+        laps = settings.laps if settings.event is None else (EVENTS[settings.event].laps or judge.laps_completed)
+        result = RunResult(outcome=outcome, laps=laps, laps_completed=judge.laps_completed,
                            lap_times_s=judge.lap_times_s, sim_time_s=run.clock.time_s,
                            wall_time_s=run.wall_time_s, track=track_label, seed=settings.seed,
                            message=message, cpu_time_s=run.cpu_time_s, error=error,

@@ -9,8 +9,7 @@ from typing import Mapping
 
 from simrunner.errors import SimError
 from simrunner.run.params import ParamValue, frozen_params
-from simrunner.run.events import EVENTS
-from simrunner.run.rules import RULES_OFF_TRACK_WHEELS
+from simrunner.run.rules import EVENTS, RULES_OFF_TRACK_WHEELS
 
 MAX_DT_S = 0.02
 
@@ -68,6 +67,9 @@ class RunSettings:
             object.__setattr__(self, name, int(v))
         if self.event is not None and self.event not in EVENTS:
             raise SettingsError(f"event = {self.event!r}: expected one of {', '.join(EVENTS)} (or none: practice)")
+        if self.event is not None and self.keep_driving:
+            raise SettingsError("keep_driving: not with an event (leaving the track or the course voids "
+                                "an attempt; keep driving in practice)")
         if self.event is not None and self.laps != 1:
             rules = EVENTS[self.event]
             raise SettingsError(f"laps = {self.laps!r}: the {self.event} event sets its own laps (rules "

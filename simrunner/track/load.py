@@ -231,7 +231,7 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
         course = course_from_sections(centreline, meta.get("course", ()), gate)
     else:
         course = traced_course(raster, gate, sum(road_extents_m(raster, gate)), lap_length)
-        if course is not None:
+        if course is not None and estimated:  # track.json's length_m, when given, comes first
             lap_length = course.length_m
     return SimTrack(
         name=name or meta.get("name") or _default_name(scene.source),

@@ -72,7 +72,8 @@ def trace_loop(raster: TrackRaster, start: Pose2, road_width_m: float, *,
     repeated. None when the walk leaves the road or does not come back within
     ``max_length_m`` (a road that is no loop: a dead end, a junction the walk cannot pass).
 
-    ``road_width_m``: the road's width at the start (the walk looks half of it to each side).
+    ``road_width_m``: the road's width at the start (each step looks a quarter of it to each
+    side for the ridge).
     The loop closes when the walk crosses the start's lateral line again, near the start
     (within a quarter of the road width), heading forwards, after at least
     ``LOOP_MIN_LENGTH_M``."""

@@ -90,7 +90,8 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     ``event="race"``); ``off_track_wheels``, ``event``: as for ``simrunner drive``."""
     from simrunner.run.controller import load_controller
     from simrunner.run.runner import default_track
-    from simrunner.run.events import EVENTS
+    from simrunner.run.events import event_track
+    from simrunner.run.rules import EVENTS
     from simrunner.run.settings import DEFAULT_TIME_LIMIT_S, RunSettings
     from vehicle.description import load_car
 
@@ -101,7 +102,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
         time_limit_s = EVENTS[event].time_limit_s if event in EVENTS else DEFAULT_TIME_LIMIT_S
     RunSettings(laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
                 off_track_wheels=off_track_wheels, event=event)
-    refs = resolve_tracks(list(tracks) or [str(default_track())])
+    refs = resolve_tracks(list(tracks) or [str((event and event_track(event)) or default_track())])
     grid = parse_grid(list(params), reserved=RESERVED)
     jobs = make_jobs(refs, parse_seeds(seeds), grid)
     video_sel, csv_sel = Selection.parse(video, "video"), Selection.parse(csv, "csv")
