@@ -219,3 +219,16 @@ def test_bad_box_lines_are_one_line_errors(line, message):
     with pytest.raises(LayoutError) as err:
         parse_layout(f"{line}\nSTRAIGHT\n", path="t.txt")
     assert str(err.value).startswith(f"t.txt:1: {message}")
+
+
+def test_the_video_top_view_draws_the_objects():
+    from simrunner.reports.video_frame import TrackView
+
+    track = load_track(KIT_S)
+    view = TrackView(track.raster, 400, 300)
+    p = track.start
+    plain = view.draw(p, False, 0.25, 0.15)
+    drawn = view.draw(p, False, 0.25, 0.15, (braking_block("block", 0.36, 0.89, 0.0),))
+    changed = np.any(drawn != plain, axis=2)
+    col, row = view.to_px(0.36, 0.89)
+    assert changed[row, col] and 50 < changed.sum() < 5000

@@ -114,13 +114,20 @@ class TrackView:
         row = (self.origin[1] - y_m) * self.px_per_m + 0.5 * self.scale + self.off[1]
         return int(round(col)), int(round(row))
 
-    def draw(self, pose, off_track: bool, car_length_m: float, car_width_m: float) -> np.ndarray:
-        """Extend the path to ``pose`` and return the box image ``(box_h, box_w, 3)``."""
+    def draw(self, pose, off_track: bool, car_length_m: float, car_width_m: float,
+             solids=()) -> np.ndarray:
+        """Extend the path to ``pose`` and return the box image ``(box_h, box_w, 3)``, with the
+        objects standing on the track (``solids``, :class:`worlds.solids.Solid`) on it."""
         p = self.to_px(pose.x_m, pose.y_m)
         if self._last is not None:
             cv2.line(self.canvas, self._last, p, _RED if off_track else _GREEN, 1, cv2.LINE_AA)
         self._last = p
         out = self.canvas.copy()
+        for solid in solids:
+            shade = int(round(255 * solid.reflectance * 0.5))
+            pts = np.array([self.to_px(x, y) for x, y in solid.corners_xy()], np.int32)
+            cv2.fillConvexPoly(out, pts, (min(255, shade + 60), shade, shade), cv2.LINE_AA)
+            cv2.polylines(out, [pts], True, _RED, 1, cv2.LINE_AA)
         c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
         corners = [self.to_px(pose.x_m + c * fx - s * fy, pose.y_m + s * fx + c * fy)
                    for fx, fy in ((car_length_m, 0.0), (0.0, car_width_m / 2), (0.0, -car_width_m / 2))]
@@ -165,7 +172,7 @@ def _api_panel(out: np.ndarray, box, rec: FrameRecord, laps: int) -> None:
             ("cmd", f"{z(math.degrees(st['steer_cmd']), 1):.1f} deg"),
             ("x", f"{z(rec.pose.x_m, 3):.3f} m"), ("y", f"{z(rec.pose.y_m, 3):.3f} m"),
             ("yaw", f"{z(math.degrees(rec.pose.yaw_rad), 1):.1f} deg"),
-            ("lap", f"{st['lap']} / {laps}"), ("line row", f"{rec.line_row}")]
+            ("lap", f"{st['lap']} / {laps}" if laps else f"{st['lap']}"), ("line row", f"{rec.line_row}")]
     x0, y0, x1, y1 = box
     half = (x1 - x0) // 2
     per_col = max(1, math.ceil(len(rows) / 2))
@@ -249,6 +256,7 @@ def compose(rec: FrameRecord, track_view: TrackView | None, laps: int,
     _middle_panel(out, layout.middle, rec)
     if track_view is not None and layout.top is not None:
         bx0, by0, bx1, by1 = layout.top
-        view = track_view.draw(rec.pose, bool(rec.state.get("off_track")), car_length_m, car_width_m)
+        view = track_view.draw(rec.pose, bool(rec.state.get("off_track")), car_length_m, car_width_m,
+                           rec.state.get("solids", ()))
         out[by0:by0 + view.shape[0], bx0:bx0 + view.shape[1]] = view[:by1 - by0, :bx1 - bx0]
     return out

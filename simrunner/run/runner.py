@@ -87,6 +87,7 @@ class FrameWork:
         self.first_off_course = ""
         self.monitor = monitor
         self.has_solids = False  # objects on the track (Run.place_solid): a touch ends the run
+        self.solids: tuple = ()  # ... and the video's top view draws them
         self.touch_count = 0
         self.first_touch = ""
         self._touching = False
@@ -109,7 +110,7 @@ class FrameWork:
         if self.video is not None:
             self.video.frame_boundary(k, t, pose, {
                 "speed": speed, "steer": steer, "speed_cmd": cmd[0], "steer_cmd": cmd[1],
-                "lap": lap, "off_track": off})
+                "lap": lap, "off_track": off, "solids": self.solids})
         monitor = self.monitor
         if self.has_solids:
             touched = sim.touched_solids()
@@ -207,7 +208,8 @@ class Run:
             self.video = VideoRecorder(video_path, camera_fps=1.0 / car.camera.frame_period_s(),
                                        render=self._render_view, raster=track.raster,
                                        lighting=track.lighting, surface_z_m=track.surface_z_m,
-                                       laps=settings.laps, line_row=car.camera.default_row,
+                                       laps=settings.laps if settings.event is None else (event_laps or 0),
+                                       line_row=car.camera.default_row,
                                        car_length_m=car.chassis.wheelbase_m + 0.05,
                                        car_width_m=car.chassis.track_m)
         self.frames = FrameWork(self.sim, self.judge, self.recorder, settings.time_limit_s, self.video,
@@ -231,6 +233,7 @@ class Run:
         self.sim.add_solid(solid)
         self.camera.solids = self.camera.solids + (solid,)
         self.frames.has_solids = True
+        self.frames.solids = self.camera.solids
 
     def _render_view(self, pose) -> np.ndarray:
         """The debug video's camera view in a frame the controller took no image: the camera's
