@@ -78,7 +78,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time these load on first
     from . import mesh
     from .library import (DEFAULT_SETTINGS, chicane, chicane_geometry, chicane_left, chicane_right,
                           crossroads, extender, make_piece, piece_from_layout, speed_limit_end,
-                          speed_limit_start, start_finish, straight, straight_short, turn, turn_left,
+                          speed_limit_start, start_finish, straight, straight_short, tunnel, turn, turn_left,
                           turn_right, wave, wave_geometry)
     from .piece import Piece
 
@@ -88,7 +88,8 @@ _EXPORTS = {"Piece": "pieces.piece", "mesh": None}
 _EXPORTS.update((name, "pieces.library") for name in (
     "DEFAULT_SETTINGS", "chicane", "chicane_geometry", "chicane_left", "chicane_right",
     "crossroads", "extender", "make_piece", "piece_from_layout", "speed_limit_end", "speed_limit_start",
-    "start_finish", "straight", "straight_short", "turn", "turn_left", "turn_right", "wave", "wave_geometry"))
+    "start_finish", "straight", "straight_short", "tunnel", "turn", "turn_left", "turn_right", "wave",
+    "wave_geometry"))
 
 STRAIGHT = PieceType.STRAIGHT
 STRAIGHT_SHORT = PieceType.STRAIGHT_SHORT
@@ -102,15 +103,16 @@ EXTENDER = PieceType.EXTENDER
 SPEED_LIMIT_START = PieceType.SPEED_LIMIT_START
 SPEED_LIMIT_END = PieceType.SPEED_LIMIT_END
 WAVE = PieceType.WAVE
+TUNNEL = PieceType.TUNNEL
 
 __all__ = [
     "Pose2", "wrap_angle", "KITS", "Kit", "PARAMS", "SETTINGS_PARAMS", "ParamSpec", "PieceError", "PieceType",
     "TrackSettings", "Piece", "DEFAULT_SETTINGS", "chicane", "chicane_geometry", "chicane_left",
     "chicane_right", "crossroads", "extender", "make_piece", "piece_from_layout", "speed_limit_end",
-    "speed_limit_start", "start_finish", "straight", "wave", "wave_geometry",
+    "speed_limit_start", "start_finish", "straight", "tunnel", "wave", "wave_geometry",
     "straight_short", "turn", "turn_left", "turn_right", "mesh",
     "STRAIGHT", "STRAIGHT_SHORT", "CROSSROADS", "TURN_LEFT", "TURN_RIGHT", "CHICANE_LEFT",
-    "CHICANE_RIGHT", "START_FINISH", "EXTENDER", "SPEED_LIMIT_START", "SPEED_LIMIT_END", "WAVE",
+    "CHICANE_RIGHT", "START_FINISH", "EXTENDER", "SPEED_LIMIT_START", "SPEED_LIMIT_END", "WAVE", "TUNNEL",
 ]
 
 

@@ -257,6 +257,24 @@ def crossroads(*, length_m: float | None = None, angle_rad: float = math.pi / 2,
     )
 
 
+TUNNEL_CLEARANCE_M = 0.30   # ours: the roof's underside above the track (a car with its camera mast)
+TUNNEL_WALL_M = 0.05        # ours: the walls stand this far outside the road, this thick
+
+
+def tunnel(*, length_m: float = 1.0, transmission: float = 0.15,
+           settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """TUNNEL: a straight ``length_m`` long under a roof that lets ``transmission`` (0 .. 1)
+    of the light reach its floor (the track's lighting gets a shade over it:
+    ``trackgen.chain.Track.lighting``); its roof and walls are drawn in the Gazebo world
+    (``TUNNEL_CLEARANCE_M`` high, ``TUNNEL_WALL_M`` outside the road)."""
+    transmission = check_range("transmission", transmission, 0.0, 1.0, unit="", lo_open=False)
+    piece = _straight(PieceType.TUNNEL, length_m, settings)
+    return Piece(kind=piece.kind, settings=piece.settings,
+                 params={"length_m": piece.length_m, "transmission": transmission},
+                 lane=piece.lane, edges=piece.edges, marking=None, centreline=piece.centreline,
+                 ports=piece.ports, length_m=piece.length_m)
+
+
 def extender(*, length_m: float = 0.17, settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
     """EXTENDER: the official kit's short straight (0.17 m: a 45-degree kit turn's centreline
     radius, 0.445 m, is half a kit crossing, 0.275 m, plus one extender)."""
@@ -347,6 +365,7 @@ _BUILDERS: Mapping[PieceType, Callable[..., Piece]] = {
     PieceType.STRAIGHT: straight,
     PieceType.STRAIGHT_SHORT: straight_short,
     PieceType.CROSSROADS: crossroads,
+    PieceType.TUNNEL: tunnel,
     PieceType.TURN_LEFT: turn_left,
     PieceType.TURN_RIGHT: turn_right,
     PieceType.CHICANE_LEFT: chicane_left,

@@ -34,6 +34,7 @@ class PieceType(enum.Enum):
     SPEED_LIMIT_START = "SPEED_LIMIT_START"
     SPEED_LIMIT_END = "SPEED_LIMIT_END"
     WAVE = "WAVE"
+    TUNNEL = "TUNNEL"
 
 
 def _identity(value: float) -> float:
@@ -139,6 +140,12 @@ PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
     # the rules' chicane: two waves of R400 arcs, the lane swinging 85.57 mm side to side
     # (envelope 635.57 of a 550 road; ../shared/reference/nxp-cup-rules.md, section 1.2)
     PieceType.WAVE: MappingProxyType({"length": _m("length", 1.44), "swing": _m("swing", 0.08557)}),
+    # a straight under a roof: TRANSMISSION of the light reaches its floor (ours: 0.15, the
+    # light under a covered section of a hall; 2018/19 tracks "can have" tunnels, rules
+    # summary section 1.1)
+    PieceType.TUNNEL: MappingProxyType({"length": _m("length", 1.0),
+                                        "transmission": ParamSpec("transmission", "", 0.15, 0.0, 1.0,
+                                                                  lo_open=False, internal="transmission")}),
     PieceType.SPEED_LIMIT_END: MappingProxyType({"length": _m("length", 0.72),
                                                  "stripe_length": _m("stripe_length", 0.30),
                                                  "stripe_width": _m("stripe_width", 0.05)}),

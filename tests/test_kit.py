@@ -185,3 +185,33 @@ def test_a_kit_figure8_crossing_at_45_degrees_is_followed_straight_on():
     r = drive(REPO / "examples" / "line_follower.py", track=track, laps=2, seed=0)
     assert r.outcome == "finished", r.message
     assert all(d >= 0.9 * track.course.length_m for d in r.lap_distances_m)
+
+
+def test_a_tunnel_shades_its_piece_and_stands_in_the_world(tmp_path):
+    """TUNNEL: a straight with a shade over it (its length, the road and walls wide), in the
+    built world as roof and walls; the physical camera sees its floor dim."""
+    import numpy as np
+
+    from simrunner.sensors.camera import Camera
+    from simrunner.sensors.imaging import Imager
+    from simrunner.track import load_track
+    from trackgen.build import build
+    from vehicle.description import CarDescription
+    from pieces.pose import Pose2
+
+    text = "@kit = nxp\nSTART_FINISH\nTUNNEL length=1.44 transmission=0.1\nTURN_LEFT x4\nSTRAIGHT x3\nTURN_LEFT x4\n"
+    path = tmp_path / "t.txt"
+    path.write_text(text)
+    (shade,) = chain_layout(load_layout(path)).lighting().shades
+    assert (shade.x_m, shade.y_m, shade.length_m, shade.transmission) == pytest.approx((0.72 + 0.72, 0.0, 1.44, 0.1))
+    assert shade.width_m == pytest.approx(0.55 + 0.1)
+    build(path, tmp_path / "out")
+    assert (tmp_path / "out" / "world.sdf").read_text().count('name="tunnel_0_') == 3
+    track = load_track(path)
+    assert load_track(tmp_path / "out").lighting == track.lighting
+    car = CarDescription()
+    imager = Imager(Camera(car.camera, track), track.lighting, surface_z_m=track.surface_z_m)
+    row = car.camera.default_row
+    outside = imager.line(Pose2(0.0, 0.0, 0.0), row, exposure_s=0.01)
+    inside = imager.line(Pose2(1.0, 0.0, 0.0), row, exposure_s=0.01)
+    assert np.median(inside) < 0.3 * np.median(outside)

@@ -80,7 +80,7 @@ def test_every_number_has_a_finite_range():
     for specs in list(PARAMS.values()) + [SETTINGS_PARAMS]:
         for spec in specs.values():
             assert math.isfinite(spec.lo) and math.isfinite(spec.hi), spec
-            assert spec.lo > 0 or spec.name in ("mark_gap", "mark_inset", "mark_offset"), spec  # sizes: > 0
+            assert spec.lo > 0 or spec.name in ("mark_gap", "mark_inset", "mark_offset", "transmission"), spec  # sizes: > 0
             assert spec.contains(spec.default)
 
 

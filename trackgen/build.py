@@ -171,7 +171,7 @@ def _write_all(tmp: Path, checked: Checked, car: CarDescription,
         rel[role] = f"meshes/{role}.stl"
     write_track_world(tmp, track_name=name, meshes=rel, start_pose=track.car_start_pose(),
                       surface_z_m=track.layout.settings.thickness_m, car=car,
-                      lighting=track.layout.lighting, barcodes=track.layout.barcodes,
+                      lighting=track.lighting(), barcodes=track.layout.barcodes, tunnels=track.tunnels(),
                       boxes=track.layout.boxes)
     (tmp / "track.json").write_text(dumps_track_json(track_json(track, geometry)))
     if not preview:

@@ -13,6 +13,8 @@ the match error is recorded (checked by :mod:`trackgen.validate`).
 """
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from dataclasses import dataclass
 from functools import cached_property
@@ -138,6 +140,39 @@ class Track:
         if len(pts) > 1 and np.hypot(*(pts[-1] - pts[0])) < 1e-6:
             pts = pts[:-1]
         return pts
+
+    def lighting(self):
+        """The layout's light (``worlds.lighting.TrackLighting``) with a shade over each TUNNEL
+        piece: its length, the road's width plus its walls, letting its ``transmission``
+        through."""
+        from pieces.library import TUNNEL_WALL_M
+        from worlds.lighting import Shade
+
+        base = self.layout.lighting
+        shades = tuple(Shade(x, y, length, width + 2.0 * TUNNEL_WALL_M, yaw, transmission)
+                       for x, y, yaw, length, width, _, _, transmission in self._tunnel_parts())
+        if not shades:
+            return base
+        return dataclasses.replace(base, shades=tuple(base.shades) + shades)
+
+    def tunnels(self) -> tuple:
+        """``(x_m, y_m, yaw_rad, length_m, width_m, clearance_m, wall_m)`` of each TUNNEL piece
+        (its middle, heading, length, the road's width; for the Gazebo world's roofs)."""
+        return tuple(t[:7] for t in self._tunnel_parts())
+
+    def _tunnel_parts(self) -> list[tuple]:
+        from pieces.library import TUNNEL_CLEARANCE_M, TUNNEL_WALL_M
+
+        out = []
+        for p in self.passes:
+            if p.kind is not PieceType.TUNNEL:
+                continue
+            length = p.piece.length_m
+            (cx, cy), = p.world_from_piece.apply(np.array([[length / 2.0, 0.0]]))
+            out.append((float(cx), float(cy), p.world_from_piece.yaw_rad, length,
+                        self.layout.settings.road_width_m, TUNNEL_CLEARANCE_M, TUNNEL_WALL_M,
+                        float(p.piece.params["transmission"])))
+        return out
 
     def course_sections(self) -> list[tuple[float, float]]:
         """Arc length (m) along :meth:`centreline` where each pass starts and ends, in

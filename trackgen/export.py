@@ -108,7 +108,7 @@ def track_json(track: Track, geometry: TrackGeometry) -> dict:
         "surface_z_m": s.thickness_m,
         "lane_polygon": polygon_json(geometry.lane),
         "road_polygon": polygon_json(geometry.road),
-        **({} if layout.lighting.is_default() else {"lighting": layout.lighting.to_json()}),
+        **({} if track.lighting().is_default() else {"lighting": track.lighting().to_json()}),
         **({"barcodes": [b.to_json() for b in layout.barcodes]} if layout.barcodes else {}),
         **({"boxes": [b.to_json() for b in layout.boxes]} if layout.boxes else {}),
     }

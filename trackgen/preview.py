@@ -135,7 +135,7 @@ def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> t
         shade = int(round(255 * box.reflectance * 0.5))  # in the grey of their sides
         image.paste((shade, shade, min(255, shade + 60)), (0, 0), _mask(shapely.Polygon(box.corners_xy()), k_px, big))
     image = image.reduce(SUPERSAMPLE)  # box filter: smooth edges
-    lighting = track.layout.lighting
+    lighting = track.lighting()
     if not lighting.is_default():
         image = _lit(image, lighting, x0, y1, px_per_m, track.layout.settings.thickness_m)
     draw = ImageDraw.Draw(image)

@@ -369,11 +369,13 @@ def _sun(world: ET.Element) -> None:
 
 def write_world(path: Path, *, world_name: str, track_model: str, car_model: str,
                 car_pose: Pose2, car_z_m: float, lighting: TrackLighting | None = None,
-                barcodes: tuple = (), boxes: tuple = ()) -> None:
+                barcodes: tuple = (), boxes: tuple = (), tunnels: tuple = ()) -> None:
     """Write a world with ground, sun, the track and the car standing at ``car_pose``;
     ``lighting`` other than the default adds its lamps and photometric numbers
     (:func:`worlds.lighting.write_sdf`), ``barcodes`` their cards (:func:`worlds.marks.write_sdf`),
-    ``boxes`` the objects standing on the track (:func:`worlds.solids.write_sdf`).
+    ``boxes`` the objects standing on the track (:func:`worlds.solids.write_sdf`), ``tunnels``
+    ``(x_m, y_m, yaw_rad, length_m, width_m, clearance_m, wall_m)`` roofs and walls over the
+    track (a static model Gazebo shows; their light is the lighting's shades).
 
     The models are read from ``path.parent / "models" / NAME / "model.sdf"`` (written by
     :func:`write_track_model` and :func:`write_car_model`) and inlined with mesh URIs
@@ -409,6 +411,7 @@ def write_world(path: Path, *, world_name: str, track_model: str, car_model: str
     world.append(track)
     write_marks(world, tuple(barcodes), fmt, car_z_m)
     write_solids(world, tuple(boxes), car_z_m)
+    _tunnels(world, tuple(tunnels), car_z_m)
     car = _inline_model(world_dir, car_model)
     car.insert(0, ET.Element("pose"))
     car[0].text = fmt(car_pose.x_m, car_pose.y_m, car_z_m, 0, 0, car_pose.yaw_rad)
@@ -416,9 +419,31 @@ def write_world(path: Path, *, world_name: str, track_model: str, car_model: str
     write_xml(root, path)
 
 
+def _tunnels(world: ET.Element, tunnels: tuple, surface_z_m: float) -> None:
+    """A static model of box visuals: each tunnel's two walls and its roof."""
+    if not tunnels:
+        return
+    model = sub(world, "model", name="tunnels")
+    sub(model, "static", True)
+    link = sub(model, "link", name="roofs")
+    for i, (x, y, yaw, length, width, clearance, wall) in enumerate(tunnels):
+        c, s = math.cos(yaw), math.sin(yaw)
+        parts = [("roof", 0.0, surface_z_m + clearance + wall / 2.0, (length, width + 2 * wall, wall))]
+        parts += [(f"wall_{k}", side * (width / 2.0 + wall / 2.0), surface_z_m + clearance / 2.0,
+                   (length, wall, clearance)) for k, side in enumerate((1.0, -1.0))]
+        for name, across, z, size in parts:
+            visual = sub(link, "visual", name=f"tunnel_{i}_{name}")
+            sub(visual, "pose", fmt(x - s * across, y + c * across, z, 0, 0, yaw))
+            sub(sub(sub(visual, "geometry"), "box"), "size", fmt(*size))
+            material = sub(visual, "material")
+            sub(material, "ambient", "0.3 0.3 0.3 1")
+            sub(material, "diffuse", "0.3 0.3 0.3 1")
+
+
 def write_track_world(out_dir: Path, *, track_name: str, meshes: dict[str, str],
                       start_pose: Pose2, surface_z_m: float, car: CarDescription,
-                      lighting: TrackLighting | None = None, barcodes: tuple = (), boxes: tuple = ()) -> Path:
+                      lighting: TrackLighting | None = None, barcodes: tuple = (), boxes: tuple = (),
+                      tunnels: tuple = ()) -> Path:
     """Write the track model, the car model and ``out_dir/world.sdf``; return the world path.
 
     ``meshes`` maps role -> path relative to ``out_dir/models/<track_name>/`` (the STL files
@@ -432,5 +457,6 @@ def write_track_world(out_dir: Path, *, track_name: str, meshes: dict[str, str],
     write_car_model(out_dir / "models" / car.name, car)
     world_path = out_dir / "world.sdf"
     write_world(world_path, world_name=track_name, track_model=track_name, car_model=car.name,
-                car_pose=start_pose, car_z_m=surface_z_m, lighting=lighting, barcodes=barcodes, boxes=boxes)
+                car_pose=start_pose, car_z_m=surface_z_m, lighting=lighting, barcodes=barcodes, boxes=boxes,
+                tunnels=tunnels)
     return world_path

@@ -175,7 +175,7 @@ def track_from_trackgen(track: Track, *, geometry: TrackGeometry | None = None,
     return SimTrack(
         name=name or layout.name, source=source, raster=raster, surface_z_m=top_z, start=start,
         gate=gate, gate_half_width_m=float(half), lap_length_m=float(track.length_m),
-        centreline=centreline, lap_length_estimated=False, lighting=layout.lighting,
+        centreline=centreline, lap_length_estimated=False, lighting=track.lighting(),
         barcodes=layout.barcodes, course=course, boxes=layout.boxes)
 
 
