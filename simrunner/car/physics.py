@@ -80,6 +80,7 @@ GRAVITY_MPS2 = 9.81
 GROUND_SIZE_M = 400.0  # side of the square ground box (tracks are a few metres)
 GROUND_THICKNESS_M = 1.0
 SOLID_MU = 0.5          # friction of a solid on the track and the car (ours: polystyrene)
+WHEEL_CONTACTS = 4      # ODE's contacts of a car on its four round tyres (one each)
 SOLID_REST_M = 4e-8     # a solid starts at ODE's resting depth above the surface (platform facts)
 CONTACT_DEPTH_M = 4e-8  # initial tyre penetration = the resting depth measured for the default car.
 # ODE reports no contact at exactly 0 depth: a car placed exactly on the ground would fall one
@@ -490,9 +491,13 @@ class CarSim:
 
     def _step_noting_touches(self, reset: bool) -> None:
         """One world step, then the solids the car touches in it (set as the world's step once a
-        solid is on the track)."""
+        solid is on the track). The contacts are read only when there are others than the four
+        tyres' (a touch that coincides with a tyre lifting is seen a step later)."""
         self._world.step(reset)
-        for contact in self._world.getLastCollisionResult().getContacts():
+        result = self._world.getLastCollisionResult()
+        if result.getNumContacts() == WHEEL_CONTACTS:  # the tyres on the ground, nothing else
+            return
+        for contact in result.getContacts():
             a = contact.collisionObject1.getShapeFrame().getName()
             b = contact.collisionObject2.getShapeFrame().getName()
             for mine, other in ((a, b), (b, a)):
