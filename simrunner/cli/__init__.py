@@ -198,15 +198,23 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
     if watch:
         from simrunner.cli.watch import watch_drive
 
-        if more_sources or include_dirs or defines or isolate or not controller.endswith(".py"):
-            click.echo("simrunner: --watch: expected one Python controller (.py)", err=True)
-            sys.exit(2)
         try:
             params = parse_params(params)
         except input_errors() as exc:
             click.echo(f"simrunner: {exc}", err=True)
             sys.exit(2)
-        watch_drive(dict(controller=controller, track=track, laps=laps, time_limit_s=time_limit_s,
+        native = {}
+        if more_sources or include_dirs or defines or isolate or not controller.endswith(".py"):
+            if controller.endswith(".so"):
+                click.echo("simrunner: --watch: a .so is built elsewhere: watch its sources instead", err=True)
+                sys.exit(2)
+            from pathlib import Path
+
+            headers = [str(p) for d in include_dirs for p in sorted(Path(d).glob("*"))
+                       if p.suffix in (".h", ".hpp", ".hh")]
+            native = dict(make=lambda: _native_program(controller, more_sources, include_dirs, defines, isolate),
+                          watched=(controller, *more_sources, *headers))
+        watch_drive(dict(controller=controller, **native, track=track, laps=laps, time_limit_s=time_limit_s,
                          video=video, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
                          dt_s=dt_s, wall_limit_s=wall_limit_s, params=params, start=_start_pose(start),
                          start_before_finish_m=start_before_finish_m, keep_driving=keep_driving,

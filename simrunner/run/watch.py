@@ -9,6 +9,11 @@ takes; its outputs (``csv``, ``plot``, ...) are written again by every run.
 
 A file that does not compile (a syntax error while typing) is not the end: it is reported
 like a run (a :class:`WatchEvent` with ``error``) and the next save is awaited.
+
+C and C++ controllers (``make``: builds the program from its sources, compiler errors raise
+:class:`~simrunner.errors.ControllerFileError`) are watched the same way: ``watched`` lists
+every file whose save starts a new build and run (the sources and the headers of the include
+folders); the build cache makes an unchanged file cost nothing.
 """
 from __future__ import annotations
 
@@ -36,20 +41,28 @@ class WatchEvent:
     saved_at: float
 
 
-def _signature(path: Path) -> tuple[int, int] | None:
-    try:
-        st = os.stat(path)
-    except OSError:
-        return None
-    return st.st_mtime_ns, st.st_size
+def _signature(paths) -> tuple | None:
+    """The (modification time, size) of each of ``paths`` (one path or several); None while
+    one cannot be read (a save in progress)."""
+    out = []
+    for path in (paths if isinstance(paths, (list, tuple)) else [paths]):
+        try:
+            st = os.stat(path)
+        except OSError:
+            return None
+        out.append((st.st_mtime_ns, st.st_size))
+    return tuple(out)
 
 
 def watch_runs(controller: str | Path, *, track=None, car=None, poll_s: float = DEFAULT_POLL_S,
                max_runs: int | None = None, stop: Callable[[], bool] | None = None,
+               make: Callable[[], object] | None = None, watched: tuple = (),
                **drive_options) -> Iterator[WatchEvent]:
     """Run ``controller`` now and after each save; yield a :class:`WatchEvent` per run.
 
     ``track``, ``car``: as for :func:`~simrunner.run.runner.drive` (loaded once, here).
+    ``make``: builds what to drive anew before each run (C/C++: the program), ``watched``: the
+    files whose saves start a run (default: ``controller``).
     ``drive_options``: the other keywords of ``drive`` (settings fields, output paths).
     Ends after ``max_runs`` runs, when ``stop()`` returns true (checked between polls), or
     when a run was interrupted (Ctrl-C). Bad track or car input raises before the first run.
@@ -58,15 +71,17 @@ def watch_runs(controller: str | Path, *, track=None, car=None, poll_s: float = 
     from vehicle.description import CarDescription, load_car
 
     path = Path(controller)
+    files = [Path(p) for p in watched] or [path]
     car_desc = car if isinstance(car, CarDescription) else load_car(car)
     sim_track, _ = resolve_track(track, car_desc)
     number = 0
-    seen = _signature(path)
+    seen = _signature(files)
     saved_at = time.perf_counter()
     while True:
         number += 1
         try:
-            result = drive(path, track=sim_track, car=car_desc, **drive_options)
+            result = drive(make() if make is not None else path, track=sim_track, car=car_desc,
+                           **drive_options)
             event = WatchEvent(number, result, None, saved_at)
         except ControllerFileError as exc:
             event = WatchEvent(number, None, str(exc), saved_at)
@@ -78,7 +93,7 @@ def watch_runs(controller: str | Path, *, track=None, car=None, poll_s: float = 
             if stop is not None and stop():
                 return
             time.sleep(poll_s)
-            now = _signature(path)
+            now = _signature(files)
             if now is not None and now != seen:
                 seen = now
                 saved_at = time.perf_counter()
