@@ -232,3 +232,20 @@ def test_the_video_top_view_draws_the_objects():
     changed = np.any(drawn != plain, axis=2)
     col, row = view.to_px(0.36, 0.89)
     assert changed[row, col] and 50 < changed.sum() < 5000
+
+
+def test_a_bad_solid_in_a_world_is_a_one_line_error(tmp_path):
+    from trackgen.build import build
+    from simrunner.track.errors import TrackLoadError
+
+    layout = tmp_path / "b.txt"
+    layout.write_text(BOXES)
+    build(layout, tmp_path / "out")
+    sdf = tmp_path / "out" / "world.sdf"
+    text = sdf.read_text()
+    start = text.index("<nxpcup:height_m>")
+    end = text.index("</nxpcup:height_m>", start)
+    sdf.write_text(text[:start] + "<nxpcup:height_m>tall" + text[end:])
+    with pytest.raises(TrackLoadError) as err:
+        load_track(tmp_path / "out")
+    assert str(err.value) == f"{sdf}: nxpcup:solid 'box_1': height_m: expected a finite number"

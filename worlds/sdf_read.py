@@ -133,7 +133,7 @@ def read_world(path: str | Path, *, car_name: str = DEFAULT_CAR_NAME) -> Scene:
     if world is not None:
         lighting = from_sdf_world(world, lambda el: tuple(parse_pose(doc, el.find("pose"))[:3, 3]))
         barcodes = barcodes_of(world)
-        boxes = solids_of(world)
+        boxes = solids_of(world, str(source))
     return Scene(source=source, visuals=tuple(reader.visuals), collisions=tuple(reader.collisions),
                  car_pose=reader.car_pose, car_z_m=reader.car_z_m,
                  track_json=track_json if track_json.is_file() else None,

@@ -99,17 +99,23 @@ def write_sdf(world: ET.Element, solids: tuple, surface_z_m: float) -> None:
         world.append(ET.fromstring(b.sdf(surface_z_m)))
 
 
-def from_sdf_world(world: ET.Element) -> tuple[Solid, ...]:
-    """The ``<nxpcup:solid>`` elements of an SDF ``<world>`` (those with every number valid)."""
+def from_sdf_world(world: ET.Element, source: str = "<world>") -> tuple[Solid, ...]:
+    """The ``<nxpcup:solid>`` elements of an SDF ``<world>``; a missing or bad number raises
+    :class:`worlds.WorldError` naming ``source``, the solid and what was expected (the car
+    would otherwise drive through an object the world shows)."""
+    from worlds.sdf_xml import WorldError
+
     out = []
     for el in world.findall(nxpcup_tag("solid")) + world.findall("nxpcup:solid"):
+        name = el.get("name") or f"box_{len(out) + 1}"
         values = [float_of(nxpcup_child(el, key)) for key in FIELDS]
-        if None in values:
-            continue
+        missing = [key for key, v in zip(FIELDS, values) if v is None]
+        if missing:
+            raise WorldError(f"{source}: nxpcup:solid {name!r}: {missing[0]}: expected a finite number")
         try:
-            out.append(Solid(el.get("name") or f"box_{len(out) + 1}", *values))
-        except ValueError:
-            continue
+            out.append(Solid(name, *values))
+        except ValueError as exc:
+            raise WorldError(f"{source}: {exc}") from None
     return tuple(out)
 
 
