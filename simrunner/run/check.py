@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from simrunner.errors import ControllerFileError
-from simrunner.run.controller import MainFn, load_controller
+from simrunner.run.controller import MainFn, load_controller, user_location
 from simrunner.run.result import Outcome, RunResult
 from simrunner.run.runner import Run, resolve_track
 from simrunner.run.settings import RunSettings
@@ -140,11 +140,5 @@ def _user_location(result: RunResult) -> str:
     """`` at FILE:LINE`` of the innermost user frame of the traceback, if any."""
     if result.error is None:
         return ""
-    loc = ""
-    for line in result.error.traceback_text.splitlines():
-        s = line.strip()
-        if s.startswith('File "') and ", line " in s:
-            path = s[6:s.index('"', 6)]
-            lineno = s.split(", line ")[1].split(",")[0]
-            loc = f" at {Path(path).name}:{lineno}"
-    return loc
+    loc = user_location(result.error.traceback_text)
+    return f" at {loc}" if loc else ""

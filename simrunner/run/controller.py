@@ -134,6 +134,19 @@ def user_traceback(exc: BaseException) -> str:
     return "".join(te.format())
 
 
+def user_location(traceback_text: str) -> str:
+    """``FILE:LINE`` (the file's name) of the innermost frame of a user traceback's text, or
+    "" when it names none."""
+    loc = ""
+    for line in traceback_text.splitlines():
+        s = line.strip()
+        if s.startswith('File "') and ", line " in s:
+            path = s[6:s.index('"', 6)]
+            lineno = s.split(", line ")[1].split(",")[0]
+            loc = f"{os.path.basename(path)}:{lineno}"
+    return loc
+
+
 def _forget_modules_from(folder: str, names: set[str]) -> None:
     """Unload helper modules a controller imported from its own folder."""
     for name in names:

@@ -34,7 +34,7 @@ import numpy as np
 from simrunner.car import CarModel
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, SimError
 from simrunner.run.clock import Command, LockstepClock
-from simrunner.run.controller import Controller, MainFn, load_controller, user_traceback
+from simrunner.run.controller import Controller, MainFn, load_controller, user_location, user_traceback
 from simrunner.run.faults import ControllerGuards, SignalGuard, Terminated, exit_outcome, stray_threads
 from simrunner.run.judge import Judge
 from simrunner.telemetry.log import RunRecorder
@@ -275,7 +275,9 @@ class Run:
                 except Exception as exc:
                     tb = user_traceback(exc)
                     message = tb.strip().splitlines()[-1] if tb.strip() else repr(exc)
+                    where = user_location(tb)
                     outcome, error = Outcome.CONTROLLER_ERROR, ControllerError(message, tb)
+                    message = f"{message} at {where}" if where else message  # as a C fault's
                 finally:
                     watchdog.disarm()
         except ControllerFileError:
