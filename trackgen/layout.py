@@ -428,12 +428,19 @@ def _ranged_numbers(key: str, words: list[str], fields: tuple[tuple[str, str], .
     return numbers
 
 
+def _setting_words(key: str, value: str, least: int, most: int, usage: str, path: str,
+                   lineno: int) -> list[str]:
+    """The words of an ``@key`` line's value, ``least`` to ``most`` of them, else its usage."""
+    words = value.split()
+    if not least <= len(words) <= most:
+        raise LayoutError(path, lineno, f"@{key} = {_shown(value)}: {usage}")
+    return words
+
+
 def _parse_light(value: str, path: str, lineno: int) -> tuple[float, float, float, float, float | None]:
     """``X Y Z INTENSITY_CD [CONE_DEG]`` of an ``@light`` line."""
     usage = "expected '@light = X Y Z INTENSITY_CD [CONE_DEG]' (m, m, m, candela, degrees)"
-    words = value.split()
-    if not 4 <= len(words) <= 5:
-        raise LayoutError(path, lineno, f"@light = {_shown(value)}: {usage}")
+    words = _setting_words("light", value, 4, 5, usage, path, lineno)
     numbers = _ranged_numbers("light", words, (("X", "coordinate_m"), ("Y", "coordinate_m"), ("Z", "coordinate_m"),
                                                ("INTENSITY_CD", "intensity_cd"), ("CONE_DEG", "cone_deg")),
                               usage, path, lineno)
@@ -448,9 +455,7 @@ def _parse_light(value: str, path: str, lineno: int) -> tuple[float, float, floa
 def _parse_shade(value: str, path: str, lineno: int) -> tuple[float, ...]:
     """``X Y LENGTH WIDTH HEADING_DEG TRANSMISSION`` of an ``@shade`` line."""
     usage = "expected '@shade = X Y LENGTH WIDTH HEADING_DEG TRANSMISSION' (m, m, m, m, degrees, 0..1)"
-    words = value.split()
-    if len(words) != 6:
-        raise LayoutError(path, lineno, f"@shade = {_shown(value)}: {usage}")
+    words = _setting_words("shade", value, 6, 6, usage, path, lineno)
     return tuple(_ranged_numbers("shade", words, (("X", "coordinate_m"), ("Y", "coordinate_m"),
                                                   ("LENGTH", "size_m"), ("WIDTH", "size_m"),
                                                   ("HEADING_DEG", "heading_deg"), ("TRANSMISSION", "transmission")),
@@ -460,9 +465,7 @@ def _parse_shade(value: str, path: str, lineno: int) -> tuple[float, ...]:
 def _parse_barcode(value: str, path: str, lineno: int) -> tuple[float, ...]:
     """``X Y CODE HEADING_DEG [MODULE [LENGTH]]`` of an ``@barcode`` line."""
     usage = "expected '@barcode = X Y CODE HEADING_DEG [MODULE [LENGTH]]' (m, m, 0..15, degrees, m, m)"
-    words = value.split()
-    if not 4 <= len(words) <= 6:
-        raise LayoutError(path, lineno, f"@barcode = {_shown(value)}: {usage}")
+    words = _setting_words("barcode", value, 4, 6, usage, path, lineno)
     numbers = _ranged_numbers("barcode", words, (("X", "coordinate_m"), ("Y", "coordinate_m"), ("CODE", "code"),
                                                  ("HEADING_DEG", "heading_deg"), ("MODULE", "module_m"),
                                                  ("LENGTH", "length_m")), usage, path, lineno, MARK_LIMITS)
@@ -475,9 +478,7 @@ def _parse_barcode(value: str, path: str, lineno: int) -> tuple[float, ...]:
 def _parse_box(value: str, path: str, lineno: int) -> tuple[float, ...]:
     """``X Y LENGTH WIDTH HEIGHT [HEADING_DEG [REFLECTANCE]]`` of an ``@box`` line."""
     usage = "expected '@box = X Y LENGTH WIDTH HEIGHT [HEADING_DEG [REFLECTANCE]]' (m, m, m, m, m, degrees, 0..1)"
-    words = value.split()
-    if not 5 <= len(words) <= 7:
-        raise LayoutError(path, lineno, f"@box = {_shown(value)}: {usage}")
+    words = _setting_words("box", value, 5, 7, usage, path, lineno)
     numbers = _ranged_numbers("box", words, (("X", "coordinate_m"), ("Y", "coordinate_m"), ("LENGTH", "size_m"),
                                              ("WIDTH", "size_m"), ("HEIGHT", "size_m"), ("HEADING_DEG", "heading_deg"),
                                              ("REFLECTANCE", "reflectance")), usage, path, lineno, SOLID_LIMITS)
