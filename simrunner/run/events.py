@@ -310,6 +310,21 @@ def make_monitor(name: str, run) -> EventMonitor:
     return MONITORS.get(name, EventMonitor)(EVENTS[name], run)
 
 
+def event_start(settings, track):
+    """``settings`` with the discipline's own start (``EventRules.start_after``) when the run
+    gives none: the car just past the first piece of that kind."""
+    import dataclasses
+
+    rules = EVENTS.get(settings.event) if settings.event is not None else None
+    if (rules is None or rules.start_after is None or settings.start is not None
+            or settings.start_before_finish_m is not None or track.course is None):
+        return settings
+    past = start_past(track.course, rules.start_after, 0.05)
+    if past is None:
+        return settings
+    return dataclasses.replace(settings, start=(past.x_m, past.y_m, past.yaw_rad))
+
+
 def start_past(course, kind: str, past_m: float = 0.05):
     """The pose on the course ``past_m`` after the first piece of ``kind`` (rear axle),
     heading along it; None when the course has no such piece."""
@@ -323,4 +338,5 @@ def start_past(course, kind: str, past_m: float = 0.05):
     return Pose2(x, y, yaw)
 
 
-__all__ = ["EVENTS", "EventRules", "EventMonitor", "Verdict", "event_track", "make_monitor", "start_past"]
+__all__ = ["EVENTS", "EventRules", "EventMonitor", "Verdict", "event_start", "event_track", "make_monitor",
+           "start_past"]

@@ -34,7 +34,8 @@ class EventRules:
     of simrunner/data/events, None: the run's track), the judge's ``laps`` (None: as many as
     the time allows), ``time_limit_s``, ``off_track_wheels`` and the ``points`` for success
     (None: by rank among the teams, not known from one run); ``rules``: the rules summary's
-    section."""
+    section; ``start_after``: the car starts just past the first piece of that kind (None:
+    the track's start)."""
 
     name: str
     layout: str | None
@@ -43,13 +44,16 @@ class EventRules:
     off_track_wheels: int
     points: int | None
     rules: str
+    start_after: str | None = None
 
 
 EVENTS: dict[str, EventRules] = {
     "race": EventRules("race", None, RACE_LAPS, RACE_TIME_LIMIT_S, RULES_OFF_TRACK_WHEELS, None, "section 3"),
     # 60 s in 2019/20 (R20), 90 s in 2018/19 (R19): section 4.1
     "figure8": EventRules("figure8", "kit_M.txt", None, 60.0, 1, None, "section 4.1"),
-    "speed_limit": EventRules("speed_limit", "kit_speed_limit.txt", None, 90.0, 1, SUCCESS_POINTS, "section 4.3"),
+    # R20: the car starts just past the 3-stripe pattern
+    "speed_limit": EventRules("speed_limit", "kit_speed_limit.txt", None, 90.0, 1, SUCCESS_POINTS, "section 4.3",
+                              start_after="SPEED_LIMIT_END"),
     "obstacle": EventRules("obstacle", "kit_S.txt", 2, 90.0, 1, SUCCESS_POINTS, "section 4.2"),
     "emergency_brake": EventRules("emergency_brake", "kit_S_plain.txt", None, 90.0, 1, SUCCESS_POINTS,
                                   "section 4.4"),

@@ -24,7 +24,6 @@ process (:mod:`simrunner.run.watchdog`); under a supervisor (:mod:`simrunner.run
 """
 from __future__ import annotations
 
-import dataclasses
 import gc
 import threading
 import time
@@ -40,7 +39,7 @@ from simrunner.run.judge import Judge
 from simrunner.telemetry.log import RunRecorder
 from simrunner.reports.outputs import Outputs, check_outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
-from simrunner.run.events import event_track, make_monitor, start_past
+from simrunner.run.events import event_start, event_track, make_monitor
 from simrunner.run.rules import EVENTS
 from simrunner.run.settings import RunSettings
 from simrunner.run.spinner import Session, Spinner
@@ -169,11 +168,7 @@ class Run:
         from simrunner.run.start import start_pose
 
         settings = settings.for_track(track)  # the time limit's default grows with the laps
-        if (settings.event == "speed_limit" and settings.start is None and settings.start_before_finish_m is None
-                and track.course is not None):  # the rules: just past the 3-stripe piece (R20)
-            past = start_past(track.course, "SPEED_LIMIT_END", 0.05)
-            if past is not None:
-                settings = dataclasses.replace(settings, start=(past.x_m, past.y_m, past.yaw_rad))
+        settings = event_start(settings, track)  # a discipline's own start (speed_limit: R20)
         self.track, self.car, self.settings = track, car, settings
         self.time_limit_s = settings.time_limit_s
         self.start = start_pose(track, car, settings)
