@@ -88,7 +88,7 @@ _EXPORTS = {"Piece": "pieces.piece", "mesh": None}
 _EXPORTS.update((name, "pieces.library") for name in (
     "DEFAULT_SETTINGS", "chicane", "chicane_geometry", "chicane_left", "chicane_right",
     "crossroads", "extender", "make_piece", "piece_from_layout", "speed_limit_end", "speed_limit_start",
-    "start_finish", "straight", "straight_short", "tunnel", "turn", "turn_left", "turn_right", "wave",
+    "start_finish", "straight", "straight_short", "tunnel", "hill", "turn", "turn_left", "turn_right", "wave",
     "wave_geometry"))
 
 STRAIGHT = PieceType.STRAIGHT
@@ -104,15 +104,16 @@ SPEED_LIMIT_START = PieceType.SPEED_LIMIT_START
 SPEED_LIMIT_END = PieceType.SPEED_LIMIT_END
 WAVE = PieceType.WAVE
 TUNNEL = PieceType.TUNNEL
+HILL = PieceType.HILL
 
 __all__ = [
     "Pose2", "wrap_angle", "KITS", "Kit", "PARAMS", "SETTINGS_PARAMS", "ParamSpec", "PieceError", "PieceType",
     "TrackSettings", "Piece", "DEFAULT_SETTINGS", "chicane", "chicane_geometry", "chicane_left",
     "chicane_right", "crossroads", "extender", "make_piece", "piece_from_layout", "speed_limit_end",
-    "speed_limit_start", "start_finish", "straight", "tunnel", "wave", "wave_geometry",
+    "speed_limit_start", "start_finish", "straight", "tunnel", "hill", "wave", "wave_geometry",
     "straight_short", "turn", "turn_left", "turn_right", "mesh",
     "STRAIGHT", "STRAIGHT_SHORT", "CROSSROADS", "TURN_LEFT", "TURN_RIGHT", "CHICANE_LEFT",
-    "CHICANE_RIGHT", "START_FINISH", "EXTENDER", "SPEED_LIMIT_START", "SPEED_LIMIT_END", "WAVE", "TUNNEL",
+    "CHICANE_RIGHT", "START_FINISH", "EXTENDER", "SPEED_LIMIT_START", "SPEED_LIMIT_END", "WAVE", "TUNNEL", "HILL",
 ]
 
 

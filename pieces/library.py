@@ -275,6 +275,22 @@ def tunnel(*, length_m: float = 1.0, transmission: float = 0.15,
                  ports=piece.ports, length_m=piece.length_m)
 
 
+def hill(*, length_m: float = 1.44, height_m: float = 0.10,
+         settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
+    """HILL: a straight ``length_m`` long (on the floor) lifted by a raised-cosine hill
+    ``height_m`` high at its middle (:class:`worlds.terrain.Hill`: up, crest, down, zero slope at
+    both ends). Its 2D footprint is a straight's; its meshes, the physics and the cameras follow
+    the hill. At most 45 degrees steep here (``height_m <= length_m / pi``); the car's own
+    limits are :mod:`trackgen.validate`'s."""
+    piece = _straight(PieceType.HILL, length_m, settings)
+    height_m = check_range("height_m", height_m, 0.0, piece.length_m / math.pi,
+                           why="a hill at most 45 degrees steep (height <= length / pi)")
+    return Piece(kind=piece.kind, settings=piece.settings,
+                 params={"length_m": piece.length_m, "height_m": height_m},
+                 lane=piece.lane, edges=piece.edges, marking=None, centreline=piece.centreline,
+                 ports=piece.ports, length_m=piece.length_m)
+
+
 def extender(*, length_m: float = 0.17, settings: TrackSettings = DEFAULT_SETTINGS) -> Piece:
     """EXTENDER: the official kit's short straight (0.17 m: a 45-degree kit turn's centreline
     radius, 0.445 m, is half a kit crossing, 0.275 m, plus one extender)."""
@@ -366,6 +382,7 @@ _BUILDERS: Mapping[PieceType, Callable[..., Piece]] = {
     PieceType.STRAIGHT_SHORT: straight_short,
     PieceType.CROSSROADS: crossroads,
     PieceType.TUNNEL: tunnel,
+    PieceType.HILL: hill,
     PieceType.TURN_LEFT: turn_left,
     PieceType.TURN_RIGHT: turn_right,
     PieceType.CHICANE_LEFT: chicane_left,

@@ -76,3 +76,29 @@ class Pose2:
     def reversed(self) -> "Pose2":
         """Same point, opposite heading (a port seen from the other side)."""
         return Pose2(self.x_m, self.y_m, self.yaw_rad + math.pi)
+
+
+@dataclass(frozen=True)
+class Pose3(Pose2):
+    """A car's pose off the flat floor (on a hill): the planar pose plus the body frame's
+    height ``z_m`` above the track's surface, its ``pitch_rad`` (positive = nose down) and
+    ``roll_rad`` (positive = left side up), Z-Y-X Euler angles: the body's rotation is
+    ``Rz(yaw) Ry(pitch) Rx(roll)``. Everything that takes a ``Pose2`` takes it (as its planar part)."""
+
+    z_m: float = 0.0
+    pitch_rad: float = 0.0
+    roll_rad: float = 0.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("z_m", "pitch_rad", "roll_rad"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+
+    def rotation(self) -> np.ndarray:
+        """``(3, 3)`` body -> world rotation ``Rz(yaw) Ry(pitch) Rx(roll)``."""
+        cy, sy = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
+        cp, sp = math.cos(self.pitch_rad), math.sin(self.pitch_rad)
+        cr, sr = math.cos(self.roll_rad), math.sin(self.roll_rad)
+        return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                         [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                         [-sp, cp * sr, cp * cr]])

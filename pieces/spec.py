@@ -35,6 +35,7 @@ class PieceType(enum.Enum):
     SPEED_LIMIT_END = "SPEED_LIMIT_END"
     WAVE = "WAVE"
     TUNNEL = "TUNNEL"
+    HILL = "HILL"
 
 
 def _identity(value: float) -> float:
@@ -146,6 +147,10 @@ PARAMS: Mapping[PieceType, Mapping[str, ParamSpec]] = MappingProxyType({
     PieceType.TUNNEL: MappingProxyType({"length": _m("length", 1.0),
                                         "transmission": ParamSpec("transmission", "", 0.15, 0.0, 1.0,
                                                                   lo_open=False, internal="transmission")}),
+    # a straight lifted by a raised-cosine hill HEIGHT high at its middle (worlds.terrain); the
+    # rules allow inclines and declines (2018/19) without sizes (rules summary section 1.1): ours,
+    # two kit straights long, a 12-degree steepest slope
+    PieceType.HILL: MappingProxyType({"length": _m("length", 1.44), "height": _m("height", 0.10)}),
     PieceType.SPEED_LIMIT_END: MappingProxyType({"length": _m("length", 0.72),
                                                  "stripe_length": _m("stripe_length", 0.30),
                                                  "stripe_width": _m("stripe_width", 0.05)}),

@@ -390,6 +390,9 @@ def random_pieces(draw):
                   "stripe_width_m": draw(st.floats(0.05, 0.95)) * s.lane_width_m / 7}
     elif kind is PieceType.TUNNEL:
         params = {"length_m": draw(st.floats(0.01, 3.0)), "transmission": draw(st.floats(0.0, 1.0))}
+    elif kind is PieceType.HILL:
+        length = draw(st.floats(0.01, 3.0))
+        params = {"length_m": length, "height_m": draw(st.floats(1e-4, 1.0)) * length / math.pi}
     elif kind in (TURN_LEFT, TURN_RIGHT):
         params = {"radius_m": road / 2 + draw(st.floats(0.01, 3.0)),
                   "angle_rad": draw(st.floats(0.01, math.pi))}

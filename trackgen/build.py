@@ -22,7 +22,7 @@ from .errors import TrackError
 from .export import TrackGeometry, dumps_track_json, track_geometry, track_json
 from .layout import Layout, load_layout
 from .outdir import clean_stale, make_temp, replace_folder
-from .validate import Problem, check_meshes, count_errors, errors, summarise, validate_track
+from .validate import HillLimits, Problem, check_meshes, count_errors, errors, summarise, validate_track
 
 WORLD_SUFFIXES = (".sdf", ".world")
 
@@ -89,7 +89,7 @@ def check_layout(layout: Layout, car: CarDescription | None = None, *,
     10 000 pieces on one circle) and a failing layout is not built anyway."""
     car = car or CarDescription()
     track = chain(layout)
-    problems = validate_track(track, car.min_turn_radius_m)
+    problems = validate_track(track, car.min_turn_radius_m, hill_limits=HillLimits.of_car(car))
     if errors(problems) or not meshes:
         return Checked(track, None, problems)
     geometry = track_geometry(track)
@@ -229,7 +229,7 @@ def _validate_folder(folder: Path, car: CarDescription | None, sdf_checker: bool
     meshes = {}
     from worlds.sdf_read import inside
 
-    roles = ("lane", "edges", "markings")
+    roles = ("lane", "edges", "markings", "hill_lane", "hill_edges")  # the last three only if any
     if not name or not inside(mesh_dir, (folder.resolve(),)):
         problems.append(Problem(str(tj), None, f"name {name[:40]!r}: expected the track model's "
                                 "folder name (models/NAME inside the folder)", "folder"))
@@ -237,7 +237,7 @@ def _validate_folder(folder: Path, car: CarDescription | None, sdf_checker: bool
     for role in roles:
         f = mesh_dir / f"{role}.stl"
         if not f.is_file():
-            if role != "markings":
+            if role in ("lane", "edges"):
                 problems.append(Problem(str(f), None, f"{role} mesh missing", "mesh"))
             continue
         try:  # bounded and strict (worlds.mesh_read); vertices merged as trimesh.load does

@@ -174,6 +174,16 @@ class Track:
                         float(p.piece.params["transmission"])))
         return out
 
+    def terrain(self):
+        """The track's hills (:class:`worlds.terrain.Terrain`): one :class:`~worlds.terrain.Hill`
+        per HILL piece, entry at the piece's entry, as wide as the road (empty: a flat track)."""
+        from worlds.terrain import Hill, Terrain
+
+        return Terrain(tuple(
+            Hill(p.world_from_piece.x_m, p.world_from_piece.y_m, p.world_from_piece.yaw_rad,
+                 p.piece.length_m, float(p.piece.params["height_m"]), self.layout.settings.road_width_m)
+            for p in self.passes if p.kind is PieceType.HILL))
+
     def course_sections(self) -> list[tuple[float, float]]:
         """Arc length (m) along :meth:`centreline` where each pass starts and ends, in
         driving order (the polyline's own arc length: a little under ``length_m`` on arcs)."""

@@ -10,9 +10,11 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from functools import cached_property
+import numpy as np
 import shapely
 
 from pieces.mesh import extrude_arrays
+from worlds.terrain import Terrain
 
 from .chain import Track
 from .meshes import SlabMesh
@@ -21,6 +23,12 @@ GRID_M = 1e-6
 """Snapping grid of the unions (m)."""
 FORMAT = "nxpcup-track/1"
 MESH_ROLES = ("lane", "edges", "markings")
+HILL_ROLES = {"hill_lane": "lane", "hill_edges": "edges"}
+"""The meshes of the road on the hills (the lifted part of each role: :func:`hill_meshes`)."""
+HILL_MESH_STEP_M = 0.02
+"""Longest edge of a hill's mesh (m): the lifted surface's chord sags < 0.1 mm between vertices."""
+HILL_MARGIN_M = 0.01
+"""A hill's cut reaches this far beyond the road on both sides (m), so the road's edges fall inside."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -29,6 +37,7 @@ class TrackGeometry:
 
     ``lane``, ``edges``, ``markings`` (``None`` if no piece has a marking) are the unions
     per role, pairwise touching only; ``road`` = their union. ``thickness_m``: slab height.
+    ``terrain``: the track's hills (:class:`worlds.terrain.Terrain`; empty: a flat track).
     """
 
     lane: shapely.Geometry
@@ -36,15 +45,60 @@ class TrackGeometry:
     markings: shapely.Geometry | None
     road: shapely.Geometry
     thickness_m: float
+    terrain: Terrain = Terrain()
+
+    @cached_property
+    def role_footprints(self) -> dict[str, shapely.Geometry]:
+        """Mesh role -> its 2D footprint: ``lane``, ``edges``, ``markings`` (only if any); with
+        hills, ``lane`` and ``edges`` are the flat parts and ``hill_lane``, ``hill_edges`` the
+        parts on the hills (inside each hill's footprint widened by ``HILL_MARGIN_M``)."""
+        if not self.terrain:
+            out = {"lane": self.lane, "edges": self.edges}
+        else:
+            cut = _hill_cut(self.terrain)
+            out = {"lane": _polygons_only(shapely.difference(self.lane, cut, grid_size=GRID_M)),
+                   "edges": _polygons_only(shapely.difference(self.edges, cut, grid_size=GRID_M))}
+        if self.markings is not None:
+            out["markings"] = self.markings
+        if self.terrain:
+            for role, base in HILL_ROLES.items():
+                part = _polygons_only(shapely.intersection(getattr(self, base), cut, grid_size=GRID_M))
+                if not part.is_empty:
+                    out[role] = part
+        return out
 
     @cached_property
     def meshes(self) -> dict[str, SlabMesh]:
-        """Role -> watertight slab mesh, z in [0, thickness_m] (``markings`` only if any)."""
-        out = {"lane": SlabMesh(*extrude_arrays(self.lane, self.thickness_m)),
-               "edges": SlabMesh(*extrude_arrays(self.edges, self.thickness_m))}
-        if self.markings is not None:
-            out["markings"] = SlabMesh(*extrude_arrays(self.markings, self.thickness_m))
-        return out
+        """Role -> watertight slab mesh of :attr:`role_footprints`, z in [0, thickness_m]; the
+        ``hill_*`` roles lifted onto the hills (:func:`hill_mesh`)."""
+        return {role: (hill_mesh(fp, self.thickness_m, self.terrain) if role in HILL_ROLES
+                       else SlabMesh(*extrude_arrays(fp, self.thickness_m)))
+                for role, fp in self.role_footprints.items()}
+
+
+def _hill_cut(terrain: Terrain) -> shapely.Geometry:
+    """The footprints of the hills, ``HILL_MARGIN_M`` wider on both sides."""
+    return shapely.union_all([shapely.Polygon(h.corners_xy()) for h in terrain.widened(HILL_MARGIN_M).hills],
+                             grid_size=GRID_M)
+
+
+def hill_mesh(footprint: shapely.Geometry, thickness_m: float, terrain: Terrain) -> SlabMesh:
+    """The road on the hills: ``footprint`` extruded, its edges split to ``HILL_MESH_STEP_M``
+    (manifold3d ``refine_to_length``) and every vertex lifted by the hill's height there
+    (``warp_batch``): a plate bent over the hill, watertight on its own (a file of its own: a
+    boolean union with the flat part would leave coincident vertices where the two meet)."""
+    from pieces.mesh import cross_section
+
+    wide = terrain.widened(HILL_MARGIN_M)
+
+    def lift(v):
+        v = np.array(v, dtype=float)
+        v[:, 2] += wide.height_m(v[:, 0], v[:, 1])
+        return v
+
+    solid = cross_section(footprint).extrude(thickness_m).refine_to_length(HILL_MESH_STEP_M)
+    mesh = solid.warp_batch(lift).to_mesh64()
+    return SlabMesh(np.asarray(mesh.vert_properties, dtype=float)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64))
 
 
 def _polygons_only(geom: shapely.Geometry) -> shapely.Geometry:
@@ -64,7 +118,7 @@ def track_geometry(track: Track) -> TrackGeometry:
     markings = _polygons_only(shapely.union_all(marks, grid_size=GRID_M)) if marks else None
     road = _polygons_only(shapely.union_all(
         [lane, edges] + ([markings] if markings is not None else []), grid_size=GRID_M))
-    return TrackGeometry(lane, edges, markings, road, track.layout.settings.thickness_m)
+    return TrackGeometry(lane, edges, markings, road, track.layout.settings.thickness_m, track.terrain())
 
 
 def _ring(ring) -> list[list[float]]:
@@ -111,6 +165,7 @@ def track_json(track: Track, geometry: TrackGeometry) -> dict:
         **({} if track.lighting().is_default() else {"lighting": track.lighting().to_json()}),
         **({"barcodes": [b.to_json() for b in layout.barcodes]} if layout.barcodes else {}),
         **({"boxes": [b.to_json() for b in layout.boxes]} if layout.boxes else {}),
+        **({"hills": [h.to_json() for h in geometry.terrain.hills]} if geometry.terrain else {}),
     }
 
 

@@ -20,6 +20,10 @@ Checks and tolerances (module constants; tolerances in metres are multiplied by 
                 stops after MAX_OVERLAPS overlaps (bounded time and memory)
   turn radius   every piece's tightest centreline radius >= the car's minimum turning
                 radius wheelbase / tan(steering limit) (thesis eq. 5.1), RADIUS_TOL_M slack
+  hills         every HILL no steeper than the car can climb (gravity along the slope below the
+                drive's acceleration limit, and below half the tyres' grip: the driven rear
+                axle carries about half the weight) and its crest and feet no tighter than the
+                chassis clears (:class:`HillLimits`, from the car file)
   start/finish  at most one START_FINISH; none is a warning (laps are then timed at the
                 start pose)
   meshes        lane / edges / markings meshes are watertight after a binary STL round
@@ -109,8 +113,10 @@ def _deg(rad: float) -> float:
     return math.degrees(rad)
 
 
-def validate_track(track: Track, min_turn_radius_m: float, *, meshes: dict | None = None) -> list[Problem]:
-    """All checks of the module docstring; ``meshes`` (role -> trimesh) adds the mesh check.
+def validate_track(track: Track, min_turn_radius_m: float, *, meshes: dict | None = None,
+                   hill_limits: HillLimits | None = None) -> list[Problem]:
+    """All checks of the module docstring; ``meshes`` (role -> trimesh) adds the mesh check,
+    ``hill_limits`` (the car's, :meth:`HillLimits.of_car`) the hill check.
     Returns problems sorted by line (stable)."""
     path = track.layout.path
     scale = track.layout.scale
@@ -120,6 +126,8 @@ def validate_track(track: Track, min_turn_radius_m: float, *, meshes: dict | Non
     out += _check_reentries(track, path, scale)
     out += _check_overlaps(track, path, scale)
     out += _check_radius(track, path, min_turn_radius_m)
+    if hill_limits is not None:
+        out += _check_hills(track, path, hill_limits)
     out += _check_start_finish(track, path)
     if meshes is not None:
         first_line = track.passes[0].line
@@ -262,6 +270,59 @@ def _check_radius(track: Track, path: str, min_turn_radius_m: float) -> list[Pro
                 f"{p.entry.describe()} (piece {p.index + 1}): {what} {r:.3f} m is "
                 f"tighter than the car's minimum turning radius {min_turn_radius_m:.3f} m "
                 "(wheelbase / tan(steering limit), thesis eq. 5.1)"), "turn_radius"))
+    return out
+
+
+@dataclass(frozen=True)
+class HillLimits:
+    """What a car can drive over (:meth:`of_car`): the steepest slope (rad) and the tightest
+    radius of curvature at a crest or a foot (m)."""
+
+    max_slope_rad: float
+    min_radius_m: float
+    slope_why: str
+    radius_why: str
+
+    @classmethod
+    def of_car(cls, car) -> "HillLimits":
+        """From a ``vehicle.description.CarDescription``: climbing needs ``g sin(slope) <
+        drive.max_accel_mps2`` and ``tan(slope) < mu / 2`` (ours: half the weight on the driven
+        axle); the chassis box, ``clearance = cog_height - height / 2`` above the ground, clears a
+        crest of radius ``R`` when the sag between the axles, ``wheelbase^2 / (8 R)``, and an
+        overhang's dip into a foot, ``overhang^2 / (2 R)``, stay below it."""
+        g = 9.81
+        climb = math.asin(min(1.0, car.drive.max_accel_mps2 / g))
+        grip = math.atan(0.5 * car.wheels.friction_mu)
+        ch = car.chassis
+        clearance = max(ch.cog_height_m - 0.5 * ch.height_m, 1e-6)
+        overhang = max(ch.rear_overhang_m, ch.length_m - ch.rear_overhang_m - ch.wheelbase_m, 0.0)
+        radius = max(ch.wheelbase_m ** 2 / (8.0 * clearance), overhang ** 2 / (2.0 * clearance))
+        slope_why = ("the drive's acceleration limit (drive.max_accel_mps2 = "
+                     f"{car.drive.max_accel_mps2:g} m/s^2) against gravity" if climb <= grip else
+                     f"half the tyres' grip (wheels.friction_mu = {car.wheels.friction_mu:g})")
+        return cls(min(climb, grip), radius, slope_why,
+                   f"the chassis's {clearance * 1000:.0f} mm ground clearance over its wheelbase and overhangs")
+
+
+def _check_hills(track: Track, path: str, limits: HillLimits) -> list[Problem]:
+    out = []
+    for p in track.physical:
+        if p.kind is not PieceType.HILL:
+            continue
+        length, height = p.piece.length_m, float(p.piece.params["height_m"])
+        slope = math.atan(math.pi * height / length)
+        radius = length ** 2 / (2.0 * math.pi ** 2 * height)
+        where = f"{p.entry.describe()} (piece {p.index + 1})"
+        if slope > limits.max_slope_rad:
+            out.append(Problem(path, p.line, (
+                f"{where}: slopes {_deg(slope):.1f} deg at its steepest (pi height / length), "
+                f"steeper than the car climbs, {_deg(limits.max_slope_rad):.1f} deg "
+                f"({limits.slope_why}): make it lower or longer"), "hill"))
+        if radius < limits.min_radius_m:
+            out.append(Problem(path, p.line, (
+                f"{where}: its crest and feet curve on a radius of {radius:.3f} m (length^2 / "
+                f"(2 pi^2 height)), tighter than the car clears, {limits.min_radius_m:.3f} m "
+                f"({limits.radius_why}): make it lower or longer"), "hill"))
     return out
 
 

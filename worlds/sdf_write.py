@@ -54,6 +54,8 @@ TRACK_ROLES = {  # role -> RGBA of its material
     "lane": (1.0, 1.0, 1.0, 1.0),
     "edges": (0.0, 0.0, 0.0, 1.0),
     "markings": (0.0, 0.0, 0.0, 1.0),
+    "hill_lane": (1.0, 1.0, 1.0, 1.0),   # the road on the hills (trackgen.export.hill_meshes)
+    "hill_edges": (0.0, 0.0, 0.0, 1.0),
 }
 GROUND_RGBA = (0.55, 0.55, 0.55, 1.0)  # grey hall floor around the track
 STEER_P_GAIN_PER_S = 100.0  # Gazebo's steering-joint position gain (not a car property)

@@ -96,7 +96,26 @@ def read_track_json(path: str | Path) -> dict:
     course = data.get("course")
     if course is not None:
         out["course"] = _course(course, path)
+    hills = data.get("hills")
+    if hills is not None:
+        out["hills"] = _hills(hills, path)
     return out
+
+
+def _hills(hills, path: Path):
+    """track.json's ``hills`` as a :class:`worlds.terrain.Terrain`."""
+    from worlds.terrain import Hill, Terrain
+
+    if not isinstance(hills, list):
+        raise WorldError(f"{path}: hills: expected a list of {{\"x_m\", \"y_m\", \"yaw_rad\", "
+                         f"\"length_m\", \"height_m\", \"width_m\"}}, got {_short(hills)}")
+    out = []
+    for i, item in enumerate(hills):
+        try:
+            out.append(Hill.from_json(item))
+        except ValueError as exc:
+            raise WorldError(f"{path}: hills[{i}]: {exc}") from None
+    return Terrain(tuple(out))
 
 
 def _course(course, path: Path) -> tuple:

@@ -279,7 +279,7 @@ def built_car(car: CarDescription) -> CarDescription:
 def make_sim(car: CarDescription, **carsim_kwargs: Any):
     """The simulator for ``car``: a plain ``CarSim`` when all effects are neutral, else an
     :class:`EffectSim` (same interface). ``carsim_kwargs`` go to ``CarSim`` (dt_s, start,
-    surface_z_m, slope_rad, ground_mu)."""
+    surface_z_m, slope_rad, ground_mu, terrain)."""
     if is_neutral(car):
         return CarSim(car, **carsim_kwargs)
     return EffectSim(car, **carsim_kwargs)
@@ -359,6 +359,14 @@ class EffectSim:
     @property
     def pose(self) -> Pose2:
         return self.sim.pose
+
+    @property
+    def pose3(self):
+        return self.sim.pose3
+
+    @property
+    def terrain(self):
+        return self.sim.terrain
 
     @property
     def z_m(self) -> float:

@@ -59,6 +59,15 @@ Slope (thesis 5.4 tilt test): ``slope_rad > 0`` tilts the ground about the horiz
 line through the start point parallel to world y, so that it descends along +x:
 a car with ``start.yaw = 0`` faces downhill.
 
+Hills (``terrain``, a :class:`worlds.terrain.Terrain` of the track's HILL pieces): each hill is a
+closed triangle mesh (its profile every ``HILL_STEP_M`` along the road, flat across, its base
+buried in the ground box) on the static ground skeleton, loaded through dartpy's URDF reader
+(a MeshShape can only be made from a file: platform-facts); ODE collides the tyres with it, so
+gravity acts along the slope and the car pitches over the crest as the rigid body it is. The
+car is placed on a hill at the terrain's height with the pitch its axles' heights give.
+The tyres' contact points (``wheel_contacts``) stay below the wheel centres along the flat
+ground's normal (on a 12-degree slope they are ``r sin 12 deg`` = 7 mm off along the road).
+
 External forces (seam for issue 4 effects): :meth:`apply_external_force_n` sets one
 constant force on the chassis, in the car body frame, kept until changed.
 """
@@ -71,14 +80,17 @@ from typing import NamedTuple
 import dartpy as dart
 import numpy as np
 
-from pieces.pose import Pose2
+from pieces.pose import Pose2, Pose3
 from simrunner.car.body import CarBody, WheelShape, isometry, build_car_skeleton
 from simrunner.errors import SimError
 from vehicle.description import CarDescription
+from worlds.terrain import Terrain
 
 GRAVITY_MPS2 = 9.81
 GROUND_SIZE_M = 400.0  # side of the square ground box (tracks are a few metres)
 GROUND_THICKNESS_M = 1.0
+HILL_STEP_M = 0.02  # a hill's collision mesh samples its profile this often along the road (sag < 0.1 mm)
+HILL_BASE_M = -0.005  # a hill mesh's base below the surface (inside the ground box)
 SOLID_MU = 0.5          # friction of a solid on the track and the car (ours: polystyrene)
 WHEEL_CONTACTS = 4      # ODE's contacts of a car on its four round tyres (one each)
 SOLID_REST_M = 4e-8     # a solid starts at ODE's resting depth above the surface (platform facts)
@@ -165,7 +177,7 @@ class CarSim:
 
     def __init__(self, car: CarDescription, *, dt_s: float = 0.002, start: Pose2 = Pose2(),
                  surface_z_m: float = 0.0, slope_rad: float = 0.0, ground_mu: float = 10.0,
-                 wheel_shape: WheelShape = WheelShape.SPHERE):
+                 wheel_shape: WheelShape = WheelShape.SPHERE, terrain: Terrain | None = None):
         if not (0.0 < dt_s <= 0.02):
             raise SimError(f"CarSim: dt_s = {dt_s!r}: expected a time step in (0, 0.02] s")
         if not (-1.2 < slope_rad < 1.2):
@@ -173,7 +185,11 @@ class CarSim:
         if not (0.0 < ground_mu < math.inf) or not math.isfinite(surface_z_m):
             raise SimError(f"CarSim: ground_mu = {ground_mu!r}, surface_z_m = {surface_z_m!r}: "
                            "expected a positive friction coefficient and a finite height")
+        terrain = terrain if terrain is not None else Terrain()
+        if terrain and slope_rad != 0.0:
+            raise SimError("CarSim: hills (terrain) on tilted ground (slope_rad != 0) are not supported")
         self.car = car
+        self.terrain = terrain
         self.dt_s = float(dt_s)
         self.surface_z_m = float(surface_z_m)
         self.slope_rad = float(slope_rad)
@@ -242,7 +258,40 @@ class CarSim:
         node.createVisualAspect()
         node.createCollisionAspect()
         node.createDynamicsAspect().setFrictionCoeff(mu)
+        if self.terrain:
+            self._add_hills(ground, mu)
         return ground
+
+    def _add_hills(self, ground: dart.dynamics.Skeleton, mu: float) -> None:
+        """Each hill's solid mesh (``worlds.terrain.Hill.solid_arrays``) as a shape of a second
+        static body of the ground skeleton (one skeleton: no contacts between ground and hills)."""
+        import tempfile
+        from pathlib import Path
+
+        from trackgen.meshes import SlabMesh, stl_bytes
+
+        joint, body = ground.createWeldJointAndBodyNodePair()
+        body.setName("hills")
+        with tempfile.TemporaryDirectory(prefix="nxpcup-hills-") as tmp:
+            links = []
+            for i, hill in enumerate(self.terrain.hills):
+                verts, faces = hill.solid_arrays(HILL_STEP_M, HILL_BASE_M)
+                verts = verts + np.array([0.0, 0.0, self.surface_z_m])
+                Path(tmp, f"hill{i}.stl").write_bytes(stl_bytes(SlabMesh(verts, faces)))
+                links.append(f'<link name="hill{i}"><collision><geometry><mesh filename="hill{i}.stl"/>'
+                             '</geometry></collision></link>')
+            urdf = f'<robot name="hills">{"".join(links)}' + "".join(
+                f'<joint name="j{i}" type="fixed"><parent link="hill0"/><child link="hill{i}"/></joint>'
+                for i in range(1, len(links))) + "</robot>"
+            loaded = dart.utils.DartLoader().parseSkeletonString(urdf, dart.common.Uri(f"file://{tmp}/"))
+            if loaded is None:
+                raise SimError("CarSim: dartpy could not load the hills' collision meshes")
+            for i in range(len(links)):
+                shape = loaded.getBodyNode(f"hill{i}").getShapeNode(0).getShape()
+                node = body.createShapeNode(shape, f"hill_{i}")
+                node.createVisualAspect()
+                node.createCollisionAspect()
+                node.createDynamicsAspect().setFrictionCoeff(mu)
 
     def _check_velocity_convention(self) -> None:
         """The read-outs assume dartpy's FreeJoint convention (positions [rotation vector,
@@ -278,6 +327,13 @@ class CarSim:
         dx, dy = pose.x_m - self._ground_origin[0], pose.y_m - self._ground_origin[1]
         z = self._ground_origin[2] - (n[0] * dx + n[1] * dy) / n[2] - CONTACT_DEPTH_M / n[2]
         rot = self._ground_rot @ _rot_z(pose.yaw_rad)
+        if self.terrain:  # on a hill: the rear axle at its height, pitched as the axles' heights say
+            wb = self.car.chassis.wheelbase_m
+            c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+            h_rear, h_front = (float(v) for v in self.terrain.height_m(
+                [pose.x_m, pose.x_m + wb * c], [pose.y_m, pose.y_m + wb * s]))
+            z += h_rear
+            rot = rot @ _rot_y(-math.atan2(h_front - h_rear, wb))
         q6 = dart.dynamics.FreeJoint.convertToPositions(isometry([pose.x_m, pose.y_m, z], rot))
         b.free_joint.setPositions(q6)
         # dartpy 6.20: FreeJoint velocities are [angular, linear] in WORLD coordinates
@@ -557,6 +613,13 @@ class CarSim:
             q, _, rot = self._read()
             p = self._pose = Pose2(q[3], q[4], math.atan2(rot[1][0], rot[0][0]))
         return p
+
+    @property
+    def pose3(self) -> Pose3:
+        """:attr:`pose` with the body frame's height above the track surface, pitch and roll
+        (:class:`pieces.pose.Pose3`): what a camera on a hill needs."""
+        p = self.pose
+        return Pose3(p.x_m, p.y_m, p.yaw_rad, self.z_m - self.surface_z_m, self.pitch_rad, self.roll_rad)
 
     @property
     def z_m(self) -> float:

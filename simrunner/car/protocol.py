@@ -12,7 +12,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from pieces.pose import Pose2
+from pieces.pose import Pose2, Pose3
 from vehicle.description import CarDescription
 
 
@@ -22,6 +22,7 @@ class CarModel(Protocol):
     after the last step."""
 
     car: CarDescription  # the description the model was built from
+    terrain: Any         # the hills it drives over (worlds.terrain.Terrain; empty: flat)
 
     @property
     def dt_s(self) -> float: ...                # physics step, s
@@ -47,6 +48,8 @@ class CarModel(Protocol):
     # -- read-outs -----------------------------------------------------------------------
     @property
     def pose(self) -> Pose2: ...                 # rear-axle midpoint, world frame
+    @property
+    def pose3(self) -> Pose3: ...                # pose with height above the surface, pitch, roll
     @property
     def z_m(self) -> float: ...
     @property

@@ -126,7 +126,7 @@ class NXPCupEnv(gymnasium.Env):
         if parts is None:
             track, label = tracks.load(spec, self.car, self._random_options)
             sim = make_sim(self.car, dt_s=self.settings.dt_s, start=track.start,
-                           surface_z_m=track.surface_z_m)
+                           surface_z_m=track.surface_z_m, terrain=track.terrain)
             camera = Camera(self.car.camera, track)
             imager = None
             if self.car.camera.model != "ideal":

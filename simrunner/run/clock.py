@@ -115,9 +115,11 @@ class LockstepClock:
         return self._next_frame_step - self.step_index
 
     def pose(self):
-        """``sim.pose`` (a ``Pose2``), read at most once per step index (cached)."""
+        """``sim.pose`` (a ``Pose2``; on a track with hills ``sim.pose3``, a ``Pose3``), read at
+        most once per step index (cached)."""
         if self._pose_step != self.step_index:
-            self._pose = self.sim.pose
+            sim = self.sim
+            self._pose = sim.pose3 if getattr(sim, "terrain", None) else sim.pose
             self._pose_step = self.step_index
         return self._pose
 

@@ -77,6 +77,7 @@ class FrameWork:
         self.events: list = []
         self._contacts = sim.wheel_contacts
         self._record = recorder.frame
+        self._lifted = recorder.lifted
         self.judged = judged  # False on a free floor: no laps, no off track
         self.keep_driving = keep_driving  # leaving the track is recorded, does not end the run
         self.off_track_wheels = off_track_wheels
@@ -104,8 +105,12 @@ class FrameWork:
         else:
             off, lap = False, 0
         speed, steer = sim.speed_mps, sim.steer_rad
-        self._record(k, t, pose.x_m, pose.y_m, pose.yaw_rad, speed, steer, sim.yaw_rate_radps,
-                     cmd, row_cmd, lap, off)
+        if self._lifted:  # a track with hills: pose is a Pose3 (its height and pitch are logged)
+            self._record(k, t, pose.x_m, pose.y_m, pose.yaw_rad, speed, steer, sim.yaw_rate_radps,
+                         cmd, row_cmd, lap, off, pose.z_m, pose.pitch_rad)
+        else:
+            self._record(k, t, pose.x_m, pose.y_m, pose.yaw_rad, speed, steer, sim.yaw_rate_radps,
+                         cmd, row_cmd, lap, off)
         if self.video is not None:
             self.video.frame_boundary(k, t, pose, {
                 "speed": speed, "steer": steer, "speed_cmd": cmd[0], "steer_cmd": cmd[1],
@@ -175,7 +180,7 @@ class Run:
         # make_sim: a plain CarSim when every effect of the car description is neutral,
         # otherwise an EffectSim applying them (docs/effects.md)
         self.sim: CarModel = make_sim(car, dt_s=settings.dt_s, start=self.start,
-                                      surface_z_m=track.surface_z_m)
+                                      surface_z_m=track.surface_z_m, terrain=track.terrain)
         self.camera = Camera(car.camera, track)
         self.imager = None
         if car.camera.model != "ideal":  # the physical camera (docs/camera.md)
@@ -193,9 +198,9 @@ class Run:
         if csv_path is not None:  # written as the run goes (simrunner.telemetry.stream)
             from simrunner.telemetry.stream import CsvStream
 
-            self.csv = CsvStream(csv_path)
+            self.csv = CsvStream(csv_path, lifted=bool(track.terrain))
         self.recorder = RunRecorder(record_text=record_text or video_path is not None
-                                    or csv_path is not None, sink=self.csv)
+                                    or csv_path is not None, sink=self.csv, lifted=bool(track.terrain))
         self.video = None
         if video_path is not None:
             from simrunner.reports.video import VideoRecorder

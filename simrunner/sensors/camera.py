@@ -28,6 +28,15 @@ when a discipline places them) hide the ground behind them: where a pixel's ray 
 before the ground the pixel is the box's shade (:mod:`simrunner.sensors.solids`: its
 reflectance x 255 x the sky factor of the face), at the pixel's centre ray.
 
+On a track with hills (the track's ``terrain``, :class:`worlds.terrain.Terrain`) the ground is
+not flat: each frame the pixel rays leave the camera where the car's 3-D pose puts it (a
+:class:`pieces.pose.Pose3` from the physics: height, pitch and roll, so the view tilts as the
+car pitches over a crest; a plain ``Pose2`` is lifted onto the terrain, pitched along its
+slope) and :meth:`worlds.terrain.Terrain.ray_cast` finds where they meet the floor or a hill
+(a crest hides what lies behind it); the raster is sampled there as on flat ground, with the
+same range limit (horizontal distance from the camera). The flat-ground maps and the line
+kernel serve the flat tracks only.
+
 The line camera (``line_image``: one row plus noise, every frame of a run) is one compiled
 call (:mod:`simrunner.sensors.line_row`, NumPy; the numba kernel :mod:`simrunner.sensors.line_kernel`
 computes the same pixels) that computes the same maps and pixels as ``render``.
@@ -39,12 +48,16 @@ import math
 
 import numpy as np
 
-from pieces.pose import Pose2
+from pieces.pose import Pose2, Pose3
 from simrunner.errors import CameraError
 from simrunner.sensors.line_row import add_noise_u8, block_mean_u8, sample_u8
 from simrunner.track.raster import TrackRaster
+from worlds.terrain import Terrain
 
 _NO_NORMALS = np.zeros(0)
+_SLOPE_PROBE_M = 0.05  # a Pose2 lifted onto a hill takes the slope over +-5 cm (Camera.lifted)
+_FLAT = Terrain()
+_CLEAR_M = 0.3  # _view_is_flat: the car and the row's rays this far from every hill (covers the wheelbase)
 def _line_kernel():
     """The line-row function: :func:`simrunner.sensors.line_row.camera_row` (NumPy, bit for bit
     the numba kernel :mod:`simrunner.sensors.line_kernel`, without numba's ~0.5 s load)."""
@@ -67,6 +80,11 @@ class Camera:
         if int(supersample) < 1:
             raise CameraError(f"supersample must be >= 1, got {supersample!r}")
         self.cam = cam
+        terrain = getattr(raster, "terrain", None)
+        self.terrain = terrain if terrain else None  # the track's hills (None: flat ground)
+        # the hills' bounding boxes (x0, y0, x1, y1), for the flat shortcut of _view_is_flat
+        self._hill_boxes = [tuple(np.r_[h.corners_xy().min(axis=0), h.corners_xy().max(axis=0)].tolist())
+                            for h in self.terrain.hills] if self.terrain is not None else []
         self.raster = _raster_of(raster)
         self.width_px = int(cam.width_px)
         self.height_px = int(cam.height_px)
@@ -79,6 +97,10 @@ class Camera:
         rows = (np.arange(self.height_px)[:, None] + sub[None, :]).ravel()
         gx, gy, ok = self._ground(rows[:, None] - self.height_px / 2.0,
                                   cols[None, :] - self.width_px / 2.0)
+        if self.terrain is not None:  # the sub-pixel rays in the car frame, for world_points
+            self._grid_v = rows - self.height_px / 2.0
+            self._grid_u = cols - self.width_px / 2.0
+            self._grid_rays: dict[tuple, np.ndarray] = {}  # rows (start, stop) -> their car-frame rays
         self.ground_xy_m = np.stack((gx, gy), axis=-1)  # (H*k, W*k, 2), nan where no ground
         self._gx = np.where(ok, gx, 0.0)
         self._gy = np.where(ok, gy, 0.0)
@@ -132,6 +154,48 @@ class Camera:
         ok = np.isfinite(t) & (np.hypot(gx - float(self.cam.forward_m), gy) <= self.max_range_m)
         return np.where(ok, gx, np.nan), np.where(ok, gy, np.nan), ok
 
+    def rays(self, v, u) -> np.ndarray:
+        """Car-frame directions ``(..., 3)`` of the rays at image offsets ``v`` (down) and ``u``
+        (right), in pixels (module docstring; not normalised)."""
+        p = float(self.cam.pitch_rad)
+        a = -np.asarray(u, dtype=float) / self.f_px
+        b = -np.asarray(v, dtype=float) / self.f_px
+        dx = math.cos(p) + b * math.sin(p)
+        dz = -math.sin(p) + b * math.cos(p)
+        return np.stack(np.broadcast_arrays(dx, a, dz), axis=-1)
+
+    def lifted(self, pose: Pose2) -> Pose3:
+        """``pose`` as a :class:`~pieces.pose.Pose3`: itself if it is one, else on the terrain
+        (the height under the rear axle, pitched along the slope there, no roll)."""
+        if isinstance(pose, Pose3):
+            return pose
+        if self.terrain is None:
+            return Pose3(pose.x_m, pose.y_m, pose.yaw_rad)
+        c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+        d = _SLOPE_PROBE_M
+        h0, hb, hf = (float(v) for v in self.terrain.height_m(
+            [pose.x_m, pose.x_m - d * c, pose.x_m + d * c], [pose.y_m, pose.y_m - d * s, pose.y_m + d * s]))
+        return Pose3(pose.x_m, pose.y_m, pose.yaw_rad, h0, -math.atan2(hf - hb, 2.0 * d))
+
+    def world_points(self, pose: Pose2, v=None, u=None, *, rays: np.ndarray | None = None):
+        """Where the rays at image offsets ``v``, ``u`` (pixels, broadcast; or their car-frame
+        directions ``rays`` from :meth:`rays`) of a camera on a car at ``pose`` meet the ground,
+        floor or hill (:meth:`worlds.terrain.Terrain.ray_cast`): world ``x``, ``y`` (m) and
+        ``miss`` (bool: no ground within ``max_range_m``, horizontally from the camera)."""
+        p3 = self.lifted(pose)
+        rot = p3.rotation()
+        origin = np.array([p3.x_m, p3.y_m, p3.z_m]) + rot @ np.array(
+            [float(self.cam.forward_m), 0.0, float(self.cam.height_m)])
+        d = (self.rays(v, u) if rays is None else rays) @ rot.T
+        flat = np.hypot(d[..., 0], d[..., 1])
+        flat[flat == 0.0] = 1e-300
+        max_t = self.max_range_m / flat
+        terrain = self.terrain if self.terrain is not None else _FLAT
+        t = terrain.ray_cast(origin, d, max_t)
+        miss = t == np.inf
+        t[miss] = 0.0
+        return origin[0] + t * d[..., 0], origin[1] + t * d[..., 1], miss
+
     def ground_point_of_pixel(self, row: float, col: float) -> tuple[float, float]:
         """Car-frame ground point ``(x_m, y_m)`` seen at the centre of pixel ``(row, col)``;
         ``(nan, nan)`` if that ray does not meet the ground within ``max_range_m``."""
@@ -168,8 +232,44 @@ class Camera:
             map_y[miss] = -10.0
         return map_x, map_y
 
+    def _view_is_flat(self, pose: Pose2, row: int) -> bool:
+        """On a track with hills: True when the car stands level on the floor (a ``Pose3`` within
+        0.1 mm and 1 mrad of it) and neither it nor the rays of image row ``row`` come within
+        ``_CLEAR_M`` of a hill; the row is then the flat ground's (same pixels to < 1 um)."""
+        if isinstance(pose, Pose3) and (abs(pose.z_m) > 1e-4 or abs(pose.pitch_rad) > 1e-3
+                                        or abs(pose.roll_rad) > 1e-3):
+            return False
+        gx = self._row_gx[row]
+        if gx is None:
+            return False
+        c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+        xs, ys = [pose.x_m], [pose.y_m]  # the rear axle, the camera and the row's two ends
+        for px, py in ((float(self.cam.forward_m), 0.0), (gx, float(self._gy[row, 0])), (gx, float(self._gy[row, -1]))):
+            xs.append(pose.x_m + c * px - s * py)
+            ys.append(pose.y_m + s * px + c * py)
+        x0, x1 = min(xs) - _CLEAR_M, max(xs) + _CLEAR_M
+        y0, y1 = min(ys) - _CLEAR_M, max(ys) + _CLEAR_M
+        return not any(x0 <= bx1 and bx0 <= x1 and y0 <= by1 and by0 <= y1 for bx0, by0, bx1, by1 in self._hill_boxes)
+
+    def _terrain_maps(self, pose: Pose2, rows: slice):
+        """:meth:`_maps` on a track with hills: the ray grid's rows ``rows`` cast onto the terrain."""
+        key = (rows.start, rows.stop)
+        rays = self._grid_rays.get(key)
+        if rays is None:
+            rays = self._grid_rays[key] = self.rays(self._grid_v[rows][:, None], self._grid_u[None, :])
+        wx, wy, miss = self.world_points(pose, rays=rays)
+        inv = self._inv_m
+        map_x = ((wx - self._x0_m) * inv).astype(np.float32)
+        map_y = ((self._y0_m - wy) * inv).astype(np.float32)
+        map_x[miss] = -10.0
+        map_y[miss] = -10.0
+        return map_x, map_y
+
     def _sample(self, pose: Pose2, rows: slice, misses: bool) -> np.ndarray:
-        map_x, map_y = self._maps(pose, rows, misses)
+        if self.terrain is not None:
+            map_x, map_y = self._terrain_maps(pose, rows)
+        else:
+            map_x, map_y = self._maps(pose, rows, misses)
         img = sample_u8(self.raster.image, map_x, map_y, self._floor_f)
         k = self.supersample
         return img if k == 1 else block_mean_u8(img, k)
@@ -208,7 +308,8 @@ class Camera:
         ground points share one x (all rows of a camera without supersampling that see only
         ground). ``normals``: a ``numpy.random.Generator`` or a
         :class:`simrunner.run.spinner.BufferedNormals` (its ``take``)."""
-        gx = self._row_gx[row] if type(row) is int and 0 <= row < self.height_px and not self.solids else None
+        gx = (self._row_gx[row] if type(row) is int and 0 <= row < self.height_px and not self.solids
+              and (self.terrain is None or self._view_is_flat(pose, row)) else None)
         if gx is None:
             row = int(row)
             if not 0 <= row < self.height_px:

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pieces.pose import Pose2
+from pieces.pose import Pose2, Pose3
 from worlds.lighting import SHININESS, TrackLighting
 
 # Photons per lumen-second of white light: a white LED's spectrum gives ~300 lm per radiant
@@ -178,6 +178,7 @@ class Imager:
         self._lead_s = float(spec.readout_s) if spec.model == "linescan" else 0.0
         self._rows: dict[tuple[int, int], tuple] = {}
         self._solid_rays: dict[tuple[int, int], tuple] = {}
+        self._terrain_rays: dict[tuple[int, int], np.ndarray] = {}  # rows -> car-frame rays (hills)
         self._inv_m = 1.0 / camera.raster.m_per_px
         self._x0_m, self._y0_m = (float(c) for c in camera.raster.origin_xy_m)
 
@@ -221,14 +222,39 @@ class Imager:
             yaws.append(yaw - w * tau)
         return xs, ys, yaws
 
-    def scene_lux(self, poses, r0: int, r1: int) -> np.ndarray:
+    def _terrain_ground(self, lift: Pose3, r0: int, r1: int):
+        """Car-frame ground points of rows ``r0 .. r1 - 1`` (``W + 2 margin`` columns) on a track
+        with hills: the rays cast onto the terrain from the frame's pose ``lift`` (a ``Pose3``),
+        the hits expressed in its planar frame (``gx``, ``gy``, 0 where they miss) and ``miss``.
+        The motion-blur poses move these points as on flat ground (they are mm apart)."""
+        cam, m = self.camera, self._margin
+        rays = self._terrain_rays.get((r0, r1))
+        if rays is None:
+            u = (np.arange(-m, cam.width_px + m) + 0.5 - cam.width_px / 2.0)[None, :]
+            v = (np.arange(r0, r1) + 0.5 - cam.height_px / 2.0)[:, None]
+            rays = self._terrain_rays[(r0, r1)] = cam.rays(v, u)
+        wx, wy, miss = cam.world_points(lift, rays=rays)
+        c, s = math.cos(lift.yaw_rad), math.sin(lift.yaw_rad)
+        dx, dy = wx - lift.x_m, wy - lift.y_m
+        gx, gy = c * dx + s * dy, c * dy - s * dx
+        gx[miss] = 0.0
+        gy[miss] = 0.0
+        return gx, gy, miss
+
+    def scene_lux(self, poses, r0: int, r1: int, lift: Pose3 | None = None) -> np.ndarray:
         """Reflectance x illuminance (lux; plus the lamps' highlights) seen along rows ``r0 ..
         r1 - 1`` over ``W + 2 margin`` columns, the mean over ``poses`` (``(x_m, y_m,
-        yaw_rad)`` lists): ``(r1 - r0, W + 2 margin)``."""
-        gx, gy, miss, any_miss, segment = self._rows_ground(r0, r1)
+        yaw_rad)`` lists): ``(r1 - r0, W + 2 margin)``. ``lift`` (the frame's ``Pose3``, on a
+        track with hills unless the view is clear of them) casts the rays onto the terrain from
+        the camera's height, pitch and roll."""
         inv = self._inv_m
         xs, ys, yaws = poses
         n = len(xs)
+        if lift is not None:
+            gx, gy, miss = self._terrain_ground(lift, r0, r1)
+            any_miss, segment = bool(miss.any()), False
+        else:
+            gx, gy, miss, any_miss, segment = self._rows_ground(r0, r1)
         if n == 1:
             c, s = math.cos(yaws[0]), math.sin(yaws[0])
             wx = gx * c
@@ -358,17 +384,17 @@ class Imager:
             out <<= -self._shift
         return out.astype(np.uint8)
 
-    def _scene_rows(self, poses, r0: int, r1: int) -> np.ndarray:
+    def _scene_rows(self, poses, r0: int, r1: int, lift: Pose3 | None = None) -> np.ndarray:
         """``scene_lux`` of rows ``r0 .. r1 - 1``; an area camera's lens blurs across rows
         too: the rows around them are sampled (clamped at the image's top and bottom) and
         mixed with the same Gaussian (a line sensor is one row: its blur is along the row
         only)."""
         m = self._margin
         if self.spec.model != "area" or not m:
-            return self.scene_lux(poses, r0, r1)
+            return self.scene_lux(poses, r0, r1, lift)
         h = self.camera.height_px
         lo, hi = max(r0 - m, 0), min(r1 - 1 + m, h - 1)
-        scene = self.scene_lux(poses, lo, hi + 1)
+        scene = self.scene_lux(poses, lo, hi + 1, lift)
         out = np.zeros((r1 - r0, scene.shape[1]))
         for j, weight in enumerate(self._kernel):
             src = np.clip(np.arange(r0, r1) + (j - m), 0, h - 1) - lo
@@ -382,7 +408,9 @@ class Imager:
         blur; ``normals``: the temporal noise's stream, None for none; ``frame_index``: the
         frame number since power-up, 1 for the first read)."""
         poses = self._exposure_arrays(pose, exposure_s, twist)
-        return self._expose(self._scene_rows(poses, row, row + 1), row, row + 1, exposure_s, normals,
+        cam = self.camera
+        lift = None if cam.terrain is None or cam._view_is_flat(pose, row) else cam.lifted(pose)
+        return self._expose(self._scene_rows(poses, row, row + 1, lift), row, row + 1, exposure_s, normals,
                             frame_index)
 
     def frame(self, pose: Pose2, *, exposure_s: float, twist=None, normals=None,
@@ -390,4 +418,5 @@ class Imager:
         """The whole ``(H, W) uint8`` image (every row exposed as :meth:`line` exposes one)."""
         h = self.camera.height_px
         poses = self._exposure_arrays(pose, exposure_s, twist)
-        return self._expose(self._scene_rows(poses, 0, h), 0, h, exposure_s, normals, frame_index)
+        lift = self.camera.lifted(pose) if self.camera.terrain is not None else None
+        return self._expose(self._scene_rows(poses, 0, h, lift), 0, h, exposure_s, normals, frame_index)

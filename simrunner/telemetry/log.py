@@ -105,6 +105,9 @@ COLUMNS: tuple[Column, ...] = (
     Column("coast", "0/1", "flag", "%d", "drive off, rear wheels rolling freely"),
     Column("lap", "-", "int", "%d", "laps completed so far"),
     Column("off_track", "0/1", "flag", "%d", "a wheel's contact patch is entirely off the road"),
+    Column("z_m", "m", "float", "%.6f", "height of the car frame origin above the track's surface "
+                                        "(runs on tracks with hills)"),
+    Column("pitch_rad", "rad", "float", "%.6f", "pitch of the car, + = nose down (runs on tracks with hills)"),
     Column("data_text", "-", "text", "%s", "the controller's add_data text of this frame"),
 )
 COLUMN_NAMES: tuple[str, ...] = tuple(c.name for c in COLUMNS)
@@ -174,6 +177,8 @@ class RunLog:
     coast: np.ndarray | None = None
     lap: np.ndarray | None = None
     off_track: np.ndarray | None = None
+    z_m: np.ndarray | None = None
+    pitch_rad: np.ndarray | None = None
     data_text: tuple[str, ...] | None = None
     source: str = "<log>"
     command_steps: CommandSteps | None = None
@@ -562,6 +567,7 @@ def _check_format_line(line: str, source: str, lineno: int) -> None:
 # -- recording a run -------------------------------------------------------------------------
 KEEP_ROWS = 1 << 17  # rows a RunRecorder keeps in memory (43 min at 50 fps); then every 2nd, 4th, ...
 _N_RUN_COLUMNS = 13  # frame .. yaw_rate_cmd_radps, lap, off_track (coast is always 0)
+LIFT_COLUMNS = ("z_m", "pitch_rad")  # a run on a track with hills records these too (``lifted``)
 
 
 class RunRecorder:
@@ -579,13 +585,19 @@ class RunRecorder:
     the kept rows plus the open (last) row: every row of a run shorter than ``max_rows``
     frames, a thinned log (``stride`` > 1) of a longer one. :meth:`finish` closes the open
     row into the sink.
+
+    ``lifted`` (a run on a track with hills): rows also hold :data:`LIFT_COLUMNS`, the car's
+    height and pitch (``frame(..., z_m, pitch_rad)``), after ``off_track``.
     """
 
-    def __init__(self, *, record_text: bool = True, sink=None, max_rows: int = KEEP_ROWS) -> None:
+    def __init__(self, *, record_text: bool = True, sink=None, max_rows: int = KEEP_ROWS,
+                 lifted: bool = False) -> None:
         if max_rows < 2:
             raise SimError(f"RunRecorder: max_rows = {max_rows!r}: expected >= 2")
         self.max_rows = int(max_rows)
-        self._rows = np.empty((min(1024, self.max_rows), _N_RUN_COLUMNS))
+        self.lifted = bool(lifted)
+        self._width = _N_RUN_COLUMNS + (len(LIFT_COLUMNS) if lifted else 0)
+        self._rows = np.empty((min(1024, self.max_rows), self._width))
         self._kept = 0        # rows held in _rows
         self._closed = 0      # rows closed so far (written to the sink)
         self.stride = 1       # a closed row i is kept when i % stride == 0
@@ -602,18 +614,23 @@ class RunRecorder:
 
     def frame(self, k: int, t_s: float, x_m: float, y_m: float, yaw_rad: float, speed_mps: float,
               steer_rad: float, yaw_rate_radps: float, command: tuple[float, float, float],
-              previous_command: tuple[float, float, float] | None, lap: int, off_track: bool) -> None:
+              previous_command: tuple[float, float, float] | None, lap: int, off_track: bool,
+              *lift: float) -> None:
         """Row k: the state at ``t_s``; ``command`` is in force now (row k keeps it if no
-        step follows)."""
+        step follows); ``lift``: ``z_m, pitch_rad`` of a ``lifted`` recorder."""
         if self._open is not None:
             self._close(self._open_command if previous_command is None else previous_command)
-        self._open = (k, t_s, x_m, y_m, yaw_rad, speed_mps, steer_rad, yaw_rate_radps, lap, off_track)
+        self._open = (k, t_s, x_m, y_m, yaw_rad, speed_mps, steer_rad, yaw_rate_radps, lap, off_track, *lift)
         self._open_command = command
 
-    def _close(self, command: tuple[float, float, float]) -> None:
+    def _row(self, command: tuple[float, float, float]) -> tuple:
         s = self._open
         row = (s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], command[0], command[1], command[2],
                s[8], s[9])
+        return row + s[10:] if self.lifted else row
+
+    def _close(self, command: tuple[float, float, float]) -> None:
+        row = self._row(command)
         text = TEXT_SEPARATOR.join(self._open_text) if self._open_text else ""
         if self._open_text:
             self._open_text = []
@@ -628,7 +645,7 @@ class RunRecorder:
         n = self._kept
         if n == len(self._rows):
             if n < self.max_rows:  # grow
-                grown = np.empty((min(2 * n, self.max_rows), _N_RUN_COLUMNS))
+                grown = np.empty((min(2 * n, self.max_rows), self._width))
                 grown[:n] = self._rows[:n]
                 self._rows = grown
             else:  # full: keep every other row, double the stride
@@ -653,10 +670,7 @@ class RunRecorder:
         """Close the open row into the sink (the end of the run; it keeps the command in
         force at its boundary). The rows stay available to :meth:`freeze`."""
         if self._open is not None and self.sink is not None:
-            s = self._open
-            c = self._open_command
-            self.sink.row((s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], c[0], c[1], c[2],
-                           s[8], s[9]), TEXT_SEPARATOR.join(self._open_text))
+            self.sink.row(self._row(self._open_command), TEXT_SEPARATOR.join(self._open_text))
             self.sink = None
 
     def freeze(self, source: str = "<run>") -> RunLog:
@@ -666,9 +680,7 @@ class RunRecorder:
         rows = self._rows[:n]
         texts = [self._texts.get(i, "") for i in range(n)]
         if self._open is not None:
-            s, c = self._open, self._open_command
-            last = np.array([[s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], c[0], c[1], c[2],
-                              s[8], s[9]]], dtype=float)
+            last = np.array([self._row(self._open_command)], dtype=float)
             rows = np.concatenate((rows, last))
             texts.append(TEXT_SEPARATOR.join(self._open_text))
         m = len(rows)
@@ -677,6 +689,8 @@ class RunRecorder:
                 "yaw_rate_radps": rows[:, 7], "speed_cmd_mps": rows[:, 8], "steer_cmd_rad": rows[:, 9],
                 "yaw_rate_cmd_radps": rows[:, 10], "coast": np.zeros(m), "lap": rows[:, 11],
                 "off_track": rows[:, 12], "data_text": tuple(texts)}
+        if self.lifted:
+            cols.update({name: rows[:, 13 + i] for i, name in enumerate(LIFT_COLUMNS)})
         return log_from_columns(cols, source)
 
 

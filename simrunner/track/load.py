@@ -45,6 +45,7 @@ import numpy as np
 
 from pieces.pose import Pose2
 from worlds.lighting import TrackLighting
+from worlds.terrain import Terrain
 from simrunner.track.course import Course, course_from_sections, traced_course
 from simrunner.track.errors import TrackLoadError
 from simrunner.track.raster import (DEFAULT_M_PER_PX, ROLE_GRAY, TrackRaster, build_raster,
@@ -59,6 +60,7 @@ if TYPE_CHECKING:  # trackgen (shapely) loads only for a layout
 LAYOUT_SUFFIXES = (".txt",)
 WORLD_SUFFIXES = (".sdf", ".world")
 _WIDTH_SEARCH_M = 3.0  # how far to look sideways for the road's edge
+_HILL_EDGE_TOL_M = 1e-4  # a road vertex this close outside a hill's side counts as on it
 
 __all__ = ["LAYOUT_SUFFIXES", "WORLD_SUFFIXES", "SimTrack", "TrackLoadError", "load_track",
            "road_extents_m", "track_from_scene", "track_from_trackgen"]
@@ -83,6 +85,7 @@ class SimTrack:
     barcodes: tuple = ()  # printed barcodes (worlds.marks.Barcode), painted into the raster
     course: Course | None = None  # what a lap must follow (simrunner.track.course)
     boxes: tuple = ()  # objects standing on the track from the start (worlds.solids.Solid)
+    terrain: Terrain = field(default_factory=Terrain)  # the hills (worlds.terrain; empty: flat)
 
     @property
     def road_mask(self) -> np.ndarray:
@@ -153,11 +156,10 @@ def track_from_trackgen(track: Track, *, geometry: TrackGeometry | None = None,
     layout = track.layout
     source = Path(source if source is not None else layout.path)
     top_z = float(np.float32(geometry.thickness_m))  # the meshes' top as the binary STL stores it
-    layers = [layer_from_footprint("lane", geometry.lane, ROLE_GRAY["lane"], top_z_m=top_z),
-              layer_from_footprint("edges", geometry.edges, ROLE_GRAY["edge"], top_z_m=top_z)]
-    if geometry.markings is not None:
-        layers.append(layer_from_footprint("markings", geometry.markings, ROLE_GRAY["marking"],
-                                           top_z_m=top_z))
+    gray = {"lane": ROLE_GRAY["lane"], "edges": ROLE_GRAY["edge"], "markings": ROLE_GRAY["marking"],
+            "hill_lane": ROLE_GRAY["lane"], "hill_edges": ROLE_GRAY["edge"]}
+    layers = [layer_from_footprint(role, fp, gray[role], top_z_m=top_z)
+              for role, fp in geometry.role_footprints.items()]
     raster = build_raster(layers + mark_layers(layout.barcodes, top_z, m_per_px), m_per_px=m_per_px)
     start = track.car_start_pose()
     if not bool(raster.on_road([[start.x_m, start.y_m]])[0]):
@@ -176,7 +178,7 @@ def track_from_trackgen(track: Track, *, geometry: TrackGeometry | None = None,
         name=name or layout.name, source=source, raster=raster, surface_z_m=top_z, start=start,
         gate=gate, gate_half_width_m=float(half), lap_length_m=float(track.length_m),
         centreline=centreline, lap_length_estimated=False, lighting=track.lighting(),
-        barcodes=layout.barcodes, course=course, boxes=layout.boxes)
+        barcodes=layout.barcodes, course=course, boxes=layout.boxes, terrain=track.terrain())
 
 
 def _read_world(path: Path):
@@ -196,9 +198,13 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
     source = Path(source if source is not None else scene.source)
     meta = _read_track_json(scene.track_json) if scene.track_json is not None else {}
     tris = _scene_triangles(scene)
+    terrain = meta.get("hills", Terrain())
     layers = [layer for layer in (layer_from_visual(v, t) for v, t in zip(scene.visuals, tris.visuals))
               if layer is not None]
-    surface_z = _surface_z(scene, layers, tris.collisions) if layers else 0.0
+    if terrain:  # the road's edge vertices on a hill are on it, whatever their rounding
+        terrain = terrain.widened(_HILL_EDGE_TOL_M)
+        layers = [_off_hills(layer, t, terrain) for layer, t in zip(layers, tris.visuals)]
+    surface_z = _surface_z(scene, layers, tris.collisions, terrain) if layers else 0.0
     if not layers:
         raise TrackLoadError(f"{scene.source}: the world has no mesh visuals with upward faces "
                              f"(nothing to drive on)")
@@ -239,7 +245,7 @@ def track_from_scene(scene, *, source: Path | None = None, name: str | None = No
         gate_half_width_m=float(half), lap_length_m=float(lap_length),
         centreline=meta.get("centreline"), lap_length_estimated=estimated,
         lighting=scene.lighting if scene.lighting is not None else TrackLighting(),
-        barcodes=scene.barcodes, course=course, boxes=scene.boxes)
+        barcodes=scene.barcodes, course=course, boxes=scene.boxes, terrain=meta.get("hills", Terrain()))
 
 
 def mark_layers(barcodes, surface_z_m: float, m_per_px: float) -> list:
@@ -285,12 +291,30 @@ def _scene_triangles(scene):
         raise TrackLoadError(str(exc)) from None
 
 
-def _surface_z(scene, layers, collision_triangles) -> float:
+def _off_hills_top(triangles: np.ndarray, terrain: Terrain) -> float:
+    """The highest vertex of ``triangles`` ``(T, 3, 3)`` where the ground is flat (the road on a
+    hill is lifted by the hill; its ends stand on the floor), else the highest with the hill's
+    lift taken off."""
+    pts = triangles.reshape(-1, 3)
+    lift = terrain.height_m(pts[:, 0], pts[:, 1])
+    flat = lift < 1e-9
+    return float(pts[flat, 2].max()) if flat.any() else float((pts[:, 2] - lift).max())
+
+
+def _off_hills(layer, triangles: np.ndarray, terrain: Terrain):
+    """``layer`` with its top measured off the hills (:func:`_off_hills_top`): the road on a hill
+    paints in the same order as the flat road (the raster equals the layout's)."""
+    from dataclasses import replace
+
+    return replace(layer, top_z_m=_off_hills_top(upward_triangles(triangles), terrain))
+
+
+def _surface_z(scene, layers, collision_triangles, terrain: Terrain = Terrain()) -> float:
     tops = []
     for tris in collision_triangles:
         up = upward_triangles(tris)
         if len(up):
-            tops.append(float(up[:, :, 2].max()))
+            tops.append(_off_hills_top(up, terrain) if terrain else float(up[:, :, 2].max()))
     if tops:
         return max(tops)
     lane = [layer.top_z_m for layer, v in zip(layers, scene.visuals) if getattr(v, "role", None) == "lane"]
