@@ -26,11 +26,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-#: Ray-cast sampling step along the ground (m): a ray that dips into a hill for less than this
-#: (grazing a crest) can be missed; the crossing found is refined by regula falsi (the error is
-#: then far below a millimetre: the profile's sag over one step is < 0.1 mm).
-RAY_STEP_M = 0.02
-_REFINE = 2
+#: Ray-cast sampling (:meth:`Terrain.ray_cast`): a ray's height above a hill is sampled along the
+#: ground at steps over which the hill's profile sags at most RAY_SAG_M from its chord
+#: (``sqrt(8 RAY_SAG_M R)`` for the crest radius R; 4 cm on the default hill, at most
+#: RAY_STEP_MAX_M), so a ray grazing a crest deeper than that is not missed; the crossing found
+#: is then refined by regula falsi to far below a millimetre.
+RAY_SAG_M = 2e-4
+RAY_STEP_MAX_M = 0.05
+_REFINE = 1
 
 
 @dataclass(frozen=True)
@@ -176,78 +179,89 @@ class Terrain:
         hill is its top and the two upright sides of its slab (it hides what is behind)."""
         o = np.asarray(origin, dtype=float)
         d = np.asarray(dirs, dtype=float)
-        dz = d[..., 2]
+        shape = d.shape[:-1]
+        d = d.reshape(-1, 3)
+        dx, dy, dz = d[:, 0], d[:, 1], d[:, 2]
+        max_t = np.broadcast_to(max_t, shape).reshape(-1)
         down = dz < 0.0
         t = np.full(dz.shape, np.inf)
         t[down] = o[2] / -dz[down]
         t[~(t <= max_t)] = np.inf
         for hill in self.hills:
-            t = np.minimum(t, _hill_hit(hill, o, d, np.minimum(t, max_t)))
-        return t
+            t = np.minimum(t, _hill_hit(hill, o, dx, dy, dz, np.fmin(t, max_t)))
+        return t.reshape(shape)
 
 
 def _slab(o: float, d: np.ndarray, lo: float, hi: float):
-    """Ray parameter interval inside ``lo <= o + t d <= hi`` (per ray; empty when lo > hi)."""
+    """Ray parameter interval inside ``lo <= o + t d <= hi`` (per ray; empty when lo > hi). A
+    ray parallel to the slab (``d = 0``) gets ``(-inf, inf)`` inside it and an empty interval
+    outside (``1 / 0 = inf``; ``fmin``/``fmax`` skip the NaN of a ray exactly on its border)."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        t1 = (lo - o) / d
-        t2 = (hi - o) / d
-    inside = (o >= lo) & (o <= hi)
-    zero = d == 0.0
-    t_lo = np.where(zero, np.where(inside, -np.inf, np.inf), np.minimum(t1, t2))
-    t_hi = np.where(zero, np.where(inside, np.inf, -np.inf), np.maximum(t1, t2))
-    return t_lo, t_hi
+        inv = 1.0 / d
+        t1 = (lo - o) * inv
+        t2 = (hi - o) * inv
+    return np.fmin(t1, t2), np.fmax(t1, t2)
 
 
-def _hill_hit(hill: Hill, o: np.ndarray, d: np.ndarray, t_end: np.ndarray) -> np.ndarray:
-    """First ``t`` in ``[0, t_end]`` where the rays meet ``hill`` (inf where they do not): the
-    ray's height above the hill sampled every ``RAY_STEP_M`` on the floor from where it enters
-    the hill's footprint to where it leaves it, the first crossing refined by regula falsi."""
+def _hill_hit(hill: Hill, o: np.ndarray, dx: np.ndarray, dy: np.ndarray, dz: np.ndarray,
+              t_end: np.ndarray) -> np.ndarray:
+    """First ``t`` in ``[0, t_end]`` where the rays (flat arrays of their direction's components)
+    meet ``hill`` (inf where they do not): the ray's height above the hill sampled along the
+    ground (steps over which the profile sags ``RAY_SAG_M`` at most) from where it enters the
+    hill's footprint to where it leaves it, the first crossing refined by regula falsi; a ray
+    below the hill's top where it enters meets its side (or end) there."""
     c, s = math.cos(hill.yaw_rad), math.sin(hill.yaw_rad)
-    ou = c * (o[0] - hill.x_m) + s * (o[1] - hill.y_m)
-    ov = -s * (o[0] - hill.x_m) + c * (o[1] - hill.y_m)
-    du = c * d[..., 0] + s * d[..., 1]
-    dv = -s * d[..., 0] + c * d[..., 1]
-    dz = d[..., 2]
+    ox, oy = o[0] - hill.x_m, o[1] - hill.y_m
+    ou, ov = c * ox + s * oy, c * oy - s * ox
+    du = c * dx + s * dy
+    dv = c * dy - s * dx
     u_lo, u_hi = _slab(ou, du, 0.0, hill.length_m)
     v_lo, v_hi = _slab(ov, dv, -0.5 * hill.width_m, 0.5 * hill.width_m)
-    t_in = np.maximum(np.maximum(u_lo, v_lo), 0.0)
-    t_out = np.minimum(np.minimum(u_hi, v_hi), t_end)
+    t_in = np.fmax(np.fmax(u_lo, v_lo), 0.0)
+    t_out = np.fmin(np.fmin(u_hi, v_hi), t_end)
     out = np.full(dz.shape, np.inf)
-    rays = np.nonzero(t_in < t_out)
-    if not rays[0].size:
+    idx = np.flatnonzero(t_in < t_out)
+    if not idx.size:
         return out
-    t0, t1 = t_in[rays], t_out[rays]
-    ru, rz = du[rays], dz[rays]
+    t0, t1 = t_in[idx], t_out[idx]
+    ru, rz = du[idx], dz[idx]
     k = 2.0 * math.pi / hill.length_m
     half = 0.5 * hill.height_m
-    lo_u, hi_u = 0.0, hill.length_m
+    oz_half = o[2] - half
 
-    def gap(tt, ru=ru, rz=rz):  # ray height above the hill's top (u kept on the hill)
-        return o[2] + tt * rz - half * (1.0 - np.cos(k * np.clip(ou + tt * ru, lo_u, hi_u)))
+    def gap(tt, ru, rz):  # the ray's height above the hill's top (tt inside the footprint: the
+        g = ou + tt * ru    # profile's formula is smooth to zero at both of its ends)
+        g *= k
+        np.cos(g, out=g)
+        g *= half
+        g += oz_half
+        g += tt * rz
+        return g
 
-    span = (t1 - t0) * np.hypot(ru, dv[rays])
-    n = max(2, int(math.ceil(float(span.max()) / RAY_STEP_M)) + 1)
-    ts = t0[:, None] + (t1 - t0)[:, None] * np.linspace(0.0, 1.0, n)[None, :]
+    dt = t1 - t0
+    span = float((dt * np.hypot(ru, dv[idx])).max())
+    step = min(RAY_STEP_MAX_M, math.sqrt(8.0 * RAY_SAG_M * hill.crest_radius_m))
+    n = max(2, int(math.ceil(span / step)) + 1)
+    ts = t0[:, None] + dt[:, None] * (np.arange(n) / (n - 1))[None, :]
     g = gap(ts, ru[:, None], rz[:, None])
     below = g <= 0.0
-    has = below.any(axis=1)
-    if not has.any():
+    first = below.argmax(axis=1)
+    rows = np.flatnonzero(below[np.arange(len(idx)), first])
+    if not rows.size:
         return out
-    i = np.nonzero(has)[0]
-    first = below[i].argmax(axis=1)
-    hit = ts[i, first]
-    inner = first > 0  # else the ray meets the hill where it enters its footprint (a side)
+    first = first[rows]
+    hit = ts[rows, first]
+    inner = first > 0
     if inner.any():
-        j = i[inner]
-        a, b = ts[j, first[inner] - 1], ts[j, first[inner]]
-        ga, gb = g[j, first[inner] - 1], g[j, first[inner]]
+        j, f = rows[inner], first[inner]
+        a, b = ts[j, f - 1], ts[j, f]
+        ga, gb = g[j, f - 1], g[j, f]
         for _ in range(_REFINE):  # regula falsi: keeps the crossing bracketed
             m = b - gb * (b - a) / (gb - ga)
             gm = gap(m, ru[j], rz[j])
             up = gm > 0.0
             a, ga = np.where(up, m, a), np.where(up, gm, ga)
             b, gb = np.where(up, b, m), np.where(up, gb, gm)
-        hit = hit.copy()
         hit[inner] = b - gb * (b - a) / (gb - ga)
-    out[tuple(r[i] for r in rays)] = hit
+    out[idx[rows]] = hit
     return out

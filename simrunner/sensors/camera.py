@@ -1,4 +1,4 @@
-"""The car's camera: an exact pinhole view of the flat track, by ground-plane projection.
+"""The car's camera: an exact pinhole view of the track, by ground-plane projection.
 
 Conventions (DESIGN.md): the image is ``(H, W) uint8``, row 0 is the top of the image
 (farthest from the car), column 0 is the car's LEFT side of the view. The camera sits in the
@@ -13,7 +13,7 @@ below the principal point (the image centre). Its ray in the car frame is
 ``d = forward_axis - (u / f_px) * left_axis - (v / f_px) * up_axis`` with
 ``forward_axis = (cos p, 0, -sin p)``, ``left_axis = (0, 1, 0)``, ``up_axis = (sin p, 0, cos p)``.
 
-Tracks are flat, so every ray that goes down meets the ground at one point; those points
+On flat ground every ray that goes down meets the ground at one point; those points
 are computed once per camera (``ground_xy_m``, car frame). A frame is then: move those
 points by the car pose into the world, convert to raster pixels and sample the top-down
 raster bilinearly (:func:`simrunner.sensors.line_row.sample_u8`: float32 fused multiply-adds,
@@ -34,8 +34,9 @@ not flat: each frame the pixel rays leave the camera where the car's 3-D pose pu
 car pitches over a crest; a plain ``Pose2`` is lifted onto the terrain, pitched along its
 slope) and :meth:`worlds.terrain.Terrain.ray_cast` finds where they meet the floor or a hill
 (a crest hides what lies behind it); the raster is sampled there as on flat ground, with the
-same range limit (horizontal distance from the camera). The flat-ground maps and the line
-kernel serve the flat tracks only.
+same range limit (horizontal distance from the camera). Where the car stands level on the
+floor and a line row's rays stay clear of every hill (``_view_is_flat``), the flat maps and
+the line kernel serve as on a flat track.
 
 The line camera (``line_image``: one row plus noise, every frame of a run) is one compiled
 call (:mod:`simrunner.sensors.line_row`, NumPy; the numba kernel :mod:`simrunner.sensors.line_kernel`
@@ -57,7 +58,7 @@ from worlds.terrain import Terrain
 _NO_NORMALS = np.zeros(0)
 _SLOPE_PROBE_M = 0.05  # a Pose2 lifted onto a hill takes the slope over +-5 cm (Camera.lifted)
 _FLAT = Terrain()
-_CLEAR_M = 0.3  # _view_is_flat: the car and the row's rays this far from every hill (covers the wheelbase)
+_CLEAR_M = 0.02  # _view_is_flat: the car's axle and camera and the row's rays this far from every hill
 def _line_kernel():
     """The line-row function: :func:`simrunner.sensors.line_row.camera_row` (NumPy, bit for bit
     the numba kernel :mod:`simrunner.sensors.line_kernel`, without numba's ~0.5 s load)."""
