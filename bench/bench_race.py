@@ -10,10 +10,16 @@ what following the course costs.
    of a race lap on the kit's S oval (``--event race``: the lap and the stop after it)
    against a practice lap of the figure 8 measured in the same run (target: no lower), and
    the judge's own cost per update with the course followed and without (coverage rule).
+3. Hills: the same RTF of 2 laps on a track with a HILL against its flat twin (the HILL
+   replaced by a straight as long): the kit oval with a hill (``examples/kit_hill.txt``: the
+   hill is 40 % of the lap) and the thesis figure 8 with its first two straights made a
+   2 m hill (target >= 0.8 of the flat lap); and how high and steep the car went.
 """
 from __future__ import annotations
 
 import dataclasses
+import re
+import tempfile
 import time
 from pathlib import Path
 
@@ -63,6 +69,23 @@ def _judge_cost_us(track, course: bool) -> float:
     return (time.process_time() - c0) / len(poses) * 1e6
 
 
+def _hill_pairs(tmp: Path) -> list[tuple[str, Path, Path]]:
+    """``(name, layout with a hill, its flat twin)``: the kit oval and the figure 8."""
+    kit = (REPO / "examples" / "kit_hill.txt").read_text()
+    fig8 = (REPO / LAYOUTS[0]).read_text()
+    texts = {"kit oval": (kit, re.sub(r"(?m)^HILL.*$", "STRAIGHT length=1.44", kit)),
+             "figure 8": (fig8.replace("STRAIGHT\nSTRAIGHT\nTURN_LEFT", "HILL length=2.0\nTURN_LEFT", 1), fig8)}
+    out = []
+    for name, (hill, flat) in texts.items():
+        paths = []
+        for tag, text in (("hill", hill), ("flat", flat)):
+            path = tmp / f"{name.replace(' ', '_')}_{tag}.txt"
+            path.write_text(text)
+            paths.append(path)
+        out.append((name, *paths))
+    return out
+
+
 def main() -> None:
     print("counted laps (line follower, 2 laps): driven path / course length")
     for name, track in _tracks():
@@ -82,6 +105,14 @@ def main() -> None:
     for name, track in (("figure 8", fig8), ("kit S", oval)):
         print(f"judge update on {name}: {_judge_cost_us(track, True):.1f} us following the course, "
               f"{_judge_cost_us(track, False):.1f} us with the coverage rule")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, hill_path, flat_path in _hill_pairs(Path(tmp)):
+            hill, flat = load_track(hill_path), load_track(flat_path)
+            r = drive(FOLLOWER, track=hill, laps=2)
+            rtf_hill, rtf_flat = _best_rtf(hill, laps=2), _best_rtf(flat, laps=2)
+            print(f"hill on the {name}: {r.outcome}, up to {r.log.z_m.max() * 100:.1f} cm, pitch "
+                  f"{abs(r.log.pitch_rad).max() * 57.2958:.1f} deg; RTF {rtf_hill:.1f}x vs flat {rtf_flat:.1f}x "
+                  f"({rtf_hill / rtf_flat:.2f}; target >= 0.8)")
 
 
 if __name__ == "__main__":
