@@ -20,6 +20,7 @@ SEEDS = range(20)
 KIT_S = REPO / "examples" / "kit_S.txt"
 
 RUNS = [("race", EVENTS / "race.py", {"track": KIT_S}),
+        ("figure8", EVENTS / "figure8.py", {}),
         ("speed_limit", EVENTS / "speed_limit.py", {}),
         ("emergency_brake", EVENTS / "emergency_brake.py", {"car": EVENTS / "sensor_car.toml"})]
 

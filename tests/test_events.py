@@ -131,6 +131,14 @@ def test_the_speed_limit_example_passes():
         assert r.passed and r.points == 150, r.message
 
 
+def test_the_figure8_example_goes_straight_on_at_the_crossing_where_the_follower_turns():
+    r = drive(EVENTS_DIR / "figure8.py", event="figure8", seed=1)
+    assert r.passed and r.outcome == "finished" and r.laps_completed >= 10, r.message
+    follower = drive(FOLLOWER, event="figure8")
+    assert not follower.passed and follower.outcome == "off_course"
+    assert "turned at CROSSROADS" in follower.message
+
+
 def test_events_refuse_what_they_cannot_judge_in_one_line(tmp_path):
     res = CliRunner().invoke(cli, ["drive", str(FOLLOWER), "--event", "speed_limit", "--track", str(KIT_S)])
     assert res.exit_code == 2 and "needs a layout with SPEED_LIMIT_START" in res.output
