@@ -158,6 +158,69 @@ def test_c_controllers_read_the_range_sensor(tmp_path):
     assert r.outcome == "controller_error" and "no such range sensor" in r.message and "'rear'" in r.message
 
 
+LIDAR_CAR = REPO / "examples" / "events" / "lidar_car.toml"
+
+
+def test_a_lidar_scans_every_ray_and_places_the_cube():
+    """The lidar's scan: one reading per ray, inf where nothing is; the cube's near face where
+    it stands (angle and distance); held between ticks; get_distance is the nearest reading;
+    get_scan of a one-reading sensor and scan_angles of an unknown one are errors."""
+    from simrunner.run.controller import load_controller
+    from simrunner.run.runner import Run
+    from simrunner.run.settings import RunSettings
+
+    car = load_car(LIDAR_CAR)
+    track = load_track(KIT_S)
+    got = {}
+
+    def main(s):
+        got["empty"] = s.get_scan("lidar")
+        got["angles"] = s.scan_angles("lidar")
+        c = math.cos(track.start.yaw_rad)
+        run.place_solid(obstacle_cube("cube", track.start.x_m + 0.8 * c, track.start.y_m + 0.1, 0.0))
+        s.sleep(0.2)
+        got["scan"], got["again"] = s.get_scan("lidar"), s.get_scan("lidar")
+        got["nearest"] = s.get_distance("lidar")
+        s.get_scan("nothing")
+
+    run = Run(track, car, RunSettings(time_limit_s=5.0))
+    outcome, message, _ = run.execute(load_controller(main))
+    assert got["empty"].shape == (360,) and np.isinf(got["empty"]).all()
+    a = got["angles"]
+    assert a[0] == pytest.approx(-math.pi) and np.allclose(np.diff(a), 2 * math.pi / 360)
+    scan = got["scan"]
+    hit = np.isfinite(scan)
+    # the cube's near face: 0.8 - 0.1 - 0.17 = 0.53 m ahead of the lidar, from 0.0 to 0.2 m left
+    x, y = scan[hit] * np.cos(a[hit]), scan[hit] * np.sin(a[hit])
+    assert x.min() == pytest.approx(0.53, abs=0.02) and -0.01 < y.min() and y.max() < 0.21
+    assert 15 < hit.sum() < 40  # about 21 degrees of the circle
+    assert np.array_equal(scan, got["again"])  # the same tick
+    assert got["nearest"] == pytest.approx(float(scan[hit].min()))
+    assert outcome == "controller_error" and "no such range sensor" in message and "'nothing'" in message
+
+
+def test_get_scan_needs_a_lidar_and_c_reads_it(tmp_path):
+    r = drive(lambda s: s.get_scan("front"), track=KIT_S, car=SENSOR_CAR, time_limit_s=2.0)
+    assert r.outcome == "controller_error" and "get_scan is for kind" in r.message
+    src = tmp_path / "scan.c"
+    src.write_text(textwrap.dedent("""\
+        #include <math.h>
+        #include "spinner.h"
+        int main(void) {
+            double r[400], a[400];
+            int n = spinner_get_scan("lidar", r, 400);
+            int m = spinner_get_scan_angles("lidar", a, 400);
+            if (n != 360 || m != 360 || !isinf(r[0]) || fabs(a[0] + M_PI) > 1e-9) return 1;
+            if (spinner_get_scan("lidar", NULL, 0) != 360) return 2;
+            spinner_add_textf("rays %d first %.4f", n, a[0]);
+            spinner_get_scan("front", r, 400);
+            return 0;
+        }
+        """))
+    r = drive(str(src), track=KIT_S, car=LIDAR_CAR, time_limit_s=5.0)
+    assert r.outcome == "controller_error" and "no such range sensor" in r.message and "'front'" in r.message
+
+
 def test_the_line_follower_fails_the_object_events_and_the_examples_pass():
     for event in ("obstacle", "emergency_brake"):
         r = drive(FOLLOWER, event=event)

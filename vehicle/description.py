@@ -251,28 +251,32 @@ HC_SR04 = "HC-SR04 ultrasonic ranging module datasheet (Elecfreaks)"
 
 @dataclass(frozen=True)
 class RangeSensor:
-    """One range sensor on the car (``[range_sensors.NAME]``; read with ``get_distance(NAME)``,
-    docs/events.md): where it sits and looks (car body frame), its cone, range, rate and
-    noise. It measures the objects standing on the track (the rules' cube and block), not the
-    floor. Defaults: an HC-SR04 ultrasonic module at the front bumper, looking ahead."""
+    """One range sensor on the car (``[range_sensors.NAME]``; read with ``get_distance(NAME)``, a
+    lidar's whole scan with ``get_scan(NAME)``, docs/events.md): where it sits and looks (car body
+    frame), its cone, range, rate and noise. It measures the objects standing on the track (the
+    rules' cube and block), not the floor. Defaults: an HC-SR04 ultrasonic module at the front
+    bumper, looking ahead."""
 
-    kind: str = _choice("ultrasonic", ("ultrasonic", "infrared", "tof"),
-                        "What the sensor is (documents the numbers; every kind is a cone of rays).",
+    kind: str = _choice("ultrasonic", ("ultrasonic", "infrared", "tof", "lidar"),
+                        "What the sensor is: a cone of rays read as its nearest hit, or a planar 'lidar' "
+                        "whose every ray is a reading (get_scan; get_distance: the nearest).",
                         "the part on your car")
     x_m: float = _f(0.24, "Position of the sensor ahead of the rear axle.", "estimate: the default car's "
                     "front bumper", -2.0, 2.0)
     y_m: float = _f(0.0, "Position to the left of the car's centre line.", "estimate", -1.0, 1.0)
     z_m: float = _f(0.06, "Height of the sensor above the track.", "estimate", 0.0, 1.0)
     yaw_rad: float = _f(0.0, "Direction it looks, + = left of straight ahead.", "estimate", -3.1416, 3.1416)
-    fov_rad: float = _f(0.26, "Full angle of its cone across the car (rays spread over it).",
-                        HC_SR04 + ": measuring angle 15 deg", 0.0, 3.1)
-    rays: int = _f(7, "Rays across the cone; the reading is the nearest hit.", "ours", 1, 181)
+    fov_rad: float = _f(0.26, "Full angle of its cone across the car (rays spread over it, from its "
+                        "right edge to its left; 6.2832 = all round, no ray twice).",
+                        HC_SR04 + ": measuring angle 15 deg", 0.0, 6.2832)
+    rays: int = _f(7, "Rays across the cone; the reading is the nearest hit (a lidar: one reading each).",
+                   "ours", 1, 4096)
     min_range_m: float = _f(0.02, "Nearer objects read this.", HC_SR04 + ": 2 cm", 0.0, 10.0)
     max_range_m: float = _f(4.0, "Nothing nearer than this: the reading is inf.", HC_SR04 + ": 400 cm",
                             0.01, 100.0)
     rate_hz: float = _f(16.0, "Readings per second; a reading is held until the next.",
                         HC_SR04 + ": a measurement cycle of at least 60 ms", 0.1, 1000.0)
-    noise_std_m: float = _f(0.003, "Standard deviation of the reading's Gaussian noise.",
+    noise_std_m: float = _f(0.003, "Standard deviation of the reading's Gaussian noise (a lidar: each ray's).",
                             HC_SR04 + ": resolution 0.3 cm", 0.0, 1.0)
 
 

@@ -425,14 +425,34 @@ class Spinner:
         (:mod:`simrunner.sensors.ranging`), after one physics step."""
         if _get_ident() != self._owner:
             raise self._foreign("get_distance")
+        ranging = self._ranging()
+        self._clock.advance(1)
+        s = self._s
+        return ranging.read(str(name), self._clock.time_s, self._clock.pose(), s.camera.solids, s.surface_z_m)
+
+    def _ranging(self):
         s = self._s
         if s.ranging is None:
             from simrunner.sensors.ranging import RangeSensors
 
             s.ranging = RangeSensors(s.car.range_sensors, s.seed)
+        return s.ranging
+
+    def get_scan(self, name: str) -> np.ndarray:
+        """The scan of lidar ``name`` (a ``[range_sensors.NAME]`` with ``kind = "lidar"``): one
+        reading per ray (m, ``inf`` where nothing is in range), in the order of
+        :meth:`scan_angles`, after one physics step (:mod:`simrunner.sensors.ranging`)."""
+        if _get_ident() != self._owner:
+            raise self._foreign("get_scan")
+        ranging = self._ranging()
         self._clock.advance(1)
-        return s.ranging.read(str(name), self._clock.time_s, self._clock.pose(), s.camera.solids,
-                              s.surface_z_m)
+        s = self._s
+        return ranging.scan(str(name), self._clock.time_s, self._clock.pose(), s.camera.solids, s.surface_z_m)
+
+    def scan_angles(self, name: str) -> np.ndarray:
+        """The directions of range sensor ``name``'s rays: rad in the car frame, + = left of
+        straight ahead (from the car file; no time passes)."""
+        return self._ranging().angles(str(name))
 
     def get_position(self) -> tuple[float, float, float]:
         """World position ``(x, y, z)`` in metres of the car frame origin (rear-axle midpoint

@@ -46,7 +46,7 @@
 
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
-       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE };
+       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3 };
 
 static unsigned char out_buf[1 << 16];
@@ -415,6 +415,28 @@ double spinner_get_distance(const char *name) {
     if (name == NULL) misuse("spinner_get_distance(name=NULL): expected a range sensor's name");
     if (!finished) call(OP_DISTANCE, NULL, 0, name, strlen(name), &last_distance_m, sizeof last_distance_m);
     return last_distance_m;
+}
+
+static int get_scan(const char *call_name, unsigned char flag, const char *name, double *out, int max_rays) {
+    static double buf[4096];
+    static int last_n;
+    INIT();
+    if (name == NULL) misuse("%s(name=NULL): expected a lidar's name", call_name);
+    if (max_rays < 0 || (out == NULL && max_rays > 0))
+        misuse("%s(\"%s\", out=%p, max_rays=%d): expected room for max_rays >= 0 values", call_name, name,
+               (void *)out, max_rays);
+    if (!finished) last_n = (int)(call(OP_SCAN, &flag, 1, name, strlen(name), buf, sizeof buf) / sizeof(double));
+    int n = last_n < max_rays ? last_n : max_rays;
+    if (n > 0) memcpy(out, buf, (size_t)n * sizeof(double));
+    return last_n;
+}
+
+int spinner_get_scan(const char *name, double *ranges_m, int max_rays) {
+    return get_scan("spinner_get_scan", 0, name, ranges_m, max_rays);
+}
+
+int spinner_get_scan_angles(const char *name, double *angles_rad, int max_rays) {
+    return get_scan("spinner_get_scan_angles", 1, name, angles_rad, max_rays);
 }
 
 double spinner_get_time(void) {

@@ -68,6 +68,11 @@ double spinner_get_time(void);     /* simulated s */
 /* Range sensor NAME of the car file ([range_sensors.NAME]): metres to the nearest object on the
  * track, INFINITY when none is in range (docs/events.md). An unknown name is an error. */
 double spinner_get_distance(const char *name);
+/* Lidar NAME (kind = "lidar"): its scan, one reading per ray (m, INFINITY where nothing is in
+ * range), and the rays' directions (rad, car frame, + = left of ahead; no time passes). Both
+ * copy at most max_rays values and return the lidar's number of rays (at most 4096). */
+int spinner_get_scan(const char *name, double *ranges_m, int max_rays);
+int spinner_get_scan_angles(const char *name, double *angles_rad, int max_rays);
 
 /* Let `seconds` of simulated time pass (ceil(seconds / dt) steps, at least one). */
 void spinner_sleep(double seconds);

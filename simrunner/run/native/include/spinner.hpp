@@ -163,6 +163,16 @@ class Spinner {
     }
     double getTime() { return spinner_get_time(); }  // double: exact steps (the thesis: float)
     float getDistance(const std::string &name) { return float(spinner_get_distance(name.c_str())); }
+    std::vector<float> getScan(const std::string &name) {
+        std::vector<double> v(4096);
+        v.resize(size_t(spinner_get_scan(name.c_str(), v.data(), int(v.size()))));
+        return std::vector<float>(v.begin(), v.end());
+    }
+    std::vector<float> getScanAngles(const std::string &name) {
+        std::vector<double> v(4096);
+        v.resize(size_t(spinner_get_scan_angles(name.c_str(), v.data(), int(v.size()))));
+        return std::vector<float>(v.begin(), v.end());
+    }
     void setExposure(double seconds) { spinner_set_exposure(seconds); }
     double getExposure() { return spinner_get_exposure(); }
     void sleep(double seconds) { spinner_sleep(seconds); }
