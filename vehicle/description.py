@@ -280,6 +280,73 @@ class RangeSensor:
                             HC_SR04 + ": resolution 0.3 cm", 0.0, 1.0)
 
 
+FXAS21002C = "FXAS21002C gyroscope datasheet (NXP, rev. 2.1)"
+FXOS8700CQ = "FXOS8700CQ accelerometer datasheet (NXP, rev. 8)"
+
+
+@dataclass(frozen=True)
+class Encoders:
+    """Wheel encoders (``[encoders]``; read with ``get_encoder(WHEEL)``, docs/drive.md): which wheels
+    carry one, its lines per wheel revolution and how its pulses are counted. A car file
+    without the section has none."""
+
+    wheels: str = _choice("rear", ("rear", "front", "all"), "Which wheels carry an encoder.",
+                          "the rules list encoders and one Hall sensor per wheel (rules summary section 2); "
+                          "teams measure the driven rear wheels")
+    lines_per_rev: int = _f(512, "Lines (pulses of one channel) per revolution of the wheel (an encoder on "
+                            "the motor: its lines times the gear ratio).",
+                            "estimate: a 512-line incremental encoder; count your wheel's pulses", 1, 100000)
+    counting: str = _choice("x4", ("x4", "x2", "x1", "single"),
+                            "How the counter counts: quadrature decoding of both channels' edges (x4), of "
+                            "one channel's edges (x2) or of its rising edges (x1), signed; or one channel's "
+                            "rising edges without direction (single: a Hall sensor on a magnet ring).",
+                            "the quadrature decoder of the MCU's timer (FTM/TPM quadrature mode: x4)")
+
+
+@dataclass(frozen=True)
+class Imu:
+    """An inertial measurement unit (``[imu]``; read with ``get_gyro()`` and ``get_accel()``,
+    docs/drive.md): a 3-axis gyroscope and accelerometer in the car body frame (x ahead, y left,
+    z up), sampled at ``rate_hz`` (a reading is held until the next sample), each axis with its
+    white noise, a bias drawn once per device (``device_seed``) that then drifts as a random walk,
+    its range and its resolution. Defaults: NXP's FXAS21002C gyroscope (+-500 deg/s) and
+    FXOS8700CQ accelerometer (+-4 g). A car file without the section has none."""
+
+    x_m: float = _f(0.10, "Position ahead of the rear axle (the accelerometer feels the turn there).",
+                    "estimate: the main board between the axles", -1.0, 1.0)
+    y_m: float = _f(0.0, "Position to the left of the car's centre line.", "estimate", -0.5, 0.5)
+    z_m: float = _f(0.05, "Height above the ground.", "estimate", 0.0, 1.0)
+    rate_hz: float = _f(200.0, "Samples per second (output data rate).",
+                        FXAS21002C + ": ODR 12.5 to 800 Hz (ours: 200)", 1.0, 2000.0)
+    gyro_range_radps: float = _f(8.7266, "Largest angular rate it reads (+-).",
+                                 FXAS21002C + ": full scale +-250/500/1000/2000 deg/s (ours: 500)", 0.1, 100.0)
+    gyro_lsb_radps: float = _f(2.7271e-4, "Resolution: one count of its 16-bit output.",
+                               FXAS21002C + ": 0.015625 deg/s per LSB at +-500 deg/s", 0.0, 1.0)
+    gyro_noise_density_radps_rthz: float = _f(4.3633e-4, "White noise density; a sample's noise is "
+                                              "density x sqrt(rate_hz / 2).",
+                                              FXAS21002C + ": 0.025 deg/s/sqrt(Hz)", 0.0, 1.0)
+    gyro_bias_std_radps: float = _f(0.027, "Spread of the zero-rate offset between devices (each axis).",
+                                    "FXAS21002C zero-rate offset: typically +-50 LSB at +-2000 deg/s (+-3.1 "
+                                    "deg/s, NXP community answer on the FXAS21002C); ours: half of it as the "
+                                    "spread", 0.0, 1.0)
+    gyro_bias_walk_radps_rts: float = _f(1e-4, "Drift of the offset: a random walk growing by this x "
+                                         "sqrt(seconds).", "estimate: MEMS gyroscope bias instability", 0.0, 1.0)
+    accel_range_mps2: float = _f(39.227, "Largest acceleration it reads (+-).",
+                                 FXOS8700CQ + ": +-2/4/8 g (ours: 4 g)", 0.1, 1000.0)
+    accel_lsb_mps2: float = _f(4.7884e-3, "Resolution: one count of its 14-bit output.",
+                               FXOS8700CQ + ": 0.488 mg per LSB at +-4 g", 0.0, 10.0)
+    accel_noise_density_mps2_rthz: float = _f(1.2356e-3, "White noise density; a sample's noise is "
+                                              "density x sqrt(rate_hz / 2).",
+                                              FXOS8700CQ + ": 126 ug/sqrt(Hz)", 0.0, 10.0)
+    accel_bias_std_mps2: float = _f(0.1, "Spread of the zero-g offset between devices (each axis).",
+                                     "estimate: MEMS accelerometers of this class, tens of mg; measure it at rest",
+                                     0.0, 10.0)
+    accel_bias_walk_mps2_rts: float = _f(1e-3, "Drift of the offset: a random walk growing by this x "
+                                         "sqrt(seconds).", "estimate", 0.0, 10.0)
+    device_seed: int = _f(1, "This device: its offsets are drawn once from this seed (another device, "
+                          "another seed).", "ours", 0, 2 ** 31 - 1)
+
+
 @dataclass(frozen=True)
 class Effects:
     """Catalogue of effects the nominal model leaves out (issue 4). Neutral values give back
@@ -366,6 +433,8 @@ class CarDescription:
     effects: Effects = field(default_factory=Effects)
     pixy2: Pixy2 = field(default_factory=Pixy2)
     range_sensors: tuple = ()  # (name, RangeSensor) pairs: [range_sensors.NAME] tables
+    encoders: Encoders | None = None  # [encoders]: none without the section
+    imu: Imu | None = None            # [imu]: none without the section
 
     def __post_init__(self) -> None:
         problem = relation_problem(self)
@@ -395,7 +464,9 @@ class CarDescription:
         lines = ["# NXP Cup car description (units in field names; see docs/car.md).",
                  "# Every field is optional: a missing field takes its default.",
                  "", tomli_w.dumps({"name": self.name}).rstrip("\n")]
-        for section, cls in _SECTION_TYPES.items():
+        for section, cls in {**_SECTION_TYPES, **_OPTIONAL_SECTIONS}.items():
+            if getattr(self, section) is None:
+                continue
             lines += ["", f"[{section}]"]
             values = dataclasses.asdict(getattr(self, section))
             for f in fields(cls):
@@ -425,6 +496,7 @@ def _toml_value(value: Any) -> str:
 
 _SECTION_TYPES = {"chassis": Chassis, "wheels": Wheels, "steering": Steering, "drive": Drive,
                   "camera": Camera, "effects": Effects, "pixy2": Pixy2}
+_OPTIONAL_SECTIONS = {"encoders": Encoders, "imu": Imu}  # the car has the part only with the section
 
 
 def car_from_dict(data: dict[str, Any], source: str = "<car>", text: str | None = None) -> CarDescription:
@@ -452,11 +524,13 @@ def car_from_dict(data: dict[str, Any], source: str = "<car>", text: str | None 
             kwargs[key] = tuple((name, _section_from_dict(RangeSensor, f"range_sensors.{name}", table, source,
                                                           text)) for name, table in value.items())
             continue
-        cls = _SECTION_TYPES.get(key)
+        if key in _OPTIONAL_SECTIONS and value is None:  # to_dict's form of a part the car lacks
+            continue
+        cls = _SECTION_TYPES.get(key) or _OPTIONAL_SECTIONS.get(key)
         if cls is None:
             raise _error(source, text, key, None,
                          f"unknown section [{key}] (expected one of {', '.join(_SECTION_TYPES)}, "
-                         "range_sensors)")
+                         f"{', '.join(_OPTIONAL_SECTIONS)}, range_sensors)")
         if not isinstance(value, dict):
             raise _error(source, text, None, key, f"[{key}] must be a table")
         kwargs[key] = _section_from_dict(cls, key, value, source, text)
@@ -623,9 +697,11 @@ def markdown_doc() -> str:
     """The field table of docs/car.md."""
     lines = ["# Car description fields", "",
              "Generated by `python -m vehicle.description --doc`. Units are in the field names.", ""]
-    for section, cls in _SECTION_TYPES.items():
-        lines += [f"## [{section}]", "", "| field | default | range | meaning | source |",
-                  "| --- | --- | --- | --- | --- |"]
+    for section, cls in {**_SECTION_TYPES, **_OPTIONAL_SECTIONS}.items():
+        lines += [f"## [{section}]", ""]
+        if section in _OPTIONAL_SECTIONS:
+            lines += [(cls.__doc__ or "").split("\n\n")[0].replace("\n    ", " "), ""]
+        lines += ["| field | default | range | meaning | source |", "| --- | --- | --- | --- | --- |"]
         for f in fields(cls):
             m = f.metadata
             if m.get("choices"):

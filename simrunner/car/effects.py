@@ -364,6 +364,12 @@ class EffectSim:
     def pose3(self):
         return self.sim.pose3
 
+    def wheel_angles_rad(self) -> list[float]:
+        return self.sim.wheel_angles_rad()
+
+    def imu_truth(self, point_m):
+        return self.sim.imu_truth(point_m)
+
     @property
     def terrain(self):
         return self.sim.terrain

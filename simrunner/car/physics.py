@@ -688,6 +688,20 @@ class CarSim:
                              for cx, cy, cz in self._wheel_centres_m]
         return wc
 
+    def wheel_angles_rad(self) -> list[float]:
+        """FL, FR, RL, RR wheel angles turned since the car was built, rad (+ = forward)."""
+        q = self._read()[0]
+        return [q[i] for i in self._i_wheel]
+
+    def imu_truth(self, point_m) -> tuple[np.ndarray, np.ndarray]:
+        """What an ideal IMU at ``point_m`` (car body frame) reads: the chassis's angular velocity
+        (rad/s) and the specific force there (the point's acceleration minus gravity, m/s^2), both
+        in the car body frame (dart's accelerations of the last step, contacts included)."""
+        _, dq, rot = self._read()
+        r = np.array(rot)
+        accel = np.asarray(self._body.chassis.getLinearAcceleration(np.asarray(point_m, float)), float)
+        return r.T @ np.array(dq[0:3]), r.T @ (accel + np.array([0.0, 0.0, GRAVITY_MPS2]))
+
     def wheel_speeds_radps(self) -> np.ndarray:
         """``(4,)`` FL, FR, RL, RR wheel spin relative to their mounts, rad/s (+ = forward)."""
         dq = self._read()[1]

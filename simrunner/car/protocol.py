@@ -68,6 +68,8 @@ class CarModel(Protocol):
     def wheel_contacts(self) -> list[tuple[float, float]]: ...   # FL, FR, RL, RR world xy
     def wheel_contacts_xy(self) -> np.ndarray: ...              # the same, (4, 2)
     def wheel_speeds_radps(self) -> np.ndarray: ...
+    def wheel_angles_rad(self) -> list[float]: ...               # FL, FR, RL, RR turned since the start
+    def imu_truth(self, point_m: Any) -> tuple[np.ndarray, np.ndarray]: ...  # body-frame rates, specific force
 
     # -- state -------------------------------------------------------------------------
     def save_state(self) -> Any: ...

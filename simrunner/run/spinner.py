@@ -127,6 +127,8 @@ class Session:
         self.pixy2_tracker = None  # the Pixy2's line tracker (simrunner.run.pixy2), made on first use
         self.pixy2_frame: int | None = None  # the last frame the Pixy2 returned features of
         self.ranging = None  # the range sensors (simrunner.sensors.ranging), made on first use
+        self.encoders = None  # the wheel encoders (simrunner.sensors.imu), made on first use
+        self.imu = None       # the IMU (simrunner.sensors.imu), made on first use
         self.seed = 0        # the run's seed (the range sensors' noise)
         self.surface_z_m = 0.0
 
@@ -453,6 +455,46 @@ class Spinner:
         """The directions of range sensor ``name``'s rays: rad in the car frame, + = left of
         straight ahead (from the car file; no time passes)."""
         return self._ranging().angles(str(name))
+
+    def get_encoder(self, wheel) -> int:
+        """The count of the encoder on ``wheel`` (``"FL"``, ``"FR"``, ``"RL"``, ``"RR"`` or 0..3;
+        the car file's ``[encoders]``): whole counts since the start, signed for quadrature
+        decoding (:mod:`simrunner.sensors.imu`), after one physics step."""
+        if _get_ident() != self._owner:
+            raise self._foreign("get_encoder")
+        s = self._s
+        if s.encoders is None:
+            from simrunner.sensors.imu import Encoders
+
+            s.encoders = Encoders(s.car.encoders)
+        self._clock.advance(1)
+        return s.encoders.count(wheel, self._sim.wheel_angles_rad())
+
+    def _imu(self, call: str) -> np.ndarray:
+        if _get_ident() != self._owner:
+            raise self._foreign(call)
+        s = self._s
+        if s.imu is None:
+            from simrunner.sensors.imu import Imu
+
+            s.imu = Imu(s.car.imu, s.seed)
+        self._clock.advance(1)
+        spec, sim = s.car.imu, self._sim
+        point = None if spec is None else (spec.x_m, spec.y_m, spec.z_m)
+        return s.imu.sample(call, self._clock.time_s, lambda: sim.imu_truth(point))
+
+    def get_gyro(self) -> tuple[float, float, float]:
+        """The IMU's angular rates about the car's x, y, z axes (rad/s; z: + = turning left),
+        after one physics step: the car file's ``[imu]`` with its noise, bias, range and
+        resolution (:mod:`simrunner.sensors.imu`)."""
+        x, y, z = self._imu("get_gyro")[:3].tolist()
+        return x, y, z
+
+    def get_accel(self) -> tuple[float, float, float]:
+        """The IMU's accelerometer along the car's x, y, z axes (m/s^2; the specific force: at
+        rest +9.81 up), after one physics step (:mod:`simrunner.sensors.imu`)."""
+        x, y, z = self._imu("get_accel")[3:].tolist()
+        return x, y, z
 
     def get_position(self) -> tuple[float, float, float]:
         """World position ``(x, y, z)`` in metres of the car frame origin (rear-axle midpoint

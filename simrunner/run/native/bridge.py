@@ -44,7 +44,7 @@ from simrunner.run.native.build import NativeProgram
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
-    OP_PIXY_PROG, OP_DISTANCE, OP_SCAN = range(1, 19)
+    OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU = range(1, 21)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE = 0, 1, 2, 3
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
@@ -306,6 +306,10 @@ class _Session:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_exposure()))
         elif op == OP_DISTANCE:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_distance(payload.decode("utf-8", "replace"))))
+        elif op == OP_ENCODER:  # the wheel's index (int32) -> its count (int64)
+            reply(_HDR.pack(ST_OK, 8) + struct.pack("<q", s.get_encoder(struct.unpack("<i", payload[:4])[0])))
+        elif op == OP_IMU:  # a flag byte (0: the gyroscope, 1: the accelerometer) -> 3 doubles
+            reply(_HDR.pack(ST_OK, 24) + _3D.pack(*(s.get_accel() if payload[:1] == b"\x01" else s.get_gyro())))
         elif op == OP_SCAN:  # a flag byte (0: the readings, 1: the rays' angles), the name
             name = payload[1:].decode("utf-8", "replace")
             values = np.ascontiguousarray(s.scan_angles(name) if payload[:1] == b"\x01" else s.get_scan(name),

@@ -46,7 +46,7 @@
 
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
-       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN };
+       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3 };
 
 static unsigned char out_buf[1 << 16];
@@ -438,6 +438,28 @@ int spinner_get_scan(const char *name, double *ranges_m, int max_rays) {
 int spinner_get_scan_angles(const char *name, double *angles_rad, int max_rays) {
     return get_scan("spinner_get_scan_angles", 1, name, angles_rad, max_rays);
 }
+
+long long spinner_get_encoder(int wheel) {
+    static long long last[4];
+    INIT();
+    if (wheel < 0 || wheel > 3)
+        misuse("spinner_get_encoder(%d): expected a wheel, SPINNER_WHEEL_FL (0) .. SPINNER_WHEEL_RR (3)", wheel);
+    int32_t w = wheel;
+    if (!finished) call(OP_ENCODER, &w, sizeof w, NULL, 0, &last[wheel], sizeof last[wheel]);
+    return last[wheel];
+}
+
+static void get_imu(unsigned char flag, double *x, double *y, double *z) {
+    static double last[2][3];
+    INIT();
+    if (!finished) call(OP_IMU, &flag, 1, NULL, 0, last[flag], sizeof last[flag]);
+    if (x) *x = last[flag][0];
+    if (y) *y = last[flag][1];
+    if (z) *z = last[flag][2];
+}
+
+void spinner_get_gyro(double *x_radps, double *y_radps, double *z_radps) { get_imu(0, x_radps, y_radps, z_radps); }
+void spinner_get_accel(double *x_mps2, double *y_mps2, double *z_mps2) { get_imu(1, x_mps2, y_mps2, z_mps2); }
 
 double spinner_get_time(void) {
     INIT();

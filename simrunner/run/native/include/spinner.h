@@ -73,6 +73,14 @@ double spinner_get_distance(const char *name);
  * copy at most max_rays values and return the lidar's number of rays (at most 4096). */
 int spinner_get_scan(const char *name, double *ranges_m, int max_rays);
 int spinner_get_scan_angles(const char *name, double *angles_rad, int max_rays);
+/* Wheel encoder counts since the start (the car file's [encoders]; signed for quadrature
+ * decoding), and the IMU's gyroscope (rad/s) and accelerometer (m/s^2, at rest +9.81 up) along
+ * the car's x (ahead), y (left), z (up) axes ([imu]). A wheel without an encoder, or a car
+ * without an IMU, is an error. Any pointer may be NULL. */
+enum { SPINNER_WHEEL_FL = 0, SPINNER_WHEEL_FR = 1, SPINNER_WHEEL_RL = 2, SPINNER_WHEEL_RR = 3 };
+long long spinner_get_encoder(int wheel);
+void spinner_get_gyro(double *x_radps, double *y_radps, double *z_radps);
+void spinner_get_accel(double *x_mps2, double *y_mps2, double *z_mps2);
 
 /* Let `seconds` of simulated time pass (ceil(seconds / dt) steps, at least one). */
 void spinner_sleep(double seconds);

@@ -163,6 +163,17 @@ class Spinner {
     }
     double getTime() { return spinner_get_time(); }  // double: exact steps (the thesis: float)
     float getDistance(const std::string &name) { return float(spinner_get_distance(name.c_str())); }
+    long long getEncoder(int wheel) { return spinner_get_encoder(wheel); }
+    std::tuple<float, float, float> getGyro() {
+        double x, y, z;
+        spinner_get_gyro(&x, &y, &z);
+        return {float(x), float(y), float(z)};
+    }
+    std::tuple<float, float, float> getAccel() {
+        double x, y, z;
+        spinner_get_accel(&x, &y, &z);
+        return {float(x), float(y), float(z)};
+    }
     std::vector<float> getScan(const std::string &name) {
         std::vector<double> v(4096);
         v.resize(size_t(spinner_get_scan(name.c_str(), v.data(), int(v.size()))));

@@ -1,0 +1,128 @@
+"""Wheel encoders and an IMU, as the car file's ``[encoders]`` and ``[imu]`` describe them
+(:class:`vehicle.description.Encoders`, :class:`vehicle.description.Imu`).
+
+**Encoders.** A wheel's encoder counts its rotation (the wheel joint's angle since the start,
+``CarSim.wheel_angles_rad``): ``floor(angle / 2 pi x lines x m)`` with ``m`` = 4, 2 or 1 for
+quadrature decoding ``x4``, ``x2``, ``x1`` (signed: backwards counts down); ``single`` (one
+channel, a Hall sensor) counts rising edges whichever way the wheel turns, from the angle it
+turned between two reads (a direction change between reads is not seen). No noise: a counter
+counts.
+
+**IMU.** The gyroscope reads the chassis's angular velocity and the accelerometer the specific
+force at the IMU's place (the point's acceleration minus gravity: at rest it reads +9.81 m/s^2
+up), both in the car body frame (x ahead, y left, z up; docs/DESIGN.md). Each axis adds
+- a bias: drawn once per device from ``device_seed`` (``*_bias_std``), plus a random walk in
+  time (``*_bias_walk`` x sqrt(s)) from the run's seed;
+- white noise: ``*_noise_density`` x sqrt(rate_hz / 2) per sample, from the run's seed and the
+  sample's number (so a reading depends on when it is taken, not on how often);
+then rounds to ``*_lsb`` and clips to +-``*_range``. It samples at ``rate_hz``: the first read in
+a sample period takes the car's state then, later reads in the same period get the same values.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from simrunner.errors import CommandError
+
+WHEELS = ("FL", "FR", "RL", "RR")  # the order of CarSim's wheel read-outs
+ON = {"rear": ("RL", "RR"), "front": ("FL", "FR"), "all": WHEELS}
+PER_LINE = {"x4": 4, "x2": 2, "x1": 1, "single": 1}
+GRAVITY_MPS2 = 9.81
+_WALK_BLOCK = 1024  # random-walk increments are drawn in blocks of this many samples
+
+
+def wheel_index(wheel, call: str) -> int:
+    """``"FL"``..``"RR"`` (any case) or 0..3 -> the wheel's index; else a CommandError."""
+    if isinstance(wheel, str) and wheel.upper() in WHEELS:
+        return WHEELS.index(wheel.upper())
+    if isinstance(wheel, (int, np.integer)) and not isinstance(wheel, bool) and 0 <= int(wheel) < 4:
+        return int(wheel)
+    raise CommandError(f"{call}({wheel!r}): expected a wheel, one of {', '.join(WHEELS)} (or 0..3)")
+
+
+class Encoders:
+    """The car's wheel encoders (``spec``: a ``vehicle.description.Encoders`` or None)."""
+
+    def __init__(self, spec):
+        self.spec = spec
+        self._counts_per_rad = 0.0 if spec is None else spec.lines_per_rev * PER_LINE[spec.counting] / (2 * math.pi)
+        self._turned = [0.0] * 4  # single: the angle turned so far (either way)
+        self._last = None         # single: the angles at the last read
+
+    def count(self, wheel, angles_rad) -> int:
+        """The count of ``wheel``'s encoder, the wheels at ``angles_rad`` (FL, FR, RL, RR)."""
+        i = wheel_index(wheel, "get_encoder")
+        spec = self.spec
+        if spec is None:
+            raise CommandError(f"get_encoder({wheel!r}): the car has no encoders (add [encoders] to the car file)")
+        if WHEELS[i] not in ON[spec.wheels]:
+            raise CommandError(f"get_encoder({wheel!r}): the car's encoders are on its {spec.wheels} wheels "
+                               f"({', '.join(ON[spec.wheels])})")
+        if spec.counting != "single":
+            return math.floor(angles_rad[i] * self._counts_per_rad)
+        last = self._last if self._last is not None else [0.0] * 4
+        self._turned = [t + abs(a - b) for t, a, b in zip(self._turned, angles_rad, last)]
+        self._last = list(angles_rad)
+        return math.floor(self._turned[i] * self._counts_per_rad)
+
+
+class Imu:
+    """The car's IMU (``spec``: a ``vehicle.description.Imu`` or None) in a run with ``seed``."""
+
+    def __init__(self, spec, seed: int):
+        self.spec = spec
+        self.seed = int(seed)
+        self._held: tuple[int, np.ndarray] | None = None
+        self._walk: list[np.ndarray] = []  # cumulative random walk at the end of each block
+        self._block: tuple[int, np.ndarray] | None = None  # the current block's running sums
+        if spec is None:
+            return
+        dev = np.random.default_rng([int(spec.device_seed), 0x42494153])  # this device's offsets
+        stds = np.array([spec.gyro_bias_std_radps] * 3 + [spec.accel_bias_std_mps2] * 3)
+        self._bias = dev.standard_normal(6) * stds
+        rate = float(spec.rate_hz)
+        self._noise = np.array([spec.gyro_noise_density_radps_rthz] * 3
+                               + [spec.accel_noise_density_mps2_rthz] * 3) * math.sqrt(rate / 2.0)
+        self._step_walk = np.array([spec.gyro_bias_walk_radps_rts] * 3
+                                   + [spec.accel_bias_walk_mps2_rts] * 3) / math.sqrt(rate)
+        self._lsb = np.array([spec.gyro_lsb_radps] * 3 + [spec.accel_lsb_mps2] * 3)
+        self._range = np.array([spec.gyro_range_radps] * 3 + [spec.accel_range_mps2] * 3)
+
+    def sample(self, call: str, t_s: float, truth) -> np.ndarray:
+        """``(6,)``: gyro x, y, z (rad/s), accelerometer x, y, z (m/s^2) of the sample at ``t_s``;
+        ``truth()`` gives the car's ``(angular velocity (3,), specific force (3,))`` in the body
+        frame, asked only at a new sample."""
+        spec = self.spec
+        if spec is None:
+            raise CommandError(f"{call}(): the car has no IMU (add [imu] to the car file)")
+        k = math.floor(t_s * spec.rate_hz + 1e-9)
+        if self._held is not None and self._held[0] == k:
+            return self._held[1]
+        gyro, force = truth()
+        value = np.concatenate([np.asarray(gyro, float), np.asarray(force, float)])
+        noise = np.random.default_rng([self.seed, 0x494D55, k]).standard_normal(6)
+        value = value + self._bias + self._walk_at(k) + self._noise * noise
+        value = np.where(self._lsb > 0, np.round(value / np.where(self._lsb > 0, self._lsb, 1.0)) * self._lsb, value)
+        value = np.clip(value, -self._range, self._range)
+        self._held = (k, value)
+        return value
+
+    def _walk_at(self, k: int) -> np.ndarray:
+        """The bias random walk at sample ``k`` (the sum of the increments of samples 1..k)."""
+        if k <= 0 or not self._step_walk.any():
+            return np.zeros(6)
+        block, within = divmod(k - 1, _WALK_BLOCK)
+        while len(self._walk) < block:
+            b = len(self._walk)
+            steps = self._increments(b)
+            self._walk.append((self._walk[-1] if self._walk else 0.0) + steps.sum(axis=0))
+        base = self._walk[block - 1] if block else np.zeros(6)
+        if self._block is None or self._block[0] != block:
+            self._block = (block, np.cumsum(self._increments(block), axis=0))
+        return base + self._block[1][within]
+
+    def _increments(self, block: int) -> np.ndarray:
+        steps = np.random.default_rng([self.seed, 0x57414C4B, block]).standard_normal((_WALK_BLOCK, 6))
+        return steps * self._step_walk

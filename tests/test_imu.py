@@ -1,0 +1,139 @@
+"""Wheel encoders and the IMU (issue 50 item 2): the car file's [encoders] and [imu], their
+models (simrunner.sensors.imu) and the Spinner's get_encoder / get_gyro / get_accel in Python
+and C."""
+from __future__ import annotations
+
+import dataclasses
+import math
+import textwrap
+import tomllib
+
+import numpy as np
+import pytest
+
+from simrunner.errors import CommandError
+from simrunner.run.runner import drive
+from simrunner.sensors.imu import Encoders, Imu
+from vehicle.description import CarDescription, CarDescriptionError, Imu as ImuSpec, car_from_dict
+
+SENSORS = car_from_dict(tomllib.loads("[encoders]\n[imu]\n"))
+R = CarDescription().wheels.radius_m
+
+
+def test_the_car_file_declares_encoders_and_an_imu():
+    assert CarDescription().encoders is None and CarDescription().imu is None  # the default car has none
+    assert SENSORS.encoders.lines_per_rev == 512 and SENSORS.encoders.counting == "x4"
+    assert SENSORS.imu.gyro_noise_density_radps_rthz == pytest.approx(math.radians(0.025), rel=1e-3)
+    assert car_from_dict(tomllib.loads(SENSORS.to_toml())) == SENSORS
+    assert car_from_dict(SENSORS.to_dict()) == SENSORS
+    assert "[encoders]" not in CarDescription().to_toml()
+    text = "[encoders]\ncounting = \"x3\"\n"
+    with pytest.raises(CarDescriptionError, match=r"car.toml:2: encoders.counting = 'x3': expected one of"):
+        car_from_dict(tomllib.loads(text), "car.toml", text)
+    text = "[imu]\nrate_hz = 0\n"
+    with pytest.raises(CarDescriptionError, match=r"car.toml:2: imu.rate_hz = 0: expected a value in"):
+        car_from_dict(tomllib.loads(text), "car.toml", text)
+
+
+@pytest.mark.parametrize("counting, per_line", [("x4", 4), ("x2", 2), ("x1", 1)])
+def test_quadrature_counts_are_signed_whole_counts(counting, per_line):
+    enc = Encoders(dataclasses.replace(SENSORS.encoders, counting=counting))
+    turn = 2 * math.pi
+    assert enc.count("RL", [0, 0, turn, -turn]) == 512 * per_line
+    assert enc.count("RR", [0, 0, turn, -turn]) == -512 * per_line
+    assert enc.count(2, [0, 0, 0.5 * turn / (512 * per_line), 0]) == 0  # half a count: not yet one
+
+
+def test_a_single_channel_counts_up_whichever_way_the_wheel_turns():
+    enc = Encoders(dataclasses.replace(SENSORS.encoders, counting="single", lines_per_rev=10))
+    turn = 2 * math.pi
+    assert enc.count("RL", [0, 0, turn, 0]) == 10
+    assert enc.count("RL", [0, 0, 0.0, 0]) == 20  # back again: still counting up
+
+
+def test_encoder_misuse_is_the_controllers_error():
+    enc = Encoders(SENSORS.encoders)
+    with pytest.raises(CommandError, match=r"get_encoder\('FL'\): the car's encoders are on its rear wheels"):
+        enc.count("FL", [0] * 4)
+    with pytest.raises(CommandError, match=r"expected a wheel, one of FL, FR, RL, RR"):
+        enc.count("left", [0] * 4)
+    with pytest.raises(CommandError, match=r"the car has no encoders \(add \[encoders\]"):
+        Encoders(None).count("RL", [0] * 4)
+    with pytest.raises(CommandError, match=r"get_gyro\(\): the car has no IMU"):
+        Imu(None, 0).sample("get_gyro", 0.0, lambda: None)
+
+
+def test_the_imu_adds_noise_bias_and_drift_rounds_and_clips():
+    spec = SENSORS.imu
+    truth = lambda: (np.zeros(3), np.array([0.0, 0.0, 9.81]))  # noqa: E731  at rest
+    imu = Imu(spec, seed=3)
+    samples = np.array([imu.sample("get_gyro", k / spec.rate_hz, truth) for k in range(2000)])
+    noise = samples.std(axis=0)
+    want = spec.gyro_noise_density_radps_rthz * math.sqrt(spec.rate_hz / 2)
+    assert noise[:3] == pytest.approx([want] * 3, rel=0.15)
+    want_a = spec.accel_noise_density_mps2_rthz * math.sqrt(spec.rate_hz / 2)
+    assert noise[3:] == pytest.approx([want_a] * 3, rel=0.25)  # a few counts of 4.8 mm/s^2
+    assert np.allclose(np.round(samples[:, 3:] / spec.accel_lsb_mps2) * spec.accel_lsb_mps2, samples[:, 3:])
+    bias = samples.mean(axis=0) - [0, 0, 0, 0, 0, 9.81]
+    assert 0.001 < abs(bias[2]) < 4 * spec.gyro_bias_std_radps  # this device's offset
+    again = Imu(spec, seed=4)  # another run, the same device: the same offsets, other noise
+    other = np.array([again.sample("get_gyro", k / spec.rate_hz, truth) for k in range(2000)])
+    assert np.allclose(other.mean(axis=0), samples.mean(axis=0), atol=0.01)
+    assert not np.array_equal(other, samples)
+    # a reading depends on when it is taken, not on what was asked before; held within a sample
+    fresh = Imu(spec, seed=3)
+    assert np.array_equal(fresh.sample("get_gyro", 1999 / spec.rate_hz, truth), samples[-1])
+    calls = []
+    held = Imu(spec, seed=3)
+    first = held.sample("get_gyro", 0.0, lambda: calls.append(1) or truth())
+    assert np.array_equal(held.sample("get_accel", 0.4 / spec.rate_hz, lambda: calls.append(1) or truth()), first)
+    assert calls == [1]
+    spun = Imu(dataclasses.replace(spec, gyro_range_radps=1.0), seed=3)
+    assert spun.sample("get_gyro", 0.0, lambda: (np.array([0, 0, 5.0]), np.zeros(3)))[2] == 1.0
+
+
+def test_a_run_reads_its_wheels_and_turn():
+    got = []
+
+    def main(s):
+        s.set_speed_and_servo(1.0, 0.0)
+        s.sleep(1.5)
+        got.append((s.get_encoder("RL"), s.get_encoder("RR"), s.get_position()[0], s.get_accel()))
+        s.set_speed_and_servo(1.0, 0.3)
+        s.sleep(1.5)
+        got.append((s.get_gyro(), s.get_accel(), s.get_speed()))
+
+    r = drive(main, track="floor", car=SENSORS, time_limit_s=5)
+    assert r.outcome in ("finished", "controller_returned", "returned"), r.message
+    (rl, rr, x, accel), (gyro, accel_turn, v) = got
+    counts_per_m = 2048 / (2 * math.pi * R)
+    assert rl == pytest.approx(x * counts_per_m, rel=0.02) and rr == pytest.approx(rl, rel=0.01)
+    assert accel[2] == pytest.approx(9.81, abs=0.4) and abs(accel[0]) < 0.4  # steady speed, flat floor
+    yaw_rate = v * math.tan(0.3) / CarDescription().chassis.wheelbase_m
+    assert gyro[2] == pytest.approx(yaw_rate, rel=0.1)
+    assert accel_turn[1] == pytest.approx(v * yaw_rate, rel=0.15)  # to the left, into the turn
+
+
+def test_c_reads_the_encoders_and_the_imu(tmp_path):
+    car = tmp_path / "car.toml"
+    car.write_text("[encoders]\n[imu]\n")
+    src = tmp_path / "probe.c"
+    src.write_text(textwrap.dedent("""\
+        #include <math.h>
+        #include "spinner.h"
+        int main(void) {
+            double gx, gy, gz, ax, ay, az;
+            spinner_set_speed_and_servo(1.0, 0.0);
+            spinner_sleep(1.0);
+            long long rl = spinner_get_encoder(SPINNER_WHEEL_RL);
+            spinner_get_gyro(&gx, &gy, &gz);
+            spinner_get_accel(&ax, &ay, NULL);
+            spinner_get_accel(NULL, NULL, &az);
+            if (rl < 5000 || fabs(gz) > 0.2 || fabs(az - 9.81) > 0.5) return 1;
+            spinner_add_textf("rl %lld", rl);
+            spinner_get_encoder(SPINNER_WHEEL_FL);
+            return 0;
+        }
+        """))
+    r = drive(str(src), track="floor", car=car, time_limit_s=5.0)
+    assert r.outcome == "controller_error" and "on its rear wheels" in r.message, r.message
