@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from simrunner.cli import main as cli
 from simrunner.run.runner import default_track, drive
-from simrunner.telemetry.log import COLUMN_NAMES, LIFT_COLUMNS, read_log
+from simrunner.telemetry.log import COLUMN_NAMES, EXTRA_COLUMNS, read_log
 from vehicle.description import CarDescription
 
 REPO = Path(__file__).resolve().parents[1]
@@ -47,8 +47,8 @@ def test_line_follower_completes_a_lap_of_the_default_track(tmp_path):
         assert key in summary
     assert summary["outcome"] == "finished" and summary["seed"] == 0
     data = read_log(tmp_path / "t.csv")
-    # every column of the schema but a hill run's height and pitch (a flat track)
-    assert data.names == tuple(n for n in COLUMN_NAMES if n not in LIFT_COLUMNS)
+    # every column of the schema but the extra ones (a flat track, a car without encoders or IMU)
+    assert data.names == tuple(n for n in COLUMN_NAMES if n not in EXTRA_COLUMNS)
     assert len(data) == len(r.log)
     np.testing.assert_allclose(data.x_m, r.log.x_m, rtol=0, atol=5e-7)  # the file: the log, %.6f
     assert data.t_s[1] - data.t_s[0] == pytest.approx(0.02)  # one row per camera frame

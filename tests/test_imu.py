@@ -137,3 +137,29 @@ def test_c_reads_the_encoders_and_the_imu(tmp_path):
         """))
     r = drive(str(src), track="floor", car=car, time_limit_s=5.0)
     assert r.outcome == "controller_error" and "on its rear wheels" in r.message, r.message
+
+
+def test_the_run_log_records_the_encoders_and_the_imu_without_changing_the_readings(tmp_path):
+    def run(csv):
+        got = []
+
+        def main(s):
+            s.set_speed_and_servo(1.0, 0.2)
+            for _ in range(30):
+                s.get_image(s.line_row)
+                got.append((s.get_encoder("RL"), s.get_gyro(), s.get_accel()))
+
+        r = drive(main, track="floor", car=SENSORS, time_limit_s=5, csv=csv)
+        return r, got
+
+    logged, read_logged = run(tmp_path / "s.csv")
+    plain, read_plain = run(None)
+    assert read_logged == read_plain  # the log's copies do not take the controller's samples
+    header = (tmp_path / "s.csv").read_text().splitlines()[1].split(",")
+    assert header[-9:] == ["enc_rl", "enc_rr", "gyro_x_radps", "gyro_y_radps", "gyro_z_radps",
+                           "accel_x_mps2", "accel_y_mps2", "accel_z_mps2", "data_text"]
+    log = logged.log
+    assert log.enc_fl is None and log.enc_rl[-1] > log.enc_rl[5] > 0
+    turning = log.yaw_rate_radps[10:] > 0.5
+    assert np.allclose(log.gyro_z_radps[10:][turning], log.yaw_rate_radps[10:][turning], atol=0.15)
+    assert np.abs(log.accel_z_mps2 - 9.81).max() < 0.5

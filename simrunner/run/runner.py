@@ -58,6 +58,44 @@ def default_track() -> Path:
     return _DATA_DIR / DEFAULT_TRACK_NAME
 
 
+# -- the run log's extra columns -------------------------------------------------------------
+def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int):
+    """The run log's columns beyond the base ones (``simrunner.telemetry.log.EXTRA_COLUMNS``) and
+    a function ``(pose, t_s) -> their values``: the car's height and pitch on a track with hills
+    (``pose`` is then a ``Pose3``), its encoders' counts and its IMU's sample at each frame.
+    The log's encoders and IMU are copies of the car's own (the same device, seed and noise), so
+    that logging them does not change what the controller reads. ``((), None)`` without any."""
+    from simrunner.telemetry.log import IMU_COLUMNS, LIFT_COLUMNS
+
+    names: list[str] = []
+    parts: list = []
+    if track.terrain:
+        names += LIFT_COLUMNS
+        parts.append(lambda pose, t: (pose.z_m, pose.pitch_rad))
+    if car.encoders is not None or car.imu is not None:
+        from simrunner.sensors.imu import ON, Encoders, Imu
+
+        if car.encoders is not None:
+            encoders, wheels = Encoders(car.encoders), ON[car.encoders.wheels]
+            names += [f"enc_{w.lower()}" for w in wheels]
+
+            def counts(pose, t):
+                angles = sim.wheel_angles_rad()
+                return tuple(encoders.count(w, angles) for w in wheels)
+
+            parts.append(counts)
+        if car.imu is not None:
+            imu, spec = Imu(car.imu, seed), car.imu
+            names += IMU_COLUMNS
+            point = (spec.x_m, spec.y_m, spec.z_m)
+            parts.append(lambda pose, t: tuple(imu.sample("log", t, lambda: sim.imu_truth(point)).tolist()))
+    if not parts:
+        return (), None
+    if len(parts) == 1:
+        return tuple(names), parts[0]
+    return tuple(names), lambda pose, t: tuple(v for part in parts for v in part(pose, t))
+
+
 # -- per-frame work -----------------------------------------------------------------------
 class FrameWork:
     """The clock's ``on_frame``: judge, run-log row, video frame; returns how the run ends
@@ -77,7 +115,7 @@ class FrameWork:
         self.events: list = []
         self._contacts = sim.wheel_contacts
         self._record = recorder.frame
-        self._lifted = recorder.lifted
+        self.extra = None  # (pose, t) -> the values of the recorder's extra columns (Run sets it)
         self.judged = judged  # False on a free floor: no laps, no off track
         self.keep_driving = keep_driving  # leaving the track is recorded, does not end the run
         self.off_track_wheels = off_track_wheels
@@ -105,9 +143,9 @@ class FrameWork:
         else:
             off, lap = False, 0
         speed, steer = sim.speed_mps, sim.steer_rad
-        if self._lifted:  # a track with hills: pose is a Pose3 (its height and pitch are logged)
+        if self.extra is not None:  # hills, encoders, an IMU (extra_columns)
             self._record(k, t, pose.x_m, pose.y_m, pose.yaw_rad, speed, steer, sim.yaw_rate_radps,
-                         cmd, row_cmd, lap, off, pose.z_m, pose.pitch_rad)
+                         cmd, row_cmd, lap, off, *self.extra(pose, t))
         else:
             self._record(k, t, pose.x_m, pose.y_m, pose.yaw_rad, speed, steer, sim.yaw_rate_radps,
                          cmd, row_cmd, lap, off)
@@ -195,12 +233,13 @@ class Run:
         supervision = current_supervision()
         if csv_path is None and supervision is not None:  # the supervisor's copy of the log
             csv_path = supervision.csv_path
+        extra, extra_values = extra_columns(track, car, self.sim, settings.seed)
         if csv_path is not None:  # written as the run goes (simrunner.telemetry.stream)
             from simrunner.telemetry.stream import CsvStream
 
-            self.csv = CsvStream(csv_path, lifted=bool(track.terrain))
+            self.csv = CsvStream(csv_path, extra=extra)
         self.recorder = RunRecorder(record_text=record_text or video_path is not None
-                                    or csv_path is not None, sink=self.csv, lifted=bool(track.terrain))
+                                    or csv_path is not None, sink=self.csv, extra=extra)
         self.video = None
         if video_path is not None:
             from simrunner.reports.video import VideoRecorder
@@ -215,6 +254,7 @@ class Run:
         self.frames = FrameWork(self.sim, self.judge, self.recorder, settings.time_limit_s, self.video,
                                 judged=track.judged, keep_driving=settings.keep_driving,
                                 off_track_wheels=settings.off_track_wheels, monitor=self.monitor)
+        self.frames.extra = extra_values
         self.clock = LockstepClock(self.sim, dt_s=settings.dt_s,
                                    frame_period_s=car.camera.frame_period_s(), on_frame=self.frames)
         self.session = Session(clock=self.clock, camera=self.camera, car=car,

@@ -60,7 +60,7 @@ FORMAT_LINE = f"# nxpcup-sim run log, format {FORMAT_VERSION}"
 # No car reaches these (a position of a planet's size, a speed or turn rate of a rifle bullet
 # in a minute's log); a value beyond one is a unit or mapping error, read before anything
 # squares it into an overflow. Positions allow UTM coordinates (northing to 1e7 m).
-MAGNITUDE_LIMITS = {"m": 1e8, "m/s": 1e4, "rad": 1e5, "rad/s": 1e4}
+MAGNITUDE_LIMITS = {"m": 1e8, "m/s": 1e4, "rad": 1e5, "rad/s": 1e4, "m/s^2": 1e5}
 TEXT_SEPARATOR = " | "  # between the add_data text lines of one row
 
 
@@ -108,6 +108,13 @@ COLUMNS: tuple[Column, ...] = (
     Column("z_m", "m", "float", "%.6f", "height of the car frame origin above the track's surface "
                                         "(runs on tracks with hills)"),
     Column("pitch_rad", "rad", "float", "%.6f", "pitch of the car, + = nose down (runs on tracks with hills)"),
+    *(Column(f"enc_{w}", "count", "int", "%d", f"count of the {w.upper()} wheel's encoder at the frame "
+             "(runs of a car file with [encoders], its wheels)") for w in ("fl", "fr", "rl", "rr")),
+    *(Column(f"gyro_{a}_radps", "rad/s", "float", "%.6f", f"the IMU's gyroscope about the car's {a} axis, sampled "
+             "at the frame (runs of a car file with [imu])") for a in "xyz"),
+    *(Column(f"accel_{a}_mps2", "m/s^2", "float", "%.6f", f"the IMU's accelerometer along the car's {a} axis "
+             "(specific force: +9.81 up at rest), sampled at the frame (runs of a car file with [imu])")
+      for a in "xyz"),
     Column("data_text", "-", "text", "%s", "the controller's add_data text of this frame"),
 )
 COLUMN_NAMES: tuple[str, ...] = tuple(c.name for c in COLUMNS)
@@ -179,6 +186,16 @@ class RunLog:
     off_track: np.ndarray | None = None
     z_m: np.ndarray | None = None
     pitch_rad: np.ndarray | None = None
+    enc_fl: np.ndarray | None = None
+    enc_fr: np.ndarray | None = None
+    enc_rl: np.ndarray | None = None
+    enc_rr: np.ndarray | None = None
+    gyro_x_radps: np.ndarray | None = None
+    gyro_y_radps: np.ndarray | None = None
+    gyro_z_radps: np.ndarray | None = None
+    accel_x_mps2: np.ndarray | None = None
+    accel_y_mps2: np.ndarray | None = None
+    accel_z_mps2: np.ndarray | None = None
     data_text: tuple[str, ...] | None = None
     source: str = "<log>"
     command_steps: CommandSteps | None = None
@@ -567,7 +584,10 @@ def _check_format_line(line: str, source: str, lineno: int) -> None:
 # -- recording a run -------------------------------------------------------------------------
 KEEP_ROWS = 1 << 17  # rows a RunRecorder keeps in memory (43 min at 50 fps); then every 2nd, 4th, ...
 _N_RUN_COLUMNS = 13  # frame .. yaw_rate_cmd_radps, lap, off_track (coast is always 0)
-LIFT_COLUMNS = ("z_m", "pitch_rad")  # a run on a track with hills records these too (``lifted``)
+LIFT_COLUMNS = ("z_m", "pitch_rad")  # a run on a track with hills records these too
+ENCODER_COLUMNS = ("enc_fl", "enc_fr", "enc_rl", "enc_rr")  # a car with encoders: those of its wheels
+IMU_COLUMNS = ("gyro_x_radps", "gyro_y_radps", "gyro_z_radps", "accel_x_mps2", "accel_y_mps2", "accel_z_mps2")
+EXTRA_COLUMNS = LIFT_COLUMNS + ENCODER_COLUMNS + IMU_COLUMNS  # a run records these only when it has them
 
 
 class RunRecorder:
@@ -586,17 +606,20 @@ class RunRecorder:
     frames, a thinned log (``stride`` > 1) of a longer one. :meth:`finish` closes the open
     row into the sink.
 
-    ``lifted`` (a run on a track with hills): rows also hold :data:`LIFT_COLUMNS`, the car's
-    height and pitch (``frame(..., z_m, pitch_rad)``), after ``off_track``.
+    ``extra``: the names of :data:`EXTRA_COLUMNS` this run records too, in schema order (the
+    car's height and pitch on a track with hills, its encoders, its IMU): their values follow
+    ``off_track`` in ``frame(..., *extra_values)``.
     """
 
     def __init__(self, *, record_text: bool = True, sink=None, max_rows: int = KEEP_ROWS,
-                 lifted: bool = False) -> None:
+                 extra: tuple[str, ...] = ()) -> None:
         if max_rows < 2:
             raise SimError(f"RunRecorder: max_rows = {max_rows!r}: expected >= 2")
+        if tuple(extra) != tuple(n for n in EXTRA_COLUMNS if n in extra):
+            raise SimError(f"RunRecorder: extra = {extra!r}: expected names of EXTRA_COLUMNS in their order")
         self.max_rows = int(max_rows)
-        self.lifted = bool(lifted)
-        self._width = _N_RUN_COLUMNS + (len(LIFT_COLUMNS) if lifted else 0)
+        self.extra = tuple(extra)
+        self._width = _N_RUN_COLUMNS + len(self.extra)
         self._rows = np.empty((min(1024, self.max_rows), self._width))
         self._kept = 0        # rows held in _rows
         self._closed = 0      # rows closed so far (written to the sink)
@@ -615,19 +638,19 @@ class RunRecorder:
     def frame(self, k: int, t_s: float, x_m: float, y_m: float, yaw_rad: float, speed_mps: float,
               steer_rad: float, yaw_rate_radps: float, command: tuple[float, float, float],
               previous_command: tuple[float, float, float] | None, lap: int, off_track: bool,
-              *lift: float) -> None:
+              *extra: float) -> None:
         """Row k: the state at ``t_s``; ``command`` is in force now (row k keeps it if no
-        step follows); ``lift``: ``z_m, pitch_rad`` of a ``lifted`` recorder."""
+        step follows); ``extra``: the values of the recorder's ``extra`` columns."""
         if self._open is not None:
             self._close(self._open_command if previous_command is None else previous_command)
-        self._open = (k, t_s, x_m, y_m, yaw_rad, speed_mps, steer_rad, yaw_rate_radps, lap, off_track, *lift)
+        self._open = (k, t_s, x_m, y_m, yaw_rad, speed_mps, steer_rad, yaw_rate_radps, lap, off_track, *extra)
         self._open_command = command
 
     def _row(self, command: tuple[float, float, float]) -> tuple:
         s = self._open
         row = (s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], command[0], command[1], command[2],
                s[8], s[9])
-        return row + s[10:] if self.lifted else row
+        return row + s[10:] if self.extra else row
 
     def _close(self, command: tuple[float, float, float]) -> None:
         row = self._row(command)
@@ -689,8 +712,7 @@ class RunRecorder:
                 "yaw_rate_radps": rows[:, 7], "speed_cmd_mps": rows[:, 8], "steer_cmd_rad": rows[:, 9],
                 "yaw_rate_cmd_radps": rows[:, 10], "coast": np.zeros(m), "lap": rows[:, 11],
                 "off_track": rows[:, 12], "data_text": tuple(texts)}
-        if self.lifted:
-            cols.update({name: rows[:, 13 + i] for i, name in enumerate(LIFT_COLUMNS)})
+        cols.update({name: rows[:, 13 + i] for i, name in enumerate(self.extra)})
         return log_from_columns(cols, source)
 
 
@@ -706,5 +728,6 @@ def schema_markdown() -> str:
     return "\n".join(rows)
 
 
-__all__ = ["RunLog", "CommandSteps", "Repeats", "RunRecorder", "LogError", "LogWarning", "Column", "COLUMNS", "COLUMN_NAMES", "FORMAT_VERSION",
+__all__ = ["RunLog", "CommandSteps", "Repeats", "RunRecorder", "LogError", "LogWarning", "Column", "COLUMNS", "COLUMN_NAMES",
+           "EXTRA_COLUMNS", "FORMAT_VERSION",
            "log_from_columns", "read_log", "write_log", "to_csv_text", "empty_log", "schema_markdown"]

@@ -18,25 +18,28 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from simrunner.telemetry.log import COLUMNS, FORMAT_LINE, LIFT_COLUMNS, LogError, _quote
+from simrunner.telemetry.log import COLUMNS, EXTRA_COLUMNS, FORMAT_LINE, LogError, _quote
 
-# the run's columns in schema order (the lift columns only on tracks with hills); coast is always
-# 0 in a simulated run
-_FLAT = [c for c in COLUMNS if c.name not in LIFT_COLUMNS]
-_LINE = ",".join(c.fmt for c in _FLAT) + "\n"
-_HEADER = FORMAT_LINE + "\n" + ",".join(c.name for c in _FLAT) + "\n"
-_LIFTED_LINE = ",".join(c.fmt for c in COLUMNS) + "\n"
-_LIFTED_HEADER = FORMAT_LINE + "\n" + ",".join(c.name for c in COLUMNS) + "\n"
+# the run's columns in schema order (the extra columns only when the run records them); coast is
+# always 0 in a simulated run
+_BASE = [c for c in COLUMNS if c.name not in EXTRA_COLUMNS]
+_LINE = ",".join(c.fmt for c in _BASE) + "\n"
+_HEADER = FORMAT_LINE + "\n" + ",".join(c.name for c in _BASE) + "\n"
 
 
 class CsvStream:
     """Writes ``path``: created (truncated) with the header at the first :meth:`row`, which
-    appends one row (``values``: the 13 numbers of a ``RunRecorder`` row, 15 when ``lifted``,
-    ``text``: its data_text). :meth:`discard` removes what was written (a run that did not start)."""
+    appends one row (``values``: the 13 numbers of a ``RunRecorder`` row and its ``extra``
+    columns' values, ``text``: its data_text). :meth:`discard` removes what was written (a run
+    that did not start)."""
 
-    def __init__(self, path: str | Path, *, lifted: bool = False):
+    def __init__(self, path: str | Path, *, extra: tuple[str, ...] = ()):
         self.path = Path(path)
-        self.lifted = bool(lifted)
+        self.extra = tuple(extra)
+        if self.extra:
+            cols = _BASE[:-1] + [c for c in COLUMNS if c.name in self.extra] + _BASE[-1:]
+            self._line = ",".join(c.fmt for c in cols) + "\n"
+            self._header = FORMAT_LINE + "\n" + ",".join(c.name for c in cols) + "\n"
         self.rows = 0
         self._error: OSError | None = None
         self._fd: int | None = None
@@ -51,7 +54,7 @@ class CsvStream:
         except OSError as exc:
             self._error = exc
             return
-        self._write(_LIFTED_HEADER if self.lifted else _HEADER)
+        self._write(self._header if self.extra else _HEADER)
 
     def _write(self, text: str) -> None:
         if self._fd is None or self._error is not None:
@@ -69,9 +72,9 @@ class CsvStream:
                 return
             self._open()
         v = values
-        if self.lifted:
-            self._write(_LIFTED_LINE % (v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10],
-                                        0, v[11], 1 if v[12] else 0, v[13], v[14], _quote(text) if text else ""))
+        if self.extra:
+            self._write(self._line % (v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10],
+                                      0, v[11], 1 if v[12] else 0, *v[13:], _quote(text) if text else ""))
         else:
             self._write(_LINE % (v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], v[9], v[10],
                                  0, v[11], 1 if v[12] else 0, _quote(text) if text else ""))
