@@ -185,9 +185,18 @@ def main() -> None:
 @click.option("--isolate", is_flag=True,
               help="C/C++ controllers: run in a child process instead of the simulator's (slower; "
                    "code that overwrites memory cannot touch the simulator). A .so always is.")
+@click.option("--mcu-time", "mcu_time", default=None, metavar="measured|SECONDS",
+              help="The controller's own processing costs simulated time, as on the car: its CPU time "
+                   "between Spinner calls times --mcu-scale (measured: not deterministic), or SECONDS "
+                   "per call (docs/drive.md).")
+@click.option("--mcu-scale", "mcu_scale", default=1.0, show_default=True,
+              type=click.FloatRange(min=0, max=1e4, min_open=True), metavar="FACTOR",
+              help="With --mcu-time measured: how many times slower the car's MCU runs the code than "
+                   "this machine (docs/drive.md has estimates per kit).")
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
               car, dt_s, wall_limit_s, params, include_dirs, defines, start, start_before_finish_m,
-              keep_driving, off_track_wheels=None, event=None, watch=False, isolate=False) -> None:
+              keep_driving, off_track_wheels=None, event=None, watch=False, isolate=False,
+              mcu_time=None, mcu_scale=1.0) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
     a shared library (.so). See docs/c_controllers.md."""
@@ -218,7 +227,8 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
                          video=video, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
                          dt_s=dt_s, wall_limit_s=wall_limit_s, params=params, start=_start_pose(start),
                          start_before_finish_m=start_before_finish_m, keep_driving=keep_driving,
-                         off_track_wheels=off_track_wheels, event=event))
+                         off_track_wheels=off_track_wheels, event=event, mcu_time=mcu_time,
+                         mcu_scale=mcu_scale))
 
     start_pose = _start_pose(start)  # a usage error (click's), before any fork
     strays = []
@@ -230,7 +240,8 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
                            csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
                            wall_limit_s=wall_limit_s, params=parse_params(params),
                            start=start_pose, start_before_finish_m=start_before_finish_m,
-                           keep_driving=keep_driving, off_track_wheels=off_track_wheels, event=event)
+                           keep_driving=keep_driving, off_track_wheels=off_track_wheels, event=event,
+                           mcu_time=mcu_time, mcu_scale=mcu_scale)
         except input_errors() as exc:
             click.echo(f"simrunner: {exc}", err=True)
             return 2

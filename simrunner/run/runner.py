@@ -261,6 +261,11 @@ class Run:
                                rng=np.random.default_rng(settings.seed), recorder=self.recorder,
                                video=self.video, params=settings.params, imager=self.imager)
         self.session.seed, self.session.surface_z_m = settings.seed, track.surface_z_m
+        if settings.mcu_time is not None:  # the controller's own time (simrunner.run.mcu)
+            from simrunner.run.mcu import McuTime
+
+            self.session.mcu = McuTime(self.clock, scale=settings.mcu_scale,
+                                       fixed_s=None if settings.mcu_time == "measured" else settings.mcu_time)
         for box in track.boxes:  # the layout's @box objects stand there from the start
             self.place_solid(box)
         self.wall_time_s = 0.0

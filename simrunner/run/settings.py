@@ -45,6 +45,10 @@ class RunSettings:
     laps, time limit (unless ``time_limit_s`` is given) and off-track rule. ``params``: controller
     parameters, a read-only mapping name -> int | float | str, read with
     ``spinner.param(name, default)`` (:mod:`simrunner.run.params`).
+
+    The controller's own time (:mod:`simrunner.run.mcu`): ``mcu_time`` None (the default: the
+    controller's code runs in no simulated time), ``"measured"`` (its CPU time between Spinner
+    calls, times ``mcu_scale``) or a number of seconds each call costs (deterministic).
     """
 
     laps: int = 1
@@ -58,6 +62,8 @@ class RunSettings:
     keep_driving: bool = False
     off_track_wheels: int | None = None
     event: str | None = None
+    mcu_time: str | float | None = None
+    mcu_scale: float = 1.0
 
     def __post_init__(self) -> None:
         for name, lo in (("laps", 1), ("seed", 0)):
@@ -109,6 +115,25 @@ class RunSettings:
             object.__setattr__(self, "start_before_finish_m", float(v))
         if not isinstance(self.keep_driving, bool):
             raise SettingsError(f"keep_driving = {self.keep_driving!r}: expected True or False")
+        v = self.mcu_time
+        if isinstance(v, str) and v != "measured":
+            try:
+                v = float(v)
+            except ValueError:
+                v = None
+                raise SettingsError(f"mcu_time = {self.mcu_time!r}: expected \"measured\" or seconds per "
+                                    "call (e.g. 0.002)") from None
+        if v is not None and v != "measured":
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or not 0.0 <= v <= 10.0:
+                raise SettingsError(f"mcu_time = {self.mcu_time!r}: expected \"measured\" or seconds per call "
+                                    "in [0, 10]")
+            v = float(v)
+        object.__setattr__(self, "mcu_time", v)
+        v = self.mcu_scale
+        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v) or not 0.0 < v <= 1e4:
+            raise SettingsError(f"mcu_scale = {v!r}: expected a factor in (0, 10000] (how many times slower "
+                                "the MCU runs the code)")
+        object.__setattr__(self, "mcu_scale", float(v))
 
     def for_track(self, track) -> "RunSettings":
         """These settings with ``time_limit_s`` filled in for ``track`` (a ``SimTrack``)."""

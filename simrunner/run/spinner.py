@@ -130,6 +130,7 @@ class Session:
         self.encoders = None  # the wheel encoders (simrunner.sensors.imu), made on first use
         self.imu = None       # the IMU (simrunner.sensors.imu), made on first use
         self.seed = 0        # the run's seed (the range sensors' noise)
+        self.mcu = None      # the controller's own time (simrunner.run.mcu.McuTime), or None
         self.surface_z_m = 0.0
 
     def activate(self) -> None:
@@ -221,6 +222,11 @@ class Spinner:
         self.turn_norm: NormFn = _identity_angle
         self.diff_norm: NormFn = self.default_diff_norm
         self.configure(speed_norm, speed_denorm, turn_norm, diff_norm)
+        if session.mcu is not None:  # --mcu-time: each call first lets the controller's time pass
+            from simrunner.run.mcu import TIMED_METHODS, timed
+
+            for name in TIMED_METHODS:
+                setattr(self, name, timed(getattr(self, name), session.mcu))
 
     # -- configuration ---------------------------------------------------------------
     def default_diff_norm(self, speed_mps: float, steer_rad: float) -> float:

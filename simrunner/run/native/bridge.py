@@ -44,7 +44,7 @@ from simrunner.run.native.build import NativeProgram
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
-    OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU = range(1, 21)
+    OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU = range(1, 22)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE = 0, 1, 2, 3
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
@@ -206,8 +206,12 @@ class _Session:
         s = self.spinner
         try:
             h, w = s.image_shape
-            self._reply(struct.pack("<5d", h, w, s.line_row, 1.0 if s.recording else 0.0,
-                                    s.wheelbase_m))
+            mcu = s._s.mcu  # --mcu-time measured: the program reports its own CPU time (OP_CPU)
+            measured = mcu is not None and mcu.fixed_s is None
+            if measured:
+                mcu.reported = True
+            self._reply(struct.pack("<6d", h, w, s.line_row, 1.0 if s.recording else 0.0,
+                                    s.wheelbase_m, 1.0 if measured else 0.0))
             self._serve()
         except RunFinished as exc:
             if isinstance(exc, Stalled):
@@ -306,6 +310,8 @@ class _Session:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_exposure()))
         elif op == OP_DISTANCE:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_distance(payload.decode("utf-8", "replace"))))
+        elif op == OP_CPU:  # the program's CPU time since its previous request (--mcu-time measured)
+            s._s.mcu.report(_D.unpack(payload)[0])
         elif op == OP_ENCODER:  # the wheel's index (int32) -> its count (int64)
             reply(_HDR.pack(ST_OK, 8) + struct.pack("<q", s.get_encoder(struct.unpack("<i", payload[:4])[0])))
         elif op == OP_IMU:  # a flag byte (0: the gyroscope, 1: the accelerometer) -> 3 doubles

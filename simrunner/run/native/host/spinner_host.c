@@ -46,7 +46,7 @@
 
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
-       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU };
+       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3 };
 
 static unsigned char out_buf[1 << 16];
@@ -64,6 +64,16 @@ static void fault_report(int sig, const char *message, void *pc);
 static void ended(void) __attribute__((noreturn));
 static void read_init(void);
 #define INIT() do { if (!inited) read_init(); } while (0)
+
+/* --mcu-time measured: each request is preceded by the CPU time this thread spent since the
+ * previous request or reply (OP_CPU, one double): the program's own processing time. */
+static int mcu_report;
+static double mcu_mark_s;
+static double thread_cpu_s(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
 
 #ifdef SPINNER_INPROC
 /* -- in-process I/O: requests collect in out_buf; a read with nothing left of the reply
@@ -180,7 +190,7 @@ static void read_all(void *data, size_t n) {
 
 static void flush_out(void) {}  /* handed over at the next switch */
 
-static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
+static void queue_raw(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
     uint32_t hdr[2] = {op, (uint32_t)(na + nb)};
     write_all(hdr, sizeof hdr);
     if (na) write_all(a, na);
@@ -231,7 +241,7 @@ static void flush_out(void) {
 }
 
 /* Queue one message (sent with the next waiting call). */
-static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
+static void queue_raw(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
     uint32_t hdr[2] = {op, (uint32_t)(na + nb)};
     size_t total = sizeof hdr + na + nb;
     if (out_len + total > sizeof out_buf) flush_out();
@@ -248,6 +258,15 @@ static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t n
 }
 
 #endif
+
+static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
+    if (mcu_report) {
+        double now = thread_cpu_s(), spent = now - mcu_mark_s;
+        mcu_mark_s = now;
+        queue_raw(OP_CPU, &spent, sizeof spent, NULL, 0);
+    }
+    queue_raw(op, a, na, b, nb);
+}
 
 static void skip_in(size_t n) {  /* drop n bytes of a reply (longer than the caller's buffer) */
     unsigned char sink[4096];
@@ -302,6 +321,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     size_t n = hdr[1] < size ? hdr[1] : size;  /* one reply per request: have <= hdr[1] */
     if (n > have) read_all((unsigned char *)reply + have, n - have);
     skip_in(hdr[1] - n);
+    if (mcu_report) mcu_mark_s = thread_cpu_s();  /* the program's own time starts again */
     return hdr[1];
 }
 
@@ -858,11 +878,13 @@ static void install_handlers(void) {
 }
 
 static void read_init(void) {
-    double init[5];  /* height, width, line row, recording, wheelbase */
+    double init[6];  /* height, width, line row, recording, wheelbase, mcu time measured */
     inited = 1;
     read_all(init, sizeof init);
     img_h = (int)init[0], img_w = (int)init[1], line_row = (int)init[2];
     recording_on = (int)init[3], wheelbase_m = init[4];
+    mcu_report = init[5] != 0.0;
+    if (mcu_report) mcu_mark_s = thread_cpu_s();
 }
 
 #ifndef SPINNER_INPROC

@@ -1,0 +1,95 @@
+"""The microcontroller's time (issue 50 item 3, simrunner.run.mcu): --mcu-time makes the
+controller's own processing cost simulated time, measured (times --mcu-scale) or fixed."""
+from __future__ import annotations
+
+import textwrap
+import time
+
+import pytest
+from click.testing import CliRunner
+
+from simrunner.cli import main as cli
+from simrunner.run.runner import drive
+from simrunner.run.settings import RunSettings, SettingsError
+
+
+def test_a_fixed_cost_per_call_passes_in_simulated_time_deterministically():
+    def gaps(**kw):
+        times = []
+        drive(lambda s: times.extend(s.get_time() for _ in range(5)), track="floor", time_limit_s=5, **kw)
+        return [round(b - a, 9) for a, b in zip(times, times[1:])]
+
+    assert gaps() == [0.002] * 4  # get_time lets one physics step pass
+    assert gaps(mcu_time=0.05) == [0.052] * 4  # each call first lets the 50 ms pass
+    assert gaps(mcu_time=0.001) == [0.004, 0.002, 0.004, 0.002]  # half steps carried to the next call
+
+
+def test_measured_processing_time_makes_a_slow_controller_miss_frames():
+    def main(s):
+        while True:
+            s.get_image(s.line_row)
+            t0 = time.thread_time()
+            while time.thread_time() - t0 < 0.004:  # 4 ms of work per frame
+                pass
+            s.set_speed_and_servo(0.5, 0.0)
+
+    def frames(**kw):
+        seen = []
+
+        def counting(s):
+            orig = s.get_image
+
+            def get_image(*a, **k):
+                seen.append(s.get_time())
+                return orig(*a, **k)
+
+            s.get_image = get_image
+            main(s)
+
+        drive(counting, track="floor", time_limit_s=2.0, **kw)
+        return len(seen)
+
+    plain = frames()
+    slow = frames(mcu_time="measured", mcu_scale=10.0)  # 40 ms per frame at a 20 ms frame period
+    assert plain >= 95 and slow < 0.7 * plain
+
+
+def test_a_c_program_reports_its_own_cpu_time(tmp_path):
+    src = tmp_path / "busy.c"
+    src.write_text(textwrap.dedent("""\
+        #include <time.h>
+        #include "spinner.h"
+        static double cpu(void) {
+            struct timespec ts;
+            clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+            return ts.tv_sec + 1e-9 * ts.tv_nsec;
+        }
+        int main(void) {
+            int frames = 0;
+            while (spinner_get_time() < 1.0) {
+                uint8_t row[4096];
+                spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+                double t0 = cpu();
+                while (cpu() - t0 < 0.004) {}  /* 4 ms of work */
+                spinner_set_speed_and_servo(0.5, 0.0);
+                frames++;
+            }
+            spinner_add_textf("frames %d", frames);
+            return 0;
+        }
+        """))
+    plain = drive(str(src), track="floor", time_limit_s=3.0, csv=tmp_path / "a.csv")
+    slow = drive(str(src), track="floor", time_limit_s=3.0, mcu_time="measured", mcu_scale=10.0,
+                 csv=tmp_path / "b.csv")
+    count = lambda r: int(next(t for t in reversed(r.log.data_text) if t).split()[1])  # noqa: E731
+    assert plain.outcome == "controller_returned", plain.message
+    assert count(plain) >= 45 and count(slow) < 0.7 * count(plain)
+
+
+def test_bad_settings_are_one_line_errors():
+    with pytest.raises(SettingsError, match=r'mcu_time = \'soon\': expected "measured" or seconds per call'):
+        RunSettings(mcu_time="soon")
+    with pytest.raises(SettingsError, match=r"mcu_scale = 0: expected a factor in \(0, 10000\]"):
+        RunSettings(mcu_scale=0)
+    res = CliRunner().invoke(cli, ["drive", "examples/line_follower.py", "--mcu-time", "-1"])
+    assert res.exit_code == 2 and "mcu_time = " in res.output and "Traceback" not in res.output
