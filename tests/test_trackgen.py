@@ -370,3 +370,17 @@ def test_property_build_failure_writes_nothing(lines, garbage):
             assert (out / "track.json").is_file()
             return
         assert sorted(p.name for p in tmp.iterdir()) == ["in.txt"]
+
+
+def test_a_road_narrower_than_the_car_is_an_error(tmp_path):
+    """The car would stand off the road at t = 0 (issue 50, fault injection)."""
+    from trackgen import load_layout
+    from trackgen.build import check_layout
+
+    path = tmp_path / "narrow.txt"
+    path.write_text("@lane_width = 0.001\nSTART_FINISH\nTURN_LEFT angle=180\nSTRAIGHT\nTURN_LEFT angle=180\n")
+    problems = [str(p) for p in check_layout(load_layout(path)).problems]
+    assert any(p.startswith(f"{path}:2: the road is 0.041 m wide") and "narrower than the car" in p
+               for p in problems), problems
+    path.write_text("@lane_width = 0.2\nSTART_FINISH\nTURN_LEFT angle=180\nSTRAIGHT\nTURN_LEFT angle=180\n")
+    assert not [p for p in check_layout(load_layout(path)).problems if p.check == "road_width"]

@@ -89,7 +89,8 @@ def check_layout(layout: Layout, car: CarDescription | None = None, *,
     10 000 pieces on one circle) and a failing layout is not built anyway."""
     car = car or CarDescription()
     track = chain(layout)
-    problems = validate_track(track, car.min_turn_radius_m, hill_limits=HillLimits.of_car(car))
+    problems = validate_track(track, car.min_turn_radius_m, hill_limits=HillLimits.of_car(car),
+                              car_width_m=car.chassis.track_m + car.wheels.width_m)
     if errors(problems) or not meshes:
         return Checked(track, None, problems)
     geometry = track_geometry(track)

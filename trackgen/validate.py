@@ -24,6 +24,8 @@ Checks and tolerances (module constants; tolerances in metres are multiplied by 
                 drive's acceleration limit, and below half the tyres' grip: the driven rear
                 axle carries about half the weight) and its crest and feet no tighter than the
                 chassis clears (:class:`HillLimits`, from the car file)
+  road width    the road (lane and both lines) wider than the car over its tyres (chassis.track_m +
+                wheels.width_m): else the car stands off the road from the start
   start/finish  at most one START_FINISH; none is a warning (laps are then timed at the
                 start pose)
   meshes        lane / edges / markings meshes are watertight after a binary STL round
@@ -114,9 +116,10 @@ def _deg(rad: float) -> float:
 
 
 def validate_track(track: Track, min_turn_radius_m: float, *, meshes: dict | None = None,
-                   hill_limits: HillLimits | None = None) -> list[Problem]:
+                   hill_limits: HillLimits | None = None, car_width_m: float | None = None) -> list[Problem]:
     """All checks of the module docstring; ``meshes`` (role -> trimesh) adds the mesh check,
-    ``hill_limits`` (the car's, :meth:`HillLimits.of_car`) the hill check.
+    ``hill_limits`` (the car's, :meth:`HillLimits.of_car`) the hill check, ``car_width_m`` (over
+    the tyres) the road width check.
     Returns problems sorted by line (stable)."""
     path = track.layout.path
     scale = track.layout.scale
@@ -128,6 +131,8 @@ def validate_track(track: Track, min_turn_radius_m: float, *, meshes: dict | Non
     out += _check_radius(track, path, min_turn_radius_m)
     if hill_limits is not None:
         out += _check_hills(track, path, hill_limits)
+    if car_width_m is not None:
+        out += _check_road_width(track, path, car_width_m)
     out += _check_start_finish(track, path)
     if meshes is not None:
         first_line = track.passes[0].line
@@ -324,6 +329,17 @@ def _check_hills(track: Track, path: str, limits: HillLimits) -> list[Problem]:
                 f"(2 pi^2 height)), tighter than the car clears, {limits.min_radius_m:.3f} m "
                 f"({limits.radius_why}): make it lower or longer"), "hill"))
     return out
+
+
+def _check_road_width(track: Track, path: str, car_width_m: float) -> list[Problem]:
+    s = track.layout.settings
+    if s.road_width_m > car_width_m:
+        return []
+    return [Problem(path, track.passes[0].line, (
+        f"the road is {s.road_width_m:.3f} m wide (@lane_width {s.lane_width_m:g} m and two "
+        f"@edge_width {s.edge_width_m:g} m lines), narrower than the car over its tyres, "
+        f"{car_width_m:.3f} m (chassis.track_m + wheels.width_m): it would stand off the road from the "
+        "start"), "road_width")]
 
 
 def _check_start_finish(track: Track, path: str) -> list[Problem]:

@@ -697,10 +697,14 @@ class CarSim:
         """What an ideal IMU at ``point_m`` (car body frame) reads: the chassis's angular velocity
         (rad/s) and the specific force there (the point's acceleration minus gravity, m/s^2), both
         in the car body frame (dart's accelerations of the last step, contacts included)."""
-        _, dq, rot = self._read()
-        r = np.array(rot)
-        accel = np.asarray(self._body.chassis.getLinearAcceleration(np.asarray(point_m, float)), float)
-        return r.T @ np.array(dq[0:3]), r.T @ (accel + np.array([0.0, 0.0, GRAVITY_MPS2]))
+        _, dq, (r0, r1, r2) = self._read()
+        ax, ay, az = self._body.chassis.getLinearAcceleration(np.asarray(point_m, float)).tolist()
+        az += GRAVITY_MPS2
+        wx, wy, wz = dq[0], dq[1], dq[2]
+        return ((r0[0] * wx + r1[0] * wy + r2[0] * wz, r0[1] * wx + r1[1] * wy + r2[1] * wz,
+                 r0[2] * wx + r1[2] * wy + r2[2] * wz),
+                (r0[0] * ax + r1[0] * ay + r2[0] * az, r0[1] * ax + r1[1] * ay + r2[1] * az,
+                 r0[2] * ax + r1[2] * ay + r2[2] * az))
 
     def wheel_speeds_radps(self) -> np.ndarray:
         """``(4,)`` FL, FR, RL, RR wheel spin relative to their mounts, rad/s (+ = forward)."""

@@ -14,7 +14,8 @@ up), both in the car body frame (x ahead, y left, z up; docs/DESIGN.md). Each ax
 - a bias: drawn once per device from ``device_seed`` (``*_bias_std``), plus a random walk in
   time (``*_bias_walk`` x sqrt(s)) from the run's seed;
 - white noise: ``*_noise_density`` x sqrt(rate_hz / 2) per sample, from the run's seed and the
-  sample's number (so a reading depends on when it is taken, not on how often);
+  sample's number (drawn in blocks of 1024 samples: a reading depends on when it is taken, not
+  on how often);
 then rounds to ``*_lsb`` and clips to +-``*_range``. It samples at ``rate_hz``: the first read in
 a sample period takes the car's state then, later reads in the same period get the same values.
 """
@@ -76,7 +77,6 @@ class Imu:
         self.seed = int(seed)
         self._held: tuple[int, np.ndarray] | None = None
         self._walk: list[np.ndarray] = []  # cumulative random walk at the end of each block
-        self._block: tuple[int, np.ndarray] | None = None  # the current block's running sums
         if spec is None:
             return
         dev = np.random.default_rng([int(spec.device_seed), 0x42494153])  # this device's offsets
@@ -88,7 +88,9 @@ class Imu:
         self._step_walk = np.array([spec.gyro_bias_walk_radps_rts] * 3
                                    + [spec.accel_bias_walk_mps2_rts] * 3) / math.sqrt(rate)
         self._lsb = np.array([spec.gyro_lsb_radps] * 3 + [spec.accel_lsb_mps2] * 3)
+        self._noise_block: tuple[int, np.ndarray] | None = None
         self._range = np.array([spec.gyro_range_radps] * 3 + [spec.accel_range_mps2] * 3)
+        self._lsb_list, self._range_list = self._lsb.tolist(), self._range.tolist()
 
     def sample(self, call: str, t_s: float, truth) -> np.ndarray:
         """``(6,)``: gyro x, y, z (rad/s), accelerometer x, y, z (m/s^2) of the sample at ``t_s``;
@@ -101,27 +103,38 @@ class Imu:
         if self._held is not None and self._held[0] == k:
             return self._held[1]
         gyro, force = truth()
-        value = np.concatenate([np.asarray(gyro, float), np.asarray(force, float)])
-        noise = np.random.default_rng([self.seed, 0x494D55, k]).standard_normal(6)
-        value = value + self._bias + self._walk_at(k) + self._noise * noise
-        value = np.where(self._lsb > 0, np.round(value / np.where(self._lsb > 0, self._lsb, 1.0)) * self._lsb, value)
-        value = np.clip(value, -self._range, self._range)
+        offset = self._offset_at(k).tolist()
+        out = []
+        for v, off, lsb, top in zip((*gyro, *force), offset, self._lsb_list, self._range_list):
+            v = float(v) + off
+            if lsb > 0.0:
+                v = round(v / lsb) * lsb
+            out.append(top if v > top else (-top if v < -top else v))
+        value = np.array(out)
         self._held = (k, value)
         return value
 
-    def _walk_at(self, k: int) -> np.ndarray:
-        """The bias random walk at sample ``k`` (the sum of the increments of samples 1..k)."""
-        if k <= 0 or not self._step_walk.any():
-            return np.zeros(6)
-        block, within = divmod(k - 1, _WALK_BLOCK)
-        while len(self._walk) < block:
+    def _offset_at(self, k: int) -> np.ndarray:
+        """Bias + its walk + the white noise of sample ``k``. The normals come in blocks of
+        ``_WALK_BLOCK`` samples from the run's seed and the block's number (the same values
+        whatever was read before); a block's offsets are summed once."""
+        block, within = divmod(max(k, 0), _WALK_BLOCK)
+        if self._noise_block is None or self._noise_block[0] != block:
+            normals = np.random.default_rng([self.seed, 0x494D55, block]).standard_normal((_WALK_BLOCK, 6))
+            self._noise_block = (block, self._bias + self._walk_rows(block) + normals * self._noise)
+        return self._noise_block[1][within]
+
+    def _walk_rows(self, block: int) -> np.ndarray:
+        """The bias random walk at samples ``block B .. block B + B - 1`` (``B = _WALK_BLOCK``): the
+        sum of the increments of samples 1 .. k (sample ``b B + 1 + j`` has ``_increments(b)[j]``)."""
+        if not self._step_walk.any():
+            return np.zeros((_WALK_BLOCK, 6))
+        while len(self._walk) < block:  # the walk at the end of each earlier block
             b = len(self._walk)
-            steps = self._increments(b)
-            self._walk.append((self._walk[-1] if self._walk else 0.0) + steps.sum(axis=0))
+            self._walk.append((self._walk[-1] if self._walk else 0.0) + self._increments(b).sum(axis=0))
         base = self._walk[block - 1] if block else np.zeros(6)
-        if self._block is None or self._block[0] != block:
-            self._block = (block, np.cumsum(self._increments(block), axis=0))
-        return base + self._block[1][within]
+        steps = np.cumsum(self._increments(block), axis=0)
+        return base + np.vstack([np.zeros((1, 6)), steps[:-1]])
 
     def _increments(self, block: int) -> np.ndarray:
         steps = np.random.default_rng([self.seed, 0x57414C4B, block]).standard_normal((_WALK_BLOCK, 6))
