@@ -112,6 +112,19 @@ def test_rows_identical_for_one_and_two_workers(tmp_path):
     assert all(w.started_at <= w.ready_at <= w.first_row_at <= w.last_row_at for w in two.worker_timing)
 
 
+def test_batch_mcu_time_charges_each_run(tmp_path):
+    """--mcu-time in a batch: a fixed cost per Spinner call slows every run's lap, as in drive."""
+    common = dict(seeds=1, workers=1, plot=False)
+    plain = run_batch(FOLLOWER, out_dir=tmp_path / "plain", **common)
+    slow = run_batch(FOLLOWER, out_dir=tmp_path / "slow", mcu_time=0.01, **common)
+    assert slow.rows[0]["outcome"] == plain.rows[0]["outcome"] == "finished"
+    assert slow.rows[0]["sim_time_s"] > plain.rows[0]["sim_time_s"]
+    meta = json.loads((tmp_path / "slow" / "results.json").read_text())
+    assert meta["mcu_time"] == 0.01 and meta["mcu_scale"] == 1.0
+    with pytest.raises(Exception, match=r"mcu_time = 'soon'"):
+        run_batch(FOLLOWER, out_dir=tmp_path / "bad", mcu_time="soon", **common)
+
+
 def test_batch_event_race_rows_carry_the_result_and_penalty(tmp_path):
     res = CliRunner().invoke(cli, ["batch", str(FOLLOWER), "--tracks", str(EXAMPLES / "kit_S.txt"),
                                    "--seeds", "2", "--event", "race", "--workers", "1", "--no-plot",

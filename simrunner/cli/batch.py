@@ -47,9 +47,15 @@ from simrunner.run.rules import EVENT_NAMES
               help="Run on Ray: a local cluster without ADDRESS, else ray://host:10001 or "
                    "host:6379 (pip install 'nxpcup-sim[ray]').")
 @click.option("--no-plot", is_flag=True, help="Do not write summary.png.")
+@click.option("--mcu-time", "mcu_time", default=None, metavar="measured|SECONDS",
+              help="The controller's own processing costs simulated time (as simrunner drive "
+                   "--mcu-time; measured is not deterministic).")
+@click.option("--mcu-scale", "mcu_scale", default=1.0, show_default=True,
+              type=click.FloatRange(min=0, max=1e4, min_open=True), metavar="FACTOR",
+              help="With --mcu-time measured: how many times slower the car's MCU runs the code.")
 def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, out_dir, force,
               video, csv, run_timeout_s, car, dt_s, wall_limit_s, ray, no_plot,
-              off_track_wheels=None, event=None) -> None:
+              off_track_wheels=None, event=None, mcu_time=None, mcu_scale=1.0) -> None:
     """Run CONTROLLER over tracks x parameters x seeds on all cores (or Ray); one row per run."""
     from tqdm import tqdm
 
@@ -71,7 +77,7 @@ def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, ou
                            wall_limit_s=wall_limit_s, car=car, workers=workers,
                            run_timeout_s=run_timeout_s, video=video, csv=csv, plot=not no_plot,
                            ray=ray, force=force, on_row=on_row, off_track_wheels=off_track_wheels,
-                           event=event,
+                           event=event, mcu_time=mcu_time, mcu_scale=mcu_scale,
                            on_plan=lambda n: bar.reset(total=n))
     except input_errors() as exc:
         bar.close()

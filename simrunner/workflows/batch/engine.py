@@ -80,14 +80,16 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
               ray: str | None = None, force: bool = False, start_method: str | None = None,
               on_row: Callable[[dict], None] | None = None,
               on_plan: Callable[[int], None] | None = None, quiet_workers: bool = True,
-              off_track_wheels: int | None = None, event: str | None = None) -> BatchResult:
+              off_track_wheels: int | None = None, event: str | None = None,
+              mcu_time: str | float | None = None, mcu_scale: float = 1.0) -> BatchResult:
     """Run ``controller`` over every (track, parameter combination, seed); see
     docs/batch.md. ``tracks``: files, folders, globs, ``random:N`` (default: the bundled
     track). ``seeds``: N (0..N-1) or ``"A:B"``. ``params``: ``["NAME=V1,V2", "K=1:2:0.5"]``.
     ``ray``: None (local pool), ``"local"`` (a local Ray cluster) or a cluster address.
     ``on_plan``: called once with the number of runs; ``on_row``: with each row as it arrives
     (a progress bar). ``time_limit_s``: of each run (default 60 s; the race's 120 s with
-    ``event="race"``); ``off_track_wheels``, ``event``: as for ``simrunner drive``."""
+    ``event="race"``); ``off_track_wheels``, ``event``, ``mcu_time``, ``mcu_scale``: as for
+    ``simrunner drive``."""
     from simrunner.run.controller import load_controller
     from simrunner.run.runner import default_track
     from simrunner.run.events import event_track
@@ -100,8 +102,10 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     load_car(car)
     if time_limit_s is None:
         time_limit_s = EVENTS[event].time_limit_s if event in EVENTS else DEFAULT_TIME_LIMIT_S
-    RunSettings(laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
-                off_track_wheels=off_track_wheels, event=event)
+    checked = RunSettings(laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
+                          off_track_wheels=off_track_wheels, event=event, mcu_time=mcu_time,
+                          mcu_scale=mcu_scale)
+    mcu_time, mcu_scale = checked.mcu_time, checked.mcu_scale
     refs = resolve_tracks(list(tracks) or [str((event and event_track(event)) or default_track())])
     grid = parse_grid(list(params), reserved=RESERVED)
     jobs = make_jobs(refs, parse_seeds(seeds), grid)
@@ -122,7 +126,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     config = BatchConfig(controller=str(ctl_path), car=None if car is None else str(Path(car).resolve()),
                          laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
                          off_track_wheels=off_track_wheels, event=event,
-                         param_names=tuple(grid))
+                         param_names=tuple(grid), mcu_time=mcu_time, mcu_scale=mcu_scale)
 
     def outputs_for(job: Job, video_on: bool, csv_on: bool) -> dict | None:
         if not (video_on or csv_on):
@@ -181,7 +185,8 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
         wall = time.perf_counter() - t0
         meta = {"controller": str(ctl_path), "car": config.car, "laps": laps,
                 "time_limit_s": time_limit_s, "dt_s": dt_s, "wall_limit_s": wall_limit_s,
-                "off_track_wheels": off_track_wheels, "event": event,
+                "off_track_wheels": off_track_wheels, "event": event, "mcu_time": mcu_time,
+                "mcu_scale": mcu_scale,
                 "tracks": [r.label for r in refs], "seeds": parse_seeds(seeds),
                 "params": {k: v for k, v in grid.items()}, "runs_planned": len(jobs),
                 "runs_done": len(ordered), "backend": backend_name, "workers": n_workers,

@@ -59,8 +59,8 @@ class BatchConfig:
     """What every run of a batch shares (sent once to each worker).
 
     ``controller``: absolute path of the controller file. ``car``: car TOML path or None.
-    ``laps``, ``time_limit_s``, ``dt_s``, ``wall_limit_s``, ``off_track_wheels``, ``event``:
-    as for ``simrunner drive``.
+    ``laps``, ``time_limit_s``, ``dt_s``, ``wall_limit_s``, ``off_track_wheels``, ``event``,
+    ``mcu_time``, ``mcu_scale``: as for ``simrunner drive``.
     """
 
     controller: str
@@ -72,6 +72,8 @@ class BatchConfig:
     param_names: tuple[str, ...] = field(default_factory=tuple)
     off_track_wheels: int | None = None
     event: str | None = None
+    mcu_time: str | float | None = None
+    mcu_scale: float = 1.0
 
 
 def _is_track_folder(path: Path) -> bool:

@@ -75,7 +75,8 @@ def execute_job(job: Job, state: WorkerState, outputs: dict[str, str] | None = N
         track = state.track(job.track)
         settings = RunSettings(laps=cfg.laps, time_limit_s=cfg.time_limit_s, seed=job.seed,
                                dt_s=cfg.dt_s, wall_limit_s=cfg.wall_limit_s, params=dict(job.params),
-                               off_track_wheels=cfg.off_track_wheels, event=cfg.event)
+                               off_track_wheels=cfg.off_track_wheels, event=cfg.event,
+                               mcu_time=cfg.mcu_time, mcu_scale=cfg.mcu_scale)
         outputs = outputs or {}
         result = drive(cfg.controller, track=track, car=state.car, settings=settings,
                        video=outputs.get("video"), csv=outputs.get("csv"))
