@@ -493,3 +493,26 @@ def test_a_partial_map_leaves_out_a_missing_sensor_but_not_a_misnamed_column(tmp
     with pytest.raises(LogError) as err:
         read_log(typo, columns=m)
     assert "asks for column 'cam_yaw'" in _one_line(err, f"{typo}:1: mapping --column 'yaw_rad=cam_yaw'")
+
+
+def test_a_misspelt_column_is_named_not_silently_ignored(tmp_path):
+    """Unknown columns are ignored, but one that looks like a schema column misspelt is named
+    (issue 50: a 'spéed' column was silently dropped); the CLI prints it as one warning line."""
+    import warnings
+
+    from click.testing import CliRunner
+
+    from simrunner.cli import main as cli
+    from simrunner.telemetry.log import LogWarning, read_log
+
+    path = tmp_path / "log.csv"
+    path.write_text("t_s,x_m,y_m,spéed_mps,battery_v\n0,0,0,1,7.2\n0.1,0.1,0,1,7.2\n")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        log = read_log(path)
+    texts = [str(w.message) for w in caught if issubclass(w.category, LogWarning)]
+    assert log.speed_mps is None
+    assert texts == [f"{path}:1: column 'spéed_mps' is not read: did you mean 'speed_mps'? (columns are read "
+                     "by their exact names, docs/telemetry.md)"]
+    res = CliRunner().invoke(cli, ["plot", str(path), "-o", str(tmp_path / "p.png")])
+    assert res.exit_code == 0 and "simrunner: warning: " in res.output and "LogWarning" not in res.output

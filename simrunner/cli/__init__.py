@@ -84,7 +84,20 @@ class _LazyGroup(click.Group):
             self._listing = False
 
     def invoke(self, ctx: click.Context):
-        """Run the command; a simulator dependency that is not installed is one line, exit 2."""
+        """Run the command; a simulator dependency that is not installed is one line, exit 2.
+        The simulator's own warnings (a log read with a line left out, a column not read)
+        print as ``simrunner: warning: ...`` lines, not as Python's warning format."""
+        import warnings
+
+        shown = warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if getattr(category, "__module__", "").startswith(("simrunner.", "trackgen.", "worlds.", "vehicle.")):
+                click.echo(f"simrunner: warning: {message}", err=True)
+            else:
+                shown(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
         try:
             return super().invoke(ctx)
         except ModuleNotFoundError as exc:
@@ -93,6 +106,8 @@ class _LazyGroup(click.Group):
                 raise
             click.echo(line, err=True)
             sys.exit(2)
+        finally:
+            warnings.showwarning = shown
 
     def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
         if name in self.LAZY:

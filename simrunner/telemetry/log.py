@@ -509,6 +509,7 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
             raise LogError(source, reader.line_num, "expected a time column t_s (or t) in the header")
         else:
             wanted = [(i, h) for i, h in enumerate(header) if h in _BY_NAME]
+            _warn_misspelt(source, reader.line_num, [named[i] for i, h in enumerate(header) if h not in _BY_NAME])
             for name in dict.fromkeys(h for _, h in wanted):
                 at = [f"{i + 1} ({named[i]})" for i, h in wanted if h == name]
                 if len(at) > 1:  # two columns would fill one list (t and t_s are one column)
@@ -570,6 +571,20 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
         if exc.line >= 2 and exc.line - 2 < len(lines):
             raise LogError(source, lines[exc.line - 2], exc.message) from None
         raise
+
+
+def _warn_misspelt(source: str, line: int, unread: list[str]) -> None:
+    """Warn (:class:`LogWarning`) about header columns that are not read but look like a
+    schema column misspelt (``spéed``, ``Speed_mps``): unknown columns are otherwise ignored."""
+    import difflib
+
+    names = list(COLUMN_NAMES) + list(FORMAT1_NAMES)
+    for name in unread:
+        close = difflib.get_close_matches(name.strip().lower(), names, n=1, cutoff=0.75)
+        if close:
+            want = FORMAT1_NAMES.get(close[0], close[0])
+            warnings.warn(f"{source}:{line}: column {name!r} is not read: did you mean {want!r}? (columns "
+                          "are read by their exact names, docs/telemetry.md)", LogWarning, stacklevel=4)
 
 
 def _check_format_line(line: str, source: str, lineno: int) -> None:
