@@ -200,6 +200,9 @@ def main() -> None:
 @click.option("--isolate", is_flag=True,
               help="C/C++ controllers: run in a child process instead of the simulator's (slower; "
                    "code that overwrites memory cannot touch the simulator). A .so always is.")
+@click.option("--kit", default=None, metavar="tfc",
+              help="C/C++ firmware: build it against this kit library's implementation on the "
+                   "simulated car (tfc: the FRDM-TFC library; docs/c_controllers.md, Kit libraries).")
 @click.option("--mcu-time", "mcu_time", default=None, metavar="measured|SECONDS",
               help="The controller's own processing costs simulated time, as on the car: its CPU time "
                    "between Spinner calls times --mcu-scale (measured: not deterministic), or SECONDS "
@@ -211,7 +214,7 @@ def main() -> None:
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
               car, dt_s, wall_limit_s, params, include_dirs, defines, start, start_before_finish_m,
               keep_driving, off_track_wheels=None, event=None, watch=False, isolate=False,
-              mcu_time=None, mcu_scale=1.0) -> None:
+              mcu_time=None, mcu_scale=1.0, kit=None) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
     a shared library (.so). See docs/c_controllers.md."""
@@ -228,7 +231,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
             click.echo(f"simrunner: {exc}", err=True)
             sys.exit(2)
         native = {}
-        if more_sources or include_dirs or defines or isolate or not controller.endswith(".py"):
+        if more_sources or include_dirs or defines or isolate or kit or not controller.endswith(".py"):
             if controller.endswith(".so"):
                 click.echo("simrunner: --watch: a .so is built elsewhere: watch its sources instead", err=True)
                 sys.exit(2)
@@ -236,7 +239,8 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
 
             headers = [str(p) for d in include_dirs for p in sorted(Path(d).glob("*"))
                        if p.suffix in (".h", ".hpp", ".hh")]
-            native = dict(make=lambda: _native_program(controller, more_sources, include_dirs, defines, isolate),
+            native = dict(make=lambda: _native_program(controller, more_sources, include_dirs, defines, isolate,
+                                                       kit),
                           watched=(controller, *more_sources, *headers))
         watch_drive(dict(controller=controller, **native, track=track, laps=laps, time_limit_s=time_limit_s,
                          video=video, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
@@ -250,7 +254,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
 
     def run() -> int:
         try:
-            program = _native_program(controller, more_sources, include_dirs, defines, isolate)
+            program = _native_program(controller, more_sources, include_dirs, defines, isolate, kit)
             result = drive(program, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
                            csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
                            wall_limit_s=wall_limit_s, params=parse_params(params),
@@ -360,7 +364,7 @@ def _start_pose(text: str | None) -> tuple[float, float, float] | None:
 
 
 def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs: tuple[str, ...],
-                    defines: tuple[str, ...], isolate: bool = False):
+                    defines: tuple[str, ...], isolate: bool = False, kit: str | None = None):
     """``controller`` itself (Python), or the built C/C++ program (``isolate``: to run in a
     child process); compiler warnings are shown on stderr. Raises ControllerFileError (bad
     input) for compile errors."""
@@ -369,8 +373,8 @@ def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs
     from simrunner.errors import ControllerFileError
 
     if not more_sources and not include_dirs and not defines and controller.endswith(".py"):
-        if isolate:
-            raise ControllerFileError(f"{controller}: --isolate is for C/C++ controllers")
+        if isolate or kit:
+            raise ControllerFileError(f"{controller}: --{'isolate' if isolate else 'kit'} is for C/C++ controllers")
         return controller
     from simrunner.run.native import build_program, is_native
 
@@ -379,7 +383,7 @@ def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs
     if bad:
         raise ControllerFileError(f"{bad[0]}: several files, -I and -D are for C/C++ controllers "
                                   f"(.c, .cpp sources or one .so)")
-    program = build_program(sources, include_dirs=list(include_dirs), defines=list(defines))
+    program = build_program(sources, include_dirs=list(include_dirs), defines=list(defines), kit=kit)
     if program.warnings.strip():
         click.echo(program.warnings.rstrip(), err=True)
     return dataclasses.replace(program, isolate=True) if isolate else program

@@ -27,6 +27,9 @@ from simrunner.errors import ControllerFileError
 NATIVE_DIR = Path(__file__).resolve().parent
 INCLUDE_DIR = NATIVE_DIR / "include"
 HOST_SOURCE = NATIVE_DIR / "host" / "spinner_host.c"
+KITS_DIR = NATIVE_DIR / "kits"
+#: Kit libraries a firmware builds against (``--kit NAME``): NAME -> its sources beside its include/.
+KITS = {"tfc": ("tfc.c",)}
 C_SUFFIXES = (".c",)
 CXX_SUFFIXES = (".cpp", ".cc", ".cxx", ".C")
 LIB_SUFFIXES = (".so",)
@@ -194,9 +197,48 @@ def _deps(depfiles: list[Path]) -> dict[str, str]:
     return out
 
 
+def kit_files(kit: str) -> tuple[list[Path], list[Path]]:
+    """``(include dirs, sources)`` of kit library ``kit`` (:data:`KITS`): its own include/ and,
+    first, a folder of shims for the spellings code written on Windows uses
+    (``#include "TFC\\TFC.h"``: a file of that name including ``TFC/TFC.h``; ``Derivative.h``)."""
+    if kit not in KITS:
+        raise ControllerFileError(f"--kit {kit}: expected one of {', '.join(KITS)}")
+    root = KITS_DIR / kit
+    include = root / "include"
+    headers = sorted(p for p in include.rglob("*.h"))
+    shims = {}
+    for h in headers:
+        rel = h.relative_to(include).as_posix()
+        if "/" in rel:
+            shims[rel.replace("/", "\\")] = rel
+        if rel != rel[:1].upper() + rel[1:]:
+            shims[rel[:1].upper() + rel[1:]] = rel
+    key = _digest("kit/1", kit, *(f"{h}\0{_file_digest(h)}" for h in headers))
+    shim_dir = cache_dir() / "kits" / f"{kit}-{key}"
+    if not shim_dir.is_dir():
+        import tempfile
+
+        shim_dir.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".kit-", dir=shim_dir.parent))
+        for name, target in shims.items():
+            (tmp / name).write_text(f'#include "{target}"\n')
+        try:
+            os.rename(tmp, shim_dir)
+        except OSError:  # another build made it meanwhile
+            import shutil
+
+            shutil.rmtree(tmp, ignore_errors=True)
+    return [shim_dir, include], [root / name for name in KITS[kit]]
+
+
 def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] = (),
-                  defines: list[str] = ()) -> NativeProgram:
-    """Compile ``sources`` into a cached shared library (or take one prebuilt ``.so``)."""
+                  defines: list[str] = (), kit: str | None = None) -> NativeProgram:
+    """Compile ``sources`` into a cached shared library (or take one prebuilt ``.so``); with
+    ``kit``, against that kit library's headers and sources (:func:`kit_files`)."""
+    if kit is not None:
+        kit_includes, kit_sources = kit_files(kit)
+        include_dirs = [*include_dirs, *kit_includes]
+        sources = [*sources, *kit_sources]
     if len(sources) == 1 and Path(sources[0]).suffix in LIB_SUFFIXES:
         lib = Path(sources[0])
         if not lib.is_file():

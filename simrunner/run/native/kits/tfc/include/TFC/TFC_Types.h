@@ -1,0 +1,4 @@
+#ifndef TFC_TYPES_H_
+#define TFC_TYPES_H_
+#include <stdint.h>
+#endif

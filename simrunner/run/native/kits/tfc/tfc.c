@@ -1,0 +1,187 @@
+/* The FRDM-TFC library on the simulated car (simrunner drive FIRMWARE.c --kit tfc).
+ *
+ * The team's sources build unchanged against include/TFC/ (the library's headers, same names
+ * and functions) and this file, which talks to the simulator through spinner.h:
+ * - time: TFC_Task() (called in the team's main loop) and TFC_Delay_mS() let simulated time
+ *   pass (one physics step per call, or the delay); the SysTick tickers TFC_Ticker[] count its
+ *   milliseconds; the PIT-driven camera read-out becomes: when the exposure since the last
+ *   image has passed, the next image is fetched (spinner_get_image) into LineScanImage0/1 and
+ *   LineScanImageReady is set to 1;
+ * - servo 0 steers (position x tfc_servo_rad + tfc_servo_offset_rad), the motors' mean duty is
+ *   a speed command (duty x tfc_max_speed_mps) while the H-bridge is enabled;
+ * - the potentiometers, DIP switches, buttons and battery read --param values;
+ * - the LEDs are kept (and shown in the debug video's text); the serial terminal prints.
+ * docs/c_controllers.md, "Kit libraries", lists what is emulated and what is not. */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "spinner.h"
+#include "TFC/TFC.h"
+
+volatile uint32_t TFC_Ticker[NUM_TFC_TICKERS];
+static volatile uint16_t image0[TFC_LINESCAN_IMAGE_SIZE], image1[TFC_LINESCAN_IMAGE_SIZE];
+volatile uint16_t *LineScanImage0 = image0;
+volatile uint16_t *LineScanImage1 = image1;
+volatile uint8_t LineScanImageReady;
+ByteQueue SDA_SERIAL_OUTGOING_QUEUE, SDA_SERIAL_INCOMING_QUEUE;
+
+static struct {
+    int inited;
+    double ms_counted;      /* simulated ms already added to the tickers */
+    double exposure_s;      /* the line camera's exposure (TFC_SetLineScanExposureTime) */
+    double last_image_s;    /* when the last image was fetched */
+    int hbridge;            /* H-bridge enabled */
+    float duty_a, duty_b;   /* motor duties */
+    float servo;            /* servo 0 position */
+    int leds[4];
+    double servo_rad, servo_offset_rad, max_speed_mps;
+} tfc;
+
+static double clampf(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+static void send_commands(void) {
+    double v = tfc.hbridge ? 0.5 * (tfc.duty_a + tfc.duty_b) * tfc.max_speed_mps : 0.0;
+    double steer = tfc.servo * tfc.servo_rad + tfc.servo_offset_rad;
+    spinner_set_speed_and_servo(v, steer);
+}
+
+static void count_ticks(double now_s) {
+    double now_ms = now_s * 1000.0;
+    double whole = floor(now_ms - tfc.ms_counted + 1e-6);
+    if (whole >= 1.0) {
+        for (int i = 0; i < NUM_TFC_TICKERS; i++) TFC_Ticker[i] += (uint32_t)whole;
+        tfc.ms_counted += whole;
+    }
+}
+
+/* The PIT interrupt's camera read-out (at ``now``): a new image once the exposure since the last one has
+ * passed (spinner_get_image waits for the camera's next frame: at most a step away then). */
+static void camera_service(double now) {
+    if (now - tfc.last_image_s < tfc.exposure_s - 0.0025) return;
+    uint8_t row[TFC_LINESCAN_IMAGE_SIZE];
+    size_t n = spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+    tfc.last_image_s = spinner_get_time();
+    for (size_t i = 0; i < TFC_LINESCAN_IMAGE_SIZE; i++) {
+        uint16_t v = (uint16_t)((i < n ? row[i] : 0) << 4);  /* 8-bit grey -> 12-bit counts */
+        image0[i] = v;
+        image1[i] = v;
+    }
+    LineScanImageReady = 1;
+    count_ticks(tfc.last_image_s);
+}
+
+void TFC_Init(void) {
+    if (tfc.inited) return;
+    tfc.inited = 1;
+    tfc.servo_rad = spinner_param("tfc_servo_rad", 0.40);
+    tfc.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
+    tfc.max_speed_mps = spinner_param("tfc_max_speed_mps", 3.1);
+    tfc.exposure_s = TFC_DEFAULT_LINESCAN_EXPOSURE_TIME_uS * 1e-6;
+    spinner_set_exposure(tfc.exposure_s);
+    tfc.ms_counted = floor(spinner_get_time() * 1000.0);
+    tfc.last_image_s = tfc.ms_counted * 1e-3;  /* the first image one exposure after TFC_Init */
+    send_commands();
+}
+
+void TFC_Task(void) {
+    if (!tfc.inited) TFC_Init();
+    double now = spinner_get_time();  /* the main loop's pass: a physics step of simulated time */
+    count_ticks(now);
+    camera_service(now);
+}
+
+void TFC_Delay_mS(unsigned int TicksIn_mS) {
+    if (!tfc.inited) TFC_Init();
+    double until = spinner_get_time() + TicksIn_mS * 1e-3;
+    for (double now = spinner_get_time(); now < until - 1e-9; now = spinner_get_time()) {
+        count_ticks(now);
+        camera_service(now);
+    }
+}
+
+void TFC_InitSysTick(void) {}
+void InitClock(void) {}
+void TFC_InitGPIO(void) {}
+void TFC_InitServos(void) {}
+void TFC_InitMotorPWM(void) {}
+void TFC_InitADCs(void) {}
+void TFC_InitLineScanCamera(void) {}
+void TFC_InitUARTs(void) {}
+void TFC_UART_Process(void) {}
+void TFC_InitTerminal(void) {}
+void TFC_ProcessTerminal(void) {}
+
+void TFC_SetServo(uint8_t ServoNumber, float Position) {
+    if (ServoNumber != 0) return;  /* servo 1: nothing on the simulated car */
+    tfc.servo = (float)clampf(Position, -1.0, 1.0);
+    send_commands();
+}
+
+void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {
+    /* a 1.0 .. 2.0 ms pulse of the 20 ms frame is the servo's travel -1 .. 1 */
+    double mid = 0.5 * (SERVO_MIN_DUTY_CYCLE + SERVO_MAX_DUTY_CYCLE);
+    double half = 0.5 * (SERVO_MAX_DUTY_CYCLE - SERVO_MIN_DUTY_CYCLE);
+    TFC_SetServo(ServoNumber, (float)((DutyCycle - mid) / half));
+}
+
+void TFC_SetMotorPWM(float MotorA, float MotorB) {
+    tfc.duty_a = (float)clampf(MotorA, -1.0, 1.0);
+    tfc.duty_b = (float)clampf(MotorB, -1.0, 1.0);
+    send_commands();
+}
+
+void tfc_sim_hbridge(int on) {
+    tfc.hbridge = on != 0;
+    send_commands();
+}
+
+void tfc_sim_led(int led, int on) {
+    if (led < 0 || led > 3) return;
+    tfc.leds[led] = on < 0 ? !tfc.leds[led] : on != 0;
+}
+
+void TFC_SetBatteryLED_Level(uint8_t BattLevel) {
+    for (int i = 0; i < 4; i++) tfc.leds[i] = i < BattLevel;
+}
+
+int tfc_sim_button(int button) {
+    char name[16];
+    snprintf(name, sizeof name, "button%d", button);
+    if (spinner_param(name, 0.0) != 0.0) return 1;
+    if (button == 0) {  /* a start press: button 0 held 0.2 s from button0_at */
+        double at = spinner_param("button0_at", 0.1), now = spinner_get_time();
+        return now >= at && now < at + 0.2;
+    }
+    return 0;
+}
+
+uint8_t TFC_GetDIP_Switch(void) { return (uint8_t)((int)spinner_param("dip", 0.0) & 0x0F); }
+
+float TFC_ReadPot(uint8_t Channel) {
+    return (float)clampf(spinner_param(Channel == 0 ? "pot0" : "pot1", 0.0), -1.0, 1.0);
+}
+
+float TFC_ReadBatteryVoltage(void) { return (float)spinner_param("battery_v", 7.2); }
+
+void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {
+    tfc.exposure_s = clampf(TimeIn_uS * 1e-6, 1e-5, 1.0);
+    spinner_set_exposure(tfc.exposure_s);
+}
+
+void InitByteQueue(ByteQueue *BQ, uint16_t Size, uint8_t *Storage) {
+    BQ->ReadPtr = BQ->WritePtr = 0, BQ->QueueSize = Size, BQ->QueueStorage = Storage;
+}
+uint16_t BytesInQueue(ByteQueue *BQ) { (void)BQ; return 0; }
+int16_t ByteEnqueue(ByteQueue *BQ, uint8_t Val) { (void)BQ; putchar(Val); return 0; }
+int16_t ByteDequeue(ByteQueue *BQ, uint8_t *Val) { (void)BQ; (void)Val; return -1; }
+
+uint32_t Qprintf(ByteQueue *BQ, const char *FormatString, ...) {
+    (void)BQ;
+    va_list ap;
+    va_start(ap, FormatString);
+    int n = vprintf(FormatString, ap);
+    va_end(ap);
+    return n < 0 ? 0 : (uint32_t)n;
+}
