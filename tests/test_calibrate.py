@@ -90,7 +90,13 @@ def test_report_prints_before_and_after(result):
         assert section in text
     assert "measured" in text and "before" in text and "after" in text
     assert "drive.max_accel_mps2: 3.1 -> 2.5" in text
-    assert "spinner.configure(speed_norm=lambda speed, angle: 0.03" in text
+    assert "spinner.configure(speed_norm=lambda speed, angle: " in text
+    # the example's linear fit has a deadband: the suggested norm holds 0 below it (issue 50: it
+    # went negative below the deadband) and mirrors reverse commands
+    norm = text.split("speed_norm=lambda speed, angle: ", 1)[1].split("\n", 1)[0][:-1]  # without configure's ")"
+    assert "max(0.0" in norm, norm
+    f = eval("lambda speed: " + norm)  # noqa: S307 - the report's own formula
+    assert f(1.0) == 0.0 and f(100.0) > 0.0 and f(-100.0) == -f(100.0)
 
 
 def test_example_file_is_valid():

@@ -221,10 +221,16 @@ def _speed(car, m, v, dt_s):
         formula = f"{k[0]:.6g} * speed"
     else:
         formula = f"{k[0]:.6g} * speed**2 {term(k[1])} * speed {term(k[2])}"
+    norm = formula
+    if v["model"] == "linear" and k[0] > 0 and k[1] < 0:
+        # a deadband: below it the line would ask for a negative speed (the car backing up);
+        # the norm holds 0 there and mirrors it for reverse commands
+        norm = f"(1 if speed >= 0 else -1) * max(0.0, {k[0]:.6g} * abs(speed) {term(k[1])})"
     notes = [f"fit ({v['model']}, scipy curve_fit, R^2 = {r2:.5f}): speed_mps = {formula.replace('speed', 'command')}",
-             f"speed normalisation for the controller: spinner.configure(speed_norm=lambda speed, angle: {formula})"]
+             f"speed normalisation for the controller: spinner.configure(speed_norm=lambda speed, angle: {norm})"]
     if v["model"] == "linear" and k[0] != 0 and k[1] < 0:
-        notes.append(f"the car starts to roll above command {-k[1] / k[0]:.4g} (deadband of the motor driver)")
+        notes.append(f"the car starts to roll above command {-k[1] / k[0]:.4g} (deadband of the motor driver): "
+                     "the normalisation gives 0 below it (and mirrors it for reverse commands)")
     speeds = [speed_of(c) for c in cmds]
     vmax_old = car.drive.max_speed_mps
     changes: dict[str, tuple[float, float]] = {}
