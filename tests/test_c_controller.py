@@ -770,3 +770,31 @@ def test_exposure_from_c_and_cpp_sets_the_line_cameras_frame_period(tmp_path, tr
         """)
     drive(cpp, track=track, car=toml)
     assert "cpp exposure 0.0095" in capfd.readouterr().out
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_spinner_call_from_another_thread_is_reported_not_silent(tmp_path, isolate):
+    """Issue 50 (fault injection): a call from a thread of the program's own returned 0 in
+    silence; the next call from main()'s thread now reports it, with its file:line."""
+    import dataclasses
+
+    from simrunner.run.native import build_program
+
+    src = tmp_path / "threads.c"
+    src.write_text(textwrap.dedent("""\
+        #include <pthread.h>
+        #include "spinner.h"
+        static void *worker(void *arg) { (void)arg; spinner_get_time(); return NULL; }
+        int main(void) {
+            spinner_sleep(0.1);
+            pthread_t t;
+            pthread_create(&t, NULL, worker, NULL);
+            pthread_join(t, NULL);
+            spinner_get_time();
+            return 0;
+        }
+        """))
+    program = build_program([str(src)])
+    r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_error", r.message
+    assert "threads.c:9" in r.message and "another thread than the one running main()" in r.message

@@ -63,7 +63,18 @@ static int inited;  /* the run's INIT message read (lazily: the child starts bef
 static void fault_report(int sig, const char *message, void *pc);
 static void ended(void) __attribute__((noreturn));
 static void read_init(void);
-#define INIT() do { if (!inited) read_init(); } while (0)
+#define INIT() do { if (!inited) read_init(); if (foreign_calls) foreign_call_report(); } while (0)
+
+/* Spinner calls from a thread other than the one running main(): they cannot reach the
+ * simulator (they return 0); the next call from main()'s thread reports the misuse. */
+static pthread_t api_thread;
+static volatile int foreign_calls;
+static void foreign_call_report(void);
+static int foreign_thread(void) {
+    if (!inited || pthread_equal(pthread_self(), api_thread)) return 0;
+    if (!finished) foreign_calls = 1;
+    return 1;
+}
 
 /* --mcu-time measured: each request is preceded by the CPU time this thread spent since the
  * previous request or reply (OP_CPU, one double): the program's own processing time. */
@@ -260,6 +271,7 @@ static void queue_raw(uint32_t op, const void *a, size_t na, const void *b, size
 #endif
 
 static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
+    if (foreign_thread()) return;
     if (mcu_report) {
         double now = thread_cpu_s(), spent = now - mcu_mark_s;
         mcu_mark_s = now;
@@ -298,6 +310,10 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
  * reply's length. The run being over ends the program. */
 static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t nb,
                    void *reply, size_t size) {
+    if (foreign_thread()) {
+        if (size) memset(reply, 0, size);
+        return 0;
+    }
     queue(op, a, na, b, nb);
     flush_out();
     uint32_t hdr[2];
@@ -333,6 +349,12 @@ static void misuse(const char *fmt, ...) {
     vsnprintf(msg, sizeof msg, fmt, ap);
     va_end(ap);
     fault_report(0, msg, NULL);
+}
+
+static void foreign_call_report(void) {
+    foreign_calls = 0;
+    misuse("a Spinner call came from another thread than the one running main() (it returned 0): "
+           "the API answers main()'s thread only; hand the values to that thread instead");
 }
 
 static double finite_arg(const char *fn, const char *name, double v) {
@@ -884,6 +906,7 @@ static void read_init(void) {
     img_h = (int)init[0], img_w = (int)init[1], line_row = (int)init[2];
     recording_on = (int)init[3], wheelbase_m = init[4];
     mcu_report = init[5] != 0.0;
+    api_thread = pthread_self();
     if (mcu_report) mcu_mark_s = thread_cpu_s();
 }
 
@@ -1055,6 +1078,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_argv = argv;
     /* a fresh API state for this run */
     finished = inited = 0;
+    foreign_calls = 0;
     out_len = 0;
     rep_buf = rep_more = NULL, rep_len = rep_pos = rep_more_len = 0;
     gone = 0, exit_code = 0, in_controller = 0;
