@@ -516,3 +516,23 @@ def test_a_misspelt_column_is_named_not_silently_ignored(tmp_path):
                      "by their exact names, docs/telemetry.md)"]
     res = CliRunner().invoke(cli, ["plot", str(path), "-o", str(tmp_path / "p.png")])
     assert res.exit_code == 0 and "simrunner: warning: " in res.output and "LogWarning" not in res.output
+
+
+def test_controller_norms_survive_os_exit_and_a_loop_after_configure(tmp_path):
+    """Issue 50 (fault injection): os._exit ended gap --norms with status 0 and nothing
+    written; a loop after configure() hung with no limit."""
+    from simrunner.errors import ControllerFileError
+    from simrunner.run.norms import controller_norms
+
+    ctl = tmp_path / "exits.py"
+    ctl.write_text("import os\ndef main(s):\n    os._exit(3)\n")
+    with pytest.raises(ControllerFileError, match=r"exits.py: main\(spinner\) called os._exit\(3\) before"):
+        controller_norms(ctl)
+    ctl = tmp_path / "loops.py"
+    ctl.write_text("def main(s):\n    s.configure(speed_norm=lambda v, a: v / 100)\n    while True:\n        pass\n")
+    norms = controller_norms(ctl, wall_limit_s=0.5)
+    assert norms["speed_norm"](50.0, 0.0) == 0.5
+    ctl = tmp_path / "spins.py"
+    ctl.write_text("def main(s):\n    while True:\n        pass\n")
+    with pytest.raises(ControllerFileError, match=r"ran 0.5 s without configuring its norms"):
+        controller_norms(ctl, wall_limit_s=0.5)

@@ -22,6 +22,14 @@ from simrunner.run.controller import load_controller, user_traceback
 NormFn = Callable[[float, float], float]
 
 
+class _OsExit(SystemExit):
+    """``os._exit`` in the probed controller (kept from ending the process)."""
+
+
+class _TooLong(BaseException):
+    """The probe's wall-time limit passed (raised by the alarm in the main thread)."""
+
+
 class _Configured(BaseException):
     """Stops ``main`` at its first use of the Spinner after configuring its norms (a
     BaseException: a controller's ``except Exception`` does not catch it)."""
@@ -65,30 +73,53 @@ def _identity_angle(speed: float, angle: float) -> float:
     return angle
 
 
-def controller_norms(path: str | Path) -> dict[str, NormFn]:
+def controller_norms(path: str | Path, *, wall_limit_s: float = 10.0) -> dict[str, NormFn]:
     """``{"speed_norm": f, "turn_norm": g}`` (``(speed, angle)`` in the controller's units ->
     m/s, rad) as the Python controller at ``path`` configures them; a controller that
     returns without configuring any speaks m/s and radians (identities). Raises
     :class:`~simrunner.errors.ControllerFileError` (one line) for a C/C++ controller, one
-    that builds ``Spinner(...)`` itself, or one that fails before configuring (its
-    traceback's last line and file:line)."""
+    that builds ``Spinner(...)`` itself, one that fails before configuring (its traceback's
+    last line and file:line), one that calls ``os._exit`` (kept from ending the process) or
+    one still running after ``wall_limit_s`` of wall time (from the main thread only: an
+    alarm) without using the Spinner after configuring."""
     path = Path(path)
     if path.suffix != ".py":
         raise ControllerFileError(f"{path}: expected a Python controller (.py) for --norms; a C or C++ "
                                   "controller's norm functions are written as column expressions")
     controller = load_controller(path)
     probe = _Stand_in(path)
+    import os
+    import signal
+    import threading
+
+    def no_exit(code=0):
+        raise _OsExit(code)
+
+    def too_long(signum, frame):
+        raise _TooLong
+
+    real_exit, os._exit = os._exit, no_exit
+    alarm = threading.current_thread() is threading.main_thread()
+    if alarm:
+        old = signal.signal(signal.SIGALRM, too_long)
+        signal.setitimer(signal.ITIMER_REAL, float(wall_limit_s))
     try:
         with controller.loaded() as main:
             main(probe)
     except _Configured:
         return dict(probe.norms or {})
+    except _TooLong:
+        if probe.norms is not None:  # configured, then a loop that never uses the spinner
+            return dict(probe.norms)
+        raise ControllerFileError(f"{path}: main(spinner) ran {wall_limit_s:g} s without configuring its "
+                                  "norms or using the spinner: expected spinner.configure(...) first") from None
     except ControllerFileError:
         raise
     except SystemExit as exc:
         if probe.norms is not None:
             return dict(probe.norms)
-        raise ControllerFileError(f"{path}: main(spinner) called sys.exit({exc.code!r}) before configuring its "
+        call = "os._exit" if isinstance(exc, _OsExit) else "sys.exit"
+        raise ControllerFileError(f"{path}: main(spinner) called {call}({exc.code!r}) before configuring its "
                                   "norms: expected spinner.configure(...) first") from None
     except Exception as exc:  # noqa: BLE001 - the user's code: any fault is reported
         if probe.norms is not None:  # after configuring: the norms are known
@@ -102,6 +133,11 @@ def controller_norms(path: str | Path) -> dict[str, NormFn]:
                                       "norm functions written as column expressions") from None
         raise ControllerFileError(f"{path}: main(spinner) failed before configuring its norms: "
                                   f"{type(exc).__name__}: {exc}{where}") from None
+    finally:
+        os._exit = real_exit
+        if alarm:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            signal.signal(signal.SIGALRM, old)
     return dict(probe.norms or {"speed_norm": _identity_speed, "turn_norm": _identity_angle})
 
 
