@@ -798,3 +798,14 @@ def test_a_spinner_call_from_another_thread_is_reported_not_silent(tmp_path, iso
     r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0)
     assert r.outcome == "controller_error", r.message
     assert "threads.c:9" in r.message and "another thread than the one running main()" in r.message
+
+
+@pytest.mark.parametrize("mode", [[], ["-DSPINNER_INPROC"]])
+def test_the_host_compiles_without_warnings(tmp_path, mode):
+    """Both builds of host/spinner_host.c compile cleanly: an implicit declaration (pthread_self
+    without <pthread.h> in the child's build) once compared truncated thread ids."""
+    from simrunner.run.native.build import HOST_SOURCE, INCLUDE_DIR
+
+    proc = subprocess.run(["cc", "-std=gnu11", "-Wall", "-Werror", "-fPIC", *mode, f"-I{INCLUDE_DIR}", "-c",
+                           str(HOST_SOURCE), "-o", str(tmp_path / "host.o")], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr

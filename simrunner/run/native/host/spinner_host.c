@@ -35,8 +35,8 @@
 #include <sys/uio.h>
 #include <ucontext.h>
 #include <unistd.h>
-#ifdef SPINNER_INPROC
 #include <pthread.h>
+#ifdef SPINNER_INPROC
 #include <sys/mman.h>
 #include <sys/resource.h>
 #endif
