@@ -4,6 +4,7 @@ outputs for the failures, the CLI (one line, exit 2, for bad input)."""
 from __future__ import annotations
 
 import json
+import signal
 import shutil
 import textwrap
 from decimal import Decimal
@@ -198,3 +199,43 @@ def test_cli_batch_and_bad_input(tmp_path):
         assert not (tmp_path / "c" / "results.csv").exists()
     res = runner.invoke(cli, ["batch", str(tmp_path / "missing.py"), "-o", str(tmp_path / "d")])
     assert res.exit_code == 2
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_a_stopped_batch_keeps_its_finished_runs(tmp_path, sig):
+    """Issue 50 (fault injection): SIGTERM, SIGHUP or kill -9 lost every finished row. Rows now
+    go to results.partial.csv as they finish; SIGTERM also writes results.csv (exit 143)."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    cmd = [str(Path(sys.executable).parent / "simrunner"), "batch", str(FOLLOWER), "--seeds", "20", "--workers", "1",
+           "--time-limit", "2", "--no-plot", "-o", str(out)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+                            cwd=str(tmp_path))
+    partial = out / "results.partial.csv"
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if partial.exists() and len(partial.read_text().splitlines()) >= 3:  # header + 2 runs
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None, proc.communicate()
+        os.killpg(proc.pid, sig) if sig == signal.SIGKILL else proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # orphaned workers of a killed batch
+        except ProcessLookupError:
+            pass
+    if sig == signal.SIGTERM:
+        assert proc.returncode == 143 and b"SIGTERM" in err
+        rows = (out / "results.csv").read_text().splitlines()
+        assert 3 <= len(rows) < 21 and not partial.exists()
+    else:
+        rows = partial.read_text().splitlines()
+        assert len(rows) >= 3 and rows[0].startswith("run,")

@@ -71,6 +71,15 @@ def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, ou
         bar.update(1)
         bar.set_postfix(failed=failed[0], refresh=False)
 
+    import signal
+
+    stopped_by: list[int] = []
+
+    def stop(signum, frame):  # SIGTERM (timeout, CI, job schedulers), SIGHUP: as Ctrl-C
+        stopped_by.append(signum)
+        raise KeyboardInterrupt
+
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
     try:
         result = run_batch(controller, out_dir=out_dir, tracks=tracks, seeds=seeds, params=params,
                            laps=laps, time_limit_s=time_limit_s, dt_s=dt_s,
@@ -85,9 +94,13 @@ def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, ou
         sys.exit(2)
     except KeyboardInterrupt:
         bar.close()
-        click.echo(f"simrunner batch: interrupted; the finished runs are in {out_dir}/results.csv",
+        what = signal.Signals(stopped_by[0]).name if stopped_by else "interrupted"
+        click.echo(f"simrunner batch: {what}; the finished runs are in {out_dir}/results.csv",
                    err=True)
-        sys.exit(130)
+        sys.exit(128 + (stopped_by[0] if stopped_by else signal.SIGINT))
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     bar.close()
     counts = ", ".join(f"{k} {v}" for k, v in sorted(result.counts().items()))
     laps_done = sum(r["laps_completed"] for r in result.rows)

@@ -15,7 +15,7 @@ from typing import Callable
 
 from simrunner.workflows.batch.pool import LocalBackend
 from simrunner.workflows.batch.scheduler import WorkerTiming, default_workers, run_jobs
-from simrunner.workflows.batch.results import (BATCH_OUTCOMES, RESERVED, deterministic,
+from simrunner.workflows.batch.results import (BATCH_OUTCOMES, RESERVED, PartialResults, deterministic,
                                                write_results)
 from simrunner.workflows.batch.spec import (BatchConfig, BatchError, Job, make_jobs, parse_grid,
                                             parse_seeds, resolve_tracks)
@@ -152,8 +152,11 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     if on_plan is not None:
         on_plan(len(jobs))
 
+    partial = PartialResults(out / "results.partial.csv", tuple(grid))
+
     def take(row: dict) -> None:
         rows[row["run"]] = row
+        partial.add(row)  # on disk as it comes: a batch killed (kill -9, the OOM killer) keeps it
         if on_row is not None:
             on_row(row)
 
@@ -192,6 +195,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
                 "runs_done": len(ordered), "backend": backend_name, "workers": n_workers,
                 "wall_time_s": round(wall, 3)}
         csv_path, json_path = write_results(out, ordered, tuple(grid), meta)
+        partial.remove()
     plot_path = None
     if plot and ordered:
         from simrunner.workflows.batch.plot import plot_summary

@@ -131,6 +131,36 @@ def _json_safe(value: Any) -> Any:
     return value
 
 
+class PartialResults:
+    """``results.partial.csv``: each row appended (and flushed) as its run finishes, in that
+    order, so a batch killed before it writes ``results.csv`` keeps its finished runs;
+    :meth:`remove` once the sorted files are written."""
+
+    def __init__(self, path: Path, param_names):
+        self.path = Path(path)
+        self.param_names = tuple(param_names)
+        self._file = None
+
+    def add(self, row: dict[str, Any]) -> None:
+        try:
+            if self._file is None:
+                self._file = open(self.path, "w", encoding="utf-8", newline="")  # noqa: SIM115 - kept open
+                self._file.write(csv_text([], self.param_names))
+            self._file.write(csv_text([row], self.param_names).split("\n", 1)[1])
+            self._file.flush()
+        except OSError:  # the final results.csv says what could not be kept here
+            self._file = None
+
+    def remove(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        try:
+            self.path.unlink()
+        except OSError:
+            pass
+
+
 def write_results(out_dir: Path, rows: list[dict[str, Any]], param_names, meta: dict) -> tuple[Path, Path]:
     """Write ``results.csv`` and ``results.json`` (each atomically); rows sorted by run."""
     rows = sorted(rows, key=lambda r: r["run"])
