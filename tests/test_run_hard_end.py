@@ -148,3 +148,27 @@ def test_without_csv_the_stuck_run_still_gets_its_summary(tmp_path):
     assert summary["outcome"] == "stalled" and summary["frames"] == 5
     assert summary["outputs"] == {"summary": "s.json"}  # the supervisor's run log is not an output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ctrl.py", "s.json"]
+
+
+@pytest.mark.parametrize("how, signame", [("os.kill(os.getpid(), 9)", "SIGKILL"),
+                                          ("__import__('ctypes').string_at(0)", "SIGSEGV")])
+def test_a_run_process_killed_by_a_signal_still_gets_its_outputs(tmp_path, how, signame):
+    """Issue 50 (fault injection): the out-of-memory killer's SIGKILL, or a crash the run cannot
+    catch, ended `drive` with 137/139 and nothing written: the supervisor writes the summary
+    and the plot from the run log, outcome controller_error naming the signal."""
+    import json
+
+    body = "s.sleep(0.3)\nimport signal\nsignal.signal(signal.SIGSEGV, signal.SIG_DFL)\n" + how + "\n"
+    proc = start_drive(tmp_path, body, "--summary", "s.json", "--plot", "p.png")
+    try:
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 1, (out, err)
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["outcome"] == "controller_error"
+    import re
+
+    assert re.search(rf"killed by {signame} at t = 0\.[23]\d\d s", summary["message"]), summary["message"]
+    assert (tmp_path / "p.png").stat().st_size > 1000 and "Traceback" not in err

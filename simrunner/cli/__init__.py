@@ -305,17 +305,21 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
 
     end = supervise(run, csv)
     try:
-        if not end.stuck:
+        if not end.stuck and end.signal is None:
             return end.code
-        from simrunner.run.postmortem import StuckRun, finish_stuck_run
+        from simrunner.run.postmortem import StuckRun, finish_dead_run, finish_stuck_run
 
-        click.echo(end.report.rstrip(), err=True)  # every thread's stack: the controller's line
         stuck = StuckRun(controller=controller, outputs=Outputs(video=video, csv=csv, plot=plot,
                                                                 summary=summary),
                          track=track, car=car, laps=laps, seed=seed, wall_limit_s=wall_limit_s)
         try:
-            result = finish_stuck_run(stuck, end.report, end.csv_path, wall_time_s=end.wall_time_s,
-                                      cpu_time_s=end.cpu_time_s)
+            if end.stuck:
+                click.echo(end.report.rstrip(), err=True)  # every thread's stack: the controller's line
+                result = finish_stuck_run(stuck, end.report, end.csv_path, wall_time_s=end.wall_time_s,
+                                          cpu_time_s=end.cpu_time_s)
+            else:  # killed by a signal the run could not handle (SIGKILL, an uncaught crash)
+                result = finish_dead_run(stuck, end.signal, end.csv_path, wall_time_s=end.wall_time_s,
+                                         cpu_time_s=end.cpu_time_s)
         except input_errors() as exc:
             click.echo(f"simrunner: {exc}", err=True)
             return 1

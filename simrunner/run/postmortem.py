@@ -79,6 +79,43 @@ def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s:
     return result
 
 
+def finish_dead_run(run: StuckRun, signum: int, csv_path: Path, *, wall_time_s: float,
+                    cpu_time_s: float) -> RunResult:
+    """Write the outputs of a run whose process a signal killed (module docstring of
+    :mod:`simrunner.run.supervise`): outcome ``controller_error`` naming the signal."""
+    import signal as signals
+
+    from simrunner.run.runner import resolve_track
+    from simrunner.run.settings import RunSettings
+    from vehicle.description import load_car
+
+    log = _read(csv_path)
+    try:
+        name = signals.Signals(signum).name
+    except ValueError:
+        name = f"signal {signum}"
+    why = ("kill -9, or the out-of-memory killer" if signum == signals.SIGKILL else
+           "a crash the simulator could not catch: a C controller that ignored the signal, or crashed "
+           "in a constructor or a library it loaded")
+    at = f" at t = {float(log.t_s[-1]):.3f} s" if len(log) else " before the first frame"
+    message = f"the run's process was killed by {name}{at} ({why}); the outputs were written from the run log"
+    car = load_car(run.car)
+    track, label = resolve_track(run.track, car)
+    laps_completed, lap_times = _laps(log)
+    settings = RunSettings(laps=run.laps, seed=run.seed).for_track(track)
+    result = RunResult(outcome=Outcome.CONTROLLER_ERROR, laps=settings.laps, laps_completed=laps_completed,
+                       lap_times_s=lap_times, sim_time_s=float(log.t_s[-1]) if len(log) else 0.0,
+                       wall_time_s=wall_time_s, cpu_time_s=cpu_time_s, track=label,
+                       seed=run.seed, message=message, log=log, frames=len(log))
+    if run.outputs.csv is not None:
+        result.outputs["csv"] = str(run.outputs.csv)
+    video = None
+    if run.outputs.video is not None:
+        video = _rebuild_video(log, run.outputs.video, track, car, settings.laps)
+    write_outputs(result, Outputs(plot=run.outputs.plot, summary=run.outputs.summary), video, track)
+    return result
+
+
 def _read(csv_path: Path) -> RunLog:
     if not csv_path.exists():  # the run stalled before its first frame
         return empty_log(str(csv_path))

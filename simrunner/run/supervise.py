@@ -73,6 +73,7 @@ class ChildEnd:
     csv_path: Path
     wall_time_s: float
     cpu_time_s: float
+    signal: int | None = None  # the signal that killed the child (not a handled end)
 
     @property
     def stuck(self) -> bool:
@@ -122,7 +123,7 @@ def supervise(child: Callable[[], int], csv_path: str | Path | None) -> ChildEnd
         text = report.read()
     return ChildEnd(code=128 - code if code < 0 else code, report=text, csv_path=csv,
                     wall_time_s=time.monotonic() - wall0,
-                    cpu_time_s=usage.ru_utime + usage.ru_stime)
+                    cpu_time_s=usage.ru_utime + usage.ru_stime, signal=-code if code < 0 else None)
 
 
 def remove_temporary(end: ChildEnd, csv_path: str | Path | None) -> None:
