@@ -429,3 +429,26 @@ def test_track_json_name_cannot_point_the_mesh_check_outside(built, tmp_path):
     (out / "track.json").write_text(json.dumps(doc))
     result = CliRunner().invoke(trackgen_main, ["validate", str(out), "--no-sdf-check"])
     assert result.exit_code == 1 and "name '../../..': expected the track model's folder name" in result.output
+
+
+def test_a_compressed_mesh_is_held_to_the_size_limit_of_what_it_holds(tmp_path):
+    """Issue 50 (fault injection): a 1.5 kB .stl.bz2 inflated to ~11 GB in validate and drive."""
+    import bz2
+    import zipfile
+
+    from trackgen.meshes import SlabMesh, stl_bytes
+    from worlds.mesh_read import MAX_MESH_BYTES, read_triangles
+    from worlds.sdf_xml import WorldError
+
+    tri = SlabMesh(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+    (tmp_path / "ok.stl.bz2").write_bytes(bz2.compress(stl_bytes(tri)))
+    assert read_triangles(tmp_path / "ok.stl.bz2").shape == (1, 3, 3)
+    bomb = tmp_path / "lane.stl.bz2"
+    bomb.write_bytes(bz2.compress(b"\0" * (MAX_MESH_BYTES + 1)))
+    assert bomb.stat().st_size < 200
+    with pytest.raises(WorldError, match=r"lane.stl.bz2: compressed mesh holds more than 32 MiB"):
+        read_triangles(bomb)
+    with zipfile.ZipFile(tmp_path / "lane.zip", "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("lane.stl", b"\0" * (MAX_MESH_BYTES + 1))
+    with pytest.raises(WorldError, match=r"lane.zip: zip mesh holds 32.0 MiB"):
+        read_triangles(tmp_path / "lane.zip")

@@ -15,7 +15,8 @@ frame:
 * any other suffix (``.dae``, ``.obj``, ``.ply``, ...) through trimesh, every failure of
   which becomes one line;
 
-and refuses files over :data:`MAX_MESH_BYTES`, meshes with no triangles and non-finite
+and refuses files over :data:`MAX_MESH_BYTES` (of what a compressed mesh, ``.stl.bz2``,
+``.gz``, ``.xz`` or a ``.zip``, holds too), meshes with no triangles and non-finite
 coordinates. :func:`scene_triangles` reads every visual and collision of a
 ``worlds.sdf_read.Scene`` (a file used twice is read once), applies ``<scale>`` and the
 pose, and bounds the whole world: at most :data:`MAX_WORLD_TRIANGLES` triangles, all within
@@ -24,6 +25,9 @@ then at most 10,000 pixels a side).
 """
 from __future__ import annotations
 
+import bz2
+import gzip
+import lzma
 import math
 import re
 from dataclasses import dataclass
@@ -38,6 +42,7 @@ MAX_WORLD_TRIANGLES = 4_000_000  # all meshes of a world together
 MAX_EXTENT_M = 50.0  # x and y span of all meshes of a world (NXP's tracks: 7 m and 12 m)
 
 _STL_HEADER_BYTES = 84
+_COMPRESSED = {".bz2": bz2.open, ".gz": gzip.open, ".xz": lzma.open}  # a mesh compressed whole
 _STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _VERTEX = re.compile(rf"^\s*vertex\s+({_NUMBER})\s+({_NUMBER})\s+({_NUMBER})\s*$", re.IGNORECASE)
@@ -55,9 +60,14 @@ def read_triangles(path: str | Path) -> np.ndarray:
     if size > MAX_MESH_BYTES:
         raise WorldError(f"{path}: mesh file of {size / 2**20:.1f} MiB: at most "
                          f"{MAX_MESH_BYTES // 2**20} MiB are read")
-    if path.suffix.lower() == ".stl":
+    suffix = path.suffix.lower()
+    if suffix in _COMPRESSED:
+        tris = _read_compressed(path)
+    elif suffix == ".stl":
         tris = _read_stl(path)
     else:
+        if suffix == ".zip":
+            _check_zip(path)
         tris = _read_other(path)
     if len(tris) == 0:
         raise WorldError(f"{path}: mesh has no triangles")
@@ -66,11 +76,12 @@ def read_triangles(path: str | Path) -> np.ndarray:
     return tris
 
 
-def _read_stl(path: Path) -> np.ndarray:
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise WorldError(f"{path}: cannot read mesh ({exc.strerror or exc})") from None
+def _read_stl(path: Path, data: bytes | None = None) -> np.ndarray:
+    if data is None:
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise WorldError(f"{path}: cannot read mesh ({exc.strerror or exc})") from None
     if len(data) >= _STL_HEADER_BYTES:
         count = int.from_bytes(data[80:84], "little")
         if len(data) == _STL_HEADER_BYTES + 50 * count:
@@ -148,6 +159,45 @@ def _read_ascii_stl(path: Path, data: bytes) -> np.ndarray:
 def _quote(text: str, limit: int = 40) -> str:
     text = text.strip()
     return repr(text if len(text) <= limit else text[:limit] + "...")
+
+
+def _read_compressed(path: Path) -> np.ndarray:
+    """A mesh compressed as a whole (``lane.stl.bz2``): decompressed up to MAX_MESH_BYTES (a
+    small file can hold gigabytes: the limit holds for what it holds), then read as its inner
+    suffix says."""
+    opener = _COMPRESSED[path.suffix.lower()]
+    try:
+        with opener(path, "rb") as f:
+            data = f.read(MAX_MESH_BYTES + 1)
+    except (OSError, EOFError, ValueError) as exc:
+        raise WorldError(f"{path}: cannot decompress mesh ({str(exc).splitlines()[0][:120] or type(exc).__name__})") from None
+    if len(data) > MAX_MESH_BYTES:
+        raise WorldError(f"{path}: compressed mesh holds more than {MAX_MESH_BYTES // 2**20} MiB: at most "
+                         f"{MAX_MESH_BYTES // 2**20} MiB are read")
+    inner = Path(path.stem)
+    if inner.suffix.lower() == ".stl":
+        return _read_stl(path, data)
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="nxpcup-mesh-") as tmp:
+        plain = Path(tmp) / inner.name
+        plain.write_bytes(data)
+        return _read_other(plain)
+
+
+def _check_zip(path: Path) -> None:
+    """A zip archive's members hold at most MAX_MESH_BYTES together (read from its directory
+    before anything is inflated)."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as z:
+            total = sum(info.file_size for info in z.infolist())
+    except (OSError, zipfile.BadZipFile) as exc:
+        raise WorldError(f"{path}: cannot read zip mesh ({exc})") from None
+    if total > MAX_MESH_BYTES:
+        raise WorldError(f"{path}: zip mesh holds {total / 2**20:.1f} MiB: at most "
+                         f"{MAX_MESH_BYTES // 2**20} MiB are read")
 
 
 def _read_other(path: Path) -> np.ndarray:
