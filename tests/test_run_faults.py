@@ -286,3 +286,26 @@ def test_recorder_memory_is_bounded_and_the_sink_gets_every_row(n, max_rows):
         assert frames[:-1] == list(range(0, n - 1, rec.stride))  # every stride-th row
         assert all(t == f"t{f}" for f, t in zip(frames, log.data_text))
         assert log.speed_cmd_mps.tolist() == frames
+
+
+def test_a_controllers_chdir_and_environment_stay_in_its_run(tmp_path, monkeypatch):
+    """Issue 50 (fault injection): a controller that changes directory or os.environ moved the
+    run's outputs and changed later runs of a batch worker."""
+    import os
+
+    from simrunner.run.runner import drive
+
+    monkeypatch.chdir(tmp_path)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+
+    def main(s):
+        os.environ["NXPCUP_LEAK"] = "1"
+        os.chdir(elsewhere)
+        s.get_image()
+
+    r = drive(main, track="floor", time_limit_s=1.0, csv="log.csv", summary="summary.json")
+    assert r.outcome == "controller_returned"
+    assert os.getcwd() == str(tmp_path) and "NXPCUP_LEAK" not in os.environ
+    assert (tmp_path / "log.csv").exists() and (tmp_path / "summary.json").exists()
+    assert not list(elsewhere.iterdir())

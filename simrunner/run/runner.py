@@ -25,6 +25,7 @@ process (:mod:`simrunner.run.watchdog`); under a supervisor (:mod:`simrunner.run
 from __future__ import annotations
 
 import gc
+import os
 import threading
 import time
 from pathlib import Path
@@ -56,6 +57,19 @@ DEFAULT_TRACK_NAME = "thesis_figure8.txt"
 def default_track() -> Path:
     """The bundled default track layout (the thesis's figure-8, Fig. 4.2)."""
     return _DATA_DIR / DEFAULT_TRACK_NAME
+
+
+def _restore_process_state(cwd: str, environ: dict[str, str]) -> None:
+    """The working directory and the environment as they were before the controller ran."""
+    try:
+        if os.getcwd() != cwd:
+            os.chdir(cwd)
+    except OSError:  # (the controller removed it: stay where it left us)
+        pass
+    if os.environ != environ:
+        for key in [k for k in os.environ if k not in environ]:
+            del os.environ[key]
+        os.environ.update(environ)
 
 
 # -- the run log's extra columns -------------------------------------------------------------
@@ -300,6 +314,9 @@ class Run:
         self.session.activate()
         if self.signal_guard is not None:
             self.signal_guard.clock = clock
+        # what the controller's process state was: a controller that changes directory or the
+        # environment must not move this run's outputs or change the next run of a batch worker
+        cwd, environ = os.getcwd(), dict(os.environ)
         try:
             with _gc_frozen(), watchdog, ControllerGuards(self.session):
                 try:
@@ -335,6 +352,7 @@ class Run:
             self.session.deactivate()
             if self.signal_guard is not None:
                 self.signal_guard.clock = None
+            _restore_process_state(cwd, environ)
         self.wall_time_s = time.perf_counter() - wall0
         self.cpu_time_s = time.process_time() - cpu0
         if outcome not in (Outcome.CONTROLLER_ERROR, Outcome.INTERRUPTED):

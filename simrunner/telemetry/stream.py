@@ -34,7 +34,7 @@ class CsvStream:
     that did not start)."""
 
     def __init__(self, path: str | Path, *, extra: tuple[str, ...] = ()):
-        self.path = Path(path)
+        self.path = Path(path).absolute()  # opened at the first row: a controller's chdir must not move it
         self.extra = tuple(extra)
         if self.extra:
             cols = _BASE[:-1] + [c for c in COLUMNS if c.name in self.extra] + _BASE[-1:]
