@@ -809,3 +809,57 @@ def test_the_host_compiles_without_warnings(tmp_path, mode):
     proc = subprocess.run(["cc", "-std=gnu11", "-Wall", "-Werror", "-fPIC", *mode, f"-I{INCLUDE_DIR}", "-c",
                            str(HOST_SOURCE), "-o", str(tmp_path / "host.o")], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+@pytest.mark.parametrize("limit_s, lines", [(5.0, 11), (0.05, 7)])
+def test_exit_handlers_and_buffered_files_of_a_c_program_run_at_its_end(tmp_path, isolate, limit_s, lines):
+    """Issue 50 (fault injection): in the simulator's process a controller's atexit handlers and
+    its own buffered log file were lost (0 of 11 lines). Now they run and flush as exit() would,
+    whether main returns (11 lines) or the run ends at the time limit (6 lines and the handler's)."""
+    import dataclasses
+
+    from simrunner.run.native import build_program
+
+    log = tmp_path / "ctl_log.txt"
+    src = tmp_path / "logs.c"
+    src.write_text(textwrap.dedent(f"""\
+        #include <stdio.h>
+        #include <stdlib.h>
+        #include "spinner.h"
+        static FILE *log_file;
+        static void bye(void) {{ fprintf(log_file, "atexit ran\\n"); fclose(log_file); }}
+        int main(void) {{
+            log_file = fopen("{log}", "w");
+            atexit(bye);
+            for (int i = 0; i < 10; i++) {{ fprintf(log_file, "line %d\\n", i); spinner_sleep(0.01); }}
+            return 0;
+        }}
+        """))
+    program = dataclasses.replace(build_program([str(src)]), isolate=isolate)
+    drive(program, track="floor", time_limit_s=limit_s)
+    text = log.read_text().splitlines()
+    assert len(text) == lines and text[-1] == "atexit ran"
+
+
+def test_a_cpp_programs_static_destructors_run_at_its_end(tmp_path):
+    from simrunner.run.native import build_program
+
+    log = tmp_path / "dtor.txt"
+    src = tmp_path / "dtor.cpp"
+    src.write_text(textwrap.dedent(f"""\
+        #include <cstdio>
+        #include "spinner.hpp"
+        struct Logger {{
+            FILE *f;
+            Logger() {{ f = std::fopen("{log}", "w"); }}
+            ~Logger() {{ std::fputs("destructor ran\\n", f); std::fclose(f); }}
+        }};
+        static Logger logger;
+        int main() {{ std::fputs("main ran\\n", logger.f); spinner_sleep(0.05); return 0; }}
+        """))
+    program = build_program([str(src)])
+    for _ in range(2):  # a second run of the same library: fresh globals, its destructor again
+        log.unlink(missing_ok=True)
+        assert drive(program, track="floor", time_limit_s=5.0).outcome == "controller_returned"
+        assert log.read_text() == "main ran\ndestructor ran\n"

@@ -44,7 +44,8 @@ CXX_FLAGS = ("-std=gnu++17",)
 CXX_FRESH_FLAGS = ("-fno-gnu-unique",)
 # the sleeps wait in simulated time and an exit ends the program, not the simulator: the
 # controller's calls go to __wrap_NAME (host/spinner_host.c, both builds)
-WRAPPED = ("usleep", "sleep", "nanosleep", "clock_nanosleep", "exit", "_exit", "_Exit", "quick_exit")
+WRAPPED = ("usleep", "sleep", "nanosleep", "clock_nanosleep", "exit", "_exit", "_Exit", "quick_exit",
+           "atexit", "__cxa_atexit")
 LINK_FLAGS = ("-Wl,--wrap=" + ",--wrap=".join(WRAPPED),)
 INSTALL_HINT = "install a C compiler, e.g. `sudo apt-get install build-essential` (Debian/Ubuntu)"
 

@@ -713,12 +713,16 @@ int clock_nanosleep(clockid_t clock, int flags, const struct timespec *req, stru
     return sim_clock_nanosleep(clock, flags, req, rem);
 }
 
-/* exit and friends end the host process as they would end the program. */
+/* exit and friends end the host process as they would end the program; its exit handlers are
+ * the process's own (atexit, static destructors: glibc runs them). */
 static void ended(void) { exit(0); }
 void __wrap_exit(int status) { exit(status); }
 void __wrap__exit(int status) { _exit(status); }
 void __wrap__Exit(int status) { _Exit(status); }
 void __wrap_quick_exit(int status) { quick_exit(status); }
+int __wrap_atexit(void (*fn)(void)) { return atexit(fn); }
+int __cxa_atexit(void (*fn)(void *), void *arg, void *dso);
+int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) { return __cxa_atexit(fn, arg, dso); }
 #else
 /* In-process the program's exit ends its coroutine with that status (not the simulator). */
 static void leave(int status) __attribute__((noreturn));
@@ -733,8 +737,40 @@ static void leave(int status) {
     ESCAPE();
     abort();  /* not reached */
 }
-static void ended(void) { leave(0); }
-void __wrap_exit(int status) { leave(status); }
+/* In the simulator's process the program's exit handlers (atexit, a C++ program's static
+ * destructors: __cxa_atexit) are kept here and run, last registered first, when the program
+ * ends as exit() ends one (main returns, exit, the run's end), with its stdio flushed; _exit,
+ * _Exit, quick_exit and faults skip them, as they do on a real system. A fault or a run ended
+ * by the simulator drops the rest (spinner_inproc_finish). */
+#define MAX_EXIT_HANDLERS 256
+static struct { void (*fn)(void *); void *arg; } exit_handlers[MAX_EXIT_HANDLERS];
+static int n_exit_handlers;
+static void call_plain(void *fn) { ((void (*)(void))fn)(); }
+int __wrap_atexit(void (*fn)(void)) {
+    if (n_exit_handlers == MAX_EXIT_HANDLERS) return -1;
+    exit_handlers[n_exit_handlers].fn = call_plain;
+    exit_handlers[n_exit_handlers++].arg = (void *)fn;
+    return 0;
+}
+int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) {
+    (void)dso;
+    if (n_exit_handlers == MAX_EXIT_HANDLERS) return -1;
+    exit_handlers[n_exit_handlers].fn = fn;
+    exit_handlers[n_exit_handlers++].arg = arg;
+    return 0;
+}
+static void exit_run(int status) __attribute__((noreturn));
+static void exit_run(int status) {
+    finished = 1;  /* Spinner calls from the handlers return at once */
+    while (n_exit_handlers > 0) {
+        n_exit_handlers--;
+        exit_handlers[n_exit_handlers].fn(exit_handlers[n_exit_handlers].arg);
+    }
+    fflush(NULL);
+    leave(status);
+}
+static void ended(void) { exit_run(0); }
+void __wrap_exit(int status) { exit_run(status); }
 void __wrap__exit(int status) { leave(status); }
 void __wrap__Exit(int status) { leave(status); }
 void __wrap_quick_exit(int status) { leave(status); }
@@ -1020,7 +1056,7 @@ static void entry(void) {
     in_controller = 1;
     INIT();  /* the run has started */
     int rc = user_main(user_argc, user_argv, environ);
-    leave(rc);
+    exit_run(rc);
 }
 
 /* Open the controller's library: its handle, or NULL (spinner_inproc_error says why). */
@@ -1126,6 +1162,7 @@ long spinner_inproc_resume_image(const unsigned char *image, size_t n) {
 /* End the run's coroutine (wherever it is), restore the signal handlers. */
 void spinner_inproc_finish(void) {
     gone = finished = 1;
+    n_exit_handlers = 0;  /* handlers a fault or the simulator's end left: their code is unloaded next */
     in_controller = 0;
     pthread_mutex_lock(&dog_lock);  /* it sends only under the lock: none comes after this */
     dog_active = 0;  /* the watchdog goes back to sleep at its next look */
