@@ -40,6 +40,11 @@ def _f(default: Any, doc: str, source: str, lo: float | None = None, hi: float |
     return field(default=default, metadata={"doc": doc, "source": source, "lo": lo, "hi": hi})
 
 
+def _choice(default: str, choices: tuple[str, ...], doc: str, source: str):
+    return field(default=default, metadata={"doc": doc, "source": source, "lo": None, "hi": None,
+                                            "choices": choices})
+
+
 @dataclass(frozen=True)
 class Chassis:
     mass_kg: float = _f(1.0, "Total mass of the car including wheels.",
@@ -85,15 +90,34 @@ class Drive:
                             "drive; 0.5 = four-wheel drive with an even split). simrunner's car only: the "
                             "Gazebo model drives the rear wheels.",
                             "NXP Cup car: rear-wheel drive (thesis 5.2)", 0.0, 1.0)
+    command: str = _choice("speed", ("speed", "duty"),
+                           "What the car is commanded in: 'speed' (m/s; an ideal speed controller in the ESC "
+                           "reaches it within the acceleration limits) or 'duty' (the two rear motors' PWM "
+                           "duty -1..1 through the motor model below: set_speed carries the duty of both, "
+                           "set_motors each one's).",
+                           "NXP Cup kits: two brushed DC motors on an H-bridge (rules summary section 2)")
+    motor_force_n: float = _f(0.0, "duty: the force one rear motor drives its wheel with at full duty from "
+                              "standstill (c1); 0 = from max_accel_mps2: c1 = m_eff max_accel / 2.",
+                              "derived from drive.max_accel_mps2 unless measured (0 -> 0 m/s in one step)", 0.0, 1000.0)
+    motor_back_emf_nspm: float = _f(0.0, "duty: the force the motor's back-EMF takes away per m/s of the "
+                                    "wheel's speed at full duty (c2); 0 = c1 / max_speed_mps (full duty's top "
+                                    "speed is then max_speed_mps without rolling resistance and drag).",
+                                    "derived from drive.max_speed_mps unless measured (top speed at a few duties)",
+                                    0.0, 1000.0)
+    hbridge: str = _choice("coast", ("coast", "brake"),
+                           "duty: what the H-bridge does in the PWM's off time and at duty 0: 'coast' (fast "
+                           "decay: force (c1 - c2 v) d; at 0 the wheel rolls freely) or 'brake' (slow decay, "
+                           "motor shorted: force c1 d - c2 v; at 0 the back-EMF brakes).",
+                           "the H-bridge driver's decay mode (e.g. MC33887 on the FRDM-TFC)")
+    rolling_resistance_n: float = _f(0.0, "duty: the force rolling resistance takes away, the whole car "
+                                     "(constant, against the motion).",
+                                     "measure it: the constant deceleration of a coast-down x the mass", 0.0, 100.0)
+    drag_nspm2: float = _f(0.0, "duty: air drag, force per (m/s)^2 of the car's speed (updated with each "
+                           "command).", "measure it: the speed-squared part of a coast-down", 0.0, 10.0)
 
 
 CAMERA_MODELS = ("ideal", "linescan", "area")
 TSL1401 = "TSL1401CL datasheet (ams, 2016)"
-
-
-def _choice(default: str, choices: tuple[str, ...], doc: str, source: str):
-    return field(default=default, metadata={"doc": doc, "source": source, "lo": None, "hi": None,
-                                            "choices": choices})
 
 
 def _floats(doc: str, source: str, lo: float, hi: float):
@@ -569,6 +593,9 @@ def relation_problem(car: CarDescription | SimpleNamespace) -> tuple[str, tuple[
         return ("camera", ("dead_pixels", "hot_pixels"), f"camera.dead_pixels + hot_pixels = "
                 f"{cam.dead_pixels + cam.hot_pixels}: expected at most the {cam.width_px * cam.height_px} "
                 f"pixels of the sensor")
+    if car.drive.command == "duty" and car.drive.front_share > 0.0:
+        return ("drive", ("command", "front_share"), f"drive.command = 'duty' drives the two rear motors: "
+                f"expected drive.front_share = 0 (got {car.drive.front_share!r})")
     if car.wheels.width_m >= car.chassis.track_m:
         return ("wheels", ("width_m",), f"wheels.width_m = {car.wheels.width_m!r}: expected less "
                 f"than chassis.track_m = {car.chassis.track_m!r} (the wheels would overlap)")

@@ -367,6 +367,15 @@ class EffectSim:
     def wheel_angles_rad(self) -> list[float]:
         return self.sim.wheel_angles_rad()
 
+    def set_motors(self, left: float, right: float) -> None:
+        """As ``CarSim.set_motors``, straight to the car (the command-path effects act on
+        set_command)."""
+        self.sim.set_motors(left, right)
+
+    @property
+    def duties(self) -> tuple[float, float]:
+        return self.sim.duties
+
     def imu_truth(self, point_m):
         return self.sim.imu_truth(point_m)
 

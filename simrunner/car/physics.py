@@ -160,6 +160,7 @@ class _Control(NamedTuple):
     ext_force_n: tuple[float, float] = (0.0, 0.0)
     front_omega_radps: tuple[float, float] = (0.0, 0.0)  # front left, right targets (four-wheel drive)
     knuckle_tail_radps: tuple[float, float] | None = None  # knuckle speeds of a move's last, partial step
+    duties: tuple[float, float] = (0.0, 0.0)  # drive.command = "duty": rear left, rear right duty
 
 
 @dataclass(frozen=True)
@@ -225,6 +226,17 @@ class CarSim:
         self._torque_accel_nm = 0.5 * self._m_eff_kg * car.drive.max_accel_mps2 * r
         self._torque_brake_nm = 0.5 * self._m_eff_kg * car.drive.max_brake_mps2 * r
         self._front_share = car.drive.front_share  # 0: rear-wheel drive, the front wheels roll freely
+        # duty drive (drive.command = "duty", module docstring): per rear motor c1 (N at full duty,
+        # standstill) and c2 (N per m/s of the wheel at full duty), as wheel torque and damping
+        dr = car.drive
+        self._duty_mode = dr.command == "duty"
+        c1 = dr.motor_force_n or 0.5 * self._m_eff_kg * dr.max_accel_mps2
+        c2 = dr.motor_back_emf_nspm or c1 / dr.max_speed_mps
+        self._motor_torque_nm = c1 * r                     # x duty
+        self._motor_damping_nms = c2 * r * r               # x |duty| (coast) or always (brake)
+        self._hbridge_brake = dr.hbridge == "brake"
+        self._drag_nspm2 = dr.drag_nspm2
+        self._duties_applied: tuple[float, float] | None = None
         skel = self._body.skeleton
         self._skel = skel
         self._world_step = world.step
@@ -243,6 +255,12 @@ class CarSim:
         self._rd = None  # read-out cache: (positions, velocities, rotation) lists
         self._pose: Pose2 | None = None
         self._wc: list | None = None
+        if self._duty_mode:  # the rear motors are torques; rolling resistance a friction at each wheel
+            rolling_nm = 0.25 * dr.rolling_resistance_n * r
+            for j in self._body.wheel_joints:
+                j.setCoulombFriction(0, rolling_nm)
+            for j in self._body.wheel_joints[2:]:
+                j.setActuatorType(dart.dynamics.ActuatorType.FORCE)
         self._place(start, 0.0, 0.0, 0.0)
         self._apply(self._control, force=True)
         self.set_command(0.0, 0.0)  # at rest, rear wheels held at the brake torque
@@ -364,13 +382,13 @@ class CarSim:
                 and (yaw_rate_radps is None or math.isfinite(yaw_rate_radps))):
             raise SimError(f"CarSim.set_command({speed_mps!r}, {steer_rad!r}, {yaw_rate_radps!r}): "
                            "expected finite numbers")
-        v_max, d_max = self._v_max_mps, self._d_max_rad
-        v = min(max(float(speed_mps), -v_max), v_max)
+        v_max, d_max = (1.0 if self._duty_mode else self._v_max_mps), self._d_max_rad
+        v = min(max(float(speed_mps), -v_max), v_max)  # duty mode: the duty of both rear motors
         d = min(max(float(steer_rad), -d_max), d_max)
         w = v * math.sin(d) / self._wb_m if yaw_rate_radps is None else float(yaw_rate_radps)
         r, half_t = self._r_m, self._half_t_m
         torque = self._torque_accel_nm
-        if torque != self._torque_brake_nm:  # the current speed decides (equal limits: no read)
+        if torque != self._torque_brake_nm and not self._duty_mode:  # the current speed decides (equal limits: no read)
             v_now = self.speed_mps
             if not (abs(v) > abs(v_now) and v * v_now >= 0.0):  # not speeding up: brake limit
                 torque = self._torque_brake_nm
@@ -407,8 +425,10 @@ class CarSim:
             ww = w * self._wb_m
             front = (((v - w * half_t) * math.cos(tl) + ww * math.sin(tl)) / r,
                      ((v + w * half_t) * math.cos(tr) + ww * math.sin(tr)) / r)
+        duties = (v, v) if self._duty_mode else c.duties
         self._control = c = _Control(v, d, w, ((v - w * half_t) / r, (v + w * half_t) / r), torque,
-                                     q_tgt, k_vel, n_steps, c.wheels_locked, c.coast, c.ext_force_n, front, tail)
+                                     q_tgt, k_vel, n_steps, c.wheels_locked, c.coast, c.ext_force_n, front, tail,
+                                     duties)
         self._steer_left, self._kvel, self._tail = n_steps, k_vel, tail
         self._apply(c)
 
@@ -447,6 +467,25 @@ class CarSim:
         self._control = self._control_now()._replace(coast=bool(coast))
         self._apply(self._control)
 
+    def set_motors(self, left: float, right: float) -> None:
+        """drive.command = "duty": the duty (-1..1, clamped) of the left and the right rear motor
+        (the steering stays as commanded). A speed-commanded car takes their mean as a share
+        of its top speed (``(left + right) / 2 x max_speed_mps``)."""
+        if not (math.isfinite(left) and math.isfinite(right)):
+            raise SimError(f"CarSim.set_motors({left!r}, {right!r}): expected finite numbers")
+        if not self._duty_mode:
+            c = self._control
+            self.set_command(0.5 * (left + right) * self._v_max_mps, c.steer_cmd_rad)
+            return
+        duties = (min(max(float(left), -1.0), 1.0), min(max(float(right), -1.0), 1.0))
+        self._control = self._control_now()._replace(duties=duties, speed_cmd_mps=0.5 * (duties[0] + duties[1]))
+        self._apply(self._control)
+
+    @property
+    def duties(self) -> tuple[float, float]:
+        """The rear motors' duties in force (duty mode; (0, 0) otherwise)."""
+        return self._control.duties
+
     def apply_external_force_n(self, fx_n: float, fy_n: float) -> None:
         """Set a constant force on the chassis at its centre of mass, in the CAR BODY frame
         (x forward, y left; N). It replaces the previous one and stays until changed
@@ -465,39 +504,68 @@ class CarSim:
             for j, vel in zip(b.knuckle_joints, c.knuckle_vel_radps):
                 j.setCommand(0, vel)
             self._k_applied = c.knuckle_vel_radps
-        types = (c.wheels_locked, c.coast)
-        f = self._front_share
-        if types != self._types_applied:
-            A = dart.dynamics.ActuatorType
-            driven = A.LOCKED if c.wheels_locked else (A.PASSIVE if c.coast else A.SERVO)
-            for j in b.wheel_joints[:2]:
-                j.setActuatorType(driven if f > 0.0 else (A.LOCKED if c.wheels_locked else A.PASSIVE))
-            for j in b.wheel_joints[2:]:
-                j.setActuatorType(driven)
-            self._types_applied = types
-            self._omega_applied = None  # set the driven wheels' commands again for the new type
-        if c.wheel_torque_nm != self._torque_applied:
-            if f > 0.0:
-                shares = ((b.wheel_joints[:2], f * c.wheel_torque_nm), (b.wheel_joints[2:], (1.0 - f) * c.wheel_torque_nm))
-            else:
-                shares = ((b.wheel_joints[2:], c.wheel_torque_nm),)
-            for joints, torque in shares:
-                for j in joints:
-                    j.setForceLowerLimit(0, -torque)
-                    j.setForceUpperLimit(0, torque)
-            self._torque_applied = c.wheel_torque_nm
-        # a coasting (PASSIVE) wheel ignores commands: they are set when the servo is back
-        omega = (0.0, 0.0) if c.wheels_locked else (None if c.coast else c.wheel_omega_radps)
-        if f > 0.0 and omega is not None:  # rear left, rear right, front left, front right
-            omega = omega + ((0.0, 0.0) if c.wheels_locked else c.front_omega_radps)
-        if omega is not None and omega != self._omega_applied:
-            for j, o in zip(b.wheel_joints[2:] if f == 0.0 else b.wheel_joints[2:] + b.wheel_joints[:2], omega):
-                j.setCommand(0, o)
-            self._omega_applied = omega
-        if c.ext_force_n != self._force_applied:
-            b.chassis.setExtForce(np.array([c.ext_force_n[0], c.ext_force_n[1], 0.0]),
-                                  b.chassis.getLocalCOM(), True, True)
-            self._force_applied = c.ext_force_n
+        if self._duty_mode:
+            self._apply_duties(c, force)
+        else:
+            types = (c.wheels_locked, c.coast)
+            f = self._front_share
+            if types != self._types_applied:
+                A = dart.dynamics.ActuatorType
+                driven = A.LOCKED if c.wheels_locked else (A.PASSIVE if c.coast else A.SERVO)
+                for j in b.wheel_joints[:2]:
+                    j.setActuatorType(driven if f > 0.0 else (A.LOCKED if c.wheels_locked else A.PASSIVE))
+                for j in b.wheel_joints[2:]:
+                    j.setActuatorType(driven)
+                self._types_applied = types
+                self._omega_applied = None  # set the driven wheels' commands again for the new type
+            if c.wheel_torque_nm != self._torque_applied:
+                if f > 0.0:
+                    shares = ((b.wheel_joints[:2], f * c.wheel_torque_nm), (b.wheel_joints[2:], (1.0 - f) * c.wheel_torque_nm))
+                else:
+                    shares = ((b.wheel_joints[2:], c.wheel_torque_nm),)
+                for joints, torque in shares:
+                    for j in joints:
+                        j.setForceLowerLimit(0, -torque)
+                        j.setForceUpperLimit(0, torque)
+                self._torque_applied = c.wheel_torque_nm
+            # a coasting (PASSIVE) wheel ignores commands: they are set when the servo is back
+            omega = (0.0, 0.0) if c.wheels_locked else (None if c.coast else c.wheel_omega_radps)
+            if f > 0.0 and omega is not None:  # rear left, rear right, front left, front right
+                omega = omega + ((0.0, 0.0) if c.wheels_locked else c.front_omega_radps)
+            if omega is not None and omega != self._omega_applied:
+                for j, o in zip(b.wheel_joints[2:] if f == 0.0 else b.wheel_joints[2:] + b.wheel_joints[:2], omega):
+                    j.setCommand(0, o)
+                self._omega_applied = omega
+        ext = c.ext_force_n
+        if self._duty_mode and self._drag_nspm2 > 0.0:  # air drag at the speed of this command
+            v_now = self.speed_mps
+            ext = (ext[0] - self._drag_nspm2 * v_now * abs(v_now), ext[1])
+        if ext != self._force_applied:
+            b.chassis.setExtForce(np.array([ext[0], ext[1], 0.0]), b.chassis.getLocalCOM(), True, True)
+            self._force_applied = ext
+
+    def _apply_duties(self, c: _Control, force: bool) -> None:
+        """The rear motors of a duty-commanded car: wheel torque c1 r d and back-EMF damping
+        c2 r^2 |d| (coast) or c2 r^2 (brake); locked wheels are locked."""
+        if force:
+            self._duties_applied = None
+        key = (c.duties, c.wheels_locked, c.coast)
+        if key == self._duties_applied:
+            return
+        A = dart.dynamics.ActuatorType
+        for j, d in zip(self._body.wheel_joints[2:], c.duties):
+            if c.wheels_locked:
+                j.setActuatorType(A.LOCKED)
+                continue
+            j.setActuatorType(A.FORCE)
+            d = 0.0 if c.coast else d
+            brake = self._hbridge_brake and not c.coast
+            j.setDampingCoefficient(0, self._motor_damping_nms * (1.0 if brake else abs(d)))
+            j.setCommand(0, self._motor_torque_nm * d)
+        if c.wheels_locked != (self._duties_applied or ((), False))[1]:
+            for j in self._body.wheel_joints[:2]:
+                j.setActuatorType(A.LOCKED if c.wheels_locked else A.PASSIVE)
+        self._duties_applied = key
 
     @property
     def speed_cmd_mps(self) -> float:

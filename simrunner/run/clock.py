@@ -75,6 +75,7 @@ class LockstepClock:
         self._next_frame_step = self._frame_step(1)
         self._command: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._command_dirty = True
+        self._motors: tuple[float, float] | None = None  # set_motors' duties, until a speed is set
         self.finished: RunFinished | None = None
         self.last_progress_wall_s = time.monotonic()
         self.stall_limit_s: float | None = None  # the watchdog's limit, once armed
@@ -124,9 +125,19 @@ class LockstepClock:
         return self._pose
 
     # -- commands and end ----------------------------------------------------------
-    def command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None:
-        """Store the targets; they reach the sim before the next step."""
+    def command(self, speed_mps: float, steer_rad: float, yaw_rate_radps: float,
+                keep_motors: bool = False) -> None:
+        """Store the targets; they reach the sim before the next step. A command that sets
+        the speed ends the motors' own duties (``keep_motors`` False); a steering-only one keeps them."""
         self._command = (speed_mps, steer_rad, yaw_rate_radps)
+        self._command_dirty = True
+        if not keep_motors:
+            self._motors = None
+
+    def motors(self, left: float, right: float) -> None:
+        """The rear motors' duties (``sim.set_motors``), before the next step and after any
+        later steering command."""
+        self._motors = (left, right)
         self._command_dirty = True
 
     @property
@@ -157,6 +168,8 @@ class LockstepClock:
         """Send a changed command to the sim; remember the open row's command."""
         if self._command_dirty:
             self.sim.set_command(*self._command)
+            if self._motors is not None:
+                self.sim.set_motors(*self._motors)
             self._command_dirty = False
         if self._row_pending:
             self._row_pending = False

@@ -76,10 +76,11 @@ def _restore_process_state(cwd: str, environ: dict[str, str]) -> None:
 def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int):
     """The run log's columns beyond the base ones (``simrunner.telemetry.log.EXTRA_COLUMNS``) and
     a function ``(pose, t_s) -> their values``: the car's height and pitch on a track with hills
-    (``pose`` is then a ``Pose3``), its encoders' counts and its IMU's sample at each frame.
+    (``pose`` is then a ``Pose3``), its encoders' counts and its IMU's sample at each frame, a
+    duty-commanded car's motor duties.
     The log's encoders and IMU are copies of the car's own (the same device, seed and noise), so
     that logging them does not change what the controller reads. ``((), None)`` without any."""
-    from simrunner.telemetry.log import IMU_COLUMNS, LIFT_COLUMNS
+    from simrunner.telemetry.log import DUTY_COLUMNS, IMU_COLUMNS, LIFT_COLUMNS
 
     names: list[str] = []
     parts: list = []
@@ -103,6 +104,9 @@ def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int
             names += IMU_COLUMNS
             point = (spec.x_m, spec.y_m, spec.z_m)
             parts.append(lambda pose, t: tuple(imu.sample("log", t, lambda: sim.imu_truth(point)).tolist()))
+    if car.drive.command == "duty":
+        names += DUTY_COLUMNS
+        parts.append(lambda pose, t: sim.duties)
     if not parts:
         return (), None
     if len(parts) == 1:

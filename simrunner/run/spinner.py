@@ -205,7 +205,7 @@ class Spinner:
                                "`simrunner drive FILE` (it calls main(spinner))")
         self._s = session
         self._owner = session.thread_id if session.thread_id is not None else _get_ident()
-        self._vmax = session.car.drive.max_speed_mps
+        self._vmax = 1.0 if session.car.drive.command == "duty" else session.car.drive.max_speed_mps
         self._clock = session.clock
         self._sim = session.clock.sim
         self._line_image = session.camera.line_image  # render_row + add_noise in one call
@@ -267,7 +267,7 @@ class Spinner:
         yaw = self.diff_norm(self._speed_mps, self._steer_rad)
         if not (type(yaw) is float and yaw - yaw == 0.0):
             yaw = _norm_out(f"{method}(speed={speed!r}, angle={angle!r})", "diff_norm", yaw)
-        clock.command(self._speed_mps, self._steer_rad, yaw)
+        clock.command(self._speed_mps, self._steer_rad, yaw, not set_speed)
 
     def _foreign(self, method: str) -> CommandError:
         """A call from a thread that does not run ``main``: end the run (controller_error)."""
@@ -279,10 +279,16 @@ class Spinner:
         from simrunner.run.faults import caller_location
 
         where = caller_location(3)
-        self._s.warn_once("speed_cap", (
-            f"speed command {speed_mps:g} m/s{' at ' + where if where else ''} (t = "
-            f"{self._clock.time_s:.2f} s) is beyond the car's maximum {self._vmax:g} m/s "
-            f"(drive.max_speed_mps): the car drives at most that (warned once)"))
+        at = f"{' at ' + where if where else ''} (t = {self._clock.time_s:.2f} s)"
+        if self._s.car.drive.command == "duty":
+            text = (f"duty command {speed_mps:g}{at} is beyond -1..1 (drive.command = duty: "
+                    f"set_speed takes a duty after speed_norm): the motors take at most "
+                    f"full duty (warned once)")
+        else:
+            text = (f"speed command {speed_mps:g} m/s{at} is beyond the car's maximum "
+                    f"{self._vmax:g} m/s (drive.max_speed_mps): the car drives at most that "
+                    f"(warned once)")
+        self._s.warn_once("speed_cap", text)
 
     def _fail(self, err: CommandError) -> CommandError:
         self._clock.finish("controller_error", str(err))
@@ -308,6 +314,32 @@ class Spinner:
             self._send("set_speed", s, a, True, False)
         except CommandError as err:
             raise self._fail(err) from None
+
+    def set_motors(self, left: float, right: float) -> None:
+        """The duty (-1..1) of the left and the right rear motor (the car file's ``drive.command
+        = "duty"``; the differential is then yours, as on the car). A speed-commanded car takes
+        their mean as a share of its top speed. Later steering commands keep them; a speed
+        command ends them. No time passes."""
+        try:
+            l_duty = _finite("set_motors", "left", left)
+            r_duty = _finite("set_motors", "right", right)
+        except CommandError as err:
+            raise self._fail(err) from None
+        clock = self._clock
+        if clock.finished is not None:
+            clock.check()
+        if _get_ident() != self._owner:
+            raise self._foreign("set_motors")
+        if self._s.car.drive.command == "duty":
+            clock.motors(l_duty, r_duty)
+            return
+        # a speed-commanded car: the mean duty's share of the top speed, as a speed command
+        mean = 0.5 * (min(max(l_duty, -1.0), 1.0) + min(max(r_duty, -1.0), 1.0))
+        self._speed_mps = mean * self._s.car.drive.max_speed_mps
+        yaw = self.diff_norm(self._speed_mps, self._steer_rad)
+        if not (type(yaw) is float and yaw - yaw == 0.0):
+            yaw = _norm_out(f"set_motors({left!r}, {right!r})", "diff_norm", yaw)
+        clock.command(self._speed_mps, self._steer_rad, yaw)
 
     def set_speed_and_servo(self, speed: float, angle: float) -> None:
         """Drive and steer at once (recommended by the thesis)."""

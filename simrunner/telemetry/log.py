@@ -115,6 +115,9 @@ COLUMNS: tuple[Column, ...] = (
     *(Column(f"accel_{a}_mps2", "m/s^2", "float", "%.6f", f"the IMU's accelerometer along the car's {a} axis "
              "(specific force: +9.81 up at rest), sampled at the frame (runs of a car file with [imu])")
       for a in "xyz"),
+    Column("duty_left", "-", "float", "%.6f", "the left rear motor's duty -1..1 in force (runs of a car file "
+                                              "with drive.command = \"duty\")"),
+    Column("duty_right", "-", "float", "%.6f", "the right rear motor's duty -1..1 in force (duty drive)"),
     Column("data_text", "-", "text", "%s", "the controller's add_data text of this frame"),
 )
 COLUMN_NAMES: tuple[str, ...] = tuple(c.name for c in COLUMNS)
@@ -196,6 +199,8 @@ class RunLog:
     accel_x_mps2: np.ndarray | None = None
     accel_y_mps2: np.ndarray | None = None
     accel_z_mps2: np.ndarray | None = None
+    duty_left: np.ndarray | None = None
+    duty_right: np.ndarray | None = None
     data_text: tuple[str, ...] | None = None
     source: str = "<log>"
     command_steps: CommandSteps | None = None
@@ -602,7 +607,8 @@ _N_RUN_COLUMNS = 13  # frame .. yaw_rate_cmd_radps, lap, off_track (coast is alw
 LIFT_COLUMNS = ("z_m", "pitch_rad")  # a run on a track with hills records these too
 ENCODER_COLUMNS = ("enc_fl", "enc_fr", "enc_rl", "enc_rr")  # a car with encoders: those of its wheels
 IMU_COLUMNS = ("gyro_x_radps", "gyro_y_radps", "gyro_z_radps", "accel_x_mps2", "accel_y_mps2", "accel_z_mps2")
-EXTRA_COLUMNS = LIFT_COLUMNS + ENCODER_COLUMNS + IMU_COLUMNS  # a run records these only when it has them
+DUTY_COLUMNS = ("duty_left", "duty_right")  # a duty-commanded car: its rear motors' duties
+EXTRA_COLUMNS = LIFT_COLUMNS + ENCODER_COLUMNS + IMU_COLUMNS + DUTY_COLUMNS  # only when a run has them
 
 
 class RunRecorder:

@@ -44,7 +44,7 @@ from simrunner.run.native.build import NativeProgram
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
-    OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU = range(1, 22)
+    OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS = range(1, 23)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE = 0, 1, 2, 3
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
@@ -242,7 +242,7 @@ class _Session:
                         break
                     try:
                         self.yaw = yaw
-                        s.set_speed_and_servo(v, d)
+                        s.set_speed_and_servo(v, d) if v == v else s.set_servo(d)
                     except _PASS:
                         raise
                     except Exception as exc:
@@ -273,9 +273,9 @@ class _Session:
     def _handle(self, op: int, payload: bytes) -> None:
         """Answer one request (replying to the waiting ones)."""
         s, reply = self.spinner, self._reply
-        if op == OP_CMD:
+        if op == OP_CMD:  # speed NaN: a steering-only command (set_motors' duties are kept)
             v, d, self.yaw = _CMD.unpack(payload)
-            s.set_speed_and_servo(v, d)
+            s.set_speed_and_servo(v, d) if v == v else s.set_servo(d)
         elif op == OP_IMAGE:
             line, noise = _2I.unpack(payload)
             img = s.get_image(line, noise != 0)
@@ -310,6 +310,8 @@ class _Session:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_exposure()))
         elif op == OP_DISTANCE:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_distance(payload.decode("utf-8", "replace"))))
+        elif op == OP_MOTORS:  # the rear motors' duties: two doubles
+            s.set_motors(*struct.unpack("<2d", payload[:16]))
         elif op == OP_CPU:  # the program's CPU time since its previous request (--mcu-time measured)
             s._s.mcu.report(_D.unpack(payload)[0])
         elif op == OP_ENCODER:  # the wheel's index (int32) -> its count (int64)

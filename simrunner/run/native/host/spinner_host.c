@@ -46,7 +46,7 @@
 
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
-       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU };
+       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3 };
 
 static unsigned char out_buf[1 << 16];
@@ -390,7 +390,7 @@ static void send_command(const char *fn, double speed, double angle, int set_spe
     if (!isfinite(yaw))
         misuse("%s(speed=%g, angle=%g): diff_norm returned %g, expected a finite number",
                fn, speed, angle, yaw);
-    double cmd[3] = {speed_mps, steer_rad, yaw};
+    double cmd[3] = {set_speed ? speed_mps : NAN, steer_rad, yaw};  /* NaN: steering only (motors kept) */
     queue(OP_CMD, cmd, sizeof cmd, NULL, 0);
 }
 
@@ -479,6 +479,12 @@ int spinner_get_scan(const char *name, double *ranges_m, int max_rays) {
 
 int spinner_get_scan_angles(const char *name, double *angles_rad, int max_rays) {
     return get_scan("spinner_get_scan_angles", 1, name, angles_rad, max_rays);
+}
+
+void spinner_set_motors(float left, float right) {
+    INIT();
+    double duty[2] = {finite_arg("spinner_set_motors", "left", left), finite_arg("spinner_set_motors", "right", right)};
+    if (!finished) queue(OP_MOTORS, duty, sizeof duty, NULL, 0);
 }
 
 long long spinner_get_encoder(int wheel) {

@@ -45,6 +45,10 @@ void spinner_set_servo_at(double angle, double speed);
 void spinner_set_speed(double speed);              /* angle = last spinner_set_servo value */
 void spinner_set_speed_at(double speed, double angle);
 void spinner_set_speed_and_servo(double speed, double angle);
+/* The left and right rear motors' duty -1..1 (the car file's drive.command = "duty"; a
+ * speed-commanded car takes their mean as a share of its top speed). Steering commands keep
+ * them, a speed command ends them. */
+void spinner_set_motors(float left, float right);
 
 /* Camera: wait for the next frame. line = -1: the whole image (height x width bytes, row
  * after row); line = 0..height-1: that row only (width bytes). add_noise != 0 adds the

@@ -163,6 +163,7 @@ class Spinner {
     }
     double getTime() { return spinner_get_time(); }  // double: exact steps (the thesis: float)
     float getDistance(const std::string &name) { return float(spinner_get_distance(name.c_str())); }
+    void setMotors(float left, float right) { spinner_set_motors(left, right); }
     long long getEncoder(int wheel) { return spinner_get_encoder(wheel); }
     std::tuple<float, float, float> getGyro() {
         double x, y, z;

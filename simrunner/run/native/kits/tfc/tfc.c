@@ -7,8 +7,8 @@
  *   milliseconds; the PIT-driven camera read-out becomes: when the exposure since the last
  *   image has passed, the next image is fetched (spinner_get_image) into LineScanImage0/1 and
  *   LineScanImageReady is set to 1;
- * - servo 0 steers (position x tfc_servo_rad + tfc_servo_offset_rad), the motors' mean duty is
- *   a speed command (duty x tfc_max_speed_mps) while the H-bridge is enabled;
+ * - servo 0 steers (position x tfc_servo_rad + tfc_servo_offset_rad), motors A and B are the
+ *   left and right rear motors' duties (spinner_set_motors) while the H-bridge is enabled;
  * - the potentiometers, DIP switches, buttons and battery read --param values;
  * - the LEDs are kept (and shown in the debug video's text); the serial terminal prints.
  * docs/c_controllers.md, "Kit libraries", lists what is emulated and what is not. */
@@ -36,15 +36,14 @@ static struct {
     float duty_a, duty_b;   /* motor duties */
     float servo;            /* servo 0 position */
     int leds[4];
-    double servo_rad, servo_offset_rad, max_speed_mps;
+    double servo_rad, servo_offset_rad;
 } tfc;
 
 static double clampf(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
 static void send_commands(void) {
-    double v = tfc.hbridge ? 0.5 * (tfc.duty_a + tfc.duty_b) * tfc.max_speed_mps : 0.0;
-    double steer = tfc.servo * tfc.servo_rad + tfc.servo_offset_rad;
-    spinner_set_speed_and_servo(v, steer);
+    spinner_set_servo(tfc.servo * tfc.servo_rad + tfc.servo_offset_rad);
+    spinner_set_motors(tfc.hbridge ? tfc.duty_a : 0.0f, tfc.hbridge ? tfc.duty_b : 0.0f);
 }
 
 static void count_ticks(double now_s) {
@@ -77,7 +76,6 @@ void TFC_Init(void) {
     tfc.inited = 1;
     tfc.servo_rad = spinner_param("tfc_servo_rad", 0.40);
     tfc.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
-    tfc.max_speed_mps = spinner_param("tfc_max_speed_mps", 3.1);
     tfc.exposure_s = TFC_DEFAULT_LINESCAN_EXPOSURE_TIME_uS * 1e-6;
     spinner_set_exposure(tfc.exposure_s);
     tfc.ms_counted = floor(spinner_get_time() * 1000.0);
