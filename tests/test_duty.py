@@ -4,6 +4,7 @@ the duty columns of the run log."""
 from __future__ import annotations
 
 import dataclasses
+import math
 import textwrap
 
 import pytest
@@ -42,25 +43,58 @@ def test_the_default_car_is_speed_commanded_and_duty_drives_only_the_rear():
         BASE.replace(drive=dataclasses.replace(BASE.drive, command="duty", front_share=0.5))
 
 
-def test_full_duty_starts_at_the_acceleration_limit_and_tops_out_at_the_top_speed():
-    """c1 = m_eff max_accel / 2 and c2 = c1 / max_speed by default."""
-    v = speeds(duty_car(), (1.0, 1.0), [0.02, 4.0, 8.0])
-    assert v[0] / 0.02 == pytest.approx(BASE.drive.max_accel_mps2, rel=0.08)
-    assert v[2] == pytest.approx(BASE.drive.max_speed_mps, rel=0.02) and v[1] < v[2]
+def closed_form_speed(t_s, v0, v_inf, tau_s):
+    """First-order response: the speed of a car whose force is linear in its speed."""
+    return v_inf + (v0 - v_inf) * math.exp(-t_s / tau_s)
 
 
-def test_the_h_bridge_coasts_or_brakes_at_duty_zero_and_sets_how_duty_maps_to_speed():
+M_EFF = CarSim(BASE)._m_eff_kg  # the mass the motors accelerate: m + 4 I_spin / r^2
+VMAX, AMAX = BASE.drive.max_speed_mps, BASE.drive.max_accel_mps2
+TAU_S = VMAX / AMAX  # c1 = m_eff a / 2, c2 = c1 / vmax: m_eff / (2 c2) = vmax / a
+
+
+@pytest.mark.parametrize("hbridge,duty", [("coast", 1.0), ("coast", 0.4), ("brake", 0.4), ("brake", -0.7)])
+def test_duty_from_rest_follows_the_motor_models_closed_form_within_1_percent(hbridge, duty):
+    """m_eff dv/dt = 2 (c1 - c2 v) d (coast) or 2 (c1 d - c2 v) (brake), from rest."""
+    times = [0.002, 0.1, 0.5, 1.0, 2.0, 4.0, 8.0]
+    v = speeds(duty_car(hbridge=hbridge), (duty, duty), times)
+    if hbridge == "coast":
+        v_inf, tau = math.copysign(VMAX, duty), TAU_S / abs(duty)
+    else:
+        v_inf, tau = duty * VMAX, TAU_S
+    for t, got in zip(times, v):
+        assert got == pytest.approx(closed_form_speed(t, 0.0, v_inf, tau), rel=0.01), t
+    assert v[0] / 0.002 == pytest.approx(duty * AMAX, rel=0.01)   # 0 -> duty: c1 d / (m_eff / 2)
+
+
+def test_coast_down_with_rolling_resistance_and_drag_follows_its_closed_form_within_1_percent():
+    """Duty 0 with a coasting H-bridge: m_eff dv/dt = -F_rr - k v^2, so
+    v(t) = sqrt(F/k) tan(atan(v0 sqrt(k/F)) - sqrt(F k) t / m_eff); the steady speed at full
+    duty before solves 2 (c1 - c2 v) = F_rr + k v^2."""
+    f_rr, k = 0.6, 0.05
+    car = duty_car(hbridge="coast", rolling_resistance_n=f_rr, drag_nspm2=k)
+    sim = CarSim(car)
+    sim.set_motors(1.0, 1.0)
+    sim.step(round(8.0 / sim.dt_s))
+    c1 = 0.5 * M_EFF * AMAX
+    c2 = c1 / VMAX
+    v_steady = (-2 * c2 + math.sqrt(4 * c2 * c2 + 4 * k * (2 * c1 - f_rr))) / (2 * k)
+    v0 = sim.speed_mps
+    assert v0 == pytest.approx(v_steady, rel=0.01)
+    sim.set_motors(0.0, 0.0)
+    prev = 0.0
+    for t in (0.5, 1.0, 2.0, 3.0):
+        sim.step(round((t - prev) / sim.dt_s))
+        prev = t
+        want = math.sqrt(f_rr / k) * math.tan(math.atan(v0 * math.sqrt(k / f_rr)) - math.sqrt(f_rr * k) * t / M_EFF)
+        assert sim.speed_mps == pytest.approx(want, rel=0.01), t
+
+
+def test_the_h_bridge_coasts_or_brakes_at_duty_zero():
     coast = speeds(duty_car(hbridge="coast"), (0.5, 0.5), [8.0], then=((0.0, 0.0), 0.5))
     brake = speeds(duty_car(hbridge="brake"), (0.5, 0.5), [8.0], then=((0.0, 0.0), 0.5))
-    # coast (fast decay): force (c1 - c2 v) d: any duty tends to the same top speed
-    assert coast[0] == pytest.approx(BASE.drive.max_speed_mps, rel=0.08)
-    # brake (slow decay): force c1 d - c2 v: half duty, half the top speed
-    assert brake[0] == pytest.approx(0.5 * BASE.drive.max_speed_mps, rel=0.03)
-    assert coast[1] == pytest.approx(coast[0], rel=1e-3)            # rolls on
-    assert brake[1] < 0.7 * brake[0]                                 # the back-EMF brakes
-    slowed = speeds(duty_car(rolling_resistance_n=0.5), (0.5, 0.5), [3.0], then=((0.0, 0.0), 0.5))
-    m = BASE.chassis.mass_kg
-    assert (slowed[0] - slowed[1]) / 0.5 == pytest.approx(0.5 / m, rel=0.25)   # F_rr / m
+    assert coast[1] == pytest.approx(coast[0], rel=1e-3)                          # rolls on
+    assert brake[1] == pytest.approx(closed_form_speed(0.5, brake[0], 0.0, TAU_S), rel=0.01)  # back-EMF brakes
 
 
 def test_set_speed_carries_a_duty_and_set_motors_each_one(tmp_path):
@@ -129,3 +163,16 @@ def test_a_duty_beyond_full_is_warned_with_the_duty_unit():
     r = drive(main, track="floor", car=duty_car(), time_limit_s=1.0)
     assert any("duty command 50 " in w and "beyond -1..1" in w for w in r.warnings), r.warnings
     assert r.log.duty_left[-1] == 1.0 == r.log.duty_right[-1]
+
+
+def test_a_duty_car_restores_bit_exactly_with_its_drag():
+    sim = CarSim(duty_car(rolling_resistance_n=0.3, drag_nspm2=0.05))
+    sim.set_motors(0.8, 0.6)
+    sim.step(503)
+    state = sim.save_state()
+    sim.step(257)
+    first = (sim.pose, sim.speed_mps)
+    sim.restore_state(state)
+    sim.step(100)
+    sim.step(157)
+    assert (sim.pose, sim.speed_mps) == first

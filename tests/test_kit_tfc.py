@@ -33,6 +33,17 @@ def test_the_example_firmware_builds_unchanged_and_laps():
     assert r.lap_times_s[1] == pytest.approx(follower.lap_times_s[1], rel=0.05)
 
 
+@pytest.mark.parametrize("hbridge", ["brake", "coast"])
+def test_the_example_firmware_laps_a_duty_driven_car(tmp_path, hbridge):
+    """With drive.command = "duty" the firmware's TFC_SetMotorPWM duties drive the two rear
+    motors (its speed loop is the duty it sets, as on the car)."""
+    car = tmp_path / "duty.toml"
+    car.write_text(f'[drive]\ncommand = "duty"\nhbridge = "{hbridge}"\n')
+    r = drive(firmware([FIRMWARE]), car=car, laps=2)
+    assert r.outcome == "finished" and r.laps_completed == 2, r.message
+    assert r.log.duty_left is not None and np.nanmax(np.abs(r.log.duty_left)) > 0.1
+
+
 @pytest.mark.skipif(not SHARED_TRACKS.is_dir(), reason="../shared/tracks not present")
 def test_the_example_firmware_laps_both_nxp_tracks():
     for name in ("nxp_raceway", "nxp_raceway_octagon"):

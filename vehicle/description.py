@@ -104,16 +104,17 @@ class Drive:
                                     "speed is then max_speed_mps without rolling resistance and drag).",
                                     "derived from drive.max_speed_mps unless measured (top speed at a few duties)",
                                     0.0, 1000.0)
-    hbridge: str = _choice("coast", ("coast", "brake"),
-                           "duty: what the H-bridge does in the PWM's off time and at duty 0: 'coast' (fast "
-                           "decay: force (c1 - c2 v) d; at 0 the wheel rolls freely) or 'brake' (slow decay, "
-                           "motor shorted: force c1 d - c2 v; at 0 the back-EMF brakes).",
-                           "the H-bridge driver's decay mode (e.g. MC33887 on the FRDM-TFC)")
+    hbridge: str = _choice("brake", ("coast", "brake"),
+                           "duty: what the H-bridge does in the PWM's off time and at duty 0: 'brake' (the "
+                           "motor is driven or shorted all the time: force c1 d - c2 v, the steady speed is "
+                           "d x the top speed, at 0 the back-EMF brakes) or 'coast' (fast decay, the motor "
+                           "floats in the off time: force (c1 - c2 v) d, at 0 the wheel rolls freely).",
+                           "FRDM-TFC library TFC_SetMotorPWM: each motor's two half-bridges take complementary "
+                           "PWM at (d + 1) / 2 (locked anti-phase): mean voltage d x V, always driven = brake")
     rolling_resistance_n: float = _f(0.0, "duty: the force rolling resistance takes away, the whole car "
                                      "(constant, against the motion).",
                                      "measure it: the constant deceleration of a coast-down x the mass", 0.0, 100.0)
-    drag_nspm2: float = _f(0.0, "duty: air drag, force per (m/s)^2 of the car's speed (updated with each "
-                           "command).", "measure it: the speed-squared part of a coast-down", 0.0, 10.0)
+    drag_nspm2: float = _f(0.0, "duty: air drag, force per (m/s)^2 of the car's speed.", "measure it: the speed-squared part of a coast-down", 0.0, 10.0)
 
 
 CAMERA_MODELS = ("ideal", "linescan", "area")

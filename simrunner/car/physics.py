@@ -33,6 +33,13 @@ zero every joint command after the step, so commands are set only in :meth:`set_
   speed and stops the knuckles at the end of the move (at most two Python events per move,
   never per step), so the result does not depend on how ``step(n)`` calls are split.
 * Front wheels roll freely (rear-wheel drive, ``drive.front_share`` = 0).
+* Duty drive (``drive.command = "duty"``, docs/drive.md): the rear wheels are ``FORCE``
+  actuators; before each step each gets the torque of its motor, ``c1 r d - c2 r^2 omega |d|``
+  (coast) or ``c1 r d - c2 r^2 omega`` (brake), from its wheel's speed then (``c1 = m_eff a /
+  2``, ``c2 = c1 / v_max`` unless the file gives them); rolling resistance is a Coulomb
+  friction of ``F_rr r / 4`` at each wheel joint (dart's constraint solver: it holds a car at
+  rest), air drag a chassis force updated every ``DRAG_UPDATE_STEPS``. Measured against the
+  closed forms (bench/bench_duty.py): 0 -> duty, steady speed and coast-down within 0.3 %.
 
 Python cost per control update (bench/bench_closed_loop.py): ``set_command`` plans with
 precomputed constants and sets only the joint commands that changed (a repeated steering
@@ -94,6 +101,7 @@ HILL_BASE_M = -0.005  # a hill mesh's base below the surface (inside the ground 
 SOLID_MU = 0.5          # friction of a solid on the track and the car (ours: polystyrene)
 WHEEL_CONTACTS = 4      # ODE's contacts of a car on its four round tyres (one each)
 SOLID_REST_M = 4e-8     # a solid starts at ODE's resting depth above the surface (platform facts)
+DRAG_UPDATE_STEPS = 5    # duty drive: the air drag force is updated every 5 physics steps (10 ms at 2 ms)
 CONTACT_DEPTH_M = 4e-8  # initial tyre penetration = the resting depth measured for the default car.
 # ODE reports no contact at exactly 0 depth: a car placed exactly on the ground would fall one
 # step (g dt^2 = 39 um at 2 ms) and then creep back up for a second.
@@ -171,6 +179,7 @@ class SimState:
     velocities: np.ndarray
     time_s: float
     control: _Control
+    drag: tuple[int, float] = (0, 0.0)  # duty drive: (steps before the next drag update, drag force N)
 
 
 class CarSim:
@@ -239,7 +248,13 @@ class CarSim:
         self._duties_applied: tuple[float, float] | None = None
         skel = self._body.skeleton
         self._skel = skel
-        self._world_step = world.step
+        self._base_step = world.step  # one world step (noting touches once solids are down)
+        self._world_step = self._duty_step if self._duty_mode else world.step
+        self._rear_joints = self._body.wheel_joints[2:]
+        self._motor_gains: tuple[tuple[float, float], ...] = ()  # per rear motor (torque, damping), live
+        self._drag_left = 0  # steps before the drag force is updated (live value)
+        self._drag_n = 0.0  # the air drag force last computed, N along the car's x (live value)
+        self._world_frame = dart.dynamics.Frame.World()
         self._i_knuckle = tuple(j.getIndexInSkeleton(0) for j in self._body.knuckle_joints)
         self._i_wheel = tuple(j.getIndexInSkeleton(0) for j in self._body.wheel_joints)
         self._check_velocity_convention()
@@ -537,35 +552,58 @@ class CarSim:
                     j.setCommand(0, o)
                 self._omega_applied = omega
         ext = c.ext_force_n
-        if self._duty_mode and self._drag_nspm2 > 0.0:  # air drag at the speed of this command
-            v_now = self.speed_mps
-            ext = (ext[0] - self._drag_nspm2 * v_now * abs(v_now), ext[1])
+        if self._duty_mode and self._drag_nspm2 > 0.0:
+            ext = (ext[0] + self._drag_n, ext[1])
         if ext != self._force_applied:
             b.chassis.setExtForce(np.array([ext[0], ext[1], 0.0]), b.chassis.getLocalCOM(), True, True)
             self._force_applied = ext
 
     def _apply_duties(self, c: _Control, force: bool) -> None:
-        """The rear motors of a duty-commanded car: wheel torque c1 r d and back-EMF damping
-        c2 r^2 |d| (coast) or c2 r^2 (brake); locked wheels are locked."""
+        """The rear motors of a duty-commanded car: per motor the gains of :meth:`_duty_step`,
+        wheel torque c1 r d and back-EMF damping c2 r^2 |d| (coast) or c2 r^2 (brake); locked
+        wheels are locked (no motor)."""
         if force:
             self._duties_applied = None
         key = (c.duties, c.wheels_locked, c.coast)
         if key == self._duties_applied:
             return
         A = dart.dynamics.ActuatorType
-        for j, d in zip(self._body.wheel_joints[2:], c.duties):
-            if c.wheels_locked:
-                j.setActuatorType(A.LOCKED)
-                continue
-            j.setActuatorType(A.FORCE)
-            d = 0.0 if c.coast else d
-            brake = self._hbridge_brake and not c.coast
-            j.setDampingCoefficient(0, self._motor_damping_nms * (1.0 if brake else abs(d)))
-            j.setCommand(0, self._motor_torque_nm * d)
+        brake = self._hbridge_brake and not c.coast
+        gains = []
+        for j, d in zip(self._rear_joints, c.duties):
+            j.setActuatorType(A.LOCKED if c.wheels_locked else A.FORCE)
+            d = 0.0 if c.coast or c.wheels_locked else d
+            gains.append((self._motor_torque_nm * d,
+                          0.0 if c.wheels_locked else self._motor_damping_nms * (1.0 if brake else abs(d))))
+        self._motor_gains = () if c.wheels_locked else tuple(gains)  # a LOCKED joint takes no command
         if c.wheels_locked != (self._duties_applied or ((), False))[1]:
             for j in self._body.wheel_joints[:2]:
                 j.setActuatorType(A.LOCKED if c.wheels_locked else A.PASSIVE)
         self._duties_applied = key
+
+    def _duty_step(self, reset: bool) -> None:
+        """One world step of a duty-commanded car: each rear motor's torque from its wheel's speed
+        at the step's start (``c1 r d - c2 r^2 omega |d|`` or ``.. - c2 r^2 omega``), and the air
+        drag from the car's speed. Explicit, because dart's implicit joint damping divides the
+        torque by ``1 + dt c2 r^2 / I_spin`` (5 % less acceleration for the default car at 2 ms).
+        The drag force is set every ``DRAG_UPDATE_STEPS`` steps, from the speed then."""
+        for j, (torque, damping) in zip(self._rear_joints, self._motor_gains):
+            j.setCommand(0, torque - damping * j.getVelocity(0))
+        if self._drag_nspm2 > 0.0:
+            if self._drag_left <= 0:  # every DRAG_UPDATE_STEPS steps (the read and set cost ~15 %)
+                self._drag_left = DRAG_UPDATE_STEPS
+                chassis = self._body.chassis
+                v = chassis.getLinearVelocity(self._world_frame, chassis)[0]  # rear-axle midpoint
+                self._drag_n = -self._drag_nspm2 * v * abs(v)
+                self._set_drag()
+            self._drag_left -= 1
+        self._base_step(reset)
+
+    def _set_drag(self) -> None:
+        """The chassis force: the external one plus the air drag last computed (duty drive)."""
+        ext, chassis = self._control.ext_force_n, self._body.chassis
+        force = self._force_applied = (ext[0] + self._drag_n, ext[1])
+        chassis.setExtForce(np.array([force[0], force[1], 0.0]), chassis.getLocalCOM(), True, True)
 
     @property
     def speed_cmd_mps(self) -> float:
@@ -602,7 +640,8 @@ class CarSim:
         joint.setTransformFromParentBodyNode(isometry(centre, _rot_z(solid.yaw_rad)))
         self._world.addSkeleton(sk)
         self._solids.append((solid.name, sk))
-        self._world_step = self._step_noting_touches
+        self._base_step = self._step_noting_touches
+        self._world_step = self._duty_step if self._duty_mode else self._step_noting_touches
 
     def touched_solids(self) -> tuple[str, ...]:
         """Names of the solids the car touched at any step since the last call, in the order
@@ -784,7 +823,7 @@ class CarSim:
         """Snapshot (positions, velocities, time, commands); restore is bit-exact."""
         skel = self._skel
         return SimState(skel.getPositions().copy(), skel.getVelocities().copy(), self._world.getTime(),
-                        self._control_now())
+                        self._control_now(), (self._drag_left, self._drag_n))
 
     def restore_state(self, state: SimState) -> None:
         skel = self._skel
@@ -797,6 +836,9 @@ class CarSim:
         self._steer_left, self._kvel = state.control.steer_steps_left, state.control.knuckle_vel_radps
         self._tail = state.control.knuckle_tail_radps
         self._apply(self._control, force=True)
+        if self._duty_mode and self._drag_nspm2 > 0.0:
+            self._drag_left, self._drag_n = state.drag
+            self._set_drag()
 
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
                   yaw_rate_radps: float = 0.0) -> None:
