@@ -36,7 +36,7 @@ def duty_car(**fields) -> CarDescription:
 
 def closed_form_errors() -> dict[str, float]:
     """The largest relative speed error of each check against its closed form."""
-    m_eff = CarSim(BASE)._m_eff_kg
+    m_eff = CarSim(BASE).effective_mass_kg
     vmax, amax = BASE.drive.max_speed_mps, BASE.drive.max_accel_mps2
     c1 = 0.5 * m_eff * amax
     c2 = c1 / vmax

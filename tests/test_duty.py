@@ -48,7 +48,7 @@ def closed_form_speed(t_s, v0, v_inf, tau_s):
     return v_inf + (v0 - v_inf) * math.exp(-t_s / tau_s)
 
 
-M_EFF = CarSim(BASE)._m_eff_kg  # the mass the motors accelerate: m + 4 I_spin / r^2
+M_EFF = CarSim(BASE).effective_mass_kg  # the mass the motors accelerate: m + 4 I_spin / r^2
 VMAX, AMAX = BASE.drive.max_speed_mps, BASE.drive.max_accel_mps2
 TAU_S = VMAX / AMAX  # c1 = m_eff a / 2, c2 = c1 / vmax: m_eff / (2 c2) = vmax / a
 

@@ -497,6 +497,11 @@ class CarSim:
         self._apply(self._control)
 
     @property
+    def effective_mass_kg(self) -> float:
+        """The mass the drive accelerates: the car's plus its four spinning wheels' ``4 I_spin / r^2``."""
+        return self._m_eff_kg
+
+    @property
     def duties(self) -> tuple[float, float]:
         """The rear motors' duties in force (duty mode; (0, 0) otherwise)."""
         return self._control.duties

@@ -18,6 +18,9 @@ speed          5.2.1            fit of distance vs command (scipy ``curve_fit``)
                                 normalisation to use; ``drive.max_speed_mps`` from ``full_command``
 acceleration   5.2.2            ``drive.max_accel_mps2`` by brentq on the simulated distance
 braking        5.2.3            ``drive.max_brake_mps2`` by brentq on the simulated distance
+duty           motor model      ``drive.command = "duty"`` and the motor model's c1, c2, rolling
+                                resistance and drag, fitted to steady speeds, 0 -> duty and a
+                                coast-down (:mod:`.duty`)
 camera         Fig. 5.2         ``camera.default_row``: the row that sees the ground ``distance_m``
                                 ahead of the front bumper
 =============  ===============  ==========================================================
@@ -39,6 +42,7 @@ from scipy.optimize import OptimizeWarning, brentq, curve_fit
 
 from simrunner.workflows.calibration import camera_procedures as cp
 from simrunner.workflows.calibration import simtests as st
+from simrunner.workflows.calibration.duty import calibrate_duty
 from simrunner.workflows.calibration.measured import (ORDER, SOURCES, CalibrationError, Measurements,
                                             load_measurements)
 from simrunner.workflows.calibration.procedure import Check, ProcedureResult, range_checked
@@ -83,8 +87,8 @@ class CalibrationResult:
         return "\n".join(out).rstrip() + "\n"
 
 
-def _num(x: float) -> str:
-    if isinstance(x, int):
+def _num(x: float | str) -> str:
+    if isinstance(x, (int, str)):
         return str(x)
     if not math.isfinite(x):
         return str(x)
@@ -330,7 +334,7 @@ def _camera(car, m, v, dt_s):
 
 
 _PROCEDURES = {"mass": _mass, "traction": _traction, "steering": _steering, "speed": _speed,
-               "acceleration": _acceleration, "braking": _braking, "camera": _camera,
+               "acceleration": _acceleration, "braking": _braking, "duty": calibrate_duty, "camera": _camera,
                "camera_dark": cp.camera_dark, "camera_flat": cp.camera_flat, "camera_sweep": cp.camera_sweep}
 
 

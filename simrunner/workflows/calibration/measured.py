@@ -9,6 +9,8 @@ Every section is optional; each holds the numbers of one thesis chapter-5 test:
     [steering]      radius_m, measured_at, speed_mps              (5.3.1)
     [traction]      slip_angle_deg, orientation                   (5.4)
     [mass]          weight_kg, scale                              (5.5)
+    [duty]          hbridge, duties + speeds_mps, accel_duty + accel_time_s + accel_distance_m,
+                    coast_speed_mps + coast_distance_m (+ coast_time_s)   (the motor model, duty.py)
 
 :func:`load_measurements` checks types, ranges and unknown names and raises
 :class:`CalibrationError` with one line ``path:line: section.key: expected ...``.
@@ -49,6 +51,13 @@ SCHEMA: dict[str, dict[str, tuple]] = {
     "traction": {"slip_angle_deg": ("num", 0.0, 68.0, REQUIRED),
                  "orientation": ("str:downhill|sideways", None, None, "downhill")},
     "mass": {"weight_kg": ("num", 0.0, 50.0, REQUIRED), "scale": ("num", 0.0, 10.0, 1.0)},
+    # the motor model of a duty-driven car (duty.py): any of three tests
+    "duty": {"hbridge": ("str:brake|coast", None, None, None),
+             "duties": ("nums", 0.0, 1.0, None), "speeds_mps": ("nums", 0.0, 30.0, None),
+             "accel_duty": ("num", 0.0, 1.0, 1.0), "accel_time_s": ("num", 0.0, 30.0, None),
+             "accel_distance_m": ("num", 0.0, 500.0, None),
+             "coast_speed_mps": ("num", 0.0, 30.0, None), "coast_distance_m": ("num", 0.0, 500.0, None),
+             "coast_time_s": ("num", 0.0, 120.0, None)},
     # the camera procedures (camera_procedures.py): files of recorded lines, relative to this file
     "camera_dark": {"lines": ("path", None, None, REQUIRED), "exposure_s": ("num", 0.0, 1.0, None)},
     "camera_flat": {"lines": ("path", None, None, REQUIRED)},
@@ -57,9 +66,10 @@ SCHEMA: dict[str, dict[str, tuple]] = {
 THESIS = {"camera": "Fig. 5.2", "speed": "5.2.1", "acceleration": "5.2.2", "braking": "5.2.3",
           "steering": "5.3.1", "traction": "5.4", "mass": "5.5"}
 # where each procedure comes from (the report's headings, the car file's source comments)
-SOURCES = {**{k: f"thesis {v}" for k, v in THESIS.items()}, "camera_dark": "EMVA 1288 (dark measurements)",
+SOURCES = {**{k: f"thesis {v}" for k, v in THESIS.items()},
+           "duty": "motor model (c1 - c2 v) d, Liniger et al. 2015", "camera_dark": "EMVA 1288 (dark measurements)",
            "camera_flat": "EMVA 1288 (flat field, PRNU)", "camera_sweep": "EMVA 1288 (photon transfer)"}
-ORDER = ("mass", "traction", "steering", "speed", "acceleration", "braking", "camera_dark", "camera_flat",
+ORDER = ("mass", "traction", "steering", "speed", "acceleration", "braking", "duty", "camera_dark", "camera_flat",
          "camera_sweep", "camera")
 
 
@@ -177,6 +187,20 @@ def _check_section(section: str, v: dict[str, Any], fail) -> None:
             fail("distances_m", f"expected {len(v['commands'])} values, one per command")
         if len(set(v["commands"])) < need:
             fail("commands", f"expected at least {need} different commands for model '{v['model']}'")
+    if section == "duty":
+        pairs = (("duties", "speeds_mps"), ("accel_time_s", "accel_distance_m"),
+                 ("coast_speed_mps", "coast_distance_m"))
+        for a, b in pairs:
+            if (v[a] is None) != (v[b] is None):
+                given, missing = (a, b) if v[b] is None else (b, a)
+                fail(given, f"expected {missing} with it")
+        if all(v[a] is None for a, _ in pairs):
+            fail(None, "expected at least one test: duties + speeds_mps (steady speeds), accel_time_s + "
+                       "accel_distance_m (0 -> duty) or coast_speed_mps + coast_distance_m (coast-down)")
+        if v["duties"] is not None and len(v["duties"]) != len(v["speeds_mps"]):
+            fail("speeds_mps", f"expected {len(v['duties'])} values, one per duty")
+        if v["coast_time_s"] is not None and v["coast_speed_mps"] is None:
+            fail("coast_time_s", "expected together with coast_speed_mps and coast_distance_m")
     if section in ("acceleration", "braking"):
         if (v["speed_mps"] is None) == (v["command"] is None):
             fail("speed_mps", "expected exactly one of speed_mps (m/s) or command (with a [speed] section)")
