@@ -7,6 +7,7 @@ import dataclasses
 import math
 import textwrap
 
+import numpy as np
 import pytest
 
 from simrunner.car.physics import CarSim
@@ -119,7 +120,8 @@ def test_set_speed_carries_a_duty_and_set_motors_each_one(tmp_path):
     assert (log.duty_left[early] == 0.5).all() and (log.duty_right[early] == 0.5).all()
     mid = (log.t_s > 0.6) & (log.t_s < 1.0)
     assert (log.duty_left[mid] == 0.3).all() and (log.duty_right[mid] == 0.6).all()
-    assert log.duty_left[-1] == 0.2 == log.duty_right[-1]
+    assert log.duty_left[-1] == 0.2 == log.duty_right[-1] == log.duty_cmd[-1]
+    assert np.isnan(log.duty_cmd[mid]).all() and (log.duty_cmd[early] == 0.5).all()
     assert 0.0 < got[0] < 0.5 * BASE.drive.max_speed_mps
 
 

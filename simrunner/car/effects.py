@@ -376,6 +376,10 @@ class EffectSim:
     def duties(self) -> tuple[float, float]:
         return self.sim.duties
 
+    @property
+    def duty_cmd(self) -> float:
+        return self.sim.duty_cmd
+
     def imu_truth(self, point_m):
         return self.sim.imu_truth(point_m)
 

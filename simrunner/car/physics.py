@@ -169,6 +169,7 @@ class _Control(NamedTuple):
     front_omega_radps: tuple[float, float] = (0.0, 0.0)  # front left, right targets (four-wheel drive)
     knuckle_tail_radps: tuple[float, float] | None = None  # knuckle speeds of a move's last, partial step
     duties: tuple[float, float] = (0.0, 0.0)  # drive.command = "duty": rear left, rear right duty
+    each_duty: bool = False  # the duties are set_motors' (not one duty of set_command)
 
 
 @dataclass(frozen=True)
@@ -493,8 +494,16 @@ class CarSim:
             self.set_command(0.5 * (left + right) * self._v_max_mps, c.steer_cmd_rad)
             return
         duties = (min(max(float(left), -1.0), 1.0), min(max(float(right), -1.0), 1.0))
-        self._control = self._control_now()._replace(duties=duties, speed_cmd_mps=0.5 * (duties[0] + duties[1]))
+        self._control = self._control_now()._replace(duties=duties, speed_cmd_mps=0.5 * (duties[0] + duties[1]),
+                                                     each_duty=True)
         self._apply(self._control)
+
+    @property
+    def duty_cmd(self) -> float:
+        """The one duty of both rear motors that ``set_command`` gave (duty mode); NaN while
+        ``set_motors``' duties are in force or on a speed-commanded car."""
+        c = self._control
+        return c.duties[0] if self._duty_mode and not c.each_duty else math.nan
 
     @property
     def effective_mass_kg(self) -> float:

@@ -71,6 +71,8 @@ class CarModel(Protocol):
     def wheel_speeds_radps(self) -> np.ndarray: ...
     @property
     def duties(self) -> tuple[float, float]: ...                 # rear motors' duties in force
+    @property
+    def duty_cmd(self) -> float: ...                             # set_command's one duty (NaN: set_motors')
     def wheel_angles_rad(self) -> list[float]: ...               # FL, FR, RL, RR turned since the start
     def imu_truth(self, point_m: Any) -> tuple[np.ndarray, np.ndarray]: ...  # body-frame rates, specific force
 

@@ -106,7 +106,7 @@ def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int
             parts.append(lambda pose, t: tuple(imu.sample("log", t, lambda: sim.imu_truth(point)).tolist()))
     if car.drive.command == "duty":
         names += DUTY_COLUMNS
-        parts.append(lambda pose, t: sim.duties)
+        parts.append(lambda pose, t: (*sim.duties, sim.duty_cmd))
     if not parts:
         return (), None
     if len(parts) == 1:

@@ -118,6 +118,8 @@ COLUMNS: tuple[Column, ...] = (
     Column("duty_left", "-", "float", "%.6f", "the left rear motor's duty -1..1 in force (runs of a car file "
                                               "with drive.command = \"duty\")"),
     Column("duty_right", "-", "float", "%.6f", "the right rear motor's duty -1..1 in force (duty drive)"),
+    Column("duty_cmd", "-", "float", "%.6f", "the one duty of both motors set_speed gave, after speed_norm and "
+                                             "the -1..1 clamp (NaN while set_motors' own duties are in force)"),
     Column("data_text", "-", "text", "%s", "the controller's add_data text of this frame"),
 )
 COLUMN_NAMES: tuple[str, ...] = tuple(c.name for c in COLUMNS)
@@ -201,6 +203,7 @@ class RunLog:
     accel_z_mps2: np.ndarray | None = None
     duty_left: np.ndarray | None = None
     duty_right: np.ndarray | None = None
+    duty_cmd: np.ndarray | None = None
     data_text: tuple[str, ...] | None = None
     source: str = "<log>"
     command_steps: CommandSteps | None = None
@@ -303,9 +306,10 @@ def log_from_columns(columns: dict, source: str = "<log>", command_steps: Comman
         else:
             a = np.asarray(raw, dtype=float).reshape(-1)
             size = a.size
-            bad = np.flatnonzero(~np.isfinite(a))
+            bad = np.flatnonzero(~np.isfinite(a) & ~(np.isnan(a) if c.name in NAN_COLUMNS else False))
             if bad.size:
-                raise LogError(source, int(bad[0]) + 2, f"column {c.name!r}: expected a finite number")
+                raise LogError(source, int(bad[0]) + 2, f"column {c.name!r}: expected a finite number"
+                               + (" or nan" if c.name in NAN_COLUMNS else ""))
             if c.kind == "flag":
                 bad = np.flatnonzero((a != 0.0) & (a != 1.0))
                 if bad.size:
@@ -607,7 +611,8 @@ _N_RUN_COLUMNS = 13  # frame .. yaw_rate_cmd_radps, lap, off_track (coast is alw
 LIFT_COLUMNS = ("z_m", "pitch_rad")  # a run on a track with hills records these too
 ENCODER_COLUMNS = ("enc_fl", "enc_fr", "enc_rl", "enc_rr")  # a car with encoders: those of its wheels
 IMU_COLUMNS = ("gyro_x_radps", "gyro_y_radps", "gyro_z_radps", "accel_x_mps2", "accel_y_mps2", "accel_z_mps2")
-DUTY_COLUMNS = ("duty_left", "duty_right")  # a duty-commanded car: its rear motors' duties
+DUTY_COLUMNS = ("duty_left", "duty_right", "duty_cmd")
+NAN_COLUMNS = frozenset({"duty_cmd"})  # nan: no such command in force (set_motors' own duties)  # a duty-commanded car: its rear motors' duties
 EXTRA_COLUMNS = LIFT_COLUMNS + ENCODER_COLUMNS + IMU_COLUMNS + DUTY_COLUMNS  # only when a run has them
 
 
