@@ -68,6 +68,28 @@ class Wheels:
     mass_kg: float = _f(0.04, "Mass of one wheel.", "estimate", 0.001, 5)
     friction_mu: float = _f(1.0, "Tyre-track friction coefficient (thesis eq. 5.4: mu = tan(slip angle)).",
                             "estimate; calibrate with the tilt test", 0.01, 3.0)
+    tyre_model: str = _choice("rigid", ("rigid", "slip"),
+                              "How the tyres hold the track: 'rigid' (no slip below friction_mu x load, then "
+                              "sliding: the contact friction of the physics engine) or 'slip' (a tyre force "
+                              "model: the force rises with the slip to a peak of friction_mu x load and falls "
+                              "beyond it; longitudinal and lateral slip share it in a friction circle; the "
+                              "car understeers, oversteers and drifts; docs/tyres.md).",
+                              "Pacejka, Tire and Vehicle Dynamics (2012): magic formula (4.3), combined "
+                              "slip (4.3.2), relaxation length (7.2)")
+    cornering_stiffness_front_per_rad: float = _f(
+        4.718, "slip: the front tyres' cornering stiffness per unit load: lateral force / (slip angle x load) "
+        "at small slip angles (and the longitudinal slip stiffness: an isotropic tyre).",
+        "F1TENTH 1:10 car, CommonRoad vehicle parameters: C_Sf = 4.718 1/rad", 0.5, 50.0)
+    cornering_stiffness_rear_per_rad: float = _f(
+        5.4562, "slip: the rear tyres' cornering stiffness per unit load (stiffer than the front: the car "
+        "understeers).", "F1TENTH 1:10 car, CommonRoad vehicle parameters: C_Sr = 5.4562 1/rad", 0.5, 50.0)
+    tyre_shape: float = _f(1.2, "slip: the magic formula's shape factor C: beyond the peak the force falls "
+                           "to sin(C pi / 2) of it (1.2: 95 %; 1: no fall).",
+                           "Liniger et al. 2015, 1:43 racing cars: C_f = 1.2, C_r = 1.2691", 1.0, 1.9)
+    relaxation_length_m: float = _f(0.05, "slip: the distance a tyre rolls to build up its slip force "
+                                    "(first-order lag; it also holds a standing car without creep).",
+                                    "estimate: 1.5 tyre radii (car tyres: 1-2 radii, Pacejka 2012, 7.2)",
+                                    0.005, 0.5)
 
 
 @dataclass(frozen=True)

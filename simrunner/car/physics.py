@@ -88,7 +88,8 @@ import dartpy as dart
 import numpy as np
 
 from pieces.pose import Pose2, Pose3
-from simrunner.car.body import CarBody, WheelShape, isometry, build_car_skeleton
+from simrunner.car.body import WHEEL_NAMES, CarBody, WheelShape, isometry, build_car_skeleton
+from simrunner.car.tyres import G_MPS2, SlipTyres
 from simrunner.errors import SimError
 from vehicle.description import CarDescription
 from worlds.terrain import Terrain
@@ -101,6 +102,7 @@ HILL_BASE_M = -0.005  # a hill mesh's base below the surface (inside the ground 
 SOLID_MU = 0.5          # friction of a solid on the track and the car (ours: polystyrene)
 WHEEL_CONTACTS = 4      # ODE's contacts of a car on its four round tyres (one each)
 SOLID_REST_M = 4e-8     # a solid starts at ODE's resting depth above the surface (platform facts)
+MAX_TYRE_UPDATE_STEPS = 3  # slip tyres: their forces are updated every 1-3 physics steps (SlipTyres.update_steps)
 DRAG_UPDATE_STEPS = 5    # duty drive: the air drag force is updated every 5 physics steps (10 ms at 2 ms)
 CONTACT_DEPTH_M = 4e-8  # initial tyre penetration = the resting depth measured for the default car.
 # ODE reports no contact at exactly 0 depth: a car placed exactly on the ground would fall one
@@ -181,6 +183,7 @@ class SimState:
     time_s: float
     control: _Control
     drag: tuple[int, float] = (0, 0.0)  # duty drive: (steps before the next drag update, drag force N)
+    tyres: tuple | None = None  # slip tyres: (steps before the next update, SlipTyres.state())
 
 
 class CarSim:
@@ -250,7 +253,25 @@ class CarSim:
         skel = self._body.skeleton
         self._skel = skel
         self._base_step = world.step  # one world step (noting touches once solids are down)
-        self._world_step = self._duty_step if self._duty_mode else world.step
+        self._tyres: SlipTyres | None = None
+        if car.wheels.tyre_model == "slip":  # the tyres' forces are ours: their contact friction is off
+            wh, ch = car.wheels, car.chassis
+            self._tyres = SlipTyres(
+                mu=wh.friction_mu, stiffness_front=wh.cornering_stiffness_front_per_rad,
+                stiffness_rear=wh.cornering_stiffness_rear_per_rad, shape=wh.tyre_shape,
+                relaxation_m=wh.relaxation_length_m, radius_m=wh.radius_m,
+                wheel_spin_inertia_kgm2=self._body.wheel_spin_inertia_kgm2, wheelbase_m=ch.wheelbase_m,
+                half_track_m=0.5 * ch.track_m, mass_kg=self._body.total_mass_kg,
+                com_m=tuple(float(c) for c in self._body.skeleton.getCOM()))  # at rest at the origin
+            for body in self._body.wheel_bodies:
+                body.getShapeNode(0).getDynamicsAspect().setFrictionCoeff(0.0)
+            self._tyre_names = {f"{name}_tyre": i for i, name in enumerate(WHEEL_NAMES)}
+            self._tyre_every = self._tyres.update_steps(self.dt_s, MAX_TYRE_UPDATE_STEPS)
+        self._tyre_left = 0  # steps before the tyre forces are updated (live value)
+        self._contacts_then: int | None = None  # restored: the saved state's last contact count
+        self._tyre_applied: tuple = (((0.0, 0.0), (0.0, 0.0, 0.0), 0.0),) * 4  # see _apply_tyres
+        self._knuckle_bodies = tuple(j.getChildBodyNode() for j in self._body.knuckle_joints)
+        self._world_step = self._hooked_step if (self._duty_mode or self._tyres) else world.step
         self._rear_joints = self._body.wheel_joints[2:]
         self._motor_gains: tuple[tuple[float, float], ...] = ()  # per rear motor (torque, damping), live
         self._drag_left = 0  # steps before the drag force is updated (live value)
@@ -356,6 +377,8 @@ class CarSim:
         car, b = self.car, self._body
         self._rd = self._pose = self._wc = None
         self._held = False
+        if self._tyres is not None:  # placed anew: rolling without slip
+            self._tyres.reset_slip()
         # position on the (possibly tilted) ground plane below/above (x, y)
         n = self._ground_rot[:, 2]
         dx, dy = pose.x_m - self._ground_origin[0], pose.y_m - self._ground_origin[1]
@@ -569,8 +592,22 @@ class CarSim:
         if self._duty_mode and self._drag_nspm2 > 0.0:
             ext = (ext[0] + self._drag_n, ext[1])
         if ext != self._force_applied:
-            b.chassis.setExtForce(np.array([ext[0], ext[1], 0.0]), b.chassis.getLocalCOM(), True, True)
             self._force_applied = ext
+            self._chassis_forces()
+
+    def _chassis_forces(self) -> None:
+        """The chassis's external forces: the external force in force (and the drag) at the
+        centre of mass, with slip tyres the rear tyres' forces too (all in the chassis frame)."""
+        chassis, ext = self._body.chassis, self._force_applied or (0.0, 0.0)
+        if self._tyres is None:
+            chassis.setExtForce(np.array([ext[0], ext[1], 0.0]), chassis.getLocalCOM(), True, True)
+            return
+        chassis.clearExternalForces()
+        chassis.addExtForce(np.array([ext[0], ext[1], 0.0]), chassis.getLocalCOM(), True, True)
+        rl, rr = self._tyre_applied[2], self._tyre_applied[3]
+        chassis.addExtForce(np.array([rl[0][0], rl[0][1], 0.0]), np.array(rl[1]), True, True)
+        chassis.addExtForce(np.array([rr[0][0], rr[0][1], 0.0]), np.array(rr[1]), True, True)
+        chassis.addExtTorque(np.array([0.0, -(rl[2] + rr[2]), 0.0]), True)
 
     def _apply_duties(self, c: _Control, force: bool) -> None:
         """The rear motors of a duty-commanded car: per motor the gains of :meth:`_duty_step`,
@@ -595,8 +632,69 @@ class CarSim:
                 j.setActuatorType(A.LOCKED if c.wheels_locked else A.PASSIVE)
         self._duties_applied = key
 
-    def _duty_step(self, reset: bool) -> None:
-        """One world step of a duty-commanded car: each rear motor's torque from its wheel's speed
+    def _hooked_step(self, reset: bool) -> None:
+        """One world step of a duty-commanded car (:meth:`_duty_forces`) or one on slip tyres
+        (:meth:`_tyre_forces`, every ``TYRE_UPDATE_STEPS``)."""
+        if self._duty_mode:
+            self._duty_forces()
+        if self._tyres is not None:
+            if self._tyre_left <= 0:
+                self._tyre_left = 1 if self._tyres.slow else self._tyre_every
+                self._tyre_forces()
+            self._tyre_left -= 1
+        self._base_step(reset)
+        self._contacts_then = None
+
+    def _tyre_forces(self) -> None:
+        """Set each tyre's force (:mod:`simrunner.car.tyres`) on its wheel at its contact point,
+        from the state now. The loads: quasi-static (``SlipTyres.set_loads``) while the last
+        step's contacts are the four tyres', else the engine's contact forces (a wheel in the air)."""
+        tyres = self._tyres
+        self._rd = None
+        q, dq, rot = self._read()
+        self._rd = None
+        result = self._world.getLastCollisionResult()
+        contacts = result.getNumContacts() if self._contacts_then is None else self._contacts_then
+        if contacts == WHEEL_CONTACTS or self._world.getTime() == 0.0:
+            tyres.set_loads(self.car.chassis.mass_kg * G_MPS2 * rot[2][2])
+        else:
+            loads = [0.0, 0.0, 0.0, 0.0]
+            names = self._tyre_names
+            for contact in result.getContacts():
+                i = names.get(contact.collisionObject1.getShapeFrame().getName())
+                if i is None:
+                    i = names.get(contact.collisionObject2.getShapeFrame().getName())
+                if i is not None:
+                    f, n = contact.force, contact.normal
+                    loads[i] += abs(f[0] * n[0] + f[1] * n[1] + f[2] * n[2])
+            tyres.loads_n = loads
+        v_c = [rot[0][j] * dq[3] + rot[1][j] * dq[4] + rot[2][j] * dq[5] for j in range(3)]
+        w_c = [rot[0][j] * dq[0] + rot[1][j] * dq[1] + rot[2][j] * dq[2] for j in range(3)]
+        ik, iw = self._i_knuckle, self._i_wheel
+        forces = tyres.forces(v_c, w_c, (q[ik[0]], q[ik[1]]), [dq[i] for i in iw], self._control.wheels_locked,
+                              self._tyre_every * self.dt_s)
+        self._tyre_applied = tuple((fw, (x_i, y_i, 0.0), -self._r_m * fw[0])
+                                   for (x_i, y_i), fw in zip(tyres.points, forces))
+        self._apply_tyres()
+
+    def _apply_tyres(self) -> None:
+        """Set the tyre forces of ``_tyre_applied`` (per tyre: its force in its wheel's frame,
+        the contact point in the chassis frame, the spin torque ``-r F_x``) on bodies that do not
+        spin, in their own frames (exact when the state is restored; a force held on a spinning
+        wheel would turn with it): the front ones at the contact point below the knuckle, the
+        rear ones on the chassis, and each wheel its spin torque (its parent the opposite)."""
+        applied, b = self._tyre_applied, self._body
+        r = self._r_m
+        for i, body in enumerate(self._knuckle_bodies):
+            force, _, spin = applied[i]
+            body.setExtForce(np.array([force[0], force[1], 0.0]), np.array([0.0, 0.0, -r]), True, True)
+            body.setExtTorque(np.array([0.0, -spin, 0.0]), True)
+        for body, (_, _, spin) in zip(b.wheel_bodies, applied):
+            body.setExtTorque(np.array([0.0, spin, 0.0]), True)
+        self._chassis_forces()
+
+    def _duty_forces(self) -> None:
+        """Before a world step of a duty-commanded car: each rear motor's torque from its wheel's speed
         at the step's start (``c1 r d - c2 r^2 omega |d|`` or ``.. - c2 r^2 omega``), and the air
         drag from the car's speed. Explicit, because dart's implicit joint damping divides the
         torque by ``1 + dt c2 r^2 / I_spin`` (5 % less acceleration for the default car at 2 ms).
@@ -611,13 +709,12 @@ class CarSim:
                 self._drag_n = -self._drag_nspm2 * v * abs(v)
                 self._set_drag()
             self._drag_left -= 1
-        self._base_step(reset)
 
     def _set_drag(self) -> None:
         """The chassis force: the external one plus the air drag last computed (duty drive)."""
         ext, chassis = self._control.ext_force_n, self._body.chassis
-        force = self._force_applied = (ext[0] + self._drag_n, ext[1])
-        chassis.setExtForce(np.array([force[0], force[1], 0.0]), chassis.getLocalCOM(), True, True)
+        self._force_applied = (ext[0] + self._drag_n, ext[1])
+        self._chassis_forces()
 
     @property
     def speed_cmd_mps(self) -> float:
@@ -655,7 +752,7 @@ class CarSim:
         self._world.addSkeleton(sk)
         self._solids.append((solid.name, sk))
         self._base_step = self._step_noting_touches
-        self._world_step = self._duty_step if self._duty_mode else self._step_noting_touches
+        self._world_step = self._hooked_step if (self._duty_mode or self._tyres) else self._step_noting_touches
 
     def touched_solids(self) -> tuple[str, ...]:
         """Names of the solids the car touched at any step since the last call, in the order
@@ -837,7 +934,9 @@ class CarSim:
         """Snapshot (positions, velocities, time, commands); restore is bit-exact."""
         skel = self._skel
         return SimState(skel.getPositions().copy(), skel.getVelocities().copy(), self._world.getTime(),
-                        self._control_now(), (self._drag_left, self._drag_n))
+                        self._control_now(), (self._drag_left, self._drag_n),
+                        None if self._tyres is None else (self._tyre_left, self._tyres.state(), self._tyre_applied,
+                                                          self._world.getLastCollisionResult().getNumContacts()))
 
     def restore_state(self, state: SimState) -> None:
         skel = self._skel
@@ -853,6 +952,10 @@ class CarSim:
         if self._duty_mode and self._drag_nspm2 > 0.0:
             self._drag_left, self._drag_n = state.drag
             self._set_drag()
+        if self._tyres is not None:
+            self._tyre_left, tyre_state, self._tyre_applied, self._contacts_then = state.tyres
+            self._tyres.restore(tyre_state)
+            self._apply_tyres()
 
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
                   yaw_rate_radps: float = 0.0) -> None:
