@@ -271,6 +271,10 @@ class CarSim:
         self._contacts_then: int | None = None  # restored: the saved state's last contact count
         self._tyre_applied: tuple = (((0.0, 0.0), (0.0, 0.0, 0.0), 0.0),) * 4  # see _apply_tyres
         self._knuckle_bodies = tuple(j.getChildBodyNode() for j in self._body.knuckle_joints)
+        self._com_local = tuple(float(v) for v in self._body.chassis.getLocalCOM())
+        self._zero3 = np.zeros(3)
+        self._rear_couple_nm = 0.0  # the rear speed servos' share of the tyres' spin torques, on the chassis
+        self._spin_modes: tuple | None = None  # (locked, servo, front servo) of the last _apply_tyres
         self._world_step = self._hooked_step if (self._duty_mode or self._tyres) else world.step
         self._rear_joints = self._body.wheel_joints[2:]
         self._motor_gains: tuple[tuple[float, float], ...] = ()  # per rear motor (torque, damping), live
@@ -282,8 +286,11 @@ class CarSim:
         self._check_velocity_convention()
         for j in self._body.knuckle_joints:
             j.setActuatorType(dart.dynamics.ActuatorType.VELOCITY)
+        # a free wheel: PASSIVE; on slip tyres FORCE, its command the tyre's spin torque (_apply_tyres)
+        self._free = dart.dynamics.ActuatorType.FORCE if self._tyres else dart.dynamics.ActuatorType.PASSIVE
+        self._spin_rear = (0.0, 0.0)  # duty drive on slip tyres: the rear tyres' spin torques (_duty_forces)
         for j in self._body.wheel_joints[:2]:
-            j.setActuatorType(dart.dynamics.ActuatorType.PASSIVE)
+            j.setActuatorType(self._free)
         self._control = _Control()
         self._steer_left = 0  # steps before the steering move ends (live value)
         self._kvel = (0.0, 0.0)  # knuckle speeds now applied (live value)
@@ -563,13 +570,15 @@ class CarSim:
             f = self._front_share
             if types != self._types_applied:
                 A = dart.dynamics.ActuatorType
-                driven = A.LOCKED if c.wheels_locked else (A.PASSIVE if c.coast else A.SERVO)
+                driven = A.LOCKED if c.wheels_locked else (self._free if c.coast else A.SERVO)
                 for j in b.wheel_joints[:2]:
-                    j.setActuatorType(driven if f > 0.0 else (A.LOCKED if c.wheels_locked else A.PASSIVE))
+                    j.setActuatorType(driven if f > 0.0 else (A.LOCKED if c.wheels_locked else self._free))
                 for j in b.wheel_joints[2:]:
                     j.setActuatorType(driven)
                 self._types_applied = types
                 self._omega_applied = None  # set the driven wheels' commands again for the new type
+                if self._tyres is not None:  # a wheel now FORCE: its command is the tyre's spin torque
+                    self._apply_tyres()
             if c.wheel_torque_nm != self._torque_applied:
                 if f > 0.0:
                     shares = ((b.wheel_joints[:2], f * c.wheel_torque_nm), (b.wheel_joints[2:], (1.0 - f) * c.wheel_torque_nm))
@@ -602,12 +611,16 @@ class CarSim:
         if self._tyres is None:
             chassis.setExtForce(np.array([ext[0], ext[1], 0.0]), chassis.getLocalCOM(), True, True)
             return
-        chassis.clearExternalForces()
-        chassis.addExtForce(np.array([ext[0], ext[1], 0.0]), chassis.getLocalCOM(), True, True)
-        rl, rr = self._tyre_applied[2], self._tyre_applied[3]
-        chassis.addExtForce(np.array([rl[0][0], rl[0][1], 0.0]), np.array(rl[1]), True, True)
-        chassis.addExtForce(np.array([rr[0][0], rr[0][1], 0.0]), np.array(rr[1]), True, True)
-        chassis.addExtTorque(np.array([0.0, -(rl[2] + rr[2]), 0.0]), True)
+        # the external force at the centre of mass and the rear tyres' forces at their contact
+        # points (z = 0), as one force at the chassis origin and one torque (chassis frame)
+        com = self._com_local
+        (fl, pl, _), (fr, pr, _) = self._tyre_applied[2], self._tyre_applied[3]
+        fx, fy = ext[0] + fl[0] + fr[0], ext[1] + fl[1] + fr[1]
+        mx = -com[2] * ext[1]
+        my = com[2] * ext[0]
+        mz = com[0] * ext[1] - com[1] * ext[0] + pl[0] * fl[1] - pl[1] * fl[0] + pr[0] * fr[1] - pr[1] * fr[0]
+        chassis.setExtForce(np.array([fx, fy, 0.0]), self._zero3, True, True)
+        chassis.setExtTorque(np.array([mx, my + self._rear_couple_nm, mz]), True)
 
     def _apply_duties(self, c: _Control, force: bool) -> None:
         """The rear motors of a duty-commanded car: per motor the gains of :meth:`_duty_step`,
@@ -627,21 +640,26 @@ class CarSim:
             gains.append((self._motor_torque_nm * d,
                           0.0 if c.wheels_locked else self._motor_damping_nms * (1.0 if brake else abs(d))))
         self._motor_gains = () if c.wheels_locked else tuple(gains)  # a LOCKED joint takes no command
+        if self._tyres is not None:
+            self._apply_tyres()
+            self._duty_forces(0)  # the new duties now, not at the next tyre update
         if c.wheels_locked != (self._duties_applied or ((), False))[1]:
             for j in self._body.wheel_joints[:2]:
-                j.setActuatorType(A.LOCKED if c.wheels_locked else A.PASSIVE)
+                j.setActuatorType(A.LOCKED if c.wheels_locked else self._free)
         self._duties_applied = key
 
     def _hooked_step(self, reset: bool) -> None:
         """One world step of a duty-commanded car (:meth:`_duty_forces`) or one on slip tyres
         (:meth:`_tyre_forces`, every ``TYRE_UPDATE_STEPS``)."""
-        if self._duty_mode:
-            self._duty_forces()
         if self._tyres is not None:
-            if self._tyre_left <= 0:
-                self._tyre_left = 1 if self._tyres.slow else self._tyre_every
+            if self._tyre_left <= 0:  # the tyres and a duty car's motors, every few steps
+                self._tyre_left = steps = 1 if self._tyres.slow else self._tyre_every
                 self._tyre_forces()
+                if self._duty_mode:
+                    self._duty_forces(steps)
             self._tyre_left -= 1
+        elif self._duty_mode:
+            self._duty_forces(1)
         self._base_step(reset)
         self._contacts_then = None
 
@@ -682,25 +700,47 @@ class CarSim:
         the contact point in the chassis frame, the spin torque ``-r F_x``) on bodies that do not
         spin, in their own frames (exact when the state is restored; a force held on a spinning
         wheel would turn with it): the front ones at the contact point below the knuckle, the
-        rear ones on the chassis, and each wheel its spin torque (its parent the opposite)."""
-        applied, b = self._tyre_applied, self._body
+        rear ones on the chassis; each wheel's spin torque between it and its parent: the
+        command of a FORCE joint (a free wheel, a duty motor's: ``_duty_forces`` adds it), a
+        pair of external torques on a speed servo's wheel, nothing on a locked one."""
+        applied, b, c = self._tyre_applied, self._body, self._control
         r = self._r_m
+        A = dart.dynamics.ActuatorType
         for i, body in enumerate(self._knuckle_bodies):
-            force, _, spin = applied[i]
+            force = applied[i][0]
             body.setExtForce(np.array([force[0], force[1], 0.0]), np.array([0.0, 0.0, -r]), True, True)
-            body.setExtTorque(np.array([0.0, -spin, 0.0]), True)
-        for body, (_, _, spin) in zip(b.wheel_bodies, applied):
-            body.setExtTorque(np.array([0.0, spin, 0.0]), True)
+        locked, servo = c.wheels_locked, not (self._duty_mode or c.coast)
+        front_servo, couple = servo and self._front_share > 0.0, 0.0
+        modes = (locked, servo, front_servo)
+        if modes != self._spin_modes:  # the torques of the last mode end
+            self._spin_modes = modes
+            for body in b.wheel_bodies + self._knuckle_bodies:
+                body.setExtTorque(self._zero3, True)
+        for i, (j, wheel) in enumerate(zip(b.wheel_joints, b.wheel_bodies)):
+            spin = applied[i][2]
+            if locked:
+                continue
+            if (front_servo if i < 2 else servo):
+                wheel.setExtTorque(np.array([0.0, spin, 0.0]), True)
+                if i < 2:
+                    self._knuckle_bodies[i].setExtTorque(np.array([0.0, -spin, 0.0]), True)
+                else:
+                    couple -= spin
+            elif i < 2 or not self._duty_mode:
+                j.setCommand(0, spin)
+        self._spin_rear = (0.0, 0.0) if locked else (applied[2][2], applied[3][2])
+        self._rear_couple_nm = couple
         self._chassis_forces()
 
-    def _duty_forces(self) -> None:
+    def _duty_forces(self, steps: int) -> None:
         """Before a world step of a duty-commanded car: each rear motor's torque from its wheel's speed
         at the step's start (``c1 r d - c2 r^2 omega |d|`` or ``.. - c2 r^2 omega``), and the air
         drag from the car's speed. Explicit, because dart's implicit joint damping divides the
         torque by ``1 + dt c2 r^2 / I_spin`` (5 % less acceleration for the default car at 2 ms).
-        The drag force is set every ``DRAG_UPDATE_STEPS`` steps, from the speed then."""
-        for j, (torque, damping) in zip(self._rear_joints, self._motor_gains):
-            j.setCommand(0, torque - damping * j.getVelocity(0))
+        The drag force is set every ``DRAG_UPDATE_STEPS`` steps, from the speed then. On slip
+        tyres this runs with each tyre update (``steps`` steps apart), the tyres' spin torques added."""
+        for j, (torque, damping), spin in zip(self._rear_joints, self._motor_gains, self._spin_rear):
+            j.setCommand(0, torque + spin - damping * j.getVelocity(0))
         if self._drag_nspm2 > 0.0:
             if self._drag_left <= 0:  # every DRAG_UPDATE_STEPS steps (the read and set cost ~15 %)
                 self._drag_left = DRAG_UPDATE_STEPS
@@ -708,7 +748,7 @@ class CarSim:
                 v = chassis.getLinearVelocity(self._world_frame, chassis)[0]  # rear-axle midpoint
                 self._drag_n = -self._drag_nspm2 * v * abs(v)
                 self._set_drag()
-            self._drag_left -= 1
+            self._drag_left -= steps
 
     def _set_drag(self) -> None:
         """The chassis force: the external one plus the air drag last computed (duty drive)."""

@@ -50,7 +50,7 @@ LOW_SPEED_MPS = 0.15    # below it the low-speed damper fades in (ours)
 DAMPER_MAX_GAIN = 0.5   # the longitudinal damper stops at most this share of the patch's slip per update
 LAMBDA_CAP_B = 12.0     # the combined slip is capped at this / B (atan(12) = 85 deg: past the fall)
 STAND_SIGMA_M = 0.005   # the relaxation length at standstill (a tyre's static deflection scale; ours)
-STABLE_OMEGA_DT = 1.0   # update_steps: omega n dt of the stiffest tyre mode at most this (limit: 2)
+STABLE_OMEGA_DT = 1.5   # update_steps: omega n dt of the stiffest tyre mode at most this (limit: 2)
 
 
 class SlipTyres:
