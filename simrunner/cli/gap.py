@@ -105,7 +105,8 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
             if bad or not names:
                 raise SimError(f"--effects {effects!r}: expected names among {', '.join(CANDIDATES)}")
         description = load_car(car)
-        logs = [check_measured(log) for log in _read_logs(measured, columns_file, column_items, norms_file)]
+        read = _read_logs(measured, columns_file, column_items, norms_file)
+        logs = [check_measured(log, pooled=len(read) > 1) for log in read]
         limit = MAX_EFFECTS if max_effects is None else max_effects
         total = progress_total(len(names) if names is not None else len(CANDIDATES), limit)
         with _engine_stderr_silenced() as err:

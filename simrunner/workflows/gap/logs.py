@@ -47,15 +47,20 @@ AT_REST_Z = SETTINGS.at_rest_z
 MIN_SPEED_FOR_STEER_MPS = SETTINGS.min_speed_for_steer_mps
 
 
-def check_measured(log: RunLog) -> RunLog:
+def check_measured(log: RunLog, pooled: bool = False) -> RunLog:
     """``log`` if the gap workflow can use it (see the module docstring), else
-    :class:`simrunner.telemetry.log.LogError` (``path:line: what was expected``)."""
+    :class:`simrunner.telemetry.log.LogError` (``path:line: what was expected``). ``pooled``: one
+    of several runs of a data set, which may be as short as one replay window
+    (``SETTINGS.min_run_rows``, ``min_run_s``; the data set as a whole needs three windows)."""
     log.require(*REQUIRED_COLUMNS)
     if log.speed_mps is None and not has_pose(log):
         missing = [c for c in POSE_COLUMNS if getattr(log, c) is None]
         raise LogError(log.source, 1, f"expected a pose ({', '.join(POSE_COLUMNS)}) or a speed sensor (speed_mps) "
                                       f"(missing: {', '.join(missing)}, speed_mps)")
-    log.require(*REQUIRED_COLUMNS, min_rows=MIN_ROWS, min_duration_s=MIN_DURATION_S)
+    if pooled:
+        log.require(*REQUIRED_COLUMNS, min_rows=SETTINGS.min_run_rows, min_duration_s=SETTINGS.min_run_s)
+    else:
+        log.require(*REQUIRED_COLUMNS, min_rows=MIN_ROWS, min_duration_s=MIN_DURATION_S)
     step = float(np.median(np.diff(log.t_s)))
     rate = 1.0 / step
     if rate < MIN_RATE_HZ * (1.0 - 1e-6):

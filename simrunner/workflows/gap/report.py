@@ -107,6 +107,21 @@ class GapResult:
         return "+".join(self.effects) if self.effects else "none"
 
     @property
+    def runs(self) -> dict:
+        """The data set counted in runs (logs): split into fit and held-out windows, fitted
+        whole, held out whole (short runs pooled, ``workflow.pool_short_runs``), and seconds."""
+        def seconds(p, windows):
+            t = p.log.t_s
+            return sum(float(t[w.stop - 1] - t[w.start]) for w in windows)
+        return {"runs": len(self.parts),
+                "split": sum(1 for p in self.parts if p.fit_windows and p.held_windows),
+                "fitted_whole": sum(1 for p in self.parts if p.fit_windows and not p.held_windows),
+                "held_out_whole": sum(1 for p in self.parts if p.held_windows and not p.fit_windows),
+                "unused": sum(1 for p in self.parts if not p.windows),
+                "fit_s": sum(seconds(p, p.fit_windows) for p in self.parts),
+                "held_out_s": sum(seconds(p, p.held_windows) for p in self.parts)}
+
+    @property
     def log(self) -> RunLog:
         return self.parts[0].log
 
@@ -163,7 +178,7 @@ class GapResult:
             "parameter_one_window": {k: {"log": src, "t_start_s": t0, "t_end_s": t1}
                                      for k, (src, t0, t1) in self.parameter_one_window.items()},
             "parameter_spans": {k: list(v) for k, v in self.parameter_spans.items()},
-            "per_log": self.per_log, "logs_worse": self.logs_worse,
+            "per_log": self.per_log, "logs_worse": self.logs_worse, "runs": self.runs,
             "gap_before": self.gap_before, "gap_after": self.gap_after,
             "gap_ls_before": self.gap_ls_before, "gap_ls_after": self.gap_ls_after,
             "rmse_before": self.rmse_before, "rmse_after": self.rmse_after, "rmse_ratio": ratio,
@@ -305,6 +320,14 @@ def summary_text(result: GapResult) -> str:
         lines.append("tried and not kept:")
         for k, tr in chain.rejected:
             lines.append(f"  step {k}: {tr.effect:<20} {tr.reason}")
+    runs = result.runs
+    if runs["runs"] > 1:
+        whole = [f"{runs[k]} {label}" for k, label in (("split", "split into fit and held-out windows"),
+                                                        ("fitted_whole", "fitted whole"),
+                                                        ("held_out_whole", "held out whole"),
+                                                        ("unused", "without a clean window")) if runs[k]]
+        lines.append(f"data: {runs['runs']} runs ({', '.join(whole)}): {runs['fit_s']:.0f} s of fit windows, "
+                     f"{runs['held_out_s']:.0f} s held out")
     lines.append("held-out RMSE before -> after: " + ", ".join(
         f"{s} {result.rmse_before[s]:.4g} -> {result.rmse_after[s]:.4g}" for s in result.rmse_before))
     if result.rmse_smoothed_before:

@@ -93,6 +93,10 @@ class GapSettings:
     # -- logs (logs.py, conventions.py, glitches.py) -------------------------------------------
     min_rows: int = _s(50, "1", "choice: fewest rows of a log")
     min_duration_s: float = _s(6.0, "s", "three 2-s replay windows: two to fit, one to hold out")
+    min_run_rows: int = _s(20, "1", "choice: fewest rows of one of several runs pooled (a 2-s run at 10 Hz)")
+    min_run_s: float = _s(2.0, "s", "one replay window: a run of several pooled is fitted or held out whole")
+    short_run_windows: int = _s(3, "1", "a run with fewer windows than this cannot be split into fit and "
+                                "held-out windows: it is pooled whole (every holdout_every-th short run held out)")
     min_rate_hz: float = _s(10.0, "Hz", "below it the smoothing (smooth_s) sees single samples")
     smooth_s: float = _s(0.15, "s", "choice: Savitzky-Golay window of the states and their derivatives")
     at_rest_z: float = _s(3.0, "1 (standard errors)", "choice: at rest when the smoothed speed is within this "

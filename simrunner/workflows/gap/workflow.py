@@ -63,9 +63,10 @@ def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
     return out
 
 
-def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
-    """One log made ready: checked, glitches found, smoothed, windowed and split."""
-    check_measured(log)
+def prepare(log: RunLog, car: CarDescription, window_s: float, pooled: bool = False) -> LogPart:
+    """One log made ready: checked (``pooled``: as one of several runs), glitches found,
+    smoothed, windowed and split."""
+    check_measured(log, pooled)
     glitches = tuple(find_glitches(log, car))
     bad = glitch_mask(log, glitches)
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
@@ -75,6 +76,23 @@ def prepare(log: RunLog, car: CarDescription, window_s: float) -> LogPart:
     strata = window_strata(log, derived, segment(log, derived, car), windows, car.drive.max_brake_mps2)
     fit_w, held_w = split_windows(windows, strata=strata) if windows else ([], [])
     return LogPart(log, derived, glitches, tuple(fit_w), tuple(held_w), signals_of(log), unchecked)
+
+
+def pool_short_runs(parts: list[LogPart]) -> list[LogPart]:
+    """Runs too short to split into fit and held-out windows (fewer than
+    ``SETTINGS.short_run_windows``), several of them: each is fitted or held out whole, every
+    ``holdout_every``-th short run (in the order given) held out, so held-out windows are
+    whole runs the fit never saw. Longer runs keep their own split; a single log is as it was."""
+    short = [i for i, p in enumerate(parts) if len(p.windows) < SETTINGS.short_run_windows]
+    if len(parts) < 2 or len(short) < 2:
+        return parts
+    every = SETTINGS.holdout_every
+    out = list(parts)
+    for k, i in enumerate(short):
+        held = k % every == every - 1 or (len(short) < every and k == len(short) - 1)
+        windows = parts[i].windows
+        out[i] = dataclasses.replace(parts[i], fit_windows=() if held else windows, held_windows=windows if held else ())
+    return out
 
 
 def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, *, jobs: int = 2,
@@ -108,7 +126,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         raise GapError(f"unknown effect(s) {', '.join(unknown)} (expected some of {', '.join(CANDIDATES)})")
     car = car or CarDescription()
     tick = progress or (lambda label: None)
-    parts = [prepare(log, car, window_s) for log in logs]
+    parts = pool_short_runs([prepare(log, car, window_s, len(logs) > 1) for log in logs])
     signals = tuple(s for s in FIT_SIGNALS if all(s in p.signals for p in parts))
     if not signals:
         raise GapError("the logs have no signal in common to compare (pose or speed)")
