@@ -237,13 +237,15 @@ def neutral_car(car: CarDescription) -> CarDescription:
 def built_car(car: CarDescription) -> CarDescription:
     """The car the physics is built from: the car file's numbers times the build-time scale
     factors (``car`` itself when they are all 1). ``wheels.friction_mu`` x ``friction_scale``;
-    ``drive.max_speed_mps`` x ``speed_scale``; ``drive.max_accel_mps2`` x ``accel_scale /
+    ``drive.max_speed_mps`` x ``speed_scale`` (a duty-driven car's ``motor_back_emf_nspm`` / it:
+    its top speed; its duty is not scaled); ``drive.max_accel_mps2`` x ``accel_scale /
     mass_scale`` and ``max_brake_mps2`` x ``brake_scale / mass_scale``; ``steering.rate_radps``
     x ``servo_rate_scale``; ``steering.limit_rad`` x ``steer_limit_scale``; ``chassis.mass_kg``
     and ``wheels.mass_kg`` x ``mass_scale`` (all inertias follow the masses). ``CarSim`` sets
     the drive and brake torques from the built mass and limits, so with ``mass_scale`` they
     stay those of the file's numbers. ``drive.front_share`` + ``front_share_shift``, clamped to
-    [0, 1]. A scaled steering limit above the description's range raises
+    [0, 1]. A duty-driven car's ``motor_force_n`` and ``motor_back_emf_nspm`` x ``accel_scale``
+    (derived from the limits when 0, they follow them). A scaled steering limit above the description's range raises
     ``CarDescriptionError``."""
     e = car.effects
     if (e.friction_scale == e.speed_scale == e.accel_scale == e.brake_scale == e.servo_rate_scale
@@ -258,8 +260,13 @@ def built_car(car: CarDescription) -> CarDescription:
         wh = dataclasses.replace(wh, mass_kg=wh.mass_kg * m)
     if e.speed_scale != 1.0:
         dr = dataclasses.replace(dr, max_speed_mps=dr.max_speed_mps * e.speed_scale)
+        if dr.motor_back_emf_nspm:  # duty drive: the top speed c1 / c2 scales
+            dr = dataclasses.replace(dr, motor_back_emf_nspm=dr.motor_back_emf_nspm / e.speed_scale)
     if e.accel_scale != 1.0 or m != 1.0:
         dr = dataclasses.replace(dr, max_accel_mps2=dr.max_accel_mps2 * e.accel_scale / m)
+        if e.accel_scale != 1.0 and (dr.motor_force_n or dr.motor_back_emf_nspm):  # duty: force x a, top speed kept
+            dr = dataclasses.replace(dr, motor_force_n=dr.motor_force_n * e.accel_scale,
+                                     motor_back_emf_nspm=dr.motor_back_emf_nspm * e.accel_scale)
     if e.brake_scale != 1.0 or m != 1.0:
         dr = dataclasses.replace(dr, max_brake_mps2=dr.max_brake_mps2 * e.brake_scale / m)
     if e.front_share_shift != 0.0:
@@ -487,8 +494,8 @@ class EffectSim:
             d *= (1.0 + e.steering_asymmetry) if d > 0.0 else (1.0 - e.steering_asymmetry)
         if e.throttle_deadband_mps > 0.0 and abs(v) < e.throttle_deadband_mps:
             coast = True
-        if e.speed_scale != 1.0:  # on the clamped command (the physical top speed scales too)
-            vmax = self.car.drive.max_speed_mps
+        if e.speed_scale != 1.0 and self.car.drive.command != "duty":  # on the clamped command (the
+            vmax = self.car.drive.max_speed_mps                            # physical top speed scales too)
             v = e.speed_scale * min(max(v, -vmax), vmax)
         if e.top_speed_mps != math.inf:
             v = min(max(v, -e.top_speed_mps), e.top_speed_mps)

@@ -548,7 +548,7 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
                     v = float(cell)
                 except ValueError:
                     raise LogError(source, line, f"column {h!r}: expected a number (got {cell!r})") from None
-                if not math.isfinite(v):
+                if not math.isfinite(v) and not (h in NAN_COLUMNS and v != v):
                     raise LogError(source, line, f"column {h!r}: expected a finite number (got {cell!r})")
                 values[h].append(v)
             lines.append(line)

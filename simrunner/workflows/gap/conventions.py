@@ -44,11 +44,12 @@ import numpy as np
 
 from simrunner.telemetry.log import LogError, RunLog
 from simrunner.workflows.gap.glitches import has_pose
-from simrunner.workflows.gap.logs import Derived, derive
+from simrunner.workflows.gap.logs import Derived, derive, is_duty_log
 from simrunner.workflows.gap.settings import SETTINGS
 
 MIN_SAMPLES = SETTINGS.conventions_min_samples
 MIN_SPEED_MPS = SETTINGS.conventions_min_speed_mps
+MIN_DUTY = SETTINGS.conventions_min_duty
 MIN_RATE_RADPS = SETTINGS.conventions_min_rate_radps
 MIN_CORRELATION = SETTINGS.conventions_min_correlation
 ALIGNED_COS = SETTINGS.aligned_cos
@@ -190,19 +191,21 @@ def check_conventions(log: RunLog, wheelbase_m: float, steer_limit_rad: float,
     # without a pose, a reversal below may be the sensor's as well as the command's
     v, rate = measured.speed_mps, measured.yaw_rate_radps
     cmd = np.asarray(log.speed_cmd_mps, dtype=float)
-    fit = _fit(v, cmd, (np.abs(cmd) > MIN_SPEED_MPS) & (np.abs(v) > MIN_SPEED_MPS))
+    duty = is_duty_log(log)  # the command is a duty (-1..1, checked on reading): its sign only
+    name = "the duty" if duty else "speed_cmd_mps"
+    fit = _fit(v, cmd, (np.abs(cmd) > (MIN_DUTY if duty else MIN_SPEED_MPS)) & (np.abs(v) > MIN_SPEED_MPS))
     if fit is None or abs(fit[1]) <= MIN_CORRELATION:
-        unchecked.append("speed_cmd_mps's sign and unit (too little driving)" if fit is None else
-                         f"speed_cmd_mps's sign and unit (the measured speed follows it too loosely: "
+        unchecked.append(f"{name}'s sign{'' if duty else ' and unit'} (too little driving)" if fit is None else
+                         f"{name}'s sign{'' if duty else ' and unit'} (the measured speed follows it too loosely: "
                          f"correlation {fit[1]:.2f})")
+    col = ("duty_cmd" if log.duty_cmd is not None else "duty_left and duty_right") if duty else "speed_cmd_mps"
     if fit is not None and fit[0] < 0.0 and fit[1] < -MIN_CORRELATION:
-        found = f"the measured speed is {fit[0]:.3g}x the command (correlation {fit[1]:.2f})"
+        found = f"the measured speed is {fit[0]:.3g}x the {'duty' if duty else 'command'} (correlation {fit[1]:.2f})"
         if pose is not None:  # the measured speed is the pose's or was checked against it
-            raise _refuse(log, "speed_cmd_mps", f"{found}: expected + = forward; its "
-                                                f"{_REVERSED.format(col='speed_cmd_mps')}")
-        raise _refuse(log, "speed_cmd_mps or speed_mps", f"{found}: expected + = forward for both; one "
-                                                         f"{_REVERSED.format(col='speed_cmd_mps')} (or speed_mps)")
-    if fit is not None and fit[0] > MAX_SPEED_PER_COMMAND and fit[1] > MIN_CORRELATION:
+            raise _refuse(log, col, f"{found}: expected + = forward; its {_REVERSED.format(col=col)}")
+        raise _refuse(log, f"{col} or speed_mps", f"{found}: expected + = forward for both; one "
+                                                  f"{_REVERSED.format(col=col)} (or speed_mps)")
+    if not duty and fit is not None and fit[0] > MAX_SPEED_PER_COMMAND and fit[1] > MIN_CORRELATION:
         raise _refuse(log, "speed_mps or speed_cmd_mps", f"the measured speed is {fit[0]:.3g}x the command "
                                                          f"(correlation {fit[1]:.2f}): expected both in m/s; "
                                                          f"is one in km/h, cm/s or the car's own units? map it "

@@ -26,6 +26,7 @@ Commands are taken as held from their sample to the next one (zero-order hold), 
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -47,11 +48,45 @@ AT_REST_Z = SETTINGS.at_rest_z
 MIN_SPEED_FOR_STEER_MPS = SETTINGS.min_speed_for_steer_mps
 
 
+def is_duty_log(log: RunLog) -> bool:
+    """The log's motor command is a PWM duty: ``duty_cmd``, or ``duty_left`` and ``duty_right``."""
+    return log.duty_cmd is not None or (log.duty_left is not None and log.duty_right is not None)
+
+
+def duty_commands(log: RunLog) -> RunLog:
+    """A duty log with its duty as the command the replay sends (``speed_cmd_mps``: a
+    duty-driven car takes it as the duty of both motors, as ``set_speed`` does; where
+    ``duty_cmd`` is nan or absent, the mean of ``duty_left`` and ``duty_right``, which the
+    replay then sets each). Duties outside -1..1 are a :class:`LogError` naming the row."""
+    for name in ("duty_cmd", "duty_left", "duty_right"):
+        a = getattr(log, name)
+        if a is None:
+            continue
+        bad = np.flatnonzero(np.abs(a) > 1.0 + 1e-9)
+        if bad.size:
+            raise LogError(log.source, int(bad[0]) + 2, f"column {name!r}: expected a duty in -1..1 (got "
+                                                        f"{a[bad[0]]:g}); a duty in percent: --column "
+                                                        f"'{name}=YOUR_COLUMN / 100'")
+    if log.duty_left is not None and log.duty_right is not None:
+        mean = 0.5 * (log.duty_left + log.duty_right)
+        cmd = mean if log.duty_cmd is None else np.where(np.isfinite(log.duty_cmd), log.duty_cmd, mean)
+    else:
+        cmd = log.duty_cmd
+        if not np.all(np.isfinite(cmd)):
+            i = int(np.flatnonzero(~np.isfinite(cmd))[0])
+            raise LogError(log.source, i + 2, "column 'duty_cmd': expected a duty (nan only with duty_left "
+                                              "and duty_right, the motors' own)")
+    return dataclasses.replace(log, speed_cmd_mps=np.asarray(cmd, dtype=float))
+
+
 def check_measured(log: RunLog, pooled: bool = False) -> RunLog:
     """``log`` if the gap workflow can use it (see the module docstring), else
-    :class:`simrunner.telemetry.log.LogError` (``path:line: what was expected``). ``pooled``: one
+    :class:`simrunner.telemetry.log.LogError` (``path:line: what was expected``); a duty log
+    (:func:`is_duty_log`) comes back with its duty as the command (:func:`duty_commands`). ``pooled``: one
     of several runs of a data set, which may be as short as one replay window
     (``SETTINGS.min_run_rows``, ``min_run_s``; the data set as a whole needs three windows)."""
+    if is_duty_log(log):
+        log = duty_commands(log)
     log.require(*REQUIRED_COLUMNS)
     if log.speed_mps is None and not has_pose(log):
         missing = [c for c in POSE_COLUMNS if getattr(log, c) is None]

@@ -319,6 +319,8 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         first_step = np.searchsorted(steps.t_s, t, side="right")
         last_step = np.append(np.searchsorted(steps.t_s, t[1:], side="left"), first_step[-1])
 
+    motors = (log.duty_left, log.duty_right) if log.duty_left is not None and log.duty_right is not None else None
+
     def run(a: int, b: int, record: bool) -> None:
         """Apply the commands of samples a .. b-1 (zero-order hold) up to sample b (recorded
         at a .. b-1 when ``record``; the last command is applied only if b is past it); a
@@ -342,6 +344,8 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
                     coast_now = bool(coast[i])
                     sim.set_coast(coast_now)
                 sim.set_command(float(log.speed_cmd_mps[i]), float(log.steer_cmd_rad[i]))
+                if motors is not None and not (log.duty_cmd is not None and math.isfinite(log.duty_cmd[i])):
+                    sim.set_motors(float(motors[0][i]), float(motors[1][i]))  # the motors' own duties
                 if steps is not None:
                     for k in range(first_step[i], last_step[i]):
                         advance(steps.t_s[k])

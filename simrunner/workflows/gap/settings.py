@@ -93,6 +93,8 @@ class GapSettings:
     # -- logs (logs.py, conventions.py, glitches.py) -------------------------------------------
     min_rows: int = _s(50, "1", "choice: fewest rows of a log")
     min_duration_s: float = _s(6.0, "s", "three 2-s replay windows: two to fit, one to hold out")
+    conventions_min_duty: float = _s(0.05, "1 (duty)", "choice: a duty log's sign check uses the rows with a "
+                                     "larger duty (and a speed above conventions_min_speed_mps)")
     min_run_rows: int = _s(20, "1", "choice: fewest rows of one of several runs pooled (a 2-s run at 10 Hz)")
     min_run_s: float = _s(2.0, "s", "one replay window: a run of several pooled is fitted or held out whole")
     short_run_windows: int = _s(3, "1", "a run with fewer windows than this cannot be split into fit and "

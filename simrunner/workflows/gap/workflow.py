@@ -28,7 +28,7 @@ from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_
                                          window_costs)
 from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import find_glitches, glitch_mask
-from simrunner.workflows.gap.logs import Derived, check_measured, derive
+from simrunner.workflows.gap.logs import Derived, check_measured, derive, is_duty_log
 from simrunner.workflows.gap.regimes import MOVING_MPS, residual_stats, reversal_onsets, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
@@ -66,7 +66,7 @@ def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
 def prepare(log: RunLog, car: CarDescription, window_s: float, pooled: bool = False) -> LogPart:
     """One log made ready: checked (``pooled``: as one of several runs), glitches found,
     smoothed, windowed and split."""
-    check_measured(log, pooled)
+    log = check_measured(log, pooled)
     glitches = tuple(find_glitches(log, car))
     bad = glitch_mask(log, glitches)
     derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
@@ -125,6 +125,12 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     if unknown:
         raise GapError(f"unknown effect(s) {', '.join(unknown)} (expected some of {', '.join(CANDIDATES)})")
     car = car or CarDescription()
+    duty = [is_duty_log(log) for log in logs]
+    if any(duty) and not all(duty):
+        raise GapError(f"{', '.join(log.source for log, d in zip(logs, duty) if not d)}: expected duty logs as the "
+                       "others (duty_cmd, or duty_left and duty_right): one car, one kind of motor command")
+    if all(duty) and car.drive.command != "duty":  # the logs' motors take duties: so does the car
+        car = car.replace(drive=dataclasses.replace(car.drive, command="duty", front_share=0.0))
     tick = progress or (lambda label: None)
     parts = pool_short_runs([prepare(log, car, window_s, len(logs) > 1) for log in logs])
     signals = tuple(s for s in FIT_SIGNALS if all(s in p.signals for p in parts))
