@@ -108,3 +108,17 @@ def test_speed_and_accel_scale_act_on_a_duty_cars_motors(explicit):
     fast.set_command(1.0, 0.0)
     fast.step(5)
     assert fast.speed_mps / (5 * fast.dt_s) == pytest.approx(1.5 * 2 * mo.c1 / mo.m_eff_kg, rel=0.03)
+
+
+def test_the_h_bridge_mode_is_chosen_from_the_log(tmp_path):
+    """A coasting H-bridge's duty log against the file's brake mode: the answer switches it
+    (car.toml says coast) and says so."""
+    from simrunner.workflows.gap.report import summary_text
+
+    coast = hidden_motor_car(1.0)
+    coast = coast.replace(drive=dataclasses.replace(coast.drive, hbridge="coast"))
+    log = duty_run(coast, tmp_path, seconds=14.0)
+    result = run_gap(log, BASE, jobs=2, effects=["motor_lag"])
+    assert result.car.drive.hbridge == "coast"
+    assert "H-bridge (drive.hbridge, a duty log): coast (the car file says brake)" in summary_text(result)
+    assert result.settings["hbridge"]["held_cost"]["coast"] < result.settings["hbridge"]["held_cost"]["brake"]

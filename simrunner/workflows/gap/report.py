@@ -320,6 +320,12 @@ def summary_text(result: GapResult) -> str:
         lines.append("tried and not kept:")
         for k, tr in chain.rejected:
             lines.append(f"  step {k}: {tr.effect:<20} {tr.reason}")
+    hb = result.settings.get("hbridge")
+    if hb:
+        costs = ", ".join(f"{m} {c:.4g}" for m, c in hb["held_cost"].items())
+        lines.append(f"H-bridge (drive.hbridge, a duty log): {hb['chosen']}"
+                     + (f" (the car file says {hb['file']})" if hb["chosen"] != hb["file"] else "")
+                     + f"; held-out cost {costs}")
     runs = result.runs
     if runs["runs"] > 1:
         whole = [f"{runs[k]} {label}" for k, label in (("split", "split into fit and held-out windows"),

@@ -25,7 +25,7 @@ from simrunner.workflows.gap.chain import (HELD_IMPROVEMENT_MIN, MAX_EFFECTS, SC
                                            screening_problem)
 from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, ROBUST_WINDOW_FACTOR,
                                          Problem, Segment, bic, nominal_scales, robust_scale_of, robust_total,
-                                         window_costs)
+                                         cost_of, window_costs)
 from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive, is_duty_log
@@ -93,6 +93,22 @@ def pool_short_runs(parts: list[LogPart]) -> list[LogPart]:
         windows = parts[i].windows
         out[i] = dataclasses.replace(parts[i], fit_windows=() if held else windows, held_windows=windows if held else ())
     return out
+
+
+def choose_hbridge(fit_problem: Problem, held_problem: Problem, delta_bic_min: float) -> dict:
+    """A duty car's H-bridge mode (``drive.hbridge``, docs/drive.md): the other mode is taken when
+    it lowers the fit windows' BIC by more than ``delta_bic_min`` and the held-out cost too, as
+    a chain step must. ``{"chosen", "file", "fit_cost": {mode: cost}, "held_cost": {...}}``."""
+    car = fit_problem.car
+    modes = ("brake", "coast")
+    fit_cost = {m: cost_of(fit_problem, car.replace(drive=dataclasses.replace(car.drive, hbridge=m)))
+                for m in modes}
+    held_cost = {m: cost_of(held_problem, car.replace(drive=dataclasses.replace(car.drive, hbridge=m)))
+                 for m in modes}
+    own, other = car.drive.hbridge, next(m for m in modes if m != car.drive.hbridge)
+    gain = bic(fit_problem, fit_cost[own], 0) - bic(fit_problem, fit_cost[other], 0)
+    chosen = other if gain > delta_bic_min and held_cost[other] < held_cost[own] else own
+    return {"chosen": chosen, "file": own, "fit_cost": fit_cost, "held_cost": held_cost}
 
 
 def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, *, jobs: int = 2,
@@ -166,6 +182,12 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     robust = robust_scale_of(window_costs(fit_problem, fit_res), robust_factor)
     fit_problem = dataclasses.replace(fit_problem, robust_scale=robust)
     held_problem = Problem(car, held_segs, scales, signals, held_dt_s, sim_factory, robust)
+    hbridge = None
+    if car.drive.command == "duty":  # the H-bridge's mode: a choice of two, made before the chain
+        hbridge = choose_hbridge(fit_problem, held_problem, delta_bic_min)
+        if hbridge["chosen"] != car.drive.hbridge:
+            car = car.replace(drive=dataclasses.replace(car.drive, hbridge=hbridge["chosen"]))
+            fit_problem, held_problem = fit_problem.with_car(car), held_problem.with_car(car)
     pred0 = predict(car, held_dt_s)
     res0_parts = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, pred0)]
     tick("nominal")
@@ -217,7 +239,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                 "improvement_min": improvement_min, "held_improvement_min": held_improvement_min,
                 "max_effects": max_effects, "scales": scales, "signals": list(signals), "effects": names,
                 "screen_max_s": screen_max_s, "fit_windows_s": sum(g.duration_s for g in fit_problem.segments),
-                "screen_windows_s": sum(g.duration_s for g in screen.segments)}
+                "screen_windows_s": sum(g.duration_s for g in screen.segments), "hbridge": hbridge}
     return GapResult(
         effects=chain.effects, parameters=chain.parameters, car=car_after, chain=chain,
         ranking=list(chain.steps[0].screening) if chain.steps else [],
