@@ -119,13 +119,14 @@ def test_drive_and_brake_reach_the_cars_limits():
 
 
 @pytest.mark.parametrize("duty", [False, True])
-def test_save_restore_is_bit_exact_on_slip_tyres(duty):
+@pytest.mark.parametrize("save_at", [301, 302, 303, 304])  # every phase of the tyre updates
+def test_save_restore_is_bit_exact_on_slip_tyres(duty, save_at):
     car = slip_car()
     if duty:
         car = car.replace(drive=dataclasses.replace(car.drive, command="duty", drag_nspm2=0.05))
     sim = CarSim(car)
     sim.set_command(0.8 if duty else 1.8, 0.25)
-    sim.step(301)
+    sim.step(save_at)
     state = sim.save_state()
     sim.step(7)
     sim.set_command(0.3, -0.2)

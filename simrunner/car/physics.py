@@ -102,7 +102,7 @@ HILL_BASE_M = -0.005  # a hill mesh's base below the surface (inside the ground 
 SOLID_MU = 0.5          # friction of a solid on the track and the car (ours: polystyrene)
 WHEEL_CONTACTS = 4      # ODE's contacts of a car on its four round tyres (one each)
 SOLID_REST_M = 4e-8     # a solid starts at ODE's resting depth above the surface (platform facts)
-MAX_TYRE_UPDATE_STEPS = 3  # slip tyres: their forces are updated every 1-3 physics steps (SlipTyres.update_steps)
+MAX_TYRE_UPDATE_STEPS = 4  # slip tyres: their forces are updated every 1-4 physics steps (SlipTyres.update_steps)
 DRAG_UPDATE_STEPS = 5    # duty drive: the air drag force is updated every 5 physics steps (10 ms at 2 ms)
 CONTACT_DEPTH_M = 4e-8  # initial tyre penetration = the resting depth measured for the default car.
 # ODE reports no contact at exactly 0 depth: a car placed exactly on the ground would fall one
@@ -976,7 +976,8 @@ class CarSim:
         return SimState(skel.getPositions().copy(), skel.getVelocities().copy(), self._world.getTime(),
                         self._control_now(), (self._drag_left, self._drag_n),
                         None if self._tyres is None else (self._tyre_left, self._tyres.state(), self._tyre_applied,
-                                                          self._world.getLastCollisionResult().getNumContacts()))
+                                                          self._world.getLastCollisionResult().getNumContacts(),
+                                                          tuple(j.getCommand(0) for j in self._rear_joints)))
 
     def restore_state(self, state: SimState) -> None:
         skel = self._skel
@@ -993,9 +994,12 @@ class CarSim:
             self._drag_left, self._drag_n = state.drag
             self._set_drag()
         if self._tyres is not None:
-            self._tyre_left, tyre_state, self._tyre_applied, self._contacts_then = state.tyres
+            self._tyre_left, tyre_state, self._tyre_applied, self._contacts_then, rear = state.tyres
             self._tyres.restore(tyre_state)
             self._apply_tyres()
+            if self._duty_mode and not self._control.wheels_locked:  # the motors' torques as they were
+                for j, command in zip(self._rear_joints, rear):
+                    j.setCommand(0, command)
 
     def set_state(self, pose: Pose2, speed_mps: float, steer_rad: float = 0.0,
                   yaw_rate_radps: float = 0.0) -> None:

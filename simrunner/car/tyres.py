@@ -31,8 +31,8 @@ each tyre instead gets a force at its contact point from the slip of its contact
   contact forces of the last step (reading them costs more than a step). A tyre in the air
   has no force.
 * **Update.** Rolling, the forces are set every ``n`` physics steps (:meth:`SlipTyres.update_steps`:
-  the most, up to 3, that keep the stiffest mode - the tyre spring against the wheel's spin
-  inertia - at ``omega n dt <= 1``, half the explicit stability limit); while a tyre rolls
+  the most, up to 4, that keep the stiffest mode - the tyre spring against the wheel's spin
+  inertia - at ``omega n dt <= 1.5``, three quarters of the explicit stability limit); while a tyre rolls
   slower than ``LOW_SPEED_MPS``, every step, and the relaxation length shrinks toward
   ``STAND_SIGMA_M`` (at least what keeps that mode stable at one step) so that a standing
   tyre is a stiff spring: a car on a slope holds within millimetres.
