@@ -123,6 +123,7 @@ margin_m={margin:g}"""
 
 _COLUMNS = ("t", "speed_cmd", "steer_cmd", "coast", "segment", "ref_x", "ref_y", "ref_yaw")
 _REF_COLUMNS = _COLUMNS[5:]
+_DUTY_COLUMN = "duty_cmd"  # a duty-driven car's plan: the duty to send (speed_cmd: the speed it aims at)
 
 
 class PlanError(SimError):
@@ -151,6 +152,7 @@ class ExcitationPlan:
     area_centre_m: tuple[float, float] | None = None
     area_m: float = AREA_M
     margin_m: float = AREA_MARGIN_M
+    duty_cmd: np.ndarray | None = None  # a duty-driven car's plan: the duty of each row (duty_for_speed)
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -216,11 +218,12 @@ class ExcitationPlan:
                              margin=self.margin_m, wx=x1 - x0, wy=y1 - y0, sx=0.5 * self.area_m - cx,
                              sy=0.5 * self.area_m - cy, seed=self.seed, cx=cx, cy=cy)
         lines = ["# " + ln for ln in head.splitlines()]
-        lines.append(",".join(_COLUMNS))
+        duty = self.duty_cmd
+        lines.append(",".join(_COLUMNS + ((_DUTY_COLUMN,) if duty is not None else ())))
         for k, (t, v, d, c, s) in enumerate(zip(self.t_s, self.speed_cmd_mps, self.steer_cmd_rad, self.coast,
                                                 self.segment)):
             tail = f"{self.ref_x_m[k]:.4f},{self.ref_y_m[k]:.4f},{self.ref_yaw_rad[k]:.5f}" if ref[k] else ",,"
-            lines.append(f"{t:.3f},{v:.6f},{d:.6f},{int(c)},{s},{tail}")
+            lines.append(f"{t:.3f},{v:.6f},{d:.6f},{int(c)},{s},{tail}" + (f",{duty[k]:.6f}" if duty is not None else ""))
         try:
             write_atomic(path, "\n".join(lines) + "\n")
         except OSError as exc:
@@ -243,14 +246,14 @@ class ExcitationPlan:
         for need in ("t", "speed_cmd", "steer_cmd"):
             if need not in cols:
                 raise PlanError(f"{path}:{hline}: header lacks column '{need}' ({expect})")
-        unknown = [c for c in cols if c not in _COLUMNS]
+        unknown = [c for c in cols if c not in _COLUMNS + (_DUTY_COLUMN,)]
         if unknown:
             raise PlanError(f"{path}:{hline}: unknown column '{unknown[0]}' ({expect})")
         has_ref = [c in cols for c in _REF_COLUMNS]
         if any(has_ref) and not all(has_ref):
             raise PlanError(f"{path}:{hline}: expected all of {','.join(_REF_COLUMNS)} or none")
         idx = {c: cols.index(c) for c in cols}
-        t, v, d, co, seg, ref = [], [], [], [], [], []
+        t, v, d, co, seg, ref, du = [], [], [], [], [], [], []
         seed, centre, area, margin = 0, None, AREA_M, AREA_MARGIN_M
         for line_no, m in ((i + 1, ln) for i, ln in enumerate(text.splitlines()) if ln.startswith("#")):
             key, _, val = m[1:].strip().partition("=")
@@ -285,6 +288,14 @@ class ExcitationPlan:
                 raise PlanError(f"{path}:{line_no}: expected numbers in t,speed_cmd,steer_cmd and 0/1 in coast") from None
             if not all(math.isfinite(x) for x in (tv, vv, dv)) or cv not in (0, 1):
                 raise PlanError(f"{path}:{line_no}: expected finite numbers and coast 0 or 1")
+            if _DUTY_COLUMN in idx:
+                try:
+                    duty = float(vals[idx[_DUTY_COLUMN]])
+                except ValueError:
+                    duty = math.nan
+                if not -1.0 <= duty <= 1.0:
+                    raise PlanError(f"{path}:{line_no}: expected a duty_cmd in -1..1")
+                du.append(duty)
             t.append(tv), v.append(vv), d.append(dv), co.append(bool(cv))
             seg.append(vals[idx["segment"]].strip() if "segment" in idx else "")
             if all(has_ref):
@@ -302,7 +313,7 @@ class ExcitationPlan:
         r = np.array(ref, dtype=float).reshape(-1, 3).T if ref else (None, None, None)
         return cls(np.arange(len(t)) / rate, np.array(v), np.array(d), np.array(co, dtype=bool), tuple(seg),
                    rate_hz=rate, seed=seed, ref_x_m=r[0], ref_y_m=r[1], ref_yaw_rad=r[2], area_centre_m=centre,
-                   area_m=area, margin_m=margin)
+                   area_m=area, margin_m=margin, duty_cmd=np.array(du) if du else None)
 
 
 def _read_reference(cells: list[str], where: str) -> tuple[float, float, float]:
@@ -636,6 +647,12 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
     :class:`PlanError` naming the smallest that does. The same arguments give the same plan.
     """
     car = car or CarDescription()
+    if car.drive.command == "duty":  # planned as its speed-commanded twin, the speeds sent as duties
+        import dataclasses as _dc
+
+        twin = car.replace(drive=_dc.replace(car.drive, command="speed"))
+        plan = make_plan(twin, seed=seed, rate_hz=rate_hz, duration_s=duration_s, area_m=area_m)
+        return _dc.replace(plan, duty_cmd=duty_for_speed(car, plan.speed_cmd_mps))
     if not (5.0 <= rate_hz <= 1000.0):
         raise PlanError(f"rate_hz = {rate_hz!r}: expected 5 .. 1000")
     if duration_s is not None and not (MIN_DURATION_S <= duration_s <= MAX_DURATION_S):
@@ -659,6 +676,27 @@ def make_plan(car: CarDescription | None = None, *, seed: int = 0, rate_hz: floa
     raise PlanError(f"this car's plan fits no area up to {AREA_MAX_M:g} x {AREA_MAX_M:g} m (at "
                     f"{first:g} m its turns or an experiment's off-nominal cars get up to {out_m:.2f} m out): "
                     "check the car file's wheelbase and steering limit")
+
+
+def duty_for_speed(car: CarDescription, speed_mps: np.ndarray) -> np.ndarray:
+    """The duty that holds a duty-driven car at ``speed_mps``, in -1..1: the steady state of
+    the motor model (docs/drive.md), ``2 (c1 d - c2 v) = F_rr + k v^2`` for a brake H-bridge,
+    ``2 (c1 - c2 v) d = F_rr + k v^2`` for a coasting one (which needs the car file's rolling
+    resistance or drag: without losses it reaches its top speed at any duty)."""
+    from simrunner.workflows.calibration.duty import motor_of
+
+    mo = motor_of(car)
+    v = np.asarray(speed_mps, dtype=float)
+    losses = mo.rolling_n * np.sign(v) + mo.drag * v * np.abs(v)
+    if mo.brake:
+        return np.clip((2.0 * mo.c2 * v + losses) / (2.0 * mo.c1), -1.0, 1.0)
+    if mo.rolling_n <= 0.0 and mo.drag <= 0.0:
+        raise PlanError("a coasting H-bridge (drive.hbridge = coast) with no rolling resistance or drag in the car "
+                        "file reaches its top speed at any duty, so no duty holds a planned speed: measure them "
+                        "(simrunner calibrate [duty], the coast-down) or plan for hbridge = brake")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(np.abs(v) < mo.c1 / mo.c2, losses / (2.0 * (mo.c1 - mo.c2 * np.abs(v))), np.sign(v))
+    return np.clip(d, -1.0, 1.0)
 
 
 def turn_radius_m(car: CarDescription) -> float:
@@ -874,6 +912,10 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
     """
     from simrunner.car.effects import make_sim
 
+    duty = car.drive.command == "duty"
+    if duty and plan.duty_cmd is None:
+        raise PlanError("the car is driven by duty (drive.command = duty) and the plan has no duty_cmd column: "
+                        "make the plan for this car (simrunner excite --car CAR.toml)")
     steps = plan_steps_per_row(plan, dt_s)
     n = len(plan)
     turns = plan.turns() if closed_loop else []
@@ -927,7 +969,7 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
         if c != coast_now:
             sim.set_coast(c)
             coast_now = c
-        sim.set_command(v, d)
+        sim.set_command(float(plan.duty_cmd[k]) if duty else v, d)
         rows.append((k, *logged, sim.speed_mps, sim.steer_rad, sim.yaw_rate_radps, sim.yaw_rate_cmd_radps, v, d))
         sim.step(steps)
         if dead_reckoning is not None:  # this frame's wheel speed and gyro, as the car reads them after it
@@ -945,7 +987,8 @@ def run_plan(plan: ExcitationPlan, car: CarDescription, *, dt_s: float = 0.002, 
                              "x_m": state[:, 1], "y_m": state[:, 2], "yaw_rad": state[:, 3],
                              "speed_mps": state[:, 4], "steer_rad": state[:, 5], "yaw_rate_radps": state[:, 6],
                              "speed_cmd_mps": state[:, 8], "steer_cmd_rad": state[:, 9],
-                             "yaw_rate_cmd_radps": state[:, 7], "coast": plan.coast[row]}, "<excite>")
+                             "yaw_rate_cmd_radps": state[:, 7], "coast": plan.coast[row],
+                             **({"duty_cmd": plan.duty_cmd[row]} if duty else {})}, "<excite>")
 
 
 @dataclass(frozen=True)
