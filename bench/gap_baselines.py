@@ -204,10 +204,10 @@ def joint_least_squares(fit_problem, names=None, *, max_nfev: int = LSQ_MAX_NFEV
 
 def _window_smooth(t: np.ndarray, v: np.ndarray, windows) -> tuple[np.ndarray, np.ndarray]:
     """Savitzky-Golay value and derivative of ``v`` inside each window (the smoothing of
-    ``logs.derive``: SMOOTH_S, order 2, on a uniform grid), NaN elsewhere."""
+    ``logs.derive``: ``settings.smooth_s``, order 2, on a uniform grid), NaN elsewhere."""
     from scipy.signal import savgol_filter
 
-    from simrunner.workflows.gap.logs import SMOOTH_S
+    from simrunner.workflows.gap.settings import SETTINGS
 
     val, der = np.full(len(t), np.nan), np.full(len(t), np.nan)
     for w in windows:
@@ -217,7 +217,7 @@ def _window_smooth(t: np.ndarray, v: np.ndarray, windows) -> tuple[np.ndarray, n
             continue
         grid = np.linspace(tt[0], tt[-1], len(tt))
         step = grid[1] - grid[0]
-        win = max(5, int(round(SMOOTH_S / step)) | 1)
+        win = max(5, int(round(SETTINGS.smooth_s / step)) | 1)
         win = min(win, len(tt) if len(tt) % 2 else len(tt) - 1)
         g = np.interp(grid, tt[ok], vv[ok])
         val[w.start:w.stop] = np.interp(tt, grid, savgol_filter(g, win, 2, mode="interp"))

@@ -267,7 +267,7 @@ def test_follow_path_arrives_at_the_end_and_closed_loop_needs_turns():
 def test_dubins_paths_end_at_the_goal(pose):
     """Every path the planner's turns are made of ends where it should (positions of the
     sampled arcs and straights)."""
-    from simrunner.workflows.excite import _dubins, _dubins_points
+    from trackgen.dubins import dubins_points as _dubins_points, dubins_segments as _dubins
     x0, y0, yaw0, x1, y1, yaw1 = pose
     segs = _dubins(x0, y0, yaw0, np.array([x1]), np.array([y1]), np.array([yaw1]), 0.55)
     ok = np.isfinite(segs).all(-1)[:, 0]

@@ -37,18 +37,18 @@ def offset_run():
 def test_a_held_out_signal_the_kept_effects_make_worse_is_said_so(offset_run):
     """The chain keeps what shrinks the held-out gap over all signals; when a signal's own
     RMSE grows beyond the held-out test's noise level (its mean square by more than
-    HELD_IMPROVEMENT_MIN) the effects trade it for the others and the report says so (a
+    settings.held_improvement_min) the effects trade it for the others and the report says so (a
     sloped floor's coasting fitted as drag: docs/gap.md). Within that level, or with nothing
     kept, it says nothing."""
     import dataclasses
 
-    from simrunner.workflows.gap.chain import HELD_IMPROVEMENT_MIN
+    from simrunner.workflows.gap.settings import SETTINGS
     from simrunner.workflows.gap.report import summary_text, worse_signals
 
     _, _, result = offset_run
     assert result.signals_worse == {} and "trade these signals" not in summary_text(result)
     before = result.rmse_before
-    edge = math.sqrt(1.0 + HELD_IMPROVEMENT_MIN)
+    edge = math.sqrt(1.0 + SETTINGS.held_improvement_min)
     traded = dataclasses.replace(result, rmse_after={**result.rmse_after, "speed_mps": 1.10 * before["speed_mps"],
                                                      "yaw_rate_radps": 0.999 * edge * before["yaw_rate_radps"]})
     assert traded.signals_worse == {"speed_mps": pytest.approx(1.10)}
@@ -496,8 +496,8 @@ def test_a_deadband_the_log_pins_only_to_an_interval_is_kept_at_its_middle_and_s
     """This part of the plan (40-65 s) holds zero speed commands and one of 0.3 m/s, none in
     between: every deadband in (0, 0.3) fits it as well (a zero command coasts instead of
     braking). The chain keeps the middle of the interval, reports the interval (its lower
-    end at twice NEUTRAL_TOL of the 0-0.5 range) and gives no standard error."""
-    from simrunner.workflows.gap.chain import NEUTRAL_TOL
+    end at twice settings.neutral_tol of the 0-0.5 range) and gives no standard error."""
+    from simrunner.workflows.gap.settings import SETTINGS
     from simrunner.workflows.gap.report import summary_text
 
     log, _ = make_measured_log("throttle_deadband", value=0.03, rng=np.random.default_rng(3), start_s=40.0,
@@ -507,7 +507,7 @@ def test_a_deadband_the_log_pins_only_to_an_interval_is_kept_at_its_middle_and_s
     result = run_gap(log, jobs=2, effects=["throttle_deadband"])
     assert result.effects == ["throttle_deadband"] and result.gap_after < 0.5 * result.gap_before
     (lo, hi), = result.parameter_spans.values()
-    assert lo == pytest.approx(2 * NEUTRAL_TOL * CANDIDATES["throttle_deadband"].hi) and 0.2 < hi <= 0.31
+    assert lo == pytest.approx(2 * SETTINGS.neutral_tol * CANDIDATES["throttle_deadband"].hi) and 0.2 < hi <= 0.31
     assert result.parameters["throttle_deadband_mps"] == pytest.approx(0.5 * (lo + hi), rel=1e-6)
     assert math.isnan(result.parameter_sigma["throttle_deadband_mps"])
     assert f"any value {lo:.4g}-{hi:.4g} fits the fit windows as well" in summary_text(result)

@@ -153,9 +153,9 @@ def test_ds2_has_one_brake_to_reverse_and_it_stays_in_the_fit(car):
     """DS2 (README: reversing) commands reverse while rolling forward once at speed (113.9 s,
     from 4.4 m/s) and once from rest (87.8 s, a smoothed 0.11 m/s for one sample): only the
     first is a brake-to-reverse window, and a lone group stays in the fit windows."""
-    from simrunner.workflows.gap.workflow import WINDOW_S, prepare, window_strata
+    from simrunner.workflows.gap.workflow import prepare, window_strata
 
-    part = prepare(read_log(REAL / "f1tenth_DS2.csv"), car, WINDOW_S)
+    part = prepare(read_log(REAL / "f1tenth_DS2.csv"), car)
     windows = sorted(part.fit_windows + part.held_windows, key=lambda w: w.start)
     strata = window_strata(part.log, part.derived, segment(part.log, part.derived, car), windows,
                            car.drive.max_brake_mps2)
@@ -163,4 +163,4 @@ def test_ds2_has_one_brake_to_reverse_and_it_stays_in_the_fit(car):
     assert len(onset) == 1 and part.log.t_s[onset[0].start] < 113.95 < part.log.t_s[onset[0].stop - 1]
     assert onset[0] in part.fit_windows
     loose = window_strata(part.log, part.derived, segment(part.log, part.derived, car), windows)
-    assert loose.count("brake_to_reverse") == 2  # with MOVING_MPS alone the blip at rest counts
+    assert loose.count("brake_to_reverse") == 2  # with settings.moving_mps alone the blip at rest counts

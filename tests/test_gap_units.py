@@ -18,6 +18,7 @@ from simrunner.workflows.gap.fit import (Problem, Segment, cost_of, fit_effect,
                                          nominal_scales)
 from simrunner.workflows.gap.glitches import GlitchKind, find_glitches, glitch_mask, time_gaps
 from simrunner.workflows.gap.logs import MEASURED_COLUMNS, check_measured, derive
+from simrunner.workflows.gap.settings import SETTINGS
 from simrunner.workflows.gap.regimes import REGIMES, format_stats, residual_stats, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, Window, dead_reckoned_yaw, make_windows, noise_rms,
                                             replay, residuals,
@@ -389,7 +390,7 @@ def test_rescaled_weighs_every_signal_the_same_under_the_given_car():
     """The normalisation a later chain step judges on: under the nominal car it is the
     problem's own; under the true car the signals the effect bent get much smaller scales,
     and each signal's mean square is 1 again (or below, at the floor)."""
-    from simrunner.workflows.gap.fit import SCALE_FLOOR, rescaled, robust_scale_of, segment_residuals, window_costs
+    from simrunner.workflows.gap.fit import rescaled, scale_floor, robust_scale_of, segment_residuals, window_costs
 
     nominal = CarDescription()
     truth = nominal.replace(effects=nominal.effects.__class__(steering_offset_rad=0.04))
@@ -407,7 +408,7 @@ def test_rescaled_weighs_every_signal_the_same_under_the_given_car():
     mask = window_mask(len(prob.segments[0].log), prob.segments[0].windows)
     for s in judge.signals:
         ms = float(np.nanmean((res[s][mask] / judge.scales[s]) ** 2))
-        assert ms == pytest.approx(1.0, rel=1e-9) or judge.scales[s] == SCALE_FLOOR[s]
+        assert ms == pytest.approx(1.0, rel=1e-9) or judge.scales[s] == scale_floor(SETTINGS, s)
 
 
 def test_chain_acceptance_needs_bic_fit_and_held_out_improvement():
@@ -479,7 +480,7 @@ def test_a_reverse_command_is_a_brake_to_reverse_only_while_the_car_rolls_faster
         masks = segment(log, derived)
         with_car = window_strata(log, derived, masks, windows, max_brake)
         without = window_strata(log, derived, masks, windows)
-        assert "brake_to_reverse" in without  # above MOVING_MPS either way
+        assert "brake_to_reverse" in without  # above settings.moving_mps either way
         assert ("brake_to_reverse" in with_car) is (v_roll > max_brake / rate_hz)
         assert with_car.count("brake_to_reverse") <= 1
 
@@ -546,7 +547,7 @@ def test_the_plans_two_reverses_go_one_to_the_fits_one_to_the_held_out_windows()
     still rolling forward. The plan does that twice and the split keeps the two apart
     (their own stratum), so the effect can be fitted on one and confirmed on the other."""
     from simrunner.workflows.excite import make_plan
-    from simrunner.workflows.gap.workflow import WINDOW_S, prepare
+    from simrunner.workflows.gap.workflow import prepare
     from simrunner.workflows.gap.synth import make_measured_log
 
     car = CarDescription()
@@ -555,7 +556,7 @@ def test_the_plans_two_reverses_go_one_to_the_fits_one_to_the_held_out_windows()
     t0 = plan.t_s[rev[0]] - 4.0
     log, _ = make_measured_log("esc_brake_reverse", value=0.5, rng=np.random.default_rng(5), start_s=t0,
                                duration_s=rev.size * 0.02 + 8.0)
-    part = prepare(log, car, WINDOW_S)
+    part = prepare(log, car)
     speed = np.nan_to_num(part.derived.speed_mps)
     onset = (np.asarray(log.speed_cmd_mps) < -0.05) & (speed > 0.1)
 
@@ -581,10 +582,11 @@ def test_a_joint_refit_searches_the_new_effect_first(monkeypatch):
                                       "steering_gain": e.steering_gain}) - u(truth)) ** 2))
 
     monkeypatch.setattr(chain, "cost_of", cost)
-    monkeypatch.setattr(chain, "POWELL_EVALS_PER_PARAMETER", 4)  # ends inside the first pass
+    four = dataclasses.replace(SETTINGS, powell_evals_per_parameter=4)  # ends inside the first pass
     names = ["steering_offset", "mass_scale", "steering_gain"]
-    new_first, c_first, _, _ = chain.joint_refit(None, CarDescription(), names, start, first="steering_gain")
-    old, c_last, _, _ = chain.joint_refit(None, CarDescription(), names, start)
+    new_first, c_first, _, _ = chain.joint_refit(None, CarDescription(), names, start, first="steering_gain",
+                                                 settings=four)
+    old, c_last, _, _ = chain.joint_refit(None, CarDescription(), names, start, settings=four)
     assert list(new_first) == ["steering_offset_rad", "mass_scale", "steering_gain"]  # the order of names
     assert abs(new_first["steering_gain"] - 0.9) < 0.01 and c_first < c_last
     assert old["steering_gain"] == 1.0  # searched last: never reached
@@ -594,7 +596,7 @@ def test_a_refit_keeps_the_middle_of_an_interval_the_fit_windows_cannot_tell_apa
     """A deadband the fit windows pin only to (0, 0.3] m/s (no speed command in between in
     them: the cost is the same for every value there, a hair lower at 0.3) is kept at the
     middle of the interval, whose ends are reported (the end towards neutral at twice
-    NEUTRAL_TOL of the 0-0.5 range); a parameter whose cost rises towards neutral keeps
+    settings.neutral_tol of the 0-0.5 range); a parameter whose cost rises towards neutral keeps
     what the search found."""
     from types import SimpleNamespace
 
@@ -610,14 +612,15 @@ def test_a_refit_keeps_the_middle_of_an_interval_the_fit_windows_cannot_tell_apa
     problem = SimpleNamespace(n_eff=2000.0)  # a tie: within delta BIC 2, 0.1 % of the cost
     v, c, _, spans = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"],
                                        {"throttle_deadband_mps": 0.25})
-    near = 2 * chain.NEUTRAL_TOL * chain.CANDIDATES["throttle_deadband"].hi
+    near = 2 * SETTINGS.neutral_tol * chain.CANDIDATES["throttle_deadband"].hi
     (lo, hi), = spans.values()
     assert lo == pytest.approx(near) and 0.29 < hi <= 0.3  # the bisection's resolution
     assert v["throttle_deadband_mps"] == pytest.approx(0.5 * (lo + hi)) and c < 0.511
     names, start = ["steering_gain", "throttle_deadband"], {"steering_gain": 0.9, "throttle_deadband_mps": 0.25}
     both, _, _, spans2 = chain.joint_refit(problem, CarDescription(), names, start, first="throttle_deadband")
-    monkeypatch.setattr(chain, "TIE_DELTA_BIC", 0.0)  # exact ties only: the search's own answer
-    searched, _, _, none = chain.joint_refit(problem, CarDescription(), names, start, first="throttle_deadband")
+    exact = dataclasses.replace(SETTINGS, tie_delta_bic=0.0)  # exact ties only: the search's own answer
+    searched, _, _, none = chain.joint_refit(problem, CarDescription(), names, start, first="throttle_deadband",
+                                             settings=exact)
     assert list(spans2) == ["throttle_deadband_mps"] and both["throttle_deadband_mps"] == pytest.approx(0.155, abs=0.01)
     assert searched["throttle_deadband_mps"] > 0.29 and none == {}
     assert both["steering_gain"] == searched["steering_gain"] == pytest.approx(0.9, abs=0.01)  # pinned: not moved
@@ -643,7 +646,7 @@ def test_a_plateau_that_ends_short_of_neutral_is_found_to_its_ends(monkeypatch):
 
 def test_a_search_stopped_near_neutral_on_a_plateau_with_a_cliff_at_neutral_moves_out_along_it(monkeypatch):
     """Multi log 10: the cost is flat for deadbands 0.003-0.04 m/s and twice as high at 0
-    (no deadband); a search stopped at 0.004 m/s (within 2 NEUTRAL_TOL of neutral, which the
+    (no deadband); a search stopped at 0.004 m/s (within 2 settings.neutral_tol of neutral, which the
     chain rejects as no effect) is moved to the plateau's middle with its ends reported. The
     same start on a cost as good at neutral, or one that rises away from the start inside the
     band (pinned there), stays where it is, with no interval."""
@@ -664,15 +667,15 @@ def test_a_search_stopped_near_neutral_on_a_plateau_with_a_cliff_at_neutral_move
         return 2.0 if d == 0.0 else 1.0 + ((d - 0.004) * 100.0) ** 2
 
     start, problem = {"throttle_deadband_mps": 0.004}, SimpleNamespace(n_eff=2000.0)
-    monkeypatch.setattr(chain, "BRENT_MAXITER", 0)  # the search stops where it starts
+    still = dataclasses.replace(SETTINGS, brent_maxiter=0)  # the search stops where it starts
     monkeypatch.setattr(chain, "cost_of", cliff)
-    v, _, _, spans = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"], start)
+    v, _, _, spans = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"], start, settings=still)
     (lo, hi), = spans.values()
     assert 0.0 < lo <= 0.004 and 0.039 < hi < 0.042 and v["throttle_deadband_mps"] == pytest.approx(0.5 * (lo + hi))
-    assert chain.neutral_offset("throttle_deadband", v["throttle_deadband_mps"]) > chain.NEUTRAL_TOL
+    assert chain.neutral_offset("throttle_deadband", v["throttle_deadband_mps"]) > SETTINGS.neutral_tol
     for cost in (flat_to_zero, pinned):
         monkeypatch.setattr(chain, "cost_of", cost)
-        v, _, _, spans = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"], start)
+        v, _, _, spans = chain.joint_refit(problem, CarDescription(), ["throttle_deadband"], start, settings=still)
         assert spans == {} and v["throttle_deadband_mps"] == pytest.approx(0.004, abs=1e-3)
 
 
@@ -1385,13 +1388,13 @@ def test_leftovers_name_the_worst_regime_and_how_much_it_stands_out():
     assert leftovers(stats, {k: 1.0 for k in noise}, ratio=4.0) == []  # nothing well above noise
 
 
-def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None, windows=None):
+def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None, windows=None, **thresholds):
     """Fake fit and held-out problems for :func:`chain.build_chain` whose costs come from
     tables: ``refit[frozenset(active effects)] = (fit cost, held-out gap)`` for the joint
     refits and the replays, ``screened[...]`` (default: the refit's fit cost) for the
     screening, ``windows[...] = (fit windows' costs, held-out windows' costs)`` for the
     per-window comparison (default: one window each, the costs); a fitted effect takes its
-    ``fitted`` value. Returns ``(fit, held)``."""
+    ``fitted`` value; ``thresholds``: GapSettings fields the problems carry. Returns ``(fit, held)``."""
     import simrunner.workflows.gap.chain as chain
     from simrunner.workflows.gap.fit import FitResult
 
@@ -1401,6 +1404,7 @@ def _table_chain(monkeypatch, field, neutral, fitted, refit, screened=None, wind
         car = CarDescription()
         n_values = 1
         scales: dict = {}
+        settings = dataclasses.replace(SETTINGS, **thresholds)
 
         def with_car(self, car):
             p = FakeProblem()
@@ -1455,9 +1459,7 @@ def test_the_final_check_removes_an_effect_the_later_ones_made_redundant(monkeyp
     refit = {frozenset(): (1000.0, 1.0), frozenset([look]): (400.0, 0.4),  # (fit cost, held gap)
              frozenset([real]): (101.0, 0.10), frozenset([look, real]): (100.0, 0.099)}
     screened = {frozenset([look]): 400.0, frozenset([real]): 450.0, frozenset([look, real]): 100.0}
-    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
-    monkeypatch.setattr(chain, "REFINE_TOP", 1)
-    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened, refine_top=1, refine_later=1)
     result = chain.build_chain(fit_p, held_p, [look, real], jobs=1)
     assert [s.kept.effect for s in result.steps if s.kept] == [look, real]  # forward: both kept
     assert result.effects == [real] and [t.effect for t in result.pruned] == [look]
@@ -1483,18 +1485,17 @@ def test_an_effect_a_later_one_takes_a_little_from_stays_at_a_gain_no_effect_fre
     refit = {frozenset(): (1000.0, 1.0), frozenset([first]): (800.0, 0.8),  # (fit cost, held gap)
              frozenset([later]): (640.0, 0.64), frozenset([first, later]): (600.0, 0.6)}
     screened = {frozenset([first]): 800.0, frozenset([later]): 900.0, frozenset([first, later]): 600.0}
-    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
-    monkeypatch.setattr(chain, "REFINE_TOP", 1)
-    monkeypatch.setattr(chain, "REFINE_LATER", 1)
     entry = {"delta_bic_min": 40.0, "improvement_min": 0.068, "held_improvement_min": 0.029}
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened, refine_top=1, refine_later=1,
+                                 **entry)
     assert chain.staying(*entry.values()) == (20.0, 0.034, 0.0145)
-    result = chain.build_chain(fit_p, held_p, [first, later], jobs=1, **entry)
+    result = chain.build_chain(fit_p, held_p, [first, later], jobs=1)
     assert [s.kept.effect for s in result.steps if s.kept] == [first, later]
     assert result.effects == [first, later] and result.pruned == ()
     assert 1.0 - 600.0 / 640.0 < entry["improvement_min"]  # it would not enter now: it stays
     # beside a later effect that takes nearly all of it, it goes
     refit[frozenset([later])] = (615.0, 0.615)
-    gone = chain.build_chain(fit_p, held_p, [first, later], jobs=1, **entry)
+    gone = chain.build_chain(fit_p, held_p, [first, later], jobs=1)
     assert gone.effects == [later] and [t.effect for t in gone.pruned] == [first]
     assert gone.pruned[0].reason == "to stay: delta_BIC 14.7 < 20 (fit windows)"
 
@@ -1518,10 +1519,9 @@ def test_a_chain_at_its_limit_resumes_after_the_check_removes_a_look_alike(monke
     screened = {frozenset([look]): 400.0, frozenset([real]): 450.0, frozenset([third]): 900.0,
                 frozenset([look, real]): 100.0, frozenset([look, third]): 350.0, frozenset([real, third]): 50.0,
                 frozenset([look, real, third]): 49.0}
-    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
-    monkeypatch.setattr(chain, "REFINE_TOP", 1)
-    monkeypatch.setattr(chain, "REFINE_LATER", 1)
-    result = chain.build_chain(fit_p, held_p, [look, real, third], jobs=1, max_effects=2)
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened, refine_top=1, refine_later=1)
+    fit_p.settings = dataclasses.replace(fit_p.settings, max_effects=2)
+    result = chain.build_chain(fit_p, held_p, [look, real, third], jobs=1)
     assert [(s.index, s.kept.effect) for s in result.steps if s.kept] == [(1, look), (2, real), (3, third)]
     assert [t.effect for t in result.pruned] == [look] and result.pruned_after == (2,)
     assert result.effects == [real, third]
@@ -1529,7 +1529,8 @@ def test_a_chain_at_its_limit_resumes_after_the_check_removes_a_look_alike(monke
     assert look not in {r.effect for r in result.steps[2].screening}  # removed: not tried again
     assert result.stop_reason.startswith("the chain reached its limit of 2 effects (more may pass: `--max-effects N`")
     # with room for all three the look-alike is removed the same way and nothing resumes
-    roomy = chain.build_chain(fit_p, held_p, [look, real, third], jobs=1, max_effects=3)
+    fit_p.settings = dataclasses.replace(fit_p.settings, max_effects=3)
+    roomy = chain.build_chain(fit_p, held_p, [look, real, third], jobs=1)
     assert roomy.effects == [real, third] and [t.effect for t in roomy.pruned] == [look]
     assert roomy.pruned_after == (3,) and len(roomy.steps) == 3
 
@@ -1550,9 +1551,7 @@ def test_an_exchange_replaces_a_look_alike_that_won_a_near_tie(monkeypatch):
              frozenset([brake]): (401.0, 0.41), frozenset([lat]): (700.0, 0.7),
              frozenset([mass, lat]): (300.0, 0.30), frozenset([brake, lat]): (100.0, 0.10),
              frozenset([mass, brake]): (399.0, 0.40), frozenset([mass, brake, lat]): (99.0, 0.10)}
-    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit)
-    monkeypatch.setattr(chain, "REFINE_TOP", 2)
-    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, refine_top=2, refine_later=1)
     result = chain.build_chain(fit_p, held_p, [mass, brake, lat], jobs=1)
     assert [s.kept.effect for s in result.steps if s.kept] == [mass, lat]  # forward: the look-alike first
     assert [(sw.step, sw.out, sw.into) for sw in result.swaps] == [(2, mass, brake)]
@@ -1580,8 +1579,7 @@ def test_a_near_tie_the_windows_cannot_break_is_recorded(monkeypatch):
              frozenset([mass, brake]): (399.0, 0.40)}
     windows = {frozenset([mass]): ([100.0, 90.0, 110.0, 100.0], [0.2, 0.2]),
                frozenset([brake]): ([95.0, 105.0, 100.0, 101.0], [0.25, 0.16])}
-    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, windows=windows)
-    monkeypatch.setattr(chain, "REFINE_TOP", 2)
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, windows=windows, refine_top=2)
     tie = chain.build_chain(fit_p, held_p, [mass, brake], jobs=1)
     assert tie.effects == [mass]
     alike, = tie.steps[0].alike
@@ -1606,7 +1604,7 @@ def test_vuong_z():
 def test_a_candidate_the_screening_subset_underrates_is_refitted_on_its_gain_over_all_fit_windows(monkeypatch):
     """Step 4's gate judges where the tests do: a later candidate is scored at its screened
     value on every fit window (on the step's normalisation) and refitted when that gain
-    reaches half of IMPROVEMENT_MIN (multi log 0: a drag screened at 0.4 % on 20 of its 30
+    reaches half of settings.improvement_min (multi log 0: a drag screened at 0.4 % on 20 of its 30
     fit windows gains 8.4 % on all of them; the windows at top speed were left out). When
     the subset is all the fit windows on one normalisation, the screening's gain is that
     figure and decides. Costs come from tables, so only the chain's logic runs."""
@@ -1624,9 +1622,7 @@ def test_a_candidate_the_screening_subset_underrates_is_refitted_on_its_gain_ove
                 frozenset([decoy]): 960.0, frozenset([first, decoy]): 390.0,  # 2.5 %: ranked above the drag
                 frozenset([first, real]): 395.0,  # 1.25 % on the subset: below the gate of 3.4 %
                 frozenset([real, decoy]): 985.0, frozenset([first, real, decoy]): 299.0}
-    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened)
-    monkeypatch.setattr(chain, "REFINE_TOP", 1)
-    monkeypatch.setattr(chain, "REFINE_LATER", 1)
+    fit_p, held_p = _table_chain(monkeypatch, field, neutral, fitted, refit, screened, refine_top=1, refine_later=1)
     # the same chain where the screening subset is all the fit windows: the drag is never refitted
     whole = chain.build_chain(fit_p, held_p, [first, real, decoy], jobs=1)
     assert whole.effects == [first]
@@ -1662,7 +1658,7 @@ def test_screening_finds_a_small_value_in_a_narrow_valley_next_to_neutral(monkey
     import simrunner.workflows.gap.fit as fit
 
     cand = fit.CANDIDATES["command_latency"]
-    spacing = (cand.hi - cand.lo) / (fit.GRID_POINTS - 1)
+    spacing = (cand.hi - cand.lo) / (SETTINGS.grid_points - 1)
     truth = cand.lo + truth_frac * spacing
     width = 0.4 * spacing  # the valley: cost back at the neutral level this far from the truth
 
@@ -1680,9 +1676,9 @@ def test_screening_finds_a_small_value_in_a_narrow_valley_next_to_neutral(monkey
     assert screened.cost < 1000.0 - 0.5 * (1000.0 - best)  # at least half the valley's depth
     assert cand.lo < screened.parameters["command_latency_s"] < cand.lo + spacing
     # and at the other end of a grid (a limit whose neutral value is its upper bound)
-    xs = np.linspace(0.0, 1.0, fit.GRID_POINTS)
+    xs = np.linspace(0.0, 1.0, SETTINGS.grid_points)
     probe = fit._probe(xs, [1.0 + ((x - (1.0 - truth_frac * 0.25)) / 0.1) ** 2 for x in xs])
-    assert xs[-2] < probe <= xs[-1] - fit.END_PROBE_FRACTION * 0.25
+    assert xs[-2] < probe <= xs[-1] - SETTINGS.end_probe_fraction * 0.25
 
 
 @settings(max_examples=60, deadline=None)
@@ -1694,7 +1690,7 @@ def test_screening_finds_a_limits_valley_next_to_its_steep_side(truth_frac, stee
     valley (multi log 3's friction scale)."""
     from simrunner.workflows.gap import fit
 
-    xs = np.linspace(0.0, 1.0, fit.GRID_POINTS)  # grid points 0, .25, .5, .75, 1
+    xs = np.linspace(0.0, 1.0, SETTINGS.grid_points)  # grid points 0, .25, .5, .75, 1
     truth = 0.25 + truth_frac * 0.25  # between the second and the third grid point
 
     def cost(x):  # a valley at the truth, flat above it, steep below it
@@ -1715,7 +1711,6 @@ def test_a_steering_play_starts_each_window_on_the_side_the_commands_left_it(mon
     car that made the log then replays it closer than when the play starts from the noisy
     measured angle (30 s of the plan, play 0.03 rad; measured yaw RMS 0.0131 -> 0.0113 on
     windows laid on the time grid; 0.0169 -> 0.0112 when they were laid one after another)."""
-    from simrunner.workflows.gap import replay as replay_mod
     from simrunner.workflows.gap.synth import make_measured_log
 
     log, truth = make_measured_log("steering_play", value=0.03, rng=np.random.default_rng(0), duration_s=30.0)
@@ -1723,11 +1718,11 @@ def test_a_steering_play_starts_each_window_on_the_side_the_commands_left_it(mon
     windows = make_windows(log)
 
     def yaw_rms(history_s):
-        monkeypatch.setattr(replay_mod, "PLAY_HISTORY_S", history_s)
-        res = residuals(log, d, replay(truth.car, log, d, windows))
+        given = dataclasses.replace(SETTINGS, play_history_s=history_s)
+        res = residuals(log, d, replay(truth.car, log, d, windows, settings=given))
         return rmse(res, np.ones(len(log), dtype=bool))["yaw_rad"]
 
-    assert yaw_rms(replay_mod.PLAY_HISTORY_S) < 0.9 * yaw_rms(0.0)
+    assert yaw_rms(SETTINGS.play_history_s) < 0.9 * yaw_rms(0.0)
 
 
 def test_a_merged_logs_play_history_holds_the_commands_between_its_rows():
@@ -1811,14 +1806,14 @@ def _run_with_a_plateau_and_drag(monkeypatch, one_window: bool):
     real_build = chain_mod.build_chain
 
     def build(*a, **k):
-        c = real_build(*a, **{**k, "max_effects": 0})
+        c = real_build(*a, **k)  # the run's settings: max_effects 0
         return dataclasses.replace(c, parameters={"throttle_deadband_mps": 0.155, "drag_coeff_kgpm": 0.05},
                                    spans={"throttle_deadband_mps": (0.01, 0.3)})
 
     monkeypatch.setattr(workflow, "build_chain", build)
     monkeypatch.setattr(chain_mod.Chain, "effects", property(lambda self: ["throttle_deadband", "drag"]))
     log = simulate(CarDescription(), duration_s=30.0, rate_hz=50.0)
-    return seen, workflow.run_gap(log, jobs=1, sim_factory=kin_factory, effects=["drag"])
+    return seen, workflow.run_gap(log, jobs=1, sim_factory=kin_factory, effects=["drag"], max_effects=0)
 
 
 def test_a_parameter_on_a_plateau_is_held_while_the_others_get_their_standard_errors(monkeypatch):
@@ -1884,12 +1879,11 @@ def _rest_then_ramp(rng, columns, creep_mps=0.0):
 def test_a_car_standing_reads_at_rest_and_a_moving_or_creeping_one_does_not(columns):
     """Standing in noise: at rest up to the smoothing window before the ramp; moving (from 0.2
     m/s, 10 speed-noise sigmas) never; a car creeping at 0.3 m/s never."""
-    from simrunner.workflows.gap.logs import SMOOTH_S
 
     for seed in range(5):
         t, log = _rest_then_ramp(np.random.default_rng(seed), columns)
         rest = derive(log, 0.2).at_rest
-        assert rest[t <= 2.0 - SMOOTH_S - 0.05].mean() >= 0.9, seed
+        assert rest[t <= 2.0 - SETTINGS.smooth_s - 0.05].mean() >= 0.9, seed
         assert not rest[t >= 2.2].any(), seed
         t, log = _rest_then_ramp(np.random.default_rng(seed), columns, creep_mps=0.3)
         assert not derive(log, 0.2).at_rest.any(), seed

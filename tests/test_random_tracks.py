@@ -119,4 +119,6 @@ def test_dubins_paths_reach_the_goal(x, y, yaw, r):
             else:
                 pose = pose @ Pose2(r * math.sin(arc), turn * r * (1 - math.cos(arc)), turn * arc)
         err_m, err_rad = pose.distance_to(goal)
-        assert err_m < 1e-9 and err_rad < 1e-9
+        # 1e-7: where the two circles touch (an LSR/RSL of straight ~0, p = sqrt(p^2)) the straight
+        # carries sqrt(eps) of rounding, ~1e-8 radii
+        assert err_m < 1e-7 * r and err_rad < 1e-7

@@ -13,8 +13,7 @@ from pathlib import Path
 
 import click
 
-from simrunner.workflows.gap.chain import SCREEN_MAX_S
-from simrunner.workflows.gap.replay import WINDOW_S, WORKFLOW_DT_S
+from simrunner.workflows.gap.settings import SETTINGS
 
 
 @contextlib.contextmanager
@@ -60,22 +59,24 @@ def _engine_stderr_silenced():
 @click.option("--effects", default=None, metavar="NAME,NAME",
               help="Only these catalogue effects (default: all).")
 @click.option("--max-effects", default=None, type=click.IntRange(min=0, max=50), metavar="N",
-              help="Keep at most N effects (default: 6).")
-@click.option("--dt", "dt_s", default=WORKFLOW_DT_S, show_default=True,
-              type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS",
-              help="Physics step of the replays.")
-@click.option("--window", "window_s", default=WINDOW_S, show_default=True,
-              type=click.FloatRange(min=0.5, max=30.0), metavar="SECONDS",
-              help="Replay window: each restarts from the measured state.")
-@click.option("--screen", "screen_s", default=SCREEN_MAX_S, show_default=True, type=click.FloatRange(min=0.0),
+              help=f"Keep at most N effects (default: {SETTINGS.max_effects}).")
+@click.option("--dt", "dt_s", default=None, type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS",
+              help=f"Physics step of the replays (default: {SETTINGS.workflow_dt_s:g}).")
+@click.option("--window", "window_s", default=None, type=click.FloatRange(min=0.5, max=30.0), metavar="SECONDS",
+              help=f"Replay window: each restarts from the measured state (default: {SETTINGS.window_s:g}).")
+@click.option("--screen", "screen_s", default=None, type=click.FloatRange(min=0.0),
               metavar="SECONDS", help="Seconds of fit windows the screening and refits use on a longer "
                                       "log, chosen by regime; 0: all of them (slower; a near tie then "
-                                      "depends less on the windows' layout).")
+                                      f"depends less on the windows' layout; default: {SETTINGS.screen_max_s:g}).")
+@click.option("--settings", "settings_file", default=None, type=click.Path(dir_okay=False, path_type=Path),
+              metavar="FILE.toml", help="Thresholds to change, `name = value` (docs/gap.md \"Thresholds\"; "
+                                        "the options above win).")
 @click.option("--force", is_flag=True, help="Replace DIR if it exists.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_file: Path | None,
         column_items: tuple[str, ...], norms_file: Path | None, jobs: int, effects: str | None, max_effects: int | None,
-        dt_s: float, window_s: float, screen_s: float, force: bool, no_progress: bool) -> None:
+        dt_s: float | None, window_s: float | None, screen_s: float | None, settings_file: Path | None, force: bool,
+        no_progress: bool) -> None:
     """Find where MEASURED (one or several run logs of one car, docs/telemetry.md) and the
     simulator disagree, build the chain of effects that closes the gap, and show it shrink on
     held-out data.
@@ -89,10 +90,10 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
 
     from simrunner.cli import input_errors
     from simrunner.errors import SimError
-    from simrunner.workflows.gap.chain import MAX_EFFECTS
     from simrunner.workflows.gap.fit import CANDIDATES
     from simrunner.workflows.gap.logs import check_measured
     from simrunner.workflows.gap.report import check_output_dir, summary_text, write_outputs
+    from simrunner.workflows.gap.settings import load_settings
     from simrunner.workflows.gap.workflow import progress_total, run_gap
     from vehicle.description import load_car
 
@@ -104,11 +105,12 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
             bad = [n for n in names if n not in CANDIDATES]
             if bad or not names:
                 raise SimError(f"--effects {effects!r}: expected names among {', '.join(CANDIDATES)}")
+        settings = load_settings(settings_file) if settings_file is not None else SETTINGS
         description = load_car(car)
         read = _read_logs(measured, columns_file, column_items, norms_file)
-        logs = [check_measured(log, pooled=len(read) > 1) for log in read]
-        limit = MAX_EFFECTS if max_effects is None else max_effects
-        total = progress_total(len(names) if names is not None else len(CANDIDATES), limit)
+        logs = [check_measured(log, pooled=len(read) > 1, settings=settings) for log in read]
+        limit = settings.max_effects if max_effects is None else max_effects
+        total = progress_total(len(names) if names is not None else len(CANDIDATES), limit, settings)
         with _engine_stderr_silenced() as err:
             bar = tqdm(total=total, file=err, disable=no_progress, desc="gap", unit="fit", leave=False)
 
@@ -117,8 +119,8 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
                 bar.update(1)
 
             try:
-                result = run_gap(logs, description, jobs=jobs, effects=names, dt_s=dt_s, window_s=window_s,
-                                 max_effects=limit, screen_max_s=screen_s, progress=tick)
+                result = run_gap(logs, description, jobs=jobs, effects=names, settings=settings, dt_s=dt_s,
+                                 window_s=window_s, max_effects=limit, screen_max_s=screen_s, progress=tick)
             finally:
                 bar.close()
         try:

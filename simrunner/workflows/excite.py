@@ -49,6 +49,7 @@ import numpy as np
 from pieces.pose import Pose2, wrap_angle
 from simrunner.errors import SimError
 from simrunner.telemetry.log import RunLog, log_from_columns
+from trackgen.dubins import TURN_SIGN, WORDS, dubins_points, dubins_segments
 from vehicle.description import CarDescription
 from vehicle.userfiles import read_user_text, write_atomic
 
@@ -403,62 +404,7 @@ def follow_path(x_m: float, y_m: float, yaw_rad: float, path_xy: np.ndarray, end
     return FollowStep(steer, progress, bool(arrived))
 
 
-# -- the planner's turns: Dubins paths ----------------------------------------------------
-_WORDS = ("LSL", "RSR", "LSR", "RSL", "RLR", "LRL")
-_TURN_SIGN = {"L": 1.0, "S": 0.0, "R": -1.0}
-
-
-def _dubins(x0, y0, yaw0, x1, y1, yaw1, radius_m: float) -> np.ndarray:
-    """``(6, C, 3)``: the three segment lengths (in radii: arc angles, straight lengths)
-    of each :data:`_WORDS` path of radius ``radius_m`` from the poses ``(x0, y0, yaw0)``
-    to ``(x1, y1, yaw1)`` (arrays ``(C,)``); NaN where a word has no path. The shortest
-    paths between two poses of a car that turns no tighter than ``radius_m`` (L. E. Dubins,
-    1957; formulas as in Shkel and Lumelsky, 2001)."""
-    tau = 2.0 * math.pi
-    dx, dy = (np.asarray(x1) - x0) / radius_m, (np.asarray(y1) - y0) / radius_m
-    d, phi = np.hypot(dx, dy), np.arctan2(dy, dx)
-    a, b = np.mod(yaw0 - phi, tau), np.mod(yaw1 - phi, tau)
-    sa, sb, ca, cb, cab = np.sin(a), np.sin(b), np.cos(a), np.cos(b), np.cos(a - b)
-    out = np.full((6,) + d.shape + (3,), np.nan)
-    with np.errstate(invalid="ignore"):
-        at, p = np.arctan2(cb - ca, d + sa - sb), np.sqrt(2 + d * d - 2 * cab + 2 * d * (sa - sb))  # LSL
-        out[0] = np.stack([np.mod(at - a, tau), p, np.mod(b - at, tau)], -1)
-        at, p = np.arctan2(ca - cb, d - sa + sb), np.sqrt(2 + d * d - 2 * cab + 2 * d * (sb - sa))  # RSR
-        out[1] = np.stack([np.mod(a - at, tau), p, np.mod(at - b, tau)], -1)
-        p = np.sqrt(-2 + d * d + 2 * cab + 2 * d * (sa + sb))  # LSR
-        at = np.arctan2(-ca - cb, d + sa + sb) - np.arctan2(-2.0, p)
-        out[2] = np.stack([np.mod(at - a, tau), p, np.mod(at - b, tau)], -1)
-        p = np.sqrt(d * d - 2 + 2 * cab - 2 * d * (sa + sb))  # RSL
-        at = np.arctan2(ca + cb, d - sa - sb) - np.arctan2(2.0, p)
-        out[3] = np.stack([np.mod(a - at, tau), p, np.mod(b - at, tau)], -1)
-        p = np.mod(tau - np.arccos((6 - d * d + 2 * cab + 2 * d * (sa - sb)) / 8), tau)  # RLR
-        t = np.mod(a - np.arctan2(ca - cb, d - sa + sb) + p / 2, tau)
-        out[4] = np.stack([t, p, np.mod(a - b - t + p, tau)], -1)
-        p = np.mod(tau - np.arccos((6 - d * d + 2 * cab + 2 * d * (sb - sa)) / 8), tau)  # LRL
-        t = np.mod(-a - np.arctan2(ca - cb, d + sa - sb) + p / 2, tau)
-        out[5] = np.stack([t, p, np.mod(b - a - t + p, tau)], -1)
-    return out
-
-
-def _dubins_points(x0: float, y0: float, yaw0: float, segs: np.ndarray, radius_m: float, n: int = 8) -> np.ndarray:
-    """``(6, C, 3 n, 2)``: ``n`` points along each segment of the paths ``segs`` of
-    :func:`_dubins` from one pose."""
-    shape = segs.shape[:2]
-    x, y, yaw = np.full(shape, x0), np.full(shape, y0), np.full(shape, yaw0)
-    frac = np.arange(1, n + 1) / n
-    out = []
-    for j in range(3):
-        sign = np.array([_TURN_SIGN[w[j]] for w in _WORDS])[:, None, None]
-        ang = segs[:, :, j, None] * frac  # (6, C, n)
-        th = yaw[..., None] + sign * ang
-        arc_x = x[..., None] + sign * radius_m * (np.sin(th) - np.sin(yaw)[..., None])
-        arc_y = y[..., None] - sign * radius_m * (np.cos(th) - np.cos(yaw)[..., None])
-        line_x = x[..., None] + radius_m * ang * np.cos(yaw)[..., None]
-        line_y = y[..., None] + radius_m * ang * np.sin(yaw)[..., None]
-        px, py = np.where(sign == 0.0, line_x, arc_x), np.where(sign == 0.0, line_y, arc_y)
-        out.append(np.stack([px, py], -1))
-        x, y, yaw = px[..., -1], py[..., -1], th[..., -1]
-    return np.concatenate(out, axis=2)
+# -- the planner's turns: Dubins paths (trackgen.dubins) -------------------------------------
 
 
 # -- prediction ------------------------------------------------------------------------------
@@ -570,7 +516,7 @@ class _Builder:
         experiment. Candidate start poses: 24 headings (15 degrees apart), each with the
         start point that centres the envelope's paths of the experiment (:meth:`probe`) in
         the area, moved -1.5 .. 1.5 m along the heading and -0.5 .. 0.5 m across. The turn to
-        a candidate is a Dubins path (:func:`_dubins`; arcs at ``_ARC_FRACTION`` of the turn
+        a candidate is a Dubins path (:func:`trackgen.dubins.dubins_segments`; arcs at ``_ARC_FRACTION`` of the turn
         steering) to ``_RUN_IN_M`` before the start, then straight to it. Chosen: the turn
         and start whose nominal path stays ``_PLAN_MARGIN_M`` inside the area, whose
         envelope reaches least far out of the area, then the shortest and most compact
@@ -595,9 +541,9 @@ class _Builder:
         k = self.kin
         x0, y0, yaw0 = float(k.x[0]), float(k.y[0]), float(k.yaw[0])
         radius = self.car.chassis.wheelbase_m / math.tan(_ARC_FRACTION * self.steer_max)
-        segs = _dubins(x0, y0, yaw0, tx - _RUN_IN_M * ct[:, 0], ty - _RUN_IN_M * st[:, 0], tyaw, radius)
+        segs = dubins_segments(x0, y0, yaw0, tx - _RUN_IN_M * ct[:, 0], ty - _RUN_IN_M * st[:, 0], tyaw, radius)
         length = radius * segs.sum(-1) + _RUN_IN_M  # (6, C)
-        way = _dubins_points(x0, y0, yaw0, np.nan_to_num(segs), radius)
+        way = dubins_points(x0, y0, yaw0, np.nan_to_num(segs), radius)
         reach_turn = np.maximum(np.abs(way[..., 0] - self.cx), np.abs(way[..., 1] - self.cy)).max(-1)
         reach = np.maximum(reach_turn, reach_of(nom))  # (6, C) nominal
         over = np.maximum(np.maximum(reach, reach_of(pts)) - 0.5 * self.area_m, 0.0)
@@ -607,7 +553,7 @@ class _Builder:
         best_w, best_c = np.unravel_index(int(np.argmin(np.where(np.isfinite(length), cost, np.inf))), cost.shape)
         self.out_m = max(self.out_m, float(over[best_w, best_c]))
         bounds = np.cumsum(np.append(radius * segs[best_w, best_c], _RUN_IN_M))
-        signs = [_TURN_SIGN[ch] for ch in _WORDS[best_w]] + [0.0]
+        signs = [TURN_SIGN[ch] for ch in WORDS[best_w]] + [0.0]
         steer_arc = _ARC_FRACTION * self.steer_max
         done = 0.0  # distance driven: the steering follows the path's segments by distance
         for _ in range(round(60.0 / self.dt)):

@@ -5,12 +5,13 @@ refitted) and
 
 1. screens every remaining catalogue effect: a one-parameter fit of the new effect with
    the kept parameters held (:func:`simrunner.workflows.gap.fit.fit_all`, grid + probes), on
-   about :data:`SCREEN_MAX_S` seconds of the fit windows (``build_chain``'s ``screen_max_s``,
+   about ``settings.screen_max_s`` seconds of the fit windows (``build_chain``'s ``screen_max_s``,
    ``--screen``; 0: all of them), spread evenly over the log's time
-   grid with the first window of each driving regime (:func:`screening_problem`: screening only ranks, so a long log costs no more than
+   grid with the first window of each driving regime (:func:`screening_problem`: screening only
+   ranks, so a long log costs no more than
    a 45-s one here, and a rare manoeuvre is not left out; nor are the windows that steer
    hardest, :func:`extreme_windows`);
-2. refits jointly the :data:`REFINE_TOP` best screened candidates (:data:`REFINE_LATER`
+2. refits jointly the ``settings.refine_top`` best screened candidates (``settings.refine_later``
    from the second step on): all kept parameters and the new one together
    (``scipy.optimize.minimize``, Powell, in coordinates scaled to each parameter's fit
    bounds, the new parameter's coordinate searched first (:func:`joint_refit`); bounded
@@ -29,15 +30,15 @@ refitted) and
    gap on the report's normalisation has not grown (the tests judge on the step's
    normalisation, step 6; a gain that only that weighting of the signals shows is not one
    the report can show). The four tests, against the current model:
-   its own parameter left its neutral value (by more than :data:`NEUTRAL_TOL` of its fit
-   range), ``delta_bic >= DELTA_BIC_MIN`` and ``improvement >= IMPROVEMENT_MIN`` on the fit
+   its own parameter left its neutral value (by more than ``settings.neutral_tol`` of its fit
+   range), ``delta_bic >= settings.delta_bic_min`` and ``improvement >= settings.improvement_min`` on the fit
    windows (the thresholds calibrated on effect-free logs) **and** a held-out gap at least
-   :data:`HELD_IMPROVEMENT_MIN` smaller than before on the held-out windows, which no fit has
+   ``settings.held_improvement_min`` smaller than before on the held-out windows, which no fit has
    seen (the held-out problem may use a finer physics step than the fits: the step
    ``simrunner drive`` uses, so what is kept holds for the car file as it will be driven);
 4. when every refitted candidate fails, refits the next ones in the screening order, in
    batches of the same size, every one whose screening fit gained at least
-   ``IMPROVEMENT_MIN / SAFETY`` (half of it: the largest gain an effect-free log's best
+   ``settings.improvement_min / settings.safety`` (half of it: the largest gain an effect-free log's best
    candidate showed; a one-parameter gain below that is not worth a refit). The gate is
    a test and judges where the tests do: on all fit windows and on the step's
    normalisation (step 6), each candidate replayed once at its screened value (the
@@ -49,11 +50,12 @@ refitted) and
    is refitted with it can screen behind several that fail [shaped by the shared logs] (DS2's third effect screened
    7th, behind six that the tests rejected; a limit of 6 refits a step cut it off);
 5. once an effect is kept at a step past the first, tries exchanges: each effect kept at an
-   earlier step is replaced in turn by each of the :data:`REFINE_TOP` best candidates
+   earlier step is replaced in turn by each of the ``settings.refine_top`` best candidates
    refitted at that step and not kept (its runners-up), all kept parameters refitted
    jointly with the replacement; the best exchange that lowers the fit windows' cost (same
    number of parameters: a lower BIC) and does not worsen the held-out gap is made, and
-   the exchanges repeat until none helps (:data:`MAX_EXCHANGES` at most). A look-alike that won a near tie early (a mass scale
+   the exchanges repeat until none helps (``settings.max_exchanges`` at most). A look-alike that
+   won a near tie early (a mass scale
    for a brake scale, an asymmetry for an offset) is swapped for the effect the later ones
    fit with; ``Chain.swaps`` records each with its figures;
 6. sets the normalisation the next step judges on (:func:`renormalised`): every signal's
@@ -68,13 +70,13 @@ refitted) and
    cost on the problems' normalisation, the report's, so the parameters and the held-out
    gaps reported are those of one objective; only the tests' figures (``Trial.delta_bic``,
    ``improvement``, ``held_gap``, ``Step.held_gap_before``) are on the step's;
-7. stops when no candidate passes, or with :data:`MAX_EFFECTS` effects kept;
+7. stops when no candidate passes, or with ``settings.max_effects`` effects kept;
 8. then checks every kept effect once more (backward elimination): with two or more kept,
    each is left out in turn and the others refitted; an effect that would no longer pass
    the tests of step 3 as the last one added (against the others refitted without it) at
    the thresholds to *stay* is removed (so is one whose removal would not make the
    report's held-out gap grow), the weakest first, and the check repeats. To enter, a
-   candidate needs :data:`~simrunner.workflows.gap.thresholds.SAFETY` times the largest
+   candidate needs ``settings.safety`` times the largest
    ``delta_bic``, fit improvement and held-out gain an effect-free log's best candidate
    showed (the calibration, ``thresholds.py``); to stay, an effect the held-out windows
    confirmed on entry needs that largest value itself (:func:`staying`): a gain beside
@@ -94,7 +96,7 @@ refitted) and
 
 A candidate that passed a step's tests but lost to the kept one is compared with it window
 by window (fit and held-out windows, the step's normalisation): when the two models' costs
-differ by less than :data:`ALIKE_Z` standard errors (Vuong's test), the windows cannot tell
+differ by less than ``settings.alike_z`` standard errors (Vuong's test), the windows cannot tell
 them apart and ``Step.alike`` records it, for the report to say so. This changes nothing in
 the chain: it names the kept one, and a near tie's name is the report's to qualify.
 
@@ -122,26 +124,14 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
-from simrunner.workflows.gap.fit import (BRENT_MAXITER, CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN,
-                                         REFINE_TOP, ROBUST_WINDOW_FACTOR, FitResult, Problem, _quiet_worker,
+from simrunner.workflows.gap.fit import (CANDIDATES, FitResult, Problem, _quiet_worker,
                                          bic, cost_of, fit_all, rescaled, robust_total, segment_residuals,
                                          window_costs, window_values_task)
 from simrunner.workflows.gap.screening import screening_problem
-from simrunner.workflows.gap.settings import SETTINGS
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 from vehicle.description import CarDescription
 
 # The thresholds (units, derivations, sources: simrunner.workflows.gap.settings)
-SAFETY = SETTINGS.safety
-MAX_EFFECTS = SETTINGS.max_effects
-HELD_IMPROVEMENT_MIN = SETTINGS.held_improvement_min
-POWELL_EVALS_PER_PARAMETER = SETTINGS.powell_evals_per_parameter
-MAX_EXCHANGES = SETTINGS.max_exchanges
-REFINE_LATER = SETTINGS.refine_later
-SCREEN_MAX_S = SETTINGS.screen_max_s
-NEUTRAL_TOL = SETTINGS.neutral_tol
-TIE_DELTA_BIC = SETTINGS.tie_delta_bic
-TIE_BISECTIONS = SETTINGS.tie_bisections
-ALIKE_Z = SETTINGS.alike_z
 BETTER = "a better candidate was kept"
 
 
@@ -180,7 +170,7 @@ class Alike:
     """A candidate that passed a step's tests where another was kept, and that the windows
     cannot tell from the kept one: the mean over the fit and held-out windows of its cost
     minus the kept one's (each window's robust cost, on the step's normalisation) is within
-    :data:`ALIKE_Z` standard errors of 0 (``z``; > 0: the kept one fits better)."""
+    ``settings.alike_z`` standard errors of 0 (``z``; > 0: the kept one fits better)."""
 
     effect: str
     parameters: dict[str, float]  # every fitted parameter of the model with it
@@ -302,7 +292,7 @@ def _bounds01(names: Sequence[str]):
 
 
 def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
-                start: dict[str, float], first: str | None = None
+                start: dict[str, float], first: str | None = None, *, settings: GapSettings = SETTINGS
                 ) -> tuple[dict[str, float], float, int, dict[str, tuple[float, float]]]:
     """Refit the parameters of effects ``names`` together from ``start`` (their ``Effects``
     fields), on ``problem``'s windows with ``base`` as the car: ``(values, cost, evals,
@@ -311,10 +301,11 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
     One parameter: bounded Brent around the start; more: Powell in [0, 1]-scaled coordinates,
     whose first pass line-searches one coordinate after the other, ``first`` (an effect of
     ``names``: the one just added) before the others. Each line search spans the whole fit
-    range (about a dozen evaluations), so the budget of :data:`POWELL_EVALS_PER_PARAMETER` per
+    range (about a dozen evaluations), so the budget of ``settings.powell_evals_per_parameter`` per
     parameter can end inside the first pass: searched last, a new effect's parameter
     would keep its screening value (multi log 25's steering gain, bench/results/gap-history.md), while the
-    kept ones start at their last refit and move little."""
+    kept ones start at their last refit and move little. ``settings``: the thresholds (the
+    problem's, as :func:`_trial_task` passes them)."""
     given = list(names)
     if first is not None:
         names = [first] + [n for n in given if n != first]
@@ -333,20 +324,20 @@ def joint_refit(problem: Problem, base: CarDescription, names: Sequence[str],
     if len(names) == 1:
         a, b = max(u0[0] - 0.25, 0.0), min(u0[0] + 0.25, 1.0)
         minimize_scalar(lambda x: f([x]), bounds=(a, b), method="bounded",
-                        options={"xatol": 2e-3, "maxiter": BRENT_MAXITER})
+                        options={"xatol": 2e-3, "maxiter": settings.brent_maxiter})
     else:
         minimize(f, u0, method="Powell", bounds=[(0.0, 1.0)] * len(names),
                  options={"xtol": 2e-3, "ftol": 1e-4,
-                          "maxfev": POWELL_EVALS_PER_PARAMETER * len(names)})
+                          "maxfev": settings.powell_evals_per_parameter * len(names)})
     key = min(seen, key=lambda k: (seen[k], k))
-    tie = seen[key] * math.exp(TIE_DELTA_BIC / problem.n_eff) if problem is not None else seen[key]
-    key, spans = _plateaus(f, names, to_u, dict(zip((CANDIDATES[n].field for n in names), key)), tie)
+    tie = seen[key] * math.exp(settings.tie_delta_bic / problem.n_eff) if problem is not None else seen[key]
+    key, spans = _plateaus(f, names, to_u, dict(zip((CANDIDATES[n].field for n in names), key)), tie, settings)
     values = dict(zip((CANDIDATES[n].field for n in names), key))
     return {CANDIDATES[n].field: values[CANDIDATES[n].field] for n in given}, seen[key], len(seen), spans
 
 
 def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
-              tie: float) -> tuple[tuple, dict[str, tuple[float, float]]]:
+              tie: float, settings: GapSettings) -> tuple[tuple, dict[str, tuple[float, float]]]:
     """The fitted ``values`` (``Effects`` fields of ``names``) with every parameter that sits on
     a plateau of the cost ``f`` (of ``[0, 1]``-scaled coordinates) moved to its middle: ``(the
     key of the point reached, {field: (plateau's low end, high end)})``.
@@ -362,8 +353,8 @@ def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
 
     One probe halfway to neutral decides: a cost that rises towards neutral by more than
     ``tie`` (every pinned parameter) leaves the value as it is. On a plateau, each end is
-    found by bisection (:data:`TIE_BISECTIONS` steps; the end towards neutral never nearer
-    than twice :data:`NEUTRAL_TOL` of the fit range, which counts as no effect), and the
+    found by bisection (``settings.tie_bisections`` steps; the end towards neutral never nearer
+    than twice ``settings.neutral_tol`` of the fit range, which counts as no effect), and the
     middle is kept if it is on the plateau too (else the value found). A search that stopped
     within that band of neutral, on a plateau that reaches beyond it, while neutral itself
     costs more than ``tie`` (a cliff at neutral: any deadband above a few mm/s fits as well,
@@ -376,7 +367,7 @@ def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
         c = CANDIDATES[name]
         n_u = _neutral_u(name)
         side = math.copysign(1.0, u[i] - n_u)
-        near_limit = n_u + side * 2.0 * NEUTRAL_TOL
+        near_limit = n_u + side * 2.0 * settings.neutral_tol
         within = (u[i] - near_limit) * side <= 0.0
 
         def at(x: float) -> np.ndarray:
@@ -390,7 +381,7 @@ def _plateaus(f, names: Sequence[str], to_u, values: dict[str, float],
         def edge(inside: float, outside: float) -> float:
             if f(at(outside)) <= tie:
                 return outside
-            for _ in range(TIE_BISECTIONS):
+            for _ in range(settings.tie_bisections):
                 mid = 0.5 * (inside + outside)
                 if f(at(mid)) <= tie:
                     inside = mid
@@ -477,7 +468,8 @@ class RefitJob:
 
 
 def _trial_task(job: RefitJob) -> Outcome:
-    values, _, evals, spans = joint_refit(job.screen, job.base, job.names, job.start, job.first)
+    values, _, evals, spans = joint_refit(job.screen, job.base, job.names, job.start, job.first,
+                                         settings=job.screen.settings)
     car = with_parameters(job.base, values)
     cost, j_cost = judged(job.fit, job.judge.fit, car)
     held, j_held = judged(job.held, job.judge.held, car)
@@ -504,23 +496,18 @@ def _neutral_u(name: str) -> float:
 
 
 def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int = 2,
-                delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
-                held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
-                robust_factor: float = ROBUST_WINDOW_FACTOR, screen_max_s: float = SCREEN_MAX_S,
                 progress: Callable[[str], None] | None = None) -> Chain:
     """Run the stepwise selection of the module docstring over the effects ``names``.
 
     ``fit_problem`` and ``held_problem`` have the same base car (no chain effect yet), the
     same signals and scales; the held-out gap is ``cost / n_values`` of ``held_problem``
     (whose physics step may be finer than the fit problem's). Every fit minimises the cost
-    on their normalisation; the tests of step 3 judge on the step's (``robust_factor``: the
-    robust window scale's factor, as ``run_gap``'s). ``screen_max_s``: the seconds of fit
-    windows the screening and the refits use (:func:`screening_problem`; 0: all of them)."""
-    builder = _ChainBuilder(fit_problem, held_problem, names, jobs=jobs,
-                            tests=(delta_bic_min, improvement_min, held_improvement_min),
-                            max_effects=max_effects, robust_factor=robust_factor, screen_max_s=screen_max_s,
-                            progress=progress)
-    return builder.build()
+    on their normalisation; the tests of step 3 judge on the step's. The thresholds are the
+    fit problem's ``settings`` (:class:`~simrunner.workflows.gap.settings.GapSettings`): ``delta_bic_min``,
+    ``improvement_min``, ``held_improvement_min``, ``max_effects``, ``robust_window_factor``
+    (the robust window scale's factor, as ``run_gap``'s), ``screen_max_s`` (the seconds of fit
+    windows the screening and the refits use, :func:`screening_problem`; 0: all of them), ..."""
+    return _ChainBuilder(fit_problem, held_problem, names, jobs=jobs, progress=progress).build()
 
 
 @dataclass
@@ -549,11 +536,12 @@ class _ChainBuilder:
     :meth:`gate`, :meth:`polish`, :meth:`exchange`), :meth:`backward_check`, and again."""
 
     def __init__(self, fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int,
-                 tests: tuple[float, float, float], max_effects: int, robust_factor: float,
-                 screen_max_s: float, progress: Callable[[str], None] | None):
+                 progress: Callable[[str], None] | None):
         self.fit_problem, self.held_problem, self.names = fit_problem, held_problem, list(names)
-        self.jobs, self.tests, self.max_effects = jobs, tests, max_effects
-        self.robust_factor, self.screen_max_s = robust_factor, screen_max_s
+        self.settings = s = fit_problem.settings
+        self.jobs, self.tests, self.max_effects = jobs, (s.delta_bic_min, s.improvement_min,
+                                                         s.held_improvement_min), s.max_effects
+        self.robust_factor, self.screen_max_s = s.robust_window_factor, s.screen_max_s
         self.tick = progress or (lambda label: None)
         self.base = fit_problem.car
         self.order = {n: i for i, n in enumerate(CANDIDATES)}
@@ -677,7 +665,7 @@ class _ChainBuilder:
         screen_cost = self.cost if screen is full else cost_of(screen, current)
         screening = fit_all(screen, screen_cost, remaining, jobs=self.jobs, refine_top=0,
                             progress=lambda label: self.tick(f"step {index} {label}"))
-        n_top = max(REFINE_TOP if index == 1 else REFINE_LATER, 1)
+        n_top = max(self.settings.refine_top if index == 1 else self.settings.refine_later, 1)
         ranked = sorted(screening, key=lambda r: (r.cost, self.order[r.effect]))
         return _StepState(index, k, screen_base, full, screen, screening, ranked, n_top,
                           bic(self.judge.fit, self.j_cost, k))
@@ -704,7 +692,7 @@ class _ChainBuilder:
                 batches = [later[i:i + st.n_top] for i in range(0, len(later), st.n_top)]
                 continue
             for tr in self.refit(st, batches.pop(0)):
-                reason = _reject_reason(tr, self.j_held, *self.tests)
+                reason = _reject_reason(tr, self.j_held, *self.tests, self.settings.neutral_tol)
                 if chosen is None and not reason:
                     tr, reason = self.polish(st, tr.effect)
                 if chosen is None and not reason:
@@ -732,7 +720,8 @@ class _ChainBuilder:
             o = dataclasses.replace(p, spans=_carried(o.spans, p.values, p.spans))
         st.outcome[effect] = o = dataclasses.replace(o, evaluations=o.evaluations + p.evaluations)
         tr = self.trial_of(st, effect, o)
-        return tr, (_reject_reason(tr, self.j_held, *self.tests) or _report_held_reason(o.held_gap, self.held_gap))
+        return tr, (_reject_reason(tr, self.j_held, *self.tests, self.settings.neutral_tol)
+                    or _report_held_reason(o.held_gap, self.held_gap))
 
     def gate(self, st: _StepState) -> list[FitResult]:
         """Step 4's later candidates: the gate is a test, judged where the tests judge (all fit
@@ -743,7 +732,7 @@ class _ChainBuilder:
         else:
             gains = [1.0 - c / self.j_cost for c in self.costs(
                 [(self.judge.fit, with_parameters(self.base, {**self.kept_values, **r.parameters})) for r in rest])]
-        return [r for r, g in zip(rest, gains) if g >= self.tests[1] / SAFETY]
+        return [r for r, g in zip(rest, gains) if g >= self.tests[1] / self.settings.safety]
 
     def alike_of(self, chosen: Trial, others: list[Trial], outcome: dict[str, Outcome]) -> tuple[Alike, ...]:
         """The candidates of ``others`` the windows cannot tell from ``chosen`` (:class:`Alike`)."""
@@ -755,7 +744,7 @@ class _ChainBuilder:
         out = []
         for t, v in zip(others, per[1:]):
             z = vuong_z(per[0], v)
-            if abs(z) < ALIKE_Z:
+            if abs(z) < self.settings.alike_z:
                 out.append(Alike(t.effect, dict(outcome[t.effect].values), z, int(v.size)))
         return tuple(out)
 
@@ -767,10 +756,11 @@ class _ChainBuilder:
         self.cost, self.held_gap = chosen.cost, st.outcome[chosen.effect].held_gap
         self.polished = True  # the next step's baseline is done
         self.runners_up[chosen.effect] = sorted((t for t in decided if not t.kept),
-                                                key=lambda tr: (tr.cost, self.order[tr.effect]))[:REFINE_TOP]
+                                                key=lambda tr: (tr.cost,
+                                                                self.order[tr.effect]))[:self.settings.refine_top]
 
     def max_exchanges_now(self) -> int:
-        return MAX_EXCHANGES if len(self.kept_names) > 1 else 0
+        return self.settings.max_exchanges if len(self.kept_names) > 1 else 0
 
     def exchange(self, st: _StepState) -> bool:
         """Step 5: the best exchange of an earlier kept effect for a runner-up of its step, made;
@@ -805,7 +795,8 @@ class _ChainBuilder:
                            bic(self.judge.fit, o.judged_cost, k - 1) - bic(self.judge.fit, self.j_cost, k),
                            1.0 - self.j_cost / o.judged_cost if o.judged_cost > 0 else 0.0, self.j_held,
                            o.evaluations)
-                stay = _reject_reason(tr, o.judged_held_gap, *staying(*self.tests))
+                stay = _reject_reason(tr, o.judged_held_gap, *staying(*self.tests, self.settings.safety),
+                                      self.settings.neutral_tol)
                 reason = f"to stay: {stay}" if stay else _report_held_reason(self.held_gap, o.held_gap)
                 if reason and (weakest is None or tr.delta_bic < weakest[0].delta_bic):
                     weakest = (dataclasses.replace(tr, reason=reason), o)
@@ -865,10 +856,11 @@ def _best_exchange(run_jobs, screen_problem: Problem, fit_problem: Problem, held
     return best
 
 
-def staying(delta_bic_min: float, improvement_min: float, held_improvement_min: float) -> tuple[float, float, float]:
+def staying(delta_bic_min: float, improvement_min: float, held_improvement_min: float,
+            safety: float = SETTINGS.safety) -> tuple[float, float, float]:
     """The thresholds an effect already kept must still pass in the final check (step 8 of the
-    module docstring): the entry thresholds without the calibration's safety factor."""
-    return delta_bic_min / SAFETY, improvement_min / SAFETY, held_improvement_min / SAFETY
+    module docstring): the entry thresholds without the calibration's ``safety`` factor."""
+    return delta_bic_min / safety, improvement_min / safety, held_improvement_min / safety
 
 
 def _report_held_reason(after: float, before: float) -> str:
@@ -882,10 +874,10 @@ def _report_held_reason(after: float, before: float) -> str:
 
 
 def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvement_min: float,
-                   held_improvement_min: float) -> str:
+                   held_improvement_min: float, neutral_tol: float = SETTINGS.neutral_tol) -> str:
     """Why ``tr`` is not kept ("" when it passes)."""
     value = tr.parameters[CANDIDATES[tr.effect].field]
-    if neutral_offset(tr.effect, value) < NEUTRAL_TOL:
+    if neutral_offset(tr.effect, value) < neutral_tol:
         return f"fitted at its neutral value ({value:.4g}): no effect"
     if tr.delta_bic < delta_bic_min:
         return f"delta_BIC {tr.delta_bic:.1f} < {delta_bic_min:g} (fit windows)"
@@ -895,11 +887,12 @@ def _reject_reason(tr: Trial, held_before: float, delta_bic_min: float, improvem
         if tr.held_gap == held_before:
             return ("held-out gap unchanged to the last digit: the held-out windows hold nothing it acts on "
                     "(a log with more of the manoeuvre it shows in can confirm it)")
-        change = f"{tr.held_gap / held_before - 1.0:+.1%}" if held_before > 0 and math.isfinite(tr.held_gap) else "not finite"
+        change = (f"{tr.held_gap / held_before - 1.0:+.1%}" if held_before > 0 and math.isfinite(tr.held_gap)
+                  else "not finite")
         return (f"held-out gap {change}: not smaller by {held_improvement_min:.1%} "
                 "(the held-out windows do not confirm it)")
     return ""
 
 
-__all__ = ["Alike", "Chain", "Step", "Swap", "Trial", "vuong_z", "build_chain", "joint_refit", "staying", "with_parameters",
-           "MAX_EFFECTS", "HELD_IMPROVEMENT_MIN"]
+__all__ = ["Alike", "Chain", "Step", "Swap", "Trial", "vuong_z", "build_chain", "joint_refit", "staying",
+           "with_parameters"]

@@ -4,7 +4,7 @@ Each candidate effect has one parameter (a field of ``vehicle.description.Effect
 by simulation: the objective is the sum over the fit windows and the signals of
 :data:`simrunner.workflows.gap.replay.FIT_SIGNALS` of squared residuals, each signal normalised by
 its RMS under the nominal model (floored at :data:`SCALE_FLOOR`), so every signal weighs
-the same before fitting. Search: a coarse grid over the bounds (:data:`GRID_POINTS`, the
+the same before fitting. Search: a coarse grid over the bounds (``settings.grid_points``, the
 car's current value counts as known), then bounded Brent
 (``scipy.optimize.minimize_scalar``) in the bracket around the best grid point; the best
 point evaluated wins.
@@ -15,7 +15,7 @@ sum of squares a few of them outweigh every other window, and an effect that ben
 few at the expense of the rest wins the fit and then fails on held-out data. So each
 window's sum of squares ``c_w`` (``n_w`` compared values) enters through the Cauchy loss
 ``c0_w ln(1 + c_w / c0_w)`` with ``c0_w = robust_scale * n_w``; ``run_gap`` sets
-``robust_scale`` to :data:`ROBUST_WINDOW_FACTOR` times the median mean square per value of
+``robust_scale`` to ``settings.robust_window_factor`` times the median mean square per value of
 the nominal model's fit windows (:func:`robust_scale_of`), so a window well below that
 counts as in least squares and one 50 times the median counts about 10 times, not 50.
 ``robust_scale = inf`` is the plain sum of squares.
@@ -25,13 +25,14 @@ Ranking: Bayesian information criterion on the normalised residuals,
     BIC = n_eff * ln(cost / n) + k * ln(n_eff)
 
 with ``n`` compared values, ``k`` fitted parameters (0 for the nominal model, 1 per effect)
-and ``n_eff`` the effective number of independent values, :data:`N_EFF_PER_S` per second of
+and ``n_eff`` the effective number of independent values, ``settings.n_eff_per_s`` per second of
 fit windows per signal (residuals within a window are strongly correlated, so ``n`` would
 overstate the evidence). Lower is better; ``delta_bic = BIC_nominal - BIC_effect``.
 
 Acceptance (:mod:`simrunner.workflows.gap.chain` applies it at every step of the chain,
-with a held-out test on top): an effect passes only if ``delta_bic >= DELTA_BIC_MIN`` and
-its relative cost reduction ``improvement >= IMPROVEMENT_MIN``. The two thresholds are calibrated on effect-free synthetic logs by
+with a held-out test on top): an effect passes only if ``delta_bic >= settings.delta_bic_min`` and
+its relative cost reduction ``improvement >= settings.improvement_min``. The two thresholds are
+calibrated on effect-free synthetic logs by
 :mod:`simrunner.workflows.gap.thresholds` (see docs/gap.md for the run that produced them).
 
 Fits run in worker processes (``jobs``); dartpy worlds are built inside each worker. A fit
@@ -51,25 +52,17 @@ from scipy.optimize import minimize_scalar
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap import GapError
 from simrunner.workflows.gap.logs import Derived
-from simrunner.workflows.gap.replay import (FIT_SIGNALS, WORKFLOW_DT_S, SimFactory, Window, default_sim_factory,
+from simrunner.workflows.gap.replay import (FIT_SIGNALS, SimFactory, Window, default_sim_factory,
                                   replay, residuals, window_mask)
-from simrunner.workflows.gap.settings import SETTINGS
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 from vehicle.description import CarDescription
 
-# Calibrated on effect-free synthetic logs (python -m simrunner.workflows.gap.thresholds; docs/gap.md).
-DELTA_BIC_MIN = SETTINGS.delta_bic_min
-IMPROVEMENT_MIN = SETTINGS.improvement_min
 
-N_EFF_PER_S = SETTINGS.n_eff_per_s
-GRID_POINTS = SETTINGS.grid_points
-BRENT_MAXITER = SETTINGS.brent_maxiter
-ROBUST_WINDOW_FACTOR = SETTINGS.robust_window_factor
-REFINE_TOP = SETTINGS.refine_top
-END_PROBE_FRACTION = SETTINGS.end_probe_fraction
-AT_BOUND_U = SETTINGS.at_bound_u
-SCALE_FLOOR = {"along_m": SETTINGS.scale_floor_position_m, "cross_m": SETTINGS.scale_floor_position_m,
-               "yaw_rad": SETTINGS.scale_floor_yaw_rad, "speed_mps": SETTINGS.scale_floor_speed_mps,
-               "yaw_rate_radps": SETTINGS.scale_floor_yaw_rate_radps}
+def scale_floor(settings: GapSettings, signal: str) -> float:
+    """The smallest normalisation of a residual signal (``settings.scale_floor_*``)."""
+    return {"along_m": settings.scale_floor_position_m, "cross_m": settings.scale_floor_position_m,
+            "yaw_rad": settings.scale_floor_yaw_rad, "speed_mps": settings.scale_floor_speed_mps,
+            "yaw_rate_radps": settings.scale_floor_yaw_rate_radps}[signal]
 
 
 @dataclass(frozen=True)
@@ -93,10 +86,10 @@ class Candidate:
         lo, hi = self.to_x(self.lo), self.to_x(self.hi)
         return (self.to_x(min(max(v, self.lo), self.hi)) - lo) / (hi - lo)
 
-    def at_bound(self, v: float) -> bool:
-        """``v`` within :data:`AT_BOUND_U` of an end of the fit range: the fit wanted to go further."""
+    def at_bound(self, v: float, settings: GapSettings = SETTINGS) -> bool:
+        """``v`` within ``settings.at_bound_u`` of an end of the fit range: the fit wanted to go further."""
         u = self.u(v)
-        return u <= AT_BOUND_U or u >= 1.0 - AT_BOUND_U
+        return u <= settings.at_bound_u or u >= 1.0 - settings.at_bound_u
 
 
 def _candidates() -> dict[str, Candidate]:
@@ -152,9 +145,10 @@ class Problem:
     segments: tuple[Segment, ...]
     scales: dict[str, float]
     signals: tuple[str, ...] = FIT_SIGNALS
-    dt_s: float = WORKFLOW_DT_S
+    dt_s: float = SETTINGS.workflow_dt_s
     sim_factory: SimFactory = default_sim_factory
     robust_scale: float = math.inf  # Cauchy scale per compared value (module docstring); inf: least squares
+    settings: GapSettings = SETTINGS  # the workflow's thresholds for this problem's fits
 
     @property
     def n_values(self) -> int:
@@ -163,7 +157,7 @@ class Problem:
     @property
     def n_eff(self) -> float:
         dur = sum(s.duration_s for s in self.segments)
-        return max(N_EFF_PER_S * dur * len(self.signals), 2.0)
+        return max(self.settings.n_eff_per_s * dur * len(self.signals), 2.0)
 
     def with_car(self, car: CarDescription) -> "Problem":
         return dataclasses.replace(self, car=car)
@@ -219,8 +213,8 @@ def robust_total(costs: Sequence[tuple[float, int]], robust_scale: float) -> flo
     return total
 
 
-def robust_scale_of(costs: Sequence[tuple[float, int]], factor: float = ROBUST_WINDOW_FACTOR) -> float:
-    """:data:`ROBUST_WINDOW_FACTOR` (``factor``) times the median over windows of ``c_w / n_w``
+def robust_scale_of(costs: Sequence[tuple[float, int]], factor: float = SETTINGS.robust_window_factor) -> float:
+    """``settings.robust_window_factor`` (``factor``) times the median over windows of ``c_w / n_w``
     (the nominal model's, when called by ``run_gap``); inf for no windows or ``factor = inf``."""
     per_value = [c / n for c, n in costs if n > 0]
     if not per_value or not math.isfinite(factor):
@@ -248,26 +242,29 @@ def cost_of(problem: Problem, car: CarDescription) -> float:
 
 
 def nominal_scales(segments: Sequence[Segment], res: Sequence[dict[str, np.ndarray]],
-                   signals: Sequence[str] = FIT_SIGNALS) -> dict[str, float]:
+                   signals: Sequence[str] = FIT_SIGNALS, settings: GapSettings = SETTINGS) -> dict[str, float]:
     """Per-signal normalisation: RMS of the nominal residuals in the segments' windows, floored."""
     out = {}
     for s in signals:
         parts = [r[s][window_mask(len(seg.log), seg.windows) & np.isfinite(r[s])]
                  for seg, r in zip(segments, res)]
         v = np.concatenate(parts) if parts else np.zeros(0)
-        out[s] = max(float(np.sqrt(np.mean(v * v))) if v.size else 0.0, SCALE_FLOOR[s])
+        out[s] = max(float(np.sqrt(np.mean(v * v))) if v.size else 0.0, scale_floor(settings, s))
     return out
 
 
-def rescaled(problem: Problem, car: CarDescription, robust_factor: float = ROBUST_WINDOW_FACTOR,
+def rescaled(problem: Problem, car: CarDescription, robust_factor: float | None = None,
              res: Sequence[dict[str, np.ndarray]] | None = None) -> Problem:
     """``problem`` normalised to ``car``'s residuals on its windows (:func:`nominal_scales`
     and :func:`robust_scale_of` with ``car`` in the nominal model's place; a least-squares
     problem stays one): every signal weighs the same again under ``car``, as every signal
     weighs the same under the nominal model before the first fit. ``res``: ``car``'s
-    residuals on the problem (:func:`segment_residuals`), when the caller has them."""
+    residuals on the problem (:func:`segment_residuals`), when the caller has them.
+    ``robust_factor`` default: the problem's ``settings.robust_window_factor``."""
     res = segment_residuals(problem, car) if res is None else res
-    out = dataclasses.replace(problem, scales=nominal_scales(problem.segments, res, problem.signals),
+    if robust_factor is None:
+        robust_factor = problem.settings.robust_window_factor
+    out = dataclasses.replace(problem, scales=nominal_scales(problem.segments, res, problem.signals, problem.settings),
                               robust_scale=math.inf)
     if math.isfinite(problem.robust_scale):
         out = dataclasses.replace(out, robust_scale=robust_scale_of(window_costs(out, res), robust_factor))
@@ -303,7 +300,7 @@ def fit_effect(problem: Problem, name: str, nominal_cost: float, *, refine: bool
                known: Sequence[tuple[float, float]] = ()) -> FitResult:
     """Fit effect ``name`` on ``problem``: grid, then (``refine``) bounded Brent around the
     best grid point; ``known`` (value, cost) pairs are not evaluated again."""
-    cand = CANDIDATES[name]
+    cand, settings = CANDIDATES[name], problem.settings
     current = float(getattr(problem.car.effects, cand.field))
     seen: dict[float, float] = dict(known)
     if cand.lo <= current <= cand.hi:
@@ -315,19 +312,19 @@ def fit_effect(problem: Problem, name: str, nominal_cost: float, *, refine: bool
             seen[v] = cost_of(problem, with_effect(problem.car, name, v))
         return seen[v]
 
-    xs = np.linspace(cand.to_x(cand.lo), cand.to_x(cand.hi), GRID_POINTS)
+    xs = np.linspace(cand.to_x(cand.lo), cand.to_x(cand.hi), settings.grid_points)
     costs = [f(x) for x in xs]
-    probe = _probe(xs, costs)
+    probe = _probe(xs, costs, settings.end_probe_fraction)
     f(probe)
     other = _other_side(xs, costs, probe)
     if other is not None:
         f(other)
     if refine:
         k = int(np.argmin(costs))
-        a, b = xs[max(k - 1, 0)], xs[min(k + 1, GRID_POINTS - 1)]
+        a, b = xs[max(k - 1, 0)], xs[min(k + 1, settings.grid_points - 1)]
         span = cand.to_x(cand.hi) - cand.to_x(cand.lo)
         minimize_scalar(f, bounds=(a, b), method="bounded",
-                        options={"xatol": 2e-3 * span, "maxiter": BRENT_MAXITER})
+                        options={"xatol": 2e-3 * span, "maxiter": settings.brent_maxiter})
     best_v = min(seen, key=lambda v: (seen[v], v))
     best_cost = seen[best_v]
     crit = bic(problem, best_cost, 1)
@@ -336,7 +333,7 @@ def fit_effect(problem: Problem, name: str, nominal_cost: float, *, refine: bool
                      tuple(sorted(seen.items())), refined=refine)
 
 
-def _probe(xs: np.ndarray, costs: Sequence[float]) -> float:
+def _probe(xs: np.ndarray, costs: Sequence[float], end_probe_fraction: float = SETTINGS.end_probe_fraction) -> float:
     """One extra screening point: the vertex of the parabola through the best grid point
     and its neighbours (three points at an end of the grid), kept within the neighbours;
     the midpoint towards the better neighbour if the parabola is not convex. This finds
@@ -344,16 +341,16 @@ def _probe(xs: np.ndarray, costs: Sequence[float]) -> float:
     on a 0.25 grid).
 
     When the best grid point is an end of the grid (the neutral value of a latency, a lag,
-    a play...), the probe goes at least :data:`END_PROBE_FRACTION` of the way towards its
+    a play...), the probe goes at least ``end_probe_fraction`` of the way towards its
     neighbour: a small value there can sit in a narrow valley (a 12-ms latency on a 50-ms
     grid: its cost at 50 ms is far above the neutral one, the parabola's vertex falls
     outside the bounds, and a probe at the end itself would screen the latency at 0 %)."""
     k = int(np.argmin(costs))
     lo, hi = xs[max(k - 1, 0)], xs[min(k + 1, len(xs) - 1)]
-    if k == 0:  # best at an end: the probe goes at least END_PROBE_FRACTION of the way inside
-        lo = xs[0] + END_PROBE_FRACTION * (xs[1] - xs[0])
+    if k == 0:  # best at an end: the probe goes at least end_probe_fraction of the way inside
+        lo = xs[0] + end_probe_fraction * (xs[1] - xs[0])
     elif k == len(xs) - 1:
-        hi = xs[-1] - END_PROBE_FRACTION * (xs[-1] - xs[-2])
+        hi = xs[-1] - end_probe_fraction * (xs[-1] - xs[-2])
     j = min(max(k, 1), len(xs) - 2)
     x0, x1, x2 = xs[j - 1], xs[j], xs[j + 1]
     c0, c1, c2 = costs[j - 1], costs[j], costs[j + 1]
@@ -405,14 +402,17 @@ def _fit_task(args) -> FitResult:
 
 
 def fit_all(problem: Problem, nominal_cost: float, effects: Sequence[str] | None = None, *, jobs: int = 2,
-            progress: Callable[[str], None] | None = None, refine_top: int = REFINE_TOP) -> list[FitResult]:
+            progress: Callable[[str], None] | None = None, refine_top: int | None = None) -> list[FitResult]:
     """Fit every effect in ``effects`` (default: all of :data:`CANDIDATES`) and return them
     ranked by criterion (ties by catalogue order).
 
     Two stages: every effect on its grid (screening), then the ``refine_top`` best (by grid
     cost) refined by Brent; the others keep their best grid value (``refined`` False).
     ``jobs`` worker processes (1 = in this process); ``progress(label)`` is called as each
-    fit finishes (``len(effects) + min(refine_top, len(effects))`` calls)."""
+    fit finishes (``len(effects) + min(refine_top, len(effects))`` calls); ``refine_top`` default: the
+    problem's ``settings.refine_top``."""
+    if refine_top is None:
+        refine_top = problem.settings.refine_top
     names = list(CANDIDATES) if effects is None else list(effects)
     unknown = [n for n in names if n not in CANDIDATES]
     if unknown:

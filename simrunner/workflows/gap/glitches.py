@@ -15,7 +15,7 @@ filter and a 100-Hz motion-capture log alike:
     logging when it acts, a sensor with jitter) has long intervals as part of its rhythm;
     they are not gaps.
 ``duplicate``
-    a time step below ``DUPLICATE_DT_FRACTION * median(dt)`` (the same sample stamped
+    a time step below ``settings.duplicate_dt_fraction * median(dt)`` (the same sample stamped
     twice), or a row whose every sensor column (pose, speed, gyro) equals the previous
     row's while the car moves (a repeated row with a new stamp; at rest identical rows
     are normal), or a row the reader left out for repeating the previous row's stamp
@@ -28,23 +28,23 @@ filter and a 100-Hz motion-capture log alike:
     with ``v`` the mean of the logged speeds at its two ends (without a speed column: the
     median of the neighbouring steps' speeds). Its noise depends on speed (time-stamp
     jitter grows with speed), so the steps are grouped by speed (quantiles, up to
-    :data:`SPEED_GROUPS`) and each group's median and robust scale (1.4826 MAD) give a
+    ``settings.speed_groups``) and each group's median and robust scale (1.4826 MAD) give a
     z-score (steps where the pose stood still at rest carry no noise and are left out of
-    the statistics); a step with ``z > JUMP_Z`` whose residual also exceeds
-    :data:`JUMP_MOTION_FRACTION` of the step the speed gives (more than a sideslip or a
+    the statistics); a step with ``z > settings.jump_z`` whose residual also exceeds
+    ``settings.jump_motion_fraction`` of the step the speed gives (more than a sideslip or a
     speed-sensor error could explain: a noise-free log of a sliding car has outlying but
     real residuals) is a jump. The scale is floored at
-    :data:`SCALE_FLOOR_FRACTION` of the median moving step (noise-free logs) and at the
+    ``settings.scale_floor_fraction`` of the median moving step (noise-free logs) and at the
     CSV resolution.
     The heading can jump alone (a particle filter's flip, a camera marker read the wrong way
     round, a quaternion's sign): each heading step's residual is ``wrap(dyaw - turn)``, the
     turn from the gyro (trapezoid) or, without one, the median turn rate of the
-    neighbouring steps; a step is a jump when its robust z-score exceeds ``JUMP_Z`` **and**
+    neighbouring steps; a step is a jump when its robust z-score exceeds ``settings.jump_z`` **and**
     the step is more than the car can turn in it (``|v| dt / R``, ``R`` the car's smallest
-    turning radius, ``CarDescription.min_turn_radius_m``) plus ``JUMP_Z`` noise scales
-    **and** its residual exceeds :data:`JUMP_MOTION_FRACTION` of that most the car can turn
+    turning radius, ``CarDescription.min_turn_radius_m``) plus ``settings.jump_z`` noise scales
+    **and** its residual exceeds ``settings.jump_motion_fraction`` of that most the car can turn
     (a noise-free log's tiny residuals at full lock are no jump). A jump out followed by
-    the next one back (their residuals cancel within ``JUMP_Z`` scales) keeps out the
+    the next one back (their residuals cancel within ``settings.jump_z`` scales) keeps out the
     samples between them too: a heading displaced for a while and restored, whose windows
     would start from a wrong heading. The position test then uses the heading with the
     jumps taken out.
@@ -56,11 +56,11 @@ filter and a 100-Hz motion-capture log alike:
     improbable for this channel: with ``p`` the chance that one sample repeats the last -
     the larger of the fraction of repeats in the log's moving samples and the chance that
     the channel's noise (robust, from second differences) stays within its quantisation
-    step - ``n_moving * p ** (L - 1) < FROZEN_ALPHA``. That test takes the repeats as
+    step - ``n_moving * p ** (L - 1) < settings.frozen_alpha``. That test takes the repeats as
     independent. A heading, speed or yaw rate without noise (a simulator's, written with 6
     decimals) holds its value through every steady stretch instead, one run after the other:
-    where the channel has no noise (``p = 1``), or holds a value for ``FROZEN_MIN_SAMPLES`` or
-    more :data:`FROZEN_COMMON_RUNS` other times while moving (DS2's ESC speed does 13 times, a
+    where the channel has no noise (``p = 1``), or holds a value for ``settings.frozen_min_samples`` or
+    more ``settings.frozen_common_runs`` other times while moving (DS2's ESC speed does 13 times, a
     simulator's speed a hundred), a run is frozen only where the channel then catches up by
     more than the shortest frozen run would at its fast rate of change (twice the 99th
     percentile of its one-sample changes while moving): it held while the value moved on. A
@@ -68,13 +68,13 @@ filter and a 100-Hz motion-capture log alike:
 
 ``sensor_spike``
     a speed or gyro reading that steps out and back by more than the car can change it: a
-    step ``|dy| > A dt + JUMP_Z sqrt(2) sigma`` is impossible for the car, with ``A`` the
-    most that signal's rate of change can be - :data:`SPIKE_AGILITY` times the car file's
+    step ``|dy| > A dt + settings.jump_z sqrt(2) sigma`` is impossible for the car, with ``A`` the
+    most that signal's rate of change can be - ``settings.spike_agility`` times the car file's
     (speed: its acceleration or brake limit; yaw rate: ``A_speed tan(limit) / L + |v| rate /
     (L cos^2(limit))``, with the steering limit, the servo rate and the faster end's speed) -
     and ``sigma`` one sample's noise (robust, from each sample's distance to the line through
     its neighbours). An impossible step followed by the next impossible one back (opposite
-    sign, at most :data:`SPIKE_MAX_SAMPLES` readings later, and the readings either side of
+    sign, at most ``settings.spike_max_samples`` readings later, and the readings either side of
     the pair differ by what the car can do in the time) keeps the readings between out: an
     encoder that missed ticks, a gyro that saturated for a few samples. Longer excursions
     are left in: a wheel that locks under hard braking and spins up again reads like that
@@ -98,24 +98,8 @@ import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.telemetry.sparse import GAP_FACTOR, GAP_QUANTILE, gap_limit_s
-from simrunner.workflows.gap.settings import SETTINGS
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 from vehicle.description import CarDescription
-
-DUPLICATE_DT_FRACTION = SETTINGS.duplicate_dt_fraction
-JUMP_Z = SETTINGS.jump_z
-JUMP_MOTION_FRACTION = SETTINGS.jump_motion_fraction
-SPEED_GROUPS = SETTINGS.speed_groups
-GROUP_MIN_STEPS = SETTINGS.group_min_steps
-SCALE_FLOOR_FRACTION = SETTINGS.scale_floor_fraction
-RESOLUTION = SETTINGS.resolution
-FROZEN_ALPHA = SETTINGS.frozen_alpha
-FROZEN_MIN_SAMPLES = SETTINGS.frozen_min_samples
-FROZEN_COMMON_RUNS = SETTINGS.frozen_common_runs
-SPIKE_AGILITY = SETTINGS.spike_agility
-SPIKE_MAX_SAMPLES = SETTINGS.spike_max_samples
-MOVING_MPS = SETTINGS.moving_mps
-MOVING_BASELINE_S = SETTINGS.moving_baseline_s
-NEIGHBOUR_STEPS = SETTINGS.neighbour_steps
 
 POSE = ("x_m", "y_m", "yaw_rad")
 SENSOR_COLUMNS = ("x_m", "y_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
@@ -158,7 +142,7 @@ def time_gaps(t: np.ndarray) -> np.ndarray:
     return dt > gap_limit_s(dt) if dt.size else np.zeros(0, dtype=bool)
 
 
-def find_glitches(log: RunLog, car: CarDescription | None = None) -> list[Glitch]:
+def find_glitches(log: RunLog, car: CarDescription | None = None, *, settings: GapSettings = SETTINGS) -> list[Glitch]:
     """The glitches of ``log`` (see the module docstring), sorted by start time. ``car``: the
     car file (None: the default car), whose smallest turning radius bounds a real heading
     step and whose limits bound a real change of speed and yaw rate."""
@@ -166,14 +150,14 @@ def find_glitches(log: RunLog, car: CarDescription | None = None) -> list[Glitch
         return []
     if car is None:
         car = CarDescription()
-    found = _gaps(log) + _duplicates(log)
+    found = _gaps(log) + _duplicates(log, settings=settings)
     jumps = np.zeros(len(log) - 1, dtype=bool)
     pose_scale = math.nan
     if has_pose(log):
-        more, jumps, pose_scale = _jumps(log, car.min_turn_radius_m)
+        more, jumps, pose_scale = _jumps(log, car.min_turn_radius_m, settings=settings)
         found += more
-    found += _frozen(log, jumps, pose_scale)
-    found += _spikes(log, car, glitch_mask(log, found))
+    found += _frozen(log, jumps, pose_scale, settings=settings)
+    found += _spikes(log, car, glitch_mask(log, found), settings=settings)
     return sorted(found, key=lambda g: (g.t_start_s, g.t_end_s, g.kind))
 
 
@@ -211,14 +195,14 @@ def _sensor_columns(log: RunLog) -> tuple[str, ...]:
                  and (c not in POSE or has_pose(log)))
 
 
-def moving(log: RunLog) -> np.ndarray:
-    """``(N,) bool``: the car moves at each sample: ``|speed| >= MOVING_MPS`` from the speed
-    column, else from the pose's displacement over :data:`MOVING_BASELINE_S` (all True when
+def moving(log: RunLog, *, settings: GapSettings = SETTINGS) -> np.ndarray:
+    """``(N,) bool``: the car moves at each sample: ``|speed| >= settings.moving_mps`` from the speed
+    column, else from the pose's displacement over ``settings.moving_baseline_s`` (all True when
     the log has neither)."""
     if log.speed_mps is not None:
-        return np.abs(log.speed_mps) >= MOVING_MPS
+        return np.abs(log.speed_mps) >= settings.moving_mps
     if has_pose(log):
-        return _pose_speed(log, MOVING_BASELINE_S) >= MOVING_MPS
+        return _pose_speed(log, settings.moving_baseline_s) >= settings.moving_mps
     return np.ones(len(log), dtype=bool)
 
 
@@ -254,22 +238,22 @@ def _repeats(log: RunLog) -> list[Glitch]:
     return out
 
 
-def _duplicates(log: RunLog) -> list[Glitch]:
+def _duplicates(log: RunLog, *, settings: GapSettings = SETTINGS) -> list[Glitch]:
     t = log.t_s
     dt = np.diff(t)
     med = median_dt_s(t)
     out = _repeats(log) + [Glitch(GlitchKind.DUPLICATE, float(t[k]), float(t[k + 1]), "t_s",
                   f"stamped {dt[k] * 1e3:.3g} ms after the previous sample (median time step {med * 1e3:.3g} ms)")
-           for k in np.flatnonzero(dt < DUPLICATE_DT_FRACTION * med)]
+           for k in np.flatnonzero(dt < settings.duplicate_dt_fraction * med)]
     cols = _sensor_columns(log)
     if not cols:
         return out
     same = np.ones(len(log) - 1, dtype=bool)
     for c in cols:
         same &= np.diff(getattr(log, c)) == 0.0
-    mov = moving(log)
+    mov = moving(log, settings=settings)
     same &= mov[:-1] | mov[1:]
-    same &= dt >= DUPLICATE_DT_FRACTION * med  # already reported
+    same &= dt >= settings.duplicate_dt_fraction * med  # already reported
     for a, b in _runs(same):
         out.append(Glitch(GlitchKind.DUPLICATE, float(t[a]), float(t[b]), ",".join(cols),
                           f"{b - a} row(s) repeating every sensor column of the previous one while moving"))
@@ -295,11 +279,11 @@ def _robust(v: np.ndarray) -> tuple[float, float]:
     return m, 1.4826 * float(np.median(np.abs(v - m)))
 
 
-def _neighbour_median(rate: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Per step, the median of ``rate`` over the :data:`NEIGHBOUR_STEPS` valid steps each side
+def _neighbour_median(rate: np.ndarray, valid: np.ndarray, *, settings: GapSettings = SETTINGS) -> np.ndarray:
+    """Per step, the median of ``rate`` over the ``settings.neighbour_steps`` valid steps each side
     (the step itself left out; 0 where there are none)."""
     rate = np.where(valid, rate, np.nan)
-    k = NEIGHBOUR_STEPS
+    k = settings.neighbour_steps
     padded = np.concatenate([np.full(k, np.nan), rate, np.full(k, np.nan)])
     near = np.stack([padded[j:j + rate.size] for j in range(2 * k + 1) if j != k])
     with np.errstate(all="ignore"):
@@ -308,22 +292,23 @@ def _neighbour_median(rate: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(v), v, 0.0)
 
 
-def _jumps(log: RunLog, min_turn_radius_m: float) -> tuple[list[Glitch], np.ndarray, float]:
+def _jumps(log: RunLog, min_turn_radius_m: float, *,
+           settings: GapSettings = SETTINGS) -> tuple[list[Glitch], np.ndarray, float]:
     """Localisation jumps, of the heading (:func:`_heading_jumps`) and of the position; also
     the ``(N - 1,)`` jump steps and the pose's step noise at low speed (the slowest group's
     cross-heading scale, m)."""
     t = log.t_s
     dt = np.diff(t)
     med = median_dt_s(t)
-    valid = ~time_gaps(t) & (dt >= DUPLICATE_DT_FRACTION * med)
+    valid = ~time_gaps(t) & (dt >= settings.duplicate_dt_fraction * med)
     safe_dt = np.where(dt > 0, dt, 1.0)
     dx, dy = np.diff(log.x_m), np.diff(log.y_m)
     if log.speed_mps is not None:
         v = 0.5 * (log.speed_mps[:-1] + log.speed_mps[1:])
     else:  # the neighbouring steps' speed along the heading, this step left out
         yaw0 = log.yaw_rad[:-1] + 0.5 * _wrap(np.diff(log.yaw_rad))
-        v = _neighbour_median((dx * np.cos(yaw0) + dy * np.sin(yaw0)) / safe_dt, valid)
-    out, turned, yaw = _heading_jumps(log, dt, valid, v, min_turn_radius_m)
+        v = _neighbour_median((dx * np.cos(yaw0) + dy * np.sin(yaw0)) / safe_dt, valid, settings=settings)
+    out, turned, yaw = _heading_jumps(log, dt, valid, v, min_turn_radius_m, settings=settings)
     heading = yaw[:-1] + 0.5 * _wrap(np.diff(yaw))
     c, s = np.cos(heading), np.sin(heading)
     along, cross = dx * c + dy * s, -dx * s + dy * c
@@ -334,14 +319,15 @@ def _jumps(log: RunLog, min_turn_radius_m: float) -> tuple[list[Glitch], np.ndar
     if idx.size < 10:
         return out, jump | turned, math.nan
     step = np.hypot(dx, dy)
-    moving_steps = idx[np.abs(v[idx]) >= MOVING_MPS]
-    floor = max(RESOLUTION, SCALE_FLOOR_FRACTION * (float(np.median(step[moving_steps])) if moving_steps.size else 0.0))
+    moving_steps = idx[np.abs(v[idx]) >= settings.moving_mps]
+    floor = max(settings.resolution,
+                settings.scale_floor_fraction * (float(np.median(step[moving_steps])) if moving_steps.size else 0.0))
     still = (dx == 0.0) & (dy == 0.0) & (v == 0.0)  # a pose that did not move at rest: no noise to learn
     stats = idx[~still[idx]]
     if stats.size < 10:
         return out, jump | turned, math.nan
     order = stats[np.argsort(np.abs(v[stats]), kind="stable")]
-    groups = np.array_split(order, max(1, min(SPEED_GROUPS, order.size // GROUP_MIN_STEPS)))
+    groups = np.array_split(order, max(1, min(settings.speed_groups, order.size // settings.group_min_steps)))
     slow_scale = math.nan
     for g in groups:
         ma, sa = _robust(ra[g])
@@ -351,7 +337,7 @@ def _jumps(log: RunLog, min_turn_radius_m: float) -> tuple[list[Glitch], np.ndar
         if math.isnan(slow_scale):
             slow_scale = sc
     residual = np.hypot(ra, rc)
-    jump[idx] = (z[idx] > JUMP_Z) & (residual[idx] > JUMP_MOTION_FRACTION * np.abs(v[idx]) * dt[idx])
+    jump[idx] = (z[idx] > settings.jump_z) & (residual[idx] > settings.jump_motion_fraction * np.abs(v[idx]) * dt[idx])
     for a, b in _runs(jump):
         k = int(np.argmax(z[a:b])) + a
         out.append(Glitch(GlitchKind.JUMP, float(t[a]), float(t[b]), "x_m,y_m",
@@ -361,7 +347,8 @@ def _jumps(log: RunLog, min_turn_radius_m: float) -> tuple[list[Glitch], np.ndar
 
 
 def _heading_jumps(log: RunLog, dt: np.ndarray, valid: np.ndarray, v: np.ndarray,
-                   min_turn_radius_m: float) -> tuple[list[Glitch], np.ndarray, np.ndarray]:
+                   min_turn_radius_m: float, *,
+                   settings: GapSettings = SETTINGS) -> tuple[list[Glitch], np.ndarray, np.ndarray]:
     """Heading jumps (see the module docstring): the glitches, the ``(N - 1,)`` jump steps and
     the yaw with each jump taken out of its samples (for the position test)."""
     yaw = np.asarray(log.yaw_rad, float)
@@ -370,7 +357,7 @@ def _heading_jumps(log: RunLog, dt: np.ndarray, valid: np.ndarray, v: np.ndarray
         pred = 0.5 * (log.yaw_rate_radps[:-1] + log.yaw_rate_radps[1:]) * dt
         source = "the gyro turns"
     else:
-        pred = _neighbour_median(dyaw / np.where(dt > 0, dt, 1.0), valid) * dt
+        pred = _neighbour_median(dyaw / np.where(dt > 0, dt, 1.0), valid, settings=settings) * dt
         source = "the neighbouring steps turn"
     res = _wrap(dyaw - pred)
     jump = np.zeros(dt.size, dtype=bool)
@@ -378,11 +365,11 @@ def _heading_jumps(log: RunLog, dt: np.ndarray, valid: np.ndarray, v: np.ndarray
     if idx.size < 10:
         return [], jump, yaw
     m, scale = _robust(res[idx])
-    scale = max(scale, RESOLUTION)
+    scale = max(scale, settings.resolution)
     z = np.abs(res - m) / scale
     turn = np.abs(v) * dt / min_turn_radius_m  # the most the car turns in the step (at its steering limit)
-    jump[idx] = ((z[idx] > JUMP_Z) & (np.abs(dyaw[idx]) > turn[idx] + JUMP_Z * scale)
-                 & (np.abs(res[idx]) > JUMP_MOTION_FRACTION * turn[idx]))
+    jump[idx] = ((z[idx] > settings.jump_z) & (np.abs(dyaw[idx]) > turn[idx] + settings.jump_z * scale)
+                 & (np.abs(res[idx]) > settings.jump_motion_fraction * turn[idx]))
     runs = _runs(jump)
     spans: list[tuple[int, int, str]] = []
     i = 0
@@ -393,7 +380,7 @@ def _heading_jumps(log: RunLog, dt: np.ndarray, valid: np.ndarray, v: np.ndarray
                 f"turns {turn[k]:.3g} rad at most (z = {z[k]:.0f})")
         if i + 1 < len(runs):  # out and back: the samples between are displaced too
             a2, b2 = runs[i + 1]
-            if abs(float(_wrap(np.array(res[a:b].sum() + res[a2:b2].sum())))) < JUMP_Z * scale:
+            if abs(float(_wrap(np.array(res[a:b].sum() + res[a2:b2].sum())))) < settings.jump_z * scale:
                 text = (f"heading displaced by {float(res[a:b].sum()):+.3g} rad for {log.t_s[a2] - log.t_s[a]:.3g} s "
                         f"and back ({text})")
                 b, i = b2, i + 1
@@ -418,7 +405,7 @@ def _channels(log: RunLog) -> list[tuple[str, tuple[str, ...]]]:
     return out
 
 
-def _repeat_chance(values: np.ndarray, mov_pairs: np.ndarray) -> float:
+def _repeat_chance(values: np.ndarray, mov_pairs: np.ndarray, *, settings: GapSettings = SETTINGS) -> float:
     """Chance that the channel's noise leaves one column unchanged between two samples:
     ``erf(q / (4 sigma))`` with ``q`` its smallest change and ``sigma`` its noise (robust,
     from second differences over moving samples); 1 for a noise-free column."""
@@ -426,7 +413,7 @@ def _repeat_chance(values: np.ndarray, mov_pairs: np.ndarray) -> float:
     nz = np.abs(d[d != 0.0])
     if nz.size == 0:
         return 1.0
-    q = max(float(nz.min()), RESOLUTION)
+    q = max(float(nz.min()), settings.resolution)
     d2 = np.diff(values, 2)
     m2 = mov_pairs[:-1] & mov_pairs[1:]
     if not m2.any():
@@ -435,18 +422,18 @@ def _repeat_chance(values: np.ndarray, mov_pairs: np.ndarray) -> float:
     return 1.0 if sigma <= 0.0 else math.erf(q / (4.0 * sigma))
 
 
-def _catches_up(v: np.ndarray, b: int, mov_pairs: np.ndarray) -> bool:
-    """Whether ``v`` moves from sample ``b`` to the next by more than ``FROZEN_MIN_SAMPLES - 1``
+def _catches_up(v: np.ndarray, b: int, mov_pairs: np.ndarray, *, settings: GapSettings = SETTINGS) -> bool:
+    """Whether ``v`` moves from sample ``b`` to the next by more than ``settings.frozen_min_samples - 1``
     times the 99th percentile of its one-sample changes while moving: what the shortest frozen
     run catches up where the signal moves on that fast (a steady stretch's first change after
     a step command is one such change: a simulator's speed and gyro, without noise)."""
     d = np.abs(np.diff(v))
     changes = d[mov_pairs & (d > 0.0)]
     return (b + 1 < len(v) and bool(mov_pairs[b]) and changes.size > 0
-            and d[b] > (FROZEN_MIN_SAMPLES - 1) * np.quantile(changes, 0.99))
+            and d[b] > (settings.frozen_min_samples - 1) * np.quantile(changes, 0.99))
 
 
-def _frozen(log: RunLog, jumps: np.ndarray, pose_scale: float) -> list[Glitch]:
+def _frozen(log: RunLog, jumps: np.ndarray, pose_scale: float, *, settings: GapSettings = SETTINGS) -> list[Glitch]:
     t = log.t_s
     n = len(log)
     out = []
@@ -456,33 +443,33 @@ def _frozen(log: RunLog, jumps: np.ndarray, pose_scale: float) -> list[Glitch]:
         same = np.ones(n - 1, dtype=bool)
         for v in values:
             same &= np.diff(v) == 0.0
-        mov = _moving_without(log, name)
+        mov = _moving_without(log, name, settings=settings)
         mov_pairs = (mov[:-1] & mov[1:]) & ~gaps
         n_mov = int(mov_pairs.sum())
         if n_mov < 2:
             continue
         p_emp = max(float((same & mov_pairs).sum()) / n_mov, 1.0 / n_mov)
-        p_noise = math.prod(_repeat_chance(v, mov_pairs) for v in values)
+        p_noise = math.prod(_repeat_chance(v, mov_pairs, settings=settings) for v in values)
         p = max(p_emp, p_noise)
         # the channel's runs of repeats while the car moves (a heading or rate that holds its
         # value through steady driving has many)
-        n_runs = sum(b - a + 1 >= FROZEN_MIN_SAMPLES for a, b in _runs(same & mov_pairs))
+        n_runs = sum(b - a + 1 >= settings.frozen_min_samples for a, b in _runs(same & mov_pairs))
         for a, b in _runs(same):
             length = b - a + 1
-            if length < FROZEN_MIN_SAMPLES:
+            if length < settings.frozen_min_samples:
                 continue
             others = n_runs - int(bool(mov_pairs[a:b].all()))  # but this one
-            if name != "position" and (p >= 1.0 or others >= FROZEN_COMMON_RUNS):
-                if not _catches_up(values[0], b, mov_pairs):
+            if name != "position" and (p >= 1.0 or others >= settings.frozen_common_runs):
+                if not _catches_up(values[0], b, mov_pairs, settings=settings):
                     continue
                 why = (f"then jumps by {abs(values[0][b + 1] - values[0][b]):.3g}: it held while the value moved on "
-                       f"(the channel holds a value for {FROZEN_MIN_SAMPLES} samples or more {others} other times "
-                       "while moving)")
-            elif p >= 1.0 or n_mov * p ** (length - 1) >= FROZEN_ALPHA:
+                       f"(the channel holds a value for {settings.frozen_min_samples} samples or more {others} other "
+                       "times while moving)")
+            elif p >= 1.0 or n_mov * p ** (length - 1) >= settings.frozen_alpha:
                 continue
             else:
                 why = f"its noise repeats a value with p = {p:.2g} per sample"
-            if not _moves_during(log, name, a, b, jumps, pose_scale):
+            if not _moves_during(log, name, a, b, jumps, pose_scale, settings=settings):
                 continue
             out.append(Glitch(GlitchKind.FROZEN, float(t[a]), float(t[b]), ",".join(cols),
                               f"{name} holds {', '.join(f'{getattr(log, c)[a]:.6g}' for c in cols)} for {length} "
@@ -490,21 +477,22 @@ def _frozen(log: RunLog, jumps: np.ndarray, pose_scale: float) -> list[Glitch]:
     return out
 
 
-def _spikes(log: RunLog, car: CarDescription, kept_out: np.ndarray) -> list[Glitch]:
+def _spikes(log: RunLog, car: CarDescription, kept_out: np.ndarray, *,
+            settings: GapSettings = SETTINGS) -> list[Glitch]:
     """Speed and gyro spikes (module docstring); ``kept_out``: the samples other glitches
     keep out already (neither judged nor used as neighbours)."""
     t = log.t_s
     dt_all = np.diff(t)
-    cut = np.concatenate([[0], np.cumsum(time_gaps(t) | (dt_all < DUPLICATE_DT_FRACTION * median_dt_s(t)))])
+    cut = np.concatenate([[0], np.cumsum(time_gaps(t) | (dt_all < settings.duplicate_dt_fraction * median_dt_s(t)))])
     if log.speed_mps is not None:
         speed = np.abs(log.speed_mps)
     elif has_pose(log):
-        speed = _pose_speed(log, MOVING_BASELINE_S)
+        speed = _pose_speed(log, settings.moving_baseline_s)
     else:
         speed = np.zeros(len(log))
-    accel = SPIKE_AGILITY * max(car.drive.max_accel_mps2, car.drive.max_brake_mps2)
+    accel = settings.spike_agility * max(car.drive.max_accel_mps2, car.drive.max_brake_mps2)
     wheelbase, limit = car.chassis.wheelbase_m, car.steering.limit_rad
-    steer_rate = SPIKE_AGILITY * car.steering.rate_radps
+    steer_rate = settings.spike_agility * car.steering.rate_radps
     idx = np.flatnonzero(~np.asarray(kept_out, dtype=bool))
     if idx.size < 10:
         return []
@@ -519,15 +507,15 @@ def _spikes(log: RunLog, car: CarDescription, kept_out: np.ndarray) -> list[Glit
         yi = y[idx]
         most = np.full(dt.size, accel) if c == "speed_mps" else \
             accel * math.tan(limit) / wheelbase + fast * steer_rate / (wheelbase * math.cos(limit) ** 2)
-        sigma = _sample_noise(ti, yi, ok)
+        sigma = _sample_noise(ti, yi, ok, settings=settings)
         d = np.diff(yi)
-        noise = JUMP_Z * math.sqrt(2.0) * sigma  # of a step: two samples' noise
+        noise = settings.jump_z * math.sqrt(2.0) * sigma  # of a step: two samples' noise
         big = np.flatnonzero(ok & (np.abs(d) > most * dt + noise))
         i = 0
         while i + 1 < big.size:
             a, b = int(big[i]), int(big[i + 1])
             net = yi[b + 1] - yi[a]
-            if (b - a <= SPIKE_MAX_SAMPLES and ok[a:b + 1].all() and np.sign(d[a]) == -np.sign(d[b])
+            if (b - a <= settings.spike_max_samples and ok[a:b + 1].all() and np.sign(d[a]) == -np.sign(d[b])
                     and abs(net) <= float(most[a:b + 1].max()) * (ti[b + 1] - ti[a]) + noise):
                 values = ", ".join(f"{v:+.3g}" for v in yi[a + 1:b + 1][:4]) + (" ..." if b - a > 4 else "")
                 out.append(Glitch(GlitchKind.SPIKE, float(ti[a]), float(ti[b]), c,
@@ -540,7 +528,7 @@ def _spikes(log: RunLog, car: CarDescription, kept_out: np.ndarray) -> list[Glit
     return out
 
 
-def _sample_noise(t: np.ndarray, y: np.ndarray, ok: np.ndarray) -> float:
+def _sample_noise(t: np.ndarray, y: np.ndarray, ok: np.ndarray, *, settings: GapSettings = SETTINGS) -> float:
     """One sample's noise in ``y`` (robust), from each sample's distance to the line through
     its neighbours (whose variance is 1.5 sigma^2 at regular stamps); floored at the CSV
     resolution."""
@@ -550,40 +538,41 @@ def _sample_noise(t: np.ndarray, y: np.ndarray, ok: np.ndarray) -> float:
         r = y[1:-1] - (y[:-2] * d2 + y[2:] * d1) / (d1 + d2)
     r = r[both & np.isfinite(r)]
     if r.size < 10:
-        return RESOLUTION
-    return max(_robust(r)[1] / math.sqrt(1.5), RESOLUTION)
+        return settings.resolution
+    return max(_robust(r)[1] / math.sqrt(1.5), settings.resolution)
 
 
-def _moving_without(log: RunLog, channel: str) -> np.ndarray:
+def _moving_without(log: RunLog, channel: str, *, settings: GapSettings = SETTINGS) -> np.ndarray:
     """Per-sample moving evidence that does not come from ``channel`` (all True if none)."""
     if channel != "speed_mps" and log.speed_mps is not None:
-        return np.abs(log.speed_mps) >= MOVING_MPS
+        return np.abs(log.speed_mps) >= settings.moving_mps
     if channel not in ("position", "yaw") and has_pose(log):
-        return _pose_speed(log, MOVING_BASELINE_S) >= MOVING_MPS
+        return _pose_speed(log, settings.moving_baseline_s) >= settings.moving_mps
     if channel == "speed_mps":
-        return np.abs(log.speed_mps) >= MOVING_MPS
+        return np.abs(log.speed_mps) >= settings.moving_mps
     return np.ones(len(log), dtype=bool)
 
 
-def _moves_during(log: RunLog, channel: str, a: int, b: int, jumps: np.ndarray, pose_scale: float) -> bool:
+def _moves_during(log: RunLog, channel: str, a: int, b: int, jumps: np.ndarray, pose_scale: float, *,
+                  settings: GapSettings = SETTINGS) -> bool:
     """Whether the car moves over samples a .. b by evidence other than ``channel`` itself:
     the speed column; a frozen speed's own non-zero value (it says the car moves); the pose's
-    displacement, when it exceeds ``MOVING_MPS`` times the duration plus ``JUMP_Z`` times the
-    pose's step noise and no jump lies within ``MOVING_BASELINE_S / 2`` of the run."""
+    displacement, when it exceeds ``settings.moving_mps`` times the duration plus ``settings.jump_z`` times the
+    pose's step noise and no jump lies within ``settings.moving_baseline_s / 2`` of the run."""
     if channel != "speed_mps" and log.speed_mps is not None:
-        return float(np.median(np.abs(log.speed_mps[a:b + 1]))) >= MOVING_MPS
-    if channel == "speed_mps" and abs(float(log.speed_mps[a])) >= MOVING_MPS:
+        return float(np.median(np.abs(log.speed_mps[a:b + 1]))) >= settings.moving_mps
+    if channel == "speed_mps" and abs(float(log.speed_mps[a])) >= settings.moving_mps:
         return True
     if channel not in ("position", "yaw") and has_pose(log):
         t = log.t_s
-        near = slice(int(np.searchsorted(t, t[a] - 0.5 * MOVING_BASELINE_S)),
-                     int(np.searchsorted(t, t[b] + 0.5 * MOVING_BASELINE_S)))
+        near = slice(int(np.searchsorted(t, t[a] - 0.5 * settings.moving_baseline_s)),
+                     int(np.searchsorted(t, t[b] + 0.5 * settings.moving_baseline_s)))
         if jumps[near].any() or not math.isfinite(pose_scale):
             return False  # a jumping pose is no evidence of motion
         d = math.hypot(float(log.x_m[b] - log.x_m[a]), float(log.y_m[b] - log.y_m[a]))
-        return d >= MOVING_MPS * float(t[b] - t[a]) + JUMP_Z * pose_scale
+        return d >= settings.moving_mps * float(t[b] - t[a]) + settings.jump_z * pose_scale
     return False
 
 
 __all__ = ["Glitch", "GlitchKind", "find_glitches", "glitch_mask", "time_gaps", "median_dt_s", "moving",
-           "has_pose", "GAP_FACTOR", "GAP_QUANTILE", "DUPLICATE_DT_FRACTION", "JUMP_Z", "FROZEN_ALPHA"]
+           "has_pose", "GAP_FACTOR", "GAP_QUANTILE",]

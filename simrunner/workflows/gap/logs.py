@@ -10,8 +10,8 @@ A measured log is a :class:`simrunner.telemetry.log.RunLog` (read with
 and at least one way to see the car move: the pose (``x_m, y_m`` of the rear-axle midpoint
 in the world frame, ``yaw_rad`` counter-clockwise from +x, any wrapping) or a speed sensor
 (``speed_mps``, signed, along the car's x: an encoder). A gyro (``yaw_rate_radps``) is used
-when present. :func:`check_measured` also asks for at least :data:`MIN_ROWS` rows over
-:data:`MIN_DURATION_S` and a median sample rate of at least :data:`MIN_RATE_HZ`, and says
+when present. :func:`check_measured` also asks for at least ``settings.min_rows`` rows over
+``settings.min_duration_s`` and a median sample rate of at least ``settings.min_rate_hz``, and says
 what is missing in one ``path:line:`` error.
 
 Which residual signals a log supports follows from its columns
@@ -34,20 +34,12 @@ import numpy as np
 
 from simrunner.telemetry.log import LogError, RunLog
 from simrunner.workflows.gap.glitches import has_pose, time_gaps
-from simrunner.workflows.gap.settings import SETTINGS
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 
 REQUIRED_COLUMNS = ("t_s", "speed_cmd_mps", "steer_cmd_rad")
 POSE_COLUMNS = ("x_m", "y_m", "yaw_rad")
 # every state column a measured log may carry (a synthetic log has these and ``coast``)
 MEASURED_COLUMNS = ("t_s", "x_m", "y_m", "yaw_rad", "speed_mps", "speed_cmd_mps", "steer_cmd_rad")
-MIN_ROWS = SETTINGS.min_rows
-MIN_DURATION_S = SETTINGS.min_duration_s
-MIN_RATE_HZ = SETTINGS.min_rate_hz
-SMOOTH_S = SETTINGS.smooth_s
-AT_REST_Z = SETTINGS.at_rest_z
-MIN_SPEED_FOR_STEER_MPS = SETTINGS.min_speed_for_steer_mps
-
-
 def is_duty_log(log: RunLog) -> bool:
     """The log's motor command is a PWM duty: ``duty_cmd``, or ``duty_left`` and ``duty_right``."""
     return log.duty_cmd is not None or (log.duty_left is not None and log.duty_right is not None)
@@ -79,12 +71,12 @@ def duty_commands(log: RunLog) -> RunLog:
     return dataclasses.replace(log, speed_cmd_mps=np.asarray(cmd, dtype=float))
 
 
-def check_measured(log: RunLog, pooled: bool = False) -> RunLog:
+def check_measured(log: RunLog, pooled: bool = False, *, settings: GapSettings = SETTINGS) -> RunLog:
     """``log`` if the gap workflow can use it (see the module docstring), else
     :class:`simrunner.telemetry.log.LogError` (``path:line: what was expected``); a duty log
     (:func:`is_duty_log`) comes back with its duty as the command (:func:`duty_commands`). ``pooled``: one
     of several runs of a data set, which may be as short as one replay window
-    (``SETTINGS.min_run_rows``, ``min_run_s``; the data set as a whole needs three windows)."""
+    (``settings.min_run_rows``, ``min_run_s``; the data set as a whole needs three windows)."""
     if is_duty_log(log):
         log = duty_commands(log)
     log.require(*REQUIRED_COLUMNS)
@@ -93,22 +85,22 @@ def check_measured(log: RunLog, pooled: bool = False) -> RunLog:
         raise LogError(log.source, 1, f"expected a pose ({', '.join(POSE_COLUMNS)}) or a speed sensor (speed_mps) "
                                       f"(missing: {', '.join(missing)}, speed_mps)")
     if pooled:
-        log.require(*REQUIRED_COLUMNS, min_rows=SETTINGS.min_run_rows, min_duration_s=SETTINGS.min_run_s)
+        log.require(*REQUIRED_COLUMNS, min_rows=settings.min_run_rows, min_duration_s=settings.min_run_s)
     else:
-        log.require(*REQUIRED_COLUMNS, min_rows=MIN_ROWS, min_duration_s=MIN_DURATION_S)
+        log.require(*REQUIRED_COLUMNS, min_rows=settings.min_rows, min_duration_s=settings.min_duration_s)
     step = float(np.median(np.diff(log.t_s)))
     rate = 1.0 / step
-    if rate < MIN_RATE_HZ * (1.0 - 1e-6):
-        raise LogError(log.source, 0, f"expected a median sample rate of at least {MIN_RATE_HZ:g} Hz "
-                                      f"(got {rate:.3g} Hz){_stamp_unit_hint(step)}")
+    if rate < settings.min_rate_hz * (1.0 - 1e-6):
+        raise LogError(log.source, 0, f"expected a median sample rate of at least {settings.min_rate_hz:g} Hz "
+                                      f"(got {rate:.3g} Hz){_stamp_unit_hint(step, settings=settings)}")
     return log
 
 
-def _stamp_unit_hint(step: float) -> str:
+def _stamp_unit_hint(step: float, *, settings: GapSettings = SETTINGS) -> str:
     """For a median time step that would be a plausible logging rate (10-1000 Hz) in ms, us
     or ns: the mapping that reads such stamps (docs/telemetry.md), else ''."""
     for unit, factor in (("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)):
-        if MIN_RATE_HZ <= 1.0 / (step * factor) <= 1000.0:
+        if settings.min_rate_hz <= 1.0 / (step * factor) <= 1000.0:
             return (f"; a median step of {step:.6g} looks like stamps in {unit}: read them with "
                     f"--column 't_s={{column = \"YOUR_TIME_COLUMN\", unit = \"{unit}\"}}'")
     return ""
@@ -116,7 +108,7 @@ def _stamp_unit_hint(step: float) -> str:
 
 @dataclass(frozen=True)
 class Derived:
-    """Smoothed states of a log (Savitzky-Golay, ``SMOOTH_S`` window), all shape (N,), NaN
+    """Smoothed states of a log (Savitzky-Golay, ``settings.smooth_s`` window), all shape (N,), NaN
     where the log cannot give them (no pose: ``x_m``, ``y_m``, ``yaw_rad``; no pose and no
     gyro: ``yaw_rate_radps``) and at excluded samples.
 
@@ -180,7 +172,7 @@ def speed_estimate(log: RunLog) -> np.ndarray:
 
 
 def derive(log: RunLog, wheelbase_m: float, steer_limit_rad: float = math.inf, *,
-           exclude: np.ndarray | None = None) -> Derived:
+           exclude: np.ndarray | None = None, settings: GapSettings = SETTINGS) -> Derived:
     """Smoothed states and derivatives; see :class:`Derived`.
 
     The log is smoothed piece by piece (:func:`pieces`): nothing is smoothed across a time
@@ -190,18 +182,18 @@ def derive(log: RunLog, wheelbase_m: float, steer_limit_rad: float = math.inf, *
     n = len(log)
     out = {k: np.full(n, np.nan) for k in ("x_m", "y_m", "yaw_rad", "speed_mps", "yaw_rate_radps", "accel_mps2")}
     for a, b in pieces(log, exclude):
-        for k, v in _derive_piece(log, a, b).items():
+        for k, v in _derive_piece(log, a, b, settings).items():
             out[k][a:b] = v
     speed, yaw_rate = out["speed_mps"], out["yaw_rate_radps"]
     with np.errstate(divide="ignore", invalid="ignore"):
         steer = np.arctan(wheelbase_m * yaw_rate / speed)
-    fallback = ~(np.abs(speed) >= MIN_SPEED_FOR_STEER_MPS) | ~np.isfinite(steer)
+    fallback = ~(np.abs(speed) >= settings.min_speed_for_steer_mps) | ~np.isfinite(steer)
     steer = np.where(fallback, log.steer_cmd_rad, steer)
     steer = np.clip(steer, -steer_limit_rad, steer_limit_rad)
     if exclude is not None:
         steer = np.where(np.asarray(exclude, dtype=bool), np.nan, steer)
     return Derived(out["x_m"], out["y_m"], out["yaw_rad"], speed, yaw_rate, out["accel_mps2"], steer,
-                   at_rest(log, out, exclude))
+                   at_rest(log, out, exclude, settings=settings))
 
 
 def rms_finite(v: np.ndarray) -> float:
@@ -210,11 +202,12 @@ def rms_finite(v: np.ndarray) -> float:
     return float(np.sqrt(np.mean(v * v))) if v.size else math.nan
 
 
-def at_rest(log: RunLog, smoothed: dict[str, np.ndarray], exclude: np.ndarray | None = None) -> np.ndarray:
-    """``(N,) bool``: the car stands still at the sample. Over :data:`SMOOTH_S` either side
+def at_rest(log: RunLog, smoothed: dict[str, np.ndarray], exclude: np.ndarray | None = None, *,
+            settings: GapSettings = SETTINGS) -> np.ndarray:
+    """``(N,) bool``: the car stands still at the sample. Over ``settings.smooth_s`` either side
     (within the sample's piece, :func:`pieces`; at least 3 readings), the speed readings'
     mean (a speed sensor; without one, the slope of a straight line through each of the
-    pose's x and y against time) lies within :data:`AT_REST_Z` of its standard errors of
+    pose's x and y against time) lies within ``settings.at_rest_z`` of its standard errors of
     zero: the readings cannot tell the car from one standing still. The noise sigma is the
     RMS of the readings about ``smoothed`` (:func:`derive`'s states: a little below the true
     sigma, the smoother follows part of the noise)."""
@@ -231,8 +224,8 @@ def at_rest(log: RunLog, smoothed: dict[str, np.ndarray], exclude: np.ndarray | 
         return out
     for a, b in pieces(log, exclude):
         tt = t[a:b]
-        lo = np.searchsorted(tt, tt - SMOOTH_S - 1e-9, side="left")
-        hi = np.searchsorted(tt, tt + SMOOTH_S + 1e-9, side="right")
+        lo = np.searchsorted(tt, tt - settings.smooth_s - 1e-9, side="left")
+        hi = np.searchsorted(tt, tt + settings.smooth_s + 1e-9, side="right")
         m = hi - lo
         if log.speed_mps is not None:  # the finite readings' mean
             v = log.speed_mps[a:b]
@@ -241,7 +234,7 @@ def at_rest(log: RunLog, smoothed: dict[str, np.ndarray], exclude: np.ndarray | 
             k = np.concatenate([[0], np.cumsum(finite)])
             m = k[hi] - k[lo]
             mean = (c[hi] - c[lo]) / np.maximum(m, 1)
-            out[a:b] = (m >= 3) & (np.abs(mean) <= AT_REST_Z * sigma / np.sqrt(np.maximum(m, 1)))
+            out[a:b] = (m >= 3) & (np.abs(mean) <= settings.at_rest_z * sigma / np.sqrt(np.maximum(m, 1)))
             continue
         xs, ys = log.x_m[a:b], log.y_m[a:b]
         for i in np.flatnonzero(m >= 3):
@@ -249,12 +242,12 @@ def at_rest(log: RunLog, smoothed: dict[str, np.ndarray], exclude: np.ndarray | 
             sxx = float(np.sum((dt - dt.mean()) ** 2))
             if sxx <= 0.0:
                 continue
-            limit = AT_REST_Z * sigma / math.sqrt(sxx)  # the slope's standard error times AT_REST_Z
+            limit = settings.at_rest_z * sigma / math.sqrt(sxx)  # the slope's standard error times settings.at_rest_z
             out[a + i] = all(abs(float(np.dot(dt - dt.mean(), p[lo[i]:hi[i]]))) / sxx <= limit for p in (xs, ys))
     return out
 
 
-def _derive_piece(log: RunLog, a: int, b: int) -> dict[str, np.ndarray]:
+def _derive_piece(log: RunLog, a: int, b: int, settings: GapSettings) -> dict[str, np.ndarray]:
     """Smoothed states of samples a .. b - 1 (one piece: no gap, nothing excluded)."""
     m = b - a
     t = log.t_s[a:b]
@@ -267,7 +260,7 @@ def _derive_piece(log: RunLog, a: int, b: int) -> dict[str, np.ndarray]:
         if log.yaw_rate_radps is not None:
             raw["yaw_rate_radps"] = log.yaw_rate_radps[a:b]
         return raw
-    sg = _Smoother(t)
+    sg = _Smoother(t, settings=settings)
     on_grid, back = sg.on_grid, sg.back
     out: dict[str, np.ndarray] = {}
     if has_pose(log):
@@ -290,13 +283,13 @@ class _Smoother:
     """The Savitzky-Golay smoothing of one piece with stamps ``t`` (at least 3): it assumes a
     uniform grid, so values are resampled to one, filtered, and sampled back."""
 
-    def __init__(self, t: np.ndarray, win: int | None = None):
+    def __init__(self, t: np.ndarray, win: int | None = None, *, settings: GapSettings = SETTINGS):
         m = len(t)
         self.t = t
         self.grid = np.linspace(t[0], t[-1], m)
         self.step = self.grid[1] - self.grid[0]
         if win is None:
-            win = smoothing_window(t)
+            win = smoothing_window(t, settings=settings)
         self.win = min(win, m if m % 2 else m - 1)
         self.order = min(2, self.win - 1)
 
@@ -314,12 +307,12 @@ class _Smoother:
         return np.interp(self.t, self.grid, g)
 
 
-def smoothing_window(t_s: np.ndarray) -> int:
+def smoothing_window(t_s: np.ndarray, *, settings: GapSettings = SETTINGS) -> int:
     """Samples in the smoothing window of :func:`derive` for one piece with stamps ``t_s``
-    (odd, at least 5; about :data:`SMOOTH_S` at the piece's mean rate; at most the piece)."""
+    (odd, at least 5; about ``settings.smooth_s`` at the piece's mean rate; at most the piece)."""
     m = len(t_s)
     step = (t_s[-1] - t_s[0]) / (m - 1)
-    win = max(5, int(round(SMOOTH_S / step)) | 1)
+    win = max(5, int(round(settings.smooth_s / step)) | 1)
     return min(win, m if m % 2 else m - 1)
 
 
@@ -333,12 +326,12 @@ def _pose_states(sg: _Smoother, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.nd
 
 
 def pose_rates(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.ndarray,
-               window: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+               window: int | None = None, *, settings: GapSettings = SETTINGS) -> tuple[np.ndarray, np.ndarray]:
     """``(speed_mps, yaw_rate_radps)`` that :func:`derive` takes from a pose ``x_m, y_m,
     yaw_rad`` at stamps ``t_s`` (one piece, no gap): the same smoothing and derivatives. The
     replay puts its predicted pose through this where the log's speed or yaw rate comes from
     its pose, so that the prediction is compared with what the pose shows (the smoothing
-    rounds a step in yaw rate over ``SMOOTH_S``; compared unsmoothed, that rounding looks
+    rounds a step in yaw rate over ``settings.smooth_s``; compared unsmoothed, that rounding looks
     like a slower servo or a latency). ``window``: samples in the smoothing window (that of
     the log piece the samples come from, :func:`smoothing_window`; default: from ``t_s``).
     Fewer than 3 samples: NaN."""
@@ -346,11 +339,10 @@ def pose_rates(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.nd
     if len(t_s) < 3:
         nan = np.full(len(t_s), np.nan)
         return nan, nan.copy()
-    sg = _Smoother(t_s, window)
+    sg = _Smoother(t_s, window, settings=settings)
     pose = _pose_states(sg, np.asarray(x_m, float), np.asarray(y_m, float), np.asarray(yaw_rad, float))
     return sg.back(pose["v_grid"]), pose["yaw_rate_radps"]
 
 
 __all__ = ["Derived", "at_rest", "check_measured", "derive", "pieces", "pose_rates", "rms_finite", "smoothing_window",
-           "speed_estimate", "sample_dt_s", "MEASURED_COLUMNS", "REQUIRED_COLUMNS", "POSE_COLUMNS", "MIN_ROWS",
-           "MIN_DURATION_S", "MIN_RATE_HZ", "SMOOTH_S", "AT_REST_Z"]
+           "speed_estimate", "sample_dt_s", "MEASURED_COLUMNS", "REQUIRED_COLUMNS", "POSE_COLUMNS",]

@@ -1,18 +1,18 @@
 """Driving regimes of a log and residual statistics per signal and regime.
 
 Regimes (boolean masks, shape (N,); a sample can be in one longitudinal and one lateral
-regime; samples with ``|speed| < MOVING_MPS`` are in neither):
+regime; samples with ``|speed| < settings.moving_mps`` are in neither):
 
-    accelerating   smoothed acceleration > ACCEL_MPS2
-    braking        acceleration < -ACCEL_MPS2 while drive is commanded (|speed_cmd| >= COAST_CMD_MPS)
+    accelerating   smoothed acceleration > settings.accel_mps2
+    braking        acceleration < -settings.accel_mps2 while drive is commanded (|speed_cmd| >= settings.coast_cmd_mps)
     coasting       drive off (the log's ``coast`` column) or no drive commanded
-                   (|speed_cmd| < COAST_CMD_MPS), while moving
+                   (|speed_cmd| < settings.coast_cmd_mps), while moving
     steady         moving, none of the three above
-    straight       |steer_cmd| < STRAIGHT_RAD
-    left, right    steer_cmd >= STRAIGHT_RAD / <= -STRAIGHT_RAD
+    straight       |steer_cmd| < settings.straight_rad
+    left, right    steer_cmd >= settings.straight_rad / <= -settings.straight_rad
     cornering      left or right
-    reversing      smoothed speed < -MOVING_MPS
-    high_lat_accel |v * yaw_rate| above HIGH_LATERAL_FRACTION of the grip limit mu * g
+    reversing      smoothed speed < -settings.moving_mps
+    high_lat_accel |v * yaw_rate| above settings.high_lateral_fraction of the grip limit mu * g
                    (mu: the car's ``wheels.friction_mu``): the tyres work in their
                    non-linear range, where slip and friction effects show
 
@@ -26,58 +26,58 @@ import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap.logs import Derived, sample_dt_s
-from simrunner.workflows.gap.settings import SETTINGS
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 from vehicle.description import CarDescription
 
-MOVING_MPS = SETTINGS.moving_mps
-ACCEL_MPS2 = SETTINGS.accel_mps2
-COAST_CMD_MPS = SETTINGS.coast_cmd_mps
-STRAIGHT_RAD = SETTINGS.straight_rad
-HIGH_LATERAL_FRACTION = SETTINGS.high_lateral_fraction
 GRAVITY_MPS2 = 9.81  # standard gravity, rounded (CGPM 1901: 9.80665 m/s^2)
 
 REGIMES = ("all", "accelerating", "braking", "coasting", "steady", "straight", "cornering", "left", "right",
            "reversing", "high_lat_accel")
 
 
-def segment(log: RunLog, derived: Derived, car: CarDescription | None = None) -> dict[str, np.ndarray]:
+def segment(log: RunLog, derived: Derived, car: CarDescription | None = None, *,
+            settings: GapSettings = SETTINGS) -> dict[str, np.ndarray]:
     """Boolean masks (N,) for every name in :data:`REGIMES` (see the module docstring);
     ``car`` gives the grip limit (default: the default car)."""
     mu = (car or CarDescription()).wheels.friction_mu
     speed = np.where(np.isfinite(derived.speed_mps), derived.speed_mps, 0.0)
-    moving = np.abs(speed) >= MOVING_MPS
+    moving = np.abs(speed) >= settings.moving_mps
     a = derived.accel_mps2 * np.sign(np.where(speed == 0.0, 1.0, speed))
-    coasting = moving & (log.coasting() | (np.abs(log.speed_cmd_mps) < COAST_CMD_MPS))
-    accelerating = moving & ~coasting & (a > ACCEL_MPS2)
-    braking = moving & ~coasting & (a < -ACCEL_MPS2)
+    coasting = moving & (log.coasting() | (np.abs(log.speed_cmd_mps) < settings.coast_cmd_mps))
+    accelerating = moving & ~coasting & (a > settings.accel_mps2)
+    braking = moving & ~coasting & (a < -settings.accel_mps2)
     steady = moving & ~coasting & ~accelerating & ~braking
-    left = moving & (log.steer_cmd_rad >= STRAIGHT_RAD)
-    right = moving & (log.steer_cmd_rad <= -STRAIGHT_RAD)
+    left = moving & (log.steer_cmd_rad >= settings.straight_rad)
+    right = moving & (log.steer_cmd_rad <= -settings.straight_rad)
     straight = moving & ~left & ~right
     with np.errstate(invalid="ignore"):
-        lateral = np.abs(derived.speed_mps * derived.yaw_rate_radps) > HIGH_LATERAL_FRACTION * mu * GRAVITY_MPS2
+        lateral = (np.abs(derived.speed_mps * derived.yaw_rate_radps)
+                   > settings.high_lateral_fraction * mu * GRAVITY_MPS2)
     return {"all": moving, "accelerating": accelerating, "braking": braking, "coasting": coasting,
             "steady": steady, "straight": straight, "cornering": left | right, "left": left, "right": right,
-            "reversing": speed < -MOVING_MPS, "high_lat_accel": moving & lateral}
+            "reversing": speed < -settings.moving_mps, "high_lat_accel": moving & lateral}
 
 
-def brake_to_reverse(log: RunLog, derived: Derived, max_brake_mps2: float | None = None) -> np.ndarray:
-    """``(N,) bool``: a reverse command (``speed_cmd_mps`` below ``-COAST_CMD_MPS``) while the
-    car still rolls forward, faster than ``MOVING_MPS`` and than it sheds in one sample
-    interval braking at ``max_brake_mps2`` (the car file's; None: ``MOVING_MPS`` only). An
+def brake_to_reverse(log: RunLog, derived: Derived, max_brake_mps2: float | None = None, *,
+                     settings: GapSettings = SETTINGS) -> np.ndarray:
+    """``(N,) bool``: a reverse command (``speed_cmd_mps`` below ``-settings.coast_cmd_mps``) while the
+    car still rolls forward, faster than ``settings.moving_mps`` and than it sheds in one sample
+    interval braking at ``max_brake_mps2`` (the car file's; None: ``settings.moving_mps`` only). An
     ESC that brakes before it reverses shows only there; slower, the car is at rest by the
     next sample and the log cannot show how it braked (DS2's reverse command from rest at a
     smoothed 0.11 m/s is no such event)."""
     speed = np.where(np.isfinite(derived.speed_mps), derived.speed_mps, 0.0)
-    rolling_mps = MOVING_MPS if max_brake_mps2 is None else max(MOVING_MPS, max_brake_mps2 * sample_dt_s(log))
-    return (np.asarray(log.speed_cmd_mps, float) < -COAST_CMD_MPS) & (speed > rolling_mps)
+    rolling_mps = (settings.moving_mps if max_brake_mps2 is None
+                   else max(settings.moving_mps, max_brake_mps2 * sample_dt_s(log)))
+    return (np.asarray(log.speed_cmd_mps, float) < -settings.coast_cmd_mps) & (speed > rolling_mps)
 
 
-def reversal_onsets(log: RunLog, derived: Derived, windows, max_brake_mps2: float | None = None) -> list[bool]:
+def reversal_onsets(log: RunLog, derived: Derived, windows, max_brake_mps2: float | None = None, *,
+                    settings: GapSettings = SETTINGS) -> list[bool]:
     """One flag per window (anything with ``start``/``stop`` sample indices): does it hold
     a :func:`brake_to_reverse` sample? The one test behind the fit/held-out split, the
     screening subset and the cannot-reveal check."""
-    onset = brake_to_reverse(log, derived, max_brake_mps2)
+    onset = brake_to_reverse(log, derived, max_brake_mps2, settings=settings)
     return [bool(onset[w.start:w.stop].any()) for w in windows]
 
 

@@ -1,18 +1,18 @@
 """Windowed replay: re-run the logged commands in the simulator from the measured states.
 
-The log is cut into windows of ``window_s`` (default :data:`WINDOW_S`), never across a time
+The log is cut into windows of ``window_s`` (default ``settings.window_s``), never across a time
 gap or an excluded (glitch) sample. Each window starts the simulator afresh from the
 measured (smoothed) state at its first sample (``set_state(pose, speed, steer, yaw_rate)``,
 see :mod:`simrunner.workflows.gap.logs`), then applies each logged command until the next
 sample time (zero-order hold; a merged log's command messages between two samples,
 ``RunLog.command_steps``, at their own stamps) and records the predicted state at every sample. Before a
-window, the :data:`LEAD_S` seconds of commands that precede it (within the same piece of
+window, the ``settings.lead_s`` seconds of commands that precede it (within the same piece of
 the log) are replayed unrecorded and the car is then moved (``place``) to the measured
 state at the window's start, so latency queues and lags carry the commands in flight
-(a steering play, whose state no measurement gives, also gets the :data:`PLAY_HISTORY_S`
+(a steering play, whose state no measurement gives, also gets the ``settings.play_history_s``
 seconds of steering commands before that).
 A window far from the log's origin (a map frame, a motion-capture hall's corner) is replayed
-with its poses shifted by a whole number of :data:`ORIGIN_STEP_M` towards the simulator's
+with its poses shifted by a whole number of ``settings.origin_step_m`` towards the simulator's
 origin, and shifted back when recorded: the ground is flat and the same everywhere, but
 finite (``physics.GROUND_SIZE_M``), and a car placed past its edge falls. A log within
 half a step of its origin is replayed where it is.
@@ -49,27 +49,14 @@ import numpy as np
 from pieces.pose import Pose2
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap.glitches import has_pose, time_gaps
-from simrunner.workflows.gap.logs import (SMOOTH_S, Derived, pieces, pose_rates, rms_finite, smoothing_window,
+from simrunner.workflows.gap.logs import (Derived, pieces, pose_rates, rms_finite, smoothing_window,
                                           speed_estimate)
-from simrunner.workflows.gap.settings import SETTINGS
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 from vehicle.description import CarDescription
-
-WINDOW_S = SETTINGS.window_s
-HOLDOUT_EVERY = SETTINGS.holdout_every
-WORKFLOW_DT_S = SETTINGS.workflow_dt_s
-QUIET_SHIFT_S = SETTINGS.quiet_shift_s
-QUIET_BEFORE_S = SETTINGS.quiet_before_s
-QUIET_AFTER_S = SETTINGS.quiet_after_s
-NO_DRIVE_CMD_MPS = SETTINGS.coast_cmd_mps
-MOVING_MPS = SETTINGS.moving_mps
-LEAD_S = SETTINGS.lead_s
-PLAY_HISTORY_S = SETTINGS.play_history_s
-ORIGIN_STEP_M = SETTINGS.origin_step_m
 
 FIT_SIGNALS = ("along_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
 REPORT_SIGNALS = ("position_m", "yaw_rad", "speed_mps", "yaw_rate_radps")
 POSE_SIGNALS = ("along_m", "cross_m", "yaw_rad")
-EXCLUDE_MARGIN_S = 0.5 * SMOOTH_S  # windows keep this far from an excluded sample (smoothing reach)
 
 
 def signals_of(log: RunLog) -> tuple[str, ...]:
@@ -106,13 +93,15 @@ class Window:
     slot: int = 0
 
 
-def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | None = None) -> list[Window]:
-    """Consecutive windows of about ``window_s`` covering the usable parts of the log.
+def make_windows(log: RunLog, window_s: float | None = None, exclude: np.ndarray | None = None, *,
+                 settings: GapSettings = SETTINGS) -> list[Window]:
+    """Consecutive windows of about ``window_s`` (default: ``settings.window_s``) covering the
+    usable parts of the log.
 
     The log is first cut into pieces (:func:`simrunner.workflows.gap.logs.pieces`) at every
     time gap and around every ``exclude``-d sample (``(N,) bool``, e.g.
     :func:`simrunner.workflows.gap.glitches.glitch_mask`; samples within
-    :data:`EXCLUDE_MARGIN_S` of one are left out too, as the smoothing reaches that far);
+    half ``settings.smooth_s`` of one are left out too, as the smoothing reaches that far);
     pieces shorter than half a window are dropped. So no window spans a gap or holds an
     excluded sample, and a log with gaps gives fewer windows; a log that passed
     ``check_measured`` never makes this raise (it may give no window at all).
@@ -123,12 +112,12 @@ def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | 
     touches, and every window away from it is the same with and without it (laid one after
     the other, the windows after a dropped second started up to a window earlier, and a
     hidden effect living in two windows 55 s later moved the answer; bench/results/gap-history.md). Each
-    boundary is moved (by up to :data:`QUIET_SHIFT_S`, at most a quarter window) from its
+    boundary is moved (by up to ``settings.quiet_shift_s``, at most a quarter window) from its
     grid time to a quiet sample: the one with the least command change in
-    ``[t - QUIET_BEFORE_S, t + QUIET_AFTER_S]`` (ties: nearest to the regular grid). A window
+    ``[t - settings.quiet_before_s, t + settings.quiet_after_s]`` (ties: nearest to the regular grid). A window
     that starts during a step or just after it would start from smoothed states that blur
     the step; quiet starts avoid that. A sample where the car rolls with the drive off
-    (coasting, or ``speed_cmd`` ~ 0 while moving) in ``[t, t + QUIET_AFTER_S]`` is avoided
+    (coasting, or ``speed_cmd`` ~ 0 while moving) in ``[t, t + settings.quiet_after_s]`` is avoided
     above all: no speed loop would correct the noise in the start speed there, and the error
     would grow through the window. So is a sample between a reverse command given while the
     car rolls forward and the car's reversing (:func:`_esc_reversals`): an ESC that brakes
@@ -138,28 +127,30 @@ def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | 
     The last window of a piece is merged into its neighbour
     when shorter than half a window.
     """
+    window_s = settings.window_s if window_s is None else window_s
     t = log.t_s
     n = len(log)
     if n < 2:
         return []
-    shift = min(QUIET_SHIFT_S, 0.25 * window_s)
+    shift = min(settings.quiet_shift_s, 0.25 * window_s)
     steps = np.abs(np.diff(log.speed_cmd_mps)) / 1.0 + np.abs(np.diff(log.steer_cmd_rad)) / 0.1
     csum = np.concatenate([[0.0], np.cumsum(steps)])  # csum[i] = change before sample i
     # rolling with the drive off (coasting or braking to rest): no speed loop corrects the
     # start state there, so a noisy start speed would persist through the window
-    drive_off = log.coasting() | (np.abs(log.speed_cmd_mps) < NO_DRIVE_CMD_MPS)
+    drive_off = log.coasting() | (np.abs(log.speed_cmd_mps) < settings.coast_cmd_mps)
     speed = speed_estimate(log)
-    free = (drive_off & (np.abs(speed) >= MOVING_MPS)) | _esc_reversals(log.speed_cmd_mps, speed)
+    free = ((drive_off & (np.abs(speed) >= settings.moving_mps))
+            | _esc_reversals(log.speed_cmd_mps, speed, settings=settings))
     fsum = np.concatenate([[0], np.cumsum(free)])
 
-    def activity(i: int) -> float:
-        a = int(np.searchsorted(t, t[i] - QUIET_BEFORE_S))
-        b = int(np.searchsorted(t, t[i] + QUIET_AFTER_S))
+    def activity(i: int, *, settings: GapSettings = SETTINGS) -> float:
+        a = int(np.searchsorted(t, t[i] - settings.quiet_before_s))
+        b = int(np.searchsorted(t, t[i] + settings.quiet_after_s))
         b = min(b, n - 1)
         return float(csum[b] - csum[a]) + (1e3 if fsum[b + 1] - fsum[i] else 0.0)
 
     windows: list[Window] = []
-    for a, b in pieces(log, _widen(t, exclude, EXCLUDE_MARGIN_S)):
+    for a, b in pieces(log, _widen(t, exclude, 0.5 * settings.smooth_s)):
         if t[b - 1] - t[a] < 0.5 * window_s:
             continue
         edges, slots = [a], [math.ceil((t[a] + 0.5 * window_s) / window_s) - 1]
@@ -175,7 +166,7 @@ def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | 
             hi = int(np.searchsorted(t, goal + shift))
             cands = range(max(lo, edges[-1] + 1), min(hi, b - 1))
             if len(cands):
-                edges.append(min(cands, key=lambda i: (round(activity(i), 9), abs(t[i] - goal))))
+                edges.append(min(cands, key=lambda i: (round(activity(i, settings=settings), 9), abs(t[i] - goal))))
             else:
                 k = max(int(np.searchsorted(t, goal)), edges[-1] + 1)  # no sample near the goal: the next one
                 if k >= b - 1:
@@ -187,16 +178,16 @@ def make_windows(log: RunLog, window_s: float = WINDOW_S, exclude: np.ndarray | 
     return windows
 
 
-def _esc_reversals(speed_cmd_mps: np.ndarray, speed_mps: np.ndarray) -> np.ndarray:
-    """``(N,) bool``: the samples from a reverse command (``speed_cmd <= -NO_DRIVE_CMD_MPS``)
-    given while the car rolls forward (``speed >= MOVING_MPS``) until the car reverses
-    (``speed <= -MOVING_MPS``) or the command is no longer a reverse one."""
-    reverse = speed_cmd_mps <= -NO_DRIVE_CMD_MPS
+def _esc_reversals(speed_cmd_mps: np.ndarray, speed_mps: np.ndarray, *, settings: GapSettings = SETTINGS) -> np.ndarray:
+    """``(N,) bool``: the samples from a reverse command (``speed_cmd <= -settings.coast_cmd_mps``)
+    given while the car rolls forward (``speed >= settings.moving_mps``) until the car reverses
+    (``speed <= -settings.moving_mps``) or the command is no longer a reverse one."""
+    reverse = speed_cmd_mps <= -settings.coast_cmd_mps
     out = np.zeros(reverse.size, dtype=bool)
-    starts = np.flatnonzero(reverse & ~np.concatenate([[False], reverse[:-1]]) & (speed_mps >= MOVING_MPS))
+    starts = np.flatnonzero(reverse & ~np.concatenate([[False], reverse[:-1]]) & (speed_mps >= settings.moving_mps))
     for k in starts:
         j = k
-        while j < reverse.size and reverse[j] and speed_mps[j] > -MOVING_MPS:
+        while j < reverse.size and reverse[j] and speed_mps[j] > -settings.moving_mps:
             j += 1
         out[k:j] = True
     return out
@@ -216,8 +207,9 @@ def _widen(t: np.ndarray, exclude: np.ndarray | None, margin_s: float) -> np.nda
     return ex | (np.minimum(before, after) <= margin_s)
 
 
-def split_windows(windows: Sequence[Window], every: int = HOLDOUT_EVERY,
-                  strata: Sequence[object] | None = None) -> tuple[list[Window], list[Window]]:
+def split_windows(windows: Sequence[Window], every: int | None = None,
+                  strata: Sequence[object] | None = None, *,
+                  settings: GapSettings = SETTINGS) -> tuple[list[Window], list[Window]]:
     """(fit, held_out), stratified: the windows are grouped by their ``strata`` label
     (default: one group). In the largest group (the first of equal ones), a window is held
     out when its grid slot (:attr:`Window.slot`) is ``every - 1`` modulo ``every``: the
@@ -229,7 +221,9 @@ def split_windows(windows: Sequence[Window], every: int = HOLDOUT_EVERY,
     or braking to rest apart) reaches the held-out set as soon as the log has two of them -
     the plan's last coast - while its first ones stay in the fit; a group of one window
     stays in the fit. If nothing is held out that way (a short log), the split ignores the
-    strata, and if still nothing, the last window is held out."""
+    strata, and if still nothing, the last window is held out. ``every`` default:
+    ``settings.holdout_every``."""
+    every = settings.holdout_every if every is None else every
     labels = list(strata) if strata is not None else [None] * len(windows)
     size: dict[object, int] = {}
     for label in labels:
@@ -245,7 +239,7 @@ def split_windows(windows: Sequence[Window], every: int = HOLDOUT_EVERY,
             out = left[label] % every == 0 and size[label] > 1
         (held if out else fit).append(w)
     if not held and strata is not None:  # a short log: hold out without strata
-        return split_windows(windows, every)
+        return split_windows(windows, every, settings=settings)
     if not held and len(windows) > 1:
         return list(windows[:-1]), [windows[-1]]
     return fit, held
@@ -267,8 +261,8 @@ class Prediction:
 
 
 def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence[Window], *,
-           dt_s: float = WORKFLOW_DT_S, sim_factory: SimFactory = default_sim_factory,
-           lead_s: float | None = None) -> Prediction:
+           dt_s: float = SETTINGS.workflow_dt_s, sim_factory: SimFactory = default_sim_factory,
+           lead_s: float | None = None, settings: GapSettings = SETTINGS) -> Prediction:
     """Replay ``windows`` of ``log`` with a simulator of ``car``; see the module docstring.
 
     Lead-in: a window starting at sample ``i0 > 0`` is preceded by the ``lead_s`` seconds
@@ -276,10 +270,10 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
     recorded; at ``i0`` the car is moved to the measured state with ``sim.place`` (the
     physical state only), so commands still in flight (latency, lags, rate limits) reach
     the window as they would on the car instead of starting settled. ``lead_s=None``:
-    :data:`LEAD_S`; 0 starts every window settled. A car with a steering play first gets
-    the :data:`PLAY_HISTORY_S` seconds of steering commands before the lead-in
+    ``settings.lead_s``; 0 starts every window settled. A car with a steering play first gets
+    the ``settings.play_history_s`` seconds of steering commands before the lead-in
     (``prime_steering``): which side of its band the play rests on is in no measured state."""
-    lead_s = LEAD_S if lead_s is None else float(lead_s)
+    lead_s = settings.lead_s if lead_s is None else float(lead_s)
     n = len(log)
     out = np.full((5, n), np.nan)
     sim = sim_factory(car, dt_s)
@@ -296,7 +290,7 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         smooth_pieces = pieces(log, ~np.isfinite(derived.x_m))
         smooth_starts = np.array([lo for lo, _ in smooth_pieces])
 
-    shift = [0.0, 0.0]  # the current window's poses minus the simulator's (ORIGIN_STEP_M)
+    shift = [0.0, 0.0]  # the current window's poses minus the simulator's (settings.origin_step_m)
 
     def state(i: int):
         v, steer, r = float(derived.speed_mps[i]), float(derived.steer_rad[i]), float(derived.yaw_rate_radps[i])
@@ -364,12 +358,12 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         j0 = max(j0, piece_start)  # the lead-in stays on this side of a time gap
         j0 = next(j for j in range(j0, i0 + 1) if usable(j))
         if pose:
-            shift[:] = [ORIGIN_STEP_M * round(float(derived.x_m[j0]) / ORIGIN_STEP_M),
-                        ORIGIN_STEP_M * round(float(derived.y_m[j0]) / ORIGIN_STEP_M)]
+            shift[:] = [settings.origin_step_m * round(float(derived.x_m[j0]) / settings.origin_step_m),
+                        settings.origin_step_m * round(float(derived.y_m[j0]) / settings.origin_step_m)]
         sim.set_coast(bool(coast[j0]))
         sim.set_state(*state(j0))
         if prime and lead_s > 0.0:
-            h = int(np.searchsorted(t, t[j0] - PLAY_HISTORY_S - 1e-9))  # time gaps: commands held
+            h = int(np.searchsorted(t, t[j0] - settings.play_history_s - 1e-9))  # time gaps: commands held
             if h < j0 and steps is None:
                 sim.prime_steering(t[h:j0 + 1], log.steer_cmd_rad[h:j0])
             elif h < j0:  # a merged log: the command messages between the rows too
@@ -388,14 +382,14 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         # pose before the window (the car's history), and the prediction run on past its end
         k = int(np.searchsorted(smooth_starts, i0, side="right")) - 1
         lo, hi = smooth_pieces[k]
-        win = smoothing_window(t[lo:hi])
+        win = smoothing_window(t[lo:hi], settings=settings)
         a, stop2 = max(lo, i0 - win // 2), min(hi, w.stop + win // 2)
         kept = out[:, w.stop:stop2].copy()
         run(i0, stop2, record=True)
         xs = np.concatenate([log.x_m[a:i0], out[0, i0:stop2]])
         ys = np.concatenate([log.y_m[a:i0], out[1, i0:stop2]])
         yaws = np.concatenate([log.yaw_rad[a:i0], out[2, i0:stop2]])  # pose_rates unwraps
-        speed, rate = pose_rates(t[a:stop2], xs, ys, yaws, window=win)
+        speed, rate = pose_rates(t[a:stop2], xs, ys, yaws, window=win, settings=settings)
         out[:, w.stop:stop2] = kept
         if log.speed_mps is None:
             out[3, i0:w.stop] = speed[i0 - a:w.stop - a]

@@ -24,23 +24,18 @@ import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.chain import ALIKE_Z, HELD_IMPROVEMENT_MIN, MAX_EFFECTS, Chain
+from simrunner.workflows.gap.chain import Chain
 from simrunner.workflows.gap.fit import CANDIDATES, FitResult
 from simrunner.workflows.gap.glitches import Glitch
 from simrunner.workflows.gap.logs import Derived
 from simrunner.workflows.gap.replay import Prediction, Window, noise_rms
-from simrunner.workflows.gap.settings import SETTINGS
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 from trackgen.outdir import clean_stale, make_temp, replace_folder
 from vehicle.description import CarDescription
 
 FORMAT = "nxpcup-gap/2"
-TOP_SPEED_MARGIN = SETTINGS.top_speed_margin
-GLITCHES_LISTED = SETTINGS.glitches_listed
 # a log whose stamps start this far from 0 (epoch or ROS time) gets its glitch times also as
 # seconds into the log in residuals.txt
-EPOCH_LIKE_S = SETTINGS.epoch_like_s
-
-
 @dataclass(frozen=True)
 class LogPart:
     """One log of the data set as the workflow used it."""
@@ -60,7 +55,8 @@ class LogPart:
 
 @dataclass
 class GapResult:
-    """Outcome of :func:`simrunner.workflows.gap.workflow.run_gap`. ``effects``: the kept effects in the order chosen (``[]``:
+    """Outcome of :func:`simrunner.workflows.gap.workflow.run_gap`. ``effects``: the kept effects in
+    the order chosen (``[]``:
     none); ``effect`` the same joined by ``+`` (or ``"none"``); ``parameters`` every kept
     parameter; ``rmse_before``/``rmse_after`` per signal of REPORT_SIGNALS on the held-out
     windows of every log, against the measured logs; ``rmse_smoothed_*`` the same against
@@ -101,6 +97,8 @@ class GapResult:
     parameter_spans: dict[str, tuple[float, float]] = field(default_factory=dict)
     # per log with held-out windows: log, held_windows, gap_before/after, rmse_before/after
     per_log: list[dict] = field(default_factory=list)
+    # the thresholds of the run (the report's wording uses some of them)
+    gap_settings: GapSettings = SETTINGS
 
     @property
     def effect(self) -> str:
@@ -160,7 +158,8 @@ class GapResult:
     def signals_worse(self) -> dict[str, float]:
         """:func:`worse_signals` of the held-out RMSEs when effects were kept (signal ->
         RMSE after / before)."""
-        return worse_signals(self.rmse_before, self.rmse_after) if self.effects else {}
+        return (worse_signals(self.rmse_before, self.rmse_after, self.gap_settings.held_improvement_min)
+                if self.effects else {})
 
     @property
     def held_out_worse(self) -> bool:
@@ -213,7 +212,7 @@ class GapResult:
 
 
 def worse_signals(before: dict[str, float], after: dict[str, float],
-                  held_improvement_min: float = HELD_IMPROVEMENT_MIN) -> dict[str, float]:
+                  held_improvement_min: float = SETTINGS.held_improvement_min) -> dict[str, float]:
     """The signals whose RMSE ``after`` exceeds ``before`` by more than the held-out test's
     noise level (the mean square up by ``held_improvement_min``, the smallest held-out gain
     the chain takes for an effect): ``{signal: after / before}``. The chain keeps effects
@@ -264,6 +263,7 @@ def summary_text(result: GapResult) -> str:
     unexplained), then the screening of the first step and the regime tables."""
     from simrunner.workflows.gap.regimes import format_stats
 
+    settings = result.gap_settings
     chain = result.chain
     lines = [f"effects found: {', '.join(result.effects) if result.effects else 'none'}"]
     if result.parameters:
@@ -279,10 +279,11 @@ def summary_text(result: GapResult) -> str:
         if alike and step.kept is not None and step.kept.effect in result.effects:
             others = " or ".join(alike)
             lines.append(f"  {step.kept.effect} or {others}: these logs cannot tell them apart (step {step.index}: "
-                         f"window by window, within {ALIKE_Z:g} standard errors; treat the name as one of these)")
+                         f"window by window, within {result.gap_settings.alike_z:g} standard errors; "
+                         "treat the name as one of these)")
     fastest = max((float(np.nanmax(np.abs(p.derived.speed_mps))) for p in result.parts
                    if np.isfinite(p.derived.speed_mps).any()), default=0.0)
-    if fastest > TOP_SPEED_MARGIN * result.car.drive.max_speed_mps:
+    if fastest > settings.top_speed_margin * result.car.drive.max_speed_mps:
         lines.append(f"  WARNING: the logs reach {fastest:.3g} m/s, beyond the car file's top speed "
                      f"({result.car.drive.max_speed_mps:g} m/s, car \"{result.car.name}\"): is this the car's "
                      "file (--car CAR.toml)? Every effect is fitted against its numbers")
@@ -307,7 +308,8 @@ def summary_text(result: GapResult) -> str:
         for sw in (sw for sw in chain.swaps if sw.step == step.index):
             lines.append(f"  after step {sw.step}: {sw.out} -> {sw.into} (exchanged, all refitted): fit cost "
                          f"{sw.cost_before:.4g} -> {sw.cost_after:.4g}, held-out gap {sw.held_gap_before:.3g} -> "
-                         f"{sw.held_gap_after:.3g}" + (f"; removed by the check after step {gone[sw.into]}" if sw.into in gone else ""))
+                         f"{sw.held_gap_after:.3g}"
+                         + (f"; removed by the check after step {gone[sw.into]}" if sw.into in gone else ""))
     lines.append(f"  the chain stopped: {chain.stop_reason}")
     screened, fitted = result.settings.get("screen_windows_s"), result.settings.get("fit_windows_s")
     if screened is not None and fitted is not None and screened < fitted:
@@ -358,7 +360,7 @@ def summary_text(result: GapResult) -> str:
                      f"{d['gap_before']:.3g} -> {d['gap_after']:.3g}): one model does not fit all these logs. Were "
                      "they driven with one set-up (speed limit, battery, tyres, floor)? Run them one at a time "
                      "to compare.")
-    if result.leftovers and not result.settings.get("max_effects", MAX_EFFECTS):
+    if result.leftovers and not result.settings.get("max_effects", result.gap_settings.max_effects):
         lines.append("above the sensor noise (the nominal model, all windows; no effect was tried: max effects 0):")
         lines += [f"  {d['text']}" for d in result.leftovers[:8]]
     elif result.leftovers:
@@ -378,13 +380,14 @@ def summary_text(result: GapResult) -> str:
     if result.glitches:
         lines.append(f"glitches kept out of the windows ({len(result.glitches)}):")
         starts = {p.log.source: float(p.log.t_s[0]) for p in result.parts}
-        for src, g in result.glitches[:GLITCHES_LISTED]:
+        for src, g in result.glitches[:settings.glitches_listed]:
             t0 = starts.get(src, 0.0)  # stamps far from 0 (epoch time): also say how far into the log
-            into = f" ({g.t_start_s - t0:.1f} s into the log)" if abs(t0) >= EPOCH_LIKE_S else ""
+            into = f" ({g.t_start_s - t0:.1f} s into the log)" if abs(t0) >= settings.epoch_like_s else ""
             lines.append(f"  {Path(src).name} t = {g.t_start_s:.3f}..{g.t_end_s:.3f} s{into}: {g.kind} "
                          f"({g.column}) {g.detail}")
-        if len(result.glitches) > GLITCHES_LISTED:
-            lines.append(f"  ... and {len(result.glitches) - GLITCHES_LISTED} more (all of them: report.json, \"glitches\")")
+        if len(result.glitches) > settings.glitches_listed:
+            lines.append(f"  ... and {len(result.glitches) - settings.glitches_listed} more "
+                         "(all of them: report.json, \"glitches\")")
     lines += ["", "first step, every candidate screened (one parameter, the others nominal):",
               f"{'effect':<22}{'parameter':<32}{'value':>10}{'improvement':>13}{'delta_BIC':>11}"]
     for r in result.ranking:

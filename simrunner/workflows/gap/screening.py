@@ -11,13 +11,9 @@ import math
 import numpy as np
 
 from simrunner.workflows.gap.fit import Problem
-from simrunner.workflows.gap.settings import SETTINGS
-
-SCREEN_MAX_S = SETTINGS.screen_max_s
 
 # regimes that label a window for the screening subset (simrunner.workflows.gap.regimes)
 SCREEN_REGIMES = ("coasting", "braking", "accelerating", "reversing", "high_lat_accel", "cornering", "straight")
-SCREEN_LABEL_MIN_SHARE = SETTINGS.screen_label_min_share
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0  # screening_problem's even spread of grid slots
 
 
@@ -25,7 +21,7 @@ def window_labels(problem: Problem) -> list[str]:
     """One label per window of ``problem`` (the windows of all segments in turn): the regime of
     :data:`SCREEN_REGIMES` most over-represented in the window against all the problem's
     windows (its share of the window's samples over its share of all windows' samples; it
-    must cover at least :data:`SCREEN_LABEL_MIN_SHARE` of the window), ``"other"`` when none
+    must cover at least ``settings.screen_label_min_share`` of the window), ``"other"`` when none
     does. A window with the rare braking of a log is labelled ``braking``, one of a
     cornering-heavy log's few straights ``straight``."""
     from simrunner.workflows.gap.regimes import segment
@@ -43,7 +39,8 @@ def window_labels(problem: Problem) -> list[str]:
     overall = total / max(count, 1)
     labels = []
     for share in shares:
-        score = np.where((share >= SCREEN_LABEL_MIN_SHARE) & (overall > 0), share / np.maximum(overall, 1e-12), 0.0)
+        score = np.where((share >= problem.settings.screen_label_min_share) & (overall > 0),
+                         share / np.maximum(overall, 1e-12), 0.0)
         labels.append(SCREEN_REGIMES[int(np.argmax(score))] if score.max() > 0.0 else "other")
     return labels
 
@@ -90,7 +87,7 @@ def _finite_max(x) -> float:
     return float(x.max()) if x.size else -math.inf
 
 
-def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
+def screening_problem(problem: Problem, max_s: float | None = None) -> Problem:
     """``problem`` with about ``max_s`` seconds of its windows: with ``k = ceil(total /
     max_s)`` (the seconds of all windows over ``max_s``), the windows whose grid slot
     (:attr:`simrunner.workflows.gap.replay.Window.slot`) falls in the first ``1/k`` of a
@@ -101,7 +98,9 @@ def screening_problem(problem: Problem, max_s: float = SCREEN_MAX_S) -> Problem:
     that a few windows hold (a hard brake, a coast, reversing) stays in the screening and
     the effects it reveals are ranked on it; and the windows of :func:`extreme_windows`
     (the hardest steering each way) and of :func:`reversal_windows` (a reverse command
-    while rolling forward)."""
+    while rolling forward). ``max_s`` default: the problem's ``settings.screen_max_s``."""
+    if max_s is None:
+        max_s = problem.settings.screen_max_s
     total = sum(s.duration_s for s in problem.segments)
     k = max(1, math.ceil(total / max_s)) if max_s > 0 else 1
     if k == 1:

@@ -4,9 +4,10 @@ Each field carries its unit, how its value was derived and, where a script deriv
 script (``GapSettings.describe()`` lists them; docs/gap.md "Thresholds" explains the
 calibration). Fields marked ``shared_logs`` hold a value or back a rule that was shaped by the
 two shared real logs (``../shared/data/real_logs``, DS2 and DS3): other cars' logs may want
-other values. The workflow's modules read their numbers from here (their module-level names
-are these values, so a test may still override one of them there); nothing here changes while
-the workflow runs.
+other values. The workflow passes one ``GapSettings`` down to every function that reads a
+threshold (``run_gap(..., settings=)``; a fit's :class:`~simrunner.workflows.gap.fit.Problem`
+carries it to the worker processes); :data:`SETTINGS` is the default, never changed.
+``simrunner gap --settings FILE.toml`` overrides fields by name (:func:`load_settings`).
 
 Where the calibration script's output is not the value in force, the override and its reason
 are stated at the value (``derived``).
@@ -14,7 +15,10 @@ are stated at the value (``derived``).
 from __future__ import annotations
 
 import dataclasses
+import difflib
+import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 THRESHOLDS_SCRIPT = "python -m simrunner.workflows.gap.thresholds"
 
@@ -180,6 +184,51 @@ class GapSettings:
 
 
 SETTINGS = GapSettings()
-"""The values in force (a constant: never changed while the workflow runs)."""
+"""The values in force by default (a constant: never changed)."""
 
-__all__ = ["GapSettings", "SETTINGS", "THRESHOLDS_SCRIPT"]
+
+def load_settings(path: str | Path, base: GapSettings = SETTINGS) -> GapSettings:
+    """``base`` with the fields a TOML file sets (``name = value`` at the top level, names as
+    :class:`GapSettings`'s), e.g. ``moving_mps = 0.1`` for a slow car. An unknown name, a value
+    of the wrong type or out of its range is a :class:`~simrunner.workflows.gap.GapError`
+    naming the file and line."""
+    from simrunner.workflows.gap import GapError
+    from vehicle.userfiles import read_user_toml
+
+    text, data = read_user_toml(path, "gap settings", GapError)
+    fields = {f.name: f for f in dataclasses.fields(GapSettings)}
+
+    def where(key: str) -> str:
+        for number, line in enumerate(text.splitlines(), 1):
+            if line.split("=", 1)[0].strip().strip("\"'") == key:
+                return f"{path}:{number}"
+        return str(path)
+
+    changes = {}
+    for key, value in data.items():
+        if key not in fields:
+            near = difflib.get_close_matches(key, fields, n=1)
+            hint = f" (did you mean {near[0]}?)" if near else ""
+            raise GapError(f"{where(key)}: unknown gap setting {key!r}{hint}: expected one of the names "
+                           "`python -m simrunner.workflows.gap.settings` lists")
+        default = getattr(base, key)
+        ok = (isinstance(value, int) and not isinstance(value, bool) if isinstance(default, int)
+              else isinstance(value, (int, float)) and not isinstance(value, bool))
+        if not ok or (isinstance(value, float) and math.isnan(value)) or value < 0:
+            kind = "an integer" if isinstance(default, int) else "a number"
+            raise GapError(f"{where(key)}: {key} = {value!r}: expected {kind} >= 0 "
+                           f"({fields[key].metadata['unit']}; default {default!r})")
+        changes[key] = type(default)(value)
+    return dataclasses.replace(base, **changes)
+
+
+def main() -> None:  # pragma: no cover - prints the table
+    for name, value, unit, derived, script, shared in SETTINGS.describe():
+        flag = "  [shaped by the shared logs]" if shared else ""
+        print(f"{name} = {value!r}  # {unit}; {derived}{flag}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
+
+__all__ = ["GapSettings", "SETTINGS", "THRESHOLDS_SCRIPT", "load_settings"]

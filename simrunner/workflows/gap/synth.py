@@ -8,7 +8,7 @@
 * nuisance changes the workflow does not model: mass and tyre friction each scaled by a
   factor uniform in ``1 +- NUISANCE_FRACTION``;
 * a different physics step than the workflow: :data:`SYNTH_DT_S` = 1 ms
-  (the workflow uses ``replay.WORKFLOW_DT_S`` = 5 ms);
+  (the workflow uses ``SETTINGS.workflow_dt_s`` = 5 ms);
 * Gaussian noise on the logged states: position :data:`NOISE_POS_M` (5 mm per axis), yaw
   :data:`NOISE_YAW_RAD` (0.005 rad), speed :data:`NOISE_SPEED_MPS` (0.02 m/s), gyro
   :data:`NOISE_GYRO_RADPS`. Commands are exact (they are what the controller sent).

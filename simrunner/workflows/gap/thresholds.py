@@ -5,8 +5,8 @@ effect-free synthetic logs (:func:`simrunner.workflows.gap.synth.make_measured_l
 ``effect=None``: noise, nuisance mass/friction, 1 ms physics), runs the whole catalogue on
 each (nothing accepted) and prints, for the first chain step's best refitted candidate, its
 ``delta_bic``, fit ``improvement`` and held-out improvement per log, then the thresholds:
-:data:`SAFETY` times the largest value seen, but not below the floors
-(:data:`FLOOR_DELTA_BIC`, :data:`FLOOR_IMPROVEMENT`, :data:`FLOOR_HELD_IMPROVEMENT`). The
+``settings.safety`` times the largest value seen, but not below the floors
+(``settings.floor_delta_bic``, ``settings.floor_improvement``, ``settings.floor_held_improvement``). The
 values in force are :data:`simrunner.workflows.gap.settings.SETTINGS`'s ``delta_bic_min``,
 ``improvement_min`` and ``held_improvement_min``: the printed ones, or an override whose reason
 is stated there, at the value. It also prints how they compare.
@@ -18,15 +18,9 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from simrunner.workflows.gap.settings import SETTINGS
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 
-SAFETY = SETTINGS.safety
-FLOOR_DELTA_BIC = SETTINGS.floor_delta_bic
-FLOOR_IMPROVEMENT = SETTINGS.floor_improvement
-FLOOR_HELD_IMPROVEMENT = SETTINGS.floor_held_improvement
-
-
-def _one(args) -> tuple[float, float, float, str]:
+def _one(args, *, settings: GapSettings = SETTINGS) -> tuple[float, float, float, str]:
     seed, k = args
     from simrunner.workflows.gap.fit import _quiet_worker
     from simrunner.workflows.gap.workflow import run_gap
@@ -34,13 +28,14 @@ def _one(args) -> tuple[float, float, float, str]:
 
     _quiet_worker()
     log, _ = make_measured_log(None, rng=np.random.default_rng([seed, k]))
-    step = run_gap(log, jobs=1, delta_bic_min=np.inf, max_effects=1).chain.steps[0]
+    step = run_gap(log, jobs=1, delta_bic_min=np.inf, max_effects=1, settings=settings).chain.steps[0]
     best = max(step.trials, key=lambda tr: tr.delta_bic)
     held = 1.0 - best.held_gap / step.held_gap_before if step.held_gap_before > 0 else 0.0
     return best.delta_bic, best.improvement, held, best.effect
 
 
-def calibrate_thresholds(n_logs: int = 10, seed: int = 2024, jobs: int = 2) -> dict:
+def calibrate_thresholds(n_logs: int = 10, seed: int = 2024, jobs: int = 2, *,
+                         settings: GapSettings = SETTINGS) -> dict:
     """Run ``n_logs`` effect-free logs; return ``{"delta_bic_min", "improvement_min",
     "held_improvement_min", "observed": [(delta_bic, improvement, held_improvement, effect), ...]}``."""
     with ProcessPoolExecutor(max_workers=jobs) as pool:
@@ -48,8 +43,9 @@ def calibrate_thresholds(n_logs: int = 10, seed: int = 2024, jobs: int = 2) -> d
     d = max(o[0] for o in observed)
     i = max(o[1] for o in observed)
     h = max(o[2] for o in observed)
-    return {"delta_bic_min": max(FLOOR_DELTA_BIC, SAFETY * d), "improvement_min": max(FLOOR_IMPROVEMENT, SAFETY * i),
-            "held_improvement_min": max(FLOOR_HELD_IMPROVEMENT, SAFETY * h), "observed": observed}
+    return {"delta_bic_min": max(settings.floor_delta_bic, settings.safety * d),
+            "improvement_min": max(settings.floor_improvement, settings.safety * i),
+            "held_improvement_min": max(settings.floor_held_improvement, settings.safety * h), "observed": observed}
 
 
 def main(argv: list[str] | None = None) -> None:  # pragma: no cover - developer tool

@@ -34,7 +34,7 @@ of ``sub-step^2 / 12`` (uniform over it) is added to its own.
 
 Derivatives by central differences in the fit's ``[0, 1]``-scaled coordinates (the fit
 ranges of :data:`simrunner.workflows.gap.fit.CANDIDATES`, log-scaled where the fit searches
-in log), with a step of :data:`STEP` (5 % of the range: latencies act in whole control
+in log), with a step of ``settings.uncertainty_step`` (5 % of the range: latencies act in whole control
 sub-steps of 4-5 ms, so a much smaller step would see a staircase). The stencil (the centre,
 ``+-h`` along each parameter and the four corners of each pair: ``1 + 2k + 2k(k-1)``
 replays) is moved inside the range for a parameter near its bound, and each window's
@@ -62,10 +62,8 @@ import numpy as np
 from simrunner.car.effects import control_steps
 from simrunner.workflows.gap.chain import _bounds01, with_parameters
 from simrunner.workflows.gap.fit import CANDIDATES, Problem, _quiet_worker, window_values, window_values_task
-from simrunner.workflows.gap.settings import SETTINGS
 from vehicle.description import CarDescription
 
-STEP = SETTINGS.uncertainty_step
 # ``Effects`` fields that act at whole control sub-steps (simrunner.car.effects): resolved to one
 SUBSTEP_TIMES = ("command_latency_s", "esc_reverse_delay_s")
 
@@ -171,12 +169,15 @@ def covariance_u(grad: np.ndarray, hess: np.ndarray, u: np.ndarray, pinned: list
 
 
 def parameter_uncertainty(problem: Problem, base: CarDescription, names: Sequence[str], values: dict[str, float],
-                          *, jobs: int = 1, step: float = STEP) -> Uncertainty:
+                          *, jobs: int = 1, step: float | None = None) -> Uncertainty:
     """The standard error of each parameter of ``values`` (the ``Effects`` fields of the
     effects ``names``, fitted on ``problem``'s windows with ``base`` as the car): the module
     docstring's jackknife with its two shared biases, and the parameters one window alone
-    pins. ``problem`` needs ``dt_s`` and ``with_step`` (:class:`~simrunner.workflows.gap.fit.Problem`)."""
+    pins. ``problem`` needs ``dt_s`` and ``with_step`` (:class:`~simrunner.workflows.gap.fit.Problem`);
+    ``step`` default: its ``settings.uncertainty_step``."""
     names = list(names)
+    if step is None:
+        step = problem.settings.uncertainty_step
     k = len(names)
     if not k:
         return Uncertainty({})
@@ -204,7 +205,8 @@ def parameter_uncertainty(problem: Problem, base: CarDescription, names: Sequenc
     h_all = hess.sum(axis=0)
     # the others: the cost does not curve along them, or the fit stopped at a bound (a minimum
     # the bound makes, not the cost's curvature)
-    pinned = [i for i in range(k) if h_all[i, i] > 0.0 and not CANDIDATES[names[i]].at_bound(values[fields[i]])]
+    pinned = [i for i in range(k)
+              if h_all[i, i] > 0.0 and not CANDIDATES[names[i]].at_bound(values[fields[i]], problem.settings)]
     cov_u, kept, lone = covariance_u(grad, hess, u, pinned, grad_half)
     if cov_u is not None:
         var = np.maximum(np.diag(cov_u), 0.0) * _dvalue_du(names, u)[kept] ** 2
@@ -215,10 +217,10 @@ def parameter_uncertainty(problem: Problem, base: CarDescription, names: Sequenc
 
 
 def parameter_sigma(problem: Problem, base: CarDescription, names: Sequence[str], values: dict[str, float],
-                    *, jobs: int = 1, step: float = STEP) -> dict[str, float]:
+                    *, jobs: int = 1, step: float | None = None) -> dict[str, float]:
     """:attr:`Uncertainty.sigma` of :func:`parameter_uncertainty` (``{}`` for no parameter)."""
     return parameter_uncertainty(problem, base, names, values, jobs=jobs, step=step).sigma
 
 
-__all__ = ["Uncertainty", "parameter_uncertainty", "parameter_sigma", "covariance_u", "window_values", "STEP",
+__all__ = ["Uncertainty", "parameter_uncertainty", "parameter_sigma", "covariance_u", "window_values",
            "SUBSTEP_TIMES"]

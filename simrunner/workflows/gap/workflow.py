@@ -21,30 +21,25 @@ import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.chain import (HELD_IMPROVEMENT_MIN, MAX_EFFECTS, SCREEN_MAX_S, build_chain,
-                                           screening_problem)
-from simrunner.workflows.gap.fit import (CANDIDATES, DELTA_BIC_MIN, IMPROVEMENT_MIN, ROBUST_WINDOW_FACTOR,
-                                         Problem, Segment, bic, nominal_scales, robust_scale_of, robust_total,
-                                         cost_of, window_costs)
+from simrunner.workflows.gap.chain import build_chain, screening_problem
+from simrunner.workflows.gap.fit import (CANDIDATES, Problem, Segment, bic, nominal_scales, robust_scale_of,
+                                         robust_total, cost_of, window_costs)
 from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import find_glitches, glitch_mask
 from simrunner.workflows.gap.logs import Derived, check_measured, derive, is_duty_log
-from simrunner.workflows.gap.regimes import MOVING_MPS, residual_stats, reversal_onsets, segment
-from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, WINDOW_S, WORKFLOW_DT_S, Prediction,
+from simrunner.workflows.gap.regimes import residual_stats, reversal_onsets, segment
+from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, Prediction,
                                             SimFactory, Window, default_sim_factory, make_windows, noise_rms,
                                             replay, residuals, rmse, signals_of, smoothed_log, split_windows,
                                             window_mask)
 from simrunner.workflows.gap.report import GapResult, LogPart
-from simrunner.workflows.gap.settings import SETTINGS
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 from simrunner.workflows.gap.uncertainty import parameter_uncertainty
 from vehicle.description import CarDescription
 
-LEFTOVER_NOISE_RATIO = SETTINGS.leftover_noise_ratio
-LEFTOVER_MIN_SAMPLES = SETTINGS.leftover_min_samples
-
-
 def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
-                  windows: Sequence[Window], max_brake_mps2: float | None = None) -> list[str]:
+                  windows: Sequence[Window], max_brake_mps2: float | None = None, *,
+                  settings: GapSettings = SETTINGS) -> list[str]:
     """The group of each window for the fit/held-out split (:func:`split_windows`): the
     rarest manoeuvre it holds. ``"brake_to_reverse"``: a reverse command while the car
     still rolls forward (:func:`simrunner.workflows.gap.regimes.brake_to_reverse`, with the
@@ -53,7 +48,7 @@ def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
     and keeps the rest in the fit, so an effect seen only in a rare manoeuvre can be both
     fitted and confirmed (the excitation plan reverses twice for this)."""
     out = []
-    for w, onset in zip(windows, reversal_onsets(log, derived, windows, max_brake_mps2)):
+    for w, onset in zip(windows, reversal_onsets(log, derived, windows, max_brake_mps2, settings=settings)):
         if onset:
             out.append("brake_to_reverse")
         elif masks["coasting"][w.start:w.stop].any():
@@ -63,35 +58,38 @@ def window_strata(log: RunLog, derived: Derived, masks: dict[str, np.ndarray],
     return out
 
 
-def prepare(log: RunLog, car: CarDescription, window_s: float, pooled: bool = False) -> LogPart:
+def prepare(log: RunLog, car: CarDescription, window_s: float | None = None, pooled: bool = False, *,
+            settings: GapSettings = SETTINGS) -> LogPart:
     """One log made ready: checked (``pooled``: as one of several runs), glitches found,
     smoothed, windowed and split."""
-    log = check_measured(log, pooled)
-    glitches = tuple(find_glitches(log, car))
+    log = check_measured(log, pooled, settings=settings)
+    glitches = tuple(find_glitches(log, car, settings=settings))
     bad = glitch_mask(log, glitches)
-    derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad)
+    derived = derive(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad, settings=settings)
     unchecked = check_conventions(log, car.chassis.wheelbase_m, car.steering.limit_rad, exclude=bad,
-                                  measured=derived)
-    windows = make_windows(log, window_s, exclude=bad)
-    strata = window_strata(log, derived, segment(log, derived, car), windows, car.drive.max_brake_mps2)
-    fit_w, held_w = split_windows(windows, strata=strata) if windows else ([], [])
+                                  measured=derived, settings=settings)
+    windows = make_windows(log, window_s, exclude=bad, settings=settings)
+    strata = window_strata(log, derived, segment(log, derived, car, settings=settings), windows,
+                           car.drive.max_brake_mps2, settings=settings)
+    fit_w, held_w = split_windows(windows, strata=strata, settings=settings) if windows else ([], [])
     return LogPart(log, derived, glitches, tuple(fit_w), tuple(held_w), signals_of(log), unchecked)
 
 
-def pool_short_runs(parts: list[LogPart]) -> list[LogPart]:
+def pool_short_runs(parts: list[LogPart], settings: GapSettings = SETTINGS) -> list[LogPart]:
     """Runs too short to split into fit and held-out windows (fewer than
     ``SETTINGS.short_run_windows``), several of them: each is fitted or held out whole, every
     ``holdout_every``-th short run (in the order given) held out, so held-out windows are
     whole runs the fit never saw. Longer runs keep their own split; a single log is as it was."""
-    short = [i for i, p in enumerate(parts) if len(p.windows) < SETTINGS.short_run_windows]
+    short = [i for i, p in enumerate(parts) if len(p.windows) < settings.short_run_windows]
     if len(parts) < 2 or len(short) < 2:
         return parts
-    every = SETTINGS.holdout_every
+    every = settings.holdout_every
     out = list(parts)
     for k, i in enumerate(short):
         held = k % every == every - 1 or (len(short) < every and k == len(short) - 1)
         windows = parts[i].windows
-        out[i] = dataclasses.replace(parts[i], fit_windows=() if held else windows, held_windows=windows if held else ())
+        out[i] = dataclasses.replace(parts[i], fit_windows=() if held else windows,
+                                     held_windows=windows if held else ())
     return out
 
 
@@ -112,18 +110,24 @@ def choose_hbridge(fit_problem: Problem, held_problem: Problem, delta_bic_min: f
 
 
 def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, *, jobs: int = 2,
-            effects: Sequence[str] | None = None, dt_s: float = WORKFLOW_DT_S, window_s: float = WINDOW_S,
-            sim_factory: SimFactory = default_sim_factory,
-            delta_bic_min: float = DELTA_BIC_MIN, improvement_min: float = IMPROVEMENT_MIN,
-            held_improvement_min: float = HELD_IMPROVEMENT_MIN, max_effects: int = MAX_EFFECTS,
-            held_dt_s: float | None = None, robust_factor: float = ROBUST_WINDOW_FACTOR,
-            screen_max_s: float = SCREEN_MAX_S, progress: Callable[[str], None] | None = None) -> GapResult:
+            effects: Sequence[str] | None = None, settings: GapSettings = SETTINGS,
+            sim_factory: SimFactory = default_sim_factory, held_dt_s: float | None = None,
+            progress: Callable[[str], None] | None = None, dt_s: float | None = None, window_s: float | None = None,
+            delta_bic_min: float | None = None, improvement_min: float | None = None,
+            held_improvement_min: float | None = None, max_effects: int | None = None,
+            robust_factor: float | None = None, screen_max_s: float | None = None) -> GapResult:
     """Run the workflow of the module docstring on one log or several logs of one car
     (``car`` default: the default car).
 
     Every log must pass :func:`simrunner.workflows.gap.logs.check_measured` (else
     :class:`simrunner.telemetry.log.LogError`). ``effects`` restricts the candidates (default: the
     whole catalogue); ``progress(label)`` is called as the stages finish.
+
+    ``settings``: every threshold (:class:`~simrunner.workflows.gap.settings.GapSettings`,
+    default the values in force; ``simrunner gap --settings FILE`` overrides some). The
+    keywords ``dt_s`` (``workflow_dt_s``), ``window_s``, ``delta_bic_min``, ``improvement_min``,
+    ``held_improvement_min``, ``max_effects``, ``robust_factor`` (``robust_window_factor``) and
+    ``screen_max_s``, when given, override those fields of ``settings`` for this run.
 
     ``dt_s`` is the physics step of the fits; ``held_dt_s`` (default: the step of
     ``simrunner drive``, ``RunSettings.dt_s``) that of the held-out confirmation and of the
@@ -133,6 +137,11 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     chain's screening and refits use on a longer log (a subset by regime,
     :func:`simrunner.workflows.gap.screening.screening_problem`; 0: all of them, slower).
     """
+    given = {"workflow_dt_s": dt_s, "window_s": window_s, "delta_bic_min": delta_bic_min,
+             "improvement_min": improvement_min, "held_improvement_min": held_improvement_min,
+             "max_effects": max_effects, "robust_window_factor": robust_factor, "screen_max_s": screen_max_s}
+    settings = dataclasses.replace(settings, **{k: v for k, v in given.items() if v is not None})
+    dt_s, window_s, robust_factor = settings.workflow_dt_s, settings.window_s, settings.robust_window_factor
     logs = [logs] if isinstance(logs, RunLog) else list(logs)
     if not logs:
         raise GapError("expected at least one log")
@@ -148,7 +157,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     if all(duty) and car.drive.command != "duty":  # the logs' motors take duties: so does the car
         car = car.replace(drive=dataclasses.replace(car.drive, command="duty", front_share=0.0))
     tick = progress or (lambda label: None)
-    parts = pool_short_runs([prepare(log, car, window_s, len(logs) > 1) for log in logs])
+    parts = pool_short_runs([prepare(log, car, window_s, len(logs) > 1, settings=settings) for log in logs], settings)
     signals = tuple(s for s in FIT_SIGNALS if all(s in p.signals for p in parts))
     if not signals:
         raise GapError("the logs have no signal in common to compare (pose or speed)")
@@ -157,11 +166,12 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     if n_fit < 2 or n_held < 1:
         raise GapError(f"{', '.join(p.log.source for p in parts)}: expected at least 3 clean windows of "
                        f"{window_s:g} s (got {n_fit + n_held} after cutting out glitches and gaps)")
-    moving = [sum(moves_in(p, p.fit_windows) for p in parts), sum(moves_in(p, p.held_windows) for p in parts)]
+    moving = [sum(moves_in(p, p.fit_windows, settings) for p in parts),
+              sum(moves_in(p, p.held_windows, settings) for p in parts)]
     if moving[0] < 2 or moving[1] < 1:
         raise GapError(f"{', '.join(p.log.source for p in parts)}: expected the car to move (|speed| >= "
-                       f"{MOVING_MPS:g} m/s) in at least 2 fit windows and 1 held-out window (got {moving[0]} of "
-                       f"{n_fit} and {moving[1]} of {n_held}): a car at rest shows no effect; drive the plan of "
+                       f"{settings.moving_mps:g} m/s) in at least 2 fit windows and 1 held-out window (got {moving[0]} "
+                       f"of {n_fit} and {moving[1]} of {n_held}): a car at rest shows no effect; drive the plan of "
                        "`simrunner excite`")
     fit_segs = tuple(Segment(p.log, p.derived, p.fit_windows) for p in parts if p.fit_windows)
     held_segs = tuple(Segment(p.log, p.derived, p.held_windows) for p in parts if p.held_windows)
@@ -172,31 +182,28 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         held_dt_s = RunSettings().dt_s
 
     def predict(c: CarDescription, step_s: float, which: str = "windows") -> list[Prediction]:
-        return [replay(c, p.log, p.derived, getattr(p, which), dt_s=step_s, sim_factory=sim_factory)
+        return [replay(c, p.log, p.derived, getattr(p, which), dt_s=step_s, sim_factory=sim_factory, settings=settings)
                 for p in parts]
 
     fit_pred0 = predict(car, dt_s, "fit_windows")
     fit_res = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, fit_pred0) if p.fit_windows]
-    scales = nominal_scales(fit_segs, fit_res, signals)
-    fit_problem = Problem(car, fit_segs, scales, signals, dt_s, sim_factory)
+    scales = nominal_scales(fit_segs, fit_res, signals, settings)
+    fit_problem = Problem(car, fit_segs, scales, signals, dt_s, sim_factory, settings=settings)
     robust = robust_scale_of(window_costs(fit_problem, fit_res), robust_factor)
     fit_problem = dataclasses.replace(fit_problem, robust_scale=robust)
-    held_problem = Problem(car, held_segs, scales, signals, held_dt_s, sim_factory, robust)
+    held_problem = Problem(car, held_segs, scales, signals, held_dt_s, sim_factory, robust, settings)
     hbridge = None
     if car.drive.command == "duty":  # the H-bridge's mode: a choice of two, made before the chain
-        hbridge = choose_hbridge(fit_problem, held_problem, delta_bic_min)
+        hbridge = choose_hbridge(fit_problem, held_problem, settings.delta_bic_min)
         if hbridge["chosen"] != car.drive.hbridge:
             car = car.replace(drive=dataclasses.replace(car.drive, hbridge=hbridge["chosen"]))
             fit_problem, held_problem = fit_problem.with_car(car), held_problem.with_car(car)
     pred0 = predict(car, held_dt_s)
     res0_parts = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, pred0)]
     tick("nominal")
-    chain = build_chain(fit_problem, held_problem, names, jobs=jobs, delta_bic_min=delta_bic_min,
-                        improvement_min=improvement_min, held_improvement_min=held_improvement_min,
-                        max_effects=max_effects, robust_factor=robust_factor, screen_max_s=screen_max_s,
-                        progress=tick)
+    chain = build_chain(fit_problem, held_problem, names, jobs=jobs, progress=tick)
     car_after = chain.car
-    screen = screening_problem(fit_problem, screen_max_s)
+    screen = screening_problem(fit_problem)
     # a parameter on a plateau is held (its interval says how well it is pinned, not a curvature)
     curved = [e for e in chain.effects if CANDIDATES[e].field not in chain.spans]
     unc = parameter_uncertainty(screen, car, curved, chain.parameters, jobs=jobs)
@@ -221,7 +228,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
 
     res0 = joined(res0_parts, tuple(dict.fromkeys(rep_signals + signals + stat_signals)))
     res1 = joined(res1_parts, tuple(dict.fromkeys(rep_signals + signals + stat_signals)))
-    seg_masks = [segment(p.log, p.derived, car) for p in parts]
+    seg_masks = [segment(p.log, p.derived, car, settings=settings) for p in parts]
     regime = {k: np.concatenate([m[k] for m in seg_masks]) for k in seg_masks[0]}
     noise = _noise(parts, rep_signals)
     stats_after = residual_stats({s: res1[s] for s in stat_signals}, regime)
@@ -235,10 +242,11 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                         "gap_before": _gap(one, [p], [r0]), "gap_after": _gap(one, [p], [r1]),
                         "rmse_before": rmse(r0, mask, rep_signals), "rmse_after": rmse(r1, mask, rep_signals)})
     held_ls = dataclasses.replace(held_problem, robust_scale=math.inf)
-    settings = {"robust_scale": robust, "robust_factor": robust_factor, "dt_s": dt_s, "held_dt_s": held_dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": delta_bic_min,
-                "improvement_min": improvement_min, "held_improvement_min": held_improvement_min,
-                "max_effects": max_effects, "scales": scales, "signals": list(signals), "effects": names,
-                "screen_max_s": screen_max_s, "fit_windows_s": sum(g.duration_s for g in fit_problem.segments),
+    in_force = {"robust_scale": robust, "robust_factor": robust_factor, "dt_s": dt_s, "held_dt_s": held_dt_s,
+                "window_s": window_s, "jobs": jobs, "delta_bic_min": settings.delta_bic_min,
+                "improvement_min": settings.improvement_min, "held_improvement_min": settings.held_improvement_min,
+                "max_effects": settings.max_effects, "scales": scales, "signals": list(signals), "effects": names,
+                "screen_max_s": settings.screen_max_s, "fit_windows_s": sum(g.duration_s for g in fit_problem.segments),
                 "screen_windows_s": sum(g.duration_s for g in screen.segments), "hbridge": hbridge}
     return GapResult(
         effects=chain.effects, parameters=chain.parameters, car=car_after, chain=chain,
@@ -248,18 +256,18 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         gap_before=_gap(held_problem, parts, res0_parts), gap_after=_gap(held_problem, parts, res1_parts),
         gap_ls_before=_gap(held_ls, parts, res0_parts), gap_ls_after=_gap(held_ls, parts, res1_parts),
         stats_before=residual_stats({s: res0[s] for s in stat_signals}, regime), stats_after=stats_after,
-        parts=parts, pred_before=pred0[0], pred_after=pred1[0], settings=settings,
+        parts=parts, pred_before=pred0[0], pred_after=pred1[0], settings=in_force,
         rmse_smoothed_before=rmse(smoothed(pred0), held, rep_signals),
         rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
-        unrevealable={**missing_manoeuvres(names, parts, car), **cannot_reveal(names, signals)},
-        leftovers=leftovers(stats_after, noise), parameter_sigma=sigma, parameter_one_window=one_window,
-        per_log=per_log, parameter_spans=dict(chain.spans))
+        unrevealable={**missing_manoeuvres(names, parts, car, settings=settings), **cannot_reveal(names, signals)},
+        leftovers=leftovers(stats_after, noise, settings=settings), parameter_sigma=sigma,
+        parameter_one_window=one_window, per_log=per_log, parameter_spans=dict(chain.spans), gap_settings=settings)
 
 
-def moves_in(part: LogPart, windows: Sequence[Window]) -> int:
+def moves_in(part: LogPart, windows: Sequence[Window], settings: GapSettings = SETTINGS) -> int:
     """How many of ``windows`` (of ``part``) hold a sample where the car moves (the smoothed
-    speed at least ``regimes.MOVING_MPS``)."""
-    moving = np.abs(np.nan_to_num(part.derived.speed_mps)) >= MOVING_MPS
+    speed at least ``settings.moving_mps``)."""
+    moving = np.abs(np.nan_to_num(part.derived.speed_mps)) >= settings.moving_mps
     return sum(bool(moving[w.start:w.stop].any()) for w in windows)
 
 
@@ -288,7 +296,8 @@ def cannot_reveal(names: Sequence[str], signals: Sequence[str]) -> dict[str, lis
     return out
 
 
-def missing_manoeuvres(names: Sequence[str], parts: Sequence[LogPart], car: CarDescription) -> dict[str, list[str]]:
+def missing_manoeuvres(names: Sequence[str], parts: Sequence[LogPart], car: CarDescription, *,
+                       settings: GapSettings = SETTINGS) -> dict[str, list[str]]:
     """The effects among ``names`` that act only in a manoeuvre the logs' windows lack in the
     fit or in the held-out set (so no fit can find them, or no held-out window can confirm
     them): effect -> what it would need. Today one: ``esc_brake_reverse`` acts only where a
@@ -299,7 +308,7 @@ def missing_manoeuvres(names: Sequence[str], parts: Sequence[LogPart], car: CarD
     counts = [0, 0]
     for p in parts:
         for k, windows in enumerate((p.fit_windows, p.held_windows)):
-            counts[k] += sum(reversal_onsets(p.log, p.derived, windows, car.drive.max_brake_mps2))
+            counts[k] += sum(reversal_onsets(p.log, p.derived, windows, car.drive.max_brake_mps2, settings=settings))
     if min(counts) > 0:
         return {}
     return {"esc_brake_reverse": [f"a reverse command while rolling forward in a fit and in a held-out window "
@@ -316,8 +325,8 @@ _SIGNAL_WORDS = {"position_m": "position", "along_m": "position along the path",
                  "yaw_rate_radps": "yaw rate"}
 
 
-def leftovers(stats: Sequence[dict], noise: dict[str, float], ratio: float = LEFTOVER_NOISE_RATIO,
-              min_samples: int = LEFTOVER_MIN_SAMPLES) -> list[dict]:
+def leftovers(stats: Sequence[dict], noise: dict[str, float], ratio: float | None = None,
+              min_samples: int | None = None, *, settings: GapSettings = SETTINGS) -> list[dict]:
     """What the final model leaves unexplained, one entry per signal (worst first): the
     regimes where its residual RMSE is at least ``ratio`` times the sensor noise of that
     signal. Signals whose noise the log does not tell (yaw rate without a gyro) are not
@@ -325,6 +334,8 @@ def leftovers(stats: Sequence[dict], noise: dict[str, float], ratio: float = LEF
     over the signal's RMSE in all moving samples: how much that regime stands out), every
     regime above the ratio, ``everywhere`` (every judged regime is), and a text such as
     ``unexplained: yaw rate while reversing, 4x noise, 2.5x its level over all windows``."""
+    ratio = settings.leftover_noise_ratio if ratio is None else ratio
+    min_samples = settings.leftover_min_samples if min_samples is None else min_samples
     per_signal: dict[str, list[dict]] = {}
     judged: dict[str, set[str]] = {}
     level: dict[str, float] = {}
@@ -370,16 +381,14 @@ def _gap(held_problem: Problem, parts: Sequence[LogPart], res_parts: Sequence[di
     return robust_total(window_costs(held_problem, res), held_problem.robust_scale) / max(held_problem.n_values, 1)
 
 
-def progress_total(n_effects: int, max_effects: int = MAX_EFFECTS) -> int:
+def progress_total(n_effects: int, max_effects: int | None = None, settings: GapSettings = SETTINGS) -> int:
     """Upper bound of the ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates
     (each chain step screens the remaining effects and runs its batches of joint refits; the
     final check runs at most one round per kept effect but the last; and the nominal replay,
     the uncertainty and the held-out check)."""
-    from simrunner.workflows.gap.chain import REFINE_LATER
-    from simrunner.workflows.gap.fit import REFINE_TOP
-
+    max_effects = settings.max_effects if max_effects is None else max_effects
     steps = min(max_effects, n_effects) + 1
-    size = max(min(REFINE_LATER, REFINE_TOP), 1)
+    size = max(min(settings.refine_later, settings.refine_top), 1)
     final_checks = max(min(max_effects, n_effects) - 1, 0)
     return 3 + sum(max(n_effects - s, 0) + -(-max(n_effects - s, 0) // size) for s in range(steps)) + final_checks
 
