@@ -48,6 +48,13 @@ filter and a 100-Hz motion-capture log alike:
     samples between them too: a heading displaced for a while and restored, whose windows
     would start from a wrong heading. The position test then uses the heading with the
     jumps taken out.
+    A car file on slip tyres (``wheels.tyre_model = "slip"``) says the car slides: its pose
+    then moves off its heading and turns faster than its steering turns it (power oversteer,
+    a drift). For it each position step is compared with the velocity of its neighbouring
+    steps, and a jump must exceed what the tyres change that velocity in the time
+    (:func:`slip_limits`: ``settings.slip_margin`` x ``mu g``); a heading step with the same
+    z-score must leave the gyro's (or the neighbours') turn by more than the tyres change the
+    yaw rate. A slide is continuous in velocity and yaw rate; a localisation jump is not.
 ``frozen_sensor``
     a channel (position, yaw, speed, gyro) repeating its exact value for a run of ``L``
     samples while the car moves (evidence from the other channels: the speed column, a
@@ -154,7 +161,7 @@ def find_glitches(log: RunLog, car: CarDescription | None = None, *, settings: G
     jumps = np.zeros(len(log) - 1, dtype=bool)
     pose_scale = math.nan
     if has_pose(log):
-        more, jumps, pose_scale = _jumps(log, car.min_turn_radius_m, settings=settings)
+        more, jumps, pose_scale = _jumps(log, car.min_turn_radius_m, slip_limits(car, settings), settings=settings)
         found += more
     found += _frozen(log, jumps, pose_scale, settings=settings)
     found += _spikes(log, car, glitch_mask(log, found), settings=settings)
@@ -292,11 +299,28 @@ def _neighbour_median(rate: np.ndarray, valid: np.ndarray, *, settings: GapSetti
     return np.where(np.isfinite(v), v, 0.0)
 
 
-def _jumps(log: RunLog, min_turn_radius_m: float, *,
+def slip_limits(car: CarDescription, settings: GapSettings = SETTINGS) -> tuple[float, float] | None:
+    """``(a_max m/s^2, alpha_max rad/s^2)``: the most a car on slip tyres (``wheels.tyre_model =
+    "slip"``, docs/tyres.md) can change its velocity and its yaw rate, ``settings.slip_margin``
+    times what its tyres give: ``mu g`` (the friction circle) and ``mu g L / k^2`` (every tyre's
+    peak force at the wheelbase's lever about a chassis box's radius of gyration ``k``). None
+    for rigid tyres (the kinematic bounds apply)."""
+    if car.wheels.tyre_model != "slip":
+        return None
+    ch = car.chassis
+    mu_g = car.wheels.friction_mu * car.effects.friction_scale * 9.81
+    k2 = (ch.length_m ** 2 + ch.width_m ** 2) / 12.0 * car.effects.inertia_scale
+    return settings.slip_margin * mu_g, settings.slip_margin * mu_g * ch.wheelbase_m / k2
+
+
+def _jumps(log: RunLog, min_turn_radius_m: float, slip: tuple[float, float] | None = None, *,
            settings: GapSettings = SETTINGS) -> tuple[list[Glitch], np.ndarray, float]:
     """Localisation jumps, of the heading (:func:`_heading_jumps`) and of the position; also
     the ``(N - 1,)`` jump steps and the pose's step noise at low speed (the slowest group's
-    cross-heading scale, m)."""
+    cross-heading scale, m). ``slip``: :func:`slip_limits` of a car on slip tyres, which slides:
+    each step is then compared with the velocity of its neighbours (the median of
+    ``settings.neighbour_steps`` valid steps each side, the step itself left out), not with the
+    speed along the heading, and a jump must exceed what ``a_max`` changes over them."""
     t = log.t_s
     dt = np.diff(t)
     med = median_dt_s(t)
@@ -308,11 +332,16 @@ def _jumps(log: RunLog, min_turn_radius_m: float, *,
     else:  # the neighbouring steps' speed along the heading, this step left out
         yaw0 = log.yaw_rad[:-1] + 0.5 * _wrap(np.diff(log.yaw_rad))
         v = _neighbour_median((dx * np.cos(yaw0) + dy * np.sin(yaw0)) / safe_dt, valid, settings=settings)
-    out, turned, yaw = _heading_jumps(log, dt, valid, v, min_turn_radius_m, settings=settings)
+    out, turned, yaw = _heading_jumps(log, dt, valid, v, min_turn_radius_m, slip, settings=settings)
     heading = yaw[:-1] + 0.5 * _wrap(np.diff(yaw))
     c, s = np.cos(heading), np.sin(heading)
     along, cross = dx * c + dy * s, -dx * s + dy * c
     ra, rc = along - v * dt, cross
+    if slip is not None:  # a sliding car moves off its heading: the neighbours' velocity predicts the step
+        vx = _neighbour_median(dx / safe_dt, valid & ~turned, settings=settings)
+        vy = _neighbour_median(dy / safe_dt, valid & ~turned, settings=settings)
+        ex, ey = dx - vx * dt, dy - vy * dt
+        ra, rc = ex * c + ey * s, -ex * s + ey * c
     jump = np.zeros(dt.size, dtype=bool)
     z = np.zeros(dt.size)
     idx = np.flatnonzero(valid)
@@ -337,7 +366,11 @@ def _jumps(log: RunLog, min_turn_radius_m: float, *,
         if math.isnan(slow_scale):
             slow_scale = sc
     residual = np.hypot(ra, rc)
-    jump[idx] = (z[idx] > settings.jump_z) & (residual[idx] > settings.jump_motion_fraction * np.abs(v[idx]) * dt[idx])
+    if slip is None:  # more than a sideslip or a speed error explains
+        bound = settings.jump_motion_fraction * np.abs(v) * dt
+    else:  # more than the tyres change the velocity over the neighbours
+        bound = slip[0] * (settings.neighbour_steps + 1) * dt * dt
+    jump[idx] = (z[idx] > settings.jump_z) & (residual[idx] > bound[idx])
     for a, b in _runs(jump):
         k = int(np.argmax(z[a:b])) + a
         out.append(Glitch(GlitchKind.JUMP, float(t[a]), float(t[b]), "x_m,y_m",
@@ -347,10 +380,13 @@ def _jumps(log: RunLog, min_turn_radius_m: float, *,
 
 
 def _heading_jumps(log: RunLog, dt: np.ndarray, valid: np.ndarray, v: np.ndarray,
-                   min_turn_radius_m: float, *,
+                   min_turn_radius_m: float, slip: tuple[float, float] | None = None, *,
                    settings: GapSettings = SETTINGS) -> tuple[list[Glitch], np.ndarray, np.ndarray]:
     """Heading jumps (see the module docstring): the glitches, the ``(N - 1,)`` jump steps and
-    the yaw with each jump taken out of its samples (for the position test)."""
+    the yaw with each jump taken out of its samples (for the position test). ``slip``
+    (:func:`slip_limits`): a sliding car turns faster than its steering turns it, so its step
+    must instead leave the predicted turn by more than ``alpha_max`` changes the yaw rate over
+    the prediction's reach (the gyro's step, or the neighbours')."""
     yaw = np.asarray(log.yaw_rad, float)
     dyaw = _wrap(np.diff(yaw))
     if log.yaw_rate_radps is not None:
@@ -368,8 +404,12 @@ def _heading_jumps(log: RunLog, dt: np.ndarray, valid: np.ndarray, v: np.ndarray
     scale = max(scale, settings.resolution)
     z = np.abs(res - m) / scale
     turn = np.abs(v) * dt / min_turn_radius_m  # the most the car turns in the step (at its steering limit)
-    jump[idx] = ((z[idx] > settings.jump_z) & (np.abs(dyaw[idx]) > turn[idx] + settings.jump_z * scale)
-                 & (np.abs(res[idx]) > settings.jump_motion_fraction * turn[idx]))
+    if slip is None:
+        jump[idx] = ((z[idx] > settings.jump_z) & (np.abs(dyaw[idx]) > turn[idx] + settings.jump_z * scale)
+                     & (np.abs(res[idx]) > settings.jump_motion_fraction * turn[idx]))
+    else:
+        reach = 1 if log.yaw_rate_radps is not None else settings.neighbour_steps + 1
+        jump[idx] = (z[idx] > settings.jump_z) & (np.abs(res[idx]) > slip[1] * reach * dt[idx] ** 2)
     runs = _runs(jump)
     spans: list[tuple[int, int, str]] = []
     i = 0

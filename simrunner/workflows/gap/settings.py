@@ -134,6 +134,9 @@ class GapSettings:
                                       "the sample")
     jump_z: float = _s(8.0, "1 (robust z)", "choice: a position step beyond this robust z-score is a jump")
     jump_motion_fraction: float = _s(0.5, "1", "choice: ... and beyond this fraction of the step the speed gives")
+    slip_margin: float = _s(2.0, "1", "choice: a car on slip tyres changes its velocity and yaw rate by at most this "
+                            "many times what its tyres' friction_mu gives (a floor grippier than the file says: the "
+                            "friction effect fits up to 1.5; a chassis lighter in yaw than its box)")
     speed_groups: int = _s(8, "1", "choice: at most this many speed groups for the jump scale ...")
     group_min_steps: int = _s(50, "1", "... each with at least this many steps")
     scale_floor_fraction: float = _s(0.01, "1", "choice: the jump scale's floor, a fraction of the median moving "
