@@ -247,7 +247,9 @@ def design(mode: str, k: int) -> tuple[list[str], str, np.random.Generator]:
     from simrunner.workflows.gap.workflow import cannot_reveal
     from simrunner.workflows.gap.synth import RANGES
 
-    default_car = [e for e in RANGES if e not in GRIP_LIMITED]
+    from simrunner.car.effects import EFFECTS
+
+    default_car = [e for e in RANGES if e not in GRIP_LIMITED and EFFECTS[e].requires != "slip"]
     if mode == "single":
         e = trial_effect(k, default_car)
         return ([e] if e else []), "pose_speed", np.random.default_rng([SEED, k])
@@ -257,7 +259,7 @@ def design(mode: str, k: int) -> tuple[list[str], str, np.random.Generator]:
                          f"{sorted(grouped)}, expected {sorted(default_car)})")
     rng = np.random.default_rng([SEED, _MODE_TAG[mode], k])
     if mode in ("tenth", "merged"):  # the same effects and seeds
-        e = trial_effect(k, list(RANGES))
+        e = trial_effect(k, [e for e in RANGES if EFFECTS[e].requires != "slip"])
         return ([e] if e else []), "pose_speed", rng
     if mode == "unmodelled":
         return [], "pose_speed", rng

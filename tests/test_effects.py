@@ -20,7 +20,7 @@ NAMES = ["steering_offset", "steering_gain", "steering_lag", "steering_rate_limi
          "motor_lag", "throttle_deadband", "rolling_resistance", "drag", "tire_slip", "friction",
          "speed_scale", "steering_asymmetry", "steering_play", "esc_brake_reverse", "accel_scale", "brake_scale",
          "servo_rate_scale", "steer_limit_scale", "mass_scale", "top_speed", "lift_lag", "front_drive",
-         "inertia"]
+         "inertia", "tyre_stiffness", "tyre_balance", "tyre_relaxation"]
 
 
 def trace(sim, commands, seconds: float, every: int = 10) -> np.ndarray:

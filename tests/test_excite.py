@@ -289,6 +289,8 @@ EFFECT_VALUES = {
     "servo_rate_scale": {"servo_rate_scale": 0.3}, "steer_limit_scale": {"steer_limit_scale": 0.8},
     "mass_scale": {"mass_scale": 1.6}, "top_speed": {"top_speed_mps": 1.0}, "lift_lag": {"lift_lag_s": 0.5},
     "front_drive": {"front_share_shift": 0.5}, "inertia": {"inertia_scale": 0.4},
+    "tyre_stiffness": {"tyre_stiffness_scale": 0.3}, "tyre_balance": {"tyre_balance": 0.4},
+    "tyre_relaxation": {"tyre_relaxation_scale": 4.0},
 }
 # effects that show only where the drive and brake reach the tyres' grip (or the tyres slide): run
 # on a car whose limits do (9 m/s^2; the default car's 3.1 m/s^2 leaves the grip untouched)
@@ -307,6 +309,11 @@ def test_every_effect_leaves_a_trace_in_its_segments(name, nominal_coarse):
     car, nominal = CAR, nominal_coarse
     if name in GRIP_LIMITED:
         car = CAR.replace(drive=dataclasses.replace(CAR.drive, max_accel_mps2=9.0, max_brake_mps2=9.0))
+        nominal = run_plan(PLAN, car, dt_s=0.005)
+    if EFFECTS[name].requires == "slip":  # the slip tyres' own numbers: on a car with slip tyres
+        assert not EFFECTS[name].applies_to(CAR)
+        car = CAR.replace(wheels=dataclasses.replace(CAR.wheels, tyre_model="slip"))
+        assert EFFECTS[name].applies_to(car)
         nominal = run_plan(PLAN, car, dt_s=0.005)
     log = run_plan(PLAN, with_effects(car, **EFFECT_VALUES[name]), dt_s=0.005)
     kinds = [k for k in EFFECTS[name].revealed_by if k in SEGMENT_KINDS]

@@ -68,9 +68,10 @@ def test_hidden_steering_offset_is_named_and_fitted(offset_run):
     assert result.parameters["steering_offset_rad"] == pytest.approx(truth.value, rel=0.10)
     assert result.rmse_after["position_m"] < 0.5 * result.rmse_before["position_m"]
     assert result.rmse_after["yaw_rad"] < 0.5 * result.rmse_before["yaw_rad"]
-    # every catalogue effect is in the ranking, best first
+    # every catalogue effect the car can have is in the ranking, best first; the others are said
     assert [r.effect for r in result.ranking][0] == "steering_offset"
-    assert sorted(r.effect for r in result.ranking) == sorted(CANDIDATES)
+    assert sorted(r.effect for r in result.ranking) == sorted(set(CANDIDATES) - set(result.not_applicable))
+    assert list(result.not_applicable) == ["tyre_stiffness", "tyre_balance", "tyre_relaxation"]
 
 
 def test_effect_free_log_gives_none():
@@ -162,7 +163,7 @@ def test_report_folder(offset_run, tmp_path):
         assert rep["rmse_smoothed_after"][key] < rep["rmse_after"][key]
         assert rep["rmse_smoothed_after"][key] < 0.5 * rep["rmse_smoothed_before"][key]
     assert rep["noise_rms"]["position_m"] == pytest.approx(5e-3 * math.sqrt(2), rel=0.3)
-    assert len(rep["ranking"]) == len(CANDIDATES)
+    assert len(rep["ranking"]) == len(CANDIDATES) - len(rep["not_applicable"]) == 24
     assert rep["held_out_worse"] is False and rep["gap_after"] < rep["gap_before"]
     assert rep["signals_worse"] == {}  # the offset leaves the speed as it was and mends the rest
     assert rep["conventions_unchecked"] == {}  # pose, speed and gyro: every convention checked

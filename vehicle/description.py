@@ -465,6 +465,18 @@ class Effects:
                               "of the chassis size) times this: below 1 when the mass sits near the centre "
                               "(battery, motor, electronics). Revealed only where the tyres slide: circles, turns and "
                               "step steers at the grip limit.", "neutral", 0.05, 5.0)
+    tyre_stiffness_scale: float = _f(1.0, "tyre_stiffness (slip tyres only): both axles' cornering stiffness "
+                                     "(wheels.cornering_stiffness_front/rear_per_rad) times this: softer tyres "
+                                     "need larger slip angles, the car turns less for its steering. Revealed by "
+                                     "circles, turns and step steers at speed.", "neutral", 0.05, 20.0)
+    tyre_balance: float = _f(0.0, "tyre_balance (slip tyres only): the front cornering stiffness times (1 + "
+                             "this), the rear times (1 - this): > 0 moves the car towards oversteer, < 0 "
+                             "towards understeer (the single-track understeer gradient (1/c_f - 1/c_r) / g). "
+                             "Revealed by circles at several speeds.", "neutral", -0.9, 0.9)
+    tyre_relaxation_scale: float = _f(1.0, "tyre_relaxation (slip tyres only): wheels.relaxation_length_m "
+                                      "times this: the distance a tyre rolls to build up its force, a lag of "
+                                      "the car's lateral response that shrinks with speed. Revealed by chirps "
+                                      "and step steers at speed.", "neutral", 0.05, 20.0)
 
 
 @dataclass(frozen=True)

@@ -108,6 +108,24 @@ class EffectSpec:
     observed_by: tuple[str, ...]
     acts_on: str  # "command" | "force" | "build"
     log_scale: bool = False  # the gap fit searches log(value): a factor spanning a decade or more
+    # "slip": acts only on a car with wheels.tyre_model = "slip" (else it changes nothing);
+    # "speed": only on a speed-commanded car (a duty-driven car drives its two rear motors)
+    requires: str = ""
+
+    def applies_to(self, car: CarDescription) -> bool:
+        """The effect can act on ``car`` (one whose model has what it changes)."""
+        if self.requires == "slip":
+            return car.wheels.tyre_model == "slip"
+        if self.requires == "speed":
+            return car.drive.command == "speed"
+        return True
+
+    @property
+    def requirement(self) -> str:
+        """What a car needs for the effect to act ("" for every car)."""
+        needs = {"slip": 'wheels.tyre_model = "slip" (docs/tyres.md)',
+                 "speed": 'drive.command = "speed" (a duty-driven car drives its two rear motors)'}
+        return needs.get(self.requires, "")
 
 
     @property
@@ -117,11 +135,11 @@ class EffectSpec:
 
 
 def _spec(name, param, neutral, bounds, unit, meaning, revealed_by, observed_by, acts_on="command",
-          log_scale=None) -> EffectSpec:
+          log_scale=None, requires="") -> EffectSpec:
     """One-parameter entry; ``log_scale`` defaults to True for a neutral value at infinity
     (a limit that is absent in the nominal model, searched over decades)."""
     return EffectSpec(name, (param,), (neutral,), (bounds,), (unit,), meaning, tuple(revealed_by),
-                      tuple(observed_by), acts_on, math.isinf(neutral) if log_scale is None else log_scale)
+                      tuple(observed_by), acts_on, math.isinf(neutral) if log_scale is None else log_scale, requires)
 
 
 EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
@@ -197,11 +215,24 @@ EFFECTS: dict[str, EffectSpec] = {s.name: s for s in (
     _spec("front_drive", "front_share_shift", 0.0, (-0.5, 0.5), "1",
           "the car drives and brakes its front wheels too (four-wheel drive): the front share of the "
           "torque is the car file's drive.front_share + this; shows where the tyres near their grip",
-          ("brake", "speed_step"), RESIDUAL_SIGNALS, "build"),
+          ("brake", "speed_step"), RESIDUAL_SIGNALS, "build", requires="speed"),
     _spec("inertia", "inertia_scale", 1.0, (0.2, 2.0), "1",
           "the chassis's moments of inertia differ from those of the model's uniform box (mass near "
           "the centre: < 1); shows only where the tyres slide, in how fast the yaw rate changes",
           ("circle", "turn", "step_steer"), _LATERAL, "build", log_scale=True),
+    # the slip tyres' own numbers (wheels.tyre_model = "slip", docs/tyres.md; Pacejka 2012)
+    _spec("tyre_stiffness", "tyre_stiffness_scale", 1.0, (0.25, 4.0), "1",
+          "the tyres' cornering stiffness differs from the car file's (both axles): softer tyres slip "
+          "more, the car turns less for its steering, more so at speed", ("circle", "turn", "step_steer"),
+          _LATERAL, "build", log_scale=True, requires="slip"),
+    _spec("tyre_balance", "tyre_balance", 0.0, (-0.5, 0.5), "1",
+          "the front and rear tyres' stiffness balance differs from the car file's (front x (1 + b), rear "
+          "x (1 - b)): the car understeers (b < 0) or oversteers (b > 0) more than the file says",
+          ("circle", "turn"), _LATERAL, "build", requires="slip"),
+    _spec("tyre_relaxation", "tyre_relaxation_scale", 1.0, (0.2, 5.0), "1",
+          "the tyres build up their force over a longer (or shorter) roll than the car file's relaxation "
+          "length: the lateral response lags more at low speed", ("step_steer", "chirp"), _LATERAL, "build",
+          log_scale=True, requires="slip"),
 )}
 
 _DYNAMIC_PARAMS = ("steering_lag_s", "command_latency_s", "motor_lag_s", "lift_lag_s", "tire_slip_understeer_radps2pm",
@@ -244,12 +275,16 @@ def built_car(car: CarDescription) -> CarDescription:
     and ``wheels.mass_kg`` x ``mass_scale`` (all inertias follow the masses). ``CarSim`` sets
     the drive and brake torques from the built mass and limits, so with ``mass_scale`` they
     stay those of the file's numbers. ``drive.front_share`` + ``front_share_shift``, clamped to
-    [0, 1]. A duty-driven car's ``motor_force_n`` and ``motor_back_emf_nspm`` x ``accel_scale``
+    [0, 1]. ``wheels.cornering_stiffness_front_per_rad`` x ``tyre_stiffness_scale (1 + tyre_balance)``,
+    the rear's x ``tyre_stiffness_scale (1 - tyre_balance)``, ``wheels.relaxation_length_m`` x
+    ``tyre_relaxation_scale`` (they act on slip tyres only). A duty-driven car's ``motor_force_n`` and
+    ``motor_back_emf_nspm`` x ``accel_scale``
     (derived from the limits when 0, they follow them). A scaled steering limit above the description's range raises
     ``CarDescriptionError``."""
     e = car.effects
     if (e.friction_scale == e.speed_scale == e.accel_scale == e.brake_scale == e.servo_rate_scale
-            == e.steer_limit_scale == e.mass_scale == 1.0 and e.front_share_shift == 0.0):
+            == e.steer_limit_scale == e.mass_scale == e.tyre_stiffness_scale == e.tyre_relaxation_scale == 1.0
+            and e.front_share_shift == e.tyre_balance == 0.0):
         return car
     ch, wh, st, dr = car.chassis, car.wheels, car.steering, car.drive
     m = e.mass_scale
@@ -271,6 +306,14 @@ def built_car(car: CarDescription) -> CarDescription:
         dr = dataclasses.replace(dr, max_brake_mps2=dr.max_brake_mps2 * e.brake_scale / m)
     if e.front_share_shift != 0.0:
         dr = dataclasses.replace(dr, front_share=min(max(dr.front_share + e.front_share_shift, 0.0), 1.0))
+    if e.tyre_stiffness_scale != 1.0 or e.tyre_balance != 0.0:
+        wh = dataclasses.replace(
+            wh, cornering_stiffness_front_per_rad=wh.cornering_stiffness_front_per_rad * e.tyre_stiffness_scale
+            * (1.0 + e.tyre_balance),
+            cornering_stiffness_rear_per_rad=wh.cornering_stiffness_rear_per_rad * e.tyre_stiffness_scale
+            * (1.0 - e.tyre_balance))
+    if e.tyre_relaxation_scale != 1.0:
+        wh = dataclasses.replace(wh, relaxation_length_m=wh.relaxation_length_m * e.tyre_relaxation_scale)
     if e.servo_rate_scale != 1.0:
         st = dataclasses.replace(st, rate_radps=st.rate_radps * e.servo_rate_scale)
     if e.steer_limit_scale != 1.0:

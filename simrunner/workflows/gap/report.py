@@ -99,6 +99,8 @@ class GapResult:
     per_log: list[dict] = field(default_factory=list)
     # the thresholds of the run (the report's wording uses some of them)
     gap_settings: GapSettings = SETTINGS
+    # catalogue effects not tried because the car cannot have them: effect -> what it needs
+    not_applicable: dict[str, str] = field(default_factory=dict)
 
     @property
     def effect(self) -> str:
@@ -192,7 +194,7 @@ class GapResult:
                         "delta_bic": t.delta_bic, "improvement": t.improvement, "after_step": after}
                        for t, after in zip(self.chain.pruned, self.chain.pruned_after)],
             "unexplained": self.leftovers,
-            "cannot_reveal": self.unrevealable,
+            "cannot_reveal": self.unrevealable, "not_applicable": self.not_applicable,
             "conventions_unchecked": {p.log.source: list(p.unchecked) for p in self.parts if p.unchecked},
             "glitches": [{"log": src, "kind": g.kind, "t_start_s": g.t_start_s, "t_end_s": g.t_end_s,
                           "column": g.column, "detail": g.detail} for src, g in self.glitches],
@@ -374,6 +376,9 @@ def summary_text(result: GapResult) -> str:
     for part in (p for p in result.parts if p.unchecked):
         lines.append(f"not checked in {Path(part.log.source).name} (docs/gap.md, \"Input\"): "
                      + "; ".join(part.unchecked) + ": make sure of these by hand")
+    if result.not_applicable:
+        needs = sorted(set(result.not_applicable.values()))
+        lines.append(f"not tried: {', '.join(result.not_applicable)} (they need {' or '.join(needs)})")
     if result.unrevealable:
         lines.append("this log cannot reveal: " + ", ".join(
             f"{n} (needs {' or '.join(s)})" for n, s in result.unrevealable.items()))

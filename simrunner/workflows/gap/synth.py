@@ -74,8 +74,12 @@ RANGES: dict[str, tuple[str, float, float, bool]] = {
     "front_drive": ("front_share_shift", 0.15, 0.5, False),
     # the chassis's inertia: shows only where the tyres slide (as front_drive, not on the default car)
     "inertia": ("inertia_scale", 0.3, 0.6, True),  # scale = 1 +- that
+    # the slip tyres' numbers: only for a car with wheels.tyre_model = "slip"
+    "tyre_stiffness": ("tyre_stiffness_scale", 0.15, 0.6, True),  # scale = 1 +- that
+    "tyre_balance": ("tyre_balance", 0.05, 0.35, True),
+    "tyre_relaxation": ("tyre_relaxation_scale", 0.3, 1.5, True),  # scale = 1 +- that, at least 0.25
 }
-_RELATIVE_TO_ONE = {"steering_gain", "speed_scale", "mass_scale", "inertia"}
+_RELATIVE_TO_ONE = {"steering_gain", "speed_scale", "mass_scale", "inertia", "tyre_stiffness", "tyre_relaxation"}
 _BELOW_ONE = {"accel_scale", "brake_scale", "servo_rate_scale", "steer_limit_scale"}
 
 
@@ -103,13 +107,16 @@ def draw_value(effect: str, rng: np.random.Generator) -> float:
     sign = float(rng.choice([-1.0, 1.0])) if signed else 1.0
     if effect in _BELOW_ONE:
         return 1.0 - mag
+    if effect == "tyre_relaxation":  # a factor: 1 + that or 1 / (1 + that)
+        return 1.0 + mag if sign > 0 else 1.0 / (1.0 + mag)
     return 1.0 + sign * mag if effect in _RELATIVE_TO_ONE else sign * mag
 
 
 def make_measured_log(effect: str | Sequence[str] | None, *, rng: np.random.Generator,
                       car: CarDescription | None = None, value: float | Sequence[float] | None = None,
                       start_s: float = 0.0, duration_s: float | None = None, noise: bool = True,
-                      sensors: str = "pose_speed", sim_factory=None) -> tuple[RunLog, Truth]:
+                      sensors: str = "pose_speed", sim_factory=None,
+                      hbridge: str | None = None) -> tuple[RunLog, Truth]:
     """A synthetic measured log with ``effect`` hidden (see the module docstring).
 
     ``effect``: a catalogue name, several names, or None. ``value`` fixes the magnitude(s)
@@ -117,7 +124,9 @@ def make_measured_log(effect: str | Sequence[str] | None, *, rng: np.random.Gene
     (from rest at the origin; tests use ~20 s parts); ``noise=False`` gives exact states
     (for the signal-to-noise computation of the bench); ``sensors`` one of :data:`SENSORS`;
     ``sim_factory`` plays the plan in another simulator (``excite.run_plan``'s: something the
-    catalogue does not model, on top of the car and its effects).
+    catalogue does not model, on top of the car and its effects); ``hbridge``: a duty-driven
+    car's H-bridge mode in truth (the plan is made for ``car``'s). A duty-driven car's log holds
+    the duty it was given (``duty_cmd``).
     Returns ``(log, truth)``; the log holds the commands, ``coast`` and the sensors' columns
     (source ``"<synthetic EFFECT+EFFECT>"``).
     """
@@ -145,6 +154,8 @@ def make_measured_log(effect: str | Sequence[str] | None, *, rng: np.random.Gene
                             wheels=dataclasses.replace(car.wheels, friction_mu=car.wheels.friction_mu * mu_f))
     if values:
         truth_car = with_effects(truth_car, **values)
+    if hbridge is not None:
+        truth_car = truth_car.replace(drive=dataclasses.replace(truth_car.drive, hbridge=hbridge))
     plan = make_plan(car, seed=plan_seed)
     if start_s > 0.0 or duration_s is not None:
         a = int(round(start_s * plan.rate_hz))
@@ -157,6 +168,8 @@ def make_measured_log(effect: str | Sequence[str] | None, *, rng: np.random.Gene
     out = run_plan(plan, truth_car, dt_s=SYNTH_DT_S, sim_factory=sim_factory)
     n = len(out)
     keep = ("t_s", "speed_cmd_mps", "steer_cmd_rad", "coast") + SENSORS[sensors]
+    if car.drive.command == "duty":
+        keep += ("duty_cmd",)
     cols = {k: out.column(k) for k in keep}
     if noise:
         if "x_m" in cols:

@@ -156,6 +156,11 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                        "others (duty_cmd, or duty_left and duty_right): one car, one kind of motor command")
     if all(duty) and car.drive.command != "duty":  # the logs' motors take duties: so does the car
         car = car.replace(drive=dataclasses.replace(car.drive, command="duty", front_share=0.0))
+    not_applicable = not_applicable_to(names, car)
+    if effects is not None and not_applicable:
+        raise GapError(f"effect(s) {', '.join(not_applicable)} act only on a car with "
+                       f"{next(iter(not_applicable.values()))}: expected such a car file (--car) or other effects")
+    names = [n for n in names if n not in not_applicable]
     tick = progress or (lambda label: None)
     parts = pool_short_runs([prepare(log, car, window_s, len(logs) > 1, settings=settings) for log in logs], settings)
     signals = tuple(s for s in FIT_SIGNALS if all(s in p.signals for p in parts))
@@ -261,7 +266,8 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         rmse_smoothed_after=rmse(smoothed(pred1), held, rep_signals), noise_rms=noise,
         unrevealable={**missing_manoeuvres(names, parts, car, settings=settings), **cannot_reveal(names, signals)},
         leftovers=leftovers(stats_after, noise, settings=settings), parameter_sigma=sigma,
-        parameter_one_window=one_window, per_log=per_log, parameter_spans=dict(chain.spans), gap_settings=settings)
+        parameter_one_window=one_window, per_log=per_log, parameter_spans=dict(chain.spans), gap_settings=settings,
+        not_applicable=not_applicable)
 
 
 def moves_in(part: LogPart, windows: Sequence[Window], settings: GapSettings = SETTINGS) -> int:
@@ -281,6 +287,14 @@ def _noise(parts: Sequence[LogPart], signals: Sequence[str]) -> dict[str, float]
                 acc[s].append((v, len(p.log)))
     return {s: (math.sqrt(sum(v * v * n for v, n in vs) / sum(n for _, n in vs)) if vs else float("nan"))
             for s, vs in acc.items()}
+
+
+def not_applicable_to(names: Sequence[str], car: CarDescription) -> dict[str, str]:
+    """The effects among ``names`` that cannot act on ``car`` (``EffectSpec.applies_to``: the
+    slip tyres' effects on a car with rigid tyres): effect -> what the car needs."""
+    from simrunner.car.effects import EFFECTS
+
+    return {n: EFFECTS[n].requirement for n in names if not EFFECTS[n].applies_to(car)}
 
 
 def cannot_reveal(names: Sequence[str], signals: Sequence[str]) -> dict[str, list[str]]:
