@@ -105,7 +105,7 @@ import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.telemetry.sparse import GAP_FACTOR, GAP_QUANTILE, gap_limit_s
-from simrunner.workflows.gap.settings import SETTINGS, GapSettings
+from simrunner.workflows.gap.settings import GRAVITY_MPS2, SETTINGS, GapSettings
 from vehicle.description import CarDescription
 
 POSE = ("x_m", "y_m", "yaw_rad")
@@ -308,7 +308,7 @@ def slip_limits(car: CarDescription, settings: GapSettings = SETTINGS) -> tuple[
     if car.wheels.tyre_model != "slip":
         return None
     ch = car.chassis
-    mu_g = car.wheels.friction_mu * car.effects.friction_scale * 9.81
+    mu_g = car.wheels.friction_mu * car.effects.friction_scale * GRAVITY_MPS2
     k2 = (ch.length_m ** 2 + ch.width_m ** 2) / 12.0 * car.effects.inertia_scale
     return settings.slip_margin * mu_g, settings.slip_margin * mu_g * ch.wheelbase_m / k2
 

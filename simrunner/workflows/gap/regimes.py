@@ -26,10 +26,9 @@ import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap.logs import Derived, sample_dt_s
-from simrunner.workflows.gap.settings import SETTINGS, GapSettings
+from simrunner.workflows.gap.settings import GRAVITY_MPS2, SETTINGS, GapSettings
 from vehicle.description import CarDescription
 
-GRAVITY_MPS2 = 9.81  # standard gravity, rounded (CGPM 1901: 9.80665 m/s^2)
 
 REGIMES = ("all", "accelerating", "braking", "coasting", "steady", "straight", "cornering", "left", "right",
            "reversing", "high_lat_accel")

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 THRESHOLDS_SCRIPT = "python -m simrunner.workflows.gap.thresholds"
+GRAVITY_MPS2 = 9.81  # standard gravity, rounded (CGPM 1901: 9.80665 m/s^2): a physical constant, not a setting
 
 
 def _s(value, unit: str, derived: str, script: str = "", shared_logs: bool = False):
@@ -234,4 +235,4 @@ def main() -> None:  # pragma: no cover - prints the table
 if __name__ == "__main__":  # pragma: no cover
     main()
 
-__all__ = ["GapSettings", "SETTINGS", "THRESHOLDS_SCRIPT", "load_settings"]
+__all__ = ["GRAVITY_MPS2", "GapSettings", "SETTINGS", "THRESHOLDS_SCRIPT", "load_settings"]
