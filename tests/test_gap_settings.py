@@ -78,8 +78,8 @@ def test_no_module_of_the_gap_workflow_holds_a_threshold_of_its_own():
 
 def test_every_call_inside_the_workflow_passes_its_settings_on():
     """A function that reads thresholds takes ``settings``; a caller in ``gap/`` that has
-    settings in scope (its own parameter, or ``self.settings``) passes them on, so a run's
-    settings reach every stage and none silently falls back to the defaults."""
+    settings in scope (its own parameter, ``self.settings``, a ``Problem``'s) passes them on, so
+    a run's settings reach every stage and none silently falls back to the defaults."""
     trees = {p.name: ast.parse(p.read_text()) for p in sorted(GAP.glob("*.py"))}
     position = {}  # callee -> index of its positional settings parameter (None: keyword-only)
     for tree in trees.values():
@@ -92,8 +92,11 @@ def test_every_call_inside_the_workflow_passes_its_settings_on():
     missing = []
     for name, tree in trees.items():
         for fn in _functions(tree):
-            has = _takes_settings(fn) or any(isinstance(n, ast.Name) and n.id == "settings" and
-                                             isinstance(n.ctx, ast.Store) for n in ast.walk(fn))
+            has = (_takes_settings(fn)
+                   or any(isinstance(n, ast.Name) and n.id == "settings" and isinstance(n.ctx, ast.Store)
+                          for n in ast.walk(fn))
+                   or any(isinstance(n, ast.Attribute) and n.attr == "settings" for n in ast.walk(fn))
+                   or any("Problem" in ast.unparse(x.annotation) for x in fn.args.args if x.annotation))
             if not has:
                 continue
             for call in (n for n in ast.walk(fn) if isinstance(n, ast.Call)):
@@ -128,15 +131,18 @@ def test_run_gap_uses_the_settings_it_is_given():
 
 def test_a_settings_file_changes_named_fields_and_refuses_bad_ones(tmp_path):
     good = tmp_path / "slow_car.toml"
-    good.write_text("# a slow car\nmoving_mps = 0.1\nmax_effects = 3\nwindow_s = 3\n")
+    good.write_text("# a slow car\nmoving_mps = 0.05\nmax_effects = 3\nwindow_s = 3\n")
     s = load_settings(good)
-    assert (s.moving_mps, s.max_effects, s.window_s) == (0.1, 3, 3.0) and isinstance(s.window_s, float)
+    assert s.changed() == {"moving_mps": 0.05, "max_effects": 3, "window_s": 3.0}
+    assert (s.moving_mps, s.max_effects, s.window_s) == (0.05, 3, 3.0) and isinstance(s.window_s, float)
     assert dataclasses.replace(s, moving_mps=SETTINGS.moving_mps, max_effects=SETTINGS.max_effects,
                                window_s=SETTINGS.window_s) == GapSettings()
     for text, expected in (("moving_mps = 0.1\nmoving_mp = 2\n", r":2: unknown gap setting 'moving_mp' \(did you mean moving_mps\?\)"),
                            ("max_effects = 2.5\n", r":1: max_effects = 2.5: expected an integer >= 0"),
-                           ("window_s = \"2\"\n", r":1: window_s = '2': expected a number >= 0"),
-                           ("window_s = -1.0\n", r":1: window_s = -1.0: expected a number >= 0"),
+                           ("window_s = \"2\"\n", r":1: window_s = '2': expected a number > 0"),
+                           ("window_s = -1.0\n", r":1: window_s = -1.0: expected a number > 0"),
+                           ("holdout_every = 0\n", r":1: holdout_every = 0: expected an integer > 0"),
+                           ("[moving_mps]\nx = 1\n", r":1: moving_mps = \{'x': 1\}: expected a number > 0"),
                            ("window_s = \n", r": invalid TOML: .*line 1")):
         bad = tmp_path / "bad.toml"
         bad.write_text(text)

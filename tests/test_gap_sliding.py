@@ -87,7 +87,19 @@ def test_a_slip_car_s_localisation_jumps_are_still_found(precise, keep):
 
 def test_slip_limits_come_from_the_car_file():
     assert slip_limits(RIGID) is None
-    a, alpha = slip_limits(SLIP)
-    assert a == pytest.approx(2.0 * 0.6 * 9.81)
+    lim = slip_limits(SLIP)
+    assert lim.accel_mps2 == pytest.approx(2.0 * 0.6 * 9.81)
     k2 = (SLIP.chassis.length_m ** 2 + SLIP.chassis.width_m ** 2) / 12.0
-    assert alpha == pytest.approx(a * SLIP.chassis.wheelbase_m / k2)
+    assert lim.yaw_accel_radps2 == pytest.approx(lim.accel_mps2 * SLIP.chassis.wheelbase_m / (2.0 * k2))
+    assert lim.gyration_m == pytest.approx(math.sqrt(k2) / 2.0)
+
+
+def test_a_heading_flip_of_a_slow_log_is_found_on_slip_tyres(precise):
+    """At 10 Hz without a gyro the yaw-rate bound alone would let any flip pass (the tyres change
+    the yaw rate by more than pi in the reach); the spin bound does not: a half-turn flip for 0.5 s
+    is found."""
+    cols, _ = precise
+    slow = {k: v[::5].copy() for k, v in cols.items()}
+    slow["yaw_rad"][300:305] = (slow["yaw_rad"][300:305] + 2 * math.pi) % (2 * math.pi) - math.pi
+    found = _jumps(slow, SLIP, ("x_m", "y_m", "yaw_rad", "speed_mps"))
+    assert found and found[0].column == "yaw_rad" and 29.8 < found[0].t_start_s < 30.1

@@ -44,12 +44,14 @@ def soft_tyres():
 
 def test_a_rigid_car_file_says_what_it_did_not_try_and_refuses_to_be_asked(soft_tyres):
     log, _ = soft_tyres
-    with pytest.raises(GapError, match=r"tyre_stiffness act only on a car with wheels.tyre_model = \"slip\""):
+    with pytest.raises(GapError, match=r"^tyre_stiffness acts only on a car with wheels.tyre_model = \"slip\" "
+                                       r"\(docs/tyres.md\): expected other effects or a car file on slip tyres"):
         run_gap(log, RIGID, jobs=1, effects=["tyre_stiffness"])
     result = run_gap(log, RIGID, jobs=1, effects=["steering_gain"], max_effects=0)
     assert result.not_applicable == {}  # only what was asked is judged
     everything = run_gap(log, RIGID, jobs=1, max_effects=0)
     assert list(everything.not_applicable) == TYRES and everything.to_json()["not_applicable"]
+    assert everything.to_json()["settings_changed"] == {"max_effects": 0}
     assert "not tried: tyre_stiffness, tyre_balance, tyre_relaxation (they need wheels.tyre_model" \
         in summary_text(everything)
 

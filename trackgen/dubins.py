@@ -37,9 +37,10 @@ def dubins_segments(x0, y0, yaw0, x1, y1, yaw1, radius_m: float) -> np.ndarray:
     sa, sb, ca, cb, cab = np.sin(a), np.sin(b), np.cos(a), np.cos(b), np.cos(a - b)
     out = np.full((6,) + d.shape + (3,), np.nan)
     with np.errstate(invalid="ignore"):
-        at, p = np.arctan2(cb - ca, d + sa - sb), np.sqrt(2 + d * d - 2 * cab + 2 * d * (sa - sb))  # LSL
+        # LSL and RSR always exist (p^2 is the circles' squared distance): rounding below 0 is 0
+        at, p = np.arctan2(cb - ca, d + sa - sb), np.sqrt(np.maximum(2 + d * d - 2 * cab + 2 * d * (sa - sb), 0.0))
         out[0] = np.stack([np.mod(at - a, tau), p, np.mod(b - at, tau)], -1)
-        at, p = np.arctan2(ca - cb, d - sa + sb), np.sqrt(2 + d * d - 2 * cab + 2 * d * (sb - sa))  # RSR
+        at, p = np.arctan2(ca - cb, d - sa + sb), np.sqrt(np.maximum(2 + d * d - 2 * cab + 2 * d * (sb - sa), 0.0))
         out[1] = np.stack([np.mod(a - at, tau), p, np.mod(at - b, tau)], -1)
         p = np.sqrt(-2 + d * d + 2 * cab + 2 * d * (sa + sb))  # LSR
         at = np.arctan2(-ca - cb, d + sa + sb) - np.arctan2(-2.0, p)

@@ -178,7 +178,7 @@ def segment_residuals(problem: Problem, car: CarDescription) -> list[dict[str, n
     out = []
     for seg in problem.segments:
         pred = replay(car, seg.log, seg.derived, seg.windows, dt_s=problem.dt_s,
-                      sim_factory=problem.sim_factory)
+                      sim_factory=problem.sim_factory, settings=problem.settings)
         out.append(residuals(seg.log, seg.derived, pred))
     return out
 

@@ -100,6 +100,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import NamedTuple
 
 import numpy as np
 
@@ -299,28 +300,39 @@ def _neighbour_median(rate: np.ndarray, valid: np.ndarray, *, settings: GapSetti
     return np.where(np.isfinite(v), v, 0.0)
 
 
-def slip_limits(car: CarDescription, settings: GapSettings = SETTINGS) -> tuple[float, float] | None:
-    """``(a_max m/s^2, alpha_max rad/s^2)``: the most a car on slip tyres (``wheels.tyre_model =
-    "slip"``, docs/tyres.md) can change its velocity and its yaw rate, ``settings.slip_margin``
-    times what its tyres give: ``mu g`` (the friction circle) and ``mu g L / k^2`` (every tyre's
-    peak force at the wheelbase's lever about a chassis box's radius of gyration ``k``). None
-    for rigid tyres (the kinematic bounds apply)."""
+class SlipLimits(NamedTuple):
+    """What a car on slip tyres can do (:func:`slip_limits`)."""
+
+    accel_mps2: float  # the most it changes its velocity
+    yaw_accel_radps2: float  # the most it changes its yaw rate
+    gyration_m: float  # its radius of gyration about the vertical: a spin turns at most |v| / this
+
+
+def slip_limits(car: CarDescription, settings: GapSettings = SETTINGS) -> SlipLimits | None:
+    """What a car on slip tyres (``wheels.tyre_model = "slip"``, docs/tyres.md) can do, with
+    ``settings.slip_margin`` on what its tyres give: its velocity changes by at most ``mu g`` (the
+    friction circle), its yaw rate by at most ``mu g L / (2 k^2)`` (the axles' peak forces
+    ``mu m g b / L`` and ``mu m g a / L`` turning it the most at ``a = b = L / 2``; ``k`` the chassis
+    box's radius of gyration), and a spin that turns all its motion into rotation turns at
+    ``|v| / k``. None for rigid tyres (the kinematic bounds apply)."""
     if car.wheels.tyre_model != "slip":
         return None
     ch = car.chassis
     mu_g = car.wheels.friction_mu * car.effects.friction_scale * GRAVITY_MPS2
     k2 = (ch.length_m ** 2 + ch.width_m ** 2) / 12.0 * car.effects.inertia_scale
-    return settings.slip_margin * mu_g, settings.slip_margin * mu_g * ch.wheelbase_m / k2
+    m = settings.slip_margin
+    return SlipLimits(m * mu_g, m * mu_g * ch.wheelbase_m / (2.0 * k2), math.sqrt(k2) / m)
 
 
-def _jumps(log: RunLog, min_turn_radius_m: float, slip: tuple[float, float] | None = None, *,
+def _jumps(log: RunLog, min_turn_radius_m: float, slip: SlipLimits | None = None, *,
            settings: GapSettings = SETTINGS) -> tuple[list[Glitch], np.ndarray, float]:
     """Localisation jumps, of the heading (:func:`_heading_jumps`) and of the position; also
     the ``(N - 1,)`` jump steps and the pose's step noise at low speed (the slowest group's
     cross-heading scale, m). ``slip``: :func:`slip_limits` of a car on slip tyres, which slides:
     each step is then compared with the velocity of its neighbours (the median of
     ``settings.neighbour_steps`` valid steps each side, the step itself left out), not with the
-    speed along the heading, and a jump must exceed what ``a_max`` changes over them."""
+    speed along the heading, and a jump must exceed what its ``accel_mps2`` changes over their mean
+    distance (``(neighbour_steps + 1) / 2`` steps)."""
     t = log.t_s
     dt = np.diff(t)
     med = median_dt_s(t)
@@ -369,24 +381,29 @@ def _jumps(log: RunLog, min_turn_radius_m: float, slip: tuple[float, float] | No
     if slip is None:  # more than a sideslip or a speed error explains
         bound = settings.jump_motion_fraction * np.abs(v) * dt
     else:  # more than the tyres change the velocity over the neighbours
-        bound = slip[0] * (settings.neighbour_steps + 1) * dt * dt
+        bound = slip.accel_mps2 * 0.5 * (settings.neighbour_steps + 1) * dt * dt
     jump[idx] = (z[idx] > settings.jump_z) & (residual[idx] > bound[idx])
     for a, b in _runs(jump):
         k = int(np.argmax(z[a:b])) + a
+        if slip is None:
+            why = f"where speed {v[k]:+.3g} m/s moves {abs(v[k]) * dt[k]:.3g} m"
+        else:
+            why = (f"{residual[k]:.3g} m off the neighbouring steps' velocity, where the tyres change it by "
+                   f"{bound[k]:.3g} m at most")
         out.append(Glitch(GlitchKind.JUMP, float(t[a]), float(t[b]), "x_m,y_m",
-                          f"position step {step[k]:.3g} m in {dt[k]:.3g} s where speed {v[k]:+.3g} m/s moves "
-                          f"{abs(v[k]) * dt[k]:.3g} m (z = {z[k]:.0f})"))
+                          f"position step {step[k]:.3g} m in {dt[k]:.3g} s {why} (z = {z[k]:.0f})"))
     return out, jump | turned, slow_scale
 
 
 def _heading_jumps(log: RunLog, dt: np.ndarray, valid: np.ndarray, v: np.ndarray,
-                   min_turn_radius_m: float, slip: tuple[float, float] | None = None, *,
+                   min_turn_radius_m: float, slip: SlipLimits | None = None, *,
                    settings: GapSettings = SETTINGS) -> tuple[list[Glitch], np.ndarray, np.ndarray]:
     """Heading jumps (see the module docstring): the glitches, the ``(N - 1,)`` jump steps and
     the yaw with each jump taken out of its samples (for the position test). ``slip``
     (:func:`slip_limits`): a sliding car turns faster than its steering turns it, so its step
-    must instead leave the predicted turn by more than ``alpha_max`` changes the yaw rate over
-    the prediction's reach (the gyro's step, or the neighbours')."""
+    must instead leave the predicted turn by more than its ``yaw_accel_radps2`` changes the yaw
+    rate over the prediction's reach (the gyro's step, or the neighbours' mean distance), or turn
+    more than a spin can (``|v| / gyration_m``) beyond the steering."""
     yaw = np.asarray(log.yaw_rad, float)
     dyaw = _wrap(np.diff(yaw))
     if log.yaw_rate_radps is not None:
@@ -404,20 +421,26 @@ def _heading_jumps(log: RunLog, dt: np.ndarray, valid: np.ndarray, v: np.ndarray
     scale = max(scale, settings.resolution)
     z = np.abs(res - m) / scale
     turn = np.abs(v) * dt / min_turn_radius_m  # the most the car turns in the step (at its steering limit)
+    reach = 1.0 if log.yaw_rate_radps is not None else 0.5 * (settings.neighbour_steps + 1)
     if slip is None:
         jump[idx] = ((z[idx] > settings.jump_z) & (np.abs(dyaw[idx]) > turn[idx] + settings.jump_z * scale)
                      & (np.abs(res[idx]) > settings.jump_motion_fraction * turn[idx]))
     else:
-        reach = 1 if log.yaw_rate_radps is not None else settings.neighbour_steps + 1
-        jump[idx] = (z[idx] > settings.jump_z) & (np.abs(res[idx]) > slip[1] * reach * dt[idx] ** 2)
+        ground = np.hypot(np.diff(log.x_m), np.diff(log.y_m)) / np.where(dt > 0, dt, 1.0)
+        moving = np.maximum(np.abs(v), _neighbour_median(ground, valid, settings=settings))  # sliding: not |v|
+        spin = turn + moving * dt / slip.gyration_m
+        jump[idx] = (z[idx] > settings.jump_z) & (
+            (np.abs(res[idx]) > slip.yaw_accel_radps2 * reach * dt[idx] ** 2)
+            | (np.abs(dyaw[idx]) > spin[idx] + settings.jump_z * scale))
     runs = _runs(jump)
     spans: list[tuple[int, int, str]] = []
     i = 0
     while i < len(runs):
         a, b = runs[i]
         k = int(np.argmax(z[a:b])) + a
+        most = turn[k] if slip is None else float(np.abs(pred[k]) + slip.yaw_accel_radps2 * reach * dt[k] ** 2)
         text = (f"heading step {dyaw[k]:+.3g} rad in {dt[k]:.3g} s where {source} {pred[k]:+.3g} rad and the car "
-                f"turns {turn[k]:.3g} rad at most (z = {z[k]:.0f})")
+                f"turns {most:.3g} rad at most (z = {z[k]:.0f})")
         if i + 1 < len(runs):  # out and back: the samples between are displaced too
             a2, b2 = runs[i + 1]
             if abs(float(_wrap(np.array(res[a:b].sum() + res[a2:b2].sum())))) < settings.jump_z * scale:

@@ -146,7 +146,7 @@ class GapResult:
         """Kept parameters at (within 1 % of) an end of their fit range: the fit wanted to go
         further, so the catalogue probably lacks the real cause (or the car file is far off)."""
         by_field = {c.field: c for c in CANDIDATES.values()}
-        return [name for name, v in self.parameters.items() if by_field[name].at_bound(v)]
+        return [name for name, v in self.parameters.items() if by_field[name].at_bound(v, self.gap_settings)]
 
     @property
     def logs_worse(self) -> list[str]:
@@ -195,6 +195,7 @@ class GapResult:
                        for t, after in zip(self.chain.pruned, self.chain.pruned_after)],
             "unexplained": self.leftovers,
             "cannot_reveal": self.unrevealable, "not_applicable": self.not_applicable,
+            "settings_changed": self.gap_settings.changed(),
             "conventions_unchecked": {p.log.source: list(p.unchecked) for p in self.parts if p.unchecked},
             "glitches": [{"log": src, "kind": g.kind, "t_start_s": g.t_start_s, "t_end_s": g.t_end_s,
                           "column": g.column, "detail": g.detail} for src, g in self.glitches],

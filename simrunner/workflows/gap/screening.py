@@ -29,7 +29,7 @@ def window_labels(problem: Problem) -> list[str]:
 
     shares, total, count = [], np.zeros(len(SCREEN_REGIMES)), 0
     for seg in problem.segments:
-        masks = segment(seg.log, seg.derived, problem.car)
+        masks = segment(seg.log, seg.derived, problem.car, settings=problem.settings)
         inside = window_mask(len(seg.log), seg.windows)
         total += [float(np.count_nonzero(masks[r] & inside)) for r in SCREEN_REGIMES]
         count += int(np.count_nonzero(inside))
@@ -77,7 +77,8 @@ def reversal_windows(problem: Problem) -> set[int]:
     from simrunner.workflows.gap.regimes import reversal_onsets
 
     flags = [f for seg in problem.segments
-             for f in reversal_onsets(seg.log, seg.derived, seg.windows, problem.car.drive.max_brake_mps2)]
+             for f in reversal_onsets(seg.log, seg.derived, seg.windows, problem.car.drive.max_brake_mps2,
+                                      settings=problem.settings)]
     return {i for i, f in enumerate(flags) if f}
 
 

@@ -181,6 +181,10 @@ class GapSettings:
     epoch_like_s: float = _s(1000.0, "s", "choice: a log starting later than this has epoch-like times (said, "
                              "not changed)")
 
+    def changed(self) -> dict[str, float]:
+        """The fields that differ from the defaults (a report's record of how it was run)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if getattr(self, f.name) != f.default}
+
     def describe(self) -> list[tuple[str, object, str, str, str, bool]]:
         """``(name, value, unit, derived, script, shared_logs)`` of every field."""
         return [(f.name, getattr(self, f.name), f.metadata["unit"], f.metadata["derived"], f.metadata["script"],
@@ -191,11 +195,17 @@ SETTINGS = GapSettings()
 """The values in force by default (a constant: never changed)."""
 
 
+ZERO_OK = frozenset({"max_effects", "screen_max_s", "tie_delta_bic", "refine_later", "max_exchanges",
+                     "tie_bisections", "brent_maxiter"})
+"""Settings whose 0 means something (none kept, all windows, exact ties only, ...); the others
+that are not 0 by default must stay above it."""
+
+
 def load_settings(path: str | Path, base: GapSettings = SETTINGS) -> GapSettings:
     """``base`` with the fields a TOML file sets (``name = value`` at the top level, names as
     :class:`GapSettings`'s), e.g. ``moving_mps = 0.1`` for a slow car. An unknown name, a value
-    of the wrong type or out of its range is a :class:`~simrunner.workflows.gap.GapError`
-    naming the file and line."""
+    of the wrong type, a negative one, or 0 where 0 means nothing (:data:`ZERO_OK`) is a
+    :class:`~simrunner.workflows.gap.GapError` naming the file and line."""
     from simrunner.workflows.gap import GapError
     from vehicle.userfiles import read_user_toml
 
@@ -204,7 +214,8 @@ def load_settings(path: str | Path, base: GapSettings = SETTINGS) -> GapSettings
 
     def where(key: str) -> str:
         for number, line in enumerate(text.splitlines(), 1):
-            if line.split("=", 1)[0].strip().strip("\"'") == key:
+            left = line.split("=", 1)[0].strip()
+            if left.strip("\"'") == key or left.strip("[] \"'") == key:
                 return f"{path}:{number}"
         return str(path)
 
@@ -218,9 +229,10 @@ def load_settings(path: str | Path, base: GapSettings = SETTINGS) -> GapSettings
         default = getattr(base, key)
         ok = (isinstance(value, int) and not isinstance(value, bool) if isinstance(default, int)
               else isinstance(value, (int, float)) and not isinstance(value, bool))
-        if not ok or (isinstance(value, float) and math.isnan(value)) or value < 0:
+        low = 0 if key in ZERO_OK or getattr(GapSettings, key) == 0 else None
+        if not ok or not math.isfinite(value) or value < 0 or (low is None and value == 0):
             kind = "an integer" if isinstance(default, int) else "a number"
-            raise GapError(f"{where(key)}: {key} = {value!r}: expected {kind} >= 0 "
+            raise GapError(f"{where(key)}: {key} = {value!r}: expected {kind} {'>= 0' if low == 0 else '> 0'} "
                            f"({fields[key].metadata['unit']}; default {default!r})")
         changes[key] = type(default)(value)
     return dataclasses.replace(base, **changes)

@@ -77,7 +77,7 @@ RANGES: dict[str, tuple[str, float, float, bool]] = {
     # the slip tyres' numbers: only for a car with wheels.tyre_model = "slip"
     "tyre_stiffness": ("tyre_stiffness_scale", 0.15, 0.6, True),  # scale = 1 +- that
     "tyre_balance": ("tyre_balance", 0.05, 0.35, True),
-    "tyre_relaxation": ("tyre_relaxation_scale", 0.3, 1.5, True),  # scale = 1 +- that, at least 0.25
+    "tyre_relaxation": ("tyre_relaxation_scale", 0.3, 1.5, True),  # scale = 1 + that or 1 / (1 + that)
 }
 _RELATIVE_TO_ONE = {"steering_gain", "speed_scale", "mass_scale", "inertia", "tyre_stiffness", "tyre_relaxation"}
 _BELOW_ONE = {"accel_scale", "brake_scale", "servo_rate_scale", "steer_limit_scale"}

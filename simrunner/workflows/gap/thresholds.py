@@ -20,8 +20,8 @@ import numpy as np
 
 from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 
-def _one(args, *, settings: GapSettings = SETTINGS) -> tuple[float, float, float, str]:
-    seed, k = args
+def _one(args) -> tuple[float, float, float, str]:
+    seed, k, settings = args
     from simrunner.workflows.gap.fit import _quiet_worker
     from simrunner.workflows.gap.workflow import run_gap
     from simrunner.workflows.gap.synth import make_measured_log
@@ -39,7 +39,7 @@ def calibrate_thresholds(n_logs: int = 10, seed: int = 2024, jobs: int = 2, *,
     """Run ``n_logs`` effect-free logs; return ``{"delta_bic_min", "improvement_min",
     "held_improvement_min", "observed": [(delta_bic, improvement, held_improvement, effect), ...]}``."""
     with ProcessPoolExecutor(max_workers=jobs) as pool:
-        observed = list(pool.map(_one, [(seed, k) for k in range(n_logs)]))
+        observed = list(pool.map(_one, [(seed, k, settings) for k in range(n_logs)]))
     d = max(o[0] for o in observed)
     i = max(o[1] for o in observed)
     h = max(o[2] for o in observed)

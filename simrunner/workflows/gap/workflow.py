@@ -158,8 +158,10 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         car = car.replace(drive=dataclasses.replace(car.drive, command="duty", front_share=0.0))
     not_applicable = not_applicable_to(names, car)
     if effects is not None and not_applicable:
-        raise GapError(f"effect(s) {', '.join(not_applicable)} act only on a car with "
-                       f"{next(iter(not_applicable.values()))}: expected such a car file (--car) or other effects")
+        why = "; ".join(f"{n} acts only on a car with {need}" for n, need in not_applicable.items())
+        slip = any("tyre_model" in need for need in not_applicable.values())
+        raise GapError(f"{why}: expected other effects{' or a car file on slip tyres (--car)' if slip else ''}"
+                       f"{' (these logs drive the car by duty)' if all(duty) and not slip else ''}")
     names = [n for n in names if n not in not_applicable]
     tick = progress or (lambda label: None)
     parts = pool_short_runs([prepare(log, car, window_s, len(logs) > 1, settings=settings) for log in logs], settings)
