@@ -152,6 +152,37 @@ def report(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+TARGET_ROWS = (  # (figure key, target text, kind, goal text, met test or None)
+    ("named_hi", "named where SNR >= 3", "share", ">= 90 %", lambda v: v >= TARGETS["named_hi"]),
+    ("median_error", "median parameter error", "error", "<= 15 %", lambda v: v <= TARGETS["median_error"]),
+    ("false_claims", "false claims, effect-free logs", "share", "<= 5 %", lambda v: v <= TARGETS["false_claims"]),
+    ("spurious", "an extra effect named", "share", "", None),
+    ("hbridge_right", "H-bridge mode right", "share", "", None),
+    ("gap_ratio", "median held-out gap after/before", "ratio", "", None),
+    ("glitch_listed", "logs with a glitch listed (the car slides)", "share", "", None),
+)
+
+
+def results_data(rows: list[dict], command: str, date: str, commit: str, wall_min: float, jobs: int,
+                 note: str = "") -> dict:
+    """``bench/results/gap_duty.json``: the figures as target rows (tools/render_bench_tables.py
+    renders them into docs/tyres.md) and every trial's row."""
+    f = figures(rows)
+    trials = f"{min(r['trial'] for r in rows)}-{max(r['trial'] for r in rows)}"
+    out = []
+    for key, target, kind, goal, test in TARGET_ROWS:
+        value, n = f[key]
+        ok = math.isfinite(value) and n > 0
+        out.append({"mode": "duty + slip tyres", "trials": trials, "target": target, "kind": kind,
+                    "value": value if ok else None, "n": n, "detail": "", "goal": goal,
+                    "met": (bool(test(value)) if ok else False) if test else None, "run": "duty_slip"})
+    return {"format": "nxpcup-bench-results/1", "bench": "gap_duty",
+            "about": "bench/bench_gap_duty.py's figures (docs/tyres.md); rendered by tools/render_bench_tables.py",
+            "runs": {"duty_slip": {"command": command, "date": date, "commit": commit, "wall_min": round(wall_min),
+                                   "jobs": jobs, "note": note}},
+            "rows": out, "trials_data": rows}
+
+
 def main(argv: list[str] | None = None) -> None:  # pragma: no cover - a bench
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=12)
@@ -169,7 +200,14 @@ def main(argv: list[str] | None = None) -> None:  # pragma: no cover - a bench
     print(report(rows))
     print(f"wall {time.perf_counter() - t0:.0f} s, {a.jobs} processes")
     if a.results:
-        RESULTS.write_text(json.dumps({"rows": rows, "figures": figures(rows)}, indent=1, default=float) + "\n")
+        import datetime
+        import subprocess
+
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                                cwd=Path(__file__).parent).stdout.strip()
+        data = results_data(rows, "python -m bench.bench_gap_duty " + " ".join(argv or []), str(datetime.date.today()),
+                            commit, (time.perf_counter() - t0) / 60.0, a.jobs)
+        RESULTS.write_text(json.dumps(data, indent=1, default=float) + "\n")
 
 
 if __name__ == "__main__":  # pragma: no cover

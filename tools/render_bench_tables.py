@@ -131,7 +131,7 @@ def render_gap(data: dict) -> str:
     return "\n".join(lines)
 
 
-RENDERERS: dict[str, Callable[[dict], str]] = {"gap": render_gap}
+RENDERERS: dict[str, Callable[[dict], str]] = {"gap": render_gap, "gap_duty": render_gap}  # the same layout
 
 
 def render(name: str, data: dict) -> str:
