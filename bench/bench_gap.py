@@ -106,7 +106,7 @@ from typing import Iterator
 import numpy as np
 
 from bench.gap_scoring import (GLITCH_KINDS, SYNTH_TARGETS, figures, fmt_figure, inject_glitch, method_row,
-                               sigma_text, target_rows)
+                               replay_snr, sigma_text, target_rows)
 
 SEED = 20240
 NONE_EVERY = 4
@@ -289,31 +289,15 @@ def _sensor_signals(sensors: str):
 
 def effect_snr(mode: str, k: int) -> dict[str, float]:
     """SNR of each hidden effect of trial ``k`` (module docstring)."""
-    from simrunner.car.effects import neutral_car, with_effects
-    from simrunner.workflows.gap.logs import derive
-    from simrunner.workflows.gap.replay import make_windows, replay
-    from simrunner.workflows.gap.synth import RANGES, make_measured_log
+    from simrunner.car.effects import neutral_car
+    from simrunner.workflows.gap.synth import make_measured_log
 
     effects, sensors, rng = design(mode, k)
     if not effects:
         return {}
     exact, truth = make_measured_log(effects, rng=rng, noise=False, sensors=sensors, car=mode_car(mode))
-    car = neutral_car(truth.car)  # the nuisance mass and grip, no effect
-    d = derive(exact, car.chassis.wheelbase_m, car.steering.limit_rad)
-    w = make_windows(exact)
-    p0 = replay(car, exact, d, w)
-    out = {}
-    for e in effects:
-        f = RANGES[e][0]
-        p1 = replay(with_effects(car, **{f: truth.values[f]}), exact, d, w)
-        ms = []
-        for s, sigma in _sensor_signals(sensors).items():
-            diff = getattr(p1, s) - getattr(p0, s)
-            if s == "yaw_rad":
-                diff = (diff + math.pi) % (2 * math.pi) - math.pi
-            ms.append(np.nanmean((diff / sigma) ** 2))
-        out[e] = float(np.sqrt(np.mean(ms)))
-    return out
+    # the nuisance mass and grip, no effect
+    return replay_snr(neutral_car(truth.car), exact, effects, truth.values, _sensor_signals(sensors))
 
 
 def held_out(result, car_before, car_after) -> dict:

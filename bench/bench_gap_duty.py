@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.gap_scoring import SNR_MIN, method_row
+from bench.gap_scoring import SNR_MIN, method_row, replay_snr
 
 SEED = 20251
 GROUPS = {"motor": ("accel_scale", "speed_scale"), "losses": ("rolling_resistance", "drag"),
@@ -59,33 +59,17 @@ def design(k: int) -> tuple[list[str], str, np.random.Generator]:
 
 def snr(k: int) -> dict[str, float]:
     """Each hidden effect's SNR: its change of the exact log's replay over the sensor noise."""
-    from simrunner.car.effects import neutral_car, with_effects
-    from simrunner.workflows.gap.logs import derive, duty_commands
-    from simrunner.workflows.gap.replay import make_windows, replay
-    from simrunner.workflows.gap.synth import NOISE_POS_M, NOISE_SPEED_MPS, NOISE_YAW_RAD, RANGES, make_measured_log
+    from simrunner.car.effects import neutral_car
+    from simrunner.workflows.gap.logs import duty_commands
+    from simrunner.workflows.gap.synth import NOISE_POS_M, NOISE_SPEED_MPS, NOISE_YAW_RAD, make_measured_log
 
     effects, hbridge, rng = design(k)
     if not effects:
         return {}
     exact, truth = make_measured_log(effects, rng=rng, noise=False, car=car_file(), hbridge=hbridge)
-    exact = duty_commands(exact)
-    neutral = neutral_car(truth.car)  # the truth's nuisance and H-bridge, no effect
-    d = derive(exact, neutral.chassis.wheelbase_m, neutral.steering.limit_rad)
-    w = make_windows(exact)
-    p0 = replay(neutral, exact, d, w)
     sigma = {"x_m": NOISE_POS_M, "y_m": NOISE_POS_M, "yaw_rad": NOISE_YAW_RAD, "speed_mps": NOISE_SPEED_MPS}
-    out = {}
-    for e in effects:
-        f = RANGES[e][0]
-        p1 = replay(with_effects(neutral, **{f: truth.values[f]}), exact, d, w)
-        ms = []
-        for s, sd in sigma.items():
-            diff = getattr(p1, s) - getattr(p0, s)
-            if s == "yaw_rad":
-                diff = (diff + math.pi) % (2 * math.pi) - math.pi
-            ms.append(np.nanmean((diff / sd) ** 2))
-        out[e] = float(np.sqrt(np.mean(ms)))
-    return out
+    # the truth's nuisance and H-bridge, no effect; replayed by duty as run_gap does
+    return replay_snr(neutral_car(truth.car), duty_commands(exact), effects, truth.values, sigma)
 
 
 def trial(k: int) -> dict:

@@ -23,6 +23,32 @@ def rel_error(effect: str, fitted: float | None, true: float) -> float | None:
     return abs(fitted - true) / ref if ref > 0 else None
 
 
+def replay_snr(car, exact, effects, values: dict, sigma: dict[str, float]) -> dict[str, float]:
+    """Each hidden effect's SNR on a noise-free log ``exact``: the RMS over the sensors (``sigma``:
+    column -> noise) of the change its value (``values``, by ``synth.RANGES`` field) makes to the
+    replay of ``car`` (the truth without effects), over the sensor noise."""
+    from simrunner.car.effects import with_effects
+    from simrunner.workflows.gap.logs import derive
+    from simrunner.workflows.gap.replay import make_windows, replay
+    from simrunner.workflows.gap.synth import RANGES
+
+    d = derive(exact, car.chassis.wheelbase_m, car.steering.limit_rad)
+    w = make_windows(exact)
+    p0 = replay(car, exact, d, w)
+    out = {}
+    for e in effects:
+        f = RANGES[e][0]
+        p1 = replay(with_effects(car, **{f: values[f]}), exact, d, w)
+        ms = []
+        for s, sd in sigma.items():
+            diff = getattr(p1, s) - getattr(p0, s)
+            if s == "yaw_rad":
+                diff = (diff + math.pi) % (2 * math.pi) - math.pi
+            ms.append(np.nanmean((diff / sd) ** 2))
+        out[e] = float(np.sqrt(np.mean(ms)))
+    return out
+
+
 def method_row(named, params, truth_values, effects, held: dict, wall_s: float, extra: dict | None = None,
                 sigma: dict | None = None, spans: dict | None = None) -> dict:
     """``sigma``: the method's standard error per parameter (the chain's), kept per effect with
