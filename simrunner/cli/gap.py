@@ -1,14 +1,21 @@
 """``simrunner gap LOG.csv [LOG.csv ...] -o DIR``: the chain of effects the simulator misses.
 
 A thin click layer over :func:`simrunner.workflows.gap.workflow.run_gap` and ``report.write_outputs``
-(docs/gap.md). Exit codes: 0 done (whether or not effects were kept); 2 bad input (one
-line ``file:line: what was expected`` on stderr, no traceback, nothing written).
+(docs/gap.md). The findings are printed as they come (stderr) and appended to
+``DIR/findings.txt``; the progress bar counts the fits of the stage running (its own total,
+so its time estimate is the stage's). Exit codes: 0 done (whether or not effects were kept);
+2 bad input (one line ``file:line: what was expected`` on stderr, no traceback, nothing
+written); 130 stopped by Ctrl-C, 143 by SIGTERM, 129 by SIGHUP, with the partial report
+(``report.write_partial``) in DIR.
 """
 from __future__ import annotations
 
 import contextlib
+import multiprocessing
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 import click
@@ -37,6 +44,69 @@ def _engine_stderr_silenced():
         os.dup2(saved, 2)
         os.close(saved)
         stream.close()
+
+
+class _Stopped(KeyboardInterrupt):
+    """Ctrl-C, SIGTERM or SIGHUP while the workflow runs."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = int(signum)
+
+    def words(self) -> str:
+        return "Ctrl-C (SIGINT)" if self.signum == signal.SIGINT else signal.Signals(self.signum).name
+
+
+@contextlib.contextmanager
+def _stop_on_signals():
+    """SIGINT, SIGTERM and SIGHUP raise :class:`_Stopped` in the main thread after ending the fit
+    workers (whose running fits would otherwise be waited for); later ones are only noted (the
+    partial report is being written). Yields the list of signals received."""
+    received: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def handler(signum, frame):
+        received.append(signum)
+        if len(received) > 1:
+            return
+        for child in multiprocessing.active_children():
+            child.terminate()
+        raise _Stopped(signum)
+
+    sigs = [s for s in (signal.SIGINT, getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)) if s]
+    old = {s: signal.signal(s, handler) for s in sigs}
+    try:
+        yield received
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+
+
+class _LiveView:
+    """The terminal while the workflow runs: each finding a line (stderr), the progress bar the
+    fits of the stage running (reset per stage: its total and time estimate are the stage's)."""
+
+    def __init__(self, stream, no_progress: bool, live):
+        from tqdm import tqdm
+
+        self.stream, self.live = stream, live
+        self.bar = tqdm(total=1, file=stream, disable=no_progress, desc="reading the logs", unit="fit", leave=False)
+
+    def finding(self, f) -> None:
+        if f.kind == "stage":
+            self.bar.reset(total=max(int(f.data.get("fits", 1)), 1))
+            self.bar.set_description_str(f.text)
+        else:
+            self.bar.write(f.line(), file=self.stream)
+        self.live.add(f)
+
+    def tick(self, label: str) -> None:
+        self.bar.update(1)
+
+    def close(self) -> None:
+        self.bar.close()
 
 
 @click.command("gap")
@@ -71,12 +141,15 @@ def _engine_stderr_silenced():
 @click.option("--settings", "settings_file", default=None, type=click.Path(dir_okay=False, path_type=Path),
               metavar="FILE.toml", help="Thresholds to change, `name = value` (docs/gap.md \"Thresholds\"; "
                                         "the options above win).")
+@click.option("--budget", "budget_min", default=None, type=click.FloatRange(min=0, min_open=True),
+              metavar="MINUTES", help="End within MINUTES: the chain stops in time, with the model of its "
+                                      "finished steps (the report says so).")
 @click.option("--force", is_flag=True, help="Replace DIR if it exists.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_file: Path | None,
         column_items: tuple[str, ...], norms_file: Path | None, jobs: int, effects: str | None, max_effects: int | None,
-        dt_s: float | None, window_s: float | None, screen_s: float | None, settings_file: Path | None, force: bool,
-        no_progress: bool) -> None:
+        dt_s: float | None, window_s: float | None, screen_s: float | None, settings_file: Path | None,
+        budget_min: float | None, force: bool, no_progress: bool) -> None:
     """Find where MEASURED (one or several run logs of one car, docs/telemetry.md) and the
     simulator disagree, build the chain of effects that closes the gap, and show it shrink on
     held-out data.
@@ -85,16 +158,19 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
     A log needs the commands and a pose or a speed sensor (a gyro helps); a log merged from
     several topics (a row per message, other cells empty) is read at its pose's (else its
     speed sensor's) samples. A column reversed or in another unit (a gyro in deg/s, steering
-    + = right) is refused with the mapping that fixes it (docs/gap.md, "Input")."""
-    from tqdm import tqdm
+    + = right) is refused with the mapping that fixes it (docs/gap.md, "Input").
 
+    \b
+    The findings are printed as they come and kept in DIR/findings.txt; Ctrl-C or SIGTERM
+    leaves a partial report in DIR (the model of the finished steps)."""
     from simrunner.cli import input_errors
     from simrunner.errors import SimError
     from simrunner.workflows.gap.fit import CANDIDATES
     from simrunner.workflows.gap.logs import check_measured
-    from simrunner.workflows.gap.report import check_output_dir, summary_text, write_outputs
+    from simrunner.workflows.gap.live import Budget, Findings
+    from simrunner.workflows.gap.report import LiveFolder, check_output_dir, summary_text, write_outputs
     from simrunner.workflows.gap.settings import load_settings
-    from simrunner.workflows.gap.workflow import progress_total, run_gap
+    from simrunner.workflows.gap.workflow import run_gap
     from vehicle.description import load_car
 
     try:
@@ -110,21 +186,21 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
         read = _read_logs(measured, columns_file, column_items, norms_file)
         logs = [check_measured(log, pooled=len(read) > 1, settings=settings) for log in read]
         limit = settings.max_effects if max_effects is None else max_effects
-        total = progress_total(len(names) if names is not None else len(CANDIDATES), limit, settings)
-        with _engine_stderr_silenced() as err:
-            bar = tqdm(total=total, file=err, disable=no_progress, desc="gap", unit="fit", leave=False)
-
-            def tick(label: str) -> None:
-                bar.set_postfix_str(label)
-                bar.update(1)
-
+        live = LiveFolder(out_dir, force=force)
+        with _engine_stderr_silenced() as err, _stop_on_signals():
+            view = _LiveView(err, no_progress, live)
+            findings = Findings(view.finding)
             try:
                 result = run_gap(logs, description, jobs=jobs, effects=names, settings=settings, dt_s=dt_s,
-                                 window_s=window_s, max_effects=limit, screen_max_s=screen_s, progress=tick)
+                                 window_s=window_s, max_effects=limit, screen_max_s=screen_s, progress=view.tick,
+                                 findings=findings, budget=Budget(budget_min * 60.0) if budget_min else None)
+            except _Stopped as stop:
+                view.close()
+                _write_stopped(findings, live, out_dir, stop, err)
             finally:
-                bar.close()
+                view.close()
         try:
-            write_outputs(result, out_dir, force=force)
+            write_outputs(result, out_dir, force=force or live.started, findings=findings)
         except input_errors():
             click.echo(summary_text(result))  # the run's answer is not lost with the folder
             raise
@@ -134,6 +210,23 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
     click.echo(summary_text(result))
     click.echo(f"wrote {out_dir}/ (report.json, car.toml, residuals.txt, gap_before_after.png, "
                f"residuals_by_regime.png)")
+
+
+def _write_stopped(findings, live, out_dir: Path, stop: _Stopped, err) -> None:
+    """A run stopped by a signal: its partial report (when its folder was started) and the exit
+    status of the signal (130, 143, 129)."""
+    from simrunner.workflows.gap.report import write_partial
+
+    how = f"stopped by {stop.words()}"
+    if live.started:
+        write_partial(findings, out_dir, how)
+        print(f"simrunner gap: {how} during {findings.stage}; partial report in {out_dir}/ (report.json "
+              f"\"status\": \"partial\", the model of the finished steps in car.toml, findings.txt)", file=err)
+    else:
+        print(f"simrunner gap: {how} during {findings.stage}, before the nominal car's replay: nothing written",
+              file=err)
+    err.flush()
+    sys.exit(128 + stop.signum)
 
 
 def _read_logs(paths: tuple[Path, ...], columns_file: Path | None, items: tuple[str, ...],

@@ -10,7 +10,11 @@ Data flow::
       --replay.replay / residuals (signals the logs support)--> where it disagrees (regimes)
       --chain.build_chain (fit.fit_all screening, joint refits, held-out confirmation)--> kept effects
       --workflow.run_gap--> GapResult: leftovers vs noise, effects the logs cannot reveal
-      --report.write_outputs--> DIR/{report.json, car.toml, residuals.txt, *.png}
+      --report.write_outputs--> DIR/{report.json, car.toml, residuals.txt, findings.txt, *.png}
+
+While it runs, ``live.Findings`` hands each finding to a listener as it is made (``simrunner gap``:
+the terminal and DIR/findings.txt; ``report.write_partial`` when the run is stopped) and
+``live.Budget`` ends the chain in time.
 
 Every threshold: ``settings.SETTINGS`` (units, derivations). Entry: ``workflow.run_gap``.
 

@@ -127,6 +127,7 @@ from scipy.optimize import minimize, minimize_scalar
 from simrunner.workflows.gap.fit import (CANDIDATES, FitResult, Problem, _quiet_worker,
                                          bic, cost_of, fit_all, rescaled, robust_total, segment_residuals,
                                          window_costs, window_values_task)
+from simrunner.workflows.gap.live import Budget, BudgetSpent, Findings
 from simrunner.workflows.gap.screening import screening_problem
 from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 from vehicle.description import CarDescription
@@ -496,7 +497,8 @@ def _neutral_u(name: str) -> float:
 
 
 def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int = 2,
-                progress: Callable[[str], None] | None = None) -> Chain:
+                progress: Callable[[str], None] | None = None, findings: Findings | None = None,
+                budget: Budget | None = None) -> Chain:
     """Run the stepwise selection of the module docstring over the effects ``names``.
 
     ``fit_problem`` and ``held_problem`` have the same base car (no chain effect yet), the
@@ -506,8 +508,14 @@ def build_chain(fit_problem: Problem, held_problem: Problem, names: Sequence[str
     fit problem's ``settings`` (:class:`~simrunner.workflows.gap.settings.GapSettings`): ``delta_bic_min``,
     ``improvement_min``, ``held_improvement_min``, ``max_effects``, ``robust_window_factor``
     (the robust window scale's factor, as ``run_gap``'s), ``screen_max_s`` (the seconds of fit
-    windows the screening and the refits use, :func:`screening_problem`; 0: all of them), ..."""
-    return _ChainBuilder(fit_problem, held_problem, names, jobs=jobs, progress=progress).build()
+    windows the screening and the refits use, :func:`screening_problem`; 0: all of them), ...
+
+    ``findings`` (:class:`~simrunner.workflows.gap.live.Findings`) records each stage, step,
+    exchange and removal as it is made; ``budget`` (:class:`~simrunner.workflows.gap.live.Budget`)
+    ends the chain with the model of the finished steps when the time left is what the closing
+    stages need (``Chain.stop_reason`` says so)."""
+    return _ChainBuilder(fit_problem, held_problem, names, jobs=jobs, progress=progress, findings=findings,
+                         budget=budget).build()
 
 
 @dataclass
@@ -536,13 +544,16 @@ class _ChainBuilder:
     :meth:`gate`, :meth:`polish`, :meth:`exchange`), :meth:`backward_check`, and again."""
 
     def __init__(self, fit_problem: Problem, held_problem: Problem, names: Sequence[str], *, jobs: int,
-                 progress: Callable[[str], None] | None):
+                 progress: Callable[[str], None] | None, findings: Findings | None = None,
+                 budget: Budget | None = None):
         self.fit_problem, self.held_problem, self.names = fit_problem, held_problem, list(names)
         self.settings = s = fit_problem.settings
         self.jobs, self.tests, self.max_effects = jobs, (s.delta_bic_min, s.improvement_min,
                                                          s.held_improvement_min), s.max_effects
         self.robust_factor, self.screen_max_s = s.robust_window_factor, s.screen_max_s
-        self.tick = progress or (lambda label: None)
+        self.progress = progress or (lambda label: None)
+        self.findings = findings or Findings()
+        self.budget = budget
         self.base = fit_problem.car
         self.order = {n: i for i, n in enumerate(CANDIDATES)}
         self.kept_names: list[str] = []
@@ -563,6 +574,22 @@ class _ChainBuilder:
         self.pruned_after: list[int] = []  # the last step before each removal
         self.polished = False  # the kept parameters come from a kept candidate's second refit
         self.pool: ProcessPoolExecutor | None = None
+
+    # -- progress, findings, budget ---------------------------------------------------------------
+    def tick(self, label: str) -> None:
+        """A fit (or a batch of fits) done; raises BudgetSpent when the budget keeps the rest
+        of the time for the closing stages."""
+        self.progress(label)
+        if self.budget is not None:
+            self.budget.tick()
+            if self.budget.spent(len(self.kept_names) + 1):
+                raise BudgetSpent(label)
+
+    def stage(self, text: str, fits: int) -> None:
+        self.findings.add("stage", text, stage=text, fits=int(fits))
+
+    def model_changed(self) -> None:
+        self.findings.model(self.kept_names, self.kept_values)
 
     # -- workers -------------------------------------------------------------------------------
     def job(self, screen: Problem, names: Sequence[str], start: dict[str, float],
@@ -606,9 +633,14 @@ class _ChainBuilder:
                 self.runners_up = {e: [t for t in ts if t.effect not in self.excluded]
                                    for e, ts in self.runners_up.items()}
                 self.rejudge()
+        except BudgetSpent:
+            self.stop = (f"the time budget ({self.budget.minutes()}) ran out during {self.findings.stage}: "
+                         "the model of the finished steps" + (", not re-checked by the final check"
+                                                              if len(self.kept_names) > 1 else ""))
+            self.findings.add("chain", f"stopped: {self.stop}", reason=self.stop)
         finally:
             if self.pool is not None:
-                self.pool.shutdown()
+                self.pool.shutdown(cancel_futures=True)
         return Chain(tuple(self.steps), with_parameters(self.base, self.kept_values), self.nominal_cost,
                      self.nominal_held, self.stop, dict(self.kept_values), tuple(self.pruned), tuple(self.swaps),
                      tuple(self.pruned_after),
@@ -625,6 +657,8 @@ class _ChainBuilder:
         if not remaining:
             self.stop = "every candidate effect is in the model"
             return False
+        if self.budget is not None and self.budget.spent(len(self.kept_names) + 1):
+            raise BudgetSpent("before a step")
         self.index += 1
         screen_base = screening_problem(self.fit_problem, self.screen_max_s)
         if self.kept_names and not self.polished:
@@ -637,13 +671,23 @@ class _ChainBuilder:
                                tuple(sorted(st.screening, key=lambda r: (r.criterion, self.order[r.effect]))),
                                tuple(decided), dict(self.judge.fit.scales), self.held_gap,
                                self.held_gap if chosen is None else st.outcome[chosen.effect].held_gap, alike))
+        step = self.steps[-1]
         if chosen is None:
             self.stop = "no remaining effect passes the tests"
+            self.findings.add("step", f"step {st.index}: no remaining effect passes the tests", step=st.index,
+                              kept=None)
             return False
         self.keep(chosen, st, decided)
+        self.model_changed()
+        self.findings.add("step", f"step {st.index}: kept {chosen.effect} ({_values_text(chosen.parameters, chosen.effect)}); "
+                                  f"held-out gap {step.gap_before:.3g} -> {step.gap_after:.3g}",
+                          step=st.index, kept=chosen.effect, parameters=dict(self.kept_values),
+                          held_gap_before=step.gap_before, held_gap_after=step.gap_after)
         for _ in range(self.max_exchanges_now()):
+            self.stage(f"step {st.index}: exchanges", 1)
+            more = self.exchange(st)
             self.tick(f"step {st.index} exchanges")
-            if not self.exchange(st):
+            if not more:
                 break
         self.rejudge()  # module docstring, step 6
         return True
@@ -663,6 +707,7 @@ class _ChainBuilder:
         full = self.fit_problem.with_car(current)
         screen = screening_problem(full, self.screen_max_s)
         screen_cost = self.cost if screen is full else cost_of(screen, current)
+        self.stage(f"step {index}: screening {len(remaining)} effects", len(remaining))
         screening = fit_all(screen, screen_cost, remaining, jobs=self.jobs, refine_top=0,
                             progress=lambda label: self.tick(f"step {index} {label}"))
         n_top = max(self.settings.refine_top if index == 1 else self.settings.refine_later, 1)
@@ -704,6 +749,7 @@ class _ChainBuilder:
 
     def refit(self, st: _StepState, batch: list[FitResult]) -> list[Trial]:
         """Step 2: the batch's candidates refitted jointly with the kept effects, in BIC order."""
+        self.stage(f"step {st.index}: joint refits of {', '.join(r.effect for r in batch)}", 1)
         outs = self.run([self.job(st.screen_base, self.kept_names + [r.effect],
                                   {**self.kept_values, **r.parameters}, r.effect) for r in batch])
         self.tick(f"step {st.index} joint refits")
@@ -776,6 +822,10 @@ class _ChainBuilder:
         self.runners_up[swap.into] = [t for t in self.runners_up.pop(swap.out) if t.effect != swap.into]
         self.kept_values, self.cost, self.held_gap = dict(swap.parameters), swap.cost_after, swap.held_gap_after
         self.kept_spans = _carried(self.kept_spans, swap.parameters, swap.spans)
+        self.model_changed()
+        self.findings.add("exchange", f"step {st.index}: exchanged {swap.out} for {swap.into}; held-out gap "
+                                      f"{swap.held_gap_before:.3g} -> {swap.held_gap_after:.3g}",
+                          step=st.index, out=swap.out, into=swap.into, parameters=dict(self.kept_values))
         return True
 
     # -- the backward check (step 8 of the module docstring) ------------------------------------
@@ -783,12 +833,13 @@ class _ChainBuilder:
         """Every kept effect still earns its place: the weakest that would not is removed, and the
         check repeats."""
         while len(self.kept_names) > 1:
-            self.tick("final check")
+            self.stage(f"final check of {len(self.kept_names)} effects", 1)
             k = len(self.kept_names)
             outs = self.run([self.job(screening_problem(self.fit_problem, self.screen_max_s),
                                       [n for n in self.kept_names if n != e],
                                       {f: v for f, v in self.kept_values.items() if f != CANDIDATES[e].field})
                              for e in self.kept_names])
+            self.tick("final check")
             weakest = None
             for e, o in zip(self.kept_names, outs):
                 tr = Trial(e, dict(self.kept_values), self.cost,
@@ -810,6 +861,15 @@ class _ChainBuilder:
             self.kept_values, self.cost, self.held_gap = o.values, o.cost, o.held_gap
             self.j_cost, self.j_held = o.judged_cost, o.judged_held_gap
             self.kept_spans = _carried(self.kept_spans, o.values, o.spans)
+            self.model_changed()
+            self.findings.add("removed", f"final check: removed {tr.effect} ({tr.reason})", effect=tr.effect,
+                              reason=tr.reason, parameters=dict(self.kept_values))
+
+
+def _values_text(values: dict[str, float], effect: str) -> str:
+    """``field = value`` of ``effect``'s parameter among ``values``."""
+    name = CANDIDATES[effect].field
+    return f"{name} = {values[name]:.4g}" if name in values else "at neutral"
 
 
 def _carried(spans: dict[str, tuple[float, float]], values: dict[str, float],

@@ -442,5 +442,5 @@ def fit_all(problem: Problem, nominal_cost: float, effects: Sequence[str] | None
         results.update(run([(problem, r.effect, nominal_cost, True, r.trace) for r in top], "refine"))
     finally:
         if pool is not None:
-            pool.shutdown()
+            pool.shutdown(cancel_futures=True)  # all done, or a stop (Ctrl-C, the budget) in between
     return sorted(results.values(), key=lambda r: (r.criterion, order[r.effect]))

@@ -6,9 +6,13 @@ returns), its text (:func:`summary_text`) and its output folder (:func:`write_ou
     DIR/gap_before_after.png      measured vs simulated, nominal and final model (first log)
     DIR/residuals_by_regime.png   residual RMSE and bias per regime, before and after
     DIR/residuals.txt             the answer, then the regime tables, as text
+    DIR/findings.txt              what was found as it was found (simrunner.workflows.gap.live)
 
-written into a temporary sibling folder and swapped into place (trackgen.outdir), so DIR is
-complete or absent.
+written into a temporary sibling folder and swapped into place (trackgen.outdir). While a run
+goes on, DIR holds only ``findings.txt``, a line per finding as it comes
+(:func:`start_live_folder`); a run stopped before its end (Ctrl-C, SIGTERM) leaves the partial
+report of :func:`write_partial` (``report.json`` with ``"status": "partial"``, the model of the
+finished steps in ``car.toml``, ``residuals.txt``, ``findings.txt``).
 """
 from __future__ import annotations
 
@@ -24,9 +28,10 @@ import numpy as np
 
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap import GapError
-from simrunner.workflows.gap.chain import Chain
+from simrunner.workflows.gap.chain import Chain, with_parameters
 from simrunner.workflows.gap.fit import CANDIDATES, FitResult
 from simrunner.workflows.gap.glitches import Glitch
+from simrunner.workflows.gap.live import Findings
 from simrunner.workflows.gap.logs import Derived
 from simrunner.workflows.gap.replay import Prediction, Window, noise_rms
 from simrunner.workflows.gap.settings import SETTINGS, GapSettings
@@ -446,11 +451,60 @@ def check_output_dir(out_dir: str | Path, *, force: bool = False) -> Path:
     return out
 
 
-def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False) -> Path:
+def start_live_folder(out_dir: str | Path, *, force: bool = False) -> Path:
+    """Make ``out_dir`` the running run's folder (an existing one replaced only with
+    ``force``), holding an empty ``findings.txt``; returns that file's path."""
+    out = check_output_dir(out_dir, force=force)
+    clean_stale(out)
+    try:
+        tmp = make_temp(out)
+        (tmp / "findings.txt").write_text("")
+        replace_folder(tmp, out)
+    except OSError as exc:
+        raise GapError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
+    return out / "findings.txt"
+
+
+class LiveFolder:
+    """``findings.txt`` in the output folder as the findings come (pass :meth:`add` as, or
+    from, the :class:`~simrunner.workflows.gap.live.Findings` listener). The folder is made at the
+    nominal car's finding, once the input is known good (bad input leaves nothing), with the
+    lines found before it; ``started`` says whether it exists."""
+
+    def __init__(self, out_dir: str | Path, *, force: bool = False):
+        self.out, self.force = Path(out_dir), force
+        self.started = False
+        self._early: list[str] = []
+
+    def add(self, finding) -> None:
+        if finding.kind == "stage":
+            return
+        if not self.started and finding.kind in ("nominal", "done"):
+            start_live_folder(self.out, force=self.force)
+            self.started = True
+        if not self.started:
+            self._early.append(finding.line())
+            return
+        try:
+            with open(self.out / "findings.txt", "a") as fh:
+                fh.write("".join(line + "\n" for line in self._early + [finding.line()]))
+            self._early = []
+        except OSError as exc:
+            raise GapError(f"{self.out}/findings.txt: cannot write ({exc.strerror or exc})") from None
+
+
+def findings_text(findings: Findings) -> str:
+    """``findings.txt``: a line per finding but the stages, ``[m:ss] text``."""
+    return "".join(f.line() + "\n" for f in findings.items if f.kind != "stage")
+
+
+def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False,
+                  findings: Findings | None = None) -> Path:
     """Write the output folder atomically (see the module docstring); returns its path.
 
     An existing ``out_dir`` is replaced only with ``force``; that, or a folder that cannot
     be written (the disk full, no permission), is a GapError; nothing is left half-written.
+    ``findings``: the run's, written to ``findings.txt``.
     """
     from simrunner.workflows.gap.plots import plot_before_after, plot_regimes
 
@@ -466,6 +520,8 @@ def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False
         (tmp / "residuals.txt").write_text(summary_text(result) + "\n")
         plot_before_after(result, tmp / "gap_before_after.png")
         plot_regimes(result, tmp / "residuals_by_regime.png")
+        if findings is not None:
+            (tmp / "findings.txt").write_text(findings_text(findings))
         replace_folder(tmp, out)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -475,3 +531,56 @@ def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False
         raise
     return out
 
+
+
+def partial_json(findings: Findings, stopped: str) -> dict:
+    """``report.json`` of a run stopped before its end: ``"status": "partial"``, why and during
+    which stage, the model of the finished steps (not re-checked, no uncertainty) and every
+    finding with its figures."""
+    return _finite({
+        "format": FORMAT, "status": "partial", "stopped": stopped, "stage": findings.stage,
+        "elapsed_s": findings.elapsed_s(), "logs": [f.data.get("log") for f in findings.of_kind("log")],
+        "effects": findings.effects, "parameters": findings.parameters,
+        "nominal_held_gap": next((f.data.get("held_gap") for f in findings.of_kind("nominal")), None),
+        "findings": [{"kind": f.kind, "elapsed_s": f.elapsed_s, "text": f.text, **f.data} for f in findings.items],
+    })
+
+
+def partial_text(findings: Findings, stopped: str) -> str:
+    """``residuals.txt`` of a stopped run: what stopped it, the model so far, the findings."""
+    m, s = divmod(int(findings.elapsed_s()), 60)
+    model = (", ".join(f"{k} = {v:.4g}" for k, v in findings.parameters.items())
+             if findings.effects else "none yet (the nominal car)")
+    lines = [f"PARTIAL REPORT: {stopped} after {m}:{s:02d}, during {findings.stage}.",
+             f"effects kept by the finished steps: {', '.join(findings.effects) or 'none'}",
+             f"  parameters: {model}",
+             "  (not re-checked by the final check, no uncertainty, no held-out figures of the final model: "
+             "run again, with --budget MINUTES to end in time)", "", "findings:"]
+    return "\n".join(lines) + "\n" + findings_text(findings)
+
+
+def write_partial(findings: Findings, out_dir: str | Path, stopped: str) -> Path:
+    """The partial report of a run stopped before its end (module docstring), written over its
+    live folder ``out_dir`` as :func:`write_outputs` writes a whole one. ``car.toml`` is the model
+    of the finished steps when the run got as far as the nominal car."""
+    out = Path(out_dir)
+    try:
+        tmp = make_temp(out)
+    except OSError as exc:
+        raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
+    try:
+        (tmp / "report.json").write_text(json.dumps(partial_json(findings, stopped), indent=2) + "\n")
+        (tmp / "residuals.txt").write_text(partial_text(findings, stopped))
+        (tmp / "findings.txt").write_text(findings_text(findings))
+        if findings.base_car is not None:
+            with_parameters(findings.base_car, findings.parameters).save(
+                tmp / "car.toml", {f"effects.{k}": "the finished steps of a stopped `simrunner gap` run (partial)"
+                                   for k in findings.parameters})
+        replace_folder(tmp, out)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise GapError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out

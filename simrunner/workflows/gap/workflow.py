@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from typing import Callable, Sequence
 
 import numpy as np
@@ -25,7 +26,8 @@ from simrunner.workflows.gap.chain import build_chain, screening_problem
 from simrunner.workflows.gap.fit import (CANDIDATES, Problem, Segment, bic, nominal_scales, robust_scale_of,
                                          robust_total, cost_of, window_costs)
 from simrunner.workflows.gap.conventions import check_conventions
-from simrunner.workflows.gap.glitches import find_glitches, glitch_mask
+from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
+from simrunner.workflows.gap.live import Budget, Findings
 from simrunner.workflows.gap.logs import Derived, check_measured, derive, is_duty_log
 from simrunner.workflows.gap.regimes import residual_stats, reversal_onsets, segment
 from simrunner.workflows.gap.replay import (FIT_SIGNALS, REPORT_SIGNALS, Prediction,
@@ -112,7 +114,8 @@ def choose_hbridge(fit_problem: Problem, held_problem: Problem, delta_bic_min: f
 def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, *, jobs: int = 2,
             effects: Sequence[str] | None = None, settings: GapSettings = SETTINGS,
             sim_factory: SimFactory = default_sim_factory, held_dt_s: float | None = None,
-            progress: Callable[[str], None] | None = None, dt_s: float | None = None, window_s: float | None = None,
+            progress: Callable[[str], None] | None = None, findings: Findings | None = None,
+            budget: Budget | None = None, dt_s: float | None = None, window_s: float | None = None,
             delta_bic_min: float | None = None, improvement_min: float | None = None,
             held_improvement_min: float | None = None, max_effects: int | None = None,
             robust_factor: float | None = None, screen_max_s: float | None = None) -> GapResult:
@@ -121,7 +124,11 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
 
     Every log must pass :func:`simrunner.workflows.gap.logs.check_measured` (else
     :class:`simrunner.telemetry.log.LogError`). ``effects`` restricts the candidates (default: the
-    whole catalogue); ``progress(label)`` is called as the stages finish.
+    whole catalogue); ``progress(label)`` is called as the stages finish. ``findings``
+    (:class:`~simrunner.workflows.gap.live.Findings`) records what is found as it is found (each
+    log's windows and glitches, the nominal gap, each chain step, the stages and their fits), so
+    a run stopped early still has them; ``budget`` (:class:`~simrunner.workflows.gap.live.Budget`)
+    ends the chain in time with the model of its finished steps.
 
     ``settings``: every threshold (:class:`~simrunner.workflows.gap.settings.GapSettings`,
     default the values in force; ``simrunner gap --settings FILE`` overrides some). The
@@ -164,7 +171,13 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                        f"{' (these logs drive the car by duty)' if all(duty) and not slip else ''}")
     names = [n for n in names if n not in not_applicable]
     tick = progress or (lambda label: None)
-    parts = pool_short_runs([prepare(log, car, window_s, len(logs) > 1, settings=settings) for log in logs], settings)
+    findings = findings if findings is not None else Findings()
+    prepared = []
+    for log in logs:
+        prepared.append(prepare(log, car, window_s, len(logs) > 1, settings=settings))
+        findings.add("log", log_text(prepared[-1]), log=log.source, rows=len(log), windows=len(prepared[-1].windows),
+                     glitches=len(prepared[-1].glitches))
+    parts = pool_short_runs(prepared, settings)
     signals = tuple(s for s in FIT_SIGNALS if all(s in p.signals for p in parts))
     if not signals:
         raise GapError("the logs have no signal in common to compare (pose or speed)")
@@ -199,16 +212,33 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     robust = robust_scale_of(window_costs(fit_problem, fit_res), robust_factor)
     fit_problem = dataclasses.replace(fit_problem, robust_scale=robust)
     held_problem = Problem(car, held_segs, scales, signals, held_dt_s, sim_factory, robust, settings)
+    findings.add("stage", "replaying the nominal car", stage="replaying the nominal car", fits=1)
     hbridge = None
     if car.drive.command == "duty":  # the H-bridge's mode: a choice of two, made before the chain
         hbridge = choose_hbridge(fit_problem, held_problem, settings.delta_bic_min)
         if hbridge["chosen"] != car.drive.hbridge:
             car = car.replace(drive=dataclasses.replace(car.drive, hbridge=hbridge["chosen"]))
             fit_problem, held_problem = fit_problem.with_car(car), held_problem.with_car(car)
+    started = time.monotonic()
     pred0 = predict(car, held_dt_s)
+    closing_s = time.monotonic() - started
     res0_parts = [residuals(p.log, p.derived, pr) for p, pr in zip(parts, pred0)]
+    rep_signals = tuple(s for s in REPORT_SIGNALS if all(s in r for r in res0_parts))
+    held = np.concatenate([window_mask(len(p.log), p.held_windows) for p in parts])
+    findings.base_car = car
+    findings.add("nominal", nominal_text(_gap(held_problem, parts, res0_parts),
+                                         rmse(_joined(res0_parts, rep_signals), held, rep_signals)),
+                 held_gap=_gap(held_problem, parts, res0_parts))
     tick("nominal")
-    chain = build_chain(fit_problem, held_problem, names, jobs=jobs, progress=tick)
+    if budget is not None:  # what the closing stages will cost, measured on this run
+        started = time.monotonic()
+        cost_of(screening_problem(fit_problem), car)
+        budget.measure(time.monotonic() - started, 2.0 * closing_s, jobs)
+    chain = build_chain(fit_problem, held_problem, names, jobs=jobs, progress=tick, findings=findings,
+                        budget=budget)
+    if not chain.stop_reason.startswith("the time budget"):
+        findings.add("chain", f"the chain stopped: {chain.stop_reason}", reason=chain.stop_reason)
+    findings.add("stage", "the kept parameters' uncertainty", stage="the kept parameters' uncertainty", fits=1)
     car_after = chain.car
     screen = screening_problem(fit_problem)
     # a parameter on a plateau is held (its interval says how well it is pinned, not a curvature)
@@ -218,16 +248,13 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     places = screen.window_places()
     one_window = {k: places[w] for k, w in unc.one_window.items()}
     tick("uncertainty")
+    findings.add("stage", "the held-out check", stage="the held-out check", fits=1)
     pred1 = pred0 if not chain.effects else predict(car_after, held_dt_s)
     res1_parts = res0_parts if not chain.effects else [residuals(p.log, p.derived, pr)
                                                        for p, pr in zip(parts, pred1)]
     tick("held-out check")
-    rep_signals = tuple(s for s in REPORT_SIGNALS if all(s in r for r in res0_parts))
     stat_signals = tuple(dict.fromkeys(rep_signals + tuple(s for s in ("along_m", "cross_m") if s in signals)))
-    held = np.concatenate([window_mask(len(p.log), p.held_windows) for p in parts])
-
-    def joined(res_parts, names_):
-        return {s: np.concatenate([r[s] for r in res_parts]) for s in names_}
+    joined = _joined
 
     def smoothed(preds):
         return joined([residuals(smoothed_log(p.log, p.derived), p.derived, pr) for p, pr in zip(parts, preds)],
@@ -255,7 +282,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                 "max_effects": settings.max_effects, "scales": scales, "signals": list(signals), "effects": names,
                 "screen_max_s": settings.screen_max_s, "fit_windows_s": sum(g.duration_s for g in fit_problem.segments),
                 "screen_windows_s": sum(g.duration_s for g in screen.segments), "hbridge": hbridge}
-    return GapResult(
+    result = GapResult(
         effects=chain.effects, parameters=chain.parameters, car=car_after, chain=chain,
         ranking=list(chain.steps[0].screening) if chain.steps else [],
         nominal_cost=chain.nominal_cost, nominal_bic=bic(fit_problem, chain.nominal_cost, 0),
@@ -270,6 +297,41 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
         leftovers=leftovers(stats_after, noise, settings=settings), parameter_sigma=sigma,
         parameter_one_window=one_window, per_log=per_log, parameter_spans=dict(chain.spans), gap_settings=settings,
         not_applicable=not_applicable)
+    findings.model(result.effects, result.parameters)
+    findings.add("done", f"done: effects {result.effect}; held-out gap {result.gap_before:.3g} -> "
+                         f"{result.gap_after:.3g}", effects=result.effects, gap_before=result.gap_before,
+                 gap_after=result.gap_after)
+    return result
+
+
+def _joined(res_parts: Sequence[dict[str, np.ndarray]], names: Sequence[str]) -> dict[str, np.ndarray]:
+    return {s: np.concatenate([r[s] for r in res_parts]) for s in names}
+
+
+def _glitch_text(g: Glitch) -> str:
+    return f"{g.kind.value.replace('_', ' ')} at {g.t_start_s:.2f} s"
+
+
+def log_text(part: LogPart) -> str:
+    """One line on a prepared log: its length, windows and glitches (the first three)."""
+    log, gl = part.log, part.glitches
+    text = (f"{log.source}: {float(log.t_s[-1] - log.t_s[0]):.1f} s, {len(log)} rows; {len(part.windows)} windows of "
+            f"which {len(part.held_windows)} held out; ")
+    if not gl:
+        return text + "no glitch"
+    more = f", and {len(gl) - 3} more" if len(gl) > 3 else ""
+    return text + f"{len(gl)} glitch{'es' if len(gl) > 1 else ''} kept out ({'; '.join(map(_glitch_text, gl[:3]))}{more})"
+
+
+_RMSE_WORDS = {"position_m": ("position", "m"), "yaw_rad": ("heading", "rad"), "speed_mps": ("speed", "m/s"),
+               "yaw_rate_radps": ("yaw rate", "rad/s")}
+
+
+def nominal_text(gap: float, rmse_by_signal: dict[str, float]) -> str:
+    """One line on the nominal car: its held-out gap and RMSE per signal."""
+    parts = [f"{_RMSE_WORDS.get(s, (s, ''))[0]} {v:.3g} {_RMSE_WORDS.get(s, ('', ''))[1]}".rstrip()
+             for s, v in rmse_by_signal.items() if math.isfinite(v)]
+    return f"nominal car: held-out gap {gap:.3g}" + (f" (RMSE {', '.join(parts)})" if parts else "")
 
 
 def moves_in(part: LogPart, windows: Sequence[Window], settings: GapSettings = SETTINGS) -> int:
@@ -395,16 +457,3 @@ def _gap(held_problem: Problem, parts: Sequence[LogPart], res_parts: Sequence[di
     log of ``parts``; logs without held-out windows are skipped, as in the problem)."""
     res = [r for p, r in zip(parts, res_parts) if p.held_windows]
     return robust_total(window_costs(held_problem, res), held_problem.robust_scale) / max(held_problem.n_values, 1)
-
-
-def progress_total(n_effects: int, max_effects: int | None = None, settings: GapSettings = SETTINGS) -> int:
-    """Upper bound of the ``progress`` calls of :func:`run_gap` with ``n_effects`` candidates
-    (each chain step screens the remaining effects and runs its batches of joint refits; the
-    final check runs at most one round per kept effect but the last; and the nominal replay,
-    the uncertainty and the held-out check)."""
-    max_effects = settings.max_effects if max_effects is None else max_effects
-    steps = min(max_effects, n_effects) + 1
-    size = max(min(settings.refine_later, settings.refine_top), 1)
-    final_checks = max(min(max_effects, n_effects) - 1, 0)
-    return 3 + sum(max(n_effects - s, 0) + -(-max(n_effects - s, 0) // size) for s in range(steps)) + final_checks
-

@@ -1,0 +1,177 @@
+"""simrunner gap while it runs (issue 50 item 4): the findings as they come (to the terminal
+and DIR/findings.txt), a partial report when the run is stopped, and ``--budget`` ending the
+chain in time with the model of its finished steps."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from simrunner.telemetry.log import write_log
+from simrunner.workflows.gap.live import Budget, Findings, uncertainty_replays
+from simrunner.workflows.gap.synth import make_measured_log
+from simrunner.workflows.gap.uncertainty import _stencil
+from simrunner.workflows.gap.workflow import run_gap
+
+EFFECTS = ["motor_lag", "speed_scale", "throttle_deadband"]
+
+
+def lag_log():
+    """The plan's speed steps with a motor lag hidden: a step that keeps it, one that keeps nothing."""
+    log, _ = make_measured_log("motor_lag", value=0.3, rng=np.random.default_rng(5), start_s=44.0, duration_s=16.0)
+    return log
+
+
+@pytest.fixture(scope="module")
+def live_run():
+    found = []
+    findings = Findings(found.append)
+    result = run_gap(lag_log(), jobs=1, effects=EFFECTS, findings=findings)
+    return result, findings, found
+
+
+def test_findings_come_in_order_with_the_results_figures(live_run):
+    result, findings, found = live_run
+    assert found == findings.items  # the listener saw each as it was made
+    kinds = [f.kind for f in found if f.kind != "stage"]
+    assert kinds[:2] == ["log", "nominal"] and kinds[-2:] == ["chain", "done"]
+    assert [f.data["kept"] for f in findings.of_kind("step") if f.data["kept"]] == result.effects == ["motor_lag"]
+    nominal, = findings.of_kind("nominal")
+    assert nominal.data["held_gap"] == pytest.approx(result.gap_before, rel=1e-12)
+    assert "16.0 s, " in found[0].text and "no glitch" in found[0].text
+    last = findings.of_kind("step")[-1]
+    assert last.text.endswith("no remaining effect passes the tests")
+    assert findings.parameters == result.parameters and findings.effects == result.effects
+    times = [f.elapsed_s for f in found]
+    assert times == sorted(times)
+    stages = [f for f in found if f.kind == "stage"]
+    assert stages[0].text == "replaying the nominal car"
+    screening = [f for f in stages if "screening" in f.text]
+    assert [f.data["fits"] for f in screening][:2] == [3, 2]  # the effects left to screen at each step
+
+
+def test_the_uncertainty_replays_are_counted_as_its_stencil():
+    for k in range(1, 6):
+        assert uncertainty_replays(k) == len(_stencil(np.full(k, 0.5), 0.01)) + 4 * k
+
+
+def test_a_budget_keeps_the_closing_stages_time():
+    now = [0.0]
+    b = Budget(100.0, clock=lambda: now[0])
+    b.measure(replay_s=1.0, closing_s=2.0, jobs=2)
+    assert b.reserve_s(0) == pytest.approx(1.5 * 2.0)
+    # one parameter: 3 stencil replays and 2 at half the step (twice the cost): 7 on 2 workers, 4 rounds
+    assert b.reserve_s(1) == pytest.approx(1.5 * (4 * 1.0 + 2.0))
+    now[0] = 100.0 - b.reserve_s(2) - 0.01
+    assert not b.spent(2) and b.spent(3)
+    b.tick()  # a fit took this long since measure(): the next may too
+    assert b.wait_s() == pytest.approx(now[0]) and b.spent(2)
+    with pytest.raises(Exception, match="expected a positive time"):
+        Budget(0.0)
+
+
+def test_a_budget_ends_the_chain_with_the_finished_steps(live_run):
+    """The clock jumps to the end of the budget as the second step's screening runs: the result
+    is the first step's model, confirmed and reported as stopped by the budget."""
+    full, _, _ = live_run
+    now = [0.0]
+    budget = Budget(3600.0, clock=lambda: now[0])
+
+    def progress(label: str) -> None:
+        if label.startswith("step 2"):
+            now[0] = 3600.0
+
+    findings = Findings()
+    result = run_gap(lag_log(), jobs=1, effects=EFFECTS, findings=findings, budget=budget,
+                     progress=progress)
+    assert result.effects == ["motor_lag"] == full.effects[:1]
+    assert result.chain.stop_reason.startswith("the time budget (60 min) ran out during step 2: screening")
+    assert len(result.chain.steps) == 1  # the unfinished step is not in the chain
+    assert result.gap_after < result.gap_before
+    assert any(f.text.startswith("stopped: the time budget") for f in findings.items)
+    assert math_close(result.parameters["motor_lag_s"], full.chain.steps[0].kept.parameters["motor_lag_s"])
+
+
+def math_close(a: float, b: float) -> bool:
+    return abs(a - b) <= 1e-9 * max(abs(a), abs(b), 1.0)
+
+
+def test_a_spent_budget_tries_nothing():
+    result = run_gap(lag_log(), jobs=1, effects=EFFECTS, budget=Budget(1e-6))
+    assert result.effects == [] and result.chain.steps == ()
+    assert "the time budget" in result.chain.stop_reason
+
+
+def _wait_for(path, text: str, proc, timeout_s: float) -> str:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        body = path.read_text() if path.exists() else ""
+        if text in body:
+            return body
+        if proc.poll() is not None:
+            break
+        time.sleep(0.2)
+    proc.kill()
+    raise AssertionError(f"{text!r} not in {path} after {timeout_s} s (exit {proc.poll()})")
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_stopped_run_leaves_a_partial_report(tmp_path, signum):
+    log_path = tmp_path / "m.csv"
+    write_log(lag_log(), log_path)
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-c", "from simrunner.cli import main; main()", "gap", str(log_path), "-o", str(out), "--jobs", "2",
+                             "--effects", ",".join(EFFECTS), "--no-progress"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for(out / "findings.txt", "step 1: kept motor_lag", proc, 240.0)
+        proc.send_signal(signum)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 128 + signum, stderr
+    assert "Traceback" not in stderr and "partial report in" in stderr
+    assert "step 1: kept motor_lag" in stderr  # the findings reached the terminal as they came
+    report = json.loads((out / "report.json").read_text())
+    assert report["status"] == "partial" and report["effects"][:1] == ["motor_lag"]
+    assert report["stopped"] == f"stopped by {'Ctrl-C (SIGINT)' if signum == signal.SIGINT else 'SIGTERM'}"
+    assert "motor_lag_s" in (out / "car.toml").read_text()
+    text = (out / "residuals.txt").read_text()
+    assert text.startswith("PARTIAL REPORT: stopped by") and "motor_lag" in text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.csv", "out"]  # no temporary folder left
+    _no_worker_left(proc.pid)
+
+
+def _no_worker_left(pid: int) -> None:
+    """No process of the stopped run is left (its fit workers were ended)."""
+    left = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as fh:
+                    if int(fh.read().rsplit(")", 1)[1].split()[1]) == pid:
+                        left.append(int(entry))
+            except OSError:
+                continue
+    assert not left
+
+
+def test_findings_txt_is_in_a_finished_folder(tmp_path):
+    from click.testing import CliRunner
+
+    from simrunner.cli.gap import gap
+
+    log_path = tmp_path / "m.csv"
+    write_log(lag_log(), log_path)
+    res = CliRunner().invoke(gap, [str(log_path), "-o", str(tmp_path / "out"), "--max-effects", "0", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    lines = (tmp_path / "out" / "findings.txt").read_text().splitlines()
+    assert lines[0].startswith("[0:0") and "m.csv: 16.0 s" in lines[0]
+    assert "nominal car: held-out gap" in lines[1] and lines[-1].split("] ", 1)[1].startswith("done: effects none")
