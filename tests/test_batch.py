@@ -174,7 +174,10 @@ def test_a_job_handed_to_a_dead_local_worker_is_reported_not_raised():
             got = backend.wait([h], 1.0)
             if got:
                 break
-        assert got and got[0][1] is None and "died" in got[0][2]
+        assert got and "died" in got[0][2]
+        row = got[0][1]   # the row of the run it died in, naming the signal as drive does
+        assert row["run"] == 0 and row["outcome"] == "worker_died"
+        assert row["message"].startswith("the run's process was killed by SIGKILL (kill -9")
     finally:
         backend.close()
 

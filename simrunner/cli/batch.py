@@ -62,6 +62,7 @@ def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, ou
     from simrunner.cli import input_errors
     from simrunner.workflows.batch import run_batch
 
+    tqdm.monitor_interval = 0  # no monitor thread: workers fork from this process (pool.py)
     bar = tqdm(total=None, unit="run", dynamic_ncols=True, file=sys.stderr, disable=None)
     failed = [0]
 

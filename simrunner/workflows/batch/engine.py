@@ -164,10 +164,13 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     mismatches: list[int] = []
     timing: list[WorkerTiming] = []
     try:
+        lost: set[int] = set()   # runs whose worker died or was stopped: not re-run
         timing = run_jobs(jobs, make_backend(), workers=n_workers, run_timeout_s=timeout, laps=laps,
                           on_row=take, outputs=lambda j: outputs_for(j, video_sel.upfront(j),
-                                                                      csv_sel.upfront(j)))
+                                                                      csv_sel.upfront(j)),
+                          on_lost=lambda j: lost.add(j.index))
         again = [j for j in jobs if rows[j.index]["outcome"] not in OK_OUTCOMES + BATCH_OUTCOMES
+                 and j.index not in lost
                  and (video_sel.mode == "failures" or csv_sel.mode == "failures")
                  and not (video_sel.upfront(j) and csv_sel.upfront(j))]
         if again:

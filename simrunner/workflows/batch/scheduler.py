@@ -84,7 +84,9 @@ class Backend(Protocol):
 
     def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
         """Wait up to ``timeout_s`` for the first job of any of ``busy``: ``(h, row, "")``, or
-        ``(h, None, reason)`` where the worker died during it; at most one per worker."""
+        ``(h, row_or_None, reason)`` where the worker died during it (the row, if the backend
+        can tell how, else None: outcome ``worker_died`` with ``reason``); at most one per
+        worker."""
 
     def kill(self, h: Handle) -> None:
         """Stop ``h`` now (the jobs it holds are dropped)."""
@@ -135,8 +137,10 @@ def _deadline(h: Handle, run_timeout_s: float) -> float:
 def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: float,
              laps: int, on_row: Callable[[dict], None],
              outputs: Callable[[Job], dict | None] = lambda job: None,
-             prefetch: int = PREFETCH) -> list[WorkerTiming]:
-    """Run every job; ``on_row`` gets each row as it comes (any order). Stops every worker
+             prefetch: int = PREFETCH,
+             on_lost: Callable[[Job], None] = lambda job: None) -> list[WorkerTiming]:
+    """Run every job; ``on_row`` gets each row as it comes (any order); ``on_lost`` each job
+    whose worker died or was stopped during it (before its row). Stops every worker
     at the end (also on Ctrl-C, which is re-raised). Returns every worker's timing (in
     start order, replaced workers included).
 
@@ -164,6 +168,7 @@ def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: 
         h.jobs.clear()
         backend.kill(h)
         live.remove(h)
+        on_lost(job)
         on_row(row)
         if len(queue):
             start()
@@ -184,8 +189,8 @@ def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: 
             wait_s = min([_POLL_S] + [_deadline(h, run_timeout_s) - now for h in busy])
             for h, row, reason in backend.wait(busy, wait_s):
                 job = h.jobs[0]
-                if row is None:
-                    retire(h, job, failure_row(job, laps, "worker_died", reason))
+                if reason:  # the worker died during the run (the backend may tell how: a row)
+                    retire(h, job, row if row is not None else failure_row(job, laps, "worker_died", reason))
                     continue
                 if row["run"] != job.index:
                     raise RuntimeError(f"worker answered run {row['run']} for run {job.index}")

@@ -93,14 +93,19 @@ def execute_job(job: Job, state: WorkerState, outputs: dict[str, str] | None = N
     return row_from_result(job, result, track.centreline)
 
 
+WARM_MODULES = ("simrunner.car.effects", "simrunner.run.runner", "simrunner.sensors.camera",
+                "simrunner.sensors.line_kernel", "trackgen.build")
+"""What every run imports (dartpy, OpenCV, numba kernels)."""
+
+
 def warm_up() -> None:
-    """Import what every run needs (dartpy, OpenCV, numba kernels), so a worker reports
-    ready - and its first run's timeout starts - only when it can run at full speed."""
-    import simrunner.car.effects  # noqa: F401
-    import simrunner.run.runner  # noqa: F401
-    import simrunner.sensors.camera  # noqa: F401
-    import simrunner.sensors.line_kernel  # noqa: F401
-    import trackgen.build  # noqa: F401
+    """Import :data:`WARM_MODULES`, so a worker reports ready - and its first run's timeout
+    starts - only when it can run at full speed (the local pool imports them once in the
+    batch's process and forks its workers after, :mod:`.pool`)."""
+    import importlib
+
+    for name in WARM_MODULES:
+        importlib.import_module(name)
 
 
 def quiet_output() -> None:
@@ -114,30 +119,71 @@ def quiet_output() -> None:
     sys.stderr = sys.stdout
 
 
-def worker_loop(conn, config: BatchConfig, quiet: bool = True) -> None:
+def worker_loop(conn, config: BatchConfig, quiet: bool = True, report: str | None = None) -> None:
     """A child process of the local pool: receive ``(job, outputs)``, send back the row;
-    ``None`` ends it."""
+    ``None`` ends it. ``report``: the file the hard watchdog writes its stack dump to when a
+    run is stuck in one C-level call (:func:`death_row` reads it)."""
     if quiet:
         quiet_output()
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    for sig in (signal.SIGTERM, signal.SIGHUP):   # (a forked worker has its parent's handlers)
+        signal.signal(sig, signal.SIG_DFL)
     try:
         warm_up()
         state = WorkerState(config)
+        dump = open(report if report else os.devnull, "w", errors="replace")  # noqa: SIM115 - for the life of the worker
     except Exception as exc:  # noqa: BLE001 - e.g. a bad car file: every run reports it
         conn.send(("fatal", f"{type(exc).__name__}: {exc}"))
         return
+    from simrunner.run.supervise import Supervision, supervised_by
+
     conn.send(("ready", os.getpid()))
-    while True:
-        try:
-            msg = conn.recv()
-        except EOFError:
-            return
-        if msg is None:
-            return
-        job, outputs = msg
-        conn.send(("row", execute_job(job, state, outputs)))
+    with supervised_by(Supervision(dump, csv_path=None)):
+        while True:
+            try:
+                msg = conn.recv()
+            except EOFError:
+                return
+            if msg is None:
+                return
+            job, outputs = msg
+            conn.send(("row", execute_job(job, state, outputs)))
 
 
-__all__ = ["WorkerState", "execute_job", "worker_loop", "warm_up", "MAX_TRACKS"]
+def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str | os.PathLike,
+              outputs: dict[str, str] | None = None) -> dict:
+    """The row of ``job``, whose worker process ended during it with ``exitcode``, told as
+    ``simrunner drive`` tells it: a controller stuck in one C-level call (the hard watchdog's
+    stack dump in ``report``) is outcome ``stalled`` naming the controller's file:line;
+    otherwise ``worker_died`` naming the signal or exit code. Laps, lap times, simulated time
+    and frames come from the run's CSV when one was asked for (``outputs``)."""
+    from pathlib import Path
+
+    from simrunner.run.postmortem import (killed_message, read_run_log, run_log_laps,
+                                          stuck_location, stuck_message)
+
+    try:
+        dump = Path(report).read_text(errors="replace")
+    except OSError:
+        dump = ""
+    csv = (outputs or {}).get("csv")
+    log = read_run_log(Path(csv)) if csv else None
+    if "Timeout (" in dump:  # faulthandler's header (simrunner.run.watchdog)
+        outcome = "stalled"
+        message = stuck_message(stuck_location(dump, config.controller), config.wall_limit_s)
+    elif exitcode is not None and exitcode < 0:
+        outcome, message = "worker_died", killed_message(-exitcode, log)
+    else:
+        outcome, message = "worker_died", f"worker process died during the run (exit code {exitcode})"
+    row = failure_row(job, config.laps, outcome, message)
+    if log is not None and len(log):
+        laps_completed, lap_times = run_log_laps(log)
+        row.update(laps_completed=laps_completed, lap_times_s=lap_times,
+                   best_lap_s=min(lap_times) if lap_times else None,
+                   sim_time_s=float(log.t_s[-1]), frames=len(log))
+    return row
+
+
+__all__ = ["WorkerState", "execute_job", "worker_loop", "warm_up", "WARM_MODULES", "death_row", "MAX_TRACKS"]
