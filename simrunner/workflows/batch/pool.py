@@ -121,6 +121,8 @@ class LocalBackend:
                 kind, value = conn.recv()
                 if kind == "ready":
                     h.ready_at = time.monotonic()
+                elif kind == "start":   # (run index, its simulated-time limit)
+                    h.time_limits[value[0]] = value[1]
                 elif kind == "row":
                     h.ref.jobs.popleft()
                     return value, ""

@@ -63,20 +63,36 @@ def _load(ref: TrackRef, car):
     return track_from_trackgen(checked.track, geometry=checked.geometry, source=ref.label)
 
 
+def run_settings(job: Job, cfg: BatchConfig):
+    """The :class:`~simrunner.run.settings.RunSettings` of ``job`` (as ``simrunner drive``'s:
+    a time limit of None is filled in for the track by the run)."""
+    from simrunner.run.settings import RunSettings
+
+    return RunSettings(laps=cfg.laps, time_limit_s=cfg.time_limit_s, seed=job.seed,
+                       dt_s=cfg.dt_s, wall_limit_s=cfg.wall_limit_s, params=dict(job.params),
+                       off_track_wheels=cfg.off_track_wheels, event=cfg.event,
+                       mcu_time=cfg.mcu_time, mcu_scale=cfg.mcu_scale)
+
+
+def run_time_limit_s(job: Job, state: WorkerState) -> float | None:
+    """The simulated-time limit ``job`` will run with (loading its track: drive's default
+    depends on the lap length); None if the track does not load (the run reports it)."""
+    try:
+        return float(run_settings(job, state.config).for_track(state.track(job.track)).time_limit_s)
+    except Exception:  # noqa: BLE001 - execute_job reports it in the row
+        return None
+
+
 def execute_job(job: Job, state: WorkerState, outputs: dict[str, str] | None = None) -> dict:
     """Run ``job``; always returns a row (a fault that is not the controller's is outcome
     ``error`` with its message)."""
     from simrunner.run.runner import drive
-    from simrunner.run.settings import RunSettings
 
     cfg = state.config
     t0 = time.perf_counter()
     try:
         track = state.track(job.track)
-        settings = RunSettings(laps=cfg.laps, time_limit_s=cfg.time_limit_s, seed=job.seed,
-                               dt_s=cfg.dt_s, wall_limit_s=cfg.wall_limit_s, params=dict(job.params),
-                               off_track_wheels=cfg.off_track_wheels, event=cfg.event,
-                               mcu_time=cfg.mcu_time, mcu_scale=cfg.mcu_scale)
+        settings = run_settings(job, cfg)
         outputs = outputs or {}
         result = drive(cfg.controller, track=track, car=state.car, settings=settings,
                        video=outputs.get("video"), csv=outputs.get("csv"))
@@ -149,6 +165,7 @@ def worker_loop(conn, config: BatchConfig, quiet: bool = True, report: str | Non
             if msg is None:
                 return
             job, outputs = msg
+            conn.send(("start", (job.index, run_time_limit_s(job, state))))  # for its timeout
             conn.send(("row", execute_job(job, state, outputs)))
 
 
@@ -186,4 +203,5 @@ def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str |
     return row
 
 
-__all__ = ["WorkerState", "execute_job", "worker_loop", "warm_up", "WARM_MODULES", "death_row", "MAX_TRACKS"]
+__all__ = ["WorkerState", "execute_job", "worker_loop", "warm_up", "WARM_MODULES", "death_row", "run_settings",
+           "run_time_limit_s", "MAX_TRACKS"]
