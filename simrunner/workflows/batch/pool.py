@@ -33,13 +33,13 @@ from simrunner.workflows.batch.scheduler import Handle
 from simrunner.workflows.batch.spec import BatchConfig, Job
 from simrunner.workflows.batch.worker import WARM_MODULES, death_row, warm_up, worker_loop
 
+
 def fork_is_safe() -> bool:
     """This process can fork its workers: ``fork`` exists, only this thread runs Python code
     and no Ray driver is connected (its threads would be copied mid-work)."""
     if "fork" not in multiprocessing.get_all_start_methods() or threading.active_count() != 1:
         return False
-    ray = sys.modules.get("ray")
-    return not (ray is not None and getattr(ray, "is_initialized", lambda: False)())
+    return not ("ray" in sys.modules and sys.modules["ray"].is_initialized())
 
 
 def choose_start_method(wanted: str | None = None) -> str:
