@@ -77,6 +77,8 @@ def run_settings(job: Job, cfg: BatchConfig):
 def run_time_limit_s(job: Job, state: WorkerState) -> float | None:
     """The simulated-time limit ``job`` will run with (loading its track: drive's default
     depends on the lap length); None if the track does not load (the run reports it)."""
+    if state.config.time_limit_s is not None:
+        return float(state.config.time_limit_s)
     try:
         return float(run_settings(job, state.config).for_track(state.track(job.track)).time_limit_s)
     except Exception:  # noqa: BLE001 - execute_job reports it in the row
