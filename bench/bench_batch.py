@@ -17,12 +17,24 @@ batch (this driver and its descendants: workers, forkserver, Ray's daemons), rea
 ``/proc`` at each row between the moment every worker has delivered a row and the last row.
 The machines are shared: the CPU figure is the one the other jobs disturb least, and the
 machine load (1-minute average) is printed beside each line.
+
+First, the short batch where start-up shows (issue 50): 8 one-lap runs of the line follower
+on the bundled track with the default settings, 1 and 2 workers alternately
+``NXPCUP_BATCH_SHORT_REPS`` times (default 5), best and median wall time of each and the
+ratio of the bests (target: 2 workers >= 1.7 x 1 worker, rows identical). Three figures:
+the wall time of the ``run_batch`` call in this process (the simulator imported already, as
+in a sweep script); its CPU time on the critical path (:class:`_CriticalCpu`: what the wall
+time is on an idle machine, and the figure the shared machine's other jobs disturb least);
+and the wall time of the whole ``simrunner batch`` command in a fresh process (interpreter
+start, imports and writing the results included).
 """
 from __future__ import annotations
 
 import importlib.util
 import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -147,10 +159,92 @@ def _ray(tmp: Path) -> None:
     print(f"  rows identical (Ray and local, every repetition): {same}; target <= +10 % per run")
 
 
+def _short_cli(out: Path, workers: int) -> float:
+    """Wall seconds of ``simrunner batch`` (8 one-lap runs) in a fresh process."""
+    code = "import sys; from simrunner.cli import main; sys.argv[0] = 'simrunner'; main()"
+    t0 = time.monotonic()
+    subprocess.run([sys.executable, "-c", code, "batch", str(CTL), "--seeds", "8", "--workers",
+                    str(workers), "--no-plot", "-o", str(out)], check=True, capture_output=True)
+    return time.monotonic() - t0
+
+
+def _procs() -> dict[int, tuple[int, float]]:
+    """Every process: pid -> (parent pid, CPU seconds so far)."""
+    out = {}
+    for entry in os.listdir("/proc") if os.path.isdir("/proc") else ():
+        if entry.isdigit():
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+            except OSError:
+                continue
+            fields = stat[stat.rindex(")") + 2:].split()
+            out[int(entry)] = (int(fields[1]), (int(fields[11]) + int(fields[12])) * TICK_S)
+    return out
+
+
+class _CriticalCpu:
+    """``on_row`` of a short batch: the CPU time on its critical path, what its wall time is on
+    an idle machine (the shared machine's other jobs stretch wall times, hardly CPU times):
+    this process's CPU during the batch, plus that of every descendant that has children
+    (a forkserver, started before any worker), plus the largest of the workers' (the
+    leaves; read at each row, while they live)."""
+
+    def __init__(self):
+        self.before = _procs()
+        self.cpu0 = time.process_time()
+        self.last: dict[int, tuple[int, float]] = {}
+
+    def __call__(self, row: dict) -> None:
+        procs, me = _procs(), os.getpid()
+        tree, todo = {}, [me]
+        while todo:
+            pid = todo.pop()
+            kids = [c for c, (ppid, _) in procs.items() if ppid == pid]
+            todo += kids
+            if pid != me:
+                tree[pid] = (len(kids), procs[pid][1] - self.before.get(pid, (0, 0.0))[1])
+        self.last.update(tree)
+
+    def total_s(self) -> float:
+        inner = sum(cpu for kids, cpu in self.last.values() if kids)
+        leaves = [cpu for kids, cpu in self.last.values() if not kids]
+        return time.process_time() - self.cpu0 + inner + max(leaves, default=0.0)
+
+
+def _short(tmp: Path) -> None:
+    """8 one-lap runs, 1 vs 2 workers, in this process and as a fresh command (docstring)."""
+    reps = int(os.environ.get("NXPCUP_BATCH_SHORT_REPS", "5"))
+    walls: dict[tuple[str, int], list[float]] = {}
+    rows: dict[int, list] = {}
+    run_batch(CTL, out_dir=tmp / "short-warm", seeds=1, workers=1, plot=False)  # imports
+    for i in range(reps):
+        for w in (1, 2):
+            probe = _CriticalCpu()
+            t0 = time.monotonic()
+            res = run_batch(CTL, out_dir=tmp / f"short-{w}-{i}", seeds=8, workers=w, plot=False,
+                            on_row=probe)
+            walls.setdefault(("in-process", w), []).append(time.monotonic() - t0)
+            walls.setdefault(("critical CPU", w), []).append(probe.total_s())
+            rows.setdefault(w, [deterministic(r) for r in res.rows])
+            walls.setdefault(("command", w), []).append(_short_cli(tmp / f"short-cli-{w}-{i}", w))
+    same = rows[1] == rows[2] and all(r["outcome"] == "finished" for r in rows[1])
+    print(f"8 one-lap runs (bundled track, default settings), 1 vs 2 workers, x{reps} alternately, "
+          f"load {os.getloadavg()[0]:.1f}:")
+    for how in ("in-process", "critical CPU", "command"):
+        one, two = walls[(how, 1)], walls[(how, 2)]
+        print(f"  {how:12s} 1 worker best {min(one):.2f} s (median {statistics.median(one):.2f}), "
+              f"2 workers best {min(two):.2f} s (median {statistics.median(two):.2f}): "
+              f"{min(one) / min(two):.2f}x")
+    print(f"  rows identical (1 and 2 workers, all finished): {same}; target >= 1.7x")
+
+
 def main() -> None:
     print(f"machine load (1-min average) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
+        _short(tmp)
+        if os.environ.get("NXPCUP_BATCH_SHORT_ONLY"):
+            return
         results = {}
         for w in (1, 2):
             m = _batch(tmp / f"w{w}", workers=w)

@@ -139,6 +139,21 @@ def test_batch_event_race_rows_carry_the_result_and_penalty(tmp_path):
     assert meta["event"] == "race" and meta["time_limit_s"] == 120.0
 
 
+def test_the_default_time_limit_is_drives(tmp_path):
+    """Issue 50: batch ran 60 s where drive gives max(60 s, laps x lap length / 0.5 m/s).
+    A car standing still for 3 laps of the bundled track (14.7 m): the same timeout in both."""
+    from simrunner.run.runner import drive
+
+    ctl = tmp_path / "still.py"
+    ctl.write_text("def main(s):\n    while True:\n        s.sleep(10.0)\n")
+    res = run_batch(ctl, out_dir=tmp_path / "out", laps=3, dt_s=0.02, workers=1, plot=False)
+    alone = drive(ctl, laps=3, dt_s=0.02)
+    row = res.rows[0]
+    assert row["outcome"] == alone.outcome == "timeout" and row["message"] == alone.message
+    assert row["sim_time_s"] == alone.sim_time_s > 88.0   # 3 x 14.74 m / 0.5 m/s, not 60 s
+    assert json.loads((tmp_path / "out" / "results.json").read_text())["time_limit_s"] is None
+
+
 def test_faulty_runs_never_stop_the_batch(tmp_path):
     ctl = tmp_path / "faulty.py"
     ctl.write_text(textwrap.dedent(FAULTY))
@@ -174,7 +189,10 @@ def test_a_job_handed_to_a_dead_local_worker_is_reported_not_raised():
             got = backend.wait([h], 1.0)
             if got:
                 break
-        assert got and got[0][1] is None and "died" in got[0][2]
+        assert got and "died" in got[0][2]
+        row = got[0][1]   # the row of the run it died in, naming the signal as drive does
+        assert row["run"] == 0 and row["outcome"] == "worker_died"
+        assert row["message"].startswith("the run's process was killed by SIGKILL (kill -9")
     finally:
         backend.close()
 

@@ -28,8 +28,9 @@ class FakeBackend:
     """Workers that run each job at once according to ``fate[job.index]``: ``"ok"`` (a row),
     ``"die"`` (the worker dies) or ``"hang"`` (never answers). Records every hand-over."""
 
-    def __init__(self, fate: dict[int, str]):
+    def __init__(self, fate: dict[int, str], limits: dict[int, float] | None = None):
         self.fate = fate
+        self.limits = limits or {}   # job -> the simulated-time limit its worker reports
         self.handed: list[tuple[int, int]] = []   # (worker number, job index)
         self.workers: list[_Worker] = []
 
@@ -48,6 +49,8 @@ class FakeBackend:
         out = []
         for h in busy:
             job = h.ref.inbox[0]
+            if job.index in self.limits:
+                h.time_limits[job.index] = self.limits[job.index]
             fate = self.fate.get(job.index, "ok")
             if fate == "ok":
                 h.ref.inbox.popleft()
@@ -115,3 +118,20 @@ def test_no_prefetch_at_the_end_and_workers_keep_their_track():
         by_worker.setdefault(w, []).append(j)
     assert sorted(j for js in by_worker.values() for j in js) == list(range(8))  # once each
     assert sorted(by_worker.values()) == [[0, 1, 2, 3], [4, 5, 6, 7]]            # one track each
+
+
+def test_a_runs_timeout_follows_the_time_limit_its_worker_reports():
+    """The default --run-timeout is a function of each run's own time limit (drive's default
+    depends on the track): the scheduler applies what the worker reported for the run."""
+    backend = FakeBackend({1: "hang", 2: "hang"}, limits={2: 0.2})
+    rows: list[dict] = []
+    seen: list = []
+
+    def timeout(limit):
+        seen.append(limit)
+        return TIMEOUT_S if limit is None else 2 * limit
+
+    run_jobs(_jobs(3), backend, workers=1, run_timeout_s=timeout, laps=1, on_row=rows.append)
+    by_run = {r["run"]: r for r in rows}
+    assert by_run[1]["wall_time_s"] == TIMEOUT_S and by_run[2]["wall_time_s"] == 0.4
+    assert "timeout of 0.4 s" in by_run[2]["message"] and None in seen and 0.2 in seen

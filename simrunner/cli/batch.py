@@ -20,7 +20,8 @@ from simrunner.run.rules import EVENT_NAMES
 @click.option("--laps", default=1, show_default=True, type=click.IntRange(min=1))
 @click.option("--time-limit", "time_limit_s", default=None,
               type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
-              help="Simulated-time limit of each run [default: 60; the race: 120].")
+              help="Simulated-time limit of each run [default: as simrunner drive: max(60, "
+                   "laps x lap length / 0.5 m/s); the race: 120].")
 @click.option("--off-track-wheels", "off_track_wheels", default=None,
               type=click.IntRange(1, 4), metavar="N",
               help="Wheels off the road that end a run [default: 3, the rules' race; the event's].")
@@ -36,7 +37,7 @@ from simrunner.run.rules import EVENT_NAMES
 @click.option("--csv", default="none", show_default=True, metavar="none|all|failures|N,M",
               help="Run-log CSVs (DIR/runs/run_NNNNN.csv) for these runs.")
 @click.option("--run-timeout", "run_timeout_s", default=None, type=float, metavar="SECONDS",
-              help="Wall-clock limit of one run (default 60 + 4 x the time limit).")
+              help="Wall-clock limit of one run (default 60 + 4 x its time limit).")
 @click.option("--car", default=None, metavar="CAR.toml", help="Car description (default: built-in car).")
 @click.option("--dt", "dt_s", default=0.002, show_default=True,
               type=click.FloatRange(min=0, max=0.02, min_open=True), metavar="SECONDS")
@@ -62,6 +63,7 @@ def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, ou
     from simrunner.cli import input_errors
     from simrunner.workflows.batch import run_batch
 
+    tqdm.monitor_interval = 0  # no monitor thread: workers fork from this process (pool.py)
     bar = tqdm(total=None, unit="run", dynamic_ncols=True, file=sys.stderr, disable=None)
     failed = [0]
 

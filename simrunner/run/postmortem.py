@@ -47,6 +47,30 @@ def stuck_location(report: str, controller: str) -> str:
     return ""
 
 
+def stuck_message(where: str, wall_limit_s: float) -> str:
+    """The outcome message of a run the hard watchdog ended (``where``: :func:`stuck_location`)."""
+    hard_s = wall_limit_s + max(2.0, wall_limit_s)
+    return (f"controller stuck in one C-level call{f' at {where}' if where else ''}: no Python "
+            f"code ran for {hard_s:g} s of wall time (--wall-limit {wall_limit_s:g} s + "
+            f"max(2 s, --wall-limit))")
+
+
+def killed_message(signum: int, log: RunLog | None) -> str:
+    """The outcome message of a run whose process signal ``signum`` killed (``log``: its run
+    log so far, for the simulated time; None: no log was kept)."""
+    import signal as signals
+
+    try:
+        name = signals.Signals(signum).name
+    except ValueError:
+        name = f"signal {signum}"
+    why = ("kill -9, or the out-of-memory killer" if signum == signals.SIGKILL else
+           "a crash the simulator could not catch: a C controller that ignored the signal, or crashed "
+           "in a constructor or a library it loaded")
+    at = "" if log is None else f" at t = {float(log.t_s[-1]):.3f} s" if len(log) else " before the first frame"
+    return f"the run's process was killed by {name}{at} ({why})"
+
+
 def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s: float,
                      cpu_time_s: float) -> RunResult:
     """Write the outputs of a run ended by the hard watchdog (see the module docstring);
@@ -56,15 +80,12 @@ def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s:
     from simrunner.run.settings import RunSettings
     from vehicle.description import load_car
 
-    log = _read(csv_path)
-    hard_s = run.wall_limit_s + max(2.0, run.wall_limit_s)
-    where = stuck_location(report, run.controller)
-    message = (f"controller stuck in one C-level call{f' at {where}' if where else ''}: no Python "
-               f"code ran for {hard_s:g} s of wall time (--wall-limit {run.wall_limit_s:g} s + "
-               f"max(2 s, --wall-limit)); the outputs were written from the run log")
+    log = read_run_log(csv_path)
+    message = (stuck_message(stuck_location(report, run.controller), run.wall_limit_s)
+               + "; the outputs were written from the run log")
     car = load_car(run.car)
     track, label = resolve_track(run.track, car)
-    laps_completed, lap_times = _laps(log)
+    laps_completed, lap_times = run_log_laps(log)
     settings = RunSettings(laps=run.laps, seed=run.seed).for_track(track)
     result = RunResult(outcome=Outcome.STALLED, laps=settings.laps, laps_completed=laps_completed,
                        lap_times_s=lap_times, sim_time_s=float(log.t_s[-1]) if len(log) else 0.0,
@@ -83,25 +104,15 @@ def finish_dead_run(run: StuckRun, signum: int, csv_path: Path, *, wall_time_s: 
                     cpu_time_s: float) -> RunResult:
     """Write the outputs of a run whose process a signal killed (module docstring of
     :mod:`simrunner.run.supervise`): outcome ``controller_error`` naming the signal."""
-    import signal as signals
-
     from simrunner.run.runner import resolve_track
     from simrunner.run.settings import RunSettings
     from vehicle.description import load_car
 
-    log = _read(csv_path)
-    try:
-        name = signals.Signals(signum).name
-    except ValueError:
-        name = f"signal {signum}"
-    why = ("kill -9, or the out-of-memory killer" if signum == signals.SIGKILL else
-           "a crash the simulator could not catch: a C controller that ignored the signal, or crashed "
-           "in a constructor or a library it loaded")
-    at = f" at t = {float(log.t_s[-1]):.3f} s" if len(log) else " before the first frame"
-    message = f"the run's process was killed by {name}{at} ({why}); the outputs were written from the run log"
+    log = read_run_log(csv_path)
+    message = killed_message(signum, log) + "; the outputs were written from the run log"
     car = load_car(run.car)
     track, label = resolve_track(run.track, car)
-    laps_completed, lap_times = _laps(log)
+    laps_completed, lap_times = run_log_laps(log)
     settings = RunSettings(laps=run.laps, seed=run.seed).for_track(track)
     result = RunResult(outcome=Outcome.CONTROLLER_ERROR, laps=settings.laps, laps_completed=laps_completed,
                        lap_times_s=lap_times, sim_time_s=float(log.t_s[-1]) if len(log) else 0.0,
@@ -116,7 +127,7 @@ def finish_dead_run(run: StuckRun, signum: int, csv_path: Path, *, wall_time_s: 
     return result
 
 
-def _read(csv_path: Path) -> RunLog:
+def read_run_log(csv_path: Path) -> RunLog:
     if not csv_path.exists():  # the run stalled before its first frame
         return empty_log(str(csv_path))
     with warnings.catch_warnings():
@@ -124,7 +135,7 @@ def _read(csv_path: Path) -> RunLog:
         return read_log(csv_path)
 
 
-def _laps(log: RunLog) -> tuple[int, list[float]]:
+def run_log_laps(log: RunLog) -> tuple[int, list[float]]:
     """Laps completed and their times, from the ``lap`` column (to a frame): a lap's time
     runs from the previous completion (the first: from the log's first row)."""
     if not len(log):
@@ -160,4 +171,5 @@ def _rebuild_video(log: RunLog, path, track, car, laps: int):
     return video
 
 
-__all__ = ["StuckRun", "finish_stuck_run", "stuck_location"]
+__all__ = ["StuckRun", "finish_stuck_run", "finish_dead_run", "killed_message", "read_run_log",
+           "run_log_laps", "stuck_location", "stuck_message"]

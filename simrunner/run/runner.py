@@ -249,8 +249,8 @@ class Run:
         self.monitor = None if settings.event is None else make_monitor(settings.event, self)
         self.csv = None
         supervision = current_supervision()
-        if csv_path is None and supervision is not None:  # the supervisor's copy of the log
-            csv_path = supervision.csv_path
+        if csv_path is None and supervision is not None and supervision.csv_path is not None:
+            csv_path = supervision.csv_path  # the supervisor's copy of the log
         extra, extra_values = extra_columns(track, car, self.sim, settings.seed)
         if csv_path is not None:  # written as the run goes (simrunner.telemetry.stream)
             from simrunner.telemetry.stream import CsvStream

@@ -38,10 +38,10 @@ from typing import IO, Callable, Iterator
 class Supervision:
     """What a supervised run does for its supervisor: ``report`` receives the hard
     watchdog's stack dump; ``csv_path`` is where the run log streams when the run was asked
-    for none."""
+    for none (None: nowhere; a batch worker keeps no log of runs asked for none)."""
 
     report: IO[str]
-    csv_path: Path
+    csv_path: Path | None
 
 
 _SUPERVISION: contextvars.ContextVar[Supervision | None] = contextvars.ContextVar(

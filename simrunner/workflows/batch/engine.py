@@ -23,6 +23,14 @@ from simrunner.workflows.batch.spec import (BatchConfig, BatchError, Job, make_j
 OK_OUTCOMES = ("finished", "controller_returned")
 
 
+def default_run_timeout_s(time_limit_s: float | None) -> float:
+    """The wall-clock limit of a run with this simulated-time limit (s): 60 s + 4 x the limit
+    (None, not known yet: drive's smallest default, 60 s)."""
+    from simrunner.run.settings import DEFAULT_TIME_LIMIT_S
+
+    return 60.0 + 4.0 * (DEFAULT_TIME_LIMIT_S if time_limit_s is None else time_limit_s)
+
+
 @dataclass(frozen=True)
 class Selection:
     """Which runs get an output: ``"none"``, ``"all"``, ``"failures"`` or run indices."""
@@ -87,21 +95,24 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     track). ``seeds``: N (0..N-1) or ``"A:B"``. ``params``: ``["NAME=V1,V2", "K=1:2:0.5"]``.
     ``ray``: None (local pool), ``"local"`` (a local Ray cluster) or a cluster address.
     ``on_plan``: called once with the number of runs; ``on_row``: with each row as it arrives
-    (a progress bar). ``time_limit_s``: of each run (default 60 s; the race's 120 s with
-    ``event="race"``); ``off_track_wheels``, ``event``, ``mcu_time``, ``mcu_scale``: as for
+    (a progress bar). ``time_limit_s``: of each run (default: ``simrunner drive``'s for the
+    run's track, laps and event: ``max(60 s, laps x lap length / 0.5 m/s)``, an event's own,
+    the race's 120 s); ``run_timeout_s``: wall-clock limit of a run (default 60 s + 4 x its
+    time limit); ``off_track_wheels``, ``event``, ``mcu_time``, ``mcu_scale``: as for
     ``simrunner drive``."""
     from simrunner.run.controller import load_controller
     from simrunner.run.runner import default_track
     from simrunner.run.events import event_track
     from simrunner.run.rules import EVENTS
-    from simrunner.run.settings import DEFAULT_TIME_LIMIT_S, RunSettings
+    from simrunner.run.settings import RunSettings
     from vehicle.description import load_car
 
     ctl_path = Path(controller).resolve()
     load_controller(ctl_path)                       # a missing/broken file: one line, now
     load_car(car)
-    if time_limit_s is None:
-        time_limit_s = EVENTS[event].time_limit_s if event in EVENTS else DEFAULT_TIME_LIMIT_S
+    if time_limit_s is None and event in EVENTS:
+        time_limit_s = EVENTS[event].time_limit_s  # the discipline's (as drive)
+    # else None: each run gets drive's default for its track (RunSettings.for_track)
     checked = RunSettings(laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
                           off_track_wheels=off_track_wheels, event=event, mcu_time=mcu_time,
                           mcu_scale=mcu_scale)
@@ -113,9 +124,14 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     n_workers = default_workers() if workers is None else int(workers)
     if n_workers < 1:
         raise BatchError(f"--workers {workers}: expected >= 1")
-    timeout = float(run_timeout_s) if run_timeout_s is not None else 60.0 + 4.0 * time_limit_s
-    if not timeout > 0:
-        raise BatchError(f"--run-timeout {run_timeout_s}: expected > 0 (s)")
+    if run_timeout_s is not None:
+        timeout = float(run_timeout_s)
+        if not timeout > 0:
+            raise BatchError(f"--run-timeout {run_timeout_s}: expected > 0 (s)")
+    elif time_limit_s is not None:
+        timeout = default_run_timeout_s(time_limit_s)
+    else:   # each run's own limit, which its worker reports as the run starts
+        timeout = default_run_timeout_s
     out = Path(out_dir)
     if (out / "results.csv").exists() and not force:
         raise BatchError(f"{out}: already holds results.csv (use --force to replace it)")
@@ -164,10 +180,13 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     mismatches: list[int] = []
     timing: list[WorkerTiming] = []
     try:
+        lost: set[int] = set()   # runs whose worker died or was stopped: not re-run
         timing = run_jobs(jobs, make_backend(), workers=n_workers, run_timeout_s=timeout, laps=laps,
                           on_row=take, outputs=lambda j: outputs_for(j, video_sel.upfront(j),
-                                                                      csv_sel.upfront(j)))
+                                                                      csv_sel.upfront(j)),
+                          on_lost=lambda j: lost.add(j.index))
         again = [j for j in jobs if rows[j.index]["outcome"] not in OK_OUTCOMES + BATCH_OUTCOMES
+                 and j.index not in lost
                  and (video_sel.mode == "failures" or csv_sel.mode == "failures")
                  and not (video_sel.upfront(j) and csv_sel.upfront(j))]
         if again:

@@ -82,6 +82,13 @@ class _RayWorker:
     def ready(self) -> None:
         return None
 
+    def begin(self, job: Job) -> float | None:
+        """Called just before :meth:`run` of ``job`` (an actor's calls run in order): its
+        simulated-time limit, for its wall-clock timeout."""
+        from simrunner.workflows.batch.worker import run_time_limit_s
+
+        return run_time_limit_s(job, self.state)
+
     def run(self, job: Job, outputs: dict | None) -> dict:
         from simrunner.workflows.batch.worker import execute_job
 
@@ -93,6 +100,7 @@ class _Actor:
     actor: Any
     ready: Any = None   # the ``ready()`` call's ref until it has answered
     futures: deque = field(default_factory=deque)  # of the runs handed to it, in order
+    begins: deque = field(default_factory=deque)   # (run, ref of its begin() call), in order
 
 
 class RayBackend:
@@ -136,13 +144,15 @@ class RayBackend:
 
     def submit(self, h: Handle, job: Job, outputs: dict | None) -> None:
         """Queue a run on the actor (an actor runs its calls one at a time, in order)."""
+        h.ref.begins.append((job.index, h.ref.actor.begin.remote(job)))
         h.ref.futures.append(h.ref.actor.run.remote(job, outputs))
 
     def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
         ray = self.ray
         by_ref = {h.ref.futures[0]: h for h in busy}   # the run each actor is running
         starting = {h.ref.ready: h for h in busy if h.ref.ready is not None}
-        ready, rest = ray.wait([*starting, *by_ref], num_returns=1, timeout=max(timeout_s, 0.0))
+        begun = {h.ref.begins[0][1]: h for h in busy if h.ref.begins}
+        ready, rest = ray.wait([*starting, *begun, *by_ref], num_returns=1, timeout=max(timeout_s, 0.0))
         if ready and rest:
             more, _ = ray.wait(rest, num_returns=len(rest), timeout=0)
             ready += more
@@ -151,6 +161,14 @@ class RayBackend:
             if ref in starting:   # the actor has imported everything: its run's clock starts
                 h = starting[ref]
                 h.ref.ready, h.ready_at = None, time.monotonic()
+                continue
+            if ref in begun:      # a run starts: its time limit (for its timeout)
+                h = begun[ref]
+                index, _ = h.ref.begins.popleft()
+                try:
+                    h.time_limits[index] = ray.get(ref)
+                except ray.exceptions.RayError:
+                    pass   # the actor died: its run's future says so
                 continue
             h = by_ref[ref]
             h.ref.futures.popleft()

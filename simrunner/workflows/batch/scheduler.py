@@ -53,6 +53,7 @@ class Handle:
     last_row_at: float | None = None
     jobs: deque = field(default_factory=deque)  # handed to it, in order; the first one runs
     since: float | None = None   # when the first of ``jobs`` was handed over or could start
+    time_limits: dict = field(default_factory=dict)  # run -> its simulated-time limit (s), as reported
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,9 @@ class Backend(Protocol):
 
     def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
         """Wait up to ``timeout_s`` for the first job of any of ``busy``: ``(h, row, "")``, or
-        ``(h, None, reason)`` where the worker died during it; at most one per worker."""
+        ``(h, row_or_None, reason)`` where the worker died during it (the row, if the backend
+        can tell how, else None: outcome ``worker_died`` with ``reason``); at most one per
+        worker."""
 
     def kill(self, h: Handle) -> None:
         """Stop ``h`` now (the jobs it holds are dropped)."""
@@ -125,18 +128,32 @@ class _Queue:
         return job
 
 
-def _deadline(h: Handle, run_timeout_s: float) -> float:
+RunTimeout = float | Callable[[float | None], float]
+"""The wall-clock limit of a run: seconds, or a function of the run's simulated-time limit
+(None until its worker has reported it)."""
+
+
+def _timeout(h: Handle, run_timeout_s: RunTimeout) -> float:
+    """The wall-clock limit of the run ``h`` is running."""
+    if callable(run_timeout_s):
+        return run_timeout_s(h.time_limits.get(h.jobs[0].index))
+    return run_timeout_s
+
+
+def _deadline(h: Handle, run_timeout_s: RunTimeout) -> float:
     """When the run ``h`` is running (the first of ``h.jobs``) is out of time."""
     if h.ready_at is None and h.runs == 0:
-        return h.since + STARTUP_GRACE_S + run_timeout_s
-    return max(h.since, h.ready_at or h.since) + run_timeout_s
+        return h.since + STARTUP_GRACE_S + _timeout(h, run_timeout_s)
+    return max(h.since, h.ready_at or h.since) + _timeout(h, run_timeout_s)
 
 
-def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: float,
+def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: RunTimeout,
              laps: int, on_row: Callable[[dict], None],
              outputs: Callable[[Job], dict | None] = lambda job: None,
-             prefetch: int = PREFETCH) -> list[WorkerTiming]:
-    """Run every job; ``on_row`` gets each row as it comes (any order). Stops every worker
+             prefetch: int = PREFETCH,
+             on_lost: Callable[[Job], None] = lambda job: None) -> list[WorkerTiming]:
+    """Run every job; ``on_row`` gets each row as it comes (any order); ``on_lost`` each job
+    whose worker died or was stopped during it (before its row). Stops every worker
     at the end (also on Ctrl-C, which is re-raised). Returns every worker's timing (in
     start order, replaced workers included).
 
@@ -159,11 +176,13 @@ def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: 
     def retire(h: Handle, job: Job, row: dict) -> None:
         """``job`` (the one ``h`` ran) failed with ``row``: stop ``h``, requeue the rest."""
         h.jobs.popleft()
+        h.time_limits.clear()
         for queued in reversed(h.jobs):
             queue.put_back(queued)
         h.jobs.clear()
         backend.kill(h)
         live.remove(h)
+        on_lost(job)
         on_row(row)
         if len(queue):
             start()
@@ -184,12 +203,13 @@ def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: 
             wait_s = min([_POLL_S] + [_deadline(h, run_timeout_s) - now for h in busy])
             for h, row, reason in backend.wait(busy, wait_s):
                 job = h.jobs[0]
-                if row is None:
-                    retire(h, job, failure_row(job, laps, "worker_died", reason))
+                if reason:  # the worker died during the run (the backend may tell how: a row)
+                    retire(h, job, row if row is not None else failure_row(job, laps, "worker_died", reason))
                     continue
                 if row["run"] != job.index:
                     raise RuntimeError(f"worker answered run {row['run']} for run {job.index}")
                 h.jobs.popleft()
+                h.time_limits.pop(job.index, None)
                 h.runs += 1
                 h.last_row_at = time.monotonic()
                 if h.first_row_at is None:
@@ -199,9 +219,10 @@ def run_jobs(jobs: list[Job], backend: Backend, *, workers: int, run_timeout_s: 
             now = time.monotonic()
             for h in [h for h in busy if h in live and h.jobs]:
                 if now > _deadline(h, run_timeout_s):
+                    limit = _timeout(h, run_timeout_s)
                     retire(h, h.jobs[0], failure_row(h.jobs[0], laps, "wall_timeout", (
-                        f"the run passed the per-run wall-clock timeout of {run_timeout_s:g} s "
-                        "(--run-timeout); its worker was stopped"), round(run_timeout_s, 4)))
+                        f"the run passed the per-run wall-clock timeout of {limit:g} s "
+                        "(--run-timeout); its worker was stopped"), round(limit, 4)))
     finally:
         backend.close()
     return [WorkerTiming.of(h) for h in started]

@@ -60,13 +60,14 @@ class BatchConfig:
 
     ``controller``: absolute path of the controller file. ``car``: car TOML path or None.
     ``laps``, ``time_limit_s``, ``dt_s``, ``wall_limit_s``, ``off_track_wheels``, ``event``,
-    ``mcu_time``, ``mcu_scale``: as for ``simrunner drive``.
+    ``mcu_time``, ``mcu_scale``: as for ``simrunner drive`` (``time_limit_s`` None: each run
+    gets drive's default for its track, laps and event).
     """
 
     controller: str
     car: str | None = None
     laps: int = 1
-    time_limit_s: float = 60.0
+    time_limit_s: float | None = None
     dt_s: float = 0.002
     wall_limit_s: float = 10.0
     param_names: tuple[str, ...] = field(default_factory=tuple)

@@ -63,20 +63,38 @@ def _load(ref: TrackRef, car):
     return track_from_trackgen(checked.track, geometry=checked.geometry, source=ref.label)
 
 
+def run_settings(job: Job, cfg: BatchConfig):
+    """The :class:`~simrunner.run.settings.RunSettings` of ``job`` (as ``simrunner drive``'s:
+    a time limit of None is filled in for the track by the run)."""
+    from simrunner.run.settings import RunSettings
+
+    return RunSettings(laps=cfg.laps, time_limit_s=cfg.time_limit_s, seed=job.seed,
+                       dt_s=cfg.dt_s, wall_limit_s=cfg.wall_limit_s, params=dict(job.params),
+                       off_track_wheels=cfg.off_track_wheels, event=cfg.event,
+                       mcu_time=cfg.mcu_time, mcu_scale=cfg.mcu_scale)
+
+
+def run_time_limit_s(job: Job, state: WorkerState) -> float | None:
+    """The simulated-time limit ``job`` will run with (loading its track: drive's default
+    depends on the lap length); None if the track does not load (the run reports it)."""
+    if state.config.time_limit_s is not None:
+        return float(state.config.time_limit_s)
+    try:
+        return float(run_settings(job, state.config).for_track(state.track(job.track)).time_limit_s)
+    except Exception:  # noqa: BLE001 - execute_job reports it in the row
+        return None
+
+
 def execute_job(job: Job, state: WorkerState, outputs: dict[str, str] | None = None) -> dict:
     """Run ``job``; always returns a row (a fault that is not the controller's is outcome
     ``error`` with its message)."""
     from simrunner.run.runner import drive
-    from simrunner.run.settings import RunSettings
 
     cfg = state.config
     t0 = time.perf_counter()
     try:
         track = state.track(job.track)
-        settings = RunSettings(laps=cfg.laps, time_limit_s=cfg.time_limit_s, seed=job.seed,
-                               dt_s=cfg.dt_s, wall_limit_s=cfg.wall_limit_s, params=dict(job.params),
-                               off_track_wheels=cfg.off_track_wheels, event=cfg.event,
-                               mcu_time=cfg.mcu_time, mcu_scale=cfg.mcu_scale)
+        settings = run_settings(job, cfg)
         outputs = outputs or {}
         result = drive(cfg.controller, track=track, car=state.car, settings=settings,
                        video=outputs.get("video"), csv=outputs.get("csv"))
@@ -93,14 +111,19 @@ def execute_job(job: Job, state: WorkerState, outputs: dict[str, str] | None = N
     return row_from_result(job, result, track.centreline)
 
 
+WARM_MODULES = ("simrunner.car.effects", "simrunner.run.runner", "simrunner.sensors.camera",
+                "simrunner.sensors.line_kernel", "trackgen.build")
+"""What every run imports (dartpy, OpenCV, numba kernels)."""
+
+
 def warm_up() -> None:
-    """Import what every run needs (dartpy, OpenCV, numba kernels), so a worker reports
-    ready - and its first run's timeout starts - only when it can run at full speed."""
-    import simrunner.car.effects  # noqa: F401
-    import simrunner.run.runner  # noqa: F401
-    import simrunner.sensors.camera  # noqa: F401
-    import simrunner.sensors.line_kernel  # noqa: F401
-    import trackgen.build  # noqa: F401
+    """Import :data:`WARM_MODULES`, so a worker reports ready - and its first run's timeout
+    starts - only when it can run at full speed (the local pool imports them once in the
+    batch's process and forks its workers after, :mod:`.pool`)."""
+    import importlib
+
+    for name in WARM_MODULES:
+        importlib.import_module(name)
 
 
 def quiet_output() -> None:
@@ -114,30 +137,73 @@ def quiet_output() -> None:
     sys.stderr = sys.stdout
 
 
-def worker_loop(conn, config: BatchConfig, quiet: bool = True) -> None:
+def worker_loop(conn, config: BatchConfig, quiet: bool = True, report: str | None = None) -> None:
     """A child process of the local pool: receive ``(job, outputs)``, send back the row;
-    ``None`` ends it."""
+    ``None`` ends it. ``report``: the file the hard watchdog writes its stack dump to when a
+    run is stuck in one C-level call (:func:`death_row` reads it)."""
     if quiet:
         quiet_output()
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    for sig in (signal.SIGTERM, signal.SIGHUP):   # (a forked worker has its parent's handlers)
+        signal.signal(sig, signal.SIG_DFL)
     try:
         warm_up()
         state = WorkerState(config)
+        dump = open(report if report else os.devnull, "w", errors="replace")  # noqa: SIM115 - for the life of the worker
     except Exception as exc:  # noqa: BLE001 - e.g. a bad car file: every run reports it
         conn.send(("fatal", f"{type(exc).__name__}: {exc}"))
         return
+    from simrunner.run.supervise import Supervision, supervised_by
+
     conn.send(("ready", os.getpid()))
-    while True:
-        try:
-            msg = conn.recv()
-        except EOFError:
-            return
-        if msg is None:
-            return
-        job, outputs = msg
-        conn.send(("row", execute_job(job, state, outputs)))
+    with supervised_by(Supervision(dump, csv_path=None)):
+        while True:
+            try:
+                msg = conn.recv()
+            except EOFError:
+                return
+            if msg is None:
+                return
+            job, outputs = msg
+            conn.send(("start", (job.index, run_time_limit_s(job, state))))  # for its timeout
+            conn.send(("row", execute_job(job, state, outputs)))
 
 
-__all__ = ["WorkerState", "execute_job", "worker_loop", "warm_up", "MAX_TRACKS"]
+def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str | os.PathLike,
+              outputs: dict[str, str] | None = None) -> dict:
+    """The row of ``job``, whose worker process ended during it with ``exitcode``, told as
+    ``simrunner drive`` tells it: a controller stuck in one C-level call (the hard watchdog's
+    stack dump in ``report``) is outcome ``stalled`` naming the controller's file:line;
+    otherwise ``worker_died`` naming the signal or exit code. Laps, lap times, simulated time
+    and frames come from the run's CSV when one was asked for (``outputs``)."""
+    from pathlib import Path
+
+    from simrunner.run.postmortem import (killed_message, read_run_log, run_log_laps,
+                                          stuck_location, stuck_message)
+
+    try:
+        dump = Path(report).read_text(errors="replace")
+    except OSError:
+        dump = ""
+    csv = (outputs or {}).get("csv")
+    log = read_run_log(Path(csv)) if csv else None
+    if "Timeout (" in dump:  # faulthandler's header (simrunner.run.watchdog)
+        outcome = "stalled"
+        message = stuck_message(stuck_location(dump, config.controller), config.wall_limit_s)
+    elif exitcode is not None and exitcode < 0:
+        outcome, message = "worker_died", killed_message(-exitcode, log)
+    else:
+        outcome, message = "worker_died", f"worker process died during the run (exit code {exitcode})"
+    row = failure_row(job, config.laps, outcome, message)
+    if log is not None and len(log):
+        laps_completed, lap_times = run_log_laps(log)
+        row.update(laps_completed=laps_completed, lap_times_s=lap_times,
+                   best_lap_s=min(lap_times) if lap_times else None,
+                   sim_time_s=float(log.t_s[-1]), frames=len(log))
+    return row
+
+
+__all__ = ["WorkerState", "execute_job", "worker_loop", "warm_up", "WARM_MODULES", "death_row", "run_settings",
+           "run_time_limit_s", "MAX_TRACKS"]

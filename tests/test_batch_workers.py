@@ -1,0 +1,79 @@
+"""simrunner batch's local workers (issue 50): forked warm from the batch's process, runs
+still isolated from each other, and a worker that dies in a run reported as drive reports it."""
+from __future__ import annotations
+
+import textwrap
+import threading
+
+from simrunner.workflows.batch import deterministic, run_batch
+from simrunner.workflows.batch.pool import LocalBackend, choose_start_method
+from simrunner.workflows.batch.spec import BatchConfig
+
+LEAKY = """
+import os
+
+seen = []   # a module global: fresh in every run (the file is executed afresh)
+
+def main(s):
+    s.get_image()
+    report = f"env={os.environ.get('NXPCUP_LEAK', '')!r} cwd_root={os.getcwd() == '/'} seen={len(seen)}"
+    seen.append(1)
+    os.environ["NXPCUP_LEAK"] = "leaked"
+    os.chdir("/")
+    raise RuntimeError(report)
+"""
+
+
+def test_workers_fork_warm_unless_another_thread_runs():
+    assert threading.active_count() == 1 and choose_start_method() == "fork"
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:   # a thread of the caller's could hold a lock the forked worker needs
+        assert choose_start_method() in ("forkserver", "spawn")
+    finally:
+        stop.set()
+        other.join()
+    assert choose_start_method("spawn") == "spawn"
+
+
+def test_warm_workers_keep_runs_isolated_and_rows_identical(tmp_path):
+    ctl = tmp_path / "leaky.py"
+    ctl.write_text(LEAKY)
+    backend = LocalBackend(BatchConfig(controller=str(ctl)))
+    assert backend.method == "fork"
+    backend.close()
+    rows = {}
+    for workers in (1, 2):
+        res = run_batch(ctl, out_dir=tmp_path / f"w{workers}", seeds=4, workers=workers, plot=False)
+        rows[workers] = [deterministic(r) for r in res.rows]
+        # every run of a worker saw no environment, directory or module state of the runs before
+        assert [r["message"].split(" at ")[0] for r in res.rows] == [
+            "RuntimeError: env='' cwd_root=False seen=0"] * 4
+    assert rows[1] == rows[2]
+
+
+STUCK = """
+def main(s):
+    for _ in range(5):
+        s.set_speed_and_servo(0.3, 0.0)
+        s.get_image()
+    if s.param("mode", "drive") == "stuck":
+        sum(range(10 ** 13))   # one C-level call that never lets Python code run
+"""
+
+
+def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):
+    """The hard watchdog ends the worker; the row is drive's: outcome stalled, the
+    controller's file:line, and (with its CSV) the frames and simulated time it reached."""
+    from simrunner.run.postmortem import stuck_message
+
+    ctl = tmp_path / "ctrl.py"
+    ctl.write_text(textwrap.dedent(STUCK))
+    res = run_batch(ctl, out_dir=tmp_path / "out", params=["mode=stuck,drive"], wall_limit_s=0.5,
+                    workers=2, csv="all", plot=False)
+    stuck, fine = res.rows
+    assert stuck["outcome"] == "stalled", stuck
+    assert stuck["message"] == stuck_message("ctrl.py:7 in main", 0.5)
+    assert stuck["frames"] == 5 and stuck["sim_time_s"] > 0.0
+    assert fine["outcome"] == "controller_returned" and fine["frames"] >= 5
