@@ -43,10 +43,11 @@ def test_the_example_firmware_builds_unchanged_and_laps():
     assert r.lap_times_s[1] == pytest.approx(follower.lap_times_s[1], rel=0.05)
 
 
-def test_the_example_firmware_laps_a_duty_driven_car(tmp_path):
+@pytest.mark.parametrize("hbridge", ["brake", "coast"])  # coast: the kit's L298N, PWM on its enable
+def test_the_example_firmware_laps_a_duty_driven_car(tmp_path, hbridge):
     """With drive.command = "duty" HbridgeSetSpeed's duty drives the two rear motors."""
     car = tmp_path / "duty.toml"
-    car.write_text('[drive]\ncommand = "duty"\nhbridge = "brake"\n')
+    car.write_text(f'[drive]\ncommand = "duty"\nhbridge = "{hbridge}"\n')
     r = drive(firmware([FIRMWARE]), car=car, laps=2)
     assert r.outcome == "finished" and r.laps_completed == 2, r.message
     assert r.log.duty_left is not None and np.nanmax(r.log.duty_left) > 0.4

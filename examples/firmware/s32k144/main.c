@@ -11,12 +11,16 @@
  * between the two dark lines; one line in view: the lane's middle half a lane width from it;
  * all white (a crossing): straight on; nothing white (lost): the last estimate. Steer() takes
  * -100 (full left) .. 100 (full right), HbridgeSetSpeed() 0 .. 100 % duty. */
+#include "display.h"      /* the sample's includes, as its main.c has them */
+#include "receiver.h"
+#include "CDD_I2c.h"
+#include "esc.h"
 #include "servo.h"
-#include "hbridge.h"
 #include "linear_camera.h"
-#include "display.h"
 #include "main_functions.h"
+#include "hbridge.h"
 #include "Mcal.h"
+#include "pixy2.h"
 #include <math.h>
 
 #define BUFFER_SIZE 128
