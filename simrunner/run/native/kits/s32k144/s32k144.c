@@ -225,10 +225,13 @@ void LinearCameraInit(Pwm_ChannelType ClkPwmChannel, Gpt_ChannelType ShutterGptC
 }
 
 void LinearCameraGetFrame(LinearCameraFrame *Frame) {
-    uint8_t row[1024];
+    int width = spinner_image_width();
+    uint8_t row[width > 0 ? width : 1];
     size_t n = spinner_get_image(spinner_line_row(), 1, row, sizeof row);
-    for (size_t i = 0; i < 128; i++)  /* the 8-bit ADC count x 25 / 64, as the kit's driver stores it */
-        Frame->Values[i] = (uint8)(i < n ? row[i] * 25U / 64U : 0U);
+    for (size_t i = 0; i < 128; i++) {  /* 128 pixels across the row (a wider camera's sampled) */
+        size_t j = n > 0 ? i * n / 128 : 0;
+        Frame->Values[i] = (uint8)(j < n ? row[j] * 25U / 64U : 0U);  /* 8-bit ADC x 25 / 64, as the driver */
+    }
 }
 
 /* ---- display.h: the debug video's text column ---- */

@@ -13,7 +13,7 @@
  *
  * On the simulated car LinearCameraGetFrame waits for the car camera's next image of its line
  * row (with the camera's noise; simulated time passes) and converts its 8-bit grey the same
- * way. The exposure is the camera's (the car file's, 19.5 ms on the default car; docs/camera.md)
+ * way (a camera wider than 128 pixels is sampled at 128 evenly spaced ones). The exposure is the camera's (the car file's, 19.5 ms on the default car; docs/camera.md)
  * unless --param s32k_exposure_ms sets it; the camera's frames are exposure + read-out apart. */
 #ifndef LINEAR_CAMERA_H
 #define LINEAR_CAMERA_H
