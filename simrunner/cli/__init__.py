@@ -200,9 +200,10 @@ def main() -> None:
 @click.option("--isolate", is_flag=True,
               help="C/C++ controllers: run in a child process instead of the simulator's (slower; "
                    "code that overwrites memory cannot touch the simulator). A .so always is.")
-@click.option("--kit", default=None, metavar="tfc",
+@click.option("--kit", default=None, metavar="tfc|s32k144",
               help="C/C++ firmware: build it against this kit library's implementation on the "
-                   "simulated car (tfc: the FRDM-TFC library; docs/c_controllers.md, Kit libraries).")
+                   "simulated car (tfc: the FRDM-TFC library; s32k144: the NXP Cup S32K144 kit's "
+                   "drivers; docs/c_controllers.md, Kit libraries).")
 @click.option("--mcu-time", "mcu_time", default=None, metavar="measured|SECONDS",
               help="The controller's own processing costs simulated time, as on the car: its CPU time "
                    "between Spinner calls times --mcu-scale (measured: not deterministic), or SECONDS "

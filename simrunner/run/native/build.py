@@ -29,7 +29,11 @@ INCLUDE_DIR = NATIVE_DIR / "include"
 HOST_SOURCE = NATIVE_DIR / "host" / "spinner_host.c"
 KITS_DIR = NATIVE_DIR / "kits"
 #: Kit libraries a firmware builds against (``--kit NAME``): NAME -> its sources beside its include/.
-KITS = {"tfc": ("tfc.c",)}
+KITS = {"tfc": ("tfc.c",), "s32k144": ("s32k144.c",)}
+#: A kit's own driver sources in a team's project, which the kit library replaces (passing one is
+#: an error naming it rather than the linker's "multiple definition").
+KIT_REPLACES = {"s32k144": ("servo.c", "hbridge.c", "esc.c", "linear_camera.c", "display.c",
+                            "main_functions.c", "pixy2.c", "receiver.c")}
 C_SUFFIXES = (".c",)
 CXX_SUFFIXES = (".cpp", ".cc", ".cxx", ".C")
 LIB_SUFFIXES = (".so",)
@@ -238,6 +242,10 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     ``kit``, against that kit library's headers and sources (:func:`kit_files`)."""
     if kit is not None:
         kit_includes, kit_sources = kit_files(kit)
+        for s in sources:
+            if Path(s).name in KIT_REPLACES.get(kit, ()):
+                raise ControllerFileError(f"{s}: the kit's own driver source: --kit {kit} provides "
+                                          f"{Path(s).stem}.h's functions on the simulated car; leave it out")
         include_dirs = [*include_dirs, *kit_includes]
         sources = [*sources, *kit_sources]
     if len(sources) == 1 and Path(sources[0]).suffix in LIB_SUFFIXES:

@@ -1,0 +1,307 @@
+/* The NXP Cup S32K144 kit's drivers on the simulated car (simrunner drive FIRMWARE.c --kit s32k144).
+ *
+ * The team's sources build unchanged against include/ (the kit's driver headers: servo.h,
+ * hbridge.h, esc.h, linear_camera.h, display.h, main_functions.h, and the few RTD headers
+ * they name) and this file, which talks to the simulator through spinner.h. The API (names,
+ * signatures, units, ranges) is that of NXP's Nxp_Cup_Linear_Camera_S32K144 sample as
+ * published in github.com/michalfrohlich/NXP-Cup-EXPO (include/, src/ at commit 47d5179) and
+ * documented in github.com/NXPHoverGames/GitBook-NXPCup
+ * (2024-fall-2025-nxp-cup-bare-metal-drivers/drivers-description-and-usage/); the code is ours.
+ *
+ * The drivers act as the kit's do, through the PWM and DIO layer below them: a PWM channel's
+ * duty (0 .. 0x8000) and a DIO pin's level are kept, and the channels the drivers' Init calls
+ * named act on the car:
+ * - the servo channel steers (calibrated by ServoInit: Med straight, Max full right, Min full
+ *   left; full = --param s32k_servo_rad, + s32k_servo_offset_rad);
+ * - the H-bridge's two motor channels are the left and right rear motors' duties, their sign
+ *   from the direction pins (spinner_set_motors); the ESC's channel drives both;
+ * - LinearCameraGetFrame waits for the camera's next image of its line row;
+ * - the display's text and graph go to the debug video; OsIf's ms clock is simulated time.
+ * docs/c_controllers.md, "The S32K144 kit", lists what is emulated and what is not. */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "spinner.h"
+#include "servo.h"
+#include "hbridge.h"
+#include "esc.h"
+#include "linear_camera.h"
+#include "display.h"
+#include "main_functions.h"
+#include "pixy2.h"
+#include "receiver.h"
+#include "OsIf.h"
+
+#define NUM_PWM 256
+#define NUM_DIO 256
+#define DUTY_FULL 0x8000
+
+enum role { NONE, SERVO, MOTOR1, MOTOR2, ESC };
+
+static struct {
+    uint16 pwm[NUM_PWM];          /* each PWM channel's duty, 0 .. 0x8000 */
+    uint8 dio[NUM_DIO];           /* each DIO channel's level */
+    uint8 role[NUM_PWM];          /* what a PWM channel drives on the car (enum role) */
+    uint8 params_read;
+    double servo_rad, servo_offset_rad;
+    Servo servo;
+    Hbridge hbridge;
+    struct { Pwm_ChannelType channel; uint16 min, med, max; int speed; uint8 brake; } esc;
+    char screen[CharacterRows][CharacterColumns];
+    uint8 graph[128];
+    uint16 graph_len;
+} k;
+
+static double clamp(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+/* A kit function the simulator does not emulate: the run stops here, naming it. */
+static void not_emulated(const char *name) {
+    fflush(stdout);
+    fprintf(stderr, "%s: not emulated by the simulator's S32K144 kit (docs/c_controllers.md, "
+            "\"The S32K144 kit\")\n", name);
+    exit(3);
+}
+
+static void read_params(void) {
+    if (k.params_read) return;
+    k.params_read = 1;
+    k.servo_rad = spinner_param("s32k_servo_rad", 0.40);
+    k.servo_offset_rad = spinner_param("s32k_servo_offset_rad", 0.0);
+}
+
+/* -1 .. 1 of a pulse between its calibrated ends (+ towards hi), 0 at mid. */
+static double position(uint16 duty, uint16 lo, uint16 mid, uint16 hi) {
+    if (duty >= mid) return hi > mid ? clamp((double)(duty - mid) / (hi - mid), 0.0, 1.0) : 0.0;
+    return mid > lo ? -clamp((double)(mid - duty) / (mid - lo), 0.0, 1.0) : 0.0;
+}
+
+static double motor_duty(Pwm_ChannelType channel, Dio_ChannelType fwd, Dio_ChannelType bwd) {
+    int f = fwd < NUM_DIO && k.dio[fwd] != STD_LOW, b = bwd < NUM_DIO && k.dio[bwd] != STD_LOW;
+    double duty = clamp((double)k.pwm[channel] / DUTY_FULL, 0.0, 1.0);
+    return f == b ? 0.0 : (f ? duty : -duty);
+}
+
+/* The car's commands from the channels' state (after any PWM or DIO change). */
+static void apply(Pwm_ChannelType changed) {
+    read_params();
+    enum role r = changed < NUM_PWM ? k.role[changed] : NONE;
+    if (r == SERVO) {
+        Servo *s = &k.servo;  /* Max = full right: minus, as + is left in the simulator */
+        double pos = position(k.pwm[s->ServoPwmChannel], s->MinDutyCycle, s->MedDutyCycle, s->MaxDutyCycle);
+        spinner_set_servo(-pos * k.servo_rad + k.servo_offset_rad);
+    } else if (r == MOTOR1 || r == MOTOR2) {
+        Hbridge *h = &k.hbridge;
+        spinner_set_motors((float)motor_duty(h->Motor1_Speed, h->Motor1_Forward, h->Motor1_Backward),
+                           (float)motor_duty(h->Motor2_Speed, h->Motor2_Forward, h->Motor2_Backward));
+    } else if (r == ESC) {
+        float d = (float)position(k.pwm[k.esc.channel], k.esc.min, k.esc.med, k.esc.max);
+        spinner_set_motors(d, d);
+    }
+}
+
+/* ---- the RTD layer the drivers stand on ---- */
+
+void Pwm_SetDutyCycle(Pwm_ChannelType ChannelNumber, uint16 DutyCycle) {
+    k.pwm[ChannelNumber] = DutyCycle > DUTY_FULL ? DUTY_FULL : DutyCycle;
+    apply(ChannelNumber);
+}
+
+void Dio_WriteChannel(Dio_ChannelType ChannelId, Dio_LevelType Level) {
+    if (ChannelId >= NUM_DIO) return;
+    k.dio[ChannelId] = Level;
+    Hbridge *h = &k.hbridge;  /* a direction pin of the H-bridge: the motors' sign changes */
+    if (k.role[h->Motor1_Speed] == MOTOR1 && (ChannelId == h->Motor1_Forward || ChannelId == h->Motor1_Backward ||
+                                              ChannelId == h->Motor2_Forward || ChannelId == h->Motor2_Backward))
+        apply(h->Motor1_Speed);
+}
+
+Dio_LevelType Dio_ReadChannel(Dio_ChannelType ChannelId) { return ChannelId < NUM_DIO ? k.dio[ChannelId] : STD_LOW; }
+
+Dio_LevelType Dio_FlipChannel(Dio_ChannelType ChannelId) {
+    Dio_LevelType level = Dio_ReadChannel(ChannelId) == STD_LOW ? STD_HIGH : STD_LOW;
+    Dio_WriteChannel(ChannelId, level);
+    return level;
+}
+
+uint32 OsIf_GetMilliseconds(void) { return (uint32)(spinner_get_time() * 1000.0 + 1e-6); }
+
+void OsIf_TimeDelay(const uint32 delayMs) { spinner_sleep(delayMs * 1e-3); }
+
+/* ---- servo.h ---- */
+
+void ServoInit(Pwm_ChannelType ServoPwmChannel, uint16 MaxDutyCycle, uint16 MinDutyCycle, uint16 MedDutyCycle) {
+    k.servo = (Servo){ServoPwmChannel, MinDutyCycle, MaxDutyCycle, MedDutyCycle};
+    k.role[ServoPwmChannel] = SERVO;
+    Pwm_SetDutyCycle(ServoPwmChannel, MedDutyCycle);
+}
+
+void Steer(int Direction) {
+    Servo *s = &k.servo;
+    int d = Direction > 100 ? 100 : (Direction < -100 ? -100 : Direction);
+    int span = d > 0 ? s->MaxDutyCycle - s->MedDutyCycle : s->MedDutyCycle - s->MinDutyCycle;
+    Pwm_SetDutyCycle(s->ServoPwmChannel, (uint16)(s->MedDutyCycle + d * span / 100));
+}
+
+void SteerLeft(void) { Pwm_SetDutyCycle(k.servo.ServoPwmChannel, k.servo.MinDutyCycle); }
+void SteerRight(void) { Pwm_SetDutyCycle(k.servo.ServoPwmChannel, k.servo.MaxDutyCycle); }
+void SteerStraight(void) { Pwm_SetDutyCycle(k.servo.ServoPwmChannel, k.servo.MedDutyCycle); }
+
+/* ---- hbridge.h ---- */
+
+void HbridgeInit(Pwm_ChannelType Motor1_Speed, Pwm_ChannelType Motor2_Speed, Dio_ChannelType Motor1_Forward,
+                 Dio_ChannelType Motor1_Backward, Dio_ChannelType Motor2_Forward, Dio_ChannelType Motor2_Backward) {
+    k.hbridge = (Hbridge){Motor1_Speed, Motor2_Speed, Motor1_Forward, Motor1_Backward, Motor2_Forward,
+                          Motor2_Backward, 0U, 0};
+    k.role[Motor1_Speed] = MOTOR1;
+    k.role[Motor2_Speed] = MOTOR2;
+    apply(Motor1_Speed);  /* idle: whatever the channels hold (0 after reset) */
+}
+
+void HbridgeSetSpeed(int Speed) {
+    Hbridge *h = &k.hbridge;
+    h->Speed = Speed;
+    if (h->Brake != 0U) return;
+    int s = Speed > 100 ? 100 : (Speed < -100 ? -100 : Speed);
+    Dio_LevelType fwd = s >= 0 ? STD_HIGH : STD_LOW, bwd = s >= 0 ? STD_LOW : STD_HIGH;
+    uint16 duty = (uint16)((uint32)abs(s) * DUTY_FULL / 100U);
+    Dio_WriteChannel(h->Motor1_Forward, fwd);
+    Dio_WriteChannel(h->Motor1_Backward, bwd);
+    Dio_WriteChannel(h->Motor2_Forward, fwd);
+    Dio_WriteChannel(h->Motor2_Backward, bwd);
+    Pwm_SetDutyCycle(h->Motor1_Speed, duty);
+    Pwm_SetDutyCycle(h->Motor2_Speed, duty);
+}
+
+void HbridgeSetBrake(uint8 Brake) {
+    Hbridge *h = &k.hbridge;
+    if (Brake == 0U) {
+        h->Brake = 0U;
+        HbridgeSetSpeed(h->Speed);
+        return;
+    }
+    h->Brake = 1U;
+    Dio_WriteChannel(h->Motor1_Forward, STD_LOW);
+    Dio_WriteChannel(h->Motor1_Backward, STD_LOW);
+    Dio_WriteChannel(h->Motor2_Forward, STD_LOW);
+    Dio_WriteChannel(h->Motor2_Backward, STD_LOW);
+    Pwm_SetDutyCycle(h->Motor1_Speed, DUTY_FULL);
+    Pwm_SetDutyCycle(h->Motor2_Speed, DUTY_FULL);
+}
+
+int HbridgeGetSpeed(void) { return k.hbridge.Speed; }
+uint8 HbridgeGetBrake(void) { return k.hbridge.Brake; }
+
+/* ---- esc.h ---- */
+
+void EscInit(Pwm_ChannelType EscPwmChannel, uint16 MinDutyCycle, uint16 MedDutyCycle, uint16 MaxDutyCycle) {
+    k.esc.channel = EscPwmChannel, k.esc.min = MinDutyCycle, k.esc.med = MedDutyCycle, k.esc.max = MaxDutyCycle;
+    k.esc.speed = 0, k.esc.brake = 0U;
+    k.role[EscPwmChannel] = ESC;
+    Pwm_SetDutyCycle(EscPwmChannel, MedDutyCycle);
+}
+
+void EscSetSpeed(int Speed) {
+    k.esc.speed = Speed;
+    if (k.esc.brake != 0U) return;
+    int s = Speed > 100 ? 100 : (Speed < -100 ? -100 : Speed);
+    int span = s > 0 ? k.esc.max - k.esc.med : k.esc.med - k.esc.min;
+    Pwm_SetDutyCycle(k.esc.channel, (uint16)(k.esc.med + s * span / 100));
+}
+
+void EscSetBrake(uint8 Brake) {
+    k.esc.brake = Brake != 0U;
+    if (k.esc.brake) Pwm_SetDutyCycle(k.esc.channel, k.esc.med);
+    else EscSetSpeed(k.esc.speed);
+}
+
+/* ---- linear_camera.h ---- */
+
+void LinearCameraInit(Pwm_ChannelType ClkPwmChannel, Gpt_ChannelType ShutterGptChannel, Adc_GroupType InputAdcGroup,
+                      Dio_ChannelType ShutterDioChannel) {
+    (void)ClkPwmChannel, (void)ShutterGptChannel, (void)InputAdcGroup, (void)ShutterDioChannel;
+    double ms = spinner_param("s32k_exposure_ms", 0.0);
+    if (ms > 0.0) spinner_set_exposure(ms * 1e-3);
+}
+
+void LinearCameraGetFrame(LinearCameraFrame *Frame) {
+    int width = spinner_image_width();
+    uint8_t row[width > 0 ? width : 1];
+    size_t n = spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+    for (size_t i = 0; i < 128; i++) {  /* 128 pixels across the row (a wider camera's sampled) */
+        size_t j = n > 0 ? i * n / 128 : 0;
+        Frame->Values[i] = (uint8)(j < n ? row[j] * 25U / 64U : 0U);  /* 8-bit ADC x 25 / 64, as the driver */
+    }
+}
+
+/* ---- display.h: the debug video's text column ---- */
+
+void DisplayInit() { DisplayClear(); }
+void RotateFontmap(void) {}
+void DisplayVector(Vector VectorCoordinates) { (void)VectorCoordinates; }
+
+void DisplayClear(void) {
+    memset(k.screen, ' ', sizeof k.screen);
+    k.graph_len = 0;
+}
+
+void DisplayText(uint16 DisplayLine, const char *Text, uint16 TextLength, uint16 TextOffset) {
+    if (DisplayLine >= CharacterRows) return;
+    for (uint16 i = 0; i < TextLength && TextOffset + i < CharacterColumns && Text[i]; i++)
+        k.screen[DisplayLine][TextOffset + i] = Text[i];
+}
+
+void DisplayValue(uint16 DisplayLine, int Value, uint16 TextLength, uint16 TextOffset) {
+    char text[24];
+    int n = snprintf(text, sizeof text, "%*d", (int)(TextLength < 16 ? TextLength : 16), Value);
+    DisplayText(DisplayLine, text, (uint16)(n < (int)TextLength ? n : TextLength), TextOffset);
+}
+
+void DisplayGraph(uint8 DisplayLine, uint8 Values[128], uint16 ValuesCount, uint8 LinesSpan) {
+    (void)DisplayLine, (void)LinesSpan;
+    k.graph_len = ValuesCount > 128 ? 128 : ValuesCount;
+    for (uint16 i = 0; i < k.graph_len; i++) k.graph[i] = (uint8)(Values[i] > 100 ? 255 : Values[i] * 255 / 100);
+}
+
+void DisplayRefresh(void) {
+    if (!spinner_recording()) return;
+    char lines[CharacterRows][CharacterColumns + 1];
+    const char *text[CharacterRows];
+    for (unsigned r = 0; r < CharacterRows; r++) {
+        memcpy(lines[r], k.screen[r], CharacterColumns);
+        lines[r][CharacterColumns] = '\0';
+        text[r] = lines[r];
+    }
+    spinner_add_text(text, CharacterRows);
+    if (k.graph_len > 0) spinner_add_line(k.graph, 1, k.graph_len);
+}
+
+/* ---- main_functions.h ---- */
+
+void DriversInit(void) { read_params(); }
+void DisplayTest(void) { not_emulated("DisplayTest"); }
+void ReceiverTest(void) { not_emulated("ReceiverTest"); }
+void ServoTest(void) { not_emulated("ServoTest"); }
+void LinearCameraTest(void) { not_emulated("LinearCameraTest"); }
+void Pixy2Test(void) { not_emulated("Pixy2Test"); }
+void HbridgeTest(void) { not_emulated("HbridgeTest"); }
+void EscTest(void) { not_emulated("EscTest"); }
+
+/* ---- pixy2.h, receiver.h: not emulated ---- */
+
+void Pixy2Init(I2c_AddressType PixyI2cAddress, uint8 PixyI2cChannel) {
+    (void)PixyI2cAddress, (void)PixyI2cChannel;
+    not_emulated("Pixy2Init");
+}
+void Pixy2SetLed(uint8 Red, uint8 Green, uint8 Blue) { (void)Red, (void)Green, (void)Blue; not_emulated("Pixy2SetLed"); }
+void Pixy2GetVectors(DetectedVectors *Vectors) { (void)Vectors; not_emulated("Pixy2GetVectors"); }
+
+void ReceiverInit(Icu_ChannelType ReceiverIcuChannel, Gpt_ChannelType ReceiverGptChannel, uint16 ChannelMinTicks,
+                  uint16 ChannelMedTicks, uint16 ChannelMaxTicks, uint16 OutsideChannelTicks) {
+    (void)ReceiverIcuChannel, (void)ReceiverGptChannel, (void)ChannelMinTicks, (void)ChannelMedTicks;
+    (void)ChannelMaxTicks, (void)OutsideChannelTicks;
+    not_emulated("ReceiverInit");
+}
+int GetReceiverChannel(uint8 Channel) { (void)Channel; not_emulated("GetReceiverChannel"); return 0; }
+void ReceiverStateUpdate(Gpt_ValueType ReceiverPeriod) { (void)ReceiverPeriod; not_emulated("ReceiverStateUpdate"); }
+enum ReceiverStates GetReceiverState(void) { not_emulated("GetReceiverState"); return BetweenChannels; }

@@ -1,0 +1,171 @@
+"""The NXP Cup S32K144 kit's drivers on the simulated car (issue 50 item 1, simrunner drive
+--kit s32k144): a team's firmware builds unchanged against the simulator's servo.h,
+hbridge.h, linear_camera.h, display.h ... and drives."""
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from simrunner.cli import main as cli
+from simrunner.errors import ControllerFileError
+from simrunner.run.native import build_program
+from simrunner.run.runner import drive
+
+REPO = Path(__file__).resolve().parents[1]
+FIRMWARE = REPO / "examples" / "firmware" / "s32k144" / "main.c"
+SHARED_TRACKS = REPO.parent / "shared" / "tracks"
+MAX_SPEED_MPS = 3.1  # the default car's drive.max_speed_mps: a full duty's speed
+
+
+def firmware(sources, **kw):
+    return build_program([str(s) for s in sources], kit="s32k144", **kw)
+
+
+def probe(tmp_path, body, name="probe.c"):
+    src = tmp_path / name
+    src.write_text(textwrap.dedent(body))
+    return src
+
+
+def test_the_example_firmware_builds_unchanged_and_laps():
+    """examples/firmware/s32k144/main.c (the NXP sample's structure: DriversInit, ServoInit,
+    HbridgeInit, DisplayInit, LinearCameraInit, a blocking LinearCameraGetFrame loop) builds
+    without a warning and laps the default track as the Python line follower it mirrors."""
+    program = firmware([FIRMWARE])
+    assert program.warnings == ""
+    r = drive(program, laps=2)
+    follower = drive(REPO / "examples" / "line_follower.py", laps=2)
+    assert r.outcome == "finished" and r.laps_completed == 2, r.message
+    assert r.lap_times_s[1] == pytest.approx(follower.lap_times_s[1], rel=0.05)
+
+
+@pytest.mark.parametrize("hbridge", ["brake", "coast"])  # coast: the kit's L298N, PWM on its enable
+def test_the_example_firmware_laps_a_duty_driven_car(tmp_path, hbridge):
+    """With drive.command = "duty" HbridgeSetSpeed's duty drives the two rear motors."""
+    car = tmp_path / "duty.toml"
+    car.write_text(f'[drive]\ncommand = "duty"\nhbridge = "{hbridge}"\n')
+    r = drive(firmware([FIRMWARE]), car=car, laps=2)
+    assert r.outcome == "finished" and r.laps_completed == 2, r.message
+    assert r.log.duty_left is not None and np.nanmax(r.log.duty_left) > 0.4
+    assert np.array_equal(r.log.duty_left, r.log.duty_right)  # HbridgeSetSpeed drives both alike
+
+
+@pytest.mark.skipif(not SHARED_TRACKS.is_dir(), reason="../shared/tracks not present")
+def test_the_example_firmware_laps_both_nxp_tracks():
+    for name in ("nxp_raceway", "nxp_raceway_octagon"):
+        r = drive(firmware([FIRMWARE]), track=SHARED_TRACKS / name)
+        assert r.outcome == "finished", (name, r.message)
+
+
+def test_the_drivers_map_onto_the_car(tmp_path):
+    """Steer's -100..100 is the servo's calibrated travel (+ = right), HbridgeSetSpeed's
+    percentage a duty (its sign from the direction pins, 0 while braking), a frame is 128
+    pixels of 0..99, OsIf counts simulated ms, the display's lines reach the run log."""
+    src = probe(tmp_path, """\
+        #include "servo.h"
+        #include "hbridge.h"
+        #include "linear_camera.h"
+        #include "display.h"
+        #include "main_functions.h"
+        #include "OsIf.h"
+        int main(void) {
+            LinearCameraFrame f;
+            DriversInit();
+            ServoInit(1U, 3300U, 1700U, 2500U);
+            HbridgeInit(2U, 3U, 32U, 33U, 6U, 64U);
+            DisplayInit(1U);                     /* the sample's first, one-argument version */
+            LinearCameraInit(4U, 1U, 0U, 97U);
+            uint32 t0 = OsIf_GetMilliseconds();
+            OsIf_TimeDelay(100U);
+            uint32 dt = OsIf_GetMilliseconds() - t0;
+            if (dt < 100U || dt > 104U) return 1;
+            LinearCameraGetFrame(&f);
+            int bright = 0;
+            for (int i = 0; i < 128; i++) { if (f.Values[i] > 99U) return 2; bright += f.Values[i] > 50U; }
+            if (bright < 20) return 3;           /* the white lane */
+            Steer(50); HbridgeSetSpeed(50);      /* window A: half right, half forward */
+            OsIf_TimeDelay(200U);
+            SteerLeft(); HbridgeSetSpeed(-30);   /* window B: full left, 30 % backward */
+            OsIf_TimeDelay(200U);
+            HbridgeSetBrake(1U); HbridgeSetSpeed(80);  /* window C: braking ignores the speed */
+            if (HbridgeGetSpeed() != 80 || HbridgeGetBrake() != 1U) return 4;
+            OsIf_TimeDelay(200U);
+            HbridgeSetBrake(0U); Steer(-250);    /* window D: the 80 % resumes; Steer clamps */
+            DisplayText(0U, "probe", 5U, 0U);
+            DisplayValue(1U, -42, 4U, 0U);
+            DisplayRefresh();
+            OsIf_TimeDelay(200U);
+            return 0;
+        }
+        """)
+    r = drive(firmware([src]), time_limit_s=5.0, csv=tmp_path / "log.csv")
+    assert r.outcome == "controller_returned", r.message
+    log = r.log
+    t_end = log.t_s[-1]
+
+    def window(k):  # the logged frames well inside window k (0 = A) of the four 0.2 s windows
+        return (log.t_s > t_end - 0.8 + 0.2 * k + 0.03) & (log.t_s < t_end - 0.6 + 0.2 * k - 0.01)
+
+    def duty(percent):  # the driver's integer duty of 0x8000, as a fraction
+        return np.sign(percent) * (abs(percent) * 0x8000 // 100) / 0x8000
+
+    expected = [(-0.2, duty(50)), (0.4, duty(-30)), (0.4, 0.0), (0.4, duty(80))]  # (steer rad, duty)
+    for k, (steer, want) in enumerate(expected):
+        w = window(k)
+        assert w.sum() >= 5
+        assert np.allclose(log.steer_cmd_rad[w], steer), (k, log.steer_cmd_rad[w][:3])
+        assert np.allclose(log.speed_cmd_mps[w], want * MAX_SPEED_MPS), (k, log.speed_cmd_mps[w][:3])
+    assert "probe" in (tmp_path / "log.csv").read_text() and "-42" in (tmp_path / "log.csv").read_text()
+
+
+def test_the_servo_param_and_the_esc(tmp_path):
+    """--param s32k_servo_rad scales (and with a minus flips) the servo; the ESC's pulse is a
+    duty of both motors: EscSetSpeed(40) is 40 %."""
+    src = probe(tmp_path, """\
+        #include "servo.h"
+        #include "esc.h"
+        #include "OsIf.h"
+        int main(void) {
+            ServoInit(1U, 3300U, 1700U, 2500U);
+            EscInit(0U, 1638U, 2457U, 3276U);
+            SteerRight();
+            EscSetSpeed(40);
+            OsIf_TimeDelay(100U);
+            return 0;
+        }
+        """)
+    r = drive(firmware([src]), params={"s32k_servo_rad": -0.3}, time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    late = r.log.t_s > r.log.t_s[-1] - 0.05
+    assert np.allclose(r.log.steer_cmd_rad[late], 0.3)  # full right, flipped: + 0.3 rad
+    pulse = 40 * (3276 - 2457) // 100  # the driver's integer pulse above the stop pulse
+    assert np.allclose(r.log.speed_cmd_mps[late], pulse / (3276 - 2457) * MAX_SPEED_MPS)
+
+
+def test_kit_misuse_is_one_line(tmp_path, capfd):
+    with pytest.raises(ControllerFileError, match=r"--kit stm32: expected one of tfc, s32k144"):
+        build_program([str(FIRMWARE)], kit="stm32")
+    # the team's copy of a kit driver: the simulator's replaces it
+    servo_c = probe(tmp_path, '#include "servo.h"\nvoid Steer(int d) { (void)d; }\n', "servo.c")
+    with pytest.raises(ControllerFileError, match=r"servo.c: the kit's own driver source: --kit s32k144 "
+                                                  r"provides servo.h's functions"):
+        firmware([FIRMWARE, servo_c])
+    # an RTD call the simulator has not: a compile error at its line, not a failure at load
+    gpt = probe(tmp_path, '#include "Gpt.h"\n\nint main(void) { Gpt_StartTimer(1U, 100U); return 0; }\n', "gpt.c")
+    with pytest.raises(ControllerFileError, match=r"gpt.c:3:.*Gpt_StartTimer"):
+        firmware([gpt])
+    regs = probe(tmp_path, '#include "Mcal.h"\n#include "S32K144.h"\nint main(void) { return 0; }\n', "regs.c")
+    with pytest.raises(ControllerFileError, match=r"regs.c:2:.*S32K144.h"):
+        firmware([regs])
+    # a driver the simulator does not emulate: the run stops, naming it
+    pixy = probe(tmp_path, '#include "pixy2.h"\nint main(void) { Pixy2Init(0x54, 0U); return 0; }\n', "pixy.c")
+    capfd.readouterr()
+    r = drive(firmware([pixy]), time_limit_s=1.0)
+    assert r.outcome == "controller_error", r.message
+    assert "Pixy2Init: not emulated by the simulator's S32K144 kit" in capfd.readouterr().err
+    res = CliRunner().invoke(cli, ["drive", str(REPO / "examples" / "line_follower.py"), "--kit", "s32k144"])
+    assert res.exit_code == 2 and "--kit is for C/C++ controllers" in res.output
