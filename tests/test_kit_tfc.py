@@ -44,6 +44,48 @@ def test_the_example_firmware_laps_a_duty_driven_car(tmp_path, hbridge):
     assert r.log.duty_left is not None and np.nanmax(np.abs(r.log.duty_left)) > 0.1
 
 
+@pytest.mark.parametrize("track", [None, "nxp_raceway"])
+def test_the_firmwares_run_log_equals_the_same_logic_through_spinner(tmp_path, track):
+    """examples/firmware/twin/spinner_twin.c runs the firmware's logic (lane.h) through the
+    Spinner API with the library's timing written out: the two run logs are byte for byte the
+    same, so the kit adds the library's API and nothing else (no lag, no other rounding)."""
+    if track is not None:
+        if not SHARED_TRACKS.is_dir():
+            pytest.skip("../shared/tracks not present")
+        track = SHARED_TRACKS / track
+    twin = REPO / "examples" / "firmware" / "twin" / "spinner_twin.c"
+    a = drive(firmware([FIRMWARE]), track=track, laps=1, csv=tmp_path / "firmware.csv")
+    b = drive(build_program([str(twin)]), track=track, laps=1, csv=tmp_path / "twin.csv")
+    assert a.outcome == b.outcome == "finished", (a.message, b.message)
+    assert (tmp_path / "firmware.csv").read_bytes() == (tmp_path / "twin.csv").read_bytes()
+
+
+def test_the_kit_reads_the_camera_at_its_frame_rate(tmp_path, capfd):
+    """The PIT read-out takes every frame of a 19.5-ms exposure (about 50 images a second, as the
+    kit's camera gives them; it once took every other one): images counted over 1 s of ticks."""
+    src = tmp_path / "count.c"
+    src.write_text(textwrap.dedent("""\
+        #include <stdio.h>
+        #include "derivative.h"
+        #include "TFC/TFC.h"
+        int main(void) {
+            TFC_Init();
+            TFC_SetLineScanExposureTime(19500);
+            int images = 0;
+            uint32_t start = TFC_Ticker[0];
+            while (TFC_Ticker[0] - start < 1000) {
+                TFC_Task();
+                if (LineScanImageReady) { LineScanImageReady = 0; images++; }
+            }
+            printf("images %d\\n", images);
+            fflush(stdout);
+            return images >= 49 && images <= 52 ? 0 : 1;
+        }
+    """))
+    r = drive(firmware([src]), time_limit_s=3.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", (r.message, capfd.readouterr().out)
+
+
 @pytest.mark.skipif(not SHARED_TRACKS.is_dir(), reason="../shared/tracks not present")
 def test_the_example_firmware_laps_both_nxp_tracks():
     for name in ("nxp_raceway", "nxp_raceway_octagon"):

@@ -55,20 +55,21 @@ static void count_ticks(double now_s) {
     }
 }
 
-/* The PIT interrupt's camera read-out (at ``now``): a new image once the exposure since the last one has
- * passed (spinner_get_image waits for the camera's next frame: at most a step away then). */
+/* The PIT interrupt's camera read-out (at ``now``): a new image once the exposure since the last read
+ * has passed (spinner_get_image waits for the camera's next frame, a step or two away then). The
+ * read's time is ``now``, not the frame's: timed from the frame, the next read would come on the
+ * next frame's own step, and waiting for the frame after it would halve the image rate. */
 static void camera_service(double now) {
     if (now - tfc.last_image_s < tfc.exposure_s - 0.0025) return;
     uint8_t row[TFC_LINESCAN_IMAGE_SIZE];
     size_t n = spinner_get_image(spinner_line_row(), 1, row, sizeof row);
-    tfc.last_image_s = spinner_get_time();
+    tfc.last_image_s = now;
     for (size_t i = 0; i < TFC_LINESCAN_IMAGE_SIZE; i++) {
         uint16_t v = (uint16_t)((i < n ? row[i] : 0) << 4);  /* 8-bit grey -> 12-bit counts */
         image0[i] = v;
         image1[i] = v;
     }
     LineScanImageReady = 1;
-    count_ticks(tfc.last_image_s);
 }
 
 void TFC_Init(void) {
