@@ -36,7 +36,8 @@ TRACKS = REPO.parent / "shared" / "tracks"
 FOLLOWER = REPO / "examples" / "line_follower.py"
 REPEATS = 3
 LAYOUTS = ("simrunner/data/thesis_figure8.txt", "examples/kit_S.txt", "examples/kit_wave.txt",
-           "examples/kit_speed_limit.txt", "examples/kit_M.txt", "examples/kit_crossing45.txt")
+           "examples/kit_speed_limit.txt", "examples/kit_M.txt", "examples/kit_crossing45.txt",
+           "examples/kit_XL.txt")
 
 
 def _tracks() -> list[tuple[str, object]]:

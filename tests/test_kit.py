@@ -61,6 +61,28 @@ def test_the_training_sets_have_the_rules_envelopes(name, size_m, curves, straig
         assert track.length_m == pytest.approx(2 * 0.72 + 2 * math.pi * 0.445, abs=1e-3)
 
 
+def test_the_xl_layout_uses_the_xl_sets_pieces():
+    """Rules summary section 1.3: XL is 14 straights, 32 curves, 1 intersection, 1 chicane and
+    the start/finish piece; kit_XL.txt lays out all but one straight (an odd number of 0.72 m
+    lengths cannot close with the kit's 0.445 m multiples), closes, validates for the default
+    car, and the line follower laps it (through its crossing, straight on)."""
+    from simrunner.run.runner import drive
+    from trackgen.build import validate_path as validate
+
+    lay = load_layout(REPO / "examples" / "kit_XL.txt")
+    kinds = [e.kind for e in lay.entries]
+    count = {k: kinds.count(k) for k in set(kinds)}
+    assert count[PieceType.TURN_LEFT] + count[PieceType.TURN_RIGHT] == 32
+    assert count[PieceType.TURN_LEFT] == count[PieceType.TURN_RIGHT]  # a figure 8: no net turn
+    assert (count[PieceType.STRAIGHT], count[PieceType.START_FINISH], count[PieceType.WAVE]) == (13, 1, 1)
+    assert count[PieceType.CROSSROADS] == 2  # one intersection, passed twice
+    track = chain_layout(lay)
+    assert track.closure_error()[0] < 1e-9
+    assert validate(REPO / "examples" / "kit_XL.txt") == []
+    r = drive(REPO / "examples" / "line_follower.py", track=REPO / "examples" / "kit_XL.txt", laps=1, seed=0)
+    assert r.outcome == "finished", r.message
+
+
 def test_the_kit_cites_its_source():
     assert "nxp-cup-rules.md" in KITS["nxp"].source
 
