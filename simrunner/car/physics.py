@@ -819,6 +819,11 @@ class CarSim:
                     self._touched.add(mine[len("solid:"):])
 
     # -- stepping ----------------------------------------------------------------------
+    @property
+    def tyres(self) -> SlipTyres | None:
+        """The slip tyres' state and forces (``wheels.tyre_model = "slip"``), else None."""
+        return self._tyres
+
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps of ``dt_s`` (commands stay as set)."""
         self._rd = self._pose = self._wc = None

@@ -39,7 +39,9 @@ each tyre instead gets a force at its contact point from the slip of its contact
 
 Steady state (no lag left), a car on these tyres is the single-track model with cornering
 stiffness ``c N`` per tyre: understeer gradient ``K = (1/c_f - 1/c_r) / g`` rad per m/s^2 for
-load-proportional stiffness, lateral grip ``mu g`` (tests/test_tyres.py, bench/bench_duty.py).
+load-proportional stiffness at small steering angles, lateral grip a little under ``mu g``
+(the rear tyres also drive against the front tyres' drag). :meth:`SlipTyres.single_track_turn`
+solves that model's steady turn exactly (tests/test_tyres.py, bench/bench_tyres.py).
 """
 from __future__ import annotations
 
@@ -109,6 +111,73 @@ class SlipTyres:
     def reset_slip(self) -> None:
         """A car placed anew rolls without slip."""
         self.u = [0.0] * 8
+
+    # -- the closed form of a steady turn -----------------------------------------------------
+    def single_track_turn(self, speed_mps: float, steer_rad: float) -> tuple[float, float]:
+        """The single-track model's steady turn on these tyres at the rear axle's forward speed
+        ``speed_mps`` and the steering ``steer_rad``: ``(radius of the rear axle's path m, its
+        lateral acceleration m/s^2)``, or ``(nan, nan)`` where none is found. The same tyre law
+        (the front rolling free, the rear driving against the front's drag in the friction
+        ellipse, the longitudinal load transfer) with exact trigonometry; its small-angle limit
+        is ``delta = L / R + (1/c_f - 1/c_r) a_y / g``. Started from the turn without slip (the
+        branch a car reaches by speeding up slowly, below :meth:`single_track_limit`)."""
+        state = self._steady(speed_mps, steer_rad, [0.0, speed_mps * math.tan(steer_rad) / self.wheelbase_m, 0.0])
+        if state is None:
+            return math.nan, math.nan
+        radius = speed_mps / state[1]
+        return radius, speed_mps * speed_mps / radius
+
+    def single_track_limit(self, steer_rad: float, step_mps: float = 0.002) -> tuple[float, float]:
+        """Where the steady turns of :meth:`single_track_turn` end at ``steer_rad``: ``(speed
+        m/s, lateral acceleration m/s^2)`` at the peak of the lateral acceleration over the
+        speed (followed from 0.2 m/s up, each turn solved from the last); faster, no steady
+        turn holds and the car slides out."""
+        v = 0.2
+        state = [0.0, v * math.tan(steer_rad) / self.wheelbase_m, 0.0]
+        best = (0.0, 0.0)
+        while v < 100.0:
+            state = self._steady(v, steer_rad, state)
+            if state is None:
+                break
+            a_y = v * state[1]
+            if a_y < best[1]:
+                break
+            best = (v, a_y)
+            v += step_mps
+        return best
+
+    def _steady(self, speed_mps: float, steer_rad: float, guess) -> list[float] | None:
+        """``[v_y, yaw rate, rear slip kappa]`` of the steady single-track turn near ``guess``."""
+        from scipy.optimize import fsolve
+
+        mu, shape, L, x_cg, h = self.mu, self.shape, self.wheelbase_m, self.com_x_m, self.com_h_m
+        m, c_f, c_r = self.mass_kg, self.c[0], self.c[2]
+        weight, v_x, cd, sd = m * G_MPS2, float(speed_mps), math.cos(steer_rad), math.sin(steer_rad)
+
+        def force(c: float, n: float, kappa: float, tan_a: float) -> tuple[float, float]:
+            lam = math.hypot(kappa, tan_a)
+            if lam < 1e-15:
+                return 0.0, 0.0
+            f = mu * n * math.sin(shape * math.atan(c / (shape * mu) * lam)) / lam
+            return f * kappa, f * tan_a
+
+        def residual(u):
+            v_y, w, kappa = u
+            v_long = v_x * cd + (v_y + w * L) * sd  # the front wheel's velocity in its own frame
+            v_lat = (v_y + w * L) * cd - v_x * sd
+            fx_total = 0.0
+            for _ in range(3):  # the loads with the longitudinal transfer of the total force
+                n_f = (x_cg * weight - h * fx_total) / L
+                _, fy_f = force(c_f, n_f, 0.0, -v_lat / abs(v_long))
+                fx_r, fy_r = force(c_r, weight - n_f, kappa, -v_y / v_x)
+                fx_total = fx_r - fy_f * sd
+            return [fx_total + m * w * (v_y + w * x_cg), fy_r + fy_f * cd - m * w * v_x,
+                    fy_f * cd * (L - x_cg) - fy_r * x_cg]
+
+        u, _, ok, _ = fsolve(residual, list(guess), xtol=1e-12, full_output=True)
+        if ok != 1 or u[1] * steer_rad <= 0.0:
+            return None
+        return [float(x) for x in u]
 
     # -- the forces -----------------------------------------------------------------------------
     def forces(self, v_c, w_c, steer_rad, spin_radps, locked: bool, dt_s: float) -> list[tuple[float, float]]:
