@@ -161,6 +161,32 @@ def test_ray_faulty_runs_never_stop_the_batch(ray_cluster, tmp_path):
     assert not ray.is_initialized()
 
 
+STUCK = """
+def main(s):
+    for _ in range(5):
+        s.set_speed_and_servo(0.3, 0.0)
+        s.get_image()
+    if s.param("mode", "drive") == "stuck":
+        sum(range(10 ** 13))   # one C-level call that never lets Python code run
+"""
+
+
+def test_ray_run_stuck_in_one_c_call_names_its_line_as_drive_does(ray_cluster, tmp_path):
+    """The hard watchdog ends the actor; on a cluster sharing this file system the row is
+    drive's (outcome stalled, the controller's file:line), as with the local pool."""
+    from simrunner.run.postmortem import stuck_message
+
+    ctl = tmp_path / "ctrl.py"
+    ctl.write_text(textwrap.dedent(STUCK))
+    res = run_batch(ctl, out_dir=tmp_path / "out", params=["mode=stuck,drive"], wall_limit_s=0.5,
+                    workers=2, plot=False, ray=ray_cluster)
+    stuck, fine = res.rows
+    assert stuck["outcome"] == "stalled", stuck
+    assert stuck["message"] == stuck_message("ctrl.py:7 in main", 0.5)
+    assert fine["outcome"] == "controller_returned"
+    assert not ray.is_initialized()
+
+
 def test_private_local_ray_listens_only_on_loopback(tmp_path):
     """``--ray`` without an address: every server of the private Ray (GCS, raylet, agents,
     workers, this driver's) listens on 127.0.0.1 only."""

@@ -11,7 +11,9 @@ node that ran the run (use a shared folder for DIR on a multi-node cluster).
 from __future__ import annotations
 
 import os
+import shutil
 import sys
+import tempfile
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -68,16 +70,22 @@ def _check_reachable(address: str, timeout_s: float = 5.0) -> None:
 
 class _RayWorker:
     """The actor: the state of one worker, and one run per call. Like a local worker it
-    discards controllers' prints (``quiet``) and imports everything a run needs before it
-    answers :meth:`ready`."""
+    discards controllers' prints (``quiet``), imports everything a run needs before it
+    answers :meth:`ready`, and runs under the hard watchdog, which writes its stack dump to
+    ``report`` when a run is stuck in one C-level call (the driver reads it when it shares the
+    actor's file system: a local Ray; elsewhere the row keeps Ray's message)."""
 
-    def __init__(self, config: BatchConfig, quiet: bool = True):
+    def __init__(self, config: BatchConfig, quiet: bool = True, report: str | None = None):
         from simrunner.workflows.batch.worker import WorkerState, quiet_output, warm_up
 
         if quiet:
             quiet_output()
         warm_up()
         self.state = WorkerState(config)
+        try:
+            self.dump = open(report if report else os.devnull, "w", errors="replace")  # noqa: SIM115
+        except OSError:  # another node: no such folder there
+            self.dump = open(os.devnull, "w")  # noqa: SIM115
 
     def ready(self) -> None:
         return None
@@ -90,9 +98,11 @@ class _RayWorker:
         return run_time_limit_s(job, self.state)
 
     def run(self, job: Job, outputs: dict | None) -> dict:
+        from simrunner.run.supervise import Supervision, supervised_by
         from simrunner.workflows.batch.worker import execute_job
 
-        return execute_job(job, self.state, outputs)
+        with supervised_by(Supervision(self.dump, csv_path=None)):
+            return execute_job(job, self.state, outputs)
 
 
 @dataclass(eq=False)
@@ -101,6 +111,8 @@ class _Actor:
     ready: Any = None   # the ``ready()`` call's ref until it has answered
     futures: deque = field(default_factory=deque)  # of the runs handed to it, in order
     begins: deque = field(default_factory=deque)   # (run, ref of its begin() call), in order
+    jobs: deque = field(default_factory=deque)     # (job, outputs) of ``futures``, in order
+    report: str = ""                               # the hard watchdog's stack dump goes here
 
 
 class RayBackend:
@@ -135,10 +147,14 @@ class RayBackend:
         self.workers = int(workers) if workers else max(1, cpus)
         self._cls = ray.remote(num_cpus=1, max_restarts=0)(_RayWorker)
         self.handles: list[Handle] = []
+        self._dir = tempfile.mkdtemp(prefix="simrunner-batch-ray-")
+        self._count = 0
 
     def start(self) -> Handle:
-        actor = self._cls.remote(self.config, self.quiet)
-        h = Handle(_Actor(actor, actor.ready.remote()))
+        self._count += 1
+        report = os.path.join(self._dir, f"actor{self._count}.report")
+        actor = self._cls.remote(self.config, self.quiet, report)
+        h = Handle(_Actor(actor, actor.ready.remote(), report=report))
         self.handles.append(h)
         return h
 
@@ -146,6 +162,7 @@ class RayBackend:
         """Queue a run on the actor (an actor runs its calls one at a time, in order)."""
         h.ref.begins.append((job.index, h.ref.actor.begin.remote(job)))
         h.ref.futures.append(h.ref.actor.run.remote(job, outputs))
+        h.ref.jobs.append((job, outputs))
 
     def wait(self, busy: list[Handle], timeout_s: float) -> list[tuple[Handle, dict | None, str]]:
         ray = self.ray
@@ -172,12 +189,26 @@ class RayBackend:
                 continue
             h = by_ref[ref]
             h.ref.futures.popleft()
+            job, outputs = h.ref.jobs.popleft()
             try:
                 out.append((h, ray.get(ref), ""))
             except ray.exceptions.RayError as exc:
                 first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-                out.append((h, None, f"Ray worker died during the run ({type(exc).__name__}: {first})"))
+                out.append((h, self._stuck_row(h, job, outputs),
+                            f"Ray worker died during the run ({type(exc).__name__}: {first})"))
         return out
+
+    def _stuck_row(self, h: Handle, job: Job, outputs: dict | None) -> dict | None:
+        """``simrunner drive``'s row for a run whose actor the hard watchdog ended (its stack
+        dump readable here), else None (the row keeps Ray's message)."""
+        from simrunner.workflows.batch.worker import death_row
+
+        try:
+            with open(h.ref.report, errors="replace") as fh:
+                stuck = "Timeout (" in fh.read()
+        except OSError:
+            return None
+        return death_row(job, self.config, None, h.ref.report, outputs) if stuck else None
 
     def kill(self, h: Handle) -> None:
         try:
@@ -193,5 +224,6 @@ class RayBackend:
 
     def shutdown(self) -> None:
         self.close()
+        shutil.rmtree(self._dir, ignore_errors=True)
         if self.owner and self.ray.is_initialized():
             self.ray.shutdown()
