@@ -54,6 +54,8 @@ class VideoRecorder:
         self.path = Path(path)
         if self.path.suffix.lower() != ".mp4":
             raise SimError(f"{self.path}: the debug video must be an .mp4 file")
+        if not max_fps > 0:
+            raise ValueError(f"VideoRecorder(max_fps={max_fps!r}): expected a frame rate > 0")
         self.every = max(1, math.ceil(camera_fps / max_fps - 1e-9))
         self.fps = camera_fps / self.every
         self._tmp = self.path.with_name(self.path.stem + ".partial.mp4")
@@ -82,8 +84,11 @@ class VideoRecorder:
         self._last_line: np.ndarray | None = None
         self._last_row = line_row
         self.frames_written = 0
+        self._frames: queue.Queue = queue.Queue(maxsize=4)  # composed frames, to the encoder
         self._thread = threading.Thread(target=self._run, name="simrunner-video", daemon=True)
+        self._encoder = threading.Thread(target=self._encode, name="simrunner-video-encoder", daemon=True)
         self._thread.start()
+        self._encoder.start()
 
     # -- main thread -------------------------------------------------------------------
     def frame_boundary(self, frame: int, t_s: float, pose, state: dict) -> None:
@@ -155,6 +160,7 @@ class VideoRecorder:
         finally:
             self._queue.put(None)
             self._thread.join()
+            self._encoder.join()
             self._writer.release()
         if self._error is not None:
             raise SimError(f"{self.path}: video writer failed: {self._error}")
@@ -174,25 +180,42 @@ class VideoRecorder:
         if written is not None:  # only what this run wrote
             written.unlink(missing_ok=True)
 
-    # -- writer thread -------------------------------------------------------------------
+    # -- writer threads: one draws the frames, the other encodes them ---------------------
     def _run(self) -> None:
         composer = None
+        try:
+            while True:
+                rec = self._queue.get()
+                if rec is None:
+                    return
+                if self._error is not None:
+                    continue
+                try:
+                    if rec.image is None:
+                        rec.image = self._render(rec.pose)
+                    if rec.line is None:
+                        rec.line = rec.image[rec.line_row:rec.line_row + 1]
+                    if composer is None:
+                        composer = self._composer(rec.image.shape)
+                    self._frames.put(composer.frame(rec))
+                except BaseException as exc:  # keep draining the queue; reported by close()
+                    self._error = exc
+        finally:
+            self._frames.put(None)
+
+    def _encode(self) -> None:
+        """Encodes the composed frames (OpenCV releases the GIL: this runs beside the
+        simulation and the drawing)."""
         while True:
-            rec = self._queue.get()
-            if rec is None:
+            frame = self._frames.get()
+            if frame is None:
                 return
             if self._error is not None:
                 continue
             try:
-                if rec.image is None:
-                    rec.image = self._render(rec.pose)
-                if rec.line is None:
-                    rec.line = rec.image[rec.line_row:rec.line_row + 1]
-                if composer is None:
-                    composer = self._composer(rec.image.shape)
-                self._writer.write(composer.frame(rec))
+                self._writer.write(frame)
                 self.frames_written += 1
-            except BaseException as exc:  # keep draining the queue; reported by close()
+            except BaseException as exc:  # reported by close()
                 self._error = exc
 
     def _composer(self, image_shape) -> Composer:
