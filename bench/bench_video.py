@@ -8,8 +8,10 @@ its CPU seconds (user + system: what a busy machine inflates less than wall time
 loop's own real-time factor from ``--summary``, and the video's frames and size.
 
 Rows: without ``--video`` (for scale), with it, and with it on one core (the process pinned to
-CPU 0: the video's writer thread cannot run beside the simulation). The machine is shared:
-compare runs made under the same load.
+CPU 0: the video's threads cannot run beside the simulation). The target is for the machine's
+two cores, the video's encoding on the second one (wall time = CPU time on the ``--video`` row
+means another process had that core). The machine is shared: compare runs made under the same
+load, and look at the CPU seconds.
 """
 from __future__ import annotations
 
