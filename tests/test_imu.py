@@ -61,6 +61,16 @@ def test_encoder_misuse_is_the_controllers_error():
         Encoders(None).count("RL", [0] * 4)
     with pytest.raises(CommandError, match=r"get_gyro\(\): the car has no IMU"):
         Imu(None, 0).sample("get_gyro", 0.0, lambda: None)
+    for wheel in (True, 2.0, 3.0, [2], "fl", 0, "FR"):  # not wheels, or wheels without an encoder
+        with pytest.raises(CommandError, match=r"get_encoder\("):
+            enc.count(wheel, [0] * 4)
+
+
+def test_every_spelling_of_a_wheel_reads_its_encoder():
+    enc = Encoders(SENSORS.encoders)
+    angles = [0.0, 0.0, 1.0, -2.0]
+    assert {enc.count(w, angles) for w in ("RL", "rl", "Rl", 2, np.int64(2))} == {math.floor(512 * 4 / (2 * math.pi))}
+    assert {enc.count(w, angles) for w in ("RR", "rr", "rR", 3, np.int32(3))} == {math.floor(-2 * 512 * 4 / (2 * math.pi))}
 
 
 def test_the_imu_adds_noise_bias_and_drift_rounds_and_clips():

@@ -11,7 +11,8 @@ import pytest
 from pieces.pose import Pose2
 from simrunner.errors import SimError
 from simrunner.run.runner import drive
-from simrunner.reports.video import FRAME_H, FRAME_W, FrameRecord, Layout, VideoRecorder, compose
+from simrunner.reports.video import FRAME_H, FRAME_W, Composer, FrameRecord, Layout, TrackView, VideoRecorder, compose
+from simrunner.track import load_track
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -30,7 +31,7 @@ def _frames(path):
     return n, shapes
 
 
-def test_drive_writes_one_video_frame_per_camera_frame(tmp_path):
+def test_drive_writes_every_second_frame_of_the_50_fps_camera(tmp_path):
     ctrl = tmp_path / "c.py"
     ctrl.write_text(textwrap.dedent("""\
         def main(s):
@@ -43,11 +44,11 @@ def test_drive_writes_one_video_frame_per_camera_frame(tmp_path):
     r = drive(ctrl, video=tmp_path / "v.mp4", csv=tmp_path / "t.csv")
     assert r.outcome == "controller_returned"
     n, shapes = _frames(tmp_path / "v.mp4")
-    assert n == 31 == len(r.log)  # frames 0..30 at the camera's 50 fps
+    assert len(r.log) == 31 and n == 16  # frames 0, 2, .., 30 of the camera's 50 fps
     assert shapes == {(FRAME_H, FRAME_W, 3)}
     assert not (tmp_path / "v.partial.mp4").exists()
     cap = cv2.VideoCapture(str(tmp_path / "v.mp4"))
-    assert cap.get(cv2.CAP_PROP_FPS) == pytest.approx(50.0)
+    assert cap.get(cv2.CAP_PROP_FPS) == pytest.approx(25.0)
 
 
 def test_video_is_closed_and_kept_when_the_controller_crashes(tmp_path):
@@ -56,7 +57,7 @@ def test_video_is_closed_and_kept_when_the_controller_crashes(tmp_path):
     r = drive(ctrl, video=tmp_path / "v.mp4")
     assert r.outcome == "controller_error"
     n, _ = _frames(tmp_path / "v.mp4")
-    assert n == 11
+    assert n == 6  # frames 0, 2, .., 10
 
 
 def _record(**kw):
@@ -119,17 +120,59 @@ def test_video_frame_uses_its_area(tmp_path):
             break
         fractions.append(float(np.mean(frame.max(axis=2) < 16)))
     cap.release()
-    assert len(fractions) >= 50 and max(fractions) < 0.10, max(fractions)
+    assert len(fractions) >= 25 and max(fractions) < 0.10, max(fractions)
 
 
-def test_high_camera_rates_are_capped_at_60_video_fps(tmp_path):
+def test_camera_rates_are_capped_at_30_video_fps(tmp_path):
     rec = VideoRecorder(tmp_path / "v.mp4", camera_fps=200.0, render=lambda pose: np.zeros((8, 8), np.uint8))
-    assert rec.every == 4 and rec.fps == 50.0
-    for k in range(9):
+    assert rec.every == 7 and rec.fps == pytest.approx(200 / 7)
+    for k in range(15):
         rec.frame_boundary(k, k / 200, Pose2(), dict(speed=0, steer=0, speed_cmd=0, steer_cmd=0,
                                                      lap=0, off_track=False))
     assert rec.close() == tmp_path / "v.mp4"
-    assert _frames(tmp_path / "v.mp4")[0] == 3  # frames 0, 4, 8
+    assert _frames(tmp_path / "v.mp4")[0] == 3  # frames 0, 7, 14
+    assert VideoRecorder(tmp_path / "w.mp4", camera_fps=60.0, render=None).every == 2
+    assert VideoRecorder(tmp_path / "x.mp4", camera_fps=50.0, render=None, max_fps=60.0).every == 1
+
+
+def test_a_left_out_frame_does_not_change_the_frame_before_it(tmp_path):
+    """At 50 fps the video keeps frames 0, 2, ..: frame 0 shows its own image and text, not
+    those the controller got in frame 1; frame 2 (no image) shows the line of frame 1."""
+    rec = VideoRecorder(tmp_path / "v.mp4", camera_fps=50.0, render=lambda pose: np.full((128, 128), 90, np.uint8))
+    state = dict(speed=0, steer=0, speed_cmd=0, steer_cmd=0, lap=0, off_track=False)
+    white, black = np.full((128, 128), 255, np.uint8), np.zeros((128, 128), np.uint8)
+    for k, img in enumerate((white, black, None)):
+        rec.frame_boundary(k, k / 50, Pose2(), state)
+        if img is not None:
+            rec.note_image(img, -1)
+    assert rec.close() == tmp_path / "v.mp4"
+    cap = cv2.VideoCapture(str(tmp_path / "v.mp4"))
+    frames = [cap.read()[1] for _ in range(2)]
+    layout = Layout.for_frame((128, 128), None)
+    x0 = layout.middle[0] + 8
+    assert frames[0][200, 200].min() > 240 and frames[0][40, x0 + 100].min() > 240  # frame 0: white
+    assert abs(int(frames[1][200, 200].mean()) - 90) < 8  # frame 2: the rendered view ...
+    assert frames[1][40, x0 + 100].max() < 15  # ... and the last line noted (frame 1's, black)
+
+
+def test_a_composer_draws_what_compose_draws_frame_by_frame():
+    """The background drawn once (the path added to it frame by frame) gives the frames that
+    composing each frame from scratch gives."""
+    track = load_track(EXAMPLES / "kit_S.txt")
+    h, w = np.asarray(track.raster.image).shape
+    layout = Layout.for_frame((128, 128), w / h)
+    x0, y0, x1, y1 = layout.top
+    composer = Composer(layout, TrackView(track.raster, x1 - x0, y1 - y0), 2)
+    fresh = TrackView(track.raster, x1 - x0, y1 - y0)
+    p = track.start
+    for k in range(12):
+        pose = Pose2(p.x_m + 0.05 * k, p.y_m + 0.01 * k * k, p.yaw_rad + 0.02 * k)
+        rec = _record(frame=k, pose=pose, line_row=20 + k,
+                      state=dict(speed=1.0, steer=0.1, speed_cmd=1.2, steer_cmd=0.1, lap=k // 6,
+                                 off_track=k in (5, 6)), text=(f"text {k}",) * (k % 3))
+        a, b = composer.frame(rec), compose(rec, fresh, 2, layout=layout)
+        assert np.array_equal(a, b), k
+    assert np.any(a != compose(_record(), None, 2, layout=layout))  # the map and its path
 
 
 def test_video_path_must_be_mp4(tmp_path):

@@ -953,7 +953,8 @@ class CarSim:
 
     def wheel_angles_rad(self) -> list[float]:
         """FL, FR, RL, RR wheel angles turned since the car was built, rad (+ = forward)."""
-        q = self._read()[0]
+        rd = self._rd  # the positions alone when nothing else was read at this step (an encoder)
+        q = rd[0] if rd is not None else self._skel.getPositions().tolist()
         return [q[i] for i in self._i_wheel]
 
     def imu_truth(self, point_m) -> tuple[np.ndarray, np.ndarray]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from simrunner.reports.video import FrameRecord, Layout, TrackView, compose
+from simrunner.reports.video import Composer, FrameRecord, Layout, TrackView
 
 
 class EpisodeView:
@@ -15,10 +15,10 @@ class EpisodeView:
         h, w = np.asarray(raster.image).shape
         self._layout = Layout.for_frame((camera.height_px, camera.width_px), w / h)
         x0, y0, x1, y1 = self._layout.top
-        self._view = TrackView(raster, x1 - x0, y1 - y0)
+        self._composer = Composer(self._layout, TrackView(raster, x1 - x0, y1 - y0), 1,
+                                  car_length_m, car_width_m)
         self._camera = camera
         self._line_row = line_row
-        self._car = (car_length_m, car_width_m)
 
     def frame(self, *, k: int, t_s: float, pose, line: np.ndarray, state: dict,
               text: tuple[str, ...]) -> np.ndarray:
@@ -26,5 +26,6 @@ class EpisodeView:
         ``state`` holds speed, steer, speed_cmd, steer_cmd (m/s, rad), lap, off_track."""
         rec = FrameRecord(k, t_s, pose, state, image=self._camera.render(pose), line=line,
                           line_row=self._line_row, text=text)
-        bgr = compose(rec, self._view, state.get("laps", 1), *self._car, layout=self._layout)
+        self._composer.laps = state.get("laps", 1)
+        bgr = self._composer.frame(rec)
         return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)

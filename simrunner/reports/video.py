@@ -6,12 +6,17 @@ processed lines and text under it, the top-down track view).
 
 Off the control path: at a recorded frame the main thread only stores a few numbers and
 references to small arrays (the image the controller got, if any); a writer thread renders
-the camera view when needed, composes the frame and encodes it (``cv2.VideoWriter``,
-``mp4v``; OpenCV releases the GIL while encoding). The queue is bounded, so a slow encoder
-slows the run instead of filling memory. The file is written as ``NAME.partial.mp4`` and
-renamed on :meth:`VideoRecorder.close`, which also runs when the controller crashed.
+the camera view when needed, composes the frame (:class:`~simrunner.reports.video_frame.Composer`:
+what stays the same is drawn once) and encodes it (``cv2.VideoWriter``, ``mp4v``, the fastest
+encoder that writes an MP4 with opencv-python-headless; OpenCV releases the GIL while
+encoding). The queue is bounded, so a slow encoder slows the run instead of filling memory.
+The file is written as ``NAME.partial.mp4`` and renamed on :meth:`VideoRecorder.close`, which
+also runs when the controller crashed.
 
-Frame rate: every camera frame up to 60 fps; above that every ``ceil(fps / 60)``-th frame.
+Frame rate: every camera frame up to ``max_fps`` (30); above that every ``ceil(fps /
+max_fps)``-th frame (the default 50 fps camera: every second frame, a 25 fps video). Encoding
+costs ~1.6 ms a 1024 x 576 frame whatever it shows (bench/bench_video.py): at 50 fps the
+encoder alone would hold a one-lap drive under 8x real time.
 """
 from __future__ import annotations
 
@@ -26,11 +31,11 @@ import cv2
 import numpy as np
 
 from simrunner.errors import SimError
-from simrunner.reports.video_frame import FRAME_H, FRAME_W, FrameRecord, Layout, TrackView, compose
+from simrunner.reports.video_frame import FRAME_H, FRAME_W, Composer, FrameRecord, Layout, TrackView, compose
 
-__all__ = ["VideoRecorder", "FrameRecord", "TrackView", "Layout", "compose", "FRAME_W", "FRAME_H"]
+__all__ = ["VideoRecorder", "FrameRecord", "TrackView", "Layout", "Composer", "compose", "FRAME_W", "FRAME_H"]
 
-MAX_VIDEO_FPS = 60.0
+MAX_VIDEO_FPS = 30.0  # the default of VideoRecorder(max_fps=...)
 
 
 class VideoRecorder:
@@ -38,18 +43,20 @@ class VideoRecorder:
 
     ``render(pose) -> (H, W) uint8`` draws the camera view when the controller took no image
     in a frame. ``camera_fps``: frame rate of the camera; the video keeps every
-    ``ceil(fps / 60)``-th frame. ``raster``: the track's ``TrackRaster`` (top-down view), shaded
+    ``ceil(camera_fps / max_fps)``-th frame (``max_fps``: the video's highest frame rate, fps). ``raster``: the track's ``TrackRaster`` (top-down view), shaded
     by ``lighting`` (a ``worlds.lighting.TrackLighting``) when it is not the default hall.
     """
 
     def __init__(self, path: str | Path, *, camera_fps: float, render: Callable, raster=None,
                  laps: int = 1, line_row: int = 0, car_length_m: float = 0.28,
                  car_width_m: float = 0.16, queue_size: int = 32, lighting=None,
-                 surface_z_m: float = 0.0):
+                 surface_z_m: float = 0.0, max_fps: float = MAX_VIDEO_FPS):
         self.path = Path(path)
         if self.path.suffix.lower() != ".mp4":
             raise SimError(f"{self.path}: the debug video must be an .mp4 file")
-        self.every = max(1, math.ceil(camera_fps / MAX_VIDEO_FPS - 1e-9))
+        if not max_fps > 0:
+            raise ValueError(f"VideoRecorder(max_fps={max_fps!r}): expected a frame rate > 0")
+        self.every = max(1, math.ceil(camera_fps / max_fps - 1e-9))
         self.fps = camera_fps / self.every
         self._tmp = self.path.with_name(self.path.stem + ".partial.mp4")
         try:
@@ -77,32 +84,39 @@ class VideoRecorder:
         self._last_line: np.ndarray | None = None
         self._last_row = line_row
         self.frames_written = 0
+        self._frames: queue.Queue = queue.Queue(maxsize=4)  # composed frames, to the encoder
         self._thread = threading.Thread(target=self._run, name="simrunner-video", daemon=True)
+        self._encoder = threading.Thread(target=self._encode, name="simrunner-video-encoder", daemon=True)
         self._thread.start()
+        self._encoder.start()
 
     # -- main thread -------------------------------------------------------------------
     def frame_boundary(self, frame: int, t_s: float, pose, state: dict) -> None:
-        """Called at every camera frame; records every ``every``-th one."""
+        """Called at every camera frame; records every ``every``-th one (what the controller
+        notes in the frames between goes to no frame, but its line, text and processed lines
+        stay shown until it notes new ones)."""
         self._frame = frame
+        self._flush_pending()
         if frame % self.every:
             return
-        self._flush_pending()
         self._pending = FrameRecord(frame, t_s, pose, state, line_row=self._last_row)
 
     def note_image(self, img: np.ndarray, line: int) -> None:
         """The image (``line = -1``) or row the controller just got (copied: the controller
         may change its array before the writer thread draws it)."""
+        if line >= 0:
+            self._last_row = line
+        row = self.default_row if self._last_row < 0 else self._last_row
         rec = self._pending
-        if rec is None:
+        if rec is None:  # a frame the video leaves out: only its line is kept
+            self._last_line = (img if line >= 0 else img[row:row + 1]).copy()
             return
         img = img.copy()
+        rec.line_row = row
         if line < 0:
             rec.image = img
-            rec.line_row = self.default_row if self._last_row < 0 else self._last_row
-            rec.line = img[rec.line_row:rec.line_row + 1]
+            rec.line = img[row:row + 1]
         else:
-            self._last_row = line
-            rec.line_row = line
             rec.line = img
         self._last_line = rec.line
 
@@ -146,6 +160,7 @@ class VideoRecorder:
         finally:
             self._queue.put(None)
             self._thread.join()
+            self._encoder.join()
             self._writer.release()
         if self._error is not None:
             raise SimError(f"{self.path}: video writer failed: {self._error}")
@@ -165,30 +180,52 @@ class VideoRecorder:
         if written is not None:  # only what this run wrote
             written.unlink(missing_ok=True)
 
-    # -- writer thread -------------------------------------------------------------------
+    # -- writer threads: one draws the frames, the other encodes them ---------------------
     def _run(self) -> None:
-        view = layout = None
+        composer = None
+        try:
+            while True:
+                rec = self._queue.get()
+                if rec is None:
+                    return
+                if self._error is not None:
+                    continue
+                try:
+                    if rec.image is None:
+                        rec.image = self._render(rec.pose)
+                    if rec.line is None:
+                        rec.line = rec.image[rec.line_row:rec.line_row + 1]
+                    if composer is None:
+                        composer = self._composer(rec.image.shape)
+                    self._frames.put(composer.frame(rec))
+                except BaseException as exc:  # keep draining the queue; reported by close()
+                    self._error = exc
+        finally:
+            self._frames.put(None)
+
+    def _encode(self) -> None:
+        """Encodes the composed frames (OpenCV releases the GIL: this runs beside the
+        simulation and the drawing)."""
         while True:
-            rec = self._queue.get()
-            if rec is None:
+            frame = self._frames.get()
+            if frame is None:
                 return
             if self._error is not None:
                 continue
             try:
-                if rec.image is None:
-                    rec.image = self._render(rec.pose)
-                if rec.line is None:
-                    rec.line = rec.image[rec.line_row:rec.line_row + 1]
-                if layout is None:
-                    aspect = None
-                    if self._raster is not None:
-                        h, w = np.asarray(self._raster.image).shape
-                        aspect = w / h
-                    layout = Layout.for_frame(rec.image.shape, aspect)
-                    if layout.top is not None:
-                        x0, y0, x1, y1 = layout.top
-                        view = TrackView(self._raster, x1 - x0, y1 - y0, *self._lighting)
-                self._writer.write(compose(rec, view, self._laps, *self._car, layout=layout))
+                self._writer.write(frame)
                 self.frames_written += 1
-            except BaseException as exc:  # keep draining the queue; reported by close()
+            except BaseException as exc:  # reported by close()
                 self._error = exc
+
+    def _composer(self, image_shape) -> Composer:
+        """The frames' composer, for camera images of ``image_shape``."""
+        aspect = view = None
+        if self._raster is not None:
+            h, w = np.asarray(self._raster.image).shape
+            aspect = w / h
+        layout = Layout.for_frame(image_shape, aspect)
+        if layout.top is not None:
+            x0, y0, x1, y1 = layout.top
+            view = TrackView(self._raster, x1 - x0, y1 - y0, *self._lighting)
+        return Composer(layout, view, self._laps, *self._car)

@@ -114,15 +114,18 @@ class TrackView:
         row = (self.origin[1] - y_m) * self.px_per_m + 0.5 * self.scale + self.off[1]
         return int(round(col)), int(round(row))
 
-    def draw(self, pose, off_track: bool, car_length_m: float, car_width_m: float,
-             solids=()) -> np.ndarray:
-        """Extend the path to ``pose`` and return the box image ``(box_h, box_w, 3)``, with the
-        objects standing on the track (``solids``, :class:`worlds.solids.Solid`) on it."""
+    def extend(self, pose, off_track: bool, also: np.ndarray | None = None) -> None:
+        """Extend the path to ``pose`` on :attr:`canvas` (and on ``also``, an image of the box's
+        size holding the same map, e.g. the box inside a frame's background)."""
         p = self.to_px(pose.x_m, pose.y_m)
         if self._last is not None:
-            cv2.line(self.canvas, self._last, p, _RED if off_track else _GREEN, 1, cv2.LINE_AA)
+            for img in (self.canvas,) if also is None else (self.canvas, also):
+                cv2.line(img, self._last, p, _RED if off_track else _GREEN, 1, cv2.LINE_AA)
         self._last = p
-        out = self.canvas.copy()
+
+    def overlay(self, out: np.ndarray, pose, car_length_m: float, car_width_m: float, solids=()) -> None:
+        """Draw the objects standing on the track (``solids``, :class:`worlds.solids.Solid`) and
+        the car at ``pose`` on ``out`` (``(box_h, box_w, 3)``, the map with the path)."""
         for solid in solids:
             shade = int(round(255 * solid.reflectance * 0.5))
             pts = np.array([self.to_px(x, y) for x, y in solid.corners_xy()], np.int32)
@@ -132,6 +135,14 @@ class TrackView:
         corners = [self.to_px(pose.x_m + c * fx - s * fy, pose.y_m + s * fx + c * fy)
                    for fx, fy in ((car_length_m, 0.0), (0.0, car_width_m / 2), (0.0, -car_width_m / 2))]
         cv2.fillConvexPoly(out, np.array(corners, np.int32), _YELLOW, cv2.LINE_AA)
+
+    def draw(self, pose, off_track: bool, car_length_m: float, car_width_m: float,
+             solids=()) -> np.ndarray:
+        """Extend the path to ``pose`` and return the box image ``(box_h, box_w, 3)``, with the
+        objects standing on the track (``solids``, :class:`worlds.solids.Solid`) on it."""
+        self.extend(pose, off_track)
+        out = self.canvas.copy()
+        self.overlay(out, pose, car_length_m, car_width_m, solids)
         return out
 
 
@@ -157,33 +168,38 @@ def _stretch(row: np.ndarray, w: int, h: int) -> np.ndarray:
     arr = np.asarray(row)
     if arr.dtype != np.uint8:
         arr = np.clip(arr, 0, 255).astype(np.uint8)
-    return cv2.resize(arr.reshape(1, -1), (w, h), interpolation=cv2.INTER_NEAREST)[:, :, None]
+    return cv2.cvtColor(cv2.resize(arr.reshape(1, -1), (w, h), interpolation=cv2.INTER_NEAREST),
+                        cv2.COLOR_GRAY2BGR)
 
 
-def _api_panel(out: np.ndarray, box, rec: FrameRecord, laps: int) -> None:
+_API_NAMES = ("time", "frame", "speed", "cmd", "steer", "cmd", "x", "y", "yaw", "lap", "line row")
+
+
+def _api_places(box) -> list[tuple[int, int]]:
+    """Where each of the API panel's rows (``_API_NAMES``) starts: two columns."""
+    x0, y0, x1, y1 = box
+    half = (x1 - x0) // 2
+    per_col = max(1, math.ceil(len(_API_NAMES) / 2))
+    step = max(16, min(26, (y1 - y0 - 40) // per_col))
+    return [(x0 + 8 + (i // per_col) * half, y0 + 20 + (i % per_col) * step) for i in range(len(_API_NAMES))]
+
+
+def _api_values(out: np.ndarray, box, rec: FrameRecord, laps: int) -> None:
+    """The API panel's values (its names are in the background)."""
     st = rec.state
 
     def z(v: float, nd: int) -> float:  # no "-0.000"
         return round(v, nd) + 0.0
 
-    rows = [("time", f"{rec.t_s:.3f} s"), ("frame", f"{rec.frame}"),
-            ("speed", f"{z(st['speed'], 3):.3f} m/s"), ("cmd", f"{z(st['speed_cmd'], 3):.3f} m/s"),
-            ("steer", f"{z(math.degrees(st['steer']), 1):.1f} deg"),
-            ("cmd", f"{z(math.degrees(st['steer_cmd']), 1):.1f} deg"),
-            ("x", f"{z(rec.pose.x_m, 3):.3f} m"), ("y", f"{z(rec.pose.y_m, 3):.3f} m"),
-            ("yaw", f"{z(math.degrees(rec.pose.yaw_rad), 1):.1f} deg"),
-            ("lap", f"{st['lap']} / {laps}" if laps else f"{st['lap']}"), ("line row", f"{rec.line_row}")]
-    x0, y0, x1, y1 = box
-    half = (x1 - x0) // 2
-    per_col = max(1, math.ceil(len(rows) / 2))
-    step = max(16, min(26, (y1 - y0 - 40) // per_col))
-    for i, (name, value) in enumerate(rows):
-        x = x0 + 8 + (i // per_col) * half
-        y = y0 + 20 + (i % per_col) * step
-        _put(out, name, x, y, _GRAY)
+    values = (f"{rec.t_s:.3f} s", f"{rec.frame}", f"{z(st['speed'], 3):.3f} m/s",
+              f"{z(st['speed_cmd'], 3):.3f} m/s", f"{z(math.degrees(st['steer']), 1):.1f} deg",
+              f"{z(math.degrees(st['steer_cmd']), 1):.1f} deg", f"{z(rec.pose.x_m, 3):.3f} m",
+              f"{z(rec.pose.y_m, 3):.3f} m", f"{z(math.degrees(rec.pose.yaw_rad), 1):.1f} deg",
+              f"{st['lap']} / {laps}" if laps else f"{st['lap']}", f"{rec.line_row}")
+    for (x, y), value in zip(_api_places(box), values):
         _put(out, value, x + 62, y)
     if st.get("off_track"):
-        _put(out, "OFF TRACK", x0 + 8, y1 - 10, _RED, 0.7)
+        _put(out, "OFF TRACK", box[0] + 8, box[3] - 10, _RED, 0.7)
 
 
 def _middle_panel(out: np.ndarray, box, rec: FrameRecord) -> None:
@@ -233,30 +249,70 @@ def _pixy2_overlay(out: np.ndarray, box, features, vector_index, grid_w: int, gr
         cv2.putText(out, str(b.m_code), (cx - 7, cy + 5), cv2.FONT_HERSHEY_SIMPLEX, 0.4, _RED, 1, cv2.LINE_AA)
 
 
+class Composer:
+    """Draws the frames of one video (see the module's layout). What does not change from a
+    frame to the next (the panels, the API's names, the track map with the path driven so
+    far) is kept in a background drawn once; each frame copies it and draws what changes.
+
+    ``track_view`` (None: no top-down view) is extended by every frame (its path)."""
+
+    def __init__(self, layout: Layout, track_view: TrackView | None, laps: int,
+                 car_length_m: float = 0.28, car_width_m: float = 0.16):
+        self.layout, self.laps, self._car = layout, laps, (car_length_m, car_width_m)
+        self._view = track_view if layout.top is not None else None
+        bg = np.zeros((FRAME_H, FRAME_W, 3), np.uint8)
+        for x0, y0, x1, y1 in (layout.api, layout.middle):
+            bg[y0:y1, x0:x1] = _PANEL
+        for (x, y), name in zip(_api_places(layout.api), _API_NAMES):
+            _put(bg, name, x, y, _GRAY)
+        self._top = None
+        if self._view is not None:
+            bx0, by0, bx1, by1 = layout.top
+            h, w = min(by1 - by0, self._view.box_h), min(bx1 - bx0, self._view.box_w)
+            bg[by0:by0 + h, bx0:bx0 + w] = self._view.canvas[:h, :w]
+            self._top = (slice(by0, by0 + h), slice(bx0, bx0 + w))
+        self._bg = bg
+
+    def frame(self, rec: FrameRecord) -> np.ndarray:
+        """The ``(FRAME_H, FRAME_W, 3)`` BGR frame of ``rec``."""
+        layout, view = self.layout, self._view
+        fits = False
+        if view is not None:  # the path, into the background
+            rows, cols = self._top
+            fits = self._bg[rows, cols].shape[:2] == (view.box_h, view.box_w)
+            view.extend(rec.pose, bool(rec.state.get("off_track")), self._bg[rows, cols] if fits else None)
+            if not fits:  # a view other than its box's size: its top-left part
+                self._bg[rows, cols] = view.canvas[:rows.stop - rows.start, :cols.stop - cols.start]
+        out = self._bg.copy()
+        # camera image, the selected row marked at both sides
+        x0, y0, x1, y1 = layout.camera
+        img = cv2.resize(rec.image, (x1 - x0, y1 - y0), interpolation=cv2.INTER_NEAREST)
+        out[y0:y1, x0:x1] = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        ry = y0 + int((rec.line_row + 0.5) * (y1 - y0) / rec.image.shape[0])
+        cv2.line(out, (x0, ry), (x0 + 8, ry), _RED, 2)
+        cv2.line(out, (x1 - 9, ry), (x1 - 1, ry), _RED, 2)
+        if rec.pixy2 is not None:
+            _pixy2_overlay(out, layout.camera, *rec.pixy2)
+        _api_values(out, layout.api, rec, self.laps)
+        _middle_panel(out, layout.middle, rec)
+        if view is not None:  # the objects on the track and the car, over the map
+            solids = rec.state.get("solids", ())
+            if fits:
+                view.overlay(out[rows, cols], rec.pose, *self._car, solids)
+            else:
+                box = view.canvas.copy()
+                view.overlay(box, rec.pose, *self._car, solids)
+                out[rows, cols] = box[:rows.stop - rows.start, :cols.stop - cols.start]
+        return out
+
+
 def compose(rec: FrameRecord, track_view: TrackView | None, laps: int,
             car_length_m: float = 0.28, car_width_m: float = 0.16,
             layout: Layout | None = None) -> np.ndarray:
     """One ``(FRAME_H, FRAME_W, 3)`` BGR video frame from a record (see module layout);
-    ``layout`` defaults to the one for the record's image and the view's box."""
+    ``layout`` defaults to the one for the record's image and the view's box. A video's
+    frames are drawn faster by one :class:`Composer`."""
     if layout is None:
         aspect = None if track_view is None else track_view.box_w / track_view.box_h
         layout = Layout.for_frame(rec.image.shape, aspect)
-    out = np.zeros((FRAME_H, FRAME_W, 3), np.uint8)
-    for box in (layout.api, layout.middle):
-        out[box[1]:box[3], box[0]:box[2]] = _PANEL
-    # camera image, the selected row marked at both sides
-    x0, y0, x1, y1 = layout.camera
-    out[y0:y1, x0:x1] = cv2.resize(rec.image, (x1 - x0, y1 - y0), interpolation=cv2.INTER_NEAREST)[:, :, None]
-    ry = y0 + int((rec.line_row + 0.5) * (y1 - y0) / rec.image.shape[0])
-    cv2.line(out, (x0, ry), (x0 + 8, ry), _RED, 2)
-    cv2.line(out, (x1 - 9, ry), (x1 - 1, ry), _RED, 2)
-    if rec.pixy2 is not None:
-        _pixy2_overlay(out, layout.camera, *rec.pixy2)
-    _api_panel(out, layout.api, rec, laps)
-    _middle_panel(out, layout.middle, rec)
-    if track_view is not None and layout.top is not None:
-        bx0, by0, bx1, by1 = layout.top
-        view = track_view.draw(rec.pose, bool(rec.state.get("off_track")), car_length_m, car_width_m,
-                           rec.state.get("solids", ()))
-        out[by0:by0 + view.shape[0], bx0:bx0 + view.shape[1]] = view[:by1 - by0, :bx1 - bx0]
-    return out
+    return Composer(layout, track_view, laps, car_length_m, car_width_m).frame(rec)

@@ -96,14 +96,18 @@ def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int
 
             def counts(pose, t):
                 angles = sim.wheel_angles_rad()
-                return tuple(encoders.count(w, angles) for w in wheels)
+                return tuple([encoders.count(w, angles) for w in wheels])
 
             parts.append(counts)
         if car.imu is not None:
             imu, spec = Imu(car.imu, seed), car.imu
             names += IMU_COLUMNS
-            point = (spec.x_m, spec.y_m, spec.z_m)
-            parts.append(lambda pose, t: tuple(imu.sample("log", t, lambda: sim.imu_truth(point)).tolist()))
+            point = np.array([spec.x_m, spec.y_m, spec.z_m], float)
+
+            def truth():
+                return sim.imu_truth(point)
+
+            parts.append(lambda pose, t: imu.sample("log", t, truth))
     if car.drive.command == "duty":
         names += DUTY_COLUMNS
         parts.append(lambda pose, t: (*sim.duties, sim.duty_cmd))
@@ -111,7 +115,14 @@ def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int
         return (), None
     if len(parts) == 1:
         return tuple(names), parts[0]
-    return tuple(names), lambda pose, t: tuple(v for part in parts for v in part(pose, t))
+
+    def values(pose, t) -> tuple:  # each part gives a tuple
+        out = ()
+        for part in parts:
+            out += part(pose, t)
+        return out
+
+    return tuple(names), values
 
 
 # -- per-frame work -----------------------------------------------------------------------

@@ -129,6 +129,7 @@ class Session:
         self.ranging = None  # the range sensors (simrunner.sensors.ranging), made on first use
         self.encoders = None  # the wheel encoders (simrunner.sensors.imu), made on first use
         self.imu = None       # the IMU (simrunner.sensors.imu), made on first use
+        self.imu_truth = None  # () -> what an ideal IMU reads now (CarSim.imu_truth at its place)
         self.seed = 0        # the run's seed (the range sensors' noise)
         self.mcu = None      # the controller's own time (simrunner.run.mcu.McuTime), or None
         self.surface_z_m = 0.0
@@ -508,7 +509,7 @@ class Spinner:
         self._clock.advance(1)
         return s.encoders.count(wheel, self._sim.wheel_angles_rad())
 
-    def _imu(self, call: str) -> np.ndarray:
+    def _imu(self, call: str) -> tuple[float, ...]:
         if _get_ident() != self._owner:
             raise self._foreign(call)
         s = self._s
@@ -516,23 +517,22 @@ class Spinner:
             from simrunner.sensors.imu import Imu
 
             s.imu = Imu(s.car.imu, s.seed)
+            spec, sim = s.car.imu, self._sim
+            point = None if spec is None else np.array([spec.x_m, spec.y_m, spec.z_m], float)
+            s.imu_truth = lambda: sim.imu_truth(point)
         self._clock.advance(1)
-        spec, sim = s.car.imu, self._sim
-        point = None if spec is None else (spec.x_m, spec.y_m, spec.z_m)
-        return s.imu.sample(call, self._clock.time_s, lambda: sim.imu_truth(point))
+        return s.imu.sample(call, self._clock.time_s, s.imu_truth)
 
     def get_gyro(self) -> tuple[float, float, float]:
         """The IMU's angular rates about the car's x, y, z axes (rad/s; z: + = turning left),
         after one physics step: the car file's ``[imu]`` with its noise, bias, range and
         resolution (:mod:`simrunner.sensors.imu`)."""
-        x, y, z = self._imu("get_gyro")[:3].tolist()
-        return x, y, z
+        return self._imu("get_gyro")[:3]
 
     def get_accel(self) -> tuple[float, float, float]:
         """The IMU's accelerometer along the car's x, y, z axes (m/s^2; the specific force: at
         rest +9.81 up), after one physics step (:mod:`simrunner.sensors.imu`)."""
-        x, y, z = self._imu("get_accel")[3:].tolist()
-        return x, y, z
+        return self._imu("get_accel")[3:]
 
     def get_position(self) -> tuple[float, float, float]:
         """World position ``(x, y, z)`` in metres of the car frame origin (rear-axle midpoint

@@ -51,9 +51,28 @@ class Encoders:
         self._counts_per_rad = 0.0 if spec is None else spec.lines_per_rev * PER_LINE[spec.counting] / (2 * math.pi)
         self._turned = [0.0] * 4  # single: the angle turned so far (either way)
         self._last = None         # single: the angles at the last read
+        # the wheels with an encoder as a controller names them most often -> their index
+        self._fitted: dict = {}
+        if spec is not None:
+            for name in ON[spec.wheels]:
+                i = WHEELS.index(name)
+                self._fitted.update({name: i, name.lower(): i, i: i})
+        self._quadrature = spec is not None and spec.counting != "single"
 
     def count(self, wheel, angles_rad) -> int:
         """The count of ``wheel``'s encoder, the wheels at ``angles_rad`` (FL, FR, RL, RR)."""
+        i = self._fitted.get(wheel) if type(wheel) in (str, int) else None
+        if i is None:  # another spelling, or an error to report
+            i = self._check(wheel)
+        if self._quadrature:
+            return math.floor(angles_rad[i] * self._counts_per_rad)
+        last = self._last if self._last is not None else [0.0] * 4
+        self._turned = [t + abs(a - b) for t, a, b in zip(self._turned, angles_rad, last)]
+        self._last = list(angles_rad)
+        return math.floor(self._turned[i] * self._counts_per_rad)
+
+    def _check(self, wheel) -> int:
+        """``wheel``'s index, or the CommandError that says why it has no encoder."""
         i = wheel_index(wheel, "get_encoder")
         spec = self.spec
         if spec is None:
@@ -61,12 +80,7 @@ class Encoders:
         if WHEELS[i] not in ON[spec.wheels]:
             raise CommandError(f"get_encoder({wheel!r}): the car's encoders are on its {spec.wheels} wheels "
                                f"({', '.join(ON[spec.wheels])})")
-        if spec.counting != "single":
-            return math.floor(angles_rad[i] * self._counts_per_rad)
-        last = self._last if self._last is not None else [0.0] * 4
-        self._turned = [t + abs(a - b) for t, a, b in zip(self._turned, angles_rad, last)]
-        self._last = list(angles_rad)
-        return math.floor(self._turned[i] * self._counts_per_rad)
+        return i
 
 
 class Imu:
@@ -75,7 +89,7 @@ class Imu:
     def __init__(self, spec, seed: int):
         self.spec = spec
         self.seed = int(seed)
-        self._held: tuple[int, np.ndarray] | None = None
+        self._held: tuple[int, tuple[float, ...]] | None = None
         self._walk: list[np.ndarray] = []  # cumulative random walk at the end of each block
         if spec is None:
             return
@@ -88,11 +102,11 @@ class Imu:
         self._step_walk = np.array([spec.gyro_bias_walk_radps_rts] * 3
                                    + [spec.accel_bias_walk_mps2_rts] * 3) / math.sqrt(rate)
         self._lsb = np.array([spec.gyro_lsb_radps] * 3 + [spec.accel_lsb_mps2] * 3)
-        self._noise_block: tuple[int, np.ndarray] | None = None
+        self._noise_block: tuple[int, list] | None = None
         self._range = np.array([spec.gyro_range_radps] * 3 + [spec.accel_range_mps2] * 3)
         self._lsb_list, self._range_list = self._lsb.tolist(), self._range.tolist()
 
-    def sample(self, call: str, t_s: float, truth) -> np.ndarray:
+    def sample(self, call: str, t_s: float, truth) -> tuple[float, ...]:
         """``(6,)``: gyro x, y, z (rad/s), accelerometer x, y, z (m/s^2) of the sample at ``t_s``;
         ``truth()`` gives the car's ``(angular velocity (3,), specific force (3,))`` in the body
         frame, asked only at a new sample."""
@@ -100,28 +114,28 @@ class Imu:
         if spec is None:
             raise CommandError(f"{call}(): the car has no IMU (add [imu] to the car file)")
         k = math.floor(t_s * spec.rate_hz + 1e-9)
-        if self._held is not None and self._held[0] == k:
-            return self._held[1]
+        held = self._held
+        if held is not None and held[0] == k:
+            return held[1]
         gyro, force = truth()
-        offset = self._offset_at(k).tolist()
         out = []
-        for v, off, lsb, top in zip((*gyro, *force), offset, self._lsb_list, self._range_list):
+        for v, off, lsb, top in zip((*gyro, *force), self._offset_at(k), self._lsb_list, self._range_list):
             v = float(v) + off
             if lsb > 0.0:
                 v = round(v / lsb) * lsb
             out.append(top if v > top else (-top if v < -top else v))
-        value = np.array(out)
+        value = tuple(out)
         self._held = (k, value)
         return value
 
-    def _offset_at(self, k: int) -> np.ndarray:
-        """Bias + its walk + the white noise of sample ``k``. The normals come in blocks of
-        ``_WALK_BLOCK`` samples from the run's seed and the block's number (the same values
-        whatever was read before); a block's offsets are summed once."""
+    def _offset_at(self, k: int) -> list[float]:
+        """Bias + its walk + the white noise of sample ``k`` (6 floats). The normals come in
+        blocks of ``_WALK_BLOCK`` samples from the run's seed and the block's number (the same
+        values whatever was read before); a block's offsets are summed once."""
         block, within = divmod(max(k, 0), _WALK_BLOCK)
         if self._noise_block is None or self._noise_block[0] != block:
             normals = np.random.default_rng([self.seed, 0x494D55, block]).standard_normal((_WALK_BLOCK, 6))
-            self._noise_block = (block, self._bias + self._walk_rows(block) + normals * self._noise)
+            self._noise_block = (block, (self._bias + self._walk_rows(block) + normals * self._noise).tolist())
         return self._noise_block[1][within]
 
     def _walk_rows(self, block: int) -> np.ndarray:
