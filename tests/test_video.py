@@ -51,6 +51,23 @@ def test_drive_writes_every_second_frame_of_the_50_fps_camera(tmp_path):
     assert cap.get(cv2.CAP_PROP_FPS) == pytest.approx(25.0)
 
 
+def test_video_fps_keeps_every_camera_frame(tmp_path):
+    """--video-fps 50 (drive(video_fps=50)): every frame of the 50 fps camera, at 50 fps."""
+    from click.testing import CliRunner
+
+    from simrunner.cli import main as cli
+
+    ctrl = tmp_path / "c.py"
+    ctrl.write_text("def main(s):\n    s.set_speed_and_servo(0.8, 0.0)\n    for i in range(30):\n"
+                    "        s.get_image(s.line_row)\n")
+    res = CliRunner().invoke(cli, ["drive", str(ctrl), "--video", str(tmp_path / "v.mp4"), "--video-fps", "50"])
+    assert res.exit_code == 0, res.output
+    n, _ = _frames(tmp_path / "v.mp4")
+    assert n == 31
+    cap = cv2.VideoCapture(str(tmp_path / "v.mp4"))
+    assert cap.get(cv2.CAP_PROP_FPS) == pytest.approx(50.0)
+
+
 def test_video_is_closed_and_kept_when_the_controller_crashes(tmp_path):
     ctrl = tmp_path / "c.py"
     ctrl.write_text("def main(s):\n    for _ in range(10):\n        s.get_image()\n    raise RuntimeError('boom')\n")

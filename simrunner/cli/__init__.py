@@ -176,6 +176,9 @@ def main() -> None:
                    "timed lap, 120 s, +1 s without a stop within 2 m), figure8, speed_limit; "
                    "docs/events.md (default: practice, --laps).")
 @click.option("--video", default=None, metavar="PATH.mp4", help="Write the debug video.")
+@click.option("--video-fps", "video_fps", default=None, type=click.FloatRange(min=0, max=1000, min_open=True),
+              metavar="FPS", help="The debug video's highest frame rate (default 30: every second frame of "
+                                  "the 50 fps camera; 50: every frame, slower to write).")
 @click.option("--csv", default=None, metavar="PATH", help="Write telemetry (one row per camera frame).")
 @click.option("--plot", default=None, metavar="PATH.png", help="Write path/speed/steering plot.")
 @click.option("--summary", default=None, metavar="PATH.json", help="Write the run summary as JSON.")
@@ -215,7 +218,7 @@ def main() -> None:
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
               car, dt_s, wall_limit_s, params, include_dirs, defines, start, start_before_finish_m,
               keep_driving, off_track_wheels=None, event=None, watch=False, isolate=False,
-              mcu_time=None, mcu_scale=1.0, kit=None) -> None:
+              mcu_time=None, mcu_scale=1.0, kit=None, video_fps=None) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
     a shared library (.so). See docs/c_controllers.md."""
@@ -244,7 +247,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
                                                        kit),
                           watched=(controller, *more_sources, *headers))
         watch_drive(dict(controller=controller, **native, track=track, laps=laps, time_limit_s=time_limit_s,
-                         video=video, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
+                         video=video, video_fps=video_fps, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
                          dt_s=dt_s, wall_limit_s=wall_limit_s, params=params, start=_start_pose(start),
                          start_before_finish_m=start_before_finish_m, keep_driving=keep_driving,
                          off_track_wheels=off_track_wheels, event=event, mcu_time=mcu_time,
@@ -256,7 +259,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
     def run() -> int:
         try:
             program = _native_program(controller, more_sources, include_dirs, defines, isolate, kit)
-            result = drive(program, track=track, laps=laps, time_limit_s=time_limit_s, video=video,
+            result = drive(program, track=track, laps=laps, time_limit_s=time_limit_s, video=video, video_fps=video_fps,
                            csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
                            wall_limit_s=wall_limit_s, params=parse_params(params),
                            start=start_pose, start_before_finish_m=start_before_finish_m,
@@ -294,11 +297,12 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
             os._exit(code)
         sys.exit(code)
     sys.exit(_supervised(run, controller, csv=csv, video=video, plot=plot, summary=summary,
-                         track=track, car=car, laps=laps, seed=seed, wall_limit_s=wall_limit_s))
+                         track=track, car=car, laps=laps, seed=seed, wall_limit_s=wall_limit_s,
+                         video_fps=video_fps))
 
 
 def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, laps, seed,
-                wall_limit_s) -> int:
+                wall_limit_s, video_fps=None) -> int:
     """``run()`` in a supervised child (simrunner.run.supervise); a child ended by the hard
     watchdog gets its outputs written here, from its run log. Returns the exit code."""
     from simrunner.reports.outputs import Outputs
@@ -311,7 +315,7 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
         from simrunner.run.postmortem import StuckRun, finish_dead_run, finish_stuck_run
 
         stuck = StuckRun(controller=controller, outputs=Outputs(video=video, csv=csv, plot=plot,
-                                                                summary=summary),
+                                                                summary=summary, video_fps=video_fps),
                          track=track, car=car, laps=laps, seed=seed, wall_limit_s=wall_limit_s)
         try:
             if end.stuck:

@@ -19,6 +19,7 @@ class Outputs:
     csv: str | Path | None = None
     plot: str | Path | None = None
     summary: str | Path | None = None
+    video_fps: float | None = None  # the video's highest frame rate (None: VideoRecorder's default)
 
 
 def write_outputs(result, outputs: Outputs, video, track, *, csv_stream=None) -> None:

@@ -95,7 +95,7 @@ def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s:
         result.outputs["csv"] = str(run.outputs.csv)
     video = None
     if run.outputs.video is not None:
-        video = _rebuild_video(log, run.outputs.video, track, car, settings.laps)
+        video = _rebuild_video(log, run.outputs.video, track, car, settings.laps, run.outputs.video_fps)
     write_outputs(result, Outputs(plot=run.outputs.plot, summary=run.outputs.summary), video, track)
     return result
 
@@ -122,7 +122,7 @@ def finish_dead_run(run: StuckRun, signum: int, csv_path: Path, *, wall_time_s: 
         result.outputs["csv"] = str(run.outputs.csv)
     video = None
     if run.outputs.video is not None:
-        video = _rebuild_video(log, run.outputs.video, track, car, settings.laps)
+        video = _rebuild_video(log, run.outputs.video, track, car, settings.laps, run.outputs.video_fps)
     write_outputs(result, Outputs(plot=run.outputs.plot, summary=run.outputs.summary), video, track)
     return result
 
@@ -146,7 +146,7 @@ def run_log_laps(log: RunLog) -> tuple[int, list[float]]:
     return int(lap[-1]), [e - s for s, e in zip(starts, ends)]
 
 
-def _rebuild_video(log: RunLog, path, track, car, laps: int):
+def _rebuild_video(log: RunLog, path, track, car, laps: int, max_fps: float | None = None):
     """A VideoRecorder fed with every row of ``log`` (closed by write_outputs)."""
     from pieces.pose import Pose2
     from simrunner.reports.video import VideoRecorder
@@ -156,6 +156,7 @@ def _rebuild_video(log: RunLog, path, track, car, laps: int):
     path.with_name(path.stem + ".partial.mp4").unlink(missing_ok=True)  # the stuck run's
     camera = Camera(car.camera, track)
     video = VideoRecorder(path, camera_fps=car.camera.fps_hz, render=camera.render,
+                          **({} if max_fps is None else {"max_fps": max_fps}),
                           raster=track.raster, laps=laps, line_row=car.camera.default_row,
                           car_length_m=car.chassis.wheelbase_m + 0.05, car_width_m=car.chassis.track_m)
     texts = log.data_text or ("",) * len(log)

@@ -233,7 +233,7 @@ class Run:
 
     def __init__(self, track: SimTrack, car: CarDescription, settings: RunSettings, *,
                  video_path: str | Path | None = None, record_text: bool = False,
-                 csv_path: str | Path | None = None):
+                 csv_path: str | Path | None = None, video_fps: float | None = None):
         from simrunner.car.effects import make_sim
         from simrunner.sensors.camera import Camera
 
@@ -274,6 +274,7 @@ class Run:
             from simrunner.reports.video import VideoRecorder
 
             self.video = VideoRecorder(video_path, camera_fps=1.0 / car.camera.frame_period_s(),
+                                       **({} if video_fps is None else {"max_fps": video_fps}),
                                        render=self._render_view, raster=track.raster,
                                        lighting=track.lighting, surface_z_m=track.surface_z_m,
                                        laps=settings.laps if settings.event is None else (event_laps or 0),
@@ -439,7 +440,7 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
           car: str | Path | CarDescription | None = None, settings: RunSettings | None = None,
           video: str | Path | None = None, csv: str | Path | None = None,
           plot: str | Path | None = None, summary: str | Path | None = None,
-          **setting_values) -> RunResult:
+          video_fps: float | None = None, **setting_values) -> RunResult:
     """Run ``controller`` (a ``.py`` file with ``main(spinner)``, or a callable) on ``track``.
 
     ``track``: a layout ``.txt``, trackgen folder, world file, Gazebo model folder, an
@@ -449,7 +450,8 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
     (``laps=2, time_limit_s=30, seed=1, dt_s=0.002, wall_limit_s=10, start=(x_m, y_m,
     yaw_rad), start_before_finish_m=0.4, keep_driving=True``). ``video``, ``csv``, ``plot``,
     ``summary``: output paths (None: not written), all checked before the run; the CSV is
-    written as the run goes, so a run cut short keeps its rows.
+    written as the run goes, so a run cut short keeps its rows. ``video_fps``: the video's
+    highest frame rate (default 30: every second frame of a 50 fps camera).
 
     Bad input (files, settings) raises a :class:`~simrunner.errors.SimError` (or the car
     description's error) before anything is written. A failing controller does not raise:
@@ -462,7 +464,7 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
     elif setting_values:
         raise SimError(f"drive(): give either settings= or setting keywords, not both "
                        f"({', '.join(setting_values)})")
-    outputs = Outputs(video=video, csv=csv, plot=plot, summary=summary)
+    outputs = Outputs(video=video, csv=csv, plot=plot, summary=summary, video_fps=video_fps)
     check_outputs(outputs)  # before anything is loaded or driven
     with SignalGuard() as signals:
         ctrl = load_controller(controller)
@@ -470,7 +472,7 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
         if track is None and settings.event is not None:
             track = event_track(settings.event)  # the discipline's own layout (None: the default)
         sim_track, track_label = resolve_track(track, car_desc)
-        run = Run(sim_track, car_desc, settings, video_path=video, csv_path=csv)
+        run = Run(sim_track, car_desc, settings, video_path=video, csv_path=csv, video_fps=video_fps)
         run.signal_guard = signals
         threads_before = set(threading.enumerate())
         outcome, message, error = run.execute(ctrl)
