@@ -42,10 +42,11 @@ CXX_FLAGS = ("-std=gnu++17",)
 # library holding one can never be unloaded, and every later run of it would share them.
 # Runs in the simulator's process start from fresh globals, so they are made ordinary.
 CXX_FRESH_FLAGS = ("-fno-gnu-unique",)
-# the sleeps wait in simulated time and an exit ends the program, not the simulator: the
-# controller's calls go to __wrap_NAME (host/spinner_host.c, both builds)
+# the sleeps wait in simulated time, an exit ends the program, not the simulator, and a forked
+# process cannot drive the car: the controller's calls go to __wrap_NAME (host/spinner_host.c,
+# both builds)
 WRAPPED = ("usleep", "sleep", "nanosleep", "clock_nanosleep", "exit", "_exit", "_Exit", "quick_exit",
-           "atexit", "__cxa_atexit")
+           "atexit", "__cxa_atexit", "fork")
 LINK_FLAGS = ("-Wl,--wrap=" + ",--wrap=".join(WRAPPED),)
 INSTALL_HINT = "install a C compiler, e.g. `sudo apt-get install build-essential` (Debian/Ubuntu)"
 
