@@ -1063,6 +1063,8 @@ int main(int argc, char **argv) {
     req_fd = atoi(argv[2]);
     rep_fd = atoi(argv[3]);
     setvbuf(stdout, NULL, _IOLBF, 0);  /* the controller's prints reach the terminal in order */
+    signal(SIGPIPE, SIG_IGN);  /* a reader of stdout that left (`| head`) fails its writes, as
+                                  in the simulator's process, instead of killing the program */
     pthread_atfork(fork_prepare, NULL, in_forked_child);  /* a prebuilt library's forks too */
     install_handlers();
     void *lib = dlopen(argv[1], RTLD_NOW | RTLD_GLOBAL);
