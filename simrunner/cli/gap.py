@@ -106,7 +106,7 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
             if bad or not names:
                 raise SimError(f"--effects {effects!r}: expected names among {', '.join(CANDIDATES)}")
         settings = load_settings(settings_file) if settings_file is not None else SETTINGS
-        description = load_car(car)
+        description = named_after_file(load_car(car), car)
         read = _read_logs(measured, columns_file, column_items, norms_file)
         logs = [check_measured(log, pooled=len(read) > 1, settings=settings) for log in read]
         limit = settings.max_effects if max_effects is None else max_effects
@@ -134,6 +134,16 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
     click.echo(summary_text(result))
     click.echo(f"wrote {out_dir}/ (report.json, car.toml, residuals.txt, gap_before_after.png, "
                f"residuals_by_regime.png)")
+
+
+def named_after_file(description, path: Path | None):
+    """The car of ``--car FILE`` named after FILE when the file sets no ``name`` (the gap's
+    car.toml, derived from it, then carries FILE's name rather than the built-in car's)."""
+    from vehicle.description import CarDescription
+
+    if path is None or description.name != CarDescription().name:
+        return description
+    return description.replace(name=Path(path).stem)
 
 
 def _read_logs(paths: tuple[Path, ...], columns_file: Path | None, items: tuple[str, ...],

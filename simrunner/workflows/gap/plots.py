@@ -1,6 +1,7 @@
 """Figures of the gap report (matplotlib, Agg backend, no display needed)."""
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -79,11 +80,12 @@ def plot_before_after(result, path: str | Path) -> None:
     shown = [(s, label) for s, label in (("position_m", "position"), ("speed_mps", "speed"),
                                          ("yaw_rate_radps", "yaw rate"))
              if np.isfinite(result.rmse_before.get(s, np.nan))]
-    ax.set_title("held-out RMSE before->after: " + ", ".join(
-        f"{label} {result.rmse_before[s]:.3g}->{result.rmse_after.get(s, np.nan):.3g}" for s, label in shown)
+    ax.set_title("held-out RMSE before -> after:\n" + textwrap.fill(", ".join(
+        f"{label} {result.rmse_before[s]:.3g} -> {result.rmse_after.get(s, np.nan):.3g}" for s, label in shown), 70)
         if held.any() and shown else "", fontsize=9)
     param = ", ".join(f"{k} = {v:.4g}" for k, v in result.parameters.items())
-    fig.suptitle(f"{Path(log.source).name}: effects = {result.effect}" + (f" ({param})" if param else ""))
+    fig.suptitle(textwrap.fill(f"{Path(log.source).name}: effects = {result.effect}" + (f" ({param})" if param else ""),
+                               120))
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
