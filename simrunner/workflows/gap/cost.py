@@ -1,0 +1,107 @@
+"""What a gap run on a log will cost, said before the work: rows, seconds of data, memory,
+time (issue 50: a 200 MB log kept ``simrunner gap`` at 0 fits for 10 minutes at 2.3 GB).
+
+Most of a long log's time goes into replaying every second of it: the nominal car on the fit
+windows at the fits' step and on all windows at the drive's step, the held-out windows at
+each step of the chain, the final car on all windows. The screening and refits use at most
+``settings.screen_max_s`` of windows, so they cost about the same on any log. The figures
+below were measured on the development machine (2 CPUs, Python 3.11; ``docs/gap.md``,
+``--max-rows``): estimates to decide by, not promises.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from simrunner.workflows.gap.settings import SETTINGS, GapSettings
+
+#: CPU seconds to replay one second of log at physics step dt: REPLAY_BASE_S + REPLAY_STEP_S / dt
+#: (measured: 0.0059 s at 5 ms, 0.0121 s at 2 ms, the synthetic 94-s log's 47 windows).
+REPLAY_BASE_S, REPLAY_STEP_S = 0.00177, 2.07e-5
+#: Wall seconds per second of screening windows with 2 worker processes, for the whole
+#: catalogue (24 effects) and the default chain (measured: the synthetic 94-s log took 112 s,
+#: 126 s of CPU; 45 s screened; its replays of every window ~5 s).
+SCREEN_WALL_PER_S = 2.4
+#: Memory: the process before the log (~120 MB measured), then per row read (the columns, the
+#: derived states, the replays' predictions and residuals: 285 MB at 297k rows after reading
+#: and preparing; the 200-MB log of the issue stood at 2.3 GB).
+BASE_MB, BYTES_PER_ROW = 150.0, 750.0
+#: Data rows beyond which ``simrunner gap`` refuses a log unless told otherwise (``--max-rows``):
+#: about an hour of data at 50 Hz, ~0.3 GB and ~10 minutes here.
+MAX_ROWS = 250_000
+
+
+@dataclass(frozen=True)
+class Cost:
+    """``rows`` of data, ``data_s`` seconds of it (nan before reading), ``memory_mb`` and
+    ``minutes`` (wall) estimated."""
+
+    rows: int
+    data_s: float
+    memory_mb: float
+    minutes: float
+
+    def text(self) -> str:
+        data = f", {self.data_s:,.0f} s of data" if math.isfinite(self.data_s) else ""
+        when = f", ~{self.minutes:.0f} min" if math.isfinite(self.minutes) else ""
+        return f"{self.rows:,} rows{data}: ~{self.memory_mb / 1000:.1f} GB{when}"
+
+
+def count_rows(path: str | Path) -> int:
+    """The rows a log holds (its lines less the comments, blank lines and the header at its
+    top), counted without parsing it (~1 s per GB)."""
+    lines, head, last = 0, b"", b"\n"
+    with open(path, "rb") as f:
+        while chunk := f.read(1 << 20):
+            if len(head) < 65536:
+                head += chunk[:65536]
+            lines += chunk.count(b"\n")
+            last = chunk[-1:]
+    if last != b"\n":
+        lines += 1  # the last line without its newline
+    top = 0  # comments and blank lines before the header, and the header
+    for line in head.split(b"\n"):
+        top += 1
+        if line.strip() and not line.startswith(b"#"):
+            break
+    return max(lines - top, 0)
+
+
+def span_s(path: str | Path) -> float:
+    """Seconds from the first row to the last of a log whose header names ``t_s`` (read from
+    its head and its tail only), else nan."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(65536).split(b"\n")
+            f.seek(0, 2)
+            f.seek(max(f.tell() - 65536, 0))
+            tail = [x for x in f.read().split(b"\n") if x.strip()]
+        rows = [x for x in head if x.strip() and not x.startswith(b"#")]
+        col = rows[0].decode("utf-8-sig", "replace").strip().split(",").index("t_s")
+        return float(tail[-1].split(b",")[col]) - float(rows[1].split(b",")[col])
+    except (OSError, ValueError, IndexError):
+        return math.nan
+
+
+def replay_cpu_s(data_s: float, dt_s: float) -> float:
+    """CPU seconds to replay ``data_s`` seconds of log at physics step ``dt_s``."""
+    return data_s * (REPLAY_BASE_S + REPLAY_STEP_S / dt_s)
+
+
+def estimate(rows: int, data_s: float = math.nan, *, jobs: int = 2, n_effects: int = 24,
+             settings: GapSettings = SETTINGS, held_dt_s: float = 0.002) -> Cost:
+    """The :class:`Cost` of a gap run on ``rows`` rows covering ``data_s`` seconds (nan: not
+    known yet, no time given) with ``n_effects`` candidates, from ``settings`` (fit step,
+    screening seconds, chain length, held-out share) and the measured rates above."""
+    memory_mb = BASE_MB + rows * BYTES_PER_ROW / 1e6
+    if not math.isfinite(data_s):
+        return Cost(rows, data_s, memory_mb, math.nan)
+    held_share = 1.0 / settings.holdout_every
+    fit_s = data_s * (1.0 - held_share)
+    serial = (replay_cpu_s(fit_s, settings.workflow_dt_s)            # the nominal fit windows
+              + 2 * replay_cpu_s(data_s, held_dt_s)                 # nominal and final, all windows
+              + (settings.max_effects + 1) * replay_cpu_s(data_s * held_share, held_dt_s))  # chain steps
+    screened = min(settings.screen_max_s or fit_s, fit_s)
+    fits = SCREEN_WALL_PER_S * screened * n_effects / 24 * 2 / max(jobs, 1)
+    return Cost(rows, data_s, memory_mb, (serial + fits) / 60.0)
