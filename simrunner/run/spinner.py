@@ -61,6 +61,26 @@ _current_session = SESSION  # the run executing in this context (simrunner.run.c
 _get_ident = threading.get_ident
 
 
+def _call_in_forked_child() -> int:
+    """``_get_ident`` in a process the running controller forked (every Spinner call asks it
+    first): the run is the parent's, so the call ends this process with a message."""
+    import os
+    import sys
+
+    sys.stdout.flush()
+    sys.stderr.write(f"simrunner: a Spinner call in process {os.getpid()}, which the controller fork()ed from "
+                     f"process {os.getppid()}: only the controller's own process drives the car; this one ends "
+                     "(exit status 70)\n")
+    sys.stderr.flush()
+    os._exit(70)
+
+
+def forked_from_run() -> None:
+    """In a process a running controller forked (simrunner.run.faults): Spinner calls end it."""
+    global _get_ident
+    _get_ident = _call_in_forked_child
+
+
 class BufferedNormals:
     """``rng.standard_normal(shape)`` served from a buffer refilled ``chunk`` draws at a time.
 
