@@ -65,4 +65,5 @@ def tolerate_reader_leaving() -> None:
         _to_null(fd)
         out.flush()
     sys.stdout = io.TextIOWrapper(io.BufferedWriter(_ReaderMayLeave(fd)), encoding=out.encoding,
-                                  errors=out.errors, line_buffering=out.line_buffering)
+                                  errors=out.errors, line_buffering=out.line_buffering,
+                                  write_through=getattr(out, "write_through", False))  # python -u
