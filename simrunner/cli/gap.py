@@ -14,7 +14,6 @@ from pathlib import Path
 
 import click
 
-from simrunner.workflows.gap.cost import MAX_ROWS
 from simrunner.workflows.gap.settings import SETTINGS
 
 
@@ -73,15 +72,15 @@ def _engine_stderr_silenced():
 @click.option("--settings", "settings_file", default=None, type=click.Path(dir_okay=False, path_type=Path),
               metavar="FILE.toml", help="Thresholds to change, `name = value` (docs/gap.md \"Thresholds\"; "
                                         "the options above win).")
-@click.option("--max-rows", default=MAX_ROWS, show_default=True, type=click.IntRange(min=1), metavar="N",
+@click.option("--max-rows", default=None, type=click.IntRange(min=1), metavar="N",
               help="Refuse logs of more rows than this in all, before reading them (the time and memory "
-                   "grow with every row: docs/gap.md).")
+                   f"grow with every row: docs/gap.md; default: {SETTINGS.max_rows}).")
 @click.option("--force", is_flag=True, help="Replace DIR if it exists.")
 @click.option("--no-progress", is_flag=True, help="No progress bar.")
 def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_file: Path | None,
         column_items: tuple[str, ...], norms_file: Path | None, jobs: int, effects: str | None, max_effects: int | None,
         dt_s: float | None, window_s: float | None, screen_s: float | None, settings_file: Path | None,
-        max_rows: int, force: bool, no_progress: bool) -> None:
+        max_rows: int | None, force: bool, no_progress: bool) -> None:
     """Find where MEASURED (one or several run logs of one car, docs/telemetry.md) and the
     simulator disagree, build the chain of effects that closes the gap, and show it shrink on
     held-out data.
@@ -117,7 +116,8 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
         n_effects = len(names) if names is not None else len(CANDIDATES)
         shape = dataclasses.replace(settings, **{k: v for k, v in (("max_effects", limit), ("screen_max_s", screen_s),
                                                                    ("workflow_dt_s", dt_s)) if v is not None})
-        refuse_large(measured, max_rows, jobs=jobs, n_effects=n_effects, settings=shape)
+        refuse_large(measured, settings.max_rows if max_rows is None else max_rows, jobs=jobs, n_effects=n_effects,
+                     settings=shape)
         read = _read_logs(measured, columns_file, column_items, norms_file)
         logs = [check_measured(log, pooled=len(read) > 1, settings=settings) for log in read]
         cost = estimate(sum(len(log.t_s) for log in logs), sum(float(log.t_s[-1] - log.t_s[0]) for log in logs),

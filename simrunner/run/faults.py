@@ -191,11 +191,8 @@ def _after_fork_in_child() -> None:
     the controller's child (module docstring); no run executes in it."""
     if _run_session() is None:
         return
-    time.sleep, os._exit = _real_sleep, _real_exit
+    time.sleep, os._exit = _real_sleep, _real_exit  # (the Spinner's own hook ends its calls)
     _Patches.lock, _Patches.sessions, _Patches.forked = threading.Lock(), [], True
-    from simrunner.run.spinner import forked_from_run
-
-    forked_from_run()
 
 
 os.register_at_fork(after_in_child=_after_fork_in_child)

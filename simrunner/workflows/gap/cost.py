@@ -5,8 +5,8 @@ Most of a long log's time goes into replaying every second of it: the nominal ca
 windows at the fits' step and on all windows at the drive's step, the held-out windows at
 each step of the chain, the final car on all windows. The screening and refits use at most
 ``settings.screen_max_s`` of windows, so they cost about the same on any log. The figures
-below were measured on the development machine (2 CPUs, Python 3.11; ``docs/gap.md``,
-``--max-rows``): estimates to decide by, not promises.
+are ``GapSettings`` fields measured on the development machine (2 CPUs, Python 3.11; their
+derivations say how; ``docs/gap.md``, ``--max-rows``): estimates to decide by, not promises.
 """
 from __future__ import annotations
 
@@ -15,21 +15,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from simrunner.workflows.gap.settings import SETTINGS, GapSettings
-
-#: CPU seconds to replay one second of log at physics step dt: REPLAY_BASE_S + REPLAY_STEP_S / dt
-#: (measured: 0.0059 s at 5 ms, 0.0121 s at 2 ms, the synthetic 94-s log's 47 windows).
-REPLAY_BASE_S, REPLAY_STEP_S = 0.00177, 2.07e-5
-#: Wall seconds per second of screening windows with 2 worker processes, for the whole
-#: catalogue (24 effects) and the default chain (measured: the synthetic 94-s log took 112 s,
-#: 126 s of CPU; 45 s screened; its replays of every window ~5 s).
-SCREEN_WALL_PER_S = 2.4
-#: Memory: the process before the log (~120 MB measured), then per row read (the columns, the
-#: derived states, the replays' predictions and residuals: 285 MB at 297k rows after reading
-#: and preparing; the 200-MB log of the issue stood at 2.3 GB).
-BASE_MB, BYTES_PER_ROW = 150.0, 750.0
-#: Data rows beyond which ``simrunner gap`` refuses a log unless told otherwise (``--max-rows``):
-#: about an hour of data at 50 Hz, ~0.3 GB and ~10 minutes here.
-MAX_ROWS = 250_000
 
 
 @dataclass(frozen=True)
@@ -84,24 +69,24 @@ def span_s(path: str | Path) -> float:
         return math.nan
 
 
-def replay_cpu_s(data_s: float, dt_s: float) -> float:
+def replay_cpu_s(data_s: float, dt_s: float, settings: GapSettings = SETTINGS) -> float:
     """CPU seconds to replay ``data_s`` seconds of log at physics step ``dt_s``."""
-    return data_s * (REPLAY_BASE_S + REPLAY_STEP_S / dt_s)
+    return data_s * (settings.replay_cpu_base_s + settings.replay_cpu_step_s / dt_s)
 
 
 def estimate(rows: int, data_s: float = math.nan, *, jobs: int = 2, n_effects: int = 24,
              settings: GapSettings = SETTINGS, held_dt_s: float = 0.002) -> Cost:
     """The :class:`Cost` of a gap run on ``rows`` rows covering ``data_s`` seconds (nan: not
     known yet, no time given) with ``n_effects`` candidates, from ``settings`` (fit step,
-    screening seconds, chain length, held-out share) and the measured rates above."""
-    memory_mb = BASE_MB + rows * BYTES_PER_ROW / 1e6
+    screening seconds, chain length, held-out share, the measured rates)."""
+    memory_mb = settings.cost_base_mb + rows * settings.cost_bytes_per_row / 1e6
     if not math.isfinite(data_s):
         return Cost(rows, data_s, memory_mb, math.nan)
     held_share = 1.0 / settings.holdout_every
     fit_s = data_s * (1.0 - held_share)
-    serial = (replay_cpu_s(fit_s, settings.workflow_dt_s)            # the nominal fit windows
-              + 2 * replay_cpu_s(data_s, held_dt_s)                 # nominal and final, all windows
-              + (settings.max_effects + 1) * replay_cpu_s(data_s * held_share, held_dt_s))  # chain steps
+    serial = (replay_cpu_s(fit_s, settings.workflow_dt_s, settings)            # the nominal fit windows
+              + 2 * replay_cpu_s(data_s, held_dt_s, settings)                 # nominal, final: all windows
+              + (settings.max_effects + 1) * replay_cpu_s(data_s * held_share, held_dt_s, settings))  # steps
     screened = min(settings.screen_max_s or fit_s, fit_s)
-    fits = SCREEN_WALL_PER_S * screened * n_effects / 24 * 2 / max(jobs, 1)
+    fits = settings.screen_wall_per_s * screened * n_effects / 24 * 2 / max(jobs, 1)
     return Cost(rows, data_s, memory_mb, (serial + fits) / 60.0)
