@@ -38,10 +38,10 @@ def test_estimates_grow_with_the_log_and_an_ordinary_log_says_nothing():
     hour = estimate(180_000, 3600.0)
     assert ordinary.minutes < SAY_COST_MIN <= hour.minutes
     assert ordinary.memory_mb < hour.memory_mb < estimate(3_000_000, 60_000.0).memory_mb
-    # the 200 MB log (~3 million rows, 16.5 h at 50 Hz): an hour, 2.4 GB
+    # the 200 MB log (~3 million rows, 16.5 h at 50 Hz): an hour, 2.5 GB
     big = estimate(3_000_000, 60_000.0)
     assert 30 < big.minutes < 120 and 2000 < big.memory_mb < 3000
-    assert big.text() == "3,000,000 rows, 60,000 s of data: ~2.4 GB, ~58 min"
+    assert big.text() == "3,000,000 rows, 60,000 s of data: ~2.5 GB, ~58 min"
 
 
 def test_a_log_past_max_rows_is_refused_before_reading_in_one_line(tmp_path):

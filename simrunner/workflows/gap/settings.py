@@ -189,7 +189,8 @@ class GapSettings:
     replay_cpu_step_s: float = _s(2.07e-5, "s^2 (CPU per s of log, times dt)", "measured: as replay_cpu_base_s")
     screen_wall_per_s: float = _s(2.4, "s (wall per s screened, 2 processes)", "measured: the synthetic 94-s log "
                                   "took 112 s with 24 candidates, 45 s screened, ~5 s of it replays")
-    cost_base_mb: float = _s(150.0, "MB", "measured: the process holds ~120 MB before it reads a log")
+    cost_base_mb: float = _s(200.0, "MB", "measured: ~120 MB before a log is read; 219 MB at the peak of a run "
+                             "on a 19k-row log")
     cost_bytes_per_row: float = _s(750.0, "B", "measured: 285 MB at 297k rows read and prepared; the issue's "
                                    "200-MB log (3 M rows) stood at 2.3 GB, 2.6 GB here while still reading")
 
