@@ -863,3 +863,101 @@ def test_a_cpp_programs_static_destructors_run_at_its_end(tmp_path):
         log.unlink(missing_ok=True)
         assert drive(program, track="floor", time_limit_s=5.0).outcome == "controller_returned"
         assert log.read_text() == "main ran\ndestructor ran\n"
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+@pytest.mark.parametrize("end, expected", [("return 0;", "main\natexit\ndestructor\n"),
+                                           ("_exit(0);", "main\n")])
+def test_a_c_programs_destructor_functions_run_at_its_end_as_exit_runs_them(tmp_path, isolate, end,
+                                                                            expected):
+    """Issue 50 (fault injection): in the simulator's process a C function marked
+    ``__attribute__((destructor))`` never ran (the library's unloading came after the process's
+    os._exit, or never). Now it runs at the program's end after the atexit handlers, as exit()
+    runs it, and _exit skips it - also when the library is unloaded later."""
+    import gc
+
+    log = tmp_path / "log.txt"
+    src = write(tmp_path, "dtor.c", f"""\
+        #include <stdio.h>
+        #include <stdlib.h>
+        #include <unistd.h>
+        #include "spinner.h"
+        static FILE *f;
+        static void bye(void) {{ fputs("atexit\\n", f); fflush(f); }}
+        __attribute__((destructor)) static void dtor(void) {{ fputs("destructor\\n", f); fclose(f); }}
+        int main(void) {{
+            f = fopen("{log}", "w");
+            atexit(bye);
+            fputs("main\\n", f); fflush(f);
+            spinner_sleep(0.02);
+            {end}
+        }}
+        """)
+    program = dataclasses.replace(build_program([src]), isolate=isolate)
+    drive(program, track="floor", time_limit_s=1.0)
+    assert log.read_text() == expected
+    del program
+    gc.collect()  # the library is unloaded: nothing more runs
+    drive(build_program([write(tmp_path, "other.c", "int main(void) { return 0; }\n")]),
+          track="floor", time_limit_s=0.1)
+    assert log.read_text() == expected
+
+
+FORKER = """\
+    #include <stdio.h>
+    #include <stdlib.h>
+    #include <signal.h>
+    #include <unistd.h>
+    #include "spinner.h"
+    int main(void) {
+        uint8_t row[128];
+        for (int i = 0; i < 5; i++) spinner_get_image(60, 1, row, sizeof row);
+        pid_t waiter = fork();
+        if (waiter == 0) { for (;;) pause(); }  /* a helper that never ends by itself */
+        FILE *f = fopen("PIDFILE", "w");
+        fprintf(f, "%d\\n", (int)waiter);
+        fclose(f);
+        pid_t pid = fork();  /* both processes go on driving: the child must not */
+        for (int i = 0; i < 10; i++) {
+            spinner_get_image(60, 1, row, sizeof row);
+            spinner_set_speed_and_servo(0.5, 0.0);
+        }
+        printf("%s done\\n", pid == 0 ? "child" : "parent");
+        return 0;
+    }
+    """
+
+
+def _ended(pid: int) -> bool:
+    """The process ``pid`` is gone (or a zombie waiting for init)."""
+    try:
+        return Path(f"/proc/{pid}/status").read_text().split("State:")[1].split()[0] == "Z"
+    except (OSError, IndexError):
+        return True
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork and /proc: Linux")
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_fork_in_a_c_controller_leaves_the_run_and_its_log_whole(tmp_path, isolate, capfd):
+    """Issue 50 (fault injection): a controller's fork() ran the simulator twice (the child's
+    copy went on with the run: frames written twice into the CSV, which then did not read back)
+    and left a deadlocked orphan holding stdout. Now the child's Spinner call ends it with a
+    message, the log holds each frame once, and a helper still running ends with the run."""
+    import time
+
+    pidfile = tmp_path / "helper.pid"
+    src = write(tmp_path, "forker.c", FORKER.replace("PIDFILE", str(pidfile)))
+    program = dataclasses.replace(build_program([src]), isolate=isolate)
+    result = drive(program, track="floor", time_limit_s=2.0, csv=tmp_path / "run.csv")
+    assert result.outcome == "controller_returned"
+    out, err = capfd.readouterr()
+    assert out.count("parent done") == 1 and "child done" not in out
+    assert "which the controller fork()ed from process" in err and "exit status 70" in err
+    frames = read_log(tmp_path / "run.csv").frame
+    assert list(frames) == list(range(len(frames))) and len(frames) == 16
+    helper = int(pidfile.read_text())
+    for _ in range(100):  # in-process it is reaped at the run's end; isolated, init reaps it
+        if _ended(helper):
+            break
+        time.sleep(0.05)
+    assert _ended(helper)

@@ -23,3 +23,15 @@ def test_regime_figure_of_a_speed_and_gyro_log_has_its_legend_on_a_panel_with_da
         warnings.simplefilter("error")  # matplotlib warned "No artists with labels" here
         plot_regimes(result, out)
     assert matplotlib.image.imread(out).shape[0] > 100
+
+
+def test_titles_break_between_items_within_the_width():
+    """Issue 50 (cosmetic): the held-out RMSE subtitle of gap_before_after.png ran past the
+    figure's edge ("... yaw rate 0.18->" cut); it is broken between items now."""
+    from simrunner.workflows.gap.plots import _lines
+
+    items = ["position 0.137 -> 0.00909", "speed 0.161 -> 0.0197", "yaw rate 0.18 -> 0.0315"]
+    text = _lines(items, 70)
+    assert text == "position 0.137 -> 0.00909, speed 0.161 -> 0.0197,\nyaw rate 0.18 -> 0.0315"
+    assert text.replace(",\n", ", ") == ", ".join(items)
+    assert _lines(items[:1], 10) == items[0]  # an item longer than the width is kept whole

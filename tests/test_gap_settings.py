@@ -161,3 +161,18 @@ def test_simrunner_gap_reads_a_settings_file_and_says_what_is_wrong_with_one(tmp
     assert r.exit_code == 2 and "Traceback" not in r.output
     assert f"{bad}:1: unknown gap setting 'jump_zz' (did you mean jump_z?)" in r.output
     assert not (tmp_path / "out").exists()
+
+
+def test_the_gap_car_is_named_after_its_car_file(tmp_path):
+    """Issue 50 (cosmetic): the car.toml of ``--car team.toml`` (a file without a ``name``) was
+    named nxp_cup_car, the built-in car's name; it is named after the file now."""
+    from simrunner.cli.gap import named_after_file
+    from vehicle.description import load_car
+
+    team = tmp_path / "team.toml"
+    team.write_text("[chassis]\nmass_kg = 1.3\n")
+    named = tmp_path / "named.toml"
+    named.write_text('name = "blue_car"\n')
+    assert named_after_file(load_car(team), team).name == "team"
+    assert named_after_file(load_car(named), named).name == "blue_car"
+    assert named_after_file(load_car(None), None).name == "nxp_cup_car"

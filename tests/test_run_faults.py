@@ -309,3 +309,35 @@ def test_a_controllers_chdir_and_environment_stay_in_its_run(tmp_path, monkeypat
     assert os.getcwd() == str(tmp_path) and "NXPCUP_LEAK" not in os.environ
     assert (tmp_path / "log.csv").exists() and (tmp_path / "summary.json").exists()
     assert not list(elsewhere.iterdir())
+
+
+def test_a_fork_in_a_python_controller_leaves_the_run_and_its_log_whole(tmp_path, capfd):
+    """Issue 50 (fault injection), as for C controllers: after os.fork() both processes went on
+    with the run (frames written twice, a deadlocked orphan). Now the child's Spinner call ends
+    it with a message, and a child whose main ends, ends there."""
+    ctrl = tmp_path / "forker.py"
+    ctrl.write_text(textwrap.dedent("""\
+        import os, sys
+        def main(spinner):
+            for i in range(5):
+                spinner.get_image(60, 1)
+            first = os.fork()
+            if first == 0:  # a child that only exits, with a status of its own
+                sys.exit(3)
+            print("first child exit", os.waitstatus_to_exitcode(os.waitpid(first, 0)[1]), flush=True)
+            pid = os.fork()  # a child that goes on driving: it must not
+            for i in range(10):
+                spinner.get_image(60, 1)
+                spinner.set_speed_and_servo(0.5, 0.0)
+            print("child" if pid == 0 else "parent", "done", flush=True)
+            status = os.waitpid(pid, 0)[1] if pid else 0
+            print("second child exit", os.waitstatus_to_exitcode(status), flush=True)
+        """))
+    result = drive(ctrl, track="floor", time_limit_s=2.0, csv=tmp_path / "run.csv")
+    assert result.outcome == "controller_returned"
+    out, err = capfd.readouterr()
+    assert out.count("done") == 1 and "parent done" in out
+    assert "first child exit 3" in out and "second child exit 70" in out
+    assert "which the controller fork()ed from process" in err
+    frames = read_log(tmp_path / "run.csv").frame
+    assert list(frames) == list(range(len(frames))) and len(frames) == 16

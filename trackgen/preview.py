@@ -6,7 +6,8 @@ SUPERSAMPLE x the size and reduced, so edges are smooth); a grid in metres every
 :func:`grid_step_m` with the coordinates written along the left and bottom edges (world
 frame: the layout starts at (0, 0) heading +x, y up); a scale bar; a red arrow at the car's
 start pose; each physical piece labelled ``piece#:line`` in grey (at most MAX_LABELS, every
-k-th on long layouts); and a legend of all of these in the top-left corner.
+k-th on long layouts); and a legend of all of these in a band above the map (over the
+map it hid labels and grid numbers).
 """
 from __future__ import annotations
 
@@ -28,6 +29,8 @@ PREVIEW_WIDTH_PX = 1200
 """Width of the longer side of the image; the other side follows the track's aspect."""
 MIN_SIDE_PX = 400
 """The shorter side is at least this (room for the legend); the track is centred."""
+LEGEND_BAND_PX = 124
+"""Height of the band above the map that holds the legend."""
 MARGIN_M = 0.3
 MAX_LABELS = 150
 """At most this many piece labels (every k-th piece on long layouts)."""
@@ -92,15 +95,16 @@ def _lit(image, lighting, x0: float, y1: float, px_per_m: float, surface_z_m: fl
 
 
 def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> tuple[int, int]:
-    """Write the PNG to ``path``; return its ``(width_px, height_px)``."""
+    """Write the PNG to ``path``; return its ``(width_px, height_px)`` (the longer side
+    PREVIEW_WIDTH_PX, the legend's band included)."""
     from PIL import Image, ImageDraw
 
     x0, y0, x1, y1 = geometry.road.bounds
     x0, y0, x1, y1 = x0 - MARGIN_M, y0 - MARGIN_M, x1 + MARGIN_M, y1 + MARGIN_M
     w_m, h_m = max(x1 - x0, 1e-3), max(y1 - y0, 1e-3)
-    px_per_m = PREVIEW_WIDTH_PX / max(w_m, h_m)
+    px_per_m = min(PREVIEW_WIDTH_PX / w_m, (PREVIEW_WIDTH_PX - LEGEND_BAND_PX) / h_m)
     width = max(MIN_SIDE_PX, int(round(w_m * px_per_m)))
-    height = max(MIN_SIDE_PX, int(round(h_m * px_per_m)))
+    height = max(MIN_SIDE_PX - LEGEND_BAND_PX, int(round(h_m * px_per_m)))  # the map's
     # centre the track in the image
     x0 -= (width / px_per_m - w_m) / 2
     y1 += (height / px_per_m - h_m) / 2
@@ -149,9 +153,11 @@ def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> t
         _, py = to_px([[0.0, y]])[0]
         draw.text((3, py - 15), f"{y:g}", fill=TEXT_RGB, font=font)
     _scale_bar(draw, step, px_per_m, width, height, font)
-    _legend(draw, step, font)
-    image.save(str(path), format="PNG", compress_level=3)
-    return width, height
+    framed = Image.new("RGB", (width, height + LEGEND_BAND_PX), FLOOR_RGB)
+    framed.paste(image, (0, LEGEND_BAND_PX))
+    _legend(ImageDraw.Draw(framed), step, font)
+    framed.save(str(path), format="PNG", compress_level=3)
+    return framed.size
 
 
 def _labels(track: Track, draw, to_px, px_per_m: float) -> None:

@@ -86,9 +86,14 @@ class _LazyGroup(click.Group):
     def invoke(self, ctx: click.Context):
         """Run the command; a simulator dependency that is not installed is one line, exit 2.
         The simulator's own warnings (a log read with a line left out, a column not read)
-        print as ``simrunner: warning: ...`` lines, not as Python's warning format."""
+        print as ``simrunner: warning: ...`` lines, not as Python's warning format. A reader
+        of stdout that goes away (``| head``) ends nothing early and shows no traceback
+        (:mod:`simrunner.cli.pipes`)."""
         import warnings
 
+        from simrunner.cli.pipes import tolerate_reader_leaving
+
+        tolerate_reader_leaving()
         shown = warnings.showwarning
 
         def show(message, category, filename, lineno, file=None, line=None):

@@ -11,6 +11,7 @@ written); 130 stopped by Ctrl-C, 143 by SIGTERM, 129 by SIGHUP, with the partial
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import multiprocessing
 import os
 import signal
@@ -141,6 +142,9 @@ class _LiveView:
 @click.option("--settings", "settings_file", default=None, type=click.Path(dir_okay=False, path_type=Path),
               metavar="FILE.toml", help="Thresholds to change, `name = value` (docs/gap.md \"Thresholds\"; "
                                         "the options above win).")
+@click.option("--max-rows", default=None, type=click.IntRange(min=1), metavar="N",
+              help="Refuse logs of more rows than this in all, before reading them (the time and memory "
+                   f"grow with every row: docs/gap.md; default: {SETTINGS.max_rows}).")
 @click.option("--budget", "budget_min", default=None, type=click.FloatRange(min=0, min_open=True),
               metavar="MINUTES", help="End within MINUTES: the chain stops in time, with the model of its "
                                       "finished steps (the report says so).")
@@ -149,7 +153,7 @@ class _LiveView:
 def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_file: Path | None,
         column_items: tuple[str, ...], norms_file: Path | None, jobs: int, effects: str | None, max_effects: int | None,
         dt_s: float | None, window_s: float | None, screen_s: float | None, settings_file: Path | None,
-        budget_min: float | None, force: bool, no_progress: bool) -> None:
+        max_rows: int | None, budget_min: float | None, force: bool, no_progress: bool) -> None:
     """Find where MEASURED (one or several run logs of one car, docs/telemetry.md) and the
     simulator disagree, build the chain of effects that closes the gap, and show it shrink on
     held-out data.
@@ -165,6 +169,7 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
     leaves a partial report in DIR (the model of the finished steps)."""
     from simrunner.cli import input_errors
     from simrunner.errors import SimError
+    from simrunner.workflows.gap.cost import estimate
     from simrunner.workflows.gap.fit import CANDIDATES
     from simrunner.workflows.gap.logs import check_measured
     from simrunner.workflows.gap.live import Budget, Findings
@@ -182,10 +187,19 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
             if bad or not names:
                 raise SimError(f"--effects {effects!r}: expected names among {', '.join(CANDIDATES)}")
         settings = load_settings(settings_file) if settings_file is not None else SETTINGS
-        description = load_car(car)
+        description = named_after_file(load_car(car), car)
+        limit = settings.max_effects if max_effects is None else max_effects
+        n_effects = len(names) if names is not None else len(CANDIDATES)
+        shape = dataclasses.replace(settings, **{k: v for k, v in (("max_effects", limit), ("screen_max_s", screen_s),
+                                                                   ("workflow_dt_s", dt_s)) if v is not None})
+        refuse_large(measured, settings.max_rows if max_rows is None else max_rows, jobs=jobs, n_effects=n_effects,
+                     settings=shape)
         read = _read_logs(measured, columns_file, column_items, norms_file)
         logs = [check_measured(log, pooled=len(read) > 1, settings=settings) for log in read]
-        limit = settings.max_effects if max_effects is None else max_effects
+        cost = estimate(sum(len(log.t_s) for log in logs), sum(float(log.t_s[-1] - log.t_s[0]) for log in logs),
+                        jobs=jobs, n_effects=n_effects, settings=shape)
+        if cost.minutes >= SAY_COST_MIN:
+            click.echo(f"simrunner gap: {cost.text()} (estimated; docs/gap.md, --max-rows)", err=True)
         live = LiveFolder(out_dir, force=force)
         with _engine_stderr_silenced() as err, _stop_on_signals():
             view = _LiveView(err, no_progress, live)
@@ -208,7 +222,7 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
         click.echo(f"simrunner gap: {exc}", err=True)
         sys.exit(2)
     click.echo(summary_text(result))
-    click.echo(f"wrote {out_dir}/ (report.json, car.toml, residuals.txt, gap_before_after.png, "
+    click.echo(f"wrote {out_dir}/ (report.json, car.toml, residuals.txt, findings.txt, gap_before_after.png, "
                f"residuals_by_regime.png)")
 
 
@@ -227,6 +241,42 @@ def _write_stopped(findings, live, out_dir: Path, stop: _Stopped, err) -> None:
               file=err)
     err.flush()
     sys.exit(128 + stop.signum)
+
+
+SAY_COST_MIN = 5.0  # a run estimated to take longer says so (and what it reads) before it starts
+
+
+def refuse_large(paths: tuple[Path, ...], max_rows: int, **estimate_kw) -> None:
+    """SimError (one line naming the largest file, the cost and the ways out) when ``paths``
+    hold more than ``max_rows`` rows in all; counted before anything is read."""
+    from simrunner.errors import SimError
+    from simrunner.workflows.gap.cost import count_rows, estimate, span_s
+
+    rows = {}
+    for path in paths:
+        try:
+            rows[path] = count_rows(path)
+        except OSError:  # reading it says what is wrong
+            continue
+    if sum(rows.values()) <= max_rows:
+        return
+    big = max(rows, key=rows.get)
+    spans = [span_s(p) for p in rows]
+    cost = estimate(sum(rows.values()), sum(spans), **estimate_kw)
+    logs = f" in {len(rows)} logs" if len(rows) > 1 else ""
+    raise SimError(f"{big} ({big.stat().st_size / 1e6:.0f} MB): {cost.text()}{logs}, more than --max-rows "
+                   f"{max_rows:,}: give gap a part (head -n {min(max_rows, rows[big]) + 2} {big} > part.csv) "
+                   f"or raise --max-rows")
+
+
+def named_after_file(description, path: Path | None):
+    """The car of ``--car FILE`` named after FILE when the file sets no ``name`` (the gap's
+    car.toml, derived from it, then carries FILE's name rather than the built-in car's)."""
+    from vehicle.description import CarDescription
+
+    if path is None or description.name != CarDescription().name:
+        return description
+    return description.replace(name=Path(path).stem)
 
 
 def _read_logs(paths: tuple[Path, ...], columns_file: Path | None, items: tuple[str, ...],

@@ -68,7 +68,8 @@ def _map_panel(ax, log: RunLog, laps: np.ndarray, off: int | None) -> None:
         ax.annotate(f"off track\n{log.t_s[off]:.2f} s", (x[off], y[off]), textcoords="offset points",
                     xytext=(10, -24), fontsize=9, color="darkred", fontweight="bold",
                     bbox={"boxstyle": "round", "fc": "white", "ec": "red", "alpha": 0.9})
-    ax.legend(loc="best", fontsize=8)
+    # above the map, not on it: "best" avoids the lines but not the lap and off-track labels
+    ax.legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=5, fontsize=8, frameon=False)
 
 
 def _time_panel(ax, t, actual, commanded, unit: str, scale: float = 1.0) -> None:
@@ -119,9 +120,11 @@ def plot_run(log: RunLog, track, path: str | Path, *, title: str = "") -> Path:
     for ax in (ax_v, ax_s, ax_w):
         for n, i in enumerate(laps, 1):
             ax.axvline(t[i], color="goldenrod", ls=":", lw=1.2)
-            if ax is ax_v and n <= MAX_LAP_LABELS:
+            if ax is ax_v and n <= MAX_LAP_LABELS:  # left of its line near the end: not cut
+                late = t[i] > t[0] + 0.9 * (t[-1] - t[0])
                 ax.annotate(f"lap {n}", (t[i], 1.0), xycoords=("data", "axes fraction"),
-                            xytext=(2, -10), textcoords="offset points", fontsize=7)
+                            xytext=(-2 if late else 2, -10), textcoords="offset points", fontsize=7,
+                            ha="right" if late else "left")
         if off is not None:
             ax.axvline(t[off], color="red", lw=1.5)
     if off is not None:

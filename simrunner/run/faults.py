@@ -14,6 +14,9 @@ controller misbehaves").
   and the exit code is 128 + the signal's number (143, 129; Ctrl-C: 130).
 - Threads the controller started and left running are reported (:func:`stray_threads`); the
   CLI does not wait for them.
+- A process the controller forks (``os.fork``, multiprocessing's fork) is not the run's: its
+  Spinner calls end it with a message (exit status 70) and where its ``main`` ends, it ends
+  (:func:`end_forked_child`), so the run's log and outputs are the parent's alone.
 
 The patches are installed only while at least one run executes (a reference count, so runs
 in several threads nest) and are removed afterwards.
@@ -108,6 +111,7 @@ class _Patches:
 
     lock = threading.Lock()
     sessions: list = []
+    forked = False  # this process is one a running controller forked (_after_fork_in_child)
 
     @classmethod
     def acquire(cls, session) -> None:
@@ -180,6 +184,33 @@ def _exit(status: int) -> None:
     if _run_session() is None:
         _real_exit(status)
     raise ControllerExit(status)
+
+
+def _after_fork_in_child() -> None:
+    """A fork from the thread of an executing run (os.register_at_fork): mark this process as
+    the controller's child (module docstring); no run executes in it."""
+    if _run_session() is None:
+        return
+    time.sleep, os._exit = _real_sleep, _real_exit  # (the Spinner's own hook ends its calls)
+    _Patches.lock, _Patches.sessions, _Patches.forked = threading.Lock(), [], True
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+def end_forked_child() -> None:
+    """Where the ``main`` of a process the controller forked ends (returns, raises, exits):
+    the process ends there (status 0, the SystemExit's, else 1), writing nothing of the run."""
+    if not _Patches.forked:
+        return
+    exc = sys.exc_info()[1]
+    code = 0 if exc is None else exc.code if isinstance(exc, SystemExit) and isinstance(exc.code, int) else 1
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    _real_exit(code)
 
 
 class ControllerGuards:

@@ -35,7 +35,8 @@ from simrunner.car import CarModel
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, SimError
 from simrunner.run.clock import Command, LockstepClock
 from simrunner.run.controller import Controller, MainFn, load_controller, user_location, user_traceback
-from simrunner.run.faults import ControllerGuards, SignalGuard, Terminated, exit_outcome, stray_threads
+from simrunner.run.faults import (ControllerGuards, SignalGuard, Terminated, end_forked_child, exit_outcome,
+                                  stray_threads)
 from simrunner.run.judge import Judge
 from simrunner.telemetry.log import RunRecorder
 from simrunner.reports.outputs import Outputs, check_outputs, write_outputs
@@ -338,7 +339,10 @@ class Run:
                 try:
                     clock.start()
                     with controller.loaded() as main:
-                        main(Spinner(session=self.session))
+                        try:
+                            main(Spinner(session=self.session))
+                        finally:
+                            end_forked_child()  # a process the controller forked ends where its main does
                 except RunFinished as exc:
                     outcome, message = Outcome(exc.outcome), exc.message
                 except ControllerFileError:

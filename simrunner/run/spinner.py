@@ -35,6 +35,8 @@ from __future__ import annotations
 
 import contextvars
 import math
+import os
+import sys
 import threading
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
@@ -59,6 +61,29 @@ NormFn = Callable[[float, float], float]
 
 _current_session = SESSION  # the run executing in this context (simrunner.run.context)
 _get_ident = threading.get_ident
+
+
+def _call_in_forked_child() -> int:
+    """``_get_ident`` in a process the running controller forked (every Spinner call asks it
+    first): the run is the parent's, so the call ends this process with a message."""
+    sys.stdout.flush()
+    sys.stderr.write(f"simrunner: a Spinner call in process {os.getpid()}, which the controller fork()ed from "
+                     f"process {os.getppid()}: only the controller's own process drives the car; this one ends "
+                     "(exit status 70)\n")
+    sys.stderr.flush()
+    os._exit(70)
+
+
+def _after_fork_in_child() -> None:
+    """A fork from the thread of an executing run (the controller's, os.register_at_fork): in
+    the child, Spinner calls end the process (simrunner.run.faults ends it where main ends)."""
+    global _get_ident
+    session = _current_session.get()
+    if session is not None and session.thread_id == threading.get_ident():
+        _get_ident = _call_in_forked_child
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 class BufferedNormals:

@@ -46,10 +46,11 @@ CXX_FLAGS = ("-std=gnu++17",)
 # library holding one can never be unloaded, and every later run of it would share them.
 # Runs in the simulator's process start from fresh globals, so they are made ordinary.
 CXX_FRESH_FLAGS = ("-fno-gnu-unique",)
-# the sleeps wait in simulated time and an exit ends the program, not the simulator: the
-# controller's calls go to __wrap_NAME (host/spinner_host.c, both builds)
+# the sleeps wait in simulated time, an exit ends the program, not the simulator, and a forked
+# process cannot drive the car: the controller's calls go to __wrap_NAME (host/spinner_host.c,
+# both builds)
 WRAPPED = ("usleep", "sleep", "nanosleep", "clock_nanosleep", "exit", "_exit", "_Exit", "quick_exit",
-           "atexit", "__cxa_atexit")
+           "atexit", "__cxa_atexit", "fork")
 LINK_FLAGS = ("-Wl,--wrap=" + ",--wrap=".join(WRAPPED),)
 INSTALL_HINT = "install a C compiler, e.g. `sudo apt-get install build-essential` (Debian/Ubuntu)"
 
@@ -147,16 +148,123 @@ def _accepts(compiler: str, flags: tuple[str, ...]) -> bool:
     return ok
 
 
-def _run(cmd: list[str], what: str) -> str:
-    """Run the compiler; its messages (warnings) on success; ControllerFileError on failure."""
+class BuildWarning(UserWarning):
+    """A build is slow (the CLIs print it as ``simrunner: warning: ...``)."""
+
+
+@dataclass(frozen=True)
+class BuildLimits:
+    """What one compiler or linker run may take. Controllers compile in about a second here
+    (examples/line_follower.c 0.3 s, the TFC firmware with its kit 1.1 s); a generated 9 MB
+    source ran 340 s at 3.5 GB before these limits.
+
+    ``wall_s``: wall time (s) after which the compiler (its whole process group) is stopped.
+    ``memory_mb``: address space (MB, RLIMIT_AS) of each of its processes (the driver, the
+    compiler proper, the assembler, the linker). ``slow_after_s``: a build still running
+    after this long is reported (:class:`BuildWarning`), then every ``slow_every_s``.
+    :meth:`from_env` reads ``SIMRUNNER_BUILD_TIME_S`` and ``SIMRUNNER_BUILD_MEMORY_MB``."""
+
+    wall_s: float = 120.0
+    memory_mb: int = 2048
+    slow_after_s: float = 5.0
+    slow_every_s: float = 30.0
+
+    @classmethod
+    def from_env(cls) -> BuildLimits:
+        """The defaults, with the limits of the environment variables where set."""
+        values = {}
+        for var, name, kind in (("SIMRUNNER_BUILD_TIME_S", "wall_s", float),
+                                ("SIMRUNNER_BUILD_MEMORY_MB", "memory_mb", int)):
+            text = os.environ.get(var)
+            if text is None:
+                continue
+            try:
+                value = kind(text)
+            except ValueError:
+                value = 0
+            if not value > 0:
+                raise ControllerFileError(f"{var}={text}: expected a number > 0 "
+                                          f"({'seconds' if kind is float else 'megabytes'})")
+            values[name] = value
+        return cls(**values)
+
+
+_OUT_OF_MEMORY = ("out of memory", "memory exhausted", "cannot allocate memory", "bad_alloc")
+
+
+def _limit_child(memory_mb: int, cpu_s: float):
+    """preexec_fn: the limits, set in the compiler's process before it starts."""
+    def limit() -> None:
+        import resource
+
+        mem = memory_mb << 20
+        resource.setrlimit(resource.RLIMIT_AS, (mem, mem))
+        cpu = int(cpu_s) + 1  # a stray grandchild ends by SIGXCPU even if the group kill missed it
+        resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 5))
+    return limit
+
+
+def _size_text(path: str) -> str:
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, errors="replace")
+        size = os.path.getsize(path)
+    except OSError:
+        return ""
+    return f" ({size / 1e6:.1f} MB)" if size >= 100_000 else ""
+
+
+def _run(cmd: list[str], what: str, limits: BuildLimits | None = None) -> str:
+    """Run the compiler within ``limits`` (:class:`BuildLimits`); its messages (warnings) on
+    success; ControllerFileError on failure, one line when a limit stopped it."""
+    import signal
+    import time
+    import warnings
+
+    limits = limits or BuildLimits()
+    try:
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                errors="replace", start_new_session=True,
+                                preexec_fn=_limit_child(limits.memory_mb, limits.wall_s))
     except OSError as exc:
         raise ControllerFileError(f"{what}: cannot run {cmd[0]} ({exc}): {INSTALL_HINT}") from None
+    start = time.monotonic()
+    report_at = limits.slow_after_s
+    try:
+        while True:
+            elapsed = time.monotonic() - start
+            wait = min(report_at, limits.wall_s) - elapsed
+            try:
+                out, err = proc.communicate(timeout=max(wait, 0.0))
+                break
+            except subprocess.TimeoutExpired:
+                elapsed = time.monotonic() - start
+                if elapsed >= limits.wall_s:
+                    raise ControllerFileError(
+                        f"{what}: compiling stopped at the build time limit of {limits.wall_s:g} s "
+                        f"(SIMRUNNER_BUILD_TIME_S=SECONDS sets another)") from None
+                if elapsed >= report_at:
+                    warnings.warn(f"compiling {what}{_size_text(what)}: {elapsed:.0f} s so far "
+                                  f"(stopped at {limits.wall_s:g} s or {limits.memory_mb} MB)",
+                                  BuildWarning, stacklevel=2)
+                    report_at += limits.slow_every_s
+    finally:
+        if proc.returncode is None:  # the limit, Ctrl-C: the compiler and its children end
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except OSError:
+                pass
+            proc.communicate()
     if proc.returncode != 0:
-        out = (proc.stderr + proc.stdout).rstrip()
-        raise ControllerFileError(f"compiling {what} failed:\n{out}")
-    return proc.stderr
+        text = (err + out).rstrip()
+        if proc.returncode == -signal.SIGXCPU or "SIGXCPU" in text or "CPU time limit" in text:
+            raise ControllerFileError(
+                f"{what}: compiling stopped at the build time limit of {limits.wall_s:g} s "
+                f"(SIMRUNNER_BUILD_TIME_S=SECONDS sets another)")
+        if any(m in text.lower() for m in _OUT_OF_MEMORY):
+            raise ControllerFileError(
+                f"{what}: compiling needed more than the build memory limit of {limits.memory_mb} MB "
+                f"(SIMRUNNER_BUILD_MEMORY_MB=MB sets another)")
+        raise ControllerFileError(f"compiling {what} failed:\n{text}")
+    return err
 
 
 def _check_sources(sources: list[str | Path]) -> list[Path]:
@@ -237,9 +345,11 @@ def kit_files(kit: str) -> tuple[list[Path], list[Path]]:
 
 
 def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] = (),
-                  defines: list[str] = (), kit: str | None = None) -> NativeProgram:
+                  defines: list[str] = (), kit: str | None = None,
+                  limits: BuildLimits | None = None) -> NativeProgram:
     """Compile ``sources`` into a cached shared library (or take one prebuilt ``.so``); with
-    ``kit``, against that kit library's headers and sources (:func:`kit_files`)."""
+    ``kit``, against that kit library's headers and sources (:func:`kit_files`). Each
+    compiler run is held to ``limits`` (default :meth:`BuildLimits.from_env`)."""
     if kit is not None:
         kit_includes, kit_sources = kit_files(kit)
         for s in sources:
@@ -273,6 +383,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     import shutil
     import tempfile
 
+    limits = limits or BuildLimits.from_env()
     entry.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".build-", dir=entry.parent))
     try:
@@ -282,12 +393,12 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
             obj, dep = tmp / f"{i}.o", tmp / f"{i}.d"
             cmd = [compilers[is_cxx], *COMMON_FLAGS, *(cxx_flags if is_cxx else C_FLAGS), *flags,
                    "-MMD", "-MF", str(dep), "-c", str(p), "-o", str(obj)]
-            warnings.append(_run(cmd, str(p)))
+            warnings.append(_run(cmd, str(p), limits))
             objects.append(str(obj))
             depfiles.append(dep)
         linker = compilers[True] if cxx else compilers[False]
         warnings.append(_run([linker, "-shared", "-g", *LINK_FLAGS, *objects, "-o",
-                              str(tmp / "controller.so"), "-lm"], ", ".join(map(str, paths))))
+                              str(tmp / "controller.so"), "-lm"], ", ".join(map(str, paths)), limits))
         text = "".join(warnings)
         deps = _deps(depfiles)
         (tmp / "manifest.json").write_text(json.dumps({"deps": deps, "warnings": text}))
@@ -319,7 +430,7 @@ def _build_host(kind: str, suffix: str, flags: list[str], libs: list[str]) -> Pa
     tmp = out.with_name(f".{out.name}.{os.getpid()}")
     try:
         _run([compiler, "-O2", "-g", *flags, f"-I{INCLUDE_DIR}", str(HOST_SOURCE), "-o", str(tmp),
-              *libs], "the simrunner host program")
+              *libs], "the simrunner host program", BuildLimits.from_env())
         os.replace(tmp, out)
     finally:
         if tmp.exists():

@@ -79,14 +79,27 @@ def plot_before_after(result, path: str | Path) -> None:
     shown = [(s, label) for s, label in (("position_m", "position"), ("speed_mps", "speed"),
                                          ("yaw_rate_radps", "yaw rate"))
              if np.isfinite(result.rmse_before.get(s, np.nan))]
-    ax.set_title("held-out RMSE before->after: " + ", ".join(
-        f"{label} {result.rmse_before[s]:.3g}->{result.rmse_after.get(s, np.nan):.3g}" for s, label in shown)
+    ax.set_title("held-out RMSE before -> after:\n" + _lines([
+        f"{label} {result.rmse_before[s]:.3g} -> {result.rmse_after.get(s, np.nan):.3g}" for s, label in shown], 70)
         if held.any() and shown else "", fontsize=9)
-    param = ", ".join(f"{k} = {v:.4g}" for k, v in result.parameters.items())
-    fig.suptitle(f"{Path(log.source).name}: effects = {result.effect}" + (f" ({param})" if param else ""))
+    head = f"{Path(log.source).name}: effects = {result.effect}"
+    params = [f"{k} = {v:.4g}" for k, v in result.parameters.items()]
+    fig.suptitle(_lines([f"{head} ({params[0]}", *params[1:-1], f"{params[-1]})"] if len(params) > 1 else
+                        [f"{head} ({params[0]})"] if params else [head], 120))
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+def _lines(items: list[str], width: int) -> str:
+    """``items`` joined by ", ", a new line before one that would pass ``width`` characters."""
+    lines = [""]
+    for item in items:
+        if lines[-1] and len(lines[-1]) + 2 + len(item) > width:
+            lines[-1] += ","
+            lines.append("")
+        lines[-1] += (", " if lines[-1] else "") + item
+    return "\n".join(lines)
 
 
 def plot_regimes(result, path: str | Path) -> None:

@@ -180,6 +180,19 @@ class GapSettings:
     glitches_listed: int = _s(12, "1", "choice: the summary lists this many glitches (report.json: all)")
     epoch_like_s: float = _s(1000.0, "s", "choice: a log starting later than this has epoch-like times (said, "
                              "not changed)")
+    # -- the cost of a run, said before it (cost.py; simrunner gap --max-rows) -----------------
+    max_rows: int = _s(250_000, "1", "choice: about an hour of a 50-Hz log (~0.3 GB, ~10 min here); logs of more "
+                       "rows in all are refused before reading")
+    replay_cpu_base_s: float = _s(0.00177, "s (CPU per s of log)", "measured: replaying every window of the "
+                                  "synthetic 94-s log took 0.0059 s of CPU per s of log at a 5-ms step and 0.0121 s "
+                                  "at 2 ms (2-CPU machine): base + replay_cpu_step_s / dt")
+    replay_cpu_step_s: float = _s(2.07e-5, "s^2 (CPU per s of log, times dt)", "measured: as replay_cpu_base_s")
+    screen_wall_per_s: float = _s(2.4, "s (wall per s screened, 2 processes)", "measured: the synthetic 94-s log "
+                                  "took 112 s with 24 candidates, 45 s screened, ~5 s of it replays")
+    cost_base_mb: float = _s(200.0, "MB", "measured: ~120 MB before a log is read; 219 MB at the peak of a run "
+                             "on a 19k-row log")
+    cost_bytes_per_row: float = _s(750.0, "B", "measured: 285 MB at 297k rows read and prepared; the issue's "
+                                   "200-MB log (3 M rows) stood at 2.3 GB, 2.6 GB here while still reading")
 
     def changed(self) -> dict[str, float]:
         """The fields that differ from the defaults (a report's record of how it was run)."""

@@ -36,7 +36,11 @@
 #include <ucontext.h>
 #include <unistd.h>
 #include <pthread.h>
+#include <sys/prctl.h>
+#include <sys/types.h>
+#include <sys/wait.h>
 #ifdef SPINNER_INPROC
+#include <link.h>
 #include <sys/mman.h>
 #include <sys/resource.h>
 #endif
@@ -70,7 +74,10 @@ static void read_init(void);
 static pthread_t api_thread;
 static volatile int foreign_calls;
 static void foreign_call_report(void);
+static void forked_call(void) __attribute__((noreturn));
+static volatile sig_atomic_t forked;  /* this process is one the controller fork()ed (below) */
 static int foreign_thread(void) {
+    if (forked) forked_call();
     if (!inited || pthread_equal(pthread_self(), api_thread)) return 0;
     if (!finished) foreign_calls = 1;
     return 1;
@@ -151,6 +158,7 @@ static volatile double resumed_at_s;         /* monotonic time of the last switc
 static pthread_t sim_thread_id;              /* the thread that runs the simulator */
 
 static void switch_out(void) {
+    if (forked) forked_call();  /* the copy of the simulator in a forked child never runs */
     in_controller = 0;
     TO_SIM();
     in_controller = 1;
@@ -736,6 +744,7 @@ static void leave(int status) {
     finished = 1;
     fflush(stdout);
     fflush(stderr);
+    if (forked) _exit(status);  /* a process the controller forked (below) ends here */
     exit_code = status;
     gone = 1;
     in_controller = 0;
@@ -765,6 +774,13 @@ int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) {
     exit_handlers[n_exit_handlers++].arg = arg;
     return 0;
 }
+/* Its library's destructors (a C function marked __attribute__((destructor)), what its
+ * .fini_array holds) are taken from it when its run starts (take_fini: the entries are
+ * replaced by a no-op, so unloading the library later runs none of them) and run here, after
+ * the exit handlers, last first, as exit() runs a program's. */
+#define MAX_FINI 256
+static void (*fini_fns[MAX_FINI])(void);
+static int n_fini;
 static void exit_run(int status) __attribute__((noreturn));
 static void exit_run(int status) {
     finished = 1;  /* Spinner calls from the handlers return at once */
@@ -772,6 +788,7 @@ static void exit_run(int status) {
         n_exit_handlers--;
         exit_handlers[n_exit_handlers].fn(exit_handlers[n_exit_handlers].arg);
     }
+    while (n_fini > 0) fini_fns[--n_fini]();
     fflush(NULL);
     leave(status);
 }
@@ -781,6 +798,80 @@ void __wrap__exit(int status) { leave(status); }
 void __wrap__Exit(int status) { leave(status); }
 void __wrap_quick_exit(int status) { leave(status); }
 #endif
+
+/* -- fork ------------------------------------------------------------------------------- */
+/* A process the controller fork()s (linked with --wrap=fork; the host program also catches a
+ * prebuilt library's forks with pthread_atfork) is a helper of the program, not the program:
+ * it has no simulator to talk to (in-process its memory holds a copy of the simulator, which
+ * must never run twice: it would write the run's frames again). Its Spinner calls end it
+ * with a message (exit status 70); its exit, _exit and faults end it as they end a process;
+ * it ends with the run (in-process the run's end kills it; the simulator's or the host
+ * program's death does too: PR_SET_PDEATHSIG). */
+#define FORK_EXIT 70
+static pid_t fork_parent;
+
+static void forked_call(void) {
+    char msg[320];
+    int n = snprintf(msg, sizeof msg,
+                     "simrunner: a Spinner call in process %ld, which the controller fork()ed from "
+                     "process %ld: only the controller's own process drives the car; this one ends "
+                     "(exit status %d)\n", (long)getpid(), (long)fork_parent, FORK_EXIT);
+    if (n > 0) {
+        ssize_t w = write(2, msg, (size_t)n < sizeof msg ? (size_t)n : sizeof msg - 1);
+        (void)w;
+    }
+    _exit(FORK_EXIT);
+}
+
+static void in_forked_child(void) {
+    if (forked) return;
+    forked = 1;
+    prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (getppid() != fork_parent) _exit(FORK_EXIT);  /* the parent died before the call */
+#ifndef SPINNER_INPROC
+    close(req_fd), close(rep_fd);  /* the pipes are the program's: its end of file is the run's */
+    req_fd = rep_fd = -1;
+    out_len = 0;
+#endif
+}
+
+#ifdef SPINNER_INPROC
+#define MAX_HELPERS 64
+static pid_t helpers[MAX_HELPERS];  /* processes the run's controller forked */
+static int n_helpers;
+
+/* The run is over: its helpers end with it (killed, reaped; one the program reaped itself is
+ * left alone: its pid may be another process's by now). */
+static void end_helpers(void) {
+    for (int i = 0; i < n_helpers; i++) {
+        if (waitpid(helpers[i], NULL, WNOHANG) != 0) continue;  /* reaped now, or before */
+        kill(helpers[i], SIGKILL);
+        while (waitpid(helpers[i], NULL, 0) < 0 && errno == EINTR) {}
+    }
+    n_helpers = 0;
+}
+#endif
+
+#ifndef SPINNER_INPROC
+static void fork_prepare(void) { fork_parent = getpid(); }
+#endif
+
+pid_t __wrap_fork(void) {
+    pid_t self = getpid();
+    pid_t pid = fork();
+    if (pid == 0) {
+        fork_parent = self;
+        in_forked_child();
+    }
+#ifdef SPINNER_INPROC
+    else if (pid > 0) {
+        int i = __atomic_fetch_add(&n_helpers, 1, __ATOMIC_ACQ_REL);
+        if (i < MAX_HELPERS) helpers[i] = pid;
+        else __atomic_store_n(&n_helpers, MAX_HELPERS, __ATOMIC_RELEASE);
+    }
+#endif
+    return pid;
+}
 
 /* -- faults ---------------------------------------------------------------------------- */
 static char report[1 << 15];
@@ -824,6 +915,11 @@ static void rdec(long v) {
 
 /* Text report: "signal N\nmessage TEXT\npc ADDR\nframe ADDR OFFSET PATH\tSYMBOL\n"... */
 static void fault_report(int sig, const char *message, void *pc) {
+    if (forked) {  /* misuse in a forked process: said on stderr, no simulator to report to */
+        fprintf(stderr, "simrunner: %s (in process %ld, which the controller fork()ed)\n", message,
+                (long)getpid());
+        _exit(FORK_EXIT);
+    }
     void *frames[128];
     int n = backtrace(frames, 128);
     report_len = 0;
@@ -894,6 +990,11 @@ static void pass_on(int sig, siginfo_t *info) {
 #endif
 
 static void on_fault(int sig, siginfo_t *info, void *context) {
+    if (forked) {  /* a process the controller forked: the signal's own action ends it */
+        signal(sig, SIG_DFL);
+        if (info->si_code <= 0) raise(sig);
+        return;
+    }
 #ifdef SPINNER_INPROC
     if (!in_controller || !pthread_equal(pthread_self(), sim_thread_id)) {
         pass_on(sig, info);  /* not the run's controller code (another thread's, say) */
@@ -962,6 +1063,9 @@ int main(int argc, char **argv) {
     req_fd = atoi(argv[2]);
     rep_fd = atoi(argv[3]);
     setvbuf(stdout, NULL, _IOLBF, 0);  /* the controller's prints reach the terminal in order */
+    signal(SIGPIPE, SIG_IGN);  /* a reader of stdout that left (`| head`) fails its writes, as
+                                  in the simulator's process, instead of killing the program */
+    pthread_atfork(fork_prepare, NULL, in_forked_child);  /* a prebuilt library's forks too */
     install_handlers();
     void *lib = dlopen(argv[1], RTLD_NOW | RTLD_GLOBAL);
     if (lib == NULL) {
@@ -973,7 +1077,7 @@ int main(int argc, char **argv) {
     extern char **environ;
     INIT();  /* the run has started */
     int rc = user_main(argc - 4, argv + 4, environ);
-    flush_out();
+    flush_out();  /* nothing in a forked process (its pipes are closed) */
     exit(rc);
 }
 #else
@@ -1065,6 +1169,51 @@ static void entry(void) {
     exit_run(rc);
 }
 
+/* take_fini: the library's .fini_array (its destructors) into fini_fns, each entry replaced
+ * by fini_taken (the array is in the library's RELRO pages on most builds: made writable for
+ * the change, read-only again after it). A library with more than MAX_FINI keeps them all. */
+static void fini_taken(void) {}
+struct relro_query { ElfW(Addr) base; uintptr_t lo, hi; };
+static int find_relro(struct dl_phdr_info *info, size_t size, void *data) {
+    (void)size;
+    struct relro_query *q = data;
+    if (info->dlpi_addr != q->base) return 0;
+    for (int i = 0; i < info->dlpi_phnum; i++) {
+        const ElfW(Phdr) *ph = &info->dlpi_phdr[i];
+        if (ph->p_type != PT_GNU_RELRO) continue;
+        uintptr_t page = (uintptr_t)sysconf(_SC_PAGESIZE);
+        q->lo = (info->dlpi_addr + ph->p_vaddr) & ~(page - 1);  /* as the loader protects it */
+        q->hi = (info->dlpi_addr + ph->p_vaddr + ph->p_memsz) & ~(page - 1);
+    }
+    return 1;
+}
+static void take_fini(void *lib) {
+    struct link_map *lm = NULL;
+    ElfW(Addr) at = 0;
+    size_t bytes = 0;
+    n_fini = 0;
+    if (dlinfo(lib, RTLD_DI_LINKMAP, &lm) != 0 || lm == NULL) return;
+    for (const ElfW(Dyn) *d = lm->l_ld; d->d_tag != DT_NULL; d++) {
+        if (d->d_tag == DT_FINI_ARRAY) at = d->d_un.d_ptr;
+        if (d->d_tag == DT_FINI_ARRAYSZ) bytes = d->d_un.d_val;
+    }
+    size_t n = bytes / sizeof(void (*)(void));
+    if (at == 0 || n == 0 || n > MAX_FINI) return;
+    void (**fns)(void) = (void (**)(void))(lm->l_addr + at);
+    uintptr_t page = (uintptr_t)sysconf(_SC_PAGESIZE);
+    uintptr_t lo = (uintptr_t)fns & ~(page - 1);
+    uintptr_t hi = ((uintptr_t)(fns + n) + page - 1) & ~(page - 1);
+    if (mprotect((void *)lo, hi - lo, PROT_READ | PROT_WRITE) != 0) return;  /* left to dlclose */
+    for (size_t i = 0; i < n; i++) {
+        fini_fns[i] = fns[i];
+        fns[i] = fini_taken;
+    }
+    n_fini = (int)n;
+    struct relro_query q = {lm->l_addr, 0, 0};
+    dl_iterate_phdr(find_relro, &q);
+    if (lo >= q.lo && hi <= q.hi) mprotect((void *)lo, hi - lo, PROT_READ);
+}
+
 /* Open the controller's library: its handle, or NULL (spinner_inproc_error says why). */
 void *spinner_inproc_open(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
 
@@ -1128,6 +1277,8 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     last_time_s = last_speed_val = 0.0;
     last_pos[0] = last_pos[1] = last_pos[2] = 0.0;
     f_speed_norm = f_speed_denorm = f_turn_norm = f_diff_norm = NULL;
+    n_helpers = 0;
+    take_fini(lib);
     ctx_make((void *)stack_lo, stack_size);
     pthread_sigmask(SIG_BLOCK, NULL, &run_mask);
     sim_thread_id = pthread_self();
@@ -1169,6 +1320,8 @@ long spinner_inproc_resume_image(const unsigned char *image, size_t n) {
 void spinner_inproc_finish(void) {
     gone = finished = 1;
     n_exit_handlers = 0;  /* handlers a fault or the simulator's end left: their code is unloaded next */
+    n_fini = 0;
+    end_helpers();
     in_controller = 0;
     pthread_mutex_lock(&dog_lock);  /* it sends only under the lock: none comes after this */
     dog_active = 0;  /* the watchdog goes back to sleep at its next look */

@@ -1,0 +1,72 @@
+"""What a gap run will cost, said or refused before the work (issue 50: a 200 MB log kept
+``simrunner gap`` at 0 fits for 10 minutes at 2.3 GB)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from simrunner.cli import main as cli
+from simrunner.errors import SimError
+from simrunner.telemetry.log import read_log
+from simrunner.workflows.gap.cost import count_rows, estimate, span_s
+
+
+def _straight_log(path, duration_s: float = 20.0):
+    """A car driving straight at 1 m/s, 50 Hz: a log ``check_measured`` takes."""
+    t = np.arange(0.0, duration_s, 0.02)
+    rows = "\n".join(f"{ti:.6f},{ti:.6f},0.000000,0.000000,1.000000,1.000000,0.000000" for ti in t)
+    path.write_text("# nxpcup-sim run log, format 2\n\nt_s,x_m,y_m,yaw_rad,speed_mps,speed_cmd_mps,steer_cmd_rad\n"
+                    + rows + "\n")
+    return path
+
+
+def test_rows_and_span_counted_without_reading_are_the_readers(tmp_path):
+    path = _straight_log(tmp_path / "log.csv")
+    log = read_log(path)
+    assert count_rows(path) == len(log.t_s) == 1000
+    assert span_s(path) == pytest.approx(log.t_s[-1] - log.t_s[0])
+    assert math.isnan(span_s(tmp_path / "missing.csv"))
+
+
+def test_estimates_grow_with_the_log_and_an_ordinary_log_says_nothing():
+    from simrunner.cli.gap import SAY_COST_MIN
+
+    ordinary = estimate(4722, 94.4)  # the synthetic logs of the tests and the bench
+    hour = estimate(180_000, 3600.0)
+    assert ordinary.minutes < SAY_COST_MIN <= hour.minutes
+    assert ordinary.memory_mb < hour.memory_mb < estimate(3_000_000, 60_000.0).memory_mb
+    # the issue's 200 MB log (~3 million rows, 16.5 h at 50 Hz): an hour, 2.5 GB
+    big = estimate(3_000_000, 60_000.0)
+    assert 30 < big.minutes < 120 and 2000 < big.memory_mb < 3000
+    assert big.text() == "3,000,000 rows, 60,000 s of data: ~2.5 GB, ~58 min"
+
+
+def test_a_log_past_max_rows_is_refused_before_reading_in_one_line(tmp_path):
+    path = _straight_log(tmp_path / "long.csv")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(cli, ["gap", str(path), "-o", str(out), "--max-rows", "600"])
+    assert r.exit_code == 2 and len(r.output.splitlines()) == 1
+    assert r.output.startswith(f"simrunner gap: {path} (0 MB): 1,000 rows, 20 s of data: ~0.2 GB, ~")
+    assert r.output.endswith(f"more than --max-rows 600: give gap a part (head -n 602 {path} > part.csv) "
+                             "or raise --max-rows\n")
+    assert not out.exists()
+
+
+def test_a_long_run_says_its_cost_before_it_starts(tmp_path, monkeypatch):
+    import simrunner.cli.gap as gap_cli
+    import simrunner.workflows.gap.workflow as workflow
+
+    def stop(*args, **kwargs):
+        raise SimError("stopped here")
+
+    monkeypatch.setattr(gap_cli, "SAY_COST_MIN", 0.0)
+    monkeypatch.setattr(workflow, "run_gap", stop)
+    path = _straight_log(tmp_path / "log.csv")
+    r = CliRunner().invoke(cli, ["gap", str(path), "-o", str(tmp_path / "out"), "--no-progress"])
+    lines = r.output.splitlines()
+    assert r.exit_code == 2 and lines[-1] == "simrunner gap: stopped here"
+    assert lines[0].startswith("simrunner gap: 1,000 rows, 20 s of data: ~0.2 GB, ~")
+    assert lines[0].endswith('min (estimated; docs/gap.md, --max-rows)')
