@@ -451,17 +451,33 @@ def check_output_dir(out_dir: str | Path, *, force: bool = False) -> Path:
     return out
 
 
+@contextlib.contextmanager
+def _swapped_in(out: Path):
+    """A new temporary sibling of ``out`` to write the folder into, swapped into ``out`` when the
+    block ends; on any error it is removed (an OSError becomes a one-line GapError), so ``out``
+    is the old folder or the new one, never half of one."""
+    try:
+        tmp = make_temp(out)
+    except OSError as exc:
+        raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
+    try:
+        yield tmp
+        replace_folder(tmp, out)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise GapError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
 def start_live_folder(out_dir: str | Path, *, force: bool = False) -> Path:
     """Make ``out_dir`` the running run's folder (an existing one replaced only with
     ``force``), holding an empty ``findings.txt``; returns that file's path."""
     out = check_output_dir(out_dir, force=force)
     clean_stale(out)
-    try:
-        tmp = make_temp(out)
+    with _swapped_in(out) as tmp:
         (tmp / "findings.txt").write_text("")
-        replace_folder(tmp, out)
-    except OSError as exc:
-        raise GapError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
     return out / "findings.txt"
 
 
@@ -510,11 +526,7 @@ def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False
 
     out = check_output_dir(out_dir, force=force)
     clean_stale(out)
-    try:
-        tmp = make_temp(out)
-    except OSError as exc:
-        raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
-    try:
+    with _swapped_in(out) as tmp:
         (tmp / "report.json").write_text(json.dumps(result.to_json(), indent=2) + "\n")
         result.car.save(tmp / "car.toml", car_sources(result))
         (tmp / "residuals.txt").write_text(summary_text(result) + "\n")
@@ -522,13 +534,6 @@ def write_outputs(result: GapResult, out_dir: str | Path, *, force: bool = False
         plot_regimes(result, tmp / "residuals_by_regime.png")
         if findings is not None:
             (tmp / "findings.txt").write_text(findings_text(findings))
-        replace_folder(tmp, out)
-    except OSError as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise GapError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out
 
 
@@ -564,11 +569,7 @@ def write_partial(findings: Findings, out_dir: str | Path, stopped: str) -> Path
     live folder ``out_dir`` as :func:`write_outputs` writes a whole one. ``car.toml`` is the model
     of the finished steps when the run got as far as the nominal car."""
     out = Path(out_dir)
-    try:
-        tmp = make_temp(out)
-    except OSError as exc:
-        raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
-    try:
+    with _swapped_in(out) as tmp:
         (tmp / "report.json").write_text(json.dumps(partial_json(findings, stopped), indent=2) + "\n")
         (tmp / "residuals.txt").write_text(partial_text(findings, stopped))
         (tmp / "findings.txt").write_text(findings_text(findings))
@@ -576,11 +577,4 @@ def write_partial(findings: Findings, out_dir: str | Path, stopped: str) -> Path
             with_parameters(findings.base_car, findings.parameters).save(
                 tmp / "car.toml", {f"effects.{k}": "the finished steps of a stopped `simrunner gap` run (partial)"
                                    for k in findings.parameters})
-        replace_folder(tmp, out)
-    except OSError as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise GapError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return out
