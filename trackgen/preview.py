@@ -143,8 +143,8 @@ def render_preview(track: Track, geometry: TrackGeometry, path: str | Path) -> t
     if not lighting.is_default():
         image = _lit(image, lighting, x0, y1, px_per_m, track.layout.settings.thickness_m)
     draw = ImageDraw.Draw(image)
-    _labels(track, draw, to_px, px_per_m)
     _arrow(track, draw, to_px)
+    _labels(track, draw, to_px, px_per_m)  # over the arrow, on a white halo: a label it covers stays readable
     font = _font(13)
     for x in gx:
         px, _ = to_px([[x, 0.0]])[0]
@@ -166,7 +166,8 @@ def _labels(track: Track, draw, to_px, px_per_m: float) -> None:
     font = _font(min(13, max(8, 0.12 * px_per_m)))
     for p in physical[::step]:
         (cx, cy), = to_px(p.centreline_world().mean(axis=0, keepdims=True))
-        draw.text((cx, cy), f"{p.index + 1}:{p.line}", fill=LABEL_RGB, font=font, anchor="mm")
+        draw.text((cx, cy), f"{p.index + 1}:{p.line}", fill=LABEL_RGB, font=font, anchor="mm",
+                  stroke_width=2, stroke_fill=(255, 255, 255))
 
 
 def _arrow(track: Track, draw, to_px, length_m: float = 0.25) -> None:
