@@ -37,9 +37,9 @@ def write_outputs(result, outputs: Outputs, video, track, *, csv_stream=None) ->
             errors.append(exc)
     if csv_stream is not None:  # (without outputs.csv: a supervisor's copy, not an output)
         try:
-            path = csv_stream.close()
-            if outputs.csv is not None:
-                result.outputs["csv"] = str(path)
+            csv_stream.close()
+            if outputs.csv is not None:  # as given (the stream holds it absolute, against a controller's chdir)
+                result.outputs["csv"] = str(outputs.csv)
         except SimError as exc:
             errors.append(exc)
     elif outputs.csv is not None:
