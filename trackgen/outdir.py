@@ -14,6 +14,7 @@
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import errno
 import os
@@ -97,6 +98,20 @@ def exchange(a: Path, b: Path) -> bool:
     if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):
         return False
     raise OSError(err, os.strerror(err), str(b))
+
+
+@contextlib.contextmanager
+def swapped_in(out_dir: Path):
+    """A new temporary sibling of ``out_dir`` (:func:`make_temp`) to write a folder into,
+    swapped into ``out_dir`` (:func:`replace_folder`) when the block ends; removed on any error,
+    which propagates, so ``out_dir`` is the old folder or the new one, never half of one."""
+    tmp = make_temp(out_dir)
+    try:
+        yield tmp
+        replace_folder(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
 
 
 def replace_folder(tmp: Path, out_dir: Path) -> None:

@@ -584,7 +584,7 @@ def write_outputs(fit: CameraFit, out_dir, sources: list[str]) -> None:
     import json
     from pathlib import Path
 
-    from trackgen.outdir import clean_stale, make_temp, replace_folder
+    from trackgen.outdir import clean_stale, swapped_in
 
     out = Path(out_dir)
     if not out.parent.is_dir():
@@ -592,8 +592,7 @@ def write_outputs(fit: CameraFit, out_dir, sources: list[str]) -> None:
     if out.exists() and not out.is_dir():
         raise CalibrationError(f"{out}: exists and is not a folder")
     clean_stale(out)
-    tmp = make_temp(out)
-    try:
+    with swapped_in(out) as tmp:
         report = fit.report_json()
         report["recordings"] = list(sources)
         (tmp / "report.json").write_text(json.dumps(report, indent=2, allow_nan=False) + "\n")
@@ -608,12 +607,6 @@ def write_outputs(fit: CameraFit, out_dir, sources: list[str]) -> None:
             fitted["camera.prnu"] = "simrunner calibrate-camera: the measured response replaces the seeded pattern"
         fit.car_after.save(tmp / "car.toml", fitted)
         _plot(fit, tmp / "lines.png")
-        replace_folder(tmp, out)
-    except BaseException:
-        import shutil
-
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 def _plot(fit: CameraFit, path) -> None:

@@ -35,7 +35,7 @@ from simrunner.workflows.gap.live import Findings
 from simrunner.workflows.gap.logs import Derived
 from simrunner.workflows.gap.replay import Prediction, Window, noise_rms
 from simrunner.workflows.gap.settings import SETTINGS, GapSettings
-from trackgen.outdir import clean_stale, make_temp, replace_folder
+from trackgen.outdir import clean_stale, make_temp, swapped_in
 from vehicle.description import CarDescription
 
 FORMAT = "nxpcup-gap/2"
@@ -453,22 +453,12 @@ def check_output_dir(out_dir: str | Path, *, force: bool = False) -> Path:
 
 @contextlib.contextmanager
 def _swapped_in(out: Path):
-    """A new temporary sibling of ``out`` to write the folder into, swapped into ``out`` when the
-    block ends; on any error it is removed (an OSError becomes a one-line GapError), so ``out``
-    is the old folder or the new one, never half of one."""
+    """:func:`trackgen.outdir.swapped_in`, a folder that cannot be written a one-line GapError."""
     try:
-        tmp = make_temp(out)
+        with swapped_in(out) as tmp:
+            yield tmp
     except OSError as exc:
-        raise GapError(f"{out}: cannot write the output folder there ({exc.strerror or exc})") from None
-    try:
-        yield tmp
-        replace_folder(tmp, out)
-    except OSError as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
         raise GapError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 def start_live_folder(out_dir: str | Path, *, force: bool = False) -> Path:
