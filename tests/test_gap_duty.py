@@ -122,3 +122,12 @@ def test_the_h_bridge_mode_is_chosen_from_the_log(tmp_path):
     assert result.car.drive.hbridge == "coast"
     assert "H-bridge (drive.hbridge, a duty log): coast (the car file says brake)" in summary_text(result)
     assert result.settings["hbridge"]["held_cost"]["coast"] < result.settings["hbridge"]["held_cost"]["brake"]
+    # from then on the answer is the one for a file that said coast: the signals' scales, the
+    # robust loss and the held-out gap come from the coasting car's residuals (the braking
+    # car's, 15x larger, made the gap 9e-5 and hid every effect)
+    told = run_gap(log, BASE.replace(drive=dataclasses.replace(BASE.drive, hbridge="coast")), jobs=2,
+                   effects=["motor_lag"])
+    assert told.settings["hbridge"]["chosen"] == "coast"
+    for key in ("scales", "robust_scale"):
+        assert result.settings[key] == told.settings[key]
+    assert result.gap_before == told.gap_before

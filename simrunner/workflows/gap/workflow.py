@@ -23,7 +23,7 @@ import numpy as np
 from simrunner.telemetry.log import RunLog
 from simrunner.workflows.gap import GapError
 from simrunner.workflows.gap.chain import build_chain, screening_problem
-from simrunner.workflows.gap.fit import (CANDIDATES, Problem, Segment, bic, nominal_scales, robust_scale_of,
+from simrunner.workflows.gap.fit import (CANDIDATES, Problem, Segment, bic, nominal_scales, robust_scale_of, rescaled,
                                          robust_total, cost_of, window_costs)
 from simrunner.workflows.gap.conventions import check_conventions
 from simrunner.workflows.gap.glitches import Glitch, find_glitches, glitch_mask
@@ -217,8 +217,13 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     if car.drive.command == "duty":  # the H-bridge's mode: a choice of two, made before the chain
         hbridge = choose_hbridge(fit_problem, held_problem, settings.delta_bic_min)
         if hbridge["chosen"] != car.drive.hbridge:
+            # the nominal car is now the file's car in the chosen mode: its residuals set the
+            # signals' scales and the robust loss, as the file's would have (the wrong mode's
+            # residuals, mostly speed, would weigh the signals and flatten the robust loss)
             car = car.replace(drive=dataclasses.replace(car.drive, hbridge=hbridge["chosen"]))
-            fit_problem, held_problem = fit_problem.with_car(car), held_problem.with_car(car)
+            fit_problem = rescaled(fit_problem.with_car(car), car, robust_factor)
+            held_problem = dataclasses.replace(held_problem.with_car(car), scales=fit_problem.scales,
+                                               robust_scale=fit_problem.robust_scale)
     started = time.monotonic()
     pred0 = predict(car, held_dt_s)
     closing_s = time.monotonic() - started
@@ -276,10 +281,11 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
                         "gap_before": _gap(one, [p], [r0]), "gap_after": _gap(one, [p], [r1]),
                         "rmse_before": rmse(r0, mask, rep_signals), "rmse_after": rmse(r1, mask, rep_signals)})
     held_ls = dataclasses.replace(held_problem, robust_scale=math.inf)
-    in_force = {"robust_scale": robust, "robust_factor": robust_factor, "dt_s": dt_s, "held_dt_s": held_dt_s,
-                "window_s": window_s, "jobs": jobs, "delta_bic_min": settings.delta_bic_min,
+    in_force = {"robust_scale": fit_problem.robust_scale, "robust_factor": robust_factor, "dt_s": dt_s,
+                "held_dt_s": held_dt_s, "window_s": window_s, "jobs": jobs, "delta_bic_min": settings.delta_bic_min,
                 "improvement_min": settings.improvement_min, "held_improvement_min": settings.held_improvement_min,
-                "max_effects": settings.max_effects, "scales": scales, "signals": list(signals), "effects": names,
+                "max_effects": settings.max_effects, "scales": fit_problem.scales, "signals": list(signals),
+                "effects": names,
                 "screen_max_s": settings.screen_max_s, "fit_windows_s": sum(g.duration_s for g in fit_problem.segments),
                 "screen_windows_s": sum(g.duration_s for g in screen.segments), "hbridge": hbridge}
     result = GapResult(
