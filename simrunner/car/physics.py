@@ -384,8 +384,10 @@ class CarSim:
         car, b = self.car, self._body
         self._rd = self._pose = self._wc = None
         self._held = False
-        if self._tyres is not None:  # placed anew: rolling without slip
+        if self._tyres is not None:  # placed anew: rolling without slip, the tyre forces due now
             self._tyres.reset_slip()
+            self._tyre_left, self._contacts_then = 0, None
+            self._tyre_applied = (((0.0, 0.0), (0.0, 0.0, 0.0), 0.0),) * 4
         # position on the (possibly tilted) ground plane below/above (x, y)
         n = self._ground_rot[:, 2]
         dx, dy = pose.x_m - self._ground_origin[0], pose.y_m - self._ground_origin[1]

@@ -109,8 +109,13 @@ class SlipTyres:
         self.u, self.loads_n, self.last = list(u), list(loads), list(last)
 
     def reset_slip(self) -> None:
-        """A car placed anew rolls without slip."""
+        """A car placed anew rolls without slip: no deflection, no force remembered (the load
+        transfer and the update rate start as on a new car; what a placed car does must not
+        depend on where it was before)."""
         self.u = [0.0] * 8
+        self.last = [(0.0, 0.0)] * 4
+        self.slow = True
+        self.set_loads(self.mass_kg * G_MPS2)
 
     # -- the closed form of a steady turn -----------------------------------------------------
     def single_track_turn(self, speed_mps: float, steer_rad: float) -> tuple[float, float]:
