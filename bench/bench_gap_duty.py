@@ -15,6 +15,11 @@ effect named (<= 5 %); the H-bridge mode chosen right. ``--results`` writes
 ``bench/results/gap_duty.json``.
 
     python -m bench.bench_gap_duty [--trials 12] [--first 0] [--jobs 2] [--results]
+    python -m bench.bench_gap_duty --null 20 --results    # 20 effect-free trials: false claims
+    python -m bench.bench_gap_duty --only 2,5 --results   # these trials again
+
+``--results`` merges: a trial run again replaces its row; the note says which trials came
+from which commit.
 """
 from __future__ import annotations
 
@@ -22,6 +27,7 @@ import argparse
 import dataclasses
 import json
 import math
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
@@ -167,17 +173,40 @@ def results_data(rows: list[dict], command: str, date: str, commit: str, wall_mi
             "rows": out, "trials_data": rows}
 
 
+def merged(old: dict, new: dict) -> dict:
+    """``new``'s results with ``old``'s trials that ``new`` did not run again, the figures
+    recomputed over all of them; the run's note says which trials came from which commit."""
+    fresh = {r["trial"] for r in new["trials_data"]}
+    rows = sorted([r for r in old.get("trials_data", []) if r["trial"] not in fresh] + new["trials_data"],
+                  key=lambda r: r["trial"])
+    run = dict(new["runs"]["duty_slip"])
+    old_commit = next(iter(old.get("runs", {}).values()), {}).get("commit", "?")
+    by_commit: dict[str, list[int]] = {}
+    for r in rows:
+        by_commit.setdefault(r.get("commit", old_commit), []).append(r["trial"])
+    run["note"] = "; ".join(filter(None, [run.get("note"), "trials by commit: " + "; ".join(
+        f"{c}: {','.join(map(str, ks))}" for c, ks in by_commit.items())]))
+    out = results_data(rows, run["command"], run["date"], run["commit"], run["wall_min"], run["jobs"], run["note"])
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:  # pragma: no cover - a bench
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trials", type=int, default=12)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--results", action="store_true", help=f"write {RESULTS}")
+    ap.add_argument("--only", default=None, metavar="K,K,...", help="run these trials instead")
+    ap.add_argument("--null", type=int, default=0, metavar="N",
+                    help="run the first N effect-free trials (k = 0, 4, 8, ...) instead: the false-claim figure")
+    ap.add_argument("--results", action="store_true",
+                    help=f"write {RESULTS} (merged: a trial run again replaces its row, each row keeps its commit)")
     a = ap.parse_args(argv)
+    ks = (list(range(0, 4 * a.null, 4)) if a.null else [int(k) for k in a.only.split(",")] if a.only
+          else list(range(a.first, a.first + a.trials)))
     t0 = time.perf_counter()
     rows = []
     with ProcessPoolExecutor(max_workers=a.jobs) as pool:
-        futures = [pool.submit(trial, k) for k in range(a.first, a.first + a.trials)]
+        futures = [pool.submit(trial, k) for k in ks]
         for fut in as_completed(futures):
             rows.append(fut.result())
             print(f"[trial {rows[-1]['trial']} done, {rows[-1]['wall_s']:.0f} s]", flush=True)
@@ -189,8 +218,13 @@ def main(argv: list[str] | None = None) -> None:  # pragma: no cover - a bench
 
         commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                                 cwd=Path(__file__).parent).stdout.strip()
-        data = results_data(rows, "python -m bench.bench_gap_duty " + " ".join(argv or []), str(datetime.date.today()),
-                            commit, (time.perf_counter() - t0) / 60.0, a.jobs)
+        for r in rows:
+            r["commit"] = commit
+        command = "python -m bench.bench_gap_duty " + " ".join(argv if argv is not None else sys.argv[1:])
+        data = results_data(rows, command, str(datetime.date.today()), commit, (time.perf_counter() - t0) / 60.0,
+                            a.jobs)
+        if RESULTS.exists():
+            data = merged(json.loads(RESULTS.read_text()), data)
         RESULTS.write_text(json.dumps(data, indent=1, default=float) + "\n")
 
 
