@@ -3,13 +3,25 @@ what following the course costs.
 
 1. Counted laps against the course: ``examples/line_follower.py`` drives 2 laps on the
    thesis figure 8, the NXP raceways (traced courses, when ``../shared/tracks`` is there)
-   and the kit layouts; printed per track: the outcome, each counted lap's driven path
-   (rear-axle midpoint) over the course's centreline length (target >= 0.95 where the car
-   keeps to the middle; a follower that takes tight turns on their inside drives less).
+   and the kit layouts; printed per track: the outcome, the course each counted lap
+   followed (the judge's ``lap_courses_m``: the rear-axle midpoint followed along the
+   centreline) over the course's length - the target, a counted lap is the course: >= 0.95 -
+   and the path it drove over the same length (``lap_distances_m``), which an inside line
+   makes shorter on tight turns without skipping anything. On the kit's S oval (2 x 0.72 m
+   straights, two half circles of R0.445: 4.236 m) the rear axle of a car with all wheels
+   on the road may run 0.21 m inside the centreline (0.275 - 0.077 + 0.0125 m); with the
+   default car's smallest turning radius, 0.414 m, the shortest lap it can drive is two
+   half circles of 0.414 m joined by 0.36 m straights, 3.33 m (0.785 of the centreline);
+   the same half circles concentric with the track, 4.04 m (0.954). The line follower takes
+   the half circles at a mean rear-axle radius of about 0.40 m (its steering at the limit).
 2. Speed: closed-loop real-time factor (simulated / CPU seconds, the best of ``REPEATS``)
-   of a race lap on the kit's S oval (``--event race``: the lap and the stop after it)
-   against a practice lap of the figure 8 measured in the same run (target: no lower), and
-   the judge's own cost per update with the course followed and without (coverage rule).
+   of a race lap (``--event race``: the lap and the stop after it) on the kit's S oval and
+   on its XL set (the track the race is run on) against a practice lap of the figure 8
+   measured in the same run (target: no lower), with the line follower and with the race
+   example ``examples/events/race.py`` (which brakes after the finish); the per-run cost
+   (a drive whose controller returns at once) and the CPU per simulated second, which
+   together make the RTF; and the judge's own cost per update with the course followed
+   and without (coverage rule).
 3. Hills: the same RTF of 2 laps on a track with a HILL against its flat twin (the HILL
    replaced by a straight as long): the kit oval with a hill (``examples/kit_hill.txt``: the
    hill is 40 % of the lap) and the thesis figure 8 with its first two straights made a
@@ -34,6 +46,7 @@ from vehicle.description import CarDescription
 REPO = Path(__file__).resolve().parents[1]
 TRACKS = REPO.parent / "shared" / "tracks"
 FOLLOWER = REPO / "examples" / "line_follower.py"
+RACE = REPO / "examples" / "events" / "race.py"
 REPEATS = 3
 LAYOUTS = ("simrunner/data/thesis_figure8.txt", "examples/kit_S.txt", "examples/kit_wave.txt",
            "examples/kit_speed_limit.txt", "examples/kit_M.txt", "examples/kit_crossing45.txt",
@@ -47,13 +60,33 @@ def _tracks() -> list[tuple[str, object]]:
     return out
 
 
-def _best_rtf(track, **settings) -> float:
-    best = 0.0
+def _best_rtf(track, controller=FOLLOWER, **settings) -> float:
+    return _best_run(track, controller, **settings)[0]
+
+
+def _best_run(track, controller=FOLLOWER, **settings) -> tuple[float, float, float]:
+    """``(RTF, simulated s, CPU s)`` of the run with the best RTF of ``REPEATS``."""
+    best = (0.0, 0.0, 0.0)
     for _ in range(REPEATS):
         c0 = time.process_time()
-        r = drive(FOLLOWER, track=track, **settings)
-        best = max(best, r.sim_time_s / (time.process_time() - c0))
+        r = drive(controller, track=track, **settings)
+        cpu = time.process_time() - c0
+        best = max(best, (r.sim_time_s / cpu, r.sim_time_s, cpu))
     return best
+
+
+def _stop_at_once(spinner) -> None:
+    """A controller that returns at once: its drive is the per-run cost alone."""
+
+
+def _setup_ms(track) -> float:
+    """CPU milliseconds of a race drive whose controller returns at once (best of 5)."""
+    best = float("inf")
+    for _ in range(5):
+        c0 = time.process_time()
+        drive(_stop_at_once, track=track, event="race")
+        best = min(best, time.process_time() - c0)
+    return best * 1e3
 
 
 def _judge_cost_us(track, course: bool) -> float:
@@ -88,21 +121,30 @@ def _hill_pairs(tmp: Path) -> list[tuple[str, Path, Path]]:
 
 
 def main() -> None:
-    print("counted laps (line follower, 2 laps): driven path / course length")
+    print("counted laps (line follower, 2 laps): course followed / course length (target >= 0.95), "
+          "driven path / course length")
     for name, track in _tracks():
         r = drive(FOLLOWER, track=track, laps=2)
-        shares = " ".join(f"{d / track.course.length_m:.3f}" for d in r.lap_distances_m) or "-"
+        length = track.course.length_m
+        followed = " ".join(f"{d / length:.3f}" for d in r.lap_courses_m) or "-"
+        driven = " ".join(f"{d / length:.3f}" for d in r.lap_distances_m) or "-"
         kind = "traced" if track.course.traced else f"{len(track.course.sections)} passes"
-        print(f"  {name:22s} course {track.course.length_m:6.2f} m ({kind}); {r.outcome}: "
-              f"{r.message}; laps {shares}")
+        print(f"  {name:22s} course {length:6.2f} m ({kind}); {r.outcome}: {r.message}; "
+              f"followed {followed}; driven {driven}")
     fig8 = load_track(REPO / LAYOUTS[0])
     oval = load_track(REPO / "examples" / "kit_S.txt")
-    practice = _best_rtf(fig8, laps=1)
-    race = _best_rtf(oval, event="race")
-    oval_practice = _best_rtf(oval, laps=1)
-    print(f"closed-loop RTF (CPU, best of {REPEATS}): figure-8 practice lap {practice:.1f}x, "
-          f"kit S race lap {race:.1f}x ({race / practice:.2f} of it; target >= 1), "
-          f"kit S practice lap {oval_practice:.1f}x")
+    xl = load_track(REPO / "examples" / "kit_XL.txt")
+    practice, p_sim, p_cpu = _best_run(fig8, laps=1)
+    print(f"closed-loop RTF (CPU, best of {REPEATS}): figure-8 practice lap {practice:.1f}x "
+          f"({p_sim:.2f} s simulated, {p_cpu * 1e3:.0f} ms CPU); per-run cost {_setup_ms(fig8):.1f} ms")
+    for name, track in (("kit S", oval), ("kit XL", xl)):
+        setup = _setup_ms(track)
+        for label, controller in (("line follower", FOLLOWER), ("race.py", RACE)):
+            race, sim, cpu = _best_run(track, controller, event="race")
+            print(f"  {name} race lap, {label}: {race:.1f}x ({race / practice:.2f} of the figure-8 lap; "
+                  f"target >= 1): {sim:.2f} s simulated, {cpu * 1e3:.0f} ms CPU = per-run cost {setup:.1f} ms "
+                  f"+ {(cpu * 1e3 - setup) / sim:.1f} ms per simulated s")
+    print(f"  kit S practice lap (line follower): {_best_rtf(oval, laps=1):.1f}x")
     for name, track in (("figure 8", fig8), ("kit S", oval)):
         print(f"judge update on {name}: {_judge_cost_us(track, True):.1f} us following the course, "
               f"{_judge_cost_us(track, False):.1f} us with the coverage rule")

@@ -90,15 +90,17 @@ def test_a_built_folder_carries_the_course(tmp_path):
 
 
 def test_counted_laps_drive_the_whole_course():
-    """The line follower's counted laps drive about the centreline's length: >= 0.95 of it on
-    the figure 8 (a crossing each lap); on the kit's oval, whose 0.445 m turns it takes on
-    their inside, >= 0.9. It turns at the kit figure 8's crossing: off the course, named."""
+    """The line follower's counted laps follow the whole course (the judge's ``lap_courses_m``,
+    within 1 %) and drive about the centreline's length: >= 0.95 of it on the figure 8 (a
+    crossing each lap); on the kit's oval, whose 0.445 m turns it takes on their inside,
+    >= 0.9. It turns at the kit figure 8's crossing: off the course, named."""
     for layout, share in (("simrunner/data/thesis_figure8.txt", 0.95), ("examples/kit_S.txt", 0.9)):
         track = load_track(REPO / layout)
         r = drive(FOLLOWER, track=track, laps=2)
         assert r.outcome == "finished", (layout, r.message)
         assert len(r.lap_distances_m) == 2
         assert all(d >= share * track.course.length_m for d in r.lap_distances_m), r.lap_distances_m
+        assert r.lap_courses_m == pytest.approx([track.course.length_m] * 2, rel=0.01)
     r = drive(FOLLOWER, track=REPO / "examples" / "kit_M.txt", laps=1)
     assert r.outcome == "off_course" and r.message.startswith("turned at CROSSROADS (piece 11, line 17)")
 

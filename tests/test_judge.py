@@ -260,3 +260,23 @@ def test_full_figure8_centreline_lap_counts():
     for i, p in enumerate(poses):
         judge.update(i * 0.01, p, wheels(p))
     assert judge.laps_completed == 1
+
+
+def test_an_inside_line_on_the_kit_oval_drives_less_but_follows_the_whole_course():
+    """kit_S: two 0.72 m straights, two half circles of 0.445 m. A car keeping 0.05 m inside
+    the centreline drives 2 x 0.72 + 2 pi 0.395 = 3.922 m a lap (0.926 of the centreline)
+    and the judge counts it: the course it followed (``lap_courses_m``) is the whole lap."""
+    from simrunner.track.load import load_track
+
+    track = load_track(Path(__file__).resolve().parents[1] / "examples" / "kit_S.txt")
+    inside = 0.445 - 0.05
+    half = [(0.72 + inside * math.sin(a), 0.445 - inside * math.cos(a)) for a in np.linspace(0, math.pi, 60)]
+    lap = [(x, y) for x, y in half] + [(0.72 - x, 0.89 - y) for x, y in half]
+    poses = _polyline_poses([(-0.3, 0.05)] + lap + lap + [lap[0]], step_m=0.01)
+    judge = Judge(track, laps=2)
+    for i, p in enumerate(poses):
+        judge.update(i * 0.01, p, wheels(p))
+    assert judge.laps_completed == 2 and judge.off_course == ""
+    course = track.course.length_m
+    assert judge.lap_distances_m == pytest.approx([2 * 0.72 + 2 * math.pi * inside] * 2, abs=0.01)
+    assert judge.lap_courses_m == pytest.approx([course, course], abs=0.01)

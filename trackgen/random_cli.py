@@ -4,6 +4,7 @@
                     [--crossings N|MIN:MAX] [--mix straight=3,turn=4,chicane=1]
                     [--angles 30,45,60,90] [--radii 0.6,0.8,1] [--walk MIN:MAX] [--check-meshes]
     trackgen random --kit nxp --seed N [-o FILE] [--car CAR.toml] [--length MIN:MAX]
+                    [--crossings N|MIN:MAX] [--mix straight=3,chicane=1]
 
 Writes the layout text to FILE (atomically) or to stdout. Exit 2 with one line for bad
 options or an unwritable FILE.
@@ -71,16 +72,17 @@ def write_text_atomic(path: Path, text: str) -> None:
               help="Car description TOML (default: the built-in NXP Cup car).")
 @click.option("--length", "length", default=None, metavar="MIN:MAX", help="Lap length range, m (10:30).")
 @click.option("--crossings", default=None, metavar="N|MIN:MAX",
-              help="Crossroads crossed twice (0:2).")
+              help="Crossroads crossed twice (0:2; with --kit: intersections crossed straight on, 0).")
 @click.option("--mix", default=None, metavar="KIND=W,...",
-              help="Weights of walk pieces: straight, turn, chicane (straight=3,turn=4,chicane=1).")
+              help="Weights of walk pieces: straight, turn, chicane (straight=3,turn=4,chicane=1; "
+                   "with --kit: straight, chicane for the WAVE on straight tiles, straight=1,chicane=0).")
 @click.option("--angles", default=None, metavar="DEG,...", help="Turn angles, degrees (30,45,60,90).")
 @click.option("--radii", default=None, metavar="M,...", help="Turn radii, m (0.6,0.8,1).")
 @click.option("--walk", default=None, metavar="MIN:MAX", help="Pieces per random walk (2:6).")
 @click.option("--check-meshes", is_flag=True, help="Also run the watertight-mesh check (~40 ms).")
 @click.option("--kit", default=None, type=click.Choice(["nxp"]),
-              help="Only the official kit's pieces: a loop on the kit's 0.89 m grid (no crossings; "
-                   "with --length only).")
+              help="Only the official kit's pieces: a loop on the kit's 0.89 m grid, crossing "
+                   "itself straight on at intersections (with --length, --crossings, --mix).")
 def random_cmd(seed, out_path, car_path, length, crossings, mix, angles, radii, walk,
                check_meshes, kit=None) -> None:
     """Write a random closed layout (valid for the car) drawn from SEED."""
@@ -94,19 +96,18 @@ def random_cmd(seed, out_path, car_path, length, crossings, mix, angles, radii, 
         if value is not None:
             options[key] = value
     if kit is not None:
-        other = [f"--{k}" for k, v in (("crossings", crossings), ("mix", mix), ("angles", angles),
-                                        ("radii", radii), ("walk", walk)) if v is not None]
+        other = [f"--{k}" for k, v in (("angles", angles), ("radii", radii), ("walk", walk)) if v is not None]
         if other:
             click.echo(f"trackgen random: {', '.join(other)}: not with --kit (the kit's tracks are "
-                       "loops of its own pieces; --length sets them)", err=True)
+                       "loops of its own pieces; --length, --crossings and --mix set them)", err=True)
             raise click.exceptions.Exit(2)
     try:
         car = load_car(car_path)
         if kit is not None:
             from .random_kit import random_kit_layout
 
-            text = random_kit_layout(seed, car=car, **({"length_m": options["length_m"]}
-                                                       if "length_m" in options else {}))
+            text = random_kit_layout(seed, car=car, **{k: options[k] for k in ("length_m", "crossings", "mix")
+                                                       if k in options})
         else:
             text = random_layout(seed, car=car, **options)
     except (TrackError, CarDescriptionError) as exc:

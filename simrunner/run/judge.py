@@ -117,6 +117,7 @@ class Judge:
         self._lap_start: tuple[float, float] | None = None  # t, distance
         self._lap_times: list[float] = []
         self._lap_distances: list[float] = []
+        self._lap_courses: list[float] = []
         self._off_wheels: tuple[str, ...] = ()
         self.min_coverage = float(min_coverage)
         self._init_coverage(track.raster)
@@ -194,6 +195,13 @@ class Judge:
     def lap_distances_m(self) -> list[float]:
         """Path length of the rear-axle midpoint in each counted lap (m)."""
         return list(self._lap_distances)
+
+    @property
+    def lap_courses_m(self) -> list[float]:
+        """Distance followed along the course's centreline in each counted lap (m; empty
+        without a course). A counted lap is the course: about its length, whatever line the
+        car took (an inside line drives less than the centreline, ``lap_distances_m``)."""
+        return list(self._lap_courses)
 
     @property
     def finished(self) -> bool:
@@ -316,6 +324,8 @@ class Judge:
                           " lap not counted, timing restarts")]
         self._lap_times.append(tc - start_t)
         self._lap_distances.append(dc - start_d)
+        if self._follow is not None:
+            self._lap_courses.append(self._lap_progress_m)
         n = self.laps_completed
         events = [Event(tc, EventKind.LAP, f"lap {n} in {tc - start_t:.3f} s")]
         if self.finished:

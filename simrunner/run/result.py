@@ -55,6 +55,7 @@ class RunResult:
     event: str | None = None  # None: practice; else the discipline (simrunner.run.events)
     verdict: Any = None       # the discipline's simrunner.run.events.Verdict (None: practice)
     lap_distances_m: list[float] = field(default_factory=list)  # path driven in each counted lap
+    lap_courses_m: list[float] = field(default_factory=list)  # course followed in each counted lap
     course_from_start_m: float | None = None  # where the run ended along the course, from its start
     course_length_m: float | None = None
 
@@ -102,6 +103,7 @@ class RunResult:
                 "laps_completed": self.laps_completed,
                 "lap_times_s": [round(t, 6) for t in self.lap_times_s],
                 "lap_distances_m": [round(d, 4) for d in self.lap_distances_m],
+                "lap_courses_m": [round(d, 4) for d in self.lap_courses_m],
                 "sim_time_s": round(self.sim_time_s, 6), "wall_time_s": round(self.wall_time_s, 3),
                 "real_time_factor": round(self.real_time_factor, 2),
                 "cpu_time_s": round(self.cpu_time_s, 3), "track": self.track,

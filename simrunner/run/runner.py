@@ -495,7 +495,7 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
                            warnings=warnings, stray_threads=len(stray),
                            signal=signals.received if outcome == Outcome.INTERRUPTED else None,
                            event=settings.event, verdict=run.monitor.verdict if run.monitor else None,
-                           lap_distances_m=judge.lap_distances_m,
+                           lap_distances_m=judge.lap_distances_m, lap_courses_m=judge.lap_courses_m,
                            course_from_start_m=judge.course_from_start_m,
                            course_length_m=None if sim_track.course is None else sim_track.course.length_m,
                            unused_params=tuple(sorted(set(settings.params) - run.session.params_read)))
