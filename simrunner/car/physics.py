@@ -379,12 +379,19 @@ class CarSim:
             raise SimError("CarSim: this dartpy's FreeJoint state convention differs from the one "
                            "simrunner.car.physics was written for (dartpy 6.20: world-frame velocities)")
 
-    def _place(self, pose: Pose2, speed_mps: float, steer_rad: float, yaw_rate_radps: float) -> None:
-        """Set the planar state: chassis on the ground plane, wheels rolling, knuckles at steer."""
+    def _place(self, pose: Pose2, speed_mps: float, steer_rad: float, yaw_rate_radps: float,
+               keep_slip: bool = False) -> None:
+        """Set the planar state: chassis on the ground plane, wheels rolling, knuckles at steer.
+        ``keep_slip`` (slip tyres): the rear axle keeps its sideways speed and the tyres their
+        deflections and forces (the state a lead-in built); else the car rolls without slip."""
         car, b = self.car, self._body
+        lateral_mps = 0.0
+        if self._tyres is not None and keep_slip:
+            _, dq, rot0 = self._read()
+            lateral_mps = rot0[0][1] * dq[3] + rot0[1][1] * dq[4] + rot0[2][1] * dq[5]
         self._rd = self._pose = self._wc = None
         self._held = False
-        if self._tyres is not None:  # placed anew: rolling without slip, the tyre forces due now
+        if self._tyres is not None and not keep_slip:  # placed anew: rolling without slip, the forces due now
             self._tyres.reset_slip()
             self._tyre_left, self._contacts_then = 0, None
             self._tyre_applied = (((0.0, 0.0), (0.0, 0.0, 0.0), 0.0),) * 4
@@ -404,7 +411,7 @@ class CarSim:
         b.free_joint.setPositions(q6)
         # dartpy 6.20: FreeJoint velocities are [angular, linear] in WORLD coordinates
         n_w = yaw_rate_radps * rot[:, 2]
-        v_w = speed_mps * rot[:, 0]
+        v_w = speed_mps * rot[:, 0] + lateral_mps * rot[:, 1]
         b.free_joint.setVelocities(np.concatenate([n_w, v_w]))
         ql, qr = ackermann_angles_rad(car, steer_rad)
         for j, q in zip(b.knuckle_joints, (ql, qr)):
@@ -1027,8 +1034,11 @@ class CarSim:
         """Move the car to a planar state like :meth:`set_state` but keep the commands in
         force (the servo re-plans its move from the new knuckle angles; the brake/accel
         torque limit follows the new speed). Time is unchanged. Used by the gap replay to
-        re-start a window after a lead-in that filled the command path."""
-        self._place(pose, float(speed_mps), float(steer_rad), float(yaw_rate_radps))
+        re-start a window after a lead-in that filled the command path. On slip tyres the car
+        also keeps its sideways speed and its tyres' state, as the lead-in built them (a log
+        measures no sideways speed; starting a window without the sideslip of a fast turn put
+        a replay of the car's own log 18 mm RMS off, keeping it 6 mm)."""
+        self._place(pose, float(speed_mps), float(steer_rad), float(yaw_rate_radps), keep_slip=True)
         c = self._control
         self.set_command(c.speed_cmd_mps, c.steer_cmd_rad, c.yaw_rate_cmd_radps)
 
