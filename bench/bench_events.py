@@ -22,7 +22,8 @@ KIT_S = REPO / "examples" / "kit_S.txt"
 RUNS = [("race", EVENTS / "race.py", {"track": KIT_S}),
         ("figure8", EVENTS / "figure8.py", {}),
         ("speed_limit", EVENTS / "speed_limit.py", {}),
-        ("emergency_brake", EVENTS / "emergency_brake.py", {"car": EVENTS / "sensor_car.toml"})]
+        ("emergency_brake", EVENTS / "emergency_brake.py", {"car": EVENTS / "sensor_car.toml"}),
+        ("obstacle", EVENTS / "obstacle.py", {"car": EVENTS / "obstacle_car.toml"})]
 
 
 def _passes(event: str, controller, **kw) -> tuple[int, list[str]]:
