@@ -155,6 +155,28 @@ def test_wheel_off_road_detected_wheel_on_edge_line_not(ring):
     assert not judge.off_track and [e.kind for e in events] == ["on_track"]
 
 
+def test_the_other_disciplines_count_a_wheel_off_when_any_part_of_it_is(ring):
+    """Rules summary section 4: "no part of any wheel may leave the track" - a tyre over the
+    road's edge by a few millimetres is off for ``wheel_off="any_part"`` (the race's rule, the
+    default, still counts it on while any part of it touches the road)."""
+    outer_edge = R_M + HALF_ROAD_M
+
+    def car_at(right_wheel_x):
+        return Pose2(right_wheel_x - TRACK_M / 2, -0.05, math.pi / 2)
+
+    inside = car_at(outer_edge - 0.0125 - 0.006)  # the tyre's outer edge 6 mm inside the road (5 mm pixels)
+    over = car_at(outer_edge - 0.0125 + 0.006)    # ... 6 mm over it, its contact point on the road
+    strict, whole = Judge(ring, laps=1, wheel_off="any_part"), Judge(ring, laps=1)
+    for judge in (strict, whole):
+        judge.update(0.0, inside, wheels(inside))
+        assert not judge.off_track
+    events = strict.update(0.1, over, wheels(over))
+    assert strict.off_wheels == ("FR", "RR") and "partly off the track" in events[0].text
+    assert whole.update(0.1, over, wheels(over)) == [] and not whole.off_track
+    with pytest.raises(SimError, match="wheel_off"):
+        Judge(ring, laps=1, wheel_off="some")
+
+
 def test_bad_arguments(ring):
     with pytest.raises(SimError, match="laps"):
         Judge(ring, laps=0)

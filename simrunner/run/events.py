@@ -13,7 +13,8 @@ the other disciplines section 4; "ours" marks what the rules leave open.
 | ``emergency_brake`` | the kit's S oval without marks | 2 laps, then a black 20 x 60 x 20 cm block across a straight ahead (seeded) | the car stops without touching it |
 
 The other disciplines void an attempt when any part of any wheel leaves the track (section 4,
-"Common void-attempt conditions"): their runs end at the first wheel off.
+"Common void-attempt conditions"): their runs end when a wheel is first partly off the road
+(the judge's ``wheel_off="any_part"``; the race's rule is a wheel wholly off, 3 of them).
 """
 from __future__ import annotations
 

@@ -39,8 +39,11 @@ Off track. A wheel is off the road when every sample of its contact patch lies o
 lateral axis, the front wheels' steering ignored), ``tyre_width_m`` long, centred on the
 wheel's contact point, sampled at ``PATCH_SAMPLES`` points. Edge lines and markings belong to
 the road, so a wheel on the black edge line is on the road; a wheel overhanging the edge is on
-the road while any part of its tyre touches it. ``off_track`` is True while any wheel is off;
-``"off_track"`` / ``"on_track"`` events mark the changes.
+the road while any part of its tyre touches it. ``wheel_off="any_part"`` is the stricter rule
+of the rules' other disciplines (rules summary section 4: "no part of any wheel may leave the
+track"): a wheel is off as soon as any sample of its contact patch lies outside the road.
+``off_track`` is True while any wheel is off; ``"off_track"`` / ``"on_track"`` events mark the
+changes.
 
 Events: ``Event(t_s, kind, text)`` with ``kind`` an :class:`EventKind` (a ``str``):
 ``lap_start``, ``lap``, ``lap_short``, ``finished``, ``gate_backward``, ``off_track``,
@@ -60,6 +63,7 @@ from simrunner.track.progress import CentrelineProgress
 
 WHEEL_NAMES = ("FL", "FR", "RL", "RR")
 PATCH_SAMPLES = 5
+WHEEL_OFF_RULES = ("whole", "any_part")  # a wheel is off when its whole tyre / any part of it is off the road
 COVERAGE_CELL_M = 0.25
 COVERAGE_REACH_CELLS = 2      # cells within 2 cells (0.5-0.75 m) of the car count as visited
 COVERAGE_ROAD_FRACTION = 0.25  # a cell is road when at least this share of it is road
@@ -97,7 +101,7 @@ class Judge:
 
     def __init__(self, track, *, laps: int, min_lap_fraction: float = 0.5,
                  min_coverage: float = 0.8, tyre_width_m: float = 0.025,
-                 on_gate_tol_m: float = 0.02) -> None:
+                 on_gate_tol_m: float = 0.02, wheel_off: str = "whole") -> None:
         if int(laps) < 1:
             raise SimError(f"Judge: laps must be >= 1, got {laps!r}")
         if not 0.0 <= float(min_lap_fraction) <= 1.0:
@@ -107,6 +111,10 @@ class Judge:
         self.min_lap_distance_m = float(min_lap_fraction) * float(track.lap_length_m)
         self.on_gate_tol_m = float(on_gate_tol_m)
         self._patch = np.linspace(-tyre_width_m / 2.0, tyre_width_m / 2.0, PATCH_SAMPLES)
+        if wheel_off not in WHEEL_OFF_RULES:
+            raise SimError(f"Judge: wheel_off must be one of {', '.join(WHEEL_OFF_RULES)}, got {wheel_off!r}")
+        self.any_part = wheel_off == "any_part"
+        self._half_tyre_m = 0.5 * float(tyre_width_m)
         g = track.gate
         self._gate_x, self._gate_y = float(g.x_m), float(g.y_m)
         self._gate_dx, self._gate_dy = math.cos(g.yaw_rad), math.sin(g.yaw_rad)
@@ -280,10 +288,15 @@ class Judge:
                 events += self._gate_events(t_s, s, lat)
         self._prev = (t_s, s, lat, self._distance_m)
         self._prev_xy = (x, y)
-        # fast path: a wheel whose contact point is on the road is on the road; only the
-        # others get the full contact-patch test (_wheel_events)
+        # fast path: a wheel whose contact point (any_part: both ends of its patch) is on the
+        # road is on the road; only the others get the full contact-patch test (_wheel_events)
         w, h, mask = self._mask_w, self._mask_h, self._mask_bytes
-        for cx, cy in (wheel_xy.tolist() if isinstance(wheel_xy, np.ndarray) else wheel_xy):
+        points = wheel_xy.tolist() if isinstance(wheel_xy, np.ndarray) else wheel_xy
+        if self.any_part:
+            yaw = pose.yaw_rad
+            ex, ey = -math.sin(yaw) * self._half_tyre_m, math.cos(yaw) * self._half_tyre_m
+            points = [(cx + sx * ex, cy + sx * ey) for cx, cy in points for sx in (-1.0, 1.0)]
+        for cx, cy in points:
             c, r = round((cx - ox) * inv), round((oy - cy) * inv)
             if not (0 <= c < w and 0 <= r < h and mask[r * w + c]):
                 return events + self._wheel_events(t_s, pose, wheel_xy)
@@ -387,12 +400,13 @@ class Judge:
             self._visit(*self._prev_xy)
 
     def wheels_on_road(self, pose: Pose2, wheel_xy: np.ndarray) -> np.ndarray:
-        """``(4,) bool``: does each wheel's contact patch touch the road anywhere."""
+        """``(4,) bool``: is each wheel on the road: its contact patch touches the road
+        anywhere (``wheel_off="any_part"``: everywhere)."""
         wheels = np.asarray(wheel_xy, dtype=float).reshape(4, 2)
         left = np.array([-math.sin(pose.yaw_rad), math.cos(pose.yaw_rad)])
         pts = wheels[:, None, :] + self._patch[None, :, None] * left  # (4, P, 2)
         on = self.track.raster.on_road(pts.reshape(-1, 2)).reshape(4, -1)
-        return on.any(axis=1)
+        return on.all(axis=1) if self.any_part else on.any(axis=1)
 
     def _wheel_events(self, t_s: float, pose: Pose2, wheel_xy: np.ndarray) -> list[Event]:
         """Off/on-track events when some wheel's contact point is off the road (the full
@@ -402,7 +416,8 @@ class Judge:
         events = []
         if off and not self._off_wheels:
             events.append(Event(t_s, EventKind.OFF_TRACK, f"wheel{'s' if len(off) > 1 else ''} "
-                                f"{', '.join(off)} off the track at ({pose.x_m:.2f}, {pose.y_m:.2f}) m"))
+                                f"{', '.join(off)} {'partly ' if self.any_part else ''}off the track at "
+                                f"({pose.x_m:.2f}, {pose.y_m:.2f}) m"))
         elif self._off_wheels and not off:
             events.append(Event(t_s, EventKind.ON_TRACK, "all wheels back on the track"))
         self._off_wheels = off

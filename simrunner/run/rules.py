@@ -32,7 +32,9 @@ SUCCESS_POINTS = 150         # section 4.2-4.4: 150 for success, 0 otherwise
 class EventRules:
     """One discipline of ``--event`` (:mod:`simrunner.run.events` runs it): ``layout`` (a file
     of simrunner/data/events, None: the run's track), the judge's ``laps`` (None: as many as
-    the time allows), ``time_limit_s``, ``off_track_wheels`` and the ``points`` for success
+    the time allows), ``time_limit_s``, ``off_track_wheels`` (each wheel judged by
+    ``wheel_off``: ``"whole"``, off when no part of its tyre touches the road, or ``"any_part"``,
+    off when any part of it leaves the road, as in section 4) and the ``points`` for success
     (None: by rank among the teams, not known from one run); ``rules``: the rules summary's
     section; ``start_after``: the car starts just past the first piece of that kind (None:
     the track's start)."""
@@ -45,10 +47,12 @@ class EventRules:
     points: int | None
     rules: str
     start_after: str | None = None
+    wheel_off: str = "any_part"  # section 4, "Common void-attempt conditions"
 
 
 EVENTS: dict[str, EventRules] = {
-    "race": EventRules("race", None, RACE_LAPS, RACE_TIME_LIMIT_S, RULES_OFF_TRACK_WHEELS, None, "section 3"),
+    "race": EventRules("race", None, RACE_LAPS, RACE_TIME_LIMIT_S, RULES_OFF_TRACK_WHEELS, None, "section 3",
+                       wheel_off="whole"),  # section 3: "wheels leave the racing surface"
     # 60 s in 2019/20 (R20), 90 s in 2018/19 (R19): section 4.1
     "figure8": EventRules("figure8", "kit_M.txt", None, 60.0, 1, None, "section 4.1"),
     # R20: the car starts just past the 3-stripe pattern

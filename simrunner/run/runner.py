@@ -205,7 +205,8 @@ class FrameWork:
                 return Outcome.FINISHED, f"{lap} lap(s) completed"
             return monitor.at_laps(t, speed, len(judge.off_wheels) >= self.off_track_wheels)
         if off:
-            text = f"off track at t = {t:.3f} s (wheel(s) {', '.join(judge.off_wheels)} off the road)"
+            text = (f"off track at t = {t:.3f} s (wheel(s) {', '.join(judge.off_wheels)} "
+                    f"{'partly ' if judge.any_part else ''}off the road)")
             if len(judge.off_wheels) >= self.off_track_wheels and not self.keep_driving:
                 return Outcome.OFF_TRACK, text
             if events and any(e.kind == "off_track" for e in events):
@@ -257,7 +258,8 @@ class Run:
             self.imager = Imager(self.camera, track.lighting, surface_z_m=track.surface_z_m)
         event_laps = None if settings.event is None else EVENTS[settings.event].laps
         self.judge = Judge(track, laps=settings.laps if settings.event is None
-                           else (event_laps or UNLIMITED_LAPS))
+                           else (event_laps or UNLIMITED_LAPS),
+                           wheel_off="whole" if settings.event is None else EVENTS[settings.event].wheel_off)
         self.monitor = None if settings.event is None else make_monitor(settings.event, self)
         self.csv = None
         supervision = current_supervision()
