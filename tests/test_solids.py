@@ -93,6 +93,22 @@ def test_a_car_driving_into_a_block_touches_it():
         sim.add_solid(braking_block("block", 3.0, 0.0, 0.0))
 
 
+@pytest.mark.parametrize("gap_m, touches", [(0.01, False), (-0.005, True)])
+def test_a_tyre_touches_a_cube_beside_it_as_the_tyre_it_is(gap_m, touches):
+    """The wheels collide as balls of their radius (0.034 m sideways from the wheel's middle
+    plane); against an object on the track they are the 0.025 m tyres they are: a cube 1 cm
+    beside the tyres' outer faces is passed (the ball reached 1.2 cm into it), one 5 mm into
+    them is touched."""
+    car = CarDescription()
+    sim = make_sim(car, dt_s=0.002, start=Pose2(), surface_z_m=0.01)
+    outer = 0.5 * car.chassis.track_m + 0.5 * car.wheels.width_m
+    sim.add_solid(obstacle_cube("cube", 0.8, -(outer + gap_m + 0.1), 0.0))
+    sim.set_command(1.0, 0.0)
+    sim.step(800)
+    assert sim.pose.x_m > 1.2 and abs(sim.pose.y_m) < 0.005
+    assert sim.touched_solids() == (("cube",) if touches else ())
+
+
 def test_range_sensors_in_the_car_file():
     car = load_car(SENSOR_CAR)
     (name, front), = car.range_sensors

@@ -226,6 +226,7 @@ class CarSim:
         self._world = world
         self._solids: list = []  # (name, skeleton) of each solid on the track
         self._touched: set[str] = set()  # solids touched since touched_solids() was last read
+        self._tyre_solids: list = []  # (solid, the tyre's half-length below its top, reach m)
 
         r = car.wheels.radius_m
         wb, half_t = car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
@@ -800,6 +801,20 @@ class CarSim:
         joint.setTransformFromParentBodyNode(isometry(centre, _rot_z(solid.yaw_rad)))
         self._world.addSkeleton(sk)
         self._solids.append((solid.name, sk))
+        # the wheels collide as balls of their radius (simrunner.car.body), 2 cm wider a side than
+        # their tyres: against a solid they are tested as the tyres they are (_tyres_touch)
+        pairs = self._world.getConstraintSolver().getCollisionOption().collisionFilter  # dart's own
+        if not isinstance(pairs, dart.collision.BodyNodeCollisionFilter):  # (its default; the option is a copy)
+            raise SimError(f"CarSim: this dartpy's collision filter is a {type(pairs).__name__}, not the "
+                           "BodyNodeCollisionFilter simrunner.car.physics was written for")
+        for wheel in self._body.wheel_bodies:
+            pairs.addBodyNodePairToBlackList(wheel, body)
+        r = self.car.wheels.radius_m
+        h = min(solid.height_m, r)  # the tyre's half-length below the box's top
+        half_length = math.sqrt(max(2.0 * r * h - h * h, 0.0))
+        car_reach = math.hypot(self._wb_m + r, self._half_t_m + self.car.wheels.width_m)  # rear axle -> tyres
+        reach = math.hypot(solid.length_m, solid.width_m) / 2.0 + car_reach + 0.01
+        self._tyre_solids.append((solid, half_length, reach))
         self._base_step = self._step_noting_touches
         self._world_step = self._hooked_step if (self._duty_mode or self._tyres) else self._step_noting_touches
 
@@ -817,6 +832,7 @@ class CarSim:
         solid is on the track). The contacts are read only when there are others than the four
         tyres' (a touch that coincides with a tyre lifting is seen a step later)."""
         self._world.step(reset)
+        self._tyres_touch()
         result = self._world.getLastCollisionResult()
         if result.getNumContacts() == WHEEL_CONTACTS:  # the tyres on the ground, nothing else
             return
@@ -826,6 +842,27 @@ class CarSim:
             for mine, other in ((a, b), (b, a)):
                 if mine.startswith("solid:") and other != "ground_box" and not other.startswith("solid:"):
                     self._touched.add(mine[len("solid:"):])
+
+    def _tyres_touch(self) -> None:
+        """The tyres against the solids near the car: a tyre (``wheels.width_m`` wide, a disc of
+        ``wheels.radius_m``) touches a box when their footprints overlap, the tyre's cut at the
+        box's height (exact for a box with vertical faces)."""
+        qa = self._skel.getPositions()
+        x, y = float(qa[3]), float(qa[4])
+        near = [(solid, half) for solid, half, reach in self._tyre_solids
+                if (solid.x_m - x) ** 2 + (solid.y_m - y) ** 2 <= reach * reach]
+        if not near:
+            return
+        rot = _exp_map_rot(qa[:3])
+        yaw = math.atan2(rot[1, 0], rot[0, 0])
+        half_width = 0.5 * self.car.wheels.width_m
+        steer = (float(qa[self._i_knuckle[0]]), float(qa[self._i_knuckle[1]]), 0.0, 0.0)
+        for (cx, cy, cz), turn in zip(self._wheel_centres_m, steer):
+            wx = x + rot[0, 0] * cx + rot[0, 1] * cy + rot[0, 2] * cz
+            wy = y + rot[1, 0] * cx + rot[1, 1] * cy + rot[1, 2] * cz
+            for solid, half_length in near:
+                if solid.name not in self._touched and solid.overlaps(wx, wy, yaw + turn, half_length, half_width):
+                    self._touched.add(solid.name)
 
     # -- stepping ----------------------------------------------------------------------
     @property
