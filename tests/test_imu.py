@@ -13,7 +13,8 @@ import pytest
 
 from simrunner.errors import CommandError
 from simrunner.run.runner import drive
-from simrunner.sensors.imu import Encoders, Imu
+from simrunner.car.physics import CarSim
+from simrunner.sensors.imu import Encoders, Imu, ImuNoise
 from vehicle.description import CarDescription, CarDescriptionError, Imu as ImuSpec, car_from_dict
 
 SENSORS = car_from_dict(tomllib.loads("[encoders]\n[imu]\n"))
@@ -173,3 +174,71 @@ def test_the_run_log_records_the_encoders_and_the_imu_without_changing_the_readi
     turning = log.yaw_rate_radps[10:] > 0.5
     assert np.allclose(log.gyro_z_radps[10:][turning], log.yaw_rate_radps[10:][turning], atol=0.15)
     assert np.abs(log.accel_z_mps2 - 9.81).max() < 0.5
+
+
+def test_two_copies_sharing_one_imu_noise_read_what_separate_copies_read():
+    """The run log's IMU and the controller's share one ImuNoise (each block drawn once): their
+    samples, taken interleaved across blocks (1024 samples each), are those of separate copies."""
+    spec = dataclasses.replace(SENSORS.imu, gyro_bias_walk_radps_rts=0.01, accel_bias_walk_mps2_rts=0.05)
+    truth = lambda: ((0.01, -0.02, 0.5), (0.3, -0.1, 9.7))  # noqa: E731
+    noise = ImuNoise(spec, seed=5)
+    log, ctl = Imu(spec, 5, noise), Imu(spec, 5, noise)
+    alone_log, alone_ctl = Imu(spec, 5), Imu(spec, 5)
+    times = [k * 0.0175 for k in range(700)]  # 3.5 blocks at 200 Hz
+    shared = [(log.sample("log", t, truth), ctl.sample("get_gyro", t + 0.006, truth)) for t in times]
+    separate = [(alone_log.sample("log", t, truth), alone_ctl.sample("get_gyro", t + 0.006, truth)) for t in times]
+    assert shared == separate
+    late = Imu(spec, 5)  # a copy whose first read is in block 3: the walk to there is the same
+    assert late.sample("get_gyro", times[-1], truth) == shared[-1][0]
+    # unrounded, a reading in block 2 is the one of the implementation that drew each copy's
+    # blocks itself (commit 6554658), bit for bit
+    raw = Imu(dataclasses.replace(spec, gyro_lsb_radps=0.0, accel_lsb_mps2=0.0), 5)
+    assert raw.sample("get_gyro", 5.2, truth)[0] == 0.026918908560261683
+    assert raw.sample("get_gyro", 12.2475, truth) == (
+        -0.0011512342422857237, -0.05579837214758375, 0.5451617310053471, 0.3486569350855944,
+        -0.1593934656674018, 9.847697736752059)
+
+
+def test_the_imu_reader_is_the_engine_s_point_acceleration_in_the_body_frame():
+    """CarSim.imu_reader(point)() is bit for bit the chassis's angular velocity and dart's
+    acceleration of the point (getLinearAcceleration(point): world-relative, world axes), less
+    gravity, turned into the body frame; wheel_angle_rad(i) is wheel_angles_rad()[i]."""
+    sim = CarSim(SENSORS, dt_s=0.002)
+    point = (0.1, 0.02, 0.05)
+    read = sim.imu_reader(point)
+    sim.set_command(1.5, 0.3, 1.0)
+    for n in (1, 5, 40, 150):
+        sim.step(n)
+        assert sim.wheel_angle_rad(2) == sim.wheel_angles_rad()[2] and sim.wheel_angle_rad(0) != 0.0
+        gyro, force = read()
+        q = sim._skel.getPositions()
+        r = dart_rotation(q[:3])
+        dq = sim._skel.getVelocities().tolist()
+        a = sim._body.chassis.getLinearAcceleration(np.array(point)).tolist()
+        a[2] += 9.81
+        want_g = tuple(r[0][j] * dq[0] + r[1][j] * dq[1] + r[2][j] * dq[2] for j in range(3))
+        want_f = tuple(r[0][j] * a[0] + r[1][j] * a[1] + r[2][j] * a[2] for j in range(3))
+        assert (gyro, force) == (want_g, want_f)
+        assert sim.imu_truth(point) == (gyro, force)
+    assert abs(force[1]) > 0.1 and abs(gyro[2]) > 0.1  # turning: a yaw rate and a sideways force
+
+
+def dart_rotation(rotation_vector):
+    import dartpy
+
+    return dartpy.math.expMapRot(rotation_vector).tolist()
+
+
+@pytest.mark.parametrize("counting", ["x4", "single"])
+def test_an_encoder_read_from_the_car_is_its_count_of_the_wheel_angles(counting):
+    spec = dataclasses.replace(SENSORS.encoders, counting=counting, wheels="all")
+    sim = CarSim(SENSORS, dt_s=0.002)
+    sim.set_command(1.0, 0.2, 0.0)
+    read, counted = Encoders(spec), Encoders(spec)
+    got, want = [], []
+    for n in (3, 50, 1, 200):
+        sim.step(n)
+        for wheel in ("RL", "fr", 3):
+            got.append(read.read(wheel, sim))
+            want.append(counted.count(wheel, sim.wheel_angles_rad()))
+    assert got == want and got[-1] > 100

@@ -417,6 +417,9 @@ class EffectSim:
     def wheel_angles_rad(self) -> list[float]:
         return self.sim.wheel_angles_rad()
 
+    def wheel_angle_rad(self, i: int) -> float:
+        return self.sim.wheel_angle_rad(i)
+
     def set_motors(self, left: float, right: float) -> None:
         """As ``CarSim.set_motors``, straight to the car (the command-path effects act on
         set_command)."""
@@ -432,6 +435,9 @@ class EffectSim:
 
     def imu_truth(self, point_m):
         return self.sim.imu_truth(point_m)
+
+    def imu_reader(self, point_m):
+        return self.sim.imu_reader(point_m)
 
     @property
     def terrain(self):

@@ -82,7 +82,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import dartpy as dart
 import numpy as np
@@ -1003,18 +1003,34 @@ class CarSim:
         q = rd[0] if rd is not None else self._skel.getPositions().tolist()
         return [q[i] for i in self._i_wheel]
 
-    def imu_truth(self, point_m) -> tuple[np.ndarray, np.ndarray]:
+    def wheel_angle_rad(self, i: int) -> float:
+        """Wheel ``i``'s (0..3: FL, FR, RL, RR) entry of :meth:`wheel_angles_rad` (one joint read)."""
+        rd = self._rd
+        return rd[0][self._i_wheel[i]] if rd is not None else self._skel.getPosition(self._i_wheel[i])
+
+    def imu_truth(self, point_m) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """What an ideal IMU at ``point_m`` (car body frame) reads: the chassis's angular velocity
         (rad/s) and the specific force there (the point's acceleration minus gravity, m/s^2), both
         in the car body frame (dart's accelerations of the last step, contacts included)."""
-        _, dq, (r0, r1, r2) = self._read()
-        ax, ay, az = self._body.chassis.getLinearAcceleration(np.asarray(point_m, float)).tolist()
-        az += GRAVITY_MPS2
-        wx, wy, wz = dq[0], dq[1], dq[2]
-        return ((r0[0] * wx + r1[0] * wy + r2[0] * wz, r0[1] * wx + r1[1] * wy + r2[1] * wz,
-                 r0[2] * wx + r1[2] * wy + r2[2] * wz),
-                (r0[0] * ax + r1[0] * ay + r2[0] * az, r0[1] * ax + r1[1] * ay + r2[1] * az,
-                 r0[2] * ax + r1[2] * ay + r2[2] * az))
+        return self.imu_reader(point_m)()
+
+    def imu_reader(self, point_m) -> Callable[[], tuple[tuple[float, ...], tuple[float, ...]]]:
+        """:meth:`imu_truth` at ``point_m`` as a function of no arguments, read at each of the IMU's
+        samples (the point and the engine's call bound once)."""
+        point = np.array(point_m, float)
+        acceleration, world, read = self._body.chassis.getLinearAcceleration, self._world_frame, self._read
+
+        def truth() -> tuple[tuple[float, ...], tuple[float, ...]]:
+            _, dq, (r0, r1, r2) = read()
+            ax, ay, az = acceleration(point, world, world).tolist()  # = (point): world-relative, world axes
+            az += GRAVITY_MPS2
+            wx, wy, wz = dq[0], dq[1], dq[2]
+            return ((r0[0] * wx + r1[0] * wy + r2[0] * wz, r0[1] * wx + r1[1] * wy + r2[1] * wz,
+                     r0[2] * wx + r1[2] * wy + r2[2] * wz),
+                    (r0[0] * ax + r1[0] * ay + r2[0] * az, r0[1] * ax + r1[1] * ay + r2[1] * az,
+                     r0[2] * ax + r1[2] * ay + r2[2] * az))
+
+        return truth
 
     def wheel_speeds_radps(self) -> np.ndarray:
         """``(4,)`` FL, FR, RL, RR wheel spin relative to their mounts, rad/s (+ = forward)."""

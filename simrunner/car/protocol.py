@@ -8,7 +8,7 @@ steering positive = left).
 """
 from __future__ import annotations
 
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Callable, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -74,7 +74,9 @@ class CarModel(Protocol):
     @property
     def duty_cmd(self) -> float: ...                             # set_command's one duty (NaN: set_motors')
     def wheel_angles_rad(self) -> list[float]: ...               # FL, FR, RL, RR turned since the start
+    def wheel_angle_rad(self, i: int) -> float: ...              # wheel i's (0..3) of wheel_angles_rad
     def imu_truth(self, point_m: Any) -> tuple[np.ndarray, np.ndarray]: ...  # body-frame rates, specific force
+    def imu_reader(self, point_m: Any) -> Callable[[], tuple]: ...  # imu_truth at point_m, no arguments
 
     # -- state -------------------------------------------------------------------------
     def save_state(self) -> Any: ...

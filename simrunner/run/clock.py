@@ -207,6 +207,19 @@ class LockstepClock:
                 self._frame_boundary()
         self.last_progress_wall_s = _monotonic()
 
+    def step_one(self) -> None:
+        """``advance(1)`` (a frame boundary is never behind the step index): the path of every
+        Spinner call that lets one physics step pass (sensors, ``get_time``), kept short."""
+        if self.finished is not None:
+            self.check()
+        if self._command_dirty or self._row_pending:
+            self._before_chunk()
+        self.sim.step(1)
+        i = self.step_index = self.step_index + 1
+        if i == self._next_frame_step:
+            self._frame_boundary()
+        self.last_progress_wall_s = _monotonic()
+
     def advance_to_next_frame(self) -> None:
         """Step to the next frame boundary (at least one step): ``advance`` of one chunk,
         the path of every ``get_image``."""

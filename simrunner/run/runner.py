@@ -74,13 +74,14 @@ def _restore_process_state(cwd: str, environ: dict[str, str]) -> None:
 
 
 # -- the run log's extra columns -------------------------------------------------------------
-def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int):
+def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int, imu_noise=None):
     """The run log's columns beyond the base ones (``simrunner.telemetry.log.EXTRA_COLUMNS``) and
     a function ``(pose, t_s) -> their values``: the car's height and pitch on a track with hills
     (``pose`` is then a ``Pose3``), its encoders' counts and its IMU's sample at each frame, a
     duty-commanded car's motor duties.
-    The log's encoders and IMU are copies of the car's own (the same device, seed and noise), so
-    that logging them does not change what the controller reads. ``((), None)`` without any."""
+    The log's encoders and IMU are copies of the car's own (the same device, seed and noise,
+    ``imu_noise``: the run's :class:`~simrunner.sensors.imu.ImuNoise`, None: its own), so that
+    logging them does not change what the controller reads. ``((), None)`` without any."""
     from simrunner.telemetry.log import DUTY_COLUMNS, IMU_COLUMNS, LIFT_COLUMNS
 
     names: list[str] = []
@@ -101,13 +102,9 @@ def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int
 
             parts.append(counts)
         if car.imu is not None:
-            imu, spec = Imu(car.imu, seed), car.imu
+            imu = Imu(car.imu, seed, imu_noise)
             names += IMU_COLUMNS
-            point = np.array([spec.x_m, spec.y_m, spec.z_m], float)
-
-            def truth():
-                return sim.imu_truth(point)
-
+            truth = sim.imu_reader((car.imu.x_m, car.imu.y_m, car.imu.z_m))
             parts.append(lambda pose, t: imu.sample("log", t, truth))
     if car.drive.command == "duty":
         names += DUTY_COLUMNS
@@ -265,7 +262,12 @@ class Run:
         supervision = current_supervision()
         if csv_path is None and supervision is not None and supervision.csv_path is not None:
             csv_path = supervision.csv_path  # the supervisor's copy of the log
-        extra, extra_values = extra_columns(track, car, self.sim, settings.seed)
+        self.imu_noise = None  # what the car's IMU adds to its samples, shared by its two copies
+        if car.imu is not None:
+            from simrunner.sensors.imu import ImuNoise
+
+            self.imu_noise = ImuNoise(car.imu, settings.seed)
+        extra, extra_values = extra_columns(track, car, self.sim, settings.seed, self.imu_noise)
         if csv_path is not None:  # written as the run goes (simrunner.telemetry.stream)
             from simrunner.telemetry.stream import CsvStream
 
@@ -294,6 +296,7 @@ class Run:
                                rng=np.random.default_rng(settings.seed), recorder=self.recorder,
                                video=self.video, params=settings.params, imager=self.imager)
         self.session.seed, self.session.surface_z_m = settings.seed, track.surface_z_m
+        self.session.imu_noise = self.imu_noise
         if settings.mcu_time is not None:  # the controller's own time (simrunner.run.mcu)
             from simrunner.run.mcu import McuTime
 

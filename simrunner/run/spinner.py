@@ -154,7 +154,8 @@ class Session:
         self.ranging = None  # the range sensors (simrunner.sensors.ranging), made on first use
         self.encoders = None  # the wheel encoders (simrunner.sensors.imu), made on first use
         self.imu = None       # the IMU (simrunner.sensors.imu), made on first use
-        self.imu_truth = None  # () -> what an ideal IMU reads now (CarSim.imu_truth at its place)
+        self.imu_truth = None  # () -> what an ideal IMU reads now (CarSim.imu_reader at its place)
+        self.imu_noise = None  # the IMU's ImuNoise, shared with the run log's copy (None: its own)
         self.seed = 0        # the run's seed (the range sensors' noise)
         self.mcu = None      # the controller's own time (simrunner.run.mcu.McuTime), or None
         self.surface_z_m = 0.0
@@ -233,6 +234,7 @@ class Spinner:
         self._owner = session.thread_id if session.thread_id is not None else _get_ident()
         self._vmax = 1.0 if session.car.drive.command == "duty" else session.car.drive.max_speed_mps
         self._clock = session.clock
+        self._step_one = session.clock.step_one  # one physics step (every sensor call)
         self._sim = session.clock.sim
         self._line_image = session.camera.line_image  # render_row + add_noise in one call
         cam = session.car.camera
@@ -482,7 +484,7 @@ class Spinner:
         """Current speed along the car's x (after one physics step), through ``speed_denorm``."""
         if _get_ident() != self._owner:
             raise self._foreign("get_speed")
-        self._clock.advance(1)
+        self._step_one()
         return float(self.speed_denorm(self._sim.speed_mps, self._angle))
 
     def get_distance(self, name: str) -> float:
@@ -492,7 +494,7 @@ class Spinner:
         if _get_ident() != self._owner:
             raise self._foreign("get_distance")
         ranging = self._ranging()
-        self._clock.advance(1)
+        self._step_one()
         s = self._s
         return ranging.read(str(name), self._clock.time_s, self._clock.pose(), s.camera.solids, s.surface_z_m)
 
@@ -511,7 +513,7 @@ class Spinner:
         if _get_ident() != self._owner:
             raise self._foreign("get_scan")
         ranging = self._ranging()
-        self._clock.advance(1)
+        self._step_one()
         s = self._s
         return ranging.scan(str(name), self._clock.time_s, self._clock.pose(), s.camera.solids, s.surface_z_m)
 
@@ -531,8 +533,8 @@ class Spinner:
             from simrunner.sensors.imu import Encoders
 
             s.encoders = Encoders(s.car.encoders)
-        self._clock.advance(1)
-        return s.encoders.count(wheel, self._sim.wheel_angles_rad())
+        self._step_one()
+        return s.encoders.read(wheel, self._sim)
 
     def _imu(self, call: str) -> tuple[float, ...]:
         if _get_ident() != self._owner:
@@ -541,11 +543,9 @@ class Spinner:
         if s.imu is None:
             from simrunner.sensors.imu import Imu
 
-            s.imu = Imu(s.car.imu, s.seed)
-            spec, sim = s.car.imu, self._sim
-            point = None if spec is None else np.array([spec.x_m, spec.y_m, spec.z_m], float)
-            s.imu_truth = lambda: sim.imu_truth(point)
-        self._clock.advance(1)
+            s.imu = Imu(s.car.imu, s.seed, s.imu_noise)
+            s.imu_truth = None if s.car.imu is None else self._sim.imu_reader((s.car.imu.x_m, s.car.imu.y_m, s.car.imu.z_m))
+        self._step_one()
         return s.imu.sample(call, self._clock.time_s, s.imu_truth)
 
     def get_gyro(self) -> tuple[float, float, float]:
@@ -564,7 +564,7 @@ class Spinner:
         on the ground), after one physics step."""
         if _get_ident() != self._owner:
             raise self._foreign("get_position")
-        self._clock.advance(1)
+        self._step_one()
         p = self._clock.pose()
         return (p.x_m, p.y_m, float(self._sim.z_m))
 
@@ -572,7 +572,7 @@ class Spinner:
         """Simulated time in seconds, after one physics step (busy-wait loops finish)."""
         if _get_ident() != self._owner:
             raise self._foreign("get_time")
-        self._clock.advance(1)
+        self._step_one()
         return self._clock.time_s
 
     def sleep(self, seconds: float) -> None:

@@ -66,6 +66,20 @@ class Encoders:
             i = self._check(wheel)
         if self._quadrature:
             return math.floor(angles_rad[i] * self._counts_per_rad)
+        return self._single(i, angles_rad)
+
+    def read(self, wheel, sim) -> int:
+        """:meth:`count` of ``wheel`` with the wheels' angles read from ``sim`` (a ``CarModel``) now;
+        a quadrature counter reads its own wheel's angle only."""
+        i = self._fitted.get(wheel) if type(wheel) in (str, int) else None
+        if i is None:
+            i = self._check(wheel)
+        if self._quadrature:
+            return math.floor(sim.wheel_angle_rad(i) * self._counts_per_rad)
+        return self._single(i, sim.wheel_angles_rad())
+
+    def _single(self, i: int, angles_rad) -> int:
+        """One channel: every wheel's angle turned (either way) since the last read, counted."""
         last = self._last if self._last is not None else [0.0] * 4
         self._turned = [t + abs(a - b) for t, a, b in zip(self._turned, angles_rad, last)]
         self._last = list(angles_rad)
@@ -83,16 +97,15 @@ class Encoders:
         return i
 
 
-class Imu:
-    """The car's IMU (``spec``: a ``vehicle.description.Imu`` or None) in a run with ``seed``."""
+class ImuNoise:
+    """What one IMU device adds to each sample in a run: its bias, the bias's random walk and the
+    white noise (6 floats a sample, gyro x, y, z then accelerometer x, y, z), from the device's
+    seed, the run's seed and the sample's number. Two :class:`Imu` of one device in one run (the
+    controller's and the run log's copy) share one: a block is drawn and summed once."""
 
     def __init__(self, spec, seed: int):
         self.spec = spec
         self.seed = int(seed)
-        self._held: tuple[int, tuple[float, ...]] | None = None
-        self._walk: list[np.ndarray] = []  # cumulative random walk at the end of each block
-        if spec is None:
-            return
         dev = np.random.default_rng([int(spec.device_seed), 0x42494153])  # this device's offsets
         stds = np.array([spec.gyro_bias_std_radps] * 3 + [spec.accel_bias_std_mps2] * 3)
         self._bias = dev.standard_normal(6) * stds
@@ -101,42 +114,23 @@ class Imu:
                                + [spec.accel_noise_density_mps2_rthz] * 3) * math.sqrt(rate / 2.0)
         self._step_walk = np.array([spec.gyro_bias_walk_radps_rts] * 3
                                    + [spec.accel_bias_walk_mps2_rts] * 3) / math.sqrt(rate)
-        self._lsb = np.array([spec.gyro_lsb_radps] * 3 + [spec.accel_lsb_mps2] * 3)
-        self._noise_block: tuple[int, list] | None = None
-        self._range = np.array([spec.gyro_range_radps] * 3 + [spec.accel_range_mps2] * 3)
-        self._lsb_list, self._range_list = self._lsb.tolist(), self._range.tolist()
+        self._walk: list[np.ndarray] = []  # cumulative random walk at the end of each block
+        self._blocks: dict[int, list[float]] = {}  # the last two blocks' offsets, row after row
 
-    def sample(self, call: str, t_s: float, truth) -> tuple[float, ...]:
-        """``(6,)``: gyro x, y, z (rad/s), accelerometer x, y, z (m/s^2) of the sample at ``t_s``;
-        ``truth()`` gives the car's ``(angular velocity (3,), specific force (3,))`` in the body
-        frame, asked only at a new sample."""
-        spec = self.spec
-        if spec is None:
-            raise CommandError(f"{call}(): the car has no IMU (add [imu] to the car file)")
-        k = math.floor(t_s * spec.rate_hz + 1e-9)
-        held = self._held
-        if held is not None and held[0] == k:
-            return held[1]
-        gyro, force = truth()
-        out = []
-        for v, off, lsb, top in zip((*gyro, *force), self._offset_at(k), self._lsb_list, self._range_list):
-            v = float(v) + off
-            if lsb > 0.0:
-                v = round(v / lsb) * lsb
-            out.append(top if v > top else (-top if v < -top else v))
-        value = tuple(out)
-        self._held = (k, value)
-        return value
-
-    def _offset_at(self, k: int) -> list[float]:
+    def at(self, k: int) -> list[float]:
         """Bias + its walk + the white noise of sample ``k`` (6 floats). The normals come in
         blocks of ``_WALK_BLOCK`` samples from the run's seed and the block's number (the same
         values whatever was read before); a block's offsets are summed once."""
         block, within = divmod(max(k, 0), _WALK_BLOCK)
-        if self._noise_block is None or self._noise_block[0] != block:
+        flat = self._blocks.get(block)
+        if flat is None:
             normals = np.random.default_rng([self.seed, 0x494D55, block]).standard_normal((_WALK_BLOCK, 6))
-            self._noise_block = (block, (self._bias + self._walk_rows(block) + normals * self._noise).tolist())
-        return self._noise_block[1][within]
+            # one flat list of floats (a list per row: 1024 more objects to make, collect and free)
+            flat = (self._bias + self._walk_rows(block) + normals * self._noise).ravel().tolist()
+            if len(self._blocks) > 1:  # reads come in time order: the older block is done
+                del self._blocks[min(self._blocks)]
+            self._blocks[block] = flat
+        return flat[6 * within:6 * within + 6]
 
     def _walk_rows(self, block: int) -> np.ndarray:
         """The bias random walk at samples ``block B .. block B + B - 1`` (``B = _WALK_BLOCK``): the
@@ -144,12 +138,56 @@ class Imu:
         if not self._step_walk.any():
             return np.zeros((_WALK_BLOCK, 6))
         while len(self._walk) < block:  # the walk at the end of each earlier block
-            b = len(self._walk)
-            self._walk.append((self._walk[-1] if self._walk else 0.0) + self._increments(b).sum(axis=0))
+            self._walk_end(len(self._walk), self._increments(len(self._walk)))
         base = self._walk[block - 1] if block else np.zeros(6)
-        steps = np.cumsum(self._increments(block), axis=0)
+        increments = self._increments(block)
+        if len(self._walk) == block:  # this block's end, for the next (its increments drawn once)
+            self._walk_end(block, increments)
+        steps = np.cumsum(increments, axis=0)
         return base + np.vstack([np.zeros((1, 6)), steps[:-1]])
+
+    def _walk_end(self, block: int, increments: np.ndarray) -> None:
+        """Append the walk at the end of ``block`` (the one before it is known)."""
+        self._walk.append((self._walk[-1] if self._walk else 0.0) + increments.sum(axis=0))
 
     def _increments(self, block: int) -> np.ndarray:
         steps = np.random.default_rng([self.seed, 0x57414C4B, block]).standard_normal((_WALK_BLOCK, 6))
         return steps * self._step_walk
+
+
+class Imu:
+    """The car's IMU (``spec``: a ``vehicle.description.Imu`` or None) in a run with ``seed``;
+    ``noise``: the :class:`ImuNoise` of this device in this run, shared with another copy (None:
+    its own)."""
+
+    def __init__(self, spec, seed: int, noise: ImuNoise | None = None):
+        self.spec = spec
+        self.seed = int(seed)
+        self._held_k: int | None = None  # the sample held (read in its period already) and its value
+        self._held: tuple[float, ...] = ()
+        if spec is None:
+            return
+        self._rate_hz = float(spec.rate_hz)
+        self._offsets = (noise if noise is not None else ImuNoise(spec, seed)).at
+        self._lsb_list = [spec.gyro_lsb_radps] * 3 + [spec.accel_lsb_mps2] * 3
+        self._range_list = [spec.gyro_range_radps] * 3 + [spec.accel_range_mps2] * 3
+
+    def sample(self, call: str, t_s: float, truth) -> tuple[float, ...]:
+        """``(6,)``: gyro x, y, z (rad/s), accelerometer x, y, z (m/s^2) of the sample at ``t_s``;
+        ``truth()`` gives the car's ``(angular velocity (3,), specific force (3,))`` in the body
+        frame, asked only at a new sample."""
+        if self.spec is None:
+            raise CommandError(f"{call}(): the car has no IMU (add [imu] to the car file)")
+        k = math.floor(t_s * self._rate_hz + 1e-9)
+        if k == self._held_k:
+            return self._held
+        gyro, force = truth()
+        out = []
+        for v, off, lsb, top in zip((*gyro, *force), self._offsets(k), self._lsb_list, self._range_list):
+            v = float(v) + off
+            if lsb > 0.0:
+                v = round(v / lsb) * lsb
+            out.append(top if v > top else (-top if v < -top else v))
+        value = self._held = tuple(out)
+        self._held_k = k
+        return value
