@@ -19,7 +19,7 @@ from simrunner.sensors.camera import Camera
 from simrunner.sensors.imaging import PHOTONS_PER_LM_S, Imager, bilinear_f64, blur_rows, pad_with_floor
 from simrunner.track.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_from_polygon
 from vehicle.description import CarDescription, CarDescriptionError, load_car
-from worlds.lighting import Light, TrackLighting
+from worlds.lighting import TrackLighting
 
 CAR = CarDescription()
 QUIET = dict(prnu=0.0, dsnu_e=0.0, dark_current_eps=0.0, psf_sigma_px=0.0, motion_blur_samples=1,
