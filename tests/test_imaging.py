@@ -16,10 +16,10 @@ from simrunner import CommandError, Spinner
 from simrunner.run.clock import LockstepClock
 from simrunner.run.spinner import Session
 from simrunner.sensors.camera import Camera
-from simrunner.sensors.imaging import PHOTONS_PER_LM_S, Imager, bilinear_f64
+from simrunner.sensors.imaging import PHOTONS_PER_LM_S, Imager, bilinear_f64, blur_rows, pad_with_floor
 from simrunner.track.raster import BLACK_GRAY, WHITE_GRAY, build_raster, layer_from_polygon
 from vehicle.description import CarDescription, CarDescriptionError, load_car
-from worlds.lighting import Light, TrackLighting
+from worlds.lighting import TrackLighting
 
 CAR = CarDescription()
 QUIET = dict(prnu=0.0, dsnu_e=0.0, dark_current_eps=0.0, psf_sigma_px=0.0, motion_blur_samples=1,
@@ -176,6 +176,35 @@ def test_bilinear_f64_inside_and_at_the_border():
     assert bilinear_f64(img, np.array([0.25]), np.array([0.0]), 7.0)[0] == pytest.approx(25.0)
     assert bilinear_f64(img, np.array([-0.5]), np.array([0.0]), 8.0)[0] == pytest.approx(4.0)
     assert bilinear_f64(img, np.array([5.0]), np.array([5.0]), 8.0)[0] == 8.0
+
+
+@pytest.mark.parametrize("dtype, floor", [(np.uint8, 40.0), (np.uint8, 40.3), (np.uint16, 9000.0),
+                                          (np.uint16, 70000.0)])
+def test_bilinear_f64_reads_the_padded_image_as_the_masked_one_bit_for_bit(dtype, floor):
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, np.iinfo(dtype).max, (30, 41)).astype(dtype)
+    padded = pad_with_floor(img, floor)
+    assert padded.dtype == (dtype if floor == int(floor) and floor <= np.iinfo(dtype).max else np.float64)
+    sx, sy = rng.uniform(-6, 47, (2, 50, 60))  # inside, across every border, far outside
+    sx[0, :4], sy[1, :3] = (np.nan, np.inf, -np.inf, 1e300), (np.nan, -1e300, np.inf)
+    with np.errstate(invalid="ignore"):  # inf - inf, a NaN cast to an index (read as outside)
+        slow = bilinear_f64(img, sx, sy, floor)
+        fast = bilinear_f64(img, sx, sy, floor, padded=padded)
+    assert np.array_equal(slow, fast, equal_nan=True)
+    assert np.isnan(fast[0, 0]) and fast[0, 3] == floor  # no ray; far off the image: the floor
+
+
+@pytest.mark.parametrize("taps", [1, 3, 7, 13])
+def test_blur_rows_is_np_convolve_row_by_row_bit_for_bit(taps):
+    rng = np.random.default_rng(taps)
+    kernel = rng.uniform(0, 1, taps)
+    for shape in ((1, 134), (128, 134), (5, taps), (3, 200)):
+        scene = rng.uniform(0, 5000, shape) * rng.choice([1e-3, 1.0, 1e3], shape)
+        rows = np.stack([np.convolve(r, kernel, mode="valid") for r in scene])
+        got = blur_rows(scene, kernel)
+        assert got.shape == rows.shape and np.array_equal(got, rows)
+        assert np.array_equal(blur_rows(scene[:, ::-1], kernel), np.stack([np.convolve(r, kernel, mode="valid")
+                                                                           for r in scene[:, ::-1]]))
 
 
 # -- exposure on the lockstep clock --------------------------------------------------------

@@ -143,6 +143,19 @@ def test_simrunner_drive_does_not_load_numba():
     assert proc.stdout.startswith("outcome: timeout") and proc.stderr == ""
 
 
+def test_simrunner_batch_loads_neither_numba_nor_tqdm_without_a_terminal(tmp_path):
+    """The batch's process and its forked workers run with numba blocked (no run uses it,
+    ~0.16 s of the command's start-up) and, stderr not being a terminal (no progress bar is
+    shown there), with tqdm blocked (~20 ms)."""
+    script = ("from simrunner.cli import main; sys.argv = ['simrunner', 'batch', "
+              f"'examples/line_follower.py', '--seeds', '2', '--workers', '1', '--time-limit', '0.05', "
+              f"'--no-plot', '-o', {str(tmp_path / 'out')!r}]; main()")
+    proc = run_blocked(script, {"numba", "llvmlite", "scipy", "tqdm"})
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("2 runs on 1 worker(s) (local)") and "timeout 2" in proc.stdout
+    assert proc.stderr == ""
+
+
 def test_simrunner_help_without_the_simulator_dependencies():
     proc = run_blocked("from simrunner.cli import main; sys.argv = ['simrunner', '--help']; main()",
                        SIM_DEPENDENCIES)

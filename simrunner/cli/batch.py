@@ -58,13 +58,10 @@ def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, ou
               video, csv, run_timeout_s, car, dt_s, wall_limit_s, ray, no_plot,
               off_track_wheels=None, event=None, mcu_time=None, mcu_scale=1.0) -> None:
     """Run CONTROLLER over tracks x parameters x seeds on all cores (or Ray); one row per run."""
-    from tqdm import tqdm
-
     from simrunner.cli import input_errors
     from simrunner.workflows.batch import run_batch
 
-    tqdm.monitor_interval = 0  # no monitor thread: workers fork from this process (pool.py)
-    bar = tqdm(total=None, unit="run", dynamic_ncols=True, file=sys.stderr, disable=None)
+    bar = _progress_bar()
     failed = [0]
 
     def on_row(row: dict) -> None:
@@ -113,3 +110,31 @@ def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, ou
                    + ", ".join(map(str, result.rerun_mismatches)), err=True)
     written = [result.csv_path, result.json_path] + ([result.plot_path] if result.plot_path else [])
     click.echo("wrote: " + ", ".join(map(str, written)))
+
+
+class _NoBar:
+    """The progress bar where none is shown: what a disabled ``tqdm`` does, nothing."""
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def set_postfix(self, **kw) -> None:
+        pass
+
+    def reset(self, total=None) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _progress_bar():
+    """A ``tqdm`` bar on stderr when it is a terminal; else :class:`_NoBar` - what
+    ``tqdm(disable=None)`` shows there (nothing), without importing tqdm (~20 ms: its version
+    look-up reads the installed packages' metadata), as in scripts, CI and the bench."""
+    if hasattr(sys.stderr, "isatty") and not sys.stderr.isatty():
+        return _NoBar()
+    from tqdm import tqdm
+
+    tqdm.monitor_interval = 0  # no monitor thread: workers fork from this process (pool.py)
+    return tqdm(total=None, unit="run", dynamic_ncols=True, file=sys.stderr, disable=None)

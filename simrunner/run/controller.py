@@ -74,12 +74,11 @@ def load_controller(controller) -> Controller:
         if isinstance(controller, NativeProgram):
             return Controller(None, None, load_native(controller), None)
     path = Path(controller)
-    from simrunner.run.native import is_native
+    if path.suffix != ".py":  # (the build machinery is ~7 ms to import: not for a .py file)
+        from simrunner.run.native import is_native, load_native
 
-    if is_native(path):  # C/C++ sources or a shared library: compiled (cached), run (simrunner.run.native)
-        from simrunner.run.native import load_native
-
-        return Controller(path, None, load_native([path]), None)
+        if is_native(path):  # C/C++ sources or a shared library: compiled (cached), run
+            return Controller(path, None, load_native([path]), None)
     code = compile_controller(path)
     return Controller(path, code, None, code.co_filename)
 

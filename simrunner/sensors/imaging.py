@@ -45,8 +45,8 @@ Everything is float64 NumPy in a fixed order: the same inputs and normals give t
 """
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -70,12 +70,29 @@ def _gaussian_kernel(sigma_px: float) -> np.ndarray:
     return k / k.sum()
 
 
+_PAD_BEFORE, _PAD_AFTER = 2, 3  # bilinear_f64 clamps corners to -2 .. size + 2
+
+
+def pad_with_floor(image: np.ndarray, floor: float) -> np.ndarray:
+    """``image`` inside a border of ``floor`` (2 pixels before, 3 after each axis: every
+    corner :func:`bilinear_f64` reads outside the image), in the image's dtype when that
+    holds ``floor`` exactly, else float64: the ``padded`` argument of :func:`bilinear_f64`."""
+    pad = ((_PAD_BEFORE, _PAD_AFTER), (_PAD_BEFORE, _PAD_AFTER))
+    if np.issubdtype(image.dtype, np.integer):
+        info = np.iinfo(image.dtype)
+        if float(floor).is_integer() and info.min <= floor <= info.max:
+            return np.pad(image, pad, constant_values=int(floor))
+    return np.pad(image.astype(np.float64), pad, constant_values=float(floor))
+
+
 def bilinear_f64(image: np.ndarray, sx: np.ndarray, sy: np.ndarray, floor: float, *,
-                 ends_only: bool = False) -> np.ndarray:
+                 ends_only: bool = False, padded: np.ndarray | None = None) -> np.ndarray:
     """Bilinear float64 value of ``image`` at raster coordinates ``(sx, sy)`` (col, row; any
     equal shapes), ``floor`` for neighbours outside the image (unrounded: the physical
     camera's scene). ``ends_only``: each last-axis line of points is a straight segment, so
-    its extreme coordinates are at its two ends (a cheaper inside test)."""
+    its extreme coordinates are at its two ends (a cheaper inside test). ``padded``:
+    ``pad_with_floor(image, floor)``, for points near or outside the border (one read per
+    corner instead of a masked one: the same values)."""
     h, w = image.shape
     if ends_only:
         ex, ey = sx[..., ::sx.shape[-1] - 1], sy[..., ::sy.shape[-1] - 1]
@@ -93,6 +110,16 @@ def bilinear_f64(image: np.ndarray, sx: np.ndarray, sy: np.ndarray, floor: float
         p01 = flat.take(idx + 1).astype(np.float64)
         p10 = flat.take(idx + w).astype(np.float64)
         p11 = flat.take(idx + (w + 1)).astype(np.float64)
+    elif padded is not None:  # NaN (a ray through nothing) reads floor, as below
+        ix = np.fmin(np.fmax(fx, -2.0), w + 1.0).astype(np.intp)
+        iy = np.fmin(np.fmax(fy, -2.0), h + 1.0).astype(np.intp)
+        pw = w + _PAD_BEFORE + _PAD_AFTER
+        idx = (iy + _PAD_BEFORE) * pw + (ix + _PAD_BEFORE)
+        flat = padded.ravel()
+        p00 = flat.take(idx).astype(np.float64)
+        p01 = flat.take(idx + 1).astype(np.float64)
+        p10 = flat.take(idx + pw).astype(np.float64)
+        p11 = flat.take(idx + (pw + 1)).astype(np.float64)
     else:
         ix = np.clip(fx, -2.0, w + 1.0).astype(np.intp)
         iy = np.clip(fy, -2.0, h + 1.0).astype(np.intp)
@@ -115,6 +142,19 @@ def bilinear_f64(image: np.ndarray, sx: np.ndarray, sy: np.ndarray, floor: float
     p11 *= ay
     p11 += p01
     return p11
+
+
+def blur_rows(scene: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """Each row of ``scene`` (``(R, L)`` float64) convolved with ``kernel`` (``n`` taps),
+    ``mode="valid"``: ``(R, L - n + 1)``, a read-only view. Bit for bit
+    ``np.stack([np.convolve(r, kernel, "valid") for r in scene])``, in one call: the rows are
+    convolved laid end to end (each output is the same dot product of the same ``n``
+    values) and the outputs that straddle two rows are left out."""
+    n_out = scene.shape[1] - len(kernel) + 1
+    joined = np.convolve(np.ascontiguousarray(scene).ravel(), kernel, mode="valid")
+    step = joined.itemsize
+    return np.lib.stride_tricks.as_strided(joined, (len(scene), n_out), (scene.shape[1] * step, step),
+                                           writeable=False)
 
 
 class Imager:
@@ -181,6 +221,12 @@ class Imager:
         self._terrain_rays: dict[tuple[int, int], np.ndarray] = {}  # rows -> car-frame rays (hills)
         self._inv_m = 1.0 / camera.raster.m_per_px
         self._x0_m, self._y0_m = (float(c) for c in camera.raster.origin_xy_m)
+
+    @functools.cached_property
+    def _refl_padded(self) -> np.ndarray:
+        """The reflectance image in a border of its floor (:func:`pad_with_floor`; made on
+        first use: rows that see past the raster, as the upper rows of a whole frame do)."""
+        return pad_with_floor(self._refl_image, self._refl_floor)
 
     # -- geometry ------------------------------------------------------------------
     def _rows_ground(self, r0: int, r1: int):
@@ -272,7 +318,8 @@ class Imager:
         sx *= inv
         sy = self._y0_m - wy
         sy *= inv
-        scene = bilinear_f64(self._refl_image, sx, sy, self._refl_floor, ends_only=segment)
+        scene = bilinear_f64(self._refl_image, sx, sy, self._refl_floor, ends_only=segment,
+                             padded=self._refl_padded)
         if any_miss:
             scene[..., miss] = self._refl_floor
         lighting = self.lighting
@@ -344,12 +391,8 @@ class Imager:
         """ADC image (uint8 ``(r1 - r0, W)``) of ``scene`` (``scene_lux`` of those rows)."""
         spec = self.spec
         blurred = scene
-        if self._margin:  # the PSF along the row (k is symmetric); row by row, so a line is
-            k = self._kernel  # bit for bit its frame's row
-            if len(scene) == 1:
-                blurred = np.convolve(scene[0], k, mode="valid")[None, :]
-            else:
-                blurred = np.stack([np.convolve(r, k, mode="valid") for r in scene])
+        if self._margin:  # the PSF along the row (k is symmetric); a line is bit for bit
+            blurred = blur_rows(scene, self._kernel)  # its frame's row
         rows = slice(r0, r1)
         startup = int(spec.startup_frames)
         if startup and frame_index <= startup:  # frame 1 is the first read after power-up

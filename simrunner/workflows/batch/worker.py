@@ -112,8 +112,9 @@ def execute_job(job: Job, state: WorkerState, outputs: dict[str, str] | None = N
 
 
 WARM_MODULES = ("simrunner.car.effects", "simrunner.run.runner", "simrunner.sensors.camera",
-                "simrunner.sensors.line_kernel", "trackgen.build")
-"""What every run imports (dartpy, OpenCV, numba kernels)."""
+                "simrunner.sensors.imaging", "trackgen.build")
+"""What every run imports (dartpy, OpenCV; not numba: the camera's line is NumPy,
+:mod:`simrunner.sensors.line_row`)."""
 
 
 def warm_up() -> None:
