@@ -195,3 +195,20 @@ def test_a_composer_draws_what_compose_draws_frame_by_frame():
 def test_video_path_must_be_mp4(tmp_path):
     with pytest.raises(SimError, match=r"\.mp4"):
         VideoRecorder(tmp_path / "v.avi", camera_fps=50, render=None)
+
+
+RACEWAY = Path(__file__).resolve().parents[2] / "shared" / "tracks" / "nxp_raceway"
+
+
+@pytest.mark.skipif(not RACEWAY.is_dir(), reason="../shared/tracks is absent")
+def test_the_video_is_the_same_every_run_while_the_exposure_changes(tmp_path):
+    """The line follower's auto exposure changes the exposure on the raceway while the video's
+    thread draws the frames the controller took no image in: each is drawn at the exposure in
+    force when the frame began (it read the exposure when the thread got to it: 14-22 frames
+    of the camera panel differed between runs)."""
+    follower = Path(__file__).resolve().parents[1] / "examples" / "line_follower.py"
+    videos = []
+    for k in range(2):
+        drive(follower, track=RACEWAY, video=tmp_path / f"v{k}.mp4")
+        videos.append((tmp_path / f"v{k}.mp4").read_bytes())
+    assert videos[0] == videos[1]

@@ -42,7 +42,8 @@ class VideoRecorder:
     """Collects frame records on the main thread; a writer thread composes and encodes.
 
     ``render(pose) -> (H, W) uint8`` draws the camera view when the controller took no image
-    in a frame. ``camera_fps``: frame rate of the camera; the video keeps every
+    in a frame; with ``view_state``, ``render(pose, view)`` gets what ``view_state()`` returned
+    at the frame's start (the writer thread draws later: e.g. the exposure then in force). ``camera_fps``: frame rate of the camera; the video keeps every
     ``ceil(camera_fps / max_fps)``-th frame (``max_fps``: the video's highest frame rate, fps). ``raster``: the track's ``TrackRaster`` (top-down view), shaded
     by ``lighting`` (a ``worlds.lighting.TrackLighting``) when it is not the default hall.
     """
@@ -50,7 +51,8 @@ class VideoRecorder:
     def __init__(self, path: str | Path, *, camera_fps: float, render: Callable, raster=None,
                  laps: int = 1, line_row: int = 0, car_length_m: float = 0.28,
                  car_width_m: float = 0.16, queue_size: int = 32, lighting=None,
-                 surface_z_m: float = 0.0, max_fps: float = MAX_VIDEO_FPS):
+                 surface_z_m: float = 0.0, max_fps: float = MAX_VIDEO_FPS,
+                 view_state: Callable | None = None):
         self.path = Path(path)
         if self.path.suffix.lower() != ".mp4":
             raise SimError(f"{self.path}: the debug video must be an .mp4 file")
@@ -68,6 +70,7 @@ class VideoRecorder:
         if not self._writer.isOpened():
             raise SimError(f"{self.path}: OpenCV cannot write an mp4v video here")
         self._render = render
+        self._view_state = view_state
         self._raster = raster
         self._lighting = (lighting, surface_z_m)  # the top view shows the track's light
         self._laps = laps
@@ -100,6 +103,14 @@ class VideoRecorder:
         if frame % self.every:
             return
         self._pending = FrameRecord(frame, t_s, pose, state, line_row=self._last_row)
+        if self._view_state is not None:
+            self._pending.view = self._view_state()
+
+    def drain(self) -> None:
+        """Wait until the writer thread has drawn every frame recorded so far (before the
+        scene changes: an object put on the track shows from the frame being recorded on)."""
+        if self._thread.is_alive():
+            self._queue.join()
 
     def note_image(self, img: np.ndarray, line: int) -> None:
         """The image (``line = -1``) or row the controller just got (copied: the controller
@@ -186,13 +197,15 @@ class VideoRecorder:
         try:
             while True:
                 rec = self._queue.get()
+                self._queue.task_done()  # (drain() waits for the frames taken before this one)
                 if rec is None:
                     return
                 if self._error is not None:
                     continue
                 try:
                     if rec.image is None:
-                        rec.image = self._render(rec.pose)
+                        rec.image = (self._render(rec.pose) if self._view_state is None
+                                     else self._render(rec.pose, rec.view))
                     if rec.line is None:
                         rec.line = rec.image[rec.line_row:rec.line_row + 1]
                     if composer is None:

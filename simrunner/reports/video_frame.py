@@ -57,6 +57,7 @@ class FrameRecord:
     text: tuple = ()
     lines: np.ndarray | None = None  # (k, W) controller image lines
     pixy2: tuple | None = None  # (all Features, Vector index or None, grid_w, grid_h): drawn on the image
+    view: Any = None  # what the camera view is drawn with (VideoRecorder's view_state at the frame)
 
 
 @dataclass(frozen=True)

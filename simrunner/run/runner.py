@@ -280,7 +280,8 @@ class Run:
 
             self.video = VideoRecorder(video_path, camera_fps=1.0 / car.camera.frame_period_s(),
                                        **({} if video_fps is None else {"max_fps": video_fps}),
-                                       render=self._render_view, raster=track.raster,
+                                       render=self._render_view, view_state=lambda: self.session.exposure_s,
+                                       raster=track.raster,
                                        lighting=track.lighting, surface_z_m=track.surface_z_m,
                                        laps=settings.laps if settings.event is None else (event_laps or 0),
                                        line_row=car.camera.default_row,
@@ -312,16 +313,19 @@ class Run:
         """Put ``solid`` (:class:`worlds.solids.Solid`) on the track now: a rigid body the car
         can touch, seen by the cameras and the range sensors."""
         self.sim.add_solid(solid)
+        if self.video is not None:  # the frames before this one are drawn without it
+            self.video.drain()
         self.camera.solids = self.camera.solids + (solid,)
         self.frames.has_solids = True
         self.frames.solids = self.camera.solids
 
-    def _render_view(self, pose) -> np.ndarray:
+    def _render_view(self, pose, exposure_s: float) -> np.ndarray:
         """The debug video's camera view in a frame the controller took no image: the camera's
-        own image without temporal noise (the physical camera at the exposure in force)."""
+        own image without temporal noise (the physical camera at ``exposure_s``, the exposure
+        in force when the frame began; drawn in the video's thread)."""
         if self.imager is None:
             return self.camera.render(pose)
-        return self.imager.frame(pose, exposure_s=self.session.exposure_s)
+        return self.imager.frame(pose, exposure_s=exposure_s)
 
     def execute(self, controller: Controller) -> tuple[Outcome, str, ControllerError | None]:
         """Run ``controller`` to the end of the run: ``(outcome, message, error)``.
