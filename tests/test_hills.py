@@ -107,6 +107,27 @@ def test_the_solid_mesh_is_closed_and_follows_the_profile():
     assert np.allclose(np.abs(v), 0.295)
 
 
+def test_a_huge_hill_is_meshed_with_longer_edges_not_more_vertices():
+    """``@scale = 100`` makes the kit's hill 144 m long: its road meshes stay within a few
+    hundred thousand vertices (the fixed 0.02 m step took 23 GB and the fuzzer's worker was
+    killed; here in a process held to 3 GB); the kit's own hill keeps the fine step."""
+    import subprocess
+    import sys
+
+    from trackgen.export import MAX_HILL_VERTICES
+
+    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))\n"
+            "from trackgen import parse_layout\nfrom trackgen.build import check_layout\n"
+            "m = check_layout(parse_layout(sys.stdin.read(), path='hill.txt')).geometry.meshes\n"
+            "print(len(m['hill_lane'].vertices), len(m['hill_edges'].vertices))")
+    for scale, most in (("", 10_000), ("@scale = 100\n", 2 * MAX_HILL_VERTICES)):
+        out = subprocess.run([sys.executable, "-c", code], input=scale + KIT_HILL.read_text(), text=True,
+                             capture_output=True, timeout=120, cwd=REPO)
+        assert out.returncode == 0, out.stderr[-500:]
+        counts = [int(v) for v in out.stdout.split()]
+        assert 1000 < min(counts) and max(counts) < most, (scale, counts)
+
+
 # -- layouts, validation, builds ---------------------------------------------------------------
 def test_validation_names_a_hill_the_car_cannot_climb_or_clear(tmp_path):
     path = oval(tmp_path, "HILL length=0.6 height=0.15\nSTRAIGHT length=0.84")

@@ -8,6 +8,7 @@ snapped union stays watertight after the float32 STL round trip).
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from functools import cached_property
 import numpy as np
@@ -27,6 +28,13 @@ HILL_ROLES = {"hill_lane": "lane", "hill_edges": "edges"}
 """The meshes of the road on the hills (the lifted part of each role: :func:`hill_meshes`)."""
 HILL_MESH_STEP_M = 0.02
 """Longest edge of a hill's mesh (m): the lifted surface's chord sags < 0.1 mm between vertices."""
+MAX_HILL_VERTICES = 250_000
+"""A hill's mesh is refined to at most about this many vertices: on a larger hill (a layout's
+``@scale`` blows one up) the edges get longer than ``HILL_MESH_STEP_M`` (the kit's 1.44 m hill
+takes ~4,400 vertices; at @scale = 100 the fixed step took 23 GB)."""
+HILL_VERTICES_AREA, HILL_VERTICES_EDGE = 2.1, 3.0
+"""A plate refined to edges of length ``x`` has about ``2.1 area / x^2 + 3.0 perimeter / x``
+vertices (fitted to the kit hill's two plates: 4,366 and 1,164 vertices at 0.02 m)."""
 HILL_MARGIN_M = 0.01
 """A hill's cut reaches this far beyond the road on both sides (m), so the road's edges fall inside."""
 
@@ -96,9 +104,18 @@ def hill_mesh(footprint: shapely.Geometry, thickness_m: float, terrain: Terrain)
         v[:, 2] += wide.height_m(v[:, 0], v[:, 1])
         return v
 
-    solid = cross_section(footprint).extrude(thickness_m).refine_to_length(HILL_MESH_STEP_M)
+    step = max(HILL_MESH_STEP_M, _hill_step_m(footprint.area, footprint.length))
+    solid = cross_section(footprint).extrude(thickness_m).refine_to_length(step)
     mesh = solid.warp_batch(lift).to_mesh64()
     return SlabMesh(np.asarray(mesh.vert_properties, dtype=float)[:, :3], np.asarray(mesh.tri_verts, dtype=np.int64))
+
+
+def _hill_step_m(area_m2: float, perimeter_m: float) -> float:
+    """The edge length that refines a plate of ``area_m2`` and ``perimeter_m`` to about
+    ``MAX_HILL_VERTICES`` vertices (the positive root of ``a A u^2 + b P u = N``, ``u = 1 / x``)."""
+    a, b, n = HILL_VERTICES_AREA * area_m2, HILL_VERTICES_EDGE * perimeter_m, MAX_HILL_VERTICES
+    u = (-b + math.sqrt(b * b + 4.0 * a * n)) / (2.0 * a) if a > 0 else n / max(b, 1e-12)
+    return 1.0 / u
 
 
 def _polygons_only(geom: shapely.Geometry) -> shapely.Geometry:
