@@ -175,3 +175,33 @@ def test_findings_txt_is_in_a_finished_folder(tmp_path):
     lines = (tmp_path / "out" / "findings.txt").read_text().splitlines()
     assert lines[0].startswith("[0:0") and "m.csv: 16.0 s" in lines[0]
     assert "nominal car: held-out gap" in lines[1] and lines[-1].split("] ", 1)[1].startswith("done: effects none")
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # (the swallowed stop)
+def test_a_stop_swallowed_where_it_landed_still_stops_the_run(tmp_path, monkeypatch, capfd):
+    """The signal's handler ends the fit workers and raises where the main thread is; in a
+    finalizer that exception is ignored, and the next fit finds the pool broken: the run is
+    still the stop it is (exit 143, its message), not a BrokenProcessPool traceback."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    from click.testing import CliRunner
+
+    import simrunner.workflows.gap.workflow as workflow
+    from simrunner.cli import main
+
+    class Finalized:
+        def __del__(self):
+            os.kill(os.getpid(), signal.SIGTERM)  # its handler's exception is ignored here
+
+    def stopped_run(*args, **kwargs):
+        Finalized()
+        time.sleep(0.05)
+        raise BrokenProcessPool("A child process terminated abruptly")
+
+    monkeypatch.setattr(workflow, "run_gap", stopped_run)
+    log_path = tmp_path / "m.csv"
+    write_log(lag_log(), log_path)
+    result = CliRunner().invoke(main, ["gap", str(log_path), "-o", str(tmp_path / "out"), "--no-progress"])
+    err = capfd.readouterr().err
+    assert result.exit_code == 128 + signal.SIGTERM, (result.output, err)
+    assert "stopped by SIGTERM" in err and "Traceback" not in err + result.output

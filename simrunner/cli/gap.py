@@ -201,7 +201,7 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
         if cost.minutes >= SAY_COST_MIN:
             click.echo(f"simrunner gap: {cost.text()} (estimated; docs/gap.md, --max-rows)", err=True)
         live = LiveFolder(out_dir, force=force)
-        with _engine_stderr_silenced() as err, _stop_on_signals():
+        with _engine_stderr_silenced() as err, _stop_on_signals() as received:
             view = _LiveView(err, no_progress, live)
             findings = Findings(view.finding)
             try:
@@ -211,6 +211,13 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
             except _Stopped as stop:
                 view.close()
                 _write_stopped(findings, live, out_dir, stop, err)
+            except Exception:
+                # a signal whose _Stopped was swallowed where it landed (a finalizer ignores what
+                # it raises): its ended workers then broke the fit pool - the stop, all the same
+                if not received:
+                    raise
+                view.close()
+                _write_stopped(findings, live, out_dir, _Stopped(received[0]), err)
             finally:
                 view.close()
         try:
