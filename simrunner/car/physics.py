@@ -101,6 +101,7 @@ HILL_STEP_M = 0.02  # a hill's collision mesh samples its profile this often alo
 HILL_BASE_M = -0.005  # a hill mesh's base below the surface (inside the ground box)
 SOLID_MU = 0.5          # friction of a solid on the track and the car (ours: polystyrene)
 WHEEL_CONTACTS = 4      # ODE's contacts of a car on its four round tyres (one each)
+TOUCH_SPEED_BOUND_MPS = 20.0  # no car here moves faster: the tyres' touch test skips the steps it cannot reach a solid in
 SOLID_REST_M = 4e-8     # a solid starts at ODE's resting depth above the surface (platform facts)
 MAX_TYRE_UPDATE_STEPS = 4  # slip tyres: their forces are updated every 1-4 physics steps (SlipTyres.update_steps)
 DRAG_UPDATE_STEPS = 5    # duty drive: the air drag force is updated every 5 physics steps (10 ms at 2 ms)
@@ -227,6 +228,7 @@ class CarSim:
         self._solids: list = []  # (name, skeleton) of each solid on the track
         self._touched: set[str] = set()  # solids touched since touched_solids() was last read
         self._tyre_solids: list = []  # (solid, the tyre's half-length below its top, reach m)
+        self._touch_skip = 0  # steps before the tyres need testing against the solids again
 
         r = car.wheels.radius_m
         wb, half_t = car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
@@ -392,6 +394,7 @@ class CarSim:
             lateral_mps = rot0[0][1] * dq[3] + rot0[1][1] * dq[4] + rot0[2][1] * dq[5]
         self._rd = self._pose = self._wc = None
         self._held = False
+        self._touch_skip = 0  # (the car may be anywhere now)
         if self._tyres is not None and not keep_slip:  # placed anew: rolling without slip, the forces due now
             self._tyres.reset_slip()
             self._tyre_left, self._contacts_then = 0, None
@@ -815,6 +818,7 @@ class CarSim:
         car_reach = math.hypot(self._wb_m + r, self._half_t_m + self.car.wheels.width_m)  # rear axle -> tyres
         reach = math.hypot(solid.length_m, solid.width_m) / 2.0 + car_reach + 0.01
         self._tyre_solids.append((solid, half_length, reach))
+        self._touch_skip = 0
         self._base_step = self._step_noting_touches
         self._world_step = self._hooked_step if (self._duty_mode or self._tyres) else self._step_noting_touches
 
@@ -847,11 +851,15 @@ class CarSim:
         """The tyres against the solids near the car: a tyre (``wheels.width_m`` wide, a disc of
         ``wheels.radius_m``) touches a box when their footprints overlap, the tyre's cut at the
         box's height (exact for a box with vertical faces)."""
+        if self._touch_skip > 0:  # too far from every solid to reach one yet
+            self._touch_skip -= 1
+            return
         qa = self._skel.getPositions()
         x, y = float(qa[3]), float(qa[4])
-        near = [(solid, half) for solid, half, reach in self._tyre_solids
-                if (solid.x_m - x) ** 2 + (solid.y_m - y) ** 2 <= reach * reach]
+        gaps = [math.hypot(solid.x_m - x, solid.y_m - y) - reach for solid, _, reach in self._tyre_solids]
+        near = [(solid, half) for (solid, half, _), gap in zip(self._tyre_solids, gaps) if gap <= 0.0]
         if not near:
+            self._touch_skip = int(min(gaps) / (TOUCH_SPEED_BOUND_MPS * self.dt_s))
             return
         rot = _exp_map_rot(qa[:3])
         yaw = math.atan2(rot[1, 0], rot[0, 0])
@@ -1051,6 +1059,7 @@ class CarSim:
         skel = self._skel
         self._rd = self._pose = self._wc = None
         self._held = False
+        self._touch_skip = 0  # (the car may be anywhere now)
         skel.setPositions(state.positions)
         skel.setVelocities(state.velocities)
         self._world.setTime(state.time_s)
