@@ -64,16 +64,22 @@ class Solid:
     def overlaps(self, x_m: float, y_m: float, yaw_rad: float, half_length_m: float, half_width_m: float) -> bool:
         """Does the footprint overlap the rectangle centred at ``(x_m, y_m)``, turned by
         ``yaw_rad``, of half sizes ``half_length_m`` (along ``yaw_rad``) and ``half_width_m``
-        (touching counts)? Separating axes: the two rectangles' four edge directions."""
+        (touching counts)?"""
+        return self.gap_m(x_m, y_m, yaw_rad, half_length_m, half_width_m) <= 0.0
+
+    def gap_m(self, x_m: float, y_m: float, yaw_rad: float, half_length_m: float, half_width_m: float) -> float:
+        """The widest gap between the footprint and that rectangle along the separating axes
+        (the two rectangles' edge directions): <= 0 when they overlap, else a lower bound of
+        their distance (m)."""
         dx, dy = x_m - self.x_m, y_m - self.y_m
         c1, s1, c2, s2 = math.cos(self.yaw_rad), math.sin(self.yaw_rad), math.cos(yaw_rad), math.sin(yaw_rad)
         a1, b1, a2, b2 = 0.5 * self.length_m, 0.5 * self.width_m, half_length_m, half_width_m
+        gap = -math.inf
         for ux, uy in ((c1, s1), (-s1, c1), (c2, s2), (-s2, c2)):
             reach = (a1 * abs(ux * c1 + uy * s1) + b1 * abs(-ux * s1 + uy * c1)
                      + a2 * abs(ux * c2 + uy * s2) + b2 * abs(-ux * s2 + uy * c2))
-            if abs(dx * ux + dy * uy) > reach:
-                return False
-        return True
+            gap = max(gap, abs(dx * ux + dy * uy) - reach)
+        return gap
 
     def to_json(self) -> dict:
         return {"name": self.name, "x_m": self.x_m, "y_m": self.y_m, "length_m": self.length_m,

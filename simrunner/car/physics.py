@@ -101,7 +101,6 @@ HILL_STEP_M = 0.02  # a hill's collision mesh samples its profile this often alo
 HILL_BASE_M = -0.005  # a hill mesh's base below the surface (inside the ground box)
 SOLID_MU = 0.5          # friction of a solid on the track and the car (ours: polystyrene)
 WHEEL_CONTACTS = 4      # ODE's contacts of a car on its four round tyres (one each)
-TOUCH_SPEED_BOUND_MPS = 20.0  # no car here moves faster: the tyres' touch test skips the steps it cannot reach a solid in
 SOLID_REST_M = 4e-8     # a solid starts at ODE's resting depth above the surface (platform facts)
 MAX_TYRE_UPDATE_STEPS = 4  # slip tyres: their forces are updated every 1-4 physics steps (SlipTyres.update_steps)
 DRAG_UPDATE_STEPS = 5    # duty drive: the air drag force is updated every 5 physics steps (10 ms at 2 ms)
@@ -229,6 +228,8 @@ class CarSim:
         self._touched: set[str] = set()  # solids touched since touched_solids() was last read
         self._tyre_solids: list = []  # (solid, the tyre's half-length below its top, reach m)
         self._touch_skip = 0  # steps before the tyres need testing against the solids again
+        # no point of the car moves faster than this (its top speed, and turning): the skip's bound
+        self._touch_speed_mps = 2.0 * car.drive.max_speed_mps + 2.0
 
         r = car.wheels.radius_m
         wb, half_t = car.chassis.wheelbase_m, 0.5 * car.chassis.track_m
@@ -858,19 +859,24 @@ class CarSim:
         x, y = float(qa[3]), float(qa[4])
         gaps = [math.hypot(solid.x_m - x, solid.y_m - y) - reach for solid, _, reach in self._tyre_solids]
         near = [(solid, half) for (solid, half, _), gap in zip(self._tyre_solids, gaps) if gap <= 0.0]
+        per_step_m = self._touch_speed_mps * self.dt_s
         if not near:
-            self._touch_skip = int(min(gaps) / (TOUCH_SPEED_BOUND_MPS * self.dt_s))
+            self._touch_skip = int(min(gaps) / per_step_m)
             return
         rot = _exp_map_rot(qa[:3])
         yaw = math.atan2(rot[1, 0], rot[0, 0])
         half_width = 0.5 * self.car.wheels.width_m
         steer = (float(qa[self._i_knuckle[0]]), float(qa[self._i_knuckle[1]]), 0.0, 0.0)
+        closest = math.inf
         for (cx, cy, cz), turn in zip(self._wheel_centres_m, steer):
             wx = x + rot[0, 0] * cx + rot[0, 1] * cy + rot[0, 2] * cz
             wy = y + rot[1, 0] * cx + rot[1, 1] * cy + rot[1, 2] * cz
             for solid, half_length in near:
-                if solid.name not in self._touched and solid.overlaps(wx, wy, yaw + turn, half_length, half_width):
+                gap = solid.gap_m(wx, wy, yaw + turn, half_length, half_width)
+                if gap <= 0.0:
                     self._touched.add(solid.name)
+                closest = min(closest, gap)
+        self._touch_skip = int(max(closest, 0.0) / per_step_m)  # (no tyre reaches a solid sooner)
 
     # -- stepping ----------------------------------------------------------------------
     @property
