@@ -84,3 +84,13 @@ def main(spinner):
         spinner.get_image(spinner.line_row)
         spinner.set_speed_and_servo(1.0, 0.0)
 """
+
+# a controller whose run "stuck" sits in one C-level call (the batch tests of both backends)
+STUCK = """
+def main(s):
+    for _ in range(5):
+        s.set_speed_and_servo(0.3, 0.0)
+        s.get_image()
+    if s.param("mode", "drive") == "stuck":
+        sum(range(10 ** 13))   # one C-level call that never lets Python code run
+"""

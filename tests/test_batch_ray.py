@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import FAULTY
+from helpers import FAULTY, STUCK
 
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.ray_backend import LOOPBACK_ENV
@@ -161,14 +161,6 @@ def test_ray_faulty_runs_never_stop_the_batch(ray_cluster, tmp_path):
     assert not ray.is_initialized()
 
 
-STUCK = """
-def main(s):
-    for _ in range(5):
-        s.set_speed_and_servo(0.3, 0.0)
-        s.get_image()
-    if s.param("mode", "drive") == "stuck":
-        sum(range(10 ** 13))   # one C-level call that never lets Python code run
-"""
 
 
 def test_ray_run_stuck_in_one_c_call_names_its_line_as_drive_does(ray_cluster, tmp_path):

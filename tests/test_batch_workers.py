@@ -5,6 +5,8 @@ from __future__ import annotations
 import textwrap
 import threading
 
+from helpers import STUCK
+
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.pool import LocalBackend, choose_start_method
 from simrunner.workflows.batch.spec import BatchConfig
@@ -53,14 +55,6 @@ def test_warm_workers_keep_runs_isolated_and_rows_identical(tmp_path):
     assert rows[1] == rows[2]
 
 
-STUCK = """
-def main(s):
-    for _ in range(5):
-        s.set_speed_and_servo(0.3, 0.0)
-        s.get_image()
-    if s.param("mode", "drive") == "stuck":
-        sum(range(10 ** 13))   # one C-level call that never lets Python code run
-"""
 
 
 def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):

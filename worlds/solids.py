@@ -61,16 +61,10 @@ class Solid:
         return np.column_stack((self.x_m + c * local[:, 0] - s * local[:, 1],
                                 self.y_m + s * local[:, 0] + c * local[:, 1]))
 
-    def overlaps(self, x_m: float, y_m: float, yaw_rad: float, half_length_m: float, half_width_m: float) -> bool:
-        """Does the footprint overlap the rectangle centred at ``(x_m, y_m)``, turned by
-        ``yaw_rad``, of half sizes ``half_length_m`` (along ``yaw_rad``) and ``half_width_m``
-        (touching counts)?"""
-        return self.gap_m(x_m, y_m, yaw_rad, half_length_m, half_width_m) <= 0.0
-
     def gap_m(self, x_m: float, y_m: float, yaw_rad: float, half_length_m: float, half_width_m: float) -> float:
         """The widest gap between the footprint and that rectangle along the separating axes
         (the two rectangles' edge directions): <= 0 when they overlap, else a lower bound of
-        their distance (m)."""
+        their distance (m). The car's tyres touch the solid where it is <= 0."""
         dx, dy = x_m - self.x_m, y_m - self.y_m
         c1, s1, c2, s2 = math.cos(self.yaw_rad), math.sin(self.yaw_rad), math.cos(yaw_rad), math.sin(yaw_rad)
         a1, b1, a2, b2 = 0.5 * self.length_m, 0.5 * self.width_m, half_length_m, half_width_m
