@@ -118,10 +118,14 @@ class ImuNoise:
         self._blocks: dict[int, list[float]] = {}  # the last two blocks' offsets, row after row
 
     def at(self, k: int) -> list[float]:
-        """Bias + its walk + the white noise of sample ``k`` (6 floats). The normals come in
-        blocks of ``_WALK_BLOCK`` samples from the run's seed and the block's number (the same
-        values whatever was read before); a block's offsets are summed once."""
+        """Bias + its walk + the white noise of sample ``k`` (6 floats)."""
         block, within = divmod(max(k, 0), _WALK_BLOCK)
+        return self.block(block)[6 * within:6 * within + 6]
+
+    def block(self, block: int) -> list[float]:
+        """The offsets of samples ``block B .. block B + B - 1`` (``B = _WALK_BLOCK``) as one flat
+        list, 6 floats a sample. The normals come from the run's seed and the block's number (the
+        same values whatever was read before); a block's offsets are summed once."""
         flat = self._blocks.get(block)
         if flat is None:
             normals = np.random.default_rng([self.seed, 0x494D55, block]).standard_normal((_WALK_BLOCK, 6))
@@ -130,7 +134,7 @@ class ImuNoise:
             if len(self._blocks) > 1:  # reads come in time order: the older block is done
                 del self._blocks[min(self._blocks)]
             self._blocks[block] = flat
-        return flat[6 * within:6 * within + 6]
+        return flat
 
     def _walk_rows(self, block: int) -> np.ndarray:
         """The bias random walk at samples ``block B .. block B + B - 1`` (``B = _WALK_BLOCK``): the
@@ -168,26 +172,45 @@ class Imu:
         if spec is None:
             return
         self._rate_hz = float(spec.rate_hz)
-        self._offsets = (noise if noise is not None else ImuNoise(spec, seed)).at
-        self._lsb_list = [spec.gyro_lsb_radps] * 3 + [spec.accel_lsb_mps2] * 3
-        self._range_list = [spec.gyro_range_radps] * 3 + [spec.accel_range_mps2] * 3
+        self._noise = noise if noise is not None else ImuNoise(spec, seed)
+        self._block_first, self._block = -_WALK_BLOCK, []  # the block of the last sample (none yet)
+        self._gyro_lsb, self._accel_lsb = float(spec.gyro_lsb_radps), float(spec.accel_lsb_mps2)
+        self._gyro_top, self._accel_top = float(spec.gyro_range_radps), float(spec.accel_range_mps2)
 
     def sample(self, call: str, t_s: float, truth) -> tuple[float, ...]:
         """``(6,)``: gyro x, y, z (rad/s), accelerometer x, y, z (m/s^2) of the sample at ``t_s``;
         ``truth()`` gives the car's ``(angular velocity (3,), specific force (3,))`` in the body
-        frame, asked only at a new sample."""
+        frame, asked only at a new sample. (Written out axis by axis: this runs at every frame of
+        a run log, and a loop over the six axes cost twice as much.)"""
         if self.spec is None:
             raise CommandError(f"{call}(): the car has no IMU (add [imu] to the car file)")
         k = math.floor(t_s * self._rate_hz + 1e-9)
         if k == self._held_k:
             return self._held
-        gyro, force = truth()
-        out = []
-        for v, off, lsb, top in zip((*gyro, *force), self._offsets(k), self._lsb_list, self._range_list):
-            v = float(v) + off
-            if lsb > 0.0:
-                v = round(v / lsb) * lsb
-            out.append(top if v > top else (-top if v < -top else v))
-        value = self._held = tuple(out)
+        (g0, g1, g2), (a0, a1, a2) = truth()
+        i = k - self._block_first
+        if not 0 <= i < _WALK_BLOCK:
+            block = max(k, 0) // _WALK_BLOCK
+            self._block_first, self._block = block * _WALK_BLOCK, self._noise.block(block)
+            i = max(k, 0) - self._block_first
+        o0, o1, o2, o3, o4, o5 = self._block[6 * i:6 * i + 6]
+        g0, g1, g2, a0, a1, a2 = g0 + o0, g1 + o1, g2 + o2, a0 + o3, a1 + o4, a2 + o5
+        lsb = self._gyro_lsb
+        if lsb > 0.0:
+            g0, g1, g2 = round(g0 / lsb) * lsb, round(g1 / lsb) * lsb, round(g2 / lsb) * lsb
+        lsb = self._accel_lsb
+        if lsb > 0.0:
+            a0, a1, a2 = round(a0 / lsb) * lsb, round(a1 / lsb) * lsb, round(a2 / lsb) * lsb
+        top = self._gyro_top
+        low = -top
+        g0 = top if g0 > top else (low if g0 < low else g0)
+        g1 = top if g1 > top else (low if g1 < low else g1)
+        g2 = top if g2 > top else (low if g2 < low else g2)
+        top = self._accel_top
+        low = -top
+        a0 = top if a0 > top else (low if a0 < low else a0)
+        a1 = top if a1 > top else (low if a1 < low else a1)
+        a2 = top if a2 > top else (low if a2 < low else a2)
+        value = self._held = (g0, g1, g2, a0, a1, a2)
         self._held_k = k
         return value
