@@ -93,14 +93,10 @@ def extra_columns(track: SimTrack, car: CarDescription, sim: CarModel, seed: int
         from simrunner.sensors.imu import ON, Encoders, Imu
 
         if car.encoders is not None:
-            encoders, wheels = Encoders(car.encoders), ON[car.encoders.wheels]
+            wheels = ON[car.encoders.wheels]
             names += [f"enc_{w.lower()}" for w in wheels]
-
-            def counts(pose, t):
-                angles = sim.wheel_angles_rad()
-                return tuple([encoders.count(w, angles) for w in wheels])
-
-            parts.append(counts)
+            counts = Encoders(car.encoders).counter(wheels, sim)
+            parts.append(lambda pose, t: counts())
         if car.imu is not None:
             imu = Imu(car.imu, seed, imu_noise)
             names += IMU_COLUMNS

@@ -78,6 +78,23 @@ class Encoders:
             return math.floor(sim.wheel_angle_rad(i) * self._counts_per_rad)
         return self._single(i, sim.wheel_angles_rad())
 
+    def counter(self, wheels, sim):
+        """A function of no arguments giving the counts of ``wheels`` (names) with the wheels'
+        angles read from ``sim`` (a ``CarModel``) then, as :meth:`count` gives them (the run
+        log's, at each frame)."""
+        angles_of = sim.wheel_angles_rad
+        if not self._quadrature:
+            def counts() -> tuple[int, ...]:
+                angles = angles_of()
+                return tuple([self.count(w, angles) for w in wheels])
+            return counts
+        index, per_rad, floor = [self._check(w) for w in wheels], self._counts_per_rad, math.floor
+
+        def quadrature() -> tuple[int, ...]:
+            angles = angles_of()
+            return tuple([floor(angles[i] * per_rad) for i in index])
+        return quadrature
+
     def _single(self, i: int, angles_rad) -> int:
         """One channel: every wheel's angle turned (either way) since the last read, counted."""
         last = self._last if self._last is not None else [0.0] * 4
