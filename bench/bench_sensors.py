@@ -7,8 +7,9 @@
    (simulated / CPU seconds, the best of ``REPEATS``) of one lap of the default track
    (target >= 0.95 of the plain run's).
    The same four calls as ``get_speed`` (each Spinner sensor call lets one physics step pass)
-   show what the calls cost without the sensor models; the plain follower on the car with the
-   sensors, what the run log's copies of them cost alone.
+   show what the calls cost without the sensor models (reading / those: what the models cost a
+   controller that reads them); the plain follower on the car with the sensors, what the run
+   log's copies of them cost alone (the sensors on, read by no one: on / off).
 2. ``--mcu-time 0`` (every Spinner call goes through the charge) against no ``--mcu-time``.
 """
 from __future__ import annotations
@@ -74,8 +75,9 @@ def main() -> None:
     print(f"closed-loop RTF (CPU, best of {REPEATS}, one lap, log written): plain follower {plain:.1f}x, "
           f"reading 2 encoders + gyro + accelerometer every frame (and logging them) {read:.1f}x "
           f"({read / plain:.2f} of it; target >= 0.95); the same 4 calls as get_speed (each lets a "
-          f"physics step pass) {calls:.1f}x ({calls / plain:.2f}); the car with them, the plain "
-          f"follower reading none (the run log's copies only) {logged:.1f}x ({logged / plain:.2f})")
+          f"physics step pass) {calls:.1f}x ({calls / plain:.2f}), so the sensor models cost "
+          f"{read / calls:.3f} of the same calls; the car with them, the plain follower reading none "
+          f"(the run log's copies only) {logged:.1f}x ({logged / plain:.3f})")
     fixed = _best_rtf(main_fn, mcu_time=0.0)
     plain = _best_rtf(main_fn)
     print(f"--mcu-time 0 (every call charged): {fixed:.1f}x vs {plain:.1f}x without ({fixed / plain:.2f})")
