@@ -150,6 +150,31 @@ def test_c_reads_the_encoders_and_the_imu(tmp_path):
     assert r.outcome == "controller_error" and "on its rear wheels" in r.message, r.message
 
 
+def test_cpp_reads_an_encoder_by_name_and_a_wrong_name_points_at_the_call(tmp_path):
+    """``getEncoder("rl")`` reads what ``getEncoder(SPINNER_WHEEL_RL)`` reads (names as in
+    Python); a name that is no wheel throws, and the run's outcome names the controller's line
+    that called it, not the header that threw."""
+    car = tmp_path / "car.toml"
+    car.write_text("[encoders]\n")
+    src = tmp_path / "probe.cpp"
+    src.write_text(textwrap.dedent("""\
+        #include "spinner.hpp"
+        int main() {
+            Spinner s;
+            s.setSpeedAndServo(1.0, 0.0);
+            s.sleep(0.5);
+            long long by_index = s.getEncoder(SPINNER_WHEEL_RL);
+            long long by_name = s.getEncoder("rl");  // one physics step later
+            if (by_name < by_index || by_name > by_index + 40 || by_index < 2000) return 1;
+            s.getEncoder(std::string("XL"));
+            return 0;
+        }
+        """))
+    r = drive(str(src), track="floor", car=car, time_limit_s=5.0)
+    assert r.outcome == "controller_error", r.message
+    assert "probe.cpp:9: SIGABRT" in r.message and "spinner.hpp" not in r.message, r.message
+
+
 def test_the_run_log_records_the_encoders_and_the_imu_without_changing_the_readings(tmp_path):
     def run(csv):
         got = []

@@ -49,12 +49,26 @@ class Fault:
 
     @property
     def location(self) -> Frame | None:
-        """The innermost frame with a file and line (the user's code), if any."""
-        return next((f for f in self.frames if f.file), None)
+        """The innermost frame with a file and line in the user's code (not in the simulator's
+        headers and kit libraries: an exception thrown by ``spinner.hpp`` names the call that
+        caused it), else the innermost with a file, if any."""
+        with_file = [f for f in self.frames if f.file]
+        return next((f for f in with_file if not _ours(f.file)), with_file[0] if with_file else None)
 
     def where(self) -> str:
         loc = self.location
         return f"{loc.file}:{loc.line}" if loc else ""
+
+
+_NATIVE_DIR = os.path.dirname(os.path.abspath(__file__))  # the simulator's headers and kits
+
+
+def _ours(path: str) -> bool:
+    """``path`` is one of the simulator's own sources (simrunner/run/native/...)."""
+    try:
+        return os.path.commonpath([os.path.abspath(path), _NATIVE_DIR]) == _NATIVE_DIR
+    except ValueError:
+        return False
 
 
 def _display_path(path: str) -> str:

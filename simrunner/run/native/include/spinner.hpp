@@ -20,12 +20,14 @@
 
 #include <unistd.h>  // usleep, sleep: the thesis's programs got these through the ROS headers
 
+#include <cctype>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <iostream>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -165,6 +167,15 @@ class Spinner {
     float getDistance(const std::string &name) { return float(spinner_get_distance(name.c_str())); }
     void setMotors(float left, float right) { spinner_set_motors(left, right); }
     long long getEncoder(int wheel) { return spinner_get_encoder(wheel); }
+    // By name, as in Python: "FL", "FR", "RL", "RR" (any case); another name throws.
+    long long getEncoder(const std::string &wheel) {
+        static const char *const names[] = {"FL", "FR", "RL", "RR"};
+        for (int i = 0; i < 4; ++i)
+            if (wheel.size() == 2 && std::toupper((unsigned char)wheel[0]) == names[i][0] &&
+                std::toupper((unsigned char)wheel[1]) == names[i][1])
+                return spinner_get_encoder(i);
+        throw std::invalid_argument("getEncoder(\"" + wheel + "\"): expected a wheel, one of FL, FR, RL, RR");
+    }
     std::tuple<float, float, float> getGyro() {
         double x, y, z;
         spinner_get_gyro(&x, &y, &z);
