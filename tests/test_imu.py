@@ -15,7 +15,7 @@ from simrunner.errors import CommandError
 from simrunner.run.runner import drive
 from simrunner.car.physics import CarSim
 from simrunner.sensors.imu import Encoders, Imu, ImuNoise
-from vehicle.description import CarDescription, CarDescriptionError, Imu as ImuSpec, car_from_dict
+from vehicle.description import CarDescription, CarDescriptionError, car_from_dict
 
 SENSORS = car_from_dict(tomllib.loads("[encoders]\n[imu]\n"))
 R = CarDescription().wheels.radius_m
