@@ -21,6 +21,8 @@ SIGNAL_TEXT = {
     signal.SIGFPE: "arithmetic exception (integer division by zero)",
     signal.SIGABRT: "aborted (abort() or a failed assert)",
 }
+#: Where the kit libraries (--kit) live: their frames are not the user's location.
+_KITS_DIR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "kits") + os.sep
 
 
 @dataclass(frozen=True)
@@ -49,12 +51,19 @@ class Fault:
 
     @property
     def location(self) -> Frame | None:
-        """The innermost frame with a file and line (the user's code), if any."""
-        return next((f for f in self.frames if f.file), None)
+        """The innermost frame with a file and line in the user's code (a kit library's own
+        frames, simrunner/run/native/kits/, are passed over for the line that called them), if
+        any."""
+        located = [f for f in self.frames if f.file]
+        return next((f for f in located if not _in_kit(f.file)), located[0] if located else None)
 
     def where(self) -> str:
         loc = self.location
         return f"{loc.file}:{loc.line}" if loc else ""
+
+
+def _in_kit(path: str) -> bool:
+    return os.path.abspath(path).startswith(_KITS_DIR)
 
 
 def _display_path(path: str) -> str:
