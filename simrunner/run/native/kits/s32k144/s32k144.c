@@ -81,7 +81,7 @@ static void read_params(void) {
     k.servo_rad = spinner_param("s32k_servo_rad", 0.40);
     k.servo_offset_rad = spinner_param("s32k_servo_offset_rad", 0.0);
     k.gpt_tick_hz = spinner_param("s32k_gpt_tick_hz", 8e6);
-    k.osif_hz = spinner_param("s32k_osif_hz", 48e6);  /* the sample project's 48 MHz core clock */
+    k.osif_hz = spinner_param("s32k_osif_hz", 48e6);  /* defaults: OsIf.h and Gpt.h say whose */
 }
 
 /* -1 .. 1 of a pulse between its calibrated ends (+ towards hi), 0 at mid. */

@@ -3,7 +3,9 @@
  * Gpt_GetTimeElapsed, Gpt_GetTimeRemaining, Gpt_EnableNotification/DisableNotification).
  *
  * On the simulated car a channel counts simulated time in ticks of --param s32k_gpt_tick_hz
- * (default 8 MHz: set your channel's clock from your configuration), from Gpt_StartTimer, as a
+ * (default 8 MHz, the channel clock github.com/michalfrohlich/NXP-Cup-EXPO's src/main.c notes for
+ * its sample-based configuration, "ticks = 8e6 * seconds": set your channel's), from
+ * Gpt_StartTimer, as a
  * continuous channel (the count wraps at the target); a stopped or never started channel reads 0
  * elapsed. Gpt_StartTimer, Gpt_GetTimeElapsed and Gpt_GetTimeRemaining read the simulated
  * clock as OsIf_GetMilliseconds does, letting one physics step pass (2 ms by default), so a

@@ -6,8 +6,10 @@
  * - OsIf_GetMilliseconds, OsIf_GetCounter and OsIf_GetElapsed let one physics step pass (a
  *   polling loop moves on; a wait is a whole number of steps, 2 ms by default), OsIf_TimeDelay
  *   waits that many simulated ms;
- * - OSIF_COUNTER_SYSTEM counts simulated time at --param s32k_osif_hz (default 48 MHz, the
- *   sample project's core clock; OsIf_SetTimerFrequency changes it), OSIF_COUNTER_DUMMY counts
+ * - OSIF_COUNTER_SYSTEM counts simulated time at --param s32k_osif_hz (default 48 MHz, the core
+ *   clock of a sample-based team project: github.com/charbel-j-estephan/Nxp_Cup_Pixy2_S32K144,
+ *   src/main.c, DelayInit(48000000U); the S32K144 runs up to 80 MHz: set your configuration's;
+ *   OsIf_SetTimerFrequency changes it), OSIF_COUNTER_DUMMY counts
  *   calls (one per OsIf_GetCounter / OsIf_GetElapsed, MicrosToTicks = the microseconds), as the
  *   RTD's dummy counter does; OSIF_COUNTER_CUSTOM is the system counter here. */
 #ifndef NXPCUP_SIM_OSIF_H
