@@ -155,17 +155,146 @@ def test_kit_misuse_is_one_line(tmp_path, capfd):
                                                   r"provides servo.h's functions"):
         firmware([FIRMWARE, servo_c])
     # an RTD call the simulator has not: a compile error at its line, not a failure at load
-    gpt = probe(tmp_path, '#include "Gpt.h"\n\nint main(void) { Gpt_StartTimer(1U, 100U); return 0; }\n', "gpt.c")
-    with pytest.raises(ControllerFileError, match=r"gpt.c:3:.*Gpt_StartTimer"):
-        firmware([gpt])
+    adc = probe(tmp_path, '#include "Adc.h"\n\nint main(void) { Adc_StartGroupConversion(0U); return 0; }\n',
+                "adc.c")
+    with pytest.raises(ControllerFileError, match=r"adc.c:3:.*Adc_StartGroupConversion"):
+        firmware([adc])
     regs = probe(tmp_path, '#include "Mcal.h"\n#include "S32K144.h"\nint main(void) { return 0; }\n', "regs.c")
     with pytest.raises(ControllerFileError, match=r"regs.c:2:.*S32K144.h"):
         firmware([regs])
-    # a driver the simulator does not emulate: the run stops, naming it
-    pixy = probe(tmp_path, '#include "pixy2.h"\nint main(void) { Pixy2Init(0x54, 0U); return 0; }\n', "pixy.c")
-    capfd.readouterr()
-    r = drive(firmware([pixy]), time_limit_s=1.0)
+    # a driver call the simulator does not emulate: the run stops at the caller's line, saying why
+    bench = probe(tmp_path, '#include "main_functions.h"\n\nint main(void) { ServoTest(); return 0; }\n', "bench.c")
+    r = drive(firmware([bench]), time_limit_s=1.0)
     assert r.outcome == "controller_error", r.message
-    assert "Pixy2Init: not emulated by the simulator's S32K144 kit" in capfd.readouterr().err
+    assert r.message.startswith(f"{bench}:3: ServoTest: not emulated by the simulator's S32K144 kit: "
+                                "the drivers' bench test loops for ever"), r.message
+    notify = probe(tmp_path, """\
+        #include "Gpt.h"
+        int main(void) {
+            Gpt_StartTimer(2U, 8000U);
+            Gpt_EnableNotification(2U);
+            return 0;
+        }
+        """, "notify.c")
+    r = drive(firmware([notify]), time_limit_s=1.0)
+    assert r.outcome == "controller_error", r.message
+    assert r.message.startswith(f"{notify}:4: Gpt_EnableNotification: not emulated") and \
+        "interrupt handler" in r.message, r.message
     res = CliRunner().invoke(cli, ["drive", str(REPO / "examples" / "line_follower.py"), "--kit", "s32k144"])
     assert res.exit_code == 2 and "--kit is for C/C++ controllers" in res.output
+
+
+PIXY_CAR = REPO / "examples" / "pixy2_car.toml"
+
+
+def test_the_pixy2_driver_reads_the_simulated_pixy2(tmp_path, capfd):
+    """Pixy2GetVectors (the NXP Cup guide's driver) and PixyGetVectors (its earlier version)
+    give the vectors the simulator's Pixy2 C API gives for the same frames, one frame a call at
+    the Pixy2's 60 Hz, and leave the Pixy2's reply packet in PixyReceivedLinesBuffer: sync
+    175 193, type 49, the payload length, its 16-bit sum, a LINE_VECTOR block of 6 bytes a
+    vector; the earlier version's 50-byte read holds at most 7 vectors."""
+    kit = probe(tmp_path, """\
+        #include <stdio.h>
+        #include "pixy2.h"
+        #include "OsIf.h"
+        int main(void) {
+            DetectedVectors v;
+            Pixy2Init(0x54, 0U);
+            Pixy2SetLed(0U, 255U, 0U);
+            for (int i = 0; i < 4; i++) {
+                Pixy2GetVectors(&v);
+                printf("frame %u:", v.NumberOfVectors);
+                for (int j = 0; j < v.NumberOfVectors; j++)
+                    printf(" %u,%u,%u,%u,%u", v.Vectors[j].x0, v.Vectors[j].y0, v.Vectors[j].x1,
+                           v.Vectors[j].y1, v.Vectors[j].VectorIndex);
+                printf("\\n");
+            }
+            printf("packet");
+            for (int i = 0; i < 8 + 6 * v.NumberOfVectors; i++) printf(" %u", PixyReceivedLinesBuffer[i]);
+            printf("\\n");
+            uint32 t0 = OsIf_GetMilliseconds();
+            for (int i = 0; i < 6; i++) Pixy2GetVectors(&v);
+            printf("six frames %u ms\\n", OsIf_GetMilliseconds() - t0);
+            DetectedVectors old = PixyGetVectors();
+            printf("earlier %u\\n", old.NumberOfVectors);
+            return 0;
+        }
+        """)
+    direct = probe(tmp_path, """\
+        #include <stdio.h>
+        #include "pixy2_line.h"
+        int main(void) {
+            pixy2_line_features f;
+            pixy2_init();
+            for (int i = 0; i < 4; i++) {
+                pixy2_line_get_all_features(LINE_VECTOR, true, &f);
+                printf("frame %u:", f.numVectors);
+                for (int j = 0; j < f.numVectors; j++)
+                    printf(" %u,%u,%u,%u,%u", f.vectors[j].m_x0, f.vectors[j].m_y0, f.vectors[j].m_x1,
+                           f.vectors[j].m_y1, f.vectors[j].m_index);
+                printf("\\n");
+            }
+            return 0;
+        }
+        """, "direct.c")
+    capfd.readouterr()
+    r = drive(firmware([kit]), car=PIXY_CAR, time_limit_s=2.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", r.message
+    r = drive(direct, car=PIXY_CAR, time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    frames = [line for line in out.splitlines() if line.startswith("frame")]
+    assert frames == [line for line in capfd.readouterr().out.splitlines() if line.startswith("frame")]
+    last = frames[-1].split(":")[1].split()
+    assert len(last) >= 2  # the lane's two edge lines
+    vectors = [tuple(int(x) for x in v.split(",")) for v in last]
+    assert all(x0 <= 78 and y0 <= 51 and x1 <= 78 and y1 <= 51 for x0, y0, x1, y1, _ in vectors)
+    packet = [int(b) for b in next(line for line in out.splitlines() if line.startswith("packet")).split()[1:]]
+    n = len(vectors)
+    assert packet[:4] == [175, 193, 49, 2 + 6 * n] and packet[6:8] == [1, 6 * n]
+    assert packet[4] + 256 * packet[5] == sum(packet[6:])
+    assert [tuple(packet[8 + 6 * i:8 + 6 * i + 5]) for i in range(n)] == vectors
+    six_ms = int(out.split("six frames ")[1].split()[0])
+    assert 6000 / 60 - 3 <= six_ms <= 6000 / 60 + 3 + 1000 / 60  # a frame a call at 60 Hz
+    assert 1 <= int(out.split("earlier ")[1].split()[0]) <= 7
+
+
+def test_gpt_channels_and_osif_counters_count_simulated_time(tmp_path, capfd):
+    """Gpt_StartTimer's channel counts --param s32k_gpt_tick_hz ticks of simulated time,
+    continuously (wrapping at its target), 0 once stopped; OsIf's system counter counts
+    s32k_osif_hz (48 MHz by default) and a busy-wait on OsIf_GetElapsed ends after its
+    simulated microseconds; the dummy counter counts calls. The headers answer to the
+    spellings of a Windows-made project (Osif.h, std_types.h)."""
+    src = probe(tmp_path, """\
+        #include <stdio.h>
+        #include "std_types.h"
+        #include "Osif.h"
+        #include "Gpt.h"
+        int main(void) {
+            OsIf_Init(NULL_PTR);
+            Gpt_StartTimer(1U, 1000000U);
+            Gpt_StartTimer(2U, 5000U);
+            OsIf_TimeDelay(12U);
+            uint32 e1 = Gpt_GetTimeElapsed(1U), e2 = Gpt_GetTimeElapsed(2U), r2 = Gpt_GetTimeRemaining(2U);
+            Gpt_StopTimer(1U);
+            printf("gpt %u %u %u %u\\n", e1, e2, r2, Gpt_GetTimeElapsed(1U));
+            uint32 ticks = OsIf_MicrosToTicks(5000U, OSIF_COUNTER_SYSTEM);
+            uint32 ref = OsIf_GetCounter(OSIF_COUNTER_SYSTEM), elapsed = 0U, t0 = OsIf_GetMilliseconds();
+            while (elapsed < ticks) elapsed += OsIf_GetElapsed(&ref, OSIF_COUNTER_SYSTEM);
+            uint32 waited = OsIf_GetMilliseconds() - t0;
+            uint32 d = OsIf_GetCounter(OSIF_COUNTER_DUMMY);
+            printf("osif %u %u %u %u\\n", ticks, waited, OsIf_GetCounter(OSIF_COUNTER_DUMMY) - d,
+                   OsIf_MicrosToTicks(5000U, OSIF_COUNTER_DUMMY));
+            return 0;
+        }
+        """)
+    capfd.readouterr()
+    r = drive(firmware([src]), params={"s32k_gpt_tick_hz": 1e6}, time_limit_s=1.0)
+    assert r.outcome == "controller_returned", r.message
+    out = capfd.readouterr().out
+    e1, e2, r2, stopped = (int(x) for x in out.split("gpt ")[1].split()[:4])
+    # each start and read lets a 2 ms physics step pass: channel 1 starts at 2 ms, channel 2 at
+    # 4 ms, the delay ends at 16 ms, the reads come at 18, 20 and 22 ms
+    assert (e1, e2, r2) == (16000, 16000 % 5000, 5000 - 18000 % 5000) and stopped == 0
+    ticks, waited, dummy_step, dummy_ticks = (int(x) for x in out.split("osif ")[1].split()[:4])
+    assert ticks == 5000 * 48 and 5 <= waited <= 5 + 3 * 2 and dummy_step == 1 and dummy_ticks == 5000

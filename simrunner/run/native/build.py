@@ -312,21 +312,26 @@ def _deps(depfiles: list[Path]) -> dict[str, str]:
 
 def kit_files(kit: str) -> tuple[list[Path], list[Path]]:
     """``(include dirs, sources)`` of kit library ``kit`` (:data:`KITS`): its own include/ and,
-    first, a folder of shims for the spellings code written on Windows uses
-    (``#include "TFC\\TFC.h"``: a file of that name including ``TFC/TFC.h``; ``Derivative.h``)."""
+    first, a folder of shims for the spellings code written on Windows (whose file names ignore
+    case) uses: ``#include "TFC\\TFC.h"`` (a file of that name including ``TFC/TFC.h``),
+    ``Derivative.h``, ``Osif.h``, ``std_types.h`` (each header's name with its first letter
+    upper case, capitalised, and all lower case)."""
     if kit not in KITS:
         raise ControllerFileError(f"--kit {kit}: expected one of {', '.join(KITS)}")
     root = KITS_DIR / kit
     include = root / "include"
     headers = sorted(p for p in include.rglob("*.h"))
     shims = {}
+    names = {h.relative_to(include).as_posix() for h in headers}
     for h in headers:
         rel = h.relative_to(include).as_posix()
         if "/" in rel:
             shims[rel.replace("/", "\\")] = rel
-        if rel != rel[:1].upper() + rel[1:]:
-            shims[rel[:1].upper() + rel[1:]] = rel
-    key = _digest("kit/1", kit, *(f"{h}\0{_file_digest(h)}" for h in headers))
+            continue
+        for spelling in (rel[:1].upper() + rel[1:], rel.capitalize(), rel.lower()):
+            if spelling not in names:
+                shims[spelling] = rel
+    key = _digest("kit/2", kit, *(f"{h}\0{_file_digest(h)}" for h in headers))
     shim_dir = cache_dir() / "kits" / f"{kit}-{key}"
     if not shim_dir.is_dir():
         import tempfile
@@ -355,7 +360,8 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
         for s in sources:
             if Path(s).name in KIT_REPLACES.get(kit, ()):
                 raise ControllerFileError(f"{s}: the kit's own driver source: --kit {kit} provides "
-                                          f"{Path(s).stem}.h's functions on the simulated car; leave it out")
+                                          f"{Path(s).stem}.h's functions on the simulated car; leave it out (functions of "
+                                          f"your own in it go in a file of your own)")
         include_dirs = [*include_dirs, *kit_includes]
         sources = [*sources, *kit_sources]
     if len(sources) == 1 and Path(sources[0]).suffix in LIB_SUFFIXES:

@@ -359,6 +359,12 @@ static void misuse(const char *fmt, ...) {
     fault_report(0, msg, NULL);
 }
 
+void spinner_fail(const char *message) {
+    INIT();
+    misuse("%s", message);
+    for (;;) pause();  /* not reached: the report ends the run */
+}
+
 static void foreign_call_report(void) {
     foreign_calls = 0;
     misuse("a Spinner call came from another thread than the one running main() (it returned 0): "

@@ -108,6 +108,10 @@ void spinner_add_noise(uint8_t *pixels, int rows, int width);
 /* A run parameter (`simrunner drive ... --param NAME=VALUE`), or default_value. */
 double spinner_param(const char *name, double default_value);
 
+/* End the run as controller_error with `message` and the C backtrace (the calling file:line),
+ * as a misused Spinner call does; for library code that meets a call it cannot serve. */
+void spinner_fail(const char *message) __attribute__((noreturn));
+
 #ifdef __cplusplus
 }
 #endif

@@ -16,7 +16,9 @@
  * - the H-bridge's two motor channels are the left and right rear motors' duties, their sign
  *   from the direction pins (spinner_set_motors); the ESC's channel drives both;
  * - LinearCameraGetFrame waits for the camera's next image of its line row;
- * - the display's text and graph go to the debug video; OsIf's ms clock is simulated time.
+ * - Pixy2GetVectors (PixyGetVectors) reads the simulator's Pixy2 (pixy2_line.h);
+ * - the display's text and graph go to the debug video; OsIf's clocks and the Gpt channels
+ *   count simulated time.
  * docs/c_controllers.md, "The S32K144 kit", lists what is emulated and what is not. */
 #include <stdio.h>
 #include <stdlib.h>
@@ -32,10 +34,13 @@
 #include "pixy2.h"
 #include "receiver.h"
 #include "OsIf.h"
+#include "Gpt.h"
+#include "pixy2_line.h"
 
 #define NUM_PWM 256
 #define NUM_DIO 256
 #define DUTY_FULL 0x8000
+#define NUM_GPT 256
 
 enum role { NONE, SERVO, MOTOR1, MOTOR2, ESC };
 
@@ -45,6 +50,9 @@ static struct {
     uint8 role[NUM_PWM];          /* what a PWM channel drives on the car (enum role) */
     uint8 params_read;
     double servo_rad, servo_offset_rad;
+    double gpt_tick_hz, osif_hz;
+    uint32 osif_dummy;              /* OSIF_COUNTER_DUMMY: one count a call, as the RTD's */
+    struct { double start_s; Gpt_ValueType target; uint8 running; } gpt[NUM_GPT];
     Servo servo;
     Hbridge hbridge;
     struct { Pwm_ChannelType channel; uint16 min, med, max; int speed; uint8 brake; } esc;
@@ -55,19 +63,25 @@ static struct {
 
 static double clamp(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
-/* A kit function the simulator does not emulate: the run stops here, naming it. */
-static void not_emulated(const char *name) {
-    fflush(stdout);
-    fprintf(stderr, "%s: not emulated by the simulator's S32K144 kit (docs/c_controllers.md, "
-            "\"The S32K144 kit\")\n", name);
-    exit(3);
+/* A kit function the simulator does not emulate: the run ends here as controller_error, naming
+ * it and why, with the backtrace to the calling file:line. */
+__attribute__((noreturn)) static void not_emulated(const char *name, const char *why) {
+    char message[512];
+    snprintf(message, sizeof message, "%s: not emulated by the simulator's S32K144 kit: %s "
+             "(docs/c_controllers.md, \"The S32K144 kit\")", name, why);
+    spinner_fail(message);
 }
+
+#define BENCH_TEST "the drivers' bench test loops for ever on the bench"
+#define NO_RECEIVER "the simulator has no remote control"
 
 static void read_params(void) {
     if (k.params_read) return;
     k.params_read = 1;
     k.servo_rad = spinner_param("s32k_servo_rad", 0.40);
     k.servo_offset_rad = spinner_param("s32k_servo_offset_rad", 0.0);
+    k.gpt_tick_hz = spinner_param("s32k_gpt_tick_hz", 8e6);
+    k.osif_hz = spinner_param("s32k_osif_hz", 48e6);  /* defaults: OsIf.h and Gpt.h say whose */
 }
 
 /* -1 .. 1 of a pulse between its calibrated ends (+ towards hi), 0 at mid. */
@@ -127,6 +141,65 @@ Dio_LevelType Dio_FlipChannel(Dio_ChannelType ChannelId) {
 uint32 OsIf_GetMilliseconds(void) { return (uint32)(spinner_get_time() * 1000.0 + 1e-6); }
 
 void OsIf_TimeDelay(const uint32 delayMs) { spinner_sleep(delayMs * 1e-3); }
+
+void OsIf_Init(const void *Config) { (void)Config; read_params(); }
+
+/* simulated seconds as ticks of hz, modulo 2^32 as a 32-bit counter wraps */
+static uint32 ticks(double seconds, double hz) { return (uint32)(uint64_t)(seconds * hz + 1e-6); }
+
+uint32 OsIf_GetCounter(OsIf_CounterType SelectedCounter) {
+    read_params();
+    if (SelectedCounter == OSIF_COUNTER_DUMMY) return ++k.osif_dummy;
+    return ticks(spinner_get_time(), k.osif_hz);
+}
+
+uint32 OsIf_GetElapsed(uint32 *const CurrentRef, OsIf_CounterType SelectedCounter) {
+    uint32 now = OsIf_GetCounter(SelectedCounter), elapsed = now - *CurrentRef;  /* wraps as the RTD's */
+    *CurrentRef = now;
+    return elapsed;
+}
+
+void OsIf_SetTimerFrequency(uint32 Freq, OsIf_CounterType SelectedCounter) {
+    read_params();
+    if (SelectedCounter != OSIF_COUNTER_DUMMY) k.osif_hz = Freq;
+}
+
+uint32 OsIf_MicrosToTicks(uint32 Micros, OsIf_CounterType SelectedCounter) {
+    read_params();
+    if (SelectedCounter == OSIF_COUNTER_DUMMY) return Micros;
+    return (uint32)((uint64_t)Micros * (uint64_t)k.osif_hz / 1000000U);
+}
+
+/* ---- Gpt.h: a channel counts simulated time from Gpt_StartTimer, continuous ---- */
+
+void Gpt_StartTimer(Gpt_ChannelType Channel, Gpt_ValueType Value) {
+    read_params();
+    k.gpt[Channel].start_s = spinner_get_time();
+    k.gpt[Channel].target = Value;
+    k.gpt[Channel].running = 1U;
+}
+
+void Gpt_StopTimer(Gpt_ChannelType Channel) { k.gpt[Channel].running = 0U; }
+
+Gpt_ValueType Gpt_GetTimeElapsed(Gpt_ChannelType Channel) {
+    double now = spinner_get_time();  /* a physics step passes, as OsIf_GetMilliseconds */
+    if (!k.gpt[Channel].running) return 0U;
+    uint64_t n = (uint64_t)((now - k.gpt[Channel].start_s) * k.gpt_tick_hz + 1e-6);
+    return k.gpt[Channel].target > 0U ? (Gpt_ValueType)(n % k.gpt[Channel].target) : 0U;
+}
+
+Gpt_ValueType Gpt_GetTimeRemaining(Gpt_ChannelType Channel) {
+    Gpt_ValueType elapsed = Gpt_GetTimeElapsed(Channel);
+    return k.gpt[Channel].running ? k.gpt[Channel].target - elapsed : 0U;
+}
+
+void Gpt_EnableNotification(Gpt_ChannelType Channel) {
+    (void)Channel;
+    not_emulated("Gpt_EnableNotification", "a GPT notification is an interrupt handler your generated "
+                 "configuration names; the kit's Gpt channels only count simulated time");
+}
+
+void Gpt_DisableNotification(Gpt_ChannelType Channel) { (void)Channel; }
 
 /* ---- servo.h ---- */
 
@@ -279,29 +352,68 @@ void DisplayRefresh(void) {
 /* ---- main_functions.h ---- */
 
 void DriversInit(void) { read_params(); }
-void DisplayTest(void) { not_emulated("DisplayTest"); }
-void ReceiverTest(void) { not_emulated("ReceiverTest"); }
-void ServoTest(void) { not_emulated("ServoTest"); }
-void LinearCameraTest(void) { not_emulated("LinearCameraTest"); }
-void Pixy2Test(void) { not_emulated("Pixy2Test"); }
-void HbridgeTest(void) { not_emulated("HbridgeTest"); }
-void EscTest(void) { not_emulated("EscTest"); }
+void DisplayTest(void) { not_emulated("DisplayTest", BENCH_TEST); }
+void ReceiverTest(void) { not_emulated("ReceiverTest", BENCH_TEST); }
+void ServoTest(void) { not_emulated("ServoTest", BENCH_TEST); }
+void LinearCameraTest(void) { not_emulated("LinearCameraTest", BENCH_TEST); }
+void Pixy2Test(void) { not_emulated("Pixy2Test", BENCH_TEST); }
+void HbridgeTest(void) { not_emulated("HbridgeTest", BENCH_TEST); }
+void EscTest(void) { not_emulated("EscTest", BENCH_TEST); }
 
-/* ---- pixy2.h, receiver.h: not emulated ---- */
+/* ---- pixy2.h: the kit's I2C Pixy2 driver on the simulator's Pixy2 ---- */
+
+I2c_DataType PixyReceivedLinesBuffer[100U];  /* the driver's global I2C reply buffer */
+
+/* The Pixy2's reply to the driver's request "all features, vectors only" (174 193 48 2 1 1),
+ * as the I2C read of `receive_bytes` leaves it in PixyReceivedLinesBuffer (Pixy2 serial
+ * protocol: sync 0xc1af, type 49 = LINE_RESPONSE_GET_FEATURES, payload length, 16-bit sum of
+ * the payload; the payload a feature block: type LINE_VECTOR, length, 6 bytes a vector
+ * x0 y0 x1 y1 index flags), then the vectors copied into `out` as the driver parses them. */
+static void pixy2_vectors(DetectedVectors *out, unsigned receive_bytes) {
+    pixy2_line_features f;
+    int8_t got = pixy2_line_get_all_features(LINE_VECTOR, true, &f);  /* this frame, else the next */
+    unsigned n = got > 0 ? f.numVectors : 0U, fit = (receive_bytes - 8U) / 6U;
+    if (n > fit) n = fit;
+    uint8 *b = PixyReceivedLinesBuffer;
+    memset(b, 0, sizeof PixyReceivedLinesBuffer);
+    unsigned len = n > 0U ? 2U + 6U * n : 0U, sum = 0U;
+    b[0] = 175U, b[1] = 193U, b[2] = 49U, b[3] = (uint8)len;
+    if (n > 0U) b[6] = LINE_VECTOR, b[7] = (uint8)(6U * n);
+    out->NumberOfVectors = (uint8)n;
+    for (unsigned i = 0; i < n; i++) {
+        const pixy2_vector *v = &f.vectors[i];
+        uint8 *d = &b[8U + 6U * i];
+        d[0] = v->m_x0, d[1] = v->m_y0, d[2] = v->m_x1, d[3] = v->m_y1, d[4] = v->m_index, d[5] = v->m_flags;
+        out->Vectors[i] = (Vector){v->m_x0, v->m_y0, v->m_x1, v->m_y1, v->m_index};
+    }
+    for (unsigned i = 6U; i < 6U + len; i++) sum += b[i];
+    b[4] = (uint8)(sum & 0xFFU), b[5] = (uint8)(sum >> 8);
+}
 
 void Pixy2Init(I2c_AddressType PixyI2cAddress, uint8 PixyI2cChannel) {
     (void)PixyI2cAddress, (void)PixyI2cChannel;
-    not_emulated("Pixy2Init");
+    pixy2_init();  /* a car without a Pixy2 ends the run here, saying so */
 }
-void Pixy2SetLed(uint8 Red, uint8 Green, uint8 Blue) { (void)Red, (void)Green, (void)Blue; not_emulated("Pixy2SetLed"); }
-void Pixy2GetVectors(DetectedVectors *Vectors) { (void)Vectors; not_emulated("Pixy2GetVectors"); }
+
+void Pixy2SetLed(uint8 Red, uint8 Green, uint8 Blue) { (void)Red, (void)Green, (void)Blue; }
+void PixySetLed(uint8 Red, uint8 Green, uint8 Blue) { (void)Red, (void)Green, (void)Blue; }
+
+void Pixy2GetVectors(DetectedVectors *Vectors) { pixy2_vectors(Vectors, 100U); }
+
+DetectedVectors PixyGetVectors(void) {  /* the earlier driver: a 50-byte read, its result by value */
+    static DetectedVectors v;
+    pixy2_vectors(&v, 50U);
+    return v;
+}
+
+/* ---- receiver.h: not emulated ---- */
 
 void ReceiverInit(Icu_ChannelType ReceiverIcuChannel, Gpt_ChannelType ReceiverGptChannel, uint16 ChannelMinTicks,
                   uint16 ChannelMedTicks, uint16 ChannelMaxTicks, uint16 OutsideChannelTicks) {
     (void)ReceiverIcuChannel, (void)ReceiverGptChannel, (void)ChannelMinTicks, (void)ChannelMedTicks;
     (void)ChannelMaxTicks, (void)OutsideChannelTicks;
-    not_emulated("ReceiverInit");
+    not_emulated("ReceiverInit", NO_RECEIVER);
 }
-int GetReceiverChannel(uint8 Channel) { (void)Channel; not_emulated("GetReceiverChannel"); return 0; }
-void ReceiverStateUpdate(Gpt_ValueType ReceiverPeriod) { (void)ReceiverPeriod; not_emulated("ReceiverStateUpdate"); }
-enum ReceiverStates GetReceiverState(void) { not_emulated("GetReceiverState"); return BetweenChannels; }
+int GetReceiverChannel(uint8 Channel) { (void)Channel; not_emulated("GetReceiverChannel", NO_RECEIVER); return 0; }
+void ReceiverStateUpdate(Gpt_ValueType ReceiverPeriod) { (void)ReceiverPeriod; not_emulated("ReceiverStateUpdate", NO_RECEIVER); }
+enum ReceiverStates GetReceiverState(void) { not_emulated("GetReceiverState", NO_RECEIVER); return BetweenChannels; }

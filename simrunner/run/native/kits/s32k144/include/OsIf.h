@@ -1,10 +1,33 @@
-/* OsIf.h of the simulator's S32K144 kit: the RTD OS interface's millisecond clock and delay
- * (RTD BaseNXP OsIf.h: uint32 OsIf_GetMilliseconds(void), void OsIf_TimeDelay(const uint32)),
- * in simulated time: OsIf_GetMilliseconds lets one physics step pass (a polling loop moves on),
- * OsIf_TimeDelay waits that many simulated ms. */
+/* OsIf.h of the simulator's S32K144 kit: the RTD OS interface (RTD BaseNXP OsIf.h): the
+ * millisecond clock and delay (uint32 OsIf_GetMilliseconds(void), void OsIf_TimeDelay(const
+ * uint32)) and the tick counters RTD code and teams time busy-waits with (OsIf_CounterType,
+ * OsIf_Init, OsIf_GetCounter, OsIf_GetElapsed, OsIf_SetTimerFrequency, OsIf_MicrosToTicks),
+ * in simulated time:
+ * - OsIf_GetMilliseconds, OsIf_GetCounter and OsIf_GetElapsed let one physics step pass (a
+ *   polling loop moves on; a wait is a whole number of steps, 2 ms by default), OsIf_TimeDelay
+ *   waits that many simulated ms;
+ * - OSIF_COUNTER_SYSTEM counts simulated time at --param s32k_osif_hz (default 48 MHz, the core
+ *   clock of a sample-based team project: github.com/charbel-j-estephan/Nxp_Cup_Pixy2_S32K144,
+ *   src/main.c, DelayInit(48000000U); the S32K144 runs up to 80 MHz: set your configuration's;
+ *   OsIf_SetTimerFrequency changes it), OSIF_COUNTER_DUMMY counts
+ *   calls (one per OsIf_GetCounter / OsIf_GetElapsed, MicrosToTicks = the microseconds), as the
+ *   RTD's dummy counter does; OSIF_COUNTER_CUSTOM is the system counter here. */
 #ifndef NXPCUP_SIM_OSIF_H
 #define NXPCUP_SIM_OSIF_H
 #include "Std_Types.h"
+#ifdef __cplusplus
+extern "C" {
+#endif
+typedef enum { OSIF_COUNTER_DUMMY, OSIF_COUNTER_SYSTEM, OSIF_COUNTER_CUSTOM } OsIf_CounterType;
+
+void OsIf_Init(const void *Config);
 uint32 OsIf_GetMilliseconds(void);
 void OsIf_TimeDelay(const uint32 delayMs);
+uint32 OsIf_GetCounter(OsIf_CounterType SelectedCounter);
+uint32 OsIf_GetElapsed(uint32 *const CurrentRef, OsIf_CounterType SelectedCounter);
+void OsIf_SetTimerFrequency(uint32 Freq, OsIf_CounterType SelectedCounter);
+uint32 OsIf_MicrosToTicks(uint32 Micros, OsIf_CounterType SelectedCounter);
+#ifdef __cplusplus
+}
+#endif
 #endif

@@ -20,4 +20,7 @@ typedef uint8 Std_ReturnType;
 #define STD_IDLE 0x00U
 #define STD_ON 0x01U
 #define STD_OFF 0x00U
+#ifndef NULL_PTR
+#define NULL_PTR ((void *)0)  /* as the RTD's Compiler.h */
+#endif
 #endif
