@@ -24,7 +24,8 @@
 /* The library's globals (FRDM-TFC TFC_LineScanCamera.c: the images are the second half of
  * double buffers; here the simulator fills that half and never swaps). TFC_Ticker and
  * LineScanImageReady are reached through tfc_sim_tickers() and tfc_sim_image_ready(). */
-static volatile uint32_t tickers[NUM_TFC_TICKERS];
+#define TFC_SIM_TICKERS 16  /* >= any project's NUM_TFC_TICKERS (TFC_Config.h) */
+static volatile uint32_t tickers[TFC_SIM_TICKERS];
 static volatile uint8_t image_ready;
 volatile uint16_t LineScanImage0Buffer[2][128], LineScanImage1Buffer[2][128];
 volatile uint16_t *LineScanImage0 = LineScanImage0Buffer[1];
@@ -66,7 +67,7 @@ static void count_ticks(double now_s) {
     double now_ms = now_s * 1000.0;
     double whole = floor(now_ms - tfc.ms_counted + 1e-6);
     if (whole >= 1.0) {
-        for (int i = 0; i < NUM_TFC_TICKERS; i++) tickers[i] += (uint32_t)whole;
+        for (int i = 0; i < TFC_SIM_TICKERS; i++) tickers[i] += (uint32_t)whole;
         tfc.ms_counted += whole;
     }
 }
@@ -106,7 +107,7 @@ volatile uint8_t *tfc_sim_image_ready(void) {
 
 volatile uint32_t (*tfc_sim_tickers(void))[NUM_TFC_TICKERS] {
     poll();
-    return &tickers;
+    return (volatile uint32_t (*)[NUM_TFC_TICKERS])&tickers;
 }
 
 void TFC_Init(void) {

@@ -9,7 +9,7 @@
 #define TFC_ARM_SYSTICK_H_
 #include <stdint.h>
 #define SYSTICK_FREQUENCY 1000
-#define NUM_TFC_TICKERS 4
+#include "TFC/TFC_Config.h"  /* NUM_TFC_TICKERS, where the library sets it */
 /* the simulator's hook behind the tickers: a poll of them (see above) */
 volatile uint32_t (*tfc_sim_tickers(void))[NUM_TFC_TICKERS];
 #define TFC_Ticker (*tfc_sim_tickers())
