@@ -142,3 +142,73 @@ def test_kit_misuse_is_one_line(tmp_path):
     bad.write_text('#include "derivative.h"\n#include "TFC/TFC.h"\nint main(void) { GPIOB_PSOR = 1; return 0; }\n')
     with pytest.raises(ControllerFileError, match=r"regs.c:3"):
         firmware([bad])
+
+
+def test_a_loop_that_only_polls_the_board_lets_time_pass(tmp_path):
+    """Firmware written for the board waits on what its interrupts change, calling nothing:
+    `while (!TFC_PUSH_BUTTON_0_PRESSED);`, `while (!LineScanImageReady);`, a delay on a ticker.
+    Those polls let simulated time pass (the run once stalled), and the library's own extern
+    declarations of the flag and the tickers still compile against the kit's."""
+    src = tmp_path / "polls.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC\\\\TFC.h"
+        #include "spinner.h"
+        extern volatile uint8_t LineScanImageReady;               /* as TFC_LineScanCamera.h */
+        extern volatile uint32_t TFC_Ticker[NUM_TFC_TICKERS];     /* as TFC_ARM_SysTick.h */
+        static void wait_ms(uint32_t ms) { TFC_Ticker[3] = 0; while (TFC_Ticker[3] < ms); }
+        int main(void) {
+            TFC_Init();
+            TFC_SetLineScanExposureTime(10000);
+            while (!TFC_PUSH_BUTTON_0_PRESSED);                   /* pressed at 0.1 s */
+            double pressed = spinner_get_time();
+            if (pressed < 0.1 || pressed > 0.11) return 1;
+            LineScanImageReady = 0;
+            while (!LineScanImageReady);                          /* the next image */
+            if (LineScanImage0 != LineScanImage0Buffer[1]) return 2;
+            double t0 = spinner_get_time();
+            wait_ms(200);
+            double waited = spinner_get_time() - t0;
+            if (TFC_Ticker[7] < 300) return 4;     /* a project's NUM_TFC_TICKERS 8: counts too */
+            return waited >= 0.2 && waited < 0.23 ? 0 : 3;   /* + a camera read's wait */
+        }
+    """))
+    r = drive(firmware([src]), time_limit_s=5.0, wall_limit_s=5.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+
+
+def test_a_windows_project_builds_with_its_own_library_headers_on_the_path(tmp_path):
+    """A CodeWarrior project as teams publish it: -I Project_Headers holds its own copy of the
+    library's headers (register macros included), which the kit's headers win over; its
+    includes use Windows spellings (a backslash, another case, "Math.h"), found the Windows way."""
+    headers = tmp_path / "Project_Headers"
+    (headers / "TFC").mkdir(parents=True)
+    (headers / "TFC" / "TFC.h").write_text('#include "MKL25Z4.h"\n#define TAOS_SI_HIGH GPIOD_PSOR = (1<<7)\n')
+    (headers / "derivative.h").write_text('#include <MKL25Z4.h>\n')
+    (headers / "Control").mkdir()
+    (headers / "Control" / "Steering.h").write_text('#include "math.h"\n#define GAIN_PER_PIXEL (2.0f / 128)\n')
+    src = tmp_path / "Sources" / "main.c"
+    src.parent.mkdir()
+    src.write_text('#include "derivative.h"\n#include "TFC\\\\TFC.h"\n#include "control\\\\steering.h"\n'
+                   '#include "Math.h"\n'
+                   'int main(void) { TFC_Init(); TFC_SetServo(0, sqrtf(GAIN_PER_PIXEL * 32)); '
+                   'TFC_Delay_mS(50); return 0; }\n')
+    r = drive(firmware([src], include_dirs=[headers]), time_limit_s=2.0, csv=tmp_path / "log.csv")
+    assert r.outcome == "controller_returned", r.message
+    assert r.log.steer_cmd_rad[-1] == pytest.approx(0.40 * 0.5 ** 0.5, rel=1e-6)  # sqrt(2/128 * 32) x 0.40 rad
+
+
+def test_the_librarys_own_sources_and_register_writes_are_named(tmp_path):
+    """Passing the project's Sources/TFC/*.c (the kit replaces them) names the file; writing an
+    MCU register says it is not emulated, after the compiler's file:line."""
+    lib = tmp_path / "TFC" / "TFC_Servo.c"
+    lib.parent.mkdir()
+    lib.write_text("void TFC_InitServos(void) {}\n")
+    with pytest.raises(ControllerFileError, match=r"TFC_Servo.c: the kit's own driver source: --kit tfc"):
+        firmware([FIRMWARE, lib])
+    regs = tmp_path / "regs.c"
+    regs.write_text('#include "derivative.h"\n#include "TFC/TFC.h"\n'
+                    'int main(void) { GPIOB_PSOR = 1 << 8; TPM0_C0V = 3; return 0; }\n')
+    with pytest.raises(ControllerFileError, match=r"(?s)regs.c:3:.*GPIOB_PSOR, TPM0_C0V: the MCU's "
+                                                  r"registers, not emulated by the simulator's --kit tfc"):
+        firmware([regs])

@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,7 +34,17 @@ KITS = {"tfc": ("tfc.c",), "s32k144": ("s32k144.c",)}
 #: A kit's own driver sources in a team's project, which the kit library replaces (passing one is
 #: an error naming it rather than the linker's "multiple definition").
 KIT_REPLACES = {"s32k144": ("servo.c", "hbridge.c", "esc.c", "linear_camera.c", "display.c",
-                            "main_functions.c", "pixy2.c", "receiver.c")}
+                            "main_functions.c", "pixy2.c", "receiver.c"),
+                # the FRDM-TFC library's sources (Sources/TFC/ of the CodeWarrior/KDS projects)
+                "tfc": ("TFC.c", "TFC_ADC.c", "TFC_ARM_SysTick.c", "TFC_BoardSupport.c",
+                        "TFC_CrystalClock.c", "TFC_LineScanCamera.c", "TFC_Motor.c", "TFC_Queue.c",
+                        "TFC_Servo.c", "TFC_Terminal.c", "TFC_UART.c", "TFC_arm_cm0.c")}
+#: The MCU's register names a kit's firmware may write directly (the KL25Z's MKL25Z4.h
+#: peripherals, NXP KL25 Sub-Family Reference Manual KL25P80M48SF0RM): not emulated, so a compile
+#: error naming one gets a line saying so.
+KIT_REGISTERS = {"tfc": re.compile(r"[‘'`]((?:GPIO|FGPIO|PORT)[A-E]_\w+|(?:TPM[0-2]|ADC0|PIT|SIM|UART[0-2]|"
+                                   r"I2C[01]|SPI[01]|DMA|DMAMUX0|MCG|OSC0|LPTMR0|SysTick|NVIC|"
+                                   r"SCB|RTC|TSI0|DAC0|CMP0|USB0|SMC|PMC|RCM|LLWU)_\w+)[’'`] undeclared")}
 C_SUFFIXES = (".c",)
 CXX_SUFFIXES = (".cpp", ".cc", ".cxx", ".C")
 LIB_SUFFIXES = (".so",)
@@ -349,6 +360,44 @@ def kit_files(kit: str) -> tuple[list[Path], list[Path]]:
     return [shim_dir, include], [root / name for name in KITS[kit]]
 
 
+def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileError:
+    """``exc`` (a failed compile) with a last line when it names MCU registers that ``kit``
+    does not emulate (:data:`KIT_REGISTERS`)."""
+    pattern = KIT_REGISTERS.get(kit or "")
+    names = sorted(set(pattern.findall(str(exc)))) if pattern else []
+    if not names:
+        return exc
+    return ControllerFileError(
+        f"{exc}\n{', '.join(names)}: the MCU's registers, not emulated by the simulator's "
+        f"--kit {kit} (it has no registers): reach the hardware through the kit library's "
+        f"functions (docs/c_controllers.md, Kit libraries)")
+
+
+def _spelling_dir(sources: list[str | Path], include_dirs: list[str | Path]) -> list[Path]:
+    """A folder of the Windows spellings of the firmware's includes (:mod:`.spellings`), or []
+    when every include resolves as written."""
+    from simrunner.run.native.spellings import include_shims, write_shims
+
+    shims = include_shims([Path(s) for s in sources if Path(s).suffix not in LIB_SUFFIXES],
+                          [Path(d) for d in include_dirs if Path(d).is_dir()])
+    if not shims:
+        return []
+    key = _digest("spellings/1", *sorted(f"{k}\0{v}" for k, v in shims.items()))
+    folder = cache_dir() / "spellings" / key
+    if not folder.is_dir():
+        import shutil
+        import tempfile
+
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".spell-", dir=folder.parent))
+        write_shims(tmp, shims)
+        try:
+            os.rename(tmp, folder)
+        except OSError:  # another build made it meanwhile
+            shutil.rmtree(tmp, ignore_errors=True)
+    return [folder]
+
+
 def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] = (),
                   defines: list[str] = (), kit: str | None = None,
                   limits: BuildLimits | None = None) -> NativeProgram:
@@ -362,7 +411,10 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
                 raise ControllerFileError(f"{s}: the kit's own driver source: --kit {kit} provides "
                                           f"{Path(s).stem}.h's functions on the simulated car; leave it out (functions of "
                                           f"your own in it go in a file of your own)")
-        include_dirs = [*include_dirs, *kit_includes]
+        # the kit's headers first: a project's own copies of them (Project_Headers/TFC/, with the
+        # MCU's registers) are what the kit replaces; then the Windows spellings of its includes
+        include_dirs = [*kit_includes, *include_dirs]
+        include_dirs.extend(_spelling_dir(sources, include_dirs))
         sources = [*sources, *kit_sources]
     if len(sources) == 1 and Path(sources[0]).suffix in LIB_SUFFIXES:
         lib = Path(sources[0])
@@ -399,7 +451,10 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
             obj, dep = tmp / f"{i}.o", tmp / f"{i}.d"
             cmd = [compilers[is_cxx], *COMMON_FLAGS, *(cxx_flags if is_cxx else C_FLAGS), *flags,
                    "-MMD", "-MF", str(dep), "-c", str(p), "-o", str(obj)]
-            warnings.append(_run(cmd, str(p), limits))
+            try:
+                warnings.append(_run(cmd, str(p), limits))
+            except ControllerFileError as exc:
+                raise _register_hint(exc, kit) from None
             objects.append(str(obj))
             depfiles.append(dep)
         linker = compilers[True] if cxx else compilers[False]

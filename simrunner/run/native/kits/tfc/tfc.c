@@ -6,7 +6,8 @@
  *   pass (one physics step per call, or the delay); the SysTick tickers TFC_Ticker[] count its
  *   milliseconds; the PIT-driven camera read-out becomes: when the exposure since the last
  *   image has passed, the next image is fetched (spinner_get_image) into LineScanImage0/1 and
- *   LineScanImageReady is set to 1;
+ *   LineScanImageReady is set to 1; a loop that only polls the board (the ready flag, the
+ *   tickers, buttons, switches, pots: poll()) lets time pass too, as the interrupts would;
  * - servo 0 steers (position x tfc_servo_rad + tfc_servo_offset_rad), motors A and B are the
  *   left and right rear motors' duties (spinner_set_motors) while the H-bridge is enabled;
  * - the potentiometers, DIP switches, buttons and battery read --param values;
@@ -20,11 +21,18 @@
 #include "spinner.h"
 #include "TFC/TFC.h"
 
-volatile uint32_t TFC_Ticker[NUM_TFC_TICKERS];
-static volatile uint16_t image0[TFC_LINESCAN_IMAGE_SIZE], image1[TFC_LINESCAN_IMAGE_SIZE];
-volatile uint16_t *LineScanImage0 = image0;
-volatile uint16_t *LineScanImage1 = image1;
-volatile uint8_t LineScanImageReady;
+/* The library's globals (FRDM-TFC TFC_LineScanCamera.c: the images are the second half of
+ * double buffers; here the simulator fills that half and never swaps). TFC_Ticker and
+ * LineScanImageReady are reached through tfc_sim_tickers() and tfc_sim_image_ready(). */
+#define TFC_SIM_TICKERS 16  /* >= any project's NUM_TFC_TICKERS (TFC_Config.h) */
+static volatile uint32_t tickers[TFC_SIM_TICKERS];
+static volatile uint8_t image_ready;
+volatile uint16_t LineScanImage0Buffer[2][128], LineScanImage1Buffer[2][128];
+volatile uint16_t *LineScanImage0 = LineScanImage0Buffer[1];
+volatile uint16_t *LineScanImage1 = LineScanImage1Buffer[1];
+volatile uint16_t *LineScanImage0WorkingBuffer = LineScanImage0Buffer[0];
+volatile uint16_t *LineScanImage1WorkingBuffer = LineScanImage1Buffer[0];
+volatile uint8_t LineScanWorkingBuffer;
 ByteQueue SDA_SERIAL_OUTGOING_QUEUE, SDA_SERIAL_INCOMING_QUEUE;
 
 static struct {
@@ -37,7 +45,16 @@ static struct {
     float servo;            /* servo 0 position */
     int leds[4];
     double servo_rad, servo_offset_rad;
+    unsigned polls;         /* reads of the board since simulated time last passed */
 } tfc;
+
+/* A loop that polls the board without calling the library (`while (!LineScanImageReady);`,
+ * `while (TFC_Ticker[0] < 20);`, `while (!TFC_PUSH_BUTTON_0_PRESSED);`) waits on the board for
+ * the interrupts or a person; here time passes only in calls. So after this many reads without
+ * a call that lets time pass, each further read lets one physics step pass (and runs the
+ * interrupts' work). A main loop that calls TFC_Task() reads far fewer between two calls, so its
+ * timing is the same as without (the example firmware's twin test holds it to the step). */
+#define POLLS_BEFORE_TIME 64
 
 static double clampf(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
@@ -50,7 +67,7 @@ static void count_ticks(double now_s) {
     double now_ms = now_s * 1000.0;
     double whole = floor(now_ms - tfc.ms_counted + 1e-6);
     if (whole >= 1.0) {
-        for (int i = 0; i < NUM_TFC_TICKERS; i++) TFC_Ticker[i] += (uint32_t)whole;
+        for (int i = 0; i < TFC_SIM_TICKERS; i++) tickers[i] += (uint32_t)whole;
         tfc.ms_counted += whole;
     }
 }
@@ -66,10 +83,31 @@ static void camera_service(double now) {
     tfc.last_image_s = now;
     for (size_t i = 0; i < TFC_LINESCAN_IMAGE_SIZE; i++) {
         uint16_t v = (uint16_t)((i < n ? row[i] : 0) << 4);  /* 8-bit grey -> 12-bit counts */
-        image0[i] = v;
-        image1[i] = v;
+        LineScanImage0[i] = v;
+        LineScanImage1[i] = v;
     }
-    LineScanImageReady = 1;
+    image_ready = 1;
+}
+
+static void ensure_init(void);
+
+/* One read of the board's state (see POLLS_BEFORE_TIME). */
+static void poll(void) {
+    ensure_init();
+    if (++tfc.polls <= POLLS_BEFORE_TIME) return;
+    double now = spinner_get_time();  /* one physics step, as TFC_Task() */
+    count_ticks(now);
+    camera_service(now);
+}
+
+volatile uint8_t *tfc_sim_image_ready(void) {
+    poll();
+    return &image_ready;
+}
+
+volatile uint32_t (*tfc_sim_tickers(void))[NUM_TFC_TICKERS] {
+    poll();
+    return (volatile uint32_t (*)[NUM_TFC_TICKERS])&tickers;
 }
 
 void TFC_Init(void) {
@@ -84,15 +122,21 @@ void TFC_Init(void) {
     send_commands();
 }
 
-void TFC_Task(void) {
+static void ensure_init(void) {
     if (!tfc.inited) TFC_Init();
+}
+
+void TFC_Task(void) {
+    ensure_init();
+    tfc.polls = 0;
     double now = spinner_get_time();  /* the main loop's pass: a physics step of simulated time */
     count_ticks(now);
     camera_service(now);
 }
 
 void TFC_Delay_mS(unsigned int TicksIn_mS) {
-    if (!tfc.inited) TFC_Init();
+    ensure_init();
+    tfc.polls = 0;
     double until = spinner_get_time() + TicksIn_mS * 1e-3;
     for (double now = spinner_get_time(); now < until - 1e-9; now = spinner_get_time()) {
         count_ticks(now);
@@ -146,6 +190,7 @@ void TFC_SetBatteryLED_Level(uint8_t BattLevel) {
 }
 
 int tfc_sim_button(int button) {
+    poll();
     char name[16];
     snprintf(name, sizeof name, "button%d", button);
     if (spinner_param(name, 0.0) != 0.0) return 1;
@@ -156,9 +201,13 @@ int tfc_sim_button(int button) {
     return 0;
 }
 
-uint8_t TFC_GetDIP_Switch(void) { return (uint8_t)((int)spinner_param("dip", 0.0) & 0x0F); }
+uint8_t TFC_GetDIP_Switch(void) {
+    poll();
+    return (uint8_t)((int)spinner_param("dip", 0.0) & 0x0F);
+}
 
 float TFC_ReadPot(uint8_t Channel) {
+    poll();
     return (float)clampf(spinner_param(Channel == 0 ? "pot0" : "pot1", 0.0), -1.0, 1.0);
 }
 
