@@ -223,6 +223,10 @@ def _no_collection_at_exit() -> None:
 @click.option("--isolate", is_flag=True,
               help="C/C++ controllers: run in a child process instead of the simulator's (slower; "
                    "code that overwrites memory cannot touch the simulator). A .so always is.")
+@click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
+              help="C/C++ firmware: call your function NAME (void NAME(void), e.g. your timer's "
+                   "PIT_IRQHandler) HZ times a second of simulated time, as its timer interrupt "
+                   "would (repeatable; docs/c_controllers.md, Timer interrupts).")
 @click.option("--kit", default=None, metavar="tfc|s32k144",
               help="C/C++ firmware: build it against this kit library's implementation on the "
                    "simulated car (tfc: the FRDM-TFC library; s32k144: the NXP Cup S32K144 kit's "
@@ -238,7 +242,7 @@ def _no_collection_at_exit() -> None:
 def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, plot, summary, seed,
               car, dt_s, wall_limit_s, params, include_dirs, defines, start, start_before_finish_m,
               keep_driving, off_track_wheels=None, event=None, watch=False, isolate=False,
-              mcu_time=None, mcu_scale=1.0, kit=None, video_fps=None) -> None:
+              mcu_time=None, mcu_scale=1.0, kit=None, video_fps=None, isrs=()) -> None:
     """Run CONTROLLER on the simulated car: a .py file defining main(spinner), or C/C++
     sources (.c, .cpp; several allowed) with main() - compiled with debug info, cached - or
     a shared library (.so). See docs/c_controllers.md."""
@@ -255,7 +259,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
             click.echo(f"simrunner: {exc}", err=True)
             sys.exit(2)
         native = {}
-        if more_sources or include_dirs or defines or isolate or kit or not controller.endswith(".py"):
+        if more_sources or include_dirs or defines or isolate or kit or isrs or not controller.endswith(".py"):
             if controller.endswith(".so"):
                 click.echo("simrunner: --watch: a .so is built elsewhere: watch its sources instead", err=True)
                 sys.exit(2)
@@ -264,7 +268,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
             headers = [str(p) for d in include_dirs for p in sorted(Path(d).glob("*"))
                        if p.suffix in (".h", ".hpp", ".hh")]
             native = dict(make=lambda: _native_program(controller, more_sources, include_dirs, defines, isolate,
-                                                       kit),
+                                                       kit, isrs),
                           watched=(controller, *more_sources, *headers))
         watch_drive(dict(controller=controller, **native, track=track, laps=laps, time_limit_s=time_limit_s,
                          video=video, video_fps=video_fps, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
@@ -278,7 +282,7 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
 
     def run() -> int:
         try:
-            program = _native_program(controller, more_sources, include_dirs, defines, isolate, kit)
+            program = _native_program(controller, more_sources, include_dirs, defines, isolate, kit, isrs)
             result = drive(program, track=track, laps=laps, time_limit_s=time_limit_s, video=video, video_fps=video_fps,
                            csv=csv, plot=plot, summary=summary, seed=seed, car=car, dt_s=dt_s,
                            wall_limit_s=wall_limit_s, params=parse_params(params),
@@ -393,19 +397,25 @@ def _start_pose(text: str | None) -> tuple[float, float, float] | None:
 
 
 def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs: tuple[str, ...],
-                    defines: tuple[str, ...], isolate: bool = False, kit: str | None = None):
+                    defines: tuple[str, ...], isolate: bool = False, kit: str | None = None,
+                    isrs: tuple[str, ...] = ()):
     """``controller`` itself (Python), or the built C/C++ program (``isolate``: to run in a
-    child process); compiler warnings are shown on stderr. Raises ControllerFileError (bad
-    input) for compile errors."""
+    child process; ``isrs``: its ``NAME@HZ`` timer interrupts); compiler warnings are shown on
+    stderr. Raises ControllerFileError (bad input) for compile errors."""
     import dataclasses
 
     from simrunner.errors import ControllerFileError
 
+    timers = [_isr(text) for text in isrs]
     if not more_sources and not include_dirs and not defines and controller.endswith(".py"):
         if isolate or kit:
             raise ControllerFileError(f"{controller}: --{'isolate' if isolate else 'kit'} is for C/C++ controllers")
+        if timers:
+            raise ControllerFileError(f"{controller}: --isr is for C/C++ firmware (in Python: "
+                                      f"spinner.every(period_s, handler))")
         return controller
     from simrunner.run.native import build_program, is_native
+    from simrunner.run.native.build import with_isrs
 
     sources = [controller, *more_sources]
     bad = [s for s in sources if not is_native(s)]
@@ -415,7 +425,26 @@ def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs
     program = build_program(sources, include_dirs=list(include_dirs), defines=list(defines), kit=kit)
     if program.warnings.strip():
         click.echo(program.warnings.rstrip(), err=True)
+    program = with_isrs(program, timers)
     return dataclasses.replace(program, isolate=True) if isolate else program
+
+
+def _isr(text: str) -> tuple[str, float]:
+    """``NAME@HZ`` -> ``(NAME, period_s)``; a ControllerFileError naming what was expected."""
+    import math
+    import re
+
+    from simrunner.errors import ControllerFileError
+
+    name, _, rate = text.partition("@")
+    try:
+        hz = float(rate)
+    except ValueError:
+        hz = math.nan
+    if not re.fullmatch(r"[A-Za-z_]\w*", name) or not (0 < hz <= 1e5):
+        raise ControllerFileError(f"--isr {text}: expected NAME@HZ, a C function name and its rate "
+                                  f"(0 < HZ <= 100000), e.g. PIT_IRQHandler@1000")
+    return name, 1.0 / hz
 
 
 @main.command("cflags")

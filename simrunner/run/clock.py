@@ -18,6 +18,15 @@ physics step after the *previous* boundary applied (the controller's answer to f
 which telemetry row k - 1 records), or None when no step followed it. ``on_frame`` returns
 None, or ``(outcome, message)`` to end the run. The clock holds no reference back to its
 caller beyond this function.
+
+Interrupts (:meth:`LockstepClock.add_interrupt`, a timer interrupt of the controller's own): a
+handler registered at step ``s0`` with a period of ``p`` steps (not necessarily whole) runs at
+step ``ceil(s0 + k p)`` for k = 1, 2, ... - the first step boundary at or after its time, after
+that boundary's frame work; handlers due at one step run in the order they were registered, one
+due twice at a step (a period shorter than ``dt``) twice. They run inside the controller's
+waiting call that is stepping the clock then (the controller's code between calls takes no time,
+so an interrupt due meanwhile is taken at its next call, as one the code had masked). Inside a
+handler (``in_interrupt``) no time passes: :meth:`step_one` returns at once and waits are refused.
 """
 from __future__ import annotations
 
@@ -25,9 +34,32 @@ import math
 import time
 from typing import Callable, Protocol
 
-from simrunner.errors import RunFinished
+from simrunner.errors import CommandError, RunFinished
 
 _monotonic = time.monotonic
+_NEVER = 1 << 62  # the next interrupt's step when there is none
+
+
+class InterruptWait(CommandError):
+    """A wait (a frame, a sleep) asked for inside an interrupt handler, where no time passes."""
+
+
+class _Interrupt:
+    """A periodic handler: registered at step ``first_step``, every ``period_steps``."""
+
+    __slots__ = ("handler", "first_step", "period_steps", "count", "next_step")
+
+    def __init__(self, handler: Callable[[], None], first_step: int, period_steps: float):
+        self.handler, self.first_step, self.period_steps = handler, first_step, period_steps
+        self.count = 1
+        self.next_step = self._step(1)
+
+    def _step(self, k: int) -> int:  # the first step boundary at or after its k-th time
+        return self.first_step + max(1, math.ceil(k * self.period_steps - 1e-9))
+
+    def advance(self) -> None:
+        self.count += 1
+        self.next_step = self._step(self.count)
 
 
 class SteppableSim(Protocol):
@@ -81,6 +113,9 @@ class LockstepClock:
         self.stall_limit_s: float | None = None  # the watchdog's limit, once armed
         self._pose = None
         self._pose_step = -1
+        self._interrupts: list[_Interrupt] = []  # add_interrupt, in the order registered
+        self._next_irq_step = _NEVER
+        self.in_interrupt = False  # a handler runs (no time passes)
 
     # -- schedule ------------------------------------------------------------------
     def _frame_step(self, k: int) -> int:
@@ -155,6 +190,33 @@ class LockstepClock:
         if self.finished is not None:
             raise RunFinished(self.finished.outcome, self.finished.message)
 
+    # -- interrupts ----------------------------------------------------------------
+    def add_interrupt(self, period_s: float, handler: Callable[[], None]) -> None:
+        """Run ``handler()`` every ``period_s`` of simulated time from now (module docstring;
+        ``period_s`` validated by the caller)."""
+        irq = _Interrupt(handler, self.step_index, period_s / self.dt_s)
+        self._interrupts.append(irq)
+        self._next_irq_step = min(self._next_irq_step, irq.next_step)
+
+    def _interrupt(self) -> None:
+        """The step index has reached an interrupt's step: run the handlers due (module docstring)."""
+        i = self.step_index
+        for irq in self._interrupts:
+            while irq.next_step <= i:
+                irq.advance()
+                self.in_interrupt = True
+                try:
+                    irq.handler()
+                finally:
+                    self.in_interrupt = False
+        self._next_irq_step = min(irq.next_step for irq in self._interrupts)
+        if self.finished is not None:
+            self.check()
+
+    def _refuse_wait(self) -> None:
+        raise InterruptWait("inside an interrupt handler no simulated time passes: a handler cannot "
+                            "wait (for a camera frame, a sleep); leave the waiting to the main loop")
+
     # -- stepping ------------------------------------------------------------------
     def start(self) -> None:
         """Run the frame-0 callback (the initial state)."""
@@ -197,14 +259,19 @@ class LockstepClock:
         """
         if self.finished is not None:
             self.check()
+        if self.in_interrupt:
+            self._refuse_wait()
         while n_steps > 0:
-            chunk = min(self._next_frame_step - self.step_index, n_steps)
+            stop = min(self._next_frame_step, self._next_irq_step)
+            chunk = min(stop - self.step_index, n_steps)
             self._before_chunk()
             self.sim.step(chunk)
             self.step_index += chunk
             n_steps -= chunk
             if self.step_index == self._next_frame_step:
                 self._frame_boundary()
+            if self.step_index == self._next_irq_step:
+                self._interrupt()
         self.last_progress_wall_s = _monotonic()
 
     def step_one(self) -> None:
@@ -212,12 +279,16 @@ class LockstepClock:
         Spinner call that lets one physics step pass (sensors, ``get_time``), kept short."""
         if self.finished is not None:
             self.check()
+        if self.in_interrupt:
+            return  # no time passes inside a handler (a sensor read gives the state now)
         if self._command_dirty or self._row_pending:
             self._before_chunk()
         self.sim.step(1)
         i = self.step_index = self.step_index + 1
         if i == self._next_frame_step:
             self._frame_boundary()
+        if i == self._next_irq_step:
+            self._interrupt()
         self.last_progress_wall_s = _monotonic()
 
     def advance_to_next_frame(self) -> None:
@@ -225,6 +296,9 @@ class LockstepClock:
         the path of every ``get_image``."""
         if self.finished is not None:
             self.check()
+        if self._next_irq_step <= self._next_frame_step or self.in_interrupt:  # interrupts on the way
+            self.advance(self._next_frame_step - self.step_index)
+            return
         self._before_chunk()
         self.sim.step(self._next_frame_step - self.step_index)
         self.step_index = self._next_frame_step

@@ -58,6 +58,9 @@ if TYPE_CHECKING:
     from simrunner.sensors.imaging import Imager
 
 NormFn = Callable[[float, float], float]
+MIN_INTERRUPT_PERIOD_S = 1e-5  # every(): a 100 kHz timer at most (faster ones are not a control loop)
+_NO_WAIT = ("no simulated time passes in a handler; wait in the main loop and leave the "
+            "handler to read sensors and set commands")
 
 _current_session = SESSION  # the run executing in this context (simrunner.run.context)
 _get_ident = threading.get_ident
@@ -394,6 +397,8 @@ class Spinner:
         if _get_ident() != self._owner:
             raise self._foreign("get_image")
         clock, session = self._clock, self._s
+        if clock.in_interrupt:
+            raise self._fail(CommandError(f"get_image({line}) inside an interrupt handler: {_NO_WAIT}"))
         clock.advance_to_next_frame()
         img = self._frame_now(line, add_noise)
         if session.video is not None:
@@ -586,8 +591,30 @@ class Spinner:
             raise self._fail(err) from None
         if _get_ident() != self._owner:
             raise self._foreign("sleep")
+        if self._clock.in_interrupt:
+            raise self._fail(CommandError(f"sleep({seconds!r}) inside an interrupt handler: {_NO_WAIT}"))
         n = max(1, math.ceil(s / self._clock.dt_s - 1e-9))
         self._clock.advance(n)
+
+    def every(self, period_s: float, handler: Callable[[], Any]) -> None:
+        """Call ``handler()`` every ``period_s`` seconds of simulated time from now, as a timer
+        interrupt would (the first call one period from now): it interrupts the main code in
+        its next waiting call (:mod:`simrunner.run.clock`, Interrupts). Inside the handler no time
+        passes: sensor reads give the state at its time, commands act from the next physics step,
+        and a wait (``get_image``, ``sleep``) is an error. Handlers due together run in the order
+        they were set up. C: ``spinner_every``; firmware: ``simrunner drive --isr NAME@HZ``."""
+        try:
+            p = _finite("every", "period_s", period_s)
+            if not MIN_INTERRUPT_PERIOD_S <= p:
+                raise CommandError(f"every(period_s={period_s!r}): expected at least "
+                                   f"{MIN_INTERRUPT_PERIOD_S:g} s (a {1 / MIN_INTERRUPT_PERIOD_S:g} Hz timer)")
+            if not callable(handler):
+                raise CommandError(f"every(period_s={period_s!r}, handler={handler!r}): expected a function")
+        except CommandError as err:
+            raise self._fail(err) from None
+        if _get_ident() != self._owner:
+            raise self._foreign("every")
+        self._clock.add_interrupt(p, handler)
 
     # -- parameters ------------------------------------------------------------------------
     def param(self, name: str, default: Any = None) -> Any:

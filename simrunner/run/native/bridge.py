@@ -44,8 +44,9 @@ from simrunner.run.native.build import NativeProgram
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
-    OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS = range(1, 23)
-ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE = 0, 1, 2, 3
+    OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
+    OP_ISR_DONE = range(1, 25)
+ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
 _OK_EMPTY = _HDR.pack(ST_OK, 0)
@@ -210,8 +211,11 @@ class _Session:
             measured = mcu is not None and mcu.fixed_s is None
             if measured:
                 mcu.reported = True
-            self._reply(struct.pack("<6d", h, w, s.line_row, 1.0 if s.recording else 0.0,
-                                    s.wheelbase_m, 1.0 if measured else 0.0))
+            isrs = self.ctrl.isrs  # --isr NAME@HZ: (name, period_s)
+            self._reply(struct.pack("<7d", h, w, s.line_row, 1.0 if s.recording else 0.0,
+                                    s.wheelbase_m, 1.0 if measured else 0.0, len(isrs))
+                        + b"".join(struct.pack("<2d", period, len(name.encode())) + name.encode()
+                                   for name, period in isrs))
             self._serve()
         except RunFinished as exc:
             if isinstance(exc, Stalled):
@@ -224,8 +228,16 @@ class _Session:
         finally:
             self._close()
 
-    def _serve(self) -> None:
-        """Answer requests until the child ends (raises _ChildGone) or the run does.
+    def _interrupt(self, slot: int) -> None:
+        """Run the program's interrupt handler ``slot`` now (the clock is inside a waiting call
+        of the program): answer that call with ST_ISR, then the handler's requests until it
+        is done (OP_ISR_DONE); the waiting call then waits on for its own reply."""
+        self._reply(_HDR.pack(ST_ISR, 4) + struct.pack("<i", slot))
+        self._serve(until_isr_done=True)
+
+    def _serve(self, until_isr_done: bool = False) -> None:
+        """Answer requests until the child ends (raises _ChildGone) or the run does (or, with
+        ``until_isr_done``, until the interrupt handler running ends).
 
         A camera frame's usual requests - the queued command, then the image call - arrive
         in one read of exactly those bytes: they are answered from one unpack (the same
@@ -258,6 +270,8 @@ class _Session:
                         buf = exchange(img)
                 self._buf, self._pos = bytes(buf), 0  # a copy if it was the host's buffer
             op, payload = self._message()
+            if op == OP_ISR_DONE and until_isr_done:
+                return
             try:
                 self._handle(op, payload)
             except _PASS:
@@ -312,6 +326,9 @@ class _Session:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_distance(payload.decode("utf-8", "replace"))))
         elif op == OP_MOTORS:  # the rear motors' duties: two doubles
             s.set_motors(*struct.unpack("<2d", payload[:16]))
+        elif op == OP_EVERY:  # a timer interrupt: its period (double) and the program's slot for it (int32)
+            period, slot = struct.unpack("<di", payload[:12])
+            s.every(period, lambda: self._interrupt(slot))
         elif op == OP_CPU:  # the program's CPU time since its previous request (--mcu-time measured)
             s._s.mcu.report(_D.unpack(payload)[0])
         elif op == OP_ENCODER:  # the wheel's index (int32) -> its count (int64)

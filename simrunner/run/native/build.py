@@ -20,6 +20,7 @@ import json
 import os
 import re
 import subprocess
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -70,18 +71,49 @@ INSTALL_HINT = "install a C compiler, e.g. `sudo apt-get install build-essential
 class NativeProgram:
     """A controller ready to run: ``library`` (a shared library defining ``main``), the
     ``sources`` it was built from (empty for a prebuilt library), the compiler's
-    ``warnings`` text ('' if none), whether it came from the cache, and ``isolate``: run it
-    in a child process rather than in the simulator's (controller.NativeController)."""
+    ``warnings`` text ('' if none), whether it came from the cache, ``isolate``: run it
+    in a child process rather than in the simulator's (controller.NativeController), and
+    ``isrs``: its functions the simulator calls as timer interrupts, ``(name, period_s)`` each
+    (``simrunner drive --isr NAME@HZ``; :func:`with_isrs`)."""
 
     library: Path
     sources: tuple[Path, ...]
     warnings: str = ""
     cached: bool = False
     isolate: bool = False
+    isrs: tuple[tuple[str, float], ...] = ()
 
     @property
     def name(self) -> str:
         return (self.sources[0] if self.sources else self.library).stem
+
+
+def exported_functions(library: str | Path) -> set[str] | None:
+    """The function names ``library`` exports (``nm -D --defined-only``), or None where ``nm``
+    (binutils) is missing or fails."""
+    try:
+        out = subprocess.run(["nm", "-D", "--defined-only", str(library)], capture_output=True,
+                             text=True, timeout=60)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if out.returncode != 0:
+        return None
+    return {parts[2] for parts in (line.split() for line in out.stdout.splitlines())
+            if len(parts) == 3 and parts[1] in "TtWi"}
+
+
+def with_isrs(program: NativeProgram, isrs: list[tuple[str, float]]) -> NativeProgram:
+    """``program`` whose functions ``isrs`` (``(name, period_s)``) are called as timer interrupts;
+    a ControllerFileError when it defines no such function."""
+    if not isrs:
+        return program
+    names = exported_functions(program.library)
+    for name, _ in isrs:
+        if names is not None and name not in names:
+            where = ", ".join(map(str, program.sources)) or str(program.library)
+            raise ControllerFileError(f"--isr {name}: {where} defines no function {name} (expected "
+                                      f"void {name}(void), not static)")
+    return dataclasses.replace(program, isrs=tuple(isrs))
 
 
 def is_native(path: str | Path) -> bool:

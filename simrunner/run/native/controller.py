@@ -19,9 +19,11 @@ class NativeController:
     ones) and an isolated program run in a child process. The library is opened (or the
     child started) here, ahead of the run."""
 
-    def __init__(self, program: NativeProgram, args: tuple[str, ...] = ()):
+    def __init__(self, program: NativeProgram, args: tuple[str, ...] = (),
+                 isrs: tuple[tuple[str, float], ...] = ()):
         self.program = program
         self.args = tuple(args)
+        self.isrs = tuple(isrs) or program.isrs  # --isr: (function name, period s), timer interrupts
         self.inproc = bool(program.sources) and not program.isolate and sys.platform.startswith("linux")
         self.host = self.getcpu = None
         if self.inproc:
@@ -67,9 +69,11 @@ class NativeController:
                 self._ready = None
 
 
-def load_native(sources: list[str | Path] | NativeProgram, args: tuple[str, ...] = ()) -> NativeController:
-    """A controller callable from C/C++ sources (built, cached) or a :class:`NativeProgram`."""
+def load_native(sources: list[str | Path] | NativeProgram, args: tuple[str, ...] = (),
+                isrs: tuple[tuple[str, float], ...] = ()) -> NativeController:
+    """A controller callable from C/C++ sources (built, cached) or a :class:`NativeProgram`;
+    ``isrs``: its functions to call as timer interrupts, ``(name, period_s)`` each."""
     from simrunner.run.native.build import build_program
 
     program = sources if isinstance(sources, NativeProgram) else build_program(list(sources))
-    return NativeController(program, args)
+    return NativeController(program, args, isrs)

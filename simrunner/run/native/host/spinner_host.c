@@ -50,8 +50,9 @@
 
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
-       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS };
-enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3 };
+       OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
+       OP_EVERY, OP_ISR_DONE };
+enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
 static size_t out_len;
@@ -314,6 +315,31 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
 }
 #endif
 
+/* Timer interrupts (spinner_every, --isr NAME@HZ): the handlers by slot. The simulator runs one
+ * by answering a waiting call with ST_ISR {int32 slot}: the call runs the handler (its requests
+ * go out as usual; no simulated time passes in it), sends OP_ISR_DONE and waits on for its own
+ * reply - the handler runs on the program's stack inside the waiting call, as an interrupt. */
+#define MAX_ISRS 32
+static void (*isr_fn[MAX_ISRS])(void);
+static int isr_count;
+static void *prog_lib;  /* the program's library (dlsym of --isr names) */
+
+static void run_isr(uint32_t slot) {
+    if (slot >= (uint32_t)isr_count) fault_report(0, "the simulator asked for an unknown interrupt handler", NULL);
+    if (mcu_report) mcu_mark_s = thread_cpu_s();  /* the handler's own time */
+    isr_fn[slot]();
+    queue(OP_ISR_DONE, NULL, 0, NULL, 0);
+    flush_out();
+}
+
+static int add_isr(void (*handler)(void), double period_s) {
+    if (isr_count == MAX_ISRS) return -1;
+    isr_fn[isr_count] = handler;
+    int32_t slot = isr_count++;
+    queue(OP_EVERY, &period_s, sizeof period_s, &slot, sizeof slot);
+    return 0;
+}
+
 /* Send a waiting request and read the reply into `reply` (at most `size` bytes); returns the
  * reply's length. The run being over ends the program. */
 static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t nb,
@@ -326,6 +352,14 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     flush_out();
     uint32_t hdr[2];
     size_t have = read_reply_head(hdr, reply, size);  /* have <= size */
+    while (hdr[0] == ST_ISR) {  /* an interrupt first (its slot: 4 bytes, maybe read already) */
+        uint32_t slot = 0;
+        size_t c = have < sizeof slot ? have : sizeof slot;
+        if (c) memcpy(&slot, reply, c);
+        if (c < sizeof slot) read_all((unsigned char *)&slot + c, sizeof slot - c);
+        run_isr(slot);
+        have = read_reply_head(hdr, reply, size);
+    }
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
         ended();
@@ -615,6 +649,15 @@ int8_t pixy2_line_get_main_features(uint8_t features, bool wait, pixy2_line_feat
 
 int8_t pixy2_line_get_all_features(uint8_t features, bool wait, pixy2_line_features *out) {
     return pixy_features(0, features, wait, out);
+}
+
+void spinner_every(double period_s, void (*handler)(void)) {
+    INIT();
+    if (handler == NULL) misuse("spinner_every(period_s=%g, handler=NULL): expected a function", period_s);
+    if (!(period_s >= 1e-5) || !isfinite(period_s))
+        misuse("spinner_every(period_s=%g): expected at least 1e-05 s (a 100 kHz timer)", period_s);
+    if (finished) return;
+    if (add_isr(handler, period_s) < 0) misuse("spinner_every: at most %d interrupt handlers", MAX_ISRS);
 }
 
 void spinner_sleep(double seconds) {
@@ -1049,7 +1092,9 @@ static void install_handlers(void) {
 }
 
 static void read_init(void) {
-    double init[6];  /* height, width, line row, recording, wheelbase, mcu time measured */
+    /* height, width, line row, recording, wheelbase, mcu time measured, then the --isr handlers:
+     * their count, and each one's period (s) and name length, then the names */
+    double init[7];
     inited = 1;
     read_all(init, sizeof init);
     img_h = (int)init[0], img_w = (int)init[1], line_row = (int)init[2];
@@ -1057,6 +1102,18 @@ static void read_init(void) {
     mcu_report = init[5] != 0.0;
     api_thread = pthread_self();
     if (mcu_report) mcu_mark_s = thread_cpu_s();
+    for (int i = 0, n = (int)init[6]; i < n; i++) {
+        double period_len[2];
+        char name[256];
+        read_all(period_len, sizeof period_len);
+        size_t len = (size_t)period_len[1] < sizeof name - 1 ? (size_t)period_len[1] : sizeof name - 1;
+        read_all(name, len);
+        if ((size_t)period_len[1] > len) skip_in((size_t)period_len[1] - len);
+        name[len] = 0;
+        void (*handler)(void) = prog_lib ? (void (*)(void))dlsym(prog_lib, name) : NULL;
+        if (handler == NULL) misuse("--isr %s: the program has no function %s", name, name);
+        if (add_isr(handler, period_len[0]) < 0) misuse("--isr: at most %d interrupt handlers", MAX_ISRS);
+    }
 }
 
 #ifndef SPINNER_INPROC
@@ -1078,6 +1135,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "simrunner: %s\n", dlerror());
         return 71;
     }
+    prog_lib = lib;
     int (*user_main)(int, char **, char **) = (int (*)(int, char **, char **))dlsym(lib, "main");
     if (user_main == NULL) return 72;  /* the simulator says so, naming the sources */
     extern char **environ;
@@ -1249,6 +1307,8 @@ static int run_active;  /* one run at a time in a process (the state above is th
 int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     if (__atomic_exchange_n(&run_active, 1, __ATOMIC_ACQ_REL)) return 16;  /* EBUSY */
     user_main = (main_fn)dlsym(lib, "main");
+    prog_lib = lib;
+    isr_count = 0;
     if (user_main == NULL) {
         __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);
         return 72;

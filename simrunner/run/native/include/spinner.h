@@ -89,6 +89,13 @@ void spinner_get_accel(double *x_mps2, double *y_mps2, double *z_mps2);
 /* Let `seconds` of simulated time pass (ceil(seconds / dt) steps, at least one). */
 void spinner_sleep(double seconds);
 
+/* A timer interrupt: call handler() every period_s of simulated time from now (at least 1e-5 s).
+ * It interrupts main() inside its next waiting call (the code between calls takes no time
+ * unless --mcu-time); inside the handler no time passes: reads give the state then, commands
+ * act from the next physics step, a wait (camera frame, sleep) is an error. Up to 32 handlers,
+ * due together in the order set up. Firmware with its own ISR: simrunner drive --isr NAME@HZ. */
+void spinner_every(double period_s, void (*handler)(void));
+
 /* Debug video: text lines in the right column (one call = the lines of this frame). */
 void spinner_add_text(const char *const *lines, int n);
 void spinner_add_textf(const char *format, ...)

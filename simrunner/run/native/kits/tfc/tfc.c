@@ -134,6 +134,8 @@ void TFC_Task(void) {
     camera_service(now);
 }
 
+void tfc_sim_wfi(void) { TFC_Task(); }  /* __WFI() (derivative.h) */
+
 void TFC_Delay_mS(unsigned int TicksIn_mS) {
     ensure_init();
     tfc.polls = 0;

@@ -9,4 +9,14 @@
 #include <stdint.h>
 #define EnableInterrupts do { } while (0)
 #define DisableInterrupts do { } while (0)
+/* The CMSIS intrinsics of core_cm0plus.h that firmware calls. __WFI() (wait for an interrupt)
+ * lets the board's interrupts run: a pass of TFC_Task() (a physics step, the SysTick tickers, the
+ * camera read-out), in which the --isr handlers due run (docs/c_controllers.md, Timer
+ * interrupts); an idle `for (;;) __WFI();` main loop leaves the work to them. */
+void tfc_sim_wfi(void);
+#define __WFI() tfc_sim_wfi()
+#define __WFE() tfc_sim_wfi()
+#define __enable_irq() do { } while (0)
+#define __disable_irq() do { } while (0)
+#define __NOP() do { } while (0)
 #endif

@@ -1,0 +1,197 @@
+"""Timer interrupts (issue 50 item 1: "the team's own main() with its super-loop or its timer
+interrupts, a periodic ISR the simulator calls at its rate"): ``Spinner.every``, C
+``spinner_every`` and ``simrunner drive --isr NAME@HZ`` (simrunner.run.clock, Interrupts)."""
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from simrunner.cli import main as cli
+from simrunner.errors import ControllerFileError
+from simrunner.run.native import build_program
+from simrunner.run.native.build import with_isrs
+from simrunner.run.runner import drive
+
+REPO = Path(__file__).resolve().parents[1]
+ISR_FIRMWARE = REPO / "examples" / "firmware" / "isr" / "main.c"
+FIRMWARE_DIR = REPO / "examples" / "firmware"
+SHARED_TRACKS = REPO.parent / "shared" / "tracks"
+
+
+def test_a_handler_runs_at_its_rate_and_its_commands_drive():
+    """Every 10 ms exactly (simulated), from the call on; reads inside give the state then and
+    no time passes in it; the speed it commands is what moves the car."""
+    seen = []
+
+    def main(s):
+        def tick():
+            t0 = s.get_time()
+            seen.append((t0, s.get_speed(), s.get_time()))
+            s.set_speed(0.8)
+
+        s.sleep(0.1)
+        s.every(0.01, tick)
+        for _ in range(45):
+            s.get_image(s.line_row)
+
+    r = drive(main, track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_returned", r.message
+    times = [t for t, _, _ in seen]
+    assert times == pytest.approx([0.1 + 0.01 * k for k in range(1, len(seen) + 1)], abs=1e-12)
+    assert times[-1] == pytest.approx(r.sim_time_s, abs=0.0101)
+    assert all(t == again for t, _, again in seen)  # no time passes inside
+    assert seen[0][1] == pytest.approx(0.0, abs=1e-3) and seen[-1][1] > 0.5  # its command moved the car
+
+
+def test_a_handler_faster_than_the_physics_step_runs_as_often_as_it_fell_due():
+    """1 kHz at the default 2 ms step: two calls a step, 500 in 0.5 s."""
+    count = []
+
+    def main(s):
+        s.every(0.001, lambda: count.append(s.get_time()))
+        s.sleep(0.5)
+
+    drive(main, track="floor", time_limit_s=5.0)
+    assert len(count) == 500 and count[0] == count[1] == pytest.approx(0.002)
+
+
+def test_handlers_due_together_run_in_the_order_set_up():
+    order = []
+
+    def main(s):
+        s.every(0.02, lambda: order.append(("b", s.get_time())))
+        s.every(0.01, lambda: order.append(("a", s.get_time())))
+        s.sleep(0.04)
+
+    drive(main, track="floor", time_limit_s=5.0)
+    assert [(n, round(t, 6)) for n, t in order] == [("a", 0.01), ("b", 0.02), ("a", 0.02), ("a", 0.03),
+                                                    ("b", 0.04), ("a", 0.04)]
+
+
+def test_waiting_inside_a_handler_is_the_controllers_error_at_its_line(tmp_path):
+    ctl = tmp_path / "waits.py"
+    ctl.write_text(textwrap.dedent("""\
+        def main(s):
+            def tick():
+                s.get_image()
+            s.every(0.05, tick)
+            s.sleep(1.0)
+        """))
+    r = drive(ctl, track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_error" and "inside an interrupt handler" in r.message, r.message
+    assert "waits.py:3" in r.message
+
+
+C_EVERY = """\
+#include <stdio.h>
+#include "spinner.h"
+static int ticks;
+static void tick(void) {
+    ticks++;
+    spinner_set_speed(ticks < 50 ? 0.5 : 0.0);
+    spinner_add_textf("tick %d at %.3f", ticks, spinner_get_time());
+}
+int main(void) {
+    spinner_every(0.02, tick);
+    unsigned char row[256];
+    for (int i = 0; i < 75; i++) spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+    return ticks == 75 ? 0 : 3;
+}
+"""
+
+
+def test_c_handlers_run_alike_in_process_and_isolated(tmp_path):
+    """``spinner_every`` in C: the handler runs inside main's waiting calls (75 frames, 75
+    ticks at 50 Hz), the same run log in the simulator's process and in a child process."""
+    src = tmp_path / "every.c"
+    src.write_text(C_EVERY)
+    program = build_program([src])
+    logs = []
+    for isolate in (False, True):
+        csv = tmp_path / f"run{isolate}.csv"
+        r = drive(program if not isolate else __import__("dataclasses").replace(program, isolate=True),
+                  track="floor", time_limit_s=5.0, csv=csv)
+        assert r.outcome == "controller_returned", r.message
+        logs.append(csv.read_bytes())
+    assert logs[0] == logs[1] and b"tick 75 at 1.500" in logs[0]
+
+
+def test_a_c_handler_that_waits_points_at_its_line(tmp_path):
+    src = tmp_path / "isr_waits.c"
+    src.write_text(textwrap.dedent("""\
+        #include "spinner.h"
+        static void tick(void) {
+            spinner_sleep(0.01);
+        }
+        int main(void) {
+            spinner_every(0.05, tick);
+            spinner_sleep(1.0);
+            return 0;
+        }
+        """))
+    r = drive(build_program([src]), track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_error" and "isr_waits.c:3" in r.message, r.message
+    assert "inside an interrupt handler" in r.message
+
+
+def test_firmware_with_its_control_in_a_timer_interrupt_laps(tmp_path):
+    """examples/firmware/isr/main.c: main() idles in __WFI(), PIT_IRQHandler steers at 100 Hz
+    (--isr PIT_IRQHandler@100); it laps the default track as the super-loop firmware does, with
+    the same run log in a child process."""
+    program = with_isrs(build_program([str(ISR_FIRMWARE)], include_dirs=[str(FIRMWARE_DIR)], kit="tfc"),
+                        [("PIT_IRQHandler", 0.01)])
+    csv = tmp_path / "isr.csv"
+    r = drive(program, csv=csv)
+    assert r.outcome == "finished" and r.laps_completed == 1, r.message
+    loop = drive(build_program([str(FIRMWARE_DIR / "main.c")], kit="tfc"))
+    assert r.lap_times_s[0] == pytest.approx(loop.lap_times_s[0], rel=0.03)
+    alone = tmp_path / "isolated.csv"
+    import dataclasses
+
+    drive(dataclasses.replace(program, isolate=True), csv=alone)
+    assert alone.read_bytes() == csv.read_bytes()
+    # without the interrupt nothing steers or drives: the car stays at the start
+    idle = drive(build_program([str(ISR_FIRMWARE)], include_dirs=[str(FIRMWARE_DIR)], kit="tfc"),
+                 time_limit_s=2.0)
+    assert idle.outcome == "timeout" and idle.laps_completed == 0
+
+
+@pytest.mark.skipif(not SHARED_TRACKS.is_dir(), reason="../shared/tracks absent")
+@pytest.mark.parametrize("track", ["nxp_raceway", "nxp_raceway_octagon"])
+def test_the_interrupt_firmware_laps_both_nxp_tracks(track):
+    program = with_isrs(build_program([str(ISR_FIRMWARE)], include_dirs=[str(FIRMWARE_DIR)], kit="tfc"),
+                        [("PIT_IRQHandler", 0.01)])
+    r = drive(program, track=SHARED_TRACKS / track)
+    assert r.outcome == "finished" and r.laps_completed == 1, r.message
+
+
+def test_measured_mcu_time_charges_a_handlers_own_time_only():
+    """--mcu-time measured with --isr: the simulator's start-up is not the program's time (the
+    firmware still laps at 20 x this machine's time)."""
+    program = with_isrs(build_program([str(ISR_FIRMWARE)], include_dirs=[str(FIRMWARE_DIR)], kit="tfc"),
+                        [("PIT_IRQHandler", 0.01)])
+    r = drive(program, mcu_time="measured", mcu_scale=20.0)
+    assert r.outcome == "finished" and r.laps_completed == 1, r.message
+
+
+def test_the_cli_names_what_is_wrong_with_an_isr(tmp_path):
+    args = ["drive", str(ISR_FIRMWARE), "-I", str(FIRMWARE_DIR), "--kit", "tfc", "--track", "floor",
+            "--time-limit", "0.5"]
+    res = CliRunner().invoke(cli, [*args, "--isr", "PIT_Handler@100"])
+    assert res.exit_code == 2 and "defines no function PIT_Handler" in res.output, res.output
+    res = CliRunner().invoke(cli, [*args, "--isr", "PIT_IRQHandler"])
+    assert res.exit_code == 2 and "expected NAME@HZ" in res.output, res.output
+    res = CliRunner().invoke(cli, ["drive", str(REPO / "examples" / "line_follower.py"), "--isr", "f@10"])
+    assert res.exit_code == 2 and "spinner.every" in res.output, res.output
+    res = CliRunner().invoke(cli, [*args, "--isr", "PIT_IRQHandler@100"])
+    assert res.exit_code == 1 and "timeout" in res.output, res.output  # runs (0.5 s: no lap)
+
+
+def test_with_isrs_refuses_a_missing_function(tmp_path):
+    src = tmp_path / "plain.c"
+    src.write_text("int main(void) { return 0; }\n")
+    with pytest.raises(ControllerFileError, match="defines no function tick"):
+        with_isrs(build_program([src]), [("tick", 0.01)])
