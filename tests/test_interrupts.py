@@ -195,3 +195,69 @@ def test_with_isrs_refuses_a_missing_function(tmp_path):
     src.write_text("int main(void) { return 0; }\n")
     with pytest.raises(ControllerFileError, match="defines no function tick"):
         with_isrs(build_program([src]), [("tick", 0.01)])
+
+
+S32K_GPT = """\
+#include "Gpt.h"
+#include "OsIf.h"
+static volatile uint32 ticks;
+void Gpt_Notification_0(void) { ticks++; }   /* named in the generated configuration */
+int main(void) {
+    Gpt_StartTimer(0U, 8000U);               /* 1 ms at the kit's 8 MHz Gpt clock */
+    Gpt_EnableNotification(0U);
+    while (ticks < 200U) OsIf_TimeDelay(1U);
+    return OsIf_GetMilliseconds() >= 200U ? 0 : 3;
+}
+"""
+
+
+def test_an_s32k144_gpt_notification_runs_as_an_isr(tmp_path):
+    """With --kit s32k144 a Gpt notification is called with --isr NAME@HZ (enabling it does
+    nothing more); without --isr, enabling it ends the run saying how."""
+    src = tmp_path / "gpt.c"
+    src.write_text(S32K_GPT)
+    program = build_program([src], kit="s32k144")
+    r = drive(with_isrs(program, [("Gpt_Notification_0", 0.001)]), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned" and r.sim_time_s == pytest.approx(0.2, abs=0.005), r.message
+    r = drive(program, track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_error" and "--isr NAME@HZ" in r.message and "gpt.c:7" in r.message, r.message
+
+
+LPTMR_FIRMWARE = """\
+#include "derivative.h"
+#include "TFC\\\\TFC.h"
+volatile uint32_t ticks;
+void LPTimer_IRQHandler(void) {
+    LPTMR0_CSR |= LPTMR_CSR_TCF_MASK;        /* clear the compare flag */
+    ticks++;
+}
+static void timer_init(void) {               /* 100 Hz from the 1 kHz LPO, as on the board */
+    SIM_SCGC5 |= SIM_SCGC5_LPTMR_MASK;
+    LPTMR0_CSR = 0;
+    LPTMR0_PSR = LPTMR_PSR_PCS(1) | LPTMR_PSR_PBYP_MASK;
+    LPTMR0_CMR = LPTMR_CMR_COMPARE(10 - 1);
+    LPTMR0->CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK;
+    NVIC_ICPR |= 1u << (INT_LPTimer - 16);
+    NVIC_ISER |= 1u << (INT_LPTimer - 16);
+    NVIC_EnableIRQ(LPTimer_IRQn);
+}
+int main(void) {
+    TFC_Init();
+    timer_init();
+    EnableInterrupts;
+    while (ticks < 100) __WFI();
+    return 0;
+}
+"""
+
+
+def test_a_tfc_firmwares_own_timer_set_up_builds_and_its_handler_runs(tmp_path):
+    """A KL25Z timer interrupt as firmware writes it (the LPTMR's clock gate, prescaler, compare
+    value and interrupt enable, the NVIC, the flag cleared in the handler) builds unchanged with
+    --kit tfc; --isr LPTimer_IRQHandler@100 calls the handler: 100 ticks in 1 s."""
+    src = tmp_path / "lptmr.c"
+    src.write_text(LPTMR_FIRMWARE)
+    program = with_isrs(build_program([src], kit="tfc"), [("LPTimer_IRQHandler", 0.01)])
+    r = drive(program, track="floor", time_limit_s=3.0)
+    assert r.outcome == "controller_returned", r.message
+    assert r.sim_time_s == pytest.approx(1.0, abs=0.06)  # the last __WFI() pass may read an image

@@ -651,6 +651,11 @@ int8_t pixy2_line_get_all_features(uint8_t features, bool wait, pixy2_line_featu
     return pixy_features(0, features, wait, out);
 }
 
+int spinner_interrupts(void) {
+    INIT();
+    return isr_count;
+}
+
 void spinner_every(double period_s, void (*handler)(void)) {
     INIT();
     if (handler == NULL) misuse("spinner_every(period_s=%g, handler=NULL): expected a function", period_s);

@@ -95,6 +95,8 @@ void spinner_sleep(double seconds);
  * act from the next physics step, a wait (camera frame, sleep) is an error. Up to 32 handlers,
  * due together in the order set up. Firmware with its own ISR: simrunner drive --isr NAME@HZ. */
 void spinner_every(double period_s, void (*handler)(void));
+/* How many timer interrupt handlers are set up (--isr and spinner_every). */
+int spinner_interrupts(void);
 
 /* Debug video: text lines in the right column (one call = the lines of this frame). */
 void spinner_add_text(const char *const *lines, int n);

@@ -193,10 +193,15 @@ Gpt_ValueType Gpt_GetTimeRemaining(Gpt_ChannelType Channel) {
     return k.gpt[Channel].running ? k.gpt[Channel].target - elapsed : 0U;
 }
 
+/* A notification is the interrupt handler the generated configuration names: run with
+ * --isr NAME@HZ it is called at that rate (docs/c_controllers.md, Timer interrupts) and enabling it
+ * does nothing more; without --isr nothing would call it. */
 void Gpt_EnableNotification(Gpt_ChannelType Channel) {
     (void)Channel;
+    if (spinner_interrupts() > 0) return;
     not_emulated("Gpt_EnableNotification", "a GPT notification is an interrupt handler your generated "
-                 "configuration names; the kit's Gpt channels only count simulated time");
+                 "configuration names: give it and its rate as --isr NAME@HZ (the kit's Gpt channels "
+                 "only count simulated time)");
 }
 
 void Gpt_DisableNotification(Gpt_ChannelType Channel) { (void)Channel; }

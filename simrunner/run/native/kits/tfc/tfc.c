@@ -136,6 +136,13 @@ void TFC_Task(void) {
 
 void tfc_sim_wfi(void) { TFC_Task(); }  /* __WFI() (derivative.h) */
 
+/* the registers of TFC/sim_timers.h: what firmware writes to them is kept, nothing more */
+LPTMR_Type tfc_sim_lptmr0;
+PIT_Type tfc_sim_pit;
+TPM_Type tfc_sim_tpm2;
+NVIC_Type tfc_sim_nvic;
+SIM_Type tfc_sim_sim;
+
 void TFC_Delay_mS(unsigned int TicksIn_mS) {
     ensure_init();
     tfc.polls = 0;

@@ -1,12 +1,13 @@
 /* derivative.h of the simulator's TFC kit (simrunner drive ... --kit tfc).
  *
  * On the FRDM-KL25Z this header pulls in MKL25Z4.h, the MCU's register map. The simulator has
- * no registers: code that writes them directly (GPIOB_PSOR = ..., TPM0_C0V = ...) does not
- * compile here; reach the hardware through the TFC library's functions and macros, which the
+ * no registers but those of a timer interrupt's set-up (TFC/sim_timers.h): code that writes
+ * others directly (GPIOB_PSOR = ..., TPM0_C0V = ...) does not compile here; reach the hardware through the TFC library's functions and macros, which the
  * simulator implements (docs/c_controllers.md, "Kit libraries"). */
 #ifndef NXPCUP_SIM_DERIVATIVE_H
 #define NXPCUP_SIM_DERIVATIVE_H
 #include <stdint.h>
+#include "TFC/sim_timers.h"  /* the timers of a timer interrupt of your own */
 #define EnableInterrupts do { } while (0)
 #define DisableInterrupts do { } while (0)
 /* The CMSIS intrinsics of core_cm0plus.h that firmware calls. __WFI() (wait for an interrupt)

@@ -1,0 +1,106 @@
+/* The KL25Z's timers as firmware sets up its own timer interrupt (the simulator's TFC kit,
+ * included by derivative.h). Names, masks and interrupt numbers as MKL25Z4.h has them (NXP KL25
+ * Sub-Family Reference Manual KL25P80M48SF0RM: chapter 33 LPTMR, 32 PIT, 31 TPM, 12 SIM; the
+ * Cortex-M0+ NVIC): registers of both spellings (LPTMR0_CSR and LPTMR0->CSR) are memory that
+ * keeps what is written and does nothing else. The handler's rate is not read from them: run
+ * with --isr NAME@HZ (docs/c_controllers.md, Timer interrupts), e.g. --isr LPTimer_IRQHandler@100.
+ * The TFC library's own timers (TPM0, TPM1, the PIT's camera timing) stay the library's. */
+#ifndef NXPCUP_SIM_TFC_TIMERS_H
+#define NXPCUP_SIM_TFC_TIMERS_H
+#include <stdint.h>
+
+typedef struct { volatile uint32_t CSR, PSR, CMR, CNR; } LPTMR_Type;
+typedef struct { volatile uint32_t LDVAL, CVAL, TCTRL, TFLG; } PIT_CHANNEL_Type;
+typedef struct { volatile uint32_t MCR; uint32_t reserved[63]; PIT_CHANNEL_Type CHANNEL[2]; } PIT_Type;
+typedef struct { volatile uint32_t CnSC, CnV; } TPM_CONTROLS_Type;
+typedef struct { volatile uint32_t SC, CNT, MOD; TPM_CONTROLS_Type CONTROLS[6]; uint32_t reserved[5];
+                 volatile uint32_t STATUS, CONF; } TPM_Type;
+typedef struct { volatile uint32_t ISER[1], ICER[1], ISPR[1], ICPR[1], IP[8]; } NVIC_Type;
+typedef struct { volatile uint32_t SOPT2, SCGC5, SCGC6; } SIM_Type;
+
+extern LPTMR_Type tfc_sim_lptmr0;
+extern PIT_Type tfc_sim_pit;
+extern TPM_Type tfc_sim_tpm2;
+extern NVIC_Type tfc_sim_nvic;
+extern SIM_Type tfc_sim_sim;
+
+#define LPTMR0 (&tfc_sim_lptmr0)
+#define LPTMR0_BASE_PTR LPTMR0
+#define LPTMR0_CSR (LPTMR0->CSR)
+#define LPTMR0_PSR (LPTMR0->PSR)
+#define LPTMR0_CMR (LPTMR0->CMR)
+#define LPTMR0_CNR (LPTMR0->CNR)
+#define LPTMR_CSR_TEN_MASK 0x1u
+#define LPTMR_CSR_TMS_MASK 0x2u
+#define LPTMR_CSR_TFC_MASK 0x4u
+#define LPTMR_CSR_TPP_MASK 0x8u
+#define LPTMR_CSR_TPS_MASK 0x30u
+#define LPTMR_CSR_TIE_MASK 0x40u
+#define LPTMR_CSR_TCF_MASK 0x80u
+#define LPTMR_CSR_TPS(x) (((uint32_t)(x) << 4) & LPTMR_CSR_TPS_MASK)
+#define LPTMR_PSR_PCS_MASK 0x3u
+#define LPTMR_PSR_PBYP_MASK 0x4u
+#define LPTMR_PSR_PRESCALE_MASK 0x78u
+#define LPTMR_PSR_PCS(x) ((uint32_t)(x) & LPTMR_PSR_PCS_MASK)
+#define LPTMR_PSR_PRESCALE(x) (((uint32_t)(x) << 3) & LPTMR_PSR_PRESCALE_MASK)
+#define LPTMR_CMR_COMPARE(x) ((uint32_t)(x) & 0xFFFFu)
+
+#define PIT (&tfc_sim_pit)
+#define PIT_BASE_PTR PIT
+#define PIT_MCR (PIT->MCR)
+#define PIT_LDVAL0 (PIT->CHANNEL[0].LDVAL)
+#define PIT_CVAL0 (PIT->CHANNEL[0].CVAL)
+#define PIT_TCTRL0 (PIT->CHANNEL[0].TCTRL)
+#define PIT_TFLG0 (PIT->CHANNEL[0].TFLG)
+#define PIT_LDVAL1 (PIT->CHANNEL[1].LDVAL)
+#define PIT_CVAL1 (PIT->CHANNEL[1].CVAL)
+#define PIT_TCTRL1 (PIT->CHANNEL[1].TCTRL)
+#define PIT_TFLG1 (PIT->CHANNEL[1].TFLG)
+#define PIT_MCR_FRZ_MASK 0x1u
+#define PIT_MCR_MDIS_MASK 0x2u
+#define PIT_TCTRL_TEN_MASK 0x1u
+#define PIT_TCTRL_TIE_MASK 0x2u
+#define PIT_TCTRL_CHN_MASK 0x4u
+#define PIT_TFLG_TIF_MASK 0x1u
+#define PIT_LDVAL_TSV(x) ((uint32_t)(x))
+
+#define TPM2 (&tfc_sim_tpm2)
+#define TPM2_BASE_PTR TPM2
+#define TPM2_SC (TPM2->SC)
+#define TPM2_CNT (TPM2->CNT)
+#define TPM2_MOD (TPM2->MOD)
+#define TPM2_STATUS (TPM2->STATUS)
+#define TPM2_CONF (TPM2->CONF)
+#define TPM_SC_PS_MASK 0x7u
+#define TPM_SC_CMOD_MASK 0x18u
+#define TPM_SC_CPWMS_MASK 0x20u
+#define TPM_SC_TOIE_MASK 0x40u
+#define TPM_SC_TOF_MASK 0x80u
+#define TPM_SC_PS(x) ((uint32_t)(x) & TPM_SC_PS_MASK)
+#define TPM_SC_CMOD(x) (((uint32_t)(x) << 3) & TPM_SC_CMOD_MASK)
+#define TPM_MOD_MOD(x) ((uint32_t)(x) & 0xFFFFu)
+
+#define SIM (&tfc_sim_sim)
+#define SIM_SOPT2 (SIM->SOPT2)
+#define SIM_SCGC5 (SIM->SCGC5)
+#define SIM_SCGC6 (SIM->SCGC6)
+#define SIM_SOPT2_TPMSRC(x) (((uint32_t)(x) << 24) & 0x3000000u)
+#define SIM_SCGC5_LPTMR_MASK 0x1u
+#define SIM_SCGC6_PIT_MASK 0x800000u
+#define SIM_SCGC6_TPM2_MASK 0x4000000u
+
+/* the NVIC (CMSIS core_cm0plus.h) and the vector numbers: IRQn as CMSIS counts, INT_ as MKL25Z4.h */
+#define NVIC (&tfc_sim_nvic)
+#define NVIC_ISER (NVIC->ISER[0])
+#define NVIC_ICER (NVIC->ICER[0])
+#define NVIC_ISPR (NVIC->ISPR[0])
+#define NVIC_ICPR (NVIC->ICPR[0])
+typedef enum { TPM2_IRQn = 19, PIT_IRQn = 22, LPTimer_IRQn = 28 } IRQn_Type;
+#define INT_TPM2 35
+#define INT_PIT 38
+#define INT_LPTimer 44
+#define NVIC_EnableIRQ(irq) ((void)(irq))
+#define NVIC_DisableIRQ(irq) ((void)(irq))
+#define NVIC_ClearPendingIRQ(irq) ((void)(irq))
+#define NVIC_SetPriority(irq, prio) ((void)(irq), (void)(prio))
+#endif
