@@ -261,3 +261,13 @@ def test_a_tfc_firmwares_own_timer_set_up_builds_and_its_handler_runs(tmp_path):
     r = drive(program, track="floor", time_limit_s=3.0)
     assert r.outcome == "controller_returned", r.message
     assert r.sim_time_s == pytest.approx(1.0, abs=0.06)  # the last __WFI() pass may read an image
+
+
+def test_check_builds_firmware_as_drive_does():
+    """``simrunner check`` takes the firmware's sources, -I, --kit, --isr and --param as drive
+    does: the interrupt firmware passes; without its --isr nothing drives (a warning)."""
+    args = ["check", str(ISR_FIRMWARE), "-I", str(FIRMWARE_DIR), "--kit", "tfc", "--seconds", "1.5"]
+    res = CliRunner().invoke(cli, [*args, "--isr", "PIT_IRQHandler@100", "--param", "dip=1"])
+    assert res.exit_code == 0 and "isr/main.c: OK" in res.output and "warning" not in res.output, res.output
+    res = CliRunner().invoke(cli, args)
+    assert res.exit_code == 0 and "no speed was ever commanded" in res.output, res.output

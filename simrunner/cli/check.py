@@ -12,6 +12,7 @@ import click
 
 @click.command("check")
 @click.argument("controller", type=click.Path(exists=True, dir_okay=False, path_type=str))
+@click.argument("more_sources", nargs=-1, type=click.Path(exists=True, dir_okay=False, path_type=str))
 @click.option("--track", default=None, metavar="LAYOUT|DIR|WORLD",
               help="Track to check on (default: the bundled thesis figure-8).")
 @click.option("--car", default=None, metavar="CAR.toml", help="Car description (default: built-in car).")
@@ -21,15 +22,30 @@ import click
 @click.option("--wall-limit", "wall_limit_s", default=3.0, show_default=True,
               type=click.FloatRange(min=0, min_open=True), metavar="SECONDS",
               help="Wall time without simulated progress before a controller counts as stalled.")
-def check_cmd(controller, track, car, seconds, wall_limit_s) -> None:
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
+              help="Controller parameter, as for drive (repeatable).")
+@click.option("-I", "--include", "include_dirs", multiple=True, metavar="DIR",
+              help="C/C++ controllers: an include directory (repeatable).")
+@click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
+              help="C/C++ controllers: a preprocessor define (repeatable).")
+@click.option("--kit", default=None, metavar="tfc|s32k144",
+              help="C/C++ firmware: build it against this kit library, as for drive.")
+@click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
+              help="C/C++ firmware: a timer interrupt handler and its rate, as for drive (repeatable).")
+def check_cmd(controller, more_sources, track, car, seconds, wall_limit_s, params=(), include_dirs=(),
+              defines=(), kit=None, isrs=()) -> None:
     """Run CONTROLLER briefly (twice, same seed) and report what breaks the controller
-    contract: faults with file:line, stalls, nondeterminism, bad or capped commands."""
-    from simrunner.cli import input_errors
+    contract: faults with file:line, stalls, nondeterminism, bad or capped commands. C/C++
+    firmware: its sources and the options that build it, as for drive."""
+    from simrunner.cli import _native_program, input_errors
     from simrunner.run.check import check_controller
+    from simrunner.run.params import parse_params
 
     try:
-        report = check_controller(controller, track=track, car=car, seconds=seconds,
-                                  wall_limit_s=wall_limit_s)
+        program = _native_program(controller, tuple(more_sources), tuple(include_dirs), tuple(defines),
+                                  False, kit, tuple(isrs))
+        report = check_controller(program, track=track, car=car, seconds=seconds,
+                                  wall_limit_s=wall_limit_s, params=parse_params(params))
     except input_errors() as exc:
         click.echo(f"simrunner: {exc}", err=True)
         sys.exit(2)

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from simrunner.errors import ControllerFileError
-from simrunner.run.controller import MainFn, load_controller, user_location
+from simrunner.run.controller import load_controller, user_location
 from simrunner.run.result import Outcome, RunResult
 from simrunner.run.runner import Run, resolve_track
 from simrunner.run.settings import RunSettings
@@ -75,17 +75,27 @@ def _first_difference(a, b) -> str | None:
     return None
 
 
-def check_controller(controller: str | Path | MainFn, *, track: str | Path | SimTrack | None = None,
+def check_controller(controller, *, track: str | Path | SimTrack | None = None,
                      car: str | Path | CarDescription | None = None, seconds: float = CHECK_SECONDS,
-                     seed: int = 0, wall_limit_s: float = CHECK_WALL_LIMIT_S) -> CheckReport:
-    """Check ``controller`` (a file or a callable) on ``track`` (default: the bundled one).
+                     seed: int = 0, wall_limit_s: float = CHECK_WALL_LIMIT_S,
+                     params: dict | None = None) -> CheckReport:
+    """Check ``controller`` (a file, a callable or a built C/C++ ``NativeProgram``) on ``track``
+    (default: the bundled one), with the run parameters ``params`` (``--param``).
 
     Bad input (missing track, bad car file, bad settings) raises as in :func:`drive`; a bad
     controller file is a problem in the report.
     """
-    name = str(controller) if not callable(controller) else getattr(controller, "__qualname__", "main")
+    sources = getattr(controller, "sources", None)  # a NativeProgram: its sources (not a kit's) name it
+    if sources is not None:
+        from simrunner.run.native.build import KITS_DIR
+
+        own = [str(p) for p in sources if KITS_DIR not in Path(p).resolve().parents]
+        name = ", ".join(own) or str(controller.library)
+    else:
+        name = str(controller) if not callable(controller) else getattr(controller, "__qualname__", "main")
     car_desc = car if isinstance(car, CarDescription) else load_car(car)
-    settings = RunSettings(laps=1000, time_limit_s=seconds, seed=seed, wall_limit_s=wall_limit_s)
+    settings = RunSettings(laps=1000, time_limit_s=seconds, seed=seed, wall_limit_s=wall_limit_s,
+                           params=params or {})
     sim_track, _ = resolve_track(track, car_desc)
     try:
         ctrl = load_controller(controller)
