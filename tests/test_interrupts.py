@@ -271,3 +271,21 @@ def test_check_builds_firmware_as_drive_does():
     assert res.exit_code == 0 and "isr/main.c: OK" in res.output and "warning" not in res.output, res.output
     res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0 and "no speed was ever commanded" in res.output, res.output
+
+
+def test_batch_runs_firmware_built_once_with_its_kit_and_isr(tmp_path):
+    """``simrunner batch`` takes the firmware's build as drive does (built once for every run):
+    the interrupt firmware over 2 DIP settings x 2 seeds laps each run, the same rows on 1 and 2
+    workers; a build that fails says the compiler's line."""
+    from simrunner.workflows.batch import deterministic, run_batch
+
+    build = dict(include_dirs=[str(FIRMWARE_DIR)], kit="tfc", isrs=(("PIT_IRQHandler", 0.01),))
+    rows = []
+    for workers in (1, 2):
+        res = run_batch(ISR_FIRMWARE, out_dir=tmp_path / f"w{workers}", seeds=2, params=["dip=0,1"],
+                        workers=workers, plot=False, build=build)
+        assert [r["outcome"] for r in res.rows] == ["finished"] * 4
+        rows.append([deterministic(r) for r in res.rows])
+    assert rows[0] == rows[1]
+    res = CliRunner().invoke(cli, ["batch", str(ISR_FIRMWARE), "--kit", "tfc", "-o", str(tmp_path / "bad")])
+    assert res.exit_code == 2 and "lane.h: No such file" in res.output, res.output

@@ -10,6 +10,7 @@ from simrunner.run.rules import EVENT_NAMES
 
 @click.command("batch")
 @click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
+@click.argument("more_sources", nargs=-1, type=click.Path(dir_okay=False, path_type=str))
 @click.option("--tracks", "tracks", multiple=True, metavar="SPEC",
               help="Tracks: layout/world files, folders, globs ('tracks/*.txt'), random:N; "
                    "repeatable or comma-separated (default: the bundled track).")
@@ -54,11 +55,21 @@ from simrunner.run.rules import EVENT_NAMES
 @click.option("--mcu-scale", "mcu_scale", default=1.0, show_default=True,
               type=click.FloatRange(min=0, max=1e4, min_open=True), metavar="FACTOR",
               help="With --mcu-time measured: how many times slower the car's MCU runs the code.")
-def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, out_dir, force,
+@click.option("-I", "--include", "include_dirs", multiple=True, metavar="DIR",
+              help="C/C++ controllers: an include directory (repeatable), as for drive.")
+@click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
+              help="C/C++ controllers: a preprocessor define (repeatable).")
+@click.option("--kit", default=None, metavar="tfc|s32k144",
+              help="C/C++ firmware: build it against this kit library, as for drive.")
+@click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
+              help="C/C++ firmware: a timer interrupt handler and its rate, as for drive (repeatable).")
+def batch_cmd(controller, more_sources, tracks, seeds, params, laps, time_limit_s, workers, out_dir, force,
               video, csv, run_timeout_s, car, dt_s, wall_limit_s, ray, no_plot,
-              off_track_wheels=None, event=None, mcu_time=None, mcu_scale=1.0) -> None:
-    """Run CONTROLLER over tracks x parameters x seeds on all cores (or Ray); one row per run."""
-    from simrunner.cli import input_errors
+              off_track_wheels=None, event=None, mcu_time=None, mcu_scale=1.0, include_dirs=(),
+              defines=(), kit=None, isrs=()) -> None:
+    """Run CONTROLLER over tracks x parameters x seeds on all cores (or Ray); one row per run.
+    C/C++ firmware: its sources and the options that build it, as for drive."""
+    from simrunner.cli import _isr, input_errors
     from simrunner.workflows.batch import run_batch
 
     bar = _progress_bar()
@@ -80,16 +91,23 @@ def batch_cmd(controller, tracks, seeds, params, laps, time_limit_s, workers, ou
 
     previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGTERM, signal.SIGHUP)}
     try:
+        build = dict(sources=more_sources, include_dirs=include_dirs, defines=defines, kit=kit,
+                     isrs=tuple(_isr(text) for text in isrs))
         result = run_batch(controller, out_dir=out_dir, tracks=tracks, seeds=seeds, params=params,
                            laps=laps, time_limit_s=time_limit_s, dt_s=dt_s,
                            wall_limit_s=wall_limit_s, car=car, workers=workers,
                            run_timeout_s=run_timeout_s, video=video, csv=csv, plot=not no_plot,
                            ray=ray, force=force, on_row=on_row, off_track_wheels=off_track_wheels,
-                           event=event, mcu_time=mcu_time, mcu_scale=mcu_scale,
+                           event=event, mcu_time=mcu_time, mcu_scale=mcu_scale, build=build,
                            on_plan=lambda n: bar.reset(total=n))
     except input_errors() as exc:
         bar.close()
-        click.echo(f"simrunner batch: {str(exc).splitlines()[0]}", err=True)
+        lines = str(exc).splitlines() or [""]
+        if len(lines) > 1 and lines[0].endswith(" failed:"):  # a compile error: the compiler's words
+            lines = lines[:1] + [line for line in lines[1:] if line.strip()][:4]
+        else:
+            lines = lines[:1]
+        click.echo("simrunner batch: " + "\n".join(lines), err=True)
         sys.exit(2)
     except KeyboardInterrupt:
         bar.close()

@@ -80,6 +80,24 @@ class BatchResult:
         return out
 
 
+def _program(controller: Path, build: dict):
+    """The C/C++ program of ``controller`` (a source or .so) built with ``build`` (run_batch), or
+    None for a Python controller; a ControllerFileError for a bad build."""
+    from simrunner.errors import ControllerFileError
+    from simrunner.run.native.build import build_program, is_native, with_isrs
+
+    sources = [str(controller), *map(str, build.get("sources", ()))]
+    if not any(build.values()) and not is_native(controller):
+        return None
+    bad = [s for s in sources if not is_native(s)]
+    if bad:
+        raise ControllerFileError(f"{bad[0]}: several files, -I, -D, --kit and --isr are for C/C++ "
+                                  f"controllers (.c, .cpp sources or one .so)")
+    program = build_program(sources, include_dirs=list(build.get("include_dirs", ())),
+                            defines=list(build.get("defines", ())), kit=build.get("kit"))
+    return with_isrs(program, list(build.get("isrs", ())))
+
+
 def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: str | int = 1,
               params=(), laps: int = 1, time_limit_s: float | None = None, dt_s: float = 0.002,
               wall_limit_s: float = 10.0, car: str | Path | None = None,
@@ -89,7 +107,8 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
               on_row: Callable[[dict], None] | None = None,
               on_plan: Callable[[int], None] | None = None, quiet_workers: bool = True,
               off_track_wheels: int | None = None, event: str | None = None,
-              mcu_time: str | float | None = None, mcu_scale: float = 1.0) -> BatchResult:
+              mcu_time: str | float | None = None, mcu_scale: float = 1.0,
+              build: dict | None = None) -> BatchResult:
     """Run ``controller`` over every (track, parameter combination, seed); see
     docs/batch.md. ``tracks``: files, folders, globs, ``random:N`` (default: the bundled
     track). ``seeds``: N (0..N-1) or ``"A:B"``. ``params``: ``["NAME=V1,V2", "K=1:2:0.5"]``.
@@ -99,7 +118,9 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     run's track, laps and event: ``max(60 s, laps x lap length / 0.5 m/s)``, an event's own,
     the race's 120 s); ``run_timeout_s``: wall-clock limit of a run (default 60 s + 4 x its
     time limit); ``off_track_wheels``, ``event``, ``mcu_time``, ``mcu_scale``: as for
-    ``simrunner drive``."""
+    ``simrunner drive``. ``build``: a C/C++ program's build as ``simrunner drive`` takes it
+    (``sources``: its other files, ``include_dirs``, ``defines``, ``kit``, ``isrs``: ``(name,
+    period_s)``), built once here for every run."""
     from simrunner.run.controller import load_controller
     from simrunner.run.runner import default_track
     from simrunner.run.events import event_track
@@ -108,7 +129,9 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     from vehicle.description import load_car
 
     ctl_path = Path(controller).resolve()
-    load_controller(ctl_path)                       # a missing/broken file: one line, now
+    program = _program(ctl_path, build or {})      # a C/C++ program, built once; else None
+    if program is None:
+        load_controller(ctl_path)                   # a missing/broken file: one line, now
     load_car(car)
     if time_limit_s is None and event in EVENTS:
         time_limit_s = EVENTS[event].time_limit_s  # the discipline's (as drive)
@@ -139,7 +162,8 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise BatchError(f"{out}: cannot create the output folder ({exc.strerror or exc})") from None
-    config = BatchConfig(controller=str(ctl_path), car=None if car is None else str(Path(car).resolve()),
+    config = BatchConfig(controller=str(ctl_path), program=program,
+                         car=None if car is None else str(Path(car).resolve()),
                          laps=laps, time_limit_s=time_limit_s, dt_s=dt_s, wall_limit_s=wall_limit_s,
                          off_track_wheels=off_track_wheels, event=event,
                          param_names=tuple(grid), mcu_time=mcu_time, mcu_scale=mcu_scale)

@@ -58,7 +58,9 @@ class Job:
 class BatchConfig:
     """What every run of a batch shares (sent once to each worker).
 
-    ``controller``: absolute path of the controller file. ``car``: car TOML path or None.
+    ``controller``: absolute path of the controller file; ``program``: the C/C++ program built
+    from it (and the batch's other sources, kit, ``--isr``) once for every run, or None (Python).
+    ``car``: car TOML path or None.
     ``laps``, ``time_limit_s``, ``dt_s``, ``wall_limit_s``, ``off_track_wheels``, ``event``,
     ``mcu_time``, ``mcu_scale``: as for ``simrunner drive`` (``time_limit_s`` None: each run
     gets drive's default for its track, laps and event).
@@ -66,6 +68,7 @@ class BatchConfig:
 
     controller: str
     car: str | None = None
+    program: object | None = None  # a simrunner.run.native.NativeProgram
     laps: int = 1
     time_limit_s: float | None = None
     dt_s: float = 0.002

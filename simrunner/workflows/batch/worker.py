@@ -96,7 +96,7 @@ def execute_job(job: Job, state: WorkerState, outputs: dict[str, str] | None = N
         track = state.track(job.track)
         settings = run_settings(job, cfg)
         outputs = outputs or {}
-        result = drive(cfg.controller, track=track, car=state.car, settings=settings,
+        result = drive(cfg.program or cfg.controller, track=track, car=state.car, settings=settings,
                        video=outputs.get("video"), csv=outputs.get("csv"))
     except Exception as exc:  # noqa: BLE001 - recorded in the row, the batch goes on
         from trackgen import TrackError
