@@ -289,3 +289,19 @@ def test_batch_runs_firmware_built_once_with_its_kit_and_isr(tmp_path):
     assert rows[0] == rows[1]
     res = CliRunner().invoke(cli, ["batch", str(ISR_FIRMWARE), "--kit", "tfc", "-o", str(tmp_path / "bad")])
     assert res.exit_code == 2 and "lane.h: No such file" in res.output, res.output
+
+
+def test_cpp_every_takes_a_lambda(tmp_path):
+    src = tmp_path / "every.cpp"
+    src.write_text(textwrap.dedent("""\
+        #include "spinner.hpp"
+        static int ticks;
+        int main() {
+            Spinner s;
+            s.every(0.01, [] { ticks++; });
+            s.sleep(0.5);
+            return ticks == 50 ? 0 : 3;
+        }
+        """))
+    r = drive(build_program([src]), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message

@@ -166,6 +166,9 @@ class Spinner {
     double getTime() { return spinner_get_time(); }  // double: exact steps (the thesis: float)
     float getDistance(const std::string &name) { return float(spinner_get_distance(name.c_str())); }
     void setMotors(float left, float right) { spinner_set_motors(left, right); }
+    // A timer interrupt: handler() every period_s of simulated time (spinner_every; a lambda
+    // without captures is such a function).
+    void every(double period_s, void (*handler)()) { spinner_every(period_s, handler); }
     long long getEncoder(int wheel) { return spinner_get_encoder(wheel); }
     // By name, as in Python: "FL", "FR", "RL", "RR" (any case); another name throws.
     long long getEncoder(const std::string &wheel) {
