@@ -83,6 +83,8 @@ class BatchResult:
 def _program(controller: Path, build: dict):
     """The C/C++ program of ``controller`` (a source or .so) built with ``build`` (run_batch), or
     None for a Python controller; a ControllerFileError for a bad build."""
+    if not any(build.values()) and controller.suffix == ".py":
+        return None  # (a Python batch does not import the C build machinery: ~15 ms of start-up)
     from simrunner.errors import ControllerFileError
     from simrunner.run.native.build import build_program, is_native, with_isrs
 
