@@ -138,11 +138,11 @@ def test_a_c_handler_that_waits_points_at_its_line(tmp_path):
 
 
 def test_firmware_with_its_control_in_a_timer_interrupt_laps(tmp_path):
-    """examples/firmware/isr/main.c: main() idles in __WFI(), PIT_IRQHandler steers at 100 Hz
-    (--isr PIT_IRQHandler@100); it laps the default track as the super-loop firmware does, with
+    """examples/firmware/isr/main.c: main() idles in __WFI(), LPTimer_IRQHandler steers at 100 Hz
+    (--isr LPTimer_IRQHandler@100); it laps the default track as the super-loop firmware does, with
     the same run log in a child process."""
     program = with_isrs(build_program([str(ISR_FIRMWARE)], include_dirs=[str(FIRMWARE_DIR)], kit="tfc"),
-                        [("PIT_IRQHandler", 0.01)])
+                        [("LPTimer_IRQHandler", 0.01)])
     csv = tmp_path / "isr.csv"
     r = drive(program, csv=csv)
     assert r.outcome == "finished" and r.laps_completed == 1, r.message
@@ -163,7 +163,7 @@ def test_firmware_with_its_control_in_a_timer_interrupt_laps(tmp_path):
 @pytest.mark.parametrize("track", ["nxp_raceway", "nxp_raceway_octagon"])
 def test_the_interrupt_firmware_laps_both_nxp_tracks(track):
     program = with_isrs(build_program([str(ISR_FIRMWARE)], include_dirs=[str(FIRMWARE_DIR)], kit="tfc"),
-                        [("PIT_IRQHandler", 0.01)])
+                        [("LPTimer_IRQHandler", 0.01)])
     r = drive(program, track=SHARED_TRACKS / track)
     assert r.outcome == "finished" and r.laps_completed == 1, r.message
 
@@ -172,7 +172,7 @@ def test_measured_mcu_time_charges_a_handlers_own_time_only():
     """--mcu-time measured with --isr: the simulator's start-up is not the program's time (the
     firmware still laps at 20 x this machine's time)."""
     program = with_isrs(build_program([str(ISR_FIRMWARE)], include_dirs=[str(FIRMWARE_DIR)], kit="tfc"),
-                        [("PIT_IRQHandler", 0.01)])
+                        [("LPTimer_IRQHandler", 0.01)])
     r = drive(program, mcu_time="measured", mcu_scale=20.0)
     assert r.outcome == "finished" and r.laps_completed == 1, r.message
 
@@ -180,13 +180,13 @@ def test_measured_mcu_time_charges_a_handlers_own_time_only():
 def test_the_cli_names_what_is_wrong_with_an_isr(tmp_path):
     args = ["drive", str(ISR_FIRMWARE), "-I", str(FIRMWARE_DIR), "--kit", "tfc", "--track", "floor",
             "--time-limit", "0.5"]
-    res = CliRunner().invoke(cli, [*args, "--isr", "PIT_Handler@100"])
-    assert res.exit_code == 2 and "defines no function PIT_Handler" in res.output, res.output
-    res = CliRunner().invoke(cli, [*args, "--isr", "PIT_IRQHandler"])
+    res = CliRunner().invoke(cli, [*args, "--isr", "LPT_Handler@100"])
+    assert res.exit_code == 2 and "defines no function LPT_Handler" in res.output, res.output
+    res = CliRunner().invoke(cli, [*args, "--isr", "LPTimer_IRQHandler"])
     assert res.exit_code == 2 and "expected NAME@HZ" in res.output, res.output
     res = CliRunner().invoke(cli, ["drive", str(REPO / "examples" / "line_follower.py"), "--isr", "f@10"])
     assert res.exit_code == 2 and "spinner.every" in res.output, res.output
-    res = CliRunner().invoke(cli, [*args, "--isr", "PIT_IRQHandler@100"])
+    res = CliRunner().invoke(cli, [*args, "--isr", "LPTimer_IRQHandler@100"])
     assert res.exit_code == 1 and "timeout" in res.output, res.output  # runs (0.5 s: no lap)
 
 
@@ -267,7 +267,7 @@ def test_check_builds_firmware_as_drive_does():
     """``simrunner check`` takes the firmware's sources, -I, --kit, --isr and --param as drive
     does: the interrupt firmware passes; without its --isr nothing drives (a warning)."""
     args = ["check", str(ISR_FIRMWARE), "-I", str(FIRMWARE_DIR), "--kit", "tfc", "--seconds", "1.5"]
-    res = CliRunner().invoke(cli, [*args, "--isr", "PIT_IRQHandler@100", "--param", "dip=1"])
+    res = CliRunner().invoke(cli, [*args, "--isr", "LPTimer_IRQHandler@100", "--param", "dip=1"])
     assert res.exit_code == 0 and "isr/main.c: OK" in res.output and "warning" not in res.output, res.output
     res = CliRunner().invoke(cli, args)
     assert res.exit_code == 0 and "no speed was ever commanded" in res.output, res.output
@@ -279,7 +279,7 @@ def test_batch_runs_firmware_built_once_with_its_kit_and_isr(tmp_path):
     workers; a build that fails says the compiler's line."""
     from simrunner.workflows.batch import deterministic, run_batch
 
-    build = dict(include_dirs=[str(FIRMWARE_DIR)], kit="tfc", isrs=(("PIT_IRQHandler", 0.01),))
+    build = dict(include_dirs=[str(FIRMWARE_DIR)], kit="tfc", isrs=(("LPTimer_IRQHandler", 0.01),))
     rows = []
     for workers in (1, 2):
         res = run_batch(ISR_FIRMWARE, out_dir=tmp_path / f"w{workers}", seeds=2, params=["dip=0,1"],

@@ -165,6 +165,27 @@ def _no_collection_at_exit() -> None:
     atexit.register(gc.freeze)
 
 
+def build_options(command):
+    """The options that build a C/C++ controller or kit firmware (-I, -D, --kit, --isr), alike
+    for ``drive``, ``check`` and ``batch``."""
+    for option in reversed((
+            click.option("-I", "--include", "include_dirs", multiple=True, metavar="DIR",
+                         help="C/C++ controllers: an include directory (repeatable)."),
+            click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
+                         help="C/C++ controllers: a preprocessor define (repeatable)."),
+            click.option("--kit", default=None, metavar="tfc|s32k144",
+                         help="C/C++ firmware: build it against this kit library's implementation on "
+                              "the simulated car (tfc: the FRDM-TFC library; s32k144: the NXP Cup "
+                              "S32K144 kit's drivers; docs/c_controllers.md, Kit libraries)."),
+            click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
+                         help="C/C++ firmware: call your function NAME (void NAME(void), e.g. your "
+                              "timer's LPTimer_IRQHandler) HZ times a second of simulated time, as its "
+                              "timer interrupt would (repeatable; docs/c_controllers.md, Timer "
+                              "interrupts)."))):
+        command = option(command)
+    return command
+
+
 @main.command("drive")
 @click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
 @click.argument("more_sources", nargs=-1, type=click.Path(dir_okay=False, path_type=str))
@@ -216,21 +237,10 @@ def _no_collection_at_exit() -> None:
               help="Keep the track loaded and run again each time CONTROLLER is saved (Ctrl-C ends).")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="Controller parameter, read with spinner.param(NAME, default) (C: spinner_param); repeatable.")
-@click.option("-I", "--include", "include_dirs", multiple=True, metavar="DIR",
-              help="C/C++ controllers: an include directory (repeatable).")
-@click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
-              help="C/C++ controllers: a preprocessor define (repeatable).")
+@build_options
 @click.option("--isolate", is_flag=True,
               help="C/C++ controllers: run in a child process instead of the simulator's (slower; "
                    "code that overwrites memory cannot touch the simulator). A .so always is.")
-@click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
-              help="C/C++ firmware: call your function NAME (void NAME(void), e.g. your timer's "
-                   "PIT_IRQHandler) HZ times a second of simulated time, as its timer interrupt "
-                   "would (repeatable; docs/c_controllers.md, Timer interrupts).")
-@click.option("--kit", default=None, metavar="tfc|s32k144",
-              help="C/C++ firmware: build it against this kit library's implementation on the "
-                   "simulated car (tfc: the FRDM-TFC library; s32k144: the NXP Cup S32K144 kit's "
-                   "drivers; docs/c_controllers.md, Kit libraries).")
 @click.option("--mcu-time", "mcu_time", default=None, metavar="measured|SECONDS",
               help="The controller's own processing costs simulated time, as on the car: its CPU time "
                    "between Spinner calls times --mcu-scale (measured: not deterministic), or SECONDS "
@@ -443,7 +453,7 @@ def _isr(text: str) -> tuple[str, float]:
         hz = math.nan
     if not re.fullmatch(r"[A-Za-z_]\w*", name) or not (0 < hz <= 1e5):
         raise ControllerFileError(f"--isr {text}: expected NAME@HZ, a C function name and its rate "
-                                  f"(0 < HZ <= 100000), e.g. PIT_IRQHandler@1000")
+                                  f"(0 < HZ <= 100000), e.g. LPTimer_IRQHandler@100")
     return name, 1.0 / hz
 
 

@@ -5,6 +5,7 @@ import sys
 
 import click
 
+from simrunner.cli import build_options
 from simrunner.run.rules import EVENT_NAMES
 
 
@@ -55,14 +56,7 @@ from simrunner.run.rules import EVENT_NAMES
 @click.option("--mcu-scale", "mcu_scale", default=1.0, show_default=True,
               type=click.FloatRange(min=0, max=1e4, min_open=True), metavar="FACTOR",
               help="With --mcu-time measured: how many times slower the car's MCU runs the code.")
-@click.option("-I", "--include", "include_dirs", multiple=True, metavar="DIR",
-              help="C/C++ controllers: an include directory (repeatable), as for drive.")
-@click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
-              help="C/C++ controllers: a preprocessor define (repeatable).")
-@click.option("--kit", default=None, metavar="tfc|s32k144",
-              help="C/C++ firmware: build it against this kit library, as for drive.")
-@click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
-              help="C/C++ firmware: a timer interrupt handler and its rate, as for drive (repeatable).")
+@build_options
 def batch_cmd(controller, more_sources, tracks, seeds, params, laps, time_limit_s, workers, out_dir, force,
               video, csv, run_timeout_s, car, dt_s, wall_limit_s, ray, no_plot,
               off_track_wheels=None, event=None, mcu_time=None, mcu_scale=1.0, include_dirs=(),

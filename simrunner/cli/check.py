@@ -9,6 +9,7 @@ import sys
 
 import click
 
+from simrunner.cli import build_options
 
 @click.command("check")
 @click.argument("controller", type=click.Path(exists=True, dir_okay=False, path_type=str))
@@ -24,14 +25,7 @@ import click
               help="Wall time without simulated progress before a controller counts as stalled.")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="Controller parameter, as for drive (repeatable).")
-@click.option("-I", "--include", "include_dirs", multiple=True, metavar="DIR",
-              help="C/C++ controllers: an include directory (repeatable).")
-@click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
-              help="C/C++ controllers: a preprocessor define (repeatable).")
-@click.option("--kit", default=None, metavar="tfc|s32k144",
-              help="C/C++ firmware: build it against this kit library, as for drive.")
-@click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
-              help="C/C++ firmware: a timer interrupt handler and its rate, as for drive (repeatable).")
+@build_options
 def check_cmd(controller, more_sources, track, car, seconds, wall_limit_s, params=(), include_dirs=(),
               defines=(), kit=None, isrs=()) -> None:
     """Run CONTROLLER briefly (twice, same seed) and report what breaks the controller

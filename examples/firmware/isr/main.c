@@ -1,12 +1,13 @@
 /* The line-following firmware of ../main.c with its control in a timer interrupt, as teams that
- * run their control loop in the PIT's interrupt handler write it: main() sets the kit up and
- * idles; PIT_IRQHandler() steers from the newest camera image, 100 times a second.
+ * run their control loop in a timer's interrupt handler write it: main() sets the kit and the
+ * low-power timer (LPTMR0: 100 Hz) up and idles; LPTimer_IRQHandler() steers from the newest
+ * camera image. (The TFC library keeps the PIT for the camera's timing: the LPTMR is free.)
  *
- *   simrunner drive examples/firmware/isr/main.c -I examples/firmware --kit tfc --isr PIT_IRQHandler@100
+ *   simrunner drive examples/firmware/isr/main.c -I examples/firmware --kit tfc --isr LPTimer_IRQHandler@100
  *
- * On the car the PIT's set-up (its load value for 100 Hz, its interrupt enabled) sets the rate;
- * in the simulator --isr does (docs/c_controllers.md, Timer interrupts). __WFI() lets the
- * board's interrupts run: the SysTick, the camera's read-out into LineScanImage0, this handler. */
+ * On the car the LPTMR's compare value sets the rate; in the simulator --isr does, and the set-up
+ * below builds unchanged (docs/c_controllers.md, Timer interrupts). __WFI() lets the board's
+ * interrupts run: the SysTick, the camera's read-out into LineScanImage0, this handler. */
 #include "derivative.h"
 #include "TFC\TFC.h"
 
@@ -14,7 +15,8 @@
 
 static float v_max = V_MAX_MPS;
 
-void PIT_IRQHandler(void) {
+void LPTimer_IRQHandler(void) {
+    LPTMR0_CSR |= LPTMR_CSR_TCF_MASK;                   /* clear the compare flag */
     if (LineScanImageReady != 1) return;                 /* no new image since the last pass */
     LineScanImageReady = 0;
     float steer, speed;
@@ -23,11 +25,21 @@ void PIT_IRQHandler(void) {
     TFC_SetMotorPWM(speed / MAX_SPEED_MPS, speed / MAX_SPEED_MPS);
 }
 
+static void control_timer_init(void) {                  /* 100 Hz from the 1 kHz LPO clock */
+    SIM_SCGC5 |= SIM_SCGC5_LPTMR_MASK;
+    LPTMR0_CSR = 0;
+    LPTMR0_PSR = LPTMR_PSR_PCS(1) | LPTMR_PSR_PBYP_MASK;
+    LPTMR0_CMR = LPTMR_CMR_COMPARE(10 - 1);
+    LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK;
+    NVIC_EnableIRQ(LPTimer_IRQn);
+}
+
 int main(void) {
     TFC_Init();
     while (!TFC_PUSH_BUTTON_0_PRESSED) TFC_Task();      /* wait for the start button */
     TFC_SetLineScanExposureTime(EXPOSURE_US);
     TFC_HBRIDGE_ENABLE;
     if (TFC_GetDIP_Switch() & 0x01) v_max = 3.0f;
+    control_timer_init();
     for (;;) __WFI();                                     /* the work is the interrupt's */
 }
