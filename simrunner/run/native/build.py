@@ -56,7 +56,7 @@ KIT_REGISTERS = {"tfc": re.compile(r"[‘'`]((?:GPIO|FGPIO|PORT)[A-E]_\w+|(?:TPM
                                         r"USB0|SMC|PMC)(?:_\w+)?|InterruptIn|I2C|SPI|SPISlave|I2CSlave|CAN|PwmIn|"
                                         r"DigitalInOut|PortIn|PortOut|BusInOut|LowPowerTicker|Thread|ThisThread|"
                                         r"Mutex|Semaphore|EventQueue|Queue|Mail|rtos|USBSerial|NVIC_\w+)[’'`] "
-                                        r"(?:undeclared|was not declared)")}
+                                        r"(?:undeclared|was not declared|does not name a type)")}
 C_SUFFIXES = (".c",)
 CXX_SUFFIXES = (".cpp", ".cc", ".cxx", ".C")
 LIB_SUFFIXES = (".so",)
