@@ -227,9 +227,9 @@ def _no_collection_at_exit() -> None:
               help="C/C++ firmware: call your function NAME (void NAME(void), e.g. your timer's "
                    "PIT_IRQHandler) HZ times a second of simulated time, as its timer interrupt "
                    "would (repeatable; docs/c_controllers.md, Timer interrupts).")
-@click.option("--kit", default=None, metavar="tfc|s32k144",
+@click.option("--kit", default=None, metavar="tfc|tfc-mbed|s32k144",
               help="C/C++ firmware: build it against this kit library's implementation on the "
-                   "simulated car (tfc: the FRDM-TFC library; s32k144: the NXP Cup S32K144 kit's "
+                   "simulated car (tfc: the FRDM-TFC library; tfc-mbed: its mbed flavour, C++; s32k144: the NXP Cup S32K144 kit's "
                    "drivers; docs/c_controllers.md, Kit libraries).")
 @click.option("--mcu-time", "mcu_time", default=None, metavar="measured|SECONDS",
               help="The controller's own processing costs simulated time, as on the car: its CPU time "

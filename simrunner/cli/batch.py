@@ -59,7 +59,7 @@ from simrunner.run.rules import EVENT_NAMES
               help="C/C++ controllers: an include directory (repeatable), as for drive.")
 @click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
               help="C/C++ controllers: a preprocessor define (repeatable).")
-@click.option("--kit", default=None, metavar="tfc|s32k144",
+@click.option("--kit", default=None, metavar="tfc|tfc-mbed|s32k144",
               help="C/C++ firmware: build it against this kit library, as for drive.")
 @click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
               help="C/C++ firmware: a timer interrupt handler and its rate, as for drive (repeatable).")

@@ -28,7 +28,7 @@ import click
               help="C/C++ controllers: an include directory (repeatable).")
 @click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
               help="C/C++ controllers: a preprocessor define (repeatable).")
-@click.option("--kit", default=None, metavar="tfc|s32k144",
+@click.option("--kit", default=None, metavar="tfc|tfc-mbed|s32k144",
               help="C/C++ firmware: build it against this kit library, as for drive.")
 @click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
               help="C/C++ firmware: a timer interrupt handler and its rate, as for drive (repeatable).")
