@@ -26,8 +26,10 @@
 /* A loop that reads the board without waiting (`while (!TFC_LineScanImageReady) {}`,
  * `while (t.read_ms() < 20) {}`, `while (TFC_Ticker[3] < 100) {}`) waits on the board for the
  * interrupts; here time passes only in calls. After this many reads since main() last waited,
- * each further read lets one physics step pass (and fetches a due image), as in the TFC kit. */
+ * each further read takes READ_TIME_S, as a short wait (a physics step, and a due image, once
+ * they add up to one): a loop that reads several things a pass still sees each image arrive. */
 #define POLLS_BEFORE_TIME 64
+#define READ_TIME_S 1e-4
 #define MAX_EVENTS 64
 #define NUM_TICKERS 16  /* >= a program's NUM_TFC_TICKERS */
 
@@ -47,7 +49,7 @@ static volatile uint32_t tickers[NUM_TICKERS];
 static struct {
     int started;
     double now_s;            /* simulated time as the clock last read it */
-    double wait_until_s;     /* where main()'s waits have got to (short ones add up) */
+    double wait_until_s;     /* main()'s own time: where its waits and reads have got to */
     double servo_frame_s;    /* the servo frame: the camera's read-out period */
     double servo_t0_s;       /* when servo frames started to count */
     double last_image_s;
@@ -158,10 +160,20 @@ static void step(void) {
     else spinner_get_time();
 }
 
+/* Let s pass from where main()'s own time has got to: short waits and reads add up to a step, and
+ * a step's time beyond them is used up by the next ones (up to MAX_AHEAD_S of it). */
+#define MAX_AHEAD_S 0.01
+static void pass(double s) {
+    double base = k.wait_until_s > k.now_s - MAX_AHEAD_S ? k.wait_until_s : k.now_s - MAX_AHEAD_S;
+    double until = base + s;
+    k.wait_until_s = until;
+    while (k.now_s < until - 1e-9) step();
+}
+
 void tfc_mbed_poll(void) {
     tfc_mbed_start();
     if (k.in_isr) return;
-    if (++k.polls > POLLS_BEFORE_TIME) step();
+    if (++k.polls > POLLS_BEFORE_TIME) pass(READ_TIME_S);
 }
 
 void tfc_mbed_wait_s(double s, const char *what) {
@@ -177,10 +189,7 @@ void tfc_mbed_wait_s(double s, const char *what) {
         step();
         return;
     }
-    /* waits shorter than a physics step add up: twenty wait_us(100) take one 2-ms step */
-    double until = (k.wait_until_s > k.now_s ? k.wait_until_s : k.now_s) + s;
-    k.wait_until_s = until;
-    while (k.now_s < until - 1e-9) step();
+    pass(s);  /* waits shorter than a physics step add up: twenty wait_us(100) take one 2-ms step */
 }
 
 void tfc_mbed_idle(void) {
