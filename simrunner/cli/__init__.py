@@ -173,10 +173,11 @@ def build_options(command):
                          help="C/C++ controllers: an include directory (repeatable)."),
             click.option("-D", "--define", "defines", multiple=True, metavar="NAME[=VALUE]",
                          help="C/C++ controllers: a preprocessor define (repeatable)."),
-            click.option("--kit", default=None, metavar="tfc|s32k144",
+            click.option("--kit", default=None, metavar="tfc|tfc-mbed|s32k144",
                          help="C/C++ firmware: build it against this kit library's implementation on "
-                              "the simulated car (tfc: the FRDM-TFC library; s32k144: the NXP Cup "
-                              "S32K144 kit's drivers; docs/c_controllers.md, Kit libraries)."),
+                              "the simulated car (tfc: the FRDM-TFC library; tfc-mbed: its mbed "
+                              "flavour, C++; s32k144: the NXP Cup S32K144 kit's drivers; "
+                              "docs/c_controllers.md, Kit libraries)."),
             click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
                          help="C/C++ firmware: call your function NAME (void NAME(void), e.g. your "
                               "timer's LPTimer_IRQHandler) HZ times a second of simulated time, as its "

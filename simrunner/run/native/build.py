@@ -30,8 +30,9 @@ NATIVE_DIR = Path(__file__).resolve().parent
 INCLUDE_DIR = NATIVE_DIR / "include"
 HOST_SOURCE = NATIVE_DIR / "host" / "spinner_host.c"
 KITS_DIR = NATIVE_DIR / "kits"
-#: Kit libraries a firmware builds against (``--kit NAME``): NAME -> its sources beside its include/.
-KITS = {"tfc": ("tfc.c",), "s32k144": ("s32k144.c",)}
+#: Kit libraries a firmware builds against (``--kit NAME``): NAME -> its sources beside its include/
+#: (in kits/NAME, a ``-`` spelt ``_``). tfc-mbed: the FRDM-TFC library's mbed flavour (C++).
+KITS = {"tfc": ("tfc.c",), "s32k144": ("s32k144.c",), "tfc-mbed": ("tfc_mbed.cpp",)}
 #: A kit's own driver sources in a team's project, which the kit library replaces (passing one is
 #: an error naming it rather than the linker's "multiple definition").
 KIT_REPLACES = {"s32k144": ("servo.c", "hbridge.c", "esc.c", "linear_camera.c", "display.c",
@@ -39,13 +40,23 @@ KIT_REPLACES = {"s32k144": ("servo.c", "hbridge.c", "esc.c", "linear_camera.c", 
                 # the FRDM-TFC library's sources (Sources/TFC/ of the CodeWarrior/KDS projects)
                 "tfc": ("TFC.c", "TFC_ADC.c", "TFC_ARM_SysTick.c", "TFC_BoardSupport.c",
                         "TFC_CrystalClock.c", "TFC_LineScanCamera.c", "TFC_Motor.c", "TFC_Queue.c",
-                        "TFC_Servo.c", "TFC_Terminal.c", "TFC_UART.c", "TFC_arm_cm0.c")}
+                        "TFC_Servo.c", "TFC_Terminal.c", "TFC_UART.c", "TFC_arm_cm0.c"),
+                # the mbed library's source (FRDM-TFC/TFC.cpp of an mbed program)
+                "tfc-mbed": ("TFC.cpp",)}
 #: The MCU's register names a kit's firmware may write directly (the KL25Z's MKL25Z4.h
 #: peripherals, NXP KL25 Sub-Family Reference Manual KL25P80M48SF0RM): not emulated, so a compile
 #: error naming one gets a line saying so.
 KIT_REGISTERS = {"tfc": re.compile(r"[‘'`]((?:GPIO|FGPIO|PORT)[A-E]_\w+|(?:TPM[0-2]|ADC0|PIT|SIM|UART[0-2]|"
                                    r"I2C[01]|SPI[01]|DMA|DMAMUX0|MCG|OSC0|LPTMR0|SysTick|NVIC|"
-                                   r"SCB|RTC|TSI0|DAC0|CMP0|USB0|SMC|PMC|RCM|LLWU)_\w+)[’'`] undeclared")}
+                                   r"SCB|RTC|TSI0|DAC0|CMP0|USB0|SMC|PMC|RCM|LLWU)_\w+)[’'`] undeclared"),
+                 # C++: the registers as mbed's MKL25Z4.h structs (PTE->PSOR) and mbed's drivers that
+                 # the tfc-mbed kit's mbed.h leaves out
+                 "tfc-mbed": re.compile(r"[‘'`]((?:PT[A-E]|FPT[A-E]|PORT[A-E]|TPM[0-2]|ADC0|PIT|SIM|UART[0-2]|"
+                                        r"I2C[01]|SPI[01]|DMA0|DMAMUX0|MCG|LPTMR0|SysTick|SCB|RTC|TSI0|DAC0|"
+                                        r"USB0|SMC|PMC)(?:_\w+)?|InterruptIn|I2C|SPI|SPISlave|I2CSlave|CAN|PwmIn|"
+                                        r"DigitalInOut|PortIn|PortOut|BusInOut|LowPowerTicker|Thread|ThisThread|"
+                                        r"Mutex|Semaphore|EventQueue|Queue|Mail|rtos|USBSerial|NVIC_\w+)[’'`] "
+                                        r"(?:undeclared|was not declared|does not name a type)")}
 C_SUFFIXES = (".c",)
 CXX_SUFFIXES = (".cpp", ".cc", ".cxx", ".C")
 LIB_SUFFIXES = (".so",)
@@ -361,7 +372,7 @@ def kit_files(kit: str) -> tuple[list[Path], list[Path]]:
     upper case, capitalised, and all lower case)."""
     if kit not in KITS:
         raise ControllerFileError(f"--kit {kit}: expected one of {', '.join(KITS)}")
-    root = KITS_DIR / kit
+    root = KITS_DIR / kit.replace("-", "_")
     include = root / "include"
     headers = sorted(p for p in include.rglob("*.h"))
     shims = {}
@@ -400,9 +411,9 @@ def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileE
     if not names:
         return exc
     return ControllerFileError(
-        f"{exc}\n{', '.join(names)}: the MCU's registers, not emulated by the simulator's "
-        f"--kit {kit} (it has no registers): reach the hardware through the kit library's "
-        f"functions (docs/c_controllers.md, Kit libraries)")
+        f"{exc}\n{', '.join(names)}: the MCU's registers{' or mbed drivers' if kit == 'tfc-mbed' else ''}, "
+        f"not emulated by the simulator's --kit {kit} (it has no registers): reach the hardware "
+        f"through the kit library's functions (docs/c_controllers.md, Kit libraries)")
 
 
 def _spelling_dir(sources: list[str | Path], include_dirs: list[str | Path]) -> list[Path]:

@@ -1,0 +1,54 @@
+/* tfc_mbed_sim.h: the hooks between the simulator's mbed + FRDM-TFC kit headers (mbed.h, TFC.h)
+ * and its implementation (../tfc_mbed.cpp, on spinner.h). Not part of either library's API.
+ *
+ * Time: the kit keeps simulated time with a 1 kHz timer interrupt of its own (spinner_every),
+ * started at the first call into the kit: it reads the time, advances TFC_ServoTicker and runs the
+ * program's Ticker/Timeout handlers that fell due (mbed's us_ticker interrupt). main() lets time
+ * pass in wait*(), sleep(), __WFI() and, as on the board where interrupts change what it reads,
+ * in reads of the board (tfc_mbed_poll: the camera flag, the tickers, Timer reads, pots,
+ * switches, buttons, DigitalIn, AnalogIn) once it has read it many times without waiting. */
+#ifndef TFC_MBED_SIM_H
+#define TFC_MBED_SIM_H
+#include <stdint.h>
+
+void tfc_mbed_start(void);        /* the kit's set-up (idempotent), the clock first */
+void tfc_mbed_poll(void);         /* one read of the board */
+double tfc_mbed_now_s(void);      /* simulated time, s (no time passes) */
+void tfc_mbed_wait_s(double s, const char *what);  /* wait*(): let s of simulated time pass */
+void tfc_mbed_idle(void);         /* sleep(), __WFI(): one physics step */
+int tfc_mbed_in_isr(void);        /* 1 inside a Ticker/Timeout handler */
+[[noreturn]] void tfc_mbed_not_emulated(const char *what, const char *why);
+
+/* the board's pins as the kit maps them (mbed's KL25Z PinName values) */
+void tfc_mbed_digital_write(int pin, int value);
+int tfc_mbed_digital_read(int pin);
+float tfc_mbed_analog_read(int pin);
+void tfc_mbed_pwm_write(int pin, float duty, float period_s);
+
+/* mbed's Ticker/Timeout: an event the kit's clock runs (its handler: fn(arg)) */
+struct tfc_mbed_event {
+    void (*fn)(void *arg);
+    void *arg;
+    double period_s;   /* 0 for a Timeout */
+    double next_s;     /* due time, s */
+    int active;
+};
+void tfc_mbed_event_attach(struct tfc_mbed_event *ev, double delay_s, int repeat, const char *what);
+void tfc_mbed_event_detach(struct tfc_mbed_event *ev);
+
+/* the FRDM-TFC library's globals whose reads poll (TFC.h's macros) */
+volatile uint8_t *tfc_mbed_image_ready(void);   /* the flag itself: no poll */
+/* TFC_LineScanImageReady: reading it polls, writing it does not (a poll may fetch an image,
+ * which `TFC_LineScanImageReady = 0` would then drop: on the board the write is one store). */
+struct tfc_mbed_ready_flag {
+    operator uint8_t() const { tfc_mbed_poll(); return *tfc_mbed_image_ready(); }
+    tfc_mbed_ready_flag &operator=(int v) { *tfc_mbed_image_ready() = (uint8_t)v; return *this; }
+    tfc_mbed_ready_flag &operator+=(int v) { *tfc_mbed_image_ready() += (uint8_t)v; return *this; }
+    tfc_mbed_ready_flag &operator-=(int v) { *tfc_mbed_image_ready() -= (uint8_t)v; return *this; }
+    uint8_t operator++() { return ++*tfc_mbed_image_ready(); }
+    uint8_t operator--() { return --*tfc_mbed_image_ready(); }
+    uint8_t operator++(int) { return (*tfc_mbed_image_ready())++; }
+    uint8_t operator--(int) { return (*tfc_mbed_image_ready())--; }
+};
+volatile uint32_t *tfc_mbed_servo_ticker(void);
+#endif

@@ -1,0 +1,363 @@
+/* The mbed FRDM-TFC library and the part of mbed a team's program uses, on the simulated car
+ * (simrunner drive main.cpp --kit tfc-mbed; include/mbed.h, include/TFC.h). Our own code, on
+ * spinner.h; the mapping of the board onto the car is the TFC kit's (../tfc/tfc.c):
+ * - time: a 1 kHz timer interrupt of the kit (spinner_every) keeps the simulated time, counts
+ *   TFC_ServoTicker and runs the program's Ticker/Timeout handlers that fell due (in due order);
+ *   main() lets time pass in wait*(), sleep(), __WFI() and in reads of the board (poll());
+ * - the camera: on the board the library's TPM1 interrupt starts a read-out every servo frame
+ *   (SERVO_DEFAULT_PERIOD, 10 ms) and its ADC interrupt fills the image (TFC.cpp); here, when a
+ *   frame's time has passed since the last image, main()'s next wait or poll fetches the camera
+ *   row (spinner_get_image) into the working buffer, swaps the ping-pong buffers and increments
+ *   TFC_LineScanImageReady. A handler (an interrupt) cannot wait for a frame: it sees the images
+ *   main()'s waits fetched;
+ * - servo 0 steers, H-bridge A and B are the left and right rear motors' duties, the pots, DIP
+ *   switch, buttons and battery read --param values, the LEDs are kept, serial output prints. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "spinner.h"
+#include "mbed.h"
+#include "TFC.h"
+
+/* The kit's clock: 1 ms (mbed's wait_ms and Ticker users' usual grain; the default physics step,
+ * 2 ms, takes it at every step). */
+#define CLOCK_PERIOD_S 1e-3
+/* A loop that reads the board without waiting (`while (!TFC_LineScanImageReady) {}`,
+ * `while (t.read_ms() < 20) {}`, `while (TFC_Ticker[3] < 100) {}`) waits on the board for the
+ * interrupts; here time passes only in calls. After this many reads since main() last waited,
+ * each further read takes READ_TIME_S, as a short wait (a physics step, and a due image, once
+ * they add up to one): a loop that reads several things a pass still sees each image arrive. */
+#define POLLS_BEFORE_TIME 64
+#define READ_TIME_S 1e-4
+#define MAX_EVENTS 64
+#define NUM_TICKERS 16  /* >= a program's NUM_TFC_TICKERS */
+
+volatile uint16_t LineScanImage0Buffer[2][128], LineScanImage1Buffer[2][128];
+volatile uint16_t *TFC_LineScanImage0 = LineScanImage0Buffer[1];
+volatile uint16_t *TFC_LineScanImage1 = LineScanImage1Buffer[1];
+volatile uint16_t *LineScanImage0WorkingBuffer = LineScanImage0Buffer[0];
+volatile uint16_t *LineScanImage1WorkingBuffer = LineScanImage1Buffer[0];
+volatile uint8_t LineScanWorkingBuffer;
+volatile uint16_t PotADC_Value[2];
+volatile uint16_t BatSenseADC_Value;
+
+static volatile uint8_t image_ready;
+static volatile uint32_t servo_ticker;
+static volatile uint32_t tickers[NUM_TICKERS];
+
+static struct {
+    int started;
+    double now_s;            /* simulated time as the clock last read it */
+    double wait_until_s;     /* main()'s own time: where its waits and reads have got to */
+    double servo_frame_s;    /* the servo frame: the camera's read-out period */
+    double servo_t0_s;       /* when servo frames started to count */
+    double last_image_s;
+    double pulse_min_s, pulse_max_s;  /* TFC_InitServos' range of positions -1..1 */
+    double servo_rad, servo_offset_rad;
+    int servo_channel;
+    int in_isr;
+    unsigned polls;
+    int hbridge;
+    float duty_a, duty_b, servo;
+    int leds[4];
+    struct tfc_mbed_event *events[MAX_EVENTS];
+    int n_events;
+} k;
+
+static double clampd(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+[[noreturn]] void tfc_mbed_not_emulated(const char *what, const char *why) {
+    char msg[400];
+    snprintf(msg, sizeof msg, "%s: not emulated by the simulator's mbed FRDM-TFC kit (--kit tfc-mbed): %s", what, why);
+    spinner_fail(msg);
+}
+
+static void send_commands(void) {
+    spinner_set_servo(k.servo * k.servo_rad + k.servo_offset_rad);
+    spinner_set_motors(k.hbridge ? k.duty_a : 0.0f, k.hbridge ? k.duty_b : 0.0f);
+}
+
+/* The servo frames and the Ticker/Timeout handlers due at k.now_s, earliest first. */
+static void run_due(void) {
+    if (k.servo_frame_s > 0) {
+        double frames = floor((k.now_s - k.servo_t0_s) / k.servo_frame_s + 1e-9);
+        if (frames > servo_ticker) servo_ticker = (uint32_t)frames;
+    }
+    for (;;) {
+        struct tfc_mbed_event *due = NULL;
+        for (int i = 0; i < k.n_events; i++) {
+            struct tfc_mbed_event *ev = k.events[i];
+            if (ev->active && ev->next_s <= k.now_s + 1e-9 && (due == NULL || ev->next_s < due->next_s)) due = ev;
+        }
+        if (due == NULL) return;
+        if (due->period_s > 0) due->next_s += due->period_s;
+        else tfc_mbed_event_detach(due);  /* a Timeout: once (its handler may attach it again) */
+        due->fn(due->arg);
+    }
+}
+
+static void clock_isr(void) {
+    k.now_s = spinner_get_time();  /* inside an interrupt: no time passes */
+    k.in_isr = 1;
+    run_due();
+    k.in_isr = 0;
+}
+
+static void init_servos(double pulse_min_s, double pulse_max_s, double frame_s) {
+    k.pulse_min_s = pulse_min_s, k.pulse_max_s = pulse_max_s;
+    k.servo_frame_s = clampd(frame_s, 1e-3, 1.0);
+    k.servo_t0_s = k.now_s;
+    servo_ticker = 0;
+    spinner_set_exposure(k.servo_frame_s);
+}
+
+void tfc_mbed_start(void) {
+    if (k.started) return;
+    k.started = 1;
+    k.servo_rad = spinner_param("tfc_servo_rad", 0.40);
+    k.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
+    k.servo_channel = (int)spinner_param("tfc_servo_channel", 0.0);
+    k.now_s = spinner_get_time();
+    init_servos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, SERVO_DEFAULT_PERIOD);
+    k.last_image_s = k.now_s;  /* the first image one frame after start */
+    spinner_every(CLOCK_PERIOD_S, clock_isr);
+    send_commands();
+}
+
+double tfc_mbed_now_s(void) {
+    tfc_mbed_start();
+    return k.now_s;
+}
+
+int tfc_mbed_in_isr(void) { return k.in_isr; }
+
+/* The read-out: a new image once a servo frame has passed since the last (the tolerance: the
+ * camera's frame is a step or two away, as in the TFC kit's camera_service). */
+static int camera_due(void) { return k.now_s - k.last_image_s >= k.servo_frame_s - 0.0025; }
+
+static void fetch_image(void) {
+    uint8_t row[128];
+    k.last_image_s = k.now_s;  /* the read's start, as the TFC kit times it */
+    size_t n = spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+    for (size_t i = 0; i < 128; i++) {
+        uint16_t v = (uint16_t)((i < n ? row[i] : 0) << 4);  /* 8-bit grey -> 12-bit counts */
+        LineScanImage0WorkingBuffer[i] = v;
+        LineScanImage1WorkingBuffer[i] = v;
+    }
+    int done = LineScanWorkingBuffer;  /* TFC.cpp's ADC0_IRQHandler: swap, then count */
+    LineScanWorkingBuffer = !done;
+    LineScanImage0WorkingBuffer = LineScanImage0Buffer[!done];
+    LineScanImage1WorkingBuffer = LineScanImage1Buffer[!done];
+    TFC_LineScanImage0 = LineScanImage0Buffer[done];
+    TFC_LineScanImage1 = LineScanImage1Buffer[done];
+    image_ready++;
+}
+
+/* One physics step of main(): the due image's wait, or a step (the clock runs in it). */
+static void step(void) {
+    if (camera_due()) fetch_image();
+    else spinner_get_time();
+}
+
+/* Let s pass from where main()'s own time has got to: short waits and reads add up to a step, and
+ * a step's time beyond them is used up by the next ones (up to MAX_AHEAD_S of it). */
+#define MAX_AHEAD_S 0.01
+static void pass(double s) {
+    double base = k.wait_until_s > k.now_s - MAX_AHEAD_S ? k.wait_until_s : k.now_s - MAX_AHEAD_S;
+    double until = base + s;
+    k.wait_until_s = until;
+    while (k.now_s < until - 1e-9) step();
+}
+
+void tfc_mbed_poll(void) {
+    tfc_mbed_start();
+    if (k.in_isr) return;
+    if (++k.polls > POLLS_BEFORE_TIME) pass(READ_TIME_S);
+}
+
+void tfc_mbed_wait_s(double s, const char *what) {
+    tfc_mbed_start();
+    if (k.in_isr) {
+        char why[200];
+        snprintf(why, sizeof why, "%s(...) inside a Ticker or Timeout handler: no simulated time passes "
+                 "in an interrupt; wait in main()", what);
+        tfc_mbed_not_emulated(what, why);
+    }
+    k.polls = 0;
+    if (!(s > 0)) {  /* wait(0): a step */
+        step();
+        return;
+    }
+    pass(s);  /* waits shorter than a physics step add up: twenty wait_us(100) take one 2-ms step */
+}
+
+void tfc_mbed_idle(void) {
+    tfc_mbed_start();
+    if (k.in_isr) return;
+    k.polls = 0;
+    step();
+}
+
+void tfc_mbed_event_attach(struct tfc_mbed_event *ev, double delay_s, int repeat, const char *what) {
+    tfc_mbed_start();
+    if (!(delay_s >= 1e-6) || !isfinite(delay_s)) {
+        char why[200];
+        snprintf(why, sizeof why, "a time of %g s: expected at least 1 us (mbed's us ticker)", delay_s);
+        tfc_mbed_not_emulated(what, why);
+    }
+    tfc_mbed_event_detach(ev);
+    if (k.n_events == MAX_EVENTS) tfc_mbed_not_emulated(what, "more than 64 Tickers and Timeouts at once");
+    ev->period_s = repeat ? delay_s : 0.0;
+    ev->next_s = k.now_s + delay_s;
+    ev->active = 1;
+    k.events[k.n_events++] = ev;
+}
+
+void tfc_mbed_event_detach(struct tfc_mbed_event *ev) {
+    ev->active = 0;
+    for (int i = 0; i < k.n_events; i++) {
+        if (k.events[i] != ev) continue;
+        memmove(&k.events[i], &k.events[i + 1], (size_t)(k.n_events - i - 1) * sizeof k.events[0]);
+        k.n_events--;
+        return;
+    }
+}
+
+/* ---- the board's pins (FRDM-TFC schematic, as TFC.h lists the library's resources) ---- */
+static int param_button(int button) {
+    char name[16];
+    snprintf(name, sizeof name, "button%d", button);
+    if (spinner_param(name, 0.0) != 0.0) return 1;
+    if (button == 0) {  /* a start press: button 0 held 0.2 s from button0_at, as the TFC kit */
+        double at = spinner_param("button0_at", 0.1);
+        return k.now_s >= at && k.now_s < at + 0.2;
+    }
+    return 0;
+}
+
+static int pin_param(const char *kind, int pin, double fallback) {
+    char name[32];
+    snprintf(name, sizeof name, "%s_PT%c%d", kind, 'A' + ((pin >> 12) & 7), (pin >> 2) & 31);
+    return (int)spinner_param(name, fallback);
+}
+
+void tfc_mbed_digital_write(int pin, int value) {
+    tfc_mbed_start();
+    int led = pin == PTB8 ? 0 : pin == PTB9 ? 1 : pin == PTB10 ? 2 : pin == PTB11 ? 3 : -1;
+    if (led >= 0) k.leds[led] = value < 0 ? !k.leds[led] : value != 0;
+    if (pin == PTE21) {
+        k.hbridge = value != 0;
+        send_commands();
+    }
+}
+
+int tfc_mbed_digital_read(int pin) {
+    tfc_mbed_poll();
+    if (pin == PTC13) return param_button(0);
+    if (pin == PTC17) return param_button(1);
+    if (pin >= PTE2 && pin <= PTE5) return (TFC_GetDIP_Switch() >> ((pin - PTE2) >> 2)) & 1;
+    return pin_param("digital", pin, 0.0) != 0;
+}
+
+float tfc_mbed_analog_read(int pin) {
+    tfc_mbed_poll();
+    if (pin == PTB3 || pin == PTB2) {  /* the pots: ADC0_SE13 (pot 0), ADC0_SE12 (pot 1) */
+        double pot = clampd(spinner_param(pin == PTB3 ? "pot0" : "pot1", 0.0), -1.0, 1.0);
+        return (float)((1.0 - pot) / 2.0);  /* TFC_ReadPot = 1 - ADC / (4095 / 2) */
+    }
+    if (pin == PTE29) return (float)clampd(TFC_ReadBatteryVoltage() / 3.3, 0.0, 1.0);
+    char name[32];
+    snprintf(name, sizeof name, "analog_PT%c%d", 'A' + ((pin >> 12) & 7), (pin >> 2) & 31);
+    return (float)clampd(spinner_param(name, 0.0), 0.0, 1.0);
+}
+
+void tfc_mbed_pwm_write(int pin, float duty, float period_s) {
+    tfc_mbed_start();
+    if (pin == (k.servo_channel ? PTB1 : PTB0)) {  /* a servo pulse: 1.0 .. 2.0 ms is -1 .. 1 */
+        double pulse_s = duty * period_s;
+        TFC_SetServo((uint8_t)k.servo_channel, (float)((pulse_s - 0.0015) / 0.0005));
+    }
+}
+
+/* ---- the FRDM-TFC library (TFC.h) ---- */
+void TFC_Init() { tfc_mbed_start(); }
+void TFC_GPIO_Init() { tfc_mbed_start(); }
+void TFC_InitADC_System() { tfc_mbed_start(); }
+void TFC_InitLineScanCamera() { tfc_mbed_start(); }
+void TFC_InitMotorPWM(float SwitchingFrequency) { (void)SwitchingFrequency; tfc_mbed_start(); }
+
+void TFC_InitServos(float ServoPulseWidthMin, float ServoPulseWidthMax, float ServoPeriod) {
+    tfc_mbed_start();
+    init_servos(ServoPulseWidthMin, ServoPulseWidthMax, ServoPeriod);
+}
+
+void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {
+    tfc_mbed_start();
+    init_servos(k.pulse_min_s, k.pulse_max_s, TimeIn_uS * 1e-6);
+}
+
+volatile uint8_t *tfc_mbed_image_ready(void) { return &image_ready; }
+
+volatile uint32_t *tfc_mbed_servo_ticker(void) {
+    tfc_mbed_poll();
+    return &servo_ticker;
+}
+
+/* TFC_Ticker (TFC.h): the program's own definition declares this function; C++ names do not
+ * carry the return type, so its length there may be any up to NUM_TICKERS. */
+volatile uint32_t (*tfc_mbed_tickers())[NUM_TICKERS] {
+    tfc_mbed_poll();
+    return &tickers;
+}
+
+void TFC_SetServo(uint8_t ServoNumber, float Position) {
+    tfc_mbed_start();
+    if (ServoNumber != k.servo_channel) return;  /* the other channel: nothing on the car */
+    k.servo = (float)clampd(Position, -1.0, 1.0);
+    send_commands();
+}
+
+void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {
+    tfc_mbed_start();  /* the duty of the servo frame between TFC_InitServos' pulses is -1 .. 1 */
+    double lo = k.pulse_min_s / k.servo_frame_s, hi = k.pulse_max_s / k.servo_frame_s;
+    TFC_SetServo(ServoNumber, (float)(2.0 * (DutyCycle - lo) / (hi - lo) - 1.0));
+}
+
+void TFC_SetMotorPWM(float MotorA, float MotorB) {
+    tfc_mbed_start();
+    k.duty_a = (float)clampd(MotorA, -1.0, 1.0);
+    k.duty_b = (float)clampd(MotorB, -1.0, 1.0);
+    send_commands();
+}
+
+uint8_t TFC_GetDIP_Switch() {
+    tfc_mbed_poll();
+    return (uint8_t)((int)spinner_param("dip", 0.0) & 0x0F);
+}
+
+uint8_t TFC_ReadPushButton(uint8_t Index) {
+    return Index == 0 ? TFC_PUSH_BUTTON_0_PRESSED : TFC_PUSH_BUTTON_1_PRESSED;
+}
+
+float TFC_ReadPot(uint8_t Channel) {
+    tfc_mbed_poll();
+    double pot = clampd(spinner_param(Channel == 0 ? "pot0" : "pot1", 0.0), -1.0, 1.0);
+    PotADC_Value[Channel == 0 ? 0 : 1] = (uint16_t)lround((1.0 - pot) * ADC_MAX_CODE / 2.0);
+    return (float)pot;
+}
+
+float TFC_ReadBatteryVoltage() {
+    tfc_mbed_start();  /* the sense divider: 10k of 47k + 10k (TFC.cpp's commented-out factor) */
+    double sense_v = clampd(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0, 0.0, 3.0);
+    BatSenseADC_Value = (uint16_t)lround(sense_v / 3.0 * ADC_MAX_CODE);
+    return (float)sense_v;
+}
+
+void TFC_SetBatteryLED(uint8_t Value) {
+    for (int i = 0; i < 4; i++) tfc_mbed_digital_write(PTB8 + 4 * i, (Value >> i) & 1);
+}
+
+void TFC_SetBatteryLED_Level(uint8_t BattLevel) {
+    TFC_SetBatteryLED((uint8_t)(BattLevel > 4 ? 0 : (1 << BattLevel) - 1));
+}

@@ -1,0 +1,198 @@
+"""The mbed flavour of the FRDM-TFC kit library (simrunner drive main.cpp --kit tfc-mbed): a
+team's mbed program (mbed.h + the FRDM-TFC library's TFC.h) builds unchanged and drives."""
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from simrunner.errors import ControllerFileError
+from simrunner.run.native import build_program
+from simrunner.run.runner import drive
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLE = REPO / "examples" / "firmware" / "mbed" / "main.cpp"
+SHARED_TRACKS = REPO.parent / "shared" / "tracks"
+
+
+def program(tmp_path, text, name="main.cpp"):
+    src = tmp_path / name
+    src.write_text(textwrap.dedent(text))
+    return build_program([str(src)], kit="tfc-mbed")
+
+
+def test_the_example_builds_unchanged_and_laps():
+    """examples/firmware/mbed/main.cpp (Serial, a Ticker counting TFC_Ticker[], a main loop on
+    TFC_LineScanImageReady) laps the default track about as the Python line follower does."""
+    r = drive(build_program([str(EXAMPLE)], kit="tfc-mbed"), laps=2)
+    follower = drive(REPO / "examples" / "line_follower.py", laps=2)
+    assert r.outcome == "finished" and r.laps_completed == 2, r.message
+    assert r.lap_times_s[1] == pytest.approx(follower.lap_times_s[1], rel=0.05)
+
+
+@pytest.mark.skipif(not SHARED_TRACKS.is_dir(), reason="../shared/tracks not present")
+@pytest.mark.parametrize("name", ["nxp_raceway", "nxp_raceway_octagon"])
+def test_the_example_laps_both_nxp_tracks(name):
+    r = drive(build_program([str(EXAMPLE)], kit="tfc-mbed"), track=SHARED_TRACKS / name)
+    assert r.outcome == "finished", (name, r.message)
+
+
+def test_a_ticker_driven_control_loop_laps(tmp_path):
+    """The control in a Ticker's handler (an object's method, the older attach form), main()
+    only waiting: the handler steers from the images main()'s waits fetch."""
+    lane = REPO / "examples" / "firmware" / "lane.h"
+    prog = program(tmp_path, f"""\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "{lane}"
+        class Driver {{
+        public:
+            int passes = 0;
+            void control() {{
+                passes++;
+                if (!TFC_LineScanImageReady) return;
+                TFC_LineScanImageReady = 0;
+                float steer, speed;
+                lane_control(TFC_LineScanImage0, V_MAX_MPS, &steer, &speed);
+                TFC_SetServo(0, steer / STEER_LIMIT_RAD);
+                TFC_SetMotorPWM(speed / MAX_SPEED_MPS, speed / MAX_SPEED_MPS);
+            }}
+        }};
+        Driver driver;
+        Ticker control_ticker;
+        int main() {{
+            TFC_Init();
+            TFC_InitServos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, EXPOSURE_US * 1e-6f);
+            TFC_HBRIDGE_ENABLE;
+            control_ticker.attach(&driver, &Driver::control, 0.01f);   // 100 Hz
+            while (1) {{
+                wait(0.5);
+                if (driver.passes < 45) return 1;                        // ~50 a half second
+                driver.passes = 0;
+            }}
+        }}
+        """)
+    r = drive(prog, laps=1)
+    assert r.outcome == "finished", r.message
+
+
+def test_the_library_maps_the_board_onto_the_car(tmp_path):
+    """Pots, DIP switch, battery, buttons and AnalogIn read --param; Timer and wait count simulated
+    time; a Timeout fires once; images are 12-bit counts in ping-pong buffers; servo 0 steers,
+    the motors drive only with the H-bridge enabled (here through its pin, PTE21)."""
+    prog = program(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        volatile int fired = 0;
+        void once() { fired++; }
+        int main() {
+            TFC_Init();
+            if (TFC_ReadPot(0) != 0.5f || TFC_ReadPot(1) != -1.0f) return 1;
+            if (TFC_GetDIP_Switch() != 5 || !TFC_DIP_SWITCH_2_ON || TFC_DIP_SWITCH_1_ON) return 2;
+            if (fabsf(TFC_ReadBatteryVoltage() - 7.2f * 10.0f / 57.0f) > 1e-4f) return 3;
+            AnalogIn sensor(PTB0), pot0(PTB3);
+            if (fabsf(sensor.read() - 0.25f) > 1e-6f || fabsf(pot0.read() - 0.25f) > 1e-6f) return 4;
+            DigitalIn button(PTC17);
+            if (!button.read() || !TFC_PUSH_BUTTON_1_PRESSED || TFC_ReadPushButton(1) == 0) return 5;
+            Timer t;
+            t.start();
+            Timeout timeout;
+            timeout.attach(&once, 0.05f);
+            wait_ms(100);
+            if (t.read_ms() < 100 || t.read_ms() > 104 || fired != 1) return 6;
+            TFC_LineScanImageReady = 0;
+            volatile uint16_t *before = TFC_LineScanImage0;
+            while (!TFC_LineScanImageReady) {}
+            if (TFC_LineScanImage0 == before) return 7;
+            for (int i = 0; i < 128; i++) if (TFC_LineScanImage0[i] % 16 || TFC_LineScanImage0[i] > 4080) return 8;
+            TFC_SetServo(0, 0.5f);
+            TFC_SetMotorPWM(0.5f, 0.5f);       // H-bridge still disabled: no speed
+            wait(0.1);
+            DigitalOut enable(PTE21);
+            enable = 1;
+            wait(0.1);
+            return 0;
+        }
+        """)
+    r = drive(prog, params={"pot0": 0.5, "pot1": -3, "dip": 5, "analog_PTB0": 0.25, "button1": 1},
+              time_limit_s=5.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+    log = r.log
+    late = log.t_s > log.t_s[-1] - 0.05
+    assert np.allclose(log.speed_cmd_mps[late], 0.5 * 3.1) and np.allclose(log.steer_cmd_rad[late], 0.2)
+    before = (log.t_s > 0.15) & (log.t_s < log.t_s[-1] - 0.12)
+    assert np.all(log.speed_cmd_mps[before] == 0.0)
+
+
+def test_a_loop_waiting_on_the_programs_own_tickers_lets_time_pass(tmp_path):
+    """mbed programs define TFC_Ticker[] themselves and count it with a Ticker; a loop waiting on
+    it (`while (TFC_Ticker[3] < 100) {}`) lets time pass for the Ticker to count."""
+    prog = program(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #define NUM_TFC_TICKERS 4
+        Ticker TFC_TickerObj;
+        volatile uint32_t TFC_Ticker[NUM_TFC_TICKERS];
+        void TFC_TickerUpdate() {
+            for (int i = 0; i < NUM_TFC_TICKERS; i++) if (TFC_Ticker[i] < 0xFFFFFFFF) TFC_Ticker[i]++;
+        }
+        int main() {
+            TFC_TickerObj.attach_us(&TFC_TickerUpdate, 2000);
+            TFC_Init();
+            Timer t;
+            t.start();
+            TFC_Ticker[3] = 0;
+            while (TFC_Ticker[3] < 100) {}
+            int ms = t.read_ms();   // 100 ticks of 2 ms, + a camera read-out under way (< a frame)
+            return ms >= 198 && ms <= 230 ? 0 : 1;
+        }
+        """)
+    r = drive(prog, time_limit_s=3.0, wall_limit_s=5.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+
+
+def test_misuse_is_one_clear_line(tmp_path):
+    """A wait inside a handler ends the run naming its line; the serial port's input is not
+    emulated; register writes and left-out mbed drivers are named after the compiler's error; the
+    library's own TFC.cpp is named."""
+    prog = program(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        Ticker tick;
+        void handler() {
+            wait_ms(5);
+        }
+        int main() {
+            tick.attach(&handler, 0.01f);
+            while (1) wait(0.1);
+        }
+        """, name="isr_wait.cpp")
+    r = drive(prog, time_limit_s=1.0)
+    assert r.outcome == "controller_error"
+    assert "wait_ms: not emulated by the simulator's mbed FRDM-TFC kit" in r.message
+    assert "isr_wait.cpp:5" in r.message
+    prog = program(tmp_path, """\
+        #include "mbed.h"
+        Serial pc(USBTX, USBRX);
+        int main() {
+            int c = pc.getc();
+            return c;
+        }
+        """, name="getc.cpp")
+    r = drive(prog, time_limit_s=1.0)
+    assert r.outcome == "controller_error" and "Serial::getc: not emulated" in r.message
+    assert "getc.cpp:4" in r.message
+    regs = tmp_path / "regs.cpp"
+    regs.write_text('#include "mbed.h"\n#include "TFC.h"\nInterruptIn enc(PTA13);\n'
+                    'int main() { TAOS_SI_HIGH; return 0; }\n')
+    with pytest.raises(ControllerFileError, match=r"(?s)regs.cpp:3:.*InterruptIn, PTD: the MCU's registers "
+                                                  r"or mbed drivers, not emulated by the simulator's --kit tfc-mbed"):
+        build_program([str(regs)], kit="tfc-mbed")
+    lib = tmp_path / "FRDM-TFC" / "TFC.cpp"
+    lib.parent.mkdir()
+    lib.write_text("void TFC_Init() {}\n")
+    with pytest.raises(ControllerFileError, match=r"TFC.cpp: the kit's own driver source: --kit tfc-mbed"):
+        build_program([str(EXAMPLE), str(lib)], kit="tfc-mbed")
