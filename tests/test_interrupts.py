@@ -305,3 +305,39 @@ def test_cpp_every_takes_a_lambda(tmp_path):
         """))
     r = drive(build_program([src]), track="floor", time_limit_s=2.0)
     assert r.outcome == "controller_returned", r.message
+
+
+C_QUEUED = """\
+#include "spinner.h"
+static int ticks;
+static void tick(void) { ticks++; spinner_set_servo(0.01 * (ticks % 3)); }
+int main(void) {
+    spinner_every(0.004, tick);
+    unsigned char row[256];
+    for (int i = 0; i < 50; i++) {
+        spinner_add_textf("frame %d ticks %d", i, ticks);
+        spinner_set_speed(0.5);
+        spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+    }
+    return ticks >= 200 ? 0 : 3;
+}
+"""
+
+
+def test_an_interrupt_due_in_a_queued_call_runs_before_the_waiting_call_it_came_with(tmp_path):
+    """--mcu-time lets time pass in calls that do not wait (set_speed, add_text): a handler due
+    then runs inside the waiting call that follows them, and the main loop's requests queued
+    with it are still its own (in process and isolated alike)."""
+    src = tmp_path / "queued.c"
+    src.write_text(C_QUEUED)
+    program = build_program([src])
+    import dataclasses
+
+    logs = []
+    for isolate in (False, True):
+        csv = tmp_path / f"queued{isolate}.csv"
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=5.0,
+                  mcu_time=0.003, csv=csv)
+        assert r.outcome == "controller_returned", r.message
+        logs.append(csv.read_bytes())
+    assert logs[0] == logs[1]

@@ -63,6 +63,10 @@ class _ChildGone(Exception):
 
 
 _PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a refused call
+# the requests the program waits in for a reply (spinner_host.c: call()); the others are queued
+_WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, OP_PARAM, OP_FAULT,
+                      OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
+                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU))
 
 
 class _Child:
@@ -130,6 +134,7 @@ class _Session:
         spinner.configure(diff_norm=lambda v, d: self.yaw)  # the C side computes the yaw rate
         self._buf = b""
         self._pos = 0
+        self._in_call = False  # the request handled is the one the program waits in (_WAITING)
 
     def _setup_transport(self, child: _Child) -> None:
         self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
@@ -231,9 +236,29 @@ class _Session:
     def _interrupt(self, slot: int) -> None:
         """Run the program's interrupt handler ``slot`` now (the clock is inside a waiting call
         of the program): answer that call with ST_ISR, then the handler's requests until it
-        is done (OP_ISR_DONE); the waiting call then waits on for its own reply."""
+        is done (OP_ISR_DONE); the waiting call then waits on for its own reply. Due in a queued
+        request (--mcu-time charges those too), it runs inside the waiting call that came with
+        it: the requests up to that call are read first and kept for after the handler."""
+        if not self._in_call:
+            self._read_to_call()
+        outer = self._buf, self._pos, self._in_call
+        self._buf, self._pos = b"", 0
         self._reply(_HDR.pack(ST_ISR, 4) + struct.pack("<i", slot))
         self._serve(until_isr_done=True)
+        self._buf, self._pos, self._in_call = outer
+
+    def _read_to_call(self) -> None:
+        """Read the unread requests up to the waiting one the program sent them with."""
+        off = 0
+        while True:
+            if len(self._buf) - self._pos < off + 8:
+                self._fill(off + 8)
+            op, n = _HDR.unpack_from(self._buf, self._pos + off)
+            off += 8 + n
+            if len(self._buf) - self._pos < off:
+                self._fill(off)
+            if op in _WAITING:
+                return
 
     def _serve(self, until_isr_done: bool = False) -> None:
         """Answer requests until the child ends (raises _ChildGone) or the run does (or, with
@@ -252,6 +277,7 @@ class _Session:
                     op, n, v, d, yaw, op2, n2, line, noise = unpack_frame(buf)
                     if op != OP_CMD or n != _CMD.size or op2 != OP_IMAGE or n2 != _2I.size:
                         break
+                    self._in_call = True  # the image call came with the command
                     try:
                         self.yaw = yaw
                         s.set_speed_and_servo(v, d) if v == v else s.set_servo(d)
@@ -272,6 +298,7 @@ class _Session:
             op, payload = self._message()
             if op == OP_ISR_DONE and until_isr_done:
                 return
+            self._in_call = op in _WAITING
             try:
                 self._handle(op, payload)
             except _PASS:
