@@ -341,3 +341,36 @@ def test_an_interrupt_due_in_a_queued_call_runs_before_the_waiting_call_it_came_
         assert r.outcome == "controller_returned", r.message
         logs.append(csv.read_bytes())
     assert logs[0] == logs[1]
+
+
+def test_a_handler_that_changes_the_exposure_still_gets_get_image_a_frame(tmp_path):
+    """A line camera's exposure set in a handler while main() waits for a frame moves that frame
+    (set_exposure): get_image returns at the frame's boundary, one image a frame, as the run log's
+    rows record them."""
+    images = []
+
+    def main(s):
+        exposures = iter([0.0295, 0.0095, 0.0195] * 20)
+        count = [0]
+
+        def tick():
+            count[0] += 1
+            if count[0] % 4 == 0:
+                s.set_exposure(next(exposures))
+
+        s.every(0.007, tick)
+        for _ in range(25):
+            s.get_image(s.line_row)
+            images.append(round(s.get_time() - 0.002, 6))  # get_time: one 2-ms step on
+
+    csv = tmp_path / "exposure.csv"
+    r = drive(main, track="floor", time_limit_s=2.0, csv=csv)
+    assert r.outcome == "controller_returned", r.message
+    import csv as csvmod
+
+    with csv.open() as f:
+        frame_times = {round(float(row["t_s"]), 6) for row in csvmod.DictReader(line for line in f
+                                                                                 if not line.startswith("#"))}
+    assert images and all(t in frame_times for t in images), (images, sorted(frame_times)[:20])
+    assert len(set(images)) == len(images)
+

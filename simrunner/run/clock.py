@@ -297,7 +297,9 @@ class LockstepClock:
         if self.finished is not None:
             self.check()
         if self._next_irq_step <= self._next_frame_step or self.in_interrupt:  # interrupts on the way
-            self.advance(self._next_frame_step - self.step_index)
+            k = self.frame_index  # (one may move the frame: set_frame_period)
+            while self.frame_index == k:
+                self.advance(min(self._next_frame_step, self._next_irq_step) - self.step_index)
             return
         self._before_chunk()
         self.sim.step(self._next_frame_step - self.step_index)
