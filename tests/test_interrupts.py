@@ -374,3 +374,35 @@ def test_a_handler_that_changes_the_exposure_still_gets_get_image_a_frame(tmp_pa
     assert images and all(t in frame_times for t in images), (images, sorted(frame_times)[:20])
     assert len(set(images)) == len(images)
 
+
+def test_a_handler_that_raises_leaves_the_clock_in_order():
+    """A handler's exception reaches main() in the waiting call it ran in; main() may go on: the
+    clock and the car move on together (the same position as when the handler does not raise)
+    and the handler keeps its rate."""
+    def run(raises):
+        ticks = []
+
+        def main(s):
+            def tick():
+                ticks.append(s.get_time())
+                if raises and len(ticks) == 1:
+                    raise ValueError("once")
+
+            s.set_speed(1.0)
+            s.every(0.01, tick)
+            try:
+                s.sleep(0.05 if raises else 0.01)  # (the exception ends the wait at 0.01 s)
+            except ValueError:
+                pass
+            for _ in range(10):
+                s.get_time()
+            s.sleep(0.05)
+            ticks.append(s.get_position())
+
+        r = drive(main, track="floor", time_limit_s=2.0)
+        assert r.outcome == "controller_returned", r.message
+        return ticks
+
+    plain, caught = run(False), run(True)
+    assert caught == plain  # the same ticks; where the car is after the same simulated time
+    assert caught[:-1] == pytest.approx([0.01 * k for k in range(1, len(caught))], abs=1e-9)

@@ -201,15 +201,17 @@ class LockstepClock:
     def _interrupt(self) -> None:
         """The step index has reached an interrupt's step: run the handlers due (module docstring)."""
         i = self.step_index
-        for irq in self._interrupts:
-            while irq.next_step <= i:
-                irq.advance()
-                self.in_interrupt = True
-                try:
-                    irq.handler()
-                finally:
-                    self.in_interrupt = False
-        self._next_irq_step = min(irq.next_step for irq in self._interrupts)
+        try:
+            for irq in self._interrupts:
+                while irq.next_step <= i:
+                    irq.advance()
+                    self.in_interrupt = True
+                    try:
+                        irq.handler()
+                    finally:
+                        self.in_interrupt = False
+        finally:  # a handler that raised: the schedule stays the one of the handlers run
+            self._next_irq_step = min(irq.next_step for irq in self._interrupts)
         if self.finished is not None:
             self.check()
 
