@@ -212,3 +212,33 @@ def test_the_librarys_own_sources_and_register_writes_are_named(tmp_path):
     with pytest.raises(ControllerFileError, match=r"(?s)regs.c:3:.*GPIOB_PSOR, TPM0_C0V: the MCU's "
                                                   r"registers, not emulated by the simulator's --kit tfc"):
         firmware([regs])
+
+
+def test_a_timer_handler_reads_the_tickers_while_main_polls_the_image_flag(tmp_path):
+    """A handler (--isr) that reads TFC_Ticker while main() waits on `while (!LineScanImageReady);`:
+    its reads are the board's state at its time, the tickers counted to it (no time passes and no
+    image is read in an interrupt; the run once ended with "get_image inside an interrupt handler"
+    at its line, and the tickers stood still while main() waited for the camera)."""
+    from simrunner.run.native.build import with_isrs
+
+    src = tmp_path / "isr_polls.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC\\\\TFC.h"
+        #include "spinner.h"
+        static volatile int periods;
+        void PIT_IRQHandler(void) {               /* 1 kHz: 10-ms periods from the SysTick ticker */
+            if (TFC_Ticker[1] >= 10) { TFC_Ticker[1] = 0; periods++; }
+        }
+        int main(void) {
+            TFC_Init();
+            for (int images = 0; images < 20; images++) {
+                while (!LineScanImageReady) { }
+                LineScanImageReady = 0;
+            }
+            double t_ms = 1000.0 * spinner_get_time();  /* the tickers count while main() waits */
+            return periods >= 0.95 * t_ms / 10 && periods <= t_ms / 10 ? 0 : 3;
+        }
+    """))
+    r = drive(with_isrs(firmware([src]), [("PIT_IRQHandler", 0.001)]), track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", r.message

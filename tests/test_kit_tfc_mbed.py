@@ -196,3 +196,29 @@ def test_misuse_is_one_clear_line(tmp_path):
     lib.write_text("void TFC_Init() {}\n")
     with pytest.raises(ControllerFileError, match=r"TFC.cpp: the kit's own driver source: --kit tfc-mbed"):
         build_program([str(EXAMPLE), str(lib)], kit="tfc-mbed")
+
+
+def test_an_isr_handler_reads_the_board_while_main_polls_the_image_flag(tmp_path):
+    """A handler of the program's own (--isr) that reads the board (the servo ticker, a pot) while
+    main() waits on `while (!TFC_LineScanImageReady) {}`: its reads are the board's state at its
+    time; they once waited for the camera inside the interrupt (the run ended at its line)."""
+    from simrunner.run.native.build import with_isrs
+
+    prog = program(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        static volatile int reads;
+        extern "C" void PIT_IRQHandler(void) {
+            for (int i = 0; i < 100; i++) reads += TFC_ServoTicker >= 0 && TFC_ReadPot(0) > -2.0f;
+        }
+        int main() {
+            TFC_Init();
+            for (int images = 0; images < 20; images++) {
+                while (!TFC_LineScanImageReady) {}
+                TFC_LineScanImageReady = 0;
+            }
+            return reads > 0 ? 0 : 3;
+        }
+        """)
+    r = drive(with_isrs(prog, [("PIT_IRQHandler", 0.001)]), track="floor", time_limit_s=3.0, wall_limit_s=5.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", r.message

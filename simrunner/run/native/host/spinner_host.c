@@ -322,12 +322,15 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
 #define MAX_ISRS 32
 static void (*isr_fn[MAX_ISRS])(void);
 static int isr_count;
+static int isr_depth;   /* handlers running (spinner_in_interrupt) */
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
 static void run_isr(uint32_t slot) {
     if (slot >= (uint32_t)isr_count) fault_report(0, "the simulator asked for an unknown interrupt handler", NULL);
     if (mcu_report) mcu_mark_s = thread_cpu_s();  /* the handler's own time */
+    isr_depth++;
     isr_fn[slot]();
+    isr_depth--;
     queue(OP_ISR_DONE, NULL, 0, NULL, 0);
     flush_out();
 }
@@ -655,6 +658,8 @@ int spinner_interrupts(void) {
     INIT();
     return isr_count;
 }
+
+int spinner_in_interrupt(void) { return isr_depth > 0; }
 
 void spinner_every(double period_s, void (*handler)(void)) {
     INIT();
@@ -1313,7 +1318,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     if (__atomic_exchange_n(&run_active, 1, __ATOMIC_ACQ_REL)) return 16;  /* EBUSY */
     user_main = (main_fn)dlsym(lib, "main");
     prog_lib = lib;
-    isr_count = 0;
+    isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
     if (user_main == NULL) {
         __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);
         return 72;

@@ -97,6 +97,9 @@ void spinner_sleep(double seconds);
 void spinner_every(double period_s, void (*handler)(void));
 /* How many timer interrupt handlers are set up (--isr and spinner_every). */
 int spinner_interrupts(void);
+/* Non-zero inside an interrupt handler (where no simulated time passes): for library code that
+ * lets time pass when main() polls it, and must not in a handler. */
+int spinner_in_interrupt(void);
 
 /* Debug video: text lines in the right column (one call = the lines of this frame). */
 void spinner_add_text(const char *const *lines, int n);

@@ -91,9 +91,14 @@ static void camera_service(double now) {
 
 static void ensure_init(void);
 
-/* One read of the board's state (see POLLS_BEFORE_TIME). */
+/* One read of the board's state (see POLLS_BEFORE_TIME); in an interrupt handler (--isr) the
+ * state at its time (the tickers counted to it), and no time passes there. */
 static void poll(void) {
     ensure_init();
+    if (spinner_in_interrupt()) {
+        count_ticks(spinner_get_time());
+        return;
+    }
     if (++tfc.polls <= POLLS_BEFORE_TIME) return;
     double now = spinner_get_time();  /* one physics step, as TFC_Task() */
     count_ticks(now);

@@ -130,7 +130,7 @@ double tfc_mbed_now_s(void) {
     return k.now_s;
 }
 
-int tfc_mbed_in_isr(void) { return k.in_isr; }
+int tfc_mbed_in_isr(void) { return k.in_isr || spinner_in_interrupt(); }  /* a Ticker's, or --isr */
 
 /* The read-out: a new image once a servo frame has passed since the last (the tolerance: the
  * camera's frame is a step or two away, as in the TFC kit's camera_service). */
@@ -172,13 +172,13 @@ static void pass(double s) {
 
 void tfc_mbed_poll(void) {
     tfc_mbed_start();
-    if (k.in_isr) return;
+    if (tfc_mbed_in_isr()) return;
     if (++k.polls > POLLS_BEFORE_TIME) pass(READ_TIME_S);
 }
 
 void tfc_mbed_wait_s(double s, const char *what) {
     tfc_mbed_start();
-    if (k.in_isr) {
+    if (tfc_mbed_in_isr()) {
         char why[200];
         snprintf(why, sizeof why, "%s(...) inside a Ticker or Timeout handler: no simulated time passes "
                  "in an interrupt; wait in main()", what);
@@ -194,7 +194,7 @@ void tfc_mbed_wait_s(double s, const char *what) {
 
 void tfc_mbed_idle(void) {
     tfc_mbed_start();
-    if (k.in_isr) return;
+    if (tfc_mbed_in_isr()) return;
     k.polls = 0;
     step();
 }

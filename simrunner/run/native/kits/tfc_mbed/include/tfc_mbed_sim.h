@@ -16,7 +16,7 @@ void tfc_mbed_poll(void);         /* one read of the board */
 double tfc_mbed_now_s(void);      /* simulated time, s (no time passes) */
 void tfc_mbed_wait_s(double s, const char *what);  /* wait*(): let s of simulated time pass */
 void tfc_mbed_idle(void);         /* sleep(), __WFI(): one physics step */
-int tfc_mbed_in_isr(void);        /* 1 inside a Ticker/Timeout handler */
+int tfc_mbed_in_isr(void);        /* 1 inside a Ticker/Timeout handler or an --isr one */
 [[noreturn]] void tfc_mbed_not_emulated(const char *what, const char *why);
 
 /* the board's pins as the kit maps them (mbed's KL25Z PinName values) */
