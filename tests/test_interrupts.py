@@ -406,3 +406,27 @@ def test_a_handler_that_raises_leaves_the_clock_in_order():
     plain, caught = run(False), run(True)
     assert caught == plain  # the same ticks; where the car is after the same simulated time
     assert caught[:-1] == pytest.approx([0.01 * k for k in range(1, len(caught))], abs=1e-9)
+
+
+def test_a_handler_polls_the_pixy2_without_waiting():
+    """getMainFeatures(wait=False) in a handler is a read, not a wait: a new frame's features
+    when main() waited past one, else PIXY_RESULT_BUSY; the run once ended there ("cannot
+    wait")."""
+    from simrunner.sensors.pixy2 import PIXY_RESULT_BUSY
+
+    results = []
+
+    def main(s):
+        pixy = s.pixy2()
+        pixy.init()
+
+        def tick():
+            results.append(pixy.line.getMainFeatures(wait=False))
+
+        s.every(0.005, tick)
+        s.sleep(0.5)
+
+    r = drive(main, car=REPO / "examples" / "pixy2_car.toml", time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    frames = [x for x in results if x != PIXY_RESULT_BUSY]
+    assert len(results) == 100 and 25 <= len(frames) <= 31  # 60 frames a second, 0.5 s

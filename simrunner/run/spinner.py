@@ -437,7 +437,8 @@ class Spinner:
             if wait:
                 clock.advance_to_next_frame()
             else:
-                clock.advance(1)
+                if not clock.in_interrupt:  # (a poll is a read: no time passes in a handler)
+                    clock.advance(1)
                 if s.pixy2_frame == clock.frame_index:
                     return False
         s.pixy2_frame = clock.frame_index
