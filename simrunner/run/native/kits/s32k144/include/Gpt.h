@@ -10,8 +10,9 @@
  * elapsed. Gpt_StartTimer, Gpt_GetTimeElapsed and Gpt_GetTimeRemaining read the simulated
  * clock as OsIf_GetMilliseconds does, letting one physics step pass (2 ms by default), so a
  * loop polling them moves on. A channel's notification is an
- * interrupt handler your generated configuration names: not emulated, Gpt_EnableNotification
- * stops the run saying so (docs/c_controllers.md, "The S32K144 kit"). */
+ * interrupt handler your generated configuration names: run with --isr NAME@HZ it is called at
+ * that rate and Gpt_EnableNotification does nothing more; without --isr, Gpt_EnableNotification
+ * stops the run saying so (docs/c_controllers.md, "Timer interrupts"). */
 #ifndef NXPCUP_SIM_GPT_H
 #define NXPCUP_SIM_GPT_H
 #include "Std_Types.h"
