@@ -144,6 +144,34 @@ def test_kit_misuse_is_one_line(tmp_path):
         firmware([bad])
 
 
+def test_a_loop_that_polls_the_image_flag_sees_every_image(tmp_path):
+    """`while (!LineScanImageReady); LineScanImageReady = 0;` takes each image as it comes: 40
+    images at a 50 ms exposure in 40 frames' time (clearing the flag is a read of the board too,
+    and once fetched the next image before the program read this one: every second image)."""
+    src = tmp_path / "poll_images.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC\\\\TFC.h"
+        #include "spinner.h"
+        int main(void) {
+            TFC_Init();
+            TFC_SetLineScanExposureTime(50000);
+            double t0 = spinner_get_time();
+            for (int i = 0; i < 40; i++) {
+                while (!LineScanImageReady);
+                LineScanImageReady = 0;
+            }
+            spinner_add_textf("took %.3f", spinner_get_time() - t0);
+            return 0;
+        }
+    """))
+    csv = tmp_path / "poll.csv"
+    r = drive(firmware([src]), track="floor", time_limit_s=10.0, csv=csv)
+    assert r.outcome == "controller_returned", r.message
+    took = float(csv.read_text().rsplit("took ", 1)[1].split('"')[0].split(",")[0].strip())
+    assert 40 * 0.05 <= took < 41 * 0.0525, took  # a frame is the exposure + the read-out
+
+
 def test_a_loop_that_only_polls_the_board_lets_time_pass(tmp_path):
     """Firmware written for the board waits on what its interrupts change, calling nothing:
     `while (!TFC_PUSH_BUTTON_0_PRESSED);`, `while (!LineScanImageReady);`, a delay on a ticker.

@@ -107,6 +107,11 @@ static void poll(void) {
 
 volatile uint8_t *tfc_sim_image_ready(void) {
     poll();
+    /* An image is there for the program: its polling starts over. (`LineScanImageReady = 0`
+     * comes here too - C cannot tell a write from a read -, and it must not fetch the next
+     * image before the program has read this one: a `while (!LineScanImageReady);` loop saw
+     * every second image.) */
+    if (image_ready) tfc.polls = 0;
     return &image_ready;
 }
 
