@@ -298,3 +298,31 @@ def test_gpt_channels_and_osif_counters_count_simulated_time(tmp_path, capfd):
     assert (e1, e2, r2) == (16000, 16000 % 5000, 5000 - 18000 % 5000) and stopped == 0
     ticks, waited, dummy_step, dummy_ticks = (int(x) for x in out.split("osif ")[1].split()[:4])
     assert ticks == 5000 * 48 and 5 <= waited <= 5 + 3 * 2 and dummy_step == 1 and dummy_ticks == 5000
+
+
+def test_firmware_reads_encoders_and_the_imu_through_spinner_h(tmp_path):
+    """The sample's drivers have no encoder or IMU driver: a --kit s32k144 firmware reads the car
+    file's [encoders] and [imu] with spinner.h's calls beside the drivers."""
+    src = probe(tmp_path, """\
+        #include "main_functions.h"
+        #include "hbridge.h"
+        #include "OsIf.h"
+        #include "spinner.h"
+        int main(void) {
+            double gz, az;
+            DriversInit();
+            HbridgeInit(0U, 1U, 0U, 1U, 2U, 3U);
+            HbridgeSetSpeed(30);
+            OsIf_TimeDelay(1500U);
+            long long rl = spinner_get_encoder(SPINNER_WHEEL_RL), rr = spinner_get_encoder(SPINNER_WHEEL_RR);
+            spinner_get_gyro(NULL, NULL, &gz);
+            spinner_get_accel(NULL, NULL, &az);
+            if (rl < 5000 || rr < 0.98 * rl || rr > 1.02 * rl) return 1;
+            if (az < 9.3 || az > 10.3 || gz > 0.2 || gz < -0.2) return 2;
+            return 0;
+        }
+        """, name="main.c")
+    car = tmp_path / "car.toml"
+    car.write_text("[encoders]\n[imu]\n")
+    r = drive(firmware([src]), track="floor", car=car, time_limit_s=5.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", r.message

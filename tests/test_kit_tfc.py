@@ -270,3 +270,32 @@ def test_a_timer_handler_reads_the_tickers_while_main_polls_the_image_flag(tmp_p
     """))
     r = drive(with_isrs(firmware([src]), [("PIT_IRQHandler", 0.001)]), track="floor", time_limit_s=5.0)
     assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+
+
+def test_firmware_reads_encoders_and_the_imu_through_spinner_h(tmp_path):
+    """The TFC library has no encoder or accelerometer API (teams drive their own on the registers,
+    which are not emulated): a --kit tfc firmware reads the car file's [encoders] and [imu] with
+    spinner.h's calls beside the library's."""
+    src = tmp_path / "main.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC\\\\TFC.h"
+        #include "spinner.h"
+        int main(void) {
+            double gz, ax, ay, az;
+            TFC_Init();
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            while (TFC_Ticker[0] < 1500) TFC_Task();
+            long long rl = spinner_get_encoder(SPINNER_WHEEL_RL), rr = spinner_get_encoder(SPINNER_WHEEL_RR);
+            spinner_get_gyro(NULL, NULL, &gz);
+            spinner_get_accel(&ax, &ay, &az);
+            if (rl < 5000 || rr < 0.98 * rl || rr > 1.02 * rl) return 1;
+            if (az < 9.3 || az > 10.3 || gz > 0.2 || gz < -0.2) return 2;
+            return 0;
+        }
+        """))
+    car = tmp_path / "car.toml"
+    car.write_text("[encoders]\n[imu]\n")
+    r = drive(firmware([src]), track="floor", car=car, time_limit_s=5.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", r.message

@@ -222,3 +222,142 @@ def test_an_isr_handler_reads_the_board_while_main_polls_the_image_flag(tmp_path
         """)
     r = drive(with_isrs(prog, [("PIT_IRQHandler", 0.001)]), track="floor", time_limit_s=3.0, wall_limit_s=5.0)
     assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+
+
+SENSOR_CAR = "[encoders]\n[imu]\n"  # rear encoders, 512 lines, x4; the default IMU
+
+
+def sensor_drive(tmp_path, text, car=SENSOR_CAR, params=None, name="main.cpp"):
+    """Drive `text` (an mbed program) on the floor with a car file holding `car`."""
+    car_file = tmp_path / "car.toml"
+    car_file.write_text(car)
+    return drive(program(tmp_path, text, name), track="floor", car=car_file, params=params or {},
+                 time_limit_s=8.0, csv=tmp_path / "log.csv")  # a CSV keeps the program's text
+
+
+def texts(r):
+    """The program's spinner_add_textf lines with the time they were added: [(t_s, text), ...]."""
+    return [(t, s) for t, s in zip(r.log.t_s, r.log.data_text) if s]
+
+
+def test_the_boards_accelerometer_reads_the_cars_imu_in_g(tmp_path):
+    """MMA8451Q (the FRDM-KL25Z's accelerometer, as the mbed library reads it): ~(0, 0, 1) g at rest;
+    in a steady left turn getAccY() is v^2 / r in g, as the car file's [imu] measures it."""
+    r = sensor_drive(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "MMA8451Q.h"
+        #include "spinner.h"
+        #define MMA8451_I2C_ADDRESS (0x1d << 1)
+        MMA8451Q acc(PTE25, PTE24, MMA8451_I2C_ADDRESS);
+        int main() {
+            TFC_Init();
+            wait(0.2);
+            float rest[3] = {0, 0, 0}, a[3];
+            for (int i = 0; i < 50; i++) {
+                acc.getAccAllAxis(a);
+                for (int j = 0; j < 3; j++) rest[j] += a[j] / 50;
+                wait_ms(5);
+            }
+            spinner_add_textf("rest %x %.4f %.4f %.4f", acc.getWhoAmI(), rest[0], rest[1], rest[2]);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.4f, 0.4f);
+            TFC_SetServo(0, 0.6f);
+            wait(3.0);
+            float lateral = 0;
+            for (int i = 0; i < 100; i++) {
+                lateral += acc.getAccY() / 100;
+                wait_ms(10);
+            }
+            spinner_add_textf("turn %.4f", lateral);
+            return 0;
+        }
+        """)
+    assert r.outcome == "controller_returned", r.message
+    (_, rest), (t_turn, turn) = texts(r)
+    who, *g = rest.split()[1:]
+    assert who == "1a"
+    assert [float(v) for v in g] == pytest.approx([0.0, 0.0, 1.0], abs=0.03)
+    log = r.log
+    steady = (log.t_s > t_turn - 1.0) & (log.t_s <= t_turn)
+    v, yaw_rate = log.speed_mps[steady].mean(), log.yaw_rate_radps[steady].mean()
+    radius_m = v / yaw_rate
+    want_g = v ** 2 / radius_m / 9.80665
+    assert want_g > 0.05  # a real turn (left: + y)
+    assert float(turn.split()[1]) == pytest.approx(want_g, rel=0.1)
+
+
+def test_qei_counts_a_rear_wheels_encoder_as_the_library_decodes_it(tmp_path):
+    """QEI on the first rear encoder (RL): pulses per metre = lines x encoding / (2 pi r); X4 counts
+    twice X2; reset() starts again from 0; --param qei_PTxN puts a QEI on a wheel by its pin."""
+    r = sensor_drive(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "QEI.h"
+        #include "spinner.h"
+        QEI left(PTD4, PTA12, NC, 512, QEI::X4_ENCODING);   // the first QEI: RL
+        QEI left_x2(PTA4, PTA5, PTA13, 512);                 // X2, on RL by --param qei_PTA4=2
+        int main() {
+            TFC_Init();
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(1.5);
+            spinner_add_textf("a %d %d %d", left.getPulses(), left_x2.getPulses(), left_x2.getRevolutions());
+            left.reset();
+            int after_reset = left.getPulses();
+            wait(1.0);
+            spinner_add_textf("b %d %d %d", after_reset, left.getPulses(), left_x2.getPulses());
+            return 0;
+        }
+        """, params={"qei_PTA4": 2})
+    assert r.outcome == "controller_returned", r.message
+    (t_a, a), (t_b, b) = texts(r)
+    x4, x2, revs = (int(v) for v in a.split()[1:])
+    after_reset, x4_since, x2_b = (int(v) for v in b.split()[1:])
+    log = r.log
+    x_a, x_b = np.interp(t_a, log.t_s, log.x_m), np.interp(t_b, log.t_s, log.x_m)
+    per_m = 512 * 4 / (2 * np.pi * 0.034)
+    assert x4 == pytest.approx(x_a * per_m, rel=0.02)
+    assert abs(x4 - 2 * x2) <= 1 and x2 > 1000
+    assert revs == x2 // 1024  # the index channel: one pulse a turn
+    assert after_reset == 0
+    assert x4_since == pytest.approx((x_b - x_a) * per_m, rel=0.02)
+    assert abs(x2_b - x2 - x4_since / 2) <= 2  # the X2 one was not reset
+
+
+def test_missing_car_sections_end_the_run_at_the_programs_line(tmp_path):
+    r = sensor_drive(tmp_path, """\
+        #include "mbed.h"
+        #include "QEI.h"
+        QEI wheel(PTD4, PTA12, NC, 512, QEI::X4_ENCODING);
+        int main() {
+            wait(0.1);
+            return wheel.getPulses() > 0;
+        }
+        """, car="[imu]\n", name="no_encoders.cpp")
+    assert r.outcome == "controller_error"
+    assert "QEI::getPulses: the car has no wheel encoders: add [encoders] to the car file" in r.message
+    assert "no_encoders.cpp:6" in r.message
+    r = sensor_drive(tmp_path, """\
+        #include "mbed.h"
+        #include "MMA8451Q.h"
+        MMA8451Q acc(PTE25, PTE24, 0x1d << 1);
+        int main() {
+            wait(0.1);
+            return acc.getAccZ() > 0.5f;
+        }
+        """, car="[encoders]\n", name="no_imu.cpp")
+    assert r.outcome == "controller_error"
+    assert "MMA8451Q::getAccZ: the car has no IMU: add [imu] to the car file" in r.message
+    assert "no_imu.cpp:6" in r.message
+    r = sensor_drive(tmp_path, """\
+        #include "mbed.h"
+        #include "QEI.h"
+        QEI a(PTD4, PTA12, NC, 512), b(PTA4, PTA5, NC, 512), c(PTA1, PTA2, NC, 512);
+        int main() {
+            wait(0.1);
+            return c.getPulses();
+        }
+        """, name="third.cpp")
+    assert r.outcome == "controller_error" and "third.cpp:6" in r.message
+    assert "QEI number 3 (channel A PTA1): the car has 2 wheel encoders" in r.message

@@ -58,6 +58,20 @@ _FRAME = struct.Struct("<II3dII2i")  # OP_CMD {speed, steer, yaw} then OP_IMAGE 
 EXIT_WAIT_S = 5.0
 
 
+def _sensor_spec(car) -> tuple[float, float, float, float]:
+    """The car's encoders and IMU as the program's INIT message gives them (spinner_encoder_lines,
+    spinner_has_imu): the wheels with an encoder (a mask, bit i = wheel i: FL, FR, RL, RR), its
+    lines per revolution, the counts per line of spinner_get_encoder (4, 2, 1; 0: one channel
+    without direction) and 1.0 when the car has an IMU."""
+    from simrunner.sensors.imu import ON, PER_LINE, WHEELS
+
+    enc, mask, lines, per_line = car.encoders, 0, 0, 0
+    if enc is not None:
+        mask = sum(1 << WHEELS.index(w) for w in ON[enc.wheels])
+        lines, per_line = enc.lines_per_rev, 0 if enc.counting == "single" else PER_LINE[enc.counting]
+    return float(mask), float(lines), float(per_line), 0.0 if car.imu is None else 1.0
+
+
 class _ChildGone(Exception):
     """The request pipe reached its end (the child exited or died)."""
 
@@ -219,6 +233,7 @@ class _Session:
             isrs = self.ctrl.isrs  # --isr NAME@HZ: (name, period_s)
             self._reply(struct.pack("<7d", h, w, s.line_row, 1.0 if s.recording else 0.0,
                                     s.wheelbase_m, 1.0 if measured else 0.0, len(isrs))
+                        + struct.pack("<4d", *_sensor_spec(s._s.car))
                         + b"".join(struct.pack("<2d", period, len(name.encode())) + name.encode()
                                    for name, period in isrs))
             self._serve()

@@ -58,6 +58,7 @@ static unsigned char out_buf[1 << 16];
 static size_t out_len;
 static int img_h = 128, img_w = 128, line_row = 60, recording_on;
 static double wheelbase_m = 0.175;
+static int encoder_mask, encoder_lines, encoder_per_line, has_imu;  /* the car's [encoders], [imu] */
 static int finished;  /* the run is over: calls return at once (atexit, destructors) */
 static double last_speed, last_angle, speed_mps, steer_rad;
 static spinner_norm_fn f_speed_norm, f_speed_denorm, f_turn_norm, f_diff_norm;
@@ -547,6 +548,15 @@ long long spinner_get_encoder(int wheel) {
     if (!finished) call(OP_ENCODER, &w, sizeof w, NULL, 0, &last[wheel], sizeof last[wheel]);
     return last[wheel];
 }
+
+int spinner_encoder_lines(int wheel, int *counts_per_line) {
+    INIT();
+    int fitted = wheel >= 0 && wheel < 4 && ((encoder_mask >> wheel) & 1);
+    if (counts_per_line) *counts_per_line = fitted ? encoder_per_line : 0;
+    return fitted ? encoder_lines : 0;
+}
+
+int spinner_has_imu(void) { INIT(); return has_imu; }
 
 static void get_imu(unsigned char flag, double *x, double *y, double *z) {
     static double last[2][3];
@@ -1102,14 +1112,18 @@ static void install_handlers(void) {
 }
 
 static void read_init(void) {
-    /* height, width, line row, recording, wheelbase, mcu time measured, then the --isr handlers:
-     * their count, and each one's period (s) and name length, then the names */
-    double init[7];
+    /* height, width, line row, recording, wheelbase, mcu time measured, the number of --isr
+     * handlers; the encoders (wheel mask, lines per revolution, counts per line) and the IMU (0/1);
+     * then each handler's period (s) and name length, then the names */
+    double init[7], sensors[4];
     inited = 1;
     read_all(init, sizeof init);
+    read_all(sensors, sizeof sensors);
     img_h = (int)init[0], img_w = (int)init[1], line_row = (int)init[2];
     recording_on = (int)init[3], wheelbase_m = init[4];
     mcu_report = init[5] != 0.0;
+    encoder_mask = (int)sensors[0], encoder_lines = (int)sensors[1], encoder_per_line = (int)sensors[2];
+    has_imu = sensors[3] != 0.0;
     api_thread = pthread_self();
     if (mcu_report) mcu_mark_s = thread_cpu_s();
     for (int i = 0, n = (int)init[6]; i < n; i++) {

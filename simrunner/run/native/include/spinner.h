@@ -85,6 +85,12 @@ enum { SPINNER_WHEEL_FL = 0, SPINNER_WHEEL_FR = 1, SPINNER_WHEEL_RL = 2, SPINNER
 long long spinner_get_encoder(int wheel);
 void spinner_get_gyro(double *x_radps, double *y_radps, double *z_radps);
 void spinner_get_accel(double *x_mps2, double *y_mps2, double *z_mps2);
+/* What the car file fits, for libraries that convert (no time passes): the lines per revolution
+ * of the encoder on `wheel` and, in *counts_per_line (may be NULL), how spinner_get_encoder counts
+ * them: 4, 2, 1 (quadrature x4, x2, x1) or 0 (one channel, "single"); 0 and 0 for a wheel
+ * without one. spinner_has_imu(): 1 when the car has an [imu]. */
+int spinner_encoder_lines(int wheel, int *counts_per_line);
+int spinner_has_imu(void);
 
 /* Let `seconds` of simulated time pass (ceil(seconds / dt) steps, at least one). */
 void spinner_sleep(double seconds);

@@ -63,6 +63,7 @@ static struct {
     int leds[4];
     struct tfc_mbed_event *events[MAX_EVENTS];
     int n_events;
+    void (*sample)(void);   /* the sensors' read at each tick (tfc_mbed_on_tick) */
 } k;
 
 static double clampd(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
@@ -100,6 +101,7 @@ static void run_due(void) {
 static void clock_isr(void) {
     k.now_s = spinner_get_time();  /* inside an interrupt: no time passes */
     k.in_isr = 1;
+    if (k.sample) k.sample();
     run_due();
     k.in_isr = 0;
 }
@@ -131,6 +133,10 @@ double tfc_mbed_now_s(void) {
 }
 
 int tfc_mbed_in_isr(void) { return k.in_isr || spinner_in_interrupt(); }  /* a Ticker's, or --isr */
+
+int tfc_mbed_started(void) { return k.started; }
+
+void tfc_mbed_on_tick(void (*sample)(void)) { k.sample = sample; }
 
 /* The read-out: a new image once a servo frame has passed since the last (the tolerance: the
  * camera's frame is a step or two away, as in the TFC kit's camera_service). */

@@ -17,6 +17,7 @@ double tfc_mbed_now_s(void);      /* simulated time, s (no time passes) */
 void tfc_mbed_wait_s(double s, const char *what);  /* wait*(): let s of simulated time pass */
 void tfc_mbed_idle(void);         /* sleep(), __WFI(): one physics step */
 int tfc_mbed_in_isr(void);        /* 1 inside a Ticker/Timeout handler or an --isr one */
+int tfc_mbed_started(void);       /* 0 before the kit's first call (globals' constructors) */
 [[noreturn]] void tfc_mbed_not_emulated(const char *what, const char *why);
 
 /* the board's pins as the kit maps them (mbed's KL25Z PinName values) */
@@ -35,6 +36,32 @@ struct tfc_mbed_event {
 };
 void tfc_mbed_event_attach(struct tfc_mbed_event *ev, double delay_s, int repeat, const char *what);
 void tfc_mbed_event_detach(struct tfc_mbed_event *ev);
+
+/* The kit's clock calls sample() at each tick, before the program's handlers (../sensors.cpp sets
+ * it: the encoders and the accelerometer are read at the tick, as the board's interrupts and I2C
+ * reads would, and a read returns the latest sample). */
+void tfc_mbed_on_tick(void (*sample)(void));
+
+/* QEI.h (Aaron Berk's quadrature encoder interface) and MMA8451Q.h: each object's state, kept by
+ * ../sensors.cpp */
+struct tfc_mbed_qei {
+    int pin_a, has_index, x;   /* channel A's pin, an index channel given, pulses per line: 2 or 4 */
+    int ordinal;               /* the n-th QEI constructed (0, 1, ...) */
+    int wheel;                 /* SPINNER_WHEEL_*; -1 before it is resolved */
+    const char *error;         /* why it cannot read a wheel (reported at the program's call) */
+    long long base;            /* pulses (in x) of the wheel's count when reset */
+    long long offset;          /* setPulses(): the count then */
+    long long last_raw;        /* the wheel's count at the last tick (the index channel's edges) */
+    int revolutions;
+};
+void tfc_mbed_qei_attach(struct tfc_mbed_qei *q, int pin_a, int has_index, int x);
+void tfc_mbed_qei_detach(struct tfc_mbed_qei *q);
+int tfc_mbed_qei_pulses(struct tfc_mbed_qei *q, const char *what);
+int tfc_mbed_qei_revolutions(struct tfc_mbed_qei *q, const char *what);
+int tfc_mbed_qei_state(struct tfc_mbed_qei *q, const char *what);
+void tfc_mbed_qei_set(struct tfc_mbed_qei *q, int pulses, int revolutions, const char *what);
+void tfc_mbed_mma_attach(void);
+int tfc_mbed_mma_counts(int axis, const char *what);  /* axis 0..2: the library's 14-bit reading */
 
 /* the FRDM-TFC library's globals whose reads poll (TFC.h's macros) */
 volatile uint8_t *tfc_mbed_image_ready(void);   /* the flag itself: no poll */
