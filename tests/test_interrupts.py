@@ -430,3 +430,58 @@ def test_a_handler_polls_the_pixy2_without_waiting():
     assert r.outcome == "controller_returned", r.message
     frames = [x for x in results if x != PIXY_RESULT_BUSY]
     assert len(results) == 100 and 25 <= len(frames) <= 31  # 60 frames a second, 0.5 s
+
+
+def test_a_handler_that_waits_for_time_is_named_as_such(tmp_path):
+    """A loop inside a handler waiting for simulated time never ends (none passes there): the
+    stall names the handler's line and says why, in Python, in C in-process and isolated; the TFC
+    kit's TFC_Delay_mS in a handler is refused at its line."""
+    ctl = tmp_path / "spin.py"
+    ctl.write_text(textwrap.dedent("""\
+        def main(s):
+            def tick():
+                t0 = s.get_time()
+                while s.get_time() < t0 + 0.01:
+                    pass
+            s.every(0.05, tick)
+            s.sleep(1.0)
+        """))
+    r = drive(ctl, track="floor", time_limit_s=5.0, wall_limit_s=1.0)
+    assert r.outcome == "stalled" and "spin.py:4" in r.message, r.message
+    assert "inside an interrupt handler no simulated time passes" in r.message
+    src = tmp_path / "spin_isr.c"
+    src.write_text(textwrap.dedent("""\
+        #include "spinner.h"
+        static void tick(void) {
+            double t0 = spinner_get_time();
+            while (spinner_get_time() < t0 + 0.01) { }
+        }
+        int main(void) {
+            spinner_every(0.05, tick);
+            spinner_sleep(1.0);
+            return 0;
+        }
+        """))
+    import dataclasses
+
+    program = build_program([src])
+    for prog in (program, dataclasses.replace(program, isolate=True)):
+        r = drive(prog, track="floor", time_limit_s=5.0, wall_limit_s=1.0)
+        assert r.outcome == "stalled" and "spin_isr.c:4" in r.message, r.message
+        assert "inside an interrupt handler no simulated time passes" in r.message
+    fw = tmp_path / "delay_isr.c"
+    fw.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC\\\\TFC.h"
+        void LPTimer_IRQHandler(void) {
+            TFC_Delay_mS(5);
+        }
+        int main(void) {
+            TFC_Init();
+            for (;;) __WFI();
+        }
+        """))
+    r = drive(with_isrs(build_program([fw], kit="tfc"), [("LPTimer_IRQHandler", 0.01)]), track="floor",
+              time_limit_s=5.0, wall_limit_s=2.0)
+    assert r.outcome == "controller_error" and "delay_isr.c:4: TFC_Delay_mS(5) inside an interrupt handler" \
+        in r.message, r.message

@@ -27,11 +27,14 @@ from simrunner.run.clock import LockstepClock
 from simrunner.run.supervise import current_supervision
 
 
-def stall_message(idle_s: float, where: str, limit_s: float) -> str:
-    """The message of a stalled run (``where``: "" or " (at file:line in function)")."""
+def stall_message(idle_s: float, where: str, limit_s: float, in_interrupt: bool = False) -> str:
+    """The message of a stalled run (``where``: "" or " (at file:line in function)";
+    ``in_interrupt``: it stalled inside an interrupt handler, where no time passes)."""
+    hint = ("inside an interrupt handler no simulated time passes: a loop there that waits for "
+            "time, the camera or the main loop never ends; wait in the main loop" if in_interrupt
+            else "call get_image(), sleep() or get_time() in every loop")
     return (f"controller stalled: {idle_s:.1f} s of wall time without letting simulated time "
-            f"pass{where}; call get_image(), sleep() or get_time() in every loop "
-            f"(limit --wall-limit {limit_s:g} s)")
+            f"pass{where}; {hint} (limit --wall-limit {limit_s:g} s)")
 
 
 class Watchdog:
@@ -77,7 +80,7 @@ class Watchdog:
         idle = time.monotonic() - self.clock.last_progress_wall_s
         if idle <= self.limit_s:
             return
-        msg = stall_message(idle, self._where(frame), self.limit_s)
+        msg = stall_message(idle, self._where(frame), self.limit_s, self.clock.in_interrupt)
         self.clock.finish("stalled", msg)
         self.clock.last_progress_wall_s = time.monotonic()  # raise again only after another limit
         raise Stalled(msg)

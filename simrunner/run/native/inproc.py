@@ -191,7 +191,7 @@ class InprocSession(_Session):
         if report.startswith(f"signal {int(signal.SIGUSR1)}\n"):
             clock = self.spinner._clock
             idle = time.monotonic() - clock.last_progress_wall_s
-            raise Stalled(stall_message(idle, "", clock.stall_limit_s or idle))  # run() adds where
+            raise Stalled(stall_message(idle, "", clock.stall_limit_s or idle, clock.in_interrupt))  # run() adds where
         super()._fault(report)
 
     # -- the run -----------------------------------------------------------------------

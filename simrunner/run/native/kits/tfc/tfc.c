@@ -155,6 +155,12 @@ SIM_Type tfc_sim_sim;
 
 void TFC_Delay_mS(unsigned int TicksIn_mS) {
     ensure_init();
+    if (spinner_in_interrupt()) {  /* no time passes in a handler: the delay would never end */
+        char text[200];
+        snprintf(text, sizeof text, "TFC_Delay_mS(%u) inside an interrupt handler: no simulated time "
+                 "passes there, so the delay would never end; wait in the main loop", TicksIn_mS);
+        spinner_fail(text);
+    }
     tfc.polls = 0;
     double until = spinner_get_time() + TicksIn_mS * 1e-3;
     for (double now = spinner_get_time(); now < until - 1e-9; now = spinner_get_time()) {
