@@ -177,11 +177,11 @@ def build_options(command):
                          help="C/C++ firmware: build it against this kit library's implementation on "
                               "the simulated car (tfc: the FRDM-TFC library; tfc-mbed: its mbed "
                               "flavour, C++; s32k144: the NXP Cup S32K144 kit's drivers; "
-                              "docs/c_controllers.md, Kit libraries)."),
+                              "docs/firmware.md)."),
             click.option("--isr", "isrs", multiple=True, metavar="NAME@HZ",
                          help="C/C++ firmware: call your function NAME (void NAME(void), e.g. your "
                               "timer's LPTimer_IRQHandler) HZ times a second of simulated time, as its "
-                              "timer interrupt would (repeatable; docs/c_controllers.md, Timer "
+                              "timer interrupt would (repeatable; docs/firmware.md, Timer "
                               "interrupts)."))):
         command = option(command)
     return command

@@ -6,7 +6,7 @@
  *   simrunner drive examples/firmware/isr/main.c -I examples/firmware --kit tfc --isr LPTimer_IRQHandler@100
  *
  * On the car the LPTMR's compare value sets the rate; in the simulator --isr does, and the set-up
- * below builds unchanged (docs/c_controllers.md, Timer interrupts). __WFI() lets the board's
+ * below builds unchanged (docs/firmware.md, Timer interrupts). __WFI() lets the board's
  * interrupts run: the SysTick, the camera's read-out into LineScanImage0, this handler. */
 #include "derivative.h"
 #include "TFC\TFC.h"

@@ -413,7 +413,7 @@ def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileE
     return ControllerFileError(
         f"{exc}\n{', '.join(names)}: the MCU's registers{' or mbed drivers' if kit == 'tfc-mbed' else ''}, "
         f"not emulated by the simulator's --kit {kit} (it has no registers): reach the hardware "
-        f"through the kit library's functions (docs/c_controllers.md, Kit libraries)")
+        f"through the kit library's functions (docs/firmware.md)")
 
 
 def _spelling_dir(sources: list[str | Path], include_dirs: list[str | Path]) -> list[Path]:

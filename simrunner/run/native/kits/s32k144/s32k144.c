@@ -19,7 +19,7 @@
  * - Pixy2GetVectors (PixyGetVectors) reads the simulator's Pixy2 (pixy2_line.h);
  * - the display's text and graph go to the debug video; OsIf's clocks and the Gpt channels
  *   count simulated time.
- * docs/c_controllers.md, "The S32K144 kit", lists what is emulated and what is not. */
+ * docs/firmware.md, "The S32K144 kit", lists what is emulated and what is not. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -68,7 +68,7 @@ static double clamp(double v, double lo, double hi) { return v < lo ? lo : (v > 
 __attribute__((noreturn)) static void not_emulated(const char *name, const char *why) {
     char message[512];
     snprintf(message, sizeof message, "%s: not emulated by the simulator's S32K144 kit: %s "
-             "(docs/c_controllers.md, \"The S32K144 kit\")", name, why);
+             "(docs/firmware.md, \"The S32K144 kit\")", name, why);
     spinner_fail(message);
 }
 
@@ -194,7 +194,7 @@ Gpt_ValueType Gpt_GetTimeRemaining(Gpt_ChannelType Channel) {
 }
 
 /* A notification is the interrupt handler the generated configuration names: run with
- * --isr NAME@HZ it is called at that rate (docs/c_controllers.md, Timer interrupts) and enabling it
+ * --isr NAME@HZ it is called at that rate (docs/firmware.md, Timer interrupts) and enabling it
  * does nothing more; without --isr nothing would call it. */
 void Gpt_EnableNotification(Gpt_ChannelType Channel) {
     (void)Channel;

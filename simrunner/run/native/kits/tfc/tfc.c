@@ -12,7 +12,7 @@
  *   left and right rear motors' duties (spinner_set_motors) while the H-bridge is enabled;
  * - the potentiometers, DIP switches, buttons and battery read --param values;
  * - the LEDs are kept (and shown in the debug video's text); the serial terminal prints.
- * docs/c_controllers.md, "Kit libraries", lists what is emulated and what is not. */
+ * docs/firmware.md, lists what is emulated and what is not. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>

@@ -12,7 +12,7 @@
  * loop polling them moves on. A channel's notification is an
  * interrupt handler your generated configuration names: run with --isr NAME@HZ it is called at
  * that rate and Gpt_EnableNotification does nothing more; without --isr, Gpt_EnableNotification
- * stops the run saying so (docs/c_controllers.md, "Timer interrupts"). */
+ * stops the run saying so (docs/firmware.md, "Timer interrupts"). */
 #ifndef NXPCUP_SIM_GPT_H
 #define NXPCUP_SIM_GPT_H
 #include "Std_Types.h"

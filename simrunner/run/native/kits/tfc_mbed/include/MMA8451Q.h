@@ -2,7 +2,7 @@
  * mbed MMA8451Q library for the FRDM-KL25Z's on-board accelerometer (Emilio Monti, 2010-2011,
  * os.mbed.com/users/emilmont/code/MMA8451Q/: constructor, getWhoAmI, getAccX/Y/Z, getAccAllAxis;
  * the raw reads, isDataAvailable and the event set-ups of its extended fork by Clemente di Caprio),
- * implemented on the car file's [imu] accelerometer (../sensors.cpp; docs/c_controllers.md, "The
+ * implemented on the car file's [imu] accelerometer (../sensors.cpp; docs/firmware.md, "The
  * mbed flavour"):
  *
  *     #define MMA8451_I2C_ADDRESS (0x1d << 1)

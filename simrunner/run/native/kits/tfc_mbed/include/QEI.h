@@ -2,7 +2,7 @@
  * quadrature encoder interface for mbed (os.mbed.com/users/aberk/code/QEI/, 2010; the names and
  * signatures as its QEI.h publishes them, with setPulses, setRevolutions and getInvalidCount of the
  * 2021 mbed OS 6 derivative by D. Smart), implemented on the car file's [encoders] (../sensors.cpp;
- * docs/c_controllers.md, "The mbed flavour"):
+ * docs/firmware.md, "The mbed flavour"):
  *
  *     QEI left(PTD4, PTA12, NC, 512, QEI::X4_ENCODING);   // the first QEI: the first encoder (RL)
  *     QEI right(PTA4, PTA5, NC, 512, QEI::X4_ENCODING);   // the second: the second (RR)

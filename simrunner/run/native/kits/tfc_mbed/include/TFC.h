@@ -1,7 +1,7 @@
 /* TFC.h of the simulator's mbed FRDM-TFC kit (simrunner drive main.cpp --kit tfc-mbed): the API
  * of the mbed "FRDM-TFC" library (Eli Hughes; os.mbed.com/users/emh203/code/FRDM-TFC/, as teams
  * publish it beside their main.cpp: FRDM-TFC/TFC.h and TFC.cpp) with the same names, types and
- * signatures, implemented on the simulated car (../tfc_mbed.cpp; docs/c_controllers.md, "The mbed
+ * signatures, implemented on the simulated car (../tfc_mbed.cpp; docs/firmware.md, "The mbed
  * flavour"). On the board the library's TPM1 interrupt starts a camera read-out every servo period
  * and its ADC interrupt fills the image; here images arrive while the program waits or polls. */
 #ifndef _TFC_H

@@ -1,7 +1,7 @@
 /* mbed.h of the simulator's mbed FRDM-TFC kit (simrunner drive main.cpp --kit tfc-mbed): the
  * part of the mbed 2 / mbed OS 5 C++ API that FRDM-KL25Z + FRDM-TFC programs use, with mbed's
  * names and signatures (the drivers' headers, platform/Callback.h, the KL25Z target's PinNames.h),
- * implemented on the simulated car (../tfc_mbed.cpp; docs/c_controllers.md, "The mbed flavour"):
+ * implemented on the simulated car (../tfc_mbed.cpp; docs/firmware.md, "The mbed flavour"):
  * - wait(s), wait_ms, wait_us, sleep(), __WFI(): simulated time passes (a physics step at least);
  * - Timer, us_ticker_read(): simulated time; Ticker, Timeout: handlers run by simulated time, as
  *   interrupts inside main()'s waits (not inside a handler: a wait there ends the run);
@@ -121,7 +121,7 @@ private:
 };
 
 /* drivers/Ticker.h, Timeout.h: the handler every `t` seconds (once, for a Timeout) of simulated
- * time from attach(), run by the kit's clock (docs/c_controllers.md, "The mbed flavour"). */
+ * time from attach(), run by the kit's clock (docs/firmware.md, "The mbed flavour"). */
 class Ticker {
 public:
     Ticker() {}

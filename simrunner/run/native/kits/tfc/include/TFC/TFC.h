@@ -1,7 +1,7 @@
 /* TFC.h of the simulator's TFC kit: the FRDM-TFC shield library's API (TFC_Init, TFC_Task,
  * the servo, the two motors, the line-scan camera, the potentiometers, DIP switches, push
  * buttons and LEDs, the SysTick tickers) implemented on the simulated car
- * (simrunner/run/native/kits/tfc/tfc.c; docs/c_controllers.md, "Kit libraries"). */
+ * (simrunner/run/native/kits/tfc/tfc.c; docs/firmware.md). */
 #ifndef TFC_H_
 #define TFC_H_
 

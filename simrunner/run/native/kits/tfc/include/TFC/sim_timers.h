@@ -3,7 +3,7 @@
  * Sub-Family Reference Manual KL25P80M48SF0RM: chapter 33 LPTMR, 32 PIT, 31 TPM, 12 SIM; the
  * Cortex-M0+ NVIC): registers of both spellings (LPTMR0_CSR and LPTMR0->CSR) are memory that
  * keeps what is written and does nothing else. The handler's rate is not read from them: run
- * with --isr NAME@HZ (docs/c_controllers.md, Timer interrupts), e.g. --isr LPTimer_IRQHandler@100.
+ * with --isr NAME@HZ (docs/firmware.md, Timer interrupts), e.g. --isr LPTimer_IRQHandler@100.
  * The TFC library's own timers (TPM0, TPM1, the PIT's camera timing) stay the library's. */
 #ifndef NXPCUP_SIM_TFC_TIMERS_H
 #define NXPCUP_SIM_TFC_TIMERS_H
