@@ -485,3 +485,10 @@ def test_a_handler_that_waits_for_time_is_named_as_such(tmp_path):
               time_limit_s=5.0, wall_limit_s=2.0)
     assert r.outcome == "controller_error" and "delay_isr.c:4: TFC_Delay_mS(5) inside an interrupt handler" \
         in r.message, r.message
+
+
+def test_more_handlers_than_the_table_holds_is_bad_input(tmp_path):
+    src = tmp_path / "many.c"
+    src.write_text("void tick(void) {}\nint main(void) { return 0; }\n")
+    with pytest.raises(ControllerFileError, match="33 handlers, at most 32"):
+        with_isrs(build_program([src]), [("tick", 0.1)] * 33)

@@ -58,6 +58,7 @@ KIT_REGISTERS = {"tfc": re.compile(r"[‘'`]((?:GPIO|FGPIO|PORT)[A-E]_\w+|(?:TPM
                                         r"Mutex|Semaphore|EventQueue|Queue|Mail|rtos|USBSerial|NVIC_\w+)[’'`] "
                                         r"(?:undeclared|was not declared|does not name a type)")}
 C_SUFFIXES = (".c",)
+MAX_ISRS = 32  # interrupt handlers a program may have (MAX_ISRS in host/spinner_host.c)
 CXX_SUFFIXES = (".cpp", ".cc", ".cxx", ".C")
 LIB_SUFFIXES = (".so",)
 NATIVE_SUFFIXES = C_SUFFIXES + CXX_SUFFIXES + LIB_SUFFIXES
@@ -118,6 +119,8 @@ def with_isrs(program: NativeProgram, isrs: list[tuple[str, float]]) -> NativePr
     a ControllerFileError when it defines no such function."""
     if not isrs:
         return program
+    if len(isrs) > MAX_ISRS:
+        raise ControllerFileError(f"--isr: {len(isrs)} handlers, at most {MAX_ISRS} (spinner_host.c's table)")
     names = exported_functions(program.library)
     for name, _ in isrs:
         if names is not None and name not in names:
