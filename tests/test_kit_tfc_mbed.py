@@ -361,3 +361,19 @@ def test_missing_car_sections_end_the_run_at_the_programs_line(tmp_path):
         """, name="third.cpp")
     assert r.outcome == "controller_error" and "third.cpp:6" in r.message
     assert "QEI number 3 (channel A PTA1): the car has 2 wheel encoders" in r.message
+
+
+def test_an_mbed_program_named_dot_c_is_told_to_be_cpp(tmp_path):
+    """mbed's API is C++: a .c file that includes mbed.h is one line naming the fix (before, a
+    screen of compile errors); a plain C module beside the C++ program still builds."""
+    src = tmp_path / "main.c"
+    src.write_text('#include "mbed.h"\n#include "TFC.h"\nint main(void) { TFC_Init(); return 0; }\n')
+    with pytest.raises(ControllerFileError, match=r"main.c: includes mbed.h, whose API is C\+\+: name the file main.cpp"):
+        build_program([src], kit="tfc-mbed")
+    cpp = tmp_path / "prog.cpp"
+    cpp.write_text('#include "mbed.h"\n#include "TFC.h"\nextern "C" int twice(int);\n'
+                   'int main() { TFC_Init(); return twice(2) == 4 ? 0 : 1; }\n')
+    helper = tmp_path / "calc.c"
+    helper.write_text("int twice(int x) { return 2 * x; }\n")
+    r = drive(build_program([cpp, helper], kit="tfc-mbed"), track="floor", time_limit_s=1.0)
+    assert r.outcome == "controller_returned", r.message

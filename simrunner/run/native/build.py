@@ -114,6 +114,15 @@ def exported_functions(library: str | Path) -> set[str] | None:
             if len(parts) == 3 and parts[1] in "TtWi"}
 
 
+def _includes_mbed(source: Path) -> bool:
+    """``source`` includes mbed.h."""
+    try:
+        text = source.read_text(errors="replace")
+    except OSError:
+        return False  # the compiler says what is wrong with it
+    return re.search(r'^\s*#\s*include\s*[<"]mbed\.h[>"]', text, re.M) is not None
+
+
 def with_isrs(program: NativeProgram, isrs: list[tuple[str, float]]) -> NativeProgram:
     """``program`` whose functions ``isrs`` (``(name, period_s)``) are called as timer interrupts;
     a ControllerFileError when it defines no such function."""
@@ -457,6 +466,9 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
                 raise ControllerFileError(f"{s}: the kit's own driver source: --kit {kit} provides "
                                           f"{Path(s).stem}.h's functions on the simulated car; leave it out (functions of "
                                           f"your own in it go in a file of your own)")
+            if kit == "tfc-mbed" and Path(s).suffix in C_SUFFIXES and _includes_mbed(Path(s)):
+                raise ControllerFileError(f"{s}: includes mbed.h, whose API is C++: name the file "
+                                          f"{Path(s).stem}.cpp (as mbed's own tools compile it)")
         # the kit's headers first: a project's own copies of them (Project_Headers/TFC/, with the
         # MCU's registers) are what the kit replaces; then the Windows spellings of its includes
         include_dirs = [*kit_includes, *include_dirs]
