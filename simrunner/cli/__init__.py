@@ -425,18 +425,12 @@ def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs
             raise ControllerFileError(f"{controller}: --isr is for C/C++ firmware (in Python: "
                                       f"spinner.every(period_s, handler))")
         return controller
-    from simrunner.run.native import build_program, is_native
-    from simrunner.run.native.build import with_isrs
+    from simrunner.run.native.build import build_firmware
 
-    sources = [controller, *more_sources]
-    bad = [s for s in sources if not is_native(s)]
-    if bad:
-        raise ControllerFileError(f"{bad[0]}: several files, -I and -D are for C/C++ controllers "
-                                  f"(.c, .cpp sources or one .so)")
-    program = build_program(sources, include_dirs=list(include_dirs), defines=list(defines), kit=kit)
+    program = build_firmware([controller, *more_sources], include_dirs=include_dirs, defines=defines,
+                             kit=kit, isrs=timers)
     if program.warnings.strip():
         click.echo(program.warnings.rstrip(), err=True)
-    program = with_isrs(program, timers)
     return dataclasses.replace(program, isolate=True) if isolate else program
 
 

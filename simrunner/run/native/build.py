@@ -139,6 +139,19 @@ def with_isrs(program: NativeProgram, isrs: list[tuple[str, float]]) -> NativePr
     return dataclasses.replace(program, isrs=tuple(isrs))
 
 
+def build_firmware(sources: list[str | Path], *, include_dirs=(), defines=(), kit: str | None = None,
+                   isrs=()) -> NativeProgram:
+    """The program of C/C++ ``sources`` as ``drive``, ``check`` and ``batch`` take it: built
+    (:func:`build_program`) and its ``isrs`` (``(name, period_s)``) set (:func:`with_isrs`); a
+    ControllerFileError when a source is not C/C++ or the build fails."""
+    bad = [s for s in sources if not is_native(s)]
+    if bad:
+        raise ControllerFileError(f"{bad[0]}: several files, -I, -D, --kit and --isr are for C/C++ "
+                                  f"controllers (.c, .cpp sources or one .so)")
+    program = build_program(list(sources), include_dirs=list(include_dirs), defines=list(defines), kit=kit)
+    return with_isrs(program, list(isrs))
+
+
 def is_native(path: str | Path) -> bool:
     """True for a C/C++ source or a shared library (what ``simrunner drive`` compiles/loads)."""
     return Path(path).suffix in NATIVE_SUFFIXES

@@ -85,19 +85,13 @@ def _program(controller: Path, build: dict):
     None for a Python controller; a ControllerFileError for a bad build."""
     if not any(build.values()) and controller.suffix == ".py":
         return None  # (a Python batch does not import the C build machinery: ~15 ms of start-up)
-    from simrunner.errors import ControllerFileError
-    from simrunner.run.native.build import build_program, is_native, with_isrs
+    from simrunner.run.native.build import build_firmware, is_native
 
-    sources = [str(controller), *map(str, build.get("sources", ()))]
     if not any(build.values()) and not is_native(controller):
         return None
-    bad = [s for s in sources if not is_native(s)]
-    if bad:
-        raise ControllerFileError(f"{bad[0]}: several files, -I, -D, --kit and --isr are for C/C++ "
-                                  f"controllers (.c, .cpp sources or one .so)")
-    program = build_program(sources, include_dirs=list(build.get("include_dirs", ())),
-                            defines=list(build.get("defines", ())), kit=build.get("kit"))
-    return with_isrs(program, list(build.get("isrs", ())))
+    return build_firmware([str(controller), *map(str, build.get("sources", ()))],
+                          include_dirs=build.get("include_dirs", ()), defines=build.get("defines", ()),
+                          kit=build.get("kit"), isrs=build.get("isrs", ()))
 
 
 def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: str | int = 1,
