@@ -363,6 +363,26 @@ def test_missing_car_sections_end_the_run_at_the_programs_line(tmp_path):
     assert "QEI number 3 (channel A PTA1): the car has 2 wheel encoders" in r.message
 
 
+def test_a_fault_inside_a_kit_headers_function_names_the_programs_call(tmp_path):
+    """A fault inside a kit header's function that is not inlined (MMA8451Q::getAccAllAxis given
+    NULL): the report names the program's line that called into the kit, as for the kit's sources;
+    the backtrace names the header's line (it once named main.cpp at the header's line 49)."""
+    r = sensor_drive(tmp_path, """\
+        #include "mbed.h"
+        #include "MMA8451Q.h"
+        MMA8451Q acc(PTE25, PTE24, 0x1d << 1);
+        int main() {
+            wait(0.1);
+            float *axes = NULL;
+            acc.getAccAllAxis(axes);
+            return 0;
+        }
+        """, name="null_axes.cpp")
+    assert r.outcome == "controller_error"
+    assert "null_axes.cpp:7: SIGSEGV: segmentation fault (in main())" in r.message, r.message
+    assert "MMA8451Q.h:" in r.error.traceback_text and "null_axes.cpp:49" not in r.error.traceback_text
+
+
 def test_an_mbed_program_named_dot_c_is_told_to_be_cpp(tmp_path):
     """mbed's API is C++: a .c file that includes mbed.h is one line naming the fix (before, a
     screen of compile errors); a plain C module beside the C++ program still builds."""

@@ -62,8 +62,11 @@ MAX_ISRS = 32  # interrupt handlers a program may have (MAX_ISRS in host/spinner
 CXX_SUFFIXES = (".cpp", ".cc", ".cxx", ".C")
 LIB_SUFFIXES = (".so",)
 NATIVE_SUFFIXES = C_SUFFIXES + CXX_SUFFIXES + LIB_SUFFIXES
-# debug info for file:line in fault reports; -Og keeps lines exact and the code quick
-COMMON_FLAGS = ("-g", "-Og", "-fno-omit-frame-pointer", "-fPIC", "-Wall")
+# debug info for file:line in fault reports; -Og keeps lines exact and the code quick. DWARF 4:
+# binutils' addr2line (2.40, Debian 12) reads GCC 12's DWARF 5 line table's file 1 as the source
+# file itself, so a fault in a function out of a header (a kit's, or the program's own, not
+# inlined) was named at the header's line in the .c/.cpp file; the code is the same either way.
+COMMON_FLAGS = ("-g", "-gdwarf-4", "-Og", "-fno-omit-frame-pointer", "-fPIC", "-Wall")
 C_FLAGS = ("-std=gnu11",)
 CXX_FLAGS = ("-std=gnu++17",)
 # GCC makes the statics of inline functions and templates process-wide (STB_GNU_UNIQUE): a
