@@ -186,9 +186,9 @@ def test_misuse_is_one_clear_line(tmp_path):
     assert r.outcome == "controller_error" and "Serial::getc: not emulated" in r.message
     assert "getc.cpp:4" in r.message
     regs = tmp_path / "regs.cpp"
-    regs.write_text('#include "mbed.h"\n#include "TFC.h"\nInterruptIn enc(PTA13);\n'
+    regs.write_text('#include "mbed.h"\n#include "TFC.h"\nSPI flash(PTD2, PTD3, PTD1);\n'
                     'int main() { TAOS_SI_HIGH; return 0; }\n')
-    with pytest.raises(ControllerFileError, match=r"(?s)regs.cpp:3:.*InterruptIn, PTD: the MCU's registers "
+    with pytest.raises(ControllerFileError, match=r"(?s)regs.cpp:3:.*PTD, SPI: the MCU's registers "
                                                   r"or mbed drivers, not emulated by the simulator's --kit tfc-mbed"):
         build_program([str(regs)], kit="tfc-mbed")
     lib = tmp_path / "FRDM-TFC" / "TFC.cpp"

@@ -32,7 +32,8 @@ HOST_SOURCE = NATIVE_DIR / "host" / "spinner_host.c"
 KITS_DIR = NATIVE_DIR / "kits"
 #: Kit libraries a firmware builds against (``--kit NAME``): NAME -> its sources beside its include/
 #: (in kits/NAME, a ``-`` spelt ``_``). tfc-mbed: the FRDM-TFC library's mbed flavour (C++).
-KITS = {"tfc": ("tfc.c",), "s32k144": ("s32k144.c",), "tfc-mbed": ("tfc_mbed.cpp", "sensors.cpp")}
+KITS = {"tfc": ("tfc.c",), "s32k144": ("s32k144.c",),
+        "tfc-mbed": ("tfc_mbed.cpp", "sensors.cpp", "interrupt_in.cpp")}
 #: A kit's own driver sources in a team's project, which the kit library replaces (passing one is
 #: an error naming it rather than the linker's "multiple definition").
 KIT_REPLACES = {"s32k144": ("servo.c", "hbridge.c", "esc.c", "linear_camera.c", "display.c",
@@ -53,7 +54,7 @@ KIT_REGISTERS = {"tfc": re.compile(r"[‘'`]((?:GPIO|FGPIO|PORT)[A-E]_\w+|(?:TPM
                  # the tfc-mbed kit's mbed.h leaves out
                  "tfc-mbed": re.compile(r"[‘'`]((?:PT[A-E]|FPT[A-E]|PORT[A-E]|TPM[0-2]|ADC0|PIT|SIM|UART[0-2]|"
                                         r"I2C[01]|SPI[01]|DMA0|DMAMUX0|MCG|LPTMR0|SysTick|SCB|RTC|TSI0|DAC0|"
-                                        r"USB0|SMC|PMC)(?:_\w+)?|InterruptIn|I2C|SPI|SPISlave|I2CSlave|CAN|PwmIn|"
+                                        r"USB0|SMC|PMC)(?:_\w+)?|I2C|SPI|SPISlave|I2CSlave|CAN|PwmIn|"
                                         r"DigitalInOut|PortIn|PortOut|BusInOut|LowPowerTicker|Thread|ThisThread|"
                                         r"Mutex|Semaphore|EventQueue|Queue|Mail|rtos|USBSerial|NVIC_\w+)[’'`] "
                                         r"(?:undeclared|was not declared|does not name a type)")}

@@ -63,6 +63,27 @@ void tfc_mbed_qei_set(struct tfc_mbed_qei *q, int pulses, int revolutions, const
 void tfc_mbed_mma_attach(void);
 int tfc_mbed_mma_counts(int axis, const char *what);  /* axis 0..2: the library's 14-bit reading */
 
+/* InterruptIn (mbed.h): a pin's edges call the program's handlers at the kit's ticks
+ * (../interrupt_in.cpp). A pin given to a wheel's encoder by --param encoder_PTxN=W (channel A)
+ * or encoder_b_PTxN=W (channel B) has that channel's level; other pins keep theirs. */
+struct tfc_mbed_irq {
+    int pin;
+    int on_rise, on_fall;      /* rise()/fall() attached a handler */
+    int pending;               /* an edge that came while its port's interrupts were disabled */
+    void (*call)(void *obj, int rising);  /* the InterruptIn's handlers */
+    void *obj;
+};
+void tfc_mbed_irq_attach(struct tfc_mbed_irq *irq, int pin);
+void tfc_mbed_irq_detach(struct tfc_mbed_irq *irq);
+void tfc_mbed_irq_set(struct tfc_mbed_irq *irq, int on_rise, int on_fall, const char *what);
+void tfc_mbed_irq_enable(struct tfc_mbed_irq *irq, int enable, const char *what);
+int tfc_mbed_irq_read(struct tfc_mbed_irq *irq, const char *what);
+/* 1 and the level in *level when --param binds `pin` to an encoder's channel (a read of the
+ * board: DigitalIn reads it so), else 0 */
+int tfc_mbed_encoder_pin(int pin, int *level);
+/* The kit's clock calls edges() at each tick after the sensors' sample() (../interrupt_in.cpp). */
+void tfc_mbed_on_edges(void (*edges)(void));
+
 /* the FRDM-TFC library's globals whose reads poll (TFC.h's macros) */
 volatile uint8_t *tfc_mbed_image_ready(void);   /* the flag itself: no poll */
 /* TFC_LineScanImageReady: reading it polls, writing it does not (a poll may fetch an image,
