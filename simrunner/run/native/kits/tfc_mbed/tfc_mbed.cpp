@@ -2,7 +2,9 @@
  * (simrunner drive main.cpp --kit tfc-mbed; include/mbed.h, include/TFC.h). Our own code, on
  * spinner.h; the mapping of the board onto the car is the TFC kit's (../tfc/tfc.c):
  * - time: a 1 kHz timer interrupt of the kit (spinner_every) keeps the simulated time, counts
- *   TFC_ServoTicker and runs the program's Ticker/Timeout handlers that fell due (in due order);
+ *   TFC_ServoTicker, has the sensors sampled (sensors.cpp) and InterruptIn's edges of the
+ *   millisecond gone handled (interrupt_in.cpp), then runs the program's Ticker/Timeout handlers
+ *   that fell due (in due order);
  *   main() lets time pass in wait*(), sleep(), __WFI() and in reads of the board (poll());
  * - the camera: on the board the library's TPM1 interrupt starts a read-out every servo frame
  *   (SERVO_DEFAULT_PERIOD, 10 ms) and its ADC interrupt fills the image (TFC.cpp); here, when a
