@@ -418,6 +418,29 @@ def test_a_slow_symboliser_neither_loses_the_line_nor_steps_the_simulation(tmp_p
     assert r.sim_time_s == before.sim_time_s and r.frames == before.frames
 
 
+def test_a_fault_in_a_function_of_a_header_names_the_header(tmp_path, track):
+    """A function the program's header defines, not inlined, that faults: the report names the
+    header's file and line (binutils' addr2line once named the .c file at the header's line)."""
+    write(tmp_path, "util.h", """\
+        static void __attribute__((noinline)) poke(int *p) {
+            *p = 1;
+        }
+        """)
+    src = write(tmp_path, "prog.c", """\
+        #include "util.h"
+        #include "spinner.h"
+        int main(void) {
+            spinner_get_time();
+            poke(0);
+            return 0;
+        }
+        """)
+    r = drive(build_program([src]), track=track, time_limit_s=1.0)
+    assert r.outcome == "controller_error"
+    assert "util.h:2: SIGSEGV: segmentation fault (in poke())" in r.message, r.message
+    assert "prog.c:5" in r.error.traceback_text
+
+
 def test_fault_report_parsing_table():
     """The host's report format: handler frames dropped, frames below main cut."""
     host, lib = "/x/spinner_host", "/x/ctrl.so"

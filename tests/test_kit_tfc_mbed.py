@@ -186,9 +186,9 @@ def test_misuse_is_one_clear_line(tmp_path):
     assert r.outcome == "controller_error" and "Serial::getc: not emulated" in r.message
     assert "getc.cpp:4" in r.message
     regs = tmp_path / "regs.cpp"
-    regs.write_text('#include "mbed.h"\n#include "TFC.h"\nInterruptIn enc(PTA13);\n'
+    regs.write_text('#include "mbed.h"\n#include "TFC.h"\nSPI flash(PTD2, PTD3, PTD1);\n'
                     'int main() { TAOS_SI_HIGH; return 0; }\n')
-    with pytest.raises(ControllerFileError, match=r"(?s)regs.cpp:3:.*InterruptIn, PTD: the MCU's registers "
+    with pytest.raises(ControllerFileError, match=r"(?s)regs.cpp:3:.*PTD, SPI: the MCU's registers "
                                                   r"or mbed drivers, not emulated by the simulator's --kit tfc-mbed"):
         build_program([str(regs)], kit="tfc-mbed")
     lib = tmp_path / "FRDM-TFC" / "TFC.cpp"
@@ -361,6 +361,26 @@ def test_missing_car_sections_end_the_run_at_the_programs_line(tmp_path):
         """, name="third.cpp")
     assert r.outcome == "controller_error" and "third.cpp:6" in r.message
     assert "QEI number 3 (channel A PTA1): the car has 2 wheel encoders" in r.message
+
+
+def test_a_fault_inside_a_kit_headers_function_names_the_programs_call(tmp_path):
+    """A fault inside a kit header's function that is not inlined (MMA8451Q::getAccAllAxis given
+    NULL): the report names the program's line that called into the kit, as for the kit's sources;
+    the backtrace names the header's line (it once named main.cpp at the header's line 49)."""
+    r = sensor_drive(tmp_path, """\
+        #include "mbed.h"
+        #include "MMA8451Q.h"
+        MMA8451Q acc(PTE25, PTE24, 0x1d << 1);
+        int main() {
+            wait(0.1);
+            float *axes = NULL;
+            acc.getAccAllAxis(axes);
+            return 0;
+        }
+        """, name="null_axes.cpp")
+    assert r.outcome == "controller_error"
+    assert "null_axes.cpp:7: SIGSEGV: segmentation fault (in main())" in r.message, r.message
+    assert "MMA8451Q.h:" in r.error.traceback_text and "null_axes.cpp:49" not in r.error.traceback_text
 
 
 def test_an_mbed_program_named_dot_c_is_told_to_be_cpp(tmp_path):

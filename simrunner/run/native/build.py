@@ -32,7 +32,8 @@ HOST_SOURCE = NATIVE_DIR / "host" / "spinner_host.c"
 KITS_DIR = NATIVE_DIR / "kits"
 #: Kit libraries a firmware builds against (``--kit NAME``): NAME -> its sources beside its include/
 #: (in kits/NAME, a ``-`` spelt ``_``). tfc-mbed: the FRDM-TFC library's mbed flavour (C++).
-KITS = {"tfc": ("tfc.c",), "s32k144": ("s32k144.c",), "tfc-mbed": ("tfc_mbed.cpp", "sensors.cpp")}
+KITS = {"tfc": ("tfc.c",), "s32k144": ("s32k144.c",),
+        "tfc-mbed": ("tfc_mbed.cpp", "sensors.cpp", "interrupt_in.cpp")}
 #: A kit's own driver sources in a team's project, which the kit library replaces (passing one is
 #: an error naming it rather than the linker's "multiple definition").
 KIT_REPLACES = {"s32k144": ("servo.c", "hbridge.c", "esc.c", "linear_camera.c", "display.c",
@@ -53,7 +54,7 @@ KIT_REGISTERS = {"tfc": re.compile(r"[‘'`]((?:GPIO|FGPIO|PORT)[A-E]_\w+|(?:TPM
                  # the tfc-mbed kit's mbed.h leaves out
                  "tfc-mbed": re.compile(r"[‘'`]((?:PT[A-E]|FPT[A-E]|PORT[A-E]|TPM[0-2]|ADC0|PIT|SIM|UART[0-2]|"
                                         r"I2C[01]|SPI[01]|DMA0|DMAMUX0|MCG|LPTMR0|SysTick|SCB|RTC|TSI0|DAC0|"
-                                        r"USB0|SMC|PMC)(?:_\w+)?|InterruptIn|I2C|SPI|SPISlave|I2CSlave|CAN|PwmIn|"
+                                        r"USB0|SMC|PMC)(?:_\w+)?|I2C|SPI|SPISlave|I2CSlave|CAN|PwmIn|"
                                         r"DigitalInOut|PortIn|PortOut|BusInOut|LowPowerTicker|Thread|ThisThread|"
                                         r"Mutex|Semaphore|EventQueue|Queue|Mail|rtos|USBSerial|NVIC_\w+)[’'`] "
                                         r"(?:undeclared|was not declared|does not name a type)")}
@@ -62,8 +63,11 @@ MAX_ISRS = 32  # interrupt handlers a program may have (MAX_ISRS in host/spinner
 CXX_SUFFIXES = (".cpp", ".cc", ".cxx", ".C")
 LIB_SUFFIXES = (".so",)
 NATIVE_SUFFIXES = C_SUFFIXES + CXX_SUFFIXES + LIB_SUFFIXES
-# debug info for file:line in fault reports; -Og keeps lines exact and the code quick
-COMMON_FLAGS = ("-g", "-Og", "-fno-omit-frame-pointer", "-fPIC", "-Wall")
+# debug info for file:line in fault reports; -Og keeps lines exact and the code quick. DWARF 4:
+# binutils' addr2line (2.40, Debian 12) reads GCC 12's DWARF 5 line table's file 1 as the source
+# file itself, so a fault in a function out of a header (a kit's, or the program's own, not
+# inlined) was named at the header's line in the .c/.cpp file; the code is the same either way.
+COMMON_FLAGS = ("-g", "-gdwarf-4", "-Og", "-fno-omit-frame-pointer", "-fPIC", "-Wall")
 C_FLAGS = ("-std=gnu11",)
 CXX_FLAGS = ("-std=gnu++17",)
 # GCC makes the statics of inline functions and templates process-wide (STB_GNU_UNIQUE): a

@@ -4,7 +4,9 @@ The host program (``host/spinner_host.c``) reports a fault as text: ``signal N``
 TEXT``, optionally ``pc ADDR`` (the faulting instruction) and one ``frame ADDR OFFSET
 PATH<TAB>SYMBOL`` line per return address (glibc ``backtrace`` + ``dladdr``). Frames in the
 controller's own library are symbolised with its debug info by ``addr2line`` (binutils,
-part of ``build-essential``); without it, frames keep their symbol names only.
+part of ``build-essential``); without it, frames keep their symbol names only. The builds
+write DWARF 4 (``build.COMMON_FLAGS``): binutils 2.40 names the wrong file for some DWARF 5
+lines (a header's function as the source file at the header's line).
 """
 from __future__ import annotations
 

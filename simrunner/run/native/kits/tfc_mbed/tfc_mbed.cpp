@@ -2,7 +2,9 @@
  * (simrunner drive main.cpp --kit tfc-mbed; include/mbed.h, include/TFC.h). Our own code, on
  * spinner.h; the mapping of the board onto the car is the TFC kit's (../tfc/tfc.c):
  * - time: a 1 kHz timer interrupt of the kit (spinner_every) keeps the simulated time, counts
- *   TFC_ServoTicker and runs the program's Ticker/Timeout handlers that fell due (in due order);
+ *   TFC_ServoTicker, has the sensors sampled (sensors.cpp) and InterruptIn's edges of the
+ *   millisecond gone handled (interrupt_in.cpp), then runs the program's Ticker/Timeout handlers
+ *   that fell due (in due order);
  *   main() lets time pass in wait*(), sleep(), __WFI() and in reads of the board (poll());
  * - the camera: on the board the library's TPM1 interrupt starts a read-out every servo frame
  *   (SERVO_DEFAULT_PERIOD, 10 ms) and its ADC interrupt fills the image (TFC.cpp); here, when a
@@ -64,6 +66,7 @@ static struct {
     struct tfc_mbed_event *events[MAX_EVENTS];
     int n_events;
     void (*sample)(void);   /* the sensors' read at each tick (tfc_mbed_on_tick) */
+    void (*edges)(void);    /* InterruptIn's edges at each tick (tfc_mbed_on_edges) */
 } k;
 
 static double clampd(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
@@ -102,6 +105,7 @@ static void clock_isr(void) {
     k.now_s = spinner_get_time();  /* inside an interrupt: no time passes */
     k.in_isr = 1;
     if (k.sample) k.sample();
+    if (k.edges) k.edges();  /* the pins' edges of the millisecond gone, before the Tickers due */
     run_due();
     k.in_isr = 0;
 }
@@ -137,6 +141,8 @@ int tfc_mbed_in_isr(void) { return k.in_isr || spinner_in_interrupt(); }  /* a T
 int tfc_mbed_started(void) { return k.started; }
 
 void tfc_mbed_on_tick(void (*sample)(void)) { k.sample = sample; }
+
+void tfc_mbed_on_edges(void (*edges)(void)) { k.edges = edges; }
 
 /* The read-out: a new image once a servo frame has passed since the last (the tolerance: the
  * camera's frame is a step or two away, as in the TFC kit's camera_service). */
@@ -186,8 +192,8 @@ void tfc_mbed_wait_s(double s, const char *what) {
     tfc_mbed_start();
     if (tfc_mbed_in_isr()) {
         char why[200];
-        snprintf(why, sizeof why, "%s(...) inside a Ticker or Timeout handler: no simulated time passes "
-                 "in an interrupt; wait in main()", what);
+        snprintf(why, sizeof why, "%s(...) inside a Ticker, Timeout or InterruptIn handler: no simulated "
+                 "time passes in an interrupt; wait in main()", what);
         tfc_mbed_not_emulated(what, why);
     }
     k.polls = 0;
@@ -263,6 +269,8 @@ int tfc_mbed_digital_read(int pin) {
     if (pin == PTC13) return param_button(0);
     if (pin == PTC17) return param_button(1);
     if (pin >= PTE2 && pin <= PTE5) return (TFC_GetDIP_Switch() >> ((pin - PTE2) >> 2)) & 1;
+    int level;
+    if (tfc_mbed_encoder_pin(pin, &level)) return level;
     return pin_param("digital", pin, 0.0) != 0;
 }
 

@@ -9,9 +9,13 @@
  *   the run naming the line, readable() is 0);
  * - DigitalOut, DigitalIn, BusOut, BusIn, PwmOut, AnalogIn, AnalogOut: the FRDM-TFC's pins act on
  *   the car (PTE21 the H-bridge enable, PTB8..11 the LEDs, PTC13/PTC17 the buttons, PTE2..5 the
- *   DIP switch, PTB2/PTB3 the pots, PTE29 the battery sense, a servo pulse on PTB0 steers); other
- *   outputs keep what is written, other inputs read --param digital_PTxN / analog_PTxN.
- * What is not here (InterruptIn, I2C, SPI, CAN, threads, the MCU's registers) does not compile. */
+ *   DIP switch, PTB2/PTB3 the pots, PTE29 the battery sense, a servo pulse on PTB0 steers); a pin
+ *   --param encoder_PTxN=W (encoder_b_PTxN=W) gives wheel W's encoder reads its channel A (B);
+ *   other outputs keep what is written, other inputs read --param digital_PTxN / analog_PTxN;
+ * - InterruptIn (InterruptIn.h): rise()/fall() handlers run as interrupts at the kit's 1-kHz ticks
+ *   for the edges of the millisecond gone: an encoder's channel on a pin as above; other pins keep
+ *   their level (no edges); ports A and D only, as the KL25Z.
+ * What is not here (I2C, SPI, CAN, threads, the MCU's registers) does not compile. */
 #ifndef MBED_H
 #define MBED_H
 #include <math.h>
@@ -21,6 +25,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <type_traits>
 #include "tfc_mbed_sim.h"
 
 #define MBED_LIBRARY_VERSION 161
@@ -71,7 +76,9 @@ inline void deepsleep() { tfc_mbed_idle(); }
 
 namespace mbed {
 
-/* platform/Callback.h: a function, or an object and its method, taking nothing. */
+/* platform/Callback.h: a function, an object and its method, a function and its argument, or a
+ * function object (a lambda) of up to two pointers' size (mbed OS 5 takes one pointer's), taking
+ * nothing. */
 template <typename F> class Callback;
 template <> class Callback<void()> {
 public:
@@ -79,6 +86,21 @@ public:
     Callback(void (*fn)()) : fn_(fn) {}
     template <typename T> Callback(T *obj, void (T::*method)()) { bind(obj, method); }
     template <typename T> Callback(void (T::*method)(), T *obj) { bind(obj, method); }
+    template <typename T> Callback(void (*func)(T *), T *arg) {
+        obj_ = arg;
+        memcpy(method_, &func, sizeof func);
+        thunk_ = [](const Callback *c) {
+            void (*f)(T *);
+            memcpy(&f, c->method_, sizeof f);
+            f(static_cast<T *>(c->obj_));
+        };
+    }
+    template <typename F, typename = decltype(&F::operator())> Callback(F f) {
+        static_assert(sizeof(F) <= sizeof method_ && std::is_trivially_copyable<F>::value,
+                      "a Callback holds a function object (a lambda) of up to two pointers' captures");
+        memcpy(method_, &f, sizeof f);
+        thunk_ = [](const Callback *c) { (*reinterpret_cast<F *>(const_cast<unsigned char *>(c->method_)))(); };
+    }
     void call() const { if (thunk_) thunk_(this); else if (fn_) fn_(); }
     void operator()() const { call(); }
     explicit operator bool() const { return thunk_ || fn_; }
@@ -95,12 +117,14 @@ private:
     }
     void (*fn_)() = nullptr;
     void *obj_ = nullptr;
-    unsigned char method_[2 * sizeof(void *)] = {};
+    alignas(void *) unsigned char method_[2 * sizeof(void *)] = {};
     void (*thunk_)(const Callback *) = nullptr;
 };
 inline Callback<void()> callback(void (*fn)()) { return Callback<void()>(fn); }
 template <typename T> Callback<void()> callback(T *obj, void (T::*method)()) { return Callback<void()>(obj, method); }
 template <typename T> Callback<void()> callback(void (T::*method)(), T *obj) { return Callback<void()>(obj, method); }
+template <typename T> Callback<void()> callback(void (*func)(T *), T *arg) { return Callback<void()>(func, arg); }
+template <typename F, typename = decltype(&F::operator())> Callback<void()> callback(F f) { return Callback<void()>(f); }
 typedef Callback<void()> FunctionPointer;
 
 /* drivers/Timer.h: simulated time while running; reading it is a read of the board */
@@ -291,6 +315,7 @@ public:
 
 }  // namespace mbed
 
+#include "InterruptIn.h"
 using namespace mbed;
 using namespace std;
 #endif

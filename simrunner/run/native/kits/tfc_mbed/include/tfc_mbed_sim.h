@@ -2,8 +2,9 @@
  * and its implementation (../tfc_mbed.cpp, on spinner.h). Not part of either library's API.
  *
  * Time: the kit keeps simulated time with a 1 kHz timer interrupt of its own (spinner_every),
- * started at the first call into the kit: it reads the time, advances TFC_ServoTicker and runs the
- * program's Ticker/Timeout handlers that fell due (mbed's us_ticker interrupt). main() lets time
+ * started at the first call into the kit: it reads the time, advances TFC_ServoTicker, runs the
+ * InterruptIn handlers of the edges since the last tick and the program's Ticker/Timeout handlers
+ * that fell due (mbed's us_ticker interrupt). main() lets time
  * pass in wait*(), sleep(), __WFI() and, as on the board where interrupts change what it reads,
  * in reads of the board (tfc_mbed_poll: the camera flag, the tickers, Timer reads, pots,
  * switches, buttons, DigitalIn, AnalogIn) once it has read it many times without waiting. */
@@ -62,6 +63,27 @@ int tfc_mbed_qei_state(struct tfc_mbed_qei *q, const char *what);
 void tfc_mbed_qei_set(struct tfc_mbed_qei *q, int pulses, int revolutions, const char *what);
 void tfc_mbed_mma_attach(void);
 int tfc_mbed_mma_counts(int axis, const char *what);  /* axis 0..2: the library's 14-bit reading */
+
+/* InterruptIn (mbed.h): a pin's edges call the program's handlers at the kit's ticks
+ * (../interrupt_in.cpp). A pin given to a wheel's encoder by --param encoder_PTxN=W (channel A)
+ * or encoder_b_PTxN=W (channel B) has that channel's level; other pins keep theirs. */
+struct tfc_mbed_irq {
+    int pin;
+    int on_rise, on_fall;      /* rise()/fall() attached a handler */
+    int pending;               /* an edge that came while its port's interrupts were disabled */
+    void (*call)(void *obj, int rising);  /* the InterruptIn's handlers */
+    void *obj;
+};
+void tfc_mbed_irq_attach(struct tfc_mbed_irq *irq, int pin);
+void tfc_mbed_irq_detach(struct tfc_mbed_irq *irq);
+void tfc_mbed_irq_set(struct tfc_mbed_irq *irq, int on_rise, int on_fall, const char *what);
+void tfc_mbed_irq_enable(struct tfc_mbed_irq *irq, int enable, const char *what);
+int tfc_mbed_irq_read(struct tfc_mbed_irq *irq, const char *what);
+/* 1 and the level in *level when --param binds `pin` to an encoder's channel (a read of the
+ * board: DigitalIn reads it so), else 0 */
+int tfc_mbed_encoder_pin(int pin, int *level);
+/* The kit's clock calls edges() at each tick after the sensors' sample() (../interrupt_in.cpp). */
+void tfc_mbed_on_edges(void (*edges)(void));
 
 /* the FRDM-TFC library's globals whose reads poll (TFC.h's macros) */
 volatile uint8_t *tfc_mbed_image_ready(void);   /* the flag itself: no poll */

@@ -1,0 +1,229 @@
+/* mbed's InterruptIn on the FRDM-KL25Z of the mbed kit (simrunner drive main.cpp --kit tfc-mbed;
+ * include/InterruptIn.h): a pin's rising and falling edges call the program's handlers. Our own
+ * code, on spinner.h.
+ * - which pins: the KL25Z's pins interrupt on ports A and D only (KL25 Sub-Family Reference
+ *   Manual, KL25P80M48SF0RM, ch. 3, interrupt channel assignments: IRQ 30 port A, IRQ 31 port D,
+ *   no other port; mbed's KL25Z gpio_irq_api.c stops with "gpio_irq only supported on port A and
+ *   D"): an InterruptIn on another port ends the run at the program's first call to it;
+ * - what is on a pin: --param encoder_PTxN=W puts channel A of wheel W's encoder (0..3: FL, FR,
+ *   RL, RR; the car file's [encoders]) on pin PTxN, encoder_b_PTxN=W its channel B. The car's
+ *   counter gives the wheel's position: counting x4 (the default) in quarter lines, both
+ *   channels' levels (the sequence 00 01 11 10 of (A, B) counting up, as QEI.h's state); x2 in
+ *   half lines, channel A's; x1 and single in lines: each line is a rise and a fall of channel A
+ *   (its level between them is not known: it reads 0). Any other pin keeps its level (DigitalIn's
+ *   --param digital_PTxN): it gives no edges;
+ * - when: at each tick of the kit's 1-kHz clock, before the Tickers due then, the handlers of the
+ *   edges of the millisecond gone run in the order they fell (wheel by wheel, FL to RR; the pins
+ *   of one edge in the order their InterruptIns were made), each with the pin's level at its
+ *   edge; no time passes in them (they are interrupts);
+ * - disable_irq()/enable_irq(): the port's interrupt (the NVIC's PORTA or PORTD, as mbed's KL25Z
+ *   code does: every InterruptIn of the port); an edge meanwhile sets the pin's flag, which calls
+ *   its handler once at the first tick after enable_irq() (mbed's handler clears the flag). */
+#include <stdio.h>
+#include <string.h>
+
+#include "spinner.h"
+#include "tfc_mbed_sim.h"
+
+#define MAX_IRQS 32
+#define NUM_PINS (5 * 32)  /* ports A..E, 32 pins each */
+#define PORT_A 0
+#define PORT_D 3
+#define NC_PIN ((int)0xFFFFFFFF)
+
+enum { UNKNOWN = 0, FREE, ENCODER, BAD };
+
+static struct {
+    struct { int state, wheel, channel; } pin[NUM_PINS];  /* what --param puts on each pin */
+    char why[NUM_PINS][240];      /* a BAD pin's reason */
+    int tracked[4], seen[4];      /* a wheel whose pins are read; its count sampled once */
+    long long count[4];           /* its count as the edges have got to */
+    int per_line[4];              /* its counter's counts a line (4, 2, 1; 0: single) */
+    int disabled[5];              /* a port's interrupt disabled (disable_irq) */
+    struct tfc_mbed_irq *irq[MAX_IRQS];
+    int n_irq, hooked;
+} s;
+
+static int port_of(int pin) { return (pin >> 12) & 7; }
+static int index_of(int pin) { return pin == NC_PIN || port_of(pin) > 4 ? -1 : port_of(pin) * 32 + ((pin >> 2) & 31); }
+
+/* A channel's level at count c of a counter counting m a line. */
+static int level_at(int m, int channel, long long c) {
+    int q = (int)(c & 3);
+    if (m == 4) return channel ? (q == 1 || q == 2) : q >= 2;
+    return m == 2 ? (int)(c & 1) : 0;
+}
+
+static void on_edges(void);
+
+static void hook(void) {
+    if (!s.hooked) {
+        s.hooked = 1;
+        tfc_mbed_on_edges(on_edges);
+    }
+}
+
+/* What --param puts on pin i (PTxN): a wheel's encoder channel, nothing, or a reason it cannot. */
+static void resolve(int i) {
+    static const char *names[4] = {"FL", "FR", "RL", "RR"};
+    static const char *counting[5] = {"single", "x1", "x2", "?", "x4"};
+    if (s.pin[i].state != UNKNOWN) return;
+    char a[32], b[32], fitted[16] = "";
+    snprintf(a, sizeof a, "encoder_PT%c%d", 'A' + i / 32, i % 32);
+    snprintf(b, sizeof b, "encoder_b_PT%c%d", 'A' + i / 32, i % 32);
+    double wa = spinner_param(a, -1.0), wb = spinner_param(b, -1.0);
+    if (wa < 0 && wb < 0) {
+        s.pin[i].state = FREE;
+        return;
+    }
+    const char *name = wa >= 0 ? a : b;
+    double w = wa >= 0 ? wa : wb;
+    int channel = wa < 0, n = 0, m = 0;
+    for (int k = 0; k < 4; k++) {
+        if (spinner_encoder_lines(k, NULL) == 0) continue;
+        strcat(strcat(fitted, n++ ? " " : ""), names[k]);
+    }
+    int lines = w <= 3 && w == (int)w ? spinner_encoder_lines((int)w, &m) : 0;
+    char *why = s.why[i];
+    if (wa >= 0 && wb >= 0)
+        snprintf(why, sizeof s.why[i], "--param %s and %s: a pin carries one channel", a, b);
+    else if (n == 0)
+        snprintf(why, sizeof s.why[i], "--param %s: the car has no wheel encoders: add [encoders] to the car "
+                 "file (docs/car.md)", name);
+    else if (lines == 0)
+        snprintf(why, sizeof s.why[i], "--param %s=%g: expected a wheel with an encoder (0..3: FL, FR, RL, RR; "
+                 "this car has them on %s)", name, w, fitted);
+    else if (channel == 1 && m != 4)
+        snprintf(why, sizeof s.why[i], "--param %s: channel B's edges need the car's counter to count both "
+                 "channels (encoders.counting = \"x4\"; this car's: \"%s\")", name, counting[m]);
+    else {
+        s.pin[i].state = ENCODER, s.pin[i].wheel = (int)w, s.pin[i].channel = channel;
+        s.tracked[(int)w] = 1, s.per_line[(int)w] = m;
+        hook();
+        return;
+    }
+    s.pin[i].state = BAD;
+}
+
+/* Call q's handler of this edge, or set its flag while its port's interrupt is disabled. */
+static void edge(struct tfc_mbed_irq *q, int rising) {
+    if (!(rising ? q->on_rise : q->on_fall)) return;
+    if (s.disabled[port_of(q->pin)]) q->pending = 1;
+    else q->call(q->obj, rising);
+}
+
+/* Wheel w's count moves to c one count at a time; each move's edges go to the pins on w. */
+static void move(int w, long long c) {
+    int m = s.per_line[w];
+    while (s.count[w] != c) {
+        long long before = s.count[w];
+        s.count[w] += c > before ? 1 : -1;
+        for (int k = 0; k < s.n_irq; k++) {
+            struct tfc_mbed_irq *q = s.irq[k];
+            int i = index_of(q->pin);
+            if (i < 0 || s.pin[i].state != ENCODER || s.pin[i].wheel != w) continue;
+            if (m < 2) {  /* a line: a rise and a fall */
+                edge(q, 1);
+                edge(q, 0);
+                continue;
+            }
+            int was = level_at(m, s.pin[i].channel, before), now = level_at(m, s.pin[i].channel, s.count[w]);
+            if (was != now) edge(q, now);
+        }
+    }
+}
+
+static void sample(int w) {
+    long long c = spinner_get_encoder(w);
+    if (!s.seen[w]) {
+        s.seen[w] = 1;
+        s.count[w] = c;  /* the first sample: the levels from here, no edges */
+        return;
+    }
+    move(w, c);
+}
+
+static int pin_level(int i) {
+    int w = s.pin[i].wheel;
+    if (!s.seen[w]) {
+        if (tfc_mbed_in_isr()) sample(w);
+        else while (!s.seen[w]) tfc_mbed_idle();  /* main(): the first tick that reads it */
+    }
+    return level_at(s.per_line[w], s.pin[i].channel, s.count[w]);
+}
+
+/* At each tick of the kit's clock: the flags of re-enabled ports, then the wheels' edges. */
+static void on_edges(void) {
+    for (int k = 0; k < s.n_irq; k++) {
+        struct tfc_mbed_irq *q = s.irq[k];
+        if (!q->pending || s.disabled[port_of(q->pin)]) continue;
+        q->pending = 0;
+        int i = index_of(q->pin);
+        int rising = q->on_rise && q->on_fall ? (s.pin[i].state == ENCODER && pin_level(i)) : q->on_rise;
+        if (rising ? q->on_rise : q->on_fall) q->call(q->obj, rising);
+    }
+    for (int w = 0; w < 4; w++) if (s.tracked[w]) sample(w);
+}
+
+[[noreturn]] static void fail(const char *what, const char *why) {
+    char msg[400];
+    snprintf(msg, sizeof msg, "%s: %s", what, why);
+    spinner_fail(msg);
+}
+
+/* q's pin as a program's call finds it: on a port that interrupts, its --param valid. */
+static void check(struct tfc_mbed_irq *q, const char *what) {
+    tfc_mbed_start();
+    int i = index_of(q->pin);
+    if (i < 0) return;  /* NC: no pin, no edges */
+    if (port_of(q->pin) != PORT_A && port_of(q->pin) != PORT_D) {
+        char why[240];
+        snprintf(why, sizeof why, "PT%c%d: the KL25Z's pins interrupt on ports A and D only (mbed stops with "
+                 "\"gpio_irq only supported on port A and D\"): use a pin of port A or D", 'A' + i / 32, i % 32);
+        fail(what, why);
+    }
+    resolve(i);
+    if (s.pin[i].state == BAD) fail(what, s.why[i]);
+}
+
+void tfc_mbed_irq_attach(struct tfc_mbed_irq *q, int pin) {
+    q->pin = pin, q->on_rise = q->on_fall = q->pending = 0;
+    if (s.n_irq == MAX_IRQS) spinner_fail("InterruptIn: more than 32 at once");
+    s.irq[s.n_irq++] = q;
+    if (index_of(pin) >= 0) s.disabled[port_of(pin)] = 0;  /* mbed's gpio_irq_init enables the port's */
+    hook();
+}
+
+void tfc_mbed_irq_detach(struct tfc_mbed_irq *q) {
+    for (int k = 0; k < s.n_irq; k++) {
+        if (s.irq[k] != q) continue;
+        s.irq[k] = s.irq[--s.n_irq];
+        return;
+    }
+}
+
+void tfc_mbed_irq_set(struct tfc_mbed_irq *q, int on_rise, int on_fall, const char *what) {
+    check(q, what);
+    if (on_rise >= 0) q->on_rise = on_rise;
+    if (on_fall >= 0) q->on_fall = on_fall;
+}
+
+void tfc_mbed_irq_enable(struct tfc_mbed_irq *q, int enable, const char *what) {
+    check(q, what);
+    if (index_of(q->pin) >= 0) s.disabled[port_of(q->pin)] = !enable;
+}
+
+int tfc_mbed_irq_read(struct tfc_mbed_irq *q, const char *what) {
+    check(q, what);
+    return index_of(q->pin) < 0 ? 0 : tfc_mbed_digital_read(q->pin);
+}
+
+int tfc_mbed_encoder_pin(int pin, int *level) {
+    int i = index_of(pin);
+    if (i < 0) return 0;
+    resolve(i);
+    if (s.pin[i].state == BAD) spinner_fail(s.why[i]);
+    if (s.pin[i].state != ENCODER) return 0;
+    *level = pin_level(i);
+    return 1;
+}

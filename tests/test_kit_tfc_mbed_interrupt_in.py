@@ -1,0 +1,254 @@
+"""mbed's InterruptIn in the tfc-mbed kit: a pin that --param encoder_PTxN (encoder_b_PTxN) gives
+a wheel's encoder channel calls rise()/fall() handlers once an edge, at the kit's 1-kHz ticks."""
+from __future__ import annotations
+
+import textwrap
+
+import pytest
+
+from simrunner.run.native import build_program
+from simrunner.run.runner import drive
+
+ENCODERS = "[encoders]\n"  # rear encoders, 512 lines, counted x4
+
+
+def run(tmp_path, text, params=None, car=ENCODERS, name="main.cpp", time_limit_s=4.0):
+    src = tmp_path / name
+    src.write_text(textwrap.dedent(text))
+    car_file = tmp_path / "car.toml"
+    car_file.write_text(car)
+    return drive(build_program([src], kit="tfc-mbed"), track="floor", car=car_file, params=params or {},
+                 time_limit_s=time_limit_s, csv=tmp_path / "log.csv")
+
+
+def numbers(r):
+    """The integers of each spinner_add_textf line after its first word: {word: [ints]} (the lines
+    of one frame are joined by " | ")."""
+    lines = [part for s in r.log.data_text if s for part in s.split(" | ")]
+    return {s.split()[0]: [int(v) for v in s.split()[1:]] for s in lines}
+
+
+def test_rising_edges_count_the_encoders_lines_and_both_edges_its_x2_pulses(tmp_path):
+    """1 s of driving: the rising edges of RL's channel A are its lines passed (its x4 count / 4)
+    within one; rises and falls (the fall handler an object's method) are QEI's X2 pulses and,
+    with channel B's edges (a lambda), its x4 count exactly; every handler runs at a tick (whole
+    milliseconds) and reads the pin's level at its edge."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "QEI.h"
+        #include "spinner.h"
+        InterruptIn channel_a(PTA13), channel_b(PTA12);
+        QEI qei(PTD4, PTD5, NC, 512);          // X2, on RL (the first encoder)
+        volatile int rises, b_edges, off_tick, wrong_level;
+        void on_rise() {
+            rises++;
+            if (us_ticker_read() % 1000) off_tick++;
+            if (channel_a.read() != 1) wrong_level++;
+        }
+        struct Falls {
+            int n = 0;
+            void on_fall() { n++; if (channel_a.read() != 0) wrong_level++; }
+        } falls;
+        Ticker snapshot;
+        volatile int at_rises, at_falls, at_b, at_qei;
+        volatile long long at_count;
+        void take() {
+            at_rises = rises, at_falls = falls.n, at_b = b_edges, at_qei = qei.getPulses();
+            at_count = spinner_get_encoder(SPINNER_WHEEL_RL);
+        }
+        int main() {
+            TFC_Init();
+            channel_a.rise(&on_rise);
+            channel_a.fall(&falls, &Falls::on_fall);
+            channel_b.rise([] { b_edges++; });
+            channel_b.fall(callback([] { b_edges++; }));
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            snapshot.attach(&take, 1.0f);
+            wait(1.2);
+            spinner_add_textf("at %d %d %d %d %lld", at_rises, at_falls, at_b, at_qei, at_count);
+            spinner_add_textf("checks %d %d", off_tick, wrong_level);
+            return 0;
+        }
+        """, params={"encoder_PTA13": 2, "encoder_b_PTA12": 2})
+    assert r.outcome == "controller_returned", r.message
+    got = numbers(r)
+    rises, falls, b_edges, qei_x2, count_x4 = got["at"]
+    assert count_x4 > 4000  # the wheel turned
+    assert abs(rises - count_x4 / 4) <= 1
+    assert rises + falls == qei_x2 and abs(rises - falls) <= 1
+    assert rises + falls + b_edges == count_x4
+    assert got["checks"] == [0, 0]
+
+
+def test_channel_b_read_in_channel_as_handler_gives_the_direction(tmp_path):
+    """Forwards 0.8 s, backwards 0.8 s: a handler of channel A's rising edges that counts up when
+    channel B (a DigitalIn on its pin) is high, down when low, follows the wheel's lines."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn channel_a(PTD4);
+        DigitalIn channel_b(PTD5);
+        volatile int lines;
+        void on_rise() { lines += channel_b ? 1 : -1; }
+        int main() {
+            TFC_Init();
+            channel_a.rise(&on_rise);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(0.8);
+            spinner_add_textf("fwd %d %lld", lines, spinner_get_encoder(SPINNER_WHEEL_RR));
+            TFC_SetMotorPWM(-0.4f, -0.4f);
+            wait(0.8);
+            spinner_add_textf("back %d %lld", lines, spinner_get_encoder(SPINNER_WHEEL_RR));
+            return 0;
+        }
+        """, params={"encoder_PTD4": 3, "encoder_b_PTD5": 3})
+    assert r.outcome == "controller_returned", r.message
+    got = numbers(r)
+    (fwd, fwd_count), (back, back_count) = got["fwd"], got["back"]
+    assert fwd > 500 and back < fwd - 200  # it reversed
+    # the count read a physics step after the handlers' tick: up to ~5 lines on
+    assert abs(fwd - fwd_count / 4) <= 6 and abs(back - back_count / 4) <= 6
+
+
+def test_disable_irq_stops_the_handlers_of_the_port(tmp_path):
+    """disable_irq() on one InterruptIn of port A stops both its pins' handlers (the port's
+    interrupt, as mbed's KL25Z code) while one on port D, on the same channel, goes on;
+    enable_irq() calls the flagged pin's handler once, then every edge again."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn a_on_port_a(PTA13), b_on_port_a(PTA12), a_on_port_d(PTD4);
+        volatile int a, b, d;
+        int main() {
+            TFC_Init();
+            a_on_port_a.rise([] { a++; });
+            b_on_port_a.rise([] { b++; });
+            a_on_port_d.rise([] { d++; });
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(0.5);
+            a_on_port_a.disable_irq();
+            int a0 = a, b0 = b, d0 = d;
+            wait(0.5);
+            spinner_add_textf("off %d %d %d", a - a0, b - b0, d - d0);
+            b_on_port_a.enable_irq();
+            int a1 = a, b1 = b, d1 = d;
+            wait(0.5);
+            spinner_add_textf("on %d %d %d", a - a1, b - b1, d - d1);
+            return 0;
+        }
+        """, params={"encoder_PTA13": 2, "encoder_b_PTA12": 2, "encoder_PTD4": 2})
+    assert r.outcome == "controller_returned", r.message
+    got = numbers(r)
+    off_a, off_b, off_d = got["off"]
+    assert off_a == off_b == 0 and off_d > 300
+    on_a, on_b, on_d = got["on"]
+    assert on_a == on_d + 1 and on_d > 300 and abs(on_b - on_a) <= 1  # B's rises: a quarter line off
+
+
+def test_a_one_channel_counter_gives_a_rise_and_a_fall_a_line(tmp_path):
+    """A Hall sensor counted as one channel (counting = "single"): its rises are the counter's
+    count; each line is a rise and a fall in the same tick, and read() is 0."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn hall(PTA4);
+        volatile int rises, falls, high;
+        Ticker snapshot;
+        volatile int at_rises, at_falls;
+        volatile long long at_count;
+        void take() { at_rises = rises, at_falls = falls, at_count = spinner_get_encoder(SPINNER_WHEEL_RL); }
+        int main() {
+            TFC_Init();
+            hall.rise([] { rises++; });
+            hall.fall([] { falls++; });
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            snapshot.attach(&take, 1.0f);
+            for (int i = 0; i < 100; i++) { high += hall.read(); wait_ms(11); }
+            spinner_add_textf("at %d %d %lld %d", at_rises, at_falls, at_count, high);
+            return 0;
+        }
+        """, params={"encoder_PTA4": 2}, car='[encoders]\ncounting = "single"\nlines_per_rev = 20\n')
+    assert r.outcome == "controller_returned", r.message
+    rises, falls, count, high = numbers(r)["at"]
+    assert count > 50 and rises == falls == count and high == 0
+
+
+def test_an_unbound_pin_never_fires_and_reads_its_level(tmp_path):
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn free_a(PTA5), free_d(PTD3, PullUp);
+        volatile int edges;
+        void count() { edges++; }
+        int main() {
+            TFC_Init();
+            free_a.rise(&count);
+            free_a.fall(&count);
+            free_d.mode(PullNone);
+            free_d.rise(&count);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(1.0);
+            spinner_add_textf("free %d %d %d", edges, free_a.read(), (int)free_d);
+            return 0;
+        }
+        """, params={"digital_PTA5": 1})
+    assert r.outcome == "controller_returned", r.message
+    assert numbers(r)["free"] == [0, 1, 0]
+
+
+@pytest.mark.parametrize("line, params, car, words", [
+    ("InterruptIn w(PTA13);", {"encoder_PTA13": 7}, ENCODERS,
+     "InterruptIn::rise: --param encoder_PTA13=7: expected a wheel with an encoder (0..3: FL, FR, RL, RR; "
+     "this car has them on RL RR)"),
+    ("InterruptIn w(PTA13);", {"encoder_PTA13": 2}, "",
+     "InterruptIn::rise: --param encoder_PTA13: the car has no wheel encoders: add [encoders]"),
+    ("InterruptIn w(PTA13);", {"encoder_b_PTA13": 2}, '[encoders]\ncounting = "x2"\n',
+     "InterruptIn::rise: --param encoder_b_PTA13: channel B's edges need the car's counter to count both "
+     "channels (encoders.counting = \"x4\"; this car's: \"x2\")"),
+    ("InterruptIn w(PTA13);", {"encoder_PTA13": 2, "encoder_b_PTA13": 3}, ENCODERS,
+     "InterruptIn::rise: --param encoder_PTA13 and encoder_b_PTA13: a pin carries one channel"),
+    ("InterruptIn w(PTC13);", {}, ENCODERS,
+     "InterruptIn::rise: PTC13: the KL25Z's pins interrupt on ports A and D only"),
+])
+def test_bad_bindings_end_the_run_at_the_programs_call(tmp_path, line, params, car, words):
+    r = run(tmp_path, f"""\
+        #include "mbed.h"
+        {line}
+        void tick() {{}}
+        int main() {{
+            w.rise(&tick);
+            while (1) wait(0.1);
+        }}
+        """, params=params, car=car, name="binding.cpp", time_limit_s=1.0)
+    assert r.outcome == "controller_error"
+    assert words in r.message and "binding.cpp:5" in r.message, r.message
+    assert "\n" not in r.message
+
+
+def test_a_handler_is_an_interrupt(tmp_path):
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        InterruptIn w(PTA13);
+        void tick() {
+            wait_ms(1);
+        }
+        int main() {
+            w.rise(&tick);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            while (1) wait(0.1);
+        }
+        """, params={"encoder_PTA13": 2}, name="isr_wait.cpp", time_limit_s=2.0)
+    assert r.outcome == "controller_error"
+    assert "wait_ms: not emulated" in r.message and "isr_wait.cpp:5" in r.message, r.message
