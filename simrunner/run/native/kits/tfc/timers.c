@@ -240,6 +240,7 @@ void spinner_kit_before_wait(void) {
 static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
     struct timer *t = &timers[i];
     double next = t->next_period_s;
+    waits++;  /* (time passed since the last look: a change now is a reload, not a set-up) */
     *flag |= mask;
     firing = 1;
     handler_of(i)();
@@ -249,6 +250,7 @@ static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
         stop(t);
         start(t, next);
     }
+    waits++;
     sync();
 }
 
