@@ -178,8 +178,8 @@ def test_kit_misuse_is_one_line(tmp_path, capfd):
         """, "notify.c")
     r = drive(firmware([notify]), time_limit_s=1.0)
     assert r.outcome == "controller_error", r.message
-    assert r.message.startswith(f"{notify}:4: Gpt_EnableNotification: not emulated") and \
-        "interrupt handler" in r.message, r.message
+    assert r.message.startswith(f"{notify}:4: Gpt_EnableNotification: channel 2 has no notification") and \
+        "-D GPT_NOTIFICATION_2=NAME" in r.message, r.message
     res = CliRunner().invoke(cli, ["drive", str(REPO / "examples" / "line_follower.py"), "--kit", "s32k144"])
     assert res.exit_code == 2 and "--kit is for C/C++ controllers" in res.output
 

@@ -261,3 +261,23 @@ def test_frame_schedule_with_a_period_that_is_not_a_whole_number_of_steps():
         clock.advance_to_next_frame()
         boundaries.append(clock.step_index)
     assert boundaries == [7, 13, 20, 27, 33, 40]  # round(k * 20 / 3)
+
+
+def test_the_clock_removes_an_interrupt_and_steps_on_without_one():
+    """``LockstepClock.remove_interrupt``: the handler runs no more; with none left the clock
+    steps to the next frame in one chunk again; the count says how many were removed."""
+    sim = FakeSim()
+    clock = LockstepClock(sim, dt_s=0.002, frame_period_s=0.02)
+    ticks = []
+
+    def tick():
+        ticks.append(clock.step_index)
+
+    clock.add_interrupt(0.006, tick)
+    clock.advance(10)
+    assert ticks == [3, 6, 9]
+    assert clock.remove_interrupt(tick) == 1 and clock.remove_interrupt(tick) == 0
+    sim.step_calls.clear()
+    clock.advance_to_next_frame()
+    clock.advance(10)
+    assert ticks == [3, 6, 9] and sim.step_calls == [10, 10]  # no chunk cut at an interrupt's step

@@ -23,7 +23,8 @@ Interrupts (:meth:`LockstepClock.add_interrupt`, a timer interrupt of the contro
 handler registered at step ``s0`` with a period of ``p`` steps (not necessarily whole) runs at
 step ``ceil(s0 + k p)`` for k = 1, 2, ... - the first step boundary at or after its time, after
 that boundary's frame work; handlers due at one step run in the order they were registered, one
-due twice at a step (a period shorter than ``dt``) twice. They run inside the controller's
+due twice at a step (a period shorter than ``dt``) twice. :meth:`LockstepClock.remove_interrupt`
+stops one (from a handler too: one due later at the same step is then not run). They run inside the controller's
 waiting call that is stepping the clock then (the controller's code between calls takes no time,
 so an interrupt due meanwhile is taken at its next call, as one the code had masked). Inside a
 handler (``in_interrupt``) no time passes: :meth:`step_one` returns at once and waits are refused.
@@ -198,11 +199,25 @@ class LockstepClock:
         self._interrupts.append(irq)
         self._next_irq_step = min(self._next_irq_step, irq.next_step)
 
+    def remove_interrupt(self, handler: Callable[[], None]) -> int:
+        """Stop every interrupt running ``handler`` (the same object): none of them runs again,
+        one due at this step neither (also when called from a handler). Returns how many."""
+        gone = [irq for irq in self._interrupts if irq.handler is handler]
+        for irq in gone:
+            irq.next_step = _NEVER  # (a handler running now: its loop ends)
+        if gone and not self.in_interrupt:  # (inside a handler: _interrupt prunes the list)
+            self._prune()
+        return len(gone)
+
+    def _prune(self) -> None:
+        self._interrupts = [irq for irq in self._interrupts if irq.next_step != _NEVER]
+        self._next_irq_step = min((irq.next_step for irq in self._interrupts), default=_NEVER)
+
     def _interrupt(self) -> None:
         """The step index has reached an interrupt's step: run the handlers due (module docstring)."""
         i = self.step_index
         try:
-            for irq in self._interrupts:
+            for irq in self._interrupts:  # (a handler may add one: it is due later; or remove one)
                 while irq.next_step <= i:
                     irq.advance()
                     self.in_interrupt = True
@@ -211,7 +226,7 @@ class LockstepClock:
                     finally:
                         self.in_interrupt = False
         finally:  # a handler that raised: the schedule stays the one of the handlers run
-            self._next_irq_step = min(irq.next_step for irq in self._interrupts)
+            self._prune()
         if self.finished is not None:
             self.check()
 

@@ -617,6 +617,13 @@ class Spinner:
             raise self._foreign("every")
         self._clock.add_interrupt(p, handler)
 
+    def stop_every(self, handler: Callable[[], Any]) -> None:
+        """Stop the timer interrupts set up by :meth:`every` with ``handler`` (the same function
+        object): it is not called again, not even when due at this step. C: ``spinner_stop_every``."""
+        if _get_ident() != self._owner:
+            raise self._foreign("stop_every")
+        self._clock.remove_interrupt(handler)
+
     # -- parameters ------------------------------------------------------------------------
     def param(self, name: str, default: Any = None) -> Any:
         """The run's ``--param NAME=VALUE`` converted to the type of ``default`` (int, float,

@@ -1,12 +1,14 @@
 /* The line-following firmware of ../main.c with its control in a timer interrupt, as teams that
  * run their control loop in a timer's interrupt handler write it: main() sets the kit and the
- * low-power timer (LPTMR0: 100 Hz) up and idles; LPTimer_IRQHandler() steers from the newest
- * camera image. (The TFC library keeps the PIT for the camera's timing: the LPTMR is free.)
+ * low-power timer (LPTMR0: 100 Hz from the 1 kHz LPO) up and idles; LPTimer_IRQHandler() steers
+ * from the newest camera image. (The TFC library keeps the PIT for the camera's timing: the LPTMR
+ * is free.)
  *
- *   simrunner drive examples/firmware/isr/main.c -I examples/firmware --kit tfc --isr LPTimer_IRQHandler@100
+ *   simrunner drive examples/firmware/isr/main.c -I examples/firmware --kit tfc
  *
- * On the car the LPTMR's compare value sets the rate; in the simulator --isr does, and the set-up
- * below builds unchanged (docs/firmware.md, Timer interrupts). __WFI() lets the board's
+ * The simulator reads the LPTMR's set-up below as the board does (its clock, prescaler bypass and
+ * compare value: 10 counts of 1 ms) and calls the handler at that rate (docs/firmware.md, Timer
+ * interrupts); --isr LPTimer_IRQHandler@HZ would set another. __WFI() lets the board's
  * interrupts run: the SysTick, the camera's read-out into LineScanImage0, this handler. */
 #include "derivative.h"
 #include "TFC\TFC.h"

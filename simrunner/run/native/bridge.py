@@ -45,7 +45,7 @@ from simrunner.run.native.build import NativeProgram
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
-    OP_ISR_DONE = range(1, 25)
+    OP_ISR_DONE, OP_EVERY_STOP = range(1, 26)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
@@ -149,6 +149,7 @@ class _Session:
         self._buf = b""
         self._pos = 0
         self._in_call = False  # the request handled is the one the program waits in (_WAITING)
+        self._isrs: dict[int, Callable[[], None]] = {}  # the program's timer interrupts by slot
 
     def _setup_transport(self, child: _Child) -> None:
         self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
@@ -370,7 +371,10 @@ class _Session:
             s.set_motors(*struct.unpack("<2d", payload[:16]))
         elif op == OP_EVERY:  # a timer interrupt: its period (double) and the program's slot for it (int32)
             period, slot = struct.unpack("<di", payload[:12])
-            s.every(period, lambda: self._interrupt(slot))
+            self._isrs[slot] = handler = lambda: self._interrupt(slot)
+            s.every(period, handler)
+        elif op == OP_EVERY_STOP:  # the program's slot (int32) of a timer interrupt it stopped
+            s.stop_every(self._isrs.pop(struct.unpack("<i", payload[:4])[0], None))
         elif op == OP_CPU:  # the program's CPU time since its previous request (--mcu-time measured)
             s._s.mcu.report(_D.unpack(payload)[0])
         elif op == OP_ENCODER:  # the wheel's index (int32) -> its count (int64)

@@ -32,7 +32,7 @@ HOST_SOURCE = NATIVE_DIR / "host" / "spinner_host.c"
 KITS_DIR = NATIVE_DIR / "kits"
 #: Kit libraries a firmware builds against (``--kit NAME``): NAME -> its sources beside its include/
 #: (in kits/NAME, a ``-`` spelt ``_``). tfc-mbed: the FRDM-TFC library's mbed flavour (C++).
-KITS = {"tfc": ("tfc.c",), "s32k144": ("s32k144.c",),
+KITS = {"tfc": ("tfc.c", "timers.c"), "s32k144": ("s32k144.c", "gpt.c"),
         "tfc-mbed": ("tfc_mbed.cpp", "sensors.cpp", "interrupt_in.cpp")}
 #: A kit's own driver sources in a team's project, which the kit library replaces (passing one is
 #: an error naming it rather than the linker's "multiple definition").

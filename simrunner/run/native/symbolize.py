@@ -149,13 +149,13 @@ def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
         while rest and os.path.realpath(rest[0][2]) == host_real:
             rest.pop(0)  # the report's own frames and the Spinner call
         frames = [(o - 1, p, s) for _, o, p, s in rest]
-    # cut below the controller's main: the first host frame after a user frame
-    seen_user, kept = False, []
-    for f in frames:
-        real = os.path.realpath(f[1]) if f[1] and f[1] != "?" else f[1]
-        if real in user:
-            seen_user = True
-        elif seen_user and real == host_real:
+    # cut below the controller's main: the frames after the last user frame (host frames between
+    # user frames stay: an interrupt handler, a kit's hook the host calls, ran inside a call)
+    reals = [os.path.realpath(f[1]) if f[1] and f[1] != "?" else f[1] for f in frames]
+    last_user = max((i for i, real in enumerate(reals) if real in user), default=-1)
+    kept = []
+    for f, real in zip(frames, reals):
+        if last_user >= 0 and len(kept) > last_user and real == host_real:
             break
         kept.append((f[0], f[1], f[2], real in user))
     by_module: dict[str, list[int]] = {}

@@ -51,7 +51,7 @@
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
-       OP_EVERY, OP_ISR_DONE };
+       OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -319,15 +319,18 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
 /* Timer interrupts (spinner_every, --isr NAME@HZ): the handlers by slot. The simulator runs one
  * by answering a waiting call with ST_ISR {int32 slot}: the call runs the handler (its requests
  * go out as usual; no simulated time passes in it), sends OP_ISR_DONE and waits on for its own
- * reply - the handler runs on the program's stack inside the waiting call, as an interrupt. */
+ * reply - the handler runs on the program's stack inside the waiting call, as an interrupt.
+ * spinner_stop_every frees a handler's slots (OP_EVERY_STOP {int32 slot}); a freed slot is used
+ * again, the lowest first. */
 #define MAX_ISRS 32
 static void (*isr_fn[MAX_ISRS])(void);
-static int isr_count;
+static int isr_count;   /* slots in use */
 static int isr_depth;   /* handlers running (spinner_in_interrupt) */
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
 static void run_isr(uint32_t slot) {
-    if (slot >= (uint32_t)isr_count) fault_report(0, "the simulator asked for an unknown interrupt handler", NULL);
+    if (slot >= MAX_ISRS || isr_fn[slot] == NULL)
+        fault_report(0, "the simulator asked for an unknown interrupt handler", NULL);
     if (mcu_report) mcu_mark_s = thread_cpu_s();  /* the handler's own time */
     isr_depth++;
     isr_fn[slot]();
@@ -337,12 +340,20 @@ static void run_isr(uint32_t slot) {
 }
 
 static int add_isr(void (*handler)(void), double period_s) {
-    if (isr_count == MAX_ISRS) return -1;
-    isr_fn[isr_count] = handler;
-    int32_t slot = isr_count++;
+    int32_t slot = 0;
+    while (slot < MAX_ISRS && isr_fn[slot] != NULL) slot++;
+    if (slot == MAX_ISRS) return -1;
+    isr_fn[slot] = handler;
+    isr_count++;
     queue(OP_EVERY, &period_s, sizeof period_s, &slot, sizeof slot);
     return 0;
 }
+
+/* A kit built with the program may define `void spinner_kit_before_wait(void)`: it runs before
+ * each request the program waits on (not from inside itself), where the kit reads what the
+ * program wrote to its emulated registers since (the TFC kit's timers). */
+static void (*kit_before_wait)(void);
+static int in_kit_hook;
 
 /* Send a waiting request and read the reply into `reply` (at most `size` bytes); returns the
  * reply's length. The run being over ends the program. */
@@ -351,6 +362,11 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     if (foreign_thread()) {
         if (size) memset(reply, 0, size);
         return 0;
+    }
+    if (kit_before_wait != NULL && !in_kit_hook) {
+        in_kit_hook = 1;
+        kit_before_wait();
+        in_kit_hook = 0;
     }
     queue(op, a, na, b, nb);
     flush_out();
@@ -678,6 +694,24 @@ void spinner_every(double period_s, void (*handler)(void)) {
         misuse("spinner_every(period_s=%g): expected at least 1e-05 s (a 100 kHz timer)", period_s);
     if (finished) return;
     if (add_isr(handler, period_s) < 0) misuse("spinner_every: at most %d interrupt handlers", MAX_ISRS);
+}
+
+void spinner_stop_every(void (*handler)(void)) {
+    INIT();
+    if (finished || handler == NULL) return;
+    for (int32_t slot = 0; slot < MAX_ISRS; slot++) {
+        if (isr_fn[slot] != handler) continue;
+        isr_fn[slot] = NULL;
+        isr_count--;
+        queue(OP_EVERY_STOP, &slot, sizeof slot, NULL, 0);
+    }
+}
+
+int spinner_has_every(void (*handler)(void)) {
+    INIT();
+    for (int slot = 0; slot < MAX_ISRS; slot++)
+        if (handler != NULL && isr_fn[slot] == handler) return 1;
+    return 0;
 }
 
 void spinner_sleep(double seconds) {
@@ -1126,6 +1160,7 @@ static void read_init(void) {
     has_imu = sensors[3] != 0.0;
     api_thread = pthread_self();
     if (mcu_report) mcu_mark_s = thread_cpu_s();
+    if (prog_lib != NULL) kit_before_wait = (void (*)(void))dlsym(prog_lib, "spinner_kit_before_wait");
     for (int i = 0, n = (int)init[6]; i < n; i++) {
         double period_len[2];
         char name[256];
@@ -1333,6 +1368,8 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_main = (main_fn)dlsym(lib, "main");
     prog_lib = lib;
     isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
+    memset(isr_fn, 0, sizeof isr_fn);
+    kit_before_wait = NULL, in_kit_hook = 0;
     if (user_main == NULL) {
         __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);
         return 72;

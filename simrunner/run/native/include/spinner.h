@@ -101,6 +101,11 @@ void spinner_sleep(double seconds);
  * act from the next physics step, a wait (camera frame, sleep) is an error. Up to 32 handlers,
  * due together in the order set up. Firmware with its own ISR: simrunner drive --isr NAME@HZ. */
 void spinner_every(double period_s, void (*handler)(void));
+/* Stop every timer interrupt that calls handler (set up by spinner_every or --isr): from now on
+ * it is not called (one due at this step neither). */
+void spinner_stop_every(void (*handler)(void));
+/* Non-zero when handler is set up as a timer interrupt (by spinner_every or --isr). */
+int spinner_has_every(void (*handler)(void));
 /* How many timer interrupt handlers are set up (--isr and spinner_every). */
 int spinner_interrupts(void);
 /* Non-zero inside an interrupt handler (where no simulated time passes): for library code that

@@ -169,6 +169,7 @@ class Spinner {
     // A timer interrupt: handler() every period_s of simulated time (spinner_every; a lambda
     // without captures is such a function).
     void every(double period_s, void (*handler)()) { spinner_every(period_s, handler); }
+    void stopEvery(void (*handler)()) { spinner_stop_every(handler); }
     long long getEncoder(int wheel) { return spinner_get_encoder(wheel); }
     // By name, as in Python: "FL", "FR", "RL", "RR" (any case); another name throws.
     long long getEncoder(const std::string &wheel) {

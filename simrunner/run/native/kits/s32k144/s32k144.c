@@ -17,8 +17,8 @@
  *   from the direction pins (spinner_set_motors); the ESC's channel drives both;
  * - LinearCameraGetFrame waits for the camera's next image of its line row;
  * - Pixy2GetVectors (PixyGetVectors) reads the simulator's Pixy2 (pixy2_line.h);
- * - the display's text and graph go to the debug video; OsIf's clocks and the Gpt channels
- *   count simulated time.
+ * - the display's text and graph go to the debug video; OsIf's clocks count simulated time;
+ *   the Gpt channels and their notifications are gpt.c's.
  * docs/firmware.md, "The S32K144 kit", lists what is emulated and what is not. */
 #include <stdio.h>
 #include <stdlib.h>
@@ -40,7 +40,6 @@
 #define NUM_PWM 256
 #define NUM_DIO 256
 #define DUTY_FULL 0x8000
-#define NUM_GPT 256
 
 enum role { NONE, SERVO, MOTOR1, MOTOR2, ESC };
 
@@ -50,9 +49,8 @@ static struct {
     uint8 role[NUM_PWM];          /* what a PWM channel drives on the car (enum role) */
     uint8 params_read;
     double servo_rad, servo_offset_rad;
-    double gpt_tick_hz, osif_hz;
+    double osif_hz;
     uint32 osif_dummy;              /* OSIF_COUNTER_DUMMY: one count a call, as the RTD's */
-    struct { double start_s; Gpt_ValueType target; uint8 running; } gpt[NUM_GPT];
     Servo servo;
     Hbridge hbridge;
     struct { Pwm_ChannelType channel; uint16 min, med, max; int speed; uint8 brake; } esc;
@@ -80,8 +78,7 @@ static void read_params(void) {
     k.params_read = 1;
     k.servo_rad = spinner_param("s32k_servo_rad", 0.40);
     k.servo_offset_rad = spinner_param("s32k_servo_offset_rad", 0.0);
-    k.gpt_tick_hz = spinner_param("s32k_gpt_tick_hz", 8e6);
-    k.osif_hz = spinner_param("s32k_osif_hz", 48e6);  /* defaults: OsIf.h and Gpt.h say whose */
+    k.osif_hz = spinner_param("s32k_osif_hz", 48e6);  /* the default: OsIf.h says whose */
 }
 
 /* -1 .. 1 of a pulse between its calibrated ends (+ towards hi), 0 at mid. */
@@ -169,42 +166,6 @@ uint32 OsIf_MicrosToTicks(uint32 Micros, OsIf_CounterType SelectedCounter) {
     if (SelectedCounter == OSIF_COUNTER_DUMMY) return Micros;
     return (uint32)((uint64_t)Micros * (uint64_t)k.osif_hz / 1000000U);
 }
-
-/* ---- Gpt.h: a channel counts simulated time from Gpt_StartTimer, continuous ---- */
-
-void Gpt_StartTimer(Gpt_ChannelType Channel, Gpt_ValueType Value) {
-    read_params();
-    k.gpt[Channel].start_s = spinner_get_time();
-    k.gpt[Channel].target = Value;
-    k.gpt[Channel].running = 1U;
-}
-
-void Gpt_StopTimer(Gpt_ChannelType Channel) { k.gpt[Channel].running = 0U; }
-
-Gpt_ValueType Gpt_GetTimeElapsed(Gpt_ChannelType Channel) {
-    double now = spinner_get_time();  /* a physics step passes, as OsIf_GetMilliseconds */
-    if (!k.gpt[Channel].running) return 0U;
-    uint64_t n = (uint64_t)((now - k.gpt[Channel].start_s) * k.gpt_tick_hz + 1e-6);
-    return k.gpt[Channel].target > 0U ? (Gpt_ValueType)(n % k.gpt[Channel].target) : 0U;
-}
-
-Gpt_ValueType Gpt_GetTimeRemaining(Gpt_ChannelType Channel) {
-    Gpt_ValueType elapsed = Gpt_GetTimeElapsed(Channel);
-    return k.gpt[Channel].running ? k.gpt[Channel].target - elapsed : 0U;
-}
-
-/* A notification is the interrupt handler the generated configuration names: run with
- * --isr NAME@HZ it is called at that rate (docs/firmware.md, Timer interrupts) and enabling it
- * does nothing more; without --isr nothing would call it. */
-void Gpt_EnableNotification(Gpt_ChannelType Channel) {
-    (void)Channel;
-    if (spinner_interrupts() > 0) return;
-    not_emulated("Gpt_EnableNotification", "a GPT notification is an interrupt handler your generated "
-                 "configuration names: give it and its rate as --isr NAME@HZ (the kit's Gpt channels "
-                 "only count simulated time)");
-}
-
-void Gpt_DisableNotification(Gpt_ChannelType Channel) { (void)Channel; }
 
 /* ---- servo.h ---- */
 

@@ -11,7 +11,8 @@
  * - servo 0 steers (position x tfc_servo_rad + tfc_servo_offset_rad), motors A and B are the
  *   left and right rear motors' duties (spinner_set_motors) while the H-bridge is enabled;
  * - the potentiometers, DIP switches, buttons and battery read --param values;
- * - the LEDs are kept (and shown in the debug video's text); the serial terminal prints.
+ * - the LEDs are kept (and shown in the debug video's text); the serial terminal prints;
+ * - a timer interrupt of the firmware's own runs from its registers (timers.c).
  * docs/firmware.md, lists what is emulated and what is not. */
 #include <math.h>
 #include <stdarg.h>
@@ -55,6 +56,8 @@ static struct {
  * interrupts' work). A main loop that calls TFC_Task() reads far fewer between two calls, so its
  * timing is the same as without (the example firmware's twin test holds it to the step). */
 #define POLLS_BEFORE_TIME 64
+
+void tfc_sim_timers_init(void);  /* timers.c: the TPM clock as the library selects it */
 
 static double clampf(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
@@ -129,6 +132,7 @@ void TFC_Init(void) {
     spinner_set_exposure(tfc.exposure_s);
     tfc.ms_counted = floor(spinner_get_time() * 1000.0);
     tfc.last_image_s = tfc.ms_counted * 1e-3;  /* the first image one exposure after TFC_Init */
+    tfc_sim_timers_init();
     send_commands();
 }
 
@@ -145,13 +149,6 @@ void TFC_Task(void) {
 }
 
 void tfc_sim_wfi(void) { TFC_Task(); }  /* __WFI() (derivative.h) */
-
-/* the registers of TFC/sim_timers.h: what firmware writes to them is kept, nothing more */
-LPTMR_Type tfc_sim_lptmr0;
-PIT_Type tfc_sim_pit;
-TPM_Type tfc_sim_tpm2;
-NVIC_Type tfc_sim_nvic;
-SIM_Type tfc_sim_sim;
 
 void TFC_Delay_mS(unsigned int TicksIn_mS) {
     ensure_init();

@@ -2,17 +2,17 @@
  * (AUTOSAR SWS_GeneralPurposeTimer: Gpt_StartTimer(channel, target ticks), Gpt_StopTimer,
  * Gpt_GetTimeElapsed, Gpt_GetTimeRemaining, Gpt_EnableNotification/DisableNotification).
  *
- * On the simulated car a channel counts simulated time in ticks of --param s32k_gpt_tick_hz
- * (default 8 MHz, the channel clock github.com/michalfrohlich/NXP-Cup-EXPO's src/main.c notes for
- * its sample-based configuration, "ticks = 8e6 * seconds": set your channel's), from
- * Gpt_StartTimer, as a
- * continuous channel (the count wraps at the target); a stopped or never started channel reads 0
- * elapsed. Gpt_StartTimer, Gpt_GetTimeElapsed and Gpt_GetTimeRemaining read the simulated
- * clock as OsIf_GetMilliseconds does, letting one physics step pass (2 ms by default), so a
- * loop polling them moves on. A channel's notification is an
- * interrupt handler your generated configuration names: run with --isr NAME@HZ it is called at
- * that rate and Gpt_EnableNotification does nothing more; without --isr, Gpt_EnableNotification
- * stops the run saying so (docs/firmware.md, "Timer interrupts"). */
+ * On the simulated car (gpt.c) a channel counts simulated time in ticks of --param
+ * s32k_gpt_tick_hz (default 8 MHz, the channel clock github.com/michalfrohlich/NXP-Cup-EXPO's
+ * src/timebase.c notes for its sample-based configuration: set your channel's), from
+ * Gpt_StartTimer, as a continuous channel (the count wraps at the target); a stopped or never
+ * started channel reads 0 elapsed. Gpt_StartTimer, Gpt_GetTimeElapsed and Gpt_GetTimeRemaining
+ * read the simulated clock as OsIf_GetMilliseconds does, letting one physics step pass (2 ms by
+ * default), so a loop polling them moves on. A running channel whose notification is enabled
+ * calls it every target ticks: the notification the kit's Gpt configuration names (channel 0:
+ * Gpt_Notification, as the sample's generated configuration; another channel:
+ * -D GPT_NOTIFICATION_<n>=NAME), unless --isr NAME@HZ runs it at a rate of its own
+ * (docs/firmware.md, "Timer interrupts"). */
 #ifndef NXPCUP_SIM_GPT_H
 #define NXPCUP_SIM_GPT_H
 #include "Std_Types.h"

@@ -1,9 +1,10 @@
 /* The KL25Z's timers as firmware sets up its own timer interrupt (the simulator's TFC kit,
  * included by derivative.h). Names, masks and interrupt numbers as MKL25Z4.h has them (NXP KL25
- * Sub-Family Reference Manual KL25P80M48SF0RM: chapter 33 LPTMR, 32 PIT, 31 TPM, 12 SIM; the
- * Cortex-M0+ NVIC): registers of both spellings (LPTMR0_CSR and LPTMR0->CSR) are memory that
- * keeps what is written and does nothing else. The handler's rate is not read from them: run
- * with --isr NAME@HZ (docs/firmware.md, Timer interrupts), e.g. --isr LPTimer_IRQHandler@100.
+ * Sub-Family Reference Manual KL25P80M48SF0RM: chapter 33 LPTMR, 32 PIT, 31 TPM, 12 SIM, 24 MCG;
+ * the Cortex-M0+ NVIC), in both spellings (LPTMR0_CSR and LPTMR0->CSR). The registers are memory
+ * the kit reads (timers.c): a timer started with its interrupt enabled, in the NVIC too, calls the
+ * program's handler of its vector (PIT_IRQHandler, LPTimer_IRQHandler or LPTMR0_IRQHandler,
+ * TPM2_IRQHandler) at the rate its registers and clock give (docs/firmware.md, Timer interrupts).
  * The TFC library's own timers (TPM0, TPM1, the PIT's camera timing) stay the library's. */
 #ifndef NXPCUP_SIM_TFC_TIMERS_H
 #define NXPCUP_SIM_TFC_TIMERS_H
@@ -11,18 +12,21 @@
 
 typedef struct { volatile uint32_t CSR, PSR, CMR, CNR; } LPTMR_Type;
 typedef struct { volatile uint32_t LDVAL, CVAL, TCTRL, TFLG; } PIT_CHANNEL_Type;
-typedef struct { volatile uint32_t MCR; uint32_t reserved[63]; PIT_CHANNEL_Type CHANNEL[2]; } PIT_Type;
+typedef struct { volatile uint32_t MCR; uint8_t RESERVED_0[220]; volatile uint32_t LTMR64H, LTMR64L;
+                 uint8_t RESERVED_1[24]; PIT_CHANNEL_Type CHANNEL[2]; } PIT_Type;
 typedef struct { volatile uint32_t CnSC, CnV; } TPM_CONTROLS_Type;
 typedef struct { volatile uint32_t SC, CNT, MOD; TPM_CONTROLS_Type CONTROLS[6]; uint32_t reserved[5];
                  volatile uint32_t STATUS, CONF; } TPM_Type;
 typedef struct { volatile uint32_t ISER[1], ICER[1], ISPR[1], ICPR[1], IP[8]; } NVIC_Type;
-typedef struct { volatile uint32_t SOPT2, SCGC5, SCGC6; } SIM_Type;
+typedef struct { volatile uint32_t SOPT1, SOPT2, SCGC5, SCGC6; } SIM_Type;
+typedef struct { volatile uint8_t C1, C2, SC; } MCG_Type;
 
 extern LPTMR_Type tfc_sim_lptmr0;
 extern PIT_Type tfc_sim_pit;
 extern TPM_Type tfc_sim_tpm2;
 extern NVIC_Type tfc_sim_nvic;
 extern SIM_Type tfc_sim_sim;
+extern MCG_Type tfc_sim_mcg;
 
 #define LPTMR0 (&tfc_sim_lptmr0)
 #define LPTMR0_BASE_PTR LPTMR0
@@ -41,8 +45,10 @@ extern SIM_Type tfc_sim_sim;
 #define LPTMR_PSR_PCS_MASK 0x3u
 #define LPTMR_PSR_PBYP_MASK 0x4u
 #define LPTMR_PSR_PRESCALE_MASK 0x78u
+#define LPTMR_PSR_PRESCALE_SHIFT 3
 #define LPTMR_PSR_PCS(x) ((uint32_t)(x) & LPTMR_PSR_PCS_MASK)
 #define LPTMR_PSR_PRESCALE(x) (((uint32_t)(x) << 3) & LPTMR_PSR_PRESCALE_MASK)
+#define LPTMR_CMR_COMPARE_MASK 0xFFFFu
 #define LPTMR_CMR_COMPARE(x) ((uint32_t)(x) & 0xFFFFu)
 
 #define PIT (&tfc_sim_pit)
@@ -56,6 +62,9 @@ extern SIM_Type tfc_sim_sim;
 #define PIT_CVAL1 (PIT->CHANNEL[1].CVAL)
 #define PIT_TCTRL1 (PIT->CHANNEL[1].TCTRL)
 #define PIT_TFLG1 (PIT->CHANNEL[1].TFLG)
+#define PIT_LDVAL_REG(base, index) ((base)->CHANNEL[index].LDVAL)
+#define PIT_TCTRL_REG(base, index) ((base)->CHANNEL[index].TCTRL)
+#define PIT_TFLG_REG(base, index) ((base)->CHANNEL[index].TFLG)
 #define PIT_MCR_FRZ_MASK 0x1u
 #define PIT_MCR_MDIS_MASK 0x2u
 #define PIT_TCTRL_TEN_MASK 0x1u
@@ -69,6 +78,10 @@ extern SIM_Type tfc_sim_sim;
 #define TPM2_SC (TPM2->SC)
 #define TPM2_CNT (TPM2->CNT)
 #define TPM2_MOD (TPM2->MOD)
+#define TPM2_C0SC (TPM2->CONTROLS[0].CnSC)
+#define TPM2_C0V (TPM2->CONTROLS[0].CnV)
+#define TPM2_C1SC (TPM2->CONTROLS[1].CnSC)
+#define TPM2_C1V (TPM2->CONTROLS[1].CnV)
 #define TPM2_STATUS (TPM2->STATUS)
 #define TPM2_CONF (TPM2->CONF)
 #define TPM_SC_PS_MASK 0x7u
@@ -79,28 +92,50 @@ extern SIM_Type tfc_sim_sim;
 #define TPM_SC_PS(x) ((uint32_t)(x) & TPM_SC_PS_MASK)
 #define TPM_SC_CMOD(x) (((uint32_t)(x) << 3) & TPM_SC_CMOD_MASK)
 #define TPM_MOD_MOD(x) ((uint32_t)(x) & 0xFFFFu)
+#define TPM_CnSC_CHIE_MASK 0x40u
+#define TPM_CnSC_CHF_MASK 0x80u
 
 #define SIM (&tfc_sim_sim)
+#define SIM_SOPT1 (SIM->SOPT1)
 #define SIM_SOPT2 (SIM->SOPT2)
 #define SIM_SCGC5 (SIM->SCGC5)
 #define SIM_SCGC6 (SIM->SCGC6)
-#define SIM_SOPT2_TPMSRC(x) (((uint32_t)(x) << 24) & 0x3000000u)
+#define SIM_SOPT1_OSC32KSEL_MASK 0xC0000u
+#define SIM_SOPT1_OSC32KSEL(x) (((uint32_t)(x) << 18) & SIM_SOPT1_OSC32KSEL_MASK)
+#define SIM_SOPT2_PLLFLLSEL_MASK 0x10000u
+#define SIM_SOPT2_TPMSRC_MASK 0x3000000u
+#define SIM_SOPT2_TPMSRC(x) (((uint32_t)(x) << 24) & SIM_SOPT2_TPMSRC_MASK)
 #define SIM_SCGC5_LPTMR_MASK 0x1u
 #define SIM_SCGC6_PIT_MASK 0x800000u
 #define SIM_SCGC6_TPM2_MASK 0x4000000u
 
-/* the NVIC (CMSIS core_cm0plus.h) and the vector numbers: IRQn as CMSIS counts, INT_ as MKL25Z4.h */
+/* the MCG's internal reference clock (MCGIRCLK), a clock of the LPTMR and the TPM */
+#define MCG (&tfc_sim_mcg)
+#define MCG_C1 (MCG->C1)
+#define MCG_C2 (MCG->C2)
+#define MCG_SC (MCG->SC)
+#define MCG_C1_IREFSTEN_MASK 0x1u
+#define MCG_C1_IRCLKEN_MASK 0x2u
+#define MCG_C2_IRCS_MASK 0x1u
+#define MCG_SC_FCRDIV_MASK 0xEu
+#define MCG_SC_FCRDIV(x) ((uint8_t)(((uint32_t)(x) << 1) & MCG_SC_FCRDIV_MASK))
+
+/* the NVIC (CMSIS core_cm0plus.h) and the vector numbers: IRQn as CMSIS counts (both MKL25Z4.h
+ * spellings of the LPTMR's), INT_ as the older MKL25Z4.h */
 #define NVIC (&tfc_sim_nvic)
 #define NVIC_ISER (NVIC->ISER[0])
 #define NVIC_ICER (NVIC->ICER[0])
 #define NVIC_ISPR (NVIC->ISPR[0])
 #define NVIC_ICPR (NVIC->ICPR[0])
-typedef enum { TPM2_IRQn = 19, PIT_IRQn = 22, LPTimer_IRQn = 28 } IRQn_Type;
+typedef enum { TPM0_IRQn = 17, TPM1_IRQn = 18, TPM2_IRQn = 19, PIT_IRQn = 22, LPTimer_IRQn = 28,
+               LPTMR0_IRQn = 28 } IRQn_Type;
 #define INT_TPM2 35
 #define INT_PIT 38
 #define INT_LPTimer 44
-#define NVIC_EnableIRQ(irq) ((void)(irq))
-#define NVIC_DisableIRQ(irq) ((void)(irq))
+void tfc_sim_nvic_enable(int irq);   /* timers.c: NVIC_EnableIRQ, enable_irq */
+void tfc_sim_nvic_disable(int irq);
+#define NVIC_EnableIRQ(irq) tfc_sim_nvic_enable((int)(irq))
+#define NVIC_DisableIRQ(irq) tfc_sim_nvic_disable((int)(irq))
 #define NVIC_ClearPendingIRQ(irq) ((void)(irq))
 #define NVIC_SetPriority(irq, prio) ((void)(irq), (void)(prio))
 #endif

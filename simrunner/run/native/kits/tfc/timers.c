@@ -1,0 +1,265 @@
+/* The KL25Z timers of a firmware's own timer interrupt (the simulator's TFC kit; registers in
+ * include/TFC/sim_timers.h; docs/firmware.md, Timer interrupts).
+ *
+ * The registers are memory the firmware writes; the kit reads them before each request the
+ * program waits on (spinner_kit_before_wait, called by the host) - the program's code between two
+ * such requests takes no simulated time, so a timer is started at the time of its set-up - and
+ * after each handler. A timer that counts with its interrupt enabled, and its IRQ enabled in the
+ * NVIC, calls the program's handler of its vector every period its registers and clock give
+ * (spinner_every with a function of the kit that sets the timer's flag, calls the handler and
+ * clears the flag: the handler's write-1-to-clear is taken as done). Clearing the enable or the
+ * interrupt enable, or disabling the IRQ, stops the calls; a new period while it runs (a new
+ * LDVAL, CMR, MOD) takes effect at its next expiry, as the hardware reloads it then. A handler that
+ * --isr (or spinner_every) already runs is left to that: its rate is --isr's. A set-up the kit
+ * cannot time ends the run with one line saying why.
+ *
+ * Clocks: those of the TFC library's clock set-up (TFC_CrystalClock: the FRDM-KL25Z's 8 MHz
+ * crystal, the PLL at 48 MHz, CORE_CLOCK 48 MHz, PERIPHERAL_BUS_CLOCK = CORE_CLOCK / 2), the LPO
+ * and the MCG's internal reference. KL25 Sub-Family Reference Manual (KL25P80M48SF0RM) sections
+ * beside each number. */
+#include <stdio.h>
+
+#include "spinner.h"
+#include "TFC/TFC.h"
+
+#define BUS_CLOCK_HZ 24e6        /* PIT: the bus clock (RM 5.7 module clocks; TFC_CrystalClock.h) */
+#define PLL_HALF_HZ 24e6         /* MCGPLLCLK/2: the 48 MHz PLL halved (RM 12.2.3 SOPT2 PLLFLLSEL) */
+#define OSCERCLK_HZ 8e6          /* the FRDM-KL25Z's 8 MHz crystal (FRDM-KL25Z user's manual) */
+#define LPO_HZ 1e3               /* the 1 kHz low-power oscillator (RM 5.4 LPO) */
+#define SLOW_IRC_HZ 32768.0      /* MCGIRCLK, IRCS = 0: the slow IRC, factory trimmed (KL25 data sheet) */
+#define FAST_IRC_HZ 4e6          /* MCGIRCLK, IRCS = 1: the fast IRC / 2^FCRDIV (RM 24.3.8, data sheet) */
+#define IRQ_TPM2 19              /* IRQ numbers (RM 3.3.2.3, vector - 16) */
+#define IRQ_PIT 22
+#define IRQ_LPTMR 28
+
+/* The registers, at their reset values (RM 32.3.1 PIT_MCR: MDIS set; 31.3.3 TPM MOD 0xFFFF; 24.3.1
+ * MCG_C1 0x04, IRCLKEN clear) but SIM_SOPT2, which TFC_Init sets as the library's servo and motor
+ * set-up does (TPM clock MCGPLLCLK/2). */
+LPTMR_Type tfc_sim_lptmr0;
+PIT_Type tfc_sim_pit = {.MCR = PIT_MCR_MDIS_MASK};
+TPM_Type tfc_sim_tpm2 = {.MOD = 0xFFFFu};
+NVIC_Type tfc_sim_nvic;
+SIM_Type tfc_sim_sim;
+MCG_Type tfc_sim_mcg = {.C1 = 0x04u};
+
+extern void PIT_IRQHandler(void) __attribute__((weak));
+extern void LPTimer_IRQHandler(void) __attribute__((weak));   /* CMSIS startup_MKL25Z4.s */
+extern void LPTMR0_IRQHandler(void) __attribute__((weak));    /* Kinetis SDK / KDS startup */
+extern void TPM2_IRQHandler(void) __attribute__((weak));
+
+enum { PIT0, PIT1, LPTMR, TPM_2, N_TIMERS };
+static void fire_pit0(void);
+static void fire_pit1(void);
+static void fire_lptmr(void);
+static void fire_tpm2(void);
+
+static struct timer {
+    const char *name;
+    void (*fire)(void);     /* the kit's function spinner_every calls */
+    double period_s;        /* the running period (0: not running) */
+    double next_period_s;   /* a new one from the next expiry (0: none) */
+    unsigned started;       /* the wait at which it started */
+} timers[N_TIMERS] = {
+    {"PIT channel 0", fire_pit0, 0, 0, 0}, {"PIT channel 1", fire_pit1, 0, 0, 0},
+    {"LPTMR0", fire_lptmr, 0, 0, 0}, {"TPM2", fire_tpm2, 0, 0, 0},
+};
+static uint32_t nvic_enabled;  /* the IRQs enabled in the NVIC */
+static unsigned waits;         /* requests the program waited on (time may pass at each) */
+static int firing;             /* a timer's handler runs (its flag set) */
+
+__attribute__((noreturn)) static void cannot(const struct timer *t, const char *why) {
+    char text[400];
+    snprintf(text, sizeof text, "%s: its interrupt is set up but %s: not emulated by the simulator's "
+             "TFC kit (docs/firmware.md, Timer interrupts; --isr NAME@HZ runs a handler at a rate you give)",
+             t->name, why);
+    spinner_fail(text);
+}
+
+/* Raw NVIC_ISER / NVIC_ICER writes since the last look (write 1 to set / clear); a bit written
+ * to both is enabled (the "disable, set up, enable" sequence). */
+static void nvic_sync(void) {
+    uint32_t set = NVIC->ISER[0], clear = NVIC->ICER[0];
+    nvic_enabled = (nvic_enabled & ~clear) | set;
+    NVIC->ISER[0] = NVIC->ICER[0] = 0;
+}
+
+void tfc_sim_nvic_enable(int irq) {
+    nvic_sync();
+    if (irq >= 0 && irq < 32) nvic_enabled |= 1u << irq;
+}
+
+void tfc_sim_nvic_disable(int irq) {
+    nvic_sync();
+    if (irq >= 0 && irq < 32) nvic_enabled &= ~(1u << irq);
+}
+
+static int irq_on(int irq) { return (nvic_enabled >> irq) & 1u; }
+
+/* MCGIRCLK (RM 24.3.1 C1 IRCLKEN, 24.3.2 C2 IRCS, 24.3.8 SC FCRDIV), or 0 when it is off. */
+static double mcgirclk_hz(void) {
+    if (!(MCG->C1 & MCG_C1_IRCLKEN_MASK)) return 0.0;
+    if (!(MCG->C2 & MCG_C2_IRCS_MASK)) return SLOW_IRC_HZ;
+    return FAST_IRC_HZ / (double)(1u << ((MCG->SC & MCG_SC_FCRDIV_MASK) >> 1));
+}
+
+static void (*lptmr_handler(void))(void) { return LPTimer_IRQHandler ? LPTimer_IRQHandler : LPTMR0_IRQHandler; }
+
+static void (*handler_of(int i))(void) {
+    return i == LPTMR ? lptmr_handler() : i == TPM_2 ? TPM2_IRQHandler : PIT_IRQHandler;
+}
+
+static const char *vector_of(int i) {
+    return i == LPTMR ? "LPTimer_IRQHandler (or LPTMR0_IRQHandler)" : i == TPM_2 ? "TPM2_IRQHandler" : "PIT_IRQHandler";
+}
+
+/* A PIT channel: (LDVAL + 1) bus clocks (RM 32.5.1 Timers). */
+static double pit_period(int ch) {
+    const struct timer *t = &timers[PIT0 + ch];
+    uint32_t ctrl = PIT->CHANNEL[ch].TCTRL;
+    if (!(ctrl & PIT_TCTRL_TEN_MASK) || !(ctrl & PIT_TCTRL_TIE_MASK) || !irq_on(IRQ_PIT)) return 0.0;
+    if (PIT->MCR & PIT_MCR_MDIS_MASK)
+        cannot(t, "the PIT is disabled (PIT_MCR MDIS, set out of reset: clear it, PIT_MCR = 0, before the "
+               "channels' set-up, RM 32.3.1); on the board its timers would not run");
+    if (ctrl & PIT_TCTRL_CHN_MASK) cannot(t, "chained PIT timers (TCTRL CHN, RM 32.5.3)");
+    return ((double)PIT->CHANNEL[ch].LDVAL + 1.0) / BUS_CLOCK_HZ;
+}
+
+/* The LPTMR in time counter mode: CMR + 1 counts (a free-running counter, CSR TFC: 65536) of its
+ * clock (RM 33.4.1 PCS: MCGIRCLK, LPO, ERCLK32K, OSCERCLK; chip configuration 3.8.3) divided by
+ * 2^(PRESCALE + 1), or not divided with PBYP (RM 33.3.2). */
+static double lptmr_period(void) {
+    const struct timer *t = &timers[LPTMR];
+    uint32_t csr = LPTMR0->CSR, psr = LPTMR0->PSR;
+    if (!(csr & LPTMR_CSR_TEN_MASK) || !(csr & LPTMR_CSR_TIE_MASK) || !irq_on(IRQ_LPTMR)) return 0.0;
+    if (csr & LPTMR_CSR_TMS_MASK) cannot(t, "pulse counter mode (CSR TMS) counts a pin's pulses");
+    double hz = 0.0;
+    switch (psr & LPTMR_PSR_PCS_MASK) {
+    case 0:
+        hz = mcgirclk_hz();
+        if (hz == 0.0) cannot(t, "its clock MCGIRCLK is off (MCG_C1 IRCLKEN clear, as the TFC library's clock "
+                              "set-up leaves it; RM 24.3.1)");
+        break;
+    case 1: hz = LPO_HZ; break;
+    case 2: /* ERCLK32K: SIM_SOPT1 OSC32KSEL (RM 12.2.2) */
+        if (((SIM->SOPT1 & SIM_SOPT1_OSC32KSEL_MASK) >> 18) != 3u)
+            cannot(t, "its clock ERCLK32K is not the LPO (SIM_SOPT1 OSC32KSEL != 3: the FRDM-KL25Z has no 32 kHz "
+                   "crystal, RTC_CLKIN is a pin)");
+        hz = LPO_HZ;
+        break;
+    default: hz = OSCERCLK_HZ; break;
+    }
+    double divide = (psr & LPTMR_PSR_PBYP_MASK) ? 1.0 : (double)(2u << ((psr & LPTMR_PSR_PRESCALE_MASK) >> 3));
+    double counts = (csr & LPTMR_CSR_TFC_MASK) ? 65536.0 : (double)(LPTMR0->CMR & 0xFFFFu) + 1.0;
+    return counts * divide / hz;
+}
+
+/* TPM2's overflow: MOD + 1 counts (up-down counting, CPWMS: 2 x MOD) of the TPM clock (SIM_SOPT2
+ * TPMSRC, RM 12.2.3) divided by 2^PS (RM 31.3.1, 31.4.3). */
+static double tpm2_period(void) {
+    const struct timer *t = &timers[TPM_2];
+    uint32_t sc = TPM2->SC, cmod = (sc & TPM_SC_CMOD_MASK) >> 3;
+    if (cmod == 0 || !irq_on(IRQ_TPM2)) return 0.0;
+    for (int ch = 0; ch < 2; ch++)
+        if (TPM2->CONTROLS[ch].CnSC & TPM_CnSC_CHIE_MASK) cannot(t, "a channel interrupt (CnSC CHIE)");
+    if (!(sc & TPM_SC_TOIE_MASK)) return 0.0;
+    if (cmod != 1) cannot(t, "it counts the external clock pin (SC CMOD = 2, RM 31.3.1)");
+    double hz = 0.0;
+    switch ((SIM->SOPT2 & SIM_SOPT2_TPMSRC_MASK) >> 24) {
+    case 0: cannot(t, "the TPM clock is off (SIM_SOPT2 TPMSRC = 0)");
+    case 1:
+        if (!(SIM->SOPT2 & SIM_SOPT2_PLLFLLSEL_MASK))
+            cannot(t, "its clock is MCGFLLCLK (SIM_SOPT2 PLLFLLSEL = 0), off while the TFC library runs the PLL");
+        hz = PLL_HALF_HZ;
+        break;
+    case 2: hz = OSCERCLK_HZ; break;
+    default:
+        hz = mcgirclk_hz();
+        if (hz == 0.0) cannot(t, "its clock MCGIRCLK is off (MCG_C1 IRCLKEN clear; RM 24.3.1)");
+    }
+    uint32_t mod = TPM2->MOD & 0xFFFFu;
+    if ((sc & TPM_SC_CPWMS_MASK) && mod == 0) cannot(t, "MOD is 0 in up-down counting (SC CPWMS)");
+    double counts = (sc & TPM_SC_CPWMS_MASK) ? 2.0 * mod : (double)mod + 1.0;
+    return counts * (double)(1u << (sc & TPM_SC_PS_MASK)) / hz;
+}
+
+static double period_of(int i) {
+    return i == LPTMR ? lptmr_period() : i == TPM_2 ? tpm2_period() : pit_period(i - PIT0);
+}
+
+static void stop(struct timer *t) {
+    spinner_stop_every(t->fire);
+    t->period_s = t->next_period_s = 0.0;
+}
+
+static void start(struct timer *t, double period_s) {
+    if (period_s < 1e-5) {
+        char why[120];
+        snprintf(why, sizeof why, "its period %.3g s is shorter than the simulator's 10 us (a 100 kHz timer)", period_s);
+        cannot(t, why);
+    }
+    spinner_every(period_s, t->fire);
+    t->period_s = period_s, t->next_period_s = 0.0, t->started = waits;
+}
+
+/* Read every timer's registers: start, stop, or note a new period. */
+static void sync(void) {
+    nvic_sync();
+    for (int i = 0; i < N_TIMERS; i++) {
+        struct timer *t = &timers[i];
+        double period_s = period_of(i);
+        void (*handler)(void) = handler_of(i);
+        if (period_s > 0.0 && handler != NULL && spinner_has_every(handler)) period_s = 0.0;  /* --isr's */
+        if (period_s == 0.0) {
+            if (t->period_s > 0.0) stop(t);
+            continue;
+        }
+        if (handler == NULL) {
+            char why[200];
+            snprintf(why, sizeof why, "the program defines no %s (on the board the start-up file's default "
+                     "handler would take it and loop for ever)", vector_of(i));
+            cannot(t, why);
+        }
+        if (t->period_s == 0.0) {
+            start(t, period_s);
+        } else if (period_s != t->period_s && t->started == waits) {  /* no time passed since its start */
+            stop(t);
+            start(t, period_s);
+        } else {
+            t->next_period_s = period_s != t->period_s ? period_s : 0.0;
+        }
+    }
+}
+
+void spinner_kit_before_wait(void) {
+    if (firing) return;  /* (a handler's own requests: read when it returns) */
+    waits++;
+    sync();
+}
+
+/* An expiry: the flag set, the handler, the flag cleared; a new period from now on. */
+static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
+    struct timer *t = &timers[i];
+    double next = t->next_period_s;
+    waits++;  /* (time passed since the last look: a change now is a reload, not a set-up) */
+    *flag |= mask;
+    firing = 1;
+    handler_of(i)();
+    firing = 0;
+    *flag &= ~mask;
+    if (next > 0.0 && t->period_s > 0.0) {
+        stop(t);
+        start(t, next);
+    }
+    waits++;
+    sync();
+}
+
+static void fire_pit0(void) { fire(PIT0, &PIT->CHANNEL[0].TFLG, PIT_TFLG_TIF_MASK); }
+static void fire_pit1(void) { fire(PIT1, &PIT->CHANNEL[1].TFLG, PIT_TFLG_TIF_MASK); }
+static void fire_lptmr(void) { fire(LPTMR, &LPTMR0->CSR, LPTMR_CSR_TCF_MASK); }
+static void fire_tpm2(void) { fire(TPM_2, &TPM2->SC, TPM_SC_TOF_MASK); }
+
+/* TFC_Init: the TPM clock as the library's servo and motor set-up selects it (MCGPLLCLK/2). */
+void tfc_sim_timers_init(void) {
+    SIM->SOPT2 = (SIM->SOPT2 & ~SIM_SOPT2_TPMSRC_MASK) | SIM_SOPT2_PLLFLLSEL_MASK | SIM_SOPT2_TPMSRC(1);
+}

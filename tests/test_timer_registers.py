@@ -1,0 +1,391 @@
+"""A timer interrupt's handler and rate taken from the firmware's own timer set-up: the KL25Z's
+PIT, LPTMR and TPM2 registers with --kit tfc (kits/tfc/timers.c), the S32K144 kit's Gpt channels
+(kits/s32k144/gpt.c); and stopping a timer interrupt (``spinner_stop_every``, the clock's
+``remove_interrupt``). docs/firmware.md, "Timer interrupts"."""
+from __future__ import annotations
+
+import dataclasses
+import re
+import textwrap
+
+import pytest
+
+from simrunner.run.native import build_program
+from simrunner.run.native.build import with_isrs
+from simrunner.run.runner import drive
+
+TFC_FIRMWARE = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+static volatile unsigned n;
+static double t_setup, first, last;
+void {handler}(void) {{
+    if (!({flag})) return;
+    {clear};
+    if (++n == 1) first = spinner_get_time();
+    if (n == {count}) last = spinner_get_time();
+}}
+int main(void) {{
+    TFC_Init();
+    t_setup = spinner_get_time();
+    {setup}
+    while (n < {count} && spinner_get_time() < 4.0) __WFI();
+    printf("ticks %u setup %.6f first %.6f last %.6f\\n", n, t_setup, first, last);
+    return 0;
+}}
+"""
+PIT0 = dict(handler="PIT_IRQHandler", flag="PIT_TFLG0 & PIT_TFLG_TIF_MASK", clear="PIT_TFLG0 = PIT_TFLG_TIF_MASK")
+PIT1 = dict(handler="PIT_IRQHandler", flag="PIT->CHANNEL[1].TFLG & PIT_TFLG_TIF_MASK",
+            clear="PIT->CHANNEL[1].TFLG = PIT_TFLG_TIF_MASK")
+LPTIMER = dict(handler="LPTimer_IRQHandler", flag="LPTMR0_CSR & LPTMR_CSR_TCF_MASK",
+               clear="LPTMR0_CSR |= LPTMR_CSR_TCF_MASK")
+LPTMR0 = dict(LPTIMER, handler="LPTMR0_IRQHandler")  # the Kinetis SDK's name of the vector
+TPM2 = dict(handler="TPM2_IRQHandler", flag="TPM2_SC & TPM_SC_TOF_MASK", clear="TPM2_SC |= TPM_SC_TOF_MASK")
+PIT_100HZ = """SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
+    PIT_MCR = 0;
+    PIT->CHANNEL[0].LDVAL = 240000 - 1;              /* 100 Hz of the 24 MHz bus clock */
+    PIT->CHANNEL[0].TCTRL = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+    NVIC_EnableIRQ(PIT_IRQn);"""
+LPTMR_SETUP = """SIM_SCGC5 |= SIM_SCGC5_LPTMR_MASK;
+    LPTMR0_CSR = 0;
+    {extra}
+    LPTMR0_PSR = {psr};
+    LPTMR0_CMR = {cmr};
+    LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK;
+    enable_irq(INT_LPTimer - 16);"""
+TPM2_SETUP = """SIM_SCGC6 |= SIM_SCGC6_TPM2_MASK;
+    {extra}
+    TPM2_SC = 0;
+    TPM2_MOD = {mod};
+    TPM2->SC = TPM_SC_PS({ps}) | TPM_SC_TOIE_MASK | TPM_SC_CMOD(1){cpwms};
+    NVIC_ICPR = 1u << (INT_TPM2 - 16);
+    NVIC_ISER = 1u << (INT_TPM2 - 16);"""
+
+# (registers, what sets them, expected period s)
+SETUPS = {
+    "pit0": (PIT0, PIT_100HZ, 0.01),
+    "pit1": (PIT1, """PIT_MCR &= ~PIT_MCR_MDIS_MASK;
+    PIT_LDVAL1 = 480000 - 1;                          /* 50 Hz */
+    PIT_TCTRL1 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+    NVIC_ISER |= 1u << (INT_PIT - 16);""", 0.02),
+    # the LPO (1 kHz) bypassing the prescaler: CMR + 1 = 10 counts
+    "lptmr_lpo": (LPTIMER, LPTMR_SETUP.format(extra="", psr="LPTMR_PSR_PCS(1) | LPTMR_PSR_PBYP_MASK",
+                                              cmr="LPTMR_CMR_COMPARE(10 - 1)"), 0.01),
+    # the LPO / 4 (PRESCALE 1: 2^2), 25 counts
+    "lptmr_lpo_prescaled": (LPTMR0, LPTMR_SETUP.format(extra="", psr="LPTMR_PSR_PCS(1) | LPTMR_PSR_PRESCALE(1)",
+                                                       cmr="24"), 0.1),
+    # MCGIRCLK: the fast IRC (4 MHz) / 2^FCRDIV 2 = 1 MHz, / 16 (PRESCALE 3): 625 counts
+    "lptmr_fast_irc": (LPTIMER, LPTMR_SETUP.format(
+        extra="MCG_C1 |= MCG_C1_IRCLKEN_MASK; MCG_C2 |= MCG_C2_IRCS_MASK; MCG_SC = MCG_SC_FCRDIV(2);",
+        psr="LPTMR_PSR_PCS(0) | LPTMR_PSR_PRESCALE(3)", cmr="624"), 0.01),
+    # ERCLK32K from the LPO (SIM_SOPT1 OSC32KSEL 3), 20 counts
+    "lptmr_erclk32k": (LPTIMER, LPTMR_SETUP.format(extra="SIM_SOPT1 |= SIM_SOPT1_OSC32KSEL(3);",
+                                                   psr="LPTMR_PSR_PCS(2) | LPTMR_PSR_PBYP_MASK", cmr="19"), 0.02),
+    # OSCERCLK (the 8 MHz crystal) / 256: 313 counts of 32 us
+    "lptmr_oscerclk": (LPTIMER, LPTMR_SETUP.format(extra="", psr="LPTMR_PSR_PCS(3) | LPTMR_PSR_PRESCALE(7)",
+                                                   cmr="312"), 313 * 256 / 8e6),
+    # MCGPLLCLK/2 = 24 MHz (TFC_Init's choice) / 128: MOD + 1 = 1875 counts
+    "tpm2": (TPM2, TPM2_SETUP.format(extra="", mod="1875 - 1", ps=7, cpwms=""), 0.01),
+    # up-down counting: 2 x MOD
+    "tpm2_updown": (TPM2, TPM2_SETUP.format(extra="", mod="1875", ps=7, cpwms=" | TPM_SC_CPWMS_MASK"), 0.02),
+    # OSCERCLK: 8 MHz / 8, 10000 counts
+    "tpm2_oscerclk": (TPM2, TPM2_SETUP.format(
+        extra="SIM_SOPT2 = (SIM_SOPT2 & ~SIM_SOPT2_TPMSRC_MASK) | SIM_SOPT2_TPMSRC(2);",
+        mod="10000 - 1", ps=3, cpwms=""), 0.01),
+}
+
+
+def _firmware(tmp_path, name, regs, setup, count=20, **more):
+    src = tmp_path / f"{name}.c"
+    src.write_text(TFC_FIRMWARE.format(setup=setup, count=count, **{**regs, **more}))
+    return build_program([src], kit="tfc")
+
+
+def _ticks(capfd):
+    out = capfd.readouterr().out
+    m = re.search(r"ticks (\d+) setup ([\d.]+) first ([\d.]+) last ([\d.]+)", out)
+    assert m, out
+    return int(m[1]), float(m[2]), float(m[3]), float(m[4])
+
+
+@pytest.mark.parametrize("name", list(SETUPS))
+def test_a_timer_set_up_calls_its_handler_at_its_registers_rate(tmp_path, capfd, name):
+    """Without --isr: the handler of the timer's vector runs every period its registers and clock
+    give, from the set-up on (to the 2-ms physics step), with its flag set."""
+    regs, setup, period_s = SETUPS[name]
+    r = drive(_firmware(tmp_path, name, regs, setup), track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_returned", r.message
+    n, t_setup, first, last = _ticks(capfd)
+    assert n >= 20  # (the last __WFI() may wait out a camera frame)
+    assert first - t_setup == pytest.approx(period_s, abs=0.002)
+    assert last - first == pytest.approx(19 * period_s, abs=0.002)
+
+
+def test_a_pit_at_100_hz_calls_its_handler_100_times_a_second(tmp_path, capfd):
+    """The issue's case: PIT channel 0 at 100 Hz, no --isr: 100 calls in 1 s, 10 ms apart from the
+    set-up on, in the simulator's process and in a child process alike."""
+    program = _firmware(tmp_path, "pit", PIT0, PIT_100HZ, count=100)
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=3.0)
+        assert r.outcome == "controller_returned", r.message
+        n, t_setup, first, last = _ticks(capfd)
+        assert n >= 100 and (first - t_setup, last - t_setup) == (pytest.approx(0.01), pytest.approx(1.0))
+
+
+STOPPING = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+static volatile unsigned n;
+void PIT_IRQHandler(void) {{ PIT_TFLG0 = PIT_TFLG_TIF_MASK; n++; }}
+int main(void) {{
+    TFC_Init();
+    {setup}
+    while (n < 10) spinner_sleep(0.001);
+    {stop}
+    unsigned at_stop = n;
+    spinner_sleep(0.2);
+    unsigned after = n;
+    {restart}
+    spinner_sleep(0.1);
+    printf("at_stop %u after %u restarted %u\\n", at_stop, after, n);
+    return 0;
+}}
+"""
+
+
+@pytest.mark.parametrize("stop, restart", [
+    ("PIT_TCTRL0 &= ~PIT_TCTRL_TEN_MASK;", "PIT_TCTRL0 |= PIT_TCTRL_TEN_MASK;"),
+    ("PIT->CHANNEL[0].TCTRL &= ~PIT_TCTRL_TIE_MASK;", "PIT->CHANNEL[0].TCTRL |= PIT_TCTRL_TIE_MASK;"),
+    ("NVIC_DisableIRQ(PIT_IRQn);", "NVIC_EnableIRQ(PIT_IRQn);"),
+    ("NVIC_ICER = 1u << (INT_PIT - 16);", "NVIC_ISER = 1u << (INT_PIT - 16);"),
+])
+def test_stopping_a_timer_stops_its_handler(tmp_path, capfd, stop, restart):
+    """Clearing TEN or TIE, or disabling the IRQ (CMSIS or the raw NVIC write): no call in the
+    0.2 s after it; undone, the calls go on (10 in the next 0.1 s)."""
+    src = tmp_path / "stop.c"
+    src.write_text(STOPPING.format(setup=PIT_100HZ, stop=stop, restart=restart))
+    r = drive(build_program([src], kit="tfc"), track="floor", time_limit_s=3.0)
+    assert r.outcome == "controller_returned", r.message
+    out = capfd.readouterr().out
+    at_stop, after, restarted = map(int, re.search(r"at_stop (\d+) after (\d+) restarted (\d+)", out).groups())
+    assert (at_stop, after, restarted) == (10, 10, 20), out
+
+
+def test_a_new_load_value_takes_effect_at_the_next_expiry(tmp_path, capfd):
+    """A handler that writes a new LDVAL (100 Hz -> 50 Hz) at its 10th call: the PIT loads it
+    when the period running then expires (KL25 RM 32.3.2), so the 11th call is 10 ms after the
+    10th and the ones after 20 ms apart."""
+    src = tmp_path / "reload.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "spinner.h"
+        #include "TFC\\\\TFC.h"
+        static volatile unsigned n;
+        static double at[16];
+        void PIT_IRQHandler(void) {
+            PIT_TFLG0 = PIT_TFLG_TIF_MASK;
+            at[n++] = spinner_get_time();
+            if (n == 10) PIT_LDVAL0 = 480000 - 1;
+        }
+        int main(void) {
+            TFC_Init();
+            %s
+            while (n < 14) __WFI();
+            for (int i = 1; i < 14; i++) printf("%%.4f ", at[i] - at[i - 1]);
+            printf("\\n");
+            return 0;
+        }
+        """) % PIT_100HZ)
+    r = drive(build_program([src], kit="tfc"), track="floor", time_limit_s=3.0)
+    assert r.outcome == "controller_returned", r.message
+    gaps = [float(x) for x in capfd.readouterr().out.split()]
+    assert gaps == [0.01] * 10 + [0.02] * 3
+
+
+def test_isr_overrides_the_registers_rate(tmp_path, capfd):
+    """--isr PIT_IRQHandler@20 with the PIT set up for 100 Hz: --isr's rate, from the start (the
+    kit sets no flag then: the handler here does not test it)."""
+    program = _firmware(tmp_path, "isr", dict(PIT0, flag="1"), PIT_100HZ, count=10)
+    r = drive(with_isrs(program, [("PIT_IRQHandler", 0.05)]), track="floor", time_limit_s=3.0)
+    assert r.outcome == "controller_returned", r.message
+    n, _, first, last = _ticks(capfd)
+    assert n >= 10 and (first, last) == (pytest.approx(0.05), pytest.approx(0.5))
+
+
+@pytest.mark.parametrize("setup", [
+    "PIT_MCR = 0; PIT_LDVAL0 = 240000 - 1; PIT_TCTRL0 = PIT_TCTRL_TIE_MASK;",    # never enabled
+    "PIT_MCR = 0; PIT_LDVAL0 = 240000 - 1; PIT_TCTRL0 = PIT_TCTRL_TEN_MASK;",    # no interrupt
+    "PIT_MCR = 0; PIT_LDVAL0 = 240000 - 1; PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;",  # no NVIC
+    "",                                                                         # no set-up at all
+])
+def test_a_handler_whose_timer_never_runs_is_never_called(tmp_path, capfd, setup):
+    r = drive(_firmware(tmp_path, "never", PIT0, setup, count=1), track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_returned", r.message
+    assert _ticks(capfd)[0] == 0
+
+
+@pytest.mark.parametrize("setup, why", [
+    ("PIT_MCR = 0; PIT_TCTRL1 = PIT_TCTRL_CHN_MASK | PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK; "
+     "NVIC_EnableIRQ(PIT_IRQn);", "PIT channel 1: its interrupt is set up but chained PIT timers"),
+    ("PIT_LDVAL0 = 1000; PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK; NVIC_EnableIRQ(PIT_IRQn);",
+     "the PIT is disabled (PIT_MCR MDIS"),
+    ("LPTMR0_PSR = LPTMR_PSR_PCS(0); LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK; "
+     "NVIC_EnableIRQ(LPTimer_IRQn);", "its clock MCGIRCLK is off"),
+    ("LPTMR0_PSR = LPTMR_PSR_PCS(2); LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK; "
+     "NVIC_EnableIRQ(LPTimer_IRQn);", "its clock ERCLK32K is not the LPO"),
+    ("TPM2_SC = TPM_SC_TOIE_MASK | TPM_SC_CMOD(2); NVIC_EnableIRQ(TPM2_IRQn);", "external clock pin"),
+    ("TPM2_C0SC = TPM_CnSC_CHIE_MASK; TPM2_SC = TPM_SC_CMOD(1); NVIC_EnableIRQ(TPM2_IRQn);",
+     "a channel interrupt (CnSC CHIE)"),
+])
+def test_a_set_up_the_kit_cannot_time_ends_the_run_saying_why(tmp_path, setup, why):
+    """One line naming the timer and why, at the firmware's next call (line 16: the loop)."""
+    r = drive(_firmware(tmp_path, "bad", dict(LPTIMER, handler="PIT_IRQHandler"), setup), track="floor",
+              time_limit_s=2.0)
+    assert r.outcome == "controller_error" and why in r.message and "bad.c:16" in r.message, r.message
+    assert "\n" not in r.message.split("bad.c:16")[0]
+
+
+def test_a_timer_without_its_handler_ends_the_run_naming_the_vector(tmp_path):
+    r = drive(_firmware(tmp_path, "nohandler", dict(PIT0, handler="Other_IRQHandler"), PIT_100HZ),
+              track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_error" and "defines no PIT_IRQHandler" in r.message, r.message
+
+
+def test_firmware_without_timers_reads_and_writes_no_interrupt(tmp_path):
+    """The kit's look at the registers before each wait sets up nothing for a firmware that
+    writes none: no handler is counted (its exit status)."""
+    src = tmp_path / "plain.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "spinner.h"
+        #include "TFC\\\\TFC.h"
+        int main(void) {
+            TFC_Init();
+            for (int i = 0; i < 50; i++) TFC_Task();
+            return spinner_interrupts();
+        }
+        """))
+    r = drive(build_program([src], kit="tfc"), track="floor", time_limit_s=10.0)
+    assert r.outcome == "controller_returned", r.message
+
+
+# -- the S32K144 kit's Gpt -----------------------------------------------------------------------
+
+S32K_GPT = """\
+#include <stdio.h>
+#include "Gpt.h"
+#include "OsIf.h"
+#include "spinner.h"
+static volatile uint32 ticks;
+static double first, last;
+void {name}(void) {{ if (++ticks == 1) first = spinner_get_time(); last = spinner_get_time(); }}
+int main(void) {{
+    Gpt_StartTimer({channel}U, 8000U);          /* 1 ms at the kit's 8 MHz Gpt clock */
+    Gpt_EnableNotification({channel}U);
+    double t0 = spinner_get_time();
+    while (ticks < 200U) OsIf_TimeDelay(1U);
+    {stop};
+    uint32 at_stop = ticks;
+    OsIf_TimeDelay(100U);
+    printf("ticks %u first %.6f last %.6f after %u\\n", at_stop, first - t0, last - first, ticks - at_stop);
+    return 0;
+}}
+"""
+
+
+@pytest.mark.parametrize("name, channel, defines, stop", [
+    ("Gpt_Notification", 0, [], "Gpt_StopTimer(0U)"),                       # the sample's configuration
+    ("EmuTimer_Notification", 2, ["GPT_NOTIFICATION_2=EmuTimer_Notification"], "Gpt_DisableNotification(2U)"),
+])
+def test_an_s32k144_gpt_notification_runs_at_its_channels_rate(tmp_path, capfd, name, channel, defines, stop):
+    """Gpt_StartTimer(ch, 8000) + Gpt_EnableNotification(ch) without --isr: the channel's
+    notification (the kit's configuration, or -D GPT_NOTIFICATION_<n>=NAME) every 8000 ticks of
+    the 8 MHz Gpt clock; stopping the timer or the notification stops it."""
+    src = tmp_path / "gpt.c"
+    src.write_text(S32K_GPT.format(name=name, channel=channel, stop=stop))
+    r = drive(build_program([src], kit="s32k144", defines=defines), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    m = re.search(r"ticks (\d+) first ([\d.]+) last ([\d.]+) after (\d+)", capfd.readouterr().out)
+    assert int(m[1]) in (200, 201) and int(m[4]) == 0
+    assert float(m[2]) == pytest.approx(0.0, abs=0.002)  # (1 kHz: two calls a 2-ms step)
+    assert float(m[3]) == pytest.approx(0.001 * (int(m[1]) - 1), abs=0.002)
+
+
+def test_an_s32k144_notification_given_with_isr_keeps_isrs_rate(tmp_path, capfd):
+    """--isr Gpt_Notification@500 with the channel set up for 1 kHz: --isr's rate from the start
+    (200 calls at 0.4 s), and Gpt_StopTimer does not stop it (50 more in the next 0.1 s)."""
+    src = tmp_path / "gpt.c"
+    src.write_text(S32K_GPT.format(name="Gpt_Notification", channel=0, stop="Gpt_StopTimer(0U)"))
+    program = build_program([src], kit="s32k144")
+    r = drive(with_isrs(program, [("Gpt_Notification", 0.002)]), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    m = re.search(r"ticks (\d+) first (\S+) last (\S+) after (\d+)", capfd.readouterr().out)
+    assert (int(m[1]), int(m[4])) == (200, 50) and float(m[3]) == pytest.approx(0.002 * 249)
+
+
+def test_an_s32k144_channel_without_a_notification_says_how_to_name_one(tmp_path):
+    src = tmp_path / "gpt.c"
+    src.write_text(S32K_GPT.format(name="Control_Isr", channel=3, stop="Gpt_StopTimer(3U)"))
+    r = drive(build_program([src], kit="s32k144"), track="floor", time_limit_s=1.0)
+    assert r.outcome == "controller_error" and "gpt.c:10" in r.message, r.message
+    assert "-D GPT_NOTIFICATION_3=NAME" in r.message and "--isr NAME@HZ" in r.message
+
+
+# -- stopping a timer interrupt ------------------------------------------------------------------
+
+def test_the_clock_stops_an_interrupt_even_one_due_at_the_same_step():
+    """``Spinner.stop_every``: a handler stopped by another due at the same step is not run; one
+    that stops itself runs no more; the others keep their rate."""
+    calls = []
+
+    def main(s):
+        def a():
+            calls.append(("a", s.get_time()))
+            if len([n for n, _ in calls if n == "a"]) == 3:  # at 0.03 s, before b's call then
+                s.stop_every(b)
+                s.stop_every(a)
+
+        def b():
+            calls.append(("b", s.get_time()))
+
+        s.every(0.01, a)
+        s.every(0.01, b)
+        s.every(0.02, lambda: calls.append(("c", s.get_time())))
+        s.sleep(0.1)
+
+    r = drive(main, track="floor", time_limit_s=1.0)
+    assert r.outcome == "controller_returned", r.message
+    assert [n for n, _ in calls] == ["a", "b", "a", "b", "c", "a", "c", "c", "c", "c"]
+    assert [t for _, t in calls[5:]] == pytest.approx([0.03, 0.04, 0.06, 0.08, 0.1])
+
+
+C_STOP = """\
+#include <stdio.h>
+#include "spinner.h"
+static int a, b;
+static void tick_a(void) { if (++a == 5) spinner_stop_every(tick_a); }
+static void tick_b(void) { b++; }
+int main(void) {
+    spinner_every(0.01, tick_a);
+    spinner_every(0.01, tick_b);
+    spinner_sleep(0.1);
+    spinner_stop_every(tick_b);
+    int set = spinner_has_every(tick_a) + spinner_has_every(tick_b);
+    spinner_every(0.02, tick_a);                    /* the freed slot again */
+    spinner_sleep(0.1);
+    printf("a %d b %d set %d interrupts %d\\n", a, b, set, spinner_interrupts());
+    return 0;
+}
+"""
+
+
+def test_c_stop_every_stops_a_handler_in_process_and_isolated(tmp_path, capfd):
+    src = tmp_path / "stop.c"
+    src.write_text(C_STOP)
+    program = build_program([src])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0)
+        assert r.outcome == "controller_returned", r.message
+        assert "a 10 b 10 set 0 interrupts 1" in capfd.readouterr().out
