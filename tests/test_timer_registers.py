@@ -389,3 +389,68 @@ def test_c_stop_every_stops_a_handler_in_process_and_isolated(tmp_path, capfd):
         r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0)
         assert r.outcome == "controller_returned", r.message
         assert "a 10 b 10 set 0 interrupts 1" in capfd.readouterr().out
+
+
+UNROUTED = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+static volatile unsigned n;
+void PIT_IRQHandler(void) {{ PIT_TFLG0 = PIT_TFLG_TIF_MASK; n++; }}
+int main(void) {{
+    TFC_Init();
+    SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
+    PIT_MCR = 0;
+    PIT_LDVAL0 = 240000 - 1;
+    PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+    for (int i = 0; i < {late}; i++) TFC_Task();
+    {enable}
+    spinner_sleep(0.5);
+    printf("calls %u\\n", n);
+    return 0;
+}}
+"""
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_timer_whose_irq_the_nvic_keeps_off_is_warned_about(tmp_path, capfd, isolate):
+    """PIT channel 0 counts with TIE set and the program has PIT_IRQHandler, but PIT_IRQn is never
+    enabled: no call (as on the board) and one warning of the run saying so and what to write."""
+    src = tmp_path / "unrouted.c"
+    src.write_text(UNROUTED.format(late=100, enable=""))
+    program = dataclasses.replace(build_program([src], kit="tfc"), isolate=isolate)
+    r = drive(program, track="floor", time_limit_s=3.0)
+    assert r.outcome == "controller_returned", r.message
+    assert "calls 0" in capfd.readouterr().out
+    assert [w for w in r.warnings if "NVIC" in w] == [
+        "PIT channel 0 counts with its interrupt enabled but PIT_IRQn is not enabled in the NVIC: "
+        "PIT_IRQHandler is never called, on the board too (NVIC_EnableIRQ(PIT_IRQn); docs/firmware.md, "
+        "Timer interrupts)"]
+
+
+def test_an_irq_enabled_a_little_later_is_not_warned_about(tmp_path, capfd):
+    """The same timer with PIT_IRQn enabled after 10 library calls: the handler runs, no warning."""
+    src = tmp_path / "late.c"
+    src.write_text(UNROUTED.format(late=10, enable="NVIC_EnableIRQ(PIT_IRQn);"))
+    r = drive(build_program([src], kit="tfc"), track="floor", time_limit_s=3.0)
+    assert r.outcome == "controller_returned", r.message
+    assert "calls 50" in capfd.readouterr().out
+    assert not [w for w in r.warnings if "NVIC" in w]
+
+
+def test_spinner_warn_adds_a_warning_of_the_run_once_per_text(tmp_path):
+    """spinner_warn: the run goes on; each distinct text is listed once, in the order first given."""
+    src = tmp_path / "warn.c"
+    src.write_text(textwrap.dedent("""\
+        #include "spinner.h"
+        int main(void) {
+            for (int i = 0; i < 3; i++) { spinner_warn("first"); spinner_sleep(0.01); }
+            spinner_warn("second");
+            spinner_sleep(0.01);
+            return 0;
+        }
+        """))
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(build_program([src]), isolate=isolate), track="floor", time_limit_s=1.0)
+        assert r.outcome == "controller_returned", r.message
+        assert [w for w in r.warnings if w in ("first", "second")] == ["first", "second"]

@@ -105,6 +105,7 @@ class LockstepClock:
         self._anchor_step = 0   # frame _anchor_frame is at step _anchor_step; later ones follow
         self._anchor_frame = 0  # at the period (set_frame_period moves the anchor)
         self._boundary_step = 0  # step of the last frame boundary
+        self.boundary_pose = None  # the car's pose at it (a camera's latest frame is taken there)
         self._next_frame_step = self._frame_step(1)
         self._command: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._command_dirty = True
@@ -237,7 +238,8 @@ class LockstepClock:
     # -- stepping ------------------------------------------------------------------
     def start(self) -> None:
         """Run the frame-0 callback (the initial state)."""
-        end = self.on_frame(0, 0.0, self.pose(), self._command, None)
+        pose = self.boundary_pose = self.pose()
+        end = self.on_frame(0, 0.0, pose, self._command, None)
         if end is not None:
             self.finish(*end)
         self.last_progress_wall_s = time.monotonic()
@@ -261,7 +263,8 @@ class LockstepClock:
         self._boundary_step = self.step_index
         self._next_frame_step = self._frame_step(k + 1)
         row_command = None if self._row_pending else self._row_command
-        end = self.on_frame(k, self.step_index * self.dt_s, self.pose(), self._command, row_command)
+        pose = self.boundary_pose = self.pose()
+        end = self.on_frame(k, self.step_index * self.dt_s, pose, self._command, row_command)
         self._row_pending = True
         self.last_progress_wall_s = _monotonic()
         if end is not None:

@@ -405,10 +405,31 @@ class Spinner:
             session.video.note_image(img, line)
         return img
 
-    def _frame_now(self, line: int, add_noise: bool) -> np.ndarray:
-        """The camera's image (row ``line``, or all for -1) at the clock's pose."""
+    def latest_image(self, line: int = -1, add_noise: bool = True,
+                     after_frame: int = -1) -> tuple[int, np.ndarray | None]:
+        """The camera's latest frame - the last frame boundary passed - without waiting: ``(its
+        index, its image)`` when it is newer than ``after_frame``, else ``(its index, None)``
+        (frames count from 0, the start). No simulated time passes (a handler may call it): what a
+        camera read-out running beside the program sees, as a kit's camera interrupt (the TFC
+        kit's); :meth:`get_image` waits for the next frame."""
+        h = self.image_shape[0]
+        if isinstance(line, bool) or not isinstance(line, (int, np.integer)) or not -1 <= line < h:
+            raise self._fail(CommandError(
+                f"latest_image(line={line!r}): expected -1 (whole image) or a row 0..{h - 1}"))
+        if _get_ident() != self._owner:
+            raise self._foreign("latest_image")
+        clock = self._clock
+        if clock.frame_index <= after_frame:
+            return clock.frame_index, None
+        img = self._frame_now(int(line), add_noise, clock.boundary_pose)
+        if self._s.video is not None:
+            self._s.video.note_image(img, int(line))
+        return clock.frame_index, img
+
+    def _frame_now(self, line: int, add_noise: bool, pose=None) -> np.ndarray:
+        """The camera's image (row ``line``, or all for -1) at ``pose`` (None: the clock's now)."""
         session = self._s
-        pose = self._clock.pose()
+        pose = self._clock.pose() if pose is None else pose
         imager = session.imager
         if imager is not None:  # the physical camera (simrunner.sensors.imaging)
             return self._expose(imager, pose, line, add_noise)

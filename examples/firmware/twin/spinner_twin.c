@@ -1,11 +1,11 @@
 /* The TFC firmware (examples/firmware/main.c) through the Spinner API: the same logic (lane.h)
  * and the same timing, written out as the simulator's TFC library (--kit tfc) has it - a main
- * loop pass is one physics step (TFC_Task), the camera is read once its exposure has passed,
+ * loop pass is one physics step (TFC_Task), the camera's latest frame is read once a new one is there,
  * the start waits for button 0 (pressed at --param button0_at, 0.1 s). Its run log equals the
  * firmware's, row for row (tests/test_kit_tfc.py): the kit adds nothing but the library's API.
  *
  *   simrunner drive examples/firmware/twin/spinner_twin.c */
-#include <math.h>
+#include <limits.h>
 
 #include "spinner.h"
 #include "../lane.h"
@@ -13,16 +13,18 @@
 #define DEFAULT_EXPOSURE_US 50000  /* the TFC library's exposure until the firmware sets its own (TFC_Config.h) */
 #define IMAGE_SIZE_PX 128
 
-static double exposure_s = DEFAULT_EXPOSURE_US * 1e-6, last_image_s;
+static double exposure_s = DEFAULT_EXPOSURE_US * 1e-6;
+static long long frame;                 /* the camera frame read out last */
 static uint16_t image[IMAGE_SIZE_PX];   /* 12-bit counts, as LineScanImage0 */
 
-/* One pass of the library: a physics step; the camera's image once its exposure has passed. */
+/* One pass of the library: a physics step; the camera's latest frame once a new one is there. */
 static int camera_pass(void) {
-    double now = spinner_get_time();
-    if (now - last_image_s < exposure_s - 0.0025) return 0;
+    spinner_get_time();
     uint8_t row[IMAGE_SIZE_PX];
-    size_t n = spinner_get_image(spinner_line_row(), 1, row, sizeof row);
-    last_image_s = now;
+    size_t n = 0;
+    long long latest = spinner_latest_image(spinner_line_row(), 1, frame, row, sizeof row, &n);
+    if (n == 0) return 0;
+    frame = latest;
     for (size_t i = 0; i < IMAGE_SIZE_PX; i++) image[i] = (uint16_t)((i < n ? row[i] : 0) << 4);
     return 1;
 }
@@ -31,7 +33,9 @@ int main(void) {
     double servo_rad = spinner_param("tfc_servo_rad", 0.40);            /* the servo's travel */
     double servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);  /* and its trim */
     spinner_set_exposure(exposure_s);
-    last_image_s = floor(spinner_get_time() * 1000.0) * 1e-3;
+    spinner_get_time();                 /* (TFC_Init reads the time: its tickers start there) */
+    uint8_t row[IMAGE_SIZE_PX];         /* the first image: the frame after TFC_Init's */
+    frame = spinner_latest_image(spinner_line_row(), 0, LLONG_MAX, row, sizeof row, NULL);
     spinner_set_servo(servo_offset_rad);
     spinner_set_motors(0.0f, 0.0f);
     double start_s = spinner_param("button0_at", 0.1);

@@ -45,7 +45,7 @@ from simrunner.run.native.build import NativeProgram
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
-    OP_ISR_DONE, OP_EVERY_STOP = range(1, 26)
+    OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE = range(1, 28)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
@@ -80,7 +80,7 @@ _PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a r
 # the requests the program waits in for a reply (spinner_host.c: call()); the others are queued
 _WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, OP_PARAM, OP_FAULT,
                       OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
-                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU))
+                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE))
 
 
 class _Child:
@@ -337,6 +337,11 @@ class _Session:
             line, noise = _2I.unpack(payload)
             img = s.get_image(line, noise != 0)
             reply(_HDR.pack(ST_OK, img.size) + img.tobytes())
+        elif op == OP_LATEST_IMAGE:  # {line, noise (int32), after (int64)} -> {frame (int64), image if newer}
+            line, noise, after = struct.unpack("<iiq", payload[:16])
+            frame, img = s.latest_image(line, noise != 0, after)
+            data = b"" if img is None else img.tobytes()
+            reply(_HDR.pack(ST_OK, 8 + len(data)) + struct.pack("<q", frame) + data)
         elif op == OP_TEXT:
             (count,) = struct.unpack_from("<i", payload)
             parts = payload[4:].split(b"\0")[:count]
@@ -388,6 +393,9 @@ class _Session:
             reply(_HDR.pack(ST_OK, values.nbytes) + values.tobytes())
         elif op in (OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG):
             reply(_pixy2_answer(s, op, payload))
+        elif op == OP_WARN:  # spinner_warn's text: a warning of the run, once per text
+            text = payload.decode("utf-8", "replace")
+            s._s.warn_once("spinner_warn: " + text, text)
         elif op == OP_FAULT:
             self._fault(payload.decode("utf-8", "replace"))
         else:

@@ -51,7 +51,7 @@
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
-       OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP };
+       OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -419,6 +419,12 @@ void spinner_fail(const char *message) {
     for (;;) pause();  /* not reached: the report ends the run */
 }
 
+void spinner_warn(const char *message) {
+    INIT();
+    if (finished || message == NULL) return;
+    queue(OP_WARN, message, strlen(message), NULL, 0);
+}
+
 static void foreign_call_report(void) {
     foreign_calls = 0;
     misuse("a Spinner call came from another thread than the one running main() (it returned 0): "
@@ -500,6 +506,35 @@ size_t spinner_get_image(int line, int add_noise, uint8_t *buf, size_t size) {
     if (finished) return 0;
     int32_t args[2] = {line, add_noise ? 1 : 0};
     return call(OP_IMAGE, args, sizeof args, NULL, 0, buf, size);
+}
+
+long long spinner_latest_image(int line, int add_noise, long long after_frame, uint8_t *buf, size_t size,
+                               size_t *written) {
+    static unsigned char *reply;  /* the frame's index (int64), then its image */
+    static size_t reply_size;
+    INIT();
+    if (written) *written = 0;
+    if (line < -1 || line >= img_h)
+        misuse("spinner_latest_image(line=%d): expected -1 (whole image) or a row 0..%d", line, img_h - 1);
+    size_t need = line < 0 ? (size_t)img_h * img_w : (size_t)img_w;
+    if (buf == NULL || size < need)
+        misuse("spinner_latest_image(line=%d, size=%zu): the buffer must hold %zu bytes", line, size, need);
+    if (finished) return after_frame;
+    if (reply_size < 8 + need) {
+        free(reply);
+        reply = malloc(8 + need);
+        if (reply == NULL) misuse("spinner_latest_image: out of memory");
+        reply_size = 8 + need;
+    }
+    struct { int32_t line, noise; int64_t after; } args = {line, add_noise ? 1 : 0, after_frame};
+    size_t n = call(OP_LATEST_IMAGE, &args, sizeof args, NULL, 0, reply, 8 + need);
+    int64_t frame;
+    memcpy(&frame, reply, sizeof frame);
+    if (n > 8) {
+        memcpy(buf, reply + 8, n - 8);
+        if (written) *written = n - 8;
+    }
+    return frame;
 }
 
 double spinner_get_speed(void) {

@@ -55,6 +55,14 @@ void spinner_set_motors(float left, float right);
  * camera noise (seeded by the run). `buf` must hold `size` >= the bytes returned; returns
  * the number of bytes written. */
 size_t spinner_get_image(int line, int add_noise, uint8_t *buf, size_t size);
+
+/* The camera's latest frame - the last frame boundary passed - without waiting (no simulated time
+ * passes; allowed in an interrupt handler): returns its index (frames count from 0, the start)
+ * and, when it is newer than `after_frame`, writes its image (row `line`, or all for -1) into
+ * `buf` and its size into `*written` (else 0). For a camera read-out that runs beside the
+ * program, as a kit's camera interrupt does: spinner_get_image waits for the next frame. */
+long long spinner_latest_image(int line, int add_noise, long long after_frame, uint8_t *buf, size_t size,
+                               size_t *written);
 int spinner_image_width(void);     /* pixels (128 on the default car) */
 int spinner_image_height(void);    /* rows */
 int spinner_line_row(void);        /* the row that plays the real line camera (60) */
@@ -134,6 +142,10 @@ double spinner_param(const char *name, double default_value);
 /* End the run as controller_error with `message` and the C backtrace (the calling file:line),
  * as a misused Spinner call does; for library code that meets a call it cannot serve. */
 void spinner_fail(const char *message) __attribute__((noreturn));
+
+/* A warning of the run (listed after it and in the summary's warnings, once per text); the run
+ * goes on. For library code that sees a set-up that will not do what its author meant. */
+void spinner_warn(const char *message);
 
 #ifdef __cplusplus
 }

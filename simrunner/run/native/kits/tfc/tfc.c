@@ -4,9 +4,10 @@
  * and functions) and this file, which talks to the simulator through spinner.h:
  * - time: TFC_Task() (called in the team's main loop) and TFC_Delay_mS() let simulated time
  *   pass (one physics step per call, or the delay); the SysTick tickers TFC_Ticker[] count its
- *   milliseconds; the PIT-driven camera read-out becomes: when the exposure since the last
- *   image has passed, the next image is fetched (spinner_get_image) into LineScanImage0/1 and
- *   LineScanImageReady is set to 1; a loop that only polls the board (the ready flag, the
+ *   milliseconds; the PIT-driven camera read-out becomes: at each such pass, a camera frame newer
+ *   than the last one read (one an exposure) is read without waiting (spinner_latest_image) into
+ *   LineScanImage0/1 and LineScanImageReady is set to 1, so the main loop runs on between two
+ *   images as on the board; a loop that only polls the board (the ready flag, the
  *   tickers, buttons, switches, pots: poll()) lets time pass too, as the interrupts would;
  * - servo 0 steers (position x tfc_servo_rad + tfc_servo_offset_rad), motors A and B are the
  *   left and right rear motors' duties (spinner_set_motors) while the H-bridge is enabled;
@@ -14,6 +15,7 @@
  * - the LEDs are kept (and shown in the debug video's text); the serial terminal prints;
  * - a timer interrupt of the firmware's own runs from its registers (timers.c).
  * docs/firmware.md, lists what is emulated and what is not. */
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -40,7 +42,7 @@ static struct {
     int inited;
     double ms_counted;      /* simulated ms already added to the tickers */
     double exposure_s;      /* the line camera's exposure (TFC_SetLineScanExposureTime) */
-    double last_image_s;    /* when the last image was fetched */
+    long long frame;        /* the camera frame read out last */
     int hbridge;            /* H-bridge enabled */
     float duty_a, duty_b;   /* motor duties */
     float servo;            /* servo 0 position */
@@ -75,15 +77,15 @@ static void count_ticks(double now_s) {
     }
 }
 
-/* The PIT interrupt's camera read-out (at ``now``): a new image once the exposure since the last read
- * has passed (spinner_get_image waits for the camera's next frame, a step or two away then). The
- * read's time is ``now``, not the frame's: timed from the frame, the next read would come on the
- * next frame's own step, and waiting for the frame after it would halve the image rate. */
-static void camera_service(double now) {
-    if (now - tfc.last_image_s < tfc.exposure_s - 0.0025) return;
+/* The PIT interrupt's camera read-out: the camera's latest frame once a new one is there (one
+ * image an exposure: the camera's frame period is the exposure), without waiting - on the board
+ * the read-out runs beside the main loop, which goes on between two images. */
+static void camera_service(void) {
     uint8_t row[TFC_LINESCAN_IMAGE_SIZE];
-    size_t n = spinner_get_image(spinner_line_row(), 1, row, sizeof row);
-    tfc.last_image_s = now;
+    size_t n = 0;
+    long long frame = spinner_latest_image(spinner_line_row(), 1, tfc.frame, row, sizeof row, &n);
+    if (n == 0) return;
+    tfc.frame = frame;
     for (size_t i = 0; i < TFC_LINESCAN_IMAGE_SIZE; i++) {
         uint16_t v = (uint16_t)((i < n ? row[i] : 0) << 4);  /* 8-bit grey -> 12-bit counts */
         LineScanImage0[i] = v;
@@ -105,7 +107,7 @@ static void poll(void) {
     if (++tfc.polls <= POLLS_BEFORE_TIME) return;
     double now = spinner_get_time();  /* one physics step, as TFC_Task() */
     count_ticks(now);
-    camera_service(now);
+    camera_service();
 }
 
 volatile uint8_t *tfc_sim_image_ready(void) {
@@ -131,7 +133,8 @@ void TFC_Init(void) {
     tfc.exposure_s = TFC_DEFAULT_LINESCAN_EXPOSURE_TIME_uS * 1e-6;
     spinner_set_exposure(tfc.exposure_s);
     tfc.ms_counted = floor(spinner_get_time() * 1000.0);
-    tfc.last_image_s = tfc.ms_counted * 1e-3;  /* the first image one exposure after TFC_Init */
+    uint8_t row[TFC_LINESCAN_IMAGE_SIZE];  /* the first image: the frame after TFC_Init's */
+    tfc.frame = spinner_latest_image(spinner_line_row(), 0, LLONG_MAX, row, sizeof row, NULL);
     tfc_sim_timers_init();
     send_commands();
 }
@@ -145,7 +148,7 @@ void TFC_Task(void) {
     tfc.polls = 0;
     double now = spinner_get_time();  /* the main loop's pass: a physics step of simulated time */
     count_ticks(now);
-    camera_service(now);
+    camera_service();
 }
 
 void tfc_sim_wfi(void) { TFC_Task(); }  /* __WFI() (derivative.h) */
@@ -162,7 +165,7 @@ void TFC_Delay_mS(unsigned int TicksIn_mS) {
     double until = spinner_get_time() + TicksIn_mS * 1e-3;
     for (double now = spinner_get_time(); now < until - 1e-9; now = spinner_get_time()) {
         count_ticks(now);
-        camera_service(now);
+        camera_service();
     }
 }
 

@@ -59,9 +59,10 @@ static struct timer {
     double period_s;        /* the running period (0: not running) */
     double next_period_s;   /* a new one from the next expiry (0: none) */
     unsigned started;       /* the wait at which it started */
+    unsigned unrouted;      /* looks in a row at it counting, interrupt on, its IRQ off in the NVIC */
 } timers[N_TIMERS] = {
-    {"PIT channel 0", fire_pit0, 0, 0, 0}, {"PIT channel 1", fire_pit1, 0, 0, 0},
-    {"LPTMR0", fire_lptmr, 0, 0, 0}, {"TPM2", fire_tpm2, 0, 0, 0},
+    {"PIT channel 0", fire_pit0, 0, 0, 0, 0}, {"PIT channel 1", fire_pit1, 0, 0, 0, 0},
+    {"LPTMR0", fire_lptmr, 0, 0, 0, 0}, {"TPM2", fire_tpm2, 0, 0, 0, 0},
 };
 static uint32_t nvic_enabled;  /* the IRQs enabled in the NVIC */
 static unsigned waits;         /* requests the program waited on (time may pass at each) */
@@ -182,6 +183,35 @@ static double tpm2_period(void) {
     return counts * (double)(1u << (sc & TPM_SC_PS_MASK)) / hz;
 }
 
+/* The timer counts with its interrupt enabled (whatever the NVIC says). */
+static int armed(int i) {
+    if (i == LPTMR) return (LPTMR0->CSR & LPTMR_CSR_TEN_MASK) && (LPTMR0->CSR & LPTMR_CSR_TIE_MASK);
+    if (i == TPM_2) return (TPM2->SC & TPM_SC_CMOD_MASK) && (TPM2->SC & TPM_SC_TOIE_MASK);
+    uint32_t ctrl = PIT->CHANNEL[i - PIT0].TCTRL;
+    return (ctrl & PIT_TCTRL_TEN_MASK) && (ctrl & PIT_TCTRL_TIE_MASK) && !(PIT->MCR & PIT_MCR_MDIS_MASK);
+}
+
+static int irq_of(int i) { return i == LPTMR ? IRQ_LPTMR : i == TPM_2 ? IRQ_TPM2 : IRQ_PIT; }
+
+/* A timer set up to interrupt, with the program's handler, whose IRQ the NVIC keeps off for
+ * UNROUTED_LOOKS looks in a row (a set-up that enables it later is not warned about): on the board
+ * the handler is never called either, which the run's end alone would not explain. */
+#define UNROUTED_LOOKS 50
+static void warn_unrouted(int i) {
+    struct timer *t = &timers[i];
+    if (!armed(i) || irq_on(irq_of(i)) || handler_of(i) == NULL) {
+        t->unrouted = 0;
+        return;
+    }
+    if (++t->unrouted != UNROUTED_LOOKS) return;
+    static const char *const irq_names[] = {"PIT_IRQn", "PIT_IRQn", "LPTimer_IRQn", "TPM2_IRQn"};
+    char text[300];
+    snprintf(text, sizeof text, "%s counts with its interrupt enabled but %s is not enabled in the NVIC: "
+             "%s is never called, on the board too (NVIC_EnableIRQ(%s); docs/firmware.md, Timer interrupts)",
+             t->name, irq_names[i], vector_of(i), irq_names[i]);
+    spinner_warn(text);
+}
+
 static double period_of(int i) {
     return i == LPTMR ? lptmr_period() : i == TPM_2 ? tpm2_period() : pit_period(i - PIT0);
 }
@@ -206,6 +236,7 @@ static void sync(void) {
     nvic_sync();
     for (int i = 0; i < N_TIMERS; i++) {
         struct timer *t = &timers[i];
+        warn_unrouted(i);
         double period_s = period_of(i);
         void (*handler)(void) = handler_of(i);
         if (period_s > 0.0 && handler != NULL && spinner_has_every(handler)) period_s = 0.0;  /* --isr's */

@@ -7,13 +7,14 @@
  *   that fell due (in due order);
  *   main() lets time pass in wait*(), sleep(), __WFI() and in reads of the board (poll());
  * - the camera: on the board the library's TPM1 interrupt starts a read-out every servo frame
- *   (SERVO_DEFAULT_PERIOD, 10 ms) and its ADC interrupt fills the image (TFC.cpp); here, when a
- *   frame's time has passed since the last image, main()'s next wait or poll fetches the camera
- *   row (spinner_get_image) into the working buffer, swaps the ping-pong buffers and increments
- *   TFC_LineScanImageReady. A handler (an interrupt) cannot wait for a frame: it sees the images
- *   main()'s waits fetched;
+ *   (SERVO_DEFAULT_PERIOD, 10 ms) and its ADC interrupt fills the image (TFC.cpp); here the kit's
+ *   1 kHz interrupt reads the camera's latest frame (one a servo frame: the camera's frame period
+ *   is the servo frame) once a new one is there (spinner_latest_image, which never waits) into the
+ *   working buffer, swaps the ping-pong buffers and increments TFC_LineScanImageReady, before the
+ *   Tickers due then: main() runs on between two images and a Ticker handler sees each image;
  * - servo 0 steers, H-bridge A and B are the left and right rear motors' duties, the pots, DIP
  *   switch, buttons and battery read --param values, the LEDs are kept, serial output prints. */
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -54,7 +55,7 @@ static struct {
     double wait_until_s;     /* main()'s own time: where its waits and reads have got to */
     double servo_frame_s;    /* the servo frame: the camera's read-out period */
     double servo_t0_s;       /* when servo frames started to count */
-    double last_image_s;
+    long long frame;         /* the camera frame read out last */
     double pulse_min_s, pulse_max_s;  /* TFC_InitServos' range of positions -1..1 */
     double servo_rad, servo_offset_rad;
     int servo_channel;
@@ -101,9 +102,12 @@ static void run_due(void) {
     }
 }
 
+static void camera_service(void);
+
 static void clock_isr(void) {
     k.now_s = spinner_get_time();  /* inside an interrupt: no time passes */
     k.in_isr = 1;
+    camera_service();
     if (k.sample) k.sample();
     if (k.edges) k.edges();  /* the pins' edges of the millisecond gone, before the Tickers due */
     run_due();
@@ -124,9 +128,10 @@ void tfc_mbed_start(void) {
     k.servo_rad = spinner_param("tfc_servo_rad", 0.40);
     k.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
     k.servo_channel = (int)spinner_param("tfc_servo_channel", 0.0);
-    k.now_s = spinner_get_time();
+    k.now_s = k.wait_until_s = spinner_get_time();  /* main()'s own time starts now */
     init_servos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, SERVO_DEFAULT_PERIOD);
-    k.last_image_s = k.now_s;  /* the first image one frame after start */
+    uint8_t row[128];  /* the first image: the frame after the start's */
+    k.frame = spinner_latest_image(spinner_line_row(), 0, LLONG_MAX, row, sizeof row, NULL);
     spinner_every(CLOCK_PERIOD_S, clock_isr);
     send_commands();
 }
@@ -144,14 +149,13 @@ void tfc_mbed_on_tick(void (*sample)(void)) { k.sample = sample; }
 
 void tfc_mbed_on_edges(void (*edges)(void)) { k.edges = edges; }
 
-/* The read-out: a new image once a servo frame has passed since the last (the tolerance: the
- * camera's frame is a step or two away, as in the TFC kit's camera_service). */
-static int camera_due(void) { return k.now_s - k.last_image_s >= k.servo_frame_s - 0.0025; }
-
-static void fetch_image(void) {
+/* The read-out: the camera's latest frame, once a new one is there (never waits). */
+static void camera_service(void) {
     uint8_t row[128];
-    k.last_image_s = k.now_s;  /* the read's start, as the TFC kit times it */
-    size_t n = spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+    size_t n = 0;
+    long long frame = spinner_latest_image(spinner_line_row(), 1, k.frame, row, sizeof row, &n);
+    if (n == 0) return;
+    k.frame = frame;
     for (size_t i = 0; i < 128; i++) {
         uint16_t v = (uint16_t)((i < n ? row[i] : 0) << 4);  /* 8-bit grey -> 12-bit counts */
         LineScanImage0WorkingBuffer[i] = v;
@@ -166,11 +170,8 @@ static void fetch_image(void) {
     image_ready++;
 }
 
-/* One physics step of main(): the due image's wait, or a step (the clock runs in it). */
-static void step(void) {
-    if (camera_due()) fetch_image();
-    else spinner_get_time();
-}
+/* One physics step of main() (the clock's interrupt runs in it). */
+static void step(void) { spinner_get_time(); }
 
 /* Let s pass from where main()'s own time has got to: short waits and reads add up to a step, and
  * a step's time beyond them is used up by the next ones (up to MAX_AHEAD_S of it). */

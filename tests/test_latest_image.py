@@ -1,0 +1,105 @@
+"""The camera's latest frame without waiting (``Spinner.latest_image``, C
+``spinner_latest_image``), and the kits' camera read-outs built on it: on the board the TFC
+library reads the camera in its interrupts, beside the main loop, which runs on between two
+images (docs/firmware.md)."""
+from __future__ import annotations
+
+import dataclasses
+import re
+import textwrap
+
+import pytest
+
+from simrunner.run.native import build_program
+from simrunner.run.runner import drive
+
+
+def test_latest_image_gives_each_frame_once_and_lets_no_time_pass():
+    """Polled every physics step: every frame once, in order, each the frame get_image would have
+    returned then; a call lets no time pass and returns (index, None) until the next frame."""
+    seen, times = [], []
+
+    def main(s):
+        k, _ = s.latest_image(60, False)
+        while s.get_time() < 0.5:
+            t0 = s.get_time()
+            frame, img = s.latest_image(60, False, k)
+            times.append(s.get_time() - t0)  # (get_time itself is one step)
+            if img is not None:
+                assert img.shape == (1, s.image_shape[1])
+                seen.append(frame)
+                k = frame
+
+    r = drive(main, track="floor", time_limit_s=1.0)
+    assert r.outcome == "controller_returned", r.message
+    assert seen == list(range(seen[0], seen[0] + len(seen))) and len(seen) >= 20  # 50 frames/s
+    assert set(round(t, 6) for t in times) == {0.002}  # one step: get_time's own
+
+
+LOOP = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+int main(void) {
+    TFC_Init();
+    unsigned passes = 0, ticks = 0, frames = 0;
+    while (spinner_get_time() < 1.0) {
+        TFC_Task();
+        passes++;
+        if (TFC_Ticker[0] >= 1) { TFC_Ticker[0] = 0; ticks++; }
+        if (LineScanImageReady) { LineScanImageReady = 0; frames++; }
+    }
+    printf("passes %u ticks %u frames %u\\n", passes, ticks, frames);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_tfc_main_loop_runs_on_between_two_images(tmp_path, capfd, isolate):
+    """A super-loop of TFC_Task() and a 1-ms ticker check: each pass is two physics steps (TFC_Task
+    and the loop's clock read), 250 a second, and it sees every image of the library's 50-ms
+    exposure (it used to wait out a whole frame in TFC_Task whenever an image was due: 30 passes
+    a second)."""
+    src = tmp_path / "loop.c"
+    src.write_text(LOOP)
+    program = dataclasses.replace(build_program([src], kit="tfc"), isolate=isolate)
+    r = drive(program, track="floor", time_limit_s=3.0)
+    assert r.outcome == "controller_returned", r.message
+    passes, ticks, frames = map(int, re.search(r"passes (\d+) ticks (\d+) frames (\d+)",
+                                               capfd.readouterr().out).groups())
+    assert passes >= 245 and ticks == passes and 19 <= frames <= 20
+
+
+def test_the_c_call_reads_frames_without_waiting(tmp_path, capfd):
+    """spinner_latest_image in C: in a timer interrupt at 1 kHz (where a wait is an error) it
+    gives every frame once; after_frame at its own index gives nothing."""
+    src = tmp_path / "latest.c"
+    src.write_text(textwrap.dedent("""\
+        #include <limits.h>
+        #include <stdio.h>
+        #include "spinner.h"
+        static long long last;
+        static int frames, skips, empty;
+        static void tick(void) {
+            uint8_t row[1024];
+            size_t n = 0;
+            long long f = spinner_latest_image(spinner_line_row(), 1, last, row, sizeof row, &n);
+            if (n == 0) { empty++; return; }
+            if (f != last + 1) skips++;
+            last = f, frames++;
+        }
+        int main(void) {
+            uint8_t row[1024];
+            last = spinner_latest_image(spinner_line_row(), 0, LLONG_MAX, row, sizeof row, NULL);
+            spinner_every(0.001, tick);
+            spinner_sleep(1.0);
+            printf("frames %d skips %d empty %d\\n", frames, skips, empty);
+            return 0;
+        }
+        """))
+    r = drive(build_program([src]), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    frames, skips, empty = map(int, re.search(r"frames (\d+) skips (\d+) empty (\d+)",
+                                              capfd.readouterr().out).groups())
+    assert frames >= 48 and skips == 0 and empty > frames  # 50 frames/s, 1000 looks
