@@ -2,6 +2,7 @@
 team's mbed program (mbed.h + the FRDM-TFC library's TFC.h) builds unchanged and drives."""
 from __future__ import annotations
 
+import re
 import textwrap
 from pathlib import Path
 
@@ -397,3 +398,33 @@ def test_an_mbed_program_named_dot_c_is_told_to_be_cpp(tmp_path):
     helper.write_text("int twice(int x) { return 2 * x; }\n")
     r = drive(build_program([cpp, helper], kit="tfc-mbed"), track="floor", time_limit_s=1.0)
     assert r.outcome == "controller_returned", r.message
+
+
+def test_a_wait_after_other_time_passed_waits_its_whole_time(tmp_path, capfd):
+    """Waits add up within a step only while nothing else lets time pass: after sleep() or
+    __WFI() a wait counts from then (it used to count from main()'s last wait, up to 10 ms back:
+    wait_ms(5) after five __WFI() returned at once)."""
+    prog = program(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        int main() {
+            TFC_Init();
+            for (int i = 0; i < 5; i++) __WFI();
+            Timer t;
+            t.start();
+            wait_ms(5);
+            int a = t.read_us();
+            sleep();
+            t.reset();
+            wait_us(3000);
+            int b = t.read_us();
+            t.reset();
+            for (int i = 0; i < 20; i++) wait_us(100);
+            printf("waited %d %d %d\\n", a, b, t.read_us());
+            return 0;
+        }
+        """)
+    r = drive(prog, track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    a, b, c = map(int, re.search(r"waited (\d+) (\d+) (\d+)", capfd.readouterr().out).groups())
+    assert (a, b) == (6000, 4000) and c <= 2000  # whole 2-ms steps; twenty 0.1-ms waits share one

@@ -719,7 +719,6 @@ class CarSim:
         pair of external torques on a speed servo's wheel, nothing on a locked one."""
         applied, b, c = self._tyre_applied, self._body, self._control
         r = self._r_m
-        A = dart.dynamics.ActuatorType
         for i, body in enumerate(self._knuckle_bodies):
             force = applied[i][0]
             body.setExtForce(np.array([force[0], force[1], 0.0]), np.array([0.0, 0.0, -r]), True, True)
@@ -766,7 +765,7 @@ class CarSim:
 
     def _set_drag(self) -> None:
         """The chassis force: the external one plus the air drag last computed (duty drive)."""
-        ext, chassis = self._control.ext_force_n, self._body.chassis
+        ext = self._control.ext_force_n
         self._force_applied = (ext[0] + self._drag_n, ext[1])
         self._chassis_forces()
 

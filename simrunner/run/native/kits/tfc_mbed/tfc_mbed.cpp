@@ -53,6 +53,7 @@ static struct {
     int started;
     double now_s;            /* simulated time as the clock last read it */
     double wait_until_s;     /* main()'s own time: where its waits and reads have got to */
+    double pass_end_s;       /* the time when the last of them ended */
     double servo_frame_s;    /* the servo frame: the camera's read-out period */
     double servo_t0_s;       /* when servo frames started to count */
     long long frame;         /* the camera frame read out last */
@@ -128,7 +129,7 @@ void tfc_mbed_start(void) {
     k.servo_rad = spinner_param("tfc_servo_rad", 0.40);
     k.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
     k.servo_channel = (int)spinner_param("tfc_servo_channel", 0.0);
-    k.now_s = k.wait_until_s = spinner_get_time();  /* main()'s own time starts now */
+    k.now_s = k.wait_until_s = k.pass_end_s = spinner_get_time();  /* main()'s own time starts now */
     init_servos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, SERVO_DEFAULT_PERIOD);
     uint8_t row[128];  /* the first image: the frame after the start's */
     k.frame = spinner_latest_image(spinner_line_row(), 0, LLONG_MAX, row, sizeof row, NULL);
@@ -174,13 +175,14 @@ static void camera_service(void) {
 static void step(void) { spinner_get_time(); }
 
 /* Let s pass from where main()'s own time has got to: short waits and reads add up to a step, and
- * a step's time beyond them is used up by the next ones (up to MAX_AHEAD_S of it). */
-#define MAX_AHEAD_S 0.01
+ * the part of a step a wait did not need is used up by the next waits and reads - as long as no
+ * other time passed in between (a sleep(), a sensor's first read): then main()'s time is now. */
 static void pass(double s) {
-    double base = k.wait_until_s > k.now_s - MAX_AHEAD_S ? k.wait_until_s : k.now_s - MAX_AHEAD_S;
+    double base = k.now_s == k.pass_end_s ? k.wait_until_s : k.now_s;
     double until = base + s;
     k.wait_until_s = until;
     while (k.now_s < until - 1e-9) step();
+    k.pass_end_s = k.now_s;
 }
 
 void tfc_mbed_poll(void) {
