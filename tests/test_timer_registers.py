@@ -454,3 +454,14 @@ def test_spinner_warn_adds_a_warning_of_the_run_once_per_text(tmp_path):
         r = drive(dataclasses.replace(build_program([src]), isolate=isolate), track="floor", time_limit_s=1.0)
         assert r.outcome == "controller_returned", r.message
         assert [w for w in r.warnings if w in ("first", "second")] == ["first", "second"]
+
+
+def test_check_shows_the_kits_warning(tmp_path):
+    """simrunner check lists the run's own warnings beside its checks: the timer left off in the NVIC."""
+    from simrunner.run.check import check_controller
+
+    src = tmp_path / "unrouted.c"
+    src.write_text(UNROUTED.format(late=100, enable="while (1) TFC_Task();"))
+    report = check_controller(build_program([src], kit="tfc"), track="floor")
+    assert not report.problems
+    assert any("PIT_IRQn is not enabled in the NVIC" in w for w in report.warnings), report.warnings

@@ -60,7 +60,8 @@ def _run_once(controller, track: SimTrack, car: CarDescription, settings: RunSet
     return RunResult(outcome=outcome, laps=settings.laps, laps_completed=run.judge.laps_completed,
                      lap_times_s=run.judge.lap_times_s, sim_time_s=run.clock.time_s,
                      wall_time_s=run.wall_time_s, track=str(track.source), seed=settings.seed,
-                     message=message, error=error, log=run.recorder.freeze("<check>"))
+                     message=message, error=error, log=run.recorder.freeze("<check>"),
+                     warnings=run.warnings)
 
 
 def _first_difference(a, b) -> str | None:
@@ -142,6 +143,9 @@ def check_controller(controller, *, track: str | Path | SimTrack | None = None,
         if d > dmax:
             warnings.append(f"steering commands up to {d:.3g} rad exceed the car's limit "
                             f"{dmax:g} rad (they are capped); check turn_norm's units")
+    # the run's own warnings (a kit's: a timer whose IRQ is off; threads left running), but the
+    # speed cap's, which the lines above say for the whole run
+    warnings += [w for w in first.warnings if not w.startswith(("speed command ", "duty command "))]
     return CheckReport(name, tuple(problems), tuple(warnings), first.sim_time_s,
                        1 if second is None else 2)
 
