@@ -43,6 +43,8 @@ static struct {
     double ms_counted;      /* simulated ms already added to the tickers */
     double exposure_s;      /* the line camera's exposure (TFC_SetLineScanExposureTime) */
     long long frame;        /* the camera frame read out last */
+    double looked_s;        /* when the camera was last asked for a new frame */
+    double next_look_s;     /* no new frame before then (camera_service) */
     int hbridge;            /* H-bridge enabled */
     float duty_a, duty_b;   /* motor duties */
     float servo;            /* servo 0 position */
@@ -77,15 +79,23 @@ static void count_ticks(double now_s) {
     }
 }
 
-/* The PIT interrupt's camera read-out: the camera's latest frame once a new one is there (one
- * image an exposure: the camera's frame period is the exposure), without waiting - on the board
- * the read-out runs beside the main loop, which goes on between two images. */
-static void camera_service(void) {
+/* The PIT interrupt's camera read-out (at `now`): the camera's latest frame once a new one is there
+ * (one an exposure: the camera's frame period is the exposure), without waiting - on the board the
+ * read-out runs beside the main loop, which goes on between two images. A frame found at a pass
+ * was not there at the pass before (`looked_s`), so the next one is not due before one exposure
+ * after that: the passes until then do not ask. */
+static void camera_service(double now) {
+    if (now < tfc.next_look_s) return;
     uint8_t row[TFC_LINESCAN_IMAGE_SIZE];
     size_t n = 0;
     long long frame = spinner_latest_image(spinner_line_row(), 1, tfc.frame, row, sizeof row, &n);
-    if (n == 0) return;
+    if (n == 0) {
+        tfc.looked_s = now;
+        return;
+    }
     tfc.frame = frame;
+    tfc.next_look_s = tfc.looked_s + tfc.exposure_s - 1e-9;
+    tfc.looked_s = now;
     for (size_t i = 0; i < TFC_LINESCAN_IMAGE_SIZE; i++) {
         uint16_t v = (uint16_t)((i < n ? row[i] : 0) << 4);  /* 8-bit grey -> 12-bit counts */
         LineScanImage0[i] = v;
@@ -107,7 +117,7 @@ static void poll(void) {
     if (++tfc.polls <= POLLS_BEFORE_TIME) return;
     double now = spinner_get_time();  /* one physics step, as TFC_Task() */
     count_ticks(now);
-    camera_service();
+    camera_service(now);
 }
 
 volatile uint8_t *tfc_sim_image_ready(void) {
@@ -148,7 +158,7 @@ void TFC_Task(void) {
     tfc.polls = 0;
     double now = spinner_get_time();  /* the main loop's pass: a physics step of simulated time */
     count_ticks(now);
-    camera_service();
+    camera_service(now);
 }
 
 void tfc_sim_wfi(void) { TFC_Task(); }  /* __WFI() (derivative.h) */
@@ -165,7 +175,7 @@ void TFC_Delay_mS(unsigned int TicksIn_mS) {
     double until = spinner_get_time() + TicksIn_mS * 1e-3;
     for (double now = spinner_get_time(); now < until - 1e-9; now = spinner_get_time()) {
         count_ticks(now);
-        camera_service();
+        camera_service(now);
     }
 }
 
@@ -241,6 +251,7 @@ float TFC_ReadBatteryVoltage(void) { return (float)spinner_param("battery_v", 7.
 void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {
     tfc.exposure_s = clampf(TimeIn_uS * 1e-6, 1e-5, 1.0);
     spinner_set_exposure(tfc.exposure_s);
+    tfc.next_look_s = 0.0;  /* the frame in progress ends on the new period */
 }
 
 void InitByteQueue(ByteQueue *BQ, uint16_t Size, uint8_t *Storage) {
