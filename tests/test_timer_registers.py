@@ -391,6 +391,48 @@ def test_c_stop_every_stops_a_handler_in_process_and_isolated(tmp_path, capfd):
         assert "a 10 b 10 set 0 interrupts 1" in capfd.readouterr().out
 
 
+
+C_STOP_QUEUED = """\
+#include <stdio.h>
+#include "spinner.h"
+static int a, b;
+static double b_first_s = -1;
+static void tick_a(void) { a++; }
+static void tick_b(void) { if (b++ == 0) b_first_s = spinner_get_time(); }
+int main(void) {
+    spinner_every(0.001, tick_a);
+    spinner_sleep(0.01);
+    double t0 = spinner_get_time();
+    spinner_set_speed(0.1);          /* queued: --mcu-time lets 3 ms pass in it, tick_a due then */
+    spinner_stop_every(tick_a);      /* queued after it */
+    %s
+    spinner_sleep(0.01);
+    printf("a %%d b %%d after %%.4f\\n", a, b, b_first_s - t0);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_handler_due_in_a_request_queued_before_its_stop_is_its_own(tmp_path, capfd, isolate):
+    """--mcu-time: a queued call lets time pass and the handler is due in it; the program stops the
+    handler after that call (before the simulator has read the stop). The tick is the stopped
+    handler's - not a fault (an unknown slot), not the handler that took the freed slot."""
+    for name, reuse in (("alone", ""), ("reuse", "spinner_every(0.001, tick_b);")):
+        src = tmp_path / f"{name}.c"
+        src.write_text(C_STOP_QUEUED % reuse)
+        program = dataclasses.replace(build_program([src]), isolate=isolate)
+        r = drive(program, track="floor", time_limit_s=1.0, mcu_time=0.003)
+        assert r.outcome == "controller_returned", r.message
+        out = capfd.readouterr().out
+        a, b, after = re.search(r"a (\d+) b (\d+) after (\S+)", out).groups()
+        # tick_a: 3 ms charged to spinner_every, 10 ms asleep, 3 charged to the sleep, 3 to get_time,
+        # 3 to set_speed: one a millisecond
+        assert int(a) == 22, out
+        if reuse:  # tick_b: only after its spinner_every (3 ms more charged to it; the stale bug: 2 ms)
+            assert float(after) == pytest.approx(0.008) and int(b) == 14, out
+
+
 UNROUTED = """\
 #include "derivative.h"
 #include "spinner.h"

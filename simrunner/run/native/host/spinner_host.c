@@ -321,9 +321,12 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
  * go out as usual; no simulated time passes in it), sends OP_ISR_DONE and waits on for its own
  * reply - the handler runs on the program's stack inside the waiting call, as an interrupt.
  * spinner_stop_every frees a handler's slots (OP_EVERY_STOP {int32 slot}); a freed slot is used
- * again, the lowest first. */
+ * again, the lowest first, once the simulator has read the stop: the reply to the next waiting
+ * call. Until then the handler stays in its slot (isr_stopping), as the requests queued before the
+ * stop may let time pass (--mcu-time) and run it then: it was due before it was stopped. */
 #define MAX_ISRS 32
 static void (*isr_fn[MAX_ISRS])(void);
+static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read by the simulator */
 static int isr_count;   /* slots in use */
 static int isr_depth;   /* handlers running (spinner_in_interrupt) */
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
@@ -347,6 +350,12 @@ static int add_isr(void (*handler)(void), double period_s) {
     isr_count++;
     queue(OP_EVERY, &period_s, sizeof period_s, &slot, sizeof slot);
     return 0;
+}
+
+/* A reply to a waiting call: the simulator has read every request sent before it, the stops too. */
+static void release_stopped(void) {
+    for (int slot = 0; slot < MAX_ISRS; slot++)
+        if (isr_stopping[slot]) isr_stopping[slot] = 0, isr_fn[slot] = NULL;
 }
 
 /* A kit built with the program may define `void spinner_kit_before_wait(void)`: it runs before
@@ -380,6 +389,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         run_isr(slot);
         have = read_reply_head(hdr, reply, size);
     }
+    release_stopped();
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
         ended();
@@ -735,8 +745,8 @@ void spinner_stop_every(void (*handler)(void)) {
     INIT();
     if (finished || handler == NULL) return;
     for (int32_t slot = 0; slot < MAX_ISRS; slot++) {
-        if (isr_fn[slot] != handler) continue;
-        isr_fn[slot] = NULL;
+        if (isr_fn[slot] != handler || isr_stopping[slot]) continue;
+        isr_stopping[slot] = 1;
         isr_count--;
         queue(OP_EVERY_STOP, &slot, sizeof slot, NULL, 0);
     }
@@ -745,7 +755,7 @@ void spinner_stop_every(void (*handler)(void)) {
 int spinner_has_every(void (*handler)(void)) {
     INIT();
     for (int slot = 0; slot < MAX_ISRS; slot++)
-        if (handler != NULL && isr_fn[slot] == handler) return 1;
+        if (handler != NULL && isr_fn[slot] == handler && !isr_stopping[slot]) return 1;
     return 0;
 }
 
@@ -1404,6 +1414,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     prog_lib = lib;
     isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
     memset(isr_fn, 0, sizeof isr_fn);
+    memset(isr_stopping, 0, sizeof isr_stopping);
     kit_before_wait = NULL, in_kit_hook = 0;
     if (user_main == NULL) {
         __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);
