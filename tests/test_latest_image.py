@@ -103,3 +103,29 @@ def test_the_c_call_reads_frames_without_waiting(tmp_path, capfd):
     frames, skips, empty = map(int, re.search(r"frames (\d+) skips (\d+) empty (\d+)",
                                               capfd.readouterr().out).groups())
     assert frames >= 48 and skips == 0 and empty > frames  # 50 frames/s, 1000 looks
+
+
+def test_the_latest_frame_keeps_its_exposure_when_the_exposure_changes_after_it():
+    """The physical line camera: set_exposure moves the frame in progress, not the one that ended
+    before it - latest_image then gives that frame as get_image gave it (bit for bit), not
+    integrated over the new exposure (up to 20 grey levels off)."""
+    out = {}
+
+    def main(s):
+        s.set_speed(1.0)
+        s.sleep(0.3)
+        img = s.get_image(60, False)
+        out["frames"] = [s.latest_image(60, False)]
+        s.set_exposure(s.get_exposure() / 2)
+        s.set_exposure(s.get_exposure() / 2)  # (twice at one frame: the frame's own is kept)
+        out["frames"].append(s.latest_image(60, False))
+        out["img"], out["imager"] = img, s._s.imager is not None
+        nxt = s.get_image(60, False)  # the next frame has the new exposure: darker
+        out["darker"] = int(img.astype(int).sum() - nxt.astype(int).sum())
+
+    r = drive(main, track="floor", time_limit_s=1.0)
+    assert r.outcome == "controller_returned", r.message
+    (f1, a), (f2, b) = out["frames"]
+    assert out["imager"] and f1 == f2
+    assert (a == out["img"]).all() and (b == out["img"]).all()
+    assert out["darker"] > 0

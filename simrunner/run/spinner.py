@@ -152,6 +152,7 @@ class Session:
         self.thread_id: int | None = None  # the thread running main (set by activate)
         self._warned: set[str] = set()
         self.exposure_s = float(self.car.camera.exposure_s)  # set_exposure's value
+        self.exposure_before: tuple[int, float] | None = None  # (frame, the exposure it had): set_exposure at it
         self.pixy2_tracker = None  # the Pixy2's line tracker (simrunner.run.pixy2), made on first use
         self.pixy2_frame: int | None = None  # the last frame the Pixy2 returned features of
         self.ranging = None  # the range sensors (simrunner.sensors.ranging), made on first use
@@ -421,18 +422,23 @@ class Spinner:
         clock = self._clock
         if clock.frame_index <= after_frame:
             return clock.frame_index, None
-        img = self._frame_now(int(line), add_noise, clock.boundary_pose)
+        img = self._frame_now(int(line), add_noise, clock.boundary_pose, True)
         if self._s.video is not None:
             self._s.video.note_image(img, int(line))
         return clock.frame_index, img
 
-    def _frame_now(self, line: int, add_noise: bool, pose=None) -> np.ndarray:
-        """The camera's image (row ``line``, or all for -1) at ``pose`` (None: the clock's now)."""
+    def _frame_now(self, line: int, add_noise: bool, pose=None, latest: bool = False) -> np.ndarray:
+        """The camera's image (row ``line``, or all for -1) at ``pose`` (None: the clock's now);
+        ``latest``: the last boundary's frame, read after it (its exposure the one it had)."""
         session = self._s
         pose = self._clock.pose() if pose is None else pose
         imager = session.imager
         if imager is not None:  # the physical camera (simrunner.sensors.imaging)
-            return self._expose(imager, pose, line, add_noise)
+            exposure_s = session.exposure_s
+            before = session.exposure_before
+            if latest and before is not None and before[0] == self._clock.frame_index:
+                exposure_s = before[1]  # set since this frame ended: the next one has it
+            return self._expose(imager, pose, line, add_noise, exposure_s)
         if line >= 0:  # one call (simrunner.sensors.line_row)
             return self._line_image(pose, line, session.noise_rng if add_noise else None)
         cam = session.camera
@@ -471,13 +477,14 @@ class Spinner:
             s.video.note_pixy2(tracker.all, tracker.vector_index, tracker.w, tracker.h)
         return True
 
-    def _expose(self, imager: "Imager", pose, line: int, add_noise: bool) -> np.ndarray:
+    def _expose(self, imager: "Imager", pose, line: int, add_noise: bool,
+                exposure_s: float) -> np.ndarray:
         """The physical camera's frame just read: integrated over the exposure in force,
         blurred by the car's motion, noisy unless ``add_noise`` is False."""
         sim, session = self._sim, self._s
         twist = (sim.speed_mps, sim.lateral_speed_mps, sim.yaw_rate_radps) \
             if imager.spec.motion_blur_samples > 1 else None
-        kw = dict(exposure_s=session.exposure_s, twist=twist, frame_index=self._clock.frame_index,
+        kw = dict(exposure_s=exposure_s, twist=twist, frame_index=self._clock.frame_index,
                   normals=session.noise_rng if add_noise else None)
         return imager.line(pose, line, **kw) if line >= 0 else imager.frame(pose, **kw)
 
@@ -499,7 +506,10 @@ class Spinner:
                    if cam.model == "area" else "")))
         if _get_ident() != self._owner:
             raise self._foreign("set_exposure")
-        self._s.exposure_s = s
+        session, clock = self._s, self._clock
+        if session.exposure_before is None or session.exposure_before[0] != clock.frame_index:
+            session.exposure_before = (clock.frame_index, session.exposure_s)  # the latest frame's
+        session.exposure_s = s
         if cam.model == "linescan":
             self._clock.set_frame_period(cam.frame_period_s(s))
 
