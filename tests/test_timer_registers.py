@@ -433,6 +433,35 @@ def test_a_handler_due_in_a_request_queued_before_its_stop_is_its_own(tmp_path, 
             assert float(after) == pytest.approx(0.008) and int(b) == 14, out
 
 
+
+C_REARM = """\
+#include <stdio.h>
+#include "spinner.h"
+static int n;
+static void tick(void) {  /* a new period at each expiry, all inside one sleep */
+    n++;
+    spinner_stop_every(tick);
+    spinner_every(n % 2 ? 0.002 : 0.003, tick);
+}
+int main(void) {
+    spinner_every(0.002, tick);
+    spinner_sleep(0.2);
+    printf("ticks %d interrupts %d\\n", n, spinner_interrupts());
+    return 0;
+}
+"""
+
+
+def test_a_handler_that_sets_itself_up_anew_at_each_call_runs_on(tmp_path, capfd):
+    """A handler stopped and set up again in itself, 67 times within one waiting call (2 ms and 3 ms
+    periods: 4 ms on the 2-ms steps): it keeps its slot (at most 32), one interrupt all along."""
+    src = tmp_path / "rearm.c"
+    src.write_text(C_REARM)
+    r = drive(build_program([src]), track="floor", time_limit_s=1.0)
+    assert r.outcome == "controller_returned", r.message
+    assert "ticks 67 interrupts 1" in capfd.readouterr().out
+
+
 UNROUTED = """\
 #include "derivative.h"
 #include "spinner.h"

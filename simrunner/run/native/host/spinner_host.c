@@ -323,7 +323,8 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
  * spinner_stop_every frees a handler's slots (OP_EVERY_STOP {int32 slot}); a freed slot is used
  * again, the lowest first, once the simulator has read the stop: the reply to the next waiting
  * call. Until then the handler stays in its slot (isr_stopping), as the requests queued before the
- * stop may let time pass (--mcu-time) and run it then: it was due before it was stopped. */
+ * stop may let time pass (--mcu-time) and run it then: it was due before it was stopped; set up
+ * again meanwhile (a kit's timer given a new period in its handler), it takes that slot again. */
 #define MAX_ISRS 32
 static void (*isr_fn[MAX_ISRS])(void);
 static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read by the simulator */
@@ -343,10 +344,13 @@ static void run_isr(uint32_t slot) {
 }
 
 static int add_isr(void (*handler)(void), double period_s) {
-    int32_t slot = 0;
-    while (slot < MAX_ISRS && isr_fn[slot] != NULL) slot++;
+    int32_t slot = 0;  /* its own slot if it is being stopped (a timer's new period), else a free one */
+    while (slot < MAX_ISRS && !(isr_stopping[slot] && isr_fn[slot] == handler)) slot++;
+    if (slot == MAX_ISRS)
+        for (slot = 0; slot < MAX_ISRS && isr_fn[slot] != NULL; slot++) {}
     if (slot == MAX_ISRS) return -1;
     isr_fn[slot] = handler;
+    isr_stopping[slot] = 0;
     isr_count++;
     queue(OP_EVERY, &period_s, sizeof period_s, &slot, sizeof slot);
     return 0;
