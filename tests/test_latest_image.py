@@ -129,3 +129,19 @@ def test_the_latest_frame_keeps_its_exposure_when_the_exposure_changes_after_it(
     assert out["imager"] and f1 == f2
     assert (a == out["img"]).all() and (b == out["img"]).all()
     assert out["darker"] > 0
+
+
+def test_with_mcu_time_a_latest_image_call_is_charged_as_every_call():
+    """--mcu-time FIXED charges each Spinner call, latest_image too (the program's time before it
+    passes first: the frame it reads is the one the board would have by then)."""
+    spent = []
+
+    def main(s):
+        t0 = s.get_time()
+        for _ in range(10):
+            s.latest_image(60, False)
+        spent.append(s.get_time() - t0)
+
+    r = drive(main, track="floor", time_limit_s=1.0, mcu_time=0.002)
+    assert r.outcome == "controller_returned", r.message
+    assert spent[0] >= 10 * 0.002
