@@ -510,13 +510,19 @@ int spinner_image_height(void) { INIT(); return img_h; }
 int spinner_line_row(void) { INIT(); return line_row; }
 int spinner_recording(void) { INIT(); return recording_on; }
 
-size_t spinner_get_image(int line, int add_noise, uint8_t *buf, size_t size) {
-    INIT();
+/* The bytes an image of `line` (-1: all rows) takes; a bad row or a short buffer is misuse of `fn`. */
+static size_t image_bytes(const char *fn, int line, const uint8_t *buf, size_t size) {
     if (line < -1 || line >= img_h)
-        misuse("spinner_get_image(line=%d): expected -1 (whole image) or a row 0..%d", line, img_h - 1);
+        misuse("%s(line=%d): expected -1 (whole image) or a row 0..%d", fn, line, img_h - 1);
     size_t need = line < 0 ? (size_t)img_h * img_w : (size_t)img_w;
     if (buf == NULL || size < need)
-        misuse("spinner_get_image(line=%d, size=%zu): the buffer must hold %zu bytes", line, size, need);
+        misuse("%s(line=%d, size=%zu): the buffer must hold %zu bytes", fn, line, size, need);
+    return need;
+}
+
+size_t spinner_get_image(int line, int add_noise, uint8_t *buf, size_t size) {
+    INIT();
+    image_bytes("spinner_get_image", line, buf, size);
     if (finished) return 0;
     int32_t args[2] = {line, add_noise ? 1 : 0};
     return call(OP_IMAGE, args, sizeof args, NULL, 0, buf, size);
@@ -528,11 +534,7 @@ long long spinner_latest_image(int line, int add_noise, long long after_frame, u
     static size_t reply_size;
     INIT();
     if (written) *written = 0;
-    if (line < -1 || line >= img_h)
-        misuse("spinner_latest_image(line=%d): expected -1 (whole image) or a row 0..%d", line, img_h - 1);
-    size_t need = line < 0 ? (size_t)img_h * img_w : (size_t)img_w;
-    if (buf == NULL || size < need)
-        misuse("spinner_latest_image(line=%d, size=%zu): the buffer must hold %zu bytes", line, size, need);
+    size_t need = image_bytes("spinner_latest_image", line, buf, size);
     if (finished) return after_frame;
     if (reply_size < 8 + need) {
         free(reply);
