@@ -158,7 +158,7 @@ def test_faulty_runs_never_stop_the_batch(tmp_path):
     ctl = tmp_path / "faulty.py"
     ctl.write_text(textwrap.dedent(FAULTY))
     res = run_batch(ctl, out_dir=tmp_path / "out", params=["mode=drive,crash,die,slow"],
-                    time_limit_s=1000.0, workers=2, run_timeout_s=20.0, csv="failures",
+                    time_limit_s=1000.0, workers=2, run_timeout_s=8.0, csv="failures",
                     tracks=[str(EXAMPLES / "oval_start.txt")])
     by_mode = {r["mode"]: r for r in res.rows}
     assert by_mode["drive"]["outcome"] == "off_track"

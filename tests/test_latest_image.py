@@ -145,3 +145,25 @@ def test_with_mcu_time_a_latest_image_call_is_charged_as_every_call():
     r = drive(main, track="floor", time_limit_s=1.0, mcu_time=0.002)
     assert r.outcome == "controller_returned", r.message
     assert spent[0] >= 10 * 0.002
+
+
+def test_the_latest_frame_is_blurred_by_the_motion_at_its_end_not_at_the_read():
+    """The physical camera blurs a frame by the car's motion over its exposure: a frame read later
+    with latest_image (the kits read it a step or two after its end) is the frame get_image gave,
+    bit for bit, though the car has since changed speed and steering."""
+    out = {}
+
+    def main(s):
+        s.set_speed_and_servo(1.5, 0.0)
+        s.sleep(0.6)
+        img = s.get_image(60, False)
+        s.set_speed_and_servo(0.0, 0.4)  # brake and steer: the motion changes at once
+        s.sleep(0.008)
+        frame, late = s.latest_image(60, False)
+        out.update(img=img, late=late, blur=s._s.imager.spec.motion_blur_samples,
+                   moved=s.get_speed())
+
+    r = drive(main, time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    assert out["blur"] > 1 and out["late"] is not None
+    assert (out["late"] == out["img"]).all()

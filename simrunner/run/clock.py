@@ -106,6 +106,10 @@ class LockstepClock:
         self._anchor_frame = 0  # at the period (set_frame_period moves the anchor)
         self._boundary_step = 0  # step of the last frame boundary
         self.boundary_pose = None  # the car's pose at it (a camera's latest frame is taken there)
+        # set by the owner when a camera blurs by the car's motion: () -> the twist to keep at
+        # each boundary with the pose (boundary_twist), the latest frame's blur
+        self.twist_fn: Callable[[], tuple[float, float, float]] | None = None
+        self.boundary_twist: tuple[float, float, float] | None = None
         self._next_frame_step = self._frame_step(1)
         self._command: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._command_dirty = True
@@ -239,6 +243,8 @@ class LockstepClock:
     def start(self) -> None:
         """Run the frame-0 callback (the initial state)."""
         pose = self.boundary_pose = self.pose()
+        if self.twist_fn is not None:
+            self.boundary_twist = self.twist_fn()
         end = self.on_frame(0, 0.0, pose, self._command, None)
         if end is not None:
             self.finish(*end)
@@ -264,6 +270,8 @@ class LockstepClock:
         self._next_frame_step = self._frame_step(k + 1)
         row_command = None if self._row_pending else self._row_command
         pose = self.boundary_pose = self.pose()
+        if self.twist_fn is not None:
+            self.boundary_twist = self.twist_fn()
         end = self.on_frame(k, self.step_index * self.dt_s, pose, self._command, row_command)
         self._row_pending = True
         self.last_progress_wall_s = _monotonic()

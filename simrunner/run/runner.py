@@ -289,6 +289,9 @@ class Run:
         self.frames.extra = extra_values
         self.clock = LockstepClock(self.sim, dt_s=settings.dt_s,
                                    frame_period_s=car.camera.frame_period_s(), on_frame=self.frames)
+        if self.imager is not None and self.imager.spec.motion_blur_samples > 1:
+            sim = self.sim  # a latest frame (Spinner.latest_image) blurs by the boundary's motion
+            self.clock.twist_fn = lambda: (sim.speed_mps, sim.lateral_speed_mps, sim.yaw_rate_radps)
         self.session = Session(clock=self.clock, camera=self.camera, car=car,
                                rng=np.random.default_rng(settings.seed), recorder=self.recorder,
                                video=self.video, params=settings.params, imager=self.imager)

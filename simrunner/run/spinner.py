@@ -438,7 +438,8 @@ class Spinner:
             before = session.exposure_before
             if latest and before is not None and before[0] == self._clock.frame_index:
                 exposure_s = before[1]  # set since this frame ended: the next one has it
-            return self._expose(imager, pose, line, add_noise, exposure_s)
+            return self._expose(imager, pose, line, add_noise, exposure_s,
+                                self._clock.boundary_twist if latest else None)
         if line >= 0:  # one call (simrunner.sensors.line_row)
             return self._line_image(pose, line, session.noise_rng if add_noise else None)
         cam = session.camera
@@ -478,12 +479,15 @@ class Spinner:
         return True
 
     def _expose(self, imager: "Imager", pose, line: int, add_noise: bool,
-                exposure_s: float) -> np.ndarray:
+                exposure_s: float, twist=None) -> np.ndarray:
         """The physical camera's frame just read: integrated over the exposure in force,
-        blurred by the car's motion, noisy unless ``add_noise`` is False."""
+        blurred by the car's motion (``twist``: the motion kept at the frame's boundary for a
+        frame read later; None: the car's now), noisy unless ``add_noise`` is False."""
         sim, session = self._sim, self._s
-        twist = (sim.speed_mps, sim.lateral_speed_mps, sim.yaw_rate_radps) \
-            if imager.spec.motion_blur_samples > 1 else None
+        if twist is None and imager.spec.motion_blur_samples > 1:
+            twist = (sim.speed_mps, sim.lateral_speed_mps, sim.yaw_rate_radps)
+        elif imager.spec.motion_blur_samples <= 1:
+            twist = None
         kw = dict(exposure_s=exposure_s, twist=twist, frame_index=self._clock.frame_index,
                   normals=session.noise_rng if add_noise else None)
         return imager.line(pose, line, **kw) if line >= 0 else imager.frame(pose, **kw)
