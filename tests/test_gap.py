@@ -414,10 +414,12 @@ def test_cli_screen_option_fits_on_a_subset_and_says_so(tmp_path, offset_run):
 
 # -- several effects, several logs, partial sensors -----------------------------------------
 def test_two_hidden_effects_are_both_kept_with_a_chain():
-    log, truth = make_measured_log(["steering_offset", "motor_lag"], value=[-0.03, 0.3],
-                                   rng=np.random.default_rng(21), start_s=0.0, duration_s=56.0)
+    # one car, two logs: the plan's lateral part and its longitudinal part (36 s in all)
+    logs = [make_measured_log(["steering_offset", "motor_lag"], value=[-0.03, 0.3],
+                              rng=np.random.default_rng(seed), **part)[0]
+            for seed, part in ((21, PART_LATERAL), (121, PART_LONGITUDINAL))]
     candidates = ["steering_offset", "steering_gain", "motor_lag", "drag", "command_latency"]
-    result = run_gap(log, jobs=2, effects=candidates)
+    result = run_gap(logs, jobs=2, effects=candidates)
     assert sorted(result.effects) == ["motor_lag", "steering_offset"]
     assert result.parameters["steering_offset_rad"] == pytest.approx(-0.03, rel=0.15)
     assert result.parameters["motor_lag_s"] == pytest.approx(0.3, rel=0.15)
