@@ -380,7 +380,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         if (size) memset(reply, 0, size);
         return 0;
     }
-    if (kit_before_wait != NULL && !in_kit_hook) {
+    if (kit_before_wait != NULL && !in_kit_hook && op != OP_NOW) {  /* (OP_NOW: time does not pass) */
         in_kit_hook = 1;
         kit_before_wait();
         in_kit_hook = 0;
