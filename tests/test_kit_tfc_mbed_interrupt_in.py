@@ -252,3 +252,40 @@ def test_a_handler_is_an_interrupt(tmp_path):
         """, params={"encoder_PTA13": 2}, name="isr_wait.cpp", time_limit_s=2.0)
     assert r.outcome == "controller_error"
     assert "wait_ms: not emulated" in r.message and "isr_wait.cpp:5" in r.message, r.message
+
+
+def test_an_interruptin_deleted_in_its_handler_leaves_the_others_their_edges_in_order(tmp_path):
+    """Three InterruptIns on pins of one wheel's channel A: the first deletes itself in its first
+    rise; the same edge still reaches the other two, in the order they were made (b before c), and
+    every later edge both; rise(NULL) stops a handler (d never counts)."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn d(PTA5);
+        InterruptIn *a, *b, *c;
+        volatile int nb, nc, nd, order_ok = 1, last = 'c';
+        void on_a() { delete a; a = NULL; }
+        void on_b() { nb++; if (last != 'c') order_ok = 0; last = 'b'; }
+        void on_c() { nc++; if (last != 'b') order_ok = 0; last = 'c'; }
+        void on_d() { nd++; }
+        int main() {
+            TFC_Init();
+            a = new InterruptIn(PTA1);
+            b = new InterruptIn(PTA2);
+            c = new InterruptIn(PTA4);
+            a->rise(&on_a);
+            b->rise(&on_b);
+            c->rise(&on_c);
+            d.rise(&on_d);
+            d.rise(NULL);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(0.4);
+            spinner_add_textf("edges %d %d %d %d %d", nb, nc, nd, order_ok, a == NULL);
+            return 0;
+        }
+        """, params={"encoder_PTA1": 2, "encoder_PTA2": 2, "encoder_PTA4": 2, "encoder_PTA5": 2})
+    assert r.outcome == "controller_returned", r.message
+    nb, nc, nd, order_ok, deleted = numbers(r)["edges"]
+    assert nb > 10 and nc == nb and nd == 0 and order_ok == 1 and deleted == 1

@@ -536,3 +536,62 @@ def test_check_shows_the_kits_warning(tmp_path):
     report = check_controller(build_program([src], kit="tfc"), track="floor")
     assert not report.problems
     assert any("PIT_IRQn is not enabled in the NVIC" in w for w in report.warnings), report.warnings
+
+
+# -- the counters read live ----------------------------------------------------------------------
+
+COUNTERS = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+int main(void) {
+    TFC_Init();
+    PIT_MCR = 0;
+    PIT_LDVAL0 = 24000000 - 1;                        /* 1 s of the 24 MHz bus clock, no interrupt */
+    PIT_TCTRL0 = PIT_TCTRL_TEN_MASK;
+    LPTMR0_PSR = LPTMR_PSR_PCS(1) | LPTMR_PSR_PBYP_MASK; /* the 1 kHz LPO */
+    LPTMR0_CMR = 999;
+    LPTMR0_CSR = LPTMR_CSR_TEN_MASK;
+    TPM2_MOD = 0xFFFF;
+    TPM2_SC = TPM_SC_CMOD(1) | TPM_SC_PS(7);          /* 24 MHz / 128 = 187.5 kHz */
+    unsigned c0 = PIT_CVAL0, n0 = LPTMR0_CNR, t0 = TPM2_CNT;
+    double s0 = spinner_now();
+    TFC_Delay_mS(10);
+    double s1 = spinner_now();
+    LPTMR0_CNR = 0;                                   /* latch, then read (RM 33.3.4) */
+    unsigned c1 = PIT->CHANNEL[0].CVAL, n1 = LPTMR0->CNR, t1 = TPM2->CNT;
+    PIT_LDVAL0 = 240000 - 1;                          /* loaded at the next expiry (RM 32.3.2) */
+    TPM2_SC = 0;
+    TPM2_MOD = 1000;
+    TPM2_SC = TPM_SC_CMOD(1) | TPM_SC_PS(7) | TPM_SC_CPWMS_MASK;
+    TFC_Delay_mS(10);
+    double s2 = spinner_now();
+    unsigned c2 = PIT_CVAL0, t2 = TPM2_CNT;
+    LPTMR0_CSR = 0;
+    unsigned n2 = LPTMR0_CNR;
+    spinner_add_textf("us %d %d", (int)((s1 - s0) * 1e6 + 0.5), (int)((s2 - s1) * 1e6 + 0.5));
+    spinner_add_textf("pit %u %u %u", c0, c1, c2);
+    spinner_add_textf("lptmr %u %u %u", n0, n1, n2);
+    spinner_add_textf("tpm2 %u %u %u", t0, t1, t2);
+    return 0;
+}
+"""
+
+
+def test_running_counters_read_the_count_at_the_time_of_the_read(tmp_path):
+    """PIT CVAL counts down from LDVAL at 24 MHz (a new LDVAL waits for the expiry), LPTMR0 CNR up
+    at its clock (0 once disabled), TPM2 CNT up at its clock (and down again with CPWMS), over the
+    simulated time of two TFC_Delay_mS(10) (whole 2-ms physics steps)."""
+    src = tmp_path / "counters.c"
+    src.write_text(COUNTERS)
+    r = drive(build_program([src], kit="tfc"), track="floor", time_limit_s=1.0, csv=tmp_path / "log.csv")
+    assert r.outcome == "controller_returned", r.message
+    lines = [part for s in r.log.data_text if s for part in s.split(" | ")]
+    got = {s.split()[0]: [int(v) for v in s.split()[1:]] for s in lines}
+    d1_us, d2_us = got["us"]
+    assert d1_us >= 10000 and d2_us >= 10000 and d1_us % 2000 == 0 and d2_us % 2000 == 0
+    load = 24000000 - 1  # the new LDVAL waits for the 1-s period's end
+    assert got["pit"] == [load, load - 24 * d1_us, load - 24 * (d1_us + d2_us)]
+    assert got["lptmr"] == [0, d1_us // 1000, 0]  # the 1 kHz LPO; disabled: 0
+    phase = d2_us * 187500 // 1000000 % 2000  # up to MOD = 1000, then down to 0
+    assert got["tpm2"] == [0, d1_us * 187500 // 1000000, phase if phase <= 1000 else 2000 - phase]

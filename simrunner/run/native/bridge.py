@@ -45,7 +45,7 @@ from simrunner.run.native.build import NativeProgram
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
-    OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE = range(1, 28)
+    OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW = range(1, 29)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
@@ -80,7 +80,7 @@ _PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a r
 # the requests the program waits in for a reply (spinner_host.c: call()); the others are queued
 _WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, OP_PARAM, OP_FAULT,
                       OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
-                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE))
+                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_NOW))
 
 
 class _Child:
@@ -348,6 +348,8 @@ class _Session:
             s.add_data([p.decode("utf-8", "replace") for p in parts])
         elif op == OP_TIME:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_time()))
+        elif op == OP_NOW:  # spinner_now: the clock's time, no step, no --mcu-time charge
+            reply(_HDR.pack(ST_OK, 8) + _D.pack(s._clock.time_s))
         elif op == OP_SPEED:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_speed()))
         elif op == OP_POSITION:

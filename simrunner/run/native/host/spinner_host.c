@@ -51,7 +51,7 @@
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
-       OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE };
+       OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -332,13 +332,17 @@ static int isr_count;   /* slots in use */
 static int isr_depth;   /* handlers running (spinner_in_interrupt) */
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
+static int now_known;   /* spinner_now's answer holds (no waiting call since) */
+
 static void run_isr(uint32_t slot) {
+    now_known = 0;  /* the handler's time */
     if (slot >= MAX_ISRS || isr_fn[slot] == NULL)
         fault_report(0, "the simulator asked for an unknown interrupt handler", NULL);
     if (mcu_report) mcu_mark_s = thread_cpu_s();  /* the handler's own time */
     isr_depth++;
     isr_fn[slot]();
     isr_depth--;
+    now_known = 0;
     queue(OP_ISR_DONE, NULL, 0, NULL, 0);
     flush_out();
 }
@@ -376,7 +380,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         if (size) memset(reply, 0, size);
         return 0;
     }
-    if (kit_before_wait != NULL && !in_kit_hook) {
+    if (kit_before_wait != NULL && !in_kit_hook && op != OP_NOW) {  /* (OP_NOW: time does not pass) */
         in_kit_hook = 1;
         kit_before_wait();
         in_kit_hook = 0;
@@ -394,6 +398,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         have = read_reply_head(hdr, reply, size);
     }
     release_stopped();
+    now_known = 0;  /* time may have passed */
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
         ended();
@@ -641,6 +646,17 @@ double spinner_get_time(void) {
     INIT();
     if (!finished) call(OP_TIME, NULL, 0, NULL, 0, &last_time_s, sizeof last_time_s);
     return last_time_s;
+}
+
+double spinner_now(void) {
+    static double now_s;
+    INIT();
+    if (finished) return last_time_s;
+    if (!now_known) {
+        call(OP_NOW, NULL, 0, NULL, 0, &now_s, sizeof now_s);
+        now_known = 1;
+    }
+    return now_s;
 }
 
 void spinner_set_exposure(double seconds) {

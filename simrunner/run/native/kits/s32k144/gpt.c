@@ -4,11 +4,21 @@
  * A channel counts simulated time in ticks of the kit's Gpt clock, --param s32k_gpt_tick_hz
  * (default 8 MHz: the channel tick frequency github.com/michalfrohlich/NXP-Cup-EXPO's
  * src/timebase.c notes for its sample-based configuration, "GPT channel 2 is configured in
- * ConfigTools at 8 MHz tick frequency"), from Gpt_StartTimer, wrapping at its target (a continuous
- * channel). Its notification is the function the kit's Gpt configuration names for it (below):
- * once the channel runs and its notification is enabled, it is called every target ticks of
- * simulated time (spinner_every), until Gpt_StopTimer or Gpt_DisableNotification. A notification
- * that --isr (or spinner_every) already runs is left to that: its rate is --isr's. */
+ * ConfigTools at 8 MHz tick frequency"), from Gpt_StartTimer. The channel states and reads are the
+ * AUTOSAR SWS General Purpose Timer's (Gpt_GetTimeElapsed, Gpt_GetTimeRemaining, Gpt_StartTimer):
+ * running, a continuous channel wrapping at its target, a one-shot channel expiring there (it then
+ * reads the target elapsed and 0 remaining); stopped, the count at the stop; never started, 0. A
+ * start of a running channel is refused (GPT_E_BUSY: the RTD reports it and keeps the channel as it
+ * is; here a warning of the run), a start of 0 ticks ends the run at the calling line
+ * (GPT_E_PARAM_VALUE). The mode is the generated configuration's (GPT_CH_MODE_CONTINUOUS /
+ * GPT_CH_MODE_ONESHOT in Gpt_VS_0_PBcfg.c, which the build does not see): -D GPT_CHANNEL_MODE_<n>=
+ * GPT_CH_MODE_ONESHOT makes channel n one-shot; continuous otherwise. Its notification is the
+ * function the kit's Gpt configuration names for it (below): once the channel runs and its
+ * notification is enabled, it is called at each expiry (spinner_every; a one-shot's once), until
+ * Gpt_StopTimer or Gpt_DisableNotification. A notification that --isr (or spinner_every) already runs
+ * is left to that: its rate is --isr's. The reads let no simulated time pass (spinner_now: the count
+ * at the program's last call, or at a handler's time), but after 64 reads without any time passing
+ * each read lets one physics step pass (main() only), so a loop polling them moves on. */
 #include <stdio.h>
 
 #include "spinner.h"
@@ -72,6 +82,40 @@ DECLARE(GPT_NOTIFICATION_7)
 #endif
 
 #define NUM_GPT 256
+#define POLLS_FREE 64  /* reads at one time before each lets a physics step pass (the TFC kit's 64) */
+
+/* The channels' modes, as -D GPT_CHANNEL_MODE_<n> gives them (continuous by default). */
+#define MODE_(n) (GPT_CHANNEL_MODE_##n + 0 == GPT_CH_MODE_ONESHOT)
+#ifndef GPT_CHANNEL_MODE_0
+#define GPT_CHANNEL_MODE_0 GPT_CH_MODE_CONTINUOUS
+#endif
+#ifndef GPT_CHANNEL_MODE_1
+#define GPT_CHANNEL_MODE_1 GPT_CH_MODE_CONTINUOUS
+#endif
+#ifndef GPT_CHANNEL_MODE_2
+#define GPT_CHANNEL_MODE_2 GPT_CH_MODE_CONTINUOUS
+#endif
+#ifndef GPT_CHANNEL_MODE_3
+#define GPT_CHANNEL_MODE_3 GPT_CH_MODE_CONTINUOUS
+#endif
+#ifndef GPT_CHANNEL_MODE_4
+#define GPT_CHANNEL_MODE_4 GPT_CH_MODE_CONTINUOUS
+#endif
+#ifndef GPT_CHANNEL_MODE_5
+#define GPT_CHANNEL_MODE_5 GPT_CH_MODE_CONTINUOUS
+#endif
+#ifndef GPT_CHANNEL_MODE_6
+#define GPT_CHANNEL_MODE_6 GPT_CH_MODE_CONTINUOUS
+#endif
+#ifndef GPT_CHANNEL_MODE_7
+#define GPT_CHANNEL_MODE_7 GPT_CH_MODE_CONTINUOUS
+#endif
+static const unsigned char one_shot[GPT_NOTIFIED] = {MODE_(0), MODE_(1), MODE_(2), MODE_(3), MODE_(4), MODE_(5),
+                                                     MODE_(6), MODE_(7)};
+
+/* The generated configuration's names: Gpt_Init takes any (the kit's configuration is above). */
+struct Gpt_ConfigType { uint8 unused; };
+const Gpt_ConfigType Gpt_Config_VS_0, Gpt_Config;
 
 static void notify(int ch);
 #define FIRE(n) static void fire##n(void) { notify(n); }
@@ -85,11 +129,15 @@ static const struct {
     {N0, fire0}, {N1, fire1}, {N2, fire2}, {N3, fire3}, {N4, fire4}, {N5, fire5}, {N6, fire6}, {N7, fire7},
 };
 
+enum { INITIALIZED, RUNNING, STOPPED, EXPIRED };  /* the SWS's channel states */
+
 static struct {
     double tick_hz;
     int inited;
     int own;                /* notifications the kit runs (spinner_every) */
-    struct { double start_s; Gpt_ValueType target; uint8 running, notify, every; } ch[NUM_GPT];
+    double polled_at_s;     /* the time of the last read, and the reads at it */
+    int polls;
+    struct { double start_s; Gpt_ValueType target, frozen; uint8 state, notify, every; } ch[NUM_GPT];
 } g;
 
 static void init(void) {
@@ -98,7 +146,17 @@ static void init(void) {
     g.tick_hz = spinner_param("s32k_gpt_tick_hz", 8e6);
 }
 
-static void notify(int ch) { config[ch].fn(); }
+static int is_one_shot(Gpt_ChannelType c) { return c < GPT_NOTIFIED && one_shot[c]; }
+
+static void notify(int ch) {
+    if (is_one_shot((Gpt_ChannelType)ch)) {  /* expired: it stops, then notifies (SWS, one-shot mode) */
+        g.ch[ch].state = EXPIRED;
+        spinner_stop_every(config[ch].fire);
+        g.ch[ch].every = 0;
+        g.own--;
+    }
+    config[ch].fn();
+}
 
 static void quiet(Gpt_ChannelType c) {
     if (c < GPT_NOTIFIED && g.ch[c].every) {
@@ -111,7 +169,7 @@ static void quiet(Gpt_ChannelType c) {
 /* Start or stop the channel's notification calls as its state says (a start: from now). */
 static void arm(Gpt_ChannelType c) {
     quiet(c);
-    if (!g.ch[c].running || !g.ch[c].notify || g.ch[c].target == 0U) return;
+    if (g.ch[c].state != RUNNING || !g.ch[c].notify) return;
     if (c >= GPT_NOTIFIED || config[c].fn == NULL || spinner_has_every(config[c].fn)) return;
     double period_s = g.ch[c].target / g.tick_hz;
     if (period_s < 1e-5) {
@@ -126,30 +184,85 @@ static void arm(Gpt_ChannelType c) {
     g.own++;
 }
 
+/* The simulated time of a read: now, no time passing, unless main() reads at one time again and
+ * again (a poll), where each read after POLLS_FREE lets one physics step pass. */
+static double read_time(void) {
+    double now = spinner_now();
+    if (spinner_in_interrupt() || now != g.polled_at_s) {
+        g.polled_at_s = now, g.polls = 0;
+        return now;
+    }
+    if (++g.polls <= POLLS_FREE) return now;
+    return g.polled_at_s = spinner_get_time();
+}
+
+/* Channel c's elapsed ticks at time now_s (a one-shot past its target: expired). */
+static Gpt_ValueType elapsed_at(Gpt_ChannelType c, double now_s) {
+    if (g.ch[c].state == STOPPED) return g.ch[c].frozen;
+    if (g.ch[c].state == EXPIRED) return g.ch[c].target;
+    if (g.ch[c].state != RUNNING) return 0U;
+    uint64_t n = (uint64_t)((now_s - g.ch[c].start_s) * g.tick_hz + 1e-6);
+    if (is_one_shot(c) && n >= g.ch[c].target) {
+        g.ch[c].state = EXPIRED;  /* (its notification, if any, comes at the physics step of the expiry) */
+        return g.ch[c].target;
+    }
+    return (Gpt_ValueType)(n % g.ch[c].target);
+}
+
+void Gpt_Init(const Gpt_ConfigType *ConfigPtr) {
+    (void)ConfigPtr;
+    Gpt_DeInit();
+}
+
+void Gpt_DeInit(void) {
+    init();
+    for (int c = 0; c < NUM_GPT; c++) {
+        quiet((Gpt_ChannelType)c);
+        g.ch[c].state = INITIALIZED, g.ch[c].notify = 0U;
+    }
+}
+
 void Gpt_StartTimer(Gpt_ChannelType Channel, Gpt_ValueType Value) {
     init();
-    g.ch[Channel].start_s = spinner_get_time();
+    if (Value == 0U) {
+        char text[200];
+        snprintf(text, sizeof text, "Gpt_StartTimer(%u, 0): a target of 0 ticks (the RTD refuses it: "
+                 "GPT_E_PARAM_VALUE); expected 1 or more", (unsigned)Channel);
+        spinner_fail(text);
+    }
+    double now = spinner_now();
+    if (g.ch[Channel].state == RUNNING && !(elapsed_at(Channel, now), g.ch[Channel].state == EXPIRED)) {
+        char text[300];
+        snprintf(text, sizeof text, "Gpt_StartTimer(%u, ...) on a running channel was refused, as the RTD "
+                 "refuses it (GPT_E_BUSY): the channel keeps its target and count; stop it first "
+                 "(Gpt_StopTimer)", (unsigned)Channel);
+        spinner_warn(text);
+        return;
+    }
+    g.ch[Channel].start_s = now;
     g.ch[Channel].target = Value;
-    g.ch[Channel].running = 1U;
+    g.ch[Channel].state = RUNNING;
     arm(Channel);
 }
 
 void Gpt_StopTimer(Gpt_ChannelType Channel) {
-    g.ch[Channel].running = 0U;
+    init();
+    if (g.ch[Channel].state != RUNNING) return;
+    Gpt_ValueType at = elapsed_at(Channel, spinner_now());
+    if (g.ch[Channel].state == RUNNING) g.ch[Channel].state = STOPPED, g.ch[Channel].frozen = at;
     quiet(Channel);
 }
 
 Gpt_ValueType Gpt_GetTimeElapsed(Gpt_ChannelType Channel) {
     init();
-    double now = spinner_get_time();  /* a physics step passes, as OsIf_GetMilliseconds */
-    if (!g.ch[Channel].running) return 0U;
-    uint64_t n = (uint64_t)((now - g.ch[Channel].start_s) * g.tick_hz + 1e-6);
-    return g.ch[Channel].target > 0U ? (Gpt_ValueType)(n % g.ch[Channel].target) : 0U;
+    return elapsed_at(Channel, read_time());
 }
 
 Gpt_ValueType Gpt_GetTimeRemaining(Gpt_ChannelType Channel) {
-    Gpt_ValueType elapsed = Gpt_GetTimeElapsed(Channel);
-    return g.ch[Channel].running ? g.ch[Channel].target - elapsed : 0U;
+    init();
+    Gpt_ValueType elapsed = elapsed_at(Channel, read_time());
+    int state = g.ch[Channel].state;
+    return state == RUNNING || state == STOPPED ? g.ch[Channel].target - elapsed : 0U;
 }
 
 void Gpt_EnableNotification(Gpt_ChannelType Channel) {

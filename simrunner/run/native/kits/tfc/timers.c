@@ -19,6 +19,7 @@
  * beside each number. */
 #include <stdio.h>
 
+#define TFC_SIM_TIMERS_RAW  /* the kit's own uses of the registers: no counter update */
 #include "spinner.h"
 #include "TFC/TFC.h"
 
@@ -231,9 +232,139 @@ static void start(struct timer *t, double period_s) {
     t->period_s = period_s, t->next_period_s = 0.0, t->started = waits;
 }
 
+/* The counters, counting simulated time (spinner_now: the time of the program's last call, or a
+ * handler's): a counter starts at the look that finds it enabled - a use of LPTMR0, PIT or TPM2 in
+ * the program (its accessor, below), the look before a wait or after a handler - which is the time of
+ * the write, as the program's code between two calls takes no simulated time. */
+static struct counter {
+    int on;                 /* counting */
+    double start_s;         /* when the count was at its start value */
+    uint32_t load;          /* PIT: the LDVAL of the period under way */
+    uint32_t next_load;     /* PIT: a new LDVAL, loaded at next_at_s (RM 32.3.2) */
+    double next_at_s;       /* (0: none) */
+} pit_count[2], lptmr_count, tpm2_count;
+
+/* PIT channel ch (RM 32.3 memory map; 32.5.1 timers): while TEN is set and the module enabled (MCR
+ * MDIS clear) CVAL counts down from LDVAL at the bus clock and is loaded with LDVAL again at the
+ * count after 0 (a period of LDVAL + 1); a new LDVAL written meanwhile is loaded at the next expiry,
+ * not at once (RM 32.3.2 LDVAL). Disabled, CVAL keeps its value (RM 32.3.3: "unreliable"). */
+static void pit_counter(int ch) {
+    struct counter *k = &pit_count[ch];
+    PIT_CHANNEL_Type *r = &PIT->CHANNEL[ch];
+    int on = (r->TCTRL & PIT_TCTRL_TEN_MASK) && !(PIT->MCR & PIT_MCR_MDIS_MASK);
+    if (!on) {
+        k->on = 0;
+        return;
+    }
+    double now = spinner_now();
+    if (!k->on) {
+        k->on = 1, k->start_s = now, k->load = r->LDVAL, k->next_at_s = 0.0;
+    }
+    if (k->next_at_s > 0.0 && now >= k->next_at_s) {
+        k->start_s = k->next_at_s, k->load = k->next_load, k->next_at_s = 0.0;
+    }
+    double period = (double)k->load + 1.0;
+    double ticks = (now - k->start_s) * BUS_CLOCK_HZ + 1e-6;
+    if (r->LDVAL != (k->next_at_s > 0.0 ? k->next_load : k->load)) {  /* written since: at the next expiry */
+        k->next_load = r->LDVAL;
+        k->next_at_s = k->start_s + (double)((uint64_t)(ticks / period) + 1) * period / BUS_CLOCK_HZ;
+    }
+    r->CVAL = k->load - (uint32_t)((uint64_t)ticks % (uint64_t)period);
+}
+
+/* LPTMR0's count rate (RM 33.4.1 PCS, 33.3.2 PSR), 0 where it would not count. */
+static double lptmr_count_hz(void) {
+    uint32_t psr = LPTMR0->PSR;
+    double hz;
+    switch (psr & LPTMR_PSR_PCS_MASK) {
+    case 0: hz = mcgirclk_hz(); break;
+    case 1: hz = LPO_HZ; break;
+    case 2: hz = ((SIM->SOPT1 & SIM_SOPT1_OSC32KSEL_MASK) >> 18) == 3u ? LPO_HZ : 0.0; break;
+    default: hz = OSCERCLK_HZ; break;
+    }
+    return (psr & LPTMR_PSR_PBYP_MASK) ? hz : hz / (double)(2u << ((psr & LPTMR_PSR_PRESCALE_MASK) >> 3));
+}
+
+/* LPTMR0 in time counter mode (RM 33.4.5 LPTMR counter): CNR counts up at its clock from 0 while TEN
+ * is set, back to 0 after it equals CMR (with CSR TFC: free running, 16 bits); clearing TEN resets it
+ * to 0. On the KL25 a read of CNR gives the count latched by the last write to it (RM 33.3.4: write
+ * any value, then read): here every read gives the count now, as the write-then-read does. */
+static void lptmr_counter(void) {
+    struct counter *k = &lptmr_count;
+    uint32_t csr = LPTMR0->CSR;
+    double hz = lptmr_count_hz();
+    if (!(csr & LPTMR_CSR_TEN_MASK) || (csr & LPTMR_CSR_TMS_MASK) || hz == 0.0) {
+        if (k->on && !(csr & LPTMR_CSR_TEN_MASK)) LPTMR0->CNR = 0;
+        k->on = 0;
+        return;
+    }
+    double now = spinner_now();
+    if (!k->on) k->on = 1, k->start_s = now;
+    uint64_t ticks = (uint64_t)((now - k->start_s) * hz + 1e-6);
+    uint64_t wrap = (csr & LPTMR_CSR_TFC_MASK) ? 65536u : (uint64_t)(LPTMR0->CMR & 0xFFFFu) + 1u;
+    LPTMR0->CNR = (uint32_t)(ticks % wrap);
+}
+
+/* TPM2's counter (RM 31.4.3 Counter): while SC CMOD selects the TPM clock, CNT counts up at the
+ * TPM clock / 2^PS from 0 to MOD and again from 0; with SC CPWMS up to MOD and down to 0 (RM 31.4.3.2
+ * up-down counting). It starts at 0 (its value while stopped is kept; a write to CNT, which clears
+ * it on the board, is not seen). */
+static double tpm_clock_hz(void) {
+    switch ((SIM->SOPT2 & SIM_SOPT2_TPMSRC_MASK) >> 24) {
+    case 1: return (SIM->SOPT2 & SIM_SOPT2_PLLFLLSEL_MASK) ? PLL_HALF_HZ : 0.0;
+    case 2: return OSCERCLK_HZ;
+    case 3: return mcgirclk_hz();
+    default: return 0.0;
+    }
+}
+
+static void tpm2_counter(void) {
+    struct counter *k = &tpm2_count;
+    uint32_t sc = TPM2->SC, mod = TPM2->MOD & 0xFFFFu;
+    double hz = tpm_clock_hz() / (double)(1u << (sc & TPM_SC_PS_MASK));
+    if (((sc & TPM_SC_CMOD_MASK) >> 3) != 1u || hz == 0.0) {
+        k->on = 0;
+        return;
+    }
+    double now = spinner_now();
+    if (!k->on) k->on = 1, k->start_s = now;
+    uint64_t ticks = (uint64_t)((now - k->start_s) * hz + 1e-6);
+    if (!(sc & TPM_SC_CPWMS_MASK)) {
+        TPM2->CNT = (uint32_t)(ticks % ((uint64_t)mod + 1u));
+    } else {
+        uint64_t p = mod ? ticks % (2u * (uint64_t)mod) : 0u;
+        TPM2->CNT = (uint32_t)(p <= mod ? p : 2u * mod - p);
+    }
+}
+
+static void counters(void) {
+    pit_counter(0);
+    pit_counter(1);
+    lptmr_counter();
+    tpm2_counter();
+}
+
+/* The program's LPTMR0, PIT and TPM2 (sim_timers.h): the registers with their counters now. */
+LPTMR_Type *tfc_sim_lptmr0_now(void) {
+    lptmr_counter();
+    return &tfc_sim_lptmr0;
+}
+
+PIT_Type *tfc_sim_pit_now(void) {
+    pit_counter(0);
+    pit_counter(1);
+    return &tfc_sim_pit;
+}
+
+TPM_Type *tfc_sim_tpm2_now(void) {
+    tpm2_counter();
+    return &tfc_sim_tpm2;
+}
+
 /* Read every timer's registers: start, stop, or note a new period. */
 static void sync(void) {
     nvic_sync();
+    counters();
     for (int i = 0; i < N_TIMERS; i++) {
         struct timer *t = &timers[i];
         warn_unrouted(i);

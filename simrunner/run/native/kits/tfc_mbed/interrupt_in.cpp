@@ -40,8 +40,9 @@ static struct {
     long long count[4];           /* its count as the edges have got to */
     int per_line[4];              /* its counter's counts a line (4, 2, 1; 0: single) */
     int disabled[5];              /* a port's interrupt disabled (disable_irq) */
-    struct tfc_mbed_irq *irq[MAX_IRQS];
+    struct tfc_mbed_irq *irq[MAX_IRQS];  /* in the order they were made */
     int n_irq, hooked;
+    int at;                       /* the index a dispatch loop is at (detach moves it back) */
 } s;
 
 static int port_of(int pin) { return (pin >> 12) & 7; }
@@ -118,13 +119,13 @@ static void move(int w, long long c) {
     while (s.count[w] != c) {
         long long before = s.count[w];
         s.count[w] += c > before ? 1 : -1;
-        for (int k = 0; k < s.n_irq; k++) {
-            struct tfc_mbed_irq *q = s.irq[k];
+        for (s.at = 0; s.at < s.n_irq; s.at++) {
+            struct tfc_mbed_irq *q = s.irq[s.at];
             int i = index_of(q->pin);
             if (i < 0 || s.pin[i].state != ENCODER || s.pin[i].wheel != w) continue;
-            if (m < 2) {  /* a line: a rise and a fall */
+            if (m < 2) {  /* a line: a rise and a fall (not if the rise's handler deleted it) */
                 edge(q, 1);
-                edge(q, 0);
+                if (s.at >= 0 && s.irq[s.at] == q) edge(q, 0);
                 continue;
             }
             int was = level_at(m, s.pin[i].channel, before), now = level_at(m, s.pin[i].channel, s.count[w]);
@@ -154,8 +155,8 @@ static int pin_level(int i) {
 
 /* At each tick of the kit's clock: the flags of re-enabled ports, then the wheels' edges. */
 static void on_edges(void) {
-    for (int k = 0; k < s.n_irq; k++) {
-        struct tfc_mbed_irq *q = s.irq[k];
+    for (s.at = 0; s.at < s.n_irq; s.at++) {
+        struct tfc_mbed_irq *q = s.irq[s.at];
         if (!q->pending || s.disabled[port_of(q->pin)]) continue;
         q->pending = 0;
         int i = index_of(q->pin);
@@ -194,10 +195,14 @@ void tfc_mbed_irq_attach(struct tfc_mbed_irq *q, int pin) {
     hook();
 }
 
+/* An InterruptIn destroyed (in a handler too): the others keep their order, the order they were made
+ * in; a dispatch loop under way (s.at) goes on with the one after it, so none misses the edge. */
 void tfc_mbed_irq_detach(struct tfc_mbed_irq *q) {
     for (int k = 0; k < s.n_irq; k++) {
         if (s.irq[k] != q) continue;
-        s.irq[k] = s.irq[--s.n_irq];
+        memmove(&s.irq[k], &s.irq[k + 1], (size_t)(s.n_irq - k - 1) * sizeof s.irq[0]);
+        s.n_irq--;
+        if (k <= s.at) s.at--;
         return;
     }
 }

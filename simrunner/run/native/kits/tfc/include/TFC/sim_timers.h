@@ -28,7 +28,20 @@ extern NVIC_Type tfc_sim_nvic;
 extern SIM_Type tfc_sim_sim;
 extern MCG_Type tfc_sim_mcg;
 
+/* The counters (PIT CVAL, LPTMR CNR, TPM2 CNT) count simulated time: each use of LPTMR0, PIT or
+ * TPM2 gives the registers with them at the time now (timers.c; the kit itself uses the raw ones). */
+LPTMR_Type *tfc_sim_lptmr0_now(void);
+PIT_Type *tfc_sim_pit_now(void);
+TPM_Type *tfc_sim_tpm2_now(void);
+#ifdef TFC_SIM_TIMERS_RAW
 #define LPTMR0 (&tfc_sim_lptmr0)
+#define PIT (&tfc_sim_pit)
+#define TPM2 (&tfc_sim_tpm2)
+#else
+#define LPTMR0 (tfc_sim_lptmr0_now())
+#define PIT (tfc_sim_pit_now())
+#define TPM2 (tfc_sim_tpm2_now())
+#endif
 #define LPTMR0_BASE_PTR LPTMR0
 #define LPTMR0_CSR (LPTMR0->CSR)
 #define LPTMR0_PSR (LPTMR0->PSR)
@@ -51,7 +64,6 @@ extern MCG_Type tfc_sim_mcg;
 #define LPTMR_CMR_COMPARE_MASK 0xFFFFu
 #define LPTMR_CMR_COMPARE(x) ((uint32_t)(x) & 0xFFFFu)
 
-#define PIT (&tfc_sim_pit)
 #define PIT_BASE_PTR PIT
 #define PIT_MCR (PIT->MCR)
 #define PIT_LDVAL0 (PIT->CHANNEL[0].LDVAL)
@@ -73,7 +85,6 @@ extern MCG_Type tfc_sim_mcg;
 #define PIT_TFLG_TIF_MASK 0x1u
 #define PIT_LDVAL_TSV(x) ((uint32_t)(x))
 
-#define TPM2 (&tfc_sim_tpm2)
 #define TPM2_BASE_PTR TPM2
 #define TPM2_SC (TPM2->SC)
 #define TPM2_CNT (TPM2->CNT)

@@ -1,0 +1,80 @@
+"""The S32K144 kit's Gpt channels as the RTD's Gpt driver (AUTOSAR SWS General Purpose Timer):
+a running channel's elapsed time read live (no time passes in the read), a stopped channel's frozen
+at its stop, a one-shot channel (-D GPT_CHANNEL_MODE_<n>=GPT_CH_MODE_ONESHOT) notifying once and
+then expired, a start of a running channel refused with a warning (GPT_E_BUSY), a start of 0 ticks
+an error at the calling line (GPT_E_PARAM_VALUE). kits/s32k144/gpt.c; docs/firmware.md."""
+from __future__ import annotations
+
+import pytest
+
+from simrunner.run.native import build_program
+from simrunner.run.runner import drive
+
+GPT_FIRMWARE = r"""
+#include <stdio.h>
+#include "Gpt.h"
+#include "OsIf.h"
+#include "spinner.h"
+static volatile uint32 shots;
+void Us_Notification(void) { shots++; }
+int main(void) {
+    Gpt_Init(NULL_PTR);
+    Gpt_Init(&Gpt_Config_VS_0);
+    if (spinner_param("zero", 0.0) != 0.0) Gpt_StartTimer(2U, 0U);
+    Gpt_StartTimer(1U, 8000000U);                 /* 1 s of the 8 MHz clock, continuous */
+    uint32 e0 = Gpt_GetTimeElapsed(1U), e1 = Gpt_GetTimeElapsed(1U);
+    OsIf_TimeDelay(10U);
+    uint32 e2 = Gpt_GetTimeElapsed(1U), r2 = Gpt_GetTimeRemaining(1U);
+    Gpt_StartTimer(1U, 8000U);                    /* running: refused, it keeps its 1 s */
+    uint32 e3 = Gpt_GetTimeElapsed(1U);
+    Gpt_StopTimer(1U);
+    OsIf_TimeDelay(10U);
+    uint32 s1 = Gpt_GetTimeElapsed(1U), s2 = Gpt_GetTimeRemaining(1U);
+    Gpt_EnableNotification(3U);
+    Gpt_StartTimer(3U, 8000U);                    /* one-shot, 1 ms */
+    OsIf_TimeDelay(20U);
+    uint32 n1 = shots, x1 = Gpt_GetTimeElapsed(3U), y1 = Gpt_GetTimeRemaining(3U);
+    Gpt_StartTimer(3U, 8000U);                    /* expired: starts again */
+    OsIf_TimeDelay(20U);
+    spinner_add_textf("live %u %u %u", (unsigned)e0, (unsigned)(e1 - e0), (unsigned)(e2 - e1));
+    spinner_add_textf("busy %u %u", (unsigned)(e2 + r2), (unsigned)(e3 - e2));
+    spinner_add_textf("stopped %u %u %u", (unsigned)(s1 - e2), (unsigned)(s1 + s2), (unsigned)Gpt_GetTimeElapsed(5U));
+    spinner_add_textf("oneshot %u %u %u %u", (unsigned)n1, (unsigned)x1, (unsigned)y1, (unsigned)shots);
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def gpt_program(tmp_path_factory):
+    src = tmp_path_factory.mktemp("gpt") / "gpt_main.c"
+    src.write_text(GPT_FIRMWARE)
+    return build_program([src], kit="s32k144", defines=["GPT_NOTIFICATION_3=Us_Notification",
+                                                         "GPT_CHANNEL_MODE_3=GPT_CH_MODE_ONESHOT"])
+
+
+def numbers(r):
+    lines = [part for s in r.log.data_text if s for part in s.split(" | ")]
+    return {s.split()[0]: [int(v) for v in s.split()[1:]] for s in lines}
+
+
+def test_gpt_channels_count_live_stop_frozen_and_a_one_shot_notifies_once(gpt_program, tmp_path):
+    r = drive(gpt_program, track="floor", time_limit_s=1.0, csv=tmp_path / "log.csv")
+    assert r.outcome == "controller_returned", r.message
+    got = numbers(r)
+    # no time passes in a read; 10 ms are 80000 ticks of 8 MHz
+    assert got["live"] == [0, 0, 80000]
+    # the refused start keeps the 1-s target and the count; a warning says why
+    assert got["busy"] == [8000000, 0]
+    assert any("GPT_E_BUSY" in w and "gpt_main.c" not in w for w in r.warnings), r.warnings
+    # stopped: the elapsed time of the stop, for ever; elapsed + remaining = the target; never started: 0
+    assert got["stopped"] == [0, 8000000, 0]
+    # one-shot: one notification, then expired (elapsed = target, remaining 0); started again: one more
+    assert got["oneshot"] == [1, 8000, 0, 2]
+
+
+def test_gpt_start_of_zero_ticks_ends_the_run_at_its_line(gpt_program):
+    r = drive(gpt_program, track="floor", time_limit_s=1.0, params={"zero": 1})
+    assert r.outcome == "controller_error"
+    assert "gpt_main.c:11" in r.message and "GPT_E_PARAM_VALUE" in r.message, r.message
+    assert "\n" not in r.message
