@@ -38,7 +38,7 @@ def test_effects_the_car_cannot_have_are_not_tried():
 @pytest.fixture(scope="module")
 def soft_tyres():
     log, truth = make_measured_log("tyre_stiffness", rng=np.random.default_rng(5), value=0.55, car=SLIP,
-                                   start_s=20.0, duration_s=24.0)
+                                   start_s=20.0, duration_s=16.0)
     return log, truth
 
 
