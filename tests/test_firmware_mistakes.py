@@ -1,0 +1,83 @@
+"""What a team's common firmware mistakes print: one line saying what and where (file:line) and
+what to do, no traceback (a kit header built without --kit, a header of the project's own without
+its -I, a typo'd function, a source file left out, a --param the firmware never reads)."""
+from __future__ import annotations
+
+import gc
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from simrunner.cli import main as cli
+from simrunner.errors import ControllerFileError
+from simrunner.run.native import build_program
+from simrunner.run.native.controller import NativeController
+
+MAIN = """\
+    #include "derivative.h"
+    #include "TFC\\TFC.h"
+    #include "control.h"
+    int main(void) {
+        TFC_Init();
+        Control_Init();
+        for (;;) { TFC_Task(); if (TFC_Ticker[0] > 300) return 0; }
+    }
+    """
+CONTROL = """\
+    #include "TFC\\TFC.h"
+    #include "control.h"
+    void Control_Init(void) { TFC_SetServ0(0, 0.5f); }
+    """
+
+
+@pytest.fixture
+def project(tmp_path):
+    """A CodeWarrior-style project: Sources/main.c, Sources/control.c, Project_Headers/control.h."""
+    (tmp_path / "Sources").mkdir()
+    (tmp_path / "Project_Headers").mkdir()
+    (tmp_path / "Sources" / "main.c").write_text(textwrap.dedent(MAIN))
+    (tmp_path / "Sources" / "control.c").write_text(textwrap.dedent(CONTROL))
+    (tmp_path / "Project_Headers" / "control.h").write_text("void Control_Init(void);\n")
+    return tmp_path
+
+
+def test_a_missing_include_names_the_kit_or_the_folder_to_add(project, monkeypatch):
+    monkeypatch.chdir(project)
+    with pytest.raises(ControllerFileError) as err:  # the kit's header without --kit
+        build_program(["Sources/main.c"], include_dirs=["Project_Headers"])
+    assert str(err.value).splitlines()[-1] == ("derivative.h: a header of the simulator's --kit tfc: "
+                                               "build with --kit tfc (docs/firmware.md)")
+    with pytest.raises(ControllerFileError) as err:  # the project's header without its -I
+        build_program(["Sources/main.c"], kit="tfc")
+    assert "Sources/main.c:3:10: fatal error: control.h" in str(err.value)
+    assert str(err.value).splitlines()[-1] == "control.h is in Project_Headers: add -I Project_Headers"
+
+
+def test_a_typod_function_and_a_left_out_source_are_one_line_at_their_use(project, monkeypatch):
+    monkeypatch.chdir(project)
+    res = CliRunner().invoke(cli, ["drive", "Sources/main.c", "Sources/control.c", "-I",
+                                   "Project_Headers", "--kit", "tfc"])
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    assert res.output.splitlines()[-1] == (
+        "simrunner: Sources/control.c:3: TFC_SetServ0: no such function in your sources or the "
+        "libraries they build with (did you mean TFC_SetServo?)")
+    program = build_program(["Sources/main.c"], include_dirs=["Project_Headers"], kit="tfc")
+    with pytest.raises(ControllerFileError) as err:
+        NativeController(program)
+    assert str(err.value) == ("Sources/main.c:6: Control_Init is declared but defined in none of the "
+                              "sources given (main.c): pass the source file that defines it")
+
+
+def test_a_controller_that_cannot_be_loaded_leaves_nothing_for_its_finaliser(project, monkeypatch):
+    """Its __del__ once raised AttributeError ("Exception ignored ... Traceback" on stderr)."""
+    monkeypatch.chdir(project)
+    program = build_program(["Sources/main.c"], include_dirs=["Project_Headers"], kit="tfc")
+    seen = []
+    monkeypatch.setattr(sys, "unraisablehook", seen.append)
+    with pytest.raises(ControllerFileError):
+        NativeController(program)
+    gc.collect()
+    assert seen == []
