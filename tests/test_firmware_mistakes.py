@@ -6,7 +6,6 @@ from __future__ import annotations
 import gc
 import sys
 import textwrap
-from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -81,3 +80,36 @@ def test_a_controller_that_cannot_be_loaded_leaves_nothing_for_its_finaliser(pro
         NativeController(program)
     gc.collect()
     assert seen == []
+
+
+POTS = """\
+    #include "derivative.h"
+    #include "TFC/TFC.h"
+    int main(void) {
+        TFC_Init();
+        while (TFC_Ticker[0] < 100) TFC_Task();
+        TFC_SetServo(0, TFC_ReadPot(0));
+        return 0;
+    }
+    """
+
+
+def test_a_param_the_firmware_never_reads_names_what_it_read(tmp_path):
+    src = tmp_path / "pots.c"
+    src.write_text(textwrap.dedent(POTS))
+    res = CliRunner().invoke(cli, ["drive", str(src), "--kit", "tfc", "--track", "floor", "--param", "pot=0.5"])
+    assert res.exit_code == 0, res.output
+    assert res.output.splitlines()[-1] == (
+        "simrunner: warning: the controller never read --param pot (it read pot0, "
+        "tfc_servo_offset_rad, tfc_servo_rad; did you mean pot0?)")
+
+
+def test_a_batch_sweeping_a_param_no_run_reads_says_so(tmp_path):
+    ctl = tmp_path / "ctl.py"
+    ctl.write_text("def main(s):\n    s.param('v_max', 1.0)\n    s.sleep(0.05)\n")
+    res = CliRunner().invoke(cli, ["batch", str(ctl), "--time-limit", "0.2", "--param", "vmax=1,2",
+                                   "--workers", "1", "--no-plot", "-o", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert ("simrunner batch: warning: the controller never read --param vmax (it read v_max; did you "
+            "mean v_max?): its values changed nothing") in res.output
+    assert "_params_read" not in (tmp_path / "out" / "results.csv").read_text()

@@ -314,9 +314,10 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
             return 2
         _print_result(result)
         if result.unused_params:
-            click.echo("simrunner: warning: the controller never read --param "
-                       + ", ".join(result.unused_params)
-                       + " (read one with spinner.param(name, default))", err=True)
+            from simrunner.run.params import unused_params_text
+
+            click.echo("simrunner: warning: " + unused_params_text(result.unused_params, result.params_read),
+                       err=True)
         strays.append(result.stray_threads)
         return exit_code(result.outcome, result.signal)
 

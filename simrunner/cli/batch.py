@@ -117,6 +117,11 @@ def batch_cmd(controller, more_sources, tracks, seeds, params, laps, time_limit_
     laps_done = sum(r["laps_completed"] for r in result.rows)
     click.echo(f"{len(result.rows)} runs on {result.workers} worker(s) ({result.backend}) in "
                f"{result.wall_time_s:.1f} s: {counts}; {laps_done} laps")
+    if result.unused_params:
+        from simrunner.run.params import unused_params_text
+
+        click.echo("simrunner batch: warning: " + unused_params_text(result.unused_params, result.params_read)
+                   + ": its values changed nothing", err=True)
     if result.rerun_mismatches:
         click.echo("simrunner batch: warning: re-runs for outputs differed from the first run: "
                    + ", ".join(map(str, result.rerun_mismatches)), err=True)
