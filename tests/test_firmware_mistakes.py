@@ -113,3 +113,16 @@ def test_a_batch_sweeping_a_param_no_run_reads_says_so(tmp_path):
     assert ("simrunner batch: warning: the controller never read --param vmax (it read v_max; did you "
             "mean v_max?): its values changed nothing") in res.output
     assert "_params_read" not in (tmp_path / "out" / "results.csv").read_text()
+
+
+@pytest.mark.parametrize("command", ["drive", "batch"])
+def test_mcu_time_without_its_value_names_the_option_not_a_file(tmp_path, command):
+    """`--mcu-time --laps 1` once took `--laps` as the time and `1` as a source file ("1: several
+    files, -I, -D, --kit and --isr are for C/C++ controllers")."""
+    src = tmp_path / "pots.c"
+    src.write_text(textwrap.dedent(POTS))
+    res = CliRunner().invoke(cli, [command, str(src), "--kit", "tfc", "--mcu-time", "--laps", "1",
+                                   "-o", str(tmp_path / "out")][:None if command == "batch" else -2])
+    assert res.exit_code == 2
+    assert ("Invalid value for '--mcu-time': '--laps': expected measured or seconds per call, e.g. "
+            "0.002 (the option's value is missing)") in res.output

@@ -5,7 +5,7 @@ import sys
 
 import click
 
-from simrunner.cli import build_options
+from simrunner.cli import McuTime, build_options
 from simrunner.run.rules import EVENT_NAMES
 
 
@@ -50,7 +50,7 @@ from simrunner.run.rules import EVENT_NAMES
               help="Run on Ray: a local cluster without ADDRESS, else ray://host:10001 or "
                    "host:6379 (pip install 'nxpcup-sim[ray]').")
 @click.option("--no-plot", is_flag=True, help="Do not write summary.png.")
-@click.option("--mcu-time", "mcu_time", default=None, metavar="measured|SECONDS",
+@click.option("--mcu-time", "mcu_time", default=None, type=McuTime(), metavar="measured|SECONDS",
               help="The controller's own processing costs simulated time (as simrunner drive "
                    "--mcu-time; measured is not deterministic).")
 @click.option("--mcu-scale", "mcu_scale", default=1.0, show_default=True,
