@@ -204,6 +204,9 @@ def test_an_unbound_pin_never_fires_and_reads_its_level(tmp_path):
         """, params={"digital_PTA5": 1})
     assert r.outcome == "controller_returned", r.message
     assert numbers(r)["free"] == [0, 1, 0]
+    assert [w for w in r.warnings if w.startswith("InterruptIn")] == [  # said once a pin
+        f"InterruptIn on {pin}: its handler never runs: no --param encoder_{pin}=W (or encoder_b_{pin}=W) "
+        "puts a wheel's encoder channel on the pin (docs/firmware.md, --kit tfc-mbed)" for pin in ("PTA5", "PTD3")]
 
 
 @pytest.mark.parametrize("line, params, car, words", [

@@ -165,6 +165,23 @@ def _no_collection_at_exit() -> None:
     atexit.register(gc.freeze)
 
 
+class McuTime(click.ParamType):
+    """``--mcu-time``: ``measured`` or seconds per call, kept as typed (the run's settings check
+    the range); an option's name in its place (``--mcu-time --laps 2``) is named as the value."""
+
+    name = "measured|SECONDS"
+
+    def convert(self, value, param, ctx):
+        if value is None or value == "measured" or not isinstance(value, str):
+            return value
+        try:
+            float(value)
+        except ValueError:
+            missing = " (the option's value is missing)" if value.startswith("-") else ""
+            self.fail(f"{value!r}: expected measured or seconds per call, e.g. 0.002{missing}", param, ctx)
+        return value
+
+
 def build_options(command):
     """The options that build a C/C++ controller or kit firmware (-I, -D, --kit, --isr), alike
     for ``drive``, ``check`` and ``batch``."""
@@ -242,7 +259,7 @@ def build_options(command):
 @click.option("--isolate", is_flag=True,
               help="C/C++ controllers: run in a child process instead of the simulator's (slower; "
                    "code that overwrites memory cannot touch the simulator). A .so always is.")
-@click.option("--mcu-time", "mcu_time", default=None, metavar="measured|SECONDS",
+@click.option("--mcu-time", "mcu_time", default=None, type=McuTime(), metavar="measured|SECONDS",
               help="The controller's own processing costs simulated time, as on the car: its CPU time "
                    "between Spinner calls times --mcu-scale (measured: not deterministic), or SECONDS "
                    "per call (docs/drive.md).")
@@ -314,9 +331,10 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
             return 2
         _print_result(result)
         if result.unused_params:
-            click.echo("simrunner: warning: the controller never read --param "
-                       + ", ".join(result.unused_params)
-                       + " (read one with spinner.param(name, default))", err=True)
+            from simrunner.run.params import unused_params_text
+
+            click.echo("simrunner: warning: " + unused_params_text(result.unused_params, result.params_read),
+                       err=True)
         strays.append(result.stray_threads)
         return exit_code(result.outcome, result.signal)
 

@@ -5,7 +5,7 @@ import sys
 
 import click
 
-from simrunner.cli import build_options
+from simrunner.cli import McuTime, build_options
 from simrunner.run.rules import EVENT_NAMES
 
 
@@ -50,7 +50,7 @@ from simrunner.run.rules import EVENT_NAMES
               help="Run on Ray: a local cluster without ADDRESS, else ray://host:10001 or "
                    "host:6379 (pip install 'nxpcup-sim[ray]').")
 @click.option("--no-plot", is_flag=True, help="Do not write summary.png.")
-@click.option("--mcu-time", "mcu_time", default=None, metavar="measured|SECONDS",
+@click.option("--mcu-time", "mcu_time", default=None, type=McuTime(), metavar="measured|SECONDS",
               help="The controller's own processing costs simulated time (as simrunner drive "
                    "--mcu-time; measured is not deterministic).")
 @click.option("--mcu-scale", "mcu_scale", default=1.0, show_default=True,
@@ -117,6 +117,11 @@ def batch_cmd(controller, more_sources, tracks, seeds, params, laps, time_limit_
     laps_done = sum(r["laps_completed"] for r in result.rows)
     click.echo(f"{len(result.rows)} runs on {result.workers} worker(s) ({result.backend}) in "
                f"{result.wall_time_s:.1f} s: {counts}; {laps_done} laps")
+    if result.unused_params:
+        from simrunner.run.params import unused_params_text
+
+        click.echo("simrunner batch: warning: " + unused_params_text(result.unused_params, result.params_read)
+                   + ": its values changed nothing", err=True)
     if result.rerun_mismatches:
         click.echo("simrunner batch: warning: re-runs for outputs differed from the first run: "
                    + ", ".join(map(str, result.rerun_mismatches)), err=True)

@@ -103,3 +103,18 @@ def convert(name: str, value: ParamValue, default: Any) -> Any:
                            "float, bool, str or None")
     raise CommandError(f"param {name}={value!r}: expected a value of type {want.__name__} "
                        f"(the type of the default {default!r})")
+
+
+def unused_params_text(unused, read) -> str:
+    """What a run that never read the ``--param`` names ``unused`` says of them: the names it did
+    read (``read``: its own and its kit library's), the nearest as a "did you mean"."""
+    import difflib
+
+    unused, read = sorted(unused), sorted(read)
+    text = "the controller never read --param " + ", ".join(unused)
+    if not read:
+        return text + " (read one with spinner.param(name, default); C: spinner_param)"
+    near = [m for name in unused for m in difflib.get_close_matches(name, read, n=1, cutoff=0.6)]
+    mean = f"; did you mean {', '.join(dict.fromkeys(near))}?" if near else ""
+    return f"{text} (it read {', '.join(read)}{mean})"
+

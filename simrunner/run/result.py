@@ -47,6 +47,7 @@ class RunResult:
     log: RunLog = field(default_factory=empty_log, repr=False)
     outputs: dict[str, str] = field(default_factory=dict)
     unused_params: tuple[str, ...] = ()  # --param names the controller never read
+    params_read: tuple[str, ...] = ()  # names the controller (and its kit library) asked for
     # rows the run recorded (``log`` holds them all up to log.KEEP_ROWS, then every k-th)
     frames: int | None = None
     warnings: list[str] = field(default_factory=list)  # noticed, did not stop the run

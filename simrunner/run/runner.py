@@ -506,7 +506,8 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
                            lap_distances_m=judge.lap_distances_m, lap_courses_m=judge.lap_courses_m,
                            course_from_start_m=judge.course_from_start_m,
                            course_length_m=None if sim_track.course is None else sim_track.course.length_m,
-                           unused_params=tuple(sorted(set(settings.params) - run.session.params_read)))
+                           unused_params=tuple(sorted(set(settings.params) - run.session.params_read)),
+                           params_read=tuple(sorted(run.session.params_read)))
         run.recorder.finish()
         write_outputs(result, outputs, run.video, sim_track, csv_stream=run.csv)
     return result

@@ -432,6 +432,53 @@ def kit_files(kit: str) -> tuple[list[Path], list[Path]]:
     return [shim_dir, include], [root / name for name in KITS[kit]]
 
 
+def missing_function(program: NativeProgram, error: str) -> str | None:
+    """The one line for a built ``program`` that cannot be loaded because ``error`` (the loader's
+    words) names an undefined symbol: where the program uses it and why, from the compiler's
+    implicit-declaration warning (a typo: its "did you mean") or the first line of the program's
+    own sources naming it (declared in a header, defined in no source given); None for any
+    other load error."""
+    found = re.search(r"undefined symbol: (\S+)", error)
+    if found is None:
+        return None
+    name = _demangled(found.group(1))
+    base = re.escape(name.split("(")[0])
+    mine = [Path(s) for s in program.sources if KITS_DIR not in Path(s).resolve().parents]
+    implicit = re.search(rf"^(.+?):(\d+):\d+: warning: implicit declaration of function [‘'`]{base}[’'`]"
+                         rf"(?:; did you mean [‘'`](\w+)[’'`]\?)?", program.warnings, re.M)
+    if implicit:
+        hint = f" (did you mean {implicit.group(3)}?)" if implicit.group(3) else ""
+        return (f"{implicit.group(1)}:{implicit.group(2)}: {name}: no such function in your sources "
+                f"or the libraries they build with{hint}")
+    where = ", ".join(map(str, mine)) or str(program.library)
+    word = re.compile(rf"\b{re.escape(name.split('(')[0].split('::')[-1])}\b")
+    for path in mine:
+        try:
+            lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+        except OSError:
+            continue
+        for number, line in enumerate(lines, 1):
+            if word.search(line):
+                where = f"{path}:{number}"
+                break
+        else:
+            continue
+        break
+    return (f"{where}: {name} is declared but defined in none of the sources given "
+            f"({', '.join(p.name for p in mine)}): pass the source file that defines it")
+
+
+def _demangled(symbol: str) -> str:
+    """A C++ ``symbol`` as C++ spells it (``c++filt``), else as it is."""
+    if not symbol.startswith("_Z"):
+        return symbol
+    try:
+        out = subprocess.run(["c++filt", symbol], capture_output=True, text=True, timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return symbol
+    return out.stdout.strip() or symbol
+
+
 def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileError:
     """``exc`` (a failed compile) with a last line when it names MCU registers that ``kit``
     does not emulate (:data:`KIT_REGISTERS`)."""
@@ -443,6 +490,54 @@ def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileE
         f"{exc}\n{', '.join(names)}: the MCU's registers{' or mbed drivers' if kit == 'tfc-mbed' else ''}, "
         f"not emulated by the simulator's --kit {kit} (it has no registers): reach the hardware "
         f"through the kit library's functions (docs/firmware.md)")
+
+
+def _kit_headers() -> dict[str, str]:
+    """Each kit's headers as an ``#include`` names them (lower case, ``/``) -> the kit."""
+    headers = {}
+    for kit in KITS:
+        include = KITS_DIR / kit.replace("-", "_") / "include"
+        for path in include.rglob("*.h"):
+            if not path.name.startswith(("sim_", "tfc_mbed_sim")):
+                headers.setdefault(path.relative_to(include).as_posix().lower(), kit)
+    return headers
+
+
+def _include_hint(exc: ControllerFileError, kit: str | None, sources: list[Path]) -> ControllerFileError:
+    """``exc`` (a failed compile) with a last line when the compiler found no file for an
+    ``#include``: a kit's header built without ``--kit``, or a header of the project's own beside
+    its sources that no ``-I`` names (the CodeWarrior layout: ``Sources/``, ``Project_Headers/``)."""
+    found = re.search(r"fatal error: (\S+): No such file or directory", str(exc))
+    if found is None:
+        return exc
+    name = found.group(1).replace("\\", "/")
+    owner = _kit_headers().get(name.lower()) if kit is None else None
+    if owner is not None:
+        line = f"{name}: a header of the simulator's --kit {owner}: build with --kit {owner} (docs/firmware.md)"
+    else:
+        base = Path(name).name.lower()
+        roots = dict.fromkeys(d for s in sources for d in (s.parent, s.parent.parent))
+        homes = sorted({path.parent for root in roots for path in _headers_under(root, 3)
+                        if path.name.lower() == base and path.parent not in roots})
+        if not homes:
+            return exc
+        line = f"{name} is in {', '.join(map(str, homes[:3]))}: add -I {homes[0]}"
+    return ControllerFileError(f"{exc}\n{line}")
+
+
+def _headers_under(root: Path, depth: int):
+    """The ``.h`` files at most ``depth`` folders below ``root`` (hidden folders skipped)."""
+    try:
+        entries = list(root.iterdir())
+    except OSError:
+        return
+    for entry in entries:
+        if entry.name.startswith("."):
+            continue
+        if entry.is_dir() and depth > 0:
+            yield from _headers_under(entry, depth - 1)
+        elif entry.suffix.lower() in (".h", ".hpp"):
+            yield entry
 
 
 def _spelling_dir(sources: list[str | Path], include_dirs: list[str | Path]) -> list[Path]:
@@ -529,7 +624,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
             try:
                 warnings.append(_run(cmd, str(p), limits))
             except ControllerFileError as exc:
-                raise _register_hint(exc, kit) from None
+                raise _include_hint(_register_hint(exc, kit), kit, paths) from None
             objects.append(str(obj))
             depfiles.append(dep)
         linker = compilers[True] if cxx else compilers[False]

@@ -64,7 +64,7 @@ class NativeController:
     def __del__(self) -> None:  # and a library opened for a run that never started
         if getattr(self, "inproc", False):
             self._unload()
-            if self._ready is not None:
+            if getattr(self, "_ready", None) is not None:  # None too when opening it failed
                 self._ready.close()
                 self._ready = None
 

@@ -36,7 +36,7 @@ from pathlib import Path
 
 from simrunner.errors import ControllerFileError, Stalled
 from simrunner.run.native.bridge import ST_WHERE, _FRAME, _HDR, _ChildGone, _Session
-from simrunner.run.native.build import NativeProgram, inproc_library
+from simrunner.run.native.build import NativeProgram, inproc_library, missing_function
 from simrunner.run.watchdog import stall_message
 
 REQUEST_BUFFER_BYTES = 1 << 16  # out_buf in spinner_host.c
@@ -115,7 +115,7 @@ class OpenedProgram:
             err = api.spinner_inproc_error().decode("utf-8", "replace")
             self.close()
             lib = ", ".join(map(str, program.sources)) or str(program.library)
-            raise ControllerFileError(f"{lib}: cannot be loaded ({err})")
+            raise ControllerFileError(missing_function(program, err) or f"{lib}: cannot be loaded ({err})")
 
     def close(self) -> None:
         if getattr(self, "handle", None):

@@ -15,7 +15,7 @@ from typing import Callable
 
 from simrunner.workflows.batch.pool import LocalBackend
 from simrunner.workflows.batch.scheduler import WorkerTiming, default_workers, run_jobs
-from simrunner.workflows.batch.results import (BATCH_OUTCOMES, RESERVED, PartialResults, deterministic,
+from simrunner.workflows.batch.results import (BATCH_OUTCOMES, PARAMS_READ, RESERVED, PartialResults, deterministic,
                                                write_results)
 from simrunner.workflows.batch.spec import (BatchConfig, BatchError, Job, make_jobs, parse_grid,
                                             parse_seeds, resolve_tracks)
@@ -72,6 +72,8 @@ class BatchResult:
     backend: str
     rerun_mismatches: tuple[int, ...] = ()
     worker_timing: tuple[WorkerTiming, ...] = ()
+    params_read: tuple[str, ...] = ()  # the names the runs' controller read (spinner.param)
+    unused_params: tuple[str, ...] = ()  # swept --param names no run read
 
     def counts(self) -> dict[str, int]:
         out: dict[str, int] = {}
@@ -190,7 +192,13 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
 
     partial = PartialResults(out / "results.partial.csv", tuple(grid))
 
+    read: set[str] = set()
+    reported = [False]  # a run that reported what it read (one that could not start has not)
+
     def take(row: dict) -> None:
+        if PARAMS_READ in row:
+            read.update(row.pop(PARAMS_READ))
+            reported[0] = True
         rows[row["run"]] = row
         partial.add(row)  # on disk as it comes: a batch killed (kill -9, the OOM killer) keeps it
         if on_row is not None:
@@ -213,6 +221,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
             first = {j.index: rows[j.index] for j in again}
 
             def check(row: dict) -> None:
+                row.pop(PARAMS_READ, None)
                 if deterministic(row) != deterministic(first[row["run"]]):
                     mismatches.append(row["run"])
 
@@ -241,4 +250,5 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
 
         plot_path = plot_summary(ordered, tuple(grid), out / "summary.png")
     return BatchResult(ordered, csv_path, json_path, plot_path, wall, n_workers, backend_name,
-                       tuple(sorted(mismatches)), tuple(timing))
+                       tuple(sorted(mismatches)), tuple(timing), tuple(sorted(read)),
+                       tuple(sorted(set(grid) - read)) if reported[0] else ())

@@ -38,6 +38,8 @@ FIXED_AFTER = ("outcome", "message", "laps", "laps_completed", "lap_times_s", "b
 NONDETERMINISTIC = ("wall_time_s", "cpu_time_s")
 RESERVED = FIXED_BEFORE + FIXED_AFTER + NONDETERMINISTIC
 BATCH_OUTCOMES = ("error", "wall_timeout", "worker_died")
+#: the key of a row from a worker holding the --param names its run read (not written)
+PARAMS_READ = "_params_read"
 FORMAT = 1
 
 
@@ -84,6 +86,7 @@ def row_from_result(job: Job, result, centreline: np.ndarray | None) -> dict[str
                penalty_s=float(result.penalty_s), time_s=result.time_s, sim_time_s=float(result.sim_time_s),
                frames=len(result.log), wall_time_s=round(float(result.wall_time_s), 4),
                cpu_time_s=round(float(result.cpu_time_s), 4))
+    row[PARAMS_READ] = list(result.params_read)  # not a column: run_batch takes it out
     log = result.log
     if str(result.outcome) in ("off_track", "off_course") and len(log) and log.x_m is not None:
         x, y, t = float(log.x_m[-1]), float(log.y_m[-1]), float(log.t_s[-1])

@@ -211,6 +211,15 @@ void tfc_mbed_irq_set(struct tfc_mbed_irq *q, int on_rise, int on_fall, const ch
     check(q, what);
     if (on_rise >= 0) q->on_rise = on_rise;
     if (on_fall >= 0) q->on_fall = on_fall;
+    int i = index_of(q->pin);
+    if (i >= 0 && s.pin[i].state == FREE && (on_rise > 0 || on_fall > 0)) {  /* once per pin */
+        char text[300];
+        snprintf(text, sizeof text, "InterruptIn on PT%c%d: its handler never runs: no --param "
+                 "encoder_PT%c%d=W (or encoder_b_PT%c%d=W) puts a wheel's encoder channel on the pin "
+                 "(docs/firmware.md, --kit tfc-mbed)", 'A' + i / 32, i % 32, 'A' + i / 32, i % 32,
+                 'A' + i / 32, i % 32);
+        spinner_warn(text);
+    }
 }
 
 void tfc_mbed_irq_enable(struct tfc_mbed_irq *q, int enable, const char *what) {
