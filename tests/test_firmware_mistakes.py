@@ -53,6 +53,11 @@ def test_a_missing_include_names_the_kit_or_the_folder_to_add(project, monkeypat
         build_program(["Sources/main.c"], kit="tfc")
     assert "Sources/main.c:3:10: fatal error: control.h" in str(err.value)
     assert str(err.value).splitlines()[-1] == "control.h is in Project_Headers: add -I Project_Headers"
+    # simrunner batch shortens the compiler's words to four lines and keeps what to do
+    res = CliRunner().invoke(cli, ["batch", "Sources/main.c", "--kit", "tfc", "-o", "out"])
+    assert res.exit_code == 2
+    home = project / "Project_Headers"  # (batch names its sources by their full path)
+    assert res.stderr.splitlines()[-1] == f"control.h is in {home}: add -I {home}"
 
 
 def test_a_typod_function_and_a_left_out_source_are_one_line_at_their_use(project, monkeypatch):

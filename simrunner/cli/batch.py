@@ -99,6 +99,9 @@ def batch_cmd(controller, more_sources, tracks, seeds, params, laps, time_limit_
         lines = str(exc).splitlines() or [""]
         if len(lines) > 1 and lines[0].endswith(" failed:"):  # a compile error: the compiler's words
             lines = lines[:1] + [line for line in lines[1:] if line.strip()][:4]
+            hint = getattr(exc, "hint", None)  # the simulator's own last line: what to do
+            if hint and hint not in lines:
+                lines.append(hint)
         else:
             lines = lines[:1]
         click.echo("simrunner batch: " + "\n".join(lines), err=True)

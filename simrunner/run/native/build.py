@@ -522,7 +522,9 @@ def _include_hint(exc: ControllerFileError, kit: str | None, sources: list[Path]
         if not homes:
             return exc
         line = f"{name} is in {', '.join(map(str, homes[:3]))}: add -I {homes[0]}"
-    return ControllerFileError(f"{exc}\n{line}")
+    err = ControllerFileError(f"{exc}\n{line}")
+    err.hint = line  # (what a shortened report of the compiler's words keeps: simrunner batch)
+    return err
 
 
 def _headers_under(root: Path, depth: int):
