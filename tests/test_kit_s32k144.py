@@ -180,6 +180,17 @@ def test_kit_misuse_is_one_line(tmp_path, capfd):
     assert r.outcome == "controller_error", r.message
     assert r.message.startswith(f"{notify}:4: Gpt_EnableNotification: channel 2 has no notification") and \
         "-D GPT_NOTIFICATION_2=NAME" in r.message, r.message
+    typo = probe(tmp_path, """\
+        #include "Gpt.h"
+        void Gpt_Notifcation(void) {}
+        int main(void) {
+            Gpt_StartTimer(0U, 8000U);
+            Gpt_EnableNotification(0U);
+            return 0;
+        }
+        """, "typo.c")  # channel 0's notification misspelt: the name the program defines is said
+    r = drive(firmware([typo]), time_limit_s=1.0)
+    assert "notification Gpt_Notification (it defines Gpt_Notifcation: misspelt?)" in r.message, r.message
     res = CliRunner().invoke(cli, ["drive", str(REPO / "examples" / "line_follower.py"), "--kit", "s32k144"])
     assert res.exit_code == 2 and "--kit is for C/C++ controllers" in res.output
 

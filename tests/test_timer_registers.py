@@ -251,6 +251,10 @@ def test_a_timer_without_its_handler_ends_the_run_naming_the_vector(tmp_path):
     r = drive(_firmware(tmp_path, "nohandler", dict(PIT0, handler="Other_IRQHandler"), PIT_100HZ),
               track="floor", time_limit_s=2.0)
     assert r.outcome == "controller_error" and "defines no PIT_IRQHandler" in r.message, r.message
+    assert "misspelt" not in r.message  # (Other_IRQHandler is not near it)
+    r = drive(_firmware(tmp_path, "typo", dict(PIT0, handler="PIT_IRQHandlr"), PIT_100HZ),
+              track="floor", time_limit_s=2.0)  # a typo: the name it defines is said
+    assert "defines no PIT_IRQHandler (it defines PIT_IRQHandlr: misspelt?)" in r.message, r.message
 
 
 def test_firmware_without_timers_reads_and_writes_no_interrupt(tmp_path):

@@ -25,6 +25,7 @@ machine that cost ~60 us a frame). Threads the C program starts share that CPU.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import select
@@ -39,7 +40,7 @@ from typing import Callable
 import numpy as np
 
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
-from simrunner.run.native.build import NativeProgram
+from simrunner.run.native.build import NativeProgram, misspelt_function
 
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
@@ -428,6 +429,8 @@ class _Session:
         from simrunner.run.native.symbolize import fault_message, format_traceback, parse_report
 
         fault = parse_report(report, self._user_modules(), self._host())
+        if not fault.signal:  # a kit that looked for a function may have met a misspelt one
+            fault = dataclasses.replace(fault, message=misspelt_function(self.ctrl.program, fault.message))
         self._drain()
         raise ControllerError(fault_message(fault), format_traceback(fault, self.name))
 

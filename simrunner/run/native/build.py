@@ -15,6 +15,7 @@ show.
 """
 from __future__ import annotations
 
+import difflib
 import hashlib
 import json
 import os
@@ -116,6 +117,23 @@ def exported_functions(library: str | Path) -> set[str] | None:
         return None
     return {parts[2] for parts in (line.split() for line in out.stdout.splitlines())
             if len(parts) == 3 and parts[1] in "TtWi"}
+
+
+def misspelt_function(program: NativeProgram, message: str) -> str:
+    """``message`` (a kit's "... defines no NAME (or OTHER) ..." or "notification NAME ... is not
+    a function of the program") with what ``program`` defines that is spelt nearly so after the
+    names: a handler the kit never calls because of a typo."""
+    found = re.search(r"(?:defines no|notification) (\w+)(?: \(or (\w+)\))?(?=.* (?:is not a function of the "
+                      r"program|handler would take it))", message)
+    names = exported_functions(program.library) if found else None
+    if not names:
+        return message
+    wanted = [w for w in found.groups() if w]
+    close = [c for w in wanted for c in difflib.get_close_matches(w, sorted(names), n=1, cutoff=0.75)]
+    if not close:
+        return message
+    end = found.end()
+    return f"{message[:end]} (it defines {close[0]}: misspelt?){message[end:]}"
 
 
 def _includes_mbed(source: Path) -> bool:
