@@ -60,14 +60,16 @@ def test_a_missing_include_names_the_kit_or_the_folder_to_add(project, monkeypat
     assert res.stderr.splitlines()[-1] == f"control.h is in {home}: add -I {home}"
 
 
-def test_a_typod_function_and_a_left_out_source_are_one_line_at_their_use(project, monkeypatch):
+def test_a_typod_function_and_a_left_out_source_are_one_line_at_their_use(project, monkeypatch, capfd):
     monkeypatch.chdir(project)
-    res = CliRunner().invoke(cli, ["drive", "Sources/main.c", "Sources/control.c", "-I",
-                                   "Project_Headers", "--kit", "tfc"])
-    assert res.exit_code == 2 and "Traceback" not in res.output
-    assert res.output.splitlines()[-1] == (
-        "simrunner: Sources/control.c:3: TFC_SetServ0: no such function in your sources or the "
-        "libraries they build with (did you mean TFC_SetServo?)")
+    for isolate in ([], ["--isolate"]):  # (isolated: the loader's words come back from the child)
+        res = CliRunner().invoke(cli, ["drive", "Sources/main.c", "Sources/control.c", "-I",
+                                       "Project_Headers", "--kit", "tfc", *isolate])
+        assert res.exit_code == 2 and "Traceback" not in res.output
+        assert res.output.splitlines()[-1] == (
+            "simrunner: Sources/control.c:3: TFC_SetServ0: no such function in your sources or the "
+            "libraries they build with (did you mean TFC_SetServo?)")
+        assert "undefined symbol" not in capfd.readouterr().err
     program = build_program(["Sources/main.c"], include_dirs=["Project_Headers"], kit="tfc")
     with pytest.raises(ControllerFileError) as err:
         NativeController(program)

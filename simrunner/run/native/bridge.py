@@ -40,7 +40,7 @@ from typing import Callable
 import numpy as np
 
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
-from simrunner.run.native.build import NativeProgram, misspelt_function
+from simrunner.run.native.build import NativeProgram, missing_function, misspelt_function
 
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
@@ -49,6 +49,7 @@ OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP
     OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW = range(1, 29)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
+LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
 _HDR = struct.Struct("<II")
 _OK_EMPTY = _HDR.pack(ST_OK, 0)
 _CMD = struct.Struct("<3d")
@@ -94,29 +95,39 @@ class _Child:
         sys.stderr.flush()
         req_r, req_w = os.pipe()
         rep_r, rep_w = os.pipe()
+        err_r, err_w = os.pipe()  # the loader's error, if the library cannot be loaded
         try:
             self.proc = subprocess.Popen(
                 [str(host), str(program.library), str(req_w), str(rep_r), program.name, *args],
-                pass_fds=(req_w, rep_r), close_fds=True)
+                pass_fds=(req_w, rep_r, err_w), close_fds=True,
+                env={**os.environ, LOAD_ERROR_FD_ENV: str(err_w)})
         except OSError as exc:
-            for fd in (req_r, req_w, rep_r, rep_w):
+            for fd in (req_r, req_w, rep_r, rep_w, err_r, err_w):
                 os.close(fd)
             raise ControllerFileError(f"{host}: cannot start the controller ({exc})") from None
-        os.close(req_w)
-        os.close(rep_r)
-        self.rfd, self.wfd = req_r, rep_w
+        for fd in (req_w, rep_r, err_w):
+            os.close(fd)
+        self.rfd, self.wfd, self.err_fd = req_r, rep_w, err_r
+
+    def load_error(self) -> str:
+        """What the loader said when the host could not load the library (its exit status
+        EXIT_NOT_LOADED; the process has ended: the pipe's other end is closed)."""
+        chunks = []
+        while self.err_fd >= 0 and (chunk := os.read(self.err_fd, 4096)):
+            chunks.append(chunk)
+        return b"".join(chunks).decode("utf-8", "replace").strip()
 
     def close(self) -> None:
         """Kill the process (if still running), reap it, close the pipes (idempotent)."""
         if self.proc.poll() is None:
             self.proc.kill()
             self.proc.wait()
-        for fd in (self.rfd, self.wfd):
+        for fd in (self.rfd, self.wfd, self.err_fd):
             try:
                 os.close(fd)
             except OSError:
                 pass
-        self.rfd = self.wfd = -1
+        self.rfd = self.wfd = self.err_fd = -1
 
     def __del__(self) -> None:  # an unused pre-started child (the run never started)
         if getattr(self, "rfd", -1) >= 0:
@@ -480,7 +491,8 @@ class _Session:
         if rc == EXIT_NO_MAIN:
             raise ControllerFileError(f"{lib}: no main() function defined")
         if rc == EXIT_NOT_LOADED:
-            raise ControllerFileError(f"{lib}: cannot be loaded (the line above says why)")
+            err = self.child.load_error()
+            raise ControllerFileError(missing_function(prog, err) or f"{lib}: cannot be loaded ({err})")
         if rc < 0:
             name = signal.Signals(-rc).name if -rc in signal.valid_signals() else str(-rc)
             msg = f"{self.name}: the controller was killed by {name}"

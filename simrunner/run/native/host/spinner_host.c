@@ -1256,11 +1256,18 @@ int main(int argc, char **argv) {
                                   in the simulator's process, instead of killing the program */
     pthread_atfork(fork_prepare, NULL, in_forked_child);  /* a prebuilt library's forks too */
     install_handlers();
+    /* the loader's error goes to the simulator, which says it in the run's words (a misspelt
+     * function named at its use): SPINNER_LOAD_ERROR_FD, a pipe; else stderr */
+    const char *err_fd_text = getenv("SPINNER_LOAD_ERROR_FD");
+    int err_fd = err_fd_text != NULL ? atoi(err_fd_text) : -1;
+    unsetenv("SPINNER_LOAD_ERROR_FD");  /* (not the program's) */
     void *lib = dlopen(argv[1], RTLD_NOW | RTLD_GLOBAL);
     if (lib == NULL) {
-        fprintf(stderr, "simrunner: %s\n", dlerror());
+        const char *why = dlerror();
+        if (err_fd < 0 || write(err_fd, why, strlen(why)) < 0) fprintf(stderr, "simrunner: %s\n", why);
         return 71;
     }
+    if (err_fd >= 0) close(err_fd);
     prog_lib = lib;
     int (*user_main)(int, char **, char **) = (int (*)(int, char **, char **))dlsym(lib, "main");
     if (user_main == NULL) return 72;  /* the simulator says so, naming the sources */
