@@ -45,7 +45,7 @@ from simrunner.run.native.build import NativeProgram
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
-    OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE = range(1, 28)
+    OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_IRQ_MASK, OP_IRQ_MASK_WAIT = range(1, 30)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 _HDR = struct.Struct("<II")
@@ -80,7 +80,7 @@ _PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a r
 # the requests the program waits in for a reply (spinner_host.c: call()); the others are queued
 _WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, OP_PARAM, OP_FAULT,
                       OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
-                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE))
+                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_IRQ_MASK_WAIT))
 
 
 class _Child:
@@ -232,8 +232,10 @@ class _Session:
             if measured:
                 mcu.reported = True
             isrs = self.ctrl.isrs  # --isr NAME@HZ: (name, period_s)
+            # --mcu-time: 1 measured (the program reports its CPU time), 2 fixed, 0 off
+            mcu_mode = 0.0 if mcu is None else 1.0 if measured else 2.0
             self._reply(struct.pack("<7d", h, w, s.line_row, 1.0 if s.recording else 0.0,
-                                    s.wheelbase_m, 1.0 if measured else 0.0, len(isrs))
+                                    s.wheelbase_m, mcu_mode, len(isrs))
                         + struct.pack("<4d", *_sensor_spec(s._s.car))
                         + b"".join(struct.pack("<2d", period, len(name.encode())) + name.encode()
                                    for name, period in isrs))
@@ -380,6 +382,13 @@ class _Session:
             s.every(period, handler)
         elif op == OP_EVERY_STOP:  # the program's slot (int32) of a timer interrupt it stopped
             s.stop_every(self._isrs.pop(struct.unpack("<i", payload[:4])[0], None))
+        elif op in (OP_IRQ_MASK, OP_IRQ_MASK_WAIT):  # a flag byte: 1 mask (disable), 0 unmask (enable)
+            if payload[:1] == b"\x01":
+                s.disable_interrupts()
+            else:
+                s.enable_interrupts()  # (the pending handlers run here: ST_ISR in a waiting one)
+            if op == OP_IRQ_MASK_WAIT:
+                reply(_OK_EMPTY)
         elif op == OP_CPU:  # the program's CPU time since its previous request (--mcu-time measured)
             s._s.mcu.report(_D.unpack(payload)[0])
         elif op == OP_ENCODER:  # the wheel's index (int32) -> its count (int64)

@@ -51,7 +51,7 @@
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
-       OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE };
+       OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_IRQ_MASK, OP_IRQ_MASK_WAIT };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -88,6 +88,7 @@ static int foreign_thread(void) {
 /* --mcu-time measured: each request is preceded by the CPU time this thread spent since the
  * previous request or reply (OP_CPU, one double): the program's own processing time. */
 static int mcu_report;
+static int mcu_on;  /* --mcu-time measured or fixed: the program's own code lets time pass */
 static double mcu_mark_s;
 static double thread_cpu_s(void) {
     struct timespec ts;
@@ -330,6 +331,14 @@ static void (*isr_fn[MAX_ISRS])(void);
 static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read by the simulator */
 static int isr_count;   /* slots in use */
 static int isr_depth;   /* handlers running (spinner_in_interrupt) */
+/* Masked interrupts (spinner_disable_interrupts: PRIMASK, a bit): the simulator holds the handlers
+ * falling due pending and runs them at the unmask. The mask is queued (OP_IRQ_MASK) - no time
+ * passes before the next waiting call - unless the program's own code lets time pass (--mcu-time:
+ * a waiting OP_IRQ_MASK_WAIT, so a handler due before it runs before the masked code, not inside
+ * its first call). The unmask is a waiting call (the pending handlers run inside it) only when time
+ * may have passed while masked (irq_held: a waiting call since the mask, or --mcu-time); otherwise
+ * none can be pending and it is queued too. */
+static int irq_masked, irq_held;
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
 static void run_isr(uint32_t slot) {
@@ -381,6 +390,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         kit_before_wait();
         in_kit_hook = 0;
     }
+    if (irq_masked) irq_held = 1;  /* time passes while masked: handlers may be held pending */
     queue(op, a, na, b, nb);
     flush_out();
     uint32_t hdr[2];
@@ -394,6 +404,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         have = read_reply_head(hdr, reply, size);
     }
     release_stopped();
+    if (irq_masked) irq_held = 1;  /* (masked by a handler that ran in it) */
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
         ended();
@@ -757,6 +768,33 @@ void spinner_stop_every(void (*handler)(void)) {
         queue(OP_EVERY_STOP, &slot, sizeof slot, NULL, 0);
     }
 }
+
+static void set_mask(int masked) {
+    unsigned char flag = (unsigned char)masked;
+    if (finished || masked == irq_masked) return;  /* a bit: a second disable changes nothing */
+    if (masked) {  /* (the handlers due before it run in the waiting one, unmasked) */
+        if (mcu_on && isr_depth == 0) call(OP_IRQ_MASK_WAIT, &flag, 1, NULL, 0, NULL, 0);
+        else queue(OP_IRQ_MASK, &flag, 1, NULL, 0);
+        irq_masked = 1, irq_held = 0;
+    } else {
+        int held = irq_held || (mcu_on && isr_depth == 0);
+        irq_masked = irq_held = 0;
+        if (held && isr_depth == 0) call(OP_IRQ_MASK_WAIT, &flag, 1, NULL, 0, NULL, 0);
+        else queue(OP_IRQ_MASK, &flag, 1, NULL, 0);  /* (in a handler: they run after it) */
+    }
+}
+
+void spinner_disable_interrupts(void) {
+    INIT();
+    set_mask(1);
+}
+
+void spinner_enable_interrupts(void) {
+    INIT();
+    set_mask(0);
+}
+
+int spinner_interrupts_disabled(void) { return irq_masked; }
 
 int spinner_has_every(void (*handler)(void)) {
     INIT();
@@ -1206,7 +1244,8 @@ static void read_init(void) {
     read_all(sensors, sizeof sensors);
     img_h = (int)init[0], img_w = (int)init[1], line_row = (int)init[2];
     recording_on = (int)init[3], wheelbase_m = init[4];
-    mcu_report = init[5] != 0.0;
+    mcu_report = init[5] == 1.0;  /* 1 measured, 2 fixed, 0 off */
+    mcu_on = init[5] != 0.0;
     encoder_mask = (int)sensors[0], encoder_lines = (int)sensors[1], encoder_per_line = (int)sensors[2];
     has_imu = sensors[3] != 0.0;
     api_thread = pthread_self();
@@ -1419,6 +1458,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_main = (main_fn)dlsym(lib, "main");
     prog_lib = lib;
     isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
+    irq_masked = irq_held = 0;
     memset(isr_fn, 0, sizeof isr_fn);
     memset(isr_stopping, 0, sizeof isr_stopping);
     kit_before_wait = NULL, in_kit_hook = 0;
