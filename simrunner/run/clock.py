@@ -32,9 +32,9 @@ handler (``in_interrupt``) no time passes: :meth:`step_one` returns at once and 
 Masking (:meth:`LockstepClock.mask`, :meth:`LockstepClock.unmask`: the program's
 ``__disable_irq()`` / ``__enable_irq()``, the Cortex-M's PRIMASK bit): while masked, a handler
 falling due does not run but is marked pending, one flag per handler (as an NVIC pending bit:
-expiries while it is set give one call; ARMv6-M Architecture Reference Manual, ARM DDI 0419,
-B1.5.3 and B3.4: an interrupt's pending state is one bit, PRIMASK a single bit that raises the
-execution priority to 0). Its schedule goes on (its next time is a whole period later, as a
+expiries while it is set give one call; ARMv6-M Architecture Reference Manual, ARM DDI 0419, the
+exception model: pending is a state, not a count; PRIMASK one bit that keeps every exception of
+configurable priority from being taken). Its schedule goes on (its next time is a whole period later, as a
 timer's). :meth:`unmask` runs the pending handlers at once, at the time of the unmask (no time
 passes), in the order they were registered; a pending handler stopped meanwhile does not run.
 Masking is a bit, not a count: a second mask is a no-op, one unmask clears it. Handlers do not
@@ -136,6 +136,7 @@ class LockstepClock:
         self._next_irq_step = _NEVER
         self.in_interrupt = False  # a handler runs (no time passes)
         self.masked = False  # interrupts masked (PRIMASK): handlers due are held pending
+        self._any_pending = False  # a handler may be pending (cleared when none is)
         self._masked_at_step = 0  # the step of the mask
         self._held_at_step: int | None = None  # the step a handler was first held pending since the mask
         self.warn: Callable[[str, str], None] | None = None  # (key, text): a warning of the run
@@ -252,11 +253,11 @@ class LockstepClock:
                 while irq.next_step <= i:
                     irq.advance()
                     if self.masked:  # (also after a handler masked): one pending bit
-                        irq.pending = True
+                        irq.pending = self._any_pending = True
                         self._held(i)
                     else:
                         self._run(irq)
-            if not self.masked:  # a handler unmasked with others pending
+            if self._any_pending and not self.masked:  # a handler unmasked with others pending
                 self._run_pending()
         finally:  # a handler that raised: the schedule stays the one of the handlers run
             self._prune()
@@ -283,6 +284,7 @@ class LockstepClock:
         while not self.masked:
             irq = next((q for q in self._interrupts if q.pending), None)
             if irq is None:
+                self._any_pending = False
                 return
             irq.pending = False
             self._run(irq)
@@ -299,8 +301,8 @@ class LockstepClock:
         if not self.masked:
             return
         self.masked = False
-        if self.in_interrupt:
-            return  # _interrupt or the unmask running this handler runs them after it
+        if self.in_interrupt or not self._any_pending:
+            return  # (in a handler: _interrupt or the unmask running it runs them after it)
         try:
             self._run_pending()
         finally:
