@@ -201,6 +201,44 @@ def test_c_masked_handlers_run_once_at_the_unmask_alike_in_process_and_isolated(
         assert [t for _, t, _ in ticks[:4]] == [b"0.028", b"0.030", b"0.060", b"0.092"]
 
 
+C_MASK_IN_HANDLER = """\
+#include "spinner.h"
+static int a_calls, b_calls, b_while_masked;
+static void a(void) {
+    if (++a_calls == 1) spinner_disable_interrupts();   /* left masked on return */
+}
+static void b(void) {
+    b_calls++;
+    spinner_add_textf("b at %.3f", spinner_get_time());
+}
+int main(void) {
+    spinner_every(0.01, a);
+    spinner_every(0.01, b);
+    spinner_sleep(0.03);               /* a at 0.01 masks: b held at 0.01, 0.02, 0.03 */
+    if (!spinner_interrupts_disabled() || b_calls) return 3;
+    spinner_enable_interrupts();       /* a, then b, now: once each */
+    if (a_calls != 2 || b_calls != 1) return 4;
+    spinner_disable_interrupts();
+    spinner_enable_interrupts();       /* nothing between: nothing held */
+    spinner_sleep(0.01);
+    return a_calls == 3 && b_calls == 2 ? 0 : 5;
+}
+"""
+
+
+def test_c_a_mask_set_in_a_handler_holds_the_later_ones_until_main_unmasks(tmp_path):
+    src = tmp_path / "mask_in_handler.c"
+    src.write_text(C_MASK_IN_HANDLER)
+    program = build_program([src])
+    logs = []
+    for isolate in (False, True):
+        csv = tmp_path / f"run{isolate}.csv"
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0, csv=csv)
+        assert r.outcome == "controller_returned", r.message
+        logs.append(csv.read_bytes())
+    assert logs[0] == logs[1] and re.findall(rb"b at ([0-9.]+)", logs[0]) == [b"0.030", b"0.040"]
+
+
 # -- the kits ---------------------------------------------------------------------------------------
 def test_the_tfc_kits_disable_interrupts_holds_a_timer_handler_across_library_calls(tmp_path):
     """--kit tfc: DisableInterrupts / __disable_irq around TFC_Task() passes (each a physics step):

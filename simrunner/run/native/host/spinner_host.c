@@ -332,13 +332,21 @@ static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read 
 static int isr_count;   /* slots in use */
 static int isr_depth;   /* handlers running (spinner_in_interrupt) */
 /* Masked interrupts (spinner_disable_interrupts: PRIMASK, a bit): the simulator holds the handlers
- * falling due pending and runs them at the unmask. The mask is queued (OP_IRQ_MASK) - no time
- * passes before the next waiting call - unless the program's own code lets time pass (--mcu-time:
- * a waiting OP_IRQ_MASK_WAIT, so a handler due before it runs before the masked code, not inside
- * its first call). The unmask is a waiting call (the pending handlers run inside it) only when time
- * may have passed while masked (irq_held: a waiting call since the mask, or --mcu-time); otherwise
- * none can be pending and it is queued too. */
-static int irq_masked, irq_held;
+ * falling due pending and runs them at the unmask. No time passes before the program's next waiting
+ * call, so the mask is sent with it (OP_IRQ_MASK; irq_mask_unsent until then; also at the end of a
+ * handler that masked, for the handlers due after it) - an unmask before that sends nothing at all -
+ * unless the program's own code lets time pass (--mcu-time: a waiting OP_IRQ_MASK_WAIT, so a
+ * handler due before the mask runs before the masked code, not inside its first call). The unmask
+ * is a waiting call (the pending handlers run inside it) when time may have passed while masked
+ * (irq_held: a waiting call since the mask, or --mcu-time); otherwise none can be pending and it is
+ * queued. */
+static int irq_masked, irq_held, irq_mask_unsent;
+static void send_mask(void) {
+    unsigned char one = 1;
+    irq_mask_unsent = 0;
+    irq_held = 1;  /* time may pass from now on (the waiting call it goes with) */
+    queue(OP_IRQ_MASK, &one, 1, NULL, 0);
+}
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
 static void run_isr(uint32_t slot) {
@@ -348,6 +356,7 @@ static void run_isr(uint32_t slot) {
     isr_depth++;
     isr_fn[slot]();
     isr_depth--;
+    if (irq_mask_unsent) send_mask();  /* the handler masked: the ones due after it are held */
     queue(OP_ISR_DONE, NULL, 0, NULL, 0);
     flush_out();
 }
@@ -390,6 +399,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         kit_before_wait();
         in_kit_hook = 0;
     }
+    if (irq_mask_unsent) send_mask();
     if (irq_masked) irq_held = 1;  /* time passes while masked: handlers may be held pending */
     queue(op, a, na, b, nb);
     flush_out();
@@ -774,8 +784,10 @@ static void set_mask(int masked) {
     if (finished || masked == irq_masked) return;  /* a bit: a second disable changes nothing */
     if (masked) {  /* (the handlers due before it run in the waiting one, unmasked) */
         if (mcu_on && isr_depth == 0) call(OP_IRQ_MASK_WAIT, &flag, 1, NULL, 0, NULL, 0);
-        else queue(OP_IRQ_MASK, &flag, 1, NULL, 0);
+        else irq_mask_unsent = 1;
         irq_masked = 1, irq_held = 0;
+    } else if (irq_mask_unsent) {  /* nothing passed while masked: the simulator need not know */
+        irq_mask_unsent = irq_masked = 0;
     } else {
         int held = irq_held || (mcu_on && isr_depth == 0);
         irq_masked = irq_held = 0;
@@ -1458,7 +1470,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_main = (main_fn)dlsym(lib, "main");
     prog_lib = lib;
     isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
-    irq_masked = irq_held = 0;
+    irq_masked = irq_held = irq_mask_unsent = 0;
     memset(isr_fn, 0, sizeof isr_fn);
     memset(isr_stopping, 0, sizeof isr_stopping);
     kit_before_wait = NULL, in_kit_hook = 0;
