@@ -112,7 +112,9 @@ def test_interrupts_left_disabled_warn_the_run_once():
     r = ticks_of(main)
     assert calls == []
     masked = [w for w in r.warnings if MASKED_WARNING in w]
-    assert len(masked) == 1 and "interrupts disabled at 0.000 s" in masked[0] and "__enable_irq" in masked[0]
+    assert len(masked) == 1 and "__enable_irq" in masked[0], masked
+    line = main.__code__.co_firstlineno + 2  # s.disable_interrupts()
+    assert masked[0].startswith(f"{__file__}:{line}: interrupts disabled at 0.000 s"), masked
 
     def short(s):  # critical sections of a camera frame each: no warning
         s.every(0.01, lambda: calls.append(1))
@@ -270,6 +272,29 @@ def test_the_tfc_kits_disable_interrupts_holds_a_timer_handler_across_library_ca
     # 1 kHz at the 2-ms step: two calls in TFC_Init's step; then each pass one at the unmask (16
     # expiries held) and two in its unmasked step: 2 + 30 x 3 (masks ignored: 542, and bad)
     assert r.outcome == "controller_error" and "status 92" in r.message, r.message
+
+
+def test_interrupts_a_firmware_leaves_disabled_are_named_at_its_line(tmp_path):
+    """The warning names the firmware's line (through the kit's DisableInterrupts macro), the
+    same in the simulator's process and a child process."""
+    src = tmp_path / "forgot.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC/TFC.h"
+        void Tick(void) {}
+        int main(void) {
+            DisableInterrupts;
+            for (int i = 0; i < 100; i++) TFC_Task();
+            return 0;
+        }
+        """))
+    program = with_isrs(build_program([str(src)], kit="tfc"), [("Tick", 0.01)])
+    warnings = []
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0)
+        warnings.append([w for w in r.warnings if MASKED_WARNING in w])
+    assert warnings[0] == warnings[1] and len(warnings[0]) == 1, warnings
+    assert re.match(r".*forgot\.c:5: interrupts disabled at 0\.000 s", warnings[0][0]), warnings
 
 
 def test_mbed_critical_sections_nest_and_hold_tickers_while_waits_go_on(tmp_path):

@@ -138,6 +138,7 @@ class LockstepClock:
         self.masked = False  # interrupts masked (PRIMASK): handlers due are held pending
         self._any_pending = False  # a handler may be pending (cleared when none is)
         self._masked_at_step = 0  # the step of the mask
+        self.mask_where: Callable[[], str | None] | None = None  # () -> the mask's file:line, or None
         self._held_at_step: int | None = None  # the step a handler was first held pending since the mask
         self.warn: Callable[[str, str], None] | None = None  # (key, text): a warning of the run
 
@@ -271,9 +272,10 @@ class LockstepClock:
             self._held_at_step = step
         elif self.warn is not None and (step - self._held_at_step) * self.dt_s >= HELD_WARN_S - 1e-9:
             masked_s = self._masked_at_step * self.dt_s
+            where = self.mask_where() if self.mask_where is not None else None
             self.warn("interrupts_masked", (
-                f"interrupts disabled at {masked_s:.3f} s (__disable_irq, DisableInterrupts, "
-                f"OsIf_SuspendAllInterrupts, spinner_disable_interrupts) held a timer interrupt's "
+                f"{where + ': ' if where else ''}interrupts disabled at {masked_s:.3f} s (__disable_irq, "
+                f"DisableInterrupts, OsIf_SuspendAllInterrupts, spinner_disable_interrupts) held a timer interrupt's "
                 f"handler for {HELD_WARN_S:g} s and more: on the board no interrupt runs while they are "
                 f"disabled; enable them again right after the critical section (__enable_irq, "
                 f"EnableInterrupts, OsIf_ResumeAllInterrupts, spinner_enable_interrupts)"))
@@ -289,12 +291,14 @@ class LockstepClock:
             irq.pending = False
             self._run(irq)
 
-    def mask(self) -> None:
-        """Mask interrupts (module docstring): handlers falling due are held pending."""
+    def mask(self, where: Callable[[], str | None] | None = None) -> None:
+        """Mask interrupts (module docstring): handlers falling due are held pending. ``where()``
+        names the mask's file:line for the warning (called only then)."""
         if not self.masked:
             self.masked = True
             self._masked_at_step = self.step_index
             self._held_at_step = None
+            self.mask_where = where
 
     def unmask(self) -> None:
         """Unmask interrupts: the pending handlers run now (after the running handler, inside one)."""

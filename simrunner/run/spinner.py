@@ -62,6 +62,7 @@ MIN_INTERRUPT_PERIOD_S = 1e-5  # every(): a 100 kHz timer at most (faster ones a
 _NO_WAIT = ("no simulated time passes in a handler; wait in the main loop and leave the "
             "handler to read sensors and set commands")
 
+_RUN_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep  # simrunner/run/ (not the caller's code)
 _current_session = SESSION  # the run executing in this context (simrunner.run.context)
 _get_ident = threading.get_ident
 
@@ -663,7 +664,13 @@ class Spinner:
         a handler (later handlers are then held until the unmask). C: ``spinner_disable_interrupts``."""
         if _get_ident() != self._owner:
             raise self._foreign("disable_interrupts")
-        self._clock.mask()
+        if self._clock.masked:
+            return
+        frame = sys._getframe(1)  # the caller's line, for the warning of interrupts left disabled
+        while frame is not None and frame.f_code.co_filename.startswith(_RUN_DIR):
+            frame = frame.f_back  # (the --mcu-time wrapper)
+        where = None if frame is None else f"{frame.f_code.co_filename}:{frame.f_lineno}"
+        self._clock.mask(where=lambda: where)
 
     def enable_interrupts(self) -> None:
         """Unmask the timer interrupts (``__enable_irq()``): the handlers held pending run now, in

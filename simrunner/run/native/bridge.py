@@ -383,8 +383,13 @@ class _Session:
         elif op == OP_EVERY_STOP:  # the program's slot (int32) of a timer interrupt it stopped
             s.stop_every(self._isrs.pop(struct.unpack("<i", payload[:4])[0], None))
         elif op in (OP_IRQ_MASK, OP_IRQ_MASK_WAIT):  # a flag byte: 1 mask (disable), 0 unmask (enable)
-            if payload[:1] == b"\x01":
+            if payload[:1] == b"\x01":  # then the caller's return address: its offset (uint64), module
+                clock, was = s._clock, s._clock.masked
                 s.disable_interrupts()
+                if not was:  # where the program masked (for the warning of interrupts left disabled)
+                    offset = struct.unpack_from("<Q", payload, 1)[0] if len(payload) >= 9 else 0
+                    module = payload[9:].decode("utf-8", "replace")
+                    clock.mask_where = (lambda: self._where(module, offset)) if module else None
             else:
                 s.enable_interrupts()  # (the pending handlers run here: ST_ISR in a waiting one)
             if op == OP_IRQ_MASK_WAIT:
@@ -409,6 +414,15 @@ class _Session:
             self._fault(payload.decode("utf-8", "replace"))
         else:
             raise ControllerError(f"{self.name}: unknown request {op} from the host program")
+
+    def _where(self, module: str, offset: int) -> str | None:
+        """file:line of the return address at ``offset`` in ``module`` when it is the program's
+        own code (not the kits'), else None."""
+        from simrunner.run.native.symbolize import _addr2line, _ours
+
+        found = _addr2line(module, [offset - 1]).get(offset - 1)  # (a return address: after its call)
+        frame = next((f for f in found or () if f[1] and not _ours(f[1])), None)
+        return None if frame is None else f"{frame[1]}:{frame[2]}"
 
     def _param(self, payload: bytes) -> float:
         default = _D.unpack_from(payload)[0]

@@ -341,11 +341,29 @@ static int isr_depth;   /* handlers running (spinner_in_interrupt) */
  * (irq_held: a waiting call since the mask, or --mcu-time); otherwise none can be pending and it is
  * queued. */
 static int irq_masked, irq_held, irq_mask_unsent;
+static void *irq_mask_ra;  /* where the program masked (the return address of its call) */
+static unsigned char mask_msg[9 + 4096];
+/* The mask's message: 1, then the caller's offset in its module (uint64) and the module's path, for
+ * the simulator's warning of interrupts left disabled (file:line). */
+static size_t mask_message(void) {
+    uint64_t off = 0;
+    const char *path = "";
+    Dl_info info;
+    if (irq_mask_ra != NULL && dladdr(irq_mask_ra, &info) && info.dli_fname != NULL) {
+        off = (uint64_t)((uintptr_t)irq_mask_ra - (uintptr_t)info.dli_fbase);
+        path = info.dli_fname;
+    }
+    size_t n = strlen(path);
+    if (n > sizeof mask_msg - 9) n = sizeof mask_msg - 9;
+    mask_msg[0] = 1;
+    memcpy(mask_msg + 1, &off, sizeof off);
+    memcpy(mask_msg + 9, path, n);
+    return 9 + n;
+}
 static void send_mask(void) {
-    unsigned char one = 1;
     irq_mask_unsent = 0;
     irq_held = 1;  /* time may pass from now on (the waiting call it goes with) */
-    queue(OP_IRQ_MASK, &one, 1, NULL, 0);
+    queue(OP_IRQ_MASK, mask_msg, mask_message(), NULL, 0);
 }
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
@@ -783,7 +801,7 @@ static void set_mask(int masked) {
     unsigned char flag = (unsigned char)masked;
     if (finished || masked == irq_masked) return;  /* a bit: a second disable changes nothing */
     if (masked) {  /* (the handlers due before it run in the waiting one, unmasked) */
-        if (mcu_on && isr_depth == 0) call(OP_IRQ_MASK_WAIT, &flag, 1, NULL, 0, NULL, 0);
+        if (mcu_on && isr_depth == 0) call(OP_IRQ_MASK_WAIT, mask_msg, mask_message(), NULL, 0, NULL, 0);
         else irq_mask_unsent = 1;
         irq_masked = 1, irq_held = 0;
     } else if (irq_mask_unsent) {  /* nothing passed while masked: the simulator need not know */
@@ -798,6 +816,7 @@ static void set_mask(int masked) {
 
 void spinner_disable_interrupts(void) {
     INIT();
+    if (!irq_masked) irq_mask_ra = __builtin_return_address(0);
     set_mask(1);
 }
 
@@ -1470,7 +1489,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_main = (main_fn)dlsym(lib, "main");
     prog_lib = lib;
     isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
-    irq_masked = irq_held = irq_mask_unsent = 0;
+    irq_masked = irq_held = irq_mask_unsent = 0, irq_mask_ra = NULL;
     memset(isr_fn, 0, sizeof isr_fn);
     memset(isr_stopping, 0, sizeof isr_stopping);
     kit_before_wait = NULL, in_kit_hook = 0;

@@ -76,8 +76,8 @@ inline void deepsleep() { tfc_mbed_idle(); }
  * once at the enable (docs/firmware.md, "Critical sections"); mbed's critical sections
  * (mbed_critical.h) nest on it: the outermost exit enables them again if the enter found them
  * enabled. */
-#define __enable_irq() tfc_mbed_irq_mask(0)
-#define __disable_irq() tfc_mbed_irq_mask(1)
+#define __enable_irq() spinner_enable_interrupts()
+#define __disable_irq() spinner_disable_interrupts()
 #define __get_PRIMASK() ((uint32_t)tfc_mbed_irq_masked())
 #define __set_PRIMASK(primask) tfc_mbed_irq_mask((int)((primask) & 1u))
 inline void core_util_critical_section_enter() { tfc_mbed_critical_enter(); }

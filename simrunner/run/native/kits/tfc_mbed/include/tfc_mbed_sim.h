@@ -22,6 +22,8 @@ int tfc_mbed_started(void);       /* 0 before the kit's first call (globals' con
 [[noreturn]] void tfc_mbed_not_emulated(const char *what, const char *why);
 /* the interrupt mask (PRIMASK: spinner_disable_interrupts; the kit's clock interrupt is held too)
  * and mbed's counted critical sections on it (mbed_critical.c) */
+extern "C" void spinner_disable_interrupts(void);  /* spinner.h */
+extern "C" void spinner_enable_interrupts(void);
 void tfc_mbed_irq_mask(int disable);
 int tfc_mbed_irq_masked(void);
 void tfc_mbed_critical_enter(void);
