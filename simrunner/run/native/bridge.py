@@ -150,6 +150,7 @@ class _Session:
         self._pos = 0
         self._in_call = False  # the request handled is the one the program waits in (_WAITING)
         self._isrs: dict[int, Callable[[], None]] = {}  # the program's timer interrupts by slot
+        self._last_mask: tuple[bytes, Callable[[], str | None] | None] = (b"", None)  # _mask_where's
 
     def _setup_transport(self, child: _Child) -> None:
         self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
@@ -387,9 +388,7 @@ class _Session:
                 clock, was = s._clock, s._clock.masked
                 s.disable_interrupts()
                 if not was:  # where the program masked (for the warning of interrupts left disabled)
-                    offset = struct.unpack_from("<Q", payload, 1)[0] if len(payload) >= 9 else 0
-                    module = payload[9:].decode("utf-8", "replace")
-                    clock.mask_where = (lambda: self._where(module, offset)) if module else None
+                    clock.mask_where = self._mask_where(bytes(payload))
             else:
                 s.enable_interrupts()  # (the pending handlers run here: ST_ISR in a waiting one)
             if op == OP_IRQ_MASK_WAIT:
@@ -414,6 +413,15 @@ class _Session:
             self._fault(payload.decode("utf-8", "replace"))
         else:
             raise ControllerError(f"{self.name}: unknown request {op} from the host program")
+
+    def _mask_where(self, payload: bytes) -> Callable[[], str | None] | None:
+        """The ``where`` of a mask message (its return address' offset and module), the same
+        function for the same place."""
+        if payload != self._last_mask[0]:
+            offset = struct.unpack_from("<Q", payload, 1)[0] if len(payload) >= 9 else 0
+            module = payload[9:].decode("utf-8", "replace")
+            self._last_mask = (payload, (lambda: self._where(module, offset)) if module else None)
+        return self._last_mask[1]
 
     def _where(self, module: str, offset: int) -> str | None:
         """file:line of the return address at ``offset`` in ``module`` when it is the program's

@@ -345,7 +345,10 @@ static void *irq_mask_ra;  /* where the program masked (the return address of it
 static unsigned char mask_msg[9 + 4096];
 /* The mask's message: 1, then the caller's offset in its module (uint64) and the module's path, for
  * the simulator's warning of interrupts left disabled (file:line). */
+static void *mask_msg_ra;  /* the return address mask_msg holds (a loop masks at one place) */
+static size_t mask_msg_len;
 static size_t mask_message(void) {
+    if (mask_msg_len != 0 && irq_mask_ra == mask_msg_ra) return mask_msg_len;
     uint64_t off = 0;
     const char *path = "";
     Dl_info info;
@@ -358,7 +361,8 @@ static size_t mask_message(void) {
     mask_msg[0] = 1;
     memcpy(mask_msg + 1, &off, sizeof off);
     memcpy(mask_msg + 9, path, n);
-    return 9 + n;
+    mask_msg_ra = irq_mask_ra;
+    return mask_msg_len = 9 + n;
 }
 static void send_mask(void) {
     irq_mask_unsent = 0;
@@ -1489,7 +1493,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_main = (main_fn)dlsym(lib, "main");
     prog_lib = lib;
     isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
-    irq_masked = irq_held = irq_mask_unsent = 0, irq_mask_ra = NULL;
+    irq_masked = irq_held = irq_mask_unsent = 0, irq_mask_ra = NULL, mask_msg_len = 0;
     memset(isr_fn, 0, sizeof isr_fn);
     memset(isr_stopping, 0, sizeof isr_stopping);
     kit_before_wait = NULL, in_kit_hook = 0;
