@@ -28,6 +28,19 @@ stops one (from a handler too: one due later at the same step is then not run). 
 waiting call that is stepping the clock then (the controller's code between calls takes no time,
 so an interrupt due meanwhile is taken at its next call, as one the code had masked). Inside a
 handler (``in_interrupt``) no time passes: :meth:`step_one` returns at once and waits are refused.
+
+Masking (:meth:`LockstepClock.mask`, :meth:`LockstepClock.unmask`: the program's
+``__disable_irq()`` / ``__enable_irq()``, the Cortex-M's PRIMASK bit): while masked, a handler
+falling due does not run but is marked pending, one flag per handler (as an NVIC pending bit:
+expiries while it is set give one call; ARMv6-M Architecture Reference Manual, ARM DDI 0419, the
+exception model: pending is a state, not a count; PRIMASK one bit that keeps every exception of
+configurable priority from being taken). Its schedule goes on (its next time is a whole period later, as a
+timer's). :meth:`unmask` runs the pending handlers at once, at the time of the unmask (no time
+passes), in the order they were registered; a pending handler stopped meanwhile does not run.
+Masking is a bit, not a count: a second mask is a no-op, one unmask clears it. Handlers do not
+change it: one that masks leaves it masked on return (later handlers are held), and an unmask
+inside a handler lets the pending ones run after it returns (handlers do not nest). A handler
+held pending for :data:`HELD_WARN_S` of simulated time gives the run a warning (``warn``).
 """
 from __future__ import annotations
 
@@ -39,6 +52,9 @@ from simrunner.errors import CommandError, RunFinished
 
 _monotonic = time.monotonic
 _NEVER = 1 << 62  # the next interrupt's step when there is none
+#: A handler held pending this long by masked interrupts (s of simulated time) gives the run a
+#: warning: a critical section lasts microseconds on the board; one this long forgot its unmask.
+HELD_WARN_S = 0.1
 
 
 class InterruptWait(CommandError):
@@ -48,12 +64,13 @@ class InterruptWait(CommandError):
 class _Interrupt:
     """A periodic handler: registered at step ``first_step``, every ``period_steps``."""
 
-    __slots__ = ("handler", "first_step", "period_steps", "count", "next_step")
+    __slots__ = ("handler", "first_step", "period_steps", "count", "next_step", "pending")
 
     def __init__(self, handler: Callable[[], None], first_step: int, period_steps: float):
         self.handler, self.first_step, self.period_steps = handler, first_step, period_steps
         self.count = 1
         self.next_step = self._step(1)
+        self.pending = False  # fell due while masked: runs at the unmask
 
     def _step(self, k: int) -> int:  # the first step boundary at or after its k-th time
         return self.first_step + max(1, math.ceil(k * self.period_steps - 1e-9))
@@ -122,6 +139,12 @@ class LockstepClock:
         self._interrupts: list[_Interrupt] = []  # add_interrupt, in the order registered
         self._next_irq_step = _NEVER
         self.in_interrupt = False  # a handler runs (no time passes)
+        self.masked = False  # interrupts masked (PRIMASK): handlers due are held pending
+        self._any_pending = False  # a handler may be pending (cleared when none is)
+        self._masked_at_step = 0  # the step of the mask
+        self.mask_where: Callable[[], str | None] | None = None  # () -> the mask's file:line, or None
+        self._held_at_step: int | None = None  # the step a handler was first held pending since the mask
+        self.warn: Callable[[str, str], None] | None = None  # (key, text): a warning of the run
 
     # -- schedule ------------------------------------------------------------------
     def _frame_step(self, k: int) -> int:
@@ -210,6 +233,7 @@ class LockstepClock:
         gone = [irq for irq in self._interrupts if irq.handler is handler]
         for irq in gone:
             irq.next_step = _NEVER  # (a handler running now: its loop ends)
+            irq.pending = False
         if gone and not self.in_interrupt:  # (inside a handler: _interrupt prunes the list)
             self._prune()
         return len(gone)
@@ -218,19 +242,78 @@ class LockstepClock:
         self._interrupts = [irq for irq in self._interrupts if irq.next_step != _NEVER]
         self._next_irq_step = min((irq.next_step for irq in self._interrupts), default=_NEVER)
 
+    def _run(self, irq: _Interrupt) -> None:
+        self.in_interrupt = True
+        try:
+            irq.handler()
+        finally:
+            self.in_interrupt = False
+
     def _interrupt(self) -> None:
-        """The step index has reached an interrupt's step: run the handlers due (module docstring)."""
+        """The step index has reached an interrupt's step: run the handlers due (module docstring),
+        or hold them pending while masked."""
         i = self.step_index
         try:
             for irq in self._interrupts:  # (a handler may add one: it is due later; or remove one)
                 while irq.next_step <= i:
                     irq.advance()
-                    self.in_interrupt = True
-                    try:
-                        irq.handler()
-                    finally:
-                        self.in_interrupt = False
+                    if self.masked:  # (also after a handler masked): one pending bit
+                        irq.pending = self._any_pending = True
+                        self._held(i)
+                    else:
+                        self._run(irq)
+            if self._any_pending and not self.masked:  # a handler unmasked with others pending
+                self._run_pending()
         finally:  # a handler that raised: the schedule stays the one of the handlers run
+            self._prune()
+        if self.finished is not None:
+            self.check()
+
+    def _held(self, step: int) -> None:
+        """A handler is held pending at ``step``: the first since the mask starts the count to
+        the warning (HELD_WARN_S)."""
+        if self._held_at_step is None:
+            self._held_at_step = step
+        elif self.warn is not None and (step - self._held_at_step) * self.dt_s >= HELD_WARN_S - 1e-9:
+            masked_s = self._masked_at_step * self.dt_s
+            where = self.mask_where() if self.mask_where is not None else None
+            self.warn("interrupts_masked", (
+                f"{where + ': ' if where else ''}interrupts disabled at {masked_s:.3f} s (__disable_irq, "
+                f"DisableInterrupts, OsIf_SuspendAllInterrupts, spinner_disable_interrupts) held a timer interrupt's "
+                f"handler for {HELD_WARN_S:g} s and more: on the board no interrupt runs while they are "
+                f"disabled; enable them again right after the critical section (__enable_irq, "
+                f"EnableInterrupts, OsIf_ResumeAllInterrupts, spinner_enable_interrupts)"))
+
+    def _run_pending(self) -> None:
+        """Run the pending handlers, in the order registered, while unmasked (one that masks
+        holds the rest)."""
+        while not self.masked:
+            irq = next((q for q in self._interrupts if q.pending), None)
+            if irq is None:
+                self._any_pending = False
+                return
+            irq.pending = False
+            self._run(irq)
+
+    def mask(self, where: Callable[[], str | None] | None = None) -> None:
+        """Mask interrupts (module docstring): handlers falling due are held pending. ``where()``
+        names the mask's file:line for the warning (called only then)."""
+        if not self.masked:
+            self.masked = True
+            self._masked_at_step = self.step_index
+            self._held_at_step = None
+            self.mask_where = where
+
+    def unmask(self) -> None:
+        """Unmask interrupts: the pending handlers run now (after the running handler, inside one)."""
+        if not self.masked:
+            return
+        self.masked = False
+        if self.in_interrupt or not self._any_pending:
+            return  # (in a handler: _interrupt or the unmask running it runs them after it)
+        try:
+            self._run_pending()
+        finally:
             self._prune()
         if self.finished is not None:
             self.check()

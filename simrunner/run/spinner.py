@@ -62,6 +62,7 @@ MIN_INTERRUPT_PERIOD_S = 1e-5  # every(): a 100 kHz timer at most (faster ones a
 _NO_WAIT = ("no simulated time passes in a handler; wait in the main loop and leave the "
             "handler to read sensors and set commands")
 
+_RUN_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep  # simrunner/run/ (not the caller's code)
 _current_session = SESSION  # the run executing in this context (simrunner.run.context)
 _get_ident = threading.get_ident
 
@@ -163,6 +164,7 @@ class Session:
         self.seed = 0        # the run's seed (the range sensors' noise)
         self.mcu = None      # the controller's own time (simrunner.run.mcu.McuTime), or None
         self.surface_z_m = 0.0
+        self.clock.warn = self.warn_once  # (held interrupts: simrunner.run.clock)
 
     def activate(self) -> None:
         """Make this the session ``Spinner()`` attaches to in this context (and thread)."""
@@ -658,6 +660,34 @@ class Spinner:
         if _get_ident() != self._owner:
             raise self._foreign("stop_every")
         self._clock.remove_interrupt(handler)
+
+    def disable_interrupts(self) -> None:
+        """Mask the timer interrupts, as ``__disable_irq()`` sets the Cortex-M's PRIMASK: a handler
+        that falls due meanwhile is held pending and runs once (however often it fell due) at
+        :meth:`enable_interrupts`. A flag, not a count: a second call changes nothing. Allowed in
+        a handler (later handlers are then held until the unmask). C: ``spinner_disable_interrupts``."""
+        if _get_ident() != self._owner:
+            raise self._foreign("disable_interrupts")
+        if self._clock.masked:
+            return
+        frame = sys._getframe(1)  # the caller's line, for the warning of interrupts left disabled
+        while frame is not None and frame.f_code.co_filename.startswith(_RUN_DIR):
+            frame = frame.f_back  # (the --mcu-time wrapper)
+        where = None if frame is None else f"{frame.f_code.co_filename}:{frame.f_lineno}"
+        self._clock.mask(where=lambda: where)
+
+    def enable_interrupts(self) -> None:
+        """Unmask the timer interrupts (``__enable_irq()``): the handlers held pending run now, in
+        the order they were set up, before this call returns (no time passes); in a handler, after
+        it returns. C: ``spinner_enable_interrupts``."""
+        if _get_ident() != self._owner:
+            raise self._foreign("enable_interrupts")
+        self._clock.unmask()
+
+    def interrupts_disabled(self) -> bool:
+        """Whether :meth:`disable_interrupts` masks the timer interrupts now (no time passes).
+        C: ``spinner_interrupts_disabled``."""
+        return self._clock.masked
 
     # -- parameters ------------------------------------------------------------------------
     def param(self, name: str, default: Any = None) -> Any:

@@ -46,7 +46,7 @@ from simrunner.run.native.build import NativeProgram, missing_function, misspelt
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
-    OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW = range(1, 29)
+    OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK, OP_IRQ_MASK_WAIT = range(1, 31)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
@@ -82,7 +82,7 @@ _PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a r
 # the requests the program waits in for a reply (spinner_host.c: call()); the others are queued
 _WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, OP_PARAM, OP_FAULT,
                       OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
-                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_NOW))
+                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK_WAIT))
 
 
 class _Child:
@@ -162,6 +162,7 @@ class _Session:
         self._pos = 0
         self._in_call = False  # the request handled is the one the program waits in (_WAITING)
         self._isrs: dict[int, Callable[[], None]] = {}  # the program's timer interrupts by slot
+        self._last_mask: tuple[bytes, Callable[[], str | None] | None] = (b"", None)  # _mask_where's
 
     def _setup_transport(self, child: _Child) -> None:
         self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
@@ -244,8 +245,10 @@ class _Session:
             if measured:
                 mcu.reported = True
             isrs = self.ctrl.isrs  # --isr NAME@HZ: (name, period_s)
+            # --mcu-time: 1 measured (the program reports its CPU time), 2 fixed, 0 off
+            mcu_mode = 0.0 if mcu is None else 1.0 if measured else 2.0
             self._reply(struct.pack("<7d", h, w, s.line_row, 1.0 if s.recording else 0.0,
-                                    s.wheelbase_m, 1.0 if measured else 0.0, len(isrs))
+                                    s.wheelbase_m, mcu_mode, len(isrs))
                         + struct.pack("<4d", *_sensor_spec(s._s.car))
                         + b"".join(struct.pack("<2d", period, len(name.encode())) + name.encode()
                                    for name, period in isrs))
@@ -394,6 +397,16 @@ class _Session:
             s.every(period, handler)
         elif op == OP_EVERY_STOP:  # the program's slot (int32) of a timer interrupt it stopped
             s.stop_every(self._isrs.pop(struct.unpack("<i", payload[:4])[0], None))
+        elif op in (OP_IRQ_MASK, OP_IRQ_MASK_WAIT):  # a flag byte: 1 mask (disable), 0 unmask (enable)
+            if payload[:1] == b"\x01":  # then the caller's return address: its offset (uint64), module
+                clock, was = s._clock, s._clock.masked
+                s.disable_interrupts()
+                if not was:  # where the program masked (for the warning of interrupts left disabled)
+                    clock.mask_where = self._mask_where(bytes(payload))
+            else:
+                s.enable_interrupts()  # (the pending handlers run here: ST_ISR in a waiting one)
+            if op == OP_IRQ_MASK_WAIT:
+                reply(_OK_EMPTY)
         elif op == OP_CPU:  # the program's CPU time since its previous request (--mcu-time measured)
             s._s.mcu.report(_D.unpack(payload)[0])
         elif op == OP_ENCODER:  # the wheel's index (int32) -> its count (int64)
@@ -414,6 +427,24 @@ class _Session:
             self._fault(payload.decode("utf-8", "replace"))
         else:
             raise ControllerError(f"{self.name}: unknown request {op} from the host program")
+
+    def _mask_where(self, payload: bytes) -> Callable[[], str | None] | None:
+        """The ``where`` of a mask message (its return address' offset and module), the same
+        function for the same place."""
+        if payload != self._last_mask[0]:
+            offset = struct.unpack_from("<Q", payload, 1)[0] if len(payload) >= 9 else 0
+            module = payload[9:].decode("utf-8", "replace")
+            self._last_mask = (payload, (lambda: self._where(module, offset)) if module else None)
+        return self._last_mask[1]
+
+    def _where(self, module: str, offset: int) -> str | None:
+        """file:line of the return address at ``offset`` in ``module`` when it is the program's
+        own code (not the kits'), else None."""
+        from simrunner.run.native.symbolize import _addr2line, _ours
+
+        found = _addr2line(module, [offset - 1]).get(offset - 1)  # (a return address: after its call)
+        frame = next((f for f in found or () if f[1] and not _ours(f[1])), None)
+        return None if frame is None else f"{frame[1]}:{frame[2]}"
 
     def _param(self, payload: bytes) -> float:
         default = _D.unpack_from(payload)[0]

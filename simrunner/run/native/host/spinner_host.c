@@ -51,7 +51,8 @@
 enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP,
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
-       OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW };
+       OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK,
+       OP_IRQ_MASK_WAIT };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -88,6 +89,7 @@ static int foreign_thread(void) {
 /* --mcu-time measured: each request is preceded by the CPU time this thread spent since the
  * previous request or reply (OP_CPU, one double): the program's own processing time. */
 static int mcu_report;
+static int mcu_on;  /* --mcu-time measured or fixed: the program's own code lets time pass */
 static double mcu_mark_s;
 static double thread_cpu_s(void) {
     struct timespec ts;
@@ -330,6 +332,44 @@ static void (*isr_fn[MAX_ISRS])(void);
 static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read by the simulator */
 static int isr_count;   /* slots in use */
 static int isr_depth;   /* handlers running (spinner_in_interrupt) */
+/* Masked interrupts (spinner_disable_interrupts: PRIMASK, a bit): the simulator holds the handlers
+ * falling due pending and runs them at the unmask. No time passes before the program's next waiting
+ * call, so the mask is sent with it (OP_IRQ_MASK; irq_mask_unsent until then; also at the end of a
+ * handler that masked, for the handlers due after it) - an unmask before that sends nothing at all -
+ * unless the program's own code lets time pass (--mcu-time: a waiting OP_IRQ_MASK_WAIT, so a
+ * handler due before the mask runs before the masked code, not inside its first call). The unmask
+ * is a waiting call (the pending handlers run inside it) when time may have passed while masked
+ * (irq_held: a waiting call since the mask, or --mcu-time); otherwise none can be pending and it is
+ * queued. */
+static int irq_masked, irq_held, irq_mask_unsent;
+static void *irq_mask_ra;  /* where the program masked (the return address of its call) */
+static unsigned char mask_msg[9 + 4096];
+/* The mask's message: 1, then the caller's offset in its module (uint64) and the module's path, for
+ * the simulator's warning of interrupts left disabled (file:line). */
+static void *mask_msg_ra;  /* the return address mask_msg holds (a loop masks at one place) */
+static size_t mask_msg_len;
+static size_t mask_message(void) {
+    if (mask_msg_len != 0 && irq_mask_ra == mask_msg_ra) return mask_msg_len;
+    uint64_t off = 0;
+    const char *path = "";
+    Dl_info info;
+    if (irq_mask_ra != NULL && dladdr(irq_mask_ra, &info) && info.dli_fname != NULL) {
+        off = (uint64_t)((uintptr_t)irq_mask_ra - (uintptr_t)info.dli_fbase);
+        path = info.dli_fname;
+    }
+    size_t n = strlen(path);
+    if (n > sizeof mask_msg - 9) n = sizeof mask_msg - 9;
+    mask_msg[0] = 1;
+    memcpy(mask_msg + 1, &off, sizeof off);
+    memcpy(mask_msg + 9, path, n);
+    mask_msg_ra = irq_mask_ra;
+    return mask_msg_len = 9 + n;
+}
+static void send_mask(void) {
+    irq_mask_unsent = 0;
+    irq_held = 1;  /* time may pass from now on (the waiting call it goes with) */
+    queue(OP_IRQ_MASK, mask_msg, mask_message(), NULL, 0);
+}
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
 static int now_known;   /* spinner_now's answer holds (no waiting call since) */
@@ -343,6 +383,7 @@ static void run_isr(uint32_t slot) {
     isr_fn[slot]();
     isr_depth--;
     now_known = 0;
+    if (irq_mask_unsent) send_mask();  /* the handler masked: the ones due after it are held */
     queue(OP_ISR_DONE, NULL, 0, NULL, 0);
     flush_out();
 }
@@ -385,6 +426,8 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         kit_before_wait();
         in_kit_hook = 0;
     }
+    if (irq_mask_unsent) send_mask();
+    if (irq_masked) irq_held = 1;  /* time passes while masked: handlers may be held pending */
     queue(op, a, na, b, nb);
     flush_out();
     uint32_t hdr[2];
@@ -399,6 +442,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     }
     release_stopped();
     now_known = 0;  /* time may have passed */
+    if (irq_masked) irq_held = 1;  /* (masked by a handler that ran in it) */
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
         ended();
@@ -773,6 +817,36 @@ void spinner_stop_every(void (*handler)(void)) {
         queue(OP_EVERY_STOP, &slot, sizeof slot, NULL, 0);
     }
 }
+
+static void set_mask(int masked) {
+    unsigned char flag = (unsigned char)masked;
+    if (finished || masked == irq_masked) return;  /* a bit: a second disable changes nothing */
+    if (masked) {  /* (the handlers due before it run in the waiting one, unmasked) */
+        if (mcu_on && isr_depth == 0) call(OP_IRQ_MASK_WAIT, mask_msg, mask_message(), NULL, 0, NULL, 0);
+        else irq_mask_unsent = 1;
+        irq_masked = 1, irq_held = 0;
+    } else if (irq_mask_unsent) {  /* nothing passed while masked: the simulator need not know */
+        irq_mask_unsent = irq_masked = 0;
+    } else {
+        int held = irq_held || (mcu_on && isr_depth == 0);
+        irq_masked = irq_held = 0;
+        if (held && isr_depth == 0) call(OP_IRQ_MASK_WAIT, &flag, 1, NULL, 0, NULL, 0);
+        else queue(OP_IRQ_MASK, &flag, 1, NULL, 0);  /* (in a handler: they run after it) */
+    }
+}
+
+void spinner_disable_interrupts(void) {
+    INIT();
+    if (!irq_masked) irq_mask_ra = __builtin_return_address(0);
+    set_mask(1);
+}
+
+void spinner_enable_interrupts(void) {
+    INIT();
+    set_mask(0);
+}
+
+int spinner_interrupts_disabled(void) { return irq_masked; }
 
 int spinner_has_every(void (*handler)(void)) {
     INIT();
@@ -1222,7 +1296,8 @@ static void read_init(void) {
     read_all(sensors, sizeof sensors);
     img_h = (int)init[0], img_w = (int)init[1], line_row = (int)init[2];
     recording_on = (int)init[3], wheelbase_m = init[4];
-    mcu_report = init[5] != 0.0;
+    mcu_report = init[5] == 1.0;  /* 1 measured, 2 fixed, 0 off */
+    mcu_on = init[5] != 0.0;
     encoder_mask = (int)sensors[0], encoder_lines = (int)sensors[1], encoder_per_line = (int)sensors[2];
     has_imu = sensors[3] != 0.0;
     api_thread = pthread_self();
@@ -1442,6 +1517,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_main = (main_fn)dlsym(lib, "main");
     prog_lib = lib;
     isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
+    irq_masked = irq_held = irq_mask_unsent = 0, irq_mask_ra = NULL, mask_msg_len = 0;
     memset(isr_fn, 0, sizeof isr_fn);
     memset(isr_stopping, 0, sizeof isr_stopping);
     kit_before_wait = NULL, in_kit_hook = 0;

@@ -123,6 +123,17 @@ int spinner_interrupts(void);
 /* Non-zero inside an interrupt handler (where no simulated time passes): for library code that
  * lets time pass when main() polls it, and must not in a handler. */
 int spinner_in_interrupt(void);
+/* Mask the timer interrupts, as __disable_irq() sets the Cortex-M's PRIMASK (the kits' __disable_irq,
+ * DisableInterrupts, OsIf_SuspendAllInterrupts call it): a handler that falls due meanwhile is held
+ * pending and runs once, however often it fell due, at spinner_enable_interrupts - at that time, no
+ * time passing, in the order set up; one stopped meanwhile does not run. A flag, not a count: a
+ * second disable changes nothing, one enable clears it. In a handler too: it stays masked after the
+ * handler returns; an enable there lets the pending ones run after it. Interrupts left disabled for
+ * 0.1 s with a handler held give the run a warning. No time passes in either call. */
+void spinner_disable_interrupts(void);
+void spinner_enable_interrupts(void);
+/* Non-zero while spinner_disable_interrupts masks the timer interrupts (no time passes). */
+int spinner_interrupts_disabled(void);
 
 /* Debug video: text lines in the right column (one call = the lines of this frame). */
 void spinner_add_text(const char *const *lines, int n);

@@ -170,6 +170,11 @@ class Spinner {
     // without captures is such a function).
     void every(double period_s, void (*handler)()) { spinner_every(period_s, handler); }
     void stopEvery(void (*handler)()) { spinner_stop_every(handler); }
+    // Mask / unmask the timer interrupts (PRIMASK: spinner_disable_interrupts; held handlers run
+    // once at the enable).
+    void disableInterrupts() { spinner_disable_interrupts(); }
+    void enableInterrupts() { spinner_enable_interrupts(); }
+    bool interruptsDisabled() { return spinner_interrupts_disabled() != 0; }
     long long getEncoder(int wheel) { return spinner_get_encoder(wheel); }
     // By name, as in Python: "FL", "FR", "RL", "RR" (any case); another name throws.
     long long getEncoder(const std::string &wheel) {

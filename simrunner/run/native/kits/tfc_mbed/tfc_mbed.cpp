@@ -171,8 +171,38 @@ static void camera_service(void) {
     image_ready++;
 }
 
-/* One physics step of main() (the clock's interrupt runs in it). */
-static void step(void) { spinner_get_time(); }
+/* One physics step of main() (the clock's interrupt runs in it; with interrupts disabled it is held,
+ * and main()'s time is read here: a wait in a critical section ends, as mbed's on the us ticker's
+ * counter). */
+static void step(void) {
+    double t = spinner_get_time();
+    if (spinner_interrupts_disabled()) k.now_s = t;
+}
+
+/* The interrupt mask, and mbed's critical sections: counted, the outermost enter remembering whether
+ * interrupts were enabled (mbed_critical.c, core_util_critical_section_enter/exit). */
+static unsigned critical_depth;
+static int critical_found_masked;
+
+void tfc_mbed_irq_mask(int disable) {
+    if (disable) spinner_disable_interrupts();
+    else spinner_enable_interrupts();
+}
+
+int tfc_mbed_irq_masked(void) { return spinner_interrupts_disabled() != 0; }
+
+void tfc_mbed_critical_enter(void) {
+    int masked = spinner_interrupts_disabled();
+    spinner_disable_interrupts();
+    if (critical_depth++ == 0) critical_found_masked = masked;
+}
+
+void tfc_mbed_critical_exit(void) {
+    if (critical_depth == 0) return;
+    if (--critical_depth == 0 && !critical_found_masked) spinner_enable_interrupts();
+}
+
+int tfc_mbed_in_critical(void) { return critical_depth > 0; }
 
 /* Let s pass from where main()'s own time has got to: short waits and reads add up to a step, and
  * the part of a step a wait did not need is used up by the next waits and reads - as long as no

@@ -14,7 +14,14 @@
  *   RTD's dummy counter does; OSIF_COUNTER_CUSTOM is the system counter here. */
 #ifndef NXPCUP_SIM_OSIF_H
 #define NXPCUP_SIM_OSIF_H
-#include "Std_Types.h"
+#include "Mcal.h"
+/* The critical sections of RTD drivers and team code: bare-metal, OsIf.h makes them the core's
+ * interrupt mask, SuspendAllInterrupts() = __disable_irq(), ResumeAllInterrupts() = __enable_irq()
+ * (Mcal.h; a flag, not a count, as PRIMASK). */
+#define SuspendAllInterrupts() __disable_irq()
+#define ResumeAllInterrupts() __enable_irq()
+#define OsIf_SuspendAllInterrupts() SuspendAllInterrupts()
+#define OsIf_ResumeAllInterrupts() ResumeAllInterrupts()
 #ifdef __cplusplus
 extern "C" {
 #endif

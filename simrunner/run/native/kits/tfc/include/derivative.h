@@ -9,8 +9,23 @@
 #define NXPCUP_SIM_DERIVATIVE_H
 #include <stdint.h>
 #include "TFC/sim_timers.h"  /* the timers of a timer interrupt of your own */
-#define EnableInterrupts do { } while (0)
-#define DisableInterrupts do { } while (0)
+/* The MCU's interrupt mask (PRIMASK; MKL25Z4.h's EnableInterrupts / DisableInterrupts, the CMSIS
+ * __enable_irq() / __disable_irq(), __get_PRIMASK() / __set_PRIMASK()): while disabled, a timer
+ * interrupt that falls due is held pending and its handler runs once when they are enabled again
+ * (spinner.h, spinner_disable_interrupts). The library's SysTick tickers and camera read-out go on. */
+#ifdef __cplusplus
+extern "C" {
+#endif
+void spinner_disable_interrupts(void);
+void spinner_enable_interrupts(void);
+int spinner_interrupts_disabled(void);
+#ifdef __cplusplus
+}
+#endif
+#define EnableInterrupts spinner_enable_interrupts()
+#define DisableInterrupts spinner_disable_interrupts()
+#define __get_PRIMASK() ((uint32_t)(spinner_interrupts_disabled() != 0))
+#define __set_PRIMASK(primask) (((primask) & 1u) ? spinner_disable_interrupts() : spinner_enable_interrupts())
 /* The CMSIS intrinsics of core_cm0plus.h that firmware calls. __WFI() (wait for an interrupt)
  * lets the board's interrupts run: a pass of TFC_Task() (a physics step, the SysTick tickers, the
  * camera read-out), in which the timer interrupts' handlers due run (docs/firmware.md, Timer
@@ -18,7 +33,7 @@
 void tfc_sim_wfi(void);
 #define __WFI() tfc_sim_wfi()
 #define __WFE() tfc_sim_wfi()
-#define __enable_irq() do { } while (0)
-#define __disable_irq() do { } while (0)
+#define __enable_irq() spinner_enable_interrupts()
+#define __disable_irq() spinner_disable_interrupts()
 #define __NOP() do { } while (0)
 #endif

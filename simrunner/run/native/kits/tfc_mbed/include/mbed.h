@@ -71,8 +71,19 @@ inline uint32_t us_ticker_read() { tfc_mbed_poll(); return (uint32_t)(uint64_t)(
 inline void sleep() { tfc_mbed_idle(); }   /* mbed's sleep(): until the next interrupt */
 inline void deepsleep() { tfc_mbed_idle(); }
 #define __WFI() tfc_mbed_idle()
-#define __enable_irq() do { } while (0)
-#define __disable_irq() do { } while (0)
+/* The interrupt mask (the CMSIS intrinsics on PRIMASK): while disabled, the kit's 1-kHz interrupt (the
+ * camera read-out, Tickers, Timeouts, InterruptIn edges) and --isr handlers are held pending and run
+ * once at the enable (docs/firmware.md, "Critical sections"); mbed's critical sections
+ * (mbed_critical.h) nest on it: the outermost exit enables them again if the enter found them
+ * enabled. */
+#define __enable_irq() spinner_enable_interrupts()
+#define __disable_irq() spinner_disable_interrupts()
+#define __get_PRIMASK() ((uint32_t)tfc_mbed_irq_masked())
+#define __set_PRIMASK(primask) tfc_mbed_irq_mask((int)((primask) & 1u))
+inline void core_util_critical_section_enter() { tfc_mbed_critical_enter(); }
+inline void core_util_critical_section_exit() { tfc_mbed_critical_exit(); }
+inline bool core_util_are_interrupts_enabled() { return !tfc_mbed_irq_masked(); }
+inline bool core_util_in_critical_section() { return tfc_mbed_in_critical() != 0; }
 
 namespace mbed {
 
@@ -126,6 +137,17 @@ template <typename T> Callback<void()> callback(void (T::*method)(), T *obj) { r
 template <typename T> Callback<void()> callback(void (*func)(T *), T *arg) { return Callback<void()>(func, arg); }
 template <typename F, typename = decltype(&F::operator())> Callback<void()> callback(F f) { return Callback<void()>(f); }
 typedef Callback<void()> FunctionPointer;
+
+/* platform/CriticalSectionLock.h: a critical section for the object's lifetime (mbed OS 5.8+) */
+class CriticalSectionLock {
+public:
+    CriticalSectionLock() { core_util_critical_section_enter(); }
+    ~CriticalSectionLock() { core_util_critical_section_exit(); }
+    CriticalSectionLock(const CriticalSectionLock &) = delete;
+    CriticalSectionLock &operator=(const CriticalSectionLock &) = delete;
+    static void enable() { core_util_critical_section_enter(); }
+    static void disable() { core_util_critical_section_exit(); }
+};
 
 /* drivers/Timer.h: simulated time while running; reading it is a read of the board */
 class Timer {

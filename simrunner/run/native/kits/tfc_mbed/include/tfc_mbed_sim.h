@@ -20,6 +20,15 @@ void tfc_mbed_idle(void);         /* sleep(), __WFI(): one physics step */
 int tfc_mbed_in_isr(void);        /* 1 inside a Ticker/Timeout handler or an --isr one */
 int tfc_mbed_started(void);       /* 0 before the kit's first call (globals' constructors) */
 [[noreturn]] void tfc_mbed_not_emulated(const char *what, const char *why);
+/* the interrupt mask (PRIMASK: spinner_disable_interrupts; the kit's clock interrupt is held too)
+ * and mbed's counted critical sections on it (mbed_critical.c) */
+extern "C" void spinner_disable_interrupts(void);  /* spinner.h */
+extern "C" void spinner_enable_interrupts(void);
+void tfc_mbed_irq_mask(int disable);
+int tfc_mbed_irq_masked(void);
+void tfc_mbed_critical_enter(void);
+void tfc_mbed_critical_exit(void);
+int tfc_mbed_in_critical(void);
 
 /* the board's pins as the kit maps them (mbed's KL25Z PinName values) */
 void tfc_mbed_digital_write(int pin, int value);

@@ -1,0 +1,366 @@
+"""Critical sections (issue 50, the kits' ``__disable_irq()`` / ``__enable_irq()``): masked timer
+interrupts are held pending, one bit a handler, and run once at the unmask, at its time, in the
+order set up (simrunner.run.clock, Masking; the Cortex-M's PRIMASK and NVIC pending bits)."""
+from __future__ import annotations
+
+import dataclasses
+import re
+import textwrap
+
+import pytest
+
+from simrunner.run.native import build_program
+from simrunner.run.native.build import with_isrs
+from simrunner.run.runner import drive
+
+MASKED_WARNING = "interrupts disabled at"
+
+
+def ticks_of(main, **kw):
+    r = drive(main, track="floor", time_limit_s=2.0, **kw)
+    assert r.outcome == "controller_returned", r.message
+    return r
+
+
+# -- Python: Spinner.disable_interrupts / enable_interrupts ----------------------------------------
+def test_a_handler_due_while_masked_runs_once_at_the_unmask_and_keeps_its_schedule():
+    """10-ms ticks masked from 0 to 0.036 s (three expiries): one call, at 0.036 s; the next at 0.04."""
+    calls = []
+
+    def main(s):
+        s.every(0.01, lambda: calls.append(round(s.get_time(), 6)))
+        s.disable_interrupts()
+        s.sleep(0.035)  # 18 steps: 0.036 s
+        assert s.interrupts_disabled() and calls == []
+        s.enable_interrupts()
+        assert calls == [0.036]  # ran inside the unmask, at its time
+        s.sleep(0.01)
+
+    ticks_of(main)
+    assert calls == [0.036, 0.04]
+
+
+def test_masking_is_a_bit_and_pending_handlers_run_in_the_order_set_up():
+    """Two disables, one enable: unmasked. Pending b (set up first) runs before a; a handler
+    stopped while pending does not run."""
+    calls = []
+
+    def main(s):
+        def stopped():
+            calls.append("stopped")
+
+        s.every(0.02, lambda: calls.append("b"))
+        s.every(0.01, lambda: calls.append("a"))
+        s.every(0.01, stopped)
+        s.disable_interrupts()
+        s.disable_interrupts()
+        s.sleep(0.05)
+        s.stop_every(stopped)
+        s.enable_interrupts()
+        assert not s.interrupts_disabled() and calls == ["b", "a"]
+        s.sleep(0.01)  # unmasked: a runs at 0.06, b at 0.06 too (first b, set up first)
+
+    ticks_of(main)
+    assert calls == ["b", "a", "b", "a"]
+
+
+def test_a_mask_set_in_a_handler_holds_later_ones_and_an_unmask_in_a_handler_runs_them_after_it():
+    """PRIMASK is not restored by a handler's return: a masks on its first call, so b (due at the
+    same step, set up later) is held until main unmasks. An unmask inside a handler lets the held
+    ones run after that handler returns (handlers do not nest)."""
+    calls = []
+
+    def main(s):
+        def a():
+            calls.append(("a", round(s.get_time(), 6)))
+            if len(calls) == 1:
+                s.disable_interrupts()
+
+        s.every(0.01, a)
+        s.every(0.01, lambda: calls.append(("b", round(s.get_time(), 6))))
+        s.sleep(0.03)  # a at 0.01 masks: b held; a and b held at 0.02 and 0.03
+        assert calls == [("a", 0.01)] and s.interrupts_disabled()
+        s.enable_interrupts()
+        assert calls == [("a", 0.01), ("a", 0.03), ("b", 0.03)]
+        s.stop_every(a)
+        calls.clear()
+
+        def d():
+            calls.append("d start")
+            s.disable_interrupts()
+            s.enable_interrupts()  # e, held, runs after d returns, not inside it
+            calls.append("d end")
+
+        s.every(0.01, d)
+        s.every(0.01, lambda: calls.append("e"))
+        s.disable_interrupts()
+        s.sleep(0.01)  # b, d, e held
+        s.enable_interrupts()
+        assert calls == [("b", 0.04), "d start", "d end", "e"]
+
+    ticks_of(main)
+
+
+def test_interrupts_left_disabled_warn_the_run_once():
+    calls = []
+
+    def main(s):
+        s.every(0.01, lambda: calls.append(1))
+        s.disable_interrupts()
+        s.sleep(0.5)
+
+    r = ticks_of(main)
+    assert calls == []
+    masked = [w for w in r.warnings if MASKED_WARNING in w]
+    assert len(masked) == 1 and "__enable_irq" in masked[0], masked
+    line = main.__code__.co_firstlineno + 2  # s.disable_interrupts()
+    assert masked[0].startswith(f"{__file__}:{line}: interrupts disabled at 0.000 s"), masked
+
+    def short(s):  # critical sections of a camera frame each: no warning
+        s.every(0.01, lambda: calls.append(1))
+        for _ in range(20):
+            s.disable_interrupts()
+            s.get_image(s.line_row)
+            s.enable_interrupts()
+
+    assert not [w for w in ticks_of(short).warnings if MASKED_WARNING in w]
+
+
+def test_with_mcu_time_no_handler_runs_inside_a_masked_section():
+    """--mcu-time fixed: each call lets 3 ms pass, handlers fall due inside the section (between
+    its non-waiting calls) and run at the unmask, never inside; time still passes there."""
+    log = []
+
+    def main(s):
+        inside = [False]
+        s.every(0.002, lambda: log.append(inside[0]))
+        for _ in range(10):
+            s.disable_interrupts()
+            inside[0] = True
+            for _ in range(4):
+                s.set_servo(0.1)  # no wait: only --mcu-time lets time pass here
+            inside[0] = False
+            s.enable_interrupts()
+
+    r = ticks_of(main, mcu_time=0.003)
+    assert r.sim_time_s > 0.1 and len(log) >= 10 and not any(log)
+
+
+# -- C: spinner.h, in process and --isolate alike -------------------------------------------------
+C_MASKED = """\
+#include <stdio.h>
+#include "spinner.h"
+static int in_cs, bad, ticks;
+static void tick(void) {
+    ticks++;
+    if (in_cs) bad++;
+    spinner_add_textf("tick %d at %.3f masked %d", ticks, spinner_get_time(), spinner_interrupts_disabled());
+}
+int main(void) {
+    spinner_every(0.01, tick);
+    for (int i = 0; i < 20; i++) {
+        spinner_disable_interrupts();
+        spinner_disable_interrupts();
+        in_cs = 1;
+        spinner_sleep(0.025);
+        spinner_set_speed(0.3);
+        (void)spinner_get_speed();
+        in_cs = 0;
+        spinner_enable_interrupts();
+        spinner_disable_interrupts();   /* a section without a wait: no round trip, nothing held */
+        spinner_enable_interrupts();
+        spinner_sleep(0.004);
+    }
+    return bad ? 3 : 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def c_masked(tmp_path_factory):
+    src = tmp_path_factory.mktemp("masked") / "masked.c"
+    src.write_text(C_MASKED)
+    return build_program([src])
+
+
+@pytest.mark.parametrize("mcu_time", [None, 0.003])
+def test_c_masked_handlers_run_once_at_the_unmask_alike_in_process_and_isolated(c_masked, tmp_path, mcu_time):
+    """Masked for 0.028 s a pass: the 10-ms tick (two expiries) runs once at the unmask, never in
+    the section (also with --mcu-time fixed, where the calls inside let time pass); the run logs
+    of the simulator's process and a child process are the same bytes."""
+    logs = []
+    for isolate in (False, True):
+        csv = tmp_path / f"run{isolate}.csv"
+        extra = {} if mcu_time is None else {"mcu_time": mcu_time}
+        r = drive(dataclasses.replace(c_masked, isolate=isolate), track="floor", time_limit_s=3.0, csv=csv,
+                  **extra)
+        assert r.outcome == "controller_returned", r.message  # (status 3: a tick inside a section)
+        logs.append(csv.read_bytes())
+    assert logs[0] == logs[1]
+    ticks = re.findall(rb"tick (\d+) at ([0-9.]+) masked (\d)", logs[0])
+    assert ticks and all(masked == b"0" for _, _, masked in ticks)
+    if mcu_time is None:  # unmasked at 0.028 (held at 0.01, 0.02: one call), then 0.03 unmasked
+        assert [t for _, t, _ in ticks[:4]] == [b"0.028", b"0.030", b"0.060", b"0.092"]
+
+
+C_MASK_IN_HANDLER = """\
+#include "spinner.h"
+static int a_calls, b_calls, b_while_masked;
+static void a(void) {
+    if (++a_calls == 1) spinner_disable_interrupts();   /* left masked on return */
+}
+static void b(void) {
+    b_calls++;
+    spinner_add_textf("b at %.3f", spinner_get_time());
+}
+int main(void) {
+    spinner_every(0.01, a);
+    spinner_every(0.01, b);
+    spinner_sleep(0.03);               /* a at 0.01 masks: b held at 0.01, 0.02, 0.03 */
+    if (!spinner_interrupts_disabled() || b_calls) return 3;
+    spinner_enable_interrupts();       /* a, then b, now: once each */
+    if (a_calls != 2 || b_calls != 1) return 4;
+    spinner_disable_interrupts();
+    spinner_enable_interrupts();       /* nothing between: nothing held */
+    spinner_sleep(0.01);
+    return a_calls == 3 && b_calls == 2 ? 0 : 5;
+}
+"""
+
+
+def test_c_a_mask_set_in_a_handler_holds_the_later_ones_until_main_unmasks(tmp_path):
+    src = tmp_path / "mask_in_handler.c"
+    src.write_text(C_MASK_IN_HANDLER)
+    program = build_program([src])
+    logs = []
+    for isolate in (False, True):
+        csv = tmp_path / f"run{isolate}.csv"
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0, csv=csv)
+        assert r.outcome == "controller_returned", r.message
+        logs.append(csv.read_bytes())
+    assert logs[0] == logs[1] and re.findall(rb"b at ([0-9.]+)", logs[0]) == [b"0.030", b"0.040"]
+
+
+# -- the kits ---------------------------------------------------------------------------------------
+def test_the_tfc_kits_disable_interrupts_holds_a_timer_handler_across_library_calls(tmp_path):
+    """--kit tfc: DisableInterrupts / __disable_irq around TFC_Task() passes (each a physics step):
+    the --isr handler runs at EnableInterrupts, never between; __get_PRIMASK reads the bit."""
+    src = tmp_path / "tfc_cs.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC/TFC.h"
+        volatile int in_cs, bad, ticks, primask_bad;
+        void Control_Handler(void) { ticks++; if (in_cs) bad++; }
+        int main(void) {
+            TFC_Init();
+            for (int i = 0; i < 30; i++) {
+                DisableInterrupts;
+                __disable_irq();
+                in_cs = 1;
+                if (__get_PRIMASK() != 1) primask_bad++;
+                for (int k = 0; k < 8; k++) TFC_Task();
+                in_cs = 0;
+                EnableInterrupts;
+                if (__get_PRIMASK() != 0) primask_bad++;
+                TFC_Task();
+            }
+            return bad || primask_bad ? 3 : ticks;
+        }
+        """))
+    program = with_isrs(build_program([str(src)], kit="tfc"), [("Control_Handler", 0.001)])
+    r = drive(program, track="floor", time_limit_s=2.0)
+    # 1 kHz at the 2-ms step: two calls in TFC_Init's step; then each pass one at the unmask (16
+    # expiries held) and two in its unmasked step: 2 + 30 x 3 (masks ignored: 542, and bad)
+    assert r.outcome == "controller_error" and "status 92" in r.message, r.message
+
+
+def test_interrupts_a_firmware_leaves_disabled_are_named_at_its_line(tmp_path):
+    """The warning names the firmware's line (through the kit's DisableInterrupts macro), the
+    same in the simulator's process and a child process."""
+    src = tmp_path / "forgot.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC/TFC.h"
+        void Tick(void) {}
+        int main(void) {
+            DisableInterrupts;
+            for (int i = 0; i < 100; i++) TFC_Task();
+            return 0;
+        }
+        """))
+    program = with_isrs(build_program([str(src)], kit="tfc"), [("Tick", 0.01)])
+    warnings = []
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0)
+        warnings.append([w for w in r.warnings if MASKED_WARNING in w])
+    assert warnings[0] == warnings[1] and len(warnings[0]) == 1, warnings
+    assert re.match(r".*forgot\.c:5: interrupts disabled at 0\.000 s", warnings[0][0]), warnings
+
+
+def test_mbed_critical_sections_nest_and_hold_tickers_while_waits_go_on(tmp_path):
+    """--kit tfc-mbed: core_util_critical_section_enter/exit count (the inner exit keeps them
+    disabled), CriticalSectionLock too; a wait_ms inside one ends (mbed waits on the us ticker's
+    counter); the kit's clock interrupt is held, and at the exit mbed's ticker queue runs the
+    Ticker as often as it fell due (2 ms in a 20-ms wait: 10), none inside."""
+    src = tmp_path / "cs.cpp"
+    src.write_text(textwrap.dedent("""\
+        #include "mbed.h"
+        Ticker ticker;
+        Timer timer;
+        volatile int in_cs, bad, ticks;
+        void tick() { ticks++; if (in_cs) bad++; }
+        int main() {
+            ticker.attach(&tick, 0.002f);
+            timer.start();
+            core_util_critical_section_enter();
+            core_util_critical_section_enter();
+            in_cs = 1;
+            wait_ms(20);
+            int waited = timer.read_ms();
+            core_util_critical_section_exit();
+            if (core_util_are_interrupts_enabled() || ticks) return 4;
+            in_cs = 0;
+            core_util_critical_section_exit();
+            if (!core_util_are_interrupts_enabled() || ticks < 9) return 5;  /* mbed's queue catches up */
+            {
+                CriticalSectionLock lock;
+                in_cs = 1;
+                wait_ms(10);
+                in_cs = 0;
+            }
+            __disable_irq();
+            __disable_irq();
+            __enable_irq();
+            wait_ms(10);
+            if (bad || waited < 19) return 6;  /* (20 ms less rounding) */
+            return ticks < 8 ? 7 : 0;
+        }
+        """))
+    r = drive(build_program([str(src)], kit="tfc-mbed"), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+
+
+def test_the_s32k144_kits_osif_suspend_holds_a_gpt_notification(tmp_path):
+    """--kit s32k144: OsIf_SuspendAllInterrupts / OsIf_ResumeAllInterrupts (RTD bare-metal:
+    __disable_irq / __enable_irq) around OsIf_TimeDelay hold the Gpt notification."""
+    src = tmp_path / "osif_cs.c"
+    src.write_text(textwrap.dedent("""\
+        #include "Gpt.h"
+        #include "OsIf.h"
+        volatile int in_cs, bad, ticks;
+        void Gpt_Notification(void) { ticks++; if (in_cs) bad++; }
+        int main(void) {
+            Gpt_StartTimer(0U, 40000U);     /* 5 ms at the kit's 8 MHz */
+            Gpt_EnableNotification(0U);
+            for (int i = 0; i < 10; i++) {
+                OsIf_SuspendAllInterrupts();
+                in_cs = 1;
+                OsIf_TimeDelay(12U);
+                in_cs = 0;
+                OsIf_ResumeAllInterrupts();
+            }
+            return bad ? 3 : ticks;
+        }
+        """))
+    r = drive(build_program([str(src)], kit="s32k144"), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_error" and "status 10" in r.message, r.message  # one a section
