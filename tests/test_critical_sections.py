@@ -274,6 +274,47 @@ def test_the_tfc_kits_disable_interrupts_holds_a_timer_handler_across_library_ca
     assert r.outcome == "controller_error" and "status 92" in r.message, r.message
 
 
+def test_the_tfc_kits_systick_and_camera_stop_while_interrupts_are_disabled(tmp_path, capfd):
+    """--kit tfc: the SysTick tickers and the camera read-out are interrupts on the board: masked,
+    the tickers stand still and no image comes; at the unmask the one pending SysTick counts (20 ms
+    masked: +1, not +20). A TFC_Delay_mS or a polling loop with interrupts disabled never ends on
+    the board: an error at its line, a warning."""
+    src = tmp_path / "systick.c"
+    src.write_text(textwrap.dedent("""\
+        #include <stdio.h>
+        #include "derivative.h"
+        #include "spinner.h"
+        #include "TFC/TFC.h"
+        int main(void) {
+            TFC_Init();
+            TFC_Delay_mS(200);  /* images come */
+            LineScanImageReady = 0;
+            uint32_t t0 = TFC_Ticker[0];
+            __disable_irq();
+            for (int i = 0; i < 50; i++) TFC_Task();  /* 100 ms */
+            uint32_t masked = TFC_Ticker[0] - t0;
+            int image = LineScanImageReady;
+            __enable_irq();
+            TFC_Task();
+            printf("masked %u image %d after %u\\n", masked, image, TFC_Ticker[0] - t0);
+            if (spinner_param("delay", 0)) { __disable_irq(); TFC_Delay_mS(5); }
+            if (spinner_param("poll", 0)) { __disable_irq(); while (TFC_Ticker[0] < t0 + 1000) {} }
+            return 0;
+        }
+        """))
+    program = build_program([str(src)], kit="tfc")
+    r = drive(program, track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    # masked: no tick, no image; after: the pending tick and the unmasked step's two
+    assert "masked 0 image 0 after 3" in capfd.readouterr().out
+    r = drive(program, track="floor", time_limit_s=2.0, params={"delay": 1})
+    assert r.outcome == "controller_error" and re.search(
+        r"systick\.c:17: TFC_Delay_mS\(5\) with interrupts disabled: .* never returns", r.message), r.message
+    r = drive(program, track="floor", time_limit_s=0.6, params={"poll": 1})
+    assert r.outcome == "timeout" and any("polls the board" in w and "interrupts disabled" in w
+                                             for w in r.warnings), (r.outcome, r.warnings)
+
+
 def test_interrupts_a_firmware_leaves_disabled_are_named_at_its_line(tmp_path):
     """The warning names the firmware's line (through the kit's DisableInterrupts macro), the
     same in the simulator's process and a child process."""

@@ -51,6 +51,7 @@ static struct {
     int leds[4];
     double servo_rad, servo_offset_rad;
     unsigned polls;         /* reads of the board since simulated time last passed */
+    uint32_t tick_pending;  /* a SysTick fell due while interrupts were disabled */
 } tfc;
 
 /* A loop that polls the board without calling the library (`while (!LineScanImageReady);`,
@@ -70,13 +71,22 @@ static void send_commands(void) {
     spinner_set_motors(tfc.hbridge ? tfc.duty_a : 0.0f, tfc.hbridge ? tfc.duty_b : 0.0f);
 }
 
-static void count_ticks(double now_s) {
-    double now_ms = now_s * 1000.0;
-    double whole = floor(now_ms - tfc.ms_counted + 1e-6);
-    if (whole >= 1.0) {
-        for (int i = 0; i < TFC_SIM_TICKERS; i++) tickers[i] += (uint32_t)whole;
-        tfc.ms_counted += whole;
+/* The SysTick interrupt's tickers at `now_s` (one count a millisecond). While interrupts are
+ * disabled (__disable_irq, DisableInterrupts) SysTick cannot run: its ticks are lost but one, which
+ * is pending and counts at the first look after they are enabled again (ARMv6-M: pending is a state,
+ * not a count; docs/firmware.md, Critical sections). */
+static void count_ticks(double now_s) {  /* (the library: SysTick_Handler counts TFC_Ticker[] and DelayTimerTick) */
+    double whole = floor(now_s * 1000.0 - tfc.ms_counted + 1e-6);  /* SysTicks fallen due since */
+    if (whole < 1.0) whole = 0.0;
+    tfc.ms_counted += whole;
+    if (spinner_interrupts_disabled()) {
+        if (whole > 0.0) tfc.tick_pending = 1;
+        return;
     }
+    uint32_t add = (uint32_t)whole + tfc.tick_pending;
+    tfc.tick_pending = 0;
+    if (add)
+        for (int i = 0; i < TFC_SIM_TICKERS; i++) tickers[i] += add;
 }
 
 /* The PIT interrupt's camera read-out (at `now`): the camera's latest frame once a new one is there
@@ -85,7 +95,7 @@ static void count_ticks(double now_s) {
  * was not there at the pass before (`looked_s`), so the next one is not due before one exposure
  * after that: the passes until then do not ask. */
 static void camera_service(double now) {
-    if (now < tfc.next_look_s) return;
+    if (now < tfc.next_look_s || spinner_interrupts_disabled()) return;  /* (masked: no read-out) */
     uint8_t row[TFC_LINESCAN_IMAGE_SIZE];
     size_t n = 0;
     long long frame = spinner_latest_image(spinner_line_row(), 1, tfc.frame, row, sizeof row, &n);
@@ -115,6 +125,10 @@ static void poll(void) {
         return;
     }
     if (++tfc.polls <= POLLS_BEFORE_TIME) return;
+    if (spinner_interrupts_disabled())
+        spinner_warn("the program polls the board (TFC_Ticker, LineScanImageReady, a button, ...) with "
+                     "interrupts disabled: the SysTick and camera interrupts that change them cannot run, "
+                     "so on the board such a loop never ends; enable them first (__enable_irq())");
     double now = spinner_get_time();  /* one physics step, as TFC_Task() */
     count_ticks(now);
     camera_service(now);
@@ -169,6 +183,13 @@ void TFC_Delay_mS(unsigned int TicksIn_mS) {
         char text[200];
         snprintf(text, sizeof text, "TFC_Delay_mS(%u) inside an interrupt handler: no simulated time "
                  "passes there, so the delay would never end; wait in the main loop", TicksIn_mS);
+        spinner_fail(text);
+    }
+    if (spinner_interrupts_disabled() && TicksIn_mS > 0) {  /* the library waits for SysTick_Handler to count DelayTimerTick up to it */
+        char text[240];
+        snprintf(text, sizeof text, "TFC_Delay_mS(%u) with interrupts disabled: the library's delay counts "
+                 "SysTick interrupts, which cannot run then, so on the board it never returns; enable "
+                 "them first (__enable_irq())", TicksIn_mS);
         spinner_fail(text);
     }
     tfc.polls = 0;
