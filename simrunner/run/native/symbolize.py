@@ -10,6 +10,7 @@ lines (a header's function as the source file at the header's line).
 """
 from __future__ import annotations
 
+import bisect
 import os
 import shutil
 import signal
@@ -81,8 +82,48 @@ def _display_path(path: str) -> str:
     return rel if not rel.startswith("..") else path
 
 
+def _line_files(module: str) -> list[tuple[int, int, str]] | None:
+    """The line table's ``(start, end, file name)`` ranges of ``module`` as readelf decodes them
+    (``readelf -W --debug-dump=decodedline``: binutils' own DWARF reader, not bfd's), sorted; None
+    where readelf is missing or fails. binutils 2.40's addr2line reads a DWARF 5 line table's
+    file 1 as the compilation unit's source (GCC 12 writes DWARF 5 by default): a function of a
+    header was named as the .c file at the header's line, in a library built elsewhere (ours are
+    built with -gdwarf-4); readelf names the header."""
+    tool = shutil.which("readelf")
+    if tool is None:
+        return None
+    try:
+        proc = subprocess.run([tool, "-W", "--debug-dump=decodedline", module], capture_output=True,
+                              text=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    if proc.returncode != 0:
+        return None
+    ranges, last = [], None  # last: (address, name) of the row before, in this sequence
+    for line in proc.stdout.splitlines():
+        parts = line.split()
+        if len(parts) < 3 or not parts[2].startswith("0x"):
+            continue
+        try:
+            address = int(parts[2], 16)
+        except ValueError:
+            continue
+        if last is not None and address > last[0]:
+            ranges.append((last[0], address, last[1]))
+        last = None if parts[1] == "-" else (address, parts[0])  # "-": the sequence's end
+    ranges.sort()
+    return ranges
+
+
+def _line_file(ranges: list[tuple[int, int, str]], offset: int) -> str | None:
+    """The file name the line table gives ``offset``."""
+    i = bisect.bisect_right(ranges, (offset, float("inf"), "")) - 1
+    return ranges[i][2] if i >= 0 and ranges[i][0] <= offset < ranges[i][1] else None
+
+
 def _addr2line(module: str, offsets: list[int]) -> dict[int, list[tuple[str, str | None, int | None]]]:
-    """offset -> [(function, file, line)] innermost first (inlined calls expanded)."""
+    """offset -> [(function, file, line)] innermost first (inlined calls expanded); the innermost
+    file as the line table names it (:func:`_line_files`) where addr2line names another."""
     tool = shutil.which("addr2line")
     if tool is None or not offsets:
         return {}
@@ -111,6 +152,17 @@ def _addr2line(module: str, offsets: list[int]) -> dict[int, list[tuple[str, str
             i += 2
             continue
         i += 1
+    ranges = None
+    for offset, frames in out.items():
+        if not frames or frames[0][1] is None:
+            continue
+        if ranges is None:
+            ranges = _line_files(module) or []
+        name = _line_file(ranges, offset)
+        func, path, num = frames[0]
+        if name and os.path.basename(name) != os.path.basename(path):
+            beside = os.path.join(os.path.dirname(path), name)  # (a header beside its .c file)
+            frames[0] = (func, _display_path(beside) if os.path.exists(beside) else name, num)
     return out
 
 
