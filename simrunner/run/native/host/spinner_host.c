@@ -282,8 +282,12 @@ static void queue_raw(uint32_t op, const void *a, size_t na, const void *b, size
 
 #endif
 
+static int isr_depth;   /* handlers running (spinner_in_interrupt) */
+static int now_known;   /* spinner_now's answer holds (no time passed since it was asked) */
+
 static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
     if (foreign_thread()) return;
+    if (mcu_on && isr_depth == 0) now_known = 0;  /* --mcu-time: the call lets the code's time pass */
     if (mcu_report) {
         double now = thread_cpu_s(), spent = now - mcu_mark_s;
         mcu_mark_s = now;
@@ -331,7 +335,6 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
 static void (*isr_fn[MAX_ISRS])(void);
 static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read by the simulator */
 static int isr_count;   /* slots in use */
-static int isr_depth;   /* handlers running (spinner_in_interrupt) */
 /* Masked interrupts (spinner_disable_interrupts: PRIMASK, a bit): the simulator holds the handlers
  * falling due pending and runs them at the unmask. No time passes before the program's next waiting
  * call, so the mask is sent with it (OP_IRQ_MASK; irq_mask_unsent until then; also at the end of a
@@ -372,7 +375,6 @@ static void send_mask(void) {
 }
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
-static int now_known;   /* spinner_now's answer holds (no waiting call since) */
 
 static void run_isr(uint32_t slot) {
     now_known = 0;  /* the handler's time */
