@@ -45,3 +45,63 @@ def test_with_mcu_time_spinner_now_includes_the_time_of_the_calls_before_it(now_
     assert r.outcome == "controller_returned", r.message
     got = re.search(rb"now (\d+) (\d+) (\d+) (\d+)", csv.read_bytes())
     assert got and [int(v) for v in got.groups()] == [2000, 2000, 0, 4000], got  # (get_time: its charge, its step)
+
+
+PIT_READS = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+static volatile unsigned n;
+void PIT_IRQHandler(void) {
+    PIT_TFLG0 = PIT_TFLG_TIF_MASK;
+    spinner_add_textf("isr %u cval %u", ++n, (unsigned)PIT_CVAL0);
+}
+int main(void) {
+    TFC_Init();
+    PIT_MCR = 0;
+    PIT_LDVAL0 = 240000 - 1;          /* 100 Hz of the 24 MHz bus clock: 5 physics steps of 2 ms */
+    PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+    NVIC_EnableIRQ(PIT_IRQn);
+    for (int i = 0; i < 50; i++) {
+        spinner_sleep(0.002);
+        if (i % 10 == 3) spinner_add_textf("main cval %u", (unsigned)PIT_CVAL0);
+    }
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def pit_reads(tmp_path_factory):
+    src = tmp_path_factory.mktemp("pit") / "pit.c"
+    src.write_text(PIT_READS)
+    return build_program([src], kit="tfc")
+
+
+def test_a_running_timer_costs_no_time_request_per_wait_nor_per_handler(pit_reads, tmp_path, monkeypatch):
+    """A 100-Hz PIT read in its handler and now and then in main(): the handler's reads take the
+    time its interrupt came with, the kit's look before each wait reads none for a counter running
+    unchanged - one OP_NOW per read of main() (5) and the look that starts it, none per wait (50) or handler (10). The counts are
+    the PIT's: at each expiry CVAL is LDVAL; four sleeps into a period 8 ms of its 10 are gone.
+    In-process and isolated runs log the same bytes."""
+    ops = collections.Counter()
+    handle = bridge._Session._handle
+
+    def counting(self, op, payload):
+        ops[op] += 1
+        return handle(self, op, payload)
+
+    monkeypatch.setattr(bridge._Session, "_handle", counting)
+    logs = []
+    for isolate in (False, True):
+        ops.clear()
+        csv = tmp_path / f"log{isolate}.csv"
+        r = drive(dataclasses.replace(pit_reads, isolate=isolate), track="floor", time_limit_s=1.0, csv=csv)
+        assert r.outcome == "controller_returned", r.message
+        assert ops[bridge.OP_NOW] == 6, ops[bridge.OP_NOW]  # (and the look that starts it)
+        logs.append(csv.read_bytes())
+    assert logs[0] == logs[1]
+    isr = [int(v) for v in re.findall(rb"isr \d+ cval (\d+)", logs[0])]
+    main = {int(v) for v in re.findall(rb"main cval (\d+)", logs[0])}
+    assert len(isr) == 10 and set(isr) == {239999}
+    assert main == {239999 - 24 * 8000}, main  # (four 2-ms sleeps into a period)

@@ -283,7 +283,8 @@ static void queue_raw(uint32_t op, const void *a, size_t na, const void *b, size
 #endif
 
 static int isr_depth;   /* handlers running (spinner_in_interrupt) */
-static int now_known;   /* spinner_now's answer holds (no time passed since it was asked) */
+static int now_known;   /* spinner_now's answer, now_time_s, holds (no time passed since it was asked) */
+static double now_time_s;
 
 static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
     if (foreign_thread()) return;
@@ -323,7 +324,7 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
 #endif
 
 /* Timer interrupts (spinner_every, --isr NAME@HZ): the handlers by slot. The simulator runs one
- * by answering a waiting call with ST_ISR {int32 slot}: the call runs the handler (its requests
+ * by answering a waiting call with ST_ISR {int32 slot, double time}: the call runs the handler (its requests
  * go out as usual; no simulated time passes in it), sends OP_ISR_DONE and waits on for its own
  * reply - the handler runs on the program's stack inside the waiting call, as an interrupt.
  * spinner_stop_every frees a handler's slots (OP_EVERY_STOP {int32 slot}); a freed slot is used
@@ -376,8 +377,8 @@ static void send_mask(void) {
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
 
-static void run_isr(uint32_t slot) {
-    now_known = 0;  /* the handler's time */
+static void run_isr(uint32_t slot, double time_s) {
+    now_time_s = time_s, now_known = 1;  /* the handler's time (spinner_now: no round trip) */
     if (slot >= MAX_ISRS || isr_fn[slot] == NULL)
         fault_report(0, "the simulator asked for an unknown interrupt handler", NULL);
     if (mcu_report) mcu_mark_s = thread_cpu_s();  /* the handler's own time */
@@ -434,12 +435,16 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     flush_out();
     uint32_t hdr[2];
     size_t have = read_reply_head(hdr, reply, size);  /* have <= size */
-    while (hdr[0] == ST_ISR) {  /* an interrupt first (its slot: 4 bytes, maybe read already) */
-        uint32_t slot = 0;
-        size_t c = have < sizeof slot ? have : sizeof slot;
-        if (c) memcpy(&slot, reply, c);
-        if (c < sizeof slot) read_all((unsigned char *)&slot + c, sizeof slot - c);
-        run_isr(slot);
+    while (hdr[0] == ST_ISR) {  /* an interrupt first (its slot and time: 12 bytes, maybe read already) */
+        unsigned char isr[12];
+        size_t c = have < sizeof isr ? have : sizeof isr;
+        if (c) memcpy(isr, reply, c);
+        if (c < sizeof isr) read_all(isr + c, sizeof isr - c);
+        uint32_t slot;
+        double time_s;
+        memcpy(&slot, isr, sizeof slot);
+        memcpy(&time_s, isr + sizeof slot, sizeof time_s);
+        run_isr(slot, time_s);
         have = read_reply_head(hdr, reply, size);
     }
     release_stopped();
@@ -695,14 +700,13 @@ double spinner_get_time(void) {
 }
 
 double spinner_now(void) {
-    static double now_s;
     INIT();
     if (finished) return last_time_s;
     if (!now_known) {
-        call(OP_NOW, NULL, 0, NULL, 0, &now_s, sizeof now_s);
+        call(OP_NOW, NULL, 0, NULL, 0, &now_time_s, sizeof now_time_s);
         now_known = 1;
     }
-    return now_s;
+    return now_time_s;
 }
 
 void spinner_set_exposure(double seconds) {
