@@ -105,3 +105,54 @@ def test_a_running_timer_costs_no_time_request_per_wait_nor_per_handler(pit_read
     main = {int(v) for v in re.findall(rb"main cval (\d+)", logs[0])}
     assert len(isr) == 10 and set(isr) == {239999}
     assert main == {239999 - 24 * 8000}, main  # (four 2-ms sleeps into a period)
+
+
+NOW_IN_SECTION = """\
+#include "spinner.h"
+static int ticks;
+static void tick(void) { ticks++; }
+int main(void) {
+    spinner_every(0.01, tick);
+    for (int i = 0; i < 50; i++) {
+        spinner_sleep(0.002);
+        spinner_disable_interrupts();
+        double t = spinner_now();     /* a counter read inside a critical section */
+        spinner_enable_interrupts();
+        if (i % 10 == 9) spinner_add_textf("at %.3f ticks %d", t, ticks);
+    }
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def now_in_section(tmp_path_factory):
+    src = tmp_path_factory.mktemp("section") / "section.c"
+    src.write_text(NOW_IN_SECTION)
+    return build_program([src])
+
+
+def test_a_time_read_in_a_critical_section_sends_no_mask(now_in_section, tmp_path, monkeypatch):
+    """spinner_now lets no time pass, so no handler can fall due in it: a section around it holds
+    nothing and sends nothing (it sent the mask with the read and made the unmask a round trip:
+    two messages a pass). The ticks come as without the section, in both modes alike."""
+    ops = collections.Counter()
+    handle = bridge._Session._handle
+
+    def counting(self, op, payload):
+        ops[op] += 1
+        return handle(self, op, payload)
+
+    monkeypatch.setattr(bridge._Session, "_handle", counting)
+    logs = []
+    for isolate in (False, True):
+        ops.clear()
+        csv = tmp_path / f"log{isolate}.csv"
+        r = drive(dataclasses.replace(now_in_section, isolate=isolate), track="floor", time_limit_s=1.0, csv=csv)
+        assert r.outcome == "controller_returned", r.message
+        assert ops[bridge.OP_IRQ_MASK] + ops[bridge.OP_IRQ_MASK_WAIT] == 0, ops
+        assert ops[bridge.OP_NOW] == 50
+        logs.append(csv.read_bytes())
+    assert logs[0] == logs[1]
+    assert re.findall(rb"at ([0-9.]+) ticks (\d+)", logs[0]) == [
+        (b"%.3f" % (0.02 * k), b"%d" % (2 * k)) for k in range(1, 6)]

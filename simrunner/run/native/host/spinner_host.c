@@ -429,8 +429,11 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         kit_before_wait();
         in_kit_hook = 0;
     }
-    if (irq_mask_unsent) send_mask();
-    if (irq_masked) irq_held = 1;  /* time passes while masked: handlers may be held pending */
+    /* time passes while masked: handlers may be held pending - but not in OP_NOW, unless --mcu-time
+     * charges the calls queued before it (main() only: then the mask went at once) */
+    int passes = op != OP_NOW || (mcu_on && isr_depth == 0);
+    if (passes && irq_mask_unsent) send_mask();
+    if (passes && irq_masked) irq_held = 1;
     queue(op, a, na, b, nb);
     flush_out();
     uint32_t hdr[2];
@@ -449,7 +452,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     }
     release_stopped();
     now_known = 0;  /* time may have passed */
-    if (irq_masked) irq_held = 1;  /* (masked by a handler that ran in it) */
+    if (passes && irq_masked) irq_held = 1;  /* (masked by a handler that ran in it) */
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
         ended();
