@@ -13,6 +13,7 @@ from click.testing import CliRunner
 from simrunner.cli import main as cli
 from simrunner.errors import ControllerFileError
 from simrunner.run.native import build_program
+from simrunner.run.native import controller as controller_module
 from simrunner.run.native.controller import NativeController
 
 MAIN = """\
@@ -84,6 +85,24 @@ def test_a_controller_that_cannot_be_loaded_leaves_nothing_for_its_finaliser(pro
     seen = []
     monkeypatch.setattr(sys, "unraisablehook", seen.append)
     with pytest.raises(ControllerFileError):
+        NativeController(program)
+    gc.collect()
+    assert seen == []
+
+
+def test_a_host_that_cannot_be_built_leaves_nothing_for_the_finaliser(project, monkeypatch):
+    """The in-process host failing to build (a compiler missing) is the one error: the controller's
+    __del__ once raised AttributeError on its unset list of spent libraries."""
+    monkeypatch.chdir(project)
+    program = build_program(["Sources/main.c"], include_dirs=["Project_Headers"], kit="tfc")
+
+    def fails():
+        raise ControllerFileError("compiling the simrunner host program failed: (no compiler)")
+
+    monkeypatch.setattr(controller_module, "host_library", fails)
+    seen = []
+    monkeypatch.setattr(sys, "unraisablehook", seen.append)
+    with pytest.raises(ControllerFileError, match="host program failed"):
         NativeController(program)
     gc.collect()
     assert seen == []

@@ -266,15 +266,16 @@ class _Session:
 
     def _interrupt(self, slot: int) -> None:
         """Run the program's interrupt handler ``slot`` now (the clock is inside a waiting call
-        of the program): answer that call with ST_ISR, then the handler's requests until it
-        is done (OP_ISR_DONE); the waiting call then waits on for its own reply. Due in a queued
+        of the program): answer that call with ST_ISR (the slot, and the time: the handler's
+        spinner_now without a round trip), then the handler's requests until it is done
+        (OP_ISR_DONE); the waiting call then waits on for its own reply. Due in a queued
         request (--mcu-time charges those too), it runs inside the waiting call that came with
         it: the requests up to that call are read first and kept for after the handler."""
         if not self._in_call:
             self._read_to_call()
         outer = self._buf, self._pos, self._in_call
         self._buf, self._pos = b"", 0
-        self._reply(_HDR.pack(ST_ISR, 4) + struct.pack("<i", slot))
+        self._reply(_HDR.pack(ST_ISR, 12) + struct.pack("<id", slot, self.spinner._clock.time_s))
         self._serve(until_isr_done=True)
         self._buf, self._pos, self._in_call = outer
 

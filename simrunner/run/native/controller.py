@@ -26,9 +26,9 @@ class NativeController:
         self.isrs = tuple(isrs) or program.isrs  # --isr: (function name, period s), timer interrupts
         self.inproc = bool(program.sources) and not program.isolate and sys.platform.startswith("linux")
         self.host = self.getcpu = None
+        self._spent: list = []  # libraries of finished runs, unloaded before the next one
         if self.inproc:
             self.host_path, self.api = host_library()  # built (once, cached) before the run
-            self._spent: list = []  # libraries of finished runs, unloaded before the next one
             self._ready = OpenedProgram(self.api, program)
         else:
             self._ready = self._child()

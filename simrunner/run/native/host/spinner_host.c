@@ -282,8 +282,13 @@ static void queue_raw(uint32_t op, const void *a, size_t na, const void *b, size
 
 #endif
 
+static int isr_depth;   /* handlers running (spinner_in_interrupt) */
+static int now_known;   /* spinner_now's answer, now_time_s, holds (no time passed since it was asked) */
+static double now_time_s;
+
 static void queue(uint32_t op, const void *a, size_t na, const void *b, size_t nb) {
     if (foreign_thread()) return;
+    if (mcu_on && isr_depth == 0) now_known = 0;  /* --mcu-time: the call lets the code's time pass */
     if (mcu_report) {
         double now = thread_cpu_s(), spent = now - mcu_mark_s;
         mcu_mark_s = now;
@@ -319,7 +324,7 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
 #endif
 
 /* Timer interrupts (spinner_every, --isr NAME@HZ): the handlers by slot. The simulator runs one
- * by answering a waiting call with ST_ISR {int32 slot}: the call runs the handler (its requests
+ * by answering a waiting call with ST_ISR {int32 slot, double time}: the call runs the handler (its requests
  * go out as usual; no simulated time passes in it), sends OP_ISR_DONE and waits on for its own
  * reply - the handler runs on the program's stack inside the waiting call, as an interrupt.
  * spinner_stop_every frees a handler's slots (OP_EVERY_STOP {int32 slot}); a freed slot is used
@@ -331,7 +336,6 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
 static void (*isr_fn[MAX_ISRS])(void);
 static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read by the simulator */
 static int isr_count;   /* slots in use */
-static int isr_depth;   /* handlers running (spinner_in_interrupt) */
 /* Masked interrupts (spinner_disable_interrupts: PRIMASK, a bit): the simulator holds the handlers
  * falling due pending and runs them at the unmask. No time passes before the program's next waiting
  * call, so the mask is sent with it (OP_IRQ_MASK; irq_mask_unsent until then; also at the end of a
@@ -372,10 +376,9 @@ static void send_mask(void) {
 }
 static void *prog_lib;  /* the program's library (dlsym of --isr names) */
 
-static int now_known;   /* spinner_now's answer holds (no waiting call since) */
 
-static void run_isr(uint32_t slot) {
-    now_known = 0;  /* the handler's time */
+static void run_isr(uint32_t slot, double time_s) {
+    now_time_s = time_s, now_known = 1;  /* the handler's time (spinner_now: no round trip) */
     if (slot >= MAX_ISRS || isr_fn[slot] == NULL)
         fault_report(0, "the simulator asked for an unknown interrupt handler", NULL);
     if (mcu_report) mcu_mark_s = thread_cpu_s();  /* the handler's own time */
@@ -426,23 +429,30 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         kit_before_wait();
         in_kit_hook = 0;
     }
-    if (irq_mask_unsent) send_mask();
-    if (irq_masked) irq_held = 1;  /* time passes while masked: handlers may be held pending */
+    /* time passes while masked: handlers may be held pending - but not in OP_NOW, unless --mcu-time
+     * charges the calls queued before it (main() only: then the mask went at once) */
+    int passes = op != OP_NOW || (mcu_on && isr_depth == 0);
+    if (passes && irq_mask_unsent) send_mask();
+    if (passes && irq_masked) irq_held = 1;
     queue(op, a, na, b, nb);
     flush_out();
     uint32_t hdr[2];
     size_t have = read_reply_head(hdr, reply, size);  /* have <= size */
-    while (hdr[0] == ST_ISR) {  /* an interrupt first (its slot: 4 bytes, maybe read already) */
-        uint32_t slot = 0;
-        size_t c = have < sizeof slot ? have : sizeof slot;
-        if (c) memcpy(&slot, reply, c);
-        if (c < sizeof slot) read_all((unsigned char *)&slot + c, sizeof slot - c);
-        run_isr(slot);
+    while (hdr[0] == ST_ISR) {  /* an interrupt first (its slot and time: 12 bytes, maybe read already) */
+        unsigned char isr[12];
+        size_t c = have < sizeof isr ? have : sizeof isr;
+        if (c) memcpy(isr, reply, c);
+        if (c < sizeof isr) read_all(isr + c, sizeof isr - c);
+        uint32_t slot;
+        double time_s;
+        memcpy(&slot, isr, sizeof slot);
+        memcpy(&time_s, isr + sizeof slot, sizeof time_s);
+        run_isr(slot, time_s);
         have = read_reply_head(hdr, reply, size);
     }
     release_stopped();
     now_known = 0;  /* time may have passed */
-    if (irq_masked) irq_held = 1;  /* (masked by a handler that ran in it) */
+    if (passes && irq_masked) irq_held = 1;  /* (masked by a handler that ran in it) */
     if (hdr[0] == ST_FINISHED) {
         finished = 1;
         ended();
@@ -693,14 +703,13 @@ double spinner_get_time(void) {
 }
 
 double spinner_now(void) {
-    static double now_s;
     INIT();
     if (finished) return last_time_s;
     if (!now_known) {
-        call(OP_NOW, NULL, 0, NULL, 0, &now_s, sizeof now_s);
+        call(OP_NOW, NULL, 0, NULL, 0, &now_time_s, sizeof now_time_s);
         now_known = 1;
     }
-    return now_s;
+    return now_time_s;
 }
 
 void spinner_set_exposure(double seconds) {

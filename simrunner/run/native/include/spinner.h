@@ -77,9 +77,10 @@ double spinner_get_exposure(void);
 double spinner_get_speed(void);    /* through speed_denorm, with the last angle */
 void spinner_get_position(double *x_m, double *y_m, double *z_m);  /* world, rear axle */
 double spinner_get_time(void);     /* simulated s */
-/* The simulated time now (s) without letting time pass (nor --mcu-time's charge: the time the
- * program's last waiting call returned at, or the handler's time): for library code that shows a
- * running timer's count. Asked once after each waiting call. */
+/* The simulated time now (s) without letting time pass: the time of the program's last call (with
+ * --mcu-time, after the time that call charged; not the code's time since it), or the handler's
+ * time. For library code that shows a running timer's count. Asked once after each call that lets
+ * time pass. */
 double spinner_now(void);
 /* Range sensor NAME of the car file ([range_sensors.NAME]): metres to the nearest object on the
  * track, INFINITY when none is in range (docs/events.md). An unknown name is an error. */

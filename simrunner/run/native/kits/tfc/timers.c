@@ -235,7 +235,9 @@ static void start(struct timer *t, double period_s) {
 /* The counters, counting simulated time (spinner_now: the time of the program's last call, or a
  * handler's): a counter starts at the look that finds it enabled - a use of LPTMR0, PIT or TPM2 in
  * the program (its accessor, below), the look before a wait or after a handler - which is the time of
- * the write, as the program's code between two calls takes no simulated time. */
+ * the write, as the program's code between two calls takes no simulated time. The looks (`look`)
+ * read the time only for a change (a start, a new LDVAL): a running counter's count is made at the
+ * program's read, so a running timer costs no round trip per wait. */
 static struct counter {
     int on;                 /* counting */
     double start_s;         /* when the count was at its start value */
@@ -248,7 +250,7 @@ static struct counter {
  * MDIS clear) CVAL counts down from LDVAL at the bus clock and is loaded with LDVAL again at the
  * count after 0 (a period of LDVAL + 1); a new LDVAL written meanwhile is loaded at the next expiry,
  * not at once (RM 32.3.2 LDVAL). Disabled, CVAL keeps its value (RM 32.3.3: "unreliable"). */
-static void pit_counter(int ch) {
+static void pit_counter(int ch, int look) {
     struct counter *k = &pit_count[ch];
     PIT_CHANNEL_Type *r = &PIT->CHANNEL[ch];
     int on = (r->TCTRL & PIT_TCTRL_TEN_MASK) && !(PIT->MCR & PIT_MCR_MDIS_MASK);
@@ -256,6 +258,7 @@ static void pit_counter(int ch) {
         k->on = 0;
         return;
     }
+    if (look && k->on && r->LDVAL == (k->next_at_s > 0.0 ? k->next_load : k->load)) return;
     double now = spinner_now();
     if (!k->on) {
         k->on = 1, k->start_s = now, k->load = r->LDVAL, k->next_at_s = 0.0;
@@ -289,7 +292,7 @@ static double lptmr_count_hz(void) {
  * is set, back to 0 after it equals CMR (with CSR TFC: free running, 16 bits); clearing TEN resets it
  * to 0. On the KL25 a read of CNR gives the count latched by the last write to it (RM 33.3.4: write
  * any value, then read): here every read gives the count now, as the write-then-read does. */
-static void lptmr_counter(void) {
+static void lptmr_counter(int look) {
     struct counter *k = &lptmr_count;
     uint32_t csr = LPTMR0->CSR;
     double hz = lptmr_count_hz();
@@ -298,6 +301,7 @@ static void lptmr_counter(void) {
         k->on = 0;
         return;
     }
+    if (look && k->on) return;
     double now = spinner_now();
     if (!k->on) k->on = 1, k->start_s = now;
     uint64_t ticks = (uint64_t)((now - k->start_s) * hz + 1e-6);
@@ -318,7 +322,7 @@ static double tpm_clock_hz(void) {
     }
 }
 
-static void tpm2_counter(void) {
+static void tpm2_counter(int look) {
     struct counter *k = &tpm2_count;
     uint32_t sc = TPM2->SC, mod = TPM2->MOD & 0xFFFFu;
     double hz = tpm_clock_hz() / (double)(1u << (sc & TPM_SC_PS_MASK));
@@ -326,6 +330,7 @@ static void tpm2_counter(void) {
         k->on = 0;
         return;
     }
+    if (look && k->on) return;
     double now = spinner_now();
     if (!k->on) k->on = 1, k->start_s = now;
     uint64_t ticks = (uint64_t)((now - k->start_s) * hz + 1e-6);
@@ -337,27 +342,27 @@ static void tpm2_counter(void) {
     }
 }
 
-static void counters(void) {
-    pit_counter(0);
-    pit_counter(1);
-    lptmr_counter();
-    tpm2_counter();
+static void counters(void) {  /* a look */
+    pit_counter(0, 1);
+    pit_counter(1, 1);
+    lptmr_counter(1);
+    tpm2_counter(1);
 }
 
 /* The program's LPTMR0, PIT and TPM2 (sim_timers.h): the registers with their counters now. */
 LPTMR_Type *tfc_sim_lptmr0_now(void) {
-    lptmr_counter();
+    lptmr_counter(0);
     return &tfc_sim_lptmr0;
 }
 
 PIT_Type *tfc_sim_pit_now(void) {
-    pit_counter(0);
-    pit_counter(1);
+    pit_counter(0, 0);
+    pit_counter(1, 0);
     return &tfc_sim_pit;
 }
 
 TPM_Type *tfc_sim_tpm2_now(void) {
-    tpm2_counter();
+    tpm2_counter(0);
     return &tfc_sim_tpm2;
 }
 

@@ -1,0 +1,158 @@
+"""spinner_now (the simulated time without letting time pass; the kits' live timer counters read
+it): its answer with --mcu-time, and the round trips it costs (spinner_host.c, now_known)."""
+from __future__ import annotations
+
+import collections
+import dataclasses
+import re
+
+import pytest
+
+from simrunner.run.native import bridge, build_program
+from simrunner.run.runner import drive
+
+NOW_AFTER_CALLS = """\
+#include "spinner.h"
+int main(void) {
+    double a = spinner_now();
+    spinner_set_servo(0.0);          /* queued: with --mcu-time it lets the code's time pass */
+    double b = spinner_now();
+    spinner_set_servo(0.0);
+    double c = spinner_now();
+    double d = spinner_now();        /* no call between: the same time */
+    double e = spinner_get_time();
+    spinner_add_textf("now %.0f %.0f %.0f %.0f", (b - a) * 1e6, (c - b) * 1e6, (d - c) * 1e6, (e - d) * 1e6);
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def now_after_calls(tmp_path_factory):
+    src = tmp_path_factory.mktemp("now") / "now.c"
+    src.write_text(NOW_AFTER_CALLS)
+    return build_program([src])
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_with_mcu_time_spinner_now_includes_the_time_of_the_calls_before_it(now_after_calls, tmp_path, isolate):
+    """--mcu-time 0.002 (one 2-ms physics step a call): each spinner_set_servo lets 2 ms pass, so
+    the time read after it is 2 ms later (the read itself lets none pass) - not the time cached at
+    the read before it (a counter timing the code between two reads read 0)."""
+    csv = tmp_path / "log.csv"
+    r = drive(dataclasses.replace(now_after_calls, isolate=isolate), track="floor", time_limit_s=1.0,
+              csv=csv, mcu_time=0.002)
+    assert r.outcome == "controller_returned", r.message
+    got = re.search(rb"now (\d+) (\d+) (\d+) (\d+)", csv.read_bytes())
+    assert got and [int(v) for v in got.groups()] == [2000, 2000, 0, 4000], got  # (get_time: its charge, its step)
+
+
+PIT_READS = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+static volatile unsigned n;
+void PIT_IRQHandler(void) {
+    PIT_TFLG0 = PIT_TFLG_TIF_MASK;
+    spinner_add_textf("isr %u cval %u", ++n, (unsigned)PIT_CVAL0);
+}
+int main(void) {
+    TFC_Init();
+    PIT_MCR = 0;
+    PIT_LDVAL0 = 240000 - 1;          /* 100 Hz of the 24 MHz bus clock: 5 physics steps of 2 ms */
+    PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+    NVIC_EnableIRQ(PIT_IRQn);
+    for (int i = 0; i < 50; i++) {
+        spinner_sleep(0.002);
+        if (i % 10 == 3) spinner_add_textf("main cval %u", (unsigned)PIT_CVAL0);
+    }
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def pit_reads(tmp_path_factory):
+    src = tmp_path_factory.mktemp("pit") / "pit.c"
+    src.write_text(PIT_READS)
+    return build_program([src], kit="tfc")
+
+
+def test_a_running_timer_costs_no_time_request_per_wait_nor_per_handler(pit_reads, tmp_path, monkeypatch):
+    """A 100-Hz PIT read in its handler and now and then in main(): the handler's reads take the
+    time its interrupt came with, the kit's look before each wait reads none for a counter running
+    unchanged - one OP_NOW per read of main() (5) and the look that starts it, none per wait (50) or handler (10). The counts are
+    the PIT's: at each expiry CVAL is LDVAL; four sleeps into a period 8 ms of its 10 are gone.
+    In-process and isolated runs log the same bytes."""
+    ops = collections.Counter()
+    handle = bridge._Session._handle
+
+    def counting(self, op, payload):
+        ops[op] += 1
+        return handle(self, op, payload)
+
+    monkeypatch.setattr(bridge._Session, "_handle", counting)
+    logs = []
+    for isolate in (False, True):
+        ops.clear()
+        csv = tmp_path / f"log{isolate}.csv"
+        r = drive(dataclasses.replace(pit_reads, isolate=isolate), track="floor", time_limit_s=1.0, csv=csv)
+        assert r.outcome == "controller_returned", r.message
+        assert ops[bridge.OP_NOW] == 6, ops[bridge.OP_NOW]  # (and the look that starts it)
+        logs.append(csv.read_bytes())
+    assert logs[0] == logs[1]
+    isr = [int(v) for v in re.findall(rb"isr \d+ cval (\d+)", logs[0])]
+    main = {int(v) for v in re.findall(rb"main cval (\d+)", logs[0])}
+    assert len(isr) == 10 and set(isr) == {239999}
+    assert main == {239999 - 24 * 8000}, main  # (four 2-ms sleeps into a period)
+
+
+NOW_IN_SECTION = """\
+#include "spinner.h"
+static int ticks;
+static void tick(void) { ticks++; }
+int main(void) {
+    spinner_every(0.01, tick);
+    for (int i = 0; i < 50; i++) {
+        spinner_sleep(0.002);
+        spinner_disable_interrupts();
+        double t = spinner_now();     /* a counter read inside a critical section */
+        spinner_enable_interrupts();
+        if (i % 10 == 9) spinner_add_textf("at %.3f ticks %d", t, ticks);
+    }
+    return 0;
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def now_in_section(tmp_path_factory):
+    src = tmp_path_factory.mktemp("section") / "section.c"
+    src.write_text(NOW_IN_SECTION)
+    return build_program([src])
+
+
+def test_a_time_read_in_a_critical_section_sends_no_mask(now_in_section, tmp_path, monkeypatch):
+    """spinner_now lets no time pass, so no handler can fall due in it: a section around it holds
+    nothing and sends nothing (it sent the mask with the read and made the unmask a round trip:
+    two messages a pass). The ticks come as without the section, in both modes alike."""
+    ops = collections.Counter()
+    handle = bridge._Session._handle
+
+    def counting(self, op, payload):
+        ops[op] += 1
+        return handle(self, op, payload)
+
+    monkeypatch.setattr(bridge._Session, "_handle", counting)
+    logs = []
+    for isolate in (False, True):
+        ops.clear()
+        csv = tmp_path / f"log{isolate}.csv"
+        r = drive(dataclasses.replace(now_in_section, isolate=isolate), track="floor", time_limit_s=1.0, csv=csv)
+        assert r.outcome == "controller_returned", r.message
+        assert ops[bridge.OP_IRQ_MASK] + ops[bridge.OP_IRQ_MASK_WAIT] == 0, ops
+        assert ops[bridge.OP_NOW] == 50
+        logs.append(csv.read_bytes())
+    assert logs[0] == logs[1]
+    assert re.findall(rb"at ([0-9.]+) ticks (\d+)", logs[0]) == [
+        (b"%.3f" % (0.02 * k), b"%d" % (2 * k)) for k in range(1, 6)]
