@@ -405,3 +405,33 @@ def test_the_s32k144_kits_osif_suspend_holds_a_gpt_notification(tmp_path):
         """))
     r = drive(build_program([str(src)], kit="s32k144"), track="floor", time_limit_s=2.0)
     assert r.outcome == "controller_error" and "status 10" in r.message, r.message  # one a section
+    # nested (a driver's section inside the team's): the inner Resume leaves interrupts disabled;
+    # the outer one restores what the first Suspend found (OSEK/VDX OS)
+    src.write_text(textwrap.dedent("""\
+        #include "Gpt.h"
+        #include "OsIf.h"
+        volatile int in_cs, bad, ticks;
+        void Gpt_Notification(void) { ticks++; if (in_cs) bad++; }
+        int main(void) {
+            Gpt_StartTimer(0U, 40000U);
+            Gpt_EnableNotification(0U);
+            for (int i = 0; i < 10; i++) {
+                OsIf_SuspendAllInterrupts();
+                in_cs = 1;
+                OsIf_SuspendAllInterrupts();
+                OsIf_TimeDelay(6U);
+                OsIf_ResumeAllInterrupts();
+                OsIf_TimeDelay(6U);
+                in_cs = 0;
+                OsIf_ResumeAllInterrupts();
+            }
+            __disable_irq();
+            OsIf_SuspendAllInterrupts();
+            OsIf_ResumeAllInterrupts();  /* interrupts were disabled before: they stay so */
+            if (!__get_PRIMASK()) bad++;
+            __enable_irq();
+            return bad ? 3 : ticks;
+        }
+        """))
+    r = drive(build_program([str(src)], kit="s32k144"), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_error" and "status 10" in r.message, r.message

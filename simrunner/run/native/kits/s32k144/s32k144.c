@@ -139,6 +139,9 @@ uint32 OsIf_GetMilliseconds(void) { return (uint32)(spinner_get_time() * 1000.0 
 
 void OsIf_TimeDelay(const uint32 delayMs) { spinner_sleep(delayMs * 1e-3); }
 
+volatile int s32k_sim_suspend_nesting;        /* OsIf.h's nested Suspend/ResumeAllInterrupts */
+volatile uint32 s32k_sim_suspend_primask;
+
 void OsIf_Init(const void *Config) { (void)Config; read_params(); }
 
 /* simulated seconds as ticks of hz, modulo 2^32 as a 32-bit counter wraps */

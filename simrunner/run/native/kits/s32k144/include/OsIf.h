@@ -15,16 +15,23 @@
 #ifndef NXPCUP_SIM_OSIF_H
 #define NXPCUP_SIM_OSIF_H
 #include "Mcal.h"
-/* The critical sections of RTD drivers and team code: bare-metal, OsIf.h makes them the core's
- * interrupt mask, SuspendAllInterrupts() = __disable_irq(), ResumeAllInterrupts() = __enable_irq()
- * (Mcal.h; a flag, not a count, as PRIMASK). */
-#define SuspendAllInterrupts() __disable_irq()
-#define ResumeAllInterrupts() __enable_irq()
-#define OsIf_SuspendAllInterrupts() SuspendAllInterrupts()
-#define OsIf_ResumeAllInterrupts() ResumeAllInterrupts()
 #ifdef __cplusplus
 extern "C" {
 #endif
+/* The critical sections of RTD drivers and team code: bare-metal, the core's interrupt mask
+ * (__disable_irq / __set_PRIMASK, Mcal.h), nested as the OS services they stand for - OSEK/VDX OS
+ * 2.2.3, 13.3.2 (interrupt handling): SuspendAllInterrupts / ResumeAllInterrupts can be nested; the state
+ * saved by the first Suspend is restored by the last Resume (so a driver's section inside the
+ * team's does not enable interrupts). Macros, so that the warning of interrupts left disabled
+ * names the caller's line. */
+extern volatile int s32k_sim_suspend_nesting;
+extern volatile uint32 s32k_sim_suspend_primask;
+#define SuspendAllInterrupts() do { uint32 s32k_sim_pm_ = __get_PRIMASK(); __disable_irq(); \
+        if (s32k_sim_suspend_nesting++ == 0) s32k_sim_suspend_primask = s32k_sim_pm_; } while (0)
+#define ResumeAllInterrupts() do { if (s32k_sim_suspend_nesting > 0 && --s32k_sim_suspend_nesting == 0) \
+        __set_PRIMASK(s32k_sim_suspend_primask); } while (0)
+#define OsIf_SuspendAllInterrupts() SuspendAllInterrupts()
+#define OsIf_ResumeAllInterrupts() ResumeAllInterrupts()
 typedef enum { OSIF_COUNTER_DUMMY, OSIF_COUNTER_SYSTEM, OSIF_COUNTER_CUSTOM } OsIf_CounterType;
 
 void OsIf_Init(const void *Config);
