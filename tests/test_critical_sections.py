@@ -125,6 +125,13 @@ def test_interrupts_left_disabled_warn_the_run_once():
 
     assert not [w for w in ticks_of(short).warnings if MASKED_WARNING in w]
 
+    def slow(s):  # a 1-Hz timer held at 1 s: the warning 0.1 s later, not at its next expiry
+        s.every(1.0, lambda: calls.append(1))
+        s.disable_interrupts()
+        s.sleep(1.3)
+
+    assert [w for w in ticks_of(slow).warnings if MASKED_WARNING in w]
+
 
 def test_with_mcu_time_no_handler_runs_inside_a_masked_section():
     """--mcu-time fixed: each call lets 3 ms pass, handlers fall due inside the section (between

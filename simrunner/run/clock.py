@@ -144,6 +144,7 @@ class LockstepClock:
         self._masked_at_step = 0  # the step of the mask
         self.mask_where: Callable[[], str | None] | None = None  # () -> the mask's file:line, or None
         self._held_at_step: int | None = None  # the step a handler was first held pending since the mask
+        self._held_warned = False  # the warning of held handlers given for this mask
         self.warn: Callable[[str, str], None] | None = None  # (key, text): a warning of the run
 
     # -- schedule ------------------------------------------------------------------
@@ -274,7 +275,9 @@ class LockstepClock:
         the warning (HELD_WARN_S)."""
         if self._held_at_step is None:
             self._held_at_step = step
-        elif self.warn is not None and (step - self._held_at_step) * self.dt_s >= HELD_WARN_S - 1e-9:
+        elif (self.warn is not None and not self._held_warned
+              and (step - self._held_at_step) * self.dt_s >= HELD_WARN_S - 1e-9):
+            self._held_warned = True
             masked_s = self._masked_at_step * self.dt_s
             where = self.mask_where() if self.mask_where is not None else None
             self.warn("interrupts_masked", (
@@ -302,6 +305,7 @@ class LockstepClock:
             self.masked = True
             self._masked_at_step = self.step_index
             self._held_at_step = None
+            self._held_warned = False
             self.mask_where = where
 
     def unmask(self) -> None:
@@ -355,6 +359,8 @@ class LockstepClock:
         pose = self.boundary_pose = self.pose()
         if self.twist_fn is not None:
             self.boundary_twist = self.twist_fn()
+        if self._held_at_step is not None and self.masked:  # (a slow timer's next expiry is late)
+            self._held(self.step_index)
         end = self.on_frame(k, self.step_index * self.dt_s, pose, self._command, row_command)
         self._row_pending = True
         self.last_progress_wall_s = _monotonic()
