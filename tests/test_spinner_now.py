@@ -156,3 +156,41 @@ def test_a_time_read_in_a_critical_section_sends_no_mask(now_in_section, tmp_pat
     assert logs[0] == logs[1]
     assert re.findall(rb"at ([0-9.]+) ticks (\d+)", logs[0]) == [
         (b"%.3f" % (0.02 * k), b"%d" % (2 * k)) for k in range(1, 6)]
+
+
+PIT_SET_UP_THEN_READS = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+static volatile unsigned n;
+void PIT_IRQHandler(void) { PIT_TFLG0 = PIT_TFLG_TIF_MASK; n++; }
+int main(void) {
+    TFC_Init();
+    PIT_MCR = 0;
+    PIT_LDVAL0 = 240000 - 1;          /* 100 Hz */
+    PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+    NVIC_EnableIRQ(PIT_IRQn);
+    double t0 = spinner_now();
+    for (int i = 0; i < 20; i++) {    /* no waiting call: the code's time passes in the calls */
+        TFC_SetServo(0, 0.0f);
+        (void)PIT_CVAL0;
+    }
+    spinner_add_textf("handlers %u in %.0f ms", n, (spinner_now() - t0) * 1e3);
+    return 0;
+}
+"""
+
+
+def test_with_mcu_time_a_timer_set_up_counts_from_its_set_up_when_only_counters_are_read(tmp_path):
+    """--mcu-time 0.002: the queued calls of twenty TFC_SetServo let time pass (2 ms a call), each
+    counter read after one is where it passes; the timer set up before them runs from its set-up
+    (the kit's registers are looked at before the time passes), as on the board: its handler once
+    every 10 ms of it, not never."""
+    src = tmp_path / "setup.c"
+    src.write_text(PIT_SET_UP_THEN_READS)
+    csv = tmp_path / "log.csv"
+    r = drive(build_program([src], kit="tfc"), track="floor", time_limit_s=1.0, csv=csv, mcu_time=0.002)
+    assert r.outcome == "controller_returned", r.message
+    got = re.search(rb"handlers (\d+) in (\d+) ms", csv.read_bytes())
+    assert got and int(got.group(2)) >= 40, got
+    assert int(got.group(1)) == int(got.group(2)) // 10, got

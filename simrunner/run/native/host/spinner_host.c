@@ -424,14 +424,15 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         if (size) memset(reply, 0, size);
         return 0;
     }
-    if (kit_before_wait != NULL && !in_kit_hook && op != OP_NOW) {  /* (OP_NOW: time does not pass) */
+    /* time passes in the call - but not in OP_NOW, unless --mcu-time charges the calls queued
+     * before it (main() only) */
+    int passes = op != OP_NOW || (mcu_on && isr_depth == 0);
+    if (kit_before_wait != NULL && !in_kit_hook && passes) {  /* (the kit's registers before time passes) */
         in_kit_hook = 1;
         kit_before_wait();
         in_kit_hook = 0;
     }
-    /* time passes while masked: handlers may be held pending - but not in OP_NOW, unless --mcu-time
-     * charges the calls queued before it (main() only: then the mask went at once) */
-    int passes = op != OP_NOW || (mcu_on && isr_depth == 0);
+    /* time passes while masked: handlers may be held pending (then the mask went at once) */
     if (passes && irq_mask_unsent) send_mask();
     if (passes && irq_masked) irq_held = 1;
     queue(op, a, na, b, nb);
