@@ -27,6 +27,21 @@ int main(void) {
 """
 
 
+@pytest.fixture
+def op_counts(monkeypatch):
+    """The requests the simulator handles, by op (in-process and isolated alike: both go through
+    ``_Session._handle``)."""
+    ops = collections.Counter()
+    handle = bridge._Session._handle
+
+    def counting(self, op, payload):
+        ops[op] += 1
+        return handle(self, op, payload)
+
+    monkeypatch.setattr(bridge._Session, "_handle", counting)
+    return ops
+
+
 @pytest.fixture(scope="module")
 def now_after_calls(tmp_path_factory):
     src = tmp_path_factory.mktemp("now") / "now.c"
@@ -78,20 +93,13 @@ def pit_reads(tmp_path_factory):
     return build_program([src], kit="tfc")
 
 
-def test_a_running_timer_costs_no_time_request_per_wait_nor_per_handler(pit_reads, tmp_path, monkeypatch):
+def test_a_running_timer_costs_no_time_request_per_wait_nor_per_handler(pit_reads, tmp_path, op_counts):
     """A 100-Hz PIT read in its handler and now and then in main(): the handler's reads take the
     time its interrupt came with, the kit's look before each wait reads none for a counter running
     unchanged - one OP_NOW per read of main() (5) and the look that starts it, none per wait (50) or handler (10). The counts are
     the PIT's: at each expiry CVAL is LDVAL; four sleeps into a period 8 ms of its 10 are gone.
     In-process and isolated runs log the same bytes."""
-    ops = collections.Counter()
-    handle = bridge._Session._handle
-
-    def counting(self, op, payload):
-        ops[op] += 1
-        return handle(self, op, payload)
-
-    monkeypatch.setattr(bridge._Session, "_handle", counting)
+    ops = op_counts
     logs = []
     for isolate in (False, True):
         ops.clear()
@@ -132,18 +140,11 @@ def now_in_section(tmp_path_factory):
     return build_program([src])
 
 
-def test_a_time_read_in_a_critical_section_sends_no_mask(now_in_section, tmp_path, monkeypatch):
+def test_a_time_read_in_a_critical_section_sends_no_mask(now_in_section, tmp_path, op_counts):
     """spinner_now lets no time pass, so no handler can fall due in it: a section around it holds
     nothing and sends nothing (it sent the mask with the read and made the unmask a round trip:
     two messages a pass). The ticks come as without the section, in both modes alike."""
-    ops = collections.Counter()
-    handle = bridge._Session._handle
-
-    def counting(self, op, payload):
-        ops[op] += 1
-        return handle(self, op, payload)
-
-    monkeypatch.setattr(bridge._Session, "_handle", counting)
+    ops = op_counts
     logs = []
     for isolate in (False, True):
         ops.clear()

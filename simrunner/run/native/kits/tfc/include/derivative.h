@@ -12,7 +12,8 @@
 /* The MCU's interrupt mask (PRIMASK; MKL25Z4.h's EnableInterrupts / DisableInterrupts, the CMSIS
  * __enable_irq() / __disable_irq(), __get_PRIMASK() / __set_PRIMASK()): while disabled, a timer
  * interrupt that falls due is held pending and its handler runs once when they are enabled again
- * (spinner.h, spinner_disable_interrupts). The library's SysTick tickers and camera read-out go on. */
+ * (spinner.h, spinner_disable_interrupts); the library's SysTick tickers and camera read-out stop
+ * (tfc.c: interrupts too). */
 #ifdef __cplusplus
 extern "C" {
 #endif
