@@ -571,6 +571,11 @@ int main(void) {
     TFC_Delay_mS(10);
     double s2 = spinner_now();
     unsigned c2 = PIT_CVAL0, t2 = TPM2_CNT;
+    TPM2_CNT = 0;                                     /* any write clears it (RM 31, TPMx_CNT) */
+    double s3 = spinner_now();
+    TFC_Delay_mS(4);
+    unsigned t3 = TPM2_CNT, d3 = (unsigned)((spinner_now() - s3) * 1e6 + 0.5);
+    spinner_add_textf("tpm2w %u %u", d3, t3);
     LPTMR0_CSR = 0;
     unsigned n2 = LPTMR0_CNR;
     spinner_add_textf("us %d %d", (int)((s1 - s0) * 1e6 + 0.5), (int)((s2 - s1) * 1e6 + 0.5));
@@ -599,3 +604,6 @@ def test_running_counters_read_the_count_at_the_time_of_the_read(tmp_path):
     assert got["lptmr"] == [0, d1_us // 1000, 0]  # the 1 kHz LPO; disabled: 0
     phase = d2_us * 187500 // 1000000 % 2000  # up to MOD = 1000, then down to 0
     assert got["tpm2"] == [0, d1_us * 187500 // 1000000, phase if phase <= 1000 else 2000 - phase]
+    d3_us, t3 = got["tpm2w"]  # counted from the write
+    phase = d3_us * 187500 // 1000000 % 2000
+    assert d3_us >= 4000 and t3 == (phase if phase <= 1000 else 2000 - phase), got["tpm2w"]

@@ -244,6 +244,7 @@ static struct counter {
     uint32_t load;          /* PIT: the LDVAL of the period under way */
     uint32_t next_load;     /* PIT: a new LDVAL, loaded at next_at_s (RM 32.3.2) */
     double next_at_s;       /* (0: none) */
+    uint32_t shown;         /* TPM2: the CNT the kit wrote last (another there: the program wrote it) */
 } pit_count[2], lptmr_count, tpm2_count;
 
 /* PIT channel ch (RM 32.3 memory map; 32.5.1 timers): while TEN is set and the module enabled (MCR
@@ -311,8 +312,10 @@ static void lptmr_counter(int look) {
 
 /* TPM2's counter (RM 31.4.3 Counter): while SC CMOD selects the TPM clock, CNT counts up at the
  * TPM clock / 2^PS from 0 to MOD and again from 0; with SC CPWMS up to MOD and down to 0 (RM 31.4.3.2
- * up-down counting). It starts at 0 (its value while stopped is kept; a write to CNT, which clears
- * it on the board, is not seen). */
+ * up-down counting). It starts at 0 (its value while stopped is kept). A write to CNT clears it
+ * (RM chapter 31, TPMx_CNT: "writing any value to COUNT clears the counter"): the kit sees a value
+ * it did not write there at the next use of TPM2 or the next look, before time passes, and counts
+ * from 0 then (a write of the very count shown then is not seen). */
 static double tpm_clock_hz(void) {
     switch ((SIM->SOPT2 & SIM_SOPT2_TPMSRC_MASK) >> 24) {
     case 1: return (SIM->SOPT2 & SIM_SOPT2_PLLFLLSEL_MASK) ? PLL_HALF_HZ : 0.0;
@@ -330,9 +333,10 @@ static void tpm2_counter(int look) {
         k->on = 0;
         return;
     }
-    if (look && k->on) return;
+    int cleared = k->on && TPM2->CNT != k->shown;  /* the program wrote CNT */
+    if (look && k->on && !cleared) return;
     double now = spinner_now();
-    if (!k->on) k->on = 1, k->start_s = now;
+    if (!k->on || cleared) k->on = 1, k->start_s = now;
     uint64_t ticks = (uint64_t)((now - k->start_s) * hz + 1e-6);
     if (!(sc & TPM_SC_CPWMS_MASK)) {
         TPM2->CNT = (uint32_t)(ticks % ((uint64_t)mod + 1u));
@@ -340,6 +344,7 @@ static void tpm2_counter(int look) {
         uint64_t p = mod ? ticks % (2u * (uint64_t)mod) : 0u;
         TPM2->CNT = (uint32_t)(p <= mod ? p : 2u * mod - p);
     }
+    k->shown = TPM2->CNT;
 }
 
 static void counters(void) {  /* a look */
