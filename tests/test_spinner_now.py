@@ -195,3 +195,29 @@ def test_with_mcu_time_a_timer_set_up_counts_from_its_set_up_when_only_counters_
     got = re.search(rb"handlers (\d+) in (\d+) ms", csv.read_bytes())
     assert got and int(got.group(2)) >= 40, got
     assert int(got.group(1)) == int(got.group(2)) // 10, got
+
+
+TWO_RUNS = """\
+#include "spinner.h"
+int main(void) {
+    double a = spinner_now();
+    spinner_sleep(0.1);
+    double b = spinner_now();
+    spinner_add_textf("now %.3f %.3f", a, b);
+    return 0;
+}
+"""
+
+
+def test_a_second_run_in_the_process_does_not_read_the_first_runs_time(tmp_path):
+    """The in-process host serves run after run (a batch worker's): spinner_now's cached answer
+    belongs to its run - the second run's first read is its start, not the first run's end."""
+    src = tmp_path / "two.c"
+    src.write_text(TWO_RUNS)
+    program = build_program([src])
+    got = []
+    for _ in range(2):
+        r = drive(program, track="floor", time_limit_s=1.0, csv=tmp_path / "log.csv")
+        assert r.outcome == "controller_returned", r.message
+        got.append([s for s in r.log.data_text if s.startswith("now ")])
+    assert got == [["now 0.000 0.100"]] * 2, got

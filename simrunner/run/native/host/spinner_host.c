@@ -1563,6 +1563,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     gone = 0, exit_code = 0, in_controller = 0;
     last_speed = last_angle = speed_mps = steer_rad = 0.0;
     last_time_s = last_speed_val = 0.0;
+    now_known = 0, now_time_s = 0.0, mask_msg_ra = NULL;  /* (spinner_now's answer is the run's) */
     last_pos[0] = last_pos[1] = last_pos[2] = 0.0;
     f_speed_norm = f_speed_denorm = f_turn_norm = f_diff_norm = NULL;
     n_helpers = 0;
