@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import json
 import signal
-import shutil
 import textwrap
-from decimal import Decimal
 from pathlib import Path
 
 import pytest
@@ -15,8 +13,9 @@ from click.testing import CliRunner
 from hypothesis import given, strategies as st
 
 from simrunner.cli import main as cli
+from simrunner.run.runner import default_track
 from simrunner.workflows.batch import BatchError, deterministic, read_results, run_batch
-from simrunner.workflows.batch.results import columns, csv_text
+from simrunner.workflows.batch.results import columns
 from simrunner.workflows.batch.spec import (make_jobs, parse_grid, parse_seeds, parse_values,
                                             resolve_tracks)
 
@@ -87,6 +86,8 @@ def test_track_specs(tmp_path):
     labels = [r.label for r in resolve_tracks([str(tmp_path)])]
     assert labels == [str(tmp_path / "a.txt"), str(tmp_path / "b.txt")]
     assert [r.label for r in resolve_tracks([str(tmp_path / "*.txt") + ",random:1"])] == labels + ["random:0"]
+    default = resolve_tracks(["default," + str(tmp_path / "a.txt")])[0]  # the bundled track by name
+    assert default.label == "default" and default.path == str(default_track())
     for spec, match in ((str(tmp_path / "nope.txt"), "no such file"), (str(tmp_path / "*.sdf"), "matches no"),
                         (str(tmp_path / "notes.md"), "not a track"), ("random:0", "random:N"),
                         (str(tmp_path / "a.txt") + "," + str(tmp_path / "a.txt"), "given twice")):

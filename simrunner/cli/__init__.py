@@ -207,9 +207,9 @@ def build_options(command):
 @main.command("drive")
 @click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
 @click.argument("more_sources", nargs=-1, type=click.Path(dir_okay=False, path_type=str))
-@click.option("--track", default=None, metavar="LAYOUT|DIR|WORLD|floor",
-              help="Track: layout .txt, trackgen folder, world file or Gazebo model folder "
-                   "(default: the bundled thesis figure-8); 'floor': an empty floor, no judging.")
+@click.option("--track", default=None, metavar="LAYOUT|DIR|WORLD|default|floor",
+              help="Track: layout .txt, trackgen folder, world file or Gazebo model folder; "
+                   "'default': the bundled thesis figure-8 (the default); 'floor': an empty floor, no judging.")
 @click.option("--laps", default=1, show_default=True, type=click.IntRange(min=1),
               help="Laps to complete.")
 @click.option("--time-limit", "time_limit_s", default=None,

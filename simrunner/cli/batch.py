@@ -13,8 +13,8 @@ from simrunner.run.rules import EVENT_NAMES
 @click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
 @click.argument("more_sources", nargs=-1, type=click.Path(dir_okay=False, path_type=str))
 @click.option("--tracks", "tracks", multiple=True, metavar="SPEC",
-              help="Tracks: layout/world files, folders, globs ('tracks/*.txt'), random:N; "
-                   "repeatable or comma-separated (default: the bundled track).")
+              help="Tracks: layout/world files, folders, globs ('tracks/*.txt'), random:N, "
+                   "'default' (the bundled track, the default); repeatable or comma-separated.")
 @click.option("--seeds", default="1", show_default=True, metavar="N|A:B",
               help="Seeds of the camera noise: N = 0..N-1, A:B = A..B-1.")
 @click.option("--param", "params", multiple=True, metavar="NAME=V1,V2|START:STOP:STEP",

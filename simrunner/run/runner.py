@@ -431,10 +431,12 @@ class _gc_frozen:
 
 # -- drive ----------------------------------------------------------------------------------
 def resolve_track(track: str | Path | SimTrack | None, car: CarDescription) -> tuple[SimTrack, str]:
-    """``(SimTrack, label)`` for a track argument of :func:`drive` (None = the default;
-    ``"floor"`` = the free floor, :mod:`simrunner.track.floor`)."""
+    """``(SimTrack, label)`` for a track argument of :func:`drive` (None or ``"default"`` = the
+    default; ``"floor"`` = the free floor, :mod:`simrunner.track.floor`)."""
     if isinstance(track, SimTrack):
         return track, str(track.source)
+    if isinstance(track, str) and track == "default" and not Path(track).exists():
+        track = None  # the bundled track by its name (simrunner batch --tracks default too)
     if isinstance(track, str) and track == "floor":
         from simrunner.track.floor import floor_track
 

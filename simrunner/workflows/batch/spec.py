@@ -113,6 +113,11 @@ def resolve_tracks(items: list[str] | tuple[str, ...]) -> list[TrackRef]:
         if item.startswith(RANDOM_PREFIX):
             refs += [TrackRef(f"random:{s}", random_seed=s) for s in range(_random_count(item))]
             continue
+        if item == "default" and not Path(item).exists():  # the bundled track (drive's default)
+            from simrunner.run.runner import default_track
+
+            refs.append(TrackRef("default", path=str(default_track())))
+            continue
         if any(ch in item for ch in "*?["):
             matches = [Path(m) for m in sorted(glob.glob(item, recursive=True))]
             if not matches:
