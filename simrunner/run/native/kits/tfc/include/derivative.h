@@ -14,19 +14,9 @@
  * interrupt that falls due is held pending and its handler runs once when they are enabled again
  * (spinner.h, spinner_disable_interrupts); the library's SysTick tickers and camera read-out stop
  * (tfc.c: interrupts too). */
-#ifdef __cplusplus
-extern "C" {
-#endif
-void spinner_disable_interrupts(void);
-void spinner_enable_interrupts(void);
-int spinner_interrupts_disabled(void);
-#ifdef __cplusplus
-}
-#endif
+#include "spinner_primask.h"  /* __disable_irq, __enable_irq, __get_PRIMASK, __set_PRIMASK */
 #define EnableInterrupts spinner_enable_interrupts()
 #define DisableInterrupts spinner_disable_interrupts()
-#define __get_PRIMASK() ((uint32_t)(spinner_interrupts_disabled() != 0))
-#define __set_PRIMASK(primask) (((primask) & 1u) ? spinner_disable_interrupts() : spinner_enable_interrupts())
 /* The CMSIS intrinsics of core_cm0plus.h that firmware calls. __WFI() (wait for an interrupt)
  * lets the board's interrupts run: a pass of TFC_Task() (a physics step, the SysTick tickers, the
  * camera read-out), in which the timer interrupts' handlers due run (docs/firmware.md, Timer
@@ -34,7 +24,5 @@ int spinner_interrupts_disabled(void);
 void tfc_sim_wfi(void);
 #define __WFI() tfc_sim_wfi()
 #define __WFE() tfc_sim_wfi()
-#define __enable_irq() spinner_enable_interrupts()
-#define __disable_irq() spinner_disable_interrupts()
 #define __NOP() do { } while (0)
 #endif
