@@ -14,9 +14,9 @@ The file is written as ``NAME.partial.mp4`` and renamed on :meth:`VideoRecorder.
 also runs when the controller crashed.
 
 Frame rate: every camera frame up to ``max_fps`` (30); above that every ``ceil(fps /
-max_fps)``-th frame (the default 50 fps camera: every second frame, a 25 fps video). Encoding
-costs ~1.6 ms a 1024 x 576 frame whatever it shows (bench/bench_video.py): at 50 fps the
-encoder alone would hold a one-lap drive under 8x real time.
+max_fps)``-th frame (the default 50 fps camera: every second frame, a 25 fps video). Encoding is
+the largest part of the video's cost and does not depend on what a frame shows (OpenCV's
+conversion to YUV 4:2:0 and the MPEG-4 encoder; bench/bench_video.py measures it).
 """
 from __future__ import annotations
 
