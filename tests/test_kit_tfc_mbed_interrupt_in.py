@@ -205,8 +205,9 @@ def test_an_unbound_pin_never_fires_and_reads_its_level(tmp_path):
     assert r.outcome == "controller_returned", r.message
     assert numbers(r)["free"] == [0, 1, 0]
     assert [w for w in r.warnings if w.startswith("InterruptIn")] == [  # said once a pin
-        f"InterruptIn on {pin}: its handler never runs: no --param encoder_{pin}=W (or encoder_b_{pin}=W) "
-        "puts a wheel's encoder channel on the pin (docs/firmware.md, --kit tfc-mbed)" for pin in ("PTA5", "PTD3")]
+        f"InterruptIn on {pin}: its handler never runs: no --param encoder_{pin}=W (or encoder_b_{pin}=W, "
+        f"encoder_z_{pin}=W) puts a wheel's encoder channel on the pin (docs/firmware.md, --kit tfc-mbed)"
+        for pin in ("PTA5", "PTD3")]
 
 
 @pytest.mark.parametrize("line, params, car, words", [
@@ -222,6 +223,13 @@ def test_an_unbound_pin_never_fires_and_reads_its_level(tmp_path):
      "InterruptIn::rise: --param encoder_PTA13 and encoder_b_PTA13: a pin carries one channel"),
     ("InterruptIn w(PTC13);", {}, ENCODERS,
      "InterruptIn::rise: PTC13: the KL25Z's pins interrupt on ports A and D only"),
+    ("InterruptIn w(PTC5);", {"encoder_z_PTC5": 2}, ENCODERS,
+     "InterruptIn::rise: PTC5: the KL25Z's pins interrupt on ports A and D only"),
+    ("InterruptIn w(PTD7);", {"encoder_z_PTD7": 2, "encoder_b_PTD7": 2}, ENCODERS,
+     "InterruptIn::rise: --param encoder_b_PTD7 and encoder_z_PTD7: a pin carries one channel"),
+    ("InterruptIn w(PTA13);", {"encoder_z_PTA13": 2}, '[encoders]\ncounting = "single"\n',
+     "InterruptIn::rise: --param encoder_z_PTA13: the index channel needs the wheel's angle, which a "
+     "one-channel counter does not keep"),
 ])
 def test_bad_bindings_end_the_run_at_the_programs_call(tmp_path, line, params, car, words):
     r = run(tmp_path, f"""\
@@ -292,3 +300,64 @@ def test_an_interruptin_deleted_in_its_handler_leaves_the_others_their_edges_in_
     assert r.outcome == "controller_returned", r.message
     nb, nc, nd, order_ok, deleted = numbers(r)["edges"]
     assert nb > 10 and nc == nb and nd == 0 and order_ok == 1 and deleted == 1
+
+
+def test_the_index_channel_rises_once_a_revolution_either_way_as_qei_counts_it(tmp_path):
+    """Forwards 2 s, backwards 2 s, RL's index channel on PTA13 (--param encoder_z_PTA13): its
+    rises are the revolutions the x4 count passed (the index is high at counts 0, 2048, ... mod
+    512 lines x 4: it rises as the count comes to one, forwards or backwards), QEI's
+    getRevolutions() with its index pin counts the same, each rise comes while channels A and B are
+    both low (the gated index of a datasheet) and read() is 1 in the rise's handler, 0 in the
+    fall's."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "QEI.h"
+        #include "spinner.h"
+        InterruptIn z(PTA13), channel_a(PTD4), channel_b(PTD5);
+        QEI qei(PTA1, PTA2, PTA13, 512, QEI::X4_ENCODING);   // RL
+        volatile int rises, falls, not_low, wrong_level;
+        Ticker snapshot;
+        volatile int at_rises, at_falls, at_revs, turns;
+        volatile long long at_count, peak = -1000000, dir;
+        void take() {  // every tick, after its edges' handlers
+            long long count = spinner_get_encoder(SPINNER_WHEEL_RL);
+            if ((count - at_count) * dir < 0) turns++;
+            if (count != at_count) dir = count - at_count;
+            if (count > peak) peak = count;
+            at_rises = rises, at_falls = falls, at_revs = qei.getRevolutions(), at_count = count;
+        }
+        int main() {
+            TFC_Init();
+            z.rise([] {
+                rises++;
+                if (channel_a.read() || channel_b.read()) not_low++;
+                if (z.read() != 1) wrong_level++;
+            });
+            z.fall([] { falls++; if (z.read() != 0) wrong_level++; });
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.35f, 0.35f);
+            snapshot.attach_us(&take, 1000);
+            wait(2.2);
+            spinner_add_textf("fwd %d %d %d %lld", at_rises, at_falls, at_revs, at_count);
+            TFC_SetMotorPWM(-0.45f, -0.45f);
+            wait(2.5);
+            spinner_add_textf("back %d %d %d %lld", at_rises, at_falls, at_revs, at_count);
+            spinner_add_textf("checks %d %d %d %lld", not_low, wrong_level, turns, peak);
+            return 0;
+        }
+        """, params={"encoder_z_PTA13": 2, "encoder_PTD4": 2, "encoder_b_PTD5": 2}, time_limit_s=6.0)
+    assert r.outcome == "controller_returned", r.message
+    got = numbers(r)
+    per_rev = 512 * 4
+    rises_f, falls_f, revs_f, count_f = got["fwd"]
+    rises_b, falls_b, revs_b, count_b = got["back"]
+    not_low, wrong_level, turns, peak = got["checks"]
+    assert turns == 1  # up to the peak, then down
+    assert count_f > 3 * per_rev and count_b < peak - 2 * per_rev  # 3+ turns forwards, 2+ back
+    assert rises_f == count_f // per_rev and revs_f == rises_f  # from 0: 2048, 4096, ... reached
+    back_rises = (peak - 1) // per_rev - (count_b - 1) // per_rev  # reached from above
+    assert rises_b == peak // per_rev + back_rises and revs_b == rises_b
+    assert abs(back_rises - (peak - count_b) / per_rev) <= 1  # the whole revolutions back
+    assert abs(rises_b - falls_b) <= 1
+    assert not_low == 0 and wrong_level == 0
