@@ -361,3 +361,66 @@ def test_the_index_channel_rises_once_a_revolution_either_way_as_qei_counts_it(t
     assert abs(back_rises - (peak - count_b) / per_rev) <= 1  # the whole revolutions back
     assert abs(rises_b - falls_b) <= 1
     assert not_low == 0 and wrong_level == 0
+
+
+def test_mbed_2s_chains_of_handlers(tmp_path):
+    """mbed 2's rise_add / rise_add_front / rise_remove (and fall's): the handlers of one edge run in
+    the chain's order (the front one first) at every edge; rise_remove of one stops it (a second
+    remove of it is false) and leaves the others, also from inside the chain (the next one still
+    runs that edge: the falls match another InterruptIn's on the same channel); rise() replaces the
+    chain; removing the last handler stops the edge's interrupt; rise_add(NULL) adds nothing."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn enc(PTA13), same(PTA12);
+        pFunctionPointer_t p_once;
+        volatile int n_once, same_falls;
+        void once() { n_once++; enc.fall_remove(p_once); }
+        volatile int seq, bad_order, n1, n2, n0, n3, before_second = 2;
+        void first() { n1++; if (seq != 1) bad_order++; seq = 2; }
+        void second() { n2++; if (seq != before_second) bad_order++; seq = 0; }
+        void front() { n0++; if (seq != 0) bad_order++; seq = 1; }
+        void alone() { n3++; }
+        struct Falls { int n = 0; void on_fall() { n++; } } falls;
+        int main() {
+            TFC_Init();
+            pFunctionPointer_t p1 = enc.rise_add(&first);
+            pFunctionPointer_t p2 = enc.rise_add(&second);
+            pFunctionPointer_t p0 = enc.rise_add_front(&front);
+            pFunctionPointer_t pf = enc.fall_add(&falls, &Falls::on_fall);
+            p_once = enc.fall_add_front(&once);
+            same.fall([] { same_falls++; });
+            pFunctionPointer_t none = enc.rise_add(NULL);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(0.3);
+            spinner_add_textf("chain %d %d %d %d %d %d", n0, n1, n2, falls.n, bad_order, none == NULL);
+            spinner_add_textf("once %d %d %d", n_once, falls.n, same_falls);
+            int removed = enc.rise_remove(p1), again = enc.rise_remove(p1);
+            before_second = 1;  // front() now hands over to second()
+            int b0 = n0, b1 = n1, b2 = n2;
+            wait(0.3);
+            spinner_add_textf("removed %d %d %d %d %d %d", removed, again, n0 - b0, n1 - b1, n2 - b2, bad_order);
+            pFunctionPointer_t p3 = enc.rise(&alone);
+            b0 = n0, b2 = n2;
+            wait(0.3);
+            spinner_add_textf("replaced %d %d %d %d", n0 - b0, n2 - b2, n3, enc.rise_remove(p0));
+            int f_before = falls.n, gone = enc.fall_remove(pf), r3 = enc.rise_remove(p3), n3_before = n3;
+            wait(0.3);
+            spinner_add_textf("empty %d %d %d %d %d", gone, r3, falls.n - f_before, n3 - n3_before, p2 != NULL);
+            return 0;
+        }
+        """, params={"encoder_PTA13": 2, "encoder_PTA12": 2})
+    assert r.outcome == "controller_returned", r.message
+    got = numbers(r)
+    n0, n1, n2, falls, bad_order, none_null = got["chain"]
+    n_once, falls_then, same_falls = got["once"]
+    assert n_once == 1 and falls_then == same_falls
+    assert n0 > 100 and n0 == n1 == n2 and abs(falls - n0) <= 1 and bad_order == 0 and none_null == 1
+    removed, again, d0, d1, d2, bad_order = got["removed"]
+    assert removed == 1 and again == 0 and d0 > 100 and d1 == 0 and d2 == d0 and bad_order == 0
+    d0, d2, n3, p0_removed = got["replaced"]
+    assert d0 == 0 and d2 == 0 and n3 > 100 and p0_removed == 0  # rise() freed the old chain
+    gone, r3, d_falls, d3 = got["empty"][:4]
+    assert gone == 1 and r3 == 1 and d_falls == 0 and d3 == 0
