@@ -424,3 +424,40 @@ def test_mbed_2s_chains_of_handlers(tmp_path):
     assert d0 == 0 and d2 == 0 and n3 > 100 and p0_removed == 0  # rise() freed the old chain
     gone, r3, d_falls, d3 = got["empty"][:4]
     assert gone == 1 and r3 == 1 and d_falls == 0 and d3 == 0
+
+
+@pytest.mark.parametrize("counting, per_line", [("x2", 2), ("x1", 1)])
+def test_the_index_is_one_count_of_a_coarser_counter_wide(tmp_path, counting, per_line):
+    """A 20-line encoder counted x2 (x1): at every tick the index reads high exactly while the
+    count is a whole revolution (40, 20 counts) from the start, and its rises are the revolutions
+    reached."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn z(PTD2);
+        volatile int rises, wrong, high;
+        volatile long long count;
+        Ticker check;
+        void each_tick() {
+            count = spinner_get_encoder(SPINNER_WHEEL_RR);
+            int at_rev = count % PER_REV == 0;
+            if (z.read() != at_rev) wrong++;
+            high += at_rev;
+        }
+        int main() {
+            TFC_Init();
+            z.rise([] { rises++; });
+            check.attach_us(&each_tick, 1000);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(1.5);
+            spinner_add_textf("z %d %d %d %lld", rises, wrong, high, count);
+            return 0;
+        }
+        """.replace("PER_REV", str(20 * per_line)), params={"encoder_z_PTD2": 3},
+        car=f'[encoders]\ncounting = "{counting}"\nlines_per_rev = 20\n')
+    assert r.outcome == "controller_returned", r.message
+    rises, wrong, high, count = numbers(r)["z"]
+    assert count > 3 * 20 * per_line and rises == count // (20 * per_line)
+    assert wrong == 0 and high > 0
