@@ -205,8 +205,9 @@ def test_an_unbound_pin_never_fires_and_reads_its_level(tmp_path):
     assert r.outcome == "controller_returned", r.message
     assert numbers(r)["free"] == [0, 1, 0]
     assert [w for w in r.warnings if w.startswith("InterruptIn")] == [  # said once a pin
-        f"InterruptIn on {pin}: its handler never runs: no --param encoder_{pin}=W (or encoder_b_{pin}=W) "
-        "puts a wheel's encoder channel on the pin (docs/firmware.md, --kit tfc-mbed)" for pin in ("PTA5", "PTD3")]
+        f"InterruptIn on {pin}: its handler never runs: no --param encoder_{pin}=W (or encoder_b_{pin}=W, "
+        f"encoder_z_{pin}=W) puts a wheel's encoder channel on the pin (docs/firmware.md, --kit tfc-mbed)"
+        for pin in ("PTA5", "PTD3")]
 
 
 @pytest.mark.parametrize("line, params, car, words", [
@@ -222,6 +223,13 @@ def test_an_unbound_pin_never_fires_and_reads_its_level(tmp_path):
      "InterruptIn::rise: --param encoder_PTA13 and encoder_b_PTA13: a pin carries one channel"),
     ("InterruptIn w(PTC13);", {}, ENCODERS,
      "InterruptIn::rise: PTC13: the KL25Z's pins interrupt on ports A and D only"),
+    ("InterruptIn w(PTC5);", {"encoder_z_PTC5": 2}, ENCODERS,
+     "InterruptIn::rise: PTC5: the KL25Z's pins interrupt on ports A and D only"),
+    ("InterruptIn w(PTD7);", {"encoder_z_PTD7": 2, "encoder_b_PTD7": 2}, ENCODERS,
+     "InterruptIn::rise: --param encoder_b_PTD7 and encoder_z_PTD7: a pin carries one channel"),
+    ("InterruptIn w(PTA13);", {"encoder_z_PTA13": 2}, '[encoders]\ncounting = "single"\n',
+     "InterruptIn::rise: --param encoder_z_PTA13: the index channel needs the wheel's angle, which a "
+     "one-channel counter does not keep"),
 ])
 def test_bad_bindings_end_the_run_at_the_programs_call(tmp_path, line, params, car, words):
     r = run(tmp_path, f"""\
@@ -292,3 +300,164 @@ def test_an_interruptin_deleted_in_its_handler_leaves_the_others_their_edges_in_
     assert r.outcome == "controller_returned", r.message
     nb, nc, nd, order_ok, deleted = numbers(r)["edges"]
     assert nb > 10 and nc == nb and nd == 0 and order_ok == 1 and deleted == 1
+
+
+def test_the_index_channel_rises_once_a_revolution_either_way_as_qei_counts_it(tmp_path):
+    """Forwards 2 s, backwards 2 s, RL's index channel on PTA13 (--param encoder_z_PTA13): its
+    rises are the revolutions the x4 count passed (the index is high at counts 0, 2048, ... mod
+    512 lines x 4: it rises as the count comes to one, forwards or backwards), QEI's
+    getRevolutions() with its index pin counts the same, each rise comes while channels A and B are
+    both low (the gated index of a datasheet) and read() is 1 in the rise's handler, 0 in the
+    fall's."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "QEI.h"
+        #include "spinner.h"
+        InterruptIn z(PTA13), channel_a(PTD4), channel_b(PTD5);
+        QEI qei(PTA1, PTA2, PTA13, 512, QEI::X4_ENCODING);   // RL
+        volatile int rises, falls, not_low, wrong_level;
+        Ticker snapshot;
+        volatile int at_rises, at_falls, at_revs, turns;
+        volatile long long at_count, peak = -1000000, dir;
+        void take() {  // every tick, after its edges' handlers
+            long long count = spinner_get_encoder(SPINNER_WHEEL_RL);
+            if ((count - at_count) * dir < 0) turns++;
+            if (count != at_count) dir = count - at_count;
+            if (count > peak) peak = count;
+            at_rises = rises, at_falls = falls, at_revs = qei.getRevolutions(), at_count = count;
+        }
+        int main() {
+            TFC_Init();
+            z.rise([] {
+                rises++;
+                if (channel_a.read() || channel_b.read()) not_low++;
+                if (z.read() != 1) wrong_level++;
+            });
+            z.fall([] { falls++; if (z.read() != 0) wrong_level++; });
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.35f, 0.35f);
+            snapshot.attach_us(&take, 1000);
+            wait(2.2);
+            spinner_add_textf("fwd %d %d %d %lld", at_rises, at_falls, at_revs, at_count);
+            TFC_SetMotorPWM(-0.45f, -0.45f);
+            wait(2.5);
+            spinner_add_textf("back %d %d %d %lld", at_rises, at_falls, at_revs, at_count);
+            spinner_add_textf("checks %d %d %d %lld", not_low, wrong_level, turns, peak);
+            return 0;
+        }
+        """, params={"encoder_z_PTA13": 2, "encoder_PTD4": 2, "encoder_b_PTD5": 2}, time_limit_s=6.0)
+    assert r.outcome == "controller_returned", r.message
+    got = numbers(r)
+    per_rev = 512 * 4
+    rises_f, falls_f, revs_f, count_f = got["fwd"]
+    rises_b, falls_b, revs_b, count_b = got["back"]
+    not_low, wrong_level, turns, peak = got["checks"]
+    assert turns == 1  # up to the peak, then down
+    assert count_f > 3 * per_rev and count_b < peak - 2 * per_rev  # 3+ turns forwards, 2+ back
+    assert rises_f == count_f // per_rev and revs_f == rises_f  # from 0: 2048, 4096, ... reached
+    back_rises = (peak - 1) // per_rev - (count_b - 1) // per_rev  # reached from above
+    assert rises_b == peak // per_rev + back_rises and revs_b == rises_b
+    assert abs(back_rises - (peak - count_b) / per_rev) <= 1  # the whole revolutions back
+    assert abs(rises_b - falls_b) <= 1
+    assert not_low == 0 and wrong_level == 0
+
+
+def test_mbed_2s_chains_of_handlers(tmp_path):
+    """mbed 2's rise_add / rise_add_front / rise_remove (and fall's): the handlers of one edge run in
+    the chain's order (the front one first) at every edge; rise_remove of one stops it (a second
+    remove of it is false) and leaves the others, also from inside the chain (the next one still
+    runs that edge: the falls match another InterruptIn's on the same channel); rise() replaces the
+    chain; removing the last handler stops the edge's interrupt; rise_add(NULL) adds nothing."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn enc(PTA13), same(PTA12);
+        pFunctionPointer_t p_once;
+        volatile int n_once, same_falls;
+        void once() { n_once++; enc.fall_remove(p_once); }
+        volatile int seq, bad_order, n1, n2, n0, n3, before_second = 2;
+        void first() { n1++; if (seq != 1) bad_order++; seq = 2; }
+        void second() { n2++; if (seq != before_second) bad_order++; seq = 0; }
+        void front() { n0++; if (seq != 0) bad_order++; seq = 1; }
+        void alone() { n3++; }
+        struct Falls { int n = 0; void on_fall() { n++; } } falls;
+        int main() {
+            TFC_Init();
+            pFunctionPointer_t p1 = enc.rise_add(&first);
+            pFunctionPointer_t p2 = enc.rise_add(&second);
+            pFunctionPointer_t p0 = enc.rise_add_front(&front);
+            pFunctionPointer_t pf = enc.fall_add(&falls, &Falls::on_fall);
+            p_once = enc.fall_add_front(&once);
+            same.fall([] { same_falls++; });
+            pFunctionPointer_t none = enc.rise_add(NULL);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(0.3);
+            spinner_add_textf("chain %d %d %d %d %d %d", n0, n1, n2, falls.n, bad_order, none == NULL);
+            spinner_add_textf("once %d %d %d", n_once, falls.n, same_falls);
+            int removed = enc.rise_remove(p1), again = enc.rise_remove(p1);
+            before_second = 1;  // front() now hands over to second()
+            int b0 = n0, b1 = n1, b2 = n2;
+            wait(0.3);
+            spinner_add_textf("removed %d %d %d %d %d %d", removed, again, n0 - b0, n1 - b1, n2 - b2, bad_order);
+            pFunctionPointer_t p3 = enc.rise(&alone);
+            b0 = n0, b2 = n2;
+            wait(0.3);
+            spinner_add_textf("replaced %d %d %d %d", n0 - b0, n2 - b2, n3, enc.rise_remove(p0));
+            int f_before = falls.n, gone = enc.fall_remove(pf), r3 = enc.rise_remove(p3), n3_before = n3;
+            wait(0.3);
+            spinner_add_textf("empty %d %d %d %d %d", gone, r3, falls.n - f_before, n3 - n3_before, p2 != NULL);
+            return 0;
+        }
+        """, params={"encoder_PTA13": 2, "encoder_PTA12": 2})
+    assert r.outcome == "controller_returned", r.message
+    got = numbers(r)
+    n0, n1, n2, falls, bad_order, none_null = got["chain"]
+    n_once, falls_then, same_falls = got["once"]
+    assert n_once == 1 and falls_then == same_falls
+    assert n0 > 100 and n0 == n1 == n2 and abs(falls - n0) <= 1 and bad_order == 0 and none_null == 1
+    removed, again, d0, d1, d2, bad_order = got["removed"]
+    assert removed == 1 and again == 0 and d0 > 100 and d1 == 0 and d2 == d0 and bad_order == 0
+    d0, d2, n3, p0_removed = got["replaced"]
+    assert d0 == 0 and d2 == 0 and n3 > 100 and p0_removed == 0  # rise() freed the old chain
+    gone, r3, d_falls, d3 = got["empty"][:4]
+    assert gone == 1 and r3 == 1 and d_falls == 0 and d3 == 0
+
+
+@pytest.mark.parametrize("counting, per_line", [("x2", 2), ("x1", 1)])
+def test_the_index_is_one_count_of_a_coarser_counter_wide(tmp_path, counting, per_line):
+    """A 20-line encoder counted x2 (x1): at every tick the index reads high exactly while the
+    count is a whole revolution (40, 20 counts) from the start, and its rises are the revolutions
+    reached."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn z(PTD2);
+        volatile int rises, wrong, high;
+        volatile long long count;
+        Ticker check;
+        void each_tick() {
+            count = spinner_get_encoder(SPINNER_WHEEL_RR);
+            int at_rev = count % PER_REV == 0;
+            if (z.read() != at_rev) wrong++;
+            high += at_rev;
+        }
+        int main() {
+            TFC_Init();
+            z.rise([] { rises++; });
+            check.attach_us(&each_tick, 1000);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(1.5);
+            spinner_add_textf("z %d %d %d %lld", rises, wrong, high, count);
+            return 0;
+        }
+        """.replace("PER_REV", str(20 * per_line)), params={"encoder_z_PTD2": 3},
+        car=f'[encoders]\ncounting = "{counting}"\nlines_per_rev = 20\n')
+    assert r.outcome == "controller_returned", r.message
+    rises, wrong, high, count = numbers(r)["z"]
+    assert count > 3 * 20 * per_line and rises == count // (20 * per_line)
+    assert wrong == 0 and high > 0

@@ -6,12 +6,19 @@
  *   no other port; mbed's KL25Z gpio_irq_api.c stops with "gpio_irq only supported on port A and
  *   D"): an InterruptIn on another port ends the run at the program's first call to it;
  * - what is on a pin: --param encoder_PTxN=W puts channel A of wheel W's encoder (0..3: FL, FR,
- *   RL, RR; the car file's [encoders]) on pin PTxN, encoder_b_PTxN=W its channel B. The car's
- *   counter gives the wheel's position: counting x4 (the default) in quarter lines, both
- *   channels' levels (the sequence 00 01 11 10 of (A, B) counting up, as QEI.h's state); x2 in
- *   half lines, channel A's; x1 and single in lines: each line is a rise and a fall of channel A
- *   (its level between them is not known: it reads 0). Any other pin keeps its level (DigitalIn's
- *   --param digital_PTxN): it gives no edges;
+ *   RL, RR; the car file's [encoders]) on pin PTxN, encoder_b_PTxN=W its channel B,
+ *   encoder_z_PTxN=W its index channel Z. The car's counter gives the wheel's position: counting x4
+ *   (the default) in quarter lines, both channels' levels (the sequence 00 01 11 10 of (A, B)
+ *   counting up, as QEI.h's state); x2 in half lines, channel A's; x1 and single in lines: each
+ *   line is a rise and a fall of channel A (its level between them is not known: it reads 0). The
+ *   index is high once a revolution, at the wheel's angle at the start (count 0 and every lines x
+ *   counts-a-line after), for one count of the counter: at x4 the quarter line where A and B are
+ *   both low, as an incremental encoder's gated index (US Digital EM2 datasheet, "Encoding
+ *   characteristics": "The index output goes high once per revolution, coincident with the low
+ *   states of channels A and B, nominally 1/4 of one cycle (90 °e)", Po 40..135 °e); at x2 the half
+ *   line where A is low (180 °e), at x1 the whole line (360 °e); QEI.h's getRevolutions() counts its
+ *   rises (../sensors.cpp). A one-channel counter (single) counts without direction: no index.
+ *   Any other pin keeps its level (DigitalIn's --param digital_PTxN): it gives no edges;
  * - when: at each tick of the kit's 1-kHz clock, before the Tickers due then, the handlers of the
  *   edges of the millisecond gone run in the order they fell (wheel by wheel, FL to RR; the pins
  *   of one edge in the order their InterruptIns were made), each with the pin's level at its
@@ -32,6 +39,7 @@
 #define NC_PIN ((int)0xFFFFFFFF)
 
 enum { UNKNOWN = 0, FREE, ENCODER, BAD };
+enum { CHANNEL_A = 0, CHANNEL_B, CHANNEL_Z };
 
 static struct {
     struct { int state, wheel, channel; } pin[NUM_PINS];  /* what --param puts on each pin */
@@ -39,6 +47,7 @@ static struct {
     int tracked[4], seen[4];      /* a wheel whose pins are read; its count sampled once */
     long long count[4];           /* its count as the edges have got to */
     int per_line[4];              /* its counter's counts a line (4, 2, 1; 0: single) */
+    long long per_rev[4];         /* its counter's counts a revolution (lines x counts a line) */
     int disabled[5];              /* a port's interrupt disabled (disable_irq) */
     struct tfc_mbed_irq *irq[MAX_IRQS];  /* in the order they were made */
     int n_irq, hooked;
@@ -55,6 +64,12 @@ static int level_at(int m, int channel, long long c) {
     return m == 2 ? (int)(c & 1) : 0;
 }
 
+/* A pin's level on wheel w at count c: channel A's or B's, or the index's (high at counts that are
+ * whole revolutions from the start: one count of the counter a revolution). */
+static int level_of(int w, int channel, long long c) {
+    return channel == CHANNEL_Z ? c % s.per_rev[w] == 0 : level_at(s.per_line[w], channel, c);
+}
+
 static void on_edges(void);
 
 static void hook(void) {
@@ -69,37 +84,47 @@ static void resolve(int i) {
     static const char *names[4] = {"FL", "FR", "RL", "RR"};
     static const char *counting[5] = {"single", "x1", "x2", "?", "x4"};
     if (s.pin[i].state != UNKNOWN) return;
-    char a[32], b[32], fitted[16] = "";
-    snprintf(a, sizeof a, "encoder_PT%c%d", 'A' + i / 32, i % 32);
-    snprintf(b, sizeof b, "encoder_b_PT%c%d", 'A' + i / 32, i % 32);
-    double wa = spinner_param(a, -1.0), wb = spinner_param(b, -1.0);
-    if (wa < 0 && wb < 0) {
+    static const char *prefix[3] = {"encoder_", "encoder_b_", "encoder_z_"};
+    char names_of[3][32], fitted[16] = "";
+    double given[3];
+    int channel = -1, other = -1, n = 0, m = 0;
+    for (int k = 0; k < 3; k++) {  /* channel A, B, Z */
+        snprintf(names_of[k], sizeof names_of[k], "%sPT%c%d", prefix[k], 'A' + i / 32, i % 32);
+        given[k] = spinner_param(names_of[k], -1.0);
+        if (given[k] < 0) continue;
+        if (channel < 0) channel = k;
+        else if (other < 0) other = k;
+    }
+    if (channel < 0) {
         s.pin[i].state = FREE;
         return;
     }
-    const char *name = wa >= 0 ? a : b;
-    double w = wa >= 0 ? wa : wb;
-    int channel = wa < 0, n = 0, m = 0;
+    const char *name = names_of[channel];
+    double w = given[channel];
     for (int k = 0; k < 4; k++) {
         if (spinner_encoder_lines(k, NULL) == 0) continue;
         strcat(strcat(fitted, n++ ? " " : ""), names[k]);
     }
     int lines = w <= 3 && w == (int)w ? spinner_encoder_lines((int)w, &m) : 0;
     char *why = s.why[i];
-    if (wa >= 0 && wb >= 0)
-        snprintf(why, sizeof s.why[i], "--param %s and %s: a pin carries one channel", a, b);
+    if (other >= 0)
+        snprintf(why, sizeof s.why[i], "--param %s and %s: a pin carries one channel", name, names_of[other]);
     else if (n == 0)
         snprintf(why, sizeof s.why[i], "--param %s: the car has no wheel encoders: add [encoders] to the car "
                  "file (docs/car.md)", name);
     else if (lines == 0)
         snprintf(why, sizeof s.why[i], "--param %s=%g: expected a wheel with an encoder (0..3: FL, FR, RL, RR; "
                  "this car has them on %s)", name, w, fitted);
-    else if (channel == 1 && m != 4)
+    else if (channel == CHANNEL_B && m != 4)
         snprintf(why, sizeof s.why[i], "--param %s: channel B's edges need the car's counter to count both "
                  "channels (encoders.counting = \"x4\"; this car's: \"%s\")", name, counting[m]);
+    else if (channel == CHANNEL_Z && m == 0)
+        snprintf(why, sizeof s.why[i], "--param %s: the index channel needs the wheel's angle, which a "
+                 "one-channel counter does not keep (encoders.counting = \"single\" counts without "
+                 "direction): count \"x4\", \"x2\" or \"x1\"", name);
     else {
         s.pin[i].state = ENCODER, s.pin[i].wheel = (int)w, s.pin[i].channel = channel;
-        s.tracked[(int)w] = 1, s.per_line[(int)w] = m;
+        s.tracked[(int)w] = 1, s.per_line[(int)w] = m, s.per_rev[(int)w] = (long long)lines * (m ? m : 1);
         hook();
         return;
     }
@@ -123,12 +148,13 @@ static void move(int w, long long c) {
             struct tfc_mbed_irq *q = s.irq[s.at];
             int i = index_of(q->pin);
             if (i < 0 || s.pin[i].state != ENCODER || s.pin[i].wheel != w) continue;
-            if (m < 2) {  /* a line: a rise and a fall (not if the rise's handler deleted it) */
+            /* channel A counted a line at a time: a rise and a fall (not if the rise's handler deleted it) */
+            if (m < 2 && s.pin[i].channel == CHANNEL_A) {
                 edge(q, 1);
                 if (s.at >= 0 && s.irq[s.at] == q) edge(q, 0);
                 continue;
             }
-            int was = level_at(m, s.pin[i].channel, before), now = level_at(m, s.pin[i].channel, s.count[w]);
+            int was = level_of(w, s.pin[i].channel, before), now = level_of(w, s.pin[i].channel, s.count[w]);
             if (was != now) edge(q, now);
         }
     }
@@ -150,7 +176,7 @@ static int pin_level(int i) {
         if (tfc_mbed_in_isr()) sample(w);
         else while (!s.seen[w]) tfc_mbed_idle();  /* main(): the first tick that reads it */
     }
-    return level_at(s.per_line[w], s.pin[i].channel, s.count[w]);
+    return level_of(w, s.pin[i].channel, s.count[w]);
 }
 
 /* At each tick of the kit's clock: the flags of re-enabled ports, then the wheels' edges. */
@@ -215,9 +241,9 @@ void tfc_mbed_irq_set(struct tfc_mbed_irq *q, int on_rise, int on_fall, const ch
     if (i >= 0 && s.pin[i].state == FREE && (on_rise > 0 || on_fall > 0)) {  /* once per pin */
         char text[300];
         snprintf(text, sizeof text, "InterruptIn on PT%c%d: its handler never runs: no --param "
-                 "encoder_PT%c%d=W (or encoder_b_PT%c%d=W) puts a wheel's encoder channel on the pin "
-                 "(docs/firmware.md, --kit tfc-mbed)", 'A' + i / 32, i % 32, 'A' + i / 32, i % 32,
-                 'A' + i / 32, i % 32);
+                 "encoder_PT%c%d=W (or encoder_b_PT%c%d=W, encoder_z_PT%c%d=W) puts a wheel's encoder "
+                 "channel on the pin (docs/firmware.md, --kit tfc-mbed)", 'A' + i / 32, i % 32, 'A' + i / 32,
+                 i % 32, 'A' + i / 32, i % 32, 'A' + i / 32, i % 32);
         spinner_warn(text);
     }
 }

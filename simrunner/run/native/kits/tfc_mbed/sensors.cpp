@@ -48,6 +48,16 @@ static long long floor_div(long long a, long long b) {
 /* The wheel's count in pulses of x per line (counts per line m of the car's counter). */
 static long long pulses_of(long long raw, int x, int m) { return floor_div(raw * x, m); }
 
+/* The index channel's rising edges as a count moves from `from` to `to` (either way): the index is
+ * high at the counts that are whole revolutions (`per_rev` counts) from the start, one count wide
+ * (../interrupt_in.cpp, --param encoder_z_PTxN), and rises as the count comes to one: forwards at
+ * k per_rev in (from, to], backwards in [to, from). The library's index handler counts each rise,
+ * whichever way the wheel turns (QEI.cpp: index(): revolutions_++). */
+static long long index_rises(long long from, long long to, long long per_rev) {
+    return to >= from ? floor_div(to, per_rev) - floor_div(from, per_rev)
+                      : floor_div(from - 1, per_rev) - floor_div(to - 1, per_rev);
+}
+
 static int counts_per_line(int wheel) {
     int m = 0;
     spinner_encoder_lines(wheel, &m);
@@ -107,8 +117,7 @@ static void on_tick(void) {
         if (q->wheel < 0) continue;
         long long raw = s.raw[q->wheel];
         long long line = (long long)spinner_encoder_lines(q->wheel, NULL) * counts_per_line(q->wheel);
-        long long a = q->last_raw < raw ? q->last_raw : raw, b = q->last_raw < raw ? raw : q->last_raw;
-        if (q->has_index) q->revolutions += (int)(floor_div(b, line) - floor_div(a, line));  /* rising edges, either way */
+        if (q->has_index) q->revolutions += (int)index_rises(q->last_raw, raw, line);
         q->last_raw = raw;
     }
 }

@@ -13,8 +13,10 @@
  * - getPulses() counts as the library decodes the wheel's encoder: X2 two pulses a line (channel
  *   A's edges), X4 four (both channels' edges); up when the wheel rolls forwards. From the car's
  *   counter: exact when its counting is x4 (the default) or equals the encoding;
- * - getRevolutions() counts the index channel's pulses (one a turn, either way, at the wheel's angle
- *   at the start) when an index pin is given, else 0, as the library;
+ * - getRevolutions() counts the index channel's rising edges when an index pin is given, else 0, as
+ *   the library (its index pin's InterruptIn: rise -> revolutions_++): the index of --param
+ *   encoder_z_PTxN (InterruptIn.h), high for one count of the car's counter a revolution at the
+ *   wheel's angle at the start, rising as the count comes to it either way (one a turn);
  * - the counts are sampled at each tick of the kit's 1-kHz clock (the library counts in its pins'
  *   interrupts); a read is a read of the board (a loop of them lets time pass). */
 #ifndef QEI_H

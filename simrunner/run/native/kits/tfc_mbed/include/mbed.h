@@ -10,11 +10,13 @@
  * - DigitalOut, DigitalIn, BusOut, BusIn, PwmOut, AnalogIn, AnalogOut: the FRDM-TFC's pins act on
  *   the car (PTE21 the H-bridge enable, PTB8..11 the LEDs, PTC13/PTC17 the buttons, PTE2..5 the
  *   DIP switch, PTB2/PTB3 the pots, PTE29 the battery sense, a servo pulse on PTB0 steers); a pin
- *   --param encoder_PTxN=W (encoder_b_PTxN=W) gives wheel W's encoder reads its channel A (B);
+ *   --param encoder_PTxN=W (encoder_b_PTxN=W, encoder_z_PTxN=W) gives wheel W's encoder reads its
+ *   channel A (B, the index Z);
  *   other outputs keep what is written, other inputs read --param digital_PTxN / analog_PTxN;
  * - InterruptIn (InterruptIn.h): rise()/fall() handlers run as interrupts at the kit's 1-kHz ticks
  *   for the edges of the millisecond gone: an encoder's channel on a pin as above; other pins keep
- *   their level (no edges); ports A and D only, as the KL25Z.
+ *   their level (no edges); ports A and D only, as the KL25Z; mbed 2's chains of handlers
+ *   (rise_add, rise_add_front, rise_remove; CallChain, pFunctionPointer_t) too.
  * What is not here (I2C, SPI, CAN, threads, the MCU's registers) does not compile. */
 #ifndef MBED_H
 #define MBED_H
@@ -137,6 +139,83 @@ template <typename T> Callback<void()> callback(void (T::*method)(), T *obj) { r
 template <typename T> Callback<void()> callback(void (*func)(T *), T *arg) { return Callback<void()>(func, arg); }
 template <typename F, typename = decltype(&F::operator())> Callback<void()> callback(F f) { return Callback<void()>(f); }
 typedef Callback<void()> FunctionPointer;
+
+/* mbed 2's CallChain (libraries/mbed/api/CallChain.h, common/CallChain.cpp of the mbed library,
+ * github.com/ARMmbed/mbed-os history; deprecated in mbed OS 5 and removed in 6): functions called
+ * in order by call(); add() appends one, add_front() puts it first, each returning the
+ * FunctionPointer it made (pFunctionPointer_t), which remove() takes out and frees (false when it
+ * is not in the chain) and get(i) / [i] return. One of the chain's functions may remove or add
+ * functions, or delete the chain's owner: the others still run that call, none twice (mbed 2's
+ * array would skip the one after a removed one). */
+typedef FunctionPointer *pFunctionPointer_t;
+class CallChain {
+public:
+    CallChain(int size = 4) { (void)size; }
+    ~CallChain() {
+        if (alive_) *alive_ = false;  /* deleted by one of its functions: call() stops */
+        alive_ = nullptr;
+        clear();
+        free(chain_);
+    }
+    CallChain(const CallChain &) = delete;
+    CallChain &operator=(const CallChain &) = delete;
+    pFunctionPointer_t add(Callback<void()> func) { return insert(n_, func); }
+    template <typename T, typename M> pFunctionPointer_t add(T *obj, M method) { return add(Callback<void()>(obj, method)); }
+    pFunctionPointer_t add_front(Callback<void()> func) { return insert(0, func); }
+    template <typename T, typename M> pFunctionPointer_t add_front(T *obj, M method) { return add_front(Callback<void()>(obj, method)); }
+    int size() const { return n_; }
+    pFunctionPointer_t get(int i) const { return i < 0 || i >= n_ ? nullptr : chain_[i]; }
+    int find(pFunctionPointer_t f) const {
+        for (int i = 0; i < n_; i++) if (chain_[i] == f) return i;
+        return -1;
+    }
+    void clear() { while (n_) take(n_ - 1); }
+    bool remove(pFunctionPointer_t f) {
+        int i = find(f);
+        if (i < 0) return false;
+        take(i);
+        return true;
+    }
+    void call() {
+        bool alive = true, *outer = alive_;
+        int outer_at = at_;
+        alive_ = &alive;
+        for (at_ = 0; at_ < n_; at_++) {
+            FunctionPointer f = *chain_[at_];  /* a copy: the function may remove itself */
+            f.call();
+            if (!alive) {
+                if (outer) *outer = false;
+                return;
+            }
+        }
+        alive_ = outer, at_ = outer_at;
+    }
+    void operator()() { call(); }
+    pFunctionPointer_t operator[](int i) const { return get(i); }
+private:
+    pFunctionPointer_t insert(int i, Callback<void()> func) {
+        if (n_ == cap_) {
+            cap_ = cap_ ? 2 * cap_ : 4;
+            chain_ = static_cast<pFunctionPointer_t *>(realloc(chain_, (size_t)cap_ * sizeof chain_[0]));
+            if (!chain_) abort();
+        }
+        memmove(&chain_[i + 1], &chain_[i], (size_t)(n_ - i) * sizeof chain_[0]);
+        chain_[i] = new FunctionPointer(func);
+        n_++;
+        if (alive_ && i <= at_) at_++;  /* added before the one running: not called this time */
+        return chain_[i];
+    }
+    void take(int i) {
+        delete chain_[i];
+        memmove(&chain_[i], &chain_[i + 1], (size_t)(n_ - i - 1) * sizeof chain_[0]);
+        n_--;
+        if (alive_ && i <= at_) at_--;
+    }
+    pFunctionPointer_t *chain_ = nullptr;
+    int n_ = 0, cap_ = 0;
+    bool *alive_ = nullptr;  /* in call(): its flag that the chain still exists */
+    int at_ = 0;             /* in call(): the function it is at */
+};
 
 /* platform/CriticalSectionLock.h: a critical section for the object's lifetime (mbed OS 5.8+) */
 class CriticalSectionLock {

@@ -74,8 +74,9 @@ void tfc_mbed_mma_attach(void);
 int tfc_mbed_mma_counts(int axis, const char *what);  /* axis 0..2: the library's 14-bit reading */
 
 /* InterruptIn (mbed.h): a pin's edges call the program's handlers at the kit's ticks
- * (../interrupt_in.cpp). A pin given to a wheel's encoder by --param encoder_PTxN=W (channel A)
- * or encoder_b_PTxN=W (channel B) has that channel's level; other pins keep theirs. */
+ * (../interrupt_in.cpp). A pin given to a wheel's encoder by --param encoder_PTxN=W (channel A),
+ * encoder_b_PTxN=W (channel B) or encoder_z_PTxN=W (the index) has that channel's level; other
+ * pins keep theirs. */
 struct tfc_mbed_irq {
     int pin;
     int on_rise, on_fall;      /* rise()/fall() attached a handler */
