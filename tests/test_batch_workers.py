@@ -2,8 +2,11 @@
 still isolated from each other, and a worker that dies in a run reported as drive reports it."""
 from __future__ import annotations
 
+import shutil
 import textwrap
 import threading
+
+import pytest
 
 from helpers import STUCK
 
@@ -55,6 +58,33 @@ def test_warm_workers_keep_runs_isolated_and_rows_identical(tmp_path):
     assert rows[1] == rows[2]
 
 
+C_LEAKY = r"""
+#include <stdlib.h>
+#include "spinner.h"
+int main(void) {
+    spinner_sleep(0.02);
+    if (getenv("NXPCUP_C_LEAK") || !getenv("NXPCUP_C_KEEP"))
+        spinner_sleep(0.1);  /* what an earlier run left shows in this run's simulated time */
+    setenv("NXPCUP_C_LEAK", "leaked", 1);
+    unsetenv("NXPCUP_C_KEEP");
+    return 0;
+}
+"""
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_a_c_controllers_environment_does_not_reach_the_next_run(tmp_path, monkeypatch):
+    """setenv / unsetenv in a C controller (in the worker's process) change the C library's
+    environment behind os.environ: the next run of the worker saw them (rows differed between
+    1 and 2 workers)."""
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("NXPCUP_C_KEEP", "kept")
+    monkeypatch.delenv("NXPCUP_C_LEAK", raising=False)
+    ctl = tmp_path / "leaky.c"
+    ctl.write_text(C_LEAKY)
+    for workers in (1, 2):
+        res = run_batch(ctl, out_dir=tmp_path / f"w{workers}", seeds=4, workers=workers, plot=False)
+        assert [(r["outcome"], r["sim_time_s"]) for r in res.rows] == [("controller_returned", 0.02)] * 4
 
 
 def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):

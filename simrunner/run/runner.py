@@ -60,8 +60,29 @@ def default_track() -> Path:
     return _DATA_DIR / DEFAULT_TRACK_NAME
 
 
-def _restore_process_state(cwd: str, environ: dict[str, str]) -> None:
-    """The working directory and the environment as they were before the controller ran."""
+def _c_environment() -> dict[bytes, bytes] | None:
+    """The process's environment as the C library holds it (``environ``, environ(7)), which a
+    C controller's setenv / unsetenv / putenv (or Python's os.putenv) change behind
+    os.environ; None where it cannot be read."""
+    try:
+        import ctypes
+
+        env = ctypes.POINTER(ctypes.c_char_p).in_dll(ctypes.CDLL(None), "environ")
+    except (OSError, ValueError, AttributeError):  # not a POSIX C library
+        return None
+    out: dict[bytes, bytes] = {}
+    i = 0
+    while env and env[i] is not None:  # (NULL after clearenv)
+        key, sep, value = env[i].partition(b"=")
+        if sep:
+            out.setdefault(key, value)
+        i += 1
+    return out
+
+
+def _restore_process_state(cwd: str, environ: dict[str, str], c_environ: dict[bytes, bytes] | None) -> None:
+    """The working directory and the environment (os.environ and the C library's,
+    :func:`_c_environment`) as they were before the controller ran."""
     try:
         if os.getcwd() != cwd:
             os.chdir(cwd)
@@ -71,6 +92,20 @@ def _restore_process_state(cwd: str, environ: dict[str, str]) -> None:
         for key in [k for k in os.environ if k not in environ]:
             del os.environ[key]
         os.environ.update(environ)
+    now = _c_environment() if c_environ is not None else None
+    if now is None or now == c_environ:
+        return
+    for key in now.keys() - c_environ.keys():
+        try:
+            os.unsetenv(key)
+        except (OSError, ValueError):  # a name unsetenv refuses (empty, with '='): leave it
+            pass
+    for key, value in c_environ.items():
+        if now.get(key) != value:
+            try:
+                os.putenv(key, value)
+            except (OSError, ValueError):
+                pass
 
 
 # -- the run log's extra columns -------------------------------------------------------------
@@ -341,7 +376,7 @@ class Run:
             self.signal_guard.clock = clock
         # what the controller's process state was: a controller that changes directory or the
         # environment must not move this run's outputs or change the next run of a batch worker
-        cwd, environ = os.getcwd(), dict(os.environ)
+        cwd, environ, c_environ = os.getcwd(), dict(os.environ), _c_environment()
         try:
             with _gc_frozen(), watchdog, ControllerGuards(self.session):
                 try:
@@ -380,7 +415,7 @@ class Run:
             self.session.deactivate()
             if self.signal_guard is not None:
                 self.signal_guard.clock = None
-            _restore_process_state(cwd, environ)
+            _restore_process_state(cwd, environ, c_environ)
         self.wall_time_s = time.perf_counter() - wall0
         self.cpu_time_s = time.process_time() - cpu0
         if outcome not in (Outcome.CONTROLLER_ERROR, Outcome.INTERRUPTED):
