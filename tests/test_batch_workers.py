@@ -87,6 +87,41 @@ def test_a_c_controllers_environment_does_not_reach_the_next_run(tmp_path, monke
         assert [(r["outcome"], r["sim_time_s"]) for r in res.rows] == [("controller_returned", 0.02)] * 4
 
 
+UMASKED = """
+import os
+
+def main(s):
+    os.umask(0o077)  # before the first frame: the run log is created at it
+    s.get_image()
+"""
+
+
+def test_a_controllers_umask_does_not_reach_the_outputs_or_the_next_run(tmp_path):
+    """os.umask (or a C controller's umask) in a run: drive's outputs and the run logs of the
+    later runs of a batch worker were written 0600, which teammates cannot read."""
+    import os
+    import stat
+
+    from click.testing import CliRunner
+
+    from simrunner.cli import main as cli
+
+    ctl = tmp_path / "umasked.py"
+    ctl.write_text(UMASKED)
+    old = os.umask(0o022)
+    try:
+        run_batch(ctl, out_dir=tmp_path / "b", seeds=3, workers=1, csv="all", plot=False)
+        r = CliRunner().invoke(cli, ["drive", str(ctl), "--csv", str(tmp_path / "d.csv"),
+                                     "--summary", str(tmp_path / "d.json"), "--plot", str(tmp_path / "d.png")])
+        assert r.exit_code == 0, r.output
+        assert os.umask(0o022) == 0o022  # (and the caller's mask is its own again)
+    finally:
+        os.umask(old)
+    files = sorted((tmp_path / "b" / "runs").glob("*.csv")) + [tmp_path / f"d.{x}" for x in ("csv", "json", "png")]
+    assert len(files) == 6
+    assert {f.name: oct(stat.S_IMODE(f.stat().st_mode)) for f in files} == {f.name: "0o644" for f in files}
+
+
 def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):
     """The hard watchdog ends the worker; the row is drive's: outcome stalled, the
     controller's file:line, and (with its CSV) the frames and simulated time it reached."""

@@ -48,6 +48,7 @@ from simrunner.run.spinner import Session, Spinner
 from simrunner.run.supervise import current_supervision
 from simrunner.run.watchdog import Watchdog
 from simrunner.track import SimTrack
+from trackgen.outdir import process_umask
 from vehicle.description import CarDescription, load_car
 
 _DATA_DIR = Path(__file__).resolve().parent.parent / "data"
@@ -80,9 +81,13 @@ def _c_environment() -> dict[bytes, bytes] | None:
     return out
 
 
-def _restore_process_state(cwd: str, environ: dict[str, str], c_environ: dict[bytes, bytes] | None) -> None:
-    """The working directory and the environment (os.environ and the C library's,
-    :func:`_c_environment`) as they were before the controller ran."""
+def _restore_process_state(cwd: str, environ: dict[str, str], c_environ: dict[bytes, bytes] | None,
+                           umask: int) -> None:
+    """The working directory, the file-creation mask (the outputs' permissions) and the
+    environment (os.environ and the C library's, :func:`_c_environment`) as they were before
+    the controller ran."""
+    if process_umask() != umask:
+        os.umask(umask)
     try:
         if os.getcwd() != cwd:
             os.chdir(cwd)
@@ -374,9 +379,10 @@ class Run:
         self.session.activate()
         if self.signal_guard is not None:
             self.signal_guard.clock = clock
-        # what the controller's process state was: a controller that changes directory or the
-        # environment must not move this run's outputs or change the next run of a batch worker
-        cwd, environ, c_environ = os.getcwd(), dict(os.environ), _c_environment()
+        # what the controller's process state was: a controller that changes directory, the
+        # environment or the umask must not move this run's outputs, change their permissions
+        # or change the next run of a batch worker
+        cwd, environ, c_environ, umask = os.getcwd(), dict(os.environ), _c_environment(), process_umask()
         try:
             with _gc_frozen(), watchdog, ControllerGuards(self.session):
                 try:
@@ -415,7 +421,7 @@ class Run:
             self.session.deactivate()
             if self.signal_guard is not None:
                 self.signal_guard.clock = None
-            _restore_process_state(cwd, environ, c_environ)
+            _restore_process_state(cwd, environ, c_environ, umask)
         self.wall_time_s = time.perf_counter() - wall0
         self.cpu_time_s = time.process_time() - cpu0
         if outcome not in (Outcome.CONTROLLER_ERROR, Outcome.INTERRUPTED):
