@@ -258,3 +258,52 @@ def test_a_stopped_batch_keeps_its_finished_runs(tmp_path, sig):
     else:
         rows = partial.read_text().splitlines()
         assert len(rows) >= 3 and rows[0].startswith("run,")
+
+
+def _session_processes(sid: int) -> list[int]:
+    """The pids of the living (not zombie) processes of session ``sid`` (Linux /proc)."""
+    pids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue  # ended meanwhile
+        if int(fields[3]) == sid and fields[0] != "Z":
+            pids.append(int(stat.parent.name))
+    return pids
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_the_workers_of_a_batch_killed_alone_end_with_it(tmp_path):
+    """kill -9 of the batch process alone (the out-of-memory killer, `timeout -s KILL`, a
+    `kill -9 PID`) left its workers running their runs and then waiting for work forever (a
+    forked worker holds both ends of its pipe, so it never reads an end of file)."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    ctrl = tmp_path / "busy.py"
+    ctrl.write_text("import os\ndef main(s):\n    open(f'started.{os.getpid()}', 'w').close()\n"
+                    "    while True:\n        pass\n")
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    proc = subprocess.Popen([sys.executable, "-c", "from simrunner.cli import main; main()", "batch", str(ctrl),
+                             "--seeds", "2", "--workers", "2", "--wall-limit", "300", "--no-plot",
+                             "-o", str(tmp_path / "out")], cwd=tmp_path, env=env, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(tmp_path.glob("started.*"))) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.05)
+        assert len(list(tmp_path.glob("started.*"))) == 2 and proc.poll() is None
+        proc.kill()  # the batch process only, not its group
+        proc.wait(timeout=30)
+        deadline = time.monotonic() + 10
+        while _session_processes(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _session_processes(proc.pid) == []
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # what is left of it
+        except ProcessLookupError:
+            pass

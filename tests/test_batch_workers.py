@@ -2,8 +2,11 @@
 still isolated from each other, and a worker that dies in a run reported as drive reports it."""
 from __future__ import annotations
 
+import shutil
 import textwrap
 import threading
+
+import pytest
 
 from helpers import STUCK
 
@@ -55,6 +58,68 @@ def test_warm_workers_keep_runs_isolated_and_rows_identical(tmp_path):
     assert rows[1] == rows[2]
 
 
+C_LEAKY = r"""
+#include <stdlib.h>
+#include "spinner.h"
+int main(void) {
+    spinner_sleep(0.02);
+    if (getenv("NXPCUP_C_LEAK") || !getenv("NXPCUP_C_KEEP"))
+        spinner_sleep(0.1);  /* what an earlier run left shows in this run's simulated time */
+    setenv("NXPCUP_C_LEAK", "leaked", 1);
+    unsetenv("NXPCUP_C_KEEP");
+    return 0;
+}
+"""
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_a_c_controllers_environment_does_not_reach_the_next_run(tmp_path, monkeypatch):
+    """setenv / unsetenv in a C controller (in the worker's process) change the C library's
+    environment behind os.environ: the next run of the worker saw them (rows differed between
+    1 and 2 workers)."""
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("NXPCUP_C_KEEP", "kept")
+    monkeypatch.delenv("NXPCUP_C_LEAK", raising=False)
+    ctl = tmp_path / "leaky.c"
+    ctl.write_text(C_LEAKY)
+    for workers in (1, 2):
+        res = run_batch(ctl, out_dir=tmp_path / f"w{workers}", seeds=4, workers=workers, plot=False)
+        assert [(r["outcome"], r["sim_time_s"]) for r in res.rows] == [("controller_returned", 0.02)] * 4
+
+
+UMASKED = """
+import os
+
+def main(s):
+    os.umask(0o077)  # before the first frame: the run log is created at it
+    s.get_image()
+"""
+
+
+def test_a_controllers_umask_does_not_reach_the_outputs_or_the_next_run(tmp_path):
+    """os.umask (or a C controller's umask) in a run: drive's outputs and the run logs of the
+    later runs of a batch worker were written 0600, which teammates cannot read."""
+    import os
+    import stat
+
+    from click.testing import CliRunner
+
+    from simrunner.cli import main as cli
+
+    ctl = tmp_path / "umasked.py"
+    ctl.write_text(UMASKED)
+    old = os.umask(0o022)
+    try:
+        run_batch(ctl, out_dir=tmp_path / "b", seeds=3, workers=1, csv="all", plot=False)
+        r = CliRunner().invoke(cli, ["drive", str(ctl), "--csv", str(tmp_path / "d.csv"),
+                                     "--summary", str(tmp_path / "d.json"), "--plot", str(tmp_path / "d.png")])
+        assert r.exit_code == 0, r.output
+        assert os.umask(0o022) == 0o022  # (and the caller's mask is its own again)
+    finally:
+        os.umask(old)
+    files = sorted((tmp_path / "b" / "runs").glob("*.csv")) + [tmp_path / f"d.{x}" for x in ("csv", "json", "png")]
+    assert len(files) == 6
+    assert {f.name: oct(stat.S_IMODE(f.stat().st_mode)) for f in files} == {f.name: "0o644" for f in files}
 
 
 def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):

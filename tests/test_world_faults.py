@@ -452,3 +452,79 @@ def test_a_compressed_mesh_is_held_to_the_size_limit_of_what_it_holds(tmp_path):
         z.writestr("lane.stl", b"\0" * (MAX_MESH_BYTES + 1))
     with pytest.raises(WorldError, match=r"lane.zip: zip mesh holds 32.0 MiB"):
         read_triangles(tmp_path / "lane.zip")
+
+
+def _zip_bytes(members: dict[str, bytes], method: int | None = None) -> bytes:
+    import io
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED if method is None else method) as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return buf.getvalue()
+
+
+def test_a_zip_inside_a_compressed_mesh_is_held_to_the_limit_and_named_as_the_world_names_it(tmp_path):
+    """lane.zip.bz2: the zip came out of the bz2 within the limit but was then read as it was,
+    its members inflated whole (a 1 MB zip held 1 GiB: 3 GB and 10 s in `validate`); a fault
+    in what the bz2 holds was named by a temporary file's path."""
+    import bz2
+    import gzip
+
+    from worlds.mesh_read import MAX_MESH_BYTES, read_triangles
+
+    (tmp_path / "lane.zip.bz2").write_bytes(bz2.compress(_zip_bytes({"lane.stl": b"\0" * (MAX_MESH_BYTES + 1)})))
+    with pytest.raises(WorldError, match=r"^\S*/lane\.zip\.bz2: zip mesh holds 32\.0 MiB: at most 32 MiB are read$"):
+        read_triangles(tmp_path / "lane.zip.bz2")
+    (tmp_path / "lane.stl.gz.bz2").write_bytes(bz2.compress(gzip.compress(b"solid x\nendsolid x\n")))
+    with pytest.raises(WorldError, match=r"^\S*/lane\.stl\.gz\.bz2: a mesh compressed twice \(\.gz inside \.bz2\): "
+                                         r"expected one compression$"):
+        read_triangles(tmp_path / "lane.stl.gz.bz2")
+    (tmp_path / "lane.obj.bz2").write_bytes(bz2.compress(b"v 0 0 0\nv 1 0 0\nf 1 2 9\n"))
+    with pytest.raises(WorldError, match=r"^\S*/lane\.obj\.bz2: ") as err:
+        read_triangles(tmp_path / "lane.obj.bz2")
+    assert "nxpcup-mesh-" not in str(err.value)
+
+
+def test_a_zip_whose_directory_understates_a_member_is_refused_without_inflating_it(tmp_path):
+    """A zip's directory can state any size: a member of 128 MiB stated as 1000 bytes passed the
+    limit and was inflated whole before its CRC failed (memory up to ~1000 x the zip's size)."""
+    import struct
+    import tracemalloc
+    import zipfile
+
+    from worlds.mesh_read import read_triangles
+
+    data = bytearray(_zip_bytes({"lane.stl": b"\0" * (128 * 2**20)}))
+    for sig, at in ((b"PK\x03\x04", 22), (b"PK\x01\x02", 24)):  # local header, directory entry
+        i = data.index(sig)
+        data[i + at:i + at + 4] = struct.pack("<I", 1000)
+    (tmp_path / "lane.zip").write_bytes(bytes(data))
+    assert zipfile.ZipFile(tmp_path / "lane.zip").infolist()[0].file_size == 1000
+    tracemalloc.start()
+    try:
+        with pytest.raises(WorldError, match="Bad CRC-32 for file 'lane.stl'") as err:
+            read_triangles(tmp_path / "lane.zip")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20, peak  # bytes; it was the whole 128 MiB and more
+    assert str(err.value) == f"{tmp_path / 'lane.zip'}: cannot read zip mesh (Bad CRC-32 for file 'lane.stl')"
+
+
+def test_a_zip_member_compressed_otherwise_than_deflate_is_refused(tmp_path):
+    """zipfile inflates a bzip2 or lzma member without a bound per read (4 kB of bzip2 can
+    hold gigabytes), so a member whose directory understates it could not be checked."""
+    import zipfile
+
+    from trackgen.meshes import SlabMesh, stl_bytes
+    from worlds.mesh_read import read_triangles
+
+    tri = stl_bytes(SlabMesh(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([[0, 1, 2]])))
+    (tmp_path / "ok.zip").write_bytes(_zip_bytes({"lane.stl": tri}))
+    assert read_triangles(tmp_path / "ok.zip").shape == (1, 3, 3)
+    (tmp_path / "lane.zip").write_bytes(_zip_bytes({"lane.stl": tri}, zipfile.ZIP_BZIP2))
+    with pytest.raises(WorldError, match=r"lane\.zip: zip mesh member 'lane\.stl' is compressed with bzip2: "
+                                         r"expected deflate or stored \(zip it again\)$"):
+        read_triangles(tmp_path / "lane.zip")

@@ -38,11 +38,11 @@ def make_temp(out_dir: Path, suffix: str = ".tmp") -> Path:
     not read the output swapped in from it)."""
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.{_TAG}-{os.getpid()}-", suffix=suffix,
                                 dir=out_dir.parent))
-    os.chmod(tmp, 0o777 & ~_umask())
+    os.chmod(tmp, 0o777 & ~process_umask())
     return tmp
 
 
-def _umask() -> int:
+def process_umask() -> int:
     """This process's file-creation mask: from /proc (Linux 4.7+: no change to the mask, which
     other threads may be using), else by setting it and setting it back."""
     try:

@@ -16,8 +16,9 @@ frame:
   which becomes one line;
 
 and refuses files over :data:`MAX_MESH_BYTES` (of what a compressed mesh, ``.stl.bz2``,
-``.gz``, ``.xz`` or a ``.zip``, holds too), meshes with no triangles and non-finite
-coordinates. :func:`scene_triangles` reads every visual and collision of a
+``.gz``, ``.xz`` or a ``.zip``, holds too: a zip's members as they inflate, not only as its
+directory states them; a mesh compressed twice is refused), meshes with no triangles and
+non-finite coordinates. :func:`scene_triangles` reads every visual and collision of a
 ``worlds.sdf_read.Scene`` (a file used twice is read once), applies ``<scale>`` and the
 pose, and bounds the whole world: at most :data:`MAX_WORLD_TRIANGLES` triangles, all within
 :data:`MAX_EXTENT_M` of each other in x and y (a raster of the track at 5 mm per pixel is
@@ -43,6 +44,7 @@ MAX_EXTENT_M = 50.0  # x and y span of all meshes of a world (NXP's tracks: 7 m 
 
 _STL_HEADER_BYTES = 84
 _COMPRESSED = {".bz2": bz2.open, ".gz": gzip.open, ".xz": lzma.open}  # a mesh compressed whole
+_ZIP_PIECE_BYTES = 1 << 20  # a zip member is inflated at most this much at a time to check it
 _STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _VERTEX = re.compile(rf"^\s*vertex\s+({_NUMBER})\s+({_NUMBER})\s+({_NUMBER})\s*$", re.IGNORECASE)
@@ -177,27 +179,49 @@ def _read_compressed(path: Path) -> np.ndarray:
     inner = Path(path.stem)
     if inner.suffix.lower() == ".stl":
         return _read_stl(path, data)
+    if inner.suffix.lower() in _COMPRESSED:
+        raise WorldError(f"{path}: a mesh compressed twice ({inner.suffix} inside {path.suffix}): "
+                         "expected one compression")
     import tempfile
 
     with tempfile.TemporaryDirectory(prefix="nxpcup-mesh-") as tmp:
         plain = Path(tmp) / inner.name
         plain.write_bytes(data)
-        return _read_other(plain)
+        try:
+            if inner.suffix.lower() == ".zip":  # a zip holds more than itself: its own limit
+                _check_zip(plain)
+            return _read_other(plain)
+        except WorldError as exc:  # named as the world names it, not by the temporary copy
+            raise WorldError(str(exc).replace(str(plain), str(path), 1)) from None
 
 
 def _check_zip(path: Path) -> None:
-    """A zip archive's members hold at most MAX_MESH_BYTES together (read from its directory
-    before anything is inflated)."""
+    """A zip archive's members hold at most MAX_MESH_BYTES together: the sizes its directory
+    states, checked before anything is inflated; then each member inflated in pieces of
+    _ZIP_PIECE_BYTES, which zipfile ends at the stated size with a CRC check, so a directory
+    that understates a member is refused in bounded memory before the mesh reader inflates
+    it whole. Members are stored or deflated only: zipfile inflates a bzip2 or lzma member
+    without a bound on one read (Python's zipfile.ZipExtFile._read1)."""
     import zipfile
+    import zlib
 
     try:
         with zipfile.ZipFile(path) as z:
-            total = sum(info.file_size for info in z.infolist())
-    except (OSError, zipfile.BadZipFile) as exc:
+            infos = z.infolist()
+            total = sum(info.file_size for info in infos)
+            if total > MAX_MESH_BYTES:
+                raise WorldError(f"{path}: zip mesh holds {total / 2**20:.1f} MiB: at most "
+                                 f"{MAX_MESH_BYTES // 2**20} MiB are read")
+            for info in infos:
+                if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
+                    method = zipfile.compressor_names.get(info.compress_type, f"method {info.compress_type}")
+                    raise WorldError(f"{path}: zip mesh member {info.filename!r} is compressed with "
+                                     f"{method}: expected deflate or stored (zip it again)")
+                with z.open(info) as member:
+                    while member.read(_ZIP_PIECE_BYTES):
+                        pass
+    except (OSError, EOFError, RuntimeError, zipfile.BadZipFile, zlib.error) as exc:  # RuntimeError: encrypted
         raise WorldError(f"{path}: cannot read zip mesh ({exc})") from None
-    if total > MAX_MESH_BYTES:
-        raise WorldError(f"{path}: zip mesh holds {total / 2**20:.1f} MiB: at most "
-                         f"{MAX_MESH_BYTES // 2**20} MiB are read")
 
 
 def _read_other(path: Path) -> np.ndarray:

@@ -48,6 +48,7 @@ from simrunner.run.spinner import Session, Spinner
 from simrunner.run.supervise import current_supervision
 from simrunner.run.watchdog import Watchdog
 from simrunner.track import SimTrack
+from trackgen.outdir import process_umask
 from vehicle.description import CarDescription, load_car
 
 _DATA_DIR = Path(__file__).resolve().parent.parent / "data"
@@ -60,8 +61,33 @@ def default_track() -> Path:
     return _DATA_DIR / DEFAULT_TRACK_NAME
 
 
-def _restore_process_state(cwd: str, environ: dict[str, str]) -> None:
-    """The working directory and the environment as they were before the controller ran."""
+def _c_environment() -> dict[bytes, bytes] | None:
+    """The process's environment as the C library holds it (``environ``, environ(7)), which a
+    C controller's setenv / unsetenv / putenv (or Python's os.putenv) change behind
+    os.environ; None where it cannot be read."""
+    try:
+        import ctypes
+
+        env = ctypes.POINTER(ctypes.c_char_p).in_dll(ctypes.CDLL(None), "environ")
+    except (OSError, ValueError, AttributeError):  # not a POSIX C library
+        return None
+    out: dict[bytes, bytes] = {}
+    i = 0
+    while env and env[i] is not None:  # (NULL after clearenv)
+        key, sep, value = env[i].partition(b"=")
+        if sep:
+            out.setdefault(key, value)
+        i += 1
+    return out
+
+
+def _restore_process_state(cwd: str, environ: dict[str, str], c_environ: dict[bytes, bytes] | None,
+                           umask: int) -> None:
+    """The working directory, the file-creation mask (the outputs' permissions) and the
+    environment (os.environ and the C library's, :func:`_c_environment`) as they were before
+    the controller ran."""
+    if process_umask() != umask:
+        os.umask(umask)
     try:
         if os.getcwd() != cwd:
             os.chdir(cwd)
@@ -71,6 +97,20 @@ def _restore_process_state(cwd: str, environ: dict[str, str]) -> None:
         for key in [k for k in os.environ if k not in environ]:
             del os.environ[key]
         os.environ.update(environ)
+    now = _c_environment() if c_environ is not None else None
+    if now is None or now == c_environ:
+        return
+    for key in now.keys() - c_environ.keys():
+        try:
+            os.unsetenv(key)
+        except (OSError, ValueError):  # a name unsetenv refuses (empty, with '='): leave it
+            pass
+    for key, value in c_environ.items():
+        if now.get(key) != value:
+            try:
+                os.putenv(key, value)
+            except (OSError, ValueError):
+                pass
 
 
 # -- the run log's extra columns -------------------------------------------------------------
@@ -339,9 +379,10 @@ class Run:
         self.session.activate()
         if self.signal_guard is not None:
             self.signal_guard.clock = clock
-        # what the controller's process state was: a controller that changes directory or the
-        # environment must not move this run's outputs or change the next run of a batch worker
-        cwd, environ = os.getcwd(), dict(os.environ)
+        # what the controller's process state was: a controller that changes directory, the
+        # environment or the umask must not move this run's outputs, change their permissions
+        # or change the next run of a batch worker
+        cwd, environ, c_environ, umask = os.getcwd(), dict(os.environ), _c_environment(), process_umask()
         try:
             with _gc_frozen(), watchdog, ControllerGuards(self.session):
                 try:
@@ -380,7 +421,7 @@ class Run:
             self.session.deactivate()
             if self.signal_guard is not None:
                 self.signal_guard.clock = None
-            _restore_process_state(cwd, environ)
+            _restore_process_state(cwd, environ, c_environ, umask)
         self.wall_time_s = time.perf_counter() - wall0
         self.cpu_time_s = time.process_time() - cpu0
         if outcome not in (Outcome.CONTROLLER_ERROR, Outcome.INTERRUPTED):

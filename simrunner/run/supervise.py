@@ -142,7 +142,7 @@ def _pass_on(pid: int, signum: int) -> None:
 def _child(child: Callable[[], int], report: IO[str], csv_path: Path) -> None:
     code = 1
     try:
-        _die_with_parent()
+        die_with_parent()
         with supervised_by(Supervision(report, csv_path)):
             code = child()
     except SystemExit as exc:
@@ -161,8 +161,10 @@ def _child(child: Callable[[], int], report: IO[str], csv_path: Path) -> None:
         os._exit(code)
 
 
-def _die_with_parent() -> None:
-    """Linux: the kernel sends SIGKILL to this process when its parent dies."""
+def die_with_parent() -> None:
+    """Linux: the kernel sends SIGKILL to this process when its parent dies (``drive``'s run
+    process, a batch worker: a supervisor or batch killed by SIGKILL leaves nothing running;
+    prctl(2), PR_SET_PDEATHSIG: sent when the parent's thread that started this process ends)."""
     try:
         import ctypes
 
@@ -174,5 +176,5 @@ def _die_with_parent() -> None:
         os._exit(1)
 
 
-__all__ = ["ChildEnd", "Supervision", "can_supervise", "current_supervision", "remove_temporary",
-           "supervise", "supervised_by"]
+__all__ = ["ChildEnd", "Supervision", "can_supervise", "current_supervision", "die_with_parent",
+           "remove_temporary", "supervise", "supervised_by"]

@@ -19,6 +19,7 @@ import os
 from pathlib import Path
 
 from simrunner.telemetry.log import COLUMNS, EXTRA_COLUMNS, FORMAT_LINE, LogError, _quote
+from trackgen.outdir import process_umask
 
 # the run's columns in schema order (the extra columns only when the run records them); coast is
 # always 0 in a simulated run
@@ -35,6 +36,7 @@ class CsvStream:
 
     def __init__(self, path: str | Path, *, extra: tuple[str, ...] = ()):
         self.path = Path(path).absolute()  # opened at the first row: a controller's chdir must not move it
+        self._mode = 0o666 & ~process_umask()  # nor its umask change the file's permissions
         self.extra = tuple(extra)
         if self.extra:
             cols = _BASE[:-1] + [c for c in COLUMNS if c.name in self.extra] + _BASE[-1:]
@@ -50,10 +52,16 @@ class CsvStream:
         try:
             if not self.path.parent.exists():
                 self.path.parent.mkdir(parents=True, exist_ok=True)
+            created = not self.path.exists()
             self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
         except OSError as exc:
             self._error = exc
             return
+        if created:
+            try:
+                os.fchmod(self._fd, self._mode)
+            except OSError:  # a file system without modes: as it was created
+                pass
         self._write(self._header if self.extra else _HEADER)
 
     def _write(self, text: str) -> None:

@@ -142,6 +142,11 @@ def worker_loop(conn, config: BatchConfig, quiet: bool = True, report: str | Non
     """A child process of the local pool: receive ``(job, outputs)``, send back the row;
     ``None`` ends it. ``report``: the file the hard watchdog writes its stack dump to when a
     run is stuck in one C-level call (:func:`death_row` reads it)."""
+    from simrunner.run.supervise import Supervision, die_with_parent, supervised_by
+
+    # a batch killed by SIGKILL takes its workers with it: a forked worker holds both ends of
+    # its pipe, so it would never read an end of file and wait for work for ever
+    die_with_parent()
     if quiet:
         quiet_output()
     import signal
@@ -156,8 +161,6 @@ def worker_loop(conn, config: BatchConfig, quiet: bool = True, report: str | Non
     except Exception as exc:  # noqa: BLE001 - e.g. a bad car file: every run reports it
         conn.send(("fatal", f"{type(exc).__name__}: {exc}"))
         return
-    from simrunner.run.supervise import Supervision, supervised_by
-
     conn.send(("ready", os.getpid()))
     with supervised_by(Supervision(dump, csv_path=None)):
         while True:

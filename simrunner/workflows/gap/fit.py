@@ -388,9 +388,14 @@ def _other_side(xs: np.ndarray, costs: Sequence[float], probe: float) -> float |
 
 def _quiet_worker() -> None:
     """Worker initialiser: send the C++ engine's warnings (stderr, fd 2) to /dev/null so they
-    do not garble the parent's progress bar; results and exceptions come back pickled."""
+    do not garble the parent's progress bar; results and exceptions come back pickled. The
+    worker ends with the process that started it (killed by SIGKILL, it would finish its fit
+    and then wait for work for ever: it holds both ends of its queue's pipe)."""
     import os
 
+    from simrunner.run.supervise import die_with_parent
+
+    die_with_parent()
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 2)
     os.close(devnull)
