@@ -21,7 +21,7 @@ from trackgen import LayoutError, TrackError, TrackGenerator, chain, load_layout
 from trackgen.build import OPTIONAL_TRACK_JSON_KEYS, OutputError, TRACK_JSON_KEYS, ValidationFailed, build, check_layout
 from trackgen.chain import START_BEFORE_FINISH_M
 from trackgen.cli import main
-from trackgen.validate import CLOSURE_TOL_M, errors
+from trackgen.validate import errors
 from vehicle.description import CarDescription, Steering
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -380,7 +380,11 @@ def test_a_road_narrower_than_the_car_is_an_error(tmp_path):
     path = tmp_path / "narrow.txt"
     path.write_text("@lane_width = 0.001\nSTART_FINISH\nTURN_LEFT angle=180\nSTRAIGHT\nTURN_LEFT angle=180\n")
     problems = [str(p) for p in check_layout(load_layout(path)).problems]
-    assert any(p.startswith(f"{path}:2: the road is 0.041 m wide") and "narrower than the car" in p
-               for p in problems), problems
+    assert any(p.startswith(f"{path}:1: the road is 0.041 m wide") and "narrower than the car" in p
+               for p in problems), problems  # the @lane_width line
+    path.write_text("START_FINISH\n@edge_width = 0.001\n@lane_width = 0.001\nTURN_LEFT angle=180\n"
+                    "STRAIGHT\nTURN_LEFT angle=180\n")
+    assert [p for p in map(str, check_layout(load_layout(path)).problems) if "the road is" in p][0].startswith(
+        f"{path}:3: the road is 0.003 m wide")
     path.write_text("@lane_width = 0.2\nSTART_FINISH\nTURN_LEFT angle=180\nSTRAIGHT\nTURN_LEFT angle=180\n")
     assert not [p for p in check_layout(load_layout(path)).problems if p.check == "road_width"]

@@ -162,10 +162,13 @@ class Layout:
     barcodes: tuple[Barcode, ...] = ()  # @barcode lines (worlds.marks)
     boxes: tuple = ()  # @box lines (worlds.solids.Solid): objects standing on the track
     kit: str | None = None  # @kit: the pieces' defaults come from pieces.KITS[kit]
+    # the line of each @ setting set once (name -> line number), for messages about a setting
+    setting_lines: Mapping[str, int] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "entries", tuple(self.entries))
         object.__setattr__(self, "setting_values", MappingProxyType(dict(self.setting_values)))
+        object.__setattr__(self, "setting_lines", MappingProxyType(dict(self.setting_lines)))
 
     def piece_kwargs(self, entry: LayoutEntry) -> dict[str, float]:
         """Keywords for ``pieces.make_piece`` (internal units, scale applied). With a scale
@@ -355,7 +358,7 @@ def parse_layout(text: str, *, path: str = "<layout>", default_name: str = "trac
                   for i, (x, y, length, width, height, heading, reflectance) in enumerate(box_lines))
     return Layout(path=path, name=name, entries=tuple(entries), settings=settings,
                   scale=scale, setting_values=values, lighting=lighting, barcodes=barcodes, kit=kit,
-                  boxes=boxes)
+                  boxes=boxes, setting_lines=seen_at)
 
 
 def _parse_setting(body: str, path: str, lineno: int) -> tuple[str, object]:
