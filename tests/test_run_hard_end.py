@@ -117,6 +117,7 @@ def test_a_controller_stuck_in_one_c_call_keeps_every_output(tmp_path):
     out, err = _finish(proc)
     assert proc.returncode == 1, err
     assert 'ctrl.py", line 7 in main' in err  # the stack dump, with the controller's line
+    assert "runner.py" not in err and "Timeout (" not in err  # ... not the simulator's frames
     log = read_log(tmp_path / "t.csv")
     assert log.frame.tolist() == list(range(10))  # rows 0..9 closed; row 10 was still open
     summary = json.loads((tmp_path / "s.json").read_text())
@@ -172,3 +173,26 @@ def test_a_run_process_killed_by_a_signal_still_gets_its_outputs(tmp_path, how, 
 
     assert re.search(rf"killed by {signame} at t = 0\.[23]\d\d s", summary["message"]), summary["message"]
     assert (tmp_path / "p.png").stat().st_size > 1000 and "Traceback" not in err
+
+
+def test_the_stack_shown_of_a_stuck_controller_ends_at_its_outermost_frame(tmp_path):
+    """Of faulthandler's dump, the thread the controller ran in, from the innermost call (in a
+    module of the controller's) out to the controller's main; other threads and the simulator's
+    frames left out. A dump without the controller's frames is shown whole."""
+    from simrunner.run.postmortem import stuck_stack
+
+    ctrl = tmp_path / "ctrl.py"
+    dump = (f"Timeout (0:00:03)!\n"
+            f"Thread 0x00007f01 (most recent call first):\n"
+            f'  File "/usr/lib/python3.11/threading.py", line 320 in wait\n'
+            f"\n"
+            f"Thread 0x00007f00 (most recent call first):\n"
+            f'  File "{tmp_path}/helper.py", line 3 in crunch\n'
+            f'  File "{ctrl}", line 9 in step\n'
+            f'  File "{ctrl}", line 14 in main\n'
+            f'  File "/x/simrunner/run/runner.py", line 392 in execute\n'
+            f'  File "/x/simrunner/cli/__init__.py", line 314 in run\n')
+    shown = stuck_stack(dump, str(ctrl)).splitlines()
+    assert shown[1:] == [f'  File "{tmp_path}/helper.py", line 3 in crunch', f'  File "{ctrl}", line 9 in step',
+                         f'  File "{ctrl}", line 14 in main']
+    assert stuck_stack(dump, str(tmp_path / "other.py")) == dump.rstrip()

@@ -365,14 +365,14 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
     try:
         if not end.stuck and end.signal is None:
             return end.code
-        from simrunner.run.postmortem import StuckRun, finish_dead_run, finish_stuck_run
+        from simrunner.run.postmortem import StuckRun, finish_dead_run, finish_stuck_run, stuck_stack
 
         stuck = StuckRun(controller=controller, outputs=Outputs(video=video, csv=csv, plot=plot,
                                                                 summary=summary, video_fps=video_fps),
                          track=track, car=car, laps=laps, seed=seed, wall_limit_s=wall_limit_s)
         try:
             if end.stuck:
-                click.echo(end.report.rstrip(), err=True)  # every thread's stack: the controller's line
+                click.echo(stuck_stack(end.report, controller), err=True)  # down to the controller's line
                 result = finish_stuck_run(stuck, end.report, end.csv_path, wall_time_s=end.wall_time_s,
                                           cpu_time_s=end.cpu_time_s)
             else:  # killed by a signal the run could not handle (SIGKILL, an uncaught crash)

@@ -47,6 +47,25 @@ def stuck_location(report: str, controller: str) -> str:
     return ""
 
 
+def stuck_stack(report: str, controller: str) -> str:
+    """The part of a faulthandler dump a controller's author reads: the stack of the thread
+    the controller ran in, from the innermost call out to the controller's outermost frame
+    (the simulator's frames under it left out), as a traceback's lines (most recent call
+    first); the whole dump when no frame of ``controller`` is in it."""
+    want = Path(controller).resolve()
+    threads: list[list[str]] = []
+    for line in report.splitlines():
+        if line.startswith(("Thread ", "Current thread ")):
+            threads.append([])
+        elif threads and _FRAME.match(line):
+            threads[-1].append(line)
+    for frames in threads:
+        mine = [i for i, line in enumerate(frames) if Path(_FRAME.match(line)["file"]) == want]
+        if mine:
+            return "\n".join(["the controller's stack (most recent call first):", *frames[:mine[-1] + 1]])
+    return report.rstrip()
+
+
 def stuck_message(where: str, wall_limit_s: float) -> str:
     """The outcome message of a run the hard watchdog ended (``where``: :func:`stuck_location`)."""
     hard_s = wall_limit_s + max(2.0, wall_limit_s)
@@ -173,4 +192,4 @@ def _rebuild_video(log: RunLog, path, track, car, laps: int, max_fps: float | No
 
 
 __all__ = ["StuckRun", "finish_stuck_run", "finish_dead_run", "killed_message", "read_run_log",
-           "run_log_laps", "stuck_location", "stuck_message"]
+           "run_log_laps", "stuck_location", "stuck_message", "stuck_stack"]
