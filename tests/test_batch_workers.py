@@ -182,6 +182,26 @@ def test_a_controllers_umask_does_not_reach_the_outputs_or_the_next_run(tmp_path
     assert {f.name: oct(stat.S_IMODE(f.stat().st_mode)) for f in files} == {f.name: "0o644" for f in files}
 
 
+def test_a_controllers_umask_does_not_reach_the_folders_made_for_the_run_log(tmp_path):
+    """The run log's folders, made at the first frame (after the controller's os.umask), were
+    0700 while the file in them was 0644: teammates could not reach it."""
+    import os
+    import stat
+
+    from simrunner.run.runner import drive
+
+    ctl = tmp_path / "umasked.py"
+    ctl.write_text(UMASKED)
+    old = os.umask(0o022)
+    try:
+        drive(ctl, track="floor", time_limit_s=0.2, csv=tmp_path / "a" / "b" / "d.csv")
+    finally:
+        os.umask(old)
+    modes = {p.name: oct(stat.S_IMODE(p.stat().st_mode))
+             for p in (tmp_path / "a", tmp_path / "a" / "b", tmp_path / "a" / "b" / "d.csv")}
+    assert modes == {"a": "0o755", "b": "0o755", "d.csv": "0o644"}
+
+
 def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):
     """The hard watchdog ends the worker; the row is drive's: outcome stalled, the
     controller's file:line, and (with its CSV) the frames and simulated time it reached."""
