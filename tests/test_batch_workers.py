@@ -87,6 +87,66 @@ def test_a_c_controllers_environment_does_not_reach_the_next_run(tmp_path, monke
         assert [(r["outcome"], r["sim_time_s"]) for r in res.rows] == [("controller_returned", 0.02)] * 4
 
 
+C_PUTENV = r"""
+#include <stdlib.h>
+#include "spinner.h"
+static char keep[] = "NXPCUP_C_KEEP=kept";   /* the value it had: nothing to restore */
+static char ctor[] = "NXPCUP_C_CTOR=1";
+__attribute__((constructor)) static void at_load(void) { putenv(ctor); }  /* before the run */
+int main(void) {
+    putenv(keep);
+    spinner_sleep(0.02);
+    return 0;
+}
+"""
+
+
+def _environ_addresses() -> list[int]:
+    import ctypes
+
+    env = ctypes.POINTER(ctypes.c_void_p).in_dll(ctypes.CDLL(None), "environ")
+    out, i = [], 0
+    while env and env[i]:
+        out.append(env[i])
+        i += 1
+    return out
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_no_environment_string_is_left_in_a_c_controllers_library(tmp_path, monkeypatch):
+    """putenv(3) puts the controller's own string in environ; when the value was the one it had
+    (or the controller's library put it there as it was loaded), it stayed there, and the
+    library is unloaded after the run: the next getenv of the process read unmapped memory
+    (SIGSEGV in the next run of a batch worker, or at drive's end)."""
+    import os
+
+    from simrunner.run.native.controller import load_native
+    from simrunner.run.runner import drive
+
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("NXPCUP_C_KEEP", "kept")
+    ctl = tmp_path / "putenv.c"
+    ctl.write_text(C_PUTENV)
+    try:
+        ctrl = load_native([ctl])
+        res = drive(ctrl, track="floor", time_limit_s=1.0)
+        assert res.outcome == "controller_returned"
+        library = os.path.realpath(ctrl.program.library)
+        spans = []
+        with open("/proc/self/maps") as fh:
+            for line in fh:
+                fields = line.split()
+                if len(fields) >= 6 and os.path.basename(fields[5]) == os.path.basename(library):
+                    lo, hi = (int(x, 16) for x in fields[0].split("-"))
+                    spans.append((lo, hi))
+        assert spans  # (still loaded: its NativeController lives)
+        inside = [a for a in _environ_addresses() if any(lo <= a < hi for lo, hi in spans)]
+        assert inside == []
+        assert os.getenv("NXPCUP_C_KEEP") == "kept"
+    finally:
+        os.unsetenv("NXPCUP_C_CTOR")  # (set before the run: the environment the run started from)
+
+
 UMASKED = """
 import os
 
@@ -120,6 +180,26 @@ def test_a_controllers_umask_does_not_reach_the_outputs_or_the_next_run(tmp_path
     files = sorted((tmp_path / "b" / "runs").glob("*.csv")) + [tmp_path / f"d.{x}" for x in ("csv", "json", "png")]
     assert len(files) == 6
     assert {f.name: oct(stat.S_IMODE(f.stat().st_mode)) for f in files} == {f.name: "0o644" for f in files}
+
+
+def test_a_controllers_umask_does_not_reach_the_folders_made_for_the_run_log(tmp_path):
+    """The run log's folders, made at the first frame (after the controller's os.umask), were
+    0700 while the file in them was 0644: teammates could not reach it."""
+    import os
+    import stat
+
+    from simrunner.run.runner import drive
+
+    ctl = tmp_path / "umasked.py"
+    ctl.write_text(UMASKED)
+    old = os.umask(0o022)
+    try:
+        drive(ctl, track="floor", time_limit_s=0.2, csv=tmp_path / "a" / "b" / "d.csv")
+    finally:
+        os.umask(old)
+    modes = {p.name: oct(stat.S_IMODE(p.stat().st_mode))
+             for p in (tmp_path / "a", tmp_path / "a" / "b", tmp_path / "a" / "b" / "d.csv")}
+    assert modes == {"a": "0o755", "b": "0o755", "d.csv": "0o644"}
 
 
 def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):

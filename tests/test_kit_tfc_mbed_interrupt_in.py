@@ -461,3 +461,49 @@ def test_the_index_is_one_count_of_a_coarser_counter_wide(tmp_path, counting, pe
     rises, wrong, high, count = numbers(r)["z"]
     assert count > 3 * 20 * per_line and rises == count // (20 * per_line)
     assert wrong == 0 and high > 0
+
+
+def test_a_handler_added_by_a_handler_waits_for_the_next_edge(tmp_path):
+    """rise(fn) in a handler replaces the chain: fn was called at once for the same edge, so two
+    handlers that hand the pin to each other (a state machine, mbed OS 5/6 style) ran for ever in
+    one edge (the run stalled). A handler added by one (rise_add, rise_add_front, also once the
+    first removed itself) waits for the next edge, and the rest of the chain still runs."""
+    r = run(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        InterruptIn enc(PTA13), ref(PTA12), chain(PTA5);
+        volatile int na, nb, nref, n_first, n_front, n_late, n_last;
+        void b();
+        void a() { na++; enc.rise(&b); }
+        void b() { nb++; enc.rise(&a); }
+        pFunctionPointer_t p_first;
+        void front() { n_front++; }
+        void late() { n_late++; }
+        void first() {  /* once: out of the chain, another in front and one at the end */
+            n_first++;
+            chain.rise_remove(p_first);
+            chain.rise_add_front(&front);
+            chain.rise_add(&late);
+        }
+        void last() { n_last++; }
+        int main() {
+            TFC_Init();
+            enc.rise(&a);
+            ref.rise([] { nref++; });
+            p_first = chain.rise_add(&first);
+            chain.rise_add(&last);
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            wait(0.3);
+            spinner_add_textf("swap %d %d %d", na, nb, nref);
+            spinner_add_textf("chain %d %d %d %d", n_first, n_front, n_late, n_last);
+            return 0;
+        }
+        """, params={"encoder_PTA13": 2, "encoder_PTA12": 2, "encoder_PTA5": 2}, time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    got = numbers(r)
+    na, nb, nref = got["swap"]
+    assert nref > 100 and na + nb == nref and na - nb in (0, 1)
+    n_first, n_front, n_late, n_last = got["chain"]
+    assert n_first == 1 and n_last == nref and n_front == n_late == nref - 1

@@ -386,5 +386,11 @@ def test_a_road_narrower_than_the_car_is_an_error(tmp_path):
                     "STRAIGHT\nTURN_LEFT angle=180\n")
     assert [p for p in map(str, check_layout(load_layout(path)).problems) if "the road is" in p][0].startswith(
         f"{path}:3: the road is 0.003 m wide")
+    # a road wide enough as written, shrunk by @scale: the @scale line, not the @lane_width one
+    path.write_text("@lane_width = 0.55\n@scale = 0.1\nSTART_FINISH\nTURN_LEFT angle=180\nSTRAIGHT\n"
+                    "TURN_LEFT angle=180\n")
+    assert [p for p in map(str, check_layout(load_layout(path)).problems) if "the road is" in p][0].startswith(
+        f"{path}:2: the road is 0.059 m wide (@lane_width 0.055 m and two @edge_width 0.002 m lines, after "
+        "@scale 0.1), narrower")
     path.write_text("@lane_width = 0.2\nSTART_FINISH\nTURN_LEFT angle=180\nSTRAIGHT\nTURN_LEFT angle=180\n")
     assert not [p for p in check_layout(load_layout(path)).problems if p.check == "road_width"]

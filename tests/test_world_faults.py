@@ -513,6 +513,33 @@ def test_a_zip_whose_directory_understates_a_member_is_refused_without_inflating
     assert str(err.value) == f"{tmp_path / 'lane.zip'}: cannot read zip mesh (Bad CRC-32 for file 'lane.stl')"
 
 
+def test_a_zip_that_understates_a_member_with_a_matching_crc_is_refused_without_inflating_it(tmp_path):
+    """The CRC a zip states can be that of the bytes its directory states: zipfile stops
+    there and finds the CRC right, so the check passed and the mesh reader then inflated the
+    member whole (301 MB traced for a 130 kB zip, ~1000 x its size)."""
+    import struct
+    import tracemalloc
+    import zlib
+
+    from worlds.mesh_read import read_triangles
+
+    data = bytearray(_zip_bytes({"lane.stl": b"\0" * (128 * 2**20)}))
+    crc = zlib.crc32(b"\0" * 1000)
+    for sig, size_at, crc_at in ((b"PK\x03\x04", 22, 14), (b"PK\x01\x02", 24, 16)):  # local header, directory
+        i = data.index(sig)
+        data[i + size_at:i + size_at + 4] = struct.pack("<I", 1000)
+        data[i + crc_at:i + crc_at + 4] = struct.pack("<I", crc)
+    (tmp_path / "lane.zip").write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        with pytest.raises(WorldError, match=r"lane\.zip: cannot read zip mesh \(Bad CRC-32 for file 'lane\.stl'\)$"):
+            read_triangles(tmp_path / "lane.zip")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 * 2**20, peak  # bytes
+
+
 def test_a_zip_member_compressed_otherwise_than_deflate_is_refused(tmp_path):
     """zipfile inflates a bzip2 or lzma member without a bound per read (4 kB of bzip2 can
     hold gigabytes), so a member whose directory understates it could not be checked."""

@@ -336,11 +336,14 @@ def _check_road_width(track: Track, path: str, car_width_m: float) -> list[Probl
     if s.road_width_m > car_width_m:
         return []
     lines = track.layout.setting_lines  # the setting that made it so, else the first piece
-    line = next((lines[k] for k in ("lane_width", "edge_width", "scale", "kit") if k in lines),
-                track.passes[0].line)
+    scale = track.layout.scale
+    shrunk = "scale" in lines and s.road_width_m / scale > car_width_m  # wide enough as written
+    line = lines["scale"] if shrunk else next(
+        (lines[k] for k in ("lane_width", "edge_width", "scale", "kit") if k in lines), track.passes[0].line)
     return [Problem(path, line, (
         f"the road is {s.road_width_m:.3f} m wide (@lane_width {s.lane_width_m:g} m and two "
-        f"@edge_width {s.edge_width_m:g} m lines), narrower than the car over its tyres, "
+        f"@edge_width {s.edge_width_m:g} m lines{f', after @scale {scale:g}' if scale != 1 else ''}), "
+        f"narrower than the car over its tyres, "
         f"{car_width_m:.3f} m (chassis.track_m + wheels.width_m): it would stand off the road from the "
         "start"), "road_width")]
 

@@ -198,10 +198,11 @@ def _read_compressed(path: Path) -> np.ndarray:
 def _check_zip(path: Path) -> None:
     """A zip archive's members hold at most MAX_MESH_BYTES together: the sizes its directory
     states, checked before anything is inflated; then each member inflated in pieces of
-    _ZIP_PIECE_BYTES, which zipfile ends at the stated size with a CRC check, so a directory
-    that understates a member is refused in bounded memory before the mesh reader inflates
-    it whole. Members are stored or deflated only: zipfile inflates a bzip2 or lzma member
+    _ZIP_PIECE_BYTES up to one byte past its stated size (zipfile ends there with a CRC
+    check), so a directory that understates a member - even with the CRC of the stated bytes
+    - is refused in bounded memory before the mesh reader inflates it whole. Members are stored or deflated only: zipfile inflates a bzip2 or lzma member
     without a bound on one read (Python's zipfile.ZipExtFile._read1)."""
+    import copy
     import zipfile
     import zlib
 
@@ -217,9 +218,18 @@ def _check_zip(path: Path) -> None:
                     method = zipfile.compressor_names.get(info.compress_type, f"method {info.compress_type}")
                     raise WorldError(f"{path}: zip mesh member {info.filename!r} is compressed with "
                                      f"{method}: expected deflate or stored (zip it again)")
-                with z.open(info) as member:
-                    while member.read(_ZIP_PIECE_BYTES):
-                        pass
+                # read as stating one byte more than its directory does: a member that holds more
+                # (its CRC may be forged to match the stated bytes, which zipfile would stop at and
+                # accept, then inflate whole for the mesh reader) shows it in bounded memory
+                probe = copy.copy(info)
+                probe.file_size = info.file_size + 1
+                inflated = 0
+                with z.open(probe) as member:
+                    while piece := member.read(_ZIP_PIECE_BYTES):
+                        inflated += len(piece)
+                if inflated > info.file_size:
+                    raise WorldError(f"{path}: zip mesh member {info.filename!r} holds more than the "
+                                     f"{info.file_size} bytes its directory states")
     except (OSError, EOFError, RuntimeError, zipfile.BadZipFile, zlib.error) as exc:  # RuntimeError: encrypted
         raise WorldError(f"{path}: cannot read zip mesh ({exc})") from None
 

@@ -98,19 +98,22 @@ def _restore_process_state(cwd: str, environ: dict[str, str], c_environ: dict[by
             del os.environ[key]
         os.environ.update(environ)
     now = _c_environment() if c_environ is not None else None
-    if now is None or now == c_environ:
+    if now is None:
         return
     for key in now.keys() - c_environ.keys():
         try:
             os.unsetenv(key)
         except (OSError, ValueError):  # a name unsetenv refuses (empty, with '='): leave it
             pass
+    # every entry set again, even one whose value is unchanged: putenv(3) puts the caller's own
+    # string in environ, and a C controller's (its static data, a C++ constructor's at load time)
+    # is unmapped when its library is unloaded after the run - the next getenv would read freed
+    # memory. os.putenv is setenv(3) (CPython 3.9+), which stores a copy of its own.
     for key, value in c_environ.items():
-        if now.get(key) != value:
-            try:
-                os.putenv(key, value)
-            except (OSError, ValueError):
-                pass
+        try:
+            os.putenv(key, value)
+        except (OSError, ValueError):
+            pass
 
 
 # -- the run log's extra columns -------------------------------------------------------------

@@ -36,7 +36,8 @@ class CsvStream:
 
     def __init__(self, path: str | Path, *, extra: tuple[str, ...] = ()):
         self.path = Path(path).absolute()  # opened at the first row: a controller's chdir must not move it
-        self._mode = 0o666 & ~process_umask()  # nor its umask change the file's permissions
+        self._umask = process_umask()  # nor its umask change the file's (and folders') permissions
+        self._mode = 0o666 & ~self._umask
         self.extra = tuple(extra)
         if self.extra:
             cols = _BASE[:-1] + [c for c in COLUMNS if c.name in self.extra] + _BASE[-1:]
@@ -50,8 +51,18 @@ class CsvStream:
     def _open(self) -> None:
         """Create the file at the first row (a run that never starts writes nothing)."""
         try:
-            if not self.path.parent.exists():
+            made = []  # the folders it creates: with the mask from before the run, as the file
+            folder = self.path.parent
+            while not folder.exists() and folder != folder.parent:
+                made.append(folder)
+                folder = folder.parent
+            if made:
                 self.path.parent.mkdir(parents=True, exist_ok=True)
+                for folder in made:
+                    try:
+                        os.chmod(folder, 0o777 & ~self._umask)
+                    except OSError:  # a file system without modes: as it was created
+                        pass
             created = not self.path.exists()
             self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
         except OSError as exc:

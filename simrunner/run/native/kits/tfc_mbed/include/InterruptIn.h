@@ -22,7 +22,7 @@
  *   takes it out (true if it was there; the last one out stops the edges' interrupt); rise(fn)
  *   replaces the whole chain with fn (NULL: empty) and returns its pFunctionPointer_t (NULL for
  *   NULL); rise_add(NULL) adds nothing and returns NULL; an edge calls the chain's handlers in
- *   order. fall_add, fall_add_front, fall_remove and fall likewise. */
+ *   order (one a handler adds, or rise(fn) in a handler, from the next edge). fall_add, fall_add_front, fall_remove and fall likewise. */
 #ifndef INTERRUPTIN_H
 #define INTERRUPTIN_H
 #include "mbed.h"

@@ -146,7 +146,9 @@ typedef Callback<void()> FunctionPointer;
  * FunctionPointer it made (pFunctionPointer_t), which remove() takes out and frees (false when it
  * is not in the chain) and get(i) / [i] return. One of the chain's functions may remove or add
  * functions, or delete the chain's owner: the others still run that call, none twice (mbed 2's
- * array would skip the one after a removed one). */
+ * array would skip the one after a removed one); one added during a call waits for the next (so
+ * InterruptIn::rise(fn) in a handler, which replaces the chain, does not call fn for the edge
+ * being handled, as in mbed OS 5/6 and mbed 2). */
 typedef FunctionPointer *pFunctionPointer_t;
 class CallChain {
 public:
@@ -178,9 +180,9 @@ public:
     }
     void call() {
         bool alive = true, *outer = alive_;
-        int outer_at = at_;
+        int outer_at = at_, outer_end = end_;
         alive_ = &alive;
-        for (at_ = 0; at_ < n_; at_++) {
+        for (at_ = 0, end_ = n_; at_ < end_; at_++) {
             FunctionPointer f = *chain_[at_];  /* a copy: the function may remove itself */
             f.call();
             if (!alive) {
@@ -188,7 +190,7 @@ public:
                 return;
             }
         }
-        alive_ = outer, at_ = outer_at;
+        alive_ = outer, at_ = outer_at, end_ = outer_end;
     }
     void operator()() { call(); }
     pFunctionPointer_t operator[](int i) const { return get(i); }
@@ -202,7 +204,9 @@ private:
         memmove(&chain_[i + 1], &chain_[i], (size_t)(n_ - i) * sizeof chain_[0]);
         chain_[i] = new FunctionPointer(func);
         n_++;
-        if (alive_ && i <= at_) at_++;  /* added before the one running: not called this time */
+        /* added where call() has been or goes next (at_ + 1: add_front() once the first removed
+         * itself, add() after the last): not called this time; add() elsewhere appends past end_ */
+        if (alive_ && i <= at_ + 1) at_++, end_++;
         return chain_[i];
     }
     void take(int i) {
@@ -210,11 +214,13 @@ private:
         memmove(&chain_[i], &chain_[i + 1], (size_t)(n_ - i - 1) * sizeof chain_[0]);
         n_--;
         if (alive_ && i <= at_) at_--;
+        if (alive_ && i < end_) end_--;
     }
     pFunctionPointer_t *chain_ = nullptr;
     int n_ = 0, cap_ = 0;
     bool *alive_ = nullptr;  /* in call(): its flag that the chain still exists */
     int at_ = 0;             /* in call(): the function it is at */
+    int end_ = 0;            /* in call(): one past the last function of those there when it began */
 };
 
 /* platform/CriticalSectionLock.h: a critical section for the object's lifetime (mbed OS 5.8+) */
