@@ -196,3 +196,36 @@ def test_the_stack_shown_of_a_stuck_controller_ends_at_its_outermost_frame(tmp_p
     assert shown[1:] == [f'  File "{tmp_path}/helper.py", line 3 in crunch', f'  File "{ctrl}", line 9 in step',
                          f'  File "{ctrl}", line 14 in main']
     assert stuck_stack(dump, str(tmp_path / "other.py")) == dump.rstrip()
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="prctl(2): Linux")
+def test_a_run_process_whose_parent_died_first_ends_also_under_a_subreaper(tmp_path):
+    """die_with_parent with the parent's pid: a process whose parent died before its prctl call
+    ends at once also where orphans go to a subreaper (containers, systemd user sessions), not
+    to init; without the pid, only an orphan of init is seen (a forkserver's child)."""
+    script = textwrap.dedent("""\
+        import ctypes, os, sys, time
+        from simrunner.run.supervise import die_with_parent
+        ctypes.CDLL(None).prctl(36, 1)  # PR_SET_CHILD_SUBREAPER: orphans below come to this process
+        with_pid = sys.argv[1] == "pid"
+        r, w = os.pipe()
+        middle = os.fork()
+        if middle == 0:
+            parent = os.getpid()
+            if os.fork() == 0:  # the run process: its parent is gone before it calls
+                while os.getppid() == parent:
+                    time.sleep(0.01)
+                try:
+                    die_with_parent(parent if with_pid else None)
+                    os.write(w, b"alive")
+                except BaseException as exc:
+                    os.write(w, repr(exc).encode())
+                os._exit(0)
+            os._exit(0)
+        os.waitpid(middle, 0)
+        os.close(w)
+        print(os.read(r, 200).decode() or "ended")
+        """)
+    out = {how: subprocess.run([sys.executable, "-c", script, how], capture_output=True, text=True,
+                               timeout=30, cwd=REPO).stdout.strip() for how in ("pid", "none")}
+    assert out == {"pid": "ended", "none": "alive"}

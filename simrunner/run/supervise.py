@@ -105,9 +105,10 @@ def supervise(child: Callable[[], int], csv_path: str | Path | None) -> ChildEnd
     sys.stdout.flush()
     sys.stderr.flush()
     wall0 = time.monotonic()
+    parent = os.getpid()
     pid = os.fork()
     if pid == 0:  # the child: never returns
-        _child(child, report, csv)
+        _child(child, report, csv, parent)
     forward = {s: signal.signal(s, lambda signum, frame: _pass_on(pid, signum))
                for s in (signal.SIGTERM, signal.SIGHUP)}
     old_int = signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -139,10 +140,10 @@ def _pass_on(pid: int, signum: int) -> None:
         os.kill(pid, signum)
 
 
-def _child(child: Callable[[], int], report: IO[str], csv_path: Path) -> None:
+def _child(child: Callable[[], int], report: IO[str], csv_path: Path, parent_pid: int) -> None:
     code = 1
     try:
-        die_with_parent()
+        die_with_parent(parent_pid)
         with supervised_by(Supervision(report, csv_path)):
             code = child()
     except SystemExit as exc:
@@ -161,10 +162,14 @@ def _child(child: Callable[[], int], report: IO[str], csv_path: Path) -> None:
         os._exit(code)
 
 
-def die_with_parent() -> None:
+def die_with_parent(parent_pid: int | None = None) -> None:
     """Linux: the kernel sends SIGKILL to this process when its parent dies (``drive``'s run
     process, a batch worker: a supervisor or batch killed by SIGKILL leaves nothing running;
-    prctl(2), PR_SET_PDEATHSIG: sent when the parent's thread that started this process ends)."""
+    prctl(2), PR_SET_PDEATHSIG: sent when the parent's thread that started this process ends).
+    A process whose parent died before the call ends at once: with ``parent_pid`` (the pid of
+    the process that forked this one) when its parent pid is another (reparented to init or to
+    a subreaper); without it (a process started by a forkserver, whose parent is the server)
+    when its parent is init."""
     try:
         import ctypes
 
@@ -172,8 +177,8 @@ def die_with_parent() -> None:
         libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):  # not Linux: the child may outlive a killed parent
         pass
-    if os.getppid() == 1:  # the parent died before the call
-        os._exit(1)
+    if os.getppid() != parent_pid if parent_pid is not None else os.getppid() == 1:
+        os._exit(1)  # the parent died before the call
 
 
 __all__ = ["ChildEnd", "Supervision", "can_supervise", "current_supervision", "die_with_parent",

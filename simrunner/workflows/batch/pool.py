@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import multiprocessing
 import multiprocessing.connection
+import os
 import shutil
 import sys
 import tempfile
@@ -80,7 +81,8 @@ class LocalBackend:
         self._count += 1
         report = self._dir / f"worker{self._count}.report"
         parent, child = self.ctx.Pipe()
-        proc = self.ctx.Process(target=worker_loop, args=(child, self.config, self.quiet, str(report)),
+        me = os.getpid() if self.method in ("fork", "spawn") else None  # (a forkserver's child: the server's)
+        proc = self.ctx.Process(target=worker_loop, args=(child, self.config, self.quiet, str(report), me),
                                 daemon=True, name="simrunner-batch-worker")
         proc.start()
         child.close()

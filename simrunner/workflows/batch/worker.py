@@ -138,15 +138,17 @@ def quiet_output() -> None:
     sys.stderr = sys.stdout
 
 
-def worker_loop(conn, config: BatchConfig, quiet: bool = True, report: str | None = None) -> None:
+def worker_loop(conn, config: BatchConfig, quiet: bool = True, report: str | None = None,
+                parent_pid: int | None = None) -> None:
     """A child process of the local pool: receive ``(job, outputs)``, send back the row;
     ``None`` ends it. ``report``: the file the hard watchdog writes its stack dump to when a
-    run is stuck in one C-level call (:func:`death_row` reads it)."""
+    run is stuck in one C-level call (:func:`death_row` reads it). ``parent_pid``: the pid of
+    the process that started it (None: a forkserver did)."""
     from simrunner.run.supervise import Supervision, die_with_parent, supervised_by
 
     # a batch killed by SIGKILL takes its workers with it: a forked worker holds both ends of
     # its pipe, so it would never read an end of file and wait for work for ever
-    die_with_parent()
+    die_with_parent(parent_pid)
     if quiet:
         quiet_output()
     import signal
