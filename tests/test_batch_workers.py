@@ -216,3 +216,50 @@ def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):
     assert stuck["message"] == stuck_message("ctrl.py:7 in main", 0.5)
     assert stuck["frames"] == 5 and stuck["sim_time_s"] > 0.0
     assert fine["outcome"] == "controller_returned" and fine["frames"] >= 5
+
+
+C_CTOR_STATE = r"""
+#include <stdlib.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include "spinner.h"
+__attribute__((constructor)) static void at_load(void) {  /* runs as the library is loaded */
+    umask(077);
+    setenv("NXPCUP_C_CTOR_ENV", "1", 1);
+    if (chdir("/") != 0) abort();
+}
+int main(void) {
+    spinner_set_speed_and_servo(0.0, 0.0);
+    spinner_sleep(0.1);
+    return getenv("NXPCUP_C_CTOR_ENV") ? 0 : 3;  /* (its main sees what its constructor set) */
+}
+"""
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_what_a_c_constructor_changes_at_load_does_not_reach_the_outputs_or_the_caller(tmp_path, monkeypatch):
+    """A constructor runs when the controller's library is loaded, before the run: its umask,
+    setenv and chdir reached drive's outputs (written 0600, the video and the run log at the
+    constructor's mask) and stayed in the process after the run (the next run of a batch
+    worker). The controller's own main still sees them."""
+    import os
+    import stat
+
+    from simrunner.run.runner import drive
+
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("NXPCUP_C_CTOR_ENV", raising=False)
+    monkeypatch.chdir(tmp_path)
+    ctl = tmp_path / "ctor.c"
+    ctl.write_text(C_CTOR_STATE)
+    old = os.umask(0o022)
+    try:
+        result = drive(ctl, track="floor", time_limit_s=0.2, csv="out/d.csv", video="out/d.mp4",
+                       summary="out/d.json", plot="out/d.png")
+        after = (os.umask(0o022), os.getcwd(), os.environ.get("NXPCUP_C_CTOR_ENV"), os.getenv("NXPCUP_C_CTOR_ENV"))
+    finally:
+        os.umask(old)
+    assert result.outcome == "controller_returned", result.message
+    assert after == (0o022, str(tmp_path), None, None)
+    modes = {p.name: oct(stat.S_IMODE(p.stat().st_mode)) for p in (tmp_path / "out").iterdir()}
+    assert modes == {"d.csv": "0o644", "d.mp4": "0o644", "d.json": "0o644", "d.png": "0o644"}

@@ -31,8 +31,8 @@ def write_outputs(result, outputs: Outputs, video, track, *, csv_stream=None) ->
     if video is not None:
         try:
             p = video.close()
-            if p is not None:
-                result.outputs["video"] = str(p)
+            if p is not None:  # (named as given: the recorder may hold it absolute)
+                result.outputs["video"] = str(p if outputs.video is None else outputs.video)
         except SimError as exc:
             errors.append(exc)
     if csv_stream is not None:  # (without outputs.csv: a supervisor's copy, not an output)

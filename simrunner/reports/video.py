@@ -46,13 +46,14 @@ class VideoRecorder:
     at the frame's start (the writer thread draws later: e.g. the exposure then in force). ``camera_fps``: frame rate of the camera; the video keeps every
     ``ceil(camera_fps / max_fps)``-th frame (``max_fps``: the video's highest frame rate, fps). ``raster``: the track's ``TrackRaster`` (top-down view), shaded
     by ``lighting`` (a ``worlds.lighting.TrackLighting``) when it is not the default hall.
+    ``umask``: the file-creation mask the file is written with (None: the process's at the opening).
     """
 
     def __init__(self, path: str | Path, *, camera_fps: float, render: Callable, raster=None,
                  laps: int = 1, line_row: int = 0, car_length_m: float = 0.28,
                  car_width_m: float = 0.16, queue_size: int = 32, lighting=None,
                  surface_z_m: float = 0.0, max_fps: float = MAX_VIDEO_FPS,
-                 view_state: Callable | None = None):
+                 view_state: Callable | None = None, umask: int | None = None):
         self.path = Path(path)
         if self.path.suffix.lower() != ".mp4":
             raise SimError(f"{self.path}: the debug video must be an .mp4 file")
@@ -61,6 +62,7 @@ class VideoRecorder:
         self.every = max(1, math.ceil(camera_fps / max_fps - 1e-9))
         self.fps = camera_fps / self.every
         self._tmp = self.path.with_name(self.path.stem + ".partial.mp4")
+        self._umask = umask  # the file's permissions: 0666 less this mask (None: the mask at its opening)
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -178,6 +180,8 @@ class VideoRecorder:
         if self.frames_written == 0:
             self._tmp.unlink(missing_ok=True)
             return None
+        if self._umask is not None:
+            os.chmod(self._tmp, 0o666 & ~self._umask)
         os.replace(self._tmp, self.path)
         return self.path
 

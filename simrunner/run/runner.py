@@ -81,6 +81,12 @@ def _c_environment() -> dict[bytes, bytes] | None:
     return out
 
 
+def _process_state() -> tuple[str, dict[str, str], dict[bytes, bytes] | None, int]:
+    """What a controller may change of the process, for :func:`_restore_process_state`: the
+    working directory, os.environ, the C library's environment and the file-creation mask."""
+    return os.getcwd(), dict(os.environ), _c_environment(), process_umask()
+
+
 def _restore_process_state(cwd: str, environ: dict[str, str], c_environ: dict[bytes, bytes] | None,
                            umask: int) -> None:
     """The working directory, the file-creation mask (the outputs' permissions) and the
@@ -271,7 +277,8 @@ class Run:
 
     def __init__(self, track: SimTrack, car: CarDescription, settings: RunSettings, *,
                  video_path: str | Path | None = None, record_text: bool = False,
-                 csv_path: str | Path | None = None, video_fps: float | None = None):
+                 csv_path: str | Path | None = None, video_fps: float | None = None,
+                 umask: int | None = None):
         from simrunner.car.effects import make_sim
         from simrunner.sensors.camera import Camera
 
@@ -310,7 +317,7 @@ class Run:
         if csv_path is not None:  # written as the run goes (simrunner.telemetry.stream)
             from simrunner.telemetry.stream import CsvStream
 
-            self.csv = CsvStream(csv_path, extra=extra)
+            self.csv = CsvStream(csv_path, extra=extra, umask=umask)
         self.recorder = RunRecorder(record_text=record_text or video_path is not None
                                     or csv_path is not None, sink=self.csv, extra=extra)
         self.video = None
@@ -325,7 +332,7 @@ class Run:
                                        laps=settings.laps if settings.event is None else (event_laps or 0),
                                        line_row=car.camera.default_row,
                                        car_length_m=car.chassis.wheelbase_m + 0.05,
-                                       car_width_m=car.chassis.track_m)
+                                       car_width_m=car.chassis.track_m, umask=umask)
         self.frames = FrameWork(self.sim, self.judge, self.recorder, settings.time_limit_s, self.video,
                                 judged=track.judged, keep_driving=settings.keep_driving,
                                 off_track_wheels=settings.off_track_wheels, monitor=self.monitor)
@@ -385,7 +392,7 @@ class Run:
         # what the controller's process state was: a controller that changes directory, the
         # environment or the umask must not move this run's outputs, change their permissions
         # or change the next run of a batch worker
-        cwd, environ, c_environ, umask = os.getcwd(), dict(os.environ), _c_environment(), process_umask()
+        state = _process_state()
         try:
             with _gc_frozen(), watchdog, ControllerGuards(self.session):
                 try:
@@ -424,7 +431,7 @@ class Run:
             self.session.deactivate()
             if self.signal_guard is not None:
                 self.signal_guard.clock = None
-            _restore_process_state(cwd, environ, c_environ, umask)
+            _restore_process_state(*state)
         self.wall_time_s = time.perf_counter() - wall0
         self.cpu_time_s = time.process_time() - cpu0
         if outcome not in (Outcome.CONTROLLER_ERROR, Outcome.INTERRUPTED):
@@ -525,15 +532,24 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
     outputs = Outputs(video=video, csv=csv, plot=plot, summary=summary, video_fps=video_fps)
     check_outputs(outputs)  # before anything is loaded or driven
     with SignalGuard() as signals:
-        ctrl = load_controller(controller)
-        car_desc = car if isinstance(car, CarDescription) else load_car(car)
-        if track is None and settings.event is not None:
-            track = event_track(settings.event)  # the discipline's own layout (None: the default)
-        sim_track, track_label = resolve_track(track, car_desc)
-        run = Run(sim_track, car_desc, settings, video_path=video, csv_path=csv, video_fps=video_fps)
-        run.signal_guard = signals
-        threads_before = set(threading.enumerate())
-        outcome, message, error = run.execute(ctrl)
+        # the process as it was before the controller was loaded: a C/C++ controller's
+        # constructors run at its load (a setenv, chdir or umask there must not reach the
+        # outputs' places and permissions, nor the next run of a batch worker)
+        state = _process_state()
+        try:
+            ctrl = load_controller(controller)
+            car_desc = car if isinstance(car, CarDescription) else load_car(car)
+            if track is None and settings.event is not None:
+                track = event_track(settings.event)  # the discipline's own layout (None: the default)
+            sim_track, track_label = resolve_track(track, car_desc)
+            here = Path(state[0])  # (the outputs' places: a constructor's chdir must not move them)
+            run = Run(sim_track, car_desc, settings, video_path=None if video is None else here / video,
+                      csv_path=None if csv is None else here / csv, video_fps=video_fps, umask=state[3])
+            run.signal_guard = signals
+            threads_before = set(threading.enumerate())
+            outcome, message, error = run.execute(ctrl)
+        finally:
+            _restore_process_state(*state)
         signals.writing = True
         judge = run.judge
         warnings = run.warnings

@@ -34,9 +34,10 @@ class CsvStream:
     columns' values, ``text``: its data_text). :meth:`discard` removes what was written (a run
     that did not start)."""
 
-    def __init__(self, path: str | Path, *, extra: tuple[str, ...] = ()):
+    def __init__(self, path: str | Path, *, extra: tuple[str, ...] = (), umask: int | None = None):
         self.path = Path(path).absolute()  # opened at the first row: a controller's chdir must not move it
-        self._umask = process_umask()  # nor its umask change the file's (and folders') permissions
+        # nor its umask change the file's (and folders') permissions (umask: the caller's, None: now)
+        self._umask = process_umask() if umask is None else umask
         self._mode = 0o666 & ~self._umask
         self.extra = tuple(extra)
         if self.extra:
