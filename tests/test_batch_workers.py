@@ -263,3 +263,27 @@ def test_what_a_c_constructor_changes_at_load_does_not_reach_the_outputs_or_the_
     assert after == (0o022, str(tmp_path), None, None)
     modes = {p.name: oct(stat.S_IMODE(p.stat().st_mode)) for p in (tmp_path / "out").iterdir()}
     assert modes == {"d.csv": "0o644", "d.mp4": "0o644", "d.json": "0o644", "d.png": "0o644"}
+
+
+C_SHORT = r"""
+#include "spinner.h"
+int main(void) { spinner_set_speed_and_servo(0.5, 0.0); spinner_sleep(0.1); return 0; }
+"""
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_a_c_controllers_library_copies_are_removed_after_each_run(tmp_path, monkeypatch):
+    """A worker's second and later runs open a private copy of the controller's library (its
+    globals are fresh); the copies were removed only when the controller was collected, which
+    a worker's process never did: 3 of 4 runs left a simrunner-ctrl-* folder in /tmp."""
+    import tempfile
+
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    ctl = tmp_path / "short.c"
+    ctl.write_text(C_SHORT)
+    res = run_batch(ctl, out_dir=tmp_path / "out", seeds=4, workers=1, plot=False)
+    assert [r["outcome"] for r in res.rows] == ["controller_returned"] * 4
+    assert sorted(p.name for p in scratch.iterdir() if p.name.startswith("simrunner-ctrl-")) == []

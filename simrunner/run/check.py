@@ -98,6 +98,7 @@ def check_controller(controller, *, track: str | Path | SimTrack | None = None,
     settings = RunSettings(laps=1000, time_limit_s=seconds, seed=seed, wall_limit_s=wall_limit_s,
                            params=params or {})
     sim_track, _ = resolve_track(track, car_desc)
+    ctrl = None
     try:
         ctrl = load_controller(controller)
         first = _run_once(ctrl, sim_track, car_desc, settings)
@@ -106,6 +107,9 @@ def check_controller(controller, *, track: str | Path | SimTrack | None = None,
             second = _run_once(ctrl, sim_track, car_desc, settings)
     except ControllerFileError as exc:
         return CheckReport(name, (str(exc),), ())
+    finally:
+        if ctrl is not None:
+            ctrl.close()  # (a C controller's libraries unloaded now)
     problems: list[str] = []
     warnings: list[str] = []
     if first.outcome == Outcome.CONTROLLER_ERROR:

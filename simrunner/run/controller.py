@@ -35,6 +35,7 @@ class Controller:
     code: types.CodeType | None
     main: MainFn | None
     user_file: str | None  # file whose frames are the user's (watchdog, tracebacks)
+    owned: bool = False  # main was made here (a C/C++ program loaded), not the caller's to keep
 
     @contextlib.contextmanager
     def loaded(self) -> Iterator[MainFn]:
@@ -58,6 +59,12 @@ class Controller:
             if folder in sys.path:
                 sys.path.remove(folder)
 
+    def close(self) -> None:
+        """Release what loading it took (a C/C++ controller's libraries and their copies),
+        once its runs are over; a callable given by the caller stays the caller's."""
+        if self.owned:
+            self.main.close()
+
 
 def load_controller(controller) -> Controller:
     """A :class:`Controller` from a file path (``.py``; ``.c``/``.cpp``/``.so``: see
@@ -72,13 +79,13 @@ def load_controller(controller) -> Controller:
         from simrunner.run.native import NativeProgram, load_native
 
         if isinstance(controller, NativeProgram):
-            return Controller(None, None, load_native(controller), None)
+            return Controller(None, None, load_native(controller), None, owned=True)
     path = Path(controller)
     if path.suffix != ".py":  # (the build machinery is ~7 ms to import: not for a .py file)
         from simrunner.run.native import is_native, load_native
 
         if is_native(path):  # C/C++ sources or a shared library: compiled (cached), run
-            return Controller(path, None, load_native([path]), None)
+            return Controller(path, None, load_native([path]), None, owned=True)
     code = compile_controller(path)
     return Controller(path, code, None, code.co_filename)
 

@@ -535,7 +535,7 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
         # the process as it was before the controller was loaded: a C/C++ controller's
         # constructors run at its load (a setenv, chdir or umask there must not reach the
         # outputs' places and permissions, nor the next run of a batch worker)
-        state = _process_state()
+        state, ctrl = _process_state(), None
         try:
             ctrl = load_controller(controller)
             car_desc = car if isinstance(car, CarDescription) else load_car(car)
@@ -549,7 +549,9 @@ def drive(controller: str | Path | MainFn, *, track: str | Path | SimTrack | Non
             threads_before = set(threading.enumerate())
             outcome, message, error = run.execute(ctrl)
         finally:
-            _restore_process_state(*state)
+            _restore_process_state(*state)  # (first: no environ entry is then the library's)
+            if ctrl is not None:
+                ctrl.close()  # a C controller's library unloaded now, not whenever it is collected
         signals.writing = True
         judge = run.judge
         warnings = run.warnings

@@ -61,12 +61,18 @@ class NativeController:
         while self._spent:
             self._spent.pop().close()
 
-    def __del__(self) -> None:  # and a library opened for a run that never started
+    def close(self) -> None:
+        """Unload the runs' libraries (and remove their private copies), and one opened for a
+        run that never started. Called when its runs are over (drive() calls it at the end of
+        its run; a batch worker's process ends without collecting it)."""
         if getattr(self, "inproc", False):
             self._unload()
             if getattr(self, "_ready", None) is not None:  # None too when opening it failed
                 self._ready.close()
                 self._ready = None
+
+    def __del__(self) -> None:
+        self.close()
 
 
 def load_native(sources: list[str | Path] | NativeProgram, args: tuple[str, ...] = (),
