@@ -229,3 +229,31 @@ def test_a_run_process_whose_parent_died_first_ends_also_under_a_subreaper(tmp_p
     out = {how: subprocess.run([sys.executable, "-c", script, how], capture_output=True, text=True,
                                timeout=30, cwd=REPO).stdout.strip() for how in ("pid", "none")}
     assert out == {"pid": "ended", "none": "alive"}
+
+
+def test_temporary_folders_of_killed_processes_are_removed_by_the_next_one(tmp_path, monkeypatch):
+    """A drive or batch killed by SIGKILL leaves its temporary folder (nothing of it runs to
+    remove it): the next one of its kind removes those whose process is gone, if older than a
+    minute; a live process's and a fresh one stay."""
+    import tempfile
+
+    from simrunner.run.supervise import private_temp_dir
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    old = time.time() - 120.0
+    folders = {name: tmp_path / name for name in (
+        f"simrunner-batch-{gone.pid}-a1", f"simrunner-batch-{os.getppid()}-b2",
+        f"simrunner-run-{gone.pid}-c3", f"simrunner-batch-ray-d4")}
+    for folder in folders.values():
+        (folder / "worker1.report").parent.mkdir()
+        (folder / "worker1.report").write_text("x")
+        os.utime(folder, (old, old))
+    fresh = tmp_path / f"simrunner-batch-{gone.pid}-e5"
+    fresh.mkdir()
+    made = private_temp_dir("batch")
+    assert made.parent == tmp_path and made.name.startswith(f"simrunner-batch-{os.getpid()}-")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [made.name, fresh.name, f"simrunner-batch-{os.getppid()}-b2", f"simrunner-run-{gone.pid}-c3",
+         "simrunner-batch-ray-d4"])

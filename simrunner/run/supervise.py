@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import os
+import shutil
 import signal
 import sys
 import tempfile
@@ -98,7 +99,7 @@ def supervise(child: Callable[[], int], csv_path: str | Path | None) -> ChildEnd
     under :class:`Supervision`; return how it ended. ``csv_path``: the run log the child
     writes, or None (then a temporary one; the caller removes ``ChildEnd.csv_path``)."""
     if csv_path is None:
-        csv = Path(tempfile.mkdtemp(prefix="simrunner-run-")) / "run.csv"
+        csv = private_temp_dir("run") / "run.csv"
     else:
         csv = Path(csv_path)
     report = tempfile.TemporaryFile("w+", errors="replace")  # no name: nothing left behind
@@ -125,6 +126,29 @@ def supervise(child: Callable[[], int], csv_path: str | Path | None) -> ChildEnd
     return ChildEnd(code=128 - code if code < 0 else code, report=text, csv_path=csv,
                     wall_time_s=time.monotonic() - wall0,
                     cpu_time_s=usage.ru_utime + usage.ru_stime, signal=-code if code < 0 else None)
+
+
+def private_temp_dir(kind: str) -> Path:
+    """A new temporary folder ``simrunner-KIND-PID-XXXX`` of this process; first the folders
+    of earlier processes of this kind that died without removing theirs (killed by SIGKILL,
+    the out-of-memory killer) are removed: those whose process is gone, older than a minute."""
+    base = Path(tempfile.gettempdir())
+    now = time.time()
+    for old in base.glob(f"simrunner-{kind}-*-*"):
+        pid = old.name[len(f"simrunner-{kind}-"):].split("-", 1)[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+            continue  # (its process lives: yours or another user's)
+        except ProcessLookupError:
+            pass
+        except OSError:  # (another user's process)
+            continue
+        with contextlib.suppress(OSError):
+            if now - old.stat().st_mtime > 60.0 and os.access(old, os.W_OK):
+                shutil.rmtree(old, ignore_errors=True)
+    return Path(tempfile.mkdtemp(prefix=f"simrunner-{kind}-{os.getpid()}-"))
 
 
 def remove_temporary(end: ChildEnd, csv_path: str | Path | None) -> None:
@@ -181,5 +205,5 @@ def die_with_parent(parent_pid: int | None = None) -> None:
         os._exit(1)  # the parent died before the call
 
 
-__all__ = ["ChildEnd", "Supervision", "can_supervise", "current_supervision", "die_with_parent",
+__all__ = ["ChildEnd", "Supervision", "can_supervise", "current_supervision", "die_with_parent", "private_temp_dir",
            "remove_temporary", "supervise", "supervised_by"]

@@ -22,7 +22,6 @@ import multiprocessing.connection
 import os
 import shutil
 import sys
-import tempfile
 import threading
 import time
 from collections import deque
@@ -30,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from simrunner.run.supervise import private_temp_dir
 from simrunner.workflows.batch.scheduler import Handle
 from simrunner.workflows.batch.spec import BatchConfig, Job
 from simrunner.workflows.batch.worker import WARM_MODULES, death_row, warm_up, worker_loop
@@ -74,7 +74,7 @@ class LocalBackend:
         self.method = method
         self.config, self.quiet = config, quiet
         self.handles: list[Handle] = []
-        self._dir = Path(tempfile.mkdtemp(prefix="simrunner-batch-"))
+        self._dir = private_temp_dir("batch")  # (a killed batch's own removed at the next one)
         self._count = 0
 
     def start(self) -> Handle:
