@@ -174,7 +174,6 @@ def camera_sweep(car: CarDescription, m: Measurements, v: dict, dt_s: float):
     w = cam.width_px
     centre = slice(w // 2 - 8, w // 2 + 8)
     scale = 2 ** (cam.adc_bits - 8)
-    black = cam.black_level_dn / scale
     rows = []
     for t, name in sorted(zip(exposures, v["lines"])):
         frames = _lines(m, "camera_sweep", name, w, flat_ok=True)

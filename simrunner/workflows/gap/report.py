@@ -33,7 +33,7 @@ from simrunner.workflows.gap.fit import CANDIDATES, FitResult
 from simrunner.workflows.gap.glitches import Glitch
 from simrunner.workflows.gap.live import Findings
 from simrunner.workflows.gap.logs import Derived
-from simrunner.workflows.gap.replay import Prediction, Window, noise_rms
+from simrunner.workflows.gap.replay import Prediction, Window
 from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 from trackgen.outdir import clean_stale, make_temp, swapped_in
 from vehicle.description import CarDescription
