@@ -7,7 +7,7 @@ simulated log and its gap run, a Ray cluster, a build cache) is made once. Every
 is scheduled on its own, to whichever worker is free, so that slow tests do not queue
 behind each other on one worker while the other has nothing left: pytest-xdist's default
 (``--dist load``) sent test_gap.py's 330 s to one worker in one chunk, and the other idled
-for the last two minutes of a 9.6-minute run. The groups go first, largest first, then the
+for the last two minutes of a 9.8-minute run. The groups go first, largest first, then the
 single tests in file order (pytest-xdist's ``loadscope`` scheduler, whose unit of work this
 file chooses).
 
