@@ -95,6 +95,14 @@ def ray_cluster():
         yield from _cluster()
 
 
+def _default_sigint() -> None:
+    """In the ``ray start`` child before it runs: Ctrl-C back to its default. A shell without job
+    control starts a background job (``make test &``, nohup, some CI runners) with SIGINT
+    ignored, which its children inherit; Python then installs no KeyboardInterrupt handler and
+    the SIGINT below did nothing: each teardown waited its whole 15 s, then killed the group."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _cluster():
     port = _free_port()
     temp = tempfile.mkdtemp(prefix="rt", dir="/tmp")
@@ -104,7 +112,8 @@ def _cluster():
         [str(ray_cli), "start", "--head", "--block", "--node-ip-address=127.0.0.1",
          f"--port={port}", "--num-cpus=2", "--include-dashboard=false",
          "--object-store-memory=100000000", f"--temp-dir={temp}", "--disable-usage-stats"],
-        env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        env=env, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        preexec_fn=_default_sigint)
     try:
         _wait_port(port, proc, START_TIMEOUT_S)
         assert _listening(_tree(proc.pid)) <= LOOPBACK_HEX   # no server on other interfaces

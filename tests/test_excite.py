@@ -197,14 +197,20 @@ TENTH = dataclasses.replace(CAR, chassis=dataclasses.replace(CAR.chassis, mass_k
                             wheels=dataclasses.replace(CAR.wheels, friction_mu=1.05))
 
 
-def test_a_car_whose_turns_need_more_room_gets_a_larger_area_and_says_so(tmp_path):
+@pytest.fixture(scope="module")
+def tenth_plan():
+    """The 1:10 car's plan (made once, ~3 s: two tests read it; a plan is a frozen value)."""
+    return make_plan(TENTH)
+
+
+def test_a_car_whose_turns_need_more_room_gets_a_larger_area_and_says_so(tmp_path, tenth_plan):
     """The default car fits 6 x 6 m. A 1:10 car's turns do not (at 6 m its predicted path
     gets 0.3 m out): the plan grows the area to the smallest that fits, in 0.5 m steps, and
     keeps the nominal path inside it; a side asked for that does not fit names the one that
     does."""
     from simrunner.workflows.excite import predict_path
 
-    plan = make_plan(TENTH)
+    plan = tenth_plan
     assert AREA_M < plan.area_m <= AREA_M + 2.0 and (plan.area_m / 0.5).is_integer()
     xy = predict_path(plan, TENTH)
     assert plan.outside_area_m(xy[:, 0], xy[:, 1]) == 0.0
@@ -222,11 +228,11 @@ def test_a_car_whose_turns_need_more_room_gets_a_larger_area_and_says_so(tmp_pat
     assert back.area_bounds_m()[1] - back.area_bounds_m()[0] == pytest.approx(plan.area_m)
 
 
-def test_a_one_tenth_car_off_nominal_stays_in_its_area_closed_loop():
+def test_a_one_tenth_car_off_nominal_stays_in_its_area_closed_loop(tenth_plan):
     """A car of the design envelope on the 1:10 car's plan (trim and gain against its right
     turns) stays within the plan's margin: 0.11 m out, where following the turns at 90 % of
     the steering limit (it cannot steer their arcs then) took it 0.73 m out."""
-    plan = make_plan(TENTH)
+    plan = tenth_plan
     car = with_effects(TENTH, steering_offset_rad=math.radians(2.0), steering_gain=0.85)
     log = run_plan(plan, car, dt_s=0.005, closed_loop=True, pose_noise_m=0.01, seed=3)
     assert plan.outside_area_m(log.x_m, log.y_m) <= 0.3 < plan.margin_m  # 0.11 m; at 90 %: 0.73 m

@@ -22,11 +22,16 @@ def duty_car(hbridge: str, **drive) -> CarDescription:
     return BASE.replace(drive=dataclasses.replace(BASE.drive, command="duty", hbridge=hbridge, **drive))
 
 
+@pytest.fixture(scope="module")
+def speed_plan():
+    """The default (speed-command) car's plan, made once (three tests read it; a frozen value)."""
+    return make_plan(BASE)
+
+
 @pytest.mark.parametrize("hbridge", ["brake", "coast"])
-def test_a_duty_plan_holds_its_speeds_and_stays_in_its_area(hbridge):
+def test_a_duty_plan_holds_its_speeds_and_stays_in_its_area(hbridge, speed_plan):
     car = duty_car(hbridge, rolling_resistance_n=0.3, drag_nspm2=0.05)
     plan = make_plan(car)
-    speed_plan = make_plan(BASE)
     assert np.array_equal(plan.speed_cmd_mps, speed_plan.speed_cmd_mps)  # the same experiments
     assert plan.duty_cmd is not None and np.all(np.abs(plan.duty_cmd) <= 1.0)
     mo = motor_of(car)
@@ -40,11 +45,11 @@ def test_a_duty_plan_holds_its_speeds_and_stays_in_its_area(hbridge):
     assert np.max(log.speed_mps) > 0.8 * np.max(plan.speed_cmd_mps)
 
 
-def test_duty_plans_refuse_what_cannot_work(tmp_path):
+def test_duty_plans_refuse_what_cannot_work(speed_plan):
     with pytest.raises(PlanError, match=r"no rolling resistance or drag"):
         make_plan(duty_car("coast"))
     with pytest.raises(PlanError, match=r"the plan has no duty_cmd column"):
-        run_plan(make_plan(BASE), duty_car("brake"))
+        run_plan(speed_plan, duty_car("brake"))
 
 
 def test_the_cli_writes_and_plays_a_duty_plan(tmp_path):

@@ -370,30 +370,38 @@ def test_cli_bad_options_exit_2(tmp_path, offset_run):
     assert res.stderr.startswith(f"simrunner gap: {tmp_path / 'afile' / 'out'}: cannot write the output folder there")
 
 
-def test_cli_run_matches_library_and_jobs_do_not_matter(tmp_path, offset_run):
+SUBSET = ["steering_offset", "steering_gain"]
+
+
+@pytest.fixture(scope="module")
+def short_run(offset_run, tmp_path_factory):
+    """The first 12 s of the offset log (six windows) as a CSV file, and the library's run of
+    that file on two effects with 2 jobs (the CLI tests below compare with it)."""
     log, _, _ = offset_run
-    p = tmp_path / "m.csv"
-    write_log(log.subset(int(np.searchsorted(log.t_s, 12.0))), p, float_format="%.17g")  # 12 s: six windows
-    subset = ["steering_offset", "steering_gain"]
+    p = tmp_path_factory.mktemp("short") / "m.csv"
+    write_log(log.subset(int(np.searchsorted(log.t_s, 12.0))), p, float_format="%.17g")
+    return p, run_gap(read_log(p), jobs=2, effects=SUBSET)
+
+
+def test_cli_run_matches_library_and_jobs_do_not_matter(tmp_path, short_run):
+    p, lib = short_run
+    subset = SUBSET
     res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--jobs", "1", "--no-progress",
                                    "--effects", ",".join(subset)])
     assert res.exit_code == 0, res.output
     assert "effects found: steering_offset" in res.stdout
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
-    lib = run_gap(read_log(p), jobs=2, effects=subset)
     assert rep["effect"] == lib.effect
     assert [r["parameters"] for r in rep["ranking"]] == [r.parameters for r in lib.ranking]
     assert [r["bic"] for r in rep["ranking"]] == [r.criterion for r in lib.ranking]
 
 
 
-def test_cli_screen_option_fits_on_a_subset_and_says_so(tmp_path, offset_run):
+def test_cli_screen_option_fits_on_a_subset_and_says_so(tmp_path, short_run):
     """``--screen S``: the screening and refits use about S seconds of the fit windows (the
     report says how many of how many); the default uses all of a log this short."""
-    log, _, _ = offset_run
-    p = tmp_path / "m.csv"
-    write_log(log.subset(int(np.searchsorted(log.t_s, 12.0))), p, float_format="%.17g")
-    subset = ["steering_offset", "steering_gain"]
+    p, whole = short_run
+    subset = SUBSET
     res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "out"), "--jobs", "1", "--no-progress",
                                    "--effects", ",".join(subset), "--screen", "3"])
     assert res.exit_code == 0, res.output
@@ -405,7 +413,6 @@ def test_cli_screen_option_fits_on_a_subset_and_says_so(tmp_path, offset_run):
     assert "effects found: steering_offset" in res.stdout
     lib = run_gap(read_log(p), jobs=2, effects=subset, screen_max_s=3.0)
     assert lib.parameters == json.loads((tmp_path / "out" / "report.json").read_text())["parameters"]
-    whole = run_gap(read_log(p), jobs=2, effects=subset)
     assert whole.settings["screen_windows_s"] == whole.settings["fit_windows_s"]
     assert "screened and refitted on" not in summary_text(whole)
     res = CliRunner().invoke(gap, [str(p), "-o", str(tmp_path / "neg"), "--screen", "-1"])

@@ -67,8 +67,14 @@ def test_each_motors_duty_is_replayed(tmp_path):
     assert result.rmse_before["position_m"] < 0.02 and result.effects == []
 
 
-def test_a_duty_in_percent_or_reversed_is_refused_with_the_fix(tmp_path):
-    log = duty_run(hidden_motor_car(1.0), tmp_path, seconds=8.0)
+@pytest.fixture(scope="module")
+def short_duty_log(tmp_path_factory):
+    """8 s of the nominal duty car (two tests read it; a RunLog's columns are read-only)."""
+    return duty_run(hidden_motor_car(1.0), tmp_path_factory.mktemp("duty"), seconds=8.0)
+
+
+def test_a_duty_in_percent_or_reversed_is_refused_with_the_fix(short_duty_log):
+    log = short_duty_log
     percent = dataclasses.replace(log, duty_cmd=log.duty_cmd * 100.0, duty_left=None, duty_right=None)
     with pytest.raises(LogError, match=r"'duty_cmd': expected a duty in -1..1 .*--column 'duty_cmd=YOUR_COLUMN / 100'"):
         run_gap(percent, BASE)
@@ -77,8 +83,8 @@ def test_a_duty_in_percent_or_reversed_is_refused_with_the_fix(tmp_path):
         run_gap(reversed_, BASE)
 
 
-def test_duty_and_speed_logs_are_not_mixed(tmp_path):
-    duty = duty_run(hidden_motor_car(1.0), tmp_path, seconds=8.0)
+def test_duty_and_speed_logs_are_not_mixed(short_duty_log):
+    duty = short_duty_log
     speed, _ = make_measured_log(None, rng=np.random.default_rng(1), start_s=0.0, duration_s=8.0)
     with pytest.raises(GapError, match=r"expected duty logs as the others"):
         run_gap([duty, speed], BASE)

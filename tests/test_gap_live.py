@@ -3,6 +3,7 @@ and DIR/findings.txt), a partial report when the run is stopped, and ``--budget`
 chain in time with the model of its finished steps."""
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
@@ -22,8 +23,10 @@ from simrunner.workflows.gap.workflow import run_gap
 EFFECTS = ["motor_lag", "speed_scale", "throttle_deadband"]
 
 
+@functools.lru_cache(maxsize=1)
 def lag_log():
-    """The plan's speed steps with a motor lag hidden: a step that keeps it, one that keeps nothing."""
+    """The plan's speed steps with a motor lag hidden: a step that keeps it, one that keeps nothing
+    (simulated once; a RunLog's columns are read-only)."""
     log, _ = make_measured_log("motor_lag", value=0.3, rng=np.random.default_rng(5), start_s=44.0, duration_s=16.0)
     return log
 

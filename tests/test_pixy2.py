@@ -241,21 +241,30 @@ def test_the_video_draws_the_vectors(tmp_path):
 
 # -- the followers -----------------------------------------------------------------------------------
 def _tracks():
-    out = [None]
-    out += [SHARED_TRACKS / n for n in ("nxp_raceway", "nxp_raceway_octagon") if (SHARED_TRACKS / n).is_dir()]
-    return out
+    return [SHARED_TRACKS / n for n in ("nxp_raceway", "nxp_raceway_octagon") if (SHARED_TRACKS / n).is_dir()]
 
 
-@pytest.mark.parametrize("track", _tracks(), ids=lambda t: "default" if t is None else t.name)
+@pytest.fixture(scope="module")
+def python_lap(tmp_path_factory):
+    """The Python follower's lap of the default track (run once: two tests read it)."""
+    return drive(EXAMPLES / "pixy2_follower.py", car=PIXY_CAR, laps=1, seed=0,
+                 csv=tmp_path_factory.mktemp("pixy2") / "p.csv")
+
+
+def test_the_python_pixy2_follower_laps_the_default_track(python_lap):
+    assert python_lap.outcome == "finished", python_lap.message
+
+
+@pytest.mark.parametrize("track", _tracks(), ids=lambda t: t.name)
 def test_the_python_pixy2_follower_laps(track):
     r = drive(EXAMPLES / "pixy2_follower.py", car=PIXY_CAR, track=track, laps=1, seed=0)
     assert r.outcome == "finished", r.message
 
 
 @needs_cc
-def test_the_cpp_pixy2_follower_laps_as_the_python_one(tmp_path):
+def test_the_cpp_pixy2_follower_laps_as_the_python_one(tmp_path, python_lap):
     c = drive(EXAMPLES / "pixy2_follower.cpp", car=PIXY_CAR, laps=1, seed=0, csv=tmp_path / "c.csv")
-    p = drive(EXAMPLES / "pixy2_follower.py", car=PIXY_CAR, laps=1, seed=0, csv=tmp_path / "p.csv")
+    p = python_lap
     assert c.outcome == "finished", c.message
     # the same method; the C++ Spinner passes floats: the lap within a frame
     assert abs(c.lap_times_s[0] - p.lap_times_s[0]) <= 2 / 60
