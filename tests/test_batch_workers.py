@@ -30,7 +30,7 @@ def main(s):
 
 
 def test_workers_fork_warm_unless_another_thread_runs():
-    assert threading.active_count() == 1 and choose_start_method() == "fork"
+    assert threading.active_count() == 1 and choose_start_method() == "fork", threading.enumerate()
     stop = threading.Event()
     other = threading.Thread(target=stop.wait)
     other.start()

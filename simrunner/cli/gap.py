@@ -92,6 +92,8 @@ class _LiveView:
     def __init__(self, stream, no_progress: bool, live):
         from tqdm import tqdm
 
+        tqdm.monitor_interval = 0  # no monitor thread: it outlives the bar, and a batch run later in
+        # this process would then start its workers cold (simrunner.workflows.batch.pool)
         self.stream, self.live = stream, live
         self.bar = tqdm(total=1, file=stream, disable=no_progress, desc="reading the logs", unit="fit", leave=False)
 
