@@ -60,3 +60,16 @@ def test_api_spelling_and_short_spelling_both_work(tmp_path):
     for flag in ("--time-limit", "--time-limit-s"):
         r = CliRunner().invoke(simrunner_main, ["drive", str(ctrl), flag, "0.2", "--dt-s", "0.004"])
         assert r.exit_code == 1 and "time limit of 0.2 s" in r.output, r.output
+
+
+def test_dash_h_still_works_after_a_command_ran_on_its_own():
+    """click keeps a command's help option from its first invocation: a lazily loaded command
+    (gap) invoked on its own first then refused -h under simrunner (seen in a test order)."""
+    from simrunner.cli.gap import gap
+    from trackgen.cli import build
+
+    for alone, cli, args in ((gap, simrunner_main, ["gap"]), (drive_cmd, simrunner_main, ["drive"]),
+                             (build, trackgen_main, ["build"])):
+        assert CliRunner().invoke(alone, ["--help"]).exit_code == 0
+        r = CliRunner().invoke(cli, [*args, "-h"])
+        assert r.exit_code == 0 and "Usage:" in r.output, r.output

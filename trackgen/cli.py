@@ -23,6 +23,7 @@ from .errors import TrackError
 from .validate import count_errors, errors
 
 EXIT_OK, EXIT_PROBLEMS, EXIT_BAD_INPUT = 0, 1, 2
+_HELP = {"help_option_names": ["-h", "--help"]}  # -h on every command, also invoked on its own
 _INPUT_ERRORS = (TrackError, PieceError, WorldError, CarDescriptionError)
 
 
@@ -32,13 +33,13 @@ def _fail(message: str, code: int = EXIT_BAD_INPUT) -> click.exceptions.Exit:
     return click.exceptions.Exit(code)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(context_settings=_HELP)
 @click.version_option(package_name="nxpcup-sim", prog_name="trackgen")
 def main() -> None:
     """Generate NXP Cup tracks (Gazebo worlds, meshes, track.json) from layout files."""
 
 
-@main.command()
+@main.command(context_settings=_HELP)
 @click.argument("path", type=click.Path(path_type=Path))
 @click.option("--car", "car_path", type=click.Path(path_type=Path), default=None,
               help="Car description TOML (default: the built-in NXP Cup car).")
@@ -61,7 +62,7 @@ def validate(path: Path, car_path: Path | None, no_sdf_check: bool) -> None:
     click.echo(f"{path}: OK")
 
 
-@main.command()
+@main.command(context_settings=_HELP)
 @click.argument("layout", type=click.Path(path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(path_type=Path),
               help="Output folder (created; must not exist unless --force).")

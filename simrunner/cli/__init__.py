@@ -18,6 +18,8 @@ import sys
 
 import click
 
+from simrunner.cli.names import HELP
+
 from simrunner.errors import SimError
 from simrunner.run.rules import EVENT_NAMES
 
@@ -144,7 +146,7 @@ def _function_docstring(module: str, function: str) -> str | None:
     return None
 
 
-@click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=_LazyGroup, context_settings=HELP)
 @click.version_option(package_name="nxpcup-sim", prog_name="simrunner")
 def main() -> None:
     """Headless NXP Cup car simulator with the thesis's Spinner API."""
@@ -204,7 +206,7 @@ def build_options(command):
     return command
 
 
-@main.command("drive")
+@main.command("drive", context_settings=HELP)
 @click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
 @click.argument("more_sources", nargs=-1, type=click.Path(dir_okay=False, path_type=str))
 @click.option("--track", default=None, metavar="LAYOUT|DIR|WORLD|default|floor",
@@ -470,7 +472,7 @@ def _isr(text: str) -> tuple[str, float]:
     return name, 1.0 / hz
 
 
-@main.command("cflags")
+@main.command("cflags", context_settings=HELP)
 def cflags_cmd() -> None:
     """Print the compiler flags for building a C/C++ controller by hand (-I<include dir>)."""
     from simrunner.run.native.build import cflags
@@ -478,7 +480,7 @@ def cflags_cmd() -> None:
     click.echo(cflags())
 
 
-@main.command("include-dir")
+@main.command("include-dir", context_settings=HELP)
 def include_dir_cmd() -> None:
     """Print the directory holding spinner.h and spinner.hpp (the C/C++ Spinner API)."""
     from simrunner.run.native.build import INCLUDE_DIR

@@ -6,10 +6,11 @@ import sys
 import click
 
 from simrunner.cli import McuTime, build_options
+from simrunner.cli.names import HELP
 from simrunner.run.rules import EVENT_NAMES
 
 
-@click.command("batch")
+@click.command("batch", context_settings=HELP)
 @click.argument("controller", type=click.Path(dir_okay=False, path_type=str))
 @click.argument("more_sources", nargs=-1, type=click.Path(dir_okay=False, path_type=str))
 @click.option("--tracks", "tracks", multiple=True, metavar="SPEC",

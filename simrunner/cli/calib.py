@@ -12,6 +12,7 @@ import sys
 import click
 
 from simrunner.cli import input_errors
+from simrunner.cli.names import HELP
 
 
 def _fail(exc: BaseException) -> None:
@@ -19,7 +20,7 @@ def _fail(exc: BaseException) -> None:
     sys.exit(2)
 
 
-@click.command("excite")
+@click.command("excite", context_settings=HELP)
 @click.option("-o", "--output", "output", required=True, metavar="PLAN.csv",
               help="Where to write the plan (t, speed_cmd, steer_cmd, coast, segment, and the turns' "
                    "ref_x, ref_y, ref_yaw at 50 Hz).")
@@ -94,7 +95,7 @@ def excite_cmd(output, duration_s, car, seed, simulate, closed_loop, pose_noise_
                    f"path {log.x_m.max() - log.x_m.min():.1f} x {log.y_m.max() - log.y_m.min():.1f} m, {where})")
 
 
-@click.command("calibrate")
+@click.command("calibrate", context_settings=HELP)
 @click.argument("measured", metavar="MEASURED.toml", type=click.Path(dir_okay=False, path_type=str))
 @click.option("--car", default=None, metavar="CAR.toml", help="Car description to start from (default: built-in car).")
 @click.option("-o", "--output", "output", required=True, metavar="NEW_CAR.toml",
@@ -128,7 +129,7 @@ def calibrate_cmd(measured, car, output, dt_s) -> None:
     click.echo(f"car description: {output}")
 
 
-@click.command("calibrate-camera")
+@click.command("calibrate-camera", context_settings=HELP)
 @click.argument("lines", nargs=-1, required=True, metavar="LINES.csv [MORE.csv ...]",
                 type=click.Path(dir_okay=False, path_type=str))
 @click.option("--scene", type=click.Choice(["straight", "track"]), default="straight", show_default=True,

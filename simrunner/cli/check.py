@@ -10,8 +10,9 @@ import sys
 import click
 
 from simrunner.cli import build_options
+from simrunner.cli.names import HELP
 
-@click.command("check")
+@click.command("check", context_settings=HELP)
 @click.argument("controller", type=click.Path(exists=True, dir_okay=False, path_type=str))
 @click.argument("more_sources", nargs=-1, type=click.Path(exists=True, dir_okay=False, path_type=str))
 @click.option("--track", default=None, metavar="LAYOUT|DIR|WORLD",

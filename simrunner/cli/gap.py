@@ -21,6 +21,7 @@ from pathlib import Path
 
 import click
 
+from simrunner.cli.names import HELP
 from simrunner.workflows.gap.settings import SETTINGS
 
 
@@ -112,7 +113,7 @@ class _LiveView:
         self.bar.close()
 
 
-@click.command("gap")
+@click.command("gap", context_settings=HELP)
 @click.argument("measured", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
               metavar="DIR", help="Output folder (report.json, car.toml, plots); written atomically.")

@@ -10,6 +10,11 @@ from __future__ import annotations
 
 import click
 
+#: Every command's help options: ``-h`` too, also when a command is invoked on its own (click
+#: keeps a command's help option from its first invocation: a lazily loaded command invoked
+#: alone first would then refuse ``-h`` under ``simrunner``).
+HELP = {"help_option_names": ["-h", "--help"]}
+
 
 def api_spelling(name: str) -> str:
     """``time_limit_s`` -> ``--time-limit-s``."""

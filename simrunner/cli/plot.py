@@ -7,8 +7,10 @@ from pathlib import Path
 
 import click
 
+from simrunner.cli.names import HELP
 
-@click.command("plot")
+
+@click.command("plot", context_settings=HELP)
 @click.argument("log", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--out", default=None, type=click.Path(dir_okay=False, path_type=Path),
               metavar="PNG", help="Where to write the plot (default: LOG with .png).")
