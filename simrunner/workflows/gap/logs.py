@@ -316,13 +316,19 @@ def smoothing_window(t_s: np.ndarray, *, settings: GapSettings = SETTINGS) -> in
     return min(win, m if m % 2 else m - 1)
 
 
-def _pose_states(sg: _Smoother, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.ndarray) -> dict[str, np.ndarray]:
-    """Smoothed pose, and the speed (on the grid: ``v_grid``) and yaw rate the pose gives."""
+def _pose_speeds(sg: _Smoother, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.ndarray):
+    """``(yaw on the grid, speed on the grid, yaw rate)`` the pose gives (smoothed)."""
     yaw_u = np.unwrap(yaw_rad)
     yaw_grid = sg.on_grid(yaw_u)
     v_grid = sg.on_grid(x_m, 1) * np.cos(yaw_grid) + sg.on_grid(y_m, 1) * np.sin(yaw_grid)
+    return yaw_grid, v_grid, sg.back(sg.on_grid(yaw_u, 1))
+
+
+def _pose_states(sg: _Smoother, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.ndarray) -> dict[str, np.ndarray]:
+    """Smoothed pose, and the speed (on the grid: ``v_grid``) and yaw rate the pose gives."""
+    yaw_grid, v_grid, yaw_rate = _pose_speeds(sg, x_m, y_m, yaw_rad)
     return {"x_m": sg.back(sg.on_grid(x_m)), "y_m": sg.back(sg.on_grid(y_m)), "yaw_rad": sg.back(yaw_grid),
-            "v_grid": v_grid, "yaw_rate_radps": sg.back(sg.on_grid(yaw_u, 1))}
+            "v_grid": v_grid, "yaw_rate_radps": yaw_rate}
 
 
 def pose_rates(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.ndarray,
@@ -339,9 +345,9 @@ def pose_rates(t_s: np.ndarray, x_m: np.ndarray, y_m: np.ndarray, yaw_rad: np.nd
     if len(t_s) < 3:
         nan = np.full(len(t_s), np.nan)
         return nan, nan.copy()
-    sg = _Smoother(t_s, window, settings=settings)
-    pose = _pose_states(sg, np.asarray(x_m, float), np.asarray(y_m, float), np.asarray(yaw_rad, float))
-    return sg.back(pose["v_grid"]), pose["yaw_rate_radps"]
+    sg = _Smoother(t_s, window, settings=settings)  # (the smoothed pose itself is not needed here)
+    _, v_grid, yaw_rate = _pose_speeds(sg, np.asarray(x_m, float), np.asarray(y_m, float), np.asarray(yaw_rad, float))
+    return sg.back(v_grid), yaw_rate
 
 
 __all__ = ["Derived", "at_rest", "check_measured", "derive", "pieces", "pose_rates", "rms_finite", "smoothing_window",
