@@ -94,3 +94,42 @@ def main(s):
     if s.param("mode", "drive") == "stuck":
         sum(range(10 ** 13))   # one C-level call that never lets Python code run
 """
+
+
+def session_processes(sid: int) -> list[int]:
+    """The pids of the living (not zombie) processes of session ``sid`` (Linux /proc)."""
+    from pathlib import Path
+
+    pids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue  # ended meanwhile
+        if int(fields[3]) == sid and fields[0] != "Z":
+            pids.append(int(stat.parent.name))
+    return pids
+
+
+def kill_alone_and_wait_for_its_session(proc, timeout_s: float = 10.0) -> list[int]:
+    """SIGKILL ``proc`` (started with ``start_new_session=True``) alone, not its group, and wait
+    up to ``timeout_s`` for the rest of its session to end; returns the pids left."""
+    import time
+
+    proc.kill()
+    proc.wait(timeout=30)
+    end = time.monotonic() + timeout_s
+    while session_processes(proc.pid) and time.monotonic() < end:
+        time.sleep(0.05)
+    return session_processes(proc.pid)
+
+
+def kill_session(proc) -> None:
+    """SIGKILL what is left of ``proc``'s session (a test's clean-up)."""
+    import os
+    import signal
+
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass

@@ -19,7 +19,7 @@ from simrunner.workflows.batch.results import columns
 from simrunner.workflows.batch.spec import (make_jobs, parse_grid, parse_seeds, parse_values,
                                             resolve_tracks)
 
-from helpers import FAULTY
+from helpers import FAULTY, kill_alone_and_wait_for_its_session, kill_session
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
@@ -260,19 +260,6 @@ def test_a_stopped_batch_keeps_its_finished_runs(tmp_path, sig):
         assert len(rows) >= 3 and rows[0].startswith("run,")
 
 
-def _session_processes(sid: int) -> list[int]:
-    """The pids of the living (not zombie) processes of session ``sid`` (Linux /proc)."""
-    pids = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue  # ended meanwhile
-        if int(fields[3]) == sid and fields[0] != "Z":
-            pids.append(int(stat.parent.name))
-    return pids
-
-
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 def test_the_workers_of_a_batch_killed_alone_end_with_it(tmp_path):
     """kill -9 of the batch process alone (the out-of-memory killer, `timeout -s KILL`, a
@@ -296,14 +283,6 @@ def test_the_workers_of_a_batch_killed_alone_end_with_it(tmp_path):
         while len(list(tmp_path.glob("started.*"))) < 2 and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.05)
         assert len(list(tmp_path.glob("started.*"))) == 2 and proc.poll() is None
-        proc.kill()  # the batch process only, not its group
-        proc.wait(timeout=30)
-        deadline = time.monotonic() + 10
-        while _session_processes(proc.pid) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert _session_processes(proc.pid) == []
+        assert kill_alone_and_wait_for_its_session(proc) == []  # its process only, not its group
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)  # what is left of it
-        except ProcessLookupError:
-            pass
+        kill_session(proc)  # what is left of it

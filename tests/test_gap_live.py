@@ -14,6 +14,8 @@ import time
 import numpy as np
 import pytest
 
+from helpers import kill_alone_and_wait_for_its_session, kill_session, session_processes
+
 from simrunner.telemetry.log import write_log
 from simrunner.workflows.gap.live import Budget, Findings, uncertainty_replays
 from simrunner.workflows.gap.synth import make_measured_log
@@ -210,21 +212,6 @@ def test_a_stop_swallowed_where_it_landed_still_stops_the_run(tmp_path, monkeypa
     assert "stopped by SIGTERM" in err and "Traceback" not in err + result.output
 
 
-def _session_processes(sid: int) -> list[int]:
-    """The pids of the living (not zombie) processes of session ``sid`` (Linux /proc)."""
-    left = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as fh:
-                    fields = fh.read().rsplit(")", 1)[1].split()
-            except (OSError, IndexError):
-                continue
-            if int(fields[3]) == sid and fields[0] != "Z":
-                left.append(int(entry))
-    return left
-
-
 @pytest.mark.skipif(not os.path.exists("/proc/self/stat"), reason="reads /proc")
 def test_the_fit_workers_of_a_run_killed_alone_end_with_it(tmp_path):
     """kill -9 of gap's process alone (the out-of-memory killer, `timeout -s KILL`) left its fit
@@ -238,17 +225,9 @@ def test_the_fit_workers_of_a_run_killed_alone_end_with_it(tmp_path):
     try:
         _wait_for(out / "findings.txt", "nominal car", proc, 240.0)
         end = time.monotonic() + 60
-        while len(_session_processes(proc.pid)) < 3 and time.monotonic() < end:  # gap and its 2 workers
+        while len(session_processes(proc.pid)) < 3 and time.monotonic() < end:  # gap and its 2 workers
             time.sleep(0.05)
-        assert len(_session_processes(proc.pid)) >= 3
-        proc.kill()  # gap's process only, not its group
-        proc.wait(timeout=30)
-        end = time.monotonic() + 10
-        while _session_processes(proc.pid) and time.monotonic() < end:
-            time.sleep(0.05)
-        assert _session_processes(proc.pid) == []
+        assert len(session_processes(proc.pid)) >= 3
+        assert kill_alone_and_wait_for_its_session(proc) == []  # its process only, not its group
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)  # what is left of it
-        except ProcessLookupError:
-            pass
+        kill_session(proc)  # what is left of it
