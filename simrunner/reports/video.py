@@ -7,16 +7,15 @@ processed lines and text under it, the top-down track view).
 Off the control path: at a recorded frame the main thread only stores a few numbers and
 references to small arrays (the image the controller got, if any); a writer thread renders
 the camera view when needed, composes the frame (:class:`~simrunner.reports.video_frame.Composer`:
-what stays the same is drawn once) and encodes it (``cv2.VideoWriter``, ``mp4v``, the fastest
-encoder that writes an MP4 with opencv-python-headless; OpenCV releases the GIL while
+what stays the same is drawn once) and another encodes it
+(:class:`~simrunner.reports.video_encoder.H264Writer`: H.264, which releases the GIL while
 encoding). The queue is bounded, so a slow encoder slows the run instead of filling memory.
 The file is written as ``NAME.partial.mp4`` and renamed on :meth:`VideoRecorder.close`, which
 also runs when the controller crashed.
 
 Frame rate: every camera frame up to ``max_fps`` (30); above that every ``ceil(fps /
-max_fps)``-th frame (the default 50 fps camera: every second frame, a 25 fps video). Encoding is
-the largest part of the video's cost and does not depend on what a frame shows (OpenCV's
-conversion to YUV 4:2:0 and the MPEG-4 encoder; bench/bench_video.py measures it).
+max_fps)``-th frame (the default 50 fps camera: every second frame, a 25 fps video). bench/bench_video.py measures
+the video's cost.
 """
 from __future__ import annotations
 
@@ -27,10 +26,10 @@ import threading
 from pathlib import Path
 from typing import Callable
 
-import cv2
 import numpy as np
 
 from simrunner.errors import SimError
+from simrunner.reports.video_encoder import H264Writer
 from simrunner.reports.video_frame import FRAME_H, FRAME_W, Composer, FrameRecord, Layout, TrackView, compose
 
 __all__ = ["VideoRecorder", "FrameRecord", "TrackView", "Layout", "Composer", "compose", "FRAME_W", "FRAME_H"]
@@ -67,10 +66,7 @@ class VideoRecorder:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SimError(f"{self.path}: cannot create its folder ({exc.strerror})") from None
-        self._writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*"mp4v"),
-                                       self.fps, (FRAME_W, FRAME_H))
-        if not self._writer.isOpened():
-            raise SimError(f"{self.path}: OpenCV cannot write an mp4v video here")
+        self._writer = H264Writer(self._tmp, self.fps, FRAME_W, FRAME_H)
         self._render = render
         self._view_state = view_state
         self._raster = raster
@@ -174,7 +170,7 @@ class VideoRecorder:
             self._queue.put(None)
             self._thread.join()
             self._encoder.join()
-            self._writer.release()
+            self._writer.close()
         if self._error is not None:
             raise SimError(f"{self.path}: video writer failed: {self._error}")
         if self.frames_written == 0:

@@ -1,0 +1,84 @@
+"""The debug video's encoder: H.264 in an MP4 file, through PyAV (FFmpeg's libx264).
+
+H.264 (Constrained Baseline, YUV 4:2:0, x264's ``ultrafast`` preset) plays in browsers, on
+GitHub and in every player; the MPEG-4 Part 2 (``mp4v``) that OpenCV's own writer offers does
+not play in browsers, and OpenCV converted each BGR frame to YUV with FFmpeg's swscale, which
+cost as much as the encoding itself. Here OpenCV's SIMD conversion (``COLOR_BGR2YUV_I420``)
+writes the encoder's one reused frame. x264 runs one thread (the video's cost stays on one core
+beside the simulation, and a batch of runs with videos does not oversubscribe the machine) at
+constant quality (CRF 23, x264's default: the panels' text stays sharp where the picture does
+not move). x264 with one thread is deterministic: the same frames give the same file.
+
+``bench/bench_video.py`` measures the whole video's cost.
+"""
+from __future__ import annotations
+
+from fractions import Fraction
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from simrunner.errors import SimError
+
+CODEC = "libx264"
+OPTIONS = {"preset": "ultrafast", "crf": "23"}
+
+
+class H264Writer:
+    """Writes ``(height, width, 3)`` BGR uint8 frames at ``fps`` to ``path`` (an MP4 file).
+
+    ``write`` and ``close`` may run on a thread of their own (the encoder releases the GIL)."""
+
+    def __init__(self, path: str | Path, fps: float, width: int, height: int):
+        try:
+            import av
+        except ModuleNotFoundError:
+            raise SimError("--video needs PyAV, which is not installed: pip install av") from None
+        if width % 2 or height % 2:
+            raise ValueError(f"H264Writer: {width} x {height}: H.264 at 4:2:0 needs even sizes")
+        self.path, self.width, self.height = Path(path), width, height
+        rate = Fraction(fps).limit_denominator(1001)
+        try:
+            self._container = av.open(str(self.path), "w", format="mp4")
+        except OSError as exc:
+            raise SimError(f"{self.path}: cannot write the video ({exc.strerror or exc})") from None
+        try:
+            stream = self._container.add_stream(CODEC, rate=rate, options=dict(OPTIONS))
+            stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
+            stream.thread_count = 1
+        except Exception as exc:  # an FFmpeg build without libx264
+            self._container.close()
+            raise SimError(f"{self.path}: PyAV cannot encode {CODEC} here ({exc})") from None
+        self._stream = stream
+        self._yuv = np.empty((height * 3 // 2, width), np.uint8)
+        # one frame, its planes written in place for every picture (x264 copies a picture as it
+        # takes it; PyAV's from_ndarray would allocate and fill a new frame: 0.7 ms a picture)
+        self._frame = av.VideoFrame(width, height, "yuv420p")
+        self._planes = [np.frombuffer(p, np.uint8).reshape(p.height, p.line_size)[:, :p.width]
+                        for p in self._frame.planes]
+        self.frames = 0
+
+    def write(self, bgr: np.ndarray) -> None:
+        """Encode one frame (the next in time)."""
+        if bgr.shape != (self.height, self.width, 3):
+            raise ValueError(f"H264Writer: a frame of {bgr.shape}, expected {(self.height, self.width, 3)}")
+        yuv, (y, u, v), h = self._yuv, self._planes, self.height
+        cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV_I420, dst=yuv)  # Y (h rows), then U, V (h / 4 rows each)
+        y[:] = yuv[:h]
+        u[:] = yuv[h:h + h // 4].reshape(u.shape)
+        v[:] = yuv[h + h // 4:].reshape(v.shape)
+        frame = self._frame
+        frame.pts = self.frames
+        self.frames += 1
+        self._container.mux(self._stream.encode(frame))
+
+    def close(self) -> None:
+        """Flush the encoder and finish the file (once; later calls do nothing)."""
+        if self._container is None:
+            return
+        container, self._container = self._container, None
+        try:
+            container.mux(self._stream.encode(None))
+        finally:
+            container.close()
