@@ -47,7 +47,7 @@ def input_errors() -> tuple[type[BaseException], ...]:
 
 # The simulator's own dependencies (pyproject.toml; the track tools need none of them):
 # import name -> distribution. An installation without one is bad input, not a bug.
-SIM_DEPENDENCIES = {"dartpy": "dartpy", "cv2": "opencv-python-headless", "numba": "numba",
+SIM_DEPENDENCIES = {"dartpy": "dartpy", "cv2": "opencv-python-headless", "av": "av", "numba": "numba",
                     "llvmlite": "numba", "scipy": "scipy", "tqdm": "tqdm"}
 
 
