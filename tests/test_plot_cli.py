@@ -119,3 +119,18 @@ def test_bad_logs_are_one_line_exit_2(tmp_path, text, expected):
     r = CliRunner().invoke(cli, ["plot", str(path), "-o", str(tmp_path / "bad.png")])
     assert r.exit_code == 2 and re.search(expected, r.output), r.output
     assert len(r.output.strip().splitlines()) == 1 and not (tmp_path / "bad.png").exists()
+
+
+def test_a_drives_lap_labels_are_its_judged_lap_times(laps_log):
+    """A drive's plot labels each lap with the judge's time (the gate crossing, as in the title);
+    a log read from a file, or lap times that do not match its laps, with the row's time."""
+    from simrunner.reports.plot import _lap_label
+
+    log = read_log(laps_log)
+    laps = lap_rows(log)
+    rows = [float(log.t_s[i]) for i in laps]
+    judged = [rows[0] - 0.013, rows[1] - rows[0] + 0.004]
+    assert _lap_label(log, laps, 1, judged) == f"lap 1: {judged[0]:.2f} s"
+    assert _lap_label(log, laps, 2, judged) == f"lap 2: {judged[1]:.2f} s"
+    assert _lap_label(log, laps, 1, None) == f"lap 1 done at {rows[0]:.2f} s"
+    assert _lap_label(log, laps, 2, judged[:1]) == f"lap 2 done at {rows[1]:.2f} s"

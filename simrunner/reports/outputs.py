@@ -51,8 +51,8 @@ def write_outputs(result, outputs: Outputs, video, track, *, csv_stream=None) ->
         try:
             from simrunner.reports.plot import plot_run
 
-            result.outputs["plot"] = str(plot_run(result.log, track, outputs.plot,
-                                                  title=plot_title(result)))
+            result.outputs["plot"] = str(plot_run(result.log, track, outputs.plot, title=plot_title(result),
+                                                  lap_times_s=result.lap_times_s))
         except SimError as exc:
             errors.append(exc)
     if outputs.summary is not None:

@@ -45,7 +45,16 @@ def _track_background(ax, track) -> None:
               interpolation="nearest")
 
 
-def _map_panel(ax, log: RunLog, laps: np.ndarray, off: int | None) -> None:
+def _lap_label(log: RunLog, laps: np.ndarray, n: int, lap_times_s) -> str:
+    """Lap ``n``'s label on the path: its judged time when the run's lap times are known (the
+    gate crossing, interpolated between frames), else the log's time of the row it was counted at
+    (the frame after the crossing)."""
+    if lap_times_s is not None and len(lap_times_s) == laps.size:
+        return f"lap {n}: {lap_times_s[n - 1]:.2f} s"
+    return f"lap {n} done at {log.t_s[laps[n - 1]]:.2f} s"
+
+
+def _map_panel(ax, log: RunLog, laps: np.ndarray, off: int | None, lap_times_s=None) -> None:
     if log.x_m is None or log.y_m is None or not len(log):
         ax.text(0.5, 0.5, "no position (x_m, y_m) in this log", ha="center", va="center",
                 transform=ax.transAxes)
@@ -60,7 +69,7 @@ def _map_panel(ax, log: RunLog, laps: np.ndarray, off: int | None) -> None:
     if laps.size:
         ax.plot(x[laps], y[laps], "D", color="gold", mec="black", ms=8, label="lap completed")
         for n, i in enumerate(laps[:MAX_LAP_LABELS], 1):  # laps end near one line: stagger
-            ax.annotate(f"lap {n} done at {log.t_s[i]:.2f} s", (x[i], y[i]), textcoords="offset points",
+            ax.annotate(_lap_label(log, laps, n, lap_times_s), (x[i], y[i]), textcoords="offset points",
                         xytext=(10, 6 + 15 * (n - 1)), fontsize=8, arrowprops={"arrowstyle": "-", "lw": 0.5}, bbox={"boxstyle": "round", "fc": "lightyellow",
                                                          "alpha": 0.85})
     if off is not None:
@@ -88,9 +97,12 @@ def _time_panel(ax, t, actual, commanded, unit: str, scale: float = 1.0) -> None
     ax.grid(True, alpha=0.3)
 
 
-def plot_run(log: RunLog, track, path: str | Path, *, title: str = "") -> Path:
+def plot_run(log: RunLog, track, path: str | Path, *, title: str = "",
+             lap_times_s: list[float] | None = None) -> Path:
     """Write the plot of ``log`` to ``path`` (PNG); ``track``: a ``SimTrack`` drawn under the
-    path, or None. Raises :class:`SimError` when the file cannot be written."""
+    path, or None; ``lap_times_s``: the run's judged lap times (a drive's; the laps on the path
+    are labelled with them, as in the title). Raises :class:`SimError` when the file cannot be
+    written."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -107,7 +119,7 @@ def plot_run(log: RunLog, track, path: str | Path, *, title: str = "") -> Path:
     ax_w = fig.add_subplot(grid[2, 1], sharex=ax_v)
     if track is not None:
         _track_background(ax_map, track)
-    _map_panel(ax_map, log, laps, off)
+    _map_panel(ax_map, log, laps, off, lap_times_s)
     ax_map.set_aspect("equal")
     ax_map.set_xlabel("x (m)")
     ax_map.set_ylabel("y (m)")
