@@ -255,3 +255,30 @@ def test_h264_writer_is_faithful_deterministic_and_plays_as_h264(tmp_path):
     with pytest.raises(ValueError, match="expected"):
         w.write(np.zeros((FRAME_H, FRAME_W), np.uint8))
     w.close()
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_a_full_disk_is_one_line_naming_the_video_not_a_crash(tmp_path):
+    """A video whose writes fail (its file on a full disk: /dev/full) raises SimError with the
+    OS's reason at the write and every later one, and closes without muxing more (PyAV 18
+    crashes on that); drive says so in one line and keeps the CSV rows written."""
+    from click.testing import CliRunner
+
+    from simrunner.cli import main as cli
+    from simrunner.reports.video_encoder import H264Writer
+
+    (tmp_path / "a.mp4").symlink_to("/dev/full")
+    w = H264Writer(tmp_path / "a.mp4", 25, FRAME_W, FRAME_H)
+    frame = np.zeros((FRAME_H, FRAME_W, 3), np.uint8)
+    with pytest.raises(SimError, match="No space left on device"):
+        for i in range(60):
+            w.write(frame + i)
+    with pytest.raises(SimError, match="No space left on device"):
+        w.write(frame)
+    w.close()  # (already reported)
+    (tmp_path / "run.partial.mp4").symlink_to("/dev/full")
+    res = CliRunner().invoke(cli, ["drive", str(EXAMPLES / "line_follower.py"), "--video", str(tmp_path / "run.mp4"),
+                                   "--csv", str(tmp_path / "run.csv")])
+    assert res.exit_code != 0 and "Traceback" not in res.output
+    assert "cannot write the video (No space left on device)" in res.output
+    assert len((tmp_path / "run.csv").read_text().splitlines()) > 10

@@ -58,9 +58,13 @@ class H264Writer:
         self._planes = [np.frombuffer(p, np.uint8).reshape(p.height, p.line_size)[:, :p.width]
                         for p in self._frame.planes]
         self.frames = 0
+        self._broken: str | None = None  # why the file could not be written (it is then only closed)
 
     def write(self, bgr: np.ndarray) -> None:
-        """Encode one frame (the next in time)."""
+        """Encode one frame (the next in time). A file that cannot be written (a full disk)
+        raises :class:`SimError`, then and at every later frame."""
+        if self._broken is not None:
+            raise SimError(f"{self.path}: cannot write the video ({self._broken})")
         if bgr.shape != (self.height, self.width, 3):
             raise ValueError(f"H264Writer: a frame of {bgr.shape}, expected {(self.height, self.width, 3)}")
         yuv, (y, u, v), h = self._yuv, self._planes, self.height
@@ -71,14 +75,35 @@ class H264Writer:
         frame = self._frame
         frame.pts = self.frames
         self.frames += 1
-        self._container.mux(self._stream.encode(frame))
+        try:
+            self._container.mux(self._stream.encode(frame))
+        except Exception as exc:  # noqa: BLE001 - FFmpeg's errors (av.error.*): the disk, the file
+            self._broken = _reason(exc)
+            raise SimError(f"{self.path}: cannot write the video ({self._broken})") from None
 
     def close(self) -> None:
-        """Flush the encoder and finish the file (once; later calls do nothing)."""
+        """Flush the encoder and finish the file (once; later calls do nothing). A fault
+        :meth:`write` has not reported raises :class:`SimError`. After a failed write the file
+        is only closed: muxing more into it crashes PyAV 18 (a segmentation fault)."""
         if self._container is None:
             return
         container, self._container = self._container, None
+        failure = None
+        if self._broken is None:
+            try:
+                container.mux(self._stream.encode(None))
+            except Exception as exc:  # noqa: BLE001
+                failure = self._broken = _reason(exc)
         try:
-            container.mux(self._stream.encode(None))
-        finally:
             container.close()
+        except Exception as exc:  # noqa: BLE001
+            if failure is None and self._broken is None:
+                failure = self._broken = _reason(exc)
+        if failure is not None:
+            raise SimError(f"{self.path}: cannot write the video ({failure})")
+
+
+def _reason(exc: BaseException) -> str:
+    """An FFmpeg error in a few words: the OS's reason (``No space left on device``) where
+    there is one."""
+    return getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
