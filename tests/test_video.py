@@ -282,3 +282,26 @@ def test_a_full_disk_is_one_line_naming_the_video_not_a_crash(tmp_path):
     assert res.exit_code != 0 and "Traceback" not in res.output
     assert "cannot write the video (No space left on device)" in res.output
     assert len((tmp_path / "run.csv").read_text().splitlines()) > 10
+
+
+def test_without_libx264_the_video_is_mpeg4_and_without_any_encoder_one_line(tmp_path, monkeypatch):
+    """PyAV built without libx264 (an LGPL FFmpeg): MPEG-4 Part 2, still faithful; with none of
+    the encoders: one SimError line and no file left."""
+    import simrunner.reports.video_encoder as enc
+
+    monkeypatch.setattr(enc, "ENCODERS", (("no_such_encoder", {}),) + enc.ENCODERS[1:])
+    frames = [np.full((FRAME_H, FRAME_W, 3), 30 + 20 * i, np.uint8) for i in range(5)]
+    for f in frames:
+        cv2.putText(f, "speed 1.234 m/s", (40, 300), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (235, 235, 235), 1, cv2.LINE_AA)
+    w = enc.H264Writer(tmp_path / "a.mp4", 25, FRAME_W, FRAME_H)
+    assert w.codec == "mpeg4"
+    for f in frames:
+        w.write(f)
+    w.close()
+    cap = cv2.VideoCapture(str(tmp_path / "a.mp4"))
+    got = [cap.read()[1] for _ in frames]
+    assert min(cv2.PSNR(f, g) for f, g in zip(frames, got)) > 35.0
+    monkeypatch.setattr(enc, "ENCODERS", (("no_such_encoder", {}),))
+    with pytest.raises(SimError, match="none of the encoders no_such_encoder"):
+        enc.H264Writer(tmp_path / "b.mp4", 25, FRAME_W, FRAME_H)
+    assert not (tmp_path / "b.mp4").exists()

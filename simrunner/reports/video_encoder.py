@@ -9,6 +9,7 @@ beside the simulation, and a batch of runs with videos does not oversubscribe th
 constant quality (CRF 23, x264's default: the panels' text stays sharp where the picture does
 not move). x264 with one thread is deterministic: the same frames give the same file.
 
+Where PyAV's FFmpeg has no libx264 (an LGPL build), the file is MPEG-4 Part 2 at a fixed quantiser.
 ``bench/bench_video.py`` measures the whole video's cost.
 """
 from __future__ import annotations
@@ -21,8 +22,10 @@ import numpy as np
 
 from simrunner.errors import SimError
 
-CODEC = "libx264"
-OPTIONS = {"preset": "ultrafast", "crf": "23"}
+# the encoders tried, in order: H.264; MPEG-4 Part 2 where PyAV's FFmpeg has no libx264 (an
+# LGPL build), at a fixed quantiser of 3 (FFmpeg's scale 1..31: the panels' text stays sharp)
+ENCODERS = (("libx264", {"preset": "ultrafast", "crf": "23"}),
+            ("mpeg4", {"flags": "+qscale", "global_quality": str(3 * 118)}))  # 118: FF_QP2LAMBDA
 
 
 class H264Writer:
@@ -43,13 +46,21 @@ class H264Writer:
             self._container = av.open(str(self.path), "w", format="mp4")
         except OSError as exc:
             raise SimError(f"{self.path}: cannot write the video ({exc.strerror or exc})") from None
-        try:
-            stream = self._container.add_stream(CODEC, rate=rate, options=dict(OPTIONS))
+        stream = None
+        for codec, options in ENCODERS:
+            try:
+                stream = self._container.add_stream(codec, rate=rate, options=dict(options))
+            except Exception:  # noqa: BLE001 - not in this FFmpeg build (av.codec.codec.UnknownCodecError)
+                continue
             stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
             stream.thread_count = 1
-        except Exception as exc:  # an FFmpeg build without libx264
+            break
+        if stream is None:
             self._container.close()
-            raise SimError(f"{self.path}: PyAV cannot encode {CODEC} here ({exc})") from None
+            self.path.unlink(missing_ok=True)
+            raise SimError(f"{self.path}: PyAV's FFmpeg has none of the encoders "
+                           f"{', '.join(c for c, _ in ENCODERS)}: reinstall it (pip install --force-reinstall av)")
+        self.codec = stream.codec_context.name
         self._stream = stream
         self._yuv = np.empty((height * 3 // 2, width), np.uint8)
         # one frame, its planes written in place for every picture (x264 copies a picture as it
