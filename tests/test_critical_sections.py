@@ -442,3 +442,86 @@ def test_the_s32k144_kits_osif_suspend_holds_a_gpt_notification(tmp_path):
         """))
     r = drive(build_program([str(src)], kit="s32k144"), track="floor", time_limit_s=2.0)
     assert r.outcome == "controller_error" and "status 10" in r.message, r.message
+
+
+LATCHED_PIT = textwrap.dedent("""\
+    #include "derivative.h"
+    #include "TFC/TFC.h"
+    volatile int ticks, tif_at_entry;
+    void PIT_IRQHandler(void) {
+        tif_at_entry += (PIT_TFLG0 & PIT_TFLG_TIF_MASK) != 0;
+        PIT_TFLG0 = PIT_TFLG_TIF_MASK;
+        ticks++;
+    }
+    int main(void) {
+        TFC_Init();
+        SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
+        PIT_MCR = 0;
+        PIT_LDVAL0 = 24000 - 1;                                /* 1 kHz of the 24 MHz bus */
+        PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+        NVIC_EnableIRQ(PIT_IRQn);
+        for (int k = 0; k < 5; k++) TFC_Task();
+        int before = ticks;
+        __disable_irq();
+        for (int k = 0; k < 4; k++) TFC_Task();                /* expiries held: one pending bit */
+        int held = ticks - before;
+        STOP;                                                  /* the timer's source off */
+        UNPEND;
+        __enable_irq();
+        int at_unmask = ticks - before;
+        for (int k = 0; k < 5; k++) TFC_Task();
+        return 1 + 100 * held + 10 * at_unmask + (ticks - before) + (tif_at_entry == ticks ? 0 : 50);
+    }
+    """)
+
+
+@pytest.mark.parametrize("stop, unpend, status", [
+    ("PIT_TCTRL0 &= ~PIT_TCTRL_TIE_MASK", "", 12),      # its interrupt enable cleared: the NVIC's bit runs it
+    ("PIT_TCTRL0 = 0", "", 12),                         # the timer stopped: the same
+    ("NVIC_DisableIRQ(PIT_IRQn)", "", 1),               # its IRQ disabled: not taken (the bit waits)
+    ("PIT_TCTRL0 = 0", "NVIC_ClearPendingIRQ(PIT_IRQn)", 1),  # the pending bit cleared: it does not run
+    # still running: its source asserts the IRQ again (TIF && TIE), so the clear does not hold: once at the
+    # unmask, then 2 a 2-ms step
+    ("PIT_TCTRL0 = PIT_TCTRL_TEN_MASK | PIT_TCTRL_TIE_MASK", "NVIC_ClearPendingIRQ(PIT_IRQn)", 22),
+])
+def test_a_pit_expiry_held_by_the_mask_keeps_its_nvic_pending_bit_after_its_source_is_off(
+        tmp_path, stop, unpend, status):
+    """--kit tfc, a raw PIT vector (ARMv6-M: an NVIC pending bit stays until taken or cleared): an
+    expiry held by __disable_irq still calls PIT_IRQHandler once at __enable_irq although the
+    program turned the PIT's interrupt off in the critical section; NVIC_ClearPendingIRQ of the
+    stopped timer drops it. Nothing runs while masked, nothing after the stop; TIF is set at entry."""
+    src = tmp_path / "latched.c"
+    src.write_text(LATCHED_PIT)
+    program = build_program([str(src)], kit="tfc", defines=[f"STOP={stop}", f"UNPEND={unpend or '(void)0'}"])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0)
+        assert r.outcome == "controller_error" and f"status {status}" in r.message, (isolate, r.message)
+
+
+C_STOPPED_IN_A_HANDLER = """\
+#include "spinner.h"
+static int a_calls, b_calls;
+static void b(void) { b_calls++; }
+static void a(void) { if (++a_calls == 2) STOP(b); }
+int main(void) {
+    spinner_every(0.01, a);
+    spinner_every(0.01, b);
+    spinner_sleep(0.025);      /* a, b at 0.01; at 0.02 a stops b, due at that step too */
+    int mid = b_calls;
+    spinner_sleep(0.03);
+    return 10 * mid + b_calls + 1;
+}
+"""
+
+
+@pytest.mark.parametrize("stop, status", [("spinner_stop_every", 12), ("spinner_stop_every_latched", 23)])
+def test_a_handler_stopping_one_due_at_its_step_drops_it_or_with_the_nvics_bit_runs_it_after(tmp_path, stop, status):
+    """spinner_stop_every from a handler: one due at the same step does not run; the kits' NVIC stop
+    (spinner_stop_every_latched: the other timer had expired, its pending bit stays) runs it once
+    after the running handler, then never again; alike in process and isolated."""
+    src = tmp_path / "stop_in_handler.c"
+    src.write_text(C_STOPPED_IN_A_HANDLER)
+    program = build_program([src], defines=[f"STOP={stop}"])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0)
+        assert r.outcome == "controller_error" and f"status {status}" in r.message, (isolate, r.message)

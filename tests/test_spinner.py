@@ -263,6 +263,34 @@ def test_frame_schedule_with_a_period_that_is_not_a_whole_number_of_steps():
     assert boundaries == [7, 13, 20, 27, 33, 40]  # round(k * 20 / 3)
 
 
+def test_a_latched_stop_keeps_the_pending_call_until_the_unmask_and_unpend_clears_it():
+    """``remove_interrupt(latch=True)`` (an NVIC source turned off): a call held by the mask runs
+    once at the unmask, at its step, then never again; without a pending call nothing is kept;
+    ``unpend_interrupt`` (NVIC_ClearPendingIRQ) drops the kept call."""
+    sim = FakeSim()
+    clock = LockstepClock(sim, dt_s=0.002, frame_period_s=0.02)
+    ticks = []
+
+    def tick():
+        ticks.append(clock.step_index)
+
+    for unpend, expected in ((False, [3, 8]), (True, [3])):
+        ticks.clear()
+        clock.add_interrupt(0.006, tick)
+        clock.advance(4)
+        clock.mask()
+        clock.advance(4)                   # due at step 6 (of this pass): held
+        assert clock.remove_interrupt(tick, latch=True) == 1
+        if unpend:
+            assert clock.unpend_interrupt(tick) == 1
+        clock.unmask()
+        clock.advance(10)
+        assert [t - (clock.step_index - 18) for t in ticks] == expected
+    clock.add_interrupt(0.006, tick)       # stopped with nothing pending: nothing kept
+    clock.advance(1)
+    assert clock.remove_interrupt(tick, latch=True) == 1 and clock.unpend_interrupt(tick) == 0
+
+
 def test_the_clock_removes_an_interrupt_and_steps_on_without_one():
     """``LockstepClock.remove_interrupt``: the handler runs no more; with none left the clock
     steps to the next frame in one chunk again; the count says how many were removed."""

@@ -36,7 +36,9 @@ expiries while it is set give one call; ARMv6-M Architecture Reference Manual, A
 exception model: pending is a state, not a count; PRIMASK one bit that keeps every exception of
 configurable priority from being taken). Its schedule goes on (its next time is a whole period later, as a
 timer's). :meth:`unmask` runs the pending handlers at once, at the time of the unmask (no time
-passes), in the order they were registered; a pending handler stopped meanwhile does not run.
+passes), in the order they were registered; a pending handler stopped meanwhile does not run,
+unless it was stopped as an NVIC source is (``remove_interrupt(latch=True)``: the pending bit
+outlives the timer's own interrupt enable; ``unpend_interrupt`` clears it).
 Masking is a bit, not a count: a second mask is a no-op, one unmask clears it. Handlers do not
 change it: one that masks leaves it masked on return (later handlers are held), and an unmask
 inside a handler lets the pending ones run after it returns (handlers do not nest). A handler
@@ -228,19 +230,37 @@ class LockstepClock:
         self._interrupts.append(irq)
         self._next_irq_step = min(self._next_irq_step, irq.next_step)
 
-    def remove_interrupt(self, handler: Callable[[], None]) -> int:
+    def remove_interrupt(self, handler: Callable[[], None], *, latch: bool = False) -> int:
         """Stop every interrupt running ``handler`` (the same object): none of them runs again,
-        one due at this step neither (also when called from a handler). Returns how many."""
+        one due at this step neither (also when called from a handler). Returns how many.
+
+        ``latch``: an NVIC's pending bit, which outlives its source (a kit's timer whose own
+        interrupt enable is cleared): one that fell due and has not run - held by the mask, or
+        due at this step after the running handler - still runs once, when it would have."""
         gone = [irq for irq in self._interrupts if irq.handler is handler]
         for irq in gone:
+            if latch and (irq.pending or irq.next_step <= self.step_index):
+                irq.pending = self._any_pending = True  # (run by _interrupt or unmask, then pruned)
+            else:
+                irq.pending = False
             irq.next_step = _NEVER  # (a handler running now: its loop ends)
-            irq.pending = False
         if gone and not self.in_interrupt:  # (inside a handler: _interrupt prunes the list)
             self._prune()
         return len(gone)
 
-    def _prune(self) -> None:
-        self._interrupts = [irq for irq in self._interrupts if irq.next_step != _NEVER]
+    def unpend_interrupt(self, handler: Callable[[], None]) -> int:
+        """Clear the pending call a stopped ``handler`` kept (``remove_interrupt(latch=True)``;
+        the NVIC's clear-pending register): it does not run. Returns how many were cleared."""
+        cleared = [irq for irq in self._interrupts
+                   if irq.handler is handler and irq.pending and irq.next_step == _NEVER]
+        for irq in cleared:
+            irq.pending = False
+        if cleared and not self.in_interrupt:
+            self._prune()
+        return len(cleared)
+
+    def _prune(self) -> None:  # (a stopped interrupt whose pending call is kept stays until it runs)
+        self._interrupts = [irq for irq in self._interrupts if irq.next_step != _NEVER or irq.pending]
         self._next_irq_step = min((irq.next_step for irq in self._interrupts), default=_NEVER)
 
     def _run(self, irq: _Interrupt) -> None:

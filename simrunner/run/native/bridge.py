@@ -46,7 +46,8 @@ from simrunner.run.native.build import NativeProgram, missing_function, misspelt
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
-    OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK, OP_IRQ_MASK_WAIT = range(1, 31)
+    OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK, OP_IRQ_MASK_WAIT, \
+    OP_EVERY_UNPEND = range(1, 32)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
@@ -162,6 +163,7 @@ class _Session:
         self._pos = 0
         self._in_call = False  # the request handled is the one the program waits in (_WAITING)
         self._isrs: dict[int, Callable[[], None]] = {}  # the program's timer interrupts by slot
+        self._latched: dict[int, Callable[[], None] | None] = {}  # stopped ones that kept a pending call
         self._last_mask: tuple[bytes, Callable[[], str | None] | None] = (b"", None)  # _mask_where's
 
     def _setup_transport(self, child: _Child) -> None:
@@ -396,8 +398,16 @@ class _Session:
             period, slot = struct.unpack("<di", payload[:12])
             self._isrs[slot] = handler = lambda: self._interrupt(slot)
             s.every(period, handler)
-        elif op == OP_EVERY_STOP:  # the program's slot (int32) of a timer interrupt it stopped
-            s.stop_every(self._isrs.pop(struct.unpack("<i", payload[:4])[0], None))
+        elif op == OP_EVERY_STOP:  # the program's slot (int32) of a timer interrupt it stopped, then a
+            slot = struct.unpack("<i", payload[:4])[0]  # byte 1 where a call due keeps its pending bit
+            handler = self._isrs.pop(slot, None)
+            if payload[4:5] == b"\x01":  # (a kit's timer whose interrupt enable was cleared: the NVIC's bit)
+                self._latched[slot] = handler
+                s._stop_every_latched(handler)
+            else:
+                s.stop_every(handler)
+        elif op == OP_EVERY_UNPEND:  # the slot (int32) of a stopped one whose pending bit is cleared
+            s._unpend_every(self._latched.pop(struct.unpack("<i", payload[:4])[0], None))
         elif op in (OP_IRQ_MASK, OP_IRQ_MASK_WAIT):  # a flag byte: 1 mask (disable), 0 unmask (enable)
             if payload[:1] == b"\x01":  # then the caller's return address: its offset (uint64), module
                 clock, was = s._clock, s._clock.masked

@@ -52,7 +52,7 @@ enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, O
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
        OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK,
-       OP_IRQ_MASK_WAIT };
+       OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -331,10 +331,16 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
  * again, the lowest first, once the simulator has read the stop: the reply to the next waiting
  * call. Until then the handler stays in its slot (isr_stopping), as the requests queued before the
  * stop may let time pass (--mcu-time) and run it then: it was due before it was stopped; set up
- * again meanwhile (a kit's timer given a new period in its handler), it takes that slot again. */
+ * again meanwhile (a kit's timer given a new period in its handler), it takes that slot again.
+ * spinner_stop_every_latched (a kit's timer whose own interrupt enable is cleared) stops it as an
+ * NVIC source: a call that fell due and has not run keeps its pending bit (OP_EVERY_STOP {int32 slot,
+ * byte 1}) and runs at the unmask, or after the running handler; the slot is kept (isr_latched) until
+ * a reply unmasked and outside handlers, when no such call is left; spinner_unpend_every clears the
+ * bit (OP_EVERY_UNPEND {int32 slot}: NVIC_ClearPendingIRQ). */
 #define MAX_ISRS 32
 static void (*isr_fn[MAX_ISRS])(void);
 static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read by the simulator */
+static unsigned char isr_latched[MAX_ISRS];   /* stopped, a pending call of it may still run */
 static int isr_count;   /* slots in use */
 /* Masked interrupts (spinner_disable_interrupts: PRIMASK, a bit): the simulator holds the handlers
  * falling due pending and runs them at the unmask. No time passes before the program's next waiting
@@ -346,6 +352,7 @@ static int isr_count;   /* slots in use */
  * (irq_held: a waiting call since the mask, or --mcu-time); otherwise none can be pending and it is
  * queued. */
 static int irq_masked, irq_held, irq_mask_unsent;
+static int irq_unmasking;  /* the unmask's waiting call is being made (the kit's look before it) */
 static void *irq_mask_ra;  /* where the program masked (the return address of its call) */
 static unsigned char mask_msg[9 + 4096];
 /* The mask's message: 1, then the caller's offset in its module (uint64) and the module's path, for
@@ -393,12 +400,12 @@ static void run_isr(uint32_t slot, double time_s) {
 
 static int add_isr(void (*handler)(void), double period_s) {
     int32_t slot = 0;  /* its own slot if it is being stopped (a timer's new period), else a free one */
-    while (slot < MAX_ISRS && !(isr_stopping[slot] && isr_fn[slot] == handler)) slot++;
+    while (slot < MAX_ISRS && !((isr_stopping[slot] || isr_latched[slot]) && isr_fn[slot] == handler)) slot++;
     if (slot == MAX_ISRS)
         for (slot = 0; slot < MAX_ISRS && isr_fn[slot] != NULL; slot++) {}
     if (slot == MAX_ISRS) return -1;
     isr_fn[slot] = handler;
-    isr_stopping[slot] = 0;
+    isr_stopping[slot] = isr_latched[slot] = 0;
     isr_count++;
     queue(OP_EVERY, &period_s, sizeof period_s, &slot, sizeof slot);
     return 0;
@@ -408,6 +415,9 @@ static int add_isr(void (*handler)(void), double period_s) {
 static void release_stopped(void) {
     for (int slot = 0; slot < MAX_ISRS; slot++)
         if (isr_stopping[slot]) isr_stopping[slot] = 0, isr_fn[slot] = NULL;
+    if (!irq_masked && isr_depth == 0)  /* every kept pending call has run by now */
+        for (int slot = 0; slot < MAX_ISRS; slot++)
+            if (isr_latched[slot]) isr_latched[slot] = 0, isr_fn[slot] = NULL;
 }
 
 /* A kit built with the program may define `void spinner_kit_before_wait(void)`: it runs before
@@ -828,6 +838,28 @@ void spinner_stop_every(void (*handler)(void)) {
     }
 }
 
+void spinner_stop_every_latched(void (*handler)(void)) {
+    INIT();
+    if (finished || handler == NULL) return;
+    /* a call can be pending only if time passed while masked, or in a handler (one due at its step) */
+    int may_pend = (irq_masked && irq_held) || irq_unmasking || isr_depth > 0;
+    for (int32_t slot = 0; slot < MAX_ISRS; slot++) {
+        if (isr_fn[slot] != handler || isr_stopping[slot] || isr_latched[slot]) continue;
+        unsigned char latch = (unsigned char)may_pend;
+        if (may_pend) isr_latched[slot] = 1;
+        else isr_stopping[slot] = 1;
+        isr_count--;
+        queue(OP_EVERY_STOP, &slot, sizeof slot, &latch, 1);
+    }
+}
+
+void spinner_unpend_every(void (*handler)(void)) {
+    INIT();
+    if (finished || handler == NULL) return;
+    for (int32_t slot = 0; slot < MAX_ISRS; slot++)
+        if (isr_latched[slot] && isr_fn[slot] == handler) queue(OP_EVERY_UNPEND, &slot, sizeof slot, NULL, 0);
+}
+
 static void set_mask(int masked) {
     unsigned char flag = (unsigned char)masked;
     if (finished || masked == irq_masked) return;  /* a bit: a second disable changes nothing */
@@ -840,8 +872,13 @@ static void set_mask(int masked) {
     } else {
         int held = irq_held || (mcu_on && isr_depth == 0);
         irq_masked = irq_held = 0;
-        if (held && isr_depth == 0) call(OP_IRQ_MASK_WAIT, &flag, 1, NULL, 0, NULL, 0);
-        else queue(OP_IRQ_MASK, &flag, 1, NULL, 0);  /* (in a handler: they run after it) */
+        if (held && isr_depth == 0) {
+            irq_unmasking = 1;  /* (a kit timer its look before the call stops may have a call pending) */
+            call(OP_IRQ_MASK_WAIT, &flag, 1, NULL, 0, NULL, 0);
+            irq_unmasking = 0;
+        } else {
+            queue(OP_IRQ_MASK, &flag, 1, NULL, 0);  /* (in a handler: they run after it) */
+        }
     }
 }
 
@@ -1527,9 +1564,10 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_main = (main_fn)dlsym(lib, "main");
     prog_lib = lib;
     isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
-    irq_masked = irq_held = irq_mask_unsent = 0, irq_mask_ra = NULL, mask_msg_len = 0;
+    irq_masked = irq_held = irq_mask_unsent = irq_unmasking = 0, irq_mask_ra = NULL, mask_msg_len = 0;
     memset(isr_fn, 0, sizeof isr_fn);
     memset(isr_stopping, 0, sizeof isr_stopping);
+    memset(isr_latched, 0, sizeof isr_latched);
     kit_before_wait = NULL, in_kit_hook = 0;
     if (user_main == NULL) {
         __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);

@@ -117,6 +117,14 @@ void spinner_every(double period_s, void (*handler)(void));
 /* Stop every timer interrupt that calls handler (set up by spinner_every or --isr): from now on
  * it is not called (one due at this step neither). */
 void spinner_stop_every(void (*handler)(void));
+/* For kits that emulate a timer's interrupt enable behind the NVIC (the TFC kit's PIT, LPTMR0, TPM2):
+ * stop handler as spinner_stop_every does, except that a call which fell due and has not run (held
+ * by the mask, or due at this step after the running handler) keeps its NVIC pending bit and runs
+ * once, when it would have - the pending bit outlives its source (ARMv6-M, ARM DDI 0419, B3.4 the
+ * NVIC: a pending interrupt stays pending until taken or cleared). spinner_unpend_every clears it
+ * (NVIC_ClearPendingIRQ). */
+void spinner_stop_every_latched(void (*handler)(void));
+void spinner_unpend_every(void (*handler)(void));
 /* Non-zero when handler is set up as a timer interrupt (by spinner_every or --isr). */
 int spinner_has_every(void (*handler)(void));
 /* How many timer interrupt handlers are set up (--isr and spinner_every). */

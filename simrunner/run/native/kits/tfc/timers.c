@@ -79,10 +79,12 @@ __attribute__((noreturn)) static void cannot(const struct timer *t, const char *
 
 /* Raw NVIC_ISER / NVIC_ICER writes since the last look (write 1 to set / clear); a bit written
  * to both is enabled (the "disable, set up, enable" sequence). */
+static uint32_t nvic_unpend;  /* NVIC_ICPR bits written since the last look */
 static void nvic_sync(void) {
     uint32_t set = NVIC->ISER[0], clear = NVIC->ICER[0];
     nvic_enabled = (nvic_enabled & ~clear) | set;
-    NVIC->ISER[0] = NVIC->ICER[0] = 0;
+    nvic_unpend |= NVIC->ICPR[0];
+    NVIC->ISER[0] = NVIC->ICER[0] = NVIC->ICPR[0] = 0;
 }
 
 void tfc_sim_nvic_enable(int irq) {
@@ -217,8 +219,13 @@ static double period_of(int i) {
     return i == LPTMR ? lptmr_period() : i == TPM_2 ? tpm2_period() : pit_period(i - PIT0);
 }
 
-static void stop(struct timer *t) {
-    spinner_stop_every(t->fire);
+/* Stop a timer's calls; `source`: because its own interrupt enable (or the timer) was turned off
+ * while its IRQ stays enabled in the NVIC - then an expiry that has not been taken yet (held by
+ * __disable_irq, or due after the running handler) keeps the NVIC's pending bit and its handler runs
+ * once, as on the board (ARMv6-M, ARM DDI 0419, B3.4: pending until taken or cleared; NVIC_ICPR). */
+static void stop(struct timer *t, int source) {
+    if (source) spinner_stop_every_latched(t->fire);
+    else spinner_stop_every(t->fire);
     t->period_s = t->next_period_s = 0.0;
 }
 
@@ -380,9 +387,10 @@ static void sync(void) {
         warn_unrouted(i);
         double period_s = period_of(i);
         void (*handler)(void) = handler_of(i);
-        if (period_s > 0.0 && handler != NULL && spinner_has_every(handler)) period_s = 0.0;  /* --isr's */
+        int isr_own = handler != NULL && spinner_has_every(handler);  /* --isr runs it */
+        if (period_s > 0.0 && isr_own) period_s = 0.0;
         if (period_s == 0.0) {
-            if (t->period_s > 0.0) stop(t);
+            if (t->period_s > 0.0) stop(t, !isr_own && irq_on(irq_of(i)));
             continue;
         }
         if (handler == NULL) {
@@ -394,11 +402,17 @@ static void sync(void) {
         if (t->period_s == 0.0) {
             start(t, period_s);
         } else if (period_s != t->period_s && t->started == waits) {  /* no time passed since its start */
-            stop(t);
+            stop(t, 0);
             start(t, period_s);
         } else {
             t->next_period_s = period_s != t->period_s ? period_s : 0.0;
         }
+    }
+    if (nvic_unpend) {  /* NVIC_ClearPendingIRQ: a stopped timer's kept call does not run (a running
+                         * one's source still asserts its IRQ: on the board it is pending again) */
+        for (int i = 0; i < N_TIMERS; i++)
+            if (timers[i].period_s == 0.0 && ((nvic_unpend >> irq_of(i)) & 1u)) spinner_unpend_every(timers[i].fire);
+        nvic_unpend = 0;
     }
 }
 
@@ -419,7 +433,7 @@ static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
     firing = 0;
     *flag &= ~mask;
     if (next > 0.0 && t->period_s > 0.0) {
-        stop(t);
+        stop(t, 0);
         start(t, next);
     }
     waits++;

@@ -147,6 +147,6 @@ void tfc_sim_nvic_enable(int irq);   /* timers.c: NVIC_EnableIRQ, enable_irq */
 void tfc_sim_nvic_disable(int irq);
 #define NVIC_EnableIRQ(irq) tfc_sim_nvic_enable((int)(irq))
 #define NVIC_DisableIRQ(irq) tfc_sim_nvic_disable((int)(irq))
-#define NVIC_ClearPendingIRQ(irq) ((void)(irq))
+#define NVIC_ClearPendingIRQ(irq) ((void)(NVIC->ICPR[0] = 1u << ((uint32_t)(irq) & 31u)))
 #define NVIC_SetPriority(irq, prio) ((void)(irq), (void)(prio))
 #endif
