@@ -525,3 +525,86 @@ def test_a_handler_stopping_one_due_at_its_step_drops_it_or_with_the_nvics_bit_r
     for isolate in (False, True):
         r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0)
         assert r.outcome == "controller_error" and f"status {status}" in r.message, (isolate, r.message)
+
+
+RELATCHED_PIT = textwrap.dedent("""\
+    #include "derivative.h"
+    #include "TFC/TFC.h"
+    volatile int ticks;
+    void PIT_IRQHandler(void) { PIT_TFLG0 = PIT_TFLG_TIF_MASK; ticks++; }
+    int main(void) {
+        TFC_Init();
+        SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
+        PIT_MCR = 0;
+        PIT_LDVAL0 = 24000 - 1;
+        PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+        NVIC_EnableIRQ(PIT_IRQn);
+        for (int k = 0; k < 5; k++) TFC_Task();
+        int before = ticks;
+        __disable_irq();
+        for (int k = 0; k < 4; k++) TFC_Task();      /* held: the pending bit set */
+        PIT_TCTRL0 &= ~PIT_TCTRL_TIE_MASK;           /* source off: the bit stays */
+        TFC_Task();
+        PIT_TCTRL0 |= PIT_TCTRL_TIE_MASK;            /* on again: the same bit */
+        for (int k = 0; k < 4; k++) TFC_Task();
+        AFTER;
+        __enable_irq();
+        return 1 + ticks - before;
+    }
+    """)
+
+
+@pytest.mark.parametrize("after, status", [
+    ("(void)0", 2),                                                           # one bit: one call
+    ("PIT_TCTRL0 = 0; NVIC_ClearPendingIRQ(PIT_IRQn); TFC_Task()", 1),        # off and cleared: none
+    ("NVIC_DisableIRQ(PIT_IRQn); TFC_Task()", 1),                             # IRQ disabled: not taken
+])
+def test_a_timer_turned_off_and_on_again_while_masked_has_one_pending_bit(tmp_path, after, status):
+    """The NVIC has one pending bit an IRQ: a PIT whose interrupt is turned off and on again inside a
+    critical section calls its handler once at the unmask (not once for the kept call and once for
+    the new one); clearing or disabling it afterwards leaves none (the review's case: a kept call
+    left behind made the host fault with an unknown handler)."""
+    src = tmp_path / "relatched.c"
+    src.write_text(RELATCHED_PIT)
+    program = build_program([str(src)], kit="tfc", defines=[f"AFTER={after}"])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0)
+        assert r.outcome == "controller_error" and f"status {status}" in r.message, (isolate, r.message)
+
+
+C_LATCHED_API = """\
+#include "spinner.h"
+static int calls;
+static void h(void) { calls++; }
+int main(void) {
+    spinner_every(0.001, h);
+    spinner_sleep(0.01);
+    spinner_disable_interrupts();      /* (--mcu-time: the ones due before it run in it) */
+    int before = calls;
+    spinner_set_servo(0.0);            /* --mcu-time: its time passes, masked: h held */
+    BETWEEN;
+    spinner_stop_every_latched(h);     /* kept */
+    SECOND;
+    int n = spinner_interrupts() + 2 * spinner_has_every(h);
+    spinner_sleep(0.01);
+    spinner_enable_interrupts();
+    return 1 + calls - before + 10 * n;
+}
+"""
+
+
+@pytest.mark.parametrize("between, mcu_time", [("spinner_sleep(0.01)", None), ("spinner_sleep(0.01)", 0.003),
+                                               ("(void)0", 0.003)])  # (only --mcu-time's request let time pass)
+@pytest.mark.parametrize("second, status", [("(void)0", 2), ("spinner_stop_every(h)", 1)])
+def test_spinner_stop_every_latched_keeps_one_call_and_a_later_stop_drops_it(tmp_path, second, status, between,
+                                                                             mcu_time):
+    """spinner.h: a latched stop keeps the held call (also when the time passed in a request of
+    --mcu-time); the handler counts as stopped at once (spinner_interrupts 0, spinner_has_every 0);
+    a spinner_stop_every after it drops the kept call, once (no second stop of the slot)."""
+    src = tmp_path / "latched_api.c"
+    src.write_text(C_LATCHED_API)
+    program = build_program([src], defines=[f"SECOND={second}", f"BETWEEN={between}"])
+    extra = {} if mcu_time is None else {"mcu_time": mcu_time}
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
+        assert r.outcome == "controller_error" and f"status {status}" in r.message, (isolate, r.message)

@@ -280,8 +280,21 @@ def test_a_full_disk_is_one_line_naming_the_video_not_a_crash(tmp_path):
     res = CliRunner().invoke(cli, ["drive", str(EXAMPLES / "line_follower.py"), "--video", str(tmp_path / "run.mp4"),
                                    "--csv", str(tmp_path / "run.csv")])
     assert res.exit_code != 0 and "Traceback" not in res.output
-    assert "cannot write the video (No space left on device)" in res.output
+    assert f"{tmp_path / 'run.mp4'}: cannot write the video (No space left on device)" in res.output
     assert len((tmp_path / "run.csv").read_text().splitlines()) > 10
+    assert not (tmp_path / "run.partial.mp4").is_symlink() and not (tmp_path / "run.mp4").exists()
+
+
+def test_a_video_path_that_cannot_be_written_fails_before_the_run(tmp_path):
+    """PyAV opens its file at the first frame: the writer opens it itself, so a path that cannot
+    be written is one line before the run starts (a read-only folder), not a run stopped midway."""
+    from simrunner.reports.video_encoder import H264Writer
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    (ro / "v.mp4").mkdir()  # a folder where the file should be (as a read-only place, also as root)
+    with pytest.raises(SimError, match=r"v.mp4: cannot write the video \(Is a directory\)"):
+        H264Writer(ro / "v.mp4", 25, FRAME_W, FRAME_H)
 
 
 def test_without_libx264_the_video_is_mpeg4_and_without_any_encoder_one_line(tmp_path, monkeypatch):

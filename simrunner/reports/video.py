@@ -66,7 +66,7 @@ class VideoRecorder:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise SimError(f"{self.path}: cannot create its folder ({exc.strerror})") from None
-        self._writer = H264Writer(self._tmp, self.fps, FRAME_W, FRAME_H)
+        self._writer = H264Writer(self._tmp, self.fps, FRAME_W, FRAME_H, shown_as=self.path)
         self._render = render
         self._view_state = view_state
         self._raster = raster
@@ -155,9 +155,15 @@ class VideoRecorder:
             rec.line = self._last_line
         self._put(rec)
 
+    def _failure(self) -> SimError:
+        """The one line of the writer's fault (its own when it is a SimError: it names the file)."""
+        if isinstance(self._error, SimError):
+            return SimError(str(self._error))
+        return SimError(f"{self.path}: video writer failed: {self._error}")
+
     def _put(self, item) -> None:
         if self._error is not None:
-            raise SimError(f"{self.path}: video writer failed: {self._error}")
+            raise self._failure()
         self._queue.put(item)
 
     def close(self) -> Path | None:
@@ -170,9 +176,14 @@ class VideoRecorder:
             self._queue.put(None)
             self._thread.join()
             self._encoder.join()
-            self._writer.close()
+            try:
+                self._writer.close()
+            except SimError as exc:
+                self._error = self._error or exc
+            if self._error is not None:  # a file the encoder could not finish is no video
+                self._tmp.unlink(missing_ok=True)
         if self._error is not None:
-            raise SimError(f"{self.path}: video writer failed: {self._error}")
+            raise self._failure()
         if self.frames_written == 0:
             self._tmp.unlink(missing_ok=True)
             return None

@@ -33,7 +33,7 @@ class H264Writer:
 
     ``write`` and ``close`` may run on a thread of their own (the encoder releases the GIL)."""
 
-    def __init__(self, path: str | Path, fps: float, width: int, height: int):
+    def __init__(self, path: str | Path, fps: float, width: int, height: int, *, shown_as: str | Path | None = None):
         try:
             import av
         except ModuleNotFoundError:
@@ -41,11 +41,13 @@ class H264Writer:
         if width % 2 or height % 2:
             raise ValueError(f"H264Writer: {width} x {height}: H.264 at 4:2:0 needs even sizes")
         self.path, self.width, self.height = Path(path), width, height
+        self.shown = Path(shown_as) if shown_as is not None else self.path  # the name in messages
         rate = Fraction(fps).limit_denominator(1001)
-        try:
+        try:  # (PyAV opens the file at the first frame: a path that cannot be written fails now)
+            open(self.path, "wb").close()
             self._container = av.open(str(self.path), "w", format="mp4")
         except OSError as exc:
-            raise SimError(f"{self.path}: cannot write the video ({exc.strerror or exc})") from None
+            raise SimError(f"{self.shown}: cannot write the video ({exc.strerror or exc})") from None
         stream = None
         for codec, options in ENCODERS:
             try:
@@ -58,7 +60,7 @@ class H264Writer:
         if stream is None:
             self._container.close()
             self.path.unlink(missing_ok=True)
-            raise SimError(f"{self.path}: PyAV's FFmpeg has none of the encoders "
+            raise SimError(f"{self.shown}: PyAV's FFmpeg has none of the encoders "
                            f"{', '.join(c for c, _ in ENCODERS)}: reinstall it (pip install --force-reinstall av)")
         self.codec = stream.codec_context.name
         self._stream = stream
@@ -75,7 +77,7 @@ class H264Writer:
         """Encode one frame (the next in time). A file that cannot be written (a full disk)
         raises :class:`SimError`, then and at every later frame."""
         if self._broken is not None:
-            raise SimError(f"{self.path}: cannot write the video ({self._broken})")
+            raise SimError(f"{self.shown}: cannot write the video ({self._broken})")
         if bgr.shape != (self.height, self.width, 3):
             raise ValueError(f"H264Writer: a frame of {bgr.shape}, expected {(self.height, self.width, 3)}")
         yuv, (y, u, v), h = self._yuv, self._planes, self.height
@@ -90,7 +92,7 @@ class H264Writer:
             self._container.mux(self._stream.encode(frame))
         except Exception as exc:  # noqa: BLE001 - FFmpeg's errors (av.error.*): the disk, the file
             self._broken = _reason(exc)
-            raise SimError(f"{self.path}: cannot write the video ({self._broken})") from None
+            raise SimError(f"{self.shown}: cannot write the video ({self._broken})") from None
 
     def close(self) -> None:
         """Flush the encoder and finish the file (once; later calls do nothing). A fault
@@ -111,7 +113,7 @@ class H264Writer:
             if failure is None and self._broken is None:
                 failure = self._broken = _reason(exc)
         if failure is not None:
-            raise SimError(f"{self.path}: cannot write the video ({failure})")
+            raise SimError(f"{self.shown}: cannot write the video ({failure})")
 
 
 def _reason(exc: BaseException) -> str:

@@ -259,6 +259,14 @@ class LockstepClock:
             self._prune()
         return len(cleared)
 
+    def hold_pending(self, handler: Callable[[], None]) -> None:
+        """Mark ``handler``'s interrupts pending (a kit's timer started again while the call its
+        stop kept is still pending: the NVIC has one bit for both); they run when a pending one
+        would (the unmask, after the running handler)."""
+        for irq in self._interrupts:
+            if irq.handler is handler:
+                irq.pending = self._any_pending = True
+
     def _prune(self) -> None:  # (a stopped interrupt whose pending call is kept stays until it runs)
         self._interrupts = [irq for irq in self._interrupts if irq.next_step != _NEVER or irq.pending]
         self._next_irq_step = min((irq.next_step for irq in self._interrupts), default=_NEVER)

@@ -397,7 +397,11 @@ class _Session:
         elif op == OP_EVERY:  # a timer interrupt: its period (double) and the program's slot for it (int32)
             period, slot = struct.unpack("<di", payload[:12])
             self._isrs[slot] = handler = lambda: self._interrupt(slot)
+            kept = self._latched.pop(slot, None)  # its slot's stop kept a call: one NVIC bit, on the new one
+            pending = kept is not None and s._clock.unpend_interrupt(kept) > 0
             s.every(period, handler)
+            if pending:
+                s._clock.hold_pending(handler)
         elif op == OP_EVERY_STOP:  # the program's slot (int32) of a timer interrupt it stopped, then a
             slot = struct.unpack("<i", payload[:4])[0]  # byte 1 where a call due keeps its pending bit
             handler = self._isrs.pop(slot, None)

@@ -832,6 +832,10 @@ void spinner_stop_every(void (*handler)(void)) {
     if (finished || handler == NULL) return;
     for (int32_t slot = 0; slot < MAX_ISRS; slot++) {
         if (isr_fn[slot] != handler || isr_stopping[slot]) continue;
+        if (isr_latched[slot]) {  /* stopped already: its kept call goes too (the slot stays until release) */
+            queue(OP_EVERY_UNPEND, &slot, sizeof slot, NULL, 0);
+            continue;
+        }
         isr_stopping[slot] = 1;
         isr_count--;
         queue(OP_EVERY_STOP, &slot, sizeof slot, NULL, 0);
@@ -841,8 +845,9 @@ void spinner_stop_every(void (*handler)(void)) {
 void spinner_stop_every_latched(void (*handler)(void)) {
     INIT();
     if (finished || handler == NULL) return;
-    /* a call can be pending only if time passed while masked, or in a handler (one due at its step) */
-    int may_pend = (irq_masked && irq_held) || irq_unmasking || isr_depth > 0;
+    /* a call can be pending only if time passed while masked (a waiting call, or with --mcu-time any
+     * request), or in a handler (one due at its step) */
+    int may_pend = (irq_masked && (irq_held || mcu_on)) || irq_unmasking || isr_depth > 0;
     for (int32_t slot = 0; slot < MAX_ISRS; slot++) {
         if (isr_fn[slot] != handler || isr_stopping[slot] || isr_latched[slot]) continue;
         unsigned char latch = (unsigned char)may_pend;
@@ -898,7 +903,7 @@ int spinner_interrupts_disabled(void) { return irq_masked; }
 int spinner_has_every(void (*handler)(void)) {
     INIT();
     for (int slot = 0; slot < MAX_ISRS; slot++)
-        if (handler != NULL && isr_fn[slot] == handler && !isr_stopping[slot]) return 1;
+        if (handler != NULL && isr_fn[slot] == handler && !isr_stopping[slot] && !isr_latched[slot]) return 1;
     return 0;
 }
 
