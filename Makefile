@@ -42,6 +42,7 @@ lock:
 
 bench: $(BENCH_STAMP)
 	$(BIN)/python -m bench
+	$(BIN)/python tools/render_bench_tables.py
 
 clean:
 	rm -rf $(VENV) .venv-latest out build *.egg-info

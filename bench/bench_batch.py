@@ -243,6 +243,12 @@ def _short(tmp: Path) -> None:
               f"2 workers best {min(two):.2f} s (median {statistics.median(two):.2f}): "
               f"{min(one) / min(two):.2f}x")
     print(f"  rows identical (1 and 2 workers, all finished): {same}; target >= 1.7x")
+    from bench.record import save
+
+    save("batch_short", {"repetitions": reps, "rows_identical": same, "target_ratio": 1.7, "figures": [
+        {"how": how, "one_worker_s": round(min(walls[(how, 1)]), 3), "two_workers_s": round(min(walls[(how, 2)]), 3),
+         "ratio": round(min(walls[(how, 1)]) / min(walls[(how, 2)]), 3)}
+        for how in ("in-process", "critical CPU", "command")]})
 
 
 def main() -> None:

@@ -89,6 +89,12 @@ def main() -> None:
         video = "" if r["frames"] is None else f"{r['frames']}, {r['mb']:.1f} MB"
         print(f"| {name} | {r['wall_s']:.2f} | {r['rtf']:.1f}x | {r['cpu_s']:.2f} | "
               f"{r['loop_rtf']:.1f}x | {video} |")
+    from bench.record import save
+
+    save("video", {"repeat": REPEAT, "target_rtf": TARGET_RTF, "runs": [
+        {"run": name, "wall_s": round(r["wall_s"], 3), "rtf": round(r["rtf"], 2), "cpu_s": round(r["cpu_s"], 3),
+         "loop_rtf": round(r["loop_rtf"], 2), "frames": r["frames"],
+         "mb": None if r["mb"] is None else round(r["mb"], 2)} for name, r in rows]})
 
 
 if __name__ == "__main__":

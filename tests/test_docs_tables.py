@@ -153,3 +153,24 @@ def test_the_bench_results_option_writes_what_the_renderer_reads(tmp_path):
     text = module.render("gap", data)
     assert "| timing | whole chain, 60-s log, 2 processes | 150 s | <= 180 s | yes |" in text
     assert "| real: f1tenth_DS2.csv | no traceback | traceback | none | **no** |" in text
+
+
+def test_the_video_and_batch_benches_write_what_their_renderers_read(tmp_path):
+    """``bench.record.save`` (bench_video, bench_batch's short batches) writes the results format
+    the script reads; the tables carry each figure, the target and the machine it was measured on."""
+    from bench.record import RESULTS_FORMAT, save
+
+    module = load_script()
+    assert RESULTS_FORMAT == module.RESULTS_FORMAT
+    path = save("video", {"repeat": 3, "target_rtf": 8.0, "runs": [
+        {"run": "no video", "wall_s": 0.52, "rtf": 14.66, "cpu_s": 0.686, "loop_rtf": 42.1, "frames": None, "mb": None},
+        {"run": "--video, one core", "wall_s": 0.9, "rtf": 8.51, "cpu_s": 0.893, "loop_rtf": 12.0,
+         "frames": "192 @ 25 fps", "mb": 0.86}]}, results=tmp_path)
+    text = module.render("video", json.loads(path.read_text()))
+    assert "| no video | 0.52 | 14.7x | 0.69 |  |" in text
+    assert "| --video, one core | 0.90 | 8.5x | 0.89 | 192 @ 25 fps, 0.9 MB |" in text
+    assert ">= 8x real time" in text and "cores at a 1-minute load of" in text
+    path = save("batch_short", {"repetitions": 7, "rows_identical": False, "target_ratio": 1.7, "figures": [
+        {"how": "command", "one_worker_s": 1.72, "two_workers_s": 1.03, "ratio": 1.67}]}, results=tmp_path)
+    text = module.render("batch_short", json.loads(path.read_text()))
+    assert "| command | 1.72 | 1.03 | 1.67x |" in text and "2 workers: **no**" in text and ">= 1.7x" in text

@@ -7,7 +7,8 @@ Every ``bench/results/NAME.json`` that has a renderer (:data:`RENDERERS`) is ren
 markdown block, which replaces the text between ``<!-- bench:NAME begin -->`` and
 ``<!-- bench:NAME end -->`` in the docs (``docs/*.md``) that hold those markers. A bench
 writes its JSON (``python -m bench.bench_gap ... --results``); this script is the only
-writer of the blocks, so the docs show the saved figures and nothing else.
+writer of the blocks, so the docs show the saved figures and nothing else. Benches that record
+their figures with ``bench.record.save`` (``video``, ``batch``) write this format too.
 
 ``--check`` writes nothing and prints one line per doc whose block differs (exit 1). Bad
 input (a results file no doc has markers for, markers that do not pair up, a JSON in a
@@ -131,7 +132,42 @@ def render_gap(data: dict) -> str:
     return "\n".join(lines)
 
 
-RENDERERS: dict[str, Callable[[dict], str]] = {"gap": render_gap, "gap_duty": render_gap}  # the same layout
+def _machine(data: dict) -> str:
+    m = data.get("machine", {})
+    load = m.get("load_1min")
+    return (f"{m.get('cpus', '?')} cores at a 1-minute load of {'?' if load is None else load}, "
+            f"Python {m.get('python', '?')}")
+
+
+def render_video(data: dict) -> str:
+    """``bench/results/video.json`` (``python -m bench video``): a row per run (wall, real-time
+    factor, CPU, the video's frames and size), the target and what it was measured on."""
+    f = data["figures"]
+    lines = ["| `simrunner drive examples/line_follower.py`, one lap | wall s | real-time factor | CPU s | video |",
+             "| --- | --- | --- | --- | --- |"]
+    for r in f["runs"]:
+        video = "" if r["frames"] is None else f"{r['frames']}, {r['mb']:.1f} MB"
+        lines.append(f"| {_cell(r['run'])} | {r['wall_s']:.2f} | {r['rtf']:.1f}x | {r['cpu_s']:.2f} | {video} |")
+    lines += ["", f"Whole processes, the best of {f['repeat']}; target with `--video` on one core: "
+                  f">= {f['target_rtf']:g}x real time. Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
+def render_batch_short(data: dict) -> str:
+    """``bench/results/batch_short.json`` (``python -m bench batch``, its short batches): 1 and
+    2 workers and their ratio for each way of timing, whether the rows were identical."""
+    f = data["figures"]
+    lines = ["| 8 one-lap runs | 1 worker s | 2 workers s | 2 workers / 1 |", "| --- | --- | --- | --- |"]
+    for r in f["figures"]:
+        lines.append(f"| {_cell(r['how'])} | {r['one_worker_s']:.2f} | {r['two_workers_s']:.2f} | {r['ratio']:.2f}x |")
+    lines += ["", f"The best of {f['repetitions']} alternating repetitions; rows identical with 1 and 2 workers: "
+                  f"{'yes' if f['rows_identical'] else '**no**'}; target >= {f['target_ratio']:g}x. "
+                  f"Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
+RENDERERS: dict[str, Callable[[dict], str]] = {"gap": render_gap, "gap_duty": render_gap,  # the same layout
+                                               "video": render_video, "batch_short": render_batch_short}
 
 
 def render(name: str, data: dict) -> str:
