@@ -80,8 +80,9 @@ def test_every_code_is_drawn_as_the_firmware_reads_it(code):
 def test_decoding_survives_width_errors_of_a_quarter_module(code, px, errors):
     """Width errors up to a quarter module; up to an eighth for code 15, the one with no wide
     element: its elements count as all narrow only while their widest gap is under a quarter of
-    the narrowest plus half a pixel (pixy2_codes, Decoding), which one element 24 % narrow at
-    10 px a module breaks (hypothesis found it: code 15 read as 5)."""
+    the narrowest plus half a pixel (pixy2_codes, Decoding; the firmware's ``decodeCode``:
+    ``maxGap < (edges[0]>>2) + 1``), which one element 24 % narrow at 10 px a module breaks, on the
+    Pixy2 too (hypothesis found it: code 15 read as 5)."""
     elements = pattern(code)
     scale = 1.0 if any(w > 1.0 for _, w in elements) else 0.5
     widths = [px * (w + scale * e) for (_, w), e in zip(elements, errors)]
