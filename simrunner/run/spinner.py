@@ -661,15 +661,6 @@ class Spinner:
             raise self._foreign("stop_every")
         self._clock.remove_interrupt(handler)
 
-    def _stop_every_latched(self, handler: Callable[[], Any]) -> None:
-        """A C kit's timer whose own interrupt enable was cleared (``spinner_stop_every_latched``):
-        stopped, but a call that fell due and has not run keeps its NVIC pending bit and runs once."""
-        self._clock.remove_interrupt(handler, latch=True)
-
-    def _unpend_every(self, handler: Callable[[], Any]) -> None:
-        """A C kit's ``NVIC_ClearPendingIRQ`` of a stopped timer (``spinner_unpend_every``)."""
-        self._clock.unpend_interrupt(handler)
-
     def disable_interrupts(self) -> None:
         """Mask the timer interrupts, as ``__disable_irq()`` sets the Cortex-M's PRIMASK: a handler
         that falls due meanwhile is held pending and runs once (however often it fell due) at

@@ -407,11 +407,11 @@ class _Session:
             handler = self._isrs.pop(slot, None)
             if payload[4:5] == b"\x01":  # (a kit's timer whose interrupt enable was cleared: the NVIC's bit)
                 self._latched[slot] = handler
-                s._stop_every_latched(handler)
+                s._clock.remove_interrupt(handler, latch=True)
             else:
                 s.stop_every(handler)
         elif op == OP_EVERY_UNPEND:  # the slot (int32) of a stopped one whose pending bit is cleared
-            s._unpend_every(self._latched.pop(struct.unpack("<i", payload[:4])[0], None))
+            s._clock.unpend_interrupt(self._latched.pop(struct.unpack("<i", payload[:4])[0], None))
         elif op in (OP_IRQ_MASK, OP_IRQ_MASK_WAIT):  # a flag byte: 1 mask (disable), 0 unmask (enable)
             if payload[:1] == b"\x01":  # then the caller's return address: its offset (uint64), module
                 clock, was = s._clock, s._clock.masked
