@@ -371,10 +371,11 @@ class Run:
     def _render_view(self, pose, exposure_s: float) -> np.ndarray:
         """The debug video's camera view in a frame the controller took no image: the camera's
         own image without temporal noise (the physical camera at ``exposure_s``, the exposure
-        in force when the frame began; drawn in the video's thread)."""
+        in force when the frame began, :meth:`Imager.preview`: within 1 DN of ``get_image()``'s
+        without noise; drawn in the video's thread)."""
         if self.imager is None:
             return self.camera.render(pose)
-        return self.imager.frame(pose, exposure_s=exposure_s)
+        return self.imager.preview(pose, exposure_s=exposure_s)
 
     def execute(self, controller: Controller) -> tuple[Outcome, str, ControllerError | None]:
         """Run ``controller`` to the end of the run: ``(outcome, message, error)``.
