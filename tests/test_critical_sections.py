@@ -479,6 +479,10 @@ LATCHED_PIT = textwrap.dedent("""\
     ("PIT_TCTRL0 &= ~PIT_TCTRL_TIE_MASK", "", 12),      # its interrupt enable cleared: the NVIC's bit runs it
     ("PIT_TCTRL0 = 0", "", 12),                         # the timer stopped: the same
     ("NVIC_DisableIRQ(PIT_IRQn)", "", 1),               # its IRQ disabled: not taken (the bit waits)
+    # ... for NVIC_EnableIRQ, which takes it, once (ARMv6-M B3.4: the pending bit is independent of the
+    # enable bit; before the kit emulated that, the held call was dropped: 1)
+    ("NVIC_DisableIRQ(PIT_IRQn)", "__enable_irq(); if (ticks != before) return 99; PIT_TCTRL0 = 0; "
+                                  "NVIC_EnableIRQ(PIT_IRQn); __disable_irq()", 12),
     ("PIT_TCTRL0 = 0", "NVIC_ClearPendingIRQ(PIT_IRQn)", 1),  # the pending bit cleared: it does not run
     # still running: its source asserts the IRQ again (TIF && TIE), so the clear does not hold: once at the
     # unmask, then 2 a 2-ms step
@@ -558,6 +562,10 @@ RELATCHED_PIT = textwrap.dedent("""\
     ("(void)0", 2),                                                           # one bit: one call
     ("PIT_TCTRL0 = 0; NVIC_ClearPendingIRQ(PIT_IRQn); TFC_Task()", 1),        # off and cleared: none
     ("NVIC_DisableIRQ(PIT_IRQn); TFC_Task()", 1),                             # IRQ disabled: not taken
+    # ... until NVIC_EnableIRQ, once however many expiries since (before the kit emulated the NVIC's pending
+    # bit independent of its enable bit, the held call was dropped and the enable took nothing: 1)
+    ("NVIC_DisableIRQ(PIT_IRQn); TFC_Task(); __enable_irq(); TFC_Task(); if (ticks != before) return 99; "
+     "NVIC_EnableIRQ(PIT_IRQn); PIT_TCTRL0 = 0; __disable_irq()", 2),
 ])
 def test_a_timer_turned_off_and_on_again_while_masked_has_one_pending_bit(tmp_path, after, status):
     """The NVIC has one pending bit an IRQ: a PIT whose interrupt is turned off and on again inside a
@@ -608,3 +616,190 @@ def test_spinner_stop_every_latched_keeps_one_call_and_a_later_stop_drops_it(tmp
     for isolate in (False, True):
         r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
         assert r.outcome == "controller_error" and f"status {status}" in r.message, (isolate, r.message)
+
+
+# -- the NVIC's pending bits (--kit tfc): independent of the IRQ's enable bit, set by ISPR --------
+DISABLED_PIT = textwrap.dedent("""\
+    #include "derivative.h"
+    #include "TFC/TFC.h"
+    volatile int ticks, tif_at_entry;
+    void PIT_IRQHandler(void) {
+        tif_at_entry += (PIT_TFLG0 & PIT_TFLG_TIF_MASK) != 0;
+        PIT_TFLG0 = PIT_TFLG_TIF_MASK;
+        ticks++;
+    }
+    int main(void) {
+        TFC_Init();
+        SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
+        PIT_MCR = 0;
+        PIT_LDVAL0 = 24000 - 1;                                /* 1 kHz of the 24 MHz bus */
+        PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+        NVIC_EnableIRQ(PIT_IRQn);
+        for (int k = 0; k < 5; k++) TFC_Task();
+        DISABLE;
+        int before = ticks;
+        for (int k = 0; k < 4; k++) TFC_Task();                /* expiries: the pending bit, not taken */
+        int held = ticks - before;
+        BEFORE;
+        ENABLE;
+        int at_enable = ticks - before;
+        PIT_TCTRL0 = 0;                                        /* (no expiry after it: only the pending one) */
+        for (int k = 0; k < 5; k++) TFC_Task();
+        return 1 + 100 * held + 10 * at_enable + (ticks - before) + (tif_at_entry == ticks ? 0 : 50);
+    }
+    """)
+CMSIS_OFF, CMSIS_ON = "NVIC_DisableIRQ(PIT_IRQn)", "NVIC_EnableIRQ(PIT_IRQn)"
+RAW_OFF, RAW_ON = "NVIC_ICER = 1u << (INT_PIT - 16)", "NVIC_ISER = 1u << (INT_PIT - 16)"
+
+
+@pytest.mark.parametrize("disable, before, enable, status", [
+    (CMSIS_OFF, "(void)0", CMSIS_ON, 12),             # four expiries while disabled: one call, in the enable
+    (RAW_OFF, "(void)0", RAW_ON, 2),                  # raw writes: seen at the next call, taken there
+    (CMSIS_OFF, "PIT_TCTRL0 = 0", CMSIS_ON, 12),       # the timer stopped: its pending bit stays
+    (CMSIS_OFF, "PIT_TCTRL0 = 0; NVIC_ClearPendingIRQ(PIT_IRQn)", CMSIS_ON, 1),  # stopped and cleared: none
+    (CMSIS_OFF, "PIT_TCTRL0 = 0; NVIC_ICPR = 1u << (INT_PIT - 16)", CMSIS_ON, 1),
+    # still running, TIF set: the flag asserts the IRQ again, the clear does not hold
+    (CMSIS_OFF, "NVIC_ClearPendingIRQ(PIT_IRQn)", CMSIS_ON, 12),
+    # masked too: the enable makes it pending-and-enabled, the unmask takes it
+    (CMSIS_OFF, "__disable_irq(); NVIC_EnableIRQ(PIT_IRQn); TFC_Task(); if (ticks != before) return 99",
+     "__enable_irq()", 12),
+])
+@pytest.mark.parametrize("mcu_time", [None, 0.0005])
+def test_a_pit_expiry_while_its_irq_is_disabled_in_the_nvic_is_taken_once_at_the_enable(
+        tmp_path, disable, before, enable, status, mcu_time):
+    """--kit tfc (ARMv6-M, ARM DDI 0419, B3.4: an interrupt's pending bit is independent of its enable
+    bit): a PIT expiring four times while NVIC_DisableIRQ(PIT_IRQn) calls nothing then and its
+    handler once (TIF set) when the IRQ is enabled again - inside NVIC_EnableIRQ, or at the next call
+    after a raw NVIC_ISER write; NVIC_ClearPendingIRQ of the stopped timer drops it; of a running
+    one it cannot (its flag asserts the IRQ again). In process and isolated, with --mcu-time too."""
+    src = tmp_path / "disabled.c"
+    src.write_text(DISABLED_PIT)
+    program = build_program([str(src)], kit="tfc", defines=[f"DISABLE={disable}", f"BEFORE={before}",
+                                                            f"ENABLE={enable}"])
+    extra = {} if mcu_time is None else {"mcu_time": mcu_time}
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
+        assert r.outcome == "controller_error" and f"status {status}" in r.message, (isolate, r.message)
+
+
+PHASE_PIT = textwrap.dedent("""\
+    #include "derivative.h"
+    #include "spinner.h"
+    #include "TFC/TFC.h"
+    static volatile unsigned n;
+    static double at[64];
+    void PIT_IRQHandler(void) { PIT_TFLG0 = PIT_TFLG_TIF_MASK; at[n++] = spinner_get_time(); }
+    int main(void) {
+        TFC_Init();
+        SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
+        PIT_MCR = 0;
+        PIT_LDVAL0 = 240000 - 1;                               /* 100 Hz */
+        PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;  /* counts from t0, its IRQ off */
+        double t0 = spinner_now();
+        spinner_sleep(0.025);                                  /* expiries at 0.01, 0.02: pending */
+        NVIC_EnableIRQ(PIT_IRQn);                              /* taken now, 0.026 */
+        spinner_sleep(0.03);                                   /* 0.03, 0.04, 0.05: the PIT's own phase */
+        for (unsigned i = 0; i < n; i++) printf("%.3f ", at[i] - t0);
+        printf("\\n");
+        return 0;
+    }
+    """)
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_timer_counting_with_its_irq_off_keeps_its_phase_and_pends_once(tmp_path, capfd, isolate):
+    """The PIT counts while its IRQ is off in the NVIC: the expiries before NVIC_EnableIRQ set one
+    pending bit (one call, at the enable) and the calls after it follow the timer's own period from
+    its start, not one from the enable."""
+    src = tmp_path / "phase.c"
+    src.write_text(PHASE_PIT)
+    r = drive(dataclasses.replace(build_program([src], kit="tfc"), isolate=isolate), track="floor",
+              time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    assert capfd.readouterr().out.split() == ["0.026", "0.030", "0.040", "0.050"]
+
+
+SET_PENDING = textwrap.dedent("""\
+    #include "derivative.h"
+    #include "spinner.h"
+    #include "TFC/TFC.h"
+    volatile int calls, outside;
+    void PIT_IRQHandler(void) { calls++; outside += !spinner_in_interrupt(); }
+    int main(void) {
+        TFC_Init();
+        NVIC_EnableIRQ(PIT_IRQn);
+        STEPS;
+        int now = calls;
+        TFC_Task();
+        TFC_Task();
+        return 1 + 10 * now + calls + 100 * outside;
+    }
+    """)
+
+
+@pytest.mark.parametrize("steps, status", [
+    ("NVIC_SetPendingIRQ(PIT_IRQn)", 12),                  # enabled, unmasked: taken at once
+    ("NVIC_SetPendingIRQ(PIT_IRQn); NVIC_SetPendingIRQ(PIT_IRQn)", 23),  # taken each time: it was not pending
+    ("NVIC_ISPR = 1u << (INT_PIT - 16)", 2),                # a raw write: taken at the next call
+    # masked: one bit however often it is set, taken at the unmask
+    ("__disable_irq(); NVIC_SetPendingIRQ(PIT_IRQn); NVIC_SetPendingIRQ(PIT_IRQn); TFC_Task(); "
+     "if (calls) return 99; __enable_irq()", 12),
+    ("__disable_irq(); NVIC_SetPendingIRQ(PIT_IRQn); __enable_irq()", 12),  # (no call between)
+    # disabled in the NVIC: taken at the enable
+    ("NVIC_DisableIRQ(PIT_IRQn); NVIC_SetPendingIRQ(PIT_IRQn); TFC_Task(); if (calls) return 99; "
+     "NVIC_EnableIRQ(PIT_IRQn)", 12),
+    # masked, then disabled before the unmask: not taken at the unmask, at the enable
+    ("__disable_irq(); NVIC_SetPendingIRQ(PIT_IRQn); TFC_Task(); NVIC_DisableIRQ(PIT_IRQn); __enable_irq(); "
+     "TFC_Task(); if (calls) return 99; NVIC_EnableIRQ(PIT_IRQn)", 12),
+    # cleared before it could be taken: none
+    ("NVIC_DisableIRQ(PIT_IRQn); NVIC_SetPendingIRQ(PIT_IRQn); NVIC_ClearPendingIRQ(PIT_IRQn); "
+     "NVIC_EnableIRQ(PIT_IRQn)", 1),
+    ("__disable_irq(); NVIC_SetPendingIRQ(PIT_IRQn); TFC_Task(); NVIC_ClearPendingIRQ(PIT_IRQn); __enable_irq()", 1),
+    # NVIC_GetPendingIRQ: the ISPR bit
+    ("NVIC_DisableIRQ(PIT_IRQn); if (NVIC_GetPendingIRQ(PIT_IRQn)) return 98; NVIC_SetPendingIRQ(PIT_IRQn); "
+     "if (NVIC_GetPendingIRQ(PIT_IRQn) != 1) return 97; "
+     "NVIC_ClearPendingIRQ(PIT_IRQn); if (NVIC_GetPendingIRQ(PIT_IRQn)) return 95; NVIC_SetPendingIRQ(PIT_IRQn); "
+     "NVIC_EnableIRQ(PIT_IRQn); if (NVIC_GetPendingIRQ(PIT_IRQn)) return 94", 12),
+])
+@pytest.mark.parametrize("mcu_time", [None, 0.0005])
+def test_nvic_set_pending_irq_runs_the_handler_once_when_enabled_and_unmasked(tmp_path, steps, status, mcu_time):
+    """NVIC_SetPendingIRQ (and an NVIC_ISPR write) pends the IRQ in software (ARMv6-M, ARM DDI 0419,
+    B3.4): its handler runs once, as an interrupt, as soon as the IRQ is enabled in the NVIC and
+    interrupts are unmasked - inside the call, or at the next call after a raw write; one bit however
+    often it is set; NVIC_ClearPendingIRQ drops it. In process and isolated, with --mcu-time too."""
+    src = tmp_path / "set_pending.c"
+    src.write_text(SET_PENDING)
+    program = build_program([str(src)], kit="tfc", defines=[f"STEPS={steps}"])
+    extra = {} if mcu_time is None else {"mcu_time": mcu_time}
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
+        assert r.outcome == "controller_error" and f"status {status}" in r.message, (isolate, r.message)
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_pending_irqs_enabled_together_are_taken_in_the_order_of_their_numbers(tmp_path, isolate):
+    """TPM2 (IRQ 19), LPTMR0 (28, its Kinetis SDK vector name) pended while disabled in the NVIC, then
+    both enabled by one NVIC_ISER write: taken at the next call, TPM2 first (the NVIC's order for
+    equal priorities), each once."""
+    src = tmp_path / "order.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC/TFC.h"
+        volatile int order;
+        void TPM2_IRQHandler(void) { order = order * 10 + 2; }
+        void LPTMR0_IRQHandler(void) { order = order * 10 + 3; }
+        int main(void) {
+            TFC_Init();
+            NVIC_SetPendingIRQ(LPTMR0_IRQn);
+            NVIC_SetPendingIRQ(TPM2_IRQn);
+            TFC_Task();
+            if (order) return 99;
+            NVIC_ISER = (1u << (INT_TPM2 - 16)) | (1u << (INT_LPTimer - 16));
+            TFC_Task();
+            TFC_Task();
+            return order;
+        }
+        """))
+    r = drive(dataclasses.replace(build_program([src], kit="tfc"), isolate=isolate), track="floor",
+              time_limit_s=2.0)
+    assert r.outcome == "controller_error" and "status 23" in r.message, r.message

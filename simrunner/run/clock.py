@@ -38,7 +38,9 @@ configurable priority from being taken). Its schedule goes on (its next time is 
 timer's). :meth:`unmask` runs the pending handlers at once, at the time of the unmask (no time
 passes), in the order they were registered; a pending handler stopped meanwhile does not run,
 unless it was stopped as an NVIC source is (``remove_interrupt(latch=True)``: the pending bit
-outlives the timer's own interrupt enable; ``unpend_interrupt`` clears it).
+outlives the timer's own interrupt enable; ``unpend_interrupt`` clears it). :meth:`pend_interrupt`
+sets a handler's pending bit without a timer (an NVIC's set-pending register): it runs at once
+when unmasked and outside handlers, else when a pending one would.
 Masking is a bit, not a count: a second mask is a no-op, one unmask clears it. Handlers do not
 change it: one that masks leaves it masked on return (later handlers are held), and an unmask
 inside a handler lets the pending ones run after it returns (handlers do not nest). A handler
@@ -266,6 +268,32 @@ class LockstepClock:
         for irq in self._interrupts:
             if irq.handler is handler:
                 irq.pending = self._any_pending = True
+
+    def pend_interrupt(self, handler: Callable[[], None]) -> None:
+        """Set ``handler``'s pending bit (an NVIC's set-pending register: a kit's interrupt pended
+        in software, or one whose source fired while its IRQ was disabled): it runs once, as a
+        handler, at the first point interrupts are unmasked and no handler runs - now (at this
+        time: the caller answers the program's waiting call with it), at the unmask, or after the
+        running handler. One bit: pending already, nothing changes (ARMv6-M, ARM DDI 0419, B3.4).
+        ``handler`` without an interrupt is added as one with no schedule, pending (after the
+        others in the order they run); ``unpend_interrupt`` clears it."""
+        ours = [irq for irq in self._interrupts if irq.handler is handler]
+        if not ours:
+            irq = _Interrupt(handler, self.step_index, 1.0)
+            irq.next_step = _NEVER
+            self._interrupts.append(irq)
+            ours = [irq]
+        for irq in ours:
+            irq.pending = True
+        self._any_pending = True
+        if self.masked or self.in_interrupt:
+            return  # (the unmask, or _interrupt / unmask after the running handler, runs it)
+        try:
+            self._run_pending()
+        finally:
+            self._prune()
+        if self.finished is not None:
+            self.check()
 
     def _prune(self) -> None:  # (a stopped interrupt whose pending call is kept stays until it runs)
         self._interrupts = [irq for irq in self._interrupts if irq.next_step != _NEVER or irq.pending]

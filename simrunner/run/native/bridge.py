@@ -47,7 +47,7 @@ OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
     OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK, OP_IRQ_MASK_WAIT, \
-    OP_EVERY_UNPEND = range(1, 32)
+    OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT = range(1, 34)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
@@ -83,7 +83,8 @@ _PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a r
 # the requests the program waits in for a reply (spinner_host.c: call()); the others are queued
 _WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, OP_PARAM, OP_FAULT,
                       OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
-                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK_WAIT))
+                      OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK_WAIT,
+                      OP_PEND_WAIT))
 
 
 class _Child:
@@ -412,6 +413,14 @@ class _Session:
                 s.stop_every(handler)
         elif op == OP_EVERY_UNPEND:  # the slot (int32) of a stopped one whose pending bit is cleared
             s._clock.unpend_interrupt(self._latched.pop(struct.unpack("<i", payload[:4])[0], None))
+        elif op in (OP_PEND, OP_PEND_WAIT):  # the slot (int32) whose pending bit is set (NVIC_SetPendingIRQ)
+            slot = struct.unpack("<i", payload[:4])[0]
+            handler = self._isrs.get(slot) or self._latched.get(slot)
+            if handler is None:  # (no timer: a handler of its own, kept as a stopped one's kept call)
+                self._latched[slot] = handler = lambda: self._interrupt(slot)
+            s._clock.pend_interrupt(handler)  # (unmasked: it runs now, in the waiting call)
+            if op == OP_PEND_WAIT:
+                reply(_OK_EMPTY)
         elif op in (OP_IRQ_MASK, OP_IRQ_MASK_WAIT):  # a flag byte: 1 mask (disable), 0 unmask (enable)
             if payload[:1] == b"\x01":  # then the caller's return address: its offset (uint64), module
                 clock, was = s._clock, s._clock.masked

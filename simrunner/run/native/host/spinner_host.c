@@ -52,7 +52,7 @@ enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, O
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
        OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK,
-       OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND };
+       OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -336,7 +336,10 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
  * NVIC source: a call that fell due and has not run keeps its pending bit (OP_EVERY_STOP {int32 slot,
  * byte 1}) and runs at the unmask, or after the running handler; the slot is kept (isr_latched) until
  * a reply unmasked and outside handlers, when no such call is left; spinner_unpend_every clears the
- * bit (OP_EVERY_UNPEND {int32 slot}: NVIC_ClearPendingIRQ). */
+ * bit (OP_EVERY_UNPEND {int32 slot}: NVIC_ClearPendingIRQ). spinner_pend_every sets a handler's
+ * pending bit (OP_PEND {int32 slot}: NVIC_SetPendingIRQ), in a slot kept as a latched one unless
+ * the handler has a running one; unmasked and outside handlers it is a waiting call (OP_PEND_WAIT),
+ * which the handler runs in. */
 #define MAX_ISRS 32
 static void (*isr_fn[MAX_ISRS])(void);
 static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read by the simulator */
@@ -855,6 +858,27 @@ void spinner_stop_every_latched(void (*handler)(void)) {
         else isr_stopping[slot] = 1;
         isr_count--;
         queue(OP_EVERY_STOP, &slot, sizeof slot, &latch, 1);
+    }
+}
+
+void spinner_pend_every(void (*handler)(void)) {
+    INIT();
+    if (finished || handler == NULL) return;
+    int32_t slot = 0;  /* its running slot, else its kept one, else a free one (kept until it has run) */
+    while (slot < MAX_ISRS && !(isr_fn[slot] == handler && !isr_stopping[slot] && !isr_latched[slot])) slot++;
+    if (slot == MAX_ISRS)
+        for (slot = 0; slot < MAX_ISRS && !(isr_latched[slot] && isr_fn[slot] == handler); slot++) {}
+    if (slot == MAX_ISRS) {
+        for (slot = 0; slot < MAX_ISRS && isr_fn[slot] != NULL; slot++) {}
+        if (slot == MAX_ISRS) misuse("spinner_pend_every: at most %d interrupt handlers", MAX_ISRS);
+        isr_fn[slot] = handler, isr_latched[slot] = 1;
+    }
+    if (irq_masked || isr_depth > 0 || in_kit_hook) {  /* runs at the unmask, after the handler, or in */
+        if (irq_masked && irq_mask_unsent) send_mask();  /* the waiting call the kit's look precedes */
+        if (irq_masked) irq_held = 1;  /* (the unmask then waits: it runs in it) */
+        queue(OP_PEND, &slot, sizeof slot, NULL, 0);
+    } else {
+        call(OP_PEND_WAIT, &slot, sizeof slot, NULL, 0, NULL, 0);
     }
 }
 

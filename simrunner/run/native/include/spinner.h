@@ -122,9 +122,15 @@ void spinner_stop_every(void (*handler)(void));
  * by the mask, or due at this step after the running handler) keeps its NVIC pending bit and runs
  * once, when it would have - the pending bit outlives its source (ARMv6-M, ARM DDI 0419, B3.4 the
  * NVIC: a pending interrupt stays pending until taken or cleared). spinner_unpend_every clears it
- * (NVIC_ClearPendingIRQ). */
+ * (NVIC_ClearPendingIRQ). spinner_pend_every sets handler's pending bit (NVIC_SetPendingIRQ, or a
+ * timer that expired while its IRQ was disabled in the NVIC, enabled again): it runs once, as a timer
+ * interrupt's handler, when interrupts are unmasked and no handler runs - inside this call if they
+ * are (from spinner_kit_before_wait: in the waiting call it precedes), else at
+ * spinner_enable_interrupts or after the running handler; pending already, nothing changes (one
+ * bit); spinner_unpend_every clears it. */
 void spinner_stop_every_latched(void (*handler)(void));
 void spinner_unpend_every(void (*handler)(void));
+void spinner_pend_every(void (*handler)(void));
 /* Non-zero when handler is set up as a timer interrupt (by spinner_every or --isr). */
 int spinner_has_every(void (*handler)(void));
 /* How many timer interrupt handlers are set up (--isr and spinner_every). */

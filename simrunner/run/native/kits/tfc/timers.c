@@ -4,12 +4,13 @@
  * The registers are memory the firmware writes; the kit reads them before each request the
  * program waits on (spinner_kit_before_wait, called by the host) - the program's code between two
  * such requests takes no simulated time, so a timer is started at the time of its set-up - and
- * after each handler. A timer that counts with its interrupt enabled, and its IRQ enabled in the
- * NVIC, calls the program's handler of its vector every period its registers and clock give
- * (spinner_every with a function of the kit that sets the timer's flag, calls the handler and
- * clears the flag: the handler's write-1-to-clear is taken as done). Clearing the enable or the
- * interrupt enable, or disabling the IRQ, stops the calls; a new period while it runs (a new
- * LDVAL, CMR, MOD) takes effect at its next expiry, as the hardware reloads it then. A handler that
+ * after each handler. A timer that counts with its interrupt enabled expires every period its
+ * registers and clock give (spinner_every with a function of the kit); its IRQ enabled in the NVIC,
+ * the expiry sets the timer's flag, calls the program's handler of its vector and clears the flag
+ * (the handler's write-1-to-clear is taken as done); its IRQ disabled, it sets the NVIC's pending
+ * bit instead, which NVIC_EnableIRQ takes (below). Clearing the enable or the interrupt enable stops
+ * the calls; a new period while it runs (a new LDVAL, CMR, MOD) takes effect at its next expiry, as
+ * the hardware reloads it then. A handler that
  * --isr (or spinner_every) already runs is left to that: its rate is --isr's. A set-up the kit
  * cannot time ends the run with one line saying why.
  *
@@ -61,9 +62,10 @@ static struct timer {
     double next_period_s;   /* a new one from the next expiry (0: none) */
     unsigned started;       /* the wait at which it started */
     unsigned unrouted;      /* looks in a row at it counting, interrupt on, its IRQ off in the NVIC */
+    int flagged;            /* its flag set by an expiry not yet taken (its IRQ was disabled then) */
 } timers[N_TIMERS] = {
-    {"PIT channel 0", fire_pit0, 0, 0, 0, 0}, {"PIT channel 1", fire_pit1, 0, 0, 0, 0},
-    {"LPTMR0", fire_lptmr, 0, 0, 0, 0}, {"TPM2", fire_tpm2, 0, 0, 0, 0},
+    {"PIT channel 0", fire_pit0, 0, 0, 0, 0, 0}, {"PIT channel 1", fire_pit1, 0, 0, 0, 0, 0},
+    {"LPTMR0", fire_lptmr, 0, 0, 0, 0, 0}, {"TPM2", fire_tpm2, 0, 0, 0, 0, 0},
 };
 static uint32_t nvic_enabled;  /* the IRQs enabled in the NVIC */
 static unsigned waits;         /* requests the program waited on (time may pass at each) */
@@ -77,24 +79,43 @@ __attribute__((noreturn)) static void cannot(const struct timer *t, const char *
     spinner_fail(text);
 }
 
-/* Raw NVIC_ISER / NVIC_ICER writes since the last look (write 1 to set / clear); a bit written
- * to both is enabled (the "disable, set up, enable" sequence). */
-static uint32_t nvic_unpend;  /* NVIC_ICPR bits written since the last look */
+/* The NVIC's pending bits (ARMv6-M Architecture Reference Manual, ARM DDI 0419, B3.4 the NVIC: an
+ * interrupt's pending bit is independent of its enable bit; a pending, enabled interrupt is taken
+ * when PRIMASK allows, which clears the bit; one bit a source, however often it was asserted; ISPR
+ * sets it, ICPR clears it). A timer's expiry while its IRQ is disabled, and NVIC_SetPendingIRQ, set
+ * the kit's bit (nvic_pending); once the IRQ is enabled the kit hands it to the simulator
+ * (spinner_pend_every with the IRQ's take function, nvic_handed), which runs it as an interrupt when
+ * PRIMASK allows - or takes it back if the IRQ is disabled (or the bit cleared) before it ran. An
+ * expiry held by __disable_irq while the IRQ was enabled is the simulator's pending call of the
+ * timer's own function (spinner_every), not a bit here. */
+static uint32_t nvic_pending;  /* pending, not handed to the simulator (the IRQ disabled, or not looked at yet) */
+static uint32_t nvic_handed;   /* pending, handed to the simulator: its take function has not run yet */
+static uint32_t nvic_unpend;   /* NVIC_ICPR bits written since the last look */
+#define KIT_IRQS ((1u << IRQ_TPM2) | (1u << IRQ_PIT) | (1u << IRQ_LPTMR))
+static void take_tpm2(void);
+static void take_pit(void);
+static void take_lptmr(void);
+static void nvic_settle(void);
+static void (*take_of(int irq))(void) { return irq == IRQ_TPM2 ? take_tpm2 : irq == IRQ_PIT ? take_pit : take_lptmr; }
+
+/* Raw NVIC_ISER / NVIC_ICER / NVIC_ISPR writes since the last look (write 1 to set / clear); a bit
+ * written to both ISER and ICER is enabled (the "disable, set up, enable" sequence); one written to
+ * both ICPR and ISPR is pending (ICPR is applied at the end of the look: sync). */
 static void nvic_sync(void) {
     uint32_t set = NVIC->ISER[0], clear = NVIC->ICER[0];
     nvic_enabled = (nvic_enabled & ~clear) | set;
     nvic_unpend |= NVIC->ICPR[0];
-    NVIC->ISER[0] = NVIC->ICER[0] = NVIC->ICPR[0] = 0;
-}
-
-void tfc_sim_nvic_enable(int irq) {
-    nvic_sync();
-    if (irq >= 0 && irq < 32) nvic_enabled |= 1u << irq;
-}
-
-void tfc_sim_nvic_disable(int irq) {
-    nvic_sync();
-    if (irq >= 0 && irq < 32) nvic_enabled &= ~(1u << irq);
+    uint32_t pend = NVIC->ISPR[0];
+    NVIC->ISER[0] = NVIC->ICER[0] = NVIC->ICPR[0] = NVIC->ISPR[0] = 0;
+    if (pend & ~KIT_IRQS) {
+        char text[300];
+        snprintf(text, sizeof text, "NVIC_SetPendingIRQ / NVIC_ISPR 0x%08x: the simulator's TFC kit emulates the "
+                 "pending bits of IRQ 19 (TPM2), 22 (PIT) and 28 (LPTMR0) only (docs/firmware.md, Timer "
+                 "interrupts)", (unsigned)pend);
+        spinner_fail(text);
+    }
+    nvic_pending |= pend;
+    nvic_unpend &= ~pend;  /* (pending after a clear in the same interval) */
 }
 
 static int irq_on(int irq) { return (nvic_enabled >> irq) & 1u; }
@@ -116,15 +137,21 @@ static const char *vector_of(int i) {
     return i == LPTMR ? "LPTimer_IRQHandler (or LPTMR0_IRQHandler)" : i == TPM_2 ? "TPM2_IRQHandler" : "PIT_IRQHandler";
 }
 
+/* A set-up the kit cannot time: why (period_of returns -1; an error once its IRQ is enabled). */
+static const char *untimed_why;
+static double untimed(const char *why) {
+    untimed_why = why;
+    return -1.0;
+}
+
 /* A PIT channel: (LDVAL + 1) bus clocks (RM 32.5.1 Timers). */
 static double pit_period(int ch) {
-    const struct timer *t = &timers[PIT0 + ch];
     uint32_t ctrl = PIT->CHANNEL[ch].TCTRL;
-    if (!(ctrl & PIT_TCTRL_TEN_MASK) || !(ctrl & PIT_TCTRL_TIE_MASK) || !irq_on(IRQ_PIT)) return 0.0;
+    if (!(ctrl & PIT_TCTRL_TEN_MASK) || !(ctrl & PIT_TCTRL_TIE_MASK)) return 0.0;
     if (PIT->MCR & PIT_MCR_MDIS_MASK)
-        cannot(t, "the PIT is disabled (PIT_MCR MDIS, set out of reset: clear it, PIT_MCR = 0, before the "
+        return untimed("the PIT is disabled (PIT_MCR MDIS, set out of reset: clear it, PIT_MCR = 0, before the "
                "channels' set-up, RM 32.3.1); on the board its timers would not run");
-    if (ctrl & PIT_TCTRL_CHN_MASK) cannot(t, "chained PIT timers (TCTRL CHN, RM 32.5.3)");
+    if (ctrl & PIT_TCTRL_CHN_MASK) return untimed("chained PIT timers (TCTRL CHN, RM 32.5.3)");
     return ((double)PIT->CHANNEL[ch].LDVAL + 1.0) / BUS_CLOCK_HZ;
 }
 
@@ -132,21 +159,20 @@ static double pit_period(int ch) {
  * clock (RM 33.4.1 PCS: MCGIRCLK, LPO, ERCLK32K, OSCERCLK; chip configuration 3.8.3) divided by
  * 2^(PRESCALE + 1), or not divided with PBYP (RM 33.3.2). */
 static double lptmr_period(void) {
-    const struct timer *t = &timers[LPTMR];
     uint32_t csr = LPTMR0->CSR, psr = LPTMR0->PSR;
-    if (!(csr & LPTMR_CSR_TEN_MASK) || !(csr & LPTMR_CSR_TIE_MASK) || !irq_on(IRQ_LPTMR)) return 0.0;
-    if (csr & LPTMR_CSR_TMS_MASK) cannot(t, "pulse counter mode (CSR TMS) counts a pin's pulses");
+    if (!(csr & LPTMR_CSR_TEN_MASK) || !(csr & LPTMR_CSR_TIE_MASK)) return 0.0;
+    if (csr & LPTMR_CSR_TMS_MASK) return untimed("pulse counter mode (CSR TMS) counts a pin's pulses");
     double hz = 0.0;
     switch (psr & LPTMR_PSR_PCS_MASK) {
     case 0:
         hz = mcgirclk_hz();
-        if (hz == 0.0) cannot(t, "its clock MCGIRCLK is off (MCG_C1 IRCLKEN clear, as the TFC library's clock "
+        if (hz == 0.0) return untimed("its clock MCGIRCLK is off (MCG_C1 IRCLKEN clear, as the TFC library's clock "
                               "set-up leaves it; RM 24.3.1)");
         break;
     case 1: hz = LPO_HZ; break;
     case 2: /* ERCLK32K: SIM_SOPT1 OSC32KSEL (RM 12.2.2) */
         if (((SIM->SOPT1 & SIM_SOPT1_OSC32KSEL_MASK) >> 18) != 3u)
-            cannot(t, "its clock ERCLK32K is not the LPO (SIM_SOPT1 OSC32KSEL != 3: the FRDM-KL25Z has no 32 kHz "
+            return untimed("its clock ERCLK32K is not the LPO (SIM_SOPT1 OSC32KSEL != 3: the FRDM-KL25Z has no 32 kHz "
                    "crystal, RTC_CLKIN is a pin)");
         hz = LPO_HZ;
         break;
@@ -160,28 +186,27 @@ static double lptmr_period(void) {
 /* TPM2's overflow: MOD + 1 counts (up-down counting, CPWMS: 2 x MOD) of the TPM clock (SIM_SOPT2
  * TPMSRC, RM 12.2.3) divided by 2^PS (RM 31.3.1, 31.4.3). */
 static double tpm2_period(void) {
-    const struct timer *t = &timers[TPM_2];
     uint32_t sc = TPM2->SC, cmod = (sc & TPM_SC_CMOD_MASK) >> 3;
-    if (cmod == 0 || !irq_on(IRQ_TPM2)) return 0.0;
+    if (cmod == 0) return 0.0;
     for (int ch = 0; ch < 2; ch++)
-        if (TPM2->CONTROLS[ch].CnSC & TPM_CnSC_CHIE_MASK) cannot(t, "a channel interrupt (CnSC CHIE)");
+        if (TPM2->CONTROLS[ch].CnSC & TPM_CnSC_CHIE_MASK) return untimed("a channel interrupt (CnSC CHIE)");
     if (!(sc & TPM_SC_TOIE_MASK)) return 0.0;
-    if (cmod != 1) cannot(t, "it counts the external clock pin (SC CMOD = 2, RM 31.3.1)");
+    if (cmod != 1) return untimed("it counts the external clock pin (SC CMOD = 2, RM 31.3.1)");
     double hz = 0.0;
     switch ((SIM->SOPT2 & SIM_SOPT2_TPMSRC_MASK) >> 24) {
-    case 0: cannot(t, "the TPM clock is off (SIM_SOPT2 TPMSRC = 0)");
+    case 0: return untimed("the TPM clock is off (SIM_SOPT2 TPMSRC = 0)");
     case 1:
         if (!(SIM->SOPT2 & SIM_SOPT2_PLLFLLSEL_MASK))
-            cannot(t, "its clock is MCGFLLCLK (SIM_SOPT2 PLLFLLSEL = 0), off while the TFC library runs the PLL");
+            return untimed("its clock is MCGFLLCLK (SIM_SOPT2 PLLFLLSEL = 0), off while the TFC library runs the PLL");
         hz = PLL_HALF_HZ;
         break;
     case 2: hz = OSCERCLK_HZ; break;
     default:
         hz = mcgirclk_hz();
-        if (hz == 0.0) cannot(t, "its clock MCGIRCLK is off (MCG_C1 IRCLKEN clear; RM 24.3.1)");
+        if (hz == 0.0) return untimed("its clock MCGIRCLK is off (MCG_C1 IRCLKEN clear; RM 24.3.1)");
     }
     uint32_t mod = TPM2->MOD & 0xFFFFu;
-    if ((sc & TPM_SC_CPWMS_MASK) && mod == 0) cannot(t, "MOD is 0 in up-down counting (SC CPWMS)");
+    if ((sc & TPM_SC_CPWMS_MASK) && mod == 0) return untimed("MOD is 0 in up-down counting (SC CPWMS)");
     double counts = (sc & TPM_SC_CPWMS_MASK) ? 2.0 * mod : (double)mod + 1.0;
     return counts * (double)(1u << (sc & TPM_SC_PS_MASK)) / hz;
 }
@@ -219,10 +244,11 @@ static double period_of(int i) {
     return i == LPTMR ? lptmr_period() : i == TPM_2 ? tpm2_period() : pit_period(i - PIT0);
 }
 
-/* Stop a timer's calls; `source`: because its own interrupt enable (or the timer) was turned off
- * while its IRQ stays enabled in the NVIC - then an expiry that has not been taken yet (held by
- * __disable_irq, or due after the running handler) keeps the NVIC's pending bit and its handler runs
- * once, as on the board (ARMv6-M, ARM DDI 0419, B3.4: pending until taken or cleared; NVIC_ICPR). */
+/* Stop a timer's calls; `source`: because its own interrupt enable (or the timer) was turned off -
+ * then an expiry that has not been taken yet (held by __disable_irq, or due after the running
+ * handler) keeps the NVIC's pending bit and runs once, as on the board (ARMv6-M, ARM DDI 0419, B3.4:
+ * pending until taken or cleared; NVIC_ICPR): its handler, or with its IRQ disabled by then the bit
+ * the kit keeps for NVIC_EnableIRQ (fire). */
 static void stop(struct timer *t, int source) {
     if (source) spinner_stop_every_latched(t->fire);
     else spinner_stop_every(t->fire);
@@ -386,11 +412,17 @@ static void sync(void) {
         struct timer *t = &timers[i];
         warn_unrouted(i);
         double period_s = period_of(i);
+        if (period_s < 0.0) {
+            if (irq_on(irq_of(i))) cannot(t, untimed_why);
+            period_s = 0.0;  /* (its IRQ disabled: it calls nothing, on the board neither) */
+        }
         void (*handler)(void) = handler_of(i);
         int isr_own = handler != NULL && spinner_has_every(handler);  /* --isr runs it */
         if (period_s > 0.0 && isr_own) period_s = 0.0;
+        if (period_s > 0.0 && !irq_on(irq_of(i)) && (handler == NULL || period_s < 1e-5))
+            period_s = 0.0;  /* (the errors below once its IRQ is enabled) */
         if (period_s == 0.0) {
-            if (t->period_s > 0.0) stop(t, !isr_own && irq_on(irq_of(i)));
+            if (t->period_s > 0.0) stop(t, !isr_own);
             continue;
         }
         if (handler == NULL) {
@@ -412,8 +444,41 @@ static void sync(void) {
                          * one's source still asserts its IRQ: on the board it is pending again) */
         for (int i = 0; i < N_TIMERS; i++)
             if (timers[i].period_s == 0.0 && ((nvic_unpend >> irq_of(i)) & 1u)) spinner_unpend_every(timers[i].fire);
-        nvic_unpend = 0;
     }
+    if (nvic_unpend || nvic_pending || nvic_handed) nvic_settle();
+    nvic_unpend = 0;
+}
+
+/* NVIC_EnableIRQ, NVIC_DisableIRQ (CMSIS), enable_irq, disable_irq (the TFC library's arm_cm0.c): a
+ * pending bit of the IRQ enabled is taken now, inside the call, when interrupts are unmasked. */
+void tfc_sim_nvic_enable(int irq) {
+    nvic_sync();
+    if (irq < 0 || irq >= 32) return;
+    nvic_enabled |= 1u << irq;
+    if (((nvic_pending >> irq) & 1u) && !firing) sync();  /* (the look: a clear written since applies first;
+                                                            * in a handler: the look after it) */
+}
+
+void tfc_sim_nvic_disable(int irq) {
+    nvic_sync();
+    if (irq >= 0 && irq < 32) nvic_enabled &= ~(1u << irq);
+    if (irq >= 0 && irq < 32 && ((nvic_handed >> irq) & 1u) && !firing) sync();  /* (taken back) */
+}
+
+/* NVIC_SetPendingIRQ: taken now, inside the call, if the IRQ is enabled and interrupts unmasked. */
+void tfc_sim_nvic_set_pending(int irq) {
+    if (irq >= 0 && irq < 32) NVIC->ISPR[0] |= 1u << irq;
+    if (!firing) sync();  /* (in a handler: the look after it; it runs after the handler) */
+}
+
+/* NVIC_GetPendingIRQ: the IRQ's pending bit as the kit knows it (not an expiry held by __disable_irq
+ * while the IRQ was enabled: that one the simulator keeps). */
+uint32_t tfc_sim_nvic_pending(int irq) {
+    if (firing) nvic_sync();
+    else sync();
+    uint32_t pending = nvic_pending | nvic_handed;
+    if (firing) pending &= ~nvic_unpend;  /* (a clear in the handler: applied after it) */
+    return irq >= 0 && irq < 32 ? (pending >> irq) & 1u : 0u;
 }
 
 void spinner_kit_before_wait(void) {
@@ -422,11 +487,23 @@ void spinner_kit_before_wait(void) {
     sync();
 }
 
-/* An expiry: the flag set, the handler, the flag cleared; a new period from now on. */
+/* An expiry: the flag set, the handler, the flag cleared; a new period from now on. Its IRQ disabled
+ * in the NVIC (or its pending bit handed to the simulator already: one bit), the flag is kept for
+ * the take and the bit set instead (ARMv6-M, ARM DDI 0419, B3.4). */
 static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
     struct timer *t = &timers[i];
     double next = t->next_period_s;
     waits++;  /* (time passed since the last look: a change now is a reload, not a set-up) */
+    uint32_t bit = 1u << irq_of(i);
+    if (!irq_on(irq_of(i)) || (nvic_handed & bit)) {
+        t->flagged = 1;
+        if (!(nvic_handed & bit)) nvic_pending |= bit;
+        if (next > 0.0 && t->period_s > 0.0) {
+            stop(t, 0);
+            start(t, next);
+        }
+        return;
+    }
     *flag |= mask;
     firing = 1;
     handler_of(i)();
@@ -444,6 +521,76 @@ static void fire_pit0(void) { fire(PIT0, &PIT->CHANNEL[0].TFLG, PIT_TFLG_TIF_MAS
 static void fire_pit1(void) { fire(PIT1, &PIT->CHANNEL[1].TFLG, PIT_TFLG_TIF_MASK); }
 static void fire_lptmr(void) { fire(LPTMR, &LPTMR0->CSR, LPTMR_CSR_TCF_MASK); }
 static void fire_tpm2(void) { fire(TPM_2, &TPM2->SC, TPM_SC_TOF_MASK); }
+
+static volatile uint32_t *flag_of(int i, uint32_t *mask) {
+    if (i == LPTMR) return *mask = LPTMR_CSR_TCF_MASK, &LPTMR0->CSR;
+    if (i == TPM_2) return *mask = TPM_SC_TOF_MASK, &TPM2->SC;
+    return *mask = PIT_TFLG_TIF_MASK, &PIT->CHANNEL[i - PIT0].TFLG;
+}
+
+/* The IRQ's pending bit taken (the simulator runs it when PRIMASK allows, its IRQ enabled): the flags
+ * of its timers' expiries set, its handler once, the flags cleared (the handler's write-1-to-clear
+ * taken as done). Pended in software with no expiry, the handler finds no flag set, as on the board. */
+static void take(int irq) {
+    uint32_t bit = 1u << irq;
+    nvic_handed &= ~bit;
+    int first = irq == IRQ_TPM2 ? TPM_2 : irq == IRQ_PIT ? PIT0 : LPTMR;
+    int last = irq == IRQ_PIT ? PIT1 : first;
+    if (handler_of(first) == NULL) {
+        char why[200];
+        snprintf(why, sizeof why, "its IRQ is pending and enabled but the program defines no %s (on the board the "
+                 "start-up file's default handler would take it and loop for ever)", vector_of(first));
+        cannot(&timers[first], why);
+    }
+    uint32_t masks[N_TIMERS] = {0};
+    for (int i = first; i <= last; i++)
+        if (timers[i].flagged) *flag_of(i, &masks[i]) |= masks[i];
+    waits++;
+    firing = 1;
+    handler_of(first)();
+    firing = 0;
+    for (int i = first; i <= last; i++) {
+        if (masks[i]) *flag_of(i, &masks[i]) &= ~masks[i];
+        timers[i].flagged = 0;
+    }
+    waits++;
+    sync();
+}
+
+static void take_tpm2(void) { take(IRQ_TPM2); }
+static void take_pit(void) { take(IRQ_PIT); }
+static void take_lptmr(void) { take(IRQ_LPTMR); }
+
+/* The NVIC's pending bits after a look: ICPR clears one (and its timers' flags) unless a running
+ * timer's flag asserts it again (on the board TIF && TIE keep it pending); a bit handed to the
+ * simulator and not taken comes back when its IRQ is disabled or it is cleared; a pending bit of an
+ * enabled IRQ is handed to it (in the order of the IRQ numbers: the NVIC's for equal priorities). */
+static void nvic_settle(void) {
+    static const int irqs[] = {IRQ_TPM2, IRQ_PIT, IRQ_LPTMR};
+    for (int k = 0; k < 3; k++) {
+        int irq = irqs[k];
+        uint32_t bit = 1u << irq;
+        if (nvic_unpend & bit) {
+            int asserted = 0;
+            for (int i = 0; i < N_TIMERS; i++)
+                if (irq_of(i) == irq && timers[i].flagged && armed(i)) asserted = 1;
+            if (!asserted) {
+                for (int i = 0; i < N_TIMERS; i++)
+                    if (irq_of(i) == irq) timers[i].flagged = 0;
+                nvic_pending &= ~bit;
+                if (nvic_handed & bit) spinner_unpend_every(take_of(irq)), nvic_handed &= ~bit;
+            }
+        }
+        if ((nvic_handed & bit) && !irq_on(irq)) {
+            spinner_unpend_every(take_of(irq));
+            nvic_handed &= ~bit, nvic_pending |= bit;
+        }
+        if ((nvic_pending & bit) && irq_on(irq)) {
+            nvic_pending &= ~bit, nvic_handed |= bit;
+            spinner_pend_every(take_of(irq));
+        }
+    }
+}
 
 /* TFC_Init: the TPM clock as the library's servo and motor set-up selects it (MCGPLLCLK/2). */
 void tfc_sim_timers_init(void) {

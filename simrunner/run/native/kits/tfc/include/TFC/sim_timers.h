@@ -143,10 +143,18 @@ typedef enum { TPM0_IRQn = 17, TPM1_IRQn = 18, TPM2_IRQn = 19, PIT_IRQn = 22, LP
 #define INT_TPM2 35
 #define INT_PIT 38
 #define INT_LPTimer 44
+/* The pending bits (timers.c; ARMv6-M, ARM DDI 0419, B3.4): independent of the enable bits, one an
+ * IRQ; a pending, enabled IRQ is taken when PRIMASK allows - inside NVIC_EnableIRQ,
+ * NVIC_SetPendingIRQ, __enable_irq, or at the next call after a raw NVIC_ISER / NVIC_ISPR write.
+ * A read of the raw registers does not give the bits: NVIC_GetPendingIRQ does. */
 void tfc_sim_nvic_enable(int irq);   /* timers.c: NVIC_EnableIRQ, enable_irq */
 void tfc_sim_nvic_disable(int irq);
+void tfc_sim_nvic_set_pending(int irq);
+uint32_t tfc_sim_nvic_pending(int irq);
 #define NVIC_EnableIRQ(irq) tfc_sim_nvic_enable((int)(irq))
 #define NVIC_DisableIRQ(irq) tfc_sim_nvic_disable((int)(irq))
 #define NVIC_ClearPendingIRQ(irq) ((void)(NVIC->ICPR[0] = 1u << ((uint32_t)(irq) & 31u)))
+#define NVIC_SetPendingIRQ(irq) tfc_sim_nvic_set_pending((int)(irq))
+#define NVIC_GetPendingIRQ(irq) tfc_sim_nvic_pending((int)(irq))
 #define NVIC_SetPriority(irq, prio) ((void)(irq), (void)(prio))
 #endif
