@@ -183,13 +183,14 @@ def test_every_bench_that_saves_has_a_renderer():
     module = load_script()
     names = {m for path in (REPO / "bench").glob("bench_*.py")
              for m in re.findall(r"\bsave\(\s*\"(\w+)\"", path.read_text())}
-    assert {"video", "batch_short", "batch", "closed_loop", "startup", "watch", "memory", "gym", "random"} <= names
+    assert {"video", "batch_short", "batch", "closed_loop", "startup", "watch", "memory", "gym", "random",
+            "c_controller"} <= names
     assert names <= set(module.RENDERERS), f"no renderer for {sorted(names - set(module.RENDERERS))}"
 
 
 def test_the_other_recording_benches_write_what_their_renderers_read(tmp_path):
-    """The tables of ``batch``, ``closed_loop``, ``startup``, ``watch``, ``memory``, ``gym`` and
-    ``random`` carry each figure, its target and the machine it was measured on."""
+    """The tables of ``batch``, ``closed_loop``, ``startup``, ``watch``, ``memory``, ``gym``,
+    ``random`` and ``c_controller`` carry each figure, its target and the machine it was measured on."""
     from bench.record import save
 
     module = load_script()
@@ -237,3 +238,15 @@ def test_the_other_recording_benches_write_what_their_renderers_read(tmp_path):
                           "attempts_mean": 1.52, "attempts_max": 8, "invalid": 0, "crossings": {"0": 2000}})
     assert "seeds 0-1,999" in out and "| 29.8 (25.1 per wall second) | >= 20 |" in out
     assert "| 0 of 2,000 | 0 |" in out
+    out = text("c_controller", {
+        "closed_loop": {"repeats": 24, "sim_s": 7.38, "ratio": 1.002, "ratio_median": 0.998,
+                        "paired": [0.991, 0.996, 1.004], "ratio_isolate": 0.931,
+                        "laps": [{"controller": "line_follower.c", "rtf_wall": 73.04, "rtf_wall_median": 71.6}]},
+        "split": {"inside_ms": 98.71, "outside_py_ms": 2.4, "outside_c_ms": 2.1, "outside_diff_ms": [0.1, 0.3, 0.5],
+                  "implied_ratio": 1.0029},
+        "start_up": {"repeat": 3, "target_first_s": 3.0, "target_margin_s": 0.2,
+                     "rows": [{"run": "C, new", "median_s": 1.234, "min_s": 1.2, "max_s": 1.3}]}})
+    assert "| `line_follower.c` | 73.0x | 71.6x |" in out and "C / Python: 1.002 on the best laps" in out
+    assert "(95 % interval 0.991-1.004); target >= 1" in out and "`--isolate` / Python: 0.931" in out
+    assert "+0.300 ms, 95 % interval +0.100 to +0.500" in out and "| C, new | 1.23 | 1.20 | 1.30 |" in out
+    assert "first run < 3 s" in out

@@ -9,7 +9,7 @@ markdown block, which replaces the text between ``<!-- bench:NAME begin -->`` an
 writes its JSON (``python -m bench.bench_gap ... --results``); this script is the only
 writer of the blocks, so the docs show the saved figures and nothing else. Benches that record
 their figures with ``bench.record.save`` (``video``, ``batch``, ``closed_loop``, ``startup``,
-``watch``, ``memory``, ``gym``, ``random``) write this format too.
+``watch``, ``memory``, ``gym``, ``random``, ``c_controller``) write this format too.
 
 ``--check`` writes nothing and prints one line per doc whose block differs (exit 1). Bad
 input (a results file no doc has markers for, markers that do not pair up, a JSON in a
@@ -189,7 +189,8 @@ def render_batch(data: dict) -> str:
         lines += ["", f"| per run, median of {ray['repetitions']} | Ray local cluster | local pool | Ray |",
                   "| --- | --- | --- | --- |"]
         for r in ray["figures"]:
-            lines.append(f"| {_cell(r['what'])} | {r['ray_ms']:.1f} ms | {r['local_ms']:.1f} ms | {_pct(r['change'])} |")
+            lines.append(f"| {_cell(r['what'])} | {r['ray_ms']:.1f} ms | {r['local_ms']:.1f} ms | "
+                         f"{_pct(r['change'])} |")
         lines += ["", "| 2 workers, median s after the batch's start | first worker started | all ready | "
                       "end after the last row |", "| --- | --- | --- | --- |"]
         for r in ray["start"]:
@@ -277,7 +278,8 @@ def render_gym(data: dict) -> str:
     """``bench/results/gym.json`` (``python -m bench gym``): ``env.step`` per CPU-second against
     the target, the physics' share of a step, a reset."""
     f = data["figures"]
-    lines = [f"| `NXPCup-v0`, {f['episode_s']:g}-s episodes of a line follower ({f['steps']} steps) | figure | target |",
+    lines = [f"| `NXPCup-v0`, {f['episode_s']:g}-s episodes of a line follower ({f['steps']} steps) "
+             "| figure | target |",
              "| --- | --- | --- |",
              f"| `env.step`, one core | {f['steps_per_s']:,} steps/s ({f['step_us']:.0f} us CPU, "
              f"{f['step_wall_us']:.0f} us wall) | >= {f['target_steps_per_s']:,.0f} steps/s |",
@@ -292,7 +294,7 @@ def render_random(data: dict) -> str:
     """``bench/results/random.json`` (``python -m bench random``): layouts per CPU- and wall
     second, attempts per layout, crossings drawn, layouts failing the full validation."""
     f = data["figures"]
-    crossings = ", ".join(f"{k}: {v:,}" for k, v in f["crossings"].items())
+    crossings = ", ".join(f"{v:,} with {k}" for k, v in f["crossings"].items())
     lines = [f"| `random_layout`, seeds 0-{f['n'] - 1:,} | figure | target |", "| --- | --- | --- |",
              f"| layouts per CPU-second | {f['per_cpu_s']:.1f} ({f['per_wall_s']:.1f} per wall second) | "
              f">= {f['target_per_s']:g} |",
@@ -303,11 +305,38 @@ def render_random(data: dict) -> str:
     return "\n".join(lines)
 
 
+def render_c_controller(data: dict) -> str:
+    """``bench/results/c_controller.json`` (``python -m bench c_controller``): the closed-loop laps
+    of the C and the Python line follower (real-time factors, C / Python and its paired
+    interval), their split inside / outside the Spinner calls, and ``simrunner drive``'s
+    start-up with each against the targets."""
+    f, sp, up = data["figures"]["closed_loop"], data["figures"]["split"], data["figures"]["start_up"]
+    lo, mid, hi = f["paired"]
+    d_lo, d_mid, d_hi = sp["outside_diff_ms"]
+    lines = [f"| one lap of the default track ({f['sim_s']:g} s), {f['repeats']} laps each | real-time factor, best "
+             "| median |", "| --- | --- | --- |"]
+    for r in f["laps"]:
+        lines.append(f"| `{_cell(r['controller'])}` | {r['rtf_wall']:.1f}x | {r['rtf_wall_median']:.1f}x |")
+    lines += ["", f"C / Python: {f['ratio']:.3f} on the best laps, {f['ratio_median']:.3f} on the medians, "
+                  f"{mid:.3f} the median of the paired laps (95 % interval {lo:.3f}-{hi:.3f}); target >= 1. "
+                  f"`--isolate` / Python: {f['ratio_isolate']:.3f}. Split: {sp['inside_ms']:.1f} ms a lap inside the "
+                  f"Spinner calls; outside them Python {sp['outside_py_ms']:.2f} ms, C {sp['outside_c_ms']:.2f} ms "
+                  f"(Python - C, paired: {d_mid:+.3f} ms, 95 % interval {d_lo:+.3f} to {d_hi:+.3f}), which makes "
+                  f"C / Python {sp['implied_ratio']:.4f}.",
+              "", "| `simrunner drive ... --laps 1`, fresh process | median s | min | max |",
+              "| --- | --- | --- | --- |"]
+    lines += _seconds_rows(up["rows"], "run")
+    lines += ["", f"Targets: a new C controller's first run < {up['target_first_s']:g} s; a cached one within "
+                  f"{up['target_margin_s']:g} s of Python. Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
 RENDERERS: dict[str, Callable[[dict], str]] = {"gap": render_gap, "gap_duty": render_gap,  # the same layout
                                                "video": render_video, "batch_short": render_batch_short,
                                                "batch": render_batch, "closed_loop": render_closed_loop,
                                                "startup": render_startup, "watch": render_watch,
-                                               "memory": render_memory, "gym": render_gym, "random": render_random}
+                                               "memory": render_memory, "gym": render_gym, "random": render_random,
+                                               "c_controller": render_c_controller}
 
 
 def render(name: str, data: dict) -> str:
