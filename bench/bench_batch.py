@@ -1,7 +1,8 @@
 """``simrunner batch`` throughput: 1 vs 2 local workers, laps per core-minute, per-run
 overhead, and the Ray local cluster against the local pool (same rows).
 
-``python -m bench batch``. The batch: ``examples/line_follower.py``, 1 lap of the bundled
+``python -m bench batch`` (``NXPCUP_BATCH_SKIP_SHORT=1``: without the short batches below).
+The batch: ``examples/line_follower.py``, 1 lap of the bundled
 track, ``NXPCUP_BATCH_RUNS`` runs (default 16: 2 values of v_max x 8 seeds). Reported:
 wall time and runs/s for 1 and 2 workers (target: 2 workers >= 1.8 x 1 worker), laps per
 core-minute (laps / (workers x wall minutes)), the per-run overhead of the pool (wall per run
@@ -139,7 +140,8 @@ def _line(label: str, m: dict) -> str:
             f"{1e3 * m['gap_run']:.1f} ms more apart than its runs' loops last; load {m['load']:.1f}")
 
 
-def _ray(tmp: Path) -> None:
+def _ray(tmp: Path) -> dict:
+    """Ray against the local pool (docstring); returns the figures it printed."""
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     reps = int(os.environ.get("NXPCUP_BATCH_REPS", "2"))
     runs: dict[str, list[dict]] = {"local": [], "ray": []}
@@ -151,12 +153,20 @@ def _ray(tmp: Path) -> None:
             print(_line(label, m), flush=True)
     rows = {label: [[deterministic(r) for r in m["res"].rows] for m in ms] for label, ms in runs.items()}
     same = all(r == rows["local"][0] for r in rows["local"] + rows["ray"])
+    figures = []
     for key, what in (("steady_run", "steady wall"), ("cpu_run", "steady CPU"),
                       ("wall_run", "wall incl. start-up")):
         loc, ray = (statistics.median(m[key] for m in runs[k]) for k in ("local", "ray"))
         print(f"  Ray vs local pool, {what} per run (median of {reps}): {1e3 * ray:.1f} vs "
               f"{1e3 * loc:.1f} ms = {100 * (ray - loc) / loc:+.1f} %")
+        figures.append({"what": what, "ray_ms": round(1e3 * ray, 1), "local_ms": round(1e3 * loc, 1),
+                         "change": round((ray - loc) / loc, 3)})
     print(f"  rows identical (Ray and local, every repetition): {same}; target <= +10 % per run")
+    return {"repetitions": reps, "rows_identical": same, "target_change": 0.10, "figures": figures,
+            "start": [{"how": label, "to_first_worker_s": round(statistics.median(m["to_first_worker"] for m in ms), 2),
+                       "to_ready_s": round(statistics.median(m["to_ready"] for m in ms), 2),
+                       "after_last_row_s": round(statistics.median(m["after_last_row"] for m in ms), 2)}
+                      for label, ms in runs.items()]}
 
 
 _PYCACHE = tempfile.mkdtemp(prefix="bench-batch-pycache-")
@@ -255,16 +265,18 @@ def main() -> None:
     print(f"machine load (1-min average) {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        _short(tmp)
+        if not os.environ.get("NXPCUP_BATCH_SKIP_SHORT"):
+            _short(tmp)
         if os.environ.get("NXPCUP_BATCH_SHORT_ONLY"):
             return
-        results = {}
+        results, laps_per_core_min = {}, {}
         for w in (1, 2):
             m = _batch(tmp / f"w{w}", workers=w)
             res = m["res"]
             laps = sum(r["laps_completed"] for r in res.rows)
             cpu = sum(r["cpu_time_s"] for r in res.rows)
             results[w] = m
+            laps_per_core_min[w] = 60 * laps / len(res.rows) / m["steady_run"] / w
             print(f"{w} worker(s): {len(res.rows)} runs in {m['wall']:.1f} s incl. start-up; steady "
                   f"{1 / m['steady_run']:.2f} runs/s = "
                   f"{60 * laps / len(res.rows) / m['steady_run'] / w:.1f} laps per core-minute; "
@@ -278,10 +290,18 @@ def main() -> None:
         per_run = results[1]["steady_run"]
         print(f"per run: bare drive() {bare * 1e3:.0f} ms, batch on 1 worker (steady) "
               f"{per_run * 1e3:.0f} ms: overhead {100 * (per_run - bare) / bare:+.1f} %")
+        figures = {"runs": n, "target_speedup": 1.8, "target_overhead": 0.05, "rows_identical": same,
+                   "workers": [{"workers": w, "runs_per_s": round(1 / results[w]["steady_run"], 2),
+                                "laps_per_core_min": round(laps_per_core_min[w])} for w in (1, 2)],
+                   "speedup": round(speedup, 3), "bare_ms": round(bare * 1e3, 1), "pool_ms": round(per_run * 1e3, 1),
+                   "overhead": round((per_run - bare) / bare, 3), "ray": None}
         if importlib.util.find_spec("ray") is None:   # not imported: its private cluster sets
             print("ray: not installed (pip install 'nxpcup-sim[ray]'), Ray figures skipped")
-            return                                     # its loopback switch first
-        _ray(tmp)
+        else:                                          # its loopback switch first
+            figures["ray"] = _ray(tmp)
+    from bench.record import save
+
+    save("batch", figures)
 
 
 if __name__ == "__main__":

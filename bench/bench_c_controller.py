@@ -71,7 +71,8 @@ def _started_cpu_s(pid: int) -> float:
         return 0.0
 
 
-def closed_loop() -> None:
+def closed_loop() -> dict:
+    """The closed-loop laps (docstring); returns the figures it printed."""
     from simrunner.run.native import build_program, load_native
 
     car = load_car(None)
@@ -124,9 +125,16 @@ def closed_loop() -> None:
           f"--isolate / Python: wall {ratio_iso:.3f} (CPU counts the C child's run, not its start)")
     print(f"  paired laps (Python wall / C wall, same round): median {mid:.3f}, 95 % bootstrap "
           f"interval of the median {lo:.3f}-{hi:.3f}")
+    return {"repeats": REPEATS, "sim_s": round(sim_s["line_follower.py"], 2),
+            "laps": [{"controller": name, "rtf_wall": round(sim_s[name] / best[name][1], 1),
+                      "rtf_wall_median": round(sim_s[name] / med[name], 1)} for name in names],
+            "ratio": round(ratio, 3), "ratio_median": round(ratio_med, 3),
+            "paired": [round(lo, 3), round(mid, 3), round(hi, 3)],
+            "ratio_isolate": round(ratio_iso, 3)}
 
 
-def split() -> None:
+def split() -> dict:
+    """The laps split inside / outside the Spinner calls (docstring); returns the figures."""
     from simrunner.run import spinner as sp
     from simrunner.run.native import build_program, load_native
 
@@ -182,6 +190,10 @@ def split() -> None:
     print(f"  (inside, Python - C, same round: median {np.median(in_diff) * 1e3:+.2f} ms, "
           f"spread {np.percentile(in_diff, 10) * 1e3:+.2f} to {np.percentile(in_diff, 90) * 1e3:+.2f} ms "
           f"(10-90 %): the same work, its noise is the whole-lap ratio's)")
+    return {"inside_ms": round(inside_s * 1e3, 2), "outside_py_ms": round(float(np.median(out_py)) * 1e3, 3),
+            "outside_c_ms": round(float(np.median(out_c)) * 1e3, 3),
+            "outside_diff_ms": [round(float(x) * 1e3, 3) for x in (lo, np.median(diff), hi)],
+            "implied_ratio": round(ratio, 4)}
 
 
 def paired_ratio_ci(py_wall_s: list[float], c_wall_s: list[float], n_boot: int = 2000,
@@ -210,7 +222,8 @@ def _wall_s(argv: list[str], env: dict[str, str], repeat: int, before=None) -> l
     return out
 
 
-def start_up() -> None:
+def start_up() -> dict:
+    """The start-up of fresh processes (docstring); returns the figures it printed."""
     cli = [sys.executable, "-c", "import sys; from simrunner.cli import main; sys.exit(main())",
            "drive"]
     with tempfile.TemporaryDirectory() as tmp:
@@ -248,6 +261,9 @@ def start_up() -> None:
           f"{'met' if first < FIRST_RUN_TARGET_S else 'NOT met'})")
     print(f"  cached C - Python: {margin:+.2f} s (target < {CACHED_MARGIN_S:g} s: "
           f"{'met' if margin < CACHED_MARGIN_S else 'NOT met'})")
+    return {"repeat": REPEAT, "target_first_s": FIRST_RUN_TARGET_S, "target_margin_s": CACHED_MARGIN_S,
+            "rows": [{"run": label, "median_s": round(med[label], 3), "min_s": round(min(times), 3),
+                      "max_s": round(max(times), 3)} for label, times in rows]}
 
 
 def parts() -> None:
@@ -288,10 +304,12 @@ def parts() -> None:
 
 
 def main() -> None:
-    closed_loop()
-    split()
+    laps = closed_loop()
+    parts_of_lap = split()
     parts()
-    start_up()
+    from bench.record import save
+
+    save("c_controller", {"closed_loop": laps, "split": parts_of_lap, "start_up": start_up()})
 
 
 if __name__ == "__main__":

@@ -183,6 +183,14 @@ def main() -> None:
                     ("controller (outside get_image)", r2.wall_time_s - get_image),
                     ("= instrumented lap", r2.wall_time_s)):
         print(f"  {name:34s}{v * 1e6 / frames:8.1f}")
+    from bench.record import save
+
+    save("closed_loop", {
+        "repeats": REPEATS, "sim_s": round(sim_s, 2), "frames": frames, "fps": car.camera.fps_hz,
+        "rtf_target": RTF_TARGET, "ratio_target": RATIO_TARGET, "replay_exact": exact,
+        "ratio_replay": round(ratio, 3), "ratio_bare": round(best["bare"][0] / best["closed"][0], 3),
+        "rows": [{"run": key, "rtf_cpu": round(sim_s / best[key][0], 1), "us_per_frame": round(best[key][0] * us, 1)}
+                 for key in ("closed", "replay", "speed", "bare")]})
 
 
 if __name__ == "__main__":

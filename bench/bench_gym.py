@@ -103,6 +103,12 @@ def main() -> None:
           f"real-time factor {rate / env.unwrapped.car.camera.fps_hz:.0f}x; "
           f"reset (same track): {reset_cpu * 1e3:.2f} ms CPU")
     env.close()
+    from bench.record import save
+
+    save("gym", {"repeats": REPEATS, "episode_s": EPISODE_S, "steps": n, "target_steps_per_s": TARGET_STEPS_PER_S,
+                 "steps_per_s": round(rate), "step_us": round(best_env[0] * 1e6, 1),
+                 "step_wall_us": round(best_env[1] * 1e6, 1), "replay_us": round(best_replay[0] * 1e6, 1),
+                 "physics_share": round(best_replay[0] / best_env[0], 3), "reset_ms": round(reset_cpu * 1e3, 2)})
 
 
 if __name__ == "__main__":

@@ -51,12 +51,20 @@ def main() -> None:
     minutes = [float(m) for m in os.environ.get("BENCH_MEMORY_MINUTES", "10,60").split(",")]
     print(f"repo {repo}")
     print(f"{'sim min':>8} {'csv':>4} {'outcome':>10} {'rows':>8} {'log rows':>9} {'peak RSS MB':>12} {'wall s':>7}")
+    rows = []
     for with_csv in [c == "csv" for c in os.environ.get("BENCH_MEMORY_CSV", "no,csv").split(",")]:
         for m in minutes:
             t0 = time.perf_counter()
             r = measure(m, with_csv, repo)
             print(f"{m:8g} {'yes' if with_csv else 'no':>4} {r['outcome']:>10} {r['rows']:8d} "
                   f"{r['log_rows']:9d} {r['peak_rss_mb']:12.1f} {time.perf_counter() - t0:7.1f}", flush=True)
+            rows.append({"minutes": m, "csv": with_csv, "rows": r["rows"], "log_rows": r["log_rows"],
+                         "peak_rss_mb": round(r["peak_rss_mb"], 1)})
+    if repo == REPO:  # another tree's figures are not this one's
+        from bench.record import save
+        from simrunner.telemetry.log import KEEP_ROWS
+
+        save("memory", {"keep_rows": KEEP_ROWS, "rows": rows})
 
 
 if __name__ == "__main__":

@@ -46,6 +46,12 @@ def main() -> None:
           f"({time.perf_counter() - t0:.0f} s)")
     for seed, problem in bad[:5]:
         print(f"  seed {seed}: {problem}")
+    from bench.record import save
+
+    save("random", {"n": n, "target_per_s": TARGET_PER_S, "per_cpu_s": round(n / cpu, 1),
+                    "per_wall_s": round(n / wall, 1), "attempts_mean": round(sum(attempts) / n, 2),
+                    "attempts_max": max(attempts), "invalid": len(bad),
+                    "crossings": {str(k): v for k, v in sorted(crossings.items())}})
 
 
 if __name__ == "__main__":

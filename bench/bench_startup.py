@@ -126,7 +126,8 @@ def sixty_seconds(tmp: Path, repeat: int = REPEAT) -> dict[str, list[float]]:
     return out
 
 
-def _sixty_report(m: dict[str, list[float]]) -> None:
+def _sixty_report(m: dict[str, list[float]]) -> dict[str, float]:
+    """Print the 60-s table; returns its medians."""
     med = {k: statistics.median(v) for k, v in m.items()}
     factor = SIXTY_S / med["wall"]
     print(f"{'60 simulated s, default track':<40} {'median':>7} {'min':>7} {'max':>7}")
@@ -136,10 +137,15 @@ def _sixty_report(m: dict[str, list[float]]) -> None:
     print(f"real-time factor of the whole process: {factor:.1f}x (target >= {TARGET_FACTOR:g}x: "
           f"{'met' if factor >= TARGET_FACTOR else 'not met'}); start-up {med['startup']:.2f} s "
           f"(target <= {TARGET_STARTUP_S} s: {'met' if med['startup'] <= TARGET_STARTUP_S else 'not met'})")
+    return med
 
 
-def _row(label: str, measured: tuple[list[float], str]) -> str:
+def _row(label: str, measured: tuple[list[float], str], saved: list | None = None) -> str:
+    """A table row; with ``saved``, its figures are appended there too."""
     times, loaded = measured
+    if saved is not None:
+        saved.append({"command": label.strip(), "median_s": round(statistics.median(times), 3),
+                      "min_s": round(min(times), 3), "max_s": round(max(times), 3)})
     return (f"{label:<40} {statistics.median(times):7.2f} {min(times):7.2f} {max(times):7.2f}  "
             f"{loaded or '-'}")
 
@@ -147,13 +153,14 @@ def _row(label: str, measured: tuple[list[float], str]) -> str:
 def main() -> None:
     header = f"{'':<40} {'median':>7} {'min':>7} {'max':>7}  loads"
     load0 = os.getloadavg()[0]
+    rows: list[dict] = []
     with tempfile.TemporaryDirectory() as tmp:
-        _sixty_report(sixty_seconds(Path(tmp)))
+        sixty = _sixty_report(sixty_seconds(Path(tmp)))
         print(f"load average {load0:.1f} -> {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
         print()
         print(f"{'command (wall s, fresh process)':<40}" + header[40:])
         for label, argv, env, warm in commands(Path(tmp)):
-            print(_row(label, wall_times_s(argv, env=env, warm=warm)))
+            print(_row(label, wall_times_s(argv, env=env, warm=warm), rows))
     if not (TRACKS / "nxp_raceway").is_dir():
         print(f"(nxp_raceway row skipped: no {TRACKS / 'nxp_raceway'})")
     print()
@@ -161,6 +168,11 @@ def main() -> None:
     print(_row("(bare interpreter)", wall_times_s([sys.executable, "-c", "pass"])))
     for module in MODULES:
         print(_row(f"import {module}", wall_times_s(_python(f"import {module}"))))
+    from bench.record import save
+
+    save("startup", {"repeat": REPEAT, "sim_s": SIXTY_S, "target_factor": TARGET_FACTOR,
+                     "target_startup_s": TARGET_STARTUP_S, "load_before": round(load0, 1),
+                     "sixty": {k: round(v, 3) for k, v in sixty.items()}, "commands": rows})
 
 
 if __name__ == "__main__":

@@ -60,6 +60,11 @@ def main() -> None:
           f"{max(loops):7.3f}")
     print(f"outcomes: {', '.join(sorted(set(outcomes)))}; load average {load:.1f} -> "
           f"{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    from bench.record import save
+
+    save("watch", {"repeat": REPEAT, "target_s": TARGET_S, "outcomes": sorted(set(outcomes)), "rows": [
+        {"what": what, "median_s": round(statistics.median(v), 3), "min_s": round(min(v), 3), "max_s": round(max(v), 3)}
+        for what, v in (("wall", times), ("cpu", cpus), ("loop", loops))]})
 
 
 if __name__ == "__main__":

@@ -174,3 +174,79 @@ def test_the_video_and_batch_benches_write_what_their_renderers_read(tmp_path):
         {"how": "command", "one_worker_s": 1.72, "two_workers_s": 1.03, "ratio": 1.67}]}, results=tmp_path)
     text = module.render("batch_short", json.loads(path.read_text()))
     assert "| command | 1.72 | 1.03 | 1.67x |" in text and "2 workers: **no**" in text and ">= 1.7x" in text
+
+
+def test_every_bench_that_saves_has_a_renderer():
+    """A bench's ``save("NAME", ...)`` names a renderer (the NAMEs in bench/*.py, read as text)."""
+    import re
+
+    module = load_script()
+    names = {m for path in (REPO / "bench").glob("bench_*.py")
+             for m in re.findall(r"\bsave\(\s*\"(\w+)\"", path.read_text())}
+    assert {"video", "batch_short", "batch", "closed_loop", "startup", "watch", "memory", "gym", "random",
+            "c_controller"} <= names
+    assert names <= set(module.RENDERERS), f"no renderer for {sorted(names - set(module.RENDERERS))}"
+
+
+def test_the_other_recording_benches_write_what_their_renderers_read(tmp_path):
+    """The tables of ``batch``, ``closed_loop``, ``startup``, ``watch``, ``memory``, ``gym``,
+    ``random`` and ``c_controller`` carry each figure, its target and the machine it was measured on."""
+    from bench.record import save
+
+    module = load_script()
+
+    def text(name: str, figures: dict) -> str:
+        out = module.render(name, json.loads(save(name, figures, results=tmp_path).read_text()))
+        assert "cores at a 1-minute load of" in out
+        return out
+
+    batch = {"runs": 48, "target_speedup": 1.8, "target_overhead": 0.05, "rows_identical": True,
+             "workers": [{"workers": 1, "runs_per_s": 6.7, "laps_per_core_min": 404},
+                         {"workers": 2, "runs_per_s": 14.5, "laps_per_core_min": 434}],
+             "speedup": 2.164, "bare_ms": 145.2, "pool_ms": 148.6, "overhead": 0.022, "ray": None}
+    out = text("batch", batch)
+    assert "| 2 workers vs 1, steady | 14.5 vs 6.7 runs/s = 2.16x | >= 1.8x |" in out
+    assert "| +2.2 % (149 vs 145 ms) | <= 5 % |" in out and "Ray not installed" in out
+    out = text("batch", {**batch, "ray": {"repetitions": 3, "rows_identical": False, "target_change": 0.1,
+                                          "figures": [{"what": "steady CPU", "ray_ms": 112.9, "local_ms": 108.7,
+                                                       "change": 0.039}],
+                                          "start": [{"how": "ray", "to_first_worker_s": 2.4, "to_ready_s": 3.1,
+                                                     "after_last_row_s": 1.2}]}})
+    assert "| steady CPU | 112.9 ms | 108.7 ms | +3.9 % |" in out and "| ray | 2.4 | 3.1 | 1.2 |" in out
+    assert "<= +10 %" in out and "the pool: **no**" in out
+    out = text("closed_loop", {"repeats": 5, "sim_s": 7.66, "frames": 383, "fps": 50.0, "rtf_target": 30.0,
+                               "ratio_target": 0.8, "replay_exact": True, "ratio_replay": 0.82, "ratio_bare": 0.72,
+                               "rows": [{"run": "closed", "rtf_cpu": 46.2, "us_per_frame": 432.7}]})
+    assert "| 46.2x | 433 |" in out and "replay 0.82 (target >= 0.8)" in out and ">= 30x" in out
+    out = text("startup", {"repeat": 5, "sim_s": 60.0, "target_factor": 35.0, "target_startup_s": 0.6,
+                           "load_before": 0.2, "sixty": {"wall": 1.75, "cpu": 1.85, "loop": 1.43, "startup": 0.32},
+                           "commands": [{"command": "simrunner --help", "median_s": 0.16, "min_s": 0.15,
+                                         "max_s": 0.17}]})
+    assert "| 1.75 (34.3x real time) | >= 35x |" in out and "| 0.32 | <= 0.6 s |" in out
+    assert "| `simrunner --help` | 0.16 | 0.15 | 0.17 |" in out
+    out = text("watch", {"repeat": 5, "target_s": 0.5, "outcomes": ["finished"],
+                         "rows": [{"what": "wall", "median_s": 0.241, "min_s": 0.239, "max_s": 0.244}]})
+    assert "| save -> result, wall | 0.24 | 0.24 | 0.24 |" in out and "target < 0.5 s" in out
+    out = text("memory", {"keep_rows": 131072, "rows": [{"minutes": 60.0, "csv": True, "rows": 180001,
+                                                         "log_rows": 131072, "peak_rss_mb": 283.4}]})
+    assert "| 60 | yes | 180,001 | 131,072 | 283 |" in out
+    out = text("gym", {"repeats": 3, "episode_s": 20.0, "steps": 1000, "target_steps_per_s": 2000.0,
+                       "steps_per_s": 3580, "step_us": 279.3, "step_wall_us": 281.0, "replay_us": 220.4,
+                       "physics_share": 0.789, "reset_ms": 1.31})
+    assert "| 3,580 steps/s (279 us CPU, 281 us wall) | >= 2,000 steps/s |" in out and "(79 % of a step)" in out
+    out = text("random", {"n": 2000, "target_per_s": 20.0, "per_cpu_s": 29.8, "per_wall_s": 25.1,
+                          "attempts_mean": 1.52, "attempts_max": 8, "invalid": 0, "crossings": {"0": 2000}})
+    assert "seeds 0-1,999" in out and "| 29.8 (25.1 per wall second) | >= 20 |" in out
+    assert "| 0 of 2,000 | 0 |" in out
+    out = text("c_controller", {
+        "closed_loop": {"repeats": 24, "sim_s": 7.38, "ratio": 1.002, "ratio_median": 0.998,
+                        "paired": [0.991, 0.996, 1.004], "ratio_isolate": 0.931,
+                        "laps": [{"controller": "line_follower.c", "rtf_wall": 73.04, "rtf_wall_median": 71.6}]},
+        "split": {"inside_ms": 98.71, "outside_py_ms": 2.4, "outside_c_ms": 2.1, "outside_diff_ms": [0.1, 0.3, 0.5],
+                  "implied_ratio": 1.0029},
+        "start_up": {"repeat": 3, "target_first_s": 3.0, "target_margin_s": 0.2,
+                     "rows": [{"run": "C, new", "median_s": 1.234, "min_s": 1.2, "max_s": 1.3}]}})
+    assert "| `line_follower.c` | 73.0x | 71.6x |" in out and "C / Python: 1.002 on the best laps" in out
+    assert "(95 % interval 0.991-1.004); target >= 1" in out and "`--isolate` / Python: 0.931" in out
+    assert "+0.300 ms, 95 % interval +0.100 to +0.500" in out and "| C, new | 1.23 | 1.20 | 1.30 |" in out
+    assert "first run < 3 s" in out

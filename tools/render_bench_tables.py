@@ -8,7 +8,8 @@ markdown block, which replaces the text between ``<!-- bench:NAME begin -->`` an
 ``<!-- bench:NAME end -->`` in the docs (``docs/*.md``) that hold those markers. A bench
 writes its JSON (``python -m bench.bench_gap ... --results``); this script is the only
 writer of the blocks, so the docs show the saved figures and nothing else. Benches that record
-their figures with ``bench.record.save`` (``video``, ``batch``) write this format too.
+their figures with ``bench.record.save`` (``video``, ``batch``, ``closed_loop``, ``startup``,
+``watch``, ``memory``, ``gym``, ``random``, ``c_controller``) write this format too.
 
 ``--check`` writes nothing and prints one line per doc whose block differs (exit 1). Bad
 input (a results file no doc has markers for, markers that do not pair up, a JSON in a
@@ -166,8 +167,176 @@ def render_batch_short(data: dict) -> str:
     return "\n".join(lines)
 
 
+def _pct(share: float) -> str:
+    """A relative change as the docs write it: "+3.9 %"."""
+    return f"{100 * share:+.1f} %"
+
+
+def render_batch(data: dict) -> str:
+    """``bench/results/batch.json`` (``python -m bench batch``, its longer batches): 1 and 2
+    workers' steady rates, the pool's per-run overhead, and Ray against the local pool."""
+    f = data["figures"]
+    one, two = f["workers"]
+    lines = [f"| {f['runs']} one-lap runs | figure | target |", "| --- | --- | --- |",
+             f"| 2 workers vs 1, steady | {two['runs_per_s']:.1f} vs {one['runs_per_s']:.1f} runs/s = "
+             f"{f['speedup']:.2f}x | >= {f['target_speedup']:g}x |",
+             f"| laps per core-minute, 1 and 2 workers | {one['laps_per_core_min']}, {two['laps_per_core_min']} | |",
+             f"| per-run overhead of the pool (1 worker) vs bare `drive()` | {_pct(f['overhead'])} "
+             f"({f['pool_ms']:.0f} vs {f['bare_ms']:.0f} ms) | <= {100 * f['target_overhead']:g} % |"]
+    notes = [f"rows identical with 1 and 2 workers: {'yes' if f['rows_identical'] else '**no**'}"]
+    ray = f.get("ray")
+    if ray is not None:
+        lines += ["", f"| per run, median of {ray['repetitions']} | Ray local cluster | local pool | Ray |",
+                  "| --- | --- | --- | --- |"]
+        for r in ray["figures"]:
+            lines.append(f"| {_cell(r['what'])} | {r['ray_ms']:.1f} ms | {r['local_ms']:.1f} ms | "
+                         f"{_pct(r['change'])} |")
+        lines += ["", "| 2 workers, median s after the batch's start | first worker started | all ready | "
+                      "end after the last row |", "| --- | --- | --- | --- |"]
+        for r in ray["start"]:
+            lines.append(f"| {_cell(r['how'])} | {r['to_first_worker_s']:.1f} | {r['to_ready_s']:.1f} | "
+                         f"{r['after_last_row_s']:.1f} |")
+        notes.append(f"Ray's target: steady CPU <= {100 * ray['target_change']:+g} %; rows identical for Ray "
+                     f"and the pool: {'yes' if ray['rows_identical'] else '**no**'}")
+    else:
+        notes.append("Ray not installed: no Ray figures")
+    lines += ["", "; ".join(notes) + f". Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
+def _seconds_rows(rows: list[dict], key: str) -> list[str]:
+    """Table rows ``| label | median | min | max |`` of rows with ``median_s``, ``min_s``, ``max_s``."""
+    return [f"| {_cell(r[key])} | {r['median_s']:.2f} | {r['min_s']:.2f} | {r['max_s']:.2f} |" for r in rows]
+
+
+def render_startup(data: dict) -> str:
+    """``bench/results/startup.json`` (``python -m bench startup``): 60 simulated seconds as a
+    whole process (its real-time factor and start-up against their targets), and the commands'
+    wall times in fresh processes."""
+    f = data["figures"]
+    six = f["sixty"]
+    factor = f["sim_s"] / six["wall"]
+    lines = [f"| {f['sim_s']:g} simulated s of `line_follower.py`, default track | median s | target |",
+             "| --- | --- | --- |",
+             f"| whole process, wall | {six['wall']:.2f} ({factor:.1f}x real time) | >= {f['target_factor']:g}x |",
+             f"| start-up (whole process - run loop) | {six['startup']:.2f} | <= {f['target_startup_s']:g} s |",
+             f"| run loop | {six['loop']:.2f} | |",
+             f"| whole process, CPU | {six['cpu']:.2f} | |",
+             "", "| command, fresh process | median s | min | max |", "| --- | --- | --- | --- |"]
+    lines += _seconds_rows([{**r, "command": f"`{r['command']}`"} for r in f["commands"]], "command")
+    lines += ["", f"{f['repeat']} fresh processes each, after one untimed run where a cache matters; "
+                  f"targets for an idle machine. Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
+def render_watch(data: dict) -> str:
+    """``bench/results/watch.json`` (``python -m bench watch``): save-to-result turnaround of
+    ``drive --watch`` (wall, CPU, the lap's loop) and its target."""
+    f = data["figures"]
+    what = {"wall": "save -> result, wall", "cpu": "the same, CPU", "loop": "of which the lap's loop, wall"}
+    lines = ["| `drive --watch`, one lap of the default track | median s | min | max |",
+             "| --- | --- | --- | --- |"]
+    lines += _seconds_rows([{**r, "what": what.get(r["what"], r["what"])} for r in f["rows"]], "what")
+    lines += ["", f"{f['repeat']} saves; target < {f['target_s']:g} s (wall); outcomes: "
+                  f"{', '.join(f['outcomes'])}. Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
+def render_closed_loop(data: dict) -> str:
+    """``bench/results/closed_loop.json`` (``python -m bench closed_loop``): the closed-loop lap
+    and its baselines (real-time factor and CPU a frame), the ratios and their targets."""
+    f = data["figures"]
+    what = {"closed": "closed loop (physics, camera, controller, judge, telemetry)",
+            "replay": "`replay`: the lap's commands on a fresh sim", "speed": "straight, the lap's speed commands",
+            "bare": "`bare`: `CarSim.step` on a steady circle"}
+    lines = [f"| one lap of `line_follower.py`, default track ({f['sim_s']:g} s, {f['frames']} frames) "
+             "| real-time factor (CPU) | CPU us a frame |", "| --- | --- | --- |"]
+    for r in f["rows"]:
+        lines.append(f"| {_cell(what.get(r['run'], r['run']))} | {r['rtf_cpu']:.1f}x | {r['us_per_frame']:.0f} |")
+    lines += ["", f"Closed loop / replay {f['ratio_replay']:.2f} (target >= {f['ratio_target']:g}), closed loop / "
+                  f"steady circle {f['ratio_bare']:.2f}; real-time factor target >= {f['rtf_target']:g}x; the replay "
+                  f"ends at the lap's pose exactly: {'yes' if f['replay_exact'] else '**no**'}. Best of "
+                  f"{f['repeats']}, process CPU time. Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
+def render_memory(data: dict) -> str:
+    """``bench/results/memory.json`` (``python -m bench memory``): the peak RSS of whole ``drive``
+    processes by simulated length, with and without ``--csv``."""
+    f = data["figures"]
+    lines = ["| simulated minutes | `--csv` | rows | rows kept in memory | peak RSS MB |",
+             "| --- | --- | --- | --- | --- |"]
+    for r in f["rows"]:
+        lines.append(f"| {r['minutes']:g} | {'yes' if r['csv'] else 'no'} | {r['rows']:,} | {r['log_rows']:,} | "
+                     f"{r['peak_rss_mb']:.0f} |")
+    lines += ["", f"`line_follower.py` on the default track, one fresh process a row; at most {f['keep_rows']:,} "
+                  f"rows kept in memory. Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
+def render_gym(data: dict) -> str:
+    """``bench/results/gym.json`` (``python -m bench gym``): ``env.step`` per CPU-second against
+    the target, the physics' share of a step, a reset."""
+    f = data["figures"]
+    lines = [f"| `NXPCup-v0`, {f['episode_s']:g}-s episodes of a line follower ({f['steps']} steps) "
+             "| figure | target |",
+             "| --- | --- | --- |",
+             f"| `env.step`, one core | {f['steps_per_s']:,} steps/s ({f['step_us']:.0f} us CPU, "
+             f"{f['step_wall_us']:.0f} us wall) | >= {f['target_steps_per_s']:,.0f} steps/s |",
+             f"| the same commands replayed on a bare car model | {f['replay_us']:.0f} us "
+             f"({100 * f['physics_share']:.0f} % of a step) | |",
+             f"| `reset` on the same track | {f['reset_ms']:.2f} ms CPU | |",
+             "", f"Best of {f['repeats']}, process CPU time. Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
+def render_random(data: dict) -> str:
+    """``bench/results/random.json`` (``python -m bench random``): layouts per CPU- and wall
+    second, attempts per layout, crossings drawn, layouts failing the full validation."""
+    f = data["figures"]
+    crossings = ", ".join(f"{v:,} with {k}" for k, v in f["crossings"].items())
+    lines = [f"| `random_layout`, seeds 0-{f['n'] - 1:,} | figure | target |", "| --- | --- | --- |",
+             f"| layouts per CPU-second | {f['per_cpu_s']:.1f} ({f['per_wall_s']:.1f} per wall second) | "
+             f">= {f['target_per_s']:g} |",
+             f"| candidates per layout | {f['attempts_mean']:.2f} on average, at most {f['attempts_max']} | |",
+             f"| layouts by crossings | {crossings} | |",
+             f"| failing `trackgen validate` (meshes included) | {f['invalid']:,} of {f['n']:,} | 0 |",
+             "", f"Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
+def render_c_controller(data: dict) -> str:
+    """``bench/results/c_controller.json`` (``python -m bench c_controller``): the closed-loop laps
+    of the C and the Python line follower (real-time factors, C / Python and its paired
+    interval), their split inside / outside the Spinner calls, and ``simrunner drive``'s
+    start-up with each against the targets."""
+    f, sp, up = data["figures"]["closed_loop"], data["figures"]["split"], data["figures"]["start_up"]
+    lo, mid, hi = f["paired"]
+    d_lo, d_mid, d_hi = sp["outside_diff_ms"]
+    lines = [f"| one lap of the default track ({f['sim_s']:g} s), {f['repeats']} laps each | real-time factor, best "
+             "| median |", "| --- | --- | --- |"]
+    for r in f["laps"]:
+        lines.append(f"| `{_cell(r['controller'])}` | {r['rtf_wall']:.1f}x | {r['rtf_wall_median']:.1f}x |")
+    lines += ["", f"C / Python: {f['ratio']:.3f} on the best laps, {f['ratio_median']:.3f} on the medians, "
+                  f"{mid:.3f} the median of the paired laps (95 % interval {lo:.3f}-{hi:.3f}); target >= 1. "
+                  f"`--isolate` / Python: {f['ratio_isolate']:.3f}. Split: {sp['inside_ms']:.1f} ms a lap inside the "
+                  f"Spinner calls; outside them Python {sp['outside_py_ms']:.2f} ms, C {sp['outside_c_ms']:.2f} ms "
+                  f"(Python - C, paired: {d_mid:+.3f} ms, 95 % interval {d_lo:+.3f} to {d_hi:+.3f}), which makes "
+                  f"C / Python {sp['implied_ratio']:.4f}.",
+              "", "| `simrunner drive ... --laps 1`, fresh process | median s | min | max |",
+              "| --- | --- | --- | --- |"]
+    lines += _seconds_rows(up["rows"], "run")
+    lines += ["", f"Targets: a new C controller's first run < {up['target_first_s']:g} s; a cached one within "
+                  f"{up['target_margin_s']:g} s of Python. Measured on {_machine(data)}."]
+    return "\n".join(lines)
+
+
 RENDERERS: dict[str, Callable[[dict], str]] = {"gap": render_gap, "gap_duty": render_gap,  # the same layout
-                                               "video": render_video, "batch_short": render_batch_short}
+                                               "video": render_video, "batch_short": render_batch_short,
+                                               "batch": render_batch, "closed_loop": render_closed_loop,
+                                               "startup": render_startup, "watch": render_watch,
+                                               "memory": render_memory, "gym": render_gym, "random": render_random,
+                                               "c_controller": render_c_controller}
 
 
 def render(name: str, data: dict) -> str:
