@@ -803,3 +803,71 @@ def test_pending_irqs_enabled_together_are_taken_in_the_order_of_their_numbers(t
     r = drive(dataclasses.replace(build_program([src], kit="tfc"), isolate=isolate), track="floor",
               time_limit_s=2.0)
     assert r.outcome == "controller_error" and "status 23" in r.message, r.message
+
+
+NVIC_ORDER = textwrap.dedent("""\
+    #include "derivative.h"
+    #include "spinner.h"
+    #include "TFC/TFC.h"
+    volatile int order, pit_calls;
+    void TPM2_IRQHandler(void) { order = order * 10 + 2; TPM2_DOES; }
+    void PIT_IRQHandler(void) { order = order * 10 + 1; if (++pit_calls == 1) { PIT_DOES; } }
+    void LPTMR0_IRQHandler(void) { order = order * 10 + 3; }
+    static void tick(void) { spinner_stop_every(tick); TICK_DOES; }
+    int main(void) {
+        TFC_Init();
+        NVIC_EnableIRQ(TPM2_IRQn);
+        NVIC_EnableIRQ(PIT_IRQn);
+        NVIC_EnableIRQ(LPTMR0_IRQn);
+        STEPS;
+        TFC_Task();
+        TFC_Task();
+        return 1 + order;
+    }
+    """)
+BOTH_OFF_AND_PENDING = ("NVIC_DisableIRQ(PIT_IRQn); NVIC_DisableIRQ(TPM2_IRQn); NVIC_SetPendingIRQ(PIT_IRQn); "
+                        "NVIC_SetPendingIRQ(TPM2_IRQn); ")
+
+
+@pytest.mark.parametrize("steps, does, status", [
+    # two clears between two looks of the kit: both hold (NVIC_ClearPendingIRQ writes ICPR, write-1-to-clear)
+    ("NVIC_DisableIRQ(PIT_IRQn); NVIC_DisableIRQ(LPTMR0_IRQn); NVIC_SetPendingIRQ(PIT_IRQn); "
+     "NVIC_SetPendingIRQ(LPTMR0_IRQn); NVIC_ClearPendingIRQ(PIT_IRQn); NVIC_ClearPendingIRQ(LPTMR0_IRQn); "
+     "NVIC_EnableIRQ(PIT_IRQn); NVIC_EnableIRQ(LPTMR0_IRQn)", {}, 1),
+    # in a handler, set then cleared: not taken after it; cleared then set: taken after it
+    ("NVIC_SetPendingIRQ(PIT_IRQn)",
+     {"PIT_DOES": "NVIC_SetPendingIRQ(LPTMR0_IRQn); NVIC_ClearPendingIRQ(LPTMR0_IRQn)"}, 2),
+    ("NVIC_SetPendingIRQ(PIT_IRQn)",
+     {"PIT_DOES": "NVIC_ClearPendingIRQ(LPTMR0_IRQn); NVIC_SetPendingIRQ(LPTMR0_IRQn)"}, 14),
+    # pending together at the unmask: the NVIC takes the lowest number first (TPM2 19, PIT 22, LPTMR0 28),
+    # whatever the order they were pended or enabled in
+    ("__disable_irq(); NVIC_SetPendingIRQ(LPTMR0_IRQn); NVIC_SetPendingIRQ(TPM2_IRQn); "
+     "NVIC_SetPendingIRQ(PIT_IRQn); __enable_irq()", {}, 214),
+    ("__disable_irq(); NVIC_SetPendingIRQ(LPTMR0_IRQn); TFC_Task(); NVIC_SetPendingIRQ(PIT_IRQn); TFC_Task(); "
+     "NVIC_SetPendingIRQ(TPM2_IRQn); __enable_irq()", {}, 214),
+    (BOTH_OFF_AND_PENDING + "__disable_irq(); NVIC_EnableIRQ(PIT_IRQn); NVIC_EnableIRQ(TPM2_IRQn); "
+     "__enable_irq()", {}, 22),
+    # enabled together (a raw write, then the CMSIS call that looks at it): the same
+    (BOTH_OFF_AND_PENDING + "NVIC_ISER = 1u << (INT_PIT - 16); NVIC_EnableIRQ(TPM2_IRQn)", {}, 22),
+    # ... and the first one's handler disables the next IRQ: that one waits for its enable
+    (BOTH_OFF_AND_PENDING + "NVIC_ISER = 1u << (INT_PIT - 16); NVIC_EnableIRQ(TPM2_IRQn); "
+     "if (order != 2) return 99; NVIC_EnableIRQ(PIT_IRQn)", {"TPM2_DOES": "NVIC_DisableIRQ(PIT_IRQn)"}, 22),
+    # pended one by one in a handler of the program's own (spinner_every): after it, in the NVIC's order
+    ("spinner_every(0.001, tick)",
+     {"TICK_DOES": "NVIC_SetPendingIRQ(LPTMR0_IRQn); NVIC_SetPendingIRQ(PIT_IRQn); NVIC_SetPendingIRQ(TPM2_IRQn)"},
+     214),
+])
+@pytest.mark.parametrize("mcu_time", [None, 0.0005])
+def test_nvic_pending_bits_clear_and_order_as_the_nvic_does(tmp_path, steps, does, status, mcu_time):
+    """--kit tfc (ARMv6-M, ARM DDI 0419, B3.4): NVIC_ClearPendingIRQ of two IRQs before the kit looks
+    clears both; in a handler, a clear after a set clears it; IRQs pending and enabled together are
+    taken lowest number first, also when pended or enabled at different times under __disable_irq
+    or in a handler. In process and isolated, with --mcu-time too."""
+    src = tmp_path / "nvic_order.c"
+    src.write_text(NVIC_ORDER)
+    defines = [f"STEPS={steps}"] + [f"{k}={does.get(k, '(void)0')}" for k in ("TPM2_DOES", "PIT_DOES", "TICK_DOES")]
+    program = build_program([str(src)], kit="tfc", defines=defines)
+    extra = {} if mcu_time is None else {"mcu_time": mcu_time}
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
+        assert r.outcome == "controller_error" and re.search(rf"status {status}\b", r.message), (isolate, r.message)

@@ -468,7 +468,9 @@ void tfc_sim_nvic_disable(int irq) {
 /* NVIC_SetPendingIRQ: taken now, inside the call, if the IRQ is enabled and interrupts unmasked. */
 void tfc_sim_nvic_set_pending(int irq) {
     if (irq >= 0 && irq < 32) NVIC->ISPR[0] |= 1u << irq;
-    if (!firing) sync();  /* (in a handler: the look after it; it runs after the handler) */
+    if (firing) nvic_sync();  /* (in a handler: the look after it, it runs after the handler; the bit
+                               * set now, so that an NVIC_ClearPendingIRQ after it in the handler clears it) */
+    else sync();
 }
 
 /* NVIC_GetPendingIRQ: the IRQ's pending bit as the kit knows it (not an expiry held by __disable_irq
@@ -564,9 +566,14 @@ static void take_lptmr(void) { take(IRQ_LPTMR); }
 /* The NVIC's pending bits after a look: ICPR clears one (and its timers' flags) unless a running
  * timer's flag asserts it again (on the board TIF && TIE keep it pending); a bit handed to the
  * simulator and not taken comes back when its IRQ is disabled or it is cleared; a pending bit of an
- * enabled IRQ is handed to it (in the order of the IRQ numbers: the NVIC's for equal priorities). */
+ * enabled IRQ is handed to it (in the order of the IRQ numbers: the NVIC's for equal priorities).
+ * The simulator runs the bits handed in the order they were handed: one handed before (held by
+ * __disable_irq, or after the running handler) with a higher number than a new one is handed again
+ * after it; all are marked handed before the first is, as that one may run at once (inside its
+ * call, whose look must not hand the others first). */
 static void nvic_settle(void) {
     static const int irqs[] = {IRQ_TPM2, IRQ_PIT, IRQ_LPTMR};
+    uint32_t hand = 0;
     for (int k = 0; k < 3; k++) {
         int irq = irqs[k];
         uint32_t bit = 1u << irq;
@@ -585,11 +592,16 @@ static void nvic_settle(void) {
             spinner_unpend_every(take_of(irq));
             nvic_handed &= ~bit, nvic_pending |= bit;
         }
-        if ((nvic_pending & bit) && irq_on(irq)) {
-            nvic_pending &= ~bit, nvic_handed |= bit;
-            spinner_pend_every(take_of(irq));
-        }
+        if ((nvic_pending & bit) && irq_on(irq)) nvic_pending &= ~bit, hand |= bit;
     }
+    if (hand == 0) return;
+    uint32_t lowest = hand & (~hand + 1u), again = nvic_handed & ~(lowest | (lowest - 1u));
+    for (int k = 0; k < 3; k++)
+        if ((again >> irqs[k]) & 1u) spinner_unpend_every(take_of(irqs[k]));
+    hand |= again;
+    nvic_handed |= hand;
+    for (int k = 0; k < 3; k++)  /* (one taken at once may have its handler disable or clear the next) */
+        if (((hand & nvic_handed) >> irqs[k]) & 1u) spinner_pend_every(take_of(irqs[k]));
 }
 
 /* TFC_Init: the TPM clock as the library's servo and motor set-up selects it (MCGPLLCLK/2). */

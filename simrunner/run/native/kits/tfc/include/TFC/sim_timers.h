@@ -153,7 +153,7 @@ void tfc_sim_nvic_set_pending(int irq);
 uint32_t tfc_sim_nvic_pending(int irq);
 #define NVIC_EnableIRQ(irq) tfc_sim_nvic_enable((int)(irq))
 #define NVIC_DisableIRQ(irq) tfc_sim_nvic_disable((int)(irq))
-#define NVIC_ClearPendingIRQ(irq) ((void)(NVIC->ICPR[0] = 1u << ((uint32_t)(irq) & 31u)))
+#define NVIC_ClearPendingIRQ(irq) ((void)(NVIC->ICPR[0] |= 1u << ((uint32_t)(irq) & 31u)))  /* (|=: two clears before the kit's look) */
 #define NVIC_SetPendingIRQ(irq) tfc_sim_nvic_set_pending((int)(irq))
 #define NVIC_GetPendingIRQ(irq) tfc_sim_nvic_pending((int)(irq))
 #define NVIC_SetPriority(irq, prio) ((void)(irq), (void)(prio))
