@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 from simrunner.sensors.camera import Camera
+from simrunner.sensors.imaging import Imager
 from simrunner.car.effects import make_sim
 from simrunner.run.judge import Judge
 from simrunner.car.physics import CarSim
@@ -85,14 +86,14 @@ def _instrumented(acc: dict[str, float]):
     """Time the parts of the loop by wrapping the classes' methods (restored on exit)."""
     pc = time.perf_counter
     wrapped = [(CarSim, "step", "physics (CarSim.step)"), (CarSim, "set_command", "set_command"),
-               (Camera, "line_image", "camera line"),
+               (Camera, "line_image", "camera line"), (Imager, "line", "camera line"),
                (Judge, "update", "judge.update"), (FrameWork, "__call__", "frame work (all)"),
                (Spinner, "get_image", "get_image (all)")]
     saved = []
     for cls, name, label in wrapped:
         orig = cls.__dict__[name]
         saved.append((cls, name, orig))
-        acc.setdefault(label, 0.0)
+        acc.setdefault(label, 0.0)  # (two methods may add to one label: the ideal and the physical camera)
 
         def wrapper(*a, _orig=orig, _label=label, **k):
             t0 = pc()
@@ -176,7 +177,7 @@ def main() -> None:
     inside = parts["physics (CarSim.step)"] + parts["set_command"] + work + parts["camera line"]
     for name, v in (("physics (CarSim.step)", parts["physics (CarSim.step)"]),
                     ("set_command", parts["set_command"]),
-                    ("camera line + noise (line_image)", parts["camera line"]),
+                    ("camera line + noise (line_image / Imager.line)", parts["camera line"]),
                     ("judge.update", parts["judge.update"]),
                     ("read-outs + telemetry row", work - parts["judge.update"]),
                     ("Spinner + clock glue", get_image - inside),
