@@ -444,7 +444,7 @@ def test_the_s32k144_kits_osif_suspend_holds_a_gpt_notification(tmp_path):
     assert r.outcome == "controller_error" and "status 10" in r.message, r.message
 
 
-LATCHED_PIT = textwrap.dedent("""\
+PIT_AT_1KHZ = textwrap.dedent("""\
     #include "derivative.h"
     #include "TFC/TFC.h"
     volatile int ticks, tif_at_entry;
@@ -461,6 +461,10 @@ LATCHED_PIT = textwrap.dedent("""\
         PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
         NVIC_EnableIRQ(PIT_IRQn);
         for (int k = 0; k < 5; k++) TFC_Task();
+""")
+"""A PIT handler counting its calls (and those that found TIF set), the PIT at 1 kHz, five calls in:
+the start of the programs below."""
+LATCHED_PIT = PIT_AT_1KHZ + textwrap.dedent("""\
         int before = ticks;
         __disable_irq();
         for (int k = 0; k < 4; k++) TFC_Task();                /* expiries held: one pending bit */
@@ -619,23 +623,7 @@ def test_spinner_stop_every_latched_keeps_one_call_and_a_later_stop_drops_it(tmp
 
 
 # -- the NVIC's pending bits (--kit tfc): independent of the IRQ's enable bit, set by ISPR --------
-DISABLED_PIT = textwrap.dedent("""\
-    #include "derivative.h"
-    #include "TFC/TFC.h"
-    volatile int ticks, tif_at_entry;
-    void PIT_IRQHandler(void) {
-        tif_at_entry += (PIT_TFLG0 & PIT_TFLG_TIF_MASK) != 0;
-        PIT_TFLG0 = PIT_TFLG_TIF_MASK;
-        ticks++;
-    }
-    int main(void) {
-        TFC_Init();
-        SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
-        PIT_MCR = 0;
-        PIT_LDVAL0 = 24000 - 1;                                /* 1 kHz of the 24 MHz bus */
-        PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
-        NVIC_EnableIRQ(PIT_IRQn);
-        for (int k = 0; k < 5; k++) TFC_Task();
+DISABLED_PIT = PIT_AT_1KHZ + textwrap.dedent("""\
         DISABLE;
         int before = ticks;
         for (int k = 0; k < 4; k++) TFC_Task();                /* expiries: the pending bit, not taken */

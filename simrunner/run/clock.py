@@ -288,6 +288,11 @@ class LockstepClock:
         self._any_pending = True
         if self.masked or self.in_interrupt:
             return  # (the unmask, or _interrupt / unmask after the running handler, runs it)
+        self._take_pending()
+
+    def _take_pending(self) -> None:
+        """Run the pending handlers now; then drop the stopped interrupts whose calls have run
+        (also after a handler that raised) and see whether the run ended."""
         try:
             self._run_pending()
         finally:
@@ -371,12 +376,7 @@ class LockstepClock:
         self.masked = False
         if self.in_interrupt or not self._any_pending:
             return  # (in a handler: _interrupt or the unmask running it runs them after it)
-        try:
-            self._run_pending()
-        finally:
-            self._prune()
-        if self.finished is not None:
-            self.check()
+        self._take_pending()
 
     def _refuse_wait(self) -> None:
         raise InterruptWait("inside an interrupt handler no simulated time passes: a handler cannot "
