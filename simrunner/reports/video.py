@@ -7,7 +7,7 @@ processed lines and text under it, the top-down track view).
 Off the control path: at a recorded frame the main thread only stores a few numbers and
 references to small arrays (the image the controller got, if any); a writer thread renders
 the camera view when needed, composes the frame (:class:`~simrunner.reports.video_frame.Composer`:
-what stays the same is drawn once) and another encodes it
+what stays the same is drawn once) and converts it to YUV, and another encodes it
 (:class:`~simrunner.reports.video_encoder.H264Writer`: H.264, which releases the GIL while
 encoding). The queue is bounded, so a slow encoder slows the run instead of filling memory.
 The file is written as ``NAME.partial.mp4`` and renamed on :meth:`VideoRecorder.close`, which
@@ -221,7 +221,7 @@ class VideoRecorder:
                         rec.line = rec.image[rec.line_row:rec.line_row + 1]
                     if composer is None:
                         composer = self._composer(rec.image.shape)
-                    self._frames.put(composer.frame(rec))
+                    self._frames.put(self._writer.yuv(composer.frame(rec)))  # (converted while in the cache)
                 except BaseException as exc:  # keep draining the queue; reported by close()
                     self._error = exc
         finally:

@@ -3,8 +3,9 @@
 H.264 (Constrained Baseline, YUV 4:2:0, x264's ``ultrafast`` preset) plays in browsers, on
 GitHub and in every player; the MPEG-4 Part 2 (``mp4v``) that OpenCV's own writer offers does
 not play in browsers, and OpenCV converted each BGR frame to YUV with FFmpeg's swscale, which
-cost as much as the encoding itself. Here OpenCV's SIMD conversion (``COLOR_BGR2YUV_I420``)
-writes the encoder's one reused frame. x264 runs one thread (the video's cost stays on one core
+cost as much as the encoding itself. Here OpenCV's SIMD conversion (``COLOR_BGR2YUV_I420``,
+:meth:`H264Writer.yuv`: the debug video calls it on the thread that drew the frame, while the
+frame is in the CPU's cache) makes the picture, which PyAV hands to x264 without a copy. x264 runs one thread (the video's cost stays on one core
 beside the simulation, and a batch of runs with videos does not oversubscribe the machine) at a
 constant quantiser, 18: on the default lap's frames it gives the size and quality of x264's
 default constant-rate factor (CRF 23: 0.85 MB, PSNR 41.7 vs 41.5 dB; the panels' text stays
@@ -67,32 +68,29 @@ class H264Writer:
                            f"{', '.join(c for c, _ in ENCODERS)}: reinstall it (pip install --force-reinstall av)")
         self.codec = stream.codec_context.name
         self._stream = stream
-        self._yuv = np.empty((height * 3 // 2, width), np.uint8)
-        # one frame, its planes written in place for every picture (x264 copies a picture as it
-        # takes it; PyAV's from_ndarray would allocate and fill a new frame: 0.7 ms a picture)
-        self._frame = av.VideoFrame(width, height, "yuv420p")
-        self._planes = [np.frombuffer(p, np.uint8).reshape(p.height, p.line_size)[:, :p.width]
-                        for p in self._frame.planes]
+        self._av = av
         self.frames = 0
         self._broken: str | None = None  # why the file could not be written (it is then only closed)
 
-    def write(self, bgr: np.ndarray) -> None:
-        """Encode one frame (the next in time). A file that cannot be written (a full disk)
-        raises :class:`SimError`, then and at every later frame."""
-        if self._broken is not None:
-            raise SimError(f"{self.shown}: cannot write the video ({self._broken})")
+    def yuv(self, bgr: np.ndarray) -> np.ndarray:
+        """A ``(height, width, 3)`` BGR frame as the encoder's picture: YUV 4:2:0 planes (Y, then
+        U, then V) in one ``(height * 3 / 2, width)`` array (OpenCV's SIMD conversion)."""
         if bgr.shape != (self.height, self.width, 3):
             raise ValueError(f"H264Writer: a frame of {bgr.shape}, expected {(self.height, self.width, 3)}")
-        yuv, (y, u, v), h = self._yuv, self._planes, self.height
-        cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV_I420, dst=yuv)  # Y (h rows), then U, V (h / 4 rows each)
-        y[:] = yuv[:h]
-        u[:] = yuv[h:h + h // 4].reshape(u.shape)
-        v[:] = yuv[h + h // 4:].reshape(v.shape)
-        frame = self._frame
-        frame.pts = self.frames
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2YUV_I420)
+
+    def write(self, frame: np.ndarray) -> None:
+        """Encode one frame (the next in time): BGR ``(height, width, 3)`` or :meth:`yuv`'s
+        picture. A file that cannot be written (a full disk) raises :class:`SimError`, then and
+        at every later frame."""
+        if self._broken is not None:
+            raise SimError(f"{self.shown}: cannot write the video ({self._broken})")
+        yuv = frame if frame.shape == (self.height * 3 // 2, self.width) else self.yuv(frame)
+        picture = self._av.VideoFrame.from_numpy_buffer(yuv, format="yuv420p")  # (no copy: x264 copies it)
+        picture.pts = self.frames
         self.frames += 1
         try:
-            self._container.mux(self._stream.encode(frame))
+            self._container.mux(self._stream.encode(picture))
         except Exception as exc:  # noqa: BLE001 - FFmpeg's errors (av.error.*): the disk, the file
             self._broken = _reason(exc)
             raise SimError(f"{self.shown}: cannot write the video ({self._broken})") from None
