@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-REPEAT = 3
+REPEAT = 7  # (the best of more runs: the machine is shared and its speed varies from run to run)
 TARGET_RTF = 8.0
 _DRIVE = "import sys; from simrunner.cli import main; sys.exit(main())"
 

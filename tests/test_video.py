@@ -174,9 +174,22 @@ def test_a_left_out_frame_does_not_change_the_frame_before_it(tmp_path):
     assert frames[1][40, x0 + 100].max() < 15  # ... and the last line noted (frame 1's, black)
 
 
+def _features(k: int):
+    """Pixy2 features of frame ``k`` (a vector, an intersection, a barcode; at the grid's edges)."""
+    from types import SimpleNamespace as NS
+
+    vec = NS(m_index=1, m_x0=0, m_y0=51, m_x1=78 - k, m_y1=0)
+    return (NS(vectors=[vec], intersections=[NS(m_x=(k * 6) % 79, m_y=51)], barcodes=[NS(m_x=78, m_y=(k * 4) % 52, m_code=k)]),
+            1, 79, 52)
+
+
 def test_a_composer_draws_what_compose_draws_frame_by_frame():
-    """The background drawn once (the path added to it frame by frame) gives the frames that
-    composing each frame from scratch gives."""
+    """The background drawn once (the path added to it frame by frame) and the frame kept from
+    one to the next (what a frame drew restored from the background) give the frames that
+    composing each frame from scratch gives: with text, processed lines, the Pixy2's overlay and
+    objects on the track coming and going."""
+    from worlds.solids import Solid
+
     track = load_track(EXAMPLES / "kit_S.txt")
     h, w = np.asarray(track.raster.image).shape
     layout = Layout.for_frame((128, 128), w / h)
@@ -184,11 +197,16 @@ def test_a_composer_draws_what_compose_draws_frame_by_frame():
     composer = Composer(layout, TrackView(track.raster, x1 - x0, y1 - y0), 2)
     fresh = TrackView(track.raster, x1 - x0, y1 - y0)
     p = track.start
-    for k in range(12):
+    box = Solid("box", p.x_m + 0.5, p.y_m + 0.1, 0.2, 0.1, 0.1, yaw_rad=0.4)
+    for k in range(16):
         pose = Pose2(p.x_m + 0.05 * k, p.y_m + 0.01 * k * k, p.yaw_rad + 0.02 * k)
-        rec = _record(frame=k, pose=pose, line_row=20 + k,
-                      state=dict(speed=1.0, steer=0.1, speed_cmd=1.2, steer_cmd=0.1, lap=k // 6,
-                                 off_track=k in (5, 6)), text=(f"text {k}",) * (k % 3))
+        state = dict(speed=1.0, steer=0.1, speed_cmd=1.2, steer_cmd=0.1, lap=k // 6, off_track=k in (5, 6))
+        if 3 <= k < 7:
+            state["solids"] = (box,)
+        rec = _record(frame=k, pose=pose, line_row=(20 + 7 * k) % 128, state=state,
+                      text=(f"text {k}" * (1 + k % 4),) * (k % 5),
+                      lines=np.full((k % 3, 128), 15 * k, np.uint8) if k % 3 else None,
+                      pixy2=_features(k) if k % 4 in (1, 2) else None)
         a, b = composer.frame(rec), compose(rec, fresh, 2, layout=layout)
         assert np.array_equal(a, b), k
     assert np.any(a != compose(_record(), None, 2, layout=layout))  # the map and its path

@@ -115,27 +115,39 @@ class TrackView:
         row = (self.origin[1] - y_m) * self.px_per_m + 0.5 * self.scale + self.off[1]
         return int(round(col)), int(round(row))
 
-    def extend(self, pose, off_track: bool, also: np.ndarray | None = None) -> None:
+    def extend(self, pose, off_track: bool, also: np.ndarray | None = None) -> tuple[int, int, int, int] | None:
         """Extend the path to ``pose`` on :attr:`canvas` (and on ``also``, an image of the box's
-        size holding the same map, e.g. the box inside a frame's background)."""
-        p = self.to_px(pose.x_m, pose.y_m)
-        if self._last is not None:
-            for img in (self.canvas,) if also is None else (self.canvas, also):
-                cv2.line(img, self._last, p, _RED if off_track else _GREEN, 1, cv2.LINE_AA)
+        size holding the same map, e.g. the box inside a frame's background); returns the box
+        ``(x0, y0, x1, y1)`` drawn on (None: the path's first point, nothing drawn)."""
+        p, last = self.to_px(pose.x_m, pose.y_m), self._last
         self._last = p
+        if last is None:
+            return None
+        for img in (self.canvas,) if also is None else (self.canvas, also):
+            cv2.line(img, last, p, _RED if off_track else _GREEN, 1, cv2.LINE_AA)
+        return _around(min(last[0], p[0]), min(last[1], p[1]), max(last[0], p[0]), max(last[1], p[1]),
+                       self.canvas.shape)
 
-    def overlay(self, out: np.ndarray, pose, car_length_m: float, car_width_m: float, solids=()) -> None:
+    def overlay(self, out: np.ndarray, pose, car_length_m: float, car_width_m: float,
+                solids=()) -> tuple[int, int, int, int]:
         """Draw the objects standing on the track (``solids``, :class:`worlds.solids.Solid`) and
-        the car at ``pose`` on ``out`` (``(box_h, box_w, 3)``, the map with the path)."""
+        the car at ``pose`` on ``out`` (``(box_h, box_w, 3)``, the map with the path); returns the
+        box ``(x0, y0, x1, y1)`` of ``out`` drawn on."""
+        drawn = []
         for solid in solids:
             shade = int(round(255 * solid.reflectance * 0.5))
             pts = np.array([self.to_px(x, y) for x, y in solid.corners_xy()], np.int32)
             cv2.fillConvexPoly(out, pts, (min(255, shade + 60), shade, shade), cv2.LINE_AA)
             cv2.polylines(out, [pts], True, _RED, 1, cv2.LINE_AA)
+            drawn.append(pts)
         c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
-        corners = [self.to_px(pose.x_m + c * fx - s * fy, pose.y_m + s * fx + c * fy)
-                   for fx, fy in ((car_length_m, 0.0), (0.0, car_width_m / 2), (0.0, -car_width_m / 2))]
-        cv2.fillConvexPoly(out, np.array(corners, np.int32), _YELLOW, cv2.LINE_AA)
+        corners = np.array([self.to_px(pose.x_m + c * fx - s * fy, pose.y_m + s * fx + c * fy)
+                            for fx, fy in ((car_length_m, 0.0), (0.0, car_width_m / 2), (0.0, -car_width_m / 2))],
+                           np.int32)
+        cv2.fillConvexPoly(out, corners, _YELLOW, cv2.LINE_AA)
+        drawn.append(corners)
+        pts = np.concatenate(drawn)
+        return _around(pts[:, 0].min(), pts[:, 1].min(), pts[:, 0].max(), pts[:, 1].max(), out.shape)
 
     def draw(self, pose, off_track: bool, car_length_m: float, car_width_m: float,
              solids=()) -> np.ndarray:
@@ -159,6 +171,14 @@ def _lit(small: np.ndarray, raster, scale: float, lighting, surface_z_m: float) 
     ys = y0 - (np.arange(hs) + 0.5) * m
     lux = lighting.illuminance_grid(xs, ys, surface_z_m)
     return np.clip(np.rint(small * (lux / DEFAULT_AMBIENT_LUX)), 0, 255).astype(np.uint8)
+
+
+def _around(x0: int, y0: int, x1: int, y1: int, shape, margin: int = 2) -> tuple[int, int, int, int]:
+    """The box ``(x0, y0, x1, y1)`` (end exclusive) holding the pixels ``x0..x1``, ``y0..y1`` and
+    ``margin`` around them (a line's anti-aliasing), clipped to an image of ``shape``."""
+    h, w = shape[:2]
+    return (max(0, int(x0) - margin), max(0, int(y0) - margin),
+            min(w, int(x1) + margin + 1), min(h, int(y1) + margin + 1))
 
 
 def _put(img, text: str, x: int, y: int, color=_WHITE, scale: float = 0.45) -> None:
@@ -203,8 +223,9 @@ def _api_values(out: np.ndarray, box, rec: FrameRecord, laps: int) -> None:
         _put(out, "OFF TRACK", box[0] + 8, box[3] - 10, _RED, 0.7)
 
 
-def _middle_panel(out: np.ndarray, box, rec: FrameRecord) -> None:
-    """The camera line, the controller's processed lines, its text under them."""
+def _middle_panel(out: np.ndarray, box, rec: FrameRecord) -> int:
+    """The camera line, the controller's processed lines, its text under them; returns the row
+    below the last one drawn on."""
     x0, y0, x1, y1 = box
     w = x1 - x0 - 16
     y = y0 + 16
@@ -228,6 +249,7 @@ def _middle_panel(out: np.ndarray, box, rec: FrameRecord) -> None:
             break
         _put(out, str(line)[:chars], x0 + 8, y)
         y += TEXT_STEP
+    return min(y1, y + 8)  # (a text's descenders reach a few pixels below its baseline)
 
 
 def _pixy2_overlay(out: np.ndarray, box, features, vector_index, grid_w: int, grid_h: int) -> None:
@@ -273,18 +295,33 @@ class Composer:
             bg[by0:by0 + h, bx0:bx0 + w] = self._view.canvas[:h, :w]
             self._top = (slice(by0, by0 + h), slice(bx0, bx0 + w))
         self._bg = bg
+        self._out: np.ndarray | None = None  # the frame drawn, kept from one frame to the next
+        self._drawn: list[tuple[int, int, int, int]] = []  # boxes the last frame drew over the background
 
     def frame(self, rec: FrameRecord) -> np.ndarray:
-        """The ``(FRAME_H, FRAME_W, 3)`` BGR frame of ``rec``."""
-        layout, view = self.layout, self._view
+        """The ``(FRAME_H, FRAME_W, 3)`` BGR frame of ``rec``: the composer's own image, drawn
+        over by the next call (what the last frame drew over the background is restored from it,
+        not the whole frame copied)."""
+        layout, view, bg = self.layout, self._view, self._bg
+        restore = self._drawn
         fits = False
         if view is not None:  # the path, into the background
             rows, cols = self._top
-            fits = self._bg[rows, cols].shape[:2] == (view.box_h, view.box_w)
-            view.extend(rec.pose, bool(rec.state.get("off_track")), self._bg[rows, cols] if fits else None)
+            fits = bg[rows, cols].shape[:2] == (view.box_h, view.box_w)
+            segment = view.extend(rec.pose, bool(rec.state.get("off_track")), bg[rows, cols] if fits else None)
             if not fits:  # a view other than its box's size: its top-left part
-                self._bg[rows, cols] = view.canvas[:rows.stop - rows.start, :cols.stop - cols.start]
-        out = self._bg.copy()
+                bg[rows, cols] = view.canvas[:rows.stop - rows.start, :cols.stop - cols.start]
+                restore = [*restore, (cols.start, rows.start, cols.stop, rows.stop)]
+            elif segment is not None:
+                sx0, sy0, sx1, sy1 = segment
+                restore = [*restore, (cols.start + sx0, rows.start + sy0, cols.start + sx1, rows.start + sy1)]
+        out = self._out
+        if out is None:
+            out = self._out = bg.copy()
+        else:
+            for x0, y0, x1, y1 in restore:
+                out[y0:y1, x0:x1] = bg[y0:y1, x0:x1]
+        drawn = []
         # camera image, the selected row marked at both sides
         x0, y0, x1, y1 = layout.camera
         img = cv2.resize(rec.image, (x1 - x0, y1 - y0), interpolation=cv2.INTER_NEAREST)
@@ -292,18 +329,25 @@ class Composer:
         ry = y0 + int((rec.line_row + 0.5) * (y1 - y0) / rec.image.shape[0])
         cv2.line(out, (x0, ry), (x0 + 8, ry), _RED, 2)
         cv2.line(out, (x1 - 9, ry), (x1 - 1, ry), _RED, 2)
+        drawn.append(_around(x0, ry, x1 - 1, ry, out.shape))  # (a 2-px line reaches a pixel past the image)
         if rec.pixy2 is not None:
             _pixy2_overlay(out, layout.camera, *rec.pixy2)
+            drawn.append(_around(x0, y0, x1 - 1, y1 - 1, out.shape, margin=16))  # (rings and arrows reach past it)
         _api_values(out, layout.api, rec, self.laps)
-        _middle_panel(out, layout.middle, rec)
+        drawn.append(layout.api)
+        mx0, my0, mx1, _ = layout.middle
+        drawn.append((mx0, my0, mx1, _middle_panel(out, layout.middle, rec)))
         if view is not None:  # the objects on the track and the car, over the map
             solids = rec.state.get("solids", ())
             if fits:
-                view.overlay(out[rows, cols], rec.pose, *self._car, solids)
+                bx0, by0, bx1, by1 = view.overlay(out[rows, cols], rec.pose, *self._car, solids)
+                drawn.append((cols.start + bx0, rows.start + by0, cols.start + bx1, rows.start + by1))
             else:
                 box = view.canvas.copy()
                 view.overlay(box, rec.pose, *self._car, solids)
                 out[rows, cols] = box[:rows.stop - rows.start, :cols.stop - cols.start]
+                drawn.append((cols.start, rows.start, cols.stop, rows.stop))
+        self._drawn = drawn
         return out
 
 
