@@ -78,3 +78,55 @@ def test_gpt_start_of_zero_ticks_ends_the_run_at_its_line(gpt_program):
     assert r.outcome == "controller_error"
     assert "gpt_main.c:11" in r.message and "GPT_E_PARAM_VALUE" in r.message, r.message
     assert "\n" not in r.message
+
+
+HELD_ONE_SHOT = r"""
+#include "Gpt.h"
+#include "OsIf.h"
+#include "spinner.h"
+static volatile uint32 shots;
+void Us_Notification(void) { shots++; }
+int main(void) {
+    Gpt_Init(NULL_PTR);
+    Gpt_EnableNotification(3U);
+    Gpt_StartTimer(3U, 8000U);                    /* one-shot, 1 ms */
+    OsIf_SuspendAllInterrupts();
+    OsIf_TimeDelay(5U);                           /* it expires here: its interrupt is held */
+    uint32 x = Gpt_GetTimeElapsed(3U), y = Gpt_GetTimeRemaining(3U);
+    START;                                        /* the driver still has it running */
+    uint32 held = shots;
+    OsIf_ResumeAllInterrupts();                   /* the interrupt: the notification, then expired */
+    uint32 resumed = shots;
+    Gpt_StartTimer(3U, 8000U);
+    OsIf_TimeDelay(5U);
+    spinner_add_textf("held %u %u %u %u %u", (unsigned)x, (unsigned)y, (unsigned)held, (unsigned)resumed,
+                      (unsigned)shots);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("start, warned", [
+    ("(void)0", False),
+    ("Gpt_StartTimer(3U, 8000U)", True),                      # refused inside: still running
+    ("Gpt_StopTimer(3U); Gpt_StartTimer(3U, 8000U)", True),   # restarted inside: the start after the resume is refused
+])
+def test_a_one_shot_whose_expiry_a_critical_section_holds_is_running_until_its_interrupt(tmp_path, start, warned):
+    """The RTD's one-shot channel turns expired in its interrupt (Gpt_ProcessCommonInterrupt; S32K1
+    RTD 2.0.0 Gpt.c), which a critical section holds: until then Gpt_StartTimer is refused
+    (GPT_E_BUSY, Gpt_ValidateChannelStatus) and the reads give the target elapsed, 0 remaining; at
+    the resume the notification runs; a stop inside drops it (the LPIT's flag cleared,
+    Lpit_Gpt_Ip_StopTimer)."""
+    src = tmp_path / "held.c"
+    src.write_text(HELD_ONE_SHOT.replace("START;", start + ";"))
+    program = build_program([src], kit="s32k144", defines=["GPT_NOTIFICATION_3=Us_Notification",
+                                                          "GPT_CHANNEL_MODE_3=GPT_CH_MODE_ONESHOT"])
+    r = drive(program, track="floor", time_limit_s=1.0, csv=tmp_path / "log.csv")
+    assert r.outcome == "controller_returned", r.message
+    x, y, held, resumed, shots = numbers(r)["held"]
+    assert (x, y, held) == (8000, 0, 0)
+    if "Stop" in start:  # stopped inside: no notification; the restart inside notifies once
+        assert (resumed, shots) == (0, 1)
+    else:  # the held one at the resume, then the restart's
+        assert (resumed, shots) == (1, 2)
+    assert any("GPT_E_BUSY" in w for w in r.warnings) == warned, r.warnings

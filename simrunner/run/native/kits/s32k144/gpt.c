@@ -196,14 +196,23 @@ static double read_time(void) {
     return g.polled_at_s = spinner_get_time();
 }
 
-/* Channel c's elapsed ticks at time now_s (a one-shot past its target: expired). */
+/* Non-zero while an interrupt due now would be held: masked (__disable_irq, OsIf_SuspendAllInterrupts)
+ * or inside a handler (the next one runs after it returns). */
+static int interrupts_held(void) { return spinner_interrupts_disabled() || spinner_in_interrupt(); }
+
+/* Channel c's elapsed ticks at time now_s. A one-shot past its target reads the target; it turns
+ * expired in its interrupt, as the RTD's does (Gpt_ProcessCommonInterrupt sets GPT_STATUS_EXPIRED;
+ * Gpt_StartTimer enables a one-shot channel's interrupt for that, notification or not; S32K1 RTD
+ * 2.0.0 Gpt.c): here, unless interrupts are held - then the driver has it running until the
+ * interrupt (Gpt_GetTimeElapsed's rollover case), and notify() or the first read after the unmask
+ * makes it expired. */
 static Gpt_ValueType elapsed_at(Gpt_ChannelType c, double now_s) {
     if (g.ch[c].state == STOPPED) return g.ch[c].frozen;
     if (g.ch[c].state == EXPIRED) return g.ch[c].target;
     if (g.ch[c].state != RUNNING) return 0U;
     uint64_t n = (uint64_t)((now_s - g.ch[c].start_s) * g.tick_hz + 1e-6);
     if (is_one_shot(c) && n >= g.ch[c].target) {
-        g.ch[c].state = EXPIRED;  /* (its notification, if any, comes at the physics step of the expiry) */
+        if (!interrupts_held()) g.ch[c].state = EXPIRED;  /* (a notification due at this step follows) */
         return g.ch[c].target;
     }
     return (Gpt_ValueType)(n % g.ch[c].target);
@@ -232,10 +241,13 @@ void Gpt_StartTimer(Gpt_ChannelType Channel, Gpt_ValueType Value) {
     }
     double now = spinner_now();
     if (g.ch[Channel].state == RUNNING && !(elapsed_at(Channel, now), g.ch[Channel].state == EXPIRED)) {
-        char text[300];
+        char text[400];
         snprintf(text, sizeof text, "Gpt_StartTimer(%u, ...) on a running channel was refused, as the RTD "
                  "refuses it (GPT_E_BUSY): the channel keeps its target and count; stop it first "
-                 "(Gpt_StopTimer)", (unsigned)Channel);
+                 "(Gpt_StopTimer)%s", (unsigned)Channel,
+                 is_one_shot(Channel) && elapsed_at(Channel, now) == g.ch[Channel].target
+                     ? " (a one-shot channel is running until its interrupt has run: its expiry is held by "
+                       "disabled interrupts or a running handler)" : "");
         spinner_warn(text);
         return;
     }
@@ -249,7 +261,12 @@ void Gpt_StopTimer(Gpt_ChannelType Channel) {
     init();
     if (g.ch[Channel].state != RUNNING) return;
     Gpt_ValueType at = elapsed_at(Channel, spinner_now());
-    if (g.ch[Channel].state == RUNNING) g.ch[Channel].state = STOPPED, g.ch[Channel].frozen = at;
+    if (g.ch[Channel].state == RUNNING) {  /* a one-shot past its target (its interrupt held): expired,
+                                            * its notification dropped (the RTD's Gpt_StopTimer; the
+                                            * LPIT's Lpit_Gpt_Ip_StopTimer clears the channel's flag) */
+        if (is_one_shot(Channel) && at == g.ch[Channel].target) g.ch[Channel].state = EXPIRED;
+        else g.ch[Channel].state = STOPPED, g.ch[Channel].frozen = at;
+    }
     quiet(Channel);
 }
 
