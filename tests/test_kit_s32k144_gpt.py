@@ -130,3 +130,26 @@ def test_a_one_shot_whose_expiry_a_critical_section_holds_is_running_until_its_i
     else:  # the held one at the resume, then the restart's
         assert (resumed, shots) == (1, 2)
     assert any("GPT_E_BUSY" in w for w in r.warnings) == warned, r.warnings
+
+
+def test_a_one_shot_that_expired_before_a_critical_section_is_expired_in_it(tmp_path):
+    """Its interrupt ran at its expiry (interrupts enabled then), with a notification or not: a start
+    inside a later critical section or handler is a new start, not refused."""
+    src = tmp_path / "before.c"
+    before = (HELD_ONE_SHOT.replace("OsIf_SuspendAllInterrupts();\n    OsIf_TimeDelay(5U);",
+                                    "OsIf_TimeDelay(5U);\n    OsIf_SuspendAllInterrupts();")
+              .replace("START;", "Gpt_StartTimer(3U, 8000U);"))
+    assert "OsIf_TimeDelay(5U);\n    OsIf_SuspendAllInterrupts();" in before
+    for defines in (["GPT_NOTIFICATION_3=Us_Notification"], []):
+        src.write_text(before if defines else before.replace("Gpt_EnableNotification(3U);", ""))
+        program = build_program([src], kit="s32k144", defines=defines + ["GPT_CHANNEL_MODE_3=GPT_CH_MODE_ONESHOT"])
+        r = drive(program, track="floor", time_limit_s=1.0, csv=tmp_path / "log.csv")
+        assert r.outcome == "controller_returned", r.message
+        x, y, held, resumed, shots = numbers(r)["held"]
+        notified = 1 if defines else 0
+        # expired at 1 ms; restarted inside the section (not refused); its second expiry at 6 ms,
+        # after the resume; the start after the resume is refused (it runs until 6 ms)
+        assert (x, y, held, resumed) == (8000, 0, notified, notified)
+        assert shots == 2 * notified
+        assert sum("GPT_E_BUSY" in w for w in r.warnings) == 1, r.warnings
+

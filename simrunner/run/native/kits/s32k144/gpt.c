@@ -202,17 +202,17 @@ static int interrupts_held(void) { return spinner_interrupts_disabled() || spinn
 
 /* Channel c's elapsed ticks at time now_s. A one-shot past its target reads the target; it turns
  * expired in its interrupt, as the RTD's does (Gpt_ProcessCommonInterrupt sets GPT_STATUS_EXPIRED;
- * Gpt_StartTimer enables a one-shot channel's interrupt for that, notification or not; S32K1 RTD
- * 2.0.0 Gpt.c): here, unless interrupts are held - then the driver has it running until the
- * interrupt (Gpt_GetTimeElapsed's rollover case), and notify() or the first read after the unmask
- * makes it expired. */
+ * S32K1 RTD 2.0.0 Gpt.c). With its notification that is notify(), which the simulator runs at the
+ * expiry or, held by disabled interrupts or a running handler, later - until then the driver has it
+ * running (Gpt_GetTimeElapsed's rollover case). Without (the RTD still takes a one-shot channel's
+ * interrupt, here not timed): at the first read past its target. */
 static Gpt_ValueType elapsed_at(Gpt_ChannelType c, double now_s) {
     if (g.ch[c].state == STOPPED) return g.ch[c].frozen;
     if (g.ch[c].state == EXPIRED) return g.ch[c].target;
     if (g.ch[c].state != RUNNING) return 0U;
     uint64_t n = (uint64_t)((now_s - g.ch[c].start_s) * g.tick_hz + 1e-6);
     if (is_one_shot(c) && n >= g.ch[c].target) {
-        if (!interrupts_held()) g.ch[c].state = EXPIRED;  /* (a notification due at this step follows) */
+        if (!(g.ch[c].every && interrupts_held())) g.ch[c].state = EXPIRED;  /* (a notification due at this step follows) */
         return g.ch[c].target;
     }
     return (Gpt_ValueType)(n % g.ch[c].target);
