@@ -112,9 +112,10 @@ def execute_job(job: Job, state: WorkerState, outputs: dict[str, str] | None = N
 
 
 WARM_MODULES = ("simrunner.car.effects", "simrunner.run.runner", "simrunner.sensors.camera",
-                "simrunner.sensors.imaging", "trackgen.build")
-"""What every run imports (dartpy, OpenCV; not numba: the camera's line is NumPy,
-:mod:`simrunner.sensors.line_row`)."""
+                "simrunner.sensors.imaging", "trackgen.build", "trackgen.closure", "simrunner.run.start",
+                "simrunner.track.trace", "numpy.random", "manifold3d")
+"""What every run imports (dartpy, OpenCV, NumPy's random generators, manifold3d for a layout's
+raster; not numba: the camera's line is NumPy, :mod:`simrunner.sensors.line_row`)."""
 
 
 def warm_up() -> None:
