@@ -1,9 +1,12 @@
 """The S32K144 kit's Gpt channels as the RTD's Gpt driver (AUTOSAR SWS General Purpose Timer):
 a running channel's elapsed time read live (no time passes in the read), a stopped channel's frozen
 at its stop, a one-shot channel (-D GPT_CHANNEL_MODE_<n>=GPT_CH_MODE_ONESHOT) notifying once and
-then expired, a start of a running channel refused with a warning (GPT_E_BUSY), a start of 0 ticks
-an error at the calling line (GPT_E_PARAM_VALUE). kits/s32k144/gpt.c; docs/firmware.md."""
+then expired (in its interrupt, notification or not: running while a critical section holds it), a
+start of a running channel refused with a warning (GPT_E_BUSY), a start of 0 ticks an error at the
+calling line (GPT_E_PARAM_VALUE). kits/s32k144/gpt.c; docs/firmware.md."""
 from __future__ import annotations
+
+import dataclasses
 
 import pytest
 
@@ -153,3 +156,116 @@ def test_a_one_shot_that_expired_before_a_critical_section_is_expired_in_it(tmp_
         assert shots == 2 * notified
         assert sum("GPT_E_BUSY" in w for w in r.warnings) == 1, r.warnings
 
+
+
+QUIET_ONE_SHOT = r"""
+#include "Gpt.h"
+#include "OsIf.h"
+#include "spinner.h"
+static volatile uint32 shots;
+void Us_Notification(void) { shots++; }
+int main(void) {
+    Gpt_Init(NULL_PTR);
+    BEFORE;
+    Gpt_StartTimer(3U, 8000U);                    /* one-shot, 1 ms */
+    AFTER;
+    MASK;
+    OsIf_TimeDelay(5U);                           /* it expires here */
+    uint32 x = Gpt_GetTimeElapsed(3U), y = Gpt_GetTimeRemaining(3U);
+    Gpt_StartTimer(3U, 8000U);
+    uint32 x2 = Gpt_GetTimeElapsed(3U);
+    uint32 held = shots;
+    UNMASK;
+    uint32 x3 = Gpt_GetTimeElapsed(3U), y3 = Gpt_GetTimeRemaining(3U);
+    Gpt_StartTimer(3U, 16000U);                   /* accepted once expired */
+    uint32 r = Gpt_GetTimeRemaining(3U);
+    OsIf_TimeDelay(5U);
+    spinner_add_textf("quiet %u %u %u %u %u %u %u %u", (unsigned)x, (unsigned)y, (unsigned)x2, (unsigned)held,
+                      (unsigned)x3, (unsigned)y3, (unsigned)r, (unsigned)shots);
+    return 0;
+}
+"""
+
+# the notification: none configured; configured, never enabled; enabled, then disabled while running
+QUIET = [([], "(void)0", "(void)0"),
+         (["GPT_NOTIFICATION_3=Us_Notification"], "(void)0", "(void)0"),
+         (["GPT_NOTIFICATION_3=Us_Notification"], "Gpt_EnableNotification(3U)", "Gpt_DisableNotification(3U)")]
+
+
+def quiet_one_shot(tmp_path, defines, before, after, masked):
+    src = tmp_path / "quiet.c"
+    text = QUIET_ONE_SHOT.replace("BEFORE;", before + ";").replace("AFTER;", after + ";")
+    mask, unmask = ("OsIf_SuspendAllInterrupts()", "OsIf_ResumeAllInterrupts()") if masked else ("(void)0", "(void)0")
+    src.write_text(text.replace("MASK;", mask + ";", 1).replace("UNMASK;", unmask + ";"))
+    return build_program([src], kit="s32k144", defines=defines + ["GPT_CHANNEL_MODE_3=GPT_CH_MODE_ONESHOT"])
+
+
+@pytest.mark.parametrize("defines, before, after", QUIET)
+def test_a_one_shot_without_notification_whose_expiry_a_critical_section_holds_is_running_until_its_interrupt(
+        tmp_path, defines, before, after):
+    """The RTD's one-shot channel turns expired in its interrupt whether or not its notification
+    is enabled (S32K1 RTD 2.0.0 Gpt.c: Gpt_StartTimer enables a one-shot channel's interrupt,
+    Gpt_ProcessCommonInterrupt sets GPT_STATUS_EXPIRED and notifies only if enabled): inside the
+    section it reads its target elapsed and 0 remaining, Gpt_StartTimer is refused (GPT_E_BUSY);
+    the unmask runs the interrupt, no notification called: expired, a start is accepted. Alike in
+    process and isolated."""
+    program = quiet_one_shot(tmp_path, defines, before, after, masked=True)
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
+                  csv=tmp_path / f"log{isolate}.csv")
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        x, y, x2, held, x3, y3, remaining, shots = numbers(r)["quiet"]
+        assert (x, y, x2, held) == (8000, 0, 8000, 0), isolate  # running: the start inside refused
+        assert (x3, y3, remaining, shots) == (8000, 0, 16000, 0), isolate  # expired at the unmask
+        busy = [w for w in r.warnings if "GPT_E_BUSY" in w]
+        assert len(busy) == 1 and "until its interrupt has run" in busy[0], (isolate, r.warnings)
+
+
+@pytest.mark.parametrize("defines, before, after", QUIET)
+def test_a_one_shot_without_notification_expires_at_its_expiry_when_not_held(tmp_path, defines, before, after):
+    """No critical section: expired from its expiry on (the target elapsed, 0 remaining), a start
+    accepted, no warning, no notification. Alike in process and isolated."""
+    program = quiet_one_shot(tmp_path, defines, before, after, masked=False)
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
+                  csv=tmp_path / f"log{isolate}.csv")
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        x, y, x2, held, x3, y3, remaining, shots = numbers(r)["quiet"]
+        # expired at 1 ms; started again at 5 ms (accepted), running at 6 ms: the later start refused
+        assert (x, y, x2, held) == (8000, 0, 0, 0), isolate
+        assert (x3, y3, remaining, shots) == (0, 8000, 8000, 0), isolate
+        busy = [w for w in r.warnings if "GPT_E_BUSY" in w]
+        assert len(busy) == 1 and "until its interrupt" not in busy[0], (isolate, r.warnings)
+
+
+ENABLED_LATE = r"""
+#include "Gpt.h"
+#include "OsIf.h"
+#include "spinner.h"
+static volatile uint32 shots;
+static volatile double at_s;
+void Us_Notification(void) { shots++; at_s = spinner_now(); }
+int main(void) {
+    Gpt_Init(NULL_PTR);
+    Gpt_StartTimer(3U, 80000U);                   /* one-shot, 10 ms */
+    OsIf_TimeDelay(4U);
+    Gpt_EnableNotification(3U);                   /* its interrupt at 10 ms notifies */
+    OsIf_TimeDelay(20U);
+    spinner_add_textf("late %u %u", (unsigned)shots, (unsigned)(at_s * 1000.0 + 0.5));
+    return 0;
+}
+"""
+
+
+def test_a_one_shot_notification_enabled_while_it_runs_is_called_at_its_expiry(tmp_path):
+    """The one-shot's interrupt is timed from its start: a notification enabled later is called
+    at its expiry (the RTD's interrupt tests the notification's flag then), once."""
+    src = tmp_path / "late.c"
+    src.write_text(ENABLED_LATE)
+    program = build_program([src], kit="s32k144", defines=["GPT_NOTIFICATION_3=Us_Notification",
+                                                          "GPT_CHANNEL_MODE_3=GPT_CH_MODE_ONESHOT"])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
+                  csv=tmp_path / f"log{isolate}.csv")
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        assert numbers(r)["late"] == [1, 10], isolate

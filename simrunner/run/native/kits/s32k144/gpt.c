@@ -15,10 +15,12 @@
  * GPT_CH_MODE_ONESHOT makes channel n one-shot; continuous otherwise. Its notification is the
  * function the kit's Gpt configuration names for it (below): once the channel runs and its
  * notification is enabled, it is called at each expiry (spinner_every; a one-shot's once), until
- * Gpt_StopTimer or Gpt_DisableNotification. A notification that --isr (or spinner_every) already runs
- * is left to that: its rate is --isr's. The reads let no simulated time pass (spinner_now: the count
- * at the program's last call, or at a handler's time), but after 64 reads without any time passing
- * each read lets one physics step pass (main() only), so a loop polling them moves on. */
+ * Gpt_StopTimer or Gpt_DisableNotification. A one-shot channel's interrupt is the kit's timer from
+ * its start, notification or not: it sets the channel expired (below, elapsed_at). A notification
+ * that --isr (or spinner_every) already runs is left to that: its rate is --isr's. The reads let no
+ * simulated time pass (spinner_now: the count at the program's last call, or at a handler's time),
+ * but after 64 reads without any time passing each read lets one physics step pass (main() only),
+ * so a loop polling them moves on. */
 #include <stdio.h>
 
 #include "spinner.h"
@@ -124,7 +126,7 @@ FIRE(0) FIRE(1) FIRE(2) FIRE(3) FIRE(4) FIRE(5) FIRE(6) FIRE(7)
 static const struct {
     void (*fn)(void);       /* the notification, NULL when the program defines none */
     const char *name;       /* its name in the configuration (NULL: none configured) */
-    void (*fire)(void);     /* the kit's function spinner_every calls */
+    void (*fire)(void);     /* the kit's function spinner_every calls (the channel's interrupt) */
 } config[GPT_NOTIFIED] = {
     {N0, fire0}, {N1, fire1}, {N2, fire2}, {N3, fire3}, {N4, fire4}, {N5, fire5}, {N6, fire6}, {N7, fire7},
 };
@@ -134,7 +136,7 @@ enum { INITIALIZED, RUNNING, STOPPED, EXPIRED };  /* the SWS's channel states */
 static struct {
     double tick_hz;
     int inited;
-    int own;                /* notifications the kit runs (spinner_every) */
+    int own;                /* the kit's timers running (spinner_every): notifications, one-shots' interrupts */
     double polled_at_s;     /* the time of the last read, and the reads at it */
     int polls;
     struct { double start_s; Gpt_ValueType target, frozen; uint8 state, notify, every; } ch[NUM_GPT];
@@ -148,12 +150,20 @@ static void init(void) {
 
 static int is_one_shot(Gpt_ChannelType c) { return c < GPT_NOTIFIED && one_shot[c]; }
 
+/* The notification's call: enabled, the program's function, not left to --isr (or spinner_every). */
+static int notified(Gpt_ChannelType c) {
+    return c < GPT_NOTIFIED && g.ch[c].notify && config[c].fn != NULL && !spinner_has_every(config[c].fn);
+}
+
+/* The channel's interrupt (the kit's timer): a one-shot's expires it, then notifies (SWS, one-shot
+ * mode) if its notification is enabled then; a continuous one's timer runs only to notify. */
 static void notify(int ch) {
-    if (is_one_shot((Gpt_ChannelType)ch)) {  /* expired: it stops, then notifies (SWS, one-shot mode) */
+    if (is_one_shot((Gpt_ChannelType)ch)) {
         g.ch[ch].state = EXPIRED;
         spinner_stop_every(config[ch].fire);
         g.ch[ch].every = 0;
         g.own--;
+        if (!notified((Gpt_ChannelType)ch)) return;
     }
     config[ch].fn();
 }
@@ -166,20 +176,27 @@ static void quiet(Gpt_ChannelType c) {
     }
 }
 
-/* Start or stop the channel's notification calls as its state says (a start: from now). */
-static void arm(Gpt_ChannelType c) {
-    quiet(c);
-    if (g.ch[c].state != RUNNING || !g.ch[c].notify) return;
-    if (c >= GPT_NOTIFIED || config[c].fn == NULL || spinner_has_every(config[c].fn)) return;
+/* The period of channel c's timer: its target; under the simulator's 10 us an error when it notifies,
+ * else (a one-shot's interrupt only) 10 us - the reads past its target give it expired, unless held. */
+static double period_of(Gpt_ChannelType c) {
     double period_s = g.ch[c].target / g.tick_hz;
-    if (period_s < 1e-5) {
+    if (period_s < 1e-5 && notified(c)) {
         char text[300];
         snprintf(text, sizeof text, "Gpt channel %u: a period of %u ticks at %.6g Hz (--param s32k_gpt_tick_hz) "
                  "is shorter than the simulator's 10 us (a 100 kHz timer)", (unsigned)c, (unsigned)g.ch[c].target,
                  g.tick_hz);
         spinner_fail(text);
     }
-    spinner_every(period_s, config[c].fire);
+    return period_s < 1e-5 ? 1e-5 : period_s;
+}
+
+/* Start or stop the channel's timer as its state says (a start: from now): a running channel's
+ * notification calls; a running one-shot's interrupt, notification or not (it sets it expired, as
+ * the RTD's Gpt_StartTimer enables a one-shot channel's interrupt for that: S32K1 RTD 2.0.0 Gpt.c). */
+static void arm(Gpt_ChannelType c) {
+    quiet(c);
+    if (g.ch[c].state != RUNNING || c >= GPT_NOTIFIED || !(is_one_shot(c) || notified(c))) return;
+    spinner_every(period_of(c), config[c].fire);
     g.ch[c].every = 1;
     g.own++;
 }
@@ -201,18 +218,21 @@ static double read_time(void) {
 static int interrupts_held(void) { return spinner_interrupts_disabled() || spinner_in_interrupt(); }
 
 /* Channel c's elapsed ticks at time now_s. A one-shot past its target reads the target; it turns
- * expired in its interrupt, as the RTD's does (Gpt_ProcessCommonInterrupt sets GPT_STATUS_EXPIRED;
- * S32K1 RTD 2.0.0 Gpt.c). With its notification that is notify(), which the simulator runs at the
- * expiry or, held by disabled interrupts or a running handler, later - until then the driver has it
- * running (Gpt_GetTimeElapsed's rollover case). Without (the RTD still takes a one-shot channel's
- * interrupt, here not timed): at the first read past its target. */
+ * expired in its interrupt, as the RTD's does, with its notification or without (S32K1 RTD 2.0.0
+ * Gpt.c: Gpt_StartTimer enables a one-shot channel's interrupt, Gpt_ProcessCommonInterrupt sets
+ * GPT_STATUS_EXPIRED, then notifies if the notification is enabled). That is notify(), the kit's
+ * timer from the start, which the simulator runs at the expiry or, held by disabled interrupts or a
+ * running handler, at the unmask or after the handler - until then the driver has it running
+ * (Gpt_GetTimeElapsed's rollover case: the target elapsed, 0 remaining; Gpt_StartTimer refuses it,
+ * GPT_E_BUSY). Not held, a read past its target finds it expired (its interrupt due at this step
+ * follows). */
 static Gpt_ValueType elapsed_at(Gpt_ChannelType c, double now_s) {
     if (g.ch[c].state == STOPPED) return g.ch[c].frozen;
     if (g.ch[c].state == EXPIRED) return g.ch[c].target;
     if (g.ch[c].state != RUNNING) return 0U;
     uint64_t n = (uint64_t)((now_s - g.ch[c].start_s) * g.tick_hz + 1e-6);
     if (is_one_shot(c) && n >= g.ch[c].target) {
-        if (!(g.ch[c].every && interrupts_held())) g.ch[c].state = EXPIRED;  /* (a notification due at this step follows) */
+        if (!(g.ch[c].every && interrupts_held())) g.ch[c].state = EXPIRED;  /* (its interrupt due at this step follows) */
         return g.ch[c].target;
     }
     return (Gpt_ValueType)(n % g.ch[c].target);
@@ -301,10 +321,11 @@ void Gpt_EnableNotification(Gpt_ChannelType Channel) {
                      "interrupts\")", (unsigned)Channel, (unsigned)Channel, GPT_NOTIFIED - 1);
         spinner_fail(text);
     }
-    arm(Channel);
+    if (!is_one_shot(Channel)) arm(Channel);
+    else if (g.ch[Channel].every) (void)period_of(Channel);  /* its interrupt notifies from now on */
 }
 
 void Gpt_DisableNotification(Gpt_ChannelType Channel) {
     g.ch[Channel].notify = 0U;
-    quiet(Channel);
+    if (!is_one_shot(Channel)) quiet(Channel);  /* a one-shot's interrupt stays: it sets it expired */
 }
