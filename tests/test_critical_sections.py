@@ -859,3 +859,106 @@ def test_nvic_pending_bits_clear_and_order_as_the_nvic_does(tmp_path, steps, doe
     for isolate in (False, True):
         r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
         assert r.outcome == "controller_error" and re.search(rf"status {status}\b", r.message), (isolate, r.message)
+
+
+# -- NVIC_GetPendingIRQ of an expiry held by __disable_irq or a running handler (--kit tfc) ---------
+HELD_PENDING = PIT_AT_1KHZ + textwrap.dedent("""\
+        int before = ticks;
+        __disable_irq();
+        if (NVIC_GetPendingIRQ(PIT_IRQn)) return 99;           /* no time passed while masked: none */
+        for (int k = 0; k < 4; k++) TFC_Task();                /* expiries held: one pending bit */
+        if (ticks != before) return 98;
+        int inside = NVIC_GetPendingIRQ(PIT_IRQn);
+        INSIDE;
+        int after_inside = NVIC_GetPendingIRQ(PIT_IRQn);
+        __enable_irq();
+        int at_unmask = ticks - before;
+        if (NVIC_GetPendingIRQ(PIT_IRQn) != AFTER) return 97;
+        PIT_TCTRL0 = 0;
+        for (int k = 0; k < 3; k++) TFC_Task();
+        if (ticks - before != at_unmask) return 96;            /* nothing more ran */
+        if (tif_at_entry != ticks) return 95;                  /* TIF set at every entry */
+        return 1 + 100 * inside + 10 * after_inside + at_unmask;
+    }
+    """)
+
+
+@pytest.mark.parametrize("inside, after, status", [
+    ("(void)0", 0, 112),                                       # pending inside, taken once at the unmask, 0 after
+    # a running PIT: its flag (TIF && TIE) asserts the IRQ again at once, the clear does not hold
+    ("NVIC_ClearPendingIRQ(PIT_IRQn)", 0, 112),
+    ("NVIC_ICPR = 1u << (INT_PIT - 16)", 0, 112),
+    # the timer's source off: the NVIC's bit stays (latched), taken at the unmask ...
+    ("PIT_TCTRL0 = 0", 0, 112),
+    ("PIT_TCTRL0 &= ~PIT_TCTRL_TIE_MASK", 0, 112),
+    # ... unless cleared: then it reads 0 and does not run
+    ("PIT_TCTRL0 = 0; NVIC_ClearPendingIRQ(PIT_IRQn)", 0, 101),
+    # its IRQ disabled in the NVIC: still pending (independent of the enable bit), not taken at the unmask
+    ("NVIC_DisableIRQ(PIT_IRQn)", 1, 111),
+])
+@pytest.mark.parametrize("mcu_time", [None, 0.0005])
+def test_nvic_get_pending_irq_reports_an_expiry_held_by_disable_irq(tmp_path, inside, after, status, mcu_time):
+    """--kit tfc (ARMv6-M, ARM DDI 0419, B3.4: an enabled interrupt whose source asserts while PRIMASK
+    is set is pending; its ISPR bit reads 1): a PIT running with its IRQ enabled that expires inside
+    __disable_irq() reads NVIC_GetPendingIRQ(PIT_IRQn) == 1 there (0 right after the mask, before any
+    time passed), its handler runs once at __enable_irq() and the bit reads 0 after. NVIC_ClearPendingIRQ
+    of the running timer cannot clear it (its flag asserts the IRQ again); of the stopped one it does:
+    0, and no call. (Before, the held expiry was the simulator's, not a bit the kit reported: 0.)
+    In process and isolated, with --mcu-time too."""
+    src = tmp_path / "held_pending.c"
+    src.write_text(HELD_PENDING)
+    program = build_program([str(src)], kit="tfc", defines=[f"INSIDE={inside}", f"AFTER={after}"])
+    extra = {} if mcu_time is None else {"mcu_time": mcu_time}
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
+        assert r.outcome == "controller_error" and re.search(rf"status {status}\b", r.message), (isolate, r.message)
+
+
+PENDING_IN_A_HANDLER = textwrap.dedent("""\
+    #include "derivative.h"
+    #include "spinner.h"
+    #include "TFC/TFC.h"
+    volatile int pit_on, pit_calls, reads, pend;
+    static void read_pit(void) {
+        if (!pit_on) return;
+        reads++;
+        pend += NVIC_GetPendingIRQ(PIT_IRQn);                /* the PIT is due at this step, after this one */
+    }
+    void PIT_IRQHandler(void) { PIT_TFLG0 = PIT_TFLG_TIF_MASK; pit_calls++; }
+    void LPTimer_IRQHandler(void) { LPTMR0_CSR |= LPTMR_CSR_TCF_MASK; read_pit(); }
+    static void tick(void) { read_pit(); }
+    int main(void) {
+        TFC_Init();
+        FIRST;                                                 /* a 2-ms interrupt set up before the PIT */
+        TFC_Task();
+        SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
+        PIT_MCR = 0;
+        PIT_LDVAL0 = 48000 - 1;                                /* 500 Hz: due at every 2-ms step too */
+        PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+        NVIC_EnableIRQ(PIT_IRQn);
+        pit_on = 1;
+        for (int k = 0; k < 5; k++) TFC_Task();
+        if (NVIC_GetPendingIRQ(PIT_IRQn)) return 99;           /* taken: 0 */
+        if (reads < 3 || pit_calls < 3) return 90;
+        return pend == reads ? 12 : 20 + pend;
+    }
+    """)
+LPTMR_500HZ = ("SIM_SCGC5 |= SIM_SCGC5_LPTMR_MASK; LPTMR0_PSR = LPTMR_PSR_PCS(1) | LPTMR_PSR_PBYP_MASK; "
+               "LPTMR0_CMR = LPTMR_CMR_COMPARE(2 - 1); LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK; "
+               "NVIC_EnableIRQ(LPTimer_IRQn)")
+
+
+@pytest.mark.parametrize("first", ["spinner_every(0.002, tick)", LPTMR_500HZ])
+@pytest.mark.parametrize("mcu_time", [None, 0.0005])
+def test_nvic_get_pending_irq_in_a_handler_reports_another_irq_due_after_it(tmp_path, first, mcu_time):
+    """--kit tfc (ARMv6-M, ARM DDI 0419, B3.4): while a handler runs, another enabled IRQ whose timer
+    expired is pending (it is taken after the handler): a program's own 2-ms interrupt, or the LPTMR's
+    handler, set up before a 2-ms PIT, reads NVIC_GetPendingIRQ(PIT_IRQn) == 1 at every step (the PIT
+    due at the same step runs after it); main() reads 0 once it ran. In process and isolated."""
+    src = tmp_path / "pending_in_handler.c"
+    src.write_text(PENDING_IN_A_HANDLER)
+    program = build_program([str(src)], kit="tfc", defines=[f"FIRST={first}"])
+    extra = {} if mcu_time is None else {"mcu_time": mcu_time}
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
+        assert r.outcome == "controller_error" and re.search(r"status 12\b", r.message), (isolate, r.message)

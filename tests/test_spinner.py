@@ -291,6 +291,41 @@ def test_a_latched_stop_keeps_the_pending_call_until_the_unmask_and_unpend_clear
     assert clock.remove_interrupt(tick, latch=True) == 1 and clock.unpend_interrupt(tick) == 0
 
 
+def test_is_pending_tells_a_call_held_by_the_mask_kept_by_a_latched_stop_or_due_after_the_handler():
+    """``LockstepClock.is_pending`` (a kit's NVIC_GetPendingIRQ): False while nothing fell due since the
+    mask; True once a call is held, also after a latched stop; False once it ran or was unpended; in a
+    handler, True for another handler due at the same step after it (not for one that ran)."""
+    sim = FakeSim()
+    clock = LockstepClock(sim, dt_s=0.002, frame_period_s=0.02)
+    seen = []
+
+    def tick():
+        pass
+
+    def first():
+        seen.append((clock.is_pending(tick), clock.is_pending(first)))
+
+    clock.add_interrupt(0.006, tick)
+    clock.advance(1)
+    clock.mask()
+    assert not clock.is_pending(tick)
+    clock.advance(2)                       # due at step 3: held
+    assert clock.is_pending(tick)
+    clock.unmask()
+    assert not clock.is_pending(tick)
+    clock.mask()
+    clock.advance(3)                       # step 6: held again
+    clock.remove_interrupt(tick, latch=True)
+    assert clock.is_pending(tick)
+    clock.unpend_interrupt(tick)
+    assert not clock.is_pending(tick)
+    clock.unmask()
+    clock.add_interrupt(0.004, first)      # both due at steps 8 and 10: first, set up first, runs first
+    clock.add_interrupt(0.004, tick)
+    clock.advance(4)
+    assert seen == [(True, False), (True, False)] and not clock.is_pending(tick)
+
+
 def test_the_clock_removes_an_interrupt_and_steps_on_without_one():
     """``LockstepClock.remove_interrupt``: the handler runs no more; with none left the clock
     steps to the next frame in one chunk again; the count says how many were removed."""

@@ -40,7 +40,8 @@ passes), in the order they were registered; a pending handler stopped meanwhile 
 unless it was stopped as an NVIC source is (``remove_interrupt(latch=True)``: the pending bit
 outlives the timer's own interrupt enable; ``unpend_interrupt`` clears it). :meth:`pend_interrupt`
 sets a handler's pending bit without a timer (an NVIC's set-pending register): it runs at once
-when unmasked and outside handlers, else when a pending one would.
+when unmasked and outside handlers, else when a pending one would. :meth:`is_pending` tells
+whether a handler's call fell due and has not run (its NVIC pending bit, as a kit reads it).
 Masking is a bit, not a count: a second mask is a no-op, one unmask clears it. Handlers do not
 change it: one that masks leaves it masked on return (later handlers are held), and an unmask
 inside a handler lets the pending ones run after it returns (handlers do not nest). A handler
@@ -260,6 +261,15 @@ class LockstepClock:
         if cleared and not self.in_interrupt:
             self._prune()
         return len(cleared)
+
+    def is_pending(self, handler: Callable[[], None]) -> bool:
+        """Whether a call of ``handler`` fell due and has not run (no time passes): held pending by
+        the mask, kept by ``remove_interrupt(latch=True)``, set by :meth:`pend_interrupt`, or due at
+        this step after the running handler - the NVIC's pending bit of a kit's timer (ARMv6-M, ARM
+        DDI 0419, B3.4: a source asserted while PRIMASK is set, or while another handler runs, is
+        pending)."""
+        i = self.step_index
+        return any(irq.handler is handler and (irq.pending or irq.next_step <= i) for irq in self._interrupts)
 
     def hold_pending(self, handler: Callable[[], None]) -> None:
         """Mark ``handler``'s interrupts pending (a kit's timer started again while the call its

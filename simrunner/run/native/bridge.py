@@ -47,7 +47,7 @@ OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
     OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK, OP_IRQ_MASK_WAIT, \
-    OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT = range(1, 34)
+    OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING = range(1, 35)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
@@ -84,7 +84,7 @@ _PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a r
 _WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, OP_PARAM, OP_FAULT,
                       OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
                       OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK_WAIT,
-                      OP_PEND_WAIT))
+                      OP_PEND_WAIT, OP_EVERY_PENDING))
 
 
 class _Child:
@@ -421,6 +421,11 @@ class _Session:
             s._clock.pend_interrupt(handler)  # (unmasked: it runs now, in the waiting call)
             if op == OP_PEND_WAIT:
                 reply(_OK_EMPTY)
+        elif op == OP_EVERY_PENDING:  # a handler's slots (int32 each) -> int32 1 when a call of it fell due
+            slots = struct.unpack_from(f"<{len(payload) // 4}i", payload)  # and has not run (NVIC_GetPendingIRQ;
+            handlers = (self._isrs.get(slot) or self._latched.get(slot) for slot in slots)  # no time passes)
+            pending = any(h is not None and s._clock.is_pending(h) for h in handlers)
+            reply(_HDR.pack(ST_OK, 4) + struct.pack("<i", pending))
         elif op in (OP_IRQ_MASK, OP_IRQ_MASK_WAIT):  # a flag byte: 1 mask (disable), 0 unmask (enable)
             if payload[:1] == b"\x01":  # then the caller's return address: its offset (uint64), module
                 clock, was = s._clock, s._clock.masked

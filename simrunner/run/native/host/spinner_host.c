@@ -52,7 +52,7 @@ enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, O
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
        OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK,
-       OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT };
+       OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -339,7 +339,9 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
  * bit (OP_EVERY_UNPEND {int32 slot}: NVIC_ClearPendingIRQ). spinner_pend_every sets a handler's
  * pending bit (OP_PEND {int32 slot}: NVIC_SetPendingIRQ), in a slot kept as a latched one unless
  * the handler has a running one; unmasked and outside handlers it is a waiting call (OP_PEND_WAIT),
- * which the handler runs in. */
+ * which the handler runs in. spinner_every_pending asks whether a handler's call fell due and has not
+ * run (OP_EVERY_PENDING {int32 slot...} -> int32: NVIC_GetPendingIRQ), no time passing; it asks only
+ * when one can be: masked after time passed, or in a handler (else 0 without a round trip). */
 #define MAX_ISRS 32
 static void (*isr_fn[MAX_ISRS])(void);
 static unsigned char isr_stopping[MAX_ISRS];  /* stopped, the stop not yet read by the simulator */
@@ -437,9 +439,9 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         if (size) memset(reply, 0, size);
         return 0;
     }
-    /* time passes in the call - but not in OP_NOW, unless --mcu-time charges the calls queued
-     * before it (main() only) */
-    int passes = op != OP_NOW || (mcu_on && isr_depth == 0);
+    /* time passes in the call - but not in OP_NOW or OP_EVERY_PENDING, unless --mcu-time charges
+     * the calls queued before it (main() only) */
+    int passes = (op != OP_NOW && op != OP_EVERY_PENDING) || (mcu_on && isr_depth == 0);
     if (kit_before_wait != NULL && !in_kit_hook && passes) {  /* (the kit's registers before time passes) */
         in_kit_hook = 1;
         kit_before_wait();
@@ -887,6 +889,21 @@ void spinner_unpend_every(void (*handler)(void)) {
     if (finished || handler == NULL) return;
     for (int32_t slot = 0; slot < MAX_ISRS; slot++)
         if (isr_latched[slot] && isr_fn[slot] == handler) queue(OP_EVERY_UNPEND, &slot, sizeof slot, NULL, 0);
+}
+
+int spinner_every_pending(void (*handler)(void)) {
+    INIT();
+    if (finished || handler == NULL) return 0;
+    /* held by the mask only if time passed while masked (a waiting call, or with --mcu-time any
+     * request); due after the running handler only in one (as spinner_stop_every_latched) */
+    if (!((irq_masked && (irq_held || mcu_on)) || irq_unmasking || isr_depth > 0)) return 0;
+    int32_t slots[MAX_ISRS], n = 0;  /* its running and kept slots (a stopping one's calls are gone) */
+    for (int32_t slot = 0; slot < MAX_ISRS; slot++)
+        if (isr_fn[slot] == handler && !isr_stopping[slot]) slots[n++] = slot;
+    if (n == 0) return 0;
+    int32_t pending = 0;
+    call(OP_EVERY_PENDING, slots, (size_t)n * sizeof slots[0], NULL, 0, &pending, sizeof pending);
+    return pending != 0;
 }
 
 static void set_mask(int masked) {

@@ -127,10 +127,14 @@ void spinner_stop_every(void (*handler)(void));
  * interrupt's handler, when interrupts are unmasked and no handler runs - inside this call if they
  * are (from spinner_kit_before_wait: in the waiting call it precedes), else at
  * spinner_enable_interrupts or after the running handler; pending already, nothing changes (one
- * bit); spinner_unpend_every clears it. */
+ * bit); spinner_unpend_every clears it. spinner_every_pending: non-zero when a call of handler fell
+ * due and has not run - held by the mask, kept by a latched stop, or due at this step after the
+ * running handler (its NVIC pending bit: NVIC_GetPendingIRQ); no time passes, and no round trip to
+ * the simulator unless interrupts are masked or a handler runs. */
 void spinner_stop_every_latched(void (*handler)(void));
 void spinner_unpend_every(void (*handler)(void));
 void spinner_pend_every(void (*handler)(void));
+int spinner_every_pending(void (*handler)(void));
 /* Non-zero when handler is set up as a timer interrupt (by spinner_every or --isr). */
 int spinner_has_every(void (*handler)(void));
 /* How many timer interrupt handlers are set up (--isr and spinner_every). */

@@ -70,6 +70,7 @@ static struct timer {
 static uint32_t nvic_enabled;  /* the IRQs enabled in the NVIC */
 static unsigned waits;         /* requests the program waited on (time may pass at each) */
 static int firing;             /* a timer's handler runs (its flag set) */
+static int firing_irq = -1;    /* ... that of this IRQ */
 
 __attribute__((noreturn)) static void cannot(const struct timer *t, const char *why) {
     char text[400];
@@ -86,8 +87,9 @@ __attribute__((noreturn)) static void cannot(const struct timer *t, const char *
  * the kit's bit (nvic_pending); once the IRQ is enabled the kit hands it to the simulator
  * (spinner_pend_every with the IRQ's take function, nvic_handed), which runs it as an interrupt when
  * PRIMASK allows - or takes it back if the IRQ is disabled (or the bit cleared) before it ran. An
- * expiry held by __disable_irq while the IRQ was enabled is the simulator's pending call of the
- * timer's own function (spinner_every), not a bit here. */
+ * expiry held by __disable_irq (or due after a running handler) is the simulator's pending call of
+ * the timer's own function (spinner_every), not a bit here: NVIC_GetPendingIRQ asks the simulator for
+ * it (spinner_every_pending). */
 static uint32_t nvic_pending;  /* pending, not handed to the simulator (the IRQ disabled, or not looked at yet) */
 static uint32_t nvic_handed;   /* pending, handed to the simulator: its take function has not run yet */
 static uint32_t nvic_unpend;   /* NVIC_ICPR bits written since the last look */
@@ -473,14 +475,29 @@ void tfc_sim_nvic_set_pending(int irq) {
     else sync();
 }
 
-/* NVIC_GetPendingIRQ: the IRQ's pending bit as the kit knows it (not an expiry held by __disable_irq
- * while the IRQ was enabled: that one the simulator keeps). */
+/* NVIC_GetPendingIRQ: the IRQ's pending bit - the kit's, or an expiry of one of its timers that
+ * fell due and has not run (ARMv6-M, ARM DDI 0419, B3.4: a source that asserts while PRIMASK is set,
+ * or while another exception is active, makes its interrupt pending; ISPR reads 1 until it is taken
+ * or cleared). That call the simulator holds (the mask, a latched stop, or due at this step after
+ * the running handler): the kit asks it (spinner_every_pending, a round trip only while masked or
+ * in a handler). A clear (ICPR) holds for a stopped timer's call only, as in sync: a running one's
+ * flag (TIF && TIE) asserts the IRQ again. The IRQ of the running timer handler reads the kit's bit
+ * alone (on the board the active IRQ's own source does not pend it until it returns). */
 uint32_t tfc_sim_nvic_pending(int irq) {
     if (firing) nvic_sync();
     else sync();
+    if (irq < 0 || irq >= 32) return 0u;
     uint32_t pending = nvic_pending | nvic_handed;
     if (firing) pending &= ~nvic_unpend;  /* (a clear in the handler: applied after it) */
-    return irq >= 0 && irq < 32 ? (pending >> irq) & 1u : 0u;
+    if ((pending >> irq) & 1u) return 1u;
+    if (!((KIT_IRQS >> irq) & 1u) || (firing && irq == firing_irq)) return 0u;
+    if (!spinner_interrupts_disabled() && !spinner_in_interrupt()) return 0u;  /* (none can be held) */
+    for (int i = 0; i < N_TIMERS; i++) {
+        if (irq_of(i) != irq) continue;
+        if (firing && ((nvic_unpend >> irq) & 1u) && !armed(i)) continue;  /* (cleared after the handler) */
+        if (spinner_every_pending(timers[i].fire)) return 1u;
+    }
+    return 0u;
 }
 
 void spinner_kit_before_wait(void) {
@@ -507,9 +524,9 @@ static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
         return;
     }
     *flag |= mask;
-    firing = 1;
+    firing = 1, firing_irq = irq_of(i);
     handler_of(i)();
-    firing = 0;
+    firing = 0, firing_irq = -1;
     *flag &= ~mask;
     if (next > 0.0 && t->period_s > 0.0) {
         stop(t, 0);
@@ -548,9 +565,9 @@ static void take(int irq) {
     for (int i = first; i <= last; i++)
         if (timers[i].flagged) *flag_of(i, &masks[i]) |= masks[i];
     waits++;
-    firing = 1;
+    firing = 1, firing_irq = irq;
     handler_of(first)();
-    firing = 0;
+    firing = 0, firing_irq = -1;
     for (int i = first; i <= last; i++) {
         if (masks[i]) *flag_of(i, &masks[i]) &= ~masks[i];
         timers[i].flagged = 0;
