@@ -269,3 +269,47 @@ def test_a_one_shot_notification_enabled_while_it_runs_is_called_at_its_expiry(t
                   csv=tmp_path / f"log{isolate}.csv")
         assert r.outcome == "controller_returned", (isolate, r.message)
         assert numbers(r)["late"] == [1, 10], isolate
+
+
+DEINIT_DUE = r"""
+#include "Gpt.h"
+#include "OsIf.h"
+#include "spinner.h"
+static volatile uint32 shots;
+void Us_Notification(void) { shots++; }
+int main(void) {
+    Gpt_Init(NULL_PTR);
+    ENABLE;
+    Gpt_StartTimer(3U, 8000U);                    /* one-shot, 1 ms */
+    for (int k = 0; k < 6; k++) spinner_add_textf("q%d", k);  /* --mcu-time 0.0005: 3 ms of code */
+    Gpt_DeInit();                                 /* after its expiry (with --mcu-time) */
+    OsIf_TimeDelay(5U);
+    spinner_add_textf("deinit %u %u %u", (unsigned)Gpt_GetTimeElapsed(3U), (unsigned)Gpt_GetTimeRemaining(3U),
+                      (unsigned)shots);
+    Gpt_EnableNotification(5U);                   /* none configured, nothing else runs: an error */
+    OsIf_TimeDelay(5U);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("enable", ["(void)0", "Gpt_EnableNotification(3U)"])
+@pytest.mark.parametrize("mcu_time", [None, 0.0005])
+def test_gpt_deinit_after_a_one_shots_expiry_in_code_time_leaves_it_initialized(tmp_path, enable, mcu_time):
+    """Gpt_DeInit resets every channel to its initialized state (never started: 0 elapsed, 0
+    remaining). With --mcu-time the code before it may take a one-shot past its expiry: its
+    interrupt, due then, runs before the DeInit (the notification, if enabled, once), not after it -
+    an interrupt run after would make the channel expired again and count the kit's timers wrong
+    (g.own: then enabling a notification none configures was accepted). Alike in process and
+    isolated."""
+    src = tmp_path / "deinit.c"
+    src.write_text(DEINIT_DUE.replace("ENABLE;", enable + ";"))
+    program = build_program([src], kit="s32k144", defines=["GPT_NOTIFICATION_3=Us_Notification",
+                                                          "GPT_CHANNEL_MODE_3=GPT_CH_MODE_ONESHOT"])
+    extra = {} if mcu_time is None else {"mcu_time": mcu_time}
+    notified = 1 if mcu_time is not None and "Enable" in enable else 0
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
+                  csv=tmp_path / f"log{isolate}.csv", **extra)
+        assert numbers(r)["deinit"] == [0, 0, notified], isolate
+        assert r.outcome == "controller_error" and "channel 5 has no notification" in r.message, (isolate, r.message)

@@ -159,6 +159,8 @@ static int notified(Gpt_ChannelType c) {
  * mode) if its notification is enabled then; a continuous one's timer runs only to notify. */
 static void notify(int ch) {
     if (is_one_shot((Gpt_ChannelType)ch)) {
+        if (!g.ch[ch].every) return;  /* stopped since it fell due (a call the host still ran, spinner.h): the
+                                       * later call set the channel's state (Gpt_DeInit runs a due one first) */
         g.ch[ch].state = EXPIRED;
         spinner_stop_every(config[ch].fire);
         g.ch[ch].every = 0;
@@ -245,6 +247,9 @@ void Gpt_Init(const Gpt_ConfigType *ConfigPtr) {
 
 void Gpt_DeInit(void) {
     init();
+    if (g.own > 0) (void)spinner_now();  /* with --mcu-time, the code's time before it passes first: an
+                                          * interrupt due in it runs before the channels are reset, as on
+                                          * the board (a stop queued after it would leave it to run after) */
     for (int c = 0; c < NUM_GPT; c++) {
         quiet((Gpt_ChannelType)c);
         g.ch[c].state = INITIALIZED, g.ch[c].notify = 0U;
