@@ -313,3 +313,59 @@ def test_gpt_deinit_after_a_one_shots_expiry_in_code_time_leaves_it_initialized(
                   csv=tmp_path / f"log{isolate}.csv", **extra)
         assert numbers(r)["deinit"] == [0, 0, notified], isolate
         assert r.outcome == "controller_error" and "channel 5 has no notification" in r.message, (isolate, r.message)
+
+
+CODE_TIME = r"""
+#include "Gpt.h"
+#include "OsIf.h"
+#include "spinner.h"
+static volatile uint32 shots;
+void Us_Notification(void) { shots++; }
+int main(void) {
+    Gpt_Init(NULL_PTR);
+    ENABLE;
+    OsIf_TimeDelay(4U);
+    Gpt_StartTimer(3U, 32000U);                   /* one-shot, 4 ms */
+    for (int k = 0; k < NQ; k++) spinner_add_textf("q%d", k);  /* --mcu-time: the code's time */
+    uint32 mismatched = 0, expired_at = 0;
+    for (int k = 1; k <= 5; k++) {                /* interrupts enabled: expired once its interrupt ran */
+        uint32 e = Gpt_GetTimeElapsed(3U);
+        if (NOTIFIED && (e == 32000U) != (shots == 1)) mismatched++;
+        if (e == 32000U && !expired_at) expired_at = k;
+        OsIf_TimeDelay(1U);
+    }
+    Gpt_StartTimer(3U, 32000U);                   /* one-shot, 4 ms */
+    for (int k = 0; k < NQ; k++) spinner_add_textf("r%d", k);
+    OsIf_SuspendAllInterrupts();                  /* (--mcu-time: the code's time passes before it) */
+    uint32 x = Gpt_GetTimeElapsed(3U);
+    Gpt_StartTimer(3U, 32000U);                   /* no time passed in the section: nothing held */
+    OsIf_ResumeAllInterrupts();
+    spinner_add_textf("code %u %u %u", (unsigned)mismatched, (unsigned)expired_at, (unsigned)x);
+    OsIf_TimeDelay(20U);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("enable", ["(void)0", "Gpt_EnableNotification(3U)"])
+@pytest.mark.parametrize("nq", [2, 3])
+def test_with_mcu_time_a_one_shot_expires_in_its_interrupt_when_its_count_reaches_the_target(tmp_path, enable, nq):
+    """--mcu-time 0.0007 charges the kit's own requests too (the timer's spinner_every): the channel
+    counts from the time its interrupt is timed from, so a read that finds it expired (interrupts
+    enabled) finds its interrupt run - the notification called - and a one-shot whose count
+    expired before a critical section is not held in it (no GPT_E_BUSY "until its interrupt has
+    run"). Before, the count ran from before that charge: expired a physics step before its
+    interrupt. Alike in process and isolated."""
+    src = tmp_path / "code_time.c"
+    notified = 1 if "Enable" in enable else 0
+    src.write_text(CODE_TIME.replace("ENABLE;", enable + ";").replace("NQ", str(nq))
+                   .replace("NOTIFIED", str(notified)))
+    program = build_program([src], kit="s32k144", defines=["GPT_NOTIFICATION_3=Us_Notification",
+                                                          "GPT_CHANNEL_MODE_3=GPT_CH_MODE_ONESHOT"])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
+                  csv=tmp_path / f"log{isolate}.csv", mcu_time=0.0007)
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        mismatched, expired_at, _ = numbers(r)["code"]
+        assert mismatched == 0 and expired_at > 0, (isolate, numbers(r))
+        assert not any("until its interrupt has run" in w for w in r.warnings), (isolate, r.warnings)

@@ -280,6 +280,12 @@ void Gpt_StartTimer(Gpt_ChannelType Channel, Gpt_ValueType Value) {
     g.ch[Channel].target = Value;
     g.ch[Channel].state = RUNNING;
     arm(Channel);
+    if (g.ch[Channel].every) {  /* it counts from the time its interrupt is timed from: with --mcu-time the
+                                 * simulator charges the timer's request (spinner_every) before it starts it
+                                 * (else no time passes: the same time, no round trip) */
+        double armed_at = spinner_now();
+        if (g.ch[Channel].state == RUNNING && g.ch[Channel].start_s == now) g.ch[Channel].start_s = armed_at;
+    }
 }
 
 void Gpt_StopTimer(Gpt_ChannelType Channel) {
