@@ -611,3 +611,103 @@ def test_running_counters_read_the_count_at_the_time_of_the_read(tmp_path):
     d3_us, t3 = got["tpm2w"]  # counted from the write
     phase = d3_us * 187500 // 1000000 % 2000
     assert d3_us >= 4000 and t3 == (phase if phase <= 1000 else 2000 - phase), got["tpm2w"]
+
+
+# -- the counters in phase with their interrupts ---------------------------------------------------
+
+IN_PHASE = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+static volatile unsigned n;
+void {handler}(void) {{ {clear}; n++; }}
+int main(void) {{
+    TFC_Init();
+    for (int i = 0; i < {extra}; i++) (void)spinner_get_time();  /* (the --mcu-time charge's phase) */
+    {setup}
+    unsigned prev = 0, wraps = 0, reads = 0, held = 0, bad = 0, bad_wraps = 0, bad_n = 0, bad_p = 0;
+    double bad_at = -1.0;
+    while (reads < 150) {{
+        int masked = reads % 2;              /* every other read in a critical section with a wait */
+        if (masked) __disable_irq();
+        spinner_sleep(0.002);
+        unsigned c = {read}, p = NVIC_GetPendingIRQ({irq}), k = n;
+        if (masked) __enable_irq();
+        if (reads > 0 && ({wrapped})) wraps++;   /* reads are less than a period apart */
+        held += p;
+        if (wraps != k + p && bad++ == 0) bad_at = spinner_now(), bad_wraps = wraps, bad_n = k, bad_p = p;
+        prev = c, reads++;
+    }}
+    spinner_add_textf("reads %u wraps %u n %u held %u bad %u first_bad_at %.4f wraps_then %u n_then %u pending_then %u",
+                      reads, wraps, n, held, bad, bad_at, bad_wraps, bad_n, bad_p);
+    return 0;
+}}
+"""
+# (the vector, its flag's clear, the set-up: a 10-ms period unless said, the IRQ, the counter's read,
+# a reload between two reads: PIT CVAL counts down, LPTMR0 CNR and TPM2 CNT up)
+IN_PHASE_TIMERS = {
+    "pit": dict(handler="PIT_IRQHandler", clear="PIT_TFLG0 = PIT_TFLG_TIF_MASK", irq="PIT_IRQn",
+                setup="""PIT_MCR = 0;
+    PIT_LDVAL0 = 240000 - 1;
+    PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+    NVIC_EnableIRQ(PIT_IRQn);""", read="PIT_CVAL0", wrapped="c > prev"),
+    # a new LDVAL (7 ms -> 9 ms) at the 2nd call, loaded at the next expiry, a physics step before
+    # its handler (21 ms after the start, the handler at 22 ms): the interrupt's new period counts
+    # from the handler, the counter's too
+    "pit_reload": dict(handler="PIT_IRQHandler", irq="PIT_IRQn",
+                       clear="PIT_TFLG0 = PIT_TFLG_TIF_MASK; if (n == 1) PIT_LDVAL0 = 216000 - 1",
+                       setup="""PIT_MCR = 0;
+    PIT_LDVAL0 = 168000 - 1;
+    PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+    NVIC_EnableIRQ(PIT_IRQn);""", read="PIT_CVAL0", wrapped="c > prev"),
+    # a set-up changed (30 ms -> 10 ms) before a wait (the kit looks at NVIC_GetPendingIRQ): the
+    # interrupt starts again with the new period, the counter with it
+    "pit_set_up_twice": dict(handler="PIT_IRQHandler", clear="PIT_TFLG0 = PIT_TFLG_TIF_MASK", irq="PIT_IRQn",
+                             setup="""PIT_MCR = 0;
+    PIT_LDVAL0 = 720000 - 1;
+    PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+    NVIC_EnableIRQ(PIT_IRQn);
+    (void)NVIC_GetPendingIRQ(PIT_IRQn);
+    PIT_LDVAL0 = 240000 - 1;
+    (void)NVIC_GetPendingIRQ(PIT_IRQn);""", read="PIT_CVAL0", wrapped="c > prev"),
+    "lptmr": dict(handler="LPTimer_IRQHandler", clear="LPTMR0_CSR |= LPTMR_CSR_TCF_MASK", irq="LPTimer_IRQn",
+                  setup="""LPTMR0_PSR = LPTMR_PSR_PCS(1) | LPTMR_PSR_PBYP_MASK;  /* the 1 kHz LPO */
+    LPTMR0_CMR = 10 - 1;
+    LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK;
+    NVIC_EnableIRQ(LPTimer_IRQn);""", read="LPTMR0_CNR", wrapped="c < prev"),
+    "tpm2": dict(handler="TPM2_IRQHandler", clear="TPM2_SC |= TPM_SC_TOF_MASK", irq="TPM2_IRQn",
+                 setup="""TPM2_MOD = 30000 - 1;                              /* 24 MHz / 8: 3 MHz */
+    TPM2_SC = TPM_SC_PS(3) | TPM_SC_TOIE_MASK | TPM_SC_CMOD(1);
+    NVIC_EnableIRQ(TPM2_IRQn);""", read="TPM2_CNT", wrapped="c < prev"),
+}
+
+
+@pytest.mark.parametrize("timer", list(IN_PHASE_TIMERS))
+@pytest.mark.parametrize("mcu_time", [0.0013, None])
+def test_a_running_counter_is_in_phase_with_its_interrupt(tmp_path, timer, mcu_time):
+    """A 100-Hz timer's counter, read every 2 to 6 ms (every other read in a critical section with a
+    wait): each reload it shows (a wrap since the read before) is an expiry whose handler has run or
+    is pending (NVIC_GetPendingIRQ) - never one the interrupt has not reached. With --mcu-time the
+    simulator charges the code's time before it starts the timer's interrupt (spinner_every): the
+    counter counts from then too (failed before: the counter started at the kit's look, before that
+    charge, so it reloaded a physics step before its interrupt fell due). With the charge's phase
+    varied (a call more before the set-up); in process and --isolate alike."""
+    regs = IN_PHASE_TIMERS[timer]
+    results = {}
+    for extra in (0, 1):
+        src = tmp_path / f"in_phase_{timer}_{extra}.c"
+        src.write_text(IN_PHASE.format(extra=extra, **regs))
+        program = build_program([src], kit="tfc")
+        for isolate in (False, True):
+            r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=3.0,
+                      mcu_time=mcu_time, csv=tmp_path / "log.csv")
+            assert r.outcome == "controller_returned", r.message
+            text = [part for s in r.log.data_text if s for part in s.split(" | ") if part.startswith("reads")]
+            assert text, r.log.data_text
+            results[extra, isolate] = text[-1]
+    for (extra, isolate), text in results.items():
+        got = dict(zip(text.split()[0::2], text.split()[1::2]))
+        assert got["reads"] == "150" and int(got["wraps"]) >= 25, text
+        assert int(got["held"]) > 0, text  # (some reads found an expiry held by the section)
+    assert all(" bad 0 " in text for text in results.values()), results
+    assert results[0, False] == results[0, True] and results[1, False] == results[1, True], results

@@ -63,6 +63,7 @@ static struct timer {
     unsigned started;       /* the wait at which it started */
     unsigned unrouted;      /* looks in a row at it counting, interrupt on, its IRQ off in the NVIC */
     int flagged;            /* its flag set by an expiry not yet taken (its IRQ was disabled then) */
+    unsigned starts;        /* its interrupt's starts (start) */
 } timers[N_TIMERS] = {
     {"PIT channel 0", fire_pit0, 0, 0, 0, 0, 0}, {"PIT channel 1", fire_pit1, 0, 0, 0, 0, 0},
     {"LPTMR0", fire_lptmr, 0, 0, 0, 0, 0}, {"TPM2", fire_tpm2, 0, 0, 0, 0, 0},
@@ -257,20 +258,11 @@ static void stop(struct timer *t, int source) {
     t->period_s = t->next_period_s = 0.0;
 }
 
-static void start(struct timer *t, double period_s) {
-    if (period_s < 1e-5) {
-        char why[120];
-        snprintf(why, sizeof why, "its period %.3g s is shorter than the simulator's 10 us (a 100 kHz timer)", period_s);
-        cannot(t, why);
-    }
-    spinner_every(period_s, t->fire);
-    t->period_s = period_s, t->next_period_s = 0.0, t->started = waits;
-}
-
 /* The counters, counting simulated time (spinner_now: the time of the program's last call, or a
  * handler's): a counter starts at the look that finds it enabled - a use of LPTMR0, PIT or TPM2 in
  * the program (its accessor, below), the look before a wait or after a handler - which is the time of
- * the write, as the program's code between two calls takes no simulated time. The looks (`look`)
+ * the write, as the program's code between two calls takes no simulated time; one whose interrupt
+ * starts with it counts from the time that interrupt is timed from (start). The looks (`look`)
  * read the time only for a change (a start, a new LDVAL): a running counter's count is made at the
  * program's read, so a running timer costs no round trip per wait. */
 static struct counter {
@@ -280,6 +272,7 @@ static struct counter {
     uint32_t next_load;     /* PIT: a new LDVAL, loaded at next_at_s (RM 32.3.2) */
     double next_at_s;       /* (0: none) */
     uint32_t shown;         /* TPM2: the CNT the kit wrote last (another there: the program wrote it) */
+    int fresh;              /* its count started (or was cleared) since the last look ended (start) */
 } pit_count[2], lptmr_count, tpm2_count;
 
 /* PIT channel ch (RM 32.3 memory map; 32.5.1 timers): while TEN is set and the module enabled (MCR
@@ -297,7 +290,7 @@ static void pit_counter(int ch, int look) {
     if (look && k->on && r->LDVAL == (k->next_at_s > 0.0 ? k->next_load : k->load)) return;
     double now = spinner_now();
     if (!k->on) {
-        k->on = 1, k->start_s = now, k->load = r->LDVAL, k->next_at_s = 0.0;
+        k->on = 1, k->start_s = now, k->load = r->LDVAL, k->next_at_s = 0.0, k->fresh = 1;
     }
     if (k->next_at_s > 0.0 && now >= k->next_at_s) {
         k->start_s = k->next_at_s, k->load = k->next_load, k->next_at_s = 0.0;
@@ -339,7 +332,7 @@ static void lptmr_counter(int look) {
     }
     if (look && k->on) return;
     double now = spinner_now();
-    if (!k->on) k->on = 1, k->start_s = now;
+    if (!k->on) k->on = 1, k->start_s = now, k->fresh = 1;
     uint64_t ticks = (uint64_t)((now - k->start_s) * hz + 1e-6);
     uint64_t wrap = (csr & LPTMR_CSR_TFC_MASK) ? 65536u : (uint64_t)(LPTMR0->CMR & 0xFFFFu) + 1u;
     LPTMR0->CNR = (uint32_t)(ticks % wrap);
@@ -371,7 +364,7 @@ static void tpm2_counter(int look) {
     int cleared = k->on && TPM2->CNT != k->shown;  /* the program wrote CNT */
     if (look && k->on && !cleared) return;
     double now = spinner_now();
-    if (!k->on || cleared) k->on = 1, k->start_s = now;
+    if (!k->on || cleared) k->on = 1, k->start_s = now, k->fresh = 1;
     uint64_t ticks = (uint64_t)((now - k->start_s) * hz + 1e-6);
     if (!(sc & TPM_SC_CPWMS_MASK)) {
         TPM2->CNT = (uint32_t)(ticks % ((uint64_t)mod + 1u));
@@ -387,6 +380,48 @@ static void counters(void) {  /* a look */
     pit_counter(1, 1);
     lptmr_counter(1);
     tpm2_counter(1);
+}
+
+static struct counter *counter_of(int i) {
+    return i == LPTMR ? &lptmr_count : i == TPM_2 ? &tpm2_count : &pit_count[i - PIT0];
+}
+
+static double handler_s = -1.0;  /* the time of the kit's running handler (fire, take; else -1) */
+
+/* Start timer i's interrupt: every period_s from the time the simulator reads the request
+ * (spinner_every). On the board one write (TEN, CMOD) starts the counter and its interrupt, and an
+ * expiry reloads the counter as it interrupts: the counter counts from the interrupt's start too -
+ * one that started (or was cleared) since the last look, or any running one at a `restart` (a new
+ * period: at an expiry, RM 32.3.2; or a set-up changed before time passed). That time is not the
+ * look's: with --mcu-time the simulator charges the code's time before the request, so a counter
+ * left at the look's time (spinner_now) would reload that much before its interrupt fell due - a
+ * program comparing the two, or NVIC_GetPendingIRQ, would see the count past an expiry whose handler
+ * had not run. spinner_now after the request returns the time it was read at: without --mcu-time no
+ * time passed, the same time without a round trip (the look, or the program's use of the timer,
+ * asked it since the last call); with it, one round trip. In the kit's handlers (fire, take) no time
+ * passes and nothing is charged: the handler's time, asked as it starts. A counter that was counting
+ * before its interrupt was enabled (TIE set later) keeps its count. */
+static void start(int i, double period_s, int restart) {
+    struct timer *t = &timers[i];
+    if (period_s < 1e-5) {
+        char why[120];
+        snprintf(why, sizeof why, "its period %.3g s is shorter than the simulator's 10 us (a 100 kHz timer)", period_s);
+        cannot(t, why);
+    }
+    struct counter *k = counter_of(i);
+    int follow = k->on && (k->fresh || restart);
+    spinner_every(period_s, t->fire);
+    t->period_s = period_s, t->next_period_s = 0.0, t->started = waits;
+    unsigned mine = ++t->starts;
+    if (!follow) return;
+    double armed_s = handler_s >= 0.0 ? handler_s : spinner_now();
+    if (!k->on || t->starts != mine) return;  /* (stopped or started again by a handler run meanwhile) */
+    k->start_s = armed_s, k->fresh = 0;
+    if (i == PIT0 || i == PIT1) {  /* the period's LDVAL from the start: one written since it, waiting
+                                    * for the expiry, is the interrupt's new period */
+        if (k->next_at_s > 0.0) k->load = k->next_load;
+        k->next_at_s = 0.0;
+    }
 }
 
 /* The program's LPTMR0, PIT and TPM2 (sim_timers.h): the registers with their counters now. */
@@ -434,14 +469,15 @@ static void sync(void) {
             cannot(t, why);
         }
         if (t->period_s == 0.0) {
-            start(t, period_s);
+            start(i, period_s, 0);
         } else if (period_s != t->period_s && t->started == waits) {  /* no time passed since its start */
             stop(t, 0);
-            start(t, period_s);
+            start(i, period_s, 1);
         } else {
             t->next_period_s = period_s != t->period_s ? period_s : 0.0;
         }
     }
+    for (int i = 0; i < N_TIMERS; i++) counter_of(i)->fresh = 0;  /* (the look is over: start) */
     if (nvic_unpend) {  /* NVIC_ClearPendingIRQ: a stopped timer's kept call does not run (a running
                          * one's source still asserts its IRQ: on the board it is pending again) */
         for (int i = 0; i < N_TIMERS; i++)
@@ -506,21 +542,24 @@ void spinner_kit_before_wait(void) {
     sync();
 }
 
-/* An expiry: the flag set, the handler, the flag cleared; a new period from now on. Its IRQ disabled
- * in the NVIC (or its pending bit handed to the simulator already: one bit), the flag is kept for
- * the take and the bit set instead (ARMv6-M, ARM DDI 0419, B3.4). */
+/* An expiry: a new period from now on (its counter reloaded with it: start), the flag set, the
+ * handler, the flag cleared. Its IRQ disabled in the NVIC (or its pending bit handed to the
+ * simulator already: one bit), the flag is kept for the take and the bit set instead (ARMv6-M, ARM
+ * DDI 0419, B3.4). */
 static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
     struct timer *t = &timers[i];
     double next = t->next_period_s;
+    handler_s = spinner_now();  /* (the handler's time: no round trip) */
     waits++;  /* (time passed since the last look: a change now is a reload, not a set-up) */
+    if (next > 0.0 && t->period_s > 0.0) {
+        stop(t, 0);
+        start(i, next, 1);
+    }
     uint32_t bit = 1u << irq_of(i);
     if (!irq_on(irq_of(i)) || (nvic_handed & bit)) {
         t->flagged = 1;
         if (!(nvic_handed & bit)) nvic_pending |= bit;
-        if (next > 0.0 && t->period_s > 0.0) {
-            stop(t, 0);
-            start(t, next);
-        }
+        handler_s = -1.0;
         return;
     }
     *flag |= mask;
@@ -528,12 +567,9 @@ static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
     handler_of(i)();
     firing = 0, firing_irq = -1;
     *flag &= ~mask;
-    if (next > 0.0 && t->period_s > 0.0) {
-        stop(t, 0);
-        start(t, next);
-    }
     waits++;
     sync();
+    handler_s = -1.0;
 }
 
 static void fire_pit0(void) { fire(PIT0, &PIT->CHANNEL[0].TFLG, PIT_TFLG_TIF_MASK); }
@@ -552,6 +588,7 @@ static volatile uint32_t *flag_of(int i, uint32_t *mask) {
  * taken as done). Pended in software with no expiry, the handler finds no flag set, as on the board. */
 static void take(int irq) {
     uint32_t bit = 1u << irq;
+    handler_s = spinner_now();  /* (the handler's time: no round trip) */
     nvic_handed &= ~bit;
     int first = irq == IRQ_TPM2 ? TPM_2 : irq == IRQ_PIT ? PIT0 : LPTMR;
     int last = irq == IRQ_PIT ? PIT1 : first;
@@ -574,6 +611,7 @@ static void take(int irq) {
     }
     waits++;
     sync();
+    handler_s = -1.0;
 }
 
 static void take_tpm2(void) { take(IRQ_TPM2); }
