@@ -711,3 +711,61 @@ def test_a_running_counter_is_in_phase_with_its_interrupt(tmp_path, timer, mcu_t
         assert int(got["held"]) > 0, text  # (some reads found an expiry held by the section)
     assert all(" bad 0 " in text for text in results.values()), results
     assert results[0, False] == results[0, True] and results[1, False] == results[1, True], results
+
+
+RESTARTED = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+static volatile unsigned n;
+static unsigned count[2];
+static double at[2];
+void {handler}(void) {{ {clear}; if (n < 2) count[n] = {read}, at[n] = spinner_now(); n++; }}
+int main(void) {{
+    TFC_Init();
+    {setup}
+    spinner_sleep(0.004);
+    double t1 = spinner_now();
+    {restart}
+    while (n < 2) spinner_sleep(0.001);
+    spinner_add_textf("restarted %.4f first %.4f %u second %.4f %u", t1, at[0], count[0], at[1], count[1]);
+    return 0;
+}}
+"""
+# (the vector, its flag's clear, a 10-ms set-up, the counter's read, a restart of the counter while
+# its interrupt runs, the count its handler reads at most a physics step after an expiry)
+RESTARTS = {
+    # TEN cleared and set again (the count read between): the channel starts again from LDVAL (RM 32.5.1)
+    "pit_ten": dict(IN_PHASE_TIMERS["pit"], restart="""PIT_TCTRL0 = 0;
+    (void)PIT_CVAL0;
+    PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;""", near=lambda c: c > 240000 - 1 - 24 * 2000),
+    # any write to CNT clears the counter (RM 31.4.3.3): the overflow MOD + 1 counts later
+    "tpm2_cnt": dict(IN_PHASE_TIMERS["tpm2"], restart="TPM2_CNT = 0;", near=lambda c: c < 3 * 2000),
+}
+
+
+@pytest.mark.parametrize("timer", list(RESTARTS))
+@pytest.mark.parametrize("mcu_time", [None, 0.0013])
+def test_a_counter_started_again_while_its_interrupt_runs_takes_the_interrupt_with_it(tmp_path, timer, mcu_time):
+    """A running timer's counter started again (PIT TEN cleared and set, a write to TPM2 CNT) 4 ms
+    into a 10-ms period: its next expiry is a period after that, as on the board, so its handler
+    reads the count just reloaded (failed before: the interrupt kept its old phase, the handler ran
+    6 ms into the new count). In process and --isolate alike."""
+    regs = dict(RESTARTS[timer])
+    near = regs.pop("near")
+    src = tmp_path / f"restarted_{timer}.c"
+    src.write_text(RESTARTED.format(**regs))
+    program = build_program([src], kit="tfc")
+    results = []
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0, mcu_time=mcu_time,
+                  csv=tmp_path / "log.csv")
+        assert r.outcome == "controller_returned", r.message
+        text = [part for s in r.log.data_text if s for part in s.split(" | ") if part.startswith("restarted")]
+        assert text, r.log.data_text
+        results.append(text[-1])
+    assert results[0] == results[1], results
+    v = results[0].split()
+    restarted, first, c1, second, c2 = float(v[1]), float(v[3]), int(v[4]), float(v[6]), int(v[7])
+    assert 0.010 <= first - restarted <= 0.010 + 0.0021 + (mcu_time or 0.0), results
+    assert near(c1) and near(c2) and second - first <= 0.0121, results

@@ -473,6 +473,11 @@ static void sync(void) {
         } else if (period_s != t->period_s && t->started == waits) {  /* no time passed since its start */
             stop(t, 0);
             start(i, period_s, 1);
+        } else if (counter_of(i)->fresh) {  /* its counter started again while it ran (TEN cleared and set,
+                                             * a write to CNT): the interrupt with it, from the start value
+                                             * (the expiry it kept pending, TIF / TOF still set, runs once) */
+            stop(t, 1);
+            start(i, period_s, 1);
         } else {
             t->next_period_s = period_s != t->period_s ? period_s : 0.0;
         }
