@@ -118,8 +118,13 @@ def test_a_timer_set_up_calls_its_handler_at_its_registers_rate(tmp_path, capfd,
     assert r.outcome == "controller_returned", r.message
     n, t_setup, first, last = _ticks(capfd)
     assert n >= 20  # (the last __WFI() may wait out a camera frame)
-    assert first - t_setup == pytest.approx(period_s, abs=0.002)
+    assert first - t_setup == pytest.approx(FIRST_S.get(name, period_s), abs=0.002)
     assert last - first == pytest.approx(19 * period_s, abs=0.002)
+
+
+# the first period where it is not the period: up-down counting's first TOF as the count first turns at
+# MOD, MOD + 1 counts in (RM 31.4.3.2)
+FIRST_S = {"tpm2_updown": 1876 / 187500}
 
 
 def test_a_pit_at_100_hz_calls_its_handler_100_times_a_second(tmp_path, capfd):
@@ -620,6 +625,7 @@ IN_PHASE = """\
 #include "spinner.h"
 #include "TFC\\\\TFC.h"
 static volatile unsigned n;
+{pre}
 void {handler}(void) {{ {clear}; n++; }}
 int main(void) {{
     TFC_Init();
@@ -640,9 +646,29 @@ int main(void) {{
     }}
     spinner_add_textf("reads %u wraps %u n %u held %u bad %u first_bad_at %.4f wraps_then %u n_then %u pending_then %u",
                       reads, wraps, n, held, bad, bad_at, bad_wraps, bad_n, bad_p);
+    spinner_sleep(0.1);  /* (a frame of the log after the text) */
     return 0;
 }}
 """
+# TPM2 counting up and down: its reads, 2 to 6 ms apart (less than MOD = 30000 counts of 3 MHz), tell a
+# turn at the top from the counts the time between them gives
+UPDOWN_READ = """#include <math.h>
+static unsigned tops, tops_seen, last_c;
+static int down;
+static double last_t = -1.0;
+static unsigned read_updown(void) {
+    unsigned c = TPM2_CNT;
+    double t = spinner_now();
+    if (last_t >= 0.0) {
+        double d = (t - last_t) * 3e6;
+        int turn = down ? fabs((double)last_c - c - d) > fabs((double)last_c + c - d)
+                        : fabs((double)c - last_c - d) > fabs(60000.0 - last_c - c - d);
+        if (turn && (down = !down)) tops++;   /* (a turn at the top) */
+    }
+    last_c = c, last_t = t;
+    return c;
+}
+static int topped(void) { int w = tops != tops_seen; tops_seen = tops; return w; }"""
 # (the vector, its flag's clear, the set-up: a 10-ms period unless said, the IRQ, the counter's read,
 # a reload between two reads: PIT CVAL counts down, LPTMR0 CNR and TPM2 CNT up)
 IN_PHASE_TIMERS = {
@@ -679,6 +705,22 @@ IN_PHASE_TIMERS = {
                  setup="""TPM2_MOD = 30000 - 1;                              /* 24 MHz / 8: 3 MHz */
     TPM2_SC = TPM_SC_PS(3) | TPM_SC_TOIE_MASK | TPM_SC_CMOD(1);
     NVIC_EnableIRQ(TPM2_IRQn);""", read="TPM2_CNT", wrapped="c < prev"),
+    # free running (CSR TFC): 65536 counts of MCGIRCLK's 4 MHz (16.384 ms), the flag as CNR passes
+    # CMR = 39999 (the count goes on: the first 10 ms in, RM 33.3.1)
+    "lptmr_tfc": dict(handler="LPTimer_IRQHandler", clear="LPTMR0_CSR |= LPTMR_CSR_TCF_MASK", irq="LPTimer_IRQn",
+                      setup="""MCG_C1 |= MCG_C1_IRCLKEN_MASK; MCG_C2 |= MCG_C2_IRCS_MASK; MCG_SC = MCG_SC_FCRDIV(0);
+    LPTMR0_PSR = LPTMR_PSR_PCS(0) | LPTMR_PSR_PBYP_MASK;
+    LPTMR0_CMR = 40000 - 1;
+    LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK | LPTMR_CSR_TFC_MASK;
+    NVIC_EnableIRQ(LPTimer_IRQn);""", read="LPTMR0_CNR",
+                      wrapped="((40000u - prev) & 0xFFFFu) != 0 && ((40000u - prev) & 0xFFFFu) <= ((c - prev) & 0xFFFFu)",
+                      min_wraps=15),
+    # up-down counting (SC CPWMS): 3 MHz, MOD 30000: up 10 ms, down 10 ms, the flag as the count turns
+    # at the top (RM 31.4.3.2; the first 10 ms in); the reads tell the turns by the time between them
+    "tpm2_updown": dict(handler="TPM2_IRQHandler", clear="TPM2_SC |= TPM_SC_TOF_MASK", irq="TPM2_IRQn",
+                        setup="""TPM2_MOD = 30000;
+    TPM2_SC = TPM_SC_PS(3) | TPM_SC_TOIE_MASK | TPM_SC_CMOD(1) | TPM_SC_CPWMS_MASK;
+    NVIC_EnableIRQ(TPM2_IRQn);""", pre=UPDOWN_READ, read="read_updown()", wrapped="topped()", min_wraps=12),
 }
 
 
@@ -696,7 +738,7 @@ def test_a_running_counter_is_in_phase_with_its_interrupt(tmp_path, timer, mcu_t
     results = {}
     for extra in (0, 1):
         src = tmp_path / f"in_phase_{timer}_{extra}.c"
-        src.write_text(IN_PHASE.format(extra=extra, **regs))
+        src.write_text(IN_PHASE.format(extra=extra, **{"pre": "", **regs}))
         program = build_program([src], kit="tfc")
         for isolate in (False, True):
             r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=3.0,
@@ -707,7 +749,7 @@ def test_a_running_counter_is_in_phase_with_its_interrupt(tmp_path, timer, mcu_t
             results[extra, isolate] = text[-1]
     for (extra, isolate), text in results.items():
         got = dict(zip(text.split()[0::2], text.split()[1::2]))
-        assert got["reads"] == "150" and int(got["wraps"]) >= 25, text
+        assert got["reads"] == "150" and int(got["wraps"]) >= regs.get("min_wraps", 25), text
         assert int(got["held"]) > 0, text  # (some reads found an expiry held by the section)
     assert all(" bad 0 " in text for text in results.values()), results
     assert results[0, False] == results[0, True] and results[1, False] == results[1, True], results
@@ -769,3 +811,134 @@ def test_a_counter_started_again_while_its_interrupt_runs_takes_the_interrupt_wi
     restarted, first, c1, second, c2 = float(v[1]), float(v[3]), int(v[4]), float(v[6]), int(v[7])
     assert 0.010 <= first - restarted <= 0.010 + 0.0021 + (mcu_time or 0.0), results
     assert near(c1) and near(c2) and second - first <= 0.0121, results
+
+
+FIRST_PERIOD = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+static volatile unsigned n;
+static double at[3];
+static unsigned count[3];
+{pre}
+void {handler}(void) {{ {clear}; if (n < 3) at[n] = spinner_now(), count[n] = {read}; n++; }}
+int main(void) {{
+    TFC_Init();
+    double t0 = spinner_now();
+    {setup}
+    while (spinner_now() < t0 + {run}) spinner_sleep(0.001);
+    spinner_add_textf("first %.5f n %u at %.5f %.5f %.5f count %u %u %u", t0, n, at[0], at[1], at[2],
+                      count[0], count[1], count[2]);
+    spinner_sleep(0.1);  /* (a frame of the log after the text) */
+    return 0;
+}}
+"""
+# (the set-up, the run's length s, the first expiry s after the set-up, the regular period s (None:
+# no second within the run), the count the handler reads at the expiry and per second late)
+FIRST_PERIODS = {
+    # free running (CSR TFC) on the 1 kHz LPO: TCF as CNR passes CMR = 99 - 0.1 s in - and then every
+    # 65536 counts (65.5 s), not at the 16-bit wrap alone (RM 33.3.1 CSR TCF, TFC)
+    "lptmr_tfc_lpo": (dict(IN_PHASE_TIMERS["lptmr"], setup="""LPTMR0_PSR = LPTMR_PSR_PCS(1) | LPTMR_PSR_PBYP_MASK;
+    LPTMR0_CMR = 99;
+    LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK | LPTMR_CSR_TFC_MASK;
+    NVIC_EnableIRQ(LPTimer_IRQn);"""), 3.0, 0.1, None, 100, 1e3),
+    # ... on MCGIRCLK's 4 MHz: CMR = 39999, 10 ms in, then every 16.384 ms, the count going on from 40000
+    "lptmr_tfc_fast": (IN_PHASE_TIMERS["lptmr_tfc"], 0.05, 0.01, 65536 / 4e6, 40000, 4e6),
+    # up-down counting (SC CPWMS), MOD 30000 of 3 MHz: TOF as the count turns at the top, MOD + 1
+    # counts in, and every 2 x MOD; the handler reads MOD - 1 going down (RM 31.4.3.2)
+    "tpm2_updown": (dict(IN_PHASE_TIMERS["tpm2_updown"], pre="", read="TPM2_CNT"), 0.06, 30001 / 3e6, 0.02, 29999, -3e6),
+}
+
+
+@pytest.mark.parametrize("timer", list(FIRST_PERIODS))
+@pytest.mark.parametrize("mcu_time", [None, 0.0013])
+def test_an_interrupt_whose_expiry_is_not_at_the_counts_start_has_a_shorter_first_period(tmp_path, timer, mcu_time):
+    """LPTMR0 free running (TFC) interrupts as its count passes CMR, TPM2 counting up and down
+    (CPWMS) as its count turns at MOD: the first expiry CMR + 1 (MOD + 1) counts after the start,
+    then every 65536 (2 x MOD) counts, the counter going on through each (its handler reads CMR + 1,
+    MOD - 1; failed before: the kit interrupted at the 16-bit wrap, at the count's return to 0). In
+    process and --isolate alike."""
+    regs, run, first, period, count, per_s = FIRST_PERIODS[timer]
+    src = tmp_path / f"first_{timer}.c"
+    src.write_text(FIRST_PERIOD.format(run=run, **{"pre": "", **regs}))
+    program = build_program([src], kit="tfc")
+    results = []
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=run + 1.0,
+                  mcu_time=mcu_time, csv=tmp_path / "log.csv")
+        assert r.outcome == "controller_returned", r.message
+        text = [part for s in r.log.data_text if s for part in s.split(" | ") if part.startswith("first")]
+        assert text, r.log.data_text
+        results.append(text[-1])
+    assert results[0] == results[1], results
+    v = results[0].split()
+    t0, n, at, counts = float(v[1]), int(v[3]), [float(x) for x in v[5:8]], [int(x) for x in v[9:12]]
+    late = 0.0021 + 2 * (mcu_time or 0.0)  # (a physics step; the set-up's charged time)
+    assert first - 1e-6 <= at[0] - t0 <= first + late, results
+    if period is None:
+        assert n == 1, results  # (the next 65.5 s later)
+    else:
+        assert n >= 3 and all(abs(at[j + 1] - at[j] - period) <= late for j in (0, 1)), results
+    for j in range(min(n, 3)):  # (read within `late` of the expiry)
+        lo, hi = sorted((count, count + per_s * late))
+        assert lo <= counts[j] <= hi, (j, results)
+
+
+RESHAPED = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\\\\\TFC.h"
+static volatile unsigned n;
+static double at[4];
+static unsigned count[4];
+void {handler}(void) {{ {clear}; if (n < 4) at[n] = spinner_now(), count[n] = {read}; if (n == 1) {{ {change}; }} n++; }}
+int main(void) {{
+    TFC_Init();
+    {setup}
+    while (n < 4) spinner_sleep(0.001);
+    spinner_add_textf("reshaped %.5f %.5f %.5f %.5f count %u %u %u %u", at[0], at[1], at[2], at[3],
+                      count[0], count[1], count[2], count[3]);
+    spinner_sleep(0.1);  /* (a frame of the log after the text) */
+    return 0;
+}}
+"""
+# (the set-up, a change in the 2nd handler, the periods after it: to the 3rd (the old one) and the 4th
+# (from the 3rd expiry's count on, by the new set-up), the counts the 3rd and 4th handlers read)
+RESHAPES = {
+    # MOD 30000 -> 15000 counting up and down: the count goes on down from 29999 - past the new MOD, from
+    # MOD - 1 = 14999 - the next turn at the top a new period later (10 ms)
+    "tpm2_updown_mod": (dict(FIRST_PERIODS["tpm2_updown"][0], change="TPM2_MOD = 15000"), 0.02, 0.01, 14999, 14999),
+    # free running, CMR 39999 -> 19999: from 40000 the count passes the new CMR 45536 counts on (11.384 ms)
+    "lptmr_tfc_cmr": (dict(IN_PHASE_TIMERS["lptmr_tfc"], change="LPTMR0_CMR = 20000 - 1"), 65536 / 4e6,
+                      45536 / 4e6, 40000, 20000),
+    # free running turned off: the count 40000 at the 3rd expiry is 0 in the new cycle of CMR + 1 counts
+    # (the handler reads the counter as the expiry left it), the flag every CMR + 1 counts from there
+    "lptmr_tfc_off": (dict(IN_PHASE_TIMERS["lptmr_tfc"], change="LPTMR0_CSR &= ~LPTMR_CSR_TFC_MASK"), 65536 / 4e6,
+                      0.01, 0, 0),
+}
+
+
+@pytest.mark.parametrize("timer", list(RESHAPES))
+@pytest.mark.parametrize("mcu_time", [None, 0.0013])
+def test_a_new_set_up_while_its_interrupt_runs_takes_effect_at_the_next_expiry_the_count_going_on(
+        tmp_path, timer, mcu_time):
+    """A new CMR or MOD, or free running (TFC) turned off, in a handler: the next expiry still the old
+    set-up's, then the count goes on from that expiry's by the new set-up - the counter and the
+    interrupt together. In process and --isolate alike."""
+    regs, old, new, c3, c4 = RESHAPES[timer]
+    src = tmp_path / f"reshaped_{timer}.c"
+    src.write_text(RESHAPED.format(**regs))
+    program = build_program([src], kit="tfc")
+    results = []
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
+                  mcu_time=mcu_time, csv=tmp_path / "log.csv")
+        assert r.outcome == "controller_returned", r.message
+        text = [part for s in r.log.data_text if s for part in s.split(" | ") if part.startswith("reshaped")]
+        assert text, r.log.data_text
+        results.append(text[-1])
+    assert results[0] == results[1], results
+    v = results[0].split()
+    at, counts = [float(x) for x in v[1:5]], [int(x) for x in v[6:10]]
+    assert abs(at[2] - at[1] - old) <= 0.0021 and abs(at[3] - at[2] - new) <= 0.0021, results
+    assert counts[2] == c3 and counts[3] == c4, results

@@ -5,7 +5,8 @@
  * program waits on (spinner_kit_before_wait, called by the host) - the program's code between two
  * such requests takes no simulated time, so a timer is started at the time of its set-up - and
  * after each handler. A timer that counts with its interrupt enabled expires every period its
- * registers and clock give (spinner_every with a function of the kit); its IRQ enabled in the NVIC,
+ * registers and clock give (spinner_every with a function of the kit; LPTMR0 free running and TPM2
+ * counting up and down first after a shorter period: struct phase); its IRQ enabled in the NVIC,
  * the expiry sets the timer's flag, calls the program's handler of its vector and clears the flag
  * (the handler's write-1-to-clear is taken as done); its IRQ disabled, it sets the NVIC's pending
  * bit instead, which NVIC_EnableIRQ takes (below). Clearing the enable or the interrupt enable stops
@@ -18,6 +19,7 @@
  * crystal, the PLL at 48 MHz, CORE_CLOCK 48 MHz, PERIPHERAL_BUS_CLOCK = CORE_CLOCK / 2), the LPO
  * and the MCG's internal reference. KL25 Sub-Family Reference Manual (KL25P80M48SF0RM) sections
  * beside each number. */
+#include <math.h>
 #include <stdio.h>
 
 #define TFC_SIM_TIMERS_RAW  /* the kit's own uses of the registers: no counter update */
@@ -55,18 +57,27 @@ static void fire_pit1(void);
 static void fire_lptmr(void);
 static void fire_tpm2(void);
 
+struct phase {  /* LPTMR0, TPM2: where in its counter's cycle a timer expires (phase_of) */
+    double cycle, flag_at, hz;
+};
+
 static struct timer {
     const char *name;
     void (*fire)(void);     /* the kit's function spinner_every calls */
     double period_s;        /* the running period (0: not running) */
     double next_period_s;   /* a new one from the next expiry (0: none) */
+    double regular_s;       /* the period its registers give (period_of; the first may be shorter: start) */
+    struct phase ph;        /* LPTMR0, TPM2: its counter's cycle and phase of the expiry while it runs
+                             * (cycle 0: none), which the counter keeps until the interrupt takes a new one */
+    uint32_t flag_count;    /* ... the count there, */
+    int flag_down;          /* ... counting down from it (TPM2, CPWMS) */
     unsigned started;       /* the wait at which it started */
     unsigned unrouted;      /* looks in a row at it counting, interrupt on, its IRQ off in the NVIC */
     int flagged;            /* its flag set by an expiry not yet taken (its IRQ was disabled then) */
     unsigned starts;        /* its interrupt's starts (start) */
 } timers[N_TIMERS] = {
-    {"PIT channel 0", fire_pit0, 0, 0, 0, 0, 0}, {"PIT channel 1", fire_pit1, 0, 0, 0, 0, 0},
-    {"LPTMR0", fire_lptmr, 0, 0, 0, 0, 0}, {"TPM2", fire_tpm2, 0, 0, 0, 0, 0},
+    {.name = "PIT channel 0", .fire = fire_pit0}, {.name = "PIT channel 1", .fire = fire_pit1},
+    {.name = "LPTMR0", .fire = fire_lptmr}, {.name = "TPM2", .fire = fire_tpm2},
 };
 static uint32_t nvic_enabled;  /* the IRQs enabled in the NVIC */
 static unsigned waits;         /* requests the program waited on (time may pass at each) */
@@ -158,7 +169,8 @@ static double pit_period(int ch) {
     return ((double)PIT->CHANNEL[ch].LDVAL + 1.0) / BUS_CLOCK_HZ;
 }
 
-/* The LPTMR in time counter mode: CMR + 1 counts (a free-running counter, CSR TFC: 65536) of its
+/* The LPTMR in time counter mode: CMR + 1 counts (a free-running counter, CSR TFC: 65536, the first
+ * CMR + 1: struct phase) of its
  * clock (RM 33.4.1 PCS: MCGIRCLK, LPO, ERCLK32K, OSCERCLK; chip configuration 3.8.3) divided by
  * 2^(PRESCALE + 1), or not divided with PBYP (RM 33.3.2). */
 static double lptmr_period(void) {
@@ -186,7 +198,8 @@ static double lptmr_period(void) {
     return counts * divide / hz;
 }
 
-/* TPM2's overflow: MOD + 1 counts (up-down counting, CPWMS: 2 x MOD) of the TPM clock (SIM_SOPT2
+/* TPM2's overflow: MOD + 1 counts (up-down counting, CPWMS: 2 x MOD, the first MOD + 1: struct
+ * phase) of the TPM clock (SIM_SOPT2
  * TPMSRC, RM 12.2.3) divided by 2^PS (RM 31.3.1, 31.4.3). */
 static double tpm2_period(void) {
     uint32_t sc = TPM2->SC, cmod = (sc & TPM_SC_CMOD_MASK) >> 3;
@@ -255,7 +268,8 @@ static double period_of(int i) {
 static void stop(struct timer *t, int source) {
     if (source) spinner_stop_every_latched(t->fire);
     else spinner_stop_every(t->fire);
-    t->period_s = t->next_period_s = 0.0;
+    t->period_s = t->next_period_s = t->regular_s = 0.0;
+    t->ph.cycle = 0.0;
 }
 
 /* The counters, counting simulated time (spinner_now: the time of the program's last call, or a
@@ -304,6 +318,16 @@ static void pit_counter(int ch, int look) {
     r->CVAL = k->load - (uint32_t)((uint64_t)ticks % (uint64_t)period);
 }
 
+/* The cycle of LPTMR0's or TPM2's running interrupt (start; NULL: none): its counter counts by it, the
+ * registers' new CMR, MOD, TFC, CPWMS or clock taking effect with the interrupt's, at its next expiry
+ * (fire: the counter goes on from the expiry's count; on the board TPM MOD is buffered up to that
+ * expiry, RM 31.4.8.1 MOD register update, and the LPTMR's CSR, PSR and CMR are to be changed with
+ * the timer disabled or, CMR, with TCF set: RM 33.3 register descriptions). (A MOD = 1 up-down cycle counts as up counting's: 0, 1, 0, 1.) */
+static const struct phase *held_phase(int i) {
+    const struct timer *t = &timers[i];
+    return t->period_s > 0.0 && t->ph.cycle > 0.0 ? &t->ph : NULL;
+}
+
 /* LPTMR0's count rate (RM 33.4.1 PCS, 33.3.2 PSR), 0 where it would not count. */
 static double lptmr_count_hz(void) {
     uint32_t psr = LPTMR0->PSR;
@@ -333,8 +357,11 @@ static void lptmr_counter(int look) {
     if (look && k->on) return;
     double now = spinner_now();
     if (!k->on) k->on = 1, k->start_s = now, k->fresh = 1;
+    const struct phase *held = held_phase(LPTMR);
+    if (held) hz = held->hz;
     uint64_t ticks = (uint64_t)((now - k->start_s) * hz + 1e-6);
-    uint64_t wrap = (csr & LPTMR_CSR_TFC_MASK) ? 65536u : (uint64_t)(LPTMR0->CMR & 0xFFFFu) + 1u;
+    uint64_t wrap = held ? (uint64_t)held->cycle
+                         : (csr & LPTMR_CSR_TFC_MASK) ? 65536u : (uint64_t)(LPTMR0->CMR & 0xFFFFu) + 1u;
     LPTMR0->CNR = (uint32_t)(ticks % wrap);
 }
 
@@ -365,8 +392,11 @@ static void tpm2_counter(int look) {
     if (look && k->on && !cleared) return;
     double now = spinner_now();
     if (!k->on || cleared) k->on = 1, k->start_s = now, k->fresh = 1;
+    const struct phase *held = held_phase(TPM_2);
+    int updown = (sc & TPM_SC_CPWMS_MASK) != 0;
+    if (held) hz = held->hz, updown = held->flag_at != 0.0, mod = (uint32_t)(updown ? held->cycle / 2 : held->cycle - 1);
     uint64_t ticks = (uint64_t)((now - k->start_s) * hz + 1e-6);
-    if (!(sc & TPM_SC_CPWMS_MASK)) {
+    if (!updown) {
         TPM2->CNT = (uint32_t)(ticks % ((uint64_t)mod + 1u));
     } else {
         uint64_t p = mod ? ticks % (2u * (uint64_t)mod) : 0u;
@@ -386,6 +416,53 @@ static struct counter *counter_of(int i) {
     return i == LPTMR ? &lptmr_count : i == TPM_2 ? &tpm2_count : &pit_count[i - PIT0];
 }
 
+/* Where in its counter's cycle a timer expires (LPTMR0 and TPM2; the PIT expires as CVAL reloads):
+ * the cycle (counts), the phase of the expiry in it (counts from the counter's start value), the
+ * counts' rate. LPTMR0 (RM 33.3.1 CSR: TCF set when CNR equals CMR and CNR increments; TFC 0 "CNR
+ * is reset whenever TCF is set", 1 "CNR is reset on overflow"):
+ * CMR + 1 counts, its flag as the count goes back to 0; free running (TFC), 65536 counts with its
+ * flag as the count passes CMR - first CMR + 1 counts after the start, then every 65536. TPM2 (RM
+ * 31.4.3.1 up counting: TOF as the counter changes from MOD to 0; 31.4.3.2 up-down counting, CPWMS:
+ * "the TOF bit is set when the TPM counter changes from MOD to (MOD - 1)", a period of 2 x MOD):
+ * MOD + 1 counts, its flag at 0; up-down, 2 x MOD counts with its flag MOD + 1 counts in, the count
+ * MOD - 1 going down. An interrupt whose expiry is not where the count starts has a shorter first
+ * period (start). */
+static int phase_of(int i, struct phase *f) {
+    if (i == LPTMR) {
+        uint32_t cmr = LPTMR0->CMR & 0xFFFFu;
+        f->hz = lptmr_count_hz();
+        f->cycle = (LPTMR0->CSR & LPTMR_CSR_TFC_MASK) ? 65536.0 : (double)cmr + 1.0;
+        f->flag_at = (LPTMR0->CSR & LPTMR_CSR_TFC_MASK) ? (double)((cmr + 1u) & 0xFFFFu) : 0.0;
+    } else if (i == TPM_2) {
+        uint32_t sc = TPM2->SC, mod = TPM2->MOD & 0xFFFFu;
+        f->hz = tpm_clock_hz() / (double)(1u << (sc & TPM_SC_PS_MASK));
+        f->cycle = (sc & TPM_SC_CPWMS_MASK) ? 2.0 * mod : (double)mod + 1.0;
+        f->flag_at = (sc & TPM_SC_CPWMS_MASK) && mod > 1u ? (double)mod + 1.0 : 0.0;
+    } else {
+        return 0;
+    }
+    return f->hz > 0.0 && f->cycle > 0.0;
+}
+
+/* The count at phase p of the cycle (its direction: TPM2 up-down), and back. */
+static uint32_t count_at(int i, double p, int *down) {
+    uint32_t c = (uint32_t)(p + 1e-6), mod = TPM2->MOD & 0xFFFFu;
+    *down = i == TPM_2 && (TPM2->SC & TPM_SC_CPWMS_MASK) && c > mod;
+    return *down ? 2u * mod - c : c;
+}
+
+static double phase_at(int i, const struct phase *f, uint32_t c, int down) {
+    if (i == TPM_2 && (TPM2->SC & TPM_SC_CPWMS_MASK)) {
+        uint32_t mod = TPM2->MOD & 0xFFFFu;
+        if (c >= mod) {  /* (a count at or past a new, smaller MOD: going down from its top) */
+            if (!down || mod < 2u) return fmod((double)mod, f->cycle);
+            c = mod - 1u;
+        }
+        return down && c > 0u ? 2.0 * mod - c : (double)c;
+    }
+    return fmod((double)c, f->cycle);
+}
+
 static double handler_s = -1.0;  /* the time of the kit's running handler (fire, take; else -1) */
 
 /* Start timer i's interrupt: every period_s from the time the simulator reads the request
@@ -399,9 +476,18 @@ static double handler_s = -1.0;  /* the time of the kit's running handler (fire,
  * had not run. spinner_now after the request returns the time it was read at: without --mcu-time no
  * time passed, the same time without a round trip (the look, or the program's use of the timer,
  * asked it since the last call); with it, one round trip. In the kit's handlers (fire, take) no time
- * passes and nothing is charged: the handler's time, asked as it starts. A counter that was counting
- * before its interrupt was enabled (TIE set later) keeps its count. */
-static void start(int i, double period_s, int restart) {
+ * passes and nothing is charged: the handler's time, asked as it starts. A PIT counter that was
+ * counting before its interrupt was enabled (TIE set later) keeps its count.
+ *
+ * LPTMR0 and TPM2 expire at a phase of their counter's cycle (struct phase): the interrupt's first
+ * period runs from the counter's phase to it - from the start value, CMR + 1 counts free running
+ * (TFC), MOD + 1 counting up and down (CPWMS) - and the regular period_s from that expiry on
+ * (next_period_s: fire starts it again `at_expiry`). The counter keeps its count at an expiry (no
+ * reload in those modes): at_expiry it goes on from the count of the expiry (flag_count: CMR + 1,
+ * MOD - 1 going down; 0 in the reloading modes), at the phase that count has in the registers' cycle
+ * now (a CMR, MOD or mode changed since takes effect there, as a new period does); a counter counting
+ * before its interrupt was enabled keeps its phase, the interrupt timed from it. */
+static void start(int i, double period_s, int restart, int at_expiry) {
     struct timer *t = &timers[i];
     if (period_s < 1e-5) {
         char why[120];
@@ -409,19 +495,38 @@ static void start(int i, double period_s, int restart) {
         cannot(t, why);
     }
     struct counter *k = counter_of(i);
-    int follow = k->on && (k->fresh || restart);
-    spinner_every(period_s, t->fire);
-    t->period_s = period_s, t->next_period_s = 0.0, t->started = waits;
+    struct phase f;
+    int phased = phase_of(i, &f) && k->on;
+    int follow = phased || (k->on && (k->fresh || restart));
+    double lead = 0.0, first_s = period_s;  /* (the counter's phase at the start, counts) */
+    if (phased) {
+        if (at_expiry) lead = phase_at(i, &f, t->flag_count, t->flag_down);
+        else if (!k->fresh && !restart) lead = fmod((spinner_now() - k->start_s) * f.hz + 1e-6, f.cycle);
+        double first = fmod(f.flag_at - lead + f.cycle, f.cycle);
+        if (first > 1e-6 && f.cycle - first > 1e-6) first_s = fmax(first / f.hz, 1e-5);
+        t->ph = f;
+        t->flag_count = count_at(i, f.flag_at, &t->flag_down);
+    }
+    spinner_every(first_s, t->fire);
+    t->period_s = first_s, t->regular_s = period_s, t->started = waits;
+    t->next_period_s = first_s != period_s ? period_s : 0.0;
     unsigned mine = ++t->starts;
     if (!follow) return;
     double armed_s = handler_s >= 0.0 ? handler_s : spinner_now();
     if (!k->on || t->starts != mine) return;  /* (stopped or started again by a handler run meanwhile) */
-    k->start_s = armed_s, k->fresh = 0;
+    k->start_s = armed_s - (phased ? lead / f.hz : 0.0), k->fresh = 0;
     if (i == PIT0 || i == PIT1) {  /* the period's LDVAL from the start: one written since it, waiting
                                     * for the expiry, is the interrupt's new period */
         if (k->next_at_s > 0.0) k->load = k->next_load;
         k->next_at_s = 0.0;
     }
+}
+
+/* A running timer's registers give another interrupt than its own: a new period, or (LPTMR0, TPM2)
+ * another phase of the counter to expire at. */
+static int reshaped(int i, double period_s) {
+    struct phase f;
+    return period_s != timers[i].regular_s || (phase_of(i, &f) && f.flag_at != timers[i].ph.flag_at);
 }
 
 /* The program's LPTMR0, PIT and TPM2 (sim_timers.h): the registers with their counters now. */
@@ -469,17 +574,17 @@ static void sync(void) {
             cannot(t, why);
         }
         if (t->period_s == 0.0) {
-            start(i, period_s, 0);
-        } else if (period_s != t->period_s && t->started == waits) {  /* no time passed since its start */
+            start(i, period_s, 0, 0);
+        } else if (reshaped(i, period_s) && t->started == waits) {  /* no time passed since its start */
             stop(t, 0);
-            start(i, period_s, 1);
+            start(i, period_s, 1, 0);
         } else if (counter_of(i)->fresh) {  /* its counter started again while it ran (TEN cleared and set,
                                              * a write to CNT): the interrupt with it, from the start value
                                              * (the expiry it kept pending, TIF / TOF still set, runs once) */
             stop(t, 1);
-            start(i, period_s, 1);
-        } else {
-            t->next_period_s = period_s != t->period_s ? period_s : 0.0;
+            start(i, period_s, 1, 0);
+        } else {  /* (a first period running: the regular one next) */
+            t->next_period_s = reshaped(i, period_s) || period_s != t->period_s ? period_s : 0.0;
         }
     }
     for (int i = 0; i < N_TIMERS; i++) counter_of(i)->fresh = 0;  /* (the look is over: start) */
@@ -558,7 +663,7 @@ static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
     waits++;  /* (time passed since the last look: a change now is a reload, not a set-up) */
     if (next > 0.0 && t->period_s > 0.0) {
         stop(t, 0);
-        start(i, next, 1);
+        start(i, next, 1, 1);
     }
     uint32_t bit = 1u << irq_of(i);
     if (!irq_on(irq_of(i)) || (nvic_handed & bit)) {
