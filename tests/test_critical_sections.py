@@ -962,3 +962,37 @@ def test_nvic_get_pending_irq_in_a_handler_reports_another_irq_due_after_it(tmp_
     for isolate in (False, True):
         r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
         assert r.outcome == "controller_error" and re.search(r"status 12\b", r.message), (isolate, r.message)
+
+
+ISR_HELD = textwrap.dedent("""\
+    #include "derivative.h"
+    #include "TFC/TFC.h"
+    volatile int ticks;
+    void PIT_IRQHandler(void) { ticks++; }
+    int main(void) {
+        TFC_Init();
+        for (int k = 0; k < 3; k++) TFC_Task();
+        int before = ticks;
+        __disable_irq();
+        if (NVIC_GetPendingIRQ(PIT_IRQn)) return 99;           /* no time passed while masked: none */
+        for (int k = 0; k < 4; k++) TFC_Task();                /* its calls held: one pending bit */
+        int inside = NVIC_GetPendingIRQ(PIT_IRQn);
+        __enable_irq();
+        int at_unmask = ticks - before, after = NVIC_GetPendingIRQ(PIT_IRQn);
+        return 1 + 100 * inside + 10 * after + at_unmask;
+    }
+    """)
+
+
+@pytest.mark.parametrize("mcu_time", [None, 0.0005])
+def test_nvic_get_pending_irq_reports_a_held_call_of_a_vector_isr_runs(tmp_path, mcu_time):
+    """--isr PIT_IRQHandler@1000 (the kit leaves the vector to --isr): its calls held by
+    __disable_irq read as the IRQ's pending bit (ARMv6-M, ARM DDI 0419, B3.4), it runs once at the
+    unmask, and reads 0 after. In process and isolated."""
+    src = tmp_path / "isr_held.c"
+    src.write_text(ISR_HELD)
+    program = with_isrs(build_program([str(src)], kit="tfc"), [("PIT_IRQHandler", 0.001)])
+    extra = {} if mcu_time is None else {"mcu_time": mcu_time}
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, **extra)
+        assert r.outcome == "controller_error" and re.search(r"status 102\b", r.message), (isolate, r.message)

@@ -642,6 +642,8 @@ uint32_t tfc_sim_nvic_pending(int irq) {
         if (irq_of(i) != irq) continue;
         if (firing && ((nvic_unpend >> irq) & 1u) && !armed(i)) continue;  /* (cleared after the handler) */
         if (spinner_every_pending(timers[i].fire)) return 1u;
+        /* a vector --isr runs (the kit left its timer to it): the simulator holds the vector's own call */
+        if (spinner_has_every(handler_of(i)) && spinner_every_pending(handler_of(i))) return 1u;
     }
     return 0u;
 }
