@@ -619,6 +619,20 @@ def test_running_counters_read_the_count_at_the_time_of_the_read(tmp_path):
 
 
 # -- the counters in phase with their interrupts ---------------------------------------------------
+def _last_text_both_hosts(program, prefix: str, csv, *, time_limit_s: float, mcu_time) -> list[str]:
+    """Drive ``program`` in process and --isolate (on the floor): the last text line starting with
+    ``prefix`` each logged, in that order."""
+    texts = []
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=time_limit_s,
+                  mcu_time=mcu_time, csv=csv)
+        assert r.outcome == "controller_returned", r.message
+        text = [part for s in r.log.data_text if s for part in s.split(" | ") if part.startswith(prefix)]
+        assert text, r.log.data_text
+        texts.append(text[-1])
+    return texts
+
+
 
 IN_PHASE = """\
 #include "derivative.h"
@@ -740,13 +754,8 @@ def test_a_running_counter_is_in_phase_with_its_interrupt(tmp_path, timer, mcu_t
         src = tmp_path / f"in_phase_{timer}_{extra}.c"
         src.write_text(IN_PHASE.format(extra=extra, **{"pre": "", **regs}))
         program = build_program([src], kit="tfc")
-        for isolate in (False, True):
-            r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=3.0,
-                      mcu_time=mcu_time, csv=tmp_path / "log.csv")
-            assert r.outcome == "controller_returned", r.message
-            text = [part for s in r.log.data_text if s for part in s.split(" | ") if part.startswith("reads")]
-            assert text, r.log.data_text
-            results[extra, isolate] = text[-1]
+        texts = _last_text_both_hosts(program, "reads", tmp_path / "log.csv", time_limit_s=3.0, mcu_time=mcu_time)
+        results[extra, False], results[extra, True] = texts
     for (extra, isolate), text in results.items():
         got = dict(zip(text.split()[0::2], text.split()[1::2]))
         assert got["reads"] == "150" and int(got["wraps"]) >= regs.get("min_wraps", 25), text
@@ -798,14 +807,8 @@ def test_a_counter_started_again_while_its_interrupt_runs_takes_the_interrupt_wi
     src = tmp_path / f"restarted_{timer}.c"
     src.write_text(RESTARTED.format(**regs))
     program = build_program([src], kit="tfc")
-    results = []
-    for isolate in (False, True):
-        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0, mcu_time=mcu_time,
-                  csv=tmp_path / "log.csv")
-        assert r.outcome == "controller_returned", r.message
-        text = [part for s in r.log.data_text if s for part in s.split(" | ") if part.startswith("restarted")]
-        assert text, r.log.data_text
-        results.append(text[-1])
+    results = _last_text_both_hosts(program, "restarted", tmp_path / "log.csv", time_limit_s=1.0,
+                                    mcu_time=mcu_time)
     assert results[0] == results[1], results
     v = results[0].split()
     restarted, first, c1, second, c2 = float(v[1]), float(v[3]), int(v[4]), float(v[6]), int(v[7])
@@ -862,14 +865,8 @@ def test_an_interrupt_whose_expiry_is_not_at_the_counts_start_has_a_shorter_firs
     src = tmp_path / f"first_{timer}.c"
     src.write_text(FIRST_PERIOD.format(run=run, **{"pre": "", **regs}))
     program = build_program([src], kit="tfc")
-    results = []
-    for isolate in (False, True):
-        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=run + 1.0,
-                  mcu_time=mcu_time, csv=tmp_path / "log.csv")
-        assert r.outcome == "controller_returned", r.message
-        text = [part for s in r.log.data_text if s for part in s.split(" | ") if part.startswith("first")]
-        assert text, r.log.data_text
-        results.append(text[-1])
+    results = _last_text_both_hosts(program, "first", tmp_path / "log.csv", time_limit_s=run + 1.0,
+                                    mcu_time=mcu_time)
     assert results[0] == results[1], results
     v = results[0].split()
     t0, n, at, counts = float(v[1]), int(v[3]), [float(x) for x in v[5:8]], [int(x) for x in v[9:12]]
@@ -929,14 +926,8 @@ def test_a_new_set_up_while_its_interrupt_runs_takes_effect_at_the_next_expiry_t
     src = tmp_path / f"reshaped_{timer}.c"
     src.write_text(RESHAPED.format(**regs))
     program = build_program([src], kit="tfc")
-    results = []
-    for isolate in (False, True):
-        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
-                  mcu_time=mcu_time, csv=tmp_path / "log.csv")
-        assert r.outcome == "controller_returned", r.message
-        text = [part for s in r.log.data_text if s for part in s.split(" | ") if part.startswith("reshaped")]
-        assert text, r.log.data_text
-        results.append(text[-1])
+    results = _last_text_both_hosts(program, "reshaped", tmp_path / "log.csv", time_limit_s=1.0,
+                                    mcu_time=mcu_time)
     assert results[0] == results[1], results
     v = results[0].split()
     at, counts = [float(x) for x in v[1:5]], [int(x) for x in v[6:10]]
