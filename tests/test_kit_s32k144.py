@@ -3,6 +3,7 @@
 hbridge.h, linear_camera.h, display.h ... and drives."""
 from __future__ import annotations
 
+import dataclasses
 import textwrap
 from pathlib import Path
 
@@ -337,3 +338,44 @@ def test_firmware_reads_encoders_and_the_imu_through_spinner_h(tmp_path):
     car.write_text("[encoders]\n[imu]\n")
     r = drive(firmware([src]), track="floor", car=car, time_limit_s=5.0)
     assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+
+
+def test_a_cpp_firmware_builds_against_the_kit(tmp_path, capfd):
+    """A team's C++ sources (main.cpp) build against the kit's headers without a warning, as in
+    the sample's C++-ready headers (extern "C"): the sample's two DisplayInit versions (one
+    argument, two), the RTD's Pwm_SetDutyCycle and Dio calls made directly (C linkage: a C++
+    call of a mangled name would not link), a Gpt notification defined extern "C"; it runs
+    alike in process and isolated."""
+    src = probe(tmp_path, """\
+        #include <cstdio>
+        #include "Mcal.h"
+        #include "Pwm.h"
+        #include "Dio.h"
+        #include "Gpt.h"
+        #include "OsIf.h"
+        #include "servo.h"
+        #include "display.h"
+        static volatile int calls;
+        extern "C" void Control_Notification(void) { calls++; }
+        int main() {
+            DisplayInit(0U, STD_ON);             /* the sample's later, two-argument version */
+            DisplayInit(STD_ON);                 /* and its first */
+            ServoInit(1U, 3300U, 1700U, 2500U);
+            Pwm_SetDutyCycle(1U, 3300U);         /* the servo's channel, written directly: full right */
+            Dio_WriteChannel(97U, STD_HIGH);
+            Gpt_StartTimer(2U, 80000U);          /* 10 ms of 8 MHz */
+            Gpt_EnableNotification(2U);
+            OsIf_TimeDelay(100U);
+            std::printf("cpp %u %d\\n", (unsigned)Dio_ReadChannel(97U), (int)calls);
+            return 0;
+        }
+        """, "main.cpp")
+    program = firmware([src], defines=["GPT_NOTIFICATION_2=Control_Notification"])
+    assert program.warnings == "", program.warnings
+    for isolate in (False, True):
+        capfd.readouterr()
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0)
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        assert capfd.readouterr().out.split("cpp ")[1].split()[:2] == ["1", "10"], isolate
+        assert np.allclose(r.log.steer_cmd_rad[r.log.t_s > 0.05], -0.40), isolate  # full right
+

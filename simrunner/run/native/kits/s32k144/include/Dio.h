@@ -8,8 +8,14 @@
 
 typedef uint16 Dio_ChannelType;
 typedef uint8 Dio_LevelType;
+#ifdef __cplusplus
+extern "C" {
+#endif
 
 void Dio_WriteChannel(Dio_ChannelType ChannelId, Dio_LevelType Level);
 Dio_LevelType Dio_ReadChannel(Dio_ChannelType ChannelId);
 Dio_LevelType Dio_FlipChannel(Dio_ChannelType ChannelId);
+#ifdef __cplusplus
+}
+#endif
 #endif

@@ -14,6 +14,12 @@ typedef uint8 Pwm_ChannelType;
 typedef uint16 Pwm_PeriodType;
 typedef enum { PWM_RISING_EDGE = 1, PWM_FALLING_EDGE = 2, PWM_BOTH_EDGES = 3 } Pwm_EdgeNotificationType;
 #define PWM_DUTY_100_PERCENT 0x8000U
+#ifdef __cplusplus
+extern "C" {
+#endif
 
 void Pwm_SetDutyCycle(Pwm_ChannelType ChannelNumber, uint16 DutyCycle);
+#ifdef __cplusplus
+}
+#endif
 #endif

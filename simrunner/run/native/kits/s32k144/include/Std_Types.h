@@ -8,7 +8,9 @@
  * them, instead of at load time (docs/firmware.md, "The S32K144 kit"). */
 #ifndef NXPCUP_SIM_STD_TYPES_H
 #define NXPCUP_SIM_STD_TYPES_H
+#ifndef __cplusplus  /* C++ has no implicit declarations: an undeclared call is an error already */
 #pragma GCC diagnostic error "-Wimplicit-function-declaration"
+#endif
 #include "Platform_Types.h"
 
 typedef uint8 Std_ReturnType;

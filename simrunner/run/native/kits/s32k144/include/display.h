@@ -11,7 +11,7 @@
  * the graph (as a processed image line) in the video (when one is written; no I2C time
  * passes). DisplayVector and RotateFontmap do nothing.
  *
- * DisplayInit is declared without a prototype: the sample's first version takes
+ * DisplayInit is declared without a prototype (in C++: a defaulted second argument): the sample's first version takes
  * (FontmapRotation), its later one (I2cChannel, FontmapRotation); both calls build. */
 #ifndef DISPLAY_H
 #define DISPLAY_H
@@ -34,7 +34,14 @@ void DisplayGraph(uint8 DisplayLine, uint8 Values[128], uint16 ValuesCount, uint
 void DisplayVector(Vector VectorCoordinates);
 void DisplayClear(void);
 void RotateFontmap(void);
+#ifdef __cplusplus
+/* C++ has no declaration without a prototype (DisplayInit() is DisplayInit(void) there): both
+ * versions' calls, DisplayInit(FontmapRotation) and DisplayInit(I2cChannel, FontmapRotation),
+ * build against a second argument's default (the kit reads neither) */
+void DisplayInit(uint8 I2cChannel, uint8 FontmapRotation = 0U);
+#else
 void DisplayInit();
+#endif
 
 #ifdef __cplusplus
 }
