@@ -379,3 +379,32 @@ def test_a_cpp_firmware_builds_against_the_kit(tmp_path, capfd):
         assert capfd.readouterr().out.split("cpp ")[1].split()[:2] == ["1", "10"], isolate
         assert np.allclose(r.log.steer_cmd_rad[r.log.t_s > 0.05], -0.40), isolate  # full right
 
+
+@pytest.mark.parametrize("mirrored", [False, True])
+def test_a_mirrored_servo_calibration_steers_as_servo_init_says(tmp_path, mirrored):
+    """ServoInit(ch, Max, Min, Med) names the pulse of full right (Max) and full left (Min),
+    whichever is the shorter: a team whose linkage is mirrored passes Max < Med < Min, and the
+    sample's Steer() goes from Med towards Max for + and towards Min for - (src/servo.c:
+    Med + Direction * (Max - Med) / 100; Med - Direction * (Min - Med) / 100), so Steer(50) is
+    half right, SteerLeft() full left either way (was: a mirrored calibration steered 0)."""
+    mx, mn = ("1700U", "3300U") if mirrored else ("3300U", "1700U")
+    src = probe(tmp_path, f"""\
+        #include "servo.h"
+        #include "OsIf.h"
+        int main(void) {{
+            ServoInit(1U, {mx}, {mn}, 2500U);
+            Steer(50);
+            OsIf_TimeDelay(100U);
+            SteerLeft();
+            OsIf_TimeDelay(100U);
+            Steer(-250);
+            OsIf_TimeDelay(100U);
+            return 0;
+        }}
+        """)
+    r = drive(firmware([src]), track="floor", time_limit_s=1.0)
+    assert r.outcome == "controller_returned", r.message
+    t, steer = r.log.t_s, r.log.steer_cmd_rad
+    assert np.allclose(steer[(t > 0.01) & (t < 0.09)], -0.20)   # half right
+    assert np.allclose(steer[(t > 0.11) & (t < 0.19)], 0.40)    # full left
+    assert np.allclose(steer[(t > 0.21) & (t < 0.29)], 0.40)    # Steer clamps at -100: full left

@@ -81,10 +81,15 @@ static void read_params(void) {
     k.osif_hz = spinner_param("s32k_osif_hz", 48e6);  /* the default: OsIf.h says whose */
 }
 
-/* -1 .. 1 of a pulse between its calibrated ends (+ towards hi), 0 at mid. */
+/* -1 .. 1 of a pulse between its calibrated ends (+ towards hi, - towards lo), 0 at mid. The ends
+ * may lie either side of mid: a mirrored servo's ServoInit passes Max < Med < Min, and the sample's
+ * Steer still goes from Med towards Max for + and towards Min for - (src/servo.c: Med + Direction *
+ * (Max - Med) / 100, Med - Direction * (Min - Med) / 100). */
 static double position(uint16 duty, uint16 lo, uint16 mid, uint16 hi) {
-    if (duty >= mid) return hi > mid ? clamp((double)(duty - mid) / (hi - mid), 0.0, 1.0) : 0.0;
-    return mid > lo ? -clamp((double)(mid - duty) / (mid - lo), 0.0, 1.0) : 0.0;
+    double d = (double)duty - mid, to_hi = (double)hi - mid, to_lo = (double)lo - mid;
+    if (to_hi != 0.0 && d * to_hi > 0.0) return clamp(d / to_hi, 0.0, 1.0);
+    if (to_lo != 0.0 && d * to_lo > 0.0) return -clamp(d / to_lo, 0.0, 1.0);
+    return 0.0;
 }
 
 static double motor_duty(Pwm_ChannelType channel, Dio_ChannelType fwd, Dio_ChannelType bwd) {

@@ -13,7 +13,8 @@
  * MinDutyCycle, SteerStraight() MedDutyCycle: positive = right, as the guide says.
  *
  * On the simulated car the servo is calibrated as ServoInit says: MedDutyCycle is straight
- * ahead, MaxDutyCycle full right, MinDutyCycle full left; full is --param s32k_servo_rad
+ * ahead, MaxDutyCycle full right, MinDutyCycle full left (either the longer pulse: a mirrored
+ * linkage passes Max < Med < Min); full is --param s32k_servo_rad
  * (default 0.40 rad, the default car's limit; negative if your linkage turns the other way),
  * plus --param s32k_servo_offset_rad. A duty beyond the calibrated ends is held at them. */
 #ifndef SERVO_H
