@@ -408,3 +408,35 @@ def test_a_mirrored_servo_calibration_steers_as_servo_init_says(tmp_path, mirror
     assert np.allclose(steer[(t > 0.01) & (t < 0.09)], -0.20)   # half right
     assert np.allclose(steer[(t > 0.11) & (t < 0.19)], 0.40)    # full left
     assert np.allclose(steer[(t > 0.21) & (t < 0.29)], 0.40)    # Steer clamps at -100: full left
+
+
+def test_the_display_writes_values_and_text_as_the_samples_driver(tmp_path):
+    """DisplayValue writes the number from TextOffset on, left-aligned, and blanks the rest of
+    its TextLength (the sample's src/display.c: the digits first, then ' '); a number longer
+    than TextLength shows its first TextLength characters. DisplayText writes TextLength
+    characters: those past the string's end are blank (its NUL is the font's blank glyph), not
+    what the screen held. Alike in process and isolated."""
+    src = probe(tmp_path, """\
+        #include "display.h"
+        #include "OsIf.h"
+        int main(void) {
+            DisplayInit(0U, STD_OFF);
+            DisplayText(0U, "################", 16U, 0U);
+            DisplayValue(0U, 42, 4U, 0U);
+            DisplayValue(0U, -42, 5U, 5U);
+            DisplayValue(0U, 0, 3U, 11U);
+            DisplayValue(1U, 123456, 3U, 0U);
+            DisplayText(2U, "speed", 5U, 0U);
+            DisplayText(2U, "ok", 5U, 0U);
+            DisplayRefresh();
+            OsIf_TimeDelay(40U);
+            return 0;
+        }
+        """)
+    program = firmware([src])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
+                  csv=tmp_path / f"log{isolate}.csv")
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        text = [s for s in r.log.data_text if s][-1].split(" | ")
+        assert text[:3] == ["42  #-42  #0  ##", "123             ", "ok              "], (isolate, text)

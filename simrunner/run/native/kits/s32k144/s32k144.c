@@ -292,16 +292,24 @@ void DisplayClear(void) {
     k.graph_len = 0;
 }
 
+/* TextLength characters from TextOffset, as the sample's src/display.c draws them: those past the
+ * string's end blank (its NUL is the font's blank glyph; the driver reads on past it, into memory
+ * that is not the string's: the kit shows blanks), not what the screen held. */
 void DisplayText(uint16 DisplayLine, const char *Text, uint16 TextLength, uint16 TextOffset) {
     if (DisplayLine >= CharacterRows) return;
-    for (uint16 i = 0; i < TextLength && TextOffset + i < CharacterColumns && Text[i]; i++)
-        k.screen[DisplayLine][TextOffset + i] = Text[i];
+    int ended = 0;
+    for (uint16 i = 0; i < TextLength && TextOffset + i < CharacterColumns; i++) {
+        ended = ended || Text[i] == '\0';
+        k.screen[DisplayLine][TextOffset + i] = ended ? ' ' : Text[i];
+    }
 }
 
+/* The number left-aligned at TextOffset, the rest of TextLength blank; a longer number's first
+ * TextLength characters (the sample's src/display.c: its digits, then ' ' while i < TextLength). */
 void DisplayValue(uint16 DisplayLine, int Value, uint16 TextLength, uint16 TextOffset) {
     char text[24];
-    int n = snprintf(text, sizeof text, "%*d", (int)(TextLength < 16 ? TextLength : 16), Value);
-    DisplayText(DisplayLine, text, (uint16)(n < (int)TextLength ? n : TextLength), TextOffset);
+    snprintf(text, sizeof text, "%d", Value);
+    DisplayText(DisplayLine, text, TextLength, TextOffset);
 }
 
 void DisplayGraph(uint8 DisplayLine, uint8 Values[128], uint16 ValuesCount, uint8 LinesSpan) {

@@ -6,7 +6,8 @@
  * (github.com/NXPHoverGames/GitBook-NXPCup, 2024-fall-2025-nxp-cup-bare-metal-drivers/).
  *
  * On the simulated car the display is the debug video's text column: DisplayText and
- * DisplayValue write into the 4 x 16 character buffer, DisplayGraph keeps the values it would
+ * DisplayValue write into the 4 x 16 character buffer as the driver does (a value left-aligned
+ * in its TextLength, blanks after; a text's TextLength characters, blank past its end), DisplayGraph keeps the values it would
  * draw (0 .. 100), DisplayClear empties both, and DisplayRefresh shows the buffer's lines and
  * the graph (as a processed image line) in the video (when one is written; no I2C time
  * passes). DisplayVector and RotateFontmap do nothing.
