@@ -440,3 +440,27 @@ def test_the_display_writes_values_and_text_as_the_samples_driver(tmp_path):
         assert r.outcome == "controller_returned", (isolate, r.message)
         text = [s for s in r.log.data_text if s][-1].split(" | ")
         assert text[:3] == ["42  #-42  #0  ##", "123             ", "ok              "], (isolate, text)
+
+
+def test_a_cpp_notification_without_extern_c_is_named_so(tmp_path):
+    """A C++ team defines its Gpt notification without extern "C": the RTD's generated C
+    configuration could not call it (on the board the link fails); the run's error names the
+    function as the program spells it and says to declare it extern "C" - not its mangled name
+    as a misspelling. Alike in process and isolated."""
+    src = probe(tmp_path, """\
+        #include "Gpt.h"
+        void Control_Notification(void) {}
+        int main() {
+            Gpt_StartTimer(2U, 80000U);
+            Gpt_EnableNotification(2U);
+            return 0;
+        }
+        """, "main.cpp")
+    program = firmware([src], defines=["GPT_NOTIFICATION_2=Control_Notification"])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0)
+        assert r.outcome == "controller_error", (isolate, r.message)
+        assert r.message.startswith(f"{src}:5: Gpt_EnableNotification: channel 2's notification "
+                                    "Control_Notification (it defines Control_Notification with C++ linkage: "
+                                    "declare it extern \"C\")"), (isolate, r.message)
+        assert "_Z" not in r.message, (isolate, r.message)

@@ -129,10 +129,15 @@ def misspelt_function(program: NativeProgram, message: str) -> str:
     if not names:
         return message
     wanted = [w for w in found.groups() if w]
+    end = found.end()
+    # the name defined in C++ without extern "C": mangled (Itanium C++ ABI, _Z<length><name>...), it
+    # is not the C name the kit (as the board's C start-up file or generated configuration) calls
+    mangled = [w for w in wanted if any(n.startswith(f"_Z{len(w)}{w}") for n in names)]
+    if mangled:
+        return f'{message[:end]} (it defines {mangled[0]} with C++ linkage: declare it extern "C"){message[end:]}'
     close = [c for w in wanted for c in difflib.get_close_matches(w, sorted(names), n=1, cutoff=0.75)]
     if not close:
         return message
-    end = found.end()
     return f"{message[:end]} (it defines {close[0]}: misspelt?){message[end:]}"
 
 
