@@ -464,3 +464,28 @@ def test_a_cpp_notification_without_extern_c_is_named_so(tmp_path):
                                     "Control_Notification (it defines Control_Notification with C++ linkage: "
                                     "declare it extern \"C\")"), (isolate, r.message)
         assert "_Z" not in r.message, (isolate, r.message)
+
+
+def test_a_loop_polling_a_pin_nothing_drives_ends_at_its_line(tmp_path):
+    """A start-button wait (while (Dio_ReadChannel(SW2) == STD_LOW);): the simulator drives no
+    pin (a button, a sensor's echo reads what was last written to it), so the loop would never
+    end; the run ends at its line at once, naming the channel and why - not as stalled after the
+    wall-time limit with Spinner's advice. A loop that writes between its reads (bit-banging) is
+    not stopped. Alike in process and isolated."""
+    src = probe(tmp_path, """\
+        #include "Dio.h"
+        #include "OsIf.h"
+        int main(void) {
+            for (long i = 0; i < 300000; i++) { Dio_WriteChannel(5U, (Dio_LevelType)(i & 1)); (void)Dio_ReadChannel(5U); }
+            OsIf_TimeDelay(10U);
+            while (Dio_ReadChannel(76U) == STD_LOW) {
+            }
+            return 0;
+        }
+        """)
+    program = firmware([src])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0, wall_limit_s=30.0)
+        assert r.outcome == "controller_error", (isolate, r.message)
+        assert r.message.startswith(f"{src}:6: Dio_ReadChannel(76): read "), (isolate, r.message)
+        assert "reads what was last written to it" in r.message and r.sim_time_s > 0.009, (isolate, r.message)

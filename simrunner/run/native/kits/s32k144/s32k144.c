@@ -51,6 +51,8 @@ static struct {
     double servo_rad, servo_offset_rad;
     double osif_hz;
     uint32 osif_dummy;              /* OSIF_COUNTER_DUMMY: one count a call, as the RTD's */
+    double pin_polled_at;           /* Dio_ReadChannel's polls at one simulated time, no write between */
+    long pin_polls;
     Servo servo;
     Hbridge hbridge;
     struct { Pwm_ChannelType channel; uint16 min, med, max; int speed; uint8 brake; } esc;
@@ -124,6 +126,7 @@ void Pwm_SetDutyCycle(Pwm_ChannelType ChannelNumber, uint16 DutyCycle) {
 }
 
 void Dio_WriteChannel(Dio_ChannelType ChannelId, Dio_LevelType Level) {
+    k.pin_polls = 0;  /* a write between reads: the program drives its pins (bit-banging) */
     if (ChannelId >= NUM_DIO) return;
     k.dio[ChannelId] = Level;
     Hbridge *h = &k.hbridge;  /* a direction pin of the H-bridge: the motors' sign changes */
@@ -132,7 +135,26 @@ void Dio_WriteChannel(Dio_ChannelType ChannelId, Dio_LevelType Level) {
         apply(h->Motor1_Speed);
 }
 
-Dio_LevelType Dio_ReadChannel(Dio_ChannelType ChannelId) { return ChannelId < NUM_DIO ? k.dio[ChannelId] : STD_LOW; }
+/* A loop polling a pin: the simulator drives no pin (a button, a sensor's echo), so one read again and
+ * again at one simulated time, with no write between, is a loop that never ends (a start-button wait):
+ * the run ends at its line, saying why, rather than as stalled after the wall-time limit. */
+#define PIN_POLLS 100000
+
+Dio_LevelType Dio_ReadChannel(Dio_ChannelType ChannelId) {
+    if (!spinner_in_interrupt()) {
+        double now = spinner_now();
+        if (now != k.pin_polled_at) k.pin_polled_at = now, k.pin_polls = 0;
+        else if (++k.pin_polls >= PIN_POLLS) {
+            char text[400];
+            snprintf(text, sizeof text, "Dio_ReadChannel(%u): read %d times with no write and no simulated time "
+                     "passing: a loop waiting for the pin never ends - the simulator drives no pin (a button, a "
+                     "sensor's echo), one reads what was last written to it (docs/firmware.md, \"The S32K144 "
+                     "kit\": not emulated)", (unsigned)ChannelId, PIN_POLLS);
+            spinner_fail(text);
+        }
+    }
+    return ChannelId < NUM_DIO ? k.dio[ChannelId] : STD_LOW;
+}
 
 Dio_LevelType Dio_FlipChannel(Dio_ChannelType ChannelId) {
     Dio_LevelType level = Dio_ReadChannel(ChannelId) == STD_LOW ? STD_HIGH : STD_LOW;
