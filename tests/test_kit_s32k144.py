@@ -489,3 +489,29 @@ def test_a_loop_polling_a_pin_nothing_drives_ends_at_its_line(tmp_path):
         assert r.outcome == "controller_error", (isolate, r.message)
         assert r.message.startswith(f"{src}:6: Dio_ReadChannel(76): read "), (isolate, r.message)
         assert "reads what was last written to it" in r.message and r.sim_time_s > 0.009, (isolate, r.message)
+
+
+def test_a_main_waiting_on_a_flag_its_notification_sets_is_told_what_to_call(tmp_path):
+    """while (!Tick) {} waiting for a flag the Gpt notification sets: on the board the interrupt
+    ends it; here no time passes in it (documented), so the run stalls at its line - and says
+    what to call in C (a kit call that waits, spinner_sleep(0)), not the Python API's
+    get_image(). Alike in process and isolated."""
+    src = probe(tmp_path, """\
+        #include "Gpt.h"
+        static volatile int Tick;
+        void Gpt_Notification(void) { Tick = 1; }
+        int main(void) {
+            Gpt_StartTimer(0U, 80000U);
+            Gpt_EnableNotification(0U);
+            while (!Tick) {
+            }
+            return 0;
+        }
+        """)
+    program = firmware([src])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0, wall_limit_s=1.0)
+        assert r.outcome == "stalled", (isolate, r.message)
+        assert "probe.c:7" in r.message and "LinearCameraGetFrame()" in r.message, (isolate, r.message)
+        assert "spinner_sleep(0)" in r.message and "get_image()" not in r.message.replace("spinner_get_image()", ""), \
+            (isolate, r.message)

@@ -27,12 +27,19 @@ from simrunner.run.clock import LockstepClock
 from simrunner.run.supervise import current_supervision
 
 
+PYTHON_HINT = "call get_image(), sleep() or get_time() in every loop"
+# a C/C++ program's: its names of those calls, and the kits' calls that wait
+NATIVE_HINT = ("let simulated time pass in every loop: a call that waits (spinner_get_image(), spinner_sleep(0), "
+               "spinner_get_time(); a kit's: TFC_Task(), __WFI(), LinearCameraGetFrame(), OsIf_TimeDelay(), "
+               "OsIf_GetMilliseconds()) - a flag an interrupt sets is set only while time passes")
+
+
 def stall_message(idle_s: float, where: str, limit_s: float, in_interrupt: bool = False) -> str:
     """The message of a stalled run (``where``: "" or " (at file:line in function)";
     ``in_interrupt``: it stalled inside an interrupt handler, where no time passes)."""
     hint = ("inside an interrupt handler no simulated time passes: a loop there that waits for "
             "time, the camera or the main loop never ends; wait in the main loop" if in_interrupt
-            else "call get_image(), sleep() or get_time() in every loop")
+            else PYTHON_HINT)
     return (f"controller stalled: {idle_s:.1f} s of wall time without letting simulated time "
             f"pass{where}; {hint} (limit --wall-limit {limit_s:g} s)")
 

@@ -41,6 +41,7 @@ import numpy as np
 
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
 from simrunner.run.native.build import NativeProgram, missing_function, misspelt_function
+from simrunner.run.watchdog import NATIVE_HINT, PYTHON_HINT
 
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
@@ -525,7 +526,7 @@ class _Session:
         except (_ChildGone, OSError):
             pass
         self._kill()
-        message = exc.message
+        message = exc.message.replace(PYTHON_HINT, NATIVE_HINT)  # the advice in the program's language
         if where:
             head, sep, tail = message.partition("; ")
             message = f"{head}{where}{sep}{tail}"
