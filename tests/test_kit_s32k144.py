@@ -4,6 +4,7 @@ hbridge.h, linear_camera.h, display.h ... and drives."""
 from __future__ import annotations
 
 import dataclasses
+import re
 import textwrap
 from pathlib import Path
 
@@ -515,3 +516,34 @@ def test_a_main_waiting_on_a_flag_its_notification_sets_is_told_what_to_call(tmp
         assert "probe.c:7" in r.message and "LinearCameraGetFrame()" in r.message, (isolate, r.message)
         assert "spinner_sleep(0)" in r.message and "get_image()" not in r.message.replace("spinner_get_image()", ""), \
             (isolate, r.message)
+
+
+@pytest.mark.parametrize("header", ["Mcu.h", "Port.h", "S32K144.h"])
+def test_an_rtd_header_the_kit_has_not_is_said_so(tmp_path, header):
+    """A team's own set-up (Mcu_Init, Port_Init: what the sample's DriversInit does) or register
+    access includes an RTD or register header the kit does not provide: the compiler's 'no such
+    file' at its line is followed by a line saying the kit does not emulate it and what stands
+    for it (DriversInit), not left unexplained."""
+    src = probe(tmp_path, f'#include "Mcal.h"\n#include "{header}"\nint main(void) {{ return 0; }}\n', "init.c")
+    with pytest.raises(ControllerFileError) as err:
+        firmware([src])
+    text = str(err.value)
+    assert re.search(rf"init.c:2:.*{re.escape(header)}: No such file", text), text
+    assert text.splitlines()[-1].startswith(f"{header}: not a header of the simulator's --kit s32k144"), text
+    assert "DriversInit()" in text.splitlines()[-1], text
+
+
+@pytest.mark.parametrize("name", ["init.c", "init.cpp"])
+def test_an_rtd_call_the_kit_has_not_is_said_so(tmp_path, name):
+    """Pwm_Init(NULL_PTR), Adc_StartGroupConversion: the compiler's error at the call's line is
+    followed by a line naming the calls as not emulated and DriversInit as their set-up's stand-in,
+    in C (implicit declaration) and C++ (not declared)."""
+    src = probe(tmp_path, '#include "Pwm.h"\n\nint main(void) { Pwm_Init(NULL_PTR); Adc_StartGroupConversion(0U); '
+                          'return 0; }\n', name)
+    with pytest.raises(ControllerFileError) as err:
+        firmware([src])
+    text = str(err.value)
+    assert re.search(rf"{re.escape(name)}:3:.*Pwm_Init", text), text
+    assert text.splitlines()[-1].startswith("Adc_StartGroupConversion, Pwm_Init: of the RTD's calls the simulator's "
+                                            "--kit s32k144 has only"), text
+    assert "DriversInit()" in text.splitlines()[-1], text
