@@ -345,6 +345,46 @@ def test_multiple_sources_include_dirs_defines_and_exit_status(tmp_path, track, 
     assert r.outcome == "controller_error" and "exited with status 3" in r.message
 
 
+EXITS_C = """\
+#include <stdlib.h>
+#include <unistd.h>
+#include "spinner.h"
+static void leave(int status) {
+#if HOW == 0
+    exit(status);                                          /* line 6 */
+#else
+    _exit(status);                                         /* line 8 */
+#endif
+}
+int main(void) {
+    static uint8_t row[1024];
+    for (int i = 0; ; i++) {
+        spinner_set_speed_and_servo(1.0, 0.0);
+        spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+        if (i == 10) leave(STATUS);
+    }
+}
+"""
+
+
+@pytest.mark.parametrize("how, status, outcome, said", [
+    (0, 0, "controller_returned", ("the controller called exit(0) at ", "exits.c:6")),
+    (0, 5, "controller_error", ("the controller called exit(5) at ", "exits.c:6")),
+    (1, -2, "controller_error", ("the controller called _exit(-2) at ", "exits.c:8")),
+])
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_an_exit_names_its_call_and_line_as_sys_exit_is_named(tmp_path, track, how, status, outcome, said,
+                                                             isolate):
+    """exit/_exit in a C program: the outcome says which call, its status and where (as a Python
+    controller's ``sys.exit`` is told), in the simulator's process as isolated; ``_exit(-2)`` is
+    the status 254 a process ends with, not a signal (in process it read "killed by SIGINT")."""
+    src = write(tmp_path, "exits.c", EXITS_C)
+    prog = dataclasses.replace(build_program([src], defines=[f"HOW={how}", f"STATUS={status}"]), isolate=isolate)
+    r = drive(prog, track=track, csv=tmp_path / "run.csv")
+    assert r.outcome == outcome and r.message.startswith(said[0]) and r.message.endswith(said[1]), r.message
+    assert len(read_log(tmp_path / "run.csv")) >= 10  # the run so far is kept
+
+
 def test_a_prebuilt_shared_library_runs(tmp_path, track, capfd):
     src = write(tmp_path, "pre.c", """\
         #include <stdio.h>
@@ -367,7 +407,7 @@ def test_a_prebuilt_shared_library_runs(tmp_path, track, capfd):
     (5, "stalled", 17, "stalled"),
     (6, "controller_error", 19, "spinner_get_image(line=500)"),
     (7, "controller_error", 21, "spinner_set_speed(speed="),
-    (8, "controller_error", None, "exited with status 3"),
+    (8, "controller_error", 23, "the controller called exit(3) at"),
 ])
 @pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
 def test_faults_name_the_c_line_and_keep_the_run_so_far(tmp_path, track, capfd, fault, outcome,

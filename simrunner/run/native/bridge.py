@@ -48,7 +48,7 @@ OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
     OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK, OP_IRQ_MASK_WAIT, \
-    OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING = range(1, 35)
+    OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING, OP_EXIT_AT = range(1, 36)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
@@ -167,6 +167,7 @@ class _Session:
         self._isrs: dict[int, Callable[[], None]] = {}  # the program's timer interrupts by slot
         self._latched: dict[int, Callable[[], None] | None] = {}  # stopped ones that kept a pending call
         self._last_mask: tuple[bytes, Callable[[], str | None] | None] = (b"", None)  # _mask_where's
+        self._exit_at: str | None = None  # "exit(3) at main.c:91": where the program exited (OP_EXIT_AT)
 
     def _setup_transport(self, child: _Child) -> None:
         self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
@@ -455,6 +456,11 @@ class _Session:
             s._s.warn_once("spinner_warn: " + text, text)
         elif op == OP_FAULT:
             self._fault(payload.decode("utf-8", "replace"))
+        elif op == OP_EXIT_AT:  # the exit call (uint8), its status (int32), its return address' offset
+            fn, status, offset = struct.unpack_from("<BiQ", payload)  # (uint64) and module: just before
+            where = self._where(payload[13:].decode("utf-8", "replace"), offset)  # the program ends
+            name = ("exit", "_exit", "_Exit", "quick_exit")[fn] if fn < 4 else "exit"
+            self._exit_at = f"{name}({status}) at {where}" if where else None
         else:
             raise ControllerError(f"{self.name}: unknown request {op} from the host program")
 
@@ -548,6 +554,8 @@ class _Session:
         prog = self.ctrl.program
         lib = ", ".join(map(str, prog.sources)) if prog.sources else str(prog.library)
         if rc == 0:
+            if self._exit_at:  # exit(0): the run ends as a return does, saying where
+                raise RunFinished("controller_returned", f"the controller called {self._exit_at}")
             return
         if rc == EXIT_NO_MAIN:
             raise ControllerFileError(f"{lib}: no main() function defined")
@@ -557,6 +565,8 @@ class _Session:
         if rc < 0:
             name = signal.Signals(-rc).name if -rc in signal.valid_signals() else str(-rc)
             msg = f"{self.name}: the controller was killed by {name}"
+        elif self._exit_at:  # (its file:line, as a Python controller's sys.exit is told)
+            msg = f"the controller called {self._exit_at}"
         else:
             msg = f"{self.name}: the controller exited with status {rc}"
         raise ControllerError(msg, msg + "\n")

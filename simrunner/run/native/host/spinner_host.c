@@ -52,7 +52,7 @@ enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, O
        OP_NOISE, OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES,
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
        OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK,
-       OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING };
+       OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING, OP_EXIT_AT };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -1055,6 +1055,40 @@ int __wrap_clock_nanosleep(clockid_t clock, int flags, const struct timespec *re
     return sim_clock_nanosleep(clock, flags, req, rem);
 }
 
+/* Where the program called exit (or _exit, _Exit, quick_exit): OP_EXIT_AT, queued with the run's
+ * last requests, so the run's outcome names the line as a Python controller's sys.exit is named
+ * ("the controller called exit(3) at main.c:91"): which call (uint8: 0 exit, 1 _exit, 2 _Exit, 3
+ * quick_exit), the status (int32), the caller's return address as its offset in its module
+ * (uint64) and the module's path. Not from a process the program forked, nor after the run. */
+static void exit_note(uint8_t fn, int status, void *ra) {
+    if (finished || forked) return;
+#ifdef SPINNER_INPROC
+    if (!in_controller || !pthread_equal(pthread_self(), sim_thread_id)) return;
+#endif
+    INIT();
+    if (foreign_thread()) return;
+    unsigned char msg[1 + 4 + 8 + 4096];
+    int32_t st = status;
+    uint64_t off = 0;
+    const char *path = "";
+    Dl_info info;
+    if (ra != NULL && dladdr(ra, &info) && info.dli_fname != NULL) {
+        Dl_info here;  /* the host's own end (main returned: exit(0)) is no call of the program's */
+        if (dladdr((void *)exit_note, &here) && here.dli_fbase == info.dli_fbase) return;
+        off = (uint64_t)((uintptr_t)ra - (uintptr_t)info.dli_fbase);
+        path = info.dli_fname;
+    }
+    size_t n = strlen(path);
+    if (n > sizeof msg - 13) n = sizeof msg - 13;
+    msg[0] = fn;
+    memcpy(msg + 1, &st, sizeof st);
+    memcpy(msg + 5, &off, sizeof off);
+    memcpy(msg + 13, path, n);
+    queue_raw(OP_EXIT_AT, msg, 13 + n, NULL, 0);
+    flush_out();
+}
+#define EXIT_NOTE(fn, status) exit_note(fn, status, __builtin_return_address(0))
+
 #ifndef SPINNER_INPROC
 /* The host program also interposes the real names (a prebuilt library's references). */
 int usleep(useconds_t usec) { return sim_usleep(usec); }
@@ -1067,10 +1101,10 @@ int clock_nanosleep(clockid_t clock, int flags, const struct timespec *req, stru
 /* exit and friends end the host process as they would end the program; its exit handlers are
  * the process's own (atexit, static destructors: glibc runs them). */
 static void ended(void) { exit(0); }
-void __wrap_exit(int status) { exit(status); }
-void __wrap__exit(int status) { _exit(status); }
-void __wrap__Exit(int status) { _Exit(status); }
-void __wrap_quick_exit(int status) { quick_exit(status); }
+void __wrap_exit(int status) { EXIT_NOTE(0, status); exit(status); }
+void __wrap__exit(int status) { EXIT_NOTE(1, status); _exit(status); }
+void __wrap__Exit(int status) { EXIT_NOTE(2, status); _Exit(status); }
+void __wrap_quick_exit(int status) { EXIT_NOTE(3, status); quick_exit(status); }
 int __wrap_atexit(void (*fn)(void)) { return atexit(fn); }
 int __cxa_atexit(void (*fn)(void *), void *arg, void *dso);
 int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) { return __cxa_atexit(fn, arg, dso); }
@@ -1082,7 +1116,7 @@ static void leave(int status) {
     fflush(stdout);
     fflush(stderr);
     if (forked) _exit(status);  /* a process the controller forked (below) ends here */
-    exit_code = status;
+    exit_code = status & 0xff;  /* as a process's exit status: exit(-2) is 254, not a signal */
     gone = 1;
     in_controller = 0;
     pthread_sigmask(SIG_SETMASK, &run_mask, NULL);  /* from a handler: unblock its signal */
@@ -1130,10 +1164,10 @@ static void exit_run(int status) {
     leave(status);
 }
 static void ended(void) { exit_run(0); }
-void __wrap_exit(int status) { exit_run(status); }
-void __wrap__exit(int status) { leave(status); }
-void __wrap__Exit(int status) { leave(status); }
-void __wrap_quick_exit(int status) { leave(status); }
+void __wrap_exit(int status) { EXIT_NOTE(0, status); exit_run(status); }
+void __wrap__exit(int status) { EXIT_NOTE(1, status); leave(status); }
+void __wrap__Exit(int status) { EXIT_NOTE(2, status); leave(status); }
+void __wrap_quick_exit(int status) { EXIT_NOTE(3, status); leave(status); }
 #endif
 
 /* -- fork ------------------------------------------------------------------------------- */
