@@ -14,7 +14,9 @@
  * - the servo channel steers (calibrated by ServoInit: Med straight, Max full right, Min full
  *   left; full = --param s32k_servo_rad, + s32k_servo_offset_rad);
  * - the H-bridge's two motor channels are the left and right rear motors' duties, their sign
- *   from the direction pins (spinner_set_motors); the ESC's channel drives both;
+ *   from the direction pins (spinner_set_motors); the ESC's channel drives both, its pulse set by
+ *   the sample driver's state machine at each period of the ESC's PWM, taken as a car ESC takes it
+ *   (esc.h: the brake of a brake-capable ESC is duty 0);
  * - LinearCameraGetFrame waits for the camera's next image of its line row;
  * - Pixy2GetVectors (PixyGetVectors) reads the simulator's Pixy2 (pixy2_line.h);
  * - the display's text and graph go to the debug video; OsIf's clocks count simulated time;
