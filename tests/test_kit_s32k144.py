@@ -681,3 +681,20 @@ def test_an_esc_without_brake_follows_the_samples_other_table(tmp_path):
     for k, edge in enumerate((0.24, 0.26, 0.28, 0.30, 0.32)):          # Braking, Neutral, Braking, ...
         assert np.all(duty_between(t, duty, edge, edge + 0.02) == (esc_duty(50) if k % 2 == 0 else 0.0)), edge
     assert np.all(duty_between(t, duty, 0.34, 0.39) == esc_duty(-50))  # Braking -> Reverse
+
+
+def test_an_esc_frequency_out_of_range_ends_the_run_at_esc_init(tmp_path):
+    """--param s32k_esc_hz of 0 (or above the simulator's 100 kHz timer) ends the run at EscInit's
+    line, saying what was expected."""
+    src = probe(tmp_path, """\
+        #include "esc.h"
+        int main(void) {
+            EscInit(0U, 1638U, 2457U, 3276U);
+            return 0;
+        }
+        """)
+    for hz in (0.0, 2e5):
+        r = drive(firmware([src]), track="floor", time_limit_s=1.0, params={"s32k_esc_hz": hz})
+        assert r.outcome == "controller_error", (hz, r.message)
+        assert r.message.startswith(f"{src}:3: EscInit: --param s32k_esc_hz="), (hz, r.message)
+        assert "expected a PWM frequency above 0" in r.message, (hz, r.message)
