@@ -547,3 +547,154 @@ def test_an_rtd_call_the_kit_has_not_is_said_so(tmp_path, name):
     assert text.splitlines()[-1].startswith("Adc_StartGroupConversion, Pwm_Init: of the RTD's calls the simulator's "
                                             "--kit s32k144 has only"), text
     assert "DriversInit()" in text.splitlines()[-1], text
+
+
+# ---- esc.h: the sample's driver, its state machine at each period of the ESC's PWM ----
+
+ESC_CAR = '[drive]\ncommand = "duty"\nhbridge = "brake"\n[camera]\nmodel = "ideal"\nfps_hz = 500\n'  # a row a step
+
+
+def esc_run(tmp_path, calls, *, defines=(), params=None):
+    """The rear motors' duty at each physics step (2 ms) while a firmware runs `calls` after
+    EscInit(0U, 1638U, 2457U, 3276U) at t = 0 (the sample's 1, 1.5, 2 ms pulses), on a duty car
+    whose log has a row a step; alike in process and isolated. Returns (t_s, duty)."""
+    src = probe(tmp_path, f"""\
+        #include "esc.h"
+        #include "OsIf.h"
+        int main(void) {{
+            EscInit(0U, 1638U, 2457U, 3276U);
+            {calls}
+            return 0;
+        }}
+        """)
+    car = tmp_path / "esc_car.toml"
+    car.write_text(ESC_CAR)
+    program = firmware([src], defines=list(defines))
+    assert program.warnings == "", program.warnings
+    runs = []
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", car=car, time_limit_s=2.0,
+                  params=params or {})
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        assert np.array_equal(r.log.duty_left, r.log.duty_right), isolate
+        runs.append((r.log.t_s, r.log.duty_left))
+    assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
+    return runs[0]
+
+
+def esc_duty(speed):
+    """The duty of EscSetSpeed(speed)'s pulse: the driver's integer pulse of 1638, 2457, 3276."""
+    span = 3276 - 2457 if speed >= 0 else 2457 - 1638
+    return float(np.float32((2457 + int(speed * span / 100) - 2457) / span))
+
+
+def duty_between(t, duty, t0, t1):
+    """The duties of the rows in force from t0 to t1 (a command set at t acts from the next step:
+    the row at t + 2 ms)."""
+    w = (t > t0 + 0.001) & (t < t1 + 0.001)
+    assert w.sum() >= 3, (t0, t1)
+    return duty[w]
+
+
+@pytest.mark.parametrize("name", ["names.c", "names.cpp"])
+def test_esc_h_has_the_samples_names(tmp_path, capfd, name):
+    """esc.h has the sample's ESC_HAS_BRAKE (STD_ON unless -D ESC_HAS_BRAKE=STD_OFF, as a team
+    sets it in its copy), enum EscStates and the Esc struct, in C and C++ (was: undeclared)."""
+    src = probe(tmp_path, """\
+        #include <stdio.h>
+        #include "esc.h"
+        int main(void) {
+            Esc e = {Braking, 0U, 1638U, 3276U, 2457U, -20, 1U};
+            enum EscStates s = Reverse;
+        #if ESC_HAS_BRAKE == STD_ON
+            const char *brake = "on";
+        #else
+            const char *brake = "off";
+        #endif
+            printf("esc %s %d %d %d %d %u\\n", brake, (int)Forward, (int)e.State, (int)Neutral, (int)s,
+                   (unsigned)(e.MaxDutyCycle - e.MedDutyCycle + (unsigned)e.Speed + e.Brake + e.Channel + e.MinDutyCycle));
+            return 0;
+        }
+        """, name)
+    for defines, want in (((), "on"), (["ESC_HAS_BRAKE=STD_OFF"], "off")):
+        program = firmware([src], defines=defines)
+        assert program.warnings == "", program.warnings
+        capfd.readouterr()
+        r = drive(program, track="floor", time_limit_s=1.0)
+        assert r.outcome == "controller_returned", r.message
+        assert capfd.readouterr().out.split("esc ")[1].split()[:6] == [want, "0", "1", "2", "3", "2438"], defines
+
+
+@pytest.mark.parametrize("hz", [50, 25])
+def test_an_esc_speed_takes_effect_at_the_next_pwm_period(tmp_path, hz):
+    """EscSetSpeed only stores the request: the pulse changes at the end of the ESC PWM's next
+    period (its falling-edge notification, the sample's Esc_Period_Finished), every 1 / --param
+    s32k_esc_hz from EscInit (default 50 Hz, the sample's configuration) (was: at once)."""
+    params = {} if hz == 50 else {"s32k_esc_hz": hz}
+    t, duty = esc_run(tmp_path, "OsIf_TimeDelay(130U); EscSetSpeed(60); OsIf_TimeDelay(100U);", params=params)
+    period = 1.0 / hz
+    edge = np.ceil(0.130 / period - 1e-9) * period  # the next edge after the request at 130 ms
+    moved = t[np.flatnonzero(duty != 0.0)[0]] - 0.002  # a command acts from the next step's row
+    assert moved - 0.130 == pytest.approx(edge - 0.130, abs=1e-6), (hz, moved)  # 10 ms at 50 Hz, 30 at 25
+    assert np.all(duty_between(t, duty, edge, edge + 0.05) == esc_duty(60))
+
+
+def test_a_forward_esc_reverses_through_braking_and_neutral(tmp_path):
+    """From forward, EscSetSpeed(-50) goes Forward -> Braking -> Neutral -> Reverse, one period each
+    (20 ms). The Braking pulse is full reverse (-100); the car's ESC (with a brake, forward/reverse-
+    with-brake mode) takes a pulse below the stop pulse after forward ones as a brake (duty 0: the
+    motors shorted) until it has seen a stop pulse; after one it reverses: so a car stopped by
+    EscSetSpeed(0) (Forward holds, its pulse the stop pulse) sees the Braking period as full reverse
+    (was: -50 % at once; a brake drove full reverse)."""
+    t, duty = esc_run(tmp_path, "EscSetSpeed(60); OsIf_TimeDelay(130U); EscSetSpeed(-50); OsIf_TimeDelay(100U);"
+                                "EscSetSpeed(60); OsIf_TimeDelay(100U); EscSetSpeed(0); OsIf_TimeDelay(100U);"
+                                "EscSetSpeed(-50); OsIf_TimeDelay(100U);")
+    assert np.all(duty_between(t, duty, 0.02, 0.14) == esc_duty(60))
+    assert np.all(duty_between(t, duty, 0.14, 0.18) == 0.0)           # Braking: the ESC brakes; Neutral
+    assert np.all(duty_between(t, duty, 0.18, 0.24) == esc_duty(-50))  # Reverse
+    assert np.all(duty_between(t, duty, 0.24, 0.34) == esc_duty(60))   # Reverse -> Forward at once
+    assert np.all(duty_between(t, duty, 0.34, 0.44) == 0.0)            # Forward at speed 0: the stop pulse
+    assert np.all(duty_between(t, duty, 0.44, 0.46) == -1.0)           # Braking's -100, a stop pulse seen
+    assert np.all(duty_between(t, duty, 0.46, 0.48) == 0.0)            # Neutral
+    assert np.all(duty_between(t, duty, 0.48, 0.53) == esc_duty(-50))  # Reverse
+
+
+def test_esc_set_brake_brakes_and_resumes(tmp_path):
+    """EscSetBrake(1) brakes at the next period (Braking: the brake-capable ESC's brake, duty 0) for
+    as long as it is held; EscSetBrake(0) resumes the speed at the next period (was: at once)."""
+    t, duty = esc_run(tmp_path, "EscSetSpeed(60); OsIf_TimeDelay(130U); EscSetBrake(1U); OsIf_TimeDelay(100U);"
+                                "EscSetBrake(0U); OsIf_TimeDelay(100U);")
+    assert np.all(duty_between(t, duty, 0.02, 0.14) == esc_duty(60))
+    assert np.all(duty_between(t, duty, 0.14, 0.24) == 0.0)
+    assert np.all(duty_between(t, duty, 0.24, 0.32) == esc_duty(60))
+
+
+def test_an_esc_without_brake_follows_the_samples_other_table(tmp_path):
+    """-D ESC_HAS_BRAKE=STD_OFF (an ESC without a brake, which reverses at any pulse below the stop
+    pulse): Forward -> Reverse at once; EscSetBrake(1) alternates Braking (the pulse of -Speed) and
+    Neutral each period; EscSetBrake(0) goes back to Reverse."""
+    t, duty = esc_run(tmp_path, "EscSetSpeed(60); OsIf_TimeDelay(130U); EscSetSpeed(-50); OsIf_TimeDelay(100U);"
+                                "EscSetBrake(1U); OsIf_TimeDelay(100U); EscSetBrake(0U); OsIf_TimeDelay(60U);",
+                      defines=["ESC_HAS_BRAKE=STD_OFF"])
+    assert np.all(duty_between(t, duty, 0.02, 0.14) == esc_duty(60))
+    assert np.all(duty_between(t, duty, 0.14, 0.24) == esc_duty(-50))  # Forward -> Reverse
+    for k, edge in enumerate((0.24, 0.26, 0.28, 0.30, 0.32)):          # Braking, Neutral, Braking, ...
+        assert np.all(duty_between(t, duty, edge, edge + 0.02) == (esc_duty(50) if k % 2 == 0 else 0.0)), edge
+    assert np.all(duty_between(t, duty, 0.34, 0.39) == esc_duty(-50))  # Braking -> Reverse
+
+
+def test_an_esc_frequency_out_of_range_ends_the_run_at_esc_init(tmp_path):
+    """--param s32k_esc_hz of 0 (or above the simulator's 100 kHz timer) ends the run at EscInit's
+    line, saying what was expected."""
+    src = probe(tmp_path, """\
+        #include "esc.h"
+        int main(void) {
+            EscInit(0U, 1638U, 2457U, 3276U);
+            return 0;
+        }
+        """)
+    for hz in (0.0, 2e5):
+        r = drive(firmware([src]), track="floor", time_limit_s=1.0, params={"s32k_esc_hz": hz})
+        assert r.outcome == "controller_error", (hz, r.message)
+        assert r.message.startswith(f"{src}:3: EscInit: --param s32k_esc_hz="), (hz, r.message)
+        assert "expected a PWM frequency above 0" in r.message, (hz, r.message)

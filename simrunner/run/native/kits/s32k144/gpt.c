@@ -112,6 +112,8 @@ DECLARE(GPT_NOTIFICATION_7)
 #ifndef GPT_CHANNEL_MODE_7
 #define GPT_CHANNEL_MODE_7 GPT_CH_MODE_CONTINUOUS
 #endif
+int s32k_sim_esc_timers(void);  /* s32k144.c: the ESC driver's state machine's timer, 0 or 1 */
+
 static const unsigned char one_shot[GPT_NOTIFIED] = {MODE_(0), MODE_(1), MODE_(2), MODE_(3), MODE_(4), MODE_(5),
                                                      MODE_(6), MODE_(7)};
 
@@ -317,7 +319,7 @@ void Gpt_EnableNotification(Gpt_ChannelType Channel) {
     init();
     g.ch[Channel].notify = 1U;
     void (*fn)(void) = Channel < GPT_NOTIFIED ? config[Channel].fn : NULL;
-    if (fn == NULL && spinner_interrupts() - g.own <= 0) {  /* nothing the kit or --isr calls */
+    if (fn == NULL && spinner_interrupts() - g.own - s32k_sim_esc_timers() <= 0) {  /* nothing the kit or --isr calls */
         const char *name = Channel < GPT_NOTIFIED ? config[Channel].name : NULL;
         char text[600];
         if (name != NULL)

@@ -14,7 +14,9 @@
  * - the servo channel steers (calibrated by ServoInit: Med straight, Max full right, Min full
  *   left; full = --param s32k_servo_rad, + s32k_servo_offset_rad);
  * - the H-bridge's two motor channels are the left and right rear motors' duties, their sign
- *   from the direction pins (spinner_set_motors); the ESC's channel drives both;
+ *   from the direction pins (spinner_set_motors); the ESC's channel drives both, its pulse set by
+ *   the sample driver's state machine at each period of the ESC's PWM, taken as a car ESC takes it
+ *   (esc.h: the brake of a brake-capable ESC is duty 0);
  * - LinearCameraGetFrame waits for the camera's next image of its line row;
  * - Pixy2GetVectors (PixyGetVectors) reads the simulator's Pixy2 (pixy2_line.h);
  * - the display's text and graph go to the debug video; OsIf's clocks count simulated time;
@@ -55,7 +57,10 @@ static struct {
     long pin_polls;
     Servo servo;
     Hbridge hbridge;
-    struct { Pwm_ChannelType channel; uint16 min, med, max; int speed; uint8 brake; } esc;
+    Esc esc;                        /* the driver's state, as the sample's EscInstance */
+    double esc_hz;                  /* the ESC PWM's period edges a second (--param s32k_esc_hz) */
+    uint8 esc_running;              /* the state machine's timer set up (EscInit) */
+    uint8 esc_braking;              /* the car's ESC: forward pulses seen since its last stop pulse */
     char screen[CharacterRows][CharacterColumns];
     uint8 graph[128];
     uint16 graph_len;
@@ -81,6 +86,7 @@ static void read_params(void) {
     k.servo_rad = spinner_param("s32k_servo_rad", 0.40);
     k.servo_offset_rad = spinner_param("s32k_servo_offset_rad", 0.0);
     k.osif_hz = spinner_param("s32k_osif_hz", 48e6);  /* the default: OsIf.h says whose */
+    k.esc_hz = spinner_param("s32k_esc_hz", 50.0);    /* the default: esc.h says whose */
 }
 
 /* -1 .. 1 of a pulse between its calibrated ends (+ towards hi, - towards lo), 0 at mid. The ends
@@ -113,8 +119,15 @@ static void apply(Pwm_ChannelType changed) {
         spinner_set_motors((float)motor_duty(h->Motor1_Speed, h->Motor1_Forward, h->Motor1_Backward),
                            (float)motor_duty(h->Motor2_Speed, h->Motor2_Forward, h->Motor2_Backward));
     } else if (r == ESC) {
-        float d = (float)position(k.pwm[k.esc.channel], k.esc.min, k.esc.med, k.esc.max);
-        spinner_set_motors(d, d);
+        double d = position(k.pwm[k.esc.Channel], k.esc.MinDutyCycle, k.esc.MedDutyCycle, k.esc.MaxDutyCycle);
+#if ESC_HAS_BRAKE == STD_ON
+        /* a car ESC in forward/reverse-with-brake mode: below the stop pulse after forward ones it
+         * brakes (duty 0: a "brake" H-bridge car's motors shorted), until a stop pulse arms reverse */
+        if (d > 0.0) k.esc_braking = 1U;
+        else if (d == 0.0) k.esc_braking = 0U;
+        else if (k.esc_braking) d = 0.0;
+#endif
+        spinner_set_motors((float)d, (float)d);
     }
 }
 
@@ -263,26 +276,77 @@ uint8 HbridgeGetBrake(void) { return k.hbridge.Brake; }
 
 /* ---- esc.h ---- */
 
+/* The driver's pulse for a speed command -100 .. 100, in the sample's integer steps. */
+static void esc_pulse(int command) {
+    int span = command >= 0 ? k.esc.MaxDutyCycle - k.esc.MedDutyCycle : k.esc.MedDutyCycle - k.esc.MinDutyCycle;
+    Pwm_SetDutyCycle(k.esc.Channel, (uint16)(k.esc.MedDutyCycle + command * span / 100));
+}
+
+/* The state the driver's machine goes to from its state at a period's edge (the sample's src/esc.c,
+ * Esc_Period_Finished): with ESC_HAS_BRAKE on, forward goes to reverse through Braking and Neutral. */
+static enum EscStates esc_next(enum EscStates state, int speed, int brake) {
+    switch (state) {
+    case Forward:
+#if ESC_HAS_BRAKE == STD_ON
+        return brake || speed < 0 ? Braking : Forward;
+#else
+        return brake ? Braking : (speed < 0 ? Reverse : (speed == 0 ? Neutral : Forward));
+#endif
+    case Braking:
+#if ESC_HAS_BRAKE == STD_ON
+        return brake ? Braking : (speed > 0 ? Forward : Neutral);
+#else
+        return brake ? Neutral : (speed < 0 ? Reverse : (speed > 0 ? Forward : Neutral));
+#endif
+    case Neutral:
+        return brake ? Braking : (speed < 0 ? Reverse : (speed > 0 ? Forward : Neutral));
+    case Reverse:
+        return brake ? Braking : (speed > 0 ? Forward : (speed == 0 ? Neutral : Reverse));
+    }
+    return Neutral;
+}
+
+/* The ESC channel's falling edge at the end of each PWM period: the state machine moves on and sets the
+ * pulse of its state (Forward, Reverse: the speed; Braking: full reverse with a brake-capable ESC, the
+ * opposite of the speed without; Neutral: the stop pulse). */
+static void esc_period_finished(void) {
+    Esc *e = &k.esc;
+    if (e->State > Reverse) e->State = Neutral, e->Speed = 0, e->Brake = 0U;  /* the sample's safe values */
+    e->State = esc_next(e->State, e->Speed, e->Brake != 0U);
+    int command = 0;
+    if (e->State == Forward || e->State == Reverse) command = e->Speed;
+#if ESC_HAS_BRAKE == STD_ON
+    else if (e->State == Braking) command = -100;
+#else
+    else if (e->State == Braking) command = -e->Speed;
+#endif
+    esc_pulse(command);
+}
+
 void EscInit(Pwm_ChannelType EscPwmChannel, uint16 MinDutyCycle, uint16 MedDutyCycle, uint16 MaxDutyCycle) {
-    k.esc.channel = EscPwmChannel, k.esc.min = MinDutyCycle, k.esc.med = MedDutyCycle, k.esc.max = MaxDutyCycle;
-    k.esc.speed = 0, k.esc.brake = 0U;
+    read_params();
+    if (!(k.esc_hz > 0.0 && 1.0 / k.esc_hz >= 1e-5)) {
+        char text[200];
+        snprintf(text, sizeof text, "EscInit: --param s32k_esc_hz=%g: expected a PWM frequency above 0 and at most "
+                 "100 kHz (the simulator's 10 us)", k.esc_hz);
+        spinner_fail(text);
+    }
+    k.esc.Channel = EscPwmChannel, k.esc.MinDutyCycle = MinDutyCycle, k.esc.MedDutyCycle = MedDutyCycle;
+    k.esc.MaxDutyCycle = MaxDutyCycle, k.esc.State = Neutral, k.esc.Speed = 0, k.esc.Brake = 0U;
     k.role[EscPwmChannel] = ESC;
-    Pwm_SetDutyCycle(EscPwmChannel, MedDutyCycle);
+    k.esc_braking = 0U;
+    Pwm_SetDutyCycle(EscPwmChannel, MedDutyCycle);  /* the stop pulse arms the ESC */
+    if (k.esc_running) spinner_stop_every(esc_period_finished);
+    spinner_every(1.0 / k.esc_hz, esc_period_finished);  /* the channel's falling-edge notification */
+    k.esc_running = 1U;
 }
 
-void EscSetSpeed(int Speed) {
-    k.esc.speed = Speed;
-    if (k.esc.brake != 0U) return;
-    int s = Speed > 100 ? 100 : (Speed < -100 ? -100 : Speed);
-    int span = s > 0 ? k.esc.max - k.esc.med : k.esc.med - k.esc.min;
-    Pwm_SetDutyCycle(k.esc.channel, (uint16)(k.esc.med + s * span / 100));
-}
+void EscSetSpeed(int Speed) { k.esc.Speed = Speed > 100 ? 100 : (Speed < -100 ? -100 : Speed); }
 
-void EscSetBrake(uint8 Brake) {
-    k.esc.brake = Brake != 0U;
-    if (k.esc.brake) Pwm_SetDutyCycle(k.esc.channel, k.esc.med);
-    else EscSetSpeed(k.esc.speed);
-}
+void EscSetBrake(uint8 Brake) { k.esc.Brake = Brake != 0U ? 1U : 0U; }
+
+/* The kit's own timer interrupts that are no program's (gpt.c: a notification needs one of the program's). */
+int s32k_sim_esc_timers(void) { return k.esc_running; }
 
 /* ---- linear_camera.h ---- */
 
