@@ -490,6 +490,120 @@ def test_a_loop_polling_a_pin_nothing_drives_ends_at_its_line(tmp_path):
         assert r.outcome == "controller_error", (isolate, r.message)
         assert r.message.startswith(f"{src}:6: Dio_ReadChannel(76): read "), (isolate, r.message)
         assert "reads what was last written to it" in r.message and r.sim_time_s > 0.009, (isolate, r.message)
+    # a pin no --param names is still undriven when others are inputs; the message says how to drive it
+    r = drive(program, track="floor", time_limit_s=1.0, wall_limit_s=30.0, params={"s32k_sw2": 77})
+    assert r.outcome == "controller_error" and r.message.startswith(f"{src}:6: Dio_ReadChannel(76): read "), r.message
+    assert "--param names (s32k_sw2, s32k_sw3" in r.message and "s32k_pin_76=0/1" in r.message, r.message
+
+
+def button_times(tmp_path, capfd, params, *, pin="76U"):
+    """The simulated times (s) a firmware's start-button wait sees the button pressed and then
+    released (a loop polling the pin with no library call, writing an LED pin and the button's own
+    pin between reads), in process and isolated (alike)."""
+    src = probe(tmp_path, f"""\
+        #include <stdio.h>
+        #include "Dio.h"
+        #include "spinner.h"
+        int main(void) {{
+            Dio_WriteChannel({pin}, STD_HIGH);       /* an input pin: the write is ignored */
+            while (Dio_ReadChannel({pin}) == STD_LOW) {{
+                Dio_WriteChannel(5U, STD_HIGH);
+            }}
+            double pressed = spinner_now();
+            while (Dio_ReadChannel({pin}) == STD_HIGH);
+            printf("button %.6f %.6f\\n", pressed, spinner_now());
+            return 0;
+        }}
+        """)
+    program = firmware([src])
+    assert program.warnings == "", program.warnings
+    times = []
+    for isolate in (False, True):
+        capfd.readouterr()
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0,
+                  wall_limit_s=30.0, params=params)
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        times.append(tuple(float(x) for x in capfd.readouterr().out.split("button ")[1].split()[:2]))
+    assert times[0] == times[1]
+    return times[0]
+
+
+STEP_S = 0.002  # the default physics step
+
+
+@pytest.mark.parametrize("params, at", [
+    ({"s32k_sw2": 76}, 0.1),                           # SW2's start press: 0.2 s from 0.1 s
+    ({"s32k_sw2": 76, "s32k_sw2_at": 0.333}, 0.333),
+    ({"s32k_sw2": 12, "s32k_sw3": 76, "s32k_sw3_at": 0.5}, 0.5),  # SW3, pressed when asked
+])
+def test_a_start_button_wait_ends_at_the_press(tmp_path, capfd, params, at):
+    """--param s32k_sw2=N says SW2's Dio channel (s32k_sw3 SW3's): it reads STD_HIGH while pressed
+    (the S32K144EVB's buttons), 0.2 s from s32k_sw2_at (default 0.1 s, --kit tfc's start press).
+    A loop polling it lets simulated time pass, so it ends at the press, within a physics step,
+    and a wait for the release 0.2 s later; writes to the pin are ignored (an input)."""
+    pressed, released = button_times(tmp_path, capfd, params)
+    assert at - 1e-9 <= pressed <= at + STEP_S + 1e-9, (pressed, at)
+    assert at + 0.2 - 1e-9 <= released <= at + 0.2 + STEP_S + 1e-9, (released, at)
+
+
+def test_a_mode_pin_reads_its_constant_level(tmp_path, capfd):
+    """--param s32k_pin_N=0/1: channel N is an input at that level (a mode switch): writes and
+    flips leave it (a flip returns its level, as the Dio driver's on an input channel), a poll of
+    it lets time pass; the other channels read what was written to them, SW3 not pressed unless
+    s32k_sw3_at is given."""
+    src = probe(tmp_path, """\
+        #include <stdio.h>
+        #include "Dio.h"
+        #include "spinner.h"
+        int main(void) {
+            Dio_WriteChannel(40U, STD_LOW);
+            Dio_WriteChannel(41U, STD_HIGH);
+            Dio_WriteChannel(42U, STD_HIGH);
+            unsigned flip40 = Dio_FlipChannel(40U), flip42 = Dio_FlipChannel(42U);
+            int polls = 0;
+            while (Dio_ReadChannel(40U) == STD_HIGH && polls < 1000) polls++;
+            printf("mode %u %u %u %u %u %u %.3f\\n", Dio_ReadChannel(40U), Dio_ReadChannel(41U), Dio_ReadChannel(42U),
+                   flip40, flip42, Dio_ReadChannel(43U), spinner_now());
+            return 0;
+        }
+        """)
+    program = firmware([src])
+    for isolate in (False, True):
+        capfd.readouterr()
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=3.0,
+                  params={"s32k_pin_40": 1, "s32k_pin_41": 0, "s32k_sw3": 43})
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        out = capfd.readouterr().out.split("mode ")[1].split()[:7]
+        # 40 and 41 keep their levels; 42 is the program's (flipped to low); SW3 released
+        assert out[:6] == ["1", "0", "0", "1", "0", "0"], (isolate, out)
+        assert float(out[6]) == pytest.approx((1000 - 64) * STEP_S, abs=2 * STEP_S), (isolate, out)
+
+
+@pytest.mark.parametrize("params, expected", [
+    ({"s32k_sw2": 300}, "--param s32k_sw2=300: expected the Dio channel of the board's button SW2 (PTC12): a whole "
+                        "number 0..255"),
+    ({"s32k_sw3": 2.5}, "--param s32k_sw3=2.5: expected the Dio channel of the board's button SW3 (PTC13)"),
+    ({"s32k_sw2": 3, "s32k_sw2_at": -1}, "--param s32k_sw2_at=-1: expected the simulated time of the press"),
+    ({"s32k_sw3_at": 0.5}, "--param s32k_sw3_at=0.5: expected the button's Dio channel too: --param s32k_sw3=N"),
+    ({"s32k_sw2": 3, "s32k_sw3": 3}, "--param s32k_sw3=3: expected a Dio channel other than SW2's"),
+    ({"s32k_pin_7": 2}, "--param s32k_pin_7=2: expected 0 or 1: the level the input pin reads"),
+    ({"s32k_sw2": 7, "s32k_pin_7": 1}, "--param s32k_pin_7=1: expected no level for SW2's channel"),
+], ids=["sw2_out_of_range", "sw3_not_whole", "sw2_at_negative", "sw3_at_alone", "one_channel_twice",
+        "pin_level", "pin_on_a_button"])
+def test_a_bad_input_pin_param_is_one_line(tmp_path, params, expected):
+    """A button's channel out of range or not whole, a press before 0, a press time without its
+    button, two buttons on one channel, a level not 0/1 or on a button's channel: the run ends at
+    the first Dio call that reads it, saying what was expected, on one line."""
+    src = probe(tmp_path, """\
+        #include "Dio.h"
+        int main(void) {
+            (void)Dio_ReadChannel(7U);
+            return 0;
+        }
+        """)
+    r = drive(firmware([src]), track="floor", time_limit_s=1.0, params=params)
+    assert r.outcome == "controller_error", (params, r.message)
+    assert r.message.startswith(f"{src}:3: {expected}") and "\n" not in r.message, (params, r.message)
 
 
 def test_a_main_waiting_on_a_flag_its_notification_sets_is_told_what_to_call(tmp_path):

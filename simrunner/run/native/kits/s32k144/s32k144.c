@@ -20,7 +20,9 @@
  * - LinearCameraGetFrame waits for the camera's next image of its line row;
  * - Pixy2GetVectors (PixyGetVectors) reads the simulator's Pixy2 (pixy2_line.h);
  * - the display's text and graph go to the debug video; OsIf's clocks count simulated time;
- *   the Gpt channels and their notifications are gpt.c's.
+ *   the Gpt channels and their notifications are gpt.c's;
+ * - the board's buttons SW2 and SW3 and constant input levels are DIO channels --param names
+ *   (s32k_sw2, s32k_sw3, s32k_pin_N: read_buttons, pin_of); a loop polling one lets time pass.
  * docs/firmware.md, "The S32K144 kit", lists what is emulated and what is not. */
 #include <stdio.h>
 #include <stdlib.h>
@@ -45,6 +47,11 @@
 
 enum role { NONE, SERVO, MOTOR1, MOTOR2, ESC };
 
+/* What drives a DIO channel: nothing (the program: it reads what it last wrote), a constant level
+ * (--param s32k_pin_N), or one of the board's buttons (--param s32k_sw2, s32k_sw3). PIN_UNSEEN: its
+ * --param not looked up yet (at the channel's first read or write). */
+enum pin { PIN_UNSEEN, PIN_OUTPUT, PIN_LOW, PIN_HIGH, PIN_SW2, PIN_SW3 };
+
 static struct {
     uint16 pwm[NUM_PWM];          /* each PWM channel's duty, 0 .. 0x8000 */
     uint8 dio[NUM_DIO];           /* each DIO channel's level */
@@ -55,6 +62,11 @@ static struct {
     uint32 osif_dummy;              /* OSIF_COUNTER_DUMMY: one count a call, as the RTD's */
     double pin_polled_at;           /* Dio_ReadChannel's polls at one simulated time, no write between */
     long pin_polls;
+    double input_polled_at;         /* reads of input pins (--param) at one simulated time */
+    long input_polls;
+    uint8 pin[NUM_DIO];             /* what drives each DIO channel (enum pin), from --param */
+    int sw_channel[2];              /* SW2's and SW3's Dio channels (-1: not given) */
+    double sw_at[2];                /* their press (s; < 0: never pressed) */
     Servo servo;
     Hbridge hbridge;
     Esc esc;                        /* the driver's state, as the sample's EscInstance */
@@ -79,6 +91,48 @@ __attribute__((noreturn)) static void not_emulated(const char *name, const char 
 
 #define BENCH_TEST "the drivers' bench test loops for ever on the bench"
 #define NO_RECEIVER "the simulator has no remote control"
+#define NOT_GIVEN -1e300  /* spinner_param's default: the --param was not given */
+
+__attribute__((noreturn)) static void bad_param(const char *name, double value, const char *expected) {
+    char text[400];
+    snprintf(text, sizeof text, "--param %s=%g: expected %s (docs/firmware.md, \"The S32K144 kit\")", name, value,
+             expected);
+    spinner_fail(text);
+}
+
+/* The S32K144EVB's user buttons SW2 (PTC12) and SW3 (PTC13) on the Dio channels --param s32k_sw2 and
+ * s32k_sw3 say (a team's generated DioConf_DioChannel_... value: the kit cannot know it). A button reads
+ * STD_HIGH while pressed and STD_LOW released: on the EVB a pressed button drives its pin high (NXP's
+ * S32K144 cookbook examples, AN5413 "Hello World": "If Pad Data Input = 1 (BTN0 [SW2] pushed)"; NuttX's
+ * s32k144evb board_buttons() reads a set pin as pressed). Each is pressed once for BUTTON_HELD_S at
+ * --param s32k_sw2_at (default 0.1 s, as --kit tfc's start press of button 0) / s32k_sw3_at (not
+ * pressed unless given). */
+#define BUTTON_HELD_S 0.2
+
+static void read_buttons(void) {
+    static const char *const names[2] = {"s32k_sw2", "s32k_sw3"}, *const at_names[2] = {"s32k_sw2_at", "s32k_sw3_at"};
+    double channel[2];
+    for (int b = 0; b < 2; b++) {
+        channel[b] = spinner_param(names[b], NOT_GIVEN);
+        double at = spinner_param(at_names[b], NOT_GIVEN);
+        k.sw_at[b] = b == 0 ? 0.1 : -1.0;
+        if (channel[b] == NOT_GIVEN) {
+            if (at != NOT_GIVEN)
+                bad_param(at_names[b], at, b == 0 ? "the button's Dio channel too: --param s32k_sw2=N"
+                                                  : "the button's Dio channel too: --param s32k_sw3=N");
+            continue;
+        }
+        if (!(channel[b] >= 0.0 && channel[b] < NUM_DIO && channel[b] == (double)(int)channel[b]))
+            bad_param(names[b], channel[b], b == 0 ? "the Dio channel of the board's button SW2 (PTC12): a whole number "
+                      "0..255, your configuration's DioConf_DioChannel_... value" : "the Dio channel of the board's "
+                      "button SW3 (PTC13): a whole number 0..255, your configuration's DioConf_DioChannel_... value");
+        if (at != NOT_GIVEN && !(at >= 0.0)) bad_param(at_names[b], at, "the simulated time of the press, in s (0 or more)");
+        if (at != NOT_GIVEN) k.sw_at[b] = at;
+    }
+    if (channel[0] != NOT_GIVEN && channel[0] == channel[1])
+        bad_param("s32k_sw3", channel[1], "a Dio channel other than SW2's (--param s32k_sw2)");
+    for (int b = 0; b < 2; b++) k.sw_channel[b] = channel[b] == NOT_GIVEN ? -1 : (int)channel[b];
+}
 
 static void read_params(void) {
     if (k.params_read) return;
@@ -87,6 +141,33 @@ static void read_params(void) {
     k.servo_offset_rad = spinner_param("s32k_servo_offset_rad", 0.0);
     k.osif_hz = spinner_param("s32k_osif_hz", 48e6);  /* the default: OsIf.h says whose */
     k.esc_hz = spinner_param("s32k_esc_hz", 50.0);    /* the default: esc.h says whose */
+    read_buttons();
+}
+
+/* What drives channel c: at its first read or write, a button's channel (read_buttons) or --param
+ * s32k_pin_<c> (0 or 1: a constant level, a mode switch's), else the program. */
+static enum pin pin_of(Dio_ChannelType c) {
+    read_params();
+    if (c >= NUM_DIO) return PIN_OUTPUT;
+    if (k.pin[c] != PIN_UNSEEN) return (enum pin)k.pin[c];
+    char name[32];
+    snprintf(name, sizeof name, "s32k_pin_%u", (unsigned)c);
+    double level = spinner_param(name, NOT_GIVEN);
+    int sw = c == k.sw_channel[0] ? 0 : (c == k.sw_channel[1] ? 1 : -1);
+    if (sw >= 0 && level != NOT_GIVEN)
+        bad_param(name, level, sw == 0 ? "no level for SW2's channel (--param s32k_sw2)"
+                                       : "no level for SW3's channel (--param s32k_sw3)");
+    if (level != NOT_GIVEN && level != 0.0 && level != 1.0)
+        bad_param(name, level, "0 or 1: the level the input pin reads (STD_LOW, STD_HIGH)");
+    k.pin[c] = (uint8)(sw >= 0 ? PIN_SW2 + sw : (level == NOT_GIVEN ? PIN_OUTPUT : (level == 1.0 ? PIN_HIGH : PIN_LOW)));
+    return (enum pin)k.pin[c];
+}
+
+/* An input pin's level at simulated time now. */
+static Dio_LevelType input_level(enum pin p, double now) {
+    if (p == PIN_LOW || p == PIN_HIGH) return p == PIN_HIGH ? STD_HIGH : STD_LOW;
+    double at = k.sw_at[p == PIN_SW2 ? 0 : 1];
+    return at >= 0.0 && now >= at - 1e-9 && now < at + BUTTON_HELD_S - 1e-9 ? STD_HIGH : STD_LOW;
 }
 
 /* -1 .. 1 of a pulse between its calibrated ends (+ towards hi, - towards lo), 0 at mid. The ends
@@ -138,9 +219,12 @@ void Pwm_SetDutyCycle(Pwm_ChannelType ChannelNumber, uint16 DutyCycle) {
     apply(ChannelNumber);
 }
 
+/* A write to an input pin (--param s32k_sw2, s32k_sw3, s32k_pin_N) is ignored, as the Dio driver does
+ * on a channel configured as an input (AUTOSAR SWS_Dio_00029, 00079: no influence on the output nor
+ * on the next read). */
 void Dio_WriteChannel(Dio_ChannelType ChannelId, Dio_LevelType Level) {
     k.pin_polls = 0;  /* a write between reads: the program drives its pins (bit-banging) */
-    if (ChannelId >= NUM_DIO) return;
+    if (ChannelId >= NUM_DIO || pin_of(ChannelId) != PIN_OUTPUT) return;
     k.dio[ChannelId] = Level;
     Hbridge *h = &k.hbridge;  /* a direction pin of the H-bridge: the motors' sign changes */
     if (k.role[h->Motor1_Speed] == MOTOR1 && (ChannelId == h->Motor1_Forward || ChannelId == h->Motor1_Backward ||
@@ -148,29 +232,45 @@ void Dio_WriteChannel(Dio_ChannelType ChannelId, Dio_LevelType Level) {
         apply(h->Motor1_Speed);
 }
 
-/* A loop polling a pin: the simulator drives no pin (a button, a sensor's echo), so one read again and
- * again at one simulated time, with no write between, is a loop that never ends (a start-button wait):
- * the run ends at its line, saying why, rather than as stalled after the wall-time limit. */
+/* A loop polling a pin nothing drives (no --param names it: a sensor's echo, a button not given) reads
+ * again and again at one simulated time, with no write between: a loop that never ends (a start-button
+ * wait); the run ends at its line, saying why, rather than as stalled after the wall-time limit.
+ * An input pin's reads let no time pass, but after INPUT_POLLS_FREE reads at one time (writes
+ * between or not) each lets one physics step pass, as gpt.c's reads and the TFC kit's polls do: on
+ * the board a person presses the button meanwhile. So `while (Dio_ReadChannel(SW2) == STD_LOW);` ends
+ * at the press, within a physics step. In an interrupt handler no time passes. */
 #define PIN_POLLS 100000
+#define INPUT_POLLS_FREE 64
 
 Dio_LevelType Dio_ReadChannel(Dio_ChannelType ChannelId) {
+    enum pin p = pin_of(ChannelId);
+    if (p != PIN_OUTPUT) {
+        double now = spinner_now();
+        if (spinner_in_interrupt() || now != k.input_polled_at) k.input_polled_at = now, k.input_polls = 0;
+        else if (++k.input_polls > INPUT_POLLS_FREE) now = k.input_polled_at = spinner_get_time();
+        return input_level(p, now);
+    }
     if (!spinner_in_interrupt()) {
         double now = spinner_now();
         if (now != k.pin_polled_at) k.pin_polled_at = now, k.pin_polls = 0;
         else if (++k.pin_polls >= PIN_POLLS) {
-            char text[400];
+            char text[500];
             snprintf(text, sizeof text, "Dio_ReadChannel(%u): read %d times with no write and no simulated time "
-                     "passing: a loop waiting for the pin never ends - the simulator drives no pin (a button, a "
-                     "sensor's echo), one reads what was last written to it (docs/firmware.md, \"The S32K144 "
-                     "kit\": not emulated)", (unsigned)ChannelId, PIN_POLLS);
+                     "passing: a loop waiting for the pin never ends - the simulator drives no pin but the inputs "
+                     "--param names (s32k_sw2, s32k_sw3: the board's buttons; s32k_pin_%u=0/1: a constant level), "
+                     "one reads what was last written to it (docs/firmware.md, \"The S32K144 kit\")",
+                     (unsigned)ChannelId, PIN_POLLS, (unsigned)ChannelId);
             spinner_fail(text);
         }
     }
     return ChannelId < NUM_DIO ? k.dio[ChannelId] : STD_LOW;
 }
 
+/* An input pin's flip writes nothing and returns its level (AUTOSAR SWS_Dio_00192, 00193). */
 Dio_LevelType Dio_FlipChannel(Dio_ChannelType ChannelId) {
-    Dio_LevelType level = Dio_ReadChannel(ChannelId) == STD_LOW ? STD_HIGH : STD_LOW;
+    Dio_LevelType now = Dio_ReadChannel(ChannelId);
+    if (pin_of(ChannelId) != PIN_OUTPUT) return now;
+    Dio_LevelType level = now == STD_LOW ? STD_HIGH : STD_LOW;
     Dio_WriteChannel(ChannelId, level);
     return level;
 }
