@@ -2,6 +2,7 @@
 team's mbed program (mbed.h + the FRDM-TFC library's TFC.h) builds unchanged and drives."""
 from __future__ import annotations
 
+import dataclasses
 import re
 import textwrap
 from pathlib import Path
@@ -428,3 +429,26 @@ def test_a_wait_after_other_time_passed_waits_its_whole_time(tmp_path, capfd):
     assert r.outcome == "controller_returned", r.message
     a, b, c = map(int, re.search(r"waited (\d+) (\d+) (\d+)", capfd.readouterr().out).groups())
     assert (a, b) == (6000, 4000) and c <= 2000  # whole 2-ms steps; twenty 0.1-ms waits share one
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_global_digitalout_is_set_before_main_and_the_run_starts(tmp_path, isolate):
+    """`DigitalOut myled(LED1);` at file scope (mbed's blinky; its constructor writes the pin before
+    main(), as the H-bridge enable's `DigitalOut hbridge(PTE21, 1)`): the run starts on both hosts and
+    the pin's level holds from the start (in process it crashed the run with SIGSEGV before the first
+    frame: the write started the kit from the constructor, before the run's simulator was there)."""
+    prog = program(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        DigitalOut myled(LED1);
+        DigitalOut hbridge(PTE21, 1);     // the H-bridge enabled from the start
+        int main() {
+            TFC_Init();
+            TFC_SetMotorPWM(0.5f, 0.5f);
+            for (int i = 0; i < 10; i++) { myled = !myled; wait_ms(20); }
+            return myled.read() == 0 ? 0 : 1;   // toggled ten times
+        }
+        """)
+    r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+    assert np.allclose(r.log.speed_cmd_mps[r.log.t_s > 0.05], 0.5 * 3.1)
