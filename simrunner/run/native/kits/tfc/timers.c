@@ -771,6 +771,19 @@ static void nvic_settle(void) {
         if (((hand & nvic_handed) >> irqs[k]) & 1u) spinner_pend_every(take_of(irqs[k]));
 }
 
+/* TFC_InitADCs (TFC_Init calls it): the library's camera timing on PIT channel 0 leaves the PIT
+ * module enabled and its IRQ on in the NVIC - the FRDM-TFC library's TFC_ADC.c, InitPIT: SIM_SCGC6 |=
+ * SIM_SCGC6_PIT_MASK; PIT_MCR |= PIT_MCR_FRZ_MASK; PIT_MCR &= ~PIT_MCR_MDIS_MASK; enable_irq(INT_PIT-16)
+ * (RM 32.3.1 MCR: MDIS set out of reset) - so a channel the program sets up after it interrupts
+ * without a PIT_MCR write or an NVIC_EnableIRQ of its own, as on the board. Channel 0's registers stay
+ * the program's: the kit reads the camera itself (tfc.c), and the library's PIT_IRQHandler is not
+ * there. */
+void tfc_sim_timers_library_pit(void) {
+    SIM->SCGC6 |= SIM_SCGC6_PIT_MASK;
+    PIT->MCR = (PIT->MCR | PIT_MCR_FRZ_MASK) & ~PIT_MCR_MDIS_MASK;
+    tfc_sim_nvic_enable(IRQ_PIT);
+}
+
 /* TFC_Init: the TPM clock as the library's servo and motor set-up selects it (MCGPLLCLK/2). */
 void tfc_sim_timers_init(void) {
     SIM->SOPT2 = (SIM->SOPT2 & ~SIM_SOPT2_TPMSRC_MASK) | SIM_SOPT2_PLLFLLSEL_MASK | SIM_SOPT2_TPMSRC(1);
