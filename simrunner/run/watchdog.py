@@ -27,12 +27,30 @@ from simrunner.run.clock import LockstepClock
 from simrunner.run.supervise import current_supervision
 
 
+SPINNER_HINT = "call get_image(), sleep() or get_time() in every loop"
+# A firmware built against a kit (--kit) lets time pass with its kit's calls, not Spinner's: the
+# hint names them (docs/firmware.md: an idle main loop whose work is the interrupts').
+KIT_HINTS = {
+    "tfc": "call TFC_Task() in every loop, or __WFI() in a main loop whose work is the interrupts' "
+           "(for (;;) __WFI();)",
+    "tfc-mbed": "call wait(), wait_ms() or sleep() in every loop, or read the board there (a main loop "
+                "whose work is the Tickers': while (1) wait(1);)",
+}
+
+
+def kit_stall_hint(message: str, kit: str | None) -> str:
+    """``message`` (:func:`stall_message`'s) with the hint in the calls of ``kit`` (the program's
+    --kit), where it has its own."""
+    hint = KIT_HINTS.get(kit or "")
+    return message.replace(SPINNER_HINT, hint) if hint else message
+
+
 def stall_message(idle_s: float, where: str, limit_s: float, in_interrupt: bool = False) -> str:
     """The message of a stalled run (``where``: "" or " (at file:line in function)";
     ``in_interrupt``: it stalled inside an interrupt handler, where no time passes)."""
     hint = ("inside an interrupt handler no simulated time passes: a loop there that waits for "
             "time, the camera or the main loop never ends; wait in the main loop" if in_interrupt
-            else "call get_image(), sleep() or get_time() in every loop")
+            else SPINNER_HINT)
     return (f"controller stalled: {idle_s:.1f} s of wall time without letting simulated time "
             f"pass{where}; {hint} (limit --wall-limit {limit_s:g} s)")
 

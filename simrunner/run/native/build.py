@@ -91,7 +91,8 @@ class NativeProgram:
     ``warnings`` text ('' if none), whether it came from the cache, ``isolate``: run it
     in a child process rather than in the simulator's (controller.NativeController), and
     ``isrs``: its functions the simulator calls as timer interrupts, ``(name, period_s)`` each
-    (``simrunner drive --isr NAME@HZ``; :func:`with_isrs`)."""
+    (``simrunner drive --isr NAME@HZ``; :func:`with_isrs`); ``kit``: the ``--kit`` it was built
+    against (None: none), which names its kit's calls in the run's messages."""
 
     library: Path
     sources: tuple[Path, ...]
@@ -99,6 +100,7 @@ class NativeProgram:
     cached: bool = False
     isolate: bool = False
     isrs: tuple[tuple[str, float], ...] = ()
+    kit: str | None = None
 
     @property
     def name(self) -> str:
@@ -627,7 +629,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     entry = cache_dir() / key
     hit = _cached(entry)
     if hit is not None:
-        return NativeProgram(hit[0], tuple(paths), hit[1], cached=True)
+        return NativeProgram(hit[0], tuple(paths), hit[1], cached=True, kit=kit)
     import shutil
     import tempfile
 
@@ -666,7 +668,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return NativeProgram(entry / "controller.so", tuple(paths), text, cached=False)
+    return NativeProgram(entry / "controller.so", tuple(paths), text, cached=False, kit=kit)
 
 
 def _build_host(kind: str, suffix: str, flags: list[str], libs: list[str]) -> Path:
