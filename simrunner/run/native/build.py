@@ -506,9 +506,11 @@ def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileE
     names = sorted(set(pattern.findall(str(exc)))) if pattern else []
     if not names:
         return exc
+    has = ("it has a timer interrupt's only: LPTMR0, the PIT, TPM2, their SIM and MCG bits, the NVIC"
+           if kit == "tfc" else "it has no registers")
     return ControllerFileError(
         f"{exc}\n{', '.join(names)}: the MCU's registers{' or mbed drivers' if kit == 'tfc-mbed' else ''}, "
-        f"not emulated by the simulator's --kit {kit} (it has no registers): reach the hardware "
+        f"not emulated by the simulator's --kit {kit} ({has}): reach the hardware "
         f"through the kit library's functions (docs/firmware.md)")
 
 
