@@ -176,6 +176,7 @@ def test_misuse_is_one_clear_line(tmp_path):
     assert r.outcome == "controller_error"
     assert "wait_ms: not emulated by the simulator's mbed FRDM-TFC kit" in r.message
     assert "isr_wait.cpp:5" in r.message
+    assert r.message.endswith("(in handler())"), r.message  # (C++'s demangled name: it said handler()())
     prog = program(tmp_path, """\
         #include "mbed.h"
         Serial pc(USBTX, USBRX);
