@@ -300,3 +300,39 @@ def test_firmware_reads_encoders_and_the_imu_through_spinner_h(tmp_path):
     car.write_text("[encoders]\n[imu]\n")
     r = drive(firmware([src]), track="floor", car=car, time_limit_s=5.0)
     assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+
+
+def test_a_module_that_includes_the_mcus_register_header_builds(tmp_path, capfd):
+    """A team's timer module includes MKL25Z4.h itself (the header derivative.h includes on the
+    board; Kinetis Design Studio projects include it directly): it builds against the kit's timers
+    and runs (was: "fatal error: MKL25Z4.h: No such file or directory")."""
+    timer = tmp_path / "timer.c"
+    timer.write_text(textwrap.dedent("""\
+        #include "MKL25Z4.h"
+        volatile unsigned ticks;
+        void LPTMR0_IRQHandler(void) { LPTMR0->CSR |= LPTMR_CSR_TCF_MASK; ticks++; }
+        void Timer_Init(void) {
+            SIM->SCGC5 |= SIM_SCGC5_LPTMR_MASK;
+            LPTMR0->PSR = LPTMR_PSR_PCS(1) | LPTMR_PSR_PBYP_MASK;   /* the 1 kHz LPO */
+            LPTMR0->CMR = 10 - 1;                                   /* 100 Hz */
+            LPTMR0->CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK;
+            NVIC_EnableIRQ(LPTMR0_IRQn);
+        }
+        """))
+    main = tmp_path / "main.c"
+    main.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC\\TFC.h"
+        extern volatile unsigned ticks;
+        void Timer_Init(void);
+        int main(void) {
+            TFC_Init();
+            Timer_Init();
+            while (TFC_Ticker[0] < 1000) __WFI();
+            printf("ticks %u\\n", ticks);
+            return 0;
+        }
+        """))
+    r = drive(firmware([main, timer]), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned", r.message
+    assert "ticks 100" in capfd.readouterr().out
