@@ -42,6 +42,9 @@ LPTIMER = dict(handler="LPTimer_IRQHandler", flag="LPTMR0_CSR & LPTMR_CSR_TCF_MA
                clear="LPTMR0_CSR |= LPTMR_CSR_TCF_MASK")
 LPTMR0 = dict(LPTIMER, handler="LPTMR0_IRQHandler")  # the Kinetis SDK's name of the vector
 TPM2 = dict(handler="TPM2_IRQHandler", flag="TPM2_SC & TPM_SC_TOF_MASK", clear="TPM2_SC |= TPM_SC_TOF_MASK")
+# the overflow flag read and cleared in the STATUS register, which mirrors SC TOF (RM 31.3.5)
+TPM2_STATUS = dict(handler="TPM2_IRQHandler", flag="TPM2_STATUS & TPM_STATUS_TOF_MASK",
+                   clear="TPM2_STATUS = TPM_STATUS_TOF_MASK")
 PIT_100HZ = """SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
     PIT_MCR = 0;
     PIT->CHANNEL[0].LDVAL = 240000 - 1;              /* 100 Hz of the 24 MHz bus clock */
@@ -87,6 +90,10 @@ SETUPS = {
                                                    cmr="312"), 313 * 256 / 8e6),
     # MCGPLLCLK/2 = 24 MHz (TFC_Init's choice) / 128: MOD + 1 = 1875 counts
     "tpm2": (TPM2, TPM2_SETUP.format(extra="", mod="1875 - 1", ps=7, cpwms=""), 0.01),
+    # the flag in STATUS; the set-up as MKL25Z4.h's users write it: CONF DBGMODE, a CNT write, a priority
+    "tpm2_status": (TPM2_STATUS, TPM2_SETUP.format(
+        extra="TPM2_CONF |= TPM_CONF_DBGMODE(3); TPM2_CNT = TPM_CNT_COUNT(0); NVIC_IPR4 = 0;",
+        mod="1875 - 1", ps=7, cpwms=""), 0.01),
     # up-down counting: 2 x MOD
     "tpm2_updown": (TPM2, TPM2_SETUP.format(extra="", mod="1875", ps=7, cpwms=" | TPM_SC_CPWMS_MASK"), 0.02),
     # OSCERCLK: 8 MHz / 8, 10000 counts

@@ -675,10 +675,12 @@ static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
         return;
     }
     *flag |= mask;
+    if (i == TPM_2) TPM2->STATUS |= TPM_STATUS_TOF_MASK;  /* (STATUS TOF mirrors SC TOF, RM 31.3.5) */
     firing = 1, firing_irq = irq_of(i);
     handler_of(i)();
     firing = 0, firing_irq = -1;
     *flag &= ~mask;
+    if (i == TPM_2) TPM2->STATUS &= ~TPM_STATUS_TOF_MASK;
     waits++;
     sync();
     handler_s = -1.0;
@@ -713,6 +715,7 @@ static void take(int irq) {
     uint32_t masks[N_TIMERS] = {0};
     for (int i = first; i <= last; i++)
         if (timers[i].flagged) *flag_of(i, &masks[i]) |= masks[i];
+    if (masks[TPM_2]) TPM2->STATUS |= TPM_STATUS_TOF_MASK;
     waits++;
     firing = 1, firing_irq = irq;
     handler_of(first)();
@@ -721,6 +724,7 @@ static void take(int irq) {
         if (masks[i]) *flag_of(i, &masks[i]) &= ~masks[i];
         timers[i].flagged = 0;
     }
+    if (masks[TPM_2]) TPM2->STATUS &= ~TPM_STATUS_TOF_MASK;
     waits++;
     sync();
     handler_s = -1.0;
