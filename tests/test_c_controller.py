@@ -990,3 +990,26 @@ def test_a_fork_in_a_c_controller_leaves_the_run_and_its_log_whole(tmp_path, iso
             break
         time.sleep(0.05)
     assert _ended(helper)
+
+
+def test_a_global_objects_constructor_that_calls_spinner_runs_as_isolated(tmp_path, track, capfd):
+    """A C++ global whose constructor reads a parameter: in the simulator's process the library's
+    constructors run as it is loaded, before the run, where nothing can be asked (the run crashed,
+    SIGSEGV before its first frame): the program runs in a child process instead, its constructor
+    reading the run's --param as with --isolate."""
+    src = tmp_path / "ctor.cpp"
+    src.write_text(textwrap.dedent("""\
+        #include <cstdio>
+        #include "spinner.h"
+        struct Gains { double kp; Gains() : kp(spinner_param("kp", 0.5)) {} } gains;
+        int main() {
+            std::printf("kp %g\\n", gains.kp);
+            spinner_sleep(0.1);
+            return 0;
+        }
+        """))
+    prog = build_program([str(src)])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(prog, isolate=isolate), track=track, params={"kp": 2.5}, time_limit_s=1.0)
+        assert r.outcome == "controller_returned", r.message
+        assert "kp 2.5" in capfd.readouterr().out

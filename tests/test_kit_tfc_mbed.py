@@ -453,3 +453,63 @@ def test_a_global_digitalout_is_set_before_main_and_the_run_starts(tmp_path, iso
     r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", time_limit_s=2.0)
     assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
     assert np.allclose(r.log.speed_cmd_mps[r.log.t_s > 0.05], 0.5 * 3.1)
+
+
+GLOBAL_DRIVERS = """\
+    #include "mbed.h"
+    #include "TFC.h"
+    class Encoder {                      // a team's driver class: its InterruptIn set up in its constructor
+    public:
+        Encoder(PinName a) : in_(a), n(0) { in_.rise(callback(this, &Encoder::tick)); }
+        void tick() { n++; }
+        InterruptIn in_;
+        volatile int n;
+    };
+    class Steering {                     // a servo class on a PwmOut: its pulse set in its constructor
+    public:
+        Steering(PinName p) : pwm_(p) { pwm_.period_ms(20); pwm_.pulsewidth_us(1500); }
+        void set(float pos) { pwm_.pulsewidth_us(1500 + (int)(500 * pos)); }
+        PwmOut pwm_;
+    };
+    class Speed {                        // a Ticker attached in its constructor
+    public:
+        Speed(Encoder &e) : e_(e) { t_.attach(callback(this, &Speed::sample), 0.01f); }
+        void sample() { samples++; last = e_.n; }
+        Encoder &e_;
+        Ticker t_;
+        volatile int samples = 0, last = 0;
+    };
+    Encoder enc(PTA13);
+    Steering steering(PTB0);
+    Speed speed(enc);
+    int main() {
+        TFC_Init();
+        steering.set(0.5f);
+        TFC_HBRIDGE_ENABLE;
+        TFC_SetMotorPWM(0.3f, 0.3f);
+        wait(1.0);
+        printf("edges %d samples %d last %d\\n", enc.n, speed.samples, speed.last);
+        return 0;
+    }
+    """
+
+
+def test_global_driver_objects_whose_constructors_use_the_kit_run_on_both_hosts(tmp_path, capfd):
+    """Global objects of a team's driver classes whose constructors set up an InterruptIn, a PwmOut
+    and a Ticker (on the board C++ constructors run in the start-up code, before main): they run as
+    --isolate runs them, edge for edge (in the simulator's process the library's constructors ran
+    as it was loaded, before the run: the run crashed, SIGSEGV before its first frame; the program
+    now runs in a child process)."""
+    car = tmp_path / "enc.toml"
+    car.write_text('[encoders]\nwheels = "rear"\nlines_per_rev = 100\ncounting = "x1"\n')
+    prog = program(tmp_path, GLOBAL_DRIVERS)
+    outs = []
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", car=car,
+                  params={"encoder_PTA13": 2}, time_limit_s=2.0)
+        assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+        assert np.allclose(r.log.steer_cmd_rad[r.log.t_s > 0.05], 0.2)   # 0.5 x tfc_servo_rad 0.40
+        outs.append(capfd.readouterr().out)
+    m = re.search(r"edges (\d+) samples (\d+) last (\d+)", outs[0])
+    assert m and int(m[1]) > 100 and int(m[2]) >= 99 and int(m[3]) > 0, outs[0]
+    assert outs[0] == outs[1]

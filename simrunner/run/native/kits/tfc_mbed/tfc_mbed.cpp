@@ -125,6 +125,9 @@ static void init_servos(double pulse_min_s, double pulse_max_s, double frame_s) 
 
 void tfc_mbed_start(void) {
     if (k.started) return;
+    /* (a global object's constructor as the simulator's process loads the program: nothing can be
+     * asked, the program runs in a child process instead, where this starts the kit; spinner.h) */
+    if (!spinner_running()) return;
     k.started = 1;
     k.servo_rad = spinner_param("tfc_servo_rad", 0.40);
     k.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
