@@ -278,7 +278,12 @@ float TFC_ReadPot(uint8_t Channel) {
     return (float)clampf(spinner_param(Channel == 0 ? "pot0" : "pot1", 0.0), -1.0, 1.0);
 }
 
-float TFC_ReadBatteryVoltage(void) { return (float)spinner_param("battery_v", 7.2); }
+/* The library returns the battery sense input, not the battery's voltage: FRDM-TFC TFC_ADC.c,
+ * `return (((float)BatSenseADC_Value/(float)(ADC_MAX_CODE)) * 3.0);// * ((47000.0+10000.0)/10000.0);`
+ * - the shield's divider (47k over 10k) is the commented-out factor; as the mbed kit's. */
+float TFC_ReadBatteryVoltage(void) {
+    return (float)clampf(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0, 0.0, 3.0);
+}
 
 void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {
     tfc.exposure_s = clampf(TimeIn_uS * 1e-6, 1e-5, 1.0);
