@@ -59,6 +59,17 @@ def test_a_missing_include_names_the_kit_or_the_folder_to_add(project, monkeypat
     assert res.exit_code == 2
     home = project / "Project_Headers"  # (batch names its sources by their full path)
     assert res.stderr.splitlines()[-1] == f"control.h is in {home}: add -I {home}"
+    # the other kit's header: named as such (it said "derivative.h is in .../kits/tfc/include: add -I
+    # .../kits/tfc/include", a folder of the simulator's, found beside the kit's own sources)
+    with pytest.raises(ControllerFileError) as err:
+        build_program(["Sources/main.c"], include_dirs=["Project_Headers"], kit="tfc-mbed")
+    assert str(err.value).splitlines()[-1] == ("derivative.h: a header of the simulator's --kit tfc, not of "
+                                               "--kit tfc-mbed: build with --kit tfc (docs/firmware.md)")
+    (project / "Sources" / "mbed_main.cpp").write_text('#include "mbed.h"\nint main() { return 0; }\n')
+    with pytest.raises(ControllerFileError) as err:
+        build_program(["Sources/mbed_main.cpp"], kit="tfc")
+    assert str(err.value).splitlines()[-1] == ("mbed.h: a header of the simulator's --kit tfc-mbed, not of "
+                                               "--kit tfc: build with --kit tfc-mbed (docs/firmware.md)")
 
 
 def test_a_typod_function_and_a_left_out_source_are_one_line_at_their_use(project, monkeypatch, capfd):

@@ -533,12 +533,15 @@ def _include_hint(exc: ControllerFileError, kit: str | None, sources: list[Path]
     if found is None:
         return exc
     name = found.group(1).replace("\\", "/")
-    owner = _kit_headers().get(name.lower()) if kit is None else None
-    if owner is not None:
-        line = f"{name}: a header of the simulator's --kit {owner}: build with --kit {owner} (docs/firmware.md)"
+    owner = _kit_headers().get(name.lower())
+    if owner is not None and owner != kit:  # (built without --kit, or with the other kit)
+        line = (f"{name}: a header of the simulator's --kit {owner}{f', not of --kit {kit}' if kit else ''}: "
+                f"build with --kit {owner} (docs/firmware.md)")
     else:
         base = Path(name).name.lower()
-        roots = dict.fromkeys(d for s in sources for d in (s.parent, s.parent.parent))
+        kits = KITS_DIR.resolve()  # (the kit's own sources: its folders are not the project's)
+        roots = dict.fromkeys(d for s in sources if not Path(s).resolve().is_relative_to(kits)
+                              for d in (s.parent, s.parent.parent))
         homes = sorted({path.parent for root in roots for path in _headers_under(root, 3)
                         if path.name.lower() == base and path.parent not in roots})
         if not homes:
