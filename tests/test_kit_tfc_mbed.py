@@ -513,3 +513,18 @@ def test_global_driver_objects_whose_constructors_use_the_kit_run_on_both_hosts(
     m = re.search(r"edges (\d+) samples (\d+) last (\d+)", outs[0])
     assert m and int(m[1]) > 100 and int(m[2]) >= 99 and int(m[3]) > 0, outs[0]
     assert outs[0] == outs[1]
+
+
+def test_tfc_ticker_without_the_programs_definition_says_to_define_it(tmp_path):
+    """mbed's library has no TFC_Ticker (the CodeWarrior one's SysTick counts it): a program that
+    uses it without defining it is told so after the compiler's error, which names the kit's
+    function behind the name (tfc_mbed_tickers was not declared), not TFC_Ticker."""
+    src = tmp_path / "ticks.cpp"
+    src.write_text('#include "mbed.h"\n#include "TFC.h"\n'
+                   'int main() { TFC_Init(); while (TFC_Ticker[0] < 100) {} return 0; }\n')
+    with pytest.raises(ControllerFileError) as err:
+        build_program([str(src)], kit="tfc-mbed")
+    assert "ticks.cpp:3" in str(err.value)
+    assert str(err.value).splitlines()[-1].startswith(
+        "TFC_Ticker: not declared - mbed's FRDM-TFC library has none (the CodeWarrior library's SysTick "
+        "counted it): define it in your program, `volatile uint32_t TFC_Ticker[4];`")

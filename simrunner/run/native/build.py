@@ -514,6 +514,19 @@ def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileE
         f"through the kit library's functions (docs/firmware.md)")
 
 
+def _tickers_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileError:
+    """``exc`` with a last line when an mbed program uses ``TFC_Ticker`` without defining it: the
+    compiler names the kit's function behind the name (``tfc_mbed_tickers``), not the program's
+    array, which mbed's FRDM-TFC library does not have (the CodeWarrior library's SysTick counts it)."""
+    text = str(exc).replace("\u2018", "'").replace("\u2019", "'")  # (the compiler's quotes, as its locale has them)
+    if kit != "tfc-mbed" or "'tfc_mbed_tickers' was not declared" not in text:
+        return exc
+    return ControllerFileError(
+        f"{exc}\nTFC_Ticker: not declared - mbed's FRDM-TFC library has none (the CodeWarrior library's "
+        f"SysTick counted it): define it in your program, `volatile uint32_t TFC_Ticker[4];`, and count it "
+        f"with a Ticker of yours (examples/firmware/mbed/main.cpp; docs/firmware.md)")
+
+
 def _kit_headers() -> dict[str, str]:
     """Each kit's headers as an ``#include`` names them (lower case, ``/``) -> the kit."""
     headers = {}
@@ -651,7 +664,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
             try:
                 warnings.append(_run(cmd, str(p), limits))
             except ControllerFileError as exc:
-                raise _include_hint(_register_hint(exc, kit), kit, paths) from None
+                raise _include_hint(_register_hint(_tickers_hint(exc, kit), kit), kit, paths) from None
             objects.append(str(obj))
             depfiles.append(dep)
         linker = compilers[True] if cxx else compilers[False]
