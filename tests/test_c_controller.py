@@ -1030,3 +1030,56 @@ def test_a_fork_in_a_c_controller_leaves_the_run_and_its_log_whole(tmp_path, iso
             break
         time.sleep(0.05)
     assert _ended(helper)
+
+
+def test_a_program_run_elsewhere_leaves_no_exit_handlers_for_the_next(tmp_path):
+    """A C++ global with a destructor whose constructor calls Spinner: loaded in the simulator's
+    process, its destructor was registered (at the load) and the library unloaded when the program
+    went to a child process; the next in-process program's end called that destructor in unloaded
+    code and the simulator's process died (SIGSEGV). Both runs in a fresh process: it must end 0."""
+    src = tmp_path / "ctor.cpp"
+    src.write_text(textwrap.dedent("""\
+        #include <cstdio>
+        #include "spinner.h"
+        struct Gains {
+            double kp;
+            Gains() : kp(spinner_param("kp", 0.5)) {}
+            ~Gains() { std::printf("gains gone\\n"); }
+        } gains;
+        int main() { spinner_sleep(0.1); return 0; }
+        """))
+    plain = tmp_path / "plain.c"
+    plain.write_text('#include "spinner.h"\nint main(void) { spinner_sleep(0.1); return 0; }\n')
+    code = textwrap.dedent(f"""\
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        for path in ({str(src)!r}, {str(plain)!r}):
+            r = drive(build_program([path]), time_limit_s=1.0)
+            print(path, r.outcome)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, (out.returncode, out.stdout, out.stderr[-2000:])
+    assert out.stdout.count("controller_returned") == 2, out.stdout
+
+
+def test_a_global_objects_constructor_that_calls_spinner_runs_as_isolated(tmp_path, track, capfd):
+    """A C++ global whose constructor reads a parameter: in the simulator's process the library's
+    constructors run as it is loaded, before the run, where nothing can be asked (the run crashed,
+    SIGSEGV before its first frame): the program runs in a child process instead, its constructor
+    reading the run's --param as with --isolate."""
+    src = tmp_path / "ctor.cpp"
+    src.write_text(textwrap.dedent("""\
+        #include <cstdio>
+        #include "spinner.h"
+        struct Gains { double kp; Gains() : kp(spinner_param("kp", 0.5)) {} } gains;
+        int main() {
+            std::printf("kp %g\\n", gains.kp);
+            spinner_sleep(0.1);
+            return 0;
+        }
+        """))
+    prog = build_program([str(src)])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(prog, isolate=isolate), track=track, params={"kp": 2.5}, time_limit_s=1.0)
+        assert r.outcome == "controller_returned", r.message
+        assert "kp 2.5" in capfd.readouterr().out

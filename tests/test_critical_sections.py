@@ -679,6 +679,7 @@ PHASE_PIT = textwrap.dedent("""\
     void PIT_IRQHandler(void) { PIT_TFLG0 = PIT_TFLG_TIF_MASK; at[n++] = spinner_get_time(); }
     int main(void) {
         TFC_Init();
+        NVIC_DisableIRQ(PIT_IRQn);                             /* (TFC_Init enables it, as the library) */
         SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
         PIT_MCR = 0;
         PIT_LDVAL0 = 240000 - 1;                               /* 100 Hz */

@@ -59,6 +59,17 @@ def test_a_missing_include_names_the_kit_or_the_folder_to_add(project, monkeypat
     assert res.exit_code == 2
     home = project / "Project_Headers"  # (batch names its sources by their full path)
     assert res.stderr.splitlines()[-1] == f"control.h is in {home}: add -I {home}"
+    # the other kit's header: named as such (it said "derivative.h is in .../kits/tfc/include: add -I
+    # .../kits/tfc/include", a folder of the simulator's, found beside the kit's own sources)
+    with pytest.raises(ControllerFileError) as err:
+        build_program(["Sources/main.c"], include_dirs=["Project_Headers"], kit="tfc-mbed")
+    assert str(err.value).splitlines()[-1] == ("derivative.h: a header of the simulator's --kit tfc, not of "
+                                               "--kit tfc-mbed: build with --kit tfc (docs/firmware.md)")
+    (project / "Sources" / "mbed_main.cpp").write_text('#include "mbed.h"\nint main() { return 0; }\n')
+    with pytest.raises(ControllerFileError) as err:
+        build_program(["Sources/mbed_main.cpp"], kit="tfc")
+    assert str(err.value).splitlines()[-1] == ("mbed.h: a header of the simulator's --kit tfc-mbed, not of "
+                                               "--kit tfc: build with --kit tfc-mbed (docs/firmware.md)")
 
 
 def test_a_typod_function_and_a_left_out_source_are_one_line_at_their_use(project, monkeypatch, capfd):
@@ -152,3 +163,48 @@ def test_mcu_time_without_its_value_names_the_option_not_a_file(tmp_path, comman
     assert res.exit_code == 2
     assert ("Invalid value for '--mcu-time': '--laps': expected measured or seconds per call, e.g. "
             "0.002 (the option's value is missing)") in res.output
+
+
+@pytest.mark.parametrize("kit, source, hint", [
+    ("tfc", """\
+        #include "derivative.h"
+        #include "TFC\\TFC.h"
+        volatile int n;
+        void PIT_IRQHandler(void) { PIT_TFLG1 = PIT_TFLG_TIF_MASK; n++; }
+        int main(void) {
+            TFC_Init();
+            PIT_LDVAL1 = 240000 - 1;
+            PIT_TCTRL1 = PIT_TCTRL_TEN_MASK | PIT_TCTRL_TIE_MASK;
+            for (;;) {
+            }
+        }
+        """, "call TFC_Task() in every loop, or __WFI() in a main loop whose work is the interrupts'"),
+    ("tfc-mbed", """\
+        #include "mbed.h"
+        #include "TFC.h"
+        volatile int n;
+        void control() { n++; }
+        Ticker ticker;
+        int main() {
+            ticker.attach(&control, 0.01f);
+            while (1) {
+            }
+        }
+        """, "call wait(), wait_ms() or sleep() in every loop"),
+])
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_firmwares_busy_main_loop_is_told_its_kits_idle_call(tmp_path, kit, source, hint, isolate):
+    """The interrupt firmware's `for (;;) {}` main loop (the work in a timer's handler) stalls, as
+    documented; the message names the line and the kit's calls that let time pass (__WFI(), wait()),
+    not Spinner's (it said: call get_image(), sleep() or get_time())."""
+    import dataclasses
+
+    from simrunner.run.runner import drive
+
+    src = tmp_path / ("main.c" if kit == "tfc" else "main.cpp")
+    src.write_text(textwrap.dedent(source))
+    prog = dataclasses.replace(build_program([src], kit=kit), isolate=isolate)
+    r = drive(prog, track="floor", time_limit_s=2.0, wall_limit_s=1.0)
+    line = 9 if kit == "tfc" else 8
+    assert r.outcome == "stalled" and f"main.{src.suffix[1:]}:{line}" in r.message, r.message
+    assert hint in r.message and "get_image()" not in r.message, r.message

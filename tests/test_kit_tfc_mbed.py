@@ -2,6 +2,7 @@
 team's mbed program (mbed.h + the FRDM-TFC library's TFC.h) builds unchanged and drives."""
 from __future__ import annotations
 
+import dataclasses
 import re
 import textwrap
 from pathlib import Path
@@ -175,6 +176,7 @@ def test_misuse_is_one_clear_line(tmp_path):
     assert r.outcome == "controller_error"
     assert "wait_ms: not emulated by the simulator's mbed FRDM-TFC kit" in r.message
     assert "isr_wait.cpp:5" in r.message
+    assert r.message.endswith("(in handler())"), r.message  # (C++'s demangled name: it said handler()())
     prog = program(tmp_path, """\
         #include "mbed.h"
         Serial pc(USBTX, USBRX);
@@ -428,3 +430,101 @@ def test_a_wait_after_other_time_passed_waits_its_whole_time(tmp_path, capfd):
     assert r.outcome == "controller_returned", r.message
     a, b, c = map(int, re.search(r"waited (\d+) (\d+) (\d+)", capfd.readouterr().out).groups())
     assert (a, b) == (6000, 4000) and c <= 2000  # whole 2-ms steps; twenty 0.1-ms waits share one
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_a_global_digitalout_is_set_before_main_and_the_run_starts(tmp_path, isolate):
+    """`DigitalOut myled(LED1);` at file scope (mbed's blinky; its constructor writes the pin before
+    main(), as the H-bridge enable's `DigitalOut hbridge(PTE21, 1)`): the run starts on both hosts and
+    the pin's level holds from the start (in process it crashed the run with SIGSEGV before the first
+    frame: the write started the kit from the constructor, before the run's simulator was there)."""
+    prog = program(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        DigitalOut myled(LED1);
+        DigitalOut hbridge(PTE21, 1);     // the H-bridge enabled from the start
+        int main() {
+            TFC_Init();
+            TFC_SetMotorPWM(0.5f, 0.5f);
+            for (int i = 0; i < 10; i++) { myled = !myled; wait_ms(20); }
+            return myled.read() == 0 ? 0 : 1;   // toggled ten times
+        }
+        """)
+    r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+    assert np.allclose(r.log.speed_cmd_mps[r.log.t_s > 0.05], 0.5 * 3.1)
+
+
+GLOBAL_DRIVERS = """\
+    #include "mbed.h"
+    #include "TFC.h"
+    class Encoder {                      // a team's driver class: its InterruptIn set up in its constructor
+    public:
+        Encoder(PinName a) : in_(a), n(0) { in_.rise(callback(this, &Encoder::tick)); }
+        void tick() { n++; }
+        InterruptIn in_;
+        volatile int n;
+    };
+    class Steering {                     // a servo class on a PwmOut: its pulse set in its constructor
+    public:
+        Steering(PinName p) : pwm_(p) { pwm_.period_ms(20); pwm_.pulsewidth_us(1500); }
+        void set(float pos) { pwm_.pulsewidth_us(1500 + (int)(500 * pos)); }
+        PwmOut pwm_;
+    };
+    class Speed {                        // a Ticker attached in its constructor
+    public:
+        Speed(Encoder &e) : e_(e) { t_.attach(callback(this, &Speed::sample), 0.01f); }
+        void sample() { samples++; last = e_.n; }
+        Encoder &e_;
+        Ticker t_;
+        volatile int samples = 0, last = 0;
+    };
+    Encoder enc(PTA13);
+    Steering steering(PTB0);
+    Speed speed(enc);
+    int main() {
+        TFC_Init();
+        steering.set(0.5f);
+        TFC_HBRIDGE_ENABLE;
+        TFC_SetMotorPWM(0.3f, 0.3f);
+        wait(1.0);
+        printf("edges %d samples %d last %d\\n", enc.n, speed.samples, speed.last);
+        return 0;
+    }
+    """
+
+
+def test_global_driver_objects_whose_constructors_use_the_kit_run_on_both_hosts(tmp_path, capfd):
+    """Global objects of a team's driver classes whose constructors set up an InterruptIn, a PwmOut
+    and a Ticker (on the board C++ constructors run in the start-up code, before main): they run as
+    --isolate runs them, edge for edge (in the simulator's process the library's constructors ran
+    as it was loaded, before the run: the run crashed, SIGSEGV before its first frame; the program
+    now runs in a child process)."""
+    car = tmp_path / "enc.toml"
+    car.write_text('[encoders]\nwheels = "rear"\nlines_per_rev = 100\ncounting = "x1"\n')
+    prog = program(tmp_path, GLOBAL_DRIVERS)
+    outs = []
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", car=car,
+                  params={"encoder_PTA13": 2}, time_limit_s=2.0)
+        assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+        assert np.allclose(r.log.steer_cmd_rad[r.log.t_s > 0.05], 0.2)   # 0.5 x tfc_servo_rad 0.40
+        outs.append(capfd.readouterr().out)
+    m = re.search(r"edges (\d+) samples (\d+) last (\d+)", outs[0])
+    assert m and int(m[1]) > 100 and int(m[2]) >= 99 and int(m[3]) > 0, outs[0]
+    assert outs[0] == outs[1]
+
+
+def test_tfc_ticker_without_the_programs_definition_says_to_define_it(tmp_path):
+    """mbed's library has no TFC_Ticker (the CodeWarrior one's SysTick counts it): a program that
+    uses it without defining it is told so after the compiler's error, which names the kit's
+    function behind the name (tfc_mbed_tickers was not declared), not TFC_Ticker."""
+    src = tmp_path / "ticks.cpp"
+    src.write_text('#include "mbed.h"\n#include "TFC.h"\n'
+                   'int main() { TFC_Init(); while (TFC_Ticker[0] < 100) {} return 0; }\n')
+    with pytest.raises(ControllerFileError) as err:
+        build_program([str(src)], kit="tfc-mbed")
+    assert "ticks.cpp:3" in str(err.value)
+    assert str(err.value).splitlines()[-1].startswith(
+        "TFC_Ticker: not declared - mbed's FRDM-TFC library has none (the CodeWarrior library's SysTick "
+        "counted it): define it in your program, `volatile uint32_t TFC_Ticker[4];`")

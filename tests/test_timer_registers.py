@@ -42,6 +42,9 @@ LPTIMER = dict(handler="LPTimer_IRQHandler", flag="LPTMR0_CSR & LPTMR_CSR_TCF_MA
                clear="LPTMR0_CSR |= LPTMR_CSR_TCF_MASK")
 LPTMR0 = dict(LPTIMER, handler="LPTMR0_IRQHandler")  # the Kinetis SDK's name of the vector
 TPM2 = dict(handler="TPM2_IRQHandler", flag="TPM2_SC & TPM_SC_TOF_MASK", clear="TPM2_SC |= TPM_SC_TOF_MASK")
+# the overflow flag read and cleared in the STATUS register, which mirrors SC TOF (RM 31.3.5)
+TPM2_STATUS = dict(handler="TPM2_IRQHandler", flag="TPM2_STATUS & TPM_STATUS_TOF_MASK",
+                   clear="TPM2_STATUS = TPM_STATUS_TOF_MASK")
 PIT_100HZ = """SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
     PIT_MCR = 0;
     PIT->CHANNEL[0].LDVAL = 240000 - 1;              /* 100 Hz of the 24 MHz bus clock */
@@ -87,6 +90,10 @@ SETUPS = {
                                                    cmr="312"), 313 * 256 / 8e6),
     # MCGPLLCLK/2 = 24 MHz (TFC_Init's choice) / 128: MOD + 1 = 1875 counts
     "tpm2": (TPM2, TPM2_SETUP.format(extra="", mod="1875 - 1", ps=7, cpwms=""), 0.01),
+    # the flag in STATUS; the set-up as MKL25Z4.h's users write it: CONF DBGMODE, a CNT write, a priority
+    "tpm2_status": (TPM2_STATUS, TPM2_SETUP.format(
+        extra="TPM2_CONF |= TPM_CONF_DBGMODE(3); TPM2_CNT = TPM_CNT_COUNT(0); NVIC_IPR4 = 0;",
+        mod="1875 - 1", ps=7, cpwms=""), 0.01),
     # up-down counting: 2 x MOD
     "tpm2_updown": (TPM2, TPM2_SETUP.format(extra="", mod="1875", ps=7, cpwms=" | TPM_SC_CPWMS_MASK"), 0.02),
     # OSCERCLK: 8 MHz / 8, 10000 counts
@@ -120,6 +127,28 @@ def test_a_timer_set_up_calls_its_handler_at_its_registers_rate(tmp_path, capfd,
     assert n >= 20  # (the last __WFI() may wait out a camera frame)
     assert first - t_setup == pytest.approx(FIRST_S.get(name, period_s), abs=0.002)
     assert last - first == pytest.approx(19 * period_s, abs=0.002)
+
+
+def test_tfc_init_leaves_the_pit_enabled_and_its_irq_on_as_the_library_does(tmp_path, capfd):
+    """The library's TFC_Init (TFC_InitADCs: the camera's PIT channel 0) clears PIT_MCR MDIS, sets FRZ
+    and enables the PIT's IRQ (enable_irq(INT_PIT-16)), so a team's channel 1 set up after it with
+    LDVAL1 and TCTRL1 alone interrupts on the board: 100 calls in 1 s here, on both hosts, and no
+    warning (was: the run ended "the PIT is disabled (PIT_MCR MDIS ...)" once the IRQ was enabled,
+    and without the enable the handler was never called and the run warned that the board would not
+    call it either)."""
+    src = tmp_path / "pit1.c"
+    src.write_text(TFC_FIRMWARE.format(setup=textwrap.dedent("""\
+        PIT_LDVAL1 = PERIPHERAL_BUS_CLOCK / 100 - 1;      /* PIT_MCR and the NVIC: the library's */
+            PIT_TCTRL1 = PIT_TCTRL_TEN_MASK | PIT_TCTRL_TIE_MASK;
+            if ((PIT_MCR & PIT_MCR_MDIS_MASK) || !(PIT_MCR & PIT_MCR_FRZ_MASK)) return 1;"""),
+        count=100, **PIT1))
+    program = build_program([src], kit="tfc")
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=3.0)
+        assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
+        n, t_setup, first, last = _ticks(capfd)
+        assert n == 100 and last - first == pytest.approx(0.99, abs=0.002)
+        assert not [w for w in r.warnings if "NVIC" in w], r.warnings
 
 
 # the first period where it is not the period: up-down counting's first TOF as the count first turns at
@@ -224,7 +253,8 @@ def test_isr_overrides_the_registers_rate(tmp_path, capfd):
 @pytest.mark.parametrize("setup", [
     "PIT_MCR = 0; PIT_LDVAL0 = 240000 - 1; PIT_TCTRL0 = PIT_TCTRL_TIE_MASK;",    # never enabled
     "PIT_MCR = 0; PIT_LDVAL0 = 240000 - 1; PIT_TCTRL0 = PIT_TCTRL_TEN_MASK;",    # no interrupt
-    "PIT_MCR = 0; PIT_LDVAL0 = 240000 - 1; PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;",  # no NVIC
+    "NVIC_DisableIRQ(PIT_IRQn); PIT_MCR = 0; PIT_LDVAL0 = 240000 - 1; "
+    "PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;",  # no NVIC (TFC_Init enabled it, as the library)
     "",                                                                         # no set-up at all
 ])
 def test_a_handler_whose_timer_never_runs_is_never_called(tmp_path, capfd, setup):
@@ -236,8 +266,8 @@ def test_a_handler_whose_timer_never_runs_is_never_called(tmp_path, capfd, setup
 @pytest.mark.parametrize("setup, why", [
     ("PIT_MCR = 0; PIT_TCTRL1 = PIT_TCTRL_CHN_MASK | PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK; "
      "NVIC_EnableIRQ(PIT_IRQn);", "PIT channel 1: its interrupt is set up but chained PIT timers"),
-    ("PIT_LDVAL0 = 1000; PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK; NVIC_EnableIRQ(PIT_IRQn);",
-     "the PIT is disabled (PIT_MCR MDIS"),
+    ("PIT_MCR = PIT_MCR_MDIS_MASK; PIT_LDVAL0 = 1000; PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK; "
+     "NVIC_EnableIRQ(PIT_IRQn);", "the PIT is disabled (PIT_MCR MDIS"),
     ("LPTMR0_PSR = LPTMR_PSR_PCS(0); LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK; "
      "NVIC_EnableIRQ(LPTimer_IRQn);", "its clock MCGIRCLK is off"),
     ("LPTMR0_PSR = LPTMR_PSR_PCS(2); LPTMR0_CSR = LPTMR_CSR_TIE_MASK | LPTMR_CSR_TEN_MASK; "
@@ -481,6 +511,7 @@ static volatile unsigned n;
 void PIT_IRQHandler(void) {{ PIT_TFLG0 = PIT_TFLG_TIF_MASK; n++; }}
 int main(void) {{
     TFC_Init();
+    NVIC_DisableIRQ(PIT_IRQn);  /* (TFC_Init enables it, as the library's TFC_InitADCs) */
     SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
     PIT_MCR = 0;
     PIT_LDVAL0 = 240000 - 1;
@@ -496,8 +527,9 @@ int main(void) {{
 
 @pytest.mark.parametrize("isolate", [False, True])
 def test_a_timer_whose_irq_the_nvic_keeps_off_is_warned_about(tmp_path, capfd, isolate):
-    """PIT channel 0 counts with TIE set and the program has PIT_IRQHandler, but PIT_IRQn is never
-    enabled: no call (as on the board) and one warning of the run saying so and what to write."""
+    """PIT channel 0 counts with TIE set and the program has PIT_IRQHandler, but PIT_IRQn is disabled
+    (after TFC_Init, which enables it) and never enabled again: no call (as on the board) and one
+    warning of the run saying so and what to write."""
     src = tmp_path / "unrouted.c"
     src.write_text(UNROUTED.format(late=100, enable=""))
     program = dataclasses.replace(build_program([src], kit="tfc"), isolate=isolate)

@@ -28,10 +28,25 @@ from simrunner.run.supervise import current_supervision
 
 
 PYTHON_HINT = "call get_image(), sleep() or get_time() in every loop"
-# a C/C++ program's: its names of those calls, and the kits' calls that wait
+# A C/C++ program's hint names its calls that wait; a firmware built against a kit (--kit) lets
+# time pass with its kit's calls (docs/firmware.md: an idle main loop whose work is the interrupts').
 NATIVE_HINT = ("let simulated time pass in every loop: a call that waits (spinner_get_image(), spinner_sleep(0), "
-               "spinner_get_time(); a kit's: TFC_Task(), __WFI(), LinearCameraGetFrame(), OsIf_TimeDelay(), "
-               "OsIf_GetMilliseconds()) - a flag an interrupt sets is set only while time passes")
+               "spinner_get_time()) - a flag an interrupt sets is set only while time passes")
+KIT_HINTS = {
+    "tfc": "call TFC_Task() in every loop, or __WFI() in a main loop whose work is the interrupts' "
+           "(for (;;) __WFI();)",
+    "tfc-mbed": "call wait(), wait_ms() or sleep() in every loop, or read the board there (a main loop "
+                "whose work is the Tickers': while (1) wait(1);)",
+    "s32k144": ("let simulated time pass in every loop: a call that waits (LinearCameraGetFrame(), OsIf_TimeDelay(), "
+                "OsIf_GetMilliseconds(); Spinner's spinner_sleep(0)) - a flag a Gpt notification sets is set only "
+                "while time passes"),
+}
+
+
+def native_stall_hint(message: str, kit: str | None) -> str:
+    """``message`` (:func:`stall_message`'s) with the hint in a C/C++ program's calls: those of
+    ``kit`` (the program's --kit) where it has its own, else Spinner's C names."""
+    return message.replace(PYTHON_HINT, KIT_HINTS.get(kit or "", NATIVE_HINT))
 
 
 def stall_message(idle_s: float, where: str, limit_s: float, in_interrupt: bool = False) -> str:

@@ -41,7 +41,7 @@ import numpy as np
 
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
 from simrunner.run.native.build import NativeProgram, missing_function, misspelt_function
-from simrunner.run.watchdog import NATIVE_HINT, PYTHON_HINT
+from simrunner.run.watchdog import native_stall_hint
 
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c
 OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, \
@@ -532,7 +532,7 @@ class _Session:
         except (_ChildGone, OSError):
             pass
         self._kill()
-        message = exc.message.replace(PYTHON_HINT, NATIVE_HINT)  # the advice in the program's language
+        message = native_stall_hint(exc.message, getattr(self.ctrl.program, "kit", None))  # its calls
         if where:
             head, sep, tail = message.partition("; ")
             message = f"{head}{where}{sep}{tail}"

@@ -95,7 +95,8 @@ class NativeProgram:
     ``warnings`` text ('' if none), whether it came from the cache, ``isolate``: run it
     in a child process rather than in the simulator's (controller.NativeController), and
     ``isrs``: its functions the simulator calls as timer interrupts, ``(name, period_s)`` each
-    (``simrunner drive --isr NAME@HZ``; :func:`with_isrs`)."""
+    (``simrunner drive --isr NAME@HZ``; :func:`with_isrs`); ``kit``: the ``--kit`` it was built
+    against (None: none), which names its kit's calls in the run's messages."""
 
     library: Path
     sources: tuple[Path, ...]
@@ -103,6 +104,7 @@ class NativeProgram:
     cached: bool = False
     isolate: bool = False
     isrs: tuple[tuple[str, float], ...] = ()
+    kit: str | None = None
 
     @property
     def name(self) -> str:
@@ -518,10 +520,25 @@ def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileE
             f"{exc}\n{', '.join(names)}: of the RTD's calls the simulator's --kit s32k144 has only the sample's drivers' "
             f"and OsIf, Gpt, Pwm_SetDutyCycle, Dio's channel calls: the others are not emulated - DriversInit() stands "
             f"for the drivers' set-up; leave their calls out of the sources you pass (docs/firmware.md, \"The S32K144 kit\")")
+    has = ("it has a timer interrupt's only: LPTMR0, the PIT, TPM2, their SIM and MCG bits, the NVIC"
+           if kit == "tfc" else "it has no registers")
     return ControllerFileError(
         f"{exc}\n{', '.join(names)}: the MCU's registers{' or mbed drivers' if kit == 'tfc-mbed' else ''}, "
-        f"not emulated by the simulator's --kit {kit} (it has no registers): reach the hardware "
+        f"not emulated by the simulator's --kit {kit} ({has}): reach the hardware "
         f"through the kit library's functions (docs/firmware.md)")
+
+
+def _tickers_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileError:
+    """``exc`` with a last line when an mbed program uses ``TFC_Ticker`` without defining it: the
+    compiler names the kit's function behind the name (``tfc_mbed_tickers``), not the program's
+    array, which mbed's FRDM-TFC library does not have (the CodeWarrior library's SysTick counts it)."""
+    text = str(exc).replace("\u2018", "'").replace("\u2019", "'")  # (the compiler's quotes, as its locale has them)
+    if kit != "tfc-mbed" or "'tfc_mbed_tickers' was not declared" not in text:
+        return exc
+    return ControllerFileError(
+        f"{exc}\nTFC_Ticker: not declared - mbed's FRDM-TFC library has none (the CodeWarrior library's "
+        f"SysTick counted it): define it in your program, `volatile uint32_t TFC_Ticker[4];`, and count it "
+        f"with a Ticker of yours (examples/firmware/mbed/main.cpp; docs/firmware.md)")
 
 
 def _kit_headers() -> dict[str, str]:
@@ -543,12 +560,15 @@ def _include_hint(exc: ControllerFileError, kit: str | None, sources: list[Path]
     if found is None:
         return exc
     name = found.group(1).replace("\\", "/")
-    owner = _kit_headers().get(name.lower()) if kit is None else None
-    if owner is not None:
-        line = f"{name}: a header of the simulator's --kit {owner}: build with --kit {owner} (docs/firmware.md)"
+    owner = _kit_headers().get(name.lower())
+    if owner is not None and owner != kit:  # (built without --kit, or with the other kit)
+        line = (f"{name}: a header of the simulator's --kit {owner}{f', not of --kit {kit}' if kit else ''}: "
+                f"build with --kit {owner} (docs/firmware.md)")
     else:
         base = Path(name).name.lower()
-        roots = dict.fromkeys(d for s in sources for d in (s.parent, s.parent.parent))
+        kits = KITS_DIR.resolve()  # (the kit's own sources: its folders are not the project's)
+        roots = dict.fromkeys(d for s in sources if not Path(s).resolve().is_relative_to(kits)
+                              for d in (s.parent, s.parent.parent))
         homes = sorted({path.parent for root in roots for path in _headers_under(root, 3)
                         if path.name.lower() == base and path.parent not in roots})
         if homes:
@@ -648,7 +668,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     entry = cache_dir() / key
     hit = _cached(entry)
     if hit is not None:
-        return NativeProgram(hit[0], tuple(paths), hit[1], cached=True)
+        return NativeProgram(hit[0], tuple(paths), hit[1], cached=True, kit=kit)
     import shutil
     import tempfile
 
@@ -665,7 +685,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
             try:
                 warnings.append(_run(cmd, str(p), limits))
             except ControllerFileError as exc:
-                raise _include_hint(_register_hint(exc, kit), kit, paths) from None
+                raise _include_hint(_register_hint(_tickers_hint(exc, kit), kit), kit, paths) from None
             objects.append(str(obj))
             depfiles.append(dep)
         linker = compilers[True] if cxx else compilers[False]
@@ -687,7 +707,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return NativeProgram(entry / "controller.so", tuple(paths), text, cached=False)
+    return NativeProgram(entry / "controller.so", tuple(paths), text, cached=False, kit=kit)
 
 
 def _build_host(kind: str, suffix: str, flags: list[str], libs: list[str]) -> Path:

@@ -29,9 +29,20 @@ class NativeController:
         self._spent: list = []  # libraries of finished runs, unloaded before the next one
         if self.inproc:
             self.host_path, self.api = host_library()  # built (once, cached) before the run
-            self._ready = OpenedProgram(self.api, program)
-        else:
+            self._ready = self._open()
+        if not self.inproc:
             self._ready = self._child()
+
+    def _open(self) -> OpenedProgram | None:
+        """The library opened in this process, or None when its constructors called the API as it
+        was loaded (before the run, where nothing can be asked): then it runs in a child process,
+        where they run with the run there, as on the board before main() (``inproc`` cleared)."""
+        opened = OpenedProgram(self.api, self.program)
+        if not opened.early:
+            return opened
+        opened.close()
+        self.inproc = False
+        return None
 
     def _child(self) -> _Child:
         if self.host is None:
@@ -41,10 +52,10 @@ class NativeController:
 
     def __call__(self, spinner) -> None:
         ready, self._ready = self._ready, None
+        if self.inproc and ready is None:
+            self._unload()
+            ready = self._open()
         if self.inproc:
-            if ready is None:
-                self._unload()
-                ready = OpenedProgram(self.api, self.program)
             try:
                 InprocSession(self, spinner, ready, self.host_path).run()
                 return

@@ -57,6 +57,7 @@ def _api(path: str):
             ("spinner_inproc_open", c.c_void_p, [c.c_char_p]),
             ("spinner_inproc_error", c.c_char_p, []),
             ("spinner_inproc_close", c.c_int, [c.c_void_p]),
+            ("spinner_inproc_early", c.c_int, [c.c_void_p]),
             ("spinner_inproc_requests", c.c_void_p, []),
             ("spinner_inproc_exit_code", c.c_int, []),
             ("spinner_inproc_gone", c.c_int, []),
@@ -116,6 +117,9 @@ class OpenedProgram:
             self.close()
             lib = ", ".join(map(str, program.sources)) or str(program.library)
             raise ControllerFileError(missing_function(program, err) or f"{lib}: cannot be loaded ({err})")
+        # its constructors called the API as it was loaded, before any run (a global object of a
+        # kit's driver classes): it runs in a child process (controller.NativeController)
+        self.early = bool(api.spinner_inproc_early(self.handle))
 
     def close(self) -> None:
         if getattr(self, "handle", None):

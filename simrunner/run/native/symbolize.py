@@ -265,4 +265,6 @@ def fault_message(fault: Fault) -> str:
     loc = fault.location
     if loc is None:
         return f"{name}{what}"
-    return f"{loc.file}:{loc.line}: {name}{what} (in {loc.function}())"
+    # (a C++ function's name comes demangled with its parameters: "handler()", "Car::step(int)")
+    function = loc.function if loc.function.endswith(")") else f"{loc.function}()"
+    return f"{loc.file}:{loc.line}: {name}{what} (in {function})"

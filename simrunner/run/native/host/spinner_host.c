@@ -66,6 +66,18 @@ static spinner_norm_fn f_speed_norm, f_speed_denorm, f_turn_norm, f_diff_norm;
 static double last_time_s, last_speed_val, last_pos[3];
 
 static int inited;  /* the run's INIT message read (lazily: the child starts before the run) */
+#ifdef SPINNER_INPROC
+/* In the simulator's process the program's library is loaded (spinner_inproc_open) before its
+ * run, and its constructors run then: a call of a global object's constructor (a C++ driver class
+ * built on the kit's objects, a Spinner call) has no run to ask. It is not taken for the run's
+ * start (which left the run's INIT message unread: the run crashed, SIGSEGV before its first
+ * frame); its replies are zeros, and spinner_inproc_early tells the simulator, which runs such a
+ * program in a child process (--isolate), where its constructors run with the run there (on the
+ * board they run in the start-up code, before main). A run of it here ends at its start saying
+ * why (entry). */
+static int early_calls;      /* calls during the open under way */
+static void *early_lib;      /* the library whose loading made them */
+#endif
 
 static void fault_report(int sig, const char *message, void *pc);
 static void ended(void) __attribute__((noreturn));
@@ -823,6 +835,15 @@ int spinner_interrupts(void) {
 
 int spinner_in_interrupt(void) { return isr_depth > 0; }
 
+#ifdef SPINNER_INPROC
+int spinner_running(void) {
+    if (!in_controller) early_calls = 1;  /* (a kit that would have asked: as a call, read_init) */
+    return in_controller;
+}
+#else
+int spinner_running(void) { return 1; }  /* (the pipes are there before the library is loaded) */
+#endif
+
 void spinner_every(double period_s, void (*handler)(void)) {
     INIT();
     if (handler == NULL) misuse("spinner_every(period_s=%g, handler=NULL): expected a function", period_s);
@@ -1418,6 +1439,12 @@ static void read_init(void) {
      * handlers; the encoders (wheel mask, lines per revolution, counts per line) and the IMU (0/1);
      * then each handler's period (s) and name length, then the names */
     double init[7], sensors[4];
+#ifdef SPINNER_INPROC
+    if (!in_controller) {
+        early_calls = 1;
+        return;
+    }
+#endif
     inited = 1;
     read_all(init, sizeof init);
     read_all(sensors, sizeof sensors);
@@ -1564,6 +1591,10 @@ static void entry(void) {
     extern char **environ;
     in_controller = 1;
     INIT();  /* the run has started */
+    if (prog_lib != NULL && prog_lib == early_lib)
+        misuse("a call of the kit or the Spinner API before main(), in a global object's constructor: in the "
+               "simulator's process the program's constructors run as its library is loaded, before the run, "
+               "where nothing can be asked; run it with --isolate, or make the call in main()");
     int rc = user_main(user_argc, user_argv, environ);
     exit_run(rc);
 }
@@ -1614,14 +1645,51 @@ static void take_fini(void *lib) {
 }
 
 /* Open the controller's library: its handle, or NULL (spinner_inproc_error says why). */
-void *spinner_inproc_open(const char *path) { return dlopen(path, RTLD_NOW | RTLD_LOCAL); }
+static int run_active;  /* (below: a run is on, in some thread) */
+void *spinner_inproc_open(const char *path) {
+    /* its constructors' calls are seen (read_init) - not answered at once as the calls after the
+     * last run's end are (a library unloaded meanwhile: its destructors) - unless a run is on */
+    int idle = !__atomic_load_n(&run_active, __ATOMIC_ACQUIRE);
+    int was_inited = inited, was_finished = finished;
+    if (idle) inited = finished = 0;
+    early_calls = 0;
+    void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (idle) inited = was_inited, finished = was_finished;
+    if (lib != NULL && (early_calls || lib == early_lib)) early_lib = early_calls ? lib : NULL;
+    early_calls = 0;
+    return lib;
+}
+
+/* Whether `lib`'s constructors called the API as it was loaded (read_init): run it isolated. */
+int spinner_inproc_early(void *lib) { return lib != NULL && lib == early_lib; }
 
 const char *spinner_inproc_error(void) {
     const char *e = dlerror();
     return e ? e : "";
 }
 
-int spinner_inproc_close(void *lib) { return dlclose(lib); }
+/* Its exit handlers are dropped as it is unloaded: a library whose constructors registered static
+ * destructors (__cxa_atexit, at its load) and that never ran here - run in a child process instead
+ * (spinner_inproc_early), or not run at all - left them for the next program's exit to call, into
+ * unloaded code (a crash of the simulator's process). */
+static void drop_exit_handlers_of(void *lib) {
+    struct link_map *map = NULL;
+    if (dlinfo(lib, RTLD_DI_LINKMAP, &map) != 0 || map == NULL || map->l_name == NULL) return;
+    int kept = 0;
+    for (int i = 0; i < n_exit_handlers; i++) {
+        void *fn = exit_handlers[i].fn == call_plain ? exit_handlers[i].arg : (void *)exit_handlers[i].fn;
+        Dl_info info;
+        if (dladdr(fn, &info) && info.dli_fname != NULL && strcmp(info.dli_fname, map->l_name) == 0) continue;
+        exit_handlers[kept++] = exit_handlers[i];
+    }
+    n_exit_handlers = kept;
+}
+
+int spinner_inproc_close(void *lib) {
+    if (lib == early_lib) early_lib = NULL;
+    drop_exit_handlers_of(lib);
+    return dlclose(lib);
+}
 
 /* Where the simulator reads the requests (spinner_inproc_resume says how many bytes). */
 unsigned char *spinner_inproc_requests(void) { return out_buf; }

@@ -142,6 +142,11 @@ int spinner_interrupts(void);
 /* Non-zero inside an interrupt handler (where no simulated time passes): for library code that
  * lets time pass when main() polls it, and must not in a handler. */
 int spinner_in_interrupt(void);
+/* 0 while nothing can be asked: in a global object's constructor as the simulator's process loads
+ * the program, before its run (the simulator then runs the program in a child process, where its
+ * constructors run again with the run there); else 1. For kits whose objects' constructors call
+ * them: ask nothing, and end nothing, then. */
+int spinner_running(void);
 /* Mask the timer interrupts, as __disable_irq() sets the Cortex-M's PRIMASK (the kits' __disable_irq,
  * DisableInterrupts, OsIf_SuspendAllInterrupts call it): a handler that falls due meanwhile is held
  * pending and runs once, however often it fell due, at spinner_enable_interrupts - at that time, no

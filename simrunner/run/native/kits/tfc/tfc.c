@@ -63,6 +63,7 @@ static struct {
 #define POLLS_BEFORE_TIME 64
 
 void tfc_sim_timers_init(void);  /* timers.c: the TPM clock as the library selects it */
+void tfc_sim_timers_library_pit(void);  /* timers.c: the PIT as the library's TFC_InitADCs leaves it */
 
 static double clampf(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
@@ -149,7 +150,9 @@ volatile uint32_t (*tfc_sim_tickers(void))[NUM_TFC_TICKERS] {
     return (volatile uint32_t (*)[NUM_TFC_TICKERS])&tickers;
 }
 
-void TFC_Init(void) {
+/* The kit's own start (the first library call: ensure_init); TFC_Init adds what the library's
+ * initialisation leaves in the registers a program reads (TFC_InitADCs). */
+static void kit_init(void) {
     if (tfc.inited) return;
     tfc.inited = 1;
     tfc.servo_rad = spinner_param("tfc_servo_rad", 0.40);
@@ -163,8 +166,13 @@ void TFC_Init(void) {
     send_commands();
 }
 
+void TFC_Init(void) {  /* (the library's: InitClock, ..., TFC_InitADCs, ...) */
+    kit_init();
+    TFC_InitADCs();
+}
+
 static void ensure_init(void) {
-    if (!tfc.inited) TFC_Init();
+    if (!tfc.inited) kit_init();
 }
 
 void TFC_Task(void) {
@@ -205,7 +213,10 @@ void InitClock(void) {}
 void TFC_InitGPIO(void) {}
 void TFC_InitServos(void) {}
 void TFC_InitMotorPWM(void) {}
-void TFC_InitADCs(void) {}
+void TFC_InitADCs(void) {  /* the pots', battery's and camera's ADC: its PIT (timers.c) */
+    ensure_init();
+    tfc_sim_timers_library_pit();
+}
 void TFC_InitLineScanCamera(void) {}
 void TFC_InitUARTs(void) {}
 void TFC_UART_Process(void) {}
@@ -267,7 +278,12 @@ float TFC_ReadPot(uint8_t Channel) {
     return (float)clampf(spinner_param(Channel == 0 ? "pot0" : "pot1", 0.0), -1.0, 1.0);
 }
 
-float TFC_ReadBatteryVoltage(void) { return (float)spinner_param("battery_v", 7.2); }
+/* The library returns the battery sense input, not the battery's voltage: FRDM-TFC TFC_ADC.c,
+ * `return (((float)BatSenseADC_Value/(float)(ADC_MAX_CODE)) * 3.0);// * ((47000.0+10000.0)/10000.0);`
+ * - the shield's divider (47k over 10k) is the commented-out factor; as the mbed kit's. */
+float TFC_ReadBatteryVoltage(void) {
+    return (float)clampf(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0, 0.0, 3.0);
+}
 
 void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {
     tfc.exposure_s = clampf(TimeIn_uS * 1e-6, 1e-5, 1.0);

@@ -675,10 +675,12 @@ static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
         return;
     }
     *flag |= mask;
+    if (i == TPM_2) TPM2->STATUS |= TPM_STATUS_TOF_MASK;  /* (STATUS TOF mirrors SC TOF, RM 31.3.5) */
     firing = 1, firing_irq = irq_of(i);
     handler_of(i)();
     firing = 0, firing_irq = -1;
     *flag &= ~mask;
+    if (i == TPM_2) TPM2->STATUS &= ~TPM_STATUS_TOF_MASK;
     waits++;
     sync();
     handler_s = -1.0;
@@ -713,6 +715,7 @@ static void take(int irq) {
     uint32_t masks[N_TIMERS] = {0};
     for (int i = first; i <= last; i++)
         if (timers[i].flagged) *flag_of(i, &masks[i]) |= masks[i];
+    if (masks[TPM_2]) TPM2->STATUS |= TPM_STATUS_TOF_MASK;
     waits++;
     firing = 1, firing_irq = irq;
     handler_of(first)();
@@ -721,6 +724,7 @@ static void take(int irq) {
         if (masks[i]) *flag_of(i, &masks[i]) &= ~masks[i];
         timers[i].flagged = 0;
     }
+    if (masks[TPM_2]) TPM2->STATUS &= ~TPM_STATUS_TOF_MASK;
     waits++;
     sync();
     handler_s = -1.0;
@@ -769,6 +773,19 @@ static void nvic_settle(void) {
     nvic_handed |= hand;
     for (int k = 0; k < 3; k++)  /* (one taken at once may have its handler disable or clear the next) */
         if (((hand & nvic_handed) >> irqs[k]) & 1u) spinner_pend_every(take_of(irqs[k]));
+}
+
+/* TFC_InitADCs (TFC_Init calls it): the library's camera timing on PIT channel 0 leaves the PIT
+ * module enabled and its IRQ on in the NVIC - the FRDM-TFC library's TFC_ADC.c, InitPIT: SIM_SCGC6 |=
+ * SIM_SCGC6_PIT_MASK; PIT_MCR |= PIT_MCR_FRZ_MASK; PIT_MCR &= ~PIT_MCR_MDIS_MASK; enable_irq(INT_PIT-16)
+ * (RM 32.3.1 MCR: MDIS set out of reset) - so a channel the program sets up after it interrupts
+ * without a PIT_MCR write or an NVIC_EnableIRQ of its own, as on the board. Channel 0's registers stay
+ * the program's: the kit reads the camera itself (tfc.c), and the library's PIT_IRQHandler is not
+ * there. */
+void tfc_sim_timers_library_pit(void) {
+    SIM->SCGC6 |= SIM_SCGC6_PIT_MASK;
+    PIT->MCR = (PIT->MCR | PIT_MCR_FRZ_MASK) & ~PIT_MCR_MDIS_MASK;
+    tfc_sim_nvic_enable(IRQ_PIT);
 }
 
 /* TFC_Init: the TPM clock as the library's servo and motor set-up selects it (MCGPLLCLK/2). */

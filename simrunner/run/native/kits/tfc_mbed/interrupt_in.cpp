@@ -201,6 +201,7 @@ static void on_edges(void) {
 /* q's pin as a program's call finds it: on a port that interrupts, its --param valid. */
 static void check(struct tfc_mbed_irq *q, const char *what) {
     tfc_mbed_start();
+    if (!tfc_mbed_started()) return;  /* (loaded before the run: spinner_running) */
     int i = index_of(q->pin);
     if (i < 0) return;  /* NC: no pin, no edges */
     if (port_of(q->pin) != PORT_A && port_of(q->pin) != PORT_D) {

@@ -125,6 +125,9 @@ static void init_servos(double pulse_min_s, double pulse_max_s, double frame_s) 
 
 void tfc_mbed_start(void) {
     if (k.started) return;
+    /* (a global object's constructor as the simulator's process loads the program: nothing can be
+     * asked, the program runs in a child process instead, where this starts the kit; spinner.h) */
+    if (!spinner_running()) return;
     k.started = 1;
     k.servo_rad = spinner_param("tfc_servo_rad", 0.40);
     k.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
@@ -287,13 +290,17 @@ static int pin_param(const char *kind, int pin, double fallback) {
     return (int)spinner_param(name, fallback);
 }
 
+/* A pin's level: kept (the LEDs), the H-bridge's enable sent. A write takes no time and asks the
+ * simulator nothing before the kit has started: a global DigitalOut's constructor writes its pin
+ * before main() (mbed's blinky, `DigitalOut myled(LED1);`; mbed's DigitalOut(pin, value) writes
+ * the value at construction), when in the simulator's process the program's library is being
+ * loaded and no run is there to ask; tfc_mbed_start sends the H-bridge's level. */
 void tfc_mbed_digital_write(int pin, int value) {
-    tfc_mbed_start();
     int led = pin == PTB8 ? 0 : pin == PTB9 ? 1 : pin == PTB10 ? 2 : pin == PTB11 ? 3 : -1;
     if (led >= 0) k.leds[led] = value < 0 ? !k.leds[led] : value != 0;
     if (pin == PTE21) {
         k.hbridge = value != 0;
-        send_commands();
+        if (k.started) send_commands();
     }
 }
 

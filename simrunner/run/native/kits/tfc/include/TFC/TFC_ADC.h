@@ -1,5 +1,6 @@
 /* TFC_ADC.h (simulator): the potentiometers (--param pot0, pot1: -1.0 .. 1.0, default 0) and the
- * battery (--param battery_v, default 7.2 V). The camera's image and ready flag are declared in
+ * battery (--param battery_v, default 7.2 V: TFC_ReadBatteryVoltage returns its sense input, as the
+ * library does, battery_v x 10k / (47k + 10k)). The camera's image and ready flag are declared in
  * TFC_LineScanCamera.h, as in the library, which this includes for code that expects them here. */
 #ifndef TFC_ADC_H_
 #define TFC_ADC_H_
