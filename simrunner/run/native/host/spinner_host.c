@@ -61,6 +61,7 @@ static int img_h = 128, img_w = 128, line_row = 60, recording_on;
 static double wheelbase_m = 0.175;
 static int encoder_mask, encoder_lines, encoder_per_line, has_imu;  /* the car's [encoders], [imu] */
 static int finished;  /* the run is over: calls return at once (atexit, destructors) */
+static int run_over;  /* the simulator ended the run (ST_FINISHED): an exit then is not the program's */
 static double last_speed, last_angle, speed_mps, steer_rad;
 static spinner_norm_fn f_speed_norm, f_speed_denorm, f_turn_norm, f_diff_norm;
 static double last_time_s, last_speed_val, last_pos[3];
@@ -470,7 +471,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     now_known = 0;  /* time may have passed */
     if (passes && irq_masked) irq_held = 1;  /* (masked by a handler that ran in it) */
     if (hdr[0] == ST_FINISHED) {
-        finished = 1;
+        finished = run_over = 1;
         ended();
     }
     if (hdr[0] == ST_WHERE) fault_report(SIGUSR1, "", NULL);
@@ -1061,9 +1062,14 @@ int __wrap_clock_nanosleep(clockid_t clock, int flags, const struct timespec *re
  * quick_exit), the status (int32), the caller's return address as its offset in its module
  * (uint64) and the module's path. Not from a process the program forked, nor after the run. */
 static void exit_note(uint8_t fn, int status, void *ra) {
-    if (finished || forked) return;
+    if (forked) return;
 #ifdef SPINNER_INPROC
-    if (!in_controller || !pthread_equal(pthread_self(), sim_thread_id)) return;
+    /* (finished is set while the program's exit handlers run too: an exit there, an atexit
+     * handler's or a static destructor's, is the status the program ends with, as it is
+     * isolated; after the simulator ended the run, none is) */
+    if (run_over || !in_controller || !pthread_equal(pthread_self(), sim_thread_id)) return;
+#else
+    if (finished) return;
 #endif
     INIT();
     if (foreign_thread()) return;
@@ -1674,7 +1680,7 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_argc = argc;
     user_argv = argv;
     /* a fresh API state for this run */
-    finished = inited = 0;
+    finished = inited = run_over = 0;
     foreign_calls = 0;
     out_len = 0;
     rep_buf = rep_more = NULL, rep_len = rep_pos = rep_more_len = 0;
@@ -1725,7 +1731,7 @@ long spinner_inproc_resume_image(const unsigned char *image, size_t n) {
 
 /* End the run's coroutine (wherever it is), restore the signal handlers. */
 void spinner_inproc_finish(void) {
-    gone = finished = 1;
+    gone = finished = run_over = 1;
     n_exit_handlers = 0;  /* handlers a fault or the simulator's end left: their code is unloaded next */
     n_fini = 0;
     end_helpers();
