@@ -440,6 +440,43 @@ def test_the_exit_named_is_the_one_the_program_ends_with(tmp_path, track, name, 
     assert r.message.endswith("/" + said[1]), r.message
 
 
+THREAD_EXIT_C = """\
+#include <stdlib.h>
+#include <unistd.h>
+#include <pthread.h>
+#include "spinner.h"
+static void *ends(void *arg) {
+    (void)arg;
+    if (QUICK) _exit(9);
+    exit(8);
+}
+int main(void) {
+    static uint8_t row[1024];
+    pthread_t t;
+    for (int i = 0; ; i++) {
+        spinner_set_speed_and_servo(1.0, 0.0);
+        spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+        if (i == 5) pthread_create(&t, NULL, ends, NULL);
+    }
+}
+"""
+
+
+@pytest.mark.parametrize("quick, status", [(0, 8), (1, 9)])
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_an_exit_from_another_thread_ends_the_program_with_its_status(tmp_path, track, quick, status, isolate):
+    """exit/_exit called by a thread the program started ends the program with that status, as
+    it ends a process (in process: at main()'s next waiting call); in process it switched main()'s
+    stack from the other thread and crashed the simulator's process (SIGSEGV: a batch's
+    worker_died)."""
+    src = write(tmp_path, "thread_exit.c", THREAD_EXIT_C)
+    prog = dataclasses.replace(build_program([src], defines=[f"QUICK={quick}"]), isolate=isolate)
+    r = drive(prog, track=track, csv=tmp_path / "run.csv")
+    assert r.outcome == "controller_error" and r.message.endswith(f"the controller exited with status {status}"), \
+        r.message
+    assert len(read_log(tmp_path / "run.csv")) >= 5  # the run so far is kept
+
+
 def test_a_prebuilt_shared_library_runs(tmp_path, track, capfd):
     src = write(tmp_path, "pre.c", """\
         #include <stdio.h>
