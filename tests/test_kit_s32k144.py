@@ -631,9 +631,9 @@ def test_a_bad_button_param_ends_the_run_at_the_first_dio_call_not_at_drivers_in
     res = CliRunner().invoke(cli, ["drive", str(src), "--kit", "s32k144", "--track", "floor", "--time-limit", "0.5",
                                    "--param", "s32k_sw2=12"])
     assert res.exit_code == 0, res.output
-    assert res.output.splitlines()[-1].startswith("simrunner: warning: the controller never read --param s32k_sw2 "
-                                                  "(it read s32k_esc_hz, s32k_osif_hz, s32k_servo_offset_rad, "
-                                                  "s32k_servo_rad"), res.output
+    assert res.output.splitlines()[-1] == ("simrunner: warning: the controller never read --param s32k_sw2 (it read "
+                                           "s32k_esc_hz, s32k_osif_hz, s32k_servo_offset_rad, s32k_servo_rad)"), res.output
+    # (no 'did you mean s32k_esc_hz?': a name 0.63 alike is no typo; the nearest is offered from 0.7)
 
 
 def test_the_pins_looked_up_are_one_name_in_the_never_read_warning(tmp_path):

@@ -116,7 +116,7 @@ def unused_params_text(unused, read) -> str:
         return text + " (read one with spinner.param(name, default); C: spinner_param)"
     # (none for another number of a family read: s32k_pin_7 is another channel, no typo of s32k_pin_6)
     near = [m for name in unused if not any(_other_number(name, r) for r in read)
-            for m in difflib.get_close_matches(name, read, n=1, cutoff=0.6)]
+            for m in difflib.get_close_matches(name, read, n=1, cutoff=0.7)]
     mean = f"; did you mean {', '.join(dict.fromkeys(near))}?" if near else ""
     return f"{text} (it read {', '.join(_numbered_as_one(read))}{mean})"
 
