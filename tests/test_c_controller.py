@@ -385,6 +385,98 @@ def test_an_exit_names_its_call_and_line_as_sys_exit_is_named(tmp_path, track, h
     assert len(read_log(tmp_path / "run.csv")) >= 10  # the run so far is kept
 
 
+EXIT_HANDLERS = {
+    "handler.c": """\
+#include <stdlib.h>
+#include "spinner.h"
+static void bye(void) { exit(5); }                     /* line 3 */
+int main(void) {
+    static uint8_t row[1024];
+    atexit(bye);
+    for (int i = 0; ; i++) {
+        spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+        if (i == 10) exit(3);
+    }
+}
+""",
+    "dtor.cpp": """\
+#include <cstdlib>
+#include "spinner.h"
+struct Last { ~Last() { std::exit(11); } };            // line 3
+static Last last;
+int main() {
+    static uint8_t row[1024];
+    for (int i = 0; i < 10; i++) spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+    return 0;
+}
+""",
+    "seventy_two.c": """\
+#include <stdlib.h>
+#include "spinner.h"
+int main(void) {
+    static uint8_t row[1024];
+    spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+    exit(72);                                          /* line 6 */
+}
+""",
+}
+
+
+@pytest.mark.parametrize("name, said", [
+    ("handler.c", ("the controller called exit(5) at ", "handler.c:3")),
+    ("dtor.cpp", ("the controller called exit(11) at ", "dtor.cpp:3")),
+    ("seventy_two.c", ("the controller called exit(72) at ", "seventy_two.c:6")),
+])
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_the_exit_named_is_the_one_the_program_ends_with(tmp_path, track, name, said, isolate):
+    """An exit in an exit handler (an atexit handler after main's exit(3), a C++ static
+    destructor) is the status the program ends with and the call named, in process as isolated
+    (in process it read 'exit(3) at handler.c:10' for status 5, and a destructor's exit had no
+    line); a program's own exit(72) is not the host's 'no main() function defined'."""
+    src = write(tmp_path, name, EXIT_HANDLERS[name])
+    prog = dataclasses.replace(build_program([src]), isolate=isolate)
+    r = drive(prog, track=track)
+    assert r.outcome == "controller_error" and r.message.startswith(said[0]), r.message
+    assert r.message.endswith("/" + said[1]), r.message
+
+
+THREAD_EXIT_C = """\
+#include <stdlib.h>
+#include <unistd.h>
+#include <pthread.h>
+#include "spinner.h"
+static void *ends(void *arg) {
+    (void)arg;
+    if (QUICK) _exit(9);
+    exit(8);
+}
+int main(void) {
+    static uint8_t row[1024];
+    pthread_t t;
+    for (int i = 0; ; i++) {
+        spinner_set_speed_and_servo(1.0, 0.0);
+        spinner_get_image(spinner_line_row(), 1, row, sizeof row);
+        if (i == 5) pthread_create(&t, NULL, ends, NULL);
+    }
+}
+"""
+
+
+@pytest.mark.parametrize("quick, status", [(0, 8), (1, 9)])
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_an_exit_from_another_thread_ends_the_program_with_its_status(tmp_path, track, quick, status, isolate):
+    """exit/_exit called by a thread the program started ends the program with that status, as
+    it ends a process (in process: at main()'s next waiting call); in process it switched main()'s
+    stack from the other thread and crashed the simulator's process (SIGSEGV: a batch's
+    worker_died)."""
+    src = write(tmp_path, "thread_exit.c", THREAD_EXIT_C)
+    prog = dataclasses.replace(build_program([src], defines=[f"QUICK={quick}"]), isolate=isolate)
+    r = drive(prog, track=track, csv=tmp_path / "run.csv")
+    assert r.outcome == "controller_error" and r.message.endswith(f"the controller exited with status {status}"), \
+        r.message
+    assert len(read_log(tmp_path / "run.csv")) >= 5  # the run so far is kept
+
+
 def test_a_prebuilt_shared_library_runs(tmp_path, track, capfd):
     src = write(tmp_path, "pre.c", """\
         #include <stdio.h>

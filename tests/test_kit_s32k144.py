@@ -606,6 +606,60 @@ def test_a_bad_input_pin_param_is_one_line(tmp_path, params, expected):
     assert r.message.startswith(f"{src}:3: {expected}") and "\n" not in r.message, (params, r.message)
 
 
+def test_a_bad_button_param_ends_the_run_at_the_first_dio_call_not_at_drivers_init(tmp_path):
+    """The buttons' --params are read at the first Dio call, as the docs say: a bad one ends the run
+    there, not at the DriversInit() or ServoInit() before it (was: at DriversInit's line, where no
+    pin is used); a firmware that uses no pin is warned that it never read --param s32k_sw2."""
+    src = probe(tmp_path, """\
+        #include "main_functions.h"
+        #include "servo.h"
+        #include "Dio.h"
+        int main(void) {
+            DriversInit();
+            ServoInit(1U, 3000U, 2000U, 2500U);
+            (void)Dio_ReadChannel(7U);
+            return 0;
+        }
+        """)
+    program = firmware([src])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
+                  params={"s32k_sw2": 300})
+        assert r.outcome == "controller_error", (isolate, r.message)
+        assert r.message.startswith(f"{src}:7: --param s32k_sw2=300: expected the Dio channel"), (isolate, r.message)
+    src.write_text(src.read_text().replace("(void)Dio_ReadChannel(7U);", ""))
+    res = CliRunner().invoke(cli, ["drive", str(src), "--kit", "s32k144", "--track", "floor", "--time-limit", "0.5",
+                                   "--param", "s32k_sw2=12"])
+    assert res.exit_code == 0, res.output
+    assert res.output.splitlines()[-1] == ("simrunner: warning: the controller never read --param s32k_sw2 (it read "
+                                           "s32k_esc_hz, s32k_osif_hz, s32k_servo_offset_rad, s32k_servo_rad)"), res.output
+    # (no 'did you mean s32k_esc_hz?': a name 0.63 alike is no typo; the nearest is offered from 0.7)
+
+
+def test_the_pins_looked_up_are_one_name_in_the_never_read_warning(tmp_path):
+    """The kit looks up --param s32k_pin_N for each Dio channel the firmware uses: the warning of
+    a --param never read lists them as one name, s32k_pin_{6,32,64} (was: each, s32k_pin_32,
+    s32k_pin_6, s32k_pin_64, as if the program had read them), and a pin of a channel the firmware
+    does not use is no 'did you mean' of another channel's."""
+    src = probe(tmp_path, """\
+        #include "Dio.h"
+        int main(void) {
+            Dio_WriteChannel(6U, STD_HIGH);
+            Dio_WriteChannel(64U, STD_LOW);
+            (void)Dio_ReadChannel(32U);
+            return 0;
+        }
+        """)
+    for given, mean in (("s32k_sw2_att=0.3", "; did you mean s32k_sw2_at?"), ("s32k_pin_7=1", "")):
+        res = CliRunner().invoke(cli, ["drive", str(src), "--kit", "s32k144", "--track", "floor", "--time-limit", "0.5",
+                                       "--param", given])
+        assert res.exit_code == 0, res.output
+        assert res.output.splitlines()[-1] == (
+            f"simrunner: warning: the controller never read --param {given.split('=')[0]} (it read s32k_esc_hz, "
+            "s32k_osif_hz, s32k_pin_{6,32,64}, s32k_servo_offset_rad, s32k_servo_rad, s32k_sw2, s32k_sw2_at, "
+            f"s32k_sw3, s32k_sw3_at{mean})"), res.output
+
+
 def test_a_main_waiting_on_a_flag_its_notification_sets_is_told_what_to_call(tmp_path):
     """while (!Tick) {} waiting for a flag the Gpt notification sets: on the board the interrupt
     ends it; here no time passes in it (documented), so the run stalls at its line - and says

@@ -114,7 +114,40 @@ def unused_params_text(unused, read) -> str:
     text = "the controller never read --param " + ", ".join(unused)
     if not read:
         return text + " (read one with spinner.param(name, default); C: spinner_param)"
-    near = [m for name in unused for m in difflib.get_close_matches(name, read, n=1, cutoff=0.6)]
+    # (none for another number of a family read: s32k_pin_7 is another channel, no typo of s32k_pin_6)
+    near = [m for name in unused if not any(_other_number(name, r) for r in read)
+            for m in difflib.get_close_matches(name, read, n=1, cutoff=0.7)]
     mean = f"; did you mean {', '.join(dict.fromkeys(near))}?" if near else ""
-    return f"{text} (it read {', '.join(read)}{mean})"
+    return f"{text} (it read {', '.join(_numbered_as_one(read))}{mean})"
+
+
+def _other_number(a: str, b: str) -> bool:
+    """``a`` and ``b`` are ``prefix_<number>`` of one prefix."""
+    import re
+
+    ma, mb = re.fullmatch(r"(.+_)(\d+)", a), re.fullmatch(r"(.+_)(\d+)", b)
+    return bool(ma and mb and ma[1] == mb[1])
+
+
+def _numbered_as_one(names: list[str]) -> list[str]:
+    """``names`` (sorted) with each family of two or more ``prefix_<number>`` names as one,
+    ``prefix_{6,32,33}`` (a kit's lookup per channel, ``s32k_pin_N`` for each Dio channel the
+    firmware used, is one name of the kit's, not a list of things the program read)."""
+    import re
+
+    families: dict[str, list[int]] = {}
+    for name in names:
+        m = re.fullmatch(r"(.+_)(\d+)", name)
+        if m:
+            families.setdefault(m[1], []).append(int(m[2]))
+    out, done = [], set()
+    for name in names:
+        m = re.fullmatch(r"(.+_)(\d+)", name)
+        if m and len(families[m[1]]) >= 2:
+            if m[1] not in done:
+                done.add(m[1])
+                out.append(m[1] + "{" + ",".join(map(str, sorted(families[m[1]]))) + "}")
+            continue
+        out.append(name)
+    return out
 

@@ -168,6 +168,7 @@ class _Session:
         self._latched: dict[int, Callable[[], None] | None] = {}  # stopped ones that kept a pending call
         self._last_mask: tuple[bytes, Callable[[], str | None] | None] = (b"", None)  # _mask_where's
         self._exit_at: str | None = None  # "exit(3) at main.c:91": where the program exited (OP_EXIT_AT)
+        self._exit_status = 0  # that call's status as the process ends with it (0..255)
 
     def _setup_transport(self, child: _Child) -> None:
         self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
@@ -461,6 +462,7 @@ class _Session:
             where = self._where(payload[13:].decode("utf-8", "replace"), offset)  # the program ends
             name = ("exit", "_exit", "_Exit", "quick_exit")[fn] if fn < 4 else "exit"
             self._exit_at = f"{name}({status}) at {where}" if where else None
+            self._exit_status = status & 0xFF
         else:
             raise ControllerError(f"{self.name}: unknown request {op} from the host program")
 
@@ -553,10 +555,16 @@ class _Session:
         """Nothing for status 0; else the error that ends the run."""
         prog = self.ctrl.program
         lib = ", ".join(map(str, prog.sources)) if prog.sources else str(prog.library)
+        # the call named is the one the status came from (not a later end: a signal, an exit
+        # that no note names), and an exit(72) of the program's own is no missing main()
+        exit_at = self._exit_at if self._exit_at and rc == self._exit_status else None
         if rc == 0:
-            if self._exit_at:  # exit(0): the run ends as a return does, saying where
-                raise RunFinished("controller_returned", f"the controller called {self._exit_at}")
+            if exit_at:  # exit(0): the run ends as a return does, saying where
+                raise RunFinished("controller_returned", f"the controller called {exit_at}")
             return
+        if exit_at:  # (its file:line, as a Python controller's sys.exit is told)
+            msg = f"the controller called {exit_at}"
+            raise ControllerError(msg, msg + "\n")
         if rc == EXIT_NO_MAIN:
             raise ControllerFileError(f"{lib}: no main() function defined")
         if rc == EXIT_NOT_LOADED:
@@ -565,8 +573,6 @@ class _Session:
         if rc < 0:
             name = signal.Signals(-rc).name if -rc in signal.valid_signals() else str(-rc)
             msg = f"{self.name}: the controller was killed by {name}"
-        elif self._exit_at:  # (its file:line, as a Python controller's sys.exit is told)
-            msg = f"the controller called {self._exit_at}"
         else:
             msg = f"{self.name}: the controller exited with status {rc}"
         raise ControllerError(msg, msg + "\n")

@@ -61,6 +61,7 @@ static int img_h = 128, img_w = 128, line_row = 60, recording_on;
 static double wheelbase_m = 0.175;
 static int encoder_mask, encoder_lines, encoder_per_line, has_imu;  /* the car's [encoders], [imu] */
 static int finished;  /* the run is over: calls return at once (atexit, destructors) */
+static int run_over;  /* the simulator ended the run (ST_FINISHED): an exit then is not the program's */
 static double last_speed, last_angle, speed_mps, steer_rad;
 static spinner_norm_fn f_speed_norm, f_speed_denorm, f_turn_norm, f_diff_norm;
 static double last_time_s, last_speed_val, last_pos[3];
@@ -443,6 +444,30 @@ static void release_stopped(void) {
 static void (*kit_before_wait)(void);
 static int in_kit_hook;
 
+#ifdef SPINNER_INPROC
+/* An exit another thread of the program called (in process): the thread ends there and the
+ * program at main()'s thread's next waiting call, with that status, as exit() from a thread
+ * ends a process (its exit handlers run, as glibc runs them, on main()'s stack). It cannot end
+ * the coroutine from another thread: switching main()'s stack there crashed the simulator's
+ * process. -1: none. */
+static volatile int thread_exit_status = -1;
+static volatile int thread_exit_quick;  /* it was _exit, _Exit or quick_exit: no exit handlers */
+static int run_active;  /* (below: a run is on) */
+static void exit_run(int status) __attribute__((noreturn));
+static void leave(int status) __attribute__((noreturn));
+static void thread_exit_check(void) {
+    int status = __atomic_exchange_n(&thread_exit_status, -1, __ATOMIC_ACQ_REL);
+    if (status < 0 || finished || !in_controller || !pthread_equal(pthread_self(), sim_thread_id)) {
+        if (status >= 0) __atomic_store_n(&thread_exit_status, status, __ATOMIC_RELEASE);  /* (kept) */
+        return;
+    }
+    if (thread_exit_quick) leave(status);
+    exit_run(status);
+}
+#else
+static void thread_exit_check(void) {}
+#endif
+
 /* Send a waiting request and read the reply into `reply` (at most `size` bytes); returns the
  * reply's length. The run being over ends the program. */
 static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t nb,
@@ -451,6 +476,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         if (size) memset(reply, 0, size);
         return 0;
     }
+    thread_exit_check();
     /* time passes in the call - but not in OP_NOW or OP_EVERY_PENDING, unless --mcu-time charges
      * the calls queued before it (main() only) */
     int passes = (op != OP_NOW && op != OP_EVERY_PENDING) || (mcu_on && isr_depth == 0);
@@ -482,7 +508,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     now_known = 0;  /* time may have passed */
     if (passes && irq_masked) irq_held = 1;  /* (masked by a handler that ran in it) */
     if (hdr[0] == ST_FINISHED) {
-        finished = 1;
+        finished = run_over = 1;
         ended();
     }
     if (hdr[0] == ST_WHERE) fault_report(SIGUSR1, "", NULL);
@@ -501,6 +527,7 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
     if (n > have) read_all((unsigned char *)reply + have, n - have);
     skip_in(hdr[1] - n);
     if (mcu_report) mcu_mark_s = thread_cpu_s();  /* the program's own time starts again */
+    thread_exit_check();  /* (one called while this call waited) */
     return hdr[1];
 }
 
@@ -1082,9 +1109,14 @@ int __wrap_clock_nanosleep(clockid_t clock, int flags, const struct timespec *re
  * quick_exit), the status (int32), the caller's return address as its offset in its module
  * (uint64) and the module's path. Not from a process the program forked, nor after the run. */
 static void exit_note(uint8_t fn, int status, void *ra) {
-    if (finished || forked) return;
+    if (forked) return;
 #ifdef SPINNER_INPROC
-    if (!in_controller || !pthread_equal(pthread_self(), sim_thread_id)) return;
+    /* (finished is set while the program's exit handlers run too: an exit there, an atexit
+     * handler's or a static destructor's, is the status the program ends with, as it is
+     * isolated; after the simulator ended the run, none is) */
+    if (run_over || !in_controller || !pthread_equal(pthread_self(), sim_thread_id)) return;
+#else
+    if (finished) return;
 #endif
     INIT();
     if (foreign_thread()) return;
@@ -1131,7 +1163,6 @@ int __cxa_atexit(void (*fn)(void *), void *arg, void *dso);
 int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) { return __cxa_atexit(fn, arg, dso); }
 #else
 /* In-process the program's exit ends its coroutine with that status (not the simulator). */
-static void leave(int status) __attribute__((noreturn));
 static void leave(int status) {
     finished = 1;
     fflush(stdout);
@@ -1173,7 +1204,6 @@ int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) {
 #define MAX_FINI 256
 static void (*fini_fns[MAX_FINI])(void);
 static int n_fini;
-static void exit_run(int status) __attribute__((noreturn));
 static void exit_run(int status) {
     finished = 1;  /* Spinner calls from the handlers return at once */
     while (n_exit_handlers > 0) {
@@ -1185,10 +1215,19 @@ static void exit_run(int status) {
     leave(status);
 }
 static void ended(void) { exit_run(0); }
-void __wrap_exit(int status) { EXIT_NOTE(0, status); exit_run(status); }
-void __wrap__exit(int status) { EXIT_NOTE(1, status); leave(status); }
-void __wrap__Exit(int status) { EXIT_NOTE(2, status); leave(status); }
-void __wrap_quick_exit(int status) { EXIT_NOTE(3, status); leave(status); }
+/* From a thread other than the simulator's (a thread the program started): see thread_exit_status. */
+static void thread_exit(int status, int quick) {
+    if (forked || pthread_equal(pthread_self(), sim_thread_id)) return;
+    if (__atomic_load_n(&run_active, __ATOMIC_ACQUIRE) && !finished) {
+        thread_exit_quick = quick;
+        __atomic_store_n(&thread_exit_status, status & 0xff, __ATOMIC_RELEASE);
+    }
+    pthread_exit(NULL);
+}
+void __wrap_exit(int status) { thread_exit(status, 0); EXIT_NOTE(0, status); exit_run(status); }
+void __wrap__exit(int status) { thread_exit(status, 1); EXIT_NOTE(1, status); leave(status); }
+void __wrap__Exit(int status) { thread_exit(status, 1); EXIT_NOTE(2, status); leave(status); }
+void __wrap_quick_exit(int status) { thread_exit(status, 1); EXIT_NOTE(3, status); leave(status); }
 #endif
 
 /* -- fork ------------------------------------------------------------------------------- */
@@ -1742,7 +1781,8 @@ int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
     user_argc = argc;
     user_argv = argv;
     /* a fresh API state for this run */
-    finished = inited = 0;
+    finished = inited = run_over = 0;
+    thread_exit_status = -1, thread_exit_quick = 0;
     foreign_calls = 0;
     out_len = 0;
     rep_buf = rep_more = NULL, rep_len = rep_pos = rep_more_len = 0;
@@ -1793,7 +1833,7 @@ long spinner_inproc_resume_image(const unsigned char *image, size_t n) {
 
 /* End the run's coroutine (wherever it is), restore the signal handlers. */
 void spinner_inproc_finish(void) {
-    gone = finished = 1;
+    gone = finished = run_over = 1;
     n_exit_handlers = 0;  /* handlers a fault or the simulator's end left: their code is unloaded next */
     n_fini = 0;
     end_helpers();

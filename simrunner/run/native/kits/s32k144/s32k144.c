@@ -57,6 +57,7 @@ static struct {
     uint8 dio[NUM_DIO];           /* each DIO channel's level */
     uint8 role[NUM_PWM];          /* what a PWM channel drives on the car (enum role) */
     uint8 params_read;
+    uint8 buttons_read;             /* read_buttons done (at the first Dio call) */
     double servo_rad, servo_offset_rad;
     double osif_hz;
     uint32 osif_dummy;              /* OSIF_COUNTER_DUMMY: one count a call, as the RTD's */
@@ -141,13 +142,14 @@ static void read_params(void) {
     k.servo_offset_rad = spinner_param("s32k_servo_offset_rad", 0.0);
     k.osif_hz = spinner_param("s32k_osif_hz", 48e6);  /* the default: OsIf.h says whose */
     k.esc_hz = spinner_param("s32k_esc_hz", 50.0);    /* the default: esc.h says whose */
-    read_buttons();
 }
 
 /* What drives channel c: at its first read or write, a button's channel (read_buttons) or --param
  * s32k_pin_<c> (0 or 1: a constant level, a mode switch's), else the program. */
 static enum pin pin_of(Dio_ChannelType c) {
     read_params();
+    if (!k.buttons_read) k.buttons_read = 1U, read_buttons();  /* at the first Dio call: a bad value ends the
+                                                                * run there; a firmware using no pin reads none */
     if (c >= NUM_DIO) return PIN_OUTPUT;
     if (k.pin[c] != PIN_UNSEEN) return (enum pin)k.pin[c];
     char name[32];
