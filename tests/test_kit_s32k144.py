@@ -890,9 +890,11 @@ def test_an_adc_group_of_several_channels_and_its_notification(tmp_path, capfd):
     ADC_NOTIFICATION_2=NAME names is called at the conversion's end (before Adc_StartGroupConversion
     returns), where a read gives the values and leaves the group ADC_IDLE (read again later, the same
     values); Adc_DisableGroupNotification stops it. A channel
-    below the last given reads mid-scale. Both hosts alike."""
+    below the last given reads mid-scale. Adc_Types.h (the RTD's, which the sample's camera driver
+    includes) is found. Both hosts alike."""
     src = probe(tmp_path, """\
         #include <stdio.h>
+        #include "Adc_Types.h"
         #include "Adc.h"
         static Adc_ValueGroupType result[3], copy[4] = {7, 7, 7, 7}, in_notification[3];
         static int notified;
