@@ -157,10 +157,10 @@ def test_kit_misuse_is_one_line(tmp_path, capfd):
                                                   r"provides servo.h's functions"):
         firmware([FIRMWARE, servo_c])
     # an RTD call the simulator has not: a compile error at its line, not a failure at load
-    adc = probe(tmp_path, '#include "Adc.h"\n\nint main(void) { Adc_StartGroupConversion(0U); return 0; }\n',
-                "adc.c")
-    with pytest.raises(ControllerFileError, match=r"adc.c:3:.*Adc_StartGroupConversion"):
-        firmware([adc])
+    icu = probe(tmp_path, '#include "Icu.h"\n\nint main(void) { Icu_StartSignalMeasurement(0U); return 0; }\n',
+                "icu.c")
+    with pytest.raises(ControllerFileError, match=r"icu.c:3:.*Icu_StartSignalMeasurement"):
+        firmware([icu])
     regs = probe(tmp_path, '#include "Mcal.h"\n#include "S32K144.h"\nint main(void) { return 0; }\n', "regs.c")
     with pytest.raises(ControllerFileError, match=r"regs.c:2:.*S32K144.h"):
         firmware([regs])
@@ -703,16 +703,16 @@ def test_an_rtd_header_the_kit_has_not_is_said_so(tmp_path, header):
 
 @pytest.mark.parametrize("name", ["init.c", "init.cpp"])
 def test_an_rtd_call_the_kit_has_not_is_said_so(tmp_path, name):
-    """Pwm_Init(NULL_PTR), Adc_StartGroupConversion: the compiler's error at the call's line is
+    """Pwm_Init(NULL_PTR), Icu_StartSignalMeasurement: the compiler's error at the call's line is
     followed by a line naming the calls as not emulated and DriversInit as their set-up's stand-in,
     in C (implicit declaration) and C++ (not declared)."""
-    src = probe(tmp_path, '#include "Pwm.h"\n\nint main(void) { Pwm_Init(NULL_PTR); Adc_StartGroupConversion(0U); '
+    src = probe(tmp_path, '#include "Pwm.h"\n\nint main(void) { Pwm_Init(NULL_PTR); Icu_StartSignalMeasurement(0U); '
                           'return 0; }\n', name)
     with pytest.raises(ControllerFileError) as err:
         firmware([src])
     text = str(err.value)
     assert re.search(rf"{re.escape(name)}:3:.*Pwm_Init", text), text
-    assert text.splitlines()[-1].startswith("Adc_StartGroupConversion, Pwm_Init: of the RTD's calls the simulator's "
+    assert text.splitlines()[-1].startswith("Icu_StartSignalMeasurement, Pwm_Init: of the RTD's calls the simulator's "
                                             "--kit s32k144 has only"), text
     assert "DriversInit()" in text.splitlines()[-1], text
 
@@ -866,3 +866,174 @@ def test_an_esc_frequency_out_of_range_ends_the_run_at_esc_init(tmp_path):
         assert r.outcome == "controller_error", (hz, r.message)
         assert r.message.startswith(f"{src}:3: EscInit: --param s32k_esc_hz="), (hz, r.message)
         assert "expected a PWM frequency above 0" in r.message, (hz, r.message)
+
+
+# ---- Adc.h: a team's own analog inputs (the board's potentiometer, a battery sense) ----
+
+POT_MAIN = """\
+    #include <stdio.h>
+    #include "Adc.h"
+    #include "main_functions.h"
+    #include "spinner.h"
+    static Adc_ValueGroupType buf[1];
+    int main(void) {
+        Adc_CalibrationStatusType cal;
+        cal.AdcUnitSelfTestStatus = E_NOT_OK;
+        DriversInit();
+        Adc_Init(&Adc_Config_VS_0);
+        Adc_Calibrate(AdcHwUnit_0, &cal);
+        Std_ReturnType early = Adc_ReadGroup(AdcGroup_pot, buf);
+        unsigned idle = Adc_GetGroupStatus(AdcGroup_pot);
+        for (int k = 0; k < 164; k++) {
+            Adc_StartGroupConversion(AdcGroup_pot);
+            while (Adc_GetGroupStatus(AdcGroup_pot) == ADC_BUSY) {
+            }
+            (void)Adc_ReadGroup(AdcGroup_pot, buf);
+        }
+        unsigned after = Adc_GetGroupStatus(AdcGroup_pot);
+        Std_ReturnType again = Adc_ReadGroup(AdcGroup_pot, buf);
+        printf("pot %u early %u idle %u after %u again %u cal %u t %.3f\\n", (unsigned)buf[0], early, idle, after,
+               again, cal.AdcUnitSelfTestStatus, spinner_now());
+        return 0;
+    }
+    """
+
+
+def pot_run(tmp_path, capfd, params, *, isolate=False, defines=("AdcGroup_pot=1U",)):
+    """The run of the team pattern (NXP-Cup-EXPO src/onboard_pot.c's conversion: start, busy-wait
+    while ADC_BUSY, Adc_ReadGroup) and what it printed."""
+    program = firmware([probe(tmp_path, POT_MAIN)], defines=list(defines))
+    assert program.warnings == "", program.warnings
+    capfd.readouterr()
+    r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, wall_limit_s=30.0,
+              params=params)
+    out = capfd.readouterr().out
+    return r, out.split("pot ")[1].split() if "pot " in out else None
+
+
+def test_a_pot_read_through_the_rtd_adc_reads_its_param(tmp_path, capfd):
+    """A team's pot read as the RTD has it builds unchanged (-D AdcGroup_pot=1U: the configuration's
+    group name) and reads --param s32k_adc_1 on both hosts: the busy-wait ends at once (the status is
+    ADC_STREAM_COMPLETED, the conversion done), Adc_ReadGroup gives the counts and leaves the group
+    ADC_IDLE, a read again the same values; a read before any conversion is E_NOT_OK (ADC_E_IDLE);
+    Adc_Calibrate succeeds. 164 conversions at one time let 100 physics steps pass (after 64)."""
+    for isolate in (False, True):
+        r, out = pot_run(tmp_path, capfd, {"s32k_adc_1": 3000}, isolate=isolate)
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        assert out[:11] == ["3000", "early", "1", "idle", "0", "after", "0", "again", "0", "cal", "0"], (isolate, out)
+        assert float(out[12]) == pytest.approx(100 * STEP_S, abs=STEP_S), (isolate, out)
+        assert not any("Adc" in w for w in r.warnings), (isolate, r.warnings)
+
+
+def test_a_pot_with_no_param_reads_mid_scale_with_one_warning(tmp_path, capfd):
+    """No --param for the group: it reads mid-scale (2048 of 12 bits; 512 of 10 with
+    s32k_adc_bits=10), and the run lists one warning naming the param to give."""
+    r, out = pot_run(tmp_path, capfd, None)
+    assert r.outcome == "controller_returned" and out[0] == "2048", (r.message, out)
+    adc = [w for w in r.warnings if "Adc group 1" in w]
+    assert len(adc) == 1 and "no value given for --param s32k_adc_1: the channel reads mid-scale, 2048 counts" in adc[0], \
+        r.warnings
+    r, out = pot_run(tmp_path, capfd, {"s32k_adc_bits": 10})
+    assert r.outcome == "controller_returned" and out[0] == "512", (r.message, out)
+
+
+def test_an_adc_group_of_several_channels_and_its_notification(tmp_path, capfd):
+    """s32k_adc_<n>_<i> is the group's i-th channel (s32k_adc_<n>_0 its first): Adc_SetupResultBuffer's
+    buffer holds the values once the conversion is started, Adc_ReadGroup copies the group's channels
+    and no more, Adc_GetStreamLastPointer points at the one sample; the notification -D
+    ADC_NOTIFICATION_2=NAME names is called at the conversion's end (before Adc_StartGroupConversion
+    returns), where a read gives the values and leaves the group ADC_IDLE (read again later, the same
+    values); Adc_DisableGroupNotification stops it. A channel
+    below the last given reads mid-scale. Adc_Types.h (the RTD's, which the sample's camera driver
+    includes) is found. Both hosts alike."""
+    src = probe(tmp_path, """\
+        #include <stdio.h>
+        #include "Adc_Types.h"
+        #include "Adc.h"
+        static Adc_ValueGroupType result[3], copy[4] = {7, 7, 7, 7}, in_notification[3];
+        static int notified;
+        void BatteryDone(void) { notified++; (void)Adc_ReadGroup(2U, in_notification); }
+        int main(void) {
+            Adc_ValueGroupType *last = NULL;
+            Adc_Init(NULL_PTR);
+            (void)Adc_SetupResultBuffer(2U, result);
+            Adc_EnableGroupNotification(2U);
+            Adc_StartGroupConversion(2U);
+            unsigned status = Adc_GetGroupStatus(2U);
+            Adc_StreamNumSampleType n = Adc_GetStreamLastPointer(2U, &last);
+            Std_ReturnType read = Adc_ReadGroup(2U, copy);
+            Adc_DisableGroupNotification(2U);
+            Adc_StartGroupConversion(2U);
+            Adc_StartGroupConversion(3U);
+            printf("adc %u %u %u | %u %u %u %u | %u %u %u | %d %u %u %d %u\\n", result[0], result[1], result[2],
+                   copy[0], copy[1], copy[2], copy[3], in_notification[0], in_notification[1], in_notification[2],
+                   notified, status, (unsigned)n, last == result, read);
+            return 0;
+        }
+        """)
+    program = firmware([src], defines=["ADC_NOTIFICATION_2=BatteryDone"])
+    assert program.warnings == "", program.warnings
+    for isolate in (False, True):
+        capfd.readouterr()
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=1.0,
+                  params={"s32k_adc_2_0": 100, "s32k_adc_2_2": 4095, "s32k_adc_3": 5})
+        assert r.outcome == "controller_returned", (isolate, r.message)
+        out = capfd.readouterr().out.split("adc ")[1].split()
+        assert out == ["100", "2048", "4095", "|", "100", "2048", "4095", "7", "|", "100", "2048", "4095", "|",
+                       "1", "0", "1", "1", "0"], (isolate, out)  # ADC_IDLE: the notification's read
+        assert any("no value given for --param s32k_adc_2_1" in w for w in r.warnings), (isolate, r.warnings)
+
+
+@pytest.mark.parametrize("params, expected", [
+    ({"s32k_adc_1": 4096}, "--param s32k_adc_1=4096: expected the channel's conversion result: a whole number of "
+                           "counts 0..4095 (12 bits"),
+    ({"s32k_adc_1_3": 2.5}, "--param s32k_adc_1_3=2.5: expected the channel's conversion result"),
+    ({"s32k_adc_1": -1}, "--param s32k_adc_1=-1: expected the channel's conversion result"),
+    ({"s32k_adc_1": 1024, "s32k_adc_bits": 10}, "--param s32k_adc_1=1024: expected the channel's conversion result: "
+                                                "a whole number of counts 0..1023 (10 bits"),
+    ({"s32k_adc_1": 1, "s32k_adc_1_0": 2}, "--param s32k_adc_1_0=2: expected one of s32k_adc_N and s32k_adc_N_0"),
+    ({"s32k_adc_bits": 11}, "--param s32k_adc_bits=11: expected 8, 10 or 12"),
+], ids=["above_12_bits", "not_whole", "negative", "above_10_bits", "first_channel_twice", "bits"])
+def test_a_bad_adc_param_is_one_line(tmp_path, capfd, params, expected):
+    """A count out of the resolution's range or not whole, the first channel given twice, a
+    resolution the S32K1's ADC has not: the run ends at the Adc call that reads it, on one line."""
+    r, _ = pot_run(tmp_path, capfd, params)
+    assert r.outcome == "controller_error", (params, r.message)
+    line = 10 if "s32k_adc_bits" in params and len(params) == 1 else 15  # Adc_Init, or the first conversion
+    assert r.message.startswith(f"{tmp_path / 'probe.c'}:{line}: {expected}") and "\n" not in r.message, \
+        (params, r.message)
+
+
+def test_an_adc_notification_not_configured_ends_the_run_at_its_line(tmp_path):
+    """Adc_EnableGroupNotification on a group whose notification the kit's configuration has not
+    (the RTD: ADC_E_NOTIF_CAPABILITY): the run ends at the call, saying how to name it; a group
+    beyond the kit's 0..255 ends the run at its call."""
+    src = probe(tmp_path, """\
+        #include "Adc.h"
+        int main(void) {
+            Adc_StartGroupConversion(AdcGroup_pot);
+            Adc_EnableGroupNotification(AdcGroup_pot);
+            return 0;
+        }
+        """)
+    r = drive(firmware([src], defines=["AdcGroup_pot=1U"]), track="floor", time_limit_s=1.0)
+    assert r.outcome == "controller_error", r.message
+    assert r.message.startswith(f"{src}:4: Adc_EnableGroupNotification: group 1 has no notification") and \
+        "-D ADC_NOTIFICATION_1=NAME" in r.message, r.message
+    r = drive(firmware([src], defines=["AdcGroup_pot=300U"]), track="floor", time_limit_s=1.0)
+    assert r.outcome == "controller_error", r.message
+    assert r.message.startswith(f"{src}:3: Adc_StartGroupConversion(300): the simulator's Adc has groups 0..255"), \
+        r.message
+
+
+def test_an_adc_call_the_kit_has_not_is_said_so(tmp_path):
+    """An Adc call outside the kit's software-triggered subset (a hardware-triggered group's) is a
+    compile error at its line, followed by the line naming what the kit has."""
+    src = probe(tmp_path, '#include "Adc.h"\n\nint main(void) { Adc_EnableHardwareTrigger(0U); return 0; }\n', "hw.c")
+    with pytest.raises(ControllerFileError) as err:
+        firmware([src])
+    text = str(err.value)
+    assert re.search(r"hw.c:3:.*Adc_EnableHardwareTrigger", text), text
+    assert text.splitlines()[-1].startswith("Adc_EnableHardwareTrigger: of the RTD's calls the simulator's --kit "
+                                            "s32k144 has only"), text
+    assert "Adc's software-triggered group calls" in text.splitlines()[-1], text

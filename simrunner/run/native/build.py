@@ -33,7 +33,7 @@ HOST_SOURCE = NATIVE_DIR / "host" / "spinner_host.c"
 KITS_DIR = NATIVE_DIR / "kits"
 #: Kit libraries a firmware builds against (``--kit NAME``): NAME -> its sources beside its include/
 #: (in kits/NAME, a ``-`` spelt ``_``). tfc-mbed: the FRDM-TFC library's mbed flavour (C++).
-KITS = {"tfc": ("tfc.c", "timers.c"), "s32k144": ("s32k144.c", "gpt.c"),
+KITS = {"tfc": ("tfc.c", "timers.c"), "s32k144": ("s32k144.c", "gpt.c", "adc.c"),
         "tfc-mbed": ("tfc_mbed.cpp", "sensors.cpp", "interrupt_in.cpp")}
 #: A kit's own driver sources in a team's project, which the kit library replaces (passing one is
 #: an error naming it rather than the linker's "multiple definition").
@@ -518,8 +518,9 @@ def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileE
     if kit == "s32k144":
         return ControllerFileError(
             f"{exc}\n{', '.join(names)}: of the RTD's calls the simulator's --kit s32k144 has only the sample's drivers' "
-            f"and OsIf, Gpt, Pwm_SetDutyCycle, Dio's channel calls: the others are not emulated - DriversInit() stands "
-            f"for the drivers' set-up; leave their calls out of the sources you pass (docs/firmware.md, \"The S32K144 kit\")")
+            f"and OsIf, Gpt, Adc's software-triggered group calls, Pwm_SetDutyCycle, Dio's channel calls: the others "
+            f"are not emulated - DriversInit() stands for the drivers' set-up; leave their calls out of the sources "
+            f"you pass (docs/firmware.md, \"The S32K144 kit\")")
     has = ("it has a timer interrupt's only: LPTMR0, the PIT, TPM2, their SIM and MCG bits, the NVIC"
            if kit == "tfc" else "it has no registers")
     return ControllerFileError(
@@ -575,8 +576,8 @@ def _include_hint(exc: ControllerFileError, kit: str | None, sources: list[Path]
             line = f"{name} is in {', '.join(map(str, homes[:3]))}: add -I {homes[0]}"
         elif kit == "s32k144":  # an RTD driver's or the register headers, which the kit has not
             line = (f"{name}: not a header of the simulator's --kit s32k144, which provides the sample's driver "
-                    f"headers and of the RTD Std_Types.h, Mcal.h, OsIf.h, Gpt.h, Pwm.h, Dio.h: the RTD's other "
-                    f"drivers (Mcu, Port, Platform, Adc, Icu, I2c, Uart) and the registers (S32K144.h) are not "
+                    f"headers and of the RTD Std_Types.h, Mcal.h, OsIf.h, Gpt.h, Adc.h, Pwm.h, Dio.h: the RTD's other "
+                    f"drivers (Mcu, Port, Platform, Icu, I2c, Uart) and the registers (S32K144.h) are not "
                     f"emulated - DriversInit() stands for their set-up; leave their calls out of the sources you "
                     f"pass (docs/firmware.md, \"The S32K144 kit\")")
         else:

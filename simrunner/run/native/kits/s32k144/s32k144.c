@@ -20,7 +20,8 @@
  * - LinearCameraGetFrame waits for the camera's next image of its line row;
  * - Pixy2GetVectors (PixyGetVectors) reads the simulator's Pixy2 (pixy2_line.h);
  * - the display's text and graph go to the debug video; OsIf's clocks count simulated time;
- *   the Gpt channels and their notifications are gpt.c's;
+ *   the Gpt channels and their notifications are gpt.c's, the Adc groups (a team's own analog inputs,
+ *   their values from --param s32k_adc_<n>) adc.c's;
  * - the board's buttons SW2 and SW3 and constant input levels are DIO channels --param names
  *   (s32k_sw2, s32k_sw3, s32k_pin_N: read_buttons, pin_of); a loop polling one lets time pass.
  * docs/firmware.md, "The S32K144 kit", lists what is emulated and what is not. */

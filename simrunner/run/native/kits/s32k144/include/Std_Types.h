@@ -3,8 +3,8 @@
  * Platform_Types.h. On the car it comes with NXP's Real-Time Drivers (RTD); here it is ours.
  *
  * A call to a function no header declares is an error in kit builds (not C's old implicit
- * declaration): the RTD and register functions the simulator does not have (Gpt_StartTimer,
- * Adc_StartGroupConversion, IP_PTD->PSOR, ...) then fail to compile at the line that calls
+ * declaration): the RTD and register functions the simulator does not have (Pwm_Init,
+ * Icu_StartSignalMeasurement, IP_PTD->PSOR, ...) then fail to compile at the line that calls
  * them, instead of at load time (docs/firmware.md, "The S32K144 kit"). */
 #ifndef NXPCUP_SIM_STD_TYPES_H
 #define NXPCUP_SIM_STD_TYPES_H
