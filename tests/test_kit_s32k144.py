@@ -701,19 +701,23 @@ def test_an_rtd_header_the_kit_has_not_is_said_so(tmp_path, header):
     assert "DriversInit()" in text.splitlines()[-1], text
 
 
-@pytest.mark.parametrize("name", ["init.c", "init.cpp"])
-def test_an_rtd_call_the_kit_has_not_is_said_so(tmp_path, name):
-    """Pwm_Init(NULL_PTR), Icu_StartSignalMeasurement: the compiler's error at the call's line is
-    followed by a line naming the calls as not emulated and DriversInit as their set-up's stand-in,
-    in C (implicit declaration) and C++ (not declared)."""
-    src = probe(tmp_path, '#include "Pwm.h"\n\nint main(void) { Pwm_Init(NULL_PTR); Icu_StartSignalMeasurement(0U); '
-                          'return 0; }\n', name)
+@pytest.mark.parametrize("name, body, first, named", [
+    ("init.c", "Pwm_Init(NULL_PTR); Icu_StartSignalMeasurement(0U);", "Pwm_Init", "Icu_StartSignalMeasurement, Pwm_Init"),
+    ("init.cpp", "Pwm_Init(NULL_PTR); Icu_StartSignalMeasurement(0U);", "Pwm_Init", "Icu_StartSignalMeasurement, Pwm_Init"),
+    ("hw.c", "Adc_EnableHardwareTrigger(0U);", "Adc_EnableHardwareTrigger", "Adc_EnableHardwareTrigger"),
+])
+def test_an_rtd_call_the_kit_has_not_is_said_so(tmp_path, name, body, first, named):
+    """Pwm_Init(NULL_PTR), Icu_StartSignalMeasurement, an Adc call outside the kit's software-triggered
+    subset (a hardware-triggered group's): the compiler's error at the call's line is followed by a
+    line naming the calls as not emulated, what the kit has, and DriversInit as their set-up's
+    stand-in, in C (implicit declaration) and C++ (not declared)."""
+    src = probe(tmp_path, f'#include "Pwm.h"\n#include "Adc.h"\nint main(void) {{ {body} return 0; }}\n', name)
     with pytest.raises(ControllerFileError) as err:
         firmware([src])
     text = str(err.value)
-    assert re.search(rf"{re.escape(name)}:3:.*Pwm_Init", text), text
-    assert text.splitlines()[-1].startswith("Icu_StartSignalMeasurement, Pwm_Init: of the RTD's calls the simulator's "
-                                            "--kit s32k144 has only"), text
+    assert re.search(rf"{re.escape(name)}:3:.*{first}", text), text
+    assert text.splitlines()[-1].startswith(f"{named}: of the RTD's calls the simulator's --kit s32k144 has only"), text
+    assert "Adc's software-triggered group calls" in text.splitlines()[-1], text
     assert "DriversInit()" in text.splitlines()[-1], text
 
 
@@ -1024,16 +1028,3 @@ def test_an_adc_notification_not_configured_ends_the_run_at_its_line(tmp_path):
     assert r.outcome == "controller_error", r.message
     assert r.message.startswith(f"{src}:3: Adc_StartGroupConversion(300): the simulator's Adc has groups 0..255"), \
         r.message
-
-
-def test_an_adc_call_the_kit_has_not_is_said_so(tmp_path):
-    """An Adc call outside the kit's software-triggered subset (a hardware-triggered group's) is a
-    compile error at its line, followed by the line naming what the kit has."""
-    src = probe(tmp_path, '#include "Adc.h"\n\nint main(void) { Adc_EnableHardwareTrigger(0U); return 0; }\n', "hw.c")
-    with pytest.raises(ControllerFileError) as err:
-        firmware([src])
-    text = str(err.value)
-    assert re.search(r"hw.c:3:.*Adc_EnableHardwareTrigger", text), text
-    assert text.splitlines()[-1].startswith("Adc_EnableHardwareTrigger: of the RTD's calls the simulator's --kit "
-                                            "s32k144 has only"), text
-    assert "Adc's software-triggered group calls" in text.splitlines()[-1], text
