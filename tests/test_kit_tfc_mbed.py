@@ -94,7 +94,7 @@ def test_the_library_maps_the_board_onto_the_car(tmp_path):
             TFC_Init();
             if (TFC_ReadPot(0) != 0.5f || TFC_ReadPot(1) != -1.0f) return 1;
             if (TFC_GetDIP_Switch() != 5 || !TFC_DIP_SWITCH_2_ON || TFC_DIP_SWITCH_1_ON) return 2;
-            if (fabsf(TFC_ReadBatteryVoltage() - 7.2f * 10.0f / 57.0f) > 1e-4f) return 3;
+            if (fabsf(TFC_ReadBatteryVoltage() - 7.2f * 10.0f / 57.0f * 3.0f / 3.3f) > 1e-3f) return 3;
             AnalogIn sensor(PTB0), pot0(PTB3);
             if (fabsf(sensor.read() - 0.25f) > 1e-6f || fabsf(pot0.read() - 0.25f) > 1e-6f) return 4;
             DigitalIn button(PTC17);

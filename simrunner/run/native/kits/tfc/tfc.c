@@ -280,9 +280,15 @@ float TFC_ReadPot(uint8_t Channel) {
 
 /* The library returns the battery sense input, not the battery's voltage: FRDM-TFC TFC_ADC.c,
  * `return (((float)BatSenseADC_Value/(float)(ADC_MAX_CODE)) * 3.0);// * ((47000.0+10000.0)/10000.0);`
- * - the shield's divider (47k over 10k) is the commented-out factor; as the mbed kit's. */
+ * - the shield's divider (47k over 10k) is the commented-out factor; and its 3.0 V is not the ADC's
+ * full scale, which is the FRDM-KL25Z's 3.3 V supply (VREFH; "0 v or 3.3 v give 0 and close to
+ * 65535", os.mbed.com/questions/75223): the library reads sense x 3.0 / 3.3 (1.15 at 7.2 V), the
+ * 12-bit count (ADC_MAX_CODE 4095) as the library converts it; as the mbed kit's. */
+#define TFC_ADC_MAX_CODE 4095.0
+#define TFC_ADC_FULL_SCALE_V 3.3
 float TFC_ReadBatteryVoltage(void) {
-    return (float)clampf(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0, 0.0, 3.0);
+    double sense_v = clampf(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0, 0.0, TFC_ADC_FULL_SCALE_V);
+    return (float)(round(sense_v / TFC_ADC_FULL_SCALE_V * TFC_ADC_MAX_CODE) / TFC_ADC_MAX_CODE * 3.0);
 }
 
 void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {

@@ -403,9 +403,11 @@ float TFC_ReadPot(uint8_t Channel) {
 
 float TFC_ReadBatteryVoltage() {
     tfc_mbed_start();  /* the sense divider: 10k of 47k + 10k (TFC.cpp's commented-out factor) */
-    double sense_v = clampd(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0, 0.0, 3.0);
-    BatSenseADC_Value = (uint16_t)lround(sense_v / 3.0 * ADC_MAX_CODE);
-    return (float)sense_v;
+    /* the ADC's full scale is the FRDM-KL25Z's 3.3 V (VREFH; os.mbed.com/questions/75223: 3.3 V reads
+     * close to 65535); the library scales the count by 3.0 (V): it reads sense x 3.0 / 3.3 */
+    double sense_v = clampd(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0, 0.0, 3.3);
+    BatSenseADC_Value = (uint16_t)lround(sense_v / 3.3 * ADC_MAX_CODE);
+    return (float)((double)BatSenseADC_Value / ADC_MAX_CODE * 3.0);
 }
 
 void TFC_SetBatteryLED(uint8_t Value) {
