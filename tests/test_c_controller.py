@@ -1175,3 +1175,95 @@ def test_a_global_objects_constructor_that_calls_spinner_runs_as_isolated(tmp_pa
         r = drive(dataclasses.replace(prog, isolate=isolate), track=track, params={"kp": 2.5}, time_limit_s=1.0)
         assert r.outcome == "controller_returned", r.message
         assert "kp 2.5" in capfd.readouterr().out
+
+
+def test_a_c_constructors_early_calls_are_answered_as_after_a_run(tmp_path, track, capfd):
+    """A C constructor (``__attribute__((constructor))``) reading a parameter: at the library's load
+    in the simulator's process its spinner_param returned what its stack held (0 here: a buffer
+    sized by it, a loop bound by it), not its default; now the default (the program then runs in a
+    child process, where the run's value is read)."""
+    src = write(tmp_path, "ctor.c", """\
+        #include <stdio.h>
+        #include "spinner.h"
+        __attribute__((constructor)) static void early(void) { printf("ctor n=%g\\n", spinner_param("n", 3)); }
+        int main(void) { spinner_sleep(0.1); return 0; }
+        """)
+    r = drive(build_program([src]), track=track, time_limit_s=1.0)
+    assert r.outcome == "controller_returned", r.message
+    out = capfd.readouterr().out
+    assert out.count("ctor n=3") == 2 and "ctor n=" not in out.replace("ctor n=3", ""), out
+
+
+@pytest.mark.parametrize("after_a_run", [False, True])
+def test_an_exit_in_a_constructor_at_the_load_ends_the_simulator_saying_why(tmp_path, after_a_run):
+    """exit(3) in a C constructor as the library is loaded in the simulator's process (before any
+    run; nothing can be left or continued there): it ended the simulator's thread (the process's
+    status 0, no output at all) or, after an earlier run, switched to that run's stack (SIGSEGV).
+    Now the simulator ends (status 70) naming the call and --isolate; isolated it is the run's."""
+    src = write(tmp_path, "ctor_exit.c", """\
+        #include <stdlib.h>
+        #include "spinner.h"
+        __attribute__((constructor)) static void early(void) { exit(3); }
+        int main(void) { spinner_sleep(0.1); return 0; }
+        """)
+    plain = write(tmp_path, "plain.c", '#include "spinner.h"\nint main(void) { spinner_sleep(0.1); return 0; }\n')
+    paths = [str(plain), str(src)] if after_a_run else [str(src)]
+    code = textwrap.dedent(f"""\
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        for path in {paths!r}:
+            print(path, drive(build_program([path]), time_limit_s=1.0).outcome, flush=True)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 70, (out.returncode, out.stdout, out.stderr[-2000:])
+    assert "the controller called exit(3) in a global object's constructor" in out.stderr
+    assert "--isolate" in out.stderr
+    r = drive(isolated(src), time_limit_s=1.0)
+    assert r.outcome == "controller_error" and "exit(3) at" in r.message and "ctor_exit.c:3" in r.message, r.message
+
+
+def test_a_library_loaded_while_another_thread_runs_a_program_in_process(tmp_path, track, capfd):
+    """A program (its constructor reading a parameter) loaded in one thread while another thread's
+    run is on in this process: its constructor's call was taken as a call of that run's program from
+    a foreign thread (that run ended 'a Spinner call came from another thread') and not as an early
+    call (the program then ran in process, its constructor's kp 0, not the run's --param)."""
+    import threading
+
+    started, stop = tmp_path / "started", tmp_path / "stop"
+    runner = write(tmp_path, "runner.c", f"""\
+        #include <stdio.h>
+        #include <unistd.h>
+        #include "spinner.h"
+        int main(void) {{
+            fclose(fopen("{started}", "w"));
+            while (access("{stop}", F_OK) != 0) spinner_sleep(0.01);
+            return 0;
+        }}
+        """)
+    ctor = write(tmp_path, "ctor.cpp", """\
+        #include <cstdio>
+        #include "spinner.h"
+        struct Gains { double kp; Gains() : kp(spinner_param("kp", 0.5)) {} } gains;
+        int main() { std::printf("kp %g\\n", gains.kp); spinner_sleep(0.1); return 0; }
+        """)
+    first, second = build_program([runner]), build_program([ctor])
+    result = {}
+    t = threading.Thread(target=lambda: result.setdefault("r", drive(first, track=track, time_limit_s=600.0)))
+    t.start()
+    try:
+        for _ in range(600):
+            if started.exists() or not t.is_alive():
+                break
+            import time
+            time.sleep(0.05)
+        assert started.exists()
+        controller = load_native(second)  # its library opened here, the other run on
+        assert t.is_alive()
+    finally:
+        stop.touch()
+        t.join()
+    assert result["r"].outcome == "controller_returned", result["r"].message
+    assert not controller.inproc  # early: it runs in a child process
+    r = drive(controller, track=track, params={"kp": 2.5}, time_limit_s=1.0)
+    assert r.outcome == "controller_returned", r.message
+    assert "kp 2.5" in capfd.readouterr().out

@@ -76,14 +76,32 @@ static int inited;  /* the run's INIT message read (lazily: the child starts bef
  * program in a child process (--isolate), where its constructors run with the run there (on the
  * board they run in the start-up code, before main). A run of it here ends at its start saying
  * why (entry). */
-static int early_calls;      /* calls during the open under way */
-static void *early_lib;      /* the library whose loading made them */
+static __thread int opening;     /* this thread is loading a program's library (its constructors run) */
+static __thread int early_calls; /* calls during the open under way (this thread's) */
+#define MAX_EARLY 64
+static void *early_libs[MAX_EARLY];  /* the libraries whose loading made them (early_lock) */
+static pthread_mutex_t early_lock = PTHREAD_MUTEX_INITIALIZER;
+static void load_ended(const char *what, int status, void *ra) __attribute__((noreturn));
+#define OPENING() opening
+#else
+#define OPENING() 0
 #endif
 
 static void fault_report(int sig, const char *message, void *pc);
 static void ended(void) __attribute__((noreturn));
 static void read_init(void);
-#define INIT() do { if (!inited) read_init(); if (foreign_calls) foreign_call_report(); } while (0)
+#define INIT() do { \
+        if (OPENING()) early_calls_seen(); \
+        else { if (!inited) read_init(); if (foreign_calls) foreign_call_report(); } \
+    } while (0)
+#ifdef SPINNER_INPROC
+/* A call of a constructor as its library is loaded here (spinner_inproc_open): seen, and answered
+ * at once as after a run's end (foreign_thread: requests dropped, replies zeros; spinner_param its
+ * default) - never taken for the run's start, nor for a call of another thread's run under way. */
+static void early_calls_seen(void) { early_calls = 1; }
+#else
+static void early_calls_seen(void) {}
+#endif
 
 /* Spinner calls from a thread other than the one running main(): they cannot reach the
  * simulator (they return 0); the next call from main()'s thread reports the misuse. */
@@ -94,6 +112,7 @@ static void forked_call(void) __attribute__((noreturn));
 static volatile sig_atomic_t forked;  /* this process is one the controller fork()ed (below) */
 static int foreign_thread(void) {
     if (forked) forked_call();
+    if (OPENING()) return 1;  /* a constructor's call at the load (INIT): answered here */
     if (!inited || pthread_equal(pthread_self(), api_thread)) return 0;
     if (!finished) foreign_calls = 1;
     return 1;
@@ -542,6 +561,9 @@ static void misuse(const char *fmt, ...) {
 }
 
 void spinner_fail(const char *message) {
+#ifdef SPINNER_INPROC
+    if (opening) load_ended("spinner_fail", -1, __builtin_return_address(0));
+#endif
     INIT();
     misuse("%s", message);
     for (;;) pause();  /* not reached: the report ends the run */
@@ -864,7 +886,10 @@ int spinner_in_interrupt(void) { return isr_depth > 0; }
 
 #ifdef SPINNER_INPROC
 int spinner_running(void) {
-    if (!in_controller) early_calls = 1;  /* (a kit that would have asked: as a call, read_init) */
+    if (opening) {  /* (a kit that would have asked: as a call, INIT) */
+        early_calls = 1;
+        return 0;
+    }
     return in_controller;
 }
 #else
@@ -1054,7 +1079,7 @@ void spinner_add_noise(uint8_t *pixels, int rows, int width) {
 double spinner_param(const char *name, double default_value) {
     INIT();
     if (name == NULL) misuse("spinner_param(name=NULL): expected a parameter name");
-    if (finished) return default_value;
+    if (finished || OPENING()) return default_value;
     double v;
     call(OP_PARAM, &default_value, sizeof default_value, name, strlen(name), &v, sizeof v);
     return v;
@@ -1224,10 +1249,34 @@ static void thread_exit(int status, int quick) {
     }
     pthread_exit(NULL);
 }
-void __wrap_exit(int status) { thread_exit(status, 0); EXIT_NOTE(0, status); exit_run(status); }
-void __wrap__exit(int status) { thread_exit(status, 1); EXIT_NOTE(1, status); leave(status); }
-void __wrap__Exit(int status) { thread_exit(status, 1); EXIT_NOTE(2, status); leave(status); }
-void __wrap_quick_exit(int status) { thread_exit(status, 1); EXIT_NOTE(3, status); leave(status); }
+#define AT_LOAD(fn, status) do { if (opening) load_ended(fn, status, __builtin_return_address(0)); } while (0)
+void __wrap_exit(int status) { AT_LOAD("exit", status); thread_exit(status, 0); EXIT_NOTE(0, status); exit_run(status); }
+void __wrap__exit(int status) { AT_LOAD("_exit", status); thread_exit(status, 1); EXIT_NOTE(1, status); leave(status); }
+void __wrap__Exit(int status) { AT_LOAD("_Exit", status); thread_exit(status, 1); EXIT_NOTE(2, status); leave(status); }
+void __wrap_quick_exit(int status) { AT_LOAD("quick_exit", status); thread_exit(status, 1); EXIT_NOTE(3, status); leave(status); }
+
+/* A call that does not return (exit, spinner_fail, a misused call) in a constructor of a library
+ * being loaded here, before any run: nothing can be left there (the loader is in the middle of the
+ * load, holding its lock) and nothing can go on; it used to end the simulator's thread (silently:
+ * the process's status 0, no output) or switch to a run that was not there (SIGSEGV). The
+ * simulator ends saying so (status 70); with --isolate its constructors run in the run's process. */
+static void load_ended(const char *what, int status, void *ra) {
+    char where[600] = "";
+    Dl_info info;
+    if (ra != NULL && dladdr(ra, &info) && info.dli_fname != NULL)
+        snprintf(where, sizeof where, " (%s+0x%lx)", info.dli_fname,
+                 (unsigned long)((uintptr_t)ra - (uintptr_t)info.dli_fbase));
+    char call_text[64];
+    if (status >= 0) snprintf(call_text, sizeof call_text, "%s(%d)", what, status);
+    else snprintf(call_text, sizeof call_text, "%s", what);
+    fflush(stdout);
+    fprintf(stderr, "simrunner: the controller called %s in a global object's constructor%s, as its library "
+                    "was loaded into the simulator's process before the run, where the program cannot end "
+                    "without the simulator; run it with --isolate (its constructors then run in the run's "
+                    "own process, as on a board before main)\n", call_text, where);
+    fflush(stderr);
+    _exit(70);
+}
 #endif
 
 /* -- fork ------------------------------------------------------------------------------- */
@@ -1381,6 +1430,11 @@ static void fault_report(int sig, const char *message, void *pc) {
         rput("\n");
     }
 #ifdef SPINNER_INPROC
+    if (opening) {  /* a misused call in a constructor at the load (no run to report it to) */
+        static char what[640];
+        snprintf(what, sizeof what, "a misused Spinner call (%s)", message ? message : "");
+        load_ended(what, -1, NULL);
+    }
     if (out_len + 8 + report_len > sizeof out_buf) out_len = 0;  /* the report goes first */
     uint32_t hdr[2] = {OP_FAULT, (uint32_t)report_len};
     write_all(hdr, sizeof hdr);
@@ -1626,11 +1680,12 @@ static void dog_start(double limit_s) {
     pthread_mutex_unlock(&dog_lock);
 }
 
+int spinner_inproc_early(void *lib);
 static void entry(void) {
     extern char **environ;
     in_controller = 1;
     INIT();  /* the run has started */
-    if (prog_lib != NULL && prog_lib == early_lib)
+    if (prog_lib != NULL && spinner_inproc_early(prog_lib))
         misuse("a call of the kit or the Spinner API before main(), in a global object's constructor: in the "
                "simulator's process the program's constructors run as its library is loaded, before the run, "
                "where nothing can be asked; run it with --isolate, or make the call in main()");
@@ -1683,24 +1738,36 @@ static void take_fini(void *lib) {
     if (lo >= q.lo && hi <= q.hi) mprotect((void *)lo, hi - lo, PROT_READ);
 }
 
-/* Open the controller's library: its handle, or NULL (spinner_inproc_error says why). */
-static int run_active;  /* (below: a run is on, in some thread) */
+/* Open the controller's library: its handle, or NULL (spinner_inproc_error says why). Its
+ * constructors' calls are seen (INIT, spinner_running: early_calls) and answered at once. */
+static void set_early(void *lib, int early) {
+    pthread_mutex_lock(&early_lock);
+    int at = -1;
+    for (int i = 0; i < MAX_EARLY; i++) {
+        if (early_libs[i] == lib) early_libs[i] = NULL;
+        if (at < 0 && early_libs[i] == NULL) at = i;
+    }
+    if (early && at >= 0) early_libs[at] = lib;
+    pthread_mutex_unlock(&early_lock);
+}
+
 void *spinner_inproc_open(const char *path) {
-    /* its constructors' calls are seen (read_init) - not answered at once as the calls after the
-     * last run's end are (a library unloaded meanwhile: its destructors) - unless a run is on */
-    int idle = !__atomic_load_n(&run_active, __ATOMIC_ACQUIRE);
-    int was_inited = inited, was_finished = finished;
-    if (idle) inited = finished = 0;
-    early_calls = 0;
+    opening = 1, early_calls = 0;
     void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (idle) inited = was_inited, finished = was_finished;
-    if (lib != NULL && (early_calls || lib == early_lib)) early_lib = early_calls ? lib : NULL;
+    opening = 0;
+    if (lib != NULL && early_calls) set_early(lib, 1);
     early_calls = 0;
     return lib;
 }
 
-/* Whether `lib`'s constructors called the API as it was loaded (read_init): run it isolated. */
-int spinner_inproc_early(void *lib) { return lib != NULL && lib == early_lib; }
+/* Whether `lib`'s constructors called the API as it was loaded: run it isolated. */
+int spinner_inproc_early(void *lib) {
+    int early = 0;
+    pthread_mutex_lock(&early_lock);
+    for (int i = 0; i < MAX_EARLY && lib != NULL; i++) early |= early_libs[i] == lib;
+    pthread_mutex_unlock(&early_lock);
+    return early;
+}
 
 const char *spinner_inproc_error(void) {
     const char *e = dlerror();
@@ -1725,7 +1792,7 @@ static void drop_exit_handlers_of(void *lib) {
 }
 
 int spinner_inproc_close(void *lib) {
-    if (lib == early_lib) early_lib = NULL;
+    set_early(lib, 0);
     drop_exit_handlers_of(lib);
     return dlclose(lib);
 }
