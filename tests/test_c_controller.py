@@ -1154,6 +1154,32 @@ def test_a_program_run_elsewhere_leaves_no_exit_handlers_for_the_next(tmp_path):
     assert out.stdout.count("controller_returned") == 2, out.stdout
 
 
+def test_a_program_run_elsewhere_leaves_no_library_types_destructor_for_the_next(tmp_path):
+    """The same with a global of a library's type (a std::string): its destructor is libstdc++'s
+    (registered with the object, in the unloaded library, and its __dso_handle), so the handlers
+    dropped by their function's module kept it: the next program's end freed the unloaded string
+    ('munmap_chunk(): invalid pointer', that run's SIGABRT; or SIGSEGV of the process)."""
+    src = write(tmp_path, "label.cpp", """\
+        #include <cstdio>
+        #include <string>
+        #include "spinner.h"
+        std::string label = "a label long enough to live on the heap, not in the string itself";
+        struct Gains { double kp; Gains() : kp(spinner_param("kp", 0.5)) {} } gains;
+        int main() { std::printf("%s\\n", label.c_str()); spinner_sleep(0.1); return 0; }
+        """)
+    plain = write(tmp_path, "plain.c", '#include "spinner.h"\nint main(void) { spinner_sleep(0.1); return 0; }\n')
+    code = textwrap.dedent(f"""\
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        for path in ({str(src)!r}, {str(plain)!r}):
+            r = drive(build_program([path]), time_limit_s=1.0)
+            print(path, r.outcome, r.message)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, (out.returncode, out.stdout, out.stderr[-2000:])
+    assert out.stdout.count("controller_returned") == 2, (out.stdout, out.stderr[-2000:])
+
+
 def test_a_global_objects_constructor_that_calls_spinner_runs_as_isolated(tmp_path, track, capfd):
     """A C++ global whose constructor reads a parameter: in the simulator's process the library's
     constructors run as it is loaded, before the run, where nothing can be asked (the run crashed,

@@ -1206,18 +1206,19 @@ static void leave(int status) {
  * _Exit, quick_exit and faults skip them, as they do on a real system. A fault or a run ended
  * by the simulator drops the rest (spinner_inproc_finish). */
 #define MAX_EXIT_HANDLERS 256
-static struct { void (*fn)(void *); void *arg; } exit_handlers[MAX_EXIT_HANDLERS];
+static struct { void (*fn)(void *); void *arg; void *dso; } exit_handlers[MAX_EXIT_HANDLERS];
 static int n_exit_handlers;
 static void call_plain(void *fn) { ((void (*)(void))fn)(); }
 int __wrap_atexit(void (*fn)(void)) {
     if (n_exit_handlers == MAX_EXIT_HANDLERS) return -1;
     exit_handlers[n_exit_handlers].fn = call_plain;
+    exit_handlers[n_exit_handlers].dso = NULL;
     exit_handlers[n_exit_handlers++].arg = (void *)fn;
     return 0;
 }
 int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) {
-    (void)dso;
     if (n_exit_handlers == MAX_EXIT_HANDLERS) return -1;
+    exit_handlers[n_exit_handlers].dso = dso;  /* the registering library's __dso_handle */
     exit_handlers[n_exit_handlers].fn = fn;
     exit_handlers[n_exit_handlers++].arg = arg;
     return 0;
@@ -1777,13 +1778,16 @@ const char *spinner_inproc_error(void) {
 /* Its exit handlers are dropped as it is unloaded: a library whose constructors registered static
  * destructors (__cxa_atexit, at its load) and that never ran here - run in a child process instead
  * (spinner_inproc_early), or not run at all - left them for the next program's exit to call, into
- * unloaded code (a crash of the simulator's process). */
+ * unloaded code (a crash of the simulator's process). A handler is the library's by the
+ * registration's __dso_handle (a global of a library's type, a std::string: the destructor is
+ * libstdc++'s, the object the unloaded library's), else (atexit) by its function. */
 static void drop_exit_handlers_of(void *lib) {
     struct link_map *map = NULL;
     if (dlinfo(lib, RTLD_DI_LINKMAP, &map) != 0 || map == NULL || map->l_name == NULL) return;
     int kept = 0;
     for (int i = 0; i < n_exit_handlers; i++) {
         void *fn = exit_handlers[i].fn == call_plain ? exit_handlers[i].arg : (void *)exit_handlers[i].fn;
+        if (exit_handlers[i].dso != NULL) fn = exit_handlers[i].dso;
         Dl_info info;
         if (dladdr(fn, &info) && info.dli_fname != NULL && strcmp(info.dli_fname, map->l_name) == 0) continue;
         exit_handlers[kept++] = exit_handlers[i];
