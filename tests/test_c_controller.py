@@ -1293,3 +1293,34 @@ def test_a_library_loaded_while_another_thread_runs_a_program_in_process(tmp_pat
     r = drive(controller, track=track, params={"kp": 2.5}, time_limit_s=1.0)
     assert r.outcome == "controller_returned", r.message
     assert "kp 2.5" in capfd.readouterr().out
+
+
+def test_a_programs_exit_handlers_run_at_its_own_end_not_an_earlier_programs(tmp_path):
+    """Two C/C++ programs opened (loaded in process) before either runs: the second's static
+    destructors, registered at its load, ran at the first's end (its 'G gone' printed there, its
+    std::string freed before its own run read it: garbage, or a crash) and were gone at its own."""
+    src = write(tmp_path, "label.cpp", """\
+        #include <cstdio>
+        #include <string>
+        #include "spinner.h"
+        std::string label = "a label long enough to live on the heap, not in the string itself";
+        struct G { ~G() { std::printf("G gone\\n"); } } g;
+        int main() { std::printf("label: %s\\n", label.c_str()); spinner_sleep(0.1); return 0; }
+        """)
+    plain = write(tmp_path, "plain.c", """\
+        #include <stdio.h>
+        #include "spinner.h"
+        int main(void) { spinner_sleep(0.1); printf("plain done\\n"); return 0; }
+        """)
+    code = textwrap.dedent(f"""\
+        from simrunner.run.native import build_program, load_native
+        from simrunner.run.runner import drive
+        first, second = load_native(build_program([{str(plain)!r}])), load_native(build_program([{str(src)!r}]))
+        print("first", drive(first, time_limit_s=1.0).outcome, flush=True)
+        print("second", drive(second, time_limit_s=1.0).outcome, flush=True)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, (out.returncode, out.stdout, out.stderr[-2000:])
+    assert out.stdout.split() == ["plain", "done", "first", "controller_returned", "label:", "a", "label", "long",
+                                  "enough", "to", "live", "on", "the", "heap,", "not", "in", "the", "string",
+                                  "itself", "G", "gone", "second", "controller_returned"], out.stdout

@@ -1204,24 +1204,60 @@ static void leave(int status) {
  * destructors: __cxa_atexit) are kept here and run, last registered first, when the program
  * ends as exit() ends one (main returns, exit, the run's end), with its stdio flushed; _exit,
  * _Exit, quick_exit and faults skip them, as they do on a real system. A fault or a run ended
- * by the simulator drops the rest (spinner_inproc_finish). */
+ * by the simulator drops the rest (spinner_inproc_finish). Each handler is its library's: the one
+ * being loaded by the registering thread (its constructors' registrations: tagged with the handle
+ * when the load returns), else the running program's - a program's end runs its own only (another
+ * program opened ahead of its run keeps its static destructors for its own end). */
 #define MAX_EXIT_HANDLERS 256
-static struct { void (*fn)(void *); void *arg; void *dso; } exit_handlers[MAX_EXIT_HANDLERS];
+static struct { void (*fn)(void *); void *arg; void *lib; } exit_handlers[MAX_EXIT_HANDLERS];
 static int n_exit_handlers;
+static pthread_mutex_t exit_lock = PTHREAD_MUTEX_INITIALIZER;
+#define LOADING_TAG ((void *)&opening)  /* (a thread-local's address: this thread's load) */
 static void call_plain(void *fn) { ((void (*)(void))fn)(); }
-int __wrap_atexit(void (*fn)(void)) {
-    if (n_exit_handlers == MAX_EXIT_HANDLERS) return -1;
-    exit_handlers[n_exit_handlers].fn = call_plain;
-    exit_handlers[n_exit_handlers].dso = NULL;
-    exit_handlers[n_exit_handlers++].arg = (void *)fn;
-    return 0;
+static int add_exit_handler(void (*fn)(void *), void *arg) {
+    int ok = 0;
+    pthread_mutex_lock(&exit_lock);
+    if (n_exit_handlers < MAX_EXIT_HANDLERS) {
+        exit_handlers[n_exit_handlers].fn = fn;
+        exit_handlers[n_exit_handlers].arg = arg;
+        exit_handlers[n_exit_handlers++].lib = opening ? LOADING_TAG : prog_lib;
+        ok = 1;
+    }
+    pthread_mutex_unlock(&exit_lock);
+    return ok ? 0 : -1;
 }
+/* The handlers of `from` become `to`'s (NULL: dropped). */
+static void retag_exit_handlers(void *from, void *to) {
+    pthread_mutex_lock(&exit_lock);
+    int kept = 0;
+    for (int i = 0; i < n_exit_handlers; i++) {
+        if (exit_handlers[i].lib == from) {
+            if (to == NULL) continue;
+            exit_handlers[i].lib = to;
+        }
+        exit_handlers[kept++] = exit_handlers[i];
+    }
+    n_exit_handlers = kept;
+    pthread_mutex_unlock(&exit_lock);
+}
+/* Take `lib`'s last registered handler (1), or none is left (0). */
+static int take_exit_handler(void *lib, void (**fn)(void *), void **arg) {
+    int found = 0;
+    pthread_mutex_lock(&exit_lock);
+    for (int i = n_exit_handlers - 1; i >= 0 && !found; i--) {
+        if (exit_handlers[i].lib != lib) continue;
+        *fn = exit_handlers[i].fn, *arg = exit_handlers[i].arg;
+        for (int k = i + 1; k < n_exit_handlers; k++) exit_handlers[k - 1] = exit_handlers[k];
+        n_exit_handlers--;
+        found = 1;
+    }
+    pthread_mutex_unlock(&exit_lock);
+    return found;
+}
+int __wrap_atexit(void (*fn)(void)) { return add_exit_handler(call_plain, (void *)fn); }
 int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) {
-    if (n_exit_handlers == MAX_EXIT_HANDLERS) return -1;
-    exit_handlers[n_exit_handlers].dso = dso;  /* the registering library's __dso_handle */
-    exit_handlers[n_exit_handlers].fn = fn;
-    exit_handlers[n_exit_handlers++].arg = arg;
-    return 0;
+    (void)dso;
+    return add_exit_handler(fn, arg);
 }
 /* Its library's destructors (a C function marked __attribute__((destructor)), what its
  * .fini_array holds) are taken from it when its run starts (take_fini: the entries are
@@ -1232,10 +1268,9 @@ static void (*fini_fns[MAX_FINI])(void);
 static int n_fini;
 static void exit_run(int status) {
     finished = 1;  /* Spinner calls from the handlers return at once */
-    while (n_exit_handlers > 0) {
-        n_exit_handlers--;
-        exit_handlers[n_exit_handlers].fn(exit_handlers[n_exit_handlers].arg);
-    }
+    void (*fn)(void *);
+    void *arg;
+    while (take_exit_handler(prog_lib, &fn, &arg)) fn(arg);
     while (n_fini > 0) fini_fns[--n_fini]();
     fflush(NULL);
     leave(status);
@@ -1756,6 +1791,7 @@ void *spinner_inproc_open(const char *path) {
     opening = 1, early_calls = 0;
     void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     opening = 0;
+    retag_exit_handlers(LOADING_TAG, lib);  /* its constructors' registrations are its */
     if (lib != NULL && early_calls) set_early(lib, 1);
     early_calls = 0;
     return lib;
@@ -1778,22 +1814,8 @@ const char *spinner_inproc_error(void) {
 /* Its exit handlers are dropped as it is unloaded: a library whose constructors registered static
  * destructors (__cxa_atexit, at its load) and that never ran here - run in a child process instead
  * (spinner_inproc_early), or not run at all - left them for the next program's exit to call, into
- * unloaded code (a crash of the simulator's process). A handler is the library's by the
- * registration's __dso_handle (a global of a library's type, a std::string: the destructor is
- * libstdc++'s, the object the unloaded library's), else (atexit) by its function. */
-static void drop_exit_handlers_of(void *lib) {
-    struct link_map *map = NULL;
-    if (dlinfo(lib, RTLD_DI_LINKMAP, &map) != 0 || map == NULL || map->l_name == NULL) return;
-    int kept = 0;
-    for (int i = 0; i < n_exit_handlers; i++) {
-        void *fn = exit_handlers[i].fn == call_plain ? exit_handlers[i].arg : (void *)exit_handlers[i].fn;
-        if (exit_handlers[i].dso != NULL) fn = exit_handlers[i].dso;
-        Dl_info info;
-        if (dladdr(fn, &info) && info.dli_fname != NULL && strcmp(info.dli_fname, map->l_name) == 0) continue;
-        exit_handlers[kept++] = exit_handlers[i];
-    }
-    n_exit_handlers = kept;
-}
+ * unloaded code (a crash of the simulator's process). */
+static void drop_exit_handlers_of(void *lib) { retag_exit_handlers(lib, NULL); }
 
 int spinner_inproc_close(void *lib) {
     set_early(lib, 0);
@@ -1905,7 +1927,7 @@ long spinner_inproc_resume_image(const unsigned char *image, size_t n) {
 /* End the run's coroutine (wherever it is), restore the signal handlers. */
 void spinner_inproc_finish(void) {
     gone = finished = run_over = 1;
-    n_exit_handlers = 0;  /* handlers a fault or the simulator's end left: their code is unloaded next */
+    drop_exit_handlers_of(prog_lib);  /* its handlers a fault or the simulator's end left: unloaded next */
     n_fini = 0;
     end_helpers();
     in_controller = 0;
