@@ -242,11 +242,13 @@ class Camera:
         m = next(f for f in fields(Camera) if f.name == "exposure_s").metadata
         return float(m["lo"]), float(m["hi"])
 
-    def frame_period_s(self, exposure_s: float | None = None) -> float:
+    def frame_period_s(self, exposure_s: float | None = None, free_running: bool = False) -> float:
         """Time between frames: ``exposure + readout_s`` for ``linescan`` (``exposure``:
-        ``exposure_s`` when None), else ``1 / fps_hz``."""
+        ``exposure_s`` when None; ``exposure`` alone when ``free_running``: SI pulses from a
+        free-running timer, each read-out overlapping the next integration), else ``1 / fps_hz``."""
         if self.model == "linescan":
-            return float(self.exposure_s if exposure_s is None else exposure_s) + self.readout_s
+            e = float(self.exposure_s if exposure_s is None else exposure_s)
+            return e if free_running else e + self.readout_s
         return 1.0 / self.fps_hz
 
 

@@ -154,6 +154,7 @@ class Session:
         self._warned: set[str] = set()
         self.exposure_s = float(self.car.camera.exposure_s)  # set_exposure's value
         self.exposure_before: tuple[int, float] | None = None  # (frame, the exposure it had): set_exposure at it
+        self.free_running = False  # camera_free_running(): a linescan frame period is the exposure
         self.pixy2_tracker = None  # the Pixy2's line tracker (simrunner.run.pixy2), made on first use
         self.pixy2_frame: int | None = None  # the last frame the Pixy2 returned features of
         self.ranging = None  # the range sensors (simrunner.sensors.ranging), made on first use
@@ -517,7 +518,22 @@ class Spinner:
             session.exposure_before = (clock.frame_index, session.exposure_s)  # the latest frame's
         session.exposure_s = s
         if cam.model == "linescan":
-            self._clock.set_frame_period(cam.frame_period_s(s))
+            self._clock.set_frame_period(cam.frame_period_s(s, free_running=session.free_running))
+
+    def camera_free_running(self) -> None:
+        """The camera's SI pulses come from a free-running timer (a kit whose board driver reads
+        each image out while the next integrates, as the FRDM-TFC library's PIT): a ``linescan``
+        camera's frames are then one exposure apart (not exposure + ``readout_s``), from the
+        frame in progress on; each is still integrated over the exposure that ends ``readout_s``
+        before it. Other models are unchanged. No time passes."""
+        if _get_ident() != self._owner:
+            raise self._foreign("camera_free_running")
+        session, cam = self._s, self._s.car.camera
+        if session.free_running:
+            return
+        session.free_running = True
+        if cam.model == "linescan":
+            self._clock.set_frame_period(cam.frame_period_s(session.exposure_s, free_running=True))
 
     def get_exposure(self) -> float:
         """The exposure time in seconds (:meth:`set_exposure`). No time passes."""

@@ -32,6 +32,7 @@ static int camera_pass(void) {
 int main(void) {
     double servo_rad = spinner_param("tfc_servo_rad", 0.40);            /* the servo's travel */
     double servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);  /* and its trim */
+    spinner_camera_free_running();      /* (the library's PIT: one image an exposure) */
     spinner_set_exposure(exposure_s);
     spinner_get_time();                 /* (TFC_Init reads the time: its tickers start there) */
     uint8_t row[IMAGE_SIZE_PX];         /* the first image: the frame after TFC_Init's */

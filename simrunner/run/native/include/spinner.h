@@ -72,6 +72,12 @@ int spinner_line_row(void);        /* the row that plays the real line camera (6
  * its frame rate, the ideal camera ignores it (docs/camera.md). Out of range: an error. */
 void spinner_set_exposure(double seconds);
 double spinner_get_exposure(void);
+/* The camera's SI pulses come from a free-running timer (a kit's board driver that reads each
+ * image out while the next integrates, as the FRDM-TFC library's PIT): a linescan camera's
+ * frames are then one exposure apart, not exposure + read-out (from the frame in progress on);
+ * each is still integrated over the exposure ending read-out before it. A kit calls it at its
+ * init; no time passes (docs/camera.md). */
+void spinner_camera_free_running(void);
 
 /* Sensors: each lets one physics step pass (so polling loops make progress). */
 double spinner_get_speed(void);    /* through speed_denorm, with the last angle */

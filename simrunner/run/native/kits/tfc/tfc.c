@@ -158,6 +158,11 @@ static void kit_init(void) {
     tfc.servo_rad = spinner_param("tfc_servo_rad", 0.40);
     tfc.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
     tfc.exposure_s = TFC_DEFAULT_LINESCAN_EXPOSURE_TIME_uS * 1e-6;
+    /* The library's SI pulses come from PIT0, free-running at the exposure (TFC_LineScanCamera.c:
+     * TFC_SetLineScanExposureTime writes PIT_LDVAL0; each PIT0 interrupt pulses SI and starts the
+     * ADC read-out of the previous integration while the next integrates - TSL1401: integration
+     * runs from one SI to the next): one image an exposure, each ready a read-out after its SI. */
+    spinner_camera_free_running();
     spinner_set_exposure(tfc.exposure_s);
     tfc.ms_counted = floor(spinner_get_time() * 1000.0);
     uint8_t row[TFC_LINESCAN_IMAGE_SIZE];  /* the first image: the frame after TFC_Init's */
