@@ -456,6 +456,10 @@ int s32k_sim_esc_timers(void) { return k.esc_running; }
 void LinearCameraInit(Pwm_ChannelType ClkPwmChannel, Gpt_ChannelType ShutterGptChannel, Adc_GroupType InputAdcGroup,
                       Dio_ChannelType ShutterDioChannel) {
     (void)ClkPwmChannel, (void)ShutterGptChannel, (void)InputAdcGroup, (void)ShutterDioChannel;
+    /* (Frames stay exposure + read-out apart, no spinner_camera_free_running: the driver's
+     * linear_camera.c - e.g. michalfrohlich/NXP-Cup-EXPO src/linear_camera.c - starts the shutter
+     * Gpt channel one-shot after the read-out's last pixel clock, CameraClock ->
+     * LinearCamera_ScheduleNextFrame: the next frame's timer starts only once one is read.) */
     double ms = spinner_param("s32k_exposure_ms", 0.0);
     if (ms > 0.0) spinner_set_exposure(ms * 1e-3);
 }

@@ -120,6 +120,10 @@ static void init_servos(double pulse_min_s, double pulse_max_s, double frame_s) 
     k.servo_frame_s = clampd(frame_s, 1e-3, 1.0);
     k.servo_t0_s = k.now_s;
     servo_ticker = 0;
+    /* TFC.cpp's TPM1_IRQHandler, at each overflow of the free-running servo timer, raises SI and
+     * starts the ADC's read-out of the integration gone while the next integrates: one image a
+     * servo frame, each ready a read-out after its SI (not a servo frame plus the read-out). */
+    spinner_camera_free_running();
     spinner_set_exposure(k.servo_frame_s);
 }
 
