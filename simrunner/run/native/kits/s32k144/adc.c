@@ -15,10 +15,10 @@
 
 #include "spinner.h"
 #include "Adc.h"
+#include "sim_poll.h"
 
 #define NUM_GROUPS 256          /* groups 0..255 (the kit's limit; the RTD's is its configuration's) */
 #define MAX_CHANNELS 16         /* channels a group may have (s32k_adc_<n>_0 .. _15) */
-#define POLLS_FREE 64           /* conversions at one time before each lets a physics step pass */
 
 /* The kit's Adc configuration: group n's notification, -D ADC_NOTIFICATION_<n>=NAME (the function your
  * generated configuration names for it); none unless given. */
@@ -89,8 +89,7 @@ const Adc_ConfigType Adc_Config_VS_0, Adc_Config;
 static struct {
     int inited;
     unsigned full_scale;    /* 2^bits - 1 */
-    double polled_at_s;     /* the time of the last conversion in main(), and the conversions at it */
-    int polls;
+    SimPoll poll;           /* main()'s conversions at one time (sim_poll.h) */
     struct {
         uint8 looked_up;    /* its --params read */
         uint8 channels;     /* 1 .. MAX_CHANNELS */
@@ -207,12 +206,10 @@ Std_ReturnType Adc_SetupResultBuffer(Adc_GroupType Group, const Adc_ValueGroupTy
     return E_OK;
 }
 
-/* Main's conversions at one simulated time: after POLLS_FREE each lets one physics step pass. */
+/* Main's conversions at one simulated time: after SIM_POLLS_FREE each lets one physics step pass
+ * (a handler's leave main's count as it is). */
 static void poll_time(void) {
-    if (spinner_in_interrupt()) return;
-    double now = spinner_now();
-    if (now != a.polled_at_s) a.polled_at_s = now, a.polls = 0;
-    else if (++a.polls > POLLS_FREE) a.polled_at_s = spinner_get_time();
+    if (!spinner_in_interrupt()) (void)sim_poll_time(&a.poll);
 }
 
 void Adc_StartGroupConversion(Adc_GroupType Group) {

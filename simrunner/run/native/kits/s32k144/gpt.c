@@ -25,6 +25,7 @@
 
 #include "spinner.h"
 #include "Gpt.h"
+#include "sim_poll.h"
 
 /* The kit's Gpt configuration: the notification of each channel, as the sample project's generated
  * generate/src/Gpt_VS_0_PBcfg.c names them (channel 0, Receiver_Timeout: Gpt_Notification; channel
@@ -84,7 +85,6 @@ DECLARE(GPT_NOTIFICATION_7)
 #endif
 
 #define NUM_GPT 256
-#define POLLS_FREE 64  /* reads at one time before each lets a physics step pass (the TFC kit's 64) */
 
 /* The channels' modes, as -D GPT_CHANNEL_MODE_<n> gives them (continuous by default). */
 #define MODE_(n) (GPT_CHANNEL_MODE_##n + 0 == GPT_CH_MODE_ONESHOT)
@@ -139,8 +139,7 @@ static struct {
     double tick_hz;
     int inited;
     int own;                /* the kit's timers running (spinner_every): notifications, one-shots' interrupts */
-    double polled_at_s;     /* the time of the last read, and the reads at it */
-    int polls;
+    SimPoll poll;           /* main()'s reads at one time (sim_poll.h) */
     struct { double start_s; Gpt_ValueType target, frozen; uint8 state, notify, every; } ch[NUM_GPT];
 } g;
 
@@ -206,15 +205,9 @@ static void arm(Gpt_ChannelType c) {
 }
 
 /* The simulated time of a read: now, no time passing, unless main() reads at one time again and
- * again (a poll), where each read after POLLS_FREE lets one physics step pass. */
+ * again (a poll), where each read after SIM_POLLS_FREE lets one physics step pass. */
 static double read_time(void) {
-    double now = spinner_now();
-    if (spinner_in_interrupt() || now != g.polled_at_s) {
-        g.polled_at_s = now, g.polls = 0;
-        return now;
-    }
-    if (++g.polls <= POLLS_FREE) return now;
-    return g.polled_at_s = spinner_get_time();
+    return sim_poll_time(&g.poll);
 }
 
 /* Non-zero while an interrupt due now would be held: masked (__disable_irq, OsIf_SuspendAllInterrupts)

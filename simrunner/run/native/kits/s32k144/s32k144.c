@@ -39,6 +39,7 @@
 #include "pixy2.h"
 #include "receiver.h"
 #include "OsIf.h"
+#include "sim_poll.h"
 #include "Gpt.h"
 #include "pixy2_line.h"
 
@@ -64,8 +65,7 @@ static struct {
     uint32 osif_dummy;              /* OSIF_COUNTER_DUMMY: one count a call, as the RTD's */
     double pin_polled_at;           /* Dio_ReadChannel's polls at one simulated time, no write between */
     long pin_polls;
-    double input_polled_at;         /* reads of input pins (--param) at one simulated time */
-    long input_polls;
+    SimPoll input_poll;             /* reads of input pins (--param) at one simulated time (sim_poll.h) */
     uint8 pin[NUM_DIO];             /* what drives each DIO channel (enum pin), from --param */
     int sw_channel[2];              /* SW2's and SW3's Dio channels (-1: not given) */
     double sw_at[2];                /* their press (s; < 0: never pressed) */
@@ -238,20 +238,16 @@ void Dio_WriteChannel(Dio_ChannelType ChannelId, Dio_LevelType Level) {
 /* A loop polling a pin nothing drives (no --param names it: a sensor's echo, a button not given) reads
  * again and again at one simulated time, with no write between: a loop that never ends (a start-button
  * wait); the run ends at its line, saying why, rather than as stalled after the wall-time limit.
- * An input pin's reads let no time pass, but after INPUT_POLLS_FREE reads at one time (writes
+ * An input pin's reads let no time pass, but after SIM_POLLS_FREE reads at one time (writes
  * between or not) each lets one physics step pass, as gpt.c's reads and the TFC kit's polls do: on
  * the board a person presses the button meanwhile. So `while (Dio_ReadChannel(SW2) == STD_LOW);` ends
  * at the press, within a physics step. In an interrupt handler no time passes. */
 #define PIN_POLLS 100000
-#define INPUT_POLLS_FREE 64
 
 Dio_LevelType Dio_ReadChannel(Dio_ChannelType ChannelId) {
     enum pin p = pin_of(ChannelId);
     if (p != PIN_OUTPUT) {
-        double now = spinner_now();
-        if (spinner_in_interrupt() || now != k.input_polled_at) k.input_polled_at = now, k.input_polls = 0;
-        else if (++k.input_polls > INPUT_POLLS_FREE) now = k.input_polled_at = spinner_get_time();
-        return input_level(p, now);
+        return input_level(p, sim_poll_time(&k.input_poll));
     }
     if (!spinner_in_interrupt()) {
         double now = spinner_now();
