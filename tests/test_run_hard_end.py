@@ -257,3 +257,21 @@ def test_temporary_folders_of_killed_processes_are_removed_by_the_next_one(tmp_p
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
         [made.name, fresh.name, f"simrunner-batch-{os.getppid()}-b2", f"simrunner-run-{gone.pid}-c3",
          "simrunner-batch-ray-d4"])
+
+
+def test_a_run_killed_before_its_first_frame_still_writes_the_asked_csv(tmp_path):
+    """A run whose process died before its first row (a crash in a C constructor, say) was
+    told as ``wrote: out.csv`` with no such file: the CSV asked for is now written with the
+    columns' header and no row, and reads back as an empty run log."""
+    import json
+
+    from simrunner.telemetry.log import read_log
+
+    body = "import signal\nsignal.signal(signal.SIGSEGV, signal.SIG_DFL)\n__import__('ctypes').string_at(0)\n"
+    proc = start_drive(tmp_path, body, "--csv", "out.csv", "--summary", "s.json")
+    out, err = _finish(proc)
+    assert proc.returncode == 1, (out, err)
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert "killed by SIGSEGV before the first frame" in summary["message"]
+    assert summary["outputs"]["csv"] == "out.csv" and "wrote: out.csv" in out
+    assert len(read_log(tmp_path / "out.csv")) == 0

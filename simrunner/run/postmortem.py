@@ -16,7 +16,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-from simrunner.telemetry.log import TEXT_SEPARATOR, LogWarning, RunLog, empty_log, read_log
+from simrunner.telemetry.log import TEXT_SEPARATOR, LogWarning, RunLog, empty_log, read_log, write_log
 from simrunner.reports.outputs import Outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
 
@@ -95,49 +95,41 @@ def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s:
     """Write the outputs of a run ended by the hard watchdog (see the module docstring);
     the result names them in ``outputs``. Raises the first output's ``SimError`` after the
     others were written, as :func:`~simrunner.reports.outputs.write_outputs`."""
-    from simrunner.run.runner import resolve_track
-    from simrunner.run.settings import RunSettings
-    from vehicle.description import load_car
-
     log = read_run_log(csv_path)
     message = (stuck_message(stuck_location(report, run.controller), run.wall_limit_s)
                + "; the outputs were written from the run log")
-    car = load_car(run.car)
-    track, label = resolve_track(run.track, car)
-    laps_completed, lap_times = run_log_laps(log)
-    settings = RunSettings(laps=run.laps, seed=run.seed).for_track(track)
-    result = RunResult(outcome=Outcome.STALLED, laps=settings.laps, laps_completed=laps_completed,
-                       lap_times_s=lap_times, sim_time_s=float(log.t_s[-1]) if len(log) else 0.0,
-                       wall_time_s=wall_time_s, cpu_time_s=cpu_time_s, track=label,
-                       seed=run.seed, message=message, log=log, frames=len(log))
-    if run.outputs.csv is not None:
-        result.outputs["csv"] = str(run.outputs.csv)
-    video = None
-    if run.outputs.video is not None:
-        video = _rebuild_video(log, run.outputs.video, track, car, settings.laps, run.outputs.video_fps)
-    write_outputs(result, Outputs(plot=run.outputs.plot, summary=run.outputs.summary), video, track)
-    return result
+    return _finish(run, Outcome.STALLED, message, log, csv_path, wall_time_s, cpu_time_s)
 
 
 def finish_dead_run(run: StuckRun, signum: int, csv_path: Path, *, wall_time_s: float,
                     cpu_time_s: float) -> RunResult:
     """Write the outputs of a run whose process a signal killed (module docstring of
     :mod:`simrunner.run.supervise`): outcome ``controller_error`` naming the signal."""
+    log = read_run_log(csv_path)
+    message = killed_message(signum, log) + "; the outputs were written from the run log"
+    return _finish(run, Outcome.CONTROLLER_ERROR, message, log, csv_path, wall_time_s, cpu_time_s)
+
+
+def _finish(run: StuckRun, outcome: Outcome, message: str, log: RunLog, csv_path: Path,
+            wall_time_s: float, cpu_time_s: float) -> RunResult:
+    """The result of a run that ``log`` is all that is left of, its outputs written: the
+    asked-for CSV too when the run ended before its first row was streamed (the columns'
+    header, as a run that recorded nothing writes)."""
     from simrunner.run.runner import resolve_track
     from simrunner.run.settings import RunSettings
     from vehicle.description import load_car
 
-    log = read_run_log(csv_path)
-    message = killed_message(signum, log) + "; the outputs were written from the run log"
     car = load_car(run.car)
     track, label = resolve_track(run.track, car)
     laps_completed, lap_times = run_log_laps(log)
     settings = RunSettings(laps=run.laps, seed=run.seed).for_track(track)
-    result = RunResult(outcome=Outcome.CONTROLLER_ERROR, laps=settings.laps, laps_completed=laps_completed,
+    result = RunResult(outcome=outcome, laps=settings.laps, laps_completed=laps_completed,
                        lap_times_s=lap_times, sim_time_s=float(log.t_s[-1]) if len(log) else 0.0,
                        wall_time_s=wall_time_s, cpu_time_s=cpu_time_s, track=label,
                        seed=run.seed, message=message, log=log, frames=len(log))
     if run.outputs.csv is not None:
+        if not Path(run.outputs.csv).exists():
+            write_log(log, run.outputs.csv)
         result.outputs["csv"] = str(run.outputs.csv)
     video = None
     if run.outputs.video is not None:
