@@ -3,6 +3,7 @@ examples against their Python twins, the thesis's C++ programs, the CLI."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import re
 import shutil
@@ -1269,6 +1270,34 @@ CTOR_FAULTS = {
         int main() { while (true) { spinner_set_speed(0.5f); spinner_sleep(0.01f); } }
         """, "g.cpp:4: SIGSEGV: segmentation fault (in Car::Car())"),
 }
+
+
+def _cli_drive(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    """``simrunner drive ARGS`` as a command (supervised: its own process, real stdout/stderr)."""
+    return subprocess.run([sys.executable, "-c", "from simrunner.cli import main; main()", "drive", *args],
+                          cwd=cwd, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+
+
+@pytest.mark.parametrize("name", sorted(CTOR_FAULTS))
+def test_a_fault_in_a_constructor_at_the_load_names_its_line_as_isolated(tmp_path, name):
+    """A fault in a C constructor (a C++ global object's) runs as the library is loaded into the
+    simulator's process, before the run and its handlers: the process died and drive said only
+    'killed by SIGSEGV before the first frame'. Now the host reports it to the supervisor, which
+    names its file:line and function as --isolate does, and says --isolate."""
+    body, said = CTOR_FAULTS[name]
+    write(tmp_path, name, body)
+    done = _cli_drive(tmp_path, name, "--summary", "s.json")
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert done.returncode == 1, (done.stdout, done.stderr[-2000:])
+    assert summary["outcome"] == "controller_error"
+    assert summary["message"].startswith(f"{said}, in a constructor as the program loaded, before the first "
+                                         "frame"), summary["message"]
+    assert "--isolate runs the program in a process of its own" in summary["message"]
+    assert f"outcome: controller_error ({summary['message']})" in done.stdout
+    assert re.search(rf"#0 \S+ at {re.escape(name)}:4", done.stderr), done.stderr[-2000:]  # the C backtrace
+    isolated_run = _cli_drive(tmp_path, name, "--isolate", "--summary", "i.json")
+    assert json.loads((tmp_path / "i.json").read_text())["message"] == said, isolated_run.stdout
 
 
 def test_a_fault_in_a_constructor_at_the_load_unsupervised_says_one_line(tmp_path):
