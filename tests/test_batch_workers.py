@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from helpers import STUCK
+from helpers import C_CTOR_FAULT, STUCK
 
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.pool import LocalBackend, choose_start_method
@@ -216,16 +216,6 @@ def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):
     assert stuck["message"] == stuck_message("ctrl.py:7 in main", 0.5)
     assert stuck["frames"] == 5 and stuck["sim_time_s"] > 0.0
     assert fine["outcome"] == "controller_returned" and fine["frames"] >= 5
-
-
-C_CTOR_FAULT = r"""
-#include "spinner.h"
-static int *p;
-__attribute__((constructor)) static void boom(void) {
-    *p = 3;                                      /* line 5 */
-}
-int main(void) { while (1) { spinner_set_speed(0.5f); spinner_sleep(0.01f); } }
-"""
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
