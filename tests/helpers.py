@@ -96,6 +96,17 @@ def main(s):
 """
 
 
+# a C controller whose constructor faults (line 5, in boom()) as its library is loaded
+C_CTOR_FAULT = r"""
+#include "spinner.h"
+static int *p;
+__attribute__((constructor)) static void boom(void) {
+    *p = 3;                                      /* line 5 */
+}
+int main(void) { while (1) { spinner_set_speed(0.5f); spinner_sleep(0.01f); } }
+"""
+
+
 def session_processes(sid: int) -> list[int]:
     """The pids of the living (not zombie) processes of session ``sid`` (Linux /proc)."""
     from pathlib import Path

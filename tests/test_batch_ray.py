@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import FAULTY, STUCK
+from helpers import C_CTOR_FAULT, FAULTY, STUCK
 
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.ray_backend import LOOPBACK_ENV
@@ -182,6 +182,22 @@ def test_ray_run_stuck_in_one_c_call_names_its_line_as_drive_does(ray_cluster, t
     assert stuck["outcome"] == "stalled", stuck
     assert stuck["message"] == stuck_message("ctrl.py:7 in main", 0.5)
     assert fine["outcome"] == "controller_returned"
+    assert not ray.is_initialized()
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_ray_fault_in_a_c_constructor_at_the_load_names_its_line_as_drive_does(ray_cluster, tmp_path,
+                                                                               monkeypatch):
+    """A fault in a C constructor as the actor loads the program kills the actor: the row was
+    worker_died with Ray's message; now drive's, as with the local pool (controller_error, the
+    constructor's file:line)."""
+    monkeypatch.chdir(tmp_path)
+    ctl = tmp_path / "boom.c"
+    ctl.write_text(C_CTOR_FAULT)
+    res = run_batch(ctl, out_dir=tmp_path / "out", seeds=1, workers=1, plot=False, ray=ray_cluster)
+    row, = res.rows
+    assert row["outcome"] == "controller_error", row
+    assert row["message"].startswith("boom.c:5: SIGSEGV: segmentation fault (in boom())"), row["message"]
     assert not ray.is_initialized()
 
 

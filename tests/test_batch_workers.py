@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from helpers import STUCK
+from helpers import C_CTOR_FAULT, STUCK
 
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.pool import LocalBackend, choose_start_method
@@ -216,6 +216,23 @@ def test_a_run_stuck_in_one_c_call_names_its_line_as_drive_does(tmp_path):
     assert stuck["message"] == stuck_message("ctrl.py:7 in main", 0.5)
     assert stuck["frames"] == 5 and stuck["sim_time_s"] > 0.0
     assert fine["outcome"] == "controller_returned" and fine["frames"] >= 5
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_a_fault_in_a_c_constructor_at_the_load_names_its_line_as_drive_does(tmp_path, monkeypatch):
+    """A fault in a C constructor, as the worker loads the program's library before the run, kills
+    the worker: its row was worker_died 'killed by SIGSEGV before the first frame'; now drive's:
+    controller_error naming the constructor's file:line and function."""
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)
+    ctl = tmp_path / "boom.c"
+    ctl.write_text(C_CTOR_FAULT)
+    res = run_batch(ctl, out_dir=tmp_path / "out", seeds=1, workers=1, plot=False)
+    row, = res.rows
+    assert row["outcome"] == "controller_error", row
+    assert row["message"].startswith("boom.c:5: SIGSEGV: segmentation fault (in boom()), in a constructor as the "
+                                     "program loaded"), row["message"]
+    assert row["frames"] == 0
 
 
 C_CTOR_STATE = r"""

@@ -3,6 +3,7 @@ examples against their Python twins, the thesis's C++ programs, the CLI."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import re
 import shutil
@@ -793,6 +794,8 @@ def test_after_an_in_process_run_the_signals_are_the_simulators_again(tmp_path):
         faulthandler.enable()
         from simrunner.run.runner import drive
         print(drive({str(src)!r}, time_limit_s=1.0).outcome, flush=True)
+        from simrunner.run.native import load_native
+        load_native([{str(src)!r}]).close()  # (the handlers of an open too)
         faulthandler._sigsegv()
         """)
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
@@ -1246,6 +1249,74 @@ def test_an_exit_in_a_constructor_at_the_load_ends_the_simulator_saying_why(tmp_
     assert "--isolate" in out.stderr
     r = drive(isolated(src), time_limit_s=1.0)
     assert r.outcome == "controller_error" and "exit(3) at" in r.message and "ctor_exit.c:3" in r.message, r.message
+
+
+CTOR_FAULTS = {
+    "c.c": ("""\
+        #include "spinner.h"
+        static int *p;
+        __attribute__((constructor)) static void boom(void) {
+            *p = 3;                                      /* line 4 */
+        }
+        int main(void) { while (1) { spinner_set_speed(0.5f); spinner_sleep(0.01f); } }
+        """, "c.c:4: SIGSEGV: segmentation fault (in boom())"),
+    "g.cpp": ("""\
+        #include "spinner.h"
+        struct Car {
+            int *wheels = nullptr;
+            Car() { wheels[2] = 1; }                     /* line 4 */
+        };
+        Car car;
+        int main() { while (true) { spinner_set_speed(0.5f); spinner_sleep(0.01f); } }
+        """, "g.cpp:4: SIGSEGV: segmentation fault (in Car::Car())"),
+}
+
+
+def _cli_drive(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    """``simrunner drive ARGS`` as a command (supervised: its own process, real stdout/stderr)."""
+    return subprocess.run([sys.executable, "-c", "from simrunner.cli import main; main()", "drive", *args],
+                          cwd=cwd, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+
+
+@pytest.mark.parametrize("name", sorted(CTOR_FAULTS))
+def test_a_fault_in_a_constructor_at_the_load_names_its_line_as_isolated(tmp_path, name):
+    """A fault in a C constructor (a C++ global object's) runs as the library is loaded into the
+    simulator's process, before the run and its handlers: the process died and drive said only
+    'killed by SIGSEGV before the first frame'. Now the host reports it to the supervisor, which
+    names its file:line and function as --isolate does, and says --isolate."""
+    body, said = CTOR_FAULTS[name]
+    write(tmp_path, name, body)
+    done = _cli_drive(tmp_path, name, "--summary", "s.json")
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert done.returncode == 1, (done.stdout, done.stderr[-2000:])
+    assert summary["outcome"] == "controller_error"
+    assert summary["message"].startswith(f"{said}, in a constructor as the program loaded, before the first "
+                                         "frame"), summary["message"]
+    assert "--isolate runs the program in a process of its own" in summary["message"]
+    assert f"outcome: controller_error ({summary['message']})" in done.stdout
+    assert re.search(rf"#0 \S+ at {re.escape(name)}:4", done.stderr), done.stderr[-2000:]  # the C backtrace
+    isolated_run = _cli_drive(tmp_path, name, "--isolate", "--summary", "i.json")
+    assert json.loads((tmp_path / "i.json").read_text())["message"] == said, isolated_run.stdout
+
+
+def test_a_fault_in_a_constructor_at_the_load_unsupervised_says_one_line(tmp_path):
+    """The Python API in a process of its own (no supervisor to report to): the process still
+    dies by the signal (it died silently), saying where on stderr and pointing to --isolate."""
+    src = write(tmp_path, "c.c", CTOR_FAULTS["c.c"][0])
+    code = textwrap.dedent(f"""\
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        program = build_program([{str(src)!r}])
+        print("built", flush=True)
+        drive(program, time_limit_s=1.0)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == -11 and out.stdout == "built\n", (out.returncode, out.stdout, out.stderr[-2000:])
+    line, = [t for t in out.stderr.splitlines() if t.startswith("simrunner:")]
+    assert re.match(r"simrunner: SIGSEGV at \S+\.so\+0x[0-9a-f]+, in a constructor as the controller's library "
+                    r"was loaded into the simulator's process, before the run", line), line
+    assert "--isolate" in line
 
 
 def test_a_library_loaded_while_another_thread_runs_a_program_in_process(tmp_path, track, capfd):

@@ -379,7 +379,7 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
                                           cpu_time_s=end.cpu_time_s)
             else:  # killed by a signal the run could not handle (SIGKILL, an uncaught crash)
                 result = finish_dead_run(stuck, end.signal, end.csv_path, wall_time_s=end.wall_time_s,
-                                         cpu_time_s=end.cpu_time_s)
+                                         cpu_time_s=end.cpu_time_s, report=end.report)
         except input_errors() as exc:
             click.echo(f"simrunner: {exc}", err=True)
             return 1

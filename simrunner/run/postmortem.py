@@ -1,5 +1,7 @@
 """The outputs of a run whose process the hard watchdog ended, written from what it left on
-disk (:mod:`simrunner.run.supervise`): :func:`finish_stuck_run`.
+disk (:mod:`simrunner.run.supervise`): :func:`finish_stuck_run`; of one a signal killed:
+:func:`finish_dead_run` (a fault in a C/C++ program's constructors as its library loaded into the
+process is named at its file:line from the host's report, :func:`load_fault`).
 
 The run log holds every row closed before the stall (it streams one whole row per write).
 From it: the summary (outcome ``stalled``; the message names the controller's file:line, read
@@ -16,6 +18,7 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+from simrunner.errors import ControllerError
 from simrunner.telemetry.log import TEXT_SEPARATOR, LogWarning, RunLog, empty_log, read_log, write_log
 from simrunner.reports.outputs import Outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
@@ -90,6 +93,25 @@ def killed_message(signum: int, log: RunLog | None) -> str:
     return f"the run's process was killed by {name}{at} ({why})"
 
 
+def load_fault(report: str, controller: str) -> ControllerError | None:
+    """The fault of a C/C++ program's constructors (a C++ global object's) as its library was
+    loaded into the run's process, which died of it (:mod:`simrunner.run.native.inproc`), from the
+    in-process host's report in ``report`` (the supervision's report file): a ``ControllerError``
+    whose message names the fault's file:line and function, with the C backtrace; None when
+    ``report`` holds no such report."""
+    from simrunner.run.native.symbolize import describe_fault, load_fault_report
+
+    found = load_fault_report(report)
+    if found is None:
+        return None
+    library, host, text = found
+    line, traceback_text = describe_fault(text, {library}, host, Path(controller).stem)
+    return ControllerError(f"{line}, in a constructor as the program loaded, before the first frame: it killed "
+                           "the run's process (the program's library is loaded into the simulator's process "
+                           "before the run, where such a fault cannot be caught; --isolate runs the program in "
+                           "a process of its own)", traceback_text)
+
+
 def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s: float,
                      cpu_time_s: float) -> RunResult:
     """Write the outputs of a run ended by the hard watchdog (see the module docstring);
@@ -102,16 +124,21 @@ def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s:
 
 
 def finish_dead_run(run: StuckRun, signum: int, csv_path: Path, *, wall_time_s: float,
-                    cpu_time_s: float) -> RunResult:
+                    cpu_time_s: float, report: str = "") -> RunResult:
     """Write the outputs of a run whose process a signal killed (module docstring of
-    :mod:`simrunner.run.supervise`): outcome ``controller_error`` naming the signal."""
+    :mod:`simrunner.run.supervise`): outcome ``controller_error`` naming the signal, or, when
+    ``report`` (the supervision's report file) holds the report of a fault in the program's
+    constructors as it loaded (:func:`load_fault`), naming its file:line (``error``: with its C
+    backtrace)."""
     log = read_run_log(csv_path)
-    message = killed_message(signum, log) + "; the outputs were written from the run log"
-    return _finish(run, Outcome.CONTROLLER_ERROR, message, log, csv_path, wall_time_s, cpu_time_s)
+    error = load_fault(report, run.controller) if report else None
+    message = (str(error) if error is not None else killed_message(signum, log)) \
+        + "; the outputs were written from the run log"
+    return _finish(run, Outcome.CONTROLLER_ERROR, message, log, csv_path, wall_time_s, cpu_time_s, error)
 
 
 def _finish(run: StuckRun, outcome: Outcome, message: str, log: RunLog, csv_path: Path,
-            wall_time_s: float, cpu_time_s: float) -> RunResult:
+            wall_time_s: float, cpu_time_s: float, error: ControllerError | None = None) -> RunResult:
     """The result of a run that ``log`` is all that is left of, its outputs written: the
     asked-for CSV too when the run ended before its first row was streamed (the columns'
     header, as a run that recorded nothing writes)."""
@@ -126,7 +153,7 @@ def _finish(run: StuckRun, outcome: Outcome, message: str, log: RunLog, csv_path
     result = RunResult(outcome=outcome, laps=settings.laps, laps_completed=laps_completed,
                        lap_times_s=lap_times, sim_time_s=float(log.t_s[-1]) if len(log) else 0.0,
                        wall_time_s=wall_time_s, cpu_time_s=cpu_time_s, track=label,
-                       seed=run.seed, message=message, log=log, frames=len(log))
+                       seed=run.seed, message=message, log=log, frames=len(log), error=error)
     if run.outputs.csv is not None:
         if not Path(run.outputs.csv).exists():
             write_log(log, run.outputs.csv)
@@ -183,5 +210,5 @@ def _rebuild_video(log: RunLog, path, track, car, laps: int, max_fps: float | No
     return video
 
 
-__all__ = ["StuckRun", "finish_stuck_run", "finish_dead_run", "killed_message", "read_run_log",
+__all__ = ["StuckRun", "finish_stuck_run", "finish_dead_run", "killed_message", "load_fault", "read_run_log",
            "run_log_laps", "stuck_location", "stuck_message", "stuck_stack"]

@@ -11,9 +11,14 @@ the reply switches in again. A camera frame costs two context switches, no proce
 Faults stay the controller's: the library's signal handlers (installed for the run, the
 previous ones restored after it) report a SIGSEGV, SIGBUS, SIGILL, SIGFPE or SIGABRT in the
 controller's code with its raw backtrace and leave the coroutine; the run ends with
-``controller_error`` and the simulator goes on. A stack overflow hits a guard page below the
-controller's stack (``ulimit -s`` bytes, 8 MB if unlimited). A loop that never calls the
-API is stopped by a watchdog thread of the library after the run's ``--wall-limit``
+``controller_error`` and the simulator goes on. A fault in its constructors (a C++ global
+object's) as its library is opened, before the run, cannot be left - nothing returns out of the
+loader: the handlers (installed for the open, for its thread) write its report to the
+supervision's report file (:func:`~simrunner.run.supervise.current_supervision`; unsupervised,
+one line to stderr) and the process dies by the signal; ``simrunner drive``'s supervisor and a
+batch's pool name its file:line from that report (:mod:`simrunner.run.postmortem`). A stack
+overflow hits a guard page below the controller's stack (``ulimit -s`` bytes, 8 MB if
+unlimited). A loop that never calls the API is stopped by a watchdog thread of the library after the run's ``--wall-limit``
 (SIGUSR1 to the simulator's thread: the report says where). What it cannot contain - a
 controller that overwrites the simulator's memory, or threads it leaves running - is what
 ``--isolate`` (the child process of :mod:`.bridge`) is for; ``simrunner drive``'s supervisor
@@ -37,6 +42,7 @@ from pathlib import Path
 from simrunner.errors import ControllerFileError, Stalled
 from simrunner.run.native.bridge import ST_WHERE, _FRAME, _HDR, _ChildGone, _Session
 from simrunner.run.native.build import NativeProgram, inproc_library, missing_function
+from simrunner.run.supervise import current_supervision
 from simrunner.run.watchdog import stall_message
 
 REQUEST_BUFFER_BYTES = 1 << 16  # out_buf in spinner_host.c
@@ -54,7 +60,7 @@ def _api(path: str):
     lib = ctypes.CDLL(path, mode=os.RTLD_GLOBAL | os.RTLD_NOW)
     c = ctypes
     for name, res, args in (
-            ("spinner_inproc_open", c.c_void_p, [c.c_char_p]),
+            ("spinner_inproc_open", c.c_void_p, [c.c_char_p, c.c_int]),
             ("spinner_inproc_error", c.c_char_p, []),
             ("spinner_inproc_close", c.c_int, [c.c_void_p]),
             ("spinner_inproc_early", c.c_int, [c.c_void_p]),
@@ -97,6 +103,20 @@ def _is_loaded(path: Path) -> bool:
     return True
 
 
+def _load_report_fd() -> int:
+    """Where the host writes the report of a fault in the program's constructors as its library
+    is opened (the process then dies by the signal): the supervision's report file, which its
+    supervisor reads (:mod:`simrunner.run.postmortem`); -1 unsupervised (a line on stderr)."""
+    supervision = current_supervision()
+    if supervision is None:
+        return -1
+    try:
+        supervision.report.flush()  # (the host writes at the file's offset, past what is there)
+        return supervision.report.fileno()
+    except (AttributeError, OSError, ValueError):  # no file under it (closed, in memory)
+        return -1
+
+
 class OpenedProgram:
     """A controller library opened for one run (a private copy if the original is still
     loaded from an earlier run, removed on :meth:`close`)."""
@@ -111,7 +131,7 @@ class OpenedProgram:
             shutil.copyfile(path, copy)
             path = copy
         self.path = path
-        self.handle = api.spinner_inproc_open(str(path).encode())
+        self.handle = api.spinner_inproc_open(str(path).encode(), _load_report_fd())
         if not self.handle:
             err = api.spinner_inproc_error().decode("utf-8", "replace")
             self.close()

@@ -2,7 +2,10 @@
 
 The host program (``host/spinner_host.c``) reports a fault as text: ``signal N``, ``message
 TEXT``, optionally ``pc ADDR`` (the faulting instruction) and one ``frame ADDR OFFSET
-PATH<TAB>SYMBOL`` line per return address (glibc ``backtrace`` + ``dladdr``). Frames in the
+PATH<TAB>SYMBOL`` line per return address (glibc ``backtrace`` + ``dladdr``). A fault in a
+program's constructors as the in-process host opens its library is written, after a
+``load-fault LIBRARY`` and a ``host PATH`` line, to the supervision's report file, read once the
+process has died (:func:`load_fault_report`). Frames in the
 controller's own library are symbolised with its debug info by ``addr2line`` (binutils,
 part of ``build-essential``); without it, frames keep their symbol names only. The builds
 write DWARF 4 (``build.COMMON_FLAGS``): binutils 2.40 names the wrong file for some DWARF 5
@@ -268,3 +271,33 @@ def fault_message(fault: Fault) -> str:
     # (a C++ function's name comes demangled with its parameters: "handler()", "Car::step(int)")
     function = loc.function if loc.function.endswith(")") else f"{loc.function}()"
     return f"{loc.file}:{loc.line}: {name}{what} (in {function})"
+
+
+def describe_fault(report: str, user_modules: set[str], host: str, program: str) -> tuple[str, str]:
+    """``(one line, traceback text)`` of the host's raw ``report``: :func:`fault_message` and
+    :func:`format_traceback` of :func:`parse_report` (``program``: the name the traceback gives).
+    Without a frame with a file and line, the line names the innermost frame's function and
+    module."""
+    fault = parse_report(report, user_modules, host)
+    line = fault_message(fault)
+    if fault.location is None and fault.frames:
+        line = f"{line} (in {fault.frames[0].text()})"
+    return line, format_traceback(fault, program)
+
+
+LOAD_FAULT = "load-fault "
+"""The first line of the in-process host's report of a fault as a program's library loads."""
+
+
+def load_fault_report(dump: str) -> tuple[str, str, str] | None:
+    """``(library, host, report)`` of the in-process host's report of a fault in a program's
+    constructors as its library was opened (``load-fault LIBRARY``, ``host PATH``, then the
+    report) in ``dump`` (a supervision's report file), or None when there is none."""
+    at = dump.find(LOAD_FAULT)
+    if at < 0 or (at > 0 and dump[at - 1] != "\n"):
+        return None
+    head, _, rest = dump[at + len(LOAD_FAULT):].partition("\n")
+    key, _, host = rest.partition("\n")[0].partition(" ")
+    if key != "host" or not head:
+        return None
+    return head, host, rest.partition("\n")[2]

@@ -182,12 +182,14 @@ def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str |
               outputs: dict[str, str] | None = None) -> dict:
     """The row of ``job``, whose worker process ended during it with ``exitcode``, told as
     ``simrunner drive`` tells it: a controller stuck in one C-level call (the hard watchdog's
-    stack dump in ``report``) is outcome ``stalled`` naming the controller's file:line;
-    otherwise ``worker_died`` naming the signal or exit code. Laps, lap times, simulated time
-    and frames come from the run's CSV when one was asked for (``outputs``)."""
+    stack dump in ``report``) is outcome ``stalled`` naming the controller's file:line; a fault
+    in a C/C++ program's constructors as its library loaded (the in-process host's report in
+    ``report``) is ``controller_error`` naming the fault's file:line; otherwise ``worker_died``
+    naming the signal or exit code. Laps, lap times, simulated time and frames come from the
+    run's CSV when one was asked for (``outputs``)."""
     from pathlib import Path
 
-    from simrunner.run.postmortem import (killed_message, read_run_log, run_log_laps,
+    from simrunner.run.postmortem import (killed_message, load_fault, read_run_log, run_log_laps,
                                           stuck_location, stuck_message)
 
     try:
@@ -199,6 +201,8 @@ def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str |
     if "Timeout (" in dump:  # faulthandler's header (simrunner.run.watchdog)
         outcome = "stalled"
         message = stuck_message(stuck_location(dump, config.controller), config.wall_limit_s)
+    elif (fault := load_fault(dump, config.controller)) is not None:
+        outcome, message = "controller_error", str(fault)
     elif exitcode is not None and exitcode < 0:
         outcome, message = "worker_died", killed_message(-exitcode, log)
     else:

@@ -18,7 +18,10 @@
  * asking where a stalled loop is (SIGUSR1; in-process also the reply ST_WHERE) sends a FAULT
  * report with the raw backtrace (module, offset, symbol per frame); the simulator symbolises
  * it with the debug info. In-process, a fault ends the coroutine (the simulator goes on);
- * a signal that is not the controller's goes to the handler installed before.
+ * a signal that is not the controller's goes to the handler installed before. A fault in the
+ * program's constructors as its library is loaded (spinner_inproc_open, before any run: nothing
+ * can return out of the loader) writes the same report to the file descriptor the simulator
+ * handed in (its supervisor's report file) and the process dies by the signal.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -1436,13 +1439,8 @@ static void rdec(long v) {
     rput(out);
 }
 
-/* Text report: "signal N\nmessage TEXT\npc ADDR\nframe ADDR OFFSET PATH\tSYMBOL\n"... */
-static void fault_report(int sig, const char *message, void *pc) {
-    if (forked) {  /* misuse in a forked process: said on stderr, no simulator to report to */
-        fprintf(stderr, "simrunner: %s (in process %ld, which the controller fork()ed)\n", message,
-                (long)getpid());
-        _exit(FORK_EXIT);
-    }
+/* Text report into report[]: "signal N\nmessage TEXT\npc ADDR\nframe ADDR OFFSET PATH\tSYMBOL\n"... */
+static void build_report(int sig, const char *message, void *pc) {
     void *frames[128];
     int n = backtrace(frames, 128);
     report_len = 0;
@@ -1472,6 +1470,15 @@ static void fault_report(int sig, const char *message, void *pc) {
         }
         rput("\n");
     }
+}
+
+static void fault_report(int sig, const char *message, void *pc) {
+    if (forked) {  /* misuse in a forked process: said on stderr, no simulator to report to */
+        fprintf(stderr, "simrunner: %s (in process %ld, which the controller fork()ed)\n", message,
+                (long)getpid());
+        _exit(FORK_EXIT);
+    }
+    build_report(sig, message, pc);
 #ifdef SPINNER_INPROC
     if (opening) {  /* a misused call in a constructor at the load (no run to report it to) */
         static char what[640];
@@ -1500,9 +1507,22 @@ static const int fault_sigs[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGUS
 #define N_SIGS (sizeof fault_sigs / sizeof fault_sigs[0])
 
 #ifdef SPINNER_INPROC
+/* Our handlers are the process's while a run is on or a library is being opened (handler_users:
+ * the run, one open; installed by the first, the ones before restored by the last). */
 static struct sigaction old_actions[N_SIGS];
 static stack_t old_alt;
 static uintptr_t stack_lo, stack_hi;  /* the controller's stack (a guard page below stack_lo) */
+static pthread_mutex_t handlers_lock = PTHREAD_MUTEX_INITIALIZER;
+static int handler_users;
+
+/* A fault in the thread opening a program's library (spinner_inproc_open: its constructors, a C++
+ * global object's) - nothing can return out of the loader: its report goes to load_fd, and the
+ * process dies by the signal. */
+static volatile sig_atomic_t load_watch;  /* an open is under way in load_thread */
+static pthread_t load_thread;
+static int load_fd = -1;
+static const char *load_path;
+static void load_fault(int sig, siginfo_t *info, void *pc, const char *message);
 
 /* A signal that is not the controller's (the simulator's own, or after it ended): hand it
  * to the handler installed before ours. */
@@ -1523,12 +1543,6 @@ static void on_fault(int sig, siginfo_t *info, void *context) {
         if (info->si_code <= 0) raise(sig);
         return;
     }
-#ifdef SPINNER_INPROC
-    if (!in_controller || !pthread_equal(pthread_self(), sim_thread_id)) {
-        pass_on(sig, info);  /* not the run's controller code (another thread's, say) */
-        return;
-    }
-#endif
     void *pc = NULL;
     uintptr_t sp = 0;
     ucontext_t *uc = context;
@@ -1544,6 +1558,14 @@ static void on_fault(int sig, siginfo_t *info, void *context) {
     uintptr_t addr = (uintptr_t)info->si_addr;
     int overflow = sig == SIGSEGV && sp && addr + 65536 > sp && addr < sp + 65536;
 #ifdef SPINNER_INPROC
+    if (!in_controller || !pthread_equal(pthread_self(), sim_thread_id)) {
+        if (sig != SIGUSR1 && __atomic_load_n(&load_watch, __ATOMIC_ACQUIRE) &&
+            pthread_equal(pthread_self(), load_thread))  /* a constructor's, as its library loads */
+            load_fault(sig, info, pc, overflow ? "stack overflow (the stack limit is `ulimit -s`)" : "");
+        else
+            pass_on(sig, info);  /* not the run's controller code (another thread's, say) */
+        return;
+    }
     if (sig == SIGSEGV && stack_lo && addr < stack_lo && addr + 65536 >= stack_lo) overflow = 1;
     fault_report(sig, overflow ? "stack overflow (the controller's stack is `ulimit -s`)" : "", pc);
 #else
@@ -1551,24 +1573,118 @@ static void on_fault(int sig, siginfo_t *info, void *context) {
 #endif
 }
 
+static void fault_action(struct sigaction *sa) {
+    memset(sa, 0, sizeof *sa);
+    sa->sa_sigaction = on_fault;
+    sa->sa_flags = SA_SIGINFO | SA_ONSTACK;
+    sigemptyset(&sa->sa_mask);
+}
+
+#ifndef SPINNER_INPROC
 static void install_handlers(void) {
     static char alt_stack[1 << 16];
     stack_t ss = {.ss_sp = alt_stack, .ss_size = sizeof alt_stack, .ss_flags = 0};
     struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_sigaction = on_fault;
-    sa.sa_flags = SA_SIGINFO | SA_ONSTACK;
-    sigemptyset(&sa.sa_mask);
-#ifdef SPINNER_INPROC
-    sigaltstack(&ss, &old_alt);
-    for (size_t i = 0; i < N_SIGS; i++) sigaction(fault_sigs[i], &sa, &old_actions[i]);
-#else
+    fault_action(&sa);
     sigaltstack(&ss, NULL);
     for (size_t i = 0; i < N_SIGS; i++) sigaction(fault_sigs[i], &sa, NULL);
-#endif
     void *warm[2];
     backtrace(warm, 2);  /* loads the unwinder now, not inside a signal handler */
 }
+#else
+/* Our handlers for a run or an open (handlers_take), the ones before back after the last
+ * (handlers_give). The alternate stack is the calling thread's (alt_stack_on). */
+static void handlers_take(void) {
+    pthread_mutex_lock(&handlers_lock);
+    if (handler_users++ == 0) {
+        struct sigaction sa;
+        fault_action(&sa);
+        for (size_t i = 0; i < N_SIGS; i++) sigaction(fault_sigs[i], &sa, &old_actions[i]);
+    }
+    pthread_mutex_unlock(&handlers_lock);
+    void *warm[2];
+    backtrace(warm, 2);  /* loads the unwinder now, not inside a signal handler */
+}
+
+static void handlers_give(void) {
+    pthread_mutex_lock(&handlers_lock);
+    if (handler_users > 0 && --handler_users == 0)
+        for (size_t i = 0; i < N_SIGS; i++) sigaction(fault_sigs[i], &old_actions[i], NULL);
+    pthread_mutex_unlock(&handlers_lock);
+}
+
+static void alt_stack_on(char *mem, size_t size, stack_t *old) {
+    stack_t ss = {.ss_sp = mem, .ss_size = size, .ss_flags = 0};
+    sigaltstack(&ss, old);
+}
+
+/* The run's handlers (spinner_inproc_start; spinner_inproc_finish gives them back). */
+static int run_handlers;
+static void install_handlers(void) {
+    static char alt_stack[1 << 16];
+    alt_stack_on(alt_stack, sizeof alt_stack, &old_alt);
+    if (!run_handlers) handlers_take();
+    run_handlers = 1;
+}
+
+static void restore_handlers(void) {
+    if (run_handlers) handlers_give();
+    run_handlers = 0;
+    sigaltstack(&old_alt, NULL);
+}
+
+static const char *signal_name(int sig) {
+    switch (sig) {
+    case SIGSEGV: return "SIGSEGV";
+    case SIGBUS: return "SIGBUS";
+    case SIGILL: return "SIGILL";
+    case SIGFPE: return "SIGFPE";
+    case SIGABRT: return "SIGABRT";
+    default: return "a signal";
+    }
+}
+
+/* A fault of the opening thread (on_fault): the report (as a run's, after "load-fault PATH" and
+ * "host PATH" lines) to load_fd, where the simulator's supervisor reads it once the process has
+ * died (simrunner.run.postmortem); without one, a line on stderr naming the function. Then the
+ * signal's default action: the process dies by it, as it did without these handlers. */
+static void load_fault(int sig, siginfo_t *info, void *pc, const char *message) {
+    build_report(sig, message, pc);
+    Dl_info here;
+    const char *host = dladdr((void *)load_fault, &here) && here.dli_fname ? here.dli_fname : "";
+    const char *path = load_path ? load_path : "";
+    if (load_fd >= 0) {
+        struct iovec parts[] = {{(void *)"load-fault ", 11}, {(void *)path, strlen(path)}, {(void *)"\nhost ", 6},
+                                {(void *)host, strlen(host)}, {(void *)"\n", 1}, {report, report_len}};
+        ssize_t w = writev(load_fd, parts, sizeof parts / sizeof parts[0]);
+        (void)w;
+    } else {
+        void *frames[64];
+        int n = backtrace(frames, 64);
+        char where[1024] = "";
+        for (int i = 0; i < n && !where[0]; i++) {  /* the innermost frame of the program's library */
+            Dl_info info_i;
+            if (dladdr(frames[i], &info_i) && info_i.dli_fname && strcmp(info_i.dli_fname, path) == 0)
+                snprintf(where, sizeof where, " at %s+0x%lx%s%s%s", path,
+                         (unsigned long)((uintptr_t)frames[i] - (uintptr_t)info_i.dli_fbase),
+                         info_i.dli_sname ? " (" : "", info_i.dli_sname ? info_i.dli_sname : "",
+                         info_i.dli_sname ? ")" : "");
+        }
+        char line[1536];
+        int k = snprintf(line, sizeof line,
+                         "simrunner: %s%s, in a constructor as the controller's library was loaded into the "
+                         "simulator's process, before the run: the process ends (simrunner drive names the "
+                         "fault's file:line; --isolate runs the program in a process of its own)\n",
+                         signal_name(sig), where);
+        if (k > 0) {
+            ssize_t w = write(2, line, (size_t)k < sizeof line ? (size_t)k : sizeof line - 1);
+            (void)w;
+        }
+    }
+    signal(sig, SIG_DFL);
+    if (info->si_code <= 0) raise(sig);  /* sent (raise, abort): again, at the handler's return */
+}
+#endif
 
 static void read_init(void) {
     /* height, width, line row, recording, wheelbase, mcu time measured, the number of --isr
@@ -1794,10 +1910,27 @@ static void set_early(void *lib, int early) {
     pthread_mutex_unlock(&early_lock);
 }
 
-void *spinner_inproc_open(const char *path) {
+/* A fault in its constructors (or in the loader, or a library it loads) while it is opened: the
+ * report to `report_fd` (< 0: a line on stderr), and the process dies by the signal (load_fault).
+ * Opens are one at a time (the loader's own lock makes them so anyway). */
+static pthread_mutex_t open_lock = PTHREAD_MUTEX_INITIALIZER;
+
+void *spinner_inproc_open(const char *path, int report_fd) {
+    static char open_alt_stack[1 << 16];  /* (the opening thread's, during the open) */
+    stack_t alt_before;
+    pthread_mutex_lock(&open_lock);
+    handlers_take();
+    alt_stack_on(open_alt_stack, sizeof open_alt_stack, &alt_before);
+    load_fd = report_fd, load_path = path, load_thread = pthread_self();
+    __atomic_store_n(&load_watch, 1, __ATOMIC_RELEASE);
     opening = 1, early_calls = 0;
     void *lib = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     opening = 0;
+    __atomic_store_n(&load_watch, 0, __ATOMIC_RELEASE);
+    load_fd = -1, load_path = NULL;
+    sigaltstack(&alt_before, NULL);
+    handlers_give();
+    pthread_mutex_unlock(&open_lock);
     retag_exit_handlers(LOADING_TAG, lib);  /* its constructors' registrations are its */
     if (lib != NULL && early_calls) set_early(lib, 1);
     early_calls = 0;
@@ -1941,8 +2074,7 @@ void spinner_inproc_finish(void) {
     pthread_mutex_lock(&dog_lock);  /* it sends only under the lock: none comes after this */
     dog_active = 0;  /* the watchdog goes back to sleep at its next look */
     pthread_mutex_unlock(&dog_lock);
-    for (size_t i = 0; i < N_SIGS; i++) sigaction(fault_sigs[i], &old_actions[i], NULL);
-    sigaltstack(&old_alt, NULL);
+    restore_handlers();
     fflush(stdout);
     fflush(stderr);
     __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);
