@@ -6,6 +6,7 @@ import warnings
 
 import matplotlib.image
 
+from helpers import legends_off_the_panels
 from simrunner.workflows.gap.plots import plot_regimes
 
 
@@ -49,24 +50,12 @@ def _figure_of(monkeypatch, plot, result, path):
     return fig
 
 
-def _legends_off_the_panels(fig) -> None:
-    """Every legend lies inside the figure and over no panel (it hid curves and bars)."""
-    renderer = fig.canvas.get_renderer()
-    legends = list(fig.legends) + [ax.get_legend() for ax in fig.axes if ax.get_legend() is not None]
-    assert legends
-    for legend in legends:
-        box = legend.get_window_extent(renderer)
-        assert fig.bbox.x0 <= box.x0 and box.x1 <= fig.bbox.x1 and fig.bbox.y0 <= box.y0 and box.y1 <= fig.bbox.y1
-        for ax in fig.axes:
-            assert not box.overlaps(ax.get_window_extent(renderer)), ax.get_title() or ax.get_ylabel()
-
-
 def test_regime_figure_legend_hides_no_bar(tmp_path, monkeypatch):
     """Issue 50 (cosmetic): the legend sat in the first panel, over its tallest bars."""
     signals = ("position_m", "cross_m", "yaw_rad", "speed_mps", "yaw_rate_radps", "along_m")
     result = types.SimpleNamespace(stats_before=_stats(signals, 0.4), stats_after=_stats(signals, 0.2),
                                    effect="steering_lag")
-    _legends_off_the_panels(_figure_of(monkeypatch, plot_regimes, result, tmp_path / "regimes.png"))
+    legends_off_the_panels(_figure_of(monkeypatch, plot_regimes, result, tmp_path / "regimes.png"))
 
 
 def test_before_after_figure_legends_hide_no_curve(tmp_path, monkeypatch):
@@ -90,4 +79,4 @@ def test_before_after_figure_legends_hide_no_curve(tmp_path, monkeypatch):
                                    held_windows=[types.SimpleNamespace(start=100, stop=140)],
                                    rmse_before=rmse, rmse_after=rmse, effect="steering_lag",
                                    parameters={"steering_lag_s": 0.1})
-    _legends_off_the_panels(_figure_of(monkeypatch, plot_before_after, result, tmp_path / "before_after.png"))
+    legends_off_the_panels(_figure_of(monkeypatch, plot_before_after, result, tmp_path / "before_after.png"))
