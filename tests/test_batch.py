@@ -315,3 +315,17 @@ def test_summary_plot_legends_hide_no_data_and_runs_at_one_place_stay_apart(tmp_
     where = fig.axes[2].collections  # one marker series per parameter combination
     xs = [tuple(c.get_offsets()[:, 0]) for c in where]
     assert len(xs) == 3 and len(set(xs)) == 3
+
+
+def test_summary_plot_without_any_lap_says_so(tmp_path, monkeypatch):
+    """A batch whose runs all left the road drew its lap-time panel on a -0.04..0.04 s scale,
+    the no-lap crosses at '0 s'; the panel now says no run completed a lap, with no time scale."""
+    from simrunner.workflows.batch import plot as batch_plot
+
+    drawn = []
+    monkeypatch.setattr("matplotlib.pyplot.close", drawn.append)
+    rows = [r for r in _summary_rows() if r["best_lap_s"] is None]
+    batch_plot.plot_summary(rows, ("v",), tmp_path / "summary.png")
+    ax = drawn[0].axes[0]
+    assert list(ax.get_yticks()) == []
+    assert any("no run completed a lap" in t.get_text() for t in ax.texts)

@@ -1,7 +1,8 @@
 """The batch summary plot (``summary.png``): three panels over the result rows.
 
 1. Best lap time (s) by track, one marker series per parameter combination (runs without a
-   completed lap are drawn as crosses on the bottom axis).
+   completed lap are drawn as crosses on the bottom axis; when no run completed one, the
+   panel says so, with no time scale).
 2. Outcomes per parameter combination (stacked counts).
 3. Where runs leave the track: the fraction of the lap (distance along the centreline from
    the start) at which ``off_track`` runs left the road, by track, the parameter
@@ -45,6 +46,10 @@ def plot_summary(rows: list[dict], param_names: tuple[str, ...], path: Path) -> 
             ax.scatter([tx[r["track"]] + dx for r in failed], [0.0] * len(failed), marker="x",
                        s=22, color=colours(k % 10))
     ax.set_ylabel("best lap time (s); x = no lap")
+    if all(r["best_lap_s"] is None for r in rows):  # no time scale to show: the crosses alone
+        ax.set_yticks([])
+        ax.text(0.5, 0.75, "no run completed a lap", ha="center", va="center", transform=ax.transAxes,
+                fontsize=9, color="0.4")
     ax.set_title("Lap time by track and parameters")
     _track_axis(ax, tracks)
     if n <= 12:
