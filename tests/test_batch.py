@@ -286,3 +286,46 @@ def test_the_workers_of_a_batch_killed_alone_end_with_it(tmp_path):
         assert kill_alone_and_wait_for_its_session(proc) == []  # its process only, not its group
     finally:
         kill_session(proc)  # what is left of it
+
+
+def _summary_rows():
+    """Two tracks x three speeds: laps on one track, every run off the road on the other,
+    two of them at the same place."""
+    rows = []
+    for track in ("a.txt", "b.txt"):
+        for v in (1.0, 2.0, 3.0):
+            ok = track == "a.txt"
+            rows.append(dict(track=track, v=v, outcome="finished" if ok else "off_track",
+                             best_lap_s=12.0 / v if ok else None, off_progress_frac=None if ok else (0.3 if v < 3 else 0.7)))
+    return rows
+
+
+def test_summary_plot_legends_hide_no_data_and_runs_at_one_place_stay_apart(tmp_path, monkeypatch):
+    """summary.png: the legends sat inside the panels (the outcomes' over the tallest bar), and
+    off-road runs of different parameters at one place of a track were one marker."""
+    from simrunner.workflows.batch import plot as batch_plot
+    from helpers import legends_off_the_panels
+
+    drawn = []
+    monkeypatch.setattr("matplotlib.pyplot.close", drawn.append)
+    batch_plot.plot_summary(_summary_rows(), ("v",), tmp_path / "summary.png")
+    fig, = drawn
+    fig.canvas.draw()
+    legends_off_the_panels(fig)
+    where = fig.axes[2].collections  # one marker series per parameter combination
+    xs = [tuple(c.get_offsets()[:, 0]) for c in where]
+    assert len(xs) == 3 and len(set(xs)) == 3
+
+
+def test_summary_plot_without_any_lap_says_so(tmp_path, monkeypatch):
+    """A batch whose runs all left the road drew its lap-time panel on a -0.04..0.04 s scale,
+    the no-lap crosses at '0 s'; the panel now says no run completed a lap, with no time scale."""
+    from simrunner.workflows.batch import plot as batch_plot
+
+    drawn = []
+    monkeypatch.setattr("matplotlib.pyplot.close", drawn.append)
+    rows = [r for r in _summary_rows() if r["best_lap_s"] is None]
+    batch_plot.plot_summary(rows, ("v",), tmp_path / "summary.png")
+    ax = drawn[0].axes[0]
+    assert list(ax.get_yticks()) == []
+    assert any("no run completed a lap" in t.get_text() for t in ax.texts)

@@ -536,3 +536,17 @@ def test_controller_norms_survive_os_exit_and_a_loop_after_configure(tmp_path):
     ctl.write_text("def main(s):\n    while True:\n        pass\n")
     with pytest.raises(ControllerFileError, match=r"ran 0.5 s without configuring its norms"):
         controller_norms(ctl, wall_limit_s=0.5)
+
+
+def test_a_missing_or_short_column_is_named_at_the_header_line_of_a_file_with_comments(tmp_path):
+    """simrunner's own logs start with a '# nxpcup-sim run log' line: a misspelt
+    speed_cmd_mps was warned at line 2 (the header) but refused at line 1 (the comment)."""
+    path = tmp_path / "run.csv"
+    path.write_text("# nxpcup-sim run log, format 2\n# team notes\nt_s,sped_cmd_mps,steer_cmd_rad\n"
+                    "0.0,1.0,0.0\n0.1,1.0,0.0\n")
+    with pytest.warns(UserWarning, match=r"run.csv:3: column 'sped_cmd_mps'"):
+        log = read_log(path)
+    with pytest.raises(LogError, match=r"run.csv:3: expected columns t_s, speed_cmd_mps"):
+        log.require("t_s", "speed_cmd_mps")
+    with pytest.raises(LogError, match=r"run.csv:5: expected at least 3 rows"):
+        log.require("t_s", min_rows=3)

@@ -164,6 +164,18 @@ def test_bad_controller_file_is_one_line_without_traceback(tmp_path, body, expec
     assert not (tmp_path / "t.csv").exists()
 
 
+@pytest.mark.parametrize("name", ["controller.txt", "controller", "controller.PY"])
+def test_a_controller_of_another_kind_is_named_as_such(tmp_path, name):
+    """A lone file neither Python nor C/C++ was told 'several files, -I, -D, --kit and --isr
+    are for C/C++ controllers', as if C options had been given."""
+    ctrl = tmp_path / name
+    ctrl.write_text("def main(s):\n    pass\n")
+    res = run_cli(ctrl)
+    assert res.exit_code == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert f"{name}: expected a Python controller (.py) or a C/C++ one (.c, .cpp sources or one .so)" in res.stderr
+    assert "several files" not in res.stderr
+
+
 def test_bad_track_is_one_line(tmp_path):
     ctrl = write(tmp_path, "c.py", "def main(s):\n    pass\n")
     res = run_cli(ctrl, "--track", tmp_path / "nope.txt")

@@ -35,14 +35,22 @@ def lag_log():
 
 @pytest.fixture(scope="module")
 def live_run():
-    found = []
-    findings = Findings(found.append)
-    result = run_gap(lag_log(), jobs=1, effects=EFFECTS, findings=findings)
-    return result, findings, found
+    """The run, its findings, and every finding, fit batch and progress tick in order."""
+    from simrunner.workflows.gap import chain
+
+    found, events = [], []
+    findings = Findings(lambda f: (found.append(f), events.append(("stage", f.data["fits"])) if f.kind == "stage"
+                                   else None))
+    run = chain._ChainBuilder.run
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(chain._ChainBuilder, "run", lambda self, jobs: (events.append(("run", len(jobs))), run(self, jobs))[1])
+        result = run_gap(lag_log(), jobs=1, effects=EFFECTS, findings=findings,
+                         progress=lambda label: events.append(("tick", label)))
+    return result, findings, found, events
 
 
 def test_findings_come_in_order_with_the_results_figures(live_run):
-    result, findings, found = live_run
+    result, findings, found, _ = live_run
     assert found == findings.items  # the listener saw each as it was made
     kinds = [f.kind for f in found if f.kind != "stage"]
     assert kinds[:2] == ["log", "nominal"] and kinds[-2:] == ["chain", "done"]
@@ -59,6 +67,20 @@ def test_findings_come_in_order_with_the_results_figures(live_run):
     assert stages[0].text == "replaying the nominal car"
     screening = [f for f in stages if "screening" in f.text]
     assert [f.data["fits"] for f in screening][:2] == [3, 2]  # the effects left to screen at each step
+
+
+def test_no_fit_runs_while_the_progress_bar_is_full(live_run):
+    """The bar counts the fits of the stage running: a fit batch after the stage's last tick
+    left it at 100 % meanwhile (a kept candidate's second refit: ~12 s on a real log)."""
+    *_, events = live_run
+    fits = ticks = 0
+    for kind, value in events:
+        if kind == "stage":
+            fits, ticks = value, 0
+        elif kind == "tick":
+            ticks += 1
+        else:
+            assert ticks < fits, f"a fit batch of {value} after the stage's {fits} tick(s): {events}"
 
 
 def test_the_uncertainty_replays_are_counted_as_its_stencil():
@@ -84,7 +106,7 @@ def test_a_budget_keeps_the_closing_stages_time():
 def test_a_budget_ends_the_chain_with_the_finished_steps(live_run):
     """The clock jumps to the end of the budget as the second step's screening runs: the result
     is the first step's model, confirmed and reported as stopped by the budget."""
-    full, _, _ = live_run
+    full, *_ = live_run
     now = [0.0]
     budget = Budget(3600.0, clock=lambda: now[0])
 

@@ -51,3 +51,17 @@ def test_a_c_controller_is_rebuilt_on_each_save_of_a_source_or_header(tmp_path):
     _save(src, C_CONTROLLER.replace("return 0;", "return 0"))  # a save in the middle of typing
     third = next(runs)
     assert third.result is None and "ctrl.c" in third.error
+
+
+def test_the_headers_beside_the_sources_are_watched_too(tmp_path):
+    """`#include "pid.h"` next to the controller needs no -I (the compiler looks in the
+    source's folder), but a save of pid.h did not re-run the watch: only -I folders' headers
+    were watched."""
+    from simrunner.run.watch import native_watched
+
+    (tmp_path / "inc").mkdir()
+    for name in ("main.c", "pid.h", "notes.txt", "inc/speed.hpp", "more.cpp"):
+        (tmp_path / name).write_text("")
+    files = native_watched(tmp_path / "main.c", [tmp_path / "more.cpp"], [tmp_path / "inc"])
+    assert sorted(Path(f).relative_to(tmp_path).as_posix() for f in files) == [
+        "inc/speed.hpp", "main.c", "more.cpp", "pid.h"]

@@ -293,13 +293,11 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
             if controller.endswith(".so"):
                 click.echo("simrunner: --watch: a .so is built elsewhere: watch its sources instead", err=True)
                 sys.exit(2)
-            from pathlib import Path
+            from simrunner.run.watch import native_watched
 
-            headers = [str(p) for d in include_dirs for p in sorted(Path(d).glob("*"))
-                       if p.suffix in (".h", ".hpp", ".hh")]
             native = dict(make=lambda: _native_program(controller, more_sources, include_dirs, defines, isolate,
                                                        kit, isrs),
-                          watched=(controller, *more_sources, *headers))
+                          watched=native_watched(controller, more_sources, include_dirs))
         watch_drive(dict(controller=controller, **native, track=track, laps=laps, time_limit_s=time_limit_s,
                          video=video, video_fps=video_fps, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
                          dt_s=dt_s, wall_limit_s=wall_limit_s, params=params, start=_start_pose(start),

@@ -100,8 +100,8 @@ class _LiveView:
 
     def finding(self, f) -> None:
         if f.kind == "stage":
+            self.bar.set_description_str(f.text, refresh=False)  # not drawn with the last stage's total
             self.bar.reset(total=max(int(f.data.get("fits", 1)), 1))
-            self.bar.set_description_str(f.text)
         else:
             self.bar.write(f.line(), file=self.stream)
         self.live.add(f)

@@ -12,8 +12,9 @@ like a run (a :class:`WatchEvent` with ``error``) and the next save is awaited.
 
 C and C++ controllers (``make``: builds the program from its sources, compiler errors raise
 :class:`~simrunner.errors.ControllerFileError`) are watched the same way: ``watched`` lists
-every file whose save starts a new build and run (the sources and the headers of the include
-folders); the build cache makes an unchanged file cost nothing.
+every file whose save starts a new build and run (:func:`native_watched`: the sources and
+the headers of their folders and of the include folders); the build cache makes an unchanged
+file cost nothing.
 """
 from __future__ import annotations
 
@@ -39,6 +40,19 @@ class WatchEvent:
     result: RunResult | None
     error: str | None
     saved_at: float
+
+
+HEADER_SUFFIXES = (".h", ".hpp", ".hh")
+
+
+def native_watched(controller, more_sources=(), include_dirs=()) -> tuple[Path, ...]:
+    """The files whose saves rebuild a C/C++ controller: its sources and the headers of their
+    own folders (``#include "pid.h"`` finds them without ``-I``) and of the ``-I`` folders,
+    each once."""
+    sources = [Path(controller), *map(Path, more_sources)]
+    folders = dict.fromkeys([*(p.parent for p in sources), *map(Path, include_dirs)])
+    headers = [p for d in folders for p in sorted(d.glob("*")) if p.suffix in HEADER_SUFFIXES]
+    return tuple(dict.fromkeys([*sources, *headers]))
 
 
 def _signature(paths) -> tuple | None:

@@ -173,6 +173,8 @@ class RunLog:
     None for a log with a row per command), kept by :meth:`subset` and :meth:`with_columns`
     (unless it replaces a command column). ``repeats``: the rows the reader left out for
     repeating the previous row's stamp (:class:`Repeats`; None when it left none out).
+    ``header_line``: the line of ``source`` holding the header (after comment lines), which
+    :meth:`require` names; row ``i`` is then about line ``header_line + 1 + i``.
     """
 
     t_s: np.ndarray
@@ -208,6 +210,7 @@ class RunLog:
     source: str = "<log>"
     command_steps: CommandSteps | None = None
     repeats: Repeats | None = None
+    header_line: int = 1
 
     def __len__(self) -> int:
         return int(self.t_s.size)
@@ -235,13 +238,13 @@ class RunLog:
         """Raise :class:`LogError` unless the log has ``names`` and enough data."""
         missing = [n for n in names if getattr(self, n, None) is None]
         if missing:
-            raise LogError(self.source, 1, f"expected columns {', '.join(names)} "
+            raise LogError(self.source, self.header_line, f"expected columns {', '.join(names)} "
                                            f"(missing: {', '.join(missing)})")
         if not len(self) and min_rows > 0:
-            raise LogError(self.source, 1, "expected rows of data after the header (got none)")
+            raise LogError(self.source, self.header_line, "expected rows of data after the header (got none)")
         if len(self) < min_rows or self.duration_s < min_duration_s:
             want = f"{min_rows} rows and {min_duration_s:g} s" if min_duration_s > 0.0 else f"{min_rows} rows"
-            raise LogError(self.source, len(self) + 1,
+            raise LogError(self.source, self.header_line + len(self),
                            f"expected at least {want} of data (got {len(self)} rows, {self.duration_s:.3g} s)")
 
     def coasting(self) -> np.ndarray:
@@ -496,7 +499,7 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
            repeated_stamps: bool = False) -> RunLog:
     delimiter = _delimiter(text)
     reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
-    header = None
+    header, header_line = None, 1
     try:
         for row in reader:
             if row and row[0].lstrip().startswith("#"):
@@ -504,7 +507,7 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
                 continue
             if not row or all(not c.strip() for c in row):
                 continue
-            header = [h.strip() for h in row]
+            header, header_line = [h.strip() for h in row], reader.line_num
             named = list(header)  # as the file names them
             if columns is None:
                 header = [FORMAT1_NAMES.get(h, h) for h in header]
@@ -574,7 +577,8 @@ def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: boo
         repeats = None
         if repeated_stamps:
             values, lines, repeats = _drop_repeated_stamps(values, lines)
-        log = log_from_columns(values, source, CommandSteps(**steps) if steps is not None else None)
+        log = replace(log_from_columns(values, source, CommandSteps(**steps) if steps is not None else None),
+                      header_line=header_line)
         return log if repeats is None else _with_repeats(log, repeats)
     except LogError as exc:  # map the row index back to the file's line
         if exc.line >= 2 and exc.line - 2 < len(lines):

@@ -178,6 +178,9 @@ def build_firmware(sources: list[str | Path], *, include_dirs=(), defines=(), ki
     (:func:`build_program`) and its ``isrs`` (``(name, period_s)``) set (:func:`with_isrs`); a
     ControllerFileError when a source is not C/C++ or the build fails."""
     bad = [s for s in sources if not is_native(s)]
+    if bad and len(sources) == 1 and not (include_dirs or defines or kit or isrs):
+        raise ControllerFileError(f"{bad[0]}: expected a Python controller (.py) or a C/C++ one (.c, .cpp "
+                                  f"sources or one .so)")
     if bad:
         raise ControllerFileError(f"{bad[0]}: several files, -I, -D, --kit and --isr are for C/C++ "
                                   f"controllers (.c, .cpp sources or one .so)")

@@ -1,10 +1,14 @@
 """The batch summary plot (``summary.png``): three panels over the result rows.
 
 1. Best lap time (s) by track, one marker series per parameter combination (runs without a
-   completed lap are drawn as crosses on the bottom axis).
+   completed lap are drawn as crosses on the bottom axis; when no run completed one, the
+   panel says so, with no time scale).
 2. Outcomes per parameter combination (stacked counts).
 3. Where runs leave the track: the fraction of the lap (distance along the centreline from
-   the start) at which ``off_track`` runs left the road, by track.
+   the start) at which ``off_track`` runs left the road, by track, the parameter
+   combinations side by side as in panel 1.
+
+The legends sit beside their panels.
 """
 from __future__ import annotations
 
@@ -29,10 +33,11 @@ def plot_summary(rows: list[dict], param_names: tuple[str, ...], path: Path) -> 
     n = len(combos)
     fig, axes = plt.subplots(3, 1, figsize=(max(8.0, min(24.0, 0.35 * len(tracks) + 6)), 12),
                              constrained_layout=True)
+    dxs = [(k - (n - 1) / 2) * min(0.8 / max(n, 1), 0.15) for k in range(n)]  # combos side by side
     ax = axes[0]
     for k, combo in enumerate(combos):
         sel = [r for r in rows if _combo(r, param_names) == combo]
-        dx = (k - (n - 1) / 2) * min(0.8 / max(n, 1), 0.15)
+        dx = dxs[k]
         done = [r for r in sel if r["best_lap_s"] is not None]
         ax.scatter([tx[r["track"]] + dx for r in done], [r["best_lap_s"] for r in done],
                    s=18, color=colours(k % 10), label=combo)
@@ -41,10 +46,14 @@ def plot_summary(rows: list[dict], param_names: tuple[str, ...], path: Path) -> 
             ax.scatter([tx[r["track"]] + dx for r in failed], [0.0] * len(failed), marker="x",
                        s=22, color=colours(k % 10))
     ax.set_ylabel("best lap time (s); x = no lap")
+    if all(r["best_lap_s"] is None for r in rows):  # no time scale to show: the crosses alone
+        ax.set_yticks([])
+        ax.text(0.5, 0.75, "no run completed a lap", ha="center", va="center", transform=ax.transAxes,
+                fontsize=9, color="0.4")
     ax.set_title("Lap time by track and parameters")
     _track_axis(ax, tracks)
     if n <= 12:
-        ax.legend(fontsize=7, loc="upper right")
+        _legend_beside(ax)
 
     ax = axes[1]
     bottom = [0] * n
@@ -57,14 +66,14 @@ def plot_summary(rows: list[dict], param_names: tuple[str, ...], path: Path) -> 
                   fontsize=7)
     ax.set_ylabel("runs")
     ax.set_title("Outcomes by parameters")
-    ax.legend(fontsize=7)
+    _legend_beside(ax)
 
     ax = axes[2]
     off = [r for r in rows if r["off_progress_frac"] is not None]
     for k, combo in enumerate(combos):
         sel = [r for r in off if _combo(r, param_names) == combo]
         if sel:
-            ax.scatter([tx[r["track"]] for r in sel], [r["off_progress_frac"] for r in sel], s=18,
+            ax.scatter([tx[r["track"]] + dxs[k] for r in sel], [r["off_progress_frac"] for r in sel], s=18,
                        color=colours(k % 10), label=combo)
     ax.set_ylim(-0.02, 1.02)
     ax.set_ylabel("fraction of the lap")
@@ -73,6 +82,11 @@ def plot_summary(rows: list[dict], param_names: tuple[str, ...], path: Path) -> 
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
+
+
+def _legend_beside(ax) -> None:
+    """The panel's legend to its right, outside: inside it hid markers or bars."""
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
 
 
 def _track_axis(ax, tracks: list[str]) -> None:

@@ -694,7 +694,9 @@ class _ChainBuilder:
 
     def baseline(self, screen_base: Problem) -> None:
         """Step 2's baseline: the kept effects alone, refitted as the candidates will be."""
+        self.stage(f"step {self.index}: refit of the kept effects", 1)
         b, = self.run([self.job(screen_base, self.kept_names, self.kept_values)])
+        self.tick(f"step {self.index} baseline")
         if b.cost < self.cost:
             self.kept_values, self.cost, self.held_gap = b.values, b.cost, b.held_gap
             self.kept_spans = _carried(self.kept_spans, b.values, b.spans)
@@ -761,7 +763,9 @@ class _ChainBuilder:
     def polish(self, st: _StepState, effect: str) -> tuple[Trial, str]:
         """Step 3's second refit of a candidate that passed: its figures and the tests' verdict."""
         o = st.outcome[effect]
+        self.stage(f"step {st.index}: second refit of {effect}", 1)
         p, = self.run([self.job(st.screen_base, self.kept_names + [effect], o.values)])
+        self.tick(f"step {st.index} second refit")
         if p.cost < o.cost:
             o = dataclasses.replace(p, spans=_carried(o.spans, p.values, p.spans))
         st.outcome[effect] = o = dataclasses.replace(o, evaluations=o.evaluations + p.evaluations)

@@ -39,13 +39,12 @@ def plot_before_after(result, path: str | Path) -> None:
     ax = axes[0, 0]
     if pose:
         ax.plot(log.x_m, log.y_m, color="k", lw=1.0, label="measured")
-        ax.plot(p0.x_m, p0.y_m, color="tab:red", lw=0.9, label="simulated, nominal")
-        ax.plot(p1.x_m, p1.y_m, color="tab:blue", lw=0.9, ls="--", label=f"simulated, + {result.effect}")
+        ax.plot(p0.x_m, p0.y_m, color="tab:red", lw=0.9, label="nominal")
+        ax.plot(p1.x_m, p1.y_m, color="tab:blue", lw=0.9, ls="--", label=f"+ {result.effect}")
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_title("path (each window restarts from the measured state)")
-        ax.legend(fontsize=8)
     else:
         _no_data(ax, "path: the log has no pose (x_m, y_m, yaw_rad)")
     speed = log.speed_mps if log.speed_mps is not None else d.speed_mps
@@ -62,7 +61,6 @@ def plot_before_after(result, path: str | Path) -> None:
         ax.plot(t, b, color="tab:blue", lw=0.8, ls="--", label=f"+ {result.effect}")
         ax.set_xlabel("t (s)")
         ax.set_ylabel(label)
-        ax.legend(fontsize=8, loc="upper right")
     ax = axes[1, 1]
     if pose:
         _shade_held(ax, result)
@@ -72,7 +70,6 @@ def plot_before_after(result, path: str | Path) -> None:
         ax.plot(t, e1, color="tab:blue", lw=0.8, ls="--", label=f"+ {result.effect}")
         ax.set_xlabel("t (s)")
         ax.set_ylabel("position error (m)")
-        ax.legend(fontsize=8, loc="upper right")
     else:
         _no_data(ax, "position error: the log has no pose")
     held = window_mask(len(log), result.held_windows)
@@ -86,9 +83,26 @@ def plot_before_after(result, path: str | Path) -> None:
     params = [f"{k} = {v:.4g}" for k, v in result.parameters.items()]
     fig.suptitle(_lines([f"{head} ({params[0]}", *params[1:-1], f"{params[-1]})"] if len(params) > 1 else
                         [f"{head} ({params[0]})"] if params else [head], 120))
-    fig.tight_layout()
+    _legend_below(fig, axes.ravel(), fontsize=9)
     fig.savefig(path)
     plt.close(fig)
+
+
+def _legend_below(fig, axes, fontsize: float) -> None:
+    """One legend of the panels' labelled artists (each label once), in a band below the
+    panels: inside a panel it hid curves or bars wherever it sat. Lays the figure out."""
+    entries: dict[str, object] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            entries.setdefault(label, handle)
+    if not entries:
+        fig.tight_layout()
+        return
+    legend = fig.legend(list(entries.values()), list(entries), loc="lower center", ncol=len(entries),
+                        fontsize=fontsize, frameon=False)
+    fig.canvas.draw()  # the legend's height, to keep its band free
+    band = legend.get_window_extent().height / fig.bbox.height
+    fig.tight_layout(rect=(0.0, band + 0.01, 1.0, 1.0))
 
 
 def _lines(items: list[str], width: int) -> str:
@@ -123,9 +137,7 @@ def plot_regimes(result, path: str | Path) -> None:
         ax.set_xticks(x, regs, rotation=35, fontsize=8)
         ax.set_title(sig)
         legend_ax = legend_ax or ax
-    if legend_ax is not None:
-        legend_ax.legend(fontsize=7)
     fig.suptitle(f"residuals by regime (all windows): nominal vs + {result.effect}")
-    fig.tight_layout()
+    _legend_below(fig, [legend_ax] if legend_ax is not None else [], fontsize=8)
     fig.savefig(path)
     plt.close(fig)
