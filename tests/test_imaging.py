@@ -270,6 +270,33 @@ def test_set_exposure_applies_to_the_frame_in_progress(white):
     assert clock.time_s == pytest.approx(0.046)
 
 
+def test_set_exposure_next_frame_loads_at_the_end_of_the_frame_in_progress(white):
+    """set_exposure(next_frame=True), a kit's period register written while the timer runs: the
+    frame in progress keeps its period and its exposure - get_image gives it as bright as the one
+    before - the next one is integrated over the new exposure and lasts it; of several values the
+    last loads, and get_exposure gives the one in force. A plain set_exposure drops one waiting."""
+    s, clock = spinner(white, exposure_s=0.005, readout_s=0.0005)
+    s.camera_free_running()        # frames one exposure apart (a kit's)
+    s.get_image(60)
+    before = s.get_image(60, add_noise=False)[0]
+    t0 = clock.time_s
+    s.sleep(0.002)
+    s.set_exposure(0.002, next_frame=True)
+    s.set_exposure(0.010, next_frame=True)  # (the last one loads)
+    assert s.get_exposure() == 0.005
+    same = s.get_image(60, add_noise=False)[0]  # the frame in progress: 5 ms, its own exposure
+    assert clock.time_s == pytest.approx(t0 + 0.005) and s.get_exposure() == 0.010
+    assert np.array_equal(same, before)
+    brighter = s.get_image(60, add_noise=False)[0]
+    assert clock.time_s == pytest.approx(t0 + 0.005 + 0.010)
+    assert brighter[64] > 1.5 * same[64]
+    s.set_exposure(0.002, next_frame=True)
+    s.set_exposure(0.005)          # at once, and the waiting one is dropped
+    assert frame_times(s) == pytest.approx([0.005] * 3)
+    with pytest.raises(CommandError, match=r"set_exposure\(seconds=2.0\): expected 1e-05 to 1 s"):
+        s.set_exposure(2.0, next_frame=True)
+
+
 def test_area_and_ideal_cameras_keep_their_frame_rate(white):
     s, _ = spinner(white, model="area", exposure_s=0.01)
     s.set_exposure(0.002)

@@ -67,7 +67,9 @@ def test_the_kit_reads_one_image_an_exposure_as_the_pit_gives_them(tmp_path, cap
     """The library's PIT0 pulses SI every exposure, free-running, and reads each integration out
     while the next integrates: one image an exposure (2 s / exposure), not one an exposure plus
     the read-out (it gave 2.5 % fewer at 19.5 ms, 5 % at 10 ms; it once took every other one).
-    Images counted over 2 s of ticks, in process and isolated."""
+    Images counted over 2 s of ticks from the first image of the new exposure (the frame in
+    progress at TFC_SetLineScanExposureTime ends on TFC_Init's 50 ms, the next is the first of
+    the new period), in process and isolated."""
     src = tmp_path / "count.c"
     src.write_text(textwrap.dedent(f"""\
         #include <stdio.h>
@@ -76,6 +78,10 @@ def test_the_kit_reads_one_image_an_exposure_as_the_pit_gives_them(tmp_path, cap
         int main(void) {{
             TFC_Init();
             TFC_SetLineScanExposureTime({exposure_us});
+            for (int frames = 0; frames < 2; frames++) {{   /* TFC_Init's frame, then the first new one */
+                while (!LineScanImageReady) TFC_Task();
+                LineScanImageReady = 0;
+            }}
             int images = 0;
             uint32_t start = TFC_Ticker[0];
             while (TFC_Ticker[0] - start < 2000) {{
@@ -379,3 +385,107 @@ def test_a_module_that_includes_the_mcus_register_header_builds(tmp_path, capfd)
     r = drive(firmware([main, timer]), track="floor", time_limit_s=2.0)
     assert r.outcome == "controller_returned", r.message
     assert "ticks 100" in capfd.readouterr().out
+
+
+def frames_around(log, t_call_s: float) -> list[float]:
+    """The run log's frame boundaries (one row a camera frame) b0 <= ``t_call_s`` < b1 < b2 < b3."""
+    t = [float(x) for x in log.t_s]
+    i = max(j for j, b in enumerate(t) if b <= t_call_s + 1e-9)
+    return t[i:i + 4]
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_new_exposure_loads_as_the_frame_in_progress_ends(tmp_path, capfd, isolate):
+    """TFC_SetLineScanExposureTime writes PIT_LDVAL0 while PIT0 runs, and the KL25 loads it at the
+    timer's next expiry (RM, PIT_LDVALn): the image after the call still comes one old period (10 ms)
+    after the one before and is as bright, the next one 20 ms later and brighter; of the two writes
+    in that frame (5 ms, then 20 ms) the last loads. (The new exposure used to re-time the frame in
+    progress: the image after the call came 20 ms later, brighter.)"""
+    src = tmp_path / "expo.c"
+    src.write_text(textwrap.dedent("""\
+        #include <stdio.h>
+        #include "derivative.h"
+        #include "TFC/TFC.h"
+        #include "spinner.h"
+        static long sum(void) { long s = 0; for (int i = 0; i < 128; i++) s += LineScanImage0[i]; return s; }
+        int main(void) {
+            TFC_Init();
+            TFC_SetLineScanExposureTime(10000);
+            for (int n = 0; n < 10; n++) {
+                while (!LineScanImageReady) TFC_Task();
+                LineScanImageReady = 0;
+                printf("image %d %.6f %ld\\n", n, spinner_now(), sum());
+                if (n == 5) {                       /* mid-frame: two writes, the last one counts */
+                    TFC_Delay_mS(4);
+                    TFC_SetLineScanExposureTime(5000);
+                    TFC_SetLineScanExposureTime(20000);
+                }
+            }
+            fflush(stdout);
+            return 0;
+        }
+    """))
+    prog = firmware([src])
+    if isolate:
+        prog = dataclasses.replace(prog, isolate=True)
+    r = drive(prog, track="floor", time_limit_s=2.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    images = [line.split()[1:] for line in out.splitlines() if line.startswith("image ")]
+    t = {int(n): float(ts) for n, ts, _ in images}
+    light = {int(n): int(s) for n, _, s in images}
+    assert [round(t[n + 1] - t[n], 6) for n in range(2, 9)] == [0.01, 0.01, 0.01, 0.01, 0.02, 0.02, 0.02], t
+    assert abs(light[6] - light[5]) < 0.02 * light[5], light   # the frame in progress: its own exposure
+    assert light[7] > 1.4 * light[6], light                      # the next: 20 ms of light
+
+
+@pytest.mark.parametrize("how", ["no-kit-calls", "isr", "mcu-time"])
+def test_a_new_exposure_loads_at_the_frames_end_whatever_the_program_does_meanwhile(tmp_path, capfd, how):
+    """The write loads at the PIT's expiry, not at the kit's next call: a main loop that calls no
+    library function for the rest of the frame (it sleeps through spinner.h), a timer interrupt's
+    handler (--isr) that writes it, a run with --mcu-time (each call costs 1 ms): the run log's
+    frames go on 10 ms apart up to the end of the frame in progress, then 20 ms apart."""
+    from simrunner.run.native.build import with_isrs
+
+    src = tmp_path / "expo.c"
+    src.write_text(textwrap.dedent("""\
+        #include <stdio.h>
+        #include "derivative.h"
+        #include "TFC/TFC.h"
+        #include "spinner.h"
+        static volatile double t_call = -1.0;
+        static volatile unsigned calls;
+        void PIT_IRQHandler(void) {                  /* (--isr only) at 108 ms: mid-frame */
+            if (++calls == 107) { TFC_SetLineScanExposureTime(20000); t_call = spinner_now(); }
+        }
+        int main(void) {
+            TFC_Init();
+            TFC_SetLineScanExposureTime(10000);
+            while (TFC_Ticker[0] < 100) TFC_Task();
+            if (ISR == 0) {
+                while (!LineScanImageReady) TFC_Task();
+                LineScanImageReady = 0;
+                TFC_Delay_mS(DELAY_MS);
+                TFC_SetLineScanExposureTime(20000);
+                t_call = spinner_now();
+                spinner_sleep(0.06);                 /* no library call: the PIT runs on */
+            }
+            while (TFC_Ticker[0] < 300) TFC_Task();
+            printf("t_call %.6f\\n", t_call);
+            fflush(stdout);
+            return 0;
+        }
+    """))
+    # (with --mcu-time the calls' own cost puts the write mid-frame)
+    defines = [f"ISR={int(how == 'isr')}", f"DELAY_MS={0 if how == 'mcu-time' else 3}"]
+    prog = build_program([str(src)], kit="tfc", defines=defines)
+    if how == "isr":
+        prog = with_isrs(prog, [("PIT_IRQHandler", 0.001)])
+    r = drive(prog, track="floor", time_limit_s=2.0, csv=tmp_path / "log.csv",
+              **({"mcu_time": 0.001} if how == "mcu-time" else {}))
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    t_call = float(out.split("t_call ")[1].split()[0])
+    b = frames_around(r.log, t_call)
+    assert b[0] < t_call - 1e-9, (t_call, b)  # (written mid-frame)
+    assert [round(b[i + 1] - b[i], 6) for i in range(3)] == [0.01, 0.02, 0.02], (t_call, b)

@@ -58,6 +58,50 @@ def test_one_image_a_servo_frame_as_the_free_running_tpm1_gives_them(tmp_path, c
     assert abs(images - 2.0 / (frame_us * 1e-6)) <= 1, images
 
 
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_new_servo_frame_loads_as_the_frame_in_progress_ends(tmp_path, capfd, isolate):
+    """TFC_SetLineScanExposureTime writes TPM1's MOD while it counts, and the KL25 updates MOD as the
+    counter turns from MOD to zero (RM 31.4.8.1): the image after the call still comes one old frame
+    (10 ms) after the one before and is as bright, the next one 20 ms later and brighter; of the two
+    writes in that frame (5 ms, then 20 ms) the last loads; TFC_ServoTicker counts on, one a frame.
+    (It used to re-time the frame in progress, 20 ms and brighter, and start the ticker from 0.)"""
+    prog = program(tmp_path, """\
+        #include <stdio.h>
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        static long sum() { long s = 0; for (int i = 0; i < 128; i++) s += TFC_LineScanImage0[i]; return s; }
+        int main() {
+            TFC_Init();
+            for (int n = 0; n < 10; n++) {
+                while (!TFC_LineScanImageReady) {}
+                TFC_LineScanImageReady = 0;
+                printf("image %d %.6f %u %ld\\n", n, spinner_now(), (unsigned)TFC_ServoTicker, sum());
+                if (n == 5) {                       // mid-frame: two writes, the last one counts
+                    wait_ms(4);
+                    TFC_SetLineScanExposureTime(5000);
+                    TFC_SetLineScanExposureTime(20000);
+                }
+            }
+            fflush(stdout);
+            return 0;
+        }
+        """)
+    if isolate:
+        prog = dataclasses.replace(prog, isolate=True)
+    r = drive(prog, track="floor", time_limit_s=2.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    images = [line.split()[1:] for line in out.splitlines() if line.startswith("image ")]
+    t = {int(n): float(ts) for n, ts, _, _ in images}
+    ticker = {int(n): int(k) for n, _, k, _ in images}
+    light = {int(n): int(s) for n, _, _, s in images}
+    assert [round(t[n + 1] - t[n], 6) for n in range(2, 9)] == [0.01, 0.01, 0.01, 0.01, 0.02, 0.02, 0.02], t
+    assert [ticker[n + 1] - ticker[n] for n in range(2, 9)] == [1] * 7, ticker
+    assert abs(light[6] - light[5]) < 0.02 * light[5], light   # the frame in progress: its own exposure
+    assert light[7] > 1.4 * light[6], light                      # the next: 20 ms of light
+
+
 def test_the_example_builds_unchanged_and_laps():
     """examples/firmware/mbed/main.cpp (Serial, a Ticker counting TFC_Ticker[], a main loop on
     TFC_LineScanImageReady) laps the default track about as the Python line follower does."""

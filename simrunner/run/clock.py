@@ -10,7 +10,11 @@ Frame schedule: frame ``k`` (k = 0, 1, 2, ...) is at physics step ``round(k * pe
 (an exact multiple when the period is a whole number of steps). :meth:`LockstepClock.set_frame_period`
 changes the period (a line camera whose exposure the controller sets): the frame in progress then
 ends one new period after the last boundary (or after the current step, if that has passed) and
-later frames follow at the new period. At every frame boundary the
+later frames follow at the new period. A period that is to load at the next boundary instead, as a
+timer's period register written while it runs (``boundary_hook``, set by the owner: the Spinner's
+``set_exposure(..., next_frame=True)``), is loaded there: the hook runs right after that boundary's
+``on_frame``, before anything else at its step (a handler due then), and may call
+:meth:`set_frame_period`, which then anchors the new period at that boundary. At every frame boundary the
 clock calls ``on_frame(k, t_s, pose, command, row_command)`` once, whether or not the
 controller asked for an image; frame 0 is the initial state, called by :meth:`start`.
 ``command`` is the command in force at the boundary; ``row_command`` is the command the first
@@ -133,6 +137,8 @@ class LockstepClock:
         self.twist_fn: Callable[[], tuple[float, float, float]] | None = None
         self.boundary_twist: tuple[float, float, float] | None = None
         self._next_frame_step = self._frame_step(1)
+        # run once at the next frame boundary, after its on_frame (module docstring), then cleared
+        self.boundary_hook: Callable[[], None] | None = None
         self._command: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self._command_dirty = True
         self._motors: tuple[float, float] | None = None  # set_motors' duties, until a speed is set
@@ -432,6 +438,10 @@ class LockstepClock:
         self.last_progress_wall_s = _monotonic()
         if end is not None:
             self.finish(*end)
+        hook = self.boundary_hook
+        if hook is not None:  # (a period register loaded at this expiry: set_frame_period anchors here)
+            self.boundary_hook = None
+            hook()
         if self.finished is not None:
             self.check()
 

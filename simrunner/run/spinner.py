@@ -154,6 +154,8 @@ class Session:
         self._warned: set[str] = set()
         self.exposure_s = float(self.car.camera.exposure_s)  # set_exposure's value
         self.exposure_before: tuple[int, float] | None = None  # (frame, the exposure it had): set_exposure at it
+        self.exposure_next: float | None = None  # set_exposure(next_frame=True)'s value, loaded at the next boundary
+        self.exposure_loaded_at: int | None = None  # the boundary (frame) it was loaded at last
         self.free_running = False  # camera_free_running(): a linescan frame period is the exposure
         self.pixy2_tracker = None  # the Pixy2's line tracker (simrunner.run.pixy2), made on first use
         self.pixy2_frame: int | None = None  # the last frame the Pixy2 returned features of
@@ -439,8 +441,9 @@ class Spinner:
         if imager is not None:  # the physical camera (simrunner.sensors.imaging)
             exposure_s = session.exposure_s
             before = session.exposure_before
-            if latest and before is not None and before[0] == self._clock.frame_index:
-                exposure_s = before[1]  # set since this frame ended: the next one has it
+            frame = self._clock.frame_index
+            if before is not None and before[0] == frame and (latest or session.exposure_loaded_at == frame):
+                exposure_s = before[1]  # set since this frame ended (loaded at its end): the next one has it
             return self._expose(imager, pose, line, add_noise, exposure_s,
                                 self._clock.boundary_twist if latest else None)
         if line >= 0:  # one call (simrunner.sensors.line_row)
@@ -495,12 +498,20 @@ class Spinner:
                   normals=session.noise_rng if add_noise else None)
         return imager.line(pose, line, **kw) if line >= 0 else imager.frame(pose, **kw)
 
-    def set_exposure(self, seconds: float) -> None:
+    def set_exposure(self, seconds: float, *, next_frame: bool = False) -> None:
         """Set the camera's exposure (integration) time in seconds (``camera.exposure_s`` at
         the start). A ``linescan`` camera's frames are then ``seconds + readout_s`` apart,
         from the frame in progress on (as an SI pulse timer the code reprograms); an ``area``
         camera keeps its frame rate and exposes at most one frame period; the ``ideal``
-        camera stores the value and ignores it. No time passes."""
+        camera stores the value and ignores it. No time passes.
+
+        ``next_frame``: from the next frame on instead, as a timer's period register written
+        while the timer runs loads at its next expiry (a kit's: the KL25's PIT LDVAL, its TPM
+        MOD): the frame in progress keeps its period and its exposure; at its end the exposure
+        becomes ``seconds`` and the frame after it is integrated over it (and, ``linescan``, is
+        that long). Of several such calls before that end the last wins (one register); a call
+        without ``next_frame`` drops a value waiting to load. :meth:`get_exposure` gives the
+        exposure in force: the new one once loaded. C: ``spinner_set_exposure_next_frame``."""
         s = _finite("set_exposure", "seconds", seconds)
         cam = self._s.car.camera
         lo, hi = cam.exposure_range_s()
@@ -514,11 +525,36 @@ class Spinner:
         if _get_ident() != self._owner:
             raise self._foreign("set_exposure")
         session, clock = self._s, self._clock
+        if next_frame:
+            session.exposure_next = s  # (one register: the last write before the boundary wins)
+            clock.boundary_hook = self._load_exposure
+            return
+        if session.exposure_next is not None:
+            session.exposure_next = None
+            clock.boundary_hook = None
+        self._apply_exposure(s)
+
+    def _apply_exposure(self, s: float) -> None:
+        """The exposure ``s`` from the frame in progress on (``s`` validated)."""
+        session, clock = self._s, self._clock
         if session.exposure_before is None or session.exposure_before[0] != clock.frame_index:
             session.exposure_before = (clock.frame_index, session.exposure_s)  # the latest frame's
         session.exposure_s = s
+        cam = session.car.camera
         if cam.model == "linescan":
-            self._clock.set_frame_period(cam.frame_period_s(s, free_running=session.free_running))
+            clock.set_frame_period(cam.frame_period_s(s, free_running=session.free_running))
+
+    def _load_exposure(self) -> None:
+        """At a frame boundary (the clock's ``boundary_hook``): the exposure ``set_exposure(...,
+        next_frame=True)`` left waiting loads, for the frame that starts here; the frame that
+        ended keeps the one it had. One equal to the exposure in force changes nothing (the
+        timer's period goes on, its frames where they were)."""
+        session = self._s
+        s, session.exposure_next = session.exposure_next, None
+        if s is None or s == session.exposure_s:
+            return
+        self._apply_exposure(s)
+        session.exposure_loaded_at = self._clock.frame_index
 
     def camera_free_running(self) -> None:
         """The camera's SI pulses come from a free-running timer (a kit whose board driver reads

@@ -42,7 +42,7 @@ int main(void) {
     double start_s = spinner_param("button0_at", 0.1);
     while (spinner_get_time() < start_s) camera_pass();   /* the start button */
     exposure_s = EXPOSURE_US * 1e-6;
-    spinner_set_exposure(exposure_s);
+    spinner_set_exposure_next_frame(exposure_s);  /* (the library's LDVAL0: loads as the frame in progress ends) */
     float v_max = ((int)spinner_param("dip", 0.0) & 0x01) ? 3.0f : V_MAX_MPS;
     for (;;) {
         if (!camera_pass()) continue;

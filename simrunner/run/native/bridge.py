@@ -48,7 +48,8 @@ OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP
     OP_PARAM, OP_FAULT, OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, \
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
     OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK, OP_IRQ_MASK_WAIT, \
-    OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING, OP_EXIT_AT, OP_FREE_RUNNING = range(1, 37)
+    OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING, OP_EXIT_AT, OP_FREE_RUNNING, \
+    OP_SET_EXPOSURE_NEXT = range(1, 38)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
@@ -85,7 +86,7 @@ _PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a r
 _WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, OP_PARAM, OP_FAULT,
                       OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
                       OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK_WAIT,
-                      OP_PEND_WAIT, OP_EVERY_PENDING, OP_FREE_RUNNING))
+                      OP_PEND_WAIT, OP_EVERY_PENDING, OP_FREE_RUNNING, OP_SET_EXPOSURE_NEXT))
 
 
 class _Child:
@@ -391,6 +392,9 @@ class _Session:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(self._param(payload)))
         elif op == OP_SET_EXPOSURE:
             s.set_exposure(_D.unpack(payload)[0])
+            reply(_OK_EMPTY)
+        elif op == OP_SET_EXPOSURE_NEXT:  # the exposure from the next frame on (a kit's period register)
+            s.set_exposure(_D.unpack(payload)[0], next_frame=True)
             reply(_OK_EMPTY)
         elif op == OP_FREE_RUNNING:
             s.camera_free_running()

@@ -56,7 +56,7 @@ enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, O
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
        OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK,
        OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING, OP_EXIT_AT,
-       OP_FREE_RUNNING };
+       OP_FREE_RUNNING, OP_SET_EXPOSURE_NEXT };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -798,6 +798,13 @@ void spinner_set_exposure(double seconds) {
     if (!isfinite(seconds)) misuse("spinner_set_exposure(seconds=%g): expected a finite number", seconds);
     if (finished) return;
     call(OP_SET_EXPOSURE, &seconds, sizeof seconds, NULL, 0, NULL, 0);
+}
+
+void spinner_set_exposure_next_frame(double seconds) {
+    INIT();
+    if (!isfinite(seconds)) misuse("spinner_set_exposure_next_frame(seconds=%g): expected a finite number", seconds);
+    if (finished) return;
+    call(OP_SET_EXPOSURE_NEXT, &seconds, sizeof seconds, NULL, 0, NULL, 0);
 }
 
 void spinner_camera_free_running(void) {

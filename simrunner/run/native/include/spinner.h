@@ -71,7 +71,13 @@ int spinner_line_row(void);        /* the row that plays the real line camera (6
  * are then exposure + read-out apart (from the frame in progress on), an area camera keeps
  * its frame rate, the ideal camera ignores it (docs/camera.md). Out of range: an error. */
 void spinner_set_exposure(double seconds);
-double spinner_get_exposure(void);
+/* The exposure from the next frame on, as a timer's period register written while the timer runs
+ * loads at its next expiry (a kit's: the KL25's PIT LDVAL, TPM MOD): the frame in progress keeps
+ * its period and its exposure, the one after it is integrated over `seconds` (a linescan camera's:
+ * and lasts that long). Several calls before that frame's end: the last wins; spinner_set_exposure
+ * drops a value still waiting. No time passes; allowed in an interrupt handler (docs/camera.md). */
+void spinner_set_exposure_next_frame(double seconds);
+double spinner_get_exposure(void);  /* the exposure in force */
 /* The camera's SI pulses come from a free-running timer (a kit's board driver that reads each
  * image out while the next integrates, as the FRDM-TFC library's PIT): a linescan camera's
  * frames are then one exposure apart, not exposure + read-out (from the frame in progress on);

@@ -41,7 +41,8 @@ ByteQueue SDA_SERIAL_OUTGOING_QUEUE, SDA_SERIAL_INCOMING_QUEUE;
 static struct {
     int inited;
     double ms_counted;      /* simulated ms already added to the tickers */
-    double exposure_s;      /* the line camera's exposure (TFC_SetLineScanExposureTime) */
+    double exposure_s;      /* the exposure last written (TFC_SetLineScanExposureTime: PIT_LDVAL0) */
+    double floor_s;         /* the shortest the frame after the next one read can be (camera_service) */
     long long frame;        /* the camera frame read out last */
     double looked_s;        /* when the camera was last asked for a new frame */
     double next_look_s;     /* no new frame before then (camera_service) */
@@ -93,8 +94,11 @@ static void count_ticks(double now_s) {  /* (the library: SysTick_Handler counts
 /* The PIT interrupt's camera read-out (at `now`): the camera's latest frame once a new one is there
  * (one an exposure: the camera's frame period is the exposure), without waiting - on the board the
  * read-out runs beside the main loop, which goes on between two images. A frame found at a pass
- * was not there at the pass before (`looked_s`), so the next one is not due before one exposure
- * after that: the passes until then do not ask. */
+ * was not there at the pass before (`looked_s`), so the next one is not due before one period
+ * after that: the passes until then do not ask. That period is the exposure written last before
+ * the frame found ended (a new LDVAL loads at the PIT's expiry: TFC_SetLineScanExposureTime),
+ * which is no shorter than floor_s: the one written last before the frame read before, or one
+ * written since (a value written after the frame's end only makes the passes ask sooner). */
 static void camera_service(double now) {
     if (now < tfc.next_look_s || spinner_interrupts_disabled()) return;  /* (masked: no read-out) */
     uint8_t row[TFC_LINESCAN_IMAGE_SIZE];
@@ -105,7 +109,8 @@ static void camera_service(double now) {
         return;
     }
     tfc.frame = frame;
-    tfc.next_look_s = tfc.looked_s + tfc.exposure_s - 1e-9;
+    tfc.next_look_s = tfc.looked_s + tfc.floor_s - 1e-9;
+    tfc.floor_s = tfc.exposure_s;
     tfc.looked_s = now;
     for (size_t i = 0; i < TFC_LINESCAN_IMAGE_SIZE; i++) {
         uint16_t v = (uint16_t)((i < n ? row[i] : 0) << 4);  /* 8-bit grey -> 12-bit counts */
@@ -157,11 +162,12 @@ static void kit_init(void) {
     tfc.inited = 1;
     tfc.servo_rad = spinner_param("tfc_servo_rad", 0.40);
     tfc.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
-    tfc.exposure_s = TFC_DEFAULT_LINESCAN_EXPOSURE_TIME_uS * 1e-6;
+    tfc.exposure_s = tfc.floor_s = TFC_DEFAULT_LINESCAN_EXPOSURE_TIME_uS * 1e-6;
     /* The library's SI pulses come from PIT0, free-running at the exposure (TFC_LineScanCamera.c:
      * TFC_SetLineScanExposureTime writes PIT_LDVAL0; each PIT0 interrupt pulses SI and starts the
      * ADC read-out of the previous integration while the next integrates - TSL1401: integration
-     * runs from one SI to the next): one image an exposure, each ready a read-out after its SI. */
+     * runs from one SI to the next): one image an exposure, each ready a read-out after its SI.
+     * TFC_InitADCs writes LDVAL0 before it enables the timer: the first period is that one. */
     spinner_camera_free_running();
     spinner_set_exposure(tfc.exposure_s);
     tfc.ms_counted = floor(spinner_get_time() * 1000.0);
@@ -296,10 +302,19 @@ float TFC_ReadBatteryVoltage(void) {
     return (float)(round(sense_v / TFC_ADC_FULL_SCALE_V * TFC_ADC_MAX_CODE) / TFC_ADC_MAX_CODE * 3.0);
 }
 
+/* The library writes PIT_LDVAL0 (TFC_LineScanCamera.c) while PIT0 runs: the KL25 loads a new LDVAL
+ * at the timer's next expiry, it does not restart the period (KL25 Sub-Family Reference Manual,
+ * KL25P80M48SF0RM, PIT chapter 32, the Timer Load Value Register PIT_LDVALn, field TSV: "Writing a
+ * new value to this register will not restart the timer; instead the value will be loaded after
+ * the timer expires"). So the frame in progress ends on the old period and keeps its exposure (its
+ * brightness); the next SI starts an integration of the new exposure, one period long. LDVAL is one
+ * register: of several writes in a frame the last loads. The simulator loads it at the camera's
+ * next frame boundary (spinner_set_exposure_next_frame), whatever the program does meanwhile -
+ * also when it calls the kit no more in that frame, in a handler (--isr) or with --mcu-time. */
 void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {
     tfc.exposure_s = clampf(TimeIn_uS * 1e-6, 1e-5, 1.0);
-    spinner_set_exposure(tfc.exposure_s);
-    tfc.next_look_s = 0.0;  /* the frame in progress ends on the new period */
+    if (tfc.exposure_s < tfc.floor_s) tfc.floor_s = tfc.exposure_s;
+    spinner_set_exposure_next_frame(tfc.exposure_s);
 }
 
 void InitByteQueue(ByteQueue *BQ, uint16_t Size, uint8_t *Storage) {

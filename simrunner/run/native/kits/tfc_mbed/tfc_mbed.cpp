@@ -55,7 +55,10 @@ static struct {
     double wait_until_s;     /* main()'s own time: where its waits and reads have got to */
     double pass_end_s;       /* the time when the last of them ended */
     double servo_frame_s;    /* the servo frame: the camera's read-out period */
-    double servo_t0_s;       /* when servo frames started to count */
+    double servo_t0_s;       /* when servo frames started to count at servo_frame_s */
+    double servo_frames_t0;  /* servo frames (TPM1 overflows) counted before servo_t0_s */
+    double next_frame_s;     /* TFC_SetLineScanExposureTime's frame, loaded at the next overflow (0: none) */
+    double next_frame_at_s;  /* that overflow */
     long long frame;         /* the camera frame read out last */
     double pulse_min_s, pulse_max_s;  /* TFC_InitServos' range of positions -1..1 */
     double servo_rad, servo_offset_rad;
@@ -84,10 +87,22 @@ static void send_commands(void) {
     spinner_set_motors(k.hbridge ? k.duty_a : 0.0f, k.hbridge ? k.duty_b : 0.0f);
 }
 
+/* A servo frame written while TPM1 counts loads at its next overflow (TFC_SetLineScanExposureTime):
+ * from then on the frames are that long. */
+static void load_servo_frame(double now_s) {
+    if (k.next_frame_s > 0 && now_s >= k.next_frame_at_s - 1e-9) {
+        k.servo_frames_t0 += round((k.next_frame_at_s - k.servo_t0_s) / k.servo_frame_s);
+        k.servo_t0_s = k.next_frame_at_s;
+        k.servo_frame_s = k.next_frame_s;
+        k.next_frame_s = 0.0;
+    }
+}
+
 /* The servo frames and the Ticker/Timeout handlers due at k.now_s, earliest first. */
 static void run_due(void) {
+    load_servo_frame(k.now_s);
     if (k.servo_frame_s > 0) {
-        double frames = floor((k.now_s - k.servo_t0_s) / k.servo_frame_s + 1e-9);
+        double frames = k.servo_frames_t0 + floor((k.now_s - k.servo_t0_s) / k.servo_frame_s + 1e-9);
         if (frames > servo_ticker) servo_ticker = (uint32_t)frames;
     }
     for (;;) {
@@ -119,6 +134,7 @@ static void init_servos(double pulse_min_s, double pulse_max_s, double frame_s) 
     k.pulse_min_s = pulse_min_s, k.pulse_max_s = pulse_max_s;
     k.servo_frame_s = clampd(frame_s, 1e-3, 1.0);
     k.servo_t0_s = k.now_s;
+    k.servo_frames_t0 = 0.0, k.next_frame_s = 0.0;
     servo_ticker = 0;
     /* TFC.cpp's TPM1_IRQHandler, at each overflow of the free-running servo timer, raises SI and
      * starts the ADC's read-out of the integration gone while the next integrates: one image a
@@ -350,9 +366,23 @@ void TFC_InitServos(float ServoPulseWidthMin, float ServoPulseWidthMax, float Se
     init_servos(ServoPulseWidthMin, ServoPulseWidthMax, ServoPeriod);
 }
 
+/* Not in the mbed library: its servo frame, the camera's period, is set by TFC_InitServos, which stops
+ * TPM1 (TPM1->SC = 0) before it writes MOD, and a MOD written with the counter off takes the value
+ * at once (KL25 Sub-Family Reference Manual, KL25P80M48SF0RM, 31.4.8.1 MOD register update; the kit's
+ * init_servos). The kit adds the CodeWarrior library's name for the period as a write of TPM1's MOD
+ * while the counter runs: the KL25 then updates MOD only as the counter changes from MOD to zero
+ * (31.4.8.1, up counting), the overflow that ends the frame in progress. So that frame keeps its
+ * period and its exposure (its brightness); the next one is integrated over the new frame and
+ * lasts it. One register: of several calls in a frame the last loads. The simulator loads it at
+ * the camera's next frame boundary (spinner_set_exposure_next_frame), TFC_ServoTicker counting on
+ * across the change. */
 void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {
     tfc_mbed_start();
-    init_servos(k.pulse_min_s, k.pulse_max_s, TimeIn_uS * 1e-6);
+    load_servo_frame(k.now_s);  /* (one written before an overflow gone by: loaded there) */
+    if (k.next_frame_s <= 0.0)  /* the overflow that ends the frame in progress */
+        k.next_frame_at_s = k.servo_t0_s + (floor((k.now_s - k.servo_t0_s) / k.servo_frame_s + 1e-9) + 1.0) * k.servo_frame_s;
+    k.next_frame_s = clampd(TimeIn_uS * 1e-6, 1e-3, 1.0);
+    spinner_set_exposure_next_frame(k.next_frame_s);
 }
 
 volatile uint8_t *tfc_mbed_image_ready(void) { return &image_ready; }

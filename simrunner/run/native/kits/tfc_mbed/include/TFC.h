@@ -38,7 +38,9 @@ float TFC_ReadPot(uint8_t Channel);            /* --param pot0/pot1 (-1..1) */
 /* The battery sense input in volts (the library returns the ADC's 0..3 V, its divider factor
  * commented out): --param battery_v (7.2) x 10k / (47k + 10k). */
 float TFC_ReadBatteryVoltage();
-/* Not in the mbed library (the CodeWarrior one's; some copies add it): the read-out period. */
+/* Not in the mbed library (the CodeWarrior one's name): the servo frame, the camera's read-out period,
+ * written as TPM1's MOD while it counts - it loads at the overflow that ends the frame in progress
+ * (the next image is still of the old frame; the one after it of the new). */
 void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS);
 void TFC_InitLineScanCamera();
 void TFC_InitADC_System();
