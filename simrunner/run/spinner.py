@@ -786,3 +786,4 @@ class Spinner:
     addNoise = add_noise
     setExposure = set_exposure
     getExposure = get_exposure
+    cameraFreeRunning = camera_free_running
