@@ -24,6 +24,18 @@ def test_a_fixed_cost_per_call_passes_in_simulated_time_deterministically():
     assert gaps(mcu_time=0.001) == [0.004, 0.002, 0.004, 0.002]  # half steps carried to the next call
 
 
+def test_the_thesiss_camel_case_names_are_charged_as_their_methods():
+    """``getTime``, ``getImage``, ... (the thesis's C++ names) are the same calls: each lets the
+    controller's time pass first (they let none: the charge wrapped the snake_case names only)."""
+    def gaps(name):
+        times = []
+        drive(lambda s: times.extend(getattr(s, name)() for _ in range(3)), track="floor", time_limit_s=5,
+              mcu_time=0.05)
+        return [round(b - a, 9) for a, b in zip(times, times[1:])]
+
+    assert gaps("getTime") == gaps("get_time") == [0.052] * 2
+
+
 def test_measured_processing_time_makes_a_slow_controller_miss_frames():
     def main(s):
         while True:
