@@ -936,6 +936,56 @@ def test_exposure_from_c_and_cpp_sets_the_line_cameras_frame_period(tmp_path, tr
     assert "cpp exposure 0.0095" in capfd.readouterr().out
 
 
+FREE_RUNNING_CPP = """\
+    #include <cstdio>
+    #include "spinner.hpp"
+    int main() {
+        Spinner s;
+        s.cameraFreeRunning();
+        s.setExposure(0.0095);
+        s.getImage(s.lineRow());
+        double t0 = s.getTime();
+        int frames = 0;
+        while (s.getTime() - t0 < 2.0 - 1e-9) {
+            s.getImage(s.lineRow());
+            frames++;
+        }
+        std::printf("frames %d period %.6f\\n", frames, (s.getTime() - t0) / frames);
+        std::fflush(stdout);
+        return 0;
+    }
+    """
+
+
+def _free_running_py(s):  # FREE_RUNNING_CPP through Python's camelCase names
+    s.cameraFreeRunning()
+    s.setExposure(0.0095)
+    s.getImage(s.line_row)
+    t0, frames = s.getTime(), 0
+    while s.getTime() - t0 < 2.0 - 1e-9:
+        s.getImage(s.line_row)
+        frames += 1
+    print(f"frames {frames} period {(s.getTime() - t0) / frames:.6f}", flush=True)
+
+
+@pytest.mark.parametrize("lang", ["c++", "c++ isolated", "python"])
+def test_camera_free_running_from_cpp_gives_frames_one_exposure_apart(tmp_path, track, capfd, lang):
+    """spinner.hpp's cameraFreeRunning (spinner_camera_free_running; Python's camelCase alias
+    too): a linescan camera's frames are then one exposure apart, 211 in 2 s at 9.5 ms (without
+    it 200, exposure + read-out: tests/test_kit_tfc.py). Before, spinner.hpp had no such member
+    (the program did not compile)."""
+    if lang == "python":
+        prog = _free_running_py
+    else:
+        prog = build_program([str(write(tmp_path, "free.cpp", FREE_RUNNING_CPP))])
+        prog = dataclasses.replace(prog, isolate=lang.endswith("isolated"))
+    r = drive(prog, track=track, time_limit_s=3.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    frames, period = int(out.split("frames ")[1].split()[0]), float(out.split(" period ")[1].split()[0])
+    assert frames == 211 and period == pytest.approx(0.0095, abs=2e-5), out  # (frames on 2-ms steps)
+
+
 @pytest.mark.parametrize("isolate", [False, True])
 def test_a_spinner_call_from_another_thread_is_reported_not_silent(tmp_path, isolate):
     """Issue 50 (fault injection): a call from a thread of the program's own returned 0 in

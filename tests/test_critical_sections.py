@@ -864,8 +864,8 @@ def test_nvic_pending_bits_clear_and_order_as_the_nvic_does(tmp_path, steps, doe
 
 # -- NVIC_GetPendingIRQ of an expiry held by __disable_irq or a running handler (--kit tfc) ---------
 HELD_PENDING = PIT_AT_1KHZ + textwrap.dedent("""\
+        __disable_irq();                                       /* (--mcu-time: handlers due may run first) */
         int before = ticks;
-        __disable_irq();
         if (NVIC_GetPendingIRQ(PIT_IRQn)) return 99;           /* no time passed while masked: none */
         for (int k = 0; k < 4; k++) TFC_Task();                /* expiries held: one pending bit */
         if (ticks != before) return 98;
@@ -921,7 +921,8 @@ PENDING_IN_A_HANDLER = textwrap.dedent("""\
     #include "TFC/TFC.h"
     volatile int pit_on, pit_calls, reads, pend;
     static void read_pit(void) {
-        if (!pit_on) return;
+        if (!pit_on || !pit_calls) return;                  /* (from its first expiry: with --mcu-time the
+                                                             * step its set-up is read at may pass first) */
         reads++;
         pend += NVIC_GetPendingIRQ(PIT_IRQn);                /* the PIT is due at this step, after this one */
     }
@@ -965,6 +966,52 @@ def test_nvic_get_pending_irq_in_a_handler_reports_another_irq_due_after_it(tmp_
         assert r.outcome == "controller_error" and re.search(r"status 12\b", r.message), (isolate, r.message)
 
 
+LOOK_IN_A_LOOK = textwrap.dedent("""\
+    #include "derivative.h"
+    #include "spinner.h"
+    #include "TFC/TFC.h"
+    volatile int pit_calls, twice;
+    static double last_s = -1.0;
+    void PIT_IRQHandler(void) {
+        PIT_TFLG0 = PIT_TFLG_TIF_MASK;
+        double t = spinner_now();                              /* (the handler's time) */
+        twice += t == last_s;
+        last_s = t;
+        pit_calls++;
+    }
+    static void tick(void) { (void)NVIC_GetPendingIRQ(PIT_IRQn); }  /* the kit looks at the registers */
+    int main(void) {
+        TFC_Init();
+        spinner_every(0.002, tick);
+        for (int k = 0; k < CALLS; k++) spinner_get_exposure();  /* where in a step the charge is */
+        TFC_Task();
+        SIM_SCGC6 |= SIM_SCGC6_PIT_MASK;
+        PIT_MCR = 0;
+        PIT_LDVAL0 = 48000 - 1;                                /* 500 Hz: one call a 2-ms step */
+        PIT_TCTRL0 = PIT_TCTRL_TIE_MASK | PIT_TCTRL_TEN_MASK;
+        NVIC_EnableIRQ(PIT_IRQn);
+        for (int k = 0; k < 10; k++) TFC_Task();
+        return pit_calls >= 8 && twice == 0 ? 12 : 20 + twice;
+    }
+    """)
+
+
+@pytest.mark.parametrize("calls", [0, 1, 2, 3])
+def test_a_timer_started_while_a_handler_looks_at_the_registers_starts_once(tmp_path, calls):
+    """--kit tfc with --mcu-time 0.5 ms (a quarter step a call): the look that starts the PIT asks
+    the simulator for the time, which charges the program's time first; where that crosses a step,
+    a program's 2-ms interrupt due then runs inside the look, and its NVIC_GetPendingIRQ looks at the
+    registers again. That look took the PIT being started for one started again and started it a
+    second time: its handler ran twice a step (14 calls in 7 steps). Now one call a step, wherever
+    in a step the charge falls (0 to 3 calls more before the set-up). In process and isolated."""
+    src = tmp_path / "look_in_a_look.c"
+    src.write_text(LOOK_IN_A_LOOK)
+    program = build_program([str(src)], kit="tfc", defines=[f"CALLS={calls}"])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0, mcu_time=0.0005)
+        assert r.outcome == "controller_error" and re.search(r"status 12\b", r.message), (isolate, r.message)
+
+
 ISR_HELD = textwrap.dedent("""\
     #include "derivative.h"
     #include "TFC/TFC.h"
@@ -973,8 +1020,8 @@ ISR_HELD = textwrap.dedent("""\
     int main(void) {
         TFC_Init();
         for (int k = 0; k < 3; k++) TFC_Task();
+        __disable_irq();                                       /* (--mcu-time: handlers due may run first) */
         int before = ticks;
-        __disable_irq();
         if (NVIC_GetPendingIRQ(PIT_IRQn)) return 99;           /* no time passed while masked: none */
         for (int k = 0; k < 4; k++) TFC_Task();                /* its calls held: one pending bit */
         int inside = NVIC_GetPendingIRQ(PIT_IRQn);

@@ -24,6 +24,18 @@ def test_a_fixed_cost_per_call_passes_in_simulated_time_deterministically():
     assert gaps(mcu_time=0.001) == [0.004, 0.002, 0.004, 0.002]  # half steps carried to the next call
 
 
+def test_the_thesiss_camel_case_names_are_charged_as_their_methods():
+    """``getTime``, ``getImage``, ... (the thesis's C++ names) are the same calls: each lets the
+    controller's time pass first (they let none: the charge wrapped the snake_case names only)."""
+    def gaps(name):
+        times = []
+        drive(lambda s: times.extend(getattr(s, name)() for _ in range(3)), track="floor", time_limit_s=5,
+              mcu_time=0.05)
+        return [round(b - a, 9) for a, b in zip(times, times[1:])]
+
+    assert gaps("getTime") == gaps("get_time") == [0.052] * 2
+
+
 def test_measured_processing_time_makes_a_slow_controller_miss_frames():
     def main(s):
         while True:
@@ -84,6 +96,71 @@ def test_a_c_program_reports_its_own_cpu_time(tmp_path):
     count = lambda r: int(next(t for t in reversed(r.log.data_text) if t).split()[1])  # noqa: E731
     assert plain.outcome == "controller_returned", plain.message
     assert count(plain) >= 45 and count(slow) < 0.7 * count(plain)
+
+
+def test_camera_free_running_is_charged_as_set_exposure_is():
+    """camera_free_running (the kits call it at their init, beside set_exposure) lets the
+    controller's time pass first, as every call does (it let none)."""
+    def gap(call):
+        times = []
+
+        def main(s):
+            times.append(s.get_time())
+            call(s)
+            times.append(s.get_time())
+
+        drive(main, track="floor", time_limit_s=5, mcu_time=0.05)
+        return round(times[1] - times[0], 9)
+
+    assert gap(lambda s: s.camera_free_running()) == gap(lambda s: s.set_exposure(0.0195)) == 0.102
+
+
+FREE_RUNNING_C = """\
+    #include <stdio.h>
+    #include <time.h>
+    #include "spinner.h"
+    static double cpu(void) {
+        struct timespec ts;
+        clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+        return ts.tv_sec + 1e-9 * ts.tv_nsec;
+    }
+    int main(void) {
+        double t0 = spinner_get_time();
+        spinner_camera_free_running();
+        double t1 = spinner_get_time();
+        spinner_set_exposure(0.0195);
+        double t2 = spinner_get_time();
+        double c0 = cpu();
+        while (cpu() - c0 < 0.03) {}  /* 30 ms of work */
+        spinner_camera_free_running();
+        printf("gaps %.4f %.4f after work %.4f\\n", t1 - t0, t2 - t1, spinner_now() - t2);
+        fflush(stdout);
+        return 0;
+    }
+    """
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+@pytest.mark.parametrize("mcu_time", [0.05, "measured"])
+def test_a_c_programs_camera_free_running_is_charged_as_its_other_calls(tmp_path, capfd, mcu_time, isolate):
+    """spinner_camera_free_running lets the program's time pass first, as spinner_set_exposure
+    does: 50 ms a call fixed (it let none: 52 ms between two get_times around it, not 102), the
+    measured 30 ms of work before it (it was charged at the next call only)."""
+    import dataclasses
+
+    from simrunner.run.native import build_program
+
+    src = tmp_path / "free.c"
+    src.write_text(textwrap.dedent(FREE_RUNNING_C))
+    prog = dataclasses.replace(build_program([str(src)]), isolate=isolate)
+    r = drive(prog, track="floor", time_limit_s=5.0, mcu_time=mcu_time)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    gaps = [float(x) for x in out.split("gaps ")[1].replace("after work", "").split()]
+    if mcu_time == 0.05:
+        assert gaps == [0.102, 0.102, 0.05], out
+    else:
+        assert gaps[2] >= 0.028, out  # the work's 30 ms, in whole 2-ms steps
 
 
 def test_bad_settings_are_one_line_errors():

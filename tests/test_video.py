@@ -1,6 +1,7 @@
 """Debug video: frame layout, frame count and size, written off the control path."""
 from __future__ import annotations
 
+import shutil
 import textwrap
 from pathlib import Path
 
@@ -152,6 +153,69 @@ def test_camera_rates_are_capped_at_30_video_fps(tmp_path):
         rec = VideoRecorder(tmp_path / name, camera_fps=60.0 if every == 2 else 50.0, render=None, **kw)
         assert rec.every == every
         rec.discard()  # (its threads end: a later test of this process may count threads)
+
+
+def _numbered(k: int) -> np.ndarray:
+    """A camera image showing ``k`` (0..255) in binary: eight 16-pixel stripes, white for a 1."""
+    bits = np.repeat([(k >> b) & 1 for b in range(8)], 16).astype(np.uint8) * 255
+    return np.tile(bits, (128, 1))
+
+
+def _numbers_shown(path) -> list[int]:
+    """The number of :func:`_numbered` each frame of the video at ``path`` shows."""
+    x0, _, _, y1 = Layout.for_frame((128, 128), None).camera
+    cap = cv2.VideoCapture(str(path))
+    shown = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        px = [frame[y1 // 2, x0 + (16 * b + 8) * 3].mean() for b in range(8)]
+        shown.append(sum(1 << b for b, v in enumerate(px) if v > 128))
+    cap.release()
+    return shown
+
+
+@pytest.mark.parametrize("period_s", [0.0195, 0.1, 0.0045], ids=["free-running", "slow", "fast"])
+def test_each_video_frame_shows_the_camera_frame_of_its_time(tmp_path, period_s):
+    """The video (25 fps: a 50 fps camera's at the start) plays in simulated time whatever the
+    camera's period: its frame j shows the latest camera frame at or before j / 25 s - frames
+    one exposure apart (19.5 ms, as a kit's free-running camera gives them; the video took every
+    second one, 2.5 % too many: it played slow), slower ones held, faster ones left out. The
+    frames' times are whole 2-ms steps, as the clock gives them."""
+    rec = VideoRecorder(tmp_path / "v.mp4", camera_fps=50.0, render=None)
+    state = dict(speed=0, steer=0, speed_cmd=0, steer_cmd=0, lap=0, off_track=False)
+    times = [round(k * period_s / 0.002) * 0.002 for k in range(int(2.0 / period_s) + 1)]
+    for k, t in enumerate(times):
+        rec.frame_boundary(k, t, Pose2(), state)
+        rec.note_image(_numbered(k % 256), -1)
+    assert rec.close() == tmp_path / "v.mp4"
+    expected = [max(k for k, t in enumerate(times) if t <= j / 25 + 1e-9) % 256
+                for j in range(int(times[-1] * 25 + 1e-9) + 1)]
+    assert _numbers_shown(tmp_path / "v.mp4") == expected
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+@pytest.mark.parametrize("kit, source", [("tfc", "main.c"), ("tfc-mbed", "mbed/main.cpp")])
+def test_a_free_running_kits_video_plays_in_the_runs_simulated_time(tmp_path, kit, source):
+    """The TFC kits' example firmware: images one 19.5-ms exposure apart (the PIT's, the servo
+    frame's: 51.3 a second), a video of 25 fps whose every frame is 40 ms of simulated time: as
+    long as the run, to a frame (it took every second image: 2.5 % longer than the run)."""
+    import av
+
+    from simrunner.run.native import build_program
+
+    program = build_program([str(EXAMPLES / "firmware" / source)], kit=kit)
+    r = drive(program, time_limit_s=6.0, video=tmp_path / "v.mp4")
+    assert r.outcome == "timeout", r.message
+    t_s = np.asarray(r.log.t_s)
+    assert (t_s[-1] - t_s[-101]) / 100 == pytest.approx(0.0195)  # the last 100 images
+    with av.open(str(tmp_path / "v.mp4")) as video:
+        stream = video.streams.video[0]
+        frames, duration_s = stream.frames, float(stream.duration * stream.time_base)
+        rate = stream.average_rate
+    assert rate == 25 and frames == int(t_s[-1] * 25 + 1e-9) + 1, (frames, t_s[-1])
+    assert abs(duration_s - r.sim_time_s) <= 1 / 25, (duration_s, r.sim_time_s)
 
 
 def test_a_left_out_frame_does_not_change_the_frame_before_it(tmp_path):

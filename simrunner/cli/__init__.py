@@ -239,7 +239,8 @@ def build_options(command):
 @click.option("--video", default=None, metavar="PATH.mp4", help="Write the debug video.")
 @click.option("--video-fps", "video_fps", default=None, type=click.FloatRange(min=0, max=1000, min_open=True),
               metavar="FPS", help="The debug video's highest frame rate (default 30: every second frame of "
-                                  "the 50 fps camera; 50: every frame, slower to write).")
+                                  "the 50 fps camera; 50: every frame, slower to write). It plays in "
+                                  "simulated time, whatever period the camera's frames come at.")
 @click.option("--csv", default=None, metavar="PATH", help="Write telemetry (one row per camera frame).")
 @click.option("--plot", default=None, metavar="PATH.png", help="Write path/speed/steering plot.")
 @click.option("--summary", default=None, metavar="PATH.json", help="Write the run summary as JSON.")

@@ -13,9 +13,13 @@ encoding). The queue is bounded, so a slow encoder slows the run instead of fill
 The file is written as ``NAME.partial.mp4`` and renamed on :meth:`VideoRecorder.close`, which
 also runs when the controller crashed.
 
-Frame rate: every camera frame up to ``max_fps`` (30); above that every ``ceil(fps /
-max_fps)``-th frame (the default 50 fps camera: every second frame, a 25 fps video). bench/bench_video.py measures
-the video's cost.
+Frame rate: the camera's at the run's start (the car file's) up to ``max_fps`` (30); above that
+the camera's over ``ceil(fps / max_fps)`` (the default 50 fps camera: a 25 fps video). Each video
+frame shows the camera frame of its time - the latest at or before it - so the video plays in
+the run's simulated time whatever period the camera's frames come at: frames one exposure apart
+(a kit's free-running camera), an exposure the controller sets. The default camera's video shows
+every second frame; frames coming faster are left out where the video's time needs, slower ones
+held for more than one video frame. bench/bench_video.py measures the video's cost.
 """
 from __future__ import annotations
 
@@ -42,8 +46,9 @@ class VideoRecorder:
 
     ``render(pose) -> (H, W) uint8`` draws the camera view when the controller took no image
     in a frame; with ``view_state``, ``render(pose, view)`` gets what ``view_state()`` returned
-    at the frame's start (the writer thread draws later: e.g. the exposure then in force). ``camera_fps``: frame rate of the camera; the video keeps every
-    ``ceil(camera_fps / max_fps)``-th frame (``max_fps``: the video's highest frame rate, fps). ``raster``: the track's ``TrackRaster`` (top-down view), shaded
+    at the frame's start (the writer thread draws later: e.g. the exposure then in force). ``camera_fps``: frame rate of the camera at the start; the video's
+    is ``camera_fps / every``, ``every = ceil(camera_fps / max_fps)`` (``max_fps``: the video's highest frame
+    rate, fps), and its frame ``j`` shows the latest camera frame at or before ``j / fps`` s (module docstring). ``raster``: the track's ``TrackRaster`` (top-down view), shaded
     by ``lighting`` (a ``worlds.lighting.TrackLighting``) when it is not the default hall.
     ``umask``: the file-creation mask the file is written with (None: the process's at the opening).
     """
@@ -76,7 +81,8 @@ class VideoRecorder:
         self.default_row = line_row
         self._queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self._error: BaseException | None = None
-        self._pending: FrameRecord | None = None
+        self._pending: FrameRecord | None = None  # the latest camera frame, until the next one
+        self._slot = 0  # the next video frame (at self._slot / self.fps s)
         self._frame = -1
         self._text: list[str] = []
         self._text_frame = -2
@@ -93,13 +99,12 @@ class VideoRecorder:
 
     # -- main thread -------------------------------------------------------------------
     def frame_boundary(self, frame: int, t_s: float, pose, state: dict) -> None:
-        """Called at every camera frame; records every ``every``-th one (what the controller
-        notes in the frames between goes to no frame, but its line, text and processed lines
+        """Called at every camera frame (``t_s``: its simulated time). The frame before it goes
+        to the video frames whose time is from its own to this one's (none: it is left out;
+        what the controller noted in it goes to no frame, but its line, text and processed lines
         stay shown until it notes new ones)."""
         self._frame = frame
-        self._flush_pending()
-        if frame % self.every:
-            return
+        self._flush_pending(t_s)
         self._pending = FrameRecord(frame, t_s, pose, state, line_row=self._last_row)
         if self._view_state is not None:
             self._pending.view = self._view_state()
@@ -117,7 +122,7 @@ class VideoRecorder:
             self._last_row = line
         row = self.default_row if self._last_row < 0 else self._last_row
         rec = self._pending
-        if rec is None:  # a frame the video leaves out: only its line is kept
+        if rec is None:  # (before the first frame)
             self._last_line = (img if line >= 0 else img[row:row + 1]).copy()
             return
         img = img.copy()
@@ -144,16 +149,30 @@ class VideoRecorder:
             self._lines, self._lines_frame = [], self._frame
         self._lines.extend(np.array(arr, copy=True))
 
-    def _flush_pending(self) -> None:
+    def _flush_pending(self, next_s: float | None) -> None:
+        """The pending camera frame to the video frames it shows: those from its time to
+        ``next_s``, the next camera frame's (None: the run's end, only one at its own time)."""
         rec = self._pending
         if rec is None:
             return
         self._pending = None
+        shows = self._slots_until(rec.t_s if next_s is None else next_s, inclusive=next_s is None)
+        if shows == 0:
+            return
         rec.text = tuple(self._text)
         rec.lines = np.stack(self._lines) if self._lines else None
         if rec.line is None and self._last_line is not None:
             rec.line = self._last_line
-        self._put(rec)
+        self._put((rec, shows))
+
+    def _slots_until(self, t_s: float, inclusive: bool) -> int:
+        """Take the video frames from the next one due before ``t_s`` (at or before, when
+        ``inclusive``; to a microsecond: the frames' times are whole physics steps); how many."""
+        limit = t_s + 1e-6 if inclusive else t_s - 1e-6
+        first = self._slot
+        while self._slot / self.fps < limit:
+            self._slot += 1
+        return self._slot - first
 
     def _failure(self) -> SimError:
         """The one line of the writer's fault (its own when it is a SimError: it names the file)."""
@@ -171,7 +190,7 @@ class VideoRecorder:
 
         Returns the path, or None if no frame was recorded (then no file is left)."""
         try:
-            self._flush_pending()
+            self._flush_pending(None)
         finally:
             self._queue.put(None)
             self._thread.join()
@@ -207,10 +226,11 @@ class VideoRecorder:
         composer = None
         try:
             while True:
-                rec = self._queue.get()
+                item = self._queue.get()
                 self._queue.task_done()  # (drain() waits for the frames taken before this one)
-                if rec is None:
+                if item is None:
                     return
+                rec, shows = item
                 if self._error is not None:
                     continue
                 try:
@@ -221,7 +241,9 @@ class VideoRecorder:
                         rec.line = rec.image[rec.line_row:rec.line_row + 1]
                     if composer is None:
                         composer = self._composer(rec.image.shape)
-                    self._frames.put(self._writer.yuv(composer.frame(rec)))  # (converted while in the cache)
+                    yuv = self._writer.yuv(composer.frame(rec))  # (converted while in the cache)
+                    for _ in range(shows):  # (a frame held over several of the video's)
+                        self._frames.put(yuv)
                 except BaseException as exc:  # keep draining the queue; reported by close()
                     self._error = exc
         finally:

@@ -23,10 +23,12 @@ import functools
 import math
 import time
 
-#: The Spinner methods a controller calls (each charged on entry, the clock restarted on exit).
+#: The Spinner methods a controller calls (each charged on entry, the clock restarted on exit; their
+#: camelCase aliases, the thesis's names, too).
 TIMED_METHODS = ("set_servo", "set_speed", "set_speed_and_servo", "set_motors", "get_image", "get_speed", "get_position",
                  "get_distance", "get_scan", "get_encoder", "get_gyro", "get_accel", "get_time", "sleep",
-                 "add_data", "add_noise", "set_exposure", "get_exposure", "param", "every", "latest_image",
+                 "add_data", "add_noise", "set_exposure", "get_exposure", "camera_free_running", "param", "every",
+                 "latest_image",
                  "disable_interrupts", "enable_interrupts")
 
 

@@ -193,7 +193,7 @@ def _rebuild_video(log: RunLog, path, track, car, laps: int, max_fps: float | No
     path = Path(path)
     path.with_name(path.stem + ".partial.mp4").unlink(missing_ok=True)  # the stuck run's
     camera = Camera(car.camera, track)
-    video = VideoRecorder(path, camera_fps=car.camera.fps_hz, render=camera.render,
+    video = VideoRecorder(path, camera_fps=1.0 / car.camera.frame_period_s(), render=camera.render,
                           **({} if max_fps is None else {"max_fps": max_fps}),
                           raster=track.raster, laps=laps, line_row=car.camera.default_row,
                           car_length_m=car.chassis.wheelbase_m + 0.05, car_width_m=car.chassis.track_m)

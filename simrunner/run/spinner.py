@@ -34,6 +34,7 @@ car) is ``camera.default_row``: the row that plays the real line camera.
 from __future__ import annotations
 
 import contextvars
+import inspect
 import math
 import os
 import sys
@@ -264,6 +265,9 @@ class Spinner:
 
             for name in TIMED_METHODS:
                 setattr(self, name, timed(getattr(self, name), session.mcu))
+            for alias, name in _ALIASES:  # the thesis's names call the same charged methods
+                if name in TIMED_METHODS:
+                    setattr(self, alias, getattr(self, name))
 
     # -- configuration ---------------------------------------------------------------
     def default_diff_norm(self, speed_mps: float, steer_rad: float) -> float:
@@ -822,3 +826,9 @@ class Spinner:
     addNoise = add_noise
     setExposure = set_exposure
     getExposure = get_exposure
+    cameraFreeRunning = camera_free_running
+
+
+# (alias, method) of the camelCase aliases above: --mcu-time charges them as their methods
+_ALIASES = tuple((alias, fn.__name__) for alias, fn in vars(Spinner).items()
+                 if inspect.isfunction(fn) and fn.__name__ != alias)

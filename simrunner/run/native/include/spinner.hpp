@@ -207,6 +207,10 @@ class Spinner {
     }
     void setExposure(double seconds) { spinner_set_exposure(seconds); }
     double getExposure() { return spinner_get_exposure(); }
+    // The camera's SI pulses come from a free-running timer (a kit's board driver reading each
+    // image out while the next integrates): a linescan camera's frames are then one exposure
+    // apart, not exposure + read-out (spinner_camera_free_running).
+    void cameraFreeRunning() { spinner_camera_free_running(); }
     void sleep(double seconds) { spinner_sleep(seconds); }
 
     void addData(const std::vector<std::string> &data) {

@@ -464,6 +464,7 @@ static double phase_at(int i, const struct phase *f, uint32_t c, int down) {
 }
 
 static double handler_s = -1.0;  /* the time of the kit's running handler (fire, take; else -1) */
+static int starting;  /* start() waits for the simulator's time (sync: a look asked meanwhile) */
 
 /* Start timer i's interrupt: every period_s from the time the simulator reads the request
  * (spinner_every). On the board one write (TEN, CMOD) starts the counter and its interrupt, and an
@@ -512,7 +513,12 @@ static void start(int i, double period_s, int restart, int at_expiry) {
     t->next_period_s = first_s != period_s ? period_s : 0.0;
     unsigned mine = ++t->starts;
     if (!follow) return;
-    double armed_s = handler_s >= 0.0 ? handler_s : spinner_now();
+    double armed_s = handler_s;
+    if (armed_s < 0.0) {
+        starting = 1;
+        armed_s = spinner_now();
+        starting = 0;
+    }
     if (!k->on || t->starts != mine) return;  /* (stopped or started again by a handler run meanwhile) */
     k->start_s = armed_s - (phased ? lead / f.hz : 0.0), k->fresh = 0;
     if (i == PIT0 || i == PIT1) {  /* the period's LDVAL from the start: one written since it, waiting
@@ -546,8 +552,28 @@ TPM_Type *tfc_sim_tpm2_now(void) {
     return &tfc_sim_tpm2;
 }
 
-/* Read every timer's registers: start, stop, or note a new period. */
+/* Read every timer's registers: start, stop, or note a new period (look_once), again when a handler
+ * asked for a look while start() waited for the time: with --mcu-time that round trip charges the
+ * program's time, so handlers due then run inside it (a program's own, another timer's expiry), and
+ * a look one of them asks for (NVIC_GetPendingIRQ, a handler's end) reads the NVIC only and leaves
+ * the timers to the look in progress. (It looked at them there: the timer being started, its
+ * counter not yet marked started, was taken for one started again and started twice, its handler
+ * called twice an expiry.) */
+static int look_again;
+static void look_once(void);
 static void sync(void) {
+    if (starting) {
+        nvic_sync();
+        look_again = 1;
+        return;
+    }
+    do {
+        look_again = 0;
+        look_once();
+    } while (look_again);
+}
+
+static void look_once(void) {
     nvic_sync();
     counters();
     for (int i = 0; i < N_TIMERS; i++) {
