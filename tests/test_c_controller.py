@@ -986,6 +986,40 @@ def test_camera_free_running_from_cpp_gives_frames_one_exposure_apart(tmp_path, 
     assert frames == 211 and period == pytest.approx(0.0095, abs=2e-5), out  # (frames on 2-ms steps)
 
 
+NEXT_FRAME_CPP = """\
+    #include <cstdio>
+    #include "spinner.hpp"
+    int main() {
+        Spinner s;
+        s.cameraFreeRunning();
+        s.setExposure(0.010);
+        s.getImage(s.lineRow());
+        double t = s.getTime();
+        s.sleep(0.004);
+        s.setExposureNextFrame(0.020);
+        for (int i = 0; i < 3; i++) {
+            s.getImage(s.lineRow());
+            double now = s.getTime();  // (a getTime lets a physics step pass: one a frame)
+            std::printf("period %.4f\\n", now - t);
+            t = now;
+        }
+        std::fflush(stdout);
+        return 0;
+    }
+    """
+
+
+@pytest.mark.parametrize("isolate", [False, True])
+def test_set_exposure_next_frame_from_cpp_loads_as_the_frame_in_progress_ends(tmp_path, capfd, isolate):
+    """spinner.hpp's setExposureNextFrame (spinner_set_exposure_next_frame): the frame in
+    progress keeps its 10 ms, the next ones last the new 20 ms. Before, no such member."""
+    prog = build_program([str(write(tmp_path, "next.cpp", NEXT_FRAME_CPP))])
+    r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", time_limit_s=2.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    assert [float(x.split()[1]) for x in out.splitlines() if x.startswith("period")] == [0.010, 0.020, 0.020], out
+
+
 @pytest.mark.parametrize("isolate", [False, True])
 def test_a_spinner_call_from_another_thread_is_reported_not_silent(tmp_path, isolate):
     """Issue 50 (fault injection): a call from a thread of the program's own returned 0 in

@@ -206,6 +206,9 @@ class Spinner {
         return std::vector<float>(v.begin(), v.end());
     }
     void setExposure(double seconds) { spinner_set_exposure(seconds); }
+    // From the next frame on, as a timer's period register loads at its next expiry: the frame
+    // in progress keeps its period and exposure (spinner_set_exposure_next_frame).
+    void setExposureNextFrame(double seconds) { spinner_set_exposure_next_frame(seconds); }
     double getExposure() { return spinner_get_exposure(); }
     // The camera's SI pulses come from a free-running timer (a kit's board driver reading each
     // image out while the next integrates): a linescan camera's frames are then one exposure
