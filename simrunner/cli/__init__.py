@@ -358,15 +358,21 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
 def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, laps, seed,
                 wall_limit_s, video_fps=None) -> int:
     """``run()`` in a supervised child (simrunner.run.supervise); a child ended by the hard
-    watchdog gets its outputs written here, from its run log. Returns the exit code."""
+    watchdog or a signal, or by a C/C++ program's end in its constructors as its library loaded
+    (the host's report: simrunner.run.postmortem.load_end), gets its outputs written here, from its
+    run log. Returns the exit code."""
     from simrunner.reports.outputs import Outputs
+    from simrunner.run.faults import exit_code
+    from simrunner.run.postmortem import LOAD_END_STATUS, load_end
     from simrunner.run.supervise import remove_temporary, supervise
 
     end = supervise(run, csv)
     try:
-        if not end.stuck and end.signal is None:
+        ended = load_end(end.report, controller) if end.code == LOAD_END_STATUS and not end.stuck else None
+        if not end.stuck and end.signal is None and ended is None:
             return end.code
-        from simrunner.run.postmortem import StuckRun, finish_dead_run, finish_stuck_run, stuck_stack
+        from simrunner.run.postmortem import StuckRun, finish_dead_run, finish_load_ended_run, finish_stuck_run, \
+            stuck_stack
 
         stuck = StuckRun(controller=controller, outputs=Outputs(video=video, csv=csv, plot=plot,
                                                                 summary=summary, video_fps=video_fps),
@@ -376,6 +382,9 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
                 click.echo(stuck_stack(end.report, controller), err=True)  # down to the controller's line
                 result = finish_stuck_run(stuck, end.report, end.csv_path, wall_time_s=end.wall_time_s,
                                           cpu_time_s=end.cpu_time_s)
+            elif ended is not None:  # an exit, spinner_fail, a misused call in a constructor (status 70)
+                result = finish_load_ended_run(stuck, ended, end.csv_path, wall_time_s=end.wall_time_s,
+                                               cpu_time_s=end.cpu_time_s)
             else:  # killed by a signal the run could not handle (SIGKILL, an uncaught crash)
                 result = finish_dead_run(stuck, end.signal, end.csv_path, wall_time_s=end.wall_time_s,
                                          cpu_time_s=end.cpu_time_s, report=end.report)
@@ -383,7 +392,7 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
             click.echo(f"simrunner: {exc}", err=True)
             return 1
         _print_result(result)
-        return 1
+        return exit_code(result.outcome, None)  # (1: stalled, killed; an exit(0) at the load: 0)
     finally:
         remove_temporary(end, csv)
 
