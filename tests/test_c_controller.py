@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from helpers import C_CTOR_ENDS
+from helpers import C_CTOR_ENDS, C_CTOR_FAULT
 
 from simrunner.cli import main as cli
 from simrunner.errors import ControllerFileError
@@ -1458,6 +1458,21 @@ def test_an_end_in_a_constructor_at_the_load_unsupervised_says_it_in_one_line(tm
                      r"loaded into the simulator's process, before the run", line), line
     assert line.endswith("--isolate runs the program in a process of its own, where its constructors run with "
                          "the run)"), line
+
+
+@pytest.mark.parametrize("name, said", [
+    ("boom.c", "boom.c:5: SIGSEGV: segmentation fault (in boom())"),
+    ("exit3.c", "the controller called exit(3) at exit3.c:4")])
+def test_simrunner_check_reports_a_constructor_that_ends_the_program_at_its_load(tmp_path, name, said):
+    """simrunner check has no supervisor: a fault or an exit in a C constructor, run as the library
+    was loaded into its process, ended it (killed by SIGSEGV; status 70, one line) without a
+    report. It runs C/C++ programs isolated: the problem is named as --isolate names it."""
+    write(tmp_path, name, C_CTOR_FAULT if name == "boom.c" else C_CTOR_ENDS[name][0])
+    done = subprocess.run([sys.executable, "-c", "from simrunner.cli import main; main()", "check", name],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 1, (done.returncode, done.stdout, done.stderr[-2000:])
+    assert done.stdout.startswith(f"{name}: PROBLEMS") and f": {said}\n" in done.stdout, done.stdout
 
 
 def test_a_library_loaded_while_another_thread_runs_a_program_in_process(tmp_path, track, capfd):

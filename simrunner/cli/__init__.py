@@ -296,8 +296,12 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
                 sys.exit(2)
             from simrunner.run.watch import native_watched
 
-            native = dict(make=lambda: _native_program(controller, more_sources, include_dirs, defines, isolate,
-                                                       kit, isrs),
+            # isolated (as --isolate): a watch session has no supervisor, and in its process a program's
+            # constructors, run as its library loads, could end it (a fault, an exit: docs/c_controllers.md);
+            # each run's program and the threads it leaves end with its child
+            builds = _builds_native(controller, more_sources, include_dirs, defines)
+            native = dict(make=lambda: _native_program(controller, more_sources, include_dirs, defines,
+                                                       isolate or builds, kit, isrs),
                           watched=native_watched(controller, more_sources, include_dirs))
         watch_drive(dict(controller=controller, **native, track=track, laps=laps, time_limit_s=time_limit_s,
                          video=video, video_fps=video_fps, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
@@ -446,7 +450,7 @@ def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs
     from simrunner.errors import ControllerFileError
 
     timers = [_isr(text) for text in isrs]
-    if not more_sources and not include_dirs and not defines and controller.endswith(".py"):
+    if not _builds_native(controller, more_sources, include_dirs, defines):
         if isolate or kit:
             raise ControllerFileError(f"{controller}: --{'isolate' if isolate else 'kit'} is for C/C++ controllers")
         if timers:
@@ -460,6 +464,12 @@ def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs
     if program.warnings.strip():
         click.echo(program.warnings.rstrip(), err=True)
     return dataclasses.replace(program, isolate=True) if isolate else program
+
+
+def _builds_native(controller: str, more_sources, include_dirs, defines) -> bool:
+    """Whether :func:`_native_program` builds a C/C++ program of these (else the controller is the
+    Python file itself)."""
+    return bool(more_sources or include_dirs or defines) or not controller.endswith(".py")
 
 
 def _isr(text: str) -> tuple[str, float]:
