@@ -127,6 +127,14 @@ __attribute__((constructor)) static void early(void) {
 }
 int main(void) { spinner_sleep(0.1); return 0; }
 """, "controller_returned", "the controller called exit(0) at exit0.c:4"),
+    "exit_minus1.c": ("""\
+#include <stdlib.h>
+#include "spinner.h"
+__attribute__((constructor)) static void early(void) {
+    exit(-1);                                    /* line 4 */
+}
+int main(void) { spinner_sleep(0.1); return 0; }
+""", "controller_error", "the controller called exit(-1) at exit_minus1.c:4"),
     "fail.c": ("""\
 #include "spinner.h"
 static void check(void) { spinner_fail("no calibration table"); }

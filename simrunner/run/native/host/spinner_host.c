@@ -1690,8 +1690,9 @@ static void load_fault(int sig, siginfo_t *info, void *pc, const char *message) 
 }
 
 /* A call that does not return in a constructor of a library being loaded here (spinner_inproc_open,
- * before any run): exit, _exit, _Exit or quick_exit (`call`, its `status`), spinner_fail (`call`, its
- * `message`) or a misused Spinner call (`call` NULL, the misuse's `message`). Nothing can be left
+ * before any run): exit, _exit, _Exit or quick_exit (`call`, its `status`; `message` NULL),
+ * spinner_fail (`call`, its `message`) or a misused Spinner call (`call` NULL, the misuse's
+ * `message`). Nothing can be left
  * there (the loader is in the middle of the load, holding its lock) and nothing can go on: it used
  * to end the simulator's thread (silently: the process's status 0, no output) or switch to a run
  * that was not there (SIGSEGV). The simulator's process ends (status 70), first writing the report
@@ -1699,7 +1700,7 @@ static void load_fault(int sig, siginfo_t *info, void *pc, const char *message) 
  * the backtrace) to load_fd, from which simrunner drive's supervisor and a batch tell the run's
  * outcome as --isolate does (simrunner.run.postmortem.load_end); without one, a line on stderr. */
 static void load_ended(const char *call, int status, const char *message) {
-    int exits = call != NULL && status >= 0;
+    int exits = message == NULL;  /* (any status: exit(-1) is one) */
     build_report(0, exits ? "" : message, NULL);
     if (load_fd >= 0) {
         char extra[96] = "";
