@@ -107,6 +107,63 @@ int main(void) { while (1) { spinner_set_speed(0.5f); spinner_sleep(0.01f); } }
 """
 
 
+# C/C++ programs that end in a constructor (line 4) as their library is loaded, before the run:
+# name -> (source, the run's outcome, its message up to the ", in a constructor ..." drive adds
+# in process; isolated the message is just that)
+C_CTOR_ENDS = {
+    "exit3.c": ("""\
+#include <stdlib.h>
+#include "spinner.h"
+__attribute__((constructor)) static void early(void) {
+    exit(3);                                     /* line 4 */
+}
+int main(void) { spinner_sleep(0.1); return 0; }
+""", "controller_error", "the controller called exit(3) at exit3.c:4"),
+    "exit0.c": ("""\
+#include <stdlib.h>
+#include "spinner.h"
+__attribute__((constructor)) static void early(void) {
+    exit(0);                                     /* line 4 */
+}
+int main(void) { spinner_sleep(0.1); return 0; }
+""", "controller_returned", "the controller called exit(0) at exit0.c:4"),
+    "exit_minus1.c": ("""\
+#include <stdlib.h>
+#include "spinner.h"
+__attribute__((constructor)) static void early(void) {
+    exit(-1);                                    /* line 4 */
+}
+int main(void) { spinner_sleep(0.1); return 0; }
+""", "controller_error", "the controller called exit(-1) at exit_minus1.c:4"),
+    "fail.c": ("""\
+#include "spinner.h"
+static void check(void) { spinner_fail("no calibration table"); }
+__attribute__((constructor)) static void early(void) {
+    check();                                     /* line 4 */
+}
+int main(void) { spinner_sleep(0.1); return 0; }
+""", "controller_error", "fail.c:2: no calibration table (in check())"),
+    "misuse.c": ("""\
+#include "spinner.h"
+static void tick(void) {}
+__attribute__((constructor)) static void early(void) {
+    spinner_every(-1.0, tick);                   /* line 4 */
+}
+int main(void) { spinner_sleep(0.1); return 0; }
+""", "controller_error", "misuse.c:4: spinner_every(period_s=-1): expected at least 1e-05 s (a 100 kHz timer) "
+                         "(in early())"),
+    "quick.cpp": ("""\
+#include <cstdlib>
+#include "spinner.h"
+struct Car {
+    Car() { std::quick_exit(4); }                // line 4
+};
+Car car;
+int main() { spinner_sleep(0.1); return 0; }
+""", "controller_error", "the controller called quick_exit(4) at quick.cpp:4"),
+}
+
+
 def session_processes(sid: int) -> list[int]:
     """The pids of the living (not zombie) processes of session ``sid`` (Linux /proc)."""
     from pathlib import Path

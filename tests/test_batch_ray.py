@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers import C_CTOR_FAULT, FAULTY, STUCK
+from helpers import C_CTOR_ENDS, C_CTOR_FAULT, FAULTY, STUCK
 
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.ray_backend import LOOPBACK_ENV
@@ -198,6 +198,21 @@ def test_ray_fault_in_a_c_constructor_at_the_load_names_its_line_as_drive_does(r
     row, = res.rows
     assert row["outcome"] == "controller_error", row
     assert row["message"].startswith("boom.c:5: SIGSEGV: segmentation fault (in boom())"), row["message"]
+    assert not ray.is_initialized()
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_ray_exit_in_a_c_constructor_at_the_load_is_told_as_drive_tells_it(ray_cluster, tmp_path, monkeypatch):
+    """exit(3) in a C constructor as the actor loads the program ends the actor's process (status
+    70): the row was worker_died with Ray's message; now drive's, as with the local pool."""
+    monkeypatch.chdir(tmp_path)
+    body, outcome, said = C_CTOR_ENDS["exit3.c"]
+    ctl = tmp_path / "exit3.c"
+    ctl.write_text(body)
+    res = run_batch(ctl, out_dir=tmp_path / "out", seeds=1, workers=1, plot=False, ray=ray_cluster)
+    row, = res.rows
+    assert (row["outcome"], row["message"]) == (outcome, f"{said}, in a constructor as the program loaded, before "
+                                                         "the first frame"), row
     assert not ray.is_initialized()
 
 

@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from helpers import C_CTOR_FAULT, STUCK
+from helpers import C_CTOR_ENDS, C_CTOR_FAULT, STUCK
 
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.pool import LocalBackend, choose_start_method
@@ -233,6 +233,24 @@ def test_a_fault_in_a_c_constructor_at_the_load_names_its_line_as_drive_does(tmp
     assert row["message"].startswith("boom.c:5: SIGSEGV: segmentation fault (in boom()), in a constructor as the "
                                      "program loaded"), row["message"]
     assert row["frames"] == 0
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+@pytest.mark.parametrize("name", ["exit0.c", "exit3.c", "misuse.c"])
+def test_an_end_in_a_c_constructor_at_the_load_is_told_as_drive_tells_it(tmp_path, monkeypatch, name):
+    """exit(3), exit(0) or a misused Spinner call in a C constructor, as the worker loads the program's
+    library before the run, ends the worker (status 70): its row was worker_died 'worker process died
+    during the run (exit code 70)'; now drive's: the outcome --isolate gives, naming the call's
+    file:line, and the rest of the batch runs on."""
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)
+    body, outcome, said = C_CTOR_ENDS[name]
+    ctl = tmp_path / name
+    ctl.write_text(body)
+    res = run_batch(ctl, out_dir=tmp_path / "out", seeds=2, workers=1, plot=False)
+    assert [(row["outcome"], row["message"]) for row in res.rows] == \
+        [(outcome, f"{said}, in a constructor as the program loaded, before the first frame")] * 2
+    assert [row["frames"] for row in res.rows] == [0, 0]
 
 
 C_CTOR_STATE = r"""

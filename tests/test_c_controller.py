@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from helpers import C_CTOR_ENDS, C_CTOR_FAULT
+
 from simrunner.cli import main as cli
 from simrunner.errors import ControllerFileError
 from simrunner.telemetry.log import read_log, write_log
@@ -1312,7 +1314,9 @@ def test_an_exit_in_a_constructor_at_the_load_ends_the_simulator_saying_why(tmp_
     """exit(3) in a C constructor as the library is loaded in the simulator's process (before any
     run; nothing can be left or continued there): it ended the simulator's thread (the process's
     status 0, no output at all) or, after an earlier run, switched to that run's stack (SIGSEGV).
-    Now the simulator ends (status 70) naming the call and --isolate; isolated it is the run's."""
+    Now the simulator ends (status 70) naming the call and --isolate (simrunner drive's supervisor
+    tells the run's outcome: test_an_end_in_a_constructor_at_the_load_is_the_runs_outcome_as_isolated);
+    isolated it is the run's."""
     src = write(tmp_path, "ctor_exit.c", """\
         #include <stdlib.h>
         #include "spinner.h"
@@ -1329,8 +1333,10 @@ def test_an_exit_in_a_constructor_at_the_load_ends_the_simulator_saying_why(tmp_
         """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 70, (out.returncode, out.stdout, out.stderr[-2000:])
-    assert "the controller called exit(3) in a global object's constructor" in out.stderr
-    assert "--isolate" in out.stderr
+    line, = [t for t in out.stderr.splitlines() if t.startswith("simrunner:")]
+    assert re.match(r"simrunner: the controller called exit\(3\) at \S+\.so\+0x[0-9a-f]+, in a constructor as the "
+                    r"controller's library was loaded into the simulator's process, before the run", line), line
+    assert "--isolate" in line
     r = drive(isolated(src), time_limit_s=1.0)
     assert r.outcome == "controller_error" and "exit(3) at" in r.message and "ctor_exit.c:3" in r.message, r.message
 
@@ -1401,6 +1407,72 @@ def test_a_fault_in_a_constructor_at_the_load_unsupervised_says_one_line(tmp_pat
     assert re.match(r"simrunner: SIGSEGV at \S+\.so\+0x[0-9a-f]+, in a constructor as the controller's library "
                     r"was loaded into the simulator's process, before the run", line), line
     assert "--isolate" in line
+
+
+@pytest.mark.parametrize("name", sorted(C_CTOR_ENDS))
+def test_an_end_in_a_constructor_at_the_load_is_the_runs_outcome_as_isolated(tmp_path, name):
+    """exit(3), exit(0), spinner_fail, a misused Spinner call in a C constructor, quick_exit in a C++
+    global object's, as the library is loaded into the simulator's process before the run: nothing
+    returns out of the loader, the process ends (status 70) - and simrunner drive ended with it, one
+    line on stderr, no summary, plot or CSV, no outcome line. Now the host reports the call to the
+    supervisor, which tells the run's outcome as --isolate does (the call and its file:line), says
+    where it was, writes the outputs (the CSV's header: no frame was run) and exits as for that
+    outcome (exit(0): controller_returned, 0)."""
+    body, outcome, said = C_CTOR_ENDS[name]
+    write(tmp_path, name, body)
+    done = _cli_drive(tmp_path, name, "--summary", "s.json", "--csv", "c.csv", "--plot", "p.png")
+    assert done.returncode == (0 if outcome == "controller_returned" else 1), (done.stdout, done.stderr[-2000:])
+    summary = json.loads((tmp_path / "s.json").read_text())
+    message = f"{said}, in a constructor as the program loaded, before the first frame"
+    assert (summary["outcome"], summary["message"]) == (outcome, message)
+    assert summary["frames"] == 0 and summary["sim_time_s"] == 0.0
+    assert f"outcome: {outcome} ({message})" in done.stdout
+    assert "wrote: c.csv, p.png, s.json" in done.stdout
+    assert len(read_log(tmp_path / "c.csv")) == 0 and (tmp_path / "p.png").stat().st_size > 0
+    if name in ("fail.c", "misuse.c"):  # the C backtrace, as isolated
+        assert re.search(rf"#0 \S+ at {re.escape(name)}:\d", done.stderr), done.stderr[-2000:]
+    isolated_run = _cli_drive(tmp_path, name, "--isolate", "--summary", "i.json")
+    assert isolated_run.returncode == done.returncode
+    assert json.loads((tmp_path / "i.json").read_text())["message"] == said, isolated_run.stdout
+
+
+@pytest.mark.parametrize("name, said", [
+    ("fail.c", 'the controller called spinner_fail("no calibration table") at '),
+    ("misuse.c", "a misused Spinner call (spinner_every(period_s=-1): expected at least 1e-05 s (a 100 kHz timer)) "
+                 "at ")])
+def test_an_end_in_a_constructor_at_the_load_unsupervised_says_it_in_one_line(tmp_path, name, said):
+    """The Python API in a process of its own (no supervisor): one line on stderr, status 70. A misused
+    call's line was cut at 64 characters ('... (spinner_every(period_s=0.01, handler=NU in a global
+    object's constructor') and neither it nor spinner_fail's said the message or where."""
+    src = write(tmp_path, name, C_CTOR_ENDS[name][0])
+    code = textwrap.dedent(f"""\
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        drive(build_program([{str(src)!r}]), time_limit_s=1.0)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 70, (out.returncode, out.stdout, out.stderr[-2000:])
+    line, = [t for t in out.stderr.splitlines() if t.startswith("simrunner:")]
+    assert line.startswith(f"simrunner: {said}"), line
+    assert re.search(r"\.so\+0x[0-9a-f]+( \((early|check)\))?, in a constructor as the controller's library was "
+                     r"loaded into the simulator's process, before the run", line), line
+    assert line.endswith("--isolate runs the program in a process of its own, where its constructors run with "
+                         "the run)"), line
+
+
+@pytest.mark.parametrize("name, said", [
+    ("boom.c", "boom.c:5: SIGSEGV: segmentation fault (in boom())"),
+    ("exit3.c", "the controller called exit(3) at exit3.c:4")])
+def test_simrunner_check_reports_a_constructor_that_ends_the_program_at_its_load(tmp_path, name, said):
+    """simrunner check has no supervisor: a fault or an exit in a C constructor, run as the library
+    was loaded into its process, ended it (killed by SIGSEGV; status 70, one line) without a
+    report. It runs C/C++ programs isolated: the problem is named as --isolate names it."""
+    write(tmp_path, name, C_CTOR_FAULT if name == "boom.c" else C_CTOR_ENDS[name][0])
+    done = subprocess.run([sys.executable, "-c", "from simrunner.cli import main; main()", "check", name],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 1, (done.returncode, done.stdout, done.stderr[-2000:])
+    assert done.stdout.startswith(f"{name}: PROBLEMS") and f": {said}\n" in done.stdout, done.stdout
 
 
 def test_a_library_loaded_while_another_thread_runs_a_program_in_process(tmp_path, track, capfd):

@@ -296,8 +296,12 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
                 sys.exit(2)
             from simrunner.run.watch import native_watched
 
-            native = dict(make=lambda: _native_program(controller, more_sources, include_dirs, defines, isolate,
-                                                       kit, isrs),
+            # isolated (as --isolate): a watch session has no supervisor, and in its process a program's
+            # constructors, run as its library loads, could end it (a fault, an exit: docs/c_controllers.md);
+            # each run's program and the threads it leaves end with its child
+            builds = _builds_native(controller, more_sources, include_dirs, defines)
+            native = dict(make=lambda: _native_program(controller, more_sources, include_dirs, defines,
+                                                       isolate or builds, kit, isrs),
                           watched=native_watched(controller, more_sources, include_dirs))
         watch_drive(dict(controller=controller, **native, track=track, laps=laps, time_limit_s=time_limit_s,
                          video=video, video_fps=video_fps, csv=csv, plot=plot, summary=summary, seed=seed, car=car,
@@ -358,15 +362,21 @@ def drive_cmd(controller, more_sources, track, laps, time_limit_s, video, csv, p
 def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, laps, seed,
                 wall_limit_s, video_fps=None) -> int:
     """``run()`` in a supervised child (simrunner.run.supervise); a child ended by the hard
-    watchdog gets its outputs written here, from its run log. Returns the exit code."""
+    watchdog or a signal, or by a C/C++ program's end in its constructors as its library loaded
+    (the host's report: simrunner.run.postmortem.load_end), gets its outputs written here, from its
+    run log. Returns the exit code."""
     from simrunner.reports.outputs import Outputs
+    from simrunner.run.faults import exit_code
+    from simrunner.run.postmortem import LOAD_END_STATUS, load_end
     from simrunner.run.supervise import remove_temporary, supervise
 
     end = supervise(run, csv)
     try:
-        if not end.stuck and end.signal is None:
+        ended = load_end(end.report, controller) if end.code == LOAD_END_STATUS and not end.stuck else None
+        if not end.stuck and end.signal is None and ended is None:
             return end.code
-        from simrunner.run.postmortem import StuckRun, finish_dead_run, finish_stuck_run, stuck_stack
+        from simrunner.run.postmortem import StuckRun, finish_dead_run, finish_load_ended_run, finish_stuck_run, \
+            stuck_stack
 
         stuck = StuckRun(controller=controller, outputs=Outputs(video=video, csv=csv, plot=plot,
                                                                 summary=summary, video_fps=video_fps),
@@ -376,6 +386,9 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
                 click.echo(stuck_stack(end.report, controller), err=True)  # down to the controller's line
                 result = finish_stuck_run(stuck, end.report, end.csv_path, wall_time_s=end.wall_time_s,
                                           cpu_time_s=end.cpu_time_s)
+            elif ended is not None:  # an exit, spinner_fail, a misused call in a constructor (status 70)
+                result = finish_load_ended_run(stuck, ended, end.csv_path, wall_time_s=end.wall_time_s,
+                                               cpu_time_s=end.cpu_time_s)
             else:  # killed by a signal the run could not handle (SIGKILL, an uncaught crash)
                 result = finish_dead_run(stuck, end.signal, end.csv_path, wall_time_s=end.wall_time_s,
                                          cpu_time_s=end.cpu_time_s, report=end.report)
@@ -383,7 +396,7 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
             click.echo(f"simrunner: {exc}", err=True)
             return 1
         _print_result(result)
-        return 1
+        return exit_code(result.outcome, None)  # (1: stalled, killed; an exit(0) at the load: 0)
     finally:
         remove_temporary(end, csv)
 
@@ -437,7 +450,7 @@ def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs
     from simrunner.errors import ControllerFileError
 
     timers = [_isr(text) for text in isrs]
-    if not more_sources and not include_dirs and not defines and controller.endswith(".py"):
+    if not _builds_native(controller, more_sources, include_dirs, defines):
         if isolate or kit:
             raise ControllerFileError(f"{controller}: --{'isolate' if isolate else 'kit'} is for C/C++ controllers")
         if timers:
@@ -451,6 +464,12 @@ def _native_program(controller: str, more_sources: tuple[str, ...], include_dirs
     if program.warnings.strip():
         click.echo(program.warnings.rstrip(), err=True)
     return dataclasses.replace(program, isolate=True) if isolate else program
+
+
+def _builds_native(controller: str, more_sources, include_dirs, defines) -> bool:
+    """Whether :func:`_native_program` builds a C/C++ program of these (else the controller is the
+    Python file itself)."""
+    return bool(more_sources or include_dirs or defines) or not controller.endswith(".py")
 
 
 def _isr(text: str) -> tuple[str, float]:

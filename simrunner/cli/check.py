@@ -2,6 +2,8 @@
 :func:`simrunner.run.check.check_controller`.
 
 Exit codes: 0 no problems (warnings may be printed); 1 problems; 2 bad input (one line).
+A C/C++ program is checked isolated (as ``drive --isolate`` runs it): no supervisor watches this
+process, which a program's constructors, run as its library loads, could end.
 """
 from __future__ import annotations
 
@@ -32,13 +34,15 @@ def check_cmd(controller, more_sources, track, car, seconds, wall_limit_s, param
     """Run CONTROLLER briefly (twice, same seed) and report what breaks the controller
     contract: faults with file:line, stalls, nondeterminism, bad or capped commands. C/C++
     firmware: its sources and the options that build it, as for drive."""
-    from simrunner.cli import _native_program, input_errors
+    from simrunner.cli import _builds_native, _native_program, input_errors
     from simrunner.run.check import check_controller
     from simrunner.run.params import parse_params
 
     try:
+        # a C/C++ program runs isolated (as drive's --isolate): check has no supervisor, and in its
+        # process the program's constructors, run as its library loads, could end it (a fault, an exit)
         program = _native_program(controller, tuple(more_sources), tuple(include_dirs), tuple(defines),
-                                  False, kit, tuple(isrs))
+                                  _builds_native(controller, more_sources, include_dirs, defines), kit, tuple(isrs))
         report = check_controller(program, track=track, car=car, seconds=seconds,
                                   wall_limit_s=wall_limit_s, params=parse_params(params))
     except input_errors() as exc:

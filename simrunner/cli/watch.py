@@ -1,6 +1,8 @@
 """``simrunner drive --watch``: the drive options, then a run each time the controller file
 is saved (:func:`simrunner.run.watch.watch_runs`), with the outcome and lap times printed
-after each. Ctrl-C ends it (exit 130); bad track or car input is exit 2 as for ``drive``."""
+after each. Ctrl-C ends it (exit 130); bad track or car input is exit 2 as for ``drive``. C/C++
+programs run isolated (``drive_cmd`` builds them so): the session outlives its runs, with no
+supervisor, and a program's constructors, run as its library loads, could end its process."""
 from __future__ import annotations
 
 import sys

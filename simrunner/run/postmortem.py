@@ -1,7 +1,10 @@
 """The outputs of a run whose process the hard watchdog ended, written from what it left on
 disk (:mod:`simrunner.run.supervise`): :func:`finish_stuck_run`; of one a signal killed:
 :func:`finish_dead_run` (a fault in a C/C++ program's constructors as its library loaded into the
-process is named at its file:line from the host's report, :func:`load_fault`).
+process is named at its file:line from the host's report, :func:`load_fault`); of one a C/C++
+program ended as its library loaded into the process (an exit, spinner_fail, a misused Spinner call
+in a constructor: the process ends, status 70): :func:`finish_load_ended_run`, its outcome told as
+with ``--isolate`` from the host's report (:func:`load_end`).
 
 The run log holds every row closed before the stall (it streams one whole row per write).
 From it: the summary (outcome ``stalled``; the message names the controller's file:line, read
@@ -93,6 +96,11 @@ def killed_message(signum: int, log: RunLog | None) -> str:
     return f"the run's process was killed by {name}{at} ({why})"
 
 
+AT_LOAD = "in a constructor as the program loaded, before the first frame"
+"""Where a C/C++ program's fault or end at its library's load was (its constructors run then, before
+the run's first frame)."""
+
+
 def load_fault(report: str, controller: str) -> ControllerError | None:
     """The fault of a C/C++ program's constructors (a C++ global object's) as its library was
     loaded into the run's process, which died of it (:mod:`simrunner.run.native.inproc`), from the
@@ -106,10 +114,54 @@ def load_fault(report: str, controller: str) -> ControllerError | None:
         return None
     library, host, text = found
     line, traceback_text = describe_fault(text, {library}, host, Path(controller).stem)
-    return ControllerError(f"{line}, in a constructor as the program loaded, before the first frame: it killed "
-                           "the run's process (the program's library is loaded into the simulator's process "
-                           "before the run, where such a fault cannot be caught; --isolate runs the program in "
-                           "a process of its own)", traceback_text)
+    return ControllerError(f"{line}, {AT_LOAD}: it killed the run's process (the program's library is loaded "
+                           "into the simulator's process before the run, where such a fault cannot be caught; "
+                           "--isolate runs the program in a process of its own)", traceback_text)
+
+
+LOAD_END_STATUS = 70
+"""The exit status of a process whose C/C++ program ended in its constructors as its library loaded
+(the in-process host's ``load_ended``)."""
+
+
+@dataclass(frozen=True)
+class LoadEnd:
+    """How a C/C++ program ended in its constructors as its library loaded into the run's process
+    (:func:`load_end`): the run's ``outcome``, its ``message`` and ``error`` (None for an exit with
+    status 0: ``controller_returned``, as a return from main)."""
+
+    outcome: Outcome
+    message: str
+    error: ControllerError | None
+
+
+def load_end(report: str, controller: str) -> LoadEnd | None:
+    """The end of a C/C++ program in its constructors (a C++ global object's) as its library was
+    loaded into the run's process, which ended with it (status 70; nothing returns out of the
+    loader, :mod:`simrunner.run.native.inproc`), told as ``--isolate`` tells it (there its
+    constructors run in the run's own process) with where it was: ``exit(3)`` is ``controller_error``
+    'the controller called exit(3) at c.c:4, in a constructor ...' (exit(0) ``controller_returned``),
+    ``spinner_fail`` and a misused Spinner call ``controller_error`` naming its file:line, with the C
+    backtrace; from the in-process host's report in ``report`` (the supervision's report file). None
+    when ``report`` holds no such report."""
+    from simrunner.run.native.symbolize import describe_fault, load_end_report, parse_report
+
+    found = load_end_report(report)
+    if found is None:
+        return None
+    library, host, text = found
+    first, _, rest = text.partition("\n")
+    key, name, status = (first.split(" ") + ["", ""])[:3]
+    if key == "exit" and status.lstrip("-").isdigit():  # exit, _exit, _Exit, quick_exit
+        location = parse_report(rest, {library}, host).location
+        at = f" at {location.file}:{location.line}" if location is not None else ""
+        message = f"the controller called {name}({int(status)}){at}, {AT_LOAD}"
+        if int(status) & 0xFF == 0:  # (the status the process would end with, as isolated)
+            return LoadEnd(Outcome.CONTROLLER_RETURNED, message, None)
+        return LoadEnd(Outcome.CONTROLLER_ERROR, message, ControllerError(message, message + "\n"))
+    line, traceback_text = describe_fault(text, {library}, host, Path(controller).stem)
+    message = f"{line}, {AT_LOAD}"
+    return LoadEnd(Outcome.CONTROLLER_ERROR, message, ControllerError(message, traceback_text))
 
 
 def finish_stuck_run(run: StuckRun, report: str, csv_path: Path, *, wall_time_s: float,
@@ -135,6 +187,15 @@ def finish_dead_run(run: StuckRun, signum: int, csv_path: Path, *, wall_time_s: 
     message = (str(error) if error is not None else killed_message(signum, log)) \
         + "; the outputs were written from the run log"
     return _finish(run, Outcome.CONTROLLER_ERROR, message, log, csv_path, wall_time_s, cpu_time_s, error)
+
+
+def finish_load_ended_run(run: StuckRun, ended: LoadEnd, csv_path: Path, *, wall_time_s: float,
+                          cpu_time_s: float) -> RunResult:
+    """Write the outputs of a run whose C/C++ program ended in its constructors as its library
+    loaded (``ended``: :func:`load_end`), before the first frame: the summary with its outcome and
+    message, the plot, the CSV's header."""
+    return _finish(run, ended.outcome, ended.message, read_run_log(csv_path), csv_path, wall_time_s,
+                   cpu_time_s, ended.error)
 
 
 def _finish(run: StuckRun, outcome: Outcome, message: str, log: RunLog, csv_path: Path,
@@ -210,5 +271,6 @@ def _rebuild_video(log: RunLog, path, track, car, laps: int, max_fps: float | No
     return video
 
 
-__all__ = ["StuckRun", "finish_stuck_run", "finish_dead_run", "killed_message", "load_fault", "read_run_log",
+__all__ = ["AT_LOAD", "LOAD_END_STATUS", "LoadEnd", "StuckRun", "finish_stuck_run", "finish_dead_run",
+           "finish_load_ended_run", "killed_message", "load_end", "load_fault", "read_run_log",
            "run_log_laps", "stuck_location", "stuck_message", "stuck_stack"]

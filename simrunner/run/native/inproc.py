@@ -16,7 +16,10 @@ object's) as its library is opened, before the run, cannot be left - nothing ret
 loader: the handlers (installed for the open, for its thread) write its report to the
 supervision's report file (:func:`~simrunner.run.supervise.current_supervision`; unsupervised,
 one line to stderr) and the process dies by the signal; ``simrunner drive``'s supervisor and a
-batch's pool name its file:line from that report (:mod:`simrunner.run.postmortem`). A stack
+batch's pool name its file:line from that report (:mod:`simrunner.run.postmortem`). A call that
+does not return there (an exit, ``spinner_fail``, a misused Spinner call) writes its report to
+the same file and the process ends with status 70; the supervisor tells the run's outcome as
+``--isolate`` does (:func:`~simrunner.run.postmortem.load_end`). A stack
 overflow hits a guard page below the controller's stack (``ulimit -s`` bytes, 8 MB if
 unlimited). A loop that never calls the API is stopped by a watchdog thread of the library after the run's ``--wall-limit``
 (SIGUSR1 to the simulator's thread: the report says where). What it cannot contain - a
@@ -104,9 +107,10 @@ def _is_loaded(path: Path) -> bool:
 
 
 def _load_report_fd() -> int:
-    """Where the host writes the report of a fault in the program's constructors as its library
-    is opened (the process then dies by the signal): the supervision's report file, which its
-    supervisor reads (:mod:`simrunner.run.postmortem`); -1 unsupervised (a line on stderr)."""
+    """Where the host writes the report of a fault, an exit, spinner_fail or a misused call in the
+    program's constructors as its library is opened (the process then dies by the signal, or ends
+    with status 70): the supervision's report file, which its supervisor reads
+    (:mod:`simrunner.run.postmortem`); -1 unsupervised (a line on stderr)."""
     supervision = current_supervision()
     if supervision is None:
         return -1

@@ -5,8 +5,10 @@ TEXT``, optionally ``pc ADDR`` (the faulting instruction) and one ``frame ADDR O
 PATH<TAB>SYMBOL`` line per return address (glibc ``backtrace`` + ``dladdr``). A fault in a
 program's constructors as the in-process host opens its library is written, after a
 ``load-fault LIBRARY`` and a ``host PATH`` line, to the supervision's report file, read once the
-process has died (:func:`load_fault_report`). Frames in the
-controller's own library are symbolised with its debug info by ``addr2line`` (binutils,
+process has died (:func:`load_fault_report`); a program that ends there (an exit, spinner_fail,
+a misused call in a constructor) writes the same after a ``load-end LIBRARY`` line, with an
+``exit NAME STATUS`` line for an exit (:func:`load_end_report`). Frames in the controller's own
+library are symbolised with its debug info by ``addr2line`` (binutils,
 part of ``build-essential``); without it, frames keep their symbol names only. The builds
 write DWARF 4 (``build.COMMON_FLAGS``): binutils 2.40 names the wrong file for some DWARF 5
 lines (a header's function as the source file at the header's line).
@@ -288,15 +290,33 @@ def describe_fault(report: str, user_modules: set[str], host: str, program: str)
 LOAD_FAULT = "load-fault "
 """The first line of the in-process host's report of a fault as a program's library loads."""
 
+LOAD_END = "load-end "
+"""The first line of the in-process host's report of a program that ended as its library loaded
+(exit, _exit, _Exit or quick_exit, spinner_fail, a misused Spinner call in a constructor)."""
+
 
 def load_fault_report(dump: str) -> tuple[str, str, str] | None:
     """``(library, host, report)`` of the in-process host's report of a fault in a program's
     constructors as its library was opened (``load-fault LIBRARY``, ``host PATH``, then the
     report) in ``dump`` (a supervision's report file), or None when there is none."""
-    at = dump.find(LOAD_FAULT)
-    if at < 0 or (at > 0 and dump[at - 1] != "\n"):
+    return _load_record(dump, LOAD_FAULT)
+
+
+def load_end_report(dump: str) -> tuple[str, str, str] | None:
+    """``(library, host, report)`` of the in-process host's report of a program that ended in its
+    constructors as its library was opened (``load-end LIBRARY``, ``host PATH``, then an ``exit
+    NAME STATUS`` line for an exit and the report: the message, the backtrace) in ``dump``, or
+    None when there is none."""
+    return _load_record(dump, LOAD_END)
+
+
+def _load_record(dump: str, tag: str) -> tuple[str, str, str] | None:
+    at = dump.find(tag)
+    while at > 0 and dump[at - 1] != "\n":
+        at = dump.find(tag, at + 1)
+    if at < 0:
         return None
-    head, _, rest = dump[at + len(LOAD_FAULT):].partition("\n")
+    head, _, rest = dump[at + len(tag):].partition("\n")
     key, _, host = rest.partition("\n")[0].partition(" ")
     if key != "host" or not head:
         return None

@@ -201,9 +201,10 @@ class RayBackend:
     def _stuck_row(self, h: Handle, job: Job, outputs: dict | None) -> dict | None:
         """``simrunner drive``'s row for a run whose actor the hard watchdog ended (its stack
         dump readable here) or a fault in a C/C++ program's constructors killed (the host's
-        report, :func:`~simrunner.run.postmortem.load_fault`), else None (the row keeps Ray's
-        message)."""
-        from simrunner.run.native.symbolize import load_fault_report
+        report, :func:`~simrunner.run.postmortem.load_fault`) or its exit, spinner_fail or misused
+        call there ended (:func:`~simrunner.run.postmortem.load_end`), else None (the row keeps
+        Ray's message)."""
+        from simrunner.run.native.symbolize import load_end_report, load_fault_report
         from simrunner.workflows.batch.worker import death_row
 
         try:
@@ -211,7 +212,7 @@ class RayBackend:
                 dump = fh.read()
         except OSError:
             return None
-        told = "Timeout (" in dump or load_fault_report(dump) is not None
+        told = "Timeout (" in dump or load_fault_report(dump) is not None or load_end_report(dump) is not None
         return death_row(job, self.config, None, h.ref.report, outputs) if told else None
 
     def kill(self, h: Handle) -> None:

@@ -184,12 +184,15 @@ def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str |
     ``simrunner drive`` tells it: a controller stuck in one C-level call (the hard watchdog's
     stack dump in ``report``) is outcome ``stalled`` naming the controller's file:line; a fault
     in a C/C++ program's constructors as its library loaded (the in-process host's report in
-    ``report``) is ``controller_error`` naming the fault's file:line; otherwise ``worker_died``
+    ``report``) is ``controller_error`` naming the fault's file:line; an exit, spinner_fail or a
+    misused Spinner call there (the host's report; the worker ended with status 70) is told as
+    drive tells it (:func:`~simrunner.run.postmortem.load_end`: ``controller_error``, or
+    ``controller_returned`` for exit(0), naming the call's file:line); otherwise ``worker_died``
     naming the signal or exit code. Laps, lap times, simulated time and frames come from the
     run's CSV when one was asked for (``outputs``)."""
     from pathlib import Path
 
-    from simrunner.run.postmortem import (killed_message, load_fault, read_run_log, run_log_laps,
+    from simrunner.run.postmortem import (killed_message, load_end, load_fault, read_run_log, run_log_laps,
                                           stuck_location, stuck_message)
 
     try:
@@ -203,6 +206,8 @@ def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str |
         message = stuck_message(stuck_location(dump, config.controller), config.wall_limit_s)
     elif (fault := load_fault(dump, config.controller)) is not None:
         outcome, message = "controller_error", str(fault)
+    elif (ended := load_end(dump, config.controller)) is not None:
+        outcome, message = str(ended.outcome), ended.message
     elif exitcode is not None and exitcode < 0:
         outcome, message = "worker_died", killed_message(-exitcode, log)
     else:

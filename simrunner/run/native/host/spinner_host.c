@@ -21,7 +21,9 @@
  * a signal that is not the controller's goes to the handler installed before. A fault in the
  * program's constructors as its library is loaded (spinner_inproc_open, before any run: nothing
  * can return out of the loader) writes the same report to the file descriptor the simulator
- * handed in (its supervisor's report file) and the process dies by the signal.
+ * handed in (its supervisor's report file) and the process dies by the signal; an exit,
+ * spinner_fail or a misused call there writes its report there too and the process ends with
+ * status 70 (load_ended).
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -85,7 +87,7 @@ static __thread int early_calls; /* calls during the open under way (this thread
 #define MAX_EARLY 64
 static void *early_libs[MAX_EARLY];  /* the libraries whose loading made them (early_lock) */
 static pthread_mutex_t early_lock = PTHREAD_MUTEX_INITIALIZER;
-static void load_ended(const char *what, int status, void *ra) __attribute__((noreturn));
+static void load_ended(const char *call, int status, const char *message) __attribute__((noreturn));
 #define OPENING() opening
 #else
 #define OPENING() 0
@@ -566,7 +568,7 @@ static void misuse(const char *fmt, ...) {
 
 void spinner_fail(const char *message) {
 #ifdef SPINNER_INPROC
-    if (opening) load_ended("spinner_fail", -1, __builtin_return_address(0));
+    if (opening) load_ended("spinner_fail", -1, message ? message : "");
 #endif
     INIT();
     misuse("%s", message);
@@ -1302,34 +1304,11 @@ static void thread_exit(int status, int quick) {
     }
     pthread_exit(NULL);
 }
-#define AT_LOAD(fn, status) do { if (opening) load_ended(fn, status, __builtin_return_address(0)); } while (0)
+#define AT_LOAD(fn, status) do { if (opening) load_ended(fn, status, NULL); } while (0)
 void __wrap_exit(int status) { AT_LOAD("exit", status); thread_exit(status, 0); EXIT_NOTE(0, status); exit_run(status); }
 void __wrap__exit(int status) { AT_LOAD("_exit", status); thread_exit(status, 1); EXIT_NOTE(1, status); leave(status); }
 void __wrap__Exit(int status) { AT_LOAD("_Exit", status); thread_exit(status, 1); EXIT_NOTE(2, status); leave(status); }
 void __wrap_quick_exit(int status) { AT_LOAD("quick_exit", status); thread_exit(status, 1); EXIT_NOTE(3, status); leave(status); }
-
-/* A call that does not return (exit, spinner_fail, a misused call) in a constructor of a library
- * being loaded here, before any run: nothing can be left there (the loader is in the middle of the
- * load, holding its lock) and nothing can go on; it used to end the simulator's thread (silently:
- * the process's status 0, no output) or switch to a run that was not there (SIGSEGV). The
- * simulator ends saying so (status 70); with --isolate its constructors run in the run's process. */
-static void load_ended(const char *what, int status, void *ra) {
-    char where[600] = "";
-    Dl_info info;
-    if (ra != NULL && dladdr(ra, &info) && info.dli_fname != NULL)
-        snprintf(where, sizeof where, " (%s+0x%lx)", info.dli_fname,
-                 (unsigned long)((uintptr_t)ra - (uintptr_t)info.dli_fbase));
-    char call_text[64];
-    if (status >= 0) snprintf(call_text, sizeof call_text, "%s(%d)", what, status);
-    else snprintf(call_text, sizeof call_text, "%s", what);
-    fflush(stdout);
-    fprintf(stderr, "simrunner: the controller called %s in a global object's constructor%s, as its library "
-                    "was loaded into the simulator's process before the run, where the program cannot end "
-                    "without the simulator; run it with --isolate (its constructors then run in the run's "
-                    "own process, as on a board before main)\n", call_text, where);
-    fflush(stderr);
-    _exit(70);
-}
 #endif
 
 /* -- fork ------------------------------------------------------------------------------- */
@@ -1487,11 +1466,7 @@ static void fault_report(int sig, const char *message, void *pc) {
     }
     build_report(sig, message, pc);
 #ifdef SPINNER_INPROC
-    if (opening) {  /* a misused call in a constructor at the load (no run to report it to) */
-        static char what[640];
-        snprintf(what, sizeof what, "a misused Spinner call (%s)", message ? message : "");
-        load_ended(what, -1, NULL);
-    }
+    if (opening) load_ended(NULL, -1, message ? message : "");  /* in a constructor at the load */
     if (out_len + 8 + report_len > sizeof out_buf) out_len = 0;  /* the report goes first */
     uint32_t hdr[2] = {OP_FAULT, (uint32_t)report_len};
     write_all(hdr, sizeof hdr);
@@ -1651,32 +1626,54 @@ static const char *signal_name(int sig) {
     }
 }
 
+/* " at PATH+0xOFFSET (function)" of the innermost frame of the program's library being opened in
+ * the calling thread's stack ("" if none): where its constructor is. The function only when the
+ * address is inside the symbol dladdr names (a static function, a constructor, has none: dladdr
+ * names the exported one before it, main say; simrunner drive's supervisor names the file:line). */
+static void load_where(char *where, size_t size) {
+    void *frames[64];
+    int n = backtrace(frames, 64);
+    const char *path = load_path ? load_path : "";
+    where[0] = 0;
+    for (int i = 0; i < n && !where[0]; i++) {
+        Dl_info info;
+        const ElfW(Sym) *sym = NULL;
+        uintptr_t in = (uintptr_t)frames[i] - 1;  /* (a return address: after its call, maybe past the end) */
+        if (!dladdr1((void *)in, &info, (void **)&sym, RTLD_DL_SYMENT) || !info.dli_fname ||
+            strcmp(info.dli_fname, path) != 0)
+            continue;
+        const char *name = info.dli_sname;
+        if (name && (sym == NULL || in >= (uintptr_t)info.dli_saddr + sym->st_size)) name = NULL;
+        snprintf(where, size, " at %s+0x%lx%s%s%s", path,
+                 (unsigned long)((uintptr_t)frames[i] - (uintptr_t)info.dli_fbase),
+                 name ? " (" : "", name ? name : "", name ? ")" : "");
+    }
+}
+
+/* The report of the program's load to load_fd: "TAG PATH", "host PATH", then `extra` (a line or
+ * ""), then the report (build_report's). */
+static void load_record(const char *tag, const char *extra) {
+    Dl_info here;
+    const char *host = dladdr((void *)load_record, &here) && here.dli_fname ? here.dli_fname : "";
+    const char *path = load_path ? load_path : "";
+    struct iovec parts[] = {{(void *)tag, strlen(tag)}, {(void *)" ", 1}, {(void *)path, strlen(path)},
+                            {(void *)"\nhost ", 6}, {(void *)host, strlen(host)}, {(void *)"\n", 1},
+                            {(void *)extra, strlen(extra)}, {report, report_len}};
+    ssize_t w = writev(load_fd, parts, sizeof parts / sizeof parts[0]);
+    (void)w;
+}
+
 /* A fault of the opening thread (on_fault): the report (as a run's, after "load-fault PATH" and
  * "host PATH" lines) to load_fd, where the simulator's supervisor reads it once the process has
  * died (simrunner.run.postmortem); without one, a line on stderr naming the function. Then the
  * signal's default action: the process dies by it, as it did without these handlers. */
 static void load_fault(int sig, siginfo_t *info, void *pc, const char *message) {
     build_report(sig, message, pc);
-    Dl_info here;
-    const char *host = dladdr((void *)load_fault, &here) && here.dli_fname ? here.dli_fname : "";
-    const char *path = load_path ? load_path : "";
     if (load_fd >= 0) {
-        struct iovec parts[] = {{(void *)"load-fault ", 11}, {(void *)path, strlen(path)}, {(void *)"\nhost ", 6},
-                                {(void *)host, strlen(host)}, {(void *)"\n", 1}, {report, report_len}};
-        ssize_t w = writev(load_fd, parts, sizeof parts / sizeof parts[0]);
-        (void)w;
+        load_record("load-fault", "");
     } else {
-        void *frames[64];
-        int n = backtrace(frames, 64);
-        char where[1024] = "";
-        for (int i = 0; i < n && !where[0]; i++) {  /* the innermost frame of the program's library */
-            Dl_info info_i;
-            if (dladdr(frames[i], &info_i) && info_i.dli_fname && strcmp(info_i.dli_fname, path) == 0)
-                snprintf(where, sizeof where, " at %s+0x%lx%s%s%s", path,
-                         (unsigned long)((uintptr_t)frames[i] - (uintptr_t)info_i.dli_fbase),
-                         info_i.dli_sname ? " (" : "", info_i.dli_sname ? info_i.dli_sname : "",
-                         info_i.dli_sname ? ")" : "");
-        }
+        char where[1024];
+        load_where(where, sizeof where);
         char line[1536];
         int k = snprintf(line, sizeof line,
                          "simrunner: %s%s, in a constructor as the controller's library was loaded into the "
@@ -1690,6 +1687,40 @@ static void load_fault(int sig, siginfo_t *info, void *pc, const char *message) 
     }
     signal(sig, SIG_DFL);
     if (info->si_code <= 0) raise(sig);  /* sent (raise, abort): again, at the handler's return */
+}
+
+/* A call that does not return in a constructor of a library being loaded here (spinner_inproc_open,
+ * before any run): exit, _exit, _Exit or quick_exit (`call`, its `status`; `message` NULL),
+ * spinner_fail (`call`, its `message`) or a misused Spinner call (`call` NULL, the misuse's
+ * `message`). Nothing can be left
+ * there (the loader is in the middle of the load, holding its lock) and nothing can go on: it used
+ * to end the simulator's thread (silently: the process's status 0, no output) or switch to a run
+ * that was not there (SIGSEGV). The simulator's process ends (status 70), first writing the report
+ * (a "load-end PATH" record, as load_fault's: "exit NAME STATUS" for an exit, then the message and
+ * the backtrace) to load_fd, from which simrunner drive's supervisor and a batch tell the run's
+ * outcome as --isolate does (simrunner.run.postmortem.load_end); without one, a line on stderr. */
+static void load_ended(const char *call, int status, const char *message) {
+    int exits = message == NULL;  /* (any status: exit(-1) is one) */
+    build_report(0, exits ? "" : message, NULL);
+    if (load_fd >= 0) {
+        char extra[96] = "";
+        if (exits) snprintf(extra, sizeof extra, "exit %s %d\n", call, status);
+        load_record("load-end", extra);
+    } else {
+        char what[700], where[1024];
+        if (exits) snprintf(what, sizeof what, "the controller called %s(%d)", call, status);
+        else if (call) snprintf(what, sizeof what, "the controller called %s(\"%s\")", call, message);
+        else snprintf(what, sizeof what, "a misused Spinner call (%s)", message);
+        load_where(where, sizeof where);
+        fflush(stdout);
+        fprintf(stderr, "simrunner: %s%s, in a constructor as the controller's library was loaded into the "
+                        "simulator's process, before the run, where the program cannot end without the "
+                        "simulator: the process ends (simrunner drive names the call's file:line; --isolate runs "
+                        "the program in a process of its own, where its constructors run with the run)\n",
+                what, where);
+        fflush(stderr);
+    }
+    _exit(70);
 }
 #endif
 
@@ -1918,7 +1949,9 @@ static void set_early(void *lib, int early) {
 }
 
 /* A fault in its constructors (or in the loader, or a library it loads) while it is opened: the
- * report to `report_fd` (< 0: a line on stderr), and the process dies by the signal (load_fault).
+ * report to `report_fd` (< 0: a line on stderr), and the process dies by the signal (load_fault);
+ * an exit, spinner_fail or misused call there: the same, the process ends with status 70
+ * (load_ended).
  * Opens are one at a time (the loader's own lock makes them so anyway). */
 static pthread_mutex_t open_lock = PTHREAD_MUTEX_INITIALIZER;
 
