@@ -1022,32 +1022,97 @@ def test_set_exposure_next_frame_from_cpp_loads_as_the_frame_in_progress_ends(tm
     assert [float(x.split()[1]) for x in out.splitlines() if x.startswith("period")] == [0.010, 0.020, 0.020], out
 
 
-@pytest.mark.parametrize("isolate", [False, True])
-def test_a_spinner_call_from_another_thread_is_reported_not_silent(tmp_path, isolate):
+THREADS_C = """\
+#include <pthread.h>
+#include <stdint.h>
+#include "spinner.h"
+static void *worker(void *arg) {
+    (void)arg;
+#if CASE == 0
+    spinner_get_time();                                    /* line 7 */
+#elif CASE == 1
+    spinner_get_time(); spinner_get_time();                /* line 9: and again, noted already */
+#elif CASE == 2
+    uint8_t row[8]; spinner_get_image(500, 1, row, 8);     /* line 11: a misused call */
+#endif
+    return NULL;
+}
+int main(void) {
+    spinner_sleep(0.1);
+    pthread_t t;
+    pthread_create(&t, NULL, worker, NULL);
+    pthread_join(t, NULL);
+    spinner_get_time();                                    /* line 20 */
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_spinner_call_from_another_thread_is_reported_at_the_threads_line(tmp_path, isolate):
     """Issue 50 (fault injection): a call from a thread of the program's own returned 0 in
-    silence; the next call from main()'s thread now reports it, with its file:line."""
-    import dataclasses
-
-    from simrunner.run.native import build_program
-
-    src = tmp_path / "threads.c"
-    src.write_text(textwrap.dedent("""\
-        #include <pthread.h>
-        #include "spinner.h"
-        static void *worker(void *arg) { (void)arg; spinner_get_time(); return NULL; }
-        int main(void) {
-            spinner_sleep(0.1);
-            pthread_t t;
-            pthread_create(&t, NULL, worker, NULL);
-            pthread_join(t, NULL);
-            spinner_get_time();
-            return 0;
-        }
-        """))
-    program = build_program([str(src)])
+    silence; the next call from main()'s thread reports it. The line named is the thread's call
+    (the one to change), with the call's name; main()'s call that noticed it comes after (it was
+    the line named: threads.c:20, not where the thread called)."""
+    src = write(tmp_path, "threads.c", THREADS_C)
+    program = build_program([src], defines=["CASE=0"])
     r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0)
     assert r.outcome == "controller_error", r.message
-    assert "threads.c:9" in r.message and "another thread than the one running main()" in r.message
+    assert r.message.startswith(f"{src}:7: a Spinner call, spinner_get_time(), came from another thread than "
+                                "the one running main() (it returned 0)"), r.message
+    assert r.message.endswith(f"(in worker()); noticed by main()'s thread at its next call, {src}:20 (in main())"), \
+        r.message
+    text = r.error.traceback_text
+    assert f"#0 worker at {src}:7\n" in text and f"#0 main at {src}:20\n" in text
+    assert "libc" not in text  # (the thread's start cut, as the host's below main() is)
+
+
+@pytest.mark.parametrize("case, line, said", [
+    (1, 9, "(it returned 0)"),
+    (2, 11, "ended that thread (spinner_get_image(line=500): expected -1 (whole image) or a row 0..127)"),
+])
+def test_a_threads_second_or_misused_spinner_call_does_not_take_over_the_simulator(tmp_path, case, line, said):
+    """In the simulator's process a foreign thread's second Spinner call (the first one noted) or
+    a misused one reported from that thread: it switched to the simulator's stack from there, and
+    the simulator's Python went on in the program's thread (the process hung for good). Now only
+    main()'s thread reports, naming the thread's first call; a misused call ends its thread."""
+    src = write(tmp_path, "threads.c", THREADS_C)
+    code = textwrap.dedent(f"""\
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        r = drive(build_program([{str(src)!r}], defines=["CASE={case}"]), track="floor", time_limit_s=2.0)
+        print(r.outcome, r.message, sep="\\n", flush=True)
+        """)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    outcome, _, message = done.stdout.strip().partition("\n")
+    assert outcome == "controller_error", done.stdout + done.stderr
+    assert message.startswith(f"{src}:{line}: a Spinner call, spinner_get_") and said in message, message
+    assert message.endswith(f"noticed by main()'s thread at its next call, {src}:20 (in main())"), message
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_spinner_method_from_a_std_thread_names_the_programs_line(tmp_path, isolate):
+    """C++: a std::thread calling a Spinner method (spinner.hpp's inline wrapper) is named at the
+    program's line, with the method it called, not at spinner.hpp's line."""
+    src = write(tmp_path, "threads.cpp", """\
+        #include <thread>
+        #include "spinner.hpp"
+        static void worker(Spinner &s) { s.getTime(); }
+        int main() {
+            Spinner s;
+            s.getImage(60);
+            std::thread t([&s] { worker(s); });
+            t.join();
+            s.setSpeed(0.5);
+            return 0;
+        }
+        """)
+    r = drive(dataclasses.replace(build_program([src]), isolate=isolate), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_error", r.message
+    assert r.message.startswith(f"{src}:3: a Spinner call, spinner_get_time(), came from another thread"), r.message
+    assert r.message.endswith("(in worker(), calling Spinner::getTime()); noticed by main()'s thread at its next "
+                              f"call, {src}:9 (in main())"), r.message
 
 
 @pytest.mark.parametrize("mode", [[], ["-DSPINNER_INPROC"]])

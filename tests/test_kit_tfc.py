@@ -3,6 +3,9 @@ a team's firmware builds unchanged against the simulator's TFC library and drive
 from __future__ import annotations
 
 import dataclasses
+import os
+import subprocess
+import sys
 import textwrap
 from pathlib import Path
 
@@ -489,3 +492,44 @@ def test_a_new_exposure_loads_at_the_frames_end_whatever_the_program_does_meanwh
     b = frames_around(r.log, t_call)
     assert b[0] < t_call - 1e-9, (t_call, b)  # (written mid-frame)
     assert [round(b[i + 1] - b[i], 6) for i in range(3)] == [0.01, 0.02, 0.02], (t_call, b)
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_library_call_from_a_thread_of_the_firmware_names_the_firmwares_line(tmp_path, isolate):
+    """A thread of the team's own calling the library: its Spinner calls come from that thread,
+    and the run ends at main()'s next call naming the team's line and the library's function it
+    called. The library makes several calls: the second one reported from the thread itself - in
+    the simulator's process it switched to the simulator's stack from there, and the process hung
+    for good (so the run is a child process here, with a time-out); isolated it raced main()'s
+    thread for the pipe."""
+    src = tmp_path / "kit.c"
+    src.write_text(textwrap.dedent("""\
+        #include <pthread.h>
+        #include "derivative.h"
+        #include "TFC\\TFC.h"
+        static void *worker(void *arg) { (void)arg; TFC_SetMotorPWM(0.2f, 0.2f); return NULL; }
+        int main(void) {
+            TFC_Init();
+            TFC_Task();
+            pthread_t t;
+            pthread_create(&t, NULL, worker, NULL);
+            pthread_join(t, NULL);
+            for (;;)
+                TFC_Task();
+        }
+        """))
+    code = textwrap.dedent(f"""\
+        import dataclasses
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        program = dataclasses.replace(build_program([{str(src)!r}], kit="tfc"), isolate={isolate})
+        r = drive(program, track="floor", time_limit_s=2.0)
+        print(r.outcome, r.message, sep="\\n", flush=True)
+        """)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(REPO)})
+    outcome, _, message = done.stdout.strip().partition("\n")
+    assert outcome == "controller_error", done.stdout + done.stderr
+    assert message.startswith(f"{src}:4: a Spinner call, "), message
+    assert message.endswith("(in worker(), calling TFC_SetMotorPWM()); noticed by main()'s thread at its next "
+                            f"call, {src}:12 (in main())"), message

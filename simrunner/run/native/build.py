@@ -74,6 +74,9 @@ NATIVE_SUFFIXES = C_SUFFIXES + CXX_SUFFIXES + LIB_SUFFIXES
 # inlined) was named at the header's line in the .c/.cpp file; the code is the same either way.
 COMMON_FLAGS = ("-g", "-gdwarf-4", "-Og", "-fno-omit-frame-pointer", "-fPIC", "-Wall")
 C_FLAGS = ("-std=gnu11",)
+#: The host's (host/spinner_host.c, both builds). No sibling calls: each API function the program
+#: calls keeps its frame, so a report names it (a Spinner call from another thread than main()'s).
+HOST_FLAGS = ("-O2", "-g", "-fno-optimize-sibling-calls")
 CXX_FLAGS = ("-std=gnu++17",)
 # GCC makes the statics of inline functions and templates process-wide (STB_GNU_UNIQUE): a
 # library holding one can never be unloaded, and every later run of it would share them.
@@ -725,7 +728,7 @@ def _build_host(kind: str, suffix: str, flags: list[str], libs: list[str]) -> Pa
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.{os.getpid()}")
     try:
-        _run([compiler, "-O2", "-g", *flags, f"-I{INCLUDE_DIR}", str(HOST_SOURCE), "-o", str(tmp),
+        _run([compiler, *HOST_FLAGS, *flags, f"-I{INCLUDE_DIR}", str(HOST_SOURCE), "-o", str(tmp),
               *libs], "the simrunner host program", BuildLimits.from_env())
         os.replace(tmp, out)
     finally:

@@ -2,7 +2,9 @@
 
 The host program (``host/spinner_host.c``) reports a fault as text: ``signal N``, ``message
 TEXT``, optionally ``pc ADDR`` (the faulting instruction) and one ``frame ADDR OFFSET
-PATH<TAB>SYMBOL`` line per return address (glibc ``backtrace`` + ``dladdr``). A fault in a
+PATH<TAB>SYMBOL`` line per return address (glibc ``backtrace`` + ``dladdr``); a Spinner call
+from a thread of the program's own is that thread's frames, then ``noticed ...`` lines (as
+``frame`` lines): main()'s thread's backtrace at its next call, which reported it. A fault in a
 program's constructors as the in-process host opens its library is written, after a
 ``load-fault LIBRARY`` and a ``host PATH`` line, to the supervision's report file, read once the
 process has died (:func:`load_fault_report`); a program that ends there (an exit, spinner_fail,
@@ -49,23 +51,44 @@ class Frame:
 @dataclass(frozen=True)
 class Fault:
     """A parsed report: ``signal`` (0 for a misused Spinner call, SIGUSR1 for a stalled
-    loop's position), ``message`` and the user's ``frames`` (innermost first)."""
+    loop's position), ``message`` and the user's ``frames`` (innermost first). ``noticed``: where
+    the thread running main() noticed a fault of another thread's (a Spinner call from a thread
+    of the program's own, whose frames ``frames`` are), else empty."""
 
     signal: int
     message: str
     frames: tuple[Frame, ...]
+    noticed: tuple[Frame, ...] = ()
 
     @property
     def location(self) -> Frame | None:
         """The innermost frame with a file and line in the user's code (not in the simulator's
         headers and kit libraries: an exception thrown by ``spinner.hpp`` names the call that
         caused it), else the innermost with a file, if any."""
-        with_file = [f for f in self.frames if f.file]
-        return next((f for f in with_file if not _ours(f.file)), with_file[0] if with_file else None)
+        return _location(self.frames)
+
+    @property
+    def called(self) -> Frame | None:
+        """The function of the simulator's (a kit's, ``spinner.hpp``'s) that :attr:`location`
+        called, where the fault is inside one (None: the location is the innermost frame)."""
+        loc = self.location
+        i = next((k for k, f in enumerate(self.frames) if f is loc), 0)
+        inner = self.frames[i - 1] if i > 0 else None
+        return inner if inner is not None and inner.file and _ours(inner.file) else None
+
+    @property
+    def noticed_at(self) -> Frame | None:
+        """:attr:`location` of :attr:`noticed` (None without)."""
+        return _location(self.noticed)
 
     def where(self) -> str:
         loc = self.location
         return f"{loc.file}:{loc.line}" if loc else ""
+
+
+def _location(frames: tuple[Frame, ...]) -> Frame | None:
+    with_file = [f for f in frames if f.file]
+    return next((f for f in with_file if not _ours(f.file)), with_file[0] if with_file else None)
 
 
 _NATIVE_DIR = os.path.dirname(os.path.abspath(__file__))  # the simulator's headers and kits
@@ -175,8 +198,9 @@ def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
     """A :class:`Fault` from the host's report; frames of ``user_modules`` get file:line.
 
     Handler and host frames above the fault are dropped; the frames below the controller's
-    ``main`` (the host starting it) are cut."""
-    sig, message, pc, raw = 0, "", None, []
+    ``main`` (the host starting it) are cut. ``noticed`` lines (as ``frame`` lines) are main()'s
+    thread's backtrace where it noticed another thread's misuse (:attr:`Fault.noticed`)."""
+    sig, message, pc, raw, noticed = 0, "", None, [], []
     for line in text.splitlines():
         key, _, rest = line.partition(" ")
         if key == "signal":
@@ -185,10 +209,10 @@ def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
             message = rest
         elif key == "pc":
             pc = int(rest, 16)
-        elif key == "frame":
+        elif key in ("frame", "noticed"):
             addr, off, rest2 = (rest.split(" ", 2) + ["", ""])[:3]
             path, _, sym = rest2.partition("\t")
-            raw.append((int(addr, 16), int(off, 16), path, sym))
+            (raw if key == "frame" else noticed).append((int(addr, 16), int(off, 16), path, sym))
     user = {os.path.realpath(m) for m in user_modules}
     host_real = os.path.realpath(host)
     # (offset for symbolising, path, symbol): return addresses point after their call
@@ -202,17 +226,33 @@ def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
             first = raw[idx]
             frames = [(first[1], first[2], first[3])] + [(o - 1, p, s) for _, o, p, s in raw[idx + 1:]]
     else:
-        rest = list(raw)
-        while rest and os.path.realpath(rest[0][2]) == host_real:
-            rest.pop(0)  # the report's own frames and the Spinner call
-        frames = [(o - 1, p, s) for _, o, p, s in rest]
+        frames = _below_host(raw, host_real)
+    # (another thread's frames, when main()'s noticed them: that thread's start in libc is cut too)
+    return Fault(sig, message, _symbolised(frames, user, host_real, thread=bool(noticed)),
+                 _symbolised(_below_host(noticed, host_real), user, host_real))
+
+
+def _below_host(raw: list[tuple[int, int, str, str]], host_real: str) -> list[tuple[int, str, str]]:
+    """The frames of ``raw`` below its innermost host frames (the report's own and the Spinner
+    call), each with the offset of its call (a return address points after it)."""
+    rest = list(raw)
+    while rest and os.path.realpath(rest[0][2]) == host_real:
+        rest.pop(0)
+    return [(o - 1, p, s) for _, o, p, s in rest]
+
+
+def _symbolised(frames: list[tuple[int, str, str]], user: set[str], host_real: str,
+                thread: bool = False) -> tuple[Frame, ...]:
+    """:class:`Frame` s of ``(offset, path, symbol)`` frames: the user's with file:line.
+    ``thread``: the frames of a thread the program started (all after its outermost user frame,
+    the thread's start, are cut)."""
     # cut below the controller's main: the frames after the last user frame (host frames between
     # user frames stay: an interrupt handler, a kit's hook the host calls, ran inside a call)
     reals = [os.path.realpath(f[1]) if f[1] and f[1] != "?" else f[1] for f in frames]
     last_user = max((i for i, real in enumerate(reals) if real in user), default=-1)
     kept = []
     for f, real in zip(frames, reals):
-        if last_user >= 0 and len(kept) > last_user and real == host_real:
+        if last_user >= 0 and len(kept) > last_user and (real == host_real or thread):
             break
         kept.append((f[0], f[1], f[2], real in user))
     by_module: dict[str, list[int]] = {}
@@ -227,7 +267,7 @@ def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
             out.extend(Frame(fn or sym, file, line, path) for fn, file, line in found)
         else:
             out.append(Frame(sym, None, None, path))
-    return Fault(sig, message, tuple(out))
+    return tuple(out)
 
 
 def _what(fault: Fault) -> str:
@@ -238,11 +278,25 @@ def _what(fault: Fault) -> str:
 
 
 def format_traceback(fault: Fault, program: str) -> str:
-    """The traceback text (innermost frame first, repeated frames folded)."""
+    """The traceback text (innermost frame first, repeated frames folded); then, for another
+    thread's misuse, main()'s thread's where it noticed it."""
     what = _what(fault)
-    lines = [f"C controller {program}: {what}", "C backtrace (innermost first):"]
+    lines = [f"C controller {program}: {what}", "C backtrace (innermost first):", *_frame_lines(fault.frames)]
+    loc = fault.location
+    if loc is None:
+        lines.append("(no file:line: compile with debug info, -g, and install binutils for addr2line)")
+    if fault.noticed:
+        lines += [f"{_NOTICED[0].upper()}{_NOTICED[1:]} (innermost first):", *_frame_lines(fault.noticed)]
+    return "\n".join(lines) + "\n"
+
+
+_NOTICED = "noticed by main()'s thread at its next call"
+
+
+def _frame_lines(frames: tuple[Frame, ...]) -> list[str]:
+    lines: list[str] = []
     prev, repeat = None, 0
-    for i, f in enumerate(fault.frames):
+    for i, f in enumerate(frames):
         t = f.text()
         if t == prev:
             repeat += 1
@@ -252,27 +306,33 @@ def format_traceback(fault: Fault, program: str) -> str:
             repeat = 0
         lines.append(f"  #{i} {t}")
         prev = t
-        if len(lines) > 40:
+        if len(lines) > 38:
             lines.append("    ...")
             break
     if repeat:
         lines.append(f"    ... the frame above {repeat} more time(s)")
-    loc = fault.location
-    if loc is None:
-        lines.append("(no file:line: compile with debug info, -g, and install binutils for addr2line)")
-    return "\n".join(lines) + "\n"
+    return lines
+
+
+def _function(frame: Frame) -> str:
+    # (a C++ function's name comes demangled with its parameters: "handler()", "Car::step(int)")
+    return frame.function if frame.function.endswith(")") else f"{frame.function}()"
 
 
 def fault_message(fault: Fault) -> str:
-    """One line: ``file:line: what happened in function()``."""
+    """One line: ``file:line: what happened in function()``; for another thread's misuse, the
+    kit's or ``spinner.hpp``'s function it called there (``(in worker(), calling TFC_SetServo())``)
+    and where main()'s thread noticed it after that (``; noticed by main()'s thread at its next
+    call, file:line (in function())``)."""
     what = _what(fault).split(" (")[0] if fault.signal else fault.message
     name = f"SIG{signal.Signals(fault.signal).name[3:]}: " if fault.signal in SIGNAL_TEXT else ""
-    loc = fault.location
+    loc, noticed = fault.location, fault.noticed_at
+    after = f"; {_NOTICED}, {noticed.file}:{noticed.line} (in {_function(noticed)})" if noticed else ""
     if loc is None:
-        return f"{name}{what}"
-    # (a C++ function's name comes demangled with its parameters: "handler()", "Car::step(int)")
-    function = loc.function if loc.function.endswith(")") else f"{loc.function}()"
-    return f"{loc.file}:{loc.line}: {name}{what} (in {function})"
+        return f"{name}{what}{after}"
+    called = fault.called if fault.noticed else None
+    calling = f", calling {_function(called)}" if called else ""
+    return f"{loc.file}:{loc.line}: {name}{what} (in {_function(loc)}{calling}){after}"
 
 
 def describe_fault(report: str, user_modules: set[str], host: str, program: str) -> tuple[str, str]:

@@ -17,7 +17,8 @@
  * overflow through an alternate signal stack), a misused call, or the simulator's watchdog
  * asking where a stalled loop is (SIGUSR1; in-process also the reply ST_WHERE) sends a FAULT
  * report with the raw backtrace (module, offset, symbol per frame); the simulator symbolises
- * it with the debug info. In-process, a fault ends the coroutine (the simulator goes on);
+ * it with the debug info. A call from a thread of the program's own is reported by main()'s
+ * thread with that thread's backtrace, and main()'s own as "noticed" lines (foreign_noted). In-process, a fault ends the coroutine (the simulator goes on);
  * a signal that is not the controller's goes to the handler installed before. A fault in the
  * program's constructors as its library is loaded (spinner_inproc_open, before any run: nothing
  * can return out of the loader) writes the same report to the file descriptor the simulator
@@ -44,8 +45,8 @@
 #include <sys/prctl.h>
 #include <sys/types.h>
 #include <sys/wait.h>
-#ifdef SPINNER_INPROC
 #include <link.h>
+#ifdef SPINNER_INPROC
 #include <sys/mman.h>
 #include <sys/resource.h>
 #endif
@@ -98,7 +99,7 @@ static void ended(void) __attribute__((noreturn));
 static void read_init(void);
 #define INIT() do { \
         if (OPENING()) early_calls_seen(); \
-        else { if (!inited) read_init(); if (foreign_calls) foreign_call_report(); } \
+        else { if (!inited) read_init(); foreign_check(); } \
     } while (0)
 #ifdef SPINNER_INPROC
 /* A call of a constructor as its library is loaded here (spinner_inproc_open): seen, and answered
@@ -110,18 +111,52 @@ static void early_calls_seen(void) {}
 #endif
 
 /* Spinner calls from a thread other than the one running main(): they cannot reach the
- * simulator (they return 0); the next call from main()'s thread reports the misuse. */
+ * simulator (they return 0; a misused one ends its thread, foreign_misuse). That thread cannot be
+ * stopped safely, nor report (the simulator talks to main()'s thread): the first such call's
+ * thread keeps its backtrace (foreign_noted), and the next call from main()'s thread reports the
+ * misuse from those frames (foreign_call_report): the line named is the thread's call, the one
+ * to change, with main()'s call that noticed it beside it. */
+enum { FOREIGN_NONE, FOREIGN_TAKING, FOREIGN_TAKEN, FOREIGN_REPORTED };  /* foreign_calls */
+#define FOREIGN_FRAMES 64
 static pthread_t api_thread;
-static volatile int foreign_calls;
+static int foreign_calls;  /* FOREIGN_*: atomic (the frames are the taking thread's until TAKEN) */
+static void *foreign_frames[FOREIGN_FRAMES];
+static int foreign_depth;
+static char foreign_message[512];  /* a misused call's message ("": a call that returned 0) */
 static void foreign_call_report(void);
 static void forked_call(void) __attribute__((noreturn));
 static volatile sig_atomic_t forked;  /* this process is one the controller fork()ed (below) */
+
+/* The first foreign call: this thread's backtrace and, for a misused call, its message (outside
+ * a signal handler: backtrace may load the unwinder). Later ones add nothing. */
+static void foreign_noted(const char *message) {
+    int none = FOREIGN_NONE;
+    if (!__atomic_compare_exchange_n(&foreign_calls, &none, FOREIGN_TAKING, 0, __ATOMIC_ACQ_REL,
+                                     __ATOMIC_ACQUIRE))
+        return;
+    foreign_depth = backtrace(foreign_frames, FOREIGN_FRAMES);
+    snprintf(foreign_message, sizeof foreign_message, "%s", message ? message : "");
+    __atomic_store_n(&foreign_calls, FOREIGN_TAKEN, __ATOMIC_RELEASE);
+}
+
+/* This thread is not the one running main() (the run under way's; not a constructor's at the load). */
+static int on_foreign_thread(void) {
+    return !OPENING() && inited && !pthread_equal(pthread_self(), api_thread);
+}
+
 static int foreign_thread(void) {
     if (forked) forked_call();
     if (OPENING()) return 1;  /* a constructor's call at the load (INIT): answered here */
-    if (!inited || pthread_equal(pthread_self(), api_thread)) return 0;
-    if (!finished) foreign_calls = 1;
+    if (!on_foreign_thread()) return 0;
+    if (!finished) foreign_noted(NULL);
     return 1;
+}
+
+/* main()'s thread (only: a foreign thread's next call must not report from there) reports a
+ * foreign call at its next call. */
+static void foreign_check(void) {
+    if (__atomic_load_n(&foreign_calls, __ATOMIC_ACQUIRE) == FOREIGN_TAKEN && !on_foreign_thread())
+        foreign_call_report();
 }
 
 /* --mcu-time measured: each request is preceded by the CPU time this thread spent since the
@@ -581,10 +616,43 @@ void spinner_warn(const char *message) {
     queue(OP_WARN, message, strlen(message), NULL, 0);
 }
 
+/* The API function the foreign thread called (its outermost frame in this module: the host is
+ * built with -fno-optimize-sibling-calls, so the entry point keeps its frame) as ", NAME()," into
+ * `out`; "" when it has no symbol. The sleeps' --wrap names are the program's: usleep. */
+static void foreign_call_name(char *out, size_t size) {
+    Dl_info here, info;
+    out[0] = 0;
+    if (!dladdr((void *)foreign_call_name, &here)) return;
+    int entry = -1;
+    for (int i = 0; i < foreign_depth; i++) {
+        if (!dladdr(foreign_frames[i], &info) || info.dli_fbase != here.dli_fbase) break;
+        entry = i;
+    }
+    const ElfW(Sym) *sym = NULL;
+    if (entry < 0 || !dladdr1((char *)foreign_frames[entry] - 1, &info, (void **)&sym, RTLD_DL_SYMENT) ||
+        info.dli_sname == NULL || sym == NULL)
+        return;
+    uintptr_t at = (uintptr_t)foreign_frames[entry] - 1, start = (uintptr_t)info.dli_saddr;
+    if (at < start || at >= start + sym->st_size) return;  /* (a static function: not a name of the API) */
+    const char *name = info.dli_sname;
+    if (strncmp(name, "__wrap_", 7) == 0) name += 7;
+    snprintf(out, size, ", %s(),", name);
+}
+
+static void foreign_report(const char *message);
 static void foreign_call_report(void) {
-    foreign_calls = 0;
-    misuse("a Spinner call came from another thread than the one running main() (it returned 0): "
-           "the API answers main()'s thread only; hand the values to that thread instead");
+    __atomic_store_n(&foreign_calls, FOREIGN_REPORTED, __ATOMIC_RELEASE);  /* (once; the frames stay) */
+    char call[160];
+    foreign_call_name(call, sizeof call);
+    static char msg[1024];
+    if (foreign_message[0])
+        snprintf(msg, sizeof msg, "a Spinner call%s came from another thread than the one running main() and "
+                 "ended that thread (%s): the API answers main()'s thread only; hand the values to that thread "
+                 "instead", call, foreign_message);
+    else
+        snprintf(msg, sizeof msg, "a Spinner call%s came from another thread than the one running main() (it "
+                 "returned 0): the API answers main()'s thread only; hand the values to that thread instead", call);
+    foreign_report(msg);
 }
 
 static double finite_arg(const char *fn, const char *name, double v) {
@@ -1425,24 +1493,12 @@ static void rdec(long v) {
     rput(out);
 }
 
-/* Text report into report[]: "signal N\nmessage TEXT\npc ADDR\nframe ADDR OFFSET PATH\tSYMBOL\n"... */
-static void build_report(int sig, const char *message, void *pc) {
-    void *frames[128];
-    int n = backtrace(frames, 128);
-    report_len = 0;
-    rput("signal ");
-    rdec(sig);
-    rput("\nmessage ");
-    rput(message ? message : "");
-    rput("\n");
-    if (pc) {
-        rput("pc ");
-        rhex((uintptr_t)pc);
-        rput("\n");
-    }
+/* One `key` line per frame into report[]: "KEY ADDR OFFSET PATH\tSYMBOL\n". */
+static void report_frames(const char *key, void *const *frames, int n) {
     for (int i = 0; i < n; i++) {
         Dl_info info;
-        rput("frame ");
+        rput(key);
+        rput(" ");
         rhex((uintptr_t)frames[i]);
         if (dladdr(frames[i], &info) && info.dli_fname) {
             rput(" ");
@@ -1458,13 +1514,69 @@ static void build_report(int sig, const char *message, void *pc) {
     }
 }
 
+/* Text report into report[]: "signal N\nmessage TEXT\npc ADDR\nframe ADDR OFFSET PATH\tSYMBOL\n"...
+ * with `frames` (n of them; NULL: this thread's backtrace now). */
+static void build_report_frames(int sig, const char *message, void *pc, void *const *frames, int n) {
+    void *here[128];
+    if (frames == NULL) {
+        n = backtrace(here, 128);
+        frames = here;
+    }
+    report_len = 0;
+    rput("signal ");
+    rdec(sig);
+    rput("\nmessage ");
+    rput(message ? message : "");
+    rput("\n");
+    if (pc) {
+        rput("pc ");
+        rhex((uintptr_t)pc);
+        rput("\n");
+    }
+    report_frames("frame", frames, n);
+}
+
+static void build_report(int sig, const char *message, void *pc) {
+    build_report_frames(sig, message, pc, NULL, 0);
+}
+
+static void send_report(int sig, const char *message);
+
+/* A misused call (a bad argument, spinner_fail) from a thread other than main()'s: noted as the
+ * foreign call (reported by main()'s thread), and the thread ends, as the call cannot return (the
+ * caller goes on with what it rejected) nor report from here (in-process that switched the
+ * simulator's own stack onto this thread). */
+static void foreign_misuse(const char *message) __attribute__((noreturn));
+static void foreign_misuse(const char *message) {
+    if (!finished) foreign_noted(message);
+    pthread_exit(NULL);
+}
+
 static void fault_report(int sig, const char *message, void *pc) {
     if (forked) {  /* misuse in a forked process: said on stderr, no simulator to report to */
         fprintf(stderr, "simrunner: %s (in process %ld, which the controller fork()ed)\n", message,
                 (long)getpid());
         _exit(FORK_EXIT);
     }
+    if (sig == 0 && on_foreign_thread()) foreign_misuse(message);
     build_report(sig, message, pc);
+    send_report(sig, message);
+}
+
+/* The foreign call's report (foreign_call_report, main()'s thread): the foreign thread's frames,
+ * then "noticed" lines, this thread's backtrace (main()'s call that noticed it). */
+static void foreign_report(const char *message) {
+    build_report_frames(0, message, NULL, foreign_frames, foreign_depth);
+    void *here[128];
+    report_frames("noticed", here, backtrace(here, 128));
+    send_report(0, message);
+}
+
+/* The report in report[] to the simulator; the program ends (in-process: back to the simulator). */
+static void send_report(int sig, const char *message) {
+#ifndef SPINNER_INPROC
+    (void)message;
+#endif
 #ifdef SPINNER_INPROC
     if (opening) load_ended(NULL, -1, message ? message : "");  /* in a constructor at the load */
     if (out_len + 8 + report_len > sizeof out_buf) out_len = 0;  /* the report goes first */
