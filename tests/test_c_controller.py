@@ -1042,7 +1042,9 @@ int main(void) {
     pthread_t t;
     pthread_create(&t, NULL, worker, NULL);
     pthread_join(t, NULL);
-    spinner_get_time();                                    /* line 20 */
+#ifndef RETURN_AT_ONCE
+    spinner_get_time();                                    /* line 21 */
+#endif
     return 0;
 }
 """
@@ -1053,18 +1055,29 @@ def test_a_spinner_call_from_another_thread_is_reported_at_the_threads_line(tmp_
     """Issue 50 (fault injection): a call from a thread of the program's own returned 0 in
     silence; the next call from main()'s thread reports it. The line named is the thread's call
     (the one to change), with the call's name; main()'s call that noticed it comes after (it was
-    the line named: threads.c:20, not where the thread called)."""
+    the line named: threads.c:21, not where the thread called)."""
     src = write(tmp_path, "threads.c", THREADS_C)
     program = build_program([src], defines=["CASE=0"])
     r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0)
     assert r.outcome == "controller_error", r.message
     assert r.message.startswith(f"{src}:7: a Spinner call, spinner_get_time(), came from another thread than "
                                 "the one running main() (it returned 0)"), r.message
-    assert r.message.endswith(f"(in worker()); noticed by main()'s thread at its next call, {src}:20 (in main())"), \
+    assert r.message.endswith(f"(in worker()); noticed by main()'s thread at its next call, {src}:21 (in main())"), \
         r.message
     text = r.error.traceback_text
-    assert f"#0 worker at {src}:7\n" in text and f"#0 main at {src}:20\n" in text
+    assert f"#0 worker at {src}:7\n" in text and f"#0 main at {src}:21\n" in text
     assert "libc" not in text  # (the thread's start cut, as the host's below main() is)
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_spinner_call_from_another_thread_is_reported_when_main_returns_without_another(tmp_path, isolate):
+    """main() joins the thread and returns without a Spinner call of its own: the thread's call
+    is reported as main() returns (the run ended controller_returned, the misuse unsaid)."""
+    src = write(tmp_path, "threads.c", THREADS_C)
+    program = build_program([src], defines=["CASE=0", "RETURN_AT_ONCE"])
+    r = drive(dataclasses.replace(program, isolate=isolate), track="floor", time_limit_s=2.0)
+    assert r.outcome == "controller_error", r.message
+    assert r.message.startswith(f"{src}:7: a Spinner call, spinner_get_time(), came from another thread"), r.message
 
 
 @pytest.mark.parametrize("case, line, said", [
@@ -1088,7 +1101,7 @@ def test_a_threads_second_or_misused_spinner_call_does_not_take_over_the_simulat
     outcome, _, message = done.stdout.strip().partition("\n")
     assert outcome == "controller_error", done.stdout + done.stderr
     assert message.startswith(f"{src}:{line}: a Spinner call, spinner_get_") and said in message, message
-    assert message.endswith(f"noticed by main()'s thread at its next call, {src}:20 (in main())"), message
+    assert message.endswith(f"noticed by main()'s thread at its next call, {src}:21 (in main())"), message
 
 
 @pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])

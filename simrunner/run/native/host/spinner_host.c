@@ -1905,6 +1905,7 @@ int main(int argc, char **argv) {
     extern char **environ;
     INIT();  /* the run has started */
     int rc = user_main(argc - 4, argv + 4, environ);
+    foreign_check();  /* a thread's call that main()'s own calls did not report before main() returned */
     flush_out();  /* nothing in a forked process (its pipes are closed) */
     exit(rc);
 }
@@ -1999,6 +2000,7 @@ static void entry(void) {
                "simulator's process the program's constructors run as its library is loaded, before the run, "
                "where nothing can be asked; run it with --isolate, or make the call in main()");
     int rc = user_main(user_argc, user_argv, environ);
+    foreign_check();  /* a thread's call that main()'s own calls did not report before main() returned */
     exit_run(rc);
 }
 
