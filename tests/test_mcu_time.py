@@ -2,6 +2,7 @@
 controller's own processing cost simulated time, measured (times --mcu-scale) or fixed."""
 from __future__ import annotations
 
+import dataclasses
 import textwrap
 import time
 
@@ -170,3 +171,38 @@ def test_bad_settings_are_one_line_errors():
         RunSettings(mcu_scale=0)
     res = CliRunner().invoke(cli, ["drive", "examples/line_follower.py", "--mcu-time", "-1"])
     assert res.exit_code == 2 and "mcu_time = " in res.output and "Traceback" not in res.output
+
+
+PENDED_C = """\
+    #include <stdio.h>
+    #include "spinner.h"
+    static int calls;
+    static void h(void) { calls++; spinner_set_servo(0.1); }
+    int main(void) {
+        double t0 = spinner_get_time();
+        spinner_pend_every(h);   /* unmasked: h runs in it, as NVIC_SetPendingIRQ's handler */
+        double t1 = spinner_now();
+        spinner_set_servo(0.0);
+        double t2 = spinner_now();
+        printf("calls %d gaps %.4f %.4f\\n", calls, t1 - t0, t2 - t1);
+        fflush(stdout);
+        return 0;
+    }
+    """
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_handler_pended_from_main_may_call_the_spinner(tmp_path, capfd, isolate):
+    """spinner_pend_every (a kit's NVIC_SetPendingIRQ) runs the handler in its request, which is
+    not charged: the handler's own calls are not charged either, no time passes in a handler;
+    main's next call is (the handler's spinner_set_servo was charged as a call of main's,
+    inside the handler, and the run ended 'inside an interrupt handler no simulated time passes')."""
+    from simrunner.run.native import build_program
+
+    src = tmp_path / "pended.c"
+    src.write_text(textwrap.dedent(PENDED_C))
+    r = drive(dataclasses.replace(build_program([str(src)]), isolate=isolate), track="floor", time_limit_s=5.0,
+              mcu_time=0.05)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    assert "calls 1 gaps 0.0000 0.0500" in out, out

@@ -15,7 +15,8 @@ frames):
 - a fixed number of seconds per call: deterministic.
 
 The charge is whole physics steps (``dt``); the rest is carried to the next call, so no time is
-lost. Calls made from inside another call (the Spinner's own) are not charged twice.
+lost. Calls made from inside another call (the Spinner's own) are not charged twice, calls in
+an interrupt handler not at all: no simulated time passes in a handler.
 """
 from __future__ import annotations
 
@@ -54,7 +55,7 @@ class McuTime:
 
     def enter(self) -> None:
         self._depth += 1
-        if self._depth > 1:
+        if self._depth > 1 or self.clock.in_interrupt:  # (no time passes in a handler)
             return
         if self.fixed_s is not None:
             spent = self.fixed_s
@@ -72,7 +73,7 @@ class McuTime:
 
     def leave(self) -> None:
         self._depth -= 1
-        if self._depth == 0 and self.fixed_s is None and not self.reported:
+        if self._depth == 0 and self.fixed_s is None and not self.reported and not self.clock.in_interrupt:
             self._left_at = time.thread_time()
 
 
