@@ -2,10 +2,9 @@
 time, as on the car, where a frame's processing delays the command that follows it.
 
 Without it (the default) simulated time passes only inside the Spinner's calls that wait or
-read a sensor, so a controller's code runs in no time at all. With it, each call into the
-Spinner API first lets the time the controller spent since its previous call pass, with the
-commands in force until then (so a slow algorithm's commands come late, and it may miss camera
-frames):
+read a sensor, so a controller's code runs in no time at all. With it, the time the controller
+spent since its previous call passes, with the commands in force until then, so a slow
+algorithm's commands come late and it may miss camera frames:
 
 - ``measured``: the CPU time the controller used between the two calls (its thread's CPU
   clock for a Python controller; a C/C++ program reports its own thread's CPU clock with each
@@ -15,21 +14,122 @@ frames):
 - a fixed number of seconds per call: deterministic.
 
 The charge is whole physics steps (``dt``); the rest is carried to the next call, so no time is
-lost. Calls made from inside another call (the Spinner's own) are not charged twice.
+lost.
+
+Where the time passes (the rule; docs/drive.md). **Every request of the program's code to the
+simulator is charged**: before the simulator acts on it or answers it, the program's time since
+its previous charged request passes - whether the call lets time pass itself (a sensor read, a
+wait) or not (a command, a setting, a timer's start or stop, a query such as ``get_exposure``,
+``scan_angles``, a Pixy2 call). On the MCU that time has passed by then too: a timer that fell
+due in it interrupts before the call, and the call acts after it; and a program that computes
+and then makes only calls that let no time pass takes time for its work. With a fixed cost each
+request costs it. The requests:
+
+- Python: each call of a public method of the Spinner, of its Pixy2 (``spinner.pixy2()``) and of
+  the Pixy2's ``line``, their camelCase aliases too (:func:`api_calls` lists them,
+  :func:`charge_calls` charges each) but :data:`UNCHARGED_METHODS`. Attributes and properties
+  (``line_row``, ``image_shape``, ``recording``, ``pixy.frame_width``, ``pixy.line.vectors``)
+  are what the program holds, no calls.
+- C/C++: each message a call of spinner.h or pixy2_line.h sends (spinner.hpp's and Pixy2.h's
+  members, the kits' libraries - TFC_*, mbed's, the S32K144 RTD's - and usleep, sleep,
+  nanosleep, clock_nanosleep make theirs through those: a kit's function costs one charge per
+  request it sends), charged where the simulator takes every request
+  (:meth:`simrunner.run.native.bridge._Session._handle`) but :data:`UNCHARGED_REQUESTS`. A call
+  with nothing to send is answered inside the program, as on the MCU by a read of a variable or
+  a core register, and is not charged: :data:`UNCHARGED_C_FUNCTIONS`, and a call that changes
+  nothing (a second ``spinner_disable_interrupts``, ``spinner_enable_interrupts`` unmasked,
+  ``spinner_stop_every`` of a handler not set up). Python's same calls are charged: with a fixed
+  cost one charge more; measured the same, as nothing depends on where the time before a call
+  without an effect passes. The requests exempt are not calls of the program's code (its CPU
+  time, a handler's end, its end), ``spinner_now`` and ``spinner_warn``, and the kits' NVIC
+  emulation: sent at the kit's look at the registers the program wrote, they have no time of
+  their own in the program's; the program's time passes at its next call.
+
+Calls made inside another call (a Pixy2 call's exposure, the bridge's request answered by a
+Spinner method) are charged once, and calls in an interrupt handler not at all: no simulated
+time passes in a handler (a C handler's measured time is charged at main's next call).
 """
 from __future__ import annotations
 
 import functools
+import inspect
 import math
 import time
 
-#: The Spinner methods a controller calls (each charged on entry, the clock restarted on exit; their
-#: camelCase aliases, the thesis's names, too).
-TIMED_METHODS = ("set_servo", "set_speed", "set_speed_and_servo", "set_motors", "get_image", "get_speed", "get_position",
-                 "get_distance", "get_scan", "get_encoder", "get_gyro", "get_accel", "get_time", "sleep",
-                 "add_data", "add_noise", "set_exposure", "get_exposure", "camera_free_running", "param", "every",
-                 "latest_image",
-                 "disable_interrupts", "enable_interrupts")
+#: The Python calls not charged (the rule's exemptions), each with the reason: what the program
+#: holds or does itself, as the C functions of the same name do.
+UNCHARGED_METHODS = {
+    "configure": "the program's own norm functions (C: spinner_configure stays in the program)",
+    "default_diff_norm": "a formula of the program's own (v sin(delta) / L)",
+    "interrupts_disabled": "reads PRIMASK, a core register the program reads in one instruction (C: "
+                           "spinner_interrupts_disabled stays in the program; the kits read it at each "
+                           "emulated register access)",
+    "pixy2": "makes the library's object (C++: `Pixy2 pixy;`); its calls (init, ...) are charged",
+}
+
+#: The C functions (spinner.h, pixy2_line.h) not charged, each with the reason: most send no
+#: request (answered inside the program from what it was given at its start or keeps itself);
+#: spinner_now, spinner_warn, spinner_fail and the kits' NVIC functions send one of
+#: :data:`UNCHARGED_REQUESTS`.
+UNCHARGED_C_FUNCTIONS = {
+    "spinner_configure": "the program's own norm functions",
+    "spinner_image_width": "the car's camera, given at the start",
+    "spinner_image_height": "the car's camera, given at the start",
+    "spinner_line_row": "the car's camera, given at the start",
+    "spinner_recording": "given at the start",
+    "spinner_encoder_lines": "the car's encoders, given at the start",
+    "spinner_has_imu": "the car's IMU, given at the start",
+    "spinner_has_every": "the program's own handler table",
+    "spinner_interrupts": "the program's own handler table",
+    "spinner_in_interrupt": "the program's own state (a handler runs)",
+    "spinner_running": "the program's own state (a constructor at the load)",
+    "spinner_interrupts_disabled": UNCHARGED_METHODS["interrupts_disabled"],
+    "spinner_now": "its request (OP_NOW) is exempt: see UNCHARGED_REQUESTS",
+    "spinner_warn": "its request (OP_WARN) is exempt: see UNCHARGED_REQUESTS",
+    "spinner_fail": "its request (OP_FAULT) ends the run",
+    "spinner_stop_every_latched": "the kits' NVIC emulation (OP_EVERY_STOP_LATCHED): see UNCHARGED_REQUESTS",
+    "spinner_unpend_every": "the kits' NVIC emulation (OP_EVERY_UNPEND): see UNCHARGED_REQUESTS",
+    "spinner_pend_every": "the kits' NVIC emulation (OP_PEND, OP_PEND_WAIT): see UNCHARGED_REQUESTS",
+    "spinner_every_pending": "the kits' NVIC emulation (OP_EVERY_PENDING): see UNCHARGED_REQUESTS",
+}
+
+_NVIC = ("the kits' NVIC emulation (spinner.h: for kits that emulate a timer's interrupt enable behind the "
+         "NVIC): a kit sends it as it applies the register writes the program made since its previous call "
+         "(its look), which have no time of their own in the program's. Charged there, the program's time "
+         "passed between two writes the kit applies together: a PIT stopped by PIT_TCTRL0 = 0 before "
+         "NVIC_EnableIRQ expired inside the enable, its IRQ on, and called its handler, which the board does "
+         "not. The program's time passes at its next call")
+
+#: The requests (simrunner.run.native.bridge's OP_ names) not charged, each with the reason.
+UNCHARGED_REQUESTS = {
+    "OP_CPU": "no call: the program's CPU time, sent before each request (measured)",
+    "OP_ISR_DONE": "no call: a handler's end",
+    "OP_FAULT": "no call: the program's fault (or spinner_fail), which ends the run",
+    "OP_EXIT_AT": "no call: where the program called exit, as it ends",
+    "OP_NOW": "spinner_now is the time of the program's last charged call (docs/c_controllers.md): "
+              "the kits read their timers' counts with it at each register access",
+    "OP_WARN": "spinner_warn: a message to the person running the simulation, none on the car (the "
+               "kits' register emulation warns)",
+    "OP_EVERY_STOP_LATCHED": _NVIC,  # spinner_stop_every_latched
+    "OP_EVERY_UNPEND": _NVIC,        # spinner_unpend_every (NVIC_ClearPendingIRQ)
+    "OP_PEND": _NVIC,                # spinner_pend_every (NVIC_SetPendingIRQ; the kit's pending bits)
+    "OP_PEND_WAIT": _NVIC,
+    "OP_EVERY_PENDING": _NVIC,       # spinner_every_pending (NVIC_GetPendingIRQ)
+}
+
+
+def api_calls(cls: type) -> tuple[str, ...]:
+    """The public calls of an API class (the Spinner, Pixy2, Pixy2Line): its methods and their
+    aliases, not its properties, nor names starting with ``_``."""
+    return tuple(name for name, value in vars(cls).items()
+                 if not name.startswith("_") and inspect.isfunction(value))
+
+
+def charge_calls(obj, mcu: "McuTime") -> None:
+    """Charge ``mcu`` on each of ``obj``'s :func:`api_calls` but :data:`UNCHARGED_METHODS`."""
+    for name in api_calls(type(obj)):
+        if name not in UNCHARGED_METHODS:
+            setattr(obj, name, timed(getattr(obj, name), mcu))
 
 
 class McuTime:
@@ -52,9 +152,11 @@ class McuTime:
         if math.isfinite(cpu_s) and cpu_s > 0.0:
             self._pending_s += cpu_s
 
-    def enter(self) -> None:
+    def enter(self, charge: bool = True) -> None:
+        """A call begins: charged unless ``charge`` is False (an exempt request), it is inside
+        another call, or in a handler (no time passes there)."""
         self._depth += 1
-        if self._depth > 1:
+        if not charge or self._depth > 1 or self.clock.in_interrupt:
             return
         if self.fixed_s is not None:
             spent = self.fixed_s
@@ -72,7 +174,7 @@ class McuTime:
 
     def leave(self) -> None:
         self._depth -= 1
-        if self._depth == 0 and self.fixed_s is None and not self.reported:
+        if self._depth == 0 and self.fixed_s is None and not self.reported and not self.clock.in_interrupt:
             self._left_at = time.thread_time()
 
 

@@ -17,7 +17,9 @@ emulated: docs/pixy2.md). Time: ``get_main_features`` / ``get_all_features`` wit
 ``wait=True`` return the current frame's features when they were not returned yet, else wait
 for the next frame (as the Pixy2 does); with ``wait=False`` they let one physics step pass and
 return ``PIXY_RESULT_BUSY`` (-2) when no new frame came. A frame's features are computed when
-they are read, from the camera at that moment. The setters let no time pass.
+they are read, from the camera at that moment. The setters let no time pass. With
+``--mcu-time`` every call (a setter, ``init``, ``get_resolution`` too) is charged as a Spinner
+call (:mod:`simrunner.run.mcu`): on the car each is a transaction on the camera's link.
 """
 from __future__ import annotations
 
@@ -87,7 +89,7 @@ class Pixy2Line:
             feats = _int(method, "features", features, 0, 255)
         except CommandError as err:
             raise p.spinner._fail(err) from None
-        tracker = p.tracker()
+        tracker = p._tracker()
         if not p.spinner._next_pixy_frame(bool(wait)):
             return PIXY_RESULT_BUSY
         got: Features = tracker.main if main else tracker.all
@@ -115,27 +117,27 @@ class Pixy2Line:
     def set_mode(self, mode: int) -> int:
         """``LINE_MODE_WHITE_LINE`` (light lines on dark), ``LINE_MODE_MANUAL_SELECT_VECTOR``,
         ``LINE_MODE_TURN_DELAYED`` (accepted; turns are not delayed: docs/pixy2.md), or-ed."""
-        self._pixy.tracker().mode = self._set("set_mode", "mode", mode, 0, 255)
+        self._pixy._tracker().mode = self._set("set_mode", "mode", mode, 0, 255)
         return PIXY_RESULT_OK
 
     def set_next_turn(self, angle: int) -> int:
         """The branch (degrees, 0 = straight on, + = left) taken at the next intersection."""
-        self._pixy.tracker().next_turn_deg = self._set("set_next_turn", "angle", angle, -180, 180)
+        self._pixy._tracker().next_turn_deg = self._set("set_next_turn", "angle", angle, -180, 180)
         return PIXY_RESULT_OK
 
     def set_default_turn(self, angle: int) -> int:
         """The branch taken at intersections without a next turn (0 = straight on)."""
-        self._pixy.tracker().default_turn_deg = self._set("set_default_turn", "angle", angle, -180, 180)
+        self._pixy._tracker().default_turn_deg = self._set("set_default_turn", "angle", angle, -180, 180)
         return PIXY_RESULT_OK
 
     def set_vector(self, index: int) -> int:
         """Make line ``index`` the Vector (manual select mode)."""
-        self._pixy.tracker().manual_index = self._set("set_vector", "index", index, 0, 255)
+        self._pixy._tracker().manual_index = self._set("set_vector", "index", index, 0, 255)
         return PIXY_RESULT_OK
 
     def reverse_vector(self) -> int:
         """Swap the Vector's head and tail."""
-        self._pixy.tracker().reverse_vector()
+        self._pixy._tracker().reverse_vector()
         return PIXY_RESULT_OK
 
     # the C++ library's names
@@ -162,8 +164,14 @@ class Pixy2:
         self.frame_width = int(cam.width_px)
         self.frame_height = int(cam.height_px)
         self.line = Pixy2Line(self)
+        mcu = spinner._s.mcu
+        if mcu is not None:  # --mcu-time: each call is the link's transaction on the car (simrunner.run.mcu)
+            from simrunner.run.mcu import charge_calls
 
-    def tracker(self) -> LineTracker:
+            charge_calls(self, mcu)
+            charge_calls(self.line, mcu)
+
+    def _tracker(self) -> LineTracker:
         """The run's line tracker (one per run, shared by every ``spinner.pixy2()``)."""
         s = self.spinner._s
         if s.pixy2_tracker is None:
@@ -179,7 +187,7 @@ class Pixy2:
 
     def init(self, arg: int | None = None) -> int:
         """Checks the car has a Pixy2 frame; returns ``PIXY_RESULT_OK``."""
-        self.tracker()
+        self._tracker()
         return PIXY_RESULT_OK
 
     def change_prog(self, prog: str) -> int:
@@ -190,7 +198,7 @@ class Pixy2:
         return PIXY_RESULT_OK
 
     def get_resolution(self) -> int:
-        """Sets ``frame_width`` / ``frame_height`` (they are set already)."""
+        """Sets ``frame_width`` / ``frame_height`` (they are set already; C: ``pixy2_get_resolution``)."""
         return PIXY_RESULT_OK
 
     def set_camera_brightness(self, brightness: int) -> int:

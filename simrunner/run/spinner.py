@@ -34,7 +34,6 @@ car) is ``camera.default_row``: the row that plays the real line camera.
 from __future__ import annotations
 
 import contextvars
-import inspect
 import math
 import os
 import sys
@@ -261,13 +260,9 @@ class Spinner:
         self.diff_norm: NormFn = self.default_diff_norm
         self.configure(speed_norm, speed_denorm, turn_norm, diff_norm)
         if session.mcu is not None:  # --mcu-time: each call first lets the controller's time pass
-            from simrunner.run.mcu import TIMED_METHODS, timed
+            from simrunner.run.mcu import charge_calls
 
-            for name in TIMED_METHODS:
-                setattr(self, name, timed(getattr(self, name), session.mcu))
-            for alias, name in _ALIASES:  # the thesis's names call the same charged methods
-                if name in TIMED_METHODS:
-                    setattr(self, alias, getattr(self, name))
+            charge_calls(self, session.mcu)  # (every public method, camelCase too, but the exempt)
 
     # -- configuration ---------------------------------------------------------------
     def default_diff_norm(self, speed_mps: float, steer_rad: float) -> float:
@@ -827,8 +822,3 @@ class Spinner:
     setExposure = set_exposure
     getExposure = get_exposure
     cameraFreeRunning = camera_free_running
-
-
-# (alias, method) of the camelCase aliases above: --mcu-time charges them as their methods
-_ALIASES = tuple((alias, fn.__name__) for alias, fn in vars(Spinner).items()
-                 if inspect.isfunction(fn) and fn.__name__ != alias)

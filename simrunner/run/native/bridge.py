@@ -40,6 +40,7 @@ from typing import Callable
 import numpy as np
 
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
+from simrunner.run.mcu import UNCHARGED_REQUESTS
 from simrunner.run.native.build import NativeProgram, missing_function, misspelt_function
 from simrunner.run.watchdog import native_stall_hint
 
@@ -49,7 +50,7 @@ OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
     OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK, OP_IRQ_MASK_WAIT, \
     OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING, OP_EXIT_AT, OP_FREE_RUNNING, \
-    OP_SET_EXPOSURE_NEXT = range(1, 38)
+    OP_SET_EXPOSURE_NEXT, OP_EVERY_STOP_LATCHED = range(1, 39)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
@@ -87,6 +88,8 @@ _WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOI
                       OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
                       OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK_WAIT,
                       OP_PEND_WAIT, OP_EVERY_PENDING, OP_FREE_RUNNING, OP_SET_EXPOSURE_NEXT))
+# the requests --mcu-time does not charge (simrunner.run.mcu, the reason of each); _handle charges the rest
+_UNCHARGED = frozenset(globals()[name] for name in UNCHARGED_REQUESTS)
 
 
 class _Child:
@@ -170,6 +173,8 @@ class _Session:
         self._last_mask: tuple[bytes, Callable[[], str | None] | None] = (b"", None)  # _mask_where's
         self._exit_at: str | None = None  # "exit(3) at main.c:91": where the program exited (OP_EXIT_AT)
         self._exit_status = 0  # that call's status as the process ends with it (0..255)
+        self._mcu = spinner._s.mcu  # --mcu-time (simrunner.run.mcu): _handle charges the requests
+        self._pixy = None  # the Pixy2 the program's pixy2_line.h calls talk to (made on first use)
 
     def _setup_transport(self, child: _Child) -> None:
         self.proc, self.rfd, self.wfd = child.proc, child.rfd, child.wfd
@@ -306,9 +311,10 @@ class _Session:
         A camera frame's usual requests - the queued command, then the image call - arrive
         in one read of exactly those bytes: they are answered from one unpack (the same
         calls in the same order as message by message), the reply and the next read in one
-        :meth:`_exchange`."""
+        :meth:`_exchange`. Not with --mcu-time: each request is charged in :meth:`_handle`."""
         s, recv, exchange, refused = self.spinner, self._recv, self._exchange, self._refused
-        frame_size, unpack_frame = _FRAME.size, _FRAME.unpack
+        frame_size = _FRAME.size if self._mcu is None else -1
+        unpack_frame = _FRAME.unpack
         while True:
             if self._pos == len(self._buf):  # all read: read anew
                 buf = recv()
@@ -351,7 +357,21 @@ class _Session:
         self._reply(_HDR.pack(ST_ERROR, len(text)) + text)
 
     def _handle(self, op: int, payload: bytes) -> None:
-        """Answer one request (replying to the waiting ones)."""
+        """Answer one request (replying to the waiting ones). With --mcu-time every request but
+        the exempt ones (``_UNCHARGED``) is charged first, here where each passes: the program's
+        time since its previous one passes before the request acts (simrunner.run.mcu); the
+        Spinner methods answering it are calls inside it, not charged again."""
+        mcu = self._mcu
+        if mcu is None:
+            self._answer(op, payload)
+            return
+        mcu.enter(charge=op not in _UNCHARGED)  # (an exempt one's Spinner calls are inside it: not charged)
+        try:
+            self._answer(op, payload)
+        finally:
+            mcu.leave()
+
+    def _answer(self, op: int, payload: bytes) -> None:
         s, reply = self.spinner, self._reply
         if op == OP_CMD:  # speed NaN: a steering-only command (set_motors' duties are kept)
             v, d, self.yaw = _CMD.unpack(payload)
@@ -413,9 +433,9 @@ class _Session:
             s.every(period, handler)
             if pending:
                 s._clock.hold_pending(handler)
-        elif op == OP_EVERY_STOP:  # the program's slot (int32) of a timer interrupt it stopped, then a
-            slot = struct.unpack("<i", payload[:4])[0]  # byte 1 where a call due keeps its pending bit
-            handler = self._isrs.pop(slot, None)
+        elif op in (OP_EVERY_STOP, OP_EVERY_STOP_LATCHED):  # the program's slot (int32) of a timer interrupt
+            slot = struct.unpack("<i", payload[:4])[0]  # it stopped; latched, byte 1 where a call due keeps
+            handler = self._isrs.pop(slot, None)  # its pending bit
             if payload[4:5] == b"\x01":  # (a kit's timer whose interrupt enable was cleared: the NVIC's bit)
                 self._latched[slot] = handler
                 s._clock.remove_interrupt(handler, latch=True)
@@ -458,7 +478,9 @@ class _Session:
                                           dtype="<f8")
             reply(_HDR.pack(ST_OK, values.nbytes) + values.tobytes())
         elif op in (OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG):
-            reply(_pixy2_answer(s, op, payload))
+            if self._pixy is None:
+                self._pixy = s.pixy2()
+            reply(_pixy2_answer(self._pixy, op, payload))
         elif op == OP_WARN:  # spinner_warn's text: a warning of the run, once per text
             text = payload.decode("utf-8", "replace")
             s._s.warn_once("spinner_warn: " + text, text)
@@ -613,14 +635,14 @@ class _Session:
 _3I = struct.Struct("<3i")
 _I = struct.Struct("<i")
 _PIXY_SETTERS = {1: "set_mode", 2: "set_next_turn", 3: "set_default_turn", 4: "set_vector",
-                 5: "reverse_vector", 6: "set_camera_brightness", 7: "init", 8: "set_lamp"}
+                 5: "reverse_vector", 6: "set_camera_brightness", 7: "init", 8: "set_lamp", 9: "get_resolution"}
 
 
-def _pixy2_answer(spinner, op: int, payload: bytes) -> bytes:
-    """The reply to a Pixy2 request of pixy2_line.h (``spinner_host.c``'s pixy_* functions)."""
+def _pixy2_answer(pixy, op: int, payload: bytes) -> bytes:
+    """The reply to a Pixy2 request of pixy2_line.h (``spinner_host.c``'s pixy_* functions), from
+    ``pixy`` (a :class:`simrunner.run.pixy2.Pixy2`)."""
     from simrunner.run.pixy2 import pack_features
 
-    pixy = spinner.pixy2()
     if op == OP_PIXY_PROG:
         result = pixy.change_prog(payload.decode("utf-8", "replace"))
     elif op == OP_PIXY_SET:
@@ -628,8 +650,8 @@ def _pixy2_answer(spinner, op: int, payload: bytes) -> bytes:
         name = _PIXY_SETTERS.get(what)
         if name is None:
             raise ControllerError(f"unknown Pixy2 request {what} from the host program")
-        if name in ("reverse_vector", "init"):
-            result = getattr(pixy if name == "init" else pixy.line, name)()
+        if name in ("reverse_vector", "init", "get_resolution"):
+            result = getattr(pixy.line if name == "reverse_vector" else pixy, name)()
         elif name == "set_lamp":
             result = pixy.set_lamp(value >> 8, value & 0xFF)
         elif name == "set_camera_brightness":

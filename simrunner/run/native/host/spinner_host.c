@@ -59,7 +59,7 @@ enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, O
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
        OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK,
        OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING, OP_EXIT_AT,
-       OP_FREE_RUNNING, OP_SET_EXPOSURE_NEXT };
+       OP_FREE_RUNNING, OP_SET_EXPOSURE_NEXT, OP_EVERY_STOP_LATCHED };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -403,11 +403,12 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
  * spinner_stop_every frees a handler's slots (OP_EVERY_STOP {int32 slot}); a freed slot is used
  * again, the lowest first, once the simulator has read the stop: the reply to the next waiting
  * call. Until then the handler stays in its slot (isr_stopping), as the requests queued before the
- * stop may let time pass (--mcu-time) and run it then: it was due before it was stopped; set up
+ * stop, and the stop itself, may let time pass (--mcu-time charges each before it acts) and run it
+ * then: it was due before it was stopped; set up
  * again meanwhile (a kit's timer given a new period in its handler), it takes that slot again.
  * spinner_stop_every_latched (a kit's timer whose own interrupt enable is cleared) stops it as an
- * NVIC source: a call that fell due and has not run keeps its pending bit (OP_EVERY_STOP {int32 slot,
- * byte 1}) and runs at the unmask, or after the running handler; the slot is kept (isr_latched) until
+ * NVIC source: a call that fell due and has not run keeps its pending bit (OP_EVERY_STOP_LATCHED {int32
+ * slot, byte 1}; byte 0 where none can be pending: a stop) and runs at the unmask, or after the running handler; the slot is kept (isr_latched) until
  * a reply unmasked and outside handlers, when no such call is left; spinner_unpend_every clears the
  * bit (OP_EVERY_UNPEND {int32 slot}: NVIC_ClearPendingIRQ). spinner_pend_every sets a handler's
  * pending bit (OP_PEND {int32 slot}: NVIC_SetPendingIRQ), in a slot kept as a latched one unless
@@ -892,7 +893,7 @@ double spinner_get_exposure(void) {
 
 /* -- the Pixy2 (pixy2_line.h): requests answered by simrunner.run.pixy2 ------------------ */
 enum { PIXY_SET_MODE = 1, PIXY_SET_NEXT_TURN, PIXY_SET_DEFAULT_TURN, PIXY_SET_VECTOR,
-       PIXY_REVERSE_VECTOR, PIXY_SET_BRIGHTNESS, PIXY_INIT, PIXY_SET_LAMP };
+       PIXY_REVERSE_VECTOR, PIXY_SET_BRIGHTNESS, PIXY_INIT, PIXY_SET_LAMP, PIXY_GET_RESOLUTION };
 
 static int8_t pixy_set(int32_t what, int32_t value) {
     int32_t req[2] = {what, value}, result = PIXY_RESULT_OK;
@@ -910,6 +911,13 @@ int8_t pixy2_line_set_vector(uint8_t index) { return pixy_set(PIXY_SET_VECTOR, i
 int8_t pixy2_line_reverse_vector(void) { return pixy_set(PIXY_REVERSE_VECTOR, 0); }
 int8_t pixy2_set_camera_brightness(uint8_t brightness) { return pixy_set(PIXY_SET_BRIGHTNESS, brightness); }
 int8_t pixy2_set_lamp(uint8_t upper, uint8_t lower) { return pixy_set(PIXY_SET_LAMP, upper << 8 | lower); }
+
+int8_t pixy2_get_resolution(uint16_t *width, uint16_t *height) {
+    int8_t result = pixy_set(PIXY_GET_RESOLUTION, 0);  /* (a request, as the library's: --mcu-time charges it) */
+    if (width) *width = (uint16_t)img_w;
+    if (height) *height = (uint16_t)img_h;
+    return result;
+}
 
 int8_t pixy2_change_prog(const char *prog) {
     int32_t result = PIXY_RESULT_OK;
@@ -1019,7 +1027,7 @@ void spinner_stop_every_latched(void (*handler)(void)) {
         if (may_pend) isr_latched[slot] = 1;
         else isr_stopping[slot] = 1;
         isr_count--;
-        queue(OP_EVERY_STOP, &slot, sizeof slot, &latch, 1);
+        queue(OP_EVERY_STOP_LATCHED, &slot, sizeof slot, &latch, 1);
     }
 }
 

@@ -85,28 +85,24 @@ private:
     pixy2_line_features f_{};
 };
 
+extern "C" int spinner_image_width(void);
+extern "C" int spinner_image_height(void);
+
 class Pixy2 {
 public:
     int8_t init(uint32_t = 0) {
         int8_t r = pixy2_init();
-        getResolution();
+        frameWidth = (uint16_t)spinner_image_width();  // (the frame's size, known: no request of its own)
+        frameHeight = (uint16_t)spinner_image_height();
         return r;
     }
     int8_t changeProg(const char *prog) { return pixy2_change_prog(prog); }
-    int8_t getResolution();
+    int8_t getResolution() { return pixy2_get_resolution(&frameWidth, &frameHeight); }
     int8_t setCameraBrightness(uint8_t brightness) { return pixy2_set_camera_brightness(brightness); }
     int8_t setLamp(uint8_t upper, uint8_t lower) { return pixy2_set_lamp(upper, lower); }
 
     Pixy2Line line;
     uint16_t frameWidth = 0, frameHeight = 0;
 };
-
-extern "C" int spinner_image_width(void);
-extern "C" int spinner_image_height(void);
-inline int8_t Pixy2::getResolution() {
-    frameWidth = (uint16_t)spinner_image_width();
-    frameHeight = (uint16_t)spinner_image_height();
-    return PIXY_RESULT_OK;
-}
 
 #endif  // NXPCUP_PIXY2_HPP

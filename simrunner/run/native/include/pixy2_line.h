@@ -80,6 +80,9 @@ int8_t pixy2_line_reverse_vector(void);
  * and not simulated. */
 int8_t pixy2_set_camera_brightness(uint8_t brightness);
 int8_t pixy2_set_lamp(uint8_t upper, uint8_t lower);
+/* The frame's width and height in pixels (the library's getResolution; either pointer may be
+ * NULL); PIXY_RESULT_OK. */
+int8_t pixy2_get_resolution(uint16_t *width, uint16_t *height);
 
 #ifdef __cplusplus
 }
