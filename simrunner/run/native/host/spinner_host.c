@@ -1454,17 +1454,18 @@ pid_t __wrap_fork(void) {
 }
 
 /* -- faults ---------------------------------------------------------------------------- */
-static char report[1 << 15];
-static size_t report_len;
+/* A report's text (build_report). */
+struct report { size_t len; char text[1 << 15]; };
+static struct report report;
 
-static void rput(const char *s) {
+static void rput(struct report *r, const char *s) {
     size_t n = strlen(s);
-    if (report_len + n >= sizeof report) n = sizeof report - 1 - report_len;
-    memcpy(report + report_len, s, n);
-    report_len += n;
+    if (r->len + n >= sizeof r->text) n = sizeof r->text - 1 - r->len;
+    memcpy(r->text + r->len, s, n);
+    r->len += n;
 }
 
-static void rhex(uintptr_t v) {
+static void rhex(struct report *r, uintptr_t v) {
     char tmp[20];
     int i = 0;
     do {
@@ -1474,10 +1475,10 @@ static void rhex(uintptr_t v) {
     char out[22] = "0x";
     for (int k = 0; k < i; k++) out[2 + k] = tmp[i - 1 - k];
     out[2 + i] = 0;
-    rput(out);
+    rput(r, out);
 }
 
-static void rdec(long v) {
+static void rdec(struct report *r, long v) {
     char tmp[24];
     int i = 0, neg = v < 0;
     unsigned long u = neg ? -(unsigned long)v : (unsigned long)v;
@@ -1490,54 +1491,55 @@ static void rdec(long v) {
     if (neg) out[k++] = '-';
     while (i) out[k++] = tmp[--i];
     out[k] = 0;
-    rput(out);
+    rput(r, out);
 }
 
-/* One `key` line per frame into report[]: "KEY ADDR OFFSET PATH\tSYMBOL\n". */
-static void report_frames(const char *key, void *const *frames, int n) {
+/* One `key` line per frame into `r`: "KEY ADDR OFFSET PATH\tSYMBOL\n". */
+static void report_frames(struct report *r, const char *key, void *const *frames, int n) {
     for (int i = 0; i < n; i++) {
         Dl_info info;
-        rput(key);
-        rput(" ");
-        rhex((uintptr_t)frames[i]);
+        rput(r, key);
+        rput(r, " ");
+        rhex(r, (uintptr_t)frames[i]);
         if (dladdr(frames[i], &info) && info.dli_fname) {
-            rput(" ");
-            rhex((uintptr_t)frames[i] - (uintptr_t)info.dli_fbase);
-            rput(" ");
-            rput(info.dli_fname);
-            rput("\t");
-            rput(info.dli_sname ? info.dli_sname : "");
+            rput(r, " ");
+            rhex(r, (uintptr_t)frames[i] - (uintptr_t)info.dli_fbase);
+            rput(r, " ");
+            rput(r, info.dli_fname);
+            rput(r, "\t");
+            rput(r, info.dli_sname ? info.dli_sname : "");
         } else {
-            rput(" 0x0 ?\t");
+            rput(r, " 0x0 ?\t");
         }
-        rput("\n");
+        rput(r, "\n");
     }
 }
 
-/* Text report into report[]: "signal N\nmessage TEXT\npc ADDR\nframe ADDR OFFSET PATH\tSYMBOL\n"...
+/* Text report into `r`: "signal N\nmessage TEXT\npc ADDR\nframe ADDR OFFSET PATH\tSYMBOL\n"...
  * with `frames` (n of them; NULL: this thread's backtrace now). */
-static void build_report_frames(int sig, const char *message, void *pc, void *const *frames, int n) {
+static void build_report_frames(struct report *r, int sig, const char *message, void *pc, void *const *frames,
+                                int n) {
     void *here[128];
     if (frames == NULL) {
         n = backtrace(here, 128);
         frames = here;
     }
-    report_len = 0;
-    rput("signal ");
-    rdec(sig);
-    rput("\nmessage ");
-    rput(message ? message : "");
-    rput("\n");
+    r->len = 0;
+    rput(r, "signal ");
+    rdec(r, sig);
+    rput(r, "\nmessage ");
+    rput(r, message ? message : "");
+    rput(r, "\n");
     if (pc) {
-        rput("pc ");
-        rhex((uintptr_t)pc);
-        rput("\n");
+        rput(r, "pc ");
+        rhex(r, (uintptr_t)pc);
+        rput(r, "\n");
     }
-    report_frames("frame", frames, n);
+    report_frames(r, "frame", frames, n);
 }
 
 static void build_report(int sig, const char *message, void *pc) {
-    build_report_frames(sig, message, pc, NULL, 0);
+    build_report_frames(&report, sig, message, pc, NULL, 0);
 }
 
 static void send_report(int sig, const char *message);
@@ -1566,9 +1568,9 @@ static void fault_report(int sig, const char *message, void *pc) {
 /* The foreign call's report (foreign_call_report, main()'s thread): the foreign thread's frames,
  * then "noticed" lines, this thread's backtrace (main()'s call that noticed it). */
 static void foreign_report(const char *message) {
-    build_report_frames(0, message, NULL, foreign_frames, foreign_depth);
+    build_report_frames(&report, 0, message, NULL, foreign_frames, foreign_depth);
     void *here[128];
-    report_frames("noticed", here, backtrace(here, 128));
+    report_frames(&report, "noticed", here, backtrace(here, 128));
     send_report(0, message);
 }
 
@@ -1579,16 +1581,16 @@ static void send_report(int sig, const char *message) {
 #endif
 #ifdef SPINNER_INPROC
     if (opening) load_ended(NULL, -1, message ? message : "");  /* in a constructor at the load */
-    if (out_len + 8 + report_len > sizeof out_buf) out_len = 0;  /* the report goes first */
-    uint32_t hdr[2] = {OP_FAULT, (uint32_t)report_len};
+    if (out_len + 8 + report.len > sizeof out_buf) out_len = 0;  /* the report goes first */
+    uint32_t hdr[2] = {OP_FAULT, (uint32_t)report.len};
     write_all(hdr, sizeof hdr);
-    write_all(report, report_len);
+    write_all(report.text, report.len);
     leave(sig == SIGUSR1 ? 76 : 70);  /* back to the simulator (from a handler, too) */
 #else
     flush_out();
-    uint32_t hdr[2] = {OP_FAULT, (uint32_t)report_len};
+    uint32_t hdr[2] = {OP_FAULT, (uint32_t)report.len};
     write_all(hdr, sizeof hdr);
-    write_all(report, report_len);
+    write_all(report.text, report.len);
     if (sig > 0 && sig != SIGUSR1) {
         signal(sig, SIG_DFL);
         raise(sig);
@@ -1770,7 +1772,7 @@ static void load_record(const char *tag, const char *extra) {
     const char *path = load_path ? load_path : "";
     struct iovec parts[] = {{(void *)tag, strlen(tag)}, {(void *)" ", 1}, {(void *)path, strlen(path)},
                             {(void *)"\nhost ", 6}, {(void *)host, strlen(host)}, {(void *)"\n", 1},
-                            {(void *)extra, strlen(extra)}, {report, report_len}};
+                            {(void *)extra, strlen(extra)}, {report.text, report.len}};
     ssize_t w = writev(load_fd, parts, sizeof parts / sizeof parts[0]);
     (void)w;
 }
