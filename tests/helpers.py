@@ -107,6 +107,27 @@ int main(void) { while (1) { spinner_set_speed(0.5f); spinner_sleep(0.01f); } }
 """
 
 
+# a C controller one of whose threads (not main()'s: started at its 21st frame) dereferences NULL
+# (line 5, in worker()) while main() drives
+C_THREAD_FAULT = r"""#include <pthread.h>
+#include "spinner.h"
+static int *volatile nowhere;
+static void *worker(void *arg) {
+    *nowhere = 1;                                /* line 5 */
+    return arg;
+}
+int main(void) {
+    static uint8_t row[4096];
+    pthread_t t;
+    for (int frame = 0;; frame++) {
+        spinner_get_image(spinner_line_row(), 0, row, sizeof row);
+        spinner_set_speed(0.5);
+        if (frame == 20) pthread_create(&t, NULL, worker, NULL);
+    }
+}
+"""
+
+
 # C/C++ programs that end in a constructor (line 4) as their library is loaded, before the run:
 # name -> (source, the run's outcome, its message up to the ", in a constructor ..." drive adds
 # in process; isolated the message is just that)

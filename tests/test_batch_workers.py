@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from helpers import C_CTOR_ENDS, C_CTOR_FAULT, STUCK
+from helpers import C_CTOR_ENDS, C_CTOR_FAULT, C_THREAD_FAULT, STUCK
 
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.pool import LocalBackend, choose_start_method
@@ -233,6 +233,24 @@ def test_a_fault_in_a_c_constructor_at_the_load_names_its_line_as_drive_does(tmp
     assert row["message"].startswith("boom.c:5: SIGSEGV: segmentation fault (in boom()), in a constructor as the "
                                      "program loaded"), row["message"]
     assert row["frames"] == 0
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_a_fault_in_a_c_programs_thread_names_its_line_as_drive_does(tmp_path, monkeypatch):
+    """A thread the program started (not main()'s) dereferences NULL during the run, in the worker's
+    process: its row was worker_died 'the run's process was killed by SIGSEGV at t = ...'; now
+    drive's: controller_error naming the thread's file:line and function, the frames and simulated
+    time from the run's CSV."""
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)
+    ctl = tmp_path / "t.c"
+    ctl.write_text(C_THREAD_FAULT)
+    res = run_batch(ctl, out_dir=tmp_path / "out", seeds=1, workers=1, plot=False, csv="all")
+    row, = res.rows
+    assert row["outcome"] == "controller_error", row
+    assert row["message"].startswith("t.c:5: SIGSEGV: segmentation fault (in worker()), in a thread of the program's "
+                                     "own (not main()'s): it killed the run's process"), row["message"]
+    assert row["frames"] >= 20 and row["sim_time_s"] > 0.0
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")

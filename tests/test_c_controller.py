@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from helpers import C_CTOR_ENDS, C_CTOR_FAULT
+from helpers import C_CTOR_ENDS, C_CTOR_FAULT, C_THREAD_FAULT
 
 from simrunner.cli import main as cli
 from simrunner.errors import ControllerFileError
@@ -866,7 +866,7 @@ def test_while_the_in_process_host_is_taken_a_run_goes_to_a_child_process(tmp_pa
     _, api = host_library()
     other = OpenedProgram(api, prog)  # another run holds the host (as from another thread)
     argv = (ctypes.c_char_p * 2)(b"other", None)
-    assert api.spinner_inproc_start(other.handle, 1, argv, 0.0) == 0
+    assert api.spinner_inproc_start(other.handle, 1, argv, 0.0, -1) == 0
     try:
         assert drive(prog, track=track).outcome == "controller_returned"
     finally:
@@ -1485,6 +1485,125 @@ def test_a_fault_in_a_constructor_at_the_load_unsupervised_says_one_line(tmp_pat
     assert re.match(r"simrunner: SIGSEGV at \S+\.so\+0x[0-9a-f]+, in a constructor as the controller's library "
                     r"was loaded into the simulator's process, before the run", line), line
     assert "--isolate" in line
+
+
+THREAD_FAULT_SAID = ("t.c:5: SIGSEGV: segmentation fault (in worker()), in a thread of the program's own (not "
+                     "main()'s)")
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_fault_in_a_thread_of_the_programs_own_names_the_threads_line(tmp_path, isolate):
+    """A thread the program started (not main()'s) dereferences NULL while main() drives. In the
+    simulator's process the fault went to the simulator's handler and killed the process: drive said
+    'the run's process was killed by SIGSEGV at t = ... (a crash the simulator could not catch ...)',
+    no line. Isolated the line was named, but not that it was another thread's. Now both name the
+    thread's file:line and function and say it was a thread of the program's; in process the host
+    reports it to the supervisor before the process dies by the signal, which writes the outputs
+    from the run log (the rows up to the fault)."""
+    write(tmp_path, "t.c", C_THREAD_FAULT)
+    done = _cli_drive(tmp_path, "t.c", "--summary", "s.json", "--csv", "c.csv", *(["--isolate"] if isolate else []))
+    assert done.returncode == 1, (done.stdout, done.stderr[-2000:])
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["outcome"] == "controller_error"
+    if isolate:
+        assert summary["message"] == THREAD_FAULT_SAID
+    else:
+        assert summary["message"] == (
+            f"{THREAD_FAULT_SAID}: it killed the run's process (the program runs in the simulator's process, where "
+            "a fault of its threads cannot be caught; --isolate runs the program in a process of its own); the "
+            "outputs were written from the run log")
+    assert f"outcome: controller_error ({summary['message']})" in done.stdout
+    assert summary["frames"] >= 20 and len(read_log(tmp_path / "c.csv")) == summary["frames"]
+    assert "C controller t: segmentation fault (invalid memory access), in a thread of the program's own (not " \
+           "main()'s)\nC backtrace (innermost first):\n  #0 worker at t.c:5\n" in done.stderr, done.stderr[-2000:]
+    assert "libc" not in done.stderr  # (the thread's start cut, as the host's below main() is)
+
+
+RACING_THREADS_C = """\
+#include <pthread.h>
+#include <string.h>
+#include "spinner.h"
+static int *volatile nowhere;
+static volatile int go;
+static void *worker(void *arg) {
+    while (!go) {}
+    for (volatile int k = 0; k < 200000; k++) {}
+    *nowhere = 1;                                        /* line 9 */
+    return arg;
+}
+static char text[6000];
+int main(void) {
+    static uint8_t row[4096];
+    const char *lines[1] = {text};
+    pthread_t t[3];
+    memset(text, 'x', sizeof text - 1);
+    for (int k = 0; k < 3; k++) pthread_create(&t[k], NULL, worker, NULL);
+    for (int frame = 0;; frame++) {
+        spinner_get_image(spinner_line_row(), 0, row, sizeof row);
+        spinner_set_speed(0.5);
+        if (frame == 5) go = 1;
+        for (int k = 0; k < 200; k++) spinner_add_text(lines, 1);  /* 1.2 MB a frame: main() writes */
+    }
+}
+"""
+
+
+def test_isolated_a_fault_in_the_programs_threads_is_one_report_whatever_main_sends(tmp_path):
+    """Isolated, three threads of the program's fault at once while main()'s thread sends 1.2 MB of
+    text a frame: each faulting thread wrote its report into the pipe amid main()'s messages and the
+    others' (measured: 'race: the controller exited with status 70' in 10 runs of 10, the fault
+    unsaid). Now the first thread's report goes out alone, between two of main()'s messages: every
+    run names the line."""
+    src = write(tmp_path, "race.c", RACING_THREADS_C)
+    program = isolated(src)
+    messages = [drive(program, track="floor", time_limit_s=5.0).message for _ in range(10)]
+    assert messages == [f"{src}:9: SIGSEGV: segmentation fault (in worker()), in a thread of the program's own "
+                        "(not main()'s)"] * 10
+
+
+def test_a_fault_in_a_programs_thread_unsupervised_says_one_line(tmp_path):
+    """The Python API in a process of its own (no supervisor to report to): the process dies by the
+    signal (as before, when it said nothing), saying where on stderr and pointing to --isolate."""
+    src = write(tmp_path, "t.c", C_THREAD_FAULT)
+    code = textwrap.dedent(f"""\
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        program = build_program([{str(src)!r}])
+        print("built", flush=True)
+        drive(program, time_limit_s=5.0)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == -11 and out.stdout == "built\n", (out.returncode, out.stdout, out.stderr[-2000:])
+    line, = [t for t in out.stderr.splitlines() if t.startswith("simrunner:")]
+    assert re.match(r"simrunner: SIGSEGV at \S+\.so\+0x[0-9a-f]+, in a thread of the program's own \(not main\(\)'s\), "
+                    r"which runs in the simulator's process: the process ends", line), line
+    assert "--isolate" in line
+
+
+def test_a_fault_in_a_thread_not_the_programs_still_goes_to_the_handler_before(tmp_path):
+    """During an in-process run a thread of the simulator's own (a Python thread: ctypes reading
+    address 0) faults: it is not the program's (no frame in its library), so the handler installed
+    before the run's gets it as ever (faulthandler's, here), and no thread-fault report is made."""
+    src = write(tmp_path, "slow.c", """\
+        #include "spinner.h"
+        int main(void) { for (;;) { spinner_set_speed(0.5); spinner_sleep(0.01); } }
+        """)
+    code = textwrap.dedent(f"""\
+        import ctypes, threading, time
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        program = build_program([{str(src)!r}])
+        def crash():
+            time.sleep(0.5)  # (the run is on)
+            ctypes.string_at(0)
+        threading.Thread(target=crash, daemon=True).start()
+        drive(program, track="floor", time_limit_s=600.0)
+        """)
+    out = subprocess.run([sys.executable, "-X", "faulthandler", "-c", code], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == -11, (out.returncode, out.stdout, out.stderr[-2000:])
+    assert "Fatal Python error: Segmentation fault" in out.stderr and "in crash" in out.stderr, out.stderr[-2000:]
+    assert "simrunner:" not in out.stderr
 
 
 @pytest.mark.parametrize("name", sorted(C_CTOR_ENDS))

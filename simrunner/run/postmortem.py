@@ -1,7 +1,8 @@
 """The outputs of a run whose process the hard watchdog ended, written from what it left on
 disk (:mod:`simrunner.run.supervise`): :func:`finish_stuck_run`; of one a signal killed:
 :func:`finish_dead_run` (a fault in a C/C++ program's constructors as its library loaded into the
-process is named at its file:line from the host's report, :func:`load_fault`); of one a C/C++
+process, or in a thread the program started during its run, is named at its file:line from the
+host's report, :func:`load_fault`, :func:`thread_fault`); of one a C/C++
 program ended as its library loaded into the process (an exit, spinner_fail, a misused Spinner call
 in a constructor: the process ends, status 70): :func:`finish_load_ended_run`, its outcome told as
 with ``--isolate`` from the host's report (:func:`load_end`).
@@ -119,6 +120,33 @@ def load_fault(report: str, controller: str) -> ControllerError | None:
                            "--isolate runs the program in a process of its own)", traceback_text)
 
 
+def thread_fault(report: str, controller: str) -> ControllerError | None:
+    """The fault of a thread a C/C++ program started itself (pthread_create, std::thread; not
+    main()'s) during its run in the run's process, which died of it (nothing can end the run from
+    that thread and go on: :mod:`simrunner.run.native.inproc`), from the in-process host's report in
+    ``report`` (the supervision's report file): a ``ControllerError`` whose message names the
+    thread's file:line and function ('t.c:5: SIGSEGV: segmentation fault (in worker()), in a thread
+    of the program's own (not main()'s): it killed the run's process (...)'), with the C backtrace;
+    None when ``report`` holds no such report."""
+    from simrunner.run.native.symbolize import describe_fault, thread_fault_report
+
+    found = thread_fault_report(report)
+    if found is None:
+        return None
+    library, host, text = found
+    line, traceback_text = describe_fault(text, {library}, host, Path(controller).stem)
+    return ControllerError(f"{line}: it killed the run's process (the program runs in the simulator's process, "
+                           "where a fault of its threads cannot be caught; --isolate runs the program in a "
+                           "process of its own)", traceback_text)
+
+
+def dead_fault(report: str, controller: str) -> ControllerError | None:
+    """The C/C++ program's fault the in-process host reported in ``report`` before the run's
+    process died of it: in a constructor as its library loaded (:func:`load_fault`) or in a thread
+    of its own (:func:`thread_fault`); None when there is none."""
+    return load_fault(report, controller) or thread_fault(report, controller)
+
+
 LOAD_END_STATUS = 70
 """The exit status of a process whose C/C++ program ended in its constructors as its library loaded
 (the in-process host's ``load_ended``)."""
@@ -180,10 +208,10 @@ def finish_dead_run(run: StuckRun, signum: int, csv_path: Path, *, wall_time_s: 
     """Write the outputs of a run whose process a signal killed (module docstring of
     :mod:`simrunner.run.supervise`): outcome ``controller_error`` naming the signal, or, when
     ``report`` (the supervision's report file) holds the report of a fault in the program's
-    constructors as it loaded (:func:`load_fault`), naming its file:line (``error``: with its C
-    backtrace)."""
+    constructors as it loaded or in a thread of its own (:func:`dead_fault`), naming its file:line
+    (``error``: with its C backtrace)."""
     log = read_run_log(csv_path)
-    error = load_fault(report, run.controller) if report else None
+    error = dead_fault(report, run.controller) if report else None
     message = (str(error) if error is not None else killed_message(signum, log)) \
         + "; the outputs were written from the run log"
     return _finish(run, Outcome.CONTROLLER_ERROR, message, log, csv_path, wall_time_s, cpu_time_s, error)
@@ -271,6 +299,6 @@ def _rebuild_video(log: RunLog, path, track, car, laps: int, max_fps: float | No
     return video
 
 
-__all__ = ["AT_LOAD", "LOAD_END_STATUS", "LoadEnd", "StuckRun", "finish_stuck_run", "finish_dead_run",
+__all__ = ["AT_LOAD", "LOAD_END_STATUS", "LoadEnd", "StuckRun", "dead_fault", "finish_stuck_run", "finish_dead_run",
            "finish_load_ended_run", "killed_message", "load_end", "load_fault", "read_run_log",
-           "run_log_laps", "stuck_location", "stuck_message", "stuck_stack"]
+           "run_log_laps", "stuck_location", "stuck_message", "stuck_stack", "thread_fault"]

@@ -14,8 +14,10 @@ passed on to the child; SIGINT reaches both from the terminal and the parent ign
 the child's hard watchdog fired, the parent writes the outputs from what is on disk
 (:mod:`simrunner.run.postmortem`): the run log's rows, the summary (outcome ``stalled``, the
 controller's file:line from the dump), the plot and the video, rebuilt from the log; so it does
-for a child a signal killed, and for one whose C/C++ program ended in its constructors as its
-library loaded (the in-process host's report in the same file; the child's status 70).
+for a child a signal killed (a fault of a C/C++ program's constructors at its library's load or of
+a thread of the program's own named at its line: the in-process host's report in the same file),
+and for one whose C/C++ program ended in its constructors as its library loaded (the host's report;
+the child's status 70).
 
 The child dies with the parent (``PR_SET_PDEATHSIG``, Linux), so killing the command kills
 the run. Only where a fork is safe and useful: the main thread, stdout and stderr real files
@@ -41,7 +43,7 @@ from typing import IO, Callable, Iterator
 class Supervision:
     """What a supervised run does for its supervisor: ``report`` receives the hard
     watchdog's stack dump (and the in-process C host's report of a program's fault or end at its
-    library's load); ``csv_path`` is where the run log streams when the run was asked
+    library's load, or of a fault in a thread of its own); ``csv_path`` is where the run log streams when the run was asked
     for none (None: nowhere; a batch worker keeps no log of runs asked for none)."""
 
     report: IO[str]

@@ -19,7 +19,12 @@ one line to stderr) and the process dies by the signal; ``simrunner drive``'s su
 batch's pool name its file:line from that report (:mod:`simrunner.run.postmortem`). A call that
 does not return there (an exit, ``spinner_fail``, a misused Spinner call) writes its report to
 the same file and the process ends with status 70; the supervisor tells the run's outcome as
-``--isolate`` does (:func:`~simrunner.run.postmortem.load_end`). A stack
+``--isolate`` does (:func:`~simrunner.run.postmortem.load_end`). A fault in a thread the program
+started itself (not main()'s: its instruction or a frame of its stack in the program's library; a
+thread of the simulator's goes to the handler before ours) cannot be left either - nothing can
+leave main()'s coroutine from another thread: its report goes to the same file (handed to the host
+for the run too: :func:`_report_fd`), naming that thread's line, and the process dies by the signal;
+the supervisor names the line (:func:`~simrunner.run.postmortem.thread_fault`). A stack
 overflow hits a guard page below the controller's stack (``ulimit -s`` bytes, 8 MB if
 unlimited). A loop that never calls the API is stopped by a watchdog thread of the library after the run's ``--wall-limit``
 (SIGUSR1 to the simulator's thread: the report says where). What it cannot contain - a
@@ -71,7 +76,7 @@ def _api(path: str):
             ("spinner_inproc_exit_code", c.c_int, []),
             ("spinner_inproc_gone", c.c_int, []),
             ("spinner_inproc_pending", c.c_long, []),
-            ("spinner_inproc_start", c.c_int, [c.c_void_p, c.c_int, c.POINTER(c.c_char_p), c.c_double]),
+            ("spinner_inproc_start", c.c_int, [c.c_void_p, c.c_int, c.POINTER(c.c_char_p), c.c_double, c.c_int]),
             ("spinner_inproc_resume", c.c_long, [c.c_char_p, c.c_size_t]),
             ("spinner_inproc_resume_image", c.c_long, [c.c_char_p, c.c_size_t]),
             ("spinner_inproc_finish", None, [])):
@@ -106,11 +111,12 @@ def _is_loaded(path: Path) -> bool:
     return True
 
 
-def _load_report_fd() -> int:
-    """Where the host writes the report of a fault, an exit, spinner_fail or a misused call in the
-    program's constructors as its library is opened (the process then dies by the signal, or ends
-    with status 70): the supervision's report file, which its supervisor reads
-    (:mod:`simrunner.run.postmortem`); -1 unsupervised (a line on stderr)."""
+def _report_fd() -> int:
+    """Where the host writes the report of what ends the simulator's process with the program: a
+    fault, an exit, spinner_fail or a misused call in the program's constructors as its library is
+    opened (the process then dies by the signal, or ends with status 70), or a fault in a thread of
+    the program's own during its run (it dies by the signal): the supervision's report file, which
+    its supervisor reads (:mod:`simrunner.run.postmortem`); -1 unsupervised (a line on stderr)."""
     supervision = current_supervision()
     if supervision is None:
         return -1
@@ -135,7 +141,7 @@ class OpenedProgram:
             shutil.copyfile(path, copy)
             path = copy
         self.path = path
-        self.handle = api.spinner_inproc_open(str(path).encode(), _load_report_fd())
+        self.handle = api.spinner_inproc_open(str(path).encode(), _report_fd())
         if not self.handle:
             err = api.spinner_inproc_error().decode("utf-8", "replace")
             self.close()
@@ -230,7 +236,7 @@ class InprocSession(_Session):
         argv = [name.encode(), *(a.encode() for a in self.ctrl.args)]
         arr = (ctypes.c_char_p * (len(argv) + 1))(*argv, None)
         stall_s = getattr(self.spinner._clock, "stall_limit_s", None) or 0.0
-        rc = self.api.spinner_inproc_start(self.opened.handle, len(argv), arr, float(stall_s))
+        rc = self.api.spinner_inproc_start(self.opened.handle, len(argv), arr, float(stall_s), _report_fd())
         if rc == BUSY:
             raise Busy()
         if rc == EXIT_NO_MAIN:

@@ -5,6 +5,10 @@ TEXT``, optionally ``pc ADDR`` (the faulting instruction) and one ``frame ADDR O
 PATH<TAB>SYMBOL`` line per return address (glibc ``backtrace`` + ``dladdr``); a Spinner call
 from a thread of the program's own is that thread's frames, then ``noticed ...`` lines (as
 ``frame`` lines): main()'s thread's backtrace at its next call, which reported it. A fault in a
+thread the program started itself (not main()'s) has a ``thread program`` line
+(:attr:`Fault.in_thread`); in the simulator's process it is written, after a ``thread-fault
+LIBRARY`` and a ``host PATH`` line, to the supervision's report file, read once the process has
+died of it (:func:`thread_fault_report`). A fault in a
 program's constructors as the in-process host opens its library is written, after a
 ``load-fault LIBRARY`` and a ``host PATH`` line, to the supervision's report file, read once the
 process has died (:func:`load_fault_report`); a program that ends there (an exit, spinner_fail,
@@ -53,12 +57,14 @@ class Fault:
     """A parsed report: ``signal`` (0 for a misused Spinner call, SIGUSR1 for a stalled
     loop's position), ``message`` and the user's ``frames`` (innermost first). ``noticed``: where
     the thread running main() noticed a fault of another thread's (a Spinner call from a thread
-    of the program's own, whose frames ``frames`` are), else empty."""
+    of the program's own, whose frames ``frames`` are), else empty. ``in_thread``: the fault was
+    in a thread the program started itself, not main()'s (its frames are that thread's)."""
 
     signal: int
     message: str
     frames: tuple[Frame, ...]
     noticed: tuple[Frame, ...] = ()
+    in_thread: bool = False
 
     @property
     def location(self) -> Frame | None:
@@ -199,14 +205,17 @@ def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
 
     Handler and host frames above the fault are dropped; the frames below the controller's
     ``main`` (the host starting it) are cut. ``noticed`` lines (as ``frame`` lines) are main()'s
-    thread's backtrace where it noticed another thread's misuse (:attr:`Fault.noticed`)."""
-    sig, message, pc, raw, noticed = 0, "", None, [], []
+    thread's backtrace where it noticed another thread's misuse (:attr:`Fault.noticed`); a ``thread``
+    line says the fault was a thread's of the program's own (:attr:`Fault.in_thread`)."""
+    sig, message, pc, raw, noticed, in_thread = 0, "", None, [], [], False
     for line in text.splitlines():
         key, _, rest = line.partition(" ")
         if key == "signal":
             sig = int(rest or 0)
         elif key == "message":
             message = rest
+        elif key == "thread":
+            in_thread = True
         elif key == "pc":
             pc = int(rest, 16)
         elif key in ("frame", "noticed"):
@@ -227,9 +236,9 @@ def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
             frames = [(first[1], first[2], first[3])] + [(o - 1, p, s) for _, o, p, s in raw[idx + 1:]]
     else:
         frames = _below_host(raw, host_real)
-    # (another thread's frames, when main()'s noticed them: that thread's start in libc is cut too)
-    return Fault(sig, message, _symbolised(frames, user, host_real, thread=bool(noticed)),
-                 _symbolised(_below_host(noticed, host_real), user, host_real))
+    # (another thread's frames, when main()'s noticed them or it faulted: its start in libc is cut too)
+    return Fault(sig, message, _symbolised(frames, user, host_real, thread=bool(noticed) or in_thread),
+                 _symbolised(_below_host(noticed, host_real), user, host_real), in_thread)
 
 
 def _below_host(raw: list[tuple[int, int, str, str]], host_real: str) -> list[tuple[int, str, str]]:
@@ -280,7 +289,7 @@ def _what(fault: Fault) -> str:
 def format_traceback(fault: Fault, program: str) -> str:
     """The traceback text (innermost frame first, repeated frames folded); then, for another
     thread's misuse, main()'s thread's where it noticed it."""
-    what = _what(fault)
+    what = _what(fault) + (f", {IN_THREAD}" if fault.in_thread else "")
     lines = [f"C controller {program}: {what}", "C backtrace (innermost first):", *_frame_lines(fault.frames)]
     loc = fault.location
     if loc is None:
@@ -291,6 +300,9 @@ def format_traceback(fault: Fault, program: str) -> str:
 
 
 _NOTICED = "noticed by main()'s thread at its next call"
+
+IN_THREAD = "in a thread of the program's own (not main()'s)"
+"""Where a fault of :attr:`Fault.in_thread` was, as its message says it."""
 
 
 def _frame_lines(frames: tuple[Frame, ...]) -> list[str]:
@@ -323,11 +335,14 @@ def fault_message(fault: Fault) -> str:
     """One line: ``file:line: what happened in function()``; for another thread's misuse, the
     kit's or ``spinner.hpp``'s function it called there (``(in worker(), calling TFC_SetServo())``)
     and where main()'s thread noticed it after that (``; noticed by main()'s thread at its next
-    call, file:line (in function())``)."""
+    call, file:line (in function())``); for a fault of a thread the program started, that it was
+    (``t.c:5: SIGSEGV: segmentation fault (in worker()), in a thread of the program's own (not
+    main()'s)``)."""
     what = _what(fault).split(" (")[0] if fault.signal else fault.message
     name = f"SIG{signal.Signals(fault.signal).name[3:]}: " if fault.signal in SIGNAL_TEXT else ""
     loc, noticed = fault.location, fault.noticed_at
     after = f"; {_NOTICED}, {noticed.file}:{noticed.line} (in {_function(noticed)})" if noticed else ""
+    after += f", {IN_THREAD}" if fault.in_thread else ""
     if loc is None:
         return f"{name}{what}{after}"
     called = fault.called if fault.noticed else None
@@ -350,6 +365,9 @@ def describe_fault(report: str, user_modules: set[str], host: str, program: str)
 LOAD_FAULT = "load-fault "
 """The first line of the in-process host's report of a fault as a program's library loads."""
 
+THREAD_FAULT = "thread-fault "
+"""The first line of the in-process host's report of a fault in a thread the program started."""
+
 LOAD_END = "load-end "
 """The first line of the in-process host's report of a program that ended as its library loaded
 (exit, _exit, _Exit or quick_exit, spinner_fail, a misused Spinner call in a constructor)."""
@@ -360,6 +378,14 @@ def load_fault_report(dump: str) -> tuple[str, str, str] | None:
     constructors as its library was opened (``load-fault LIBRARY``, ``host PATH``, then the
     report) in ``dump`` (a supervision's report file), or None when there is none."""
     return _load_record(dump, LOAD_FAULT)
+
+
+def thread_fault_report(dump: str) -> tuple[str, str, str] | None:
+    """``(library, host, report)`` of the in-process host's report of a fault in a thread the
+    program started itself (``thread-fault LIBRARY``, ``host PATH``, then the report, which has a
+    ``thread program`` line) in ``dump`` (a supervision's report file), or None when there is
+    none."""
+    return _load_record(dump, THREAD_FAULT)
 
 
 def load_end_report(dump: str) -> tuple[str, str, str] | None:

@@ -200,11 +200,11 @@ class RayBackend:
 
     def _stuck_row(self, h: Handle, job: Job, outputs: dict | None) -> dict | None:
         """``simrunner drive``'s row for a run whose actor the hard watchdog ended (its stack
-        dump readable here) or a fault in a C/C++ program's constructors killed (the host's
-        report, :func:`~simrunner.run.postmortem.load_fault`) or its exit, spinner_fail or misused
+        dump readable here) or a fault in a C/C++ program's constructors or in a thread of its own
+        killed (the host's report, :func:`~simrunner.run.postmortem.dead_fault`) or its exit, spinner_fail or misused
         call there ended (:func:`~simrunner.run.postmortem.load_end`), else None (the row keeps
         Ray's message)."""
-        from simrunner.run.native.symbolize import load_end_report, load_fault_report
+        from simrunner.run.native.symbolize import load_end_report, load_fault_report, thread_fault_report
         from simrunner.workflows.batch.worker import death_row
 
         try:
@@ -212,7 +212,8 @@ class RayBackend:
                 dump = fh.read()
         except OSError:
             return None
-        told = "Timeout (" in dump or load_fault_report(dump) is not None or load_end_report(dump) is not None
+        told = "Timeout (" in dump or any(find(dump) is not None for find in (load_fault_report, thread_fault_report,
+                                                                              load_end_report))
         return death_row(job, self.config, None, h.ref.report, outputs) if told else None
 
     def kill(self, h: Handle) -> None:

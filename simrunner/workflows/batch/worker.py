@@ -184,7 +184,8 @@ def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str |
     ``simrunner drive`` tells it: a controller stuck in one C-level call (the hard watchdog's
     stack dump in ``report``) is outcome ``stalled`` naming the controller's file:line; a fault
     in a C/C++ program's constructors as its library loaded (the in-process host's report in
-    ``report``) is ``controller_error`` naming the fault's file:line; an exit, spinner_fail or a
+    ``report``) or in a thread the program started (the same) is ``controller_error`` naming the
+    fault's file:line; an exit, spinner_fail or a
     misused Spinner call there (the host's report; the worker ended with status 70) is told as
     drive tells it (:func:`~simrunner.run.postmortem.load_end`: ``controller_error``, or
     ``controller_returned`` for exit(0), naming the call's file:line); otherwise ``worker_died``
@@ -192,7 +193,7 @@ def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str |
     run's CSV when one was asked for (``outputs``)."""
     from pathlib import Path
 
-    from simrunner.run.postmortem import (killed_message, load_end, load_fault, read_run_log, run_log_laps,
+    from simrunner.run.postmortem import (dead_fault, killed_message, load_end, read_run_log, run_log_laps,
                                           stuck_location, stuck_message)
 
     try:
@@ -204,7 +205,7 @@ def death_row(job: Job, config: BatchConfig, exitcode: int | None, report: str |
     if "Timeout (" in dump:  # faulthandler's header (simrunner.run.watchdog)
         outcome = "stalled"
         message = stuck_message(stuck_location(dump, config.controller), config.wall_limit_s)
-    elif (fault := load_fault(dump, config.controller)) is not None:
+    elif (fault := dead_fault(dump, config.controller)) is not None:
         outcome, message = "controller_error", str(fault)
     elif (ended := load_end(dump, config.controller)) is not None:
         outcome, message = str(ended.outcome), ended.message

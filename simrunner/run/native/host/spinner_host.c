@@ -18,13 +18,17 @@
  * asking where a stalled loop is (SIGUSR1; in-process also the reply ST_WHERE) sends a FAULT
  * report with the raw backtrace (module, offset, symbol per frame); the simulator symbolises
  * it with the debug info. A call from a thread of the program's own is reported by main()'s
- * thread with that thread's backtrace, and main()'s own as "noticed" lines (foreign_noted). In-process, a fault ends the coroutine (the simulator goes on);
+ * thread with that thread's backtrace, and main()'s own as "noticed" lines (foreign_noted). A
+ * fault in such a thread is reported from it, naming it as one (thread_fault), and the process
+ * dies by the signal. In-process, a fault ends the coroutine (the simulator goes on);
  * a signal that is not the controller's goes to the handler installed before. A fault in the
  * program's constructors as its library is loaded (spinner_inproc_open, before any run: nothing
  * can return out of the loader) writes the same report to the file descriptor the simulator
  * handed in (its supervisor's report file) and the process dies by the signal; an exit,
  * spinner_fail or a misused call there writes its report there too and the process ends with
- * status 70 (load_ended).
+ * status 70 (load_ended). So does a fault in a thread of the program's during its run (to the
+ * descriptor handed in for the run, spinner_inproc_start): nothing can leave main()'s coroutine
+ * from that thread.
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -37,6 +41,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sched.h>
 #include <time.h>
 #include <sys/uio.h>
 #include <ucontext.h>
@@ -302,6 +307,37 @@ static size_t read_reply_head(uint32_t hdr[2], void *reply, size_t size) {
 #else
 /* -- pipe I/O (the host program) ------------------------------------------------------ */
 static int req_fd = -1, rep_fd = -1;
+static pthread_t host_thread;  /* the host's main thread, which runs the program's main() */
+
+/* The requests are main()'s thread's (another thread's calls send nothing: foreign_thread), but a
+ * thread of the program's own that faults reports from itself (thread_fault): whole messages go
+ * to the pipe under pipe_take (flush_out, a long message, a report), so that report comes between
+ * two of main()'s messages, never inside one, and the thread that sends a report keeps the pipe
+ * (nothing after the report: the process ends with it). Main()'s thread takes it again in a
+ * signal handler that interrupted its own write (the simulator's SIGUSR1 asking where: that
+ * report goes where the write was, as before). A spin lock (a thread waits for one message); a
+ * report waiting for it goes first (pipe_report: main()'s thread, writing one message after
+ * another, took it back each time before the reporting thread could, for seconds). */
+static uintptr_t pipe_owner;  /* the thread sending (its pthread_self, no system call), 0 none: atomic */
+static int pipe_depth;        /* the owner's takes */
+static int pipe_report;       /* a report waits for the pipe: no other message takes it (atomic) */
+static void pipe_take(int for_report) {
+    uintptr_t self = (uintptr_t)pthread_self(), none = 0;
+    if (__atomic_load_n(&pipe_owner, __ATOMIC_ACQUIRE) == self) {
+        pipe_depth++;
+        return;
+    }
+    if (for_report) __atomic_store_n(&pipe_report, 1, __ATOMIC_RELEASE);
+    while ((!for_report && __atomic_load_n(&pipe_report, __ATOMIC_ACQUIRE)) ||
+           !__atomic_compare_exchange_n(&pipe_owner, &none, self, 0, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE)) {
+        none = 0;
+        sched_yield();
+    }
+    pipe_depth = 1;
+}
+static void pipe_give(void) {
+    if (--pipe_depth == 0) __atomic_store_n(&pipe_owner, 0, __ATOMIC_RELEASE);
+}
 
 static void write_all(const void *data, size_t n) {
     const unsigned char *p = data;
@@ -331,7 +367,9 @@ static void read_all(void *data, size_t n) {
 
 static void flush_out(void) {
     if (out_len) {
+        pipe_take(0);
         write_all(out_buf, out_len);
+        pipe_give();
         out_len = 0;
     }
 }
@@ -342,9 +380,11 @@ static void queue_raw(uint32_t op, const void *a, size_t na, const void *b, size
     size_t total = sizeof hdr + na + nb;
     if (out_len + total > sizeof out_buf) flush_out();
     if (total > sizeof out_buf) {
+        pipe_take(0);
         write_all(hdr, sizeof hdr);
         if (na) write_all(a, na);
         if (nb) write_all(b, nb);
+        pipe_give();
         return;
     }
     memcpy(out_buf + out_len, hdr, sizeof hdr);
@@ -1462,17 +1502,20 @@ pid_t __wrap_fork(void) {
 }
 
 /* -- faults ---------------------------------------------------------------------------- */
-static char report[1 << 15];
-static size_t report_len;
+/* A report's text (build_report). main()'s thread's (a run's fault or misuse, the load's) is
+ * `report`; a thread of the program's own that faults builds its own (thread_fault: it may fault
+ * while main()'s thread builds one). */
+struct report { size_t len; char text[1 << 15]; };
+static struct report report;
 
-static void rput(const char *s) {
+static void rput(struct report *r, const char *s) {
     size_t n = strlen(s);
-    if (report_len + n >= sizeof report) n = sizeof report - 1 - report_len;
-    memcpy(report + report_len, s, n);
-    report_len += n;
+    if (r->len + n >= sizeof r->text) n = sizeof r->text - 1 - r->len;
+    memcpy(r->text + r->len, s, n);
+    r->len += n;
 }
 
-static void rhex(uintptr_t v) {
+static void rhex(struct report *r, uintptr_t v) {
     char tmp[20];
     int i = 0;
     do {
@@ -1482,10 +1525,10 @@ static void rhex(uintptr_t v) {
     char out[22] = "0x";
     for (int k = 0; k < i; k++) out[2 + k] = tmp[i - 1 - k];
     out[2 + i] = 0;
-    rput(out);
+    rput(r, out);
 }
 
-static void rdec(long v) {
+static void rdec(struct report *r, long v) {
     char tmp[24];
     int i = 0, neg = v < 0;
     unsigned long u = neg ? -(unsigned long)v : (unsigned long)v;
@@ -1498,54 +1541,57 @@ static void rdec(long v) {
     if (neg) out[k++] = '-';
     while (i) out[k++] = tmp[--i];
     out[k] = 0;
-    rput(out);
+    rput(r, out);
 }
 
-/* One `key` line per frame into report[]: "KEY ADDR OFFSET PATH\tSYMBOL\n". */
-static void report_frames(const char *key, void *const *frames, int n) {
+/* One `key` line per frame into `r`: "KEY ADDR OFFSET PATH\tSYMBOL\n". */
+static void report_frames(struct report *r, const char *key, void *const *frames, int n) {
     for (int i = 0; i < n; i++) {
         Dl_info info;
-        rput(key);
-        rput(" ");
-        rhex((uintptr_t)frames[i]);
+        rput(r, key);
+        rput(r, " ");
+        rhex(r, (uintptr_t)frames[i]);
         if (dladdr(frames[i], &info) && info.dli_fname) {
-            rput(" ");
-            rhex((uintptr_t)frames[i] - (uintptr_t)info.dli_fbase);
-            rput(" ");
-            rput(info.dli_fname);
-            rput("\t");
-            rput(info.dli_sname ? info.dli_sname : "");
+            rput(r, " ");
+            rhex(r, (uintptr_t)frames[i] - (uintptr_t)info.dli_fbase);
+            rput(r, " ");
+            rput(r, info.dli_fname);
+            rput(r, "\t");
+            rput(r, info.dli_sname ? info.dli_sname : "");
         } else {
-            rput(" 0x0 ?\t");
+            rput(r, " 0x0 ?\t");
         }
-        rput("\n");
+        rput(r, "\n");
     }
 }
 
-/* Text report into report[]: "signal N\nmessage TEXT\npc ADDR\nframe ADDR OFFSET PATH\tSYMBOL\n"...
- * with `frames` (n of them; NULL: this thread's backtrace now). */
-static void build_report_frames(int sig, const char *message, void *pc, void *const *frames, int n) {
+/* Text report into `r`: "signal N\nmessage TEXT\n[thread program\n][pc ADDR\n]frame ADDR OFFSET
+ * PATH\tSYMBOL\n"... with `frames` (n of them; NULL: this thread's backtrace now). `in_thread`: the
+ * "thread program" line, a fault of a thread the program started (not main()'s: thread_fault). */
+static void build_report_frames(struct report *r, int sig, const char *message, void *pc, void *const *frames,
+                                int n, int in_thread) {
     void *here[128];
     if (frames == NULL) {
         n = backtrace(here, 128);
         frames = here;
     }
-    report_len = 0;
-    rput("signal ");
-    rdec(sig);
-    rput("\nmessage ");
-    rput(message ? message : "");
-    rput("\n");
+    r->len = 0;
+    rput(r, "signal ");
+    rdec(r, sig);
+    rput(r, "\nmessage ");
+    rput(r, message ? message : "");
+    rput(r, "\n");
+    if (in_thread) rput(r, "thread program\n");
     if (pc) {
-        rput("pc ");
-        rhex((uintptr_t)pc);
-        rput("\n");
+        rput(r, "pc ");
+        rhex(r, (uintptr_t)pc);
+        rput(r, "\n");
     }
-    report_frames("frame", frames, n);
+    report_frames(r, "frame", frames, n);
 }
 
 static void build_report(int sig, const char *message, void *pc) {
-    build_report_frames(sig, message, pc, NULL, 0);
+    build_report_frames(&report, sig, message, pc, NULL, 0, 0);
 }
 
 static void send_report(int sig, const char *message);
@@ -1574,9 +1620,9 @@ static void fault_report(int sig, const char *message, void *pc) {
 /* The foreign call's report (foreign_call_report, main()'s thread): the foreign thread's frames,
  * then "noticed" lines, this thread's backtrace (main()'s call that noticed it). */
 static void foreign_report(const char *message) {
-    build_report_frames(0, message, NULL, foreign_frames, foreign_depth);
+    build_report_frames(&report, 0, message, NULL, foreign_frames, foreign_depth, 0);
     void *here[128];
-    report_frames("noticed", here, backtrace(here, 128));
+    report_frames(&report, "noticed", here, backtrace(here, 128));
     send_report(0, message);
 }
 
@@ -1587,16 +1633,17 @@ static void send_report(int sig, const char *message) {
 #endif
 #ifdef SPINNER_INPROC
     if (opening) load_ended(NULL, -1, message ? message : "");  /* in a constructor at the load */
-    if (out_len + 8 + report_len > sizeof out_buf) out_len = 0;  /* the report goes first */
-    uint32_t hdr[2] = {OP_FAULT, (uint32_t)report_len};
+    if (out_len + 8 + report.len > sizeof out_buf) out_len = 0;  /* the report goes first */
+    uint32_t hdr[2] = {OP_FAULT, (uint32_t)report.len};
     write_all(hdr, sizeof hdr);
-    write_all(report, report_len);
+    write_all(report.text, report.len);
     leave(sig == SIGUSR1 ? 76 : 70);  /* back to the simulator (from a handler, too) */
 #else
     flush_out();
-    uint32_t hdr[2] = {OP_FAULT, (uint32_t)report_len};
+    pipe_take(1);  /* (kept: the report is the last message) */
+    uint32_t hdr[2] = {OP_FAULT, (uint32_t)report.len};
     write_all(hdr, sizeof hdr);
-    write_all(report, report_len);
+    write_all(report.text, report.len);
     if (sig > 0 && sig != SIGUSR1) {
         signal(sig, SIG_DFL);
         raise(sig);
@@ -1607,6 +1654,41 @@ static void send_report(int sig, const char *message) {
 
 static const int fault_sigs[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGUSR1};
 #define N_SIGS (sizeof fault_sigs / sizeof fault_sigs[0])
+
+/* A fault (SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT) in a thread the program started itself
+ * (pthread_create, std::thread), not main()'s: its report says so ("thread program") and names that
+ * thread's line. Nothing can end the run from there and go on (main()'s thread may be anywhere in
+ * its code; in the simulator's process main()'s coroutine would have to be left from another
+ * thread): the process ends, by the signal, once the report is out. The first thread to fault
+ * reports; one faulting after it waits for the end (its report would race the first's). Isolated,
+ * the report goes to the simulator between two of main()'s messages (pipe_take); in the simulator's
+ * process it goes to the file descriptor the simulator handed in for the run (its supervisor's
+ * report file), or as one line to stderr (thread_report_out); there a fault of a thread that is not
+ * the program's (the simulator's, a library's) goes to the handler before ours as ever (pass_on).
+ * (A thread's stack overflow kills the process unreported: the thread has no alternate signal
+ * stack for the handler to run on.) */
+static struct report thread_report;
+static int thread_faulted;  /* atomic: a thread of the program's has faulted */
+static void thread_report_out(int sig, void *pc);
+
+static void thread_fault(int sig, siginfo_t *info, void *pc, const char *message) {
+    if (__atomic_exchange_n(&thread_faulted, 1, __ATOMIC_ACQ_REL))
+        for (;;) pause();  /* another thread's fault is being reported: the process ends with it */
+    build_report_frames(&thread_report, sig, message, pc, NULL, 0, 1);
+    thread_report_out(sig, pc);
+    signal(sig, SIG_DFL);  /* the process dies by the signal, as without our handlers */
+    if (info->si_code <= 0) raise(sig);  /* sent (raise, abort): again, at the handler's return */
+}                                        /* a fault: the instruction runs again */
+
+#ifndef SPINNER_INPROC
+static void thread_report_out(int sig, void *pc) {
+    (void)sig, (void)pc;
+    pipe_take(1);  /* after main()'s message being sent; kept: the report is the last */
+    uint32_t hdr[2] = {OP_FAULT, (uint32_t)thread_report.len};
+    write_all(hdr, sizeof hdr);
+    write_all(thread_report.text, thread_report.len);
+}
+#endif
 
 #ifdef SPINNER_INPROC
 /* Our handlers are the process's while a run is on or a library is being opened (handler_users:
@@ -1625,6 +1707,13 @@ static pthread_t load_thread;
 static int load_fd = -1;
 static const char *load_path;
 static void load_fault(int sig, siginfo_t *info, void *pc, const char *message);
+
+/* A fault in a thread the run's program started (thread_fault): its report goes to run_fd (or to
+ * stderr), naming the program's library (prog_path, loaded at prog_base). */
+static int run_fd = -1;
+static void *prog_base;
+static const char *prog_path;
+static int program_thread(void *pc);
 
 /* A signal that is not the controller's (the simulator's own, or after it ended): hand it
  * to the handler installed before ours. */
@@ -1664,6 +1753,8 @@ static void on_fault(int sig, siginfo_t *info, void *context) {
         if (sig != SIGUSR1 && __atomic_load_n(&load_watch, __ATOMIC_ACQUIRE) &&
             pthread_equal(pthread_self(), load_thread))  /* a constructor's, as its library loads */
             load_fault(sig, info, pc, overflow ? "stack overflow (the stack limit is `ulimit -s`)" : "");
+        else if (sig != SIGUSR1 && !pthread_equal(pthread_self(), sim_thread_id) && program_thread(pc))
+            thread_fault(sig, info, pc, overflow ? "stack overflow (the thread's stack)" : "");
         else
             pass_on(sig, info);  /* not the run's controller code (another thread's, say) */
         return;
@@ -1671,6 +1762,13 @@ static void on_fault(int sig, siginfo_t *info, void *context) {
     if (sig == SIGSEGV && stack_lo && addr < stack_lo && addr + 65536 >= stack_lo) overflow = 1;
     fault_report(sig, overflow ? "stack overflow (the controller's stack is `ulimit -s`)" : "", pc);
 #else
+    if (!pthread_equal(pthread_self(), host_thread)) {  /* a thread the program started */
+        if (sig == SIGUSR1)  /* the simulator asks where main()'s thread is (a stall): that thread answers */
+            pthread_kill(host_thread, SIGUSR1);
+        else
+            thread_fault(sig, info, pc, overflow ? "stack overflow (the thread's stack)" : "");
+        return;
+    }
     fault_report(sig, overflow ? "stack overflow (the stack limit is `ulimit -s`)" : "", pc);
 #endif
 }
@@ -1746,41 +1844,49 @@ static const char *signal_name(int sig) {
     }
 }
 
-/* " at PATH+0xOFFSET (function)" of the innermost frame of the program's library being opened in
- * the calling thread's stack ("" if none): where its constructor is. The function only when the
+/* " at PATH+0xOFFSET (function)" of the innermost frame of the library at `path` ("" if none):
+ * `pc` (the faulting instruction) if it is in it, else the calling thread's stack's innermost one in
+ * it (a constructor of the library being opened, a thread's function). The function only when the
  * address is inside the symbol dladdr names (a static function, a constructor, has none: dladdr
  * names the exported one before it, main say; simrunner drive's supervisor names the file:line). */
-static void load_where(char *where, size_t size) {
+static void lib_where(char *where, size_t size, const char *path, void *pc) {
     void *frames[64];
     int n = backtrace(frames, 64);
-    const char *path = load_path ? load_path : "";
     where[0] = 0;
-    for (int i = 0; i < n && !where[0]; i++) {
+    if (path == NULL) return;
+    for (int i = pc ? -1 : 0; i < n && !where[0]; i++) {
         Dl_info info;
         const ElfW(Sym) *sym = NULL;
-        uintptr_t in = (uintptr_t)frames[i] - 1;  /* (a return address: after its call, maybe past the end) */
+        void *at = i < 0 ? pc : frames[i];
+        uintptr_t in = (uintptr_t)at - (i < 0 ? 0 : 1);  /* (a return address: after its call, maybe past the end) */
         if (!dladdr1((void *)in, &info, (void **)&sym, RTLD_DL_SYMENT) || !info.dli_fname ||
             strcmp(info.dli_fname, path) != 0)
             continue;
         const char *name = info.dli_sname;
         if (name && (sym == NULL || in >= (uintptr_t)info.dli_saddr + sym->st_size)) name = NULL;
-        snprintf(where, size, " at %s+0x%lx%s%s%s", path,
-                 (unsigned long)((uintptr_t)frames[i] - (uintptr_t)info.dli_fbase),
+        snprintf(where, size, " at %s+0x%lx%s%s%s", path, (unsigned long)((uintptr_t)at - (uintptr_t)info.dli_fbase),
                  name ? " (" : "", name ? name : "", name ? ")" : "");
     }
 }
 
-/* The report of the program's load to load_fd: "TAG PATH", "host PATH", then `extra` (a line or
- * ""), then the report (build_report's). */
-static void load_record(const char *tag, const char *extra) {
+static void load_where(char *where, size_t size) { lib_where(where, size, load_path, NULL); }
+
+/* A report for the simulator's supervisor, to `fd`: "TAG PATH", "host PATH", then `extra` (a line or
+ * ""), then the report `r` (build_report's). */
+static void report_record(int fd, const char *tag, const char *path, const char *extra, const struct report *r) {
     Dl_info here;
-    const char *host = dladdr((void *)load_record, &here) && here.dli_fname ? here.dli_fname : "";
-    const char *path = load_path ? load_path : "";
+    const char *host = dladdr((void *)report_record, &here) && here.dli_fname ? here.dli_fname : "";
+    path = path ? path : "";
     struct iovec parts[] = {{(void *)tag, strlen(tag)}, {(void *)" ", 1}, {(void *)path, strlen(path)},
                             {(void *)"\nhost ", 6}, {(void *)host, strlen(host)}, {(void *)"\n", 1},
-                            {(void *)extra, strlen(extra)}, {report, report_len}};
-    ssize_t w = writev(load_fd, parts, sizeof parts / sizeof parts[0]);
+                            {(void *)extra, strlen(extra)}, {(void *)r->text, r->len}};
+    ssize_t w = writev(fd, parts, sizeof parts / sizeof parts[0]);
     (void)w;
+}
+
+/* The report of the program's load to load_fd. */
+static void load_record(const char *tag, const char *extra) {
+    report_record(load_fd, tag, load_path, extra, &report);
 }
 
 /* A fault of the opening thread (on_fault): the report (as a run's, after "load-fault PATH" and
@@ -1807,6 +1913,45 @@ static void load_fault(int sig, siginfo_t *info, void *pc, const char *message) 
     }
     signal(sig, SIG_DFL);
     if (info->si_code <= 0) raise(sig);  /* sent (raise, abort): again, at the handler's return */
+}
+
+/* A thread of the run's program (thread_fault): a fault on a thread that is not the simulator's
+ * whose instruction, or a frame of whose stack, is in the program's library (prog_base, the run's;
+ * a thread of the simulator's, of a library it uses, goes to the handler before ours: pass_on). */
+static int in_program(void *at) {
+    Dl_info info;
+    return at != NULL && dladdr(at, &info) && info.dli_fbase != NULL && info.dli_fbase == prog_base;
+}
+
+static int program_thread(void *pc) {
+    if (!__atomic_load_n(&run_active, __ATOMIC_ACQUIRE) || prog_base == NULL) return 0;
+    if (in_program(pc)) return 1;
+    void *frames[64];
+    int n = backtrace(frames, 64);
+    for (int i = 0; i < n; i++)
+        if (in_program((char *)frames[i] - 1)) return 1;  /* (a return address: after its call) */
+    return 0;
+}
+
+/* The thread's report to run_fd ("thread-fault PATH", "host PATH", then the report), where the
+ * simulator's supervisor reads it once the process has died (simrunner.run.postmortem); without
+ * one, a line on stderr naming the function. */
+static void thread_report_out(int sig, void *pc) {
+    if (run_fd >= 0) {
+        report_record(run_fd, "thread-fault", prog_path, "", &thread_report);
+        return;
+    }
+    char where[1024];
+    lib_where(where, sizeof where, prog_path, pc);
+    char line[1536];
+    int k = snprintf(line, sizeof line,
+                     "simrunner: %s%s, in a thread of the program's own (not main()'s), which runs in the "
+                     "simulator's process: the process ends (simrunner drive names the fault's file:line; "
+                     "--isolate runs the program in a process of its own)\n", signal_name(sig), where);
+    if (k > 0) {
+        ssize_t w = write(2, line, (size_t)k < sizeof line ? (size_t)k : sizeof line - 1);
+        (void)w;
+    }
 }
 
 /* A call that does not return in a constructor of a library being loaded here (spinner_inproc_open,
@@ -1890,6 +2035,7 @@ int main(int argc, char **argv) {
     }
     req_fd = atoi(argv[2]);
     rep_fd = atoi(argv[3]);
+    host_thread = pthread_self();  /* main() runs on it */
     setvbuf(stdout, NULL, _IOLBF, 0);  /* the controller's prints reach the terminal in order */
     signal(SIGPIPE, SIG_IGN);  /* a reader of stdout that left (`| head`) fails its writes, as
                                   in the simulator's process, instead of killing the program */
@@ -2135,16 +2281,22 @@ int spinner_inproc_exit_code(void) { return exit_code; }
 int spinner_inproc_gone(void) { return gone; }
 long spinner_inproc_pending(void) { return (long)out_len; }
 
-/* Prepare a run of `lib`'s main(argc, argv) (`stall_s` > 0: with the watchdog). 0, or 72
- * without main(), 12 without memory for its stack, 16 while another run is on (in another
- * thread: spinner_inproc_finish ends a run). The controller starts at the first
- * resume (whose reply is the run's INIT message). */
+/* Prepare a run of `lib`'s main(argc, argv) (`stall_s` > 0: with the watchdog; `report_fd`: where a
+ * fault in a thread of the program's own is reported before the process dies by it, the
+ * supervision's report file, < 0: a line on stderr; thread_fault). 0, or 72 without main(), 12
+ * without memory for its stack, 16 while another run is on (in another thread:
+ * spinner_inproc_finish ends a run). The controller starts at the first resume (whose reply is the
+ * run's INIT message). */
 static int run_active;  /* one run at a time in a process (the state above is the run's) */
 
-int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s) {
+int spinner_inproc_start(void *lib, int argc, char **argv, double stall_s, int report_fd) {
     if (__atomic_exchange_n(&run_active, 1, __ATOMIC_ACQ_REL)) return 16;  /* EBUSY */
     user_main = (main_fn)dlsym(lib, "main");
     prog_lib = lib;
+    Dl_info info;  /* (the program's threads: their faults are the run's, thread_fault) */
+    prog_base = user_main != NULL && dladdr((void *)user_main, &info) ? info.dli_fbase : NULL;
+    prog_path = prog_base != NULL ? info.dli_fname : NULL;
+    run_fd = report_fd;
     isr_count = isr_depth = 0;  /* (a handler that faulted never returned) */
     irq_masked = irq_held = irq_mask_unsent = irq_unmasking = 0, irq_mask_ra = NULL, mask_msg_len = 0;
     memset(isr_fn, 0, sizeof isr_fn);
@@ -2239,6 +2391,7 @@ void spinner_inproc_finish(void) {
     restore_handlers();
     fflush(stdout);
     fflush(stderr);
+    run_fd = -1;
     __atomic_store_n(&run_active, 0, __ATOMIC_RELEASE);
 }
 #endif
