@@ -275,3 +275,21 @@ def test_a_run_killed_before_its_first_frame_still_writes_the_asked_csv(tmp_path
     assert "killed by SIGSEGV before the first frame" in summary["message"]
     assert summary["outputs"]["csv"] == "out.csv" and "wrote: out.csv" in out
     assert len(read_log(tmp_path / "out.csv")) == 0
+
+
+def test_a_killed_run_that_drew_long_texts_still_gets_its_outputs(tmp_path):
+    """A run log whose add_data text is longer than the csv module's default field limit
+    (128 KiB) read back as 'expected valid CSV (field larger than field limit (131072))': the
+    supervisor of a killed run wrote no outputs. The reader now takes any field the writer wrote."""
+    import json
+
+    from simrunner.telemetry.log import read_log
+
+    body = ("import signal\nsignal.signal(signal.SIGSEGV, signal.SIG_DFL)\nfor _ in range(3):\n"
+            "    s.add_data(['x' * 200000])\n    s.get_image()\n__import__('ctypes').string_at(0)\n")
+    proc = start_drive(tmp_path, body, "--csv", "out.csv", "--summary", "s.json")
+    out, err = _finish(proc)
+    assert proc.returncode == 1, (out, err)
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert "killed by SIGSEGV" in summary["message"] and summary["frames"] >= 3, summary
+    assert max(len(t) for t in read_log(tmp_path / "out.csv").data_text) >= 200000

@@ -498,6 +498,9 @@ def _drop_repeated_stamps(values: dict, lines: list[int]) -> tuple[dict, list[in
 def _parse(text: str, source: str, columns: ColumnMap | None = None, merged: bool = False,
            repeated_stamps: bool = False) -> RunLog:
     delimiter = _delimiter(text)
+    # a field as long as the file reads (the writer bounds no add_data text; the csv module's
+    # default limit, 128 KiB, refused the log of a run that drew long texts); only ever raised
+    csv.field_size_limit(max(csv.field_size_limit(), len(text)))
     reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
     header, header_line = None, 1
     try:
