@@ -229,7 +229,7 @@ def test_log_without_pose_reads_and_require_names_what_is_missing(tmp_path):
     assert log.x_m is None and log.coasting().shape == (60,) and not log.coasting().any()
     with pytest.raises(LogError, match=r"missing: x_m\)") as info:
         log.require("x_m")
-    assert str(info.value).startswith(f"{p}:1: ")
+    assert str(info.value).startswith(f"{p}:2: ")  # the header's line (after the comment)
     with pytest.raises(LogError, match=r"missing: speed_cmd_mps, steer_cmd_rad\)"):
         check_measured(log)
 
