@@ -605,3 +605,115 @@ def test_tfc_ticker_without_the_programs_definition_says_to_define_it(tmp_path):
     assert str(err.value).splitlines()[-1].startswith(
         "TFC_Ticker: not declared - mbed's FRDM-TFC library has none (the CodeWarrior library's SysTick "
         "counted it): define it in your program, `volatile uint32_t TFC_Ticker[4];`")
+
+
+# -- TPM1 as TFC.cpp drives it: TFC_InitServos, TFC_ServoTicker, the servo's CnV ------------------
+def image_lines(out):
+    """The program's `image N T TICKER` lines: {N: (T_s, ticker)}."""
+    rows = [line.split()[1:] for line in out.splitlines() if line.startswith("image ")]
+    return {int(n): (float(t), int(k)) for n, t, k in rows}
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_init_servos_keeps_the_ticker_and_the_counter_where_they_are(tmp_path, capfd, isolate):
+    """TFC.cpp's TFC_InitServos stops TPM1 (TPM1->SC = 0: the counter keeps its count, KL25 RM
+    31.4.1), writes MOD (at once, the counter off: 31.4.8.1) and lets it count on; it writes neither
+    CNT nor TFC_ServoTicker (TFC_Init zeroes the ticker, after it). So a 20-ms frame set 4 ms into a
+    10-ms frame ends 20 ms after that frame began, and the ticker counts on, one an image; a 4-ms
+    frame set 6 ms into a 10-ms one finds the counter past the new MOD: it counts on to 0xFFFF
+    (65536 counts of 750 kHz, 87.4 ms) and round, the next image 87.4 + 4 ms after the last. (The
+    kit zeroed the ticker and restarted the frame from the call: 6 + 4 ms.)"""
+    prog = program(tmp_path, """\
+        #include <stdio.h>
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        int main() {
+            TFC_Init();
+            for (int n = 0; n < 14; n++) {
+                while (!TFC_LineScanImageReady) {}
+                TFC_LineScanImageReady = 0;
+                printf("image %d %.6f %u\\n", n, spinner_now(), (unsigned)TFC_ServoTicker);
+                if (n == 5) {
+                    wait_ms(4);
+                    TFC_InitServos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, 0.020f);
+                    printf("ticker %u\\n", (unsigned)TFC_ServoTicker);
+                }
+                if (n == 9) {
+                    wait_ms(6);
+                    TFC_InitServos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, 0.004f);
+                }
+            }
+            fflush(stdout);
+            return 0;
+        }
+        """)
+    if isolate:
+        prog = dataclasses.replace(prog, isolate=True)
+    r = drive(prog, track="floor", time_limit_s=2.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    images = image_lines(out)
+    t = {n: ts for n, (ts, _) in images.items()}
+    gap = {n: round(t[n + 1] - t[n], 6) for n in range(2, 13)}
+    assert [gap[n] for n in (2, 3, 4)] == [0.01] * 3, gap
+    assert [gap[n] for n in (5, 6, 7, 8)] == [0.02] * 4, gap          # from the frame's start, not the call
+    assert gap[9] == pytest.approx(65536 / 750e3 + 0.004, abs=0.0011), gap  # the counter round 0xFFFF
+    assert [gap[n] for n in (10, 11, 12)] == [0.004] * 3, gap
+    ticker = {n: k for n, (_, k) in images.items()}
+    assert int(out.split("ticker ")[1].split()[0]) == ticker[5], out  # the call keeps it
+    assert [ticker[n + 1] - ticker[n] for n in range(0, 13)] == [1] * 13, ticker
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_program_that_writes_the_servo_ticker_sees_it_count_on_from_its_value(tmp_path, capfd, isolate):
+    """TFC_ServoTicker is the library's variable, which TPM1's interrupt increments (to 0xFFFFFFFF):
+    a write sticks, from main() and from a handler. Teams' `if (TFC_ServoTicker >= 10) {
+    TFC_ServoTicker = 0; ...}` then runs once every 10 frames (the kit kept the count of frames
+    since TFC_Init and took it back at the next tick: every pass after the first 10). The program's
+    own TFC_Ticker[] (counted by its Ticker) keeps a write too, from main() and a handler."""
+    prog = program(tmp_path, """\
+        #include <stdio.h>
+        #include "mbed.h"
+        #include "TFC.h"
+        volatile uint32_t TFC_Ticker[2];
+        Ticker ms;
+        Timeout later;
+        void count() { TFC_Ticker[0]++; TFC_Ticker[1]++; }
+        void set() { TFC_ServoTicker = 1000; TFC_Ticker[1] = 5000; }
+        int main() {
+            TFC_Init();
+            ms.attach_us(&count, 1000);
+            int passes = 0;
+            Timer t;
+            t.start();
+            while (t.read_ms() < 1000) {                 // 100 frames of 10 ms
+                if (TFC_ServoTicker >= 10) {
+                    TFC_ServoTicker = 0;
+                    passes++;
+                }
+                wait_ms(1);
+            }
+            TFC_ServoTicker = 0;
+            TFC_Ticker[0] = 0;
+            wait_ms(50);
+            printf("passes %d after %u %u\\n", passes, (unsigned)TFC_ServoTicker, (unsigned)TFC_Ticker[0]);
+            later.attach(&set, 0.0105f);
+            wait_ms(40);
+            printf("handler %u %u\\n", (unsigned)TFC_ServoTicker, (unsigned)TFC_Ticker[1]);
+            fflush(stdout);
+            return 0;
+        }
+        """)
+    if isolate:
+        prog = dataclasses.replace(prog, isolate=True)
+    r = drive(prog, track="floor", time_limit_s=3.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    m = re.search(r"passes (\d+) after (\d+) (\d+)\s+handler (\d+) (\d+)", out)
+    assert m, out
+    passes, after, ticks, from_handler, ticks_1 = (int(v) for v in m.groups())
+    assert 9 <= passes <= 10, out                       # once every 10 frames
+    assert 4 <= after <= 6 and 49 <= ticks <= 52, out   # 50 ms: 5 frames, 50 ms ticks from 0
+    assert 1002 <= from_handler <= 1004, out            # 30 ms after the handler's write: 3 frames on
+    assert 5028 <= ticks_1 <= 5031, out
