@@ -717,3 +717,45 @@ def test_a_program_that_writes_the_servo_ticker_sees_it_count_on_from_its_value(
     assert 4 <= after <= 6 and 49 <= ticks <= 52, out   # 50 ms: 5 frames, 50 ms ticks from 0
     assert 1002 <= from_handler <= 1004, out            # 30 ms after the handler's write: 3 frames on
     assert 5028 <= ticks_1 <= 5031, out
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_servo_position_reaches_the_car_at_the_second_frame_edge_after_it(tmp_path, capfd, isolate):
+    """TFC_SetServo queues the position (QueuedServo0Val); TPM1's interrupt writes it to the channel's
+    CnV at the next overflow, and in edge-aligned PWM a CnV written while the counter runs loads as it
+    next turns from MOD to zero (KL25 RM 31.4.8.2): the pulse from the second frame edge after the
+    call carries it. Set 3 ms after an image's edge (10-ms frames; 4 ms at the 2-ms step), twice
+    (the last queued wins): the car steers from 20 ms after that edge (it did from the call)."""
+    prog = program(tmp_path, """\
+        #include <stdio.h>
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        int main() {
+            TFC_Init();
+            for (int n = 0; n < 6; n++) {
+                while (!TFC_LineScanImageReady) {}
+                TFC_LineScanImageReady = 0;
+            }
+            double edge = spinner_now();
+            wait_ms(3);
+            TFC_SetServo(0, -1.0f);
+            TFC_SetServo(0, 1.0f);
+            printf("edge %.6f\\n", edge);
+            fflush(stdout);
+            wait(0.1);
+            return 0;
+        }
+        """)
+    if isolate:
+        prog = dataclasses.replace(prog, isolate=True)
+    r = drive(prog, track="floor", time_limit_s=2.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    edge = float(out.split("edge ")[1].split()[0])
+    log = r.log
+    steered = log.t_s[log.steer_cmd_rad != 0.0]
+    assert np.all(log.steer_cmd_rad[log.steer_cmd_rad != 0.0] == pytest.approx(0.4)), log.steer_cmd_rad
+    # a row of the run log holds the command the step after its frame's boundary applied: the one
+    # the overflow at edge + 20 ms loads (the call's own row, edge + 10 ms, before)
+    assert steered[0] == pytest.approx(edge + 0.020, abs=1e-6), (edge, steered[:3])

@@ -11,11 +11,12 @@
  *   the image. Here the camera is TPM1: the simulator's line camera, free-running at the servo
  *   frame (its frame period is the servo frame), gives a frame at each overflow; the kit's 1 kHz
  *   interrupt finds a new one there (spinner_latest_image, which never waits) and does what the
- *   overflow does (tpm1_overflow: MOD loads, TPM1_IRQHandler's TFC_ServoTicker++), reads it into
- *   the working buffer, swaps the ping-pong buffers and increments
+ *   overflow does (tpm1_overflow: MOD and the servos' CnV load, TPM1_IRQHandler's CnV writes and
+ *   TFC_ServoTicker++), reads it into the working buffer, swaps the ping-pong buffers and increments
  *   TFC_LineScanImageReady, before the Tickers due then: main() runs on between two images and a
  *   Ticker handler sees each image;
- * - servo 0 steers, H-bridge A and B are the left and right rear motors' duties, the pots, DIP switch, buttons and battery read --param values,
+ * - servo 0 steers (at TPM1's overflows, as the servo's pulse does), H-bridge A and B are the left
+ *   and right rear motors' duties, the pots, DIP switch, buttons and battery read --param values,
  *   the LEDs are kept, serial output prints. */
 #include <limits.h>
 #include <math.h>
@@ -70,7 +71,12 @@ static struct {
     double next_frame_s;     /* MOD written while TPM1 counts (TFC_SetLineScanExposureTime): its
                               * write buffer, loaded at the next overflow (0: none) */
     double overflow_s;       /* TPM1's last overflow (the read-out of the latest image), or its start */
-    float servo;             /* the steering servo's position (-1..1) */
+    int library_servos;      /* the library's TPM1 interrupt writes the servos' CnV: once the program
+                              * queues positions (TFC_SetServo, ...) or calls TFC_InitServos (not for
+                              * TFC_Init alone: a PwmOut's pulse on the pin then holds) */
+    float servo_queued;      /* QueuedServo0Val (or 1's: tfc_servo_channel): TFC_SetServo's position */
+    float servo_cnv;         /* the channel's CnV as written: loads at the next overflow */
+    float servo;             /* CnV in force: the pulse the servo steers by (-1..1) */
     long long frame;         /* the camera frame read out last */
     double pulse_min_s, pulse_max_s;  /* TFC_InitServos' range of positions -1..1 */
     double servo_rad, servo_offset_rad;
@@ -126,11 +132,12 @@ static void clock_isr(void) {
 }
 
 /* TPM1 at the kit's start: as TFC_Init leaves it (TFC_InitServos' defaults: SERVO_DEFAULT_PERIOD,
- * the counter from 0 now). */
+ * the counter from 0 now, the servos' queued positions 0). */
 static void start_tpm1(void) {
     k.pulse_min_s = SERVO_MIN_PULSE_WIDTH_DEFAULT, k.pulse_max_s = SERVO_MAX_PULSE_WIDTH_DEFAULT;
     k.servo_frame_s = clampd(SERVO_DEFAULT_PERIOD, 1e-3, 1.0);
     k.next_frame_s = 0.0, k.overflow_s = k.now_s;
+    k.servo_queued = k.servo_cnv = k.servo = 0.0f;
     servo_ticker = 0;
     /* TFC.cpp's TPM1_IRQHandler, at each overflow of the free-running servo timer, raises SI and
      * starts the ADC's read-out of the integration gone while the next integrates: one image a
@@ -172,13 +179,20 @@ void tfc_mbed_on_edges(void (*edges)(void)) { k.edges = edges; }
 
 /* TPM1's overflow, the counter turning from MOD to 0, that started the read-out of the image just
  * come; one however many came while the kit's interrupt was held (masked: TPM1's NVIC pending bit,
- * one bit). First what the timer does at the overflow: MOD loads what was written to it since (KL25
- * RM 31.4.8.1: with the counter running, in up counting, "after MOD register was written and the
- * TPM counter changes from MOD to zero"). Then TPM1_IRQHandler: TFC_ServoTicker++ (up to
- * 0xFFFFFFFF). */
+ * one bit). First what the timer does at the overflow: MOD and the channels' CnV load what was
+ * written to them since (KL25 RM 31.4.8.1 MOD, 31.4.8.2 CnV: with the counter running, in up
+ * counting and edge-aligned PWM, "after [the register] was written and the TPM counter changes
+ * from MOD to zero"), so the servo's pulse from this edge is the CnV TPM1_IRQHandler wrote at the
+ * overflow before. Then that handler: each channel's CnV = its queued position (TFC_SetServo's
+ * QueuedServo0Val, 1Val), loaded at the next overflow; TFC_ServoTicker++ (up to 0xFFFFFFFF). */
 static void tpm1_overflow(void) {
     k.overflow_s = k.now_s;
     if (k.next_frame_s > 0.0) k.servo_frame_s = k.next_frame_s, k.next_frame_s = 0.0;
+    if (k.servo != k.servo_cnv) {
+        k.servo = k.servo_cnv;
+        send_servo();
+    }
+    if (k.library_servos) k.servo_cnv = k.servo_queued;
     if (servo_ticker < 0xFFFFFFFFu) servo_ticker++;
 }
 
@@ -356,11 +370,15 @@ float tfc_mbed_analog_read(int pin) {
     return (float)clampd(spinner_param(name, 0.0), 0.0, 1.0);
 }
 
+/* A PwmOut on the steering servo's pin: a servo pulse, 1.0 .. 2.0 ms is -1 .. 1, from the write (mbed's
+ * PwmOut writes the channel's CnV itself, not the library's queue; with the library's TPM1 interrupt
+ * on too, that interrupt's next CnV write replaces it, as on the board). */
 void tfc_mbed_pwm_write(int pin, float duty, float period_s) {
     tfc_mbed_start();
-    if (pin == (k.servo_channel ? PTB1 : PTB0)) {  /* a servo pulse: 1.0 .. 2.0 ms is -1 .. 1 */
+    if (pin == (k.servo_channel ? PTB1 : PTB0)) {
         double pulse_s = duty * period_s;
-        TFC_SetServo((uint8_t)k.servo_channel, (float)((pulse_s - 0.0015) / 0.0005));
+        k.servo = k.servo_cnv = (float)clampd((pulse_s - 0.0015) / 0.0005, -1.0, 1.0);
+        send_servo();
     }
 }
 
@@ -388,7 +406,8 @@ void TFC_InitMotorPWM(float SwitchingFrequency) { (void)SwitchingFrequency; tfc_
  * in progress ends as the counter reaches the new MOD: one new period after the last overflow; or,
  * the counter being past the new MOD already, after it has counted on to 0xFFFF and round (a 16-bit
  * counter, 31.4.3) and up to MOD: TPM1_ROUND_S (87.4 ms) more, one long frame (the camera
- * integrates from SI to SI). The camera follows: spinner_set_exposure ends the frame in progress one period
+ * integrates from SI to SI). Its queued positions go to 0 (TFC_SetServo(0, 0.0) and (1, 0.0)); CnV
+ * is not written. The camera follows: spinner_set_exposure ends the frame in progress one period
  * after its last boundary, TPM1's last overflow. */
 static void init_servos(double pulse_min_s, double pulse_max_s, double period_s) {
     double p = clampd(period_s, 1e-3, 1.0);
@@ -400,12 +419,14 @@ static void init_servos(double pulse_min_s, double pulse_max_s, double period_s)
     }
     k.pulse_min_s = pulse_min_s, k.pulse_max_s = pulse_max_s;
     k.servo_frame_s = p, k.next_frame_s = 0.0;  /* (MOD written directly: none waits to load) */
+    k.servo_queued = 0.0f;
 }
 
 void TFC_InitServos(float ServoPulseWidthMin, float ServoPulseWidthMax, float ServoPeriod) {
     tfc_mbed_start();
     if (!k.started) return;
     init_servos(ServoPulseWidthMin, ServoPulseWidthMax, ServoPeriod);
+    k.library_servos = 1;
 }
 
 /* Not in the mbed library: its servo frame, the camera's period, is set by TFC_InitServos (above).
@@ -438,11 +459,15 @@ volatile uint32_t (*tfc_mbed_tickers())[NUM_TICKERS] {
     return &tickers;
 }
 
+/* TFC.cpp's TFC_SetServoDutyCycle only queues the pulse (QueuedServo0Val, 1Val; a number but 1 is
+ * servo 0): TPM1's interrupt writes it to the channel's CnV at the next overflow, which loads it at
+ * the one after (tpm1_overflow). The servo steers by it from the second frame edge after the call:
+ * one to two servo frames later. */
 void TFC_SetServo(uint8_t ServoNumber, float Position) {
     tfc_mbed_start();
-    if (ServoNumber != k.servo_channel) return;  /* the other channel: nothing on the car */
-    k.servo = (float)clampd(Position, -1.0, 1.0);
-    send_servo();
+    k.library_servos = 1;
+    if ((ServoNumber == 1) != (k.servo_channel == 1)) return;  /* the other channel: nothing on the car */
+    k.servo_queued = (float)clampd(Position, -1.0, 1.0);
 }
 
 void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {

@@ -28,7 +28,9 @@ uint8_t TFC_ReadPushButton(uint8_t Index);     /* --param button0/button1; butto
 void TFC_SetBatteryLED(uint8_t Value);         /* lower 4 bits: the 4 LEDs */
 void TFC_SetBatteryLED_Level(uint8_t BattLevel);
 /* Position -1..1 of servo 0 (1: --param tfc_servo_channel=1) steers: x --param tfc_servo_rad
- * (0.40, + = left) + tfc_servo_offset_rad. */
+ * (0.40, + = left) + tfc_servo_offset_rad. Queued, as the library does: TPM1's interrupt writes it to
+ * the channel's CnV at the next overflow, which loads it at the one after: the servo steers by it
+ * from the second servo frame edge after the call. */
 void TFC_SetServo(uint8_t ServoNumber, float Position);
 void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle);
 /* The pulse range of positions -1..1 and the servo frame, which is the camera's period too. TPM1's
