@@ -759,3 +759,58 @@ def test_a_servo_position_reaches_the_car_at_the_second_frame_edge_after_it(tmp_
     # a row of the run log holds the command the step after its frame's boundary applied: the one
     # the overflow at edge + 20 ms loads (the call's own row, edge + 10 ms, before)
     assert steered[0] == pytest.approx(edge + 0.020, abs=1e-6), (edge, steered[:3])
+
+
+
+INIT_SERVOS_IN_A_CHARGE = """\
+    #include <stdio.h>
+    #include "mbed.h"
+    #include "TFC.h"
+    #include "spinner.h"
+    int main() {
+        TFC_Init();
+        for (int k = 0; k < CALLS; k++) spinner_get_exposure();  /* where in a step the charges fall */
+        for (int j = 0; j < 16; j++) {
+            while (!TFC_LineScanImageReady) {}
+            TFC_LineScanImageReady = 0;
+            for (int i = 0; i < 10 + j % 8; i++) spinner_get_exposure();  /* 5 to 8.5 ms of code */
+            float period = j % 2 ? 0.007f : 0.012f;                 /* 7 ms in a 12-ms frame */
+            TFC_InitServos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, period);
+            printf("call %.6f %.3f\\n", spinner_now(), period);
+        }
+        fflush(stdout);
+        wait(0.12);                                             /* the frame after the last call */
+        return 0;
+    }
+    """
+
+
+@pytest.mark.parametrize("calls", [0, 1, 2, 3])
+def test_init_servos_finds_the_counter_where_mains_code_time_left_it(tmp_path, capfd, calls):
+    """--mcu-time 0.5 ms a call: TFC_InitServos 5 to 8.5 ms after each image, 12 ms and 7 ms in turn.
+    Its calls to the simulator let main()'s code time pass first, and the kit's tick runs in it: an
+    overflow there (an image), or the counter passing the new period, changes where the call finds
+    the counter, as on the board, where that code ran before the call. So the frame after each call
+    follows TPM1's last overflow (the run log's last frame) by the new period when the counter had
+    not passed it at the call's end, else by 87.4 ms more (round 0xFFFF), whichever way the charges
+    fell (0 to 3 calls before; in process and isolated)."""
+    src = tmp_path / "init_in_charge.cpp"
+    src.write_text(textwrap.dedent(INIT_SERVOS_IN_A_CHARGE))
+    prog = build_program([str(src)], kit="tfc-mbed", defines=[f"CALLS={calls}"])
+    kinds = set()
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", time_limit_s=3.0, mcu_time=0.0005)
+        out = capfd.readouterr().out
+        assert r.outcome == "controller_returned", (isolate, r.message, out)
+        frames = r.log.t_s
+        calls = [(float(a), float(b)) for a, b in re.findall(r"call ([\d.]+) ([\d.]+)", out)]
+        for (call, period), (next_call, _) in zip(calls, calls[1:] + [(np.inf, 0.0)]):
+            last = frames[frames <= call + 1e-9].max()
+            after = frames[frames > call + 1e-9].min()
+            if after > next_call + 1e-9:
+                continue  # (the next call set another period before that frame ended)
+            past = call - last > period + 1e-9
+            expect = last + (65536 / 750e3 if past else 0.0) + period
+            assert after == pytest.approx(expect, abs=0.0011), (isolate, call, last, after)
+            kinds.add(past)
+    assert kinds == {False, True}  # both: the counter short of the new MOD, and past it

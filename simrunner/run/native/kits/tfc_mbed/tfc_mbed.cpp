@@ -408,14 +408,23 @@ void TFC_InitMotorPWM(float SwitchingFrequency) { (void)SwitchingFrequency; tfc_
  * counter, 31.4.3) and up to MOD: TPM1_ROUND_S (87.4 ms) more, one long frame (the camera
  * integrates from SI to SI). Its queued positions go to 0 (TFC_SetServo(0, 0.0) and (1, 0.0)); CnV
  * is not written. The camera follows: spinner_set_exposure ends the frame in progress one period
- * after its last boundary, TPM1's last overflow. */
+ * after its last boundary, TPM1's last overflow.
+ * With --mcu-time each call lets main()'s code time pass first, with the kit's interrupt in it: an
+ * overflow there, or the counter passing the new MOD, moves where the call finds the counter (on the
+ * board that code ran before the call), so the period is set again from where it is. */
 static void init_servos(double pulse_min_s, double pulse_max_s, double period_s) {
     double p = clampd(period_s, 1e-3, 1.0);
-    if (k.now_s - k.overflow_s <= p + 1e-9) {  /* the counter short of the new MOD */
-        spinner_set_exposure(p);
-    } else {
-        spinner_set_exposure(fmin(TPM1_ROUND_S + p, 1.0));
-        spinner_set_exposure_next_frame(p);
+    int set = -1;  /* what the camera was given: 1 a frame round 0xFFFF, 0 one period */
+    for (int tries = 0; tries < 4; tries++) {
+        int past = k.now_s - k.overflow_s > p + 1e-9;  /* the counter past the new MOD */
+        if (past == set) break;
+        set = past;
+        if (!past) {
+            spinner_set_exposure(p);
+        } else {
+            spinner_set_exposure(fmin(TPM1_ROUND_S + p, 1.0));
+            spinner_set_exposure_next_frame(p);
+        }
     }
     k.pulse_min_s = pulse_min_s, k.pulse_max_s = pulse_max_s;
     k.servo_frame_s = p, k.next_frame_s = 0.0;  /* (MOD written directly: none waits to load) */
