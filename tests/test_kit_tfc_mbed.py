@@ -814,3 +814,40 @@ def test_init_servos_finds_the_counter_where_mains_code_time_left_it(tmp_path, c
             assert after == pytest.approx(expect, abs=0.0011), (isolate, call, last, after)
             kinds.add(past)
     assert kinds == {False, True}  # both: the counter short of the new MOD, and past it
+
+# -- a kit's object made in main(), and --mcu-time: the kit's tick inside its set-up ---------------
+QEI_IN_MAIN = """\
+    #include "mbed.h"
+    #include "TFC.h"
+    #include "QEI.h"
+    #include "spinner.h"
+    int main() {
+        TFC_Init();
+        TFC_HBRIDGE_ENABLE;
+        TFC_SetMotorPWM(0.5f, 0.5f);
+        wait(1.0);                                            /* the wheels turn: ~5 revolutions */
+        for (int k = 0; k < CALLS; k++) spinner_get_exposure();  /* where in a step the charges fall */
+        QEI enc(PTD4, PTA12, PTA13, 512, QEI::X4_ENCODING);   /* in main(): counts from now */
+        int revs = enc.getRevolutions();
+        return revs == 0 ? 12 : 20 + (revs > 50 ? 50 : revs);
+    }
+    """
+
+
+@pytest.mark.parametrize("mcu_time, calls", [(None, 0), (0.0005, 0), (0.0005, 1), (0.0005, 2), (0.0005, 3)])
+def test_a_qei_made_in_main_counts_its_revolutions_from_then(tmp_path, mcu_time, calls):
+    """A QEI constructed in main() counts from then, its index channel's rises too: the kit's tick
+    that samples its wheel first (in main()'s wait for it, or, --mcu-time 0.5 ms a call, inside the
+    read of its --param, where that charge crosses a step) counted the rises from the wheel's count
+    0, the run's start: getRevolutions() gave the 5 turns before the QEI existed. Now 0, without
+    --mcu-time and wherever in a step the charges fall (0 to 3 calls before), in process and
+    isolated."""
+    src = tmp_path / "qei_in_main.cpp"
+    src.write_text(textwrap.dedent(QEI_IN_MAIN))
+    car = tmp_path / "car.toml"
+    car.write_text(SENSOR_CAR)
+    prog = build_program([str(src)], kit="tfc-mbed", defines=[f"CALLS={calls}"])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", car=car, time_limit_s=3.0,
+                  mcu_time=mcu_time)
+        assert r.outcome == "controller_error" and re.search(r"status 12\b", r.message), (isolate, r.message)

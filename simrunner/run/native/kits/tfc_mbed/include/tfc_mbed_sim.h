@@ -62,6 +62,8 @@ struct tfc_mbed_qei {
     long long base;            /* pulses (in x) of the wheel's count when reset */
     long long offset;          /* setPulses(): the count then */
     long long last_raw;        /* the wheel's count at the last tick (the index channel's edges) */
+    int counting;              /* its count set (at the start, or its construction): the ticks count
+                                * its index channel's edges from then */
     int revolutions;
 };
 void tfc_mbed_qei_attach(struct tfc_mbed_qei *q, int pin_a, int has_index, int x);
