@@ -605,3 +605,249 @@ def test_tfc_ticker_without_the_programs_definition_says_to_define_it(tmp_path):
     assert str(err.value).splitlines()[-1].startswith(
         "TFC_Ticker: not declared - mbed's FRDM-TFC library has none (the CodeWarrior library's SysTick "
         "counted it): define it in your program, `volatile uint32_t TFC_Ticker[4];`")
+
+
+# -- TPM1 as TFC.cpp drives it: TFC_InitServos, TFC_ServoTicker, the servo's CnV ------------------
+def image_lines(out):
+    """The program's `image N T TICKER` lines: {N: (T_s, ticker)}."""
+    rows = [line.split()[1:] for line in out.splitlines() if line.startswith("image ")]
+    return {int(n): (float(t), int(k)) for n, t, k in rows}
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_init_servos_keeps_the_ticker_and_the_counter_where_they_are(tmp_path, capfd, isolate):
+    """TFC.cpp's TFC_InitServos stops TPM1 (TPM1->SC = 0: the counter keeps its count, KL25 RM
+    31.4.1), writes MOD (at once, the counter off: 31.4.8.1) and lets it count on; it writes neither
+    CNT nor TFC_ServoTicker (TFC_Init zeroes the ticker, after it). So a 20-ms frame set 4 ms into a
+    10-ms frame ends 20 ms after that frame began, and the ticker counts on, one an image; a 4-ms
+    frame set 6 ms into a 10-ms one finds the counter past the new MOD: it counts on to 0xFFFF
+    (65536 counts of 750 kHz, 87.4 ms) and round, the next image 87.4 + 4 ms after the last. (The
+    kit zeroed the ticker and restarted the frame from the call: 6 + 4 ms.)"""
+    prog = program(tmp_path, """\
+        #include <stdio.h>
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        int main() {
+            TFC_Init();
+            for (int n = 0; n < 14; n++) {
+                while (!TFC_LineScanImageReady) {}
+                TFC_LineScanImageReady = 0;
+                printf("image %d %.6f %u\\n", n, spinner_now(), (unsigned)TFC_ServoTicker);
+                if (n == 5) {
+                    wait_ms(4);
+                    TFC_InitServos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, 0.020f);
+                    printf("ticker %u\\n", (unsigned)TFC_ServoTicker);
+                }
+                if (n == 9) {
+                    wait_ms(6);
+                    TFC_InitServos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, 0.004f);
+                }
+            }
+            fflush(stdout);
+            return 0;
+        }
+        """)
+    if isolate:
+        prog = dataclasses.replace(prog, isolate=True)
+    r = drive(prog, track="floor", time_limit_s=2.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    images = image_lines(out)
+    t = {n: ts for n, (ts, _) in images.items()}
+    gap = {n: round(t[n + 1] - t[n], 6) for n in range(2, 13)}
+    assert [gap[n] for n in (2, 3, 4)] == [0.01] * 3, gap
+    assert [gap[n] for n in (5, 6, 7, 8)] == [0.02] * 4, gap          # from the frame's start, not the call
+    assert gap[9] == pytest.approx(65536 / 750e3 + 0.004, abs=0.0011), gap  # the counter round 0xFFFF
+    assert [gap[n] for n in (10, 11, 12)] == [0.004] * 3, gap
+    ticker = {n: k for n, (_, k) in images.items()}
+    assert int(out.split("ticker ")[1].split()[0]) == ticker[5], out  # the call keeps it
+    assert [ticker[n + 1] - ticker[n] for n in range(0, 13)] == [1] * 13, ticker
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_program_that_writes_the_servo_ticker_sees_it_count_on_from_its_value(tmp_path, capfd, isolate):
+    """TFC_ServoTicker is the library's variable, which TPM1's interrupt increments (to 0xFFFFFFFF):
+    a write sticks, from main() and from a handler. Teams' `if (TFC_ServoTicker >= 10) {
+    TFC_ServoTicker = 0; ...}` then runs once every 10 frames (the kit kept the count of frames
+    since TFC_Init and took it back at the next tick: every pass after the first 10). The program's
+    own TFC_Ticker[] (counted by its Ticker) keeps a write too, from main() and a handler."""
+    prog = program(tmp_path, """\
+        #include <stdio.h>
+        #include "mbed.h"
+        #include "TFC.h"
+        volatile uint32_t TFC_Ticker[2];
+        Ticker ms;
+        Timeout later;
+        void count() { TFC_Ticker[0]++; TFC_Ticker[1]++; }
+        void set() { TFC_ServoTicker = 1000; TFC_Ticker[1] = 5000; }
+        int main() {
+            TFC_Init();
+            ms.attach_us(&count, 1000);
+            int passes = 0;
+            Timer t;
+            t.start();
+            while (t.read_ms() < 1000) {                 // 100 frames of 10 ms
+                if (TFC_ServoTicker >= 10) {
+                    TFC_ServoTicker = 0;
+                    passes++;
+                }
+                wait_ms(1);
+            }
+            TFC_ServoTicker = 0;
+            TFC_Ticker[0] = 0;
+            wait_ms(50);
+            printf("passes %d after %u %u\\n", passes, (unsigned)TFC_ServoTicker, (unsigned)TFC_Ticker[0]);
+            later.attach(&set, 0.0105f);
+            wait_ms(40);
+            printf("handler %u %u\\n", (unsigned)TFC_ServoTicker, (unsigned)TFC_Ticker[1]);
+            fflush(stdout);
+            return 0;
+        }
+        """)
+    if isolate:
+        prog = dataclasses.replace(prog, isolate=True)
+    r = drive(prog, track="floor", time_limit_s=3.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    m = re.search(r"passes (\d+) after (\d+) (\d+)\s+handler (\d+) (\d+)", out)
+    assert m, out
+    passes, after, ticks, from_handler, ticks_1 = (int(v) for v in m.groups())
+    assert 9 <= passes <= 10, out                       # once every 10 frames
+    assert 4 <= after <= 6 and 49 <= ticks <= 52, out   # 50 ms: 5 frames, 50 ms ticks from 0
+    assert 1002 <= from_handler <= 1004, out            # 30 ms after the handler's write: 3 frames on
+    assert 5028 <= ticks_1 <= 5031, out
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+def test_a_servo_position_reaches_the_car_at_the_second_frame_edge_after_it(tmp_path, capfd, isolate):
+    """TFC_SetServo queues the position (QueuedServo0Val); TPM1's interrupt writes it to the channel's
+    CnV at the next overflow, and in edge-aligned PWM a CnV written while the counter runs loads as it
+    next turns from MOD to zero (KL25 RM 31.4.8.2): the pulse from the second frame edge after the
+    call carries it. Set 3 ms after an image's edge (10-ms frames; 4 ms at the 2-ms step), twice
+    (the last queued wins): the car steers from 20 ms after that edge (it did from the call)."""
+    prog = program(tmp_path, """\
+        #include <stdio.h>
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        int main() {
+            TFC_Init();
+            for (int n = 0; n < 6; n++) {
+                while (!TFC_LineScanImageReady) {}
+                TFC_LineScanImageReady = 0;
+            }
+            double edge = spinner_now();
+            wait_ms(3);
+            TFC_SetServo(0, -1.0f);
+            TFC_SetServo(0, 1.0f);
+            printf("edge %.6f\\n", edge);
+            fflush(stdout);
+            wait(0.1);
+            return 0;
+        }
+        """)
+    if isolate:
+        prog = dataclasses.replace(prog, isolate=True)
+    r = drive(prog, track="floor", time_limit_s=2.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    edge = float(out.split("edge ")[1].split()[0])
+    log = r.log
+    steered = log.t_s[log.steer_cmd_rad != 0.0]
+    assert np.all(log.steer_cmd_rad[log.steer_cmd_rad != 0.0] == pytest.approx(0.4)), log.steer_cmd_rad
+    # a row of the run log holds the command the step after its frame's boundary applied: the one
+    # the overflow at edge + 20 ms loads (the call's own row, edge + 10 ms, before)
+    assert steered[0] == pytest.approx(edge + 0.020, abs=1e-6), (edge, steered[:3])
+
+
+
+INIT_SERVOS_IN_A_CHARGE = """\
+    #include <stdio.h>
+    #include "mbed.h"
+    #include "TFC.h"
+    #include "spinner.h"
+    int main() {
+        TFC_Init();
+        for (int k = 0; k < CALLS; k++) spinner_get_exposure();  /* where in a step the charges fall */
+        for (int j = 0; j < 16; j++) {
+            while (!TFC_LineScanImageReady) {}
+            TFC_LineScanImageReady = 0;
+            for (int i = 0; i < 10 + j % 8; i++) spinner_get_exposure();  /* 5 to 8.5 ms of code */
+            float period = j % 2 ? 0.007f : 0.012f;                 /* 7 ms in a 12-ms frame */
+            TFC_InitServos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, period);
+            printf("call %.6f %.3f\\n", spinner_now(), period);
+        }
+        fflush(stdout);
+        wait(0.12);                                             /* the frame after the last call */
+        return 0;
+    }
+    """
+
+
+@pytest.mark.parametrize("calls", [0, 1, 2, 3])
+def test_init_servos_finds_the_counter_where_mains_code_time_left_it(tmp_path, capfd, calls):
+    """--mcu-time 0.5 ms a call: TFC_InitServos 5 to 8.5 ms after each image, 12 ms and 7 ms in turn.
+    Its calls to the simulator let main()'s code time pass first, and the kit's tick runs in it: an
+    overflow there (an image), or the counter passing the new period, changes where the call finds
+    the counter, as on the board, where that code ran before the call. So the frame after each call
+    follows TPM1's last overflow (the run log's last frame) by the new period when the counter had
+    not passed it at the call's end, else by 87.4 ms more (round 0xFFFF), whichever way the charges
+    fell (0 to 3 calls before; in process and isolated)."""
+    src = tmp_path / "init_in_charge.cpp"
+    src.write_text(textwrap.dedent(INIT_SERVOS_IN_A_CHARGE))
+    prog = build_program([str(src)], kit="tfc-mbed", defines=[f"CALLS={calls}"])
+    kinds = set()
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", time_limit_s=3.0, mcu_time=0.0005)
+        out = capfd.readouterr().out
+        assert r.outcome == "controller_returned", (isolate, r.message, out)
+        frames = r.log.t_s
+        calls = [(float(a), float(b)) for a, b in re.findall(r"call ([\d.]+) ([\d.]+)", out)]
+        for (call, period), (next_call, _) in zip(calls, calls[1:] + [(np.inf, 0.0)]):
+            last = frames[frames <= call + 1e-9].max()
+            after = frames[frames > call + 1e-9].min()
+            if after > next_call + 1e-9:
+                continue  # (the next call set another period before that frame ended)
+            past = call - last > period + 1e-9
+            expect = last + (65536 / 750e3 if past else 0.0) + period
+            assert after == pytest.approx(expect, abs=0.0011), (isolate, call, last, after)
+            kinds.add(past)
+    assert kinds == {False, True}  # both: the counter short of the new MOD, and past it
+
+# -- a kit's object made in main(), and --mcu-time: the kit's tick inside its set-up ---------------
+QEI_IN_MAIN = """\
+    #include "mbed.h"
+    #include "TFC.h"
+    #include "QEI.h"
+    #include "spinner.h"
+    int main() {
+        TFC_Init();
+        TFC_HBRIDGE_ENABLE;
+        TFC_SetMotorPWM(0.5f, 0.5f);
+        wait(1.0);                                            /* the wheels turn: ~5 revolutions */
+        for (int k = 0; k < CALLS; k++) spinner_get_exposure();  /* where in a step the charges fall */
+        QEI enc(PTD4, PTA12, PTA13, 512, QEI::X4_ENCODING);   /* in main(): counts from now */
+        int revs = enc.getRevolutions();
+        return revs == 0 ? 12 : 20 + (revs > 50 ? 50 : revs);
+    }
+    """
+
+
+@pytest.mark.parametrize("mcu_time, calls", [(None, 0), (0.0005, 0), (0.0005, 1), (0.0005, 2), (0.0005, 3)])
+def test_a_qei_made_in_main_counts_its_revolutions_from_then(tmp_path, mcu_time, calls):
+    """A QEI constructed in main() counts from then, its index channel's rises too: the kit's tick
+    that samples its wheel first (in main()'s wait for it, or, --mcu-time 0.5 ms a call, inside the
+    read of its --param, where that charge crosses a step) counted the rises from the wheel's count
+    0, the run's start: getRevolutions() gave the 5 turns before the QEI existed. Now 0, without
+    --mcu-time and wherever in a step the charges fall (0 to 3 calls before), in process and
+    isolated."""
+    src = tmp_path / "qei_in_main.cpp"
+    src.write_text(textwrap.dedent(QEI_IN_MAIN))
+    car = tmp_path / "car.toml"
+    car.write_text(SENSOR_CAR)
+    prog = build_program([str(src)], kit="tfc-mbed", defines=[f"CALLS={calls}"])
+    for isolate in (False, True):
+        r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", car=car, time_limit_s=3.0,
+                  mcu_time=mcu_time)
+        assert r.outcome == "controller_error" and re.search(r"status 12\b", r.message), (isolate, r.message)

@@ -114,7 +114,7 @@ static void on_tick(void) {
     if (s.imu_used) read_accel();
     for (int i = 0; i < s.n_qei; i++) {
         struct tfc_mbed_qei *q = s.qei[i];
-        if (q->wheel < 0) continue;
+        if (q->wheel < 0 || !q->counting) continue;  /* (one being constructed in main(): from its count) */
         long long raw = s.raw[q->wheel];
         long long line = (long long)spinner_encoder_lines(q->wheel, NULL) * counts_per_line(q->wheel);
         if (q->has_index) q->revolutions += (int)index_rises(q->last_raw, raw, line);
@@ -160,10 +160,17 @@ void tfc_mbed_qei_attach(struct tfc_mbed_qei *q, int pin_a, int has_index, int x
     if (s.n_qei == MAX_QEI) spinner_fail("QEI: more than 16 at once");
     s.qei[s.n_qei++] = q;
     start_sampling();
-    if (!tfc_mbed_started()) return;  /* a global: it counts from the start (0) */
-    usable(q, "QEI::QEI");            /* constructed in main() or a handler: from the count now */
+    if (!tfc_mbed_started()) {  /* a global: it counts from the start (0) */
+        q->counting = 1;
+        return;
+    }
+    /* constructed in main() or a handler: from the count now. Until it is set the ticks leave it be:
+     * one runs in main()'s wait for the wheel's first sample, or (--mcu-time) in its --param's read,
+     * and counted the index channel's rises from the wheel's count 0, the run's start. */
+    usable(q, "QEI::QEI");
     q->base = pulses_of(s.raw[q->wheel], q->x, counts_per_line(q->wheel));
     q->last_raw = s.raw[q->wheel];
+    q->counting = 1;
 }
 
 void tfc_mbed_qei_detach(struct tfc_mbed_qei *q) {

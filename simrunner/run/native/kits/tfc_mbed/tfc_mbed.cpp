@@ -1,19 +1,23 @@
 /* The mbed FRDM-TFC library and the part of mbed a team's program uses, on the simulated car
  * (simrunner drive main.cpp --kit tfc-mbed; include/mbed.h, include/TFC.h). Our own code, on
  * spinner.h; the mapping of the board onto the car is the TFC kit's (../tfc/tfc.c):
- * - time: a 1 kHz timer interrupt of the kit (spinner_every) keeps the simulated time, counts
- *   TFC_ServoTicker, has the sensors sampled (sensors.cpp) and InterruptIn's edges of the
- *   millisecond gone handled (interrupt_in.cpp), then runs the program's Ticker/Timeout handlers
- *   that fell due (in due order);
+ * - time: a 1 kHz timer interrupt of the kit (spinner_every) keeps the simulated time, has the
+ *   sensors sampled (sensors.cpp) and InterruptIn's edges of the millisecond gone handled
+ *   (interrupt_in.cpp), then runs the program's Ticker/Timeout handlers that fell due (in due order);
  *   main() lets time pass in wait*(), sleep(), __WFI() and in reads of the board (poll());
- * - the camera: on the board the library's TPM1 interrupt starts a read-out every servo frame
- *   (SERVO_DEFAULT_PERIOD, 10 ms) and its ADC interrupt fills the image (TFC.cpp); here the kit's
- *   1 kHz interrupt reads the camera's latest frame (one a servo frame: the camera's frame period
- *   is the servo frame) once a new one is there (spinner_latest_image, which never waits) into the
- *   working buffer, swaps the ping-pong buffers and increments TFC_LineScanImageReady, before the
- *   Tickers due then: main() runs on between two images and a Ticker handler sees each image;
- * - servo 0 steers, H-bridge A and B are the left and right rear motors' duties, the pots, DIP
- *   switch, buttons and battery read --param values, the LEDs are kept, serial output prints. */
+ * - TPM1, the servo timer, and the camera: on the board the library's TPM1 overflow interrupt
+ *   (TFC.cpp, TPM1_IRQHandler) raises SI, starting the read-out of the integration gone while the
+ *   next integrates, every servo frame (SERVO_DEFAULT_PERIOD, 10 ms), and its ADC interrupt fills
+ *   the image. Here the camera is TPM1: the simulator's line camera, free-running at the servo
+ *   frame (its frame period is the servo frame), gives a frame at each overflow; the kit's 1 kHz
+ *   interrupt finds a new one there (spinner_latest_image, which never waits) and does what the
+ *   overflow does (tpm1_overflow: MOD and the servos' CnV load, TPM1_IRQHandler's CnV writes and
+ *   TFC_ServoTicker++), reads it into the working buffer, swaps the ping-pong buffers and increments
+ *   TFC_LineScanImageReady, before the Tickers due then: main() runs on between two images and a
+ *   Ticker handler sees each image;
+ * - servo 0 steers (at TPM1's overflows, as the servo's pulse does), H-bridge A and B are the left
+ *   and right rear motors' duties, the pots, DIP switch, buttons and battery read --param values,
+ *   the LEDs are kept, serial output prints. */
 #include <limits.h>
 #include <math.h>
 #include <stdio.h>
@@ -35,6 +39,12 @@
 #define READ_TIME_S 1e-4
 #define MAX_EVENTS 64
 #define NUM_TICKERS 16  /* >= a program's NUM_TFC_TICKERS */
+/* TPM1's counter clock: TFC_InitServos selects MCGPLLCLK/2 (48 MHz, SystemCoreClock on the
+ * FRDM-KL25Z) and the prescaler 2^6 (FTM1_CLK_PRESCALE 6): 750 kHz. Its counter has 16 bits (KL25
+ * Sub-Family Reference Manual, KL25P80M48SF0RM, 31.4.3): past MOD it counts on to 0xFFFF and
+ * round to 0, 65536 counts, without an overflow. */
+#define TPM1_COUNT_HZ 750e3
+#define TPM1_ROUND_S (65536 / TPM1_COUNT_HZ)
 
 volatile uint16_t LineScanImage0Buffer[2][128], LineScanImage1Buffer[2][128];
 volatile uint16_t *TFC_LineScanImage0 = LineScanImage0Buffer[1];
@@ -46,6 +56,8 @@ volatile uint16_t PotADC_Value[2];
 volatile uint16_t BatSenseADC_Value;
 
 static volatile uint8_t image_ready;
+/* TFC_ServoTicker: the library's variable, which its TPM1 interrupt increments and a program may
+ * write (`TFC_ServoTicker = 0;`): from then it counts on from the value written. */
 static volatile uint32_t servo_ticker;
 static volatile uint32_t tickers[NUM_TICKERS];
 
@@ -54,11 +66,17 @@ static struct {
     double now_s;            /* simulated time as the clock last read it */
     double wait_until_s;     /* main()'s own time: where its waits and reads have got to */
     double pass_end_s;       /* the time when the last of them ended */
-    double servo_frame_s;    /* the servo frame: the camera's read-out period */
-    double servo_t0_s;       /* when servo frames started to count at servo_frame_s */
-    double servo_frames_t0;  /* servo frames (TPM1 overflows) counted before servo_t0_s */
-    double next_frame_s;     /* TFC_SetLineScanExposureTime's frame, loaded at the next overflow (0: none) */
-    double next_frame_at_s;  /* that overflow */
+    /* TPM1 (the servo frame; the camera's frame) */
+    double servo_frame_s;    /* the period MOD gives (TFC_InitServos): the camera's frame */
+    double next_frame_s;     /* MOD written while TPM1 counts (TFC_SetLineScanExposureTime): its
+                              * write buffer, loaded at the next overflow (0: none) */
+    double overflow_s;       /* TPM1's last overflow (the read-out of the latest image), or its start */
+    int library_servos;      /* the library's TPM1 interrupt writes the servos' CnV: once the program
+                              * queues positions (TFC_SetServo, ...) or calls TFC_InitServos (not for
+                              * TFC_Init alone: a PwmOut's pulse on the pin then holds) */
+    float servo_queued;      /* QueuedServo0Val (or 1's: tfc_servo_channel): TFC_SetServo's position */
+    float servo_cnv;         /* the channel's CnV as written: loads at the next overflow */
+    float servo;             /* CnV in force: the pulse the servo steers by (-1..1) */
     long long frame;         /* the camera frame read out last */
     double pulse_min_s, pulse_max_s;  /* TFC_InitServos' range of positions -1..1 */
     double servo_rad, servo_offset_rad;
@@ -66,7 +84,7 @@ static struct {
     int in_isr;
     unsigned polls;
     int hbridge;
-    float duty_a, duty_b, servo;
+    float duty_a, duty_b;
     int leds[4];
     struct tfc_mbed_event *events[MAX_EVENTS];
     int n_events;
@@ -82,29 +100,12 @@ static double clampd(double v, double lo, double hi) { return v < lo ? lo : (v >
     spinner_fail(msg);
 }
 
-static void send_commands(void) {
-    spinner_set_servo(k.servo * k.servo_rad + k.servo_offset_rad);
-    spinner_set_motors(k.hbridge ? k.duty_a : 0.0f, k.hbridge ? k.duty_b : 0.0f);
-}
+static void send_servo(void) { spinner_set_servo(k.servo * k.servo_rad + k.servo_offset_rad); }
 
-/* A servo frame written while TPM1 counts loads at its next overflow (TFC_SetLineScanExposureTime):
- * from then on the frames are that long. */
-static void load_servo_frame(double now_s) {
-    if (k.next_frame_s > 0 && now_s >= k.next_frame_at_s - 1e-9) {
-        k.servo_frames_t0 += round((k.next_frame_at_s - k.servo_t0_s) / k.servo_frame_s);
-        k.servo_t0_s = k.next_frame_at_s;
-        k.servo_frame_s = k.next_frame_s;
-        k.next_frame_s = 0.0;
-    }
-}
+static void send_motors(void) { spinner_set_motors(k.hbridge ? k.duty_a : 0.0f, k.hbridge ? k.duty_b : 0.0f); }
 
-/* The servo frames and the Ticker/Timeout handlers due at k.now_s, earliest first. */
+/* The Ticker/Timeout handlers due at k.now_s, earliest first. */
 static void run_due(void) {
-    load_servo_frame(k.now_s);
-    if (k.servo_frame_s > 0) {
-        double frames = k.servo_frames_t0 + floor((k.now_s - k.servo_t0_s) / k.servo_frame_s + 1e-9);
-        if (frames > servo_ticker) servo_ticker = (uint32_t)frames;
-    }
     for (;;) {
         struct tfc_mbed_event *due = NULL;
         for (int i = 0; i < k.n_events; i++) {
@@ -123,18 +124,20 @@ static void camera_service(void);
 static void clock_isr(void) {
     k.now_s = spinner_get_time();  /* inside an interrupt: no time passes */
     k.in_isr = 1;
-    camera_service();
+    camera_service();  /* TPM1's overflow and the image it read out */
     if (k.sample) k.sample();
     if (k.edges) k.edges();  /* the pins' edges of the millisecond gone, before the Tickers due */
     run_due();
     k.in_isr = 0;
 }
 
-static void init_servos(double pulse_min_s, double pulse_max_s, double frame_s) {
-    k.pulse_min_s = pulse_min_s, k.pulse_max_s = pulse_max_s;
-    k.servo_frame_s = clampd(frame_s, 1e-3, 1.0);
-    k.servo_t0_s = k.now_s;
-    k.servo_frames_t0 = 0.0, k.next_frame_s = 0.0;
+/* TPM1 at the kit's start: as TFC_Init leaves it (TFC_InitServos' defaults: SERVO_DEFAULT_PERIOD,
+ * the counter from 0 now, the servos' queued positions 0). */
+static void start_tpm1(void) {
+    k.pulse_min_s = SERVO_MIN_PULSE_WIDTH_DEFAULT, k.pulse_max_s = SERVO_MAX_PULSE_WIDTH_DEFAULT;
+    k.servo_frame_s = clampd(SERVO_DEFAULT_PERIOD, 1e-3, 1.0);
+    k.next_frame_s = 0.0, k.overflow_s = k.now_s;
+    k.servo_queued = k.servo_cnv = k.servo = 0.0f;
     servo_ticker = 0;
     /* TFC.cpp's TPM1_IRQHandler, at each overflow of the free-running servo timer, raises SI and
      * starts the ADC's read-out of the integration gone while the next integrates: one image a
@@ -153,11 +156,12 @@ void tfc_mbed_start(void) {
     k.servo_offset_rad = spinner_param("tfc_servo_offset_rad", 0.0);
     k.servo_channel = (int)spinner_param("tfc_servo_channel", 0.0);
     k.now_s = k.wait_until_s = k.pass_end_s = spinner_get_time();  /* main()'s own time starts now */
-    init_servos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, SERVO_DEFAULT_PERIOD);
+    start_tpm1();
     uint8_t row[128];  /* the first image: the frame after the start's */
     k.frame = spinner_latest_image(spinner_line_row(), 0, LLONG_MAX, row, sizeof row, NULL);
     spinner_every(CLOCK_PERIOD_S, clock_isr);
-    send_commands();
+    send_servo();
+    send_motors();
 }
 
 double tfc_mbed_now_s(void) {
@@ -173,12 +177,32 @@ void tfc_mbed_on_tick(void (*sample)(void)) { k.sample = sample; }
 
 void tfc_mbed_on_edges(void (*edges)(void)) { k.edges = edges; }
 
+/* TPM1's overflow, the counter turning from MOD to 0, that started the read-out of the image just
+ * come; one however many came while the kit's interrupt was held (masked: TPM1's NVIC pending bit,
+ * one bit). First what the timer does at the overflow: MOD and the channels' CnV load what was
+ * written to them since (KL25 RM 31.4.8.1 MOD, 31.4.8.2 CnV: with the counter running, in up
+ * counting and edge-aligned PWM, "after [the register] was written and the TPM counter changes
+ * from MOD to zero"), so the servo's pulse from this edge is the CnV TPM1_IRQHandler wrote at the
+ * overflow before. Then that handler: each channel's CnV = its queued position (TFC_SetServo's
+ * QueuedServo0Val, 1Val), loaded at the next overflow; TFC_ServoTicker++ (up to 0xFFFFFFFF). */
+static void tpm1_overflow(void) {
+    k.overflow_s = k.now_s;
+    if (k.next_frame_s > 0.0) k.servo_frame_s = k.next_frame_s, k.next_frame_s = 0.0;
+    if (k.servo != k.servo_cnv) {
+        k.servo = k.servo_cnv;
+        send_servo();
+    }
+    if (k.library_servos) k.servo_cnv = k.servo_queued;
+    if (servo_ticker < 0xFFFFFFFFu) servo_ticker++;
+}
+
 /* The read-out: the camera's latest frame, once a new one is there (never waits). */
 static void camera_service(void) {
     uint8_t row[128];
     size_t n = 0;
     long long frame = spinner_latest_image(spinner_line_row(), 1, k.frame, row, sizeof row, &n);
     if (n == 0) return;
+    tpm1_overflow();
     k.frame = frame;
     for (size_t i = 0; i < 128; i++) {
         uint16_t v = (uint16_t)((i < n ? row[i] : 0) << 4);  /* 8-bit grey -> 12-bit counts */
@@ -320,7 +344,7 @@ void tfc_mbed_digital_write(int pin, int value) {
     if (led >= 0) k.leds[led] = value < 0 ? !k.leds[led] : value != 0;
     if (pin == PTE21) {
         k.hbridge = value != 0;
-        if (k.started) send_commands();
+        if (k.started) send_motors();
     }
 }
 
@@ -346,43 +370,88 @@ float tfc_mbed_analog_read(int pin) {
     return (float)clampd(spinner_param(name, 0.0), 0.0, 1.0);
 }
 
+/* A PwmOut on the steering servo's pin: a servo pulse, 1.0 .. 2.0 ms is -1 .. 1, from the write (mbed's
+ * PwmOut writes the channel's CnV itself, not the library's queue; with the library's TPM1 interrupt
+ * on too, that interrupt's next CnV write replaces it, as on the board). */
 void tfc_mbed_pwm_write(int pin, float duty, float period_s) {
     tfc_mbed_start();
-    if (pin == (k.servo_channel ? PTB1 : PTB0)) {  /* a servo pulse: 1.0 .. 2.0 ms is -1 .. 1 */
+    if (pin == (k.servo_channel ? PTB1 : PTB0)) {
         double pulse_s = duty * period_s;
-        TFC_SetServo((uint8_t)k.servo_channel, (float)((pulse_s - 0.0015) / 0.0005));
+        k.servo = k.servo_cnv = (float)clampd((pulse_s - 0.0015) / 0.0005, -1.0, 1.0);
+        send_servo();
     }
 }
 
 /* ---- the FRDM-TFC library (TFC.h) ---- */
-void TFC_Init() { tfc_mbed_start(); }
+static void init_servos(double pulse_min_s, double pulse_max_s, double period_s);
+
+/* TFC.cpp's TFC_Init: ..., TFC_InitServos(the defaults), then TFC_ServoTicker = 0 (the kit's start is
+ * the first: TPM1 as it leaves it). */
+void TFC_Init() {
+    int running = k.started;
+    tfc_mbed_start();
+    if (!k.started) return;
+    if (running) init_servos(SERVO_MIN_PULSE_WIDTH_DEFAULT, SERVO_MAX_PULSE_WIDTH_DEFAULT, SERVO_DEFAULT_PERIOD);
+    servo_ticker = 0;
+}
 void TFC_GPIO_Init() { tfc_mbed_start(); }
 void TFC_InitADC_System() { tfc_mbed_start(); }
 void TFC_InitLineScanCamera() { tfc_mbed_start(); }
 void TFC_InitMotorPWM(float SwitchingFrequency) { (void)SwitchingFrequency; tfc_mbed_start(); }
 
-void TFC_InitServos(float ServoPulseWidthMin, float ServoPulseWidthMax, float ServoPeriod) {
-    tfc_mbed_start();
-    init_servos(ServoPulseWidthMin, ServoPulseWidthMax, ServoPeriod);
+/* TFC.cpp's TFC_InitServos. TPM1->SC = 0 stops the counter where it is (KL25 RM 31.4.1: writing CMOD
+ * 0 "does not affect the TPM counter value"); MOD, written with the counter stopped, takes the new
+ * period at once (31.4.8.1); the counter then counts on (CMOD 1). It writes neither CNT (a write of
+ * which would reset the counter) nor TFC_ServoTicker (TFC_Init zeroes that, after it). So the frame
+ * in progress ends as the counter reaches the new MOD: one new period after the last overflow; or,
+ * the counter being past the new MOD already, after it has counted on to 0xFFFF and round (a 16-bit
+ * counter, 31.4.3) and up to MOD: TPM1_ROUND_S (87.4 ms) more, one long frame (the camera
+ * integrates from SI to SI). Its queued positions go to 0 (TFC_SetServo(0, 0.0) and (1, 0.0)); CnV
+ * is not written. The camera follows: spinner_set_exposure ends the frame in progress one period
+ * after its last boundary, TPM1's last overflow.
+ * With --mcu-time each call lets main()'s code time pass first, with the kit's interrupt in it: an
+ * overflow there, or the counter passing the new MOD, moves where the call finds the counter (on the
+ * board that code ran before the call), so the period is set again from where it is. */
+static void init_servos(double pulse_min_s, double pulse_max_s, double period_s) {
+    double p = clampd(period_s, 1e-3, 1.0);
+    int set = -1;  /* what the camera was given: 1 a frame round 0xFFFF, 0 one period */
+    for (int tries = 0; tries < 4; tries++) {
+        int past = k.now_s - k.overflow_s > p + 1e-9;  /* the counter past the new MOD */
+        if (past == set) break;
+        set = past;
+        if (!past) {
+            spinner_set_exposure(p);
+        } else {
+            spinner_set_exposure(fmin(TPM1_ROUND_S + p, 1.0));
+            spinner_set_exposure_next_frame(p);
+        }
+    }
+    k.pulse_min_s = pulse_min_s, k.pulse_max_s = pulse_max_s;
+    k.servo_frame_s = p, k.next_frame_s = 0.0;  /* (MOD written directly: none waits to load) */
+    k.servo_queued = 0.0f;
 }
 
-/* Not in the mbed library: its servo frame, the camera's period, is set by TFC_InitServos, which stops
- * TPM1 (TPM1->SC = 0) before it writes MOD, and a MOD written with the counter off takes the value
- * at once (KL25 Sub-Family Reference Manual, KL25P80M48SF0RM, 31.4.8.1 MOD register update; the kit's
- * init_servos). The kit adds the CodeWarrior library's name for the period as a write of TPM1's MOD
- * while the counter runs: the KL25 then updates MOD only as the counter changes from MOD to zero
- * (31.4.8.1, up counting), the overflow that ends the frame in progress. So that frame keeps its
- * period and its exposure (its brightness); the next one is integrated over the new frame and
- * lasts it. One register: of several calls in a frame the last loads. The simulator loads it at
- * the camera's next frame boundary (spinner_set_exposure_next_frame), TFC_ServoTicker counting on
- * across the change. */
+void TFC_InitServos(float ServoPulseWidthMin, float ServoPulseWidthMax, float ServoPeriod) {
+    tfc_mbed_start();
+    if (!k.started) return;
+    init_servos(ServoPulseWidthMin, ServoPulseWidthMax, ServoPeriod);
+    k.library_servos = 1;
+}
+
+/* Not in the mbed library: its servo frame, the camera's period, is set by TFC_InitServos (above).
+ * The kit adds the CodeWarrior library's name for the period as a write of TPM1's MOD while the
+ * counter runs: the KL25 then updates MOD only as the counter changes from MOD to zero (31.4.8.1,
+ * up counting), the overflow that ends the frame in progress. So that frame keeps its period and
+ * its exposure (its brightness); the next one is integrated over the new frame and lasts it. One
+ * register: of several calls in a frame the last loads. The simulator loads it at the camera's next
+ * frame boundary (spinner_set_exposure_next_frame), the kit at the overflow it is (tpm1_overflow),
+ * TFC_ServoTicker counting on across the change. The simulator first: with --mcu-time the call lets
+ * main()'s code time pass, and an overflow in it comes before this write, which loads at the next. */
 void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {
     tfc_mbed_start();
-    load_servo_frame(k.now_s);  /* (one written before an overflow gone by: loaded there) */
-    if (k.next_frame_s <= 0.0)  /* the overflow that ends the frame in progress */
-        k.next_frame_at_s = k.servo_t0_s + (floor((k.now_s - k.servo_t0_s) / k.servo_frame_s + 1e-9) + 1.0) * k.servo_frame_s;
-    k.next_frame_s = clampd(TimeIn_uS * 1e-6, 1e-3, 1.0);
-    spinner_set_exposure_next_frame(k.next_frame_s);
+    double p = clampd(TimeIn_uS * 1e-6, 1e-3, 1.0);
+    spinner_set_exposure_next_frame(p);
+    k.next_frame_s = p;
 }
 
 volatile uint8_t *tfc_mbed_image_ready(void) { return &image_ready; }
@@ -399,11 +468,15 @@ volatile uint32_t (*tfc_mbed_tickers())[NUM_TICKERS] {
     return &tickers;
 }
 
+/* TFC.cpp's TFC_SetServoDutyCycle only queues the pulse (QueuedServo0Val, 1Val; a number but 1 is
+ * servo 0): TPM1's interrupt writes it to the channel's CnV at the next overflow, which loads it at
+ * the one after (tpm1_overflow). The servo steers by it from the second frame edge after the call:
+ * one to two servo frames later. */
 void TFC_SetServo(uint8_t ServoNumber, float Position) {
     tfc_mbed_start();
-    if (ServoNumber != k.servo_channel) return;  /* the other channel: nothing on the car */
-    k.servo = (float)clampd(Position, -1.0, 1.0);
-    send_commands();
+    k.library_servos = 1;
+    if ((ServoNumber == 1) != (k.servo_channel == 1)) return;  /* the other channel: nothing on the car */
+    k.servo_queued = (float)clampd(Position, -1.0, 1.0);
 }
 
 void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {
@@ -416,7 +489,7 @@ void TFC_SetMotorPWM(float MotorA, float MotorB) {
     tfc_mbed_start();
     k.duty_a = (float)clampd(MotorA, -1.0, 1.0);
     k.duty_b = (float)clampd(MotorB, -1.0, 1.0);
-    send_commands();
+    send_motors();
 }
 
 uint8_t TFC_GetDIP_Switch() {

@@ -19,17 +19,23 @@
 
 void TFC_Init();
 void TFC_GPIO_Init();
-/* Counts servo frames (the library's TPM1 overflow interrupt): read through a poll (below). */
+/* The library's count of servo frames: its TPM1 overflow interrupt increments it (up to 0xFFFFFFFF),
+ * at each image's read-out start. A program's write sticks (`TFC_ServoTicker = 0;`: it counts on
+ * from 0); TFC_Init zeroes it, TFC_InitServos does not. Read through a poll (below). */
 #define TFC_ServoTicker (*tfc_mbed_servo_ticker())
 uint8_t TFC_GetDIP_Switch();                   /* --param dip (0..15) */
 uint8_t TFC_ReadPushButton(uint8_t Index);     /* --param button0/button1; button0_at */
 void TFC_SetBatteryLED(uint8_t Value);         /* lower 4 bits: the 4 LEDs */
 void TFC_SetBatteryLED_Level(uint8_t BattLevel);
 /* Position -1..1 of servo 0 (1: --param tfc_servo_channel=1) steers: x --param tfc_servo_rad
- * (0.40, + = left) + tfc_servo_offset_rad. */
+ * (0.40, + = left) + tfc_servo_offset_rad. Queued, as the library does: TPM1's interrupt writes it to
+ * the channel's CnV at the next overflow, which loads it at the one after: the servo steers by it
+ * from the second servo frame edge after the call. */
 void TFC_SetServo(uint8_t ServoNumber, float Position);
 void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle);
-/* The pulse range of positions -1..1 and the servo frame, which is the camera's period too. */
+/* The pulse range of positions -1..1 and the servo frame, which is the camera's period too. TPM1's
+ * counter counts on: the frame in progress ends one new period after it began (87.4 ms more when the
+ * counter is past the new period already: it counts round 0xFFFF); TFC_ServoTicker counts on. */
 void TFC_InitServos(float ServoPulseWidthMin, float ServoPulseWidthMax, float ServoPeriod);
 void TFC_InitMotorPWM(float SwitchingFrequency);
 /* -1..1 duties of H-bridge A (the left rear motor) and B (the right), while enabled. */

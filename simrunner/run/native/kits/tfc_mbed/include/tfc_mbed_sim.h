@@ -2,9 +2,10 @@
  * and its implementation (../tfc_mbed.cpp, on spinner.h). Not part of either library's API.
  *
  * Time: the kit keeps simulated time with a 1 kHz timer interrupt of its own (spinner_every),
- * started at the first call into the kit: it reads the time, advances TFC_ServoTicker, runs the
- * InterruptIn handlers of the edges since the last tick and the program's Ticker/Timeout handlers
- * that fell due (mbed's us_ticker interrupt). main() lets time
+ * started at the first call into the kit: it reads the time, takes a new camera frame as TPM1's
+ * overflow (the servo's pulse, TFC_ServoTicker) and its image, runs the InterruptIn handlers of the
+ * edges since the last tick and the program's Ticker/Timeout handlers that fell due (mbed's
+ * us_ticker interrupt). main() lets time
  * pass in wait*(), sleep(), __WFI() and, as on the board where interrupts change what it reads,
  * in reads of the board (tfc_mbed_poll: the camera flag, the tickers, Timer reads, pots,
  * switches, buttons, DigitalIn, AnalogIn) once it has read it many times without waiting. */
@@ -62,6 +63,8 @@ struct tfc_mbed_qei {
     long long base;            /* pulses (in x) of the wheel's count when reset */
     long long offset;          /* setPulses(): the count then */
     long long last_raw;        /* the wheel's count at the last tick (the index channel's edges) */
+    int counting;              /* its count set (at the start, or its construction): the ticks count
+                                * its index channel's edges from then */
     int revolutions;
 };
 void tfc_mbed_qei_attach(struct tfc_mbed_qei *q, int pin_a, int has_index, int x);
