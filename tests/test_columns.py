@@ -433,7 +433,7 @@ def _norm_read_error(tmp_path, norm_source: str, name: str, line: int) -> str:
 def test_a_norm_function_that_fails_names_the_log_line_and_its_own_line(tmp_path):
     text = _norm_read_error(tmp_path, "lambda v, a: 1.0 / (v - 2.0)", "ctl.py", 3)
     assert "speed_norm(speed=2.0, angle=0.0) raised ZeroDivisionError: float division by zero at " in text
-    assert text.endswith(f"ctl.py:3")
+    assert text.endswith("ctl.py:3")
 
 
 @pytest.mark.parametrize("source, what", [

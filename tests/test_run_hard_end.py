@@ -245,7 +245,7 @@ def test_temporary_folders_of_killed_processes_are_removed_by_the_next_one(tmp_p
     old = time.time() - 120.0
     folders = {name: tmp_path / name for name in (
         f"simrunner-batch-{gone.pid}-a1", f"simrunner-batch-{os.getppid()}-b2",
-        f"simrunner-run-{gone.pid}-c3", f"simrunner-batch-ray-d4")}
+        f"simrunner-run-{gone.pid}-c3", "simrunner-batch-ray-d4")}
     for folder in folders.values():
         (folder / "worker1.report").parent.mkdir()
         (folder / "worker1.report").write_text("x")

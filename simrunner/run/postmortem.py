@@ -108,16 +108,11 @@ def load_fault(report: str, controller: str) -> ControllerError | None:
     in-process host's report in ``report`` (the supervision's report file): a ``ControllerError``
     whose message names the fault's file:line and function, with the C backtrace; None when
     ``report`` holds no such report."""
-    from simrunner.run.native.symbolize import describe_fault, load_fault_report
+    from simrunner.run.native.symbolize import load_fault_report
 
-    found = load_fault_report(report)
-    if found is None:
-        return None
-    library, host, text = found
-    line, traceback_text = describe_fault(text, {library}, host, Path(controller).stem)
-    return ControllerError(f"{line}, {AT_LOAD}: it killed the run's process (the program's library is loaded "
-                           "into the simulator's process before the run, where such a fault cannot be caught; "
-                           "--isolate runs the program in a process of its own)", traceback_text)
+    return _described(load_fault_report(report), controller, f", {AT_LOAD}: it killed the run's process (the "
+                      "program's library is loaded into the simulator's process before the run, where such a "
+                      "fault cannot be caught; --isolate runs the program in a process of its own)")
 
 
 def thread_fault(report: str, controller: str) -> ControllerError | None:
@@ -128,16 +123,23 @@ def thread_fault(report: str, controller: str) -> ControllerError | None:
     thread's file:line and function ('t.c:5: SIGSEGV: segmentation fault (in worker()), in a thread
     of the program's own (not main()'s): it killed the run's process (...)'), with the C backtrace;
     None when ``report`` holds no such report."""
-    from simrunner.run.native.symbolize import describe_fault, thread_fault_report
+    from simrunner.run.native.symbolize import thread_fault_report
 
-    found = thread_fault_report(report)
+    return _described(thread_fault_report(report), controller, ": it killed the run's process (the program runs "
+                      "in the simulator's process, where a fault of its threads cannot be caught; --isolate runs "
+                      "the program in a process of its own)")
+
+
+def _described(found, controller: str, tail: str) -> ControllerError | None:
+    """``found`` (a host report: library, host, text; or None) as a ``ControllerError`` naming
+    the fault's file:line and function, then ``tail``, with the C backtrace."""
+    from simrunner.run.native.symbolize import describe_fault
+
     if found is None:
         return None
     library, host, text = found
     line, traceback_text = describe_fault(text, {library}, host, Path(controller).stem)
-    return ControllerError(f"{line}: it killed the run's process (the program runs in the simulator's process, "
-                           "where a fault of its threads cannot be caught; --isolate runs the program in a "
-                           "process of its own)", traceback_text)
+    return ControllerError(line + tail, traceback_text)
 
 
 def dead_fault(report: str, controller: str) -> ControllerError | None:
