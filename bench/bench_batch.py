@@ -176,7 +176,7 @@ def _short_cli(out: Path, workers: int) -> float:
     """Wall seconds of ``simrunner batch`` (8 one-lap runs) in a fresh process, which caches its
     compiled modules as on a student's machine (``PYTHONDONTWRITEBYTECODE`` unset, the cache in a
     temp folder: without it each start compiles ~80 modules again, ~0.1 s)."""
-    code = "import sys; from simrunner.cli import main; sys.argv[0] = 'simrunner'; main()"
+    code = "import sys; from simrunner.cli import run; sys.argv[0] = 'simrunner'; run()"
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPYCACHEPREFIX"] = _PYCACHE
     t0 = time.monotonic()

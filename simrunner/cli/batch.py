@@ -5,7 +5,7 @@ import sys
 
 import click
 
-from simrunner.cli import McuTime, build_options
+from simrunner.cli import McuTime, build_options, end_without_teardown
 from simrunner.cli.names import HELP
 from simrunner.run.rules import EVENT_NAMES
 
@@ -131,6 +131,8 @@ def batch_cmd(controller, more_sources, tracks, seeds, params, laps, time_limit_
                    + ", ".join(map(str, result.rerun_mismatches)), err=True)
     written = [result.csv_path, result.json_path] + ([result.plot_path] if result.plot_path else [])
     click.echo("wrote: " + ", ".join(map(str, written)))
+    if ray is None:  # (Ray's driver keeps its connection and threads: the usual end)
+        end_without_teardown(click.get_current_context())
 
 
 class _NoBar:
