@@ -546,6 +546,72 @@ def test_a_start_button_wait_ends_at_the_press(tmp_path, capfd, params, at):
     assert at + 0.2 - 1e-9 <= released <= at + 0.2 + STEP_S + 1e-9, (released, at)
 
 
+def level_edges(tmp_path, capfd, params, pin="76U", until_s=1.5):
+    """The simulated times (s) at which a firmware polling `pin` sees its level change, and the
+    level it read first (a loop of reads, each 64 at one time letting a physics step pass)."""
+    src = probe(tmp_path, f"""\
+        #include <stdio.h>
+        #include "Dio.h"
+        #include "spinner.h"
+        int main(void) {{
+            Dio_LevelType last = Dio_ReadChannel({pin});
+            printf("first %u\\n", last);
+            while (spinner_now() < {until_s}) {{
+                Dio_LevelType now = Dio_ReadChannel({pin});
+                if (now != last) printf("edge %.6f %u\\n", spinner_now(), now), last = now;
+            }}
+            return 0;
+        }}
+        """, name="edges.c")
+    r = drive(firmware([src]), track="floor", time_limit_s=until_s + 0.5, wall_limit_s=60.0, params=params)
+    assert r.outcome == "controller_returned", r.message
+    out = capfd.readouterr().out
+    first = int(out.split("first ")[1].split()[0])
+    edges = [(float(t), int(v)) for t, v in re.findall(r"edge ([0-9.]+) (\d)", out)]
+    return first, edges
+
+
+def test_a_button_wired_active_low_reads_low_while_pressed(tmp_path, capfd):
+    """--param s32k_sw2_pressed_level=0 (a team board's button to ground with a pull-up): SW2 reads
+    STD_HIGH released and STD_LOW while pressed, the 0.2 s from s32k_sw2_at; the EVB's default (1)
+    reads the other way. Before: the level was STD_HIGH while pressed whatever the board."""
+    first, edges = level_edges(tmp_path, capfd, {"s32k_sw2": 76, "s32k_sw2_at": 0.3, "s32k_sw2_pressed_level": 0})
+    assert first == 1 and [v for _, v in edges] == [0, 1], (first, edges)
+    assert edges[0][0] == pytest.approx(0.3, abs=STEP_S + 1e-9) and edges[1][0] == pytest.approx(0.5, abs=STEP_S + 1e-9)
+    first, edges = level_edges(tmp_path, capfd, {"s32k_sw2": 76, "s32k_sw2_at": 0.3})
+    assert first == 0 and [v for _, v in edges] == [1, 0], (first, edges)
+
+
+def test_a_button_pressed_several_times(tmp_path, capfd):
+    """s32k_sw3_at, s32k_sw3_at_2, s32k_sw3_at_3: SW3 pressed three times, 0.2 s each (numbered
+    params: a comma list would be batch's sweep). Before: one press only, the later ones unread."""
+    params = {"s32k_sw3": 76, "s32k_sw3_at": 0.2, "s32k_sw3_at_2": 0.6, "s32k_sw3_at_3": 1.0}
+    first, edges = level_edges(tmp_path, capfd, params)
+    assert first == 0 and [v for _, v in edges] == [1, 0] * 3, (first, edges)
+    for (t, _), want in zip(edges, (0.2, 0.4, 0.6, 0.8, 1.0, 1.2)):
+        assert t == pytest.approx(want, abs=STEP_S + 1e-9), edges
+
+
+@pytest.mark.parametrize("params, expected", [
+    ({"s32k_sw2": 3, "s32k_sw2_pressed_level": 2}, "--param s32k_sw2_pressed_level=2: expected 0 or 1: the level the "
+                                                   "pin reads while the button is pressed"),
+    ({"s32k_sw2": 3, "s32k_sw2_at": 0.5, "s32k_sw2_at_2": 0.6}, "--param s32k_sw2_at_2=0.6: expected a press after the "
+                                                                "one before it is released: 0.7 s or later"),
+    ({"s32k_sw3": 3, "s32k_sw3_at_2": 0.6}, "--param s32k_sw3_at_2=0.6: expected the presses before it given too"),
+], ids=["level", "overlapping", "second_without_first"])
+def test_a_bad_press_param_is_one_line(tmp_path, params, expected):
+    src = probe(tmp_path, """\
+        #include "Dio.h"
+        int main(void) {
+            (void)Dio_ReadChannel(7U);
+            return 0;
+        }
+        """)
+    r = drive(firmware([src]), track="floor", time_limit_s=1.0, params=params)
+    assert r.outcome == "controller_error", (params, r.message)
+    assert r.message.startswith(f"{src}:3: {expected}") and "\n" not in r.message, (params, r.message)
+
+
 def test_a_mode_pin_reads_its_constant_level(tmp_path, capfd):
     """--param s32k_pin_N=0/1: channel N is an input at that level (a mode switch): writes and
     flips leave it (a flip returns its level, as the Dio driver's on an input channel), a poll of

@@ -58,6 +58,49 @@ def test_one_image_a_servo_frame_as_the_free_running_tpm1_gives_them(tmp_path, c
     assert abs(images - 2.0 / (frame_us * 1e-6)) <= 1, images
 
 
+def servo_frames(tmp_path, capfd, period_s, seconds, position=0.0):
+    """TFC_ServoTicker's count over `seconds` after TFC_InitServos(0.5 ms, 2 ms, period_s) and
+    TFC_SetServo(0, position); the run's log."""
+    prog = program(tmp_path, f"""\
+        #include <stdio.h>
+        #include "mbed.h"
+        #include "TFC.h"
+        int main() {{
+            TFC_Init();
+            TFC_InitServos(0.0005f, 0.002f, {period_s}f);
+            TFC_SetServo(0, {position}f);
+            TFC_ServoTicker = 0;
+            wait({seconds});
+            printf("frames %u\\n", (unsigned)TFC_ServoTicker);
+            fflush(stdout);
+            return 0;
+        }}
+        """)
+    r = drive(prog, track="floor", time_limit_s=seconds + 1.0)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    return int(out.split("frames ")[1].split()[0]), r.log
+
+
+def test_a_servo_frame_is_mod_plus_one_counts(tmp_path, capfd):
+    """TFC_InitServos' MOD = 750 kHz x 2.5 ms = 1875, and TPM1 counts 0 .. MOD: a frame of 1876 counts,
+    2.50133 ms (KL25 RM 31.4.3.1: "(MOD + 0x0001) x period of the TPM counter clock"), so 20 s hold
+    7995.7 frames; before, the kit's frames were the period given, 8000."""
+    frames, _ = servo_frames(tmp_path, capfd, 0.0025, 20.0)
+    assert abs(frames - 20.0 / (1876 / 750e3)) <= 1.5, frames
+
+
+def test_a_servo_period_over_87_ms_wraps_the_16_bit_mod(tmp_path, capfd):
+    """TFC_InitServos(..., 0.1 s): MOD = 75000 written to a 16-bit field keeps 75000 - 65536 = 9464
+    (KL25 RM 31.3.3), a frame of 9465 counts, 12.62 ms: 2 s hold 158 frames (before: 100-ms frames, 20);
+    and the library's duty, MOD x pulse / 0.1 s, gives a neutral pulse of 118 counts, 0.157 ms, under the
+    0.5 ms end: the servo goes to its end (before: straight ahead)."""
+    frames, log = servo_frames(tmp_path, capfd, 0.1, 2.0)
+    assert abs(frames - 2.0 / (9465 / 750e3)) <= 1.5, frames
+    late = log.t_s > 1.0
+    assert np.allclose(log.steer_cmd_rad[late], -0.4), log.steer_cmd_rad[late][:5]
+
+
 @pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
 def test_a_new_servo_frame_loads_as_the_frame_in_progress_ends(tmp_path, capfd, isolate):
     """TFC_SetLineScanExposureTime writes TPM1's MOD while it counts, and the KL25 updates MOD as the
@@ -201,7 +244,10 @@ def test_the_library_maps_the_board_onto_the_car(tmp_path):
     assert r.outcome == "controller_returned" and r.message == "main() returned", r.message
     log = r.log
     late = log.t_s > log.t_s[-1] - 0.05
-    assert np.allclose(log.speed_cmd_mps[late], 0.5 * 3.1) and np.allclose(log.steer_cmd_rad[late], 0.2)
+    # TFC_SetServo(0, 0.5): CnV = trunc(MOD 7500 x duty 0.1625) = 1218 counts of 750 kHz, a 1.624 ms pulse of
+    # TFC_InitServos' 0.5 .. 2 ms: position 0.49867, not 0.5 (TFC.cpp's QueuedServo0Val = TPM1->MOD * DutyCycle)
+    steer = 0.4 * (2 * (1218 / 750e3 - 0.5e-3) / 1.5e-3 - 1)
+    assert np.allclose(log.speed_cmd_mps[late], 0.5 * 3.1) and np.allclose(log.steer_cmd_rad[late], steer, atol=1e-6)
     before = (log.t_s > 0.15) & (log.t_s < log.t_s[-1] - 0.12)
     assert np.all(log.speed_cmd_mps[before] == 0.0)
 

@@ -211,7 +211,7 @@ def test_stopping_a_timer_stops_its_handler(tmp_path, capfd, stop, restart, rest
 
 def test_a_new_load_value_takes_effect_at_the_next_expiry(tmp_path, capfd):
     """A handler that writes a new LDVAL (100 Hz -> 50 Hz) at its 10th call: the PIT loads it
-    when the period running then expires (KL25 RM 32.3.2), so the 11th call is 10 ms after the
+    when the period running then expires (KL25 RM 32.3.4), so the 11th call is 10 ms after the
     10th and the ones after 20 ms apart."""
     src = tmp_path / "reload.c"
     src.write_text(textwrap.dedent("""\
@@ -605,7 +605,7 @@ int main(void) {
     double s1 = spinner_now();
     LPTMR0_CNR = 0;                                   /* latch, then read (RM 33.3.4) */
     unsigned c1 = PIT->CHANNEL[0].CVAL, n1 = LPTMR0->CNR, t1 = TPM2->CNT;
-    PIT_LDVAL0 = 240000 - 1;                          /* loaded at the next expiry (RM 32.3.2) */
+    PIT_LDVAL0 = 240000 - 1;                          /* loaded at the next expiry (RM 32.3.4) */
     TPM2_SC = 0;
     TPM2_MOD = 1000;
     TPM2_SC = TPM_SC_CMOD(1) | TPM_SC_PS(7) | TPM_SC_CPWMS_MASK;

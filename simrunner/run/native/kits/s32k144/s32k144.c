@@ -53,6 +53,7 @@ enum role { NONE, SERVO, MOTOR1, MOTOR2, ESC };
  * (--param s32k_pin_N), or one of the board's buttons (--param s32k_sw2, s32k_sw3). PIN_UNSEEN: its
  * --param not looked up yet (at the channel's first read or write). */
 enum pin { PIN_UNSEEN, PIN_OUTPUT, PIN_LOW, PIN_HIGH, PIN_SW2, PIN_SW3 };
+#define MAX_PRESSES 8  /* a button's presses: s32k_swN_at, s32k_swN_at_2 .. _8 */
 
 static struct {
     uint16 pwm[NUM_PWM];          /* each PWM channel's duty, 0 .. 0x8000 */
@@ -68,7 +69,8 @@ static struct {
     SimPoll input_poll;             /* reads of input pins (--param) at one simulated time (sim_poll.h) */
     uint8 pin[NUM_DIO];             /* what drives each DIO channel (enum pin), from --param */
     int sw_channel[2];              /* SW2's and SW3's Dio channels (-1: not given) */
-    double sw_at[2];                /* their press (s; < 0: never pressed) */
+    double sw_at[2][MAX_PRESSES];   /* their presses (s; < 0: none), in order, each BUTTON_HELD_S long */
+    int sw_pressed_level[2];        /* the level a pressed button reads (STD_HIGH on the EVB) */
     Servo servo;
     Hbridge hbridge;
     Esc esc;                        /* the driver's state, as the sample's EscInstance */
@@ -106,30 +108,60 @@ __attribute__((noreturn)) static void bad_param(const char *name, double value, 
  * s32k_sw3 say (a team's generated DioConf_DioChannel_... value: the kit cannot know it). A button reads
  * STD_HIGH while pressed and STD_LOW released: on the EVB a pressed button drives its pin high (NXP's
  * S32K144 cookbook examples, AN5413 "Hello World": "If Pad Data Input = 1 (BTN0 [SW2] pushed)"; NuttX's
- * s32k144evb board_buttons() reads a set pin as pressed). Each is pressed once for BUTTON_HELD_S at
+ * s32k144evb board_buttons() reads a set pin as pressed). A board of the team's own that wires its
+ * button to ground with a pull-up reads the other way: --param s32k_sw2_pressed_level=0 (sw3's alike)
+ * makes the pressed level STD_LOW, the released one STD_HIGH. Each is pressed for BUTTON_HELD_S at
  * --param s32k_sw2_at (default 0.1 s, as --kit tfc's start press of button 0) / s32k_sw3_at (not
- * pressed unless given). */
+ * pressed unless given), and again at s32k_sw2_at_2, _at_3, ... (up to MAX_PRESSES; numbers, not a
+ * list: batch's comma is a sweep), each after the one before it has been released. */
 #define BUTTON_HELD_S 0.2
 
+static void read_presses(int b, int given) {
+    static const char *const at_names[2] = {"s32k_sw2_at", "s32k_sw3_at"};
+    char name[40], expected[160];
+    for (int i = 0; i < MAX_PRESSES; i++) k.sw_at[b][i] = -1.0;
+    double at = spinner_param(at_names[b], NOT_GIVEN);
+    if (!given && at != NOT_GIVEN)
+        bad_param(at_names[b], at, b == 0 ? "the button's Dio channel too: --param s32k_sw2=N"
+                                          : "the button's Dio channel too: --param s32k_sw3=N");
+    if (!given) return;
+    if (at != NOT_GIVEN && !(at >= 0.0)) bad_param(at_names[b], at, "the simulated time of the press, in s (0 or more)");
+    k.sw_at[b][0] = at != NOT_GIVEN ? at : (b == 0 ? 0.1 : -1.0);
+    for (int i = 1; i < MAX_PRESSES; i++) {
+        snprintf(name, sizeof name, "%s_%d", at_names[b], i + 1);
+        double next = spinner_param(name, NOT_GIVEN);
+        if (next == NOT_GIVEN) return;
+        if (k.sw_at[b][i - 1] < 0.0) bad_param(name, next, "the presses before it given too (s32k_sw3_at, _at_2, ...)");
+        snprintf(expected, sizeof expected, "a press after the one before it is released: %g s or later (%s, held %g s)",
+                 k.sw_at[b][i - 1] + BUTTON_HELD_S, i == 1 ? at_names[b] : "the press before", BUTTON_HELD_S);
+        if (!(next >= k.sw_at[b][i - 1] + BUTTON_HELD_S - 1e-9)) bad_param(name, next, expected);
+        k.sw_at[b][i] = next;
+    }
+    snprintf(name, sizeof name, "%s_%d", at_names[b], MAX_PRESSES + 1);
+    double more = spinner_param(name, NOT_GIVEN);
+    if (more != NOT_GIVEN) bad_param(name, more, "at most 8 presses of a button (s32k_swN_at, _at_2 .. _at_8)");
+}
+
 static void read_buttons(void) {
-    static const char *const names[2] = {"s32k_sw2", "s32k_sw3"}, *const at_names[2] = {"s32k_sw2_at", "s32k_sw3_at"};
+    static const char *const names[2] = {"s32k_sw2", "s32k_sw3"};
+    static const char *const level_names[2] = {"s32k_sw2_pressed_level", "s32k_sw3_pressed_level"};
     double channel[2];
     for (int b = 0; b < 2; b++) {
         channel[b] = spinner_param(names[b], NOT_GIVEN);
-        double at = spinner_param(at_names[b], NOT_GIVEN);
-        k.sw_at[b] = b == 0 ? 0.1 : -1.0;
-        if (channel[b] == NOT_GIVEN) {
-            if (at != NOT_GIVEN)
-                bad_param(at_names[b], at, b == 0 ? "the button's Dio channel too: --param s32k_sw2=N"
-                                                  : "the button's Dio channel too: --param s32k_sw3=N");
-            continue;
-        }
-        if (!(channel[b] >= 0.0 && channel[b] < NUM_DIO && channel[b] == (double)(int)channel[b]))
+        k.sw_pressed_level[b] = STD_HIGH;
+        /* (read for a button given only: one without its channel is a --param never read, which the run
+         * warns of, naming those read) */
+        double level = channel[b] == NOT_GIVEN ? NOT_GIVEN : spinner_param(level_names[b], NOT_GIVEN);
+        if (channel[b] != NOT_GIVEN &&
+            !(channel[b] >= 0.0 && channel[b] < NUM_DIO && channel[b] == (double)(int)channel[b]))
             bad_param(names[b], channel[b], b == 0 ? "the Dio channel of the board's button SW2 (PTC12): a whole number "
                       "0..255, your configuration's DioConf_DioChannel_... value" : "the Dio channel of the board's "
                       "button SW3 (PTC13): a whole number 0..255, your configuration's DioConf_DioChannel_... value");
-        if (at != NOT_GIVEN && !(at >= 0.0)) bad_param(at_names[b], at, "the simulated time of the press, in s (0 or more)");
-        if (at != NOT_GIVEN) k.sw_at[b] = at;
+        if (level != NOT_GIVEN && level != 0.0 && level != 1.0)
+            bad_param(level_names[b], level, "0 or 1: the level the pin reads while the button is pressed (1, STD_HIGH: "
+                      "the EVB's; 0, STD_LOW: a button to ground with a pull-up)");
+        if (level != NOT_GIVEN) k.sw_pressed_level[b] = level == 1.0 ? STD_HIGH : STD_LOW;
+        read_presses(b, channel[b] != NOT_GIVEN);
     }
     if (channel[0] != NOT_GIVEN && channel[0] == channel[1])
         bad_param("s32k_sw3", channel[1], "a Dio channel other than SW2's (--param s32k_sw2)");
@@ -169,8 +201,12 @@ static enum pin pin_of(Dio_ChannelType c) {
 /* An input pin's level at simulated time now. */
 static Dio_LevelType input_level(enum pin p, double now) {
     if (p == PIN_LOW || p == PIN_HIGH) return p == PIN_HIGH ? STD_HIGH : STD_LOW;
-    double at = k.sw_at[p == PIN_SW2 ? 0 : 1];
-    return at >= 0.0 && now >= at - 1e-9 && now < at + BUTTON_HELD_S - 1e-9 ? STD_HIGH : STD_LOW;
+    int b = p == PIN_SW2 ? 0 : 1, pressed = 0;
+    for (int i = 0; i < MAX_PRESSES && k.sw_at[b][i] >= 0.0; i++) {
+        double at = k.sw_at[b][i];
+        if (now >= at - 1e-9 && now < at + BUTTON_HELD_S - 1e-9) pressed = 1;
+    }
+    return (Dio_LevelType)(pressed ? k.sw_pressed_level[b] : !k.sw_pressed_level[b]);
 }
 
 /* -1 .. 1 of a pulse between its calibrated ends (+ towards hi, - towards lo), 0 at mid. The ends

@@ -283,16 +283,17 @@ static struct counter {
     int on;                 /* counting */
     double start_s;         /* when the count was at its start value */
     uint32_t load;          /* PIT: the LDVAL of the period under way */
-    uint32_t next_load;     /* PIT: a new LDVAL, loaded at next_at_s (RM 32.3.2) */
+    uint32_t next_load;     /* PIT: a new LDVAL, loaded at next_at_s (RM 32.3.4) */
     double next_at_s;       /* (0: none) */
     uint32_t shown;         /* TPM2: the CNT the kit wrote last (another there: the program wrote it) */
     int fresh;              /* its count started (or was cleared) since the last look ended (start) */
 } pit_count[2], lptmr_count, tpm2_count;
 
-/* PIT channel ch (RM 32.3 memory map; 32.5.1 timers): while TEN is set and the module enabled (MCR
+/* PIT channel ch (RM 32.3 memory map: 32.3.1 MCR, 32.3.2-3 LTMR64H/L, 32.3.4 LDVALn, 32.3.5 CVALn,
+ * 32.3.6 TCTRLn, 32.3.7 TFLGn; 32.5.1 timers): while TEN is set and the module enabled (MCR
  * MDIS clear) CVAL counts down from LDVAL at the bus clock and is loaded with LDVAL again at the
  * count after 0 (a period of LDVAL + 1); a new LDVAL written meanwhile is loaded at the next expiry,
- * not at once (RM 32.3.2 LDVAL). Disabled, CVAL keeps its value (RM 32.3.3: "unreliable"). */
+ * not at once (RM 32.3.4 LDVAL). Disabled, CVAL keeps its value (RM 32.3.5 CVAL: "unreliable"). */
 static void pit_counter(int ch, int look) {
     struct counter *k = &pit_count[ch];
     PIT_CHANNEL_Type *r = &PIT->CHANNEL[ch];
@@ -470,7 +471,7 @@ static int starting;  /* start() waits for the simulator's time (sync: a look as
  * (spinner_every). On the board one write (TEN, CMOD) starts the counter and its interrupt, and an
  * expiry reloads the counter as it interrupts: the counter counts from the interrupt's start too -
  * one that started (or was cleared) since the last look, or any running one at a `restart` (a new
- * period: at an expiry, RM 32.3.2; or a set-up changed before time passed). That time is not the
+ * period: at an expiry, RM 32.3.4; or a set-up changed before time passed). That time is not the
  * look's: with --mcu-time the simulator charges the code's time before the request, so a counter
  * left at the look's time (spinner_now) would reload that much before its interrupt fell due - a
  * program comparing the two, or NVIC_GetPendingIRQ, would see the count past an expiry whose handler

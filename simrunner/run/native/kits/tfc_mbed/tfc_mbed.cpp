@@ -45,6 +45,23 @@
  * round to 0, 65536 counts, without an overflow. */
 #define TPM1_COUNT_HZ 750e3
 #define TPM1_ROUND_S (65536 / TPM1_COUNT_HZ)
+/* TFC.cpp's TFC_InitServos: TPM1->MOD = (SystemCoreClock / (1 << FTM1_CLK_PRESCALE)) * _ServoPeriod,
+ * a uint32_t (48e6 / 64 = 750000) times a float, in float, converted to the 32-bit register; its MOD
+ * field has 16 bits (KL25 RM 31.3.3 MOD: bits 15-0, the rest reserved), so a period above 87.38 ms
+ * keeps the low 16 bits of the count (100 ms: 75000 -> 9464, a 12.62 ms frame). The counter counts 0 ..
+ * MOD: a period of MOD + 1 counts (RM 31.4.3.1 up counting: "(MOD + 0x0001) x period of the TPM
+ * counter clock"), 10 ms -> MOD 7500 -> 10.00133 ms. */
+static uint16_t tpm1_mod_of(double period_s) {
+    float counts = (float)(48000000u / (1u << 6)) * (float)period_s;
+    uint32_t mod = counts <= 0.0f ? 0u : (counts >= 4294967040.0f ? 0xFFFFFFFFu : (uint32_t)counts);
+    return (uint16_t)(mod & 0xFFFFu);
+}
+/* The frame MOD gives; the kit's camera takes 1 ms .. 1 s (a MOD under 749, a period under 1 ms,
+ * runs 1 ms frames: not emulated). */
+static double tpm1_frame_of(uint16_t mod) {
+    double s = ((double)mod + 1.0) / TPM1_COUNT_HZ;
+    return s < 1e-3 ? 1e-3 : (s > 1.0 ? 1.0 : s);
+}
 
 volatile uint16_t LineScanImage0Buffer[2][128], LineScanImage1Buffer[2][128];
 volatile uint16_t *TFC_LineScanImage0 = LineScanImage0Buffer[1];
@@ -70,12 +87,14 @@ static struct {
     double servo_frame_s;    /* the period MOD gives (TFC_InitServos): the camera's frame */
     double next_frame_s;     /* MOD written while TPM1 counts (TFC_SetLineScanExposureTime): its
                               * write buffer, loaded at the next overflow (0: none) */
+    uint16_t mod, next_mod;  /* TPM1's MOD in force, and the one in its write buffer */
+    double servo_period_s;   /* TFC_InitServos' ServoPeriod (_ServoPeriod): the duty's denominator */
     double overflow_s;       /* TPM1's last overflow (the read-out of the latest image), or its start */
     int library_servos;      /* the library's TPM1 interrupt writes the servos' CnV: once the program
                               * queues positions (TFC_SetServo, ...) or calls TFC_InitServos (not for
                               * TFC_Init alone: a PwmOut's pulse on the pin then holds) */
-    float servo_queued;      /* QueuedServo0Val (or 1's: tfc_servo_channel): TFC_SetServo's position */
-    float servo_cnv;         /* the channel's CnV as written: loads at the next overflow */
+    uint16_t servo_queued;   /* QueuedServo0Val (or 1's: tfc_servo_channel): TFC_SetServo's counts */
+    float servo_cnv;         /* the channel's CnV as written (as a position): loads at the next overflow */
     float servo;             /* CnV in force: the pulse the servo steers by (-1..1) */
     long long frame;         /* the camera frame read out last */
     double pulse_min_s, pulse_max_s;  /* TFC_InitServos' range of positions -1..1 */
@@ -120,6 +139,7 @@ static void run_due(void) {
 }
 
 static void camera_service(void);
+static uint16_t neutral_counts(void);
 
 static void clock_isr(void) {
     k.now_s = spinner_get_time();  /* inside an interrupt: no time passes */
@@ -135,9 +155,12 @@ static void clock_isr(void) {
  * the counter from 0 now, the servos' queued positions 0). */
 static void start_tpm1(void) {
     k.pulse_min_s = SERVO_MIN_PULSE_WIDTH_DEFAULT, k.pulse_max_s = SERVO_MAX_PULSE_WIDTH_DEFAULT;
-    k.servo_frame_s = clampd(SERVO_DEFAULT_PERIOD, 1e-3, 1.0);
+    k.servo_period_s = SERVO_DEFAULT_PERIOD;
+    k.mod = tpm1_mod_of(SERVO_DEFAULT_PERIOD);
+    k.servo_frame_s = tpm1_frame_of(k.mod);
     k.next_frame_s = 0.0, k.overflow_s = k.now_s;
-    k.servo_queued = k.servo_cnv = k.servo = 0.0f;
+    k.servo_queued = neutral_counts();
+    k.servo_cnv = k.servo = 0.0f;
     servo_ticker = 0;
     /* TFC.cpp's TPM1_IRQHandler, at each overflow of the free-running servo timer, raises SI and
      * starts the ADC's read-out of the integration gone while the next integrates: one image a
@@ -177,6 +200,15 @@ void tfc_mbed_on_tick(void (*sample)(void)) { k.sample = sample; }
 
 void tfc_mbed_on_edges(void (*edges)(void)) { k.edges = edges; }
 
+/* The servo's position (-1 .. 1 of TFC_InitServos' pulses) a CnV of `counts` gives: its pulse is
+ * counts / 750 kHz (edge-aligned PWM: high from the overflow to CnV, RM 31.4.6), so the position the
+ * library asked for, truncated to whole counts by its QueuedServo0Val = TPM1->MOD * DutyCycle, and
+ * shortened with MOD when a long period wrapped it (tpm1_mod_of); the car's servo stops at its ends. */
+static float cnv_position(uint16_t counts) {
+    double pulse_s = counts / TPM1_COUNT_HZ, span = k.pulse_max_s - k.pulse_min_s;
+    return (float)clampd(span > 0 ? 2.0 * (pulse_s - k.pulse_min_s) / span - 1.0 : 0.0, -1.0, 1.0);
+}
+
 /* TPM1's overflow, the counter turning from MOD to 0, that started the read-out of the image just
  * come; one however many came while the kit's interrupt was held (masked: TPM1's NVIC pending bit,
  * one bit). First what the timer does at the overflow: MOD and the channels' CnV load what was
@@ -187,12 +219,12 @@ void tfc_mbed_on_edges(void (*edges)(void)) { k.edges = edges; }
  * QueuedServo0Val, 1Val), loaded at the next overflow; TFC_ServoTicker++ (up to 0xFFFFFFFF). */
 static void tpm1_overflow(void) {
     k.overflow_s = k.now_s;
-    if (k.next_frame_s > 0.0) k.servo_frame_s = k.next_frame_s, k.next_frame_s = 0.0;
+    if (k.next_frame_s > 0.0) k.servo_frame_s = k.next_frame_s, k.next_frame_s = 0.0, k.mod = k.next_mod;
     if (k.servo != k.servo_cnv) {
         k.servo = k.servo_cnv;
         send_servo();
     }
-    if (k.library_servos) k.servo_cnv = k.servo_queued;
+    if (k.library_servos) k.servo_cnv = cnv_position(k.servo_queued);
     if (servo_ticker < 0xFFFFFFFFu) servo_ticker++;
 }
 
@@ -413,7 +445,8 @@ void TFC_InitMotorPWM(float SwitchingFrequency) { (void)SwitchingFrequency; tfc_
  * overflow there, or the counter passing the new MOD, moves where the call finds the counter (on the
  * board that code ran before the call), so the period is set again from where it is. */
 static void init_servos(double pulse_min_s, double pulse_max_s, double period_s) {
-    double p = clampd(period_s, 1e-3, 1.0);
+    uint16_t mod = tpm1_mod_of(period_s);
+    double p = tpm1_frame_of(mod);
     int set = -1;  /* what the camera was given: 1 a frame round 0xFFFF, 0 one period */
     for (int tries = 0; tries < 4; tries++) {
         int past = k.now_s - k.overflow_s > p + 1e-9;  /* the counter past the new MOD */
@@ -426,10 +459,25 @@ static void init_servos(double pulse_min_s, double pulse_max_s, double period_s)
             spinner_set_exposure_next_frame(p);
         }
     }
-    k.pulse_min_s = pulse_min_s, k.pulse_max_s = pulse_max_s;
-    k.servo_frame_s = p, k.next_frame_s = 0.0;  /* (MOD written directly: none waits to load) */
-    k.servo_queued = 0.0f;
+    k.pulse_min_s = pulse_min_s, k.pulse_max_s = pulse_max_s, k.servo_period_s = period_s;
+    k.servo_frame_s = p, k.next_frame_s = 0.0, k.mod = mod;  /* (MOD written directly: none waits to load) */
+    k.servo_queued = neutral_counts();  /* its TFC_SetServo(0, 0.0), (1, 0.0) */
 }
+
+/* TFC.cpp's TFC_SetServoDutyCycle: QueuedServo0Val (a uint16_t) = TPM1->MOD * DutyCycle, in float. */
+static uint16_t queue_counts(float duty) {
+    float counts = (float)k.mod * duty;
+    return (uint16_t)(counts <= 0.0f ? 0u : (counts >= 65535.0f ? 65535u : (uint32_t)counts));
+}
+
+/* TFC.cpp's TFC_SetServo: ((Position + 1.0)/2) * (_ServoDutyCycleMax - _ServoDutyCycleMin) +
+ * _ServoDutyCycleMin, the duty cycles being TFC_InitServos' pulses / its ServoPeriod (floats). */
+static float servo_duty(float position) {
+    float lo = (float)k.pulse_min_s / (float)k.servo_period_s, hi = (float)k.pulse_max_s / (float)k.servo_period_s;
+    return (float)(((position + 1.0) / 2) * (hi - lo) + lo);
+}
+
+static uint16_t neutral_counts(void) { return queue_counts(servo_duty(0.0f)); }
 
 void TFC_InitServos(float ServoPulseWidthMin, float ServoPulseWidthMax, float ServoPeriod) {
     tfc_mbed_start();
@@ -449,9 +497,10 @@ void TFC_InitServos(float ServoPulseWidthMin, float ServoPulseWidthMax, float Se
  * main()'s code time pass, and an overflow in it comes before this write, which loads at the next. */
 void TFC_SetLineScanExposureTime(uint32_t TimeIn_uS) {
     tfc_mbed_start();
-    double p = clampd(TimeIn_uS * 1e-6, 1e-3, 1.0);
+    uint16_t mod = tpm1_mod_of(TimeIn_uS * 1e-6);  /* (as TFC_InitServos computes MOD) */
+    double p = tpm1_frame_of(mod);
     spinner_set_exposure_next_frame(p);
-    k.next_frame_s = p;
+    k.next_frame_s = p, k.next_mod = mod;
 }
 
 volatile uint8_t *tfc_mbed_image_ready(void) { return &image_ready; }
@@ -475,14 +524,14 @@ volatile uint32_t (*tfc_mbed_tickers())[NUM_TICKERS] {
 void TFC_SetServo(uint8_t ServoNumber, float Position) {
     tfc_mbed_start();
     k.library_servos = 1;
-    if ((ServoNumber == 1) != (k.servo_channel == 1)) return;  /* the other channel: nothing on the car */
-    k.servo_queued = (float)clampd(Position, -1.0, 1.0);
+    TFC_SetServoDutyCycle(ServoNumber, servo_duty(Position));
 }
 
 void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {
-    tfc_mbed_start();  /* the duty of the servo frame between TFC_InitServos' pulses is -1 .. 1 */
-    double lo = k.pulse_min_s / k.servo_frame_s, hi = k.pulse_max_s / k.servo_frame_s;
-    TFC_SetServo(ServoNumber, (float)(2.0 * (DutyCycle - lo) / (hi - lo) - 1.0));
+    tfc_mbed_start();
+    k.library_servos = 1;
+    if ((ServoNumber == 1) != (k.servo_channel == 1)) return;  /* the other channel: nothing on the car */
+    k.servo_queued = queue_counts(DutyCycle);
 }
 
 void TFC_SetMotorPWM(float MotorA, float MotorB) {
