@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from helpers import C_CTOR_ENDS, C_CTOR_FAULT, C_THREAD_FAULT
+from helpers import C_CTOR_ENDS, C_CTOR_FAULT, C_THREAD_FAULT, C_THREAD_OVERFLOW, CXX_THREAD_OVERFLOW
 
 from simrunner.cli import main as cli
 from simrunner.errors import ControllerFileError
@@ -1518,6 +1518,86 @@ def test_a_fault_in_a_thread_of_the_programs_own_names_the_threads_line(tmp_path
            "main()'s)\nC backtrace (innermost first):\n  #0 worker at t.c:5\n" in done.stderr, done.stderr[-2000:]
     assert "libc" not in done.stderr  # (the thread's start cut, as the host's below main() is)
 
+
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+@pytest.mark.parametrize("name, body, function", [("t.c", C_THREAD_OVERFLOW, "recurse()"),
+                                                  ("t.cpp", CXX_THREAD_OVERFLOW, "recurse(int)")])
+def test_a_stack_overflow_in_a_thread_of_the_programs_own_names_the_threads_line(tmp_path, isolate, name, body,
+                                                                                function):
+    """A thread the program started (pthread_create, std::thread) recurses without end. Its thread
+    had no alternate signal stack, so the handler could not run on the overflowed stack: drive said
+    only 'the run's process was killed by SIGSEGV at t = ...' (in process) or 't: the controller was
+    killed by SIGSEGV' (isolated), no line. Now each thread the program starts gets one (the host's
+    thread start): the overflow is named at the recursing function's line as a fault of the thread's,
+    'stack overflow' as main()'s is, with the rows up to it kept."""
+    write(tmp_path, name, body)
+    done = _cli_drive(tmp_path, name, "--summary", "s.json", "--csv", "c.csv", *(["--isolate"] if isolate else []))
+    assert done.returncode == 1, (done.stdout, done.stderr[-2000:])
+    summary = json.loads((tmp_path / "s.json").read_text())
+    said = f"{name}:5: SIGSEGV: stack overflow (in {function}), in a thread of the program's own (not main()'s)"
+    assert summary["outcome"] == "controller_error"
+    assert summary["message"] == (said if isolate else f"{said}: it killed the run's process (the program runs in "
+                                  "the simulator's process, where a fault of its threads cannot be caught; --isolate "
+                                  "runs the program in a process of its own); the outputs were written from the run "
+                                  "log")
+    assert summary["frames"] >= 20 and len(read_log(tmp_path / "c.csv")) == summary["frames"]
+    assert f"stack overflow (the thread's stack), in a thread of the program's own (not main()'s)\nC backtrace " \
+           f"(innermost first):\n  #0 {function.replace('()', '')} at {name}:5\n" in done.stderr, done.stderr[-2000:]
+
+
+def test_a_stack_overflow_in_a_prebuilt_librarys_thread_names_its_line(tmp_path):
+    """The same in a prebuilt library (run isolated, not linked by simrunner): its pthread_create is
+    the host program's, which gives the thread its alternate signal stack too."""
+    src = write(tmp_path, "t.c", C_THREAD_OVERFLOW)
+    lib = tmp_path / "libt.so"
+    subprocess.run(["cc", "-shared", "-fPIC", "-g", "-O0", cflags(), str(src), "-o", str(lib)], check=True,
+                   capture_output=True)
+    r = drive(build_program([str(lib)]), track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_error"  # (-O0: in the function's prologue, its line 4, or its body's)
+    assert re.fullmatch(rf"{re.escape(str(src))}:[45]: SIGSEGV: stack overflow \(in recurse\(\)\), in a thread of "
+                        r"the program's own \(not main\(\)'s\)", r.message), r.message
+
+
+def test_the_programs_threads_still_run_join_and_return_their_values(tmp_path, track, capfd):
+    """The host's thread start (the alternate signal stack) changes nothing else: a pthread's return
+    value reaches pthread_join, a std::thread's lambda runs and joins, pthread_exit's value too."""
+    c = write(tmp_path, "j.c", """\
+        #include <pthread.h>
+        #include <stdio.h>
+        #include "spinner.h"
+        static void *twice(void *arg) { return (void *)(2 * (long)arg); }
+        static void *leaves(void *arg) { pthread_exit((void *)(3 * (long)arg)); }
+        int main(void) {
+            pthread_t a, b;
+            void *ra, *rb;
+            pthread_create(&a, NULL, twice, (void *)21L);
+            pthread_create(&b, NULL, leaves, (void *)5L);
+            pthread_join(a, &ra);
+            pthread_join(b, &rb);
+            printf("joined %ld %ld\\n", (long)ra, (long)rb);
+            spinner_sleep(0.05);
+            return 0;
+        }
+        """)
+    cxx = write(tmp_path, "j.cpp", """\
+        #include <cstdio>
+        #include <thread>
+        #include "spinner.h"
+        int main() {
+            int x = 0;
+            std::thread t([&x] { x = 42; });
+            t.join();
+            std::printf("joined %d\\n", x);
+            spinner_sleep(0.05);
+            return 0;
+        }
+        """)
+    for src, said in ((c, "joined 42 15\n"), (cxx, "joined 42\n")):
+        for isolate in (False, True):
+            r = drive(dataclasses.replace(build_program([src]), isolate=isolate), track=track, time_limit_s=1.0)
+            assert r.outcome == "controller_returned", r.message
+            assert capfd.readouterr().out.endswith(said)
 
 RACING_THREADS_C = """\
 #include <pthread.h>

@@ -51,8 +51,8 @@
 #include <sys/types.h>
 #include <sys/wait.h>
 #include <link.h>
-#ifdef SPINNER_INPROC
 #include <sys/mman.h>
+#ifdef SPINNER_INPROC
 #include <sys/resource.h>
 #endif
 
@@ -1665,24 +1665,24 @@ static const int fault_sigs[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGUS
  * process it goes to the file descriptor the simulator handed in for the run (its supervisor's
  * report file), or as one line to stderr (thread_report_out); there a fault of a thread that is not
  * the program's (the simulator's, a library's) goes to the handler before ours as ever (pass_on).
- * (A thread's stack overflow kills the process unreported: the thread has no alternate signal
- * stack for the handler to run on.) */
+ * A thread's stack overflow is one too: the thread has an alternate signal stack of its own for the
+ * handler to run on (thread_begin). */
 static struct report thread_report;
 static int thread_faulted;  /* atomic: a thread of the program's has faulted */
-static void thread_report_out(int sig, void *pc);
+static void thread_report_out(int sig, void *pc, const char *message);
 
 static void thread_fault(int sig, siginfo_t *info, void *pc, const char *message) {
     if (__atomic_exchange_n(&thread_faulted, 1, __ATOMIC_ACQ_REL))
         for (;;) pause();  /* another thread's fault is being reported: the process ends with it */
     build_report_frames(&thread_report, sig, message, pc, NULL, 0, 1);
-    thread_report_out(sig, pc);
+    thread_report_out(sig, pc, message);
     signal(sig, SIG_DFL);  /* the process dies by the signal, as without our handlers */
     if (info->si_code <= 0) raise(sig);  /* sent (raise, abort): again, at the handler's return */
 }                                        /* a fault: the instruction runs again */
 
 #ifndef SPINNER_INPROC
-static void thread_report_out(int sig, void *pc) {
-    (void)sig, (void)pc;
+static void thread_report_out(int sig, void *pc, const char *message) {
+    (void)sig, (void)pc, (void)message;
     pipe_take(1);  /* after main()'s message being sent; kept: the report is the last */
     uint32_t hdr[2] = {OP_FAULT, (uint32_t)thread_report.len};
     write_all(hdr, sizeof hdr);
@@ -1778,6 +1778,123 @@ static void fault_action(struct sigaction *sa) {
     sa->sa_sigaction = on_fault;
     sa->sa_flags = SA_SIGINFO | SA_ONSTACK;
     sigemptyset(&sa->sa_mask);
+}
+
+/* -- the program's threads: an alternate signal stack each ---------------------------------
+ * A stack overflow faults with the stack pointer in the guard page: the kernel can run a handler
+ * only on an alternate signal stack, and without one the process dies by SIGSEGV unreported. The
+ * main thread's is install_handlers' (the controller's coroutine, the open's: theirs); a thread the
+ * program starts gets its own from thread_begin, which runs the thread's function on the thread's
+ * own stack after mapping ALT_STACK_BYTES for the handler and registering them (sigaltstack is
+ * per thread, and a new thread starts without one), then unregisters and unmaps them as the
+ * thread ends (its function returns, or pthread_exit or a cancellation runs the cleanup). The
+ * thread's fault, an overflow included, is then reported from it (thread_fault), naming its line.
+ *
+ * How the program's threads come here, in both hosts:
+ * - pthread_create: a program simrunner built is linked with --wrap=pthread_create (build.py):
+ *   its calls are __wrap_pthread_create's (host/thread_start.c, linked into the program: libgcc.a
+ *   has one of its own), which calls spinner_thread_create. The host program also defines pthread_create itself
+ *   (exported, -rdynamic, and first in the lookup: the executable), so a prebuilt library's calls
+ *   and libstdc++'s come here too; in the simulator's process libc's comes first for any library
+ *   but the wrapped program (a library's threads there are not the program's).
+ * - std::thread (std::jthread, std::async): the template in the program's code calls libstdc++'s
+ *   std::thread::_M_start_thread(unique_ptr<_State>, void (*)()), which calls libc's pthread_create
+ *   from libstdc++ (out of reach of the program's --wrap). The program is linked with --wrap of that
+ *   name too: __wrap_STD_THREAD_START starts the thread here, doing what libstdc++'s does
+ *   (std_thread_run: the state's _M_run(), then its deletion, through the Itanium C++ ABI's vtable
+ *   of std::thread::_State: complete destructor, deleting destructor, _M_run), and leaves a failure
+ *   to libstdc++'s own (which throws its std::system_error). */
+#define ALT_STACK_BYTES (1 << 16)  /* as main()'s (the handler's report: backtrace, dladdr) */
+typedef int (*create_fn)(pthread_t *, const pthread_attr_t *, void *(*)(void *), void *);
+struct thread_start {
+    void *(*fn)(void *);
+    void *arg;
+};
+
+static void alt_stack_off(void *mem) {
+    stack_t off = {.ss_sp = NULL, .ss_size = 0, .ss_flags = SS_DISABLE};
+    sigaltstack(&off, NULL);
+    munmap(mem, ALT_STACK_BYTES);
+}
+
+static void *thread_begin(void *p) {
+    struct thread_start start = *(struct thread_start *)p;
+    free(p);
+    void *mem = mmap(NULL, ALT_STACK_BYTES, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (mem == MAP_FAILED) return start.fn(start.arg);  /* (runs unguarded, as before) */
+    stack_t ss = {.ss_sp = mem, .ss_size = ALT_STACK_BYTES, .ss_flags = 0};
+    sigaltstack(&ss, NULL);
+    void *ret;
+    pthread_cleanup_push(alt_stack_off, mem);
+    ret = start.fn(start.arg);
+    pthread_cleanup_pop(1);
+    return ret;
+}
+
+static create_fn real_pthread_create(void) {
+#ifdef SPINNER_INPROC
+    return pthread_create;  /* (libc's: this library defines none) */
+#else
+    static create_fn real;
+    if (real == NULL) real = (create_fn)dlsym(RTLD_NEXT, "pthread_create");
+    return real;
+#endif
+}
+
+static int thread_spawn(pthread_t *thread, const pthread_attr_t *attr, void *(*fn)(void *), void *arg) {
+    create_fn create = real_pthread_create();
+    if (create == NULL) return EAGAIN;
+    struct thread_start *start = malloc(sizeof *start);
+    if (start == NULL) return create(thread, attr, fn, arg);
+    start->fn = fn, start->arg = arg;
+    int err = create(thread, attr, thread_begin, start);
+    if (err != 0) free(start);
+    return err;
+}
+
+/* The program's __wrap_pthread_create's (host/thread_start.c, linked into it). */
+int spinner_thread_create(pthread_t *thread, const pthread_attr_t *attr, void *(*fn)(void *), void *arg) {
+    return thread_spawn(thread, attr, fn, arg);
+}
+
+#ifndef SPINNER_INPROC
+int pthread_create(pthread_t *restrict thread, const pthread_attr_t *restrict attr, void *(*fn)(void *),
+                   void *restrict arg) {
+    return thread_spawn(thread, attr, fn, arg);
+}
+#endif
+
+#define STD_THREAD_START _ZNSt6thread15_M_start_threadESt10unique_ptrINS_6_StateESt14default_deleteIS1_EEPFvvE
+#define STD_THREAD_NAME_(x) #x
+#define STD_THREAD_NAME(x) STD_THREAD_NAME_(x)
+#define STD_THREAD_WRAP_(x) __wrap_##x
+#define STD_THREAD_WRAP(x) STD_THREAD_WRAP_(x)
+
+static void *std_thread_run(void *state) {
+    void (**vtable)(void *) = *(void (***)(void *))state;
+    vtable[2](state);  /* state->_M_run() */
+    vtable[1](state);  /* delete state */
+    return NULL;
+}
+
+/* `self`: the std::thread (its id, a pthread_t, first); `state`: the unique_ptr<_State> passed by
+ * reference (its owner, the caller, destroys it: released here once the thread owns the state). */
+void STD_THREAD_WRAP(STD_THREAD_START)(void *self, void **state, void (*depend)(void)) {
+    if (*state != NULL && thread_spawn((pthread_t *)self, NULL, std_thread_run, *state) == 0) {
+        *state = NULL;
+        return;
+    }
+    Dl_info info;  /* libstdc++'s own, as the caller's library finds it */
+    void (*real)(void *, void **, void (*)(void)) = NULL;
+    if (dladdr(__builtin_return_address(0), &info) && info.dli_fname != NULL) {
+        void *caller = dlopen(info.dli_fname, RTLD_LAZY | RTLD_NOLOAD);
+        if (caller != NULL) {
+            real = (void (*)(void *, void **, void (*)(void)))dlsym(caller, STD_THREAD_NAME(STD_THREAD_START));
+            dlclose(caller);
+        }
+    }
+    if (real == NULL) abort();  /* (no libstdc++: no std::thread to start) */
+    real(self, state, depend);
 }
 
 #ifndef SPINNER_INPROC
@@ -1936,7 +2053,7 @@ static int program_thread(void *pc) {
 /* The thread's report to run_fd ("thread-fault PATH", "host PATH", then the report), where the
  * simulator's supervisor reads it once the process has died (simrunner.run.postmortem); without
  * one, a line on stderr naming the function. */
-static void thread_report_out(int sig, void *pc) {
+static void thread_report_out(int sig, void *pc, const char *message) {
     if (run_fd >= 0) {
         report_record(run_fd, "thread-fault", prog_path, "", &thread_report);
         return;
@@ -1945,9 +2062,10 @@ static void thread_report_out(int sig, void *pc) {
     lib_where(where, sizeof where, prog_path, pc);
     char line[1536];
     int k = snprintf(line, sizeof line,
-                     "simrunner: %s%s, in a thread of the program's own (not main()'s), which runs in the "
+                     "simrunner: %s%s%s, in a thread of the program's own (not main()'s), which runs in the "
                      "simulator's process: the process ends (simrunner drive names the fault's file:line; "
-                     "--isolate runs the program in a process of its own)\n", signal_name(sig), where);
+                     "--isolate runs the program in a process of its own)\n", signal_name(sig),
+                     strncmp(message, "stack overflow", 14) == 0 ? " (stack overflow)" : "", where);
     if (k > 0) {
         ssize_t w = write(2, line, (size_t)k < sizeof line ? (size_t)k : sizeof line - 1);
         (void)w;
