@@ -1599,6 +1599,74 @@ def test_the_programs_threads_still_run_join_and_return_their_values(tmp_path, t
             assert r.outcome == "controller_returned", r.message
             assert capfd.readouterr().out.endswith(said)
 
+
+LEFT_RUNNING_C = """\
+#include <poll.h>
+#include <pthread.h>
+#include "spinner.h"
+static int *volatile nowhere;
+static void *worker(void *arg) {
+    poll(NULL, 0, 1500);                                 /* (after the run) */
+    if (arg) *nowhere = 1;                               /* line 7 */
+    return arg;
+}
+int main(void) {
+    pthread_t t;
+    pthread_create(&t, NULL, worker, (void *)(long)FAULTS);
+    for (int k = 0; k < 5; k++) spinner_sleep(0.01);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("faults", [0, 1], ids=["returns", "faults"])
+def test_a_thread_left_running_after_an_in_process_run_keeps_its_library_loaded(tmp_path, faults):
+    """A program's main() returns while a thread it started still runs (it waits 1.5 s). Its library
+    was unloaded after the run: the thread went on in unmapped code and killed the process a second
+    later, in the next program's run (a batch worker's, a test process's), unreported (-11, nothing
+    said), even a thread that would only have returned. Now the library stays loaded while its
+    threads run (the run warns once): a thread that returns harms nothing, and one that faults is
+    named as the program's thread left running (one line on stderr, no supervisor here)."""
+    src = write(tmp_path, "left.c", LEFT_RUNNING_C)
+    plain = write(tmp_path, "plain.c", '#include "spinner.h"\nint main(void) { spinner_sleep(0.1); return 0; }\n')
+    code = textwrap.dedent(f"""\
+        import time
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        r = drive(build_program([{str(src)!r}], defines=["FAULTS={faults}"]), track="floor", time_limit_s=1.0)
+        print("first", r.outcome, r.warnings, flush=True)
+        time.sleep(3.0)  # (the thread's wait is over)
+        r = drive(build_program([{str(plain)!r}]), track="floor", time_limit_s=1.0)
+        print("second", r.outcome, flush=True)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    first = out.stdout.splitlines()[0] if out.stdout else ""
+    assert first.startswith("first controller_returned ['the C/C++ program left 1 thread running (not waited "
+                            "for): its library stays loaded in this process while they run"), (out.returncode,
+                                                                                                 out.stdout,
+                                                                                                 out.stderr[-2000:])
+    if not faults:
+        assert out.returncode == 0 and "second controller_returned" in out.stdout, (out.returncode, out.stderr[-2000:])
+        return
+    assert out.returncode == -11, (out.returncode, out.stdout, out.stderr[-2000:])
+    line, = [t for t in out.stderr.splitlines() if t.startswith("simrunner:")]
+    assert re.match(r"simrunner: SIGSEGV at \S+\.so\+0x[0-9a-f]+, in a thread a C/C\+\+ program started and left "
+                    r"running after its run in the simulator's process \(its library was kept loaded for it\): the "
+                    r"process ends", line), line
+
+
+def test_a_fault_of_a_thread_an_earlier_run_left_running_is_named_so():
+    """Its report to a later run's supervisor (a batch worker's next run): named at its line, as an
+    earlier run's thread that killed this run's process, not as this run's program's."""
+    from simrunner.run.postmortem import thread_fault
+
+    report = ("thread-fault /nowhere/left.so\nhost /nowhere/host.so\nstray\nsignal 11\nmessage \n"
+              "thread program\n")
+    error = thread_fault(report, "plain.c")
+    assert str(error).startswith("SIGSEGV: segmentation fault, in a thread of the program's own (not main()'s): a "
+                                 "thread an earlier run's program in this process left running (not waited for), "
+                                 "which killed this run's process"), str(error)
+
 RACING_THREADS_C = """\
 #include <pthread.h>
 #include <string.h>

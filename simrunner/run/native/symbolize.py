@@ -368,6 +368,10 @@ LOAD_FAULT = "load-fault "
 THREAD_FAULT = "thread-fault "
 """The first line of the in-process host's report of a fault in a thread the program started."""
 
+STRAY = "stray\n"
+"""The line a ``thread-fault`` record's report starts with when the thread was an earlier run's
+program's, left running after its run (its library kept loaded for it), not the run's."""
+
 LOAD_END = "load-end "
 """The first line of the in-process host's report of a program that ended as its library loaded
 (exit, _exit, _Exit or quick_exit, spinner_fail, a misused Spinner call in a constructor)."""

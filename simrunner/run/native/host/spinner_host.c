@@ -1714,6 +1714,8 @@ static int run_fd = -1;
 static void *prog_base;
 static const char *prog_path;
 static int program_thread(void *pc);
+static int stray_thread(void);
+static void stray_fault(int sig, siginfo_t *info, void *pc, const char *message);
 
 /* A signal that is not the controller's (the simulator's own, or after it ended): hand it
  * to the handler installed before ours. */
@@ -1753,6 +1755,8 @@ static void on_fault(int sig, siginfo_t *info, void *context) {
         if (sig != SIGUSR1 && __atomic_load_n(&load_watch, __ATOMIC_ACQUIRE) &&
             pthread_equal(pthread_self(), load_thread))  /* a constructor's, as its library loads */
             load_fault(sig, info, pc, overflow ? "stack overflow (the stack limit is `ulimit -s`)" : "");
+        else if (sig != SIGUSR1 && stray_thread())  /* an earlier run's program's, left running */
+            stray_fault(sig, info, pc, overflow ? "stack overflow (the thread's stack)" : "");
         else if (sig != SIGUSR1 && !pthread_equal(pthread_self(), sim_thread_id) && program_thread(pc))
             thread_fault(sig, info, pc, overflow ? "stack overflow (the thread's stack)" : "");
         else
@@ -1809,23 +1813,86 @@ typedef int (*create_fn)(pthread_t *, const pthread_attr_t *, void *(*)(void *),
 struct thread_start {
     void *(*fn)(void *);
     void *arg;
+    void *prog;  /* the load address of the program's library that started it (in process; else NULL) */
+};
+struct thread_own {
+    void *mem;  /* its alternate signal stack (NULL: none could be mapped) */
+    void *prog;
 };
 
-static void alt_stack_off(void *mem) {
-    stack_t off = {.ss_sp = NULL, .ss_size = 0, .ss_flags = SS_DISABLE};
-    sigaltstack(&off, NULL);
-    munmap(mem, ALT_STACK_BYTES);
+#ifdef SPINNER_INPROC
+/* In the simulator's process a program's threads may outlive its run (nothing stops them): the
+ * ones still running, by their program's library (its load address, `base`). Its library is not
+ * unloaded while they run (spinner_inproc_close keeps it, and the run's handlers stay installed
+ * for them: `kept`), so a thread left running executes mapped code, and its later fault is named
+ * from it (stray_fault) instead of a crash in unloaded code that killed the process unreported
+ * (a batch worker's, or a test process's running one program after another). */
+#define MAX_THREAD_PROGS 64
+static struct { void *base; int live, kept; } thread_progs[MAX_THREAD_PROGS];
+static pthread_mutex_t thread_progs_lock = PTHREAD_MUTEX_INITIALIZER;
+static __thread void *thread_prog;  /* this thread's program (thread_begin; read by on_fault) */
+static void handlers_take(void);
+static void handlers_give(void);
+
+/* The program at `base`'s running threads, changed by `delta`; the count after. Its last thread
+ * ending after its library was kept gives the handlers kept for it back. */
+static int thread_progs_count(void *base, int delta) {
+    if (base == NULL) return 0;
+    int live = 0, give = 0, free_at = -1;
+    pthread_mutex_lock(&thread_progs_lock);
+    for (int i = 0; i < MAX_THREAD_PROGS; i++) {
+        if (thread_progs[i].base == base) {
+            live = thread_progs[i].live += delta;
+            if (live <= 0) {
+                give = thread_progs[i].kept;
+                thread_progs[i].base = NULL, thread_progs[i].live = thread_progs[i].kept = 0;
+            }
+            free_at = -2;
+            break;
+        }
+        if (free_at == -1 && thread_progs[i].base == NULL) free_at = i;
+    }
+    if (free_at >= 0 && delta > 0) thread_progs[free_at].base = base, thread_progs[free_at].live = live = delta;
+    pthread_mutex_unlock(&thread_progs_lock);
+    if (give) handlers_give();
+    return live;
+}
+
+static void *caller_base(void *ra) {
+    Dl_info info;
+    return ra != NULL && dladdr(ra, &info) ? info.dli_fbase : NULL;
+}
+#else
+static int thread_progs_count(void *base, int delta) { (void)base, (void)delta; return 0; }
+static void *caller_base(void *ra) { (void)ra; return NULL; }
+#endif
+
+static void thread_end(void *p) {
+    struct thread_own *own = p;
+    if (own->mem != NULL) {
+        stack_t off = {.ss_sp = NULL, .ss_size = 0, .ss_flags = SS_DISABLE};
+        sigaltstack(&off, NULL);
+        munmap(own->mem, ALT_STACK_BYTES);
+    }
+    thread_progs_count(own->prog, -1);
 }
 
 static void *thread_begin(void *p) {
     struct thread_start start = *(struct thread_start *)p;
     free(p);
-    void *mem = mmap(NULL, ALT_STACK_BYTES, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-    if (mem == MAP_FAILED) return start.fn(start.arg);  /* (runs unguarded, as before) */
-    stack_t ss = {.ss_sp = mem, .ss_size = ALT_STACK_BYTES, .ss_flags = 0};
-    sigaltstack(&ss, NULL);
+#ifdef SPINNER_INPROC
+    thread_prog = start.prog;
+#endif
+    struct thread_own own = {mmap(NULL, ALT_STACK_BYTES, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0),
+                             start.prog};
+    if (own.mem == MAP_FAILED) {
+        own.mem = NULL;  /* (runs unguarded, as before) */
+    } else {
+        stack_t ss = {.ss_sp = own.mem, .ss_size = ALT_STACK_BYTES, .ss_flags = 0};
+        sigaltstack(&ss, NULL);
+    }
     void *ret;
-    pthread_cleanup_push(alt_stack_off, mem);
+    pthread_cleanup_push(thread_end, &own);
     ret = start.fn(start.arg);
     pthread_cleanup_pop(1);
     return ret;
@@ -1841,26 +1908,32 @@ static create_fn real_pthread_create(void) {
 #endif
 }
 
-static int thread_spawn(pthread_t *thread, const pthread_attr_t *attr, void *(*fn)(void *), void *arg) {
+/* `prog`: the load address of the program's library starting it (counted: thread_progs_count). */
+static int thread_spawn(pthread_t *thread, const pthread_attr_t *attr, void *(*fn)(void *), void *arg,
+                        void *prog) {
     create_fn create = real_pthread_create();
     if (create == NULL) return EAGAIN;
     struct thread_start *start = malloc(sizeof *start);
     if (start == NULL) return create(thread, attr, fn, arg);
-    start->fn = fn, start->arg = arg;
+    start->fn = fn, start->arg = arg, start->prog = prog;
+    thread_progs_count(prog, 1);  /* (before it runs: it may end first) */
     int err = create(thread, attr, thread_begin, start);
-    if (err != 0) free(start);
+    if (err != 0) {
+        thread_progs_count(prog, -1);
+        free(start);
+    }
     return err;
 }
 
 /* The program's __wrap_pthread_create's (host/thread_start.c, linked into it). */
 int spinner_thread_create(pthread_t *thread, const pthread_attr_t *attr, void *(*fn)(void *), void *arg) {
-    return thread_spawn(thread, attr, fn, arg);
+    return thread_spawn(thread, attr, fn, arg, caller_base(__builtin_return_address(0)));
 }
 
 #ifndef SPINNER_INPROC
 int pthread_create(pthread_t *restrict thread, const pthread_attr_t *restrict attr, void *(*fn)(void *),
                    void *restrict arg) {
-    return thread_spawn(thread, attr, fn, arg);
+    return thread_spawn(thread, attr, fn, arg, NULL);
 }
 #endif
 
@@ -1880,7 +1953,8 @@ static void *std_thread_run(void *state) {
 /* `self`: the std::thread (its id, a pthread_t, first); `state`: the unique_ptr<_State> passed by
  * reference (its owner, the caller, destroys it: released here once the thread owns the state). */
 void STD_THREAD_WRAP(STD_THREAD_START)(void *self, void **state, void (*depend)(void)) {
-    if (*state != NULL && thread_spawn((pthread_t *)self, NULL, std_thread_run, *state) == 0) {
+    if (*state != NULL &&
+        thread_spawn((pthread_t *)self, NULL, std_thread_run, *state, caller_base(__builtin_return_address(0))) == 0) {
         *state = NULL;
         return;
     }
@@ -2070,6 +2144,42 @@ static void thread_report_out(int sig, void *pc, const char *message) {
         ssize_t w = write(2, line, (size_t)k < sizeof line ? (size_t)k : sizeof line - 1);
         (void)w;
     }
+}
+
+/* A thread a program started (thread_begin) that is not the run's program's: an earlier run's,
+ * left running (its library kept: thread_progs). */
+static int stray_thread(void) {
+    void *prog = thread_prog;
+    return prog != NULL && !(__atomic_load_n(&run_active, __ATOMIC_ACQUIRE) && prog == prog_base);
+}
+
+/* Its fault: reported as thread_fault's, with a "stray" line first (the library named is its
+ * program's, not the run's: simrunner.run.postmortem says so), to the run's report file if a run is
+ * on, else a line on stderr; then the process dies by the signal. */
+static void stray_fault(int sig, siginfo_t *info, void *pc, const char *message) {
+    if (__atomic_exchange_n(&thread_faulted, 1, __ATOMIC_ACQ_REL))
+        for (;;) pause();  /* another thread's fault is being reported: the process ends with it */
+    Dl_info lib;
+    const char *path = dladdr(thread_prog, &lib) && lib.dli_fname ? lib.dli_fname : NULL;
+    build_report_frames(&thread_report, sig, message, pc, NULL, 0, 1);
+    if (run_fd >= 0) {
+        report_record(run_fd, "thread-fault", path, "stray\n", &thread_report);
+    } else {
+        char where[1024], line[1536];
+        lib_where(where, sizeof where, path, pc);
+        int k = snprintf(line, sizeof line,
+                         "simrunner: %s%s%s, in a thread a C/C++ program started and left running after its run in "
+                         "the simulator's process (its library was kept loaded for it): the process ends (join "
+                         "the program's threads before main() returns; --isolate runs the program in a process "
+                         "of its own)\n", signal_name(sig),
+                         strncmp(message, "stack overflow", 14) == 0 ? " (stack overflow)" : "", where);
+        if (k > 0) {
+            ssize_t w = write(2, line, (size_t)k < sizeof line ? (size_t)k : sizeof line - 1);
+            (void)w;
+        }
+    }
+    signal(sig, SIG_DFL);
+    if (info->si_code <= 0) raise(sig);
 }
 
 /* A call that does not return in a constructor of a library being loaded here (spinner_inproc_open,
@@ -2383,10 +2493,39 @@ const char *spinner_inproc_error(void) {
  * unloaded code (a crash of the simulator's process). */
 static void drop_exit_handlers_of(void *lib) { retag_exit_handlers(lib, NULL); }
 
+/* The library's load address (the threads' key: thread_progs). */
+static void *lib_base(void *lib) {
+    struct link_map *lm = NULL;
+    return lib != NULL && dlinfo(lib, RTLD_DI_LINKMAP, &lm) == 0 && lm != NULL ? (void *)lm->l_addr : NULL;
+}
+
+/* How many threads `lib`'s program started (thread_begin) are running now. */
+int spinner_inproc_threads(void *lib) {
+    void *base = lib_base(lib);
+    int live = 0;
+    pthread_mutex_lock(&thread_progs_lock);
+    for (int i = 0; i < MAX_THREAD_PROGS && base != NULL; i++)
+        if (thread_progs[i].base == base) live = thread_progs[i].live;
+    pthread_mutex_unlock(&thread_progs_lock);
+    return live;
+}
+
+/* Unload `lib`: 0 (dlclose's -1 if it failed), or the number of its program's threads still
+ * running, for which it stays loaded (their code must stay mapped) with our signal handlers
+ * installed (their faults are named: stray_fault), both until the last of them ends (it gives the
+ * handlers back; the library stays). */
 int spinner_inproc_close(void *lib) {
     set_early(lib, 0);
     drop_exit_handlers_of(lib);
-    return dlclose(lib);
+    void *base = lib_base(lib);
+    int live = 0, take = 0;
+    pthread_mutex_lock(&thread_progs_lock);
+    for (int i = 0; i < MAX_THREAD_PROGS && base != NULL; i++)
+        if (thread_progs[i].base == base && (live = thread_progs[i].live) > 0 && !thread_progs[i].kept)
+            thread_progs[i].kept = take = 1;
+    if (take) handlers_take();  /* (under the lock: its last thread gives them back after this) */
+    pthread_mutex_unlock(&thread_progs_lock);
+    return live > 0 ? live : dlclose(lib);
 }
 
 /* Where the simulator reads the requests (spinner_inproc_resume says how many bytes). */
