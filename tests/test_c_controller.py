@@ -493,6 +493,42 @@ def test_a_prebuilt_shared_library_runs(tmp_path, track, capfd):
     assert r.outcome == "controller_returned" and "bytes 16384" in capfd.readouterr().out
 
 
+
+PREBUILT_EXIT_C = """\
+#include <stdlib.h>
+#include "spinner.h"
+static int frames;
+void tick(void) {
+    if (++frames == 10) EXIT(3);                         /* line 5 */
+}
+int main(void) {
+    for (;;) { spinner_set_speed(0.5f); spinner_sleep(0.01f); tick(); }
+}
+"""
+
+
+@pytest.mark.parametrize("call", ["exit", "_exit"])
+@pytest.mark.parametrize("build", ["-g", "no -g", "stripped"])
+def test_a_prebuilt_librarys_exit_says_where_it_can(tmp_path, monkeypatch, call, build):
+    """exit(3) in a prebuilt library (not linked by simrunner: its exit was libc's, unnoted) said
+    only 'pre: the controller exited with status 3', even with debug information. Now the host
+    program's own exit notes the call: its file:line with -g; without, the function and offset from
+    the symbol table and what to do for a line, in the same message."""
+    monkeypatch.chdir(tmp_path)
+    src = write(tmp_path, "pre.c", PREBUILT_EXIT_C)
+    lib = tmp_path / "pre.so"
+    subprocess.run(["cc", "-shared", "-fPIC", "-O0", *(["-g"] if build == "-g" else []), f"-DEXIT={call}",
+                    cflags(), str(src), "-o", str(lib)], check=True)
+    if build == "stripped":
+        subprocess.run(["strip", str(lib)], check=True)
+    r = drive(build_program([str(lib)]), track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_error"
+    if build == "-g":
+        assert r.message == f"the controller called {call}(3) at pre.c:5", r.message
+    else:
+        assert re.fullmatch(rf"the controller called {call}\(3\) at pre\.so\+0x[0-9a-f]+ \(in tick\(\); no debug "
+                            r"information in pre\.so: build it with -g for its file:line\)", r.message), r.message
+
 # -- faults -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("fault, outcome, line, words", [
     (1, "controller_error", 9, "SIGSEGV"),

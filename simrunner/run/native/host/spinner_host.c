@@ -52,6 +52,7 @@
 #include <sys/wait.h>
 #include <link.h>
 #include <sys/mman.h>
+#include <sys/syscall.h>
 #ifdef SPINNER_INPROC
 #include <sys/resource.h>
 #endif
@@ -1270,6 +1271,9 @@ int __wrap_clock_nanosleep(clockid_t clock, int flags, const struct timespec *re
  * (uint64) and the module's path. Not from a process the program forked, nor after the run. */
 static void exit_note(uint8_t fn, int status, void *ra) {
     if (forked) return;
+    Dl_info host, caller;  /* the host's own end (main returned: exit(0); a report's _exit) is no call of the program's */
+    if (ra != NULL && dladdr((void *)exit_note, &host) && dladdr(ra, &caller) && host.dli_fbase == caller.dli_fbase)
+        return;
 #ifdef SPINNER_INPROC
     /* (finished is set while the program's exit handlers run too: an exit there, an atexit
      * handler's or a static destructor's, is the status the program ends with, as it is
@@ -1286,8 +1290,6 @@ static void exit_note(uint8_t fn, int status, void *ra) {
     const char *path = "";
     Dl_info info;
     if (ra != NULL && dladdr(ra, &info) && info.dli_fname != NULL) {
-        Dl_info here;  /* the host's own end (main returned: exit(0)) is no call of the program's */
-        if (dladdr((void *)exit_note, &here) && here.dli_fbase == info.dli_fbase) return;
         off = (uint64_t)((uintptr_t)ra - (uintptr_t)info.dli_fbase);
         path = info.dli_fname;
     }
@@ -1312,12 +1314,28 @@ int clock_nanosleep(clockid_t clock, int flags, const struct timespec *req, stru
 }
 
 /* exit and friends end the host process as they would end the program; its exit handlers are
- * the process's own (atexit, static destructors: glibc runs them). */
+ * the process's own (atexit, static destructors: glibc runs them). A prebuilt library's calls (not
+ * linked with --wrap) come to the host program's own exit, _exit, _Exit and quick_exit (exported,
+ * first in the lookup), which note the call as the --wrap ones do (its place: a file:line with
+ * debug info, else the function, simrunner's symbolize) and go on to libc's (LIBC_EXIT). The host's
+ * own calls are no program's: exit_note leaves them out. */
+#define LIBC_EXIT(name, status)                                         \
+    do {                                                                \
+        static void (*real)(int);                                       \
+        if (real == NULL) real = (void (*)(int))dlsym(RTLD_NEXT, name); \
+        if (real != NULL) real(status);                                 \
+        syscall(SYS_exit_group, status); /* (no libc's: not reached) */ \
+        __builtin_unreachable();                                        \
+    } while (0)
 static void ended(void) { exit(0); }
-void __wrap_exit(int status) { EXIT_NOTE(0, status); exit(status); }
-void __wrap__exit(int status) { EXIT_NOTE(1, status); _exit(status); }
-void __wrap__Exit(int status) { EXIT_NOTE(2, status); _Exit(status); }
-void __wrap_quick_exit(int status) { EXIT_NOTE(3, status); quick_exit(status); }
+void __wrap_exit(int status) { EXIT_NOTE(0, status); LIBC_EXIT("exit", status); }
+void __wrap__exit(int status) { EXIT_NOTE(1, status); LIBC_EXIT("_exit", status); }
+void __wrap__Exit(int status) { EXIT_NOTE(2, status); LIBC_EXIT("_Exit", status); }
+void __wrap_quick_exit(int status) { EXIT_NOTE(3, status); LIBC_EXIT("quick_exit", status); }
+void exit(int status) { EXIT_NOTE(0, status); LIBC_EXIT("exit", status); }
+void _exit(int status) { EXIT_NOTE(1, status); LIBC_EXIT("_exit", status); }
+void _Exit(int status) { EXIT_NOTE(2, status); LIBC_EXIT("_Exit", status); }
+void quick_exit(int status) { EXIT_NOTE(3, status); LIBC_EXIT("quick_exit", status); }
 int __wrap_atexit(void (*fn)(void)) { return atexit(fn); }
 int __cxa_atexit(void (*fn)(void *), void *arg, void *dso);
 int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) { return __cxa_atexit(fn, arg, dso); }
