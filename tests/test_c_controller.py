@@ -1817,6 +1817,26 @@ def test_an_end_in_a_constructor_at_the_load_is_the_runs_outcome_as_isolated(tmp
     assert json.loads((tmp_path / "i.json").read_text())["message"] == said, isolated_run.stdout
 
 
+def test_a_run_ended_in_a_constructor_says_it_wrote_no_video_and_no_earlier_runs_log(tmp_path):
+    """exit(3) in a C constructor as the library loads in the simulator's process, with --video,
+    --csv and --summary, where an earlier run wrote its CSV: the run said nothing of the video asked
+    for (none was written: no frame), and the earlier run's CSV, untouched, was read as this run's
+    log (its frames, its simulated time in the summary; 'wrote: c.csv'). Now it says there is no
+    video and why, and the CSV is this run's: its header only."""
+    write(tmp_path, "plain.c", '#include "spinner.h"\nint main(void) { spinner_sleep(0.1); return 0; }\n')
+    write(tmp_path, "exit3.c", C_CTOR_ENDS["exit3.c"][0])
+    assert _cli_drive(tmp_path, "plain.c", "--csv", "c.csv").returncode == 0
+    assert len(read_log(tmp_path / "c.csv")) > 0
+    done = _cli_drive(tmp_path, "exit3.c", "--video", "v.mp4", "--csv", "c.csv", "--summary", "s.json")
+    assert done.returncode == 1, (done.stdout, done.stderr[-2000:])
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert "warning: no video: the run ended before its first camera frame\n" in done.stderr, done.stderr[-2000:]
+    assert summary["warnings"] == ["no video: the run ended before its first camera frame"]
+    assert "wrote: c.csv, s.json\n" in done.stdout, done.stdout
+    assert not (tmp_path / "v.mp4").exists() and not (tmp_path / "v.partial.mp4").exists()
+    assert summary["frames"] == 0 and summary["sim_time_s"] == 0.0
+    assert len(read_log(tmp_path / "c.csv")) == 0
+
 @pytest.mark.parametrize("name, said", [
     ("fail.c", 'the controller called spinner_fail("no calibration table") at '),
     ("misuse.c", "a misused Spinner call (spinner_every(period_s=-1): expected at least 1e-05 s (a 100 kHz timer)) "
