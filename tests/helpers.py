@@ -128,6 +128,45 @@ int main(void) {
 """
 
 
+# A thread the program started recurses without end: its stack overflows (the recursing
+# function's line: 5 as the fault is named, its first line 4 for the frames' own)
+C_THREAD_OVERFLOW = r"""#include <pthread.h>
+#include "spinner.h"
+static volatile int depth;
+static int recurse(int n) {
+    volatile char pad[256]; pad[0] = (char)n; depth++;  /* line 5 */
+    return recurse(n + 1) + pad[0];
+}
+static void *worker(void *arg) { return (void *)(long)recurse(0); }
+int main(void) {
+    static uint8_t row[4096];
+    pthread_t t;
+    for (int frame = 0;; frame++) {
+        spinner_get_image(spinner_line_row(), 0, row, sizeof row);
+        spinner_set_speed(0.5);
+        if (frame == 20) pthread_create(&t, NULL, worker, NULL);
+    }
+}
+"""
+
+# The same from a std::thread (line 5 too)
+CXX_THREAD_OVERFLOW = r"""#include <thread>
+#include "spinner.h"
+static volatile int depth;
+static int recurse(int n) {
+    volatile char pad[256]; pad[0] = (char)n; depth++;  /* line 5 */
+    return recurse(n + 1) + pad[0];
+}
+int main() {
+    static uint8_t row[4096];
+    for (int frame = 0;; frame++) {
+        spinner_get_image(spinner_line_row(), 0, row, sizeof row);
+        spinner_set_speed(0.5);
+        if (frame == 20) std::thread([] { recurse(0); }).detach();
+    }
+}
+"""
+
 # C/C++ programs that end in a constructor (line 4) as their library is loaded, before the run:
 # name -> (source, the run's outcome, its message up to the ", in a constructor ..." drive adds
 # in process; isolated the message is just that)

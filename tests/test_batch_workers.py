@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from helpers import C_CTOR_ENDS, C_CTOR_FAULT, C_THREAD_FAULT, STUCK
+from helpers import C_CTOR_ENDS, C_CTOR_FAULT, C_THREAD_FAULT, C_THREAD_OVERFLOW, STUCK
 
 from simrunner.workflows.batch import deterministic, run_batch
 from simrunner.workflows.batch.pool import LocalBackend, choose_start_method
@@ -252,6 +252,22 @@ def test_a_fault_in_a_c_programs_thread_names_its_line_as_drive_does(tmp_path, m
                                      "own (not main()'s): it killed the run's process"), row["message"]
     assert row["frames"] >= 20 and row["sim_time_s"] > 0.0
 
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_a_stack_overflow_in_a_c_programs_thread_names_its_line_as_drive_does(tmp_path, monkeypatch):
+    """A thread the program started recurses without end, in the worker's process: the thread had no
+    alternate signal stack, and the row said 'the run's process was killed by SIGSEGV at t = ...';
+    now drive's: the recursing function's line, 'stack overflow', a thread of the program's."""
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)
+    ctl = tmp_path / "t.c"
+    ctl.write_text(C_THREAD_OVERFLOW)
+    res = run_batch(ctl, out_dir=tmp_path / "out", seeds=1, workers=1, plot=False, csv="all")
+    row, = res.rows
+    assert row["outcome"] == "controller_error", row
+    assert row["message"].startswith("t.c:5: SIGSEGV: stack overflow (in recurse()), in a thread of the program's "
+                                     "own (not main()'s): it killed the run's process"), row["message"]
+    assert row["frames"] >= 20 and row["sim_time_s"] > 0.0
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
 @pytest.mark.parametrize("name", ["exit0.c", "exit3.c", "misuse.c"])

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from helpers import C_CTOR_ENDS, C_CTOR_FAULT, C_THREAD_FAULT
+from helpers import C_CTOR_ENDS, C_CTOR_FAULT, C_THREAD_FAULT, C_THREAD_OVERFLOW, CXX_THREAD_OVERFLOW
 
 from simrunner.cli import main as cli
 from simrunner.errors import ControllerFileError
@@ -492,6 +492,42 @@ def test_a_prebuilt_shared_library_runs(tmp_path, track, capfd):
     r = drive(lib, track=track)
     assert r.outcome == "controller_returned" and "bytes 16384" in capfd.readouterr().out
 
+
+
+PREBUILT_EXIT_C = """\
+#include <stdlib.h>
+#include "spinner.h"
+static int frames;
+void tick(void) {
+    if (++frames == 10) EXIT(3);                         /* line 5 */
+}
+int main(void) {
+    for (;;) { spinner_set_speed(0.5f); spinner_sleep(0.01f); tick(); }
+}
+"""
+
+
+@pytest.mark.parametrize("call", ["exit", "_exit"])
+@pytest.mark.parametrize("build", ["-g", "no -g", "stripped"])
+def test_a_prebuilt_librarys_exit_says_where_it_can(tmp_path, monkeypatch, call, build):
+    """exit(3) in a prebuilt library (not linked by simrunner: its exit was libc's, unnoted) said
+    only 'pre: the controller exited with status 3', even with debug information. Now the host
+    program's own exit notes the call: its file:line with -g; without, the function and offset from
+    the symbol table and what to do for a line, in the same message."""
+    monkeypatch.chdir(tmp_path)
+    src = write(tmp_path, "pre.c", PREBUILT_EXIT_C)
+    lib = tmp_path / "pre.so"
+    subprocess.run(["cc", "-shared", "-fPIC", "-O0", *(["-g"] if build == "-g" else []), f"-DEXIT={call}",
+                    cflags(), str(src), "-o", str(lib)], check=True)
+    if build == "stripped":
+        subprocess.run(["strip", str(lib)], check=True)
+    r = drive(build_program([str(lib)]), track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_error"
+    if build == "-g":
+        assert r.message == f"the controller called {call}(3) at pre.c:5", r.message
+    else:
+        assert re.fullmatch(rf"the controller called {call}\(3\) at pre\.so\+0x[0-9a-f]+ \(in tick\(\); no debug "
+                            r"information in pre\.so: build it with -g for its file:line\)", r.message), r.message
 
 # -- faults -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("fault, outcome, line, words", [
@@ -1519,6 +1555,154 @@ def test_a_fault_in_a_thread_of_the_programs_own_names_the_threads_line(tmp_path
     assert "libc" not in done.stderr  # (the thread's start cut, as the host's below main() is)
 
 
+
+@pytest.mark.parametrize("isolate", [False, True], ids=["in-process", "isolate"])
+@pytest.mark.parametrize("name, body, function", [("t.c", C_THREAD_OVERFLOW, "recurse()"),
+                                                  ("t.cpp", CXX_THREAD_OVERFLOW, "recurse(int)")])
+def test_a_stack_overflow_in_a_thread_of_the_programs_own_names_the_threads_line(tmp_path, isolate, name, body,
+                                                                                function):
+    """A thread the program started (pthread_create, std::thread) recurses without end. Its thread
+    had no alternate signal stack, so the handler could not run on the overflowed stack: drive said
+    only 'the run's process was killed by SIGSEGV at t = ...' (in process) or 't: the controller was
+    killed by SIGSEGV' (isolated), no line. Now each thread the program starts gets one (the host's
+    thread start): the overflow is named at the recursing function's line as a fault of the thread's,
+    'stack overflow' as main()'s is, with the rows up to it kept."""
+    write(tmp_path, name, body)
+    done = _cli_drive(tmp_path, name, "--summary", "s.json", "--csv", "c.csv", *(["--isolate"] if isolate else []))
+    assert done.returncode == 1, (done.stdout, done.stderr[-2000:])
+    summary = json.loads((tmp_path / "s.json").read_text())
+    said = f"{name}:5: SIGSEGV: stack overflow (in {function}), in a thread of the program's own (not main()'s)"
+    assert summary["outcome"] == "controller_error"
+    assert summary["message"] == (said if isolate else f"{said}: it killed the run's process (the program runs in "
+                                  "the simulator's process, where a fault of its threads cannot be caught; --isolate "
+                                  "runs the program in a process of its own); the outputs were written from the run "
+                                  "log")
+    assert summary["frames"] >= 20 and len(read_log(tmp_path / "c.csv")) == summary["frames"]
+    assert f"stack overflow (the thread's stack), in a thread of the program's own (not main()'s)\nC backtrace " \
+           f"(innermost first):\n  #0 {function.replace('()', '')} at {name}:5\n" in done.stderr, done.stderr[-2000:]
+
+
+def test_a_stack_overflow_in_a_prebuilt_librarys_thread_names_its_line(tmp_path):
+    """The same in a prebuilt library (run isolated, not linked by simrunner): its pthread_create is
+    the host program's, which gives the thread its alternate signal stack too."""
+    src = write(tmp_path, "t.c", C_THREAD_OVERFLOW)
+    lib = tmp_path / "libt.so"
+    subprocess.run(["cc", "-shared", "-fPIC", "-g", "-O0", cflags(), str(src), "-o", str(lib)], check=True,
+                   capture_output=True)
+    r = drive(build_program([str(lib)]), track="floor", time_limit_s=5.0)
+    assert r.outcome == "controller_error"  # (-O0: in the function's prologue, its line 4, or its body's)
+    assert re.fullmatch(rf"{re.escape(str(src))}:[45]: SIGSEGV: stack overflow \(in recurse\(\)\), in a thread of "
+                        r"the program's own \(not main\(\)'s\)", r.message), r.message
+
+
+def test_the_programs_threads_still_run_join_and_return_their_values(tmp_path, track, capfd):
+    """The host's thread start (the alternate signal stack) changes nothing else: a pthread's return
+    value reaches pthread_join, a std::thread's lambda runs and joins, pthread_exit's value too."""
+    c = write(tmp_path, "j.c", """\
+        #include <pthread.h>
+        #include <stdio.h>
+        #include "spinner.h"
+        static void *twice(void *arg) { return (void *)(2 * (long)arg); }
+        static void *leaves(void *arg) { pthread_exit((void *)(3 * (long)arg)); }
+        int main(void) {
+            pthread_t a, b;
+            void *ra, *rb;
+            pthread_create(&a, NULL, twice, (void *)21L);
+            pthread_create(&b, NULL, leaves, (void *)5L);
+            pthread_join(a, &ra);
+            pthread_join(b, &rb);
+            printf("joined %ld %ld\\n", (long)ra, (long)rb);
+            spinner_sleep(0.05);
+            return 0;
+        }
+        """)
+    cxx = write(tmp_path, "j.cpp", """\
+        #include <cstdio>
+        #include <thread>
+        #include "spinner.h"
+        int main() {
+            int x = 0;
+            std::thread t([&x] { x = 42; });
+            t.join();
+            std::printf("joined %d\\n", x);
+            spinner_sleep(0.05);
+            return 0;
+        }
+        """)
+    for src, said in ((c, "joined 42 15\n"), (cxx, "joined 42\n")):
+        for isolate in (False, True):
+            r = drive(dataclasses.replace(build_program([src]), isolate=isolate), track=track, time_limit_s=1.0)
+            assert r.outcome == "controller_returned", r.message
+            assert capfd.readouterr().out.endswith(said)
+
+
+LEFT_RUNNING_C = """\
+#include <poll.h>
+#include <pthread.h>
+#include "spinner.h"
+static int *volatile nowhere;
+static void *worker(void *arg) {
+    poll(NULL, 0, 1500);                                 /* (after the run) */
+    if (arg) *nowhere = 1;                               /* line 7 */
+    return arg;
+}
+int main(void) {
+    pthread_t t;
+    pthread_create(&t, NULL, worker, (void *)(long)FAULTS);
+    for (int k = 0; k < 5; k++) spinner_sleep(0.01);
+    return 0;
+}
+"""
+
+
+@pytest.mark.parametrize("faults", [0, 1], ids=["returns", "faults"])
+def test_a_thread_left_running_after_an_in_process_run_keeps_its_library_loaded(tmp_path, faults):
+    """A program's main() returns while a thread it started still runs (it waits 1.5 s). Its library
+    was unloaded after the run: the thread went on in unmapped code and killed the process a second
+    later, in the next program's run (a batch worker's, a test process's), unreported (-11, nothing
+    said), even a thread that would only have returned. Now the library stays loaded while its
+    threads run (the run warns once): a thread that returns harms nothing, and one that faults is
+    named as the program's thread left running (one line on stderr, no supervisor here)."""
+    src = write(tmp_path, "left.c", LEFT_RUNNING_C)
+    plain = write(tmp_path, "plain.c", '#include "spinner.h"\nint main(void) { spinner_sleep(0.1); return 0; }\n')
+    code = textwrap.dedent(f"""\
+        import time
+        from simrunner.run.native import build_program
+        from simrunner.run.runner import drive
+        r = drive(build_program([{str(src)!r}], defines=["FAULTS={faults}"]), track="floor", time_limit_s=1.0)
+        print("first", r.outcome, r.warnings, flush=True)
+        time.sleep(3.0)  # (the thread's wait is over)
+        r = drive(build_program([{str(plain)!r}]), track="floor", time_limit_s=1.0)
+        print("second", r.outcome, flush=True)
+        """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    first = out.stdout.splitlines()[0] if out.stdout else ""
+    assert first.startswith("first controller_returned ['the C/C++ program left 1 thread running (not waited "
+                            "for): its library stays loaded in this process while they run"), (out.returncode,
+                                                                                                 out.stdout,
+                                                                                                 out.stderr[-2000:])
+    if not faults:
+        assert out.returncode == 0 and "second controller_returned" in out.stdout, (out.returncode, out.stderr[-2000:])
+        return
+    assert out.returncode == -11, (out.returncode, out.stdout, out.stderr[-2000:])
+    line, = [t for t in out.stderr.splitlines() if t.startswith("simrunner:")]
+    assert re.match(r"simrunner: SIGSEGV at \S+\.so\+0x[0-9a-f]+, in a thread a C/C\+\+ program started and left "
+                    r"running after its run in the simulator's process \(its library was kept loaded for it\): the "
+                    r"process ends", line), line
+
+
+def test_a_fault_of_a_thread_an_earlier_run_left_running_is_named_so():
+    """Its report to a later run's supervisor (a batch worker's next run): named at its line, as an
+    earlier run's thread that killed this run's process, not as this run's program's."""
+    from simrunner.run.postmortem import thread_fault
+
+    report = ("thread-fault /nowhere/left.so\nhost /nowhere/host.so\nstray\nsignal 11\nmessage \n"
+              "thread program\n")
+    error = thread_fault(report, "plain.c")
+    assert str(error).startswith("SIGSEGV: segmentation fault, in a thread of the program's own (not main()'s): a "
+                                 "thread an earlier run's program in this process left running (not waited for), "
+                                 "which killed this run's process"), str(error)
+
 RACING_THREADS_C = """\
 #include <pthread.h>
 #include <string.h>
@@ -1632,6 +1816,26 @@ def test_an_end_in_a_constructor_at_the_load_is_the_runs_outcome_as_isolated(tmp
     assert isolated_run.returncode == done.returncode
     assert json.loads((tmp_path / "i.json").read_text())["message"] == said, isolated_run.stdout
 
+
+def test_a_run_ended_in_a_constructor_says_it_wrote_no_video_and_no_earlier_runs_log(tmp_path):
+    """exit(3) in a C constructor as the library loads in the simulator's process, with --video,
+    --csv and --summary, where an earlier run wrote its CSV: the run said nothing of the video asked
+    for (none was written: no frame), and the earlier run's CSV, untouched, was read as this run's
+    log (its frames, its simulated time in the summary; 'wrote: c.csv'). Now it says there is no
+    video and why, and the CSV is this run's: its header only."""
+    write(tmp_path, "plain.c", '#include "spinner.h"\nint main(void) { spinner_sleep(0.1); return 0; }\n')
+    write(tmp_path, "exit3.c", C_CTOR_ENDS["exit3.c"][0])
+    assert _cli_drive(tmp_path, "plain.c", "--csv", "c.csv").returncode == 0
+    assert len(read_log(tmp_path / "c.csv")) > 0
+    done = _cli_drive(tmp_path, "exit3.c", "--video", "v.mp4", "--csv", "c.csv", "--summary", "s.json")
+    assert done.returncode == 1, (done.stdout, done.stderr[-2000:])
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert "warning: no video: the run ended before its first camera frame\n" in done.stderr, done.stderr[-2000:]
+    assert summary["warnings"] == ["no video: the run ended before its first camera frame"]
+    assert "wrote: c.csv, s.json\n" in done.stdout, done.stdout
+    assert not (tmp_path / "v.mp4").exists() and not (tmp_path / "v.partial.mp4").exists()
+    assert summary["frames"] == 0 and summary["sim_time_s"] == 0.0
+    assert len(read_log(tmp_path / "c.csv")) == 0
 
 @pytest.mark.parametrize("name, said", [
     ("fail.c", 'the controller called spinner_fail("no calibration table") at '),

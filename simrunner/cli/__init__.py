@@ -432,6 +432,7 @@ def _supervised(run, controller: str, *, csv, video, plot, summary, track, car, 
         from simrunner.run.postmortem import StuckRun, finish_dead_run, finish_load_ended_run, finish_stuck_run, \
             stuck_stack
 
+        end.stale_log_removed()  # (an earlier run's CSV where this run's would have been)
         stuck = StuckRun(controller=controller, outputs=Outputs(video=video, csv=csv, plot=plot,
                                                                 summary=summary, video_fps=video_fps),
                          track=track, car=car, laps=laps, seed=seed, wall_limit_s=wall_limit_s)

@@ -22,6 +22,12 @@ class Outputs:
     video_fps: float | None = None  # the video's highest frame rate (None: VideoRecorder's default)
 
 
+NO_VIDEO = "no video: the run ended before its first camera frame"
+"""The run's warning when a video was asked for and the run recorded no frame (a C/C++ program's
+fault or exit in a constructor as its library loaded into the simulator's process): the CSV is
+still written (its header), the video is not."""
+
+
 def write_outputs(result, outputs: Outputs, video, track, *, csv_stream=None) -> None:
     """Write what a run's ``result`` (a :class:`simrunner.run.result.RunResult`) asks for. Close the video (``video``: the run's VideoRecorder or None) and the CSV
     (``csv_stream``: the run's :class:`~simrunner.telemetry.stream.CsvStream`, else ``result.log``
@@ -33,6 +39,8 @@ def write_outputs(result, outputs: Outputs, video, track, *, csv_stream=None) ->
             p = video.close()
             if p is not None:  # (named as given: the recorder may hold it absolute)
                 result.outputs["video"] = str(p if outputs.video is None else outputs.video)
+            else:  # (an .mp4 holds at least one frame: none is written, and the run says so)
+                result.warnings.append(NO_VIDEO)
         except SimError as exc:
             errors.append(exc)
     if csv_stream is not None:  # (without outputs.csv: a supervisor's copy, not an output)

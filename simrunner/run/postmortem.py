@@ -123,9 +123,15 @@ def thread_fault(report: str, controller: str) -> ControllerError | None:
     thread's file:line and function ('t.c:5: SIGSEGV: segmentation fault (in worker()), in a thread
     of the program's own (not main()'s): it killed the run's process (...)'), with the C backtrace;
     None when ``report`` holds no such report."""
-    from simrunner.run.native.symbolize import thread_fault_report
+    from simrunner.run.native.symbolize import STRAY, thread_fault_report
 
-    return _described(thread_fault_report(report), controller, ": it killed the run's process (the program runs "
+    found = thread_fault_report(report)
+    if found is not None and found[2].startswith(STRAY):  # a thread an earlier run's program left running
+        return _described((found[0], found[1], found[2][len(STRAY):]), controller, ": a thread an earlier run's "
+                          "program in this process left running (not waited for), which killed this run's process "
+                          "(join the program's threads before main() returns; --isolate runs the program in a "
+                          "process of its own)")
+    return _described(found, controller, ": it killed the run's process (the program runs "
                       "in the simulator's process, where a fault of its threads cannot be caught; --isolate runs "
                       "the program in a process of its own)")
 

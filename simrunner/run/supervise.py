@@ -80,6 +80,14 @@ class ChildEnd:
     wall_time_s: float
     cpu_time_s: float
     signal: int | None = None  # the signal that killed the child (not a handled end)
+    csv_untouched: bool = False  # csv_path is the file that was there before the run, as it was
+
+    def stale_log_removed(self) -> None:
+        """Remove ``csv_path`` if the child never wrote it (:attr:`csv_untouched`: an earlier run's
+        log, which this run's was to replace - it ended before its first row); the outputs written
+        from the run log then have its header only, not that run's rows."""
+        if self.csv_untouched:
+            self.csv_path.unlink(missing_ok=True)
 
     @property
     def stuck(self) -> bool:
@@ -107,6 +115,7 @@ def supervise(child: Callable[[], int], csv_path: str | Path | None) -> ChildEnd
         csv = private_temp_dir("run") / "run.csv"
     else:
         csv = Path(csv_path)
+    before = _file_state(csv)
     report = tempfile.TemporaryFile("w+", errors="replace")  # no name: nothing left behind
     sys.stdout.flush()
     sys.stderr.flush()
@@ -130,7 +139,17 @@ def supervise(child: Callable[[], int], csv_path: str | Path | None) -> ChildEnd
         text = report.read()
     return ChildEnd(code=128 - code if code < 0 else code, report=text, csv_path=csv,
                     wall_time_s=time.monotonic() - wall0,
-                    cpu_time_s=usage.ru_utime + usage.ru_stime, signal=-code if code < 0 else None)
+                    cpu_time_s=usage.ru_utime + usage.ru_stime, signal=-code if code < 0 else None,
+                    csv_untouched=before is not None and _file_state(csv) == before)
+
+
+def _file_state(path: Path) -> tuple[int, int, int, int, int] | None:
+    """What tells whether the file at ``path`` was written or replaced (None: there is none)."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns
 
 
 def private_temp_dir(kind: str) -> Path:

@@ -506,12 +506,20 @@ class _Session:
 
     def _where(self, module: str, offset: int) -> str | None:
         """file:line of the return address at ``offset`` in ``module`` when it is the program's
-        own code (not the kits'), else None."""
-        from simrunner.run.native.symbolize import _addr2line, _ours
+        own code (not the kits'); in the program's library without debug information (a prebuilt
+        one), what its symbol table says: ``libx.so+0x1153 (in tick(); no debug information in
+        libx.so: build it with -g for its file:line)``; else None."""
+        from simrunner.run.native.symbolize import _addr2line, _ours, no_line_where
 
         found = _addr2line(module, [offset - 1]).get(offset - 1)  # (a return address: after its call)
         frame = next((f for f in found or () if f[1] and not _ours(f[1])), None)
-        return None if frame is None else f"{frame[1]}:{frame[2]}"
+        if frame is not None:
+            return f"{frame[1]}:{frame[2]}"
+        if found is None or any(f[1] for f in found):  # (no addr2line; or in a kit's code, the simulator's)
+            return None
+        if os.path.realpath(module) not in {os.path.realpath(m) for m in self._user_modules()}:
+            return None
+        return no_line_where(module, offset - 1, found[0][0] if found else "")
 
     def _param(self, payload: bytes) -> float:
         default = _D.unpack_from(payload)[0]

@@ -30,6 +30,8 @@ from simrunner.errors import ControllerFileError
 NATIVE_DIR = Path(__file__).resolve().parent
 INCLUDE_DIR = NATIVE_DIR / "include"
 HOST_SOURCE = NATIVE_DIR / "host" / "spinner_host.c"
+#: linked into every program built (its __wrap_pthread_create: WRAPPED)
+THREAD_START_SOURCE = NATIVE_DIR / "host" / "thread_start.c"
 KITS_DIR = NATIVE_DIR / "kits"
 #: Kit libraries a firmware builds against (``--kit NAME``): NAME -> its sources beside its include/
 #: (in kits/NAME, a ``-`` spelt ``_``). tfc-mbed: the FRDM-TFC library's mbed flavour (C++).
@@ -82,11 +84,14 @@ CXX_FLAGS = ("-std=gnu++17",)
 # library holding one can never be unloaded, and every later run of it would share them.
 # Runs in the simulator's process start from fresh globals, so they are made ordinary.
 CXX_FRESH_FLAGS = ("-fno-gnu-unique",)
-# the sleeps wait in simulated time, an exit ends the program, not the simulator, and a forked
-# process cannot drive the car: the controller's calls go to __wrap_NAME (host/spinner_host.c,
-# both builds)
+# the sleeps wait in simulated time, an exit ends the program, not the simulator, a forked
+# process cannot drive the car, and a thread the program starts (pthread_create, std::thread's
+# start in libstdc++) gets an alternate signal stack, so its stack overflow is reported at its line:
+# the controller's calls go to __wrap_NAME (host/spinner_host.c, both builds; __wrap_pthread_create
+# is THREAD_START_SOURCE's, linked into the program)
+STD_THREAD_START = "_ZNSt6thread15_M_start_threadESt10unique_ptrINS_6_StateESt14default_deleteIS1_EEPFvvE"
 WRAPPED = ("usleep", "sleep", "nanosleep", "clock_nanosleep", "exit", "_exit", "_Exit", "quick_exit",
-           "atexit", "__cxa_atexit", "fork")
+           "atexit", "__cxa_atexit", "fork", "pthread_create", STD_THREAD_START)
 LINK_FLAGS = ("-Wl,--wrap=" + ",--wrap=".join(WRAPPED),)
 INSTALL_HINT = "install a C compiler, e.g. `sudo apt-get install build-essential` (Debian/Ubuntu)"
 
@@ -670,7 +675,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     cwd = os.getcwd()
     cxx_flags = CXX_FLAGS + (CXX_FRESH_FLAGS if cxx and _accepts(compilers[True], CXX_FRESH_FLAGS) else ())
     key = _digest("controller/2", cwd, *map(str, flags), *COMMON_FLAGS, *cxx_flags, *LINK_FLAGS,
-                  *(_compiler_id(c) for c in compilers.values() if c),
+                  *(_compiler_id(c) for c in compilers.values() if c), _file_digest(THREAD_START_SOURCE),
                   *(f"{p}\0{_file_digest(p)}" for p in paths))
     entry = cache_dir() / key
     hit = _cached(entry)
@@ -696,6 +701,9 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
             objects.append(str(obj))
             depfiles.append(dep)
         linker = compilers[True] if cxx else compilers[False]
+        objects.append(str(tmp / "thread_start.o"))  # (__wrap_pthread_create: WRAPPED)
+        _run([linker, "-x", "c", "-O2", "-g", "-fPIC", "-c", str(THREAD_START_SOURCE), "-o", objects[-1]],
+             "the simrunner thread start", limits)
         warnings.append(_run([linker, "-shared", "-g", *LINK_FLAGS, *objects, "-o",
                               str(tmp / "controller.so"), "-lm"], ", ".join(map(str, paths)), limits))
         text = "".join(warnings)

@@ -27,7 +27,10 @@ for the run too: :func:`_report_fd`), naming that thread's line, and the process
 the supervisor names the line (:func:`~simrunner.run.postmortem.thread_fault`). A stack
 overflow hits a guard page below the controller's stack (``ulimit -s`` bytes, 8 MB if
 unlimited). A loop that never calls the API is stopped by a watchdog thread of the library after the run's ``--wall-limit``
-(SIGUSR1 to the simulator's thread: the report says where). What it cannot contain - a
+(SIGUSR1 to the simulator's thread: the report says where). A thread the program leaves
+running after its run keeps its library loaded (unloading it made the thread run on in unmapped
+code, crashing the process at once, unreported): the run warns, and a later fault of that thread is
+reported naming it (the host's ``stray_fault``). What it cannot contain - a
 controller that overwrites the simulator's memory, or threads it leaves running - is what
 ``--isolate`` (the child process of :mod:`.bridge`) is for; ``simrunner drive``'s supervisor
 still writes the outputs from the run log if the process dies.
@@ -71,6 +74,7 @@ def _api(path: str):
             ("spinner_inproc_open", c.c_void_p, [c.c_char_p, c.c_int]),
             ("spinner_inproc_error", c.c_char_p, []),
             ("spinner_inproc_close", c.c_int, [c.c_void_p]),
+            ("spinner_inproc_threads", c.c_int, [c.c_void_p]),
             ("spinner_inproc_early", c.c_int, [c.c_void_p]),
             ("spinner_inproc_requests", c.c_void_p, []),
             ("spinner_inproc_exit_code", c.c_int, []),
@@ -152,9 +156,13 @@ class OpenedProgram:
         self.early = bool(api.spinner_inproc_early(self.handle))
 
     def close(self) -> None:
+        """Unload it, unless threads its program started still run (their code must stay mapped:
+        the host keeps it loaded, and its private copy stays, for a fault of theirs to be named)."""
         if getattr(self, "handle", None):
-            self.api.spinner_inproc_close(self.handle)
+            kept = self.api.spinner_inproc_close(self.handle) > 0
             self.handle = None
+            if kept:
+                return
         if self.copy_dir is not None:
             shutil.rmtree(self.copy_dir, ignore_errors=True)
             self.copy_dir = None
@@ -265,3 +273,13 @@ class InprocSession(_Session):
     def _close(self) -> None:
         self.api.spinner_inproc_finish()
         self.ctrl.spent(self.opened)  # unloaded after the run (NativeController)
+        live = self.api.spinner_inproc_threads(self.opened.handle) if self.opened.handle else 0
+        if live:
+            self.spinner._s.warn_once("inproc-threads", left_threads_warning(live))
+
+
+def left_threads_warning(live: int) -> str:
+    """The run's warning when ``live`` threads the C/C++ program started still run at its end."""
+    return (f"the C/C++ program left {live} thread{'s' if live > 1 else ''} running (not waited for): its "
+            "library stays loaded in this process while they run, and a fault of theirs ends the process; join "
+            "them before main() returns, or run the program with --isolate")

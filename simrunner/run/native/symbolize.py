@@ -200,6 +200,15 @@ def _addr2line(module: str, offsets: list[int]) -> dict[int, list[tuple[str, str
     return out
 
 
+def no_line_where(module: str, offset: int, function: str = "") -> str:
+    """Where ``offset`` in ``module`` (a library without debug information: no file:line) is, as
+    far as its symbol table tells: ``libx.so+0x1153 (in tick(); no debug information in libx.so:
+    build it with -g for its file:line)`` (``function``: addr2line's name there, "" for none)."""
+    name = _display_path(module)
+    called = f"in {function if function.endswith(')') else function + '()'}; " if function else ""
+    return f"{name}+0x{offset:x} ({called}no debug information in {name}: build it with -g for its file:line)"
+
+
 def parse_report(text: str, user_modules: set[str], host: str) -> Fault:
     """A :class:`Fault` from the host's report; frames of ``user_modules`` get file:line.
 
@@ -367,6 +376,10 @@ LOAD_FAULT = "load-fault "
 
 THREAD_FAULT = "thread-fault "
 """The first line of the in-process host's report of a fault in a thread the program started."""
+
+STRAY = "stray\n"
+"""The line a ``thread-fault`` record's report starts with when the thread was an earlier run's
+program's, left running after its run (its library kept loaded for it), not the run's."""
 
 LOAD_END = "load-end "
 """The first line of the in-process host's report of a program that ended as its library loaded

@@ -51,8 +51,9 @@
 #include <sys/types.h>
 #include <sys/wait.h>
 #include <link.h>
-#ifdef SPINNER_INPROC
 #include <sys/mman.h>
+#include <sys/syscall.h>
+#ifdef SPINNER_INPROC
 #include <sys/resource.h>
 #endif
 
@@ -1270,6 +1271,9 @@ int __wrap_clock_nanosleep(clockid_t clock, int flags, const struct timespec *re
  * (uint64) and the module's path. Not from a process the program forked, nor after the run. */
 static void exit_note(uint8_t fn, int status, void *ra) {
     if (forked) return;
+    Dl_info host, caller;  /* the host's own end (main returned: exit(0); a report's _exit) is no call of the program's */
+    if (ra != NULL && dladdr((void *)exit_note, &host) && dladdr(ra, &caller) && host.dli_fbase == caller.dli_fbase)
+        return;
 #ifdef SPINNER_INPROC
     /* (finished is set while the program's exit handlers run too: an exit there, an atexit
      * handler's or a static destructor's, is the status the program ends with, as it is
@@ -1286,8 +1290,6 @@ static void exit_note(uint8_t fn, int status, void *ra) {
     const char *path = "";
     Dl_info info;
     if (ra != NULL && dladdr(ra, &info) && info.dli_fname != NULL) {
-        Dl_info here;  /* the host's own end (main returned: exit(0)) is no call of the program's */
-        if (dladdr((void *)exit_note, &here) && here.dli_fbase == info.dli_fbase) return;
         off = (uint64_t)((uintptr_t)ra - (uintptr_t)info.dli_fbase);
         path = info.dli_fname;
     }
@@ -1312,12 +1314,28 @@ int clock_nanosleep(clockid_t clock, int flags, const struct timespec *req, stru
 }
 
 /* exit and friends end the host process as they would end the program; its exit handlers are
- * the process's own (atexit, static destructors: glibc runs them). */
+ * the process's own (atexit, static destructors: glibc runs them). A prebuilt library's calls (not
+ * linked with --wrap) come to the host program's own exit, _exit, _Exit and quick_exit (exported,
+ * first in the lookup), which note the call as the --wrap ones do (its place: a file:line with
+ * debug info, else the function, simrunner's symbolize) and go on to libc's (LIBC_EXIT). The host's
+ * own calls are no program's: exit_note leaves them out. */
+#define LIBC_EXIT(name, status)                                         \
+    do {                                                                \
+        static void (*real)(int);                                       \
+        if (real == NULL) real = (void (*)(int))dlsym(RTLD_NEXT, name); \
+        if (real != NULL) real(status);                                 \
+        syscall(SYS_exit_group, status); /* (no libc's: not reached) */ \
+        __builtin_unreachable();                                        \
+    } while (0)
 static void ended(void) { exit(0); }
-void __wrap_exit(int status) { EXIT_NOTE(0, status); exit(status); }
-void __wrap__exit(int status) { EXIT_NOTE(1, status); _exit(status); }
-void __wrap__Exit(int status) { EXIT_NOTE(2, status); _Exit(status); }
-void __wrap_quick_exit(int status) { EXIT_NOTE(3, status); quick_exit(status); }
+void __wrap_exit(int status) { EXIT_NOTE(0, status); LIBC_EXIT("exit", status); }
+void __wrap__exit(int status) { EXIT_NOTE(1, status); LIBC_EXIT("_exit", status); }
+void __wrap__Exit(int status) { EXIT_NOTE(2, status); LIBC_EXIT("_Exit", status); }
+void __wrap_quick_exit(int status) { EXIT_NOTE(3, status); LIBC_EXIT("quick_exit", status); }
+void exit(int status) { EXIT_NOTE(0, status); LIBC_EXIT("exit", status); }
+void _exit(int status) { EXIT_NOTE(1, status); LIBC_EXIT("_exit", status); }
+void _Exit(int status) { EXIT_NOTE(2, status); LIBC_EXIT("_Exit", status); }
+void quick_exit(int status) { EXIT_NOTE(3, status); LIBC_EXIT("quick_exit", status); }
 int __wrap_atexit(void (*fn)(void)) { return atexit(fn); }
 int __cxa_atexit(void (*fn)(void *), void *arg, void *dso);
 int __wrap___cxa_atexit(void (*fn)(void *), void *arg, void *dso) { return __cxa_atexit(fn, arg, dso); }
@@ -1665,24 +1683,24 @@ static const int fault_sigs[] = {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGUS
  * process it goes to the file descriptor the simulator handed in for the run (its supervisor's
  * report file), or as one line to stderr (thread_report_out); there a fault of a thread that is not
  * the program's (the simulator's, a library's) goes to the handler before ours as ever (pass_on).
- * (A thread's stack overflow kills the process unreported: the thread has no alternate signal
- * stack for the handler to run on.) */
+ * A thread's stack overflow is one too: the thread has an alternate signal stack of its own for the
+ * handler to run on (thread_begin). */
 static struct report thread_report;
 static int thread_faulted;  /* atomic: a thread of the program's has faulted */
-static void thread_report_out(int sig, void *pc);
+static void thread_report_out(int sig, void *pc, const char *message);
 
 static void thread_fault(int sig, siginfo_t *info, void *pc, const char *message) {
     if (__atomic_exchange_n(&thread_faulted, 1, __ATOMIC_ACQ_REL))
         for (;;) pause();  /* another thread's fault is being reported: the process ends with it */
     build_report_frames(&thread_report, sig, message, pc, NULL, 0, 1);
-    thread_report_out(sig, pc);
+    thread_report_out(sig, pc, message);
     signal(sig, SIG_DFL);  /* the process dies by the signal, as without our handlers */
     if (info->si_code <= 0) raise(sig);  /* sent (raise, abort): again, at the handler's return */
 }                                        /* a fault: the instruction runs again */
 
 #ifndef SPINNER_INPROC
-static void thread_report_out(int sig, void *pc) {
-    (void)sig, (void)pc;
+static void thread_report_out(int sig, void *pc, const char *message) {
+    (void)sig, (void)pc, (void)message;
     pipe_take(1);  /* after main()'s message being sent; kept: the report is the last */
     uint32_t hdr[2] = {OP_FAULT, (uint32_t)thread_report.len};
     write_all(hdr, sizeof hdr);
@@ -1714,6 +1732,8 @@ static int run_fd = -1;
 static void *prog_base;
 static const char *prog_path;
 static int program_thread(void *pc);
+static int stray_thread(void);
+static void stray_fault(int sig, siginfo_t *info, void *pc, const char *message);
 
 /* A signal that is not the controller's (the simulator's own, or after it ended): hand it
  * to the handler installed before ours. */
@@ -1753,6 +1773,8 @@ static void on_fault(int sig, siginfo_t *info, void *context) {
         if (sig != SIGUSR1 && __atomic_load_n(&load_watch, __ATOMIC_ACQUIRE) &&
             pthread_equal(pthread_self(), load_thread))  /* a constructor's, as its library loads */
             load_fault(sig, info, pc, overflow ? "stack overflow (the stack limit is `ulimit -s`)" : "");
+        else if (sig != SIGUSR1 && stray_thread())  /* an earlier run's program's, left running */
+            stray_fault(sig, info, pc, overflow ? "stack overflow (the thread's stack)" : "");
         else if (sig != SIGUSR1 && !pthread_equal(pthread_self(), sim_thread_id) && program_thread(pc))
             thread_fault(sig, info, pc, overflow ? "stack overflow (the thread's stack)" : "");
         else
@@ -1778,6 +1800,193 @@ static void fault_action(struct sigaction *sa) {
     sa->sa_sigaction = on_fault;
     sa->sa_flags = SA_SIGINFO | SA_ONSTACK;
     sigemptyset(&sa->sa_mask);
+}
+
+/* -- the program's threads: an alternate signal stack each ---------------------------------
+ * A stack overflow faults with the stack pointer in the guard page: the kernel can run a handler
+ * only on an alternate signal stack, and without one the process dies by SIGSEGV unreported. The
+ * main thread's is install_handlers' (the controller's coroutine, the open's: theirs); a thread the
+ * program starts gets its own from thread_begin, which runs the thread's function on the thread's
+ * own stack after mapping ALT_STACK_BYTES for the handler and registering them (sigaltstack is
+ * per thread, and a new thread starts without one), then unregisters and unmaps them as the
+ * thread ends (its function returns, or pthread_exit or a cancellation runs the cleanup). The
+ * thread's fault, an overflow included, is then reported from it (thread_fault), naming its line.
+ *
+ * How the program's threads come here, in both hosts:
+ * - pthread_create: a program simrunner built is linked with --wrap=pthread_create (build.py):
+ *   its calls are __wrap_pthread_create's (host/thread_start.c, linked into the program: libgcc.a
+ *   has one of its own), which calls spinner_thread_create. The host program also defines pthread_create itself
+ *   (exported, -rdynamic, and first in the lookup: the executable), so a prebuilt library's calls
+ *   and libstdc++'s come here too; in the simulator's process libc's comes first for any library
+ *   but the wrapped program (a library's threads there are not the program's).
+ * - std::thread (std::jthread, std::async): the template in the program's code calls libstdc++'s
+ *   std::thread::_M_start_thread(unique_ptr<_State>, void (*)()), which calls libc's pthread_create
+ *   from libstdc++ (out of reach of the program's --wrap). The program is linked with --wrap of that
+ *   name too: __wrap_STD_THREAD_START starts the thread here, doing what libstdc++'s does
+ *   (std_thread_run: the state's _M_run(), then its deletion, through the Itanium C++ ABI's vtable
+ *   of std::thread::_State: complete destructor, deleting destructor, _M_run), and leaves a failure
+ *   to libstdc++'s own (which throws its std::system_error). */
+#define ALT_STACK_BYTES (1 << 16)  /* as main()'s (the handler's report: backtrace, dladdr) */
+typedef int (*create_fn)(pthread_t *, const pthread_attr_t *, void *(*)(void *), void *);
+struct thread_start {
+    void *(*fn)(void *);
+    void *arg;
+    void *prog;  /* the load address of the program's library that started it (in process; else NULL) */
+};
+struct thread_own {
+    void *mem;  /* its alternate signal stack (NULL: none could be mapped) */
+    void *prog;
+};
+
+#ifdef SPINNER_INPROC
+/* In the simulator's process a program's threads may outlive its run (nothing stops them): the
+ * ones still running, by their program's library (its load address, `base`). Its library is not
+ * unloaded while they run (spinner_inproc_close keeps it, and the run's handlers stay installed
+ * for them: `kept`), so a thread left running executes mapped code, and its later fault is named
+ * from it (stray_fault) instead of a crash in unloaded code that killed the process unreported
+ * (a batch worker's, or a test process's running one program after another). */
+#define MAX_THREAD_PROGS 64
+static struct { void *base; int live, kept; } thread_progs[MAX_THREAD_PROGS];
+static pthread_mutex_t thread_progs_lock = PTHREAD_MUTEX_INITIALIZER;
+static __thread void *thread_prog;  /* this thread's program (thread_begin; read by on_fault) */
+static void handlers_take(void);
+static void handlers_give(void);
+
+/* The program at `base`'s running threads, changed by `delta`; the count after. Its last thread
+ * ending after its library was kept gives the handlers kept for it back. */
+static int thread_progs_count(void *base, int delta) {
+    if (base == NULL) return 0;
+    int live = 0, give = 0, free_at = -1;
+    pthread_mutex_lock(&thread_progs_lock);
+    for (int i = 0; i < MAX_THREAD_PROGS; i++) {
+        if (thread_progs[i].base == base) {
+            live = thread_progs[i].live += delta;
+            if (live <= 0) {
+                give = thread_progs[i].kept;
+                thread_progs[i].base = NULL, thread_progs[i].live = thread_progs[i].kept = 0;
+            }
+            free_at = -2;
+            break;
+        }
+        if (free_at == -1 && thread_progs[i].base == NULL) free_at = i;
+    }
+    if (free_at >= 0 && delta > 0) thread_progs[free_at].base = base, thread_progs[free_at].live = live = delta;
+    pthread_mutex_unlock(&thread_progs_lock);
+    if (give) handlers_give();
+    return live;
+}
+
+static void *caller_base(void *ra) {
+    Dl_info info;
+    return ra != NULL && dladdr(ra, &info) ? info.dli_fbase : NULL;
+}
+#else
+static int thread_progs_count(void *base, int delta) { (void)base, (void)delta; return 0; }
+static void *caller_base(void *ra) { (void)ra; return NULL; }
+#endif
+
+static void thread_end(void *p) {
+    struct thread_own *own = p;
+    if (own->mem != NULL) {
+        stack_t off = {.ss_sp = NULL, .ss_size = 0, .ss_flags = SS_DISABLE};
+        sigaltstack(&off, NULL);
+        munmap(own->mem, ALT_STACK_BYTES);
+    }
+    thread_progs_count(own->prog, -1);
+}
+
+static void *thread_begin(void *p) {
+    struct thread_start start = *(struct thread_start *)p;
+    free(p);
+#ifdef SPINNER_INPROC
+    thread_prog = start.prog;
+#endif
+    struct thread_own own = {mmap(NULL, ALT_STACK_BYTES, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0),
+                             start.prog};
+    if (own.mem == MAP_FAILED) {
+        own.mem = NULL;  /* (runs unguarded, as before) */
+    } else {
+        stack_t ss = {.ss_sp = own.mem, .ss_size = ALT_STACK_BYTES, .ss_flags = 0};
+        sigaltstack(&ss, NULL);
+    }
+    void *ret;
+    pthread_cleanup_push(thread_end, &own);
+    ret = start.fn(start.arg);
+    pthread_cleanup_pop(1);
+    return ret;
+}
+
+static create_fn real_pthread_create(void) {
+#ifdef SPINNER_INPROC
+    return pthread_create;  /* (libc's: this library defines none) */
+#else
+    static create_fn real;
+    if (real == NULL) real = (create_fn)dlsym(RTLD_NEXT, "pthread_create");
+    return real;
+#endif
+}
+
+/* `prog`: the load address of the program's library starting it (counted: thread_progs_count). */
+static int thread_spawn(pthread_t *thread, const pthread_attr_t *attr, void *(*fn)(void *), void *arg,
+                        void *prog) {
+    create_fn create = real_pthread_create();
+    if (create == NULL) return EAGAIN;
+    struct thread_start *start = malloc(sizeof *start);
+    if (start == NULL) return create(thread, attr, fn, arg);
+    start->fn = fn, start->arg = arg, start->prog = prog;
+    thread_progs_count(prog, 1);  /* (before it runs: it may end first) */
+    int err = create(thread, attr, thread_begin, start);
+    if (err != 0) {
+        thread_progs_count(prog, -1);
+        free(start);
+    }
+    return err;
+}
+
+/* The program's __wrap_pthread_create's (host/thread_start.c, linked into it). */
+int spinner_thread_create(pthread_t *thread, const pthread_attr_t *attr, void *(*fn)(void *), void *arg) {
+    return thread_spawn(thread, attr, fn, arg, caller_base(__builtin_return_address(0)));
+}
+
+#ifndef SPINNER_INPROC
+int pthread_create(pthread_t *restrict thread, const pthread_attr_t *restrict attr, void *(*fn)(void *),
+                   void *restrict arg) {
+    return thread_spawn(thread, attr, fn, arg, NULL);
+}
+#endif
+
+#define STD_THREAD_START _ZNSt6thread15_M_start_threadESt10unique_ptrINS_6_StateESt14default_deleteIS1_EEPFvvE
+#define STD_THREAD_NAME_(x) #x
+#define STD_THREAD_NAME(x) STD_THREAD_NAME_(x)
+#define STD_THREAD_WRAP_(x) __wrap_##x
+#define STD_THREAD_WRAP(x) STD_THREAD_WRAP_(x)
+
+static void *std_thread_run(void *state) {
+    void (**vtable)(void *) = *(void (***)(void *))state;
+    vtable[2](state);  /* state->_M_run() */
+    vtable[1](state);  /* delete state */
+    return NULL;
+}
+
+/* `self`: the std::thread (its id, a pthread_t, first); `state`: the unique_ptr<_State> passed by
+ * reference (its owner, the caller, destroys it: released here once the thread owns the state). */
+void STD_THREAD_WRAP(STD_THREAD_START)(void *self, void **state, void (*depend)(void)) {
+    if (*state != NULL &&
+        thread_spawn((pthread_t *)self, NULL, std_thread_run, *state, caller_base(__builtin_return_address(0))) == 0) {
+        *state = NULL;
+        return;
+    }
+    Dl_info info;  /* libstdc++'s own, as the caller's library finds it */
+    void (*real)(void *, void **, void (*)(void)) = NULL;
+    if (dladdr(__builtin_return_address(0), &info) && info.dli_fname != NULL) {
+        void *caller = dlopen(info.dli_fname, RTLD_LAZY | RTLD_NOLOAD);
+        if (caller != NULL) {
+            real = (void (*)(void *, void **, void (*)(void)))dlsym(caller, STD_THREAD_NAME(STD_THREAD_START));
+            dlclose(caller);
+        }
+    }
+    if (real == NULL) abort();  /* (no libstdc++: no std::thread to start) */
+    real(self, state, depend);
 }
 
 #ifndef SPINNER_INPROC
@@ -1936,7 +2145,7 @@ static int program_thread(void *pc) {
 /* The thread's report to run_fd ("thread-fault PATH", "host PATH", then the report), where the
  * simulator's supervisor reads it once the process has died (simrunner.run.postmortem); without
  * one, a line on stderr naming the function. */
-static void thread_report_out(int sig, void *pc) {
+static void thread_report_out(int sig, void *pc, const char *message) {
     if (run_fd >= 0) {
         report_record(run_fd, "thread-fault", prog_path, "", &thread_report);
         return;
@@ -1945,13 +2154,50 @@ static void thread_report_out(int sig, void *pc) {
     lib_where(where, sizeof where, prog_path, pc);
     char line[1536];
     int k = snprintf(line, sizeof line,
-                     "simrunner: %s%s, in a thread of the program's own (not main()'s), which runs in the "
+                     "simrunner: %s%s%s, in a thread of the program's own (not main()'s), which runs in the "
                      "simulator's process: the process ends (simrunner drive names the fault's file:line; "
-                     "--isolate runs the program in a process of its own)\n", signal_name(sig), where);
+                     "--isolate runs the program in a process of its own)\n", signal_name(sig),
+                     strncmp(message, "stack overflow", 14) == 0 ? " (stack overflow)" : "", where);
     if (k > 0) {
         ssize_t w = write(2, line, (size_t)k < sizeof line ? (size_t)k : sizeof line - 1);
         (void)w;
     }
+}
+
+/* A thread a program started (thread_begin) that is not the run's program's: an earlier run's,
+ * left running (its library kept: thread_progs). */
+static int stray_thread(void) {
+    void *prog = thread_prog;
+    return prog != NULL && !(__atomic_load_n(&run_active, __ATOMIC_ACQUIRE) && prog == prog_base);
+}
+
+/* Its fault: reported as thread_fault's, with a "stray" line first (the library named is its
+ * program's, not the run's: simrunner.run.postmortem says so), to the run's report file if a run is
+ * on, else a line on stderr; then the process dies by the signal. */
+static void stray_fault(int sig, siginfo_t *info, void *pc, const char *message) {
+    if (__atomic_exchange_n(&thread_faulted, 1, __ATOMIC_ACQ_REL))
+        for (;;) pause();  /* another thread's fault is being reported: the process ends with it */
+    Dl_info lib;
+    const char *path = dladdr(thread_prog, &lib) && lib.dli_fname ? lib.dli_fname : NULL;
+    build_report_frames(&thread_report, sig, message, pc, NULL, 0, 1);
+    if (run_fd >= 0) {
+        report_record(run_fd, "thread-fault", path, "stray\n", &thread_report);
+    } else {
+        char where[1024], line[1536];
+        lib_where(where, sizeof where, path, pc);
+        int k = snprintf(line, sizeof line,
+                         "simrunner: %s%s%s, in a thread a C/C++ program started and left running after its run in "
+                         "the simulator's process (its library was kept loaded for it): the process ends (join "
+                         "the program's threads before main() returns; --isolate runs the program in a process "
+                         "of its own)\n", signal_name(sig),
+                         strncmp(message, "stack overflow", 14) == 0 ? " (stack overflow)" : "", where);
+        if (k > 0) {
+            ssize_t w = write(2, line, (size_t)k < sizeof line ? (size_t)k : sizeof line - 1);
+            (void)w;
+        }
+    }
+    signal(sig, SIG_DFL);
+    if (info->si_code <= 0) raise(sig);
 }
 
 /* A call that does not return in a constructor of a library being loaded here (spinner_inproc_open,
@@ -2265,10 +2511,39 @@ const char *spinner_inproc_error(void) {
  * unloaded code (a crash of the simulator's process). */
 static void drop_exit_handlers_of(void *lib) { retag_exit_handlers(lib, NULL); }
 
+/* The library's load address (the threads' key: thread_progs). */
+static void *lib_base(void *lib) {
+    struct link_map *lm = NULL;
+    return lib != NULL && dlinfo(lib, RTLD_DI_LINKMAP, &lm) == 0 && lm != NULL ? (void *)lm->l_addr : NULL;
+}
+
+/* How many threads `lib`'s program started (thread_begin) are running now. */
+int spinner_inproc_threads(void *lib) {
+    void *base = lib_base(lib);
+    int live = 0;
+    pthread_mutex_lock(&thread_progs_lock);
+    for (int i = 0; i < MAX_THREAD_PROGS && base != NULL; i++)
+        if (thread_progs[i].base == base) live = thread_progs[i].live;
+    pthread_mutex_unlock(&thread_progs_lock);
+    return live;
+}
+
+/* Unload `lib`: 0 (dlclose's -1 if it failed), or the number of its program's threads still
+ * running, for which it stays loaded (their code must stay mapped) with our signal handlers
+ * installed (their faults are named: stray_fault), both until the last of them ends (it gives the
+ * handlers back; the library stays). */
 int spinner_inproc_close(void *lib) {
     set_early(lib, 0);
     drop_exit_handlers_of(lib);
-    return dlclose(lib);
+    void *base = lib_base(lib);
+    int live = 0, take = 0;
+    pthread_mutex_lock(&thread_progs_lock);
+    for (int i = 0; i < MAX_THREAD_PROGS && base != NULL; i++)
+        if (thread_progs[i].base == base && (live = thread_progs[i].live) > 0 && !thread_progs[i].kept)
+            thread_progs[i].kept = take = 1;
+    if (take) handlers_take();  /* (under the lock: its last thread gives them back after this) */
+    pthread_mutex_unlock(&thread_progs_lock);
+    return live > 0 ? live : dlclose(lib);
 }
 
 /* Where the simulator reads the requests (spinner_inproc_resume says how many bytes). */
