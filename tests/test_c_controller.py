@@ -276,6 +276,31 @@ def test_sleeps_wait_in_simulated_time_and_stdout_reaches_the_terminal(tmp_path,
     assert r.sim_time_s == pytest.approx(1.41, abs=0.005)
 
 
+@pytest.mark.parametrize("isolate", [False, True])
+@pytest.mark.parametrize("lang", ["c", "cpp"])
+def test_a_programs_own_function_or_global_named_as_libcs_is_its_own(tmp_path, track, capfd, isolate, lang):
+    """A program's own ``step()`` ran libc's regex step(3) (a SIGSEGV in libc), its ``index()``
+    libc's, its global ``daylight`` was libc's variable: a shared library's references went to the
+    process's global scope first. Programs link with -Bsymbolic: its own, as on the MCU."""
+    src = write(tmp_path, f"names.{lang}", """\
+        #include <stdio.h>
+        #include "spinner.h"
+        int daylight = 7;
+        int step(int n) { return n + 1; }
+        double index(double x) { return 2 * x; }
+        int main(void) {
+            int n = 0;
+            for (int i = 0; i < 5; i++) n = step(n);
+            printf("step %d index %g daylight %d\\n", n, index(1.5), daylight);
+            return 0;
+        }
+        """)
+    program = isolated(src) if isolate else src
+    r = drive(program, track=track, time_limit_s=1)
+    assert r.outcome == "controller_returned", r.message
+    assert "step 5 index 3 daylight 7" in capfd.readouterr().out
+
+
 def test_param_comes_from_the_python_spinner(tmp_path, track, capfd):
     src = write(tmp_path, "param.c", """\
         #include <stdio.h>

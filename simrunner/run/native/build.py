@@ -92,7 +92,11 @@ CXX_FRESH_FLAGS = ("-fno-gnu-unique",)
 STD_THREAD_START = "_ZNSt6thread15_M_start_threadESt10unique_ptrINS_6_StateESt14default_deleteIS1_EEPFvvE"
 WRAPPED = ("usleep", "sleep", "nanosleep", "clock_nanosleep", "exit", "_exit", "_Exit", "quick_exit",
            "atexit", "__cxa_atexit", "fork", "pthread_create", STD_THREAD_START)
-LINK_FLAGS = ("-Wl,--wrap=" + ",--wrap=".join(WRAPPED),)
+# -Bsymbolic: the program's calls of its own functions (and uses of its own globals) reach its own
+# definitions, as in the firmware on the MCU. Without it a shared library's references go first to
+# the process's global scope, where libc is: a program's own `step()` or `index()` ran libc's
+# (regex step(3), a SIGSEGV), a global `int daylight` was libc's variable.
+LINK_FLAGS = ("-Wl,--wrap=" + ",--wrap=".join(WRAPPED), "-Wl,-Bsymbolic")
 INSTALL_HINT = "install a C compiler, e.g. `sudo apt-get install build-essential` (Debian/Ubuntu)"
 
 
