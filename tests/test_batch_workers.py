@@ -6,6 +6,7 @@ import shutil
 import textwrap
 import threading
 
+import numpy as np
 import pytest
 
 from helpers import C_CTOR_ENDS, C_CTOR_FAULT, C_THREAD_FAULT, C_THREAD_OVERFLOW, STUCK
@@ -233,6 +234,26 @@ def test_a_fault_in_a_c_constructor_at_the_load_names_its_line_as_drive_does(tmp
     assert row["message"].startswith("boom.c:5: SIGSEGV: segmentation fault (in boom()), in a constructor as the "
                                      "program loaded"), row["message"]
     assert row["frames"] == 0
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_an_earlier_batchs_run_csv_is_not_read_as_a_dead_runs_log(tmp_path, monkeypatch):
+    """A worker that dies before its run writes its CSV (a constructor's fault) left an earlier
+    batch's runs/run_00000.csv at the run's path (--force, or a killed batch's): the row took its
+    laps, frames and time. The run's output paths are cleared before it runs."""
+    from simrunner.telemetry.log import RunLog, write_log
+
+    monkeypatch.setenv("SIMRUNNER_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)
+    ctl = tmp_path / "boom.c"
+    ctl.write_text(C_CTOR_FAULT)
+    stale = tmp_path / "out" / "runs" / "run_00000.csv"
+    stale.parent.mkdir(parents=True)
+    t_s = np.arange(1, 40) * 0.02
+    write_log(RunLog(t_s=t_s, frame=np.arange(1, 40), lap=np.zeros(39, dtype=np.int64)), stale)
+    res = run_batch(ctl, out_dir=tmp_path / "out", seeds=1, workers=1, plot=False, csv="all")
+    row, = res.rows
+    assert row["outcome"] == "controller_error" and row["frames"] == 0 and row["sim_time_s"] == 0.0, row
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")

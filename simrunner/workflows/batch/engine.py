@@ -172,8 +172,11 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
         runs = out / "runs"
         runs.mkdir(exist_ok=True)
         stem = runs / f"run_{job.index:05d}"
-        return {k: str(stem.with_suffix(sfx)) for k, sfx, on in
-                (("video", ".mp4", video_on), ("csv", ".csv", csv_on)) if on}
+        paths = {k: stem.with_suffix(sfx) for k, sfx, on in
+                 (("video", ".mp4", video_on), ("csv", ".csv", csv_on)) if on}
+        for path in paths.values():  # an earlier batch's (--force, a killed one's): a run that
+            path.unlink(missing_ok=True)  # dies before writing its own is not told from it
+        return {k: str(v) for k, v in paths.items()}
 
     if ray is None:
         backend_name, make_backend = "local", lambda: LocalBackend(config, start_method=start_method,
