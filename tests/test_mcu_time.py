@@ -620,3 +620,108 @@ def test_cpp_members_are_charged_as_the_c_calls_they_make(tmp_path, capfd, isola
     out = capfd.readouterr().out
     assert r.outcome == "controller_returned", (r.message, out)
     assert "frame 316 208 gaps 0.0500 0.0500 0.0500 0.0500 0.0500 0.0500 0.0000" in out, out
+
+
+# -- a handler's own time (measured: charged at main's next call; fixed: nothing), C and Python alike --
+
+HANDLER_BURN_PY = """\
+import time
+
+
+def main(s):
+    burned = []
+
+    def handler():
+        c0 = time.thread_time()
+        while time.thread_time() - c0 < 0.010:  # 10 ms of the handler's own work
+            pass
+        burned.append(time.thread_time() - c0)
+        s.stop_every(handler)
+
+    s.every(0.02, handler)
+    s.sleep(0.02)          # the handler runs at 0.020 s, inside this wait
+    t = s.get_time()       # main's next call: the handler's time passes first
+    print(f"handler burned {burned[0]:.6f} get_time {t:.6f}", flush=True)
+"""
+
+HANDLER_BURN_C = """\
+#include <stdio.h>
+#include <time.h>
+#include "spinner.h"
+static double burned;
+static double cpu(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+static void handler(void) {
+    double c0 = cpu();
+    while (cpu() - c0 < 0.010) {}   /* 10 ms of the handler's own work */
+    burned = cpu() - c0;
+    spinner_stop_every(handler);
+}
+int main(void) {
+    spinner_every(0.02, handler);
+    spinner_sleep(0.02);            /* the handler runs at 0.020 s, inside this wait */
+    double t = spinner_get_time();  /* main's next call: the handler's time passes first */
+    printf("handler burned %.6f get_time %.6f\\n", burned, t);
+    fflush(stdout);
+    return 0;
+}
+"""
+
+
+def _handler_burn(tmp_path, capfd, language: str, **kw) -> tuple[float, float]:
+    """``(the handler's CPU seconds, main's get_time after it)`` of HANDLER_BURN_* in ``language``."""
+    src = tmp_path / ("burn.py" if language == "python" else "burn.c")
+    src.write_text(HANDLER_BURN_PY if language == "python" else HANDLER_BURN_C)
+    capfd.readouterr()
+    r = drive(str(src), track="floor", time_limit_s=5.0, **kw)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    got = re.search(r"handler burned ([0-9.]+) get_time ([0-9.]+)", out)
+    assert got, out
+    return float(got.group(1)), float(got.group(2))
+
+
+@pytest.mark.parametrize("language", ["python", "c"])
+def test_measured_a_handlers_cpu_time_is_charged_at_mains_next_call(tmp_path, capfd, language):
+    """A handler burning 10 ms of CPU at 0.020 s, --mcu-scale 2: main's get_time after the wait reads
+    0.020 + about 20 ms + its own 2-ms step, C and Python alike (Python's handler's time was not
+    charged: 0.022, as without --mcu-time). The charge is whole 2-ms steps, the rest carried."""
+    burned, t = _handler_burn(tmp_path, capfd, language, mcu_time="measured", mcu_scale=2.0)
+    shift = t - 0.022
+    assert burned >= 0.010 and burned * 2 - 0.0021 <= shift <= burned * 2 + 0.004, (burned, t)
+    _, plain = _handler_burn(tmp_path, capfd, language)
+    assert plain == pytest.approx(0.022)
+
+
+def test_with_a_fixed_cost_a_handler_costs_nothing_in_c_and_python_alike(tmp_path, capfd):
+    """--mcu-time 0.001: the handler's work and its call (stop_every) are not charged; main's calls
+    are (every, sleep, get_time: 3 ms, a step of it carried) - the same time in both languages."""
+    times = [_handler_burn(tmp_path, capfd, language, mcu_time=0.001)[1] for language in ("python", "c")]
+    assert times == [pytest.approx(0.024)] * 2, times
+
+
+def test_measured_a_python_handlers_spinner_calls_are_not_its_time():
+    """The simulator's work in a handler's Spinner calls (20 latest_image renders, over 100 ms of
+    CPU here) is not the handler's time: at --mcu-scale 20 main's next call moves by its own step and
+    the handler's few lines only (charged, the renders alone would be seconds)."""
+    got = {}
+
+    def main(s):
+        def handler():
+            c0 = time.thread_time()
+            for _ in range(20):
+                s.latest_image(-1)
+            got["calls_s"] = time.thread_time() - c0
+            s.stop_every(handler)
+
+        s.every(0.02, handler)
+        s.sleep(0.02)
+        got["t"] = s.get_time()
+
+    r = drive(main, track="floor", time_limit_s=5.0, mcu_time="measured", mcu_scale=20.0)
+    assert r.outcome == "controller_returned", r.message
+    assert got["calls_s"] * 20 > 0.2, got  # (what charging them would have cost)
+    assert got["t"] <= 0.022 + 0.010, got

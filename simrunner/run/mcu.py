@@ -47,7 +47,11 @@ request costs it. The requests:
 
 Calls made inside another call (a Pixy2 call's exposure, the bridge's request answered by a
 Spinner method) are charged once, and calls in an interrupt handler not at all: no simulated
-time passes in a handler (a C handler's measured time is charged at main's next call).
+time passes in a handler. Measured, a handler's own CPU time is charged, times ``scale``, at
+main's next charged call, in both languages alike: a C handler reports it with its requests and
+its end; a Python handler's is its thread's CPU clock around it, less the Spinner calls it makes
+(:meth:`McuTime.run_handler`). With a fixed cost a handler costs nothing (its calls are not
+charged), C and Python alike.
 """
 from __future__ import annotations
 
@@ -142,10 +146,12 @@ class McuTime:
         self.scale = float(scale)
         self.reported = False   # a native program reports its CPU time (report)
         self.charged_s = 0.0    # simulated time charged so far (the summary's mcu_time_s)
-        self._pending_s = 0.0   # reported CPU seconds not charged yet
+        self._pending_s = 0.0   # CPU seconds not charged yet: reported, or a Python handler's
         self._debt_s = 0.0      # charged time not yet a whole physics step
-        self._left_at: float | None = None
+        self._left_at: float | None = None  # thread CPU clock (s) as main's code resumed (Python)
         self._depth = 0
+        self._handler_depth: int | None = None  # _depth as a Python handler began (None: none runs)
+        self._handler_at = 0.0  # thread CPU clock (s) as the handler's own code resumed
 
     def report(self, cpu_s: float) -> None:
         """CPU seconds a native program spent since its previous request (its OP_CPU message)."""
@@ -154,8 +160,11 @@ class McuTime:
 
     def enter(self, charge: bool = True) -> None:
         """A call begins: charged unless ``charge`` is False (an exempt request), it is inside
-        another call, or in a handler (no time passes there)."""
+        another call, or in a handler (no time passes there; a Python handler's own time up to
+        its call is kept for main's next charge)."""
         self._depth += 1
+        if self._depth - 1 == self._handler_depth:  # a Python handler's call: its code's time so far
+            self._pending_s += time.thread_time() - self._handler_at
         if not charge or self._depth > 1 or self.clock.in_interrupt:
             return
         if self.fixed_s is not None:
@@ -164,7 +173,8 @@ class McuTime:
             spent, self._pending_s = self._pending_s * self.scale, 0.0
         else:
             now = time.thread_time()
-            spent = 0.0 if self._left_at is None else (now - self._left_at) * self.scale
+            own_s = 0.0 if self._left_at is None else now - self._left_at
+            spent, self._pending_s = (own_s + self._pending_s) * self.scale, 0.0
         self.charged_s += spent
         self._debt_s += spent
         steps = math.floor(self._debt_s / self.clock.dt_s + 1e-9)
@@ -174,8 +184,26 @@ class McuTime:
 
     def leave(self) -> None:
         self._depth -= 1
-        if self._depth == 0 and self.fixed_s is None and not self.reported and not self.clock.in_interrupt:
+        if self._depth == self._handler_depth:  # back in a Python handler's own code
+            self._handler_at = time.thread_time()
+        elif self._depth == 0 and self.fixed_s is None and not self.reported and not self.clock.in_interrupt:
             self._left_at = time.thread_time()
+
+    def run_handler(self, handler) -> None:
+        """Run a timer interrupt's ``handler()`` (the clock's ``run_handler``). Measured, a Python
+        program's handler's own CPU time - its thread's CPU clock around it, less the Spinner calls
+        it makes - is kept and charged, times ``scale``, at main's next charged call, as a C
+        handler's reported time is (no simulated time passes in a handler). With a fixed cost a
+        handler costs nothing, in C neither: its calls are not charged."""
+        if self.fixed_s is not None or self.reported or self._handler_depth is not None:
+            handler()  # (a C handler reports its own time; handlers do not nest)
+            return
+        self._handler_depth, self._handler_at = self._depth, time.thread_time()
+        try:
+            handler()
+        finally:
+            self._pending_s += time.thread_time() - self._handler_at
+            self._handler_depth = None
 
 
 def timed(method, mcu: McuTime):
