@@ -138,7 +138,7 @@ FREE_RUNNING_C = """\
         double c0 = cpu();
         while (cpu() - c0 < 0.03) {}  /* 30 ms of work */
         spinner_camera_free_running();
-        printf("gaps %.4f %.4f after work %.4f\\n", t1 - t0, t2 - t1, spinner_now() - t2);
+        printf("gaps %.4f %.4f after work %.4f\\n", t1 - t0, t2 - t1, spinner_now_uncharged() - t2);
         fflush(stdout);
         return 0;
     }
@@ -346,7 +346,7 @@ def test_python_calls_that_were_not_charged_are(tmp_path, mcu_time):
 
 
 # A C call of each function of spinner.h and pixy2_line.h: (setup, the call, teardown); the
-# charge is the time from before the call to spinner_now after it (no charge of its own).
+# charge is the time from before the call to spinner_now_uncharged after it (no charge of its own).
 C_CALLS = {
     "spinner_configure": ("", "spinner_configure(NULL, NULL, NULL, NULL)", ""),
     "spinner_set_servo": ("", "spinner_set_servo(0.0)", ""),
@@ -368,6 +368,7 @@ C_CALLS = {
     "spinner_get_position": ("", "spinner_get_position(&x, &y, &z)", ""),
     "spinner_get_time": ("", "spinner_get_time()", ""),
     "spinner_now": ("", "spinner_now()", ""),
+    "spinner_now_uncharged": ("", "spinner_now_uncharged()", ""),
     "spinner_get_distance": ("", 'spinner_get_distance("front")', ""),
     "spinner_get_scan": ("", 'spinner_get_scan("lidar", rays, 4096)', ""),
     "spinner_get_scan_angles": ("", 'spinner_get_scan_angles("lidar", rays, 4096)', ""),
@@ -416,7 +417,7 @@ C_CALLS = {
 C_EXEMPT = {"spinner_configure", "spinner_image_width", "spinner_image_height", "spinner_line_row",
             "spinner_recording", "spinner_encoder_lines", "spinner_has_imu", "spinner_has_every",
             "spinner_interrupts", "spinner_in_interrupt", "spinner_running", "spinner_interrupts_disabled",
-            "spinner_now", "spinner_warn", "spinner_fail", "spinner_stop_every_latched", "spinner_unpend_every",
+            "spinner_now_uncharged", "spinner_warn", "spinner_fail", "spinner_stop_every_latched", "spinner_unpend_every",
             "spinner_pend_every", "spinner_every_pending"}  # simrunner.run.mcu.UNCHARGED_C_FUNCTIONS
 # what the review found not charged (set_camera_brightness was, through set_exposure)
 C_NEWLY_CHARGED = ("spinner_stop_every", "spinner_get_scan_angles", "pixy2_init", "pixy2_change_prog",
@@ -432,7 +433,7 @@ def _c_api() -> list[str]:
 
 
 def _c_charges(tmp_path, capfd, names, isolate: bool, mcu_time) -> dict[str, float]:
-    """``{name: the time passed from before its call to spinner_now after it}`` in a C program
+    """``{name: the time passed from before its call to spinner_now_uncharged after it}`` in a C program
     calling each function of ``names`` (C_CALLS), with 30 ms of CPU time before each when
     measured."""
     from simrunner.run.native import build_program
@@ -441,7 +442,7 @@ def _c_charges(tmp_path, capfd, names, isolate: bool, mcu_time) -> dict[str, flo
     for name in names:
         setup, call, teardown = C_CALLS[name]
         body.append(f"    {setup}; t0 = spinner_get_time(); work(); {call}; "
-                    f'printf("%s %.6f\\n", "{name}", spinner_now() - t0); {teardown};')
+                    f'printf("%s %.6f\\n", "{name}", spinner_now_uncharged() - t0); {teardown};')
     src = tmp_path / "calls.c"
     src.write_text(textwrap.dedent("""\
         #include <stdio.h>
@@ -481,10 +482,11 @@ def _c_charges(tmp_path, capfd, names, isolate: bool, mcu_time) -> dict[str, flo
 def test_every_c_function_is_charged_but_the_documented_exemptions(tmp_path, capfd, isolate):
     """Each function of spinner.h and pixy2_line.h costs the fixed cost (its request is), but
     those that send none (answered in the program: the car's constants, its own state, the PRIMASK
-    read) and spinner_now, spinner_warn, spinner_fail and the kits' NVIC functions, whose requests
-    are exempt (simrunner.run.mcu, the reasons there). A new function must have its call in
+    read) and spinner_now_uncharged, spinner_warn, spinner_fail and the kits' NVIC functions, whose
+    requests are exempt (simrunner.run.mcu, the reasons there). A new function must have its call in
     C_CALLS. (Before: spinner_stop_every, spinner_get_scan_angles and the Pixy2's calls but
-    pixy2_set_camera_brightness cost nothing.)"""
+    pixy2_set_camera_brightness cost nothing; spinner_now was exempt, so a loop polling it let no
+    time pass.)"""
     from simrunner.run import mcu
 
     api = _c_api()
@@ -501,7 +503,7 @@ def test_every_c_function_is_charged_but_the_documented_exemptions(tmp_path, cap
 def test_c_functions_that_were_not_charged_are(tmp_path, capfd, mcu_time, isolate):
     """spinner_stop_every, spinner_get_scan_angles and pixy2_line.h's calls: fixed, each costs the
     50 ms (none); measured, the 30 ms of work before it pass there (they passed at the next charged
-    call only: spinner_now after it read the time before the work)."""
+    call only: spinner_now_uncharged after it read the time before the work)."""
     passed = _c_charges(tmp_path, capfd, C_NEWLY_CHARGED, isolate, mcu_time)
     low = 0.05 if mcu_time == 0.05 else 0.028  # (measured: whole 2-ms steps)
     wrong = {name: got for name, got in passed.items() if got < low}
@@ -516,9 +518,9 @@ PENDED_C = """\
     int main(void) {
         double t0 = spinner_get_time();
         spinner_pend_every(h);   /* unmasked: h runs in it, as NVIC_SetPendingIRQ's handler */
-        double t1 = spinner_now();
+        double t1 = spinner_now_uncharged();
         spinner_set_servo(0.0);
-        double t2 = spinner_now();
+        double t2 = spinner_now_uncharged();
         printf("calls %d gaps %.4f %.4f\\n", calls, t1 - t0, t2 - t1);
         fflush(stdout);
         return 0;
@@ -585,19 +587,19 @@ CPP_MEMBERS = """\
         Pixy2 pixy;
         double t0 = s.getTime();
         pixy.init();
-        double t1 = spinner_now();
+        double t1 = spinner_now_uncharged();
         pixy.getResolution();
-        double t2 = spinner_now();
+        double t2 = spinner_now_uncharged();
         pixy.line.setMode(0);
-        double t3 = spinner_now();
+        double t3 = spinner_now_uncharged();
         s.every(10.0, h);
-        double t4 = spinner_now();
+        double t4 = spinner_now_uncharged();
         s.stopEvery(h);
-        double t5 = spinner_now();
+        double t5 = spinner_now_uncharged();
         s.getScanAngles("lidar");
-        double t6 = spinner_now();
+        double t6 = spinner_now_uncharged();
         s.interruptsDisabled();
-        double t7 = spinner_now();
+        double t7 = spinner_now_uncharged();
         std::printf("frame %d %d gaps %.4f %.4f %.4f %.4f %.4f %.4f %.4f\\n", pixy.frameWidth, pixy.frameHeight,
                     t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5, t7 - t6);
         std::fflush(stdout);

@@ -41,9 +41,17 @@ request costs it. The requests:
   ``spinner_stop_every`` of a handler not set up). Python's same calls are charged: with a fixed
   cost one charge more; measured the same, as nothing depends on where the time before a call
   without an effect passes. The requests exempt are not calls of the program's code (its CPU
-  time, a handler's end, its end), ``spinner_now`` and ``spinner_warn``, and the kits' NVIC
-  emulation: sent at the kit's look at the registers the program wrote, they have no time of
-  their own in the program's; the program's time passes at its next call.
+  time, a handler's end, its end), ``spinner_warn``, and the kits' bookkeeping - their NVIC
+  emulation and ``spinner_now_uncharged``: sent at the kit's look at the registers the program
+  wrote, or for the time a timer it starts counts from, they have no time of their own in the
+  program's; the program's time passes at its next call.
+
+A read of the time is a request like any other: ``spinner_now`` in ``main()``, and so the kits'
+registers whose values are made with it (the S32K144 kit's Gpt reads, input pins and conversions), each a round trip with a charge. On the MCU a
+loop that polls a clock spends its time reading it: ``while (spinner_now() < t0 + 0.005) {}``
+ends 5 ms later (measured: by the CPU time its reads take; fixed: one cost a read), where without
+the charge no time passed in it and the watchdog ended the run. Python has no such read:
+``get_time`` is charged and lets a physics step pass.
 
 Calls made inside another call (a Pixy2 call's exposure, the bridge's request answered by a
 Spinner method) are charged once, and calls in an interrupt handler not at all: no simulated
@@ -73,7 +81,7 @@ UNCHARGED_METHODS = {
 
 #: The C functions (spinner.h, pixy2_line.h) not charged, each with the reason: most send no
 #: request (answered inside the program from what it was given at its start or keeps itself);
-#: spinner_now, spinner_warn, spinner_fail and the kits' NVIC functions send one of
+#: spinner_now_uncharged, spinner_warn, spinner_fail and the kits' NVIC functions send one of
 #: :data:`UNCHARGED_REQUESTS`.
 UNCHARGED_C_FUNCTIONS = {
     "spinner_configure": "the program's own norm functions",
@@ -88,7 +96,7 @@ UNCHARGED_C_FUNCTIONS = {
     "spinner_in_interrupt": "the program's own state (a handler runs)",
     "spinner_running": "the program's own state (a constructor at the load)",
     "spinner_interrupts_disabled": UNCHARGED_METHODS["interrupts_disabled"],
-    "spinner_now": "its request (OP_NOW) is exempt: see UNCHARGED_REQUESTS",
+    "spinner_now_uncharged": "its request (OP_NOW_UNCHARGED) is exempt: see UNCHARGED_REQUESTS",
     "spinner_warn": "its request (OP_WARN) is exempt: see UNCHARGED_REQUESTS",
     "spinner_fail": "its request (OP_FAULT) ends the run",
     "spinner_stop_every_latched": "the kits' NVIC emulation (OP_EVERY_STOP_LATCHED): see UNCHARGED_REQUESTS",
@@ -110,8 +118,11 @@ UNCHARGED_REQUESTS = {
     "OP_ISR_DONE": "no call: a handler's end",
     "OP_FAULT": "no call: the program's fault (or spinner_fail), which ends the run",
     "OP_EXIT_AT": "no call: where the program called exit, as it ends",
-    "OP_NOW": "spinner_now is the time of the program's last charged call (docs/c_controllers.md): "
-              "the kits read their timers' counts with it at each register access",
+    "OP_NOW_UNCHARGED": "spinner_now_uncharged: the time of the program's last charged call, for the kits' "
+                        "bookkeeping of their registers (their look before a wait, the time a timer they start "
+                        "counts from), which has no time of its own in the program's; charged there, a look "
+                        "would let the time pass between two register writes it applies together (see the NVIC "
+                        "requests). The program's reads of the time are spinner_now (OP_NOW), charged",
     "OP_WARN": "spinner_warn: a message to the person running the simulation, none on the car (the "
                "kits' register emulation warns)",
     "OP_EVERY_STOP_LATCHED": _NVIC,  # spinner_stop_every_latched
