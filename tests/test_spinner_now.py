@@ -249,6 +249,25 @@ int main(void) {
 }
 """
 
+PIT_BUSY_WAIT = """\
+#include "derivative.h"
+#include "spinner.h"
+#include "TFC\\\\TFC.h"
+int main(void) {
+    TFC_Init();
+    PIT_MCR = 0;
+    PIT_LDVAL1 = 0xFFFFFFFFu;                  /* free running, down at the 24 MHz bus clock */
+    PIT_TCTRL1 = PIT_TCTRL_TEN_MASK;
+    spinner_sleep(0.002);                      /* the look that starts it, then a step */
+    double t0 = spinner_now_uncharged();
+    uint32_t c0 = PIT_CVAL1;
+    long reads = 0;
+    while (c0 - PIT_CVAL1 < 120000u) reads++;  /* 5 ms of ticks */
+    spinner_add_textf("from %.4f to %.4f reads %ld", t0, spinner_now_uncharged(), reads);
+    return 0;
+}
+"""
+
 GPT_BUSY_WAIT = """\
 #include "Gpt.h"
 #include "spinner.h"
@@ -294,6 +313,21 @@ def test_without_mcu_time_a_busy_wait_on_spinner_now_is_stalled_as_before(tmp_pa
     stops it at its line (unchanged)."""
     r, got = _busy_wait(tmp_path, NOW_BUSY_WAIT, wall_limit_s=1.0)
     assert r.outcome == "stalled" and "wait.c:5" in r.message, r.message
+
+
+def test_with_mcu_time_a_busy_wait_on_a_tfc_timer_register_ends_at_its_time(tmp_path):
+    """A loop polling PIT_CVAL1 for 5 ms of its ticks: with --mcu-time 0.0001 each use of the running
+    PIT is a charged read of the time, so the loop ends 5 ms (a whole step: 6) later, after some 50
+    reads; measured, there too. Without --mcu-time the count never moves (a read lets no time pass)
+    and the watchdog stops the run, as before."""
+    r, got = _busy_wait(tmp_path, PIT_BUSY_WAIT, kit="tfc", mcu_time=0.0001)
+    assert r.outcome == "controller_returned", r.message
+    assert round(got[1] - got[0], 6) == 0.006 and 45 <= got[2] <= 60, got
+    r, got = _busy_wait(tmp_path, PIT_BUSY_WAIT, kit="tfc", mcu_time="measured", mcu_scale=40.0)
+    assert r.outcome == "controller_returned", r.message
+    assert 0.005 <= got[1] - got[0] <= 0.008, got
+    r, _ = _busy_wait(tmp_path, PIT_BUSY_WAIT, kit="tfc", wall_limit_s=1.0)
+    assert r.outcome == "stalled", r.message
 
 
 def test_with_mcu_time_a_busy_wait_on_a_gpt_channel_is_charged_read_by_read(tmp_path):

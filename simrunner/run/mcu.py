@@ -47,9 +47,10 @@ request costs it. The requests:
   program's; the program's time passes at its next call.
 
 A read of the time is a request like any other: ``spinner_now`` in ``main()``, and so the kits'
-registers whose values are made with it (the S32K144 kit's Gpt reads, input pins and conversions), each a round trip with a charge. On the MCU a
-loop that polls a clock spends its time reading it: ``while (spinner_now() < t0 + 0.005) {}``
-ends 5 ms later (measured: by the CPU time its reads take; fixed: one cost a read), where without
+timer registers whose counts are made with it (the TFC kit's PIT, LPTMR0 and TPM2 counters while
+they count, the S32K144 kit's Gpt reads, input pins and conversions), each a round trip with a
+charge. On the MCU a loop that polls a clock spends its time reading it:
+``while (spinner_now() < t0 + 0.005) {}`` ends 5 ms later (measured: by the CPU time its reads take; fixed: one cost a read), where without
 the charge no time passed in it and the watchdog ended the run. Python has no such read:
 ``get_time`` is charged and lets a physics step pass.
 

@@ -273,7 +273,9 @@ static void stop(struct timer *t, int source) {
 }
 
 /* The counters, counting simulated time (spinner_now_uncharged: the time of the program's last
- * call, or a handler's): a counter starts at the look that finds it enabled - a use of LPTMR0, PIT or TPM2 in the program (its accessor, below), the look before a
+ * call, or a handler's; the program's use of a counting timer is a read of the time, charged with
+ * --mcu-time before the counter is made: tfc_sim_pit_now): a counter starts at the look that finds
+ * it enabled - a use of LPTMR0, PIT or TPM2 in the program (its accessor, below), the look before a
  * wait or after a handler - which is the time of
  * the write, as the program's code between two calls takes no simulated time; one whose interrupt
  * starts with it counts from the time that interrupt is timed from (start). The looks (`look`)
@@ -550,19 +552,26 @@ static int reshaped(int i, double period_s) {
     return period_s != timers[i].regular_s || (phase_of(i, &f) && f.flag_at != timers[i].ph.flag_at);
 }
 
-/* The program's LPTMR0, PIT and TPM2 (sim_timers.h): the registers with their counters now. */
+/* The program's LPTMR0, PIT and TPM2 (sim_timers.h): the registers with their counters now. A use
+ * of a timer whose counter counts reads the time (spinner_now): with --mcu-time, in main(), the
+ * program's time since its last charged call passes first - a handler due in it runs before the
+ * access, as on the board - so a loop polling a counter ends; without it no time passes (a round trip
+ * once a time at most, as before). A set-up of a stopped timer reads none. */
 LPTMR_Type *tfc_sim_lptmr0_now(void) {
+    if (lptmr_counting()) (void)spinner_now();
     lptmr_counter(0);
     return &tfc_sim_lptmr0;
 }
 
 PIT_Type *tfc_sim_pit_now(void) {
+    if (pit_counting(0) || pit_counting(1)) (void)spinner_now();
     pit_counter(0, 0);
     pit_counter(1, 0);
     return &tfc_sim_pit;
 }
 
 TPM_Type *tfc_sim_tpm2_now(void) {
+    if (tpm2_counting()) (void)spinner_now();
     tpm2_counter(0);
     return &tfc_sim_tpm2;
 }
