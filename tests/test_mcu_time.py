@@ -138,7 +138,7 @@ FREE_RUNNING_C = """\
         double c0 = cpu();
         while (cpu() - c0 < 0.03) {}  /* 30 ms of work */
         spinner_camera_free_running();
-        printf("gaps %.4f %.4f after work %.4f\\n", t1 - t0, t2 - t1, spinner_now() - t2);
+        printf("gaps %.4f %.4f after work %.4f\\n", t1 - t0, t2 - t1, spinner_now_uncharged() - t2);
         fflush(stdout);
         return 0;
     }
@@ -346,7 +346,7 @@ def test_python_calls_that_were_not_charged_are(tmp_path, mcu_time):
 
 
 # A C call of each function of spinner.h and pixy2_line.h: (setup, the call, teardown); the
-# charge is the time from before the call to spinner_now after it (no charge of its own).
+# charge is the time from before the call to spinner_now_uncharged after it (no charge of its own).
 C_CALLS = {
     "spinner_configure": ("", "spinner_configure(NULL, NULL, NULL, NULL)", ""),
     "spinner_set_servo": ("", "spinner_set_servo(0.0)", ""),
@@ -368,6 +368,7 @@ C_CALLS = {
     "spinner_get_position": ("", "spinner_get_position(&x, &y, &z)", ""),
     "spinner_get_time": ("", "spinner_get_time()", ""),
     "spinner_now": ("", "spinner_now()", ""),
+    "spinner_now_uncharged": ("", "spinner_now_uncharged()", ""),
     "spinner_get_distance": ("", 'spinner_get_distance("front")', ""),
     "spinner_get_scan": ("", 'spinner_get_scan("lidar", rays, 4096)', ""),
     "spinner_get_scan_angles": ("", 'spinner_get_scan_angles("lidar", rays, 4096)', ""),
@@ -416,7 +417,7 @@ C_CALLS = {
 C_EXEMPT = {"spinner_configure", "spinner_image_width", "spinner_image_height", "spinner_line_row",
             "spinner_recording", "spinner_encoder_lines", "spinner_has_imu", "spinner_has_every",
             "spinner_interrupts", "spinner_in_interrupt", "spinner_running", "spinner_interrupts_disabled",
-            "spinner_now", "spinner_warn", "spinner_fail", "spinner_stop_every_latched", "spinner_unpend_every",
+            "spinner_now_uncharged", "spinner_warn", "spinner_fail", "spinner_stop_every_latched", "spinner_unpend_every",
             "spinner_pend_every", "spinner_every_pending"}  # simrunner.run.mcu.UNCHARGED_C_FUNCTIONS
 # what the review found not charged (set_camera_brightness was, through set_exposure)
 C_NEWLY_CHARGED = ("spinner_stop_every", "spinner_get_scan_angles", "pixy2_init", "pixy2_change_prog",
@@ -432,7 +433,7 @@ def _c_api() -> list[str]:
 
 
 def _c_charges(tmp_path, capfd, names, isolate: bool, mcu_time) -> dict[str, float]:
-    """``{name: the time passed from before its call to spinner_now after it}`` in a C program
+    """``{name: the time passed from before its call to spinner_now_uncharged after it}`` in a C program
     calling each function of ``names`` (C_CALLS), with 30 ms of CPU time before each when
     measured."""
     from simrunner.run.native import build_program
@@ -441,7 +442,7 @@ def _c_charges(tmp_path, capfd, names, isolate: bool, mcu_time) -> dict[str, flo
     for name in names:
         setup, call, teardown = C_CALLS[name]
         body.append(f"    {setup}; t0 = spinner_get_time(); work(); {call}; "
-                    f'printf("%s %.6f\\n", "{name}", spinner_now() - t0); {teardown};')
+                    f'printf("%s %.6f\\n", "{name}", spinner_now_uncharged() - t0); {teardown};')
     src = tmp_path / "calls.c"
     src.write_text(textwrap.dedent("""\
         #include <stdio.h>
@@ -481,10 +482,11 @@ def _c_charges(tmp_path, capfd, names, isolate: bool, mcu_time) -> dict[str, flo
 def test_every_c_function_is_charged_but_the_documented_exemptions(tmp_path, capfd, isolate):
     """Each function of spinner.h and pixy2_line.h costs the fixed cost (its request is), but
     those that send none (answered in the program: the car's constants, its own state, the PRIMASK
-    read) and spinner_now, spinner_warn, spinner_fail and the kits' NVIC functions, whose requests
-    are exempt (simrunner.run.mcu, the reasons there). A new function must have its call in
+    read) and spinner_now_uncharged, spinner_warn, spinner_fail and the kits' NVIC functions, whose
+    requests are exempt (simrunner.run.mcu, the reasons there). A new function must have its call in
     C_CALLS. (Before: spinner_stop_every, spinner_get_scan_angles and the Pixy2's calls but
-    pixy2_set_camera_brightness cost nothing.)"""
+    pixy2_set_camera_brightness cost nothing; spinner_now was exempt, so a loop polling it let no
+    time pass.)"""
     from simrunner.run import mcu
 
     api = _c_api()
@@ -501,7 +503,7 @@ def test_every_c_function_is_charged_but_the_documented_exemptions(tmp_path, cap
 def test_c_functions_that_were_not_charged_are(tmp_path, capfd, mcu_time, isolate):
     """spinner_stop_every, spinner_get_scan_angles and pixy2_line.h's calls: fixed, each costs the
     50 ms (none); measured, the 30 ms of work before it pass there (they passed at the next charged
-    call only: spinner_now after it read the time before the work)."""
+    call only: spinner_now_uncharged after it read the time before the work)."""
     passed = _c_charges(tmp_path, capfd, C_NEWLY_CHARGED, isolate, mcu_time)
     low = 0.05 if mcu_time == 0.05 else 0.028  # (measured: whole 2-ms steps)
     wrong = {name: got for name, got in passed.items() if got < low}
@@ -516,9 +518,9 @@ PENDED_C = """\
     int main(void) {
         double t0 = spinner_get_time();
         spinner_pend_every(h);   /* unmasked: h runs in it, as NVIC_SetPendingIRQ's handler */
-        double t1 = spinner_now();
+        double t1 = spinner_now_uncharged();
         spinner_set_servo(0.0);
-        double t2 = spinner_now();
+        double t2 = spinner_now_uncharged();
         printf("calls %d gaps %.4f %.4f\\n", calls, t1 - t0, t2 - t1);
         fflush(stdout);
         return 0;
@@ -585,19 +587,19 @@ CPP_MEMBERS = """\
         Pixy2 pixy;
         double t0 = s.getTime();
         pixy.init();
-        double t1 = spinner_now();
+        double t1 = spinner_now_uncharged();
         pixy.getResolution();
-        double t2 = spinner_now();
+        double t2 = spinner_now_uncharged();
         pixy.line.setMode(0);
-        double t3 = spinner_now();
+        double t3 = spinner_now_uncharged();
         s.every(10.0, h);
-        double t4 = spinner_now();
+        double t4 = spinner_now_uncharged();
         s.stopEvery(h);
-        double t5 = spinner_now();
+        double t5 = spinner_now_uncharged();
         s.getScanAngles("lidar");
-        double t6 = spinner_now();
+        double t6 = spinner_now_uncharged();
         s.interruptsDisabled();
-        double t7 = spinner_now();
+        double t7 = spinner_now_uncharged();
         std::printf("frame %d %d gaps %.4f %.4f %.4f %.4f %.4f %.4f %.4f\\n", pixy.frameWidth, pixy.frameHeight,
                     t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4, t6 - t5, t7 - t6);
         std::fflush(stdout);
@@ -620,3 +622,108 @@ def test_cpp_members_are_charged_as_the_c_calls_they_make(tmp_path, capfd, isola
     out = capfd.readouterr().out
     assert r.outcome == "controller_returned", (r.message, out)
     assert "frame 316 208 gaps 0.0500 0.0500 0.0500 0.0500 0.0500 0.0500 0.0000" in out, out
+
+
+# -- a handler's own time (measured: charged at main's next call; fixed: nothing), C and Python alike --
+
+HANDLER_BURN_PY = """\
+import time
+
+
+def main(s):
+    burned = []
+
+    def handler():
+        c0 = time.thread_time()
+        while time.thread_time() - c0 < 0.010:  # 10 ms of the handler's own work
+            pass
+        burned.append(time.thread_time() - c0)
+        s.stop_every(handler)
+
+    s.every(0.02, handler)
+    s.sleep(0.02)          # the handler runs at 0.020 s, inside this wait
+    t = s.get_time()       # main's next call: the handler's time passes first
+    print(f"handler burned {burned[0]:.6f} get_time {t:.6f}", flush=True)
+"""
+
+HANDLER_BURN_C = """\
+#include <stdio.h>
+#include <time.h>
+#include "spinner.h"
+static double burned;
+static double cpu(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+static void handler(void) {
+    double c0 = cpu();
+    while (cpu() - c0 < 0.010) {}   /* 10 ms of the handler's own work */
+    burned = cpu() - c0;
+    spinner_stop_every(handler);
+}
+int main(void) {
+    spinner_every(0.02, handler);
+    spinner_sleep(0.02);            /* the handler runs at 0.020 s, inside this wait */
+    double t = spinner_get_time();  /* main's next call: the handler's time passes first */
+    printf("handler burned %.6f get_time %.6f\\n", burned, t);
+    fflush(stdout);
+    return 0;
+}
+"""
+
+
+def _handler_burn(tmp_path, capfd, language: str, **kw) -> tuple[float, float]:
+    """``(the handler's CPU seconds, main's get_time after it)`` of HANDLER_BURN_* in ``language``."""
+    src = tmp_path / ("burn.py" if language == "python" else "burn.c")
+    src.write_text(HANDLER_BURN_PY if language == "python" else HANDLER_BURN_C)
+    capfd.readouterr()
+    r = drive(str(src), track="floor", time_limit_s=5.0, **kw)
+    out = capfd.readouterr().out
+    assert r.outcome == "controller_returned", (r.message, out)
+    got = re.search(r"handler burned ([0-9.]+) get_time ([0-9.]+)", out)
+    assert got, out
+    return float(got.group(1)), float(got.group(2))
+
+
+@pytest.mark.parametrize("language", ["python", "c"])
+def test_measured_a_handlers_cpu_time_is_charged_at_mains_next_call(tmp_path, capfd, language):
+    """A handler burning 10 ms of CPU at 0.020 s, --mcu-scale 2: main's get_time after the wait reads
+    0.020 + about 20 ms + its own 2-ms step, C and Python alike (Python's handler's time was not
+    charged: 0.022, as without --mcu-time). The charge is whole 2-ms steps, the rest carried."""
+    burned, t = _handler_burn(tmp_path, capfd, language, mcu_time="measured", mcu_scale=2.0)
+    shift = t - 0.022
+    assert burned >= 0.010 and burned * 2 - 0.0021 <= shift <= burned * 2 + 0.004, (burned, t)
+    _, plain = _handler_burn(tmp_path, capfd, language)
+    assert plain == pytest.approx(0.022)
+
+
+def test_with_a_fixed_cost_a_handler_costs_nothing_in_c_and_python_alike(tmp_path, capfd):
+    """--mcu-time 0.001: the handler's work and its call (stop_every) are not charged; main's calls
+    are (every, sleep, get_time: 3 ms, a step of it carried) - the same time in both languages."""
+    times = [_handler_burn(tmp_path, capfd, language, mcu_time=0.001)[1] for language in ("python", "c")]
+    assert times == [pytest.approx(0.024)] * 2, times
+
+
+def test_measured_a_python_handlers_spinner_calls_are_not_its_time():
+    """The simulator's work in a handler's Spinner calls (20 latest_image renders, over 100 ms of
+    CPU here) is not the handler's time: at --mcu-scale 20 main's next call moves by its own step and
+    the handler's few lines only (charged, the renders alone would be seconds)."""
+    got = {}
+
+    def main(s):
+        def handler():
+            c0 = time.thread_time()
+            for _ in range(20):
+                s.latest_image(-1)
+            got["calls_s"] = time.thread_time() - c0
+            s.stop_every(handler)
+
+        s.every(0.02, handler)
+        s.sleep(0.02)
+        got["t"] = s.get_time()
+
+    r = drive(main, track="floor", time_limit_s=5.0, mcu_time="measured", mcu_scale=20.0)
+    assert r.outcome == "controller_returned", r.message
+    assert got["calls_s"] * 20 > 0.2, got  # (what charging them would have cost)
+    assert got["t"] <= 0.022 + 0.010, got

@@ -157,6 +157,9 @@ class LockstepClock:
         self._held_at_step: int | None = None  # the step a handler was first held pending since the mask
         self._held_warned = False  # the warning of held handlers given for this mask
         self.warn: Callable[[str, str], None] | None = None  # (key, text): a warning of the run
+        # set by the owner: run_handler(handler) runs a handler in place of handler() (--mcu-time
+        # measures a Python handler's CPU time: simrunner.run.mcu.McuTime.run_handler)
+        self.run_handler: Callable[[Callable[[], None]], None] | None = None
 
     # -- schedule ------------------------------------------------------------------
     def _frame_step(self, k: int) -> int:
@@ -323,7 +326,10 @@ class LockstepClock:
     def _run(self, irq: _Interrupt) -> None:
         self.in_interrupt = True
         try:
-            irq.handler()
+            if self.run_handler is None:
+                irq.handler()
+            else:
+                self.run_handler(irq.handler)
         finally:
             self.in_interrupt = False
 

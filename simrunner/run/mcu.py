@@ -41,13 +41,26 @@ request costs it. The requests:
   ``spinner_stop_every`` of a handler not set up). Python's same calls are charged: with a fixed
   cost one charge more; measured the same, as nothing depends on where the time before a call
   without an effect passes. The requests exempt are not calls of the program's code (its CPU
-  time, a handler's end, its end), ``spinner_now`` and ``spinner_warn``, and the kits' NVIC
-  emulation: sent at the kit's look at the registers the program wrote, they have no time of
-  their own in the program's; the program's time passes at its next call.
+  time, a handler's end, its end), ``spinner_warn``, and the kits' bookkeeping - their NVIC
+  emulation and ``spinner_now_uncharged``: sent at the kit's look at the registers the program
+  wrote, or for the time a timer it starts counts from, they have no time of their own in the
+  program's; the program's time passes at its next call.
+
+A read of the time is a request like any other: ``spinner_now`` in ``main()``, and so the kits'
+timer registers whose counts are made with it (the TFC kit's PIT, LPTMR0 and TPM2 counters while
+they count, the S32K144 kit's Gpt reads, input pins and conversions), each a round trip with a
+charge. On the MCU a loop that polls a clock spends its time reading it:
+``while (spinner_now() < t0 + 0.005) {}`` ends 5 ms later (measured: by the CPU time its reads take; fixed: one cost a read), where without
+the charge no time passed in it and the watchdog ended the run. Python has no such read:
+``get_time`` is charged and lets a physics step pass.
 
 Calls made inside another call (a Pixy2 call's exposure, the bridge's request answered by a
 Spinner method) are charged once, and calls in an interrupt handler not at all: no simulated
-time passes in a handler (a C handler's measured time is charged at main's next call).
+time passes in a handler. Measured, a handler's own CPU time is charged, times ``scale``, at
+main's next charged call, in both languages alike: a C handler reports it with its requests and
+its end; a Python handler's is its thread's CPU clock around it, less the Spinner calls it makes
+(:meth:`McuTime.run_handler`). With a fixed cost a handler costs nothing (its calls are not
+charged), C and Python alike.
 """
 from __future__ import annotations
 
@@ -69,7 +82,7 @@ UNCHARGED_METHODS = {
 
 #: The C functions (spinner.h, pixy2_line.h) not charged, each with the reason: most send no
 #: request (answered inside the program from what it was given at its start or keeps itself);
-#: spinner_now, spinner_warn, spinner_fail and the kits' NVIC functions send one of
+#: spinner_now_uncharged, spinner_warn, spinner_fail and the kits' NVIC functions send one of
 #: :data:`UNCHARGED_REQUESTS`.
 UNCHARGED_C_FUNCTIONS = {
     "spinner_configure": "the program's own norm functions",
@@ -84,7 +97,7 @@ UNCHARGED_C_FUNCTIONS = {
     "spinner_in_interrupt": "the program's own state (a handler runs)",
     "spinner_running": "the program's own state (a constructor at the load)",
     "spinner_interrupts_disabled": UNCHARGED_METHODS["interrupts_disabled"],
-    "spinner_now": "its request (OP_NOW) is exempt: see UNCHARGED_REQUESTS",
+    "spinner_now_uncharged": "its request (OP_NOW_UNCHARGED) is exempt: see UNCHARGED_REQUESTS",
     "spinner_warn": "its request (OP_WARN) is exempt: see UNCHARGED_REQUESTS",
     "spinner_fail": "its request (OP_FAULT) ends the run",
     "spinner_stop_every_latched": "the kits' NVIC emulation (OP_EVERY_STOP_LATCHED): see UNCHARGED_REQUESTS",
@@ -106,8 +119,11 @@ UNCHARGED_REQUESTS = {
     "OP_ISR_DONE": "no call: a handler's end",
     "OP_FAULT": "no call: the program's fault (or spinner_fail), which ends the run",
     "OP_EXIT_AT": "no call: where the program called exit, as it ends",
-    "OP_NOW": "spinner_now is the time of the program's last charged call (docs/c_controllers.md): "
-              "the kits read their timers' counts with it at each register access",
+    "OP_NOW_UNCHARGED": "spinner_now_uncharged: the time of the program's last charged call, for the kits' "
+                        "bookkeeping of their registers (their look before a wait, the time a timer they start "
+                        "counts from), which has no time of its own in the program's; charged there, a look "
+                        "would let the time pass between two register writes it applies together (see the NVIC "
+                        "requests). The program's reads of the time are spinner_now (OP_NOW), charged",
     "OP_WARN": "spinner_warn: a message to the person running the simulation, none on the car (the "
                "kits' register emulation warns)",
     "OP_EVERY_STOP_LATCHED": _NVIC,  # spinner_stop_every_latched
@@ -142,10 +158,12 @@ class McuTime:
         self.scale = float(scale)
         self.reported = False   # a native program reports its CPU time (report)
         self.charged_s = 0.0    # simulated time charged so far (the summary's mcu_time_s)
-        self._pending_s = 0.0   # reported CPU seconds not charged yet
+        self._pending_s = 0.0   # CPU seconds not charged yet: reported, or a Python handler's
         self._debt_s = 0.0      # charged time not yet a whole physics step
-        self._left_at: float | None = None
+        self._left_at: float | None = None  # thread CPU clock (s) as main's code resumed (Python)
         self._depth = 0
+        self._handler_depth: int | None = None  # _depth as a Python handler began (None: none runs)
+        self._handler_at = 0.0  # thread CPU clock (s) as the handler's own code resumed
 
     def report(self, cpu_s: float) -> None:
         """CPU seconds a native program spent since its previous request (its OP_CPU message)."""
@@ -154,8 +172,11 @@ class McuTime:
 
     def enter(self, charge: bool = True) -> None:
         """A call begins: charged unless ``charge`` is False (an exempt request), it is inside
-        another call, or in a handler (no time passes there)."""
+        another call, or in a handler (no time passes there; a Python handler's own time up to
+        its call is kept for main's next charge)."""
         self._depth += 1
+        if self._depth - 1 == self._handler_depth:  # a Python handler's call: its code's time so far
+            self._pending_s += time.thread_time() - self._handler_at
         if not charge or self._depth > 1 or self.clock.in_interrupt:
             return
         if self.fixed_s is not None:
@@ -164,7 +185,8 @@ class McuTime:
             spent, self._pending_s = self._pending_s * self.scale, 0.0
         else:
             now = time.thread_time()
-            spent = 0.0 if self._left_at is None else (now - self._left_at) * self.scale
+            own_s = 0.0 if self._left_at is None else now - self._left_at
+            spent, self._pending_s = (own_s + self._pending_s) * self.scale, 0.0
         self.charged_s += spent
         self._debt_s += spent
         steps = math.floor(self._debt_s / self.clock.dt_s + 1e-9)
@@ -174,8 +196,26 @@ class McuTime:
 
     def leave(self) -> None:
         self._depth -= 1
-        if self._depth == 0 and self.fixed_s is None and not self.reported and not self.clock.in_interrupt:
+        if self._depth == self._handler_depth:  # back in a Python handler's own code
+            self._handler_at = time.thread_time()
+        elif self._depth == 0 and self.fixed_s is None and not self.reported and not self.clock.in_interrupt:
             self._left_at = time.thread_time()
+
+    def run_handler(self, handler) -> None:
+        """Run a timer interrupt's ``handler()`` (the clock's ``run_handler``). Measured, a Python
+        program's handler's own CPU time - its thread's CPU clock around it, less the Spinner calls
+        it makes - is kept and charged, times ``scale``, at main's next charged call, as a C
+        handler's reported time is (no simulated time passes in a handler). With a fixed cost a
+        handler costs nothing, in C neither: its calls are not charged."""
+        if self.fixed_s is not None or self.reported or self._handler_depth is not None:
+            handler()  # (a C handler reports its own time; handlers do not nest)
+            return
+        self._handler_depth, self._handler_at = self._depth, time.thread_time()
+        try:
+            handler()
+        finally:
+            self._pending_s += time.thread_time() - self._handler_at
+            self._handler_depth = None
 
 
 def timed(method, mcu: McuTime):

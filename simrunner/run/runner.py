@@ -352,6 +352,7 @@ class Run:
 
             self.session.mcu = McuTime(self.clock, scale=settings.mcu_scale,
                                        fixed_s=None if settings.mcu_time == "measured" else settings.mcu_time)
+            self.clock.run_handler = self.session.mcu.run_handler  # (a Python handler's time, measured)
         for box in track.boxes:  # the layout's @box objects stand there from the start
             self.place_solid(box)
         self.wall_time_s = 0.0

@@ -50,7 +50,7 @@ OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP
     OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS, OP_EVERY, \
     OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK, OP_IRQ_MASK_WAIT, \
     OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING, OP_EXIT_AT, OP_FREE_RUNNING, \
-    OP_SET_EXPOSURE_NEXT, OP_EVERY_STOP_LATCHED = range(1, 39)
+    OP_SET_EXPOSURE_NEXT, OP_EVERY_STOP_LATCHED, OP_NOW_UNCHARGED = range(1, 40)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
 LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
@@ -87,7 +87,7 @@ _PASS = (RunFinished, ControllerError, _ChildGone, KeyboardInterrupt)  # not a r
 _WAITING = frozenset((OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP_NOISE, OP_PARAM, OP_FAULT,
                       OP_SET_EXPOSURE, OP_GET_EXPOSURE, OP_PIXY_FEATURES, OP_PIXY_SET, OP_PIXY_PROG,
                       OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK_WAIT,
-                      OP_PEND_WAIT, OP_EVERY_PENDING, OP_FREE_RUNNING, OP_SET_EXPOSURE_NEXT))
+                      OP_PEND_WAIT, OP_EVERY_PENDING, OP_FREE_RUNNING, OP_SET_EXPOSURE_NEXT, OP_NOW_UNCHARGED))
 # the requests --mcu-time does not charge (simrunner.run.mcu, the reason of each); _handle charges the rest
 _UNCHARGED = frozenset(globals()[name] for name in UNCHARGED_REQUESTS)
 
@@ -391,8 +391,8 @@ class _Session:
             s.add_data([p.decode("utf-8", "replace") for p in parts])
         elif op == OP_TIME:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_time()))
-        elif op == OP_NOW:  # spinner_now: the clock's time, no step, no --mcu-time charge
-            reply(_HDR.pack(ST_OK, 8) + _D.pack(s._clock.time_s))
+        elif op == OP_NOW or op == OP_NOW_UNCHARGED:  # spinner_now (charged), spinner_now_uncharged: the
+            reply(_HDR.pack(ST_OK, 8) + _D.pack(s._clock.time_s))  # clock's time, no step
         elif op == OP_SPEED:
             reply(_HDR.pack(ST_OK, 8) + _D.pack(s.get_speed()))
         elif op == OP_POSITION:

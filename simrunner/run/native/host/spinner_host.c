@@ -65,7 +65,7 @@ enum { OP_CMD = 1, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, O
        OP_PIXY_SET, OP_PIXY_PROG, OP_DISTANCE, OP_SCAN, OP_ENCODER, OP_IMU, OP_CPU, OP_MOTORS,
        OP_EVERY, OP_ISR_DONE, OP_EVERY_STOP, OP_WARN, OP_LATEST_IMAGE, OP_NOW, OP_IRQ_MASK,
        OP_IRQ_MASK_WAIT, OP_EVERY_UNPEND, OP_PEND, OP_PEND_WAIT, OP_EVERY_PENDING, OP_EXIT_AT,
-       OP_FREE_RUNNING, OP_SET_EXPOSURE_NEXT, OP_EVERY_STOP_LATCHED };
+       OP_FREE_RUNNING, OP_SET_EXPOSURE_NEXT, OP_EVERY_STOP_LATCHED, OP_NOW_UNCHARGED };
 enum { ST_OK = 0, ST_FINISHED = 1, ST_ERROR = 2, ST_WHERE = 3, ST_ISR = 4 };
 
 static unsigned char out_buf[1 << 16];
@@ -579,9 +579,10 @@ static size_t call(uint32_t op, const void *a, size_t na, const void *b, size_t 
         return 0;
     }
     thread_exit_check();
-    /* time passes in the call - but not in OP_NOW or OP_EVERY_PENDING, unless --mcu-time charges
-     * the calls queued before it (main() only) */
-    int passes = (op != OP_NOW && op != OP_EVERY_PENDING) || (mcu_on && isr_depth == 0);
+    /* time passes in the call - but not in OP_NOW, OP_NOW_UNCHARGED or OP_EVERY_PENDING, unless
+     * --mcu-time charges it or the calls queued before it (main() only) */
+    int passes = (op != OP_NOW && op != OP_NOW_UNCHARGED && op != OP_EVERY_PENDING)
+                 || (mcu_on && isr_depth == 0);
     if (kit_before_wait != NULL && !in_kit_hook && passes) {  /* (the kit's registers before time passes) */
         in_kit_hook = 1;
         kit_before_wait();
@@ -895,14 +896,37 @@ double spinner_get_time(void) {
     return last_time_s;
 }
 
-double spinner_now(void) {
-    INIT();
-    if (finished) return last_time_s;
+/* The time as the program's last charged call left it (or a handler's time), asked with `op` once
+ * after each call that may let time pass (now_known). */
+static double known_time(uint32_t op) {
     if (!now_known) {
-        call(OP_NOW, NULL, 0, NULL, 0, &now_time_s, sizeof now_time_s);
+        call(op, NULL, 0, NULL, 0, &now_time_s, sizeof now_time_s);
         now_known = 1;
     }
     return now_time_s;
+}
+
+/* A read of the time. With --mcu-time, main()'s read is a request as charged as any: the program's
+ * time since its previous charged call passes first (a handler due in it runs before the read
+ * returns, as an interrupt before the instruction), so each read is a round trip and a loop that
+ * polls the time - or a kit's timer register, whose count the kit makes with it - lets time pass:
+ * on the MCU such a loop spends its time reading. Without it, and in a handler, as
+ * spinner_now_uncharged (sent as OP_NOW). */
+double spinner_now(void) {
+    INIT();
+    if (finished) return last_time_s;
+    if (mcu_on && isr_depth == 0) {
+        call(OP_NOW, NULL, 0, NULL, 0, &now_time_s, sizeof now_time_s);
+        now_known = 1;
+        return now_time_s;
+    }
+    return known_time(OP_NOW);
+}
+
+double spinner_now_uncharged(void) {
+    INIT();
+    if (finished) return last_time_s;
+    return known_time(OP_NOW_UNCHARGED);
 }
 
 void spinner_set_exposure(double seconds) {

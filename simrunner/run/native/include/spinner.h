@@ -89,11 +89,17 @@ void spinner_camera_free_running(void);
 double spinner_get_speed(void);    /* through speed_denorm, with the last angle */
 void spinner_get_position(double *x_m, double *y_m, double *z_m);  /* world, rear axle */
 double spinner_get_time(void);     /* simulated s */
-/* The simulated time now (s) without letting time pass: the time of the program's last call (with
- * --mcu-time, after the time that call charged; not the code's time since it), or the handler's
- * time. For library code that shows a running timer's count. Asked once after each call that lets
- * time pass. */
+/* The simulated time now (s), no physics step: a read of a clock (a library showing a running
+ * timer's count, a busy wait on it). Without --mcu-time no time passes in it: the time of the
+ * program's last call, asked once after each call that lets time pass; in a handler its time. With
+ * --mcu-time a read in main() is charged as any call is (the code's time since its previous charged
+ * call passes first: a loop polling the time ends), each read a round trip. */
 double spinner_now(void);
+/* The time of the program's last charged call (s), or in a handler its time, without a charge even
+ * with --mcu-time: for a kit's bookkeeping of its emulated registers (its look before a wait, the
+ * time a timer it starts counts from), which has no time of its own in the program's. Without
+ * --mcu-time the same as spinner_now. */
+double spinner_now_uncharged(void);
 /* Range sensor NAME of the car file ([range_sensors.NAME]): metres to the nearest object on the
  * track, INFINITY when none is in range (docs/events.md). An unknown name is an error. */
 double spinner_get_distance(const char *name);

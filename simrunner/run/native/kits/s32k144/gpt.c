@@ -18,9 +18,10 @@
  * Gpt_StopTimer or Gpt_DisableNotification. A one-shot channel's interrupt is the kit's timer from
  * its start, notification or not: it sets the channel expired (below, elapsed_at). A notification
  * that --isr (or spinner_every) already runs is left to that: its rate is --isr's. The reads let no
- * simulated time pass (spinner_now: the count at the program's last call, or at a handler's time),
- * but after 64 reads without any time passing each read lets one physics step pass (main() only),
- * so a loop polling them moves on. */
+ * simulated time pass (spinner_now: the count at the program's last call, or at a handler's time;
+ * with --mcu-time a read of main()'s is charged, the program's time since its last call passing
+ * first), but after 64 reads without any time passing each read lets one physics step pass (main()
+ * only), so a loop polling them moves on. */
 #include <stdio.h>
 
 #include "spinner.h"
@@ -278,7 +279,7 @@ void Gpt_StartTimer(Gpt_ChannelType Channel, Gpt_ValueType Value) {
     if (g.ch[Channel].every) {  /* it counts from the time its interrupt is timed from: with --mcu-time the
                                  * simulator charges the timer's request (spinner_every) before it starts it
                                  * (else no time passes: the same time, no round trip) */
-        double armed_at = spinner_now();
+        double armed_at = spinner_now_uncharged();
         if (g.ch[Channel].state == RUNNING && g.ch[Channel].start_s == now) g.ch[Channel].start_s = armed_at;
     }
 }

@@ -1,8 +1,9 @@
 /* sim_poll.h: the S32K144 kit's own (not a header of the board's): the rule its reads follow when
- * main() polls them (Gpt counts, input pins, Adc conversions). A read lets no simulated time pass,
- * but after SIM_POLLS_FREE reads at one simulated time each further one lets one physics step pass,
- * so a loop that only polls ends (on the board the hardware or a person moves meanwhile), as the
- * TFC kit's polls of its board. In an interrupt handler no time passes (the count starts again). */
+ * main() polls them (Gpt counts, input pins, Adc conversions). A read lets no simulated time pass
+ * (with --mcu-time, main()'s read is charged: spinner_now), but after SIM_POLLS_FREE reads at one
+ * simulated time each further one lets one physics step pass, so a loop that only polls ends (on the
+ * board the hardware or a person moves meanwhile), as the TFC kit's polls of its board. In an
+ * interrupt handler no time passes (the count starts again). */
 #ifndef NXPCUP_SIM_S32K_POLL_H
 #define NXPCUP_SIM_S32K_POLL_H
 #include "spinner.h"

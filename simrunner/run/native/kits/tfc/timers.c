@@ -272,9 +272,11 @@ static void stop(struct timer *t, int source) {
     t->ph.cycle = 0.0;
 }
 
-/* The counters, counting simulated time (spinner_now: the time of the program's last call, or a
- * handler's): a counter starts at the look that finds it enabled - a use of LPTMR0, PIT or TPM2 in
- * the program (its accessor, below), the look before a wait or after a handler - which is the time of
+/* The counters, counting simulated time (spinner_now_uncharged: the time of the program's last
+ * call, or a handler's; the program's use of a counting timer is a read of the time, charged with
+ * --mcu-time before the counter is made: tfc_sim_pit_now): a counter starts at the look that finds
+ * it enabled - a use of LPTMR0, PIT or TPM2 in the program (its accessor, below), the look before a
+ * wait or after a handler - which is the time of
  * the write, as the program's code between two calls takes no simulated time; one whose interrupt
  * starts with it counts from the time that interrupt is timed from (start). The looks (`look`)
  * read the time only for a change (a start, a new LDVAL): a running counter's count is made at the
@@ -294,16 +296,20 @@ static struct counter {
  * MDIS clear) CVAL counts down from LDVAL at the bus clock and is loaded with LDVAL again at the
  * count after 0 (a period of LDVAL + 1); a new LDVAL written meanwhile is loaded at the next expiry,
  * not at once (RM 32.3.4 LDVAL). Disabled, CVAL keeps its value (RM 32.3.5 CVAL: "unreliable"). */
+static int pit_counting(int ch) {
+    return (PIT->CHANNEL[ch].TCTRL & PIT_TCTRL_TEN_MASK) && !(PIT->MCR & PIT_MCR_MDIS_MASK);
+}
+
 static void pit_counter(int ch, int look) {
     struct counter *k = &pit_count[ch];
     PIT_CHANNEL_Type *r = &PIT->CHANNEL[ch];
-    int on = (r->TCTRL & PIT_TCTRL_TEN_MASK) && !(PIT->MCR & PIT_MCR_MDIS_MASK);
+    int on = pit_counting(ch);
     if (!on) {
         k->on = 0;
         return;
     }
     if (look && k->on && r->LDVAL == (k->next_at_s > 0.0 ? k->next_load : k->load)) return;
-    double now = spinner_now();
+    double now = spinner_now_uncharged();
     if (!k->on) {
         k->on = 1, k->start_s = now, k->load = r->LDVAL, k->next_at_s = 0.0, k->fresh = 1;
     }
@@ -346,17 +352,22 @@ static double lptmr_count_hz(void) {
  * is set, back to 0 after it equals CMR (with CSR TFC: free running, 16 bits); clearing TEN resets it
  * to 0. On the KL25 a read of CNR gives the count latched by the last write to it (RM 33.3.4: write
  * any value, then read): here every read gives the count now, as the write-then-read does. */
+static int lptmr_counting(void) {
+    uint32_t csr = LPTMR0->CSR;
+    return (csr & LPTMR_CSR_TEN_MASK) && !(csr & LPTMR_CSR_TMS_MASK) && lptmr_count_hz() != 0.0;
+}
+
 static void lptmr_counter(int look) {
     struct counter *k = &lptmr_count;
     uint32_t csr = LPTMR0->CSR;
     double hz = lptmr_count_hz();
-    if (!(csr & LPTMR_CSR_TEN_MASK) || (csr & LPTMR_CSR_TMS_MASK) || hz == 0.0) {
+    if (!lptmr_counting()) {
         if (k->on && !(csr & LPTMR_CSR_TEN_MASK)) LPTMR0->CNR = 0;
         k->on = 0;
         return;
     }
     if (look && k->on) return;
-    double now = spinner_now();
+    double now = spinner_now_uncharged();
     if (!k->on) k->on = 1, k->start_s = now, k->fresh = 1;
     const struct phase *held = held_phase(LPTMR);
     if (held) hz = held->hz;
@@ -381,17 +392,22 @@ static double tpm_clock_hz(void) {
     }
 }
 
+static int tpm2_counting(void) {
+    uint32_t sc = TPM2->SC;
+    return ((sc & TPM_SC_CMOD_MASK) >> 3) == 1u && tpm_clock_hz() / (double)(1u << (sc & TPM_SC_PS_MASK)) != 0.0;
+}
+
 static void tpm2_counter(int look) {
     struct counter *k = &tpm2_count;
     uint32_t sc = TPM2->SC, mod = TPM2->MOD & 0xFFFFu;
     double hz = tpm_clock_hz() / (double)(1u << (sc & TPM_SC_PS_MASK));
-    if (((sc & TPM_SC_CMOD_MASK) >> 3) != 1u || hz == 0.0) {
+    if (!tpm2_counting()) {
         k->on = 0;
         return;
     }
     int cleared = k->on && TPM2->CNT != k->shown;  /* the program wrote CNT */
     if (look && k->on && !cleared) return;
-    double now = spinner_now();
+    double now = spinner_now_uncharged();
     if (!k->on || cleared) k->on = 1, k->start_s = now, k->fresh = 1;
     const struct phase *held = held_phase(TPM_2);
     int updown = (sc & TPM_SC_CPWMS_MASK) != 0;
@@ -473,13 +489,13 @@ static int starting;  /* start() waits for the simulator's time (sync: a look as
  * one that started (or was cleared) since the last look, or any running one at a `restart` (a new
  * period: at an expiry, RM 32.3.4; or a set-up changed before time passed). That time is not the
  * look's: with --mcu-time the simulator charges the code's time before the request, so a counter
- * left at the look's time (spinner_now) would reload that much before its interrupt fell due - a
- * program comparing the two, or NVIC_GetPendingIRQ, would see the count past an expiry whose handler
- * had not run. spinner_now after the request returns the time it was read at: without --mcu-time no
- * time passed, the same time without a round trip (the look, or the program's use of the timer,
- * asked it since the last call); with it, one round trip. In the kit's handlers (fire, take) no time
- * passes and nothing is charged: the handler's time, asked as it starts. A PIT counter that was
- * counting before its interrupt was enabled (TIE set later) keeps its count.
+ * left at the look's time (spinner_now_uncharged) would reload that much before its interrupt fell
+ * due - a program comparing the two, or NVIC_GetPendingIRQ, would see the count past an expiry whose
+ * handler had not run. spinner_now_uncharged after the request returns the time it was read at:
+ * without --mcu-time no time passed, the same time without a round trip (the look, or the program's
+ * use of the timer, asked it since the last call); with it, one round trip. In the kit's handlers
+ * (fire, take) no time passes and nothing is charged: the handler's time, asked as it starts. A PIT
+ * counter that was counting before its interrupt was enabled (TIE set later) keeps its count.
  *
  * LPTMR0 and TPM2 expire at a phase of their counter's cycle (struct phase): the interrupt's first
  * period runs from the counter's phase to it - from the start value, CMR + 1 counts free running
@@ -503,7 +519,8 @@ static void start(int i, double period_s, int restart, int at_expiry) {
     double lead = 0.0, first_s = period_s;  /* (the counter's phase at the start, counts) */
     if (phased) {
         if (at_expiry) lead = phase_at(i, &f, t->flag_count, t->flag_down);
-        else if (!k->fresh && !restart) lead = fmod((spinner_now() - k->start_s) * f.hz + 1e-6, f.cycle);
+        else if (!k->fresh && !restart)
+            lead = fmod((spinner_now_uncharged() - k->start_s) * f.hz + 1e-6, f.cycle);
         double first = fmod(f.flag_at - lead + f.cycle, f.cycle);
         if (first > 1e-6 && f.cycle - first > 1e-6) first_s = fmax(first / f.hz, 1e-5);
         t->ph = f;
@@ -517,7 +534,7 @@ static void start(int i, double period_s, int restart, int at_expiry) {
     double armed_s = handler_s;
     if (armed_s < 0.0) {
         starting = 1;
-        armed_s = spinner_now();
+        armed_s = spinner_now_uncharged();
         starting = 0;
     }
     if (!k->on || t->starts != mine) return;  /* (stopped or started again by a handler run meanwhile) */
@@ -536,19 +553,26 @@ static int reshaped(int i, double period_s) {
     return period_s != timers[i].regular_s || (phase_of(i, &f) && f.flag_at != timers[i].ph.flag_at);
 }
 
-/* The program's LPTMR0, PIT and TPM2 (sim_timers.h): the registers with their counters now. */
+/* The program's LPTMR0, PIT and TPM2 (sim_timers.h): the registers with their counters now. A use
+ * of a timer whose counter counts reads the time (spinner_now): with --mcu-time, in main(), the
+ * program's time since its last charged call passes first - a handler due in it runs before the
+ * access, as on the board - so a loop polling a counter ends; without it no time passes (a round trip
+ * once a time at most, as before). A set-up of a stopped timer reads none. */
 LPTMR_Type *tfc_sim_lptmr0_now(void) {
+    if (lptmr_counting()) (void)spinner_now();
     lptmr_counter(0);
     return &tfc_sim_lptmr0;
 }
 
 PIT_Type *tfc_sim_pit_now(void) {
+    if (pit_counting(0) || pit_counting(1)) (void)spinner_now();
     pit_counter(0, 0);
     pit_counter(1, 0);
     return &tfc_sim_pit;
 }
 
 TPM_Type *tfc_sim_tpm2_now(void) {
+    if (tpm2_counting()) (void)spinner_now();
     tpm2_counter(0);
     return &tfc_sim_tpm2;
 }
@@ -688,7 +712,7 @@ void spinner_kit_before_wait(void) {
 static void fire(int i, volatile uint32_t *flag, uint32_t mask) {
     struct timer *t = &timers[i];
     double next = t->next_period_s;
-    handler_s = spinner_now();  /* (the handler's time: no round trip) */
+    handler_s = spinner_now_uncharged();  /* (the handler's time: no round trip) */
     waits++;  /* (time passed since the last look: a change now is a reload, not a set-up) */
     if (next > 0.0 && t->period_s > 0.0) {
         stop(t, 0);
@@ -729,7 +753,7 @@ static volatile uint32_t *flag_of(int i, uint32_t *mask) {
  * taken as done). Pended in software with no expiry, the handler finds no flag set, as on the board. */
 static void take(int irq) {
     uint32_t bit = 1u << irq;
-    handler_s = spinner_now();  /* (the handler's time: no round trip) */
+    handler_s = spinner_now_uncharged();  /* (the handler's time: no round trip) */
     nvic_handed &= ~bit;
     int first = irq == IRQ_TPM2 ? TPM_2 : irq == IRQ_PIT ? PIT0 : LPTMR;
     int last = irq == IRQ_PIT ? PIT1 : first;
