@@ -8,6 +8,7 @@ controller's own modules) and undoes both afterwards, so a later run of another 
 """
 from __future__ import annotations
 
+import ast
 import contextlib
 import inspect
 import os
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from simrunner.errors import ControllerFileError
+from simrunner.run.hostclock import ClockRead, python_clock_reads
 from vehicle.userfiles import read_user_text
 
 PACKAGE_DIR = str(Path(__file__).resolve().parent.parent)  # simrunner/: not the user's frames
@@ -36,6 +38,7 @@ class Controller:
     main: MainFn | None
     user_file: str | None  # file whose frames are the user's (watchdog, tracebacks)
     owned: bool = False  # main was made here (a C/C++ program loaded), not the caller's to keep
+    clock_reads: tuple[ClockRead, ...] = ()  # where it reads the computer's clock (hostclock), warned
 
     @contextlib.contextmanager
     def loaded(self) -> Iterator[MainFn]:
@@ -79,20 +82,29 @@ def load_controller(controller) -> Controller:
         from simrunner.run.native import NativeProgram, load_native
 
         if isinstance(controller, NativeProgram):
-            return Controller(None, None, load_native(controller), None, owned=True)
+            return Controller(None, None, load_native(controller), None, owned=True,
+                              clock_reads=controller.clock_reads)
     path = Path(controller)
     if path.suffix != ".py":  # (the build machinery is ~7 ms to import: not for a .py file)
         from simrunner.run.native import is_native, load_native
 
         if is_native(path):  # C/C++ sources or a shared library: compiled (cached), run
-            return Controller(path, None, load_native([path]), None, owned=True)
-    code = compile_controller(path)
-    return Controller(path, code, None, code.co_filename)
+            main = load_native([path])
+            return Controller(path, None, main, None, owned=True, clock_reads=main.program.clock_reads)
+    tree, source = _parse_controller(path)
+    code = _compile_tree(tree, path)
+    return Controller(path, code, None, code.co_filename,
+                      clock_reads=python_clock_reads(tree, source, str(path)))
 
 
 def compile_controller(path: str | Path) -> types.CodeType:
     """Compile a controller file; bad files raise :class:`ControllerFileError` (one line)."""
     path = Path(path)
+    return _compile_tree(_parse_controller(path)[0], path)
+
+
+def _parse_controller(path: Path) -> tuple[ast.Module, str]:
+    """``(syntax tree, source)`` of a controller file; bad files raise :class:`ControllerFileError`."""
     if not path.is_file():
         raise ControllerFileError(f"{path}: no such controller file")
     if path.suffix != ".py":
@@ -100,11 +112,19 @@ def compile_controller(path: str | Path) -> types.CodeType:
                                   f"C/C++ sources (.c, .cpp) with main() or a shared library (.so)")
     source = read_user_text(path, "controller", ControllerFileError, "Python")
     try:
-        return compile(source, str(path.resolve()), "exec")
+        return ast.parse(source, str(path.resolve()), "exec"), source
     except SyntaxError as exc:
         raise ControllerFileError(f"{path}:{exc.lineno}: syntax error: {exc.msg}") from None
     except ValueError as exc:  # e.g. null bytes
         raise ControllerFileError(f"{path}: not a Python file ({exc})") from None
+
+
+def _compile_tree(tree: ast.Module, path: Path) -> types.CodeType:
+    """The code of a parsed controller file (what ``compile`` of its source gives)."""
+    try:
+        return compile(tree, str(path.resolve()), "exec")
+    except SyntaxError as exc:  # (found past the parser: `return` outside a function)
+        raise ControllerFileError(f"{path}:{exc.lineno}: syntax error: {exc.msg}") from None
 
 
 def controller_main(module: types.ModuleType, path: Path | None) -> MainFn:

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from simrunner.errors import ControllerFileError
+from simrunner.run.hostclock import ClockRead, native_clock_reads
 
 NATIVE_DIR = Path(__file__).resolve().parent
 INCLUDE_DIR = NATIVE_DIR / "include"
@@ -108,7 +109,9 @@ class NativeProgram:
     in a child process rather than in the simulator's (controller.NativeController), and
     ``isrs``: its functions the simulator calls as timer interrupts, ``(name, period_s)`` each
     (``simrunner drive --isr NAME@HZ``; :func:`with_isrs`); ``kit``: the ``--kit`` it was built
-    against (None: none), which names its kit's calls in the run's messages."""
+    against (None: none), which names its kit's calls in the run's messages; ``clock_reads``: where
+    its own sources read the computer's clock or seed from it (:mod:`simrunner.run.hostclock`;
+    found at the build, kept in the cache with it)."""
 
     library: Path
     sources: tuple[Path, ...]
@@ -117,6 +120,7 @@ class NativeProgram:
     isolate: bool = False
     isrs: tuple[tuple[str, float], ...] = ()
     kit: str | None = None
+    clock_reads: tuple[ClockRead, ...] = ()
 
     @property
     def name(self) -> str:
@@ -409,8 +413,8 @@ def _check_sources(sources: list[str | Path]) -> list[Path]:
     return paths
 
 
-def _cached(entry: Path) -> tuple[Path, str] | None:
-    """(library, warnings) of a cache entry whose dependencies are unchanged, else None."""
+def _cached(entry: Path) -> tuple[Path, str, tuple[ClockRead, ...]] | None:
+    """(library, warnings, clock reads) of a cache entry whose dependencies are unchanged, else None."""
     lib, manifest = entry / "controller.so", entry / "manifest.json"
     try:
         data = json.loads(manifest.read_text())
@@ -421,20 +425,42 @@ def _cached(entry: Path) -> tuple[Path, str] | None:
     for dep, digest in data.get("deps", {}).items():
         if _file_digest(dep) != digest:
             return None
-    return lib, data.get("warnings", "")
+    return lib, data.get("warnings", ""), tuple(ClockRead.from_json(r) for r in data.get("clock_reads", ()))
 
 
 def _deps(depfiles: list[Path]) -> dict[str, str]:
     """{path: digest} of every file the compiler read (make-style ``-MMD`` dependency lists)."""
     out: dict[str, str] = {}
     for d in depfiles:
-        text = d.read_text().replace("\\\n", " ")
-        for line in text.splitlines():
-            _, _, rest = line.partition(": ")
-            for name in rest.split():
-                path = os.path.abspath(name)
-                out[path] = _file_digest(path) or ""
+        for path in _dep_paths(d):
+            out[path] = _file_digest(path) or ""
     return out
+
+
+def _dep_paths(depfile: Path) -> list[str]:
+    """The absolute paths in a make-style ``-MMD`` dependency list (the source, then its headers)."""
+    text = depfile.read_text().replace("\\\n", " ")
+    return [os.path.abspath(name) for line in text.splitlines() for name in line.partition(": ")[2].split()]
+
+
+def _own_files(paths: list[Path], depfiles: list[Path]) -> dict[str, str]:
+    """The program's own files - its sources given, not a kit's, and the headers they read that are
+    neither the simulator's (its include/, a kit's, the cache's spellings) nor the system's (``-MMD``
+    lists none of those): real path -> the name a message shows (a source as given, a header relative
+    to the working folder when under it)."""
+    cwd = os.getcwd()
+    skip = (os.path.realpath(NATIVE_DIR), os.path.realpath(cache_dir()))
+    own: dict[str, str] = {}
+    for p, dep in zip(paths, depfiles):
+        if KITS_DIR in p.resolve().parents:
+            continue
+        own[os.path.realpath(p)] = str(p)
+        for name in _dep_paths(dep):
+            real = os.path.realpath(name)
+            if real not in own and not any(real.startswith(s + os.sep) for s in skip):
+                rel = os.path.relpath(name, cwd)
+                own[real] = name if rel.startswith("..") else rel
+    return own
 
 
 def kit_files(kit: str) -> tuple[list[Path], list[Path]]:
@@ -678,13 +704,13 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     flags = [*(f"-I{d}" for d in include_dirs), f"-I{INCLUDE_DIR}", *(f"-D{d}" for d in defines)]
     cwd = os.getcwd()
     cxx_flags = CXX_FLAGS + (CXX_FRESH_FLAGS if cxx and _accepts(compilers[True], CXX_FRESH_FLAGS) else ())
-    key = _digest("controller/2", cwd, *map(str, flags), *COMMON_FLAGS, *cxx_flags, *LINK_FLAGS,
+    key = _digest("controller/3", cwd, *map(str, flags), *COMMON_FLAGS, *cxx_flags, *LINK_FLAGS,
                   *(_compiler_id(c) for c in compilers.values() if c), _file_digest(THREAD_START_SOURCE),
                   *(f"{p}\0{_file_digest(p)}" for p in paths))
     entry = cache_dir() / key
     hit = _cached(entry)
     if hit is not None:
-        return NativeProgram(hit[0], tuple(paths), hit[1], cached=True, kit=kit)
+        return NativeProgram(hit[0], tuple(paths), hit[1], cached=True, kit=kit, clock_reads=hit[2])
     import shutil
     import tempfile
 
@@ -712,7 +738,11 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
                               str(tmp / "controller.so"), "-lm"], ", ".join(map(str, paths)), limits))
         text = "".join(warnings)
         deps = _deps(depfiles)
-        (tmp / "manifest.json").write_text(json.dumps({"deps": deps, "warnings": text}))
+        # where the program's own code reads the computer's clock: its objects' calls (not the kit's)
+        reads = native_clock_reads([Path(o) for o, p in zip(objects, paths) if KITS_DIR not in p.resolve().parents],
+                                   _own_files(paths, depfiles))
+        (tmp / "manifest.json").write_text(json.dumps({"deps": deps, "warnings": text,
+                                                       "clock_reads": [r.to_json() for r in reads]}))
         for o in objects:
             os.unlink(o)
         try:
@@ -726,7 +756,7 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return NativeProgram(entry / "controller.so", tuple(paths), text, cached=False, kit=kit)
+    return NativeProgram(entry / "controller.so", tuple(paths), text, cached=False, kit=kit, clock_reads=reads)
 
 
 def _build_host(kind: str, suffix: str, flags: list[str], libs: list[str]) -> Path:
