@@ -19,7 +19,7 @@ from simrunner.run.hostclock import SHOWN, ClockRead, clock_warnings, python_clo
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "examples"
-CLOCK = "reads the computer's clock, which runs ~30x slower than the simulated car's here"
+CLOCK = "reads the computer's clock, not the simulated car's (a run goes many times faster than real time)"
 PY_ADVICE = "use spinner.get_time() (simulated seconds) for loop timing and dt"
 C_ADVICE = "use spinner_get_time() (simulated seconds) for loop timing and dt"
 needs_cc = pytest.mark.skipif(shutil.which("cc") is None and not os.environ.get("CC"),

@@ -2,8 +2,8 @@
 
 The simulator keeps the host's clock the host's (as ROS's ``use_sim_time`` does): simulated time
 passes only through the Spinner API, and the sleeps wait in it. A controller that times its loop
-or its dt with ``time.monotonic()`` / ``clock_gettime`` reads a clock that runs ~30x slower than
-the simulated car's here, and one seeded from the clock makes every run different. These are
+or its dt with ``time.monotonic()`` / ``clock_gettime`` reads the computer's clock, not the
+simulated car's (a run goes many times faster than real time), and one seeded from the clock makes every run different. These are
 found before the run, to be said with the run's warnings (``simrunner check`` and ``drive``):
 
 - :func:`python_clock_reads`: from a Python controller's syntax tree (its imports' aliases
@@ -69,8 +69,8 @@ class ClockRead:
             api = 'spinner.param("seed", 1)' if self.python else 'spinner_param("seed", 1)'
             return f"{self.file}:{self.line}: {self.call} makes every run different: seed from {api} or a constant"
         api = "spinner.get_time()" if self.python else "spinner_get_time()"
-        return (f"{self.file}:{self.line}: {self.call} reads the computer's clock, which runs ~30x slower than "
-                f"the simulated car's here: use {api} (simulated seconds) for loop timing and dt")
+        return (f"{self.file}:{self.line}: {self.call} reads the computer's clock, not the simulated car's (a run goes many "
+                f"times faster than real time): use {api} (simulated seconds) for loop timing and dt")
 
     def to_json(self) -> list:
         return [self.file, self.line, self.call, self.seeds, self.python]
