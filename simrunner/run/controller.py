@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ast
 import contextlib
+import functools
 import inspect
 import os
 import sys
@@ -91,40 +92,41 @@ def load_controller(controller) -> Controller:
         if is_native(path):  # C/C++ sources or a shared library: compiled (cached), run
             main = load_native([path])
             return Controller(path, None, main, None, owned=True, clock_reads=main.program.clock_reads)
-    tree, source = _parse_controller(path)
-    code = _compile_tree(tree, path)
-    return Controller(path, code, None, code.co_filename,
-                      clock_reads=python_clock_reads(tree, source, str(path)))
+    code, clock_reads = _compiled(str(path), str(path.resolve()), _controller_source(path))
+    return Controller(path, code, None, code.co_filename, clock_reads=clock_reads)
 
 
 def compile_controller(path: str | Path) -> types.CodeType:
     """Compile a controller file; bad files raise :class:`ControllerFileError` (one line)."""
     path = Path(path)
-    return _compile_tree(_parse_controller(path)[0], path)
+    return _compiled(str(path), str(path.resolve()), _controller_source(path))[0]
 
 
-def _parse_controller(path: Path) -> tuple[ast.Module, str]:
-    """``(syntax tree, source)`` of a controller file; bad files raise :class:`ControllerFileError`."""
+def _controller_source(path: Path) -> str:
+    """The text of a controller file; bad files raise :class:`ControllerFileError`."""
     if not path.is_file():
         raise ControllerFileError(f"{path}: no such controller file")
     if path.suffix != ".py":
         raise ControllerFileError(f"{path}: expected a Python file (.py) with main(spinner), "
                                   f"C/C++ sources (.c, .cpp) with main() or a shared library (.so)")
-    source = read_user_text(path, "controller", ControllerFileError, "Python")
+    return read_user_text(path, "controller", ControllerFileError, "Python")
+
+
+@functools.lru_cache(maxsize=16)
+def _compiled(shown: str, filename: str, source: str) -> tuple[types.CodeType, tuple[ClockRead, ...]]:
+    """The code of a controller file's ``source`` and where it reads the computer's clock
+    (:func:`~simrunner.run.hostclock.python_clock_reads`), parsed once; kept for the same text,
+    so a batch worker's or ``--watch``'s next run of an unchanged file compiles nothing (a code
+    object is immutable: each run executes it in a fresh module). ``shown``: the path as given,
+    for the messages; ``filename``: the code's (tracebacks)."""
     try:
-        return ast.parse(source, str(path.resolve()), "exec"), source
-    except SyntaxError as exc:
-        raise ControllerFileError(f"{path}:{exc.lineno}: syntax error: {exc.msg}") from None
+        tree = ast.parse(source, filename, "exec")
+        code = compile(tree, filename, "exec")
+    except SyntaxError as exc:  # (compile finds some past the parser: `return` outside a function)
+        raise ControllerFileError(f"{shown}:{exc.lineno}: syntax error: {exc.msg}") from None
     except ValueError as exc:  # e.g. null bytes
-        raise ControllerFileError(f"{path}: not a Python file ({exc})") from None
-
-
-def _compile_tree(tree: ast.Module, path: Path) -> types.CodeType:
-    """The code of a parsed controller file (what ``compile`` of its source gives)."""
-    try:
-        return compile(tree, str(path.resolve()), "exec")
-    except SyntaxError as exc:  # (found past the parser: `return` outside a function)
-        raise ControllerFileError(f"{path}:{exc.lineno}: syntax error: {exc.msg}") from None
+        raise ControllerFileError(f"{shown}: not a Python file ({exc})") from None
+    return code, python_clock_reads(tree, source, shown)
 
 
 def controller_main(module: types.ModuleType, path: Path | None) -> MainFn:
