@@ -220,6 +220,26 @@ def test_cli_batch_and_bad_input(tmp_path):
     assert res.exit_code == 2
 
 
+def test_the_runs_warnings_are_the_batchs_once_each(tmp_path):
+    """A run's warnings (a controller reading the computer's clock, say) reached drive's output
+    and summary but no batch row: the batch said nothing. Each distinct warning is now in
+    results.json with the runs that gave it, and printed once after the batch."""
+    import json
+
+    ctl = tmp_path / "clocky.py"
+    ctl.write_text("import time\n\n\ndef main(spinner):\n    while True:\n"
+                   "        spinner.get_image()\n        spinner.set_speed(0.5 + 0 * time.monotonic())\n")
+    res = run_batch(ctl, out_dir=tmp_path / "a", seeds=3, workers=2, time_limit_s=0.5, plot=False)
+    (text, runs), = res.warnings
+    assert text.startswith(f"{ctl}:7: time.monotonic() reads the computer's clock") and runs == (0, 1, 2)
+    assert json.loads(res.json_path.read_text())["warnings"] == [{"text": text, "runs": [0, 1, 2]}]
+    out = CliRunner().invoke(cli, ["batch", str(ctl), "--seeds", "2", "--workers", "1", "--time-limit", "0.5",
+                                   "--no-plot", "-o", str(tmp_path / "b")])
+    assert out.exit_code == 0 and f"simrunner batch: warning (every run): {text}" in out.output
+    quiet = run_batch(FOLLOWER, out_dir=tmp_path / "c", seeds=1, workers=1, time_limit_s=0.5, plot=False)
+    assert quiet.warnings == ()
+
+
 def test_the_program_ends_a_batch_without_the_interpreters_teardown(tmp_path):
     """``simrunner batch`` as a program (the entry point :func:`simrunner.cli.run`) ends with
     ``os._exit`` after its exit handlers and flushed output (~20 ms less): the status, the

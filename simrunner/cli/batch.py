@@ -126,6 +126,12 @@ def batch_cmd(controller, more_sources, tracks, seeds, params, laps, time_limit_
 
         click.echo("simrunner batch: warning: " + unused_params_text(result.unused_params, result.params_read)
                    + ": its values changed nothing", err=True)
+    for text, runs in result.warnings[:WARNINGS_SHOWN]:
+        which = "every run" if len(runs) == len(result.rows) else f"{len(runs)} of {len(result.rows)} runs"
+        click.echo(f"simrunner batch: warning ({which}): {text}", err=True)
+    if len(result.warnings) > WARNINGS_SHOWN:
+        click.echo(f"simrunner batch: {len(result.warnings) - WARNINGS_SHOWN} more warnings of the runs in "
+                   f"{result.json_path} (\"warnings\")", err=True)
     if result.rerun_mismatches:
         click.echo("simrunner batch: warning: re-runs for outputs differed from the first run: "
                    + ", ".join(map(str, result.rerun_mismatches)), err=True)
@@ -133,6 +139,10 @@ def batch_cmd(controller, more_sources, tracks, seeds, params, laps, time_limit_
     click.echo("wrote: " + ", ".join(map(str, written)))
     if ray is None:  # (Ray's driver keeps its connection and threads: the usual end)
         end_without_teardown(click.get_current_context())
+
+
+WARNINGS_SHOWN = 5
+"""Distinct warnings of the runs printed after a batch (all are in results.json)."""
 
 
 class _NoBar:

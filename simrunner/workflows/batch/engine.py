@@ -15,8 +15,8 @@ from typing import Callable
 
 from simrunner.workflows.batch.pool import LocalBackend
 from simrunner.workflows.batch.scheduler import WorkerTiming, default_workers, run_jobs
-from simrunner.workflows.batch.results import (BATCH_OUTCOMES, PARAMS_READ, RESERVED, PartialResults, deterministic,
-                                               write_results)
+from simrunner.workflows.batch.results import (BATCH_OUTCOMES, PARAMS_READ, RESERVED, RUN_WARNINGS, PartialResults,
+                                               deterministic, write_results)
 from simrunner.workflows.batch.spec import (BatchConfig, BatchError, Job, make_jobs, parse_grid,
                                             parse_seeds, resolve_tracks)
 
@@ -74,6 +74,7 @@ class BatchResult:
     worker_timing: tuple[WorkerTiming, ...] = ()
     params_read: tuple[str, ...] = ()  # the names the runs' controller read (spinner.param)
     unused_params: tuple[str, ...] = ()  # swept --param names no run read
+    warnings: tuple[tuple[str, tuple[int, ...]], ...] = ()  # each run warning and the runs that gave it
 
     def counts(self) -> dict[str, int]:
         out: dict[str, int] = {}
@@ -198,10 +199,14 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
     read: set[str] = set()
     reported = [False]  # a run that reported what it read (one that could not start has not)
 
+    warned: dict[str, list[int]] = {}  # each run's warning (a clock read, a kit's set-up) -> runs
+
     def take(row: dict) -> None:
         if PARAMS_READ in row:
             read.update(row.pop(PARAMS_READ))
             reported[0] = True
+        for text in row.pop(RUN_WARNINGS, ()):
+            warned.setdefault(text, []).append(row["run"])
         rows[row["run"]] = row
         partial.add(row)  # on disk as it comes: a batch killed (kill -9, the OOM killer) keeps it
         if on_row is not None:
@@ -225,6 +230,7 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
 
             def check(row: dict) -> None:
                 row.pop(PARAMS_READ, None)
+                row.pop(RUN_WARNINGS, None)
                 if deterministic(row) != deterministic(first[row["run"]]):
                     mismatches.append(row["run"])
 
@@ -244,7 +250,8 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
                 "tracks": [r.label for r in refs], "seeds": parse_seeds(seeds),
                 "params": {k: v for k, v in grid.items()}, "runs_planned": len(jobs),
                 "runs_done": len(ordered), "backend": backend_name, "workers": n_workers,
-                "wall_time_s": round(wall, 3)}
+                "wall_time_s": round(wall, 3),
+                "warnings": [{"text": text, "runs": sorted(runs)} for text, runs in warned.items()]}
         csv_path, json_path = write_results(out, ordered, tuple(grid), meta)
         partial.remove()
     plot_path = None
@@ -254,4 +261,5 @@ def run_batch(controller: str | Path, *, out_dir: str | Path, tracks=(), seeds: 
         plot_path = plot_summary(ordered, tuple(grid), out / "summary.png")
     return BatchResult(ordered, csv_path, json_path, plot_path, wall, n_workers, backend_name,
                        tuple(sorted(mismatches)), tuple(timing), tuple(sorted(read)),
-                       tuple(sorted(set(grid) - read)) if reported[0] else ())
+                       tuple(sorted(set(grid) - read)) if reported[0] else (),
+                       tuple((text, tuple(sorted(runs))) for text, runs in warned.items()))

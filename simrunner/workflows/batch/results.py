@@ -40,6 +40,8 @@ RESERVED = FIXED_BEFORE + FIXED_AFTER + NONDETERMINISTIC
 BATCH_OUTCOMES = ("error", "wall_timeout", "worker_died")
 #: the key of a row from a worker holding the --param names its run read (not written)
 PARAMS_READ = "_params_read"
+#: the key of a row from a worker holding its run's warnings (not a column: the batch's warnings)
+RUN_WARNINGS = "_warnings"
 FORMAT = 1
 
 
@@ -87,6 +89,7 @@ def row_from_result(job: Job, result, centreline: np.ndarray | None) -> dict[str
                frames=len(result.log), wall_time_s=round(float(result.wall_time_s), 4),
                cpu_time_s=round(float(result.cpu_time_s), 4))
     row[PARAMS_READ] = list(result.params_read)  # not a column: run_batch takes it out
+    row[RUN_WARNINGS] = list(result.warnings)     # (the same)
     log = result.log
     if str(result.outcome) in ("off_track", "off_course") and len(log) and log.x_m is not None:
         x, y, t = float(log.x_m[-1]), float(log.y_m[-1]), float(log.t_s[-1])
