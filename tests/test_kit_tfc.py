@@ -533,3 +533,38 @@ def test_a_library_call_from_a_thread_of_the_firmware_names_the_firmwares_line(t
     assert message.startswith(f"{src}:4: a Spinner call, "), message
     assert message.endswith("(in worker(), calling TFC_SetMotorPWM()); noticed by main()'s thread at its next "
                             f"call, {src}:12 (in main())"), message
+
+
+def test_motor_duties_with_the_h_bridge_disabled_are_a_warning(tmp_path):
+    """TFC_Init() disables the H-bridge (the library's TFC.c): a firmware that sets duties and never
+    writes TFC_HBRIDGE_ENABLE stands still, on the board too - the run says why (it said nothing);
+    duties set before an enable within a second are no warning."""
+    src = tmp_path / "still.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC\\\\TFC.h"
+        int main(void) {
+            TFC_Init();
+            TFC_SetMotorPWM(0.4f, 0.4f);
+            if (TFC_GetDIP_Switch() & 1) { TFC_Delay_mS(500); TFC_HBRIDGE_ENABLE; }
+            for (;;) TFC_Task();
+        }
+        """))
+    r = drive(firmware([src]), time_limit_s=2.0)
+    assert any("TFC_SetMotorPWM(0.40, 0.40) with the H-bridge disabled for 1.0 s: the motors stay off" in w
+               and "TFC_HBRIDGE_ENABLE" in w for w in r.warnings), r.warnings
+    r = drive(firmware([src]), params={"dip": 1}, time_limit_s=2.0)
+    assert not any("H-bridge" in w for w in r.warnings), r.warnings
+
+
+def test_a_program_that_clocks_the_camera_itself_is_named(tmp_path):
+    """The library's TAOS_SI_HIGH, TAOS_CLK_HIGH, ... (its TFC_LineScanCamera.h: GPIO writes) are
+    there; a program that reads the camera out with them is not emulated, and its build says so
+    after the compiler's line (it said only "TAOS_SI_HIGH undeclared")."""
+    src = tmp_path / "cam.c"
+    src.write_text('#include "derivative.h"\n#include "TFC/TFC.h"\n'
+                   'int main(void) { TFC_Init(); TAOS_SI_HIGH; TAOS_CLK_HIGH; TAOS_SI_LOW; return 0; }\n')
+    with pytest.raises(ControllerFileError, match=r"(?s)cam.c:3:.*GPIOD_PCOR, GPIOD_PSOR, GPIOE_PSOR: the MCU's "
+                                                  r"registers, not emulated .* - TAOS_CLK_HIGH, TAOS_SI_HIGH, "
+                                                  r"TAOS_SI_LOW are the library's camera pins"):
+        firmware([src])

@@ -897,3 +897,21 @@ def test_a_qei_made_in_main_counts_its_revolutions_from_then(tmp_path, mcu_time,
         r = drive(dataclasses.replace(prog, isolate=isolate), track="floor", car=car, time_limit_s=3.0,
                   mcu_time=mcu_time)
         assert r.outcome == "controller_error" and re.search(r"status 12\b", r.message), (isolate, r.message)
+
+
+def test_motor_duties_with_the_h_bridge_disabled_are_a_warning(tmp_path):
+    """mbed's TFC_Init() disables the H-bridge (TFC.cpp, TFC_GPIO_Init): a program that sets duties
+    and never writes TFC_HBRIDGE_ENABLE stands still, on the board too - the run says why."""
+    src = tmp_path / "still.cpp"
+    src.write_text(textwrap.dedent("""\
+        #include "mbed.h"
+        #include "TFC.h"
+        int main() {
+            TFC_Init();
+            TFC_SetMotorPWM(0.3f, -0.1f);
+            while (1) wait_ms(10);
+        }
+        """))
+    r = drive(build_program([str(src)], kit="tfc-mbed"), time_limit_s=2.0)
+    assert any("TFC_SetMotorPWM(0.30, -0.10) with the H-bridge disabled for 1.0 s: the motors stay off" in w
+               for w in r.warnings), r.warnings

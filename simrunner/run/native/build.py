@@ -564,10 +564,14 @@ def _register_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileE
             f"you pass (docs/firmware.md, \"The S32K144 kit\")")
     has = ("it has a timer interrupt's only: LPTMR0, the PIT, TPM2, their SIM and MCG bits, the NVIC"
            if kit == "tfc" else "it has no registers")
+    taos = sorted(set(re.findall(r"\bTAOS_(?:CLK|SI)_(?:HIGH|LOW)\b", str(exc))))
+    camera = (f" - {', '.join(taos)} are the library's camera pins: a program that clocks the camera out itself "
+              f"is not emulated; take the image from the library (LineScanImage0 once LineScanImageReady)"
+              if taos and kit in ("tfc", "tfc-mbed") else "")
     return ControllerFileError(
         f"{exc}\n{', '.join(names)}: the MCU's registers{' or mbed drivers' if kit == 'tfc-mbed' else ''}, "
         f"not emulated by the simulator's --kit {kit} ({has}): reach the hardware "
-        f"through the kit library's functions (docs/firmware.md)")
+        f"through the kit library's functions (docs/firmware.md){camera}")
 
 
 def _tickers_hint(exc: ControllerFileError, kit: str | None) -> ControllerFileError:

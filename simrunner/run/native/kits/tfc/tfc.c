@@ -53,7 +53,9 @@ static struct {
     double servo_rad, servo_offset_rad;
     unsigned polls;         /* reads of the board since simulated time last passed */
     uint32_t tick_pending;  /* a SysTick fell due while interrupts were disabled */
-} tfc;
+    double unpowered_s;     /* since when duties are set with the H-bridge disabled (-1: not so) */
+    int unpowered_warned;
+} tfc = {.unpowered_s = -1.0};
 
 /* A loop that polls the board without calling the library (`while (!LineScanImageReady);`,
  * `while (TFC_Ticker[0] < 20);`, `while (!TFC_PUSH_BUTTON_0_PRESSED);`) waits on the board for
@@ -73,11 +75,32 @@ static void send_commands(void) {
     spinner_set_motors(tfc.hbridge ? tfc.duty_a : 0.0f, tfc.hbridge ? tfc.duty_b : 0.0f);
 }
 
+/* Duties set while the H-bridge is disabled move nothing, on the board too: the library's TFC_Init
+ * (TFC.c) ends with TFC_HBRIDGE_DISABLE and TFC_SetMotorPWM(0,0), and TFC_HBRIDGE_ENABLE (EN, PTE21,
+ * TFC_BoardSupport.h) is the program's to write. Held so for UNPOWERED_WARN_S of simulated time, the
+ * run gets a warning saying so, as a car that stands still says nothing of why. */
+#define UNPOWERED_WARN_S 1.0
+static void check_unpowered(double now_s) {
+    if (tfc.hbridge || (tfc.duty_a == 0.0f && tfc.duty_b == 0.0f)) {
+        tfc.unpowered_s = -1.0;
+        return;
+    }
+    if (tfc.unpowered_s < 0.0) tfc.unpowered_s = now_s;
+    if (tfc.unpowered_warned || now_s - tfc.unpowered_s < UNPOWERED_WARN_S) return;
+    tfc.unpowered_warned = 1;
+    char text[300];
+    snprintf(text, sizeof text, "TFC_SetMotorPWM(%.2f, %.2f) with the H-bridge disabled for %.1f s: the motors "
+             "stay off, on the board too (TFC_Init() disables it): enable it with TFC_HBRIDGE_ENABLE",
+             tfc.duty_a, tfc.duty_b, now_s - tfc.unpowered_s);
+    spinner_warn(text);
+}
+
 /* The SysTick interrupt's tickers at `now_s` (one count a millisecond). While interrupts are
  * disabled (__disable_irq, DisableInterrupts) SysTick cannot run: its ticks are lost but one, which
  * is pending and counts at the first look after they are enabled again (ARMv6-M: pending is a state,
  * not a count; docs/firmware.md, Critical sections). */
 static void count_ticks(double now_s) {  /* (the library: SysTick_Handler counts TFC_Ticker[] and DelayTimerTick) */
+    check_unpowered(now_s);
     double whole = floor(now_s * 1000.0 - tfc.ms_counted + 1e-6);  /* SysTicks fallen due since */
     if (whole < 1.0) whole = 0.0;
     tfc.ms_counted += whole;

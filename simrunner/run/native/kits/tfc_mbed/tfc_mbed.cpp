@@ -109,6 +109,8 @@ static struct {
     int n_events;
     void (*sample)(void);   /* the sensors' read at each tick (tfc_mbed_on_tick) */
     void (*edges)(void);    /* InterruptIn's edges at each tick (tfc_mbed_on_edges) */
+    int unpowered, unpowered_warned;  /* duties set with the H-bridge disabled: since unpowered_s */
+    double unpowered_s;
 } k;
 
 static double clampd(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
@@ -141,8 +143,29 @@ static void run_due(void) {
 static void camera_service(void);
 static uint16_t neutral_counts(void);
 
+/* Duties set while the H-bridge is disabled move nothing, on the board too: the library's TFC_Init
+ * (TFC.cpp: TFC_GPIO_Init ends with TFC_HBRIDGE_DISABLE), and TFC_HBRIDGE_ENABLE (PTE21) is the
+ * program's to write. Held so for UNPOWERED_WARN_S of simulated time, the run gets a warning saying
+ * so, as a car that stands still says nothing of why. */
+#define UNPOWERED_WARN_S 1.0
+static void check_unpowered(void) {
+    if (k.hbridge || (k.duty_a == 0.0f && k.duty_b == 0.0f)) {
+        k.unpowered = 0;
+        return;
+    }
+    if (!k.unpowered) k.unpowered = 1, k.unpowered_s = k.now_s;
+    if (k.unpowered_warned || k.now_s - k.unpowered_s < UNPOWERED_WARN_S) return;
+    k.unpowered_warned = 1;
+    char text[300];
+    snprintf(text, sizeof text, "TFC_SetMotorPWM(%.2f, %.2f) with the H-bridge disabled for %.1f s: the motors "
+             "stay off, on the board too (TFC_Init() disables it): enable it with TFC_HBRIDGE_ENABLE",
+             k.duty_a, k.duty_b, k.now_s - k.unpowered_s);
+    spinner_warn(text);
+}
+
 static void clock_isr(void) {
     k.now_s = spinner_get_time();  /* inside an interrupt: no time passes */
+    check_unpowered();
     k.in_isr = 1;
     camera_service();  /* TPM1's overflow and the image it read out */
     if (k.sample) k.sample();

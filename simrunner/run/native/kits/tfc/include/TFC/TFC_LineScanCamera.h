@@ -22,6 +22,13 @@ extern volatile uint16_t *LineScanImage1WorkingBuffer;
 extern volatile uint16_t LineScanImage0Buffer[2][128];
 extern volatile uint16_t LineScanImage1Buffer[2][128];
 extern volatile uint8_t LineScanWorkingBuffer;
+/* The camera's clock and SI pins as the library's TFC_LineScanCamera.h writes them (the PIT and ADC
+ * interrupts clock the camera out). A program that clocks the camera itself with them writes GPIO
+ * registers, which are not emulated: its build fails naming them (docs/firmware.md). */
+#define TAOS_CLK_HIGH GPIOE_PSOR = (1 << 1)
+#define TAOS_CLK_LOW GPIOE_PCOR = (1 << 1)
+#define TAOS_SI_HIGH GPIOD_PSOR = (1 << 7)
+#define TAOS_SI_LOW GPIOD_PCOR = (1 << 7)
 /* the simulator's hook behind the flag: a poll of it (see above) */
 volatile uint8_t *tfc_sim_image_ready(void);
 #define LineScanImageReady (*tfc_sim_image_ready())
