@@ -454,7 +454,7 @@ def _own_files(paths: list[Path], depfiles: list[Path]) -> dict[str, str]:
     lists none of those): real path -> the name a message shows (a source as given, a header relative
     to the working folder when under it)."""
     cwd = os.getcwd()
-    skip = (os.path.realpath(NATIVE_DIR), os.path.realpath(cache_dir()))
+    skip = (os.path.realpath(NATIVE_DIR), os.path.realpath(KITS_DIR), os.path.realpath(cache_dir()))
     own: dict[str, str] = {}
     for p, dep in zip(paths, depfiles):
         if KITS_DIR in p.resolve().parents:
