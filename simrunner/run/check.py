@@ -8,7 +8,8 @@ drives it twice for a short simulated time with the same seed, and reports
   pass (stalled); it sends bad commands; two runs with the same seed differ (hidden wall-clock
   time, an unseeded random generator, state kept between runs);
 - warnings (it runs, but probably not as meant): it reads the computer's clock or seeds randomness
-  from it (file:line, :mod:`simrunner.run.hostclock`), ``main`` returns early, the car never moves,
+  from it (file:line, :mod:`simrunner.run.hostclock`), delays with an empty counting loop
+  (:mod:`simrunner.run.delayloops`), ``main`` returns early, the car never moves,
   commands beyond the car's limits (capped), the car leaves the track in the check window.
 
 ``simrunner check CONTROLLER`` prints the report; exit 0 without problems, 1 with.
@@ -22,7 +23,6 @@ import numpy as np
 
 from simrunner.errors import ControllerFileError
 from simrunner.run.controller import load_controller, user_location
-from simrunner.run.hostclock import clock_warnings
 from simrunner.run.result import Outcome, RunResult
 from simrunner.run.runner import Run, resolve_track
 from simrunner.run.settings import RunSettings
@@ -108,13 +108,14 @@ def check_controller(controller, *, track: str | Path | SimTrack | None = None,
         if first.outcome not in (Outcome.CONTROLLER_ERROR, Outcome.STALLED):
             second = _run_once(ctrl, sim_track, car_desc, settings)
     except ControllerFileError as exc:
-        return CheckReport(name, (str(exc),), () if ctrl is None else tuple(clock_warnings(ctrl.clock_reads)))
+        return CheckReport(name, (str(exc),), () if ctrl is None else tuple(ctrl.load_warnings()))
     finally:
         if ctrl is not None:
             ctrl.close()  # (a C controller's libraries unloaded now)
     problems: list[str] = []
-    # where it reads the computer's clock (found at its load), first: the likely cause of what follows
-    clock = clock_warnings(ctrl.clock_reads)
+    # where it reads the computer's clock or delays with an empty loop (found at its load), first: the
+    # likely cause of what follows
+    clock = ctrl.load_warnings()
     warnings: list[str] = list(clock)
     if first.outcome == Outcome.CONTROLLER_ERROR:
         where = _user_location(first)

@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from simrunner.errors import ControllerFileError
-from simrunner.run.hostclock import ClockRead, python_clock_reads
+from simrunner.run.delayloops import DelayLoop, delay_warnings
+from simrunner.run.hostclock import ClockRead, clock_warnings, python_clock_reads
 from vehicle.userfiles import read_user_text
 
 PACKAGE_DIR = str(Path(__file__).resolve().parent.parent)  # simrunner/: not the user's frames
@@ -40,6 +41,12 @@ class Controller:
     user_file: str | None  # file whose frames are the user's (watchdog, tracebacks)
     owned: bool = False  # main was made here (a C/C++ program loaded), not the caller's to keep
     clock_reads: tuple[ClockRead, ...] = ()  # where it reads the computer's clock (hostclock), warned
+    delay_loops: tuple[DelayLoop, ...] = ()  # its empty counting loops (C/C++: delayloops), warned
+
+    def load_warnings(self) -> list[str]:
+        """What was found in its code before a run, worded (said first, with the run's warnings): where
+        it reads the computer's clock, then where it delays with an empty counting loop."""
+        return clock_warnings(self.clock_reads) + delay_warnings(self.delay_loops)
 
     @contextlib.contextmanager
     def loaded(self) -> Iterator[MainFn]:
@@ -84,14 +91,15 @@ def load_controller(controller) -> Controller:
 
         if isinstance(controller, NativeProgram):
             return Controller(None, None, load_native(controller), None, owned=True,
-                              clock_reads=controller.clock_reads)
+                              clock_reads=controller.clock_reads, delay_loops=controller.delay_loops)
     path = Path(controller)
     if path.suffix != ".py":  # (the build machinery is ~7 ms to import: not for a .py file)
         from simrunner.run.native import is_native, load_native
 
         if is_native(path):  # C/C++ sources or a shared library: compiled (cached), run
             main = load_native([path])
-            return Controller(path, None, main, None, owned=True, clock_reads=main.program.clock_reads)
+            return Controller(path, None, main, None, owned=True, clock_reads=main.program.clock_reads,
+                              delay_loops=main.program.delay_loops)
     code, clock_reads = _compiled(str(path), str(path.resolve()), _controller_source(path))
     return Controller(path, code, None, code.co_filename, clock_reads=clock_reads)
 

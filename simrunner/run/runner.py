@@ -37,7 +37,6 @@ from simrunner.run.clock import Command, LockstepClock
 from simrunner.run.controller import Controller, MainFn, load_controller, user_location, user_traceback
 from simrunner.run.faults import (ControllerGuards, SignalGuard, Terminated, end_forked_child, exit_outcome,
                                   stray_threads)
-from simrunner.run.hostclock import clock_warnings
 from simrunner.run.judge import Judge
 from simrunner.telemetry.log import RunRecorder
 from simrunner.reports.outputs import Outputs, check_outputs, write_outputs
@@ -389,7 +388,7 @@ class Run:
         clock = self.clock
         watchdog = Watchdog(clock, self.settings.wall_limit_s, controller.user_file)
         wall0, cpu0 = time.perf_counter(), time.process_time()
-        for n, text in enumerate(clock_warnings(controller.clock_reads)):  # found at its load: said first
+        for n, text in enumerate(controller.load_warnings()):  # found at its load: said first
             self.session.warn_once(f"host_clock:{n}", text)
         self.session.activate()
         if self.signal_guard is not None:

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from simrunner.errors import ControllerFileError
+from simrunner.run.delayloops import DelayLoop, delay_loops
 from simrunner.run.hostclock import ClockRead, native_clock_reads
 
 NATIVE_DIR = Path(__file__).resolve().parent
@@ -111,7 +112,8 @@ class NativeProgram:
     (``simrunner drive --isr NAME@HZ``; :func:`with_isrs`); ``kit``: the ``--kit`` it was built
     against (None: none), which names its kit's calls in the run's messages; ``clock_reads``: where
     its own sources read the computer's clock or seed from it (:mod:`simrunner.run.hostclock`;
-    found at the build, kept in the cache with it)."""
+    found at the build, kept in the cache with it); ``delay_loops``: its own empty counting loops,
+    which delay no simulated time (:mod:`simrunner.run.delayloops`; found and kept likewise)."""
 
     library: Path
     sources: tuple[Path, ...]
@@ -121,6 +123,7 @@ class NativeProgram:
     isrs: tuple[tuple[str, float], ...] = ()
     kit: str | None = None
     clock_reads: tuple[ClockRead, ...] = ()
+    delay_loops: tuple[DelayLoop, ...] = ()
 
     @property
     def name(self) -> str:
@@ -413,8 +416,9 @@ def _check_sources(sources: list[str | Path]) -> list[Path]:
     return paths
 
 
-def _cached(entry: Path) -> tuple[Path, str, tuple[ClockRead, ...]] | None:
-    """(library, warnings, clock reads) of a cache entry whose dependencies are unchanged, else None."""
+def _cached(entry: Path) -> tuple[Path, str, tuple[ClockRead, ...], tuple[DelayLoop, ...]] | None:
+    """(library, warnings, clock reads, delay loops) of a cache entry whose dependencies are unchanged,
+    else None."""
     lib, manifest = entry / "controller.so", entry / "manifest.json"
     try:
         data = json.loads(manifest.read_text())
@@ -425,7 +429,8 @@ def _cached(entry: Path) -> tuple[Path, str, tuple[ClockRead, ...]] | None:
     for dep, digest in data.get("deps", {}).items():
         if _file_digest(dep) != digest:
             return None
-    return lib, data.get("warnings", ""), tuple(ClockRead.from_json(r) for r in data.get("clock_reads", ()))
+    return (lib, data.get("warnings", ""), tuple(ClockRead.from_json(r) for r in data.get("clock_reads", ())),
+            tuple(DelayLoop.from_json(d) for d in data.get("delay_loops", ())))
 
 
 def _deps(depfiles: list[Path]) -> dict[str, str]:
@@ -449,7 +454,7 @@ def _own_files(paths: list[Path], depfiles: list[Path]) -> dict[str, str]:
     lists none of those): real path -> the name a message shows (a source as given, a header relative
     to the working folder when under it)."""
     cwd = os.getcwd()
-    skip = (os.path.realpath(NATIVE_DIR), os.path.realpath(cache_dir()))
+    skip = (os.path.realpath(NATIVE_DIR), os.path.realpath(KITS_DIR), os.path.realpath(cache_dir()))
     own: dict[str, str] = {}
     for p, dep in zip(paths, depfiles):
         if KITS_DIR in p.resolve().parents:
@@ -708,13 +713,14 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     flags = [*(f"-I{d}" for d in include_dirs), f"-I{INCLUDE_DIR}", *(f"-D{d}" for d in defines)]
     cwd = os.getcwd()
     cxx_flags = CXX_FLAGS + (CXX_FRESH_FLAGS if cxx and _accepts(compilers[True], CXX_FRESH_FLAGS) else ())
-    key = _digest("controller/3", cwd, *map(str, flags), *COMMON_FLAGS, *cxx_flags, *LINK_FLAGS,
+    key = _digest("controller/4", cwd, *map(str, flags), *COMMON_FLAGS, *cxx_flags, *LINK_FLAGS,
                   *(_compiler_id(c) for c in compilers.values() if c), _file_digest(THREAD_START_SOURCE),
                   *(f"{p}\0{_file_digest(p)}" for p in paths))
     entry = cache_dir() / key
     hit = _cached(entry)
     if hit is not None:
-        return NativeProgram(hit[0], tuple(paths), hit[1], cached=True, kit=kit, clock_reads=hit[2])
+        return NativeProgram(hit[0], tuple(paths), hit[1], cached=True, kit=kit, clock_reads=hit[2],
+                             delay_loops=hit[3])
     import shutil
     import tempfile
 
@@ -743,10 +749,14 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
         text = "".join(warnings)
         deps = _deps(depfiles)
         # where the program's own code reads the computer's clock: its objects' calls (not the kit's)
+        own = _own_files(paths, depfiles)
         reads = native_clock_reads([Path(o) for o, p in zip(objects, paths) if KITS_DIR not in p.resolve().parents],
-                                   _own_files(paths, depfiles))
+                                   own)
+        # and where it delays with an empty counting loop (a scan of its own sources' and headers' text)
+        loops = delay_loops(own, kit)
         (tmp / "manifest.json").write_text(json.dumps({"deps": deps, "warnings": text,
-                                                       "clock_reads": [r.to_json() for r in reads]}))
+                                                       "clock_reads": [r.to_json() for r in reads],
+                                                       "delay_loops": [d.to_json() for d in loops]}))
         for o in objects:
             os.unlink(o)
         try:
@@ -760,7 +770,8 @@ def build_program(sources: list[str | Path], *, include_dirs: list[str | Path] =
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return NativeProgram(entry / "controller.so", tuple(paths), text, cached=False, kit=kit, clock_reads=reads)
+    return NativeProgram(entry / "controller.so", tuple(paths), text, cached=False, kit=kit, clock_reads=reads,
+                         delay_loops=loops)
 
 
 def _build_host(kind: str, suffix: str, flags: list[str], libs: list[str]) -> Path:
