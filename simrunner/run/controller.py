@@ -22,7 +22,8 @@ from typing import Callable, Iterator
 
 from simrunner.errors import ControllerFileError
 from simrunner.run.delayloops import DelayLoop, delay_warnings
-from simrunner.run.hostclock import ClockRead, clock_warnings, python_clock_reads
+from simrunner.run.hostclock import (ClockRead, clock_warnings, module_names, own_module_clock_reads,
+                                     python_clock_reads)
 from vehicle.userfiles import read_user_text
 
 PACKAGE_DIR = str(Path(__file__).resolve().parent.parent)  # simrunner/: not the user's frames
@@ -100,8 +101,9 @@ def load_controller(controller) -> Controller:
             main = load_native([path])
             return Controller(path, None, main, None, owned=True, clock_reads=main.program.clock_reads,
                               delay_loops=main.program.delay_loops)
-    code, clock_reads = _compiled(str(path), str(path.resolve()), _controller_source(path))
-    return Controller(path, code, None, code.co_filename, clock_reads=clock_reads)
+    code, clock_reads, imports = _compiled(str(path), str(path.resolve()), _controller_source(path))
+    return Controller(path, code, None, code.co_filename,
+                      clock_reads=clock_reads + own_module_clock_reads(imports, str(path)))
 
 
 def compile_controller(path: str | Path) -> types.CodeType:
@@ -121,9 +123,12 @@ def _controller_source(path: Path) -> str:
 
 
 @functools.lru_cache(maxsize=16)
-def _compiled(shown: str, filename: str, source: str) -> tuple[types.CodeType, tuple[ClockRead, ...]]:
-    """The code of a controller file's ``source`` and where it reads the computer's clock
-    (:func:`~simrunner.run.hostclock.python_clock_reads`), parsed once; kept for the same text,
+def _compiled(shown: str, filename: str,
+              source: str) -> tuple[types.CodeType, tuple[ClockRead, ...], tuple[str, ...]]:
+    """The code of a controller file's ``source``, where it reads the computer's clock
+    (:func:`~simrunner.run.hostclock.python_clock_reads`) and the modules it imports
+    (:func:`~simrunner.run.hostclock.module_names`: its own beside it are read for their clock
+    reads at each load, as they may change), parsed once; kept for the same text,
     so a batch worker's or ``--watch``'s next run of an unchanged file compiles nothing (a code
     object is immutable: each run executes it in a fresh module). ``shown``: the path as given,
     for the messages; ``filename``: the code's (tracebacks)."""
@@ -134,7 +139,7 @@ def _compiled(shown: str, filename: str, source: str) -> tuple[types.CodeType, t
         raise ControllerFileError(f"{shown}:{exc.lineno}: syntax error: {exc.msg}") from None
     except ValueError as exc:  # e.g. null bytes
         raise ControllerFileError(f"{shown}: not a Python file ({exc})") from None
-    return code, python_clock_reads(tree, source, shown)
+    return code, python_clock_reads(tree, source, shown), module_names(tree)
 
 
 def controller_main(module: types.ModuleType, path: Path | None) -> MainFn:

@@ -17,6 +17,7 @@ found before the run, to be said with the run's warnings (``simrunner check`` an
 from __future__ import annotations
 
 import ast
+import functools
 import os
 import re
 import subprocess
@@ -115,6 +116,66 @@ def python_clock_reads(tree: ast.AST, source: str, file: str) -> tuple[ClockRead
         if qualified in PYTHON_CLOCKS and id(node) not in seeded:
             found.setdefault((node.lineno, qualified), ClockRead(file, node.lineno, f"{qualified}()", python=True))
     return tuple(sorted(found.values(), key=lambda r: (r.line, r.call)))
+
+
+MAX_OWN_MODULES = 32
+"""The controller's own modules (beside it) :func:`own_module_clock_reads` reads at most."""
+
+
+def own_module_clock_reads(imports: tuple[str, ...], file: str) -> tuple[ClockRead, ...]:
+    """:func:`python_clock_reads` of the controller's own modules: those it imports (``imports``:
+    :func:`module_names` of the controller) and they import in turn, that are files beside it
+    (``import pid``, ``from helpers.timing import dt``: ``pid.py``, ``helpers/timing.py``; the
+    folder is on ``sys.path`` while it runs), shown beside ``file`` (``team/main.py`` ->
+    ``team/pid.py``). Installed packages and the standard library are not the controller's; a
+    module that cannot be read or parsed is skipped (the run says what is wrong with it when it
+    imports it). At most :data:`MAX_OWN_MODULES` files, each parsed once for its text."""
+    shown_dir = Path(file).parent
+    folder = shown_dir.resolve()
+    seen: set[Path] = set()
+    todo = [imports]
+    reads: list[ClockRead] = []
+    while todo and len(seen) < MAX_OWN_MODULES:
+        for name in todo.pop():
+            parts = name.split(".")
+            for path in (folder.joinpath(*parts).with_suffix(".py"), folder.joinpath(*parts, "__init__.py")):
+                if path in seen or not path.is_file():
+                    continue
+                seen.add(path)
+                try:
+                    source = path.read_text(encoding="utf-8")
+                except (OSError, UnicodeDecodeError):
+                    break
+                found, more = _module_scan(str(shown_dir / path.relative_to(folder)), source)
+                reads += found
+                todo.append(more)
+                break
+    return tuple(reads)
+
+
+@functools.lru_cache(maxsize=64)
+def _module_scan(shown: str, source: str) -> tuple[tuple[ClockRead, ...], tuple[str, ...]]:
+    """A module's clock reads and :func:`module_names` (none if it does not parse)."""
+    try:
+        tree = ast.parse(source, shown)
+    except (SyntaxError, ValueError):
+        return (), ()
+    return python_clock_reads(tree, source, shown), module_names(tree)
+
+
+def module_names(tree: ast.AST) -> tuple[str, ...]:
+    """The absolute module names ``tree`` imports (``import a.b`` -> ``a``, ``a.b``)."""
+    names: list[str] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                parts = alias.name.split(".")
+                names += [".".join(parts[:i + 1]) for i in range(len(parts))]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            parts = node.module.split(".")
+            names += [".".join(parts[:i + 1]) for i in range(len(parts))]
+            names += [f"{node.module}.{alias.name}" for alias in node.names if alias.name != "*"]
+    return tuple(dict.fromkeys(names))
 
 
 def _imported_names(tree: ast.AST) -> dict[str, str]:
