@@ -105,15 +105,16 @@ def test_python_monotonic_is_warned_once_by_drive_before_the_outcome_and_in_the_
 
 
 def test_the_controllers_own_modules_beside_it_are_read_too(here, track):
-    """A team's timing in its own module (``import pid``; a package ``helpers/``) was not found:
+    """A team's timing in its own module (``import pid``; a package ``teamlib/``) was not found:
     the modules the controller imports from its folder are read as it is (installed ones and the
-    standard library are not), shown beside it, and read again when they change."""
-    Path("team/helpers").mkdir(parents=True)
+    standard library are not), shown beside it, and read again when they change. (A package
+    name of its own: this process has imported the tests' ``helpers``.)"""
+    Path("team/teamlib").mkdir(parents=True)
     write("team/main.py", """\
         import json
         import numpy as np
         import pid
-        from helpers.timing import stamp
+        from teamlib.timing import stamp
 
 
         def main(s):
@@ -122,15 +123,15 @@ def test_the_controllers_own_modules_beside_it_are_read_too(here, track):
                 s.set_speed(0.5 + 0 * pid.dt() + 0 * stamp())
         """)
     write("team/pid.py", "import time\n\n\ndef dt():\n    return time.monotonic()\n")
-    write("team/helpers/__init__.py", "")
-    write("team/helpers/timing.py", "import time\n\n\ndef stamp():\n    return time.perf_counter()\n")
+    write("team/teamlib/__init__.py", "")
+    write("team/teamlib/timing.py", "import time\n\n\ndef stamp():\n    return time.perf_counter()\n")
     report = check_controller("team/main.py", track=track, seconds=0.2)
     assert report.ok, report.text()
     assert clock_lines(report.warnings) == [f"team/pid.py:5: time.monotonic() {CLOCK}: {PY_ADVICE}",
-                                            f"team/helpers/timing.py:5: time.perf_counter() {CLOCK}: {PY_ADVICE}"]
+                                            f"team/teamlib/timing.py:5: time.perf_counter() {CLOCK}: {PY_ADVICE}"]
     write("team/pid.py", "def dt():\n    return 0.0\n")  # (the controller's own text unchanged)
     report = check_controller("team/main.py", track=track, seconds=0.2)
-    assert clock_lines(report.warnings) == [f"team/helpers/timing.py:5: time.perf_counter() {CLOCK}: {PY_ADVICE}"]
+    assert clock_lines(report.warnings) == [f"team/teamlib/timing.py:5: time.perf_counter() {CLOCK}: {PY_ADVICE}"]
 
 
 def test_aliased_imports_helpers_and_datetime_are_followed():
