@@ -24,8 +24,10 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-#: places worded one by one; the rest are counted in one more line (as the clock reads)
-SHOWN = 3
+from simrunner.run.hostclock import SHOWN as CLOCK_SHOWN, place_warnings
+
+#: places worded one by one; the rest are counted in one more line (the clock reads' number)
+SHOWN = CLOCK_SHOWN
 
 #: the kit's call that waits in simulated time (``--kit``; None: a plain C/C++ program)
 WAIT_CALLS = {None: "spinner_sleep(seconds) / usleep(us)", "tfc": "TFC_Delay_mS(ms)",
@@ -69,14 +71,9 @@ class DelayLoop:
 
 
 def delay_warnings(loops: tuple[DelayLoop, ...] | list[DelayLoop]) -> list[str]:
-    """The warnings of ``loops``: one per place, the first :data:`SHOWN`, then how many more."""
-    texts = [d.text() for d in loops[:SHOWN]]
-    rest = loops[SHOWN:]
-    if rest:
-        where = ", ".join(f"{d.file}:{d.line}" for d in rest[:5]) + (", ..." if len(rest) > 5 else "")
-        texts.append(f"and {len(rest)} more empty counting loop{'s' if len(rest) > 1 else ''} delaying no "
-                     f"simulated time ({where})")
-    return texts
+    """The warnings of ``loops``: one per place, the first three, then how many more
+    (:func:`~simrunner.run.hostclock.place_warnings`)."""
+    return place_warnings(loops, "empty counting loop", "delaying no simulated time")
 
 
 def delay_loops(own_files: dict[str, str], kit: str | None = None) -> tuple[DelayLoop, ...]:

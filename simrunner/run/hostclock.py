@@ -82,15 +82,20 @@ class ClockRead:
         return cls(str(file), int(line), str(call), bool(seeds), bool(python))
 
 
-def clock_warnings(reads: tuple[ClockRead, ...] | list[ClockRead]) -> list[str]:
-    """The warnings of ``reads``: one per place, the first :data:`SHOWN`, then how many more."""
-    texts = [r.text() for r in reads[:SHOWN]]
-    rest = reads[SHOWN:]
+def place_warnings(places, noun: str, what: str) -> list[str]:
+    """The warnings of ``places`` (each with ``text()``, ``file`` and ``line``): one per place, the
+    first :data:`SHOWN`, then ``and N more {noun}s {what} (file:line, ...)``."""
+    texts = [p.text() for p in places[:SHOWN]]
+    rest = places[SHOWN:]
     if rest:
-        where = ", ".join(f"{r.file}:{r.line}" for r in rest[:5]) + (", ..." if len(rest) > 5 else "")
-        texts.append(f"and {len(rest)} more place{'s' if len(rest) > 1 else ''} reading the computer's clock "
-                     f"or seeding from it ({where})")
+        where = ", ".join(f"{p.file}:{p.line}" for p in rest[:5]) + (", ..." if len(rest) > 5 else "")
+        texts.append(f"and {len(rest)} more {noun}{'s' if len(rest) > 1 else ''} {what} ({where})")
     return texts
+
+
+def clock_warnings(reads: tuple[ClockRead, ...] | list[ClockRead]) -> list[str]:
+    """The warnings of ``reads`` (:func:`place_warnings`)."""
+    return place_warnings(reads, "place", "reading the computer's clock or seeding from it")
 
 
 # -- Python ---------------------------------------------------------------------------------
