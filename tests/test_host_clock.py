@@ -170,6 +170,28 @@ def test_seeding_from_the_clock_is_one_warning_at_the_seed():
     assert read.text() == 'r.py:2: random.seed() makes every run different: seed from spinner.param("seed", 1) or a constant'
 
 
+def test_generators_seeded_by_the_operating_system_are_warned_at_their_line():
+    found = reads("""\
+        import random
+        import numpy as np
+        from numpy.random import default_rng
+        def main(s):
+            a = np.random.default_rng()
+            b = default_rng(None)
+            c = np.random.RandomState()
+            d = random.Random()
+            e = random.SystemRandom(3)
+            f = np.random.default_rng(seed=None)
+            ok1 = np.random.default_rng(7)
+            ok2 = default_rng(int(s.param("seed", 1)))
+            ok3 = random.Random(42)
+            ok4 = np.random.PCG64(1)
+        """)
+    assert found == [(5, "np.random.default_rng()", True), (6, "default_rng(None)", True),
+                     (7, "np.random.RandomState()", True), (8, "random.Random()", True),
+                     (9, "random.SystemRandom(3)", True), (10, "np.random.default_rng(seed=None)", True)]
+
+
 def test_names_that_only_look_like_the_clock_are_not_warned():
     assert reads("""\
         import time

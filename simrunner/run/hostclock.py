@@ -32,8 +32,13 @@ PYTHON_CLOCKS = frozenset(
     [f"time.{name}{ns}" for name in ("time", "monotonic", "perf_counter", "process_time", "thread_time")
      for ns in ("", "_ns")]
     + ["datetime.datetime.now", "datetime.datetime.utcnow", "datetime.datetime.today", "datetime.date.today"])
-#: seeding calls that, without an argument, seed from the operating system / the clock
-PYTHON_SEEDS = frozenset(["random.seed", "numpy.random.seed"])
+#: seeding calls and generators that, without an argument (or with None), seed from the operating
+#: system / the clock (Python's random module docs; NumPy's "Random Generator": ``default_rng()``
+#: "pulls fresh, unpredictable entropy from the OS"); ``random.SystemRandom`` is never seeded
+PYTHON_SEEDS = frozenset(["random.seed", "numpy.random.seed", "random.Random", "random.SystemRandom",
+                          "numpy.random.default_rng", "numpy.random.RandomState", "numpy.random.SeedSequence",
+                          "numpy.random.PCG64", "numpy.random.PCG64DXSM", "numpy.random.MT19937",
+                          "numpy.random.Philox", "numpy.random.SFC64"])
 
 #: C/C++ symbols (as the linker sees them) that read the host's clock -> their name as written
 NATIVE_CLOCKS = {
@@ -111,7 +116,8 @@ def python_clock_reads(tree: ast.AST, source: str, file: str) -> tuple[ClockRead
         if isinstance(node, ast.Call) and _qualified(node.func, names) in PYTHON_SEEDS:
             inner = [n for arg in [*node.args, *node.keywords] for n in ast.walk(arg)
                      if _qualified(n, names) in PYTHON_CLOCKS]
-            if not (node.args or node.keywords) or inner:
+            if not (node.args or node.keywords) or inner or _seeds_none(node) \
+                    or _qualified(node.func, names) == "random.SystemRandom":
                 seeded.update(id(n) for n in inner)
                 call = ast.get_source_segment(source, node) or f"{_qualified(node.func, names)}()"
                 found.setdefault((node.lineno, call), ClockRead(file, node.lineno, " ".join(call.split()),
@@ -121,6 +127,13 @@ def python_clock_reads(tree: ast.AST, source: str, file: str) -> tuple[ClockRead
         if qualified in PYTHON_CLOCKS and id(node) not in seeded:
             found.setdefault((node.lineno, qualified), ClockRead(file, node.lineno, f"{qualified}()", python=True))
     return tuple(sorted(found.values(), key=lambda r: (r.line, r.call)))
+
+
+def _seeds_none(call: ast.Call) -> bool:
+    """``call``'s seed is the constant None (``default_rng(None)``, ``random.seed(a=None)``)."""
+    first = call.args[0] if call.args else next(
+        (k.value for k in call.keywords if k.arg in ("seed", "a", "x", "entropy")), None)
+    return isinstance(first, ast.Constant) and first.value is None
 
 
 MAX_OWN_MODULES = 32
