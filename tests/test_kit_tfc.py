@@ -551,7 +551,7 @@ def test_motor_duties_with_the_h_bridge_disabled_are_a_warning(tmp_path):
         }
         """))
     r = drive(firmware([src]), time_limit_s=2.0)
-    assert any("TFC_SetMotorPWM(0.40, 0.40) with the H-bridge disabled for 1.0 s: the motors stay off" in w
+    assert any("still.c:5: TFC_SetMotorPWM(0.40, 0.40) with the H-bridge disabled for 1.0 s: the motors stay off" in w
                and "TFC_HBRIDGE_ENABLE" in w for w in r.warnings), r.warnings
     r = drive(firmware([src]), params={"dip": 1}, time_limit_s=2.0)
     assert not any("H-bridge" in w for w in r.warnings), r.warnings

@@ -913,5 +913,5 @@ def test_motor_duties_with_the_h_bridge_disabled_are_a_warning(tmp_path):
         }
         """))
     r = drive(build_program([str(src)], kit="tfc-mbed"), time_limit_s=2.0)
-    assert any("TFC_SetMotorPWM(0.30, -0.10) with the H-bridge disabled for 1.0 s: the motors stay off" in w
+    assert any("still.cpp:5: TFC_SetMotorPWM(0.30, -0.10) with the H-bridge disabled for 1.0 s: the motors stay off" in w
                for w in r.warnings), r.warnings

@@ -401,6 +401,7 @@ C_CALLS = {
     "spinner_param": ("", 'spinner_param("x", 1.0)', ""),
     "spinner_fail": None,  # (ends the run: its request OP_FAULT is exempt)
     "spinner_warn": ("", 'spinner_warn("x")', ""),
+    "spinner_warn_at": ("", 'spinner_warn_at("x", 0)', ""),
     "pixy2_init": ("", "pixy2_init()", ""),
     "pixy2_change_prog": ("", 'pixy2_change_prog("line")', ""),
     "pixy2_line_get_main_features": ("", "pixy2_line_get_main_features(LINE_ALL_FEATURES, true, &f)", ""),
@@ -417,7 +418,7 @@ C_CALLS = {
 C_EXEMPT = {"spinner_configure", "spinner_image_width", "spinner_image_height", "spinner_line_row",
             "spinner_recording", "spinner_encoder_lines", "spinner_has_imu", "spinner_has_every",
             "spinner_interrupts", "spinner_in_interrupt", "spinner_running", "spinner_interrupts_disabled",
-            "spinner_now_uncharged", "spinner_warn", "spinner_fail", "spinner_stop_every_latched", "spinner_unpend_every",
+            "spinner_now_uncharged", "spinner_warn", "spinner_warn_at", "spinner_fail", "spinner_stop_every_latched", "spinner_unpend_every",
             "spinner_pend_every", "spinner_every_pending"}  # simrunner.run.mcu.UNCHARGED_C_FUNCTIONS
 # what the review found not charged (set_camera_brightness was, through set_exposure)
 C_NEWLY_CHARGED = ("spinner_stop_every", "spinner_get_scan_angles", "pixy2_init", "pixy2_change_prog",

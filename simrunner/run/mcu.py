@@ -99,6 +99,7 @@ UNCHARGED_C_FUNCTIONS = {
     "spinner_interrupts_disabled": UNCHARGED_METHODS["interrupts_disabled"],
     "spinner_now_uncharged": "its request (OP_NOW_UNCHARGED) is exempt: see UNCHARGED_REQUESTS",
     "spinner_warn": "its request (OP_WARN) is exempt: see UNCHARGED_REQUESTS",
+    "spinner_warn_at": "its request (OP_WARN) is exempt: see UNCHARGED_REQUESTS",
     "spinner_fail": "its request (OP_FAULT) ends the run",
     "spinner_stop_every_latched": "the kits' NVIC emulation (OP_EVERY_STOP_LATCHED): see UNCHARGED_REQUESTS",
     "spinner_unpend_every": "the kits' NVIC emulation (OP_EVERY_UNPEND): see UNCHARGED_REQUESTS",

@@ -174,6 +174,10 @@ class Session:
         self._token = _current_session.set(self)
         self.thread_id = _get_ident()
 
+    def has_warned(self, key: str) -> bool:
+        """A warning with ``key`` was added already (:meth:`warn_once`)."""
+        return key in self._warned
+
     def warn_once(self, key: str, text: str) -> None:
         """Add warning ``text`` unless one with ``key`` was added already."""
         if key not in self._warned:

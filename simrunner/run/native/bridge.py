@@ -481,9 +481,12 @@ class _Session:
             if self._pixy is None:
                 self._pixy = s.pixy2()
             reply(_pixy2_answer(self._pixy, op, payload))
-        elif op == OP_WARN:  # spinner_warn's text: a warning of the run, once per text
-            text = payload.decode("utf-8", "replace")
-            s._s.warn_once("spinner_warn: " + text, text)
+        elif op == OP_WARN:  # spinner_warn's text, NUL, its frames: a warning of the run, once per text
+            raw, _, frames = payload.partition(b"\0")
+            text = raw.decode("utf-8", "replace")
+            if not s._s.has_warned("spinner_warn: " + text):
+                where = self._warned_at(frames.decode("utf-8", "replace"))
+                s._s.warn_once("spinner_warn: " + text, f"{where}: {text}" if where else text)
         elif op == OP_FAULT:
             self._fault(payload.decode("utf-8", "replace"))
         elif op == OP_EXIT_AT:  # the exit call (uint8), its status (int32), its return address' offset
@@ -520,6 +523,17 @@ class _Session:
         if os.path.realpath(module) not in {os.path.realpath(m) for m in self._user_modules()}:
             return None
         return no_line_where(module, offset - 1, found[0][0] if found else "")
+
+    def _warned_at(self, frames: str) -> str | None:
+        """file:line of the innermost frame of a warning's ``frames`` (the host's report lines) in
+        the program's own code, not a kit's (None: none there, or no debug information)."""
+        if not frames:
+            return None
+        from simrunner.run.native.symbolize import _ours, parse_report
+
+        fault = parse_report("signal 0\n" + frames, self._user_modules(), self._host())
+        loc = fault.location
+        return f"{loc.file}:{loc.line}" if loc is not None and not _ours(loc.file) else None
 
     def _param(self, payload: bytes) -> float:
         default = _D.unpack_from(payload)[0]

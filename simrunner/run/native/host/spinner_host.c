@@ -653,11 +653,6 @@ void spinner_fail(const char *message) {
     for (;;) pause();  /* not reached: the report ends the run */
 }
 
-void spinner_warn(const char *message) {
-    INIT();
-    if (finished || message == NULL) return;
-    queue(OP_WARN, message, strlen(message), NULL, 0);
-}
 
 /* The API function the foreign thread called (its outermost frame in this module: the host is
  * built with -fno-optimize-sibling-calls, so the entry point keeps its frame) as ", NAME()," into
@@ -1605,6 +1600,31 @@ static void report_frames(struct report *r, const char *key, void *const *frames
         }
         rput(r, "\n");
     }
+}
+
+/* A warning: its text, a NUL, then where the program was as "frame" lines (report_frames), from
+ * which the simulator names the innermost place in the program's own code. */
+static void warn_from(const char *message, void *const *frames, int n) {
+    static struct report where;  /* (main()'s thread only) */
+    INIT();
+    if (finished || message == NULL) return;
+    if (OPENING() || on_foreign_thread()) {  /* queue() drops it (noting another thread's call) */
+        queue(OP_WARN, message, strlen(message) + 1, NULL, 0);
+        return;
+    }
+    where.len = 0;
+    report_frames(&where, "frame", frames, n);
+    queue(OP_WARN, message, strlen(message) + 1, where.text, where.len);
+}
+
+void spinner_warn(const char *message) {
+    void *here[64];
+    warn_from(message, here, backtrace(here, 64));
+}
+
+void spinner_warn_at(const char *message, const void *call) {
+    void *at[1] = {(void *)call};
+    warn_from(message, at, call != NULL);
 }
 
 /* Text report into `r`: "signal N\nmessage TEXT\n[thread program\n][pc ADDR\n]frame ADDR OFFSET

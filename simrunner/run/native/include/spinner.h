@@ -200,9 +200,13 @@ double spinner_param(const char *name, double default_value);
  * as a misused Spinner call does; for library code that meets a call it cannot serve. */
 void spinner_fail(const char *message) __attribute__((noreturn));
 
-/* A warning of the run (listed after it and in the summary's warnings, once per text); the run
+/* A warning of the run (listed after it and in the summary's warnings, once per text, at the
+ * innermost place in the program's own code the call came through: "main.c:12: TEXT"); the run
  * goes on. For library code that sees a set-up that will not do what its author meant. */
 void spinner_warn(const char *message);
+/* The same, said at `call`: a return address into the program's code that the library kept
+ * (__builtin_return_address(0) in the function the program called; NULL: no place). */
+void spinner_warn_at(const char *message, const void *call);
 
 #ifdef __cplusplus
 }

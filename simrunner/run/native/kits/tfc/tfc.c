@@ -55,6 +55,7 @@ static struct {
     uint32_t tick_pending;  /* a SysTick fell due while interrupts were disabled */
     double unpowered_s;     /* since when duties are set with the H-bridge disabled (-1: not so) */
     int unpowered_warned;
+    const void *duty_call;  /* where the program last called TFC_SetMotorPWM (its return address) */
 } tfc = {.unpowered_s = -1.0};
 
 /* A loop that polls the board without calling the library (`while (!LineScanImageReady);`,
@@ -92,7 +93,7 @@ static void check_unpowered(double now_s) {
     snprintf(text, sizeof text, "TFC_SetMotorPWM(%.2f, %.2f) with the H-bridge disabled for %.1f s: the motors "
              "stay off, on the board too (TFC_Init() disables it): enable it with TFC_HBRIDGE_ENABLE",
              tfc.duty_a, tfc.duty_b, now_s - tfc.unpowered_s);
-    spinner_warn(text);
+    spinner_warn_at(text, tfc.duty_call);
 }
 
 /* The SysTick interrupt's tickers at `now_s` (one count a millisecond). While interrupts are
@@ -271,6 +272,7 @@ void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {
 }
 
 void TFC_SetMotorPWM(float MotorA, float MotorB) {
+    tfc.duty_call = __builtin_return_address(0);
     tfc.duty_a = (float)clampf(MotorA, -1.0, 1.0);
     tfc.duty_b = (float)clampf(MotorB, -1.0, 1.0);
     send_commands();

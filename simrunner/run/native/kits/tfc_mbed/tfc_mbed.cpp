@@ -111,6 +111,7 @@ static struct {
     void (*edges)(void);    /* InterruptIn's edges at each tick (tfc_mbed_on_edges) */
     int unpowered, unpowered_warned;  /* duties set with the H-bridge disabled: since unpowered_s */
     double unpowered_s;
+    const void *duty_call;  /* where the program last called TFC_SetMotorPWM (its return address) */
 } k;
 
 static double clampd(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
@@ -160,7 +161,7 @@ static void check_unpowered(void) {
     snprintf(text, sizeof text, "TFC_SetMotorPWM(%.2f, %.2f) with the H-bridge disabled for %.1f s: the motors "
              "stay off, on the board too (TFC_Init() disables it): enable it with TFC_HBRIDGE_ENABLE",
              k.duty_a, k.duty_b, k.now_s - k.unpowered_s);
-    spinner_warn(text);
+    spinner_warn_at(text, k.duty_call);
 }
 
 static void clock_isr(void) {
@@ -558,6 +559,7 @@ void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {
 }
 
 void TFC_SetMotorPWM(float MotorA, float MotorB) {
+    k.duty_call = __builtin_return_address(0);
     tfc_mbed_start();
     k.duty_a = (float)clampd(MotorA, -1.0, 1.0);
     k.duty_b = (float)clampd(MotorB, -1.0, 1.0);
