@@ -237,6 +237,8 @@ static int armed(int i) {
 
 static int irq_of(int i) { return i == LPTMR ? IRQ_LPTMR : i == TPM_2 ? IRQ_TPM2 : IRQ_PIT; }
 
+static const void *nvic_disabled_at[32];  /* where the program called NVIC_DisableIRQ (a return address) */
+
 /* A timer set up to interrupt, with the program's handler, whose IRQ the NVIC keeps off for
  * UNROUTED_LOOKS looks in a row (a set-up that enables it later is not warned about): on the board
  * the handler is never called either, which the run's end alone would not explain. */
@@ -253,7 +255,7 @@ static void warn_unrouted(int i) {
     snprintf(text, sizeof text, "%s counts with its interrupt enabled but %s is not enabled in the NVIC: "
              "%s is never called, on the board too (NVIC_EnableIRQ(%s); docs/firmware.md, Timer interrupts)",
              t->name, irq_names[i], vector_of(i), irq_names[i]);
-    spinner_warn(text);
+    spinner_warn_at(text, nvic_disabled_at[irq_of(i)]);  /* (where the program disabled it, if it did) */
 }
 
 static double period_of(int i) {
@@ -654,13 +656,14 @@ void tfc_sim_nvic_enable(int irq) {
     nvic_sync();
     if (irq < 0 || irq >= 32) return;
     nvic_enabled |= 1u << irq;
+    nvic_disabled_at[irq] = NULL;
     if (((nvic_pending >> irq) & 1u) && !firing) sync();  /* (the look: a clear written since applies first;
                                                             * in a handler: the look after it) */
 }
 
 void tfc_sim_nvic_disable(int irq) {
     nvic_sync();
-    if (irq >= 0 && irq < 32) nvic_enabled &= ~(1u << irq);
+    if (irq >= 0 && irq < 32) nvic_enabled &= ~(1u << irq), nvic_disabled_at[irq] = __builtin_return_address(0);
     if (irq >= 0 && irq < 32 && ((nvic_handed >> irq) & 1u) && !firing) sync();  /* (taken back) */
 }
 
