@@ -169,7 +169,8 @@ int main() {
 
 # C/C++ programs that end in a constructor (line 4) as their library is loaded, before the run:
 # name -> (source, the run's outcome, its message up to the ", in a constructor ..." drive adds
-# in process; isolated the message is just that)
+# in process; isolated an exit's message adds ", in a constructor as the program loaded", a fault's
+# is just that)
 C_CTOR_ENDS = {
     "exit3.c": ("""\
 #include <stdlib.h>

@@ -69,7 +69,7 @@ def test_the_headers_beside_the_sources_are_watched_too(tmp_path):
 
 @pytest.mark.parametrize("name, said", [
     ("boom.c", "boom.c:5: SIGSEGV: segmentation fault (in boom())"),
-    ("exit3.c", "the controller called exit(3) at exit3.c:4")])
+    ("exit3.c", "the controller called exit(3) at exit3.c:4, in a constructor as the program loaded")])
 def test_a_constructor_that_ends_the_program_at_its_load_ends_a_run_not_the_watch(tmp_path, name, said):
     """A fault or an exit in a C constructor runs as the program's library is loaded: in the watch's
     own process (no supervisor there) it ended the whole watch session (killed by SIGSEGV; status 70)

@@ -97,7 +97,8 @@ def killed_message(signum: int, log: RunLog | None) -> str:
     return f"the run's process was killed by {name}{at} ({why})"
 
 
-AT_LOAD = "in a constructor as the program loaded, before the first frame"
+IN_CONSTRUCTOR = "in a constructor as the program loaded"
+AT_LOAD = f"{IN_CONSTRUCTOR}, before the first frame"
 """Where a C/C++ program's fault or end at its library's load was (its constructors run then, before
 the run's first frame)."""
 
@@ -307,6 +308,6 @@ def _rebuild_video(log: RunLog, path, track, car, laps: int, max_fps: float | No
     return video
 
 
-__all__ = ["AT_LOAD", "LOAD_END_STATUS", "LoadEnd", "StuckRun", "dead_fault", "finish_stuck_run", "finish_dead_run",
+__all__ = ["AT_LOAD", "IN_CONSTRUCTOR", "LOAD_END_STATUS", "LoadEnd", "StuckRun", "dead_fault", "finish_stuck_run", "finish_dead_run",
            "finish_load_ended_run", "killed_message", "load_end", "load_fault", "read_run_log",
            "run_log_laps", "stuck_location", "stuck_message", "stuck_stack", "thread_fault"]

@@ -41,6 +41,7 @@ import numpy as np
 
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
 from simrunner.run.mcu import UNCHARGED_REQUESTS
+from simrunner.run.postmortem import IN_CONSTRUCTOR
 from simrunner.run.native.build import NativeProgram, missing_function, misspelt_function
 from simrunner.run.watchdog import native_stall_hint
 
@@ -53,6 +54,7 @@ OP_CMD, OP_TEXT, OP_LINE, OP_IMAGE, OP_SPEED, OP_POSITION, OP_TIME, OP_SLEEP, OP
     OP_SET_EXPOSURE_NEXT, OP_EVERY_STOP_LATCHED, OP_NOW_UNCHARGED = range(1, 40)
 ST_OK, ST_FINISHED, ST_ERROR, ST_WHERE, ST_ISR = 0, 1, 2, 3, 4
 EXIT_NO_MAIN, EXIT_NOT_LOADED = 72, 71
+EXIT_AT_LOAD = 0x80  # OP_EXIT_AT's call byte: the exit was in a constructor (spinner_host.c)
 LOAD_ERROR_FD_ENV = "SPINNER_LOAD_ERROR_FD"  # where the host writes the loader's error (not stderr)
 _HDR = struct.Struct("<II")
 _OK_EMPTY = _HDR.pack(ST_OK, 0)
@@ -492,8 +494,10 @@ class _Session:
         elif op == OP_EXIT_AT:  # the exit call (uint8), its status (int32), its return address' offset
             fn, status, offset = struct.unpack_from("<BiQ", payload)  # (uint64) and module: just before
             where = self._where(payload[13:].decode("utf-8", "replace"), offset)  # the program ends
+            at_load, fn = fn & EXIT_AT_LOAD, fn & ~EXIT_AT_LOAD  # (in a constructor, as the library loaded)
             name = ("exit", "_exit", "_Exit", "quick_exit")[fn] if fn < 4 else "exit"
-            self._exit_at = f"{name}({status}) at {where}" if where else None
+            self._exit_at = (f"{name}({status}) at {where}" + (f", {IN_CONSTRUCTOR}" if at_load else "")
+                             if where else None)
             self._exit_status = status & 0xFF
         else:
             raise ControllerError(f"{self.name}: unknown request {op} from the host program")

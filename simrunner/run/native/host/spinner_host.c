@@ -98,6 +98,7 @@ static void load_ended(const char *call, int status, const char *message) __attr
 #define OPENING() opening
 #else
 #define OPENING() 0
+static int loading;  /* main() is opening the program's library: its constructors run (exit_note) */
 #endif
 
 static void fault_report(int sig, const char *message, void *pc);
@@ -1286,8 +1287,9 @@ int __wrap_clock_nanosleep(clockid_t clock, int flags, const struct timespec *re
 /* Where the program called exit (or _exit, _Exit, quick_exit): OP_EXIT_AT, queued with the run's
  * last requests, so the run's outcome names the line as a Python controller's sys.exit is named
  * ("the controller called exit(3) at main.c:91"): which call (uint8: 0 exit, 1 _exit, 2 _Exit, 3
- * quick_exit), the status (int32), the caller's return address as its offset in its module
+ * quick_exit; + EXIT_AT_LOAD from a constructor as an isolated host opens the library), the status (int32), the caller's return address as its offset in its module
  * (uint64) and the module's path. Not from a process the program forked, nor after the run. */
+#define EXIT_AT_LOAD 0x80  /* OP_EXIT_AT's call byte: the exit was in a constructor as the library loaded */
 static void exit_note(uint8_t fn, int status, void *ra) {
     if (forked) return;
     Dl_info host, caller;  /* the host's own end (main returned: exit(0); a report's _exit) is no call of the program's */
@@ -1318,6 +1320,9 @@ static void exit_note(uint8_t fn, int status, void *ra) {
     memcpy(msg + 1, &st, sizeof st);
     memcpy(msg + 5, &off, sizeof off);
     memcpy(msg + 13, path, n);
+#ifndef SPINNER_INPROC
+    if (loading) msg[0] |= EXIT_AT_LOAD;  /* (in a constructor: said so, as in process) */
+#endif
     queue_raw(OP_EXIT_AT, msg, 13 + n, NULL, 0);
     flush_out();
 }
@@ -2336,7 +2341,9 @@ int main(int argc, char **argv) {
     const char *err_fd_text = getenv("SPINNER_LOAD_ERROR_FD");
     int err_fd = err_fd_text != NULL ? atoi(err_fd_text) : -1;
     unsetenv("SPINNER_LOAD_ERROR_FD");  /* (not the program's) */
+    loading = 1;
     void *lib = dlopen(argv[1], RTLD_NOW | RTLD_GLOBAL);
+    loading = 0;
     if (lib == NULL) {
         const char *why = dlerror();
         if (err_fd < 0 || write(err_fd, why, strlen(why)) < 0) fprintf(stderr, "simrunner: %s\n", why);
