@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from simrunner.errors import ControllerError
+from simrunner.run.native.symbolize import IN_CONSTRUCTOR
 from simrunner.telemetry.log import TEXT_SEPARATOR, LogWarning, RunLog, empty_log, read_log, write_log
 from simrunner.reports.outputs import Outputs, write_outputs
 from simrunner.run.result import Outcome, RunResult
@@ -97,7 +98,6 @@ def killed_message(signum: int, log: RunLog | None) -> str:
     return f"the run's process was killed by {name}{at} ({why})"
 
 
-IN_CONSTRUCTOR = "in a constructor as the program loaded"
 AT_LOAD = f"{IN_CONSTRUCTOR}, before the first frame"
 """Where a C/C++ program's fault or end at its library's load was (its constructors run then, before
 the run's first frame)."""

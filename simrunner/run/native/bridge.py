@@ -41,8 +41,8 @@ import numpy as np
 
 from simrunner.errors import ControllerError, ControllerFileError, RunFinished, Stalled
 from simrunner.run.mcu import UNCHARGED_REQUESTS
-from simrunner.run.postmortem import IN_CONSTRUCTOR
 from simrunner.run.native.build import NativeProgram, missing_function, misspelt_function
+from simrunner.run.native.symbolize import IN_CONSTRUCTOR
 from simrunner.run.watchdog import native_stall_hint
 
 # request ops (host -> simulator), reply status (simulator -> host): spinner_host.c

@@ -28,6 +28,10 @@ import signal
 import subprocess
 from dataclasses import dataclass
 
+IN_CONSTRUCTOR = "in a constructor as the program loaded"
+"""Where a program's end was when it was in a constructor as its library loaded (the run's message
+adds it: :data:`simrunner.run.postmortem.AT_LOAD` in process, this alone isolated)."""
+
 SIGNAL_TEXT = {
     signal.SIGSEGV: "segmentation fault (invalid memory access)",
     signal.SIGBUS: "bus error (invalid memory access)",
