@@ -276,6 +276,7 @@ class CarSim:
         self._tyre_applied: tuple = (((0.0, 0.0), (0.0, 0.0, 0.0), 0.0),) * 4  # see _apply_tyres
         self._knuckle_bodies = tuple(j.getChildBodyNode() for j in self._body.knuckle_joints)
         self._com_local = tuple(float(v) for v in self._body.chassis.getLocalCOM())
+        self._com_local_array = self._body.chassis.getLocalCOM()  # fixed at build (body.py): read once
         self._zero3 = np.zeros(3)
         self._rear_couple_nm = 0.0  # the rear speed servos' share of the tyres' spin torques, on the chassis
         self._spin_modes: tuple | None = None  # (locked, servo, front servo) of the last _apply_tyres
@@ -623,7 +624,7 @@ class CarSim:
         centre of mass, with slip tyres the rear tyres' forces too (all in the chassis frame)."""
         chassis, ext = self._body.chassis, self._force_applied or (0.0, 0.0)
         if self._tyres is None:
-            chassis.setExtForce(np.array([ext[0], ext[1], 0.0]), chassis.getLocalCOM(), True, True)
+            chassis.setExtForce(np.array([ext[0], ext[1], 0.0]), self._com_local_array, True, True)
             return
         # the external force at the centre of mass and the rear tyres' forces at their contact
         # points (z = 0), as one force at the chassis origin and one torque (chassis frame)
