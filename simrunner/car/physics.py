@@ -564,8 +564,10 @@ class CarSim:
         """Set a constant force on the chassis at its centre of mass, in the CAR BODY frame
         (x forward, y left; N). It replaces the previous one and stays until changed
         (seam for drag / rolling resistance effects)."""
-        self._control = self._control_now()._replace(ext_force_n=(float(fx_n), float(fy_n)))
-        self._apply(self._control)
+        self._control = c = self._control_now()._replace(ext_force_n=(float(fx_n), float(fy_n)))
+        # only the force changed: every other change of _control went through _apply, so the
+        # joints already hold what it would set (the effects' drag calls this every step)
+        self._apply_force(c)
 
     def _apply(self, c: _Control, *, force: bool = False) -> None:
         """Set the joints and the chassis force from ``c``; only what changed since the last
@@ -612,6 +614,10 @@ class CarSim:
                 for j, o in zip(b.wheel_joints[2:] if f == 0.0 else b.wheel_joints[2:] + b.wheel_joints[:2], omega):
                     j.setCommand(0, o)
                 self._omega_applied = omega
+        self._apply_force(c)
+
+    def _apply_force(self, c: _Control) -> None:
+        """The chassis force part of :meth:`_apply` (only if it changed)."""
         ext = c.ext_force_n
         if self._duty_mode and self._drag_nspm2 > 0.0:
             ext = (ext[0] + self._drag_n, ext[1])
