@@ -143,7 +143,7 @@ class ResidualMemo:
     and need not be simulated again. Shared by the problems ``dataclasses.replace`` makes
     from one (other scales, car or step: the key holds what the residuals depend on);
     least recently used entries go beyond ``max_values`` stored floats. Pickled empty (a
-    worker process starts its own). The residuals are read, never written, by their users."""
+    worker process starts its own). The residual arrays are shared, so they are read-only."""
 
     def __init__(self, max_values: int = 4_000_000):
         self.max_values = max_values
@@ -163,6 +163,9 @@ class ResidualMemo:
             return compute()
         if hit is None:
             res = compute()
+            for r in res:  # shared with every later caller: read-only, so none can change another's
+                for v in r.values():
+                    v.setflags(write=False)
             hit = (problem.segments, res, sum(v.size for r in res for v in r.values()))
             self._values += hit[2]
         self._entries[key] = hit  # now the most recently used
