@@ -389,6 +389,7 @@ class EffectSim:
         self._raw = raw
         self._queue: deque = deque()
         self._held = raw
+        self._mapped: tuple = (None, None)  # (held command, its _static_map), see _update
         self._steer_lag = self._steer_rl = self._speed_lag = 0.0
         self._last_t = self.sim.time_s
         self._substep = 0
@@ -592,7 +593,10 @@ class EffectSim:
         q = self._queue
         while q and q[0][0] <= t + 1e-9:
             self._held = q.popleft()[1]
-        v, d, w_cmd, coast = self._static_map(self._held)
+        held = self._held
+        if held is not self._mapped[0]:  # a pure function of the held command: mapped once per command
+            self._mapped = (held, self._static_map(held))
+        v, d, w_cmd, coast = self._mapped[1]
         if e.esc_reverse_delay_s > 0.0:
             v = self._esc_target(v, coast, t)
         if self._dynamic:

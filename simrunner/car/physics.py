@@ -276,6 +276,7 @@ class CarSim:
         self._tyre_applied: tuple = (((0.0, 0.0), (0.0, 0.0, 0.0), 0.0),) * 4  # see _apply_tyres
         self._knuckle_bodies = tuple(j.getChildBodyNode() for j in self._body.knuckle_joints)
         self._com_local = tuple(float(v) for v in self._body.chassis.getLocalCOM())
+        self._com_local_array = self._body.chassis.getLocalCOM()  # fixed at build (body.py): read once
         self._zero3 = np.zeros(3)
         self._rear_couple_nm = 0.0  # the rear speed servos' share of the tyres' spin torques, on the chassis
         self._spin_modes: tuple | None = None  # (locked, servo, front servo) of the last _apply_tyres
@@ -563,8 +564,10 @@ class CarSim:
         """Set a constant force on the chassis at its centre of mass, in the CAR BODY frame
         (x forward, y left; N). It replaces the previous one and stays until changed
         (seam for drag / rolling resistance effects)."""
-        self._control = self._control_now()._replace(ext_force_n=(float(fx_n), float(fy_n)))
-        self._apply(self._control)
+        self._control = c = self._control_now()._replace(ext_force_n=(float(fx_n), float(fy_n)))
+        # only the force changed: every other change of _control went through _apply, so the
+        # joints already hold what it would set (the effects' drag calls this every step)
+        self._apply_force(c)
 
     def _apply(self, c: _Control, *, force: bool = False) -> None:
         """Set the joints and the chassis force from ``c``; only what changed since the last
@@ -611,6 +614,10 @@ class CarSim:
                 for j, o in zip(b.wheel_joints[2:] if f == 0.0 else b.wheel_joints[2:] + b.wheel_joints[:2], omega):
                     j.setCommand(0, o)
                 self._omega_applied = omega
+        self._apply_force(c)
+
+    def _apply_force(self, c: _Control) -> None:
+        """The chassis force part of :meth:`_apply` (only if it changed)."""
         ext = c.ext_force_n
         if self._duty_mode and self._drag_nspm2 > 0.0:
             ext = (ext[0] + self._drag_n, ext[1])
@@ -623,7 +630,7 @@ class CarSim:
         centre of mass, with slip tyres the rear tyres' forces too (all in the chassis frame)."""
         chassis, ext = self._body.chassis, self._force_applied or (0.0, 0.0)
         if self._tyres is None:
-            chassis.setExtForce(np.array([ext[0], ext[1], 0.0]), chassis.getLocalCOM(), True, True)
+            chassis.setExtForce(np.array([ext[0], ext[1], 0.0]), self._com_local_array, True, True)
             return
         # the external force at the centre of mass and the rear tyres' forces at their contact
         # points (z = 0), as one force at the chassis origin and one torque (chassis frame)

@@ -135,6 +135,46 @@ class Segment:
         return int(window_mask(len(self.log), self.windows).sum())
 
 
+class ResidualMemo:
+    """The residuals (:func:`segment_residuals`) a problem already computed in this process, by
+    car and replay set-up: the chain and the fits ask for the same car more than once (a
+    fit's best value again by the joint refit, a trial's winner by the next step, the
+    nominal model by several steps); a replay is deterministic, so the answer is the same
+    and need not be simulated again. Shared by the problems ``dataclasses.replace`` makes
+    from one (other scales, car or step: the key holds what the residuals depend on);
+    least recently used entries go beyond ``max_values`` stored floats. Pickled empty (a
+    worker process starts its own). The residual arrays are shared, so they are read-only."""
+
+    def __init__(self, max_values: int = 4_000_000):
+        self.max_values = max_values
+        self._entries: dict = {}  # key -> (segments (kept alive: the key holds their id), residuals, size)
+        self._values = 0
+
+    def __reduce__(self):
+        return ResidualMemo, (self.max_values,)
+
+    def residuals(self, problem: "Problem", car: CarDescription, compute: Callable[[], list]) -> list:
+        """``compute()``'s answer for ``(problem, car)``, computed once."""
+        # repr: floats round-trip exactly and -0.0 stays apart from 0.0 (== would merge them)
+        key = (repr(car), id(problem.segments), problem.dt_s, problem.sim_factory, problem.settings)
+        try:
+            hit = self._entries.pop(key, None)
+        except TypeError:  # an unhashable sim_factory: no memo
+            return compute()
+        if hit is None:
+            res = compute()
+            for r in res:  # shared with every later caller: read-only, so none can change another's
+                for v in r.values():
+                    v.setflags(write=False)
+            hit = (problem.segments, res, sum(v.size for r in res for v in r.values()))
+            self._values += hit[2]
+        self._entries[key] = hit  # now the most recently used
+        while self._values > self.max_values and len(self._entries) > 1:
+            oldest = next(iter(self._entries))
+            self._values -= self._entries.pop(oldest)[2]
+        return hit[1]
+
+
 @dataclass(frozen=True)
 class Problem:
     """Everything a fit needs (picklable: sent to worker processes): the car the candidate
@@ -149,6 +189,7 @@ class Problem:
     sim_factory: SimFactory = default_sim_factory
     robust_scale: float = math.inf  # Cauchy scale per compared value (module docstring); inf: least squares
     settings: GapSettings = SETTINGS  # the workflow's thresholds for this problem's fits
+    memo: ResidualMemo = field(default_factory=ResidualMemo, compare=False, repr=False)  # replays done
 
     @property
     def n_values(self) -> int:
@@ -174,7 +215,12 @@ class Problem:
 
 
 def segment_residuals(problem: Problem, car: CarDescription) -> list[dict[str, np.ndarray]]:
-    """Residuals of ``car`` on each segment's windows (NaN elsewhere), per log."""
+    """Residuals of ``car`` on each segment's windows (NaN elsewhere), per log (computed once
+    per problem and car: :class:`ResidualMemo`)."""
+    return problem.memo.residuals(problem, car, lambda: _segment_residuals(problem, car))
+
+
+def _segment_residuals(problem: Problem, car: CarDescription) -> list[dict[str, np.ndarray]]:
     out = []
     for seg in problem.segments:
         pred = replay(car, seg.log, seg.derived, seg.windows, dt_s=problem.dt_s,

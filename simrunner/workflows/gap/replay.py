@@ -312,19 +312,31 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         # the command messages strictly between each row and the next
         first_step = np.searchsorted(steps.t_s, t, side="right")
         last_step = np.append(np.searchsorted(steps.t_s, t[1:], side="left"), first_step[-1])
+        # as Python values once per replay (the same floats; numpy scalars are slow one at a time)
+        step_t, step_coast_l = steps.t_s.tolist(), step_coast.astype(bool).tolist()
+        step_speed, step_steer = steps.speed_cmd_mps.tolist(), steps.steer_cmd_rad.tolist()
+        first_l, last_l = first_step.tolist(), last_step.tolist()
 
     motors = (log.duty_left, log.duty_right) if log.duty_left is not None and log.duty_right is not None else None
+    # the per-sample columns the loop below reads, as Python values (same floats, bools)
+    t_l, coast_l = t.tolist(), coast.astype(bool).tolist()
+    speed_cmd, steer_cmd = log.speed_cmd_mps.tolist(), log.steer_cmd_rad.tolist()
+    if motors is not None:  # the motors' own duties where the log gives no one duty command
+        own_duties = ~np.isfinite(log.duty_cmd) if log.duty_cmd is not None else np.ones(n, dtype=bool)
+        own_duties_l, duty_l, duty_r = own_duties.tolist(), motors[0].tolist(), motors[1].tolist()
 
     def run(a: int, b: int, record: bool) -> None:
         """Apply the commands of samples a .. b-1 (zero-order hold) up to sample b (recorded
         at a .. b-1 when ``record``; the last command is applied only if b is past it); a
         merged log's command messages between two samples take effect at their own stamps."""
         done = 0
-        coast_now = bool(coast[a])
+        coast_now = coast_l[a]
+        t_a = t_l[a]
+        rows = []
 
         def advance(to_s: float) -> None:  # step the simulator up to the time to_s
             nonlocal done
-            target = int(round((to_s - t[a]) / dt_s))
+            target = int(round((to_s - t_a) / dt_s))
             if target > done:
                 sim.step(target - done)
                 done = target
@@ -332,22 +344,24 @@ def replay(car: CarDescription, log: RunLog, derived: Derived, windows: Sequence
         for i in range(a, b):
             if record:
                 p = sim.pose
-                out[:, i] = (p.x_m + shift[0], p.y_m + shift[1], p.yaw_rad, sim.speed_mps, sim.yaw_rate_radps)
+                rows.append((p.x_m + shift[0], p.y_m + shift[1], p.yaw_rad, sim.speed_mps, sim.yaw_rate_radps))
             if i + 1 < n and (i + 1 < b or not record):
-                if coast[i] != coast_now:
-                    coast_now = bool(coast[i])
+                if coast_l[i] != coast_now:
+                    coast_now = coast_l[i]
                     sim.set_coast(coast_now)
-                sim.set_command(float(log.speed_cmd_mps[i]), float(log.steer_cmd_rad[i]))
-                if motors is not None and not (log.duty_cmd is not None and math.isfinite(log.duty_cmd[i])):
-                    sim.set_motors(float(motors[0][i]), float(motors[1][i]))  # the motors' own duties
+                sim.set_command(speed_cmd[i], steer_cmd[i])
+                if motors is not None and own_duties_l[i]:
+                    sim.set_motors(duty_l[i], duty_r[i])  # the motors' own duties
                 if steps is not None:
-                    for k in range(first_step[i], last_step[i]):
-                        advance(steps.t_s[k])
-                        if bool(step_coast[k]) != coast_now:
-                            coast_now = bool(step_coast[k])
+                    for k in range(first_l[i], last_l[i]):
+                        advance(step_t[k])
+                        if step_coast_l[k] != coast_now:
+                            coast_now = step_coast_l[k]
                             sim.set_coast(coast_now)
-                        sim.set_command(float(steps.speed_cmd_mps[k]), float(steps.steer_cmd_rad[k]))
-                advance(t[i + 1])
+                        sim.set_command(step_speed[k], step_steer[k])
+                advance(t_l[i + 1])
+        if rows:  # recorded at once: one array write instead of one per sample
+            out[:, a:a + len(rows)] = np.array(rows).T
 
     for w in windows:
         i0 = next((i for i in range(w.start, w.stop) if usable(i)), None)
