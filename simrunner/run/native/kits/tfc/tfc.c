@@ -55,6 +55,7 @@ static struct {
     uint32_t tick_pending;  /* a SysTick fell due while interrupts were disabled */
     double unpowered_s;     /* since when duties are set with the H-bridge disabled (-1: not so) */
     int unpowered_warned;
+    int masked_poll_warned; /* the warning of a poll with interrupts disabled was given */
     const void *duty_call;  /* where the program last called TFC_SetMotorPWM (its return address) */
 } tfc = {.unpowered_s = -1.0};
 
@@ -155,7 +156,7 @@ static void poll(void) {
         return;
     }
     if (++tfc.polls <= POLLS_BEFORE_TIME) return;
-    if (spinner_interrupts_disabled())
+    if (!tfc.masked_poll_warned && spinner_interrupts_disabled() && (tfc.masked_poll_warned = 1))
         spinner_warn("the program polls the board (TFC_Ticker, LineScanImageReady, a button, ...) with "
                      "interrupts disabled: the SysTick and camera interrupts that change them cannot run, "
                      "so on the board such a loop never ends; enable them first (__enable_irq())");
