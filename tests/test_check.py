@@ -90,6 +90,32 @@ def test_warnings_for_a_car_that_never_moves_and_a_main_that_returns(tmp_path, t
     assert any("no speed was ever commanded" in w for w in report.warnings)
 
 
+@pytest.mark.parametrize("name, body, kit, said", [
+    ("idle.py", "def main(s):\n    while True:\n        s.sleep(0.01)\n", None, "call set_speed or set_speed_and_servo"),
+    ("idle.c", '#include "spinner.h"\nint main(void) { for (;;) spinner_sleep(0.01); }\n', None,
+     "call spinner_set_speed or spinner_set_speed_and_servo"),
+    ("idle.cpp", '#include "spinner.hpp"\nint main() { for (;;) spinner_sleep(0.01); }\n', None,
+     "call setSpeed or setSpeedAndServo (spinner.hpp), or spinner_set_speed"),
+    ("still.c", '#include "derivative.h"\n#include "TFC/TFC.h"\nint main(void) { TFC_Init(); '
+     'TFC_SetMotorPWM(0.4f, 0.4f); for (;;) TFC_Task(); }\n', "tfc",
+     "set the motors' duties with TFC_SetMotorPWM after TFC_HBRIDGE_ENABLE")])
+def test_a_car_that_never_moves_is_told_the_call_in_its_own_language_and_kit(tmp_path, track, name, body, kit, said):
+    """The hint named the Python API's set_speed to a C program and to a TFC firmware whose duties
+    the disabled H-bridge kept off; now the program's own language's call, or its kit's."""
+    if not name.endswith(".py"):
+        import shutil
+
+        if shutil.which("cc") is None or shutil.which("c++") is None:
+            pytest.skip("no C/C++ compiler")
+        from simrunner.run.native import build_program
+
+        ctrl = build_program([write(tmp_path, name, body)], kit=kit)
+    else:
+        ctrl = write(tmp_path, name, body)
+    report = check_controller(ctrl, track=track, seconds=1.5)
+    assert f"no speed was ever commanded: the car does not move ({said})" in report.warnings, report.text()
+
+
 def test_commands_beyond_the_limits_are_warned(tmp_path, track):
     ctrl = write(tmp_path, "wild.py", """\
         def main(s):

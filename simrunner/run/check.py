@@ -141,8 +141,7 @@ def check_controller(controller, *, track: str | Path | SimTrack | None = None,
     log = first.log
     if len(log) > 1 and first.outcome not in (Outcome.CONTROLLER_ERROR, Outcome.STALLED):
         if not np.any(log.speed_cmd_mps != 0.0):
-            warnings.append("no speed was ever commanded: the car does not move "
-                            "(call set_speed or set_speed_and_servo)")
+            warnings.append(f"no speed was ever commanded: the car does not move ({_speed_calls(ctrl)})")
         vmax, dmax = car_desc.drive.max_speed_mps, car_desc.steering.limit_rad
         v = float(np.max(np.abs(log.speed_cmd_mps)))
         if v > vmax:
@@ -157,6 +156,26 @@ def check_controller(controller, *, track: str | Path | SimTrack | None = None,
     warnings += [w for w in first.warnings if not w.startswith(("speed command ", "duty command ")) and w not in clock]
     return CheckReport(name, tuple(problems), tuple(warnings), first.sim_time_s,
                        1 if second is None else 2)
+
+
+#: what sets the speed, by the --kit a C/C++ program was built against (docs/firmware.md)
+_KIT_SPEED_CALLS = {
+    "tfc": "set the motors' duties with TFC_SetMotorPWM after TFC_HBRIDGE_ENABLE",
+    "tfc-mbed": "set the motors' duties with TFC_SetMotorPWM after TFC_HBRIDGE_ENABLE",
+    "s32k144": "drive the motors with HbridgeSetSpeed or EscSetSpeed after their Init",
+}
+
+
+def _speed_calls(ctrl) -> str:
+    """How the controller ``ctrl`` sets a speed, in its own language and kit."""
+    program = getattr(ctrl.main, "program", None)  # (a C/C++ program's: NativeController)
+    if program is None:
+        return "call set_speed or set_speed_and_servo"
+    if program.kit in _KIT_SPEED_CALLS:
+        return _KIT_SPEED_CALLS[program.kit]
+    if any(Path(src).suffix.lower() in (".cpp", ".cc", ".cxx", ".c++") for src in program.sources):
+        return "call setSpeed or setSpeedAndServo (spinner.hpp), or spinner_set_speed"
+    return "call spinner_set_speed or spinner_set_speed_and_servo"
 
 
 def _user_location(result: RunResult) -> str:
