@@ -557,6 +557,31 @@ def test_motor_duties_with_the_h_bridge_disabled_are_a_warning(tmp_path):
     assert not any("H-bridge" in w for w in r.warnings), r.warnings
 
 
+@pytest.mark.parametrize("init, outcome", [("", "controller_error"), ("TFC_InitMotorPWM();", "timeout"),
+                                           ("TFC_Init();", "timeout")])
+def test_motor_duties_before_the_library_clocks_tpm0_end_the_run_at_the_call(tmp_path, init, outcome):
+    """The library's TFC_SetMotorPWM reads TPM0_MOD, whose clock TFC_InitMotorPWM (TFC_Init) opens:
+    before it the board stops in a bus fault. The kit drove the motors; now the run ends at the call,
+    saying why; either init call opens it."""
+    src = tmp_path / "early.c"
+    src.write_text(textwrap.dedent(f"""\
+        #include "derivative.h"
+        #include "TFC\\TFC.h"
+        int main(void) {{
+            {init}
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            for (;;) TFC_Task();
+        }}
+        """))
+    r = drive(firmware([src]), time_limit_s=0.5)
+    assert r.outcome == outcome, r.message
+    if outcome == "controller_error":
+        assert r.message.startswith(f"{src}:6: TFC_SetMotorPWM() before TFC_Init() (or TFC_InitMotorPWM()): on the "
+                                    "board the library's write reads TPM0_MOD while TPM0's clock is still gated off"), \
+            r.message
+
+
 def test_a_program_that_clocks_the_camera_itself_is_named(tmp_path):
     """The library's TAOS_SI_HIGH, TAOS_CLK_HIGH, ... (its TFC_LineScanCamera.h: GPIO writes) are
     there; a program that reads the camera out with them is not emulated, and its build says so

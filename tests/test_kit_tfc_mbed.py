@@ -899,6 +899,24 @@ def test_a_qei_made_in_main_counts_its_revolutions_from_then(tmp_path, mcu_time,
         assert r.outcome == "controller_error" and re.search(r"status 12\b", r.message), (isolate, r.message)
 
 
+def test_motor_duties_before_tfc_init_end_the_run_at_the_call(tmp_path):
+    """mbed's TFC_SetMotorPWM writes TPM0's channels from TPM0->MOD, whose clock TFC_InitMotorPWM
+    (TFC_Init) opens: before it the board stops in a bus fault; the run ends at the call."""
+    src = tmp_path / "early.cpp"
+    src.write_text(textwrap.dedent("""\
+        #include "mbed.h"
+        #include "TFC.h"
+        int main() {
+            TFC_HBRIDGE_ENABLE;
+            TFC_SetMotorPWM(0.3f, 0.3f);
+            while (1) wait_ms(10);
+        }
+        """))
+    r = drive(build_program([str(src)], kit="tfc-mbed"), time_limit_s=0.5)
+    assert r.outcome == "controller_error", r.message
+    assert r.message.startswith(f"{src}:5: TFC_SetMotorPWM() before TFC_Init() (or TFC_InitMotorPWM())"), r.message
+
+
 def test_motor_duties_with_the_h_bridge_disabled_are_a_warning(tmp_path):
     """mbed's TFC_Init() disables the H-bridge (TFC.cpp, TFC_GPIO_Init): a program that sets duties
     and never writes TFC_HBRIDGE_ENABLE stands still, on the board too - the run says why."""

@@ -256,6 +256,7 @@ def test_a_handler_is_an_interrupt(tmp_path):
             wait_ms(1);
         }
         int main() {
+            TFC_Init();
             w.rise(&tick);
             TFC_HBRIDGE_ENABLE;
             TFC_SetMotorPWM(0.3f, 0.3f);

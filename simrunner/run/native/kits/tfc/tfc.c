@@ -57,7 +57,19 @@ static struct {
     int unpowered_warned;
     int masked_poll_warned; /* the warning of a poll with interrupts disabled was given */
     const void *duty_call;  /* where the program last called TFC_SetMotorPWM (its return address) */
+    int motor_pwm_on;       /* TFC_Init or TFC_InitMotorPWM has clocked TPM0 (TFC_SetMotorPWM) */
 } tfc = {.unpowered_s = -1.0};
+
+/* The library's TFC_SetMotorPWM writes TPM0's channels from TPM0_MOD, and TPM0's clock gate
+ * (SIM_SCGC6 TPM0) is opened by TFC_InitMotorPWM (TFC_Init calls it): before it, the access is a
+ * bus error on the board (a Kinetis peripheral whose clock is gated off answers none: NXP community
+ * thread 460069, a hard fault on a PIT access so), and the program stops in its HardFault handler. */
+static void motor_pwm_check(void) {
+    if (!tfc.motor_pwm_on)
+        spinner_fail("TFC_SetMotorPWM() before TFC_Init() (or TFC_InitMotorPWM()): on the board the library's write "
+                     "reads TPM0_MOD while TPM0's clock is still gated off (TFC_InitMotorPWM opens it, SIM_SCGC6), a "
+                     "bus error that stops the board in its HardFault handler; call TFC_Init() first");
+}
 
 /* A loop that polls the board without calling the library (`while (!LineScanImageReady);`,
  * `while (TFC_Ticker[0] < 20);`, `while (!TFC_PUSH_BUTTON_0_PRESSED);`) waits on the board for
@@ -202,7 +214,8 @@ static void kit_init(void) {
     send_commands();
 }
 
-void TFC_Init(void) {  /* (the library's: InitClock, ..., TFC_InitADCs, ...) */
+void TFC_Init(void) {  /* (the library's: InitClock, ..., TFC_InitMotorPWM, TFC_InitADCs, ...) */
+    tfc.motor_pwm_on = 1;
     kit_init();
     TFC_InitADCs();
 }
@@ -248,7 +261,7 @@ void TFC_InitSysTick(void) {}
 void InitClock(void) {}
 void TFC_InitGPIO(void) {}
 void TFC_InitServos(void) {}
-void TFC_InitMotorPWM(void) {}
+void TFC_InitMotorPWM(void) { tfc.motor_pwm_on = 1; }
 void TFC_InitADCs(void) {  /* the pots', battery's and camera's ADC: its PIT (timers.c) */
     ensure_init();
     tfc_sim_timers_library_pit();
@@ -274,6 +287,7 @@ void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {
 
 void TFC_SetMotorPWM(float MotorA, float MotorB) {
     tfc.duty_call = __builtin_return_address(0);
+    motor_pwm_check();
     tfc.duty_a = (float)clampf(MotorA, -1.0, 1.0);
     tfc.duty_b = (float)clampf(MotorB, -1.0, 1.0);
     send_commands();

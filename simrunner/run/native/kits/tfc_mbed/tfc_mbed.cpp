@@ -112,6 +112,7 @@ static struct {
     int unpowered, unpowered_warned;  /* duties set with the H-bridge disabled: since unpowered_s */
     double unpowered_s;
     const void *duty_call;  /* where the program last called TFC_SetMotorPWM (its return address) */
+    int motor_pwm_on;       /* TFC_Init or TFC_InitMotorPWM has clocked TPM0 (TFC_SetMotorPWM) */
 } k;
 
 static double clampd(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
@@ -444,6 +445,7 @@ static void init_servos(double pulse_min_s, double pulse_max_s, double period_s)
 /* TFC.cpp's TFC_Init: ..., TFC_InitServos(the defaults), then TFC_ServoTicker = 0 (the kit's start is
  * the first: TPM1 as it leaves it). */
 void TFC_Init() {
+    k.motor_pwm_on = 1;  /* (TFC.cpp's TFC_Init calls TFC_InitMotorPWM) */
     int running = k.started;
     tfc_mbed_start();
     if (!k.started) return;
@@ -453,7 +455,11 @@ void TFC_Init() {
 void TFC_GPIO_Init() { tfc_mbed_start(); }
 void TFC_InitADC_System() { tfc_mbed_start(); }
 void TFC_InitLineScanCamera() { tfc_mbed_start(); }
-void TFC_InitMotorPWM(float SwitchingFrequency) { (void)SwitchingFrequency; tfc_mbed_start(); }
+void TFC_InitMotorPWM(float SwitchingFrequency) {
+    (void)SwitchingFrequency;
+    k.motor_pwm_on = 1;
+    tfc_mbed_start();
+}
 
 /* TFC.cpp's TFC_InitServos. TPM1->SC = 0 stops the counter where it is (KL25 RM 31.4.1: writing CMOD
  * 0 "does not affect the TPM counter value"); MOD, written with the counter stopped, takes the new
@@ -560,6 +566,12 @@ void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {
 
 void TFC_SetMotorPWM(float MotorA, float MotorB) {
     k.duty_call = __builtin_return_address(0);
+    /* TFC.cpp's writes TPM0->CONTROLS[n].CnV from TPM0->MOD: before TFC_InitMotorPWM opens TPM0's
+     * clock gate (SIM_SCGC6) a bus error on the board, as --kit tfc says (tfc.c: motor_pwm_check) */
+    if (!k.motor_pwm_on)
+        spinner_fail("TFC_SetMotorPWM() before TFC_Init() (or TFC_InitMotorPWM()): on the board the library's write "
+                     "reads TPM0->MOD while TPM0's clock is still gated off (TFC_InitMotorPWM opens it, SIM_SCGC6), a "
+                     "bus error that stops the board in its HardFault handler; call TFC_Init() first");
     tfc_mbed_start();
     k.duty_a = (float)clampd(MotorA, -1.0, 1.0);
     k.duty_b = (float)clampd(MotorB, -1.0, 1.0);
