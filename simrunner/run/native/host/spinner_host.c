@@ -654,7 +654,6 @@ void spinner_fail(const char *message) {
     for (;;) pause();  /* not reached: the report ends the run */
 }
 
-
 /* The API function the foreign thread called (its outermost frame in this module: the host is
  * built with -fno-optimize-sibling-calls, so the entry point keeps its frame) as ", NAME()," into
  * `out`; "" when it has no symbol. The sleeps' --wrap names are the program's: usleep. */
@@ -1287,8 +1286,9 @@ int __wrap_clock_nanosleep(clockid_t clock, int flags, const struct timespec *re
 /* Where the program called exit (or _exit, _Exit, quick_exit): OP_EXIT_AT, queued with the run's
  * last requests, so the run's outcome names the line as a Python controller's sys.exit is named
  * ("the controller called exit(3) at main.c:91"): which call (uint8: 0 exit, 1 _exit, 2 _Exit, 3
- * quick_exit; + EXIT_AT_LOAD from a constructor as an isolated host opens the library), the status (int32), the caller's return address as its offset in its module
- * (uint64) and the module's path. Not from a process the program forked, nor after the run. */
+ * quick_exit; + EXIT_AT_LOAD from a constructor as an isolated host opens the library), the status
+ * (int32), the caller's return address as its offset in its module (uint64) and the module's path.
+ * Not from a process the program forked, nor after the run. */
 #define EXIT_AT_LOAD 0x80  /* OP_EXIT_AT's call byte: the exit was in a constructor as the library loaded */
 static void exit_note(uint8_t fn, int status, void *ra) {
     if (forked) return;
