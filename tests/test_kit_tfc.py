@@ -582,6 +582,28 @@ def test_motor_duties_before_the_library_clocks_tpm0_end_the_run_at_the_call(tmp
             r.message
 
 
+@pytest.mark.parametrize("init, outcome", [("", "controller_error"), ("TFC_InitServos();", "timeout"),
+                                           ("TFC_Init();", "timeout")])
+def test_a_servo_position_before_the_library_clocks_tpm1_ends_the_run_at_the_call(tmp_path, init, outcome):
+    """The library's TFC_SetServoDutyCycle (TFC_SetServo's) writes TPM1_C0V = TPM1_MOD * DutyCycle,
+    TPM1's clock opened by TFC_InitServos (TFC_Init): before it a bus fault on the board."""
+    src = tmp_path / "early.c"
+    src.write_text(textwrap.dedent(f"""\
+        #include "derivative.h"
+        #include "TFC\\TFC.h"
+        int main(void) {{
+            {init}
+            TFC_SetServo(0, 0.2f);
+            for (;;) TFC_Task();
+        }}
+        """))
+    r = drive(firmware([src]), time_limit_s=0.5)
+    assert r.outcome == outcome, r.message
+    if outcome == "controller_error":
+        assert r.message.startswith(f"{src}:5: TFC_SetServo() before TFC_Init() (or TFC_InitServos()): on the board "
+                                    "the library's write reads TPM1_MOD"), r.message
+
+
 def test_a_program_that_clocks_the_camera_itself_is_named(tmp_path):
     """The library's TAOS_SI_HIGH, TAOS_CLK_HIGH, ... (its TFC_LineScanCamera.h: GPIO writes) are
     there; a program that reads the camera out with them is not emulated, and its build says so

@@ -58,6 +58,7 @@ static struct {
     int masked_poll_warned; /* the warning of a poll with interrupts disabled was given */
     const void *duty_call;  /* where the program last called TFC_SetMotorPWM (its return address) */
     int motor_pwm_on;       /* TFC_Init or TFC_InitMotorPWM has clocked TPM0 (TFC_SetMotorPWM) */
+    int servos_on;          /* TFC_Init or TFC_InitServos has clocked TPM1 (TFC_SetServo...) */
 } tfc = {.unpowered_s = -1.0};
 
 /* The library's TFC_SetMotorPWM writes TPM0's channels from TPM0_MOD, and TPM0's clock gate
@@ -69,6 +70,17 @@ static void motor_pwm_check(void) {
         spinner_fail("TFC_SetMotorPWM() before TFC_Init() (or TFC_InitMotorPWM()): on the board the library's write "
                      "reads TPM0_MOD while TPM0's clock is still gated off (TFC_InitMotorPWM opens it, SIM_SCGC6), a "
                      "bus error that stops the board in its HardFault handler; call TFC_Init() first");
+}
+
+/* The same for the servos: the library's TFC_SetServoDutyCycle (TFC_SetServo calls it) writes
+ * TPM1_C0V = TPM1_MOD * DutyCycle, TPM1's clock opened by TFC_InitServos (TFC_Init calls it). */
+static void servo_check(const char *call) {
+    if (tfc.servos_on) return;
+    char text[400];
+    snprintf(text, sizeof text, "%s() before TFC_Init() (or TFC_InitServos()): on the board the library's "
+             "write reads TPM1_MOD while TPM1's clock is still gated off (TFC_InitServos opens it, SIM_SCGC6), a "
+             "bus error that stops the board in its HardFault handler; call TFC_Init() first", call);
+    spinner_fail(text);
 }
 
 /* A loop that polls the board without calling the library (`while (!LineScanImageReady);`,
@@ -214,8 +226,8 @@ static void kit_init(void) {
     send_commands();
 }
 
-void TFC_Init(void) {  /* (the library's: InitClock, ..., TFC_InitMotorPWM, TFC_InitADCs, ...) */
-    tfc.motor_pwm_on = 1;
+void TFC_Init(void) {  /* (the library's: InitClock, ..., TFC_InitServos, TFC_InitMotorPWM, TFC_InitADCs, ...) */
+    tfc.motor_pwm_on = tfc.servos_on = 1;
     kit_init();
     TFC_InitADCs();
 }
@@ -260,7 +272,7 @@ void TFC_Delay_mS(unsigned int TicksIn_mS) {
 void TFC_InitSysTick(void) {}
 void InitClock(void) {}
 void TFC_InitGPIO(void) {}
-void TFC_InitServos(void) {}
+void TFC_InitServos(void) { tfc.servos_on = 1; }
 void TFC_InitMotorPWM(void) { tfc.motor_pwm_on = 1; }
 void TFC_InitADCs(void) {  /* the pots', battery's and camera's ADC: its PIT (timers.c) */
     ensure_init();
@@ -273,12 +285,14 @@ void TFC_InitTerminal(void) {}
 void TFC_ProcessTerminal(void) {}
 
 void TFC_SetServo(uint8_t ServoNumber, float Position) {
+    servo_check("TFC_SetServo");
     if (ServoNumber != 0) return;  /* servo 1: nothing on the simulated car */
     tfc.servo = (float)clampf(Position, -1.0, 1.0);
     send_commands();
 }
 
 void TFC_SetServoDutyCycle(uint8_t ServoNumber, float DutyCycle) {
+    servo_check("TFC_SetServoDutyCycle");
     /* a 1.0 .. 2.0 ms pulse of the 20 ms frame is the servo's travel -1 .. 1 */
     double mid = 0.5 * (SERVO_MIN_DUTY_CYCLE + SERVO_MAX_DUTY_CYCLE);
     double half = 0.5 * (SERVO_MAX_DUTY_CYCLE - SERVO_MIN_DUTY_CYCLE);
