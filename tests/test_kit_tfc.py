@@ -557,51 +557,35 @@ def test_motor_duties_with_the_h_bridge_disabled_are_a_warning(tmp_path):
     assert not any("H-bridge" in w for w in r.warnings), r.warnings
 
 
-@pytest.mark.parametrize("init, outcome", [("", "controller_error"), ("TFC_InitMotorPWM();", "timeout"),
-                                           ("TFC_Init();", "timeout")])
-def test_motor_duties_before_the_library_clocks_tpm0_end_the_run_at_the_call(tmp_path, init, outcome):
-    """The library's TFC_SetMotorPWM reads TPM0_MOD, whose clock TFC_InitMotorPWM (TFC_Init) opens:
-    before it the board stops in a bus fault. The kit drove the motors; now the run ends at the call,
-    saying why; either init call opens it."""
+MOTORS = ("TFC_HBRIDGE_ENABLE;\n    TFC_SetMotorPWM(0.3f, 0.3f);",
+          "6: TFC_SetMotorPWM() before TFC_Init() (or TFC_InitMotorPWM()): on the board the library's write reads "
+          "TPM0_MOD while TPM0's clock is still gated off")
+SERVO = ("TFC_SetServo(0, 0.2f);",
+         "5: TFC_SetServo() before TFC_Init() (or TFC_InitServos()): on the board the library's write reads TPM1_MOD")
+
+
+@pytest.mark.parametrize("calls, init, said", [
+    (MOTORS, "", MOTORS[1]), (MOTORS, "TFC_InitMotorPWM();", None), (MOTORS, "TFC_Init();", None),
+    (SERVO, "", SERVO[1]), (SERVO, "TFC_InitServos();", None), (SERVO, "TFC_Init();", None)])
+def test_motors_or_servo_before_the_library_clocks_their_timer_end_the_run_at_the_call(tmp_path, calls, init, said):
+    """The library's TFC_SetMotorPWM reads TPM0_MOD, whose clock TFC_InitMotorPWM (TFC_Init) opens; its
+    TFC_SetServoDutyCycle (TFC_SetServo's) writes TPM1_C0V = TPM1_MOD * DutyCycle, TPM1's clock opened
+    by TFC_InitServos (TFC_Init): before them the board stops in a bus fault. The kit drove the car;
+    now the run ends at the call, saying why; either init call opens its timer."""
     src = tmp_path / "early.c"
     src.write_text(textwrap.dedent(f"""\
         #include "derivative.h"
         #include "TFC\\TFC.h"
         int main(void) {{
             {init}
-            TFC_HBRIDGE_ENABLE;
-            TFC_SetMotorPWM(0.3f, 0.3f);
+            {calls[0]}
             for (;;) TFC_Task();
         }}
         """))
     r = drive(firmware([src]), time_limit_s=0.5)
-    assert r.outcome == outcome, r.message
-    if outcome == "controller_error":
-        assert r.message.startswith(f"{src}:6: TFC_SetMotorPWM() before TFC_Init() (or TFC_InitMotorPWM()): on the "
-                                    "board the library's write reads TPM0_MOD while TPM0's clock is still gated off"), \
-            r.message
-
-
-@pytest.mark.parametrize("init, outcome", [("", "controller_error"), ("TFC_InitServos();", "timeout"),
-                                           ("TFC_Init();", "timeout")])
-def test_a_servo_position_before_the_library_clocks_tpm1_ends_the_run_at_the_call(tmp_path, init, outcome):
-    """The library's TFC_SetServoDutyCycle (TFC_SetServo's) writes TPM1_C0V = TPM1_MOD * DutyCycle,
-    TPM1's clock opened by TFC_InitServos (TFC_Init): before it a bus fault on the board."""
-    src = tmp_path / "early.c"
-    src.write_text(textwrap.dedent(f"""\
-        #include "derivative.h"
-        #include "TFC\\TFC.h"
-        int main(void) {{
-            {init}
-            TFC_SetServo(0, 0.2f);
-            for (;;) TFC_Task();
-        }}
-        """))
-    r = drive(firmware([src]), time_limit_s=0.5)
-    assert r.outcome == outcome, r.message
-    if outcome == "controller_error":
-        assert r.message.startswith(f"{src}:5: TFC_SetServo() before TFC_Init() (or TFC_InitServos()): on the board "
-                                    "the library's write reads TPM1_MOD"), r.message
+    assert r.outcome == ("controller_error" if said else "timeout"), r.message
+    if said:
+        assert r.message.startswith(f"{src}:{said}"), r.message
 
 
 def test_a_program_that_clocks_the_camera_itself_is_named(tmp_path):
