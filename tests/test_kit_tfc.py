@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -153,7 +154,9 @@ def test_the_library_maps_the_board_onto_the_car(tmp_path):
         #include "spinner.h"
         int main(void) {
             TFC_Init();
-            if (TFC_ReadPot(0) != 0.5f || TFC_ReadPot(1) != -1.0f) return 1;   /* --param pot0, pot1 */
+            TFC_Delay_mS(60);   /* the ADC's first conversion: the PIT's first period (50 ms) */
+            /* --param pot0, pot1 as the library reads them: 12-bit counts 1 - pot x 2047.5 */
+            if (TFC_ReadPot(0) != (float)(1024.0f / -2047.5 + 1.0) || TFC_ReadPot(1) != -1.0f) return 1;
             if (TFC_GetDIP_Switch() != 5) return 2;
             /* the library's sense voltage, battery_v x 10k / (47k + 10k), counted by the 3.3-V ADC and
              * scaled by the library's 3.0 (it returned battery_v, then the sense voltage itself) */
@@ -555,6 +558,42 @@ def test_motor_duties_with_the_h_bridge_disabled_are_a_warning(tmp_path):
                and "TFC_HBRIDGE_ENABLE" in w for w in r.warnings), r.warnings
     r = drive(firmware([src]), params={"dip": 1}, time_limit_s=2.0)
     assert not any("H-bridge" in w for w in r.warnings), r.warnings
+
+
+def test_pots_and_battery_read_zero_counts_until_the_adcs_first_conversion(tmp_path):
+    """The library's ADC interrupts fill the pots' and the battery's counts from the first PIT0
+    interrupt after TFC_Init (one exposure, 50 ms): before it - or without TFC_Init - TFC_ReadPot
+    returns 1.0 (a count of 0) and the battery 0 V, on the board too; the first such read is a
+    warning at its line. After it, the counts are the params' (12 bits)."""
+    src = tmp_path / "early.c"
+    src.write_text(textwrap.dedent("""\
+        #include "derivative.h"
+        #include "TFC\\TFC.h"
+        #include "spinner.h"
+        int main(void) {
+            float before_init = TFC_ReadPot(0);
+            TFC_Init();
+            float at_init = TFC_ReadPot(1), battery = TFC_ReadBatteryVoltage();
+            TFC_Delay_mS(40);
+            float still = TFC_ReadPot(0);
+            TFC_Delay_mS(20);
+            float pot = TFC_ReadPot(0), pot1 = TFC_ReadPot(1), later_battery = TFC_ReadBatteryVoltage();
+            spinner_add_textf("%g %g %g %g %.6f %.6f %.4f", before_init, at_init, battery, still, pot, pot1, later_battery);
+            return 0;
+        }
+        """))
+    r = drive(firmware([src]), params={"pot0": -0.25, "pot1": 1.0}, time_limit_s=1.0, csv=tmp_path / "log.csv")
+    assert r.outcome == "controller_returned", r.message
+    text = [t for t in r.log.data_text if t][-1]
+    # -0.25 -> count lround(1.25 x 2047.5) = 2559 -> 1 - 2559 / 2047.5; 1.0 -> count 0 -> 1.0;
+    # the battery: 7.2 V x 10/57 of 3.3 V in 4095 counts (1567), x 3.0 / 4095
+    assert text == f"1 1 0 1 {1 - 2559 / 2047.5:.6f} 1.000000 {1567 / 4095 * 3.0:.4f}", text
+    early = [w for w in r.warnings if "before" in w and "ADC" in w]
+    assert len(early) == 2, r.warnings
+    assert early[0].startswith(f"{src}:5: TFC_ReadPot(0) before TFC_Init(): ") and "returns 1.0" in early[0]
+    m = re.match(re.escape(str(src)) + r":7: TFC_ReadBatteryVoltage\(\) at t = ([0-9.]+) s, before the ADC's first conversion "
+                 r"\(([0-9.]+) s: the first PIT0 interrupt, one exposure after TFC_Init\)", early[1])
+    assert m and float(m[2]) - float(m[1]) == pytest.approx(0.050) and "returns 0 V" in early[1], early[1]
 
 
 MOTORS = ("TFC_HBRIDGE_ENABLE;\n    TFC_SetMotorPWM(0.3f, 0.3f);",

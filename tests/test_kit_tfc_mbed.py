@@ -212,7 +212,8 @@ def test_the_library_maps_the_board_onto_the_car(tmp_path):
         void once() { fired++; }
         int main() {
             TFC_Init();
-            if (TFC_ReadPot(0) != 0.5f || TFC_ReadPot(1) != -1.0f) return 1;
+            wait_ms(12);   /* the ADC's first conversion: TPM1's first overflow (10 ms) */
+            if (TFC_ReadPot(0) != (float)(1024.0f / -2047.5 + 1.0) || TFC_ReadPot(1) != -1.0f) return 1;
             if (TFC_GetDIP_Switch() != 5 || !TFC_DIP_SWITCH_2_ON || TFC_DIP_SWITCH_1_ON) return 2;
             if (fabsf(TFC_ReadBatteryVoltage() - 7.2f * 10.0f / 57.0f * 3.0f / 3.3f) > 1e-3f) return 3;
             AnalogIn sensor(PTB0), pot0(PTB3);
@@ -250,6 +251,38 @@ def test_the_library_maps_the_board_onto_the_car(tmp_path):
     assert np.allclose(log.speed_cmd_mps[late], 0.5 * 3.1) and np.allclose(log.steer_cmd_rad[late], steer, atol=1e-6)
     before = (log.t_s > 0.15) & (log.t_s < log.t_s[-1] - 0.12)
     assert np.all(log.speed_cmd_mps[before] == 0.0)
+
+
+def test_pots_and_battery_read_zero_counts_until_tpm1s_first_overflow(tmp_path):
+    """TFC.cpp's TPM1 interrupt starts the pots' and the battery's conversions at each servo frame:
+    before the first after TFC_Init (10 ms) - or without TFC_Init - TFC_ReadPot returns 1.0 (a count
+    of 0) and the battery 0 V, on the board too, and the first such read is a warning at its line;
+    an AnalogIn on a pot's pin converts at once."""
+    prog = program(tmp_path, """\
+        #include "mbed.h"
+        #include "TFC.h"
+        #include "spinner.h"
+        int main() {
+            float before_init = TFC_ReadPot(0);
+            TFC_Init();
+            float at_init = TFC_ReadPot(0), battery = TFC_ReadBatteryVoltage();
+            AnalogIn pot0(PTB3);
+            float direct = pot0.read();
+            wait_ms(12);
+            float pot = TFC_ReadPot(0);
+            spinner_add_textf("%g %g %g %.4f %.6f %u", before_init, at_init, battery, direct, pot, PotADC_Value[0]);
+            return 0;
+        }
+        """, name="early.cpp")
+    r = drive(prog, params={"pot0": -0.25}, time_limit_s=1.0, csv=tmp_path / "log.csv")
+    assert r.outcome == "controller_returned", r.message
+    assert [s for s in r.log.data_text if s][-1] == f"1 1 0 0.6250 {1 - 2559 / 2047.5:.6f} 2559"
+    early = [w for w in r.warnings if "ADC" in w]
+    assert len(early) == 2, r.warnings
+    src = tmp_path / "early.cpp"
+    assert early[0].startswith(f"{src}:5: TFC_ReadPot(0) before TFC_Init(): ") and "returns 1.0" in early[0]
+    assert early[1].startswith(f"{src}:7: TFC_ReadBatteryVoltage() at t = 0.002 s, before the ADC's first "
+                               "conversion (TPM1's first overflow") and "returns 0 V" in early[1], early[1]
 
 
 def test_a_loop_waiting_on_the_programs_own_tickers_lets_time_pass(tmp_path):

@@ -59,6 +59,9 @@ static struct {
     const void *duty_call;  /* where the program last called TFC_SetMotorPWM (its return address) */
     int motor_pwm_on;       /* TFC_Init or TFC_InitMotorPWM has clocked TPM0 (TFC_SetMotorPWM) */
     int servos_on;          /* TFC_Init or TFC_InitServos has clocked TPM1 (TFC_SetServo...) */
+    double adc_first_s;     /* the ADC's first conversion: the first PIT0 interrupt after TFC_InitADCs */
+    int adc_on;             /* TFC_InitADCs has run (TFC_Init calls it) */
+    int early_pot_warned, early_battery_warned;  /* a read before that first conversion was warned */
 } tfc = {.unpowered_s = -1.0};
 
 /* The library's TFC_SetMotorPWM writes TPM0's channels from TPM0_MOD, and TPM0's clock gate
@@ -277,6 +280,10 @@ void TFC_InitMotorPWM(void) { tfc.motor_pwm_on = 1; }
 void TFC_InitADCs(void) {  /* the pots', battery's and camera's ADC: its PIT (timers.c) */
     ensure_init();
     tfc_sim_timers_library_pit();
+    if (!tfc.adc_on) {  /* (the library writes LDVAL0 with its default exposure, then enables PIT0) */
+        tfc.adc_on = 1;
+        tfc.adc_first_s = spinner_now_uncharged() + TFC_DEFAULT_LINESCAN_EXPOSURE_TIME_uS * 1e-6;
+    }
 }
 void TFC_InitLineScanCamera(void) {}
 void TFC_InitUARTs(void) {}
@@ -338,9 +345,45 @@ uint8_t TFC_GetDIP_Switch(void) {
     return (uint8_t)((int)spinner_param("dip", 0.0) & 0x0F);
 }
 
+/* The pots and the battery are read by the library's ADC interrupts, not by TFC_ReadPot: FRDM-TFC
+ * TFC_ADC.c, TFC_InitADCs enables PIT0 ("The pump will be primed with the PIT interrupt"); each
+ * PIT_IRQHandler starts the conversions (pot 0, pot 1, the battery, then the camera's pixels) and
+ * ADC0_IRQHandler stores them in PotADC_Value[] and BatSenseADC_Value, which the read functions
+ * scale. Until the first PIT0 interrupt, one exposure after TFC_InitADCs (TFC_Init calls it), those
+ * counts are still 0 - and stay 0 without TFC_Init -, so the library returns 1.0 for a pot and 0 V for
+ * the battery: here too, with a warning at the program's first such read. The counts are 12-bit
+ * (ADC_MAX_CODE 4095): TFC_ReadPot = 1 - count / 2047.5, in the library's arithmetic. */
+#define TFC_ADC_MAX_CODE 4095.0
+static int adc_converted(const char *read, int *warned, const void *call) {
+    double now = spinner_now_uncharged();  /* (a look: no time passes) */
+    if (tfc.adc_on && now >= tfc.adc_first_s - 1e-9) return 1;
+    if (!*warned) {
+        *warned = 1;
+        char text[400];
+        if (tfc.adc_on)
+            snprintf(text, sizeof text, "%s at t = %.3f s, before the ADC's first conversion (%.3f s: the first PIT0 "
+                     "interrupt, one exposure after TFC_Init): its count is still 0, so the library returns %s, "
+                     "on the board too; read it once the first image is in (LineScanImageReady)",
+                     read, now, tfc.adc_first_s, strcmp(read, "TFC_ReadBatteryVoltage()") ? "1.0" : "0 V");
+        else
+            snprintf(text, sizeof text, "%s before TFC_Init(): the ADC that reads it runs from TFC_Init (TFC_InitADCs), so "
+                     "its count is 0 and the library returns %s, on the board too; call TFC_Init() first", read,
+                     strcmp(read, "TFC_ReadBatteryVoltage()") ? "1.0" : "0 V");
+        spinner_warn_at(text, call);
+    }
+    return 0;
+}
+
 float TFC_ReadPot(uint8_t Channel) {
+    const void *call = __builtin_return_address(0);
     poll();
-    return (float)clampf(spinner_param(Channel == 0 ? "pot0" : "pot1", 0.0), -1.0, 1.0);
+    char read[40];
+    snprintf(read, sizeof read, "TFC_ReadPot(%d)", Channel);
+    uint16_t count = 0;  /* PotADC_Value[]: the pot's position -1..1 at counts 4095..0 */
+    if (adc_converted(read, &tfc.early_pot_warned, call))
+        count = (uint16_t)lround((1.0 - clampf(spinner_param(Channel == 0 ? "pot0" : "pot1", 0.0), -1.0, 1.0))
+                                 * TFC_ADC_MAX_CODE / 2.0);
+    return (float)(((float)count / -((float)TFC_ADC_MAX_CODE / 2.0)) + 1.0);
 }
 
 /* The library returns the battery sense input, not the battery's voltage: FRDM-TFC TFC_ADC.c,
@@ -349,9 +392,11 @@ float TFC_ReadPot(uint8_t Channel) {
  * full scale, which is the FRDM-KL25Z's 3.3 V supply (VREFH; "0 v or 3.3 v give 0 and close to
  * 65535", os.mbed.com/questions/75223): the library reads sense x 3.0 / 3.3 (1.15 at 7.2 V), the
  * 12-bit count (ADC_MAX_CODE 4095) as the library converts it; as the mbed kit's. */
-#define TFC_ADC_MAX_CODE 4095.0
 #define TFC_ADC_FULL_SCALE_V 3.3
 float TFC_ReadBatteryVoltage(void) {
+    const void *call = __builtin_return_address(0);
+    ensure_init();
+    if (!adc_converted("TFC_ReadBatteryVoltage()", &tfc.early_battery_warned, call)) return 0.0f;
     double sense_v = clampf(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0, 0.0, TFC_ADC_FULL_SCALE_V);
     return (float)(round(sense_v / TFC_ADC_FULL_SCALE_V * TFC_ADC_MAX_CODE) / TFC_ADC_MAX_CODE * 3.0);
 }

@@ -113,6 +113,9 @@ static struct {
     double unpowered_s;
     const void *duty_call;  /* where the program last called TFC_SetMotorPWM (its return address) */
     int motor_pwm_on;       /* TFC_Init or TFC_InitMotorPWM has clocked TPM0 (TFC_SetMotorPWM) */
+    int adc_on;             /* TFC_Init or TFC_InitADC_System has run: TPM1's overflows start conversions */
+    int adc_converted;      /* the pots and the battery converted once (TFC_ReadPot ...) */
+    int early_pot_warned, early_battery_warned;  /* a read before that was warned */
 } k;
 
 static double clampd(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
@@ -251,6 +254,7 @@ static void tpm1_overflow(void) {
     }
     if (k.library_servos) k.servo_cnv = cnv_position(k.servo_queued);
     if (servo_ticker < 0xFFFFFFFFu) servo_ticker++;
+    if (k.adc_on) k.adc_converted = 1;  /* (the handler then starts the pots', battery's conversions) */
 }
 
 /* The read-out: the camera's latest frame, once a new one is there (never waits). */
@@ -421,7 +425,8 @@ float tfc_mbed_analog_read(int pin) {
         double pot = clampd(spinner_param(pin == PTB3 ? "pot0" : "pot1", 0.0), -1.0, 1.0);
         return (float)((1.0 - pot) / 2.0);  /* TFC_ReadPot = 1 - ADC / (4095 / 2) */
     }
-    if (pin == PTE29) return (float)clampd(TFC_ReadBatteryVoltage() / 3.3, 0.0, 1.0);
+    if (pin == PTE29)  /* the battery sense, 10k of 47k + 10k, of the ADC's 3.3 V (TFC_ReadBatteryVoltage) */
+        return (float)clampd(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0 / 3.3, 0.0, 1.0);
     char name[32];
     snprintf(name, sizeof name, "analog_PT%c%d", 'A' + ((pin >> 12) & 7), (pin >> 2) & 31);
     return (float)clampd(spinner_param(name, 0.0), 0.0, 1.0);
@@ -446,6 +451,7 @@ static void init_servos(double pulse_min_s, double pulse_max_s, double period_s)
  * the first: TPM1 as it leaves it). */
 void TFC_Init() {
     k.motor_pwm_on = 1;  /* (TFC.cpp's TFC_Init calls TFC_InitMotorPWM) */
+    k.adc_on = 1;        /* (and TFC_InitADC_System) */
     int running = k.started;
     tfc_mbed_start();
     if (!k.started) return;
@@ -453,7 +459,10 @@ void TFC_Init() {
     servo_ticker = 0;
 }
 void TFC_GPIO_Init() { tfc_mbed_start(); }
-void TFC_InitADC_System() { tfc_mbed_start(); }
+void TFC_InitADC_System() {
+    k.adc_on = 1;
+    tfc_mbed_start();
+}
 void TFC_InitLineScanCamera() { tfc_mbed_start(); }
 void TFC_InitMotorPWM(float SwitchingFrequency) {
     (void)SwitchingFrequency;
@@ -587,19 +596,53 @@ uint8_t TFC_ReadPushButton(uint8_t Index) {
     return Index == 0 ? TFC_PUSH_BUTTON_0_PRESSED : TFC_PUSH_BUTTON_1_PRESSED;
 }
 
+/* The pots and the battery are converted by the library's interrupts, not by the read functions:
+ * TFC.cpp's TPM1_IRQHandler, at each servo frame, starts the ADC on pot 0 ("Prime the ADC pump"), and
+ * ADC0_IRQHandler stores pot 0, pot 1 and the battery in PotADC_Value[], BatSenseADC_Value, which
+ * TFC_ReadPot and TFC_ReadBatteryVoltage scale. Until TPM1's first overflow after TFC_Init (one servo
+ * frame) those counts are 0 - and stay 0 without TFC_Init -, so the library returns 1.0 for a pot and
+ * 0 V for the battery: here too, with a warning at the program's first such read. */
+static int adc_converted(const char *read, int *warned, const void *call) {
+    if (k.adc_converted) return 1;
+    if (!*warned) {
+        *warned = 1;
+        int battery = strcmp(read, "TFC_ReadBatteryVoltage()") == 0;
+        char text[400];
+        if (k.adc_on)
+            snprintf(text, sizeof text, "%s at t = %.3f s, before the ADC's first conversion (TPM1's first overflow, "
+                     "one servo frame after TFC_Init): its count is still 0, so the library returns %s, on the board "
+                     "too; read it once the first image is in (TFC_LineScanImageReady)", read, k.now_s,
+                     battery ? "0 V" : "1.0");
+        else
+            snprintf(text, sizeof text, "%s before TFC_Init(): the ADC that reads it runs from TFC_Init, so its count is "
+                     "0 and the library returns %s, on the board too; call TFC_Init() first", read,
+                     battery ? "0 V" : "1.0");
+        spinner_warn_at(text, call);
+    }
+    return 0;
+}
+
 float TFC_ReadPot(uint8_t Channel) {
+    const void *call = __builtin_return_address(0);
     tfc_mbed_poll();
-    double pot = clampd(spinner_param(Channel == 0 ? "pot0" : "pot1", 0.0), -1.0, 1.0);
-    PotADC_Value[Channel == 0 ? 0 : 1] = (uint16_t)lround((1.0 - pot) * ADC_MAX_CODE / 2.0);
-    return (float)pot;
+    char read[40];
+    snprintf(read, sizeof read, "TFC_ReadPot(%d)", Channel);
+    uint16_t count = 0;  /* the pot's position -1..1 at counts 4095..0 */
+    if (adc_converted(read, &k.early_pot_warned, call))
+        count = (uint16_t)lround((1.0 - clampd(spinner_param(Channel == 0 ? "pot0" : "pot1", 0.0), -1.0, 1.0))
+                                 * ADC_MAX_CODE / 2.0);
+    PotADC_Value[Channel == 0 ? 0 : 1] = count;
+    return (float)(((float)count / -((float)ADC_MAX_CODE / 2.0)) + 1.0);  /* TFC.cpp's TFC_ReadPot */
 }
 
 float TFC_ReadBatteryVoltage() {
+    const void *call = __builtin_return_address(0);
     tfc_mbed_start();  /* the sense divider: 10k of 47k + 10k (TFC.cpp's commented-out factor) */
     /* the ADC's full scale is the FRDM-KL25Z's 3.3 V (VREFH; os.mbed.com/questions/75223: 3.3 V reads
      * close to 65535); the library scales the count by 3.0 (V): it reads sense x 3.0 / 3.3 */
     double sense_v = clampd(spinner_param("battery_v", 7.2) * 10000.0 / 57000.0, 0.0, 3.3);
-    BatSenseADC_Value = (uint16_t)lround(sense_v / 3.3 * ADC_MAX_CODE);
+    BatSenseADC_Value = adc_converted("TFC_ReadBatteryVoltage()", &k.early_battery_warned, call)
+        ? (uint16_t)lround(sense_v / 3.3 * ADC_MAX_CODE) : 0;
     return (float)((double)BatSenseADC_Value / ADC_MAX_CODE * 3.0);
 }
 
