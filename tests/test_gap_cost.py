@@ -31,6 +31,19 @@ def test_rows_and_span_counted_without_reading_are_the_readers(tmp_path):
     assert math.isnan(span_s(tmp_path / "missing.csv"))
 
 
+def test_span_of_a_format1_log_is_counted_as_the_reader_reads_it(tmp_path):
+    """A log whose header names ``t`` (format 1, as the shared F1/10 logs): the reader takes it,
+    so the refusal's cost gives its seconds of data too."""
+    path = tmp_path / "f1.csv"
+    t = np.arange(0.0, 20.0, 0.02)
+    path.write_text("t,x,y,yaw,speed,speed_cmd,steer_cmd\n"
+                    + "".join(f"{ti:.6f},{ti:.6f},0,0,1,1,0\n" for ti in t))
+    log = read_log(path)
+    assert span_s(path) == pytest.approx(log.t_s[-1] - log.t_s[0])
+    r = CliRunner().invoke(cli, ["gap", str(path), "-o", str(tmp_path / "out"), "--max-rows", "600"])
+    assert r.exit_code == 2 and "1,000 rows, 20 s of data: ~0.2 GB, ~" in r.output
+
+
 def test_estimates_grow_with_the_log_and_an_ordinary_log_says_nothing():
     from simrunner.cli.gap import SAY_COST_MIN
 
