@@ -42,6 +42,11 @@ def test_span_of_a_format1_log_is_counted_as_the_reader_reads_it(tmp_path):
     assert span_s(path) == pytest.approx(log.t_s[-1] - log.t_s[0])
     r = CliRunner().invoke(cli, ["gap", str(path), "-o", str(tmp_path / "out"), "--max-rows", "600"])
     assert r.exit_code == 2 and "1,000 rows, 20 s of data: ~0.2 GB, ~" in r.output
+    # the part it suggests (one header line here) holds --max-rows rows: gap takes it
+    assert f"(head -n 601 {path} > part.csv)" in r.output
+    part = tmp_path / "part.csv"
+    part.write_text("".join(path.read_text().splitlines(keepends=True)[:601]))
+    assert count_rows(part) == 600
 
 
 def test_estimates_grow_with_the_log_and_an_ordinary_log_says_nothing():
@@ -63,7 +68,7 @@ def test_a_log_past_max_rows_is_refused_before_reading_in_one_line(tmp_path):
     r = CliRunner().invoke(cli, ["gap", str(path), "-o", str(out), "--max-rows", "600"])
     assert r.exit_code == 2 and len(r.output.splitlines()) == 1
     assert r.output.startswith(f"simrunner gap: {path} (0 MB): 1,000 rows, 20 s of data: ~0.2 GB, ~")
-    assert r.output.endswith(f"more than --max-rows 600: give gap a part (head -n 602 {path} > part.csv) "
+    assert r.output.endswith(f"more than --max-rows 600: give gap a part (head -n 603 {path} > part.csv) "
                              "or raise --max-rows\n")
     assert not out.exists()
 

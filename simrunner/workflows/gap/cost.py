@@ -46,12 +46,23 @@ def count_rows(path: str | Path) -> int:
             last = chunk[-1:]
     if last != b"\n":
         lines += 1  # the last line without its newline
-    top = 0  # comments and blank lines before the header, and the header
+    return max(lines - _top_lines(head), 0)
+
+
+def _top_lines(head: bytes) -> int:
+    """The comments and blank lines before the header, and the header, at the top of ``head``."""
+    top = 0
     for line in head.split(b"\n"):
         top += 1
         if line.strip() and not line.startswith(b"#"):
             break
-    return max(lines - top, 0)
+    return top
+
+
+def head_lines(path: str | Path, rows: int) -> int:
+    """How many lines ``head -n`` keeps for the top lines (comments, header) and ``rows`` rows."""
+    with open(path, "rb") as f:
+        return _top_lines(f.read(65536)) + rows
 
 
 def span_s(path: str | Path) -> float:
