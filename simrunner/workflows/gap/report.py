@@ -399,8 +399,11 @@ def summary_text(result: GapResult) -> str:
         if len(result.glitches) > settings.glitches_listed:
             lines.append(f"  ... and {len(result.glitches) - settings.glitches_listed} more "
                          "(all of them: report.json, \"glitches\")")
-    lines += ["", "first step, every candidate screened (one parameter, the others nominal):",
-              f"{'effect':<22}{'parameter':<32}{'value':>10}{'improvement':>13}{'delta_BIC':>11}"]
+    lines += ["", "first step, every candidate screened (one parameter, the others nominal):"]
+    if result.ranking:
+        lines.append(f"{'effect':<22}{'parameter':<32}{'value':>10}{'improvement':>13}{'delta_BIC':>11}")
+    else:  # not an empty table: no candidate was ranked
+        lines.append(f"  none: the chain ended before its first step was done ({chain.stop_reason})")
     for r in result.ranking:
         (p, v), = r.parameters.items()
         lines.append(f"{r.effect:<22}{p:<32}{v:>10.4g}{r.improvement:>12.1%}{r.delta_bic:>11.1f}")
