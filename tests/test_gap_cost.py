@@ -31,6 +31,24 @@ def test_rows_and_span_counted_without_reading_are_the_readers(tmp_path):
     assert math.isnan(span_s(tmp_path / "missing.csv"))
 
 
+def test_span_of_a_format1_log_is_counted_as_the_reader_reads_it(tmp_path):
+    """A log whose header names ``t`` (format 1, as the shared F1/10 logs): the reader takes it,
+    so the refusal's cost gives its seconds of data too."""
+    path = tmp_path / "f1.csv"
+    t = np.arange(0.0, 20.0, 0.02)
+    path.write_text("t,x,y,yaw,speed,speed_cmd,steer_cmd\n"
+                    + "".join(f"{ti:.6f},{ti:.6f},0,0,1,1,0\n" for ti in t))
+    log = read_log(path)
+    assert span_s(path) == pytest.approx(log.t_s[-1] - log.t_s[0])
+    r = CliRunner().invoke(cli, ["gap", str(path), "-o", str(tmp_path / "out"), "--max-rows", "600"])
+    assert r.exit_code == 2 and "1,000 rows, 20 s of data: ~0.2 GB, ~" in r.output
+    # the part it suggests (one header line here) holds --max-rows rows: gap takes it
+    assert f"(head -n 601 {path} > part.csv)" in r.output
+    part = tmp_path / "part.csv"
+    part.write_text("".join(path.read_text().splitlines(keepends=True)[:601]))
+    assert count_rows(part) == 600
+
+
 def test_estimates_grow_with_the_log_and_an_ordinary_log_says_nothing():
     from simrunner.cli.gap import SAY_COST_MIN
 
@@ -50,7 +68,7 @@ def test_a_log_past_max_rows_is_refused_before_reading_in_one_line(tmp_path):
     r = CliRunner().invoke(cli, ["gap", str(path), "-o", str(out), "--max-rows", "600"])
     assert r.exit_code == 2 and len(r.output.splitlines()) == 1
     assert r.output.startswith(f"simrunner gap: {path} (0 MB): 1,000 rows, 20 s of data: ~0.2 GB, ~")
-    assert r.output.endswith(f"more than --max-rows 600: give gap a part (head -n 602 {path} > part.csv) "
+    assert r.output.endswith(f"more than --max-rows 600: give gap a part (head -n 603 {path} > part.csv) "
                              "or raise --max-rows\n")
     assert not out.exists()
 

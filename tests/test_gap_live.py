@@ -135,6 +135,31 @@ def test_a_spent_budget_tries_nothing():
     assert "the time budget" in result.chain.stop_reason
 
 
+def test_a_partial_report_lists_every_glitch_found(tmp_path):
+    """The log finding names its first three glitches; a stopped run's report.json and
+    residuals.txt keep all of them, as a whole report does (here: 5 gaps cut into the log)."""
+    from simrunner.telemetry.log import read_log
+    from simrunner.workflows.gap.report import partial_json, partial_text
+
+    path = tmp_path / "m.csv"
+    write_log(lag_log(), path)
+    lines = path.read_text().splitlines(keepends=True)
+    top = next(i for i, line in enumerate(lines) if line.startswith("t_s,")) + 1
+    cut = {top + 60 * k + j for k in range(1, 6) for j in range(20)}  # 5 gaps of 20 rows (0.4 s)
+    path.write_text("".join(line for i, line in enumerate(lines) if i not in cut))
+    findings = Findings()
+    run_gap(read_log(path), jobs=1, effects=EFFECTS, findings=findings, budget=Budget(1e-6))
+    (log_finding,) = findings.of_kind("log")
+    assert "5 glitches kept out" in log_finding.text and "and 2 more" in log_finding.text
+    report = partial_json(findings, "stopped by SIGTERM")
+    assert [g["kind"] for g in report["glitches"]] == ["time_gap"] * 5
+    assert all(g["log"] == str(path) for g in report["glitches"])
+    assert "glitch_list" not in report["findings"][0]
+    json.dumps(report)
+    text = partial_text(findings, "stopped by SIGTERM")
+    assert "glitches kept out of the windows (5):" in text and text.count(": time_gap (t_s)") == 5
+
+
 def _wait_for(path, text: str, proc, timeout_s: float) -> str:
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:

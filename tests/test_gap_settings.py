@@ -117,6 +117,11 @@ def test_run_gap_uses_the_settings_it_is_given():
     log, _ = make_measured_log("steering_offset", rng=np.random.default_rng(3), value=-0.03, duration_s=20.0)
     none = run_gap(log, jobs=1, effects=["steering_offset"], settings=dataclasses.replace(SETTINGS, max_effects=0))
     assert none.effects == [] and none.chain.stop_reason == "max effects 0: nothing tried"
+    # the screening section says why it is empty (was a table header over no rows)
+    from simrunner.workflows.gap.report import summary_text
+    text = summary_text(none).splitlines()
+    at = text.index("first step, every candidate screened (one parameter, the others nominal):")
+    assert text[at + 1] == "  none: the chain ended before its first step was done (max effects 0: nothing tried)"
     assert none.gap_settings.max_effects == 0 and none.settings["max_effects"] == 0
     long = run_gap(log, jobs=1, effects=["steering_offset"],
                    settings=dataclasses.replace(SETTINGS, window_s=4.0, max_effects=0))

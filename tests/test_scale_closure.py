@@ -129,6 +129,10 @@ CLOSURE_CASES = [
     ("STRAIGHT length=1.5\nTURN_LEFT angle=180\nSTRAIGHT\nTURN_LEFT angle=180\n", None,
      r"the pieces heading 180.0 deg \(line 3\) are 0.500 m too short in total, or those "
      r"heading 0.0 deg \(line 1\) 0.500 m too long"),
+    # a straight missing on the way out: the gap points along +x, named "0.0 deg" (not "-0.0")
+    ("STRAIGHT\nTURN_LEFT angle=180\nSTRAIGHT x2\nTURN_LEFT angle=180\n", None,
+     r"\(dx = -1.000 m, dy = 0.000 m\): the pieces heading 0.0 deg \(line 1\) are 1.000 m too "
+     r"short in total, or those heading 180.0 deg \(line 3\) 1.000 m too long"),
 ]
 
 

@@ -171,6 +171,16 @@ def test_crossroads_reentry_miss():
                               "right of it; the pieces before it are 0.120 m too long (along the side road)")
 
 
+def test_crossroads_reentry_miss_beside_the_port_names_the_straights():
+    """A straight across the side road's direction too long (line 2, before the upper loop)
+    moves the arrival beside the port: the fix names it, as the closure check names straights."""
+    text = "\n".join(fig8_lines(L2="STRAIGHT_SHORT length=0.62"))
+    (p,) = problems_of(text, "reentry")
+    assert p.line == 14
+    assert p.message.endswith("it arrives 0.000 m past the port and 0.120 m to its left, heading 0.0 deg right "
+                              "of it; the pieces heading 0.0 deg (line 2) are 0.120 m too long in total")
+
+
 def test_crossroads_three_passes_and_different_params():
     text = "\n".join(fig8_lines(L14="CROSSROADS length=0.7"))
     (p,) = problems_of(text, "reentry")

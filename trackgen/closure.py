@@ -47,7 +47,7 @@ def _lines(passes: list[PlacedPiece]) -> str:
 def _heading_deg(rad: float) -> float:
     """Degrees in (-180, 180]."""
     deg = math.degrees(math.remainder(rad, 2.0 * math.pi))
-    return 180.0 if deg <= -180.0 + 1e-9 else deg
+    return 180.0 if deg <= -180.0 + 1e-9 else round(deg, 9) + 0.0  # no "-0.0 deg"
 
 
 def explain_closure(track: Track, tol_m: float, tol_rad: float) -> tuple[int | None, str]:

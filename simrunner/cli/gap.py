@@ -260,7 +260,7 @@ def refuse_large(paths: tuple[Path, ...], max_rows: int, **estimate_kw) -> None:
     """SimError (one line naming the largest file, the cost and the ways out) when ``paths``
     hold more than ``max_rows`` rows in all; counted before anything is read."""
     from simrunner.errors import SimError
-    from simrunner.workflows.gap.cost import count_rows, estimate, span_s
+    from simrunner.workflows.gap.cost import count_rows, estimate, head_lines, span_s
 
     rows = {}
     for path in paths:
@@ -275,7 +275,7 @@ def refuse_large(paths: tuple[Path, ...], max_rows: int, **estimate_kw) -> None:
     cost = estimate(sum(rows.values()), sum(spans), **estimate_kw)
     logs = f" in {len(rows)} logs" if len(rows) > 1 else ""
     raise SimError(f"{big} ({big.stat().st_size / 1e6:.0f} MB): {cost.text()}{logs}, more than --max-rows "
-                   f"{max_rows:,}: give gap a part (head -n {min(max_rows, rows[big]) + 2} {big} > part.csv) "
+                   f"{max_rows:,}: give gap a part (head -n {head_lines(big, min(max_rows, rows[big]))} {big} > part.csv) "
                    f"or raise --max-rows")
 
 

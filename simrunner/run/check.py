@@ -119,7 +119,10 @@ def check_controller(controller, *, track: str | Path | SimTrack | None = None,
     warnings: list[str] = list(clock)
     if first.outcome == Outcome.CONTROLLER_ERROR:
         where = _user_location(first)
-        problems.append(f"main raised{where}: {first.message}")
+        message = first.message  # (drive's outcome message may end with the same place: said once)
+        if where and message.endswith(where):
+            message = message[:-len(where)]
+        problems.append(f"main raised{where}: {message}")
     elif first.outcome == Outcome.STALLED:
         problems.append(first.message)
     elif first.outcome == Outcome.CONTROLLER_RETURNED:

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from simrunner.telemetry.log import FORMAT1_NAMES
 from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 
 
@@ -45,17 +46,28 @@ def count_rows(path: str | Path) -> int:
             last = chunk[-1:]
     if last != b"\n":
         lines += 1  # the last line without its newline
-    top = 0  # comments and blank lines before the header, and the header
+    return max(lines - _top_lines(head), 0)
+
+
+def _top_lines(head: bytes) -> int:
+    """The comments and blank lines before the header, and the header, at the top of ``head``."""
+    top = 0
     for line in head.split(b"\n"):
         top += 1
         if line.strip() and not line.startswith(b"#"):
             break
-    return max(lines - top, 0)
+    return top
+
+
+def head_lines(path: str | Path, rows: int) -> int:
+    """How many lines ``head -n`` keeps for the top lines (comments, header) and ``rows`` rows."""
+    with open(path, "rb") as f:
+        return _top_lines(f.read(65536)) + rows
 
 
 def span_s(path: str | Path) -> float:
-    """Seconds from the first row to the last of a log whose header names ``t_s`` (read from
-    its head and its tail only), else nan."""
+    """Seconds from the first row to the last of a log whose header names ``t_s`` (or format 1's
+    ``t``, as the log reader takes it; read from its head and its tail only), else nan."""
     try:
         with open(path, "rb") as f:
             head = f.read(65536).split(b"\n")
@@ -63,7 +75,8 @@ def span_s(path: str | Path) -> float:
             f.seek(max(f.tell() - 65536, 0))
             tail = [x for x in f.read().split(b"\n") if x.strip()]
         rows = [x for x in head if x.strip() and not x.startswith(b"#")]
-        col = rows[0].decode("utf-8-sig", "replace").strip().split(",").index("t_s")
+        header = [FORMAT1_NAMES.get(h.strip(), h.strip()) for h in rows[0].decode("utf-8-sig", "replace").split(",")]
+        col = header.index("t_s")
         return float(tail[-1].split(b",")[col]) - float(rows[1].split(b",")[col])
     except (OSError, ValueError, IndexError):
         return math.nan

@@ -399,8 +399,11 @@ def summary_text(result: GapResult) -> str:
         if len(result.glitches) > settings.glitches_listed:
             lines.append(f"  ... and {len(result.glitches) - settings.glitches_listed} more "
                          "(all of them: report.json, \"glitches\")")
-    lines += ["", "first step, every candidate screened (one parameter, the others nominal):",
-              f"{'effect':<22}{'parameter':<32}{'value':>10}{'improvement':>13}{'delta_BIC':>11}"]
+    lines += ["", "first step, every candidate screened (one parameter, the others nominal):"]
+    if result.ranking:
+        lines.append(f"{'effect':<22}{'parameter':<32}{'value':>10}{'improvement':>13}{'delta_BIC':>11}")
+    else:  # not an empty table: no candidate was ranked
+        lines.append(f"  none: the chain ended before its first step was done ({chain.stop_reason})")
     for r in result.ranking:
         (p, v), = r.parameters.items()
         lines.append(f"{r.effect:<22}{p:<32}{v:>10.4g}{r.improvement:>12.1%}{r.delta_bic:>11.1f}")
@@ -537,8 +540,16 @@ def partial_json(findings: Findings, stopped: str) -> dict:
         "elapsed_s": findings.elapsed_s(), "logs": [f.data.get("log") for f in findings.of_kind("log")],
         "effects": findings.effects, "parameters": findings.parameters,
         "nominal_held_gap": next((f.data.get("held_gap") for f in findings.of_kind("nominal")), None),
-        "findings": [{"kind": f.kind, "elapsed_s": f.elapsed_s, "text": f.text, **f.data} for f in findings.items],
+        "findings": [{"kind": f.kind, "elapsed_s": f.elapsed_s, "text": f.text,
+                      **{k: v for k, v in f.data.items() if k != "glitch_list"}} for f in findings.items],
+        "glitches": [{"log": src, "kind": g.kind, "t_start_s": g.t_start_s, "t_end_s": g.t_end_s,
+                      "column": g.column, "detail": g.detail} for src, g in _found_glitches(findings)],
     })
+
+
+def _found_glitches(findings: Findings) -> list[tuple[str, Glitch]]:
+    """Every glitch of the logs read so far (the log findings' ``glitch_list``), with its log."""
+    return [(f.data.get("log"), g) for f in findings.of_kind("log") for g in f.data.get("glitch_list", ())]
 
 
 def partial_text(findings: Findings, stopped: str) -> str:
@@ -551,7 +562,16 @@ def partial_text(findings: Findings, stopped: str) -> str:
              f"  parameters: {model}",
              "  (not re-checked by the final check, no uncertainty, no held-out figures of the final model: "
              "run again, with --budget MINUTES to end in time)", "", "findings:"]
-    return "\n".join(lines) + "\n" + findings_text(findings)
+    text = "\n".join(lines) + "\n" + findings_text(findings)
+    glitches = _found_glitches(findings)
+    if glitches:  # the log findings name the first three; here all of them, as the whole report lists them
+        listed = SETTINGS.glitches_listed
+        text += f"\nglitches kept out of the windows ({len(glitches)}):\n" + "".join(
+            f"  {Path(src).name} t = {g.t_start_s:.3f}..{g.t_end_s:.3f} s: {g.kind} ({g.column}) {g.detail}\n"
+            for src, g in glitches[:listed])
+        if len(glitches) > listed:
+            text += f"  ... and {len(glitches) - listed} more (all of them: report.json, \"glitches\")\n"
+    return text
 
 
 def write_partial(findings: Findings, out_dir: str | Path, stopped: str) -> Path:

@@ -176,7 +176,7 @@ def run_gap(logs: RunLog | Sequence[RunLog], car: CarDescription | None = None, 
     for log in logs:
         prepared.append(prepare(log, car, window_s, len(logs) > 1, settings=settings))
         findings.add("log", log_text(prepared[-1]), log=log.source, rows=len(log), windows=len(prepared[-1].windows),
-                     glitches=len(prepared[-1].glitches))
+                     glitches=len(prepared[-1].glitches), glitch_list=list(prepared[-1].glitches))
     parts = pool_short_runs(prepared, settings)
     signals = tuple(s for s in FIT_SIGNALS if all(s in p.signals for p in parts))
     if not signals:
