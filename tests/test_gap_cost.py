@@ -2,6 +2,7 @@
 ``simrunner gap`` at 0 fits for 10 minutes at 2.3 GB)."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ from simrunner.cli import main as cli
 from simrunner.errors import SimError
 from simrunner.telemetry.log import read_log
 from simrunner.workflows.gap.cost import count_rows, estimate, span_s
+from simrunner.workflows.gap.settings import SETTINGS
 
 
 def _straight_log(path, duration_s: float = 20.0):
@@ -49,17 +51,26 @@ def test_span_of_a_format1_log_is_counted_as_the_reader_reads_it(tmp_path):
     assert count_rows(part) == 600
 
 
-def test_estimates_grow_with_the_log_and_an_ordinary_log_says_nothing():
+def test_estimates_grow_with_the_log_and_the_chain_and_a_short_run_says_nothing():
     from simrunner.cli.gap import SAY_COST_MIN
 
-    ordinary = estimate(4722, 94.4)  # the synthetic logs of the tests and the bench
+    focused = estimate(4722, 94.4, n_effects=2)  # the synthetic logs of the tests and the bench, two effects
     hour = estimate(180_000, 3600.0)
-    assert ordinary.minutes < SAY_COST_MIN <= hour.minutes
-    assert ordinary.memory_mb < hour.memory_mb < estimate(3_000_000, 60_000.0).memory_mb
-    # the issue's 200 MB log (~3 million rows, 16.5 h at 50 Hz): an hour, 2.5 GB
+    assert focused.minutes < SAY_COST_MIN <= hour.minutes
+    assert focused.memory_mb < hour.memory_mb < estimate(3_000_000, 60_000.0).memory_mb
+    # a chain of every candidate: ~2 min to its first step, and each later step longer (the kept
+    # effects join its refits) - DS2's chain to step 5 took 19 min, DS3's to step 4 9.2 min
+    whole = estimate(4722, 94.4)
+    assert whole.steps == 7 and 1.0 < whole.first_minutes < 3.0 and 15.0 < whole.minutes < 30.0
+    shorter = estimate(4722, 94.4, settings=dataclasses.replace(SETTINGS, max_effects=3))
+    assert shorter.steps == 4 and shorter.first_minutes == whole.first_minutes and shorter.minutes < whole.minutes
+    assert whole.text() == ("4,722 rows, 94 s of data: ~0.2 GB, ~2 min to the first step, up to ~20 min for a "
+                            "chain of 7 steps")
+    # the issue's 200 MB log (~3 million rows, 16.5 h at 50 Hz): an hour or more, 2.5 GB
     big = estimate(3_000_000, 60_000.0)
     assert 30 < big.minutes < 120 and 2000 < big.memory_mb < 3000
-    assert big.text() == "3,000,000 rows, 60,000 s of data: ~2.5 GB, ~58 min"
+    assert big.text() == ("3,000,000 rows, 60,000 s of data: ~2.5 GB, ~22 min to the first step, up to ~77 min "
+                          "for a chain of 7 steps")
 
 
 def test_a_log_past_max_rows_is_refused_before_reading_in_one_line(tmp_path):
@@ -87,4 +98,4 @@ def test_a_long_run_says_its_cost_before_it_starts(tmp_path, monkeypatch):
     lines = r.output.splitlines()
     assert r.exit_code == 2 and lines[-1] == "simrunner gap: stopped here"
     assert lines[0].startswith("simrunner gap: 1,000 rows, 20 s of data: ~0.2 GB, ~")
-    assert lines[0].endswith('min (estimated; docs/gap.md, --max-rows)')
+    assert lines[0].endswith(" min to the first step, up to ~7 min for a chain of 7 steps (estimated; docs/gap.md, --max-rows)")

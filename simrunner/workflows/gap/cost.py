@@ -20,17 +20,26 @@ from simrunner.workflows.gap.settings import SETTINGS, GapSettings
 
 @dataclass(frozen=True)
 class Cost:
-    """``rows`` of data, ``data_s`` seconds of it (nan before reading), ``memory_mb`` and
-    ``minutes`` (wall) estimated."""
+    """``rows`` of data, ``data_s`` seconds of it (nan before reading), ``memory_mb`` and the wall
+    time estimated: ``first_minutes`` to the chain's first step, ``minutes`` up to the end of a
+    chain that takes its ``steps`` steps (``max_effects`` effects and the step that finds no
+    more; a chain that stops sooner ends sooner)."""
 
     rows: int
     data_s: float
     memory_mb: float
     minutes: float
+    first_minutes: float = math.nan
+    steps: int = 1
 
     def text(self) -> str:
         data = f", {self.data_s:,.0f} s of data" if math.isfinite(self.data_s) else ""
-        when = f", ~{self.minutes:.0f} min" if math.isfinite(self.minutes) else ""
+        when = ""
+        if math.isfinite(self.minutes):
+            when = f", ~{self.minutes:.0f} min"
+            if self.steps > 1 and math.isfinite(self.first_minutes):
+                when = (f", ~{self.first_minutes:.0f} min to the first step, up to ~{self.minutes:.0f} min "
+                        f"for a chain of {self.steps} steps")
         return f"{self.rows:,} rows{data}: ~{self.memory_mb / 1000:.1f} GB{when}"
 
 
@@ -97,9 +106,17 @@ def estimate(rows: int, data_s: float = math.nan, *, jobs: int = 2, n_effects: i
         return Cost(rows, data_s, memory_mb, math.nan)
     held_share = 1.0 / settings.holdout_every
     fit_s = data_s * (1.0 - held_share)
-    serial = (replay_cpu_s(fit_s, settings.workflow_dt_s, settings)            # the nominal fit windows
-              + 2 * replay_cpu_s(data_s, held_dt_s, settings)                 # nominal, final: all windows
-              + (settings.max_effects + 1) * replay_cpu_s(data_s * held_share, held_dt_s, settings))  # steps
+    steps = min(settings.max_effects, n_effects) + 1    # (the last finds nothing more to keep)
+    nominal = (replay_cpu_s(fit_s, settings.workflow_dt_s, settings)            # the nominal fit windows
+               + replay_cpu_s(data_s, held_dt_s, settings))                     # nominal: all windows
+    step_replays = replay_cpu_s(data_s * held_share, held_dt_s, settings)       # each step's held-out check
     screened = min(settings.screen_max_s or fit_s, fit_s)
-    fits = settings.screen_wall_per_s * screened * n_effects / 24 * 2 / max(jobs, 1)
-    return Cost(rows, data_s, memory_mb, (serial + fits) / 60.0)
+
+    def fits(k: int) -> float:  # step k screens the candidates left and refits with the effects kept
+        return (settings.screen_wall_per_s * screened * max(n_effects - k, 0) / 24 * 2 / max(jobs, 1)
+                * (1.0 + settings.screen_step_growth * k))
+
+    first = nominal + step_replays + fits(0)
+    whole = (nominal + replay_cpu_s(data_s, held_dt_s, settings)                # the final car: all windows
+             + sum(step_replays + fits(k) for k in range(steps)))
+    return Cost(rows, data_s, memory_mb, whole / 60.0, first / 60.0, steps)

@@ -189,6 +189,10 @@ class GapSettings:
     replay_cpu_step_s: float = _s(2.07e-5, "s^2 (CPU per s of log, times dt)", "measured: as replay_cpu_base_s")
     screen_wall_per_s: float = _s(2.4, "s (wall per s screened, 2 processes)", "measured: the synthetic 94-s log "
                                   "took 112 s with 24 candidates, 45 s screened, ~5 s of it replays")
+    screen_step_growth: float = _s(0.3, "1 (per step)", "measured: a chain's step k costs (1 + 0.3 k) times its "
+                                   "first (each effect kept joins the later steps' refits): DS2 to step 5 took 19 "
+                                   "min (docs/gap.md), DS3 to step 4 9.2 min (steps 1.5, 1.3, 2.8, 3.5 min; both "
+                                   "on 2 busy CPUs)", shared_logs=True)
     cost_base_mb: float = _s(200.0, "MB", "measured: ~120 MB before a log is read; 219 MB at the peak of a run "
                              "on a 19k-row log")
     cost_bytes_per_row: float = _s(750.0, "B", "measured: 285 MB at 297k rows read and prepared; the issue's "
