@@ -53,6 +53,7 @@ def test_ranges_are_exact_decimals(start, n, step):
 
 @pytest.mark.parametrize("text, match", [
     ("2:1:0.5", "START <= STOP"), ("1:2:0", "STEP > 0"), ("0:1e9:1", "at most"), ("1,,2", "empty"),
+    ("1:2", r"'1:2': a range needs its step, START:STOP:STEP \(e.g. 1:2:0.5\)"),
 ])
 def test_bad_value_lists(text, match):
     with pytest.raises(BatchError, match=match):

@@ -167,6 +167,9 @@ def parse_values(text: str, where: str = "--param") -> list[ParamValue]:
                                  f"{MAX_RANGE_VALUES})")
             ints = all(isinstance(parse_value(t), int) for t in (start_t, stop_t, step_t))
             out += [int(start + i * step) if ints else float(start + i * step) for i in range(count)]
+        elif item.count(":") == 1 and all(not isinstance(parse_value(p), str) for p in item.split(":")):
+            raise BatchError(f"{where}: {item.strip()!r}: a range needs its step, START:STOP:STEP "
+                             f"(e.g. {item.strip()}:0.5)")
         elif item.strip() == "":
             raise BatchError(f"{where}: empty value in {text!r}")
         else:
