@@ -77,6 +77,9 @@ def test_no_main_is_a_problem(tmp_path, track):
     ctrl = write(tmp_path, "nomain.py", "x = 1\n")
     report = check_controller(ctrl, track=track)
     assert report.problems == (f"{ctrl}: no main(spinner) function defined",)
+    typo = write(tmp_path, "typo.py", "def mian(spinner):\n    pass\n\ndef helper():\n    pass\n")
+    assert check_controller(typo, track=track).problems == (
+        f"{typo}: no main(spinner) function defined (did you mean mian?)",)
 
 
 def test_warnings_for_a_car_that_never_moves_and_a_main_that_returns(tmp_path, track):

@@ -146,7 +146,12 @@ def controller_main(module: types.ModuleType, path: Path | None) -> MainFn:
     """The module's ``main``, checked to take one argument."""
     main = getattr(module, "main", None)
     if not callable(main):
-        raise ControllerFileError(f"{path}: no main(spinner) function defined")
+        import difflib
+
+        own = [n for n, v in vars(module).items() if inspect.isfunction(v) and v.__module__ == module.__name__]
+        near = difflib.get_close_matches("main", own, n=1, cutoff=0.6)
+        hint = f" (did you mean {near[0]}?)" if near else ""
+        raise ControllerFileError(f"{path}: no main(spinner) function defined{hint}")
     try:
         inspect.signature(main).bind(object())
     except TypeError:
