@@ -305,22 +305,31 @@ GRIP_LIMITED = {"front_drive", "inertia"}
 
 @pytest.fixture(scope="module")
 def nominal_coarse():
-    return run_plan(PLAN, CAR, dt_s=0.005)
+    """The plan's nominal run (5 ms steps) of each car the effects below are run on, simulated
+    once for the module (the nominal of a grip-limited or slip-tyre car was simulated again
+    for each of its effects; the tests only read it)."""
+    runs: dict[CarDescription, RunLog] = {}
+
+    def of(car: CarDescription) -> RunLog:
+        if car not in runs:
+            runs[car] = run_plan(PLAN, car, dt_s=0.005)
+        return runs[car]
+
+    return of
 
 
 @pytest.mark.parametrize("name", list(EFFECTS))
 def test_every_effect_leaves_a_trace_in_its_segments(name, nominal_coarse):
     """Speed and yaw rate (pose-independent) differ from nominal in a segment kind that the
     catalogue says reveals the effect (5 ms steps keep this fast)."""
-    car, nominal = CAR, nominal_coarse
+    car = CAR
     if name in GRIP_LIMITED:
         car = CAR.replace(drive=dataclasses.replace(CAR.drive, max_accel_mps2=9.0, max_brake_mps2=9.0))
-        nominal = run_plan(PLAN, car, dt_s=0.005)
     if EFFECTS[name].requires == "slip":  # the slip tyres' own numbers: on a car with slip tyres
         assert not EFFECTS[name].applies_to(CAR)
         car = CAR.replace(wheels=dataclasses.replace(CAR.wheels, tyre_model="slip"))
         assert EFFECTS[name].applies_to(car)
-        nominal = run_plan(PLAN, car, dt_s=0.005)
+    nominal = nominal_coarse(car)
     log = run_plan(PLAN, with_effects(car, **EFFECT_VALUES[name]), dt_s=0.005)
     kinds = [k for k in EFFECTS[name].revealed_by if k in SEGMENT_KINDS]
     mask = np.zeros(len(PLAN), dtype=bool)
@@ -400,12 +409,12 @@ def test_run_plan_plays_in_the_simulator_the_factory_builds(nominal_coarse):
         return make_sim(car, dt_s=dt_s, start=start)
 
     log = run_plan(PLAN, CAR, dt_s=0.005, sim_factory=same)
-    assert built == [0.005] and np.array_equal(log.x_m, nominal_coarse.x_m)
-    assert np.array_equal(log.speed_mps, nominal_coarse.speed_mps)
+    assert built == [0.005] and np.array_equal(log.x_m, nominal_coarse(CAR).x_m)
+    assert np.array_equal(log.speed_mps, nominal_coarse(CAR).speed_mps)
     tilted = run_plan(PLAN, CAR, dt_s=0.005,
                       sim_factory=lambda car, dt_s, start: make_sim(car, dt_s=dt_s, start=start, slope_rad=0.05))
     coasting = PLAN.coast.astype(bool)
-    assert np.abs(tilted.speed_mps - nominal_coarse.speed_mps)[coasting].max() > 0.05
+    assert np.abs(tilted.speed_mps - nominal_coarse(CAR).speed_mps)[coasting].max() > 0.05
 
 
 def test_dead_reckoning_integrates_speed_and_gyro_with_their_errors():

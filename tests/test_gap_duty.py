@@ -50,7 +50,7 @@ def duty_run(car, tmp_path, *, each: bool = False, seconds: float = 20.0):
 
 def test_a_duty_log_replays_in_duty_mode_and_names_the_motors_force(tmp_path):
     log = duty_run(hidden_motor_car(1.35), tmp_path)
-    result = run_gap(log, BASE, jobs=2, effects=["accel_scale", "speed_scale", "motor_lag"])
+    result = run_gap(log, BASE, jobs=1, effects=["accel_scale", "speed_scale", "motor_lag"])
     assert result.car.drive.command == "duty"
     assert result.effects == ["accel_scale"]
     assert result.parameters["accel_scale"] == pytest.approx(1.35, rel=0.1)
@@ -63,7 +63,7 @@ def test_each_motors_duty_is_replayed(tmp_path):
     car = hidden_motor_car(1.0)
     log = duty_run(car, tmp_path, each=True, seconds=12.0)
     assert np.isnan(log.duty_cmd[1:]).all() and not np.allclose(log.duty_left, log.duty_right)
-    result = run_gap(log, car, jobs=2, effects=["accel_scale"])
+    result = run_gap(log, car, jobs=1, effects=["accel_scale"])
     assert result.rmse_before["position_m"] < 0.02 and result.effects == []
 
 
@@ -124,14 +124,14 @@ def test_the_h_bridge_mode_is_chosen_from_the_log(tmp_path):
     coast = hidden_motor_car(1.0)
     coast = coast.replace(drive=dataclasses.replace(coast.drive, hbridge="coast"))
     log = duty_run(coast, tmp_path, seconds=14.0)
-    result = run_gap(log, BASE, jobs=2, effects=["motor_lag"])
+    result = run_gap(log, BASE, jobs=1, effects=["motor_lag"])
     assert result.car.drive.hbridge == "coast"
     assert "H-bridge (drive.hbridge, a duty log): coast (the car file says brake)" in summary_text(result)
     assert result.settings["hbridge"]["held_cost"]["coast"] < result.settings["hbridge"]["held_cost"]["brake"]
     # from then on the answer is the one for a file that said coast: the signals' scales, the
     # robust loss and the held-out gap come from the coasting car's residuals (the braking
     # car's, 15x larger, made the gap 9e-5 and hid every effect)
-    told = run_gap(log, BASE.replace(drive=dataclasses.replace(BASE.drive, hbridge="coast")), jobs=2,
+    told = run_gap(log, BASE.replace(drive=dataclasses.replace(BASE.drive, hbridge="coast")), jobs=1,
                    effects=["motor_lag"])
     assert told.settings["hbridge"]["chosen"] == "coast"
     for key in ("scales", "robust_scale"):

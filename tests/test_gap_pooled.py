@@ -21,7 +21,7 @@ def step_runs(n: int, duration_s: float = 3.0):
 @pytest.fixture(scope="module")
 def pooled():
     logs = step_runs(6)
-    return logs, run_gap(logs, jobs=2, effects=["motor_lag", "command_latency", "throttle_deadband"])
+    return logs, run_gap(logs, jobs=1, effects=["motor_lag", "command_latency", "throttle_deadband"])
 
 
 def test_a_single_short_log_is_still_refused_but_one_of_several_is_not():
