@@ -84,18 +84,22 @@ def test_a_log_past_max_rows_is_refused_before_reading_in_one_line(tmp_path):
     assert not out.exists()
 
 
-def test_a_long_run_says_its_cost_before_it_starts(tmp_path, monkeypatch):
+def test_a_long_run_says_its_cost_with_its_first_finding(tmp_path, monkeypatch, capfd):
+    """Said with the first finding (on the terminal's stderr, as the findings), after the logs'
+    own checks: a log refused at once is one line (tests/test_gap.py's car at rest)."""
     import simrunner.cli.gap as gap_cli
     import simrunner.workflows.gap.workflow as workflow
 
-    def stop(*args, **kwargs):
+    def stop(*args, findings, **kwargs):
+        findings.add("log", "the log, read")
         raise SimError("stopped here")
 
     monkeypatch.setattr(gap_cli, "SAY_COST_MIN", 0.0)
     monkeypatch.setattr(workflow, "run_gap", stop)
     path = _straight_log(tmp_path / "log.csv")
     r = CliRunner().invoke(cli, ["gap", str(path), "-o", str(tmp_path / "out"), "--no-progress"])
-    lines = r.output.splitlines()
-    assert r.exit_code == 2 and lines[-1] == "simrunner gap: stopped here"
-    assert lines[0].startswith("simrunner gap: 1,000 rows, 20 s of data: ~0.2 GB, ~")
-    assert lines[0].endswith(" min to the first step, up to ~7 min for a chain of 7 steps (estimated; docs/gap.md, --max-rows)")
+    assert r.exit_code == 2 and r.output.splitlines()[-1] == "simrunner gap: stopped here"
+    said = capfd.readouterr().err.splitlines()
+    assert said[0].startswith("simrunner gap: 1,000 rows, 20 s of data: ~0.2 GB, ~") and said[0].endswith(
+        " min to the first step, up to ~7 min for a chain of 7 steps (estimated; docs/gap.md, --max-rows)")
+    assert said[1].endswith("the log, read") and len(said) == 2

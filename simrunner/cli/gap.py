@@ -90,8 +90,11 @@ class _LiveView:
     """The terminal while the workflow runs: each finding a line (stderr), the progress bar the
     fits of the stage running (reset per stage: its total and time estimate are the stage's)."""
 
-    def __init__(self, stream, no_progress: bool, live):
+    def __init__(self, stream, no_progress: bool, live, preface: str = ""):
         from tqdm import tqdm
+
+        self.preface = preface  # said before the first finding: after the logs' own checks, so a
+        # log refused at once is one line
 
         tqdm.monitor_interval = 0  # no monitor thread: it outlives the bar, and a batch run later in
         # this process would then start its workers cold (simrunner.workflows.batch.pool)
@@ -103,6 +106,9 @@ class _LiveView:
             self.bar.set_description_str(f.text, refresh=False)  # not drawn with the last stage's total
             self.bar.reset(total=max(int(f.data.get("fits", 1)), 1))
         else:
+            if self.preface:
+                self.bar.write(self.preface, file=self.stream)
+                self.preface = ""
             self.bar.write(f.line(), file=self.stream)
         self.live.add(f)
 
@@ -201,11 +207,10 @@ def gap(measured: tuple[Path, ...], out_dir: Path, car: Path | None, columns_fil
         logs = [check_measured(log, pooled=len(read) > 1, settings=settings) for log in read]
         cost = estimate(sum(len(log.t_s) for log in logs), sum(float(log.t_s[-1] - log.t_s[0]) for log in logs),
                         jobs=jobs, n_effects=n_effects, settings=shape)
-        if cost.minutes >= SAY_COST_MIN:
-            click.echo(f"simrunner gap: {cost.text()} (estimated; docs/gap.md, --max-rows)", err=True)
+        say = f"simrunner gap: {cost.text()} (estimated; docs/gap.md, --max-rows)" if cost.minutes >= SAY_COST_MIN else ""
         live = LiveFolder(out_dir, force=force)
         with _engine_stderr_silenced() as err, _stop_on_signals() as received:
-            view = _LiveView(err, no_progress, live)
+            view = _LiveView(err, no_progress, live, say)
             findings = Findings(view.finding)
             try:
                 result = run_gap(logs, description, jobs=jobs, effects=names, settings=settings, dt_s=dt_s,
@@ -253,7 +258,7 @@ def _write_stopped(findings, live, out_dir: Path, stop: _Stopped, err) -> None:
     sys.exit(128 + stop.signum)
 
 
-SAY_COST_MIN = 5.0  # a run estimated to take longer says so (and what it reads) before it starts
+SAY_COST_MIN = 5.0  # a run estimated to take longer says so (and what it reads) with its first finding
 
 
 def refuse_large(paths: tuple[Path, ...], max_rows: int, **estimate_kw) -> None:
