@@ -216,7 +216,7 @@ def test_mapping_file_errors(tmp_path, text, line, what):
 def test_missing_mapping_file(tmp_path):
     with pytest.raises(ColumnMapError) as err:
         column_map_from(tmp_path / "nope.toml")
-    _one_line(err, f"{tmp_path / 'nope.toml'}:0: expected a readable TOML file")
+    _one_line(err, f"{tmp_path / 'nope.toml'}: expected a readable TOML file")
 
 
 @pytest.mark.parametrize("item, what", [
@@ -413,7 +413,7 @@ def test_norm_calls_parse_evaluate_and_say_what_is_missing(tmp_path):
                    "the controller whose norm functions it means: --norms CONTROLLER.py")
     with pytest.raises(ColumnMapError) as err:
         column_map_from(items=["x_m=a"], norms={"speed_norm": max, "turn_norm": max}, norms_from="--norms c.py")
-    _one_line(err, "--norms c.py:0: no column rule calls speed_norm or turn_norm")
+    _one_line(err, "--norms c.py: no column rule calls speed_norm or turn_norm")
 
 
 def _norm_read_error(tmp_path, norm_source: str, name: str, line: int) -> str:

@@ -91,7 +91,9 @@ class Origin:
     item: str = ""
 
     def __str__(self) -> str:
-        return f"--column {self.item!r}" if self.item else f"{self.path}:{self.line}"
+        if self.item:
+            return f"--column {self.item!r}"
+        return f"{self.path}:{self.line}" if self.line else self.path  # (line 0: the file as a whole)
 
 
 class ColumnMapError(LogError):

@@ -66,12 +66,13 @@ TEXT_SEPARATOR = " | "  # between the add_data text lines of one row
 
 class LogError(SimError):
     """A log file or log columns are malformed. ``str(err)`` is ``path:line: what was
-    expected`` (line 0: the file as a whole)."""
+    expected``, or ``path: what was expected`` for the file as a whole (``line`` 0)."""
 
     def __init__(self, path: str, line: int, message: str):
         self.path, self.line, self.message = str(path), int(line), message
         # one line, whatever the file holds (a quoted cell may contain a line break)
-        text = f"{self.path}:{self.line}: {message}".replace("\r", "\\r").replace("\n", "\\n")
+        where = f"{self.path}:{self.line}" if self.line else self.path
+        text = f"{where}: {message}".replace("\r", "\\r").replace("\n", "\\n")
         super().__init__(text)
 
 
