@@ -9,7 +9,8 @@ How a layout is drawn (docs/random-tracks.md states the distribution):
 1. ``START_FINISH`` at the origin, heading +x (the layout's start pose).
 2. The number of crossings ``k`` is uniform in ``crossings``; the route visits k new
    ``CROSSROADS`` (first passes) and then crosses each of them a second time along its side
-   road, in a random order and a random direction. Between two of these events, and before
+   road, in a random order and a random direction, each pass between two ``STRAIGHT_SHORT``
+   (:data:`LEAD_IN_M`). Between two of these events, and before
    the closing, comes a *walk* of ``walk_pieces`` (uniform) pieces drawn by ``mix``: a
    straight (``STRAIGHT`` or ``STRAIGHT_SHORT``), a turn (left/right, angle from
    ``angles_deg``, radius from ``radii_m``, uniform) or a chicane (left/right).
@@ -49,7 +50,9 @@ MIN_ARC_DEG = 3.0
 MIN_STRAIGHT_M = 0.05
 """A closing straight shorter than this (and not zero) makes the candidate redrawn."""
 LEAD_IN_M = 0.5
-"""Straight (``STRAIGHT_SHORT``) before the second pass of a crossroads."""
+"""Straight (``STRAIGHT_SHORT``) before each pass of a crossroads, and after it: the kit's
+intersection has lined stubs on its four arms (the rules summary, "Intersection": "Short lined
+stubs lead into it"), so a car never turns into or out of the open square."""
 SEGMENT_TRIES = 20
 """Draws of one walk-and-close segment before the whole candidate is redrawn."""
 _ZERO = 1e-9
@@ -303,7 +306,9 @@ def _candidate(rng: np.random.Generator, opts: RandomOptions, settings: TrackSet
         if not _segment(rng, w, opts, radii, chicanes, None):
             return None
         since = w.snapshot()
+        w.add(PieceType.STRAIGHT_SHORT)              # the lead-in
         world, piece = w.add(PieceType.CROSSROADS)
+        w.add(PieceType.STRAIGHT_SHORT)              # the lead-out
         if w.clashes(since):
             return None
         ports.append((len(w.feet) - 1, world @ piece.ports["side_in"],
@@ -317,6 +322,10 @@ def _candidate(rng: np.random.Generator, opts: RandomOptions, settings: TrackSet
         if not _segment(rng, w, opts, radii, chicanes, port @ Pose2(-LEAD_IN_M, 0.0, 0.0)):
             return None
         w.revisit(physical, leave, side_m)
+        since = w.snapshot()
+        w.add(PieceType.STRAIGHT_SHORT)              # the lead-out
+        if w.clashes(since):
+            return None
     if not _segment(rng, w, opts, radii, chicanes, Pose2(), closing=True):
         return None
     return w
