@@ -145,6 +145,26 @@ def test_faults_keep_the_run_and_say_what_happened(tmp_path, fault, options, cod
         assert video_frames(tmp_path / "v.mp4") == (len(rows) + 1) // 2  # every second frame (50 fps)
 
 
+def test_a_spinner_call_from_a_thread_is_said_once_without_the_threads_traceback(tmp_path):
+    """The run's outcome names the call and its line; the thread's own traceback (through the
+    simulator's frames) is not printed too. A thread's other exceptions print as Python prints them."""
+    ctrl = controller(tmp_path, """\
+        def boom():
+            raise ValueError("own fault")
+        own = threading.Thread(target=boom, name="mine")
+        own.start()
+        own.join()
+        t = threading.Thread(target=s.get_image, name="helper")
+        t.start()
+        t.join()
+        s.get_image()
+        """)
+    res = cli("ctrl.py", cwd=tmp_path)
+    assert res.returncode == 1 and "Spinner.get_image() called from thread 'helper'" in res.stdout
+    assert res.stderr.count("Traceback") == 1 and "ValueError: own fault" in res.stderr, res.stderr
+    assert "spinner.py" not in res.stderr
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name)
 def test_termination_signals_write_every_output(tmp_path, sig):
     ctrl = controller(tmp_path, """\

@@ -14,6 +14,7 @@ import functools
 import inspect
 import os
 import sys
+import threading
 import traceback
 import types
 from dataclasses import dataclass
@@ -62,10 +63,13 @@ class Controller:
         module.__file__ = self.code.co_filename
         sys.modules[MODULE_NAME] = module
         sys.path.insert(0, folder)
+        hook = threading.excepthook
+        threading.excepthook = functools.partial(_thread_excepthook, hook)
         try:
             exec(self.code, module.__dict__)
             yield controller_main(module, self.path)
         finally:
+            threading.excepthook = hook
             sys.modules.pop(MODULE_NAME, None)
             _forget_modules_from(folder, set(sys.modules) - modules_before)
             if folder in sys.path:
@@ -140,6 +144,14 @@ def _compiled(shown: str, filename: str,
     except ValueError as exc:  # e.g. null bytes
         raise ControllerFileError(f"{shown}: not a Python file ({exc})") from None
     return code, python_clock_reads(tree, source, shown), module_names(tree)
+
+
+def _thread_excepthook(hook, args) -> None:
+    """A controller thread's exception: one that ended the run and is its outcome already (a
+    Spinner call from that thread) is not printed again as the thread's traceback, through the
+    simulator's frames; any other goes to ``hook``."""
+    if not getattr(args.exc_value, "ends_the_run", False):
+        hook(args)
 
 
 def controller_main(module: types.ModuleType, path: Path | None) -> MainFn:

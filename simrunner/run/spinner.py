@@ -313,7 +313,9 @@ class Spinner:
         """A call from a thread that does not run ``main``: end the run (controller_error)."""
         from simrunner.run.faults import foreign_thread_message
 
-        return self._fail(CommandError(foreign_thread_message(method)))
+        err = CommandError(foreign_thread_message(method))
+        err.ends_the_run = True  # said as the run's outcome: the thread's traceback is not printed
+        return self._fail(err)
 
     def _capped(self, speed_mps: float) -> None:
         from simrunner.run.faults import caller_location
