@@ -67,6 +67,10 @@ def test_findings_come_in_order_with_the_results_figures(live_run):
     assert stages[0].text == "replaying the nominal car"
     screening = [f for f in stages if "screening" in f.text]
     assert [f.data["fits"] for f in screening][:2] == [3, 2]  # the effects left to screen at each step
+    # each screening's ranking is a finding as it ends (a run stopped in the refits after it keeps it)
+    screened = findings.of_kind("screened")
+    assert [len(f.data["ranking"]) for f in screened] == [f.data["fits"] for f in screening]
+    assert screened[0].text.startswith("step 1: screened 3 effects; the best alone: motor_lag (")
 
 
 def test_no_fit_runs_while_the_progress_bar_is_full(live_run):

@@ -714,6 +714,11 @@ class _ChainBuilder:
                             progress=lambda label: self.tick(f"step {index} {label}"))
         n_top = max(self.settings.refine_top if index == 1 else self.settings.refine_later, 1)
         ranked = sorted(screening, key=lambda r: (r.cost, self.order[r.effect]))
+        best = ", ".join(f"{r.effect} ({r.improvement:.1%}, delta_BIC {r.delta_bic:.1f})" for r in ranked[:3])
+        self.findings.add("screened", f"step {index}: screened {len(ranked)} effects; the best alone: {best}",
+                          step=index, ranking=[{"effect": r.effect, "parameters": r.parameters,
+                                                "improvement": r.improvement, "delta_bic": r.delta_bic}
+                                               for r in ranked])
         return _StepState(index, k, screen_base, full, screen, screening, ranked, n_top,
                           bic(self.judge.fit, self.j_cost, k))
 
