@@ -36,7 +36,7 @@ def turning_deg(p: PlacedPiece) -> float:
     return sign * math.degrees(p.piece.params["angle_rad"])
 
 
-def _lines(passes: list[PlacedPiece]) -> str:
+def lines_text(passes: list[PlacedPiece]) -> str:
     """``line 3`` / ``lines 3, 5`` (at most _MAX_LINES listed)."""
     lines = sorted({p.line for p in passes})
     more = f" and {len(lines) - _MAX_LINES} more" if len(lines) > _MAX_LINES else ""
@@ -44,10 +44,26 @@ def _lines(passes: list[PlacedPiece]) -> str:
     return f"{word} " + ", ".join(str(n) for n in lines[:_MAX_LINES]) + more
 
 
-def _heading_deg(rad: float) -> float:
+def heading_deg(rad: float) -> float:
     """Degrees in (-180, 180]."""
     deg = math.degrees(math.remainder(rad, 2.0 * math.pi))
     return 180.0 if deg <= -180.0 + 1e-9 else round(deg, 9) + 0.0  # no "-0.0 deg"
+
+
+def runs_along(passes: list[PlacedPiece], direction_rad: float, dist_m: float, tol_m: float,
+               tol_rad: float = math.inf) -> tuple[list[PlacedPiece], list[PlacedPiece]]:
+    """The passes that move what follows them along ``direction_rad`` by their change of length
+    (first passes of the ``_RUNS`` pieces heading along it, to ``tol_m`` sideways over ``dist_m``
+    and ``tol_rad``), and those heading against it: ``(along, against)``."""
+    along, against = [], []
+    for p in passes:
+        if p.kind not in _RUNS or p.revisit:
+            continue
+        off = math.remainder(p.entry_world.yaw_rad - direction_rad, 2.0 * math.pi)
+        if dist_m * abs(math.sin(off)) > tol_m or abs(math.sin(off)) > tol_rad:
+            continue
+        (along if abs(off) < math.pi / 2 else against).append(p)
+    return along, against
 
 
 def explain_closure(track: Track, tol_m: float, tol_rad: float) -> tuple[int | None, str]:
@@ -91,24 +107,16 @@ def _position_cause(track: Track, total: float, tol_m: float,
     text = (f"the headings close (turns sum to {total:.6g} deg) but the exit is {dist:.3f} m "
             f"from the start (dx = {dx:.3f} m, dy = {dy:.3f} m)")
     need = math.atan2(-dy, -dx)  # the direction the track still has to go
-    short, long_ = [], []
-    for p in track.passes:
-        if p.kind not in _RUNS or p.revisit:
-            continue
-        off = math.remainder(p.entry_world.yaw_rad - need, 2.0 * math.pi)
-        lateral = dist * abs(math.sin(off))
-        if lateral > tol_m or abs(math.sin(off)) > tol_rad:
-            continue
-        (short if abs(off) < math.pi / 2 else long_).append(p)
+    short, long_ = runs_along(track.passes, need, dist, tol_m, tol_rad)
     if not short and not long_:
         return None, text + "; no straight piece runs along that gap"
     parts = []
     if short:
-        parts.append(f"the pieces heading {_heading_deg(need):.1f} deg ({_lines(short)}) "
+        parts.append(f"the pieces heading {heading_deg(need):.1f} deg ({lines_text(short)}) "
                      f"are {dist:.3f} m too short in total")
     if long_:
-        back = _heading_deg(need + math.pi)
-        parts.append(f"those heading {back:.1f} deg ({_lines(long_)}) {dist:.3f} m too long")
+        back = heading_deg(need + math.pi)
+        parts.append(f"those heading {back:.1f} deg ({lines_text(long_)}) {dist:.3f} m too long")
     first = (short or long_)[0]
     line = first.line if len({p.line for p in short + long_}) == 1 else None
     return line, text + ": " + ", or ".join(parts)

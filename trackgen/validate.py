@@ -216,27 +216,19 @@ def _reentry_runs(track: Track, r) -> str:
     crossroads' first pass and the re-entry that run along the miss ``d`` (they move the arrival
     by their change of length, as the closure check names them: :mod:`trackgen.closure`) are
     together ``|d|`` too long, or those running against it too short; "" when none does."""
-    from .closure import _RUNS, _heading_deg, _lines
+    from .closure import heading_deg, lines_text, runs_along
 
     port = track.passes[r.index].entry_world
     end = track.passes[r.index - 1].exit_world
-    dx, dy = end.x_m - port.x_m, end.y_m - port.y_m
-    dist = math.hypot(dx, dy)
-    miss = math.atan2(dy, dx)
-    long_, short = [], []
-    for p in track.passes[r.of_index + 1:r.index]:
-        if p.kind not in _RUNS or p.revisit:
-            continue
-        off = math.remainder(p.entry_world.yaw_rad - miss, 2.0 * math.pi)
-        if dist * abs(math.sin(off)) > 5e-4:
-            continue
-        (long_ if abs(off) < math.pi / 2 else short).append(p)
+    dist = math.hypot(end.x_m - port.x_m, end.y_m - port.y_m)
+    miss = math.atan2(end.y_m - port.y_m, end.x_m - port.x_m)
+    long_, short = runs_along(track.passes[r.of_index + 1:r.index], miss, dist, 5e-4)
     parts = []
     if long_:
-        parts.append(f"the pieces heading {_heading_deg(miss):.1f} deg ({_lines(long_)}) are {dist:.3f} m "
+        parts.append(f"the pieces heading {heading_deg(miss):.1f} deg ({lines_text(long_)}) are {dist:.3f} m "
                      "too long in total")
     if short:
-        parts.append(f"those heading {_heading_deg(miss + math.pi):.1f} deg ({_lines(short)}) {dist:.3f} m "
+        parts.append(f"those heading {heading_deg(miss + math.pi):.1f} deg ({lines_text(short)}) {dist:.3f} m "
                      "too short")
     return "; " + ", or ".join(parts) if parts else ""
 
